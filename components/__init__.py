@@ -10,6 +10,7 @@ from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
 from components.screen_reflections import ScreenReflections
+from components.skin import Skin
 from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_of, yaw_pitch_rotation
 from components.visibility import Visibility
@@ -20,7 +21,7 @@ __all__ = [
     "ComponentWarning",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "Model", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
-    "ScreenPanel", "ScreenReflections", "ScreenText", "Skybox", "Slice",
+    "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",
 ]

@@ -45,6 +45,10 @@ MAX_DISPERSION = 10.0
 # Material.iridescence_thickness, nanometres: past a few thousand a film's fringes are finer
 # than the eye's colour bands and it shows white (the thin-film model's two orders say nothing more).
 MAX_FILM_THICKNESS = 5000.0
+# Joints one skin may have (Skin.joint_matrices, a mesh's joints a vertex): one row of the
+# joint palette texture, three texels a joint (engine/render/joint_palettes.py); a character
+# rig has 20 to 150, Unreal's limit a section is 256 too.
+MAX_JOINTS = 256
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

@@ -2,6 +2,7 @@
 // Instanced scene geometry: per-vertex mesh data, per-instance transform and material record.
 #include "camera.glsl"
 #include "visibility.glsl"
+#include "skinning.glsl"
 
 // Clip distances (indices defined from engine/render/bindings.py): CLIP_VIEW_PLANE is the
 // view's plane (mirror and portal views), CLIP_RECT_* the batched mirror path's per-view
@@ -27,7 +28,7 @@ in vec3 in_normal;
 in vec2 in_uv;
 
 in mat4 in_model;          // model -> world
-#ifndef VERTEX_COLOR
+#if !defined(VERTEX_COLOR) && !defined(SKINNED)
 in mat3 in_normal_matrix;  // inverse-transpose of the model's upper 3x3
 #endif
 in vec4 in_color;          // linear base colour, alpha
@@ -39,7 +40,8 @@ in uvec4 in_slots;         // emissive variant, refract variant, reflect variant
 #ifdef VERTEX_COLOR
 // The mesh's colour a vertex (Mesh.colors), linear.  The sixteen vertex inputs GL 4.1
 // promises are all taken, so this build works the normal matrix out here instead of
-// reading the instance's (three inputs freed for one).
+// reading the instance's (three inputs freed for one; a SKINNED build frees them too, for its
+// joints and weights: skinning.glsl).
 in vec4 in_vertex_color;
 out vec4 v_vertex_color;
 #endif
@@ -57,13 +59,19 @@ flat out vec4 v_tint;
 flat out uvec4 v_slots;
 
 void main() {
+#ifdef SKINNED
+    mat4 skin = skin_matrix();  // bent by its joints, then placed (as shadow.vert)
+    vec4 world = in_model * (skin * vec4(in_position, 1.0));
+    v_normal = transpose(inverse(mat3(in_model) * mat3(skin))) * in_normal;
+#else
     vec4 world = in_model * vec4(in_position, 1.0);
-    v_world_pos = world.xyz;
 #ifdef VERTEX_COLOR
     v_normal = transpose(inverse(mat3(in_model))) * in_normal;
 #else
     v_normal = in_normal_matrix * in_normal;
 #endif
+#endif
+    v_world_pos = world.xyz;
     v_uv = in_uv;
     v_color = in_color;
     v_surface = in_surface;

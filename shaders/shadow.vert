@@ -10,6 +10,7 @@
 // shadow.frag reads its alpha as scene.frag does.
 #include "camera.glsl"
 #include "visibility.glsl"
+#include "skinning.glsl"
 
 in vec3 in_position;
 in mat4 in_model;
@@ -38,7 +39,11 @@ out vec2 v_clip;  // shadow_layered.geom writes them per face
 #endif
 
 void main() {
+#ifdef SKINNED
+    vec4 world = in_model * (skin_matrix() * vec4(in_position, 1.0));  // bent by its joints, as scene.vert
+#else
     vec4 world = in_model * vec4(in_position, 1.0);
+#endif
     gl_Position = camera.view_proj * world;
     // A virtual light's map (light through a mirror or portal) leaves out the surfaces it
     // passes through (camera.skip) and what lies behind them (camera.clip_plane); a light's

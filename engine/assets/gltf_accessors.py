@@ -25,7 +25,7 @@ from engine.core.errors import AssetError
 # max(c / max, -1.0)
 NORMALIZED_TYPES = {5120: (np.int8, 127.0), 5121: (np.uint8, 255.0), 5122: (np.int16, 32767.0),
                     5123: (np.uint16, 65535.0)}
-COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}  # (a float MAT4 has no padding)
 FLOAT = 5126
 # A file's buffer by index: its bytes as read (a view of a GLB's binary chunk), None where it has none
 BufferBytes = Callable[[int], "bytes | memoryview | None"]
@@ -102,7 +102,9 @@ def _decode(accessor: dict, views: list, buffer_bytes: BufferBytes, label: str,
         raise AssetError(f"{label}: normalized is only for byte and short components (glTF), got componentType "
                          f"{ctype!r}")
     if kind not in COMPONENTS:
-        raise AssetError(f"{label}: an accessor of type {kind!r} is not read here (SCALAR or VEC2-4)")
+        raise AssetError(f"{label}: an accessor of type {kind!r} is not read here (SCALAR, VEC2-4 or MAT4)")
+    if kind == "MAT4" and float_type is None:
+        raise AssetError(f"{label}: a normalized MAT4 is not read (its columns are padded; glTF's matrices are floats)")
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
         raise AssetError(f"{label}: count must be an integer >= 1, got {count!r}")
     if "sparse" in accessor:

@@ -25,6 +25,7 @@ from pyglm import glm
 
 from components.limits import MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR
 from components.water import f0_from_ior
+from engine.assets.gltf_skins import skin_arrays
 from engine.assets.gltf_variants import variant_names
 from engine.assets.model_cameras import ModelCamera, read_gltf_cameras
 from engine.assets.model_files import (
@@ -53,6 +54,7 @@ from engine.assets.texture_data import (
 )
 from engine.core.color import linear_to_srgb, srgb_to_linear
 from engine.core.errors import AssetError
+from engine.core.skinning import INFLUENCES, MAX_JOINTS, joint_boxes, strongest_influences
 
 if TYPE_CHECKING:  # trimesh is imported when a mesh file is first loaded
     import trimesh
@@ -86,6 +88,11 @@ class Mesh:
     unit_shape: tuple | None = field(default=None, repr=False)  # (kind, segments, rings)
     unit_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
     colors: np.ndarray | None = field(default=None, repr=False)
+    # A skinned mesh's joints and weights a vertex (glTF's JOINTS_0 and WEIGHTS_0): up to
+    # four joints of its Skin each vertex follows (uint16, (V, 4)) and how much (float32,
+    # summing to 1); None: not skinned (engine/core/skinning.py).
+    joints: np.ndarray | None = field(default=None, repr=False)
+    weights: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def unit(self) -> Mesh | None:
@@ -121,6 +128,57 @@ class Mesh:
                 raise AssetError(f"mesh {self.name!r}: a colour's alpha must be in [0, 1], got up to "
                                  f"{float(colors[:, 3].max()):g}")
             self.colors = colors
+        if self.joints is not None or self.weights is not None:
+            self._check_skin(n)
+
+    def _check_skin(self, n: int) -> None:
+        """Joints and weights a vertex, both or neither: a vertex's strongest four kept
+        (``skinning.strongest_influences``), its weights made to sum to 1."""
+        if self.joints is None or self.weights is None:
+            raise AssetError(f"mesh {self.name!r}: a skinned mesh needs both joints and weights a vertex, got "
+                             f"{'joints' if self.weights is None else 'weights'} alone")
+        joints, weights = np.asarray(self.joints), np.asarray(self.weights)
+        if joints.ndim != 2 or joints.shape[0] != n or not 1 <= joints.shape[1] <= 4 * INFLUENCES \
+                or weights.shape != joints.shape:
+            raise AssetError(f"mesh {self.name!r}: joints and weights must be one row a vertex of the same width (1 "
+                             f"to {4 * INFLUENCES}), shape ({n}, k); got {joints.shape} and {weights.shape}")
+        if not np.issubdtype(joints.dtype, np.integer) or (len(joints) and (joints.min() < 0
+                                                                            or joints.max() >= MAX_JOINTS)):
+            raise AssetError(f"mesh {self.name!r}: joints must be integers in 0..{MAX_JOINTS - 1} (MAX_JOINTS: a "
+                             f"skin's joints), got {joints.dtype} from {joints.min()} to {joints.max()}")
+        if not np.issubdtype(weights.dtype, np.number) or not np.isfinite(weights).all() or weights.min() < 0.0:
+            raise AssetError(f"mesh {self.name!r}: weights must be finite numbers >= 0")
+        joints, weights = strongest_influences(joints, weights)
+        unmoved = int((weights.sum(axis=1) == 0.0).sum())
+        if unmoved:
+            raise AssetError(f"mesh {self.name!r}: {unmoved} vertices have weights summing to 0 (glTF: a vertex's "
+                             "weights sum to 1; it would follow no joint)")
+        self.joints = np.ascontiguousarray(joints, np.uint16)
+        self.weights = np.ascontiguousarray(weights, np.float32)
+
+    @property
+    def skinned(self) -> bool:
+        """Whether it has joints and weights a vertex (a ``Skin`` bends it)."""
+        return self.joints is not None
+
+    @property
+    def joint_count(self) -> int:
+        """How many joint matrices a ``Skin`` bending it needs (its highest joint + 1; 0: not skinned)."""
+        return int(self.joints.max()) + 1 if self.joints is not None else 0
+
+    def joint_boxes(self) -> np.ndarray:
+        """Each joint's box of the vertices it moves (``skinning.joint_boxes``), made once."""
+        boxes = self.__dict__.get("_joint_boxes")
+        if boxes is None:
+            boxes = self.__dict__["_joint_boxes"] = joint_boxes(self.positions, self.joints, self.weights,
+                                                                self.joint_count)
+        return boxes
+
+    def skin_interleaved(self) -> bytes:
+        """The skin buffer: a vertex's four joints (uint16) and weights (float32), 24 bytes."""
+        rows = np.zeros(len(self.joints), [("joints", "<u2", (4,)), ("weights", "<f4", (4,))])
+        rows["joints"], rows["weights"] = self.joints, self.weights
+        return rows.tobytes()
 
     @property
     def has_alpha(self) -> bool:
@@ -456,6 +514,7 @@ class ModelPart:
     iridescence_thickness: float = 400.0  # its film's thickness in nm (Material.iridescence_thickness)
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
     node: int | None = None  # its glTF node's index (what an animation moves; None: not a glTF's)
+    skin: int | None = None  # its glTF node's skin (LoadedModel.skins: what bends it; None: not skinned)
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -477,7 +536,8 @@ class LoadedModel:
     cameras: list[ModelCamera] = field(default_factory=list)
     variants: list[str] = field(default_factory=list)  # its material variants' names (KHR_materials_variants)
     animations: list = field(default_factory=list)     # its clips (engine/assets/gltf_animations.py Clip)
-    node_tree: object = None                           # its nodes (gltf_animations.NodeTree), with clips
+    node_tree: object = None                           # its nodes (gltf_animations.NodeTree), with clips or skins
+    skins: list = field(default_factory=list)          # its skins (engine/assets/gltf_skins.py SkinDef)
 
 
 def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
@@ -589,13 +649,22 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
                 raise AssetError(f"node {shown!r} has a transform too large for float32 rendering "
                                  f"(largest entry {np.abs(matrix).max():.3g}, limit 1e18)")
             name = f"{path.name}:{geom_name}"
-            mesh = meshes.get(("geometry", geom_name))
+            index = gltf.node(node) if gltf is not None else None
+            skin = gltf.skin_of(index) if gltf is not None else None
+            mesh = meshes.get(("geometry", geom_name, skin))
             if mesh is None:
                 mesh = Mesh.from_trimesh(tm, name=name, srgb_colors=suffix not in (".gltf", ".glb"))
+                if skin is not None:  # its joints and weights a vertex, as trimesh kept them
+                    joints, weights = skin_arrays(getattr(tm, "vertex_attributes", {}), len(mesh.positions),
+                                                  gltf.skins[skin], f"node {shown!r}'s mesh")
+                    mesh = Mesh(mesh.positions, mesh.normals, mesh.uvs, mesh.indices, name=name, colors=mesh.colors,
+                                joints=joints, weights=weights)
                 mesh = meshes.setdefault(("content", _digest(mesh)), mesh)
-                meshes[("geometry", geom_name)] = mesh
+                meshes[("geometry", geom_name, skin)] = mesh
+            if skin is not None:  # glTF: a skinned node's own transform is left out (its joints place it)
+                matrix = np.eye(4)
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()), name=name,
-                             node=gltf.node(node) if gltf is not None else None)
+                             node=index, skin=skin)
             if materials:
                 _read_material(tm, part, path, maps)
                 maps.read(tm, part)
@@ -611,14 +680,17 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
     if variant and gltf is None:
         raise AssetError(f"{what}: has no material variant {variant!r} (only a glTF file has variants)")
     clips = gltf.animations if gltf is not None else []
-    return LoadedModel(parts, lights, cameras, variants, clips, gltf.node_tree if clips else None)
+    skins = gltf.skins if gltf is not None else []
+    return LoadedModel(parts, lights, cameras, variants, clips, gltf.node_tree if clips or skins else None, skins)
 
 
 def _digest(mesh: Mesh) -> bytes:
     """What makes two meshes the same geometry: their arrays, byte for byte."""
     digest = hashlib.blake2b(digest_size=20)
     for array in (mesh.positions, mesh.normals, mesh.uvs, mesh.indices,
-                  mesh.colors if mesh.colors is not None else np.zeros(0, np.float32)):
+                  mesh.colors if mesh.colors is not None else np.zeros(0, np.float32),
+                  mesh.joints if mesh.joints is not None else np.zeros(0, np.uint16),
+                  mesh.weights if mesh.weights is not None else np.zeros(0, np.float32)):
         digest.update(np.asarray(array.shape, np.int64).tobytes())
         digest.update(memoryview(array).cast("B"))
     return digest.digest()
@@ -635,6 +707,7 @@ def model_bytes(parts: Sequence[ModelPart]) -> int:
             seen.add(id(mesh))
             total += mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
             total += mesh.colors.nbytes if mesh.colors is not None else 0
+            total += mesh.joints.nbytes + mesh.weights.nbytes if mesh.joints is not None else 0
         for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map,
                         part.occlusion_map):
             if texture is not None and id(texture) not in seen:
@@ -998,7 +1071,8 @@ class _MaterialMaps:
             v = (1.0 - mesh.uvs[:, 1].astype(np.float64)) * sy
             moved_u, moved_v = ox + c * u + s * v, oy - s * u + c * v
             made = self._made[key] = Mesh(mesh.positions, mesh.normals, np.stack([moved_u, 1.0 - moved_v], axis=1),
-                                          mesh.indices, name=mesh.name, colors=mesh.colors)
+                                          mesh.indices, name=mesh.name, colors=mesh.colors, joints=mesh.joints,
+                                          weights=mesh.weights)
         return made
 
     def mtl_map(self, material, key: str) -> MtlMap | None:

@@ -34,6 +34,7 @@ from urllib.parse import unquote
 from engine.assets.gltf_accessors import float_normalized_accessors
 from engine.assets.gltf_animations import read_animations, read_node_tree
 from engine.assets.gltf_instancing import expand_gpu_instancing
+from engine.assets.gltf_skins import read_skins
 from engine.assets.gltf_variants import apply_variant
 from engine.assets.texture_data import contained_path, file_problem, read_asset_file
 from engine.core.errors import AssetError
@@ -383,6 +384,7 @@ class GltfFiles:
     uv_transforms: dict[int, tuple[float, float, float, float, float]] = field(default_factory=dict)
     animations: list = field(default_factory=list)  # its clips (engine/assets/gltf_animations.py)
     node_tree: object = None                         # its nodes' parents and rest transforms (NodeTree)
+    skins: list = field(default_factory=list)        # its skins (engine/assets/gltf_skins.py SkinDef)
 
     def node(self, trimesh_name: object) -> int | None:
         """The index of the node trimesh calls ``trimesh_name`` (None: not one of the file's)."""
@@ -398,6 +400,13 @@ class GltfFiles:
         if index is None or not isinstance(nodes, list) or index >= len(nodes) or not isinstance(nodes[index], dict):
             return trimesh_name
         return nodes[index].get("name", f"node {index}")
+
+    def skin_of(self, node: int | None) -> int | None:
+        """The skin node ``node`` bends its mesh by (None: none; read_skins checked it)."""
+        nodes = self.doc.get("nodes") if self.doc else None
+        if node is None or not isinstance(nodes, list) or node >= len(nodes) or not isinstance(nodes[node], dict):
+            return None
+        return nodes[node].get("skin") if self.skins else None
 
     def material(self, trimesh_name: object) -> tuple[int | None, dict]:
         """The index and the file's JSON of the material trimesh calls ``trimesh_name``."""
@@ -568,6 +577,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from None
     animations = read_animations(doc, buffer_bytes, what)
+    skins = read_skins(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
     for texture in textures_list:
@@ -582,6 +592,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
                       if isinstance(primitive, dict)}
     result = GltfFiles(b"", resolver, doc, [m.get("name") if isinstance(m, dict) else None for m in materials])
     result.animations = animations
+    result.skins = skins
     wanted: dict[int, tuple[str, str]] = {}  # image index -> (material label, slot)
     for index, material in enumerate(materials):
         if not isinstance(material, dict) or index not in used_materials:
@@ -652,7 +663,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
                 del node["name"]
             else:
                 node["name"] = name
-    if animations:  # (its nodes' rest transforms: what the clips' poses start from)
+    if animations or skins:  # (its nodes' rest transforms: what the clips' poses and the skins start from)
         result.node_tree = read_node_tree(doc, what)
     return result
 

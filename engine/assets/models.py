@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,10 +30,12 @@ from components import (
     PointLight,
     Reflective,
     Refractive,
+    Skin,
     Transform,
 )
 from components.model import MAX_MODEL_PROBES, FromModel, Model
-from engine.assets.gltf_animations import moved_nodes, pose
+from engine.assets.gltf_animations import Clip, moved_nodes, pose
+from engine.assets.gltf_skins import joint_palette
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
 from engine.assets.model_lights import ModelLight, check_light_intensity
@@ -41,7 +43,7 @@ from engine.core.errors import AssetError
 from engine.core.world import World
 
 __all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key", "pose_parts",
-           "remove_parts", "respawn_parts", "spawn_model", "spawn_parts"]
+           "remove_parts", "respawn_parts", "skin_palettes", "spawn_model", "spawn_parts"]
 
 @dataclass
 class SpawnedModel:
@@ -51,7 +53,8 @@ class SpawnedModel:
     key: tuple
     parts: list[int] = field(default_factory=list)
     nodes: list[int | None] = field(default_factory=list)  # each part's glTF node (None: not animated)
-    loaded: LoadedModel | None = None                        # its clips and node tree
+    loaded: LoadedModel | None = None                        # its clips, node tree and skins
+    skins: list[int | None] = field(default_factory=list)  # each part's skin (None: not skinned)
 
 
 class SpawnedModels(dict):
@@ -158,9 +161,12 @@ def model_components(loaded: LoadedModel, path: str | Path, root: Transform, max
     probed = set(sorted(curved, key=lambda i: -_placed_size(parts[i]))[:max_probes])
     _name_sources(path, parts)
     part_components = []
+    palettes = skin_palettes(loaded, None, 0.0)  # each skin's joints at rest
     try:
         for index, part in enumerate(parts):
             part_components.append(_part_components(part, index in probed))
+            if part.skin is not None:
+                part_components[-1].append(Skin(palettes[part.skin]))
         for light in loaded.lights:
             part_components.append(_light_components(light, root, light_scale))
         for camera in loaded.cameras:
@@ -237,9 +243,12 @@ def spawn_parts(world: World, root: int, model: Model | None, part_components: S
     record = world.resources.get(SpawnedModels)
     if record is None:
         record = world.resources[SpawnedModels] = SpawnedModels()
-    nodes = [part.node for part in loaded.parts] if loaded is not None else []
+    # (a skinned part stays at the root: its joints place it)
+    nodes = [None if part.skin is not None else part.node for part in loaded.parts] if loaded is not None else []
     nodes += [None] * (len(spawned) - len(nodes))  # its lights and cameras: where their nodes put them
-    record[root] = SpawnedModel(None if model is None else model_key(model), spawned, nodes, loaded)
+    skins = [part.skin for part in loaded.parts] if loaded is not None else []
+    skins += [None] * (len(spawned) - len(skins))
+    record[root] = SpawnedModel(None if model is None else model_key(model), spawned, nodes, loaded, skins)
     return spawned
 
 
@@ -305,6 +314,7 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
             raise AssetError(f"entity {root}'s Animation: its model has no animations (clip {clip_name!r})")
         return
     clips = record.loaded.animations
+    clip = None
     if not clip_name:
         matrices = {}
     else:
@@ -313,9 +323,11 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
             names = ", ".join(repr(c.name) for c in clips)
             raise AssetError(f"entity {root}'s Animation: its model has no clip {clip_name!r} (its clips: {names})")
         matrices = pose(record.loaded.node_tree, clip, time, [n for n in record.nodes if n is not None])
-        if not every:
-            moved = moved_nodes(record.loaded.node_tree, clip)
-            matrices = {node: m for node, m in matrices.items() if node in moved}
+    moved = moved_nodes(record.loaded.node_tree, clip) if clip is not None and not every else None
+    if any(skin is not None for skin in record.skins):
+        _pose_skins(world, record, clip, time, moved)
+    if moved is not None:
+        matrices = {node: m for node, m in matrices.items() if node in moved}
     rest = {part.node: part.local for part in record.loaded.parts}
     for entity, node in zip(record.parts, record.nodes, strict=True):
         if node is None or not world.exists(entity) or (not every and node not in matrices):
@@ -325,6 +337,32 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
         at = _node_transform(local, f"node {node}")
         transform = world.get(entity, Transform)
         transform.position, transform.rotation, transform.scale = at.position, at.rotation, at.scale
+
+
+def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float,
+                  skins: Collection[int] | None = None) -> dict[int, np.ndarray]:
+    """Each skin's joint matrices (skin index -> (J, 4, 4)) with its joints where ``clip``
+    puts them at ``time`` (None: at rest); ``skins``: only those."""
+    chosen = range(len(loaded.skins)) if skins is None else skins
+    if not loaded.skins or not chosen:
+        return {}
+    wanted = sorted({joint for s in chosen for joint in loaded.skins[s].joints})
+    placed = pose(loaded.node_tree, clip or Clip("", [], 0.0), time, wanted)
+    return {s: joint_palette(loaded.skins[s], placed) for s in chosen}
+
+
+def _pose_skins(world: World, record: SpawnedModel, clip: Clip | None, time: float,
+                moved: set[int] | None) -> None:
+    """Pose the skinned parts of ``record``: their ``Skin`` from ``clip`` at ``time`` (None:
+    at rest); with ``moved`` (the nodes the clip moves), only skins with a joint among them."""
+    loaded = record.loaded
+    used = {skin for skin in record.skins if skin is not None}
+    if moved is not None:
+        used = {s for s in used if not moved.isdisjoint(loaded.skins[s].joints)}
+    palettes = skin_palettes(loaded, clip, time, used)
+    for entity, skin in zip(record.parts, record.skins, strict=True):
+        if skin in palettes and world.exists(entity):
+            world.get(entity, Skin).joint_matrices = palettes[skin]
 
 
 def _camera_components(camera: ModelCamera) -> list:

@@ -134,6 +134,10 @@ class GpuMesh:
         # Its colour a vertex (Mesh.colors, linear RGBA), a buffer of its own (None: none): the
         # VERTEX_COLOR builds read it (and a cutout's VERTEX_ALPHA shadow build its alpha).
         self.colors = ctx.buffer(mesh.rgba_colors().tobytes()) if mesh.colors is not None else None
+        # A skinned mesh's joints and weights a vertex (Mesh.joints, Mesh.weights; None: not
+        # skinned): the SKINNED builds read them (shaders/include/skinning.glsl).
+        self.skin = ctx.buffer(mesh.skin_interleaved()) if mesh.skinned else None
+        self.joint_boxes = mesh.joint_boxes() if mesh.skinned else None  # each joint's box (a pose's box)
         self.has_alpha = mesh.has_alpha  # some vertex's alpha below 1 (Mesh.has_alpha)
         self.index_count = mesh.indices.size
         # Model-space radius about the origin (what an instance's scale stretches).
@@ -150,8 +154,9 @@ class GpuMesh:
     def release(self) -> None:
         self.vertices.release()
         self.indices.release()
-        if self.colors is not None:
-            self.colors.release()
+        for buffer in (self.colors, self.skin):
+            if buffer is not None:
+                buffer.release()
 
 
 class BatchKey(NamedTuple):
@@ -179,6 +184,7 @@ class BatchKey(NamedTuple):
     dispersion: float = 0.0             # Refractive.dispersion: its DISPERSION build's uniform (0: none)
     anisotropy: tuple[float, float] | None = None  # Material.anisotropy and its direction in radians (None: none)
     iridescence: tuple[float, float, float] | None = None  # Material.iridescence, its film's index and nm
+    skinned_entity: int = 0             # a skinned entity's own batch (its joint palette row its draws' uniform)
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -298,6 +304,14 @@ class InstanceBatch:
         self.anisotropy: tuple[float, float] | None = None
         # A thin film (Material.iridescence, its index, thickness; None: none): IRIDESCENCE's uniform.
         self.iridescence: tuple[float, float, float] | None = None
+        # A skinned entity's batch (BatchKey.skinned_entity): drawn with the SKINNED builds,
+        # its palette row (JointPalettes) their uniform.
+        self.skinned = False
+        self.joint_row = 0
+        # The model-space box its rows' world boxes are made from, and its radius about the
+        # origin: its mesh's, or a skinned instance's pose's (``set_local_box``).
+        self.box_ends, self.box_lo, self.box_hi = mesh.box_ends, mesh.box_lo, mesh.box_hi
+        self.radius = mesh.radius
 
     # --- rows ----------------------------------------------------------------------------
     def add(self, entity: int) -> np.void:
@@ -480,7 +494,7 @@ class InstanceBatch:
     def extent(self) -> float:
         """About the world radius of this batch's largest instance (mesh radius x largest
         axis scale, as of the last upload; it may overestimate after a shrink)."""
-        return self.mesh.radius * self._max_scale
+        return self.radius * self._max_scale
 
     def centre(self) -> glm.vec3:
         """The mean world position of the instances (what back-to-front sorting compares)."""
@@ -510,7 +524,7 @@ class InstanceBatch:
         self._boxes_for(len(self.rows))
         written = self.rows["model"][rows]
         models = written.astype(np.float64).reshape(-1, 4, 4)  # [instance, column, row]
-        terms = models[:, None, :3, :3] * self.mesh.box_ends  # [instance, lo/hi corner, column, row]
+        terms = models[:, None, :3, :3] * self.box_ends  # [instance, lo/hi corner, column, row]
         ends = np.empty_like(terms)  # each term's lower value, then its higher one
         np.minimum(terms[:, 0], terms[:, 1], out=ends[:, 0])
         np.maximum(terms[:, 0], terms[:, 1], out=ends[:, 1])
@@ -544,7 +558,7 @@ class InstanceBatch:
         are the same numbers the array path writes; the changed box skips NaN (never
         measured) as fmin and fmax do."""
         boxes = self._boxes_for(len(self.rows))
-        lo_ends, hi_ends = self.mesh.box_lo, self.mesh.box_hi
+        lo_ends, hi_ends = self.box_lo, self.box_hi
         longest = 0.0
         measured = []
         changed_lo = changed_hi = None
@@ -609,6 +623,21 @@ class InstanceBatch:
             models[: len(self._row_models)] = self._row_models
             self._row_models = models
         return self._row_boxes
+
+    def set_local_box(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """A skinned instance's pose changed: [lo, hi] is the model-space box holding it
+        (``skinning.posed_box``).  Where it stood counts as changed (its shape there is not
+        what the shadow maps hold), and its rows are measured and sent again, their boxes
+        from this one (a pose may reach past the mesh as modelled: culled by it, an arm
+        raised above the head would vanish)."""
+        for entity in self.entity_at:
+            self.note_shadow_change(entity)
+        self.box_ends = np.array([lo, hi], np.float64).reshape(2, 3, 1)
+        self.box_lo, self.box_hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        self.radius = float(np.linalg.norm(corners, axis=1).max())
+        self._dirty.update(range(self.count))
+        self._rescale = True
 
     def note_shadow_change(self, entity: int) -> None:
         """``entity``'s row changed what the shadow pass draws of it (whether it casts:
@@ -749,6 +778,8 @@ class InstanceBatch:
                        (self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES)]
             if self.mesh.colors is not None:
                 buffers.append((self.mesh.colors, "4f", "in_vertex_color"))
+            if self.skinned and self.mesh.skin is not None:
+                buffers.append((self.mesh.skin, "4u2 4f", "in_joints", "in_weights"))
             vao = self.ctx.vertex_array(
                 program,
                 buffers,

@@ -141,7 +141,8 @@ class Renderer(Gpu):
                   dielectric_f0: float = 0.04,
                   sheen: tuple[float, float, float, float] | None = None,
                   dispersion: float = 0.0, anisotropy: tuple[float, float] | None = None,
-                  iridescence: tuple[float, float, float] | None = None) -> InstanceBatch:
+                  iridescence: tuple[float, float, float] | None = None,
+                  skinned_entity: int = 0) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -164,6 +165,8 @@ class Renderer(Gpu):
         # ``dispersion``: a refraction's Refractive.dispersion, its DISPERSION build's (0: none).
         # ``anisotropy``: (Material.anisotropy, its direction in radians), ANISOTROPY's (None: none).
         # ``iridescence``: (Material.iridescence, the film's index, its nm), IRIDESCENCE's (None: none).
+        # ``skinned_entity``: a skinned entity (a Skin bends its mesh) gets a batch of its own,
+        # drawn with the SKINNED builds, its joint palette row their uniform (set by extract).
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
@@ -172,7 +175,7 @@ class Renderer(Gpu):
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
                        bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen,
-                       dispersion, anisotropy, iridescence)
+                       dispersion, anisotropy, iridescence, skinned_entity)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -221,6 +224,7 @@ class Renderer(Gpu):
             batch.dispersion = dispersion
             batch.anisotropy = anisotropy
             batch.iridescence = iridescence
+            batch.skinned = bool(skinned_entity)
             if sheen is not None:  # the sheen's albedo table, made once a sheen is drawn
                 self.irradiance.write_sheen_albedo()
             self._order_stale = True
@@ -362,6 +366,7 @@ class Renderer(Gpu):
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "level_copies": len(self.level_copies),
                 "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
+                "joint_palettes": int(self.joint_palettes.texture is not None),
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
                 "irradiance_rows": len(self.irradiance.rows),
                 "occlusion_targets": self.occlusion.target_count(),
@@ -496,7 +501,7 @@ class Renderer(Gpu):
             self.text_pass.release()
             self.text_pass = None
         for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog,
-                    self.spot_cookies):
+                    self.spot_cookies, self.joint_palettes):
             obj.release()
         self.shaders.release()
 

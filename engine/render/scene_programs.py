@@ -30,6 +30,7 @@ from engine.render.bindings import (
     FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
+    JOINT_PALETTE_UNIT,
     LIGHTS_BINDING,
     METALLIC_ROUGHNESS_UNIT,
     NODE_UNIT,
@@ -63,7 +64,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                      "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
-                     "anisotropy", "iridescence")
+                     "anisotropy", "iridescence", "joint_row")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -73,7 +74,7 @@ NO_SHEEN = (0.0, 0.0, 0.0, 0.0)  # the sheen uniform of a batch without one (lik
 NO_ANISOTROPY = (0.0, 0.0)  # the anisotropy uniform of a batch without one (likewise)
 NO_IRIDESCENCE = (0.0, 1.0, 0.0)  # the thin film's uniform of a batch without one (likewise)
 # a batch's build with none of _material_build's
-NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False)
+NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False)
 
 
 
@@ -117,7 +118,7 @@ class ScenePrograms:
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
-                material: tuple[bool, bool, bool, str, bool, bool, bool, bool] = NO_MATERIAL_MAPS,
+                material: tuple = NO_MATERIAL_MAPS,
                 probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False, screen: str = "") -> moderngl.Program:
@@ -166,7 +167,8 @@ class ScenePrograms:
         if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
-            material = (False, False, material[2], "", False, False, False, False, False, False, False, False)
+            material = (False, False, material[2], "", False, False, False, False, False, False, False, False,
+                        material[12])  # (a skinned mesh's depth is where its pose puts it)
             virtual, unlit, masked, shadowing, fogging, cookies = False, False, False, (), (), ()
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -206,6 +208,8 @@ class ScenePrograms:
                 defines["ANISOTROPY"] = "1"
             if material[11]:  # a thin film's colours over it (Material.iridescence)
                 defines["IRIDESCENCE"] = "1"
+            if material[12]:  # its mesh bent by its joints (a Skin: shaders/include/skinning.glsl)
+                defines["SKINNED"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -259,7 +263,8 @@ class ScenePrograms:
                                ("point_shadow1", POINT_SHADOW_UNITS[1]),
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
                                ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT),
-                               ("screen_occlusion", SCREEN_OCCLUSION_UNIT), ("spot_cookies", COOKIE_UNIT)):
+                               ("screen_occlusion", SCREEN_OCCLUSION_UNIT), ("spot_cookies", COOKIE_UNIT),
+                               ("joint_palette", JOINT_PALETTE_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -339,7 +344,8 @@ class ScenePrograms:
         albedo = batch.texture if batch.texture is not None else self.renderer.blank_color
         textures = tuple((unit, texture) for unit, texture in (
             (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
-            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map), (OCCLUSION_UNIT, batch.occlusion_map))
+            (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map), (OCCLUSION_UNIT, batch.occlusion_map),
+            (JOINT_PALETTE_UNIT, self.renderer.joint_palettes.texture if batch.skinned else None))
             if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
@@ -347,7 +353,7 @@ class ScenePrograms:
                    0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0,
                    batch.occlusion_strength, batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0,
                    batch.sheen or NO_SHEEN, batch.dispersion, batch.anisotropy or NO_ANISOTROPY,
-                   batch.iridescence or NO_IRIDESCENCE)
+                   batch.iridescence or NO_IRIDESCENCE, batch.joint_row)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -376,11 +382,12 @@ def _material_build(batch: InstanceBatch) -> tuple:
     reads the probe, ``ENVIRONMENT_PROBE``: only such batches pay for the lookup), and
     whether it is clear-coated (``CLEARCOAT``), whether it is unlit (``UNLIT_MATERIAL``) and
     whether it has a sheen (``SHEEN``) and whether its refraction splits the colours
-    (``DISPERSION``), whether its highlights are anisotropic (``ANISOTROPY``) and whether a
-    thin film colours its reflections (``IRIDESCENCE``)."""
+    (``DISPERSION``), whether its highlights are anisotropic (``ANISOTROPY``), whether a
+    thin film colours its reflections (``IRIDESCENCE``) and whether a Skin bends its mesh
+    (``SKINNED``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
             batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None,
-            batch.iridescence is not None)
+            batch.iridescence is not None, batch.skinned)
 

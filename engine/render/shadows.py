@@ -33,6 +33,7 @@ from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
     CLIP_LEG_PLANE,
+    JOINT_PALETTE_UNIT,
     POINT_SHADOW_UNITS,
     SCENE_CLIPS,
     SHADOW_ATLAS_UNIT,
@@ -144,7 +145,7 @@ class ShadowMaps:
         self.ubo = ctx.buffer(self.block.tobytes())
         # The caster programs by (build: _DEPTH, _DISTANCE, _LAYERED or _LEG; whether for
         # cutouts): _caster_program.
-        self._casters: dict[tuple[tuple[tuple[str, str], ...], bool | str], moderngl.Program] = {}
+        self._casters: dict[tuple[tuple[tuple[str, str], ...], bool | str, bool], moderngl.Program] = {}
         for build in (_DEPTH, _DISTANCE):
             self._caster_program(build, False)
         # Until a light casts: a 1x1 atlas at the far depth and 1x1 cubes at the range's end
@@ -606,23 +607,29 @@ class ShadowMaps:
         return True
 
     # --- drawing --------------------------------------------------------------------------
-    def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool | str) -> moderngl.Program:
+    def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool | str,
+                        skinned: bool = False) -> moderngl.Program:
         """The caster program of ``build`` (its defines), for cutouts (``cutout``: the
         ``ALPHA_CUTOFF`` build, its albedo map read for its holes; "vertex alpha": and its
-        mesh's alpha a vertex, ``VERTEX_ALPHA``) or whole casters."""
-        program = self._casters.get((build, cutout))
+        mesh's alpha a vertex, ``VERTEX_ALPHA``) or whole casters, bent by a Skin or not
+        (``skinned``: the ``SKINNED`` build, its joints read from the joint palette)."""
+        program = self._casters.get((build, cutout, skinned))
         if program is None:
             defines = dict(build)
             if cutout:
                 defines["ALPHA_CUTOFF"] = "1"
             if cutout == "vertex alpha":
                 defines["VERTEX_ALPHA"] = "1"
+            if skinned:
+                defines["SKINNED"] = "1"
             geometry = "shadow_layered.geom" if "LAYERED" in defines else None
-            program = self._casters[(build, cutout)] = self.renderer.shaders.program(
+            program = self._casters[(build, cutout, skinned)] = self.renderer.shaders.program(
                 "shadow.vert", "shadow.frag", geometry, defines=defines)
             program["Camera"].binding = CAMERA_BINDING
             if "albedo_map" in program:
                 program["albedo_map"].value = ALBEDO_UNIT
+            if "joint_palette" in program:
+                program["joint_palette"].value = JOINT_PALETTE_UNIT
         return program
 
     def _draw_casters(self, view: View | None, build: tuple[tuple[str, str], ...],
@@ -637,7 +644,8 @@ class ShadowMaps:
             renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
         whole = self._caster_program(build, False)
-        cutouts: dict[bool | str, moderngl.Program] = {}  # made and given ``uniforms`` at the first cutout
+        # The other builds (a cutout's, a skinned mesh's), made and given ``uniforms`` at their first batch.
+        others: dict[tuple[bool | str, bool], moderngl.Program] = {}
         for name, value in (uniforms or {}).items():
             _set_uniform(whole, name, value)
         stats = renderer.stats
@@ -646,18 +654,22 @@ class ShadowMaps:
                 if not batch.count:
                     continue
                 cutoff = batch.alpha_cutoff
-                if cutoff is None:
+                if cutoff is None and not batch.skinned:
                     batch.draw(whole)
                 else:
-                    kind = "vertex alpha" if batch.mesh.has_alpha else True
-                    program = cutouts.get(kind)
+                    kind = False if cutoff is None else "vertex alpha" if batch.mesh.has_alpha else True
+                    program = others.get((kind, batch.skinned))
                     if program is None:
-                        program = cutouts[kind] = self._caster_program(build, kind)
+                        program = others[kind, batch.skinned] = self._caster_program(build, kind, batch.skinned)
                         for name, value in (uniforms or {}).items():
                             _set_uniform(program, name, value)
-                    bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,
-                                 ALBEDO_UNIT)
-                    program["alpha_cutoff"].value = cutoff
+                    if cutoff is not None:
+                        bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,
+                                     ALBEDO_UNIT)
+                        program["alpha_cutoff"].value = cutoff
+                    if batch.skinned:  # its joints: its row of the palette
+                        bind_texture(ctx, renderer.joint_palettes.texture, JOINT_PALETTE_UNIT)
+                        program["joint_row"].value = batch.joint_row
                     batch.draw(program)
                 stats.shadow_draw_calls += 1
         finally:

@@ -4,7 +4,8 @@ and a Transform that a ray hits (for picking, aiming, placing things on walls).
 The test is Möller–Trumbore ray/triangle intersection, vectorised with numpy over every
 triangle of every candidate entity at once (one pass of array arithmetic per ray, no Python
 loop over triangles).  Triangles are kept in world space in a per-entity cache; an entry is
-rebuilt only when its entity's world matrix or mesh changed:
+rebuilt only when its entity's world matrix, mesh or pose (a skinned mesh's ``Skin``: its
+triangles where the joints bend them, as drawn) changed:
 
 * the TransformSystem writes a new ``Transform.world`` matrix object whenever it recomputes a
   pose (its ``world.frame.moved`` set), so an entry keyed on that object's identity goes
@@ -31,8 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, Transform
+from components import MeshRef, Skin, Transform
 from engine.core.errors import SpeculumError
+from engine.core.skinning import skin_positions
 from engine.core.transforms import MAX_PARENT_HOPS, current_world_matrix
 from engine.core.world import World
 
@@ -70,6 +72,7 @@ class _Entry:
     e1: np.ndarray
     e2: np.ndarray
     normal: np.ndarray  # (n, 3) unit geometric normals (zero for degenerate triangles)
+    pose: np.ndarray | None = None  # a skinned mesh's Skin.joint_matrices they were bent by (None: as modelled)
 
 
 class RayCaster:
@@ -165,10 +168,13 @@ class RayCaster:
             entry = self._entries.get(entity)
             key = self._world_key(entity, transform, written)
             mesh = mesh_ref.mesh
-            if entry is not None and entry.mesh_id == mesh.id and _same_key(entry.world_key, key):
+            skin = world.try_get(entity, Skin) if mesh.skinned else None
+            pose = skin.joint_matrices if skin is not None else None  # (a new array each pose: Skin copies it)
+            if entry is not None and entry.mesh_id == mesh.id and _same_key(entry.world_key, key) \
+                    and entry.pose is pose:
                 continue
             matrix = _matrix_of(key)
-            self._entries[entity] = _build(mesh, matrix, mesh.id, key)
+            self._entries[entity] = _build(mesh, matrix, mesh.id, key, pose)
             self.rebuilds += 1
             dirty = True
         gone = [entity for entity in self._entries if entity not in present]
@@ -242,8 +248,9 @@ def _matrix_of(key: object) -> np.ndarray:
     return np.array(columns, np.float64).T
 
 
-def _build(mesh, matrix: np.ndarray, mesh_id: int, key: object) -> _Entry:
-    positions = np.asarray(mesh.positions, np.float64)
+def _build(mesh, matrix: np.ndarray, mesh_id: int, key: object, pose: np.ndarray | None = None) -> _Entry:
+    positions = np.asarray(mesh.positions, np.float64) if pose is None else \
+        skin_positions(mesh.positions, mesh.joints, mesh.weights, pose)  # where its Skin bends it, as drawn
     world = positions @ matrix[:3, :3].T + matrix[:3, 3]
     tri = world[np.asarray(mesh.indices)]
     v0 = np.ascontiguousarray(tri[:, 0])
@@ -252,4 +259,4 @@ def _build(mesh, matrix: np.ndarray, mesh_id: int, key: object) -> _Entry:
     cross = np.cross(e1, e2)
     length = np.linalg.norm(cross, axis=1)
     normal = np.divide(cross, length[:, None], out=np.zeros_like(cross), where=length[:, None] > 0.0)
-    return _Entry(mesh_id, key, v0, e1, e2, normal)
+    return _Entry(mesh_id, key, v0, e1, e2, normal, pose)

@@ -1,0 +1,59 @@
+"""A skinned mesh's pose: the matrices its joints bend it by.
+
+A mesh with joints and weights a vertex (``Mesh.joints``, ``Mesh.weights``: a character's
+body, a rope, a flag) is bent by the ``Skin`` on its entity: ``joint_matrices`` holds one
+4 x 4 matrix a joint (numpy, (J, 4, 4), points as columns: ``M @ (x, y, z, 1)``), each the
+joint's pose times its inverse bind matrix, in the mesh's own space (the identity: the joint
+where the mesh was modelled).  The GPU blends each vertex's joints by its weights in every
+view and shadow map (``shaders/include/skinning.glsl``; ``engine/core/skinning.py`` the same
+sum on arrays).  A model file's skinned parts get theirs from the file, posed by their
+``Animation`` each frame (``systems/model_system.py``); a game may give its own.
+
+Assign a new array to pose it (``skin.joint_matrices = posed``): an array edited in place is
+not seen until ``skin.touch()``.  At most ``MAX_JOINTS`` joints; the mesh's highest joint
+must have a matrix (checked when either is given: ``engine/rules/skin_rules.py``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from components.limits import MAX_JOINTS
+from components.tracking import ComponentValueError, TrackedComponent
+
+MAX_JOINT_VALUE = 1e18  # a matrix entry past this leaves float32 once multiplied out
+
+
+def _identity() -> np.ndarray:
+    return np.eye(4, dtype=np.float32)[None]
+
+
+@dataclass(eq=False)
+class Skin(TrackedComponent):
+    """The joint matrices (J, 4, 4) bending this entity's skinned mesh (see the module)."""
+
+    SHAREABLE = False  # one entity's pose
+    joint_matrices: np.ndarray = field(default_factory=_identity)
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name != "joint_matrices":
+            return value
+        matrices = np.asarray(value) if isinstance(value, (np.ndarray, list, tuple)) else None
+        if matrices is None or not np.issubdtype(matrices.dtype, np.number) or matrices.ndim != 3 \
+                or matrices.shape[1:] != (4, 4) or not 1 <= len(matrices) <= MAX_JOINTS:
+            shape = getattr(matrices, "shape", type(value).__name__)
+            raise ComponentValueError(f"Skin.joint_matrices must be 1 to {MAX_JOINTS} (MAX_JOINTS) 4x4 matrices, a "
+                                      f"numpy array of shape (J, 4, 4), got {shape}")
+        if not np.isfinite(matrices).all() or np.abs(matrices).max() > MAX_JOINT_VALUE:
+            raise ComponentValueError(f"Skin.joint_matrices must be finite, within +-{MAX_JOINT_VALUE:g}")
+        if not np.allclose(matrices[:, 3], (0.0, 0.0, 0.0, 1.0), atol=1e-5):
+            raise ComponentValueError("Skin.joint_matrices must be affine (each matrix's bottom row 0, 0, 0, 1; "
+                                      "points are columns: M @ (x, y, z, 1))")
+        matrices = np.array(matrices, np.float32)  # its own copy: an edit of the caller's array changes nothing
+        world = getattr(self, "_world_ref", None)
+        if world is not None:
+            for entity in self._entities:
+                world.check_invariants(entity, Skin, joint_matrices=matrices)
+        return matrices

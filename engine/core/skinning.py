@@ -1,0 +1,92 @@
+"""Linear blend skinning: a vertex moved by up to four joints, each weighing its share.
+
+A skinned mesh (``Mesh.joints``, ``Mesh.weights``: glTF's JOINTS_0 and WEIGHTS_0) is bent by
+its ``Skin``'s joint matrices: each one a joint's pose times its inverse bind matrix, in the
+mesh's own space, so a joint at rest gives the identity.  A vertex goes to
+``sum_i weight_i x joint_matrix[joint_i] x position`` (its normal by the inverse transpose of
+that blend), as every real-time engine since Quake III's MD4 has drawn characters.  The GPU
+does it in ``shaders/include/skinning.glsl`` for every view and shadow map; this module is
+the same sum on arrays, for what the CPU needs: a ray cast against the posed triangles, and
+the box that holds the pose (what culling and the shadow maps' redraws read).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from components.limits import MAX_JOINTS
+
+__all__ = ["INFLUENCES", "MAX_JOINTS", "blend_matrices", "joint_boxes", "posed_box", "skin_normals",
+           "skin_positions", "strongest_influences"]
+
+INFLUENCES = 4              # joints a vertex may follow (glTF's JOINTS_0: more are folded into the four largest)
+
+
+def blend_matrices(joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """Each vertex's blended matrix (V, 4, 4): its joints' matrices weighed by its weights."""
+    return np.einsum("vi,virc->vrc", weights.astype(np.float64), matrices.astype(np.float64)[joints])
+
+
+def skin_positions(positions: np.ndarray, joints: np.ndarray, weights: np.ndarray,
+                   matrices: np.ndarray) -> np.ndarray:
+    """Where each vertex goes (V, 3, float64) under the joint ``matrices`` (J, 4, 4)."""
+    blended = blend_matrices(joints, weights, matrices)
+    return np.einsum("vrc,vc->vr", blended[:, :3, :3], positions.astype(np.float64)) + blended[:, :3, 3]
+
+
+def skin_normals(normals: np.ndarray, joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """Each vertex's normal (V, 3, unit) under the blend: its inverse transpose, as the shader."""
+    linear = blend_matrices(joints, weights, matrices)[:, :3, :3]
+    turned = np.einsum("vrc,vc->vr", np.linalg.inv(linear).transpose(0, 2, 1), normals.astype(np.float64))
+    return turned / np.maximum(np.linalg.norm(turned, axis=1, keepdims=True), 1e-30)
+
+
+def joint_boxes(positions: np.ndarray, joints: np.ndarray, weights: np.ndarray,
+                joint_count: int) -> np.ndarray:
+    """For each joint (``joint_count``), the box (2, 3) of the vertices it moves at all (a
+    weight above 0); NaN for a joint that moves none.  A posed vertex lies in the convex
+    hull of its joints' images of it (the weights are non-negative and sum to 1), so the
+    union of each joint's box placed by its matrix holds the whole pose (``posed_box``)."""
+    boxes = np.full((joint_count, 2, 3), np.nan)
+    used = weights > 0.0
+    flat_joints = joints[used]
+    flat_points = np.repeat(positions[:, None, :], joints.shape[1], axis=1)[used].astype(np.float64)
+    if len(flat_joints):
+        lo = np.full((joint_count, 3), np.inf)
+        hi = np.full((joint_count, 3), -np.inf)
+        np.minimum.at(lo, flat_joints, flat_points)
+        np.maximum.at(hi, flat_joints, flat_points)
+        moving = np.isfinite(lo[:, 0])
+        boxes[moving, 0], boxes[moving, 1] = lo[moving], hi[moving]
+    return boxes
+
+
+def posed_box(boxes: np.ndarray, matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box (lo, hi) holding a pose: each joint's box (``joint_boxes``) placed by its
+    matrix, axis by axis (the lower of ``lo_c x M[r][c]`` and ``hi_c x M[r][c]`` summed, plus the
+    translation), and their union."""
+    moving = ~np.isnan(boxes[:, 0, 0])  # (matrices past the mesh's highest joint move nothing)
+    boxes, placed = boxes[moving], matrices[: len(moving)].astype(np.float64)[moving]
+    if not len(boxes):
+        return np.zeros(3), np.zeros(3)
+    terms = placed[:, None, :3, :3] * boxes[:, :, None, :]  # [joint, lo/hi, row, column]
+    low = np.minimum(terms[:, 0], terms[:, 1]).sum(axis=2) + placed[:, :3, 3]
+    high = np.maximum(terms[:, 0], terms[:, 1]).sum(axis=2) + placed[:, :3, 3]
+    return low.min(axis=0), high.max(axis=0)
+
+
+def strongest_influences(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A vertex's ``INFLUENCES`` largest weights and their joints, the weights made to sum to 1
+    (glTF's JOINTS_1 and WEIGHTS_1 sets fold in here; Unity's "four bones" does the same);
+    fewer columns are padded with joint 0 at weight 0."""
+    joints = np.asarray(joints)
+    weights = np.asarray(weights, np.float64)
+    if joints.shape[1] < INFLUENCES:
+        pad = INFLUENCES - joints.shape[1]
+        joints = np.hstack([joints, np.zeros((len(joints), pad), joints.dtype)])
+        weights = np.hstack([weights, np.zeros((len(weights), pad))])
+    if joints.shape[1] > INFLUENCES:
+        order = np.argsort(-weights, axis=1, kind="stable")[:, :INFLUENCES]
+        joints = np.take_along_axis(joints, order, axis=1)
+        weights = np.take_along_axis(weights, order, axis=1)
+    total = weights.sum(axis=1, keepdims=True)
+    return joints, weights / np.where(total > 0.0, total, 1.0)
