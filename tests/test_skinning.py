@@ -1,0 +1,390 @@
+"""Skinned meshes: a mesh bent by its joints (``Mesh.joints``/``weights``, ``Skin``), drawn
+in every view and shadow map as the sum written out here by hand, from a glTF's skins and
+clips, and refused plainly where the data cannot be drawn."""
+from __future__ import annotations
+
+import base64
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    AmbientOcclusion,
+    Animation,
+    ComponentValueError,
+    DirectionalLight,
+    FromModel,
+    Material,
+    MeshRef,
+    Mirror,
+    ScreenReflections,
+    Skin,
+    Transform,
+)
+from engine.assets.mesh import Mesh, load_model_file, plane, quad
+from engine.assets.models import spawn_model
+from engine.core.errors import AssetError
+from engine.core.world import World
+from engine.rules.raycast import raycast
+from tests.support import look_from
+from tests.test_materials_from_files import write_glb
+from tests.test_model_variants import edit_glb
+
+RED = (0.8, 0.25, 0.15, 1.0)
+
+
+def bar_arrays(segments: int = 8, height: float = 2.0, half: float = 0.15):
+    """A square tube along +y from 0 to ``height`` (four flat sides, open ends): positions,
+    normals, uvs, triangles, and each vertex's weight on the elbow joint (0 below y = 0.75,
+    1 above y = 1.25, linear between)."""
+    positions, normals, uvs, triangles = [], [], [], []
+    for n, t in (((1, 0, 0), (0, 0, -1)), ((0, 0, 1), (1, 0, 0)), ((-1, 0, 0), (0, 0, 1)), ((0, 0, -1), (-1, 0, 0))):
+        n, t = np.array(n, float), np.array(t, float)
+        base = len(positions)
+        for i in range(segments + 1):
+            for s in (-1.0, 1.0):
+                positions.append(n * half + t * half * s + (0.0, height * i / segments, 0.0))
+                normals.append(n)
+                uvs.append((0.5 + 0.5 * s, i / segments))
+        for i in range(segments):
+            a = base + 2 * i
+            triangles += [(a, a + 1, a + 3), (a, a + 3, a + 2)]
+    positions = np.array(positions)
+    elbow = np.clip((positions[:, 1] - 0.75) / 0.5, 0.0, 1.0)
+    return positions, np.array(normals), np.array(uvs), np.array(triangles), elbow
+
+
+def skinned_bar() -> Mesh:
+    positions, normals, uvs, triangles, elbow = bar_arrays()
+    return Mesh(positions, normals, uvs, triangles, name="arm", joints=np.tile([0, 1], (len(positions), 1)),
+                weights=np.stack([1.0 - elbow, elbow], axis=1))
+
+
+def elbow_matrix(angle: float) -> np.ndarray:
+    """The elbow joint's matrix: turned by ``angle`` about +z at (0, 1, 0) (its pose, a turn
+    at its place, times its inverse bind matrix, a move back to the origin)."""
+    c, s = math.cos(angle), math.sin(angle)
+    turn = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], float)
+    there, back = np.eye(4), np.eye(4)
+    there[1, 3], back[1, 3] = 1.0, -1.0
+    return there @ turn @ back
+
+
+def bent_by_hand(angle: float, at: np.ndarray | None = None) -> Mesh:
+    """The bar bent at the elbow, vertex by vertex: (1 - w) x p + w x (E p), its normal by the
+    inverse transpose of the blend (the test's own sum, not the engine's)."""
+    positions, normals, uvs, triangles, elbow = bar_arrays()
+    moved = elbow_matrix(angle) if at is None else at
+    out_p, out_n = [], []
+    for p, n, w in zip(positions, normals, elbow, strict=True):
+        blend = (1.0 - w) * np.eye(4) + w * moved
+        out_p.append((blend @ np.append(p, 1.0))[:3])
+        turned = np.linalg.inv(blend[:3, :3]).T @ n
+        out_n.append(turned / np.linalg.norm(turned))
+    return Mesh(np.array(out_p), np.array(out_n), uvs, triangles, name="by hand")
+
+
+def arm_glb(path: Path, weights_kind: str = "float") -> Path:
+    """The bar as a glTF: node 0 the skinned mesh (its own transform, a move of 5 along x,
+    left out as glTF says), node 1 the shoulder at the origin, node 2 the elbow at (0, 1, 0)
+    under it; skin 0 the two joints with their inverse bind matrices; clip "Bend" turns the
+    elbow a quarter about +z over 1 s.  ``weights_kind`` "normalized": WEIGHTS_0 as
+    normalised unsigned bytes (KHR_mesh_quantization's packing); "split": the elbow's
+    weight in a JOINTS_1/WEIGHTS_1 set, with a stray small weight on the shoulder."""
+    positions, normals, uvs, triangles, elbow = bar_arrays()
+    write_glb(path, Mesh(positions, normals, uvs, triangles, name="arm"),
+              {"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": list(RED)}}, [])
+    count = len(positions)
+    joints = np.zeros((count, 4), np.uint8)
+    joints[:, 1] = 1
+    weights = np.zeros((count, 4), np.float32)
+    weights[:, 0], weights[:, 1] = 1.0 - elbow, elbow
+    sets = [(joints, weights)]
+    if weights_kind == "normalized":
+        sets = [(joints, np.round(weights * 255.0).astype(np.uint8))]
+    elif weights_kind == "split":
+        first = np.zeros((count, 4), np.float32)
+        first[:, 0] = 1.0 - elbow
+        second_joints = np.zeros((count, 4), np.uint8)
+        second_weights = np.zeros((count, 4), np.float32)
+        second_joints[:, 0], second_weights[:, 0] = 1, elbow
+        sets = [(np.zeros((count, 4), np.uint8), first), (second_joints, second_weights)]
+    binds = np.stack([np.eye(4), np.linalg.inv(np.array([[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1.0]]))])
+    quarter = [0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)]
+    arrays = [*(a for pair in sets for a in pair), binds.transpose(0, 2, 1).astype(np.float32).reshape(2, 16),
+              np.array([0.0, 1.0], np.float32), np.array([[0, 0, 0, 1], quarter], np.float32)]
+
+    def change(doc: dict) -> None:
+        blob = b"".join(a.tobytes() for a in arrays)
+        doc["buffers"].append({"byteLength": len(blob),
+                               "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
+        first, offset = len(doc["accessors"]), 0
+        for array in arrays:
+            doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": offset,
+                                       "byteLength": array.nbytes})
+            width = 1 if array.ndim == 1 else array.shape[1]
+            component = {np.dtype(np.uint8): 5121, np.dtype(np.float32): 5126}[array.dtype]
+            doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": component,
+                                     "count": len(array), "type": {1: "SCALAR", 4: "VEC4", 16: "MAT4"}[width],
+                                     **({"normalized": True} if weights_kind == "normalized" and array.dtype == np.uint8
+                                        and array is arrays[1] else {}),
+                                     **({"min": [float(array.min())], "max": [float(array.max())]}
+                                        if array.ndim == 1 else {})})
+            offset += array.nbytes
+        attributes = doc["meshes"][0]["primitives"][0]["attributes"]
+        for n in range(len(sets)):
+            attributes[f"JOINTS_{n}"], attributes[f"WEIGHTS_{n}"] = first + 2 * n, first + 2 * n + 1
+        a = first + 2 * len(sets)
+        doc["nodes"] = [{"name": "arm", "mesh": 0, "skin": 0, "translation": [5.0, 0.0, 0.0]},
+                        {"name": "shoulder", "children": [2]},
+                        {"name": "elbow", "translation": [0.0, 1.0, 0.0]}]
+        doc["scenes"] = [{"nodes": [0, 1]}]
+        doc["skins"] = [{"name": "rig", "joints": [1, 2], "inverseBindMatrices": a}]
+        doc["animations"] = [{"name": "Bend", "samplers": [{"input": a + 1, "output": a + 2}],
+                              "channels": [{"sampler": 0, "target": {"node": 2, "path": "rotation"}}]}]
+    return edit_glb(path, change)
+
+
+def lit(build, eye=(0.6, 1.4, 5.0), target=(0.3, 1.0, 0.0), fov=50.0, camera=()):
+    """A floor under a sun (with shadows), the camera at ``eye`` (with the components
+    ``camera``), then ``build``."""
+    def made(world):
+        eye_entity = look_from(world, eye, target, fov=fov)
+        for component in camera:
+            world.add_component(eye_entity, component)
+        world.spawn(DirectionalLight(direction=(-0.4, -1.0, -0.6), intensity=2.0))
+        world.spawn(Transform(), MeshRef(plane(8, 8)), Material(color=(0.6, 0.6, 0.6, 1.0)))
+        build(world)
+    return made
+
+
+def frame_of(scene, build, size=(160, 120), frames=2) -> np.ndarray:
+    runner = scene(build, size)
+    for _ in range(frames - 1):
+        runner.frame()
+    return runner.frame().astype(int)
+
+
+def same_picture(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal but for rounding at a few edge pixels (the GPU's float32 blend against float64)."""
+    differ = np.abs(a - b).max(axis=-1) > 12
+    return differ.sum() <= 0.002 * differ.size
+
+
+def test_a_skin_bends_the_mesh_as_the_sum_written_out(scene):
+    """The bar bent a quarter at the elbow by its Skin, seen directly, in a mirror behind it
+    and by its shadow on the floor, draws what the bar bent vertex by vertex does."""
+    def mirror(world):
+        world.spawn(Transform(position=(0.0, 1.0, -1.5)), MeshRef(quad(4.0, 2.5)), Mirror())
+
+    def skinned(world):
+        mirror(world)
+        world.spawn(Transform(), MeshRef(skinned_bar()), Material(color=RED),
+                    Skin(np.stack([np.eye(4), elbow_matrix(math.pi / 2)])))
+
+    def by_hand(world):
+        mirror(world)
+        world.spawn(Transform(), MeshRef(bent_by_hand(math.pi / 2)), Material(color=RED))
+
+    def straight(world):
+        mirror(world)
+        world.spawn(Transform(), MeshRef(skinned_bar()), Material(color=RED))
+
+    bent, hand, modelled = (frame_of(scene, lit(b)) for b in (skinned, by_hand, straight))
+    assert same_picture(bent, hand)
+    assert not same_picture(bent, modelled)  # (without a Skin: drawn as modelled, straight up)
+    red = (bent[..., 0] > bent[..., 2] + 60)
+    assert red.sum() > 300  # the bar, its reflection and no black frame
+    # The shadow: the floor darker where the bent arm's shadow falls than the straight one's
+    # leaves it, in both frames alike (the caster build bends it too).
+    shade = np.abs(bent - modelled).max(axis=-1) > 20
+    assert (shade & ~red & ~(modelled[..., 0] > modelled[..., 2] + 60)).sum() > 20
+
+
+def test_the_screen_passes_see_the_pose(scene):
+    """With ambient occlusion (its depth-and-normals pass) and screen reflections (the
+    builds that write what they read) on the camera, the bent arm and its occlusion on the
+    floor are drawn as the bar bent by hand."""
+    def extras():  # (occlusion dimming the sun too: the arm's on the floor is plain to see)
+        return (AmbientOcclusion(radius=1.0, intensity=2.0, direct_light=1.0, half_resolution=False),
+                ScreenReflections())
+
+    down = 2.4  # the forearm bent down to near the floor
+    bent = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(skinned_bar()), Material(color=RED),
+                                                  Skin(np.stack([np.eye(4), elbow_matrix(down)]))), camera=extras()))
+    hand = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(bent_by_hand(down)), Material(color=RED)),
+                               camera=extras()))
+    plain = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(bent_by_hand(down)), Material(color=RED))))
+    assert same_picture(bent, hand)
+    assert (np.abs(hand - plain).max(axis=-1) > 40).sum() > 200   # (the occlusion is there to see)
+
+
+def test_a_pose_reaching_past_the_mesh_as_modelled_is_held_by_its_box(scene):
+    """The instance's world box (what per-view culling, the probes' empty faces and the sun's
+    map fit go by) holds every vertex of the bar bent by hand, though the bent forearm reaches
+    past the bar as modelled; and the arm is drawn where only the forearm is in view."""
+    holder = {}
+
+    def skinned(world):
+        holder["arm"] = world.spawn(Transform(position=(0.0, 0.0, 0.5)), MeshRef(skinned_bar()),
+                                    Material(color=RED), Skin(np.stack([np.eye(4), elbow_matrix(-math.pi / 2)])))
+
+    runner = scene(lit(skinned, eye=(0.8, 1.0, 2.5), target=(0.8, 1.0, 0.0), fov=20.0), (64, 48))
+    runner.frame()
+    frame = runner.frame().astype(int)
+    assert (frame[..., 0] > frame[..., 2] + 60).sum() > 100
+    (batch,) = [b for b in runner.engine.renderer.batches.values() if b.skinned]
+    lo, hi = batch.row_boxes[0]
+    placed = bent_by_hand(-math.pi / 2).positions + (0.0, 0.0, 0.5)
+    assert (placed >= lo - 1e-5).all() and (placed <= hi + 1e-5).all()
+    assert hi[0] > 0.99   # (the bar as modelled stops at x = 0.15)
+    level_lo, level_hi = runner.engine.renderer.level_bounds()
+    assert (placed >= level_lo - 1e-5).all() and (placed <= level_hi + 1e-5).all()
+
+
+def test_the_pose_changes_from_frame_to_frame_and_its_shadow_follows(scene):
+    """A Skin given new matrices is drawn bent the new way in the next frame (its shadow too)."""
+    holder = {}
+
+    def skinned(world):
+        holder["arm"] = world.spawn(Transform(), MeshRef(skinned_bar()), Material(color=RED),
+                                    Skin(np.stack([np.eye(4), elbow_matrix(0.0)])))
+
+    runner = scene(lit(skinned), (160, 120))
+    runner.frame()
+    straight = runner.frame().astype(int)
+    runner.world.get(holder["arm"], Skin).joint_matrices = np.stack([np.eye(4), elbow_matrix(math.pi / 2)])
+    bent = runner.frame().astype(int)
+    hand = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(bent_by_hand(math.pi / 2)),
+                                                  Material(color=RED))))
+    assert same_picture(bent, hand) and not same_picture(bent, straight)
+
+
+def test_a_models_skin_plays_its_clip(scene, tmp_path):
+    """A glTF's skinned mesh: at rest where its joints' rest pose puts it (its node's own move
+    of 5 left out), and at 0.5 s into "Bend" the elbow turned an eighth, drawn as the bar bent
+    by hand there."""
+    path = arm_glb(tmp_path / "arm.glb")
+    loaded = load_model_file(path)
+    (part,) = loaded.parts
+    assert part.skin == 0 and part.mesh.skinned and [s.joints for s in loaded.skins] == [[1, 2]]
+    world = World("arm")
+    root = spawn_model(world, path)
+    ((entity, _),) = list(world.query_one(FromModel))
+    assert world.get(entity, Transform).position == glm.vec3(0.0)   # the skinned node's own move is left out
+    np.testing.assert_allclose(world.get(entity, Skin).joint_matrices, np.stack([np.eye(4)] * 2), atol=1e-6)
+    world.add_component(root, Animation(clip="Bend", time=0.5, playing=False))
+    from systems.model_system import ModelSystem
+    ModelSystem(world).process(1 / 60)
+    np.testing.assert_allclose(world.get(entity, Skin).joint_matrices[1], elbow_matrix(math.pi / 4), atol=1e-5)
+
+    def animated(world):
+        model_root = spawn_model(world, path)
+        world.add_component(model_root, Animation(clip="Bend", time=0.5, playing=False))
+
+    bent = frame_of(scene, lit(animated), frames=3)
+    hand = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(bent_by_hand(math.pi / 4)), Material(color=RED))))
+    assert same_picture(bent, hand)
+    assert (bent[..., 0] > bent[..., 2] + 60).sum() > 150
+
+
+@pytest.mark.parametrize("kind", ["normalized", "split"])
+def test_packed_and_split_weights_are_read_as_the_file_means(tmp_path, kind):
+    """Normalised byte weights are read as fractions of 255; a second JOINTS/WEIGHTS set
+    folds into the four strongest joints, the weights made to sum to 1."""
+    (part,) = load_model_file(arm_glb(tmp_path / "arm.glb", kind)).parts
+    _, _, _, _, elbow = bar_arrays()
+    mesh = part.mesh
+    np.testing.assert_allclose(mesh.weights.sum(axis=1), 1.0, atol=1e-6)
+    on_elbow = np.where(mesh.joints == 1, mesh.weights, 0.0).sum(axis=1)
+    np.testing.assert_allclose(on_elbow, elbow, atol=1.0 / 255.0 if kind == "normalized" else 1e-6)
+
+
+def test_a_ray_hits_the_arm_where_it_is_bent(ctx):
+    world = World("aim")
+    world.spawn(Transform(), MeshRef(skinned_bar()), Skin(np.stack([np.eye(4), elbow_matrix(-math.pi / 2)])))
+    from systems.transform_system import TransformSystem
+    TransformSystem(world).process(0.0)
+    hit = raycast(world, (0.8, 1.0, 5.0), (0.0, 0.0, -1.0))   # where the bent forearm lies along +x
+    assert hit is not None and hit.distance == pytest.approx(5.0 - 0.15, abs=1e-4)
+    assert raycast(world, (0.0, 1.9, 5.0), (0.0, 0.0, -1.0)) is None   # where the straight one stood
+
+
+def test_skins_given_and_taken_keep_their_rows_and_release_the_palette(scene):
+    """Five arms (past the palette's first rows), each bent its own way, each drawn as bent by
+    hand; all deleted, the palette texture and their batches go."""
+    angles = [0.3, -0.6, 0.9, -1.2, 1.5]
+
+    def arms(world, skinned):
+        for i, angle in enumerate(angles):
+            at = Transform(position=(1.2 * i - 2.4, 0.0, 0.0))
+            if skinned:
+                world.spawn(at, MeshRef(skinned_bar()), Material(color=RED),
+                            Skin(np.stack([np.eye(4), elbow_matrix(angle)])))
+            else:
+                world.spawn(at, MeshRef(bent_by_hand(angle)), Material(color=RED))
+
+    view = {"eye": (0.0, 1.5, 7.0), "target": (0.0, 1.0, 0.0)}
+    runner = scene(lit(lambda w: arms(w, True), **view), (200, 100))
+    runner.frame()
+    bent = runner.frame().astype(int)
+    hand = frame_of(scene, lit(lambda w: arms(w, False), **view), (200, 100))
+    assert same_picture(bent, hand)
+    renderer = runner.engine.renderer
+    assert len(renderer.joint_palettes) == 5 and renderer.resource_counts()["joint_palettes"] == 1
+    for entity, _ in list(runner.world.query_one(Skin)):
+        runner.world.delete_entity(entity)
+    runner.frame()
+    assert len(renderer.joint_palettes) == 0 and renderer.resource_counts()["joint_palettes"] == 0
+    assert not [b for b in renderer.batches.values() if b.skinned]
+
+
+def test_bad_skins_are_refused_when_given():
+    world = World("refusals")
+    arm = skinned_bar()
+    with pytest.raises(ComponentValueError, match=r"shape \(J, 4, 4\)"):
+        Skin(np.eye(4))
+    with pytest.raises(ComponentValueError, match="affine"):
+        Skin(np.stack([np.eye(4), np.ones((4, 4))]))
+    with pytest.raises(ComponentValueError, match="finite"):
+        Skin(np.full((1, 4, 4), np.nan))
+    with pytest.raises(ComponentValueError, match=r"holds 1 matrices, but mesh 'arm' names joints up to 1"):
+        world.spawn(Transform(), MeshRef(arm), Skin())
+    with pytest.raises(ComponentValueError, match="has no joints and weights a vertex"):
+        world.spawn(Transform(), MeshRef(quad(1, 1)), Skin())
+    entity = world.spawn(Transform(), MeshRef(arm), Skin(np.stack([np.eye(4)] * 2)))
+    with pytest.raises(ComponentValueError, match="holds 1 matrices"):
+        world.get(entity, Skin).joint_matrices = np.eye(4)[None]
+    flat = quad(1.0, 1.0)
+    sheet = world.spawn(Transform(), Skin(), MeshRef(Mesh(flat.positions, flat.normals, flat.uvs, flat.indices,
+                                                          joints=np.zeros((4, 1), int), weights=np.ones((4, 1)))))
+    with pytest.raises(ComponentValueError, match="a Skin on a Mirror"):
+        world.add_component(sheet, Mirror())
+    positions, normals, uvs, triangles, _ = bar_arrays()
+    with pytest.raises(AssetError, match="needs both joints and weights"):
+        Mesh(positions, normals, uvs, triangles, joints=np.zeros((len(positions), 4), int))
+    with pytest.raises(AssetError, match="weights summing to 0"):
+        Mesh(positions, normals, uvs, triangles, joints=np.zeros((len(positions), 4), int),
+             weights=np.zeros((len(positions), 4)))
+    with pytest.raises(AssetError, match=r"joints must be integers in 0..255"):
+        Mesh(positions, normals, uvs, triangles, joints=np.full((len(positions), 4), 300),
+             weights=np.ones((len(positions), 4)))
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda doc: doc["nodes"][0].update(skin=3), r"node 0 names skin 3, which the file does not have"),
+    (lambda doc: doc["skins"][0].update(joints=[1, 9]), r"skin 0 \('rig'\): names joint node 9"),
+    (lambda doc: doc["skins"][0].update(joints=[1, 2, 0]), r"inverseBindMatrices must be 3 MAT4"),
+    (lambda doc: doc["skins"][0].update(joints=list(range(300))), r"has 300 joints; .* at most 256"),
+    (lambda doc: doc["skins"][0].update(joints=[2]) or doc["skins"][0].pop("inverseBindMatrices"),
+     r"a vertex names joint 1 of skin 'rig', which has 1"),
+    (lambda doc: doc["meshes"][0]["primitives"][0]["attributes"].pop("WEIGHTS_0"),
+     r"node 0 is skinned \(skin 0\) but mesh 0's primitive 0 has no JOINTS_0 and WEIGHTS_0"),
+])
+def test_malformed_skins_in_a_file_are_refused_naming_them(tmp_path, change, message):
+    path = edit_glb(arm_glb(tmp_path / "arm.glb"), change)
+    with pytest.raises(AssetError, match=message):
+        load_model_file(path)
