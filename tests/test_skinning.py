@@ -388,3 +388,38 @@ def test_malformed_skins_in_a_file_are_refused_naming_them(tmp_path, change, mes
     path = edit_glb(arm_glb(tmp_path / "arm.glb"), change)
     with pytest.raises(AssetError, match=message):
         load_model_file(path)
+
+
+def test_a_level_places_the_skinned_model_the_editor_picks_it_and_a_save_keeps_the_model_alone(scene, tmp_path):
+    """A level file's skinned model with its clip: drawn bent (its part's id where the bent
+    forearm is), a click there selects the model, and the saved file holds the Model and its
+    Animation, not the part or its Skin, and loads to the same frame."""
+    from engine.assets.level_file import load_level, save_level
+    from shell.editor import Editor
+
+    arm_glb(tmp_path / "arm.glb")
+    text = ('[level]\nname = "gym"\n\n[[entity]]\nname = "eye"\n[entity.Transform]\nposition = [0.6, 1.4, 5.0]\n'
+            'rotation = { look = [-0.3, -0.4, -5.0] }\n[entity.Camera]\nfov_y = 50.0\n\n'
+            '[[entity]]\nname = "arm"\n[entity.Transform]\n[entity.Model]\nfile = "arm.glb"\n'
+            '[entity.Animation]\nclip = "Bend"\ntime = 1.0\nplaying = false\n')
+    (tmp_path / "gym.toml").write_text(text)
+    names: dict[str, int] = {}
+    runner = scene(lambda world: names.update(load_level(tmp_path / "gym.toml").spawn(world)), (160, 120))
+    runner.frame()
+    first = runner.frame().astype(int)
+    world = runner.world
+    ((part, _),) = list(world.query_one(FromModel))
+    np.testing.assert_allclose(world.get(part, Skin).joint_matrices[1], elbow_matrix(math.pi / 2), atol=1e-5)
+    column, row = runner.project((-0.6, 1.0, 0.15))   # on the forearm, bent to -x
+    ids = runner.ids()
+    assert ids[row, column] == part
+    assert ids[runner.project((0.0, 1.8, 0.15))[::-1]] != part   # where the straight arm would stand
+    editor = Editor(world, names=names, level_path=tmp_path / "gym.toml")
+    assert editor.pick(ids, None, column, row) == names["arm"]
+    save_level(world, tmp_path / "saved.toml", names)
+    saved = (tmp_path / "saved.toml").read_text()
+    assert "[entity.Model]" in saved and 'clip = "Bend"' in saved and "Skin" not in saved
+    assert saved.count("[[entity]]") == 2
+    again = scene(lambda w: load_level(tmp_path / "saved.toml").spawn(w), (160, 120))
+    again.frame()
+    assert same_picture(again.frame().astype(int), first)

@@ -6,8 +6,9 @@ A model's parts are placed by their nodes (``ModelPart.node``); the node tree
 (``NodeTree``: each node's parent and its own transform at rest) lets ``pose`` put every
 part where a clip puts its node at a time: the animated nodes' sampled translation, rotation
 and scale, the others at rest, multiplied down from the scene's roots.  ``Animation`` on a
-model's root plays one (``systems/model_system.py``).  Morph-target weights are left out (with
-a warning: the engine's meshes have no morph targets), as is skinning.
+model's root plays one (``systems/model_system.py``); a skinned part follows its joints' poses
+(``engine/assets/gltf_skins.py``).  Morph-target weights are left out (with a warning: the
+engine's meshes have no morph targets).
 """
 from __future__ import annotations
 
