@@ -16,8 +16,9 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import Material, MeshRef, Portal, PortalClone, Slice, Transform, Traveller
+from components import Material, MeshRef, Portal, PortalClone, Skin, Slice, Transform, Traveller
 from engine.core.portal_math import pair_transform, portal_plane
+from engine.core.skinning import posed_box
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.frame_rules import frame_rules, world_corners
@@ -31,8 +32,11 @@ class PortalSliceSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         portals = self._open_portals()
+        bent = world.changed(Skin)
         for entity, (_, mesh_ref, transform) in world.query(Traveller, MeshRef, Transform):
-            straddled = self._straddled(mesh_ref, current_world_matrix(world, transform), portals) if portals else None
+            skin = world.try_get(entity, Skin) if mesh_ref.mesh.skinned else None
+            straddled = self._straddled(mesh_ref, current_world_matrix(world, transform), portals, skin) \
+                if portals else None
             if straddled is None:
                 self._release(entity)
                 continue
@@ -41,6 +45,8 @@ class PortalSliceSystem(esper.Processor):
             clone = self.clones.get(entity)
             if clone is None or not world.exists(clone):
                 clone = self.clones[entity] = self._spawn_clone(entity, mesh_ref, portal)
+            elif skin is not None and entity in bent:  # bent as its source is, this frame
+                world.get(clone, Skin).joint_matrices = skin.joint_matrices
             clone_t = world.get(clone, Transform)
             position, rotation, scale = _decompose(carry * current_world_matrix(world, transform))
             clone_t.position, clone_t.rotation, clone_t.scale = position, rotation, scale
@@ -56,9 +62,12 @@ class PortalSliceSystem(esper.Processor):
                 for entity, partner in frame_rules(world).open_portals.items()]
 
     @staticmethod
-    def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals):
-        """(slice plane, carry, partner's plane, portal) of the first portal cutting the bounds."""
-        corners = world_corners(mesh_ref.mesh, model)
+    def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals, skin: Skin | None = None):
+        """(slice plane, carry, partner's plane, portal) of the first portal cutting the bounds
+        (a skinned mesh's as its ``skin`` bends it)."""
+        mesh = mesh_ref.mesh
+        bounds = posed_box(mesh.joint_boxes(), skin.joint_matrices) if skin is not None else None
+        corners = world_corners(mesh, model, bounds)
         for entity, portal, in_world, out_world in portals:
             plane = portal_plane(in_world)
             distances = corners[:, :3] @ np.array(glm.vec3(plane)) + plane.w
@@ -85,6 +94,9 @@ class PortalSliceSystem(esper.Processor):
         components = [Transform(), MeshRef(mesh_ref.mesh), PortalClone(source=source, portal=portal)]
         if material is not None:
             components.append(replace(material))  # its own copy: components belong to one entity
+        skin = world.try_get(source, Skin) if mesh_ref.mesh.skinned else None
+        if skin is not None:  # bent as its source is (kept so each frame its source's pose changes)
+            components.append(Skin(skin.joint_matrices))
         return world.spawn(*components)
 
     def _release(self, source: int) -> None:

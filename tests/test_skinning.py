@@ -423,3 +423,42 @@ def test_a_level_places_the_skinned_model_the_editor_picks_it_and_a_save_keeps_t
     again = scene(lambda w: load_level(tmp_path / "saved.toml").spawn(w), (160, 120))
     again.frame()
     assert same_picture(again.frame().astype(int), first)
+
+
+def test_a_skinned_traveller_comes_out_of_the_partner_bent_as_it_is(scene):
+    """The arm pushed elbow first into portal A: its clone beyond B carries its Skin, is drawn
+    bent there (its forearm's id where the bend puts it past B) and follows a new pose."""
+    from components import PortalClone, Traveller
+    from tests.test_portal_slice import SIZE, build_pair
+
+    ents: dict[str, int] = {}
+    into = glm.angleAxis(-math.pi / 2, glm.vec3(1.0, 0.0, 0.0))   # the bar's +y along -z, into A
+
+    def build(world):
+        build_pair(world, ents, (0.0, 3.0, 7.0), (0.0, 1.5, 0.0))
+        world.delete_entity(ents["bar"])
+        ents["arm"] = world.spawn(Transform(position=(-3.0, 1.5, 0.6), rotation=into), MeshRef(skinned_bar()),
+                                  Material(color=RED), Traveller(),
+                                  Skin(np.stack([np.eye(4), elbow_matrix(math.pi / 2)])))
+
+    def past_b(angle: float) -> glm.vec3:
+        """Where the forearm's middle (its top face) comes out in front of B: A's point
+        turned a half about +y and moved from A to B."""
+        local = glm.vec3(0.0, 1.0, 0.0) + 0.6 * glm.vec3(-math.sin(angle), math.cos(angle), 0.0) + glm.vec3(0, 0, 0.15)
+        at_a = glm.vec3(-3.0, 1.5, 0.6) + into * local
+        return glm.vec3(-at_a.x, at_a.y, -at_a.z)
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    world = runner.world
+    ((clone, _),) = list(world.query_one(PortalClone))
+    np.testing.assert_array_equal(world.get(clone, Skin).joint_matrices, world.get(ents["arm"], Skin).joint_matrices)
+    ids = runner.ids()
+    column, row = runner.project(past_b(math.pi / 2))
+    assert ids[row, column] == ents["arm"]
+    world.get(ents["arm"], Skin).joint_matrices = np.stack([np.eye(4), elbow_matrix(-math.pi / 2)])
+    runner.frame()
+    np.testing.assert_allclose(world.get(clone, Skin).joint_matrices[1], elbow_matrix(-math.pi / 2), atol=1e-6)
+    ids = runner.ids()
+    assert ids[runner.project(past_b(-math.pi / 2))[::-1]] == ents["arm"]
+    assert ids[row, column] != ents["arm"]   # (where the old bend put it: empty now)

@@ -68,14 +68,14 @@ def active_camera_parts(world: World) -> tuple[int, Camera, Transform] | None:
     return None if entity is None else (entity, world.get(entity, Camera), world.get(entity, Transform))
 
 
-def world_corners(mesh: Mesh, model: glm.mat4) -> np.ndarray:
-    """The 8 corners of ``mesh.bounds`` carried by ``model``: an (8, 4) float64 array of
-    homogeneous world-space rows.
+def world_corners(mesh: Mesh, model: glm.mat4, bounds: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """The 8 corners of ``mesh.bounds`` (or ``bounds``: a skinned mesh's pose's box) carried
+    by ``model``: an (8, 4) float64 array of homogeneous world-space rows.
 
     Order: x outer loop, then y, then z (corner ``i`` takes the high bound on x when bit 2
     is set, y bit 1, z bit 0).  The mirror outline relies on it: it picks the four corners
     on one side of the flat axis by that bit."""
-    lo, hi = mesh.bounds
+    lo, hi = mesh.bounds if bounds is None else bounds
     corners = np.array([(x, y, z, 1.0) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])],
                        np.float64)
     # glm's to_list() is column by column, so rows @ it is model * each corner.
