@@ -69,7 +69,7 @@ def door(path: Path, channels: list[dict] | None = None) -> Path:
 
 
 def door_matrix(world: World) -> glm.mat4:
-    ((entity, _),) = list(world.query_one(FromModel))
+    (entity,) = [entity for entity, _ in world.query_one(FromModel) if world.has(entity, MeshRef)]
     t = world.get(entity, Transform)
     return glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale)
 
@@ -227,3 +227,39 @@ def test_a_playing_clip_leaves_the_parts_it_does_not_move_unwritten(tmp_path):
     stage.process(0.1)
     assert {door_part, frame_part} <= world.changed(Transform)
     assert list(world.get(frame_part, Transform).position) == pytest.approx([-1.0, 0.0, 0.0])
+
+
+def test_a_clip_moves_the_lights_and_cameras_on_the_nodes_it_turns(tmp_path):
+    """A spot light, a sun and a camera on nodes under the hinge: half way through "Open" each
+    stands (and the sun shines) where the hinge's turn puts its node, the camera unscaled."""
+    from components import Camera, PointLight
+
+    path = door(tmp_path / "door.glb")
+
+    def change(doc: dict) -> None:
+        doc["extensionsUsed"] = ["KHR_lights_punctual"]
+        doc["extensions"] = {"KHR_lights_punctual": {"lights": [
+            {"type": "spot", "intensity": 5.0, "spot": {"outerConeAngle": 0.6}}, {"type": "directional"}]}}
+        doc["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}]
+        doc["nodes"][0]["children"] += [2, 3, 4]
+        doc["nodes"] += [{"name": "lamp", "translation": [0.5, 1.0, 0.0],
+                          "extensions": {"KHR_lights_punctual": {"light": 0}}},
+                         {"name": "sun", "extensions": {"KHR_lights_punctual": {"light": 1}}},
+                         {"name": "eye", "camera": 0, "translation": [0.0, 0.5, 2.0], "scale": [2.0, 2.0, 2.0]}]
+
+    edit_glb(path, change)
+    world, _ = played(path, "Open", [1.0], playing=True)
+    hinge = glm.translate(glm.vec3(1, 0, 0)) * glm.mat4_cast(glm.slerp(glm.quat(), QUARTER, 0.5))
+
+    def placed(kind) -> Transform:
+        ((entity, _),) = list(world.query_one(kind))
+        return world.get(entity, Transform)
+
+    lamp, eye = placed(PointLight), placed(Camera)
+    assert glm.distance(lamp.position, glm.vec3(hinge * glm.vec4(0.5, 1.0, 0.0, 1.0))) < 1e-5
+    assert abs(abs(glm.dot(lamp.rotation, glm.quat_cast(glm.mat3(hinge)))) - 1.0) < 1e-6   # turned with it
+    assert glm.distance(eye.position, glm.vec3(hinge * glm.vec4(0.0, 0.5, 2.0, 1.0))) < 1e-5
+    assert glm.distance(eye.scale, glm.vec3(1.0)) < 1e-6
+    ((_, sun),) = list(world.query_one(DirectionalLight))
+    expected = glm.normalize(glm.vec3(hinge * glm.vec4(0.0, 0.0, -1.0, 0.0)))
+    assert glm.distance(glm.normalize(sun.direction), expected) < 1e-5

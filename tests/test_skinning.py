@@ -462,3 +462,30 @@ def test_a_skinned_traveller_comes_out_of_the_partner_bent_as_it_is(scene):
     ids = runner.ids()
     assert ids[runner.project(past_b(-math.pi / 2))[::-1]] == ents["arm"]
     assert ids[row, column] != ents["arm"]   # (where the old bend put it: empty now)
+
+
+def test_a_skinned_mesh_with_vertex_colours_and_a_cutout_draws_as_bent_by_hand(scene):
+    """The fullest vertex inputs (the SKINNED build with a colour a vertex: all sixteen GL 4.1
+    promises) and a cutout's shadow build: the bar striped by its vertex colours, holes cut by
+    its texture, bent by its Skin, draws (and shadows) as the same bar bent by hand."""
+    from engine.assets.texture_data import TextureData
+
+    stripes = np.zeros((8, 8, 4), np.uint8)
+    stripes[..., :3] = 255
+    stripes[..., 3] = np.where(np.arange(8) % 4 == 0, 0, 255)[:, None]   # a row in four cut away
+    holes = TextureData(stripes, name="holes")
+    positions, normals, uvs, triangles, elbow = bar_arrays()
+    colours = np.where((positions[:, 1] * 2).astype(int)[:, None] % 2 == 0, (1.0, 0.9, 0.2, 1.0), (0.2, 0.5, 1.0, 1.0))
+    skinned = Mesh(positions, normals, uvs, triangles, name="striped", colors=colours,
+                   joints=np.tile([0, 1], (len(positions), 1)), weights=np.stack([1.0 - elbow, elbow], axis=1))
+    hand = bent_by_hand(math.pi / 2)
+    hand = Mesh(hand.positions, hand.normals, hand.uvs, hand.indices, name="striped by hand", colors=colours)
+
+    def cutout():
+        return Material(color=(1.0, 1.0, 1.0, 1.0), texture=holes, alpha_cutoff=0.5)
+
+    bent = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(skinned), cutout(),
+                                                  Skin(np.stack([np.eye(4), elbow_matrix(math.pi / 2)])))))
+    by_hand = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(hand), cutout())))
+    assert same_picture(bent, by_hand)
+    assert (np.abs(bent - bent[0, 0]).max(axis=-1) > 60).sum() > 300

@@ -35,6 +35,7 @@ class ModelCamera:
     far: float | None
     local: glm.mat4
     name: str
+    node: int | None = None  # its node's index (what an animation moves)
 
 
 def read_gltf_cameras(doc: dict | None) -> list[ModelCamera]:
@@ -65,6 +66,7 @@ def read_gltf_cameras(doc: dict | None) -> list[ModelCamera]:
             orthographic.append(_name(defined[which], which))
             continue
         camera.local = glm.mat4(*matrix.astype(np.float32).T.ravel())
+        camera.node = index
         found.append(camera)
     if orthographic:
         warnings.warn(f"orthographic cameras {orthographic} are left out (the engine's cameras are perspective)",

@@ -49,6 +49,7 @@ class ModelLight:
     outer_cone: float
     local: glm.mat4
     name: str
+    node: int | None = None  # its node's index (what an animation moves)
 
     def reach(self, scale: float = 1.0) -> float:
         """The engine light's range: the file's, or where its light at ``scale`` falls to
@@ -97,7 +98,8 @@ def read_gltf_lights(doc: dict | None) -> list[ModelLight]:
                              f"have ({len(lights)} defined)")
         light = lights[light_index]
         found.append(ModelLight(light.kind, light.color, light.intensity, light.range, light.inner_cone,
-                                light.outer_cone, glm.mat4(*matrix.astype(np.float32).T.ravel()), light.name))
+                                light.outer_cone, glm.mat4(*matrix.astype(np.float32).T.ravel()), light.name,
+                                index))
     return found
 
 

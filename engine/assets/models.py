@@ -40,6 +40,7 @@ from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
 from engine.assets.model_lights import ModelLight, check_light_intensity
 from engine.core.errors import AssetError
+from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 
 __all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key", "pose_parts",
@@ -243,9 +244,11 @@ def spawn_parts(world: World, root: int, model: Model | None, part_components: S
     record = world.resources.get(SpawnedModels)
     if record is None:
         record = world.resources[SpawnedModels] = SpawnedModels()
-    # (a skinned part stays at the root: its joints place it)
+    # (a skinned part stays at the root: its joints place it; its lights and cameras follow their nodes)
     nodes = [None if part.skin is not None else part.node for part in loaded.parts] if loaded is not None else []
-    nodes += [None] * (len(spawned) - len(nodes))  # its lights and cameras: where their nodes put them
+    if loaded is not None:
+        nodes += [light.node for light in loaded.lights] + [camera.node for camera in loaded.cameras]
+    nodes += [None] * (len(spawned) - len(nodes))
     skins = [part.skin for part in loaded.parts] if loaded is not None else []
     skins += [None] * (len(spawned) - len(skins))
     record[root] = SpawnedModel(None if model is None else model_key(model), spawned, nodes, loaded, skins)
@@ -304,7 +307,9 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
 
 def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True) -> None:
     """Put ``root``'s parts where clip ``clip_name`` of its model puts their nodes at
-    ``time`` (seconds); "" puts them at rest.  ``every`` False (the clip only moved on): only
+    ``time`` (seconds); "" puts them at rest.  Its lights and cameras follow their nodes (a
+    camera unscaled; a directional light's direction turned, as the root stands now), its
+    skinned parts their joints (their ``Skin``).  ``every`` False (the clip only moved on): only
     the parts the clip moves (their node or an ancestor animated) are written, so the others
     stay unchanged for the stages after (no rows uploaded, no shadow drawn again).  A clip the
     model lacks is an AssetError naming the entity and the clips it has."""
@@ -328,15 +333,26 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
         _pose_skins(world, record, clip, time, moved)
     if moved is not None:
         matrices = {node: m for node, m in matrices.items() if node in moved}
-    rest = {part.node: part.local for part in record.loaded.parts}
+    loaded = record.loaded
+    rest = {thing.node: thing.local for thing in (*loaded.parts, *loaded.lights, *loaded.cameras)}
+    root_matrix = None
     for entity, node in zip(record.parts, record.nodes, strict=True):
         if node is None or not world.exists(entity) or (not every and node not in matrices):
             continue
         placed = matrices.get(node)
         local = glm.mat4(*placed.astype(np.float32).T.ravel()) if placed is not None else rest[node]
         at = _node_transform(local, f"node {node}")
+        if world.has(entity, Camera):
+            at.scale = glm.vec3(1.0)  # (a camera's picture is not stretched by its node's scale)
         transform = world.get(entity, Transform)
         transform.position, transform.rotation, transform.scale = at.position, at.rotation, at.scale
+        sun = world.try_get(entity, DirectionalLight)
+        if sun is not None:  # a direction, not a place: along the node's -Z as the model stands now
+            if root_matrix is None:
+                root_matrix = current_world_matrix(world, world.get(root, Transform))
+            travel = glm.vec3((root_matrix * local) * glm.vec4(0.0, 0.0, -1.0, 0.0))
+            if glm.length(travel) > 0.0:
+                sun.direction = travel
 
 
 def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float,
