@@ -5,12 +5,12 @@ from components.fog import Fog
 from components.mirror import Mirror
 from components.model import Animation, FromModel, Model
 from components.portal import Portal, PortalClone, Slice, Traveller
+from components.pose import Morph, Skin
 from components.post import Bloom, ColorGrading, Tonemap, Vignette
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
 from components.screen_reflections import ScreenReflections
-from components.skin import Skin
 from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_of, yaw_pitch_rotation
 from components.visibility import Visibility
@@ -20,7 +20,8 @@ __all__ = [
     "AmbientOcclusion", "Animation", "Bloom", "Camera", "ColorGrading", "ComponentValueError",
     "ComponentWarning",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "Material",
-    "MeshRef", "Mirror", "Model", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective", "Refractive",
+    "MeshRef", "Mirror", "Model", "Morph", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective",
+    "Refractive",
     "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",

@@ -45,10 +45,16 @@ MAX_DISPERSION = 10.0
 # Material.iridescence_thickness, nanometres: past a few thousand a film's fringes are finer
 # than the eye's colour bands and it shows white (the thin-film model's two orders say nothing more).
 MAX_FILM_THICKNESS = 5000.0
-# Joints one skin may have (Skin.joint_matrices, a mesh's joints a vertex): one row of the
-# joint palette texture, three texels a joint (engine/render/joint_palettes.py); a character
-# rig has 20 to 150, Unreal's limit a section is 256 too.
+# Joints one skin may have (Skin.joint_matrices, a mesh's joints a vertex): a row of the
+# pose texture, three texels a joint (engine/render/pose_rows.py); a character rig has 20
+# to 150, Unreal's limit a section is 256 too.
 MAX_JOINTS = 256
+# Morph targets one mesh may have (Mesh.morph_positions, Morph.weights): their weights in
+# four texels of its pose row; a face's expressions are a dozen or two (three.js's limit
+# with the targets in a texture is larger; glTF's own viewer blends every one, as here).
+MAX_MORPH_TARGETS = 16
+# A morph weight's reach either side of 0 (glTF's are usually 0 to 1; past a few is a mistake).
+MAX_MORPH_WEIGHT = 16.0
 
 # Reflection layers (show/hide lists): an entity belongs to some of REFLECTION_LAYERS layers
 # and a mirror, portal, probe or camera shows some of them; a view shows an entity when they

@@ -21,7 +21,7 @@ A tiny game::
 from __future__ import annotations
 
 import engine.rules.mirror_rules  # noqa: F401  (registers the mirror-mesh invariant with every world)
-import engine.rules.skin_rules  # noqa: F401  (registers the skin rule with every world)
+import engine.rules.pose_rules  # noqa: F401  (registers the Skin and Morph rules with every world)
 import engine.rules.water_rules  # noqa: F401  (registers the water rule with every world)
 from engine.core.game import Game, GameSystem, spawn_camera
 from engine.core.world import World

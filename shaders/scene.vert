@@ -2,7 +2,7 @@
 // Instanced scene geometry: per-vertex mesh data, per-instance transform and material record.
 #include "camera.glsl"
 #include "visibility.glsl"
-#include "skinning.glsl"
+#include "pose.glsl"
 
 // Clip distances (indices defined from engine/render/bindings.py): CLIP_VIEW_PLANE is the
 // view's plane (mirror and portal views), CLIP_RECT_* the batched mirror path's per-view
@@ -28,7 +28,7 @@ in vec3 in_normal;
 in vec2 in_uv;
 
 in mat4 in_model;          // model -> world
-#if !defined(VERTEX_COLOR) && !defined(SKINNED)
+#if !defined(VERTEX_COLOR) && !defined(SKINNED) && !defined(MORPHED)
 in mat3 in_normal_matrix;  // inverse-transpose of the model's upper 3x3
 #endif
 in vec4 in_color;          // linear base colour, alpha
@@ -41,7 +41,7 @@ in uvec4 in_slots;         // emissive variant, refract variant, reflect variant
 // The mesh's colour a vertex (Mesh.colors), linear.  The sixteen vertex inputs GL 4.1
 // promises are all taken, so this build works the normal matrix out here instead of
 // reading the instance's (three inputs freed for one; a SKINNED build frees them too, for its
-// joints and weights: skinning.glsl).
+// joints and weights: pose.glsl).
 in vec4 in_vertex_color;
 out vec4 v_vertex_color;
 #endif
@@ -59,10 +59,20 @@ flat out vec4 v_tint;
 flat out uvec4 v_slots;
 
 void main() {
+#if defined(SKINNED) || defined(MORPHED)
+    vec3 position = in_position;
+    vec3 normal = in_normal;
+#ifdef MORPHED
+    morph(position, normal);  // its morph targets weighed in (as shadow.vert)
+#endif
 #ifdef SKINNED
-    mat4 skin = skin_matrix();  // bent by its joints, then placed (as shadow.vert)
-    vec4 world = in_model * (skin * vec4(in_position, 1.0));
-    v_normal = transpose(inverse(mat3(in_model) * mat3(skin))) * in_normal;
+    mat4 skin = skin_matrix();  // bent by its joints, then placed
+    vec4 world = in_model * (skin * vec4(position, 1.0));
+    v_normal = transpose(inverse(mat3(in_model) * mat3(skin))) * normal;
+#else
+    vec4 world = in_model * vec4(position, 1.0);
+    v_normal = transpose(inverse(mat3(in_model))) * normal;
+#endif
 #else
     vec4 world = in_model * vec4(in_position, 1.0);
 #ifdef VERTEX_COLOR

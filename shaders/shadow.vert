@@ -10,7 +10,7 @@
 // shadow.frag reads its alpha as scene.frag does.
 #include "camera.glsl"
 #include "visibility.glsl"
-#include "skinning.glsl"
+#include "pose.glsl"
 
 in vec3 in_position;
 in mat4 in_model;
@@ -39,10 +39,15 @@ out vec2 v_clip;  // shadow_layered.geom writes them per face
 #endif
 
 void main() {
+    vec3 position = in_position;
+#ifdef MORPHED
+    vec3 normal = vec3(0.0);  // (unread: a caster's depth is all it draws)
+    morph(position, normal);  // its morph targets weighed in, as scene.vert
+#endif
 #ifdef SKINNED
-    vec4 world = in_model * (skin_matrix() * vec4(in_position, 1.0));  // bent by its joints, as scene.vert
+    vec4 world = in_model * (skin_matrix() * vec4(position, 1.0));  // bent by its joints, as scene.vert
 #else
-    vec4 world = in_model * vec4(in_position, 1.0);
+    vec4 world = in_model * vec4(position, 1.0);
 #endif
     gl_Position = camera.view_proj * world;
     // A virtual light's map (light through a mirror or portal) leaves out the surfaces it

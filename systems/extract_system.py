@@ -19,6 +19,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Morph,
     Portal,
     PortalClone,
     Reflective,
@@ -29,8 +30,9 @@ from components import (
     Visibility,
 )
 from components.transform import mirroring_seen
+from engine.assets.mesh import Mesh
 from engine.core.errors import GLLimitError
-from engine.core.skinning import posed_box
+from engine.core.skinning import posed_bounds
 from engine.core.world import World
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
@@ -70,15 +72,18 @@ class ExtractSystem(esper.Processor):
         shown = world.changed(Visibility)
         if shown:  # a portal clone is drawn where its source is (its row reads the source's Visibility)
             touched |= {entity for entity, clone in world.query_one(PortalClone) if clone.source in shown}
-        bent = world.changed(Skin)
-        if bent:  # a new pose is written on its own; a Skin come or gone changes the batch
+        skins, morphs = world.changed(Skin), world.changed(Morph)
+        if skins or morphs:  # a new pose is written on its own; a Skin or Morph come or gone changes the batch
             touched = set(touched)
-            for entity in bent - touched:
+            for entity in (skins | morphs) - touched:
                 batch = self._batch_of.get(entity)
-                skin = world.try_get(entity, Skin) if world.exists(entity) else None
-                if batch is not None and batch.skinned and skin is not None:
-                    self._pose_skin(entity, batch, skin)
-                elif skin is not None or (batch is not None and batch.skinned):
+                here = world.exists(entity)
+                skin = world.try_get(entity, Skin) if here else None
+                morph = world.try_get(entity, Morph) if here else None
+                if batch is not None and batch.skinned == (skin is not None) and batch.morphed == (morph is not None):
+                    if skin is not None or morph is not None:
+                        self._pose(entity, batch, world.get(entity, MeshRef).mesh, skin, morph)
+                elif skin is not None or morph is not None or batch is not None:
                     touched.add(entity)
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
@@ -157,9 +162,12 @@ class ExtractSystem(esper.Processor):
         # portal's, whose batch of surfaces alone the unlit-mirror pass keeps (unlit_mirrors).
         surface = world.has(entity, Mirror) or world.has(entity, Portal)
         drawn = mesh_ref.mesh if surface else mesh_ref.mesh.unit or mesh_ref.mesh
-        # A skinned mesh bent by a Skin: a batch of its own (its joints its own); one without
-        # a Skin is drawn as modelled.
+        # A skinned mesh bent by a Skin, or one wearing a Morph: a batch of its own (its pose
+        # its own); one without is drawn as modelled.
         skin = world.try_get(entity, Skin) if drawn.skinned else None
+        morph = world.try_get(entity, Morph) if drawn.morph_count else None
+        posed = (entity, skin is not None, morph is not None) if skin is not None or morph is not None \
+            else (0, False, False)
         try:
             batch = self.renderer.batch_for(drawn, material.texture if material else None, probe,
                                             entity if transparent else 0, material.normal_map if material else None,
@@ -173,7 +181,7 @@ class ExtractSystem(esper.Processor):
                                             double_sided=material.double_sided if material else False,
                                             keeps_specular=material is not None and material.blend == "transparent",
                                             unlit=material is not None and material.unlit,
-                                            skinned_entity=entity if skin is not None else 0,
+                                            posed=posed,
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None
@@ -192,8 +200,8 @@ class ExtractSystem(esper.Processor):
             self._joined.add(entity)
         else:
             row = batch.row(entity)
-        if skin is not None:
-            self._pose_skin(entity, batch, skin)
+        if posed[0]:
+            self._pose(entity, batch, drawn, skin, morph)
         if batch.set_size(entity, None if drawn is mesh_ref.mesh else mesh_ref.mesh.unit_scale):
             self._joined.add(entity)  # its model matrix is written again below, with its size
         casting_before = batch.shadow_fields(row) if old is batch else None
@@ -225,17 +233,20 @@ class ExtractSystem(esper.Processor):
         batch.note_row_casts(entity, row)  # one that casts nothing: its moves change no shadow
         batch.variants_changed()
 
-    def _pose_skin(self, entity: int, batch: InstanceBatch, skin: Skin) -> None:
-        """Write ``entity``'s joint matrices to its row of the joint palette (its batch's draws
-        read that row) and give its batch the box holding the pose."""
-        batch.joint_row = self.renderer.joint_palettes.write(entity, skin.joint_matrices)  # (a limit names it)
-        batch.set_local_box(*posed_box(batch.mesh.joint_boxes, skin.joint_matrices))
+    def _pose(self, entity: int, batch: InstanceBatch, mesh: Mesh, skin: Skin | None, morph: Morph | None) -> None:
+        """Write ``entity``'s joint matrices and morph weights to its row of the pose texture
+        (its batch's draws read that row) and give its batch the box holding the pose
+        (``skinning.posed_bounds``)."""
+        joints = skin.joint_matrices if skin is not None else None
+        weights = morph.weights if morph is not None else None
+        batch.pose_row = self.renderer.pose_rows.write(entity, joints, weights)  # (a limit names it)
+        batch.set_local_box(*posed_bounds(mesh, joints, weights))
         self.renderer.note_scene_change()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:
         self._see_through.pop(entity, None)
-        if batch.skinned:
-            self.renderer.joint_palettes.free(entity)
+        if batch.skinned or batch.morphed:
+            self.renderer.pose_rows.free(entity)
         batch.remove(entity)
         del self._batch_of[entity]
         self._layout += 1

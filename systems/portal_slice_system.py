@@ -16,9 +16,9 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import Material, MeshRef, Portal, PortalClone, Skin, Slice, Transform, Traveller
+from components import Material, MeshRef, Morph, Portal, PortalClone, Skin, Slice, Transform, Traveller
 from engine.core.portal_math import pair_transform, portal_plane
-from engine.core.skinning import posed_box
+from engine.core.skinning import posed_bounds
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.frame_rules import frame_rules, world_corners
@@ -32,10 +32,11 @@ class PortalSliceSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         portals = self._open_portals()
-        bent = world.changed(Skin)
+        bent, morphs = world.changed(Skin), world.changed(Morph)
         for entity, (_, mesh_ref, transform) in world.query(Traveller, MeshRef, Transform):
             skin = world.try_get(entity, Skin) if mesh_ref.mesh.skinned else None
-            straddled = self._straddled(mesh_ref, current_world_matrix(world, transform), portals, skin) \
+            morph = world.try_get(entity, Morph) if mesh_ref.mesh.morph_count else None
+            straddled = self._straddled(mesh_ref, current_world_matrix(world, transform), portals, skin, morph) \
                 if portals else None
             if straddled is None:
                 self._release(entity)
@@ -45,8 +46,11 @@ class PortalSliceSystem(esper.Processor):
             clone = self.clones.get(entity)
             if clone is None or not world.exists(clone):
                 clone = self.clones[entity] = self._spawn_clone(entity, mesh_ref, portal)
-            elif skin is not None and entity in bent:  # bent as its source is, this frame
-                world.get(clone, Skin).joint_matrices = skin.joint_matrices
+            else:  # posed as its source is, this frame
+                if skin is not None and entity in bent:
+                    world.get(clone, Skin).joint_matrices = skin.joint_matrices
+                if morph is not None and entity in morphs:
+                    world.get(clone, Morph).weights = morph.weights
             clone_t = world.get(clone, Transform)
             position, rotation, scale = _decompose(carry * current_world_matrix(world, transform))
             clone_t.position, clone_t.rotation, clone_t.scale = position, rotation, scale
@@ -62,11 +66,12 @@ class PortalSliceSystem(esper.Processor):
                 for entity, partner in frame_rules(world).open_portals.items()]
 
     @staticmethod
-    def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals, skin: Skin | None = None):
+    def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals, skin: Skin | None = None, morph: Morph | None = None):
         """(slice plane, carry, partner's plane, portal) of the first portal cutting the bounds
-        (a skinned mesh's as its ``skin`` bends it)."""
+        (a posed mesh's as its ``skin`` and ``morph`` pose it)."""
         mesh = mesh_ref.mesh
-        bounds = posed_box(mesh.joint_boxes(), skin.joint_matrices) if skin is not None else None
+        bounds = None if skin is None and morph is None else \
+            posed_bounds(mesh, skin.joint_matrices if skin else None, morph.weights if morph else None)
         corners = world_corners(mesh, model, bounds)
         for entity, portal, in_world, out_world in portals:
             plane = portal_plane(in_world)
@@ -97,6 +102,9 @@ class PortalSliceSystem(esper.Processor):
         skin = world.try_get(source, Skin) if mesh_ref.mesh.skinned else None
         if skin is not None:  # bent as its source is (kept so each frame its source's pose changes)
             components.append(Skin(skin.joint_matrices))
+        morph = world.try_get(source, Morph) if mesh_ref.mesh.morph_count else None
+        if morph is not None:
+            components.append(Morph(morph.weights))
         return world.spawn(*components)
 
     def _release(self, source: int) -> None:

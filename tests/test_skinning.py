@@ -334,11 +334,11 @@ def test_skins_given_and_taken_keep_their_rows_and_release_the_palette(scene):
     hand = frame_of(scene, lit(lambda w: arms(w, False), **view), (200, 100))
     assert same_picture(bent, hand)
     renderer = runner.engine.renderer
-    assert len(renderer.joint_palettes) == 5 and renderer.resource_counts()["joint_palettes"] == 1
+    assert len(renderer.pose_rows) == 5 and renderer.resource_counts()["pose_rows"] == 1
     for entity, _ in list(runner.world.query_one(Skin)):
         runner.world.delete_entity(entity)
     runner.frame()
-    assert len(renderer.joint_palettes) == 0 and renderer.resource_counts()["joint_palettes"] == 0
+    assert len(renderer.pose_rows) == 0 and renderer.resource_counts()["pose_rows"] == 0
     assert not [b for b in renderer.batches.values() if b.skinned]
 
 

@@ -1,5 +1,5 @@
-"""glTF accessors of normalised integers (``"normalized": true``) made floats before trimesh
-reads them.
+"""glTF accessors of normalised integers (``"normalized": true``) made floats, and sparse
+accessors made dense, before trimesh reads them.
 
 glTF stores texture coordinates and vertex colours as normalised bytes or shorts where an
 exporter packs them (core glTF allows it for ``TEXCOORD_n`` and ``COLOR_n``), and
@@ -75,6 +75,90 @@ def float_normalized_accessors(doc: dict, buffer_bytes: BufferBytes, what: str) 
     return len(rewritten)
 
 
+# componentType -> numpy type, every kind an accessor may hold
+COMPONENT_TYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
+                   5126: np.float32}
+INDEX_TYPES = (5121, 5123, 5125)  # what a sparse accessor's indices may be
+
+
+def dense_sparse_accessors(doc: dict, buffer_bytes: BufferBytes, what: str) -> int:
+    """Rewrite ``doc``'s sparse accessors (a base, its bufferView's values or zeros, with some
+    elements replaced: glTF's way to store a morph target that moves a few vertices) as dense
+    ones reading a new buffer, as ``float_normalized_accessors`` does; trimesh reads a sparse
+    accessor's base alone, zeros where it has none, without a word.  How many were
+    rewritten; one that cannot be read (indices out of range or not increasing, a view past
+    its buffer) is an AssetError naming it.  Run before ``float_normalized_accessors``: a
+    normalised one stays normalised, dense."""
+    accessors = doc.get("accessors")
+    if not isinstance(accessors, list):
+        return 0
+    views = doc.get("bufferViews") if isinstance(doc.get("bufferViews"), list) else []
+    decoded = bytearray()
+    rewritten: list[tuple[dict, int, int]] = []
+    for index, accessor in enumerate(accessors):
+        if not isinstance(accessor, dict) or "sparse" not in accessor:
+            continue
+        label = f"{what}: accessor {index}"
+        values = _dense(accessor, views, buffer_bytes, label)
+        while len(decoded) % 4:
+            decoded.append(0)
+        rewritten.append((accessor, len(decoded), values.nbytes))
+        decoded.extend(values.tobytes())
+    if not rewritten:
+        return 0
+    buffers = doc.setdefault("buffers", [])
+    buffers.append({"byteLength": len(decoded),
+                    "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(decoded)).decode("ascii")})
+    for accessor, offset, length in rewritten:
+        views.append({"buffer": len(buffers) - 1, "byteOffset": offset, "byteLength": length})
+        accessor.update(bufferView=len(views) - 1, byteOffset=0)
+        del accessor["sparse"]
+    doc["bufferViews"] = views
+    return len(rewritten)
+
+
+def _dense(accessor: dict, views: list, buffer_bytes: BufferBytes, label: str) -> np.ndarray:
+    """A sparse accessor's elements, its base with the sparse ones put in (its own type)."""
+    ctype, kind, count = accessor.get("componentType"), accessor.get("type"), accessor.get("count")
+    if ctype not in COMPONENT_TYPES or kind not in COMPONENTS or kind == "MAT4":
+        raise AssetError(f"{label}: a sparse accessor of componentType {ctype!r} and type {kind!r} is not read")
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise AssetError(f"{label}: count must be an integer >= 1, got {count!r}")
+    dtype, width = COMPONENT_TYPES[ctype], COMPONENTS[kind]
+    if "bufferView" in accessor:
+        base = {key: value for key, value in accessor.items() if key != "sparse"}
+        values = _read(base, views, buffer_bytes, label, dtype).copy()
+    else:
+        values = np.zeros((count, width), dtype)
+    sparse = accessor["sparse"]
+    if not isinstance(sparse, dict) or not isinstance(sparse.get("indices"), dict) \
+            or not isinstance(sparse.get("values"), dict):
+        raise AssetError(f"{label}: sparse must hold a count, indices and values, got {sparse!r}")
+    replaced = sparse.get("count")
+    if isinstance(replaced, bool) or not isinstance(replaced, int) or not 1 <= replaced <= count:
+        raise AssetError(f"{label}: sparse.count must be an integer in 1..{count}, got {replaced!r}")
+    indices_info, values_info = sparse["indices"], sparse["values"]
+    if indices_info.get("componentType") not in INDEX_TYPES:
+        raise AssetError(f"{label}: sparse.indices.componentType must be an unsigned byte, short or int, got "
+                         f"{indices_info.get('componentType')!r}")
+    indices = _read({"bufferView": indices_info.get("bufferView"), "byteOffset": indices_info.get("byteOffset", 0),
+                     "count": replaced, "type": "SCALAR"}, views, buffer_bytes, f"{label}: sparse.indices",
+                    COMPONENT_TYPES[indices_info["componentType"]]).reshape(-1).astype(np.int64)
+    if (np.diff(indices) <= 0).any() or indices.min() < 0 or indices.max() >= count:
+        raise AssetError(f"{label}: sparse.indices must increase and lie in 0..{count - 1}")
+    where = {"bufferView": values_info.get("bufferView"), "byteOffset": values_info.get("byteOffset", 0),
+             "count": replaced, "type": kind}
+    values[indices] = _read(where, views, buffer_bytes, f"{label}: sparse.values", dtype)
+    if dtype is np.float32 and not np.isfinite(values).all():
+        raise AssetError(f"{label}: holds NaN or infinite values")
+    return values
+
+
+def _read(accessor: dict, views: list, buffer_bytes: BufferBytes, label: str, dtype) -> np.ndarray:
+    """A dense accessor's elements as they are stored (one row an element)."""
+    return _decode(accessor, views, buffer_bytes, label, (dtype, None))
+
+
 def read_float_accessor(doc: dict, index: object, buffer_bytes: BufferBytes, label: str) -> np.ndarray:
     """Accessor ``index`` of ``doc`` as float32 rows, one an element: a float accessor's values
     or a normalised one's (run ``float_normalized_accessors`` first, or not); anything else is
@@ -108,7 +192,7 @@ def _decode(accessor: dict, views: list, buffer_bytes: BufferBytes, label: str,
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
         raise AssetError(f"{label}: count must be an integer >= 1, got {count!r}")
     if "sparse" in accessor:
-        raise AssetError(f"{label}: a sparse normalized accessor is not read")
+        raise AssetError(f"{label}: a sparse accessor is read once made dense (dense_sparse_accessors)")
     view_index = accessor.get("bufferView")
     if isinstance(view_index, bool) or not isinstance(view_index, int) or not 0 <= view_index < len(views) \
             or not isinstance(views[view_index], dict):
@@ -135,6 +219,8 @@ def _decode(accessor: dict, views: list, buffer_bytes: BufferBytes, label: str,
     if end > view_length or view_offset + view_length > len(data):
         raise AssetError(f"{label}: its {count} elements run past the end of bufferView {view_index}")
     raw = np.ndarray((count, components), dtype, buffer=data, offset=view_offset + offset, strides=(stride, size))
+    if float_type is not None and one is None:  # (as stored: _read)
+        return np.array(raw)
     if float_type is not None:
         values = raw.astype(np.float32)
         if not np.isfinite(values).all():

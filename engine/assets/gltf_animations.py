@@ -7,13 +7,12 @@ A model's parts are placed by their nodes (``ModelPart.node``); the node tree
 part where a clip puts its node at a time: the animated nodes' sampled translation, rotation
 and scale, the others at rest, multiplied down from the scene's roots.  ``Animation`` on a
 model's root plays one (``systems/model_system.py``); a skinned part follows its joints' poses
-(``engine/assets/gltf_skins.py``).  Morph-target weights are left out (with a warning: the
-engine's meshes have no morph targets).
+(``engine/assets/gltf_skins.py``), and a ``weights`` channel sets the weights a node's mesh
+wears its morph targets at (``engine/assets/gltf_morphs.py``; ``pose_weights``).
 """
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,15 +22,16 @@ from engine.assets.model_lights import node_matrix, placed_nodes
 from engine.core.errors import AssetError
 
 PATHS = {"translation": 3, "rotation": 4, "scale": 3}  # what a channel may animate, and its width
+# ("weights" too: as wide as the node's mesh has morph targets)
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 MAX_KEYS = 1 << 20  # key times one channel may have
 
 
 @dataclass
 class Channel:
-    """One node's translation, rotation (x, y, z, w) or scale over ``times`` (seconds,
-    increasing); ``values`` (keys, width), or (keys, 3, width) for a cubic spline: in-tangent,
-    value, out-tangent."""
+    """One node's translation, rotation (x, y, z, w), scale or morph weights over ``times``
+    (seconds, increasing); ``values`` (keys, width), or (keys, 3, width) for a cubic spline:
+    in-tangent, value, out-tangent."""
 
     node: int
     path: str
@@ -121,8 +121,8 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
     if not isinstance(animations, list):
         raise AssetError(f"{what}: animations must be a list, got {animations!r}")
     nodes = doc.get("nodes") if isinstance(doc.get("nodes"), list) else []
+    meshes = doc.get("meshes") if isinstance(doc.get("meshes"), list) else []
     clips: list[Clip] = []
-    morphs = 0
     for a, animation in enumerate(animations):
         name = animation.get("name") if isinstance(animation, dict) else None
         label = f"{what}: animation {a}" + (f" ({name!r})" if isinstance(name, str) and name else "")
@@ -139,37 +139,51 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
             if not isinstance(target, dict):
                 raise AssetError(f"{where}: needs a target object, got {channel!r}")
             path = target.get("path")
-            if path == "weights":
-                morphs += 1
-                continue
-            if path not in PATHS:
+            if path not in PATHS and path != "weights":
                 raise AssetError(f"{where}: target.path must be one of {sorted(PATHS)} or 'weights', got {path!r}")
             node = target.get("node")
             if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < len(nodes):
                 raise AssetError(f"{where}: target.node names node {node!r}, which the file does not have")
-            if isinstance(nodes[node], dict) and "matrix" in nodes[node]:
+            width = PATHS.get(path, 0)
+            if path == "weights":
+                width = _target_count(nodes[node], meshes)
+                if not width:
+                    raise AssetError(f"{where}: animates the morph weights of node {node}, whose mesh has no morph "
+                                     "targets")
+            elif isinstance(nodes[node], dict) and "matrix" in nodes[node]:
                 raise AssetError(f"{where}: animates node {node}, which has a matrix (glTF animates only "
                                  "translation, rotation and scale nodes)")
             s = channel.get("sampler")
             if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s < len(samplers) \
                     or not isinstance(samplers[s], dict):
                 raise AssetError(f"{where}: names sampler {s!r}, which the animation does not have")
-            channels.append(_channel(samplers[s], node, path, buffer_bytes, doc, f"{where}: sampler {s}"))
+            channels.append(_channel(samplers[s], node, path, width, buffer_bytes, doc, f"{where}: sampler {s}"))
         duration = max((float(ch.times[-1]) for ch in channels), default=0.0)
         clips.append(Clip(name if isinstance(name, str) and name else f"animation {a}", channels, duration))
-    if morphs:
-        warnings.warn(f"{what}: {morphs} animation channel(s) of morph-target weights left out (the engine's "
-                      "meshes have no morph targets)", stacklevel=5)
     return clips
 
 
-def _channel(sampler: dict, node: int, path: str, buffer_bytes: BufferBytes, doc: dict, where: str) -> Channel:
+def _target_count(node: object, meshes: list) -> int:
+    """How many morph targets the mesh of ``node`` has (0: none, or no mesh)."""
+    mesh = node.get("mesh") if isinstance(node, dict) else None
+    if isinstance(mesh, bool) or not isinstance(mesh, int) or not 0 <= mesh < len(meshes) \
+            or not isinstance(meshes[mesh], dict):
+        return 0
+    primitives = meshes[mesh].get("primitives") or []
+    first = primitives[0] if isinstance(primitives, list) and primitives and isinstance(primitives[0], dict) else {}
+    targets = first.get("targets") or []
+    return len(targets) if isinstance(targets, list) else 0
+
+
+def _channel(sampler: dict, node: int, path: str, width: int, buffer_bytes: BufferBytes, doc: dict,
+             where: str) -> Channel:
     interpolation = sampler.get("interpolation", "LINEAR")
     if interpolation not in INTERPOLATIONS:
         raise AssetError(f"{where}: interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
     times = read_float_accessor(doc, sampler.get("input"), buffer_bytes, f"{where}: input").reshape(-1)
     values = read_float_accessor(doc, sampler.get("output"), buffer_bytes, f"{where}: output")
-    width = PATHS[path]
+    if path == "weights" and values.ndim == 2 and values.shape[1] == 1:  # (scalars: a key's weights in a row)
+        values = values.reshape(-1, width) if len(values) % width == 0 else values
     if len(times) == 0 or len(times) > MAX_KEYS:
         raise AssetError(f"{where}: has {len(times)} key times (1 to {MAX_KEYS})")
     if not np.isfinite(times).all() or (np.diff(times) <= 0.0).any():
@@ -208,9 +222,14 @@ def trs_matrix(translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray)
     return m
 
 
+def pose_weights(clip: Clip, t: float) -> dict[int, np.ndarray]:
+    """The morph weights at time ``t`` of each node a ``weights`` channel of ``clip`` animates."""
+    return {channel.node: channel.sample(t) for channel in clip.channels if channel.path == "weights"}
+
+
 def moved_nodes(tree: NodeTree, clip: Clip) -> set[int]:
-    """The nodes ``clip`` moves: those it animates and every node under them."""
-    animated = {channel.node for channel in clip.channels}
+    """The nodes ``clip`` moves: those it animates (their transform) and every node under them."""
+    animated = {channel.node for channel in clip.channels if channel.path != "weights"}
     moved = set()
     for node in range(len(tree.parents)):
         walk: int | None = node
@@ -227,6 +246,8 @@ def pose(tree: NodeTree, clip: Clip, t: float, wanted: list[int]) -> dict[int, n
     times its parent's."""
     animated: dict[int, dict[str, np.ndarray]] = {}
     for channel in clip.channels:
+        if channel.path == "weights":
+            continue  # (pose_weights: no transform)
         animated.setdefault(channel.node, {})[channel.path] = channel.sample(t)
     placed: dict[int, np.ndarray] = {}
 

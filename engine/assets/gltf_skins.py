@@ -10,8 +10,8 @@ Read before trimesh parses the file: trimesh reads neither skins nor JOINTS and 
 (it keeps a primitive's attributes whose names start with "_" as vertex attributes, so each
 primitive's sets are named again as ``_SPECULUM_JOINTS_n`` and ``_SPECULUM_WEIGHTS_n``,
 read back a vertex in the order trimesh keeps them: ``skin_arrays``).  A joint's matrix in
-a pose is its place in the model times its inverse bind matrix (``joint_palette``), what
-``Skin.joint_matrices`` holds (components/skin.py).
+a pose is its place in the model times its inverse bind matrix (``pose_rows``), what
+``Skin.joint_matrices`` holds (components/pose.py).
 """
 from __future__ import annotations
 
@@ -133,7 +133,7 @@ def skin_arrays(vertex_attributes: dict, count: int, skin: SkinDef, where: str) 
     return np.where(used, joints_all, 0), weights_all
 
 
-def joint_palette(skin: SkinDef, placed: dict[int, np.ndarray]) -> np.ndarray:
+def pose_rows(skin: SkinDef, placed: dict[int, np.ndarray]) -> np.ndarray:
     """The skin's joint matrices (J, 4, 4, float32) with its joint nodes where ``placed``
     (node -> model-space matrix) puts them: each one's place times its inverse bind matrix."""
     places = np.stack([placed[joint] for joint in skin.joints])

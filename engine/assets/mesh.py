@@ -23,8 +23,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR
+from components.limits import MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR, MAX_MORPH_TARGETS
 from components.water import f0_from_ior
+from engine.assets.gltf_morphs import morph_arrays
 from engine.assets.gltf_skins import skin_arrays
 from engine.assets.gltf_variants import variant_names
 from engine.assets.model_cameras import ModelCamera, read_gltf_cameras
@@ -93,6 +94,11 @@ class Mesh:
     # summing to 1); None: not skinned (engine/core/skinning.py).
     joints: np.ndarray | None = field(default=None, repr=False)
     weights: np.ndarray | None = field(default=None, repr=False)
+    # Morph targets (glTF's ``targets``: blend shapes): each target's offset a vertex of its
+    # positions and of its normals (float32, (T, V, 3); normals None: not moved), added by a
+    # ``Morph``'s weights (engine/core/skinning.py); None: none.
+    morph_positions: np.ndarray | None = field(default=None, repr=False)
+    morph_normals: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def unit(self) -> Mesh | None:
@@ -130,6 +136,53 @@ class Mesh:
             self.colors = colors
         if self.joints is not None or self.weights is not None:
             self._check_skin(n)
+        if self.morph_positions is not None or self.morph_normals is not None:
+            self._check_morphs(n)
+
+    def _check_morphs(self, n: int) -> None:
+        """Each target's offsets a vertex: positions, and normals or none."""
+        if self.morph_positions is None:
+            raise AssetError(f"mesh {self.name!r}: morph_normals without morph_positions (a target moves its "
+                             "positions; give zeros where it moves only normals)")
+        for name in ("morph_positions", "morph_normals"):
+            offsets = getattr(self, name)
+            if offsets is None:
+                continue
+            offsets = np.asarray(offsets)
+            if offsets.ndim != 3 or offsets.shape[1:] != (n, 3) or not 1 <= len(offsets) <= MAX_MORPH_TARGETS \
+                    or not np.issubdtype(offsets.dtype, np.number):
+                raise AssetError(f"mesh {self.name!r}: {name} must be 1 to {MAX_MORPH_TARGETS} targets "
+                                 f"(MAX_MORPH_TARGETS) of one offset a vertex, shape (T, {n}, 3); got {offsets.shape}")
+            offsets = np.ascontiguousarray(offsets, np.float32)
+            if not np.isfinite(offsets).all():
+                raise AssetError(f"mesh {self.name!r}: {name} has NaN or infinite offsets")
+            setattr(self, name, offsets)
+        if self.morph_normals is not None and len(self.morph_normals) != len(self.morph_positions):
+            raise AssetError(f"mesh {self.name!r}: {len(self.morph_positions)} position targets but "
+                             f"{len(self.morph_normals)} normal targets")
+
+    @property
+    def morph_count(self) -> int:
+        """How many morph targets it has (a ``Morph`` on it gives as many weights; 0: none)."""
+        return len(self.morph_positions) if self.morph_positions is not None else 0
+
+    def morph_offset_boxes(self) -> np.ndarray:
+        """Each target's box of position offsets (T, 2, 3): how far it can move a vertex."""
+        boxes = self.__dict__.get("_morph_offset_boxes")
+        if boxes is None:
+            offsets = self.morph_positions.astype(np.float64)
+            boxes = self.__dict__["_morph_offset_boxes"] = np.stack([offsets.min(axis=1), offsets.max(axis=1)], axis=1)
+        return boxes
+
+    def morph_texels(self) -> np.ndarray:
+        """The morph texture's texels (V x T x 2, 4 floats): for each vertex, each target's
+        position offset then its normal offset (``shaders/include/pose.glsl``)."""
+        count, vertices = self.morph_count, len(self.positions)
+        texels = np.zeros((vertices, count, 2, 4), np.float32)
+        texels[:, :, 0, :3] = self.morph_positions.transpose(1, 0, 2)
+        if self.morph_normals is not None:
+            texels[:, :, 1, :3] = self.morph_normals.transpose(1, 0, 2)
+        return texels.reshape(-1, 4)
 
     def _check_skin(self, n: int) -> None:
         """Joints and weights a vertex, both or neither: a vertex's strongest four kept
@@ -515,6 +568,7 @@ class ModelPart:
     name: str = ""  # "file:part", as a level file's part = "..." names it (parts may share one mesh)
     node: int | None = None  # its glTF node's index (what an animation moves; None: not a glTF's)
     skin: int | None = None  # its glTF node's skin (LoadedModel.skins: what bends it; None: not skinned)
+    morph_weights: tuple[float, ...] | None = None  # the weights its node wears its morph targets at (None: none)
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -651,20 +705,26 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
             name = f"{path.name}:{geom_name}"
             index = gltf.node(node) if gltf is not None else None
             skin = gltf.skin_of(index) if gltf is not None else None
+            morph_weights = gltf.morph_weights(index) if gltf is not None else None
             mesh = meshes.get(("geometry", geom_name, skin))
             if mesh is None:
                 mesh = Mesh.from_trimesh(tm, name=name, srgb_colors=suffix not in (".gltf", ".glb"))
-                if skin is not None:  # its joints and weights a vertex, as trimesh kept them
-                    joints, weights = skin_arrays(getattr(tm, "vertex_attributes", {}), len(mesh.positions),
-                                                  gltf.skins[skin], f"node {shown!r}'s mesh")
+                kept = getattr(tm, "vertex_attributes", {})  # (as trimesh kept them: a vertex each)
+                joints = weights = offsets = normal_offsets = None
+                if skin is not None:  # its joints and weights a vertex
+                    joints, weights = skin_arrays(kept, len(mesh.positions), gltf.skins[skin], f"node {shown!r}'s mesh")
+                if morph_weights is not None:  # its morph targets' offsets
+                    offsets, normal_offsets = morph_arrays(kept, len(mesh.positions), len(morph_weights),
+                                                           f"node {shown!r}'s mesh")
+                if skin is not None or morph_weights is not None:
                     mesh = Mesh(mesh.positions, mesh.normals, mesh.uvs, mesh.indices, name=name, colors=mesh.colors,
-                                joints=joints, weights=weights)
+                                joints=joints, weights=weights, morph_positions=offsets, morph_normals=normal_offsets)
                 mesh = meshes.setdefault(("content", _digest(mesh)), mesh)
                 meshes[("geometry", geom_name, skin)] = mesh
             if skin is not None:  # glTF: a skinned node's own transform is left out (its joints place it)
                 matrix = np.eye(4)
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()), name=name,
-                             node=index, skin=skin)
+                             node=index, skin=skin, morph_weights=morph_weights)
             if materials:
                 _read_material(tm, part, path, maps)
                 maps.read(tm, part)
@@ -690,7 +750,9 @@ def _digest(mesh: Mesh) -> bytes:
     for array in (mesh.positions, mesh.normals, mesh.uvs, mesh.indices,
                   mesh.colors if mesh.colors is not None else np.zeros(0, np.float32),
                   mesh.joints if mesh.joints is not None else np.zeros(0, np.uint16),
-                  mesh.weights if mesh.weights is not None else np.zeros(0, np.float32)):
+                  mesh.weights if mesh.weights is not None else np.zeros(0, np.float32),
+                  mesh.morph_positions if mesh.morph_positions is not None else np.zeros(0, np.float32),
+                  mesh.morph_normals if mesh.morph_normals is not None else np.zeros(0, np.float32)):
         digest.update(np.asarray(array.shape, np.int64).tobytes())
         digest.update(memoryview(array).cast("B"))
     return digest.digest()
@@ -708,6 +770,7 @@ def model_bytes(parts: Sequence[ModelPart]) -> int:
             total += mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
             total += mesh.colors.nbytes if mesh.colors is not None else 0
             total += mesh.joints.nbytes + mesh.weights.nbytes if mesh.joints is not None else 0
+            total += sum(a.nbytes for a in (mesh.morph_positions, mesh.morph_normals) if a is not None)
         for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map,
                         part.occlusion_map):
             if texture is not None and id(texture) not in seen:
@@ -1072,7 +1135,8 @@ class _MaterialMaps:
             moved_u, moved_v = ox + c * u + s * v, oy - s * u + c * v
             made = self._made[key] = Mesh(mesh.positions, mesh.normals, np.stack([moved_u, 1.0 - moved_v], axis=1),
                                           mesh.indices, name=mesh.name, colors=mesh.colors, joints=mesh.joints,
-                                          weights=mesh.weights)
+                                          weights=mesh.weights, morph_positions=mesh.morph_positions,
+                                          morph_normals=mesh.morph_normals)
         return made
 
     def mtl_map(self, material, key: str) -> MtlMap | None:

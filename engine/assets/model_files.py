@@ -31,9 +31,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
 
-from engine.assets.gltf_accessors import float_normalized_accessors
+from engine.assets.gltf_accessors import dense_sparse_accessors, float_normalized_accessors
 from engine.assets.gltf_animations import read_animations, read_node_tree
 from engine.assets.gltf_instancing import expand_gpu_instancing
+from engine.assets.gltf_morphs import node_weights, read_morphs
 from engine.assets.gltf_skins import read_skins
 from engine.assets.gltf_variants import apply_variant
 from engine.assets.texture_data import contained_path, file_problem, read_asset_file
@@ -385,6 +386,7 @@ class GltfFiles:
     animations: list = field(default_factory=list)  # its clips (engine/assets/gltf_animations.py)
     node_tree: object = None                         # its nodes' parents and rest transforms (NodeTree)
     skins: list = field(default_factory=list)        # its skins (engine/assets/gltf_skins.py SkinDef)
+    morphs: dict = field(default_factory=dict)       # mesh index -> its morph targets' default weights
 
     def node(self, trimesh_name: object) -> int | None:
         """The index of the node trimesh calls ``trimesh_name`` (None: not one of the file's)."""
@@ -407,6 +409,10 @@ class GltfFiles:
         if node is None or not isinstance(nodes, list) or node >= len(nodes) or not isinstance(nodes[node], dict):
             return None
         return nodes[node].get("skin") if self.skins else None
+
+    def morph_weights(self, node: int | None) -> tuple[float, ...] | None:
+        """The weights node ``node`` wears its mesh's morph targets at (None: none to wear)."""
+        return node_weights(self.doc, node, self.morphs) if node is not None and self.morphs else None
 
     def material(self, trimesh_name: object) -> tuple[int | None, dict]:
         """The index and the file's JSON of the material trimesh calls ``trimesh_name``."""
@@ -570,14 +576,16 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
             read_buffers[number] = _buffer_bytes(doc, number, resolver, chunks)
         return read_buffers[number]
 
+    dense_sparse_accessors(doc, buffer_bytes, what)  # (first: a sparse normalised one is then decoded too)
     float_normalized_accessors(doc, buffer_bytes, what)
     expand_gpu_instancing(doc, buffer_bytes, what)
     try:
         apply_variant(doc, variant)
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from None
-    animations = read_animations(doc, buffer_bytes, what)
     skins = read_skins(doc, buffer_bytes, what)
+    morphs = read_morphs(doc, what)  # (before the clips: a weights channel is as wide as its mesh's targets)
+    animations = read_animations(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
     for texture in textures_list:
@@ -593,6 +601,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     result = GltfFiles(b"", resolver, doc, [m.get("name") if isinstance(m, dict) else None for m in materials])
     result.animations = animations
     result.skins = skins
+    result.morphs = morphs
     wanted: dict[int, tuple[str, str]] = {}  # image index -> (material label, slot)
     for index, material in enumerate(materials):
         if not isinstance(material, dict) or index not in used_materials:

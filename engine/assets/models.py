@@ -27,15 +27,17 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Morph,
     PointLight,
     Reflective,
     Refractive,
     Skin,
     Transform,
 )
+from components.limits import MAX_MORPH_WEIGHT
 from components.model import MAX_MODEL_PROBES, FromModel, Model
-from engine.assets.gltf_animations import Clip, moved_nodes, pose
-from engine.assets.gltf_skins import joint_palette
+from engine.assets.gltf_animations import Clip, moved_nodes, pose, pose_weights
+from engine.assets.gltf_skins import pose_rows
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
 from engine.assets.model_lights import ModelLight, check_light_intensity
@@ -168,6 +170,8 @@ def model_components(loaded: LoadedModel, path: str | Path, root: Transform, max
             part_components.append(_part_components(part, index in probed))
             if part.skin is not None:
                 part_components[-1].append(Skin(palettes[part.skin]))
+            if part.morph_weights is not None:
+                part_components[-1].append(Morph(part.morph_weights))
         for light in loaded.lights:
             part_components.append(_light_components(light, root, light_scale))
         for camera in loaded.cameras:
@@ -331,6 +335,7 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
     moved = moved_nodes(record.loaded.node_tree, clip) if clip is not None and not every else None
     if any(skin is not None for skin in record.skins):
         _pose_skins(world, record, clip, time, moved)
+    _pose_morphs(world, record, clip, time, every)
     if moved is not None:
         matrices = {node: m for node, m in matrices.items() if node in moved}
     loaded = record.loaded
@@ -364,7 +369,7 @@ def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float,
         return {}
     wanted = sorted({joint for s in chosen for joint in loaded.skins[s].joints})
     placed = pose(loaded.node_tree, clip or Clip("", [], 0.0), time, wanted)
-    return {s: joint_palette(loaded.skins[s], placed) for s in chosen}
+    return {s: pose_rows(loaded.skins[s], placed) for s in chosen}
 
 
 def _pose_skins(world: World, record: SpawnedModel, clip: Clip | None, time: float,
@@ -379,6 +384,21 @@ def _pose_skins(world: World, record: SpawnedModel, clip: Clip | None, time: flo
     for entity, skin in zip(record.parts, record.skins, strict=True):
         if skin in palettes and world.exists(entity):
             world.get(entity, Skin).joint_matrices = palettes[skin]
+
+
+def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: float, every: bool) -> None:
+    """Set the ``Morph`` of ``record``'s morphed parts: the weights ``clip``'s ``weights``
+    channels give their nodes at ``time``, the file's (the node's or its mesh's) where none
+    does; ``every`` False: only the parts a channel animates."""
+    sampled = pose_weights(clip, time) if clip is not None else {}
+    for entity, part in zip(record.parts, record.loaded.parts, strict=False):
+        if part.morph_weights is None or not world.exists(entity):
+            continue
+        weights = sampled.get(part.node)
+        if weights is not None:
+            world.get(entity, Morph).weights = np.clip(weights, -MAX_MORPH_WEIGHT, MAX_MORPH_WEIGHT)
+        elif every:
+            world.get(entity, Morph).weights = part.morph_weights
 
 
 def _camera_components(camera: ModelCamera) -> list:

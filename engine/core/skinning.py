@@ -1,13 +1,18 @@
-"""Linear blend skinning: a vertex moved by up to four joints, each weighing its share.
+"""Linear blend skinning and morph targets: a vertex moved by up to four joints, each weighing
+its share, after its morph targets' offsets, each weighed by its weight.
 
 A skinned mesh (``Mesh.joints``, ``Mesh.weights``: glTF's JOINTS_0 and WEIGHTS_0) is bent by
 its ``Skin``'s joint matrices: each one a joint's pose times its inverse bind matrix, in the
 mesh's own space, so a joint at rest gives the identity.  A vertex goes to
 ``sum_i weight_i x joint_matrix[joint_i] x position`` (its normal by the inverse transpose of
 that blend), as every real-time engine since Quake III's MD4 has drawn characters.  The GPU
-does it in ``shaders/include/skinning.glsl`` for every view and shadow map; this module is
+does it in ``shaders/include/pose.glsl`` for every view and shadow map; this module is
 the same sum on arrays, for what the CPU needs: a ray cast against the posed triangles, and
 the box that holds the pose (what culling and the shadow maps' redraws read).
+
+A morph target (``Mesh.morph_positions``, ``morph_normals``: glTF's ``targets``, a face's
+smile, a door's dent) is an offset a vertex; a ``Morph``'s weights say how much of each is
+added (``shaders/include/pose.glsl``), before the joints bend the result.
 """
 from __future__ import annotations
 
@@ -15,8 +20,8 @@ import numpy as np
 
 from components.limits import MAX_JOINTS
 
-__all__ = ["INFLUENCES", "MAX_JOINTS", "blend_matrices", "joint_boxes", "posed_box", "skin_normals",
-           "skin_positions", "strongest_influences"]
+__all__ = ["INFLUENCES", "MAX_JOINTS", "blend_matrices", "joint_boxes", "morph_reach", "morphed", "posed_bounds",
+           "posed_box", "posed_positions", "skin_normals", "skin_positions", "strongest_influences"]
 
 INFLUENCES = 4              # joints a vertex may follow (glTF's JOINTS_0: more are folded into the four largest)
 
@@ -90,3 +95,41 @@ def strongest_influences(joints: np.ndarray, weights: np.ndarray) -> tuple[np.nd
         weights = np.take_along_axis(weights, order, axis=1)
     total = weights.sum(axis=1, keepdims=True)
     return joints, weights / np.where(total > 0.0, total, 1.0)
+
+
+def morphed(base: np.ndarray, offsets: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``base`` (V, 3) plus each target's ``offsets`` (T, V, 3) times its weight (T), float64."""
+    return base.astype(np.float64) + np.einsum("t,tvc->vc", np.asarray(weights, np.float64),
+                                                offsets.astype(np.float64))
+
+
+def morph_reach(offset_boxes: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far the weighted targets can move any vertex, a box (lo, hi) to add to the mesh's:
+    each target's box of offsets (T, 2, 3) scaled by its weight (a negative one swaps its
+    ends), summed axis by axis."""
+    scaled = offset_boxes.astype(np.float64) * np.asarray(weights, np.float64)[:, None, None]
+    return np.minimum(scaled[:, 0], scaled[:, 1]).sum(axis=0), np.maximum(scaled[:, 0], scaled[:, 1]).sum(axis=0)
+
+
+def posed_bounds(mesh, joint_matrices: np.ndarray | None,
+                 morph_weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The box (lo, hi) holding ``mesh`` posed (``posed_positions``' points): its box, or each
+    joint's (``joint_boxes``), grown by how far the weighed targets reach (``morph_reach``),
+    then placed by the joints (``posed_box``)."""
+    reach = morph_reach(mesh.morph_offset_boxes(), morph_weights) if morph_weights is not None \
+        else (np.zeros(3), np.zeros(3))
+    if joint_matrices is None:
+        lo, hi = mesh.bounds
+        return lo + reach[0], hi + reach[1]
+    return posed_box(mesh.joint_boxes() + np.stack(reach)[None], joint_matrices)
+
+
+def posed_positions(mesh, joint_matrices: np.ndarray | None, morph_weights: np.ndarray | None) -> np.ndarray:
+    """Where ``mesh``'s vertices go (V, 3, float64): its morph targets weighed in, then bent
+    by its joints (either None: not applied), as the SKINNED and MORPHED builds draw it."""
+    positions = mesh.positions.astype(np.float64)
+    if morph_weights is not None:
+        positions = morphed(positions, mesh.morph_positions, morph_weights)
+    if joint_matrices is not None:
+        positions = skin_positions(positions, mesh.joints, mesh.weights, joint_matrices)
+    return positions

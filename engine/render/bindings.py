@@ -119,9 +119,11 @@ OCCLUSION_UNIT = 19      # scene (OCCLUSION_MAP builds): the batch's occlusion m
 # The spot lights' cookies (engine/render/spot_cookies.py), a texture array: the 17th sampler of
 # the fullest build, only where the context has one (SpotCookies.supported).
 COOKIE_UNIT = 25         # scene (SPOT_COOKIES builds): the kept spot lights' cookie images
-# The skinned entities' joint matrices (engine/render/joint_palettes.py): read by the vertex
-# stage of the SKINNED scene and caster builds, so no fragment stage's 16 samplers count it.
-JOINT_PALETTE_UNIT = 26  # scene, casters (SKINNED builds): the joint palette
+# The posed entities' joint matrices and morph weights (engine/render/pose_rows.py) and a
+# morphed mesh's offsets: read by the vertex stage of the SKINNED and MORPHED scene and caster
+# builds, so no fragment stage's 16 samplers count them.
+POSE_ROWS_UNIT = 26  # scene, casters (SKINNED, MORPHED builds): the pose texture
+MORPH_UNIT = 27      # scene, casters (MORPHED builds): the batch's mesh's morph offsets (GpuMesh.morphs)
 # Screen-space ambient occlusion (engine/render/screen_occlusion.py): the root view's builds
 # that read it are never MASKED, so its sampler takes the node image's place in the count.
 SCREEN_OCCLUSION_UNIT = 20  # scene (SCREEN_OCCLUSION builds): the camera's occlusion image, a texel a pixel

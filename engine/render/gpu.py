@@ -26,7 +26,7 @@ from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.fog import FogBlock
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
-from engine.render.joint_palettes import JointPalettes
+from engine.render.pose_rows import PoseRows
 from engine.render.raw_gl import RawGL
 from engine.render.shader_library import ShaderLibrary
 from engine.render.sky import SkyModel, flat_cube
@@ -200,9 +200,9 @@ class Gpu:
         # the scene programs' SPHERE_LIGHTS builds.
         self.sphere_lights = False
         self.spot_cookies = SpotCookies(ctx, caps.max_texture_image_units, self.normal_map_anisotropy, caps.software)
-        # Every skinned entity's joint matrices (engine/render/joint_palettes.py; the extract
-        # stage writes them): the SKINNED builds read them.
-        self.joint_palettes = JointPalettes(ctx, caps.max_texture_size)
+        # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
+        # the extract stage writes them): the SKINNED and MORPHED builds read them.
+        self.pose_rows = PoseRows(ctx, caps.max_texture_size)
         # Debug mode: every pass checks for an OpenGL error when it ends and names itself
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")

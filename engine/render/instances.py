@@ -8,6 +8,7 @@ nothing.
 from __future__ import annotations
 
 import math
+import re
 from typing import NamedTuple
 
 import moderngl
@@ -54,6 +55,10 @@ _SPAN_SLACK = 4
 # Movers of one batch in a frame from which their rows are gathered at the batch's front
 # (InstanceBatch.write_transforms).
 _GATHER_AT = 16
+
+
+# Texels a row of a mesh's morph-offset texture (GpuMesh.morphs; GL 4.1 promises 16384).
+MORPH_TEXTURE_WIDTH = 1024
 
 
 # Rows an upload measures (world boxes, largest scale) in Python floats rather than arrays
@@ -125,6 +130,33 @@ def normal_matrices(models: np.ndarray) -> np.ndarray:
     return u
 
 
+_FORMAT_PART = re.compile(r"^(\d*)([fiu])(\d?)$")
+
+
+def read_by(program: moderngl.Program, buffer: moderngl.Buffer, layout: str, *names: str) -> tuple | None:
+    """A vertex array's entry for ``buffer`` (``layout``: moderngl's format, one part a name)
+    as ``program`` reads it: the inputs the build does not read (its linker dropped them)
+    skipped as padding bytes; None where it reads none.  Rather than moderngl's
+    ``skip_errors``, which gives a name the program lacks the location of a built-in input
+    the program reads (gl_VertexID's -1: the MORPHED builds'), so GL refuses the array
+    (GL_INVALID_VALUE)."""
+    parts = layout.split()
+    per_instance = parts[-1].endswith("/i")
+    if per_instance:
+        parts[-1] = parts[-1][:-2]
+    kept, layout_parts = [], []
+    for part, name in zip(parts, names, strict=True):
+        if name in program:
+            kept.append(name)
+            layout_parts.append(part)
+            continue
+        count, kind, size = _FORMAT_PART.match(part).groups()
+        layout_parts.append(f"{int(count or 1) * int(size or 4)}x")
+    if not kept:
+        return None
+    return (buffer, " ".join(layout_parts) + ("/i" if per_instance else ""), *kept)
+
+
 class GpuMesh:
     """Vertex and index buffers of one Mesh, shared by every batch that draws it."""
 
@@ -135,9 +167,12 @@ class GpuMesh:
         # VERTEX_COLOR builds read it (and a cutout's VERTEX_ALPHA shadow build its alpha).
         self.colors = ctx.buffer(mesh.rgba_colors().tobytes()) if mesh.colors is not None else None
         # A skinned mesh's joints and weights a vertex (Mesh.joints, Mesh.weights; None: not
-        # skinned): the SKINNED builds read them (shaders/include/skinning.glsl).
+        # skinned): the SKINNED builds read them (shaders/include/pose.glsl).
         self.skin = ctx.buffer(mesh.skin_interleaved()) if mesh.skinned else None
-        self.joint_boxes = mesh.joint_boxes() if mesh.skinned else None  # each joint's box (a pose's box)
+        # A mesh with morph targets: their offsets a vertex in a float texture (Mesh.morph_texels,
+        # MORPH_TEXTURE_WIDTH texels a row), which the MORPHED builds read by gl_VertexID.
+        self.morph_count = mesh.morph_count
+        self.morphs = self._morph_texture(ctx, mesh) if mesh.morph_count else None
         self.has_alpha = mesh.has_alpha  # some vertex's alpha below 1 (Mesh.has_alpha)
         self.index_count = mesh.indices.size
         # Model-space radius about the origin (what an instance's scale stretches).
@@ -151,12 +186,22 @@ class GpuMesh:
         self.box_ends = np.array([lo, hi], np.float64).reshape(2, 3, 1)
         self.box_lo, self.box_hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)  # the same, as floats
 
+    @staticmethod
+    def _morph_texture(ctx: moderngl.Context, mesh: Mesh) -> moderngl.Texture:
+        texels = mesh.morph_texels()
+        rows = -(-len(texels) // MORPH_TEXTURE_WIDTH)
+        filled = np.zeros((rows * MORPH_TEXTURE_WIDTH, 4), np.float32)  # every texel written (a GPU zeroes nothing)
+        filled[: len(texels)] = texels
+        texture = ctx.texture((MORPH_TEXTURE_WIDTH, rows), 4, filled.tobytes(), dtype="f4")
+        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        return texture
+
     def release(self) -> None:
         self.vertices.release()
         self.indices.release()
-        for buffer in (self.colors, self.skin):
-            if buffer is not None:
-                buffer.release()
+        for obj in (self.colors, self.skin, self.morphs):
+            if obj is not None:
+                obj.release()
 
 
 class BatchKey(NamedTuple):
@@ -184,7 +229,8 @@ class BatchKey(NamedTuple):
     dispersion: float = 0.0             # Refractive.dispersion: its DISPERSION build's uniform (0: none)
     anisotropy: tuple[float, float] | None = None  # Material.anisotropy and its direction in radians (None: none)
     iridescence: tuple[float, float, float] | None = None  # Material.iridescence, its film's index and nm
-    skinned_entity: int = 0             # a skinned entity's own batch (its joint palette row its draws' uniform)
+    # A posed entity's own batch: (entity, bent by a Skin, wearing a Morph); (0, False, False): none.
+    posed: tuple[int, bool, bool] = (0, False, False)
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -304,12 +350,14 @@ class InstanceBatch:
         self.anisotropy: tuple[float, float] | None = None
         # A thin film (Material.iridescence, its index, thickness; None: none): IRIDESCENCE's uniform.
         self.iridescence: tuple[float, float, float] | None = None
-        # A skinned entity's batch (BatchKey.skinned_entity): drawn with the SKINNED builds,
-        # its palette row (JointPalettes) their uniform.
+        # A posed entity's batch (BatchKey.posed): drawn with the SKINNED builds (a Skin bends
+        # it) and the MORPHED builds (it wears a Morph), its row of the pose texture (PoseRows)
+        # their uniform.
         self.skinned = False
-        self.joint_row = 0
+        self.morphed = False
+        self.pose_row = 0
         # The model-space box its rows' world boxes are made from, and its radius about the
-        # origin: its mesh's, or a skinned instance's pose's (``set_local_box``).
+        # origin: its mesh's, or a posed instance's pose's (``set_local_box``).
         self.box_ends, self.box_lo, self.box_hi = mesh.box_ends, mesh.box_lo, mesh.box_hi
         self.radius = mesh.radius
 
@@ -625,9 +673,10 @@ class InstanceBatch:
         return self._row_boxes
 
     def set_local_box(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """A skinned instance's pose changed: [lo, hi] is the model-space box holding it
-        (``skinning.posed_box``).  Where it stood counts as changed (its shape there is not
-        what the shadow maps hold), and its rows are measured and sent again, their boxes
+        """A posed instance's pose changed: [lo, hi] is the model-space box holding it
+        (``skinning.posed_box``, grown by its morph targets' reach).  Where it stood counts as
+        changed (its shape there is not what the shadow maps hold), and its rows are measured
+        and sent again, their boxes
         from this one (a pose may reach past the mesh as modelled: culled by it, an arm
         raised above the head would vanish)."""
         for entity in self.entity_at:
@@ -780,13 +829,8 @@ class InstanceBatch:
                 buffers.append((self.mesh.colors, "4f", "in_vertex_color"))
             if self.skinned and self.mesh.skin is not None:
                 buffers.append((self.mesh.skin, "4u2 4f", "in_joints", "in_weights"))
-            vao = self.ctx.vertex_array(
-                program,
-                buffers,
-                index_buffer=self.mesh.indices,
-                index_element_size=4,
-                skip_errors=True,
-            )
+            content = [fitted for entry in buffers if (fitted := read_by(program, *entry)) is not None]
+            vao = self.ctx.vertex_array(program, content, index_buffer=self.mesh.indices, index_element_size=4)
             self._vaos[key] = vao
         return vao
 

@@ -142,7 +142,7 @@ class Renderer(Gpu):
                   sheen: tuple[float, float, float, float] | None = None,
                   dispersion: float = 0.0, anisotropy: tuple[float, float] | None = None,
                   iridescence: tuple[float, float, float] | None = None,
-                  skinned_entity: int = 0) -> InstanceBatch:
+                  posed: tuple[int, bool, bool] = (0, False, False)) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -165,8 +165,9 @@ class Renderer(Gpu):
         # ``dispersion``: a refraction's Refractive.dispersion, its DISPERSION build's (0: none).
         # ``anisotropy``: (Material.anisotropy, its direction in radians), ANISOTROPY's (None: none).
         # ``iridescence``: (Material.iridescence, the film's index, its nm), IRIDESCENCE's (None: none).
-        # ``skinned_entity``: a skinned entity (a Skin bends its mesh) gets a batch of its own,
-        # drawn with the SKINNED builds, its joint palette row their uniform (set by extract).
+        # ``posed``: (entity, skinned, morphed): a posed entity (a Skin bends its mesh, or it
+        # wears a Morph) gets a batch of its own, drawn with the SKINNED and MORPHED builds, its
+        # row of the pose texture their uniform (set by extract).
         key = BatchKey(mesh.id, id(texture) if texture is not None else 0,
                        (probe, second_probe, probe_blend, rest_probe), transparent_entity,
                        id(normal_map) if normal_map is not None else 0,
@@ -175,7 +176,7 @@ class Renderer(Gpu):
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
                        bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen,
-                       dispersion, anisotropy, iridescence, skinned_entity)
+                       dispersion, anisotropy, iridescence, posed)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -224,7 +225,7 @@ class Renderer(Gpu):
             batch.dispersion = dispersion
             batch.anisotropy = anisotropy
             batch.iridescence = iridescence
-            batch.skinned = bool(skinned_entity)
+            batch.skinned, batch.morphed = posed[1], posed[2]
             if sheen is not None:  # the sheen's albedo table, made once a sheen is drawn
                 self.irradiance.write_sheen_albedo()
             self._order_stale = True
@@ -366,7 +367,7 @@ class Renderer(Gpu):
                 "face_targets": len(self.probes._faces),
                 "levels": len(self.levels), "level_copies": len(self.level_copies),
                 "probe_levels": sum(len(s) for s in self.probes._stacks.values()),
-                "joint_palettes": int(self.joint_palettes.texture is not None),
+                "pose_rows": int(self.pose_rows.texture is not None),
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
                 "irradiance_rows": len(self.irradiance.rows),
                 "occlusion_targets": self.occlusion.target_count(),
@@ -501,7 +502,7 @@ class Renderer(Gpu):
             self.text_pass.release()
             self.text_pass = None
         for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog,
-                    self.spot_cookies, self.joint_palettes):
+                    self.spot_cookies, self.pose_rows):
             obj.release()
         self.shaders.release()
 

@@ -203,9 +203,9 @@ class ScenePass:
             seen = programs.reloads_seen
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         shadows = self.shadows
-        # (And the joint palette: a skinned batch's record binds its texture, made again as it grows.)
+        # (And the pose texture: a posed batch's record binds it, made again as it grows.)
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines,
-                 renderer.joint_palettes.version)
+                 renderer.pose_rows.version)
         kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked, screen))
         if kinds is None:
             kinds = self._kinds[invocations, layered, self._ambient_probes, masked, screen] = (
@@ -280,7 +280,8 @@ class ScenePass:
         return (batch.texture is not None, blend_code(batch), probe_size, *lookup, probe2_size, *lookup2, rest_size,
                 *lookup_rest, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0, batch.occlusion_strength,
                 batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN, batch.dispersion,
-                batch.anisotropy or NO_ANISOTROPY, batch.iridescence or NO_IRIDESCENCE, batch.joint_row)
+                batch.anisotropy or NO_ANISOTROPY, batch.iridescence or NO_IRIDESCENCE, batch.pose_row,
+                batch.mesh.morph_count if batch.morphed else 0)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The

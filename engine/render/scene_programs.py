@@ -30,13 +30,14 @@ from engine.render.bindings import (
     FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
-    JOINT_PALETTE_UNIT,
     LIGHTS_BINDING,
     METALLIC_ROUGHNESS_UNIT,
+    MORPH_UNIT,
     NODE_UNIT,
     NORMAL_UNIT,
     OCCLUSION_UNIT,
     POINT_SHADOW_UNITS,
+    POSE_ROWS_UNIT,
     PROBE2_UNIT,
     PROBE_REST_UNIT,
     PROBE_UNIT,
@@ -64,7 +65,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                      "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
-                     "anisotropy", "iridescence", "joint_row")
+                     "anisotropy", "iridescence", "pose_row", "morph_targets")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -74,7 +75,7 @@ NO_SHEEN = (0.0, 0.0, 0.0, 0.0)  # the sheen uniform of a batch without one (lik
 NO_ANISOTROPY = (0.0, 0.0)  # the anisotropy uniform of a batch without one (likewise)
 NO_IRIDESCENCE = (0.0, 1.0, 0.0)  # the thin film's uniform of a batch without one (likewise)
 # a batch's build with none of _material_build's
-NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False)
+NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False, False)
 
 
 
@@ -168,7 +169,7 @@ class ScenePrograms:
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
             material = (False, False, material[2], "", False, False, False, False, False, False, False, False,
-                        material[12])  # (a skinned mesh's depth is where its pose puts it)
+                        material[12], material[13])  # (a posed mesh's depth is where its pose puts it)
             virtual, unlit, masked, shadowing, fogging, cookies = False, False, False, (), (), ()
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -208,8 +209,10 @@ class ScenePrograms:
                 defines["ANISOTROPY"] = "1"
             if material[11]:  # a thin film's colours over it (Material.iridescence)
                 defines["IRIDESCENCE"] = "1"
-            if material[12]:  # its mesh bent by its joints (a Skin: shaders/include/skinning.glsl)
+            if material[12]:  # its mesh bent by its joints (a Skin: shaders/include/pose.glsl)
                 defines["SKINNED"] = "1"
+            if material[13]:  # its mesh's morph targets weighed in (a Morph: shaders/include/pose.glsl)
+                defines["MORPHED"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -264,7 +267,7 @@ class ScenePrograms:
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
                                ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT),
                                ("screen_occlusion", SCREEN_OCCLUSION_UNIT), ("spot_cookies", COOKIE_UNIT),
-                               ("joint_palette", JOINT_PALETTE_UNIT)):
+                               ("pose_rows", POSE_ROWS_UNIT), ("morph_offsets", MORPH_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -345,7 +348,8 @@ class ScenePrograms:
         textures = tuple((unit, texture) for unit, texture in (
             (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
             (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map), (OCCLUSION_UNIT, batch.occlusion_map),
-            (JOINT_PALETTE_UNIT, self.renderer.joint_palettes.texture if batch.skinned else None))
+            (POSE_ROWS_UNIT, self.renderer.pose_rows.texture if batch.skinned or batch.morphed else None),
+            (MORPH_UNIT, batch.mesh.morphs if batch.morphed else None))
             if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:
@@ -353,7 +357,7 @@ class ScenePrograms:
                    0, *NO_PROBE_LOOKUP, *(batch.checker or NO_CHECKER), batch.alpha_cutoff or 0.0,
                    batch.occlusion_strength, batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0,
                    batch.sheen or NO_SHEEN, batch.dispersion, batch.anisotropy or NO_ANISOTROPY,
-                   batch.iridescence or NO_IRIDESCENCE, batch.joint_row)
+                   batch.iridescence or NO_IRIDESCENCE, batch.pose_row, batch.mesh.morph_count if batch.morphed else 0)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -383,11 +387,11 @@ def _material_build(batch: InstanceBatch) -> tuple:
     whether it is clear-coated (``CLEARCOAT``), whether it is unlit (``UNLIT_MATERIAL``) and
     whether it has a sheen (``SHEEN``) and whether its refraction splits the colours
     (``DISPERSION``), whether its highlights are anisotropic (``ANISOTROPY``), whether a
-    thin film colours its reflections (``IRIDESCENCE``) and whether a Skin bends its mesh
-    (``SKINNED``)."""
+    thin film colours its reflections (``IRIDESCENCE``), whether a Skin bends its mesh
+    (``SKINNED``) and whether it wears a Morph (``MORPHED``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
             batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None,
-            batch.iridescence is not None, batch.skinned)
+            batch.iridescence is not None, batch.skinned, batch.morphed)
 

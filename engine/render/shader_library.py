@@ -66,7 +66,7 @@ import shaders
 from components.post import TONEMAP_CURVES
 from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
-from engine.render import views
+from engine.render import pose_rows, views
 from engine.render.bindings import clip_glsl_defines
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.render.raw_gl import _load as load_gl_function
@@ -267,7 +267,8 @@ def limit_glsl_defines() -> dict[str, str]:
     that packs them (the Lights block: ``views``; the point lights' shadow cubes:
     ``shadows``; the irradiance boxes: ``irradiance``; the environment BRDF's rows:
     ``environment_brdf``; the virtual lights and the outlines
-    each one's line crosses: ``shadow_rules``), and each tone curve's number (its index in ``TONEMAP_CURVES``, the
+    each one's line crosses: ``shadow_rules``; where a pose row's morph weights start:
+    ``pose_rows``), and each tone curve's number (its index in ``TONEMAP_CURVES``, the
     number a build's ``TONEMAP_CURVE`` is)."""
     return {"MAX_DIRECTIONAL_LIGHTS": str(views.MAX_DIRECTIONAL_LIGHTS),
             "MAX_POINT_LIGHTS": str(views.MAX_POINT_LIGHTS), "MAX_POINT_SHADOWS": str(views.MAX_POINT_SHADOWS),
@@ -276,6 +277,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
+            "POSE_WEIGHTS_AT": str(pose_rows.WEIGHTS_AT),
             **{f"TONEMAP_{curve.upper()}": str(index) for index, curve in enumerate(TONEMAP_CURVES)}}
 
 

@@ -33,8 +33,9 @@ from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
     CLIP_LEG_PLANE,
-    JOINT_PALETTE_UNIT,
+    MORPH_UNIT,
     POINT_SHADOW_UNITS,
+    POSE_ROWS_UNIT,
     SCENE_CLIPS,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
@@ -145,7 +146,7 @@ class ShadowMaps:
         self.ubo = ctx.buffer(self.block.tobytes())
         # The caster programs by (build: _DEPTH, _DISTANCE, _LAYERED or _LEG; whether for
         # cutouts): _caster_program.
-        self._casters: dict[tuple[tuple[tuple[str, str], ...], bool | str, bool], moderngl.Program] = {}
+        self._casters: dict[tuple[tuple[tuple[str, str], ...], bool | str, bool, bool], moderngl.Program] = {}
         for build in (_DEPTH, _DISTANCE):
             self._caster_program(build, False)
         # Until a light casts: a 1x1 atlas at the far depth and 1x1 cubes at the range's end
@@ -608,12 +609,13 @@ class ShadowMaps:
 
     # --- drawing --------------------------------------------------------------------------
     def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool | str,
-                        skinned: bool = False) -> moderngl.Program:
+                        skinned: bool = False, morphed: bool = False) -> moderngl.Program:
         """The caster program of ``build`` (its defines), for cutouts (``cutout``: the
         ``ALPHA_CUTOFF`` build, its albedo map read for its holes; "vertex alpha": and its
         mesh's alpha a vertex, ``VERTEX_ALPHA``) or whole casters, bent by a Skin or not
-        (``skinned``: the ``SKINNED`` build, its joints read from the joint palette)."""
-        program = self._casters.get((build, cutout, skinned))
+        (``skinned``: the ``SKINNED`` build, its joints read from the pose texture) or wearing a
+        Morph or not (``morphed``: the ``MORPHED`` build, its offsets read from its mesh's)."""
+        program = self._casters.get((build, cutout, skinned, morphed))
         if program is None:
             defines = dict(build)
             if cutout:
@@ -622,14 +624,18 @@ class ShadowMaps:
                 defines["VERTEX_ALPHA"] = "1"
             if skinned:
                 defines["SKINNED"] = "1"
+            if morphed:
+                defines["MORPHED"] = "1"
             geometry = "shadow_layered.geom" if "LAYERED" in defines else None
-            program = self._casters[(build, cutout, skinned)] = self.renderer.shaders.program(
+            program = self._casters[(build, cutout, skinned, morphed)] = self.renderer.shaders.program(
                 "shadow.vert", "shadow.frag", geometry, defines=defines)
             program["Camera"].binding = CAMERA_BINDING
             if "albedo_map" in program:
                 program["albedo_map"].value = ALBEDO_UNIT
-            if "joint_palette" in program:
-                program["joint_palette"].value = JOINT_PALETTE_UNIT
+            if "pose_rows" in program:
+                program["pose_rows"].value = POSE_ROWS_UNIT
+            if "morph_offsets" in program:
+                program["morph_offsets"].value = MORPH_UNIT
         return program
 
     def _draw_casters(self, view: View | None, build: tuple[tuple[str, str], ...],
@@ -644,8 +650,8 @@ class ShadowMaps:
             renderer.bind_view(view)
         ctx.polygon_offset = SLOPE_BIAS
         whole = self._caster_program(build, False)
-        # The other builds (a cutout's, a skinned mesh's), made and given ``uniforms`` at their first batch.
-        others: dict[tuple[bool | str, bool], moderngl.Program] = {}
+        # The other builds (a cutout's, a posed mesh's), made and given ``uniforms`` at their first batch.
+        others: dict[tuple[bool | str, bool, bool], moderngl.Program] = {}
         for name, value in (uniforms or {}).items():
             _set_uniform(whole, name, value)
         stats = renderer.stats
@@ -654,22 +660,26 @@ class ShadowMaps:
                 if not batch.count:
                     continue
                 cutoff = batch.alpha_cutoff
-                if cutoff is None and not batch.skinned:
+                if cutoff is None and not batch.skinned and not batch.morphed:
                     batch.draw(whole)
                 else:
                     kind = False if cutoff is None else "vertex alpha" if batch.mesh.has_alpha else True
-                    program = others.get((kind, batch.skinned))
+                    posed = (batch.skinned, batch.morphed)
+                    program = others.get((kind, *posed))
                     if program is None:
-                        program = others[kind, batch.skinned] = self._caster_program(build, kind, batch.skinned)
+                        program = others[(kind, *posed)] = self._caster_program(build, kind, *posed)
                         for name, value in (uniforms or {}).items():
                             _set_uniform(program, name, value)
                     if cutoff is not None:
                         bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,
                                      ALBEDO_UNIT)
                         program["alpha_cutoff"].value = cutoff
-                    if batch.skinned:  # its joints: its row of the palette
-                        bind_texture(ctx, renderer.joint_palettes.texture, JOINT_PALETTE_UNIT)
-                        program["joint_row"].value = batch.joint_row
+                    if batch.skinned or batch.morphed:  # its joints and weights: its row of the pose texture
+                        bind_texture(ctx, renderer.pose_rows.texture, POSE_ROWS_UNIT)
+                        program["pose_row"].value = batch.pose_row
+                    if batch.morphed:  # its mesh's offsets
+                        bind_texture(ctx, batch.mesh.morphs, MORPH_UNIT)
+                        program["morph_targets"].value = batch.mesh.morph_count
                     batch.draw(program)
                 stats.shadow_draw_calls += 1
         finally:

@@ -4,8 +4,8 @@ and a Transform that a ray hits (for picking, aiming, placing things on walls).
 The test is Möller–Trumbore ray/triangle intersection, vectorised with numpy over every
 triangle of every candidate entity at once (one pass of array arithmetic per ray, no Python
 loop over triangles).  Triangles are kept in world space in a per-entity cache; an entry is
-rebuilt only when its entity's world matrix, mesh or pose (a skinned mesh's ``Skin``: its
-triangles where the joints bend them, as drawn) changed:
+rebuilt only when its entity's world matrix, mesh or pose (its ``Skin`` and ``Morph``: its
+triangles where its joints and morph targets put them, as drawn) changed:
 
 * the TransformSystem writes a new ``Transform.world`` matrix object whenever it recomputes a
   pose (its ``world.frame.moved`` set), so an entry keyed on that object's identity goes
@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, Skin, Transform
+from components import MeshRef, Morph, Skin, Transform
 from engine.core.errors import SpeculumError
-from engine.core.skinning import skin_positions
+from engine.core.skinning import posed_positions
 from engine.core.transforms import MAX_PARENT_HOPS, current_world_matrix
 from engine.core.world import World
 
@@ -72,7 +72,8 @@ class _Entry:
     e1: np.ndarray
     e2: np.ndarray
     normal: np.ndarray  # (n, 3) unit geometric normals (zero for degenerate triangles)
-    pose: np.ndarray | None = None  # a skinned mesh's Skin.joint_matrices they were bent by (None: as modelled)
+    # What posed them: (its Skin.joint_matrices, its Morph.weights), each None where it has none
+    pose: tuple = (None, None)
 
 
 class RayCaster:
@@ -169,9 +170,11 @@ class RayCaster:
             key = self._world_key(entity, transform, written)
             mesh = mesh_ref.mesh
             skin = world.try_get(entity, Skin) if mesh.skinned else None
-            pose = skin.joint_matrices if skin is not None else None  # (a new array each pose: Skin copies it)
+            morph = world.try_get(entity, Morph) if mesh.morph_count else None
+            # (a new array or tuple each pose: Skin and Morph copy what they are given)
+            pose = (skin.joint_matrices if skin is not None else None, morph.weights if morph is not None else None)
             if entry is not None and entry.mesh_id == mesh.id and _same_key(entry.world_key, key) \
-                    and entry.pose is pose:
+                    and entry.pose[0] is pose[0] and entry.pose[1] is pose[1]:
                 continue
             matrix = _matrix_of(key)
             self._entries[entity] = _build(mesh, matrix, mesh.id, key, pose)
@@ -248,9 +251,8 @@ def _matrix_of(key: object) -> np.ndarray:
     return np.array(columns, np.float64).T
 
 
-def _build(mesh, matrix: np.ndarray, mesh_id: int, key: object, pose: np.ndarray | None = None) -> _Entry:
-    positions = np.asarray(mesh.positions, np.float64) if pose is None else \
-        skin_positions(mesh.positions, mesh.joints, mesh.weights, pose)  # where its Skin bends it, as drawn
+def _build(mesh, matrix: np.ndarray, mesh_id: int, key: object, pose: tuple = (None, None)) -> _Entry:
+    positions = posed_positions(mesh, *pose)  # where its Morph and Skin put them, as drawn
     world = positions @ matrix[:3, :3].T + matrix[:3, 3]
     tri = world[np.asarray(mesh.indices)]
     v0 = np.ascontiguousarray(tri[:, 0])

@@ -1,26 +1,34 @@
-"""A skinned mesh's pose: the matrices its joints bend it by.
+"""A mesh's pose: the matrices its joints bend it by (``Skin``) and how much of each of its
+morph targets it wears (``Morph``).
 
 A mesh with joints and weights a vertex (``Mesh.joints``, ``Mesh.weights``: a character's
 body, a rope, a flag) is bent by the ``Skin`` on its entity: ``joint_matrices`` holds one
 4 x 4 matrix a joint (numpy, (J, 4, 4), points as columns: ``M @ (x, y, z, 1)``), each the
 joint's pose times its inverse bind matrix, in the mesh's own space (the identity: the joint
 where the mesh was modelled).  The GPU blends each vertex's joints by its weights in every
-view and shadow map (``shaders/include/skinning.glsl``; ``engine/core/skinning.py`` the same
+view and shadow map (``shaders/include/pose.glsl``; ``engine/core/skinning.py`` the same
 sum on arrays).  A model file's skinned parts get theirs from the file, posed by their
 ``Animation`` each frame (``systems/model_system.py``); a game may give its own.
 
 Assign a new array to pose it (``skin.joint_matrices = posed``): an array edited in place is
 not seen until ``skin.touch()``.  At most ``MAX_JOINTS`` joints; the mesh's highest joint
-must have a matrix (checked when either is given: ``engine/rules/skin_rules.py``).
+must have a matrix (checked when either is given: ``engine/rules/pose_rules.py``).
+
+A mesh with morph targets (``Mesh.morph_positions``: glTF's ``targets``, blend shapes: a
+face's smile, a flag's ripple) wears them by the ``Morph`` on its entity: one weight a
+target, each target's offsets times its weight added to the mesh as modelled, before any
+Skin bends it.  A model file's morphed parts get the file's weights, played by a clip's
+``weights`` channels.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from components.limits import MAX_JOINTS
+from components.limits import MAX_JOINTS, MAX_MORPH_TARGETS, MAX_MORPH_WEIGHT
 from components.tracking import ComponentValueError, TrackedComponent
 
 MAX_JOINT_VALUE = 1e18  # a matrix entry past this leaves float32 once multiplied out
@@ -57,3 +65,29 @@ class Skin(TrackedComponent):
             for entity in self._entities:
                 world.check_invariants(entity, Skin, joint_matrices=matrices)
         return matrices
+
+
+@dataclass(eq=False)
+class Morph(TrackedComponent):
+    """How much of each of its mesh's morph targets this entity wears: ``weights``, one a
+    target (see the module), each within +-``MAX_MORPH_WEIGHT``."""
+
+    SHAREABLE = False  # one entity's pose
+    weights: tuple[float, ...] = ()
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name != "weights":
+            return value
+        try:
+            weights = tuple(float(w) for w in value)
+        except (TypeError, ValueError):
+            raise ComponentValueError(f"Morph.weights must be numbers, one a morph target, got {value!r}") from None
+        if any(isinstance(w, bool) for w in value) or len(weights) > MAX_MORPH_TARGETS \
+                or not all(math.isfinite(w) and abs(w) <= MAX_MORPH_WEIGHT for w in weights):
+            raise ComponentValueError(f"Morph.weights must be at most {MAX_MORPH_TARGETS} (MAX_MORPH_TARGETS) finite "
+                                      f"numbers within +-{MAX_MORPH_WEIGHT:g}, got {value!r}")
+        world = getattr(self, "_world_ref", None)
+        if world is not None:
+            for entity in self._entities:
+                world.check_invariants(entity, Morph, weights=weights)
+        return weights

@@ -1,0 +1,109 @@
+"""Pose rows: every posed entity's joint matrices and morph weights in one float texture.
+
+A row a posed entity (a ``Skin``, a ``Morph`` or both), RGBA32F: three texels a joint, the
+first three rows of its matrix (the fourth is 0, 0, 0, 1: the matrices are affine), then at
+``WEIGHTS_AT`` its morph targets' weights, four a texel.  The SKINNED and MORPHED builds read
+them with ``texelFetch`` (``shaders/include/pose.glsl``)
+at their draw's ``pose_row``.  A texture, not uniform arrays: GL 4.1 promises a vertex stage
+1,024 uniform components, 85 joints at the most, shared with everything else a build reads; a
+texture row holds ``MAX_JOINTS`` and every view, shadow map and probe face reads the same one
+without a write a pass, and a new pose is one write a frame.  Rows are given out as posed
+entities come and taken back as they go (the texture itself released with the last); the
+texture doubles its rows when full (its rows kept on the CPU, sent again whole) up to
+``GL_MAX_TEXTURE_SIZE`` posed entities, past which a GLLimitError names the entity.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import moderngl
+import numpy as np
+
+from components.limits import MAX_JOINTS, MAX_MORPH_TARGETS
+from engine.core.errors import GLLimitError
+
+TEXELS_PER_JOINT = 3
+WEIGHTS_AT = TEXELS_PER_JOINT * MAX_JOINTS       # the texel a row's morph weights start at
+ROW_TEXELS = WEIGHTS_AT + -(-MAX_MORPH_TARGETS // 4)
+FIRST_ROWS = 4  # rows the texture is made with
+
+
+class PoseRows:
+    """The pose texture and which row each posed entity has."""
+
+    def __init__(self, ctx: moderngl.Context, max_rows: int) -> None:
+        self.ctx = ctx
+        self.max_rows = max_rows
+        self.texture: moderngl.Texture | None = None
+        self.version = 0  # moved on when the texture is made again (what holds it binds the new one)
+        self._rows: dict[int, int] = {}
+        self._free: list[int] = []
+        self._kept = np.zeros((0, ROW_TEXELS, 4), np.float32)  # every row, as sent
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def row_of(self, entity: int) -> int | None:
+        return self._rows.get(entity)
+
+    def write(self, entity: int, joints: np.ndarray | None, weights: Sequence[float] | None) -> int:
+        """Put ``entity``'s joint matrices (J, 4, 4) and morph ``weights`` in its row (given
+        one the first time); returns the row."""
+        row = self._rows.get(entity)
+        if row is None:
+            row = self._take_row(entity)
+        kept = self._kept[row]
+        if joints is not None:
+            texels = np.ascontiguousarray(joints[:, :3, :], np.float32).reshape(-1, 4)  # a joint's 3 rows
+            kept[: len(texels)] = texels
+            self.texture.write(texels.tobytes(), viewport=(0, row, len(texels), 1))
+        if weights is not None:
+            packed = np.zeros(ROW_TEXELS - WEIGHTS_AT, (np.float32, 4))
+            packed.reshape(-1)[: len(weights)] = weights
+            kept[WEIGHTS_AT:] = packed
+            self.texture.write(packed.tobytes(), viewport=(WEIGHTS_AT, row, len(packed), 1))
+        return row
+
+    def free(self, entity: int) -> None:
+        """``entity`` has no pose drawn any more: its row is given back; the last one's takes the texture."""
+        row = self._rows.pop(entity, None)
+        if row is None:
+            return
+        self._free.append(row)
+        if not self._rows:
+            self.release()
+
+    def _take_row(self, entity: int) -> int:
+        if not self._free:
+            self._grow(entity)
+        row = self._free.pop()
+        self._rows[entity] = row
+        return row
+
+    def _grow(self, entity: int) -> None:
+        """Twice the rows (or the first ones), the rows written so far sent again whole."""
+        held = len(self._kept)
+        if held >= self.max_rows:
+            raise GLLimitError(f"entity {entity}: a Skin or Morph past this OpenGL's {self.max_rows} posed entities "
+                               "(the pose texture's rows: GL_MAX_TEXTURE_SIZE)")
+        rows = min(max(FIRST_ROWS, 2 * held), self.max_rows)
+        kept = np.zeros((rows, ROW_TEXELS, 4), np.float32)
+        kept[:held] = self._kept
+        self._kept = kept
+        if self.texture is not None:
+            self.texture.release()
+        # Filled from the start (a GPU does not zero a new texture): every texel is some row's.
+        self.texture = self.ctx.texture((ROW_TEXELS, rows), 4, kept.tobytes(), dtype="f4")
+        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self.version += 1
+        self._free.extend(range(rows - 1, held - 1, -1))  # the lowest first
+
+    def release(self) -> None:
+        if self.texture is not None:
+            self.texture.release()
+            self.texture = None
+            self.version += 1
+        self._rows.clear()
+        self._free.clear()
+        self._kept = self._kept[:0]
