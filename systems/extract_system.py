@@ -72,19 +72,6 @@ class ExtractSystem(esper.Processor):
         shown = world.changed(Visibility)
         if shown:  # a portal clone is drawn where its source is (its row reads the source's Visibility)
             touched |= {entity for entity, clone in world.query_one(PortalClone) if clone.source in shown}
-        skins, morphs = world.changed(Skin), world.changed(Morph)
-        if skins or morphs:  # a new pose is written on its own; a Skin or Morph come or gone changes the batch
-            touched = set(touched)
-            for entity in (skins | morphs) - touched:
-                batch = self._batch_of.get(entity)
-                here = world.exists(entity)
-                skin = world.try_get(entity, Skin) if here else None
-                morph = world.try_get(entity, Morph) if here else None
-                if batch is not None and batch.skinned == (skin is not None) and batch.morphed == (morph is not None):
-                    if skin is not None or morph is not None:
-                        self._pose(entity, batch, world.get(entity, MeshRef).mesh, skin, morph)
-                elif skin is not None or morph is not None or batch is not None:
-                    touched.add(entity)
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)

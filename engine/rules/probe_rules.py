@@ -49,11 +49,13 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Morph,
     Portal,
     PortalClone,
     ReflectionProbe,
     Reflective,
     Refractive,
+    Skin,
     Skybox,
     Slice,
     Transform,
@@ -356,6 +358,8 @@ LOOK_KINDS: dict[type, str] = {
     PortalClone: "the entity it is drawn as: the id image, and the views that hide it (a probe face hides "
                  "its own object's clones too)",
     Visibility: "which kinds of view draw it (direct, mirrors, portals, probe captures) and its reflection layers",
+    Skin: "where its joints bend its mesh (a new pose, a Skin come or gone: its own batch or a shared one)",
+    Morph: "how much of each morph target it wears",
 }
 
 
