@@ -5,6 +5,9 @@ frame where nothing changed touches nothing), chooses each instance's material v
 (``material_dispatch``) and writes the rows the GPU batches upload in the prepare stage:
 the rows of entities that moved or whose look changed (``probe_rules.LookChanges``, the
 kinds in ``LOOK_KINDS``), with the probes each one samples (``probe_rules.probe_blend``).
+A posed entity (a ``Skin`` bends its mesh, or it wears a ``Morph``) gets a batch of its own,
+its joint matrices and morph weights written to its row of the pose texture
+(``engine/render/pose_rows.py``) and the box holding the pose given to its batch.
 It also publishes which probes each mirror and portal shows where it gets no view
 (``SurfaceBlends``, ``probe_rules.surface_blend``), which the view trees' fallbacks draw.
 Nothing here writes game state.
