@@ -143,8 +143,9 @@ TARGETS: dict[str, Target] = {
 def make_scene(name: str, ctx):
     """The engine of scene ``name`` (``mirrors_<n>``, ``portals_d<depth>``, ``portals_d<depth>_sway``
     with a swaying camera, ``probe_none``, ``probe_dynamic``, ``glass_<panes>``: the 8-mirror ring
-    with a see-through pond and that many panes, ``benchmarks.glass``; ``hall``: the sample
-    level), each with its suite's default settings."""
+    with a see-through pond and that many panes, ``benchmarks.glass``; ``posed_<mirrors>_<n>``:
+    the ring with n animated skinned and morphed meshes, ``benchmarks.posed``; ``hall``: the
+    sample level), each with its suite's default settings."""
     from shell.app import Engine
 
     if name == "hall":
@@ -169,6 +170,11 @@ def make_scene(name: str, ctx):
         from benchmarks.glass import GlassHouse
 
         return Engine(GlassHouse(int(arg)), ctx)
+    if kind == "posed":  # posed_<mirrors>_<tentacles>: the ring with animated skinned and morphed meshes
+        from benchmarks.posed import PosedRing
+
+        mirrors, _, posed = arg.partition("_")
+        return Engine(PosedRing(int(mirrors), int(posed or 0)), ctx)
     if kind == "probe":
         from benchmarks.probes import MODES, ProbeRing
 

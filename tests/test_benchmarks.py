@@ -840,3 +840,28 @@ def test_ab_at_another_size_times_frames_with_the_rasteriser_in_and_gives_the_8_
     for side in ("old", "new"):
         assert summary["ratio_8_to_0_mirrors"][side] == pytest.approx(
             by_scene["mirrors_8"][f"{side}_ms"] / by_scene["mirrors_0"][f"{side}_ms"], abs=1e-3)
+
+
+def test_the_posed_scene_poses_its_meshes_every_frame_and_draws_them(ctx):
+    """``posed_<mirrors>_<n>``: n tentacles, each a Skin and a Morph written by the game each
+    frame, drawn bent (pixels of their colour) with a row each in the pose texture."""
+    from benchmarks.cpu import make_scene
+    from components import Morph, Skin
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    engine = make_scene("posed_0_3", ctx)
+    capture = CaptureTarget(ctx, (96, 54))
+    try:
+        poses = []
+        for _ in range(2):
+            engine.frame(1.0 / 60.0, Output(capture.framebuffer, (96, 54)))
+            poses.append([skin.joint_matrices for _, skin in engine.world.query_one(Skin)])
+        rgb = capture.read_rgb().astype(int)
+        assert len(poses[1]) == 3 and len(list(engine.world.query_one(Morph))) == 3
+        assert all(not np.array_equal(a, b) for a, b in zip(poses[0], poses[1], strict=True))
+        assert len(engine.renderer.pose_rows) == 3
+        assert ((rgb[..., 0] > rgb[..., 1] + 40) & (rgb[..., 2] > rgb[..., 1] + 40)).sum() > 10   # purple
+    finally:
+        capture.release()
+        engine.close()
