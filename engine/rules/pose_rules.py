@@ -13,26 +13,30 @@ from components.tracking import ComponentValueError
 from engine.core.world import World, world_invariant
 
 
+def _posing(world: World, entity: int, kind: type, joining: Any, mesh: Any) -> tuple[Any, Any]:
+    """``entity``'s ``kind`` (Skin or Morph) and the mesh it poses (``mesh``: one about to be
+    set; None where it has none yet), as they will be once ``joining`` joins; a pose on a
+    mirror or a portal refused."""
+    held = {k: world.try_get(entity, k) if world.exists(entity) else None for k in (kind, MeshRef, Mirror, Portal)}
+    if joining is not None:
+        held[type(joining)] = joining
+    pose = held[kind]
+    surface = "Mirror" if held[Mirror] is not None else "Portal" if held[Portal] is not None else None
+    if pose is not None and surface is not None:
+        raise ComponentValueError(f"entity {entity}: a {kind.__name__} on a {surface}: a mirror's or portal's plane is "
+                                  "its mesh as modelled; pose a mesh in front of it instead")
+    return pose, mesh if mesh is not None else getattr(held[MeshRef], "mesh", None)
+
+
 @world_invariant(Skin, MeshRef, Mirror, Portal)
 def check_skin(world: World, entity: int, joining: Any = None, joint_matrices: Any = None, mesh: Any = None,
                **_other: Any) -> None:
     """Refuse ``entity``'s Skin (``joint_matrices``: ones about to be set) on a mesh (``mesh``:
     one about to be set) without joints a vertex, or with a joint it has no matrix for."""
-    held = {kind: world.try_get(entity, kind) if world.exists(entity) else None
-            for kind in (Skin, MeshRef, Mirror, Portal)}
-    if joining is not None:
-        held[type(joining)] = joining
-    skin, mesh_ref = held[Skin], held[MeshRef]
-    if skin is None:
+    skin, mesh = _posing(world, entity, Skin, joining, mesh)
+    if skin is None or mesh is None:
         return
     matrices = joint_matrices if joint_matrices is not None else skin.joint_matrices
-    mesh = mesh if mesh is not None else getattr(mesh_ref, "mesh", None)
-    surface = "Mirror" if held[Mirror] is not None else "Portal" if held[Portal] is not None else None
-    if surface is not None:
-        raise ComponentValueError(f"entity {entity}: a Skin on a {surface}: a mirror's or portal's plane is its mesh "
-                                  "as modelled; bend a mesh in front of it instead")
-    if mesh is None:
-        return
     if not mesh.skinned:
         raise ComponentValueError(f"entity {entity}: Skin on mesh {mesh.name!r}, which has no joints and weights a "
                                   "vertex (Mesh.joints, Mesh.weights): nothing for it to bend")
@@ -46,21 +50,10 @@ def check_morph(world: World, entity: int, joining: Any = None, weights: Any = N
                 **_other: Any) -> None:
     """Refuse ``entity``'s Morph (``weights``: ones about to be set) on a mesh (``mesh``: one
     about to be set) without morph targets, or with a count of targets not its weights'."""
-    held = {kind: world.try_get(entity, kind) if world.exists(entity) else None
-            for kind in (Morph, MeshRef, Mirror, Portal)}
-    if joining is not None:
-        held[type(joining)] = joining
-    morph, mesh_ref = held[Morph], held[MeshRef]
-    if morph is None:
+    morph, mesh = _posing(world, entity, Morph, joining, mesh)
+    if morph is None or mesh is None:
         return
     weights = weights if weights is not None else morph.weights
-    mesh = mesh if mesh is not None else getattr(mesh_ref, "mesh", None)
-    surface = "Mirror" if held[Mirror] is not None else "Portal" if held[Portal] is not None else None
-    if surface is not None:
-        raise ComponentValueError(f"entity {entity}: a Morph on a {surface}: a mirror's or portal's plane is its mesh "
-                                  "as modelled; morph a mesh in front of it instead")
-    if mesh is None:
-        return
     if not mesh.morph_count:
         raise ComponentValueError(f"entity {entity}: Morph on mesh {mesh.name!r}, which has no morph targets "
                                   "(Mesh.morph_positions): nothing for its weights to weigh")
