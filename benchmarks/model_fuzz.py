@@ -9,7 +9,9 @@ or name texture coordinates the file never gives; lines continued with a backsla
 unknown one) naming an image, a 16-bit or grey map, garbage, a FIFO, a directory, a symlink
 loop, a missing file whose bare name is a FIFO, a file outside the model's folder; glTF
 materials whose textures are missing, not images, ``data:`` URIs of either kind, indices
-out of range; many chrome nodes of one mesh.  A case passes when ``load_model`` or
+out of range; many chrome nodes of one mesh; skins (joints past the skin's, weights negative
+or all zero, inverse bind matrices too few or not affine) and morph targets (sparse indices
+past the vertices, weights too few, a clip playing them).  A case passes when ``load_model`` or
 ``spawn_model`` raises an ``AssetError`` naming the model's file (and the world is left as
 it was), or the model spawns and ``FRAMES`` frames render with no NaN in the HDR target
 and ``ctx.error`` clean.  Any other exception, or a case still running after
@@ -218,12 +220,74 @@ def random_glb(rng: random.Random) -> ModelCase:
     if images:
         doc["images"] = images
         doc["textures"] = [{"source": rng.choice([i, i, i, 9])} for i in range(len(images))]
+    if rng.random() < 0.25:
+        _skin(rng, doc, view, mutations)
+    if rng.random() < 0.25:
+        _morphs(rng, doc, view, mutations)
     text = json.dumps(doc).encode()
     text += b" " * (-len(text) % 4)
     while len(blob) % 4:
         blob.append(0)
     body = struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(blob), b"BIN\0") + bytes(blob)
     return ModelCase("glb", {"model.glb": struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body}, mutations)
+
+
+def _skin(rng: random.Random, doc: dict, view, mutations: list[str]) -> None:
+    """Skin the mesh by two joint nodes: JOINTS_0 that may name a joint the skin lacks,
+    WEIGHTS_0 as floats or normalised bytes that may be negative or all zero, inverse bind
+    matrices that may be too few or not affine, a node naming a skin the file lacks."""
+    accessors = doc["accessors"]
+    joints = np.array([[rng.choice([0, 1, 1, 2, 7]) for _ in range(4)] for _ in range(6)], np.uint8)
+    weights = np.array([[rng.choice([0.0, 0.25, 0.5, 1.0, -0.5]) for _ in range(4)] for _ in range(6)], np.float32)
+    if rng.random() < 0.3:
+        weights = (np.clip(weights, 0.0, 1.0) * 255).astype(np.uint8)
+    accessors.append({"bufferView": view(joints.tobytes()), "componentType": 5121, "count": 6, "type": "VEC4"})
+    accessors.append({"bufferView": view(weights.tobytes()), "componentType": 5126 if weights.dtype == np.float32
+                      else 5121, "count": 6, "type": "VEC4", **({} if weights.dtype == np.float32
+                                                               else {"normalized": True})})
+    attributes = doc["meshes"][0]["primitives"][0]["attributes"]
+    attributes["JOINTS_0"], attributes["WEIGHTS_0"] = len(accessors) - 2, len(accessors) - 1
+    binds = np.tile(np.eye(4, dtype=np.float32), (rng.choice([2, 2, 1]), 1, 1))
+    if rng.random() < 0.2:
+        binds[0, 3, 0] = 1.0  # not affine
+    accessors.append({"bufferView": view(binds.transpose(0, 2, 1).tobytes()), "componentType": 5126,
+                      "count": len(binds), "type": "MAT4"})
+    first = len(doc["nodes"])
+    doc["nodes"] += [{"name": "hip", "children": [first + 1]}, {"name": "knee", "translation": [0.0, 0.3, 0.0]}]
+    doc["scenes"][0]["nodes"].append(first)
+    doc["skins"] = [{"joints": rng.choice([[first, first + 1], [first, first + 1], [first, 99], []]),
+                     "inverseBindMatrices": len(accessors) - 1}]
+    doc["nodes"][0]["skin"] = rng.choice([0, 0, 0, 3])
+    mutations.append(f"skin {doc['skins'][0]['joints']} node skin {doc['nodes'][0]['skin']}, {len(binds)} binds, "
+                     f"weights {weights.dtype}")
+
+
+def _morphs(rng: random.Random, doc: dict, view, mutations: list[str]) -> None:
+    """One or two morph targets, dense or sparse (indices that may run past the vertices or
+    not increase), the mesh's weights that may be too few, and a clip playing them."""
+    accessors = doc["accessors"]
+    targets = []
+    for _ in range(rng.choice([1, 2])):
+        offsets = np.array([[rng.uniform(-0.2, 0.2) for _ in range(3)] for _ in range(6)], np.float32)
+        if rng.random() < 0.5:
+            accessors.append({"bufferView": view(offsets.tobytes()), "componentType": 5126, "count": 6, "type": "VEC3"})
+        else:
+            moved = np.array(rng.choice([[1, 3], [3, 1], [2, 9], [0]]), np.uint16)
+            accessors.append({"componentType": 5126, "count": 6, "type": "VEC3", "sparse": {
+                "count": len(moved), "indices": {"bufferView": view(moved.tobytes()), "componentType": 5123},
+                "values": {"bufferView": view(offsets[: len(moved)].tobytes())}}})
+        targets.append({"POSITION": len(accessors) - 1})
+    doc["meshes"][0]["primitives"][0]["targets"] = targets
+    doc["meshes"][0]["weights"] = rng.choice([[0.5] * len(targets), [0.5] * len(targets), [1.0] * 3, ["x"]])
+    times = np.array([0.0, 1.0], np.float32)
+    values = np.array([rng.uniform(-1, 2) for _ in range(2 * len(targets) + rng.choice([0, 0, 1]))], np.float32)
+    accessors.append({"bufferView": view(times.tobytes()), "componentType": 5126, "count": 2, "type": "SCALAR",
+                      "min": [0.0], "max": [1.0]})
+    accessors.append({"bufferView": view(values.tobytes()), "componentType": 5126, "count": len(values),
+                      "type": "SCALAR"})
+    doc["animations"] = [{"name": "Wobble", "samplers": [{"input": len(accessors) - 2, "output": len(accessors) - 1}],
+                          "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}]
+    mutations.append(f"{len(targets)} morph targets, weights {doc['meshes'][0]['weights']}, {len(values)} keyed")
 
 
 def _glb_with(data: bytes, old: bytes, new: bytes) -> bytes:
