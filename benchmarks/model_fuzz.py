@@ -237,8 +237,13 @@ def _skin(rng: random.Random, doc: dict, view, mutations: list[str]) -> None:
     WEIGHTS_0 as floats or normalised bytes that may be negative or all zero, inverse bind
     matrices that may be too few or not affine, a node naming a skin the file lacks."""
     accessors = doc["accessors"]
-    joints = np.array([[rng.choice([0, 1, 1, 2, 7]) for _ in range(4)] for _ in range(6)], np.uint8)
-    weights = np.array([[rng.choice([0.0, 0.25, 0.5, 1.0, -0.5]) for _ in range(4)] for _ in range(6)], np.float32)
+    joints = np.array([[rng.choice([0, 1]) for _ in range(4)] for _ in range(6)], np.uint8)
+    weights = np.array([[rng.choice([0.0, 0.25, 0.5, 1.0]) for _ in range(4)] for _ in range(6)], np.float32)
+    weights[:, 0] += 0.1  # (every vertex follows some joint, unless made otherwise below)
+    if rng.random() < 0.15:
+        joints[rng.randrange(6), 0] = 7   # a joint the skin lacks
+    if rng.random() < 0.15:
+        weights[rng.randrange(6)] = rng.choice([0.0, -0.5])   # a vertex following nothing, or negative
     if rng.random() < 0.3:
         weights = (np.clip(weights, 0.0, 1.0) * 255).astype(np.uint8)
     accessors.append({"bufferView": view(joints.tobytes()), "componentType": 5121, "count": 6, "type": "VEC4"})
@@ -247,17 +252,17 @@ def _skin(rng: random.Random, doc: dict, view, mutations: list[str]) -> None:
                                                                else {"normalized": True})})
     attributes = doc["meshes"][0]["primitives"][0]["attributes"]
     attributes["JOINTS_0"], attributes["WEIGHTS_0"] = len(accessors) - 2, len(accessors) - 1
-    binds = np.tile(np.eye(4, dtype=np.float32), (rng.choice([2, 2, 1]), 1, 1))
-    if rng.random() < 0.2:
+    binds = np.tile(np.eye(4, dtype=np.float32), (rng.choice([2] * 6 + [1]), 1, 1))
+    if rng.random() < 0.08:
         binds[0, 3, 0] = 1.0  # not affine
     accessors.append({"bufferView": view(binds.transpose(0, 2, 1).tobytes()), "componentType": 5126,
                       "count": len(binds), "type": "MAT4"})
     first = len(doc["nodes"])
     doc["nodes"] += [{"name": "hip", "children": [first + 1]}, {"name": "knee", "translation": [0.0, 0.3, 0.0]}]
     doc["scenes"][0]["nodes"].append(first)
-    doc["skins"] = [{"joints": rng.choice([[first, first + 1], [first, first + 1], [first, 99], []]),
+    doc["skins"] = [{"joints": rng.choice([[first, first + 1]] * 6 + [[first, 99], []]),
                      "inverseBindMatrices": len(accessors) - 1}]
-    doc["nodes"][0]["skin"] = rng.choice([0, 0, 0, 3])
+    doc["nodes"][0]["skin"] = rng.choice([0] * 9 + [3])
     mutations.append(f"skin {doc['skins'][0]['joints']} node skin {doc['nodes'][0]['skin']}, {len(binds)} binds, "
                      f"weights {weights.dtype}")
 
@@ -272,15 +277,15 @@ def _morphs(rng: random.Random, doc: dict, view, mutations: list[str]) -> None:
         if rng.random() < 0.5:
             accessors.append({"bufferView": view(offsets.tobytes()), "componentType": 5126, "count": 6, "type": "VEC3"})
         else:
-            moved = np.array(rng.choice([[1, 3], [3, 1], [2, 9], [0]]), np.uint16)
+            moved = np.array(rng.choice([[1, 3]] * 3 + [[0], [3, 1], [2, 9]]), np.uint16)
             accessors.append({"componentType": 5126, "count": 6, "type": "VEC3", "sparse": {
                 "count": len(moved), "indices": {"bufferView": view(moved.tobytes()), "componentType": 5123},
                 "values": {"bufferView": view(offsets[: len(moved)].tobytes())}}})
         targets.append({"POSITION": len(accessors) - 1})
     doc["meshes"][0]["primitives"][0]["targets"] = targets
-    doc["meshes"][0]["weights"] = rng.choice([[0.5] * len(targets), [0.5] * len(targets), [1.0] * 3, ["x"]])
+    doc["meshes"][0]["weights"] = rng.choice([[0.5] * len(targets)] * 6 + [[1.0] * 3, ["x"]])
     times = np.array([0.0, 1.0], np.float32)
-    values = np.array([rng.uniform(-1, 2) for _ in range(2 * len(targets) + rng.choice([0, 0, 1]))], np.float32)
+    values = np.array([rng.uniform(-1, 2) for _ in range(2 * len(targets) + rng.choice([0] * 6 + [1]))], np.float32)
     accessors.append({"bufferView": view(times.tobytes()), "componentType": 5126, "count": 2, "type": "SCALAR",
                       "min": [0.0], "max": [1.0]})
     accessors.append({"bufferView": view(values.tobytes()), "componentType": 5126, "count": len(values),
