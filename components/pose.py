@@ -32,6 +32,7 @@ from components.limits import MAX_JOINTS, MAX_MORPH_TARGETS, MAX_MORPH_WEIGHT
 from components.tracking import ComponentValueError, TrackedComponent
 
 MAX_JOINT_VALUE = 1e18  # a matrix entry past this leaves float32 once multiplied out
+_BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0], np.float32)  # an affine matrix's
 
 
 def _identity() -> np.ndarray:
@@ -54,12 +55,14 @@ class Skin(TrackedComponent):
             shape = getattr(matrices, "shape", type(value).__name__)
             raise ComponentValueError(f"Skin.joint_matrices must be 1 to {MAX_JOINTS} (MAX_JOINTS) 4x4 matrices, a "
                                       f"numpy array of shape (J, 4, 4), got {shape}")
-        if not np.isfinite(matrices).all() or np.abs(matrices).max() > MAX_JOINT_VALUE:
+        matrices = np.array(matrices, np.float32)  # its own copy: an edit of the caller's array changes nothing
+        largest = float(np.abs(matrices).max())  # (NaN where one is: it fails the test below)
+        if not largest <= MAX_JOINT_VALUE:
             raise ComponentValueError(f"Skin.joint_matrices must be finite, within +-{MAX_JOINT_VALUE:g}")
-        if not np.allclose(matrices[:, 3], (0.0, 0.0, 0.0, 1.0), atol=1e-5):
+        if float(np.abs(matrices[:, 3] - _BOTTOM_ROW).max()) > 1e-5:  # (a few numpy calls: a pose a frame)
             raise ComponentValueError("Skin.joint_matrices must be affine (each matrix's bottom row 0, 0, 0, 1; "
                                       "points are columns: M @ (x, y, z, 1))")
-        matrices = np.array(matrices, np.float32)  # its own copy: an edit of the caller's array changes nothing
+        matrices[:, 3] = _BOTTOM_ROW  # (within 1e-5 of it: made exact)
         world = getattr(self, "_world_ref", None)
         if world is not None:
             for entity in self._entities:

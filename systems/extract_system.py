@@ -41,7 +41,7 @@ from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatc
 from engine.render.renderer import Renderer
 from engine.render.surface_table import SurfaceBlends
 from engine.resources import Surfaces
-from engine.rules.probe_rules import LookChanges, SurfaceProbes, probe_blend
+from engine.rules.probe_rules import APPEARANCE_KINDS, POSE_KINDS, LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
 from systems.material_dispatch import choose_material, layer_uniforms
 
@@ -75,6 +75,8 @@ class ExtractSystem(esper.Processor):
         shown = world.changed(Visibility)
         if shown:  # a portal clone is drawn where its source is (its row reads the source's Visibility)
             touched |= {entity for entity, clone in world.query_one(PortalClone) if clone.source in shown}
+        if world.changed(Skin) or world.changed(Morph):
+            touched = self._posed_only(touched)
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)
@@ -222,6 +224,27 @@ class ExtractSystem(esper.Processor):
             batch.note_shadow_change(entity)  # it stopped or started casting where it stands: maps drawn again
         batch.note_row_casts(entity, row)  # one that casts nothing: its moves change no shadow
         batch.variants_changed()
+
+    def _posed_only(self, touched: set[int]) -> set[int]:
+        """Pose the entities of ``touched`` whose only change is a new pose (its Skin or Morph
+        written, nothing else of its look, the probes it samples the same, its batch posed as
+        it is: ``_pose``, not its whole row again, as an animated character each frame); the
+        rest of ``touched``, to refresh."""
+        world = self.world
+        posed = world.changed_any(POSE_KINDS) & touched
+        posed -= world.changed_any(APPEARANCE_KINDS)
+        posed -= self._looks.last_resampled
+        done = set()
+        for entity in posed:
+            batch = self._batch_of.get(entity)
+            if batch is None or not world.exists(entity):
+                continue
+            skin, morph = world.try_get(entity, Skin), world.try_get(entity, Morph)
+            if (skin is not None or morph is not None) and batch.skinned == (skin is not None) \
+                    and batch.morphed == (morph is not None):
+                self._pose(entity, batch, world.get(entity, MeshRef).mesh, skin, morph)
+                done.add(entity)
+        return touched - done if done else touched
 
     def _pose(self, entity: int, batch: InstanceBatch, mesh: Mesh, skin: Skin | None, morph: Morph | None) -> None:
         """Write ``entity``'s joint matrices and morph weights to its row of the pose texture

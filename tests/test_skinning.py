@@ -245,9 +245,16 @@ def test_a_pose_reaching_past_the_mesh_as_modelled_is_held_by_its_box(scene):
     assert (placed >= level_lo - 1e-5).all() and (placed <= level_hi + 1e-5).all()
 
 
-def test_the_pose_changes_from_frame_to_frame_and_its_shadow_follows(scene):
-    """A Skin given new matrices is drawn bent the new way in the next frame (its shadow too)."""
+def test_the_pose_changes_from_frame_to_frame_and_its_shadow_follows(scene, monkeypatch):
+    """A Skin given new matrices is drawn bent the new way in the next frame (its shadow too),
+    its pose written alone (the entity's whole row is not worked out again for it)."""
+    from systems.extract_system import ExtractSystem
+
     holder = {}
+    refreshed = []
+    original = ExtractSystem._refresh_instance
+    monkeypatch.setattr(ExtractSystem, "_refresh_instance",
+                        lambda self, entity: refreshed.append(entity) or original(self, entity))
 
     def skinned(world):
         holder["arm"] = world.spawn(Transform(), MeshRef(skinned_bar()), Material(color=RED),
@@ -257,7 +264,9 @@ def test_the_pose_changes_from_frame_to_frame_and_its_shadow_follows(scene):
     runner.frame()
     straight = runner.frame().astype(int)
     runner.world.get(holder["arm"], Skin).joint_matrices = np.stack([np.eye(4), elbow_matrix(math.pi / 2)])
+    refreshed.clear()
     bent = runner.frame().astype(int)
+    assert holder["arm"] not in refreshed
     hand = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(bent_by_hand(math.pi / 2)),
                                                   Material(color=RED))))
     assert same_picture(bent, hand) and not same_picture(bent, straight)

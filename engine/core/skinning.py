@@ -121,12 +121,13 @@ def posed_bounds(mesh: Mesh, joint_matrices: np.ndarray | None,
     """The box (lo, hi) holding ``mesh`` posed (``posed_positions``' points): its box, or each
     joint's (``joint_boxes``), grown by how far the weighed targets reach (``morph_reach``),
     then placed by the joints (``posed_box``)."""
-    reach = morph_reach(mesh.morph_offset_boxes(), morph_weights) if morph_weights is not None \
-        else (np.zeros(3), np.zeros(3))
+    if morph_weights is None:
+        return mesh.bounds if joint_matrices is None else posed_box(mesh.joint_boxes(), joint_matrices)
+    low, high = morph_reach(mesh.morph_offset_boxes(), morph_weights)
     if joint_matrices is None:
         lo, hi = mesh.bounds
-        return lo + reach[0], hi + reach[1]
-    return posed_box(mesh.joint_boxes() + np.stack(reach)[None], joint_matrices)
+        return lo + low, hi + high
+    return posed_box(mesh.joint_boxes() + np.stack([low, high])[None], joint_matrices)
 
 
 def posed_positions(mesh: Mesh, joint_matrices: np.ndarray | None, morph_weights: np.ndarray | None) -> np.ndarray:

@@ -683,8 +683,8 @@ class InstanceBatch:
             self.note_shadow_change(entity)
         self.box_ends = np.array([lo, hi], np.float64).reshape(2, 3, 1)
         self.box_lo, self.box_hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        self.radius = float(np.linalg.norm(corners, axis=1).max())
+        # (its farthest corner from the origin: the larger end on each axis)
+        self.radius = math.sqrt(sum(max(a * a, b * b) for a, b in zip(self.box_lo, self.box_hi, strict=True)))
         self._dirty.update(range(self.count))
         self._rescale = True
 

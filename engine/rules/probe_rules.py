@@ -361,6 +361,10 @@ LOOK_KINDS: dict[type, str] = {
     Skin: "where its joints bend its mesh (a new pose, a Skin come or gone: its own batch or a shared one)",
     Morph: "how much of each morph target it wears",
 }
+# The look kinds that pose a mesh: a new pose alone is written to the pose texture, not the
+# instance's whole row (the extract stage's ``_pose``).
+POSE_KINDS = (Skin, Morph)
+APPEARANCE_KINDS = tuple(kind for kind in LOOK_KINDS if kind not in POSE_KINDS)
 
 
 class LookChanges:
@@ -372,6 +376,8 @@ class LookChanges:
     when last asked."""
 
     def __init__(self) -> None:
+        # The entities the last ``entities`` call found whose sampled probes changed.
+        self.last_resampled: set[int] = set()
         self._sampled: dict[int, ProbeBlend] = {}  # entity -> what it sampled (not NO_PROBE), when last asked
         self._influences: dict[int, tuple | None] = {}  # probe owner -> its influence box and falloff, when last asked
 
@@ -379,7 +385,8 @@ class LookChanges:
         """This frame's entities whose look may have changed (each call follows on from the
         last: ask once a frame)."""
         looks = world.changed_any(LOOK_KINDS)
-        return looks | self.resampled(world, looks)
+        self.last_resampled = self.resampled(world, looks)
+        return looks | self.last_resampled
 
     def resampled(self, world: World, looks: set[int]) -> set[int]:
         """The entities whose sampled probes or their weights changed since the last call
