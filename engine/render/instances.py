@@ -685,8 +685,7 @@ class InstanceBatch:
         self.box_lo, self.box_hi = tuple(float(v) for v in lo), tuple(float(v) for v in hi)
         # (its farthest corner from the origin: the larger end on each axis)
         self.radius = math.sqrt(sum(max(a * a, b * b) for a, b in zip(self.box_lo, self.box_hi, strict=True)))
-        self._dirty.update(range(self.count))
-        self._rescale = True
+        self._dirty.update(range(self.count))  # (their scale is their model matrix's: unchanged)
 
     def note_shadow_change(self, entity: int) -> None:
         """``entity``'s row changed what the shadow pass draws of it (whether it casts:
