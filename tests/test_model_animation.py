@@ -263,3 +263,68 @@ def test_a_clip_moves_the_lights_and_cameras_on_the_nodes_it_turns(tmp_path):
     ((_, sun),) = list(world.query_one(DirectionalLight))
     expected = glm.normalize(glm.vec3(hinge * glm.vec4(0.0, 0.0, -1.0, 0.0)))
     assert glm.distance(glm.normalize(sun.direction), expected) < 1e-5
+
+
+def test_every_nodes_pose_is_its_own_transform_times_its_parents_on_a_branching_tree():
+    """``pose_all`` (every node at once, a depth at a time) against each node's matrix worked
+    out by hand with glm, its parent's times its own: a tree branching at its root, a chain
+    under one branch, a node given a matrix, channels of each interpolation (two groups of
+    rotations with different key times), at rest, between keys and past the end."""
+    from engine.assets.gltf_animations import Channel, Clip, NodeTree, pose_all
+
+    rng = np.random.default_rng(5)
+    parents = [None, 0, 0, 2, 3, 4, None]
+    rest = [(rng.uniform(-1, 1, 3), (lambda q: q / np.linalg.norm(q))(rng.normal(size=4)), rng.uniform(0.5, 2, 3))
+            for _ in parents]
+    tree = NodeTree(parents=parents, rest=rest, matrices={1: np.array(glm.translate(glm.vec3(0.3, 0.2, 0.1))
+                                                                       * glm.mat4_cast(glm.angleAxis(0.4, glm.vec3(0, 0, 1))),
+                                                                       np.float64)})
+
+    def unit_rows(n):
+        q = rng.normal(size=(n, 4))
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+    times = np.array([0.0, 0.5, 1.2])
+    channels = [Channel(3, "rotation", times, unit_rows(3), "LINEAR"),
+                Channel(5, "rotation", times, unit_rows(3), "LINEAR"),
+                Channel(4, "rotation", np.array([0.0, 2.0]), unit_rows(2), "LINEAR"),
+                Channel(2, "translation", times, rng.uniform(-1, 1, (3, 3)), "STEP"),
+                Channel(0, "scale", times, rng.uniform(0.5, 1.5, (3, 3, 3)), "CUBICSPLINE")]
+    clip = Clip("mixed", channels, 2.0)
+
+    def by_hand(node: int, t: float) -> glm.mat4:
+        if node in tree.matrices:
+            local = glm.mat4(*np.asarray(tree.matrices[node], np.float32).T.ravel())
+        else:
+            translation, rotation, scale = (glm.vec3(*rest[node][0]), glm.quat(rest[node][1][3], *rest[node][1][:3]),
+                                            glm.vec3(*rest[node][2]))
+            for channel in channels:
+                if channel.node != node:
+                    continue
+                k = min(max(int(np.searchsorted(channel.times, t, side="right")) - 1, 0), len(channel.times) - 1)
+                s = 0.0 if k == len(channel.times) - 1 else \
+                    min(max((t - channel.times[k]) / (channel.times[k + 1] - channel.times[k]), 0.0), 1.0)
+                if channel.path == "rotation":
+                    a, b = (glm.quat(v[3], *v[:3]) for v in channel.values[k:k + 2]) if s else \
+                        (glm.quat(channel.values[k][3], *channel.values[k][:3]),) * 2
+                    rotation = glm.slerp(a, b, s)
+                elif channel.interpolation == "STEP":
+                    translation = glm.vec3(*channel.values[k])
+                else:  # the cubic spline's Hermite terms
+                    v = channel.values
+                    if s == 0.0:
+                        scale = glm.vec3(*v[k, 1])
+                    else:
+                        span = channel.times[k + 1] - channel.times[k]
+                        s2, s3 = s * s, s ** 3
+                        scale = glm.vec3(*((2 * s3 - 3 * s2 + 1) * v[k, 1] + (s3 - 2 * s2 + s) * span * v[k, 2]
+                                           + (-2 * s3 + 3 * s2) * v[k + 1, 1] + (s3 - s2) * span * v[k + 1, 0]))
+            local = glm.translate(translation) * glm.mat4_cast(rotation) * glm.scale(scale)
+        parent = parents[node]
+        return local if parent is None else by_hand(parent, t) * local
+
+    for t in (0.0, 0.3, 0.5, 0.9, 1.7, 3.0):
+        placed = pose_all(tree, clip, t)
+        for node in range(len(parents)):
+            expected = np.array(by_hand(node, t), np.float64)
+            np.testing.assert_allclose(placed[node], expected, atol=2e-4, err_msg=f"node {node} at {t}")

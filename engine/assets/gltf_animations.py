@@ -3,7 +3,7 @@ rotation or scale sampled at key times, with linear, step or cubic-spline interp
 read before trimesh parses the file (which ignores them), and the poses they give.
 
 A model's parts are placed by their nodes (``ModelPart.node``); the node tree
-(``NodeTree``: each node's parent and its own transform at rest) lets ``pose`` put every
+(``NodeTree``: each node's parent and its own transform at rest) lets ``pose_all`` put every
 part where a clip puts its node at a time: the animated nodes' sampled translation, rotation
 and scale, the others at rest, multiplied down from the scene's roots.  ``Animation`` on a
 model's root plays one (``systems/model_system.py``); a skinned part follows its joints' poses
@@ -12,7 +12,6 @@ wears its morph targets at (``engine/assets/gltf_morphs.py``; ``pose_weights``).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,33 +38,6 @@ class Channel:
     values: np.ndarray
     interpolation: str
 
-    def sample(self, t: float) -> np.ndarray:
-        """The value at time ``t`` (held at the ends)."""
-        times = self.times
-        cubic = self.interpolation == "CUBICSPLINE"
-        if t <= times[0] or len(times) == 1:
-            value = self.values[0, 1] if cubic else self.values[0]
-        elif t >= times[-1]:
-            value = self.values[-1, 1] if cubic else self.values[-1]
-        else:
-            k = int(np.searchsorted(times, t, side="right")) - 1
-            span = times[k + 1] - times[k]
-            s = (t - times[k]) / span
-            if self.interpolation == "STEP":
-                value = self.values[k]
-            elif cubic:  # glTF's Hermite spline: the tangents scaled by the span
-                s2, s3 = s * s, s * s * s
-                value = ((2 * s3 - 3 * s2 + 1) * self.values[k, 1] + (s3 - 2 * s2 + s) * span * self.values[k, 2]
-                         + (-2 * s3 + 3 * s2) * self.values[k + 1, 1] + (s3 - s2) * span * self.values[k + 1, 0])
-            elif self.path == "rotation":
-                value = _slerp(self.values[k], self.values[k + 1], s)
-            else:
-                value = (1.0 - s) * self.values[k] + s * self.values[k + 1]
-        if self.path == "rotation":
-            length = float(np.linalg.norm(value))
-            value = value / length if length > 0.0 else np.array([0.0, 0.0, 0.0, 1.0])
-        return np.asarray(value, np.float64)
-
 
 @dataclass
 class Clip:
@@ -74,6 +46,8 @@ class Clip:
     name: str
     channels: list[Channel]
     duration: float
+    # Its channels grouped for sampling on arrays (``_groups``), made at its first pose.
+    groups: list | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass
@@ -84,6 +58,8 @@ class NodeTree:
     parents: list[int | None] = field(default_factory=list)
     rest: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
     matrices: dict[int, np.ndarray] = field(default_factory=dict)
+    # The same as arrays, and the nodes by depth, made at the first pose (``_tree_arrays``).
+    arrays: tuple | None = field(default=None, repr=False, compare=False)
 
 
 def read_node_tree(doc: dict, what: str) -> NodeTree:
@@ -199,34 +175,6 @@ def _channel(sampler: dict, node: int, path: str, width: int, buffer_bytes: Buff
     return Channel(node, path, times.astype(np.float64), values, interpolation)
 
 
-def _slerp(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
-    """Spherical interpolation of unit quaternions (x, y, z, w) along the shorter arc."""
-    d = float(np.dot(a, b))
-    if d < 0.0:
-        b, d = -b, -d
-    if d > 0.9995:
-        return (1.0 - s) * a + s * b
-    angle = math.acos(min(d, 1.0))
-    return (math.sin((1.0 - s) * angle) * a + math.sin(s * angle) * b) / math.sin(angle)
-
-
-def trs_matrix(translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """T x R x S as a 4 x 4 float64 matrix; rotation (x, y, z, w), unit."""
-    x, y, z, w = rotation
-    r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                  [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-    m = np.eye(4)
-    m[:3, :3] = r * scale
-    m[:3, 3] = translation
-    return m
-
-
-def pose_weights(clip: Clip, t: float) -> dict[int, np.ndarray]:
-    """The morph weights at time ``t`` of each node a ``weights`` channel of ``clip`` animates."""
-    return {channel.node: channel.sample(t) for channel in clip.channels if channel.path == "weights"}
-
-
 def moved_nodes(tree: NodeTree, clip: Clip) -> set[int]:
     """The nodes ``clip`` moves: those it animates (their transform) and every node under them."""
     animated = {channel.node for channel in clip.channels if channel.path != "weights"}
@@ -240,31 +188,146 @@ def moved_nodes(tree: NodeTree, clip: Clip) -> set[int]:
     return moved
 
 
-def pose(tree: NodeTree, clip: Clip, t: float, wanted: list[int]) -> dict[int, np.ndarray]:
-    """The model-space matrix at time ``t`` of each node in ``wanted`` (and of their
-    ancestors): its own transform (the clip's channels where it animates it, else at rest)
-    times its parent's."""
-    animated: dict[int, dict[str, np.ndarray]] = {}
-    for channel in clip.channels:
-        if channel.path == "weights":
-            continue  # (pose_weights: no transform)
-        animated.setdefault(channel.node, {})[channel.path] = channel.sample(t)
-    placed: dict[int, np.ndarray] = {}
-
-    def matrix(node: int) -> np.ndarray:
-        found = placed.get(node)
-        if found is None:
-            if node in tree.matrices:
-                local = tree.matrices[node]
-            else:
-                rest_t, rest_r, rest_s = tree.rest[node]
-                own = animated.get(node, {})
-                local = trs_matrix(own.get("translation", rest_t), own.get("rotation", rest_r),
-                                   own.get("scale", rest_s))
-            parent = tree.parents[node]
-            found = placed[node] = local if parent is None else matrix(parent) @ local
-        return found
-
-    for node in wanted:
-        matrix(node)
+def pose_all(tree: NodeTree, clip: Clip, t: float) -> np.ndarray:
+    """Every node's model-space matrix at time ``t`` (N, 4, 4): its own transform (the clip's
+    channels where it animates it, else at rest) times its parent's, on arrays: each group
+    of channels sampled at once (``_sample``), every node's T x R x S made at once, and the
+    tree multiplied down a depth at a time (a 60-joint character's pose is a few dozen
+    numpy calls, not one chain of them a node).  A node outside the scene's tree is its own
+    transform."""
+    rest_t, rest_r, rest_s, with_matrix, matrices, levels = _tree_arrays(tree)
+    own = {"translation": rest_t.copy(), "rotation": rest_r.copy(), "scale": rest_s.copy()}
+    for group in _groups(clip):
+        if group.path != "weights":
+            own[group.path][group.nodes] = _sample(group, t)
+    local = trs_matrices(own["translation"], own["rotation"], own["scale"])
+    if len(with_matrix):
+        local[with_matrix] = matrices
+    placed = local.copy()
+    for nodes, parents in levels:
+        if isinstance(nodes, int):  # one node this deep (a chain): plain indexing, no gather
+            np.matmul(placed[parents], local[nodes], out=placed[nodes])
+        else:
+            placed[nodes] = placed[parents] @ local[nodes]
     return placed
+
+
+def pose_weights(clip: Clip, t: float) -> dict[int, np.ndarray]:
+    """The morph weights at time ``t`` of each node a ``weights`` channel of ``clip`` animates."""
+    found: dict[int, np.ndarray] = {}
+    for group in _groups(clip):
+        if group.path == "weights":
+            found.update(zip(group.nodes.tolist(), _sample(group, t), strict=True))
+    return found
+
+
+def trs_matrices(translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """T x R x S for each row (N, 4, 4, float64); rotations (x, y, z, w), unit."""
+    x, y, z, w = rotation.T
+    r = np.empty((len(rotation), 3, 3))
+    r[:, 0, 0], r[:, 0, 1], r[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+    r[:, 1, 0], r[:, 1, 1], r[:, 1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+    r[:, 2, 0], r[:, 2, 1], r[:, 2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+    m = np.zeros((len(rotation), 4, 4))
+    m[:, :3, :3] = r * scale[:, None, :]
+    m[:, :3, 3] = translation
+    m[:, 3, 3] = 1.0
+    return m
+
+
+@dataclass
+class _Group:
+    """Channels of one path and interpolation sharing their key times (exporters bake a clip's
+    channels at the same frames): sampled together."""
+
+    path: str
+    interpolation: str
+    times: np.ndarray
+    nodes: np.ndarray   # (C,)
+    values: np.ndarray  # (C, keys, width), or (C, keys, 3, width) for a cubic spline
+
+
+def _groups(clip: Clip) -> list[_Group]:
+    """``clip``'s channels grouped (made once a clip)."""
+    if clip.groups is None:
+        grouped: dict[tuple, list[Channel]] = {}
+        for channel in clip.channels:
+            key = (channel.path, channel.interpolation, channel.values.shape[1:], channel.times.tobytes())
+            grouped.setdefault(key, []).append(channel)
+        clip.groups = [_Group(channels[0].path, channels[0].interpolation, channels[0].times,
+                              np.array([c.node for c in channels], np.int64),
+                              np.stack([c.values for c in channels])) for channels in grouped.values()]
+    return clip.groups
+
+
+def _sample(group: _Group, t: float) -> np.ndarray:
+    """Each of the group's channels at time ``t`` (C, width), held at the ends."""
+    times, values = group.times, group.values
+    cubic = group.interpolation == "CUBICSPLINE"
+    if t <= times[0] or len(times) == 1:
+        value = values[:, 0, 1] if cubic else values[:, 0]
+    elif t >= times[-1]:
+        value = values[:, -1, 1] if cubic else values[:, -1]
+    else:
+        k = int(np.searchsorted(times, t, side="right")) - 1
+        span = times[k + 1] - times[k]
+        s = (t - times[k]) / span
+        if group.interpolation == "STEP":
+            value = values[:, k]
+        elif cubic:  # glTF's Hermite spline: the tangents scaled by the span
+            s2, s3 = s * s, s * s * s
+            value = ((2 * s3 - 3 * s2 + 1) * values[:, k, 1] + (s3 - 2 * s2 + s) * span * values[:, k, 2]
+                     + (-2 * s3 + 3 * s2) * values[:, k + 1, 1] + (s3 - s2) * span * values[:, k + 1, 0])
+        elif group.path == "rotation":
+            value = _slerp_rows(values[:, k], values[:, k + 1], s)
+        else:
+            value = (1.0 - s) * values[:, k] + s * values[:, k + 1]
+    if group.path == "rotation":
+        length = np.linalg.norm(value, axis=1, keepdims=True)
+        value = np.where(length > 0.0, value / np.where(length > 0.0, length, 1.0), (0.0, 0.0, 0.0, 1.0))
+    return np.asarray(value, np.float64)
+
+
+def _slerp_rows(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """Spherical interpolation of each row pair of unit quaternions (x, y, z, w): along the
+    shorter arc, a lerp where they nearly agree."""
+    d = np.einsum("ij,ij->i", a, b)
+    b = np.where(d[:, None] < 0.0, -b, b)
+    d = np.abs(d)
+    angle = np.arccos(np.minimum(d, 1.0))
+    sine = np.sin(angle)
+    near = d > 0.9995
+    safe = np.where(near, 1.0, sine)
+    wa = np.where(near, 1.0 - s, np.sin((1.0 - s) * angle) / safe)
+    wb = np.where(near, s, np.sin(s * angle) / safe)
+    return wa[:, None] * a + wb[:, None] * b
+
+
+def _tree_arrays(tree: NodeTree) -> tuple:
+    """The tree's rest transforms as arrays, its matrix nodes, and its nodes by depth below
+    the roots as (nodes, their parents) index arrays, or a (node, parent) pair where one node
+    is that deep (made once a tree)."""
+    if tree.arrays is None:
+        count = len(tree.parents)
+        rest_t = np.array([r[0] for r in tree.rest], np.float64).reshape(count, 3)
+        rest_r = np.array([r[1] for r in tree.rest], np.float64).reshape(count, 4)
+        rest_s = np.array([r[2] for r in tree.rest], np.float64).reshape(count, 3)
+        with_matrix = np.array(sorted(tree.matrices), np.int64)
+        matrices = np.array([tree.matrices[n] for n in with_matrix.tolist()], np.float64).reshape(-1, 4, 4)
+        children: dict[int, list[int]] = {}
+        for node, parent in enumerate(tree.parents):
+            if parent is not None:
+                children.setdefault(parent, []).append(node)
+        levels = []
+        frontier = [node for node, parent in enumerate(tree.parents) if parent is None]
+        seen = set(frontier)
+        while frontier:
+            below = [(child, parent) for parent in frontier for child in children.get(parent, ()) if child not in seen]
+            seen.update(child for child, _ in below)
+            if len(below) == 1:
+                levels.append(below[0])
+            elif below:
+                levels.append((np.array([c for c, _ in below], np.int64), np.array([p for _, p in below], np.int64)))
+            frontier = [c for c, _ in below]
+        tree.arrays = (rest_t, rest_r, rest_s, with_matrix, matrices, levels)
+    return tree.arrays

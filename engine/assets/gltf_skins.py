@@ -10,7 +10,7 @@ Read before trimesh parses the file: trimesh reads neither skins nor JOINTS and 
 (it keeps a primitive's attributes whose names start with "_" as vertex attributes, so each
 primitive's sets are named again as ``_SPECULUM_JOINTS_n`` and ``_SPECULUM_WEIGHTS_n``,
 read back a vertex in the order trimesh keeps them: ``skin_arrays``).  A joint's matrix in
-a pose is its place in the model times its inverse bind matrix (``pose_rows``), what
+a pose is its place in the model times its inverse bind matrix (``joint_matrices``), what
 ``Skin.joint_matrices`` holds (components/pose.py).
 """
 from __future__ import annotations
@@ -133,8 +133,9 @@ def skin_arrays(vertex_attributes: dict, count: int, skin: SkinDef, where: str) 
     return np.where(used, joints_all, 0), weights_all
 
 
-def pose_rows(skin: SkinDef, placed: dict[int, np.ndarray]) -> np.ndarray:
+def joint_matrices(skin: SkinDef, placed: np.ndarray) -> np.ndarray:
     """The skin's joint matrices (J, 4, 4, float32) with its joint nodes where ``placed``
-    (node -> model-space matrix) puts them: each one's place times its inverse bind matrix."""
-    places = np.stack([placed[joint] for joint in skin.joints])
+    (every node's model-space matrix, ``gltf_animations.pose_all``) puts them: each one's
+    place times its inverse bind matrix."""
+    places = placed[skin.joints]
     return (places @ skin.inverse_binds).astype(np.float32)

@@ -36,8 +36,8 @@ from components import (
 )
 from components.limits import MAX_MORPH_WEIGHT
 from components.model import MAX_MODEL_PROBES, FromModel, Model
-from engine.assets.gltf_animations import Clip, moved_nodes, pose, pose_weights
-from engine.assets.gltf_skins import pose_rows
+from engine.assets.gltf_animations import Clip, moved_nodes, pose_all, pose_weights
+from engine.assets.gltf_skins import joint_matrices
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
 from engine.assets.model_lights import ModelLight, check_light_intensity
@@ -323,7 +323,7 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
             raise AssetError(f"entity {root}'s Animation: its model has no animations (clip {clip_name!r})")
         return
     clips = record.loaded.animations
-    clip = None
+    clip = placed = None
     if not clip_name:
         matrices = {}
     else:
@@ -331,10 +331,11 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
         if clip is None:
             names = ", ".join(repr(c.name) for c in clips)
             raise AssetError(f"entity {root}'s Animation: its model has no clip {clip_name!r} (its clips: {names})")
-        matrices = pose(record.loaded.node_tree, clip, time, [n for n in record.nodes if n is not None])
+        placed = pose_all(record.loaded.node_tree, clip, time)  # (every node: the parts', the joints')
+        matrices = {node: placed[node] for node in record.nodes if node is not None}
     moved = moved_nodes(record.loaded.node_tree, clip) if clip is not None and not every else None
     if any(skin is not None for skin in record.skins):
-        _pose_skins(world, record, clip, time, moved)
+        _pose_skins(world, record, clip, time, moved, placed)
     _pose_morphs(world, record, clip, time, every)
     if moved is not None:
         matrices = {node: m for node, m in matrices.items() if node in moved}
@@ -360,27 +361,28 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
                 sun.direction = travel
 
 
-def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float,
-                  skins: Collection[int] | None = None) -> dict[int, np.ndarray]:
+def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float, skins: Collection[int] | None = None,
+                  placed: np.ndarray | None = None) -> dict[int, np.ndarray]:
     """Each skin's joint matrices (skin index -> (J, 4, 4)) with its joints where ``clip``
-    puts them at ``time`` (None: at rest); ``skins``: only those."""
+    puts them at ``time`` (None: at rest); ``skins``: only those; ``placed``: the nodes'
+    matrices there already (``pose_all``'s)."""
     chosen = range(len(loaded.skins)) if skins is None else skins
     if not loaded.skins or not chosen:
         return {}
-    wanted = sorted({joint for s in chosen for joint in loaded.skins[s].joints})
-    placed = pose(loaded.node_tree, clip or Clip("", [], 0.0), time, wanted)
-    return {s: pose_rows(loaded.skins[s], placed) for s in chosen}
+    if placed is None:
+        placed = pose_all(loaded.node_tree, clip or Clip("", [], 0.0), time)
+    return {s: joint_matrices(loaded.skins[s], placed) for s in chosen}
 
 
 def _pose_skins(world: World, record: SpawnedModel, clip: Clip | None, time: float,
-                moved: set[int] | None) -> None:
+                moved: set[int] | None, placed: np.ndarray | None) -> None:
     """Pose the skinned parts of ``record``: their ``Skin`` from ``clip`` at ``time`` (None:
     at rest); with ``moved`` (the nodes the clip moves), only skins with a joint among them."""
     loaded = record.loaded
     used = {skin for skin in record.skins if skin is not None}
     if moved is not None:
         used = {s for s in used if not moved.isdisjoint(loaded.skins[s].joints)}
-    palettes = skin_palettes(loaded, clip, time, used)
+    palettes = skin_palettes(loaded, clip, time, used, placed)
     for entity, skin in zip(record.parts, record.skins, strict=True):
         if skin in palettes and world.exists(entity):
             world.get(entity, Skin).joint_matrices = palettes[skin]
