@@ -276,9 +276,8 @@ def test_every_nodes_pose_is_its_own_transform_times_its_parents_on_a_branching_
     parents = [None, 0, 0, 2, 3, 4, None]
     rest = [(rng.uniform(-1, 1, 3), (lambda q: q / np.linalg.norm(q))(rng.normal(size=4)), rng.uniform(0.5, 2, 3))
             for _ in parents]
-    tree = NodeTree(parents=parents, rest=rest, matrices={1: np.array(glm.translate(glm.vec3(0.3, 0.2, 0.1))
-                                                                       * glm.mat4_cast(glm.angleAxis(0.4, glm.vec3(0, 0, 1))),
-                                                                       np.float64)})
+    given = glm.translate(glm.vec3(0.3, 0.2, 0.1)) * glm.mat4_cast(glm.angleAxis(0.4, glm.vec3(0, 0, 1)))
+    tree = NodeTree(parents=parents, rest=rest, matrices={1: np.array(given, np.float64)})
 
     def unit_rows(n):
         q = rng.normal(size=(n, 4))
