@@ -16,7 +16,7 @@ from pyglm import glm
 
 from components import Animation, ComponentValueError, DirectionalLight, FromModel, Material, MeshRef, Model, Transform
 from engine.assets.mesh import box, load_model_file
-from engine.assets.models import spawn_model
+from engine.assets.models import SpawnedModels, spawn_model
 from engine.core.errors import AssetError
 from engine.core.world import World
 from tests.support import look_from
@@ -69,7 +69,8 @@ def door(path: Path, channels: list[dict] | None = None) -> Path:
 
 
 def door_matrix(world: World) -> glm.mat4:
-    (entity,) = [entity for entity, _ in world.query_one(FromModel) if world.has(entity, MeshRef)]
+    (record,) = world.resources[SpawnedModels].values()
+    entity = record.parts[[part.node for part in record.loaded.parts].index(1)]   # the door's node
     t = world.get(entity, Transform)
     return glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale)
 
@@ -327,3 +328,77 @@ def test_every_nodes_pose_is_its_own_transform_times_its_parents_on_a_branching_
         for node in range(len(parents)):
             expected = np.array(by_hand(node, t), np.float64)
             np.testing.assert_allclose(placed[node], expected, atol=2e-4, err_msg=f"node {node} at {t}")
+
+
+def test_a_node_a_clip_shrinks_to_nothing_or_grows_from_nothing_is_hidden_then_drawn(scene, tmp_path):
+    """Clip "Vanish" steps the door's scale to 0 at 1 s: hidden there, drawn before (no error
+    for the flat transform); a second box, its node at scale 0 at rest, is kept (hidden) because
+    clip "Appear" grows it, drawn at its grown size as a box placed there by hand; a node at
+    scale 0 that no clip grows is left out, as before."""
+    from components import DirectionalLight
+    from systems.model_system import ModelSystem
+
+    path = door(tmp_path / "door.glb")
+    keys = [np.array([0.0, 1.0], np.float32), np.array([[1, 1, 1], [0, 0, 0]], np.float32),
+            np.array([[0, 0, 0], [1, 1, 1]], np.float32)]
+
+    def change(doc: dict) -> None:
+        blob = b"".join(a.tobytes() for a in keys)
+        doc["buffers"].append({"byteLength": len(blob),
+                               "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
+        first, offset = len(doc["accessors"]), 0
+        for array in keys:
+            doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": offset,
+                                       "byteLength": array.nbytes})
+            doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126,
+                                     "count": len(array), "type": "SCALAR" if array.ndim == 1 else "VEC3",
+                                     **({"min": [0.0], "max": [1.0]} if array.ndim == 1 else {})})
+            offset += array.nbytes
+        doc["nodes"] += [{"name": "lid", "mesh": 0, "translation": [-1.5, 0.5, 0.0], "scale": [0.0, 0.0, 0.0]},
+                         {"name": "ghost", "mesh": 0, "translation": [0.0, 2.0, 0.0], "scale": [0.0, 1.0, 1.0]}]
+        doc["scenes"][0]["nodes"] += [2, 3]
+        doc["animations"] += [
+            {"name": "Vanish", "samplers": [{"input": first, "output": first + 1, "interpolation": "STEP"}],
+             "channels": [{"sampler": 0, "target": {"node": 1, "path": "scale"}}]},
+            {"name": "Appear", "samplers": [{"input": first, "output": first + 2}],
+             "channels": [{"sampler": 0, "target": {"node": 2, "path": "scale"}}]}]
+
+    edit_glb(path, change)
+    loaded = load_model_file(path)
+    assert sorted((p.node, p.hidden) for p in loaded.parts) == [(1, False), (2, True)]   # the ghost left out
+    world, _ = played(path, "Vanish", [0.5])
+    record = world.resources[SpawnedModels][next(iter(world.resources[SpawnedModels]))]
+    door_part, lid = (record.parts[[p.node for p in record.loaded.parts].index(node)] for node in (1, 2))
+    assert world.get(door_part, MeshRef).visible and not world.get(lid, MeshRef).visible
+    ((root, animation),) = list(world.query_one(Animation))
+    animation.time = 1.5
+    stage = ModelSystem(world)
+    stage.process(0.0)
+    assert not world.get(door_part, MeshRef).visible
+    animation.time = 0.25
+    stage.process(0.0)
+    assert world.get(door_part, MeshRef).visible
+
+    def lit(build):
+        def made(world):
+            look_from(world, (-0.5, 2.0, 4.0), (-1.0, 0.5, 0.0), fov=50.0)
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=2.0))
+            build(world)
+        return made
+
+    def appearing(world):
+        world.add_component(world.spawn(Transform(), Model(file=str(path))),
+                            Animation(clip="Appear", time=0.6, playing=False))
+
+    def by_hand(world):
+        world.spawn(Transform(position=(1.5, 0.0, 0.0)), MeshRef(load_model_file(path).parts[0].mesh),
+                    Material(color=(0.7, 0.4, 0.2, 1.0)))  # the door at rest (the hinge turns it nowhere)
+        world.spawn(Transform(position=(-1.5, 0.5, 0.0), scale=(0.6, 0.6, 0.6)),
+                    MeshRef(load_model_file(path).parts[0].mesh), Material(color=(0.7, 0.4, 0.2, 1.0)))
+
+    frames = []
+    for build in (appearing, by_hand):
+        runner = scene(lit(build), (96, 72))
+        runner.frame()
+        frames.append(runner.frame().astype(int))
+    assert np.abs(frames[0] - frames[1]).max() <= 2

@@ -175,6 +175,13 @@ def _channel(sampler: dict, node: int, path: str, width: int, buffer_bytes: Buff
     return Channel(node, path, times.astype(np.float64), values, interpolation)
 
 
+def collapsed(matrix: np.ndarray) -> bool:
+    """Whether a transform (4 x 4, or its 3 x 3) squashes everything flat or to a point (a
+    scale of 0 on some axis: how files hide a node, and how clips make one vanish or grow)."""
+    singular = np.linalg.svd(np.asarray(matrix, np.float64)[:3, :3], compute_uv=False)
+    return bool(singular[-1] <= 1e-9 * singular[0] or singular[0] == 0.0)
+
+
 def moved_nodes(tree: NodeTree, clip: Clip) -> set[int]:
     """The nodes ``clip`` moves: those it animates (their transform) and every node under them."""
     animated = {channel.node for channel in clip.channels if channel.path != "weights"}

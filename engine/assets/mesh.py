@@ -25,6 +25,7 @@ from pyglm import glm
 
 from components.limits import MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR, MAX_MORPH_TARGETS
 from components.water import f0_from_ior
+from engine.assets.gltf_animations import collapsed, moved_nodes
 from engine.assets.gltf_morphs import morph_arrays
 from engine.assets.gltf_skins import skin_arrays
 from engine.assets.gltf_variants import variant_names
@@ -569,6 +570,7 @@ class ModelPart:
     node: int | None = None  # its glTF node's index (what an animation moves; None: not a glTF's)
     skin: int | None = None  # its glTF node's skin (LoadedModel.skins: what bends it; None: not skinned)
     morph_weights: tuple[float, ...] | None = None  # the weights its node wears its morph targets at (None: none)
+    hidden: bool = False     # its node is scaled to nothing at rest (a clip grows it): spawned not visible
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -684,6 +686,10 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
     del body
     parts: list[ModelPart] = []
     meshes: dict = {}  # geometry name, then content digest -> the one Mesh
+    # The nodes a clip moves (itself or an ancestor animated): one scaled to nothing at rest
+    # is kept, hidden, for a clip that grows it.
+    animated = {node for clip in gltf.animations for node in moved_nodes(gltf.node_tree, clip)} \
+        if gltf is not None and gltf.animations else set()
     try:
         maps = _MaterialMaps(path, gltf, obj)
         for node in loaded.graph.nodes_geometry:
@@ -695,16 +701,16 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
             shown = gltf.node_name(node) if gltf is not None else node
             if not np.isfinite(matrix).all():
                 raise AssetError(f"node {shown!r} has a NaN or infinite transform")
-            singular = np.linalg.svd(matrix[:3, :3], compute_uv=False)
-            if singular[-1] <= 1e-9 * singular[0] or singular[0] == 0.0:
-                continue  # scaled to nothing (files hide nodes this way): it would draw nothing
+            index = gltf.node(node) if gltf is not None else None
+            skin = gltf.skin_of(index) if gltf is not None else None
+            hidden = skin is None and collapsed(matrix)  # (a skinned node's own transform is left out)
+            if hidden and index not in animated:
+                continue  # scaled to nothing (files hide nodes this way), no clip grows it: it would draw nothing
             if np.abs(matrix).max() > 1e18:
                 # Past float32 once multiplied out (vertex x scale x parents): refuse here, by node.
                 raise AssetError(f"node {shown!r} has a transform too large for float32 rendering "
                                  f"(largest entry {np.abs(matrix).max():.3g}, limit 1e18)")
             name = f"{path.name}:{geom_name}"
-            index = gltf.node(node) if gltf is not None else None
-            skin = gltf.skin_of(index) if gltf is not None else None
             morph_weights = gltf.morph_weights(index) if gltf is not None else None
             mesh = meshes.get(("geometry", geom_name, skin))
             if mesh is None:
@@ -724,7 +730,7 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
             if skin is not None:  # glTF: a skinned node's own transform is left out (its joints place it)
                 matrix = np.eye(4)
             part = ModelPart(mesh=mesh, local=glm.mat4(*matrix.astype(np.float32).T.ravel()), name=name,
-                             node=index, skin=skin, morph_weights=morph_weights)
+                             node=index, skin=skin, morph_weights=morph_weights, hidden=hidden)
             if materials:
                 _read_material(tm, part, path, maps)
                 maps.read(tm, part)

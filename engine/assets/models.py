@@ -36,7 +36,7 @@ from components import (
 )
 from components.limits import MAX_MORPH_WEIGHT
 from components.model import MAX_MODEL_PROBES, FromModel, Model
-from engine.assets.gltf_animations import Clip, moved_nodes, pose_all, pose_weights
+from engine.assets.gltf_animations import Clip, collapsed, moved_nodes, pose_all, pose_weights
 from engine.assets.gltf_skins import joint_matrices
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
@@ -198,8 +198,10 @@ def _part_components(part, probed: bool) -> list:
     refracts = _glass(part) and probed
     color = (*part.color[:3], 1.0 - part.transmission) if _glass(part) else part.color
     components = [
-        _node_transform(part.local, part.mesh.name),  # parent set by spawn_parts
-        MeshRef(part.mesh),
+        # (parent set by spawn_parts; a part scaled to nothing at rest stands at its node's place
+        # unscaled, not drawn until a clip grows it: pose_parts)
+        Transform(position=glm.vec3(part.local[3])) if part.hidden else _node_transform(part.local, part.mesh.name),
+        MeshRef(part.mesh, visible=not part.hidden),
         Material(color=color, texture=part.texture, metallic=part.metallic, roughness=part.roughness,
                  normal_map=part.normal_map, normal_scale=part.normal_scale, emissive_map=part.emissive_map,
                  metallic_roughness_map=part.metallic_roughness_map, occlusion_map=part.occlusion_map,
@@ -347,6 +349,13 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
             continue
         placed = matrices.get(node)
         local = glm.mat4(*placed.astype(np.float32).T.ravel()) if placed is not None else rest[node]
+        shown = world.try_get(entity, MeshRef)
+        if collapsed(np.array(local, np.float64)):  # scaled to nothing: not drawn (its light, its camera stay)
+            if shown is not None and shown.visible:
+                shown.visible = False
+            continue
+        if shown is not None and not shown.visible:  # grown again from nothing
+            shown.visible = True
         at = _node_transform(local, f"node {node}")
         if world.has(entity, Camera):
             at.scale = glm.vec3(1.0)  # (a camera's picture is not stretched by its node's scale)
