@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import Animation, ComponentValueError, DirectionalLight, FromModel, Material, MeshRef, Model, Transform
+from components import Animation, ComponentValueError, DirectionalLight, Material, MeshRef, Model, Transform
 from engine.assets.mesh import box, load_model_file
 from engine.assets.models import SpawnedModels, spawn_model
 from engine.core.errors import AssetError
