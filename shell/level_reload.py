@@ -20,8 +20,10 @@ shader errors).  A save the run makes itself (an editor in the window writing it
 calls ``follow`` after writing: the file as written counts as loaded, and nothing is rebuilt.
 
 The model files its ``Model`` entities place are watched the same way (their stat, settled
-over two polls): a model exported again from Blender rebuilds the level, so its new meshes,
-materials and lights show in the running game.
+over two polls), and the files they name beside them (a glTF's buffers and images, an OBJ's
+material libraries and maps): a model exported again from Blender, or a texture painted
+again, rebuilds the level, so its new meshes, materials, images and lights show in the
+running game.
 """
 from __future__ import annotations
 
@@ -35,6 +37,7 @@ from pathlib import Path
 from pyglm import glm
 
 from components import ComponentValueError, FlyController, Model, Transform
+from engine.assets.models import SpawnedModels
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Input
 from engine.core.game import Game
@@ -87,8 +90,16 @@ class LevelReload:
         self._follow_models()
 
     def _follow_models(self) -> None:
-        """Watch the model files the world's Models place, as they are now."""
-        files = {Path(model.file) for _, model in self.world.query_one(Model) if model.file}
+        """Watch the model files the world's Models place, and the files beside them they name
+        (a glTF's buffers and images, an OBJ's material libraries and maps), as they are now."""
+        spawned = self.world.resources.get(SpawnedModels, {})
+        files = set()
+        for root, model in self.world.query_one(Model):
+            if model.file:
+                files.add(Path(model.file))
+                record = spawned.get(root)
+                if record is not None and record.loaded is not None:
+                    files.update(record.loaded.side_files)
         self._models = {path: _file_stat(path) for path in sorted(files)}  # as loaded
         self._models_last = dict(self._models)                              # as last seen
 

@@ -360,3 +360,42 @@ def test_a_model_file_the_level_places_reloads_the_level_when_saved(ctx, tmp_pat
         assert reload.poll() == [] and part_color(run.engine) == pytest.approx([0.1, 0.2, 0.9, 1.0], abs=0.01)
     finally:
         run.close()
+
+
+def test_an_image_a_model_names_beside_it_reloads_the_level_when_painted_again(ctx, tmp_path):
+    """A GLB whose colour map is a PNG beside it: painting the PNG again (the model file
+    untouched) reloads the level, and the part wears the new image."""
+    from components import FromModel, Material
+    from engine.assets.mesh import box
+    from tests.test_materials_from_files import write_glb
+    from tests.test_model_variants import edit_glb
+
+    def paint(rgb: tuple[int, int, int]) -> None:
+        from PIL import Image
+
+        Image.fromarray(np.full((4, 4, 3), rgb, np.uint8)).save(tmp_path / "paint.png")
+        _clock[0] += 10**9
+        os.utime(tmp_path / "paint.png", ns=(_clock[0], _clock[0]))
+
+    def texel(engine: Engine) -> list[int]:
+        (entity,) = [e for e, _ in engine.world.query_one(FromModel)]
+        return engine.world.get(entity, Material).texture.pixels[0, 0, :3].tolist()
+
+    paint((200, 30, 30))
+    write_glb(tmp_path / "crate.glb", box((1.0, 1.0, 1.0)),
+              {"name": "paint", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0.0}}, [])
+    edit_glb(tmp_path / "crate.glb", lambda doc: doc.update(images=[{"uri": "paint.png"}], textures=[{"source": 0}]))
+    path = tmp_path / "level.toml"
+    save(path, level_text() + '\n[[entity]]\nname = "crate"\n[entity.Transform]\nposition = [1.5, 0.5, 0.0]\n'
+                              '[entity.Model]\nfile = "crate.glb"\n')
+    run = Run(ctx, path)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.frame()
+        assert texel(run.engine) == [200, 30, 30]
+        paint((30, 60, 220))
+        assert reload.poll() == []                               # changed since the last look: wait
+        assert reload.poll() == [f"level reloaded: {path}"]
+        assert texel(run.engine) == [30, 60, 220]
+    finally:
+        run.close()

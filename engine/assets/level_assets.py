@@ -15,6 +15,7 @@ into a LevelError naming the file, line, entity and field.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -102,6 +103,18 @@ def _asset_table(spec: Any, what: str, examples: str) -> tuple[dict, Any]:
     return spec, name
 
 
+def _side_stats(loaded: Any) -> tuple:
+    """The modification time and size of each file a loaded model names beside it (None: gone)."""
+    stats = []
+    for side in loaded.side_files:
+        try:
+            info = os.stat(side)
+            stats.append((info.st_mtime_ns, info.st_size))
+        except OSError:
+            stats.append(None)
+    return tuple(stats)
+
+
 def level_model_path(value: Any, where: LevelAssets) -> str:
     """A ``Model.file``: the model file's path (inside the level's folder or an asset root),
     made absolute.  "" is no file (a Model placing nothing yet)."""
@@ -119,7 +132,11 @@ def level_model(value: Any, where: LevelAssets, variant: str = "") -> str:
         return ""
     info = check_asset_file(Path(path), f"model file {path!r}")
     key = ("model file", path, variant, info.st_mtime_ns, info.st_size, info.st_ino, tuple(map(str, where.roots)))
-    loaded = _cached(key, lambda: load_model_file(path, roots=where.roots, variant=variant))
+    kept = _ASSETS.get(key)
+    if kept is None or kept[1] != _side_stats(kept[0]):  # (a buffer or image beside it saved again: loaded again)
+        loaded = load_model_file(path, roots=where.roots, variant=variant)
+        kept = _ASSETS[key] = (loaded, _side_stats(loaded))
+    loaded = kept[0]
     where.budget.take(key, model_bytes(loaded.parts))
     where.models[(path, variant)] = loaded
     return path

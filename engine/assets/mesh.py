@@ -594,6 +594,7 @@ class LoadedModel:
     animations: list = field(default_factory=list)     # its clips (engine/assets/gltf_animations.py Clip)
     node_tree: object = None                           # its nodes (gltf_animations.NodeTree), with clips or skins
     skins: list = field(default_factory=list)          # its skins (engine/assets/gltf_skins.py SkinDef)
+    side_files: list[Path] = field(default_factory=list)  # the files beside it that it names and were found
 
 
 def load_model(path: str | Path, roots: Sequence[str | Path] | None = None,
@@ -747,7 +748,8 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
         raise AssetError(f"{what}: has no material variant {variant!r} (only a glTF file has variants)")
     clips = gltf.animations if gltf is not None else []
     skins = gltf.skins if gltf is not None else []
-    return LoadedModel(parts, lights, cameras, variants, clips, gltf.node_tree if clips or skins else None, skins)
+    return LoadedModel(parts, lights, cameras, variants, clips, gltf.node_tree if clips or skins else None, skins,
+                       sorted(resolver.side_files))
 
 
 def _digest(mesh: Mesh) -> bytes:

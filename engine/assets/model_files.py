@@ -58,6 +58,9 @@ class CheckedFiles:
         self.file_name = file_name  # trimesh names an unnamed OBJ part after it
         self._data: dict[str, bytes] = {}
         self.total = 0
+        # Every file beside the model it names and the engine found (buffers, images, material
+        # libraries and their maps): what a level reload watches as it watches the model.
+        self.side_files: set[Path] = set()
 
     def bytes_of(self, name: str) -> bytes | None:
         """The bytes read for ``name`` (None: none were)."""
@@ -325,6 +328,7 @@ def _mtl_libraries(obj: Path, names: list[str], used: set[str], roots, textures:
                           stacklevel=5)
             continue
         data = read_asset_file(library, f"mesh file {str(obj)!r}: its material library {name!r}", MAX_MTL_BYTES)
+        resolver.side_files.add(library)
         material = None
         for number, line in enumerate(data.decode("utf-8", "replace").splitlines(), 1):
             words = line.split()
@@ -340,6 +344,8 @@ def _mtl_libraries(obj: Path, names: list[str], used: set[str], roots, textures:
             if key in MTL_FILE_KEYS:
                 if key in MTL_MAP_KEYS and material in used:
                     entry = mtl_map_statement(words, library, number, roots)
+                    if entry.path is not None:
+                        resolver.side_files.add(entry.path)
                     found = maps.setdefault(material, {})
                     found["bump" if key == "map_bump" else key] = entry
                     if key == "map_kd" and entry.path is not None and textures:
@@ -697,5 +703,6 @@ def _uri(path: Path, uri: str, roots, label: str, resolver: CheckedFiles, read: 
     if target is None:
         raise AssetError(f"{what}: {label}: its file {name!r} does not exist (looked for "
                          f"{str(path.parent / name)!r})")
+    resolver.side_files.add(target)
     if read:
         resolver.add(uri, read_asset_file(target, f"{what}: {label}: its file {name!r}", MAX_SIDE_FILE_BYTES), what)
