@@ -12,7 +12,9 @@ left alone (the world's ``SpawnedModels`` says what was made from what).
 
 Then each ``Animation`` on a model's root moves on by the frame's time and puts the parts
 where its clip puts their nodes (``engine.assets.models.pose_parts``): before the transform
-stage, so the pose is drawn in this frame.
+stage, so the pose is drawn in this frame.  A model whose root's Transform was written has
+its directional lights pointed again (``turn_suns``: a direction is not a place the
+transform stage carries).
 
 The file is looked for as given (relative to where the program runs) and the files it
 names in its own folder and the asset roots (``--asset-root``); one that cannot be loaded
@@ -24,9 +26,10 @@ from pathlib import Path
 
 import esper
 
+from components import Transform
 from components.model import Animation, Model
 from engine.assets.level_assets import user_asset_roots
-from engine.assets.models import SpawnedModels, model_key, pose_parts, remove_parts, respawn_parts
+from engine.assets.models import SpawnedModels, model_key, pose_parts, remove_parts, respawn_parts, turn_suns
 from engine.core.world import World
 
 
@@ -41,6 +44,11 @@ class ModelSystem(esper.Processor):
         if changed:
             self._place(changed)
         self._animate(dt, changed)
+        turned = world.changed(Transform)
+        if turned:  # a model turned by its root: its suns' directions with it
+            spawned = world.resources.get(SpawnedModels, {})
+            for root in [root for root in spawned if root in turned and root not in changed]:
+                turn_suns(world, root)
 
     def _animate(self, dt: float, remade: set[int]) -> None:
         """Move each playing ``Animation`` on by ``dt`` x its speed (wrapped at the clip's end

@@ -264,6 +264,14 @@ def test_a_clip_moves_the_lights_and_cameras_on_the_nodes_it_turns(tmp_path):
     ((_, sun),) = list(world.query_one(DirectionalLight))
     expected = glm.normalize(glm.vec3(hinge * glm.vec4(0.0, 0.0, -1.0, 0.0)))
     assert glm.distance(glm.normalize(sun.direction), expected) < 1e-5
+    # The model's root turned a quarter about +y (the clip paused): its sun turns with it.
+    from systems.model_system import ModelSystem
+    ((root, animation),) = list(world.query_one(Animation))
+    animation.playing = False
+    world.get(root, Transform).rotation = QUARTER
+    ModelSystem(world).process(0.0)
+    turned = glm.normalize(glm.vec3(glm.mat4_cast(QUARTER) * hinge * glm.vec4(0.0, 0.0, -1.0, 0.0)))
+    assert glm.distance(glm.normalize(sun.direction), turned) < 1e-5
 
 
 def test_every_nodes_pose_is_its_own_transform_times_its_parents_on_a_branching_tree():

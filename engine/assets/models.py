@@ -46,7 +46,7 @@ from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 
 __all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key", "pose_parts",
-           "remove_parts", "respawn_parts", "skin_palettes", "spawn_model", "spawn_parts"]
+           "remove_parts", "respawn_parts", "skin_palettes", "spawn_model", "spawn_parts", "turn_suns"]
 
 @dataclass
 class SpawnedModel:
@@ -343,7 +343,6 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
         matrices = {node: m for node, m in matrices.items() if node in moved}
     loaded = record.loaded
     rest = {thing.node: thing.local for thing in (*loaded.parts, *loaded.lights, *loaded.cameras)}
-    root_matrix = None
     for entity, node in zip(record.parts, record.nodes, strict=True):
         if node is None or not world.exists(entity) or (not every and node not in matrices):
             continue
@@ -361,13 +360,8 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
             at.scale = glm.vec3(1.0)  # (a camera's picture is not stretched by its node's scale)
         transform = world.get(entity, Transform)
         transform.position, transform.rotation, transform.scale = at.position, at.rotation, at.scale
-        sun = world.try_get(entity, DirectionalLight)
-        if sun is not None:  # a direction, not a place: along the node's -Z as the model stands now
-            if root_matrix is None:
-                root_matrix = current_world_matrix(world, world.get(root, Transform))
-            travel = glm.vec3((root_matrix * local) * glm.vec4(0.0, 0.0, -1.0, 0.0))
-            if glm.length(travel) > 0.0:
-                sun.direction = travel
+        if world.has(entity, DirectionalLight):
+            turn_suns(world, root, [entity])
 
 
 def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float, skins: Collection[int] | None = None,
@@ -410,6 +404,20 @@ def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: fl
             world.get(entity, Morph).weights = np.clip(weights, -MAX_MORPH_WEIGHT, MAX_MORPH_WEIGHT)
         elif every:
             world.get(entity, Morph).weights = part.morph_weights
+
+
+def turn_suns(world: World, root: int, entities: Sequence[int] | None = None) -> None:
+    """Point the directional lights among ``root``'s parts (``entities``: those; None: all)
+    along their nodes' -Z as the model stands now (a DirectionalLight has a direction, not a
+    place: its entity's Transform does not turn it), after the root turned or a clip did."""
+    record = world.resources.get(SpawnedModels, {}).get(root)
+    for entity in record.parts if entities is None and record is not None else entities or ():
+        sun = world.try_get(entity, DirectionalLight) if world.exists(entity) else None
+        if sun is None:
+            continue
+        travel = glm.vec3(current_world_matrix(world, world.get(entity, Transform)) * glm.vec4(0.0, 0.0, -1.0, 0.0))
+        if glm.length(travel) > 0.0:
+            sun.direction = travel
 
 
 def _camera_components(camera: ModelCamera) -> list:
