@@ -268,8 +268,10 @@ def test_a_clip_moves_the_lights_and_cameras_on_the_nodes_it_turns(tmp_path):
     from systems.model_system import ModelSystem
     ((root, animation),) = list(world.query_one(Animation))
     animation.playing = False
+    stage = ModelSystem(world)
+    stage.process(0.0)   # (posed once, paused: the next frame poses nothing)
     world.get(root, Transform).rotation = QUARTER
-    ModelSystem(world).process(0.0)
+    stage.process(0.0)
     turned = glm.normalize(glm.vec3(glm.mat4_cast(QUARTER) * hinge * glm.vec4(0.0, 0.0, -1.0, 0.0)))
     assert glm.distance(glm.normalize(sun.direction), turned) < 1e-5
 
