@@ -270,6 +270,7 @@ def test_a_clip_moves_the_lights_and_cameras_on_the_nodes_it_turns(tmp_path):
     animation.playing = False
     stage = ModelSystem(world)
     stage.process(0.0)   # (posed once, paused: the next frame poses nothing)
+    world.step(0.0)      # (a frame's end: its change sets cleared)
     world.get(root, Transform).rotation = QUARTER
     stage.process(0.0)
     turned = glm.normalize(glm.vec3(glm.mat4_cast(QUARTER) * hinge * glm.vec4(0.0, 0.0, -1.0, 0.0)))
