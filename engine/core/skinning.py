@@ -16,17 +16,32 @@ added (``shaders/include/pose.glsl``), before the joints bend the result.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from components.limits import MAX_JOINTS
 
-if TYPE_CHECKING:  # (a type only: the assets build on the core, not the other way)
-    from engine.assets.mesh import Mesh
 
-__all__ = ["INFLUENCES", "MAX_JOINTS", "blend_matrices", "joint_boxes", "morph_reach", "morphed", "posed_bounds",
-           "posed_box", "posed_positions", "skin_normals", "skin_positions", "strongest_influences"]
+class PosedMesh(Protocol):
+    """What posing reads of a mesh (``engine.assets.mesh.Mesh`` has it; the core does not
+    import the assets, which build on it)."""
+
+    positions: np.ndarray
+    joints: np.ndarray | None
+    weights: np.ndarray | None
+    morph_positions: np.ndarray | None
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def joint_boxes(self) -> np.ndarray: ...
+
+    def morph_offset_boxes(self) -> np.ndarray: ...
+
+
+__all__ = ["INFLUENCES", "MAX_JOINTS", "PosedMesh", "blend_matrices", "joint_boxes", "morph_reach", "morphed",
+           "posed_bounds", "posed_box", "posed_positions", "skin_normals", "skin_positions", "strongest_influences"]
 
 INFLUENCES = 4              # joints a vertex may follow (glTF's JOINTS_0: more are folded into the four largest)
 
@@ -116,7 +131,7 @@ def morph_reach(offset_boxes: np.ndarray, weights: np.ndarray) -> tuple[np.ndarr
     return np.minimum(scaled[:, 0], scaled[:, 1]).sum(axis=0), np.maximum(scaled[:, 0], scaled[:, 1]).sum(axis=0)
 
 
-def posed_bounds(mesh: Mesh, joint_matrices: np.ndarray | None,
+def posed_bounds(mesh: PosedMesh, joint_matrices: np.ndarray | None,
                  morph_weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The box (lo, hi) holding ``mesh`` posed (``posed_positions``' points): its box, or each
     joint's (``joint_boxes``), grown by how far the weighed targets reach (``morph_reach``),
@@ -130,7 +145,7 @@ def posed_bounds(mesh: Mesh, joint_matrices: np.ndarray | None,
     return posed_box(mesh.joint_boxes() + np.stack([low, high])[None], joint_matrices)
 
 
-def posed_positions(mesh: Mesh, joint_matrices: np.ndarray | None, morph_weights: np.ndarray | None) -> np.ndarray:
+def posed_positions(mesh: PosedMesh, joint_matrices: np.ndarray | None, morph_weights: np.ndarray | None) -> np.ndarray:
     """Where ``mesh``'s vertices go (V, 3, float64): its morph targets weighed in, then bent
     by its joints (either None: not applied), as the SKINNED and MORPHED builds draw it."""
     positions = mesh.positions.astype(np.float64)
