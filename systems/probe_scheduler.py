@@ -69,6 +69,7 @@ from engine.rules.probe_rules import (
     has_own_probe,
     images_through_surfaces,
     lights_reaching,
+    pose_bounds,
     probe_samplers,
     world_bounds,
 )
@@ -265,7 +266,7 @@ class ProbeScheduler:
         for owner in probe_samplers(world, plain=False):  # (a plain mesh has none of its own)
             if has_own_probe(world, owner) and world.has(owner, Transform):
                 mesh_ref, transform = world.get(owner, MeshRef), world.get(owner, Transform)
-                lo, hi = world_bounds(mesh_ref.mesh, transform.world)
+                lo, hi = world_bounds(mesh_ref.mesh, transform.world, pose_bounds(world, owner, mesh_ref.mesh))
                 found[owner] = (None, glm.vec3(*((lo + hi) / 2.0)), True)
         gone = [owner for owner in self.probes if owner not in found]
         for owner in gone:
@@ -322,7 +323,8 @@ class ProbeScheduler:
         if placed:
             # Where each is now, all in a few array operations (``world_bounds``' box, each
             # mesh's own box carried by its model matrix).
-            corners = np.array([self._mesh_corners(mesh) for _, _, _, mesh, _ in placed])  # (entity, 8, xyzw)
+            corners = np.array([self._mesh_corners(mesh, entity)
+                                for entity, _, _, mesh, _ in placed])  # (entity, 8, xyzw)
             # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
             models = np.ascontiguousarray(np.array([model for _, _, _, _, model in placed], np.float64)
                                           .transpose(0, 2, 1))
@@ -333,9 +335,14 @@ class ProbeScheduler:
                 rows.append((entity, what, *new, code))
         return ChangedBoxes(rows)
 
-    def _mesh_corners(self, mesh: Mesh) -> np.ndarray:
+    def _mesh_corners(self, mesh: Mesh, entity: int = 0) -> np.ndarray:
         """The corners of ``mesh.bounds`` (8, xyzw: w = 1, as ``box_corners`` orders them), kept
-        by mesh (its vertices are read once, as the renderer uploads them once)."""
+        by mesh (its vertices are read once, as the renderer uploads them once); ``entity``'s
+        pose's box where a Skin or Morph poses it (``pose_bounds``, worked out each time)."""
+        posed = pose_bounds(self.world, entity, mesh) if entity and (mesh.skinned or mesh.morph_count) else None
+        if posed is not None:
+            corners = box_corners(np.asarray(posed[0], np.float64)[None], np.asarray(posed[1], np.float64)[None])[0]
+            return np.concatenate([corners, np.ones((8, 1))], axis=1)
         kept = self._mesh_boxes.get(id(mesh))
         if kept is None or kept[0] is not mesh:
             if len(self._mesh_boxes) > 4096:
@@ -346,8 +353,9 @@ class ProbeScheduler:
         return kept[1]
 
     def _all_boxes(self) -> ChangedBoxes:
-        self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
-                        for entity, (mesh_ref, transform) in self.world.query(MeshRef, Transform)}
+        world = self.world
+        self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world, pose_bounds(world, entity, mesh_ref.mesh))
+                        for entity, (mesh_ref, transform) in world.query(MeshRef, Transform)}
         return ChangedBoxes([])  # every probe is new: a first capture takes every face anyway
 
     def _changed_lights(self) -> list[tuple[str, np.ndarray, float]]:

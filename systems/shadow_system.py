@@ -33,7 +33,18 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import DirectionalLight, Material, MeshRef, PointLight, Portal, Refractive, Transform, Visibility
+from components import (
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Morph,
+    PointLight,
+    Portal,
+    Refractive,
+    Skin,
+    Transform,
+    Visibility,
+)
 from components.tracking import raw_field
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.transforms import current_world_matrix
@@ -51,7 +62,7 @@ from engine.rules.light_rules import (
     lamp_cookie,
     spot_map_half_width,
 )
-from engine.rules.probe_rules import world_bounds
+from engine.rules.probe_rules import pose_bounds, world_bounds
 from engine.rules.shadow_rules import (
     MAX_VIRTUAL_LIGHTS,
     DirectionalFit,
@@ -69,7 +80,8 @@ from engine.rules.shadow_rules import (
 )
 from engine.rules.visibility_rules import ShadowCasting
 
-_LOOKS = (MeshRef, Material, Visibility, Refractive, Portal)  # what decides whether, and what shape, a thing casts
+# What decides whether, and what shape, a thing casts.
+_LOOKS = (MeshRef, Material, Visibility, Refractive, Portal, Skin, Morph)
 
 
 class ShadowSystem(esper.Processor):
@@ -350,7 +362,8 @@ class ShadowSystem(esper.Processor):
         world = self.world
         frame = world.frame
         if not self._bounds:
-            self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world)
+            self._bounds = {entity: world_bounds(mesh_ref.mesh, transform.world,
+                                                 pose_bounds(world, entity, mesh_ref.mesh))
                             for entity, (mesh_ref, transform) in world.query(MeshRef, Transform)}
             return np.zeros((0, 3)), np.zeros((0, 3))
         gone = frame.removed | world.deleted()
@@ -363,7 +376,8 @@ class ShadowSystem(esper.Processor):
             if world.exists(entity):
                 mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
                 if mesh_ref is not None and transform is not None:
-                    new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world)
+                    new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world,
+                                                              pose_bounds(world, entity, mesh_ref.mesh))
             if entity not in looks and entity not in frame.added and entity not in gone and new is not None:
                 casting = casting or ShadowCasting(world)
                 if not casting.casts(entity, mesh_ref, world.try_get(entity, Visibility)):

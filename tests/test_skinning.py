@@ -245,6 +245,29 @@ def test_a_pose_reaching_past_the_mesh_as_modelled_is_held_by_its_box(scene):
     assert (placed >= level_lo - 1e-5).all() and (placed <= level_hi + 1e-5).all()
 
 
+def test_the_shadow_and_probe_stages_box_a_posed_mesh_where_its_pose_puts_it(scene):
+    """The boxes the point lights' shadow cubes and the probes' recaptures go by (which faces
+    a change touches) hold the arm bent past the mesh as modelled, after a new pose too."""
+    from components import PointLight, ReflectionProbe
+
+    holder = {}
+
+    def build(world):
+        world.spawn(Transform(position=(0.0, 3.5, 1.0)), PointLight(intensity=6.0, range=10.0, shadows=True))
+        world.spawn(Transform(position=(1.5, 1.0, 1.5)), ReflectionProbe())
+        holder["arm"] = world.spawn(Transform(), MeshRef(skinned_bar()), Material(color=RED),
+                                    Skin(np.stack([np.eye(4), elbow_matrix(0.0)])))
+
+    runner = scene(lit(build), (64, 48))
+    runner.frame()
+    runner.world.get(holder["arm"], Skin).joint_matrices = np.stack([np.eye(4), elbow_matrix(-math.pi / 2)])
+    runner.frame()
+    placed = bent_by_hand(-math.pi / 2).positions
+    for boxes in (runner.engine.stages["shadows"]._bounds, runner.engine.stages["probes"].scheduler._bounds):
+        lo, hi = boxes[holder["arm"]]
+        assert (placed >= lo - 1e-5).all() and (placed <= hi + 1e-5).all()
+
+
 def test_the_pose_changes_from_frame_to_frame_and_its_shadow_follows(scene, monkeypatch):
     """A Skin given new matrices is drawn bent the new way in the next frame (its shadow too),
     its pose written alone (the entity's whole row is not worked out again for it)."""

@@ -63,6 +63,7 @@ from components import (
 )
 from engine.assets.mesh import Mesh, flat_plane
 from engine.core.cube_faces import CUBE_FACES
+from engine.core.skinning import posed_bounds
 from engine.core.world import World
 from engine.resources import SurfaceState
 from engine.rules.frame_rules import world_corners
@@ -132,10 +133,23 @@ def has_own_probe(world: World, entity: int) -> bool:
             and not world.has(entity, ReflectionProbe) and not is_flat(mesh_ref.mesh))
 
 
-def world_bounds(mesh: Mesh, model: glm.mat4) -> tuple[np.ndarray, np.ndarray]:
-    """The world AABB of ``mesh`` placed by ``model`` (from ``frame_rules.world_corners``)."""
-    world = world_corners(mesh, model)
+def world_bounds(mesh: Mesh, model: glm.mat4, bounds: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The world AABB of ``mesh`` (or of ``bounds``, its pose's box: ``pose_bounds``) placed by
+    ``model`` (from ``frame_rules.world_corners``)."""
+    world = world_corners(mesh, model, bounds)
     return world[:, :3].min(axis=0), world[:, :3].max(axis=0)
+
+
+def pose_bounds(world: World, entity: int, mesh: Mesh) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box of ``mesh`` as ``entity``'s Skin and Morph pose it (``skinning.posed_bounds``),
+    or None where it has neither (the mesh's own box holds it)."""
+    skin = world.try_get(entity, Skin) if mesh.skinned else None
+    morph = world.try_get(entity, Morph) if mesh.morph_count else None
+    if skin is None and morph is None:
+        return None
+    return posed_bounds(mesh, skin.joint_matrices if skin is not None else None,
+                        morph.weights if morph is not None else None)
 
 
 MAX_BLENDED_PROBES = 2  # probes an object blends at most (two cube samplers: GL 4.1 has no cube-map arrays)
