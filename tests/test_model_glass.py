@@ -121,6 +121,10 @@ def test_curved_glass_past_the_probe_budget_is_a_see_through_pane(tmp_path):
     ({"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 0.5}},
      r"KHR_materials_ior.ior must be a number in \[1, 4\]"),
     ({"KHR_materials_volume": {"thicknessFactor": -1}}, r"thicknessFactor must be a number >= 0"),
+    ({"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_volume": {
+        "thicknessFactor": 1, "attenuationColor": [2, 0, 0]}}, r"attenuationColor must be three numbers in \[0, 1\]"),
+    ({"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_volume": {
+        "thicknessFactor": 1, "attenuationDistance": 0}}, r"attenuationDistance must be a number > 0"),
     ({"KHR_materials_transmission": 3}, r"KHR_materials_transmission must be an object"),
 ])
 def test_bad_glass_is_refused_naming_the_material(tmp_path, extensions, message):
@@ -137,3 +141,17 @@ def test_a_file_requiring_the_glass_extensions_is_read(tmp_path):
                       "extensionsRequired": ["KHR_materials_transmission", "KHR_materials_volume"]})
     (part,) = load_model(path)
     assert part.transmission == 1.0 and part.thick and part.ior == 1.5
+
+
+def test_a_volumes_attenuation_tints_thick_glass_by_beer_lambert_over_its_thickness(tmp_path):
+    """Green-tinted thick glass (attenuationColor (0.5, 0.9, 0.8) every 0.5 m, 1 m thick): what
+    passes keeps that colour squared, times the base colour; a thin wall or no distance
+    absorbs nothing."""
+    material = glass(1.0, ior=1.5, thickness=1.0, color=(0.9, 1.0, 1.0, 1.0))
+    material["extensions"]["KHR_materials_volume"].update(attenuationColor=[0.5, 0.9, 0.8], attenuationDistance=0.5)
+    (part,) = load_model(write_glb(tmp_path / "bottle.glb", sphere(0.5), material, []))
+    # (the base colour as the file's factor is kept: 8 bits a channel, 0.9 read as 230 / 255)
+    assert part.color[:3] == pytest.approx((0.9 * 0.25, 0.81, 0.64), abs=2e-3) and part.color[3] == 1.0
+    material["extensions"]["KHR_materials_volume"]["thicknessFactor"] = 0.0   # a thin wall: no volume
+    (thin,) = load_model(write_glb(tmp_path / "pane.glb", sphere(0.5), material, []))
+    assert thin.color[:3] == pytest.approx((0.9, 1.0, 1.0), abs=2e-3)

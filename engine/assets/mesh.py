@@ -961,6 +961,28 @@ def _gltf_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
                           "everywhere", stacklevel=6)
     part.transmission, part.ior, part.thick = float(factor), float(ior), thickness > 0.0
     part.dispersion = float(dispersion)
+    if factor > 0.0 and thickness > 0.0:
+        _gltf_attenuation(found["KHR_materials_volume"], float(thickness), part, what)
+
+
+def _gltf_attenuation(volume: dict, thickness: float, part: ModelPart, what: str) -> None:
+    """Coloured glass: ``KHR_materials_volume``'s attenuation (Beer-Lambert: what passes keeps
+    ``attenuationColor`` once every ``attenuationDistance``), over the volume's
+    ``thicknessFactor``, as the glTF sample viewer tints a thick part's transmitted light:
+    ``attenuationColor ^ (thickness / attenuationDistance)``, multiplied into the colour that
+    tints what the glass lets through (the engine's glass has no path length of its own)."""
+    colour = volume.get("attenuationColor", [1.0, 1.0, 1.0])
+    if not (isinstance(colour, list) and len(colour) == 3 and all(
+            isinstance(c, numbers.Real) and not isinstance(c, bool) and 0.0 <= c <= 1.0 for c in colour)):
+        raise AssetError(f"{what}: KHR_materials_volume.attenuationColor must be three numbers in [0, 1], "
+                         f"got {colour!r}")
+    distance = volume.get("attenuationDistance", math.inf)
+    if isinstance(distance, bool) or not isinstance(distance, numbers.Real) or not distance > 0.0:
+        raise AssetError(f"{what}: KHR_materials_volume.attenuationDistance must be a number > 0, got {distance!r}")
+    if math.isinf(distance):
+        return  # (glTF's default: nothing absorbed)
+    kept = [float(c) ** (thickness / float(distance)) for c in colour]
+    part.color = (*(base * k for base, k in zip(part.color[:3], kept, strict=True)), part.color[3])
 
 
 def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:
