@@ -63,6 +63,8 @@ def level_text(box_x: float = 0.0, color: str = RED, roughness: str = "0.5") -> 
 
 
 _clock = [1_700_000_000 * 10**9]
+# A model placed by the level: crate.glb beside it.
+CRATE = '\n[[entity]]\nname = "crate"\n[entity.Transform]\nposition = [1.5, 0.5, 0.0]\n[entity.Model]\nfile = "crate.glb"\n'
 
 
 def save(path: Path, text: str) -> None:
@@ -339,8 +341,7 @@ def test_a_model_file_the_level_places_reloads_the_level_when_saved(ctx, tmp_pat
 
     export([0.9, 0.1, 0.1, 1.0])
     path = tmp_path / "level.toml"
-    save(path, level_text() + '\n[[entity]]\nname = "crate"\n[entity.Transform]\nposition = [1.5, 0.5, 0.0]\n'
-                              '[entity.Model]\nfile = "crate.glb"\n')
+    save(path, level_text() + CRATE)
     run = Run(ctx, path)
     try:
         reload = run.engine.watch_level(interval=0.0)
@@ -386,8 +387,7 @@ def test_an_image_a_model_names_beside_it_reloads_the_level_when_painted_again(c
               {"name": "paint", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0.0}}, [])
     edit_glb(tmp_path / "crate.glb", lambda doc: doc.update(images=[{"uri": "paint.png"}], textures=[{"source": 0}]))
     path = tmp_path / "level.toml"
-    save(path, level_text() + '\n[[entity]]\nname = "crate"\n[entity.Transform]\nposition = [1.5, 0.5, 0.0]\n'
-                              '[entity.Model]\nfile = "crate.glb"\n')
+    save(path, level_text() + CRATE)
     run = Run(ctx, path)
     try:
         reload = run.engine.watch_level(interval=0.0)

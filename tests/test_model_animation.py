@@ -6,7 +6,6 @@ the posed model against the same box placed by hand there (a second path); playi
 looping and holding at the end; a clip the file lacks, and malformed channels, refused."""
 from __future__ import annotations
 
-import base64
 import math
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from engine.core.errors import AssetError
 from engine.core.world import World
 from tests.support import look_from
 from tests.test_materials_from_files import write_glb
-from tests.test_model_variants import edit_glb
+from tests.test_model_variants import add_accessors, edit_glb
 
 QUARTER = glm.angleAxis(math.pi / 2, glm.vec3(0.0, 1.0, 0.0))
 
@@ -40,20 +39,7 @@ def door(path: Path, channels: list[dict] | None = None) -> Path:
               np.array([0.0, 1.0, 2.0], np.float32), np.array([[1, 1, 1], [2, 2, 2], [1, 1, 1]], np.float32)]
 
     def change(doc: dict) -> None:
-        blob = b"".join(a.tobytes() for a in arrays)
-        doc["buffers"].append({"byteLength": len(blob),
-                               "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
-        offset = 0
-        first = len(doc["accessors"])
-        for array in arrays:
-            doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": offset,
-                                       "byteLength": array.nbytes})
-            kind = {1: "SCALAR", 3: "VEC3", 4: "VEC4"}[1 if array.ndim == 1 else array.shape[1]]
-            doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126,
-                                     "count": len(array), "type": kind,
-                                     **({"min": [float(array.min())], "max": [float(array.max())]}
-                                        if array.ndim == 1 else {})})
-            offset += array.nbytes
+        first = add_accessors(doc, arrays)
         doc["nodes"] = [{"name": "hinge", "translation": [1.0, 0.0, 0.0], "children": [1]},
                         {"name": "door", "mesh": 0, "translation": [0.5, 0.0, 0.0]}]
         doc["scenes"] = [{"nodes": [0]}]
@@ -354,17 +340,7 @@ def test_a_node_a_clip_shrinks_to_nothing_or_grows_from_nothing_is_hidden_then_d
             np.array([[0, 0, 0], [1, 1, 1]], np.float32)]
 
     def change(doc: dict) -> None:
-        blob = b"".join(a.tobytes() for a in keys)
-        doc["buffers"].append({"byteLength": len(blob),
-                               "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
-        first, offset = len(doc["accessors"]), 0
-        for array in keys:
-            doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": offset,
-                                       "byteLength": array.nbytes})
-            doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126,
-                                     "count": len(array), "type": "SCALAR" if array.ndim == 1 else "VEC3",
-                                     **({"min": [0.0], "max": [1.0]} if array.ndim == 1 else {})})
-            offset += array.nbytes
+        first = add_accessors(doc, keys)
         doc["nodes"] += [{"name": "lid", "mesh": 0, "translation": [-1.5, 0.5, 0.0], "scale": [0.0, 0.0, 0.0]},
                          {"name": "ghost", "mesh": 0, "translation": [0.0, 2.0, 0.0], "scale": [0.0, 1.0, 1.0]}]
         doc["scenes"][0]["nodes"] += [2, 3]

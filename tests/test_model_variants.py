@@ -5,6 +5,7 @@ a second path); a Model's variant changed at run time makes its parts again; a l
 places a variant; a variant the file does not have is refused listing those it has."""
 from __future__ import annotations
 
+import base64
 import json
 import struct
 from pathlib import Path
@@ -40,6 +41,35 @@ def edit_glb(path: Path, change) -> Path:
     path.write_bytes(b"glTF" + struct.pack("<II", 2, 12 + 8 + len(text) + len(rest)) + struct.pack("<I", len(text))
                      + b"JSON" + text + rest)
     return path
+
+
+# componentType and type of the arrays add_accessors stores
+_COMPONENTS = {np.dtype(np.uint8): 5121, np.dtype(np.uint16): 5123, np.dtype(np.float32): 5126}
+_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+
+
+def add_accessors(doc: dict, arrays: list[np.ndarray], normalized: frozenset[int] = frozenset()) -> int:
+    """Append ``arrays`` to a glTF document (as ``edit_glb`` hands it): one base64 buffer, a
+    view and an accessor each (componentType from the dtype, type from the width; a
+    one-dimensional array gets its min and max, as an animation's input must); those whose
+    index is in ``normalized`` marked normalised.  Returns the first new accessor's index."""
+    blob = bytearray()
+    doc["buffers"].append({})
+    first = len(doc["accessors"])
+    for index, array in enumerate(arrays):
+        while len(blob) % 4:
+            blob.append(0)
+        doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": len(blob),
+                                   "byteLength": array.nbytes})
+        blob.extend(array.tobytes())
+        doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": _COMPONENTS[array.dtype],
+                                 "count": len(array), "type": _TYPES[1 if array.ndim == 1 else array.shape[1]],
+                                 **({"normalized": True} if index in normalized else {}),
+                                 **({"min": [float(array.min())], "max": [float(array.max())]}
+                                    if array.ndim == 1 else {})})
+    doc["buffers"][-1] = {"byteLength": len(blob), "uri": "data:application/octet-stream;base64,"
+                          + base64.b64encode(bytes(blob)).decode()}
+    return first
 
 
 def shoe(path: Path, default: list[float] = RED, mappings: list[dict] | None = None) -> Path:

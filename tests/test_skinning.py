@@ -3,7 +3,6 @@ in every view and shadow map as the sum written out here by hand, from a glTF's 
 clips, and refused plainly where the data cannot be drawn."""
 from __future__ import annotations
 
-import base64
 import math
 from pathlib import Path
 
@@ -31,7 +30,7 @@ from engine.core.world import World
 from engine.rules.raycast import raycast
 from tests.support import look_from
 from tests.test_materials_from_files import write_glb
-from tests.test_model_variants import edit_glb
+from tests.test_model_variants import add_accessors, edit_glb
 
 RED = (0.8, 0.25, 0.15, 1.0)
 
@@ -118,22 +117,7 @@ def arm_glb(path: Path, weights_kind: str = "float") -> Path:
               np.array([0.0, 1.0], np.float32), np.array([[0, 0, 0, 1], quarter], np.float32)]
 
     def change(doc: dict) -> None:
-        blob = b"".join(a.tobytes() for a in arrays)
-        doc["buffers"].append({"byteLength": len(blob),
-                               "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
-        first, offset = len(doc["accessors"]), 0
-        for array in arrays:
-            doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": offset,
-                                       "byteLength": array.nbytes})
-            width = 1 if array.ndim == 1 else array.shape[1]
-            component = {np.dtype(np.uint8): 5121, np.dtype(np.float32): 5126}[array.dtype]
-            doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": component,
-                                     "count": len(array), "type": {1: "SCALAR", 4: "VEC4", 16: "MAT4"}[width],
-                                     **({"normalized": True} if weights_kind == "normalized" and array.dtype == np.uint8
-                                        and array is arrays[1] else {}),
-                                     **({"min": [float(array.min())], "max": [float(array.max())]}
-                                        if array.ndim == 1 else {})})
-            offset += array.nbytes
+        first = add_accessors(doc, arrays, frozenset({1}) if weights_kind == "normalized" else frozenset())
         attributes = doc["meshes"][0]["primitives"][0]["attributes"]
         for n in range(len(sets)):
             attributes[f"JOINTS_{n}"], attributes[f"WEIGHTS_{n}"] = first + 2 * n, first + 2 * n + 1
