@@ -64,7 +64,8 @@ def level_text(box_x: float = 0.0, color: str = RED, roughness: str = "0.5") -> 
 
 _clock = [1_700_000_000 * 10**9]
 # A model placed by the level: crate.glb beside it.
-CRATE = '\n[[entity]]\nname = "crate"\n[entity.Transform]\nposition = [1.5, 0.5, 0.0]\n[entity.Model]\nfile = "crate.glb"\n'
+CRATE = ('\n[[entity]]\nname = "crate"\n[entity.Transform]\nposition = [1.5, 0.5, 0.0]\n'
+         '[entity.Model]\nfile = "crate.glb"\n')
 
 
 def save(path: Path, text: str) -> None:
