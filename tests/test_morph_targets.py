@@ -269,3 +269,26 @@ def test_a_models_clip_plays_its_weights(scene, tmp_path):
 def test_malformed_targets_in_a_file_are_refused_naming_them(tmp_path, change, message):
     with pytest.raises(AssetError, match=message):
         load_model_file(edit_glb(sheet_glb(tmp_path / "sheet.glb"), change))
+
+
+def test_targets_past_what_the_offsets_texture_holds_are_refused_naming_the_mesh(scene):
+    """A context whose textures are at most 2 rows (its reported limit lowered): the sheet's
+    169 vertices x 2 targets need a 1024 x 1 texture of offsets (drawn); with 16 targets, past
+    the limit, the entity is refused naming the mesh and the limit, and nothing is made."""
+    from dataclasses import replace
+
+    from engine.core.errors import GLLimitError
+
+    positions, normals, uvs, triangles, offsets, _ = sheet_arrays()
+    many = Mesh(positions, normals, uvs, triangles, name="many targets", morph_positions=np.repeat(offsets, 8, axis=0))
+    runner = scene(lit(lambda w: None), (32, 24))
+    renderer = runner.engine.renderer
+    renderer.caps = replace(renderer.caps, max_texture_size=2)
+    runner.world.spawn(Transform(), MeshRef(morphed_sheet()), Material(color=RED), Morph((0.5, 0.5)))
+    runner.frame()
+    meshes = renderer.resource_counts()["meshes"]
+    crowd = runner.world.spawn(Transform(), MeshRef(many), Material(color=RED), Morph(tuple([0.1] * 16)))
+    with pytest.raises(GLLimitError, match=rf"entity {crowd}: mesh 'many targets': 169 vertices x 16 morph targets "
+                                           r"need a 1024x6 texture .* 2 rows at most \(GL_MAX_TEXTURE_SIZE\)"):
+        runner.frame()
+    assert renderer.resource_counts()["meshes"] == meshes

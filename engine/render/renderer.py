@@ -24,7 +24,7 @@ from engine.core.errors import GLLimitError
 from engine.render.cutout_mips import FILTERED_TEXELS, alpha_share, keep_alpha_share
 from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
-from engine.render.instances import MAX_CHANGED_PARTS, BatchKey, GpuMesh, InstanceBatch
+from engine.render.instances import MAX_CHANGED_PARTS, MORPH_TEXTURE_WIDTH, BatchKey, GpuMesh, InstanceBatch
 from engine.render.irradiance import IrradianceTable
 from engine.render.level_copies import LevelCopies
 from engine.render.path_checks import PathChecks
@@ -185,6 +185,12 @@ class Renderer(Gpu):
                                 ("Material.occlusion_map", occlusion_map)):
                 if image is not None:
                     self.check_texture(image, name)  # before anything is made: nothing half-built
+            rows = -(-len(mesh.positions) * mesh.morph_count * 2 // MORPH_TEXTURE_WIDTH)
+            if rows > self.caps.max_texture_size:  # (its offsets' texture: GpuMesh.morphs)
+                raise GLLimitError(f"mesh {mesh.name!r}: {len(mesh.positions)} vertices x {mesh.morph_count} morph "
+                                   f"targets need a {MORPH_TEXTURE_WIDTH}x{rows} texture of offsets; this OpenGL "
+                                   f"({self.caps.renderer}) takes {self.caps.max_texture_size} rows at most "
+                                   "(GL_MAX_TEXTURE_SIZE): fewer targets or a lighter mesh")
             gpu_mesh = self._acquire(self._meshes, mesh.id, lambda: GpuMesh(self.ctx, mesh))
             gpu_texture = gpu_normal_map = None
             if texture is not None and alpha_cutoff is not None:  # its mips keep its coverage at the cutoff
