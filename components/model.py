@@ -78,7 +78,13 @@ class Animation(TrackedComponent):
     ("" for none: the parts at rest), ``time`` where it is (seconds, moved on by the models
     stage by the frame's time x ``speed`` while ``playing``), ``loop`` starting it again at
     its end (else it stops there).  The parts' Transforms are the clip's pose each frame
-    (engine/assets/gltf_animations.py); a clip the file lacks is an error naming those it has."""
+    (engine/assets/gltf_animations.py); a clip the file lacks is an error naming those it has.
+
+    A cross-fade (a walk easing into a run): while ``fade_from`` names a clip, the pose is
+    that clip's at ``fade_from_time`` (moved on as ``time`` is) blended into ``clip``'s by
+    ``faded`` / ``fade_seconds`` (translations and scales mixed, rotations along the shorter
+    arc), ``faded`` moved on by the frame's time; once it reaches ``fade_seconds`` the fade
+    ends (``fade_from`` ""). ``engine.assets.models.crossfade`` starts one."""
 
     SHAREABLE = False
     clip: str = ""
@@ -86,12 +92,18 @@ class Animation(TrackedComponent):
     speed: float = 1.0
     playing: bool = True
     loop: bool = True
+    fade_from: str = ""
+    fade_from_time: float = 0.0
+    fade_seconds: float = 0.0
+    faded: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
-        if name == "clip" and not isinstance(value, str):
-            raise ComponentValueError(f"Animation.clip must be a clip's name (a str; \"\": none), got {value!r}")
-        if name == "time":
+        if name in ("clip", "fade_from") and not isinstance(value, str):
+            raise ComponentValueError(f"Animation.{name} must be a clip's name (a str; \"\": none), got {value!r}")
+        if name in ("time", "fade_from_time", "faded"):
             return finite(self, name, value, low=0.0)
+        if name == "fade_seconds":
+            return finite(self, name, value, low=0.0, high=3600.0)
         if name == "speed":
             return finite(self, name, value, low=-1000.0, high=1000.0)
         if name in ("playing", "loop"):

@@ -53,24 +53,32 @@ class ModelSystem(esper.Processor):
     def _animate(self, dt: float, remade: set[int]) -> None:
         """Move each playing ``Animation`` on by ``dt`` x its speed (wrapped at the clip's end
         when it loops, held there when not) and pose its model's parts; a changed Animation,
-        or a model whose parts were just made, is posed even when paused."""
+        or a model whose parts were just made, is posed even when paused.  A cross-fade's
+        clip faded from moves on the same way and its ``faded`` by ``dt``; the fade ends (its
+        clip dropped) once it has lasted its ``fade_seconds``."""
         world = self.world
         changed = world.changed(Animation)
         for root, animation in world.query_one(Animation):
             record = world.resources.get(SpawnedModels, {}).get(root)
-            moving = animation.playing and animation.clip and dt and animation.speed
+            moving = animation.playing and (animation.clip or animation.fade_from) and dt and animation.speed
             if not (moving or root in changed or root in remade):
                 continue
+            fade = None
             if moving and record is not None and record.loaded is not None:
-                clip = next((c for c in record.loaded.animations if c.name == animation.clip), None)
-                duration = clip.duration if clip is not None else 0.0
-                time = animation.time + dt * animation.speed
-                if duration > 0.0:
-                    time = time % duration if animation.loop else min(max(time, 0.0), duration)
-                animation.time = max(time, 0.0)
-            # (a clip only moved on rewrites only the parts it moves; another clip or new parts, all)
-            every = root in remade or self._posed.get(root) != animation.clip
-            pose_parts(world, root, animation.clip, animation.time, every)
+                animation.time = _moved_on(record.loaded, animation.clip, animation.time, dt, animation)
+                if animation.fade_from:
+                    animation.fade_from_time = _moved_on(record.loaded, animation.fade_from, animation.fade_from_time,
+                                                         dt, animation)
+                    animation.faded = min(animation.faded + dt, animation.fade_seconds)
+            if animation.fade_from:
+                share = animation.faded / animation.fade_seconds if animation.fade_seconds > 0.0 else 1.0
+                if share >= 1.0:
+                    animation.fade_from = ""  # (faded in: the clip alone from here)
+                else:
+                    fade = (animation.fade_from, animation.fade_from_time, share)
+            # (a clip only moved on rewrites only the parts it moves; another clip, a fade or new parts, all)
+            every = root in remade or self._posed.get(root) != animation.clip or fade is not None
+            pose_parts(world, root, animation.clip, animation.time, every, fade)
             self._posed[root] = animation.clip
 
     def _place(self, changed: set[int]) -> None:
@@ -86,3 +94,15 @@ class ModelSystem(esper.Processor):
             if record is not None and record.key == model_key(model):
                 continue
             respawn_parts(world, root, roots=[Path(model.file).parent, *user_asset_roots()])
+
+
+def _moved_on(loaded, name: str, time: float, dt: float, animation: Animation) -> float:
+    """Clip ``name``'s time ``time`` moved on by ``dt`` x the animation's speed: wrapped at the
+    clip's end when it loops, held at its ends when not (a clip the file lacks: as it is)."""
+    clip = next((c for c in loaded.animations if c.name == name), None)
+    if clip is None or not name:
+        return time
+    moved = time + dt * animation.speed
+    if clip.duration > 0.0:
+        moved = moved % clip.duration if animation.loop else min(max(moved, 0.0), clip.duration)
+    return max(moved, 0.0)

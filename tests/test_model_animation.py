@@ -389,3 +389,36 @@ def test_a_node_a_clip_shrinks_to_nothing_or_grows_from_nothing_is_hidden_then_d
         runner.frame()
         frames.append(runner.frame().astype(int))
     assert np.abs(frames[0] - frames[1]).max() <= 2
+
+
+def test_a_crossfade_mixes_the_two_clips_poses_and_ends_in_the_new_one(tmp_path):
+    """``crossfade`` from "Open" (at 1 s: the hinge a quarter's half) into "Slide" over 1 s:
+    half way, each node's own transform is the two clips' mixed half and half (the hinge's
+    turn half of its, along the arc; the door's place half way between its rest and the
+    slide's cubic spline at 0.5 s), multiplied down as any pose; once the fade has lasted
+    its second, the pose is the slide's alone and the fade is over."""
+    from engine.assets.models import crossfade
+    from systems.model_system import ModelSystem
+
+    path = door(tmp_path / "door.glb")
+    world = World("fading")
+    root = spawn_model(world, path)
+    animation = Animation(clip="Open", time=1.0, playing=False, loop=False)   # (held at their ends)
+    world.add_component(root, animation)
+    stage = ModelSystem(world)
+    stage.process(0.0)
+    animation.playing = True
+    crossfade(animation, "Slide", 1.0)
+    assert (animation.fade_from, animation.fade_from_time) == ("Open", 1.0)
+    assert (animation.clip, animation.time) == ("Slide", 0.0)
+    stage.process(0.5)
+    s = 0.5   # the slide at 0.5 s (its Hermite spline, as test_a_clips_channels_place_the_parts_at_each_time)
+    slid = (2 * s ** 3 - 3 * s ** 2 + 1) * glm.vec3(0.5, 0, 0) + (s ** 3 - 2 * s ** 2 + s) * glm.vec3(1, 0, 0) \
+        + (-2 * s ** 3 + 3 * s ** 2) * glm.vec3(0.5, 1, 0) + (s ** 3 - s ** 2) * glm.vec3(1, 0, 0)
+    open_turn = glm.slerp(glm.quat(), QUARTER, (1.0 + 0.5) / 2.0)   # "Open" moved on to 1.5 s
+    hinge = glm.translate(glm.vec3(1, 0, 0)) * glm.mat4_cast(glm.slerp(open_turn, glm.quat(), 0.5))
+    mixed = hinge * glm.translate(glm.mix(glm.vec3(0.5, 0, 0), slid, 0.5))
+    assert close(door_matrix(world), mixed)
+    stage.process(0.5)   # the fade's second is up: the slide alone (at 1 s: its end, (0.5, 1, 0))
+    assert animation.fade_from == ""
+    assert close(door_matrix(world), glm.translate(glm.vec3(1, 0, 0)) * glm.translate(glm.vec3(0.5, 1, 0)))

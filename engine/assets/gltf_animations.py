@@ -195,19 +195,25 @@ def moved_nodes(tree: NodeTree, clip: Clip) -> set[int]:
     return moved
 
 
-def pose_all(tree: NodeTree, clip: Clip, t: float) -> np.ndarray:
+def pose_all(tree: NodeTree, clip: Clip, t: float, fade: tuple[Clip, float, float] | None = None) -> np.ndarray:
     """Every node's model-space matrix at time ``t`` (N, 4, 4): its own transform (the clip's
     channels where it animates it, else at rest) times its parent's, on arrays: each group
     of channels sampled at once (``_sample``), every node's T x R x S made at once, and the
     tree multiplied down a depth at a time (a 60-joint character's pose is a few dozen
     numpy calls, not one chain of them a node).  A node outside the scene's tree is its own
-    transform."""
-    rest_t, rest_r, rest_s, with_matrix, matrices, levels = _tree_arrays(tree)
-    own = {"translation": rest_t.copy(), "rotation": rest_r.copy(), "scale": rest_s.copy()}
-    for group in _groups(clip):
-        if group.path != "weights":
-            own[group.path][group.nodes] = _sample(group, t)
-    local = trs_matrices(own["translation"], own["rotation"], own["scale"])
+    transform.  ``fade``: (the clip faded from, its time, ``clip``'s share from 0 to 1): each
+    node's own transforms from the two mixed (translation and scale linearly, rotation along
+    the shorter arc) before they are multiplied down."""
+    with_matrix, matrices, levels = _tree_arrays(tree)[3:]
+    translation, rotation, scale = _own_transforms(tree, clip, t)
+    if fade is not None:
+        old_clip, old_time, share = fade
+        old_t, old_r, old_s = _own_transforms(tree, old_clip, old_time)
+        translation = old_t + share * (translation - old_t)
+        scale = old_s + share * (scale - old_s)
+        rotation = _slerp_rows(old_r, rotation, share)
+        rotation /= np.linalg.norm(rotation, axis=1, keepdims=True)
+    local = trs_matrices(translation, rotation, scale)
     if len(with_matrix):
         local[with_matrix] = matrices
     placed = local.copy()
@@ -217,6 +223,17 @@ def pose_all(tree: NodeTree, clip: Clip, t: float) -> np.ndarray:
         else:
             placed[nodes] = placed[parents] @ local[nodes]
     return placed
+
+
+def _own_transforms(tree: NodeTree, clip: Clip, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every node's own translation, rotation and scale at time ``t`` of ``clip`` (at rest
+    where it animates none)."""
+    rest_t, rest_r, rest_s = _tree_arrays(tree)[:3]
+    own = {"translation": rest_t.copy(), "rotation": rest_r.copy(), "scale": rest_s.copy()}
+    for group in _groups(clip):
+        if group.path != "weights":
+            own[group.path][group.nodes] = _sample(group, t)
+    return own["translation"], own["rotation"], own["scale"]
 
 
 def pose_weights(clip: Clip, t: float) -> dict[int, np.ndarray]:

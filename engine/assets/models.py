@@ -35,7 +35,7 @@ from components import (
     Transform,
 )
 from components.limits import MAX_MORPH_WEIGHT
-from components.model import MAX_MODEL_PROBES, FromModel, Model
+from components.model import MAX_MODEL_PROBES, Animation, FromModel, Model
 from engine.assets.gltf_animations import Clip, collapsed, moved_nodes, pose_all, pose_weights
 from engine.assets.gltf_skins import joint_matrices
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
@@ -46,7 +46,7 @@ from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 
 __all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key", "pose_parts",
-           "remove_parts", "respawn_parts", "skin_palettes", "spawn_model", "spawn_parts", "turn_suns"]
+           "remove_parts", "respawn_parts", "skin_palettes", "spawn_model", "spawn_parts", "turn_suns", "crossfade"]
 
 @dataclass
 class SpawnedModel:
@@ -311,34 +311,44 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
                                spot_angle=light.spot_angle(), spot_blend=light.spot_blend())]
 
 
-def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True) -> None:
+def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True,
+               fade: tuple[str, float, float] | None = None) -> None:
     """Put ``root``'s parts where clip ``clip_name`` of its model puts their nodes at
     ``time`` (seconds); "" puts them at rest.  Its lights and cameras follow their nodes (a
     camera unscaled; a directional light's direction turned, as the root stands now), its
     skinned parts their joints (their ``Skin``).  ``every`` False (the clip only moved on): only
     the parts the clip moves (their node or an ancestor animated) are written, so the others
-    stay unchanged for the stages after (no rows uploaded, no shadow drawn again).  A clip the
-    model lacks is an AssetError naming the entity and the clips it has."""
+    stay unchanged for the stages after (no rows uploaded, no shadow drawn again).  ``fade``:
+    (the clip faded from, its time, ``clip_name``'s share from 0 to 1), the two poses mixed
+    (``gltf_animations.pose_all``; every part written).  A clip the model lacks is an
+    AssetError naming the entity and the clips it has."""
     record = world.resources.get(SpawnedModels, {}).get(root)
     if record is None or record.loaded is None:
         if clip_name:
             raise AssetError(f"entity {root}'s Animation: its model has no animations (clip {clip_name!r})")
         return
     clips = record.loaded.animations
-    clip = placed = None
-    if not clip_name:
-        matrices = {}
-    else:
-        clip = next((c for c in clips if c.name == clip_name), None)
+
+    def found(name: str) -> Clip:
+        clip = next((c for c in clips if c.name == name), None)
         if clip is None:
             names = ", ".join(repr(c.name) for c in clips)
-            raise AssetError(f"entity {root}'s Animation: its model has no clip {clip_name!r} (its clips: {names})")
-        placed = pose_all(record.loaded.node_tree, clip, time)  # (every node: the parts', the joints')
+            raise AssetError(f"entity {root}'s Animation: its model has no clip {name!r} (its clips: {names})")
+        return clip
+
+    clip = found(clip_name) if clip_name else None
+    fading = (found(fade[0]), fade[1], fade[2]) if fade is not None and fade[0] else None
+    placed = None
+    if clip is None and fading is None:
+        matrices = {}
+    else:  # (every node: the parts', the joints')
+        placed = pose_all(record.loaded.node_tree, clip or _REST, time, fading)
         matrices = {node: placed[node] for node in record.nodes if node is not None}
+    every = every or fading is not None
     moved = moved_nodes(record.loaded.node_tree, clip) if clip is not None and not every else None
     if any(skin is not None for skin in record.skins):
         _pose_skins(world, record, clip, time, moved, placed)
-    _pose_morphs(world, record, clip, time, every)
+    _pose_morphs(world, record, clip, time, every, fading)
     if moved is not None:
         matrices = {node: m for node, m in matrices.items() if node in moved}
     loaded = record.loaded
@@ -364,6 +374,19 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
             turn_suns(world, root, [entity])
 
 
+_REST = Clip("", [], 0.0)  # no clip: every node at rest
+
+
+def crossfade(animation: Animation, clip: str, seconds: float) -> None:
+    """Start ``animation`` fading from the clip it plays (where it is) into ``clip`` (from its
+    start) over ``seconds`` (``Animation``'s fade fields; the models stage plays it on); 0
+    seconds, or no clip playing: a plain switch."""
+    fading = seconds > 0.0 and bool(animation.clip)
+    animation.fade_from, animation.fade_from_time = (animation.clip, animation.time) if fading else ("", 0.0)
+    animation.fade_seconds, animation.faded = (seconds, 0.0) if fading else (0.0, 0.0)
+    animation.clip, animation.time = clip, 0.0
+
+
 def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float, skins: Collection[int] | None = None,
                   placed: np.ndarray | None = None) -> dict[int, np.ndarray]:
     """Each skin's joint matrices (skin index -> (J, 4, 4)) with its joints where ``clip``
@@ -373,7 +396,7 @@ def skin_palettes(loaded: LoadedModel, clip: Clip | None, time: float, skins: Co
     if not loaded.skins or not chosen:
         return {}
     if placed is None:
-        placed = pose_all(loaded.node_tree, clip or Clip("", [], 0.0), time)
+        placed = pose_all(loaded.node_tree, clip or _REST, time)
     return {s: joint_matrices(loaded.skins[s], placed) for s in chosen}
 
 
@@ -391,15 +414,22 @@ def _pose_skins(world: World, record: SpawnedModel, clip: Clip | None, time: flo
             world.get(entity, Skin).joint_matrices = palettes[skin]
 
 
-def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: float, every: bool) -> None:
+def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: float, every: bool,
+                 fading: tuple[Clip, float, float] | None = None) -> None:
     """Set the ``Morph`` of ``record``'s morphed parts: the weights ``clip``'s ``weights``
     channels give their nodes at ``time``, the file's (the node's or its mesh's) where none
-    does; ``every`` False: only the parts a channel animates."""
+    does; ``every`` False: only the parts a channel animates; ``fading``: mixed from the
+    clip faded from's by ``clip``'s share."""
     sampled = pose_weights(clip, time) if clip is not None else {}
+    before = pose_weights(fading[0], fading[1]) if fading is not None else None
     for entity, part in zip(record.parts, record.loaded.parts, strict=False):
         if part.morph_weights is None or not world.exists(entity):
             continue
         weights = sampled.get(part.node)
+        if before is not None:
+            rest = np.array(part.morph_weights)
+            old = before.get(part.node, rest)
+            weights = old + fading[2] * ((rest if weights is None else weights) - old)
         if weights is not None:
             world.get(entity, Morph).weights = np.clip(weights, -MAX_MORPH_WEIGHT, MAX_MORPH_WEIGHT)
         elif every:
