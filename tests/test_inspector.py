@@ -1222,3 +1222,28 @@ def test_an_animations_clip_is_chosen_from_its_models_clips(scene, ctx, tmp_path
         assert abs(glm.dot(glm.quat(world.get(part, Transform).rotation), rest)) < 0.99   # turned by the clip
         with pytest.raises(EditError, match=r"no clip 'Close' \(its clips: 'Open', 'Slide', 'Blink'\)"):
             editor.set_field(root, "Animation", "clip", "Close")
+
+
+def test_a_posed_entity_shows_its_skin_and_morph(scene, ctx):
+    """An entity a game bent by hand (a Skin and a Morph): the inspector lists both, the
+    joint matrices as an array (not four thousand numbers), the weights as numbers."""
+    from components import MeshRef, Morph, Skin
+    from tests.test_morph_targets import morphed_sheet
+
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, _):
+        world = runner.world
+        sheet = morphed_sheet()
+        from engine.assets.mesh import Mesh
+        posed = world.spawn(Transform(position=(0.0, 0.5, 0.0)),
+                            MeshRef(Mesh(sheet.positions, sheet.normals, sheet.uvs, sheet.indices, name="flag",
+                                         joints=np.zeros((len(sheet.positions), 1), int),
+                                         weights=np.ones((len(sheet.positions), 1)),
+                                         morph_positions=sheet.morph_positions)),
+                            Material(), Skin(), Morph((0.25, 0.5)))
+        runner.frame()
+        editor.select(posed)
+        draw()
+        lines = overlay.inspector_lines
+        assert {"Skin", "Morph"} <= set(lines)
+        assert "  joint_matrices = array" in lines
+        assert any(line.startswith("  weights = ") and "0.25" in line for line in lines), lines
