@@ -188,6 +188,34 @@ def test_a_skin_bends_the_mesh_as_the_sum_written_out(scene):
     assert (shade & ~red & ~(modelled[..., 0] > modelled[..., 2] + 60)).sum() > 20
 
 
+def test_a_chrome_balls_probe_sees_the_pose(scene):
+    """A mirror ball looking back at the arm behind the camera (its own cube-map probe): the
+    bent arm in its reflection, as the arm bent by hand is there, and not where the straight
+    one would stand."""
+    from components import Reflective
+    from engine.assets.mesh import sphere
+
+    def ball(world):
+        world.spawn(Transform(position=(0.3, 1.0, 1.2)), MeshRef(sphere(0.45)),
+                    Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"))
+
+    view = {"eye": (0.3, 1.0, 3.5), "target": (0.3, 1.0, 1.2), "fov": 30.0}   # the ball fills the frame
+
+    def skinned(world):
+        ball(world)
+        world.spawn(Transform(position=(0.0, 0.0, 4.5)), MeshRef(skinned_bar()), Material(color=RED),
+                    Skin(np.stack([np.eye(4), elbow_matrix(math.pi / 2)])))
+
+    def by_hand(world, mesh):
+        ball(world)
+        world.spawn(Transform(position=(0.0, 0.0, 4.5)), MeshRef(mesh), Material(color=RED))
+
+    bent = frame_of(scene, lit(skinned, **view), frames=3)
+    hand = frame_of(scene, lit(lambda w: by_hand(w, bent_by_hand(math.pi / 2)), **view), frames=3)
+    straight = frame_of(scene, lit(lambda w: by_hand(w, bent_by_hand(0.0)), **view), frames=3)
+    assert same_picture(bent, hand) and not same_picture(bent, straight)
+
+
 def test_the_screen_passes_see_the_pose(scene):
     """With ambient occlusion (its depth-and-normals pass) and screen reflections (the
     builds that write what they read) on the camera, the bent arm and its occlusion on the

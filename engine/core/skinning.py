@@ -41,7 +41,7 @@ class PosedMesh(Protocol):
 
 
 __all__ = ["INFLUENCES", "MAX_JOINTS", "PosedMesh", "blend_matrices", "joint_boxes", "morph_reach", "morphed",
-           "posed_bounds", "posed_box", "posed_positions", "skin_normals", "skin_positions", "strongest_influences"]
+           "posed_bounds", "posed_box", "posed_positions", "skin_positions", "strongest_influences"]
 
 INFLUENCES = 4              # joints a vertex may follow (glTF's JOINTS_0: more are folded into the four largest)
 
@@ -56,13 +56,6 @@ def skin_positions(positions: np.ndarray, joints: np.ndarray, weights: np.ndarra
     """Where each vertex goes (V, 3, float64) under the joint ``matrices`` (J, 4, 4)."""
     blended = blend_matrices(joints, weights, matrices)
     return np.einsum("vrc,vc->vr", blended[:, :3, :3], positions.astype(np.float64)) + blended[:, :3, 3]
-
-
-def skin_normals(normals: np.ndarray, joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray) -> np.ndarray:
-    """Each vertex's normal (V, 3, unit) under the blend: its inverse transpose, as the shader."""
-    linear = blend_matrices(joints, weights, matrices)[:, :3, :3]
-    turned = np.einsum("vrc,vc->vr", np.linalg.inv(linear).transpose(0, 2, 1), normals.astype(np.float64))
-    return turned / np.maximum(np.linalg.norm(turned, axis=1, keepdims=True), 1e-30)
 
 
 def joint_boxes(positions: np.ndarray, joints: np.ndarray, weights: np.ndarray,

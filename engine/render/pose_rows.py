@@ -43,9 +43,6 @@ class PoseRows:
     def __len__(self) -> int:
         return len(self._rows)
 
-    def row_of(self, entity: int) -> int | None:
-        return self._rows.get(entity)
-
     def write(self, entity: int, joints: np.ndarray | None, weights: Sequence[float] | None) -> int:
         """Put ``entity``'s joint matrices (J, 4, 4) and morph ``weights`` in its row (given
         one the first time); returns the row."""
