@@ -102,6 +102,15 @@ class Material(TrackedComponent):
     own light is not darkened, as glTF says.  A map left out costs nothing: each is sampled
     only by a build of the scene shader for batches that have it.
 
+    ``second_uv_maps`` names the maps (of ``"texture"``, ``"normal_map"``,
+    ``"emissive_map"``, ``"metallic_roughness_map"`` and ``"occlusion_map"``) that read the
+    mesh's second UV set (``Mesh.second_uvs``, glTF's TEXCOORD_1) instead of its first, as a
+    glTF map's ``texCoord`` 1, three.js's ``Texture.channel`` and Godot's "UV2" switches: a
+    baked occlusion map or lightmap unwrapped once over a model whose colour texture tiles,
+    or a decal sheet laid over a repeating one.  Refused when given for a mesh without a
+    second set (``engine/rules/uv_rules.py``).  Only batches with such a map pay for it (a
+    build of the scene shaders that reads the second set).
+
     ``alpha_cutoff`` (None: off) makes the material a cutout, as glTF's ``alphaMode: MASK``
     with its ``alphaCutoff``, three.js's ``alphaTest``, Unity's alpha clipping and Godot's
     alpha scissor: where the alpha (``color``'s times ``texture``'s) is below it, nothing
@@ -214,8 +223,16 @@ class Material(TrackedComponent):
     iridescence: float = 0.0
     iridescence_ior: float = 1.3
     iridescence_thickness: float = 400.0
+    second_uv_maps: tuple[str, ...] = ()
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "second_uv_maps":
+            value = second_uv_names(value)
+            world = getattr(self, "_world_ref", None)
+            if world is not None and value:
+                for entity in self._entities:  # its mesh must have a second UV set, as at spawn
+                    world.check_invariants(entity, Material, second_uv_maps=value)
+            return value
         if name == "blend":
             return choice(self, name, value, MATERIAL_BLENDS)
         if name == "alpha_cutoff":
@@ -265,6 +282,36 @@ class Material(TrackedComponent):
                 for entity in self._entities:  # a mirror's UVs must allow it, as at spawn
                     world.check_invariants(entity, Material, normal_map=value)
         return value
+
+
+def second_uv_names(value: Any) -> tuple[str, ...]:
+    """``Material.second_uv_maps`` checked: names of its map fields (``MATERIAL_IMAGES``),
+    each once, kept in that order."""
+    names = (value,) if isinstance(value, str) else value
+    try:
+        names = tuple(names)
+    except TypeError:
+        raise ComponentValueError(f"Material.second_uv_maps must be a list of map names, got {value!r}") from None
+    unknown = [n for n in names if n not in MATERIAL_IMAGES]
+    if unknown:
+        raise ComponentValueError(f"Material.second_uv_maps names {unknown[0]!r}, which is not one of its maps "
+                                  f"({', '.join(MATERIAL_IMAGES)})")
+    if len(set(names)) != len(names):
+        raise ComponentValueError(f"Material.second_uv_maps names a map twice: {list(names)!r}")
+    return tuple(n for n in MATERIAL_IMAGES if n in names)
+
+
+ALBEDO_UV_BIT = 1 << MATERIAL_IMAGES.index("texture")  # the albedo map's bit in ``second_uv_mask``
+
+
+def second_uv_mask(material: Material | None) -> int:
+    """The maps of ``material`` that are set and read the second UV set, as bits (bit i:
+    ``MATERIAL_IMAGES[i]``): what the scene shaders' SECOND_UV_MAPS build reads
+    (``shaders/include/uv_sets.glsl``); 0: none."""
+    if material is None or not material.second_uv_maps:
+        return 0
+    return sum(1 << i for i, n in enumerate(MATERIAL_IMAGES)
+               if n in material.second_uv_maps and getattr(material, n) is not None)
 
 
 @dataclass(eq=False)

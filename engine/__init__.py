@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import engine.rules.mirror_rules  # noqa: F401  (registers the mirror-mesh invariant with every world)
 import engine.rules.pose_rules  # noqa: F401  (registers the Skin and Morph rules with every world)
+import engine.rules.uv_rules  # noqa: F401  (registers the second-UV rule with every world)
 import engine.rules.water_rules  # noqa: F401  (registers the water rule with every world)
 from engine.core.game import Game, GameSystem, spawn_camera
 from engine.core.world import World

@@ -24,6 +24,10 @@ uniform float alpha_cutoff;     // a cutout's (its batch's Material.alpha_cutoff
 in vec3 v_world_pos;
 in vec3 v_normal;
 in vec2 v_uv;
+#ifdef SECOND_UV_MAPS
+in vec2 v_uv2;  // the mesh's second UV set (Mesh.second_uvs): MAP_UV picks it for the maps that read it
+#endif
+#include "uv_sets.glsl"
 flat in vec4 v_color;
 flat in vec4 v_surface;
 flat in vec4 v_reflect;
@@ -657,13 +661,13 @@ void main() {
     if (!gl_FrontFacing) s.normal = -s.normal;
     s.geometric_normal = s.normal;
 #ifdef NORMAL_MAP
-    s.normal = mapped_normal(s.normal, v_world_pos, v_uv, v_surface.w);
+    s.normal = mapped_normal(s.normal, v_world_pos, MAP_UV(UV_BIT_NORMAL_MAP), v_surface.w);
 #endif
     vec4 base = v_color;
 #ifdef CHECKER
-    base.rgb *= checker_colour(v_uv);
+    base.rgb *= checker_colour(MAP_UV(UV_BIT_TEXTURE));
 #else
-    if (has_albedo_map) base *= texture(albedo_map, v_uv);
+    if (has_albedo_map) base *= texture(albedo_map, MAP_UV(UV_BIT_TEXTURE));
 #endif
 #ifdef VERTEX_COLOR
     base *= v_vertex_color;
@@ -686,7 +690,7 @@ void main() {
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
     s.highlight_roughness = filtered_roughness(s.roughness, s.normal);
 #ifdef ANISOTROPY
-    anisotropic_frame(s.normal, v_world_pos, v_uv, anisotropy.y, s.highlight_roughness * s.highlight_roughness);
+    anisotropic_frame(s.normal, v_world_pos, MAP_UV(UV_BIT_NORMAL_MAP), anisotropy.y, s.highlight_roughness * s.highlight_roughness);
 #endif
 #ifdef CLEARCOAT
     coat_normal = s.geometric_normal;

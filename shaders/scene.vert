@@ -15,6 +15,7 @@
 #define v_world_pos g_world_pos
 #define v_normal g_normal
 #define v_uv g_uv
+#define v_uv2 g_uv2
 #define v_color g_color
 #define v_surface g_surface
 #define v_reflect g_reflect
@@ -25,7 +26,7 @@
 
 in vec3 in_position;
 in vec3 in_normal;
-in vec2 in_uv;
+in vec4 in_uv;             // xy: its UVs; zw: its second set (Mesh.second_uvs; (0, 1) without one)
 
 in mat4 in_model;          // model -> world
 #if !defined(VERTEX_COLOR) && !defined(SKINNED) && !defined(MORPHED)
@@ -52,6 +53,9 @@ out float g_slice_distance;  // the geometry shader re-emits it as gl_ClipDistan
 out vec3 v_world_pos;
 out vec3 v_normal;
 out vec2 v_uv;
+#ifdef SECOND_UV_MAPS
+out vec2 v_uv2;            // the second set, read by the maps Material.second_uv_maps names (uv_sets.glsl)
+#endif
 flat out vec4 v_color;
 flat out vec4 v_surface;
 flat out vec4 v_reflect;
@@ -82,7 +86,10 @@ void main() {
 #endif
 #endif
     v_world_pos = world.xyz;
-    v_uv = in_uv;
+    v_uv = in_uv.xy;
+#ifdef SECOND_UV_MAPS
+    v_uv2 = in_uv.zw;
+#endif
     v_color = in_color;
     v_surface = in_surface;
     v_reflect = in_reflect;

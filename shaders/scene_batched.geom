@@ -43,6 +43,10 @@ layout(std140) uniform Views {
 in vec3 g_world_pos[];
 in vec3 g_normal[];
 in vec2 g_uv[];
+#ifdef SECOND_UV_MAPS
+in vec2 g_uv2[];
+out vec2 v_uv2;
+#endif
 flat in vec4 g_color[];
 flat in vec4 g_surface[];
 flat in vec4 g_reflect[];
@@ -87,6 +91,9 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     v_world_pos = g_world_pos[c];
     v_normal = g_normal[c];
     v_uv = g_uv[c];
+#ifdef SECOND_UV_MAPS
+    v_uv2 = g_uv2[c];
+#endif
     v_color = g_color[c];
     v_surface = g_surface[c];
     v_reflect = g_reflect[c];

@@ -19,7 +19,7 @@ in vec4 in_slice;
 in uvec4 in_slots;  // emissive, refract, reflect variants, entity id
 
 #ifdef ALPHA_CUTOFF
-in vec2 in_uv;
+in vec4 in_uv;      // xy: its UVs; zw: its second set (Mesh.second_uvs)
 in vec4 in_color;   // alpha: the colour's share of the cutout's alpha
 out vec2 v_uv;
 out float v_alpha;
@@ -66,7 +66,12 @@ void main() {
     v_world_pos = world.xyz;
 #endif
 #ifdef ALPHA_CUTOFF
-    v_uv = in_uv;
+    v_uv = in_uv.xy;
+#ifdef SECOND_UV_MAPS
+#if ((SECOND_UV_MAPS) & UV_BIT_TEXTURE) != 0
+    v_uv = in_uv.zw;  // its albedo map reads the second set (Material.second_uv_maps)
+#endif
+#endif
     v_alpha = in_color.a;
 #endif
 #ifdef VERTEX_ALPHA

@@ -32,6 +32,7 @@ from components import (
     Transform,
     Visibility,
 )
+from components.rendering import second_uv_mask
 from components.transform import mirroring_seen
 from engine.assets.mesh import Mesh
 from engine.core.errors import GLLimitError
@@ -173,7 +174,7 @@ class ExtractSystem(esper.Processor):
                                             double_sided=material.double_sided if material else False,
                                             keeps_specular=material is not None and material.blend == "transparent",
                                             unlit=material is not None and material.unlit,
-                                            posed=posed,
+                                            posed=posed, second_uv_maps=second_uv_mask(material),
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None

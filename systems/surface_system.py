@@ -155,7 +155,7 @@ class SurfaceSystem(esper.Processor):
         mesh = mesh_ref.mesh
         bumpy = material is not None and material.normal_map is not None
         try:
-            shape = mirror_mesh(mirror, mesh, bumpy)
+            shape = mirror_mesh(mirror, mesh, bumpy, bumpy and "normal_map" in material.second_uv_maps)
         except MirrorMeshError as exc:
             raise MirrorError(f"Mirror on entity {entity}: {exc}") from None
         point, normal = shape.point, shape.normal

@@ -100,6 +100,10 @@ class Mesh:
     # ``Morph``'s weights (engine/core/skinning.py); None: none.
     morph_positions: np.ndarray | None = field(default=None, repr=False)
     morph_normals: np.ndarray | None = field(default=None, repr=False)
+    # A second set of UVs (glTF's TEXCOORD_1, or a map's own transform of the first: a
+    # lightmap's or a baked occlusion map's unwrapping), float32 (V, 2); None: none.  The maps
+    # a Material's ``second_uv_maps`` names read it, the others ``uvs``.
+    second_uvs: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def unit(self) -> Mesh | None:
@@ -139,6 +143,15 @@ class Mesh:
             self._check_skin(n)
         if self.morph_positions is not None or self.morph_normals is not None:
             self._check_morphs(n)
+        if self.second_uvs is not None:
+            second = np.asarray(self.second_uvs)
+            if second.ndim != 2 or second.shape != (n, 2) or not np.issubdtype(second.dtype, np.number):
+                raise AssetError(f"mesh {self.name!r}: second_uvs must be one UV pair a vertex, shape ({n}, 2), "
+                                 f"got shape {second.shape}")
+            second = np.ascontiguousarray(second, np.float32)
+            if not np.isfinite(second).all():
+                raise AssetError(f"mesh {self.name!r}: second_uvs has NaN or infinite values")
+            self.second_uvs = second
 
     def _check_morphs(self, n: int) -> None:
         """Each target's offsets a vertex: positions, and normals or none."""
@@ -251,8 +264,15 @@ class Mesh:
         return self.positions.min(axis=0), self.positions.max(axis=0)
 
     def interleaved(self) -> np.ndarray:
-        """Vertex buffer contents: position, normal, uv per vertex (8 floats)."""
-        return np.hstack([self.positions, self.normals, self.uvs]).astype(np.float32)
+        """Vertex buffer contents: position, normal, uv per vertex (8 floats), and the second
+        uv where it has one (10: the scene shaders' ``in_uv`` is a vec4, its zw the second set)."""
+        sets = [self.uvs] if self.second_uvs is None else [self.uvs, self.second_uvs]
+        return np.hstack([self.positions, self.normals, *sets]).astype(np.float32)
+
+    @property
+    def vertex_format(self) -> str:
+        """The vertex buffer's layout as moderngl reads it (``interleaved``)."""
+        return "3f 3f 2f" if self.second_uvs is None else "3f 3f 4f"
 
     @classmethod
     def from_trimesh(cls, tm: trimesh.Trimesh, name: str = "mesh", srgb_colors: bool = True) -> Mesh:
@@ -725,7 +745,8 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
                                                            f"node {shown!r}'s mesh")
                 if skin is not None or morph_weights is not None:
                     mesh = Mesh(mesh.positions, mesh.normals, mesh.uvs, mesh.indices, name=name, colors=mesh.colors,
-                                joints=joints, weights=weights, morph_positions=offsets, morph_normals=normal_offsets)
+                                joints=joints, weights=weights, morph_positions=offsets, morph_normals=normal_offsets,
+                                second_uvs=mesh.second_uvs)
                 mesh = meshes.setdefault(("content", _digest(mesh)), mesh)
                 meshes[("geometry", geom_name, skin)] = mesh
             if skin is not None:  # glTF: a skinned node's own transform is left out (its joints place it)
@@ -760,7 +781,8 @@ def _digest(mesh: Mesh) -> bytes:
                   mesh.joints if mesh.joints is not None else np.zeros(0, np.uint16),
                   mesh.weights if mesh.weights is not None else np.zeros(0, np.float32),
                   mesh.morph_positions if mesh.morph_positions is not None else np.zeros(0, np.float32),
-                  mesh.morph_normals if mesh.morph_normals is not None else np.zeros(0, np.float32)):
+                  mesh.morph_normals if mesh.morph_normals is not None else np.zeros(0, np.float32),
+                  mesh.second_uvs if mesh.second_uvs is not None else np.zeros(0, np.float32)):
         digest.update(np.asarray(array.shape, np.int64).tobytes())
         digest.update(memoryview(array).cast("B"))
     return digest.digest()
@@ -778,7 +800,7 @@ def model_bytes(parts: Sequence[ModelPart]) -> int:
             total += mesh.positions.nbytes + mesh.normals.nbytes + mesh.uvs.nbytes + mesh.indices.nbytes
             total += mesh.colors.nbytes if mesh.colors is not None else 0
             total += mesh.joints.nbytes + mesh.weights.nbytes if mesh.joints is not None else 0
-            total += sum(a.nbytes for a in (mesh.morph_positions, mesh.morph_normals) if a is not None)
+            total += sum(a.nbytes for a in (mesh.morph_positions, mesh.morph_normals, mesh.second_uvs) if a is not None)
         for texture in (part.texture, part.normal_map, part.emissive_map, part.metallic_roughness_map,
                         part.occlusion_map):
             if texture is not None and id(texture) not in seen:
@@ -1397,13 +1419,14 @@ def _first(value, default: float) -> float:
 UV_FIT_TOLERANCE = 1e-3  # of the UVs' range: how far from an affine map of position they may be
 
 
-def planar_uv_map(mesh: Mesh) -> tuple[np.ndarray | None, str]:
-    """The mesh's UVs as an affine function of model position, (2, 4) rows (u and v as
-    ``dot(row.xyz, p) + row.w``), fitted to its vertices by least squares (on a flat mesh
-    the part along the normal is the smallest); (None, why) when they are not one (a
-    bumpy mirror's composite works its UVs out from the plane point it shades)."""
+def planar_uv_map(mesh: Mesh, second: bool = False) -> tuple[np.ndarray | None, str]:
+    """The mesh's UVs (its second set, ``second``) as an affine function of model position,
+    (2, 4) rows (u and v as ``dot(row.xyz, p) + row.w``), fitted to its vertices by least
+    squares (on a flat mesh the part along the normal is the smallest); (None, why) when
+    they are not one (a bumpy mirror's composite works its UVs out from the plane point it
+    shades)."""
     points = np.hstack([mesh.positions.astype(np.float64), np.ones((len(mesh.positions), 1))])
-    uvs = mesh.uvs.astype(np.float64)
+    uvs = (mesh.second_uvs if second else mesh.uvs).astype(np.float64)
     rows, *_ = np.linalg.lstsq(points, uvs, rcond=None)  # (4, 2)
     span = float(np.ptp(uvs, axis=0).max())
     if not span > 0.0:

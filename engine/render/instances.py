@@ -38,7 +38,6 @@ _MATRIX_FLOATS = 25  # "model" then "normal_matrix": a row's first floats (Insta
 assert INSTANCE_DTYPE.fields["model"][1] == 0 and INSTANCE_DTYPE.fields["normal_matrix"][1] == 64
 INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface", "in_reflect", "in_tint",
                        "in_slice", "in_slots")
-VERTEX_FORMAT = "3f 3f 2f"
 
 
 # An instance's ``tint`` w is where it is drawn: ``engine.rules.visibility_rules.entity_code``,
@@ -162,6 +161,9 @@ class GpuMesh:
 
     def __init__(self, ctx: moderngl.Context, mesh: Mesh) -> None:
         self.vertices = ctx.buffer(mesh.interleaved().tobytes())
+        # Its layout (Mesh.vertex_format): a second UV set (Mesh.second_uvs) makes ``in_uv`` four
+        # floats; without one the shaders' vec4 reads (u, v, 0, 1).
+        self.vertex_format = mesh.vertex_format
         self.indices = ctx.buffer(mesh.indices.astype(np.uint32).tobytes())
         # Its colour a vertex (Mesh.colors, linear RGBA), a buffer of its own (None: none): the
         # VERTEX_COLOR builds read it (and a cutout's VERTEX_ALPHA shadow build its alpha).
@@ -231,6 +233,8 @@ class BatchKey(NamedTuple):
     iridescence: tuple[float, float, float] | None = None  # Material.iridescence, its film's index and nm
     # A posed entity's own batch: (entity, bent by a Skin, wearing a Morph); (0, False, False): none.
     posed: tuple[int, bool, bool] = (0, False, False)
+    # The maps that read the mesh's second UV set, as bits (components.rendering.second_uv_mask; 0: none).
+    second_uv_maps: int = 0
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -338,6 +342,8 @@ class InstanceBatch:
         # packed occlusion-roughness-metallic texture): no map, nor sampler, of its own.
         self.occlusion_packed = False
         self.double_sided = False  # Material.double_sided: its draws turn face culling off
+        # The maps that read its mesh's second UV set (BatchKey.second_uv_maps): its SECOND_UV_MAPS builds' bits.
+        self.second_uv_maps = 0
         # A clear-coated material's coat (Material.clearcoat, clearcoat_roughness; None:
         # none): its CLEARCOAT build's uniform, part of the batch's key.
         self.clearcoat: tuple[float, float] | None = None
@@ -822,7 +828,7 @@ class InstanceBatch:
         key = program.glo
         vao = self._vaos.get(key)
         if vao is None:
-            buffers = [(self.mesh.vertices, VERTEX_FORMAT, *VERTEX_ATTRIBUTES),
+            buffers = [(self.mesh.vertices, self.mesh.vertex_format, *VERTEX_ATTRIBUTES),
                        (self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES)]
             if self.mesh.colors is not None:
                 buffers.append((self.mesh.colors, "4f", "in_vertex_color"))

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import moderngl
 
+from components.rendering import ALBEDO_UV_BIT
 from engine.core.material_slots import SLOTS, ReflectVariant
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_PER_INVOCATION
 from engine.render.bindings import (
@@ -75,7 +76,7 @@ NO_SHEEN = (0.0, 0.0, 0.0, 0.0)  # the sheen uniform of a batch without one (lik
 NO_ANISOTROPY = (0.0, 0.0)  # the anisotropy uniform of a batch without one (likewise)
 NO_IRIDESCENCE = (0.0, 1.0, 0.0)  # the thin film's uniform of a batch without one (likewise)
 # a batch's build with none of _material_build's
-NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False, False)
+NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False, False, 0)
 
 
 
@@ -169,7 +170,8 @@ class ScenePrograms:
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
             material = (False, False, material[2], "", False, False, False, False, False, False, False, False,
-                        material[12], material[13])  # (a posed mesh's depth is where its pose puts it)
+                        material[12], material[13],  # (a posed mesh's depth is where its pose puts it)
+                        material[14] & ALBEDO_UV_BIT if material[2] else 0)  # (a cutout's holes: its albedo's UVs)
             virtual, unlit, masked, shadowing, fogging, cookies = False, False, False, (), (), ()
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -213,6 +215,8 @@ class ScenePrograms:
                 defines["SKINNED"] = "1"
             if material[13]:  # its mesh's morph targets weighed in (a Morph: shaders/include/pose.glsl)
                 defines["MORPHED"] = "1"
+            if material[14]:  # maps that read the mesh's second UV set (shaders/include/uv_sets.glsl)
+                defines["SECOND_UV_MAPS"] = str(material[14])
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -388,10 +392,11 @@ def _material_build(batch: InstanceBatch) -> tuple:
     whether it has a sheen (``SHEEN``) and whether its refraction splits the colours
     (``DISPERSION``), whether its highlights are anisotropic (``ANISOTROPY``), whether a
     thin film colours its reflections (``IRIDESCENCE``), whether a Skin bends its mesh
-    (``SKINNED``) and whether it wears a Morph (``MORPHED``)."""
+    (``SKINNED``), whether it wears a Morph (``MORPHED``) and which of its maps read the
+    mesh's second UV set (``SECOND_UV_MAPS``, their bits; 0: none)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
             batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None,
-            batch.iridescence is not None, batch.skinned, batch.morphed)
+            batch.iridescence is not None, batch.skinned, batch.morphed, batch.second_uv_maps)
 

@@ -28,6 +28,7 @@ import numpy as np
 from pyglm import glm
 
 from components.limits import ALL_LAYERS
+from components.rendering import ALBEDO_UV_BIT
 from engine.core.cube_faces import CUBE_FACES
 from engine.render.bindings import (
     ALBEDO_UNIT,
@@ -609,17 +610,20 @@ class ShadowMaps:
 
     # --- drawing --------------------------------------------------------------------------
     def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool | str,
-                        skinned: bool = False, morphed: bool = False) -> moderngl.Program:
+                        skinned: bool = False, morphed: bool = False, second_uv: bool = False) -> moderngl.Program:
         """The caster program of ``build`` (its defines), for cutouts (``cutout``: the
         ``ALPHA_CUTOFF`` build, its albedo map read for its holes; "vertex alpha": and its
-        mesh's alpha a vertex, ``VERTEX_ALPHA``) or whole casters, bent by a Skin or not
+        mesh's alpha a vertex, ``VERTEX_ALPHA``; ``second_uv``: the map read at the mesh's
+        second UV set, ``Material.second_uv_maps``) or whole casters, bent by a Skin or not
         (``skinned``: the ``SKINNED`` build, its joints read from the pose texture) or wearing a
         Morph or not (``morphed``: the ``MORPHED`` build, its offsets read from its mesh's)."""
-        program = self._casters.get((build, cutout, skinned, morphed))
+        program = self._casters.get((build, cutout, skinned, morphed, second_uv))
         if program is None:
             defines = dict(build)
             if cutout:
                 defines["ALPHA_CUTOFF"] = "1"
+            if cutout and second_uv:
+                defines["SECOND_UV_MAPS"] = str(ALBEDO_UV_BIT)
             if cutout == "vertex alpha":
                 defines["VERTEX_ALPHA"] = "1"
             if skinned:
@@ -627,7 +631,7 @@ class ShadowMaps:
             if morphed:
                 defines["MORPHED"] = "1"
             geometry = "shadow_layered.geom" if "LAYERED" in defines else None
-            program = self._casters[(build, cutout, skinned, morphed)] = self.renderer.shaders.program(
+            program = self._casters[(build, cutout, skinned, morphed, second_uv)] = self.renderer.shaders.program(
                 "shadow.vert", "shadow.frag", geometry, defines=defines)
             program["Camera"].binding = CAMERA_BINDING
             if "albedo_map" in program:
@@ -651,7 +655,7 @@ class ShadowMaps:
         ctx.polygon_offset = SLOPE_BIAS
         whole = self._caster_program(build, False)
         # The other builds (a cutout's, a posed mesh's), made and given ``uniforms`` at their first batch.
-        others: dict[tuple[bool | str, bool, bool], moderngl.Program] = {}
+        others: dict[tuple[bool | str, bool, bool, bool], moderngl.Program] = {}
         for name, value in (uniforms or {}).items():
             _set_uniform(whole, name, value)
         stats = renderer.stats
@@ -664,7 +668,8 @@ class ShadowMaps:
                     batch.draw(whole)
                 else:
                     kind = False if cutoff is None else "vertex alpha" if batch.mesh.has_alpha else True
-                    posed = (batch.skinned, batch.morphed)
+                    second_uv = bool(cutoff is not None and batch.second_uv_maps & ALBEDO_UV_BIT)
+                    posed = (batch.skinned, batch.morphed, second_uv)
                     program = others.get((kind, *posed))
                     if program is None:
                         program = others[(kind, *posed)] = self._caster_program(build, kind, *posed)

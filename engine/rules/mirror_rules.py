@@ -40,13 +40,14 @@ class MirrorMesh:
     uv_rows: np.ndarray | None  # with a normal map: (2, 4) rows, the UVs as an affine map of position
 
 
-def mirror_mesh(mirror: Mirror, mesh: Mesh, normal_map: bool = False) -> MirrorMesh:
+def mirror_mesh(mirror: Mirror, mesh: Mesh, normal_map: bool = False, second_uvs: bool = False) -> MirrorMesh:
     """The mirror rule: the plane of ``mirror`` on ``mesh`` (``Mirror.plane_normal`` through
     ``plane_point`` when given, else the flat mesh's own) and, with a normal map, the mesh's
-    planar UV map; ``MirrorMeshError`` says why there is none."""
+    planar UV map (of its second UV set with ``second_uvs``: the map reads it,
+    ``Material.second_uv_maps``); ``MirrorMeshError`` says why there is none."""
     uv_rows = None
     if normal_map:
-        uv_rows, why = planar_uv_map(mesh)
+        uv_rows, why = planar_uv_map(mesh, second_uvs)
         if uv_rows is None:
             raise MirrorMeshError(f"Material.normal_map needs UVs that vary linearly over the mirror (mesh "
                                   f"{mesh.name!r}: {why}); use a flat mesh with planar UVs, such as a quad")
@@ -68,10 +69,11 @@ def mirror_mesh(mirror: Mirror, mesh: Mesh, normal_map: bool = False) -> MirrorM
 
 @world_invariant(Mirror, MeshRef, Material)
 def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh | None = None,
-                      normal_map: Any = None, **_other: Any) -> None:
+                      normal_map: Any = None, second_uv_maps: Any = None, **_other: Any) -> None:
     """Refuse ``entity`` as a mirror when its mesh (``mesh``: a replacement about to be set)
-    or, with a normal map (``normal_map``: one about to be set), its UVs cannot make one
-    (``_other``: values about to be set that other rules check)."""
+    or, with a normal map (``normal_map``: one about to be set), the UVs it reads
+    (``second_uv_maps``: a choice about to be set) cannot make one (``_other``: values about
+    to be set that other rules check)."""
     held = {kind: world.try_get(entity, kind) if world.exists(entity) else None for kind in (Mirror, MeshRef, Material)}
     if joining is not None:
         held[type(joining)] = joining
@@ -80,8 +82,12 @@ def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh
         mesh = mesh_ref.mesh
     if mirror is None or mesh is None:
         return
+    second = second_uv_maps if second_uv_maps is not None else getattr(material, "second_uv_maps", ())
+    if "normal_map" in second and mesh.second_uvs is None:
+        return  # (the second-UV rule refuses it: engine/rules/uv_rules.py)
     try:
-        mirror_mesh(mirror, mesh, (normal_map or getattr(material, "normal_map", None)) is not None)
+        mirror_mesh(mirror, mesh, (normal_map or getattr(material, "normal_map", None)) is not None,
+                    "normal_map" in second)
     except MirrorMeshError as exc:
         raise ComponentValueError(f"Mirror on entity {entity}: {exc}") from None
 

@@ -4,7 +4,8 @@
 // build of scene.frag for batches that have it (METALLIC_ROUGHNESS_MAP, EMISSIVE_MAP,
 // OCCLUSION_MAP: engine/render/scene_programs.py); without the define these functions are
 // the plain material's, and a map left out costs nothing.
-// Included by scene.frag after its Surface struct; reads its v_uv.
+// Included by scene.frag after its Surface struct; reads its v_uv, or where Material.second_uv_maps
+// names the map its v_uv2 (MAP_UV: uv_sets.glsl).
 
 #ifdef METALLIC_ROUGHNESS_MAP
 uniform sampler2D metallic_roughness_map;  // linear: green = roughness, blue = metallic (red: a packed occlusion)
@@ -24,10 +25,10 @@ uniform float occlusion_strength;          // Material.occlusion_strength (glTF'
 // own light is not scaled (glTF: occlusion is of indirect light only).
 float material_occlusion() {
 #if defined(OCCLUSION_MAP)
-    return 1.0 + occlusion_strength * (texture(occlusion_map, v_uv).r - 1.0);
+    return 1.0 + occlusion_strength * (texture(occlusion_map, MAP_UV(UV_BIT_OCCLUSION_MAP)).r - 1.0);
 #elif defined(OCCLUSION_PACKED)
     // glTF's packed occlusion-roughness-metallic image: the occlusion in its red (one sampler)
-    return 1.0 + occlusion_strength * (texture(metallic_roughness_map, v_uv).r - 1.0);
+    return 1.0 + occlusion_strength * (texture(metallic_roughness_map, MAP_UV(UV_BIT_OCCLUSION_MAP)).r - 1.0);
 #else
     return 1.0;
 #endif
@@ -38,7 +39,7 @@ float material_occlusion() {
 // which ``mapped_reflection`` weighs a sky or probe reflection by.
 float apply_metallic_roughness(inout Surface s) {
 #ifdef METALLIC_ROUGHNESS_MAP
-    vec3 texel = texture(metallic_roughness_map, v_uv).rgb;
+    vec3 texel = texture(metallic_roughness_map, MAP_UV(UV_BIT_METALLIC_ROUGHNESS_MAP)).rgb;
     s.roughness *= texel.g;
     s.metallic *= texel.b;
     return texel.b;
@@ -52,7 +53,7 @@ float apply_metallic_roughness(inout Surface s) {
 // colour (the engine's Emissive without a map).
 vec3 emitted_colour(Surface s) {
 #ifdef EMISSIVE_MAP
-    return texture(emissive_map, v_uv).rgb;
+    return texture(emissive_map, MAP_UV(UV_BIT_EMISSIVE_MAP)).rgb;
 #else
     return s.albedo;
 #endif
