@@ -216,25 +216,28 @@ def _moved(**transform) -> dict:
     return {"index": 0, "extensions": {"KHR_texture_transform": transform}}
 
 
-@pytest.mark.parametrize("info, colour_map, reason", [
-    ({"index": 0, "texCoord": 1}, None, "it reads TEXCOORD_1"),
-    (_moved(texCoord=1), None, "it reads TEXCOORD_1"),
-    (_moved(scale=[2, 2]), {"index": 0}, "its KHR_texture_transform differs from its material's other maps'"),
-    (_moved(rotation=0.4), {"index": 0}, "its KHR_texture_transform differs from its material's other maps'")])
-def test_a_map_on_uvs_the_engine_does_not_read_is_left_out_with_a_warning(tmp_path, info, colour_map, reason):
-    """A slot reading the second UV set (an occlusion map on lightmap UVs), or moving or
-    turning its UVs unlike the material's other maps, would be drawn in the wrong place:
-    the map is left out, and a warning names the material, the slot and why; the rest of
-    the material is read."""
-    material = {"name": "walled", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0]},
+@pytest.mark.parametrize("info, maps, reason", [
+    ({"index": 0, "texCoord": 1}, {}, "it reads TEXCOORD_1, which mesh 0's primitive 0 does not have"),
+    (_moved(texCoord=1), {}, "it reads TEXCOORD_1, which mesh 0's primitive 0 does not have"),
+    ({"index": 0, "texCoord": "1"}, {}, "its texCoord is '1', not a UV set's number"),
+    (_moved(scale=[2, 2]), {"baseColorTexture": {"index": 0}, "metallicRoughnessTexture": _moved(rotation=0.4)},
+     "a material's maps read two UV sets at most .* its others read TEXCOORD_0 and TEXCOORD_0 moved by a "
+     "KHR_texture_transform")])
+def test_a_map_on_uvs_the_engine_does_not_read_is_left_out_with_a_warning(tmp_path, info, maps, reason):
+    """A slot reading a UV set its mesh lacks, or a third pair of UV set and transform in
+    its material (the mesh carries two: engine/assets/gltf_uv_sets.py), would be drawn in
+    the wrong place: the map is left out, and a warning names the material, the slot and
+    why; the rest of the material is read."""
+    material = {"name": "walled", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0], **maps},
                 "occlusionTexture": info}
-    if colour_map is not None:
-        material["pbrMetallicRoughness"]["baseColorTexture"] = colour_map
     path = write_glb(tmp_path / "ao.glb", quad(2.0, 2.0), material, [occlusion_pixels()[..., :3].copy()])
     with pytest.warns(UserWarning, match=rf"walled.*occlusionTexture: .*{reason}.*the map is left out"):
         (part,) = load_model(path)
     assert part.occlusion_map is None
     assert part.color[:3] == pytest.approx((0.8, 0.5, 0.3), abs=1 / 255)   # (trimesh keeps it as bytes)
+    if maps:   # (the other two pairs are read: the first set and the second)
+        assert part.texture is not None and part.metallic_roughness_map is not None
+        assert part.second_uv_maps == ("metallic_roughness_map",) and part.mesh.second_uvs is not None
 
 
 def test_a_file_requiring_an_extension_the_engine_does_not_read_is_refused(tmp_path):

@@ -227,3 +227,76 @@ def test_a_bumpy_mirror_fits_the_set_its_normal_map_reads():
     entity = world.spawn(Transform(), MeshRef(crooked), Mirror(), Material(normal_map=BUMPS))
     with pytest.raises(ComponentValueError, match="off a plane map"):
         world.get(entity, Material).second_uv_maps = ("normal_map",)
+
+
+def gltf_sheet(tmp_path, occlusion_info, second=None, quantized=False, name="sheet.glb"):
+    """The two-set sheet as a GLB: a base colour texture at TEXCOORD_0, an occlusion map by
+    ``occlusion_info``, and TEXCOORD_1 (``second``; None: none), as float or as normalised
+    uint16 (``quantized``, KHR_mesh_quantization)."""
+    from tests.test_materials_from_files import write_glb
+    from tests.test_model_variants import add_accessors, edit_glb
+
+    material = {"name": "lit sheet", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0.0},
+                "occlusionTexture": occlusion_info}
+    path = write_glb(tmp_path / name, only("first"), material,
+                     [COLOURS.pixels[..., :3].copy(), OCCLUSION.pixels[..., :3].copy()])
+    if second is not None:
+        down = second.astype(np.float32).copy()
+        down[:, 1] = 1.0 - down[:, 1]   # (glTF's v counts down from the image's top)
+
+        def add(doc):
+            stored = np.round(down * 65535).astype(np.uint16) if quantized else down
+            number = add_accessors(doc, [stored], normalized=frozenset({0}) if quantized else frozenset())
+            doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = number
+            if quantized:
+                doc["extensionsUsed"] = ["KHR_mesh_quantization"]
+        edit_glb(path, add)
+    return path
+
+
+@pytest.mark.parametrize("quantized", [False, True])
+def test_a_gltf_map_at_texcoord_1_reads_the_second_set(tmp_path, quantized):
+    """A glTF occlusion map whose ``texCoord`` is 1 is read, its part's mesh carrying the file's
+    TEXCOORD_1 (float or normalised integers) as its second set and the map named in
+    ``second_uv_maps``; the colour texture keeps the first."""
+    from engine.assets.mesh import load_model
+
+    *_, first, second = sheet_arrays()
+    (part,) = load_model(gltf_sheet(tmp_path, {"index": 1, "texCoord": 1}, second, quantized))
+    assert part.second_uv_maps == ("occlusion_map",)
+    assert part.occlusion_map is not None and part.texture is not None
+    np.testing.assert_allclose(part.mesh.uvs, first, atol=1e-6)
+    np.testing.assert_allclose(part.mesh.second_uvs, second, atol=1e-4)
+    world = World()
+    from engine.assets.models import spawn_model
+    root = spawn_model(world, gltf_sheet(tmp_path, {"index": 1, "texCoord": 1}, second, quantized, "again.glb"))
+    (entity,) = [e for e, (t,) in world.query(Transform) if t.parent == root]
+    assert world.get(entity, Material).second_uv_maps == ("occlusion_map",)
+
+
+def test_a_gltf_map_moved_unlike_the_others_reads_its_own_set(tmp_path):
+    """An occlusion map at TEXCOORD_0 moved by its own KHR_texture_transform (offset and
+    scale) while the colour texture is not: the first set is TEXCOORD_0 as it is, the second
+    TEXCOORD_0 moved (worked out here as the extension's offset + scale x uv, v down)."""
+    from engine.assets.mesh import load_model
+
+    *_, first, _ = sheet_arrays()
+    moved = {"index": 1, "extensions": {"KHR_texture_transform": {"offset": [0.25, 0.5], "scale": [2.0, 3.0]}}}
+    (part,) = load_model(gltf_sheet(tmp_path, moved))
+    down = np.stack([first[:, 0], 1.0 - first[:, 1]], axis=1) * (2.0, 3.0) + (0.25, 0.5)
+    np.testing.assert_allclose(part.mesh.uvs, first, atol=1e-6)
+    np.testing.assert_allclose(part.mesh.second_uvs, np.stack([down[:, 0], 1.0 - down[:, 1]], axis=1), atol=1e-5)
+    assert part.second_uv_maps == ("occlusion_map",)
+
+
+def test_a_gltf_mesh_keeps_its_texcoord_1_for_a_game_to_use(tmp_path):
+    """A mesh whose file has TEXCOORD_1 that no map reads keeps it as its second set (a game
+    may give it a lightmap); one without has none."""
+    from engine.assets.mesh import load_model
+
+    *_, second = sheet_arrays()
+    (part,) = load_model(gltf_sheet(tmp_path, {"index": 1}, second))
+    assert part.second_uv_maps == ()
+    np.testing.assert_allclose(part.mesh.second_uvs, second, atol=1e-6)
+    (plain,) = load_model(gltf_sheet(tmp_path, {"index": 1}, name="plain.glb"))
+    assert plain.mesh.second_uvs is None

@@ -28,6 +28,7 @@ from components.water import f0_from_ior
 from engine.assets.gltf_animations import collapsed, moved_nodes
 from engine.assets.gltf_morphs import morph_arrays
 from engine.assets.gltf_skins import skin_arrays
+from engine.assets.gltf_uv_sets import UvPlan, UvSource, moved_uvs, uv_sets
 from engine.assets.gltf_variants import variant_names
 from engine.assets.model_cameras import ModelCamera, read_gltf_cameras
 from engine.assets.model_files import (
@@ -591,6 +592,7 @@ class ModelPart:
     skin: int | None = None  # its glTF node's skin (LoadedModel.skins: what bends it; None: not skinned)
     morph_weights: tuple[float, ...] | None = None  # the weights its node wears its morph targets at (None: none)
     hidden: bool = False     # its node is scaled to nothing at rest (a clip grows it): spawned not visible
+    second_uv_maps: tuple[str, ...] = ()  # the maps that read its mesh's second UV set (Material.second_uv_maps)
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -734,19 +736,21 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
             name = f"{path.name}:{geom_name}"
             morph_weights = gltf.morph_weights(index) if gltf is not None else None
             mesh = meshes.get(("geometry", geom_name, skin))
+            kept = getattr(tm, "vertex_attributes", {})  # (as trimesh kept them: a vertex each)
+            # its UV sets past the first (glTF's TEXCOORD_1...: engine/assets/gltf_uv_sets.py)
+            sets = uv_sets(kept, len(tm.vertices), f"node {shown!r}'s mesh") if gltf is not None else {}
             if mesh is None:
                 mesh = Mesh.from_trimesh(tm, name=name, srgb_colors=suffix not in (".gltf", ".glb"))
-                kept = getattr(tm, "vertex_attributes", {})  # (as trimesh kept them: a vertex each)
                 joints = weights = offsets = normal_offsets = None
                 if skin is not None:  # its joints and weights a vertex
                     joints, weights = skin_arrays(kept, len(mesh.positions), gltf.skins[skin], f"node {shown!r}'s mesh")
                 if morph_weights is not None:  # its morph targets' offsets
                     offsets, normal_offsets = morph_arrays(kept, len(mesh.positions), len(morph_weights),
                                                            f"node {shown!r}'s mesh")
-                if skin is not None or morph_weights is not None:
+                if skin is not None or morph_weights is not None or 1 in sets:  # (a mesh keeps its TEXCOORD_1)
                     mesh = Mesh(mesh.positions, mesh.normals, mesh.uvs, mesh.indices, name=name, colors=mesh.colors,
                                 joints=joints, weights=weights, morph_positions=offsets, morph_normals=normal_offsets,
-                                second_uvs=mesh.second_uvs)
+                                second_uvs=sets.get(1))
                 mesh = meshes.setdefault(("content", _digest(mesh)), mesh)
                 meshes[("geometry", geom_name, skin)] = mesh
             if skin is not None:  # glTF: a skinned node's own transform is left out (its joints place it)
@@ -755,7 +759,7 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
                              node=index, skin=skin, morph_weights=morph_weights, hidden=hidden)
             if materials:
                 _read_material(tm, part, path, maps)
-                maps.read(tm, part)
+                maps.read(tm, part, sets)
             parts.append(part)
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from exc
@@ -1149,7 +1153,9 @@ class _MaterialMaps:
         self.obj = obj
         self._made: dict[tuple, TextureData] = {}
 
-    def read(self, tm: trimesh.Trimesh, part: ModelPart) -> None:
+    def read(self, tm: trimesh.Trimesh, part: ModelPart, sets: dict[int, np.ndarray] | None = None) -> None:
+        """Fill ``part``'s material from the one trimesh read for ``tm``; a glTF's maps get the
+        UV sets they read (``sets``: the primitive's past the first, ``gltf_uv_sets.uv_sets``)."""
         from trimesh.visual.material import SimpleMaterial
 
         material = getattr(getattr(tm, "visual", None), "material", None)
@@ -1158,38 +1164,43 @@ class _MaterialMaps:
         if hasattr(material, "baseColorFactor"):
             self._gltf(material, part)
             index, _ = self.gltf.material(material.name) if self.gltf else (None, {})
-            transform = self.gltf.uv_transforms.get(index) if self.gltf else None
-            if transform is not None:
-                part.mesh = self._uv_transformed(part.mesh, transform)
+            plan = self.gltf.uv_plans.get(index) if self.gltf else None
+            if plan is not None:
+                self._plan_uvs(part, plan, sets or {}, self.gltf_label(material))
         elif isinstance(material, SimpleMaterial):
             found = self.obj.maps.get(getattr(material, "_name", None) or "") if self.obj else None
             if found:
                 extra = {str(k).lower(): v for k, v in (getattr(material, "kwargs", {}) or {}).items()}
                 self._obj(found, extra, part)
 
-    def _uv_transformed(self, mesh: Mesh, transform: tuple[float, float, float, float, float]) -> Mesh:
-        """``mesh`` with its UVs moved by a glTF ``KHR_texture_transform`` (offset x, offset
-        y, rotation, scale x, scale y) every map of its material shares, baked once a mesh and
-        transform: ``offset + R(rotation) (scale x uv)`` in glTF's UV space (v down from the
-        image's top; the engine's v is 1 - that), R turning u towards -v: counter-clockwise as
-        the UV square is drawn with v down, the image clockwise on the surface.  That is the
-        direction of the extension's text and its example (offset (0, 1), a quarter turn and
-        scale 0.5 show the image's lower left quarter turned clockwise) and of three.js's
-        GLTFLoader (``Matrix3.setUvTransform``); the matrix in its GLSL listing, written as
-        for v up, turns the other way (KhronosGroup/glTF issue 1563)."""
-        key = ("uv transform", id(mesh), transform)
+    def _plan_uvs(self, part: ModelPart, plan: UvPlan, sets: dict[int, np.ndarray], label: str) -> None:
+        """``part``'s mesh made with the two UV sets its material's maps read (``plan``,
+        ``engine/assets/gltf_uv_sets.py``): the first moved by its transform, the second the set
+        and transform of the maps it names in ``second_uv_maps`` (their Material fields); made
+        once a mesh, plan and sets.  (``prepare_gltf`` left out a map reading a set some
+        primitive of its material lacks.)"""
+        mesh = part.mesh
+
+        def made_from(used: UvSource) -> np.ndarray:
+            number, transform = used
+            uvs = mesh.uvs if number == 0 else sets.get(number)
+            if uvs is None:  # (prepare_gltf checked every primitive of the material has it)
+                raise AssetError(f"{label}: its maps read TEXCOORD_{number}, which mesh {mesh.name!r} does not have")
+            return moved_uvs(uvs, transform)
+
+        numbers = sorted({plan.first[0], *((plan.second[0],) if plan.second is not None else ())} - {0})
+        read = tuple(hashlib.blake2b(sets[n].tobytes(), digest_size=16).digest() if n in sets else None
+                     for n in numbers)  # (the sets themselves: meshes alike but for a third set are one mesh)
+        key = ("uv plan", id(mesh), plan, read)
         made = self._made.get(key)
         if made is None:
-            ox, oy, rotation, sx, sy = transform
-            c, s = math.cos(rotation), math.sin(rotation)
-            u = mesh.uvs[:, 0].astype(np.float64) * sx
-            v = (1.0 - mesh.uvs[:, 1].astype(np.float64)) * sy
-            moved_u, moved_v = ox + c * u + s * v, oy - s * u + c * v
-            made = self._made[key] = Mesh(mesh.positions, mesh.normals, np.stack([moved_u, 1.0 - moved_v], axis=1),
-                                          mesh.indices, name=mesh.name, colors=mesh.colors, joints=mesh.joints,
-                                          weights=mesh.weights, morph_positions=mesh.morph_positions,
-                                          morph_normals=mesh.morph_normals)
-        return made
+            made = self._made[key] = Mesh(
+                mesh.positions, mesh.normals, made_from(plan.first), mesh.indices, name=mesh.name, colors=mesh.colors,
+                joints=mesh.joints, weights=mesh.weights, morph_positions=mesh.morph_positions,
+                morph_normals=mesh.morph_normals,
+                second_uvs=made_from(plan.second) if plan.second is not None else mesh.second_uvs)
+        part.mesh = made
+        part.second_uv_maps = plan.second_maps
 
     def mtl_map(self, material, key: str) -> MtlMap | None:
         """The ``key`` map statement of the OBJ material trimesh calls ``material``."""

@@ -26,7 +26,7 @@ import math
 import os
 import re
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
@@ -36,6 +36,7 @@ from engine.assets.gltf_animations import read_animations, read_node_tree
 from engine.assets.gltf_instancing import expand_gpu_instancing
 from engine.assets.gltf_morphs import node_weights, read_morphs
 from engine.assets.gltf_skins import read_skins
+from engine.assets.gltf_uv_sets import UvPlan, plan_uv_sets, tag_uv_sets
 from engine.assets.gltf_variants import apply_variant
 from engine.assets.texture_data import contained_path, file_problem, read_asset_file
 from engine.core.errors import AssetError
@@ -383,12 +384,12 @@ class GltfFiles:
     doc: dict | None
     names: list = field(default_factory=list)
     slots: dict[int, dict[str, int]] = field(default_factory=dict)
-    # (material index, slot) -> why its map is left out (it reads a UV set or a transform the
-    # engine does not: drawn with the first UVs it would land in the wrong place)
+    # (material index, slot) -> why its map is left out (a third UV set and transform, or a
+    # texCoord that is no set's number: drawn at another set it would land in the wrong place)
     unread: dict[tuple[int, str], str] = field(default_factory=dict)
-    # material index -> the KHR_texture_transform all its maps share (offset x, offset y,
-    # rotation, scale x, scale y): baked into its meshes' UVs when they are read
-    uv_transforms: dict[int, tuple[float, float, float, float, float]] = field(default_factory=dict)
+    # material index -> the UV sets its maps read (engine/assets/gltf_uv_sets.py UvPlan): made
+    # into its meshes' two sets when they are read (none: TEXCOORD_0 as it is)
+    uv_plans: dict[int, UvPlan] = field(default_factory=dict)
     animations: list = field(default_factory=list)  # its clips (engine/assets/gltf_animations.py)
     node_tree: object = None                         # its nodes' parents and rest transforms (NodeTree)
     skins: list = field(default_factory=list)        # its skins (engine/assets/gltf_skins.py SkinDef)
@@ -466,9 +467,9 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
     return doc if isinstance(doc, dict) else None
 
 
-# glTF extensions the engine reads (a texture transform: offset, rotation and scale, shared by a
-# material's maps; lights: engine/assets/model_lights.py; glass: transmission, ior, volume,
-# dispersion; a clear coat; a sheen; anisotropy; a thin film; unlit; material variants:
+# glTF extensions the engine reads (a texture transform: offset, rotation and scale, two sets of
+# them a material: engine/assets/gltf_uv_sets.py; lights: engine/assets/model_lights.py; glass:
+# transmission, ior, volume, dispersion; a clear coat; a sheen; anisotropy; a thin film; unlit; material variants:
 # engine/assets/gltf_variants.py; packed vertex data: engine/assets/gltf_accessors.py;
 # instancing: engine/assets/gltf_instancing.py; WebP images)
 GLTF_READ_EXTENSIONS = frozenset({
@@ -479,20 +480,38 @@ GLTF_READ_EXTENSIONS = frozenset({
     "KHR_materials_unlit", "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform"})
 
 
-def _unread_texture(info: object) -> str | None:
-    """Why a material slot's texture (its ``textureInfo``) cannot be drawn as the file
-    means it, or None: it reads a second UV set (``texCoord`` > 0, or its transform's: the
-    engine's meshes carry the first)."""
+def _texture_set(info: object) -> int | str:
+    """The UV set a material slot's texture (its ``textureInfo``) reads: its ``texCoord``, or
+    its transform's, which overrides it (KHR_texture_transform); a reason where it names none."""
     if not isinstance(info, dict):
-        return None
+        return 0
     transform = (info.get("extensions") or {}).get("KHR_texture_transform") \
         if isinstance(info.get("extensions"), dict) else None
     coord = transform.get("texCoord", info.get("texCoord", 0)) if isinstance(transform, dict) \
         else info.get("texCoord", 0)
-    if coord != 0:
-        return (f"it reads TEXCOORD_{coord}" if isinstance(coord, int) else f"its texCoord is {coord!r}") \
-            + ", which the engine's meshes do not carry"
-    return None
+    if isinstance(coord, bool) or not isinstance(coord, int) or coord < 0:
+        return f"its texCoord is {coord!r}, not a UV set's number"
+    return coord
+
+
+def _uv_sets_lacking(doc: dict) -> Callable[[int, int], str | None]:
+    """``lacking(material index, UV set number past 0)``: the first primitive drawn with that
+    material that lacks that TEXCOORD_n, named (None: none lacks it); its maps reading it are
+    left out (drawn at another set they would land in the wrong place)."""
+    primitives = [(f"mesh {m}'s primitive {p}", primitive) for m, mesh in enumerate(doc.get("meshes") or [])
+                  if isinstance(mesh, dict) for p, primitive in enumerate(mesh.get("primitives") or [])
+                  if isinstance(primitive, dict) and isinstance(primitive.get("attributes"), dict)]
+    have = {name: {int(a[9:]) for a in primitive["attributes"] if isinstance(a, str) and a.startswith("TEXCOORD_")
+                   and a[9:].isdigit()} for name, primitive in primitives}
+    highest = max((n for sets in have.values() for n in sets), default=0)
+    lacking: dict[tuple[int, int], str] = {}
+    for name, primitive in primitives:
+        material = primitive.get("material")
+        if isinstance(material, int) and not isinstance(material, bool):
+            for number in range(1, highest + 2):
+                if number not in have[name]:
+                    lacking.setdefault((material, number), name)
+    return lambda material, number: lacking.get((material, min(number, highest + 1)))
 
 
 def _uv_transform(info: object, label: str) -> tuple[float, float, float, float, float] | None:
@@ -590,6 +609,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from None
     skins = read_skins(doc, buffer_bytes, what)
+    tag_uv_sets(doc)
     morphs = read_morphs(doc, what)  # (before the clips: a weights channel is as wide as its mesh's targets)
     animations = read_animations(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
@@ -604,6 +624,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     used_materials = {primitive.get("material") for mesh in (doc.get("meshes") or [])
                       if isinstance(mesh, dict) for primitive in (mesh.get("primitives") or [])
                       if isinstance(primitive, dict)}
+    lacking = _uv_sets_lacking(doc)
     result = GltfFiles(b"", resolver, doc, [m.get("name") if isinstance(m, dict) else None for m in materials])
     result.animations = animations
     result.skins = skins
@@ -618,24 +639,31 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
                 isinstance(e, (int, float)) and not isinstance(e, bool) and 0.0 <= e <= 65504.0 for e in emissive)):
             raise AssetError(f"{what}: {result.label(index)}: emissiveFactor must be three numbers in [0, 65504], "
                              f"got {emissive!r}")
-        transforms = {slot: _uv_transform(info, f"{what}: {result.label(index)}: {slot}")
-                      for slot in GLTF_TEXTURE_SLOTS if (info := pbr.get(slot, material.get(slot))) is not None}
-        shared = set(transforms.values())
-        if len(shared) == 1 and None not in shared:
-            # one offset, rotation and scale for every map: baked into the UVs
-            result.uv_transforms[index] = shared.pop()
+        # Each map's UV set and transform, grouped into the mesh's two sets (gltf_uv_sets.py)
+        uses, unread = {}, {}
+        for slot in GLTF_TEXTURE_SLOTS:
+            info = pbr.get(slot, material.get(slot))
+            if info is not None:
+                transform = _uv_transform(info, f"{what}: {result.label(index)}: {slot}")
+                coord = _texture_set(info)
+                if isinstance(coord, str):
+                    unread[slot] = coord
+                elif coord > 0 and (where := lacking(index, coord)) is not None:
+                    unread[slot] = f"it reads TEXCOORD_{coord}, which {where} does not have"
+                else:
+                    uses[slot] = (coord, transform)
+        plan, left_out = plan_uv_sets(uses)
+        unread.update(left_out)
+        if plan is not None:
+            result.uv_plans[index] = plan
         for slot in GLTF_TEXTURE_SLOTS:
             info = pbr.get(slot, material.get(slot))
             if info is None:
                 continue
             label = f"{what}: {result.label(index)}: {slot}"
-            unread = _unread_texture(info)
-            if unread is None and len(shared) > 1 and transforms[slot] is not None:
-                unread = ("its KHR_texture_transform differs from its material's other maps' (one transform a "
-                          "material is baked into the UVs)")
-            if unread is not None:
-                result.unread[(index, slot)] = unread
-                warnings.warn(f"{label}: {unread}: the map is left out", stacklevel=4)
+            if slot in unread:
+                result.unread[(index, slot)] = unread[slot]
+                warnings.warn(f"{label}: {unread[slot]}: the map is left out", stacklevel=4)
                 continue
             texture_index = info.get("index") if isinstance(info, dict) else None
             if not _index_in(texture_index, textures_list) or not isinstance(textures_list[texture_index], dict):

@@ -212,7 +212,8 @@ def _part_components(part, probed: bool) -> list:
                  unlit=part.unlit, reflectance=part.reflectance, sheen_color=part.sheen_color,
                  sheen_roughness=part.sheen_roughness, anisotropy=part.anisotropy,
                  anisotropy_direction=part.anisotropy_direction, iridescence=part.iridescence,
-                 iridescence_ior=part.iridescence_ior, iridescence_thickness=part.iridescence_thickness),
+                 iridescence_ior=part.iridescence_ior, iridescence_thickness=part.iridescence_thickness,
+                 second_uv_maps=part.second_uv_maps),
     ]
     if part.emissive_factor > 0.0:
         components.append(Emissive(part.emissive_factor))
