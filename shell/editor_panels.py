@@ -24,6 +24,7 @@ from imgui_bundle import imgui
 from pyglm import glm
 
 from components import ComponentValueError, Transform
+from components.rendering import MATERIAL_IMAGES
 from engine.assets.level_assets import MESH_MAKERS
 from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
@@ -340,6 +341,14 @@ class EditorPanels:
                         self._try(editor, editor.set_field, entity, "Animation", "clip", choice)
                     self._widget(f"Animation.clip {choice}")
                 imgui.end_combo()
+        elif (cls_name, field) == ("Material", "second_uv_maps"):  # a tick a map: read at the mesh's second UVs
+            imgui.text(f"{field}: the maps read at the mesh's second UV set")
+            for name in MATERIAL_IMAGES:
+                ticked, on = imgui.checkbox(f"{name}##{cls_name}.{field}", name in value)
+                self._widget(f"{cls_name}.{field} {name}")
+                if ticked:
+                    chosen = tuple(n for n in MATERIAL_IMAGES if (n == name and on) or (n != name and n in value))
+                    editor.try_set_field(entity, cls_name, field, chosen)  # (refused: no second set, said why)
         elif (cls_name, field) == ("MeshRef", "mesh"):  # a shape to choose (its size: the Transform's scale)
             shape = editor.mesh_shape(entity)
             if imgui.begin_combo(label, shape):

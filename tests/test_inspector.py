@@ -1247,3 +1247,26 @@ def test_a_posed_entity_shows_its_skin_and_morph(scene, ctx):
         assert {"Skin", "Morph"} <= set(lines)
         assert "  joint_matrices = array" in lines
         assert any(line.startswith("  weights = ") and "0.25" in line for line in lines), lines
+
+
+def test_the_maps_read_at_the_second_uv_set_are_ticked(scene, ctx):
+    """``Material.second_uv_maps`` is a tick a map: on a box (no second UV set) the tick is
+    refused saying why; on a mesh with one it names the map, and undo takes it back."""
+    from components import MeshRef
+    from tests.test_second_uvs import two_sets
+
+    size = (1280, 720)
+    with _box_selected(scene, ctx, size) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        _scrolled_to(overlay, draw, "Material.second_uv_maps occlusion_map", size)
+        click("Material.second_uv_maps occlusion_map")
+        assert world.get(box, Material).second_uv_maps == ()
+        assert "has no second UV set" in editor.message
+        world.get(box, MeshRef).mesh = two_sets()
+        draw()
+        _scrolled_to(overlay, draw, "Material.second_uv_maps occlusion_map", size)
+        click("Material.second_uv_maps occlusion_map")
+        assert world.get(box, Material).second_uv_maps == ("occlusion_map",)
+        draw()
+        assert "  second_uv_maps = ['occlusion_map']" in overlay.inspector_lines
+        assert editor.undo() and world.get(box, Material).second_uv_maps == ()

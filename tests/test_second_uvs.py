@@ -300,3 +300,36 @@ def test_a_gltf_mesh_keeps_its_texcoord_1_for_a_game_to_use(tmp_path):
     np.testing.assert_allclose(part.mesh.second_uvs, second, atol=1e-6)
     (plain,) = load_model(gltf_sheet(tmp_path, {"index": 1}, name="plain.glb"))
     assert plain.mesh.second_uvs is None
+
+
+def test_a_level_file_names_the_maps_of_the_second_set_and_a_save_keeps_them(tmp_path):
+    """``second_uv_maps`` in a level file: on a model file's mesh with TEXCOORD_1 it is read
+    and saved again; on a box (no second set) the load fails naming the line and the mesh."""
+    from PIL import Image
+
+    from engine.assets.level_file import LevelError, load_level
+    from engine.assets.level_save import save_level
+
+    *_, second = sheet_arrays()
+    gltf_sheet(tmp_path, {"index": 1}, second, name="sheet.glb")
+    Image.fromarray(np.full((4, 4, 3), 128, np.uint8)).save(tmp_path / "ao.png")
+    text = """[level]
+name = "uv"
+
+[[entity]]
+name = "wall"
+Transform = {{}}
+MeshRef = {{ mesh = {mesh} }}
+Material = {{ occlusion_map = {{ file = "ao.png" }}, second_uv_maps = ["occlusion_map"] }}
+"""
+    (tmp_path / "sheet.toml").write_text(text.format(mesh='{ file = "sheet.glb" }'))
+    world = World()
+    names = load_level(tmp_path / "sheet.toml").spawn(world)
+    assert world.get(names["wall"], Material).second_uv_maps == ("occlusion_map",)
+    saved = save_level(world, tmp_path / "again.toml", names, name="uv")
+    assert 'second_uv_maps = ["occlusion_map"]' in saved.read_text()
+    again = World()
+    assert again.get(load_level(saved).spawn(again)["wall"], Material).second_uv_maps == ("occlusion_map",)
+    (tmp_path / "box.toml").write_text(text.format(mesh="{ box = [1, 1, 1] }"))
+    with pytest.raises(LevelError, match=r"box\.toml:\d+: entity 'wall': .*mesh 'box' has no second UV set"):
+        load_level(tmp_path / "box.toml").spawn(World())
