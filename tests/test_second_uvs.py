@@ -333,3 +333,25 @@ Material = {{ occlusion_map = {{ file = "ao.png" }}, second_uv_maps = ["occlusio
     (tmp_path / "box.toml").write_text(text.format(mesh="{ box = [1, 1, 1] }"))
     with pytest.raises(LevelError, match=r"box\.toml:\d+: entity 'wall': .*mesh 'box' has no second UV set"):
         load_level(tmp_path / "box.toml").spawn(World())
+
+
+def test_a_choice_changed_is_drawn_the_next_frame_and_the_old_batch_goes(scene):
+    """``second_uv_maps`` set on a drawn sheet: the next frame reads the second set (its batch
+    of the SECOND_UV_MAPS build in place of the plain one, which is dropped); taken back, the
+    first again."""
+    holder = {}
+
+    def build(world):
+        world.spawn(HemisphereLight(intensity=6.0))
+        holder["sheet"] = world.spawn(Transform(), MeshRef(two_sets()), Material(texture=COLOURS))
+
+    runner = scene(lit(build), (160, 120))
+    runner.frame()
+    first = runner.frame().astype(int)
+    material = runner.world.get(holder["sheet"], Material)
+    material.second_uv_maps = ("texture",)
+    second = runner.frame().astype(int)
+    assert same_picture(second, frame_of(scene, lit(sheet(only("second"), texture=COLOURS))))
+    assert [b.second_uv_maps for b in runner.engine.renderer.batches.values() if b.count and b.texture] == [1]
+    material.second_uv_maps = ()
+    assert same_picture(runner.frame().astype(int), first)
