@@ -195,8 +195,11 @@ def random_glb(rng: random.Random) -> ModelCase:
         texture = {"index": rng.choice([0, 0, 0, 1, 2, 7])}
         if slot == "occlusionTexture" and rng.random() < 0.5:
             texture["strength"] = rng.choice([0.0, 0.5, 1.0, 2.0, -1.0, "full"])
-        if rng.random() < 0.1:  # a second UV set or a transform: the map left out, with a warning
-            texture.update(rng.choice([{"texCoord": 1}, {"extensions": {"KHR_texture_transform": {}}}]))
+        if rng.random() < 0.2:  # a UV set (maybe one the mesh lacks, or no number) or a transform of its own
+            texture.update(rng.choice([{"texCoord": 1}, {"texCoord": 2}, {"texCoord": -1}, {"texCoord": "1"},
+                                       {"extensions": {"KHR_texture_transform": {}}},
+                                       {"extensions": {"KHR_texture_transform": {"scale": [2, 2], "texCoord": 1}}},
+                                       {"extensions": {"KHR_texture_transform": {"offset": [0.5, 0.0]}}}]))
         (material["pbrMetallicRoughness"] if slot in ("baseColorTexture", "metallicRoughnessTexture")
          else material)[slot] = texture
         mutations.append(f"{slot} -> {texture}")
@@ -220,6 +223,14 @@ def random_glb(rng: random.Random) -> ModelCase:
     if images:
         doc["images"] = images
         doc["textures"] = [{"source": rng.choice([i, i, i, 9])} for i in range(len(images))]
+    if rng.random() < 0.3:  # a second UV set: float, normalised bytes, too few or of the wrong type
+        kind = rng.choice(["float", "float", "bytes", "short", "scalar"])
+        second = (uvs[:, ::-1] * (255 if kind == "bytes" else 1)).astype(np.uint8 if kind == "bytes" else np.float32)
+        accessors.append({"bufferView": view(second.tobytes()), "componentType": 5121 if kind == "bytes" else 5126,
+                          "count": 5 if kind == "short" else 6, "type": "SCALAR" if kind == "scalar" else "VEC2",
+                          **({"normalized": True} if kind == "bytes" else {})})
+        doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = len(accessors) - 1
+        mutations.append(f"TEXCOORD_1 {kind}")
     if rng.random() < 0.25:
         _skin(rng, doc, view, mutations)
     if rng.random() < 0.25:
