@@ -3,7 +3,7 @@ from components.ambient import AmbientOcclusion, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.fog import Fog
 from components.mirror import Mirror
-from components.model import Animation, FromModel, Model
+from components.model import Animation, AnimationLayer, FromModel, Model
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.pose import Morph, Skin
 from components.post import Bloom, ColorGrading, Tonemap, Vignette
@@ -17,7 +17,7 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "AmbientOcclusion", "Animation", "Bloom", "Camera", "ColorGrading", "ComponentValueError",
+    "AmbientOcclusion", "Animation", "AnimationLayer", "Bloom", "Camera", "ColorGrading", "ComponentValueError",
     "ComponentWarning",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "Model", "Morph", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective",

@@ -15,7 +15,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
-from components.tracking import ComponentValueError, TrackedComponent, boolean, finite, integer
+from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, finite, integer
 
 MAX_MODEL_PROBES = 4  # curved reflective or glass parts of one model that get a cube-map probe each (by default)
 MAX_MODEL_PROBES_LIMIT = 64  # the most Model.max_probes may ask for (each probe is six views a capture)
@@ -108,4 +108,53 @@ class Animation(TrackedComponent):
             return finite(self, name, value, low=-1000.0, high=1000.0)
         if name in ("playing", "loop"):
             return boolean(self, name, value)
+        return value
+
+
+ANIMATION_LAYER_BLENDS = ("override", "additive")  # AnimationLayer.blend
+
+
+@dataclass(eq=False)
+class AnimationLayer(TrackedComponent):
+    """A second clip played over a model's ``Animation`` (or over its rest pose without one),
+    as Unity's animator layers, Godot's blend and add nodes and three.js's mixed actions:
+    a wave over a walk, a breath or a recoil added to any pose.  ``clip``, ``time``,
+    ``speed``, ``playing`` and ``loop`` play it as ``Animation``'s do.  It acts on the
+    nodes its clip animates (and their morph weights), and of those only ``root`` and the
+    nodes under it where ``root`` names one (a node's name in the file: an avatar mask, the
+    arms from the shoulders down; "" the whole model):
+
+    ``blend`` "override" (the default): their pose moves from the base's towards the
+    layer's by ``weight`` (0 none, 1 the layer's alone; translations and scales mixed,
+    rotations along the shorter arc).  "additive": the layer's change from its clip's first
+    key is added to the base pose, times ``weight`` (a rotation turned on by the layer's
+    turn, a translation moved by its move, a scale multiplied by its ratio), as three.js's
+    additive blending of a clip made additive against its first frame.
+
+    A clip or root the model lacks is an error naming those it has."""
+
+    SHAREABLE = False
+    clip: str = ""
+    time: float = 0.0
+    speed: float = 1.0
+    playing: bool = True
+    loop: bool = True
+    weight: float = 1.0
+    blend: str = "override"
+    root: str = ""
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in ("clip", "root") and not isinstance(value, str):
+            what = "a clip's name" if name == "clip" else "a node's name"
+            raise ComponentValueError(f"AnimationLayer.{name} must be {what} (a str; \"\": none), got {value!r}")
+        if name == "time":
+            return finite(self, name, value, low=0.0)
+        if name == "speed":
+            return finite(self, name, value, low=-1000.0, high=1000.0)
+        if name == "weight":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name in ("playing", "loop"):
+            return boolean(self, name, value)
+        if name == "blend":
+            return choice(self, name, value, ANIMATION_LAYER_BLENDS)
         return value

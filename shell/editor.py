@@ -300,10 +300,11 @@ class Editor:
             variants = ", ".join(repr(v) for v in self.model_variants(entity)) or "none"
             self.message = f"Model.variant: the model file has no material variant {value!r} (its variants: {variants})"
             raise EditError(self.message)
-        if type(target).__name__ == "Animation" and field == "clip" and value and isinstance(value, str) \
+        kind = type(target).__name__
+        if kind in ("Animation", "AnimationLayer") and field == "clip" and value and isinstance(value, str) \
                 and self.world.has(entity, Model) and value not in self.model_clips(entity):
             clips = ", ".join(repr(c) for c in self.model_clips(entity)) or "none"
-            self.message = f"Animation.clip: the model file has no clip {value!r} (its clips: {clips})"
+            self.message = f"{kind}.clip: the model file has no clip {value!r} (its clips: {clips})"
             raise EditError(self.message)
         if dataclasses.is_dataclass(target) and field not in {f.name for f in dataclasses.fields(target)}:
             raise EditError(f"{type(target).__name__} has no field {field!r} "

@@ -334,12 +334,14 @@ class EditorPanels:
                         self._try(editor, editor.set_field, entity, "Model", "variant", choice)
                     self._widget(f"Model.variant {choice}")
                 imgui.end_combo()
-        elif (cls_name, field) == ("Animation", "clip") and editor.model_clips(entity):  # one of its model's clips
+        elif field == "clip" and cls_name in ("Animation", "AnimationLayer") and editor.model_clips(entity):
+            # one of its model's clips
             if imgui.begin_combo(label, value or "(none: at rest)"):
                 for choice in ("", *editor.model_clips(entity)):
-                    if imgui.selectable(f"{choice or '(none: at rest)'}##clip", choice == value)[0] and choice != value:
-                        self._try(editor, editor.set_field, entity, "Animation", "clip", choice)
-                    self._widget(f"Animation.clip {choice}")
+                    if imgui.selectable(f"{choice or '(none: at rest)'}##{cls_name}.clip", choice == value)[0] \
+                            and choice != value:
+                        self._try(editor, editor.set_field, entity, cls_name, "clip", choice)
+                    self._widget(f"{cls_name}.clip {choice}")
                 imgui.end_combo()
         elif (cls_name, field) == ("Material", "second_uv_maps"):  # a tick a map: read at the mesh's second UVs
             imgui.text(f"{field}: the maps read at the mesh's second UV set")

@@ -27,7 +27,7 @@ from pathlib import Path
 import esper
 
 from components import Transform
-from components.model import Animation, Model
+from components.model import Animation, AnimationLayer, Model
 from engine.assets.level_assets import user_asset_roots
 from engine.assets.models import SpawnedModels, model_key, pose_parts, remove_parts, respawn_parts, turn_suns
 from engine.core.world import World
@@ -55,13 +55,19 @@ class ModelSystem(esper.Processor):
         when it loops, held there when not) and pose its model's parts; a changed Animation,
         or a model whose parts were just made, is posed even when paused.  A cross-fade's
         clip faded from moves on the same way and its ``faded`` by ``dt``; the fade ends (its
-        clip dropped) once it has lasted its ``fade_seconds``."""
+        clip dropped) once it has lasted its ``fade_seconds``.  An ``AnimationLayer`` on the
+        root moves on the same way, by its own speed, and is laid over that pose."""
         world = self.world
-        changed = world.changed(Animation)
-        for root, animation in world.query_one(Animation):
+        changed = world.changed(Animation) | world.changed(AnimationLayer)
+        roots = {root for root, _ in world.query_one(Animation)} | {root for root, _ in world.query_one(AnimationLayer)}
+        roots |= {root for root in changed if world.exists(root)}  # (one taken away: its parts posed without it)
+        for root in sorted(roots):
+            animation = world.try_get(root, Animation) or _AT_REST
+            layer = world.try_get(root, AnimationLayer)
             record = world.resources.get(SpawnedModels, {}).get(root)
             moving = animation.playing and (animation.clip or animation.fade_from) and dt and animation.speed
-            if not (moving or root in changed or root in remade):
+            layer_moving = layer is not None and layer.playing and layer.clip and dt and layer.speed
+            if not (moving or layer_moving or root in changed or root in remade):
                 continue
             fade = None
             if moving and record is not None and record.loaded is not None:
@@ -70,16 +76,20 @@ class ModelSystem(esper.Processor):
                     animation.fade_from_time = _moved_on(record.loaded, animation.fade_from, animation.fade_from_time,
                                                          dt, animation)
                     animation.faded = min(animation.faded + dt, animation.fade_seconds)
+            if layer_moving and record is not None and record.loaded is not None:
+                layer.time = _moved_on(record.loaded, layer.clip, layer.time, dt, layer)
             if animation.fade_from:
                 share = animation.faded / animation.fade_seconds if animation.fade_seconds > 0.0 else 1.0
                 if share >= 1.0:
                     animation.fade_from = ""  # (faded in: the clip alone from here)
                 else:
                     fade = (animation.fade_from, animation.fade_from_time, share)
-            # (a clip only moved on rewrites only the parts it moves; another clip, a fade or new parts, all)
+            laid = (layer.clip, layer.time, layer.weight, layer.blend, layer.root) if layer is not None else None
+            # (a clip only moved on rewrites only the parts it moves; another clip, a fade, a
+            # layer or new parts, all)
             every = root in remade or self._posed.get(root) != animation.clip or fade is not None
-            pose_parts(world, root, animation.clip, animation.time, every, fade)
-            self._posed[root] = animation.clip
+            pose_parts(world, root, animation.clip, animation.time, every, fade, laid)
+            self._posed[root] = animation.clip if layer is None else None
 
     def _place(self, changed: set[int]) -> None:
         world = self.world
@@ -96,9 +106,13 @@ class ModelSystem(esper.Processor):
             respawn_parts(world, root, roots=[Path(model.file).parent, *user_asset_roots()])
 
 
-def _moved_on(loaded, name: str, time: float, dt: float, animation: Animation) -> float:
-    """Clip ``name``'s time ``time`` moved on by ``dt`` x the animation's speed: wrapped at the
-    clip's end when it loops, held at its ends when not (a clip the file lacks: as it is)."""
+_AT_REST = Animation(playing=False)  # a root with a layer and no Animation: the layer over the rest pose
+
+
+def _moved_on(loaded, name: str, time: float, dt: float, animation: Animation | AnimationLayer) -> float:
+    """Clip ``name``'s time ``time`` moved on by ``dt`` x the animation's (or layer's) speed:
+    wrapped at the clip's end when it loops, held at its ends when not (a clip the file lacks:
+    as it is)."""
     clip = next((c for c in loaded.animations if c.name == name), None)
     if clip is None or not name:
         return time

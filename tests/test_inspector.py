@@ -1270,3 +1270,26 @@ def test_the_maps_read_at_the_second_uv_set_are_ticked(scene, ctx):
         draw()
         assert "  second_uv_maps = ['occlusion_map']" in overlay.inspector_lines
         assert editor.undo() and world.get(box, Material).second_uv_maps == ()
+
+
+def test_an_animation_layers_clip_is_chosen_from_its_models_clips(scene, ctx, tmp_path):
+    """An AnimationLayer's clip is offered as the Animation's is (the model's clips); a clip
+    the file lacks is refused saying which it has."""
+    from components import AnimationLayer, Model
+    from shell.editor import EditError
+    from tests.test_model_animation import door
+
+    path = door(tmp_path / "door.glb")
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, _):
+        world = runner.world
+        root = editor.create(Transform(position=(0.0, 0.5, 0.0)), Model(file=str(path)),
+                             AnimationLayer(time=1.0, playing=False), name="door")
+        runner.frame()
+        editor.select(root)
+        draw()
+        click("AnimationLayer.clip")
+        assert {"AnimationLayer.clip Open", "AnimationLayer.clip Slide"} <= set(overlay.widgets)
+        click("AnimationLayer.clip Slide")
+        assert world.get(root, AnimationLayer).clip == "Slide"
+        with pytest.raises(EditError, match=r"AnimationLayer.clip: the model file has no clip 'Wave'"):
+            editor.set_field(root, "AnimationLayer", "clip", "Wave")

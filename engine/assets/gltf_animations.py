@@ -58,6 +58,7 @@ class NodeTree:
     parents: list[int | None] = field(default_factory=list)
     rest: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
     matrices: dict[int, np.ndarray] = field(default_factory=dict)
+    names: list[str | None] = field(default_factory=list)  # each node's name in the file (None: none)
     # The same as arrays, and the nodes by depth, made at the first pose (``_tree_arrays``).
     arrays: tuple | None = field(default=None, repr=False, compare=False)
 
@@ -69,7 +70,9 @@ def read_node_tree(doc: dict, what: str) -> NodeTree:
     nodes = doc.get("nodes") if isinstance(doc.get("nodes"), list) else []
     try:
         placed_nodes(doc, nodes)
-        tree = NodeTree(parents=[None] * len(nodes))
+        tree = NodeTree(parents=[None] * len(nodes),
+                        names=[n.get("name") if isinstance(n, dict) and isinstance(n.get("name"), str) else None
+                               for n in nodes])
         for index, node in enumerate(nodes):
             for child in (node.get("children") or []) if isinstance(node, dict) else []:
                 tree.parents[child] = index
@@ -195,7 +198,32 @@ def moved_nodes(tree: NodeTree, clip: Clip) -> set[int]:
     return moved
 
 
-def pose_all(tree: NodeTree, clip: Clip, t: float, fade: tuple[Clip, float, float] | None = None) -> np.ndarray:
+@dataclass(frozen=True)
+class Layer:
+    """An ``AnimationLayer`` as ``pose_all`` lays it over the base pose: its clip at ``time``,
+    its ``weight``, whether it adds (``additive``) or overrides, and the nodes it may act on
+    (``nodes``: a mask a node, ``subtree``'s; None: all)."""
+
+    clip: Clip
+    time: float
+    weight: float
+    additive: bool = False
+    nodes: np.ndarray | None = None
+
+
+def subtree(tree: NodeTree, root: int) -> np.ndarray:
+    """A mask of ``root`` and every node under it (bool, a node each)."""
+    inside = np.zeros(len(tree.parents), bool)
+    for node in range(len(tree.parents)):
+        walk: int | None = node
+        while walk is not None and walk != root:
+            walk = tree.parents[walk]
+        inside[node] = walk == root
+    return inside
+
+
+def pose_all(tree: NodeTree, clip: Clip, t: float, fade: tuple[Clip, float, float] | None = None,
+             layer: Layer | None = None) -> np.ndarray:
     """Every node's model-space matrix at time ``t`` (N, 4, 4): its own transform (the clip's
     channels where it animates it, else at rest) times its parent's, on arrays: each group
     of channels sampled at once (``_sample``), every node's T x R x S made at once, and the
@@ -203,7 +231,8 @@ def pose_all(tree: NodeTree, clip: Clip, t: float, fade: tuple[Clip, float, floa
     numpy calls, not one chain of them a node).  A node outside the scene's tree is its own
     transform.  ``fade``: (the clip faded from, its time, ``clip``'s share from 0 to 1): each
     node's own transforms from the two mixed (translation and scale linearly, rotation along
-    the shorter arc) before they are multiplied down."""
+    the shorter arc) before they are multiplied down.  ``layer``: a second clip laid over
+    that pose (``_layered``)."""
     with_matrix, matrices, levels = _tree_arrays(tree)[3:]
     translation, rotation, scale = _own_transforms(tree, clip, t)
     if fade is not None:
@@ -213,6 +242,8 @@ def pose_all(tree: NodeTree, clip: Clip, t: float, fade: tuple[Clip, float, floa
         scale = old_s + share * (scale - old_s)
         rotation = _slerp_rows(old_r, rotation, share)
         rotation /= np.linalg.norm(rotation, axis=1, keepdims=True)
+    if layer is not None:
+        translation, rotation, scale = _layered(tree, translation, rotation, scale, layer)
     local = trs_matrices(translation, rotation, scale)
     if len(with_matrix):
         local[with_matrix] = matrices
@@ -234,6 +265,61 @@ def _own_transforms(tree: NodeTree, clip: Clip, t: float) -> tuple[np.ndarray, n
         if group.path != "weights":
             own[group.path][group.nodes] = _sample(group, t)
     return own["translation"], own["rotation"], own["scale"]
+
+
+def _layered(tree: NodeTree, translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray,
+             layer: Layer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The base pose's own transforms with ``layer`` laid over them, on the nodes and paths
+    its clip animates (within its mask): overriding, each moved towards the layer's by its
+    weight (translation and scale linearly, rotation along the shorter arc); adding, the
+    layer's change from its clip's first key (sampled at time 0: each channel's first value)
+    times the weight added on (translation and scale: the difference; rotation: the turn
+    from the first key's, taken ``weight`` of the way and applied after the base's)."""
+    own = _own_transforms(tree, layer.clip, layer.time)
+    first = _own_transforms(tree, layer.clip, 0.0) if layer.additive else None
+    result = [translation.copy(), rotation.copy(), scale.copy()]
+    w = layer.weight
+    for group in _groups(layer.clip):
+        if group.path == "weights":
+            continue
+        nodes = group.nodes if layer.nodes is None else group.nodes[layer.nodes[group.nodes]]
+        if not len(nodes):
+            continue
+        k = ("translation", "rotation", "scale").index(group.path)
+        base, theirs = result[k][nodes], own[k][nodes]
+        if k == 1:
+            if layer.additive:
+                turn = _quaternion_product(first[1][nodes] * (-1.0, -1.0, -1.0, 1.0), theirs)  # first^-1 x layer
+                turned = _slerp_rows(np.tile((0.0, 0.0, 0.0, 1.0), (len(nodes), 1)), turn, w)
+                moved = _quaternion_product(base, turned)
+            else:
+                moved = _slerp_rows(base, theirs, w)
+            result[k][nodes] = moved / np.linalg.norm(moved, axis=1, keepdims=True)
+        else:
+            result[k][nodes] = base + w * (theirs - (first[k][nodes] if layer.additive else base))
+    return result[0], result[1], result[2]
+
+
+def layered_weights(base: np.ndarray | None, rest: np.ndarray, node: int, layer: Layer) -> np.ndarray | None:
+    """Node ``node``'s morph weights with ``layer`` over ``base`` (None: its ``rest``, the
+    file's), where its clip animates them within its mask (else ``base`` as it is)."""
+    if layer.nodes is not None and not layer.nodes[node]:
+        return base
+    theirs = pose_weights(layer.clip, layer.time).get(node)
+    if theirs is None:
+        return base
+    under = rest if base is None else base
+    if layer.additive:
+        return under + layer.weight * (theirs - pose_weights(layer.clip, 0.0)[node])
+    return under + layer.weight * (theirs - under)
+
+
+def _quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for each row pair of quaternions (x, y, z, w): b's turn, then a's."""
+    ax, ay, az, aw = a.T
+    bx, by, bz, bw = b.T
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=1)
 
 
 def pose_weights(clip: Clip, t: float) -> dict[int, np.ndarray]:

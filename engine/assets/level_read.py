@@ -57,8 +57,8 @@ except ImportError:  # Python 3.10
 # never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
-        "AmbientOcclusion", "Animation", "Bloom", "Camera", "ColorGrading", "DirectionalLight", "Emissive",
-        "FlyController", "Fog", "HemisphereLight", "Material", "MeshRef",
+        "AmbientOcclusion", "Animation", "AnimationLayer", "Bloom", "Camera", "ColorGrading", "DirectionalLight",
+        "Emissive", "FlyController", "Fog", "HemisphereLight", "Material", "MeshRef",
         "Mirror", "Model", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
         "Skybox", "Tonemap",
@@ -379,13 +379,21 @@ def _check_model(path: Path, index: int, name: str, parts: list[tuple[type, dict
         field = "variant" if variant and "has no material variant" in problem else "file"
         raise LevelError(path, problem, lines.get((index, "Model", field), lines.get((index, "Model"))), name,
                          f"Model.{field}")
-    clip = fields.get("Animation", {}).get("clip", "")
-    clips = [c.name for c in assets.models[(model["file"], variant)].animations]
-    if clip and clip not in clips:
-        having = f"its clips: {', '.join(repr(c) for c in clips)}" if clips else "it has none"
-        raise LevelError(path, f"the model file has no animation clip {clip!r} ({having})",
-                         lines.get((index, "Animation", "clip"), lines.get((index, "Animation"))), name,
-                         "Animation.clip")
+    loaded = assets.models[(model["file"], variant)]
+    clips = [c.name for c in loaded.animations]
+    for kind in ("Animation", "AnimationLayer"):
+        clip = fields.get(kind, {}).get("clip", "")
+        if clip and clip not in clips:
+            having = f"its clips: {', '.join(repr(c) for c in clips)}" if clips else "it has none"
+            raise LevelError(path, f"the model file has no animation clip {clip!r} ({having})",
+                             lines.get((index, kind, "clip"), lines.get((index, kind))), name, f"{kind}.clip")
+    root = fields.get("AnimationLayer", {}).get("root", "")
+    nodes = [n for n in (loaded.node_tree.names if loaded.node_tree is not None else []) if n]
+    if root and root not in nodes:
+        raise LevelError(path, f"the model file has no node {root!r} (its nodes: "
+                         f"{', '.join(repr(n) for n in nodes[:12]) or 'none named'})",
+                         lines.get((index, "AnimationLayer", "root"), lines.get((index, "AnimationLayer"))), name,
+                         "AnimationLayer.root")
 
 
 def _model_problem(file: str, variant: str, assets: LevelAssets) -> str | None:

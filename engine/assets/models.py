@@ -36,7 +36,16 @@ from components import (
 )
 from components.limits import MAX_MORPH_WEIGHT
 from components.model import MAX_MODEL_PROBES, Animation, FromModel, Model
-from engine.assets.gltf_animations import Clip, collapsed, moved_nodes, pose_all, pose_weights
+from engine.assets.gltf_animations import (
+    Clip,
+    Layer,
+    collapsed,
+    layered_weights,
+    moved_nodes,
+    pose_all,
+    pose_weights,
+    subtree,
+)
 from engine.assets.gltf_skins import joint_matrices
 from engine.assets.mesh import LoadedModel, flat_plane, load_model_file
 from engine.assets.model_cameras import ModelCamera
@@ -58,6 +67,7 @@ class SpawnedModel:
     nodes: list[int | None] = field(default_factory=list)  # each part's glTF node (None: not animated)
     loaded: LoadedModel | None = None                        # its clips, node tree and skins
     skins: list[int | None] = field(default_factory=list)  # each part's skin (None: not skinned)
+    masks: dict[str, np.ndarray] = field(default_factory=dict)  # an AnimationLayer's root -> its nodes (subtree)
 
 
 class SpawnedModels(dict):
@@ -313,7 +323,8 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
 
 
 def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True,
-               fade: tuple[str, float, float] | None = None) -> None:
+               fade: tuple[str, float, float] | None = None,
+               layer: tuple[str, float, float, str, str] | None = None) -> None:
     """Put ``root``'s parts where clip ``clip_name`` of its model puts their nodes at
     ``time`` (seconds); "" puts them at rest.  Its lights and cameras follow their nodes (a
     camera unscaled; a directional light's direction turned, as the root stands now), its
@@ -321,8 +332,9 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
     the parts the clip moves (their node or an ancestor animated) are written, so the others
     stay unchanged for the stages after (no rows uploaded, no shadow drawn again).  ``fade``:
     (the clip faded from, its time, ``clip_name``'s share from 0 to 1), the two poses mixed
-    (``gltf_animations.pose_all``; every part written).  A clip the model lacks is an
-    AssetError naming the entity and the clips it has."""
+    (``gltf_animations.pose_all``; every part written).  ``layer``: an ``AnimationLayer``'s
+    (clip, time, weight, blend, root) laid over that pose (every part written).  A clip or
+    layer root the model lacks is an AssetError naming the entity and those it has."""
     record = world.resources.get(SpawnedModels, {}).get(root)
     if record is None or record.loaded is None:
         if clip_name:
@@ -339,17 +351,20 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
 
     clip = found(clip_name) if clip_name else None
     fading = (found(fade[0]), fade[1], fade[2]) if fade is not None and fade[0] else None
+    laid = None
+    if layer is not None and layer[0]:
+        laid = Layer(found(layer[0]), layer[1], layer[2], layer[3] == "additive", _layer_mask(root, record, layer[4]))
     placed = None
-    if clip is None and fading is None:
+    if clip is None and fading is None and laid is None:
         matrices = {}
     else:  # (every node: the parts', the joints')
-        placed = pose_all(record.loaded.node_tree, clip or _REST, time, fading)
+        placed = pose_all(record.loaded.node_tree, clip or _REST, time, fading, laid)
         matrices = {node: placed[node] for node in record.nodes if node is not None}
-    every = every or fading is not None
+    every = every or fading is not None or laid is not None
     moved = moved_nodes(record.loaded.node_tree, clip) if clip is not None and not every else None
     if any(skin is not None for skin in record.skins):
         _pose_skins(world, record, clip, time, moved, placed)
-    _pose_morphs(world, record, clip, time, every, fading)
+    _pose_morphs(world, record, clip, time, every, fading, laid)
     if moved is not None:
         matrices = {node: m for node, m in matrices.items() if node in moved}
     loaded = record.loaded
@@ -415,12 +430,30 @@ def _pose_skins(world: World, record: SpawnedModel, clip: Clip | None, time: flo
             world.get(entity, Skin).joint_matrices = palettes[skin]
 
 
+def _layer_mask(root: int, record: SpawnedModel, name: str) -> np.ndarray | None:
+    """The nodes an AnimationLayer whose ``root`` is ``name`` acts on (None: all), found once
+    a model; a name no node of the model has is an AssetError naming the entity and its
+    nodes' names."""
+    if not name:
+        return None
+    mask = record.masks.get(name)
+    if mask is None:
+        tree = record.loaded.node_tree
+        if name not in tree.names:
+            named = [n for n in tree.names if n]
+            shown = ", ".join(repr(n) for n in named[:12]) + (f" and {len(named) - 12} more" if len(named) > 12 else "")
+            raise AssetError(f"entity {root}'s AnimationLayer: its model has no node {name!r} "
+                             f"(its nodes: {shown or 'none named'})")
+        mask = record.masks[name] = subtree(tree, tree.names.index(name))
+    return mask
+
+
 def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: float, every: bool,
-                 fading: tuple[Clip, float, float] | None = None) -> None:
+                 fading: tuple[Clip, float, float] | None = None, layer: Layer | None = None) -> None:
     """Set the ``Morph`` of ``record``'s morphed parts: the weights ``clip``'s ``weights``
     channels give their nodes at ``time``, the file's (the node's or its mesh's) where none
     does; ``every`` False: only the parts a channel animates; ``fading``: mixed from the
-    clip faded from's by ``clip``'s share."""
+    clip faded from's by ``clip``'s share; ``layer``: a layer's laid over them."""
     sampled = pose_weights(clip, time) if clip is not None else {}
     before = pose_weights(fading[0], fading[1]) if fading is not None else None
     for entity, part in zip(record.parts, record.loaded.parts, strict=False):
@@ -431,6 +464,8 @@ def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: fl
             rest = np.array(part.morph_weights)
             old = before.get(part.node, rest)
             weights = old + fading[2] * ((rest if weights is None else weights) - old)
+        if layer is not None:
+            weights = layered_weights(weights, np.array(part.morph_weights), part.node, layer)
         if weights is not None:
             world.get(entity, Morph).weights = np.clip(weights, -MAX_MORPH_WEIGHT, MAX_MORPH_WEIGHT)
         elif every:
