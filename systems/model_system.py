@@ -45,10 +45,11 @@ class ModelSystem(esper.Processor):
             self._place(changed)
         self._animate(dt, changed)
         turned = world.changed(Transform)
-        if turned:  # a model turned by its root: its suns' directions with it
+        if turned:  # a model turned by its root, or by an entity it hangs under: its suns' directions with it
             spawned = world.resources.get(SpawnedModels, {})
-            for root in [root for root in spawned if root in turned and root not in changed]:
-                turn_suns(world, root)
+            for root in [root for root, record in spawned.items() if record.suns and root not in changed]:
+                if _moved_above(world, root, turned):
+                    turn_suns(world, root)
 
     def _animate(self, dt: float, remade: set[int]) -> None:
         """Move each playing ``Animation`` on by ``dt`` x its speed (wrapped at the clip's end
@@ -104,6 +105,19 @@ class ModelSystem(esper.Processor):
             if record is not None and record.key == model_key(model):
                 continue
             respawn_parts(world, root, roots=[Path(model.file).parent, *user_asset_roots()])
+
+
+def _moved_above(world: World, entity: int, turned: set[int]) -> bool:
+    """Whether ``entity``'s Transform or one of its parents' is among ``turned``."""
+    seen = 0
+    walk: int | None = entity
+    while walk is not None and world.exists(walk) and seen <= 256:  # (a cycle is refused elsewhere)
+        if walk in turned:
+            return True
+        transform = world.try_get(walk, Transform)
+        walk = transform.parent if transform is not None else None
+        seen += 1
+    return False
 
 
 _AT_REST = Animation(playing=False)  # a root with a layer and no Animation: the layer over the rest pose

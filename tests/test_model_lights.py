@@ -144,3 +144,25 @@ def test_a_missing_light_or_one_past_half_floats_is_refused(tmp_path):
     spawn_model(world, path, light_scale=0.5)
     ((_, sun),) = list(world.query_one(DirectionalLight))
     assert sun.intensity == pytest.approx(50000.0)
+
+
+def test_a_models_sun_turns_with_an_entity_it_hangs_under(tmp_path):
+    """A model placed under a turntable entity: turning the turntable (the model's root
+    untouched) turns the file's sun with it, as turning the root does."""
+    from systems.model_system import ModelSystem
+
+    nodes = [{"extensions": {"KHR_lights_punctual": {"light": 0}}}]
+    path = lit_file(tmp_path / "sun.glb", [{"type": "directional", "intensity": 3.0}], nodes)
+    world = World("turntable")
+    table = world.spawn(Transform())
+    root = spawn_model(world, path)
+    world.get(root, Transform).parent = table
+    stage = ModelSystem(world)
+    stage.process(0.0)
+    ((_, sun),) = list(world.query_one(DirectionalLight))
+    np.testing.assert_allclose(list(sun.direction), [0.0, 0.0, -1.0], atol=1e-6)
+    world.step(0.0)   # (the frame over: its changes forgotten)
+    turn = glm.angleAxis(math.radians(90.0), glm.vec3(0.0, 1.0, 0.0))
+    world.get(table, Transform).rotation = turn
+    stage.process(0.0)
+    np.testing.assert_allclose(list(sun.direction), list(turn * glm.vec3(0.0, 0.0, -1.0)), atol=1e-6)

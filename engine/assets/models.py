@@ -69,6 +69,11 @@ class SpawnedModel:
     skins: list[int | None] = field(default_factory=list)  # each part's skin (None: not skinned)
     masks: dict[str, np.ndarray] = field(default_factory=dict)  # an AnimationLayer's root -> its nodes (subtree)
 
+    @property
+    def suns(self) -> bool:
+        """Whether its file carries a directional light (turned with the model: ``turn_suns``)."""
+        return self.loaded is None or any(light.kind == "directional" for light in self.loaded.lights)
+
 
 class SpawnedModels(dict):
     """The world's resource: root entity -> ``SpawnedModel``."""
