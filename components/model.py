@@ -84,7 +84,16 @@ class Animation(TrackedComponent):
     that clip's at ``fade_from_time`` (moved on as ``time`` is) blended into ``clip``'s by
     ``faded`` / ``fade_seconds`` (translations and scales mixed, rotations along the shorter
     arc), ``faded`` moved on by the frame's time; once it reaches ``fade_seconds`` the fade
-    ends (``fade_from`` ""). ``engine.assets.models.crossfade`` starts one."""
+    ends (``fade_from`` ""). ``engine.assets.models.crossfade`` starts one.
+
+    Root motion (Unity's "Apply Root Motion", Godot's root motion track): ``root_motion``
+    names the node whose travel carries a walk (a character's hips; "" none).  Its travel
+    across the ground (the model's x and z) from the clip's first key is taken out of the
+    pose, so the model walks on the spot, and moves the root's Transform instead, each frame
+    by what the clip travelled in that frame (turned and scaled as the root is; a loop's
+    wrap carries on from where it ended), so a game steers and collides the root.  Its
+    height (a walk's bob) stays in the pose.  The travel is the clip's own (``clip``'s, not
+    a fade's or a layer's)."""
 
     SHAREABLE = False
     clip: str = ""
@@ -96,10 +105,13 @@ class Animation(TrackedComponent):
     fade_from_time: float = 0.0
     fade_seconds: float = 0.0
     faded: float = 0.0
+    root_motion: str = ""
 
     def _validate(self, name: str, value: Any) -> Any:
         if name in ("clip", "fade_from") and not isinstance(value, str):
             raise ComponentValueError(f"Animation.{name} must be a clip's name (a str; \"\": none), got {value!r}")
+        if name == "root_motion" and not isinstance(value, str):
+            raise ComponentValueError(f"Animation.root_motion must be a node's name (a str; \"\": none), got {value!r}")
         if name in ("time", "fade_from_time", "faded"):
             return finite(self, name, value, low=0.0)
         if name == "fade_seconds":

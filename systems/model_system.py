@@ -22,14 +22,25 @@ raises an AssetError naming the entity and the file, and leaves its old parts st
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import esper
+from pyglm import glm
 
 from components import Transform
 from components.model import Animation, AnimationLayer, Model
 from engine.assets.level_assets import user_asset_roots
-from engine.assets.models import SpawnedModels, model_key, pose_parts, remove_parts, respawn_parts, turn_suns
+from engine.assets.models import (
+    SpawnedModels,
+    clip_duration,
+    model_key,
+    pose_parts,
+    remove_parts,
+    respawn_parts,
+    root_travel,
+    turn_suns,
+)
 from engine.core.world import World
 
 
@@ -71,6 +82,7 @@ class ModelSystem(esper.Processor):
             if not (moving or layer_moving or root in changed or root in remade):
                 continue
             fade = None
+            before = animation.time
             if moving and record is not None and record.loaded is not None:
                 animation.time = _moved_on(record.loaded, animation.clip, animation.time, dt, animation)
                 if animation.fade_from:
@@ -89,8 +101,12 @@ class ModelSystem(esper.Processor):
             # (a clip only moved on rewrites only the parts it moves; another clip, a fade, a
             # layer or new parts, all)
             every = root in remade or self._posed.get(root) != animation.clip or fade is not None
-            pose_parts(world, root, animation.clip, animation.time, every, fade, laid)
+            walking = bool(animation.root_motion and animation.clip)
+            pose_parts(world, root, animation.clip, animation.time, every, fade, laid,
+                       animation.root_motion if walking else "")
             self._posed[root] = animation.clip if layer is None else None
+            if walking and moving:
+                _walk_root(world, root, animation, before, dt)
 
     def _place(self, changed: set[int]) -> None:
         world = self.world
@@ -105,6 +121,23 @@ class ModelSystem(esper.Processor):
             if record is not None and record.key == model_key(model):
                 continue
             respawn_parts(world, root, roots=[Path(model.file).parent, *user_asset_roots()])
+
+
+def _walk_root(world: World, root: int, animation: Animation, before: float, dt: float) -> None:
+    """Move ``root`` by what its clip carried the root-motion node across the ground this
+    frame (``Animation.root_motion``): the travel at the new time less at ``before``, plus a
+    whole clip's travel for each time a loop wrapped (forwards or back), turned and scaled as
+    the root is (model space to its parent's)."""
+    duration = clip_duration(world, root, animation.clip)
+    wraps = 0
+    if animation.loop and duration > 0.0:
+        wraps = math.floor((before + dt * animation.speed) / duration)
+    travel = root_travel(world, root, animation.clip, animation.root_motion, animation.time) \
+        - root_travel(world, root, animation.clip, animation.root_motion, before)
+    if wraps:
+        travel = travel + wraps * root_travel(world, root, animation.clip, animation.root_motion, duration)
+    transform = world.get(root, Transform)
+    transform.position = transform.position + transform.rotation * (transform.scale * glm.vec3(*travel))
 
 
 def _moved_above(world: World, entity: int, turned: set[int]) -> bool:

@@ -387,13 +387,13 @@ def _check_model(path: Path, index: int, name: str, parts: list[tuple[type, dict
             having = f"its clips: {', '.join(repr(c) for c in clips)}" if clips else "it has none"
             raise LevelError(path, f"the model file has no animation clip {clip!r} ({having})",
                              lines.get((index, kind, "clip"), lines.get((index, kind))), name, f"{kind}.clip")
-    root = fields.get("AnimationLayer", {}).get("root", "")
     nodes = [n for n in (loaded.node_tree.names if loaded.node_tree is not None else []) if n]
-    if root and root not in nodes:
-        raise LevelError(path, f"the model file has no node {root!r} (its nodes: "
-                         f"{', '.join(repr(n) for n in nodes[:12]) or 'none named'})",
-                         lines.get((index, "AnimationLayer", "root"), lines.get((index, "AnimationLayer"))), name,
-                         "AnimationLayer.root")
+    for kind, field in (("AnimationLayer", "root"), ("Animation", "root_motion")):
+        node = fields.get(kind, {}).get(field, "")
+        if node and node not in nodes:
+            raise LevelError(path, f"the model file has no node {node!r} (its nodes: "
+                             f"{', '.join(repr(n) for n in nodes[:12]) or 'none named'})",
+                             lines.get((index, kind, field), lines.get((index, kind))), name, f"{kind}.{field}")
 
 
 def _model_problem(file: str, variant: str, assets: LevelAssets) -> str | None:

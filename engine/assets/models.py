@@ -55,7 +55,8 @@ from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 
 __all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key", "pose_parts",
-           "remove_parts", "respawn_parts", "skin_palettes", "spawn_model", "spawn_parts", "turn_suns", "crossfade"]
+           "remove_parts", "respawn_parts", "root_travel", "clip_duration", "skin_palettes", "spawn_model",
+           "spawn_parts", "turn_suns", "crossfade"]
 
 @dataclass
 class SpawnedModel:
@@ -68,6 +69,7 @@ class SpawnedModel:
     loaded: LoadedModel | None = None                        # its clips, node tree and skins
     skins: list[int | None] = field(default_factory=list)  # each part's skin (None: not skinned)
     masks: dict[str, np.ndarray] = field(default_factory=dict)  # an AnimationLayer's root -> its nodes (subtree)
+    starts: dict[tuple, np.ndarray] = field(default_factory=dict)  # (clip, node) -> its place at the clip's start
 
     @property
     def suns(self) -> bool:
@@ -329,7 +331,7 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
 
 def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True,
                fade: tuple[str, float, float] | None = None,
-               layer: tuple[str, float, float, str, str] | None = None) -> None:
+               layer: tuple[str, float, float, str, str] | None = None, hold: str = "") -> None:
     """Put ``root``'s parts where clip ``clip_name`` of its model puts their nodes at
     ``time`` (seconds); "" puts them at rest.  Its lights and cameras follow their nodes (a
     camera unscaled; a directional light's direction turned, as the root stands now), its
@@ -339,7 +341,9 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
     (the clip faded from, its time, ``clip_name``'s share from 0 to 1), the two poses mixed
     (``gltf_animations.pose_all``; every part written).  ``layer``: an ``AnimationLayer``'s
     (clip, time, weight, blend, root) laid over that pose (every part written).  A clip or
-    layer root the model lacks is an AssetError naming the entity and those it has."""
+    layer root the model lacks is an AssetError naming the entity and those it has.  ``hold``:
+    the node whose travel across the ground ``clip_name`` carries (``Animation.root_motion``),
+    taken out of the pose with everything under it (``root_travel``)."""
     record = world.resources.get(SpawnedModels, {}).get(root)
     if record is None or record.loaded is None:
         if clip_name:
@@ -364,6 +368,9 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
         matrices = {}
     else:  # (every node: the parts', the joints')
         placed = pose_all(record.loaded.node_tree, clip or _REST, time, fading, laid)
+        if hold and clip is not None:  # walked on the spot: the travel moves the root instead
+            travel = root_travel(world, root, clip_name, hold, time)
+            placed[_layer_mask(root, record, hold, "Animation.root_motion"), :3, 3] -= travel
         matrices = {node: placed[node] for node in record.nodes if node is not None}
     every = every or fading is not None or laid is not None
     moved = moved_nodes(record.loaded.node_tree, clip) if clip is not None and not every else None
@@ -435,22 +442,51 @@ def _pose_skins(world: World, record: SpawnedModel, clip: Clip | None, time: flo
             world.get(entity, Skin).joint_matrices = palettes[skin]
 
 
-def _layer_mask(root: int, record: SpawnedModel, name: str) -> np.ndarray | None:
-    """The nodes an AnimationLayer whose ``root`` is ``name`` acts on (None: all), found once
-    a model; a name no node of the model has is an AssetError naming the entity and its
-    nodes' names."""
+def _layer_mask(root: int, record: SpawnedModel, name: str, owner: str = "AnimationLayer") -> np.ndarray | None:
+    """The nodes an AnimationLayer whose ``root`` is ``name`` acts on (None: all), or those
+    under ``Animation.root_motion``'s node (``owner``), found once a model; a name no node of
+    the model has is an AssetError naming the entity, ``owner`` and its nodes' names."""
     if not name:
         return None
     mask = record.masks.get(name)
     if mask is None:
-        tree = record.loaded.node_tree
-        if name not in tree.names:
-            named = [n for n in tree.names if n]
-            shown = ", ".join(repr(n) for n in named[:12]) + (f" and {len(named) - 12} more" if len(named) > 12 else "")
-            raise AssetError(f"entity {root}'s AnimationLayer: its model has no node {name!r} "
-                             f"(its nodes: {shown or 'none named'})")
-        mask = record.masks[name] = subtree(tree, tree.names.index(name))
+        mask = record.masks[name] = subtree(record.loaded.node_tree, _named_node(root, record, name, owner))
     return mask
+
+
+def _named_node(root: int, record: SpawnedModel, name: str, owner: str) -> int:
+    """The index of ``root``'s model's node called ``name`` (an AssetError naming ``owner``
+    and the nodes it has where none is)."""
+    tree = record.loaded.node_tree
+    if name not in tree.names:
+        named = [n for n in tree.names if n]
+        shown = ", ".join(repr(n) for n in named[:12]) + (f" and {len(named) - 12} more" if len(named) > 12 else "")
+        raise AssetError(f"entity {root}'s {owner}: its model has no node {name!r} "
+                         f"(its nodes: {shown or 'none named'})")
+    return tree.names.index(name)
+
+
+def root_travel(world: World, root: int, clip_name: str, node_name: str, time: float) -> np.ndarray:
+    """How far clip ``clip_name`` of ``root``'s model has carried node ``node_name`` across the
+    ground at ``time`` (model space, x and z; y 0) from where it stood at the clip's start:
+    what ``Animation.root_motion`` takes out of the pose and moves the root by."""
+    record = world.resources[SpawnedModels][root]
+    clip = next(c for c in record.loaded.animations if c.name == clip_name)
+    node = _named_node(root, record, node_name, "Animation.root_motion")
+    start = record.starts.get((clip_name, node))
+    if start is None:
+        start = record.starts[(clip_name, node)] = pose_all(record.loaded.node_tree, clip, 0.0)[node, :3, 3].copy()
+    travel = pose_all(record.loaded.node_tree, clip, time)[node, :3, 3] - start
+    travel[1] = 0.0
+    return travel
+
+
+def clip_duration(world: World, root: int, clip_name: str) -> float:
+    """The length in seconds of clip ``clip_name`` of ``root``'s model (0: none such)."""
+    record = world.resources.get(SpawnedModels, {}).get(root)
+    clip = next((c for c in record.loaded.animations if c.name == clip_name), None) \
+        if record is not None and record.loaded is not None else None
+    return clip.duration if clip is not None else 0.0
 
 
 def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: float, every: bool,
