@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
 
-from engine.assets.gltf_accessors import dense_sparse_accessors, float_normalized_accessors
+from engine.assets.gltf_accessors import BufferBytes, dense_sparse_accessors, float_normalized_accessors
 from engine.assets.gltf_animations import read_animations, read_node_tree
+from engine.assets.gltf_compression import decode_basisu_textures, decode_meshopt_views, missing_decoders
 from engine.assets.gltf_instancing import expand_gpu_instancing
 from engine.assets.gltf_morphs import node_weights, read_morphs
 from engine.assets.gltf_skins import read_skins
@@ -471,13 +472,15 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 # them a material: engine/assets/gltf_uv_sets.py; lights: engine/assets/model_lights.py; glass:
 # transmission, ior, volume, dispersion; a clear coat; a sheen; anisotropy; a thin film; unlit; material variants:
 # engine/assets/gltf_variants.py; packed vertex data: engine/assets/gltf_accessors.py;
-# instancing: engine/assets/gltf_instancing.py; WebP images)
+# instancing: engine/assets/gltf_instancing.py; WebP images; meshopt-packed data and KTX2
+# images, with their optional packages: engine/assets/gltf_compression.py)
 GLTF_READ_EXTENSIONS = frozenset({
     "EXT_mesh_gpu_instancing", "EXT_texture_webp", "KHR_lights_punctual", "KHR_materials_anisotropy",
     "KHR_materials_clearcoat", "KHR_materials_dispersion", "KHR_materials_iridescence",
     "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_sheen", "KHR_materials_specular",
     "KHR_materials_transmission", "KHR_materials_variants",
-    "KHR_materials_unlit", "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform"})
+    "KHR_materials_unlit", "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform",
+    "EXT_meshopt_compression", "KHR_texture_basisu"})
 
 
 def _texture_set(info: object) -> int | str:
@@ -583,6 +586,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     required = doc.get("extensionsRequired")
     missing = sorted(str(name) for name in required if name not in GLTF_READ_EXTENSIONS) \
         if isinstance(required, list) else []
+    missing += missing_decoders(required if isinstance(required, list) else [])
     if missing:
         raise AssetError(f"{what}: requires the glTF extension{'s' if len(missing) > 1 else ''} "
                          f"{', '.join(missing)}, which the engine does not read (glTF: a file a loader cannot "
@@ -601,6 +605,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
             read_buffers[number] = _buffer_bytes(doc, number, resolver, chunks)
         return read_buffers[number]
 
+    decode_meshopt_views(doc, buffer_bytes, what)  # (first of all: the views the others read, made plain)
     dense_sparse_accessors(doc, buffer_bytes, what)  # (first: a sparse normalised one is then decoded too)
     float_normalized_accessors(doc, buffer_bytes, what)
     expand_gpu_instancing(doc, buffer_bytes, what)
@@ -614,6 +619,8 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     animations = read_animations(doc, buffer_bytes, what)
     materials = doc.get("materials") if isinstance(doc.get("materials"), list) else []
     textures_list = doc.get("textures") if isinstance(doc.get("textures"), list) else []
+    decode_basisu_textures(doc, lambda number: _image_bytes(doc, number, buffer_bytes, path, roots, resolver, what),
+                           what)
     for texture in textures_list:
         # EXT_texture_webp: a WebP image (Pillow decodes it) in place of the fallback "source"
         extensions = texture.get("extensions") if isinstance(texture, dict) else None
@@ -709,6 +716,31 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     if animations or skins:  # (its nodes' rest transforms: what the clips' poses and the skins start from)
         result.node_tree = read_node_tree(doc, what)
     return result
+
+
+def _image_bytes(doc: dict, number: int, buffer_bytes: BufferBytes, path: Path, roots, resolver: CheckedFiles,
+                 what: str) -> bytes | memoryview | None:
+    """Image ``number``'s bytes: its view's (checked against its buffer), its base64 data's,
+    or its file's (found and read as any side file); None where it names none."""
+    image = doc["images"][number] if isinstance(doc["images"][number], dict) else {}
+    uri, view = image.get("uri"), image.get("bufferView")
+    if isinstance(uri, str) and uri.startswith("data:"):
+        try:
+            return base64.b64decode(uri.split(",", 1)[1], validate=False)
+        except (ValueError, IndexError):
+            return None
+    if isinstance(uri, str):
+        _uri(path, uri, roots, f"image {number}", resolver, True, what)
+        return resolver.bytes_of(uri)
+    views = doc.get("bufferViews") if isinstance(doc.get("bufferViews"), list) else []
+    if not _index_in(view, views) or not isinstance(views[view], dict):
+        return None
+    entry = views[view]
+    data = buffer_bytes(entry.get("buffer", 0)) if isinstance(entry.get("buffer", 0), int) else None
+    start, length = entry.get("byteOffset", 0), entry.get("byteLength", 0)
+    if data is None or not all(isinstance(v, int) and v >= 0 for v in (start, length)) or start + length > len(data):
+        raise AssetError(f"{what}: image {number}: its bufferView {view} lies outside its buffer")
+    return data[start:start + length]
 
 
 def _index_in(index, items: list) -> bool:

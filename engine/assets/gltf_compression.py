@@ -1,0 +1,145 @@
+"""Compressed glTF: ``EXT_meshopt_compression``'s buffer views and ``KHR_texture_basisu``'s
+KTX2 images made plain before trimesh reads the file.
+
+gltfpack and glTF-Transform write both for the web: vertex and index data packed by
+meshoptimizer's codecs (often a quarter of the bytes, with ``KHR_mesh_quantization``), and
+textures as Basis Universal KTX2 (a tenth of a PNG on the GPU).  Each compressed view is
+decoded (``decode_meshopt_views``: the meshopt package's decoder, its filters undone: octahedral
+normals, quaternions, exponents, colours) into a buffer of the engine's making, a ``data:``
+URI, and the view pointed at it; each KTX2 image a texture names is transcoded to PNG
+(``decode_basisu_textures``: the alktx2 package, Basis Universal's transcoder) and the texture
+pointed at it.  The packages are optional (``pip install speculum[compressed]``): a file that
+requires an extension whose package is missing is refused naming the package
+(``missing_decoders``); one that only uses it keeps its fallback (uncompressed data or a PNG).
+"""
+from __future__ import annotations
+
+import base64
+import importlib
+from collections.abc import Callable
+
+from engine.assets.gltf_accessors import BufferBytes
+from engine.core.errors import AssetError
+
+MESHOPT = "EXT_meshopt_compression"
+BASISU = "KHR_texture_basisu"
+# extension -> the package that decodes it
+DECODERS = {MESHOPT: "meshopt", BASISU: "alktx2"}
+MESHOPT_MODES = ("ATTRIBUTES", "TRIANGLES", "INDICES")
+MESHOPT_FILTERS = ("NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL", "COLOR")
+
+
+def _decoder(extension: str):
+    """The package that decodes ``extension`` (None: not installed)."""
+    try:
+        return importlib.import_module(DECODERS[extension])
+    except ImportError:
+        return None
+
+
+def missing_decoders(required: list[str]) -> list[str]:
+    """Of the extensions a file requires, those this engine reads only with a package that
+    is not installed, each with the package (for the refusal: "... install meshopt")."""
+    return [f"{name} (needs the {DECODERS[name]} package: pip install {DECODERS[name]})"
+            for name in required if name in DECODERS and _decoder(name) is None]
+
+
+def decode_meshopt_views(doc: dict, buffer_bytes: BufferBytes, what: str) -> int:
+    """Decode every bufferView ``EXT_meshopt_compression`` packs into a new buffer (appended
+    to ``doc["buffers"]`` as base64 data) and point the view at it; how many were decoded.
+    Without the meshopt package (the file only uses the extension: its fallback buffer holds
+    the data) nothing is done.  A view whose compressed bytes lie outside its buffer, or
+    whose mode, filter, count or stride are not the extension's, or whose data does not
+    decode, is an AssetError naming it."""
+    views = doc.get("bufferViews") if isinstance(doc.get("bufferViews"), list) else []
+    packed = [(i, view) for i, view in enumerate(views) if isinstance(view, dict)
+              and isinstance(view.get("extensions"), dict) and MESHOPT in view["extensions"]]
+    meshopt = _decoder(MESHOPT) if packed else None
+    if meshopt is None:
+        return 0
+    decoded = bytearray()
+    placed: list[tuple[dict, int, int]] = []
+    for index, view in packed:
+        label = f"{what}: bufferView {index} ({MESHOPT})"
+        ext = view["extensions"][MESHOPT]
+        if not isinstance(ext, dict):
+            raise AssetError(f"{label}: must be an object, got {ext!r}")
+        count, stride, mode = ext.get("count"), ext.get("byteStride"), ext.get("mode")
+        filter_ = ext.get("filter", "NONE")
+        offset, length, buffer = ext.get("byteOffset", 0), ext.get("byteLength"), ext.get("buffer")
+        for name, value in (("count", count), ("byteStride", stride), ("byteLength", length), ("buffer", buffer),
+                            ("byteOffset", offset)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise AssetError(f"{label}: {name} must be a whole number >= 0, got {value!r}")
+        if mode not in MESHOPT_MODES or filter_ not in MESHOPT_FILTERS:
+            raise AssetError(f"{label}: mode must be one of {MESHOPT_MODES} and filter one of {MESHOPT_FILTERS}, "
+                             f"got {mode!r} and {filter_!r}")
+        if (mode == "ATTRIBUTES" and not (stride % 4 == 0 and 4 <= stride <= 256)) or \
+                (mode != "ATTRIBUTES" and stride not in (2, 4)):
+            raise AssetError(f"{label}: byteStride {stride} does not suit mode {mode} (attributes: a multiple of 4 "
+                             "up to 256; triangles and indices: 2 or 4)")
+        source = buffer_bytes(buffer)
+        if source is None or offset + length > len(source):
+            raise AssetError(f"{label}: its {length} bytes at {offset} lie outside buffer {buffer}")
+        try:
+            plain = meshopt.decode_gltf_buffer(bytes(source[offset:offset + length]), count, stride, mode,
+                                               None if filter_ == "NONE" else filter_)
+        except (ValueError, RuntimeError) as exc:
+            raise AssetError(f"{label}: its data does not decode ({exc})") from None
+        data = plain.tobytes()
+        if len(data) != count * stride:
+            raise AssetError(f"{label}: decoded to {len(data)} bytes, not count x byteStride = {count * stride}")
+        while len(decoded) % 4:
+            decoded.append(0)
+        placed.append((view, len(decoded), len(data)))
+        decoded.extend(data)
+    buffers = doc.setdefault("buffers", [])
+    for buffer in buffers:  # a fallback buffer holds nothing: no view reads it now
+        extensions = buffer.get("extensions") if isinstance(buffer, dict) else None
+        if isinstance(extensions, dict) and isinstance(extensions.get(MESHOPT), dict) and "uri" not in buffer:
+            buffer.update(byteLength=0, uri="data:application/octet-stream;base64,")
+            del extensions[MESHOPT]
+    number = len(buffers)
+    buffers.append({"byteLength": len(decoded),
+                    "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(decoded)).decode("ascii")})
+    for view, offset, length in placed:
+        view.update(buffer=number, byteOffset=offset, byteLength=length)
+        del view["extensions"][MESHOPT]
+    return len(placed)
+
+
+def decode_basisu_textures(doc: dict, image_bytes: Callable[[int], bytes | memoryview | None], what: str) -> int:
+    """Point each texture whose ``KHR_texture_basisu`` names a KTX2 image at that image
+    transcoded to PNG (a ``data:`` URI in its place); how many were.  ``image_bytes(i)``:
+    image i's bytes (its file's or its view's; None: none).  Without the alktx2 package (the
+    file only uses the extension: its textures keep their PNG or JPEG ``source``) nothing is
+    done.  A KTX2 image the texture names that the file lacks, or that does not transcode, is
+    an AssetError naming it."""
+    textures = doc.get("textures") if isinstance(doc.get("textures"), list) else []
+    named = [(i, t["extensions"][BASISU]) for i, t in enumerate(textures) if isinstance(t, dict)
+             and isinstance(t.get("extensions"), dict) and BASISU in t["extensions"]]
+    alktx2 = _decoder(BASISU) if named else None
+    if alktx2 is None:
+        return 0
+    images = doc.get("images") if isinstance(doc.get("images"), list) else []
+    done: dict[int, int] = {}
+    for index, ext in named:
+        source = ext.get("source") if isinstance(ext, dict) else None
+        label = f"{what}: texture {index} ({BASISU})"
+        if isinstance(source, bool) or not isinstance(source, int) or not 0 <= source < len(images):
+            raise AssetError(f"{label}: names image {source!r}, which the file does not have")
+        if source not in done:
+            data = image_bytes(source)
+            if data is None:
+                raise AssetError(f"{label}: image {source} has no data")
+            try:
+                png, _ = alktx2.decode_ktx2_to_bytes(bytes(data), format="png", lossless=True)
+            except Exception as exc:  # (the transcoder's own errors: a malformed KTX2)
+                raise AssetError(f"{label}: image {source} is not a KTX2 image Basis Universal can read "
+                                 f"({type(exc).__name__}: {exc})") from None
+            images[source] = {"uri": "data:image/png;base64," + base64.b64encode(png).decode("ascii"),
+                              "mimeType": "image/png"}
+            done[source] = source
+        textures[index]["source"] = source
+        del textures[index]["extensions"][BASISU]
+    return len(named)
