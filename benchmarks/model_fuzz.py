@@ -231,6 +231,8 @@ def random_glb(rng: random.Random) -> ModelCase:
                           **({"normalized": True} if kind == "bytes" else {})})
         doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = len(accessors) - 1
         mutations.append(f"TEXCOORD_1 {kind}")
+    if rng.random() < 0.15:
+        _meshopt(rng, doc, view, positions, mutations)
     if rng.random() < 0.25:
         _skin(rng, doc, view, mutations)
     if rng.random() < 0.25:
@@ -241,6 +243,36 @@ def random_glb(rng: random.Random) -> ModelCase:
         blob.append(0)
     body = struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(blob), b"BIN\0") + bytes(blob)
     return ModelCase("glb", {"model.glb": struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body}, mutations)
+
+
+def _meshopt(rng: random.Random, doc: dict, view, positions: np.ndarray, mutations: list[str]) -> None:
+    """Pack the positions' view with meshoptimizer (EXT_meshopt_compression, required), its
+    extension maybe spoilt: a wrong stride, count, mode or filter, bytes cut short or
+    scrambled; without the meshopt package the file is refused naming it."""
+    try:
+        import meshopt
+    except ImportError:
+        return
+    packed = bytearray(meshopt.encode_gltf_buffer(positions.view(np.uint8).reshape(-1, 12), "ATTRIBUTES"))
+    ext = {"buffer": 0, "byteOffset": 0, "byteLength": len(packed), "byteStride": 12, "count": 6,
+           "mode": "ATTRIBUTES"}
+    spoil = rng.choice(["none", "none", "stride", "count", "mode", "filter", "short", "scramble"])
+    if spoil == "stride":
+        ext["byteStride"] = rng.choice([0, 6, 16, 300])
+    elif spoil == "count":
+        ext["count"] = rng.choice([0, 5, 7, -1, 10 ** 9])
+    elif spoil == "mode":
+        ext["mode"] = rng.choice(["TRIANGLES", "POINTS", 3])
+    elif spoil == "filter":
+        ext["filter"] = rng.choice(["OCTAHEDRAL", "QUATERNION", "BLUR"])
+    elif spoil == "short":
+        ext["byteLength"] = len(packed) // 2
+    elif spoil == "scramble":
+        packed[len(packed) // 2:] = bytes(rng.randrange(256) for _ in range(len(packed) - len(packed) // 2))
+    ext["byteOffset"] = doc["bufferViews"][view(bytes(packed))]["byteOffset"]  # (in the file's own buffer)
+    mutations.append(f"meshopt positions, {spoil}")
+    doc["bufferViews"][0]["extensions"] = {"EXT_meshopt_compression": ext}
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["EXT_meshopt_compression"]
 
 
 def _skin(rng: random.Random, doc: dict, view, mutations: list[str]) -> None:
