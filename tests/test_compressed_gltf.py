@@ -1,6 +1,7 @@
-"""Compressed glTF (engine/assets/gltf_compression.py): a box whose vertex and index views
-are packed by meshoptimizer (``EXT_meshopt_compression``, normals octahedral-filtered bytes
-under ``KHR_mesh_quantization``) loads as the same box written plainly, and draws the same;
+"""Compressed glTF (engine/assets/gltf_compression.py): a box coded by Draco
+(``KHR_draco_mesh_compression``) loads as the box's triangles; a box whose vertex and index
+views are packed by meshoptimizer (``EXT_meshopt_compression``, normals octahedral-filtered
+bytes under ``KHR_mesh_quantization``) loads as the same box written plainly, and draws the same;
 a texture as a Basis Universal KTX2 image (``KHR_texture_basisu``) reads as the picture it
 was made from; a file only using the extensions keeps its fallback; one requiring them
 without their package is refused naming it; malformed data is refused naming the view."""
@@ -175,3 +176,64 @@ def test_a_ktx2_texture_reads_as_the_picture_it_was_made_from(tmp_path):
         patch.setattr(gltf_compression, "_decoder", lambda extension: None)
         with pytest.raises(AssetError, match=r"KHR_texture_basisu \(needs the alktx2 package"):
             load_model_file(path)
+
+
+def draco_box(path: Path, required: bool = True, spoil: str = "") -> Path:
+    """The box as one Draco-coded primitive (positions, normals, UVs and triangles), its
+    accessors naming no view (the Draco data holds them); ``spoil`` "bytes": the Draco data
+    scrambled, "id": an attribute naming an id the data lacks."""
+    draco = pytest.importorskip("DracoPy", reason="the DracoPy package is not installed: KHR_draco_mesh_compression "
+                                                  "cannot be read")
+    uv = BOX.uvs.astype(np.float64).copy()
+    uv[:, 1] = 1.0 - uv[:, 1]
+    coded = bytearray(draco.encode(BOX.positions, BOX.indices.astype(np.uint32), quantization_bits=16,
+                                   normals=BOX.normals.astype(np.float64), tex_coord=uv, preserve_order=True))
+    ids = {a["attribute_type"]: a["unique_id"] for a in draco.decode(bytes(coded)).attributes}
+    if spoil == "bytes":
+        coded[len(coded) // 3:] = bytes(len(coded) - len(coded) // 3)
+    names = {"POSITION": ids[0], "NORMAL": ids[1], "TEXCOORD_0": 99 if spoil == "id" else ids[3]}
+    count = len(BOX.positions)
+    accessors = [{"componentType": 5126, "count": count, "type": "VEC3", "min": BOX.positions.min(0).tolist(),
+                  "max": BOX.positions.max(0).tolist()},
+                 {"componentType": 5126, "count": count, "type": "VEC3"},
+                 {"componentType": 5126, "count": count, "type": "VEC2"},
+                 {"componentType": 5125, "count": BOX.indices.size, "type": "SCALAR"}]
+    used = ["KHR_draco_mesh_compression"]
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}, "indices": 3,
+                                       "material": 0, "extensions": {"KHR_draco_mesh_compression": {
+                                           "bufferView": 0, "attributes": names}}}]}],
+           "materials": [MATERIAL], "accessors": accessors,
+           "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(coded)}],
+           "buffers": [{"byteLength": len(coded)}], "extensionsUsed": used,
+           **({"extensionsRequired": used} if required else {})}
+    path.write_bytes(glb_bytes(doc, bytes(coded)))
+    return path
+
+
+def corners(mesh) -> np.ndarray:
+    """Each triangle's corners (position, normal, uv), rows sorted: the same triangles match
+    whatever order a coder stores them in."""
+    rows = np.hstack([mesh.positions[mesh.indices.ravel()], mesh.normals[mesh.indices.ravel()],
+                      mesh.uvs[mesh.indices.ravel()]]).reshape(len(mesh.indices), -1)
+    return rows[np.lexsort(np.round(rows, 3).T[::-1])]
+
+
+def test_a_draco_coded_box_loads_as_the_box_written_plainly(tmp_path):
+    (part,) = load_model_file(draco_box(tmp_path / "draco.glb")).parts
+    np.testing.assert_allclose(corners(part.mesh), corners(BOX), atol=2e-3)   # (16-bit positions, Draco's normals)
+
+
+@pytest.mark.parametrize("spoil, message", [("bytes", r"its data does not decode"),
+                                            ("id", r"attribute TEXCOORD_0 \(Draco id 99\) is not in its Draco data")])
+def test_a_damaged_draco_primitive_is_refused_naming_it(tmp_path, spoil, message):
+    with pytest.raises(AssetError, match=rf"mesh 0's primitive 0 \(KHR_draco_mesh_compression\): {message}"):
+        load_model_file(draco_box(tmp_path / "bad.glb", spoil=spoil))
+
+
+def test_without_dracopy_a_draco_file_is_refused_naming_the_package(tmp_path, monkeypatch):
+    path = draco_box(tmp_path / "draco.glb")
+    monkeypatch.setattr(gltf_compression, "_decoder", lambda extension: None)
+    with pytest.raises(AssetError, match=r"KHR_draco_mesh_compression \(needs the DracoPy package: pip install "
+                                         r"DracoPy\)"):
+        load_model_file(path)

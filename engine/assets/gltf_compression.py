@@ -1,16 +1,18 @@
-"""Compressed glTF: ``EXT_meshopt_compression``'s buffer views and ``KHR_texture_basisu``'s
-KTX2 images made plain before trimesh reads the file.
+"""Compressed glTF: ``KHR_draco_mesh_compression``'s primitives, ``EXT_meshopt_compression``'s
+buffer views and ``KHR_texture_basisu``'s KTX2 images made plain before trimesh reads the file.
 
-gltfpack and glTF-Transform write both for the web: vertex and index data packed by
-meshoptimizer's codecs (often a quarter of the bytes, with ``KHR_mesh_quantization``), and
-textures as Basis Universal KTX2 (a tenth of a PNG on the GPU).  Each compressed view is
-decoded (``decode_meshopt_views``: the meshopt package's decoder, its filters undone: octahedral
-normals, quaternions, exponents, colours) into a buffer of the engine's making, a ``data:``
-URI, and the view pointed at it; each KTX2 image a texture names is transcoded to PNG
-(``decode_basisu_textures``: the alktx2 package, Basis Universal's transcoder) and the texture
-pointed at it.  The packages are optional (``pip install speculum[compressed]``): a file that
-requires an extension whose package is missing is refused naming the package
-(``missing_decoders``); one that only uses it keeps its fallback (uncompressed data or a PNG).
+Blender and Sketchfab write Draco (a primitive's geometry as one Draco-coded bufferView, a
+tenth of the bytes); gltfpack and glTF-Transform write meshopt (vertex and index data packed
+by meshoptimizer's codecs, often with ``KHR_mesh_quantization``) and Basis Universal KTX2
+textures.  Each Draco primitive is decoded (``decode_draco_primitives``: the DracoPy package,
+Google's decoder) and its accessors pointed at the decoded attributes and triangles; each
+meshopt view is decoded (``decode_meshopt_views``: the meshopt package, its filters undone:
+octahedral normals, quaternions, exponents, colours); each KTX2 image a texture names is
+transcoded to PNG (``decode_basisu_textures``: the alktx2 package, Basis Universal's
+transcoder) and the texture pointed at it.  Decoded data goes into a buffer of the engine's
+making (a ``data:`` URI).  The packages are optional (``pip install speculum[compressed]``):
+a file that requires an extension whose package is missing is refused naming the package
+(``missing_decoders``); one that only uses it keeps its fallback (plain data or a PNG).
 """
 from __future__ import annotations
 
@@ -18,13 +20,16 @@ import base64
 import importlib
 from collections.abc import Callable
 
+import numpy as np
+
 from engine.assets.gltf_accessors import BufferBytes
 from engine.core.errors import AssetError
 
 MESHOPT = "EXT_meshopt_compression"
 BASISU = "KHR_texture_basisu"
+DRACO = "KHR_draco_mesh_compression"
 # extension -> the package that decodes it
-DECODERS = {MESHOPT: "meshopt", BASISU: "alktx2"}
+DECODERS = {MESHOPT: "meshopt", BASISU: "alktx2", DRACO: "DracoPy"}
 MESHOPT_MODES = ("ATTRIBUTES", "TRIANGLES", "INDICES")
 MESHOPT_FILTERS = ("NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL", "COLOR")
 
@@ -42,6 +47,89 @@ def missing_decoders(required: list[str]) -> list[str]:
     is not installed, each with the package (for the refusal: "... install meshopt")."""
     return [f"{name} (needs the {DECODERS[name]} package: pip install {DECODERS[name]})"
             for name in required if name in DECODERS and _decoder(name) is None]
+
+
+# glTF componentType of the arrays a Draco primitive decodes to (its floats, its integer attributes)
+_DRACO_TYPES = {np.dtype(np.float32): 5126, np.dtype(np.uint8): 5121, np.dtype(np.uint16): 5123,
+                np.dtype(np.uint32): 5125, np.dtype(np.int8): 5120, np.dtype(np.int16): 5122}
+
+
+def decode_draco_primitives(doc: dict, buffer_bytes: BufferBytes, what: str) -> int:
+    """Decode every primitive ``KHR_draco_mesh_compression`` codes and point its attribute and
+    index accessors at the decoded arrays (in a new buffer appended to ``doc["buffers"]``);
+    how many were decoded.  Without the DracoPy package (the file only uses the extension:
+    its accessors hold the plain data too) nothing is done.  A primitive whose Draco view
+    lies outside its buffer, whose data does not decode, or which names an attribute its
+    Draco data lacks, is an AssetError naming it."""
+    meshes = doc.get("meshes") if isinstance(doc.get("meshes"), list) else []
+    coded = [(m, p, primitive) for m, mesh in enumerate(meshes) if isinstance(mesh, dict)
+             for p, primitive in enumerate(mesh.get("primitives") or []) if isinstance(primitive, dict)
+             and isinstance(primitive.get("extensions"), dict) and DRACO in primitive["extensions"]]
+    draco = _decoder(DRACO) if coded else None
+    if draco is None:
+        return 0
+    accessors = doc.get("accessors") if isinstance(doc.get("accessors"), list) else []
+    views = doc.setdefault("bufferViews", [])
+    buffers = doc.setdefault("buffers", [])
+    decoded = bytearray()
+    pointed: list[tuple[dict, np.ndarray]] = []
+    for m, p, primitive in coded:
+        label = f"{what}: mesh {m}'s primitive {p} ({DRACO})"
+        ext = primitive["extensions"][DRACO]
+        view = ext.get("bufferView") if isinstance(ext, dict) else None
+        names = ext.get("attributes") if isinstance(ext, dict) else None
+        if isinstance(view, bool) or not isinstance(view, int) or not 0 <= view < len(views) \
+                or not isinstance(views[view], dict) or not isinstance(names, dict):
+            raise AssetError(f"{label}: needs a bufferView the file has and an attributes object, got {ext!r}")
+        data = _view_bytes(views[view], buffer_bytes, label)
+        try:
+            mesh = draco.decode(bytes(data))
+        except Exception as exc:  # (the decoder's own errors: not Draco, or damaged)
+            raise AssetError(f"{label}: its data does not decode ({type(exc).__name__}: {exc})") from None
+        attributes = primitive.get("attributes") if isinstance(primitive.get("attributes"), dict) else {}
+        for name, unique in names.items():
+            accessor = attributes.get(name)
+            found = mesh.get_attribute_by_unique_id(unique) if isinstance(unique, int) else None
+            if found is None or not _index_in(accessor, accessors):
+                raise AssetError(f"{label}: attribute {name} (Draco id {unique!r}) is not in its Draco data or "
+                                 "names no accessor")
+            pointed.append((accessors[accessor], np.ascontiguousarray(found["data"])))
+        faces = getattr(mesh, "faces", None)
+        if "indices" in primitive and faces is not None and _index_in(primitive["indices"], accessors):
+            pointed.append((accessors[primitive["indices"]], np.ascontiguousarray(faces, np.uint32).reshape(-1)))
+        del primitive["extensions"][DRACO]
+    number = len(buffers)
+    for accessor, array in pointed:
+        array = array.astype(np.float32) if array.dtype.kind == "f" else array
+        if array.dtype not in _DRACO_TYPES:
+            array = array.astype(np.uint32 if array.dtype.kind == "u" else np.float32)
+        while len(decoded) % 4:
+            decoded.append(0)
+        views.append({"buffer": number, "byteOffset": len(decoded), "byteLength": array.nbytes})
+        decoded.extend(array.tobytes())
+        accessor.update(bufferView=len(views) - 1, byteOffset=0, count=len(array),
+                        componentType=_DRACO_TYPES[array.dtype])
+        accessor.pop("normalized", None)  # (decoded to the values themselves)
+        accessor.pop("sparse", None)
+        if array.ndim == 2 and "min" in accessor:  # (a position's box, as decoded)
+            accessor["min"], accessor["max"] = array.min(axis=0).tolist(), array.max(axis=0).tolist()
+    buffers.append({"byteLength": len(decoded),
+                    "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(decoded)).decode("ascii")})
+    return len(coded)
+
+
+def _view_bytes(view: dict, buffer_bytes: BufferBytes, label: str) -> bytes | memoryview:
+    """A bufferView's bytes, checked against its buffer."""
+    buffer, offset, length = view.get("buffer"), view.get("byteOffset", 0), view.get("byteLength")
+    source = buffer_bytes(buffer) if isinstance(buffer, int) and not isinstance(buffer, bool) else None
+    if source is None or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in (offset, length)) \
+            or offset + length > len(source):
+        raise AssetError(f"{label}: its bufferView lies outside its buffer")
+    return source[offset:offset + length]
+
+
+def _index_in(index: object, items: list) -> bool:
+    return isinstance(index, int) and not isinstance(index, bool) and 0 <= index < len(items)
 
 
 def decode_meshopt_views(doc: dict, buffer_bytes: BufferBytes, what: str) -> int:

@@ -33,7 +33,12 @@ from urllib.parse import unquote
 
 from engine.assets.gltf_accessors import BufferBytes, dense_sparse_accessors, float_normalized_accessors
 from engine.assets.gltf_animations import read_animations, read_node_tree
-from engine.assets.gltf_compression import decode_basisu_textures, decode_meshopt_views, missing_decoders
+from engine.assets.gltf_compression import (
+    decode_basisu_textures,
+    decode_draco_primitives,
+    decode_meshopt_views,
+    missing_decoders,
+)
 from engine.assets.gltf_instancing import expand_gpu_instancing
 from engine.assets.gltf_morphs import node_weights, read_morphs
 from engine.assets.gltf_skins import read_skins
@@ -480,7 +485,7 @@ GLTF_READ_EXTENSIONS = frozenset({
     "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_sheen", "KHR_materials_specular",
     "KHR_materials_transmission", "KHR_materials_variants",
     "KHR_materials_unlit", "KHR_materials_volume", "KHR_mesh_quantization", "KHR_texture_transform",
-    "EXT_meshopt_compression", "KHR_texture_basisu"})
+    "EXT_meshopt_compression", "KHR_texture_basisu", "KHR_draco_mesh_compression"})
 
 
 def _texture_set(info: object) -> int | str:
@@ -605,7 +610,8 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
             read_buffers[number] = _buffer_bytes(doc, number, resolver, chunks)
         return read_buffers[number]
 
-    decode_meshopt_views(doc, buffer_bytes, what)  # (first of all: the views the others read, made plain)
+    decode_draco_primitives(doc, buffer_bytes, what)  # (first of all: the data the others read, made plain)
+    decode_meshopt_views(doc, buffer_bytes, what)
     dense_sparse_accessors(doc, buffer_bytes, what)  # (first: a sparse normalised one is then decoded too)
     float_normalized_accessors(doc, buffer_bytes, what)
     expand_gpu_instancing(doc, buffer_bytes, what)
