@@ -233,6 +233,8 @@ def random_glb(rng: random.Random) -> ModelCase:
         mutations.append(f"TEXCOORD_1 {kind}")
     if rng.random() < 0.15:
         _meshopt(rng, doc, view, positions, mutations)
+    elif rng.random() < 0.15:
+        _draco(rng, doc, view, positions, indices, mutations)
     if rng.random() < 0.25:
         _skin(rng, doc, view, mutations)
     if rng.random() < 0.25:
@@ -273,6 +275,31 @@ def _meshopt(rng: random.Random, doc: dict, view, positions: np.ndarray, mutatio
     mutations.append(f"meshopt positions, {spoil}")
     doc["bufferViews"][0]["extensions"] = {"EXT_meshopt_compression": ext}
     doc["extensionsUsed"] = doc["extensionsRequired"] = ["EXT_meshopt_compression"]
+
+
+def _draco(rng: random.Random, doc: dict, view, positions: np.ndarray, indices: np.ndarray,
+           mutations: list[str]) -> None:
+    """Code the primitive's positions and triangles with Draco (KHR_draco_mesh_compression,
+    required), maybe spoilt: bytes scrambled or cut short, an attribute id the data lacks, a
+    view the file lacks; without the DracoPy package the file is refused naming it."""
+    try:
+        import DracoPy
+    except ImportError:
+        return
+    coded = bytearray(DracoPy.encode(positions, indices, preserve_order=True))
+    unique = DracoPy.decode(bytes(coded)).attributes[0]["unique_id"]
+    spoil = rng.choice(["none", "none", "scramble", "short", "id", "view"])
+    if spoil == "scramble":
+        coded[len(coded) // 2:] = bytes(rng.randrange(256) for _ in range(len(coded) - len(coded) // 2))
+    elif spoil == "short":
+        coded = coded[: len(coded) // 2]
+    ext = {"bufferView": 99 if spoil == "view" else view(bytes(coded)),
+           "attributes": {"POSITION": unique + 5 if spoil == "id" else unique}}
+    primitive = doc["meshes"][0]["primitives"][0]
+    primitive["extensions"] = {"KHR_draco_mesh_compression": ext}
+    primitive["attributes"] = {"POSITION": 0}
+    mutations.append(f"draco positions, {spoil}")
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]
 
 
 def _skin(rng: random.Random, doc: dict, view, mutations: list[str]) -> None:
