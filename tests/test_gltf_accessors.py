@@ -157,23 +157,27 @@ def test_a_normalized_accessor_that_cannot_be_read_is_refused_naming_it(tmp_path
         load_model(writer.write(tmp_path / "bad.glb", attributes, FLAT.indices))
 
 
-def test_a_webp_texture_is_read_in_place_of_its_fallback(tmp_path):
-    """EXT_texture_webp: the texture's WebP image (lossless here) is the one read, its PNG
-    "source" only a fallback; a texture with the WebP alone reads it too."""
+@pytest.mark.parametrize("kind", ["webp", "avif"])
+def test_a_webp_or_avif_texture_is_read_in_place_of_its_fallback(tmp_path, kind):
+    """EXT_texture_webp and EXT_texture_avif: the texture's WebP or AVIF image (lossless) is
+    the one read, its PNG "source" only a fallback; a texture with that image alone reads it
+    too."""
     import io
 
-    from PIL import Image
+    from PIL import Image, features
 
-    webp_pixels = np.zeros((4, 4, 3), np.uint8)
-    webp_pixels[:, :2] = (200, 30, 30)
-    webp_pixels[:, 2:] = (30, 30, 200)
+    if not features.check(kind):
+        pytest.skip(f"this Pillow decodes no {kind.upper()} (EXT_texture_{kind} files are refused by it)")
+    webp_pixels = np.zeros((16, 16, 3), np.uint8)
+    webp_pixels[:, :8] = (200, 30, 30)
+    webp_pixels[:, 8:] = (30, 30, 200)
     out = io.BytesIO()
-    Image.fromarray(webp_pixels).save(out, format="WEBP", lossless=True)
+    Image.fromarray(webp_pixels).save(out, format=kind.upper(), lossless=True)
     for fallback in (True, False):
         writer = GlbWriter()
         webp_view = writer.view(out.getvalue())
-        images = [{"bufferView": webp_view, "mimeType": "image/webp"}]
-        texture: dict = {"extensions": {"EXT_texture_webp": {"source": 0}}}
+        images = [{"bufferView": webp_view, "mimeType": f"image/{kind}"}]
+        texture: dict = {"extensions": {f"EXT_texture_{kind}": {"source": 0}}}
         if fallback:
             images.append({"bufferView": writer.view(png_bytes(np.full((4, 4, 3), 90, np.uint8))),
                            "mimeType": "image/png"})
@@ -183,7 +187,12 @@ def test_a_webp_texture_is_read_in_place_of_its_fallback(tmp_path):
         path = writer.write(tmp_path / "webp.glb",
                             {"POSITION": float_positions(writer), "TEXCOORD_0": writer.accessor(
                                 gltf_uvs(FLAT).astype(np.float32), "VEC2", 5126)}, FLAT.indices, material=material,
-                            extra={"images": images, "textures": [texture], "extensionsUsed": ["EXT_texture_webp"],
-                                   "extensionsRequired": [] if fallback else ["EXT_texture_webp"]})
+                            extra={"images": images, "textures": [texture],
+                                   "extensionsUsed": [f"EXT_texture_{kind}"],
+                                   "extensionsRequired": [] if fallback else [f"EXT_texture_{kind}"]})
         (part,) = load_model(path)
-        np.testing.assert_array_equal(part.texture.pixels[..., :3], webp_pixels)
+        if kind == "webp":
+            np.testing.assert_array_equal(part.texture.pixels[..., :3], webp_pixels)
+        else:  # (AVIF's "lossless" goes through YUV: exact away from the edge, within a few levels)
+            away = np.r_[0:5, 11:16]
+            assert np.abs(part.texture.pixels[:, away, :3].astype(int) - webp_pixels[:, away]).max() <= 6

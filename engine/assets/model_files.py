@@ -477,10 +477,11 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 # them a material: engine/assets/gltf_uv_sets.py; lights: engine/assets/model_lights.py; glass:
 # transmission, ior, volume, dispersion; a clear coat; a sheen; anisotropy; a thin film; unlit; material variants:
 # engine/assets/gltf_variants.py; packed vertex data: engine/assets/gltf_accessors.py;
-# instancing: engine/assets/gltf_instancing.py; WebP images; meshopt-packed data and KTX2
+# instancing: engine/assets/gltf_instancing.py; WebP and AVIF images; meshopt-packed data and KTX2
 # images, with their optional packages: engine/assets/gltf_compression.py)
 GLTF_READ_EXTENSIONS = frozenset({
-    "EXT_mesh_gpu_instancing", "EXT_texture_webp", "KHR_lights_punctual", "KHR_materials_anisotropy",
+    "EXT_mesh_gpu_instancing", "EXT_texture_avif", "EXT_texture_webp", "KHR_lights_punctual",
+    "KHR_materials_anisotropy",
     "KHR_materials_clearcoat", "KHR_materials_dispersion", "KHR_materials_iridescence",
     "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_sheen", "KHR_materials_specular",
     "KHR_materials_transmission", "KHR_materials_variants",
@@ -628,11 +629,14 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     decode_basisu_textures(doc, lambda number: _image_bytes(doc, number, buffer_bytes, path, roots, resolver, what),
                            what)
     for texture in textures_list:
-        # EXT_texture_webp: a WebP image (Pillow decodes it) in place of the fallback "source"
+        # EXT_texture_webp, EXT_texture_avif: a WebP or AVIF image (Pillow decodes both) in
+        # place of the fallback "source"
         extensions = texture.get("extensions") if isinstance(texture, dict) else None
-        webp = extensions.get("EXT_texture_webp") if isinstance(extensions, dict) else None
-        if isinstance(webp, dict) and "source" in webp:
-            texture["source"] = webp["source"]
+        for name in ("EXT_texture_avif", "EXT_texture_webp"):
+            found = extensions.get(name) if isinstance(extensions, dict) else None
+            if isinstance(found, dict) and "source" in found:
+                texture["source"] = found["source"]
+                break
     images = doc.get("images") if isinstance(doc.get("images"), list) else []
     used_materials = {primitive.get("material") for mesh in (doc.get("meshes") or [])
                       if isinstance(mesh, dict) for primitive in (mesh.get("primitives") or [])
