@@ -59,6 +59,7 @@ class MeshRef(TrackedComponent):
 MAX_NORMAL_SCALE = 16.0  # beyond this a normal map's bumps are all edge-on: a mistake, not a look
 
 
+MAX_SPECULAR_TINT = 10.0  # Material.specular_color: past it a dielectric's f0 is held at 1 in every channel anyway
 MATERIAL_BLENDS = ("fade", "transparent")  # Material.blend: what a see-through material's alpha fades
 MATERIAL_IMAGES = ("texture", "normal_map", "emissive_map", "metallic_roughness_map", "occlusion_map")
 
@@ -187,7 +188,10 @@ class Material(TrackedComponent):
     0.5 is the 4% of glass, plastic and most things (index 1.5), 0.35 water's 2%, 1 the 16% of
     a gem; the Fresnel effect raises it towards grazing angles whatever it is.  A metal
     reflects its colour instead.  glTF's ``KHR_materials_ior`` and ``KHR_materials_specular``
-    set it.
+    set it.  ``specular_color`` (linear RGB, each 0 to 10, default white) tints that head-on
+    reflection, each channel held at 1 (glTF's ``specularColorFactor``, three.js's
+    ``specularColor``): the coloured sheen of some plastics, lacquers and fabrics, whose
+    highlights are not the light's colour.
 
     ``unlit`` (default False) draws the material's colour as it is, lit by nothing (glTF's
     ``KHR_materials_unlit``, Unity's Unlit shaders, three.js's ``MeshBasicMaterial``,
@@ -224,6 +228,7 @@ class Material(TrackedComponent):
     iridescence_ior: float = 1.3
     iridescence_thickness: float = 400.0
     second_uv_maps: tuple[str, ...] = ()
+    specular_color: Any = field(default_factory=lambda: glm.vec3(1.0))
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "second_uv_maps":
@@ -259,6 +264,12 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=MAX_FILM_THICKNESS)
         if name == "anisotropy_direction":
             return finite(self, name, value, low=-360.0, high=360.0)
+        if name == "specular_color":
+            tint = vec3(self, name, value, low=0.0)
+            if max(tint) > MAX_SPECULAR_TINT:
+                raise ComponentValueError(f"Material.specular_color must have components in "
+                                          f"[0, {MAX_SPECULAR_TINT:g}], got {value!r}")
+            return tint
         if name == "sheen_color":
             sheen = vec3(self, name, value, low=0.0)
             if max(sheen) > 1.0:  # a layer's albedo: more than 1 would reflect more light than arrives

@@ -16,7 +16,8 @@ uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
 uniform int transparent;        // the transparent slot (instances.blend_code): 0 opaque; its colour
                                 // premultiplied by its alpha: 1 all of it, 2 its diffuse light only
-uniform float dielectric_f0;    // what a non-metal reflects head on: 0.16 x its batch's Material.reflectance^2
+uniform vec3 dielectric_f0;     // what a non-metal reflects head on: 0.16 x its batch's Material.reflectance^2
+                                // x its specular_color, each channel held at 1
 #ifdef ALPHA_CUTOFF
 uniform float alpha_cutoff;     // a cutout's (its batch's Material.alpha_cutoff)
 #endif
@@ -703,7 +704,7 @@ void main() {
     s.occlusion *= screen_shares.r;
     s.direct_occlusion = screen_shares.g;
 #endif
-    s.f0 = mix(vec3(dielectric_f0), s.albedo, s.metallic);
+    s.f0 = mix(dielectric_f0, s.albedo, s.metallic);
 #ifdef IRIDESCENCE
     s.f0 = iridescent_f0(s.f0, max(dot(s.normal, s.to_eye), 1e-4));
 #endif

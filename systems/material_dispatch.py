@@ -72,10 +72,13 @@ def choose_material(material: Material | None, emissive: Emissive | None,
     )
 
 
-def dielectric_f0(material: Material | None) -> float:
+def dielectric_f0(material: Material | None) -> tuple[float, float, float]:
     """What a non-metal reflects head on, its batch's uniform: Filament's 0.16 x reflectance^2
-    (``Material.reflectance``; 0.04, glass's and most things', at the default 0.5)."""
-    return 0.16 * (material or DEFAULT_MATERIAL).reflectance ** 2
+    (``Material.reflectance``; 0.04, glass's and most things', at the default 0.5) times its
+    tint (``Material.specular_color``), each channel held at 1."""
+    m = material or DEFAULT_MATERIAL
+    grey = 0.16 * m.reflectance ** 2
+    return tuple(min(grey * float(c), 1.0) for c in m.specular_color)
 
 
 def layer_uniforms(material: Material | None, refractive: Refractive | None) -> dict[str, Any]:

@@ -166,12 +166,37 @@ def test_a_dielectrics_reflectance_is_a_grey_metals_f0(scene, reflectance):
     assert abs(float(np.median(dielectric[inside] - default[inside]))) > 0.004   # (not the default 0.04's)
 
 
+def test_a_tinted_dielectrics_reflectance_is_a_coloured_metals_f0(scene):
+    """``Material.specular_color``: a black non-metal of reflectance 0.8 tinted (1, 0.5, 0.2)
+    reflects head on as a metal coloured 0.16 x 0.8^2 x the tint; a tint past 1 is held at 1 in
+    that channel (as a white metal)."""
+    f0 = 0.16 * 0.8 ** 2
+    tint = (1.0, 0.5, 0.2)
+    tinted, view = render(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3, reflectance=0.8,
+                                          specular_color=tint), sun=True)
+    metal, _ = render(scene, Material(color=(f0 * tint[0], f0 * tint[1], f0 * tint[2], 1.0), metallic=1.0,
+                                      roughness=0.3), sun=True)
+    inside, _ = sphere_pixels(view)
+    np.testing.assert_allclose(tinted[inside], metal[inside], atol=0.004, rtol=0.01)
+    assert float(np.median(tinted[inside][:, 0] - tinted[inside][:, 2])) > 0.004   # (the red shows)
+    held, _ = render(scene, Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3, reflectance=1.0,
+                                     specular_color=(10.0, 1.0, 1.0)), sun=True)
+    white_red, _ = render(scene, Material(color=(1.0, 0.16, 0.16, 1.0), metallic=1.0, roughness=0.3), sun=True)
+    np.testing.assert_allclose(held[inside], white_red[inside], atol=0.004, rtol=0.01)
+    with pytest.raises(ComponentValueError, match=r"Material.specular_color must have components in \[0, 10\]"):
+        Material(specular_color=(11.0, 1.0, 1.0))
+
+
 @pytest.mark.parametrize("extensions, reflectance", [
     ({}, 0.5),
     ({"KHR_materials_ior": {"ior": 2.0}}, math.sqrt(((1.0 / 3.0) ** 2) / 0.16)),
     ({"KHR_materials_specular": {"specularFactor": 0.5}}, math.sqrt(0.02 / 0.16)),
     ({"KHR_materials_ior": {"ior": 1.33}, "KHR_materials_specular": {"specularColorFactor": [1.0, 1.0, 1.0]}},
      math.sqrt(((0.33 / 2.33) ** 2) / 0.16)),
+    # a tint: the reflectance from the largest channel, the tint the channels over it
+    ({"KHR_materials_specular": {"specularColorFactor": [1.0, 0.5, 0.25]}}, 0.5),
+    # past 16%: the reflectance held at 1, the tint carrying the rest (f0 0.4 = 0.16 x 2.5)
+    ({"KHR_materials_specular": {"specularColorFactor": [10.0, 1.0, 1.0]}}, 1.0),
 ])
 def test_a_gltf_ior_and_specular_set_the_reflectance(tmp_path, extensions, reflectance):
     from engine.assets.mesh import load_model
@@ -181,3 +206,8 @@ def test_a_gltf_ior_and_specular_set_the_reflectance(tmp_path, extensions, refle
                 "extensions": extensions}
     (part,) = load_model(write_glb(tmp_path / "m.glb", sphere(0.5), material, []))
     assert part.reflectance == pytest.approx(reflectance, rel=1e-6)
+    colour = extensions.get("KHR_materials_specular", {}).get("specularColorFactor", [1.0, 1.0, 1.0])
+    ior = extensions.get("KHR_materials_ior", {}).get("ior", 1.5)
+    factor = extensions.get("KHR_materials_specular", {}).get("specularFactor", 1.0)
+    f0 = [min(((ior - 1) / (ior + 1)) ** 2 * c, 1.0) * factor for c in colour]   # (glTF's, channel by channel)
+    assert [0.16 * reflectance ** 2 * t for t in part.specular_color] == pytest.approx(f0, rel=1e-6)

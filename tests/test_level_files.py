@@ -333,7 +333,7 @@ def test_a_bad_level_through_the_runner_is_one_error_line(tmp_path):
                      "color, double_sided, emissive_map, environment_reflection, iridescence, iridescence_ior, "
                      "iridescence_thickness, metallic, metallic_roughness_map, "
                      "normal_map, normal_scale, occlusion_map, occlusion_strength, reflectance, roughness, "
-                     "second_uv_maps, sheen_color, sheen_roughness, texture, unlit)"], lines
+                     "second_uv_maps, sheen_color, sheen_roughness, specular_color, texture, unlit)"], lines
     assert not list((tmp_path / "out").glob("frame_*.png"))
 
 

@@ -580,6 +580,7 @@ class ModelPart:
     clearcoat_roughness: float = 0.0  # its roughness factor (Material.clearcoat_roughness)
     unlit: bool = False               # KHR_materials_unlit (Material.unlit)
     reflectance: float = 0.5          # from KHR_materials_ior and _specular (Material.reflectance)
+    specular_color: tuple[float, float, float] = (1.0, 1.0, 1.0)  # its tint (Material.specular_color)
     sheen_color: tuple[float, float, float] = (0.0, 0.0, 0.0)  # KHR_materials_sheen's (Material.sheen_color)
     sheen_roughness: float = 0.0      # its roughness factor (Material.sheen_roughness)
     anisotropy: float = 0.0           # KHR_materials_anisotropy's strength (Material.anisotropy)
@@ -1012,11 +1013,13 @@ def _gltf_attenuation(volume: dict, thickness: float, part: ModelPart, what: str
 
 
 def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:
-    """What a glTF material's non-metal reflects head on, as ``Material.reflectance``
-    (f0 = 0.16 r^2): ``KHR_materials_ior``'s index as Schlick's f0 (``f0_from_ior``; part.ior, read with
-    the glass), times ``KHR_materials_specular``'s factor and its colour's mean (the engine's
-    f0 is grey: a tint is left out with a warning, as are its textures); past the engine's
-    16% (reflectance 1) it is held there, with a warning."""
+    """What a glTF material's non-metal reflects head on, as ``Material.reflectance`` (f0 =
+    0.16 r^2) and ``Material.specular_color`` (its tint): ``KHR_materials_ior``'s index as
+    Schlick's f0 (``f0_from_ior``; part.ior, read with the glass) times
+    ``KHR_materials_specular``'s colour, each channel held at 1, times its factor (glTF's
+    ``min(f0 x specularColorFactor, 1) x specularFactor``): the reflectance from the largest
+    channel (up to 16%), the tint the channels over it.  Its textures are left out with a
+    warning."""
     extensions = doc_material.get("extensions") if isinstance(doc_material, dict) else None
     specular = extensions.get("KHR_materials_specular") if isinstance(extensions, dict) else None
     if specular is not None and not isinstance(specular, dict):
@@ -1031,16 +1034,13 @@ def _gltf_reflectance(doc_material: dict, part: ModelPart, what: str) -> None:
         raise AssetError(f"{what}: KHR_materials_specular.specularColorFactor must be three numbers >= 0, "
                          f"got {colour!r}")
     f0_ior = f0_from_ior(part.ior)
-    f0 = float(np.mean([min(f0_ior * c, 1.0) for c in colour])) * float(factor)
+    f0 = [min(f0_ior * float(c), 1.0) * float(factor) for c in colour]
     left = [slot for slot in ("specularTexture", "specularColorTexture") if slot in specular]
-    if max(colour) - min(colour) > 1e-6:
-        left.append("specularColorFactor's tint (its mean kept)")
     if left:
         warnings.warn(f"{what}: KHR_materials_specular's {', '.join(left)} left out", stacklevel=6)
-    if f0 > 0.16 + 1e-9:
-        warnings.warn(f"{what}: reflects {f0:.3f} head on (ior {part.ior:g}), past the engine's 0.16 "
-                      "(Material.reflectance 1): held there", stacklevel=6)
-    part.reflectance = min(math.sqrt(f0 / 0.16), 1.0)
+    grey = min(max(f0), 0.16)
+    part.reflectance = math.sqrt(grey / 0.16)
+    part.specular_color = tuple(c / grey for c in f0) if grey > 0.0 else (1.0, 1.0, 1.0)
 
 
 def _gltf_extension(doc_material: dict, name: str, what: str) -> dict | None:

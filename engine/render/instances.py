@@ -226,7 +226,7 @@ class BatchKey(NamedTuple):
     keeps_specular: bool = False        # a transparent one's Material.blend "transparent"
     clearcoat: tuple[float, float] | None = None  # Material.clearcoat and its roughness (None: none)
     unlit: bool = False                 # Material.unlit: its colour as it is (the UNLIT_MATERIAL build)
-    dielectric_f0: float = 0.04         # 0.16 x Material.reflectance^2: its draws' uniform
+    dielectric_f0: tuple[float, float, float] = (0.04, 0.04, 0.04)  # its non-metal's f0 (RGB): its draws' uniform
     sheen: tuple[float, float, float, float] | None = None  # Material.sheen_color and roughness (None: none)
     dispersion: float = 0.0             # Refractive.dispersion: its DISPERSION build's uniform (0: none)
     anisotropy: tuple[float, float] | None = None  # Material.anisotropy and its direction in radians (None: none)
@@ -348,7 +348,8 @@ class InstanceBatch:
         # none): its CLEARCOAT build's uniform, part of the batch's key.
         self.clearcoat: tuple[float, float] | None = None
         self.unlit = False  # Material.unlit: drawn with the UNLIT_MATERIAL build, lit by nothing
-        self.dielectric_f0 = 0.04  # what its non-metal reflects head on (Material.reflectance), a uniform
+        self.dielectric_f0 = (0.04, 0.04, 0.04)  # what its non-metal reflects head on (Material.reflectance,
+        # specular_color), a uniform
         # A sheen (Material.sheen_color, sheen_roughness; None: none): its SHEEN build's uniform.
         self.sheen: tuple[float, float, float, float] | None = None
         self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform

@@ -138,7 +138,7 @@ class Renderer(Gpu):
                   occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0,
                   double_sided: bool = False, keeps_specular: bool = False,
                   clearcoat: tuple[float, float] | None = None, unlit: bool = False,
-                  dielectric_f0: float = 0.04,
+                  dielectric_f0: tuple[float, float, float] = (0.04, 0.04, 0.04),
                   sheen: tuple[float, float, float, float] | None = None,
                   dispersion: float = 0.0, anisotropy: tuple[float, float] | None = None,
                   iridescence: tuple[float, float, float] | None = None,
@@ -160,7 +160,7 @@ class Renderer(Gpu):
         # ``keeps_specular``: a transparent entity's Material.blend "transparent".
         # ``clearcoat``: a clear-coated material's (clearcoat, clearcoat_roughness), its
         # CLEARCOAT build's uniform (None: none).  ``unlit``: Material.unlit (UNLIT_MATERIAL).
-        # ``dielectric_f0``: 0.16 x Material.reflectance^2, its draws' uniform.  ``sheen``: a
+        # ``dielectric_f0``: 0.16 x Material.reflectance^2 x its specular_color, its draws' uniform.  ``sheen``: a
         # sheen's (red, green, blue, roughness), its SHEEN build's uniform (None: none).
         # ``dispersion``: a refraction's Refractive.dispersion, its DISPERSION build's (0: none).
         # ``anisotropy``: (Material.anisotropy, its direction in radians), ANISOTROPY's (None: none).
