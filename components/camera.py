@@ -22,6 +22,7 @@ from components.tracking import (
     ComponentValueError,
     TrackedComponent,
     boolean,
+    choice,
     color,
     finite,
     integer,
@@ -30,6 +31,7 @@ from components.tracking import (
 from components.visibility import LAYER_FIELDS, ShownLayers
 
 _DEFAULT_FAR = 200.0
+CAMERA_PROJECTIONS = ("perspective", "orthographic")  # Camera.projection
 
 # An image (engine.assets.texture_data.TextureData): components import none of the engine
 # (rendering.py's note), a cookie is checked by its class's ASSET_KIND.
@@ -38,7 +40,15 @@ TextureData = Any
 
 @dataclass(eq=False)
 class Camera(ShownLayers):
-    """A perspective camera. The active camera with the lowest entity id renders.
+    """A camera. The active camera with the lowest entity id renders.
+
+    ``projection`` "perspective" (the default: ``fov_y`` degrees top to bottom) or
+    "orthographic" (parallel rays, ``ortho_height`` world units top to bottom whatever the
+    distance: isometric, top-down and side-on games, as Unity's and Godot's orthographic
+    cameras).  Mirrors, portals, probes, shadows, fog and the sky draw alike in both; an
+    orthographic camera's screen-space ambient occlusion and reflections are refused (they
+    rebuild positions from a perspective depth image), and a bumpy mirror or water seen in one
+    reflects flat (its bent lookup is a perspective vanishing point).
 
     ``shows_layers`` (None: all) and ``hides_layers`` are the reflection layers its view
     shows (a camera's culling mask, ``components.visibility``); the mirrors and portals it
@@ -49,6 +59,8 @@ class Camera(ShownLayers):
     near: float = 0.05
     far: float = _DEFAULT_FAR
     active: bool = True
+    projection: str = "perspective"
+    ortho_height: float = 10.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name in LAYER_FIELDS:
@@ -59,6 +71,15 @@ class Camera(ShownLayers):
             return check_near_far(self, name, value, _DEFAULT_FAR)
         if name == "active":
             return boolean(self, name, value)
+        if name == "projection":
+            value = choice(self, name, value, CAMERA_PROJECTIONS)
+            world = getattr(self, "_world_ref", None)
+            if world is not None:
+                for entity in self._entities:  # its screen passes need a perspective, as at spawn
+                    world.check_invariants(entity, Camera, projection=value)
+            return value
+        if name == "ortho_height":
+            return finite(self, name, value, low=1e-3, high=1e6)
         return value
 
 

@@ -35,6 +35,7 @@
 #include "probe_lookup.glsl"
 #include "hdr.glsl"
 #include "fog.glsl"
+#include "view_axis.glsl"
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif
@@ -132,12 +133,19 @@ void main() {
     // A point on the near plane along this pixel's ray (for an oblique projection that is
     // the parent mirror's plane: still in front of the eye, unlike its tilted far plane).
     vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
-    vec3 view_dir = normalize(near.xyz / near.w - v_eye.xyz);
+    // An orthographic parent's rays are parallel (its inverse affine too): along its axis (the
+    // way only depth changes), each from its eye's plane (view_axis.glsl); a perspective
+    // parent's from its eye.
+    vec3 w_row = vec3(v_inv_view_proj[0][3], v_inv_view_proj[1][3], v_inv_view_proj[2][3]);
+    bool parallel = dot(w_row, w_row) <= 1e-12 * v_inv_view_proj[3][3] * v_inv_view_proj[3][3];
+    vec3 view_dir = parallel ? normalize((v_inv_view_proj * vec4(0.0, 0.0, 1.0, 0.0)).xyz)
+                             : normalize(near.xyz / near.w - v_eye.xyz);
+    vec3 eye = parallel ? ray_eye(v_eye.xyz, view_dir, near.xyz / near.w) : v_eye.xyz;
     // Where the pixel's ray meets the surface (what box projection starts from), and the air
     // before it in the parent view: from where the parent's rays enter it (its eye for a root
     // view, else the surface it looks out of: its oblique near plane) to the surface.
-    vec3 at = v_eye.xyz + view_dir * (-(dot(v_normal.xyz, v_eye.xyz) + v_params.z) / dot(v_normal.xyz, view_dir));
-    float parent_fog = fog_depth(fog_from_eye ? v_eye.xyz : near.xyz / near.w, at);
+    vec3 at = eye + view_dir * (-(dot(v_normal.xyz, eye) + v_params.z) / dot(v_normal.xyz, view_dir));
+    float parent_fog = fog_depth(fog_from_eye ? eye : near.xyz / near.w, at);
 #ifndef COMPOSITE_FALLBACK
     uint seen_id = texelFetch(reflection_seen, px, 0).r;
     if (seen_id == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
@@ -167,7 +175,7 @@ void main() {
     // is where the image holds what lies far along it (exact for distant things, overstated
     // for near ones).  A lookup that leaves this view's pixels keeps the flat one.
     vec3 flat_normal = normal;
-    vec3 p = v_eye.xyz + view_dir * (-(dot(flat_normal, v_eye.xyz) + v_params.z) / dot(flat_normal, view_dir));
+    vec3 p = eye + view_dir * (-(dot(flat_normal, eye) + v_params.z) / dot(flat_normal, view_dir));
     vec2 mirror_uv = vec2(dot(v_carry[0], p), dot(v_carry[1], p)) + v_carry[2].xy;
     vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
     vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);

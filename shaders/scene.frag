@@ -2,6 +2,7 @@
 // Scene shading: lights, then the material slots in order (reflect, refract, emissive)
 // (reflect, refract, emissive). Each slot switches on the instance's variant index.
 #include "camera.glsl"
+#include "view_axis.glsl"
 #include "visibility.glsl"
 #include "lights.glsl"
 #include "shadows.glsl"
@@ -90,17 +91,24 @@ uniform usampler2D node_map;
 // says which view (node index and eye) each triangle was emitted for.
 flat in uint v_node;
 flat in vec3 v_eye;
+flat in vec3 v_eye_axis;  // its axis where it is orthographic (0: perspective; view_axis.glsl)
 #define node_index v_node
-#define VIEW_EYE v_eye
+#define VIEW_POINT v_eye
+#define VIEW_AXIS v_eye_axis
 #ifdef FOG
 flat in vec4 v_clip;
 #define VIEW_ENTRY v_clip
 #endif
 #else
 #define node_index camera.skip.w  // the view's index in its tree (camera.glsl)
-#define VIEW_EYE camera.eye.xyz
+#define VIEW_POINT camera.eye.xyz
+#define VIEW_AXIS view_axis(camera.view_proj)
 #define VIEW_ENTRY camera.clip_plane
 #endif
+// Where this pixel's view ray starts (view_axis.glsl ray_eye: the eye, or for an orthographic
+// view the point across from it on the eye's plane), set first thing in main.
+vec3 view_eye;
+#define VIEW_EYE view_eye
 
 // The variant of each slot: the instance's own (v_slots), or, in a program specialised for a
 // batch whose instances all use the same variants, a constant (FIXED_*, defined by
@@ -655,6 +663,7 @@ void main() {
 #ifdef TRIVIAL
     out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = v_slots.w; out_node = node_index; return;
 #endif
+    view_eye = ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos);
     Surface s;
     s.position = v_world_pos;
     s.to_eye = normalize(VIEW_EYE - v_world_pos);

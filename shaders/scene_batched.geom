@@ -21,6 +21,7 @@
 // capture, six copies of every triangle, kept to measure the culling against).
 
 #include "visibility.glsl"
+#include "view_axis.glsl"
 
 layout(triangles, invocations = GS_INVOCATIONS) in;
 layout(triangle_strip, max_vertices = GS_MAX_VERTICES) out;  // 3 x VIEWS_PER_INVOCATION
@@ -70,6 +71,7 @@ flat out vec4 v_tint;
 flat out uvec4 v_slots;
 flat out uint v_node;
 flat out vec3 v_eye;
+flat out vec3 v_eye_axis;  // the view's axis where it is orthographic (view_axis.glsl; 0: perspective)
 #ifdef FOG
 flat out vec4 v_clip;  // the view's clip plane: where its rays enter it, for the fog (fog.glsl)
 #endif
@@ -104,6 +106,7 @@ void emit_corner(int c, vec4 position, MirrorView v) {
 #endif
     v_node = v.node.x;
     v_eye = v.eye.xyz;
+    v_eye_axis = view_axis(v.view_proj);
 #ifdef FOG
     v_clip = v.clip_plane;
 #endif

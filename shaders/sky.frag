@@ -3,6 +3,7 @@
 // include/sky_model.glsl, sharp at any resolution), else the cube map (given faces, or no
 // Skybox: the flat background).
 #include "camera.glsl"
+#include "view_axis.glsl"
 #include "hdr.glsl"
 #include "fog.glsl"
 
@@ -29,8 +30,10 @@ void main() {
     vec3 eye = g_eye;
 #else
     vec4 far_point = camera.inv_view_proj * vec4(v_ndc, 1.0, 1.0);
-    vec3 direction = normalize(far_point.xyz / far_point.w - camera.eye.xyz);
-    vec3 eye = camera.eye.xyz;
+    vec3 far = far_point.xyz / far_point.w;
+    // (an orthographic view's rays are parallel, along its axis, from its eye's plane: view_axis.glsl)
+    vec3 eye = ray_eye(camera.eye.xyz, view_axis(camera.view_proj), far);
+    vec3 direction = normalize(far - eye);
 #endif
 #ifdef GENERATED_SKY
     vec3 sky = generated_sky(direction);

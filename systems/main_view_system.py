@@ -77,7 +77,8 @@ class MainViewSystem(esper.Processor):
         levels = self.renderer.levels  # the main view tree's targets (the renderer owns them)
         targets = levels.get(0, output.size)
         views.levels = levels
-        views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size)
+        views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size,
+                                 ortho_height=cam.ortho_height if cam.projection == "orthographic" else None)
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
         views.options = self._root_options()
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None

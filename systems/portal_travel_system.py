@@ -171,7 +171,7 @@ class PortalTravelSystem(esper.Processor):
             elif cam is not None and d1 <= d0 + 1e-9:  # not while backing away from its front
                 if tip is None:
                     tip = [now, *near_plane_corners(now, transform.rotation, cam.fov_y, cam.near,
-                                                    self.near_aspect())]
+                                                    self.near_aspect(), _ortho_height(cam))]
                 if not self._tip_touches(gate, tip, TOUCH * cam.near):
                     continue
                 key = (1.0, d1)
@@ -209,7 +209,8 @@ class PortalTravelSystem(esper.Processor):
         position = glm.vec3(gate.carry * glm.vec4(transform.position, 1.0))
         rotation = glm.normalize(gate.turn * transform.rotation)
         if cam is not None:
-            tip = [position, *near_plane_corners(position, rotation, cam.fov_y, cam.near, self.near_aspect())]
+            tip = [position, *near_plane_corners(position, rotation, cam.fov_y, cam.near, self.near_aspect(),
+                                                 _ortho_height(cam))]
             lowest = min(signed_distance(gate.exit_plane, p) for p in tip)
             clear = CLEAR * cam.near
             if lowest < clear:
@@ -226,3 +227,8 @@ class PortalTravelSystem(esper.Processor):
             if abs(forward.y) < 0.9999:  # straight up or down keeps the old yaw
                 fly.yaw = fly.yaw + (yaw - fly.yaw + 180.0) % 360.0 - 180.0  # nearest turn: no jump
             fly.pitch = max(-89.0, min(89.0, pitch))
+
+
+def _ortho_height(cam: Camera) -> float | None:
+    """An orthographic camera's near rectangle's height (None: a perspective camera's comes from its field of view)."""
+    return cam.ortho_height if cam.projection == "orthographic" else None

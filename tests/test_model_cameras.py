@@ -1,7 +1,7 @@
 """Cameras from glTF files: ``spawn_model`` makes a file's perspective cameras into Camera
 entities under the model, placed by their nodes and not active; made active, one shows the
 frame a camera placed by hand at the node's place in the world shows (a second path); bad
-cameras are refused naming them, orthographic ones left out with a warning."""
+cameras are refused naming them; orthographic ones become orthographic Cameras."""
 from __future__ import annotations
 
 import math
@@ -75,16 +75,18 @@ def test_a_files_cameras_are_entities_under_the_model_not_active(tmp_path):
     cameras = [SHOT, {"type": "perspective", "perspective": {"yfov": 1.0, "znear": 0.5}},
                {"type": "orthographic", "name": "plan", "orthographic": {"xmag": 1, "ymag": 1, "znear": 0, "zfar": 9}}]
     path = filmed_box(tmp_path / "three.glb", cameras, nodes)
-    with pytest.warns(UserWarning, match=r"orthographic cameras \['plan'\] are left out"):
-        loaded = load_model_file(path)
-    assert [c.name for c in loaded.cameras] == ["shot", "shot", "camera 1"]
+    loaded = load_model_file(path)
+    assert [c.name for c in loaded.cameras] == ["shot", "shot", "camera 1", "plan"]
     world = World("cameras")
-    with pytest.warns(UserWarning, match="orthographic"):
-        root = spawn_model(world, path)
-    found = sorted(((world.get(e, Transform).position.x, c) for e, c in world.query_one(Camera)), key=lambda i: i[0])
-    assert len(found) == 3 and not any(c.active for _, c in found)
-    assert [(round(c.fov_y, 4), c.near, c.far) for _, c in found] == [
-        (40.0, 0.1, 50.0), (round(math.degrees(1.0), 4), 0.5, Camera().far), (40.0, 0.1, 50.0)]
+    root = spawn_model(world, path)
+    found = sorted(((world.get(e, Transform).position.x, c.projection == "orthographic", c)
+                    for e, c in world.query_one(Camera)), key=lambda i: i[:2])
+    assert len(found) == 4 and not any(c.active for _, _, c in found)
+    assert [(round(c.fov_y, 4), c.near, c.far, c.projection) for _, _, c in found if c.projection == "perspective"] == [
+        (40.0, 0.1, 50.0, "perspective"), (round(math.degrees(1.0), 4), 0.5, Camera().far, "perspective"),
+        (40.0, 0.1, 50.0, "perspective")]
+    ((_, _, plan),) = [f for f in found if f[1]]   # (glTF's ymag is half the height; its znear 0 held just above)
+    assert (plan.ortho_height, plan.near, plan.far) == (2.0, pytest.approx(1e-3), 9.0)
     assert all(world.get(e, FromModel).model == root for e, _ in world.query_one(Camera))
 
 
@@ -93,6 +95,10 @@ def test_a_files_cameras_are_entities_under_the_model_not_active(tmp_path):
     ({"type": "perspective", "perspective": {"yfov": 1.0, "znear": 0}}, r"znear must be a number > 0, got 0"),
     ({"type": "perspective", "perspective": {"yfov": 1.0, "znear": 1.0, "zfar": 0.5}}, r"zfar must be a number beyond"),
     ({"type": "fisheye"}, r"type must be 'perspective'"),
+    ({"type": "orthographic", "orthographic": {"xmag": 1, "ymag": 0, "znear": 0, "zfar": 9}},
+     r"ymag must be a number > 0"),
+    ({"type": "orthographic", "orthographic": {"xmag": 1, "ymag": 1, "znear": 2, "zfar": 1}},
+     r"zfar must be a number beyond znear"),
 ])
 def test_a_bad_camera_is_refused_naming_it(tmp_path, camera, message):
     path = filmed_box(tmp_path / "bad.glb", [camera])

@@ -9,12 +9,12 @@ A perspective camera's ``yfov`` (radians) is the engine's ``Camera.fov_y`` (degr
 glTF, the engine's default far here, the engine's cameras having a far plane); its
 ``aspectRatio`` is left to the picture's (glTF: "when undefined, the aspect ratio of the
 rendering viewport"; the engine's cameras always take the picture's).  An orthographic
-camera is left out with a warning: the engine's cameras are perspective.
+camera's ``ymag`` (half its height) makes ``Camera.ortho_height`` (its ``xmag`` left to the
+picture's aspect, as ``aspectRatio`` is), its ``znear`` and ``zfar`` its planes.
 """
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,14 +36,15 @@ class ModelCamera:
     local: glm.mat4
     name: str
     node: int | None = None  # its node's index (what an animation moves)
+    ortho_height: float | None = None  # an orthographic camera's height (2 x ymag; None: perspective)
 
 
 def read_gltf_cameras(doc: dict | None) -> list[ModelCamera]:
-    """The perspective cameras the nodes of a glTF document's scene name, each placed by its
-    node and ancestors (a camera named by two nodes is two cameras).  A malformed camera (a
-    field that is not a finite number, ``yfov`` outside the engine's 1-179 degrees, ``znear``
-    not above 0 or ``zfar`` not beyond it, an index the file does not have) is an AssetError
-    naming it; an orthographic one is left out with a warning."""
+    """The cameras the nodes of a glTF document's scene name, each placed by its node and
+    ancestors (a camera named by two nodes is two cameras).  A malformed camera (a field that
+    is not a finite number, ``yfov`` outside the engine's 1-179 degrees, ``ymag`` not above 0,
+    ``znear`` not above 0 (perspective) or below 0 (orthographic) or ``zfar`` not beyond it,
+    an index the file does not have) is an AssetError naming it."""
     if not isinstance(doc, dict):
         return []
     nodes = doc.get("nodes") if isinstance(doc.get("nodes"), list) else []
@@ -53,7 +54,6 @@ def read_gltf_cameras(doc: dict | None) -> list[ModelCamera]:
     if not isinstance(defined, list):
         raise AssetError("a node names a camera, but the file defines none (cameras)")
     found: list[ModelCamera] = []
-    orthographic: list[str] = []
     for index, matrix in placed_nodes(doc, nodes):
         if "camera" not in nodes[index]:
             continue
@@ -62,15 +62,9 @@ def read_gltf_cameras(doc: dict | None) -> list[ModelCamera]:
             raise AssetError(f"node {index} names camera {which!r}, which the file does not have "
                              f"({len(defined)} defined)")
         camera = _camera(defined, which)
-        if camera is None:
-            orthographic.append(_name(defined[which], which))
-            continue
         camera.local = glm.mat4(*matrix.astype(np.float32).T.ravel())
         camera.node = index
         found.append(camera)
-    if orthographic:
-        warnings.warn(f"orthographic cameras {orthographic} are left out (the engine's cameras are perspective)",
-                      stacklevel=3)
     return found
 
 
@@ -79,17 +73,16 @@ def _name(entry: object, index: int) -> str:
     return name if isinstance(name, str) and name else f"camera {index}"
 
 
-def _camera(defined: list, index: int) -> ModelCamera | None:
-    """Camera ``index`` of the file's ``cameras``, checked (placed at the origin); None for
-    an orthographic one."""
+def _camera(defined: list, index: int) -> ModelCamera:
+    """Camera ``index`` of the file's ``cameras``, checked (placed at the origin)."""
     entry = defined[index]
     name = _name(entry, index)
     what = f"camera {index}" + (f" ({name!r})" if name != f"camera {index}" else "")
     if not isinstance(entry, dict):
         raise AssetError(f"{what}: must be an object, got {entry!r}")
     kind = entry.get("type")
-    if kind == "orthographic":
-        return None
+    if kind == "orthographic" and isinstance(entry.get("orthographic"), dict):
+        return _orthographic(entry["orthographic"], what, name)
     if kind != "perspective" or not isinstance(entry.get("perspective"), dict):
         raise AssetError(f"{what}: type must be 'perspective' (with its perspective object) or 'orthographic', "
                          f"got {kind!r}")
@@ -103,3 +96,16 @@ def _camera(defined: list, index: int) -> ModelCamera | None:
     if zfar is not None and not (finite_number(zfar) and zfar > znear):
         raise AssetError(f"{what}: zfar must be a number beyond znear ({znear!r}), got {zfar!r}")
     return ModelCamera(math.degrees(yfov), float(znear), None if zfar is None else float(zfar), glm.mat4(), name)
+
+
+def _orthographic(lens: dict, what: str, name: str) -> ModelCamera:
+    """An orthographic camera's lens, checked: ``ymag`` half its height, ``znear`` >= 0 and
+    ``zfar`` beyond it (both required by glTF); the engine's near plane is held just above 0."""
+    ymag, znear, zfar = lens.get("ymag"), lens.get("znear"), lens.get("zfar")
+    if not (finite_number(ymag) and 0.0 < ymag <= 5e5):
+        raise AssetError(f"{what}: ymag must be a number > 0 (half the view's height, at most 500000), got {ymag!r}")
+    if not (finite_number(znear) and znear >= 0.0):
+        raise AssetError(f"{what}: znear must be a number >= 0, got {znear!r}")
+    if not (finite_number(zfar) and zfar > znear):
+        raise AssetError(f"{what}: zfar must be a number beyond znear ({znear!r}), got {zfar!r}")
+    return ModelCamera(60.0, max(float(znear), 1e-3), float(zfar), glm.mat4(), name, ortho_height=2.0 * float(ymag))

@@ -534,7 +534,9 @@ def _camera_components(camera: ModelCamera) -> list:
     the node is left out: a camera's picture is not stretched by it)."""
     placed = _node_transform(camera.local, camera.name)
     placed.scale = glm.vec3(1.0)
-    lens = {"fov_y": camera.fov_y, "near": camera.near, **({"far": camera.far} if camera.far is not None else {})}
+    lens = {"fov_y": camera.fov_y, "near": camera.near, **({"far": camera.far} if camera.far is not None else {}),
+            **({"projection": "orthographic", "ortho_height": camera.ortho_height}
+               if camera.ortho_height is not None else {})}
     return [placed, Camera(active=False, **lens)]
 
 

@@ -29,9 +29,10 @@ def pair_rotation(carry: glm.mat4) -> glm.quat:
 
 
 def near_plane_corners(position: glm.vec3 | Sequence[float], rotation: glm.quat, fov_y_deg: float, near: float,
-                       aspect: float) -> list[glm.vec3]:
-    """World corners of a camera's near-plane rectangle (the camera looks down its -Z)."""
-    half_h = near * glm.tan(glm.radians(fov_y_deg) / 2.0)
+                       aspect: float, ortho_height: float | None = None) -> list[glm.vec3]:
+    """World corners of a camera's near-plane rectangle (the camera looks down its -Z;
+    ``ortho_height``: an orthographic camera's, its rectangle that tall whatever ``near``)."""
+    half_h = near * glm.tan(glm.radians(fov_y_deg) / 2.0) if ortho_height is None else ortho_height / 2.0
     half_w = half_h * aspect
     eye = glm.vec3(position)
     return [eye + rotation * glm.vec3(sx * half_w, sy * half_h, -near)

@@ -528,7 +528,7 @@ class ScenePass:
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:
-                    batches = back_to_front(transparent, view.eye, view, geometry)
+                    batches = back_to_front(transparent, view.sorting_eye, view, geometry)
                 else:
                     batches, _, torn = split_slot(transparent, view, geometry)
                     renderer.stats.glass_between_surfaces += torn
@@ -626,8 +626,8 @@ class ScenePass:
             viewport = (0, 0, *views[0].size)
             if groups is None:  # farthest from the first view's eye first (the views of a level are close)
                 apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
-                self._draw_batches(back_to_front(transparent, views[0].eye, None, self._slot_geometry(transparent)),
-                                   invocations, options.masked)
+                ordered = back_to_front(transparent, views[0].sorting_eye, None, self._slot_geometry(transparent))
+                self._draw_batches(ordered, invocations, options.masked)
             else:  # in one draw a batch a group
                 for group, first, _, torn in groups:
                     renderer.stats.glass_between_surfaces += torn
@@ -690,8 +690,8 @@ class ScenePass:
             transparent = renderer.transparent_batches()
             if transparent:
                 apply_pass_state(ctx, _LAYERED_TRANSPARENT, size)
-                self._draw_batches(back_to_front(transparent, views[0].eye, None, self._slot_geometry(transparent)),
-                                   6, False, layered, skip=skip,
+                ordered = back_to_front(transparent, views[0].sorting_eye, None, self._slot_geometry(transparent))
+                self._draw_batches(ordered, 6, False, layered, skip=skip,
                                    before_draw=draw_check)
             apply_pass_state(ctx, _LAYERED_SKY, size)
             if check is not None:

@@ -600,7 +600,7 @@ _SPLITS_KEPT = 256
 
 def _split_now(geometry: SlotGeometry, view: View) -> SlotSplit:
     batches = geometry.batches
-    ordered = geometry.back_to_front(view.eye)
+    ordered = geometry.back_to_front(view.sorting_eye)
     skipped = (view.skip, view.hide)
     seeds = [i for i, k in enumerate(ordered) if geometry.see_through[k]
              and not (batches[k].count == 1 and batches[k].entity_at[0] in skipped)]
@@ -615,12 +615,12 @@ def _split_now(geometry: SlotGeometry, view: View) -> SlotSplit:
     # fewer edges may keep the centres' and put more before the claims.)
     slot = None
     if len(ordered) <= FEW_BATCHES:
-        slot = slot_order(geometry, ordered, view.eye, None)
+        slot = slot_order(geometry, ordered, view.sorting_eye, None)
         needed = slot.before_any(seeds)
         if slot.planes_only or len(needed) > len(seeds) or any(i != at for at, i in enumerate(slot.order)):
             slot = None
     if slot is None:
-        slot = slot_order(geometry, ordered, view.eye, view)
+        slot = slot_order(geometry, ordered, view.sorting_eye, view)
         needed = slot.before_any(seeds)
     torn = slot.torn(seeds, needed) if len(needed) > len(seeds) else 0
     order = slot.order

@@ -143,7 +143,7 @@ class _UnlitViews:
         unlit = self.unlit
         if not unlit or not drawn:
             return unlit
-        eye = view.eye
+        eye = view.sorting_eye
         ex, ey, ez = eye.x, eye.y, eye.z
         fronts = []  # [batch, box, the eye's height over its plane (None: no plane), rectangle, nearest]
         for batch in drawn:
@@ -189,7 +189,7 @@ class _UnlitViews:
     def _covers(self, front: list, instance: tuple, view: View) -> bool:
         """Whether ``front`` (a drawn batch) may blend over ``instance`` (centre, half sizes):
         nearer the eye than its box's farthest corner, and their screen rectangles meeting."""
-        eye = view.eye
+        eye = view.sorting_eye
         cx, cy, cz, hx, hy, hz = instance
         far = math.sqrt((abs(cx - eye.x) + hx) ** 2 + (abs(cy - eye.y) + hy) ** 2 + (abs(cz - eye.z) + hz) ** 2)
         if front[4] is _UNKNOWN:

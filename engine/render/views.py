@@ -99,6 +99,24 @@ class View:
         return self.proj * self.view
 
     @property
+    def parallel(self) -> bool:
+        """Whether it is orthographic (its rays parallel: Camera.projection "orthographic", and
+        its mirror and portal views): its projection's fourth row is 0, 0, 0, 1."""
+        proj = self.proj
+        return proj[0][3] == 0.0 and proj[1][3] == 0.0 and proj[2][3] == 0.0
+
+    @property
+    def sorting_eye(self) -> glm.vec3:
+        """Where the transparent slot's order (and the unlit mirrors' cover) is measured from:
+        its eye, or, for an orthographic view, a point ``PARALLEL_SORT_DISTANCE`` back along its
+        axis (its rays are parallel: what lies farther along the axis is behind, whatever its
+        offset across it, as from a far eye)."""
+        if not self.parallel:
+            return self.eye
+        back = glm.vec3(self.view[0][2], self.view[1][2], self.view[2][2])  # the camera's +Z: behind it
+        return self.eye + glm.normalize(back) * PARALLEL_SORT_DISTANCE
+
+    @property
     def view_mask(self) -> int:
         """Its kinds and the layers it shows, packed as the shaders read them
         (``engine.rules.visibility_rules.visibility_code``)."""
@@ -171,8 +189,13 @@ class PlannedView(View):
         return int.from_bytes(self._block[_VIEW_MASK_BYTES], "little")
 
 
+# How far back along an orthographic view's axis its transparent things are ordered from
+# (View.sorting_eye): objects a metre apart in depth order right up to about 200 m across it.
+PARALLEL_SORT_DISTANCE = 1.0e4
+
+
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,
-                size: tuple[int, int], name: str = "main") -> View:
+                size: tuple[int, int], name: str = "main", ortho_height: float | None = None) -> View:
     """The view of a camera whose model-to-world matrix is ``world_matrix`` (looks down -Z).
     A matrix that mirrors (a camera under a parent with a negative scale: a negative
     determinant) has its X axis turned back first, as game engines' cameras ignore a
@@ -180,7 +203,12 @@ def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: floa
     image is not mirrored and its front faces wind as any view's (else every face would be
     culled as a back face: no floor, no mirror)."""
     w, h = size
-    proj = glm.perspective(glm.radians(fov_y_deg), w / max(h, 1), near, far)
+    if ortho_height is None:
+        proj = glm.perspective(glm.radians(fov_y_deg), w / max(h, 1), near, far)
+    else:  # an orthographic camera: ortho_height world units top to bottom, parallel rays
+        half_h = ortho_height / 2.0
+        half_w = half_h * w / max(h, 1)
+        proj = glm.ortho(-half_w, half_w, -half_h, half_h, near, far)
     if glm.determinant(glm.mat3(world_matrix)) < 0.0:
         world_matrix = world_matrix * glm.scale(glm.vec3(-1.0, 1.0, 1.0))
     return View(view=glm.inverse(world_matrix), proj=proj, eye=glm.vec3(world_matrix[3]), size=size, name=name)

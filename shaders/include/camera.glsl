@@ -12,3 +12,4 @@ layout(std140) uniform Camera {
                      // its kinds, bits 0-3, and the reflection layers it shows, bits 4-19; visibility.glsl);
                      // w: the view's index in its tree (View.node: the node image's value for its pixels)
 } camera;
+

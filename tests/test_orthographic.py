@@ -1,0 +1,178 @@
+"""Orthographic cameras (``Camera.projection = "orthographic"``): parallel rays, for
+isometric and top-down games.  The picture is checked against a second path, the limit it
+is of: a perspective camera far back along the same axis with a field of view that spans the
+same height at the scene (its rays all but parallel), which the engine already draws right:
+the same floor, shadows, sky, highlights, a mirror's reflection by both reflection paths and
+a chrome ball's probe.  Then the projection's own facts (a thing's size on screen whatever
+its distance), the transparent slot's order, refusals, a glTF's orthographic camera and a
+level file's."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    AmbientOcclusion,
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    HemisphereLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Reflective,
+    ScreenReflections,
+    Transform,
+)
+from engine.assets.mesh import box, plane, quad, sphere
+from engine.core.world import World
+from tests.support import look_rotation
+from tests.test_skinning import same_picture
+
+TARGET = glm.vec3(0.0, 0.8, 0.0)
+AXIS = glm.normalize(glm.vec3(-0.55, -0.6, -1.0))   # the way the camera looks
+HEIGHT = 6.0                                        # world units the view spans top to bottom
+FOV = 1.0                                           # the stand-in's field of view (the least a Camera takes)
+FAR_BACK = HEIGHT / 2.0 / math.tan(math.radians(FOV / 2.0))  # its distance: HEIGHT across at TARGET
+
+
+def camera(world, kind: str) -> int:
+    """The orthographic camera 10 back from TARGET, or its stand-in FAR_BACK back."""
+    if kind == "orthographic":
+        eye = TARGET - AXIS * 10.0
+        lens = Camera(projection="orthographic", ortho_height=HEIGHT, near=0.1, far=40.0)
+    else:
+        eye = TARGET - AXIS * FAR_BACK
+        lens = Camera(fov_y=FOV, near=FAR_BACK - 30.0, far=FAR_BACK + 30.0)
+    return world.spawn(Transform(position=eye, rotation=look_rotation(AXIS)), lens)
+
+
+def things(world) -> None:
+    """A brushed-metal floor under a sun (one shadow map over the level) shining along the
+    view axis mirrored in it (an orthographic view sees its highlight on all of the floor at
+    once: its rays are parallel; from a near eye it would be a spot) and a second sun doing
+    the same for the mirror's view, light from all round, a red box, a blue ball, a chrome
+    ball with its own probe and a mirror behind them."""
+    world.spawn(DirectionalLight(direction=glm.vec3(-AXIS.x, AXIS.y, -AXIS.z), intensity=0.25))
+    # ... and a second sun doing the same for the mirror's view (the axis mirrored in its plane)
+    world.spawn(DirectionalLight(direction=glm.vec3(-AXIS.x, AXIS.y, AXIS.z), intensity=0.25, shadows=False))
+    world.spawn(HemisphereLight(intensity=1.0))
+    world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.7, 0.7, 0.7, 1.0), metallic=0.8,
+                                                              roughness=0.45))
+    world.spawn(Transform(position=(-1.2, 0.5, 0.6)), MeshRef(box()),
+                Material(color=(0.8, 0.15, 0.1, 1.0), roughness=0.35))
+    world.spawn(Transform(position=(0.9, 0.6, 0.9)), MeshRef(sphere(0.6)),
+                Material(color=(0.1, 0.2, 0.8, 1.0), roughness=0.25))
+    world.spawn(Transform(position=(0.2, 0.5, -0.4)), MeshRef(sphere(0.5)),
+                Material(color=(1, 1, 1), metallic=1.0, roughness=0.05), Reflective("cube"))
+    world.spawn(Transform(position=(1.6, 1.2, -1.8)), MeshRef(quad(3.0, 2.4)), Mirror())
+
+
+def same_but_edges(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal but where an edge moved by a pixel (the stand-in's rays are a degree apart: what
+    lies nearer or farther than TARGET is a fraction of a percent larger or smaller): each
+    pixel of ``a`` within 12 levels of ``b``'s at it or one of its eight neighbours, but for a
+    few: 1% (an edge a metre off TARGET moves by a third of a pixel, and its pixel blends two
+    sides; measured 0.4%; an orthographic view shaded from its camera's place, as a
+    perspective one is, differs on 44%: its floor's highlight a spot)."""
+    padded = np.pad(b, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    h, w = a.shape[:2]
+    best = np.full((h, w), 1 << 30)
+    for dy in range(3):
+        for dx in range(3):
+            best = np.minimum(best, np.abs(a - padded[dy:dy + h, dx:dx + w]).max(axis=-1))
+    return (best > 12).sum() <= 0.01 * best.size
+
+
+def frame(scene, kind: str, path: str | None = None, size=(160, 120)) -> np.ndarray:
+    def build(world):
+        camera(world, kind)
+        things(world)
+    runner = scene(build, size)
+    if path is not None:
+        runner.engine.reflection_system.path = path
+    for _ in range(3):
+        image = runner.frame()
+    if path is not None:
+        assert runner.stats.reflection_path == path and runner.stats.reflection_views >= 1
+    return image.astype(int)
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_an_orthographic_view_is_a_far_narrow_perspectives_limit(scene, path):
+    ortho, standin = frame(scene, "orthographic", path), frame(scene, "perspective", path)
+    assert same_but_edges(ortho, standin) and same_but_edges(standin, ortho)
+    assert not same_picture(ortho, standin)   # (the stand-in's edges do move: the comparison is not vacuous)
+    assert (np.abs(ortho - ortho[5, 5]).max(axis=-1) > 40).sum() > 2000   # (the things and the mirror are there)
+
+
+def ortho_camera(world, position, height: float, axis=(0.0, 0.0, -1.0)) -> int:
+    return world.spawn(Transform(position=glm.vec3(position), rotation=look_rotation(glm.vec3(axis))),
+                       Camera(projection="orthographic", ortho_height=height, near=0.1, far=60.0))
+
+
+def test_a_thing_is_its_size_on_screen_whatever_its_distance(scene):
+    """Two 1 m boxes, one 2 m and one 25 m down the axis: both 1/6 of the view's 6 m height
+    across (20 of 120 pixels), as a perspective camera would not draw them."""
+    def build(world):
+        ortho_camera(world, (0.0, 0.0, 5.0), 6.0)
+        world.spawn(Transform(position=(-1.5, 0.0, 3.0)), MeshRef(box()), Material(color=(1, 0, 0, 1), unlit=True))
+        world.spawn(Transform(position=(1.5, 0.0, -20.0)), MeshRef(box()), Material(color=(0, 1, 0, 1), unlit=True))
+
+    runner = scene(build, (160, 120))
+    image = runner.frame().astype(int)
+    for channel, other in ((0, 1), (1, 0)):
+        mask = (image[..., channel] > 200) & (image[..., other] < 60)
+        rows, columns = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        assert abs(len(rows) - 20) <= 1 and abs(len(columns) - 20) <= 1, (channel, len(rows), len(columns))
+
+
+def test_the_transparent_slot_orders_an_orthographic_view_by_depth(scene):
+    """Two half-transparent panes, the red one 1 m in front of the blue one but farther from
+    the camera's place (the camera stands 10 m to the side of them, its view wide): where they
+    overlap the red is over the blue, as depth says (from the camera's place the blue would
+    be nearer)."""
+    def build(world):
+        ortho_camera(world, (10.0, 0.0, 0.0), 30.0)
+        world.spawn(Transform(position=(0.0, 0.0, -5.0)), MeshRef(quad(4.0, 4.0)),
+                    Material(color=(1.0, 0.0, 0.0, 0.5), unlit=True))
+        world.spawn(Transform(position=(1.5, 0.0, -6.0)), MeshRef(quad(4.0, 4.0)),
+                    Material(color=(0.0, 0.0, 1.0, 0.5), unlit=True))
+
+    runner = scene(build, (160, 120))
+    image = runner.frame().astype(int)
+    column, row = runner.project(glm.vec3(0.75, 0.0, -5.5))   # (inside both panes on screen)
+    red, _, blue = image[row, column]
+    assert red > blue + 40, (red, blue)
+
+
+def test_screen_passes_are_refused_on_an_orthographic_camera():
+    world = World("ortho")
+    entity = world.spawn(Transform(), Camera(projection="orthographic"))
+    with pytest.raises(ComponentValueError, match=r"AmbientOcclusion on an orthographic Camera"):
+        world.add_component(entity, AmbientOcclusion())
+    seeing = world.spawn(Transform(), Camera(), ScreenReflections())
+    with pytest.raises(ComponentValueError, match=r"ScreenReflections on an orthographic Camera"):
+        world.get(seeing, Camera).projection = "orthographic"
+    assert world.get(seeing, Camera).projection == "perspective"
+    with pytest.raises(ComponentValueError, match=r"Camera.projection"):
+        Camera(projection="fisheye")
+    with pytest.raises(ComponentValueError, match=r"Camera.ortho_height"):
+        Camera(ortho_height=0.0)
+
+
+def test_a_level_file_places_an_orthographic_camera(tmp_path):
+    from engine.assets.level_file import load_level
+    from engine.assets.level_save import save_level
+
+    (tmp_path / "iso.toml").write_text('[level]\nname = "iso"\n\n[[entity]]\nname = "camera"\n[entity.Transform]\n'
+                                       '[entity.Camera]\nprojection = "orthographic"\northo_height = 12.0\n')
+    world = World("iso")
+    names = load_level(tmp_path / "iso.toml").spawn(world)
+    lens = world.get(names["camera"], Camera)
+    assert (lens.projection, lens.ortho_height) == ("orthographic", 12.0)
+    saved = save_level(world, tmp_path / "again.toml", names, name="iso").read_text()
+    assert 'projection = "orthographic"' in saved and "ortho_height = 12.0" in saved
