@@ -549,6 +549,14 @@ def _uv_transform(info: object, label: str) -> tuple[float, float, float, float,
     return None if found == (0.0, 0.0, 0.0, 1.0, 1.0) else found
 
 
+def _data_uri_bytes(uri: str) -> bytes | None:
+    """A ``data:`` URI's bytes (glTF's are base64; None where it holds none that decode)."""
+    try:
+        return base64.b64decode(uri.split(",", 1)[1], validate=False)
+    except (ValueError, IndexError):
+        return None
+
+
 def _buffer_bytes(doc: dict, number: int, resolver: CheckedFiles, chunks: memoryview) -> bytes | memoryview | None:
     """Buffer ``number``'s bytes as read: a file's (``resolver``), base64 data's, or a GLB's
     binary chunk (``chunks``: what follows its JSON chunk) for the buffer without a URI; None
@@ -559,10 +567,7 @@ def _buffer_bytes(doc: dict, number: int, resolver: CheckedFiles, chunks: memory
         return None
     uri = buffer.get("uri")
     if isinstance(uri, str) and uri.startswith("data:"):
-        try:
-            return base64.b64decode(uri.split(",", 1)[1], validate=False)
-        except (ValueError, IndexError):
-            return None
+        return _data_uri_bytes(uri)
     if isinstance(uri, str):
         return resolver.bytes_of(uri)
     if len(chunks) >= 8 and bytes(chunks[4:8]) == b"BIN\0":
@@ -735,10 +740,7 @@ def _image_bytes(doc: dict, number: int, buffer_bytes: BufferBytes, path: Path, 
     image = doc["images"][number] if isinstance(doc["images"][number], dict) else {}
     uri, view = image.get("uri"), image.get("bufferView")
     if isinstance(uri, str) and uri.startswith("data:"):
-        try:
-            return base64.b64decode(uri.split(",", 1)[1], validate=False)
-        except (ValueError, IndexError):
-            return None
+        return _data_uri_bytes(uri)
     if isinstance(uri, str):
         _uri(path, uri, roots, f"image {number}", resolver, True, what)
         return resolver.bytes_of(uri)
