@@ -242,10 +242,10 @@ def test_a_map_on_uvs_the_engine_does_not_read_is_left_out_with_a_warning(tmp_pa
 
 def test_a_file_requiring_an_extension_the_engine_does_not_read_is_refused(tmp_path):
     material = {"name": "walled", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.5, 0.3, 1.0]}}
-    path = write_glb(tmp_path / "draco.glb", quad(2.0, 2.0), material, [],
-                     {"extensionsUsed": ["KHR_draco_mesh_compression"],
-                      "extensionsRequired": ["KHR_draco_mesh_compression"]})
-    with pytest.raises(AssetError, match=r"draco\.glb.*requires the glTF extension KHR_draco_mesh_compression, "
+    path = write_glb(tmp_path / "lit.glb", quad(2.0, 2.0), material, [],
+                     {"extensionsUsed": ["EXT_lights_image_based"],
+                      "extensionsRequired": ["EXT_lights_image_based"]})
+    with pytest.raises(AssetError, match=r"lit\.glb.*requires the glTF extension EXT_lights_image_based, "
                                          r"which the engine does not read"):
         load_model(path)
 
