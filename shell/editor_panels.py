@@ -31,12 +31,14 @@ from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
 from shell.editor import AUTOMATIC_FIELDS, IMAGE_FIELDS, OFF_FIELDS, EditError, Editor
 from shell.handles import (
+    FRAME_MARGIN,
     HANDLE_MODES,
     MARKER_REACH,
     Handles,
     Marker,
     ReachOutline,
     framing_eye,
+    framing_sphere,
     marker_at,
     markers,
     reach_outline,
@@ -530,6 +532,13 @@ class EditorPanels:
             return
         _, camera, transform = active
         forward = transform.rotation * glm.vec3(0.0, 0.0, -1.0)
+        if camera.projection == "orthographic":  # spans the selection, from far enough back to see all of it
+            found = framing_sphere(engine.world, entity)
+            if found is not None:
+                centre, radius = found
+                transform.position = centre - glm.normalize(forward) * (radius * FRAME_MARGIN + camera.near + radius)
+                camera.ortho_height = 2.0 * radius * FRAME_MARGIN
+            return
         eye = framing_eye(engine.world, entity, forward, camera.fov_y)
         if eye is not None:
             transform.position = eye

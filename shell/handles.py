@@ -281,9 +281,21 @@ FRAME_MARGIN = 1.3  # framing a selection: its bounding sphere fills this much l
 
 def framing_eye(world: World, entity: int, forward: glm.vec3, fov_y_degrees: float) -> glm.vec3 | None:
     """Where an eye looking along ``forward`` stands to frame ``entity``: its bounding sphere
-    (its mesh's world box, or a metre across about its origin) centred in view and
-    filling the view's height less ``FRAME_MARGIN``; None when it has no Transform.  The
-    view keeps its direction, as an editor's "frame selected" does."""
+    (``framing_sphere``) centred in view and filling the view's height less
+    ``FRAME_MARGIN``; None when it has no Transform.  The view keeps its direction, as an
+    editor's "frame selected" does."""
+    found = framing_sphere(world, entity)
+    if found is None:
+        return None
+    centre, radius = found
+    distance = radius * FRAME_MARGIN / math.tan(math.radians(fov_y_degrees) / 2.0)
+    return centre - glm.normalize(glm.vec3(forward)) * distance
+
+
+def framing_sphere(world: World, entity: int) -> tuple[glm.vec3, float] | None:
+    """``entity``'s bounding sphere as framing sees it: its mesh's world box's, or a metre
+    across about its origin (None: no Transform).  An orthographic camera frames it by
+    standing back along its axis and spanning ``2 x radius x FRAME_MARGIN``."""
     transform = world.try_get(entity, Transform)
     if transform is None:
         return None
@@ -294,5 +306,4 @@ def framing_eye(world: World, entity: int, forward: glm.vec3, fov_y_degrees: flo
         lo, hi = world_bounds(mesh.mesh, matrix)
         centre = glm.vec3(*((lo + hi) / 2.0))
         radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-3)
-    distance = radius * FRAME_MARGIN / math.tan(math.radians(fov_y_degrees) / 2.0)
-    return centre - glm.normalize(glm.vec3(forward)) * distance
+    return centre, radius

@@ -1030,6 +1030,31 @@ def test_f_frames_the_selection_keeping_the_view_direction(scene, ctx):
         assert camera.position == where
 
 
+def test_f_frames_the_selection_with_an_orthographic_camera(scene, ctx):
+    """With an orthographic camera F centres the selection and spans it (its view's height
+    the box's bounding sphere's diameter x FRAME_MARGIN), standing back far enough along the
+    axis to see all of it; the direction kept."""
+    from components import Camera, MeshRef
+    from shell.handles import FRAME_MARGIN
+
+    with _box_selected(scene, ctx) as (runner, overlay, draw, click, editor, box):
+        world = runner.world
+        camera_entity, lens, camera = runner.engine.active_camera()
+        lens.projection, lens.ortho_height = "orthographic", 40.0
+        turned = glm.quat(camera.rotation)
+        assert overlay.shortcut(runner.engine, "F")
+        runner.frame()
+        assert camera.rotation == turned
+        lo, hi = world.get(box, MeshRef).mesh.bounds
+        radius = float(np.linalg.norm(hi - lo)) / 2.0 * float(world.get(box, Transform).scale.x)
+        assert world.get(camera_entity, Camera).ortho_height == pytest.approx(2.0 * radius * FRAME_MARGIN, rel=1e-4)
+        centre = glm.vec3(world.get(box, Transform).position)
+        cx, cy = runner.project(centre)
+        w, h = runner.size
+        assert abs(cx - w / 2) <= 2 and abs(cy - h / 2) <= 2
+        assert (runner.ids() == box).sum() > 0.1 * w * h   # (seen whole, not cut by the near plane)
+
+
 def test_the_entity_list_is_made_again_on_an_edit_or_a_moment_later_not_every_frame(scene, ctx, monkeypatch):
     """With the list open the editor's ``listed`` runs once over frames where nothing was
     edited and the filter stayed (a filter over 100,000 entities takes a quarter second), at
