@@ -193,6 +193,16 @@ class Material(TrackedComponent):
     ``specularColor``): the coloured sheen of some plastics, lacquers and fabrics, whose
     highlights are not the light's colour.
 
+    ``diffuse_transmission`` (0 to 1, default 0: none) lets that share of the light a
+    surface scatters pass through it, as thin leaves, paper, a lampshade or a curtain do
+    (glTF's ``KHR_materials_diffuse_transmission``, Godot's backlight, Unity's translucency):
+    lit from behind, its front glows with ``diffuse_transmission_color`` (linear RGB, each 0
+    to 1, default white: what it lets through, not tinted by its colour) times that light's
+    share, scattered evenly (the back's Lambert, with the back's shadows), and it scatters
+    ``1 - diffuse_transmission`` of the light in front.  Lit by the sun and the lamps and the
+    light from all round behind it (light through mirrors and portals lights its front only).
+    Give a leaf or a sheet ``double_sided`` as well: each side is then the other's back.
+
     ``unlit`` (default False) draws the material's colour as it is, lit by nothing (glTF's
     ``KHR_materials_unlit``, Unity's Unlit shaders, three.js's ``MeshBasicMaterial``,
     Godot's unshaded mode): a sign, a backdrop, a baked or stylised asset whose texture
@@ -229,6 +239,8 @@ class Material(TrackedComponent):
     iridescence_thickness: float = 400.0
     second_uv_maps: tuple[str, ...] = ()
     specular_color: Any = field(default_factory=lambda: glm.vec3(1.0))
+    diffuse_transmission: float = 0.0
+    diffuse_transmission_color: Any = field(default_factory=lambda: glm.vec3(1.0))
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "second_uv_maps":
@@ -256,7 +268,7 @@ class Material(TrackedComponent):
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
-                    "sheen_roughness", "anisotropy", "iridescence"):
+                    "sheen_roughness", "anisotropy", "iridescence", "diffuse_transmission"):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "iridescence_ior":
             return finite(self, name, value, low=1.0, high=MAX_IOR)
@@ -270,6 +282,12 @@ class Material(TrackedComponent):
                 raise ComponentValueError(f"Material.specular_color must have components in "
                                           f"[0, {MAX_SPECULAR_TINT:g}], got {value!r}")
             return tint
+        if name == "diffuse_transmission_color":
+            passed = vec3(self, name, value, low=0.0)
+            if max(passed) > 1.0:  # what passes: more than arrives would make light
+                raise ComponentValueError(f"Material.diffuse_transmission_color must have components in [0, 1], "
+                                          f"got {value!r}")
+            return passed
         if name == "sheen_color":
             sheen = vec3(self, name, value, low=0.0)
             if max(sheen) > 1.0:  # a layer's albedo: more than 1 would reflect more light than arrives

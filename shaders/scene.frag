@@ -393,10 +393,26 @@ vec3 sheen_environment(Surface s, AmbientBoxes boxes, float albedo) {
 }
 #endif
 
+#ifdef DIFFUSE_TRANSMISSION
+// Diffuse transmission (Material.diffuse_transmission; glTF's KHR_materials_diffuse_transmission):
+// a thin surface lets its share of the light it scatters through, so what lights its back
+// (the sun, the lamps and the light from all round behind it, with the back's shadows: the
+// lookups again with the normal turned) lights its front too, in its own colour, evenly (the
+// back's Lambert); its front scatters the rest.  Only in the DIFFUSE_TRANSMISSION builds.
+uniform vec4 diffuse_transmission;  // rgb: its batch's Material.diffuse_transmission_color, a: its share
+#endif
+
 vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
+#ifdef DIFFUSE_TRANSMISSION
+    vec3 through = diffuse_transmission.rgb * (diffuse_transmission.a * (1.0 - s.metallic) / PI);
+    diffuse *= 1.0 - diffuse_transmission.a;
+#endif
     // E(n) x albedo x (1 - metallic) / pi, less what the environment's reflection took, and that reflection
     vec3 total = ambient_irradiance(boxes, s.normal) * diffuse * s.occlusion * (1.0 - s.environment_weight);
+#ifdef DIFFUSE_TRANSMISSION
+    total += ambient_irradiance(boxes, -s.normal) * through * s.occlusion;  // the light from all round behind
+#endif
     if (environment_reflected()) total += environment_specular(s, boxes);
 #ifdef SCREEN_OCCLUSION
     vec3 ambient = total;  // the direct light, summed apart, takes its own share of the occlusion
@@ -407,9 +423,16 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     bool shadowed = !receives_no_shadow(v_tint.w);
     vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
     vec4 point_lit = shadowed ? point_shadows(s.position, s.geometric_normal) : vec4(1.0);
+#ifdef DIFFUSE_TRANSMISSION
+    vec4 directional_behind = shadowed ? directional_shadows(s.position, -s.geometric_normal) : vec4(1.0);
+    vec4 point_behind = shadowed ? point_shadows(s.position, -s.geometric_normal) : vec4(1.0);
+#endif
     for (int i = 0; i < lights.counts.x; ++i) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
+#ifdef DIFFUSE_TRANSMISSION
+        total += through * (max(-dot(s.normal, l), 0.0) * directional_behind[i]) * lights.directional_color[i].rgb;
+#endif
         if (nl > 0.0) {
             vec3 arriving = lights.directional_color[i].rgb * nl * directional_lit[i];
 #ifdef ANISOTROPY
@@ -439,6 +462,18 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #ifdef SPOT_COOKIES
         vec3 cookie_at = cookie_place(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
         vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));
+#endif
+#ifdef DIFFUSE_TRANSMISSION
+        float behind = max(-dot(s.normal, l), 0.0);
+        if (behind > 0.0 && falloff > 0.0) {
+#ifdef SPOT_COOKIES
+            vec3 behind_cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
+#else
+            const vec3 behind_cookie = vec3(1.0);
+#endif
+            total += through * behind * lights.point_color[i].rgb * behind_cookie * falloff
+                     * point_shadow(i, point_behind);
+        }
 #endif
         if (nl > 0.0 && falloff > 0.0) {
 #ifdef SPOT_COOKIES

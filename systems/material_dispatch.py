@@ -84,12 +84,15 @@ def dielectric_f0(material: Material | None) -> tuple[float, float, float]:
 def layer_uniforms(material: Material | None, refractive: Refractive | None) -> dict[str, Any]:
     """The batch arguments (``Renderer.batch_for``) of the material's optional layers, each its
     build's uniform and None (or 0) where the material has none, so it pays nothing for it: a
-    clear coat (clearcoat, its roughness), a sheen (colour, roughness), anisotropy (strength,
+    clear coat (clearcoat, its roughness), a sheen (colour, roughness), diffuse transmission
+    (its colour, its share), anisotropy (strength,
     direction in radians), a thin film (iridescence, its index, its thickness in nm), what
     non-metals reflect head on and a refraction's dispersion."""
     m = material or DEFAULT_MATERIAL
     return {"clearcoat": (m.clearcoat, m.clearcoat_roughness) if m.clearcoat > 0.0 else None,
             "sheen": (*m.sheen_color, m.sheen_roughness) if max(m.sheen_color) > 0.0 else None,
+            "diffuse_transmission": (*m.diffuse_transmission_color, m.diffuse_transmission)
+            if m.diffuse_transmission > 0.0 else None,
             "anisotropy": (m.anisotropy, math.radians(m.anisotropy_direction)) if m.anisotropy > 0.0 else None,
             "iridescence": (m.iridescence, m.iridescence_ior, m.iridescence_thickness) if m.iridescence > 0.0 else None,
             "dielectric_f0": dielectric_f0(material),

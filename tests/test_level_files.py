@@ -330,7 +330,8 @@ def test_a_bad_level_through_the_runner_is_one_error_line(tmp_path):
     assert lines == [f"speculum: error: {path}:{line_of(path, 'colour =')}: entity 'floor': Material.colour: "
                      "Material has no field 'colour' (fields: alpha_cutoff, anisotropy, anisotropy_direction, blend, "
                      "clearcoat, clearcoat_roughness, "
-                     "color, double_sided, emissive_map, environment_reflection, iridescence, iridescence_ior, "
+                     "color, diffuse_transmission, diffuse_transmission_color, double_sided, emissive_map, "
+                     "environment_reflection, iridescence, iridescence_ior, "
                      "iridescence_thickness, metallic, metallic_roughness_map, "
                      "normal_map, normal_scale, occlusion_map, occlusion_strength, reflectance, roughness, "
                      "second_uv_maps, sheen_color, sheen_roughness, specular_color, texture, unlit)"], lines

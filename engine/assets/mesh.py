@@ -581,6 +581,8 @@ class ModelPart:
     unlit: bool = False               # KHR_materials_unlit (Material.unlit)
     reflectance: float = 0.5          # from KHR_materials_ior and _specular (Material.reflectance)
     specular_color: tuple[float, float, float] = (1.0, 1.0, 1.0)  # its tint (Material.specular_color)
+    diffuse_transmission: float = 0.0  # KHR_materials_diffuse_transmission's factor (Material.diffuse_transmission)
+    diffuse_transmission_color: tuple[float, float, float] = (1.0, 1.0, 1.0)  # its colour factor
     sheen_color: tuple[float, float, float] = (0.0, 0.0, 0.0)  # KHR_materials_sheen's (Material.sheen_color)
     sheen_roughness: float = 0.0      # its roughness factor (Material.sheen_roughness)
     anisotropy: float = 0.0           # KHR_materials_anisotropy's strength (Material.anisotropy)
@@ -1102,6 +1104,26 @@ def _gltf_sheen(doc_material: dict, part: ModelPart, what: str) -> None:
                             "the sheen is its factors' everywhere")
 
 
+def _gltf_diffuse_transmission(doc_material: dict, part: ModelPart, what: str) -> None:
+    """A glTF material's diffuse transmission (``KHR_materials_diffuse_transmission``): its
+    factor and colour factor (``Material.diffuse_transmission``, ``diffuse_transmission_color``);
+    a factor out of [0, 1] is an error naming the material; its textures are left out with a
+    warning."""
+    name = "KHR_materials_diffuse_transmission"
+    info = _gltf_extension(doc_material, name, what)
+    if info is None:
+        return
+    part.diffuse_transmission = _gltf_number(info, name, "diffuseTransmissionFactor", 0.0, 0.0, 1.0, what)
+    colour = info.get("diffuseTransmissionColorFactor", [1.0, 1.0, 1.0])
+    if not (isinstance(colour, list) and len(colour) == 3 and all(
+            not isinstance(c, bool) and isinstance(c, numbers.Real) and 0.0 <= float(c) <= 1.0 for c in colour)):
+        raise AssetError(f"{what}: {name}.diffuseTransmissionColorFactor must be three numbers in [0, 1], "
+                         f"got {colour!r}")
+    part.diffuse_transmission_color = tuple(float(c) for c in colour)
+    _gltf_textures_left_out(info, name, ("diffuseTransmissionTexture", "diffuseTransmissionColorTexture"),
+                            part.diffuse_transmission > 0.0, what, "it passes its factors' light everywhere")
+
+
 def _gltf_anisotropy(doc_material: dict, part: ModelPart, what: str) -> None:
     """A glTF material's anisotropy (``KHR_materials_anisotropy``): its strength and rotation
     (radians, counter-clockwise from the UVs' u: ``Material.anisotropy``,
@@ -1283,6 +1305,7 @@ class _MaterialMaps:
         _gltf_transmission(doc_material, part, what)
         _gltf_clearcoat(doc_material, part, what)
         _gltf_sheen(doc_material, part, what)
+        _gltf_diffuse_transmission(doc_material, part, what)
         _gltf_anisotropy(doc_material, part, what)
         _gltf_iridescence(doc_material, part, what)
         _gltf_reflectance(doc_material, part, what)
@@ -1293,6 +1316,7 @@ class _MaterialMaps:
             part.unlit = True
             part.metallic = part.reflectivity = part.transmission = part.clearcoat = 0.0
             part.sheen_color = (0.0, 0.0, 0.0)
+            part.diffuse_transmission = 0.0
 
     def image(self, image, what: str, kind: str) -> TextureData:
         """A decoded image of the file as a TextureData (once per image and kind), its size

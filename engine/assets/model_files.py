@@ -481,7 +481,7 @@ def _json(path: Path, data: bytes, quiet: bool = False) -> dict | None:
 # images, with their optional packages: engine/assets/gltf_compression.py)
 GLTF_READ_EXTENSIONS = frozenset({
     "EXT_mesh_gpu_instancing", "EXT_texture_avif", "EXT_texture_webp", "KHR_lights_punctual",
-    "KHR_materials_anisotropy",
+    "KHR_materials_anisotropy", "KHR_materials_diffuse_transmission",
     "KHR_materials_clearcoat", "KHR_materials_dispersion", "KHR_materials_iridescence",
     "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_sheen", "KHR_materials_specular",
     "KHR_materials_transmission", "KHR_materials_variants",

@@ -227,6 +227,8 @@ def _part_components(part, probed: bool) -> list:
                  blend="transparent" if _glass(part) and not refracts else "fade",
                  clearcoat=part.clearcoat, clearcoat_roughness=part.clearcoat_roughness,
                  unlit=part.unlit, reflectance=part.reflectance, specular_color=part.specular_color,
+                 diffuse_transmission=part.diffuse_transmission,
+                 diffuse_transmission_color=part.diffuse_transmission_color,
                  sheen_color=part.sheen_color,
                  sheen_roughness=part.sheen_roughness, anisotropy=part.anisotropy,
                  anisotropy_direction=part.anisotropy_direction, iridescence=part.iridescence,

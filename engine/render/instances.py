@@ -235,6 +235,8 @@ class BatchKey(NamedTuple):
     posed: tuple[int, bool, bool] = (0, False, False)
     # The maps that read the mesh's second UV set, as bits (components.rendering.second_uv_mask; 0: none).
     second_uv_maps: int = 0
+    # Material.diffuse_transmission_color and diffuse_transmission (None: none)
+    diffuse_transmission: tuple[float, float, float, float] | None = None
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -352,6 +354,9 @@ class InstanceBatch:
         # specular_color), a uniform
         # A sheen (Material.sheen_color, sheen_roughness; None: none): its SHEEN build's uniform.
         self.sheen: tuple[float, float, float, float] | None = None
+        # Diffuse transmission (Material.diffuse_transmission_color, its share; None: none): its
+        # DIFFUSE_TRANSMISSION build's uniform.
+        self.diffuse_transmission: tuple[float, float, float, float] | None = None
         self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform
         # Anisotropy (Material.anisotropy; its direction in radians; None: none): its ANISOTROPY build's uniform.
         self.anisotropy: tuple[float, float] | None = None

@@ -142,7 +142,8 @@ class Renderer(Gpu):
                   sheen: tuple[float, float, float, float] | None = None,
                   dispersion: float = 0.0, anisotropy: tuple[float, float] | None = None,
                   iridescence: tuple[float, float, float] | None = None,
-                  posed: tuple[int, bool, bool] = (0, False, False), second_uv_maps: int = 0) -> InstanceBatch:
+                  posed: tuple[int, bool, bool] = (0, False, False), second_uv_maps: int = 0,
+                  diffuse_transmission: tuple[float, float, float, float] | None = None) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -169,7 +170,8 @@ class Renderer(Gpu):
         # wears a Morph) gets a batch of its own, drawn with the SKINNED and MORPHED builds, its
         # row of the pose texture their uniform (set by extract).  ``second_uv_maps``: the maps
         # that read the mesh's second UV set, as bits (components.rendering.second_uv_mask): its
-        # SECOND_UV_MAPS builds.
+        # SECOND_UV_MAPS builds.  ``diffuse_transmission``: (red, green, blue, share) of what a
+        # thin surface lets through from behind, its DIFFUSE_TRANSMISSION build's uniform (None: none).
         if second_uv_maps and mesh.second_uvs is None:
             raise GLLimitError(f"mesh {mesh.name!r}: Material.second_uv_maps reads a second UV set the mesh does "
                                "not have (Mesh.second_uvs)")
@@ -181,7 +183,7 @@ class Renderer(Gpu):
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
                        bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen,
-                       dispersion, anisotropy, iridescence, posed, second_uv_maps)
+                       dispersion, anisotropy, iridescence, posed, second_uv_maps, diffuse_transmission)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -238,6 +240,7 @@ class Renderer(Gpu):
             batch.iridescence = iridescence
             batch.skinned, batch.morphed = posed[1], posed[2]
             batch.second_uv_maps = second_uv_maps
+            batch.diffuse_transmission = diffuse_transmission
             if sheen is not None:  # the sheen's albedo table, made once a sheen is drawn
                 self.irradiance.write_sheen_albedo()
             self._order_stale = True
