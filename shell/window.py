@@ -214,7 +214,9 @@ class SpeculumWindow(mglw.WindowConfig):
 
     def on_mouse_scroll_event(self, x_offset: float, y_offset: float) -> None:
         if not self.released and self.overlay.visible:
-            self.overlay.scroll(x_offset, y_offset)  # the entity list, the inspector (the game takes no wheel)
+            self.overlay.scroll(x_offset, y_offset)  # the entity list, the inspector
+        else:  # the game's: a fly camera flies, an orthographic one zooms (systems/fly_camera_system.py)
+            self.input.wheel += float(y_offset)
 
     def _in_pixels(self, x: float, y: float) -> tuple[float, float]:
         """A window position (points) in the output's pixels, the overlay's units (its display

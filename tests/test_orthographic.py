@@ -176,3 +176,25 @@ def test_a_level_file_places_an_orthographic_camera(tmp_path):
     assert (lens.projection, lens.ortho_height) == ("orthographic", 12.0)
     saved = save_level(world, tmp_path / "again.toml", names, name="iso").read_text()
     assert 'projection = "orthographic"' in saved and "ortho_height = 12.0" in saved
+
+
+def test_the_mouse_wheel_zooms_an_orthographic_fly_camera_and_flies_a_perspective_one():
+    """Two wheel steps away: an orthographic camera's height times 0.9^2, its place kept; a
+    perspective one half a second's flight forward (a quarter a step), its lens kept; the
+    wheel forgotten after the frame."""
+    from components import FlyController
+    from engine.core.frame_io import Input
+    from systems.fly_camera_system import FlyCameraSystem
+
+    world = World("wheel")
+    flat = world.spawn(Transform(position=(0.0, 5.0, 0.0)), Camera(projection="orthographic", ortho_height=10.0),
+                       FlyController(speed=4.0))
+    deep = world.spawn(Transform(), Camera(), FlyController(speed=4.0))
+    stage = FlyCameraSystem(world)
+    world.resources[Input].wheel = 2.0
+    stage.process(1 / 60)
+    assert world.get(flat, Camera).ortho_height == pytest.approx(8.1)
+    assert list(world.get(flat, Transform).position) == [0.0, 5.0, 0.0]
+    assert list(world.get(deep, Transform).position) == pytest.approx([0.0, 0.0, -2.0])
+    world.resources[Input].end_frame()
+    assert world.resources[Input].wheel == 0.0

@@ -18,9 +18,10 @@ class Input:
     went down since the last frame (an edge: one frame per press, for toggles and actions);
     ``clicks`` the mouse buttons pressed since the last frame ('left', 'right', 'middle') and
     ``mouse`` the pointer's last position in the output's pixels (x right, y down;
-    the window shell scales a high-DPI window's points by its pixel ratio).  The engine
-    empties ``pressed``, ``clicks`` and the mouse motion after every frame; the shell (a
-    window, a test, a scripted player) fills them before the next."""
+    the window shell scales a high-DPI window's points by its pixel ratio); ``wheel`` the
+    mouse wheel's steps since the last frame (away from the player: positive).  The engine
+    empties ``pressed``, ``clicks``, the mouse motion and the wheel after every frame; the
+    shell (a window, a test, a scripted player) fills them before the next."""
 
     held: set[str] = field(default_factory=set)
     pressed: set[str] = field(default_factory=set)
@@ -28,6 +29,7 @@ class Input:
     mouse: tuple[float, float] = (0.0, 0.0)
     mouse_dx: float = 0.0
     mouse_dy: float = 0.0
+    wheel: float = 0.0
 
     def press(self, *names: str) -> None:
         """Keys go down this frame (a scripted player's or a window's key press)."""
@@ -43,6 +45,7 @@ class Input:
         self.pressed.clear()
         self.clicks.clear()
         self.mouse_dx = self.mouse_dy = 0.0
+        self.wheel = 0.0
 
 
 @dataclass
