@@ -102,6 +102,11 @@ def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.v
     matrix = current_world_matrix(world, transform)
     origin = glm.vec3(matrix[3])
     length = GIZMO_SHARE * max(glm.length(origin - glm.vec3(eye)), 1e-3)
+    if view_proj[0][3] == 0.0 and view_proj[1][3] == 0.0 and view_proj[2][3] == 0.0:
+        # An orthographic view (its rays parallel): as long on screen as from a 60-degree
+        # camera, whatever the distance; its clip y grows by |row 1| a world unit.
+        across = glm.length(glm.vec3(view_proj[0][1], view_proj[1][1], view_proj[2][1]))
+        length = GIZMO_SHARE / (max(across, 1e-9) * math.tan(math.radians(30.0)))
     axes = AXES
     if mode == "scale":
         axes = tuple(glm.normalize(glm.vec3(matrix[i])) if glm.length(glm.vec3(matrix[i])) > 1e-9 else AXES[i]

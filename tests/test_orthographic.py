@@ -198,3 +198,27 @@ def test_the_mouse_wheel_zooms_an_orthographic_fly_camera_and_flies_a_perspectiv
     assert list(world.get(deep, Transform).position) == pytest.approx([0.0, 0.0, -2.0])
     world.resources[Input].end_frame()
     assert world.resources[Input].wheel == 0.0
+
+
+def test_the_editors_handles_are_one_size_on_screen_in_an_orthographic_view():
+    """The move handles of a thing near and of one far down an orthographic view's axis are
+    equally long on screen, a share of the view's height as a 60-degree camera's are (their
+    world length from the view's height, not from the distance to the camera's place)."""
+    from engine.render.views import camera_view
+    from shell.handles import transform_handles
+
+    world = World("handles")
+    near = world.spawn(Transform(position=(0.0, 0.0, -2.0)))
+    far = world.spawn(Transform(position=(1.0, 0.0, -30.0)))
+    eye = glm.mat4(1.0)  # (at the origin, looking down -z)
+    view = camera_view(eye, 60.0, 0.1, 100.0, (200, 150), ortho_height=8.0)
+    lengths = []
+    for entity in (near, far):
+        handles = transform_handles(world, entity, view.view_proj, view.eye, (200, 150))
+        (x0, y0), (x1, y1) = handles.lines[1]   # the y axis: straight up the screen
+        lengths.append(math.hypot(x1 - x0, y1 - y0))
+    assert lengths[0] == pytest.approx(lengths[1], rel=1e-4)
+    perspective = camera_view(eye, 60.0, 0.1, 100.0, (200, 150))
+    handles = transform_handles(world, near, perspective.view_proj, perspective.eye, (200, 150))
+    (x0, y0), (x1, y1) = handles.lines[1]
+    assert lengths[0] == pytest.approx(math.hypot(x1 - x0, y1 - y0), rel=0.02)
