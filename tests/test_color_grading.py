@@ -96,10 +96,9 @@ def test_white_balance_makes_the_daylight_of_its_temperature_neutral(known, kelv
 
 def _function_lut(size: int) -> ColorLut:
     """A table of a curved function of the input (not linear, so the interpolation shows)."""
-    lut = identity_lut(size, name="curved")
-    r, g, b = lut.table[..., 0], lut.table[..., 1], lut.table[..., 2]
-    lut.table[:] = np.stack([0.25 + 0.5 * b * b, (r + g) * 0.5, 1.0 - 0.8 * g * g], axis=-1)
-    return lut
+    identity = identity_lut(size).table
+    r, g, b = identity[..., 0], identity[..., 1], identity[..., 2]
+    return ColorLut(np.stack([0.25 + 0.5 * b * b, (r + g) * 0.5, 1.0 - 0.8 * g * g], axis=-1), name="curved")
 
 
 @pytest.mark.parametrize("size", [2, 9, 33])
@@ -276,3 +275,15 @@ def test_bad_vignette_values_are_refused_naming_the_field(field, value):
 
     with pytest.raises(ComponentValueError, match=f"Vignette.{field}"):
         Vignette(**{field: value})
+
+
+def test_a_tables_edit_in_place_raises_at_the_edit_and_a_callers_array_is_not_shared():
+    """The GPU's copy of a table is made once, so an edit in place would never show: it is
+    refused where it is made; the table is the ColorLut's own copy (the caller's array
+    changed afterwards changes nothing)."""
+    source = identity_lut(5).table.copy()
+    lut = ColorLut(source)
+    with pytest.raises(ValueError, match="read-only"):
+        lut.table[0, 0, 0] = (1.0, 0.0, 0.0)
+    source[0, 0, 0] = (1.0, 0.0, 0.0)
+    assert lut.table[0, 0, 0].tolist() == [0.0, 0.0, 0.0]

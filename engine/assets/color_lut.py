@@ -30,7 +30,10 @@ class ColorLut:
     """A 3D colour table: ``table[b, g, r]`` is the output colour (RGB, float32) for the
     input (r, g, b) / (size - 1) of the domain, inputs between points interpolated
     trilinearly.  ``domain_min`` and ``domain_max`` are the input range the grid spans (the
-    file's ``DOMAIN_MIN``/``DOMAIN_MAX``, 0 and 1 by default)."""
+    file's ``DOMAIN_MIN``/``DOMAIN_MAX``, 0 and 1 by default).  The table is its own copy,
+    read-only: the GPU's copy is made once a table, so an edit in place would never reach the
+    picture; it raises instead, at the edit (a changed table is a new ColorLut, given to
+    ``ColorGrading.lut``)."""
 
     ASSET_KIND = "lut"  # what ColorGrading.lut checks for (components do not import the engine)
 
@@ -57,7 +60,8 @@ class ColorLut:
                 or any(a >= b for a, b in zip(lo, hi, strict=True)):
             raise AssetError(f"colour table {self.name!r}: the domain must be finite with min < max a channel, "
                              f"got {lo} to {hi}")
-        self.table = np.ascontiguousarray(table, np.float32)
+        self.table = np.array(table, np.float32, order="C", copy=True)
+        self.table.flags.writeable = False
         self.domain_min, self.domain_max = lo, hi
 
     @property
@@ -84,7 +88,7 @@ class ColorLut:
 
 def identity_lut(size: int = 33, name: str = "identity") -> ColorLut:
     """The table that changes nothing (each point its own colour): a start for a grade made
-    in code."""
+    in code (its ``table.copy()`` changed, then ``ColorLut(changed)``)."""
     axis = np.linspace(0.0, 1.0, size, dtype=np.float32)
     b, g, r = np.meshgrid(axis, axis, axis, indexing="ij")
     return ColorLut(np.stack([r, g, b], axis=-1), name=name)
