@@ -153,7 +153,7 @@ from components import (
     Vignette,
     look_rotation,
 )
-from engine.assets.color_lut import identity_lut
+from engine.assets.color_lut import ColorLut, identity_lut
 from engine.assets.mesh import box
 from engine.core.frame_io import Output
 from engine.render.bloom import level_sizes
@@ -276,9 +276,10 @@ def _post(engine: Engine) -> None:
 
 def _graded(engine: Engine) -> None:
     _sun_shadows(engine, False)
-    lut = identity_lut(33, name="warm")
-    lut.table[..., 0] = lut.table[..., 0] ** 0.9   # a little warmer: red lifted, blue lowered
-    lut.table[..., 2] = lut.table[..., 2] ** 1.1
+    table = identity_lut(33).table.copy()
+    table[..., 0] = table[..., 0] ** 0.9   # a little warmer: red lifted, blue lowered
+    table[..., 2] = table[..., 2] ** 1.1
+    lut = ColorLut(table, name="warm")
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx"))
     engine.world.add_component(camera_entity(engine), ColorGrading(
         temperature=0.2, tint=-0.1, contrast=1.1, slope=(1.05, 1.0, 0.95), offset=(0.0, 0.0, 0.01),
