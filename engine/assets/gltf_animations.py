@@ -300,17 +300,25 @@ def _layered(tree: NodeTree, translation: np.ndarray, rotation: np.ndarray, scal
     return result[0], result[1], result[2]
 
 
-def layered_weights(base: np.ndarray | None, rest: np.ndarray, node: int, layer: Layer) -> np.ndarray | None:
-    """Node ``node``'s morph weights with ``layer`` over ``base`` (None: its ``rest``, the
-    file's), where its clip animates them within its mask (else ``base`` as it is)."""
+def layer_weights(layer: Layer) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray] | None]:
+    """``layer``'s clip's morph weights at its time and, adding, at its first key (None:
+    overriding), each node's: sampled once a pose for ``layered_weights``."""
+    return pose_weights(layer.clip, layer.time), pose_weights(layer.clip, 0.0) if layer.additive else None
+
+
+def layered_weights(base: np.ndarray | None, rest: np.ndarray, node: int, layer: Layer,
+                    sampled: tuple[dict[int, np.ndarray], dict[int, np.ndarray] | None]) -> np.ndarray | None:
+    """Node ``node``'s morph weights with ``layer`` (``sampled``: its ``layer_weights``) over
+    ``base`` (None: its ``rest``, the file's), where its clip animates them within its mask
+    (else ``base`` as it is)."""
     if layer.nodes is not None and not layer.nodes[node]:
         return base
-    theirs = pose_weights(layer.clip, layer.time).get(node)
+    theirs = sampled[0].get(node)
     if theirs is None:
         return base
     under = rest if base is None else base
     if layer.additive:
-        return under + layer.weight * (theirs - pose_weights(layer.clip, 0.0)[node])
+        return under + layer.weight * (theirs - sampled[1][node])
     return under + layer.weight * (theirs - under)
 
 

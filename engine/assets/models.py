@@ -40,6 +40,7 @@ from engine.assets.gltf_animations import (
     Clip,
     Layer,
     collapsed,
+    layer_weights,
     layered_weights,
     moved_nodes,
     pose_all,
@@ -70,6 +71,9 @@ class SpawnedModel:
     skins: list[int | None] = field(default_factory=list)  # each part's skin (None: not skinned)
     masks: dict[str, np.ndarray] = field(default_factory=dict)  # an AnimationLayer's root -> its nodes (subtree)
     starts: dict[tuple, np.ndarray] = field(default_factory=dict)  # (clip, node) -> its place at the clip's start
+    # (clip, node, time) -> its travel there (root_travel), the last few: a frame asks for the
+    # same times its pose and the frame before did
+    travels: dict[tuple, np.ndarray] = field(default_factory=dict)
 
     @property
     def suns(self) -> bool:
@@ -476,11 +480,18 @@ def root_travel(world: World, root: int, clip_name: str, node_name: str, time: f
     record = world.resources[SpawnedModels][root]
     clip = next(c for c in record.loaded.animations if c.name == clip_name)
     node = _named_node(root, record, node_name, "Animation.root_motion")
+    found = record.travels.get((clip_name, node, time))
+    if found is not None:
+        return found
     start = record.starts.get((clip_name, node))
     if start is None:
         start = record.starts[(clip_name, node)] = pose_all(record.loaded.node_tree, clip, 0.0)[node, :3, 3].copy()
     travel = pose_all(record.loaded.node_tree, clip, time)[node, :3, 3] - start
     travel[1] = 0.0
+    if len(record.travels) >= 8:
+        del record.travels[next(iter(record.travels))]
+    record.travels[(clip_name, node, time)] = travel
+    travel.flags.writeable = False  # (kept: callers make new arrays of it)
     return travel
 
 
@@ -500,6 +511,7 @@ def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: fl
     clip faded from's by ``clip``'s share; ``layer``: a layer's laid over them."""
     sampled = pose_weights(clip, time) if clip is not None else {}
     before = pose_weights(fading[0], fading[1]) if fading is not None else None
+    laid = layer_weights(layer) if layer is not None else None
     for entity, part in zip(record.parts, record.loaded.parts, strict=False):
         if part.morph_weights is None or not world.exists(entity):
             continue
@@ -509,7 +521,7 @@ def _pose_morphs(world: World, record: SpawnedModel, clip: Clip | None, time: fl
             old = before.get(part.node, rest)
             weights = old + fading[2] * ((rest if weights is None else weights) - old)
         if layer is not None:
-            weights = layered_weights(weights, np.array(part.morph_weights), part.node, layer)
+            weights = layered_weights(weights, np.array(part.morph_weights), part.node, layer, laid)
         if weights is not None:
             world.get(entity, Morph).weights = np.clip(weights, -MAX_MORPH_WEIGHT, MAX_MORPH_WEIGHT)
         elif every:
