@@ -4,6 +4,7 @@ from components.camera import Camera, DirectionalLight, FlyController, PointLigh
 from components.fog import Fog
 from components.mirror import Mirror
 from components.model import Animation, AnimationLayer, FromModel, Model
+from components.particles import ParticleEmitter
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.pose import Morph, Skin
 from components.post import Bloom, ColorGrading, Tonemap, Vignette
@@ -20,7 +21,8 @@ __all__ = [
     "AmbientOcclusion", "Animation", "AnimationLayer", "Bloom", "Camera", "ColorGrading", "ComponentValueError",
     "ComponentWarning",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "Material",
-    "MeshRef", "Mirror", "Model", "Morph", "PointLight", "Portal", "PortalClone", "ReflectionProbe", "Reflective",
+    "MeshRef", "Mirror", "Model", "Morph", "ParticleEmitter", "PointLight", "Portal", "PortalClone", "ReflectionProbe",
+    "Reflective",
     "Refractive",
     "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "Water",

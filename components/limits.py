@@ -108,3 +108,13 @@ def check_near_far(owner: Any, name: str, value: Any, default_far: float) -> flo
             f"{kind}.{name} must keep far / near <= {MAX_DEPTH_RATIO:.0e} (beyond it the depth buffer "
             f"cannot tell surfaces apart), got near={near} far={far}")
     return value
+
+# Living particles one emitter may hold (ParticleEmitter.max_particles): each is a row of 48
+# bytes uploaded a frame and four vertices a view; an emitter asked for more spawns none past
+# it (counted in RenderStats.particles_capped, said once with a ParticleLimitWarning).
+MAX_PARTICLES = 65536
+# A particle's longest life (ParticleEmitter.lifetime, seconds): an hour is a still cloud.
+MAX_PARTICLE_LIFETIME = 3600.0
+# A flipbook's most columns or rows (ParticleEmitter.sheet): 64 x 64 frames of a 4096 texture
+# are 64 texels each.
+MAX_SHEET_CELLS = 64

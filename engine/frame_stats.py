@@ -108,3 +108,7 @@ class RenderStats(BudgetLedger):
     # where they cover the farther surface it shows its own colour, not its reflection: one
     # per (view, batch) this frame.
     glass_between_surfaces: int = 0
+    # Particles (systems/particle_system.py): living this frame, every emitter's; and those the
+    # emitters could not spawn this frame, their max_particles reached (ParticleLimitWarning).
+    particles: int = 0
+    particles_capped: int = 0

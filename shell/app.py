@@ -56,6 +56,7 @@ from systems import (
 )
 from systems.frame_rules_system import FrameRulesSystem
 from systems.model_system import ModelSystem
+from systems.particle_system import ParticleSystem
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.shadow_system import ShadowSystem
@@ -153,6 +154,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("transform", lambda e: TransformSystem(e.world)),
     ("surfaces", lambda e: SurfaceSystem(e.world)),
     ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
+    ("particles", lambda e: ParticleSystem(e.world, e.renderer)),  # every emitter's particles stepped and uploaded
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),
     ("shadows", lambda e: ShadowSystem(e.world, e.renderer)),
     ("probes", lambda e: ProbeSystem(e.world, e.renderer)),

@@ -504,7 +504,7 @@ def test_srgb_is_decoded_as_the_gl_does_and_encoded_as_the_present_shader_does(c
     """engine/core/color.py's ``srgb_to_linear`` gives every byte of an sRGB texture as the GL's
     own decode reads it back, and its ``linear_to_srgb`` is color.glsl's ``linear_to_srgb``."""
     from engine.core.color import linear_to_srgb, srgb_to_linear
-    from engine.render.renderer import GL_SRGB8_ALPHA8
+    from engine.render.gpu import GL_SRGB8_ALPHA8
 
     levels = np.arange(256, dtype=np.uint8)
     texels = np.stack([levels, levels, levels, np.full(256, 255, np.uint8)], axis=1)

@@ -48,3 +48,9 @@ class LightLimitWarning(UserWarning):
 class GLLimitWarning(UserWarning):
     """A feature this context cannot draw (a limit below what it needs, named with the
     limit): what is drawn goes on without it, said once."""
+
+
+class ParticleLimitWarning(UserWarning):
+    """An emitter asked for more living particles than its ``ParticleEmitter.max_particles``:
+    those past it are not spawned (counted every frame in ``RenderStats.particles_capped``;
+    said when an emitter starts to be capped)."""

@@ -124,6 +124,8 @@ COOKIE_UNIT = 25         # scene (SPOT_COOKIES builds): the kept spot lights' co
 # builds, so no fragment stage's 16 samplers count them.
 POSE_ROWS_UNIT = 26  # scene, casters (SKINNED, MORPHED builds): the pose texture
 MORPH_UNIT = 27      # scene, casters (MORPHED builds): the batch's mesh's morph offsets (GpuMesh.morphs)
+# Particles (engine/render/particle_draw.py): an emitter's sprite, on a unit no scene build reads.
+PARTICLE_UNIT = 28   # particles (SPRITE builds): the emitter's texture (ParticleEmitter.texture)
 # Screen-space ambient occlusion (engine/render/screen_occlusion.py): the root view's builds
 # that read it are never MASKED, so its sampler takes the node image's place in the count.
 SCREEN_OCCLUSION_UNIT = 20  # scene (SCREEN_OCCLUSION builds): the camera's occlusion image, a texel a pixel

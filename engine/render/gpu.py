@@ -18,9 +18,10 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import moderngl
+import numpy as np
 
 from engine.assets.texture_data import TextureData
-from engine.core.errors import GLPassError
+from engine.core.errors import GLLimitError, GLPassError
 from engine.frame_stats import RenderStats
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.fog import FogBlock
@@ -37,6 +38,7 @@ __all__ = ["BACKGROUND", "Gpu", "PathTrust", "ProbeCube", "Shared"]
 
 TEXTURE_ANISOTROPY = 8.0
 BACKGROUND = (0.05, 0.05, 0.06)
+GL_SRGB8_ALPHA8 = 0x8C43  # an sRGB colour texture (moderngl names no such format)
 
 
 @dataclass
@@ -221,6 +223,58 @@ class Gpu:
         (``ReflectionSystem.keep_still_views``).  Every place that writes such data calls
         it; one missed is a stale reflection, so a doubtful write calls it too."""
         self.scene_version += 1
+
+    @staticmethod
+    def _acquire(table: dict[int, Shared], key: int, make):
+        shared = table.get(key)
+        if shared is None:
+            shared = table[key] = Shared(make())
+        shared.users += 1
+        return shared.obj
+
+    def _release(self, table: dict[int, Shared], key: int) -> None:
+        shared = table[key]
+        shared.users -= 1
+        if shared.users == 0:
+            self.colour_maps.discard(shared.obj)  # (a texture: no longer one to leave bound)
+            shared.obj.release()
+            del table[key]
+
+    def check_texture(self, texture: TextureData, field: str = "texture") -> None:
+        """Refuse a texture this context cannot hold, naming it, the field it fills and the limit."""
+        w, h = texture.size
+        limit = self.caps.max_texture_size
+        if w > limit or h > limit:
+            raise GLLimitError(f"{field}: texture {texture.name!r} is {w}x{h}: this OpenGL ({self.caps.renderer}) "
+                               f"takes textures of at most {limit}x{limit} (GL_MAX_TEXTURE_SIZE); scale the image down")
+
+    def _upload_texture(self, texture: TextureData, linear: bool = False) -> moderngl.Texture:
+        w, h = texture.size
+        # Image rows are top-first, GL's are bottom-first: flip so v=0 is the bottom.  A 16-bit
+        # normal map stays 16 bits (normalised RGBA16: its slopes without 8-bit terraces); a
+        # colour is 8 bits (sRGB decoding has no 16-bit format).
+        if linear and texture.pixels.dtype == np.uint16:
+            gl_texture = self.ctx.texture((w, h), 4, texture.pixels[::-1].tobytes(), dtype="nu2")
+        else:
+            gl_texture = self.ctx.texture((w, h), 4, texture.as_8_bits()[::-1].tobytes(),
+                                          internal_format=None if linear else GL_SRGB8_ALPHA8)
+        gl_texture.build_mipmaps()
+        gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        gl_texture.anisotropy = self.normal_map_anisotropy if linear else self.texture_anisotropy
+        self.colour_maps.add(gl_texture)  # complete (mipmapped), a float format: a stand-in albedo map too
+        return gl_texture
+
+    def shared_texture(self, texture: TextureData, field: str) -> moderngl.Texture:
+        """``texture`` on the GPU (colour: sRGB, mipmapped), shared with every batch and emitter
+        that uses it; each call is one more user, let go by ``let_go_texture``.  Checked
+        against the context's size limit first (``field`` names it in the error)."""
+        if id(texture) not in self._textures:
+            self.check_texture(texture, field)
+        return self._acquire(self._textures, id(texture), lambda: self._upload_texture(texture))
+
+    def let_go_texture(self, texture: TextureData) -> None:
+        """One user fewer of ``shared_texture(texture)``: released with its last."""
+        self._release(self._textures, id(texture))
 
     def normal_map_texture(self, normal_map: TextureData) -> moderngl.Texture | None:
         """The uploaded normal map of ``normal_map`` while a batch draws with it (a mirror's

@@ -227,7 +227,7 @@ class StillTree:
                 self.copies.release()
             return None
         deepest = max(node.level for node in result.end_views)
-        see_through = bool(self.renderer.transparent_batches())
+        see_through = self.scene_pass.slot_drawn()
         rects, transparent, filled = {}, {}, {}
         for level in range(1, deepest + 1):
             step = walk.steps[level - 1]

@@ -39,7 +39,6 @@ from engine.render.sky_bake import SkyBake
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
 
-GL_SRGB8_ALPHA8 = 0x8C43
 _MAX_EXPOSURE = 2.0 ** MAX_EXPOSURE_EV
 
 
@@ -288,46 +287,6 @@ class Renderer(Gpu):
             self._release(self._textures, ("normal", key.metallic_roughness_map))
         if key.occlusion_map and key.occlusion_map != key.metallic_roughness_map:  # (packed: nothing of its own)
             self._release(self._textures, ("normal", key.occlusion_map))
-
-    @staticmethod
-    def _acquire(table: dict[int, Shared], key: int, make):
-        shared = table.get(key)
-        if shared is None:
-            shared = table[key] = Shared(make())
-        shared.users += 1
-        return shared.obj
-
-    def _release(self, table: dict[int, Shared], key: int) -> None:
-        shared = table[key]
-        shared.users -= 1
-        if shared.users == 0:
-            self.colour_maps.discard(shared.obj)  # (a texture: no longer one to leave bound)
-            shared.obj.release()
-            del table[key]
-
-    def check_texture(self, texture: TextureData, field: str = "texture") -> None:
-        """Refuse a texture this context cannot hold, naming it, the field it fills and the limit."""
-        w, h = texture.size
-        limit = self.caps.max_texture_size
-        if w > limit or h > limit:
-            raise GLLimitError(f"{field}: texture {texture.name!r} is {w}x{h}: this OpenGL ({self.caps.renderer}) "
-                               f"takes textures of at most {limit}x{limit} (GL_MAX_TEXTURE_SIZE); scale the image down")
-
-    def _upload_texture(self, texture: TextureData, linear: bool = False) -> moderngl.Texture:
-        w, h = texture.size
-        # Image rows are top-first, GL's are bottom-first: flip so v=0 is the bottom.  A 16-bit
-        # normal map stays 16 bits (normalised RGBA16: its slopes without 8-bit terraces); a
-        # colour is 8 bits (sRGB decoding has no 16-bit format).
-        if linear and texture.pixels.dtype == np.uint16:
-            gl_texture = self.ctx.texture((w, h), 4, texture.pixels[::-1].tobytes(), dtype="nu2")
-        else:
-            gl_texture = self.ctx.texture((w, h), 4, texture.as_8_bits()[::-1].tobytes(),
-                                          internal_format=None if linear else GL_SRGB8_ALPHA8)
-        gl_texture.build_mipmaps()
-        gl_texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        gl_texture.anisotropy = self.normal_map_anisotropy if linear else self.texture_anisotropy
-        self.colour_maps.add(gl_texture)  # complete (mipmapped), a float format: a stand-in albedo map too
-        return gl_texture
 
     def _upload_cutout_texture(self, texture: TextureData, cutoff: float) -> moderngl.Texture:
         """A cutout's albedo texture whose mip levels keep level 0's coverage at ``cutoff``

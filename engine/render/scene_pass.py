@@ -80,6 +80,7 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code
 from engine.render.irradiance import IrradianceTable
+from engine.render.particle_draw import ParticleDraw
 from engine.render.raw_gl import LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_options import ROOT_VIEW, SceneOptions
 from engine.render.scene_programs import (
@@ -143,6 +144,7 @@ class ScenePass:
         self.screen_reflections = screen_reflections
         self.ctx = renderer.ctx
         self.sky_draw = SkyDraw(renderer)  # the sky's triangle behind every view
+        self.particle_draw = ParticleDraw(renderer, shadows)  # every emitter's particles, after a view's glass
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
@@ -383,16 +385,19 @@ class ScenePass:
         reflections behind it.  ``conditions`` as for ``draw``.  Nothing at all where no
         batch is transparent."""
         transparent = self.renderer.transparent_batches()
-        if not views or not transparent:
+        particles = self._particles_now()
+        if not views or not (transparent or particles):
             return
         renderer = self.renderer
-        geometry = self._slot_geometry(transparent)
         self._sky_size = renderer.sky.size[0]
         state = _BATCHED_TRANSPARENT if options.batched else _TRANSPARENT
         targets.view_framebuffer.depth_mask = False
         self._begin(views, targets, options, state)
         try:
-            if options.batched:
+            if not transparent:
+                pass
+            elif options.batched:
+                geometry = self._slot_geometry(transparent)
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
                     groups = slot_groups(transparent, views[first:first + MAX_BATCHED_VIEWS], geometry)
                     for group, _, rest, _ in groups:
@@ -403,12 +408,17 @@ class ScenePass:
                         set_front_face(self.ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
                         self._draw_batches(rest, geometry_invocations(len(group)), options.masked)
             else:
+                geometry = self._slot_geometry(transparent)
                 renderer.upload_views(views)
                 for index, view in enumerate(views):
                     batches = split_slot(transparent, view, geometry)[1]
                     if batches:  # (else all behind its see-through surfaces: drawn with them)
                         with _ALWAYS if conditions is None else conditions[index].crender:
                             self._transparent_view(view, index, batches, options.masked)
+            if particles:  # after the glass, in every view (engine/render/particle_draw.py)
+                renderer.upload_views(views)
+                self.particle_draw.draw(views, targets.size, targets.view_framebuffer, options.masked,
+                                        self._ambient_probes, conditions=conditions)
         finally:
             targets.view_framebuffer.depth_mask = True
             targets.view_framebuffer.use()
@@ -468,6 +478,16 @@ class ScenePass:
         # reflection level to the next (bind_texture takes it off for any other pass).
         bind_sampler(ctx, self._reflection_filter() if options.reflection_filter else None, ALBEDO_UNIT)
 
+    def slot_drawn(self) -> bool:
+        """Whether a view's transparent slot (``draw_transparent``) draws anything now: some
+        batch is transparent, or particles live."""
+        return bool(self.renderer.transparent_batches()) or self._particles_now()
+
+    def _particles_now(self) -> bool:
+        """Whether a view drawn now draws particles: some live, and no probe is captured (a
+        capture leaves them out: ``ParticleEmitter``)."""
+        return self.renderer.capturing == 0 and any(record.particles for record in self.particle_draw.emitters.values())
+
     def _slot_geometry(self, transparent: list[InstanceBatch]) -> SlotGeometry:
         """``transparent``'s ``SlotGeometry``, worked out again only when the batches, their
         planes, instances or variants are others (``SlotGeometry.matches``; a frame's views,
@@ -498,6 +518,7 @@ class ScenePass:
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
         geometry = self._slot_geometry(transparent) if now else None
+        particles = options.transparent and self._particles_now()  # (a tree's views: draw_transparent's)
         opaque = renderer.opaque_batches()
         unlit = unlit_batches(opaque, options.unlit)
         # What each view keeps of them.
@@ -508,7 +529,7 @@ class ScenePass:
                 and len(views) * len(opaque) >= self.cull_min_draws):
             reach = batch_reach(views, targets.size, opaque)  # which batch can draw a sample in which view
         masked = options.masked
-        if conditions is None and not options.sky and not now:
+        if conditions is None and not options.sky and not now and not particles:
             # A reflection level's views (exact visibility), drawn whatever their claims
             # count: per view its scissor, winding, camera and draws, nothing else.
             draw, bind_view_at = self._draw_batches, renderer.bind_view_at
@@ -561,7 +582,14 @@ class ScenePass:
                     self._transparent_view(view, index, batches, options.masked)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
-                if (options.sky or now) and index + 1 < len(views):
+                if particles:  # after the glass (engine/render/particle_draw.py)
+                    targets.view_framebuffer.depth_mask = False
+                    targets.view_framebuffer.use()
+                    self.particle_draw.draw([view], targets.size, targets.view_framebuffer, options.masked,
+                                            self._ambient_probes, first_index=index)
+                    targets.view_framebuffer.depth_mask = True
+                    targets.view_framebuffer.use()
+                if (options.sky or now or particles) and index + 1 < len(views):
                     # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)
                 renderer.stats.passes += 1
@@ -738,6 +766,7 @@ class ScenePass:
         if self._reflection_sampler is not None:
             forget_sampler(self.ctx, self._reflection_sampler)
         self.sky_draw.release()
+        self.particle_draw.release()
         for obj in (self._views_ubo, self._reflection_sampler):
             if obj is not None:
                 obj.release()

@@ -479,7 +479,7 @@ class ViewTree:
             if step.prepared is None and step.composite is not None:
                 step.prepared = self._prepare_composite(step.composite, walk.root, step.parent_targets.size)
         composites = walk.composited = [step.prepared for step in steps if step.prepared is not None][:walk.level]
-        see_through = bool(self.renderer.transparent_batches())  # else no level has a slot to draw
+        see_through = self.scene_pass.slot_drawn()  # else no level has a slot to draw
         for depth in range(walk.level, -1, -1):
             if fallbacks.get(depth):
                 child = steps[depth].targets if depth < len(steps) else None

@@ -1,0 +1,198 @@
+"""Particles: an emitter of camera-facing sprites (sparks, smoke, dust, fire).
+
+The emitter is plain data here; the particles stage (``systems/particle_system.py``) spawns
+and moves its particles (``engine/core/particle_cloud.py``), and every view (the main
+camera's, each mirror's and portal's) draws them after its glass
+(``engine/render/particle_draw.py``)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from pyglm import glm
+
+from components.limits import MAX_PARTICLE_LIFETIME, MAX_PARTICLES, MAX_SHEET_CELLS
+from components.tracking import (
+    ComponentValueError,
+    TrackedComponent,
+    boolean,
+    choice,
+    color,
+    finite,
+    integer,
+    vec3,
+)
+
+# Assets are the engine's types (engine.assets.texture_data.TextureData); components import none
+# of it: the field is checked by the class's ASSET_KIND.
+TextureData = Any
+
+PARTICLE_BLENDS = ("additive", "alpha")
+PARTICLE_SHAPES = ("point", "sphere", "box")
+PARTICLE_SPACES = ("world", "local")
+MAX_PARTICLE_RATE = 1.0e6      # particles a second (max_particles caps what lives anyway)
+MAX_PARTICLE_SPEED = 1.0e4     # metres a second
+MAX_PARTICLE_SIZE = 1.0e4      # metres across
+MAX_PARTICLE_SPIN = 1.0e5      # degrees a second
+MAX_PARTICLE_DRAG = 1.0e3      # per second
+MAX_PARTICLE_GRAVITY = 1.0e4   # metres a second squared, a component
+
+
+@dataclass(eq=False)
+class ParticleEmitter(TrackedComponent):
+    """Spawns particles at its entity's Transform, as Unity's particle system, Godot's
+    CPUParticles3D and three.js's point sprites do: each particle a square that faces the
+    view it is drawn in, born at the emitter, flying and fading, then gone.
+
+    - **Emission.**  ``rate`` particles a second while ``playing``, spread evenly through
+      each frame (a fast emitter leaves a trail, not clumps), and ``burst`` at once each time
+      it starts playing (when it is added playing, or ``playing`` turns True): an explosion
+      is ``rate=0, burst=200``.  Stopping leaves the living ones to die out.
+    - **Where and which way.**  Born at a point (``shape`` "point"), anywhere in a ball of
+      radius ``extent.x`` ("sphere") or a box of half-sizes ``extent`` ("box"), in the
+      emitter's frame; flying along ``direction`` (its frame) within a cone of ``spread``
+      degrees about it (180: every way) at a speed between ``speed``'s two.
+    - **Flight.**  ``gravity`` (world, m/s^2) pulls, ``drag`` slows (the velocity keeps
+      exp(-drag dt)).  ``space`` "world": a particle stays where it was born when the emitter
+      moves (smoke from a torch); "local": the whole cloud moves with it (a jet's glow).
+    - **Life.**  Each lives between ``lifetime``'s two seconds; its size goes from
+      ``size[0]`` to ``size[1]`` metres across and its colour from ``color`` to
+      ``end_color`` (None: ``color`` at alpha 0, so it fades out) over its life.  It spins at
+      between ``spin``'s two degrees a second, from an angle of its own.
+    - **Look.**  ``texture`` its sprite (its alpha its shape; None: a round soft spot),
+      ``sheet`` (columns, rows) a flipbook on it played once over a particle's life, left to
+      right, top row first.  ``blend`` "additive": its light adds to what is behind (sparks,
+      fire, glow; colour past 1 blooms), in any order; "alpha": it covers what is behind by its
+      alpha (smoke, dust), the farthest drawn first in each view.  ``lit`` False: its colour
+      is its light (unlit); True: its colour is an albedo lit by the sun, lamps and the light
+      from all round where it is, with the sun's and lamps' shadows, as a thin sheet facing
+      the viewer that lets ``translucency`` of the light through from behind (smoke lit by a
+      lamp behind it glows at its edge of the lamp).
+    - ``max_particles`` living at once (spawning stops there, counted in
+      ``RenderStats.particles_capped``); ``seed`` makes the same cloud again.
+
+    A particle is not an entity: it casts no shadow, is not picked or cut by a portal, and a
+    reflection probe's capture leaves particles out (a probe is redrawn on its own schedule,
+    so its faces would hold a still frame of them).
+    """
+
+    rate: float = 20.0
+    burst: int = 0
+    playing: bool = True
+    lifetime: Any = (1.0, 1.0)
+    speed: Any = (1.0, 1.0)
+    direction: Any = field(default_factory=lambda: glm.vec3(0.0, 1.0, 0.0))
+    spread: float = 15.0
+    shape: str = "point"
+    extent: Any = field(default_factory=lambda: glm.vec3(0.0))
+    gravity: Any = field(default_factory=lambda: glm.vec3(0.0))
+    drag: float = 0.0
+    size: Any = (0.1, 0.1)
+    color: Any = field(default_factory=lambda: glm.vec4(1.0))
+    end_color: Any = None
+    blend: str = "additive"
+    texture: TextureData | None = None
+    sheet: Any = (1, 1)
+    spin: Any = (0.0, 0.0)
+    space: str = "world"
+    max_particles: int = 1000
+    seed: int = 0
+    lit: bool = False
+    translucency: float = 0.5
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "rate":
+            return finite(self, name, value, low=0.0, high=MAX_PARTICLE_RATE)
+        if name == "burst":
+            return integer(self, name, value, low=0, high=MAX_PARTICLES)
+        if name in ("playing", "lit"):
+            return boolean(self, name, value)
+        if name == "lifetime":
+            return self._range(name, value, low=0.0, high=MAX_PARTICLE_LIFETIME, positive=True)
+        if name == "speed":
+            return self._range(name, value, low=0.0, high=MAX_PARTICLE_SPEED)
+        if name == "size":
+            return self._pair(name, value, low=0.0, high=MAX_PARTICLE_SIZE)
+        if name == "spin":
+            return self._range(name, value, low=-MAX_PARTICLE_SPIN, high=MAX_PARTICLE_SPIN)
+        if name == "direction":
+            return glm.normalize(vec3(self, name, value, nonzero=True))
+        if name == "spread":
+            return finite(self, name, value, low=0.0, high=180.0)
+        if name == "shape":
+            return choice(self, name, value, PARTICLE_SHAPES)
+        if name == "extent":
+            return vec3(self, name, value, low=0.0)
+        if name == "gravity":
+            g = vec3(self, name, value)
+            if max(abs(c) for c in g) > MAX_PARTICLE_GRAVITY:
+                raise ComponentValueError(f"ParticleEmitter.gravity must have components within "
+                                          f"+-{MAX_PARTICLE_GRAVITY:g} m/s^2, got {value!r}")
+            return g
+        if name == "drag":
+            return finite(self, name, value, low=0.0, high=MAX_PARTICLE_DRAG)
+        if name == "color":
+            return color(self, name, value)
+        if name == "end_color":
+            return None if value is None else color(self, name, value)
+        if name == "blend":
+            return choice(self, name, value, PARTICLE_BLENDS)
+        if name == "space":
+            return choice(self, name, value, PARTICLE_SPACES)
+        if name == "texture" and value is not None:
+            if getattr(type(value), "ASSET_KIND", None) != "texture":
+                raise ComponentValueError("ParticleEmitter.texture must be an engine.assets.texture_data.TextureData, "
+                                          f"got {type(value).__name__}")
+            return value
+        if name == "sheet":
+            try:
+                columns, rows = value
+            except (TypeError, ValueError):
+                raise ComponentValueError(f"ParticleEmitter.sheet must be two ints (columns, rows), "
+                                          f"got {value!r}") from None
+            return (integer(self, "sheet", columns, low=1, high=MAX_SHEET_CELLS),
+                    integer(self, "sheet", rows, low=1, high=MAX_SHEET_CELLS))
+        if name == "max_particles":
+            return integer(self, name, value, low=1, high=MAX_PARTICLES)
+        if name == "seed":
+            return integer(self, name, value, low=0, high=2**63 - 1)
+        if name == "translucency":
+            return finite(self, name, value, low=0.0, high=1.0)
+        return value
+
+    def _pair(self, name: str, value: Any, low: float, high: float, positive: bool = False) -> tuple[float, float]:
+        """Two numbers (one is both), each finite in [low, high] (> 0 when ``positive``)."""
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = (value, value)
+        try:
+            first, second = value
+        except (TypeError, ValueError):
+            raise ComponentValueError(f"ParticleEmitter.{name} must be a number or two numbers, "
+                                      f"got {value!r}") from None
+        return (finite(self, name, first, low=low, high=high, positive=positive),
+                finite(self, name, second, low=low, high=high, positive=positive))
+
+    def _range(self, name: str, value: Any, low: float, high: float, positive: bool = False) -> tuple[float, float]:
+        """A (least, most) pair: ``_pair``'s, the first not above the second."""
+        least, most = self._pair(name, value, low, high, positive)
+        if least > most:
+            raise ComponentValueError(f"ParticleEmitter.{name} must be (least, most) with least <= most, "
+                                      f"got {value!r}")
+        return (least, most)
+
+    @property
+    def final_color(self) -> glm.vec4:
+        """The colour at death: ``end_color``, or ``color`` at alpha 0."""
+        end = self.end_color
+        return glm.vec4(glm.vec3(self.color), 0.0) if end is None else glm.vec4(end)
+
+    @property
+    def frames(self) -> int:
+        """The flipbook's frames (``sheet``'s columns x rows)."""
+        return self.sheet[0] * self.sheet[1]
+
+
+def cone_cosine(spread_degrees: float) -> float:
+    """The cosine of the spread cone's half-angle (-1 at 180: every way)."""
+    return math.cos(math.radians(spread_degrees))

@@ -1,0 +1,221 @@
+"""The living particles of one emitter, as arrays: spawned, moved and aged a frame at a time.
+
+One ``ParticleCloud`` an emitter (``components/particles.py`` ``ParticleEmitter``), held by
+the particles stage (``systems/particle_system.py``).  A frame's step is a fixed handful of
+numpy calls whatever the count: the dead dropped (a boolean mask), the living moved (gravity
+then drag, exactly: the velocity keeps exp(-drag dt) of itself), the new ones spawned.  New
+particles are spread evenly through the frame: each is born at its own moment of it, at
+where the emitter was then (its place between last frame's and this frame's, a straight
+line) and already moved for the rest of the frame, so a fast emitter leaves an even trail,
+not a clump a frame.
+
+``rows`` is what a view draws: a row a particle of ``ROW_FLOATS`` float32 (world position,
+size, linear colour and alpha, angle in radians, flipbook frame), its size, colour and frame
+worked out from its age over its life.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pyglm import glm
+
+from components.particles import ParticleEmitter
+
+# A drawn particle: x, y, z, size, r, g, b, a, angle, frame.
+ROW_FLOATS = 10
+ROW_POSITION, ROW_SIZE, ROW_COLOR, ROW_ANGLE, ROW_FRAME = slice(0, 3), 3, slice(4, 8), 8, 9
+
+
+class ParticleCloud:
+    """What lives of one emitter's particles (positions in the world, or in the emitter's
+    frame for ``space`` "local"), its random stream (from its ``seed``) and the share of a
+    particle its rate carries over to the next frame."""
+
+    def __init__(self, seed: int, capacity: int) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.position = np.zeros((0, 3))
+        self.velocity = np.zeros((0, 3))
+        self.age = np.zeros(0)
+        self.life = np.ones(0)
+        self.angle = np.zeros(0)
+        self.spin = np.zeros(0)
+        self.carry = 0.0       # the part of a particle the rate owes (spawned once it reaches 1)
+        self.capacity = capacity
+        self.capped = 0        # particles the last step could not spawn (max_particles reached)
+        self.last_origin: glm.mat4 | None = None  # the emitter's matrix at the last step
+        self.was_playing = False
+
+    @property
+    def count(self) -> int:
+        return len(self.age)
+
+    def step(self, emitter: ParticleEmitter, matrix: glm.mat4, dt: float) -> None:
+        """One frame of ``dt`` seconds of ``emitter`` (a ParticleEmitter) whose entity's
+        model-to-world matrix is now ``matrix``: age, drop the dead, move, spawn."""
+        local = emitter.space == "local"
+        previous = self.last_origin if self.last_origin is not None else matrix
+        self.last_origin = glm.mat4(matrix)
+        self.capacity = emitter.max_particles
+        self.capped = 0
+        if dt > 0.0 and self.count:
+            self.age += dt
+            alive = self.age < self.life
+            if not alive.all():
+                self._keep(alive)
+            gravity = np.array(emitter.gravity, dtype=np.float64)
+            if local and gravity.any():  # (the pull is the world's: into the emitter's frame)
+                gravity = np.array(glm.inverse(glm.mat3(matrix)) * glm.vec3(*gravity))
+            self._move(slice(None), dt, gravity, emitter.drag)
+        if len(self.age) > self.capacity:  # (max_particles lowered: the oldest go)
+            self._keep(np.argsort(self.life - self.age)[-self.capacity:])
+        new = 0
+        starting = emitter.playing and not self.was_playing
+        self.was_playing = emitter.playing
+        if emitter.playing:
+            self.carry += emitter.rate * dt
+            new = int(self.carry)
+            self.carry -= new
+            if starting:
+                new += emitter.burst
+        elif not emitter.playing:
+            self.carry = 0.0
+        if new:
+            room = max(self.capacity - self.count, 0)
+            self.capped = max(new - room, 0)
+            self._spawn(emitter, min(new, room), matrix, previous, dt, starting, local)
+
+    def _keep(self, which) -> None:
+        for name in ("position", "velocity", "age", "life", "angle", "spin"):
+            setattr(self, name, getattr(self, name)[which])
+
+    def _move(self, which, dt, gravity: np.ndarray, drag: float) -> None:
+        """Move the particles ``which`` on by ``dt`` (one number, or one a particle) under
+        ``gravity`` and ``drag``: dv/dt = g - drag v, solved exactly over the step."""
+        dt = np.asarray(dt, dtype=np.float64).reshape(-1, 1) if np.ndim(dt) else dt
+        v = self.velocity[which]
+        if drag > 0.0:
+            keep = np.exp(-drag * dt)
+            # x(t) = x0 + g t / k + (v0 - g / k) (1 - e^-kt) / k ; v(t) = g / k + (v0 - g / k) e^-kt
+            terminal = gravity / drag
+            moved = terminal * dt + (v - terminal) * ((1.0 - keep) / drag)
+            self.velocity[which] = terminal + (v - terminal) * keep
+        else:
+            moved = v * dt + 0.5 * gravity * (dt * dt)
+            self.velocity[which] = v + gravity * dt
+        self.position[which] = self.position[which] + moved
+
+    def _spawn(self, emitter: ParticleEmitter, n: int, matrix: glm.mat4, previous: glm.mat4, dt: float, starting: bool,
+               local: bool) -> None:
+        """``n`` new particles of ``emitter``, born evenly through the last ``dt`` seconds
+        (a burst's at the frame's end: all at once), at the emitter's place then."""
+        if n <= 0:
+            return
+        rng = self.rng
+        bursting = emitter.burst if starting else 0
+        streamed = max(n - bursting, 0)
+        # Each streamed particle's moment: (i + u) / streamed of the frame back from its end.
+        age = np.zeros(n)
+        if streamed and dt > 0.0:
+            age[:streamed] = dt * (1.0 - (np.arange(streamed) + rng.random(streamed)) / streamed)
+        start = self._start_points(emitter, n)
+        heading = self._headings(emitter, n)
+        lo, hi = emitter.speed
+        speed = lo + (hi - lo) * rng.random(n)
+        velocity = heading * speed[:, None]
+        if local:
+            position = start
+        else:
+            # Into the world, each from where the emitter was at its moment (its place on the
+            # line from last frame's matrix to this one's; turned as it is now).
+            turn = np.array(glm.mat3(matrix)).reshape(3, 3)  # column-major: [column][row]
+            position = start @ turn + np.array(matrix[3].xyz)
+            if dt > 0.0:
+                back = (age / dt)[:, None]
+                position -= back * (np.array(matrix[3].xyz) - np.array(previous[3].xyz))
+            along = velocity @ turn
+            norms = np.linalg.norm(heading @ turn, axis=1)[:, None]
+            velocity = along / np.maximum(norms, 1e-30)  # (the emitter's scale sizes no speed)
+        lo, hi = emitter.lifetime
+        life = lo + (hi - lo) * rng.random(n)
+        lo, hi = emitter.spin
+        spin = np.radians(lo + (hi - lo) * rng.random(n))
+        angle = rng.random(n) * (2.0 * math.pi)
+        first = self.count
+        self.position = np.concatenate([self.position, position])
+        self.velocity = np.concatenate([self.velocity, velocity])
+        self.age = np.concatenate([self.age, np.zeros(n)])
+        self.life = np.concatenate([self.life, life])
+        self.angle = np.concatenate([self.angle, angle])
+        self.spin = np.concatenate([self.spin, spin])
+        born = slice(first, first + n)
+        if streamed and dt > 0.0:  # each moved on for its part of the frame
+            gravity = np.array(emitter.gravity, dtype=np.float64)
+            if local and gravity.any():
+                gravity = np.array(glm.inverse(glm.mat3(matrix)) * glm.vec3(*gravity))
+            self._move(born, age, gravity, emitter.drag)
+            self.age[born] = age
+            self.angle[born] += self.spin[born] * age
+        dead = self.age >= self.life  # (born so early in a long frame that it is gone already)
+        if dead.any():
+            self._keep(~dead)
+
+    def _start_points(self, emitter: ParticleEmitter, n: int) -> np.ndarray:
+        """``n`` points of the emitter's shape, in its frame."""
+        rng = self.rng
+        extent = np.array(emitter.extent, dtype=np.float64)
+        if emitter.shape == "sphere":
+            directions = _unit_vectors(rng, n)
+            return directions * (extent[0] * np.cbrt(rng.random(n)))[:, None]
+        if emitter.shape == "box":
+            return (rng.random((n, 3)) * 2.0 - 1.0) * extent
+        return np.zeros((n, 3))
+
+    def _headings(self, emitter: ParticleEmitter, n: int) -> np.ndarray:
+        """``n`` unit vectors spread evenly over the cone of ``spread`` degrees about
+        ``direction`` (uniform on the sphere's cap: its height uniform)."""
+        rng = self.rng
+        lowest = math.cos(math.radians(emitter.spread))
+        cos_t = 1.0 - rng.random(n) * (1.0 - lowest)
+        sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
+        phi = rng.random(n) * (2.0 * math.pi)
+        axis = np.array(emitter.direction, dtype=np.float64)
+        helper = np.array((1.0, 0.0, 0.0)) if abs(axis[0]) < 0.9 else np.array((0.0, 0.0, 1.0))
+        u = np.cross(axis, helper)
+        u /= np.linalg.norm(u)
+        w = np.cross(axis, u)
+        return (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * u
+                + (sin_t * np.sin(phi))[:, None] * w)
+
+    def rows(self, emitter: ParticleEmitter, matrix: glm.mat4) -> np.ndarray:
+        """The drawn rows (``ROW_FLOATS`` float32 a particle) of the living particles of
+        ``emitter``, whose entity's model-to-world matrix is ``matrix``."""
+        n = self.count
+        out = np.empty((n, ROW_FLOATS), np.float32)
+        if not n:
+            return out
+        t = np.clip(self.age / self.life, 0.0, 1.0)
+        if emitter.space == "local":
+            turn = np.array(glm.mat4(matrix)).reshape(4, 4)
+            out[:, ROW_POSITION] = self.position @ turn[:3, :3] + turn[3, :3]
+            scale = glm.length(glm.vec3(matrix[0])) * glm.length(glm.vec3(matrix[1])) * glm.length(glm.vec3(matrix[2]))
+            grow = scale ** (1.0 / 3.0)  # (a scaled emitter's cloud is scaled, its sprites with it)
+        else:
+            out[:, ROW_POSITION] = self.position
+            grow = 1.0
+        first, last = emitter.size
+        out[:, ROW_SIZE] = (first + (last - first) * t) * grow
+        start, end = np.array(emitter.color), np.array(emitter.final_color)
+        out[:, ROW_COLOR] = start + (end - start) * t[:, None]
+        out[:, ROW_ANGLE] = self.angle + self.spin * self.age
+        frames = emitter.frames
+        out[:, ROW_FRAME] = np.minimum(np.floor(t * frames), frames - 1)
+        return out
+
+
+def _unit_vectors(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``n`` directions spread evenly over the sphere."""
+    z = rng.random(n) * 2.0 - 1.0
+    phi = rng.random(n) * (2.0 * math.pi)
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)

@@ -1,0 +1,267 @@
+"""Particles on the GPU: each emitter's rows in a buffer of its own, drawn into a view as one
+instanced strip of four vertices a particle (``shaders/particle.vert``: a square facing the
+view, made from the vertex's index; ``shaders/particle.frag``).
+
+The particles stage (``systems/particle_system.py``) hands each emitter's rows here once a
+frame (``update``: sizes, colours and frames worked out on the CPU,
+``engine/core/particle_cloud.py``); the scene pass draws them into each view after its glass
+(``ScenePass``: the main view, every mirror and portal view, per view or batched level alike),
+with the view's Camera block, so a particle in a mirror faces the mirror's image camera and
+is cut at the mirror's plane as any geometry is.  Blending is premultiplied (the glass's
+``BLEND_PREMULTIPLIED``), so "additive" (alpha written 0) and "alpha" emitters draw with one
+state, in any order among each other; an "alpha" emitter's own particles are drawn farthest
+first in each view (its rows sorted by distance from the view's ``sorting_eye`` and written
+again before its draw), an "additive" one's as they are (a sum has no order).  They test the
+view's depth and write none, and write only the colour image: a particle is no entity, so the
+surface and seen ids (what the claims, the outline and picking read) keep what is behind it.
+An emitter whose box (its particles' centres, grown by the largest half-diagonal) cannot reach
+a view (``batch_cull.batch_reach``), or whose ``Visibility`` hides it there, draws nothing there.
+
+Limits: particles blend after a view's glass, so one behind a window is drawn over it
+untinted; a probe's capture leaves them out (``ParticleEmitter``'s docstring says why); a lit
+particle's light is its centre's (the sun's and lamps' shadows, the light from all round at
+that point), and light through mirrors and portals (virtual lights) does not light it.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+
+import moderngl
+import numpy as np
+
+from components.particles import ParticleEmitter
+from engine.core.particle_cloud import ROW_FLOATS, ROW_POSITION, ROW_SIZE
+from engine.render.batch_cull import batch_reach
+from engine.render.bindings import (
+    BLEND_PREMULTIPLIED,
+    CAMERA_BINDING,
+    CLIP_VIEW_PLANE,
+    FOG_BINDING,
+    IRRADIANCE_BINDING,
+    IRRADIANCE_UNIT,
+    LIGHTS_BINDING,
+    NODE_UNIT,
+    PARTICLE_UNIT,
+    POINT_SHADOW_UNITS,
+    SHADOW_ATLAS_UNIT,
+    SHADOWS_BINDING,
+    SPOT_SHADOW_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_texture,
+    set_scissor,
+)
+from engine.render.gpu import Gpu
+from engine.render.instances import read_by
+from engine.render.shadows import ShadowMaps
+from engine.render.views import View
+from engine.rules.visibility_rules import drawn_in
+
+ROW_BYTES = ROW_FLOATS * 4
+_FORMAT = "3f 1f 4f 1f 1f/i"
+_ATTRIBUTES = ("in_center", "in_size", "in_color", "in_angle", "in_frame")
+# Depth tested, not written (the framebuffer's mask, set by the caller's pass), no culling (a
+# mirror's view turns the winding), the view's plane clipped, blended premultiplied.
+PARTICLE_PASS = PassState(depth_func="<", cull=False, clips=frozenset((CLIP_VIEW_PLANE,)),
+                          blend=BLEND_PREMULTIPLIED)
+# The colour image alone of a view's framebuffer (colour, surface ids, seen ids) takes writes.
+_COLOUR_ONLY = ((True, True, True, True), (False, False, False, False), (False, False, False, False))
+_ALL = ((True, True, True, True),) * 3
+
+
+@dataclass
+class GpuEmitter:
+    """One emitter's particles on the GPU: its rows (a CPU copy for sorting), its buffer
+    (grown by doubling), its look, its box and where it is drawn (``drawn_code``)."""
+
+    buffer: moderngl.Buffer
+    rows: np.ndarray
+    blend: str
+    lit: bool
+    translucency: float
+    sheet: tuple[int, int]
+    texture: object | None              # the TextureData, while it holds a share of it
+    gl_texture: moderngl.Texture | None
+    code: int
+    row_boxes: np.ndarray = field(default_factory=lambda: np.zeros((1, 2, 3)))
+    vertex_arrays: dict = field(default_factory=dict)  # by program build
+    count: int = 1  # boxes (batch_cull reads an emitter as a batch of one box)
+
+    @property
+    def particles(self) -> int:
+        return len(self.rows)
+
+
+class ParticleDraw:
+    """Every emitter's GPU record by entity, and their draw into a view."""
+
+    def __init__(self, gpu: Gpu, shadows: ShadowMaps) -> None:
+        self.gpu = gpu
+        self.ctx = gpu.ctx
+        self.shadows = shadows
+        self.emitters: dict[int, GpuEmitter] = {}
+        self._programs: dict[tuple, moderngl.Program] = {}
+        self._reloads = gpu.shaders.reloads
+
+    # --- what the particles stage hands over ---------------------------------------------
+    def update(self, entity: int, emitter: ParticleEmitter, rows: np.ndarray, code: int) -> None:
+        """``entity``'s emitter (a ParticleEmitter) now has ``rows`` (``ROW_FLOATS`` float32 a
+        particle) and is drawn where ``code`` says (``visibility_rules.drawn_code``)."""
+        record = self.emitters.get(entity)
+        texture = emitter.texture
+        if record is not None and record.texture is not texture:
+            self._let_go_texture(record)
+        if record is None:
+            record = self.emitters[entity] = GpuEmitter(
+                self.ctx.buffer(reserve=max(len(rows), 16) * ROW_BYTES), rows, emitter.blend, emitter.lit,
+                emitter.translucency, emitter.sheet, None, None, code)
+        if record.texture is not texture and texture is not None:
+            record.gl_texture = self.gpu.shared_texture(texture, "ParticleEmitter.texture")
+            record.texture = texture
+        record.blend, record.lit, record.translucency = emitter.blend, emitter.lit, emitter.translucency
+        record.sheet, record.code, record.rows = emitter.sheet, code, rows
+        if len(rows) * ROW_BYTES > record.buffer.size:
+            record.buffer.release()
+            record.buffer = self.ctx.buffer(reserve=_grown(len(rows)) * ROW_BYTES)
+            self._drop_arrays(record)
+        if len(rows):
+            record.buffer.write(rows.tobytes())
+            reach = float((rows[:, ROW_SIZE].max()) * (0.5 * math.sqrt(2.0)))
+            centres = rows[:, ROW_POSITION]
+            record.row_boxes = np.array([[centres.min(axis=0) - reach, centres.max(axis=0) + reach]])
+        self.gpu.note_scene_change()
+
+    def drop(self, entity: int) -> None:
+        """``entity``'s emitter is gone: its buffer, arrays and share of its texture released."""
+        record = self.emitters.pop(entity, None)
+        if record is None:
+            return
+        self._drop_arrays(record)
+        self._let_go_texture(record)
+        record.buffer.release()
+        self.gpu.note_scene_change()
+
+    @property
+    def particles(self) -> int:
+        """Living particles of every emitter (what a view may draw)."""
+        return sum(record.particles for record in self.emitters.values())
+
+    # --- the draw --------------------------------------------------------------------------
+    def draw(self, views: Sequence[View], size: tuple[int, int], framebuffer: moderngl.Framebuffer,
+             masked: bool, ambient_probes: bool, first_index: int = 0,
+             conditions: Sequence[moderngl.Query] | None = None) -> None:
+        """Each of ``views`` (its Camera block at ``first_index`` + its place, uploaded by the
+        caller) draws the particles that can reach it, into ``framebuffer`` (a view's:
+        colour, surface and seen ids, depth; bound now, its depth mask off) of ``size``;
+        ``masked``: a reflection level's views, each only where the node image names it.
+        ``conditions``: a samples query a view, its draws conditional on it (as the scene
+        pass's).  The pass state is this module's afterwards."""
+        live = [record for record in self.emitters.values() if record.particles]
+        if not live or not views:
+            return
+        gpu, ctx = self.gpu, self.ctx
+        reach = batch_reach(views, size, live)
+        framebuffer.color_mask = _COLOUR_ONLY
+        apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *size), views[0].scissor)
+        try:
+            for index, view in enumerate(views):
+                drawn = [record for record, reaches in zip(live, reach[index], strict=True)
+                         if reaches and drawn_in(record.code, view.view_mask)]
+                if not drawn:
+                    continue
+                with nullcontext() if conditions is None else conditions[index].crender:
+                    set_scissor(ctx, view.scissor)
+                    gpu.bind_view_at(first_index + index)
+                    for record in drawn:
+                        self._draw_one(record, view, masked, ambient_probes)
+        finally:
+            framebuffer.color_mask = _ALL
+
+    def _draw_one(self, record: GpuEmitter, view: View, masked: bool, ambient_probes: bool) -> None:
+        if record.blend == "alpha" and record.particles > 1:
+            eye = np.array(view.sorting_eye, dtype=np.float32)
+            far = np.square(record.rows[:, ROW_POSITION] - eye).sum(axis=1)
+            record.buffer.write(record.rows[np.argsort(-far, kind="stable")].tobytes())
+        vao = self._vertex_array(record, masked, ambient_probes)
+        if record.gl_texture is not None:
+            bind_texture(self.ctx, record.gl_texture, PARTICLE_UNIT)
+        vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=record.particles)
+        self.gpu.stats.draw_calls += 1
+
+    def _vertex_array(self, record: GpuEmitter, masked: bool, ambient_probes: bool) -> moderngl.VertexArray:
+        if self.gpu.shaders.reloads != self._reloads:
+            self.forget()
+        program = self._program(record.gl_texture is not None, record.lit, masked, ambient_probes)
+        vao = record.vertex_arrays.get(program.glo)
+        if vao is None:
+            vao = record.vertex_arrays[program.glo] = self.ctx.vertex_array(
+                program, [read_by(program, record.buffer, _FORMAT, *_ATTRIBUTES)])  # (gl_VertexID read)
+        for name, value in (("sheet", record.sheet), ("coverage", 1.0 if record.blend == "alpha" else 0.0),
+                            ("translucency", record.translucency)):
+            if name in program:  # (a build without a texture reads no sheet; an unlit one no translucency)
+                program[name].value = value
+        return vao
+
+    def _program(self, sprite: bool, lit: bool, masked: bool, ambient_probes: bool) -> moderngl.Program:
+        """The build for a textured emitter or not (``SPRITE``), lit or not (``LIT``, with the
+        shadow lookups the shadows stage compiled in, and the probes' boxes where they light
+        the scene: ``AMBIENT_PROBES``), masked or not, fogged while the camera's fog is."""
+        shadowing = self.shadows.program_defines if lit else ()
+        key = (sprite, lit, masked, lit and ambient_probes, shadowing, self.gpu.fog.defines)
+        program = self._programs.get(key)
+        if program is None:
+            defines = dict(self.gpu.fog.defines)
+            if sprite:
+                defines["SPRITE"] = "1"
+            if masked:
+                defines["MASKED"] = "1"
+            if lit:
+                defines["LIT"] = "1"
+                defines.update(shadowing)
+                if ambient_probes:
+                    defines["AMBIENT_PROBES"] = "1"
+            program = self.gpu.shaders.program("particle.vert", "particle.frag", defines=defines)
+            program["Camera"].binding = CAMERA_BINDING
+            for block, binding in (("Lights", LIGHTS_BINDING), ("Shadows", SHADOWS_BINDING),
+                                   ("Irradiance", IRRADIANCE_BINDING), ("Fog", FOG_BINDING)):
+                if block in program:
+                    program[block].binding = binding
+            for name, unit in (("sprite_map", PARTICLE_UNIT), ("node_map", NODE_UNIT),
+                               ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
+                               ("point_shadow1", POINT_SHADOW_UNITS[1]), ("spot_atlas", SPOT_SHADOW_UNIT),
+                               ("irradiance_table", IRRADIANCE_UNIT)):
+                if name in program:
+                    program[name].value = unit
+            self._programs[key] = program
+        return program
+
+    # --- resources -------------------------------------------------------------------------
+    def _drop_arrays(self, record: GpuEmitter) -> None:
+        for vao in record.vertex_arrays.values():
+            vao.release()
+        record.vertex_arrays.clear()
+
+    def _let_go_texture(self, record: GpuEmitter) -> None:
+        if record.texture is not None:
+            self.gpu.let_go_texture(record.texture)
+        record.texture = record.gl_texture = None
+
+    def forget(self) -> None:
+        """After a shader hot reload: programs and vertex arrays made again."""
+        for record in self.emitters.values():
+            self._drop_arrays(record)
+        self._programs.clear()  # (the library owns and releases them)
+        self._reloads = self.gpu.shaders.reloads
+
+    def release(self) -> None:
+        for entity in list(self.emitters):
+            self.drop(entity)
+        self._programs.clear()
+
+
+def _grown(n: int) -> int:
+    """Rows a buffer holds for ``n``: the next power of two (a growing cloud reallocates a few times)."""
+    return max(16, 1 << (n - 1).bit_length())

@@ -1,0 +1,80 @@
+"""Particles: every ``ParticleEmitter``'s particles spawned, moved and aged, then handed to the
+GPU, once a frame after the transform stage.
+
+Each emitter entity has a ``ParticleCloud`` (``engine/core/particle_cloud.py``: arrays, a
+fixed handful of numpy calls a step whatever the count), stepped by the frame's time at its
+entity's world matrix (identity without a Transform); its drawn rows go to the scene pass's
+``ParticleDraw`` (``engine/render/particle_draw.py``), which every view then draws after its
+glass.  A cloud is made when its emitter comes (or its ``seed`` changes: the same seed makes
+the same cloud) and dropped with its GPU buffer when the emitter or its entity goes.  The
+living particles and those the emitters' ``max_particles`` kept from being born are counted
+in ``RenderStats``; an emitter that starts being capped is named in a
+``ParticleLimitWarning``.
+"""
+from __future__ import annotations
+
+import warnings
+
+import esper
+from pyglm import glm
+
+from components import Transform, Visibility
+from components.particles import ParticleEmitter
+from engine.core.errors import ParticleLimitWarning
+from engine.core.particle_cloud import ParticleCloud
+from engine.core.world import World
+from engine.render.renderer import Renderer
+from engine.resources import RenderStats
+from engine.rules.visibility_rules import entity_code
+
+_IDENTITY = glm.mat4(1.0)
+
+
+class ParticleSystem(esper.Processor):
+    """Steps every emitter's cloud and hands its rows to the renderer."""
+
+    def __init__(self, world: World, renderer: Renderer) -> None:
+        super().__init__()
+        self.world = world
+        self.renderer = renderer
+        self.clouds: dict[int, tuple[ParticleCloud, int]] = {}   # by entity: its cloud and the seed it grew from
+        self._capped: set[int] = set()  # emitters capped last frame (warned once a run of capped frames)
+
+    def process(self, dt: float) -> None:
+        world = self.world
+        draw = self.renderer.scene_pass.particle_draw
+        stats: RenderStats = world.resources[RenderStats]
+        emitters = world.query_one(ParticleEmitter)
+        seen = set()
+        living = capped = 0
+        for entity, emitter in emitters:
+            seen.add(entity)
+            kept = self.clouds.get(entity)
+            if kept is None or kept[1] != emitter.seed:
+                kept = self.clouds[entity] = (ParticleCloud(emitter.seed, emitter.max_particles), emitter.seed)
+            cloud = kept[0]
+            transform = world.try_get(entity, Transform)
+            matrix = transform.world if transform is not None else _IDENTITY
+            cloud.step(emitter, matrix, dt)
+            living += cloud.count
+            capped += cloud.capped
+            self._warn_capped(entity, emitter, cloud.capped)
+            code = entity_code(world.try_get(entity, Visibility))
+            if cloud.count or entity in draw.emitters:
+                draw.update(entity, emitter, cloud.rows(emitter, matrix), code)
+        for entity in [e for e in self.clouds if e not in seen]:
+            del self.clouds[entity]
+            self._capped.discard(entity)
+            draw.drop(entity)
+        stats.particles = living
+        stats.particles_capped = capped
+
+    def _warn_capped(self, entity: int, emitter: ParticleEmitter, capped: int) -> None:
+        if not capped:
+            self._capped.discard(entity)
+            return
+        if entity not in self._capped:
+            self._capped.add(entity)
+            warnings.warn(f"entity {entity}: its ParticleEmitter spawns more than its max_particles "
+                          f"({emitter.max_particles}) can hold living at once ({capped} not born this frame): "
+                          "raise max_particles, or lower rate, burst or lifetime", ParticleLimitWarning, stacklevel=2)
