@@ -58,8 +58,9 @@ class ParticleEmitter(TrackedComponent):
       moves (smoke from a torch); "local": the whole cloud moves with it (a jet's glow).
     - **Life.**  Each lives between ``lifetime``'s two seconds; its size goes from
       ``size[0]`` to ``size[1]`` metres across and its colour from ``color`` to
-      ``end_color`` (None: ``color`` at alpha 0, so it fades out) over its life.  It spins at
-      between ``spin``'s two degrees a second, from an angle of its own.
+      ``end_color`` (None: ``color`` at alpha 0, so it fades out) over its life.  It starts
+      turned between ``angle``'s two degrees about the view's axis (a sprite that must stay
+      upright: ``(0, 0)``) and spins at between ``spin``'s two degrees a second.
     - **Look.**  ``texture`` its sprite (its alpha its shape; None: a round soft spot),
       ``sheet`` (columns, rows) a flipbook on it played once over a particle's life, left to
       right, top row first.  ``blend`` "additive": its light adds to what is behind (sparks,
@@ -95,6 +96,7 @@ class ParticleEmitter(TrackedComponent):
     texture: TextureData | None = None
     sheet: Any = (1, 1)
     spin: Any = (0.0, 0.0)
+    angle: Any = (0.0, 360.0)
     space: str = "world"
     max_particles: int = 1000
     seed: int = 0
@@ -116,6 +118,8 @@ class ParticleEmitter(TrackedComponent):
             return self._pair(name, value, low=0.0, high=MAX_PARTICLE_SIZE)
         if name == "spin":
             return self._range(name, value, low=-MAX_PARTICLE_SPIN, high=MAX_PARTICLE_SPIN)
+        if name == "angle":
+            return self._range(name, value, low=-360.0, high=360.0)
         if name == "direction":
             return glm.normalize(vec3(self, name, value, nonzero=True))
         if name == "spread":

@@ -59,7 +59,8 @@ ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "AmbientOcclusion", "Animation", "AnimationLayer", "Bloom", "Camera", "ColorGrading", "DirectionalLight",
         "Emissive", "FlyController", "Fog", "HemisphereLight", "Material", "MeshRef",
-        "Mirror", "Model", "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
+        "Mirror", "Model", "ParticleEmitter",
+        "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
         "Skybox", "Tonemap",
         "Transform", "Traveller", "Vignette", "Visibility", "Water")}

@@ -69,21 +69,24 @@ class ParticleCloud:
             self._move(slice(None), dt, gravity, emitter.drag)
         if len(self.age) > self.capacity:  # (max_particles lowered: the oldest go)
             self._keep(np.argsort(self.life - self.age)[-self.capacity:])
-        new = 0
         starting = emitter.playing and not self.was_playing
         self.was_playing = emitter.playing
-        if emitter.playing:
-            self.carry += emitter.rate * dt
-            new = int(self.carry)
-            self.carry -= new
-            if starting:
-                new += emitter.burst
+        ages = np.zeros(0)
+        if emitter.playing and emitter.rate > 0.0 and dt > 0.0:
+            # Births every 1 / rate seconds, the first when the share carried from the last
+            # frame makes a whole particle: each one's age at the frame's end.
+            owed = self.carry + emitter.rate * dt
+            streamed = int(owed)
+            ages = np.maximum(dt - (np.arange(streamed) + 1.0 - self.carry) / emitter.rate, 0.0)
+            self.carry = owed - streamed
         elif not emitter.playing:
             self.carry = 0.0
-        if new:
+        if starting and emitter.burst:  # a burst is born at once, at the frame's end
+            ages = np.concatenate([ages, np.zeros(emitter.burst)])
+        if len(ages):
             room = max(self.capacity - self.count, 0)
-            self.capped = max(new - room, 0)
-            self._spawn(emitter, min(new, room), matrix, previous, dt, starting, local)
+            self.capped = max(len(ages) - room, 0)
+            self._spawn(emitter, ages[len(ages) - room:] if len(ages) > room else ages, matrix, previous, dt, local)
 
     def _keep(self, which) -> None:
         for name in ("position", "velocity", "age", "life", "angle", "spin"):
@@ -105,19 +108,15 @@ class ParticleCloud:
             self.velocity[which] = v + gravity * dt
         self.position[which] = self.position[which] + moved
 
-    def _spawn(self, emitter: ParticleEmitter, n: int, matrix: glm.mat4, previous: glm.mat4, dt: float, starting: bool,
+    def _spawn(self, emitter: ParticleEmitter, age: np.ndarray, matrix: glm.mat4, previous: glm.mat4, dt: float,
                local: bool) -> None:
-        """``n`` new particles of ``emitter``, born evenly through the last ``dt`` seconds
-        (a burst's at the frame's end: all at once), at the emitter's place then."""
+        """New particles of ``emitter``, one an ``age`` (how long before the frame's end it
+        was born), each at the emitter's place at its birth and moved on for the rest of the
+        frame."""
+        n = len(age)
         if n <= 0:
             return
         rng = self.rng
-        bursting = emitter.burst if starting else 0
-        streamed = max(n - bursting, 0)
-        # Each streamed particle's moment: (i + u) / streamed of the frame back from its end.
-        age = np.zeros(n)
-        if streamed and dt > 0.0:
-            age[:streamed] = dt * (1.0 - (np.arange(streamed) + rng.random(streamed)) / streamed)
         start = self._start_points(emitter, n)
         heading = self._headings(emitter, n)
         lo, hi = emitter.speed
@@ -128,7 +127,7 @@ class ParticleCloud:
         else:
             # Into the world, each from where the emitter was at its moment (its place on the
             # line from last frame's matrix to this one's; turned as it is now).
-            turn = np.array(glm.mat3(matrix)).reshape(3, 3)  # column-major: [column][row]
+            turn = np.array(glm.mat3(matrix)).T  # (numpy's copy of a glm matrix is row by row: M^T for row vectors)
             position = start @ turn + np.array(matrix[3].xyz)
             if dt > 0.0:
                 back = (age / dt)[:, None]
@@ -140,7 +139,8 @@ class ParticleCloud:
         life = lo + (hi - lo) * rng.random(n)
         lo, hi = emitter.spin
         spin = np.radians(lo + (hi - lo) * rng.random(n))
-        angle = rng.random(n) * (2.0 * math.pi)
+        lo, hi = emitter.angle
+        angle = np.radians(lo + (hi - lo) * rng.random(n))
         first = self.count
         self.position = np.concatenate([self.position, position])
         self.velocity = np.concatenate([self.velocity, velocity])
@@ -149,7 +149,7 @@ class ParticleCloud:
         self.angle = np.concatenate([self.angle, angle])
         self.spin = np.concatenate([self.spin, spin])
         born = slice(first, first + n)
-        if streamed and dt > 0.0:  # each moved on for its part of the frame
+        if age.any():  # each moved on for its part of the frame
             gravity = np.array(emitter.gravity, dtype=np.float64)
             if local and gravity.any():
                 gravity = np.array(glm.inverse(glm.mat3(matrix)) * glm.vec3(*gravity))
@@ -180,6 +180,7 @@ class ParticleCloud:
         sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
         phi = rng.random(n) * (2.0 * math.pi)
         axis = np.array(emitter.direction, dtype=np.float64)
+        axis /= np.linalg.norm(axis)  # (unit in float32: made unit again in float64)
         helper = np.array((1.0, 0.0, 0.0)) if abs(axis[0]) < 0.9 else np.array((0.0, 0.0, 1.0))
         u = np.cross(axis, helper)
         u /= np.linalg.norm(u)
@@ -196,8 +197,8 @@ class ParticleCloud:
             return out
         t = np.clip(self.age / self.life, 0.0, 1.0)
         if emitter.space == "local":
-            turn = np.array(glm.mat4(matrix)).reshape(4, 4)
-            out[:, ROW_POSITION] = self.position @ turn[:3, :3] + turn[3, :3]
+            m = np.array(matrix)  # (row by row)
+            out[:, ROW_POSITION] = self.position @ m[:3, :3].T + m[:3, 3]
             scale = glm.length(glm.vec3(matrix[0])) * glm.length(glm.vec3(matrix[1])) * glm.length(glm.vec3(matrix[2]))
             grow = scale ** (1.0 / 3.0)  # (a scaled emitter's cloud is scaled, its sprites with it)
         else:

@@ -257,8 +257,11 @@ class ParticleDraw:
         self._reloads = self.gpu.shaders.reloads
 
     def release(self) -> None:
-        for entity in list(self.emitters):
-            self.drop(entity)
+        """Every emitter's buffer and arrays (the renderer releases the textures it shares)."""
+        for record in self.emitters.values():
+            self._drop_arrays(record)
+            record.buffer.release()
+        self.emitters.clear()
         self._programs.clear()
 
 

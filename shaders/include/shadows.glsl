@@ -127,7 +127,12 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     ring_coordinates(2, i, at, along, grazing, p, coarser, fine);
 #endif
 #endif
-    if (any(lessThan(p, vec3(0.0))) || any(greaterThan(p, vec3(1.0)))) return 1.0;  // outside the map
+    // Beside the map: no caster is between the point and the light (the map holds them all).
+    if (any(lessThan(p.xy, vec2(0.0))) || any(greaterThan(p.xy, vec2(1.0)))) return 1.0;
+    // Past its far side (what the map's fit leaves out: a particle below the level's last
+    // caster) it is behind every caster over it: compared at the far side (the reference is
+    // clamped so whatever the depth format; in front of the near side it is lit either way).
+    p.z = clamp(p.z, 0.0, 1.0);
     float lit = filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y);
 #ifdef SHADOW_RING_BLEND
     if (fine < 1.0) {   // in a ring's band: fade towards the next larger map's shadow

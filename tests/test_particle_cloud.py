@@ -1,0 +1,212 @@
+"""The particle simulation (``engine/core/particle_cloud.py``), without GL: what a stream
+spawns, where its particles fly (against the closed forms of ballistic flight and a second,
+tiny-step integration with drag), the cone and shapes they start in, their life, the cap,
+bursts, local and world space, a moving emitter's trail, and the drawn rows' size, colour
+and flipbook frame from age; the component's refusals."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, ParticleEmitter
+from engine.core.particle_cloud import ROW_ANGLE, ROW_COLOR, ROW_FRAME, ROW_POSITION, ROW_SIZE, ParticleCloud
+
+DT = 1.0 / 60.0
+
+
+def run(emitter: ParticleEmitter, frames: int, dt: float = DT, matrix: glm.mat4 | None = None,
+        cloud: ParticleCloud | None = None) -> ParticleCloud:
+    cloud = cloud or ParticleCloud(emitter.seed, emitter.max_particles)
+    for _ in range(frames):
+        cloud.step(emitter, matrix if matrix is not None else glm.mat4(1.0), dt)
+    return cloud
+
+
+def test_a_stream_spawns_its_rate_spread_evenly_through_each_frame():
+    emitter = ParticleEmitter(rate=90.0, lifetime=(10.0, 10.0), speed=(0.0, 0.0))
+    cloud = run(emitter, 60)  # one second
+    assert cloud.count == 90
+    ages = np.sort(cloud.age)
+    # Born every 1/90 s through the second, across the frames' edges (1.5 a frame).
+    np.testing.assert_allclose(np.diff(ages), 1.0 / 90.0, rtol=1e-6)
+    assert ages[0] < 1.0 / 90.0
+    # 1.5 a frame: the half particle is carried, not lost or rounded up.
+    assert run(ParticleEmitter(rate=90.0, lifetime=10.0), 1).count == 1
+    assert run(ParticleEmitter(rate=90.0, lifetime=10.0), 2).count == 3
+
+
+def test_ballistic_flight_is_the_closed_form_whatever_the_frame_rate():
+    g = glm.vec3(0.5, -9.81, 0.0)
+    emitter = ParticleEmitter(rate=30.0, lifetime=5.0, speed=3.0, spread=0.0, direction=(0.0, 1.0, 1.0), gravity=g)
+    start = glm.vec3(1.0, 2.0, 3.0)
+    v0 = np.array(glm.normalize(glm.vec3(0.0, 1.0, 1.0))) * 3.0
+    for dt in (1.0 / 20.0, 1.0 / 144.0):
+        cloud = run(emitter, round(1.5 / dt), dt, glm.translate(start))
+        t = cloud.age[:, None]
+        expected = np.array(start) + v0 * t + 0.5 * np.array(g) * t * t
+        np.testing.assert_allclose(cloud.position, expected, atol=1e-6)  # (glm holds float32s)
+        np.testing.assert_allclose(cloud.velocity, v0 + np.array(g) * t, atol=1e-6)
+
+
+def test_drag_follows_a_tiny_step_integration():
+    g = np.array((0.0, -9.81, 0.0))
+    k = 1.7
+    emitter = ParticleEmitter(rate=0.0, burst=1, lifetime=5.0, speed=4.0, spread=0.0, direction=(1.0, 0.0, 0.0),
+                              gravity=tuple(g), drag=k)
+    cloud = run(emitter, 45, 1.0 / 30.0)  # born at the first frame's end: 44 frames of 1/30 s in flight
+    steps = 146667
+    x, v, h = np.zeros(3), np.array((4.0, 0.0, 0.0)), (44.0 / 30.0) / steps
+    for _ in range(steps):  # the same time, a hundred-thousandth of a second at a time
+        v = v + (g - k * v) * h
+        x = x + v * h
+    np.testing.assert_allclose(cloud.position[0], x, atol=2e-4)
+    np.testing.assert_allclose(cloud.velocity[0], v, atol=2e-4)
+
+
+@pytest.mark.parametrize("spread", [0.0, 20.0, 90.0, 180.0])
+def test_headings_fill_the_cone_and_no_more(spread):
+    axis = glm.normalize(glm.vec3(1.0, 2.0, -0.5))
+    emitter = ParticleEmitter(rate=0.0, burst=4000, max_particles=4000, lifetime=10.0, speed=1.0, spread=spread,
+                              direction=axis)
+    cloud = run(emitter, 1)
+    cosines = cloud.velocity @ np.array(axis)
+    assert cosines.min() >= math.cos(math.radians(spread)) - 1e-6
+    # Uniform over the cap: the cosines spread evenly between cos(spread) and 1.
+    expected_mean = (1.0 + math.cos(math.radians(spread))) / 2.0
+    assert abs(cosines.mean() - expected_mean) < 0.03
+    np.testing.assert_allclose(np.linalg.norm(cloud.velocity, axis=1), 1.0)
+
+
+def test_shapes_start_inside_their_extent_filling_it():
+    ball = run(ParticleEmitter(rate=0.0, burst=3000, max_particles=3000, speed=0.0, lifetime=9.0, shape="sphere",
+                               extent=(2.0, 0.0, 0.0)), 1)
+    radii = np.linalg.norm(ball.position, axis=1)
+    assert radii.max() <= 2.0 and radii.max() > 1.95
+    assert abs(np.mean(radii < 1.0) - 1.0 / 8.0) < 0.03  # a uniform ball: 1/8 of it within half the radius
+    box = run(ParticleEmitter(rate=0.0, burst=3000, max_particles=3000, speed=0.0, lifetime=9.0, shape="box",
+                              extent=(1.0, 0.5, 0.25)), 1)
+    assert (np.abs(box.position) <= np.array((1.0, 0.5, 0.25))).all()
+    assert (np.abs(box.position).max(axis=0) > np.array((0.95, 0.47, 0.23))).all()
+    point = run(ParticleEmitter(rate=0.0, burst=10, speed=0.0, lifetime=9.0), 1,
+                matrix=glm.translate(glm.vec3(4, 5, 6)))
+    np.testing.assert_allclose(point.position, [[4.0, 5.0, 6.0]] * 10)
+
+
+def test_particles_live_between_their_lifetimes_then_go():
+    emitter = ParticleEmitter(rate=200.0, lifetime=(0.5, 1.0))
+    cloud = run(emitter, 120)
+    assert (cloud.life >= 0.5).all() and (cloud.life <= 1.0).all()
+    assert (cloud.age < cloud.life).all()
+    emitter.playing = False
+    run(emitter, 25, cloud=cloud)
+    assert 0 < cloud.count  # the last frame's births live at least 0.5 s
+    run(emitter, 36, cloud=cloud)  # 1.017 s since the last birth: past every life
+    assert cloud.count == 0
+
+
+def test_the_cap_holds_counts_and_warns_once_at_the_system(scene):
+    from components import Transform
+    emitter = ParticleEmitter(rate=600.0, lifetime=10.0, max_particles=50)
+    cloud = run(emitter, 6)
+    assert cloud.count == 50 and cloud.capped == 10  # 60 asked for
+    run(emitter, 1, cloud=cloud)
+    assert cloud.count == 50 and cloud.capped == 10
+
+    def build(world):
+        world.spawn(Transform(), ParticleEmitter(rate=600.0, lifetime=10.0, max_particles=50))
+    runner = scene(build, (32, 18))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(8):
+            runner.frame()
+    from engine.core.errors import ParticleLimitWarning
+    limits = [w for w in caught if issubclass(w.category, ParticleLimitWarning)]
+    assert len(limits) == 1 and "max_particles (50)" in str(limits[0].message)
+    assert runner.stats.particles == 50 and runner.stats.particles_capped == 10
+
+
+def test_a_burst_comes_each_time_it_starts_playing():
+    emitter = ParticleEmitter(rate=0.0, burst=25, lifetime=10.0)
+    cloud = run(emitter, 3)
+    assert cloud.count == 25
+    emitter.playing = False
+    run(emitter, 1, cloud=cloud)
+    emitter.playing = True
+    run(emitter, 1, cloud=cloud)
+    assert cloud.count == 50
+    # A burst is born at once: no age, all at the emitter.
+    assert (cloud.age[-25:] == 0.0).all()
+
+
+def test_world_space_stays_behind_local_space_moves_with_the_emitter():
+    kw = dict(rate=0.0, burst=5, lifetime=10.0, speed=1.0, spread=0.0, direction=(0.0, 1.0, 0.0))
+    here, there = glm.translate(glm.vec3(0.0)), glm.translate(glm.vec3(10.0, 0.0, 0.0)) * glm.rotate(
+        math.pi / 2.0, glm.vec3(0.0, 0.0, 1.0))
+    world = ParticleEmitter(**kw)
+    cloud = run(world, 30, matrix=here)
+    run(world, 30, matrix=there, cloud=cloud)
+    rows = cloud.rows(world, there)
+    up = 59.0 / 60.0  # born at the first frame's end, flown 59 frames
+    np.testing.assert_allclose(rows[:, ROW_POSITION], [[0.0, up, 0.0]] * 5, atol=1e-5)  # up from the origin
+    local = ParticleEmitter(**kw, space="local")
+    cloud = run(local, 30, matrix=here)
+    run(local, 30, matrix=there, cloud=cloud)
+    rows = cloud.rows(local, there)
+    # As far along the emitter's up, which now points along -x, from where the emitter is now.
+    np.testing.assert_allclose(rows[:, ROW_POSITION], [[10.0 - up, 0.0, 0.0]] * 5, atol=1e-5)
+
+
+def test_a_moving_emitter_leaves_an_even_trail():
+    emitter = ParticleEmitter(rate=600.0, lifetime=10.0, speed=0.0, max_particles=5000)
+    cloud = ParticleCloud(0, 5000)
+    for frame in range(11):  # 10 m/s along x, 10 particles a frame
+        cloud.step(emitter, glm.translate(glm.vec3(frame * 10.0 * DT, 0.0, 0.0)), DT)
+    assert cloud.count == 110
+    # Born after the first frame (which has no place before it): each where the emitter was
+    # at its birth, x = 10 m/s x (now - age), one every 1/600 s: 1/60 m apart.
+    moved = cloud.age < 10 * DT - 1e-9
+    np.testing.assert_allclose(cloud.position[moved, 0], 10.0 * (10 * DT - cloud.age[moved]), atol=1e-6)
+    np.testing.assert_allclose(np.diff(np.sort(cloud.position[moved, 0])), 10.0 / 600.0, atol=1e-6)
+
+
+def test_rows_carry_size_colour_and_frame_by_age():
+    emitter = ParticleEmitter(rate=0.0, burst=1, lifetime=2.0, speed=0.0, size=(0.2, 1.0),
+                              color=(2.0, 1.0, 0.0, 1.0), end_color=(0.0, 1.0, 1.0, 0.5), sheet=(4, 2),
+                              spin=(90.0, 90.0))
+    cloud = run(emitter, 1)
+    angle0 = cloud.rows(emitter, glm.mat4(1.0))[0, ROW_ANGLE]
+    run(emitter, 45, cloud=cloud)  # 0.75 s of 2: t = 0.375
+    row = cloud.rows(emitter, glm.mat4(1.0))[0]
+    t = 0.375
+    assert row[ROW_SIZE] == pytest.approx(0.2 + 0.8 * t, rel=1e-5)
+    np.testing.assert_allclose(row[ROW_COLOR], [2.0 - 2.0 * t, 1.0, t, 1.0 - 0.5 * t], rtol=1e-5)
+    assert row[ROW_FRAME] == math.floor(t * 8)
+    assert row[ROW_ANGLE] - angle0 == pytest.approx(math.radians(90.0) * 0.75, rel=1e-4)
+    fade = ParticleEmitter(color=(1.0, 0.5, 0.25, 0.8))
+    assert tuple(fade.final_color) == (1.0, 0.5, 0.25, 0.0)  # end_color None: the colour, faded out
+
+
+def test_the_same_seed_makes_the_same_cloud():
+    def cloud(seed):
+        e = ParticleEmitter(rate=100.0, spread=60.0, speed=(1.0, 2.0), lifetime=(1.0, 2.0), seed=seed)
+        return run(e, 20).rows(e, glm.mat4(1.0))
+    np.testing.assert_array_equal(cloud(3), cloud(3))
+    assert not np.array_equal(cloud(3), cloud(4))
+
+
+@pytest.mark.parametrize("field, value, words", [
+    ("rate", -1.0, ">= 0"), ("burst", 1.5, "int"), ("lifetime", (2.0, 1.0), "least <= most"),
+    ("lifetime", 0.0, "> 0"), ("speed", (1.0, float("nan")), "finite"), ("direction", (0, 0, 0), "zero vector"),
+    ("spread", 181.0, "<= 180"), ("shape", "cone", "one of"), ("blend", "multiply", "one of"),
+    ("sheet", (0, 1), "int in [1, 64]"), ("sheet", 3, "two ints"), ("max_particles", 10 ** 6, "int in [1, 65536]"),
+    ("color", (1.0, 1.0, 1.0, 2.0), "alpha <= 1"), ("texture", "smoke.png", "TextureData"),
+    ("gravity", (0.0, -1e5, 0.0), "within"), ("space", "screen", "one of"), ("translucency", 1.5, "<= 1"),
+])
+def test_bad_values_are_refused_naming_the_field(field, value, words):
+    with pytest.raises(ComponentValueError, match=f"ParticleEmitter.{field}") as caught:
+        ParticleEmitter(**{field: value})
+    assert words in str(caught.value)

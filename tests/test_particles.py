@@ -1,0 +1,318 @@
+"""Particles drawn (``ParticleEmitter``; ``engine/render/particle_draw.py``): one still particle
+against the round spot's formula worked out pixel by pixel (added, and covering by its
+alpha), an alpha emitter's particles farthest first in the main view and in a mirror's (where
+the order turns round), cut at the mirror's plane, hidden behind walls, no ids written, a
+Visibility honoured, fogged by the air's transmittance, lit as the scene pass lights a thin
+sheet letting light through (a second path), its shadow, a flipbook's frames the right way
+up, and every GPU resource let go with the emitter."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    DirectionalLight,
+    Fog,
+    HemisphereLight,
+    Material,
+    MeshRef,
+    Mirror,
+    ParticleEmitter,
+    PointLight,
+    Transform,
+    Visibility,
+)
+from engine.assets.mesh import box, quad
+from engine.assets.texture_data import TextureData
+from engine.core.color import srgb_to_linear
+from tests.support import look_from
+
+SIZE = (96, 72)
+EYE = glm.vec3(0.0, 0.0, 4.0)
+FOV = 40.0
+WALL = (0.2, 0.2, 0.2)
+
+
+def still(**fields) -> ParticleEmitter:
+    """One particle that stays where it is born, upright, for as long as a test runs."""
+    return ParticleEmitter(**{"rate": 0.0, "burst": 1, "speed": 0.0, "lifetime": 1000.0, "angle": (0.0, 0.0),
+                              **fields})
+
+
+def backdrop(world, color=WALL) -> int:
+    """An unlit wall filling the view 3 m behind the origin: a known colour behind everything."""
+    return world.spawn(Transform(position=glm.vec3(0.0, 0.0, -3.0)), MeshRef(quad(40.0, 40.0)),
+                       Material(color=(*color, 1.0), unlit=True))
+
+
+def render(scene, build, frames: int = 2, size=SIZE):
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    for _ in range(frames):
+        image = runner.frame()
+    return runner, srgb_to_linear(image.astype(np.float64) / 255.0)
+
+
+def spot_alpha(size: float, centre=glm.vec3(0.0), shape=SIZE) -> np.ndarray:
+    """The round spot's alpha at each pixel's centre, (1 - r^2)^2 with r the distance from the
+    particle's centre over its half-size, for a square facing the camera at EYE looking down -z."""
+    w, h = shape
+    half_h = math.tan(math.radians(FOV / 2.0))
+    x = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * half_h * (w / h)
+    y = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * half_h
+    depth = EYE.z - centre.z
+    qx, qy = np.meshgrid(x * depth + EYE.x, y * depth + EYE.y)
+    r2 = ((qx - centre.x) ** 2 + (qy - centre.y) ** 2) / (size / 2.0) ** 2
+    return np.maximum(1.0 - r2, 0.0) ** 2
+
+
+def test_an_additive_particle_adds_its_colour_by_the_round_spot(scene):
+    colour = np.array((0.5, 0.3, 0.1))
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.spawn(Transform(), still(size=1.2, color=(*colour, 1.0)))
+    runner, image = render(scene, build)
+    expected = np.array(WALL) + spot_alpha(1.2)[..., None] * colour
+    assert (spot_alpha(1.2) > 0.5).sum() > 150  # (a spot of some size: the test can see it)
+    np.testing.assert_allclose(image, expected, atol=0.012)
+    assert runner.stats.particles == 1
+
+
+def test_an_alpha_particle_covers_by_its_alpha(scene):
+    colour, alpha = np.array((0.9, 0.1, 0.1)), 0.8
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.spawn(Transform(), still(size=1.2, color=(*colour, alpha), end_color=(*colour, alpha), blend="alpha"))
+    _, image = render(scene, build)
+    a = alpha * spot_alpha(1.2)[..., None]
+    np.testing.assert_allclose(image, colour * a + np.array(WALL) * (1.0 - a), atol=0.012)
+
+
+def stream(**fields) -> ParticleEmitter:
+    """A particle every 0.5 s flying towards +z at 1 m/s, red when born and blue at 4 s, solid
+    (a white texture: alpha 1 over its square): the older are nearer the camera and bluer."""
+    white = TextureData(np.full((4, 4, 4), 255, np.uint8), name="white")
+    return ParticleEmitter(**{"rate": 2.0, "speed": 1.0, "spread": 0.0, "direction": (0.0, 0.0, 1.0),
+                              "lifetime": 4.0, "size": 0.5, "color": (1.0, 0.0, 0.0, 1.0),
+                              "end_color": (0.0, 0.0, 1.0, 1.0), "blend": "alpha", "texture": white,
+                              "angle": (0.0, 0.0), **fields})
+
+
+def test_alpha_particles_are_drawn_farthest_first_in_each_view(scene):
+    """Seen from the camera the oldest (nearest, bluest) covers the rest; in a mirror behind them
+    the youngest (nearest the mirror: nearest its image camera, reddest) does."""
+    at = glm.vec3(-1.0, 0.0, -1.0)
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.spawn(Transform(position=glm.vec3(0.0, 0.0, -2.5)), MeshRef(quad(4.0, 3.0)), Mirror())
+        world.spawn(Transform(position=at), stream())
+    runner, image = render(scene, build, frames=100)  # 1.67 s: particles aged 0.17 to 1.5 s on the line
+    cloud = runner.engine.stages["particles"].clouds
+    (entity, (particles, _)), = cloud.items()
+    assert particles.count == 3
+    col, row = runner.project(at + glm.vec3(0.0, 0.0, particles.age.max()))  # the oldest's centre
+    oldest_t, youngest_t = particles.age.max() / 4.0, particles.age.min() / 4.0
+    np.testing.assert_allclose(image[row, col], [1.0 - oldest_t, 0.0, oldest_t], atol=0.02)
+    # The mirror's image of the youngest's centre (the plane z = -2.5).
+    young = at + glm.vec3(0.0, 0.0, particles.age.min())
+    col, row = runner.project(glm.vec3(young.x, young.y, -5.0 - young.z))
+    pixel = image[row, col]
+    assert pixel[0] > 0.5 and pixel[0] > 3.0 * pixel[2], pixel  # red: the youngest's ~(0.9, 0, 0.1)
+    np.testing.assert_allclose(pixel / pixel.sum(), np.array([1.0 - youngest_t, 0.0, youngest_t]), atol=0.03)
+
+
+def test_a_mirror_shows_particles_in_front_and_cuts_those_behind_it(scene):
+    """A particle in front of a mirror at its mirrored place; one behind the mirror's plane
+    (seen by nothing but the mirror's view, were it not cut) adds nothing there."""
+    front, behind = glm.vec3(-0.6, 0.3, -1.0), glm.vec3(0.6, -0.3, -3.3)
+
+    def build(with_particles):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            backdrop(world)
+            world.spawn(Transform(position=glm.vec3(0.0, 0.0, -2.5)), MeshRef(quad(4.0, 3.0)), Mirror())
+            if with_particles:
+                for place in (front, behind):
+                    world.spawn(Transform(position=place), still(size=0.4, color=(3.0, 3.0, 3.0, 1.0)))
+        return make
+    runner, lit = render(scene, build(True))
+    _, plain = render(scene, build(False))
+    col, row = runner.project(glm.vec3(front.x, front.y, -5.0 - front.z))
+    assert (lit[row, col] - plain[row, col]).min() > 0.3  # the front particle's image
+    col, row = runner.project(glm.vec3(behind.x, behind.y, -5.0 - behind.z))
+    np.testing.assert_allclose(lit[row - 2:row + 3, col - 2:col + 3], plain[row - 2:row + 3, col - 2:col + 3],
+                               atol=0.01)
+
+
+def test_depth_hides_a_particle_behind_a_wall_and_no_id_is_written(scene):
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        world.wall = backdrop(world)
+        world.spawn(Transform(position=glm.vec3(0.6, 0.0, 1.0)), MeshRef(box((0.6, 0.6, 0.1))),
+                    Material(color=(0.0, 0.6, 0.0, 1.0), unlit=True))
+        world.spawn(Transform(position=glm.vec3(0.6, 0.0, 0.0)), still(size=0.5, color=(3.0, 3.0, 3.0, 1.0)))
+        world.spawn(Transform(position=glm.vec3(-0.6, 0.0, 0.0)), still(size=0.5, color=(3.0, 3.0, 3.0, 1.0)))
+    runner, image = render(scene, build)
+    col, row = runner.project(glm.vec3(0.6, 0.0, 1.0))
+    np.testing.assert_allclose(image[row, col], [0.0, 0.6, 0.0], atol=0.01)  # the box, not the particle
+    col, row = runner.project(glm.vec3(-0.6, 0.0, 0.0))
+    assert image[row, col].min() > 0.9  # the one in the open
+    assert runner.ids()[::-1][row, col] == runner.world.wall  # its pixels keep the wall's id
+
+
+def test_a_visibility_hides_an_emitter_in_mirrors(scene):
+    place = glm.vec3(-0.6, 0.3, -1.0)
+
+    def build(hidden):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            backdrop(world)
+            world.spawn(Transform(position=glm.vec3(0.0, 0.0, -2.5)), MeshRef(quad(4.0, 3.0)), Mirror())
+            parts = [Transform(position=place), still(size=0.4, color=(3.0, 3.0, 3.0, 1.0))]
+            if hidden:
+                parts.append(Visibility(in_mirrors=False))
+            world.spawn(*parts)
+        return make
+    runner, shown = render(scene, build(False))
+    _, hidden = render(scene, build(True))
+    col, row = runner.project(place)
+    assert shown[row, col].min() > 0.9 and hidden[row, col].min() > 0.9  # seen directly both times
+    col, row = runner.project(glm.vec3(place.x, place.y, -5.0 - place.z))
+    assert shown[row, col].min() > hidden[row, col].max() + 0.3
+
+
+def test_fog_keeps_the_airs_transmittance_of_an_additive_particles_light(scene):
+    density = 0.15
+
+    def build(fog, particle):
+        def make(world):
+            camera = look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            if fog:
+                world.add_component(camera, Fog(density=density, sky_affect=0.0))
+            backdrop(world)
+            if particle:
+                world.spawn(Transform(), still(size=1.2, color=(0.6, 0.6, 0.6, 1.0)))
+        return make
+    added = {}
+    for fog in (False, True):
+        _, lit = render(scene, build(fog, True))
+        _, plain = render(scene, build(fog, False))
+        added[fog] = (lit - plain)[32:40, 44:52].mean()
+    assert added[False] > 0.4
+    assert added[True] / added[False] == pytest.approx(math.exp(-density * 4.0), rel=0.03)
+
+
+def solid(value=255) -> TextureData:
+    return TextureData(np.full((4, 4, 4), value, np.uint8), name="solid")
+
+
+ALBEDO = (0.6, 0.5, 0.4)
+
+
+def lit_scene(particle: bool, sun: glm.vec3, lamp: bool = False, blocker: bool = False, sun_on: bool = True):
+    """A 1 m lit particle facing the camera (a solid sprite: alpha 1 all over), or in its place
+    a quad of the same albedo letting the same share of light through (diffuse transmission,
+    its transmission's colour the albedo), lit by a sun (or a lamp the way the sun comes from)
+    and a hemisphere; ``blocker``: a box in the sun's way."""
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        world.spawn(HemisphereLight(sky=(0.3, 0.35, 0.5), ground=(0.2, 0.15, 0.1), intensity=1.0))
+        if lamp:
+            world.spawn(Transform(position=-sun * 1.5), PointLight(intensity=5.0, range=20.0))
+        else:
+            world.spawn(DirectionalLight(direction=sun, intensity=3.0 if sun_on else 0.0))
+        if particle:
+            world.spawn(Transform(), still(size=1.0, color=(*ALBEDO, 1.0), end_color=(*ALBEDO, 1.0), lit=True,
+                                           translucency=0.3, blend="alpha", texture=solid()))
+        else:
+            world.spawn(Transform(), MeshRef(quad(1.0, 1.0)),
+                        Material(color=(*ALBEDO, 1.0), reflectance=0.0, roughness=1.0, environment_reflection=0.0,
+                                 diffuse_transmission=0.3, diffuse_transmission_color=ALBEDO))
+        if blocker:
+            world.spawn(Transform(position=-sun * 1.2), MeshRef(box((0.8, 0.8, 0.8))),
+                        Material(color=(0.1, 0.1, 0.1, 1.0)))
+    return build
+
+
+@pytest.mark.parametrize("sun, lamp", [
+    (glm.normalize(glm.vec3(0.4, -0.3, -1.0)), False),   # from in front
+    (glm.normalize(glm.vec3(-0.3, -0.2, 1.0)), False),   # from behind: through it
+    (glm.normalize(glm.vec3(0.3, -0.4, -1.0)), True),    # a lamp in front
+])
+def test_a_lit_particle_is_lit_as_a_thin_sheet_letting_light_through(scene, sun, lamp):
+    _, particle = render(scene, lit_scene(True, sun, lamp))
+    _, sheet = render(scene, lit_scene(False, sun, lamp))
+    middle = (slice(33, 39), slice(45, 51))
+    assert particle[middle].mean() > 0.05
+    np.testing.assert_allclose(particle[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
+                               atol=0.004)
+
+
+def test_a_lit_particle_in_a_shadow_keeps_only_the_light_from_all_round(scene):
+    sun = glm.normalize(glm.vec3(0.7, -0.3, -0.6))  # (from the left and in front: the box off the camera's line)
+    _, shaded = render(scene, lit_scene(True, sun, blocker=True))
+    _, unlit_sun = render(scene, lit_scene(True, sun, sun_on=False))
+    _, open_sun = render(scene, lit_scene(True, sun))
+    middle = (slice(34, 38), slice(46, 50))
+    np.testing.assert_allclose(shaded[middle].mean(axis=(0, 1)), unlit_sun[middle].mean(axis=(0, 1)), rtol=0.05,
+                               atol=0.005)
+    assert open_sun[middle].mean() > shaded[middle].mean() + 0.1
+
+
+def test_a_flipbooks_frames_play_over_its_life_the_right_way_up(scene):
+    """A 2 x 1 sheet: frame 0's cell green above red, frame 1's all blue; each particle upright."""
+    pixels = np.zeros((8, 16, 4), np.uint8)
+    pixels[..., 3] = 255
+    pixels[:4, :8, 1] = 255   # frame 0's top half: green (row 0 is the image's top)
+    pixels[4:, :8, 0] = 255   # its bottom half: red
+    pixels[:, 8:, 2] = 255    # frame 1: blue
+    sheet = TextureData(pixels, name="sheet")
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world, (0.0, 0.0, 0.0))
+        world.spawn(Transform(position=glm.vec3(-0.7, 0.0, 0.0)),
+                    still(size=1.0, texture=sheet, sheet=(2, 1), lifetime=1000.0, color=(1, 1, 1, 1),
+                          end_color=(1, 1, 1, 1)))
+        world.spawn(Transform(position=glm.vec3(0.7, 0.0, 0.0)),
+                    still(size=1.0, texture=sheet, sheet=(2, 1), lifetime=0.2, color=(1, 1, 1, 1),
+                          end_color=(1, 1, 1, 1)))
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame(1.0 / 60.0)
+    image = srgb_to_linear(runner.frame(0.12).astype(np.float64) / 255.0)  # the short-lived past half its life
+    top, bottom = runner.project(glm.vec3(-0.7, 0.25, 0.0)), runner.project(glm.vec3(-0.7, -0.25, 0.0))
+    np.testing.assert_allclose(image[top[1], top[0]], [0.0, 1.0, 0.0], atol=0.02)
+    np.testing.assert_allclose(image[bottom[1], bottom[0]], [1.0, 0.0, 0.0], atol=0.02)
+    col, row = runner.project(glm.vec3(0.7, 0.0, 0.0))
+    np.testing.assert_allclose(image[row, col], [0.0, 0.0, 1.0], atol=0.02)
+
+
+def test_an_emitter_gone_lets_its_buffer_and_texture_go(scene):
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.emitter = world.spawn(Transform(), ParticleEmitter(rate=300.0, texture=solid(200), size=0.3))
+    runner = scene(build, SIZE)
+    renderer = runner.engine.renderer
+    textures = len(renderer._textures)
+    for _ in range(3):
+        runner.frame()
+    draw = renderer.scene_pass.particle_draw
+    record = draw.emitters[runner.world.emitter]
+    assert len(renderer._textures) == textures + 1 and record.particles > 0
+    buffer = record.buffer
+    runner.world.delete_entity(runner.world.emitter)
+    runner.frame()
+    assert draw.emitters == {} and len(renderer._textures) == textures
+    assert buffer.mglo.__class__.__name__ == "InvalidObject" or buffer.glo == 0  # released
+    assert runner.stats.particles == 0
