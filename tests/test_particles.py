@@ -56,10 +56,11 @@ def render(scene, build, frames: int = 2, size=SIZE):
     return runner, srgb_to_linear(image.astype(np.float64) / 255.0)
 
 
-def spot_alpha(size: float, centre=glm.vec3(0.0), shape=SIZE) -> np.ndarray:
+def spot_alpha(size: float, centre=(0.0, 0.0, 0.0), shape=SIZE) -> np.ndarray:
     """The round spot's alpha at each pixel's centre, (1 - r^2)^2 with r the distance from the
     particle's centre over its half-size, for a square facing the camera at EYE looking down -z."""
     w, h = shape
+    centre = glm.vec3(centre)
     half_h = math.tan(math.radians(FOV / 2.0))
     x = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * half_h * (w / h)
     y = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * half_h
