@@ -155,8 +155,9 @@ class ParticleEmitter(TrackedComponent):
             except (TypeError, ValueError):
                 raise ComponentValueError(f"ParticleEmitter.sheet must be two ints (columns, rows), "
                                           f"got {value!r}") from None
-            return (integer(self, "sheet", columns, low=1, high=MAX_SHEET_CELLS),
-                    integer(self, "sheet", rows, low=1, high=MAX_SHEET_CELLS))
+            whole = [int(v) if isinstance(v, float) and v.is_integer() else v for v in (columns, rows)]  # (dragged)
+            return (integer(self, "sheet", whole[0], low=1, high=MAX_SHEET_CELLS),
+                    integer(self, "sheet", whole[1], low=1, high=MAX_SHEET_CELLS))
         if name == "max_particles":
             return integer(self, name, value, low=1, high=MAX_PARTICLES)
         if name == "seed":

@@ -48,7 +48,8 @@ SAME_ANGLES_DEGREES = 0.01  # a rotation within this of the angles last shown sh
                             # (at yaw 90 pitch and roll turn about one axis: the triple is not unique)
 TEXTURE_FIELDS = MATERIAL_IMAGES  # Material's images
 # Every image field, (component, field): typed as a level file's texture table names it.
-IMAGE_FIELDS = frozenset({("Material", name) for name in TEXTURE_FIELDS} | {("PointLight", "cookie")})
+IMAGE_FIELDS = frozenset({("Material", name) for name in TEXTURE_FIELDS} | {("PointLight", "cookie"),
+                                                                    ("ParticleEmitter", "texture")})
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
 # inspector shows such a field as automatic with a button that pins the value in use now, and
@@ -56,6 +57,7 @@ IMAGE_FIELDS = frozenset({("Material", name) for name in TEXTURE_FIELDS} | {("Po
 AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
     ("Skybox", "sun_direction"): "follows the brightest directional light",
     ("Reflective", "mix"): "1.0 untextured, 0.5 textured",
+    ("ParticleEmitter", "end_color"): "its colour, faded to alpha 0",
 }
 
 # Fields whose None means "off": the inspector shows such a field as off with a button that
@@ -251,6 +253,8 @@ class Editor:
             raise EditError(f"{name}.{field} is not a field the engine decides")
         if name == "Skybox":
             return glm.vec3(*followed_sun(self.world).direction)
+        if name == "ParticleEmitter":
+            return target.final_color
         return automatic_mix(self.world.try_get(entity, Material))
 
     # --- what an entity holds --------------------------------------------------------------
