@@ -59,9 +59,11 @@ class ParticleSystem(esper.Processor):
             living += cloud.count
             capped += cloud.capped
             self._warn_capped(entity, emitter, cloud.capped)
-            code = entity_code(world.try_get(entity, Visibility))
-            if cloud.count or entity in draw.emitters:
+            if cloud.count:
+                code = entity_code(world.try_get(entity, Visibility))
                 draw.update(entity, emitter, cloud.rows(emitter, matrix), code)
+            elif entity in draw.emitters:  # (all gone: nothing to draw, nothing to upload each frame)
+                draw.drop(entity)
         for entity in [e for e in self.clouds if e not in seen]:
             del self.clouds[entity]
             self._capped.discard(entity)

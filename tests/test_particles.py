@@ -412,3 +412,70 @@ def test_the_editor_adds_an_emitter_and_edits_its_fields(scene):
     assert emitter.end_color is None and editor.undo() and tuple(emitter.end_color) == (2.0, 2.0, 2.0, 0.0)
     runner.frame()
     assert runner.stats.particles == 1
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_both_reflection_paths_draw_particles_in_a_mirror(scene, path):
+    place = glm.vec3(-0.6, 0.3, -1.0)
+
+    def build(with_particles):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            backdrop(world)
+            world.spawn(Transform(position=glm.vec3(-1.0, 0.0, -2.5)), MeshRef(quad(2.0, 3.0)), Mirror())
+            world.spawn(Transform(position=glm.vec3(1.0, 0.0, -2.5)), MeshRef(quad(2.0, 3.0)), Mirror())
+            if with_particles:
+                world.spawn(Transform(position=place), still(size=0.4, color=(3.0, 3.0, 3.0, 1.0)))
+        return make
+    shown = {}
+    for with_particles in (False, True):
+        runner = scene(build(with_particles), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.path = path
+        runner.frame()
+        shown[with_particles] = srgb_to_linear(runner.frame().astype(np.float64) / 255.0)
+        assert runner.stats.reflection_path == path
+    col, row = runner.project(glm.vec3(place.x, place.y, -5.0 - place.z))
+    assert shown[True][row, col].min() > shown[False][row, col].max() + 0.3
+
+
+def test_a_paused_cloud_keeps_the_mirrors_views_and_a_moving_one_does_not(scene):
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.spawn(Transform(position=glm.vec3(0.0, 0.0, -2.5)), MeshRef(quad(4.0, 3.0)), Mirror())
+        world.spawn(Transform(position=glm.vec3(-0.6, 0.0, -1.0)),
+                    ParticleEmitter(rate=30.0, speed=0.5, size=0.2, color=(3.0, 3.0, 3.0, 1.0)))
+    runner = scene(build, SIZE)
+    kept = []
+    for dt in (1 / 60,) * 4 + (0.0,) * 4 + (1 / 60,) * 2:
+        runner.frame(dt)
+        kept.append(runner.stats.reflection_views_kept)
+    assert kept[:4] == [0] * 4 and kept[-2:] == [0, 0]  # moving: drawn every frame
+    assert kept[6:8] == [1, 1]  # paused: nothing a view shows changed (the first still frame draws)
+
+
+def test_a_probe_capture_leaves_particles_out(scene):
+    """A chrome ball's probe would see a bright cloud behind the camera in the ball's middle;
+    it is left out of the capture (a probe redrawn on its schedule would hold a still frame of it)."""
+    from components import Reflective, Skybox
+    from engine.assets.mesh import sphere
+
+    def build(with_particles):
+        def make(world):
+            world.spawn(Skybox())
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            world.spawn(Transform(), MeshRef(sphere(0.6, 48, 24)),
+                        Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"))
+            if with_particles:
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, 6.0)), still(size=3.0, color=(5.0, 5.0, 5.0, 1.0)))
+        return make
+    middle = {}
+    for with_particles in (False, True):
+        runner = scene(build(with_particles), SIZE)
+        runner.engine.renderer.antialias = "off"
+        for _ in range(3):
+            image = runner.frame()
+        assert runner.engine.renderer.scene_pass.particle_draw.particles == int(with_particles)
+        middle[with_particles] = image[33:39, 45:51].astype(int)
+    np.testing.assert_array_equal(middle[True], middle[False])

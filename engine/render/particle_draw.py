@@ -89,6 +89,7 @@ class GpuEmitter:
     row_boxes: np.ndarray = field(default_factory=lambda: np.zeros((1, 2, 3)))
     vertex_arrays: dict = field(default_factory=dict)  # by program build
     count: int = 1  # boxes (batch_cull reads an emitter as a batch of one box)
+    uploaded: bool = False  # its rows are in its buffer
 
     @property
     def particles(self) -> int:
@@ -112,7 +113,8 @@ class ParticleDraw:
         particle) and is drawn where ``code`` says (``visibility_rules.drawn_code``)."""
         record = self.emitters.get(entity)
         texture = emitter.texture
-        if record is not None and record.texture is not texture:
+        retextured = record is not None and record.texture is not texture
+        if retextured:
             self._let_go_texture(record)
         if record is None:
             record = self.emitters[entity] = GpuEmitter(
@@ -121,8 +123,12 @@ class ParticleDraw:
         if record.texture is not texture and texture is not None:
             record.gl_texture = self.gpu.shared_texture(texture, "ParticleEmitter.texture")
             record.texture = texture
+        look = (emitter.blend, emitter.lit, emitter.translucency, emitter.sheet, code, texture)
+        if not retextured and record.uploaded and np.array_equal(rows, record.rows) \
+                and look == (record.blend, record.lit, record.translucency, record.sheet, record.code, record.texture):
+            return  # (a still cloud, a paused game: nothing a view shows changed)
         record.blend, record.lit, record.translucency = emitter.blend, emitter.lit, emitter.translucency
-        record.sheet, record.code, record.rows = emitter.sheet, code, rows
+        record.sheet, record.code, record.rows, record.uploaded = emitter.sheet, code, rows, True
         if len(rows) * ROW_BYTES > record.buffer.size:
             record.buffer.release()
             record.buffer = self.ctx.buffer(reserve=_grown(len(rows)) * ROW_BYTES)
