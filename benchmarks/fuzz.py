@@ -62,6 +62,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    ParticleEmitter,
     PointLight,
     Portal,
     PortalClone,
@@ -89,7 +90,7 @@ SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, Fog,
-                             AmbientOcclusion, ScreenReflections, Visibility, Water)
+                             AmbientOcclusion, ScreenReflections, Visibility, Water, ParticleEmitter)
 
 @dataclasses.dataclass
 class Case:

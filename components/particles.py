@@ -37,6 +37,7 @@ MAX_PARTICLE_SIZE = 1.0e4      # metres across
 MAX_PARTICLE_SPIN = 1.0e5      # degrees a second
 MAX_PARTICLE_DRAG = 1.0e3      # per second
 MAX_PARTICLE_GRAVITY = 1.0e4   # metres a second squared, a component
+MAX_PARTICLE_STRETCH = 100.0   # seconds of flight a streak is long
 
 
 @dataclass(eq=False)
@@ -69,7 +70,10 @@ class ParticleEmitter(TrackedComponent):
       is its light (unlit); True: its colour is an albedo lit by the sun, lamps and the light
       from all round where it is, with the sun's and lamps' shadows, as a thin sheet facing
       the viewer that lets ``translucency`` of the light through from behind (smoke lit by a
-      lamp behind it glows at its edge of the lamp).
+      lamp behind it glows at its edge of the lamp).  ``stretch`` (seconds) above 0 draws
+      each as a streak along its flight as the view sees it, its size across and ahead, its
+      speed x ``stretch`` long behind (sparks, rain: Unity's stretched billboards); its angle
+      is then the flight's.
     - ``max_particles`` living at once (spawning stops there, counted in
       ``RenderStats.particles_capped``); ``seed`` makes the same cloud again.
 
@@ -102,6 +106,7 @@ class ParticleEmitter(TrackedComponent):
     seed: int = 0
     lit: bool = False
     translucency: float = 0.5
+    stretch: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
@@ -164,6 +169,8 @@ class ParticleEmitter(TrackedComponent):
             return integer(self, name, value, low=0, high=2**63 - 1)
         if name == "translucency":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "stretch":
+            return finite(self, name, value, low=0.0, high=MAX_PARTICLE_STRETCH)
         return value
 
     def _pair(self, name: str, value: Any, low: float, high: float, positive: bool = False) -> tuple[float, float]:

@@ -14,6 +14,7 @@ in float in_size;    // metres across
 in vec4 in_color;    // linear colour, alpha
 in float in_angle;   // radians, about the view's axis
 in float in_frame;   // the flipbook's frame
+in vec3 in_streak;   // world: its velocity x ParticleEmitter.stretch (0: a square)
 
 uniform ivec2 sheet;  // the flipbook's columns and rows (1, 1: the whole texture)
 #ifdef LIT
@@ -65,6 +66,16 @@ void main() {
     vec2 corner = vec2((gl_VertexID & 1) == 0 ? -1.0 : 1.0, (gl_VertexID & 2) == 0 ? -1.0 : 1.0);
     float c = cos(in_angle), s = sin(in_angle);
     vec2 turned = vec2(c * corner.x - s * corner.y, s * corner.x + c * corner.y) * (0.5 * in_size);
+    // A streak: its v along its flight as the view sees it (the streak in view space), its
+    // size across and ahead of its centre, the streak's length behind.
+    vec2 streak = (mat3(camera.view) * in_streak).xy;
+    float streak_length = length(streak);
+    if (streak_length > 1e-4 * in_size) {
+        vec2 along = streak / streak_length;
+        vec2 across = vec2(along.y, -along.x);
+        turned = across * (corner.x * 0.5 * in_size)
+                 + along * (corner.y * 0.5 * (in_size + streak_length) - 0.5 * streak_length);
+    }
     // The view's right and up in the world: the rows of its rotation (a mirror's view too,
     // whose rows are its image camera's).
     vec3 right = normalize(vec3(camera.view[0][0], camera.view[1][0], camera.view[2][0]));

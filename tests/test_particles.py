@@ -479,3 +479,23 @@ def test_a_probe_capture_leaves_particles_out(scene):
         assert runner.engine.renderer.scene_pass.particle_draw.particles == int(with_particles)
         middle[with_particles] = image[33:39, 45:51].astype(int)
     np.testing.assert_array_equal(middle[True], middle[False])
+
+
+def test_a_stretched_particle_is_a_streak_trailing_its_flight(scene):
+    """0.5 m/s along +x, stretch 2 s, size 0.2: a 0.2 m band from 1.1 m behind its centre to
+    0.1 m ahead of it (its speed x stretch behind, half its size each way)."""
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world, (0.0, 0.0, 0.0))
+        world.spawn(Transform(position=glm.vec3(-0.5, 0.0, 0.0)),
+                    still(speed=0.5, spread=0.0, direction=(1.0, 0.0, 0.0), size=0.2, stretch=2.0, texture=solid(),
+                          color=(1.0, 1.0, 1.0, 1.0), end_color=(1.0, 1.0, 1.0, 1.0)))
+    runner, image = render(scene, build, frames=30)
+    (particles, _), = runner.engine.stages["particles"].clouds.values()
+    centre = float(particles.position[0, 0])
+    lit = image.mean(axis=2) > 0.5
+    rows, cols = np.nonzero(lit)
+    left, top = runner.project(glm.vec3(centre - 1.1, 0.1, 0.0))
+    right, bottom = runner.project(glm.vec3(centre + 0.1, -0.1, 0.0))
+    assert abs(cols.min() - left) <= 1 and abs(cols.max() + 1 - right) <= 1
+    assert abs(rows.min() - top) <= 1 and abs(rows.max() + 1 - bottom) <= 1

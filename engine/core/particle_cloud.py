@@ -10,8 +10,8 @@ line) and already moved for the rest of the frame, so a fast emitter leaves an e
 not a clump a frame.
 
 ``rows`` is what a view draws: a row a particle of ``ROW_FLOATS`` float32 (world position,
-size, linear colour and alpha, angle in radians, flipbook frame), its size, colour and frame
-worked out from its age over its life.
+size, linear colour and alpha, angle in radians, flipbook frame, streak), its size, colour and
+frame worked out from its age over its life.
 """
 from __future__ import annotations
 
@@ -22,9 +22,11 @@ from pyglm import glm
 
 from components.particles import ParticleEmitter
 
-# A drawn particle: x, y, z, size, r, g, b, a, angle, frame.
-ROW_FLOATS = 10
+# A drawn particle: x, y, z, size, r, g, b, a, angle, frame, and its streak (x, y, z: its
+# velocity x ParticleEmitter.stretch, world; 0 for a square).
+ROW_FLOATS = 13
 ROW_POSITION, ROW_SIZE, ROW_COLOR, ROW_ANGLE, ROW_FRAME = slice(0, 3), 3, slice(4, 8), 8, 9
+ROW_STREAK = slice(10, 13)
 
 
 class ParticleCloud:
@@ -211,6 +213,11 @@ class ParticleCloud:
         out[:, ROW_ANGLE] = self.angle + self.spin * self.age
         frames = emitter.frames
         out[:, ROW_FRAME] = np.minimum(np.floor(t * frames), frames - 1)
+        if emitter.stretch > 0.0:
+            velocity = self.velocity if emitter.space == "world" else self.velocity @ m[:3, :3].T
+            out[:, ROW_STREAK] = velocity * emitter.stretch
+        else:
+            out[:, ROW_STREAK] = 0.0
         return out
 
 

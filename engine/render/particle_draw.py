@@ -33,7 +33,7 @@ import moderngl
 import numpy as np
 
 from components.particles import ParticleEmitter
-from engine.core.particle_cloud import ROW_FLOATS, ROW_POSITION, ROW_SIZE
+from engine.core.particle_cloud import ROW_FLOATS, ROW_POSITION, ROW_SIZE, ROW_STREAK
 from engine.render.batch_cull import batch_reach
 from engine.render.bindings import (
     BLEND_PREMULTIPLIED,
@@ -61,8 +61,8 @@ from engine.render.views import View
 from engine.rules.visibility_rules import drawn_in
 
 ROW_BYTES = ROW_FLOATS * 4
-_FORMAT = "3f 1f 4f 1f 1f/i"
-_ATTRIBUTES = ("in_center", "in_size", "in_color", "in_angle", "in_frame")
+_FORMAT = "3f 1f 4f 1f 1f 3f/i"
+_ATTRIBUTES = ("in_center", "in_size", "in_color", "in_angle", "in_frame", "in_streak")
 # Depth tested, not written (the framebuffer's mask, set by the caller's pass), no culling (a
 # mirror's view turns the winding), the view's plane clipped, blended premultiplied.
 PARTICLE_PASS = PassState(depth_func="<", cull=False, clips=frozenset((CLIP_VIEW_PLANE,)),
@@ -135,7 +135,9 @@ class ParticleDraw:
             self._drop_arrays(record)
         if len(rows):
             record.buffer.write(rows.tobytes())
-            reach = float((rows[:, ROW_SIZE].max()) * (0.5 * math.sqrt(2.0)))
+            # (its square's half-diagonal, and a streak's whole length behind it)
+            reach = float(rows[:, ROW_SIZE].max()) * math.sqrt(2.0) + float(
+                np.sqrt(np.square(rows[:, ROW_STREAK]).sum(axis=1).max()))
             centres = rows[:, ROW_POSITION]
             record.row_boxes = np.array([[centres.min(axis=0) - reach, centres.max(axis=0) + reach]])
         self.gpu.note_scene_change()
