@@ -55,7 +55,8 @@ class ParticleEmitter(TrackedComponent):
       emitter's frame; flying along ``direction`` (its frame) within a cone of ``spread``
       degrees about it (180: every way) at a speed between ``speed``'s two.
     - **Flight.**  ``gravity`` (world, m/s^2) pulls, ``drag`` slows (the velocity keeps
-      exp(-drag dt)).  ``space`` "world": a particle stays where it was born when the emitter
+      exp(-drag dt)); ``ground`` (a world height; None: none) is a floor they bounce off,
+      keeping ``bounce`` of their speed into it (0: they stop on it and slide).  ``space`` "world": a particle stays where it was born when the emitter
       moves (smoke from a torch); "local": the whole cloud moves with it (a jet's glow).
     - **Life.**  Each lives between ``lifetime``'s two seconds; its size goes from
       ``size[0]`` to ``size[1]`` metres across and its colour from ``color`` to
@@ -107,6 +108,8 @@ class ParticleEmitter(TrackedComponent):
     lit: bool = False
     translucency: float = 0.5
     stretch: float = 0.0
+    ground: float | None = None
+    bounce: float = 0.3
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
@@ -148,7 +151,11 @@ class ParticleEmitter(TrackedComponent):
         if name == "blend":
             return choice(self, name, value, PARTICLE_BLENDS)
         if name == "space":
-            return choice(self, name, value, PARTICLE_SPACES)
+            value = choice(self, name, value, PARTICLE_SPACES)
+            if value == "local" and self.__dict__.get("ground") is not None:
+                raise ComponentValueError('ParticleEmitter.space cannot be "local" with a ground (a world height): '
+                                          "set ground to None first")
+            return value
         if name == "texture" and value is not None:
             if getattr(type(value), "ASSET_KIND", None) != "texture":
                 raise ComponentValueError("ParticleEmitter.texture must be an engine.assets.texture_data.TextureData, "
@@ -171,6 +178,15 @@ class ParticleEmitter(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "stretch":
             return finite(self, name, value, low=0.0, high=MAX_PARTICLE_STRETCH)
+        if name == "ground":
+            if value is None:
+                return None
+            if self.__dict__.get("space") == "local":
+                raise ComponentValueError('ParticleEmitter.ground is a world height: give it to a "world" space '
+                                          f'emitter, not a "local" one, got {value!r}')
+            return finite(self, name, value)
+        if name == "bounce":
+            return finite(self, name, value, low=0.0, high=1.0)
         return value
 
     def _pair(self, name: str, value: Any, low: float, high: float, positive: bool = False) -> tuple[float, float]:

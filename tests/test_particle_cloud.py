@@ -210,3 +210,27 @@ def test_bad_values_are_refused_naming_the_field(field, value, words):
     with pytest.raises(ComponentValueError, match=f"ParticleEmitter.{field}") as caught:
         ParticleEmitter(**{field: value})
     assert words in str(caught.value)
+
+
+def test_a_ground_bounces_particles_keeping_its_share_of_their_fall():
+    """Dropped from 2 m onto ground 0.5 with bounce 0.5: never below it, and back up to a
+    quarter of the fall (the speed kept, squared: 0.375 m above it), then lower each time."""
+    emitter = ParticleEmitter(rate=0.0, burst=1, lifetime=100.0, speed=0.0, gravity=(0.0, -9.81, 0.0), ground=0.5,
+                              bounce=0.5)
+    cloud = ParticleCloud(0, 10)
+    heights = []
+    for _ in range(480):  # 2 s at 240 Hz
+        cloud.step(emitter, glm.translate(glm.vec3(0.0, 2.0, 0.0)), 1.0 / 240.0)
+        heights.append(cloud.position[0, 1])
+    heights = np.array(heights)
+    assert heights.min() >= 0.5
+    first_landing = int(np.argmax(heights < 0.52))
+    assert heights[first_landing:].max() == pytest.approx(0.5 + 1.5 * 0.25, rel=0.03)
+    flat = ParticleEmitter(rate=0.0, burst=1, lifetime=100.0, speed=1.0, spread=0.0, direction=(1.0, -1.0, 0.0),
+                           gravity=(0.0, -9.81, 0.0), ground=0.0, bounce=0.0)
+    cloud = run(flat, 60)
+    assert cloud.position[0, 1] == 0.0 and cloud.velocity[0, 1] == 0.0 and cloud.velocity[0, 0] > 0.7  # sliding
+    with pytest.raises(ComponentValueError, match="ParticleEmitter.ground is a world height"):
+        ParticleEmitter(space="local", ground=0.0)
+    with pytest.raises(ComponentValueError, match='ParticleEmitter.space cannot be "local"'):
+        ParticleEmitter(ground=0.0).space = "local"

@@ -69,6 +69,8 @@ class ParticleCloud:
             if local and gravity.any():  # (the pull is the world's: into the emitter's frame)
                 gravity = np.array(glm.inverse(glm.mat3(matrix)) * glm.vec3(*gravity))
             self._move(slice(None), dt, gravity, emitter.drag)
+            if emitter.ground is not None:
+                self._bounce(slice(None), emitter.ground, emitter.bounce)
         if len(self.age) > self.capacity:  # (max_particles lowered: the oldest go)
             self._keep(np.argsort(self.life - self.age)[-self.capacity:])
         starting = emitter.playing and not self.was_playing
@@ -109,6 +111,20 @@ class ParticleCloud:
             moved = v * dt + 0.5 * gravity * (dt * dt)
             self.velocity[which] = v + gravity * dt
         self.position[which] = self.position[which] + moved
+
+    def _bounce(self, which, ground: float, keep: float) -> None:
+        """Particles ``which`` that went below ``ground`` this step: put back above it by
+        ``keep`` of how far they went under, their fall turned upwards at ``keep`` of its
+        speed (their slide along it left as it is)."""
+        y = self.position[which, 1]
+        under = y < ground
+        if not under.any():
+            return
+        y[under] = ground + (ground - y[under]) * keep
+        self.position[which, 1] = y
+        vy = self.velocity[which, 1]
+        vy[under] = np.abs(vy[under]) * keep
+        self.velocity[which, 1] = vy
 
     def _spawn(self, emitter: ParticleEmitter, age: np.ndarray, matrix: glm.mat4, previous: glm.mat4, dt: float,
                local: bool) -> None:
@@ -156,6 +172,8 @@ class ParticleCloud:
             if local and gravity.any():
                 gravity = np.array(glm.inverse(glm.mat3(matrix)) * glm.vec3(*gravity))
             self._move(born, age, gravity, emitter.drag)
+            if emitter.ground is not None:
+                self._bounce(born, emitter.ground, emitter.bounce)
             self.age[born] = age
             self.angle[born] += self.spin[born] * age
         dead = self.age >= self.life  # (born so early in a long frame that it is gone already)
