@@ -56,8 +56,9 @@ class ParticleEmitter(TrackedComponent):
       degrees about it (180: every way) at a speed between ``speed``'s two.
     - **Flight.**  ``gravity`` (world, m/s^2) pulls, ``drag`` slows (the velocity keeps
       exp(-drag dt)); ``ground`` (a world height; None: none) is a floor they bounce off,
-      keeping ``bounce`` of their speed into it (0: they stop on it and slide).  ``space`` "world": a particle stays where it was born when the emitter
-      moves (smoke from a torch); "local": the whole cloud moves with it (a jet's glow).
+      keeping ``bounce`` of their speed into it (0: they stop on it and slide).  ``space``
+      "world": a particle stays where it was born when the emitter moves (smoke from a
+      torch); "local": the whole cloud moves with it (a jet's glow).
     - **Life.**  Each lives between ``lifetime``'s two seconds; its size goes from
       ``size[0]`` to ``size[1]`` metres across and its colour from ``color`` to
       ``end_color`` (None: ``color`` at alpha 0, so it fades out) over its life.  It starts
