@@ -81,7 +81,11 @@ class ParticleCloud:
             # frame makes a whole particle: each one's age at the frame's end.
             owed = self.carry + emitter.rate * dt
             streamed = int(owed)
-            ages = np.maximum(dt - (np.arange(streamed) + 1.0 - self.carry) / emitter.rate, 0.0)
+            # (only the youngest that could live are made: a long frame at a high rate asks
+            # for more than max_particles, and the rest are counted as capped, not built)
+            first = max(streamed - self.capacity, 0)
+            ages = np.maximum(dt - (np.arange(first, streamed) + 1.0 - self.carry) / emitter.rate, 0.0)
+            self.capped += first
             self.carry = owed - streamed
         elif not emitter.playing:
             self.carry = 0.0
@@ -89,7 +93,7 @@ class ParticleCloud:
             ages = np.concatenate([ages, np.zeros(emitter.burst)])
         if len(ages):
             room = max(self.capacity - self.count, 0)
-            self.capped = max(len(ages) - room, 0)
+            self.capped += max(len(ages) - room, 0)
             self._spawn(emitter, ages[len(ages) - room:] if len(ages) > room else ages, matrix, previous, dt, local)
 
     def _keep(self, which) -> None:
