@@ -1,9 +1,10 @@
 """Churn: mirrors, portals, probes, meshes and textures made and deleted in waves; the
 engine's GL resources and the world's entities must come back to where they started.
 
-Each wave spawns ``--entities`` things in a ring around the camera, cycling through five
+Each wave spawns ``--entities`` things in a ring around the camera, cycling through six
 kinds: a mirror (its own quad mesh), a portal pair, a chrome sphere (its own automatic
-probe), a box with its own new mesh, and a box with its own new texture; renders
+probe), a box with its own new mesh, a box with its own new texture, and a particle
+emitter with its own sprite (its particles' buffer and the texture); renders
 ``--frames`` frames (320 x 180, ``--size``), deletes every one of them, renders one more frame, and
 prints the renderer's live GL resources (``resource_counts``), the entity count and the
 resident memory.  The exit status is 1 when, after the last wave, a count is not back to
@@ -31,6 +32,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    ParticleEmitter,
     ReflectionProbe,
     Reflective,
     Skybox,
@@ -67,7 +69,7 @@ def spawn_wave(world: World, count: int, wave: int) -> list[int]:
         radius = 3 + (i % 7)
         at = (radius * math.cos(angle), 0.75, radius * math.sin(angle))
         facing = look_rotation((math.cos(angle), 0, math.sin(angle)))  # +Z towards the middle
-        kind = i % 5
+        kind = i % 6
         if kind == 0:
             made.append(world.spawn(Transform(position=at, rotation=facing), MeshRef(quad(1.2, 1.0, name=f"m{i}")),
                                     Material(), Mirror(max_depth=1)))
@@ -81,10 +83,14 @@ def spawn_wave(world: World, count: int, wave: int) -> list[int]:
         elif kind == 3:
             made.append(world.spawn(Transform(position=at), MeshRef(box((0.5, 0.5, 0.5), name=f"box {wave}.{i}")),
                                     Material(color=(0.8, 0.3, 0.2))))
-        else:
+        elif kind == 4:
             pixels = np.full((8, 8, 4), (wave * 40 + i) % 256, np.uint8)
             made.append(world.spawn(Transform(position=at), MeshRef(box((0.5, 0.5, 0.5))),
                                     Material(texture=TextureData(pixels, name=f"texture {wave}.{i}"))))
+        else:
+            pixels = np.full((4, 4, 4), (wave * 40 + i) % 256, np.uint8)
+            made.append(world.spawn(Transform(position=at), ParticleEmitter(
+                rate=60.0, size=0.2, texture=TextureData(pixels, name=f"sprite {wave}.{i}"))))
     return made
 
 

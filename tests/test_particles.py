@@ -316,6 +316,7 @@ def test_an_emitter_gone_lets_its_buffer_and_texture_go(scene):
     runner.world.delete_entity(runner.world.emitter)
     runner.frame()
     assert draw.emitters == {} and len(renderer._textures) == textures
+    assert renderer.resource_counts()["particle_buffers"] == 0
     assert buffer.mglo.__class__.__name__ == "InvalidObject" or buffer.glo == 0  # released
     assert runner.stats.particles == 0
 

@@ -345,7 +345,8 @@ class Renderer(Gpu):
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
                 "irradiance_rows": len(self.irradiance.rows),
                 "occlusion_targets": self.occlusion.target_count(),
-                "reflection_targets": self.screen_reflections.target_count()}
+                "reflection_targets": self.screen_reflections.target_count(),
+                "particle_buffers": len(self.scene_pass.particle_draw.emitters)}
 
     # --- frame -----------------------------------------------------------------------------
     @property
