@@ -38,6 +38,7 @@ MAX_PARTICLE_SPIN = 1.0e5      # degrees a second
 MAX_PARTICLE_DRAG = 1.0e3      # per second
 MAX_PARTICLE_GRAVITY = 1.0e4   # metres a second squared, a component
 MAX_PARTICLE_STRETCH = 100.0   # seconds of flight a streak is long
+MAX_PARTICLE_SOFTNESS = 1000.0  # metres over which a soft particle fades into what is behind it
 
 
 @dataclass(eq=False)
@@ -75,7 +76,9 @@ class ParticleEmitter(TrackedComponent):
       lamp behind it glows at its edge of the lamp).  ``stretch`` (seconds) above 0 draws
       each as a streak along its flight as the view sees it, its size across and ahead, its
       speed x ``stretch`` long behind (sparks, rain: Unity's stretched billboards); its angle
-      is then the flight's.
+      is then the flight's.  ``softness`` (metres) above 0 fades a particle where what is
+      behind it is nearer than that (soft particles: smoke meets a floor or wall without a
+      hard line), at the cost of a copy of the view's depth a pass that draws one.
     - ``max_particles`` living at once (spawning stops there, counted in
       ``RenderStats.particles_capped``); ``seed`` makes the same cloud again.
 
@@ -111,6 +114,7 @@ class ParticleEmitter(TrackedComponent):
     stretch: float = 0.0
     ground: float | None = None
     bounce: float = 0.3
+    softness: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
@@ -188,6 +192,8 @@ class ParticleEmitter(TrackedComponent):
             return finite(self, name, value)
         if name == "bounce":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "softness":
+            return finite(self, name, value, low=0.0, high=MAX_PARTICLE_SOFTNESS)
         return value
 
     def _pair(self, name: str, value: Any, low: float, high: float, positive: bool = False) -> tuple[float, float]:

@@ -16,6 +16,10 @@ uniform usampler2D node_map;  // a reflection level's claims: only this view's p
 uniform sampler2D sprite_map;
 #endif
 uniform float coverage;
+#ifdef SOFT
+uniform sampler2D scene_depth;  // a copy of the view's depth (RenderTargets.depth_copy)
+uniform float softness;         // metres: fades in over that much room behind it
+#endif
 
 in vec2 v_uv;
 in vec2 v_corner;
@@ -38,6 +42,16 @@ void main() {
     vec4 sprite = vec4(1.0, 1.0, 1.0, round_spot * round_spot);
 #endif
     float a = v_color.a * sprite.a;
+#ifdef SOFT
+    // Soft particles: what is behind this pixel, back in the world from the depth copy, and
+    // the room along the pixel's ray between it and the particle; faded in over softness.
+    vec2 ndc = gl_FragCoord.xy / camera.viewport.zw * 2.0 - 1.0;
+    float depth = texelFetch(scene_depth, ivec2(gl_FragCoord.xy), 0).r;
+    vec4 behind = camera.inv_view_proj * vec4(ndc, depth * 2.0 - 1.0, 1.0);
+    vec3 start = ray_eye(camera.eye.xyz, view_axis(camera.view_proj), v_world);
+    float room = distance(behind.xyz / behind.w, start) - distance(v_world, start);
+    a *= clamp(room / softness, 0.0, 1.0);
+#endif
     vec3 rgb = v_color.rgb * sprite.rgb;
 #ifdef LIT
     rgb *= v_light;

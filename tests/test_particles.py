@@ -500,3 +500,27 @@ def test_a_stretched_particle_is_a_streak_trailing_its_flight(scene):
     right, bottom = runner.project(glm.vec3(centre + 0.1, -0.1, 0.0))
     assert abs(cols.min() - left) <= 1 and abs(cols.max() + 1 - right) <= 1
     assert abs(rows.min() - top) <= 1 and abs(rows.max() + 1 - bottom) <= 1
+
+
+@pytest.mark.parametrize("gap, softness", [(0.1, 0.4), (0.3, 0.4), (0.1, 0.0), (0.6, 0.4)])
+def test_a_soft_particle_fades_by_the_room_behind_it(scene, gap, softness):
+    """A solid additive square ``gap`` in front of an unlit wall: at its middle it adds its
+    colour times the room to the wall (along the ray, about the gap there) over its softness,
+    held at 1; a hard one (softness 0) all of it."""
+    colour = 0.5
+
+    def build(particle):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            world.spawn(Transform(position=glm.vec3(0.0, 0.0, -gap)), MeshRef(quad(6.0, 6.0)),
+                        Material(color=(*WALL, 1.0), unlit=True))
+            if particle:
+                world.spawn(Transform(), still(size=1.0, texture=solid(), softness=softness,
+                                               color=(colour, colour, colour, 1.0), end_color=(colour,) * 3 + (1.0,)))
+        return make
+    _, lit = render(scene, build(True))
+    _, plain = render(scene, build(False))
+    middle = (slice(34, 38), slice(46, 50))
+    added = (lit - plain)[middle].mean()
+    expected = colour * (min(gap / softness, 1.0) if softness else 1.0)
+    assert added == pytest.approx(expected, rel=0.04, abs=0.01)

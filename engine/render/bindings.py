@@ -126,6 +126,7 @@ POSE_ROWS_UNIT = 26  # scene, casters (SKINNED, MORPHED builds): the pose textur
 MORPH_UNIT = 27      # scene, casters (MORPHED builds): the batch's mesh's morph offsets (GpuMesh.morphs)
 # Particles (engine/render/particle_draw.py): an emitter's sprite, on a unit no scene build reads.
 PARTICLE_UNIT = 28   # particles (SPRITE builds): the emitter's texture (ParticleEmitter.texture)
+PARTICLE_DEPTH_UNIT = 29  # particles (SOFT builds): a copy of the view's depth (RenderTargets.depth_copy)
 # Screen-space ambient occlusion (engine/render/screen_occlusion.py): the root view's builds
 # that read it are never MASKED, so its sampler takes the node image's place in the count.
 SCREEN_OCCLUSION_UNIT = 20  # scene (SCREEN_OCCLUSION builds): the camera's occlusion image, a texel a pixel

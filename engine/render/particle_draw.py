@@ -44,6 +44,7 @@ from engine.render.bindings import (
     IRRADIANCE_UNIT,
     LIGHTS_BINDING,
     NODE_UNIT,
+    PARTICLE_DEPTH_UNIT,
     PARTICLE_UNIT,
     POINT_SHADOW_UNITS,
     SHADOW_ATLAS_UNIT,
@@ -57,6 +58,7 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.instances import read_by
 from engine.render.shadows import ShadowMaps
+from engine.render.targets import RenderTargets
 from engine.render.views import View
 from engine.rules.visibility_rules import drawn_in
 
@@ -90,6 +92,7 @@ class GpuEmitter:
     vertex_arrays: dict = field(default_factory=dict)  # by program build
     count: int = 1  # boxes (batch_cull reads an emitter as a batch of one box)
     uploaded: bool = False  # its rows are in its buffer
+    softness: float = 0.0
 
     @property
     def particles(self) -> int:
@@ -123,11 +126,13 @@ class ParticleDraw:
         if record.texture is not texture and texture is not None:
             record.gl_texture = self.gpu.shared_texture(texture, "ParticleEmitter.texture")
             record.texture = texture
-        look = (emitter.blend, emitter.lit, emitter.translucency, emitter.sheet, code, texture)
+        look = (emitter.blend, emitter.lit, emitter.translucency, emitter.sheet, code, texture, emitter.softness)
         if not retextured and record.uploaded and np.array_equal(rows, record.rows) \
-                and look == (record.blend, record.lit, record.translucency, record.sheet, record.code, record.texture):
+                and look == (record.blend, record.lit, record.translucency, record.sheet, record.code, record.texture,
+                             record.softness):
             return  # (a still cloud, a paused game: nothing a view shows changed)
         record.blend, record.lit, record.translucency = emitter.blend, emitter.lit, emitter.translucency
+        record.softness = emitter.softness
         record.sheet, record.code, record.rows, record.uploaded = emitter.sheet, code, rows, True
         if len(rows) * ROW_BYTES > record.buffer.size:
             record.buffer.release()
@@ -158,20 +163,23 @@ class ParticleDraw:
         return sum(record.particles for record in self.emitters.values())
 
     # --- the draw --------------------------------------------------------------------------
-    def draw(self, views: Sequence[View], size: tuple[int, int], framebuffer: moderngl.Framebuffer,
-             masked: bool, ambient_probes: bool, first_index: int = 0,
-             conditions: Sequence[moderngl.Query] | None = None) -> None:
+    def draw(self, views: Sequence[View], targets: RenderTargets, masked: bool, ambient_probes: bool,
+             first_index: int = 0, conditions: Sequence[moderngl.Query] | None = None) -> None:
         """Each of ``views`` (its Camera block at ``first_index`` + its place, uploaded by the
-        caller) draws the particles that can reach it, into ``framebuffer`` (a view's:
-        colour, surface and seen ids, depth; bound now, its depth mask off) of ``size``;
+        caller) draws the particles that can reach it, into ``targets``' view framebuffer
+        (colour, surface and seen ids, depth; bound now, its depth mask off);
         ``masked``: a reflection level's views, each only where the node image names it.
+        Where a soft emitter draws, the depth is copied first (``RenderTargets.depth_copy``).
         ``conditions``: a samples query a view, its draws conditional on it (as the scene
         pass's).  The pass state is this module's afterwards."""
         live = [record for record in self.emitters.values() if record.particles]
         if not live or not views:
             return
         gpu, ctx = self.gpu, self.ctx
+        size, framebuffer = targets.size, targets.view_framebuffer
         reach = batch_reach(views, size, live)
+        if any(record.softness > 0.0 for record in live):
+            gpu.raw_gl.copy_depth(framebuffer, targets.depth_copy(), PARTICLE_DEPTH_UNIT)
         framebuffer.color_mask = _COLOUR_ONLY
         apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *size), views[0].scissor)
         try:
@@ -202,23 +210,25 @@ class ParticleDraw:
     def _vertex_array(self, record: GpuEmitter, masked: bool, ambient_probes: bool) -> moderngl.VertexArray:
         if self.gpu.shaders.reloads != self._reloads:
             self.forget()
-        program = self._program(record.gl_texture is not None, record.lit, masked, ambient_probes)
+        program = self._program(record.gl_texture is not None, record.lit, masked, ambient_probes,
+                                record.softness > 0.0)
         vao = record.vertex_arrays.get(program.glo)
         if vao is None:
             vao = record.vertex_arrays[program.glo] = self.ctx.vertex_array(
                 program, [read_by(program, record.buffer, _FORMAT, *_ATTRIBUTES)])  # (gl_VertexID read)
         for name, value in (("sheet", record.sheet), ("coverage", 1.0 if record.blend == "alpha" else 0.0),
-                            ("translucency", record.translucency)):
+                            ("translucency", record.translucency), ("softness", record.softness)):
             if name in program:  # (a build without a texture reads no sheet; an unlit one no translucency)
                 program[name].value = value
         return vao
 
-    def _program(self, sprite: bool, lit: bool, masked: bool, ambient_probes: bool) -> moderngl.Program:
+    def _program(self, sprite: bool, lit: bool, masked: bool, ambient_probes: bool, soft: bool) -> moderngl.Program:
         """The build for a textured emitter or not (``SPRITE``), lit or not (``LIT``, with the
         shadow lookups the shadows stage compiled in, and the probes' boxes where they light
-        the scene: ``AMBIENT_PROBES``), masked or not, fogged while the camera's fog is."""
+        the scene: ``AMBIENT_PROBES``), soft or not (``SOFT``), masked or not, fogged while
+        the camera's fog is."""
         shadowing = self.shadows.program_defines if lit else ()
-        key = (sprite, lit, masked, lit and ambient_probes, shadowing, self.gpu.fog.defines)
+        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, self.gpu.fog.defines)
         program = self._programs.get(key)
         if program is None:
             defines = dict(self.gpu.fog.defines)
@@ -226,6 +236,8 @@ class ParticleDraw:
                 defines["SPRITE"] = "1"
             if masked:
                 defines["MASKED"] = "1"
+            if soft:
+                defines["SOFT"] = "1"
             if lit:
                 defines["LIT"] = "1"
                 defines.update(shadowing)
@@ -238,6 +250,7 @@ class ParticleDraw:
                 if block in program:
                     program[block].binding = binding
             for name, unit in (("sprite_map", PARTICLE_UNIT), ("node_map", NODE_UNIT),
+                               ("scene_depth", PARTICLE_DEPTH_UNIT),
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]), ("spot_atlas", SPOT_SHADOW_UNIT),
                                ("irradiance_table", IRRADIANCE_UNIT)):

@@ -80,6 +80,7 @@ _COPY_TEX_SUB_IMAGE_2D = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_int, cty
                                           ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_int)
 GL_TEXTURE_CUBE_MAP_POSITIVE_X = 0x8515
 GL_TEXTURE_CUBE_MAP = 0x8513
+GL_TEXTURE_2D = 0x0DE1
 GL_FRAMEBUFFER = 0x8D40
 GL_COLOR_ATTACHMENT0 = 0x8CE0
 GL_DEPTH_ATTACHMENT = 0x8D00
@@ -263,6 +264,20 @@ class RawGL:
             return
         bind_texture_now(self.ctx, cube, unit)  # the copy writes the active unit's cube
         self._copy_tex_sub_image(GL_TEXTURE_CUBE_MAP_POSITIVE_X + face, 0, 0, 0, 0, 0, size[0], size[1])
+
+    def copy_depth(self, source: moderngl.Framebuffer, target: moderngl.Texture, unit: int) -> None:
+        """Copy ``source``'s depth image into ``target`` (a depth texture of its size), binding
+        ``target`` on ``unit``: ``glCopyTexSubImage2D`` into a depth texture reads the read
+        framebuffer's depth (soft particles read the copy: the view's own depth stays attached,
+        and sampling an attached image is a feedback loop).  Through client memory where the
+        loader is not reachable."""
+        source.use()
+        if self._copy_tex_sub_image is None:
+            target.write(source.read(attachment=-1, dtype="f4"))
+            return
+        bind_texture_now(self.ctx, target, unit)  # the copy writes the active unit's texture
+        width, height = target.size
+        self._copy_tex_sub_image(GL_TEXTURE_2D, 0, 0, 0, 0, 0, width, height)
 
 
 class LayeredCubeTarget:

@@ -417,8 +417,7 @@ class ScenePass:
                             self._transparent_view(view, index, batches, options.masked)
             if particles:  # after the glass, in every view (engine/render/particle_draw.py)
                 renderer.upload_views(views)
-                self.particle_draw.draw(views, targets.size, targets.view_framebuffer, options.masked,
-                                        self._ambient_probes, conditions=conditions)
+                self.particle_draw.draw(views, targets, options.masked, self._ambient_probes, conditions=conditions)
         finally:
             targets.view_framebuffer.depth_mask = True
             targets.view_framebuffer.use()
@@ -585,8 +584,7 @@ class ScenePass:
                 if particles:  # after the glass (engine/render/particle_draw.py)
                     targets.view_framebuffer.depth_mask = False
                     targets.view_framebuffer.use()
-                    self.particle_draw.draw([view], targets.size, targets.view_framebuffer, options.masked,
-                                            self._ambient_probes, first_index=index)
+                    self.particle_draw.draw([view], targets, options.masked, self._ambient_probes, first_index=index)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
                 if (options.sky or now or particles) and index + 1 < len(views):

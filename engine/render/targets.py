@@ -51,7 +51,9 @@ class RenderTargets:
 
     def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
         check_target_size(ctx, size, "a render target")
+        self.ctx = ctx
         self.size = size
+        self._depth_copy: moderngl.Texture | None = None  # (depth_copy: made when soft particles draw)
         self.color = ctx.texture(size, 4, dtype=HDR_FORMAT)
         self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.surface = ctx.texture(size, 1, dtype="u4")
@@ -91,6 +93,16 @@ class RenderTargets:
         data = np.frombuffer(texture.read(), np.uint32)
         return np.flipud(data.reshape(h, w)).copy()
 
+    def depth_copy(self) -> moderngl.Texture:
+        """A depth texture of this size for a copy of ``depth`` (soft particles read it while
+        ``depth`` stays attached), made the first time it is asked for; read as numbers (no
+        comparison)."""
+        if self._depth_copy is None:
+            self._depth_copy = self.ctx.depth_texture(self.size)
+            self._depth_copy.compare_func = ""
+            self._depth_copy.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        return self._depth_copy
+
     def release(self) -> None:
         release_framebuffer(self.composite_framebuffer)
         release_framebuffer(self.color_framebuffer)
@@ -98,6 +110,9 @@ class RenderTargets:
         release_framebuffer(self.framebuffer)
         for texture in (self.color, self.surface, self.seen, self.node, self.depth):
             texture.release()
+        if self._depth_copy is not None:
+            self._depth_copy.release()
+            self._depth_copy = None
 
 
 class LevelStack:
