@@ -3,7 +3,7 @@ from components.ambient import AmbientOcclusion, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.fog import Fog
 from components.mirror import Mirror
-from components.model import Animation, AnimationLayer, FromModel, Model
+from components.model import Animation, AnimationEvents, AnimationLayer, FromModel, Model
 from components.particles import ParticleEmitter
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.pose import Morph, Skin
@@ -18,7 +18,8 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "AmbientOcclusion", "Animation", "AnimationLayer", "Bloom", "Camera", "ColorGrading", "ComponentValueError",
+    "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
+    "ComponentValueError",
     "ComponentWarning",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "Material",
     "MeshRef", "Mirror", "Model", "Morph", "ParticleEmitter", "PointLight", "Portal", "PortalClone", "ReflectionProbe",

@@ -123,6 +123,53 @@ class Animation(TrackedComponent):
         return value
 
 
+MAX_ANIMATION_EVENTS = 1024  # AnimationEvents.events: a character's footsteps and cues, not a data store
+
+
+@dataclass(eq=False)
+class AnimationEvents(TrackedComponent):
+    """Named moments of a model's clips, fired as its ``Animation`` (or ``AnimationLayer``)
+    plays past them, as Unity's animation events and Godot's method tracks: a footstep's
+    sound and dust, a sword's hit, a door's click.  ``events`` is (clip, time in seconds,
+    name) triples, on the model's root.  Each frame the models stage puts the ones the
+    playback passed in the ``FiredEvents`` resource (``engine.resources``), in the order
+    met (``engine/core/clip_events.py``: looping, backwards, several wraps in one frame); a
+    game reads them in its ``update`` (last frame's) or in a system after "models".  A clip
+    the model lacks, or a time past the clip's end, is an AssetError naming the entity, the
+    event and what the clip has, when the model is known.  Shareable: a character's events
+    serve every copy of it."""
+
+    events: Any = ()
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name != "events":
+            return value
+        try:
+            items = list(value)
+        except TypeError:
+            raise ComponentValueError(f"AnimationEvents.events must be (clip, time, name) triples, got {value!r}") \
+                from None
+        if len(items) > MAX_ANIMATION_EVENTS:
+            raise ComponentValueError(f"AnimationEvents.events holds at most {MAX_ANIMATION_EVENTS} events, "
+                                      f"got {len(items)}")
+        events = []
+        for item in items:
+            try:
+                clip, time, label = item
+            except (TypeError, ValueError):
+                raise ComponentValueError(f"AnimationEvents.events must be (clip, time, name) triples, got {item!r}") \
+                    from None
+            if not isinstance(clip, str) or not clip or not isinstance(label, str) or not label:
+                raise ComponentValueError(f"AnimationEvents.events: a clip's name and an event's name are non-empty "
+                                          f"strs, got {item!r}")
+            events.append((clip, finite(self, "events", time, low=0.0), label))
+        return tuple(sorted(events, key=lambda event: (event[0], event[1])))
+
+    def of_clip(self, clip: str) -> tuple[tuple[float, str], ...]:
+        """``clip``'s events as (time, name), by time."""
+        return tuple((time, label) for name, time, label in self.events if name == clip)
+
+
 ANIMATION_LAYER_BLENDS = ("override", "additive")  # AnimationLayer.blend
 
 

@@ -127,6 +127,27 @@ class Surfaces:
 
 
 @dataclass(frozen=True)
+class FiredEvent:
+    """An ``AnimationEvents`` event the playback of ``clip`` passed on ``entity`` (a model's
+    root): its ``name`` and ``time`` in the clip; ``layer`` True where the root's
+    ``AnimationLayer`` played it, not its ``Animation``."""
+
+    entity: int
+    clip: str
+    name: str
+    time: float
+    layer: bool = False
+
+
+class FiredEvents(list):
+    """The animation events of the latest frame's models stage, in the order each root's
+    playback met them (list of FiredEvent); ``dropped`` counts those a frame left out
+    (``engine.core.clip_events.MAX_EVENTS_A_FRAME`` a clip)."""
+
+    dropped: int = 0
+
+
+@dataclass(frozen=True)
 class PortalCrossing:
     """``entity`` went into ``from_portal`` and came out of ``to_portal``; ``carry`` took it
     there (world to world: the pair's transform) and ``turn`` is carry's rotation, what a

@@ -12,7 +12,8 @@ left alone (the world's ``SpawnedModels`` says what was made from what).
 
 Then each ``Animation`` on a model's root moves on by the frame's time and puts the parts
 where its clip puts their nodes (``engine.assets.models.pose_parts``): before the transform
-stage, so the pose is drawn in this frame.  A model whose root's Transform was written has
+stage, so the pose is drawn in this frame.  The ``AnimationEvents`` the playback passed are
+this frame's ``FiredEvents`` (``engine/core/clip_events.py``).  A model whose root's Transform was written has
 its directional lights pointed again (``turn_suns``: a direction is not a place the
 transform stage carries).
 
@@ -29,7 +30,7 @@ import esper
 from pyglm import glm
 
 from components import Transform
-from components.model import Animation, AnimationLayer, Model
+from components.model import Animation, AnimationEvents, AnimationLayer, Model
 from engine.assets.level_assets import user_asset_roots
 from engine.assets.models import (
     SpawnedModels,
@@ -41,7 +42,10 @@ from engine.assets.models import (
     root_travel,
     turn_suns,
 )
+from engine.core.clip_events import events_problem, passed_events
+from engine.core.errors import AssetError
 from engine.core.world import World
+from engine.resources import FiredEvent, FiredEvents
 
 
 class ModelSystem(esper.Processor):
@@ -70,6 +74,8 @@ class ModelSystem(esper.Processor):
         clip dropped) once it has lasted its ``fade_seconds``.  An ``AnimationLayer`` on the
         root moves on the same way, by its own speed, and is laid over that pose."""
         world = self.world
+        fired = world.resources[FiredEvents] = FiredEvents()  # (this frame's: the last frame's are gone)
+        self._check_events(remade)
         changed = world.changed(Animation) | world.changed(AnimationLayer)
         roots = {root for root, _ in world.query_one(Animation)} | {root for root, _ in world.query_one(AnimationLayer)}
         roots |= {root for root in changed if world.exists(root)}  # (one taken away: its parts posed without it)
@@ -83,6 +89,7 @@ class ModelSystem(esper.Processor):
                 continue
             fade = None
             before = animation.time
+            layer_before = layer.time if layer is not None else 0.0
             if moving and record is not None and record.loaded is not None:
                 animation.time = _moved_on(record.loaded, animation.clip, animation.time, dt, animation)
                 if animation.fade_from:
@@ -107,6 +114,27 @@ class ModelSystem(esper.Processor):
             self._posed[root] = animation.clip if layer is None else None
             if walking and moving:
                 _walk_root(world, root, animation, before, dt)
+            cues = world.try_get(root, AnimationEvents)
+            if cues is not None and record is not None and record.loaded is not None:
+                if moving:
+                    fired.dropped += _fire(fired, root, cues, record.loaded, animation, before, dt, False)
+                if layer_moving:
+                    fired.dropped += _fire(fired, root, cues, record.loaded, layer, layer_before, dt, True)
+
+    def _check_events(self, remade: set[int]) -> None:
+        """Each ``AnimationEvents`` given or changed, or on a model just made: every event's
+        clip is one of the model's and its time within it, else an AssetError naming the
+        entity, the event and the clip's length or the model's clips."""
+        world = self.world
+        spawned = world.resources.get(SpawnedModels, {})
+        for root in sorted(world.changed(AnimationEvents) | remade):
+            cues = world.try_get(root, AnimationEvents) if world.exists(root) else None
+            record = spawned.get(root)
+            if cues is None or not cues.events or record is None or record.loaded is None:
+                continue
+            problem = events_problem(cues.events, {clip.name: clip.duration for clip in record.loaded.animations})
+            if problem is not None:
+                raise AssetError(f"entity {root}'s AnimationEvents: {problem}")
 
     def _place(self, changed: set[int]) -> None:
         world = self.world
@@ -138,6 +166,19 @@ def _walk_root(world: World, root: int, animation: Animation, before: float, dt:
         travel = travel + wraps * root_travel(world, root, animation.clip, animation.root_motion, duration)
     transform = world.get(root, Transform)
     transform.position = transform.position + transform.rotation * (transform.scale * glm.vec3(*travel))
+
+
+def _fire(fired: FiredEvents, root: int, cues: AnimationEvents, loaded, playback: Animation | AnimationLayer,
+          before: float, dt: float, layer: bool) -> int:
+    """Add to ``fired`` the events of ``playback``'s clip its step from ``before`` by ``dt``
+    x its speed passed (``clip_events.passed_events``); returns how many it left out."""
+    events = cues.of_clip(playback.clip)
+    clip = next((c for c in loaded.animations if c.name == playback.clip), None)
+    if not events or clip is None:
+        return 0
+    passed, dropped = passed_events(events, before, dt * playback.speed, clip.duration, playback.loop)
+    fired.extend(FiredEvent(root, playback.clip, name, time, layer) for time, name in passed)
+    return dropped
 
 
 def _moved_above(world: World, entity: int, turned: set[int]) -> bool:

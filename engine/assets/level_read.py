@@ -44,6 +44,7 @@ from engine.assets.level_lines import MAX_NESTING, deep_line, line_map, nesting_
 from engine.assets.models import remove_parts, respawn_parts
 from engine.assets.texture_data import file_problem
 from engine.core.budget import ViewBudget, ViewBudgetError
+from engine.core.clip_events import events_problem
 from engine.core.errors import AssetError, SpeculumError
 from engine.core.world import World, check_components
 
@@ -57,7 +58,8 @@ except ImportError:  # Python 3.10
 # never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
-        "AmbientOcclusion", "Animation", "AnimationLayer", "Bloom", "Camera", "ColorGrading", "DirectionalLight",
+        "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
+        "DirectionalLight",
         "Emissive", "FlyController", "Fog", "HemisphereLight", "Material", "MeshRef",
         "Mirror", "Model", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
@@ -388,6 +390,14 @@ def _check_model(path: Path, index: int, name: str, parts: list[tuple[type, dict
             having = f"its clips: {', '.join(repr(c) for c in clips)}" if clips else "it has none"
             raise LevelError(path, f"the model file has no animation clip {clip!r} ({having})",
                              lines.get((index, kind, "clip"), lines.get((index, kind))), name, f"{kind}.clip")
+    events = fields.get("AnimationEvents", {}).get("events")
+    if events:
+        problem = events_problem(_components.AnimationEvents(events=events).events,
+                                 {c.name: c.duration for c in loaded.animations})
+        if problem is not None:
+            raise LevelError(path, problem, lines.get((index, "AnimationEvents", "events"),
+                                                      lines.get((index, "AnimationEvents"))), name,
+                             "AnimationEvents.events")
     nodes = [n for n in (loaded.node_tree.names if loaded.node_tree is not None else []) if n]
     for kind, field in (("AnimationLayer", "root"), ("Animation", "root_motion")):
         node = fields.get(kind, {}).get(field, "")

@@ -1,0 +1,122 @@
+"""Animation events (``AnimationEvents``, fired into ``FiredEvents`` by the models stage):
+which a playback passes, checked against the unwrapped time line worked out here by hand
+(forwards, backwards, a loop's wraps, several wraps in one long frame, a held end, a paused
+clip, a layer's clip); a bad event refused by the models stage and by a level file's line."""
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from components import Animation, AnimationEvents, AnimationLayer, ComponentValueError
+from engine.core.clip_events import MAX_EVENTS_A_FRAME, passed_events
+from engine.core.errors import AssetError
+from engine.core.world import World
+from engine.resources import FiredEvents
+from systems.model_system import ModelSystem
+from tests.test_root_motion import walker
+
+STEPS = (("Walk", 0.0, "left"), ("Walk", 1.0, "right"), ("Walk", 2.0, "end"))
+
+
+def playing(tmp_path, steps, events=STEPS, layer=None, **fields):
+    """The walker (clip "Walk", 2 s) with ``events``; each step's fired events as (name, time)."""
+    from engine.assets.models import spawn_model
+
+    world = World("events")
+    root = spawn_model(world, walker(tmp_path / "walker.glb"))
+    world.add_component(root, Animation("Walk", **fields))
+    world.add_component(root, AnimationEvents(events=events))
+    if layer is not None:
+        world.add_component(root, layer)
+    stage = ModelSystem(world)
+    seen = []
+    for dt in steps:
+        stage.process(dt)
+        fired = world.resources[FiredEvents]
+        assert all(event.entity == root and event.clip == "Walk" for event in fired)
+        seen.append([(event.name, event.time, event.layer) for event in fired])
+    return seen
+
+
+def test_forwards_events_fire_once_as_the_time_passes_them(tmp_path):
+    seen = playing(tmp_path, [0.5, 0.4, 0.2, 0.5, 0.5, 0.5])  # times 0.5, 0.9, 1.1, 1.6, 2.1 -> 0.1, 0.6
+    assert seen == [[("left", 0.0, False)], [], [("right", 1.0, False)], [],
+                    [("end", 2.0, False), ("left", 0.0, False)], []]
+
+
+def test_backwards_through_the_start_and_a_long_frame_of_wraps(tmp_path):
+    # From 1.2 s back 0.5 s a step: 0.7, then 0.2, then -0.3 (wrapped to 1.7): "left" at 0 once
+    # (the end at 2 is the start at 0 of the loop before, so "end" is met too, as the time
+    # comes down through 2).
+    seen = playing(tmp_path, [0.5, 0.5, 0.5], time=1.2, speed=-1.0)
+    assert seen == [[("right", 1.0, False)], [], [("left", 0.0, False), ("end", 2.0, False)]]
+    # 5.1 s forwards from 0.5 in one frame: places 1, 2, 2|0, 3, 4, 4|0, 5 (unwrapped) passed.
+    (events,) = playing(tmp_path, [5.1], time=0.5)
+    assert [name for name, _, _ in events] == ["right", "end", "left", "right", "end", "left", "right"]
+
+
+def test_a_clip_that_does_not_loop_fires_its_end_once_and_a_paused_one_nothing(tmp_path):
+    seen = playing(tmp_path, [1.5, 1.0, 1.0], time=0.2, loop=False)
+    assert seen == [[("right", 1.0, False)], [("end", 2.0, False)], []]
+    assert playing(tmp_path, [0.5, 0.5], playing=False) == [[], []]
+
+
+def test_a_layers_clip_fires_its_events_as_the_layers(tmp_path):
+    seen = playing(tmp_path, [0.6], layer=AnimationLayer("Walk", time=0.5, speed=1.0), speed=0.5)
+    assert seen == [[("left", 0.0, False), ("right", 1.0, True)]]
+
+
+def test_passed_events_counts_what_a_frame_leaves_out():
+    events = [(0.0, "tick")]
+    fired, dropped = passed_events(events, 0.0, 10.0, 0.01, True)  # a thousand passes of a 10 ms clip
+    assert len(fired) == MAX_EVENTS_A_FRAME and len(fired) + dropped == 1000
+    fired, dropped = passed_events(events, 10.0, -10.0, 0.01, True)
+    assert len(fired) == MAX_EVENTS_A_FRAME and len(fired) + dropped == 1000
+
+
+def test_bad_events_are_refused(tmp_path):
+    with pytest.raises(ComponentValueError, match="AnimationEvents.events"):
+        AnimationEvents(events=[("Walk", -1.0, "x")])
+    with pytest.raises(ComponentValueError, match="triples"):
+        AnimationEvents(events=[("Walk", 1.0)])
+    with pytest.raises(ComponentValueError, match="non-empty strs"):
+        AnimationEvents(events=[("Walk", 1.0, "")])
+    with pytest.raises(AssetError, match=r"event 'x' is on clip 'Run', which the model has not \(its clips: 'Walk'\)"):
+        playing(tmp_path, [0.1], events=[("Run", 0.5, "x")])
+    with pytest.raises(AssetError, match=r"event 'late' at 2.5 s is past the end of clip 'Walk' \(2 s long\)"):
+        playing(tmp_path, [0.1], events=[("Walk", 2.5, "late")])
+
+
+def test_a_level_file_gives_events_and_names_a_bad_ones_line(tmp_path):
+    from engine.assets.level_file import LevelError, load_level, save_level
+
+    walker(tmp_path / "walker.glb")
+    text = textwrap.dedent("""
+        [level]
+        name = "steps"
+
+        [[entity]]
+        name = "walker"
+        [entity.Transform]
+        [entity.Model]
+        file = "walker.glb"
+        [entity.Animation]
+        clip = "Walk"
+        [entity.AnimationEvents]
+        events = [["Walk", 0.0, "left"], ["Walk", 1.0, "right"]]
+        """)
+    path = tmp_path / "steps.toml"
+    path.write_text(text)
+    world = World("steps")
+    names = load_level(path).spawn(world)
+    assert world.get(names["walker"], AnimationEvents).events == (("Walk", 0.0, "left"), ("Walk", 1.0, "right"))
+    saved = save_level(world, tmp_path / "saved.toml", names, name="steps")
+    again = World("again")
+    names_again = load_level(saved).spawn(again)
+    first = world.get(names["walker"], AnimationEvents).events
+    assert again.get(names_again["walker"], AnimationEvents).events == first
+    path.write_text(text.replace('["Walk", 1.0, "right"]', '["Run", 1.0, "right"]'))
+    with pytest.raises(LevelError, match=r"steps\.toml:13: entity 'walker': AnimationEvents\.events: event 'right' "
+                                         r"is on clip 'Run'"):
+        load_level(path)
