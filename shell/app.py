@@ -54,6 +54,7 @@ from systems import (
     ReflectionSystem,
     TransformSystem,
 )
+from systems.detail_system import DetailSystem
 from systems.frame_rules_system import FrameRulesSystem
 from systems.model_system import ModelSystem
 from systems.particle_system import ParticleSystem
@@ -153,6 +154,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("slice", lambda e: PortalSliceSystem(e.world)),
     ("transform", lambda e: TransformSystem(e.world)),
     ("surfaces", lambda e: SurfaceSystem(e.world)),
+    ("detail", lambda e: DetailSystem(e.world)),  # each LevelOfDetail's mesh by its distance from the eyes
     ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
     ("particles", lambda e: ParticleSystem(e.world, e.renderer)),  # every emitter's particles stepped and uploaded
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),

@@ -84,7 +84,8 @@ def test_game_systems_are_ordered_in_among_the_stages_and_run_in_that_order(ctx)
     try:
         names = [name for name, _ in engine.schedule]
         assert names == ["first", "game", "physics", "models", "rules", "input", "travel", "recorder", "slice",
-                         "transform", "surfaces", "trace", "follow", "transform_late", "extract", "particles",
+                         "transform", "surfaces", "trace", "follow", "transform_late", "detail", "extract",
+                         "particles",
                          "prepare", "shadows", "probes", "main", "reflect", "present", "late", "text", "probes_after"]
         assert dict(engine.schedule)["recorder"].calls is game.calls  # a processor is scheduled as it is
         assert game.built
@@ -109,9 +110,9 @@ def test_the_order_is_the_same_every_time_and_follows_the_listing_where_free():
 
     both = [GameSystem(f, after="surfaces"), GameSystem(g, after="surfaces")]
     order = [item if isinstance(item, str) else item.name for item in schedule_order(STAGES, both)]
-    assert order[order.index("surfaces"):order.index("extract")] == ["surfaces", "f", "g"]
+    assert order[order.index("surfaces"):order.index("detail")] == ["surfaces", "f", "g"]
     order = [item if isinstance(item, str) else item.name for item in schedule_order(STAGES, both[::-1])]
-    assert order[order.index("surfaces"):order.index("extract")] == ["surfaces", "g", "f"]
+    assert order[order.index("surfaces"):order.index("detail")] == ["surfaces", "g", "f"]
     for _ in range(3):
         again = [item if isinstance(item, str) else item.name for item in schedule_order(STAGES, both[::-1])]
         assert again == order

@@ -60,7 +60,7 @@ ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
         "DirectionalLight",
-        "Emissive", "FlyController", "Fog", "HemisphereLight", "Material", "MeshRef",
+        "Emissive", "FlyController", "Fog", "HemisphereLight", "LevelOfDetail", "Material", "MeshRef",
         "Mirror", "Model", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
@@ -510,6 +510,10 @@ def _type_name(expected: Any) -> str:
 def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
     if cls_name == "MeshRef" and field == "mesh":
         return level_mesh(value, where)
+    if cls_name == "LevelOfDetail" and field == "meshes":
+        if not isinstance(value, list):
+            raise ValueError(f"LevelOfDetail.meshes is a list of meshes, finest first, got {value!r}")
+        return tuple(level_mesh(item, where) for item in value)
     if field == "texture" or (cls_name, field) in _MATERIAL_MAPS or (cls_name, field) == ("PointLight", "cookie"):
         # A linear map (normal, metallic-roughness) keeps a 16-bit PNG's 16 bits; colour is 8 bits.
         return level_texture(value, where, normal_map=field in _LINEAR_MAPS)

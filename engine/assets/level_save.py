@@ -344,20 +344,28 @@ def _encode_component(path: Path, component: Any, by_id: Mapping[int, str], enti
             out[f.name] = by_id.get(value, f"entity_{value}")
         elif (cls.__name__, f.name) in FILE_FIELDS:
             out[f.name] = Path(os.path.relpath(os.path.abspath(value), path.parent)).as_posix()
+        elif isinstance(value, tuple) and value and all(isinstance(v, Mesh) for v in value):  # LevelOfDetail.meshes
+            out[f.name] = [_asset_source(mesh, path, entity, where) for mesh in value]
         elif isinstance(value, (Mesh, TextureData, ColorLut)):
-            source = getattr(value, "source", None)
-            if source is not None and "inside" in source:
-                raise LevelError(path, f"{type(value).__name__} {value.name!r} is an image inside the model file "
-                                       f"{source['inside']!r} (spawn_model), and a level file names image files only: "
-                                       "save the image as a file and name it (texture = { file = \"...\" })",
-                                 None, entity, where)
-            if source is None:
-                raise LevelError(path, f"{type(value).__name__} {value.name!r} was not made by a generator or loaded "
-                                       "from a file, so a level file cannot name it", None, entity, where)
-            out[f.name] = _relative(source, path.parent)
+            out[f.name] = _asset_source(value, path, entity, where)
         else:
             out[f.name] = _plain(value, path, entity, where)
     return out
+
+
+def _asset_source(value: Any, path: Path, entity: str, where: str) -> Any:
+    """How a level file names a mesh, texture or colour table: how it was made (a generator's
+    table, a file relative to ``path``'s folder), or a LevelError saying why it cannot."""
+    source = getattr(value, "source", None)
+    if source is not None and "inside" in source:
+        raise LevelError(path, f"{type(value).__name__} {value.name!r} is an image inside the model file "
+                               f"{source['inside']!r} (spawn_model), and a level file names image files only: "
+                               "save the image as a file and name it (texture = { file = \"...\" })",
+                         None, entity, where)
+    if source is None:
+        raise LevelError(path, f"{type(value).__name__} {value.name!r} was not made by a generator or loaded "
+                               "from a file, so a level file cannot name it", None, entity, where)
+    return _relative(source, path.parent)
 
 
 def _same(a: Any, b: Any) -> bool:

@@ -1,0 +1,122 @@
+"""Levels of detail (``LevelOfDetail``; ``systems/detail_system.py``): the mesh drawn is the one
+the distance from the nearest eye picks (the picture the same as the same entity given that
+mesh plainly), with a hysteresis band on the way back in; an object close behind a portal's
+far side keeps its fine mesh however far it is from the camera; the rule's refusals; a level
+file's meshes."""
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, LevelOfDetail, Material, MeshRef, Mirror, Transform
+from engine.assets.mesh import box, quad, sphere
+from engine.assets.portals import spawn_portal_pair
+from tests.support import look_from
+
+FINE, MIDDLE, COARSE = box((1.0, 1.0, 1.0), name="fine"), sphere(0.5, 12, 6, name="middle"), \
+    box((0.6, 0.6, 0.6), name="coarse")
+
+
+def detailed(camera_z, plain_mesh=None, hysteresis=0.0):
+    def build(world):
+        world.camera = look_from(world, (0.0, 0.0, camera_z), (0.0, 0.0, 0.0), fov=40.0)
+        if plain_mesh is not None:
+            world.thing = world.spawn(Transform(), MeshRef(plain_mesh), Material(color=(0.8, 0.3, 0.2)))
+        else:
+            world.thing = world.spawn(Transform(), MeshRef(FINE), Material(color=(0.8, 0.3, 0.2)),
+                                      LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), distances=(6.0, 12.0),
+                                                    hysteresis=hysteresis))
+    return build
+
+
+@pytest.mark.parametrize("camera_z, expected", [(4.0, FINE), (9.0, MIDDLE), (20.0, COARSE)])
+def test_the_distance_picks_the_mesh_and_the_picture_is_that_meshs(scene, camera_z, expected):
+    runner = scene(detailed(camera_z), (96, 72))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    image, ids = runner.frame(), runner.ids()
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is expected
+    plain = scene(detailed(camera_z, plain_mesh=expected), (96, 72))
+    plain.engine.renderer.antialias = "off"
+    plain.frame()
+    np.testing.assert_array_equal(image, plain.frame())
+    assert (ids == runner.world.thing).sum() > 10  # (it is drawn: the comparison is of something)
+
+
+def test_a_switch_back_to_finer_waits_out_the_hysteresis_band(scene):
+    runner = scene(detailed(9.0, hysteresis=0.2), (64, 48))
+    world = runner.world
+    camera = world.get(world.camera, Transform)
+    seen = []
+    for z in (9.0, 5.5, 4.0, 7.0, 13.0, 11.0, 9.0):  # thresholds 6 and 12; back in below 4.8 and 9.6
+        camera.position = glm.vec3(0.0, 0.0, z)
+        runner.frame()
+        seen.append(world.get(world.thing, MeshRef).mesh.name)
+    assert seen == ["middle", "middle", "fine", "middle", "coarse", "coarse", "middle"]
+
+
+def test_an_object_near_a_portals_far_side_keeps_its_fine_mesh(scene):
+    """The camera 3 m from portal A, the object 1.5 m in front of portal B, 60 m away: seen
+    through the portal it is close, so after the portal's view has been drawn once it is fine."""
+    def build(world):
+        look_from(world, (0.0, 1.5, 3.0), (0.0, 1.5, 0.0), fov=60.0)
+        spawn_portal_pair(world, (0.0, 1.5, 0.0), None, (60.0, 1.5, 0.0), glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0)))
+        world.thing = world.spawn(Transform(position=glm.vec3(60.0, 1.5, -1.5)), MeshRef(FINE),
+                                  Material(color=(0.8, 0.3, 0.2)),
+                                  LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), distances=(6.0, 12.0)))
+    runner = scene(build, (96, 72))
+    for _ in range(3):
+        runner.frame()
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is FINE
+    assert runner.stats.reflection_views >= 1
+
+
+def test_the_rule_refuses_what_it_cannot_do(scene):
+    from engine.core.world import World
+
+    world = World("lod")
+    with pytest.raises(ComponentValueError, match="give the entity a MeshRef too"):
+        world.spawn(Transform(), LevelOfDetail(meshes=(FINE, COARSE), distances=(5.0,)))
+    with pytest.raises(ComponentValueError, match="a Mirror's mesh is its surface"):
+        world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), Mirror(), LevelOfDetail(meshes=(quad(1.0, 1.0),)))
+    with pytest.raises(ComponentValueError, match="one fewer than its meshes"):
+        LevelOfDetail(meshes=(FINE, COARSE), distances=(5.0, 9.0))
+    with pytest.raises(ComponentValueError, match="must increase"):
+        LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), distances=(9.0, 5.0))
+    with pytest.raises(ComponentValueError, match="Mesh objects, got a str"):
+        LevelOfDetail(meshes=("fine.obj",))
+    with pytest.raises(ComponentValueError, match="1 to 8 meshes"):
+        LevelOfDetail(meshes=())
+
+
+def test_a_level_file_names_its_meshes_and_saves_them(tmp_path):
+    from engine.assets.level_file import load_level, save_level
+    from engine.core.world import World
+
+    path = tmp_path / "lod.toml"
+    path.write_text(textwrap.dedent("""
+        [level]
+        name = "lod"
+
+        [[entity]]
+        name = "tree"
+        [entity.Transform]
+        [entity.MeshRef]
+        mesh = { box = [1.0, 2.0, 1.0] }
+        [entity.LevelOfDetail]
+        meshes = [{ box = [1.0, 2.0, 1.0] }, { sphere = 0.8 }]
+        distances = [15.0]
+        """))
+    world = World("lod")
+    names = load_level(path).spawn(world)
+    detail = world.get(names["tree"], LevelOfDetail)
+    assert [m.name for m in detail.meshes] == ["box", "sphere"] and detail.distances == (15.0,)
+    assert detail.meshes[0] is world.get(names["tree"], MeshRef).mesh  # (one file mesh, one object)
+    saved = save_level(world, tmp_path / "saved.toml", names, name="lod")
+    assert "meshes = [{ box = [1.0, 2.0, 1.0] }, { sphere = 0.8 }]" in saved.read_text()
+    again = World("again")
+    names_again = load_level(saved).spawn(again)
+    assert again.get(names_again["tree"], LevelOfDetail).distances == (15.0,)
