@@ -62,6 +62,14 @@ class Arena(Game):
         world.spawn(Transform(), MeshRef(plane(40, 40)), Material(texture=checker_texture(64, 8, name="floor")))
 
 
+KINDS = 6  # mirror, portal pair, chrome sphere, own mesh, own texture, particle emitter (spawn_wave)
+
+
+def of_kind(kind: int, count: int) -> int:
+    """How many of a wave of ``count`` are of ``kind`` (0 to KINDS - 1, ``spawn_wave``'s order)."""
+    return len(range(kind, count, KINDS))
+
+
 def spawn_wave(world: World, count: int, wave: int) -> list[int]:
     made: list[int] = []
     for i in range(count):
@@ -69,7 +77,7 @@ def spawn_wave(world: World, count: int, wave: int) -> list[int]:
         radius = 3 + (i % 7)
         at = (radius * math.cos(angle), 0.75, radius * math.sin(angle))
         facing = look_rotation((math.cos(angle), 0, math.sin(angle)))  # +Z towards the middle
-        kind = i % 6
+        kind = i % KINDS
         if kind == 0:
             made.append(world.spawn(Transform(position=at, rotation=facing), MeshRef(quad(1.2, 1.0, name=f"m{i}")),
                                     Material(), Mirror(max_depth=1)))

@@ -1,6 +1,6 @@
 """Short soak and churn runs (the benchmarks ``soak`` and ``churn`` at small sizes): nothing
 the engine holds grows over a tour of the sample level, and everything made in waves of
-mirrors, portals, probes, meshes and textures goes back when they are deleted."""
+mirrors, portals, probes, meshes, textures and particle emitters goes back when they are deleted."""
 from __future__ import annotations
 
 from benchmarks import churn, soak
@@ -16,7 +16,9 @@ def test_a_tour_of_the_sample_level_holds_its_resources_flat():
 def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
     rows = churn.run(entities=40, waves=2, frames=2)
     peak = rows[1]["peak_gl_resources"]
-    assert peak["probe_cubes"] == 8 and peak["textures"] == 1 + 8 and peak["meshes"] >= 1 + 8 + 8
+    mirrors, spheres, boxes, textured, emitters = (churn.of_kind(kind, 40) for kind in (0, 2, 3, 4, 5))
+    assert peak["probe_cubes"] == spheres and peak["textures"] == 1 + textured + emitters
+    assert peak["meshes"] >= 1 + mirrors + boxes and peak["particle_buffers"] == emitters
     assert churn.leftovers(rows, rss_slack=40.0) == []
     assert rows[-1]["gl_resources"]["batches"] == rows[0]["gl_resources"]["batches"]
 
@@ -38,7 +40,7 @@ def _churn_arena():
 
 
 def test_the_planners_memory_grows_with_the_surfaces_not_with_their_square():
-    """A hundred things (20 mirrors, 20 portal pairs, 20 probes whose faces see them): the
+    """A hundred things (17 mirrors, 17 portal pairs, 17 probes whose faces see them, and the rest): the
     planner keeps each view's camera-free rows by its view mask and winding, not by the
     surface it looks out of, so what it keeps is (classes x surfaces) rows, not (surfaces x
     surfaces) for each probe's face tree.  Kept by exit row, these frames peaked at 313 MiB
@@ -82,7 +84,8 @@ def test_the_cull_keeps_a_bias_row_a_class_of_view_not_a_row_a_surface_looked_ou
             engine.frame(1 / 60, output)
         table = engine.world.resources[PlannerSurfaces].table
         surfaces = len(table.states)
-        assert surfaces == 20 + 2 * 20 and engine.renderer.stats.reflection_views > 0
+        assert surfaces == churn.of_kind(0, 100) + 2 * churn.of_kind(1, 100)
+        assert engine.renderer.stats.reflection_views > 0
         assert len(IDS_OF) > 2 * len(CLASS_OF)  # (numbers were many: a row each would show)
         tables = [rows for _, rows in table._bias_tables.values()]
         assert tables and all(rows.shape == (len(rows), surfaces + 1) for rows in tables)
@@ -108,7 +111,7 @@ def test_deleting_every_mirror_and_portal_lets_the_planners_table_go():
         for _ in range(2):
             engine.frame(1 / 60, output)
         table = weakref.ref(engine.world.resources[PlannerSurfaces].table)
-        assert len(table().states) == 8 + 2 * 8
+        assert len(table().states) == churn.of_kind(0, 40) + 2 * churn.of_kind(1, 40)
         for entity in made:
             engine.world.delete_entity(entity)
         for _ in range(2):
