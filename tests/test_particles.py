@@ -524,3 +524,24 @@ def test_a_soft_particle_fades_by_the_room_behind_it(scene, gap, softness):
     added = (lit - plain)[middle].mean()
     expected = colour * (min(gap / softness, 1.0) if softness else 1.0)
     assert added == pytest.approx(expected, rel=0.04, abs=0.01)
+
+
+def test_emitters_are_drawn_farthest_first_in_each_view(scene):
+    """Two solid alpha squares, a red one nearer the camera, a green one behind it, made in
+    the other order: the red covers the green where they overlap; in a mirror behind them the
+    green (nearer the mirror's image camera) covers the red."""
+    near, far = glm.vec3(-1.0, 0.0, 0.5), glm.vec3(-1.0, 0.0, -1.0)
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.spawn(Transform(position=glm.vec3(0.0, 0.0, -2.5)), MeshRef(quad(4.0, 3.0)), Mirror())
+        for place, colour in ((far, (0.0, 1.0, 0.0, 1.0)), (near, (1.0, 0.0, 0.0, 1.0))):
+            world.spawn(Transform(position=place), still(size=0.6, texture=solid(), blend="alpha", color=colour,
+                                                         end_color=colour))
+    runner, image = render(scene, build)
+    col, row = runner.project(near)
+    np.testing.assert_allclose(image[row, col], [1.0, 0.0, 0.0], atol=0.02)
+    col, row = runner.project(glm.vec3(far.x, far.y, -5.0 - far.z))
+    pixel = image[row, col]
+    assert pixel[1] > 0.5 and pixel[1] > 3.0 * pixel[0], pixel

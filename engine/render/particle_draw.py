@@ -11,7 +11,8 @@ is cut at the mirror's plane as any geometry is.  Blending is premultiplied (the
 ``BLEND_PREMULTIPLIED``), so "additive" (alpha written 0) and "alpha" emitters draw with one
 state, in any order among each other; an "alpha" emitter's own particles are drawn farthest
 first in each view (its rows sorted by distance from the view's ``sorting_eye`` and written
-again before its draw), an "additive" one's as they are (a sum has no order).  They test the
+again before its draw), an "additive" one's as they are (a sum has no order); emitters are
+drawn farthest first by the middles of their boxes (two clouds that mix are sorted as wholes).  They test the
 view's depth and write none, and write only the colour image: a particle is no entity, so the
 surface and seen ids (what the claims, the outline and picking read) keep what is behind it.
 An emitter whose box (its particles' centres, grown by the largest half-diagonal) cannot reach
@@ -188,6 +189,9 @@ class ParticleDraw:
                          if reaches and drawn_in(record.code, view.view_mask)]
                 if not drawn:
                     continue
+                if len(drawn) > 1:  # emitters farthest first (by their boxes' middles), as the glass is
+                    eye = np.array(view.sorting_eye, dtype=np.float64)
+                    drawn.sort(key=lambda record: -float(np.square(record.row_boxes[0].mean(axis=0) - eye).sum()))
                 with nullcontext() if conditions is None else conditions[index].crender:
                     set_scissor(ctx, view.scissor)
                     gpu.bind_view_at(first_index + index)
