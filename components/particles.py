@@ -50,7 +50,11 @@ class ParticleEmitter(TrackedComponent):
     - **Emission.**  ``rate`` particles a second while ``playing``, spread evenly through
       each frame (a fast emitter leaves a trail, not clumps), and ``burst`` at once each time
       it starts playing (when it is added playing, or ``playing`` turns True): an explosion
-      is ``rate=0, burst=200``.  Stopping leaves the living ones to die out.
+      is ``rate=0, burst=200``.  Stopping leaves the living ones to die out.  ``burst_on``
+      names an animation event (``AnimationEvents``): each time one of that name fires on
+      the model the emitter hangs under (its entity or a parent is the model's root), while
+      playing, ``burst`` are born (a footstep's dust, a sword's sparks), instead of as it
+      starts.
     - **Where and which way.**  Born at a point (``shape`` "point"), anywhere in a ball of
       radius ``extent.x`` ("sphere") or a box of half-sizes ``extent`` ("box"), in the
       emitter's frame; flying along ``direction`` (its frame) within a cone of ``spread``
@@ -115,6 +119,7 @@ class ParticleEmitter(TrackedComponent):
     ground: float | None = None
     bounce: float = 0.3
     softness: float = 0.0
+    burst_on: str = ""
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
@@ -192,6 +197,11 @@ class ParticleEmitter(TrackedComponent):
             return finite(self, name, value)
         if name == "bounce":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "burst_on":
+            if not isinstance(value, str):
+                raise ComponentValueError(f"ParticleEmitter.burst_on must be an animation event's name (a str; \"\": "
+                                          f"none), got {value!r}")
+            return value
         if name == "softness":
             return finite(self, name, value, low=0.0, high=MAX_PARTICLE_SOFTNESS)
         return value

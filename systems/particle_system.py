@@ -22,9 +22,10 @@ from components import Transform, Visibility
 from components.particles import ParticleEmitter
 from engine.core.errors import ParticleLimitWarning
 from engine.core.particle_cloud import ParticleCloud
+from engine.core.transforms import MAX_PARENT_HOPS
 from engine.core.world import World
 from engine.render.renderer import Renderer
-from engine.resources import RenderStats
+from engine.resources import FiredEvents, RenderStats
 from engine.rules.visibility_rules import entity_code
 
 _IDENTITY = glm.mat4(1.0)
@@ -55,7 +56,7 @@ class ParticleSystem(esper.Processor):
             cloud = kept[0]
             transform = world.try_get(entity, Transform)
             matrix = transform.world if transform is not None else _IDENTITY
-            cloud.step(emitter, matrix, dt)
+            cloud.step(emitter, matrix, dt, self._bursts(entity, emitter.burst_on) if emitter.burst_on else 0)
             living += cloud.count
             capped += cloud.capped
             self._warn_capped(entity, emitter, cloud.capped)
@@ -70,6 +71,22 @@ class ParticleSystem(esper.Processor):
             draw.drop(entity)
         stats.particles = living
         stats.particles_capped = capped
+
+    def _bursts(self, entity: int, event: str) -> int:
+        """How many ``event``s fired this frame (``FiredEvents``) on the model ``entity`` hangs
+        under: its own root's, or a parent's up its chain."""
+        fired = self.world.resources.get(FiredEvents)
+        if not fired:
+            return 0
+        roots = {e.entity for e in fired if e.name == event}
+        count, walk, hops = 0, entity, 0
+        while walk is not None and hops <= MAX_PARENT_HOPS and roots:
+            if walk in roots:
+                count += sum(1 for e in fired if e.name == event and e.entity == walk)
+                break
+            transform = self.world.try_get(walk, Transform) if self.world.exists(walk) else None
+            walk, hops = (transform.parent if transform is not None else None), hops + 1
+        return count
 
     def _warn_capped(self, entity: int, emitter: ParticleEmitter, capped: int) -> None:
         if not capped:

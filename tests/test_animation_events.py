@@ -14,6 +14,7 @@ from engine.core.errors import AssetError
 from engine.core.world import World
 from engine.resources import FiredEvents
 from systems.model_system import ModelSystem
+from tests.support import look_from
 from tests.test_root_motion import walker
 
 STEPS = (("Walk", 0.0, "left"), ("Walk", 1.0, "right"), ("Walk", 2.0, "end"))
@@ -120,3 +121,30 @@ def test_a_level_file_gives_events_and_names_a_bad_ones_line(tmp_path):
     with pytest.raises(LevelError, match=r"steps\.toml:13: entity 'walker': AnimationEvents\.events: event 'right' "
                                          r"is on clip 'Run'"):
         load_level(path)
+
+
+def test_an_emitter_under_a_model_bursts_on_its_event(scene, tmp_path):
+    """A dust emitter hung under the walker bursts 10 each time "step" fires (at 0.5 and 1.5 s
+    of the 2 s Walk), and not as it starts; one hung elsewhere does not."""
+    from pyglm import glm
+
+    from components import ParticleEmitter, Transform
+    from engine.assets.models import spawn_model
+
+    path = walker(tmp_path / "walker.glb")
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0))
+        world.root = spawn_model(world, path)
+        world.add_component(world.root, Animation("Walk"))
+        world.add_component(world.root, AnimationEvents(events=[("Walk", 0.5, "step"), ("Walk", 1.5, "step")]))
+        dust = dict(rate=0.0, burst=10, lifetime=100.0, speed=0.0, burst_on="step")
+        world.dust = world.spawn(Transform(parent=world.root), ParticleEmitter(**dust))
+        world.other = world.spawn(Transform(position=glm.vec3(5.0, 0.0, 0.0)), ParticleEmitter(**dust))
+    runner = scene(build, (32, 18))
+    clouds = runner.engine.stages["particles"].clouds
+    counts = []
+    for _ in range(8):  # 0.25 s a frame: steps at 0.5 (frame 2) and 1.5 (frame 6)
+        runner.frame(0.25)
+        counts.append((clouds[runner.world.dust][0].count, clouds[runner.world.other][0].count))
+    assert counts == [(0, 0), (0, 0), (10, 0), (10, 0), (10, 0), (10, 0), (20, 0), (20, 0)]

@@ -52,9 +52,10 @@ class ParticleCloud:
     def count(self) -> int:
         return len(self.age)
 
-    def step(self, emitter: ParticleEmitter, matrix: glm.mat4, dt: float) -> None:
+    def step(self, emitter: ParticleEmitter, matrix: glm.mat4, dt: float, bursts: int = 0) -> None:
         """One frame of ``dt`` seconds of ``emitter`` (a ParticleEmitter) whose entity's
-        model-to-world matrix is now ``matrix``: age, drop the dead, move, spawn."""
+        model-to-world matrix is now ``matrix``: age, drop the dead, move, spawn (``bursts``:
+        its ``burst_on`` events fired this frame, a burst each)."""
         local = emitter.space == "local"
         previous = self.last_origin if self.last_origin is not None else matrix
         self.last_origin = glm.mat4(matrix)
@@ -89,8 +90,11 @@ class ParticleCloud:
             self.carry = owed - streamed
         elif not emitter.playing:
             self.carry = 0.0
-        if starting and emitter.burst:  # a burst is born at once, at the frame's end
-            ages = np.concatenate([ages, np.zeros(emitter.burst)])
+        # (with burst_on the bursts come on its events instead of as it starts)
+        bursting = (int(starting and not emitter.burst_on) + (bursts if emitter.playing else 0)) * emitter.burst
+        if bursting:  # a burst is born at once, at the frame's end
+            ages = np.concatenate([ages, np.zeros(min(bursting, self.capacity))])
+            self.capped += max(bursting - self.capacity, 0)
         if len(ages):
             room = max(self.capacity - self.count, 0)
             self.capped += max(len(ages) - room, 0)
