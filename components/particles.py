@@ -2,7 +2,7 @@
 
 The emitter is plain data here; the particles stage (``systems/particle_system.py``) spawns
 and moves its particles (``engine/core/particle_cloud.py``), and every view (the main
-camera's, each mirror's and portal's) draws them after its glass
+camera's, each mirror's and portal's) draws them in among its glass
 (``engine/render/particle_draw.py``)."""
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
 """Particles: every ``ParticleEmitter``'s particles spawned, moved and aged, then handed to the
-GPU, once a frame after the transform stage.
+GPU, once a frame after the extract stage (every game system that moves things has run).
 
 Each emitter entity has a ``ParticleCloud`` (``engine/core/particle_cloud.py``: arrays, a
 fixed handful of numpy calls a step whatever the count), stepped by the frame's time at its
 entity's world matrix (identity without a Transform); its drawn rows go to the scene pass's
-``ParticleDraw`` (``engine/render/particle_draw.py``), which every view then draws after its
+``ParticleDraw`` (``engine/render/particle_draw.py``), which every view then draws in among its
 glass.  A cloud is made when its emitter comes (or its ``seed`` changes: the same seed makes
 the same cloud) and dropped with its GPU buffer when the emitter or its entity goes.  The
 living particles and those the emitters' ``max_particles`` kept from being born are counted

@@ -545,3 +545,41 @@ def test_emitters_are_drawn_farthest_first_in_each_view(scene):
     col, row = runner.project(glm.vec3(far.x, far.y, -5.0 - far.z))
     pixel = image[row, col]
     assert pixel[1] > 0.5 and pixel[1] > 3.0 * pixel[0], pixel
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_particles_are_drawn_among_the_glass_by_distance(scene, path):
+    """A half-clear pane in front of a spark, a mirror behind both: seen directly the spark is
+    behind the pane (its light through it: 1 - alpha of it); in the mirror the spark is
+    nearer the mirror's image camera than the pane, so the mirror's view adds it whole, and
+    the camera sees that reflection through the pane once (1 - alpha again, not twice)."""
+    spark, alpha = glm.vec3(-1.0, 0.0, -1.0), 0.5
+
+    def build(glass, particle):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            backdrop(world, (0.05, 0.05, 0.05))
+            world.spawn(Transform(position=glm.vec3(0.0, 0.0, -2.5)), MeshRef(quad(6.0, 4.0)), Mirror())
+            if glass:
+                world.spawn(Transform(position=glm.vec3(-1.0, 0.0, 0.0)), MeshRef(quad(1.5, 1.5)),
+                            Material(color=(0.2, 0.3, 0.8, alpha), unlit=True))
+            if particle:
+                world.spawn(Transform(position=spark), still(size=0.3, texture=solid(), color=(0.6, 0.6, 0.6, 1.0),
+                                                             end_color=(0.6, 0.6, 0.6, 1.0)))
+        return make
+    added = {}
+    for glass in (False, True):
+        images = []
+        for particle in (False, True):
+            runner = scene(build(glass, particle), SIZE)
+            runner.engine.renderer.antialias = "off"
+            runner.engine.reflection_system.path = path
+            runner.frame()
+            images.append(srgb_to_linear(runner.frame().astype(np.float64) / 255.0))
+        col, row = runner.project(spark)
+        ref_col, ref_row = runner.project(glm.vec3(spark.x, spark.y, -5.0 - spark.z))
+        added[glass] = ((images[1] - images[0])[row - 1:row + 2, col - 1:col + 2].mean(),
+                        (images[1] - images[0])[ref_row - 1:ref_row + 2, ref_col - 1:ref_col + 2].mean())
+    assert added[False][0] > 0.3 and added[False][1] > 0.1
+    assert added[True][0] / added[False][0] == pytest.approx(1.0 - alpha, abs=0.05)  # behind the pane
+    assert added[True][1] / added[False][1] == pytest.approx(1.0 - alpha, abs=0.05)  # the pane once, in front

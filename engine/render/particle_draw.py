@@ -4,7 +4,7 @@ view, made from the vertex's index; ``shaders/particle.frag``).
 
 The particles stage (``systems/particle_system.py``) hands each emitter's rows here once a
 frame (``update``: sizes, colours and frames worked out on the CPU,
-``engine/core/particle_cloud.py``); the scene pass draws them into each view after its glass
+``engine/core/particle_cloud.py``); the scene pass draws them into each view in among its glass
 (``ScenePass``: the main view, every mirror and portal view, per view or batched level alike),
 with the view's Camera block, so a particle in a mirror faces the mirror's image camera and
 is cut at the mirror's plane as any geometry is.  Blending is premultiplied (the glass's
@@ -12,14 +12,16 @@ is cut at the mirror's plane as any geometry is.  Blending is premultiplied (the
 state, in any order among each other; an "alpha" emitter's own particles are drawn farthest
 first in each view (its rows sorted by distance from the view's ``sorting_eye`` and written
 again before its draw), an "additive" one's as they are (a sum has no order); emitters are
-drawn farthest first by the middles of their boxes (two clouds that mix are sorted as wholes).  They test the
+drawn farthest first by the middles of their boxes (two clouds that mix are sorted as wholes),
+and among the view's glass batches by the same measure (``ScenePass``: an emitter goes in
+before the first glass batch whose middle is nearer).  They test the
 view's depth and write none, and write only the colour image: a particle is no entity, so the
 surface and seen ids (what the claims, the outline and picking read) keep what is behind it.
 An emitter whose box (its particles' centres, grown by the largest half-diagonal) cannot reach
 a view (``batch_cull.batch_reach``), or whose ``Visibility`` hides it there, draws nothing there.
 
-Limits: particles blend after a view's glass, so one behind a window is drawn over it
-untinted; a probe's capture leaves them out (``ParticleEmitter``'s docstring says why); a lit
+Limits: particles beyond a see-through surface (water, a see-through mirror or portal) blend
+after it, over its reflection; a probe's capture leaves them out (``ParticleEmitter``'s docstring says why); a lit
 particle's light is its centre's (the sun's and lamps' shadows, the light from all round at
 that point), and light through mirrors and portals (virtual lights) does not light it.
 """
@@ -164,38 +166,55 @@ class ParticleDraw:
         return sum(record.particles for record in self.emitters.values())
 
     # --- the draw --------------------------------------------------------------------------
-    def draw(self, views: Sequence[View], targets: RenderTargets, masked: bool, ambient_probes: bool,
-             first_index: int = 0, conditions: Sequence[moderngl.Query] | None = None) -> None:
-        """Each of ``views`` (its Camera block at ``first_index`` + its place, uploaded by the
-        caller) draws the particles that can reach it, into ``targets``' view framebuffer
-        (colour, surface and seen ids, depth; bound now, its depth mask off);
-        ``masked``: a reflection level's views, each only where the node image names it.
-        Where a soft emitter draws, the depth is copied first (``RenderTargets.depth_copy``).
-        ``conditions``: a samples query a view, its draws conditional on it (as the scene
-        pass's).  The pass state is this module's afterwards."""
+    def visible(self, views: Sequence[View], size: tuple[int, int]) -> list[list[tuple[float, GpuEmitter]]]:
+        """For each of ``views`` (of a target of ``size``), the emitters it draws: with living
+        particles, whose box can reach it (``batch_reach``) and that its kinds and layers show,
+        each with the squared distance of its box's middle from the view's ``sorting_eye``,
+        farthest first (how emitters are ordered, among themselves and among the glass)."""
         live = [record for record in self.emitters.values() if record.particles]
         if not live or not views:
+            return [[] for _ in views]
+        reach = batch_reach(views, size, live)
+        found = []
+        for index, view in enumerate(views):
+            eye = np.array(view.sorting_eye, dtype=np.float64)
+            drawn = [(float(np.square(record.row_boxes[0].mean(axis=0) - eye).sum()), record)
+                     for record, reaches in zip(live, reach[index], strict=True)
+                     if reaches and drawn_in(record.code, view.view_mask)]
+            drawn.sort(key=lambda pair: -pair[0])
+            found.append(drawn)
+        return found
+
+    def draw(self, views: Sequence[View], targets: RenderTargets, masked: bool, ambient_probes: bool,
+             first_index: int = 0, conditions: Sequence[moderngl.Query] | None = None,
+             chosen: Sequence[Sequence[GpuEmitter]] | None = None, copy_depth: bool = True) -> None:
+        """Each of ``views`` (its Camera block at ``first_index`` + its place, uploaded by the
+        caller) draws its emitters (``chosen``, one list a view, in order; else all it draws:
+        ``visible``), into ``targets``' view framebuffer (colour, surface and seen ids, depth;
+        bound now, its depth mask off); ``masked``: a reflection level's views, each only
+        where the node image names it.  Where a soft emitter draws, the depth is copied first
+        (``RenderTargets.depth_copy``; ``copy_depth`` False: copied already for these views,
+        whose depth the transparent slot does not change).  ``conditions``: a samples query a
+        view, its draws conditional on it (as the scene pass's).  The pass state is this
+        module's afterwards."""
+        if chosen is None:
+            chosen = [[record for _, record in drawn] for drawn in self.visible(views, targets.size)]
+        if not any(chosen):
             return
         gpu, ctx = self.gpu, self.ctx
-        size, framebuffer = targets.size, targets.view_framebuffer
-        reach = batch_reach(views, size, live)
-        if any(record.softness > 0.0 for record in live):
+        framebuffer = targets.view_framebuffer
+        if copy_depth and any(record.softness > 0.0 for drawn in chosen for record in drawn):
             gpu.raw_gl.copy_depth(framebuffer, targets.depth_copy(), PARTICLE_DEPTH_UNIT)
         framebuffer.color_mask = _COLOUR_ONLY
-        apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *size), views[0].scissor)
+        apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *targets.size), views[0].scissor)
         try:
             for index, view in enumerate(views):
-                drawn = [record for record, reaches in zip(live, reach[index], strict=True)
-                         if reaches and drawn_in(record.code, view.view_mask)]
-                if not drawn:
+                if not chosen[index]:
                     continue
-                if len(drawn) > 1:  # emitters farthest first (by their boxes' middles), as the glass is
-                    eye = np.array(view.sorting_eye, dtype=np.float64)
-                    drawn.sort(key=lambda record: -float(np.square(record.row_boxes[0].mean(axis=0) - eye).sum()))
                 with nullcontext() if conditions is None else conditions[index].crender:
                     set_scissor(ctx, view.scissor)
                     gpu.bind_view_at(first_index + index)
-                    for record in drawn:
+                    for record in chosen[index]:
                         self._draw_one(record, view, masked, ambient_probes)
         finally:
             framebuffer.color_mask = _ALL

@@ -45,6 +45,7 @@ from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
 import moderngl
+from pyglm import glm
 
 from engine.core.errors import GLPassError
 from engine.render import bindings
@@ -394,13 +395,20 @@ class ScenePass:
         targets.view_framebuffer.depth_mask = False
         self._begin(views, targets, options, state)
         try:
-            if not transparent:
-                pass
+            if not transparent:  # the particles alone (engine/render/particle_draw.py)
+                renderer.upload_views(views)
+                self.particle_draw.draw(views, targets, options.masked, self._ambient_probes, conditions=conditions)
             elif options.batched:
                 geometry = self._slot_geometry(transparent)
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
-                    groups = slot_groups(transparent, views[first:first + MAX_BATCHED_VIEWS], geometry)
-                    for group, _, rest, _ in groups:
+                    chunk = views[first:first + MAX_BATCHED_VIEWS]
+                    emitters = self.particle_draw.visible(chunk, targets.size) if particles else None
+                    for group, _, rest, _ in slot_groups(transparent, chunk, geometry):
+                        if emitters is not None:  # the group's views' emitters, in among its glass
+                            at = [chunk.index(view) for view in group]
+                            self._batched_slot(group, [first + i for i in at], rest, [emitters[i] for i in at],
+                                               targets, options, state, conditions)
+                            continue
                         if not rest:
                             continue
                         scissor = self._views_table(group)
@@ -410,14 +418,13 @@ class ScenePass:
             else:
                 geometry = self._slot_geometry(transparent)
                 renderer.upload_views(views)
+                emitters = self.particle_draw.visible(views, targets.size) if particles else None
                 for index, view in enumerate(views):
                     batches = split_slot(transparent, view, geometry)[1]
-                    if batches:  # (else all behind its see-through surfaces: drawn with them)
+                    if batches or emitters:  # (else all behind its see-through surfaces: drawn with them)
                         with _ALWAYS if conditions is None else conditions[index].crender:
-                            self._transparent_view(view, index, batches, options.masked)
-            if particles:  # after the glass, in every view (engine/render/particle_draw.py)
-                renderer.upload_views(views)
-                self.particle_draw.draw(views, targets, options.masked, self._ambient_probes, conditions=conditions)
+                            self._slot_view(view, index, batches, options.masked, targets,
+                                            emitters[index] if emitters else (), _TRANSPARENT)
         finally:
             targets.view_framebuffer.depth_mask = True
             targets.view_framebuffer.use()
@@ -507,6 +514,77 @@ class ScenePass:
         self.renderer.bind_view_at(index)
         self._draw_batches(batches, 0, masked, skip=view.skip, hide=view.hide)
 
+    def _slot_view(self, view: View, index: int, batches: list[InstanceBatch], masked: bool, targets: RenderTargets,
+                   emitters: Sequence[tuple[float, object]], state: PassState) -> None:
+        """One view's glass ``batches`` (in their order; the pass state is ``state``) with its
+        particle ``emitters`` ((squared distance from its sorting eye, record), farthest first:
+        ``ParticleDraw.visible``) each drawn in before the first batch whose middle is nearer,
+        the rest after the last, so a cloud behind a window is tinted by it and one in front
+        of it covers it."""
+        if not emitters:
+            if batches:
+                self._transparent_view(view, index, batches, masked)
+            return
+        ctx, eye = self.ctx, view.sorting_eye
+        pending, run, copied = list(emitters), [], False
+
+        def particles(records: list) -> None:
+            nonlocal copied
+            if run:
+                self._transparent_view(view, index, run, masked)
+                run.clear()
+            self.particle_draw.draw([view], targets, masked, self._ambient_probes, first_index=index,
+                                    chosen=[records], copy_depth=not copied)
+            copied = True
+            apply_pass_state(ctx, state, (0, 0, *targets.size), view.scissor)
+
+        for batch in batches:
+            near = glm.length2(batch.centre() - eye)
+            ready = []
+            while pending and pending[0][0] > near:
+                ready.append(pending.pop(0)[1])
+            if ready:
+                particles(ready)
+            run.append(batch)
+        if run:
+            self._transparent_view(view, index, run, masked)
+            run.clear()
+        if pending:
+            particles([record for _, record in pending])
+
+    def _batched_slot(self, group: Sequence[View], indices: list[int], rest: list[InstanceBatch],
+                      emitters: list[list[tuple[float, object]]], targets: RenderTargets, options: SceneOptions,
+                      state: PassState, conditions: Sequence[moderngl.Query] | None) -> None:
+        """A batched group's glass ``rest`` (one draw a batch for all of ``group``, its views at
+        ``indices`` of the pass) with each view's particle ``emitters`` drawn in among it: the
+        group's glass ordered by its first view's eye (as ``back_to_front`` orders it), an
+        emitter before the first batch nearer that eye than it."""
+        renderer, ctx = self.renderer, self.ctx
+        eye = group[0].sorting_eye
+        distance = {id(record): glm.length2(glm.vec3(*record.row_boxes[0].mean(axis=0)) - eye)
+                    for drawn in emitters for _, record in drawn}
+        runs: list[tuple[list[InstanceBatch], list[list]]] = []  # (glass, then each view's emitters)
+        placed: set[int] = set()
+        for batch in [*rest, None]:
+            near = glm.length2(batch.centre() - eye) if batch is not None else -1.0
+            ready = [[record for _, record in drawn if id(record) not in placed and distance[id(record)] > near]
+                     for drawn in emitters]
+            placed.update(id(record) for drawn in ready for record in drawn)
+            runs.append(([batch] if batch is not None else [], ready))
+        copied = False
+        for glass, ready in runs:
+            if any(ready):
+                renderer.upload_views(group)
+                self.particle_draw.draw(group, targets, options.masked, self._ambient_probes, chosen=ready,
+                                        copy_depth=not copied,
+                                        conditions=None if conditions is None else [conditions[i] for i in indices])
+                copied = True
+            if glass:
+                scissor = self._views_table(group)
+                apply_pass_state(ctx, state, (0, 0, *targets.size), scissor)
+                set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
+                self._draw_batches(glass, geometry_invocations(len(group)), options.masked)
+
     def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
                    options: SceneOptions, conditions: Sequence[moderngl.Query] | None = None) -> None:
         """Each view its own draws: state shared by the views is set once; per view there is
@@ -574,17 +652,13 @@ class ScenePass:
                     apply_pass_state(ctx, _SKY, viewport, view.scissor)
                     sky_draw.vertex_array(layered=False).render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
-                if now:
+                if now or particles:  # the slot, the particles in among it (engine/render/particle_draw.py)
                     targets.view_framebuffer.depth_mask = False
                     targets.view_framebuffer.use()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
-                    self._transparent_view(view, index, batches, options.masked)
-                    targets.view_framebuffer.depth_mask = True
-                    targets.view_framebuffer.use()
-                if particles:  # after the glass (engine/render/particle_draw.py)
-                    targets.view_framebuffer.depth_mask = False
-                    targets.view_framebuffer.use()
-                    self.particle_draw.draw([view], targets, options.masked, self._ambient_probes, first_index=index)
+                    emitters = self.particle_draw.visible([view], targets.size)[0] if particles else ()
+                    self._slot_view(view, index, batches if now else [], options.masked, targets, emitters,
+                                    _TRANSPARENT)
                     targets.view_framebuffer.depth_mask = True
                     targets.view_framebuffer.use()
                 if (options.sky or now or particles) and index + 1 < len(views):
