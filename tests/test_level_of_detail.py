@@ -120,3 +120,27 @@ def test_a_level_file_names_its_meshes_and_saves_them(tmp_path):
     again = World("again")
     names_again = load_level(saved).spawn(again)
     assert again.get(names_again["tree"], LevelOfDetail).distances == (15.0,)
+
+
+def test_a_moved_entity_and_a_changed_chain_are_seen(scene):
+    """The entity itself moving out changes its mesh as the camera moving does; a new
+    LevelOfDetail (other meshes and distances) is taken at once; taken away, the MeshRef keeps
+    the mesh it has."""
+    runner = scene(detailed(4.0), (64, 48))
+    world = runner.world
+    runner.frame()
+    assert world.get(world.thing, MeshRef).mesh is FINE
+    world.get(world.thing, Transform).position = glm.vec3(0.0, 0.0, -14.0)  # 18 m from the camera
+    runner.frame()
+    assert world.get(world.thing, MeshRef).mesh is COARSE
+    other = box((0.3, 0.3, 0.3), name="other")
+    world.add_component(world.thing, LevelOfDetail(meshes=(FINE, other), distances=(30.0,)))
+    runner.frame()
+    assert world.get(world.thing, MeshRef).mesh is FINE
+    world.get(world.thing, LevelOfDetail).distances = (10.0,)
+    runner.frame()
+    assert world.get(world.thing, MeshRef).mesh is other
+    world.remove_component(world.thing, LevelOfDetail)
+    runner.frame()
+    assert world.get(world.thing, MeshRef).mesh is other
+    assert runner.engine.stages["detail"].entities == []
