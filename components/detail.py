@@ -64,7 +64,9 @@ class LevelOfDetail(TrackedComponent):
     def _check_counts(meshes: tuple | None, distances: tuple | None) -> None:
         if meshes is not None and distances is not None and len(distances) != len(meshes) - 1:
             raise ComponentValueError(f"LevelOfDetail.distances must be one fewer than its meshes "
-                                      f"({len(meshes)} meshes: {len(meshes) - 1} distances), got {len(distances)}")
+                                      f"({len(meshes)} meshes: {len(meshes) - 1} distances), got {len(distances)} "
+                                      "(to change how many, give both at once: a new LevelOfDetail(meshes=..., "
+                                      "distances=...), or dataclasses.replace)")
 
     def level_at(self, distance: float, current: int) -> int:
         """The mesh to draw at ``distance`` (metres) when ``current`` is drawn now: further

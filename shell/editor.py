@@ -27,7 +27,7 @@ import numpy as np
 import tomllib
 from pyglm import glm
 
-from components import Camera, ComponentValueError, FromModel, Material, Model, Portal, Transform
+from components import Camera, ComponentValueError, FromModel, Material, MeshRef, Model, Portal, Transform
 from components.rendering import MATERIAL_IMAGES, automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_model, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
@@ -523,6 +523,13 @@ class Editor:
             raise EditError(f"{self.name_of(entity)} already has a {name}")
         if name == "MeshRef" and "mesh" not in fields:
             fields = {**fields, "mesh": MESH_MAKERS[NEW_MESH]()}  # a shape to start from (``set_mesh_shape``)
+        if name == "LevelOfDetail" and "meshes" not in fields:  # a chain of one to start from: the mesh it has
+            mesh_ref = self.world.try_get(entity, MeshRef)
+            if mesh_ref is None:
+                self.message = (f"{self.name_of(entity)}: a LevelOfDetail swaps the entity's MeshRef.mesh; "
+                                "add a MeshRef first")
+                raise EditError(self.message)
+            fields = {**fields, "meshes": (mesh_ref.mesh,)}
         try:
             component = cls(**fields)
             self._check_whole(entity, [*self.world.components_of(entity), component])

@@ -144,3 +144,25 @@ def test_a_moved_entity_and_a_changed_chain_are_seen(scene):
     runner.frame()
     assert world.get(world.thing, MeshRef).mesh is other
     assert runner.engine.stages["detail"].entities == []
+
+
+def test_the_editor_adds_a_chain_of_the_mesh_it_has(scene):
+    from shell.editor import EditError, Editor
+
+    runner = scene(detailed(4.0, plain_mesh=FINE), (32, 24))
+    world = runner.world
+    editor = Editor(world)
+    added = editor.add_component(world.thing, "LevelOfDetail")
+    assert added.meshes == (FINE,) and added.distances == ()
+    with pytest.raises(ComponentValueError, match="give both at once"):
+        editor.set_field(world.thing, "LevelOfDetail", "meshes", (FINE, COARSE))
+    editor.remove_component(world.thing, "LevelOfDetail")
+    editor.add_component(world.thing, "LevelOfDetail", meshes=(FINE, COARSE), distances=(2.0,))
+    runner.frame()
+    assert world.get(world.thing, MeshRef).mesh is COARSE
+    editor.set_field(world.thing, "LevelOfDetail", "distances", (9.0,))  # (as many: one at a time is fine)
+    runner.frame()
+    assert world.get(world.thing, MeshRef).mesh is FINE
+    bare = world.spawn(Transform())
+    with pytest.raises(EditError, match="add a MeshRef first"):
+        editor.add_component(bare, "LevelOfDetail")
