@@ -60,8 +60,10 @@ class ParticleEmitter(TrackedComponent):
       emitter's frame; flying along ``direction`` (its frame) within a cone of ``spread``
       degrees about it (180: every way) at a speed between ``speed``'s two.
     - **Flight.**  ``gravity`` (world, m/s^2) pulls, ``drag`` slows (the velocity keeps
-      exp(-drag dt)); ``ground`` (a world height; None: none) is a floor they bounce off,
-      keeping ``bounce`` of their speed into it (0: they stop on it and slide).  ``space``
+      exp(-drag dt)); a "world" space particle that flies into an open portal comes out of
+      its partner, carried as a traveller is; ``ground`` (a world height; None: none) is a
+      floor they bounce off, keeping ``bounce`` of their speed into it (0: they stop on it
+      and slide).  ``space``
       "world": a particle stays where it was born when the emitter moves (smoke from a
       torch); "local": the whole cloud moves with it (a jet's glow).
     - **Life.**  Each lives between ``lifetime``'s two seconds; its size goes from

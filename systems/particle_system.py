@@ -16,16 +16,19 @@ from __future__ import annotations
 import warnings
 
 import esper
+import numpy as np
 from pyglm import glm
 
 from components import Transform, Visibility
 from components.particles import ParticleEmitter
 from engine.core.errors import ParticleLimitWarning
-from engine.core.particle_cloud import ParticleCloud
+from engine.core.particle_cloud import Gate, ParticleCloud
 from engine.core.transforms import MAX_PARENT_HOPS
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.resources import FiredEvents, RenderStats
+from engine.rules.frame_rules import frame_rules
+from engine.rules.portal_gates import PortalGate, portal_gates
 from engine.rules.visibility_rules import entity_code
 
 _IDENTITY = glm.mat4(1.0)
@@ -46,6 +49,7 @@ class ParticleSystem(esper.Processor):
         draw = self.renderer.scene_pass.particle_draw
         stats: RenderStats = world.resources[RenderStats]
         emitters = world.query_one(ParticleEmitter)
+        gates = None  # the open portals, made once a frame when a world-space emitter has particles
         seen = set()
         living = capped = 0
         for entity, emitter in emitters:
@@ -56,7 +60,10 @@ class ParticleSystem(esper.Processor):
             cloud = kept[0]
             transform = world.try_get(entity, Transform)
             matrix = transform.world if transform is not None else _IDENTITY
-            cloud.step(emitter, matrix, dt, self._bursts(entity, emitter.burst_on) if emitter.burst_on else 0)
+            if gates is None and cloud.count and emitter.space == "world":
+                gates = _numpy_gates(portal_gates(world, frame_rules(world).open_portals))
+            cloud.step(emitter, matrix, dt, self._bursts(entity, emitter.burst_on) if emitter.burst_on else 0,
+                       gates if emitter.space == "world" and gates else ())
             living += cloud.count
             capped += cloud.capped
             self._warn_capped(entity, emitter, cloud.capped)
@@ -97,3 +104,10 @@ class ParticleSystem(esper.Processor):
             warnings.warn(f"entity {entity}: its ParticleEmitter spawns more than its max_particles "
                           f"({emitter.max_particles}) can hold living at once ({capped} not born this frame): "
                           "raise max_particles, or lower rate, burst or lifetime", ParticleLimitWarning, stacklevel=2)
+
+
+def _numpy_gates(gates: list[PortalGate]) -> list[Gate]:
+    """The gates as the particle step reads them (``particle_cloud.Gate``: numpy, row by row)."""
+    return [(np.array(gate.plane, np.float64), np.array(gate.to_local, np.float64),
+             gate.half, np.array(gate.carry, np.float64), np.array(glm.mat3_cast(gate.turn), np.float64))
+            for gate in gates]

@@ -39,39 +39,24 @@ the very next frame.  Each frame's crossings are published as ``world.resources[
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import esper
 from pyglm import glm
 
-from components import Camera, FlyController, Portal, Transform, Traveller, yaw_pitch_of
+from components import Camera, FlyController, Transform, Traveller, yaw_pitch_of
 from engine.core.frame_io import Output
-from engine.core.portal_math import near_plane_corners, pair_rotation, pair_transform, portal_plane
+from engine.core.portal_math import near_plane_corners
 from engine.core.reflection_math import signed_distance
-from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.resources import PortalCrossing, PortalCrossings
 from engine.rules.frame_rules import frame_rules
+from engine.rules.portal_gates import PortalGate, portal_gates
 
 DEFAULT_ASPECT = 16.0 / 9.0
 TOUCH = 0.02  # the frustum tip "touches" a portal within TOUCH x near of its plane
 CLEAR = 0.1  # after a teleport the whole tip is at least CLEAR x near in front of the exit
 # Edges of the frustum tip: points are [eye, corner 0..3] (corners go round the rectangle).
 _TIP_EDGES = ((0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1))
-
-
-@dataclass
-class _Gate:
-    """One usable portal this frame, with everything a crossing test needs."""
-
-    entity: int
-    partner: int
-    to_local: glm.mat4
-    plane: glm.vec4
-    half: tuple[float, float]
-    carry: glm.mat4
-    turn: glm.quat
-    exit_plane: glm.vec4
 
 
 class PortalTravelSystem(esper.Processor):
@@ -131,30 +116,17 @@ class PortalTravelSystem(esper.Processor):
         return self.aspect
 
     # --- portals -----------------------------------------------------------------------------
-    def _gates(self, open_portals: Mapping[int, int]) -> list[_Gate]:
+    def _gates(self, open_portals: Mapping[int, int]) -> list[PortalGate]:
         """A gate for each open pair (entry portal -> the partner it looks out of)."""
-        world = self.world
-        gates = []
-        for entity, partner in open_portals.items():
-            portal = world.get(entity, Portal)
-            look_in = self._world_matrix(world.get(entity, Transform))
-            look_out = self._world_matrix(world.get(partner, Transform))
-            carry = pair_transform(look_in, look_out)
-            gates.append(_Gate(entity, partner, glm.inverse(look_in), portal_plane(look_in),
-                               (portal.size[0] / 2, portal.size[1] / 2), carry, pair_rotation(carry),
-                               portal_plane(look_out)))
-        return gates
-
-    def _world_matrix(self, transform: Transform) -> glm.mat4:
-        return current_world_matrix(self.world, transform)
+        return portal_gates(self.world, open_portals)
 
     # --- crossing tests ------------------------------------------------------------------------
-    def _crossed(self, gates: list[_Gate], before: glm.vec3, transform: Transform, cam: Camera | None,
-                 skip: int | None) -> _Gate | None:
+    def _crossed(self, gates: list[PortalGate], before: glm.vec3, transform: Transform, cam: Camera | None,
+                 skip: int | None) -> PortalGate | None:
         """The portal this traveller went into this frame (the earliest along its path)."""
         now = glm.vec3(transform.position)
         tip = None
-        best: tuple[float, float, _Gate] | None = None
+        best: tuple[float, float, PortalGate] | None = None
         for gate in gates:
             if gate.entity == skip:
                 continue
@@ -182,11 +154,10 @@ class PortalTravelSystem(esper.Processor):
         return best[2] if best is not None else None
 
     @staticmethod
-    def _inside(gate: _Gate, point: glm.vec3, margin: float) -> bool:
-        local = gate.to_local * glm.vec4(point, 1.0)
-        return abs(local.x) <= gate.half[0] + margin and abs(local.y) <= gate.half[1] + margin
+    def _inside(gate: PortalGate, point: glm.vec3, margin: float) -> bool:
+        return gate.inside(point, margin)
 
-    def _tip_touches(self, gate: _Gate, tip: list[glm.vec3], touch: float) -> bool:
+    def _tip_touches(self, gate: PortalGate, tip: list[glm.vec3], touch: float) -> bool:
         """Whether the frustum tip reaches within ``touch`` of the portal plane inside its
         rectangle: its cross-section with that (offset) plane overlaps the rectangle."""
         s = [signed_distance(gate.plane, p) - touch for p in tip]
@@ -204,7 +175,7 @@ class PortalTravelSystem(esper.Processor):
         return min(xs) <= hw and max(xs) >= -hw and min(ys) <= hh and max(ys) >= -hh
 
     # --- teleport ------------------------------------------------------------------------------
-    def _carry(self, entity: int, transform: Transform, cam: Camera | None, gate: _Gate) -> None:
+    def _carry(self, entity: int, transform: Transform, cam: Camera | None, gate: PortalGate) -> None:
         world = self.world
         position = glm.vec3(gate.carry * glm.vec4(transform.position, 1.0))
         rotation = glm.normalize(gate.turn * transform.rotation)

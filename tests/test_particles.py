@@ -583,3 +583,29 @@ def test_particles_are_drawn_among_the_glass_by_distance(scene, path):
     assert added[False][0] > 0.3 and added[False][1] > 0.1
     assert added[True][0] / added[False][0] == pytest.approx(1.0 - alpha, abs=0.05)  # behind the pane
     assert added[True][1] / added[False][1] == pytest.approx(1.0 - alpha, abs=0.05)  # the pane once, in front
+
+
+def test_world_space_particles_go_through_open_portals(scene):
+    """Portal A at the origin and its partner B 10 m along x, both facing +z: a particle flying
+    into A's rectangle comes out of B, carried as a traveller is (mirrored across, flying out of
+    B's front); one flying past A's edge, and a local-space one, are not carried."""
+    from engine.assets.portals import spawn_portal_pair
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0), fov=FOV)
+        spawn_portal_pair(world, (0.0, 1.0, 0.0), None, (10.0, 1.0, 0.0), None, size=(2.0, 3.0))
+        flight = dict(rate=0.0, burst=1, speed=2.0, spread=0.0, direction=(0.0, 0.0, -1.0), lifetime=100.0)
+        world.into = world.spawn(Transform(position=glm.vec3(0.2, 1.1, 1.0)), ParticleEmitter(**flight))
+        world.past = world.spawn(Transform(position=glm.vec3(3.0, 1.1, 1.0)), ParticleEmitter(**flight))
+        world.local = world.spawn(Transform(position=glm.vec3(-0.2, 1.1, 1.0)),
+                                  ParticleEmitter(**flight, space="local"))
+    runner = scene(build, (64, 48))
+    for _ in range(61):  # born at the first frame's end, then 60 frames: 1 s of flight
+        runner.frame(1.0 / 60.0)
+    clouds = runner.engine.stages["particles"].clouds
+    into, past, local = (clouds[getattr(runner.world, name)][0] for name in ("into", "past", "local"))
+    # Unwrapped it would be at (0.2, 1.1, -1): 1 m behind A; carried, 1 m in front of B, x mirrored.
+    np.testing.assert_allclose(into.position[0], [10.0 - 0.2, 1.1, 1.0], atol=1e-4)
+    np.testing.assert_allclose(into.velocity[0], [0.0, 0.0, 2.0], atol=1e-5)
+    np.testing.assert_allclose(past.position[0], [3.0, 1.1, -1.0], atol=1e-4)
+    np.testing.assert_allclose(local.position[0], [0.0, 0.0, -2.0], atol=1e-4)  # (its own frame: not carried)

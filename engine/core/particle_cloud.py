@@ -16,11 +16,17 @@ frame worked out from its age over its life.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from pyglm import glm
 
 from components.particles import ParticleEmitter
+
+# An open portal as the step's crossing test reads it: its world plane (4,), world -> its local
+# space (4, 4), half its rectangle (2,), the pair transform (4, 4) and its rotation (3, 3), as
+# numpy arrays of engine/rules/portal_gates.PortalGate's (the particles stage makes them).
+Gate = tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray, np.ndarray]
 
 # A drawn particle: x, y, z, size, r, g, b, a, angle, frame, and its streak (x, y, z: its
 # velocity x ParticleEmitter.stretch, world; 0 for a square).
@@ -52,10 +58,12 @@ class ParticleCloud:
     def count(self) -> int:
         return len(self.age)
 
-    def step(self, emitter: ParticleEmitter, matrix: glm.mat4, dt: float, bursts: int = 0) -> None:
+    def step(self, emitter: ParticleEmitter, matrix: glm.mat4, dt: float, bursts: int = 0,
+             gates: Sequence[Gate] = ()) -> None:
         """One frame of ``dt`` seconds of ``emitter`` (a ParticleEmitter) whose entity's
-        model-to-world matrix is now ``matrix``: age, drop the dead, move, spawn (``bursts``:
-        its ``burst_on`` events fired this frame, a burst each)."""
+        model-to-world matrix is now ``matrix``: age, drop the dead, move (through ``gates``,
+        the open portals, world-space particles), spawn (``bursts``: its ``burst_on`` events
+        fired this frame, a burst each)."""
         local = emitter.space == "local"
         previous = self.last_origin if self.last_origin is not None else matrix
         self.last_origin = glm.mat4(matrix)
@@ -69,9 +77,12 @@ class ParticleCloud:
             gravity = np.array(emitter.gravity, dtype=np.float64)
             if local and gravity.any():  # (the pull is the world's: into the emitter's frame)
                 gravity = np.array(glm.inverse(glm.mat3(matrix)) * glm.vec3(*gravity))
+            before = self.position.copy() if gates and not local else None
             self._move(slice(None), dt, gravity, emitter.drag)
             if emitter.ground is not None:
                 self._bounce(slice(None), emitter.ground, emitter.bounce)
+            if before is not None:
+                self._through(before, gates)
         if len(self.age) > self.capacity:  # (max_particles lowered: the oldest go)
             self._keep(np.argsort(self.life - self.age)[-self.capacity:])
         starting = emitter.playing and not self.was_playing
@@ -119,6 +130,31 @@ class ParticleCloud:
             moved = v * dt + 0.5 * gravity * (dt * dt)
             self.velocity[which] = v + gravity * dt
         self.position[which] = self.position[which] + moved
+
+    def _through(self, before: np.ndarray, gates: Sequence[Gate]) -> None:
+        """Carry each particle whose step from ``before`` went into a portal (from its front
+        to its back, meeting its plane inside its rectangle) to the partner: its position and
+        velocity by the pair transform, as a traveller is (the earliest gate a path meets)."""
+        n = len(before)
+        best = np.full(n, np.inf)
+        which = np.full(n, -1)
+        for index, (plane, to_local, half, _, _) in enumerate(gates):
+            d0 = before @ plane[:3] + plane[3]
+            d1 = self.position @ plane[:3] + plane[3]
+            crossing = (d0 >= 0.0) & (d1 < 0.0)
+            if not crossing.any():
+                continue
+            t = np.where(crossing, d0 / np.where(crossing, d0 - d1, 1.0), np.inf)
+            met = before + (self.position - before) * np.minimum(t, 1.0)[:, None]
+            local = met @ to_local[:3, :3].T + to_local[:3, 3]
+            inside = crossing & (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1]) & (t < best)
+            best[inside] = t[inside]
+            which[inside] = index
+        for index, (_, _, _, carry, turn) in enumerate(gates):
+            carried = which == index
+            if carried.any():
+                self.position[carried] = self.position[carried] @ carry[:3, :3].T + carry[:3, 3]
+                self.velocity[carried] = self.velocity[carried] @ turn.T
 
     def _bounce(self, which, ground: float, keep: float) -> None:
         """Particles ``which`` that went below ``ground`` this step: put back above it by
