@@ -144,8 +144,9 @@ def make_scene(name: str, ctx):
     """The engine of scene ``name`` (``mirrors_<n>``, ``portals_d<depth>``, ``portals_d<depth>_sway``
     with a swaying camera, ``probe_none``, ``probe_dynamic``, ``glass_<panes>``: the 8-mirror ring
     with a see-through pond and that many panes, ``benchmarks.glass``; ``posed_<mirrors>_<n>``:
-    the ring with n animated skinned and morphed meshes, ``benchmarks.posed``; ``hall``: the
-    sample level), each with its suite's default settings."""
+    the ring with n animated skinned and morphed meshes, ``benchmarks.posed``;
+    ``sparks_<mirrors>_<n>``: the ring with n living particles, ``benchmarks.sparks``; ``hall``:
+    the sample level), each with its suite's default settings."""
     from shell.app import Engine
 
     if name == "hall":
@@ -170,6 +171,11 @@ def make_scene(name: str, ctx):
         from benchmarks.glass import GlassHouse
 
         return Engine(GlassHouse(int(arg)), ctx)
+    if kind == "sparks":  # sparks_<mirrors>_<particles>: the ring with sparks and smoke (benchmarks.sparks)
+        from benchmarks.sparks import SparkRing
+
+        mirrors, _, particles = arg.partition("_")
+        return Engine(SparkRing(int(mirrors), int(particles or 0)), ctx)
     if kind == "posed":  # posed_<mirrors>_<tentacles>: the ring with animated skinned and morphed meshes
         from benchmarks.posed import PosedRing
 

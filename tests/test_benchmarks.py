@@ -865,3 +865,31 @@ def test_the_posed_scene_poses_its_meshes_every_frame_and_draws_them(ctx):
     finally:
         capture.release()
         engine.close()
+
+
+def test_the_sparks_scene_keeps_about_its_particles_alive_and_draws_them(ctx):
+    """``sparks_<mirrors>_<n>``: two emitters at the ring's centre, about n living after a
+    lifetime (their rates n / 2 / LIFETIME each), drawn: the frame differs from the same ring's
+    without them, frame for frame (the camera's orbit the same)."""
+    from benchmarks.cpu import make_scene
+    from benchmarks.sparks import LIFETIME
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    capture = CaptureTarget(ctx, (96, 54))
+    frames = {}
+    try:
+        for name in ("sparks_2_400", "sparks_2_0"):
+            engine = make_scene(name, ctx)
+            try:
+                for _ in range(int(LIFETIME * 30) + 5):
+                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (96, 54)))
+                frames[name] = (capture.read_rgb().astype(int), engine.renderer.stats.particles,
+                                engine.renderer.stats.reflection_views)
+            finally:
+                engine.close()
+    finally:
+        capture.release()
+    assert 360 <= frames["sparks_2_400"][1] <= 400 and frames["sparks_2_0"][1] == 0
+    assert frames["sparks_2_400"][2] > 0
+    assert (np.abs(frames["sparks_2_400"][0] - frames["sparks_2_0"][0]).max(axis=2) > 8).sum() >= 5
