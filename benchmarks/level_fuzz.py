@@ -153,6 +153,45 @@ spot_angle = 30.0
 spot_blend = 0.2
 shadows = true
 shadow_resolution = 64
+
+[[entity]]
+name = "sparks"
+[entity.Transform]
+position = [0.0, 0.5, 0.0]
+[entity.ParticleEmitter]
+rate = 60.0
+lifetime = [0.5, 1.0]
+speed = [1.0, 2.0]
+gravity = [0.0, -9.8, 0.0]
+size = [0.1, 0.02]
+color = [3.0, 1.0, 0.2, 1.0]
+ground = 0.0
+stretch = 0.02
+blend = "additive"
+
+[[entity]]
+name = "smoke"
+[entity.Transform]
+position = [1.0, 0.5, 0.0]
+[entity.ParticleEmitter]
+rate = 20.0
+size = [0.2, 0.6]
+color = [0.6, 0.6, 0.6, 0.5]
+blend = "alpha"
+lit = true
+softness = 0.2
+sheet = [2, 2]
+texture = { checker = [8, 2] }
+
+[[entity]]
+name = "statue"
+[entity.Transform]
+position = [-1.0, 0.5, 0.0]
+[entity.MeshRef]
+mesh = { box = [0.5, 1.0, 0.5] }
+[entity.LevelOfDetail]
+meshes = [{ box = [0.5, 1.0, 0.5] }, { sphere = 0.4 }]
+distances = [4.0]
 """
 
 _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", "nan", "inf", "-inf",
@@ -167,10 +206,10 @@ _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", 
            "{ file = \"../outside/there.png\" }", "{ file = \"assets/loop.png\" }", "{ file = \"assets/fifo.obj\" }",
            "{ box = [-1.0, 1.0, 1.0] }", "{ plane = [1.0, 1.0], uv_repeat = \"x\" }", "{ checker = [2.5, 1] }"]
 _NAMES = ["Transform", "MeshRef", "Material", "Mirror", "Portal", "Camera", "Skybox", "Emissive", "Slice",
-          "PortalClone", "Nope", "transform"]
+          "PortalClone", "Nope", "transform", "ParticleEmitter", "LevelOfDetail", "AnimationEvents"]
 _FIELDS = ["position", "rotation", "scale", "parent", "partner", "color", "colour", "mesh", "texture", "size",
            "enabled", "mode", "resolution", "refresh", "fov_y", "near", "far", "power", "spot_angle", "spot_blend",
-           "bogus"]
+           "bogus", "rate", "lifetime", "meshes", "distances", "sheet", "softness", "events"]
 
 
 CASE_SECONDS = 30.0  # a case still loading or rendering after this long has hung
