@@ -145,7 +145,7 @@ class ScenePass:
         self.screen_reflections = screen_reflections
         self.ctx = renderer.ctx
         self.sky_draw = SkyDraw(renderer)  # the sky's triangle behind every view
-        self.particle_draw = ParticleDraw(renderer, shadows)  # every emitter's particles, after a view's glass
+        self.particle_draw = ParticleDraw(renderer, shadows)  # every emitter's particles, in among a view's glass
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
@@ -571,19 +571,29 @@ class ScenePass:
                      for drawn in emitters]
             placed.update(id(record) for drawn in ready for record in drawn)
             runs.append(([batch] if batch is not None else [], ready))
-        copied = False
+        copied, scissor, glass_run = False, None, []
+
+        def flush_glass() -> None:
+            nonlocal scissor
+            if not glass_run:
+                return
+            if scissor is None:  # (the group's view table, written once)
+                scissor = self._views_table(group)
+            apply_pass_state(ctx, state, (0, 0, *targets.size), scissor)
+            set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
+            self._draw_batches(glass_run, geometry_invocations(len(group)), options.masked)
+            glass_run.clear()
+
         for glass, ready in runs:
             if any(ready):
+                flush_glass()
                 renderer.upload_views(group)
                 self.particle_draw.draw(group, targets, options.masked, self._ambient_probes, chosen=ready,
                                         copy_depth=not copied,
                                         conditions=None if conditions is None else [conditions[i] for i in indices])
                 copied = True
-            if glass:
-                scissor = self._views_table(group)
-                apply_pass_state(ctx, state, (0, 0, *targets.size), scissor)
-                set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
-                self._draw_batches(glass, geometry_invocations(len(group)), options.masked)
+            glass_run.extend(glass)
+        flush_glass()
 
     def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
                    options: SceneOptions, conditions: Sequence[moderngl.Query] | None = None) -> None:
