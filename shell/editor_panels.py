@@ -485,11 +485,15 @@ class EditorPanels:
         r = 5.0 * self.scale
         light = imgui.get_color_u32(imgui.ImVec4(1.0, 0.85, 0.3, 0.9))
         probe = imgui.get_color_u32(imgui.ImVec4(0.3, 0.9, 1.0, 0.9))
+        emitter = imgui.get_color_u32(imgui.ImVec4(1.0, 0.45, 0.1, 0.9))
         white = imgui.get_color_u32(imgui.ImVec4(1.0, 1.0, 1.0, 1.0))
         for marker in self.markers:
             at = imgui.ImVec2(*marker.at)
             if marker.kind == "light":
                 draw.add_circle_filled(at, r, light)
+            elif marker.kind == "emitter":  # an orange diamond
+                draw.add_quad_filled(imgui.ImVec2(at.x, at.y - r), imgui.ImVec2(at.x + r, at.y),
+                                     imgui.ImVec2(at.x, at.y + r), imgui.ImVec2(at.x - r, at.y), emitter)
             else:
                 draw.add_circle(at, r, probe, 0, 2.0 * self.scale)
             if marker.entity == selected:

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import DirectionalLight, MeshRef, PointLight, ReflectionProbe, Transform
+from components import DirectionalLight, MeshRef, ParticleEmitter, PointLight, ReflectionProbe, Transform
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.probe_rules import world_bounds
@@ -150,7 +150,8 @@ class ReachOutline:
 
 def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> ReachOutline | None:
     """``entity``'s ``ReachOutline`` in the view ``view_proj`` on an output of ``size``: its
-    sun's arrow, its point light's reach, else its probe's influence box; None when it has
+    sun's arrow, its point light's reach, its particle emitter's launch cone, else its probe's
+    influence box; None when it has
     none of them (or no Transform, but for a sun; or a probe serving only its own entity).
     A polyline with a point behind the eye is left out (the rest still show)."""
     transform = world.try_get(entity, Transform)
@@ -163,6 +164,8 @@ def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[in
         return None
     elif (light := world.try_get(entity, PointLight)) is not None:
         worlds = _light_reach(light, current_world_matrix(world, transform))
+    elif (emitter := world.try_get(entity, ParticleEmitter)) is not None:
+        worlds = _emitter_reach(emitter, current_world_matrix(world, transform))
     else:
         probe = world.try_get(entity, ReflectionProbe)
         if probe is None or probe.influence is None:
@@ -223,16 +226,36 @@ def _influence_box(centre: glm.vec3, influence: glm.vec3, blend: float) -> list[
 
 def _light_reach(light: PointLight, matrix: glm.mat4) -> list[tuple[glm.vec3, ...]]:
     """A point light's cone (a spot) or range sphere, as polylines."""
-    apex = glm.vec3(matrix[3])
-    reach = float(light.range)
+    forward = -glm.vec3(matrix[2])
+    axis = glm.normalize(forward) if glm.length(forward) > 1e-9 else glm.vec3(0.0, 0.0, -1.0)
+    return _cone(glm.vec3(matrix[3]), axis, float(light.spot_angle), float(light.range))
+
+
+def _emitter_reach(emitter: ParticleEmitter, matrix: glm.mat4) -> list[tuple[glm.vec3, ...]]:
+    """A particle emitter's launch cone (its ``direction`` and ``spread``, the emitter's frame)
+    as long as its fastest particle flies in its longest life (its drag slowing it; gravity
+    left out: the cone is where they set off), as polylines."""
+    axis = glm.vec3(glm.mat3(matrix) * glm.vec3(emitter.direction))
+    axis = glm.normalize(axis) if glm.length(axis) > 1e-9 else glm.vec3(0.0, 1.0, 0.0)
+    speed, life = emitter.speed[1], emitter.lifetime[1]
+    flight = speed * life if emitter.drag <= 0.0 else speed / emitter.drag * (1.0 - math.exp(-emitter.drag * life))
+    return _cone(glm.vec3(matrix[3]), axis, float(emitter.spread), min(max(flight, MIN_EMITTER_REACH),
+                                                                       MAX_EMITTER_REACH))
+
+
+MIN_EMITTER_REACH, MAX_EMITTER_REACH = 0.25, 100.0  # metres an emitter's outline is long, at least and at most
+
+
+def _cone(apex: glm.vec3, axis: glm.vec3, half_angle: float, reach: float) -> list[tuple[glm.vec3, ...]]:
+    """The cone of ``half_angle`` degrees about the unit ``axis`` from ``apex``, ``reach`` long
+    (its rim circle and ``CONE_EDGES`` edges), or at 180 degrees the sphere of that radius
+    (three great circles), as polylines."""
     steps = [2.0 * math.pi * k / OUTLINE_POINTS for k in range(OUTLINE_POINTS + 1)]
-    if light.spot_angle < 180.0:
-        forward = -glm.vec3(matrix[2])
-        axis = glm.normalize(forward) if glm.length(forward) > 1e-9 else glm.vec3(0.0, 0.0, -1.0)
+    if half_angle < 180.0:
         helper = glm.vec3(0.0, 1.0, 0.0) if abs(axis.y) < 0.9 else glm.vec3(1.0, 0.0, 0.0)
         u = glm.normalize(glm.cross(axis, helper))
         v = glm.cross(axis, u)
-        theta = math.radians(light.spot_angle)
+        theta = math.radians(half_angle)
         centre, radius = apex + axis * (reach * math.cos(theta)), reach * math.sin(theta)
         circle = tuple(centre + radius * (math.cos(t) * u + math.sin(t) * v) for t in steps)
         edges = [(apex, circle[k * OUTLINE_POINTS // CONE_EDGES]) for k in range(CONE_EDGES)]
@@ -247,7 +270,7 @@ MARKER_REACH = 10.0   # pixels (at scale 1) from a marker that a click selects i
 @dataclasses.dataclass(frozen=True)
 class Marker:
     """An entity with no mesh to click (a lamp, a spot, a probe) drawn as a marker where it
-    stands: ``kind`` "light" or "probe", ``at`` its place on screen (output pixels from the
+    stands: ``kind`` "light", "probe" or "emitter", ``at`` its place on screen (output pixels from the
     top left)."""
 
     entity: int
@@ -257,10 +280,11 @@ class Marker:
 
 def markers(world: World, view_proj: glm.mat4, size: tuple[int, int]) -> list[Marker]:
     """The markers in view (in front of the eye, inside the output): each entity with a
-    Transform and a point light or a reflection probe but no visible mesh, which the id
-    images cannot pick (an entity with a mesh is picked where it shows)."""
+    Transform and a point light, a reflection probe or a particle emitter but no visible mesh,
+    which the id images cannot pick (an entity with a mesh is picked where it shows; particles
+    write no id)."""
     found = []
-    for kind, component in (("light", PointLight), ("probe", ReflectionProbe)):
+    for kind, component in (("light", PointLight), ("probe", ReflectionProbe), ("emitter", ParticleEmitter)):
         for entity, _ in world.query_one(component):
             transform, mesh_ref = world.try_get(entity, Transform), world.try_get(entity, MeshRef)
             if transform is None or (mesh_ref is not None and mesh_ref.visible):

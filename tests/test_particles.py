@@ -609,3 +609,28 @@ def test_world_space_particles_go_through_open_portals(scene):
     np.testing.assert_allclose(into.velocity[0], [0.0, 0.0, 2.0], atol=1e-5)
     np.testing.assert_allclose(past.position[0], [3.0, 1.1, -1.0], atol=1e-4)
     np.testing.assert_allclose(local.position[0], [0.0, 0.0, -2.0], atol=1e-4)  # (its own frame: not carried)
+
+
+@pytest.mark.parametrize("drag", [0.0, 0.5])
+def test_the_editors_outline_is_the_launch_cone_as_far_as_a_particle_flies(drag):
+    """``reach_outline`` of a selected emitter (shell/handles.py): a cone from the emitter
+    about its direction turned as the entity is, its rim ``spread`` from the axis, as long as
+    the fastest particle flies in its longest life (speed x life; with drag, speed / k x
+    (1 - e^-k life))."""
+    from engine.core.world import World
+    from shell.handles import reach_outline
+
+    world = World("outline")
+    turn = glm.angleAxis(glm.radians(90.0), glm.vec3(0.0, 0.0, 1.0))  # the emitter's +y to -x
+    entity = world.spawn(Transform(position=glm.vec3(1.0, 2.0, 3.0), rotation=turn),
+                         ParticleEmitter(speed=(1.0, 2.0), lifetime=(0.5, 1.5), spread=25.0, drag=drag))
+    eye = glm.lookAt(glm.vec3(1.0, 2.0, 10.0), glm.vec3(1.0, 2.0, 3.0), glm.vec3(0.0, 1.0, 0.0))
+    outline = reach_outline(world, entity, glm.perspective(glm.radians(60.0), 1.0, 0.1, 100.0) * eye, (400, 400))
+    reach = 2.0 * 1.5 if drag == 0.0 else 2.0 / drag * (1.0 - math.exp(-drag * 1.5))
+    apex, axis = glm.vec3(1.0, 2.0, 3.0), glm.vec3(-1.0, 0.0, 0.0)
+    rim = outline.world[0]
+    for point in rim:
+        arm = point - apex
+        assert glm.length(arm) == pytest.approx(reach, rel=1e-5)
+        assert math.degrees(math.acos(glm.dot(glm.normalize(arm), axis))) == pytest.approx(25.0, abs=1e-3)
+    assert all(edge[0] == apex for edge in outline.world[1:])
