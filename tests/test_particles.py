@@ -634,3 +634,27 @@ def test_the_editors_outline_is_the_launch_cone_as_far_as_a_particle_flies(drag)
         assert glm.length(arm) == pytest.approx(reach, rel=1e-5)
         assert math.degrees(math.acos(glm.dot(glm.normalize(arm), axis))) == pytest.approx(25.0, abs=1e-3)
     assert all(edge[0] == apex for edge in outline.world[1:])
+
+
+@pytest.mark.parametrize("distance", [3.0, 12.0])
+def test_an_orthographic_view_draws_a_particle_its_size_at_any_distance(scene, distance):
+    """Seen by an orthographic camera 4 m tall, a 1 m particle's round spot spans a quarter of
+    the view's height wherever it stands along the axis (its alpha the spot's formula, by the
+    pixels' offsets across the view, not by any eye)."""
+    from components import Camera, look_rotation
+
+    height, colour = 4.0, np.array((0.5, 0.3, 0.1))
+
+    def build(world):
+        eye = glm.vec3(0.0, 0.0, distance)
+        world.spawn(Transform(position=eye, rotation=look_rotation(-eye)),
+                    Camera(projection="orthographic", ortho_height=height, near=0.1, far=40.0))
+        backdrop(world)
+        world.spawn(Transform(), still(size=1.0, color=(*colour, 1.0)))
+    _, image = render(scene, build)
+    w, h = SIZE
+    x = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * (height / 2.0) * (w / h)
+    y = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * (height / 2.0)
+    qx, qy = np.meshgrid(x, y)
+    spot = np.maximum(1.0 - (qx ** 2 + qy ** 2) / 0.25, 0.0) ** 2
+    np.testing.assert_allclose(image, np.array(WALL) + spot[..., None] * colour, atol=0.012)
