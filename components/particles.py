@@ -38,6 +38,7 @@ MAX_PARTICLE_SPIN = 1.0e5      # degrees a second
 MAX_PARTICLE_DRAG = 1.0e3      # per second
 MAX_PARTICLE_GRAVITY = 1.0e4   # metres a second squared, a component
 MAX_PARTICLE_STRETCH = 100.0   # seconds of flight a streak is long
+MAX_PARTICLE_KEYS = 16            # keys of a colour or size curve over a particle's life
 MAX_PARTICLE_SOFTNESS = 1000.0  # metres over which a soft particle fades into what is behind it
 
 
@@ -68,7 +69,10 @@ class ParticleEmitter(TrackedComponent):
       torch); "local": the whole cloud moves with it (a jet's glow).
     - **Life.**  Each lives between ``lifetime``'s two seconds; its size goes from
       ``size[0]`` to ``size[1]`` metres across and its colour from ``color`` to
-      ``end_color`` (None: ``color`` at alpha 0, so it fades out) over its life.  It starts
+      ``end_color`` (None: ``color`` at alpha 0, so it fades out) over its life; or, given,
+      along ``size_keys`` ((life share, metres), ...) and ``color_keys`` ((life share, r, g,
+      b, a), ...): a curve through the keys, straight between them, held before the first and
+      after the last (fire: yellow, orange, red, then smoke grey).  It starts
       turned between ``angle``'s two degrees about the view's axis (a sprite that must stay
       upright: ``(0, 0)``) and spins at between ``spin``'s two degrees a second.
     - **Look.**  ``texture`` its sprite (its alpha its shape; None: a round soft spot),
@@ -122,6 +126,8 @@ class ParticleEmitter(TrackedComponent):
     bounce: float = 0.3
     softness: float = 0.0
     burst_on: str = ""
+    color_keys: Any = ()
+    size_keys: Any = ()
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
@@ -199,6 +205,11 @@ class ParticleEmitter(TrackedComponent):
             return finite(self, name, value)
         if name == "bounce":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "color_keys":
+            return self._keys(name, value, 5, lambda key: (key[0], *color(self, name, key[1:])))
+        if name == "size_keys":
+            return self._keys(name, value, 2, lambda key: (key[0], finite(self, name, key[1], low=0.0,
+                                                                             high=MAX_PARTICLE_SIZE)))
         if name == "burst_on":
             if not isinstance(value, str):
                 raise ComponentValueError(f"ParticleEmitter.burst_on must be an animation event's name (a str; \"\": "
@@ -207,6 +218,26 @@ class ParticleEmitter(TrackedComponent):
         if name == "softness":
             return finite(self, name, value, low=0.0, high=MAX_PARTICLE_SOFTNESS)
         return value
+
+    def _keys(self, name: str, value: Any, width: int, check) -> tuple[tuple[float, ...], ...]:
+        """A curve over a particle's life: keys (share of its life 0 to 1, value...), the
+        shares increasing; each key's value checked by ``check``."""
+        try:
+            keys = [tuple(key) for key in value]
+        except TypeError:
+            raise ComponentValueError(f"ParticleEmitter.{name} must be keys (life share, ...), got {value!r}") from None
+        if len(keys) > MAX_PARTICLE_KEYS:
+            raise ComponentValueError(f"ParticleEmitter.{name} holds at most {MAX_PARTICLE_KEYS} keys, got {len(keys)}")
+        checked = []
+        for key in keys:
+            if len(key) != width and not (width == 5 and len(key) == 4):
+                raise ComponentValueError(f"ParticleEmitter.{name}: a key is (life share, "
+                                          f"{'r, g, b[, a]' if width == 5 else 'size'}), got {key!r}")
+            share = finite(self, name, key[0], low=0.0, high=1.0)
+            checked.append(check((share, *key[1:])))
+        if any(b[0] <= a[0] for a, b in zip(checked, checked[1:], strict=False)):
+            raise ComponentValueError(f"ParticleEmitter.{name}: the keys' life shares must increase, got {value!r}")
+        return tuple(tuple(float(v) for v in key) for key in checked)
 
     def _pair(self, name: str, value: Any, low: float, high: float, positive: bool = False) -> tuple[float, float]:
         """Two numbers (one is both), each finite in [low, high] (> 0 when ``positive``)."""

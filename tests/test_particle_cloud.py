@@ -234,3 +234,27 @@ def test_a_ground_bounces_particles_keeping_its_share_of_their_fall():
         ParticleEmitter(space="local", ground=0.0)
     with pytest.raises(ComponentValueError, match='ParticleEmitter.space cannot be "local"'):
         ParticleEmitter(ground=0.0).space = "local"
+
+
+def test_colour_and_size_keys_make_a_curve_over_life():
+    """Fire: yellow to orange at 30%, red at 60%, grey smoke at the end; size growing to 70%
+    then shrinking: each row the straight line between the two keys about its life share."""
+    keys = ((0.0, 1.0, 0.9, 0.2, 1.0), (0.3, 1.0, 0.5, 0.1, 1.0), (0.6, 0.8, 0.1, 0.0, 0.8), (1.0, 0.3, 0.3, 0.3, 0.0))
+    emitter = ParticleEmitter(rate=0.0, burst=1, lifetime=2.0, speed=0.0, color_keys=keys,
+                              size_keys=((0.0, 0.1), (0.7, 0.5), (1.0, 0.2)))
+    for share in (0.1, 0.25, 0.45, 0.75):  # ages 0.2, 0.5, 0.9, 1.5 s of 2
+        cloud = run(emitter, 1)
+        run(emitter, int(round(share * 2.0 * 60)), cloud=cloud)
+        row = cloud.rows(emitter, glm.mat4(1.0))[0]
+        t = cloud.age[0] / cloud.life[0]
+        below = max(k for k in keys if k[0] <= t)
+        above = min(k for k in keys if k[0] >= t)
+        f = 0.0 if above[0] == below[0] else (t - below[0]) / (above[0] - below[0])
+        np.testing.assert_allclose(row[ROW_COLOR], [b + (a - b) * f for b, a in zip(below[1:], above[1:],
+                                                                                       strict=True)], atol=1e-6)
+        size = 0.1 + (0.5 - 0.1) * t / 0.7 if t <= 0.7 else 0.5 + (0.2 - 0.5) * (t - 0.7) / 0.3
+        assert row[ROW_SIZE] == pytest.approx(size, abs=1e-6)
+    with pytest.raises(ComponentValueError, match="life shares must increase"):
+        ParticleEmitter(size_keys=((0.5, 1.0), (0.2, 2.0)))
+    with pytest.raises(ComponentValueError, match=r"ParticleEmitter.color_keys"):
+        ParticleEmitter(color_keys=((0.0, 1.0, 1.0),))

@@ -269,9 +269,17 @@ class ParticleCloud:
             out[:, ROW_POSITION] = self.position
             grow = 1.0
         first, last = emitter.size
-        out[:, ROW_SIZE] = (first + (last - first) * t) * grow
-        start, end = np.array(emitter.color), np.array(emitter.final_color)
-        out[:, ROW_COLOR] = start + (end - start) * t[:, None]
+        if emitter.size_keys:
+            keys = np.array(emitter.size_keys)
+            out[:, ROW_SIZE] = np.interp(t, keys[:, 0], keys[:, 1]) * grow
+        else:
+            out[:, ROW_SIZE] = (first + (last - first) * t) * grow
+        if emitter.color_keys:
+            keys = np.array(emitter.color_keys)
+            out[:, ROW_COLOR] = np.stack([np.interp(t, keys[:, 0], keys[:, 1 + c]) for c in range(4)], axis=1)
+        else:
+            start, end = np.array(emitter.color), np.array(emitter.final_color)
+            out[:, ROW_COLOR] = start + (end - start) * t[:, None]
         out[:, ROW_ANGLE] = self.angle + self.spin * self.age
         frames = emitter.frames
         out[:, ROW_FRAME] = np.minimum(np.floor(t * frames), frames - 1)
