@@ -19,7 +19,7 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import Transform, Visibility
+from components import MeshRef, Transform, Visibility
 from components.particles import ParticleEmitter
 from engine.core.errors import ParticleLimitWarning
 from engine.core.particle_cloud import Gate, ParticleCloud
@@ -43,6 +43,7 @@ class ParticleSystem(esper.Processor):
         self.renderer = renderer
         self.clouds: dict[int, tuple[ParticleCloud, int]] = {}   # by entity: its cloud and the seed it grew from
         self._capped: set[int] = set()  # emitters capped last frame (warned once a run of capped frames)
+        self._meshless: set[int] = set()  # "mesh" emitters whose MeshRef went (warned once)
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -62,8 +63,16 @@ class ParticleSystem(esper.Processor):
             matrix = transform.world if transform is not None else _IDENTITY
             if gates is None and cloud.count and emitter.space == "world":
                 gates = _numpy_gates(portal_gates(world, frame_rules(world).open_portals))
+            mesh_ref = world.try_get(entity, MeshRef) if emitter.shape == "mesh" else None
+            if emitter.shape == "mesh" and mesh_ref is None and entity not in self._meshless:
+                self._meshless.add(entity)
+                warnings.warn(f"entity {entity}: its ParticleEmitter's shape is \"mesh\" and its MeshRef is gone: "
+                              "none are born until it has one again", ParticleLimitWarning, stacklevel=2)
+            elif mesh_ref is not None:
+                self._meshless.discard(entity)
             cloud.step(emitter, matrix, dt, self._bursts(entity, emitter.burst_on) if emitter.burst_on else 0,
-                       gates if emitter.space == "world" and gates else ())
+                       gates if emitter.space == "world" and gates else (),
+                       mesh_ref.mesh if mesh_ref is not None else None)
             living += cloud.count
             capped += cloud.capped
             self._warn_capped(entity, emitter, cloud.capped)

@@ -258,3 +258,68 @@ def test_colour_and_size_keys_make_a_curve_over_life():
         ParticleEmitter(size_keys=((0.5, 1.0), (0.2, 2.0)))
     with pytest.raises(ComponentValueError, match=r"ParticleEmitter.color_keys"):
         ParticleEmitter(color_keys=((0.0, 1.0, 1.0),))
+
+
+def test_a_mesh_emitter_is_born_on_its_surface_by_area_flying_along_its_normals(scene):
+    """A 4 x 1 x 1 box turned a quarter about y and moved: every particle on its surface, its
+    velocity the outward normal of the face it was born on (spread 0), and the long faces
+    (4 x 1, four of them) taking 16/18 of the births, as their area."""
+    from components import Transform
+    from engine.assets.mesh import box
+
+    mesh = box((4.0, 1.0, 1.0))
+    turn = glm.angleAxis(glm.radians(90.0), glm.vec3(0.0, 1.0, 0.0))
+    matrix = glm.translate(glm.vec3(1.0, 2.0, 3.0)) * glm.mat4_cast(turn)
+    emitter = ParticleEmitter(rate=0.0, burst=6000, max_particles=6000, lifetime=10.0, speed=1.0, spread=0.0,
+                              shape="mesh")
+    cloud = ParticleCloud(0, 6000)
+    cloud.step(emitter, matrix, DT, mesh=mesh)
+    assert cloud.count == 6000
+    inverse = np.array(glm.inverse(matrix))
+    local = cloud.position @ inverse[:3, :3].T + inverse[:3, 3]
+    on_face = np.isclose(np.abs(local), (2.0, 0.5, 0.5), atol=1e-6)
+    assert on_face.any(axis=1).all()  # on the surface
+    local_velocity = cloud.velocity @ inverse[:3, :3].T
+    expected = np.where(on_face, np.sign(local), 0.0)  # the outward normal of its face
+    one = on_face.sum(axis=1) == 1  # (a point on an edge is on two faces: left out)
+    assert one.mean() > 0.99
+    np.testing.assert_allclose(local_velocity[one], expected[one], atol=1e-6)
+    long_faces = (on_face[:, 1] | on_face[:, 2]).mean()
+    assert long_faces == pytest.approx(16.0 / 18.0, abs=0.02)
+
+    def build(world):
+        world.spawn(Transform(), ParticleEmitter(shape="mesh"))
+    with pytest.raises(ComponentValueError, match="give the entity a MeshRef too"):
+        scene(build, (16, 16))
+    from engine.core.world import World
+    world = World("mesh")
+    entity = world.spawn(Transform(), ParticleEmitter())
+    with pytest.raises(ComponentValueError, match="it has no MeshRef; give it one first"):
+        world.get(entity, ParticleEmitter).shape = "mesh"
+
+
+def test_the_particles_stage_gives_a_mesh_emitter_its_mesh_and_says_when_it_went(scene):
+    from components import Material, MeshRef, Transform
+    from engine.assets.mesh import box
+    from engine.core.errors import ParticleLimitWarning
+    from tests.support import look_from
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0))
+        world.log = world.spawn(Transform(position=glm.vec3(0.0, 1.0, 0.0)), MeshRef(box((2.0, 0.4, 0.4))),
+                                Material(), ParticleEmitter(rate=60.0, burst=50, lifetime=10.0, speed=0.0,
+                                                            shape="mesh"))
+    runner = scene(build, (32, 24))
+    runner.frame()
+    (cloud, _), = runner.engine.stages["particles"].clouds.values()
+    assert cloud.count == 51  # the burst and a frame's one
+    local = np.abs(cloud.position - np.array((0.0, 1.0, 0.0)))
+    assert np.isclose(local, (1.0, 0.2, 0.2), atol=1e-5).any(axis=1).all()
+    runner.world.remove_component(runner.world.log, MeshRef)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(3):
+            runner.frame()
+    said = [w for w in caught if issubclass(w.category, ParticleLimitWarning)]
+    assert len(said) == 1 and "its MeshRef is gone" in str(said[0].message)
+    assert cloud.count == 51  # none born since

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from pyglm import glm
@@ -53,17 +54,20 @@ class ParticleCloud:
         self.capped = 0        # particles the last step could not spawn (max_particles reached)
         self.last_origin: glm.mat4 | None = None  # the emitter's matrix at the last step
         self.was_playing = False
+        self._mesh = None      # the entity's mesh this step (shape "mesh")
+        self._surface = None   # (mesh, its triangles' corners, their normals, their areas' running shares)
 
     @property
     def count(self) -> int:
         return len(self.age)
 
     def step(self, emitter: ParticleEmitter, matrix: glm.mat4, dt: float, bursts: int = 0,
-             gates: Sequence[Gate] = ()) -> None:
+             gates: Sequence[Gate] = (), mesh: Any = None) -> None:
         """One frame of ``dt`` seconds of ``emitter`` (a ParticleEmitter) whose entity's
         model-to-world matrix is now ``matrix``: age, drop the dead, move (through ``gates``,
         the open portals, world-space particles), spawn (``bursts``: its ``burst_on`` events
-        fired this frame, a burst each)."""
+        fired this frame, a burst each; ``mesh``: the entity's, for ``shape`` "mesh")."""
+        self._mesh = mesh
         local = emitter.space == "local"
         previous = self.last_origin if self.last_origin is not None else matrix
         self.last_origin = glm.mat4(matrix)
@@ -179,8 +183,14 @@ class ParticleCloud:
         if n <= 0:
             return
         rng = self.rng
-        start = self._start_points(emitter, n)
-        heading = self._headings(emitter, n)
+        if emitter.shape == "mesh":
+            if self._mesh is None:  # (its MeshRef taken away: none born; the particles stage says so)
+                return
+            start, axes = self._surface_points(n)
+            heading = self._headings(emitter, n, axes)
+        else:
+            start = self._start_points(emitter, n)
+            heading = self._headings(emitter, n)
         lo, hi = emitter.speed
         speed = lo + (hi - lo) * rng.random(n)
         velocity = heading * speed[:, None]
@@ -235,21 +245,45 @@ class ParticleCloud:
             return (rng.random((n, 3)) * 2.0 - 1.0) * extent
         return np.zeros((n, 3))
 
-    def _headings(self, emitter: ParticleEmitter, n: int) -> np.ndarray:
+    def _surface_points(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` points spread evenly by area over the entity's mesh (a triangle chosen by its
+        area, a point in it by uniform barycentric coordinates), and the face's unit normal
+        at each: where ``shape`` "mesh" particles are born and which way they fly."""
+        mesh = self._mesh
+        kept = self._surface
+        if kept is None or kept[0] is not mesh:
+            corners = mesh.positions[mesh.indices].astype(np.float64)  # (T, 3, 3)
+            cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+            area = np.linalg.norm(cross, axis=1)
+            normals = cross / np.maximum(area, 1e-30)[:, None]
+            kept = self._surface = (mesh, corners, normals, np.cumsum(area) / max(float(area.sum()), 1e-30))
+        _, corners, normals, shares = kept
+        rng = self.rng
+        triangle = np.minimum(np.searchsorted(shares, rng.random(n), side="right"), len(shares) - 1)
+        a, b = rng.random(n), rng.random(n)
+        flip = a + b > 1.0
+        a[flip], b[flip] = 1.0 - a[flip], 1.0 - b[flip]
+        c = corners[triangle]
+        points = c[:, 0] + a[:, None] * (c[:, 1] - c[:, 0]) + b[:, None] * (c[:, 2] - c[:, 0])
+        return points, normals[triangle]
+
+    def _headings(self, emitter: ParticleEmitter, n: int, axes: np.ndarray | None = None) -> np.ndarray:
         """``n`` unit vectors spread evenly over the cone of ``spread`` degrees about
-        ``direction`` (uniform on the sphere's cap: its height uniform)."""
+        ``direction`` (uniform on the sphere's cap: its height uniform), or about each of
+        ``axes`` (unit, one a particle: a mesh's face normals)."""
         rng = self.rng
         lowest = math.cos(math.radians(emitter.spread))
         cos_t = 1.0 - rng.random(n) * (1.0 - lowest)
         sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
         phi = rng.random(n) * (2.0 * math.pi)
-        axis = np.array(emitter.direction, dtype=np.float64)
-        axis /= np.linalg.norm(axis)  # (unit in float32: made unit again in float64)
-        helper = np.array((1.0, 0.0, 0.0)) if abs(axis[0]) < 0.9 else np.array((0.0, 0.0, 1.0))
-        u = np.cross(axis, helper)
-        u /= np.linalg.norm(u)
-        w = np.cross(axis, u)
-        return (cos_t[:, None] * axis + (sin_t * np.cos(phi))[:, None] * u
+        if axes is None:
+            axes = np.array(emitter.direction, dtype=np.float64)[None, :]
+            axes = axes / np.linalg.norm(axes)  # (unit in float32: made unit again in float64)
+        helper = np.where((np.abs(axes[:, 0]) < 0.9)[:, None], (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+        u = np.cross(axes, helper)
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        w = np.cross(axes, u)
+        return (cos_t[:, None] * axes + (sin_t * np.cos(phi))[:, None] * u
                 + (sin_t * np.sin(phi))[:, None] * w)
 
     def rows(self, emitter: ParticleEmitter, matrix: glm.mat4) -> np.ndarray:
