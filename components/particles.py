@@ -38,6 +38,7 @@ MAX_PARTICLE_SPIN = 1.0e5      # degrees a second
 MAX_PARTICLE_DRAG = 1.0e3      # per second
 MAX_PARTICLE_GRAVITY = 1.0e4   # metres a second squared, a component
 MAX_PARTICLE_STRETCH = 100.0   # seconds of flight a streak is long
+MAX_PREWARM_SECONDS = 10.0      # the most time a prewarm runs (ParticleEmitter.prewarm)
 MAX_PARTICLE_KEYS = 16            # keys of a colour or size curve over a particle's life
 MAX_PARTICLE_SOFTNESS = 1000.0  # metres over which a soft particle fades into what is behind it
 
@@ -93,7 +94,10 @@ class ParticleEmitter(TrackedComponent):
       behind it is nearer than that (soft particles: smoke meets a floor or wall without a
       hard line), at the cost of a copy of the view's depth a pass that draws one.
     - ``max_particles`` living at once (spawning stops there, counted in
-      ``RenderStats.particles_capped``); ``seed`` makes the same cloud again.
+      ``RenderStats.particles_capped``); ``seed`` makes the same cloud again; ``prewarm``
+      starts the cloud as it would be after its longest lifetime of playing (Unity's
+      prewarm: a torch already smoking on the first frame), stepped at 30 Hz up to
+      ``MAX_PREWARM_SECONDS``.
 
     A particle is not an entity: it casts no shadow, is not picked or cut by a portal, and a
     reflection probe's capture leaves particles out (a probe is redrawn on its own schedule,
@@ -131,13 +135,14 @@ class ParticleEmitter(TrackedComponent):
     burst_on: str = ""
     color_keys: Any = ()
     size_keys: Any = ()
+    prewarm: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
             return finite(self, name, value, low=0.0, high=MAX_PARTICLE_RATE)
         if name == "burst":
             return integer(self, name, value, low=0, high=MAX_PARTICLES)
-        if name in ("playing", "lit"):
+        if name in ("playing", "lit", "prewarm"):
             return boolean(self, name, value)
         if name == "lifetime":
             return self._range(name, value, low=0.0, high=MAX_PARTICLE_LIFETIME, positive=True)

@@ -20,7 +20,7 @@ import numpy as np
 from pyglm import glm
 
 from components import MeshRef, Transform, Visibility
-from components.particles import ParticleEmitter
+from components.particles import MAX_PREWARM_SECONDS, ParticleEmitter
 from engine.core.errors import ParticleLimitWarning
 from engine.core.particle_cloud import Gate, ParticleCloud
 from engine.core.transforms import MAX_PARENT_HOPS
@@ -32,6 +32,7 @@ from engine.rules.portal_gates import PortalGate, portal_gates
 from engine.rules.visibility_rules import entity_code
 
 _IDENTITY = glm.mat4(1.0)
+PREWARM_RATE = 30.0  # steps a second a prewarm runs (ParticleEmitter.prewarm)
 
 
 class ParticleSystem(esper.Processor):
@@ -56,11 +57,18 @@ class ParticleSystem(esper.Processor):
         for entity, emitter in emitters:
             seen.add(entity)
             kept = self.clouds.get(entity)
-            if kept is None or kept[1] != emitter.seed:
+            fresh = kept is None or kept[1] != emitter.seed
+            if fresh:
                 kept = self.clouds[entity] = (ParticleCloud(emitter.seed, emitter.max_particles), emitter.seed)
             cloud = kept[0]
             transform = world.try_get(entity, Transform)
             matrix = transform.world if transform is not None else _IDENTITY
+            if fresh and emitter.prewarm and emitter.playing:  # as after a lifetime of playing, at 30 Hz
+                mesh_ref = world.try_get(entity, MeshRef) if emitter.shape == "mesh" else None
+                seconds = min(emitter.lifetime[1], MAX_PREWARM_SECONDS)
+                mesh = mesh_ref.mesh if mesh_ref is not None else None
+                for _ in range(round(seconds * PREWARM_RATE)):
+                    cloud.step(emitter, matrix, 1.0 / PREWARM_RATE, mesh=mesh)
             if gates is None and cloud.count and emitter.space == "world":
                 gates = _numpy_gates(portal_gates(world, frame_rules(world).open_portals))
             mesh_ref = world.try_get(entity, MeshRef) if emitter.shape == "mesh" else None

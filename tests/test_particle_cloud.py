@@ -323,3 +323,21 @@ def test_the_particles_stage_gives_a_mesh_emitter_its_mesh_and_says_when_it_went
     said = [w for w in caught if issubclass(w.category, ParticleLimitWarning)]
     assert len(said) == 1 and "its MeshRef is gone" in str(said[0].message)
     assert cloud.count == 51  # none born since
+
+
+def test_a_prewarmed_cloud_starts_a_lifetime_in(scene):
+    """Prewarmed, 40 a second living 1.5 s: the first frame already holds about 60, of every
+    age up to the lifetime; not prewarmed, the frame's one."""
+    from components import Transform
+    from tests.support import look_from
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0))
+        world.warm = world.spawn(Transform(), ParticleEmitter(rate=40.0, lifetime=1.5, prewarm=True))
+        world.cold = world.spawn(Transform(), ParticleEmitter(rate=40.0, lifetime=1.5))
+    runner = scene(build, (16, 16))
+    runner.frame()
+    clouds = runner.engine.stages["particles"].clouds
+    warm, cold = clouds[runner.world.warm][0], clouds[runner.world.cold][0]
+    assert 58 <= warm.count <= 61 and cold.count <= 1
+    assert warm.age.min() < 0.05 and warm.age.max() > 1.4
