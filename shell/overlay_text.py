@@ -32,6 +32,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         *([f"game stopped in {stopped} (F5 resumes; the traceback is on the console)"] if stopped else []),
         f"{fps:.1f} fps, {seconds * 1000.0:.2f} ms a frame",
         f"passes {stats.passes}, draw calls {stats.draw_calls}",
+        f"particles {stats.particles}"
+        f"{f', {stats.particles_capped} not born (max_particles)' if stats.particles_capped else ''}",
         f"views per level {per_level}",
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
         f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}, "

@@ -341,3 +341,19 @@ def test_a_prewarmed_cloud_starts_a_lifetime_in(scene):
     warm, cold = clouds[runner.world.warm][0], clouds[runner.world.cold][0]
     assert 58 <= warm.count <= 61 and cold.count <= 1
     assert warm.age.min() < 0.05 and warm.age.max() > 1.4
+
+
+def test_the_overlay_says_how_many_live_and_how_many_the_cap_kept_from_being_born(scene):
+    from components import Transform
+    from shell.overlay_text import overlay_lines
+    from tests.support import look_from
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0))
+        world.spawn(Transform(), ParticleEmitter(rate=600.0, lifetime=10.0, max_particles=25))
+    runner = scene(build, (16, 16))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(4):  # 10 asked a frame: the third takes the last 5, the fourth none
+            runner.frame()
+    assert "particles 25, 10 not born (max_particles)" in overlay_lines(runner.engine, [0.02])
