@@ -527,7 +527,7 @@ def test_a_normal_map_loads_saves_and_loads_again(tmp_path):
      r"slope must be a number, got 'steep'"),
     ("{ ripples = [64, 4] }", "{ ripples = [64, 4], slop = 1.0 }", "Material.normal_map",
      r"ripples normal map: unknown keys \['slop'\]"),
-    ("{ ripples = [64, 4] }", "{ waves = 3 }", "Material.normal_map", r"names one of checker, ripples or file"),
+    ("{ ripples = [64, 4] }", "{ waves = 3 }", "Material.normal_map", r"names one of checker, ripples, puff or file"),
     ("{ ripples = [64, 4] }", "\"ripples.png\"", "Material.normal_map", r"a texture is a table"),
     ("{ ripples = [64, 4] }", "{ file = \"maps/gone.png\" }", "Material.normal_map",
      r"texture file .*gone\.png.*: no such file"),

@@ -658,3 +658,31 @@ def test_an_orthographic_view_draws_a_particle_its_size_at_any_distance(scene, d
     qx, qy = np.meshgrid(x, y)
     spot = np.maximum(1.0 - (qx ** 2 + qy ** 2) / 0.25, 0.0) ** 2
     np.testing.assert_allclose(image, np.array(WALL) + spot[..., None] * colour, atol=0.012)
+
+
+def test_a_puff_texture_is_a_soft_lumpy_disc_a_level_file_names(tmp_path):
+    """``puff_texture``: white, its alpha zero outside the inscribed circle and at most the
+    round spot's falloff inside, not flat (lumps), the same for the same seed and not for
+    another; a level file names one as ``{ puff = [size, seed] }`` and saves it so."""
+    from engine.assets.level_file import load_level, save_level
+    from engine.assets.texture_data import puff_texture
+    from engine.core.world import World
+
+    puff = puff_texture(64, 3)
+    alpha = puff.pixels[..., 3].astype(float) / 255.0
+    centres = (np.arange(64) + 0.5) / 64 - 0.5
+    r2 = 4.0 * (centres[None, :] ** 2 + centres[:, None] ** 2)
+    falloff = np.maximum(1.0 - r2, 0.0) ** 2
+    assert (puff.pixels[..., :3] == 255).all() and (alpha[r2 >= 1.0] == 0.0).all()
+    assert (alpha <= falloff + 1.0 / 255.0).all()
+    inner = alpha[r2 < 0.25] / falloff[r2 < 0.25]
+    assert inner.std() > 0.05  # lumpy, not the plain spot
+    np.testing.assert_array_equal(puff_texture(64, 3).pixels, puff.pixels)
+    assert not np.array_equal(puff_texture(64, 4).pixels, puff.pixels)
+    path = tmp_path / "smoke.toml"
+    path.write_text(LEVEL.replace("texture = { checker = [16, 2] }", "texture = { puff = [64, 3] }"))
+    world = World("smoke")
+    names = load_level(path).spawn(world)
+    np.testing.assert_array_equal(world.get(names["torch"], ParticleEmitter).texture.pixels, puff.pixels)
+    saved = save_level(world, tmp_path / "saved.toml", names, name="sparks")
+    assert "texture = { puff = [64, 3] }" in saved.read_text()

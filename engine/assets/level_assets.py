@@ -29,6 +29,7 @@ from engine.assets.texture_data import (
     checker_texture,
     contained_path,
     load_texture,
+    puff_texture,
     ripple_normal_map,
     texture_bytes,
 )
@@ -202,9 +203,11 @@ def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
 
 
 def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> TextureData:
-    """The texture a ``Material`` table names (``texture`` or a map): checker, ripples or an
-    image file; ``normal_map``: a linear map, which keeps a 16-bit file's 16 bits."""
-    spec, name = _asset_table(spec, "texture", '{ checker = [128, 8] }, { ripples = [256, 6] } or { file = "x.png" }')
+    """The texture a ``Material`` table names (``texture`` or a map), or a particle emitter's:
+    checker, ripples, puff (``puff_texture``) or an image file; ``normal_map``: a linear map,
+    which keeps a 16-bit file's 16 bits."""
+    spec, name = _asset_table(spec, "texture", '{ checker = [128, 8] }, { ripples = [256, 6] }, { puff = [64, 0] } '
+                                                   'or { file = "x.png" }')
     if "file" in spec:
         path = _asset_path(spec.pop("file"), where)
         _no_more(spec, "texture file")
@@ -216,8 +219,19 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
         return texture
     if "ripples" in spec and "checker" not in spec:
         return _ripples(spec, name, where)
+    if "puff" in spec and "checker" not in spec:
+        size_seed = spec.pop("puff")
+        if not isinstance(size_seed, list) or len(size_seed) != 2 or not all(_is_int(v) for v in size_seed):
+            raise ValueError(f"puff = [size, seed] (two integers), got {size_seed!r}")
+        _no_more(spec, "puff texture")
+        size, seed = size_seed
+        options = {} if name is None or name == "puff" else {"name": name}
+        key = ("puff", size, seed, tuple(sorted(options.items())))
+        if 1 <= size <= MAX_TEXTURE_SIDE:
+            where.budget.take(key, texture_bytes(size, size))
+        return _cached(key, lambda: puff_texture(size, seed, **options))
     if "checker" not in spec:
-        raise ValueError(f"a texture names one of checker, ripples or file, got {sorted(spec)}")
+        raise ValueError(f"a texture names one of checker, ripples, puff or file, got {sorted(spec)}")
     size_squares = spec.pop("checker")
     if not isinstance(size_squares, list) or len(size_squares) != 2 or not all(_is_int(v) for v in size_squares):
         raise ValueError(f"checker = [size, squares] (two integers), got {size_squares!r}")
