@@ -686,3 +686,31 @@ def test_a_puff_texture_is_a_soft_lumpy_disc_a_level_file_names(tmp_path):
     np.testing.assert_array_equal(world.get(names["torch"], ParticleEmitter).texture.pixels, puff.pixels)
     saved = save_level(world, tmp_path / "saved.toml", names, name="sparks")
     assert "texture = { puff = [64, 3] }" in saved.read_text()
+
+
+def test_culling_an_alpha_clouds_particles_per_view_changes_no_pixel(scene, monkeypatch):
+    """A wide alpha cloud about a mirror, partly out of the camera's and the mirror's views:
+    each view draws only the particles that can reach it (``in_view``), and the picture is the
+    same, pixel for pixel, as with every particle drawn in every view; some were left out."""
+    import engine.render.particle_draw as particle_draw
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.spawn(Transform(position=glm.vec3(0.0, 0.0, -2.5)), MeshRef(quad(2.0, 1.5)), Mirror())
+        world.spawn(Transform(), ParticleEmitter(rate=0.0, burst=400, shape="box", extent=(6.0, 3.0, 3.0),
+                                                 speed=0.0, lifetime=100.0, size=0.3, blend="alpha",
+                                                 color=(0.9, 0.5, 0.2, 0.6), end_color=(0.9, 0.5, 0.2, 0.6)))
+    kept = []
+    real = particle_draw.in_view
+
+    def counting(rows, view):
+        found = real(rows, view)
+        kept.append((int(found.sum()), len(rows)))
+        return found
+    monkeypatch.setattr(particle_draw, "in_view", counting)
+    _, culled = render(scene, build)
+    assert kept and any(k < n for k, n in kept)  # (some views left some out)
+    monkeypatch.setattr(particle_draw, "in_view", lambda rows, view: np.ones(len(rows), bool))
+    _, whole = render(scene, build)
+    np.testing.assert_array_equal(culled, whole)

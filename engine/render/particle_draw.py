@@ -11,7 +11,8 @@ is cut at the mirror's plane as any geometry is.  Blending is premultiplied (the
 ``BLEND_PREMULTIPLIED``), so "additive" (alpha written 0) and "alpha" emitters draw with one
 state, in any order among each other; an "alpha" emitter's own particles are drawn farthest
 first in each view (its rows sorted by distance from the view's ``sorting_eye`` and written
-again before its draw), an "additive" one's as they are (a sum has no order); emitters are
+again before its draw, only those that can reach the view: ``in_view``, so a mirror that sees
+part of a cloud draws that part), an "additive" one's as they are (a sum has no order); emitters are
 drawn farthest first by the middles of their boxes (two clouds that mix are sorted as wholes),
 and among the view's glass batches by the same measure (``ScenePass``: an emitter goes in
 before the first glass batch whose middle is nearer).  They test the
@@ -220,14 +221,22 @@ class ParticleDraw:
             framebuffer.color_mask = _ALL
 
     def _draw_one(self, record: GpuEmitter, view: View, masked: bool, ambient_probes: bool) -> None:
-        if record.blend == "alpha" and record.particles > 1:
+        """One emitter's particles in ``view``: an "alpha" emitter's rows written again for the
+        view, only those whose squares can reach it (``in_view``), farthest first; an
+        "additive" one's as uploaded."""
+        count = record.particles
+        if record.blend == "alpha" and count > 1:
+            rows = record.rows[in_view(record.rows, view)]
             eye = np.array(view.sorting_eye, dtype=np.float32)
-            far = np.square(record.rows[:, ROW_POSITION] - eye).sum(axis=1)
-            record.buffer.write(record.rows[np.argsort(-far, kind="stable")].tobytes())
+            far = np.square(rows[:, ROW_POSITION] - eye).sum(axis=1)
+            record.buffer.write(rows[np.argsort(-far, kind="stable")].tobytes())
+            count = len(rows)
+            if not count:
+                return
         vao = self._vertex_array(record, masked, ambient_probes)
         if record.gl_texture is not None:
             bind_texture(self.ctx, record.gl_texture, PARTICLE_UNIT)
-        vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=record.particles)
+        vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
         self.gpu.stats.draw_calls += 1
 
     def _vertex_array(self, record: GpuEmitter, masked: bool, ambient_probes: bool) -> moderngl.VertexArray:
@@ -307,6 +316,23 @@ class ParticleDraw:
             record.buffer.release()
         self.emitters.clear()
         self._programs.clear()
+
+
+def in_view(rows: np.ndarray, view: View) -> np.ndarray:
+    """Which of ``rows`` (drawn particles) can put a pixel in ``view``: the sphere about each
+    (its square's half-diagonal, and a streak's length) not wholly outside one of the view's
+    side planes, its near plane or its clip plane (a mirror's or portal's surface): the planes
+    of the view-projection's rows (Gribb and Hartmann), each scaled to metres.  Conservative:
+    what it drops cannot be drawn."""
+    m = np.array(view.view_proj, dtype=np.float64)  # (row by row)
+    planes = np.stack([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2],
+                       np.array(view.clip_plane, dtype=np.float64)])
+    lengths = np.linalg.norm(planes[:, :3], axis=1)
+    planes = planes / np.where(lengths > 0.0, lengths, 1.0)[:, None]  # (the clip plane of a root: 0, 0, 0, 1)
+    radius = rows[:, ROW_SIZE].astype(np.float64) * (0.5 * math.sqrt(2.0)) \
+        + np.sqrt(np.square(rows[:, ROW_STREAK].astype(np.float64)).sum(axis=1))
+    distance = rows[:, ROW_POSITION].astype(np.float64) @ planes[:, :3].T + planes[:, 3]
+    return (distance >= -(radius[:, None] + 1e-4)).all(axis=1)
 
 
 def _grown(n: int) -> int:
