@@ -98,6 +98,11 @@ class ParticleEmitter(TrackedComponent):
       starts the cloud as it would be after its longest lifetime of playing (Unity's
       prewarm: a torch already smoking on the first frame), stepped at 30 Hz up to
       ``MAX_PREWARM_SECONDS``.
+    - ``on_death``: another emitter's entity (a sub-emitter), whose ``burst`` is born where
+      each of these particles dies, flying by its own settings (fireworks: a rocket's spark
+      climbs, and bursts where it ends), whether it plays or not (give it ``playing`` False
+      for no births of its own).  An entity with no ParticleEmitter is said once and left
+      alone.
 
     A particle is not an entity: it casts no shadow, is not picked or cut by a portal, and a
     reflection probe's capture leaves particles out (a probe is redrawn on its own schedule,
@@ -136,12 +141,15 @@ class ParticleEmitter(TrackedComponent):
     color_keys: Any = ()
     size_keys: Any = ()
     prewarm: bool = False
+    on_death: int | None = None
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
             return finite(self, name, value, low=0.0, high=MAX_PARTICLE_RATE)
         if name == "burst":
             return integer(self, name, value, low=0, high=MAX_PARTICLES)
+        if name == "on_death":
+            return None if value is None else integer(self, name, value, low=1, high=2**31 - 1)
         if name in ("playing", "lit", "prewarm"):
             return boolean(self, name, value)
         if name == "lifetime":

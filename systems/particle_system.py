@@ -45,6 +45,7 @@ class ParticleSystem(esper.Processor):
         self.clouds: dict[int, tuple[ParticleCloud, int]] = {}   # by entity: its cloud and the seed it grew from
         self._capped: set[int] = set()  # emitters capped last frame (warned once a run of capped frames)
         self._meshless: set[int] = set()  # "mesh" emitters whose MeshRef went (warned once)
+        self._targetless: set[tuple[int, int]] = set()  # (emitter, on_death) pairs said to name no emitter
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -54,6 +55,7 @@ class ParticleSystem(esper.Processor):
         gates = None  # the open portals, made once a frame when a world-space emitter has particles
         seen = set()
         living = capped = 0
+        stepped = []  # (entity, emitter, cloud, matrix): stepped this frame
         for entity, emitter in emitters:
             seen.add(entity)
             kept = self.clouds.get(entity)
@@ -81,6 +83,16 @@ class ParticleSystem(esper.Processor):
             cloud.step(emitter, matrix, dt, self._bursts(entity, emitter.burst_on) if emitter.burst_on else 0,
                        gates if emitter.space == "world" and gates else (),
                        mesh_ref.mesh if mesh_ref is not None else None)
+            stepped.append((entity, emitter, cloud, matrix))
+        by_entity = {entity: (emitter, cloud, matrix) for entity, emitter, cloud, matrix in stepped}
+        for entity, emitter, cloud, _ in stepped:  # sub-emitters' bursts where particles died
+            if emitter.on_death is not None and len(cloud.died):
+                target = by_entity.get(emitter.on_death)
+                if target is None:
+                    self._warn_no_target(entity, emitter.on_death)
+                else:
+                    target[1].burst_at(target[0], cloud.died, target[2])
+        for entity, emitter, cloud, matrix in stepped:
             living += cloud.count
             capped += cloud.capped
             self._warn_capped(entity, emitter, cloud.capped)
@@ -95,6 +107,13 @@ class ParticleSystem(esper.Processor):
             draw.drop(entity)
         stats.particles = living
         stats.particles_capped = capped
+
+    def _warn_no_target(self, entity: int, target: int) -> None:
+        if (entity, target) not in self._targetless:
+            self._targetless.add((entity, target))
+            warnings.warn(f"entity {entity}: its ParticleEmitter.on_death names entity {target}, which has no "
+                          "ParticleEmitter: nothing is born where its particles die", ParticleLimitWarning,
+                          stacklevel=3)
 
     def _bursts(self, entity: int, event: str) -> int:
         """How many ``event``s fired this frame (``FiredEvents``) on the model ``entity`` hangs

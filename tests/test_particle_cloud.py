@@ -357,3 +357,82 @@ def test_the_overlay_says_how_many_live_and_how_many_the_cap_kept_from_being_bor
         for _ in range(4):  # 10 asked a frame: the third takes the last 5, the fourth none
             runner.frame()
     assert "particles 25, 10 not born (max_particles)" in overlay_lines(runner.engine, [0.02])
+
+
+def test_a_sub_emitter_bursts_where_each_particle_dies(scene):
+    """Fireworks: a rocket (one particle up at 5 m/s, living 0.5 s) whose on_death is a burst of
+    20 sparks (every way, 2 m/s): the frame the rocket dies, 20 sparks at age 0 where it was,
+    flying 2 m/s; a sub-emitter that names no emitter is said once."""
+    from components import Transform
+    from engine.core.errors import ParticleLimitWarning
+    from tests.support import look_from
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 8.0), (0.0, 1.0, 0.0))
+        world.sparks = world.spawn(Transform(position=glm.vec3(5.0, 0.0, 0.0)),
+                                   ParticleEmitter(rate=0.0, burst=20, speed=2.0, spread=180.0, lifetime=5.0,
+                                                   max_particles=100, playing=False))  # (no burst of its own)
+        world.rocket = world.spawn(Transform(), ParticleEmitter(rate=0.0, burst=1, speed=5.0, spread=0.0,
+                                                                lifetime=0.5, on_death=world.sparks))
+    runner = scene(build, (16, 16))
+    runner.frame(1.0 / 60.0)
+    clouds = runner.engine.stages["particles"].clouds
+    world = runner.world
+    rocket, sparks = clouds[world.rocket][0], clouds[world.sparks][0]
+    for _ in range(40):
+        before = rocket.position.copy()
+        runner.frame(1.0 / 60.0)
+        if sparks.count:
+            break
+    assert rocket.count == 0 and sparks.count == 20
+    # Born where the rocket was when it died (the last place it stood: its step's start).
+    np.testing.assert_allclose(sparks.position, np.repeat(before, 20, axis=0), atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(sparks.velocity, axis=1), 2.0, rtol=1e-6)
+    assert (sparks.age == 0.0).all() and before[0, 1] > 2.0
+    world.get(world.rocket, ParticleEmitter).on_death = 9999
+    world.get(world.rocket, ParticleEmitter).playing = False
+    runner.frame(1.0 / 60.0)
+    world.get(world.rocket, ParticleEmitter).playing = True  # another rocket
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(40):
+            runner.frame(1.0 / 60.0)
+    said = [w for w in caught if issubclass(w.category, ParticleLimitWarning) and "names entity 9999" in str(w.message)]
+    assert len(said) == 1
+
+
+def test_a_level_file_names_a_sub_emitter_by_its_entitys_name(tmp_path):
+    import textwrap
+
+    from engine.assets.level_file import LevelError, load_level, save_level
+    from engine.core.world import World
+
+    text = textwrap.dedent("""
+        [level]
+        name = "fireworks"
+
+        [[entity]]
+        name = "rocket"
+        [entity.Transform]
+        [entity.ParticleEmitter]
+        rate = 0.5
+        on_death = "burst"
+
+        [[entity]]
+        name = "burst"
+        [entity.Transform]
+        [entity.ParticleEmitter]
+        rate = 0.0
+        burst = 40
+        playing = false
+        """)
+    path = tmp_path / "fireworks.toml"
+    path.write_text(text)
+    world = World("fireworks")
+    names = load_level(path).spawn(world)
+    assert world.get(names["rocket"], ParticleEmitter).on_death == names["burst"]
+    saved = save_level(world, tmp_path / "saved.toml", names, name="fireworks")
+    assert 'on_death = "burst"' in saved.read_text()
+    path.write_text(text.replace('on_death = "burst"', 'on_death = "nobody"'))
+    with pytest.raises(LevelError, match="nobody"):
+        load_level(path)

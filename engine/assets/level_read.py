@@ -68,7 +68,7 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "Transform", "Traveller", "Vignette", "Visibility", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel")
 # Fields holding another entity: a name in the file, an id in the world.
-REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner")}
+REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner"), ("ParticleEmitter", "on_death")}
 # Fields holding a file's path: relative to the level's folder in the file, absolute in the world.
 FILE_FIELDS = {("Model", "file")}
 MAX_LEVEL_BYTES = 4 << 20  # a level file's size (the shipped ones are a few KB)

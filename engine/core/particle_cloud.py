@@ -24,6 +24,8 @@ from pyglm import glm
 
 from components.particles import ParticleEmitter
 
+_NONE = np.zeros((0, 3))  # no particle died
+
 # An open portal as the step's crossing test reads it: its world plane (4,), world -> its local
 # space (4, 4), half its rectangle (2,), the pair transform (4, 4) and its rotation (3, 3), as
 # numpy arrays of engine/rules/portal_gates.PortalGate's (the particles stage makes them).
@@ -55,6 +57,7 @@ class ParticleCloud:
         self.last_origin: glm.mat4 | None = None  # the emitter's matrix at the last step
         self.was_playing = False
         self._mesh = None      # the entity's mesh this step (shape "mesh")
+        self.died = _NONE      # where the last step's dead died (world): a sub-emitter's bursts are born there
         self._surface = None   # (mesh, its triangles' corners, their normals, their areas' running shares)
 
     @property
@@ -73,10 +76,16 @@ class ParticleCloud:
         self.last_origin = glm.mat4(matrix)
         self.capacity = emitter.max_particles
         self.capped = 0
+        self.died = _NONE
         if dt > 0.0 and self.count:
             self.age += dt
             alive = self.age < self.life
             if not alive.all():
+                dead = self.position[~alive]
+                if local:  # (where they died in the world: a sub-emitter's bursts are born there)
+                    m = np.array(matrix)
+                    dead = dead @ m[:3, :3].T + m[:3, 3]
+                self.died = dead
                 self._keep(alive)
             gravity = np.array(emitter.gravity, dtype=np.float64)
             if local and gravity.any():  # (the pull is the world's: into the emitter's frame)
@@ -135,6 +144,19 @@ class ParticleCloud:
             self.velocity[which] = v + gravity * dt
         self.position[which] = self.position[which] + moved
 
+    def burst_at(self, emitter: ParticleEmitter, points: np.ndarray, matrix: glm.mat4) -> None:
+        """``emitter``'s ``burst`` born at each of ``points`` (world) now, by its shape, cone
+        and speeds as at its own place (a sub-emitter's: ``ParticleEmitter.on_death``); its
+        entity's model-to-world matrix is ``matrix``.  Past its room, counted as capped."""
+        if not len(points) or not emitter.burst:
+            return
+        origins = np.repeat(np.asarray(points, np.float64), emitter.burst, axis=0)
+        room = max(self.capacity - self.count, 0)
+        self.capped += max(len(origins) - room, 0)
+        origins = origins[:room]
+        if len(origins):
+            self._spawn(emitter, np.zeros(len(origins)), matrix, matrix, 0.0, emitter.space == "local", origins)
+
     def _through(self, before: np.ndarray, gates: Sequence[Gate]) -> None:
         """Carry each particle whose step from ``before`` went into a portal (from its front
         to its back, meeting its plane inside its rectangle) to the partner: its position and
@@ -175,10 +197,10 @@ class ParticleCloud:
         self.velocity[which, 1] = vy
 
     def _spawn(self, emitter: ParticleEmitter, age: np.ndarray, matrix: glm.mat4, previous: glm.mat4, dt: float,
-               local: bool) -> None:
+               local: bool, origins: np.ndarray | None = None) -> None:
         """New particles of ``emitter``, one an ``age`` (how long before the frame's end it
         was born), each at the emitter's place at its birth and moved on for the rest of the
-        frame."""
+        frame; ``origins`` (world, one a particle): born about those instead (``burst_at``)."""
         n = len(age)
         if n <= 0:
             return
@@ -194,7 +216,17 @@ class ParticleCloud:
         lo, hi = emitter.speed
         speed = lo + (hi - lo) * rng.random(n)
         velocity = heading * speed[:, None]
-        if local:
+        if origins is not None:  # about given world points: the shape turned as the emitter is
+            m = np.array(matrix)
+            if local:
+                inverse = np.linalg.inv(m)
+                position = start + (origins @ inverse[:3, :3].T + inverse[:3, 3])
+            else:
+                position = start @ m[:3, :3].T + origins
+                along = velocity @ m[:3, :3].T
+                norms = np.linalg.norm(heading @ m[:3, :3].T, axis=1)[:, None]
+                velocity = along / np.maximum(norms, 1e-30)
+        elif local:
             position = start
         else:
             # Into the world, each from where the emitter was at its moment (its place on the
