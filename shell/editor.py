@@ -27,7 +27,17 @@ import numpy as np
 import tomllib
 from pyglm import glm
 
-from components import Camera, ComponentValueError, FromModel, Material, MeshRef, Model, Portal, Transform
+from components import (
+    Camera,
+    ComponentValueError,
+    FromModel,
+    Material,
+    MeshRef,
+    Model,
+    ParticleEmitter,
+    Portal,
+    Transform,
+)
 from components.rendering import MATERIAL_IMAGES, automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_model, level_texture, user_asset_roots
 from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
@@ -223,15 +233,16 @@ class Editor:
     def reference_choices(self, entity: int, component: str | type, field: str,
                           limit: int = MAX_LISTED) -> tuple[list[tuple[int | None, str]], bool]:
         """What a field naming another entity (``REFERENCE_FIELDS``: a Transform's parent, a
-        Portal's partner) may name, for the inspector's choice: none, then the other entities
-        holding what it names (a Transform; a Portal) by ``label``, at most ``limit``; and
+        Portal's partner, a ParticleEmitter's sub-emitter) may name, for the inspector's choice:
+        none, then the other entities holding what it names (a Transform; a Portal; a
+        ParticleEmitter) by ``label``, at most ``limit``; and
         whether there were more.  The component's own checks still judge the choice (a
         parent that descends from the entity is a cycle, refused)."""
         name = component if isinstance(component, str) else component.__name__
         if (name, field) not in REFERENCE_FIELDS:
             raise EditError(f"{name}.{field} does not name an entity")
         by_id = {e: n for n, e in self.names.items()}
-        kind = Portal if name == "Portal" else Transform
+        kind = {"Portal": Portal, "ParticleEmitter": ParticleEmitter}.get(name, Transform)
         others = sorted(e for e, _ in self.world.query_one(kind) if e != entity)
         choices = [(None, "none"), *((e, self.label(e, by_id.get(e))) for e in others[:limit])]
         return choices, len(others) > limit

@@ -436,3 +436,19 @@ def test_a_level_file_names_a_sub_emitter_by_its_entitys_name(tmp_path):
     path.write_text(text.replace('on_death = "burst"', 'on_death = "nobody"'))
     with pytest.raises(LevelError, match="nobody"):
         load_level(path)
+
+
+def test_the_editor_offers_the_other_emitters_as_a_sub_emitter(scene):
+    from components import Transform
+    from shell.editor import Editor
+
+    def build(world):
+        world.a = world.spawn(Transform(), ParticleEmitter())
+        world.b = world.spawn(Transform(), ParticleEmitter(playing=False))
+        world.plain = world.spawn(Transform())
+    runner = scene(build, (16, 16))
+    editor = Editor(runner.world)
+    choices, more = editor.reference_choices(runner.world.a, "ParticleEmitter", "on_death")
+    assert [entity for entity, _ in choices] == [None, runner.world.b] and not more
+    editor.set_field(runner.world.a, "ParticleEmitter", "on_death", runner.world.b)
+    assert runner.world.get(runner.world.a, ParticleEmitter).on_death == runner.world.b
