@@ -11,7 +11,9 @@ draws on the calling thread at flushes) the GPU column is not a GPU's and is rep
 
 Scenes, each its own engine, their frames interleaved (frame i of every engine, then i + 1):
 the mirrors benchmark's ring (``benchmarks.mirrors.MirrorRing``) with 0, 8 and 16 mirrors
-(``--mirrors``), and the probes benchmark's dynamic probe (``ProbeRing``, six faces due a
+(``--mirrors``), the ring of 8 with sparks and lit soft smoke keeping ``SPARKS`` particles
+alive (``benchmarks.sparks.SparkRing``: the particles stage's CPU and the views' draws of them),
+and the probes benchmark's dynamic probe (``ProbeRing``, six faces due a
 frame, those no change reached kept; its capture path is fixed to ``six_pass``, since ``auto`` times its candidates with
 timer queries of its own, which cannot nest in these).  The engine has no timing code: the
 stages' ``process`` methods are wrapped on the instances for the run.
@@ -46,6 +48,7 @@ from collections.abc import Callable
 from benchmarks import add_size_argument, format_size
 from benchmarks.mirrors import DT, MirrorRing
 from benchmarks.probes import ProbeRing
+from benchmarks.sparks import SparkRing
 from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.render.gl_context import create_headless_context, prepare_context
@@ -53,12 +56,14 @@ from engine.render.targets import CaptureTarget
 from shell.app import Engine
 
 SIZE = (640, 360)
+SPARKS = 2000  # living particles in the sparks scene
 
 
 def scenes(mirror_counts: tuple[int, ...]) -> list[tuple[str, Callable[[], Game]]]:
     """(name, game factory) of every scene the suite times."""
     found = [(f"mirrors_{n}", lambda n=n: MirrorRing(n)) for n in mirror_counts]
-    return [*found, ("probe_dynamic", lambda: ProbeRing("every_frame"))]
+    return [*found, ("probe_dynamic", lambda: ProbeRing("every_frame")),
+            (f"sparks_8_{SPARKS}", lambda: SparkRing(8, SPARKS))]
 
 
 def rasteriser_clocks(prefix: str = "llvmpipe-") -> list[int]:

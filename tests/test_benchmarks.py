@@ -275,7 +275,8 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     assert {t["value"] for t in report["medians"]["mirrors"]} == {"frame_ms_median", "cpu_ms_median",
                                                                   "plan_us_per_view"}
     stage_rows = runs["stages"]["160x90"]["rows"]
-    assert {r["scene"] for r in stage_rows} == {"mirrors_0", "mirrors_8", "mirrors_16", "probe_dynamic"}
+    assert {r["scene"] for r in stage_rows} == {"mirrors_0", "mirrors_8", "mirrors_16", "probe_dynamic",
+                                                 "sparks_8_2000"}
     lighting = runs["lighting"]["160x90"]["rows"]
     from benchmarks.lighting import STAND_IN_VARIANTS, VARIANTS
     frame_rows = [r for r in lighting if "variant" in r]
@@ -515,7 +516,7 @@ def test_stages_time_every_stage_inside_its_frame(ctx):
 
     rows = stages.run(ctx, (0, 16), frames=3, warmup=1, size=(64, 36), clock=time.thread_time)
     scenes = {r["scene"] for r in rows}
-    assert scenes == {"mirrors_0", "mirrors_16", "probe_dynamic"}
+    assert scenes == {"mirrors_0", "mirrors_16", "probe_dynamic", f"sparks_8_{stages.SPARKS}"}
     for scene in scenes:
         by_stage = {r["stage"]: r for r in rows if r["scene"] == scene}
         assert set(by_stage) == {*(name for name, _ in FRAME_STAGES), "frame"}, scene
@@ -528,6 +529,8 @@ def test_stages_time_every_stage_inside_its_frame(ctx):
     assert reflect["mirrors_16"] > 5 * reflect["mirrors_0"]
     probes = {r["scene"]: r["cpu_ms_median"] for r in rows if r["stage"] == "probes"}
     assert probes["probe_dynamic"] > probes["mirrors_0"]
+    particles = {r["scene"]: r["cpu_ms_median"] for r in rows if r["stage"] == "particles"}
+    assert particles[f"sparks_8_{stages.SPARKS}"] > particles["mirrors_0"]
     # The rasteriser's CPU time: llvmpipe's threads, where it has any (None elsewhere); the
     # stages' shares are parts of the frame's, which has some (its shadow maps, its views).
     if stages.rasteriser_clocks():
