@@ -6,7 +6,6 @@ camera's, each mirror's and portal's) draws them in among its glass
 (``engine/render/particle_draw.py``)."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -290,8 +289,3 @@ class ParticleEmitter(TrackedComponent):
     def frames(self) -> int:
         """The flipbook's frames (``sheet``'s columns x rows)."""
         return self.sheet[0] * self.sheet[1]
-
-
-def cone_cosine(spread_degrees: float) -> float:
-    """The cosine of the spread cone's half-angle (-1 at 180: every way)."""
-    return math.cos(math.radians(spread_degrees))
