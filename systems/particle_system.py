@@ -6,10 +6,14 @@ fixed handful of numpy calls a step whatever the count), stepped by the frame's 
 entity's world matrix (identity without a Transform); its drawn rows go to the scene pass's
 ``ParticleDraw`` (``engine/render/particle_draw.py``), which every view then draws in among its
 glass.  A cloud is made when its emitter comes (or its ``seed`` changes: the same seed makes
-the same cloud) and dropped with its GPU buffer when the emitter or its entity goes.  The
-living particles and those the emitters' ``max_particles`` kept from being born are counted
-in ``RenderStats``; an emitter that starts being capped is named in a
-``ParticleLimitWarning``.
+the same cloud; ``prewarm`` steps it a lifetime first) and dropped with its GPU buffer when the
+emitter or its entity goes.  A frame: every cloud stepped (a world-space one through the open
+portals, ``engine/rules/portal_gates.py``; a burst for each of its ``burst_on`` events this
+frame's models stage fired), then each sub-emitter's bursts where another's particles died
+(``on_death``), then the rows.  The living particles and those the emitters'
+``max_particles`` kept from being born are counted in ``RenderStats``; an emitter that starts
+being capped, a "mesh" emitter that lost its MeshRef and an ``on_death`` that names no
+emitter are each said once in a ``ParticleLimitWarning``.
 """
 from __future__ import annotations
 
