@@ -12,18 +12,18 @@ is cut at the mirror's plane as any geometry is.  Blending is premultiplied (the
 state, in any order among each other; an "alpha" emitter's own particles are drawn farthest
 first in each view (its rows sorted by distance from the view's ``sorting_eye`` and written
 again before its draw, only those that can reach the view: ``in_view``, so a mirror that sees
-part of a cloud draws that part), an "additive" one's as they are (a sum has no order); emitters are
-drawn farthest first by the middles of their boxes (two clouds that mix are sorted as wholes),
-and among the view's glass batches by the same measure (``ScenePass``: an emitter goes in
-before the first glass batch whose middle is nearer).  They test the
-view's depth and write none, and write only the colour image: a particle is no entity, so the
+part of a cloud draws that part), an "additive" one's as they are (a sum has no order);
+emitters are drawn farthest first by the middles of their boxes (two clouds that mix are
+sorted as wholes), and among the view's glass batches by the same measure (``ScenePass``: an
+emitter goes in before the first glass batch whose middle is nearer).  They test the view's
+depth and write none, and write only the colour image: a particle is no entity, so the
 surface and seen ids (what the claims, the outline and picking read) keep what is behind it.
 An emitter whose box (its particles' centres, grown by the largest half-diagonal) cannot reach
 a view (``batch_cull.batch_reach``), or whose ``Visibility`` hides it there, draws nothing there.
 
 Limits: particles beyond a see-through surface (water, a see-through mirror or portal) blend
-after it, over its reflection; a probe's capture leaves them out (``ParticleEmitter``'s docstring says why); a lit
-particle's light is its centre's (the sun's and lamps' shadows, the light from all round at
+after it, over its reflection; a probe's capture leaves them out (``ParticleEmitter``'s
+docstring says why); a lit particle's light is its centre's (the sun's and lamps' shadows, the light from all round at
 that point), and light through mirrors and portals (virtual lights) does not light it.
 """
 from __future__ import annotations
@@ -145,7 +145,7 @@ class ParticleDraw:
         if len(rows):
             record.buffer.write(rows.tobytes())
             # (its square's half-diagonal, and a streak's whole length behind it)
-            reach = float(rows[:, ROW_SIZE].max()) * math.sqrt(2.0) + float(
+            reach = float(rows[:, ROW_SIZE].max()) * (0.5 * math.sqrt(2.0)) + float(
                 np.sqrt(np.square(rows[:, ROW_STREAK]).sum(axis=1).max()))
             centres = rows[:, ROW_POSITION]
             record.row_boxes = np.array([[centres.min(axis=0) - reach, centres.max(axis=0) + reach]])
