@@ -37,9 +37,9 @@ MAX_PARTICLE_SPIN = 1.0e5      # degrees a second
 MAX_PARTICLE_DRAG = 1.0e3      # per second
 MAX_PARTICLE_GRAVITY = 1.0e4   # metres a second squared, a component
 MAX_PARTICLE_STRETCH = 100.0   # seconds of flight a streak is long
-MAX_PREWARM_SECONDS = 10.0      # the most time a prewarm runs (ParticleEmitter.prewarm)
-MAX_PARTICLE_KEYS = 16            # keys of a colour or size curve over a particle's life
-MAX_PARTICLE_SOFTNESS = 1000.0  # metres over which a soft particle fades into what is behind it
+MAX_PREWARM_SECONDS = 10.0     # the most time a prewarm runs (ParticleEmitter.prewarm)
+MAX_PARTICLE_KEYS = 16         # keys of a colour or size curve over a particle's life
+MAX_PARTICLE_SOFTNESS = 1e3    # metres over which a soft particle fades into what is behind it
 
 
 @dataclass(eq=False)
@@ -67,17 +67,16 @@ class ParticleEmitter(TrackedComponent):
       exp(-drag dt)); a "world" space particle that flies into an open portal comes out of
       its partner, carried as a traveller is; ``ground`` (a world height; None: none) is a
       floor they bounce off, keeping ``bounce`` of their speed into it (0: they stop on it
-      and slide).  ``space``
-      "world": a particle stays where it was born when the emitter moves (smoke from a
-      torch); "local": the whole cloud moves with it (a jet's glow).
+      and slide).  ``space`` "world": a particle stays where it was born when the emitter
+      moves (smoke from a torch); "local": the whole cloud moves with it (a jet's glow).
     - **Life.**  Each lives between ``lifetime``'s two seconds; its size goes from
       ``size[0]`` to ``size[1]`` metres across and its colour from ``color`` to
       ``end_color`` (None: ``color`` at alpha 0, so it fades out) over its life; or, given,
       along ``size_keys`` ((life share, metres), ...) and ``color_keys`` ((life share, r, g,
       b, a), ...): a curve through the keys, straight between them, held before the first and
-      after the last (fire: yellow, orange, red, then smoke grey).  It starts
-      turned between ``angle``'s two degrees about the view's axis (a sprite that must stay
-      upright: ``(0, 0)``) and spins at between ``spin``'s two degrees a second.
+      after the last (fire: yellow, orange, red, then smoke grey).  It starts turned
+      between ``angle``'s two degrees about the view's axis (a sprite that must stay upright:
+      ``(0, 0)``) and spins at between ``spin``'s two degrees a second.
     - **Look.**  ``texture`` its sprite (its alpha its shape; None: a round soft spot),
       ``sheet`` (columns, rows) a flipbook on it played once over a particle's life, left to
       right, top row first.  ``blend`` "additive": its light adds to what is behind (sparks,
@@ -103,8 +102,8 @@ class ParticleEmitter(TrackedComponent):
       for no births of its own).  An entity with no ParticleEmitter is said once and left
       alone.
 
-    A particle is not an entity: it casts no shadow, is not picked or cut by a portal, and a
-    reflection probe's capture leaves particles out (a probe is redrawn on its own schedule,
+    A particle is not an entity: it casts no shadow, is not picked, is not sliced where it
+    straddles a portal's plane, and a reflection probe's capture leaves particles out (a probe is redrawn on its own schedule,
     so its faces would hold a still frame of them).
     """
 
