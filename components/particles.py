@@ -103,8 +103,8 @@ class ParticleEmitter(TrackedComponent):
       alone.
 
     A particle is not an entity: it casts no shadow, is not picked, is not sliced where it
-    straddles a portal's plane, and a reflection probe's capture leaves particles out (a probe is redrawn on its own schedule,
-    so its faces would hold a still frame of them).
+    straddles a portal's plane, and a reflection probe's capture leaves particles out (a
+    probe is redrawn on its own schedule, so its faces would hold a still frame of them).
     """
 
     rate: float = 20.0
