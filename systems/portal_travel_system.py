@@ -38,8 +38,6 @@ the very next frame.  Each frame's crossings are published as ``world.resources[
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
-
 import esper
 from pyglm import glm
 
@@ -95,7 +93,7 @@ class PortalTravelSystem(esper.Processor):
             movers[entity] = (transform, world.get(entity, Camera))
             start.setdefault(entity, glm.vec3(transform.position))
 
-        gates = self._gates(rules.open_portals)
+        gates = portal_gates(self.world, rules.open_portals)
         last, exited = self._last, self._exited
         self._last, self._exited = {}, {}
         for entity, (transform, cam) in movers.items():
@@ -115,11 +113,6 @@ class PortalTravelSystem(esper.Processor):
             return output.size[0] / output.size[1]
         return self.aspect
 
-    # --- portals -----------------------------------------------------------------------------
-    def _gates(self, open_portals: Mapping[int, int]) -> list[PortalGate]:
-        """A gate for each open pair (entry portal -> the partner it looks out of)."""
-        return portal_gates(self.world, open_portals)
-
     # --- crossing tests ------------------------------------------------------------------------
     def _crossed(self, gates: list[PortalGate], before: glm.vec3, transform: Transform, cam: Camera | None,
                  skip: int | None) -> PortalGate | None:
@@ -136,7 +129,7 @@ class PortalTravelSystem(esper.Processor):
                 continue  # came from behind (or walks behind it): no travel
             if d1 < 0.0:
                 t = d0 / (d0 - d1)
-                if self._inside(gate, glm.mix(before, now, t), 0.0):
+                if gate.inside(glm.mix(before, now, t)):
                     key = (t, 0.0)
                 else:
                     continue
@@ -152,10 +145,6 @@ class PortalTravelSystem(esper.Processor):
             if best is None or key < best[:2]:
                 best = (*key, gate)
         return best[2] if best is not None else None
-
-    @staticmethod
-    def _inside(gate: PortalGate, point: glm.vec3, margin: float) -> bool:
-        return gate.inside(point, margin)
 
     def _tip_touches(self, gate: PortalGate, tip: list[glm.vec3], touch: float) -> bool:
         """Whether the frustum tip reaches within ``touch`` of the portal plane inside its

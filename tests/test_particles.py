@@ -714,3 +714,27 @@ def test_culling_an_alpha_clouds_particles_per_view_changes_no_pixel(scene, monk
     monkeypatch.setattr(particle_draw, "in_view", lambda rows, view: np.ones(len(rows), bool))
     _, whole = render(scene, build)
     np.testing.assert_array_equal(culled, whole)
+
+
+def test_a_still_alpha_cloud_is_not_sorted_and_written_again_for_the_same_view(scene, monkeypatch):
+    """Paused (dt 0) and seen by the same one view, an alpha emitter's buffer already holds its
+    rows in that view's order: no cull, sort or write again; moving on, it is done again."""
+    import engine.render.particle_draw as particle_draw
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.spawn(Transform(), ParticleEmitter(rate=300.0, speed=0.5, spread=60.0, blend="alpha", size=0.3))
+    calls = []
+    real = particle_draw.in_view
+    monkeypatch.setattr(particle_draw, "in_view", lambda rows, view: calls.append(1) or real(rows, view))
+    runner = scene(build, SIZE)
+    for _ in range(4):
+        runner.frame(1.0 / 60.0)
+    moving = len(calls)
+    assert moving == 4  # (one view: once a frame while it moves)
+    paused = runner.frame(0.0), runner.frame(0.0)
+    assert len(calls) == moving  # the rows and the view the buffer was sorted for, both unchanged
+    np.testing.assert_array_equal(paused[0], paused[1])
+    runner.frame(1.0 / 60.0)
+    assert len(calls) == moving + 1

@@ -97,6 +97,7 @@ class GpuEmitter:
     count: int = 1  # boxes (batch_cull reads an emitter as a batch of one box)
     uploaded: bool = False  # its rows are in its buffer
     softness: float = 0.0
+    written: tuple | None = None  # (rows, Camera block, count) an alpha emitter's buffer holds, sorted for that view
 
     @property
     def particles(self) -> int:
@@ -142,6 +143,7 @@ class ParticleDraw:
             record.buffer.release()
             record.buffer = self.ctx.buffer(reserve=_grown(len(rows)) * ROW_BYTES)
             self._drop_arrays(record)
+        record.written = None
         if len(rows):
             record.buffer.write(rows.tobytes())
             # (its square's half-diagonal, and a streak's whole length behind it)
@@ -226,11 +228,14 @@ class ParticleDraw:
         "additive" one's as uploaded."""
         count = record.particles
         if record.blend == "alpha" and count > 1:
-            rows = record.rows[in_view(record.rows, view)]
-            eye = np.array(view.sorting_eye, dtype=np.float32)
-            far = np.square(rows[:, ROW_POSITION] - eye).sum(axis=1)
-            record.buffer.write(rows[np.argsort(-far, kind="stable")].tobytes())
-            count = len(rows)
+            written = (record.rows, view.camera_block())  # (a still frame's one view: the buffer holds it)
+            if record.written is None or record.written[0] is not written[0] or record.written[1] != written[1]:
+                rows = record.rows[in_view(record.rows, view)]
+                eye = np.array(view.sorting_eye, dtype=np.float32)
+                far = np.square(rows[:, ROW_POSITION] - eye).sum(axis=1)
+                record.buffer.write(rows[np.argsort(-far, kind="stable")].tobytes())
+                record.written = (*written, len(rows))
+            count = record.written[2]
             if not count:
                 return
         vao = self._vertex_array(record, masked, ambient_probes)
