@@ -1,6 +1,7 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
 from components.ambient import AmbientOcclusion, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
+from components.decal import Decal, FromDecal
 from components.detail import LevelOfDetail
 from components.fog import Fog
 from components.mirror import Mirror
@@ -21,9 +22,9 @@ from components.water import Water
 __all__ = [
     "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
     "ComponentValueError",
-    "ComponentWarning",
-    "DirectionalLight", "Emissive", "FlyController", "Fog", "FromModel", "HemisphereLight", "LevelOfDetail",
-    "Material",
+    "ComponentWarning", "Decal",
+    "DirectionalLight", "Emissive", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
+    "LevelOfDetail", "Material",
     "MeshRef", "Mirror", "Model", "Morph", "ParticleEmitter", "PointLight", "Portal", "PortalClone", "ReflectionProbe",
     "Reflective",
     "Refractive",

@@ -54,6 +54,7 @@ from systems import (
     ReflectionSystem,
     TransformSystem,
 )
+from systems.decal_system import DecalSystem
 from systems.detail_system import DetailSystem
 from systems.frame_rules_system import FrameRulesSystem
 from systems.model_system import ModelSystem
@@ -155,6 +156,8 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("transform", lambda e: TransformSystem(e.world)),
     ("surfaces", lambda e: SurfaceSystem(e.world)),
     ("detail", lambda e: DetailSystem(e.world)),  # each LevelOfDetail's mesh by its distance from the eyes
+    # each Decal's surfaces cut into its mesh (a new part's Transform worked out at once: settle)
+    ("decals", lambda e: DecalSystem(e.world, LateTransformSystem(e.world, e.stages["transform"]).process)),
     ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
     ("particles", lambda e: ParticleSystem(e.world, e.renderer)),  # every emitter's particles stepped and uploaded
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),

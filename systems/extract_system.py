@@ -19,6 +19,7 @@ from pyglm import glm
 
 from components import (
     Emissive,
+    FromDecal,
     Material,
     MeshRef,
     Mirror,
@@ -148,8 +149,10 @@ class ExtractSystem(esper.Processor):
         # A material whose alpha is below 1 is see-through: blended in the transparent slot
         # (glass, whose alpha weighs the refracted view, stays opaque).
         # A cutout (Material.alpha_cutoff) is opaque where it is drawn at all.
+        # A decal's cut mesh (FromDecal) blends whatever its alpha: its image's alpha is its shape.
         refractive = world.try_get(entity, Refractive)
-        transparent = material is not None and material.color.w < 1.0 and material.alpha_cutoff is None \
+        decal = world.has(entity, FromDecal)
+        transparent = material is not None and (material.color.w < 1.0 or decal) and material.alpha_cutoff is None \
             and refractive is None
         # A generated shape is drawn as its unit mesh, its size in its row; not a mirror's or a
         # portal's, whose batch of surfaces alone the unlit-mirror pass keeps (unlit_mirrors).
@@ -174,7 +177,7 @@ class ExtractSystem(esper.Processor):
                                             double_sided=material.double_sided if material else False,
                                             keeps_specular=material is not None and material.blend == "transparent",
                                             unlit=material is not None and material.unlit,
-                                            posed=posed, second_uv_maps=second_uv_mask(material),
+                                            posed=posed, second_uv_maps=second_uv_mask(material), decal=decal,
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}: {exc}") from None

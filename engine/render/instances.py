@@ -237,6 +237,7 @@ class BatchKey(NamedTuple):
     second_uv_maps: int = 0
     # Material.diffuse_transmission_color and diffuse_transmission (None: none)
     diffuse_transmission: tuple[float, float, float, float] | None = None
+    decal: bool = False  # a decal's cut mesh (FromDecal): drawn pulled towards the eye by a depth offset
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -344,6 +345,7 @@ class InstanceBatch:
         # packed occlusion-roughness-metallic texture): no map, nor sampler, of its own.
         self.occlusion_packed = False
         self.double_sided = False  # Material.double_sided: its draws turn face culling off
+        self.decal = False  # a decal's cut mesh (BatchKey.decal): its draws offset their depth towards the eye
         # The maps that read its mesh's second UV set (BatchKey.second_uv_maps): its SECOND_UV_MAPS builds' bits.
         self.second_uv_maps = 0
         # A clear-coated material's coat (Material.clearcoat, clearcoat_roughness; None:

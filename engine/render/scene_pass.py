@@ -121,6 +121,10 @@ _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # is undefined (llvmpipe reads 0 and keeps the pixel; a GPU may clip the sky away), so its
 # pass turns none on.  It needs none: the sky lies on the far plane, behind any view's plane.
 _SKY = PassState(depth_func="<=")
+# A decal's cut mesh lies on the surface it was cut from, computed through another matrix:
+# glPolygonOffset's (slope factor, units of depth resolution) pulls it towards the eye so the
+# depth test ("<") keeps it over that surface at any angle and distance, and nothing else.
+DECAL_DEPTH_OFFSET = (-1.0, -4.0)
 _ALBEDO_KEY = (ALBEDO_UNIT, moderngl.Texture)  # the albedo unit's 2D binding in the texture record
 _LAYERED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 _LAYERED_SKY = PassState(depth_func="<=")
@@ -251,6 +255,8 @@ class ScenePass:
                 last_own[glo] = own
             if before_draw is not None:
                 before_draw()
+            if batch.decal:  # a decal's cut mesh, on the surface it was cut from: its depth offset to win
+                ctx.polygon_offset = DECAL_DEPTH_OFFSET
             if batch.double_sided:  # both faces (Material.double_sided): culling off for its draw
                 culled = set_face_culling(ctx, False)
                 vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
@@ -264,6 +270,8 @@ class ScenePass:
                 set_front_face(ctx, restore)
             else:
                 vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
+            if batch.decal:
+                ctx.polygon_offset = (0.0, 0.0)
             draws += 1
             instances += count
         if draws:
