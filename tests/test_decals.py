@@ -1,0 +1,318 @@
+"""Decals drawn (``Decal``; ``systems/decal_system.py``): a decal on a wall against a second
+path (a quad of the same look laid on the wall: the same pixels, lit alike), its image the
+right way up, in a mirror's view as a quad there is, over a wall seen far off and at a
+grazing angle, cut again when a surface moves into its box (and not when decal and wall
+move together), a surface on another layer, turned away, or a mirror left bare, its
+Visibility honoured, emission, and its part and GPU mesh gone with it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    Skybox,
+    Transform,
+    Visibility,
+    look_rotation,
+)
+from components.decal import Decal, FromDecal
+from engine.assets.mesh import box, quad
+from engine.assets.texture_data import TextureData
+from tests.support import look_from
+
+SIZE = (96, 72)
+GREY = (0.5, 0.5, 0.5, 1.0)
+LOOK = (0.8, 0.25, 0.1, 0.7)
+
+
+def lit(world) -> None:
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(-0.3, -0.4, -1.0), intensity=2.0))
+
+
+def wall(world, position=(0.0, 0.0, 0.0), size=4.0) -> int:
+    """A grey wall facing +z."""
+    return world.spawn(Transform(position=glm.vec3(position)), MeshRef(quad(size, size)), Material(color=GREY))
+
+
+def render(scene, build, frames: int = 2, size=SIZE):
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    for _ in range(frames):
+        image = runner.frame()
+    return runner, image.astype(np.int64)
+
+
+def decals(runner):
+    return runner.engine.stages["decals"]
+
+
+def test_a_decal_on_a_wall_is_the_pixels_a_quad_of_its_look_laid_there_draws(scene):
+    def build(kind):
+        def make(world):
+            look_from(world, (0.4, 0.3, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+            lit(world)
+            wall(world)
+            if kind == "decal":
+                world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(color=LOOK))
+            elif kind == "quad":  # the second path: the same look on a quad just in front
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, 1e-3)), MeshRef(quad(1.0, 1.0)), Material(color=LOOK))
+        return make
+
+    runner, with_decal = render(scene, build("decal"))
+    _, with_quad = render(scene, build("quad"))
+    _, bare = render(scene, build("none"))
+    x0, y0 = runner.project((-0.4, 0.4, 0.0))
+    x1, y1 = runner.project((0.4, -0.4, 0.0))
+    inside = (slice(y0, y1), slice(x0, x1))
+    assert np.abs(with_decal[inside] - with_quad[inside]).max() <= 2
+    assert np.abs(with_decal[inside] - bare[inside]).min() > 20  # it is there: not the bare wall
+    outside = np.ones(with_decal.shape[:2], bool)
+    ox0, oy0 = runner.project((-0.55, 0.55, 0.0))
+    ox1, oy1 = runner.project((0.55, -0.55, 0.0))
+    outside[oy0:oy1, ox0:ox1] = False
+    assert np.abs(with_decal[outside] - bare[outside]).max() <= 1  # nothing beyond its box
+    part = [e for e, _ in runner.world.query_one(FromDecal)]
+    assert len(part) == 1 and runner.world.get(part[0], MeshRef).casts_shadows is False
+
+
+def corners_texture() -> TextureData:
+    """2 x 2: red top left, green top right, blue bottom left, white bottom right (row 0 at the top)."""
+    pixels = np.array([[[255, 0, 0, 255], [0, 255, 0, 255]], [[0, 0, 255, 255], [255, 255, 255, 255]]], np.uint8)
+    return TextureData(np.repeat(np.repeat(pixels, 8, axis=0), 8, axis=1), name="corners")
+
+
+@pytest.mark.parametrize("where", ["wall", "floor"])
+def test_the_image_is_the_right_way_up_seen_from_where_it_is_thrown(scene, where):
+    def build(world):
+        lit(world)
+        if where == "wall":
+            look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+            wall(world)
+            world.spawn(Transform(scale=glm.vec3(1.2, 1.2, 0.5)), Decal(texture=corners_texture()))
+        else:  # a floor decal looking down, its up (+y) towards -z: seen from above with -z up the screen
+            look_from(world, (0.0, 3.0, 0.01), target=(0.0, 0.0, 0.0), fov=40.0)
+            world.spawn(Transform(rotation=glm.angleAxis(glm.radians(-90.0), glm.vec3(1, 0, 0))),
+                        MeshRef(quad(4.0, 4.0)), Material(color=GREY))
+            world.spawn(Transform(rotation=look_rotation(glm.vec3(0, -1, 0), glm.vec3(0, 0, -1)),
+                                  scale=glm.vec3(1.2, 1.2, 0.5)), Decal(texture=corners_texture()))
+
+    runner, image = render(scene, build)
+    if where == "wall":
+        points = {"red": (-0.3, 0.3, 0.0), "green": (0.3, 0.3, 0.0), "blue": (-0.3, -0.3, 0.0), "white": (0.3, -0.3, 0.0)}
+    else:
+        points = {"red": (-0.3, 0.0, -0.3), "green": (0.3, 0.0, -0.3), "blue": (-0.3, 0.0, 0.3), "white": (0.3, 0.0, 0.3)}
+    for name, point in points.items():
+        x, y = runner.project(point)
+        r, g, b = image[y, x]
+        if name == "red":
+            assert r > 2 * g and r > 2 * b, (name, image[y, x])
+        elif name == "green":
+            assert g > 2 * r and g > 2 * b, (name, image[y, x])
+        elif name == "blue":
+            assert b > 2 * r and b > 2 * g, (name, image[y, x])
+        else:
+            assert min(r, g, b) > 0.7 * max(r, g, b), (name, image[y, x])
+
+
+def mirror_scene(kind: str, hidden: bool = False):
+    """The camera looks into a mirror that faces the wall with the decal (or a quad of its look)."""
+    def make(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 2.0), target=(0.0, 0.0, 5.0), fov=40.0)  # facing away from the wall
+        wall(world)
+        world.spawn(Transform(position=glm.vec3(0.0, 0.0, 5.0), rotation=look_rotation(glm.vec3(0, 0, 1))),
+                    MeshRef(quad(4.0, 4.0)), Mirror())  # (its face, +z, turned to -z: towards the wall)
+        shown = [Visibility(in_mirrors=False)] if hidden else []
+        if kind == "decal":
+            world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(color=LOOK), *shown)
+        elif kind == "quad":
+            world.spawn(Transform(position=glm.vec3(0.0, 0.0, 1e-3)), MeshRef(quad(1.0, 1.0)), Material(color=LOOK),
+                        *shown)
+    return make
+
+
+def test_a_mirror_shows_the_decal_as_it_shows_a_quad_of_its_look(scene):
+    runner, with_decal = render(scene, mirror_scene("decal"))
+    _, with_quad = render(scene, mirror_scene("quad"))
+    _, bare = render(scene, mirror_scene("none"))
+    differs = np.abs(with_quad - bare).sum(axis=2) > 30  # where the quad shows in the mirror
+    assert differs.sum() > 100
+    assert np.abs(with_decal - with_quad).max() <= 3
+
+
+def test_a_decal_hidden_in_mirrors_is_not_in_the_mirror(scene):
+    runner, hidden = render(scene, mirror_scene("decal", hidden=True))
+    _, bare = render(scene, mirror_scene("none"))
+    assert np.abs(hidden - bare).max() <= 1
+    part = [e for e, _ in runner.world.query_one(FromDecal)][0]
+    assert runner.world.get(part, Visibility).in_mirrors is False
+
+
+@pytest.mark.parametrize("eye", [(0.0, 0.0, 40.0), (6.0, 0.0, 1.2)])
+def test_the_decal_wins_over_its_wall_far_off_and_at_a_grazing_angle(scene, eye):
+    """Every pixel inside the decal's square shows it (the depth offset), not the wall under it."""
+    colour = (0.0, 0.9, 0.0, 1.0)
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, eye, target=(0.0, 0.0, 0.0), fov=8.0 if eye[2] > 10 else 40.0)
+        world.spawn(Transform(), MeshRef(quad(4.0, 4.0)), Material(color=(0.9, 0.0, 0.0, 1.0), unlit=True))
+        world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(color=colour))
+
+    runner, image = render(scene, build, size=(128, 96))
+    xs, ys = zip(*(runner.project(p) for p in [(-0.45, 0.45, 0), (0.45, 0.45, 0), (-0.45, -0.45, 0),
+                                                (0.45, -0.45, 0)]), strict=True)
+    window = image[min(ys) + 1:max(ys) - 1, min(xs) + 1:max(xs) - 1]
+    assert window.size > 0
+    red = window[..., 0] > window[..., 1]
+    assert red.sum() == 0, f"{red.sum()} of {red.size} pixels show the wall through the decal"
+
+
+def floor_world(world, crate_x: float):
+    """A floor, a crate and a decal over the middle of the floor looking down."""
+    lit(world)
+    look_from(world, (0.0, 4.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+    world.spawn(Transform(rotation=glm.angleAxis(glm.radians(-90.0), glm.vec3(1, 0, 0))), MeshRef(quad(8.0, 8.0)),
+                Material(color=GREY))
+    crate = world.spawn(Transform(position=glm.vec3(crate_x, 0.25, 0.0)), MeshRef(box((0.5, 0.5, 0.5))),
+                        Material(color=GREY))
+    decal = world.spawn(Transform(rotation=look_rotation(glm.vec3(0, -1, 0), glm.vec3(0, 0, -1)),
+                                  scale=glm.vec3(1.5, 1.5, 1.4)), Decal(color=(0.9, 0.0, 0.0, 1.0)))
+    return crate, decal
+
+
+def test_a_surface_moving_into_the_box_is_cut_again_and_painted(scene):
+    made = {}
+
+    def build(world):
+        made["crate"], made["decal"] = floor_world(world, crate_x=3.0)
+
+    runner, _ = render(scene, build)
+    stage = decals(runner)
+    state = stage.states[made["decal"]]
+    assert made["crate"] not in state.poses
+    cuts = stage.cuts
+    x, y = runner.project((0.0, 0.5, 0.0))  # where the crate's top will be
+    runner.world.get(made["crate"], Transform).position = glm.vec3(0.0, 0.25, 0.0)
+    image = runner.frame().astype(np.int64)
+    assert stage.cuts == cuts + 1 and made["crate"] in state.poses
+    r, g, b = image[y, x]
+    assert r > 3 * g, image[y, x]  # the crate's top is painted
+    # Its sides, turned 90 degrees from the decal (past the angle fade's end), are not.
+    part = [e for e, c in runner.world.query_one(FromDecal) if c.decal == made["decal"]][0]
+    mesh = runner.world.get(part, MeshRef).mesh
+    world_normals = mesh.normals @ np.array(glm.mat3(runner.world.get(part, Transform).world), np.float64).T
+    up = world_normals[:, 1] / np.linalg.norm(world_normals, axis=1)
+    assert up.min() >= np.cos(np.radians(80.0)) - 1e-6
+    # And moving out again takes it away.
+    runner.world.get(made["crate"], Transform).position = glm.vec3(3.0, 0.25, 0.0)
+    runner.frame()
+    assert made["crate"] not in state.poses and stage.cuts == cuts + 2
+
+
+def test_a_decal_moved_with_its_wall_is_not_cut_again_and_follows_it(scene):
+    made = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=50.0)
+        made["mover"] = mover = world.spawn(Transform())
+        world.spawn(Transform(parent=mover), MeshRef(quad(2.0, 2.0)), Material(color=GREY))
+        world.spawn(Transform(parent=mover, scale=glm.vec3(0.6, 0.6, 0.4)), Decal(color=(0.0, 0.0, 0.9, 1.0)))
+
+    runner, _ = render(scene, build)
+    stage = decals(runner)
+    cuts = stage.cuts
+    runner.world.get(made["mover"], Transform).position = glm.vec3(0.8, 0.3, 0.0)
+    image = runner.frame().astype(np.int64)
+    assert stage.cuts == cuts
+    x, y = runner.project((0.8, 0.3, 0.0))
+    r, g, b = image[y, x]
+    assert b > 3 * r and b > 3 * g, image[y, x]
+    x, y = runner.project((0.0, 0.0, 0.0))  # where it was: the wall now (grey)
+    r, g, b = image[y, x]
+    assert b < 1.3 * r, image[y, x]
+
+
+def test_surfaces_on_other_layers_and_mirrors_take_no_decal(scene):
+    made = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=50.0)
+        made["wall"] = wall(world)
+        made["other"] = world.spawn(Transform(position=glm.vec3(0.0, 0.0, 0.1)), MeshRef(quad(0.3, 0.3)),
+                                    Material(color=GREY), Visibility(layers=[1]))
+        made["mirror"] = world.spawn(Transform(position=glm.vec3(0.5, 0.0, 0.05)), MeshRef(quad(0.3, 0.3)), Mirror())
+        made["decal"] = world.spawn(Transform(scale=glm.vec3(1.5, 1.5, 0.5)), Decal(layers=[0]))
+
+    runner, _ = render(scene, build)
+    assert set(decals(runner).states[made["decal"]].poses) == {made["wall"]}
+    decal = runner.world.get(made["decal"], Decal)
+    decal.layers = None  # every layer: the other one too, the mirror still not
+    runner.frame()
+    assert set(decals(runner).states[made["decal"]].poses) == {made["wall"], made["other"]}
+
+
+def test_emission_makes_a_decal_glow_as_an_emissive_quad_does(scene):
+    def build(kind):
+        def make(world):
+            world.spawn(Skybox(zenith=(0, 0, 0, 1), horizon=(0, 0, 0, 1), ground=(0, 0, 0, 1)))
+            look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+            wall(world)
+            if kind == "decal":
+                world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(color=(0.6, 0.3, 0.1, 1.0), emissive=2.0))
+            else:
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, 1e-3)), MeshRef(quad(1.0, 1.0)),
+                            Material(color=(0.6, 0.3, 0.1, 1.0)), Emissive(2.0))
+        return make
+
+    runner, with_decal = render(scene, build("decal"))
+    _, with_quad = render(scene, build("quad"))
+    x, y = runner.project((0.0, 0.0, 0.0))
+    assert with_decal[y, x].max() > 100
+    assert np.abs(with_decal[y - 5:y + 5, x - 5:x + 5] - with_quad[y - 5:y + 5, x - 5:x + 5]).max() <= 2
+
+
+def test_its_part_and_gpu_mesh_go_with_the_decal_and_with_what_it_lay_on(scene):
+    made = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        made["wall"] = wall(world)
+
+    def held(runner):  # GL objects by kind, less the program builds (a cache, kept for the next decal)
+        counts = runner.engine.renderer.resource_counts()
+        counts.pop("programs")
+        return counts
+
+    runner, _ = render(scene, build)
+    before = held(runner)
+    world = runner.world
+    decal = world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(color=LOOK))
+    runner.frame()
+    assert len(world.query_one(FromDecal)) == 1
+    assert runner.engine.renderer.resource_counts()["meshes"] == before["meshes"] + 1
+    world.delete_entity(decal)
+    runner.frame()
+    assert world.query_one(FromDecal) == [] and held(runner) == before
+    # Its component removed, likewise; and the wall going leaves a decal nothing to lie on.
+    decal = world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(color=LOOK))
+    runner.frame()
+    world.remove_component(decal, Decal)
+    runner.frame()
+    assert world.query_one(FromDecal) == [] and held(runner) == before
+    world.add_component(decal, Decal(color=LOOK))
+    runner.frame()
+    assert len(world.query_one(FromDecal)) == 1
+    world.delete_entity(made["wall"])
+    runner.frame()
+    assert world.query_one(FromDecal) == [] and decals(runner).states[decal].part is None
