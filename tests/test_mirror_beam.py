@@ -268,7 +268,7 @@ def test_frame_0_shows_the_beam(run):
     r = run(path, size=(320, 180))
     names = [name for name, _ in r.engine.schedule]
     assert names[names.index("surfaces"):names.index("extract") + 1] == ["surfaces", "beam", "transform_late",
-                                                                         "detail", "extract"]
+                                                                         "detail", "decals", "extract"]
     first = r.frame()
     assert r.world.frame_index == 1 and r.state.frame == 1
     beam = r.state.path
