@@ -316,3 +316,71 @@ def test_its_part_and_gpu_mesh_go_with_the_decal_and_with_what_it_lay_on(scene):
     world.delete_entity(made["wall"])
     runner.frame()
     assert world.query_one(FromDecal) == [] and decals(runner).states[decal].part is None
+
+
+LEVEL = """
+[level]
+name = "stained"
+
+[[entity]]
+name = "camera"
+[entity.Transform]
+position = [0.0, 3.0, 0.01]
+rotation = { pitch = -89.0 }
+[entity.Camera]
+
+[[entity]]
+name = "sky"
+[entity.Skybox]
+
+[[entity]]
+name = "floor"
+[entity.Transform]
+rotation = { pitch = -90.0 }
+[entity.MeshRef]
+mesh = { quad = [4.0, 4.0] }
+[entity.Material]
+color = [0.5, 0.5, 0.5, 1.0]
+
+[[entity]]
+name = "stain"
+[entity.Transform]
+position = [0.3, 0.0, 0.2]
+rotation = { pitch = -90.0 }
+scale = [1.6, 1.6, 0.4]
+[entity.Decal]
+texture = { puff = [64, 3] }
+color = [0.05, 0.03, 0.02, 0.9]
+region = [0.0, 0.0, 1.0, 1.0]
+angle_fade = [50.0, 70.0]
+layers = [0]
+"""
+
+
+def test_a_decal_loads_saves_without_its_part_and_loads_again_to_the_same_picture(tmp_path, scene):
+    from engine.assets.level_file import LevelError, load_level, save_level
+
+    path = tmp_path / "stained.toml"
+    path.write_text(LEVEL)
+    made = {}
+
+    def build(level_path):
+        def make(world):
+            made.update(load_level(level_path).spawn(world))
+        return make
+
+    runner, first = render(scene, build(path))
+    decal = runner.world.get(made["stain"], Decal)
+    assert decal.angle_fade == (50.0, 70.0) and decal.layers == (0,) and decal.texture is not None
+    assert len(runner.world.query_one(FromDecal)) == 1
+    saved = save_level(runner.world, tmp_path / "saved.toml", made, name="stained")
+    text = saved.read_text()
+    assert text.count("[[entity]]") == 4 and "FromDecal" not in text and "[entity.Decal]" in text
+    _, again = render(scene, build(saved))
+    assert np.abs(again - first).max() == 0
+    x, y = runner.project((0.3, 0.0, 0.2))  # the stain's middle darkens the floor there
+    bx, by = runner.project((-1.0, 0.0, -0.9))  # bare floor
+    assert first[y, x].sum() < 0.75 * first[by, bx].sum(), (first[y, x], first[by, bx])
+    path.write_text(LEVEL.replace("angle_fade = [50.0, 70.0]", "angle_fade = [70.0, 50.0]"))
+    with pytest.raises(LevelError, match=r"stained\.toml:\d+: entity 'stain': Decal\.angle_fade.*end >= start"):
+        load_level(path)

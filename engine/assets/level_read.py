@@ -54,19 +54,19 @@ except ImportError:  # Python 3.10
     import tomli as tomllib
 
 # The engine's components a level file may hold, by table name. PortalClone and Slice are
-# made by the slice stage each frame, FromModel on the parts a Model makes (derived state),
-# never written by hand.
+# made by the slice stage each frame, FromModel on the parts a Model makes, FromDecal on a
+# decal's cut mesh (derived state), never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
-        "DirectionalLight",
+        "Decal", "DirectionalLight",
         "Emissive", "FlyController", "Fog", "HemisphereLight", "LevelOfDetail", "Material", "MeshRef",
         "Mirror", "Model", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
         "Skybox", "Tonemap",
         "Transform", "Traveller", "Vignette", "Visibility", "Water")}
-DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel")
+DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel", "FromDecal")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner"), ("ParticleEmitter", "on_death")}
 # Fields holding a file's path: relative to the level's folder in the file, absolute in the world.
@@ -439,7 +439,7 @@ def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dic
 
 
 _MATERIAL_MAPS = {("Material", name) for name in ("normal_map", "emissive_map", "metallic_roughness_map",
-                                                  "occlusion_map")}
+                                                  "occlusion_map")} | {("Decal", "normal_map")}
 _LINEAR_MAPS = ("normal_map", "metallic_roughness_map", "occlusion_map")  # data, not colour: 16 bits kept
 
 

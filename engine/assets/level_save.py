@@ -91,10 +91,10 @@ def _world_tables(world: World, path: Path, names: Mapping[str, int] | None,
     holds it (``name`` and one dict of written fields per component), by id in id order."""
     known = {**ENGINE_COMPONENTS, **(extra_components or {})}
     by_id = {entity: n for n, entity in (names or {}).items()}
-    # A portal's clone and a model's parts are made again from what the file holds (the
-    # portal, the Model on the parts' root): neither is written.
+    # A portal's clone, a model's parts and a decal's cut mesh are made again from what the
+    # file holds (the portal, the Model on the parts' root, the Decal): none is written.
     made_again = {e for e in world.entities()
-                  if any(type(c).__name__ in ("PortalClone", "FromModel") for c in world.components_of(e))}
+                  if any(type(c).__name__ in ("PortalClone", "FromModel", "FromDecal") for c in world.components_of(e))}
     entities = [e for e in sorted(world.entities()) if e not in made_again]
     for entity in entities:
         by_id.setdefault(entity, f"entity_{entity}")
