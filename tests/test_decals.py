@@ -104,10 +104,9 @@ def test_the_image_is_the_right_way_up_seen_from_where_it_is_thrown(scene, where
                                   scale=glm.vec3(1.2, 1.2, 0.5)), Decal(texture=corners_texture()))
 
     runner, image = render(scene, build)
-    if where == "wall":
-        points = {"red": (-0.3, 0.3, 0.0), "green": (0.3, 0.3, 0.0), "blue": (-0.3, -0.3, 0.0), "white": (0.3, -0.3, 0.0)}
-    else:
-        points = {"red": (-0.3, 0.0, -0.3), "green": (0.3, 0.0, -0.3), "blue": (-0.3, 0.0, 0.3), "white": (0.3, 0.0, 0.3)}
+    # Each quarter's middle: on the wall (x, y), on the floor (x, -z) as the screen shows them.
+    corners = {"red": (-0.3, 0.3), "green": (0.3, 0.3), "blue": (-0.3, -0.3), "white": (0.3, -0.3)}
+    points = {name: (x, y, 0.0) if where == "wall" else (x, 0.0, -y) for name, (x, y) in corners.items()}
     for name, point in points.items():
         x, y = runner.project(point)
         r, g, b = image[y, x]
