@@ -30,6 +30,7 @@ from pyglm import glm
 from components import (
     Camera,
     ComponentValueError,
+    FromDecal,
     FromModel,
     Material,
     MeshRef,
@@ -59,7 +60,8 @@ SAME_ANGLES_DEGREES = 0.01  # a rotation within this of the angles last shown sh
 TEXTURE_FIELDS = MATERIAL_IMAGES  # Material's images
 # Every image field, (component, field): typed as a level file's texture table names it.
 IMAGE_FIELDS = frozenset({("Material", name) for name in TEXTURE_FIELDS} | {("PointLight", "cookie"),
-                                                                    ("ParticleEmitter", "texture")})
+                                                                    ("ParticleEmitter", "texture"),
+                                                                    ("Decal", "texture"), ("Decal", "normal_map")})
 
 # Fields whose None means "the engine decides" (what it decides: ``Editor.automatic``).  The
 # inspector shows such a field as automatic with a button that pins the value in use now, and
@@ -74,6 +76,8 @@ AUTOMATIC_FIELDS: dict[tuple[str, str], str] = {
 # switches it on at the value given here, and a set one with a button that switches it off.
 OFF_FIELDS: dict[tuple[str, str], tuple[Any, str]] = {
     ("Material", "alpha_cutoff"): (0.5, "a cutout: nothing is drawn where the alpha is below it"),
+    ("Decal", "alpha_cutoff"): (0.5, "a hard edge: solid where the image's alpha reaches it, nothing below"),
+    ("Decal", "layers"): ((0,), "only surfaces on these reflection layers take it (off: every surface)"),
 }
 
 
@@ -192,6 +196,9 @@ class Editor:
         # A model's part is the file's: the click selects the model (its root), what a level
         # file holds and a designer moves, as Unity's and Godot's editors pick a placed scene.
         self.selected = part.model if part is not None and self.world.exists(part.model) else picked
+        cut = self.world.try_get(picked, FromDecal) if picked is not None and self.world.exists(picked) else None
+        if cut is not None and self.world.exists(cut.decal):  # a decal's cut mesh: the decal
+            self.selected = cut.decal
         self.message = None
         return self.selected
 
@@ -222,6 +229,8 @@ class Editor:
         by_id = {e: n for n, e in self.names.items()}
         found: list[tuple[int, str]] = []
         for entity in self.world.entities():
+            if self.world.has(entity, FromDecal):  # a decal's cut mesh: the engine's, made again with each cut
+                continue
             label = self.label(entity, by_id.get(entity))
             if needle and needle not in label.lower():
                 continue
@@ -308,7 +317,7 @@ class Editor:
         """Write ``value`` into a field as code would (``setattr``): the component's checks
         and the world's invariants refuse a bad value with their own ComponentValueError,
         and nothing changes. ``merge``: part of a drag (one undo step for the whole drag)."""
-        self._refuse_model_part(entity)
+        self._refuse_made_again(entity)
         target = self.component(entity, component)
         if type(target).__name__ == "Model" and field == "variant" and value and isinstance(value, str) \
                 and target.file and value not in self.model_variants(entity):
@@ -529,7 +538,7 @@ class Editor:
             raise EditError(f"no component {name!r} to add (components: {', '.join(sorted(self.components))})")
         if not self.world.exists(entity):
             raise EditError(f"entity {entity} does not exist")
-        self._refuse_model_part(entity)
+        self._refuse_made_again(entity)
         if self.world.has(entity, cls):
             raise EditError(f"{self.name_of(entity)} already has a {name}")
         if name == "MeshRef" and "mesh" not in fields:
@@ -554,7 +563,7 @@ class Editor:
 
     def remove_component(self, entity: int, name: str) -> Any:
         """Take the entity's component of class ``name`` away (undo gives the same one back)."""
-        self._refuse_model_part(entity)
+        self._refuse_made_again(entity)
         component = self.component(entity, name)
         self._refuse_if_needed(entity, type(component).__name__)
         try:
@@ -582,7 +591,7 @@ class Editor:
     def duplicate(self, entity: int) -> int:
         """A copy of ``entity`` where it stands (each component made again from its fields;
         a portal's copy has no partner: a pair is two portals), named ``<name>_copy``, selected."""
-        self._refuse_model_part(entity)
+        self._refuse_made_again(entity)
         made = []
         for cls_name, component in self.components_of(entity):
             fields = {f: _copy(value) for f, value in self.fields(component)}
@@ -598,11 +607,12 @@ class Editor:
         name = self.name_of(entity)
         if not self.world.exists(entity):
             raise EditError(f"entity {entity} does not exist")
-        self._refuse_model_part(entity)
+        self._refuse_made_again(entity)
         self._refuse_if_needed(entity, None)
         # (a model's parts go with its root: the models stage deletes them)
         children = [self.name_of(e) for e, t in self.world.query_one(Transform) if t.parent == entity and e != entity
-                    and getattr(self.world.try_get(e, FromModel), "model", None) != entity]
+                    and getattr(self.world.try_get(e, FromModel), "model", None) != entity
+                    and getattr(self.world.try_get(e, FromDecal), "decal", None) != entity]  # (the decals stage's)
         if children:
             self.message = f"{name} is the parent of {', '.join(children)}: delete them or clear their parent first"
             raise EditError(self.message)
@@ -614,15 +624,20 @@ class Editor:
         self._remove(edit)
         self._push(edit)
 
-    def _refuse_model_part(self, entity: int) -> None:
-        """An EditError for an edit of a model's part: it is made from the model's file each
-        time the level loads, so a level file could keep no edit of it (edit the file, or the
-        model's own entity: its place, its Model)."""
+    def _refuse_made_again(self, entity: int) -> None:
+        """An EditError for an edit of a model's part (it is made from the model's file each
+        time the level loads, so a level file could keep no edit of it: edit the file, or the
+        model's own entity, its place, its Model) or of a decal's cut mesh (its decal's)."""
         part = self.world.try_get(entity, FromModel) if self.world.exists(entity) else None
         if part is not None:
             self.message = (f"{self.name_of(entity)} is a part of the model {self.name_of(part.model)}, made from its "
                             "file each time the level loads: edit the model's entity (its Transform, its Model) or "
                             "the file")
+            raise EditError(self.message)
+        cut = self.world.try_get(entity, FromDecal) if self.world.exists(entity) else None
+        if cut is not None:
+            self.message = (f"{self.name_of(entity)} is the cut mesh of the decal {self.name_of(cut.decal)}, made "
+                            "again each time the decal or what it lies on changes: edit the decal")
             raise EditError(self.message)
 
     def _refuse_if_needed(self, entity: int, component: str | None) -> None:

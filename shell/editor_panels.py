@@ -475,9 +475,9 @@ class EditorPanels:
                 draw.add_circle_filled(end, r, colour)
 
     def _markers(self, engine: Engine, selected: int | None) -> None:
-        """A marker where each light and probe with no mesh stands (``markers``: a light a
-        yellow dot, a probe a cyan ring, the selected one ringed in white): what a click
-        there selects (``click``)."""
+        """A marker where each light, probe, emitter and decal with no mesh stands (``markers``:
+        a light a yellow dot, a probe a cyan ring, an emitter an orange diamond, a decal a violet
+        square, the selected one ringed in white): what a click there selects (``click``)."""
         view = engine.main_view
         size = self.io.display_size
         self.markers = markers(engine.world, view.view_proj, (size.x, size.y)) if view is not None else []
@@ -486,6 +486,7 @@ class EditorPanels:
         light = imgui.get_color_u32(imgui.ImVec4(1.0, 0.85, 0.3, 0.9))
         probe = imgui.get_color_u32(imgui.ImVec4(0.3, 0.9, 1.0, 0.9))
         emitter = imgui.get_color_u32(imgui.ImVec4(1.0, 0.45, 0.1, 0.9))
+        decal = imgui.get_color_u32(imgui.ImVec4(0.85, 0.4, 1.0, 0.9))
         white = imgui.get_color_u32(imgui.ImVec4(1.0, 1.0, 1.0, 1.0))
         for marker in self.markers:
             at = imgui.ImVec2(*marker.at)
@@ -494,6 +495,8 @@ class EditorPanels:
             elif marker.kind == "emitter":  # an orange diamond
                 draw.add_quad_filled(imgui.ImVec2(at.x, at.y - r), imgui.ImVec2(at.x + r, at.y),
                                      imgui.ImVec2(at.x, at.y + r), imgui.ImVec2(at.x - r, at.y), emitter)
+            elif marker.kind == "decal":  # a violet square
+                draw.add_rect_filled(imgui.ImVec2(at.x - r, at.y - r), imgui.ImVec2(at.x + r, at.y + r), decal)
             else:
                 draw.add_circle(at, r, probe, 0, 2.0 * self.scale)
             if marker.entity == selected:

@@ -1,8 +1,9 @@
 """The level editor's handles and framing, as geometry (GL-free): where an entity's move,
 turn and scale handles stand on the main view's screen (``transform_handles``), which of them
 the mouse is on, what a drag along or round one asks for (``Handles.distance``,
-``Handles.sweep``), what a selected light or probe reaches (``reach_outline``), the markers
-of the lights and probes that have no mesh to click (``markers``, ``marker_at``), and where
+``Handles.sweep``), what a selected light, probe, emitter or decal reaches (``reach_outline``),
+the markers of the lights, probes, emitters and decals that have no mesh to click (``markers``,
+``marker_at``), and where
 a camera stands to frame an entity (``framing_eye``).  The overlay (``shell/overlay.py``)
 draws them and drags them; the edits they make are the editor's (``Editor.move``,
 ``Editor.turn``, ``Editor.rescale``: ``shell/editor.py``).
@@ -15,7 +16,7 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import DirectionalLight, MeshRef, ParticleEmitter, PointLight, ReflectionProbe, Transform
+from components import Decal, DirectionalLight, MeshRef, ParticleEmitter, PointLight, ReflectionProbe, Transform
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.probe_rules import world_bounds
@@ -150,8 +151,8 @@ class ReachOutline:
 
 def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> ReachOutline | None:
     """``entity``'s ``ReachOutline`` in the view ``view_proj`` on an output of ``size``: its
-    sun's arrow, its point light's reach, its particle emitter's launch cone, else its probe's
-    influence box; None when it has
+    sun's arrow, its point light's reach, its particle emitter's launch cone, its decal's box
+    (and the way it throws), else its probe's influence box; None when it has
     none of them (or no Transform, but for a sun; or a probe serving only its own entity).
     A polyline with a point behind the eye is left out (the rest still show)."""
     transform = world.try_get(entity, Transform)
@@ -166,6 +167,8 @@ def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[in
         worlds = _light_reach(light, current_world_matrix(world, transform))
     elif (emitter := world.try_get(entity, ParticleEmitter)) is not None:
         worlds = _emitter_reach(emitter, current_world_matrix(world, transform))
+    elif world.has(entity, Decal):
+        worlds = _decal_box(current_world_matrix(world, transform))
     else:
         probe = world.try_get(entity, ReflectionProbe)
         if probe is None or probe.influence is None:
@@ -224,6 +227,15 @@ def _influence_box(centre: glm.vec3, influence: glm.vec3, blend: float) -> list[
     return edges
 
 
+def _decal_box(matrix: glm.mat4) -> list[tuple[glm.vec3, ...]]:
+    """A decal's box (its Transform's unit cube: the twelve edges) and an arrow from the middle
+    of its image's face the way it is thrown (-z), as polylines."""
+    corners = [glm.vec3(matrix * glm.vec4(x, y, z, 1.0)) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]
+    edges = [(corners[a], corners[a | bit]) for a in range(8) for bit in (1, 2, 4) if not a & bit]
+    start, tip = glm.vec3(matrix * glm.vec4(0.0, 0.0, 0.5, 1.0)), glm.vec3(matrix * glm.vec4(0.0, 0.0, -0.5, 1.0))
+    return [*edges, (start, tip)]
+
+
 def _light_reach(light: PointLight, matrix: glm.mat4) -> list[tuple[glm.vec3, ...]]:
     """A point light's cone (a spot) or range sphere, as polylines."""
     forward = -glm.vec3(matrix[2])
@@ -270,7 +282,7 @@ MARKER_REACH = 10.0   # pixels (at scale 1) from a marker that a click selects i
 @dataclasses.dataclass(frozen=True)
 class Marker:
     """An entity with no mesh to click (a lamp, a spot, a probe) drawn as a marker where it
-    stands: ``kind`` "light", "probe" or "emitter", ``at`` its place on screen (output pixels from the
+    stands: ``kind`` "light", "probe", "emitter" or "decal", ``at`` its place on screen (output pixels from the
     top left)."""
 
     entity: int
@@ -280,11 +292,13 @@ class Marker:
 
 def markers(world: World, view_proj: glm.mat4, size: tuple[int, int]) -> list[Marker]:
     """The markers in view (in front of the eye, inside the output): each entity with a
-    Transform and a point light, a reflection probe or a particle emitter but no visible mesh,
-    which the id images cannot pick (an entity with a mesh is picked where it shows; particles
-    write no id)."""
+    Transform and a point light, a reflection probe, a particle emitter or a decal but no
+    visible mesh, which the id images cannot pick (an entity with a mesh is picked where it
+    shows; particles write no id; a decal's cut mesh is picked as the decal, but it may cut
+    nothing)."""
     found = []
-    for kind, component in (("light", PointLight), ("probe", ReflectionProbe), ("emitter", ParticleEmitter)):
+    for kind, component in (("light", PointLight), ("probe", ReflectionProbe), ("emitter", ParticleEmitter),
+                            ("decal", Decal)):
         for entity, _ in world.query_one(component):
             transform, mesh_ref = world.try_get(entity, Transform), world.try_get(entity, MeshRef)
             if transform is None or (mesh_ref is not None and mesh_ref.visible):

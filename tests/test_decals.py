@@ -383,3 +383,50 @@ def test_a_decal_loads_saves_without_its_part_and_loads_again_to_the_same_pictur
     path.write_text(LEVEL.replace("angle_fade = [50.0, 70.0]", "angle_fade = [70.0, 50.0]"))
     with pytest.raises(LevelError, match=r"stained\.toml:\d+: entity 'stain': Decal\.angle_fade.*end >= start"):
         load_level(path)
+
+
+def test_the_editor_picks_the_decal_refuses_edits_of_its_cut_and_outlines_its_box(scene):
+    """A click on a decal's pixels selects the decal (its cut mesh is the engine's); the cut
+    is not in the entity list and refuses edits; deleting the decal is not refused for that
+    child and takes the cut with it; the decal's outline is its box's twelve edges and the way
+    it throws; its layers switch on at [0] and off again."""
+    from shell.editor import EditError, Editor
+    from shell.handles import reach_outline
+
+    made = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        made["wall"] = wall(world)
+        made["decal"] = world.spawn(Transform(position=glm.vec3(0.2, 0.1, 0.0), scale=glm.vec3(1.0, 0.8, 0.5)),
+                                    Decal(color=LOOK))
+
+    runner, _ = render(scene, build)
+    world = runner.world
+    editor = Editor(world, names={"wall": made["wall"], "stain": made["decal"]})
+    part = [e for e, _ in world.query_one(FromDecal)][0]
+    x, y = runner.project((0.2, 0.1, 0.0))
+    ids = runner.ids()
+    assert ids[y, x] == part  # the cut's own id is drawn there ...
+    assert editor.pick(ids, None, x, y) == made["decal"]  # ... and the click selects the decal
+    bx, by = runner.project((-0.8, -0.7, 0.0))
+    assert editor.pick(ids, None, bx, by) == made["wall"]
+    assert part not in [e for e, _ in editor.listed()[0]]
+    with pytest.raises(EditError, match="cut mesh of the decal stain"):
+        editor.set_field(part, "Material", "roughness", 0.9)
+    matrix = world.get(made["decal"], Transform).world
+    outline = reach_outline(world, made["decal"], runner.engine.main_view.view_proj, SIZE)
+    corners = {tuple(round(c, 5) for c in glm.vec3(matrix * glm.vec4(sx, sy, sz, 1.0)))
+               for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)}
+    edges = outline.world[:12]
+    assert {tuple(round(c, 5) for c in p) for edge in edges for p in edge} == corners
+    assert sorted(round(glm.length(a - b), 4) for a, b in edges) == [0.5] * 4 + [0.8] * 4 + [1.0] * 4
+    start, tip = outline.world[12]
+    assert tuple(tip) == pytest.approx((0.2, 0.1, -0.25)) and tuple(start) == pytest.approx((0.2, 0.1, 0.25))
+    assert editor.switched_on(made["decal"], "Decal", "layers") == (0,)
+    editor.set_field(made["decal"], "Decal", "layers", (0,))
+    assert world.get(made["decal"], Decal).layers == (0,)
+    editor.delete(made["decal"])
+    runner.frame()
+    assert not world.exists(part) and world.query_one(FromDecal) == []

@@ -1125,11 +1125,11 @@ def test_a_selected_spot_light_shows_its_cone(scene, ctx):
 
 
 def test_a_light_or_probe_without_a_mesh_is_a_marker_a_click_selects(scene, ctx):
-    """A spot light, a probe and a particle emitter with no mesh (no pixel in the id images)
-    are drawn as markers where the test projects them, a yellow dot, a cyan ring and an orange
-    diamond; a click on a marker selects
+    """A spot light, a probe, a particle emitter and a decal with no mesh (no pixel in the id
+    images) are drawn as markers where the test projects them, a yellow dot, a cyan ring, an
+    orange diamond and a violet square; a click on a marker selects
     its entity, and a click away from it picks the world as before (the red box)."""
-    from components import ParticleEmitter, PointLight, ReflectionProbe
+    from components import Decal, ParticleEmitter, PointLight, ReflectionProbe
     from shell.handles import screen_point
 
     ents = {}
@@ -1141,16 +1141,19 @@ def test_a_light_or_probe_without_a_mesh_is_a_marker_a_click_selects(scene, ctx)
         ents["probe"] = world.spawn(Transform(position=(1.6, 0.6, 2.0)), ReflectionProbe(resolution=16))
         ents["emitter"] = world.spawn(Transform(position=(2.0, 1.4, 2.0)),
                                       ParticleEmitter(rate=0.0, burst=0, color=(0.0, 0.0, 0.0, 1.0)))
+        ents["decal"] = world.spawn(Transform(position=(2.6, 1.0, 2.4), scale=(0.2, 0.2, 0.2)), Decal())
 
     size = (1280, 720)
     with _overlay_over(scene, ctx, build, size) as (runner, overlay, _):
         view = runner.engine.main_view
         kinds = {m.entity: m.kind for m in overlay.markers}
-        assert kinds == {ents["spot"]: "light", ents["probe"]: "probe", ents["emitter"]: "emitter"}
+        assert kinds == {ents["spot"]: "light", ents["probe"]: "probe", ents["emitter"]: "emitter",
+                         ents["decal"]: "decal"}
         frame = runner.capture.read_rgb()
         for name, want in (("spot", lambda p: p[0] > 200 and p[1] > 170 and p[2] < 150),
                            ("probe", lambda p: p[2] > 200 and p[1] > 180 and p[0] < 150),
-                           ("emitter", lambda p: p[0] > 200 and 60 < p[1] < 160 and p[2] < 80)):
+                           ("emitter", lambda p: p[0] > 200 and 60 < p[1] < 160 and p[2] < 80),
+                           ("decal", lambda p: p[0] > 180 and 60 < p[1] < 150 and p[2] > 200)):
             x, y = screen_point(view.view_proj, size, glm.vec3(runner.world.get(ents[name], Transform).position))
             assert x > 700, "clear of the overlay's window"
             patch = frame[int(y) - 6:int(y) + 7, int(x) - 6:int(x) + 7].reshape(-1, 3).astype(int)
