@@ -3,8 +3,9 @@ engine's GL resources and the world's entities must come back to where they star
 
 Each wave spawns ``--entities`` things in a ring around the camera, cycling through six
 kinds: a mirror (its own quad mesh), a portal pair, a chrome sphere (its own automatic
-probe), a box with its own new mesh, a box with its own new texture, and a particle
-emitter with its own sprite (its particles' buffer and the texture); renders
+probe), a box with its own new mesh, a box with its own new texture, a particle emitter
+with its own sprite (its particles' buffer and the texture), and a decal on the floor with
+its own image (its cut mesh on a part it makes, the texture); renders
 ``--frames`` frames (320 x 180, ``--size``), deletes every one of them, renders one more frame, and
 prints the renderer's live GL resources (``resource_counts``), the entity count and the
 resident memory.  The exit status is 1 when, after the last wave, a count is not back to
@@ -28,6 +29,7 @@ from benchmarks import add_size_argument
 from benchmarks.soak import resident_mib
 from components import (
     Camera,
+    Decal,
     DirectionalLight,
     Material,
     MeshRef,
@@ -62,7 +64,7 @@ class Arena(Game):
         world.spawn(Transform(), MeshRef(plane(40, 40)), Material(texture=checker_texture(64, 8, name="floor")))
 
 
-KINDS = 6  # mirror, portal pair, chrome sphere, own mesh, own texture, particle emitter (spawn_wave)
+KINDS = 7  # mirror, portal pair, chrome sphere, own mesh, own texture, particle emitter, decal (spawn_wave)
 
 
 def of_kind(kind: int, count: int) -> int:
@@ -95,10 +97,15 @@ def spawn_wave(world: World, count: int, wave: int) -> list[int]:
             pixels = np.full((8, 8, 4), (wave * 40 + i) % 256, np.uint8)
             made.append(world.spawn(Transform(position=at), MeshRef(box((0.5, 0.5, 0.5))),
                                     Material(texture=TextureData(pixels, name=f"texture {wave}.{i}"))))
-        else:
+        elif kind == 5:
             pixels = np.full((4, 4, 4), (wave * 40 + i) % 256, np.uint8)
             made.append(world.spawn(Transform(position=at), ParticleEmitter(
                 rate=60.0, size=0.2, texture=TextureData(pixels, name=f"sprite {wave}.{i}"))))
+        else:  # a decal on the floor with its own image (its cut mesh, its part, the texture)
+            pixels = np.full((4, 4, 4), (wave * 40 + i) % 256, np.uint8)
+            down = look_rotation((0, -1, 0), (0, 0, -1))
+            made.append(world.spawn(Transform(position=(at[0], 0.0, at[2]), rotation=down, scale=(1.0, 1.0, 0.5)),
+                                    Decal(texture=TextureData(pixels, name=f"decal {wave}.{i}"))))
     return made
 
 

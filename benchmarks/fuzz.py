@@ -55,6 +55,7 @@ from components import (
     Camera,
     ColorGrading,
     ComponentValueError,
+    Decal,
     DirectionalLight,
     Emissive,
     FlyController,
@@ -90,7 +91,7 @@ SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, Fog,
-                             AmbientOcclusion, ScreenReflections, Visibility, Water, ParticleEmitter)
+                             AmbientOcclusion, ScreenReflections, Visibility, Water, ParticleEmitter, Decal)
 
 @dataclasses.dataclass
 class Case:

@@ -192,6 +192,19 @@ mesh = { box = [0.5, 1.0, 0.5] }
 [entity.LevelOfDetail]
 meshes = [{ box = [0.5, 1.0, 0.5] }, { sphere = 0.4 }]
 distances = [4.0]
+
+[[entity]]
+name = "stain"
+[entity.Transform]
+position = [0.0, 0.0, 0.0]
+rotation = { pitch = -90.0 }
+scale = [2.0, 2.0, 1.0]
+[entity.Decal]
+texture = { checker = [8, 2] }
+color = [0.2, 0.1, 0.05, 0.8]
+region = [0.0, 0.0, 0.5, 0.5]
+angle_fade = [40.0, 70.0]
+layers = [0]
 """
 
 _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", "nan", "inf", "-inf",
@@ -206,10 +219,12 @@ _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", 
            "{ file = \"../outside/there.png\" }", "{ file = \"assets/loop.png\" }", "{ file = \"assets/fifo.obj\" }",
            "{ box = [-1.0, 1.0, 1.0] }", "{ plane = [1.0, 1.0], uv_repeat = \"x\" }", "{ checker = [2.5, 1] }"]
 _NAMES = ["Transform", "MeshRef", "Material", "Mirror", "Portal", "Camera", "Skybox", "Emissive", "Slice",
-          "PortalClone", "Nope", "transform", "ParticleEmitter", "LevelOfDetail", "AnimationEvents"]
+          "PortalClone", "Nope", "transform", "ParticleEmitter", "LevelOfDetail", "AnimationEvents", "Decal",
+          "FromDecal"]
 _FIELDS = ["position", "rotation", "scale", "parent", "partner", "color", "colour", "mesh", "texture", "size",
            "enabled", "mode", "resolution", "refresh", "fov_y", "near", "far", "power", "spot_angle", "spot_blend",
-           "bogus", "rate", "lifetime", "meshes", "distances", "sheet", "softness", "events"]
+           "bogus", "rate", "lifetime", "meshes", "distances", "sheet", "softness", "events", "region", "angle_fade",
+           "layers", "depth_fade"]
 
 
 CASE_SECONDS = 30.0  # a case still loading or rendering after this long has hung

@@ -1,6 +1,6 @@
 """Short soak and churn runs (the benchmarks ``soak`` and ``churn`` at small sizes): nothing
 the engine holds grows over a tour of the sample level, and everything made in waves of
-mirrors, portals, probes, meshes, textures and particle emitters goes back when they are deleted."""
+mirrors, portals, probes, meshes, textures, particle emitters and decals goes back when they are deleted."""
 from __future__ import annotations
 
 from benchmarks import churn, soak
@@ -16,9 +16,9 @@ def test_a_tour_of_the_sample_level_holds_its_resources_flat():
 def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
     rows = churn.run(entities=40, waves=2, frames=2)
     peak = rows[1]["peak_gl_resources"]
-    mirrors, spheres, boxes, textured, emitters = (churn.of_kind(kind, 40) for kind in (0, 2, 3, 4, 5))
-    assert peak["probe_cubes"] == spheres and peak["textures"] == 1 + textured + emitters
-    assert peak["meshes"] >= 1 + mirrors + boxes and peak["particle_buffers"] == emitters
+    mirrors, spheres, boxes, textured, emitters, decals = (churn.of_kind(kind, 40) for kind in (0, 2, 3, 4, 5, 6))
+    assert peak["probe_cubes"] == spheres and peak["textures"] == 1 + textured + emitters + decals
+    assert peak["meshes"] >= 1 + mirrors + boxes + decals and peak["particle_buffers"] == emitters
     assert churn.leftovers(rows, rss_slack=40.0) == []
     assert rows[-1]["gl_resources"]["batches"] == rows[0]["gl_resources"]["batches"]
 
