@@ -730,6 +730,10 @@ void main() {
 #endif
     s.albedo = base.rgb;
     s.alpha = base.a;
+    // Faded whole (the transparent slot's code 1) with no alpha left, nothing of it shows: it
+    // writes nothing either (its id would take a click through a clear part of its image:
+    // a decal's corners, a texture's holes), and costs no shading.
+    if (transparent == 1 && s.alpha < 0.5 / 255.0) discard;
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map

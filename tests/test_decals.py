@@ -464,3 +464,24 @@ def test_a_probe_captures_the_decal_as_it_captures_a_quad_of_its_look(scene):
         faces[kind] = runner.engine.renderer.probes.read_face(runner.world.probe, 5).astype(np.float64)  # -z
     assert np.abs(faces["quad"] - faces["none"]).max() > 0.1  # the look is on that face
     np.testing.assert_allclose(faces["decal"], faces["quad"], atol=0.01)
+
+
+def test_where_its_image_is_clear_a_decal_writes_no_id_and_a_click_goes_through(scene):
+    """A round image's clear corners leave the wall's id (a click there selects the wall);
+    its middle has the decal's cut's."""
+    from engine.assets.texture_data import puff_texture
+
+    made = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        made["wall"] = wall(world)
+        world.spawn(Transform(scale=glm.vec3(1.2, 1.2, 0.5)), Decal(texture=puff_texture(32, 1)))
+
+    runner, _ = render(scene, build)
+    part = [e for e, _ in runner.world.query_one(FromDecal)][0]
+    ids = runner.ids()
+    cx, cy = runner.project((0.0, 0.0, 0.0))
+    kx, ky = runner.project((0.55, 0.55, 0.0))  # inside the box, outside the puff's disc
+    assert ids[cy, cx] == part and ids[ky, kx] == made["wall"]

@@ -78,14 +78,14 @@ def test_added_and_removed_components_and_entities_are_their_tables_only(tmp_pat
     world, names, level = loaded(path, "edit_tables")
     world.remove_component(names["koi"], Spin)  # the last table of its entity
     world.add_component(names["lamp_post"], Visibility(in_mirrors=False))
-    world.delete_entity(names.pop("lamp_embers"))  # (the file's last entity)
+    world.delete_entity(names.pop("oil_stain"))  # (the file's last entity)
     extra = world.spawn(Material(roughness=0.25))
     names["new_one"] = extra
     save_level(world, path, names, extra_components=EXTRA, keep=path)
     text = path.read_text()
     removed = [line for line in diff(original, text) if line.startswith("-")]
     added = [line for line in diff(original, text) if line.startswith("+")]
-    last = original[original.index('name = "lamp_embers"'):].splitlines()
+    last = original[original.index('name = "oil_stain"'):].splitlines()
     assert removed == ["-[entity.Spin]", "-speed = 35.0"] + [f"-{line}" for line in last]
     assert added == ["+[entity.Visibility]", "+in_mirrors = false",
                      '+name = "new_one"', "+[entity.Material]", "+roughness = 0.25"]
