@@ -145,7 +145,8 @@ def make_scene(name: str, ctx):
     with a swaying camera, ``probe_none``, ``probe_dynamic``, ``glass_<panes>``: the 8-mirror ring
     with a see-through pond and that many panes, ``benchmarks.glass``; ``posed_<mirrors>_<n>``:
     the ring with n animated skinned and morphed meshes, ``benchmarks.posed``;
-    ``sparks_<mirrors>_<n>``: the ring with n living particles, ``benchmarks.sparks``; ``hall``:
+    ``sparks_<mirrors>_<n>``: the ring with n living particles, ``benchmarks.sparks``;
+    ``decals_<mirrors>_<n>``: the ring with n stains on its floor, ``benchmarks.decals``; ``hall``:
     the sample level), each with its suite's default settings."""
     from shell.app import Engine
 
@@ -176,6 +177,11 @@ def make_scene(name: str, ctx):
 
         mirrors, _, particles = arg.partition("_")
         return Engine(SparkRing(int(mirrors), int(particles or 0)), ctx)
+    if kind == "decals":  # decals_<mirrors>_<decals>: the ring with stains on its floor and boxes (benchmarks.decals)
+        from benchmarks.decals import DecalRing
+
+        mirrors, _, decals = arg.partition("_")
+        return Engine(DecalRing(int(mirrors), int(decals or 0)), ctx)
     if kind == "posed":  # posed_<mirrors>_<tentacles>: the ring with animated skinned and morphed meshes
         from benchmarks.posed import PosedRing
 

@@ -51,6 +51,7 @@ class Decal(TrackedComponent):
       decal is not painted.
 
     Mirrors and portals take no decal (their picture is the view beyond them), nor water,
+    see-through surfaces (a Material faded by its alpha: glass is blended after every decal),
     skinned or morphed meshes (the GPU poses them), nor particles.  A surface that moves
     through the box, or changes its mesh, is cut again the frame it does; one parented with
     the decal under the same mover is not (nothing moved between them)."""

@@ -29,11 +29,11 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import Emissive, Material, MeshRef, Mirror, Portal, PortalClone, Transform, Visibility
+from components import Emissive, Material, MeshRef, Mirror, Portal, PortalClone, Refractive, Transform, Visibility
 from components.decal import Decal, FromDecal
 from components.visibility import DEFAULT_LAYERS
 from engine.assets.mesh import Mesh
-from engine.core.decal_clip import decal_geometry, soup
+from engine.core.decal_clip import DecalGeometry, decal_geometry, join_geometry, soup
 from engine.core.world import World
 
 # How far a surface's pose relative to its decal may drift (box-space units, matrix entries)
@@ -97,12 +97,21 @@ class ReceiverBoxes:
 
 
 @dataclass
+class _Piece:
+    """The decal on one surface, and what it was cut from."""
+
+    mesh_id: int                        # the surface's Mesh.id
+    pose: np.ndarray                    # its matrix into the decal's box space
+    geometry: DecalGeometry | None      # None: nothing of it takes the decal (turned away, faded out)
+
+
+@dataclass
 class _DecalState:
     """What a decal's cut was made from, to tell whether it must be made again."""
 
     low: np.ndarray                    # the decal's box, world bounds
     high: np.ndarray
-    poses: dict[int, tuple[int, np.ndarray]] = field(default_factory=dict)  # surface -> (mesh id, pose in box space)
+    pieces: dict[int, _Piece] = field(default_factory=dict)  # by the surface it lies on
     part: int | None = None            # the entity holding its mesh (None: nothing in its box takes it)
 
 
@@ -116,7 +125,8 @@ class DecalSystem(esper.Processor):
         self.states: dict[int, _DecalState] = {}
         self.boxes: ReceiverBoxes | None = None
         self._mesh_bounds: weakref.WeakKeyDictionary[Mesh, np.ndarray] = weakref.WeakKeyDictionary()
-        self.cuts = 0  # decals cut (made or made again) since the start: what tests count
+        self.cuts = 0  # decals' meshes made (or made again) since the start: what tests count
+        self.pieces_cut = 0  # surfaces' pieces cut since the start
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -130,7 +140,8 @@ class DecalSystem(esper.Processor):
             self._drop(entity)
         # The surfaces that changed this frame (moved, came, went, a new mesh or layers):
         # their boxes brought up to date, and the decals they reach, before or now, cut again.
-        touched = frame.moved | frame.added | gone | world.changed_any((MeshRef, Visibility, Mirror, Portal))
+        touched = frame.moved | frame.added | gone | world.changed_any((MeshRef, Visibility, Mirror, Portal, Material,
+                                                                        Refractive))
         reached: set[int] = set()
         if self.boxes is None:
             self.boxes = ReceiverBoxes()
@@ -149,7 +160,7 @@ class DecalSystem(esper.Processor):
         for entity, (decal, transform) in decals:
             state = self.states.get(entity)
             if state is None or entity in changed_decals or entity in touched or entity in reached \
-                    or not touched.isdisjoint(state.poses):
+                    or not touched.isdisjoint(state.pieces):
                 spawned |= self._refresh(entity, decal, transform, state, entity in changed_decals or state is None)
         if spawned:
             self.settle(dt)
@@ -164,8 +175,14 @@ class DecalSystem(esper.Processor):
         if mesh_ref is None or not mesh_ref.visible or not world.has(entity, Transform):
             return False
         mesh = mesh_ref.mesh
-        return not (mesh.skinned or mesh.morph_count or world.has(entity, FromDecal) or world.has(entity, Mirror)
-                    or world.has(entity, Portal) or world.has(entity, PortalClone) or world.has(entity, Decal))
+        if mesh.skinned or mesh.morph_count or world.has(entity, FromDecal) or world.has(entity, Mirror) \
+                or world.has(entity, Portal) or world.has(entity, PortalClone) or world.has(entity, Decal):
+            return False
+        # A see-through surface (faded by its alpha) is glass in the transparent slot, which
+        # the decals' cut meshes precede: a decal there would be blended under it.
+        material = world.try_get(entity, Material)
+        return material is None or material.color.w >= 1.0 or material.alpha_cutoff is not None \
+            or world.has(entity, Refractive)
 
     def _put_boxes(self, entities: list[int]) -> tuple[np.ndarray, np.ndarray]:
         """Put ``entities``' world boxes in the table (all at once); the boxes."""
@@ -200,33 +217,41 @@ class DecalSystem(esper.Processor):
     # --- a decal's cut --------------------------------------------------------------------------
     def _refresh(self, entity: int, decal: Decal, transform: Transform, state: _DecalState | None,
                  look_changed: bool) -> bool:
-        """Cut ``entity``'s decal again where its surfaces or their poses changed; its part's
-        look where its Decal or Visibility did.  Whether a part was made."""
+        """Cut ``entity``'s decal again where its surfaces or their poses changed (each
+        surface's piece on its own: a crate turning under a floor's stain cuts the crate's
+        piece alone); its part's look where its Decal or Visibility did.  Whether a part was made."""
         world = self.world
         box_world = _matrix(transform.world)
         lows, highs = _placed_boxes(_HALF_CUBE[None, 0], _HALF_CUBE[None, 1], box_world[None])
         low, high = lows[0], highs[0]
         to_box = np.linalg.inv(box_world)
+        if state is None:
+            state = self.states[entity] = _DecalState(low, high)
+        state.low, state.high = low, high
         layers = decal.layers
-        poses: dict[int, tuple[int, np.ndarray]] = {}
+        pieces: dict[int, _Piece] = {}
+        changed = look_changed or state.part is None
         for surface in self.boxes.reaching(low, high):
             if layers is not None:
                 shown = world.try_get(surface, Visibility)
                 if not set(shown.layers if shown is not None else DEFAULT_LAYERS) & set(layers):
                     continue
             mesh = world.get(surface, MeshRef).mesh
-            poses[surface] = (mesh.id, to_box @ _matrix(world.get(surface, Transform).world))
-        if state is None:
-            state = self.states[entity] = _DecalState(low, high)
-        state.low, state.high = low, high
-        same = state.part is not None and not look_changed and poses.keys() == state.poses.keys() and all(
-            poses[s][0] == state.poses[s][0] and np.allclose(poses[s][1], state.poses[s][1], rtol=0, atol=_SAME_POSE)
-            for s in poses)
-        if same:
+            pose = to_box @ _matrix(world.get(surface, Transform).world)
+            kept = state.pieces.get(surface)
+            if not look_changed and kept is not None and kept.mesh_id == mesh.id \
+                    and np.allclose(pose, kept.pose, rtol=0.0, atol=_SAME_POSE):
+                pieces[surface] = kept
+                continue
+            pieces[surface] = _Piece(mesh.id, pose, self._cut(decal, box_world, surface, mesh, pose))
+            self.pieces_cut += 1
+            changed = True
+        changed |= pieces.keys() != state.pieces.keys()
+        state.pieces = pieces
+        if not changed:
             return False
-        state.poses = poses
-        geometry = self._cut(decal, box_world, poses)
         self.cuts += 1
+        geometry = join_geometry([p.geometry for p in pieces.values() if p.geometry is not None])
         if geometry is None:
             if state.part is not None:
                 self._delete_part(state)
@@ -246,23 +271,18 @@ class DecalSystem(esper.Processor):
         self._dress(state.part, entity, decal)
         return True
 
-    def _cut(self, decal: Decal, box_world: np.ndarray, poses: dict[int, tuple[int, np.ndarray]]):
-        """The decal's geometry from its surfaces (``poses``: each one's matrix into box space)."""
-        world = self.world
+    def _cut(self, decal: Decal, box_world: np.ndarray, surface: int, mesh: Mesh,
+             pose: np.ndarray) -> DecalGeometry | None:
+        """The piece of the decal on one surface (``pose``: its matrix into box space)."""
         axis = box_world[:3, 2] / max(np.linalg.norm(box_world[:3, 2]), 1e-30)  # whence it comes, in the world
-        pieces = []
-        for surface, (_, pose) in poses.items():
-            mesh = world.get(surface, MeshRef).mesh
-            surface_world = _matrix(world.get(surface, Transform).world)
-            positions = mesh.positions @ pose[:3, :3].T + pose[:3, 3]
-            to_surface = np.linalg.inv(surface_world[:3, :3])
-            world_normals = mesh.normals @ to_surface          # inverse transpose, rows
-            world_normals /= np.maximum(np.linalg.norm(world_normals, axis=1, keepdims=True), 1e-30)
-            box_normals = mesh.normals @ to_surface @ box_world[:3, :3]
-            pieces.append(soup(positions, box_normals, world_normals @ axis, mesh.indices))
-        if not pieces:
-            return None
-        return decal_geometry(np.concatenate(pieces), decal.angle_fade, decal.depth_fade, decal.region)
+        surface_world = _matrix(self.world.get(surface, Transform).world)
+        positions = mesh.positions @ pose[:3, :3].T + pose[:3, 3]
+        to_surface = np.linalg.inv(surface_world[:3, :3])
+        world_normals = mesh.normals @ to_surface          # inverse transpose, rows
+        world_normals /= np.maximum(np.linalg.norm(world_normals, axis=1, keepdims=True), 1e-30)
+        box_normals = mesh.normals @ to_surface @ box_world[:3, :3]
+        triangles = soup(positions, box_normals, world_normals @ axis, mesh.indices)
+        return decal_geometry(triangles, decal.angle_fade, decal.depth_fade, decal.region)
 
     def _dress(self, part: int, entity: int, decal: Decal) -> None:
         """The part's look: a Material (and Emissive, Visibility) from the decal's."""

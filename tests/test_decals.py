@@ -196,12 +196,12 @@ def test_a_surface_moving_into_the_box_is_cut_again_and_painted(scene):
     runner, _ = render(scene, build)
     stage = decals(runner)
     state = stage.states[made["decal"]]
-    assert made["crate"] not in state.poses
+    assert made["crate"] not in state.pieces
     cuts = stage.cuts
     x, y = runner.project((0.0, 0.5, 0.0))  # where the crate's top will be
     runner.world.get(made["crate"], Transform).position = glm.vec3(0.0, 0.25, 0.0)
     image = runner.frame().astype(np.int64)
-    assert stage.cuts == cuts + 1 and made["crate"] in state.poses
+    assert stage.cuts == cuts + 1 and made["crate"] in state.pieces
     r, g, b = image[y, x]
     assert r > 3 * g, image[y, x]  # the crate's top is painted
     # Its sides, turned 90 degrees from the decal (past the angle fade's end), are not.
@@ -213,16 +213,18 @@ def test_a_surface_moving_into_the_box_is_cut_again_and_painted(scene):
     # Each frame it slides through the box it is cut again; the cuts it leaves behind let
     # their GPU meshes go (as many held after twenty as after one).
     held = runner.engine.renderer.resource_counts()
+    pieces = stage.pieces_cut
     for step in range(1, 21):
         runner.world.get(made["crate"], Transform).position = glm.vec3(0.01 * step, 0.25, 0.0)
         runner.frame()
     assert stage.cuts == cuts + 21
+    assert stage.pieces_cut == pieces + 20  # the crate's piece alone each frame: the floor's is kept
     assert runner.engine.renderer.resource_counts()["meshes"] == held["meshes"]
     assert runner.engine.renderer.resource_counts()["batches"] == held["batches"]
     # And moving out again takes it away.
     runner.world.get(made["crate"], Transform).position = glm.vec3(3.0, 0.25, 0.0)
     runner.frame()
-    assert made["crate"] not in state.poses and stage.cuts == cuts + 22
+    assert made["crate"] not in state.pieces and stage.cuts == cuts + 22
 
 
 def test_a_decal_moved_with_its_wall_is_not_cut_again_and_follows_it(scene):
@@ -249,7 +251,7 @@ def test_a_decal_moved_with_its_wall_is_not_cut_again_and_follows_it(scene):
     assert b < 1.3 * r, image[y, x]
 
 
-def test_surfaces_on_other_layers_and_mirrors_take_no_decal(scene):
+def test_surfaces_on_other_layers_mirrors_and_glass_take_no_decal(scene):
     made = {}
 
     def build(world):
@@ -261,12 +263,18 @@ def test_surfaces_on_other_layers_and_mirrors_take_no_decal(scene):
         made["mirror"] = world.spawn(Transform(position=glm.vec3(0.5, 0.0, 0.05)), MeshRef(quad(0.3, 0.3)), Mirror())
         made["decal"] = world.spawn(Transform(scale=glm.vec3(1.5, 1.5, 0.5)), Decal(layers=[0]))
 
+        made["pane"] = world.spawn(Transform(position=glm.vec3(-0.5, 0.0, 0.1)), MeshRef(quad(0.3, 0.3)),
+                                   Material(color=(0.2, 0.4, 0.9, 0.5)))  # see-through: glass
+
     runner, _ = render(scene, build)
-    assert set(decals(runner).states[made["decal"]].poses) == {made["wall"]}
+    assert set(decals(runner).states[made["decal"]].pieces) == {made["wall"]}
     decal = runner.world.get(made["decal"], Decal)
-    decal.layers = None  # every layer: the other one too, the mirror still not
+    decal.layers = None  # every layer: the other one too, the mirror and the glass still not
     runner.frame()
-    assert set(decals(runner).states[made["decal"]].poses) == {made["wall"], made["other"]}
+    assert set(decals(runner).states[made["decal"]].pieces) == {made["wall"], made["other"]}
+    runner.world.get(made["pane"], Material).color = glm.vec4(0.2, 0.4, 0.9, 1.0)  # opaque now: it takes it
+    runner.frame()
+    assert set(decals(runner).states[made["decal"]].pieces) == {made["wall"], made["other"], made["pane"]}
 
 
 def test_emission_makes_a_decal_glow_as_an_emissive_quad_does(scene):
@@ -485,3 +493,36 @@ def test_where_its_image_is_clear_a_decal_writes_no_id_and_a_click_goes_through(
     cx, cy = runner.project((0.0, 0.0, 0.0))
     kx, ky = runner.project((0.55, 0.55, 0.0))  # inside the box, outside the puff's disc
     assert ids[cy, cx] == part and ids[ky, kx] == made["wall"]
+
+
+def test_glass_in_front_of_a_decal_blends_over_it_wherever_their_boxes_centres_are(scene):
+    """A pane standing on a floor's big decal, farther from the eye by its centre than the
+    decal's is: the decal (on an opaque surface) is blended first, so the pane tints it as
+    it tints an opaque quad of the decal's look (a second path, drawn with the opaque
+    batches)."""
+    colour = (0.9, 0.2, 0.1, 1.0)
+
+    def build(kind):
+        def make(world):
+            lit(world)
+            look_from(world, (0.0, 1.2, 4.0), target=(0.0, 0.3, 0.0), fov=40.0)
+            world.spawn(Transform(rotation=glm.angleAxis(glm.radians(-90.0), glm.vec3(1, 0, 0))),
+                        MeshRef(quad(8.0, 8.0)), Material(color=GREY))
+            world.spawn(Transform(position=glm.vec3(0.0, 0.5, 0.6)), MeshRef(quad(1.5, 1.0)),
+                        Material(color=(0.1, 0.3, 0.9, 0.5)))  # the pane, its centre 3.4 m off
+            if kind == "decal":  # its centre 2.9 m off, reaching under and behind the pane
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, 2.0),
+                                      rotation=look_rotation(glm.vec3(0, -1, 0), glm.vec3(0, 0, -1)),
+                                      scale=glm.vec3(3.0, 4.0, 0.5)), Decal(color=colour))
+            else:
+                world.spawn(Transform(position=glm.vec3(0.0, 1e-3, 2.0),
+                                      rotation=glm.angleAxis(glm.radians(-90.0), glm.vec3(1, 0, 0))),
+                            MeshRef(quad(3.0, 4.0)), Material(color=colour))
+        return make
+
+    runner, with_decal = render(scene, build("decal"))
+    _, with_quad = render(scene, build("quad"))
+    x, y = runner.project((0.0, 0.0, 0.3))  # the floor behind the pane, under the decal
+    px, py = runner.project((0.0, 0.5, 0.6))
+    assert abs(y - py) < 20  # (the pane covers it on screen)
+    assert np.abs(with_decal - with_quad).max() <= 3

@@ -44,6 +44,16 @@ class DecalGeometry:
         return len(self.positions) // 3
 
 
+def join_geometry(pieces: list[DecalGeometry]) -> DecalGeometry | None:
+    """Pieces cut from several surfaces as one geometry (None for none)."""
+    if not pieces:
+        return None
+    if len(pieces) == 1:
+        return pieces[0]
+    return DecalGeometry(*(np.concatenate([getattr(p, name) for p in pieces])
+                           for name in ("positions", "normals", "uvs", "alphas")))
+
+
 def soup(positions: np.ndarray, normals: np.ndarray, facing: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """The triangles of a mesh as a soup, (T, 3, 7): ``positions`` and ``normals`` (V, 3) in
     box space, ``facing`` (V,), ``indices`` (T, 3)."""
@@ -64,6 +74,8 @@ def clip_plane(triangles: np.ndarray, axis: int, side: float, offset: float) -> 
         return triangles
     d = side * triangles[:, :, axis] - offset  # <= 0: inside
     inside = d <= 0.0
+    if inside.all():  # (the usual case past the first planes: nothing to cut)
+        return triangles
     count = inside.sum(axis=1)
     whole = triangles[count == 3]
     pieces = [whole]

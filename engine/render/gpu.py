@@ -212,6 +212,7 @@ class Gpu:
         self.scene_only: list[InstanceBatch] | None = None
         # A batch was made since prepare_programs last ran (Engine.frame calls it then).
         self.needs_preparing = False
+        self._prepared_for: tuple | None = None  # (reflections, ambient boxes) the last preparing was for
         # What the views show, as a version (``note_scene_change``): moved on by every
         # upload or redraw that changes what a scene pass, a fallback or a composite draws.
         self.scene_version = 0

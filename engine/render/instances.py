@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+import weakref
 from typing import NamedTuple
 
 import moderngl
@@ -132,6 +133,12 @@ def normal_matrices(models: np.ndarray) -> np.ndarray:
 _FORMAT_PART = re.compile(r"^(\d*)([fiu])(\d?)$")
 
 
+# What each program reads of each layout (``read_by``), kept while the program lives: every
+# new batch makes a vertex array for each build a view may draw it with, a dozen or so, each
+# reading three buffers' layouts the same way as the last batch's did.
+_READS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def read_by(program: moderngl.Program, buffer: moderngl.Buffer, layout: str, *names: str) -> tuple | None:
     """A vertex array's entry for ``buffer`` (``layout``: moderngl's format, one part a name)
     as ``program`` reads it: the inputs the build does not read (its linker dropped them)
@@ -139,6 +146,21 @@ def read_by(program: moderngl.Program, buffer: moderngl.Buffer, layout: str, *na
     ``skip_errors``, which gives a name the program lacks the location of a built-in input
     the program reads (gl_VertexID's -1: the MORPHED builds'), so GL refuses the array
     (GL_INVALID_VALUE)."""
+    reads = _READS.get(program)
+    if reads is None:
+        reads = _READS[program] = {}
+    key = (layout, names)
+    found = reads.get(key, _UNREAD)
+    if found is _UNREAD:
+        found = reads[key] = _read_by(program, layout, names)
+    return None if found is None else (buffer, *found)
+
+
+_UNREAD = object()
+
+
+def _read_by(program: moderngl.Program, layout: str, names: tuple[str, ...]) -> tuple | None:
+    """``read_by``'s answer less the buffer: (layout, the names read...), or None."""
     parts = layout.split()
     per_instance = parts[-1].endswith("/i")
     if per_instance:
@@ -153,7 +175,7 @@ def read_by(program: moderngl.Program, buffer: moderngl.Buffer, layout: str, *na
         layout_parts.append(f"{int(count or 1) * int(size or 4)}x")
     if not kept:
         return None
-    return (buffer, " ".join(layout_parts) + ("/i" if per_instance else ""), *kept)
+    return (" ".join(layout_parts) + ("/i" if per_instance else ""), *kept)
 
 
 class GpuMesh:
@@ -238,6 +260,9 @@ class BatchKey(NamedTuple):
     # Material.diffuse_transmission_color and diffuse_transmission (None: none)
     diffuse_transmission: tuple[float, float, float, float] | None = None
     decal: bool = False  # a decal's cut mesh (FromDecal): drawn pulled towards the eye by a depth offset
+
+
+_NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first preparing
 
 
 def blend_code(batch: InstanceBatch) -> int:
@@ -346,6 +371,9 @@ class InstanceBatch:
         self.occlusion_packed = False
         self.double_sided = False  # Material.double_sided: its draws turn face culling off
         self.decal = False  # a decal's cut mesh (BatchKey.decal): its draws offset their depth towards the eye
+        # The variants Renderer.prepare_programs last built its programs for (a marker: no
+        # variants, None, is a build too, the mixed one).
+        self.prepared_variants: object = _NOT_PREPARED
         # The maps that read its mesh's second UV set (BatchKey.second_uv_maps): its SECOND_UV_MAPS builds' bits.
         self.second_uv_maps = 0
         # A clear-coated material's coat (Material.clearcoat, clearcoat_roughness; None:

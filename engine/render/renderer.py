@@ -264,7 +264,17 @@ class Renderer(Gpu):
         mrdoob/three.js#30568).  The composite, claim and reset programs are built when the
         view tree is made.  Returns the number of programs built."""
         self.needs_preparing = False
-        built = self.scene_pass.prepare([b for b in self.batches.values() if b.count], reflections)
+        # Every batch when what the builds depend on across batches changed (the batched
+        # path's coming or going, the ambient probes' boxes), else only those not prepared as
+        # they are now (made since, or drawn with other variants): a frame that makes one new
+        # batch (a decal cut again, a level of detail switched) does not walk every other.
+        everything = (reflections, self.irradiance.has_boxes())
+        whole = everything != self._prepared_for
+        self._prepared_for = everything
+        batches = [b for b in self.batches.values() if b.count and (whole or b.prepared_variants != b.variants)]
+        built = self.scene_pass.prepare(batches, reflections)
+        for batch in batches:
+            batch.prepared_variants = batch.variants
         if level_scale is not None and len(self.levels) and self.targets is not None:
             width, height = self.targets.size
             self.levels.get(1, (max(1, round(width * level_scale)), max(1, round(height * level_scale))))

@@ -40,6 +40,7 @@ Mirrors whose reflection paints over every pixel of them draw unlit (``SceneOpti
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
 from typing import TYPE_CHECKING
@@ -547,7 +548,9 @@ class ScenePass:
             apply_pass_state(ctx, state, (0, 0, *targets.size), view.scissor)
 
         for batch in batches:
-            near = glm.length2(batch.centre() - eye)
+            # (a decal lies on an opaque surface: a cloud in front of it is drawn after it, one
+            # behind its surface is hidden by that surface's depth either way)
+            near = math.inf if batch.decal else glm.length2(batch.centre() - eye)
             ready = []
             while pending and pending[0][0] > near:
                 ready.append(pending.pop(0)[1])
@@ -574,7 +577,7 @@ class ScenePass:
         runs: list[tuple[list[InstanceBatch], list[list]]] = []  # (glass, then each view's emitters)
         placed: set[int] = set()
         for batch in [*rest, None]:
-            near = glm.length2(batch.centre() - eye) if batch is not None else -1.0
+            near = -1.0 if batch is None else math.inf if batch.decal else glm.length2(batch.centre() - eye)
             ready = [[record for _, record in drawn if id(record) not in placed and distance[id(record)] > near]
                      for drawn in emitters]
             placed.update(id(record) for drawn in ready for record in drawn)

@@ -2,8 +2,9 @@
 (glass, water, see-through mirrors and portals), and which of them a tree's view blends
 before its claims (``split_slot``).  Drawn by ``engine/render/scene_pass.py``.
 
-Back to front by the batches' centres, except where a see-through surface's plane says
-otherwise: a batch on the far side of a pond or a see-through mirror, seen from the eye,
+Back to front by the batches' centres, decals' cut meshes first (they lie on opaque
+surfaces: glass that covers one on screen is in front of it), except where a see-through
+surface's plane says otherwise: a batch on the far side of a pond or a see-through mirror, seen from the eye,
 blends before it, one on the near side after (for pairs whose boxes overlap on the view's
 screen); where planes and centres make a cycle, the centres give way.  What a view needs is
 worked out once while the glass stands (``SlotGeometry``); up to ``FEW_BATCHES`` batches are
@@ -40,7 +41,7 @@ class SlotGeometry:
     ``splits``: the views' ``split_slot`` answers, kept from a view's ``draw`` to its
     ``draw_transparent`` (``split_slot``)."""
 
-    __slots__ = ("batches", "states", "centres", "corners", "planes", "see_through", "sides", "planar",
+    __slots__ = ("batches", "states", "centres", "corners", "planes", "see_through", "decals", "sides", "planar",
                  "corner_columns", "boxed", "planar_at", "splits")
 
     def __init__(self, batches: Sequence[InstanceBatch]) -> None:
@@ -48,6 +49,7 @@ class SlotGeometry:
         self.states = [(batch.uploads, batch.count, batch.variants) for batch in self.batches]
         self.centres = [batch.centre() for batch in self.batches]
         self.see_through = [see_through_surface(batch) for batch in self.batches]
+        self.decals = [batch.decal for batch in self.batches]
         self.planes = [batch.plane if batch.surface else None for batch in self.batches]
         self.planar = any(plane is not None for plane in self.planes) and len(self.batches) > 1
         boxes = [box_floats(batch) for batch in self.batches]
@@ -78,9 +80,11 @@ class SlotGeometry:
             for a, b, plane, state in zip(batches, self.batches, self.planes, self.states, strict=True))
 
     def back_to_front(self, eye: glm.vec3) -> list[int]:
-        """The batches' indices by their centres' distance from ``eye``, the farthest first."""
-        centres = self.centres
-        return sorted(range(len(centres)), key=lambda k: -glm.distance(centres[k], eye))
+        """The batches' indices by their centres' distance from ``eye``, the farthest first;
+        decals' cut meshes before all else (each lies on an opaque surface, so whatever glass
+        covers it on screen is in front of it, wherever the boxes' centres are)."""
+        centres, decals = self.centres, self.decals
+        return sorted(range(len(centres)), key=lambda k: (not decals[k], -glm.distance(centres[k], eye)))
 
 
 def box_floats(batch: InstanceBatch) -> tuple[list[float], list[float]] | None:
