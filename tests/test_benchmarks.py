@@ -896,3 +896,32 @@ def test_the_sparks_scene_keeps_about_its_particles_alive_and_draws_them(ctx):
     assert 360 <= frames["sparks_2_400"][1] <= 400 and frames["sparks_2_0"][1] == 0
     assert frames["sparks_2_400"][2] > 0
     assert (np.abs(frames["sparks_2_400"][0] - frames["sparks_2_0"][0]).max(axis=2) > 8).sum() >= 5
+
+
+def test_the_decals_scene_throws_its_stains_and_draws_them(ctx):
+    """``decals_<mirrors>_<n>``: n decals on the ring's floor, each cut into a part of its own
+    (the floor under every one, some boxes too), drawn: the frame differs from the same ring's
+    without them, frame for frame."""
+    from benchmarks.cpu import make_scene
+    from components.decal import FromDecal
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    capture = CaptureTarget(ctx, (96, 54))
+    frames = {}
+    try:
+        for name in ("decals_2_12", "decals_2_0"):
+            engine = make_scene(name, ctx)
+            try:
+                for _ in range(3):
+                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (96, 54)))
+                stage = engine.stages["decals"]
+                frames[name] = (capture.read_rgb().astype(int), len(engine.world.query_one(FromDecal)),
+                                sum(len(state.pieces) for state in stage.states.values()))
+            finally:
+                engine.close()
+    finally:
+        capture.release()
+    assert frames["decals_2_12"][1] == 12 and frames["decals_2_0"][1] == 0
+    assert frames["decals_2_12"][2] > 12  # each on the floor, and some on boxes
+    assert (np.abs(frames["decals_2_12"][0] - frames["decals_2_0"][0]).max(axis=2) > 8).sum() >= 20
