@@ -147,8 +147,8 @@ def read_by(program: moderngl.Program, buffer: moderngl.Buffer, layout: str, *na
     the program reads (gl_VertexID's -1: the MORPHED builds'), so GL refuses the array
     (GL_INVALID_VALUE)."""
     reads = _READS.get(program)
-    if reads is None:
-        reads = _READS[program] = {}
+    if reads is None or reads.get(_GLO) != program.glo:  # (a program relinked under the same object)
+        reads = _READS[program] = {_GLO: program.glo}
     key = (layout, names)
     found = reads.get(key, _UNREAD)
     if found is _UNREAD:
@@ -157,6 +157,12 @@ def read_by(program: moderngl.Program, buffer: moderngl.Buffer, layout: str, *na
 
 
 _UNREAD = object()
+_GLO = object()  # a program's entry's key for the GL program name it was read from
+
+
+def forget_reads() -> None:
+    """Forget what every program reads (``read_by``): after a shader hot reload relinks them."""
+    _READS.clear()
 
 
 def _read_by(program: moderngl.Program, layout: str, names: tuple[str, ...]) -> tuple | None:

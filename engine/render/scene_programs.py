@@ -52,7 +52,7 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
 )
 from engine.render.gpu import Gpu
-from engine.render.instances import blend_code
+from engine.render.instances import blend_code, forget_reads
 from engine.render.shadows import ShadowMaps
 from engine.render.unlit_mirrors import may_be_unlit
 
@@ -302,6 +302,7 @@ class ScenePrograms:
         self.last_own.clear()
         for batch in self.renderer.batches.values():
             batch.drop_vertex_arrays()  # made again for the relinked programs' inputs
+        forget_reads()  # (what each program reads: a relinked one may read more)
         self.reloads_seen = self.renderer.shaders.reloads
 
     def prepare(self, batches: Iterable[InstanceBatch], reflections: bool, ambient_boxes: bool) -> int:
