@@ -16,7 +16,8 @@ uniform bool has_albedo_map;
 uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
 uniform int transparent;        // the transparent slot (instances.blend_code): 0 opaque; its colour
-                                // premultiplied by its alpha: 1 all of it, 2 its diffuse light only
+                                // premultiplied by its alpha: 1 all of it, 2 its diffuse light only,
+                                // 3 all of it, a decal's cut (nothing drawn where it has no alpha)
 uniform vec3 dielectric_f0;     // what a non-metal reflects head on: 0.16 x its batch's Material.reflectance^2
                                 // x its specular_color, each channel held at 1
 #ifdef ALPHA_CUTOFF
@@ -730,10 +731,11 @@ void main() {
 #endif
     s.albedo = base.rgb;
     s.alpha = base.a;
-    // Faded whole (the transparent slot's code 1) with no alpha left, nothing of it shows: it
-    // writes nothing either (its id would take a click through a clear part of its image:
-    // a decal's corners, a texture's holes), and costs no shading.
-    if (transparent == 1 && s.alpha < 0.5 / 255.0) discard;
+    // A decal's cut (the transparent slot's code 3) with no alpha left shows nothing: it writes
+    // nothing either (its id would take a click through a clear part of its image, its
+    // corners), and costs no shading.  (Water and see-through surfaces keep their ids at any
+    // alpha: the view tree claims their pixels by them.)
+    if (transparent == 3 && s.alpha < 0.5 / 255.0) discard;
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map

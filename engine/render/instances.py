@@ -273,8 +273,11 @@ _NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first pre
 
 def blend_code(batch: InstanceBatch) -> int:
     """The scene shader's ``transparent`` uniform for ``batch``: 0 opaque, 1 faded by its
-    alpha whole, 2 its diffuse light alone faded (``keeps_specular``)."""
-    return (2 if batch.keeps_specular else 1) if batch.transparent else 0
+    alpha whole, 2 its diffuse light alone faded (``keeps_specular``), 3 a decal's cut, faded
+    whole and not drawn at all where its alpha is 0."""
+    if not batch.transparent:
+        return 0
+    return 3 if batch.decal else 2 if batch.keeps_specular else 1
 
 
 class InstanceBatch:

@@ -45,6 +45,7 @@ from pyglm import glm
 from components import (
     DirectionalLight,
     Emissive,
+    FromDecal,
     HemisphereLight,
     Material,
     MeshRef,
@@ -372,6 +373,7 @@ LOOK_KINDS: dict[type, str] = {
     PortalClone: "the entity it is drawn as: the id image, and the views that hide it (a probe face hides "
                  "its own object's clones too)",
     Visibility: "which kinds of view draw it (direct, mirrors, portals, probe captures) and its reflection layers",
+    FromDecal: "a decal's cut: blended in the transparent slot whatever its alpha, its depth offset",
     Skin: "where its joints bend its mesh (a new pose, a Skin come or gone: its own batch or a shared one)",
     Morph: "how much of each morph target it wears",
 }
