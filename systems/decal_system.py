@@ -230,7 +230,7 @@ class DecalSystem(esper.Processor):
         state.low, state.high = low, high
         layers = decal.layers
         pieces: dict[int, _Piece] = {}
-        changed = look_changed or state.part is None
+        changed = look_changed or (state.part is not None and not world.exists(state.part))  # (deleted by hand)
         for surface in self.boxes.reaching(low, high):
             if layers is not None:
                 shown = world.try_get(surface, Visibility)

@@ -180,7 +180,9 @@ class ExtractSystem(esper.Processor):
                                             posed=posed, second_uv_maps=second_uv_mask(material), decal=decal,
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
-            raise GLLimitError(f"entity {entity}: {exc}") from None
+            cut = world.try_get(entity, FromDecal) if decal else None
+            raise GLLimitError(f"entity {entity}{f' (the cut of the Decal on entity {cut.decal})' if cut else ''}: "
+                               f"{exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims
             batch.surface = world.has(entity, Mirror) or world.has(entity, Portal)
         if transparent and batch.surface:

@@ -558,3 +558,21 @@ def test_glass_in_front_of_a_decal_blends_over_it_wherever_their_boxes_centres_a
     px, py = runner.project((0.0, 0.5, 0.6))
     assert abs(y - py) < 20  # (the pane covers it on screen)
     assert np.abs(with_decal - with_quad).max() <= 3
+
+
+def test_an_image_past_the_gl_limit_is_refused_naming_the_decal(scene):
+    from engine.core.errors import GLLimitError
+
+    made = {}
+
+    def build(world):
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0))
+        wall(world)
+        made["decal"] = world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)),
+                                    Decal(texture=TextureData(np.zeros((1, 40000, 4), np.uint8), name="banner")))
+
+    runner = scene(build, (32, 32))
+    decal = made["decal"]
+    with pytest.raises(GLLimitError, match=rf"the cut of the Decal on entity {decal}\).*'banner' is 40000x1.*"
+                                           r"GL_MAX_TEXTURE_SIZE"):
+        runner.frame()
