@@ -96,6 +96,15 @@ class ParticleEmitter(TrackedComponent):
       starts the cloud as it would be after its longest lifetime of playing (Unity's
       prewarm: a torch already smoking on the first frame), stepped at 30 Hz up to
       ``MAX_PREWARM_SECONDS``.
+    - ``ribbon``: the particles joined in the order they were born into one band facing
+      the view (a trail: Unity's trail and ribbon renderers, Godot's trails): a sword's
+      swing, a comet's tail, a light painted through the air behind a moving emitter, each
+      particle a point of it, its size the band's width there and its colour the colour
+      there (so a trail fades and narrows to its end as its particles age), bent smoothly
+      through each point; the texture stretched along it from the newest to the oldest and
+      across it (None: soft across its width).  Drawn as a whole, in no order of its own;
+      ``angle``, ``spin``, ``stretch`` and ``sheet`` do not apply.  A point carried through a
+      portal starts a new band beyond it.
     - ``on_death``: another emitter's entity (a sub-emitter), whose ``burst`` is born where
       each of these particles dies, flying by its own settings (fireworks: a rocket's spark
       climbs, and bursts where it ends), whether it plays or not (give it ``playing`` False
@@ -140,6 +149,7 @@ class ParticleEmitter(TrackedComponent):
     size_keys: Any = ()
     prewarm: bool = False
     on_death: int | None = None
+    ribbon: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "rate":
@@ -148,7 +158,7 @@ class ParticleEmitter(TrackedComponent):
             return integer(self, name, value, low=0, high=MAX_PARTICLES)
         if name == "on_death":
             return None if value is None else integer(self, name, value, low=1, high=2**31 - 1)
-        if name in ("playing", "lit", "prewarm"):
+        if name in ("playing", "lit", "prewarm", "ribbon"):
             return boolean(self, name, value)
         if name == "lifetime":
             return self._range(name, value, low=0.0, high=MAX_PARTICLE_LIFETIME, positive=True)

@@ -24,9 +24,14 @@ uniform float softness;         // metres: fades in over that much room behind i
 in vec2 v_uv;
 in vec2 v_corner;
 in vec3 v_world;
-flat in vec4 v_color;
+#ifdef RIBBON
+#define SHADING_QUALIFIER   // (a ribbon's colour and light vary along it: particle.vert)
+#else
+#define SHADING_QUALIFIER flat
+#endif
+SHADING_QUALIFIER in vec4 v_color;
 #ifdef LIT
-flat in vec3 v_light;
+SHADING_QUALIFIER in vec3 v_light;
 #endif
 
 layout(location = 0) out vec4 out_color;

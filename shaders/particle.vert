@@ -15,6 +15,23 @@ in vec4 in_color;    // linear colour, alpha
 in float in_angle;   // radians, about the view's axis
 in float in_frame;   // the flipbook's frame
 in vec3 in_streak;   // world: its velocity x ParticleEmitter.stretch (0: a square)
+#ifdef RIBBON
+// A ribbon's segment (ParticleEmitter.ribbon: an instance a segment, from the point in_* to the
+// point in_next_*; the points either side of them bend the band).  in_angle is a point's share
+// of its life (the texture's u along the band), in_frame its portal crossings.
+in vec3 in_prev_center;
+in float in_prev_frame;
+in vec3 in_next_center;
+in float in_next_size;
+in vec4 in_next_color;
+in float in_next_angle;
+in float in_next_frame;
+in vec3 in_after_center;
+in float in_after_frame;
+#define SHADING_QUALIFIER   // (colour and light vary along the band)
+#else
+#define SHADING_QUALIFIER flat
+#endif
 
 uniform ivec2 sheet;  // the flipbook's columns and rows (1, 1: the whole texture)
 #ifdef LIT
@@ -24,9 +41,9 @@ uniform float translucency;  // the share of its scattered light a particle lets
 out vec2 v_uv;        // the texture's, in the frame's cell
 out vec2 v_corner;    // -1 to 1 across the square (the round spot's shape)
 out vec3 v_world;
-flat out vec4 v_color;
+SHADING_QUALIFIER out vec4 v_color;
 #ifdef LIT
-flat out vec3 v_light;  // the light at its centre, over pi: its colour is an albedo
+SHADING_QUALIFIER out vec3 v_light;  // the light at its centre (a ribbon's: at its point), over pi: its colour is an albedo
 #endif
 
 #ifdef LIT
@@ -62,6 +79,35 @@ vec3 sheet_light(vec3 p, vec3 n) {
 }
 #endif
 
+#ifdef RIBBON
+// A segment of a ribbon as a strip of four: vertices 0 and 1 either side of its start, 2 and 3
+// either side of its end.  Across the band at a point is across the line through the points
+// either side of it (the band bends through it with no gap or overlap between segments) and
+// across the view's axis (it faces the view); a segment between points carried through a
+// portal between them (their crossings differ) has no area.
+void main() {
+    bool at_end = gl_VertexID >= 2;
+    float side = (gl_VertexID & 1) == 0 ? -1.0 : 1.0;
+    vec3 point = at_end ? in_next_center : in_center;
+    vec3 before = at_end ? in_center : (in_prev_frame == in_frame ? in_prev_center : in_center);
+    vec3 after = at_end ? (in_after_frame == in_next_frame ? in_after_center : in_next_center) : in_next_center;
+    vec3 toward_viewer = normalize(vec3(camera.view[0][2], camera.view[1][2], camera.view[2][2]));
+    vec3 across = cross(after - before, toward_viewer);
+    float across_length = length(across);
+    across = across_length > 1e-12 ? across / across_length : vec3(0.0);
+    float size = at_end ? in_next_size : in_size;
+    vec3 world = in_frame == in_next_frame ? point + across * (0.5 * size * side) : in_center;
+    v_world = world;
+    v_corner = vec2(0.0, side);  // (the untextured band: soft across, as the round spot is)
+    v_uv = vec2(at_end ? in_next_angle : in_angle, 0.5 + 0.5 * side);
+    v_color = at_end ? in_next_color : in_color;
+#ifdef LIT
+    v_light = sheet_light(point, toward_viewer);
+#endif
+    gl_Position = camera.view_proj * vec4(world, 1.0);
+    gl_ClipDistance[CLIP_VIEW_PLANE] = dot(vec4(world, 1.0), camera.clip_plane);
+}
+#else
 void main() {
     vec2 corner = vec2((gl_VertexID & 1) == 0 ? -1.0 : 1.0, (gl_VertexID & 2) == 0 ? -1.0 : 1.0);
     float c = cos(in_angle), s = sin(in_angle);
@@ -98,3 +144,4 @@ void main() {
     // Behind the view's plane is clipped (a mirror's or portal's view: what is behind its surface).
     gl_ClipDistance[CLIP_VIEW_PLANE] = dot(vec4(world, 1.0), camera.clip_plane);
 }
+#endif

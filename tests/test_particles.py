@@ -29,6 +29,7 @@ from components import (
 from engine.assets.mesh import box, quad
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
+from engine.core.particle_cloud import ROW_FRAME
 from tests.support import look_from
 
 SIZE = (96, 72)
@@ -609,6 +610,12 @@ def test_world_space_particles_go_through_open_portals(scene):
     np.testing.assert_allclose(into.velocity[0], [0.0, 0.0, 2.0], atol=1e-5)
     np.testing.assert_allclose(past.position[0], [3.0, 1.1, -1.0], atol=1e-4)
     np.testing.assert_allclose(local.position[0], [0.0, 0.0, -2.0], atol=1e-4)  # (its own frame: not carried)
+    # Each counts the portals it went through: a ribbon's rows carry the count (its frame's
+    # place), so the band breaks between a point carried and one not.
+    assert list(into.crossed) == [1.0] and list(past.crossed) == [0.0]
+    emitter = runner.world.get(runner.world.into, ParticleEmitter)
+    emitter.ribbon = True
+    assert into.rows(emitter, glm.mat4(1.0))[0, ROW_FRAME] == 1.0
 
 
 @pytest.mark.parametrize("drag", [0.0, 0.5])
@@ -738,3 +745,78 @@ def test_a_still_alpha_cloud_is_not_sorted_and_written_again_for_the_same_view(s
     np.testing.assert_array_equal(paused[0], paused[1])
     runner.frame(1.0 / 60.0)
     assert len(calls) == moving + 1
+
+
+def ribbon_band(half_width: float, x_range: tuple[float, float], shape=SIZE) -> np.ndarray:
+    """A straight untextured ribbon's alpha at each pixel's centre: the round spot's falloff
+    across it, (1 - (d / half_width)^2)^2 with d the distance from its line (y = 0, z = 0),
+    within ``x_range`` along it (None outside: not compared), for the camera at EYE looking down -z."""
+    w, h = shape
+    half_h = math.tan(math.radians(FOV / 2.0))
+    x = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * half_h * (w / h) * EYE.z
+    y = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * half_h * EYE.z
+    qx, qy = np.meshgrid(x, y)
+    band = np.maximum(1.0 - (qy / half_width) ** 2, 0.0) ** 2
+    return np.where((qx >= x_range[0]) & (qx <= x_range[1]), band, np.nan)
+
+
+def test_a_ribbon_joins_its_particles_into_a_band_facing_the_view(scene):
+    """An emitter swept along x leaves still points on a line; joined (``ribbon``), they are a
+    band as wide as their size, soft across as the round spot (its formula across the line,
+    pixel by pixel, away from its ends), added to the wall."""
+    colour = np.array((0.5, 0.3, 0.1))
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        backdrop(world)
+        world.emitter = world.spawn(Transform(position=glm.vec3(-1.6, 0.0, 0.0)), ParticleEmitter(
+            rate=60.0, speed=0.0, lifetime=1000.0, size=0.5, color=(*colour, 1.0), end_color=(*colour, 1.0),
+            ribbon=True))
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    for step in range(33):
+        runner.world.get(runner.world.emitter, Transform).position = glm.vec3(-1.6 + 0.1 * step, 0.0, 0.0)
+        runner.frame(1.0 / 60.0)
+    image = srgb_to_linear(runner.frame(0.0).astype(np.float64) / 255.0)
+    band = ribbon_band(0.25, (-1.3, 1.3))
+    inside = ~np.isnan(band)
+    assert (band[inside] > 0.5).sum() > 150  # (a band the test can see)
+    expected = np.array(WALL) + np.nan_to_num(band)[..., None] * colour
+    np.testing.assert_allclose(image[inside], expected[inside], atol=0.012)
+    assert runner.stats.particles == 33
+
+
+def test_a_ribbon_bends_through_its_points_with_no_gap_and_shows_in_a_mirror(scene):
+    """Swept round a circle, the band's middle line is lit all the way round what it drew
+    (its segments meet at each point: no crack at a bend), and a mirror beside it shows it
+    (its pixels there differ from the same scene's without the emitter)."""
+    def build(with_ribbon):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            backdrop(world)
+            world.spawn(Transform(position=glm.vec3(-1.7, 0.0, -0.3),  # to the left, turned towards the ring
+                                  rotation=glm.angleAxis(glm.radians(50.0), glm.vec3(0, 1, 0))),
+                        MeshRef(quad(1.0, 2.0)), Mirror())
+            world.emitter = world.spawn(Transform(position=glm.vec3(0.8, 0.0, 0.0)), ParticleEmitter(
+                rate=60.0, speed=0.0, lifetime=1000.0, size=0.12, color=(3.0, 3.0, 3.0, 1.0),
+                end_color=(3.0, 3.0, 3.0, 1.0), ribbon=True, playing=with_ribbon))
+        return make
+
+    images = {}
+    for with_ribbon in (True, False):
+        runner = scene(build(with_ribbon), (192, 144))
+        runner.engine.renderer.antialias = "off"
+        for step in range(48):  # three quarters of a turn
+            a = 2.0 * math.pi * step / 64.0
+            runner.world.get(runner.world.emitter, Transform).position = glm.vec3(0.8 * math.cos(a),
+                                                                                  0.8 * math.sin(a), 0.0)
+            runner.frame(1.0 / 60.0)
+        images[with_ribbon] = runner.frame(0.0).astype(int)
+    image = images[True]
+    for k in range(1, 94):  # the middle line, between the drawn points
+        a = 2.0 * math.pi * 47.0 / 64.0 * k / 94.0
+        x, y = runner.project((0.8 * math.cos(a), 0.8 * math.sin(a), 0.0))
+        assert image[y, x].min() > 200, (k, image[y, x])
+    mx, my = runner.project(glm.vec3(-1.7, 0.0, -0.3))
+    mirror_region = (slice(max(my - 40, 0), my + 40), slice(max(mx - 12, 0), mx + 12))
+    assert (np.abs(images[True][mirror_region] - images[False][mirror_region]).max(axis=2) > 40).sum() > 20

@@ -11,7 +11,9 @@ not a clump a frame.
 
 ``rows`` is what a view draws: a row a particle of ``ROW_FLOATS`` float32 (world position,
 size, linear colour and alpha, angle in radians, flipbook frame, streak), its size, colour and
-frame worked out from its age over its life.
+frame worked out from its age over its life, oldest first (the order they were born); a
+ribbon's rows hold its share of its life and its portal crossings in the angle's and frame's
+places.
 """
 from __future__ import annotations
 
@@ -32,7 +34,8 @@ _NONE = np.zeros((0, 3))  # no particle died
 Gate = tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray, np.ndarray]
 
 # A drawn particle: x, y, z, size, r, g, b, a, angle, frame, and its streak (x, y, z: its
-# velocity x ParticleEmitter.stretch, world; 0 for a square).
+# velocity x ParticleEmitter.stretch, world; 0 for a square).  A ribbon's point (ParticleEmitter.
+# ribbon): its life share (0 newborn, 1 dying) for the angle, its portal crossings for the frame.
 ROW_FLOATS = 13
 ROW_POSITION, ROW_SIZE, ROW_COLOR, ROW_ANGLE, ROW_FRAME = slice(0, 3), 3, slice(4, 8), 8, 9
 ROW_STREAK = slice(10, 13)
@@ -51,6 +54,7 @@ class ParticleCloud:
         self.life = np.ones(0)
         self.angle = np.zeros(0)
         self.spin = np.zeros(0)
+        self.crossed = np.zeros(0)  # portals each has been carried through (a ribbon breaks between counts)
         self.carry = 0.0       # the part of a particle the rate owes (spawned once it reaches 1)
         self.capacity = capacity
         self.capped = 0        # particles the last step could not spawn (max_particles reached)
@@ -97,7 +101,7 @@ class ParticleCloud:
             if before is not None:
                 self._through(before, gates)
         if len(self.age) > self.capacity:  # (max_particles lowered: the oldest go)
-            self._keep(np.argsort(self.life - self.age)[-self.capacity:])
+            self._keep(np.sort(np.argsort(self.life - self.age)[-self.capacity:]))  # (in the order born)
         starting = emitter.playing and not self.was_playing
         self.was_playing = emitter.playing
         ages = np.zeros(0)
@@ -125,7 +129,7 @@ class ParticleCloud:
             self._spawn(emitter, ages[len(ages) - room:] if len(ages) > room else ages, matrix, previous, dt, local)
 
     def _keep(self, which) -> None:
-        for name in ("position", "velocity", "age", "life", "angle", "spin"):
+        for name in ("position", "velocity", "age", "life", "angle", "spin", "crossed"):
             setattr(self, name, getattr(self, name)[which])
 
     def _move(self, which, dt, gravity: np.ndarray, drag: float) -> None:
@@ -181,6 +185,7 @@ class ParticleCloud:
             if carried.any():
                 self.position[carried] = self.position[carried] @ carry[:3, :3].T + carry[:3, 3]
                 self.velocity[carried] = self.velocity[carried] @ turn.T
+                self.crossed[carried] += 1.0
 
     def _bounce(self, which, ground: float, keep: float) -> None:
         """Particles ``which`` that went below ``ground`` this step: put back above it by
@@ -252,6 +257,7 @@ class ParticleCloud:
         self.life = np.concatenate([self.life, life])
         self.angle = np.concatenate([self.angle, angle])
         self.spin = np.concatenate([self.spin, spin])
+        self.crossed = np.concatenate([self.crossed, np.zeros(n)])
         born = slice(first, first + n)
         if age.any():  # each moved on for its part of the frame
             gravity = np.array(emitter.gravity, dtype=np.float64)
@@ -346,10 +352,14 @@ class ParticleCloud:
         else:
             start, end = np.array(emitter.color), np.array(emitter.final_color)
             out[:, ROW_COLOR] = start + (end - start) * t[:, None]
-        out[:, ROW_ANGLE] = self.angle + self.spin * self.age
-        frames = emitter.frames
-        out[:, ROW_FRAME] = np.minimum(np.floor(t * frames), frames - 1)
-        if emitter.stretch > 0.0:
+        if emitter.ribbon:  # a ribbon's point: how far along its life (its u), and its portal crossings
+            out[:, ROW_ANGLE] = t
+            out[:, ROW_FRAME] = self.crossed
+        else:
+            out[:, ROW_ANGLE] = self.angle + self.spin * self.age
+            frames = emitter.frames
+            out[:, ROW_FRAME] = np.minimum(np.floor(t * frames), frames - 1)
+        if emitter.stretch > 0.0 and not emitter.ribbon:
             velocity = self.velocity if emitter.space == "world" else self.velocity @ m[:3, :3].T
             out[:, ROW_STREAK] = velocity * emitter.stretch
         else:

@@ -20,6 +20,9 @@ depth and write none, and write only the colour image: a particle is no entity, 
 surface and seen ids (what the claims, the outline and picking read) keep what is behind it.
 An emitter whose box (its particles' centres, grown by the largest half-diagonal) cannot reach
 a view (``batch_cull.batch_reach``), or whose ``Visibility`` hides it there, draws nothing there.
+A ribbon (``ParticleEmitter.ribbon``) is drawn as a strip of four a segment, from each
+particle to the next born (the ``RIBBON`` build: each segment reads four rows of the one
+buffer, bound four times a row apart, ``_ribbon_array``), unsorted.
 
 Limits: particles beyond a see-through surface (water, a see-through mirror or portal) blend
 after it, over its reflection; a probe's capture leaves them out (``ParticleEmitter``'s
@@ -69,6 +72,11 @@ from engine.rules.visibility_rules import drawn_in
 ROW_BYTES = ROW_FLOATS * 4
 _FORMAT = "3f 1f 4f 1f 1f 3f/i"
 _ATTRIBUTES = ("in_center", "in_size", "in_color", "in_angle", "in_frame", "in_streak")
+# A ribbon's segment's inputs: each of the four rows it reads (particle.vert's RIBBON build:
+# in_prev_*, in_*, in_next_*, in_after_*) and each field of a row (its offset, its format).
+_RIBBON_ROWS = ("in_prev_", "in_", "in_next_", "in_after_")
+_RIBBON_FIELDS = (("center", 0, "3f"), ("size", 12, "1f"), ("color", 16, "4f"), ("angle", 32, "1f"),
+                  ("frame", 36, "1f"))
 # Depth tested, not written (the framebuffer's mask, set by the caller's pass), no culling (a
 # mirror's view turns the winding), the view's plane clipped, blended premultiplied.
 PARTICLE_PASS = PassState(depth_func="<", cull=False, clips=frozenset((CLIP_VIEW_PLANE,)),
@@ -98,6 +106,7 @@ class GpuEmitter:
     uploaded: bool = False  # its rows are in its buffer
     softness: float = 0.0
     written: tuple | None = None  # (rows, Camera block, count) an alpha emitter's buffer holds, sorted for that view
+    ribbon: bool = False  # its rows joined into a band (ParticleEmitter.ribbon): uploaded with the ends repeated
 
     @property
     def particles(self) -> int:
@@ -131,21 +140,26 @@ class ParticleDraw:
         if record.texture is not texture and texture is not None:
             record.gl_texture = self.gpu.shared_texture(texture, "ParticleEmitter.texture")
             record.texture = texture
-        look = (emitter.blend, emitter.lit, emitter.translucency, emitter.sheet, code, texture, emitter.softness)
+        look = (emitter.blend, emitter.lit, emitter.translucency, emitter.sheet, code, texture, emitter.softness,
+                emitter.ribbon)
         if not retextured and record.uploaded and np.array_equal(rows, record.rows) \
                 and look == (record.blend, record.lit, record.translucency, record.sheet, record.code, record.texture,
-                             record.softness):
+                             record.softness, record.ribbon):
             return  # (a still cloud, a paused game: nothing a view shows changed)
         record.blend, record.lit, record.translucency = emitter.blend, emitter.lit, emitter.translucency
-        record.softness = emitter.softness
+        record.softness, record.ribbon = emitter.softness, emitter.ribbon
         record.sheet, record.code, record.rows, record.uploaded = emitter.sheet, code, rows, True
-        if len(rows) * ROW_BYTES > record.buffer.size:
+        # A ribbon's segment reads four rows (the point before it, its two ends, the point
+        # after: the band bends through each point along the line through its neighbours),
+        # so its rows go up with the first and last repeated.
+        uploaded = np.concatenate([rows[:1], rows, rows[-1:]]) if emitter.ribbon and len(rows) else rows
+        if len(uploaded) * ROW_BYTES > record.buffer.size:
             record.buffer.release()
-            record.buffer = self.ctx.buffer(reserve=_grown(len(rows)) * ROW_BYTES)
+            record.buffer = self.ctx.buffer(reserve=_grown(len(uploaded)) * ROW_BYTES)
             self._drop_arrays(record)
         record.written = None
         if len(rows):
-            record.buffer.write(rows.tobytes())
+            record.buffer.write(uploaded.tobytes())
             # (its square's half-diagonal, and a streak's whole length behind it)
             reach = float(rows[:, ROW_SIZE].max()) * (0.5 * math.sqrt(2.0)) + float(
                 np.sqrt(np.square(rows[:, ROW_STREAK]).sum(axis=1).max()))
@@ -227,7 +241,11 @@ class ParticleDraw:
         view, only those whose squares can reach it (``in_view``), farthest first; an
         "additive" one's as uploaded."""
         count = record.particles
-        if record.blend == "alpha" and count > 1:
+        if record.ribbon:  # its segments, a point to the next, drawn as a whole
+            count -= 1
+            if count < 1:
+                return
+        elif record.blend == "alpha" and count > 1:
             written = (record.rows, view.camera_block())  # (a still frame's one view: the buffer holds it)
             if record.written is None or record.written[0] is not written[0] or record.written[1] != written[1]:
                 rows = record.rows[in_view(record.rows, view)]
@@ -248,27 +266,45 @@ class ParticleDraw:
         if self.gpu.shaders.reloads != self._reloads:
             self.forget()
         program = self._program(record.gl_texture is not None, record.lit, masked, ambient_probes,
-                                record.softness > 0.0)
+                                record.softness > 0.0, record.ribbon)
         vao = record.vertex_arrays.get(program.glo)
         if vao is None:
-            vao = record.vertex_arrays[program.glo] = self.ctx.vertex_array(
-                program, [read_by(program, record.buffer, _FORMAT, *_ATTRIBUTES)])  # (gl_VertexID read)
+            if record.ribbon:
+                vao = record.vertex_arrays[program.glo] = self._ribbon_array(program, record.buffer)
+            else:
+                vao = record.vertex_arrays[program.glo] = self.ctx.vertex_array(
+                    program, [read_by(program, record.buffer, _FORMAT, *_ATTRIBUTES)])  # (gl_VertexID read)
         for name, value in (("sheet", record.sheet), ("coverage", 1.0 if record.blend == "alpha" else 0.0),
                             ("translucency", record.translucency), ("softness", record.softness)):
             if name in program:  # (a build without a texture reads no sheet; an unlit one no translucency)
                 program[name].value = value
         return vao
 
-    def _program(self, sprite: bool, lit: bool, masked: bool, ambient_probes: bool, soft: bool) -> moderngl.Program:
+    def _ribbon_array(self, program: moderngl.Program, buffer: moderngl.Buffer) -> moderngl.VertexArray:
+        """A ribbon's vertex array: segment ``i`` (an instance) reads rows ``i`` to ``i + 3`` of
+        its buffer (the point before it, its start, its end, the point after), each input
+        bound at its row's offset (the one buffer four times; what the build dropped left out)."""
+        vao = self.ctx.vertex_array(program, [])
+        for row, prefix in enumerate(_RIBBON_ROWS):
+            for name, offset, fmt in _RIBBON_FIELDS:
+                if prefix + name in program:
+                    vao.bind(program[prefix + name].location, "f", buffer, fmt, offset=row * ROW_BYTES + offset,
+                             stride=ROW_BYTES, divisor=1)
+        return vao
+
+    def _program(self, sprite: bool, lit: bool, masked: bool, ambient_probes: bool, soft: bool,
+                 ribbon: bool = False) -> moderngl.Program:
         """The build for a textured emitter or not (``SPRITE``), lit or not (``LIT``, with the
         shadow lookups the shadows stage compiled in, and the probes' boxes where they light
-        the scene: ``AMBIENT_PROBES``), soft or not (``SOFT``), masked or not, fogged while
-        the camera's fog is."""
+        the scene: ``AMBIENT_PROBES``), soft or not (``SOFT``), a ribbon or not (``RIBBON``),
+        masked or not, fogged while the camera's fog is."""
         shadowing = self.shadows.program_defines if lit else ()
-        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, self.gpu.fog.defines)
+        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, self.gpu.fog.defines, ribbon)
         program = self._programs.get(key)
         if program is None:
             defines = dict(self.gpu.fog.defines)
+            if ribbon:
+                defines["RIBBON"] = "1"
             if sprite:
                 defines["SPRITE"] = "1"
             if masked:
