@@ -123,6 +123,7 @@ class DecalSystem(esper.Processor):
         self.world = world
         self.settle = settle  # the transform stage's work again (a part made after it ran)
         self.states: dict[int, _DecalState] = {}
+        self.holders: set[int] = set()  # the entities with a Decal
         self.boxes: ReceiverBoxes | None = None
         self._mesh_bounds: weakref.WeakKeyDictionary[Mesh, np.ndarray] = weakref.WeakKeyDictionary()
         self.cuts = 0  # decals' meshes made (or made again) since the start: what tests count
@@ -130,11 +131,18 @@ class DecalSystem(esper.Processor):
 
     def process(self, dt: float) -> None:
         world = self.world
-        decals = world.query(Decal, Transform)
-        if not decals and not self.states:
+        # The entities holding a Decal, kept from the change sets (a frame without decals asks
+        # the world nothing: a look at two sets).
+        added = world.changed(Decal)
+        deleted = world.deleted()
+        if added or (deleted and self.holders):
+            self.holders = {e for e in self.holders | added if e not in deleted and world.has(e, Decal)}
+        if not self.holders and not self.states:
             self.boxes = None
             return
-        frame, deleted = world.frame, world.deleted()
+        decals = [(e, (world.get(e, Decal), transform)) for e in sorted(self.holders)
+                  if (transform := world.try_get(e, Transform)) is not None]
+        frame = world.frame
         gone = deleted | frame.removed
         for entity in [e for e in self.states if e in gone or not world.has(e, Decal) or not world.has(e, Transform)]:
             self._drop(entity)
@@ -314,5 +322,6 @@ class DecalSystem(esper.Processor):
 
     def close(self) -> None:
         self.states.clear()
+        self.holders.clear()
         self.boxes = None
         self._mesh_bounds.clear()
