@@ -3,6 +3,7 @@
 // centre, facing the view (its sides along the view's right and up, turned by its angle), made
 // from gl_VertexID as a strip of four; nothing per vertex is read.
 #include "camera.glsl"
+#include "view_axis.glsl"
 #ifdef LIT
 #include "lights.glsl"
 #include "shadows.glsl"
@@ -83,7 +84,7 @@ vec3 sheet_light(vec3 p, vec3 n) {
 // A segment of a ribbon as a strip of four: vertices 0 and 1 either side of its start, 2 and 3
 // either side of its end.  Across the band at a point is across the line through the points
 // either side of it (the band bends through it with no gap or overlap between segments) and
-// across the view's axis (it faces the view); a segment between points carried through a
+// across the way to the view's eye from it (it faces the view); a segment between points carried through a
 // portal between them (their crossings differ) has no area.
 void main() {
     bool at_end = gl_VertexID >= 2;
@@ -91,7 +92,10 @@ void main() {
     vec3 point = at_end ? in_next_center : in_center;
     vec3 before = at_end ? in_center : (in_prev_frame == in_frame ? in_prev_center : in_center);
     vec3 after = at_end ? (in_after_frame == in_next_frame ? in_after_center : in_next_center) : in_next_center;
-    vec3 toward_viewer = normalize(vec3(camera.view[0][2], camera.view[1][2], camera.view[2][2]));
+    // (towards the view's eye from the point: a perspective view's rays fan out, so a band
+    // seen along itself close up keeps its width; an orthographic view's, its axis)
+    vec3 toward_viewer = ray_eye(camera.eye.xyz, view_axis(camera.view_proj), point) - point;
+    toward_viewer *= inversesqrt(max(dot(toward_viewer, toward_viewer), 1e-24));
     vec3 across = cross(after - before, toward_viewer);
     float across_length = length(across);
     across = across_length > 1e-12 ? across / across_length : vec3(0.0);
