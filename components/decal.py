@@ -13,7 +13,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, color, finite
+from components.tracking import HALF_MAX, ComponentValueError, TrackedComponent, color, finite, integer
 from components.visibility import layer_list
 
 # Assets are the engine's types (engine.assets.texture_data.TextureData); components import none
@@ -21,6 +21,7 @@ from components.visibility import layer_list
 TextureData = Any
 
 MAX_DECAL_NORMAL_SCALE = 10.0  # Decal.normal_scale: as Material.normal_scale's bound
+MAX_DECAL_ORDER = 1 << 20      # Decal.order either side of 0: far more layers of decals than a wall holds
 
 
 @dataclass(eq=False)
@@ -49,6 +50,9 @@ class Decal(TrackedComponent):
     - ``layers``: only surfaces on one of these reflection layers take it (their
       ``Visibility.layers``; None: every surface), so a character walking through a floor's
       decal is not painted.
+    - ``order``: where decals overlap, one of a higher order is blended over one of a lower
+      (a bullet hole over a poster: Unity's draw order, Godot's sorting offset); of the same
+      order, the one whose box's middle is farther from the eye first.
 
     Mirrors and portals take no decal (their picture is the view beyond them), nor water,
     see-through surfaces (a Material faded by its alpha: glass is blended after every decal),
@@ -68,6 +72,7 @@ class Decal(TrackedComponent):
     angle_fade: Any = (60.0, 80.0)
     depth_fade: float = 0.1
     layers: Any = None
+    order: int = 0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -91,6 +96,8 @@ class Decal(TrackedComponent):
             return self._angle_fade(value)
         if name == "depth_fade":
             return finite(self, name, value, low=0.0, high=0.5)
+        if name == "order":
+            return integer(self, name, value, low=-MAX_DECAL_ORDER, high=MAX_DECAL_ORDER)
         if name == "layers":
             if value is None:
                 return None
@@ -134,8 +141,11 @@ class FromDecal(TrackedComponent):
 
     SHAREABLE = False
     decal: int = 0
+    order: int = 0  # the decal's Decal.order: blended over the cuts of lower orders
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "decal" and (isinstance(value, bool) or not isinstance(value, int) or value <= 0):
             raise ComponentValueError(f"FromDecal.decal must be an entity id, got {value!r}")
+        if name == "order":
+            return integer(self, name, value, low=-MAX_DECAL_ORDER, high=MAX_DECAL_ORDER)
         return value

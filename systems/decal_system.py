@@ -275,7 +275,7 @@ class DecalSystem(esper.Processor):
                 self._dress(part, entity, decal)
             return False
         state.part = world.spawn(Transform(parent=entity), MeshRef(mesh, casts_shadows=False),
-                                 FromDecal(decal=entity))
+                                 FromDecal(decal=entity, order=decal.order))
         self._dress(state.part, entity, decal)
         return True
 
@@ -293,8 +293,11 @@ class DecalSystem(esper.Processor):
         return decal_geometry(triangles, decal.angle_fade, decal.depth_fade, decal.region)
 
     def _dress(self, part: int, entity: int, decal: Decal) -> None:
-        """The part's look: a Material (and Emissive, Visibility) from the decal's."""
+        """The part's look: a Material (and Emissive, Visibility, its order) from the decal's."""
         world = self.world
+        cut = world.get(part, FromDecal)
+        if cut.order != decal.order:
+            cut.order = decal.order
         world.add_component(part, Material(color=glm.vec4(decal.color), texture=decal.texture,
                                            normal_map=decal.normal_map, normal_scale=decal.normal_scale,
                                            roughness=decal.roughness, metallic=decal.metallic,

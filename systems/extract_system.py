@@ -151,7 +151,8 @@ class ExtractSystem(esper.Processor):
         # A cutout (Material.alpha_cutoff) is opaque where it is drawn at all.
         # A decal's cut mesh (FromDecal) blends whatever its alpha: its image's alpha is its shape.
         refractive = world.try_get(entity, Refractive)
-        decal = world.has(entity, FromDecal)
+        cut = world.try_get(entity, FromDecal)
+        decal = cut is not None
         transparent = material is not None and (material.color.w < 1.0 or decal) and material.alpha_cutoff is None \
             and refractive is None
         # A generated shape is drawn as its unit mesh, its size in its row; not a mirror's or a
@@ -178,9 +179,9 @@ class ExtractSystem(esper.Processor):
                                             keeps_specular=material is not None and material.blend == "transparent",
                                             unlit=material is not None and material.unlit,
                                             posed=posed, second_uv_maps=second_uv_mask(material), decal=decal,
+                                            decal_order=cut.order if cut is not None else 0,
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
-            cut = world.try_get(entity, FromDecal) if decal else None
             raise GLLimitError(f"entity {entity}{f' (the cut of the Decal on entity {cut.decal})' if cut else ''}: "
                                f"{exc}") from None
         if transparent:  # a see-through mirror or portal (water): drawn before the view trees' claims

@@ -576,3 +576,22 @@ def test_an_image_past_the_gl_limit_is_refused_naming_the_decal(scene):
     with pytest.raises(GLLimitError, match=rf"the cut of the Decal on entity {decal}\).*'banner' is 40000x1.*"
                                            r"GL_MAX_TEXTURE_SIZE"):
         runner.frame()
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_of_two_overlapping_decals_the_higher_order_is_blended_over(scene, order):
+    """A small green decal inside a big red one, its box's middle farther from the eye: of the
+    same order the farther is blended first (the red covers it); given a higher order it is
+    blended over the red."""
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        wall(world)
+        world.spawn(Transform(scale=glm.vec3(1.2, 1.2, 0.4)), Decal(color=(0.9, 0.05, 0.05, 1.0)))
+        world.spawn(Transform(position=glm.vec3(0.0, 0.0, -0.2), scale=glm.vec3(0.4, 0.4, 0.8)),
+                    Decal(color=(0.05, 0.9, 0.05, 1.0), order=order))
+
+    runner, image = render(scene, build)
+    x, y = runner.project((0.0, 0.0, 0.0))
+    r, g, b = image[y, x]
+    assert (g > 2 * r) if order else (r > 2 * g), image[y, x]

@@ -266,6 +266,7 @@ class BatchKey(NamedTuple):
     # Material.diffuse_transmission_color and diffuse_transmission (None: none)
     diffuse_transmission: tuple[float, float, float, float] | None = None
     decal: bool = False  # a decal's cut mesh (FromDecal): drawn pulled towards the eye by a depth offset
+    decal_order: int = 0  # its Decal.order: decals of higher orders blended later
 
 
 _NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first preparing
@@ -380,6 +381,7 @@ class InstanceBatch:
         self.occlusion_packed = False
         self.double_sided = False  # Material.double_sided: its draws turn face culling off
         self.decal = False  # a decal's cut mesh (BatchKey.decal): its draws offset their depth towards the eye
+        self.decal_order = 0  # its Decal.order (BatchKey.decal_order)
         # The variants Renderer.prepare_programs last built its programs for (a marker: no
         # variants, None, is a build too, the mixed one).
         self.prepared_variants: object = _NOT_PREPARED

@@ -143,7 +143,7 @@ class Renderer(Gpu):
                   iridescence: tuple[float, float, float] | None = None,
                   posed: tuple[int, bool, bool] = (0, False, False), second_uv_maps: int = 0,
                   diffuse_transmission: tuple[float, float, float, float] | None = None,
-                  decal: bool = False) -> InstanceBatch:
+                  decal: bool = False, decal_order: int = 0) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -173,7 +173,8 @@ class Renderer(Gpu):
         # SECOND_UV_MAPS builds.  ``diffuse_transmission``: (red, green, blue, share) of what a
         # thin surface lets through from behind, its DIFFUSE_TRANSMISSION build's uniform (None: none).
         # ``decal``: a decal's cut mesh (systems/decal_system.py), lying on the surfaces it was
-        # cut from: its draws' depth is offset towards the eye (ScenePass), so it wins their tie.
+        # cut from: its draws' depth is offset towards the eye (ScenePass), so it wins their tie;
+        # ``decal_order``: its Decal.order (the transparent slot blends higher orders later).
         if second_uv_maps and mesh.second_uvs is None:
             raise GLLimitError(f"mesh {mesh.name!r}: Material.second_uv_maps reads a second UV set the mesh does "
                                "not have (Mesh.second_uvs)")
@@ -185,7 +186,8 @@ class Renderer(Gpu):
                        alpha_cutoff, id(occlusion_map) if occlusion_map is not None else 0,
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
                        bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen,
-                       dispersion, anisotropy, iridescence, posed, second_uv_maps, diffuse_transmission, decal)
+                       dispersion, anisotropy, iridescence, posed, second_uv_maps, diffuse_transmission, decal,
+                       decal_order)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -228,7 +230,7 @@ class Renderer(Gpu):
             batch.mirrored = mirrored
             batch.alpha_cutoff = alpha_cutoff
             batch.double_sided = double_sided
-            batch.decal = decal
+            batch.decal, batch.decal_order = decal, decal_order
             batch.probe = probe
             batch.second_probe, batch.probe_blend, batch.rest_probe = second_probe, probe_blend, rest_probe
             batch.checker = checker_look(texture)

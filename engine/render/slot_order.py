@@ -49,7 +49,7 @@ class SlotGeometry:
         self.states = [(batch.uploads, batch.count, batch.variants) for batch in self.batches]
         self.centres = [batch.centre() for batch in self.batches]
         self.see_through = [see_through_surface(batch) for batch in self.batches]
-        self.decals = [batch.decal for batch in self.batches]
+        self.decals = [batch.decal_order if batch.decal else None for batch in self.batches]  # None: no decal
         self.planes = [batch.plane if batch.surface else None for batch in self.batches]
         self.planar = any(plane is not None for plane in self.planes) and len(self.batches) > 1
         boxes = [box_floats(batch) for batch in self.batches]
@@ -82,9 +82,11 @@ class SlotGeometry:
     def back_to_front(self, eye: glm.vec3) -> list[int]:
         """The batches' indices by their centres' distance from ``eye``, the farthest first;
         decals' cut meshes before all else (each lies on an opaque surface, so whatever glass
-        covers it on screen is in front of it, wherever the boxes' centres are)."""
+        covers it on screen is in front of it, wherever the boxes' centres are), by their
+        ``Decal.order`` (a higher one blended over a lower), then the farthest first."""
         centres, decals = self.centres, self.decals
-        return sorted(range(len(centres)), key=lambda k: (not decals[k], -glm.distance(centres[k], eye)))
+        return sorted(range(len(centres)), key=lambda k: (decals[k] is None, decals[k] or 0,
+                                                           -glm.distance(centres[k], eye)))
 
 
 def box_floats(batch: InstanceBatch) -> tuple[list[float], list[float]] | None:
