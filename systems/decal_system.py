@@ -4,17 +4,19 @@ them (``engine/core/decal_clip.py`` says how a cut is made).
 A decal's mesh lives on an entity this stage makes for it: a child of the decal's entity
 (so it moves with the decal) carrying a ``FromDecal``, a MeshRef of the cut triangles in the
 decal's box space (casting no shadow) and a Material with the decal's look; the extract
-stage draws it in the transparent slot with a depth offset (``Renderer.batch_for``'s
-``decal``), so every view draws it as it draws glass, after the surface it lies on.
+stage puts it in the transparent slot with a depth offset (``Renderer.batch_for``'s
+``decal``), so every view draws it after the surface it lies on and before any glass.
 
 Work is done only when something changed: a decal is cut again when its ``Decal``, its
 ``Visibility`` or its place changes, or when a surface that took it (or now reaches into its
-box) moves, changes its mesh or goes; a cut is kept when its decal and its surfaces moved
-together (their poses relative to each other are the same: a decal parented with its wall
-under a moving platform).  To find the surfaces a box reaches without a look at every
+box) moves, changes its mesh, material or layers, or goes; each surface's piece is cut on its
+own and kept while its pose relative to the decal stays the same (a crate turning under a
+floor's stain cuts the crate's piece alone; a decal parented with its wall under a moving
+platform is not cut again).  To find the surfaces a box reaches without a look at every
 entity, the stage keeps every candidate surface's world box in arrays (``ReceiverBoxes``),
 made when the first decal comes, brought up to date with the frame's movers, and dropped
-when the last decal goes: a level without decals pays one query a frame.
+when the last decal goes; the entities holding a Decal are kept from the change sets, so a
+level without decals asks the world nothing.
 
 It runs after the transform stage (it reads world matrices and the frame's movers) and
 before extract; a new part's Transform is worked out by the transform stage's system again
