@@ -16,11 +16,13 @@ frame on this machine, against 10 ms a loop of glm calls an entity).
 """
 from __future__ import annotations
 
+import math
+
 import esper
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, Transform
+from components import Camera, MeshRef, Transform
 from components.detail import MAX_DETAIL_LEVELS, LevelOfDetail
 from engine.core.world import World
 from engine.rules.frame_rules import frame_rules
@@ -37,6 +39,8 @@ class DetailSystem(esper.Processor):
         self._rows: dict[int, int] = {}             # entity -> row
         self._details: list[LevelOfDetail] = []
         self._centres = np.zeros((0, 3))            # world centre of the finest mesh's box, a row
+        self._sizes = np.ones(0)                    # ... its largest side as placed
+        self._screen = np.zeros(0, bool)            # ... picked by screen height (LevelOfDetail.screen_heights)
         self._out = np.zeros((0, MAX_DETAIL_LEVELS - 1))   # thresholds (inf past the last)
         self._back = np.zeros((0, MAX_DETAIL_LEVELS - 1))  # thresholds x (1 - hysteresis)
         self.levels = np.zeros(0, np.int64)         # the level each row's MeshRef holds
@@ -53,7 +57,8 @@ class DetailSystem(esper.Processor):
             return
         moved = [entity for entity in world.frame.moved | world.frame.added if entity in self._rows]
         for entity in moved:
-            self._centres[self._rows[entity]] = self._centre(entity, self._details[self._rows[entity]])
+            row = self._rows[entity]
+            self._centres[row], self._sizes[row] = self._centre(entity, self._details[row])
         eyes = self._eyes()
         if not len(eyes):
             return
@@ -61,6 +66,8 @@ class DetailSystem(esper.Processor):
         # the thresholds it is past, at most those it is not back within.
         gap = self._centres[:, None, :] - eyes[None, :, :]
         distance = np.sqrt(np.einsum("nek,nek->ne", gap, gap).min(axis=1))[:, None]
+        if self._screen.any():  # by screen height: 1 / its share of the view's height (its thresholds likewise)
+            distance[self._screen, 0] = self._inverse_shares(distance[self._screen, 0], self._sizes[self._screen])
         out = (distance > self._out).sum(axis=1)
         kept = (distance >= self._back).sum(axis=1)
         levels = np.minimum(np.maximum(self.levels, out), kept)
@@ -83,28 +90,50 @@ class DetailSystem(esper.Processor):
         self._out = np.full((n, width), np.inf)
         self._back = np.full((n, width), np.inf)
         self._centres = np.zeros((n, 3))
+        self._sizes = np.ones(n)
+        self._screen = np.zeros(n, bool)
         self.levels = np.zeros(n, np.int64)
         for row, (entity, (detail, mesh_ref)) in enumerate(chosen):
-            thresholds = np.array(detail.distances, np.float64)
+            # (by screen height: the thresholds as 1 / share, which grows as distance does)
+            thresholds = 1.0 / np.array(detail.screen_heights, np.float64) if detail.by_screen \
+                else np.array(detail.distances, np.float64)
+            self._screen[row] = detail.by_screen
             self._out[row, :len(thresholds)] = thresholds
             self._back[row, :len(thresholds)] = thresholds * (1.0 - detail.hysteresis)
-            self._centres[row] = self._centre(entity, detail)
+            self._centres[row], self._sizes[row] = self._centre(entity, detail)
             level = previous.get(entity, 0) if entity not in written else 0
             level = min(level, len(detail.meshes) - 1)
             self.levels[row] = level
             if mesh_ref.mesh is not detail.meshes[level]:
                 mesh_ref.mesh = detail.meshes[level]
 
-    def _centre(self, entity: int, detail: LevelOfDetail) -> tuple[float, float, float]:
-        """The world centre of ``detail``'s finest mesh's box on ``entity``."""
+    def _centre(self, entity: int, detail: LevelOfDetail) -> tuple[tuple[float, float, float], float]:
+        """The world centre of ``detail``'s finest mesh's box on ``entity``, and the box's size
+        as placed (its largest side, scaled: Unity's LOD Group size)."""
         mesh = detail.meshes[0]
         kept = self._mesh_centres.get(id(mesh))
         if kept is None or kept[0] is not mesh:
             low, high = mesh.bounds
-            kept = self._mesh_centres[id(mesh)] = (mesh, glm.vec3(*((low + high) * 0.5)))
+            kept = self._mesh_centres[id(mesh)] = (mesh, glm.vec3(*((low + high) * 0.5)), glm.vec3(*(high - low)))
         transform = self.world.try_get(entity, Transform)
-        where = glm.vec3(transform.world * glm.vec4(kept[1], 1.0)) if transform is not None else kept[1]
-        return where.x, where.y, where.z
+        if transform is None:
+            return (kept[1].x, kept[1].y, kept[1].z), max(max(kept[2]), 1e-9)
+        where = glm.vec3(transform.world * glm.vec4(kept[1], 1.0))
+        sides = [glm.length(glm.vec3(transform.world[axis])) * kept[2][axis] for axis in range(3)]
+        return (where.x, where.y, where.z), max(max(sides), 1e-9)
+
+    def _inverse_shares(self, distance: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+        """1 over the share of the active camera's view height that things of ``sizes`` at
+        ``distance`` cover: the height it sees there (2 d tan(fov / 2); an orthographic
+        camera's ortho_height at any distance) over their size."""
+        world = self.world
+        camera = frame_rules(world).active_camera
+        lens = world.try_get(camera, Camera) if camera is not None else None
+        if lens is None:
+            return distance * (2.0 * math.tan(math.radians(30.0))) / sizes
+        if lens.projection == "orthographic":
+            return np.full_like(distance, lens.ortho_height) / sizes
+        return distance * (2.0 * math.tan(math.radians(lens.fov_y) * 0.5)) / sizes
 
     def _eyes(self) -> np.ndarray:
         """The active camera's eye and last frame's mirror and portal views' (n, 3)."""

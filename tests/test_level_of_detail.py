@@ -166,3 +166,75 @@ def test_the_editor_adds_a_chain_of_the_mesh_it_has(scene):
     bare = world.spawn(Transform())
     with pytest.raises(EditError, match="add a MeshRef first"):
         editor.add_component(bare, "LevelOfDetail")
+
+
+def screened(fov: float | None, camera_z: float, ortho_height: float | None = None, by_screen: bool = True):
+    """The 1 m fine box 10 m off (or ``camera_z``), its chain by screen height (0.2 of the
+    view's height: fine above it) or by distance (6 m), seen by a camera of ``fov`` degrees or
+    an orthographic one ``ortho_height`` tall."""
+    from components import Camera, look_rotation
+
+    def build(world):
+        eye = glm.vec3(0.0, 0.0, camera_z)
+        lens = Camera(projection="orthographic", ortho_height=ortho_height, near=0.1, far=100.0) \
+            if ortho_height is not None else Camera(fov_y=fov)
+        world.camera = world.spawn(Transform(position=eye, rotation=look_rotation(-eye)), lens)
+        chain = dict(screen_heights=(0.2,)) if by_screen else dict(distances=(6.0,))
+        world.thing = world.spawn(Transform(), MeshRef(FINE), Material(), LevelOfDetail(meshes=(FINE, COARSE), **chain))
+    return build
+
+
+@pytest.mark.parametrize("fov, expected", [(60.0, COARSE), (5.0, FINE)])
+def test_by_screen_height_a_camera_zoomed_in_keeps_the_fine_mesh(scene, fov, expected):
+    """At 10 m a 1 m box covers 1 / (2 x 10 x tan(fov / 2)) of the view's height: 0.087 at 60
+    degrees (under 0.2: the coarse mesh), 1.14 at 5 (the fine); by distance (6 m) the zoom
+    changes nothing."""
+    runner = scene(screened(fov, 10.0), (32, 24))
+    runner.frame()
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is expected
+    by_distance = scene(screened(fov, 10.0, by_screen=False), (32, 24))
+    by_distance.frame()
+    assert by_distance.world.get(by_distance.world.thing, MeshRef).mesh is COARSE
+
+
+@pytest.mark.parametrize("ortho_height, camera_z, expected", [(4.0, 40.0, FINE), (4.0, 3.0, FINE),
+                                                               (10.0, 3.0, COARSE), (10.0, 40.0, COARSE)])
+def test_by_screen_height_an_orthographic_view_picks_by_its_zoom_alone(scene, ortho_height, camera_z, expected):
+    """An orthographic camera 4 m tall shows the 1 m box as a quarter of its height at any
+    distance (fine), 10 m tall a tenth (coarse)."""
+    runner = scene(screened(None, camera_z, ortho_height=ortho_height), (32, 24))
+    runner.frame()
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is expected
+
+
+def test_screen_heights_are_checked_and_written_in_level_files(tmp_path):
+    from engine.assets.level_file import load_level, save_level
+    from engine.core.world import World
+
+    with pytest.raises(ComponentValueError, match="distances or screen_heights, not both"):
+        LevelOfDetail(meshes=(FINE, COARSE), distances=(3.0,), screen_heights=(0.2,))
+    with pytest.raises(ComponentValueError, match="screen_heights must decrease"):
+        LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), screen_heights=(0.2, 0.3))
+    with pytest.raises(ComponentValueError, match=r"screen_heights must be one fewer than its meshes"):
+        LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), screen_heights=(0.2,))
+    path = tmp_path / "lod.toml"
+    path.write_text(textwrap.dedent("""
+        [level]
+        name = "lod"
+
+        [[entity]]
+        name = "tree"
+        [entity.Transform]
+        [entity.MeshRef]
+        mesh = { box = [1.0, 2.0, 1.0] }
+        [entity.LevelOfDetail]
+        meshes = [{ box = [1.0, 2.0, 1.0] }, { sphere = 0.8 }]
+        screen_heights = [0.25]
+        """))
+    world = World("lod")
+    names = load_level(path).spawn(world)
+    assert world.get(names["tree"], LevelOfDetail).screen_heights == (0.25,)
+    saved = save_level(world, tmp_path / "saved.toml", names, name="lod")
+    assert "screen_heights = [0.25]" in saved.read_text()
+    again = World("again")
+    assert again.get(load_level(saved).spawn(again)["tree"], LevelOfDetail).by_screen
