@@ -82,8 +82,9 @@ class ParticleEmitter(TrackedComponent):
       right, top row first.  ``blend`` "additive": its light adds to what is behind (sparks,
       fire, glow; colour past 1 blooms), in any order; "alpha": it covers what is behind by its
       alpha (smoke, dust), the farthest drawn first in each view.  ``lit`` False: its colour
-      is its light (unlit); True: its colour is an albedo lit by the sun, lamps and the light
-      from all round where it is, with the sun's and lamps' shadows, as a thin sheet facing
+      is its light (unlit); True: its colour is an albedo lit by the sun, lamps, their light
+      through mirrors and portals and the light from all round where it is, with their
+      shadows, as a thin sheet facing
       the viewer that lets ``translucency`` of the light through from behind (smoke lit by a
       lamp behind it glows at its edge of the lamp).  ``stretch`` (seconds) above 0 draws
       each as a streak along its flight as the view sees it, its size across and ahead, its

@@ -8,6 +8,7 @@
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "ambient.glsl"
+#include "virtual_light_ways.glsl"
 #endif
 
 in vec3 in_center;   // world
@@ -51,7 +52,8 @@ SHADING_QUALIFIER out vec3 v_light;  // the light at its centre (a ribbon's: at 
 // The light a thin sheet at ``p`` facing ``n`` scatters towards the viewer, over its albedo
 // and pi: (1 - translucency) of what falls on its front, translucency of what falls on its
 // back (scene.frag's diffuse transmission, Material.diffuse_transmission, for a sheet that
-// faces the viewer), with the lights' shadows at its centre.
+// faces the viewer), with the lights' shadows at its centre; light through mirrors and
+// portals too (VIRTUAL_LIGHTS builds, while one shines).
 vec3 sheet_light(vec3 p, vec3 n) {
     AmbientBoxes boxes = ambient_boxes(p);
     float front = 1.0 - translucency;
@@ -76,6 +78,20 @@ vec3 sheet_light(vec3 p, vec3 n) {
              * (max(nl, 0.0) * front * point_shadow(i, lamp_front)
                 + max(-nl, 0.0) * translucency * point_shadow(i, lamp_back));
     }
+#ifdef VIRTUAL_LIGHTS
+    // Light through mirrors and portals (virtual_light_ways.glsl), onto whichever side it
+    // reaches, shadowed as it is there.
+    for (int i = 0; i < virtual_lights.virtual_count.x; ++i) {
+        vec3 l;
+        float dist;
+        float falloff = virtual_falloff(i, p, l, dist);
+        if (falloff <= 0.0 || !virtual_comes_through(i, p, l, dist)) continue;
+        float nl = dot(n, l);
+        vec3 side = nl >= 0.0 ? n : -n;
+        e += virtual_lights.virtual_color[i].rgb * falloff * abs(nl) * (nl >= 0.0 ? front : translucency)
+             * virtual_shadow(i, p, side, l, dist);
+    }
+#endif
     return e / 3.14159265;
 }
 #endif

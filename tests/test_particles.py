@@ -25,6 +25,7 @@ from components import (
     PointLight,
     Transform,
     Visibility,
+    look_rotation,
 )
 from engine.assets.mesh import box, quad
 from engine.assets.texture_data import TextureData
@@ -258,6 +259,35 @@ def test_a_lit_particle_is_lit_as_a_thin_sheet_letting_light_through(scene, sun,
     assert particle[middle].mean() > 0.05
     np.testing.assert_allclose(particle[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
                                atol=0.004)
+
+
+def through_a_mirror(particle: bool, reflects: bool):
+    """lit_scene's particle (or thin quad) with a lamp to the right and a mirror to
+    the right in front turned to it, throwing the lamp's light back onto its front
+    (``reflects``: Mirror.reflects_light) from the lamp's image."""
+    base = lit_scene(particle, glm.vec3(0.0, -1.0, 0.0), sun_on=False)
+
+    def make(world):
+        base(world)
+        world.spawn(Transform(position=glm.vec3(2.0, 0.0, 1.0)), PointLight(intensity=40.0, range=30.0))
+        world.spawn(Transform(position=glm.vec3(2.5, 0.0, 2.5), rotation=look_rotation(glm.vec3(1.0, 0.0, 1.0))),
+                    MeshRef(quad(3.0, 3.0)), Mirror(reflects_light=reflects))
+    return make
+
+
+@pytest.mark.parametrize("reflects", [True, False])
+def test_a_lit_particle_is_lit_through_a_mirror_as_a_thin_sheet_is(scene, reflects):
+    """The particle's middle is the thin quad's there (the scene's light through mirrors, a
+    second path), and with the mirror reflecting light brighter than without."""
+    _, particle = render(scene, through_a_mirror(True, reflects))
+    _, sheet = render(scene, through_a_mirror(False, reflects))
+    middle = (slice(33, 39), slice(45, 51))
+    np.testing.assert_allclose(particle[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
+                               atol=0.004)
+    if reflects:
+        _, without = render(scene, through_a_mirror(True, False))
+        assert particle[middle].mean() > without[middle].mean() + 0.05, (particle[middle].mean(),
+                                                                         without[middle].mean())
 
 
 def test_a_lit_particle_in_a_shadow_keeps_only_the_light_from_all_round(scene):

@@ -27,7 +27,7 @@ buffer, bound four times a row apart, ``_ribbon_array``), unsorted.
 Limits: particles beyond a see-through surface (water, a see-through mirror or portal) blend
 after it, over its reflection; a probe's capture leaves them out (``ParticleEmitter``'s
 docstring says why); a lit particle's light is its centre's (the sun's and lamps' shadows, the light from all round at
-that point), and light through mirrors and portals (virtual lights) does not light it.
+that point, and the light through mirrors and portals there).
 """
 from __future__ import annotations
 
@@ -57,6 +57,8 @@ from engine.render.bindings import (
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
+    VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
     bind_texture,
@@ -299,7 +301,8 @@ class ParticleDraw:
         the scene: ``AMBIENT_PROBES``), soft or not (``SOFT``), a ribbon or not (``RIBBON``),
         masked or not, fogged while the camera's fog is."""
         shadowing = self.shadows.program_defines if lit else ()
-        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, self.gpu.fog.defines, ribbon)
+        virtual = lit and self.shadows.virtual_shining  # light through mirrors and portals, while one shines
+        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, self.gpu.fog.defines, ribbon, virtual)
         program = self._programs.get(key)
         if program is None:
             defines = dict(self.gpu.fog.defines)
@@ -316,17 +319,20 @@ class ParticleDraw:
                 defines.update(shadowing)
                 if ambient_probes:
                     defines["AMBIENT_PROBES"] = "1"
+                if virtual:
+                    defines["VIRTUAL_LIGHTS"] = "1"
             program = self.gpu.shaders.program("particle.vert", "particle.frag", defines=defines)
             program["Camera"].binding = CAMERA_BINDING
             for block, binding in (("Lights", LIGHTS_BINDING), ("Shadows", SHADOWS_BINDING),
-                                   ("Irradiance", IRRADIANCE_BINDING), ("Fog", FOG_BINDING)):
+                                   ("Irradiance", IRRADIANCE_BINDING), ("Fog", FOG_BINDING),
+                                   ("VirtualLights", VIRTUAL_LIGHTS_BINDING)):
                 if block in program:
                     program[block].binding = binding
             for name, unit in (("sprite_map", PARTICLE_UNIT), ("node_map", NODE_UNIT),
                                ("scene_depth", PARTICLE_DEPTH_UNIT),
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]), ("spot_atlas", SPOT_SHADOW_UNIT),
-                               ("irradiance_table", IRRADIANCE_UNIT)):
+                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT)):
                 if name in program:
                     program[name].value = unit
             self._programs[key] = program

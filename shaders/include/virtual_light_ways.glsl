@@ -1,0 +1,97 @@
+// The ways of light through mirrors and portals (engine/rules/shadow_rules.py VirtualLight), as
+// every shader lit by them reads them: the VirtualLights block, whether a line from a point to
+// a light's image comes out of its exit's front through its outline (and each earlier
+// surface's: virtual_through), how much of its light the distance and its spot cone leave
+// there (virtual_falloff) and its shadow map's lookup (virtual_shadow).  Included by
+// virtual_lights.glsl (the scene's lighting) and particle.vert (a lit particle's sheet).
+// Only builds with VIRTUAL_LIGHTS hold it: frames where one shines.
+#ifdef VIRTUAL_LIGHTS
+// MAX_VIRTUAL_LIGHTS: engine/rules/shadow_rules.py's, defined by the shader library; so is
+// MAX_APERTURES (components/limits.py MAX_LIGHT_BOUNCES): the exit's outline and
+// MAX_APERTURES - 1 more a light.
+layout(std140) uniform VirtualLights {
+    ivec4 virtual_count;                            // x: how many
+    mat4 virtual_matrix[MAX_VIRTUAL_LIGHTS];        // world -> atlas uv and depth (divide by w)
+    vec4 virtual_position[MAX_VIRTUAL_LIGHTS];      // xyz: the image (w 1), or the direction it travels (w 0)
+    vec4 virtual_color[MAX_VIRTUAL_LIGHTS];         // rgb: colour x intensity x tint x rate; w: range (point)
+    vec4 virtual_exit[MAX_VIRTUAL_LIGHTS];          // the exit surface's plane, its front positive
+    vec4 virtual_origin[MAX_VIRTUAL_LIGHTS];        // xyz: a corner of the exit's outline; w: a texel's size
+                                                    // (metres for a directional image, radians for a point)
+    vec4 virtual_u[MAX_VIRTUAL_LIGHTS];             // xyz: an edge of the outline over its length squared
+    vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
+    vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
+                                                    // w: how many further outlines (virtual_more)
+    vec4 virtual_spot[MAX_VIRTUAL_LIGHTS];          // a point image's spot cone, carried (spot_cone.glsl spot_factor)
+    vec4 virtual_cookie_u[MAX_VIRTUAL_LIGHTS];      // its cookie's right / tan(angle), carried; w: layer (-1: none)
+    vec4 virtual_cookie_v[MAX_VIRTUAL_LIGHTS];      // xyz: its cookie's top / tan(angle), carried (spot_cookie.glsl);
+                                                    // w: a point image's sphere radius (PointLight.radius)
+    vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
+} virtual_lights;
+
+// Whether the line from ``position`` along ``l`` (towards the image), already through the
+// exit at ``t``, passes each further outline of light ``i`` in order, from its front, before
+// ``dist`` (the image).
+bool virtual_through(int i, vec3 position, vec3 l, float t, float dist) {
+    int count = int(virtual_lights.virtual_params[i].w);
+    for (int k = 0; k < count; ++k) {
+        int at = (i * (MAX_APERTURES - 1) + k) * 4;
+        vec4 plane = virtual_lights.virtual_more[at];
+        float towards = dot(plane.xyz, l);
+        float h = dot(plane.xyz, position) + plane.w;
+        if (towards >= 0.0 || h <= 0.0) return false;
+        float s = h / -towards;
+        if (s <= t || s > dist) return false;
+        vec3 x = position + l * s - virtual_lights.virtual_more[at + 1].xyz;
+        float a = dot(x, virtual_lights.virtual_more[at + 2].xyz);
+        float b = dot(x, virtual_lights.virtual_more[at + 3].xyz);
+        if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0) return false;
+        t = s;
+    }
+    return true;
+}
+
+uniform sampler2DShadow virtual_atlas;
+
+float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
+    vec4 params = virtual_lights.virtual_params[i];
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    float texel = virtual_lights.virtual_origin[i].w;
+    if (virtual_lights.virtual_position[i].w > 0.5) texel *= dist;  // an angle: its size here
+    vec4 p = virtual_lights.virtual_matrix[i] * vec4(position + normal * texel * (1.0 + params.y) * (1.5 - nl), 1.0);
+    p.xyz /= p.w;
+    if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
+    return filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y);  // shadows.glsl
+}
+
+// How much of virtual light ``i``'s light reaches ``position`` by distance and spot cone
+// (1 for a directional image), with ``l`` the unit way towards its image and ``dist`` the
+// distance to it (1e30 for a directional one).
+float virtual_falloff(int i, vec3 position, out vec3 l, out float dist) {
+    vec4 image = virtual_lights.virtual_position[i];
+    l = -image.xyz;
+    dist = 1e30;
+    if (image.w <= 0.5) return 1.0;
+    vec3 d = image.xyz - position;
+    dist = length(d);
+    l = d / max(dist, 1e-4);
+    float range = virtual_lights.virtual_color[i].w;
+    float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);  // lights.glsl's falloff, along the whole path
+    return fade * fade / (dist * dist + 1.0) * spot_factor(virtual_lights.virtual_spot[i], l);
+}
+
+// Whether virtual light ``i``'s line from ``position`` along ``l`` (towards its image,
+// ``dist`` away) comes out of its exit: ``position`` in front of the exit's plane, the line
+// crossing that plane inside its outline before the image, and then every further outline
+// (virtual_through): the light came through the mirror or the portal's opening.
+bool virtual_comes_through(int i, vec3 position, vec3 l, float dist) {
+    vec4 exit_plane = virtual_lights.virtual_exit[i];
+    float height = dot(exit_plane.xyz, position) + exit_plane.w;
+    float towards = dot(exit_plane.xyz, l);
+    if (height <= 0.0 || towards >= 0.0) return false;  // behind the exit, or the line leaves it
+    vec3 x = position + l * (height / -towards) - virtual_lights.virtual_origin[i].xyz;
+    float a = dot(x, virtual_lights.virtual_u[i].xyz);
+    float b = dot(x, virtual_lights.virtual_v[i].xyz);
+    if (a < 0.0 || a > 1.0 || b < 0.0 || b > 1.0 || height / -towards > dist) return false;
+    return virtual_through(i, position, l, height / -towards, dist);
+}
+#endif
