@@ -42,6 +42,7 @@ from engine.core.world import World
 # before its cut is made again: float32 world matrices of two entities moved together agree
 # to about 1e-7 relative.
 _SAME_POSE = 1e-5
+_LOW_BITS, _HIGH_BITS = np.array([1, 2, 4], np.uint8), np.array([8, 16, 32], np.uint8)  # a vertex beyond a side
 _HALF_CUBE = np.array([[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]])  # a decal's box, in its own space
 _CORNERS = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)])
 
@@ -287,11 +288,22 @@ class DecalSystem(esper.Processor):
         axis = box_world[:3, 2] / max(np.linalg.norm(box_world[:3, 2]), 1e-30)  # whence it comes, in the world
         surface_world = _matrix(self.world.get(surface, Transform).world)
         positions = mesh.positions @ pose[:3, :3].T + pose[:3, 3]
+        # Only the triangles whose bounds meet the box go on (a small decal on a big mesh:
+        # the soup and its normals are made for a few of its triangles, not all): a bit a
+        # vertex for each of the box's six sides it lies beyond, and a triangle whose three
+        # vertices share one lies wholly beyond that side.
+        beyond = (positions < -0.5) @ _LOW_BITS | (positions > 0.5) @ _HIGH_BITS
+        triangle_beyond = beyond[mesh.indices[:, 0]] & beyond[mesh.indices[:, 1]] & beyond[mesh.indices[:, 2]]
+        indices = mesh.indices[triangle_beyond == 0]
+        if not len(indices):
+            return None
+        used = np.unique(indices)
         to_surface = np.linalg.inv(surface_world[:3, :3])
-        world_normals = mesh.normals @ to_surface          # inverse transpose, rows
+        normals = mesh.normals[used]
+        world_normals = normals @ to_surface          # inverse transpose, rows
         world_normals /= np.maximum(np.linalg.norm(world_normals, axis=1, keepdims=True), 1e-30)
-        box_normals = mesh.normals @ to_surface @ box_world[:3, :3]
-        triangles = soup(positions, box_normals, world_normals @ axis, mesh.indices)
+        box_normals = normals @ to_surface @ box_world[:3, :3]
+        triangles = soup(positions[used], box_normals, world_normals @ axis, np.searchsorted(used, indices))
         return decal_geometry(triangles, decal.angle_fade, decal.depth_fade, decal.region)
 
     def _dress(self, part: int, entity: int, decal: Decal) -> None:

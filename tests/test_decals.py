@@ -595,3 +595,38 @@ def test_of_two_overlapping_decals_the_higher_order_is_blended_over(scene, order
     x, y = runner.project((0.0, 0.0, 0.0))
     r, g, b = image[y, x]
     assert (g > 2 * r) if order else (r > 2 * g), image[y, x]
+
+
+def test_on_a_dense_mesh_the_cut_is_the_whole_soups_cut(scene):
+    """The stage hands the cut only the triangles whose bounds meet the box (a small decal on
+    a big mesh); the pieces are those of cutting every triangle (a second path, here)."""
+    from engine.assets.mesh import sphere
+    from engine.core.decal_clip import decal_geometry, soup
+
+    ball = sphere(1.0, 96, 48)
+    made = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 4.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        world.spawn(Transform(), MeshRef(ball), Material(color=GREY))
+        made["decal"] = world.spawn(Transform(position=glm.vec3(0.2, 0.1, 1.0), scale=glm.vec3(0.6, 0.5, 0.8)),
+                                    Decal(angle_fade=(40.0, 70.0)))
+
+    runner, _ = render(scene, build)
+    part = [e for e, _ in runner.world.query_one(FromDecal)][0]
+    cut = runner.world.get(part, MeshRef).mesh
+    box_world = np.array(runner.world.get(made["decal"], Transform).world, np.float64)
+    to_box = np.linalg.inv(box_world)
+    positions = ball.positions @ to_box[:3, :3].T + to_box[:3, 3]
+    facing = ball.normals @ np.array([0.0, 0.0, 1.0])  # (the ball unturned, unscaled: its normals are the world's)
+    whole = decal_geometry(soup(positions, ball.normals @ box_world[:3, :3], facing, ball.indices), (40.0, 70.0),
+                           0.1, (0.0, 0.0, 1.0, 1.0))
+
+    def area(p):
+        t = p.reshape(-1, 3, 3)
+        return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum()
+
+    assert len(cut.positions) == len(whole.positions) > 100
+    assert area(cut.positions) == pytest.approx(area(whole.positions), rel=1e-5)
+    np.testing.assert_allclose(np.sort(cut.colors[:, 3]), np.sort(whole.alphas), atol=1e-6)
