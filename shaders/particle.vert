@@ -8,8 +8,8 @@
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "ambient.glsl"
-#include "virtual_light_ways.glsl"
 #endif
+#include "virtual_light_ways.glsl"
 
 in vec3 in_center;   // world
 in float in_size;    // metres across

@@ -7,8 +7,8 @@
 // each earlier surface's outline as the later surfaces carry it, in order along the line,
 // each entered from its front (virtual_more: up to MAX_APERTURES - 1 of them a light).
 // Only the VIRTUAL_LIGHTS builds hold it (engine/render/scene_pass.py): frames where one shines.
-#ifdef VIRTUAL_LIGHTS
 #include "virtual_light_ways.glsl"
+#ifdef VIRTUAL_LIGHTS
 
 // The light of every virtual light at a surface point: ``diffuse`` its Lambertian share,
 // ``normal`` the shading normal, ``geometric`` the mesh's (for the shadow lookup),
