@@ -136,23 +136,27 @@ class DecalSystem(esper.Processor):
         world = self.world
         # The entities holding a Decal, kept from the change sets (a frame without decals asks
         # the world nothing: a look at two sets).
-        added = world.changed(Decal)
+        written = world.changed(Decal)  # (added, removed or written)
         deleted = world.deleted()
-        if added or (deleted and self.holders):
-            self.holders = {e for e in self.holders | added if e not in deleted and world.has(e, Decal)}
+        if written or (deleted and self.holders):
+            self.holders = {e for e in self.holders | written if e not in deleted and world.has(e, Decal)}
         if not self.holders and not self.states:
             self.boxes = None
             return
-        decals = [(e, (world.get(e, Decal), transform)) for e in sorted(self.holders)
-                  if (transform := world.try_get(e, Transform)) is not None]
         frame = world.frame
         gone = deleted | frame.removed
-        for entity in [e for e in self.states if e in gone or not world.has(e, Decal) or not world.has(e, Transform)]:
-            self._drop(entity)
-        # The surfaces that changed this frame (moved, came, went, a new mesh or layers):
-        # their boxes brought up to date, and the decals they reach, before or now, cut again.
-        touched = frame.moved | frame.added | gone | world.changed_any((MeshRef, Visibility, Mirror, Portal, Material,
-                                                                        Refractive))
+        if gone or written:
+            for entity in [e for e in self.states if e in gone or not world.has(e, Decal)
+                           or not world.has(e, Transform)]:
+                self._drop(entity)
+        # The surfaces that changed this frame (moved, came, went, a new mesh, material or
+        # layers): their boxes brought up to date, and the decals they reach, before or now, cut
+        # again.  A still frame stops here.
+        looks = world.changed_any((MeshRef, Visibility, Mirror, Portal, Material, Refractive))
+        touched = frame.moved | frame.added | gone | looks
+        changed_decals = written | (world.changed(Visibility) & self.holders)
+        if self.boxes is not None and not touched and not changed_decals:
+            return
         reached: set[int] = set()
         if self.boxes is None:
             self.boxes = ReceiverBoxes()
@@ -161,12 +165,16 @@ class DecalSystem(esper.Processor):
             boxes = self.boxes
             rows = [boxes.row[e] for e in touched if e in boxes.row]  # where they were
             reached |= self._decals_meeting(boxes.low[rows], boxes.high[rows])
-            receiving = [e for e in touched if self._receives(e)]
+            # Whether each can take a decal is asked again only where its components changed
+            # (a mover that only moved keeps its answer).
+            again = frame.added | gone | looks | written
+            receiving = [e for e in touched if (self._receives(e) if e in again else e in boxes.row)]
             for entity in touched:
                 if entity in boxes.row:
                     boxes.drop(entity)
             reached |= self._decals_meeting(*self._put_boxes(receiving))  # where they are
-        changed_decals = world.changed_any((Decal, Visibility))
+        decals = [(e, (world.get(e, Decal), transform)) for e in sorted(self.holders)
+                  if (transform := world.try_get(e, Transform)) is not None]
         spawned = False
         for entity, (decal, transform) in decals:
             state = self.states.get(entity)

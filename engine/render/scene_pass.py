@@ -226,6 +226,7 @@ class ScenePass:
         blank, colour_maps, recorded = renderer.blank_color, renderer.colour_maps, texture_record(ctx)
         draws = instances = 0
         skipped = (skip, hide)
+        offset = False  # the decals' depth offset on (their cuts come in one run: set once for it)
         for batch in batches:
             count = batch.count
             if not count or (count == 1 and batch.entity_at[0] in skipped):
@@ -256,8 +257,9 @@ class ScenePass:
                 last_own[glo] = own
             if before_draw is not None:
                 before_draw()
-            if batch.decal:  # a decal's cut mesh, on the surface it was cut from: its depth offset to win
-                ctx.polygon_offset = DECAL_DEPTH_OFFSET
+            if batch.decal != offset:  # a decal's cut mesh, on the surface it was cut from: its depth offset
+                ctx.polygon_offset = DECAL_DEPTH_OFFSET if batch.decal else (0.0, 0.0)  # (set once for a run)
+                offset = batch.decal
             if batch.double_sided:  # both faces (Material.double_sided): culling off for its draw
                 culled = set_face_culling(ctx, False)
                 vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
@@ -271,10 +273,10 @@ class ScenePass:
                 set_front_face(ctx, restore)
             else:
                 vao.render(moderngl.TRIANGLES, vertices=vertices, instances=count)
-            if batch.decal:
-                ctx.polygon_offset = (0.0, 0.0)
             draws += 1
             instances += count
+        if offset:
+            ctx.polygon_offset = (0.0, 0.0)
         if draws:
             stats = renderer.stats
             stats.draw_calls += draws
