@@ -9,7 +9,7 @@ from components.model import Animation, AnimationEvents, AnimationLayer, FromMod
 from components.particles import ParticleEmitter
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.pose import Morph, Skin
-from components.post import Bloom, ColorGrading, Tonemap, Vignette
+from components.post import Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
@@ -22,7 +22,7 @@ from components.water import Water
 __all__ = [
     "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
     "ComponentValueError",
-    "ComponentWarning", "Decal",
+    "ComponentWarning", "Decal", "DepthOfField",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
     "LevelOfDetail", "Material",
     "MeshRef", "Mirror", "Model", "Morph", "ParticleEmitter", "PointLight", "Portal", "PortalClone", "ReflectionProbe",

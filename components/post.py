@@ -239,3 +239,70 @@ class Vignette(TrackedComponent):
         if name == "falloff":
             return finite(self, name, value, low=0.0, high=MAX_VIGNETTE_FALLOFF)
         return value
+
+
+MIN_FOCUS_DISTANCE = 0.01    # metres (DepthOfField.focus_distance): a centimetre, a macro lens's closest
+MAX_FOCUS_DISTANCE = 1.0e6   # metres: a million is infinity to any lens
+MAX_F_STOP = 64.0
+MIN_F_STOP = 0.5             # faster than any real lens (f/0.7 is the fastest made)
+MAX_FOCAL_LENGTH = 2000.0    # millimetres
+MAX_BLUR = 0.1               # the largest disc's diameter, as a share of the picture's height
+
+
+def _screen_point(owner: object, name: str, value: Any) -> glm.vec2:
+    """Two numbers in [0, 1]: a share of the picture's width and height from its top-left."""
+    parts = _items(value) if not isinstance(value, (str, bytes, dict)) else []
+    if len(parts) != 2 or any(isinstance(p, bool) for p in parts):
+        raise ComponentValueError(f"{type(owner).__name__}.{name} must be two numbers (shares of the picture's "
+                                  f"width and height from its top-left), got {value!r}")
+    return glm.vec2(finite(owner, name, parts[0], low=0.0, high=1.0), finite(owner, name, parts[1], low=0.0, high=1.0))
+
+
+@dataclass(eq=False)
+class DepthOfField(TrackedComponent):
+    """The camera's lens focused at one distance, blurring what lies nearer or farther (on the
+    camera's entity), as Unity's and Unreal's physical cameras do: each point is spread into
+    the disc a thin lens images it as (its circle of confusion, ``engine/rules/lens_rules.py``),
+    in the linear image before bloom and the tone curve.  The distance is the length of the
+    light's way: a face seen in a mirror lies as far as the mirror plus the mirror to the face,
+    so focusing on the mirror's frame blurs the reflection and focusing on the reflection
+    blurs the frame, as a real camera's photograph does (a depth buffer holds only the glass).
+
+    - ``focus_distance`` (metres, 0.01 to a million): what is sharp, along the light's way;
+    - ``f_stop`` (0.5..64): the aperture's f-number; a smaller number blurs more;
+    - ``focal_length`` (millimetres, or None): the lens; None: the one whose field of view on
+      a full-frame sensor is the camera's (a wide camera has a short lens and a deep focus);
+      a longer one blurs more (an orthographic camera without one: 50 mm);
+    - ``max_blur`` (0..0.1): the largest disc's diameter as a share of the picture's height
+      (a lens at f/1 can spread the sky over much of the frame; this keeps it a look);
+    - ``autofocus``: focus on what the picture shows at ``focus_point`` (shares of its width
+      and height from its top-left; the middle by default), through mirrors and portals too,
+      following it at ``focus_speed`` (per second: each frame the focus moves the share
+      ``1 - exp(-focus_speed * dt)`` of the way, in dioptres as a lens's focus ring turns; a
+      camera's first frame starts there).  Without it the focus is ``focus_distance`` at once.
+    """
+
+    focus_distance: float = 10.0
+    f_stop: float = 2.8
+    focal_length: float | None = None
+    max_blur: float = 0.02
+    autofocus: bool = False
+    focus_point: Any = field(default_factory=lambda: glm.vec2(0.5, 0.5))
+    focus_speed: float = 4.0
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "focus_distance":
+            return finite(self, name, value, low=MIN_FOCUS_DISTANCE, high=MAX_FOCUS_DISTANCE)
+        if name == "f_stop":
+            return finite(self, name, value, low=MIN_F_STOP, high=MAX_F_STOP)
+        if name == "focal_length":
+            return None if value is None else finite(self, name, value, low=1.0, high=MAX_FOCAL_LENGTH)
+        if name == "max_blur":
+            return finite(self, name, value, positive=True, high=MAX_BLUR)
+        if name == "autofocus":
+            return boolean(self, name, value)
+        if name == "focus_point":
+            return _screen_point(self, name, value)
+        if name == "focus_speed":
+            return finite(self, name, value, positive=True, high=MAX_ADAPT_SPEED)
+        return value

@@ -11,6 +11,8 @@
 // keeps its surface's closed look (the composite leaves it).
 #include "camera.glsl"
 #include "end_image.glsl"
+#include "view_axis.glsl"
+#include "way.glsl"
 
 uniform sampler2D history;      // the previous frame's main image (linear HDR, alpha 1)
 uniform usampler2D node_map;    // this level's node image (the claims)
@@ -22,7 +24,7 @@ uniform vec2 level_size;
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;
-layout(location = 2) out uint out_seen;
+layout(location = 2) out uvec2 out_seen;  // the way: to the surface it looks out of (way.glsl)
 
 void main() {
     if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != view_index) discard;  // (drawn at the level's size)
@@ -33,12 +35,14 @@ void main() {
     vec3 dir = b.xyz / b.w - origin;
     float along = dot(camera.clip_plane.xyz, dir);
     float t = abs(along) > 1e-8 ? -(dot(camera.clip_plane.xyz, origin) + camera.clip_plane.w) / along : 0.0;
-    vec4 previous = reproject * (to_ancestor * vec4(origin + dir * t, 1.0));
+    vec3 on_surface = origin + dir * t;
+    vec4 previous = reproject * (to_ancestor * vec4(on_surface, 1.0));
     vec2 uv = previous.w > 1e-6 ? previous.xy / previous.w * 0.5 + 0.5 : vec2(-1.0);
     bool held = all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)));
     // (Where nothing is held the colour is the nearest edge's, only for a rough mirror's
     // blur to read beside the pixels it does show.)
     out_color = vec4(textureLod(history, clamp(uv, 0.0, 1.0), 0.0).rgb, 1.0);
     out_surface = 0u;
-    out_seen = held ? surface : NO_END_IMAGE;
+    out_seen = seen_at(held ? surface : NO_END_IMAGE,
+                       length(on_surface - ray_eye(camera.eye.xyz, view_axis(camera.view_proj), on_surface)));
 }

@@ -36,6 +36,7 @@
 #include "hdr.glsl"
 #include "fog.glsl"
 #include "view_axis.glsl"
+#include "way.glsl"
 #ifdef COMPOSITE_BUMPY
 flat in mat3 v_project_dir;
 #endif
@@ -109,7 +110,7 @@ float fallback_alpha(float rate) {
 #endif
 
 layout(location = 0) out vec4 out_color;  // blended: rgb x reflect_rate + own x (1 - reflect_rate)
-layout(location = 1) out uint out_seen;
+layout(location = 1) out uvec2 out_seen;  // the view's entity and way, carried up (way.glsl)
 
 void main() {
     // Only this frame's claims wrote the node image, inside the views' rectangles.
@@ -125,7 +126,7 @@ void main() {
         if (texelFetch(reflection_nodes, child, 0).r != v_ids.y - 1u
                 || texelFetch(reflection_seen, child, 0).r != NO_END_IMAGE) discard;
     }
-    out_seen = v_ids.x;  // nothing followed: the surface itself, as its scene pass wrote it
+    // (its seen pair is written below, once the ray's point on the surface is known)
 #else
     if (texelFetch(reflection_nodes, px, 0).r != v_view) discard;
 #endif
@@ -147,9 +148,11 @@ void main() {
     vec3 at = eye + view_dir * (-(dot(v_normal.xyz, eye) + v_params.z) / dot(v_normal.xyz, view_dir));
     float parent_fog = fog_depth(fog_from_eye ? eye : near.xyz / near.w, at);
 #ifndef COMPOSITE_FALLBACK
-    uint seen_id = texelFetch(reflection_seen, px, 0).r;
-    if (seen_id == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
-    out_seen = seen_id;
+    uvec2 seen_pair = texelFetch(reflection_seen, px, 0).rg;
+    if (seen_pair.r == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
+    out_seen = seen_pair;
+#else
+    out_seen = seen_at(v_ids.x, length(at - eye));  // nothing followed: the surface itself, as its scene pass wrote it
 #endif
 #ifdef COMPOSITE_PORTAL
 #ifdef COMPOSITE_FALLBACK
@@ -201,7 +204,7 @@ void main() {
             uv = bent_uv;
             level_px = bent_level_px;
             px = bent_px;
-            out_seen = texelFetch(reflection_seen, px, 0).r;
+            out_seen = texelFetch(reflection_seen, px, 0).rg;
         }
     }
 #endif

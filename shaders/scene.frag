@@ -9,6 +9,7 @@
 #include "ggx.glsl"
 #include "ambient.glsl"
 #include "hdr.glsl"
+#include "way.glsl"
 #include "fog.glsl"
 
 uniform sampler2D albedo_map;
@@ -127,7 +128,7 @@ vec3 view_eye;
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;  // the entity drawn here
-layout(location = 2) out uint out_seen;     // the entity finally seen here (reflections overwrite)
+layout(location = 2) out uvec2 out_seen;    // the entity finally seen here and its way (way.glsl; reflections overwrite)
 layout(location = 3) out uint out_node;
 #ifdef SCREEN_REFLECTION
 // A root view drawn for screen-space reflections (engine/render/screen_reflections.py): what
@@ -692,12 +693,12 @@ void main() {
     // its colour is never seen, so only its depth and ids count (the claims below read them).
     out_color = vec4(0.0, 0.0, 0.0, 1.0);
     out_surface = v_slots.w;
-    out_seen = v_slots.w;
+    out_seen = seen_at(v_slots.w, length(v_world_pos - ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos)));
     out_node = node_index;
     return;
 #endif
 #ifdef TRIVIAL
-    out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = v_slots.w; out_node = node_index; return;
+    out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = uvec2(v_slots.w, 0u); out_node = node_index; return;
 #endif
     view_eye = ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos);
     Surface s;
@@ -870,6 +871,6 @@ void main() {
 #endif
     out_color = vec4(hdr_store(color), alpha);
     out_surface = v_slots.w;
-    out_seen = v_slots.w;
+    out_seen = seen_at(v_slots.w, length(v_world_pos - VIEW_EYE));
     out_node = node_index;
 }

@@ -6,6 +6,7 @@
 #include "view_axis.glsl"
 #include "hdr.glsl"
 #include "fog.glsl"
+#include "way.glsl"
 
 #ifdef GENERATED_SKY
 #include "sky_model.glsl"
@@ -21,7 +22,7 @@ in vec2 v_ndc;
 #endif
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;
-layout(location = 2) out uint out_seen;
+layout(location = 2) out uvec2 out_seen;  // nothing, beyond everything (way.glsl)
 layout(location = 3) out uint out_node;
 
 void main() {
@@ -44,6 +45,6 @@ void main() {
     // or a probe face's; reflection levels leave the sky to their composites).
     out_color = vec4(hdr_store(fog_sky(sky, eye, direction)), 1.0);
     out_surface = 0u;
-    out_seen = 0u;
+    out_seen = seen_at(0u, SKY_WAY);
     out_node = 0u;
 }

@@ -6,7 +6,7 @@ from __future__ import annotations
 import esper
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap, Vignette
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
@@ -33,6 +33,9 @@ class PresentSystem(esper.Processor):
         self.bloomed: Bloom | None = None
         self.graded: ColorGrading | None = None
         self.vignetted: Vignette | None = None
+        self.focused: DepthOfField | None = None
+        # The debug overlay's switch: False draws no camera's DepthOfField.
+        self.depth_of_field = True
 
     @property
     def curve(self) -> str | None:
@@ -61,18 +64,22 @@ class PresentSystem(esper.Processor):
         exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
-        tonemap = bloom = grading = vignette = None
+        tonemap = bloom = grading = vignette = focus = None
+        fov_y = None
         if camera is not None:
+            focus = self.world.try_get(camera, DepthOfField) if self.depth_of_field else None
+            fov_y = parts[1].fov_y if parts[1].projection == "perspective" else None
             tonemap = self.world.try_get(camera, Tonemap)
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
             grading = self.world.try_get(camera, ColorGrading) if self.grade else None
             vignette = self.world.try_get(camera, Vignette) if self.grade else None
         self.tonemap, self.bloomed, self.graded, self.vignetted = tonemap, bloom, grading, vignette
+        self.focused = focus
         views: FrameViews | None = self.world.resources.get(FrameViews)
         main = views.main if views is not None else None
         self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt,
                               views.image if views is not None else None, grading, vignette,
-                              main.proj if main is not None else None)
+                              main.proj if main is not None else None, focus, fov_y)
         shares = self.renderer.screen_occlusion
         if self.show_occlusion and shares is not None:
             self.renderer.present_pass.draw_occlusion(shares, framebuffer, size)

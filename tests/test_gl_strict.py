@@ -415,7 +415,7 @@ def test_a_level_is_made_and_cleared_with_each_image_at_its_clear_value(ctx):
 
         check()
         for texture in (targets.surface, targets.seen, targets.node):
-            texture.write(rng.integers(1, 2**32, size[0] * size[1], dtype=np.uint32).tobytes())
+            texture.write(rng.integers(1, 2**32, size[0] * size[1] * texture.components, dtype=np.uint32).tobytes())
         targets.color.write(rng.uniform(1.0, 5.0, size[0] * size[1] * 4).astype(np.float16).tobytes())
         targets.depth.write(np.full(size[0] * size[1], 0.25, np.float32).tobytes())
         targets.framebuffer.use()

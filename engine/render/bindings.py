@@ -145,6 +145,11 @@ REFLECTION_ADDED_UNIT = 35    # the sky's or probe's reflection the scene pass a
 REFLECTION_NORMAL_UNIT = 36   # the shading normals
 REFLECTION_SURFACE_UNIT = 37  # the main view's surface ids
 REFLECTION_HITS_UNIT = 38     # the rays marched at half size (ScreenReflections.half_resolution)
+# Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
+DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
+DOF_FOCUS_UNIT = 40      # the 1x1 focus distance
+DOF_PREPARED_UNIT = 41   # each pixel's colour and signed blur radius
+DOF_TILES_UNIT = 42      # each tile's largest blur radius of what lies nearer than the focus
 FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages

@@ -82,7 +82,7 @@ class LevelCopies:
     def _make(self, targets: RenderTargets) -> _Copy:
         ctx = self.ctx
         textures = (ctx.texture(targets.size, 4, dtype=targets.color.dtype), ctx.texture(targets.size, 1, dtype="u4"),
-                    ctx.texture(targets.size, 1, dtype="u4"))
+                    ctx.texture(targets.size, targets.seen.components, dtype="u4"))
         for texture in textures:
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         return _Copy(targets, ctx.framebuffer([targets.color, targets.surface, targets.seen]), textures,

@@ -85,7 +85,6 @@ PARTICLE_PASS = PassState(depth_func="<", cull=False, clips=frozenset((CLIP_VIEW
                           blend=BLEND_PREMULTIPLIED)
 # The colour image alone of a view's framebuffer (colour, surface ids, seen ids) takes writes.
 _COLOUR_ONLY = ((True, True, True, True), (False, False, False, False), (False, False, False, False))
-_ALL = ((True, True, True, True),) * 3
 
 
 @dataclass
@@ -224,6 +223,7 @@ class ParticleDraw:
         framebuffer = targets.view_framebuffer
         if copy_depth and any(record.softness > 0.0 for drawn in chosen for record in drawn):
             gpu.raw_gl.copy_depth(framebuffer, targets.depth_copy(), PARTICLE_DEPTH_UNIT)
+        writes = framebuffer.color_mask  # (the glass slot's: back to it after)
         framebuffer.color_mask = _COLOUR_ONLY
         apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *targets.size), views[0].scissor)
         try:
@@ -236,7 +236,7 @@ class ParticleDraw:
                     for record in chosen[index]:
                         self._draw_one(record, view, masked, ambient_probes)
         finally:
-            framebuffer.color_mask = _ALL
+            framebuffer.color_mask = writes
 
     def _draw_one(self, record: GpuEmitter, view: View, masked: bool, ambient_probes: bool) -> None:
         """One emitter's particles in ``view``: an "alpha" emitter's rows written again for the

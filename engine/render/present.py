@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, Tonemap, Vignette
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
 from engine.assets.color_lut import ColorLut
 from engine.render.bindings import (
     BLOOM_UNIT,
@@ -45,6 +45,7 @@ from engine.render.bindings import (
     bind_texture,
 )
 from engine.render.bloom import BloomPass
+from engine.render.depth_of_field import DepthOfFieldPass
 from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
 from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
@@ -83,6 +84,14 @@ class PresentPass:
         self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
         self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
         self._occlusion_view: moderngl.VertexArray | None = None  # the overlay's "AO only" view, made on first use
+        self._depth_of_field: DepthOfFieldPass | None = None  # made when a camera first has a DepthOfField
+
+    @property
+    def depth_of_field(self) -> DepthOfFieldPass:
+        """The depth-of-field pass (``engine/render/depth_of_field.py``), made on first use."""
+        if self._depth_of_field is None:
+            self._depth_of_field = DepthOfFieldPass(self.ctx, self.shaders)
+        return self._depth_of_field
 
     @property
     def search_steps(self) -> int:
@@ -126,8 +135,11 @@ class PresentPass:
              size: tuple[int, int], tonemap: Tonemap | None = None, bloom: Bloom | None = None,
              curve: str | None = None, camera: int | None = None, dt: float = 0.0,
              grading: ColorGrading | None = None, vignette: Vignette | None = None,
-             projection: object | None = None) -> None:
-        """Present ``hdr`` into ``output``.  ``tonemap``, ``bloom``, ``grading`` and
+             projection: object | None = None, focus: DepthOfField | None = None,
+             seen: moderngl.Texture | None = None, fov_y: float | None = None) -> None:
+        """Present ``hdr`` into ``output``, first blurred by the camera's lens where ``focus``
+        (its DepthOfField) is given (``seen``: the same level's seen pair, its ways; ``fov_y``
+        the camera's field of view, None: orthographic).  ``tonemap``, ``bloom``, ``grading`` and
         ``vignette``: the active camera's components (None: none), ``projection`` its view's
         (the vignette's rays); ``curve`` overrides the tone curve (the debug overlay's
         choice; None: the Tonemap's, or "none"); ``camera`` is whose image it is (automatic
@@ -138,6 +150,11 @@ class PresentPass:
                 self._encoded.release()
             self._encoded = CaptureTarget(self.ctx, size)
         self.post_passes = 0
+        if focus is not None and seen is not None:
+            hdr = self.depth_of_field.draw(hdr, seen, focus, fov_y, camera, dt)
+            self.post_passes += self.depth_of_field.passes()
+        elif self._depth_of_field is not None:
+            self._depth_of_field.release_targets()
         if grading is not None and not grades(grading) and (grading.lut is None or grading.lut_strength == 0.0):
             grading = None  # (nothing to grade: the same picture without it)
         if vignette is not None and (vignette.intensity == 0.0 or projection is None):
@@ -254,9 +271,11 @@ class PresentPass:
             self._written[key] = value
 
     def release_post_targets(self) -> None:
-        """Let the bloom chain, the automatic exposure and the grade's table go (no camera
-        asks for them now)."""
+        """Let the bloom chain, the automatic exposure, the grade's table and the depth of
+        field's images go (no camera asks for them now)."""
         self._release_post_targets()
+        if self._depth_of_field is not None:
+            self._depth_of_field.release_targets()
 
     def _release_post_targets(self) -> None:
         self._lut_texture(None)
@@ -266,10 +285,11 @@ class PresentPass:
             self.auto_exposure.release_targets()
 
     def post_target_count(self) -> int:
-        """Textures the bloom chain and automatic exposure hold now (0 without a camera
-        that asks for them)."""
+        """Textures the bloom chain, automatic exposure, the grade and depth of field hold now
+        (0 without a camera that asks for them)."""
         return (self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
-                + (self._lut is not None))
+                + (self._lut is not None)
+                + (self._depth_of_field.target_count() if self._depth_of_field is not None else 0))
 
     def release(self) -> None:
         self._lut_texture(None)
@@ -281,6 +301,9 @@ class PresentPass:
         if self._occlusion_view is not None:
             self._occlusion_view.release()
             self._occlusion_view = None
+        if self._depth_of_field is not None:
+            self._depth_of_field.release()
+            self._depth_of_field = None
         self._post.clear()
         self.bloom.release()
         self.auto_exposure.release()

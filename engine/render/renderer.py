@@ -16,7 +16,7 @@ import math
 import moderngl
 import numpy as np
 
-from components.post import MAX_EXPOSURE_EV, Bloom, ColorGrading, Tonemap, Vignette
+from components.post import MAX_EXPOSURE_EV, Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
@@ -443,17 +443,19 @@ class Renderer(Gpu):
     def present(self, output: moderngl.Framebuffer, size: tuple[int, int], tonemap: Tonemap | None = None,
                 bloom: Bloom | None = None, curve: str | None = None, camera: int | None = None,
                 dt: float = 0.0, image: RenderTargets | None = None, grading: ColorGrading | None = None,
-                vignette: Vignette | None = None, projection: object | None = None) -> None:
+                vignette: Vignette | None = None, projection: object | None = None,
+                focus: DepthOfField | None = None, fov_y: float | None = None) -> None:
         """Encode the HDR ``image`` (the present stage's: the main view's, ``FrameViews.image``;
         None: level 0 of the main view tree) to sRGB into ``output`` (a window's or a capture
         target), anti-aliased unless ``antialias`` is "off"; with the active camera's
         ``tonemap``, ``bloom`` and ``grading`` (``components/post.py``), bloomed, exposed,
         graded and tone mapped first (``PresentPass.draw``; ``exposure`` is used only without
-        a Tonemap)."""
+        a Tonemap); with its ``focus`` (a DepthOfField; ``fov_y`` its field of view, None:
+        orthographic) blurred by its lens first, by the ways in ``image``'s seen image."""
         image = image if image is not None else self.targets
         assert image is not None
         self.present_pass.draw(image.color, self.exposure, self._antialias, output, size, tonemap, bloom,
-                               curve, camera, dt, grading, vignette, projection)
+                               curve, camera, dt, grading, vignette, projection, focus, image.seen, fov_y)
         self.checkpoint("present")
 
     def text(self) -> TextPass:

@@ -403,7 +403,7 @@ class ScenePass:
         renderer = self.renderer
         self._sky_size = renderer.sky.size[0]
         state = _BATCHED_TRANSPARENT if options.batched else _TRANSPARENT
-        targets.view_framebuffer.depth_mask = False
+        targets.begin_glass()
         self._begin(views, targets, options, state)
         try:
             if not transparent:  # the particles alone (engine/render/particle_draw.py)
@@ -437,8 +437,7 @@ class ScenePass:
                             self._slot_view(view, index, batches, options.masked, targets,
                                             emitters[index] if emitters else (), _TRANSPARENT)
         finally:
-            targets.view_framebuffer.depth_mask = True
-            targets.view_framebuffer.use()
+            targets.end_glass()
         if renderer.debug:
             renderer.checkpoint(f"transparent ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
@@ -676,14 +675,12 @@ class ScenePass:
                     sky_draw.vertex_array(layered=False).render(moderngl.TRIANGLES, vertices=3)
                     renderer.stats.draw_calls += 1
                 if now or particles:  # the slot, the particles in among it (engine/render/particle_draw.py)
-                    targets.view_framebuffer.depth_mask = False
-                    targets.view_framebuffer.use()
+                    targets.begin_glass()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
                     emitters = self.particle_draw.visible([view], targets.size)[0] if particles else ()
                     self._slot_view(view, index, batches if now else [], options.masked, targets, emitters,
                                     _TRANSPARENT)
-                    targets.view_framebuffer.depth_mask = True
-                    targets.view_framebuffer.use()
+                    targets.end_glass()
                 if (options.sky or now or particles) and index + 1 < len(views):
                     # The next view's state (the pass after the last applies its own).
                     apply_pass_state(ctx, _SCENE, viewport, views[index + 1].scissor)

@@ -71,7 +71,7 @@ from engine.render import pose_rows, views
 from engine.render.bindings import clip_glsl_defines
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.render.raw_gl import _load as load_gl_function
-from engine.rules import shadow_rules, visibility_rules
+from engine.rules import lens_rules, shadow_rules, visibility_rules
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _BRANCH = re.compile(r"^\s*#\s*(else|elif|endif)\b")  # after these the line numbering is resumed
@@ -258,9 +258,10 @@ def engine_defines() -> dict[str, str]:
     """The defines every program is built with: numbers the GLSL shares with Python, each
     made from its one Python owner (the material slot indices, the cube-face table, the
     clip-distance indices of ``engine/render/bindings.py``, the visibility code's kind bits,
-    the blocks' array sizes and the tone curves' numbers: ``limit_glsl_defines``)."""
+    the blocks' array sizes and the tone curves' numbers: ``limit_glsl_defines``; the sky's
+    way and the nearest focus: ``lens_rules``)."""
     return {**material_slots.glsl_defines(), **cube_faces.glsl_defines(), **clip_glsl_defines(),
-            **visibility_rules.glsl_defines(), **limit_glsl_defines()}
+            **visibility_rules.glsl_defines(), **lens_rules.glsl_defines(), **limit_glsl_defines()}
 
 
 def limit_glsl_defines() -> dict[str, str]:

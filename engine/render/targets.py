@@ -43,10 +43,19 @@ def release_framebuffer(framebuffer: moderngl.Framebuffer) -> None:
     framebuffer.release()
 
 
+# Per attachment of a level's view framebuffer (colour, surface ids, the seen pair), what a
+# draw writes: everything, or (the glass slot) all but the seen pair's way.
+_WRITE_ALL = ((True, True, True, True),) * 3
+_GLASS_WRITES = ((True, True, True, True), (True, True, True, True), (True, False, False, False))
+
+
 class RenderTargets:
     """One level: HDR colour (alpha = something was drawn), and three uint images:
     ``surface`` - the entity whose surface is at the pixel (masks of the next level),
-    ``seen``    - the entity finally seen there, following reflections (the --ids image),
+    ``seen``    - what is finally seen there, following reflections: r the entity (the --ids
+                  image), g the length of the light's way from the eye to it as float bits
+                  (``shaders/include/way.glsl``: through mirrors and portals, the image's
+                  distance; what depth of field focuses by),
     ``node``    - which view of this level drew the pixel."""
 
     def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
@@ -57,7 +66,7 @@ class RenderTargets:
         self.color = ctx.texture(size, 4, dtype=HDR_FORMAT)
         self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.surface = ctx.texture(size, 1, dtype="u4")
-        self.seen = ctx.texture(size, 1, dtype="u4")
+        self.seen = ctx.texture(size, 2, dtype="u4")
         self.node = ctx.texture(size, 1, dtype="u4")
         for texture in (self.surface, self.seen, self.node):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -81,17 +90,39 @@ class RenderTargets:
         if bound is not None:
             bound.use()
 
+    def begin_glass(self) -> None:
+        """Bind the view framebuffer for a glass slot: depth tested but not written, and the
+        seen pair's way kept (glass writes its entity, but what shows through it keeps its own
+        way: depth of field focuses by it, as a depth buffer the glass does not write)."""
+        framebuffer = self.view_framebuffer
+        framebuffer.depth_mask = False
+        framebuffer.color_mask = _GLASS_WRITES
+        framebuffer.use()
+
+    def end_glass(self) -> None:
+        """Bind the view framebuffer writing everything again (after ``begin_glass``)."""
+        framebuffer = self.view_framebuffer
+        framebuffer.depth_mask = True
+        framebuffer.color_mask = _WRITE_ALL
+        framebuffer.use()
+
     def read_ids(self) -> np.ndarray:
         """Entity finally seen at each pixel, uint32 (height, width), row 0 at the top."""
-        return self._read(self.seen)
+        return self._read(self.seen)[..., 0].copy()
+
+    def read_ways(self) -> np.ndarray:
+        """The length of the light's way from the eye to what each pixel finally shows, in
+        metres, float32 (height, width), row 0 at the top (``SKY_WAY`` where the sky shows; 0
+        where nothing was drawn); waits for the GPU: tests and tools only."""
+        return self._read(self.seen)[..., 1].copy().view(np.float32)
 
     def read_surface_ids(self) -> np.ndarray:
         return self._read(self.surface)
 
     def _read(self, texture: moderngl.Texture) -> np.ndarray:
         w, h = self.size
-        data = np.frombuffer(texture.read(), np.uint32)
-        return np.flipud(data.reshape(h, w)).copy()
+        data = np.frombuffer(texture.read(), np.uint32).reshape(h, w, texture.components)
+        return np.flipud(data if texture.components > 1 else data[..., 0]).copy()
 
     def depth_copy(self) -> moderngl.Texture:
         """A depth texture of this size for a copy of ``depth`` (soft particles read it while

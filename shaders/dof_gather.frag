@@ -1,0 +1,66 @@
+#version 410 core
+// Depth of field, step 4 (engine/render/depth_of_field.py): each pixel gathers the discs that
+// cover it (scatter as gather), SAMPLES taps on a golden-angle spiral out to its reach (its
+// own radius, or the largest of a nearer thing in the 3x3 tiles about it), each tap standing
+// for an equal share of that disc's area.  Two layers, as a camera sees them:
+//   - behind: taps as far as the pixel or farther, each spread no wider than the pixel's own
+//     disc (a blurred background does not spread over a sharp thing in front of it), averaged
+//     with the pixel where their disc covers it;
+//   - in front: taps nearer than the pixel whose disc covers it, each bringing the share of
+//     its light its disc's area gives one pixel (its cell's area over the disc's), so a
+//     blurred foreground's edge covers half of an in-focus pixel beside it, and all of one
+//     well inside its disc; that share, at most 1, is laid over the layer behind.
+// The signed radius orders taps by distance (lens_rules: it grows with the distance).
+
+uniform sampler2D prepared;      // dof_prepare.frag: rgb colour, a signed radius
+uniform sampler2D near_tiles;    // dof_tiles.frag
+uniform int tile;
+
+out vec4 out_color;
+
+const int SAMPLES = 48;
+const float GOLDEN_ANGLE = 2.39996323;
+const float NEARER = 0.5;        // pixels of radius: a tap this much nearer is in front
+
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    ivec2 last = textureSize(prepared, 0) - 1;
+    vec4 centre = texelFetch(prepared, px, 0);
+    float own = abs(centre.a);
+    float reach = own;
+    ivec2 at_tile = px / tile;
+    ivec2 last_tile = textureSize(near_tiles, 0) - 1;
+    for (int y = -1; y <= 1; ++y) {
+        for (int x = -1; x <= 1; ++x) {
+            reach = max(reach, texelFetch(near_tiles, clamp(at_tile + ivec2(x, y), ivec2(0), last_tile), 0).r);
+        }
+    }
+    if (reach < 0.5) {  // nothing's disc reaches past its own pixel here
+        out_color = vec4(centre.rgb, 1.0);
+        return;
+    }
+    vec3 behind = centre.rgb;
+    float behind_weight = 1.0;
+    vec3 front = vec3(0.0);
+    float front_share = 0.0;
+    float cell = reach * reach / float(SAMPLES);  // a tap's share of the disc, over pi
+    for (int i = 0; i < SAMPLES; ++i) {
+        float r = reach * sqrt((float(i) + 0.5) / float(SAMPLES));
+        float angle = float(i) * GOLDEN_ANGLE;
+        ivec2 at = clamp(px + ivec2(round(vec2(cos(angle), sin(angle)) * r)), ivec2(0), last);
+        vec4 tap = texelFetch(prepared, at, 0);
+        float size = abs(tap.a);
+        if (tap.a < centre.a - NEARER) {
+            float share = clamp(size - r + 0.5, 0.0, 1.0) * cell / max(size * size, 0.25);
+            front += tap.rgb * share;
+            front_share += share;
+        } else {
+            float covers = clamp(min(size, own) - r + 0.5, 0.0, 1.0);
+            behind += tap.rgb * covers;
+            behind_weight += covers;
+        }
+    }
+    vec3 back = behind / behind_weight;
+    vec3 near = front_share > 0.0 ? front / front_share : back;
+    out_color = vec4(mix(back, near, min(front_share, 1.0)), 1.0);
+}
