@@ -45,10 +45,10 @@ void main() {
     float front_share = 0.0;
     float cell = reach * reach / float(SAMPLES);  // a tap's share of the disc, over pi
     for (int i = 0; i < SAMPLES; ++i) {
-        float r = reach * sqrt((float(i) + 0.5) / float(SAMPLES));
         float angle = float(i) * GOLDEN_ANGLE;
-        ivec2 at = clamp(px + ivec2(round(vec2(cos(angle), sin(angle)) * r)), ivec2(0), last);
-        vec4 tap = texelFetch(prepared, at, 0);
+        ivec2 offset = ivec2(round(vec2(cos(angle), sin(angle)) * (reach * sqrt((float(i) + 0.5) / float(SAMPLES)))));
+        float r = length(vec2(offset));  // (the pixel fetched: whether a disc covers this one is its distance)
+        vec4 tap = texelFetch(prepared, clamp(px + offset, ivec2(0), last), 0);
         float size = abs(tap.a);
         if (tap.a < centre.a - NEARER) {
             float share = clamp(size - r + 0.5, 0.0, 1.0) * cell / max(size * size, 0.25);

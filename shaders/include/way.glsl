@@ -10,3 +10,9 @@
 uvec2 seen_at(uint entity, float way) {
     return uvec2(entity, floatBitsToUint(way));
 }
+
+// A view's seen pair as its composite carries it up: where the view drew nothing (its
+// claim's (0, 0): a reflection level leaves the sky to its composite) the sky it puts there.
+uvec2 carried_seen(uvec2 seen) {
+    return seen.r == 0u ? seen_at(0u, SKY_WAY) : seen;
+}
