@@ -349,6 +349,8 @@ class DebugOverlay(EditorPanels):
         self._switch("SSR only", engine.renderer.screen_reflections, "show_found")
         imgui.same_line()
         self._switch("sky refl", engine.stages["prepare"], "environment_reflections")
+        imgui.same_line()
+        self._switch("DoF", present, "depth_of_field")
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()
         width, height = self.io.display_size

@@ -69,7 +69,8 @@ def post_lines(engine: Engine) -> list[str]:
     whose it is), the exposure, the bloom (intensity, levels), the grade (and its colour
     table's name), the post passes drawn; and a line of the main stage's screen-space
     passes: ambient occlusion (radius, intensity) and reflections (reach, quality), and the
-    materials' sky reflections where the overlay turned them off.  (One
+    materials' sky reflections where the overlay turned them off, and the camera's depth of
+    field (its f-number and focus: autofocus's read back, a wait too).  (One
     line grew the overlay's window over the view it is clicked through.)  The automatic
     exposure's adapted value is read back from the GPU (a wait, only while the overlay
     shows it)."""
@@ -111,6 +112,13 @@ def post_lines(engine: Engine) -> list[str]:
         reflections = "SSR off" + (" (set)" if not main.reflections else "")
     if not engine.stages["prepare"].environment_reflections:
         reflections += "; sky reflections off (set)"
+    focused = present.focused
+    if focused is not None:
+        distance = renderer.present_pass.depth_of_field.focused() if focused.autofocus else focused.focus_distance
+        reflections += (f"; DoF f/{focused.f_stop:g} at {'-' if distance is None else f'{distance:.3g}'} m"
+                        f"{' auto' if focused.autofocus else ''}")
+    elif not present.depth_of_field:
+        reflections += "; DoF off (set)"
     passes = renderer.present_pass.post_passes
     return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}",
             f"screen: {occlusion}; {reflections}"]

@@ -450,3 +450,22 @@ DepthOfField = { focus_distance = 3.5, f_stop = 1.8, focal_length = 50.0, autofo
     (tmp_path / "bad.toml").write_text(text.replace("f_stop = 1.8", "f_stop = 0.1"))
     with pytest.raises(LevelError, match=r"f_stop"):
         load_level(tmp_path / "bad.toml").spawn(World())
+
+
+def test_the_overlay_names_the_lens_and_its_switch_turns_it_off(scene):
+    """The overlay's screen line gives the f-number and the focus (autofocus's read back);
+    ``PresentSystem.depth_of_field = False`` (its "DoF" switch) draws none and says so."""
+    from shell.overlay_text import post_lines
+
+    def build(world):
+        framed_mirror(world, 1.0, autofocus=True)
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    line = post_lines(runner.engine)[1]
+    focus = runner.engine.renderer.present_pass.depth_of_field.focused()
+    assert line.endswith(f"; DoF f/1.4 at {focus:.3g} m auto"), line
+    runner.engine.stages["present"].depth_of_field = False
+    runner.frame()
+    assert post_lines(runner.engine)[1].endswith("; DoF off (set)")
+    assert runner.engine.renderer.present_pass.post_target_count() == 0
