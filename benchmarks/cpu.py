@@ -146,7 +146,9 @@ def make_scene(name: str, ctx):
     with a see-through pond and that many panes, ``benchmarks.glass``; ``posed_<mirrors>_<n>``:
     the ring with n animated skinned and morphed meshes, ``benchmarks.posed``;
     ``sparks_<mirrors>_<n>``: the ring with n living particles, ``benchmarks.sparks``;
-    ``decals_<mirrors>_<n>``: the ring with n stains on its floor, ``benchmarks.decals``; ``hall``:
+    ``decals_<mirrors>_<n>``: the ring with n stains on its floor, ``benchmarks.decals``;
+    ``focus_<mirrors>``: the ring seen through a lens with autofocus (its camera's
+    ``DepthOfField``: 85 mm at f/1.4, the widest disc 0.05 of the height); ``hall``:
     the sample level), each with its suite's default settings."""
     from shell.app import Engine
 
@@ -182,6 +184,15 @@ def make_scene(name: str, ctx):
 
         mirrors, _, decals = arg.partition("_")
         return Engine(DecalRing(int(mirrors), int(decals or 0)), ctx)
+    if kind == "focus":  # focus_<mirrors>: the ring, its camera's lens focusing by itself (depth of field)
+        from benchmarks.mirrors import MirrorRing
+        from components import Camera, DepthOfField
+
+        engine = Engine(MirrorRing(int(arg)), ctx)
+        (camera, _), = engine.world.query_one(Camera)
+        engine.world.add_component(camera, DepthOfField(f_stop=1.4, focal_length=85.0, max_blur=0.05,
+                                                        autofocus=True))
+        return engine
     if kind == "posed":  # posed_<mirrors>_<tentacles>: the ring with animated skinned and morphed meshes
         from benchmarks.posed import PosedRing
 

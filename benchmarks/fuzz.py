@@ -4,7 +4,7 @@ Each case builds one component (Visibility and Water among them) with one to thr
 drawn from a pool of awkward values (NaN, infinities, numbers past float32 and float16, huge
 ints, wrong kinds, zero vectors, Euler-looking tuples), attaches it to an entity of a small
 lit scene (a box, a quad for surfaces, the camera entity for Camera, FlyController, Tonemap,
-Bloom, ColorGrading, Vignette, Fog, AmbientOcclusion and ScreenReflections, the sky entity
+Bloom, ColorGrading, Vignette, DepthOfField, Fog, AmbientOcclusion and ScreenReflections, the sky entity
 for the Skybox) and
 renders ``FRAMES`` 48 x 32 frames (``benchmarks/fuzz_cases.py``: what a first frame leaves
 to later ones, probes captured a face a frame, is run too). A case passes when either the
@@ -56,6 +56,7 @@ from components import (
     ColorGrading,
     ComponentValueError,
     Decal,
+    DepthOfField,
     DirectionalLight,
     Emissive,
     FlyController,
@@ -90,8 +91,8 @@ from shell.app import Engine
 SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
-                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, Fog,
-                             AmbientOcclusion, ScreenReflections, Visibility, Water, ParticleEmitter, Decal)
+                             DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
+                             Fog, AmbientOcclusion, ScreenReflections, Visibility, Water, ParticleEmitter, Decal)
 
 @dataclasses.dataclass
 class Case:
@@ -159,8 +160,8 @@ class Fuzzer:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, Fog, AmbientOcclusion,
-                                ScreenReflections):
+                if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField, Fog,
+                                AmbientOcclusion, ScreenReflections):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

@@ -925,3 +925,27 @@ def test_the_decals_scene_throws_its_stains_and_draws_them(ctx):
     assert frames["decals_2_12"][1] == 12 and frames["decals_2_0"][1] == 0
     assert frames["decals_2_12"][2] > 12  # each on the floor, and some on boxes
     assert (np.abs(frames["decals_2_12"][0] - frames["decals_2_0"][0]).max(axis=2) > 8).sum() >= 20
+
+
+def test_the_focus_scene_blurs_the_ring_through_its_lens(ctx):
+    """``focus_<mirrors>``: the ring's camera has a DepthOfField with autofocus; its four
+    passes run and the frame differs from the plain ring's."""
+    from benchmarks.cpu import make_scene
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    capture = CaptureTarget(ctx, (192, 108))
+    frames = {}
+    try:
+        for name in ("focus_2", "mirrors_2"):
+            engine = make_scene(name, ctx)
+            try:
+                for _ in range(3):
+                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (192, 108)))
+                frames[name] = (capture.read_rgb().astype(int), engine.renderer.present_pass.post_passes)
+            finally:
+                engine.close()
+    finally:
+        capture.release()
+    assert frames["focus_2"][1] >= frames["mirrors_2"][1] + 4
+    assert (np.abs(frames["focus_2"][0] - frames["mirrors_2"][0]).max(axis=2) > 8).sum() >= 20
