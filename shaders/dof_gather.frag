@@ -16,7 +16,14 @@ uniform sampler2D prepared;      // dof_prepare.frag: rgb colour, a signed radiu
 uniform sampler2D near_tiles;    // dof_tiles.frag
 uniform int tile;
 
+#ifdef SPLIT_LAYERS
+// At half size (DepthOfField.half_resolution) the two layers go out apart, for dof_compose.frag
+// to put each full-size pixel's own sharp colour behind where its disc is narrow.
+layout(location = 0) out vec4 out_back;    // rgb: the layer behind
+layout(location = 1) out vec4 out_front;   // rgb: the layer in front x its share, a: the share
+#else
 out vec4 out_color;
+#endif
 
 const int SAMPLES = 48;
 const float GOLDEN_ANGLE = 2.39996323;
@@ -36,7 +43,12 @@ void main() {
         }
     }
     if (reach < 0.5) {  // nothing's disc reaches past its own pixel here
+#ifdef SPLIT_LAYERS
+        out_back = vec4(centre.rgb, 1.0);
+        out_front = vec4(0.0);
+#else
         out_color = vec4(centre.rgb, 1.0);
+#endif
         return;
     }
     vec3 behind = centre.rgb;
@@ -62,5 +74,11 @@ void main() {
     }
     vec3 back = behind / behind_weight;
     vec3 near = front_share > 0.0 ? front / front_share : back;
-    out_color = vec4(mix(back, near, min(front_share, 1.0)), 1.0);
+    float share = min(front_share, 1.0);
+#ifdef SPLIT_LAYERS
+    out_back = vec4(back, 1.0);
+    out_front = vec4(near * share, share);
+#else
+    out_color = vec4(mix(back, near, share), 1.0);
+#endif
 }

@@ -237,7 +237,8 @@ def edge_scene(world, focus: float, max_blur: float = 0.08):
     """A bright square 3 m from the camera before a dark wall 10 m away."""
     lit(world)
     camera = look_from(world, (0.0, 1.5, 3.0), (0, 1.5, 0))
-    world.add_component(camera, DepthOfField(focus_distance=focus, f_stop=1.4, focal_length=85.0, max_blur=max_blur))
+    world.add_component(camera, DepthOfField(focus_distance=focus, f_stop=1.4, focal_length=85.0, max_blur=max_blur,
+                                             half_resolution=False))
     square = world.spawn(Transform(position=(0.4, 1.5, 0.0)), MeshRef(quad(0.8, 0.8)), Material(color=(1.0, 1.0, 1.0)),
                          Emissive(1.0))
     world.spawn(Transform(position=(0, 1.5, -7.0)), MeshRef(quad(40, 30)), Material(color=(0.02, 0.02, 0.02)))
@@ -410,7 +411,8 @@ def test_the_images_go_with_the_component(scene):
     runner = scene(build, SIZE)
     runner.frame()
     present = runner.engine.renderer.present_pass
-    assert present.post_target_count() == 5   # prepared, tiles, result and the two 1x1 focuses
+    # prepared, half size, tiles, the two layers, result and the two 1x1 focuses
+    assert present.post_target_count() == 8 and present.post_passes == 6
     runner.world.remove_component(ents["camera"], DepthOfField)
     runner.frame()
     assert present.post_target_count() == 0 and present.post_passes == 0

@@ -7,7 +7,7 @@ shows, carried up the view tree beside its entity (the main view's seen image:
 ``shaders/include/way.glsl``), so a reflection is blurred by the distance of its image, not
 of the glass, and autofocus on a mirror focuses on what it shows.
 
-Four draws, none read back (no wait for the GPU):
+Four draws at full size (six at half size, below), none read back (no wait for the GPU):
 
 1. **focus** (``shaders/dof_focus.frag``): the focus distance into a 1x1 texture: the
    component's, or (autofocus) the way at the focus point, followed from last frame's in
@@ -21,10 +21,15 @@ Four draws, none read back (no wait for the GPU):
    (scatter as gather, a golden-angle spiral of taps), what lies behind it no wider than its
    own disc, what lies in front laid over it by the share of its light it covers.
 
-All at the image's full size: half-size buffers would halve the cost on a GPU but bleed a
-sharp edge's neighbours by a pixel; not measured worth it yet.  Costs one full-size gather of
-48 taps a pixel (``SAMPLES`` in the gather shader) where anything is blurred; a tile where
-nothing is returns at once.
+At half size (``DepthOfField.half_resolution``, the default, as Unity's and Unreal's run it)
+steps 3 and 4 run on a half-size image (**downsample**, ``shaders/dof_downsample.frag``: the
+mean colour of four pixels and the nearest one's radius), the gather writing its two layers
+apart, and a **compose** (``shaders/dof_compose.frag``) puts each full-size pixel's own sharp
+colour behind where its disc is narrow, the half-size layer where it is wide, and lays the
+layer in front over it.  The gather is 48 taps a pixel (``SAMPLES`` in its shader) where any
+disc reaches; a pixel whose tiles hold none returns at once.  Measured at 640x360 on llvmpipe
+(``focus_0`` against ``mirrors_0``, interleaved): the full-size gather added about 2x the
+frame, the half-size path a fraction of that (the README's What a frame costs).
 """
 from __future__ import annotations
 
@@ -35,7 +40,9 @@ import numpy as np
 
 from components.post import DepthOfField
 from engine.render.bindings import (
+    DOF_BACK_UNIT,
     DOF_FOCUS_UNIT,
+    DOF_FRONT_UNIT,
     DOF_PREPARED_UNIT,
     DOF_SEEN_UNIT,
     DOF_TILES_UNIT,
@@ -77,15 +84,17 @@ class DepthOfFieldPass:
                                   focus_state=DOF_FOCUS_UNIT)
         self._tiles = self._vao("dof_tiles.frag", prepared=DOF_PREPARED_UNIT)
         self._gather = self._vao("dof_gather.frag", prepared=DOF_PREPARED_UNIT, near_tiles=DOF_TILES_UNIT)
+        self._half: tuple[moderngl.VertexArray, ...] | None = None   # downsample, split gather, compose: made on first use
         self._images: dict[str, tuple[moderngl.Texture, moderngl.Framebuffer]] = {}
-        self._size: tuple[int, int, int] | None = None   # (width, height, tile) the images were made for
+        self._size: tuple[int, int, int, bool] | None = None   # (width, height, tile, half) the images were made for
         self._state: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
         self.current: moderngl.Texture | None = None      # the 1x1 focus written last
         self.camera: int | None = None                     # whose focus it is
         self._written: dict[tuple[int, str], object] = {}  # (vao id, uniform) -> the value last written
+        self.passes = 0   # draws in the last frame's depth of field
 
-    def _vao(self, fragment: str, **units: int) -> moderngl.VertexArray:
-        program = self.shaders.program("fullscreen.vert", fragment)
+    def _vao(self, fragment: str, defines: dict[str, str] | None = None, **units: int) -> moderngl.VertexArray:
+        program = self.shaders.program("fullscreen.vert", fragment, defines=defines)
         for name, unit in units.items():
             program[name].value = unit
         return self.ctx.vertex_array(program, [])
@@ -104,14 +113,33 @@ class DepthOfFieldPass:
         texture.repeat_x = texture.repeat_y = False
         return texture, self.ctx.framebuffer([texture])
 
-    def _make(self, size: tuple[int, int], tile: int) -> None:
-        if self._size != (*size, tile):
+    def _half_programs(self) -> tuple[moderngl.VertexArray, ...]:
+        if self._half is None:
+            self._half = (self._vao("dof_downsample.frag", prepared=DOF_PREPARED_UNIT),
+                          self._vao("dof_gather.frag", {"SPLIT_LAYERS": "1"}, prepared=DOF_PREPARED_UNIT,
+                                    near_tiles=DOF_TILES_UNIT),
+                          self._vao("dof_compose.frag", prepared=DOF_PREPARED_UNIT, back_layer=DOF_BACK_UNIT,
+                                    front_layer=DOF_FRONT_UNIT))
+        return self._half
+
+    def _make(self, size: tuple[int, int], tile: int, half: bool) -> None:
+        if self._size != (*size, tile, half):
             self._release_images()
             w, h = size
+            gathered = (-(-w // 2), -(-h // 2)) if half else size
             self._images = {"prepared": self._image(size, 4, "f2"),
-                            "tiles": self._image((-(-w // tile), -(-h // tile)), 1, "f2"),
+                            "tiles": self._image((-(-gathered[0] // tile), -(-gathered[1] // tile)), 1, "f2"),
                             "result": self._image(size, 4, "f2", linear=True)}  # (bloom reads it bilinear)
-            self._size = (*size, tile)
+            if half:
+                self._images["half"] = self._image(gathered, 4, "f2")
+                back = self.ctx.texture(gathered, 4, dtype="f2")
+                front = self.ctx.texture(gathered, 4, dtype="f2")
+                for texture in (back, front):   # (the compose reads them bilinear)
+                    texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+                    texture.repeat_x = texture.repeat_y = False
+                layers = self.ctx.framebuffer([back, front])
+                self._images["back"], self._images["front"] = (back, layers), (front, layers)
+            self._size = (*size, tile, half)
         if not self._state:
             zero = np.zeros(1, np.float32).tobytes()   # defined (the first frame starts over, whatever it holds)
             self._state = []
@@ -131,8 +159,9 @@ class DepthOfFieldPass:
         height = size[1]
         f = focal_length(fov_y, settings.focal_length)
         max_radius = max_blur_radius(settings.max_blur, height)
-        tile = tile_size(max_radius)
-        self._make(size, tile)
+        half = settings.half_resolution
+        tile = tile_size(max_radius * 0.5 if half else max_radius)
+        self._make(size, tile, half)
         reset = camera != self.camera or self.current is None
         self.camera = camera
         ctx = self.ctx
@@ -157,24 +186,39 @@ class DepthOfFieldPass:
         bind_texture(ctx, state, DOF_FOCUS_UNIT)
         self._set(self._prepare, "lens", (f, lens_scale(f, settings.f_stop, height), max_radius))
         self._prepare.render(moderngl.TRIANGLES, vertices=3)
+        source = prepared
+        if half:  # (the half-size image the tiles and the gather read)
+            downsample, gather, compose = self._half_programs()
+            source, half_framebuffer = self._images["half"]
+            half_framebuffer.use()
+            apply_pass_state(ctx, _PASS, (0, 0, *source.size))
+            bind_texture(ctx, prepared, DOF_PREPARED_UNIT)
+            downsample.render(moderngl.TRIANGLES, vertices=3)
+        else:
+            gather = self._gather
         # 3. The tiles' nearer reach.
         tiles, tiles_framebuffer = self._images["tiles"]
         tiles_framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, *tiles.size))
-        bind_texture(ctx, prepared, DOF_PREPARED_UNIT)
+        bind_texture(ctx, source, DOF_PREPARED_UNIT)
         self._set(self._tiles, "tile", tile)
         self._tiles.render(moderngl.TRIANGLES, vertices=3)
-        # 4. The gather.
+        # 4. The gather: the picture, or at half size its two layers.
         result, result_framebuffer = self._images["result"]
-        result_framebuffer.use()
-        apply_pass_state(ctx, _PASS, (0, 0, *size))
+        (self._images["back"][1] if half else result_framebuffer).use()
+        apply_pass_state(ctx, _PASS, (0, 0, *source.size))
         bind_texture(ctx, tiles, DOF_TILES_UNIT)
-        self._set(self._gather, "tile", tile)
-        self._gather.render(moderngl.TRIANGLES, vertices=3)
+        self._set(gather, "tile", tile)
+        gather.render(moderngl.TRIANGLES, vertices=3)
+        if half:  # 5. Each full-size pixel's own colour behind where its disc is narrow, the layers over it.
+            result_framebuffer.use()
+            apply_pass_state(ctx, _PASS, (0, 0, *size))
+            bind_texture(ctx, prepared, DOF_PREPARED_UNIT)
+            bind_texture(ctx, self._images["back"][0], DOF_BACK_UNIT)
+            bind_texture(ctx, self._images["front"][0], DOF_FRONT_UNIT)
+            compose.render(moderngl.TRIANGLES, vertices=3)
+        self.passes = 6 if half else 4
         return result
-
-    def passes(self) -> int:
-        return 4
 
     def focused(self) -> float | None:
         """The focus distance last written, in metres (read back: waits for the GPU; tests and
@@ -195,8 +239,10 @@ class DepthOfFieldPass:
         return np.flipud(data[..., 3]).astype(np.float32)
 
     def _release_images(self) -> None:
-        for texture, framebuffer in self._images.values():
+        framebuffers = {id(framebuffer): framebuffer for _, framebuffer in self._images.values()}
+        for framebuffer in framebuffers.values():   # (the two layers share one)
             release_framebuffer(framebuffer)
+        for texture, _ in self._images.values():
             texture.release()
         self._images, self._size = {}, None
 
@@ -214,5 +260,6 @@ class DepthOfFieldPass:
 
     def release(self) -> None:
         self.release_targets()
-        for vao in (self._focus, self._prepare, self._tiles, self._gather):
+        for vao in (self._focus, self._prepare, self._tiles, self._gather, *(self._half or ())):
             vao.release()
+        self._half = None

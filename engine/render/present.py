@@ -152,7 +152,7 @@ class PresentPass:
         self.post_passes = 0
         if focus is not None and seen is not None:
             hdr = self.depth_of_field.draw(hdr, seen, focus, fov_y, camera, dt)
-            self.post_passes += self.depth_of_field.passes()
+            self.post_passes += self.depth_of_field.passes
         elif self._depth_of_field is not None:
             self._depth_of_field.release_targets()
         if grading is not None and not grades(grading) and (grading.lut is None or grading.lut_strength == 0.0):
