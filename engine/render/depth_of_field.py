@@ -84,7 +84,7 @@ class DepthOfFieldPass:
                                   focus_state=DOF_FOCUS_UNIT)
         self._tiles = self._vao("dof_tiles.frag", prepared=DOF_PREPARED_UNIT)
         self._gather = self._vao("dof_gather.frag", prepared=DOF_PREPARED_UNIT, near_tiles=DOF_TILES_UNIT)
-        self._half: tuple[moderngl.VertexArray, ...] | None = None   # downsample, split gather, compose: made on first use
+        self._half: tuple[moderngl.VertexArray, ...] | None = None   # downsample, split gather, compose (first use)
         self._images: dict[str, tuple[moderngl.Texture, moderngl.Framebuffer]] = {}
         self._size: tuple[int, int, int, bool] | None = None   # (width, height, tile, half) the images were made for
         self._state: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
