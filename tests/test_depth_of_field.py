@@ -471,3 +471,34 @@ def test_the_overlay_names_the_lens_and_its_switch_turns_it_off(scene):
     runner.frame()
     assert post_lines(runner.engine)[1].endswith("; DoF off (set)")
     assert runner.engine.renderer.present_pass.post_target_count() == 0
+
+
+def test_the_half_size_gather_agrees_with_the_full_size_one(scene):
+    """The same lens gathered at half size and at full size: the sharp frame identical, the
+    blurred reflection close (a half-size blur of a blur), and both far from the sharp one."""
+    ents = {}
+
+    def build(world):
+        ents.update(framed_mirror(world, 2.0))
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    lens = runner.world.get(ents["camera"], DepthOfField)
+    present = runner.engine.stages["present"]
+    present.depth_of_field = False
+    sharp = runner.frame().astype(float)
+    present.depth_of_field = True
+    half = runner.frame().astype(float)
+    lens.half_resolution = False
+    full = runner.frame().astype(float)
+    assert runner.engine.renderer.present_pass.post_passes == 4
+    targets = runner.engine.renderer.targets
+    ids, surfaces = targets.read_ids(), targets.read_surface_ids()
+    reach = int(np.ceil(max_blur_radius(FRAMED_BLUR, SIZE[1]))) + 1
+    reflection = erode((surfaces == ents["mirror"]) & (ids == ents["wall"]), reach)
+    radii = runner.engine.renderer.present_pass.depth_of_field.prepared_radii()
+    frame = erode(ids == ents["frame"], reach) & (np.abs(radii) < 0.5)
+    assert frame.sum() > 100
+    assert np.abs(half[frame] - full[frame]).max() <= 1.0
+    assert np.abs(half[reflection] - full[reflection]).mean() < 4.0
+    assert np.abs(full[reflection] - sharp[reflection]).mean() > 3.0 * np.abs(half[reflection] - full[reflection]).mean()
