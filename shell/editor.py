@@ -30,6 +30,7 @@ from pyglm import glm
 from components import (
     Camera,
     ComponentValueError,
+    Decal,
     FromDecal,
     FromModel,
     Material,
@@ -38,6 +39,7 @@ from components import (
     ParticleEmitter,
     Portal,
     Transform,
+    look_rotation,
 )
 from components.rendering import MATERIAL_IMAGES, automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_model, level_texture, user_asset_roots
@@ -348,6 +350,59 @@ class Editor:
         else:
             self._push(Edit("set", entity, type(target), target, field, before, after))
         self._done[-1].open = merge
+
+    def set_fields(self, entity: int, component: str | type, values: Mapping[str, Any]) -> None:
+        """Write several fields of one component as one undo step (``set_field`` for each; a
+        refused value leaves every field as it was)."""
+        self._refuse_made_again(entity)
+        target = self.component(entity, component)
+        names = tuple(values)
+        before = tuple(_copy(getattr(target, name)) for name in names)
+        try:
+            for name in names:
+                setattr(target, name, values[name])
+        except ComponentValueError as exc:
+            for name, value in zip(names, before, strict=True):
+                setattr(target, name, _copy(value))
+            self.message = str(exc)
+            raise
+        self.message = None
+        self._push(Edit("set", entity, type(target), target, names, before,
+                        tuple(_copy(getattr(target, name)) for name in names), open=False))
+
+    def place(self, entity: int, point: glm.vec3, normal: glm.vec3) -> None:
+        """Put ``entity`` on the surface at world ``point`` whose unit ``normal`` faces the side
+        it is put on, in one undo step: a ``Decal`` centred there and turned to throw its image
+        into the surface (its -z along -normal; its image's top up a wall, or towards -z on a
+        floor or ceiling), anything else moved, not turned, until the box of its mesh rests on
+        the surface there (its lowest corner along the normal on the surface's plane; without a
+        mesh, its origin at the point).  The overlay's Shift+click places the selection where
+        the picture shows a surface, through mirrors and portals (``raycast_seen``)."""
+        transform = self.component(entity, Transform)
+        point, normal = glm.vec3(point), glm.normalize(glm.vec3(normal))
+        world = current_world_matrix(self.world, transform)
+        parent = transform.parent
+        to_parent = glm.mat4(1.0)
+        if parent is not None and self.world.exists(parent) and self.world.has(parent, Transform):
+            to_parent = glm.inverse(current_world_matrix(self.world, self.world.get(parent, Transform)))
+        values: dict[str, Any] = {}
+        if self.world.has(entity, Decal):
+            up = glm.vec3(0.0, 0.0, -1.0) if abs(normal.y) > 0.9 else glm.vec3(0.0, 1.0, 0.0)
+            linear = glm.mat3(to_parent)
+            frame = glm.quat_cast(glm.mat3(*(glm.normalize(column) for column in (linear[0], linear[1], linear[2]))))
+            values["rotation"] = glm.normalize(frame * look_rotation(-normal, up))
+            origin = point
+        else:
+            mesh_ref = self.world.try_get(entity, MeshRef)
+            origin = point
+            if mesh_ref is not None:
+                lo, hi = mesh_ref.mesh.bounds
+                corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+                linear = np.array(glm.mat3(world).to_list(), np.float64)   # (columns as rows)
+                lowest = float(np.min(corners @ linear @ np.array(normal, np.float64)))
+                origin = point - normal * lowest
+        values["position"] = glm.vec3(to_parent * glm.vec4(origin, 1.0))
+        self.set_fields(entity, Transform, values)
 
     def move(self, entity: int, start: glm.vec3, world_offset: glm.vec3) -> None:
         """Put ``entity`` at ``world_offset`` (world units) from where it stood at the drag's
@@ -757,7 +812,10 @@ class Editor:
             return
         if not self.world.exists(edit.entity):
             raise EditError(f"entity {edit.entity} (edited) no longer exists")
-        if edit.action == "set":
+        if edit.action == "set" and isinstance(edit.field, tuple):  # (set_fields: one step)
+            for name, value in zip(edit.field, edit.before if backwards else edit.after, strict=True):
+                setattr(edit.component, name, _copy(value))
+        elif edit.action == "set":
             setattr(edit.component, edit.field, _copy(edit.before if backwards else edit.after))
         elif (edit.action == "add") == backwards:
             self.world.remove_component(edit.entity, edit.kind)

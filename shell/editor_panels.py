@@ -23,12 +23,13 @@ from typing import TYPE_CHECKING
 from imgui_bundle import imgui
 from pyglm import glm
 
-from components import ComponentValueError, Transform
+from components import ComponentValueError, FromDecal, Transform
 from components.rendering import MATERIAL_IMAGES
 from engine.assets.level_assets import MESH_MAKERS
 from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
+from engine.rules.raycast import raycast_seen
 from shell.editor import AUTOMATIC_FIELDS, IMAGE_FIELDS, OFF_FIELDS, EditError, Editor
 from shell.handles import (
     FRAME_MARGIN,
@@ -37,12 +38,14 @@ from shell.handles import (
     Handles,
     Marker,
     ReachOutline,
+    descendants,
     framing_eye,
     framing_sphere,
     marker_at,
     markers,
     reach_outline,
     transform_handles,
+    view_ray,
 )
 
 if TYPE_CHECKING:
@@ -104,15 +107,20 @@ class EditorPanels:
             self._names_taken = game.names if game else None                  # its edits named entities gone
         return self.editor
 
-    def click(self, engine: Engine, x: float, y: float, surface: bool = False) -> bool:
+    def click(self, engine: Engine, x: float, y: float, surface: bool = False, place: bool = False) -> bool:
         """A click in the world at output pixel (``x``, ``y``) while the overlay is shown:
         select what the last frame's id images hold there (``surface``: the mirror or portal
-        seen through). True when it was the editor's click (the overlay is shown)."""
+        seen through), or (``place``: Shift+click) put the selection on the surface the
+        picture shows there, followed through mirrors and portals (``Editor.place``). True
+        when it was the editor's click (the overlay is shown)."""
         targets = engine.renderer.targets
         if not self.visible or self.context is None or targets is None:
             return False
         editor = self.editing(engine)
         view = engine.main_view
+        if place:
+            self._place_at(engine, editor, x, y)
+            return True
         if view is not None and not surface:   # a light's or probe's marker first: it has no pixel of its own
             size = self.io.display_size
             entity = marker_at(markers(engine.world, view.view_proj, (size.x, size.y)), (x, y),
@@ -122,6 +130,25 @@ class EditorPanels:
                 return True
         editor.pick(targets.read_ids(), targets.read_surface_ids(), int(x), int(y), surface)
         return True
+
+    def _place_at(self, engine: Engine, editor: Editor, x: float, y: float) -> None:
+        """Shift+click: the selection put where the main view's ray through output pixel
+        (``x``, ``y``) meets a surface, followed through mirrors and portals; the selection,
+        its descendants and decals' cuts are left out of the cast."""
+        entity = editor.selected
+        view = engine.main_view
+        if entity is None or not engine.world.exists(entity) or view is None:
+            editor.message = "select something first: Shift+click puts the selection where you click"
+            return
+        size = self.io.display_size
+        origin, direction = view_ray(view.view_proj, (size.x, size.y), (x, y))
+        world = engine.world
+        own = descendants(world, entity) | {entity}
+        seen = raycast_seen(world, origin, direction, ignore=own, where=lambda e: not world.has(e, FromDecal))
+        if seen is None:
+            editor.message = "nothing there to put it on"
+            return
+        self._try(editor, editor.place, entity, seen.hit.point, seen.hit.normal)
 
     def shortcut(self, engine: Engine, name: str, ctrl: bool = False, shift: bool = False) -> bool:
         """The editor's keys while the overlay is shown and no field is typed in: Ctrl+Z undo,

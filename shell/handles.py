@@ -90,6 +90,35 @@ def screen_point(view_proj: glm.mat4, size: tuple[int, int], point: glm.vec3) ->
     return ((clip.x / clip.w * 0.5 + 0.5) * size[0], (0.5 - clip.y / clip.w * 0.5) * size[1])
 
 
+def view_ray(view_proj: glm.mat4, size: tuple[float, float], pixel: Pixel) -> tuple[glm.vec3, glm.vec3]:
+    """The ray through ``pixel`` (output pixels from the top left) of a view of ``size``: its
+    start on the near plane and its unit direction (``screen_point`` the other way; an
+    orthographic view's rays are parallel)."""
+    inverse = glm.inverse(view_proj)
+    x = pixel[0] / size[0] * 2.0 - 1.0
+    y = 1.0 - pixel[1] / size[1] * 2.0
+    near = inverse * glm.vec4(x, y, -1.0, 1.0)
+    far = inverse * glm.vec4(x, y, 1.0, 1.0)
+    start = glm.vec3(near) / near.w
+    return start, glm.normalize(glm.vec3(far) / far.w - start)
+
+
+def descendants(world: World, entity: int) -> set[int]:
+    """Every entity whose Transform's parent chain leads to ``entity`` (its children, theirs...)."""
+    children: dict[int, list[int]] = {}
+    for child, transform in world.query_one(Transform):
+        if transform.parent is not None:
+            children.setdefault(transform.parent, []).append(child)
+    found: set[int] = set()
+    todo = [entity]
+    while todo:
+        for child in children.get(todo.pop(), ()):
+            if child not in found and child != entity:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
 def transform_handles(world: World, entity: int, view_proj: glm.mat4, eye: glm.vec3, size: tuple[int, int],
                       mode: str = "move") -> Handles | None:
     """``entity``'s handles of ``mode`` (``HANDLE_MODES``) in the view ``view_proj`` (from

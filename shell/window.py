@@ -237,10 +237,12 @@ class SpeculumWindow(mglw.WindowConfig):
             if self.overlay.wants_mouse:
                 return
             # With the overlay shown a click in the world is the level editor's: it selects what
-            # is seen there (Ctrl: the mirror or portal it is seen through), see shell/editor.py.
+            # is seen there (Ctrl: the mirror or portal it is seen through; Shift: puts the
+            # selection on the surface seen there), see shell/editor.py.
             ratio = float(getattr(self.wnd, "pixel_ratio", 1.0) or 1.0)
-            ctrl = bool(getattr(getattr(self.wnd, "modifiers", None), "ctrl", False))
-            if self.overlay.click(self.engine, float(x) * ratio, float(y) * ratio, surface=ctrl):
+            modifiers = getattr(self.wnd, "modifiers", None)
+            ctrl, shift = bool(getattr(modifiers, "ctrl", False)), bool(getattr(modifiers, "shift", False))
+            if self.overlay.click(self.engine, float(x) * ratio, float(y) * ratio, surface=ctrl, place=shift):
                 return
         # In the output's pixels (what Output.size and the main view measure): on a
         # high-DPI screen the framebuffer has pixel_ratio times the window's pixels.

@@ -22,6 +22,12 @@ physics collider is in Unity or Godot: the cast is of geometry, not of what its 
 
 ``raycast(world, origin, direction)`` uses one ``RayCaster`` kept in
 ``world.resources[RayCaster]``; make your own ``RayCaster(world)`` to hold a separate cache.
+
+``raycast_seen`` follows a ray as the picture shows it: on through each mirror it meets from
+the front (reflected by the mirror's own carry, the matrix its view is drawn with) and each
+open portal (carried to beyond the partner), so a click on a floor seen in a mirror finds the
+real floor where the image shows it (the editor places things so), with the length of the
+light's way the seen image holds there.
 """
 from __future__ import annotations
 
@@ -37,8 +43,10 @@ from engine.core.errors import SpeculumError
 from engine.core.skinning import posed_positions
 from engine.core.transforms import MAX_PARENT_HOPS, current_world_matrix
 from engine.core.world import World
+from engine.resources import Surfaces
 
 EPSILON = 1e-9  # |determinant| below this: the ray runs along the triangle's plane (no hit)
+MAX_SEEN_SURFACES = 16  # raycast_seen follows at most this many mirrors and portals (facing pairs)
 
 
 class RayCastError(SpeculumError, ValueError):
@@ -225,6 +233,52 @@ def raycast(world: World, origin: glm.vec3 | Sequence[float], direction: glm.vec
     if caster is None or caster.world is not world:
         caster = world.resources[RayCaster] = RayCaster(world)
     return caster.cast(origin, direction, max_distance, where, ignore, two_sided)
+
+
+@dataclass(frozen=True)
+class SeenHit:
+    """What a ray from an eye meets as the picture shows it (``raycast_seen``): ``hit`` where
+    the thing really is (world space; its ``distance`` the last stretch's), ``through`` the
+    mirrors and portals the ray went on through, in order, and ``way`` the length of the whole
+    way (the seen image's, ``shaders/include/way.glsl``)."""
+
+    hit: RayHit
+    through: tuple[int, ...]
+    way: float
+
+
+def raycast_seen(world: World, origin: glm.vec3 | Sequence[float], direction: glm.vec3 | Sequence[float],
+                 where: Callable[[int], bool] | None = None, ignore: Collection[int] = (),
+                 max_surfaces: int = MAX_SEEN_SURFACES) -> SeenHit | None:
+    """``raycast``, followed on through each enabled mirror met from its front (the ray
+    reflected by the mirror's ``carry``) and each open portal met from its front (the point and
+    the ray carried by the pair to beyond the partner, which the next stretch leaves out), as
+    the surfaces stage left them (``Surfaces``; none there: a plain cast).  A surface met
+    from behind, switched off, or past ``max_surfaces`` is the hit itself.  ``where`` and
+    ``ignore`` as for ``raycast``, on every stretch.  None when a stretch meets nothing."""
+    surfaces = world.resources.get(Surfaces)
+    o = glm.vec3(*_vector("origin", origin))
+    d = _vector("direction", direction)
+    length = float(np.linalg.norm(d))
+    if not length > 0.0:
+        raise RayCastError(f"ray direction must not be zero, got {tuple(d)}")
+    d = glm.vec3(*(d / length))
+    through: list[int] = []
+    way = 0.0
+    left_out = set(ignore)
+    while True:
+        hit = raycast(world, o, d, where=where, ignore=left_out)
+        if hit is None:
+            return None
+        way += hit.distance
+        state = None if surfaces is None else surfaces.mirrors.get(hit.entity) or surfaces.portals.get(hit.entity)
+        if state is None or not state.enabled or glm.dot(glm.vec3(state.plane), d) >= 0.0 \
+                or len(through) >= max_surfaces:
+            return SeenHit(hit, tuple(through), way)
+        through.append(hit.entity)
+        o = glm.vec3(state.carry * glm.vec4(hit.point, 1.0))
+        d = glm.normalize(glm.vec3(state.carry * glm.vec4(d, 0.0)))
+        left_out = set(ignore) | {state.exit_entity}
 
 
 # --- helpers ---------------------------------------------------------------------------------
