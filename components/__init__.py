@@ -9,7 +9,7 @@ from components.model import Animation, AnimationEvents, AnimationLayer, FromMod
 from components.particles import ParticleEmitter
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.pose import Morph, Skin
-from components.post import Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
+from components.post import Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
@@ -25,7 +25,8 @@ __all__ = [
     "ComponentWarning", "Decal", "DepthOfField",
     "DirectionalLight", "Emissive", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
     "LevelOfDetail", "Material",
-    "MeshRef", "Mirror", "Model", "Morph", "ParticleEmitter", "PointLight", "Portal", "PortalClone", "ReflectionProbe",
+    "MeshRef", "Mirror", "Model", "Morph", "MotionBlur", "ParticleEmitter", "PointLight", "Portal", "PortalClone",
+    "ReflectionProbe",
     "Reflective",
     "Refractive",
     "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice",

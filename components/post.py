@@ -313,3 +313,34 @@ class DepthOfField(TrackedComponent):
         if name == "focus_speed":
             return finite(self, name, value, positive=True, high=MAX_ADAPT_SPEED)
         return value
+
+
+MAX_MOTION_BLUR = 0.25   # MotionBlur.max_blur: a streak at most a quarter of the picture's height
+
+
+@dataclass(eq=False)
+class MotionBlur(TrackedComponent):
+    """The picture streaked by the camera's own motion while its shutter is open (on the
+    camera's entity), as Unity's camera motion blur: each pixel is smeared along the way the
+    point it shows moved on screen since the last frame, ``shutter`` of it.  The point is where
+    the light's way puts it (``shaders/include/way.glsl``): in a mirror, the reflection's image
+    behind the glass, so a reflection streaks by its own distance as the camera moves, not as
+    the glass does; through a portal, the image beyond it; a camera carried through a portal
+    keeps its motion across (last frame's view carried with it).  Moving things streak only by
+    the camera's motion (no per-object motion).
+
+    - ``shutter`` (0..1): the share of a frame the shutter is open (0.5: a film camera's
+      180-degree shutter; 0: none);
+    - ``max_blur`` (0..0.25): the longest streak, as a share of the picture's height (a turn
+      of the camera in one frame does not smear the picture away).
+    """
+
+    shutter: float = 0.5
+    max_blur: float = 0.05
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "shutter":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "max_blur":
+            return finite(self, name, value, positive=True, high=MAX_MOTION_BLUR)
+        return value

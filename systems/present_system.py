@@ -6,11 +6,12 @@ from __future__ import annotations
 import esper
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
+from engine.resources import PortalCrossings
 from engine.rules.frame_rules import active_camera_parts
 
 
@@ -34,8 +35,10 @@ class PresentSystem(esper.Processor):
         self.graded: ColorGrading | None = None
         self.vignetted: Vignette | None = None
         self.focused: DepthOfField | None = None
-        # The debug overlay's switch: False draws no camera's DepthOfField.
+        self.streaked: MotionBlur | None = None
+        # The debug overlay's switches: False draws no camera's DepthOfField, MotionBlur.
         self.depth_of_field = True
+        self.motion_blur = True
 
     @property
     def curve(self) -> str | None:
@@ -64,22 +67,27 @@ class PresentSystem(esper.Processor):
         exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
-        tonemap = bloom = grading = vignette = focus = None
+        tonemap = bloom = grading = vignette = focus = motion = None
         fov_y = None
         if camera is not None:
             focus = self.world.try_get(camera, DepthOfField) if self.depth_of_field else None
             fov_y = parts[1].fov_y if parts[1].projection == "perspective" else None
+            motion = self.world.try_get(camera, MotionBlur) if self.motion_blur else None
+            if motion is not None and dt > 0.0:  # (a camera carried through a portal: its last view with it)
+                for crossing in self.world.resources.get(PortalCrossings, ()):
+                    if crossing.entity == camera:
+                        self.renderer.present_pass.motion_blur.carry(crossing.carry)
             tonemap = self.world.try_get(camera, Tonemap)
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
             grading = self.world.try_get(camera, ColorGrading) if self.grade else None
             vignette = self.world.try_get(camera, Vignette) if self.grade else None
         self.tonemap, self.bloomed, self.graded, self.vignetted = tonemap, bloom, grading, vignette
-        self.focused = focus
+        self.focused, self.streaked = focus, motion
         views: FrameViews | None = self.world.resources.get(FrameViews)
         main = views.main if views is not None else None
         self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt,
                               views.image if views is not None else None, grading, vignette,
-                              main.proj if main is not None else None, focus, fov_y)
+                              main.proj if main is not None else None, focus, fov_y, motion, main)
         shares = self.renderer.screen_occlusion
         if self.show_occlusion and shares is not None:
             self.renderer.present_pass.draw_occlusion(shares, framebuffer, size)

@@ -61,7 +61,7 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
         "Decal", "DepthOfField", "DirectionalLight",
         "Emissive", "FlyController", "Fog", "HemisphereLight", "LevelOfDetail", "Material", "MeshRef",
-        "Mirror", "Model", "ParticleEmitter",
+        "Mirror", "Model", "MotionBlur", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
         "Skybox", "Tonemap",

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
+from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
 from engine.assets.color_lut import ColorLut
 from engine.render.bindings import (
     BLOOM_UNIT,
@@ -47,9 +47,11 @@ from engine.render.bindings import (
 from engine.render.bloom import BloomPass
 from engine.render.depth_of_field import DepthOfFieldPass
 from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
+from engine.render.motion_blur import MotionBlurPass
 from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import CaptureTarget
+from engine.render.views import View
 
 ANTIALIAS_MODES = ("fxaa", "off")
 MAX_SEARCH_STEPS = 8   # the length of fxaa.frag's SEARCH table
@@ -85,6 +87,14 @@ class PresentPass:
         self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
         self._occlusion_view: moderngl.VertexArray | None = None  # the overlay's "AO only" view, made on first use
         self._depth_of_field: DepthOfFieldPass | None = None  # made when a camera first has a DepthOfField
+        self._motion_blur: MotionBlurPass | None = None       # made when a camera first has a MotionBlur
+
+    @property
+    def motion_blur(self) -> MotionBlurPass:
+        """The camera motion blur pass (``engine/render/motion_blur.py``), made on first use."""
+        if self._motion_blur is None:
+            self._motion_blur = MotionBlurPass(self.ctx, self.shaders)
+        return self._motion_blur
 
     @property
     def depth_of_field(self) -> DepthOfFieldPass:
@@ -136,14 +146,17 @@ class PresentPass:
              curve: str | None = None, camera: int | None = None, dt: float = 0.0,
              grading: ColorGrading | None = None, vignette: Vignette | None = None,
              projection: object | None = None, focus: DepthOfField | None = None,
-             seen: moderngl.Texture | None = None, fov_y: float | None = None) -> None:
+             seen: moderngl.Texture | None = None, fov_y: float | None = None,
+             motion: MotionBlur | None = None, view: View | None = None) -> None:
         """Present ``hdr`` into ``output``, first blurred by the camera's lens where ``focus``
         (its DepthOfField) is given (``seen``: the same level's seen pair, its ways; ``fov_y``
-        the camera's field of view, None: orthographic).  ``tonemap``, ``bloom``, ``grading`` and
-        ``vignette``: the active camera's components (None: none), ``projection`` its view's
-        (the vignette's rays); ``curve`` overrides the tone curve (the debug overlay's
-        choice; None: the Tonemap's, or "none"); ``camera`` is whose image it is (automatic
-        exposure starts over when it changes) and ``dt`` the frame's time step (adaptation)."""
+        the camera's field of view, None: orthographic), then smeared by the camera's motion
+        where ``motion`` (its MotionBlur) is given (``view``: this frame's main view).
+        ``tonemap``, ``bloom``, ``grading`` and ``vignette``: the active camera's components
+        (None: none), ``projection`` its view's (the vignette's rays); ``curve`` overrides the
+        tone curve (the debug overlay's choice; None: the Tonemap's, or "none"); ``camera`` is
+        whose image it is (automatic exposure, autofocus and motion blur start over when it
+        changes) and ``dt`` the frame's time step (adaptation)."""
         fxaa = antialias == "fxaa"
         if fxaa and (self._encoded is None or self._encoded.size != size):
             if self._encoded is not None:
@@ -155,6 +168,11 @@ class PresentPass:
             self.post_passes += self.depth_of_field.passes
         elif self._depth_of_field is not None:
             self._depth_of_field.release_targets()
+        if motion is not None and seen is not None and view is not None and motion.shutter > 0.0:
+            hdr = self.motion_blur.draw(hdr, seen, motion, view, camera, dt)
+            self.post_passes += 1
+        elif self._motion_blur is not None:
+            self._motion_blur.release_targets()
         if grading is not None and not grades(grading) and (grading.lut is None or grading.lut_strength == 0.0):
             grading = None  # (nothing to grade: the same picture without it)
         if vignette is not None and (vignette.intensity == 0.0 or projection is None):
@@ -276,6 +294,8 @@ class PresentPass:
         self._release_post_targets()
         if self._depth_of_field is not None:
             self._depth_of_field.release_targets()
+        if self._motion_blur is not None:
+            self._motion_blur.release_targets()
 
     def _release_post_targets(self) -> None:
         self._lut_texture(None)
@@ -289,7 +309,8 @@ class PresentPass:
         (0 without a camera that asks for them)."""
         return (self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
                 + (self._lut is not None)
-                + (self._depth_of_field.target_count() if self._depth_of_field is not None else 0))
+                + (self._depth_of_field.target_count() if self._depth_of_field is not None else 0)
+                + (self._motion_blur.target_count() if self._motion_blur is not None else 0))
 
     def release(self) -> None:
         self._lut_texture(None)
@@ -304,6 +325,9 @@ class PresentPass:
         if self._depth_of_field is not None:
             self._depth_of_field.release()
             self._depth_of_field = None
+        if self._motion_blur is not None:
+            self._motion_blur.release()
+            self._motion_blur = None
         self._post.clear()
         self.bloom.release()
         self.auto_exposure.release()

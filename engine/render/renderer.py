@@ -16,7 +16,7 @@ import math
 import moderngl
 import numpy as np
 
-from components.post import MAX_EXPOSURE_EV, Bloom, ColorGrading, DepthOfField, Tonemap, Vignette
+from components.post import MAX_EXPOSURE_EV, Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
@@ -38,6 +38,7 @@ from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.sky_bake import SkyBake
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
+from engine.render.views import View
 
 _MAX_EXPOSURE = 2.0 ** MAX_EXPOSURE_EV
 
@@ -444,18 +445,21 @@ class Renderer(Gpu):
                 bloom: Bloom | None = None, curve: str | None = None, camera: int | None = None,
                 dt: float = 0.0, image: RenderTargets | None = None, grading: ColorGrading | None = None,
                 vignette: Vignette | None = None, projection: object | None = None,
-                focus: DepthOfField | None = None, fov_y: float | None = None) -> None:
+                focus: DepthOfField | None = None, fov_y: float | None = None,
+                motion: MotionBlur | None = None, view: View | None = None) -> None:
         """Encode the HDR ``image`` (the present stage's: the main view's, ``FrameViews.image``;
         None: level 0 of the main view tree) to sRGB into ``output`` (a window's or a capture
         target), anti-aliased unless ``antialias`` is "off"; with the active camera's
         ``tonemap``, ``bloom`` and ``grading`` (``components/post.py``), bloomed, exposed,
         graded and tone mapped first (``PresentPass.draw``; ``exposure`` is used only without
         a Tonemap); with its ``focus`` (a DepthOfField; ``fov_y`` its field of view, None:
-        orthographic) blurred by its lens first, by the ways in ``image``'s seen image."""
+        orthographic) blurred by its lens first, by the ways in ``image``'s seen image, then
+        with its ``motion`` (a MotionBlur; ``view`` this frame's main view) smeared by its motion."""
         image = image if image is not None else self.targets
         assert image is not None
         self.present_pass.draw(image.color, self.exposure, self._antialias, output, size, tonemap, bloom,
-                               curve, camera, dt, grading, vignette, projection, focus, image.seen, fov_y)
+                               curve, camera, dt, grading, vignette, projection, focus, image.seen, fov_y,
+                               motion, view)
         self.checkpoint("present")
 
     def text(self) -> TextPass:

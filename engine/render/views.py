@@ -106,6 +106,15 @@ class View:
         return proj[0][3] == 0.0 and proj[1][3] == 0.0 and proj[2][3] == 0.0
 
     @property
+    def axis(self) -> glm.vec3:
+        """An orthographic view's axis (unit, its camera's +Z: the way behind it), along which
+        its parallel rays run; zero for a perspective view (``shaders/include/view_axis.glsl``'s
+        ``view_axis``, whose sign the rays' starts do not depend on)."""
+        if not self.parallel:
+            return glm.vec3(0.0)
+        return glm.normalize(glm.vec3(self.view[0][2], self.view[1][2], self.view[2][2]))
+
+    @property
     def sorting_eye(self) -> glm.vec3:
         """Where the transparent slot's order (and the unlit mirrors' cover) is measured from:
         its eye, or, for an orthographic view, a point ``PARALLEL_SORT_DISTANCE`` back along its
@@ -113,8 +122,7 @@ class View:
         offset across it, as from a far eye)."""
         if not self.parallel:
             return self.eye
-        back = glm.vec3(self.view[0][2], self.view[1][2], self.view[2][2])  # the camera's +Z: behind it
-        return self.eye + glm.normalize(back) * PARALLEL_SORT_DISTANCE
+        return self.eye + self.axis * PARALLEL_SORT_DISTANCE
 
     @property
     def view_mask(self) -> int:

@@ -1,0 +1,171 @@
+"""Camera motion blur (``components/post.py`` MotionBlur, ``engine/render/motion_blur.py``):
+each pixel's streak against the screen motion of the point it shows, worked out from the
+geometry (a reflection's image behind the glass, a direct point, the sky's direction); a still
+camera leaves the picture as it was; a camera carried through a portal keeps its motion; the
+component's checks, its level-file table and its images' release."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, Material, MeshRef, Mirror, MotionBlur, Transform
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.assets.mesh import box, plane, quad
+from engine.assets.portals import spawn_portal_pair
+from engine.assets.texture_data import checker_texture
+from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
+from engine.core.world import World
+from tests.support import look_from
+from tests.test_mirrors import base_scene
+
+SIZE = (160, 120)
+BOX = glm.vec3(0.3, 1.5, 12.0)   # behind the camera: seen in the mirror only
+FRAME_POINT = glm.vec3(-1.1, 1.8, -0.01)   # on the mirror's frame, seen directly
+
+
+def mirror_scene(world, ents, shutter=1.0):
+    base_scene(world)
+    ents["camera"] = look_from(world, (0.0, 1.5, 2.0), (0, 1.5, 0))
+    world.add_component(ents["camera"], MotionBlur(shutter=shutter, max_blur=0.2))
+    ents["frame"] = world.spawn(Transform(position=(0, 1.5, -0.01)), MeshRef(quad(2.6, 2.0)),
+                                Material(color=(0.9, 0.8, 0.2), texture=checker_texture(64, 16)))
+    ents["mirror"] = world.spawn(Transform(position=(0, 1.5, 0)), MeshRef(quad(2.0, 1.4)),
+                                 Material(color=(0.1, 0.1, 0.1)), Mirror())
+    world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.8, 0.8, 0.8), texture=checker_texture(256, 32)))
+    ents["box"] = world.spawn(Transform(position=BOX, scale=(0.6, 0.6, 0.6)), MeshRef(box()),
+                              Material(color=(0.9, 0.1, 0.1), texture=checker_texture(64, 4)))
+
+
+def gl_pixel(view_proj: glm.mat4, point: glm.vec4) -> glm.vec2:
+    """Where a point (w 1) or direction (w 0) lands, in pixels, y up (GL's)."""
+    clip = view_proj * point
+    return (glm.vec2(clip) / clip.w * 0.5 + 0.5) * glm.vec2(*SIZE)
+
+
+def streak_at(runner, pixel: glm.vec2) -> np.ndarray:
+    streaks = runner.engine.renderer.present_pass.motion_blur.streaks()
+    return streaks[SIZE[1] - 1 - int(pixel.y), int(pixel.x)]
+
+
+@pytest.mark.parametrize("shutter", [1.0, 0.5])
+def test_a_reflection_streaks_as_its_image_moves_not_as_the_glass(scene, shutter):
+    """The camera steps sideways: the box seen in the mirror streaks by the motion of its
+    image behind the glass (14 m along the way), the frame by its own (2 m), each times the
+    shutter; a depth buffer's point on the glass would give the box the frame's streak."""
+    ents = {}
+    runner = scene(lambda world: mirror_scene(world, ents, shutter), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    before = glm.mat4(runner.engine.main_view.view_proj)
+    runner.world.get(ents["camera"], Transform).position += glm.vec3(0.1, 0.0, 0.0)
+    runner.frame()
+    now = glm.mat4(runner.engine.main_view.view_proj)
+    image = glm.vec4(glm.vec3(reflection_matrix(plane_from_point_normal((0, 1.5, 0), (0, 0, 1)))
+                              * glm.vec4(BOX, 1.0)), 1.0)
+    at = gl_pixel(now, image)
+    assert runner.ids()[SIZE[1] - 1 - int(at.y), int(at.x)] == ents["box"]
+    expected = (at - gl_pixel(before, image)) * shutter
+    np.testing.assert_allclose(streak_at(runner, at), expected, rtol=0.03, atol=0.02)
+    on_frame = gl_pixel(now, glm.vec4(FRAME_POINT, 1.0))
+    assert runner.ids()[SIZE[1] - 1 - int(on_frame.y), int(on_frame.x)] == ents["frame"]
+    frame_expected = (on_frame - gl_pixel(before, glm.vec4(FRAME_POINT, 1.0))) * shutter
+    np.testing.assert_allclose(streak_at(runner, on_frame), frame_expected, rtol=0.03, atol=0.02)
+    assert abs(frame_expected.x) > 4.0 * abs(expected.x) > 0.5   # (nearer moves more)
+
+
+def test_the_sky_streaks_by_the_cameras_turn_alone(scene):
+    """A yaw of the camera: a sky pixel's streak is its direction's motion on screen."""
+    ents = {}
+    runner = scene(lambda world: mirror_scene(world, ents), SIZE)
+    runner.frame()
+    before = glm.mat4(runner.engine.main_view.view_proj)
+    transform = runner.world.get(ents["camera"], Transform)
+    transform.rotation = glm.angleAxis(glm.radians(2.0), glm.vec3(0, 1, 0)) * transform.rotation
+    runner.frame()
+    now = glm.mat4(runner.engine.main_view.view_proj)
+    pixel = glm.vec2(SIZE[0] * 0.5 + 0.5, SIZE[1] - 6.5)   # the top middle: sky
+    assert runner.ids()[5, SIZE[0] // 2] == 0
+    ndc = glm.vec4(pixel / glm.vec2(*SIZE) * 2.0 - 1.0, 1.0, 1.0)
+    far = glm.inverse(now) * ndc
+    direction = glm.vec4(glm.normalize(glm.vec3(far) / far.w - runner.engine.main_view.eye), 0.0)
+    expected = pixel - gl_pixel(before, direction)
+    np.testing.assert_allclose(streak_at(runner, pixel), expected, rtol=0.03, atol=0.05)
+    assert abs(expected.x) > 2.0
+
+
+def test_a_still_camera_leaves_the_picture_as_it_was(scene):
+    ents = {}
+    runner = scene(lambda world: mirror_scene(world, ents), SIZE)
+    present = runner.engine.stages["present"]
+    present.motion_blur = False
+    runner.frame()
+    sharp = runner.frame()
+    present.motion_blur = True
+    streaked = runner.frame()
+    np.testing.assert_array_equal(streaked, sharp)
+    assert np.abs(runner.engine.renderer.present_pass.motion_blur.streaks()).max() < 0.01   # (float error alone)
+
+
+def test_stepping_through_a_portal_keeps_the_motion(scene):
+    """The camera walks through a portal pair (a 90-degree turn between them): on the frame
+    it comes out, the picture's streaks are the step's, not the jump from one end to the other."""
+    ents = {}
+    turn = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
+
+    def build(world):
+        base_scene(world)
+        ents["camera"] = look_from(world, (0.0, 1.5, 0.6), (0, 1.5, -5))
+        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.25))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), turn, size=(3.0, 3.0))
+        world.spawn(Transform(), MeshRef(plane(60, 60)), Material(texture=checker_texture(256, 32)))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    transform = runner.world.get(ents["camera"], Transform)
+    longest = []
+    for _ in range(5):
+        transform.position += glm.vec3(0.0, 0.0, -0.25)
+        runner.frame()
+        streaks = runner.engine.renderer.present_pass.motion_blur.streaks()
+        longest.append(float(np.hypot(streaks[..., 0], streaks[..., 1]).max()))
+    assert runner.world.get(ents["camera"], Transform).position.x > 5.0   # it came out of the other end
+    assert max(longest) < 0.5 * 0.25 * SIZE[1], longest   # never near the longest streak there is: no jump
+
+
+@pytest.mark.parametrize(("field", "value"), [("shutter", -0.1), ("shutter", 1.5), ("max_blur", 0.0),
+                                              ("max_blur", 0.3), ("shutter", "half")])
+def test_motion_blur_values_are_checked(field, value):
+    with pytest.raises(ComponentValueError, match=f"MotionBlur.{field}"):
+        MotionBlur(**{field: value})
+
+
+def test_a_level_file_keeps_the_shutter_and_the_images_go_with_the_component(tmp_path, scene):
+    text = """
+[level]
+name = "shutter"
+
+[[entity]]
+name = "eye"
+Transform = { position = [0.0, 1.5, 4.0] }
+Camera = {}
+MotionBlur = { shutter = 0.25, max_blur = 0.1 }
+"""
+    (tmp_path / "shutter.toml").write_text(text)
+    world = World()
+    names = load_level(tmp_path / "shutter.toml").spawn(world)
+    saved = save_level(world, tmp_path / "again.toml", names, name="shutter")
+    again = World()
+    blur = again.get(load_level(saved).spawn(again)["eye"], MotionBlur)
+    assert (blur.shutter, blur.max_blur) == (0.25, 0.1)
+    (tmp_path / "bad.toml").write_text(text.replace("shutter = 0.25", "shutter = 2.0"))
+    with pytest.raises(LevelError, match="shutter"):
+        load_level(tmp_path / "bad.toml").spawn(World())
+    ents = {}
+    runner = scene(lambda world: mirror_scene(world, ents), SIZE)
+    runner.frame()
+    present = runner.engine.renderer.present_pass
+    assert present.post_target_count() == 2 and present.post_passes == 1
+    runner.world.remove_component(ents["camera"], MotionBlur)
+    runner.frame()
+    assert present.post_target_count() == 0 and present.post_passes == 0
