@@ -351,6 +351,8 @@ class DebugOverlay(EditorPanels):
         self._switch("sky refl", engine.stages["prepare"], "environment_reflections")
         imgui.same_line()
         self._switch("DoF", present, "depth_of_field")
+        imgui.same_line()
+        self._switch("motion blur", present, "motion_blur")
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()
         width, height = self.io.display_size

@@ -70,7 +70,8 @@ def post_lines(engine: Engine) -> list[str]:
     table's name), the post passes drawn; and a line of the main stage's screen-space
     passes: ambient occlusion (radius, intensity) and reflections (reach, quality), and the
     materials' sky reflections where the overlay turned them off, and the camera's depth of
-    field (its f-number and focus: autofocus's read back, a wait too).  (One
+    field (its f-number and focus: autofocus's read back, a wait too) and motion blur (its
+    shutter).  (One
     line grew the overlay's window over the view it is clicked through.)  The automatic
     exposure's adapted value is read back from the GPU (a wait, only while the overlay
     shows it)."""
@@ -119,6 +120,10 @@ def post_lines(engine: Engine) -> list[str]:
                         f"{' auto' if focused.autofocus else ''}")
     elif not present.depth_of_field:
         reflections += "; DoF off (set)"
+    if present.streaked is not None:
+        reflections += f"; motion blur {present.streaked.shutter:g}"
+    elif not present.motion_blur:
+        reflections += "; motion blur off (set)"
     passes = renderer.present_pass.post_passes
     return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}",
             f"screen: {occlusion}; {reflections}"]
