@@ -34,6 +34,7 @@ frame, the half-size path a fraction of that (the README's What a frame costs).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import moderngl
 import numpy as np
@@ -66,7 +67,7 @@ def tile_size(max_radius: float) -> int:
     return max(MIN_TILE, math.ceil(max_radius))
 
 
-def focus_pixel(point, size: tuple[int, int]) -> tuple[int, int]:
+def focus_pixel(point: Sequence[float], size: tuple[int, int]) -> tuple[int, int]:
     """The pixel (GL's: row 0 at the bottom) of ``DepthOfField.focus_point`` (shares of the
     width and height from the top-left) in a picture of ``size``."""
     w, h = size

@@ -414,6 +414,16 @@ class FaceTarget:
     def view_framebuffer(self) -> moderngl.Framebuffer:
         return self.framebuffer
 
+    def begin_glass(self) -> None:
+        """The glass slot's framebuffer (``RenderTargets.begin_glass``): depth not written (a
+        face has no seen image whose way to keep)."""
+        self.framebuffer.depth_mask = False
+        self.framebuffer.use()
+
+    def end_glass(self) -> None:
+        self.framebuffer.depth_mask = True
+        self.framebuffer.use()
+
 
 class CubeFaceTargets:
     """Six framebuffers drawing straight into the faces of one probe's cube map (raw GL:

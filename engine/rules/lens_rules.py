@@ -55,7 +55,8 @@ def lens_scale(f: float, f_stop: float, height_px: float) -> float:
     return f * f / (f_stop * SENSOR_HEIGHT) * 0.5 * height_px
 
 
-def blur_radius(distance, focus: float, f: float, f_stop: float, height_px: float, max_radius: float):
+def blur_radius(distance: float | np.ndarray, focus: float, f: float, f_stop: float, height_px: float,
+                max_radius: float) -> np.ndarray:
     """The signed radius in pixels of the disc a point at ``distance`` (metres along the
     light's way; a number or an array) is blurred into, by a lens of focal length ``f``
     (metres) at ``f_stop`` focused at ``focus`` metres, on a picture ``height_px`` pixels high:
