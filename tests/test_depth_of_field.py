@@ -20,6 +20,7 @@ from components import (
     Mirror,
     Skybox,
     Transform,
+    Water,
     look_rotation,
 )
 from engine.assets.level_file import LevelError, load_level, save_level
@@ -29,6 +30,7 @@ from engine.assets.texture_data import checker_texture
 from engine.core.portal_math import pair_transform
 from engine.core.world import World
 from engine.render.depth_of_field import focus_pixel, tile_size
+from engine.resources import Surfaces
 from engine.rules.lens_rules import SKY_WAY, blur_radius, focal_length, focus_step, max_blur_radius
 from tests.support import look_from, pixel_rays
 
@@ -489,3 +491,54 @@ def test_the_half_size_gather_agrees_with_the_full_size_one(scene):
     apart = np.abs(half[reflection] - full[reflection]).mean()
     assert apart < 4.0
     assert np.abs(full[reflection] - sharp[reflection]).mean() > 3.0 * apart
+
+
+@pytest.mark.parametrize("pose", ["start", "back_mirror", "partner_side"])
+def test_every_pixel_of_the_sample_level_has_a_way_no_shorter_than_its_first_surface(ctx, pose):
+    """The sample level (mirrors facing with end images, portals, the pond's water, glass,
+    probes): every pixel's way is finite and positive; where the main view's depth buffer holds
+    a surface, the way is at least the eye's distance to it (a second path: the depth read
+    back and carried out by the inverse projection), equal where that surface is the thing seen
+    (not a mirror, portal or water); the sky's is SKY_WAY."""
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.app import Engine
+    from tests.golden_scenes import HALL_POSES
+
+    engine = Engine(HallOfMirrors(), ctx)
+    size = (160, 90)
+    capture = CaptureTarget(ctx, size)
+    try:
+        if HALL_POSES[pose] is not None:
+            engine.place_camera(*HALL_POSES[pose])
+        for _ in range(3):
+            engine.frame(1 / 60, Output(capture.framebuffer, size))
+        targets = engine.renderer.targets
+        ways, surfaces = targets.read_ways(), targets.read_surface_ids()
+        w, h = targets.size
+        depth = np.flipud(np.frombuffer(targets.depth.read(), np.float32).reshape(h, w))
+        view = engine.main_view
+        eye, directions = pixel_rays(view, (w, h))
+        inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
+        xs, ys = np.meshgrid((np.arange(w) + 0.5) / w * 2 - 1, 1 - (np.arange(h) + 0.5) / h * 2)
+        clip = np.stack([xs, ys, depth * 2.0 - 1.0, np.ones_like(xs)], axis=-1) @ inverse.T
+        first = np.linalg.norm(clip[..., :3] / clip[..., 3:] - eye, axis=-1)
+        surfaced = depth < 1.0
+        assert np.isfinite(ways).all() and (ways > 0.0).all()
+        assert (ways[~surfaced] == np.float32(SKY_WAY)).all()
+        state = engine.world.resources
+        looking_on = set(state[Surfaces].mirrors) | set(state[Surfaces].portals)
+        water = {entity for entity, _ in engine.world.query_one(Water)}
+        looking_on |= water
+        # (Water is drawn see-through, writing no depth: the depth there is the basin's under it.)
+        solid = surfaced & ~np.isin(surfaces, list(water))
+        assert (ways[solid] >= first[solid] * (1 - 2e-3) - 2e-3).all()
+        direct = surfaced & ~np.isin(surfaces, list(looking_on))
+        assert direct.sum() > 0.3 * w * h
+        np.testing.assert_allclose(ways[direct], first[direct], rtol=3e-3, atol=3e-3)
+        reflected = surfaced & np.isin(surfaces, list(looking_on))
+        assert reflected.sum() > 200 and (ways[reflected] > first[reflected] * 1.01).mean() > 0.5
+    finally:
+        capture.release()
+        engine.close()
