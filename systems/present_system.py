@@ -10,6 +10,7 @@ from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, M
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
+from engine.render.present import CameraPost
 from engine.render.renderer import Renderer
 from engine.resources import PortalCrossings
 from engine.rules.frame_rules import active_camera_parts
@@ -85,9 +86,9 @@ class PresentSystem(esper.Processor):
         self.focused, self.streaked = focus, motion
         views: FrameViews | None = self.world.resources.get(FrameViews)
         main = views.main if views is not None else None
-        self.renderer.present(framebuffer, size, tonemap, bloom, self._curve, camera, dt,
-                              views.image if views is not None else None, grading, vignette,
-                              main.proj if main is not None else None, focus, fov_y, motion, main)
+        post = CameraPost(tonemap, bloom, grading, vignette, focus, motion, main, fov_y)
+        self.renderer.present(framebuffer, size, post, self._curve, camera, dt,
+                              views.image if views is not None else None)
         shares = self.renderer.screen_occlusion
         if self.show_occlusion and shares is not None:
             self.renderer.present_pass.draw_occlusion(shares, framebuffer, size)

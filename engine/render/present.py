@@ -29,6 +29,8 @@ POST build fetches the image's texel where the plain one filters it.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import moderngl
 
 from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
@@ -66,6 +68,21 @@ def _vignette_ray(projection) -> tuple[float, float, float, float]:
     p = projection
     return (1.0 / float(p[0][0]), 1.0 / float(p[1][1]), float(p[2][0]) / float(p[0][0]),
             float(p[2][1]) / float(p[1][1]))
+
+
+@dataclass(frozen=True)
+class CameraPost:
+    """The active camera's post-processing components (None: it has none) and what they read
+    of it: what the present stage hands ``PresentPass.draw`` each frame."""
+
+    tonemap: Tonemap | None = None
+    bloom: Bloom | None = None
+    grading: ColorGrading | None = None
+    vignette: Vignette | None = None
+    focus: DepthOfField | None = None     # depth of field
+    motion: MotionBlur | None = None      # motion blur
+    view: View | None = None              # this frame's main view (the vignette's rays, motion blur)
+    fov_y: float | None = None            # the camera's field of view (the lens's; None: orthographic)
 
 
 class PresentPass:
@@ -142,21 +159,19 @@ class PresentPass:
         return vao
 
     def draw(self, hdr: moderngl.Texture, exposure: float, antialias: str, output: moderngl.Framebuffer,
-             size: tuple[int, int], tonemap: Tonemap | None = None, bloom: Bloom | None = None,
-             curve: str | None = None, camera: int | None = None, dt: float = 0.0,
-             grading: ColorGrading | None = None, vignette: Vignette | None = None,
-             projection: object | None = None, focus: DepthOfField | None = None,
-             seen: moderngl.Texture | None = None, fov_y: float | None = None,
-             motion: MotionBlur | None = None, view: View | None = None) -> None:
-        """Present ``hdr`` into ``output``, first blurred by the camera's lens where ``focus``
-        (its DepthOfField) is given (``seen``: the same level's seen pair, its ways; ``fov_y``
-        the camera's field of view, None: orthographic), then smeared by the camera's motion
-        where ``motion`` (its MotionBlur) is given (``view``: this frame's main view).
-        ``tonemap``, ``bloom``, ``grading`` and ``vignette``: the active camera's components
-        (None: none), ``projection`` its view's (the vignette's rays); ``curve`` overrides the
-        tone curve (the debug overlay's choice; None: the Tonemap's, or "none"); ``camera`` is
-        whose image it is (automatic exposure, autofocus and motion blur start over when it
-        changes) and ``dt`` the frame's time step (adaptation)."""
+             size: tuple[int, int], post: CameraPost | None = None, curve: str | None = None,
+             camera: int | None = None, dt: float = 0.0, seen: moderngl.Texture | None = None) -> None:
+        """Present ``hdr`` into ``output`` as the active camera's ``post`` says (its
+        components; None: none): first blurred by its lens (``focus``: ``seen`` is the same
+        level's seen pair, its ways), then smeared by its motion (``motion``), then bloomed,
+        exposed, vignetted, graded and tone mapped.  ``curve`` overrides the tone curve (the
+        debug overlay's choice; None: the Tonemap's, or "none"); ``camera`` is whose image it
+        is (automatic exposure, autofocus and motion blur start over when it changes) and
+        ``dt`` the frame's time step (adaptation)."""
+        post = post if post is not None else CameraPost()
+        tonemap, bloom, grading, vignette = post.tonemap, post.bloom, post.grading, post.vignette
+        focus, motion, view = post.focus, post.motion, post.view
+        projection = view.proj if view is not None else None
         fxaa = antialias == "fxaa"
         if fxaa and (self._encoded is None or self._encoded.size != size):
             if self._encoded is not None:
@@ -164,7 +179,7 @@ class PresentPass:
             self._encoded = CaptureTarget(self.ctx, size)
         self.post_passes = 0
         if focus is not None and seen is not None:
-            hdr = self.depth_of_field.draw(hdr, seen, focus, fov_y, camera, dt)
+            hdr = self.depth_of_field.draw(hdr, seen, focus, post.fov_y, camera, dt)
             self.post_passes += self.depth_of_field.passes
         elif self._depth_of_field is not None:
             self._depth_of_field.release_targets()

@@ -16,7 +16,7 @@ import math
 import moderngl
 import numpy as np
 
-from components.post import MAX_EXPOSURE_EV, Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
+from components.post import MAX_EXPOSURE_EV
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
@@ -28,7 +28,7 @@ from engine.render.instances import MAX_CHANGED_PARTS, MORPH_TEXTURE_WIDTH, Batc
 from engine.render.irradiance import IrradianceTable
 from engine.render.level_copies import LevelCopies
 from engine.render.path_checks import PathChecks
-from engine.render.present import ANTIALIAS_MODES, PresentPass
+from engine.render.present import ANTIALIAS_MODES, CameraPost, PresentPass
 from engine.render.probes import ProbeCaptures
 from engine.render.scene_pass import ScenePass
 from engine.render.screen_occlusion import ScreenOcclusion
@@ -38,7 +38,6 @@ from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.sky_bake import SkyBake
 from engine.render.targets import LevelStack, RenderTargets
 from engine.render.text import TextPass
-from engine.render.views import View
 
 _MAX_EXPOSURE = 2.0 ** MAX_EXPOSURE_EV
 
@@ -441,25 +440,18 @@ class Renderer(Gpu):
         self.lights_ubo.write(block)
         self.note_scene_change()
 
-    def present(self, output: moderngl.Framebuffer, size: tuple[int, int], tonemap: Tonemap | None = None,
-                bloom: Bloom | None = None, curve: str | None = None, camera: int | None = None,
-                dt: float = 0.0, image: RenderTargets | None = None, grading: ColorGrading | None = None,
-                vignette: Vignette | None = None, projection: object | None = None,
-                focus: DepthOfField | None = None, fov_y: float | None = None,
-                motion: MotionBlur | None = None, view: View | None = None) -> None:
+    def present(self, output: moderngl.Framebuffer, size: tuple[int, int], post: CameraPost | None = None,
+                curve: str | None = None, camera: int | None = None, dt: float = 0.0,
+                image: RenderTargets | None = None) -> None:
         """Encode the HDR ``image`` (the present stage's: the main view's, ``FrameViews.image``;
         None: level 0 of the main view tree) to sRGB into ``output`` (a window's or a capture
-        target), anti-aliased unless ``antialias`` is "off"; with the active camera's
-        ``tonemap``, ``bloom`` and ``grading`` (``components/post.py``), bloomed, exposed,
-        graded and tone mapped first (``PresentPass.draw``; ``exposure`` is used only without
-        a Tonemap); with its ``focus`` (a DepthOfField; ``fov_y`` its field of view, None:
-        orthographic) blurred by its lens first, by the ways in ``image``'s seen image, then
-        with its ``motion`` (a MotionBlur; ``view`` this frame's main view) smeared by its motion."""
+        target), anti-aliased unless ``antialias`` is "off"; with the active camera's ``post``
+        components (``components/post.py``: ``PresentPass.draw``; ``exposure`` is used only
+        without a Tonemap), its lens and motion blur reading the ways in ``image``'s seen image."""
         image = image if image is not None else self.targets
         assert image is not None
-        self.present_pass.draw(image.color, self.exposure, self._antialias, output, size, tonemap, bloom,
-                               curve, camera, dt, grading, vignette, projection, focus, image.seen, fov_y,
-                               motion, view)
+        self.present_pass.draw(image.color, self.exposure, self._antialias, output, size, post, curve, camera, dt,
+                               image.seen)
         self.checkpoint("present")
 
     def text(self) -> TextPass:
