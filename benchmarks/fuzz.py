@@ -4,8 +4,8 @@ Each case builds one component (Visibility and Water among them) with one to thr
 drawn from a pool of awkward values (NaN, infinities, numbers past float32 and float16, huge
 ints, wrong kinds, zero vectors, Euler-looking tuples), attaches it to an entity of a small
 lit scene (a box, a quad for surfaces, the camera entity for Camera, FlyController, Tonemap,
-Bloom, ColorGrading, Vignette, DepthOfField, MotionBlur, Fog, AmbientOcclusion and ScreenReflections, the
-sky entity
+Bloom, ColorGrading, Vignette, DepthOfField, MotionBlur, ChromaticAberration, FilmGrain, Fog,
+AmbientOcclusion and ScreenReflections, the sky entity
 for the Skybox) and
 renders ``FRAMES`` 48 x 32 frames (``benchmarks/fuzz_cases.py``: what a first frame leaves
 to later ones, probes captured a face a frame, is run too). A case passes when either the
@@ -54,12 +54,14 @@ from components import (
     AmbientOcclusion,
     Bloom,
     Camera,
+    ChromaticAberration,
     ColorGrading,
     ComponentValueError,
     Decal,
     DepthOfField,
     DirectionalLight,
     Emissive,
+    FilmGrain,
     FlyController,
     Fog,
     Material,
@@ -94,8 +96,8 @@ SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
-                             MotionBlur, Fog, AmbientOcclusion, ScreenReflections, Visibility, Water, ParticleEmitter,
-                             Decal)
+                             MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ScreenReflections,
+                             Visibility, Water, ParticleEmitter, Decal)
 
 @dataclasses.dataclass
 class Case:
@@ -164,7 +166,8 @@ class Fuzzer:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
-                                MotionBlur, Fog, AmbientOcclusion, ScreenReflections):
+                                MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion,
+                                ScreenReflections):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

@@ -9,7 +9,16 @@ from components.model import Animation, AnimationEvents, AnimationLayer, FromMod
 from components.particles import ParticleEmitter
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.pose import Morph, Skin
-from components.post import Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
+from components.post import (
+    Bloom,
+    ChromaticAberration,
+    ColorGrading,
+    DepthOfField,
+    FilmGrain,
+    MotionBlur,
+    Tonemap,
+    Vignette,
+)
 from components.probe import ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
@@ -20,10 +29,11 @@ from components.visibility import Visibility
 from components.water import Water
 
 __all__ = [
-    "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
+    "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ChromaticAberration",
+    "ColorGrading",
     "ComponentValueError",
     "ComponentWarning", "Decal", "DepthOfField",
-    "DirectionalLight", "Emissive", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
+    "DirectionalLight", "Emissive", "FilmGrain", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
     "LevelOfDetail", "Material",
     "MeshRef", "Mirror", "Model", "Morph", "MotionBlur", "ParticleEmitter", "PointLight", "Portal", "PortalClone",
     "ReflectionProbe",

@@ -344,3 +344,51 @@ class MotionBlur(TrackedComponent):
         if name == "max_blur":
             return finite(self, name, value, positive=True, high=MAX_MOTION_BLUR)
         return value
+
+
+MAX_ABERRATION = 0.02   # ChromaticAberration.intensity 1: red and blue images 2% larger and smaller than green
+MAX_GRAIN = 1.0
+
+
+@dataclass(eq=False)
+class ChromaticAberration(TrackedComponent):
+    """Colour fringes towards the picture's edges (on the camera's entity), as a real lens's
+    lateral chromatic aberration makes them: its magnification differs with the wavelength, so
+    the red image is a little larger than the green and the blue a little smaller, about the
+    picture's middle.  Nothing moves at the middle; at the edges a bright edge splits into a red
+    and a blue fringe (Unity's and Unreal's chromatic aberration).
+
+    - ``intensity`` (0..1): the red image ``intensity x 2%`` larger than the green, the blue as
+      much smaller (at 1920 pixels wide, up to about 19 pixels at the corners).
+    """
+
+    intensity: float = 0.25
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "intensity":
+            return finite(self, name, value, low=0.0, high=1.0)
+        return value
+
+
+@dataclass(eq=False)
+class FilmGrain(TrackedComponent):
+    """Film's grain over the picture (on the camera's entity): noise a pixel, new each frame,
+    added to the encoded picture after the tone curve, as Unity's and Unreal's film grain.
+
+    - ``intensity`` (0..1): the grain's strength (its spread: ``intensity x 0.1`` of full
+      white either way);
+    - ``response`` (0..1): how much less grain the bright parts take (film's grain shows most in
+      the shadows and mid-tones: 0 the same everywhere, 1 none on white);
+    - ``size`` (1..8): a grain's size in pixels (a high-resolution picture's grain stays visible).
+    """
+
+    intensity: float = 0.3
+    response: float = 0.8
+    size: float = 1.0
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in ("intensity", "response"):
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "size":
+            return finite(self, name, value, low=1.0, high=8.0)
+        return value

@@ -10,7 +10,8 @@
 // code is the plain look's, unchanged.  With VIGNETTE the exposed image is darkened towards
 // its edges (Vignette).  With GRADE (components/post.py ColorGrading) the
 // exposed image is graded before the curve (grade()); with LUT the encoded picture is looked
-// up in the grade's colour table last.
+// up in the grade's colour table.  With ABERRATION the red and blue images are read scaled
+// about the middle (ChromaticAberration); with GRAIN film grain is added last (FilmGrain).
 #include "color.glsl"
 #include "tonemap.glsl"
 
@@ -55,6 +56,27 @@ vec3 grade(vec3 c) {
     return max(luma + saturation * (c - luma), 0.0);
 }
 #endif
+#ifdef ABERRATION
+uniform float aberration;     // the red image's scale over the green's less 1 (the blue's: 1 less it)
+#endif
+#ifdef GRAIN
+uniform vec4 grain;           // x: the spread (intensity x 0.1), y: response, z: a grain's size (pixels), w: the seed
+
+// PCG's output permutation as a hash (Jarzynski and Olano, "Hash Functions for GPU Rendering",
+// 2020): 32 well-mixed bits of one uint.
+uint pcg_hash(uint v) {
+    uint state = v * 747796405u + 2891336453u;
+    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// The grain at a pixel this frame: uniform in [-1, 1), the same within a grain's square.
+float grain_noise(vec2 pixel, float seed) {
+    uvec2 cell = uvec2(pixel / grain.z);
+    uint h = pcg_hash(cell.x + pcg_hash(cell.y + pcg_hash(uint(seed))));
+    return float(h >> 8u) * (2.0 / 16777216.0) - 1.0;
+}
+#endif
 #ifdef LUT
 uniform sampler3D lut_map;    // ColorGrading.lut (engine/assets/color_lut.py), trilinear
 uniform vec3 lut_scale;       // encoded colour -> its texture coordinates (grading.lut_lookup)
@@ -72,6 +94,15 @@ void main() {
     // image, smaller, through textureLod (no mipmaps, and a software rasteriser skips the
     // derivatives).  v_uv is below 1 at every pixel centre, so the texel is inside.
     vec3 hdr = texelFetch(hdr_image, ivec2(v_uv * vec2(textureSize(hdr_image, 0))), 0).rgb;
+#ifdef ABERRATION
+    // A lens's lateral chromatic aberration: the red image larger than the green, the blue
+    // smaller, about the middle, so a pixel shows red from nearer the middle, blue from farther out.
+    // (The blue is read from past the edge near it: the edge's texels, not the far side's.)
+    vec2 from_middle = v_uv - 0.5;
+    vec2 half_texel = 0.5 / vec2(textureSize(hdr_image, 0));
+    hdr.r = textureLod(hdr_image, 0.5 + from_middle / (1.0 + aberration), 0.0).r;
+    hdr.b = textureLod(hdr_image, clamp(0.5 + from_middle / (1.0 - aberration), half_texel, 1.0 - half_texel), 0.0).b;
+#endif
 #ifdef BLOOM
     hdr = hdr * bloom_mix.x + textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;
 #endif
@@ -90,6 +121,11 @@ void main() {
     vec3 srgb = linear_to_srgb(tone_map(exposed));
 #ifdef LUT
     srgb = mix(srgb, textureLod(lut_map, srgb * lut_scale + lut_bias, 0.0).rgb, lut_strength);
+#endif
+#ifdef GRAIN
+    // Film grain on the encoded picture, less on its bright parts by the response.
+    float luma = dot(srgb, vec3(0.2126, 0.7152, 0.0722));
+    srgb = max(srgb + grain_noise(gl_FragCoord.xy, grain.w) * grain.x * (1.0 - grain.y * clamp(luma, 0.0, 1.0)), 0.0);
 #endif
 #else
     vec3 srgb = linear_to_srgb(texture(hdr_image, v_uv).rgb * exposure);

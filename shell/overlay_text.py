@@ -98,6 +98,10 @@ def post_lines(engine: Engine) -> list[str]:
         grade = "; grade off (set)"
     if present.vignetted is not None:
         grade += f"; vignette {present.vignetted.intensity:g}"
+    if present.fringed is not None:
+        grade += f"; fringes {present.fringed.intensity:g}"
+    if present.grained is not None:
+        grade += f"; grain {present.grained.intensity:g}"
     main = engine.stages["main"]
     occluded = main.occluded
     if occluded is not None:

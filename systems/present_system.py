@@ -6,7 +6,17 @@ from __future__ import annotations
 import esper
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
+from components.post import (
+    TONEMAP_CURVES,
+    Bloom,
+    ChromaticAberration,
+    ColorGrading,
+    DepthOfField,
+    FilmGrain,
+    MotionBlur,
+    Tonemap,
+    Vignette,
+)
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
@@ -37,6 +47,8 @@ class PresentSystem(esper.Processor):
         self.vignetted: Vignette | None = None
         self.focused: DepthOfField | None = None
         self.streaked: MotionBlur | None = None
+        self.fringed: ChromaticAberration | None = None
+        self.grained: FilmGrain | None = None
         # The debug overlay's switches: False draws no camera's DepthOfField, MotionBlur.
         self.depth_of_field = True
         self.motion_blur = True
@@ -68,7 +80,7 @@ class PresentSystem(esper.Processor):
         exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
-        tonemap = bloom = grading = vignette = focus = motion = None
+        tonemap = bloom = grading = vignette = focus = motion = aberration = grain = None
         fov_y = None
         if camera is not None:
             focus = self.world.try_get(camera, DepthOfField) if self.depth_of_field else None
@@ -82,11 +94,14 @@ class PresentSystem(esper.Processor):
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
             grading = self.world.try_get(camera, ColorGrading) if self.grade else None
             vignette = self.world.try_get(camera, Vignette) if self.grade else None
+            aberration = self.world.try_get(camera, ChromaticAberration) if self.grade else None
+            grain = self.world.try_get(camera, FilmGrain) if self.grade else None
         self.tonemap, self.bloomed, self.graded, self.vignetted = tonemap, bloom, grading, vignette
-        self.focused, self.streaked = focus, motion
+        self.focused, self.streaked, self.fringed, self.grained = focus, motion, aberration, grain
         views: FrameViews | None = self.world.resources.get(FrameViews)
         main = views.main if views is not None else None
-        post = CameraPost(tonemap, bloom, grading, vignette, focus, motion, main, fov_y)
+        post = CameraPost(tonemap=tonemap, bloom=bloom, grading=grading, vignette=vignette, focus=focus,
+                          motion=motion, aberration=aberration, grain=grain, view=main, fov_y=fov_y)
         self.renderer.present(framebuffer, size, post, self._curve, camera, dt,
                               views.image if views is not None else None)
         shares = self.renderer.screen_occlusion

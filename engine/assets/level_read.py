@@ -58,9 +58,10 @@ except ImportError:  # Python 3.10
 # decal's cut mesh (derived state), never written by hand.
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
-        "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ColorGrading",
+        "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ChromaticAberration",
+        "ColorGrading",
         "Decal", "DepthOfField", "DirectionalLight",
-        "Emissive", "FlyController", "Fog", "HemisphereLight", "LevelOfDetail", "Material", "MeshRef",
+        "Emissive", "FilmGrain", "FlyController", "Fog", "HemisphereLight", "LevelOfDetail", "Material", "MeshRef",
         "Mirror", "Model", "MotionBlur", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",

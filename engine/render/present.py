@@ -33,7 +33,18 @@ from dataclasses import dataclass
 
 import moderngl
 
-from components.post import TONEMAP_CURVES, Bloom, ColorGrading, DepthOfField, MotionBlur, Tonemap, Vignette
+from components.post import (
+    MAX_ABERRATION,
+    TONEMAP_CURVES,
+    Bloom,
+    ChromaticAberration,
+    ColorGrading,
+    DepthOfField,
+    FilmGrain,
+    MotionBlur,
+    Tonemap,
+    Vignette,
+)
 from engine.assets.color_lut import ColorLut
 from engine.render.bindings import (
     BLOOM_UNIT,
@@ -70,6 +81,10 @@ def _vignette_ray(projection) -> tuple[float, float, float, float]:
             float(p[2][1]) / float(p[1][1]))
 
 
+GRAIN_SPREAD = 0.1     # FilmGrain.intensity 1: the grain moves the encoded picture up to 0.1 either way
+GRAIN_SEEDS = 1 << 20  # film grain's frames go round after this many
+
+
 @dataclass(frozen=True)
 class CameraPost:
     """The active camera's post-processing components (None: it has none) and what they read
@@ -81,6 +96,8 @@ class CameraPost:
     vignette: Vignette | None = None
     focus: DepthOfField | None = None     # depth of field
     motion: MotionBlur | None = None      # motion blur
+    aberration: ChromaticAberration | None = None
+    grain: FilmGrain | None = None
     view: View | None = None              # this frame's main view (the vignette's rays, motion blur)
     fov_y: float | None = None            # the camera's field of view (the lens's; None: orthographic)
 
@@ -105,6 +122,7 @@ class PresentPass:
         self._occlusion_view: moderngl.VertexArray | None = None  # the overlay's "AO only" view, made on first use
         self._depth_of_field: DepthOfFieldPass | None = None  # made when a camera first has a DepthOfField
         self._motion_blur: MotionBlurPass | None = None       # made when a camera first has a MotionBlur
+        self.grain_seed = 0   # film grain's frame: a new one each frame with time in it
 
     @property
     def motion_blur(self) -> MotionBlurPass:
@@ -140,14 +158,16 @@ class PresentPass:
         return self.ctx.vertex_array(program, [])
 
     def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool, grade: bool = False,
-                    lut: bool = False, vignette: bool = False) -> moderngl.VertexArray:
-        key = (curve, bloom, auto, luma, grade, lut, vignette)
+                    lut: bool = False, vignette: bool = False, aberration: bool = False,
+                    grain: bool = False) -> moderngl.VertexArray:
+        key = (curve, bloom, auto, luma, grade, lut, vignette, aberration, grain)
         vao = self._post.get(key)
         if vao is None:
             defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
             defines.update((name, "1") for name, on in (("BLOOM", bloom), ("AUTO_EXPOSURE", auto),
                                                         ("LUMA_IN_ALPHA", luma), ("GRADE", grade), ("LUT", lut),
-                                                        ("VIGNETTE", vignette)) if on)
+                                                        ("VIGNETTE", vignette), ("ABERRATION", aberration),
+                                                        ("GRAIN", grain)) if on)
             vao = self._post[key] = self._fullscreen("present.frag", **defines)
             vao.program["hdr_image"].value = PRESENT_UNIT
             if bloom:
@@ -192,7 +212,12 @@ class PresentPass:
             grading = None  # (nothing to grade: the same picture without it)
         if vignette is not None and (vignette.intensity == 0.0 or projection is None):
             vignette = None  # (no darkening: the same picture without it)
-        if tonemap is None and bloom is None and curve is None and grading is None and vignette is None:
+        aberration = post.aberration if post.aberration is not None and post.aberration.intensity > 0.0 else None
+        grain = post.grain if post.grain is not None and post.grain.intensity > 0.0 else None
+        if dt > 0.0:
+            self.grain_seed = (self.grain_seed + 1) % GRAIN_SEEDS   # (a screenshot's grain is its frame's)
+        if tonemap is None and bloom is None and curve is None and grading is None and vignette is None \
+                and aberration is None and grain is None:
             self._release_post_targets()
             encode = self._encode_luma if fxaa else self._encode
             (self._encoded.framebuffer if fxaa else output).use()
@@ -201,7 +226,12 @@ class PresentPass:
             encode.program["exposure"].value = exposure
         else:
             encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa, grading,
-                                       vignette is not None)
+                                       vignette is not None, aberration is not None, grain is not None)
+            if aberration is not None:
+                self._set(encode, "aberration", aberration.intensity * MAX_ABERRATION)
+            if grain is not None:
+                self._set(encode, "grain", (grain.intensity * GRAIN_SPREAD, grain.response, grain.size,
+                                            float(self.grain_seed)))
             if vignette is not None:
                 self._set(encode, "vignette_ray", _vignette_ray(projection))
                 self._set(encode, "vignette", (vignette.intensity, vignette.falloff))
@@ -218,7 +248,8 @@ class PresentPass:
 
     def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,
                      curve: str | None, camera: int | None, dt: float, luma: bool,
-                     grading: ColorGrading | None = None, vignette: bool = False) -> moderngl.VertexArray:
+                     grading: ColorGrading | None = None, vignette: bool = False, aberration: bool = False,
+                     grain: bool = False) -> moderngl.VertexArray:
         """Run bloom and automatic exposure; the present build to draw, its inputs bound."""
         bloomed = None
         if bloom is not None and bloom.intensity > 0.0:
@@ -236,7 +267,8 @@ class PresentPass:
         curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
         lut = self._lut_texture(grading.lut if grading is not None and grading.lut_strength > 0.0 else None)
         graded = grades(grading)
-        encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None, vignette)
+        encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None, vignette,
+                                  aberration, grain)
         self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
         if graded:
             self._set_grade(encode, grading)

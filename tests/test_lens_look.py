@@ -1,0 +1,170 @@
+"""A lens's colour fringes and film's grain (``components/post.py`` ChromaticAberration and
+FilmGrain, drawn in the present pass): the red and blue images scaled about the middle by what
+the intensity says (each channel's centroid of a thin bright line against the scaling worked
+out by hand), and grain of the stated spread, zero mean, its response, its size, new each
+frame and the same in a screenshot of the frame."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from components import ChromaticAberration, ComponentValueError, Emissive, FilmGrain, Material, MeshRef, Transform
+from components.post import MAX_ABERRATION
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.assets.mesh import quad
+from engine.core.world import World
+from engine.render.present import GRAIN_SPREAD
+from tests.support import look_from
+
+SIZE = (320, 180)
+LINES = (-1.4, 0.0, 1.1)   # x of thin bright lines 3 m before the camera
+
+
+def lines(world, **components):
+    camera = look_from(world, (0, 1.5, 3), (0, 1.5, 0))
+    for component in components.values():
+        world.add_component(camera, component)
+    for x in LINES:
+        world.spawn(Transform(position=(x, 1.5, 0)), MeshRef(quad(0.02, 2.0)), Material(color=(1.0, 1.0, 1.0)),
+                    Emissive(1.0))
+    return camera
+
+
+def centroids(rgb: np.ndarray, row: int, around: float, reach: int = 14) -> np.ndarray:
+    """Each channel's brightness-weighted mean column in ``reach`` columns about ``around``."""
+    low, high = int(around) - reach, int(around) + reach + 1
+    band = rgb[row, low:high].astype(float)
+    band -= band.min(axis=0)   # (the sky behind the line)
+    columns = np.arange(low, high) + 0.5
+    return (band * columns[:, None]).sum(axis=0) / band.sum(axis=0)
+
+
+@pytest.mark.parametrize("intensity", [1.0, 0.5])
+def test_the_red_image_is_larger_and_the_blue_smaller_about_the_middle(scene, intensity):
+    camera = {}
+
+    def build(world):
+        camera["entity"] = lines(world, aberration=ChromaticAberration(intensity=intensity))
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.stages["present"].grade = False   # (the look switch: no fringes)
+    plain = runner.frame()
+    runner.engine.stages["present"].grade = True
+    fringed = runner.frame()
+    k = intensity * MAX_ABERRATION
+    middle = SIZE[0] / 2.0
+    row = SIZE[1] // 2
+    for x in LINES:
+        column, _ = runner.project((x, 1.5, 0.0))
+        at = centroids(plain, row, column)[1]               # the line's own centre (green, unfringed)
+        r, g, b = centroids(fringed, row, at)
+        assert g == pytest.approx(at, abs=0.05)
+        assert r == pytest.approx(middle + (at - middle) * (1 + k), abs=0.3)
+        assert b == pytest.approx(middle + (at - middle) * (1 - k), abs=0.3)
+    assert abs(centroids(fringed, row, runner.project((1.1, 1.5, 0))[0])[0] - middle) > 10   # (a line off the middle)
+
+
+def grey_wall(world, **components):
+    camera = look_from(world, (0, 1.5, 3), (0, 1.5, 0))
+    for component in components.values():
+        world.add_component(camera, component)
+    world.spawn(Transform(position=(0, 1.5, 0)), MeshRef(quad(40, 40)), Material(color=(0.2, 0.2, 0.2)), Emissive(1.0))
+    return camera
+
+
+def test_grain_has_its_spread_zero_mean_and_changes_each_frame_not_in_a_screenshot(scene):
+    """On a flat grey wall (response 0): the grain's spread is intensity x 0.1 of white either
+    way (uniform: a standard deviation of that over the square root of 3), its mean nil; the next
+    frame's differs; a screenshot of a frame (presented again, dt 0) has the frame's grain."""
+    runner = scene(lambda world: grey_wall(world, grain=FilmGrain(intensity=0.5, response=0.0)), SIZE)
+    runner.engine.renderer.antialias = "off"
+    present = runner.engine.stages["present"]
+    present.grade = False
+    plain = runner.frame().astype(float)
+    present.grade = True
+    first = runner.frame().astype(float)
+    noise = (first - plain)[..., 1]
+    spread = 0.5 * GRAIN_SPREAD * 255.0
+    assert abs(noise.mean()) < 0.05 * spread
+    assert noise.std() == pytest.approx(spread / np.sqrt(3.0), rel=0.08)
+    again = runner.engine.renderer.present_pass.grain_seed
+    present.present_into(runner.capture.framebuffer, SIZE, dt=0.0)   # a screenshot of the same frame
+    np.testing.assert_array_equal(runner.capture.read_rgb().astype(float), first)
+    assert runner.engine.renderer.present_pass.grain_seed == again
+    second = runner.frame().astype(float)
+    assert np.abs(second - first).mean() > 0.3 * spread
+
+
+def test_grain_takes_its_size_and_spares_white_by_its_response(scene):
+    runner = scene(lambda world: grey_wall(world, grain=FilmGrain(intensity=0.5, response=0.0, size=2.0)), SIZE)
+    runner.engine.renderer.antialias = "off"
+    present = runner.engine.stages["present"]
+    present.grade = False
+    plain = runner.frame().astype(int)
+    present.grade = True
+    noise = runner.frame().astype(int)[..., 1] - plain[..., 1]
+    # The same grain over each 2x2 block of pixels (GL's rows, from the bottom: even rows pair up).
+    # (Each pixel's own rounding aside: within a block at most one level apart, blocks apart far more.)
+    from_bottom = noise[::-1].astype(float)
+    within = np.abs(from_bottom[0::2, 0::2] - from_bottom[1::2, 1::2])
+    across = np.abs(from_bottom[0::2, 0:-2:2] - from_bottom[0::2, 2::2])
+    assert within.max() <= 1.0 and across.mean() > 5.0 * max(within.mean(), 0.2)
+    # On white with response 1: none.
+    white = scene(lambda world: _white_wall(world), SIZE)
+    white.engine.renderer.antialias = "off"
+    rgb = white.frame()
+    assert (rgb == 255).all()
+
+
+def _white_wall(world):
+    camera = look_from(world, (0, 1.5, 3), (0, 1.5, 0))
+    world.add_component(camera, FilmGrain(intensity=1.0, response=1.0))
+    world.spawn(Transform(position=(0, 1.5, 0)), MeshRef(quad(40, 40)), Material(color=(1.0, 1.0, 1.0)), Emissive(4.0))
+
+
+@pytest.mark.parametrize(("cls", "field", "value"), [
+    (ChromaticAberration, "intensity", -0.1), (ChromaticAberration, "intensity", 1.5),
+    (FilmGrain, "intensity", 2.0), (FilmGrain, "response", -1.0), (FilmGrain, "size", 0.5), (FilmGrain, "size", 9.0),
+    (FilmGrain, "intensity", "strong"),
+])
+def test_lens_look_values_are_checked(cls, field, value):
+    with pytest.raises(ComponentValueError, match=f"{cls.__name__}.{field}"):
+        cls(**{field: value})
+
+
+def test_a_level_file_keeps_the_fringes_and_the_grain(tmp_path):
+    text = """
+[level]
+name = "film"
+
+[[entity]]
+name = "eye"
+Transform = { position = [0.0, 1.5, 4.0] }
+Camera = {}
+ChromaticAberration = { intensity = 0.4 }
+FilmGrain = { intensity = 0.2, response = 0.5, size = 2.0 }
+"""
+    (tmp_path / "film.toml").write_text(text)
+    world = World()
+    names = load_level(tmp_path / "film.toml").spawn(world)
+    saved = save_level(world, tmp_path / "again.toml", names, name="film")
+    again = World()
+    eye = load_level(saved).spawn(again)["eye"]
+    assert again.get(eye, ChromaticAberration).intensity == pytest.approx(0.4)
+    grain = again.get(eye, FilmGrain)
+    assert (grain.intensity, grain.response, grain.size) == pytest.approx((0.2, 0.5, 2.0))
+    (tmp_path / "bad.toml").write_text(text.replace("size = 2.0", "size = 20.0"))
+    with pytest.raises(LevelError, match="size"):
+        load_level(tmp_path / "bad.toml").spawn(World())
+
+
+def test_output_is_unchanged_by_a_zero_intensity(scene):
+    """An intensity of 0 draws the plain picture (no build with the effect)."""
+    runner = scene(lambda world: lines(world, aberration=ChromaticAberration(intensity=0.0),
+                                       grain=FilmGrain(intensity=0.0)), SIZE)
+    runner.engine.renderer.antialias = "off"
+    shown = runner.frame()
+    present = runner.engine.stages["present"]
+    present.grade = False
+    np.testing.assert_array_equal(runner.frame(), shown)
