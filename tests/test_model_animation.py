@@ -168,6 +168,36 @@ def test_a_missing_clip_and_malformed_channels_are_refused(tmp_path):
             Animation(**{field: value})
 
 
+def test_animation_pointer_channels_play_a_nodes_transform_and_leave_the_rest_out_saying_so(tmp_path):
+    """KHR_animation_pointer: a channel aimed at ``/nodes/0/rotation`` turns the hinge exactly
+    as the same channel by ``path``; one aimed at a material's colour is left out with a
+    warning naming its pointer (the clip plays the rest, no refusal of the file); a pointer
+    target without its pointer string is refused."""
+    plain = door(tmp_path / "plain.glb")
+    pointed = door(tmp_path / "pointed.glb", [
+        {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
+            "pointer": "/nodes/0/rotation"}}}},
+        {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
+            "pointer": "/materials/0/pbrMetallicRoughness/baseColorFactor"}}}}])
+    with pytest.warns(UserWarning, match=r"animation 0 \('Open'\): channel 1: KHR_animation_pointer "
+                                         r"'/materials/0/pbrMetallicRoughness/baseColorFactor' left out"):
+        loaded = load_model_file(pointed)
+    assert [(channel.node, channel.path) for channel in loaded.animations[0].channels] == [(0, "rotation")]
+    times = [0.0, 0.5, 1.0, 0.5]
+    with pytest.warns(UserWarning):
+        _, turned = played(pointed, "Open", times)
+    _, expected = played(plain, "Open", times)
+    assert all(close(a, b) for a, b in zip(turned, expected, strict=True))
+    assert not close(turned[1], turned[0])
+    bare = door(tmp_path / "bare.glb", [{"sampler": 0, "target": {"path": "pointer"}}])
+    with pytest.raises(AssetError, match=r"channel 0: target.path 'pointer' needs extensions.KHR_animation_pointer"):
+        load_model_file(bare)
+    far = door(tmp_path / "far.glb", [{"sampler": 0, "target": {"path": "pointer", "extensions": {
+        "KHR_animation_pointer": {"pointer": "/nodes/9/rotation"}}}}])
+    with pytest.raises(AssetError, match=r"channel 0: target.node names node 9"):
+        load_model_file(far)
+
+
 def test_a_level_plays_a_clip_and_a_missing_one_is_refused_by_its_line(tmp_path):
     from engine.assets.level_file import LevelError, load_level
 

@@ -2,6 +2,12 @@
 rotation or scale sampled at key times, with linear, step or cubic-spline interpolation),
 read before trimesh parses the file (which ignores them), and the poses they give.
 
+``KHR_animation_pointer`` (Blender 4.2 and later export it) names a channel's target by a
+JSON pointer: a node's ``/nodes/{i}/translation``, ``rotation``, ``scale`` or ``weights`` is
+read as that node's channel; any other property it animates (a material's colour, a light's
+intensity, a camera's field of view) is left out with a warning naming the pointer, and the
+clip plays the rest.
+
 A model's parts are placed by their nodes (``ModelPart.node``); the node tree
 (``NodeTree``: each node's parent and its own transform at rest) lets ``pose_all`` put every
 part where a clip puts its node at a time: the animated nodes' sampled translation, rotation
@@ -12,6 +18,8 @@ wears its morph targets at (``engine/assets/gltf_morphs.py``; ``pose_weights``).
 """
 from __future__ import annotations
 
+import re
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +32,8 @@ PATHS = {"translation": 3, "rotation": 4, "scale": 3}  # what a channel may anim
 # ("weights" too: as wide as the node's mesh has morph targets)
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 MAX_KEYS = 1 << 20  # key times one channel may have
+POINTER = "KHR_animation_pointer"
+_NODE_POINTER = re.compile(r"/nodes/(0|[1-9][0-9]*)/(translation|rotation|scale|weights)")
 
 
 @dataclass
@@ -118,9 +128,15 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
             if not isinstance(target, dict):
                 raise AssetError(f"{where}: needs a target object, got {channel!r}")
             path = target.get("path")
-            if path not in PATHS and path != "weights":
-                raise AssetError(f"{where}: target.path must be one of {sorted(PATHS)} or 'weights', got {path!r}")
             node = target.get("node")
+            if path == "pointer":
+                found = _pointed_node(target, where)
+                if found is None:
+                    continue
+                node, path = found
+            if path not in PATHS and path != "weights":
+                raise AssetError(f"{where}: target.path must be one of {sorted(PATHS)}, 'weights' or 'pointer' "
+                                 f"(KHR_animation_pointer), got {path!r}")
             if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < len(nodes):
                 raise AssetError(f"{where}: target.node names node {node!r}, which the file does not have")
             width = PATHS.get(path, 0)
@@ -140,6 +156,23 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
         duration = max((float(ch.times[-1]) for ch in channels), default=0.0)
         clips.append(Clip(name if isinstance(name, str) and name else f"animation {a}", channels, duration))
     return clips
+
+
+def _pointed_node(target: dict, where: str) -> tuple[int, str] | None:
+    """A ``KHR_animation_pointer`` target's node and path, for a pointer to a node's
+    translation, rotation, scale or weights; None (warned: left out) for any other property;
+    an AssetError where the target has no pointer string."""
+    extension = (target.get("extensions") or {}).get(POINTER) if isinstance(target.get("extensions"), dict) else None
+    pointer = extension.get("pointer") if isinstance(extension, dict) else None
+    if not isinstance(pointer, str):
+        raise AssetError(f"{where}: target.path 'pointer' needs extensions.{POINTER}.pointer, a string, got "
+                         f"{pointer!r}")
+    match = _NODE_POINTER.fullmatch(pointer)
+    if match is None:
+        warnings.warn(f"{where}: {POINTER} {pointer!r} left out (only a node's translation, rotation, scale and "
+                      "weights are played); the clip plays the rest", stacklevel=6)
+        return None
+    return int(match.group(1)), match.group(2)
 
 
 def _target_count(node: object, meshes: list) -> int:
