@@ -170,17 +170,17 @@ def test_a_missing_clip_and_malformed_channels_are_refused(tmp_path):
 
 def test_animation_pointer_channels_play_a_nodes_transform_and_leave_the_rest_out_saying_so(tmp_path):
     """KHR_animation_pointer: a channel aimed at ``/nodes/0/rotation`` turns the hinge exactly
-    as the same channel by ``path``; one aimed at a material's colour is left out with a
-    warning naming its pointer (the clip plays the rest, no refusal of the file); a pointer
+    as the same channel by ``path``; one aimed at a property the engine does not play (a
+    material's emissive factor) is left out with a warning naming its pointer (the clip plays the rest, no refusal of the file); a pointer
     target without its pointer string is refused."""
     plain = door(tmp_path / "plain.glb")
     pointed = door(tmp_path / "pointed.glb", [
         {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
             "pointer": "/nodes/0/rotation"}}}},
         {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
-            "pointer": "/materials/0/pbrMetallicRoughness/baseColorFactor"}}}}])
+            "pointer": "/materials/0/emissiveFactor"}}}}])
     with pytest.warns(UserWarning, match=r"animation 0 \('Open'\): channel 1: KHR_animation_pointer "
-                                         r"'/materials/0/pbrMetallicRoughness/baseColorFactor' left out"):
+                                         r"'/materials/0/emissiveFactor' left out"):
         loaded = load_model_file(pointed)
     assert [(channel.node, channel.path) for channel in loaded.animations[0].channels] == [(0, "rotation")]
     times = [0.0, 0.5, 1.0, 0.5]
@@ -196,6 +196,75 @@ def test_animation_pointer_channels_play_a_nodes_transform_and_leave_the_rest_ou
         "KHR_animation_pointer": {"pointer": "/nodes/9/rotation"}}}}])
     with pytest.raises(AssetError, match=r"channel 0: target.node names node 9"):
         load_model_file(far)
+
+
+def glowing(path: Path, metallic: tuple[float, float] = (0.0, 1.0), camera: int = 0) -> Path:
+    """The door with a spot light and a camera under the hinge, and a clip "Glow" of
+    KHR_animation_pointer channels over 2 s: material 0's baseColorFactor (linear) and
+    metallicFactor (step, ``metallic``), light 0's intensity 5 -> 15 (linear) and camera
+    ``camera``'s yfov 0.8 -> 0.4 (linear)."""
+    def change(doc: dict) -> None:
+        doc["extensionsUsed"] = ["KHR_lights_punctual", "KHR_animation_pointer"]
+        doc["extensions"] = {"KHR_lights_punctual": {"lights": [
+            {"type": "spot", "intensity": 5.0, "spot": {"outerConeAngle": 0.6}}]}}
+        doc["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}]
+        doc["nodes"][0]["children"] += [2, 3]
+        doc["nodes"] += [{"name": "lamp", "translation": [0.5, 1.0, 0.0],
+                          "extensions": {"KHR_lights_punctual": {"light": 0}}},
+                         {"name": "eye", "camera": 0, "translation": [0.0, 0.5, 2.0]}]
+        first = add_accessors(doc, [np.array([0.0, 2.0], np.float32),
+                                    np.array([[0.7, 0.4, 0.2, 1.0], [0.1, 0.9, 0.3, 0.5]], np.float32),
+                                    np.array([[metallic[0]], [metallic[1]]], np.float32),
+                                    np.array([[5.0], [15.0]], np.float32), np.array([[0.8], [0.4]], np.float32)])
+
+        def aimed(sampler: int, pointer: str) -> dict:
+            return {"sampler": sampler, "target": {"path": "pointer",
+                                                   "extensions": {"KHR_animation_pointer": {"pointer": pointer}}}}
+        doc["animations"].append({"name": "Glow", "samplers": [
+            {"input": first, "output": first + 1}, {"input": first, "output": first + 2, "interpolation": "STEP"},
+            {"input": first, "output": first + 3}, {"input": first, "output": first + 4}], "channels": [
+            aimed(0, "/materials/0/pbrMetallicRoughness/baseColorFactor"),
+            aimed(1, "/materials/0/pbrMetallicRoughness/metallicFactor"),
+            aimed(2, "/extensions/KHR_lights_punctual/lights/0/intensity"),
+            aimed(3, f"/cameras/{camera}/perspective/yfov")]})
+    return edit_glb(door(path), change)
+
+
+def test_animation_pointers_play_a_materials_colour_a_lights_intensity_and_a_cameras_lens(tmp_path):
+    """A clip of KHR_animation_pointer channels at a material's baseColorFactor (linear) and
+    metallicFactor (step), a spot light's intensity (linear; the engine's is the file's times
+    the light scale) and a camera's yfov: at each time the components made from them hold the
+    keys' values mixed as glTF says (worked out here); keys outside a property's range, or a
+    pointer at a camera the file lacks, are refused naming the channel."""
+    from components import Camera, PointLight
+    from engine.assets.models import SpawnedModels
+    from systems.model_system import ModelSystem
+
+    world = World("glowing")
+    root = spawn_model(world, glowing(tmp_path / "door.glb"), light_scale=2.0)
+    world.add_component(root, Animation(clip="Glow", loop=False))
+    stage = ModelSystem(world)
+    record = world.resources[SpawnedModels][root]
+    door_part = record.parts[record.nodes.index(1)]
+    (lamp, _), = world.query_one(PointLight)
+    (eye, _), = world.query_one(Camera)
+    for dt, t in ((0.5, 0.5), (1.0, 1.5)):
+        stage.process(dt)
+        s = t / 2.0
+        material = world.get(door_part, Material)
+        expected = np.array([0.7, 0.4, 0.2, 1.0]) * (1 - s) + np.array([0.1, 0.9, 0.3, 0.5]) * s
+        np.testing.assert_allclose(list(material.color), expected, atol=1e-6)
+        assert material.metallic == 0.0                                     # (stepped: the first key's)
+        assert world.get(lamp, PointLight).intensity == pytest.approx((5.0 * (1 - s) + 15.0 * s) * 2.0)
+        assert world.get(eye, Camera).fov_y == pytest.approx(math.degrees(0.8 * (1 - s) + 0.4 * s))
+    stage.process(1.0)   # (held at the end: the last keys)
+    assert world.get(door_part, Material).metallic == 1.0
+    assert world.get(lamp, PointLight).intensity == pytest.approx(30.0)
+    with pytest.raises(AssetError, match=r"'Glow'\): channel 1: .*materials.metallicFactor keys must lie in \[0, 1\]"):
+        load_model_file(glowing(tmp_path / "bad.glb", metallic=(0.0, 2.0)))
+    with pytest.raises(AssetError, match=r"channel 3: KHR_animation_pointer '/cameras/7/perspective/yfov' names "
+                                         r"camera 7, which the file does not have"):
+        load_model_file(glowing(tmp_path / "far.glb", camera=7))
 
 
 def test_a_level_plays_a_clip_and_a_missing_one_is_refused_by_its_line(tmp_path):

@@ -4,9 +4,12 @@ read before trimesh parses the file (which ignores them), and the poses they giv
 
 ``KHR_animation_pointer`` (Blender 4.2 and later export it) names a channel's target by a
 JSON pointer: a node's ``/nodes/{i}/translation``, ``rotation``, ``scale`` or ``weights`` is
-read as that node's channel; any other property it animates (a material's colour, a light's
-intensity, a camera's field of view) is left out with a warning naming the pointer, and the
-clip plays the rest.
+read as that node's channel; a material's ``baseColorFactor``, ``metallicFactor``,
+``roughnessFactor`` and ``alphaCutoff``, a ``KHR_lights_punctual`` light's ``color`` and
+``intensity`` and a perspective camera's ``yfov``, ``znear`` and ``zfar`` are the clip's
+``properties`` (``PROPERTY_POINTERS``), which the models stage writes into the components made
+from them (``engine/assets/models.py``); any other pointer is left out with a warning naming
+it, and the clip plays the rest.
 
 A model's parts are placed by their nodes (``ModelPart.node``); the node tree
 (``NodeTree``: each node's parent and its own transform at rest) lets ``pose_all`` put every
@@ -33,7 +36,18 @@ PATHS = {"translation": 3, "rotation": 4, "scale": 3}  # what a channel may anim
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 MAX_KEYS = 1 << 20  # key times one channel may have
 POINTER = "KHR_animation_pointer"
-_NODE_POINTER = re.compile(r"/nodes/(0|[1-9][0-9]*)/(translation|rotation|scale|weights)")
+_INDEX = r"(0|[1-9][0-9]*)"
+_NODE_POINTER = re.compile(rf"/nodes/{_INDEX}/(translation|rotation|scale|weights)")
+# The properties a pointer may animate besides nodes: (pattern, what it names: the document's
+# array of them, the channel's path, its width)
+PROPERTY_POINTERS = (
+    (re.compile(rf"/materials/{_INDEX}/pbrMetallicRoughness/(baseColorFactor)"), "materials", 4),
+    (re.compile(rf"/materials/{_INDEX}/pbrMetallicRoughness/(metallicFactor|roughnessFactor)"), "materials", 1),
+    (re.compile(rf"/materials/{_INDEX}/(alphaCutoff)"), "materials", 1),
+    (re.compile(rf"/extensions/KHR_lights_punctual/lights/{_INDEX}/(color)"), "lights", 3),
+    (re.compile(rf"/extensions/KHR_lights_punctual/lights/{_INDEX}/(intensity)"), "lights", 1),
+    (re.compile(rf"/cameras/{_INDEX}/perspective/(yfov|znear|zfar)"), "cameras", 1),
+)
 
 
 @dataclass
@@ -51,11 +65,15 @@ class Channel:
 
 @dataclass
 class Clip:
-    """A file's animation: its ``name`` and channels; ``duration`` its last key's time."""
+    """A file's animation: its ``name`` and channels; ``duration`` its last key's time.
+    ``properties``: its ``KHR_animation_pointer`` channels of materials, lights and cameras,
+    each a ``Channel`` whose ``node`` is the material's, light's or camera's index and whose
+    ``path`` is "materials.baseColorFactor", "lights.intensity", "cameras.yfov"..."""
 
     name: str
     channels: list[Channel]
     duration: float
+    properties: list[Channel] = field(default_factory=list)
     # Its channels grouped for sampling on arrays (``_groups``), made at its first pose.
     groups: list | None = field(default=None, repr=False, compare=False)
 
@@ -122,6 +140,7 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
         if not isinstance(listed, list):
             raise AssetError(f"{label}: channels must be a list, got {listed!r}")
         channels: list[Channel] = []
+        properties: list[Channel] = []
         for c, channel in enumerate(listed):
             where = f"{label}: channel {c}"
             target = channel.get("target") if isinstance(channel, dict) else None
@@ -130,11 +149,20 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
             path = target.get("path")
             node = target.get("node")
             if path == "pointer":
-                found = _pointed_node(target, where)
+                found = _pointed(target, doc, where)
                 if found is None:
                     continue
-                node, path = found
-            if path not in PATHS and path != "weights":
+                node, path, width = found
+                if "." in path:  # a material's, light's or camera's property
+                    s = channel.get("sampler")
+                    if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s < len(samplers) \
+                            or not isinstance(samplers[s], dict):
+                        raise AssetError(f"{where}: names sampler {s!r}, which the animation does not have")
+                    made = _channel(samplers[s], node, path, width, buffer_bytes, doc, f"{where}: sampler {s}")
+                    _check_property(made, where)
+                    properties.append(made)
+                    continue
+            if path not in PATHS and path != "weights":  # (a pointer's node path is one of them)
                 raise AssetError(f"{where}: target.path must be one of {sorted(PATHS)}, 'weights' or 'pointer' "
                                  f"(KHR_animation_pointer), got {path!r}")
             if isinstance(node, bool) or not isinstance(node, int) or not 0 <= node < len(nodes):
@@ -153,26 +181,84 @@ def read_animations(doc: dict, buffer_bytes: BufferBytes, what: str) -> list[Cli
                     or not isinstance(samplers[s], dict):
                 raise AssetError(f"{where}: names sampler {s!r}, which the animation does not have")
             channels.append(_channel(samplers[s], node, path, width, buffer_bytes, doc, f"{where}: sampler {s}"))
-        duration = max((float(ch.times[-1]) for ch in channels), default=0.0)
-        clips.append(Clip(name if isinstance(name, str) and name else f"animation {a}", channels, duration))
+        duration = max((float(ch.times[-1]) for ch in (*channels, *properties)), default=0.0)
+        clips.append(Clip(name if isinstance(name, str) and name else f"animation {a}", channels, duration,
+                          properties))
     return clips
 
 
-def _pointed_node(target: dict, where: str) -> tuple[int, str] | None:
-    """A ``KHR_animation_pointer`` target's node and path, for a pointer to a node's
-    translation, rotation, scale or weights; None (warned: left out) for any other property;
-    an AssetError where the target has no pointer string."""
+def _pointed(target: dict, doc: dict, where: str) -> tuple[int, str, int] | None:
+    """A ``KHR_animation_pointer`` target as (index, path, width): a node's translation,
+    rotation, scale or weights as its node channel (the width worked out as for ``path``), a
+    property of ``PROPERTY_POINTERS`` as (its material's, light's or camera's index, "kind.name",
+    its width); None (warned: left out) for any other pointer.  An AssetError where the target
+    has no pointer string, or a property's index names what the file does not have."""
     extension = (target.get("extensions") or {}).get(POINTER) if isinstance(target.get("extensions"), dict) else None
     pointer = extension.get("pointer") if isinstance(extension, dict) else None
     if not isinstance(pointer, str):
         raise AssetError(f"{where}: target.path 'pointer' needs extensions.{POINTER}.pointer, a string, got "
                          f"{pointer!r}")
     match = _NODE_POINTER.fullmatch(pointer)
-    if match is None:
-        warnings.warn(f"{where}: {POINTER} {pointer!r} left out (only a node's translation, rotation, scale and "
-                      "weights are played); the clip plays the rest", stacklevel=6)
-        return None
-    return int(match.group(1)), match.group(2)
+    if match is not None:
+        return int(match.group(1)), match.group(2), 0
+    for pattern, kind, width in PROPERTY_POINTERS:
+        match = pattern.fullmatch(pointer)
+        if match is None:
+            continue
+        index = int(match.group(1))
+        listed = ((doc.get("extensions") or {}).get("KHR_lights_punctual") or {}).get("lights") \
+            if kind == "lights" else doc.get(kind)
+        if not isinstance(listed, list) or index >= len(listed):
+            raise AssetError(f"{where}: {POINTER} {pointer!r} names {kind[:-1]} {index}, which the file does not have")
+        return index, f"{kind}.{match.group(2)}", width
+    warnings.warn(f"{where}: {POINTER} {pointer!r} left out (a node's transform and weights, a material's "
+                  "colour, metallic, roughness and cutoff, a light's colour and intensity and a camera's field "
+                  "of view and clip planes are played); the clip plays the rest", stacklevel=6)
+    return None
+
+
+# Each property's keys must lie in [low, high] (what the engine's field takes; a cubic
+# spline's overshoot between keys is kept inside when written).
+PROPERTY_RANGES = {"baseColorFactor": (0.0, None), "metallicFactor": (0.0, 1.0), "roughnessFactor": (0.0, 1.0),
+                   "alphaCutoff": (0.0, 1.0), "color": (0.0, None), "intensity": (0.0, None),
+                   "yfov": (np.radians(1.0), np.radians(179.0)), "znear": (1e-6, None), "zfar": (1e-6, None)}
+
+
+def _check_property(channel: Channel, where: str) -> None:
+    """An AssetError naming the channel where a key's value is outside what its property takes."""
+    name = channel.path.split(".")[1]
+    low, high = PROPERTY_RANGES[name]
+    keys = channel.values[:, 1] if channel.values.ndim == 3 else channel.values
+    if (keys < low).any() or (high is not None and (keys > high).any()) \
+            or (name == "baseColorFactor" and (keys[:, 3] > 1.0).any()):
+        raise AssetError(f"{where}: {channel.path} keys must lie in [{low:g}, {'inf' if high is None else f'{high:g}'}]"
+                         f"{' (alpha at most 1)' if name == 'baseColorFactor' else ''}, got {keys.min():g} to "
+                         f"{keys.max():g}")
+
+
+def sample_property(channel: Channel, t: float) -> np.ndarray:
+    """A property channel's value at ``t`` (seconds; held at its first and last keys): its
+    keys mixed linearly, stepped, or along its cubic spline (Hermite, the tangents scaled by the
+    keys' gap), as glTF defines them."""
+    times = channel.times
+    if t <= times[0] or len(times) == 1:
+        k, s = 0, 0.0
+    elif t >= times[-1]:
+        k, s = len(times) - 1, 0.0
+    else:
+        k = int(np.searchsorted(times, t, side="right")) - 1
+        s = (t - times[k]) / (times[k + 1] - times[k])
+    values = channel.values
+    if channel.interpolation == "CUBICSPLINE":
+        if s == 0.0:
+            return values[k, 1].copy()
+        gap = times[k + 1] - times[k]
+        s2, s3 = s * s, s * s * s
+        return ((2 * s3 - 3 * s2 + 1) * values[k, 1] + (s3 - 2 * s2 + s) * gap * values[k, 2]
+                + (-2 * s3 + 3 * s2) * values[k + 1, 1] + (s3 - s2) * gap * values[k + 1, 0])
+    if channel.interpolation == "STEP" or s == 0.0:
+        return values[k].copy()
+    return values[k] * (1.0 - s) + values[k + 1] * s
 
 
 def _target_count(node: object, meshes: list) -> int:

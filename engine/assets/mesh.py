@@ -596,6 +596,7 @@ class ModelPart:
     morph_weights: tuple[float, ...] | None = None  # the weights its node wears its morph targets at (None: none)
     hidden: bool = False     # its node is scaled to nothing at rest (a clip grows it): spawned not visible
     second_uv_maps: tuple[str, ...] = ()  # the maps that read its mesh's second UV set (Material.second_uv_maps)
+    material: int | None = None  # its glTF material's index (what an animation pointer names; None: none)
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -763,6 +764,8 @@ def _load_model(path: Path, data: bytes, what: str, roots, materials: bool, trim
             if materials:
                 _read_material(tm, part, path, maps)
                 maps.read(tm, part, sets)
+            if gltf is not None:
+                part.material = gltf.material(getattr(getattr(tm.visual, "material", None), "name", None))[0]
             parts.append(part)
     except AssetError as exc:
         raise AssetError(f"{what}: {exc}") from exc

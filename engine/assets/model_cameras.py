@@ -37,6 +37,7 @@ class ModelCamera:
     name: str
     node: int | None = None  # its node's index (what an animation moves)
     ortho_height: float | None = None  # an orthographic camera's height (2 x ymag; None: perspective)
+    camera: int | None = None  # its index in the file's cameras (what an animation pointer names)
 
 
 def read_gltf_cameras(doc: dict | None) -> list[ModelCamera]:
@@ -64,6 +65,7 @@ def read_gltf_cameras(doc: dict | None) -> list[ModelCamera]:
         camera = _camera(defined, which)
         camera.local = glm.mat4(*matrix.astype(np.float32).T.ravel())
         camera.node = index
+        camera.camera = which
         found.append(camera)
     return found
 

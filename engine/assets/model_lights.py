@@ -50,6 +50,7 @@ class ModelLight:
     local: glm.mat4
     name: str
     node: int | None = None  # its node's index (what an animation moves)
+    light: int | None = None  # its KHR_lights_punctual light's index (what an animation pointer names)
 
     def reach(self, scale: float = 1.0) -> float:
         """The engine light's range: the file's, or where its light at ``scale`` falls to
@@ -99,7 +100,7 @@ def read_gltf_lights(doc: dict | None) -> list[ModelLight]:
         light = lights[light_index]
         found.append(ModelLight(light.kind, light.color, light.intensity, light.range, light.inner_cone,
                                 light.outer_cone, glm.mat4(*matrix.astype(np.float32).T.ravel()), light.name,
-                                index))
+                                index, light_index))
     return found
 
 

@@ -36,6 +36,7 @@ from components import (
 )
 from components.limits import MAX_MORPH_WEIGHT
 from components.model import MAX_MODEL_PROBES, Animation, FromModel, Model
+from components.tracking import HALF_MAX
 from engine.assets.gltf_animations import (
     Clip,
     Layer,
@@ -45,6 +46,7 @@ from engine.assets.gltf_animations import (
     moved_nodes,
     pose_all,
     pose_weights,
+    sample_property,
     subtree,
 )
 from engine.assets.gltf_skins import joint_matrices
@@ -74,6 +76,11 @@ class SpawnedModel:
     # (clip, node, time) -> its travel there (root_travel), the last few: a frame asks for the
     # same times its pose and the frame before did
     travels: dict[tuple, np.ndarray] = field(default_factory=dict)
+    # (kind, index) -> the entities made from a file's material, light or camera, and each
+    # light's engine intensity over the file's (what an animation pointer writes), made at the
+    # first pose of a clip that has property channels
+    targets: dict[tuple[str, int], list[int]] | None = None
+    light_scales: dict[int, float] = field(default_factory=dict)
 
     @property
     def suns(self) -> bool:
@@ -387,6 +394,8 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
     if moved is not None:
         matrices = {node: m for node, m in matrices.items() if node in moved}
     loaded = record.loaded
+    if clip is not None and clip.properties:
+        _pose_properties(world, record, clip, time)
     rest = {thing.node: thing.local for thing in (*loaded.parts, *loaded.lights, *loaded.cameras)}
     for entity, node in zip(record.parts, record.nodes, strict=True):
         if node is None or not world.exists(entity) or (not every and node not in matrices):
@@ -410,6 +419,77 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
 
 
 _REST = Clip("", [], 0.0)  # no clip: every node at rest
+
+
+def _property_targets(world: World, record: SpawnedModel) -> dict[tuple[str, int], list[int]]:
+    """(kind, index) -> the entities made from the file's material, light or camera of that
+    index (the record's parts are its parts, then its lights, then its cameras, in order)."""
+    if record.targets is None:
+        loaded = record.loaded
+        targets: dict[tuple[str, int], list[int]] = {}
+        made = iter(record.parts)
+        for part, entity in zip(loaded.parts, made, strict=False):
+            if part.material is not None:
+                targets.setdefault(("materials", part.material), []).append(entity)
+        for light, entity in zip(loaded.lights, made, strict=False):
+            if light.light is not None:
+                targets.setdefault(("lights", light.light), []).append(entity)
+                engine_light = world.try_get(entity, PointLight) or world.try_get(entity, DirectionalLight)
+                if engine_light is not None and light.intensity > 0.0:
+                    record.light_scales[entity] = engine_light.intensity / light.intensity
+        for camera, entity in zip(loaded.cameras, made, strict=False):
+            if camera.camera is not None:
+                targets.setdefault(("cameras", camera.camera), []).append(entity)
+        record.targets = targets
+    return record.targets
+
+
+def _pose_properties(world: World, record: SpawnedModel, clip: Clip, time: float) -> None:
+    """``clip``'s property channels (``KHR_animation_pointer``) at ``time`` written into what
+    was made from what each names: a material's colour (a see-through part's alpha kept: its
+    glass's), metallic, roughness and cutoff into its parts' Materials; a light's colour and
+    intensity (times the light scale it was made with) into its light; a camera's field of
+    view and clip planes into its Camera; each kept within what its field takes (a cubic
+    spline may overshoot between its keys)."""
+    targets = _property_targets(world, record)
+    for channel in clip.properties:
+        kind, name = channel.path.split(".")
+        value = sample_property(channel, time)
+        for entity in targets.get((kind, channel.node), ()):
+            if not world.exists(entity):
+                continue
+            if kind == "materials":
+                material = world.try_get(entity, Material)
+                if material is None:
+                    continue
+                if name == "baseColorFactor":
+                    rgb = np.clip(value[:3], 0.0, HALF_MAX)
+                    alpha = material.color[3] if material.blend == "transparent" else float(np.clip(value[3], 0, 1))
+                    material.color = glm.vec4(*rgb, alpha)
+                elif name == "alphaCutoff":
+                    if material.alpha_cutoff is not None:
+                        material.alpha_cutoff = float(np.clip(value[0], 0.0, 1.0))
+                else:
+                    setattr(material, "metallic" if name == "metallicFactor" else "roughness",
+                            float(np.clip(value[0], 0.0, 1.0)))
+            elif kind == "lights":
+                light = world.try_get(entity, PointLight) or world.try_get(entity, DirectionalLight)
+                if light is None:
+                    continue
+                if name == "color":
+                    light.color = glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), 1.0)
+                else:
+                    light.intensity = float(np.clip(value[0] * record.light_scales.get(entity, 1.0), 0.0, HALF_MAX))
+            else:
+                camera = world.try_get(entity, Camera)
+                if camera is None or camera.projection != "perspective":
+                    continue
+                if name == "yfov":
+                    camera.fov_y = float(np.clip(np.degrees(value[0]), 1.0, 179.0))
+                elif name == "znear":
+                    camera.near = float(np.clip(value[0], 1e-6, camera.far * 0.999))
+                else:
+                    camera.far = float(max(value[0], camera.near * 1.001))
 
 
 def crossfade(animation: Animation, clip: str, seconds: float) -> None:
