@@ -171,8 +171,8 @@ def test_a_missing_clip_and_malformed_channels_are_refused(tmp_path):
 def test_animation_pointer_channels_play_a_nodes_transform_and_leave_the_rest_out_saying_so(tmp_path):
     """KHR_animation_pointer: a channel aimed at ``/nodes/0/rotation`` turns the hinge exactly
     as the same channel by ``path``; one aimed at a property the engine does not play (a
-    material's emissive factor) is left out with a warning naming its pointer (the clip plays the rest, no refusal of the file); a pointer
-    target without its pointer string is refused."""
+    material's emissive factor) is left out with a warning naming its pointer (the clip plays
+    the rest, no refusal of the file); a pointer target without its pointer string is refused."""
     plain = door(tmp_path / "plain.glb")
     pointed = door(tmp_path / "pointed.glb", [
         {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
