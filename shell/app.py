@@ -23,8 +23,10 @@ import moderngl
 from components import (
     AmbientOcclusion,
     Camera,
+    DepthOfField,
     FlyController,
     Mirror,
+    MotionBlur,
     Portal,
     ScreenReflections,
     Transform,
@@ -171,6 +173,12 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
 )
 
 
+def start_lens() -> DepthOfField:
+    """``--dof``'s lens: a portrait lens wide open, focusing on the picture's middle by itself
+    (the camera's own field of view would make a wide, deep-focus lens: nothing to see)."""
+    return DepthOfField(f_stop=1.4, focal_length=85.0, max_blur=0.04, autofocus=True)
+
+
 class Engine:
     """Owns a game's world and renderer on a given GL context."""
 
@@ -307,23 +315,28 @@ class Engine:
             fly.yaw, fly.pitch = yaw, pitch
 
     def start(self, antialias: str = "fxaa", camera: tuple[float, float, float, float, float] | None = None,
-              occlusion: bool = False, reflections: bool = False) -> None:
+              occlusion: bool = False, reflections: bool = False, focus: bool = False,
+              motion: bool = False) -> None:
         """The command line's start options (``shell/runner.py``), after the game is built: the
         anti-aliasing, the camera's pose (``--camera``: ``place_camera``), and screen-space
-        ambient occlusion and reflections (``--ao``, ``--ssr``: an ``AmbientOcclusion()`` and a
-        ``ScreenReflections()`` on the active camera, where it has none of its own), to see any
-        game or level with them without editing it."""
+        ambient occlusion and reflections, depth of field and motion blur (``--ao``, ``--ssr``,
+        ``--dof``, ``--motion-blur``: an ``AmbientOcclusion()``, a ``ScreenReflections()``, a
+        ``DepthOfField`` of an 85 mm lens at f/1.4 focusing by itself (``start_lens``) and a
+        ``MotionBlur()`` on the active camera, where it has none of its own), to see any game or
+        level with them without editing it."""
         self.renderer.antialias = antialias
         if camera:
             self.place_camera(*camera)
-        for asked, kind, flag in ((occlusion, AmbientOcclusion, "--ao"), (reflections, ScreenReflections, "--ssr")):
+        for asked, make, flag in ((occlusion, AmbientOcclusion, "--ao"), (reflections, ScreenReflections, "--ssr"),
+                                  (focus, start_lens, "--dof"), (motion, MotionBlur, "--motion-blur")):
             if not asked:
                 continue
             active = self.active_camera()
             if active is None:
                 raise StartOptionError(f"{flag} given but the level has no active Camera")
-            if not self.world.has(active[0], kind):
-                self.world.add_component(active[0], kind())
+            component = make()
+            if not self.world.has(active[0], type(component)):
+                self.world.add_component(active[0], component)
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

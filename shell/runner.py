@@ -61,6 +61,11 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                         help="ambient occlusion on the active camera (an AmbientOcclusion(), if it has none)")
     parser.add_argument("--ssr", action="store_true",
                         help="screen-space reflections on the active camera (a ScreenReflections(), if it has none)")
+    parser.add_argument("--dof", action="store_true",
+                        help="depth of field on the active camera (an 85 mm lens at f/1.4 with autofocus, if it has "
+                             "no DepthOfField)")
+    parser.add_argument("--motion-blur", action="store_true",
+                        help="camera motion blur on the active camera (a MotionBlur(), if it has none)")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
     parser.add_argument("--asset-root", type=_folder, action="append", default=[], metavar="DIR",
@@ -259,7 +264,8 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
     overlay = None
     try:
         engine = Engine(game, ctx)
-        engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False))
+        engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
+                     getattr(args, "dof", False), getattr(args, "motion_blur", False))
         capture = CaptureTarget(ctx, args.size)
         output = Output(capture.framebuffer, args.size)
         if args.overlay:

@@ -126,7 +126,8 @@ class SpeculumWindow(mglw.WindowConfig):
         # (the traceback printed, the title and the overlay say so, F5 resumes).
         self.engine.game_guard.contain = True
         if args is not None:
-            self.engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False))
+            self.engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
+                              getattr(args, "dof", False), getattr(args, "motion_blur", False))
         self.input: Input = self.engine.world.resources[Input]
         self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
         self.mouse_captured = False

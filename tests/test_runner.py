@@ -242,6 +242,24 @@ def test_the_runner_says_no_camera_in_one_line(tmp_path):
         "engine.spawn_camera makes one): frames show nothing until there is one"]
 
 
+def test_dof_and_motion_blur_flags_put_the_lens_and_the_shutter_on_the_active_camera(tmp_path):
+    """``--dof`` and ``--motion-blur`` give the sample level's camera its lens (autofocus) and
+    a MotionBlur: the scene export lists them on the camera and the frame is blurred (the
+    checker floor's edges soften: fewer steps between neighbouring pixels)."""
+    frames = {}
+    for name, flags in (("plain", ()), ("lens", ("--dof", "--motion-blur"))):
+        out = tmp_path / name
+        result = run_level("--headless", "--frames", "2", "--size", "320x180", "--aa", "off", "--out", str(out),
+                           "--export-scene", str(tmp_path / f"{name}.gltf"), *flags)
+        assert result.returncode == 0, result.stderr
+        frames[name] = np.asarray(Image.open(out / "frame_0001.png")).astype(int)
+        info = json.loads((tmp_path / f"{name}.json").read_text())
+        camera = next(kinds for kinds in info["entities"].values() if "Camera" in kinds)
+        assert ("DepthOfField" in camera and "MotionBlur" in camera) == bool(flags), sorted(camera)
+    steps = {name: np.abs(np.diff(frame.mean(axis=-1), axis=1)).mean() for name, frame in frames.items()}
+    assert steps["lens"] < 0.9 * steps["plain"], steps
+
+
 def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
     """``--ao`` and ``--ssr`` give the sample level's camera an AmbientOcclusion() and a
     ScreenReflections() (its chrome ball and crates reflect the room where their rays find
@@ -261,7 +279,8 @@ def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
     assert 0.01 < changed.mean() < 0.9  # (the picture, not a different one)
 
     level = _no_camera_level(tmp_path)
-    for flag in (["--ssr"], ["--ao"], ["--camera", "0,1,2,0,0"]):  # (--camera: one line too, no traceback)
+    for flag in (["--ssr"], ["--ao"], ["--dof"], ["--motion-blur"],
+                 ["--camera", "0,1,2,0,0"]):  # (--camera: one line too, no traceback)
         result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
                                  "--out", str(tmp_path / "none"), *flag], cwd=ROOT,
                                 env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
