@@ -46,10 +46,12 @@ void main() {
         out_color = vec4(centre, 1.0);
         return;
     }
+    // (Taps past the picture's edge read its edge, not the far side: the image may repeat.)
+    vec2 half_texel = 0.5 / size;
     vec3 sum = vec3(0.0);
     for (int i = 0; i < SAMPLES; ++i) {
         float t = (float(i) + 0.5) / float(SAMPLES) - 0.5;
-        sum += textureLod(hdr_image, uv + streak * t / size, 0.0).rgb;
+        sum += textureLod(hdr_image, clamp(uv + streak * t / size, half_texel, 1.0 - half_texel), 0.0).rgb;
     }
     out_color = vec4(sum / float(SAMPLES), 1.0);
 }

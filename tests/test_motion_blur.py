@@ -169,3 +169,29 @@ MotionBlur = { shutter = 0.25, max_blur = 0.1 }
     runner.world.remove_component(ents["camera"], MotionBlur)
     runner.frame()
     assert present.post_target_count() == 0 and present.post_passes == 0
+
+
+def test_a_streak_at_the_pictures_edge_reads_the_edge_not_the_far_side(scene):
+    """The camera turns fast: along the left edge, where the streak runs off the picture, the
+    smeared pixels are mixed from what is near that edge (a bright wall's right half never
+    bleeds into the left column)."""
+    def build(world):
+        camera = look_from(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
+        world.add_component(camera, MotionBlur(shutter=1.0, max_blur=0.25))
+        world.spawn(Transform(position=(0, 1.5, -2)), MeshRef(quad(40, 20)), Material(color=(0.02, 0.02, 0.02)))
+        world.spawn(Transform(position=(6.0, 1.5, -1.9)), MeshRef(quad(8, 20)), Material(color=(1.0, 1.0, 1.0)),
+                    Emissive(3.0))   # bright, filling the right edge only
+        ents["camera"] = camera
+
+    from components import Emissive
+    ents = {}
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    transform = runner.world.get(ents["camera"], Transform)
+    transform.rotation = glm.angleAxis(glm.radians(-3.0), glm.vec3(0, 1, 0)) * transform.rotation
+    rgb = runner.frame().astype(float)
+    streaks = runner.engine.renderer.present_pass.motion_blur.streaks()
+    assert np.abs(streaks[:, :3, 0]).max() > 5.0          # (a long streak at the left edge)
+    assert rgb[:, :3].mean() < 40.0, rgb[:, :3].mean()    # dark: the bright right edge stays on its side
+    assert rgb[:, -3:].mean() > 150.0
