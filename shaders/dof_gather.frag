@@ -1,8 +1,8 @@
 #version 410 core
 // Depth of field, step 4 (engine/render/depth_of_field.py): each pixel gathers the discs that
-// cover it (scatter as gather), SAMPLES taps on a golden-angle spiral out to its reach (its
-// own radius, or the largest of a nearer thing in the 3x3 tiles about it), each tap standing
-// for an equal share of that disc's area.  Two layers, as a camera sees them:
+// cover it (scatter as gather), taps on a golden-angle spiral out to its reach (its own
+// radius, or the largest of a nearer thing in the 3x3 tiles about it), about one a square
+// pixel of that disc (8 to SAMPLES), each tap standing for an equal share of its area.  Two layers, as a camera sees them:
 //   - behind: taps as far as the pixel or farther, each spread no wider than the pixel's own
 //     disc (a blurred background does not spread over a sharp thing in front of it), averaged
 //     with the pixel where their disc covers it;
@@ -55,10 +55,13 @@ void main() {
     float behind_weight = 1.0;
     vec3 front = vec3(0.0);
     float front_share = 0.0;
-    float cell = reach * reach / float(SAMPLES);  // a tap's share of the disc, over pi
+    // As many taps as the disc needs, about one a square pixel of it (3 r^2 of its pi r^2), SAMPLES at most.
+    int taps = int(clamp(ceil(reach * reach * 3.0), 8.0, float(SAMPLES)));
+    float cell = reach * reach / float(taps);  // a tap's share of the disc, over pi
     for (int i = 0; i < SAMPLES; ++i) {
+        if (i >= taps) break;
         float angle = float(i) * GOLDEN_ANGLE;
-        ivec2 offset = ivec2(round(vec2(cos(angle), sin(angle)) * (reach * sqrt((float(i) + 0.5) / float(SAMPLES)))));
+        ivec2 offset = ivec2(round(vec2(cos(angle), sin(angle)) * (reach * sqrt((float(i) + 0.5) / float(taps)))));
         float r = length(vec2(offset));  // (the pixel fetched: whether a disc covers this one is its distance)
         vec4 tap = texelFetch(prepared, clamp(px + offset, ivec2(0), last), 0);
         float size = abs(tap.a);
