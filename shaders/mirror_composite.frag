@@ -150,7 +150,7 @@ void main() {
 #ifndef COMPOSITE_FALLBACK
     uvec2 seen_pair = texelFetch(reflection_seen, px, 0).rg;
     if (seen_pair.r == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
-    out_seen = carried_seen(seen_pair, length(at - eye));
+    out_seen = carried_seen(seen_pair);
 #else
     out_seen = seen_at(v_ids.x, length(at - eye));  // nothing followed: the surface itself, as its scene pass wrote it
 #endif
@@ -204,7 +204,7 @@ void main() {
             uv = bent_uv;
             level_px = bent_level_px;
             px = bent_px;
-            out_seen = carried_seen(texelFetch(reflection_seen, px, 0).rg, length(at - eye));
+            out_seen = carried_seen(texelFetch(reflection_seen, px, 0).rg);
         }
     }
 #endif

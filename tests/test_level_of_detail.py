@@ -92,7 +92,11 @@ def test_the_rule_refuses_what_it_cannot_do(scene):
         LevelOfDetail(meshes=())
 
 
-def test_a_level_file_names_its_meshes_and_saves_them(tmp_path):
+def tree_level(tmp_path, thresholds: str):
+    """A level file of one tree with a LevelOfDetail (a box and a sphere) switching at
+    ``thresholds`` (its line, e.g. ``distances = [15.0]``): loaded into a world, then saved and
+    loaded into another.  Returns (its detail, its MeshRef's mesh, the saved text, the detail
+    loaded again)."""
     from engine.assets.level_file import load_level, save_level
     from engine.core.world import World
 
@@ -108,18 +112,21 @@ def test_a_level_file_names_its_meshes_and_saves_them(tmp_path):
         mesh = { box = [1.0, 2.0, 1.0] }
         [entity.LevelOfDetail]
         meshes = [{ box = [1.0, 2.0, 1.0] }, { sphere = 0.8 }]
-        distances = [15.0]
-        """))
+        """) + thresholds + "\n")
     world = World("lod")
     names = load_level(path).spawn(world)
-    detail = world.get(names["tree"], LevelOfDetail)
-    assert [m.name for m in detail.meshes] == ["box", "sphere"] and detail.distances == (15.0,)
-    assert detail.meshes[0] is world.get(names["tree"], MeshRef).mesh  # (one file mesh, one object)
     saved = save_level(world, tmp_path / "saved.toml", names, name="lod")
-    assert "meshes = [{ box = [1.0, 2.0, 1.0] }, { sphere = 0.8 }]" in saved.read_text()
     again = World("again")
-    names_again = load_level(saved).spawn(again)
-    assert again.get(names_again["tree"], LevelOfDetail).distances == (15.0,)
+    return (world.get(names["tree"], LevelOfDetail), world.get(names["tree"], MeshRef).mesh, saved.read_text(),
+            again.get(load_level(saved).spawn(again)["tree"], LevelOfDetail))
+
+
+def test_a_level_file_names_its_meshes_and_saves_them(tmp_path):
+    detail, mesh, saved, again = tree_level(tmp_path, "distances = [15.0]")
+    assert [m.name for m in detail.meshes] == ["box", "sphere"] and detail.distances == (15.0,)
+    assert detail.meshes[0] is mesh  # (one file mesh, one object)
+    assert "meshes = [{ box = [1.0, 2.0, 1.0] }, { sphere = 0.8 }]" in saved
+    assert again.distances == (15.0,)
 
 
 def test_a_moved_entity_and_a_changed_chain_are_seen(scene):
@@ -208,33 +215,13 @@ def test_by_screen_height_an_orthographic_view_picks_by_its_zoom_alone(scene, or
 
 
 def test_screen_heights_are_checked_and_written_in_level_files(tmp_path):
-    from engine.assets.level_file import load_level, save_level
-    from engine.core.world import World
-
     with pytest.raises(ComponentValueError, match="distances or screen_heights, not both"):
         LevelOfDetail(meshes=(FINE, COARSE), distances=(3.0,), screen_heights=(0.2,))
     with pytest.raises(ComponentValueError, match="screen_heights must decrease"):
         LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), screen_heights=(0.2, 0.3))
     with pytest.raises(ComponentValueError, match=r"screen_heights must be one fewer than its meshes"):
         LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), screen_heights=(0.2,))
-    path = tmp_path / "lod.toml"
-    path.write_text(textwrap.dedent("""
-        [level]
-        name = "lod"
-
-        [[entity]]
-        name = "tree"
-        [entity.Transform]
-        [entity.MeshRef]
-        mesh = { box = [1.0, 2.0, 1.0] }
-        [entity.LevelOfDetail]
-        meshes = [{ box = [1.0, 2.0, 1.0] }, { sphere = 0.8 }]
-        screen_heights = [0.25]
-        """))
-    world = World("lod")
-    names = load_level(path).spawn(world)
-    assert world.get(names["tree"], LevelOfDetail).screen_heights == (0.25,)
-    saved = save_level(world, tmp_path / "saved.toml", names, name="lod")
-    assert "screen_heights = [0.25]" in saved.read_text()
-    again = World("again")
-    assert again.get(load_level(saved).spawn(again)["tree"], LevelOfDetail).by_screen
+    detail, _, saved, again = tree_level(tmp_path, "screen_heights = [0.25]")
+    assert detail.screen_heights == (0.25,)
+    assert "screen_heights = [0.25]" in saved
+    assert again.by_screen

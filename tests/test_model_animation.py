@@ -260,6 +260,9 @@ def test_animation_pointers_play_a_materials_colour_a_lights_intensity_and_a_cam
     stage.process(1.0)   # (held at the end: the last keys)
     assert world.get(door_part, Material).metallic == 1.0
     assert world.get(lamp, PointLight).intensity == pytest.approx(30.0)
+    world.step(0.0)      # (forgets the frame's changes)
+    stage.process(0.5)   # held: the same values, not written again (no rows uploaded again)
+    assert door_part not in world.changed(Material) and lamp not in world.changed(PointLight)
     with pytest.raises(AssetError, match=r"'Glow'\): channel 1: .*materials.metallicFactor keys must lie in \[0, 1\]"):
         load_model_file(glowing(tmp_path / "bad.glb", metallic=(0.0, 2.0)))
     with pytest.raises(AssetError, match=r"channel 3: KHR_animation_pointer '/cameras/7/perspective/yfov' names "

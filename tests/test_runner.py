@@ -242,22 +242,30 @@ def test_the_runner_says_no_camera_in_one_line(tmp_path):
         "engine.spawn_camera makes one): frames show nothing until there is one"]
 
 
+def _sample_with_flags(tmp_path, size: str, flags: tuple[str, ...]) -> tuple[dict, dict]:
+    """The sample level's second headless frame at ``size`` without and with ``flags``
+    ("plain", "with"), and the kinds of its camera's components as the scene export lists them."""
+    frames, cameras = {}, {}
+    for name, given in (("plain", ()), ("with", flags)):
+        out = tmp_path / name
+        result = run_level("--headless", "--frames", "2", "--size", size, "--aa", "off", "--out", str(out),
+                           "--export-scene", str(tmp_path / f"{name}.gltf"), *given)
+        assert result.returncode == 0, result.stderr
+        frames[name] = np.asarray(Image.open(out / "frame_0001.png")).astype(int)
+        info = json.loads((tmp_path / f"{name}.json").read_text())
+        cameras[name] = next(kinds for kinds in info["entities"].values() if "Camera" in kinds)
+    return frames, cameras
+
+
 def test_dof_and_motion_blur_flags_put_the_lens_and_the_shutter_on_the_active_camera(tmp_path):
     """``--dof`` and ``--motion-blur`` give the sample level's camera its lens (autofocus) and
     a MotionBlur: the scene export lists them on the camera and the frame is blurred (the
     checker floor's edges soften: fewer steps between neighbouring pixels)."""
-    frames = {}
-    for name, flags in (("plain", ()), ("lens", ("--dof", "--motion-blur"))):
-        out = tmp_path / name
-        result = run_level("--headless", "--frames", "2", "--size", "320x180", "--aa", "off", "--out", str(out),
-                           "--export-scene", str(tmp_path / f"{name}.gltf"), *flags)
-        assert result.returncode == 0, result.stderr
-        frames[name] = np.asarray(Image.open(out / "frame_0001.png")).astype(int)
-        info = json.loads((tmp_path / f"{name}.json").read_text())
-        camera = next(kinds for kinds in info["entities"].values() if "Camera" in kinds)
-        assert ("DepthOfField" in camera and "MotionBlur" in camera) == bool(flags), sorted(camera)
+    frames, cameras = _sample_with_flags(tmp_path, "320x180", ("--dof", "--motion-blur"))
+    assert "DepthOfField" in cameras["with"] and "MotionBlur" in cameras["with"], sorted(cameras["with"])
+    assert not {"DepthOfField", "MotionBlur"} & set(cameras["plain"])
     steps = {name: np.abs(np.diff(frame.mean(axis=-1), axis=1)).mean() for name, frame in frames.items()}
-    assert steps["lens"] < 0.9 * steps["plain"], steps
+    assert steps["with"] < 0.9 * steps["plain"], steps
 
 
 def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
@@ -265,17 +273,10 @@ def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
     ScreenReflections() (its chrome ball and crates reflect the room where their rays find
     it; corners darken): the frame changes, the scene export lists them on the camera, and a
     game without a camera is told why the flag cannot be kept."""
-    frames = {}
-    for name, flags in (("plain", ()), ("effects", ("--ao", "--ssr"))):
-        out = tmp_path / name
-        result = run_level("--headless", "--frames", "2", "--size", "160x90", "--aa", "off", "--out", str(out),
-                           "--export-scene", str(tmp_path / f"{name}.gltf"), *flags)
-        assert result.returncode == 0, result.stderr
-        frames[name] = np.asarray(Image.open(out / "frame_0001.png")).astype(int)
-        info = json.loads((tmp_path / f"{name}.json").read_text())
-        camera = next(kinds for kinds in info["entities"].values() if "Camera" in kinds)
-        assert ("AmbientOcclusion" in camera and "ScreenReflections" in camera) == bool(flags), sorted(camera)
-    changed = np.abs(frames["effects"] - frames["plain"]).max(axis=-1) > 8
+    frames, cameras = _sample_with_flags(tmp_path, "160x90", ("--ao", "--ssr"))
+    assert "AmbientOcclusion" in cameras["with"] and "ScreenReflections" in cameras["with"], sorted(cameras["with"])
+    assert not {"AmbientOcclusion", "ScreenReflections"} & set(cameras["plain"])
+    changed = np.abs(frames["with"] - frames["plain"]).max(axis=-1) > 8
     assert 0.01 < changed.mean() < 0.9  # (the picture, not a different one)
 
     level = _no_camera_level(tmp_path)

@@ -456,40 +456,41 @@ def _pose_properties(world: World, record: SpawnedModel, clip: Clip, time: float
         kind, name = channel.path.split(".")
         value = sample_property(channel, time)
         for entity in targets.get((kind, channel.node), ()):
-            if not world.exists(entity):
-                continue
-            if kind == "materials":
-                material = world.try_get(entity, Material)
-                if material is None:
-                    continue
-                if name == "baseColorFactor":
-                    rgb = np.clip(value[:3], 0.0, HALF_MAX)
-                    alpha = material.color[3] if material.blend == "transparent" else float(np.clip(value[3], 0, 1))
-                    material.color = glm.vec4(*rgb, alpha)
-                elif name == "alphaCutoff":
-                    if material.alpha_cutoff is not None:
-                        material.alpha_cutoff = float(np.clip(value[0], 0.0, 1.0))
-                else:
-                    setattr(material, "metallic" if name == "metallicFactor" else "roughness",
-                            float(np.clip(value[0], 0.0, 1.0)))
-            elif kind == "lights":
-                light = world.try_get(entity, PointLight) or world.try_get(entity, DirectionalLight)
-                if light is None:
-                    continue
-                if name == "color":
-                    light.color = glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), 1.0)
-                else:
-                    light.intensity = float(np.clip(value[0] * record.light_scales.get(entity, 1.0), 0.0, HALF_MAX))
-            else:
-                camera = world.try_get(entity, Camera)
-                if camera is None or camera.projection != "perspective":
-                    continue
-                if name == "yfov":
-                    camera.fov_y = float(np.clip(np.degrees(value[0]), 1.0, 179.0))
-                elif name == "znear":
-                    camera.near = float(np.clip(value[0], 1e-6, camera.far * 0.999))
-                else:
-                    camera.far = float(max(value[0], camera.near * 1.001))
+            written = _property_field(world, record, entity, kind, name, value) if world.exists(entity) else None
+            if written is not None and getattr(written[0], written[1]) != written[2]:  # (a held key: no write)
+                setattr(*written)
+
+
+def _property_field(world: World, record: SpawnedModel, entity: int, kind: str, name: str,
+                    value: np.ndarray) -> tuple[object, str, object] | None:
+    """(the component, its field, the value to write) for a property channel's ``value`` on
+    ``entity``, kept within what the field takes; None where the entity has nothing it sets."""
+    if kind == "materials":
+        material = world.try_get(entity, Material)
+        if material is None:
+            return None
+        if name == "baseColorFactor":
+            alpha = material.color[3] if material.blend == "transparent" else float(np.clip(value[3], 0.0, 1.0))
+            return material, "color", glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), alpha)
+        if name == "alphaCutoff":
+            return None if material.alpha_cutoff is None else (material, "alpha_cutoff",
+                                                               float(np.clip(value[0], 0.0, 1.0)))
+        return material, "metallic" if name == "metallicFactor" else "roughness", float(np.clip(value[0], 0.0, 1.0))
+    if kind == "lights":
+        light = world.try_get(entity, PointLight) or world.try_get(entity, DirectionalLight)
+        if light is None:
+            return None
+        if name == "color":
+            return light, "color", glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), 1.0)
+        return light, "intensity", float(np.clip(value[0] * record.light_scales.get(entity, 1.0), 0.0, HALF_MAX))
+    camera = world.try_get(entity, Camera)
+    if camera is None or camera.projection != "perspective":
+        return None
+    if name == "yfov":
+        return camera, "fov_y", float(np.clip(np.degrees(value[0]), 1.0, 179.0))
+    if name == "znear":
+        return camera, "near", float(np.clip(value[0], 1e-6, camera.far * 0.999))
+    return camera, "far", float(max(value[0], camera.near * 1.001))
 
 
 def crossfade(animation: Animation, clip: str, seconds: float) -> None:

@@ -66,12 +66,14 @@ class MotionBlurPass:
         """Smear ``hdr`` (``seen``: the same level's seen pair) by the camera's motion from last
         frame's view to ``view`` (this frame's main view), ``camera`` whose it is; ``dt`` 0
         keeps last frame's view for the next.  Returns the smeared image (kept until the next
-        draw)."""
+        draw), or ``hdr`` itself where the view is last frame's (a still camera: no pass)."""
         size = hdr.size
         now = glm.mat4(view.view_proj)
         if camera != self.camera or size != self._size or self.previous is None:
             self.previous = now   # (a cut: nothing moved)
         self.camera, self._size = camera, size
+        if self.previous == now:
+            return hdr
         self._make(size)
         result, _, framebuffer = self._image
         framebuffer.use()
@@ -90,8 +92,8 @@ class MotionBlurPass:
         return result
 
     def streaks(self) -> np.ndarray | None:
-        """Each pixel's streak in pixels from the last draw, float32 (height, width, 2: x right,
-        y up), row 0 at the top (read back: tests only)."""
+        """Each pixel's streak in pixels from the last pass drawn, float32 (height, width, 2:
+        x right, y up), row 0 at the top (read back: tests only); None before the first."""
         if self._image is None:
             return None
         texture = self._image[1]

@@ -204,8 +204,9 @@ class PresentPass:
         elif self._depth_of_field is not None:
             self._depth_of_field.release_targets()
         if motion is not None and seen is not None and view is not None and motion.shutter > 0.0:
-            hdr = self.motion_blur.draw(hdr, seen, motion, view, camera, dt)
-            self.post_passes += 1
+            streaked = self.motion_blur.draw(hdr, seen, motion, view, camera, dt)
+            self.post_passes += streaked is not hdr
+            hdr = streaked
         elif self._motion_blur is not None:
             self._motion_blur.release_targets()
         if grading is not None and not grades(grading) and (grading.lut is None or grading.lut_strength == 0.0):

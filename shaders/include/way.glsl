@@ -11,11 +11,8 @@ uvec2 seen_at(uint entity, float way) {
     return uvec2(entity, floatBitsToUint(way));
 }
 
-// A view's seen pair as its composite carries it up over a surface ``to_surface`` along the
-// way: where the view drew nothing (its claim's (0, 0): a reflection level leaves the sky to
-// its composite) the sky it puts there; else its way, at least the way to the surface (what
-// the view's clip keeps just under its plane at a seam, or a rippled lookup's neighbouring
-// ray, would fall a little short).
-uvec2 carried_seen(uvec2 seen, float to_surface) {
-    return seen.r == 0u ? seen_at(0u, SKY_WAY) : seen_at(seen.r, max(uintBitsToFloat(seen.g), to_surface));
+// A view's seen pair as its composite carries it up: where the view drew nothing (its
+// claim's (0, 0): a reflection level leaves the sky to its composite) the sky it puts there.
+uvec2 carried_seen(uvec2 seen) {
+    return seen.r == 0u ? seen_at(0u, SKY_WAY) : seen;
 }
