@@ -320,29 +320,36 @@ MAX_MOTION_BLUR = 0.25   # MotionBlur.max_blur: a streak at most a quarter of th
 
 @dataclass(eq=False)
 class MotionBlur(TrackedComponent):
-    """The picture streaked by the camera's own motion while its shutter is open (on the
-    camera's entity), as Unity's camera motion blur: each pixel is smeared along the way the
-    point it shows moved on screen since the last frame, ``shutter`` of it.  The point is where
-    the light's way puts it (``shaders/include/way.glsl``): in a mirror, the reflection's image
-    behind the glass, so a reflection streaks by its own distance as the camera moves, not as
-    the glass does; through a portal, the image beyond it; a camera carried through a portal
-    keeps its motion across (last frame's view carried with it).  Moving things streak only by
-    the camera's motion (no per-object motion).
+    """The picture streaked by motion while the shutter is open (on the camera's entity), as
+    Unity's and Unreal's motion blur: each pixel is smeared along the way what it shows moved on
+    screen since the last frame, ``shutter`` of it, and a moving thing smears out over what lies
+    behind it (a reconstruction filter: McGuire et al. 2012).  The camera's motion moves a point
+    where the light's way puts it (``shaders/include/way.glsl``): in a mirror, the
+    reflection's image behind the glass, so a reflection streaks by its own distance as the
+    camera moves, not as the glass does; through a portal, the image beyond it; a camera
+    carried through a portal keeps its motion across (last frame's view carried with it).
 
     - ``shutter`` (0..1): the share of a frame the shutter is open (0.5: a film camera's
       180-degree shutter; 0: none);
     - ``max_blur`` (0..0.25): the longest streak, as a share of the picture's height (a turn
-      of the camera in one frame does not smear the picture away).
+      of the camera in one frame does not smear the picture away);
+    - ``objects``: things that move streak by their own motion too (an entity's model matrix
+      since the last frame, seen directly, in mirrors and through portals as each view
+      projects it; ``engine/render/object_motion.py``).  Not its skin's or morph's pose;
+      a mirror or portal that moves streaks what it shows by the camera's motion alone.
     """
 
     shutter: float = 0.5
     max_blur: float = 0.05
+    objects: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "shutter":
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "max_blur":
             return finite(self, name, value, positive=True, high=MAX_MOTION_BLUR)
+        if name == "objects":
+            return boolean(self, name, value)
         return value
 
 

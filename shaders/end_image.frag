@@ -24,7 +24,7 @@ uniform vec2 level_size;
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;
-layout(location = 2) out uvec2 out_seen;  // the way: to the surface it looks out of (way.glsl)
+layout(location = 2) out uvec4 out_seen;  // the way: to the surface it looks out of (way.glsl)
 
 void main() {
     if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != view_index) discard;  // (drawn at the level's size)

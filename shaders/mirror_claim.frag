@@ -12,7 +12,7 @@ uniform vec2 to_parent;        // this level's pixels -> the parent level's (res
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;
-layout(location = 2) out uvec2 out_seen;
+layout(location = 2) out uvec4 out_seen;
 layout(location = 3) out uint out_node;
 
 void main() {
@@ -23,7 +23,7 @@ void main() {
         texelFetch(parent_surface_map, px, 0).r != v_claim.y) discard;
     out_color = vec4(0.0);
     out_surface = 0u;
-    out_seen = uvec2(0u);
+    out_seen = uvec4(0u);
     out_node = v_claim.z;
     gl_FragDepth = 1.0;
 }

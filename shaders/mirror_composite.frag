@@ -110,7 +110,7 @@ float fallback_alpha(float rate) {
 #endif
 
 layout(location = 0) out vec4 out_color;  // blended: rgb x reflect_rate + own x (1 - reflect_rate)
-layout(location = 1) out uvec2 out_seen;  // the view's entity and way, carried up (way.glsl)
+layout(location = 1) out uvec4 out_seen;  // the view's entity and way, carried up (way.glsl)
 
 void main() {
     // Only this frame's claims wrote the node image, inside the views' rectangles.
@@ -148,7 +148,7 @@ void main() {
     vec3 at = eye + view_dir * (-(dot(v_normal.xyz, eye) + v_params.z) / dot(v_normal.xyz, view_dir));
     float parent_fog = fog_depth(fog_from_eye ? eye : near.xyz / near.w, at);
 #ifndef COMPOSITE_FALLBACK
-    uvec2 seen_pair = texelFetch(reflection_seen, px, 0).rg;
+    uvec4 seen_pair = texelFetch(reflection_seen, px, 0);
     if (seen_pair.r == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
     out_seen = carried_seen(seen_pair);
 #else
@@ -204,7 +204,7 @@ void main() {
             uv = bent_uv;
             level_px = bent_level_px;
             px = bent_px;
-            out_seen = carried_seen(texelFetch(reflection_seen, px, 0).rg);
+            out_seen = carried_seen(texelFetch(reflection_seen, px, 0));
         }
     }
 #endif

@@ -8,13 +8,13 @@
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;
-layout(location = 2) out uvec2 out_seen;
+layout(location = 2) out uvec4 out_seen;
 layout(location = 3) out uint out_node;
 
 void main() {
     out_color = vec4(0.0);
     out_surface = 0u;
-    out_seen = uvec2(0u);
+    out_seen = uvec4(0u);
     out_node = NO_NODE;
     gl_FragDepth = 0.0;
 }

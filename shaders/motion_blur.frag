@@ -1,57 +1,70 @@
 #version 410 core
-// Camera motion blur (engine/render/motion_blur.py): each pixel smeared along the way the point
-// it shows moved on screen since the last frame, ``shutter`` of it, at most ``max_pixels``
-// long.  The point is where the light's way puts it (way.glsl: the eye along the pixel's ray
-// for the way's length), so a reflection moves as its image behind the glass does; the sky (and
-// a pixel nothing drew) as a direction, which only the camera's turn moves.  A point behind
-// last frame's camera is not smeared.
-#include "view_axis.glsl"
+// Motion blur, step 4 (engine/render/motion_blur.py): each pixel gathered along the longest
+// streak near it (motion_neighbours.frag) with the reconstruction filter of McGuire et al.
+// 2012 ("A reconstruction filter for plausible motion blur"): a tap counts where its own
+// streak reaches the pixel and it lies in front (a moving thing smeared over what is behind
+// it), where the pixel's own streak reaches the tap and the tap lies behind (the background a
+// moving pixel reveals), or both streak past each other.  In front and behind compare the
+// lengths of the light's way (way.glsl), so through a mirror a reflection is behind the frame
+// round the glass.  The taps' places are jittered a pixel (interleaved gradient noise,
+// Jimenez 2014) to trade banding for noise; taps past the picture's edge read its edge.
 
 uniform sampler2D hdr_image;     // the finished picture (bilinear)
-uniform usampler2D seen_image;   // the main view's seen pair (entity, way)
-uniform mat4 inv_view_proj;      // this frame's main view
-uniform mat4 previous_view_proj; // last frame's (carried through a portal the camera crossed)
-uniform vec3 eye;
-uniform vec3 axis;               // an orthographic view's axis (view_axis.glsl); 0: perspective
-uniform vec2 blur;               // x: the shutter's share, y: the longest streak in pixels
+uniform usampler2D seen_image;   // the main view's seen image (the way: g)
+uniform sampler2D streaks;       // each pixel's streak (motion_streaks.frag)
+uniform sampler2D neighbours;    // each tile's longest streak near it
+uniform int tile;                // pixels a tile side
 
-layout(location = 0) out vec4 out_color;
-layout(location = 1) out vec4 out_streak;  // xy: the streak in pixels (its whole length, centred on the pixel)
+out vec4 out_color;
 
 const int SAMPLES = 12;
 
+float way_at(ivec2 px) {
+    return uintBitsToFloat(texelFetch(seen_image, px, 0).g);
+}
+
+// 1 where a lies in front of b (its way shorter), falling to 0 over a few per cent of the way.
+float in_front(float a, float b) {
+    return clamp(1.0 - (a - b) / (0.02 * min(a, b) + 0.01), 0.0, 1.0);
+}
+
+// How much a streak of half-length ``radius`` covers a point ``distance`` from its pixel.
+float cone(float distance, float radius) {
+    return clamp(1.0 - distance / max(radius, 1e-3), 0.0, 1.0);
+}
+
+float cylinder(float distance, float radius) {
+    return 1.0 - smoothstep(0.95 * radius, 1.05 * radius, distance);
+}
+
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
-    vec2 size = vec2(textureSize(hdr_image, 0));
-    vec2 uv = gl_FragCoord.xy / size;
-    vec4 near = inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
-    vec4 far = inv_view_proj * vec4(uv * 2.0 - 1.0, 1.0, 1.0);
-    vec3 start = near.xyz / near.w;
-    vec3 dir = normalize(far.xyz / far.w - start);
-    float way = uintBitsToFloat(texelFetch(seen_image, px, 0).g);
-    bool beyond = way <= 0.0 || way >= 0.5 * SKY_WAY;
-    vec4 before = beyond ? previous_view_proj * vec4(dir, 0.0)
-                         : previous_view_proj * vec4(ray_eye(eye, axis, start) + dir * way, 1.0);
+    ivec2 size = textureSize(hdr_image, 0);
+    vec2 longest = texelFetch(neighbours, px / tile, 0).xy;
     vec3 centre = texelFetch(hdr_image, px, 0).rgb;
-    out_streak = vec4(0.0);
-    if (before.w <= 1e-6) {
+    if (dot(longest, longest) < 0.25) {   // under half a pixel near here: nothing to smear
         out_color = vec4(centre, 1.0);
         return;
     }
-    vec2 streak = (uv - (before.xy / before.w * 0.5 + 0.5)) * size * blur.x;  // pixels
-    float length_px = length(streak);
-    if (length_px > blur.y) streak *= blur.y / length_px;
-    out_streak = vec4(streak, 0.0, 0.0);
-    if (length_px < 0.5) {
-        out_color = vec4(centre, 1.0);
-        return;
-    }
-    // (Taps past the picture's edge read its edge, not the far side: the image may repeat.)
-    vec2 half_texel = 0.5 / size;
-    vec3 sum = vec3(0.0);
+    float own_radius = 0.5 * length(texelFetch(streaks, px, 0).xy);
+    float own_way = way_at(px);
+    float weight = 1.0 / max(own_radius, 0.5);
+    vec3 sum = centre * weight;
+    float jitter = fract(52.9829189 * fract(dot(gl_FragCoord.xy, vec2(0.06711056, 0.00583715)))) - 0.5;
+    vec2 half_texel = 0.5 / vec2(size);
     for (int i = 0; i < SAMPLES; ++i) {
-        float t = (float(i) + 0.5) / float(SAMPLES) - 0.5;
-        sum += textureLod(hdr_image, clamp(uv + streak * t / size, half_texel, 1.0 - half_texel), 0.0).rgb;
+        float t = (float(i) + 0.5 + jitter) / float(SAMPLES) - 0.5;   // along the whole streak
+        vec2 offset = longest * t;
+        vec2 uv = clamp((gl_FragCoord.xy + offset) / vec2(size), half_texel, 1.0 - half_texel);
+        ivec2 tap = ivec2(uv * vec2(size));
+        float distance = length(offset);
+        float tap_radius = 0.5 * length(texelFetch(streaks, tap, 0).xy);
+        float tap_way = way_at(tap);
+        float w = in_front(tap_way, own_way) * cone(distance, tap_radius)
+                + in_front(own_way, tap_way) * cone(distance, own_radius)
+                + 2.0 * cylinder(distance, tap_radius) * cylinder(distance, own_radius);
+        sum += w * textureLod(hdr_image, uv, 0.0).rgb;
+        weight += w;
     }
-    out_color = vec4(sum / float(SAMPLES), 1.0);
+    out_color = vec4(sum / weight, 1.0);
 }

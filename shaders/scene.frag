@@ -107,6 +107,15 @@ flat in vec4 v_clip;
 #define VIEW_AXIS view_axis(camera.view_proj)
 #define VIEW_ENTRY camera.clip_plane
 #endif
+#ifdef OBJECT_MOTION
+// Where this view projects the point this frame and projected it last frame (scene.vert,
+// scene_batched.geom: the instance's motion, engine/render/object_motion.py).
+in vec4 v_clip_now;
+in vec4 v_clip_before;
+#define SEEN(entity, way) seen_moved(entity, way, v_clip_now, v_clip_before)
+#else
+#define SEEN(entity, way) seen_at(entity, way)
+#endif
 // Where this pixel's view ray starts (view_axis.glsl ray_eye: the eye, or for an orthographic
 // view the point across from it on the eye's plane), set first thing in main.
 vec3 view_eye;
@@ -128,7 +137,7 @@ vec3 view_eye;
 
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;  // the entity drawn here
-layout(location = 2) out uvec2 out_seen;    // the entity finally seen here and its way (way.glsl; reflections overwrite)
+layout(location = 2) out uvec4 out_seen;    // the entity finally seen here, its way, its own motion (way.glsl; reflections overwrite)
 layout(location = 3) out uint out_node;
 #ifdef SCREEN_REFLECTION
 // A root view drawn for screen-space reflections (engine/render/screen_reflections.py): what
@@ -693,12 +702,12 @@ void main() {
     // its colour is never seen, so only its depth and ids count (the claims below read them).
     out_color = vec4(0.0, 0.0, 0.0, 1.0);
     out_surface = v_slots.w;
-    out_seen = seen_at(v_slots.w, length(v_world_pos - ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos)));
+    out_seen = SEEN(v_slots.w, length(v_world_pos - ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos)));
     out_node = node_index;
     return;
 #endif
 #ifdef TRIVIAL
-    out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = uvec2(v_slots.w, 0u); out_node = node_index; return;
+    out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = uvec4(v_slots.w, 0u, 0u, 0u); out_node = node_index; return;
 #endif
     view_eye = ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos);
     Surface s;
@@ -871,6 +880,6 @@ void main() {
 #endif
     out_color = vec4(hdr_store(color), alpha);
     out_surface = v_slots.w;
-    out_seen = seen_at(v_slots.w, length(v_world_pos - VIEW_EYE));
+    out_seen = SEEN(v_slots.w, length(v_world_pos - VIEW_EYE));
     out_node = node_index;
 }

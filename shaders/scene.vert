@@ -3,6 +3,7 @@
 #include "camera.glsl"
 #include "visibility.glsl"
 #include "pose.glsl"
+#include "object_motion.glsl"
 
 // Clip distances (indices defined from engine/render/bindings.py): CLIP_VIEW_PLANE is the
 // view's plane (mirror and portal views), CLIP_RECT_* the batched mirror path's per-view
@@ -22,6 +23,12 @@
 #define v_tint g_tint
 #define v_slots g_slots
 #define v_vertex_color g_vertex_color
+#endif
+#if defined(OBJECT_MOTION) && defined(BATCHED_VIEWS)
+out vec3 g_world_before;  // last frame's place (the geometry shader projects it for each view)
+#elif defined(OBJECT_MOTION)
+out vec4 v_clip_now;      // where the view projects the point this frame and last (way.glsl seen_moved)
+out vec4 v_clip_before;
 #endif
 
 in vec3 in_position;
@@ -98,12 +105,19 @@ void main() {
 #ifdef VERTEX_COLOR
     v_vertex_color = in_vertex_color;
 #endif
+#if defined(OBJECT_MOTION) && defined(BATCHED_VIEWS)
+    g_world_before = world_before(in_slots.w, world);
+#endif
     gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
 #ifdef BATCHED_VIEWS
     g_slice_distance = dot(world, in_slice);
 #endif
 #ifndef BATCHED_VIEWS
     gl_Position = camera.view_proj * world;
+#ifdef OBJECT_MOTION
+    v_clip_now = gl_Position;
+    v_clip_before = camera.view_proj * vec4(world_before(in_slots.w, world), 1.0);
+#endif
     // Behind the view's plane is clipped; so is all of the surface the view looks out of
     // (a mirror's own glass, a portal's partner), which lies on that plane: the plane itself
     // needs no offset, so nothing touching the mirror opens a crack in its reflection.  An

@@ -55,6 +55,11 @@ flat in vec4 g_tint[];
 flat in uvec4 g_slots[];
 
 in float g_slice_distance[];
+#ifdef OBJECT_MOTION
+in vec3 g_world_before[];  // last frame's place (scene.vert: the instance's own motion)
+out vec4 v_clip_now;       // where this view projects the point this frame and last (way.glsl seen_moved)
+out vec4 v_clip_before;
+#endif
 #ifdef VERTEX_COLOR
 in vec4 g_vertex_color[];
 out vec4 v_vertex_color;
@@ -91,6 +96,10 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     gl_ClipDistance[CLIP_RECT_TOP] = v.rect.w * position.w - position.y;
     gl_ClipDistance[CLIP_SLICE] = g_slice_distance[c];  // scene.vert's, passed on
     v_world_pos = g_world_pos[c];
+#ifdef OBJECT_MOTION
+    v_clip_now = position;
+    v_clip_before = v.view_proj * vec4(g_world_before[c], 1.0);
+#endif
     v_normal = g_normal[c];
     v_uv = g_uv[c];
 #ifdef SECOND_UV_MAPS

@@ -22,7 +22,7 @@ in vec2 v_ndc;
 #endif
 layout(location = 0) out vec4 out_color;
 layout(location = 1) out uint out_surface;
-layout(location = 2) out uvec2 out_seen;  // nothing, beyond everything (way.glsl)
+layout(location = 2) out uvec4 out_seen;  // nothing, beyond everything (way.glsl)
 layout(location = 3) out uint out_node;
 
 void main() {

@@ -42,7 +42,7 @@ from engine.core.world import World
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.render.surface_table import SurfaceBlends
-from engine.resources import Surfaces
+from engine.resources import PortalCrossings, Surfaces
 from engine.rules.probe_rules import APPEARANCE_KINDS, POSE_KINDS, LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
 from systems.material_dispatch import choose_material, layer_uniforms
@@ -71,6 +71,12 @@ class ExtractSystem(esper.Processor):
 
     def process(self, dt: float) -> None:
         world = self.world
+        renderer = self.renderer
+        # Per-object motion blur: on while the camera's last presented motion blur streaked
+        # moving things (the first frame of a motion blur has no last frame to streak from).
+        renderer.begin_object_motion(renderer.present_pass.streaks_objects, dt,
+                                     world.resources.get(PortalCrossings, ()))
+        motion = renderer.object_motion if renderer.object_motion.on else None
         # A component of probe_rules.LOOK_KINDS changed, or the probe the entity samples did (a
         # probe came, went, changed or moved, or the entity moved into or out of an influence box).
         touched = self._looks.entities(world)
@@ -117,7 +123,7 @@ class ExtractSystem(esper.Processor):
             for batch, group in entities.items():
                 models = [worlds[entity] if entity in worlds else component(entity, Transform).world
                           for entity in group]
-                batch.write_transforms(group, models, moving)
+                batch.write_transforms(group, models, moving, motion)
 
     def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
         """``entities`` that have a row, by their batch."""

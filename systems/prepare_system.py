@@ -103,6 +103,8 @@ class PrepareSystem(esper.Processor):
             self._sky_sh = ambient_sh(world, self._cube_sun)
             sky_changed = True
         renderer.upload_instances()
+        if renderer.object_motion.upload():   # (the movers' own motion: per-object motion blur)
+            renderer.note_scene_change()
         self._probe_boxes()
         kept = self._kept
         if not (self._lights and not sky_changed and self._lights_stand_still()

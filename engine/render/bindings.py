@@ -124,6 +124,9 @@ COOKIE_UNIT = 25         # scene (SPOT_COOKIES builds): the kept spot lights' co
 # builds, so no fragment stage's 16 samplers count them.
 POSE_ROWS_UNIT = 26  # scene, casters (SKINNED, MORPHED builds): the pose texture
 MORPH_UNIT = 27      # scene, casters (MORPHED builds): the batch's mesh's morph offsets (GpuMesh.morphs)
+# Each mover's own motion (engine/render/object_motion.py), read by the scene builds' vertex
+# stage while the camera's motion blur streaks moving things.
+OBJECT_MOTION_UNIT = 30  # scene (OBJECT_MOTION builds): the frame's movers' records
 # Particles (engine/render/particle_draw.py): an emitter's sprite, on a unit no scene build reads.
 PARTICLE_UNIT = 28   # particles (SPRITE builds): the emitter's texture (ParticleEmitter.texture)
 PARTICLE_DEPTH_UNIT = 29  # particles (SOFT builds): a copy of the view's depth (RenderTargets.depth_copy)
@@ -152,6 +155,11 @@ DOF_PREPARED_UNIT = 41   # each pixel's colour and signed blur radius
 DOF_TILES_UNIT = 42      # each tile's largest blur radius of what lies nearer than the focus
 DOF_BACK_UNIT = 43       # at half size: the gather's layer behind
 DOF_FRONT_UNIT = 44      # at half size: the gather's layer in front
+# Motion blur (engine/render/motion_blur.py, after depth of field): the main view's seen image
+# on DOF_SEEN_UNIT, the picture on PRESENT_UNIT, and these.
+MOTION_STREAKS_UNIT = 45     # each pixel's streak
+MOTION_TILES_UNIT = 46       # each tile's longest streak
+MOTION_NEIGHBOURS_UNIT = 47  # each tile's longest streak near it
 FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages

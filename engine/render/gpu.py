@@ -27,6 +27,7 @@ from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
 from engine.render.fog import FogBlock
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
+from engine.render.object_motion import ObjectMotion
 from engine.render.pose_rows import PoseRows
 from engine.render.raw_gl import RawGL
 from engine.render.shader_library import ShaderLibrary
@@ -205,6 +206,9 @@ class Gpu:
         # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
         # the extract stage writes them): the SKINNED and MORPHED builds read them.
         self.pose_rows = PoseRows(ctx, caps.max_texture_size)
+        # Each mover's own motion since the last frame while the camera's motion blur streaks
+        # moving things (engine/render/object_motion.py; extract notes, prepare sends).
+        self.object_motion = ObjectMotion(ctx, caps.max_texture_size)
         # Debug mode: every pass checks for an OpenGL error when it ends and names itself
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")

@@ -18,6 +18,7 @@ from pyglm import glm
 
 from components.limits import NO_RECEIVE_BIT
 from engine.assets.mesh import Mesh
+from engine.render.object_motion import ObjectMotion
 from engine.rules.visibility_rules import row_casts_shadow
 
 INSTANCE_DTYPE = np.dtype([
@@ -457,7 +458,8 @@ class InstanceBatch:
         self._dirty.add(index)
         return self.rows[index]
 
-    def write_transforms(self, entities: list[int], models: list[glm.mat4], moving: bool = False) -> None:
+    def write_transforms(self, entities: list[int], models: list[glm.mat4], moving: bool = False,
+                         motion: ObjectMotion | None = None) -> None:
         """Write the model and normal matrices of ``entities`` (each in this batch) from their
         world matrices, all rows at once, and mark the rows for upload.
 
@@ -465,7 +467,8 @@ class InstanceBatch:
         outside the block of moving rows at the front (``_moving``) is swapped into it, so
         the rows a frame's movers write lie together and go up in one write, not one per
         scattered row (1,000 movers among 100,000 rows: 4 writes a frame, not 1,000).  A few
-        movers keep their rows: a few writes cost less than the swaps."""
+        movers keep their rows: a few writes cost less than the swaps.  ``motion``: the
+        movers' model matrices before and after are noted there (per-object motion blur)."""
         kept = self._rows_of
         if kept is not None and kept[0] == self._layout and kept[1] == entities:
             rows, listed = kept[2], kept[3]  # the same entities as last time, on the same rows
@@ -477,6 +480,7 @@ class InstanceBatch:
                 rows = np.array([index[entity] for entity in entities], np.int64)
             listed = rows.tolist()
             self._rows_of = (self._layout, list(entities), rows, listed) if moving else None
+        before = self.rows["model"][rows] if motion is not None and moving else None  # (a copy: picked by index)
         flat = None
         if self.sized:  # each model matrix times its row's size (its first three columns scaled): on arrays
             sizes = self._sizes_for(len(self.rows))[rows]
@@ -495,6 +499,8 @@ class InstanceBatch:
             data = b"".join([model.to_bytes() + glm.transpose(glm.inverse(glm.mat3(model))).to_bytes()
                              for model in models])
             self._matrices()[rows] = np.frombuffer(data, np.float32).reshape(-1, _MATRIX_FLOATS)
+        if before is not None:
+            motion.note(entities, before, self.rows["model"][rows])
         self._dirty.update(listed)
 
     def _matrices(self) -> np.ndarray:

@@ -61,6 +61,7 @@ from engine.render.bloom import BloomPass
 from engine.render.depth_of_field import DepthOfFieldPass
 from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
 from engine.render.motion_blur import MotionBlurPass
+from engine.render.object_motion import ObjectMotion
 from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import CaptureTarget
@@ -103,9 +104,10 @@ class CameraPost:
 
 
 class PresentPass:
-    def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary, software: bool) -> None:
+    def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary, software: bool, moving: ObjectMotion) -> None:
         self.ctx = ctx
         self.shaders = shaders
+        self.moving = moving   # the frame's movers, whose own motion the motion blur streaks
         self._encode = self._fullscreen("present.frag")
         self._encode_luma = self._fullscreen("present.frag", LUMA_IN_ALPHA="1")
         for encode in (self._encode, self._encode_luma):
@@ -126,10 +128,16 @@ class PresentPass:
 
     @property
     def motion_blur(self) -> MotionBlurPass:
-        """The camera motion blur pass (``engine/render/motion_blur.py``), made on first use."""
+        """The motion blur pass (``engine/render/motion_blur.py``), made on first use."""
         if self._motion_blur is None:
-            self._motion_blur = MotionBlurPass(self.ctx, self.shaders)
+            self._motion_blur = MotionBlurPass(self.ctx, self.shaders, self.moving)
         return self._motion_blur
+
+    @property
+    def streaks_objects(self) -> bool:
+        """Whether the last frame's motion blur streaked moving things by their own motion
+        (``MotionBlur.objects``): the next frame's scene pass writes it (``ObjectMotion``)."""
+        return self._motion_blur is not None and self._motion_blur.objects
 
     @property
     def depth_of_field(self) -> DepthOfFieldPass:
@@ -204,9 +212,8 @@ class PresentPass:
         elif self._depth_of_field is not None:
             self._depth_of_field.release_targets()
         if motion is not None and seen is not None and view is not None and motion.shutter > 0.0:
-            streaked = self.motion_blur.draw(hdr, seen, motion, view, camera, dt)
-            self.post_passes += streaked is not hdr
-            hdr = streaked
+            hdr = self.motion_blur.draw(hdr, seen, motion, view, camera, dt)
+            self.post_passes += self.motion_blur.passes
         elif self._motion_blur is not None:
             self._motion_blur.release_targets()
         if grading is not None and not grades(grading) and (grading.lut is None or grading.lut_strength == 0.0):

@@ -12,6 +12,7 @@ renderer.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import moderngl
 import numpy as np
@@ -36,8 +37,9 @@ from engine.render.screen_reflections import ScreenReflectionPass
 from engine.render.shadows import ShadowMaps
 from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.sky_bake import SkyBake
-from engine.render.targets import LevelStack, RenderTargets
+from engine.render.targets import SEEN_CHANNELS, SEEN_MOVING_CHANNELS, LevelStack, RenderTargets
 from engine.render.text import TextPass
+from engine.resources import PortalCrossing
 
 _MAX_EXPOSURE = 2.0 ** MAX_EXPOSURE_EV
 
@@ -82,7 +84,7 @@ class Renderer(Gpu):
         self.casters_version = 0
         self._dropped_changes: tuple[np.ndarray, np.ndarray] | None = None  # boxes of batches dropped
         self._level_union: tuple[list, tuple[np.ndarray, np.ndarray] | None] | None = None  # level_bounds' last
-        self.present_pass = PresentPass(ctx, self.shaders, caps.software)
+        self.present_pass = PresentPass(ctx, self.shaders, caps.software, self.object_motion)
         self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
@@ -388,6 +390,16 @@ class Renderer(Gpu):
             self.note_scene_change()
         return sent
 
+    def begin_object_motion(self, on: bool, dt: float, crossings: Iterable[PortalCrossing] = ()) -> None:
+        """Start the frame's per-object motion (``ObjectMotion.begin``: ``on`` while the active
+        camera's motion blur streaks moving things); when it turns on or off the main tree's
+        levels are made again with or without the seen images' motion channels, and nothing
+        drawn before is kept."""
+        if self.object_motion.begin(on, dt, crossings):
+            self.levels.set_seen_channels(SEEN_MOVING_CHANNELS if on else SEEN_CHANNELS)
+            self.level_copies.release()
+            self.note_scene_change()
+
     def _note_dropped(self, box: tuple[np.ndarray, np.ndarray] | None) -> None:
         if box is not None:
             old = self._dropped_changes
@@ -491,7 +503,7 @@ class Renderer(Gpu):
             self.text_pass.release()
             self.text_pass = None
         for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog,
-                    self.spot_cookies, self.pose_rows):
+                    self.spot_cookies, self.pose_rows, self.object_motion):
             obj.release()
         self.shaders.release()
 

@@ -212,9 +212,9 @@ class ScenePass:
             seen = programs.reloads_seen
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
         shadows = self.shadows
-        # (And the pose texture: a posed batch's record binds it, made again as it grows.)
+        # (And the pose and motion textures: a record binds them, made again as they grow.)
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines,
-                 renderer.pose_rows.version)
+                 renderer.pose_rows.version, renderer.object_motion.version)
         kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked, screen))
         if kinds is None:
             kinds = self._kinds[invocations, layered, self._ambient_probes, masked, screen] = (

@@ -36,6 +36,7 @@ from engine.render.bindings import (
     MORPH_UNIT,
     NODE_UNIT,
     NORMAL_UNIT,
+    OBJECT_MOTION_UNIT,
     OCCLUSION_UNIT,
     POINT_SHADOW_UNITS,
     POSE_ROWS_UNIT,
@@ -168,6 +169,8 @@ class ScenePrograms:
         cookies = self.renderer.spot_cookies.defines  # SPOT_COOKIES while a kept spot light has a cookie
         if self.renderer.sphere_lights:  # SPHERE_LIGHTS while a kept point light has a radius
             cookies = (*cookies, ("SPHERE_LIGHTS", "1"))
+        if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
+            cookies = (*cookies, *self.renderer.object_motion.defines)
         if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
@@ -275,7 +278,8 @@ class ScenePrograms:
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
                                ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT),
                                ("screen_occlusion", SCREEN_OCCLUSION_UNIT), ("spot_cookies", COOKIE_UNIT),
-                               ("pose_rows", POSE_ROWS_UNIT), ("morph_offsets", MORPH_UNIT)):
+                               ("pose_rows", POSE_ROWS_UNIT), ("morph_offsets", MORPH_UNIT),
+                               ("object_motion", OBJECT_MOTION_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -358,7 +362,8 @@ class ScenePrograms:
             (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
             (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map), (OCCLUSION_UNIT, batch.occlusion_map),
             (POSE_ROWS_UNIT, self.renderer.pose_rows.texture if batch.skinned or batch.morphed else None),
-            (MORPH_UNIT, batch.mesh.morphs if batch.morphed else None))
+            (MORPH_UNIT, batch.mesh.morphs if batch.morphed else None),
+            (OBJECT_MOTION_UNIT, self.renderer.object_motion.texture if not layered else None))
             if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:

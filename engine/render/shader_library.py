@@ -67,7 +67,7 @@ from components.post import TONEMAP_CURVES
 from components.rendering import MATERIAL_IMAGES
 from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
-from engine.render import pose_rows, views
+from engine.render import object_motion, pose_rows, views
 from engine.render.bindings import clip_glsl_defines
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.render.raw_gl import _load as load_gl_function
@@ -270,9 +270,9 @@ def limit_glsl_defines() -> dict[str, str]:
     ``shadows``; the irradiance boxes: ``irradiance``; the environment BRDF's rows:
     ``environment_brdf``; the virtual lights and the outlines
     each one's line crosses: ``shadow_rules``; where a pose row's morph weights start:
-    ``pose_rows``), each material map's bit in a SECOND_UV_MAPS build (its index in
-    ``MATERIAL_IMAGES``: ``UV_BIT_TEXTURE`` ...), and each tone curve's number (its index in ``TONEMAP_CURVES``, the
-    number a build's ``TONEMAP_CURVE`` is)."""
+    ``pose_rows``; the motion texture's row: ``object_motion``), each material map's bit in a
+    SECOND_UV_MAPS build (its index in ``MATERIAL_IMAGES``: ``UV_BIT_TEXTURE`` ...), and each
+    tone curve's number (its index in ``TONEMAP_CURVES``, the number a build's ``TONEMAP_CURVE`` is)."""
     return {"MAX_DIRECTIONAL_LIGHTS": str(views.MAX_DIRECTIONAL_LIGHTS),
             "MAX_POINT_LIGHTS": str(views.MAX_POINT_LIGHTS), "MAX_POINT_SHADOWS": str(views.MAX_POINT_SHADOWS),
             "MAX_SHADOW_RINGS": str(views.MAX_SHADOW_RINGS),
@@ -281,6 +281,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
             "POSE_WEIGHTS_AT": str(pose_rows.WEIGHTS_AT),
+            **object_motion.glsl_defines(),
             **{f"UV_BIT_{name.upper()}": str(1 << index) for index, name in enumerate(MATERIAL_IMAGES)},
             **{f"TONEMAP_{curve.upper()}": str(index) for index, curve in enumerate(TONEMAP_CURVES)}}
 

@@ -47,6 +47,10 @@ def release_framebuffer(framebuffer: moderngl.Framebuffer) -> None:
 # draw writes: everything, or (the glass slot) all but the seen pair's way.
 _WRITE_ALL = ((True, True, True, True),) * 3
 _GLASS_WRITES = ((True, True, True, True), (True, True, True, True), (True, False, False, False))
+# The seen image's channels: the entity and the way; with each pixel's own motion on the
+# picture besides, while the camera's motion blur streaks moving things (object_motion.py).
+SEEN_CHANNELS = 2
+SEEN_MOVING_CHANNELS = 4
 
 
 class RenderTargets:
@@ -55,10 +59,12 @@ class RenderTargets:
     ``seen``    - what is finally seen there, following reflections: r the entity (the --ids
                   image), g the length of the light's way from the eye to it as float bits
                   (``shaders/include/way.glsl``: through mirrors and portals, the image's
-                  distance; what depth of field focuses by),
+                  distance; what depth of field focuses by), and with ``seen_channels`` 4
+                  b and a: what shows there moved on the picture since the last frame by its
+                  own motion (float bits; ``engine/render/object_motion.py``),
     ``node``    - which view of this level drew the pixel."""
 
-    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], seen_channels: int = SEEN_CHANNELS) -> None:
         check_target_size(ctx, size, "a render target")
         self.ctx = ctx
         self.size = size
@@ -66,7 +72,7 @@ class RenderTargets:
         self.color = ctx.texture(size, 4, dtype=HDR_FORMAT)
         self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.surface = ctx.texture(size, 1, dtype="u4")
-        self.seen = ctx.texture(size, 2, dtype="u4")
+        self.seen = ctx.texture(size, seen_channels, dtype="u4")
         self.node = ctx.texture(size, 1, dtype="u4")
         for texture in (self.surface, self.seen, self.node):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -116,6 +122,15 @@ class RenderTargets:
         where nothing was drawn); waits for the GPU: tests and tools only."""
         return self._read(self.seen)[..., 1].copy().view(np.float32)
 
+    def read_motion(self) -> np.ndarray | None:
+        """What each pixel shows moved on the picture since the last frame by its own motion,
+        in the picture's widths and heights, float32 (height, width, 2: x right, y up), row 0 at
+        the top; None where the seen image has no motion channels (per-object motion blur off);
+        waits for the GPU: tests and tools only."""
+        if self.seen.components != SEEN_MOVING_CHANNELS:
+            return None
+        return self._read(self.seen)[..., 2:4].copy().view(np.float32)
+
     def read_surface_ids(self) -> np.ndarray:
         return self._read(self.surface)
 
@@ -163,12 +178,13 @@ class LevelStack:
         self._before: dict[int, RenderTargets] = {}  # level -> its targets of the size before
         self._made_for: dict[int, tuple[int, int]] = {}  # level -> the root's size when its set was made
         self.made = 0  # target sets made so far (tests watch it)
+        self.seen_channels = SEEN_CHANNELS  # what a set made now has (a set of other channels is made again)
 
     def get(self, level: int, size: tuple[int, int]) -> RenderTargets:
         while len(self._levels) <= level:
             self._levels.append(None)
         targets = self._levels[level]
-        if targets is None or targets.size != size:
+        if targets is None or targets.size != size or targets.seen.components != self.seen_channels:
             if level == 0 and targets is not None:  # the root resized: what was kept is the old size's
                 for kept in self._before.values():
                     kept.release()
@@ -180,16 +196,23 @@ class LevelStack:
                     self._before[level] = targets
                 else:
                     targets.release()
-            if spare is not None and spare.size == size:
+            if spare is not None and spare.size == size and spare.seen.components == self.seen_channels:
                 targets = spare
             else:
                 if spare is not None:
                     spare.release()
-                targets = RenderTargets(self.ctx, size)
+                targets = RenderTargets(self.ctx, size, self.seen_channels)
                 self.made += 1
             self._levels[level] = targets
             self._made_for[level] = root
         return targets
+
+    def set_seen_channels(self, channels: int) -> None:
+        """Make every set from now on with ``channels`` seen channels (``SEEN_CHANNELS`` or
+        ``SEEN_MOVING_CHANNELS``); the sets held of the other kind are released."""
+        if channels != self.seen_channels:
+            self.release()
+            self.seen_channels = channels
 
     def kept(self) -> int:
         """Target sets held besides the levels' own (the pixel budget's previous sizes)."""
