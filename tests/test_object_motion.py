@@ -287,3 +287,36 @@ def test_more_movers_than_the_texture_holds_are_refused(ctx):
     with pytest.raises(GLLimitError, match="1100 moving entities"):
         motion.upload()
     motion.release()
+
+
+def test_a_box_carried_through_a_portal_streaks_by_its_step_not_across_the_room(scene):
+    """A travelling box goes into one portal and comes out of the other, 6 m to the side,
+    before a still camera: on every frame, the crossing's included, its streak is about its
+    step (its last place carried through the portal with it), never the jump."""
+    from components import Traveller
+    from engine.assets.portals import spawn_portal_pair
+
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        ents["camera"] = look_from(world, (6.0, 1.5, 5.0), (6.0, 1.5, 0.0))
+        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        spawn_portal_pair(world, (0, 1.5, 0), None, (6, 1.5, 0), None, size=(2.0, 2.0))
+        world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.6, 0.6, 0.6)))
+        ents["box"] = world.spawn(Transform(position=(0.0, 1.5, 0.8), scale=(0.5, 0.5, 0.5)), MeshRef(box()),
+                                  Material(color=(0.9, 0.1, 0.1)), Traveller(velocity=(0.0, 0.0, -3.0)))
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    longest = []
+    for _ in range(30):
+        runner.frame()
+        box_pixels = runner.ids() == ents["box"]
+        if box_pixels.any():
+            found = streaks(runner)
+            longest.append(float(np.hypot(found[..., 0], found[..., 1])[box_pixels].max()))
+    position = runner.world.get(ents["box"], Transform).position
+    assert position.x > 5.0, position   # it came out of the other portal
+    assert longest and max(longest) < 4.0, longest   # (the jump would streak 30 pixels: max_blur)
