@@ -148,7 +148,10 @@ def make_scene(name: str, ctx):
     ``sparks_<mirrors>_<n>``: the ring with n living particles, ``benchmarks.sparks``;
     ``decals_<mirrors>_<n>``: the ring with n stains on its floor, ``benchmarks.decals``;
     ``focus_<mirrors>``: the ring seen through a lens with autofocus (its camera's
-    ``DepthOfField``: 85 mm at f/1.4, the widest disc 0.05 of the height); ``hall``:
+    ``DepthOfField``: 85 mm at f/1.4, the widest disc 0.05 of the height);
+    ``streaks_<mirrors>``: the ring with motion blur on its orbiting camera, its spinning boxes
+    streaking by their own motion (``MotionBlur()``; ``streaks_<mirrors>_camera``: by the
+    camera's alone, ``objects=False``); ``hall``:
     the sample level), each with its suite's default settings."""
     from shell.app import Engine
 
@@ -192,6 +195,17 @@ def make_scene(name: str, ctx):
         (camera, _), = engine.world.query_one(Camera)
         engine.world.add_component(camera, DepthOfField(f_stop=1.4, focal_length=85.0, max_blur=0.05,
                                                         autofocus=True))
+        return engine
+    if kind == "streaks":  # streaks_<mirrors>[_camera]: the ring with motion blur (per-object unless _camera)
+        from benchmarks.mirrors import MirrorRing
+        from components import Camera, MotionBlur
+
+        mirrors, _, only = arg.partition("_")
+        if only not in ("", "camera"):
+            raise ValueError(f"no scene {name!r}")
+        engine = Engine(MirrorRing(int(mirrors)), ctx)
+        (camera, _), = engine.world.query_one(Camera)
+        engine.world.add_component(camera, MotionBlur(objects=not only))
         return engine
     if kind == "posed":  # posed_<mirrors>_<tentacles>: the ring with animated skinned and morphed meshes
         from benchmarks.posed import PosedRing

@@ -17,7 +17,8 @@ uniform vec3 axis;               // an orthographic view's axis (view_axis.glsl)
 uniform vec2 blur;               // x: the shutter's share, y: the longest streak in pixels
 uniform bool objects;            // the seen image holds each thing's own motion (b, a)
 
-out vec4 out_streak;  // xy: the streak in pixels (its whole length, centred on the pixel), y up
+out vec4 out_streak;  // xy: the streak in pixels (its whole length, centred on the pixel), y up;
+                      // z: the way's length (a half float: the sky's and anything past 60 km as 60 km)
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
@@ -37,5 +38,5 @@ void main() {
     vec2 streak = moved * size * blur.x;  // pixels
     float length_px = length(streak);
     if (length_px > blur.y) streak *= blur.y / length_px;
-    out_streak = vec4(streak, 0.0, 0.0);
+    out_streak = vec4(streak, min(beyond ? SKY_WAY : way, 6.0e4), 0.0);
 }

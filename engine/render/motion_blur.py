@@ -82,8 +82,8 @@ class MotionBlurPass:
         self._streaks = self._vao(shaders, "motion_streaks.frag", seen_image=DOF_SEEN_UNIT)
         self._tiles = self._vao(shaders, "motion_tiles.frag", streaks=MOTION_STREAKS_UNIT)
         self._neighbours = self._vao(shaders, "motion_neighbours.frag", tiles=MOTION_TILES_UNIT)
-        self._blur = self._vao(shaders, "motion_blur.frag", hdr_image=PRESENT_UNIT, seen_image=DOF_SEEN_UNIT,
-                               streaks=MOTION_STREAKS_UNIT, neighbours=MOTION_NEIGHBOURS_UNIT)
+        self._blur = self._vao(shaders, "motion_blur.frag", hdr_image=PRESENT_UNIT, streaks=MOTION_STREAKS_UNIT,
+                               neighbours=MOTION_NEIGHBOURS_UNIT)
         self._images: _Images | None = None
         self.previous: glm.mat4 | None = None   # last frame's view-projection (None: none yet)
         self.camera: int | None = None
@@ -106,7 +106,8 @@ class MotionBlurPass:
         result = ctx.texture(size, 4, dtype="f2")
         result.filter = (moderngl.LINEAR, moderngl.LINEAR)   # (bloom reads it bilinear)
         tiled = (-(-size[0] // TILE), -(-size[1] // TILE))
-        streaks, tiles, neighbours = (ctx.texture(at, 2, dtype="f2") for at in (size, tiled, tiled))
+        streaks = ctx.texture(size, 4, dtype="f2")   # (xy the streak, z the way)
+        tiles, neighbours = (ctx.texture(tiled, 2, dtype="f2") for _ in range(2))
         for texture in (streaks, tiles, neighbours):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._images = _Images(result, streaks, tiles, neighbours,
@@ -175,7 +176,7 @@ class MotionBlurPass:
             return None
         texture = self._images.streaks
         w, h = texture.size
-        return np.flipud(np.frombuffer(texture.read(), np.float16).reshape(h, w, 2)).astype(np.float32)
+        return np.flipud(np.frombuffer(texture.read(), np.float16).reshape(h, w, 4)[..., :2]).astype(np.float32)
 
     def release_targets(self, keep_view: bool = False) -> None:
         if self._images is not None:

@@ -49,8 +49,10 @@ class ObjectMotion:
         self.texture: moderngl.Texture | None = None
         self.version = 0   # moved on when the texture is made again (a draw record binds the new one)
         self._max_rows = max_texture_size
-        self._moves: dict[int, list[np.ndarray]] = {}   # entity -> [model before, model now] (float32, 16)
-        self._carried: dict[int, np.ndarray] = {}       # entity -> its crossings' transform this frame
+        # The movers noted: (entities, models before, models now), float32 column-major rows of 16.
+        self._chunks: list[tuple[list[int], np.ndarray, np.ndarray]] = []
+        self._fresh = False   # something was noted this frame
+        self._carried: dict[int, np.ndarray] = {}   # entity -> its crossings' transform this frame
         self._sent: bytes | None = None                  # the records the texture holds
         self.count = 0                                   # movers in the texture (0: nothing moved)
 
@@ -61,12 +63,13 @@ class ObjectMotion:
 
     def begin(self, on: bool, dt: float, crossings: Iterable[PortalCrossing] = ()) -> bool:
         """Start a frame's notes (``on``: the camera's motion blur streaks moving things; ``dt``
-        0 keeps last frame's movers); returns whether ``on`` changed (the scene programs and
-        the level targets are built again)."""
+        0 keeps last frame's movers unless something moves); returns whether ``on`` changed
+        (the scene programs and the level targets are built again)."""
         changed = on != self.on
         self.on = on
+        self._fresh = False
         if dt > 0.0 or not on:
-            self._moves = {}
+            self._chunks = []
         carried = {}
         for crossing in crossings:   # (in order: a second crossing carries the first's result)
             step = np.array(crossing.carry.to_list(), np.float64).T   # (glm lists columns)
@@ -77,40 +80,45 @@ class ObjectMotion:
         return changed
 
     def note(self, entities: list[int], before: np.ndarray, now: np.ndarray) -> None:
-        """``entities`` moved: their model matrices (column-major float32 rows of 16, as the
-        instance rows hold them) ``before`` and ``now``."""
-        moves = self._moves
-        for entity, old, new in zip(entities, before, now, strict=True):
-            move = moves.get(entity)
-            if move is None:
-                moves[entity] = [old.copy(), new.copy()]
-            else:
-                move[1] = new.copy()   # (moved twice: from the first place to the last)
+        """``entities`` (each once a frame) moved: their model matrices (column-major float32
+        rows of 16, as the instance rows hold them) ``before`` and ``now``."""
+        if not self._fresh:   # (the first this frame: a frame of dt 0 drops last frame's)
+            self._chunks, self._fresh = [], True
+        self._chunks.append((entities, before, now.copy()))
 
     def records(self) -> tuple[np.ndarray, np.ndarray]:
         """The frame's movers: their entities (sorted, int64) and each one's matrix taking a
-        point's place now to its place last frame (float64, (n, 4, 4), rows), identities left
-        out (nothing moved)."""
-        if not self._moves:
+        point's place now to its place last frame (float64, (n, 4, 4), rows); one whose
+        matrix is the same, or has no inverse (a scale of 0), is left out."""
+        chunks = self._chunks
+        if not chunks:
             return np.zeros(0, np.int64), np.zeros((0, 4, 4))
-        entities = np.array(sorted(self._moves), np.int64)
-        if entities[-1] >= _LARGEST_ID:
-            raise GLLimitError(f"entity {int(entities[-1])}: per-object motion blur holds entity ids below "
+        if len(chunks) == 1:
+            entities, before, now = chunks[0]
+            entities = np.array(entities, np.int64)
+        else:
+            entities = np.array([entity for chunk in chunks for entity in chunk[0]], np.int64)
+            before, now = np.concatenate([chunk[1] for chunk in chunks]), np.concatenate([chunk[2] for chunk in chunks])
+        moved = np.flatnonzero((before != now).any(axis=1))
+        if len(moved) < len(entities):
+            entities, before, now = entities[moved], before[moved], now[moved]
+        if len(entities) and entities.max() >= _LARGEST_ID:
+            raise GLLimitError(f"entity {int(entities.max())}: per-object motion blur holds entity ids below "
                                f"{_LARGEST_ID} (a float32 in the motion texture)")
-        pairs = np.array([self._moves[entity] for entity in entities.tolist()], np.float64)
-        before = pairs[:, 0].reshape(-1, 4, 4).transpose(0, 2, 1)   # column-major -> rows
-        now = pairs[:, 1].reshape(-1, 4, 4).transpose(0, 2, 1)
+        before = before.reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)   # column-major -> rows
+        now = now.reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
         if self._carried:
             for at, entity in enumerate(entities.tolist()):
                 carry = self._carried.get(entity)
                 if carry is not None:
                     before[at] = carry @ before[at]
-        invertible = np.abs(np.linalg.det(now)) > _SINGULAR
-        back = np.broadcast_to(np.eye(4), now.shape).copy()
-        if invertible.any():
-            back[invertible] = before[invertible] @ np.linalg.inv(now[invertible])
-        moved = ~np.all(np.abs(back - np.eye(4)) < 1e-7, axis=(1, 2))
-        return entities[moved], back[moved]
+        try:
+            back = before @ np.linalg.inv(now)
+        except np.linalg.LinAlgError:   # (one scaled to nothing: it alone is left out)
+            kept = np.abs(np.linalg.det(now)) > _SINGULAR
+            entities, back = entities[kept], before[kept] @ np.linalg.inv(now[kept])
+        order = np.argsort(entities)
+        return entities[order], back[order]
 
     def upload(self) -> bool:
         """Send the frame's records (while on); returns whether what the texture holds changed
