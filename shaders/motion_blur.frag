@@ -1,6 +1,6 @@
 #version 410 core
 // Motion blur, step 4 (engine/render/motion_blur.py): each pixel gathered along the longest
-// streak near it (motion_neighbours.frag) with the reconstruction filter of McGuire et al.
+// streak near it (motion_neighbours.frag) with a reconstruction filter after McGuire et al.
 // 2012 ("A reconstruction filter for plausible motion blur"): a tap counts where its own
 // streak reaches the pixel and it lies in front (a moving thing smeared over what is behind
 // it), where the pixel's own streak reaches the tap and the tap lies behind (the background a
@@ -21,20 +21,27 @@ out vec4 out_color;
 const int MIN_SAMPLES = 3;
 const int MAX_SAMPLES = 12;
 
-// 1 where a lies in front of b (its way shorter), falling to 0 over a few per cent of the way.
+// The share of a tap's weight that goes as in front of the pixel (a's way shorter than b's):
+// 1 well in front, 0 well behind, a half at the same way (a tap of the same surface is as much
+// in front as behind, so it counts once), over a few per cent of the way.
 float in_front(float a, float b) {
-    return clamp(1.0 - (a - b) / (0.02 * min(a, b) + 0.01), 0.0, 1.0);
+    return clamp(0.5 + (b - a) / (0.04 * min(a, b) + 0.02), 0.0, 1.0);
 }
 
-// How much a streak of half-length ``radius`` covers a point ``distance`` from its pixel.
-float cone(float distance, float radius) {
-    return clamp(1.0 - distance / max(radius, 1e-3), 0.0, 1.0);
-}
-
-float cylinder(float distance, float radius) {
+// Whether a streak of half-length ``radius`` reaches a point ``distance`` from its pixel (soft
+// at its end).
+float reaches(float distance, float radius) {
     return 1.0 - smoothstep(0.95 * radius, 1.05 * radius, distance);
 }
 
+// The reconstruction (McGuire et al. 2012, each term as the share of the shutter's time a tap
+// is what the pixel shows): a tap in front whose own streak reaches the pixel covers it for its
+// spacing over its streak's length; a tap behind shows where the pixel's own streak reaches
+// it (the background a moving pixel reveals), for its spacing over the pixel's streak.  The
+// shares add to 1 where everything moves alike (a box filter along the streak, the shutter's
+// average); less is what the pixel keeps of its own colour (a still pixel a moving thing
+// passes over part of the time; a tap on the pixel itself is left to that); more, they are
+// normalised.
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
     ivec2 size = textureSize(hdr_image, 0);
@@ -45,11 +52,12 @@ void main() {
         return;
     }
     vec3 own = texelFetch(streaks, px, 0).xyz;
-    float own_radius = 0.5 * length(own.xy);
+    float own_radius = max(0.5 * length(own.xy), 0.5);
     float own_way = own.z;
     int samples = clamp(int(ceil(length(longest))), MIN_SAMPLES, MAX_SAMPLES);
-    float weight = 1.0 / max(own_radius, 0.5);
-    vec3 sum = centre * weight;
+    float spacing = length(longest) / float(samples);   // pixels of streak a tap stands for
+    float weight = 0.0;
+    vec3 sum = vec3(0.0);
     float jitter = fract(52.9829189 * fract(dot(gl_FragCoord.xy, vec2(0.06711056, 0.00583715)))) - 0.5;
     vec2 half_texel = 0.5 / vec2(size);
     for (int i = 0; i < samples; ++i) {
@@ -57,15 +65,15 @@ void main() {
         vec2 offset = longest * t;
         vec2 uv = clamp((gl_FragCoord.xy + offset) / vec2(size), half_texel, 1.0 - half_texel);
         ivec2 tap = ivec2(uv * vec2(size));
+        if (tap == px) continue;   // (the pixel itself: what the shares leave it)
         float distance = length(offset);
         vec3 at_tap = texelFetch(streaks, tap, 0).xyz;
-        float tap_radius = 0.5 * length(at_tap.xy);
-        float tap_way = at_tap.z;
-        float w = in_front(tap_way, own_way) * cone(distance, tap_radius)
-                + in_front(own_way, tap_way) * cone(distance, own_radius)
-                + 2.0 * cylinder(distance, tap_radius) * cylinder(distance, own_radius);
+        float tap_radius = max(0.5 * length(at_tap.xy), 0.5);
+        float front = in_front(at_tap.z, own_way);
+        float w = front * reaches(distance, tap_radius) * spacing / (2.0 * tap_radius)
+                + (1.0 - front) * reaches(distance, own_radius) * spacing / (2.0 * own_radius);
         sum += w * textureLod(hdr_image, uv, 0.0).rgb;
         weight += w;
     }
-    out_color = vec4(sum / weight, 1.0);
+    out_color = vec4(weight >= 1.0 ? sum / weight : sum + (1.0 - weight) * centre, 1.0);
 }
