@@ -320,3 +320,40 @@ def test_a_box_carried_through_a_portal_streaks_by_its_step_not_across_the_room(
     position = runner.world.get(ents["box"], Transform).position
     assert position.x > 5.0, position   # it came out of the other portal
     assert longest and max(longest) < 4.0, longest   # (the jump would streak 30 pixels: max_blur)
+
+
+def test_alike_motion_is_the_shutters_average_along_the_streak(scene):
+    """The camera steps sideways before a flat striped wall: every pixel moves alike, and the
+    blurred picture is the still picture averaged along the streak (a box filter, what an open
+    shutter integrates), not weighted to the middle."""
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        ents["camera"] = look_from(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
+        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        world.spawn(Transform(position=(0, 1.5, 0)), MeshRef(quad(40, 20)),
+                    Material(color=(0.8, 0.8, 0.8), texture=checker_texture(256, 64)))
+
+    runner = started(build)(scene)
+    runner.world.get(ents["camera"], Transform).position += glm.vec3(0.25, 0.0, 0.0)
+    blurred = runner.frame().astype(float).mean(axis=-1)
+    length = float(np.abs(streaks(runner)[SIZE[1] // 2, SIZE[0] // 2, 0]))
+    sharp = runner.frame().astype(float).mean(axis=-1)   # the same pose, nothing moving: no pass
+    assert runner.engine.renderer.present_pass.post_passes == 0
+    assert 5.0 < length < 12.0
+    rows = slice(SIZE[1] // 2 - 10, SIZE[1] // 2 + 10)
+    inner = slice(12, SIZE[0] - 12)
+
+    def boxed(span: float) -> np.ndarray:
+        """The still picture averaged over ``span`` pixels (its ends by their fractions)."""
+        half = 0.5 * span
+        reach = int(np.ceil(half))
+        offsets = np.arange(-reach, reach + 1)
+        weights = np.clip(half + 0.5 - np.abs(offsets), 0.0, 1.0)
+        weights /= weights.sum()
+        return sum(w * np.roll(sharp[rows], -k, axis=1) for k, w in zip(offsets, weights, strict=True))[:, inner]
+
+    errors = {share: np.abs(blurred[rows, inner] - boxed(share * length)).mean() for share in (0.5, 0.75, 1.0, 1.25)}
+    assert min(errors, key=errors.get) == 1.0, errors   # (a filter weighted to the middle fits a shorter box)
+    assert np.abs(blurred[rows, inner] - sharp[rows, inner]).mean() > 2.0 * errors[1.0]
