@@ -32,7 +32,8 @@ PATHS = ("auto", "per_mirror", "batched")
 MAX_BATCHED_VIEWS = 32
 # Views per geometry-shader invocation.  One view is 3 vertices of 41 output components (48
 # where whole vec4 slots count; 49 and 56 in the OBJECT_MOTION builds, two clip positions
-# more); 4 keeps 12 vertices under GL 4.1's 1024 total output components, and 8 invocations x 4 views cover MAX_BATCHED_VIEWS (32 invocations guaranteed).
+# more); 4 keeps 12 vertices under GL 4.1's 1024 total output components, and 8 invocations
+# x 4 views cover MAX_BATCHED_VIEWS (32 invocations guaranteed).
 VIEWS_PER_INVOCATION = 4
 # std140 layout of the Views block: ivec4 count, then per view (128 bytes)
 # mat4 view_proj, vec4 clip_plane, vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 node (node,
