@@ -71,7 +71,7 @@ def post_lines(engine: Engine) -> list[str]:
     passes: ambient occlusion (radius, intensity) and reflections (reach, quality), and the
     materials' sky reflections where the overlay turned them off, and the camera's depth of
     field (its f-number and focus: autofocus's read back, a wait too) and motion blur (its
-    shutter).  (One
+    shutter, and how many things streak by their own motion, or "camera only").  (One
     line grew the overlay's window over the view it is clicked through.)  The automatic
     exposure's adapted value is read back from the GPU (a wait, only while the overlay
     shows it)."""
@@ -125,7 +125,9 @@ def post_lines(engine: Engine) -> list[str]:
     elif not present.depth_of_field:
         reflections += "; DoF off (set)"
     if present.streaked is not None:
-        reflections += f"; motion blur {present.streaked.shutter:g}"
+        movers = renderer.object_motion.count
+        reflections += (f"; motion blur {present.streaked.shutter:g}"
+                        + (f", {movers} moving" if present.streaked.objects else ", camera only"))
     elif not present.motion_blur:
         reflections += "; motion blur off (set)"
     passes = renderer.present_pass.post_passes

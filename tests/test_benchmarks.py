@@ -927,6 +927,33 @@ def test_the_decals_scene_throws_its_stains_and_draws_them(ctx):
     assert (np.abs(frames["decals_2_12"][0] - frames["decals_2_0"][0]).max(axis=2) > 8).sum() >= 20
 
 
+def test_the_streaks_scenes_blur_the_ring_by_the_camera_and_the_spinning_boxes(ctx):
+    """``streaks_<mirrors>``: the orbiting camera's MotionBlur streaks the spinning boxes by their
+    own motion too (movers in the motion table, four passes); ``_camera``: by the camera's alone."""
+    from benchmarks.cpu import make_scene
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    capture = CaptureTarget(ctx, (192, 108))
+    seen = {}
+    try:
+        for name in ("streaks_2", "streaks_2_camera"):
+            engine = make_scene(name, ctx)
+            try:
+                for _ in range(3):
+                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (192, 108)))
+                renderer = engine.renderer
+                seen[name] = (renderer.object_motion.count, renderer.present_pass.motion_blur.passes)
+            finally:
+                engine.close()
+    finally:
+        capture.release()
+    assert seen["streaks_2"][0] > 0 and seen["streaks_2"][1] == 4
+    assert seen["streaks_2_camera"] == (0, 4)
+    with pytest.raises(ValueError, match="streaks_2_other"):
+        make_scene("streaks_2_other", ctx)
+
+
 def test_the_focus_scene_blurs_the_ring_through_its_lens(ctx):
     """``focus_<mirrors>``: the ring's camera has a DepthOfField with autofocus; its four
     passes run and the frame differs from the plain ring's."""

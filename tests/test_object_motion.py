@@ -210,11 +210,15 @@ def test_nothing_streaks_once_it_stops_a_kept_reflection_level_included(scene):
 
 def test_objects_off_keeps_two_channels_and_streaks_the_camera_only(scene):
     """``objects=False``: the seen images keep two channels, no OBJECT_MOTION builds, the
-    moving box has no streak of its own; switched on, the next frames have it."""
+    moving box has no streak of its own; switched on, the next frames have it.  The overlay's
+    screen line says which."""
+    from shell.overlay_text import post_lines
+
     ents = {}
     runner = started(lambda world: wall_scene(world, ents, objects=False))(scene)
     renderer = runner.engine.renderer
     assert not renderer.object_motion.on and renderer.targets.seen.components == 2
+    assert post_lines(runner.engine)[1].endswith("; motion blur 1, camera only")
     assert renderer.targets.read_motion() is None
     transform = runner.world.get(ents["box"], Transform)
     transform.position += glm.vec3(0.3, 0.0, 0.0)
@@ -226,6 +230,7 @@ def test_objects_off_keeps_two_channels_and_streaks_the_camera_only(scene):
     runner.frame()
     assert renderer.object_motion.on and renderer.targets.seen.components == 4
     assert renderer.present_pass.post_passes == 4
+    assert post_lines(runner.engine)[1].endswith("; motion blur 1, 1 moving")
     runner.world.remove_component(ents["camera"], MotionBlur)
     runner.frame()
     runner.frame()
