@@ -68,13 +68,13 @@ class ObjectMotion:
         changed = on != self.on
         self.on = on
         self._fresh = False
-        if dt > 0.0 or not on:
+        if dt > 0.0 or not on:   # (dt 0: last frame's movers and crossings are kept)
             self._chunks = []
-        carried = {}
-        for crossing in crossings:   # (in order: a second crossing carries the first's result)
-            step = np.array(crossing.carry.to_list(), np.float64).T   # (glm lists columns)
-            carried[crossing.entity] = step @ carried.get(crossing.entity, np.eye(4))
-        self._carried = carried
+            carried = {}
+            for crossing in crossings:   # (in order: a second crossing carries the first's result)
+                step = np.array(crossing.carry.to_list(), np.float64).T   # (glm lists columns)
+                carried[crossing.entity] = step @ carried.get(crossing.entity, np.eye(4))
+            self._carried = carried
         if not on:
             self.release()
         return changed
