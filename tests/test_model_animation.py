@@ -168,19 +168,22 @@ def test_a_missing_clip_and_malformed_channels_are_refused(tmp_path):
             Animation(**{field: value})
 
 
+OFFSET_POINTER = "/materials/0/pbrMetallicRoughness/baseColorTexture/extensions/KHR_texture_transform/offset"
+
+
 def test_animation_pointer_channels_play_a_nodes_transform_and_leave_the_rest_out_saying_so(tmp_path):
     """KHR_animation_pointer: a channel aimed at ``/nodes/0/rotation`` turns the hinge exactly
     as the same channel by ``path``; one aimed at a property the engine does not play (a
-    material's emissive factor) is left out with a warning naming its pointer (the clip plays
+    texture transform's offset) is left out with a warning naming its pointer (the clip plays
     the rest, no refusal of the file); a pointer target without its pointer string is refused."""
     plain = door(tmp_path / "plain.glb")
     pointed = door(tmp_path / "pointed.glb", [
         {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
             "pointer": "/nodes/0/rotation"}}}},
         {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
-            "pointer": "/materials/0/emissiveFactor"}}}}])
+            "pointer": OFFSET_POINTER}}}}])
     with pytest.warns(UserWarning, match=r"animation 0 \('Open'\): channel 1: KHR_animation_pointer "
-                                         r"'/materials/0/emissiveFactor' left out"):
+                                         rf"'{OFFSET_POINTER}' left out"):
         loaded = load_model_file(pointed)
     assert [(channel.node, channel.path) for channel in loaded.animations[0].channels] == [(0, "rotation")]
     times = [0.0, 0.5, 1.0, 0.5]
@@ -268,6 +271,80 @@ def test_animation_pointers_play_a_materials_colour_a_lights_intensity_and_a_cam
     with pytest.raises(AssetError, match=r"channel 3: KHR_animation_pointer '/cameras/7/perspective/yfov' names "
                                          r"camera 7, which the file does not have"):
         load_model_file(glowing(tmp_path / "far.glb", camera=7))
+
+
+def pulsing(path: Path, inner: float = 0.5) -> Path:
+    """The door with a spot light (cones 0.2 and 0.6 rad, range 8 m) and an orthographic
+    camera (ymag 2) under the hinge, and a clip "Pulse" over 2 s (all linear): material 0's
+    emissiveFactor (0, 0, 0) -> (0.35, 0.2, 0.1) and emissive strength 1 -> 3, its normal
+    texture's scale 1 -> 0.5 and occlusion texture's strength 1 -> 0, the light's range 8 -> 4
+    and cones 0.2 -> ``inner``, 0.6 -> 0.7, the camera's ymag 2 -> 1."""
+    def change(doc: dict) -> None:
+        doc["extensionsUsed"] = ["KHR_lights_punctual", "KHR_animation_pointer", "KHR_materials_emissive_strength"]
+        doc["materials"][0]["extensions"] = {"KHR_materials_emissive_strength": {"emissiveStrength": 1.0}}
+        doc["extensions"] = {"KHR_lights_punctual": {"lights": [
+            {"type": "spot", "intensity": 5.0, "range": 8.0, "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.6}}]}}
+        doc["cameras"] = [{"type": "orthographic", "orthographic": {"xmag": 2.0, "ymag": 2.0, "znear": 0.1,
+                                                                     "zfar": 50.0}}]
+        doc["nodes"][0]["children"] += [2, 3]
+        doc["nodes"] += [{"name": "lamp", "translation": [0.5, 1.0, 0.0],
+                          "extensions": {"KHR_lights_punctual": {"light": 0}}},
+                         {"name": "eye", "camera": 0, "translation": [0.0, 0.5, 2.0]}]
+        pairs = [([0.0, 0.0, 0.0], [0.35, 0.2, 0.1]), ([1.0], [3.0]), ([1.0], [0.5]), ([1.0], [0.0]),
+                 ([8.0], [4.0]), ([0.2], [inner]), ([0.6], [0.7]), ([2.0], [1.0])]
+        first = add_accessors(doc, [np.array([0.0, 2.0], np.float32),
+                                    *(np.array([a, b], np.float32) for a, b in pairs)])
+        pointers = ["/materials/0/emissiveFactor",
+                    "/materials/0/extensions/KHR_materials_emissive_strength/emissiveStrength",
+                    "/materials/0/normalTexture/scale", "/materials/0/occlusionTexture/strength",
+                    "/extensions/KHR_lights_punctual/lights/0/range",
+                    "/extensions/KHR_lights_punctual/lights/0/spot/innerConeAngle",
+                    "/extensions/KHR_lights_punctual/lights/0/spot/outerConeAngle", "/cameras/0/orthographic/ymag"]
+        doc["animations"].append({"name": "Pulse", "samplers": [
+            {"input": first, "output": first + 1 + i} for i in range(len(pointers))], "channels": [
+            {"sampler": i, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {"pointer": p}}}}
+            for i, p in enumerate(pointers)]})
+    return edit_glb(door(path), change)
+
+
+def test_animation_pointers_play_emission_map_strengths_a_spots_cones_and_range_and_an_orthographic_height(
+        tmp_path):
+    """A clip of KHR_animation_pointer channels at a material's emissiveFactor and emissive
+    strength (the part had no Emissive: one is given, its power the factor over the diffuse
+    colour on its strongest channel times the strength, as the loader works it out), its
+    normal scale and occlusion strength, a spot light's range and cone angles (spot_angle the
+    outer in degrees, spot_blend the share between the cones) and an orthographic camera's
+    ymag (half its height): at each time the components hold the keys' mix; a cone past 90
+    degrees is refused naming the channel."""
+    from components import Camera, Emissive, PointLight
+    from systems.model_system import ModelSystem
+
+    world = World("pulsing")
+    root = spawn_model(world, pulsing(tmp_path / "door.glb"))
+    world.add_component(root, Animation(clip="Pulse", loop=False))
+    stage = ModelSystem(world)
+    record = world.resources[SpawnedModels][root]
+    door_part = record.parts[record.nodes.index(1)]
+    (lamp, _), = world.query_one(PointLight)
+    (eye, _), = world.query_one(Camera)
+    assert world.try_get(door_part, Emissive) is None   # (black at rest)
+    red = world.get(door_part, Material).color[0]       # its diffuse's strongest channel (0.7, as the file keeps it)
+    for dt, t in ((0.5, 0.5), (1.0, 1.5)):
+        stage.process(dt)
+        s = t / 2.0
+        assert world.get(door_part, Emissive).power == pytest.approx(0.35 * s * (1 + 2 * s) / red, rel=1e-5)
+        material = world.get(door_part, Material)
+        assert (material.normal_scale, material.occlusion_strength) == pytest.approx((1 - 0.5 * s, 1 - s))
+        light = world.get(lamp, PointLight)
+        inner, outer = 0.2 + 0.3 * s, 0.6 + 0.1 * s
+        assert light.range == pytest.approx(8 - 4 * s)
+        assert light.spot_angle == pytest.approx(math.degrees(outer), rel=1e-5)
+        assert light.spot_blend == pytest.approx((outer - inner) / outer, rel=1e-5)
+        camera = world.get(eye, Camera)
+        assert camera.projection == "orthographic" and camera.ortho_height == pytest.approx(2 * (2 - s))
+    with pytest.raises(AssetError, match=r"'Pulse'\): channel 5: .*lights.innerConeAngle keys must lie in "
+                                         r"\[0, 1.5708\]"):
+        load_model_file(pulsing(tmp_path / "bad.glb", inner=2.0))
 
 
 def test_a_level_plays_a_clip_and_a_missing_one_is_refused_by_its_line(tmp_path):

@@ -5,8 +5,10 @@ read before trimesh parses the file (which ignores them), and the poses they giv
 ``KHR_animation_pointer`` (Blender 4.2 and later export it) names a channel's target by a
 JSON pointer: a node's ``/nodes/{i}/translation``, ``rotation``, ``scale`` or ``weights`` is
 read as that node's channel; a material's ``baseColorFactor``, ``metallicFactor``,
-``roughnessFactor`` and ``alphaCutoff``, a ``KHR_lights_punctual`` light's ``color`` and
-``intensity`` and a perspective camera's ``yfov``, ``znear`` and ``zfar`` are the clip's
+``roughnessFactor``, ``alphaCutoff``, ``emissiveFactor`` and ``KHR_materials_emissive_strength``,
+its normal texture's ``scale`` and occlusion texture's ``strength``, a ``KHR_lights_punctual``
+light's ``color``, ``intensity``, ``range`` and spot cone angles, and a camera's ``yfov``
+(perspective), ``ymag`` (orthographic), ``znear`` and ``zfar`` are the clip's
 ``properties`` (``PROPERTY_POINTERS``), which the models stage writes into the components made
 from them (``engine/assets/models.py``); any other pointer is left out with a warning naming
 it, and the clip plays the rest.
@@ -39,14 +41,22 @@ POINTER = "KHR_animation_pointer"
 _INDEX = r"(0|[1-9][0-9]*)"
 _NODE_POINTER = re.compile(rf"/nodes/{_INDEX}/(translation|rotation|scale|weights)")
 # The properties a pointer may animate besides nodes: (pattern, what it names: the document's
-# array of them, the channel's path, its width)
+# array of them, its width, the channel's name: None for the pattern's second group)
 PROPERTY_POINTERS = (
-    (re.compile(rf"/materials/{_INDEX}/pbrMetallicRoughness/(baseColorFactor)"), "materials", 4),
-    (re.compile(rf"/materials/{_INDEX}/pbrMetallicRoughness/(metallicFactor|roughnessFactor)"), "materials", 1),
-    (re.compile(rf"/materials/{_INDEX}/(alphaCutoff)"), "materials", 1),
-    (re.compile(rf"/extensions/KHR_lights_punctual/lights/{_INDEX}/(color)"), "lights", 3),
-    (re.compile(rf"/extensions/KHR_lights_punctual/lights/{_INDEX}/(intensity)"), "lights", 1),
-    (re.compile(rf"/cameras/{_INDEX}/perspective/(yfov|znear|zfar)"), "cameras", 1),
+    (re.compile(rf"/materials/{_INDEX}/pbrMetallicRoughness/(baseColorFactor)"), "materials", 4, None),
+    (re.compile(rf"/materials/{_INDEX}/pbrMetallicRoughness/(metallicFactor|roughnessFactor)"), "materials", 1, None),
+    (re.compile(rf"/materials/{_INDEX}/(alphaCutoff)"), "materials", 1, None),
+    (re.compile(rf"/materials/{_INDEX}/(emissiveFactor)"), "materials", 3, None),
+    (re.compile(rf"/materials/{_INDEX}/extensions/KHR_materials_emissive_strength/(emissiveStrength)"),
+     "materials", 1, None),
+    (re.compile(rf"/materials/{_INDEX}/normalTexture/(scale)"), "materials", 1, "normalScale"),
+    (re.compile(rf"/materials/{_INDEX}/occlusionTexture/(strength)"), "materials", 1, "occlusionStrength"),
+    (re.compile(rf"/extensions/KHR_lights_punctual/lights/{_INDEX}/(color)"), "lights", 3, None),
+    (re.compile(rf"/extensions/KHR_lights_punctual/lights/{_INDEX}/(intensity|range)"), "lights", 1, None),
+    (re.compile(rf"/extensions/KHR_lights_punctual/lights/{_INDEX}/spot/(innerConeAngle|outerConeAngle)"),
+     "lights", 1, None),
+    (re.compile(rf"/cameras/{_INDEX}/perspective/(yfov|znear|zfar)"), "cameras", 1, None),
+    (re.compile(rf"/cameras/{_INDEX}/orthographic/(ymag|znear|zfar)"), "cameras", 1, None),
 )
 
 
@@ -201,7 +211,7 @@ def _pointed(target: dict, doc: dict, where: str) -> tuple[int, str, int] | None
     match = _NODE_POINTER.fullmatch(pointer)
     if match is not None:
         return int(match.group(1)), match.group(2), 0
-    for pattern, kind, width in PROPERTY_POINTERS:
+    for pattern, kind, width, name in PROPERTY_POINTERS:
         match = pattern.fullmatch(pointer)
         if match is None:
             continue
@@ -210,18 +220,23 @@ def _pointed(target: dict, doc: dict, where: str) -> tuple[int, str, int] | None
             if kind == "lights" else doc.get(kind)
         if not isinstance(listed, list) or index >= len(listed):
             raise AssetError(f"{where}: {POINTER} {pointer!r} names {kind[:-1]} {index}, which the file does not have")
-        return index, f"{kind}.{match.group(2)}", width
+        return index, f"{kind}.{name or match.group(2)}", width
     warnings.warn(f"{where}: {POINTER} {pointer!r} left out (a node's transform and weights, a material's "
-                  "colour, metallic, roughness and cutoff, a light's colour and intensity and a camera's field "
-                  "of view and clip planes are played); the clip plays the rest", stacklevel=6)
+                  "colour, metallic, roughness, cutoff, emission and its strength, normal scale and occlusion "
+                  "strength, a light's colour, intensity, range and spot cones and a camera's field of view, "
+                  "height and clip planes are played); the clip plays the rest", stacklevel=6)
     return None
 
 
 # Each property's keys must lie in [low, high] (what the engine's field takes; a cubic
 # spline's overshoot between keys is kept inside when written).
 PROPERTY_RANGES = {"baseColorFactor": (0.0, None), "metallicFactor": (0.0, 1.0), "roughnessFactor": (0.0, 1.0),
-                   "alphaCutoff": (0.0, 1.0), "color": (0.0, None), "intensity": (0.0, None),
-                   "yfov": (np.radians(1.0), np.radians(179.0)), "znear": (1e-6, None), "zfar": (1e-6, None)}
+                   "alphaCutoff": (0.0, 1.0), "emissiveFactor": (0.0, None), "emissiveStrength": (0.0, None),
+                   "normalScale": (0.0, None), "occlusionStrength": (0.0, 1.0),
+                   "color": (0.0, None), "intensity": (0.0, None), "range": (1e-6, None),
+                   "innerConeAngle": (0.0, np.pi / 2), "outerConeAngle": (1e-6, np.pi / 2),
+                   "yfov": (np.radians(1.0), np.radians(179.0)), "ymag": (1e-6, 5e5),
+                   "znear": (0.0, None), "zfar": (1e-6, None)}
 
 
 def _check_property(channel: Channel, where: str) -> None:

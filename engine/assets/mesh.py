@@ -563,6 +563,8 @@ class ModelPart:
     metallic: float = 0.0
     roughness: float = 0.5
     emissive_factor: float = 0.0   # emissive colour / diffuse colour (with an emissive map: its strength)
+    emissive_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)  # glTF's emissiveFactor (what a pointer animates)
+    emissive_strength: float = 1.0  # glTF's KHR_materials_emissive_strength (likewise)
     reflectivity: float = 0.0
     normal_map: TextureData | None = None
     normal_scale: float = 1.0
@@ -868,8 +870,10 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
         part.metallic = float(material.metallicFactor if material.metallicFactor is not None else 0.0)
         part.roughness = float(material.roughnessFactor if material.roughnessFactor is not None else 0.5)
         emissive = _floats(material.emissiveFactor)
+        part.emissive_strength = maps.gltf_emissive_strength(material)
         if emissive is not None:  # KHR_materials_emissive_strength: how far past 1 it glows
-            emissive = [e * maps.gltf_emissive_strength(material) for e in emissive]
+            part.emissive_rgb = tuple(float(e) for e in (list(emissive[:3]) + [0.0, 0.0, 0.0])[:3])
+            emissive = [e * part.emissive_strength for e in emissive]
         part.reflectivity = part.metallic
     else:  # OBJ/MTL SimpleMaterial
         extra = {str(k).lower(): v for k, v in (getattr(material, "kwargs", {}) or {}).items()}

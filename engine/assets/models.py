@@ -34,8 +34,9 @@ from components import (
     Skin,
     Transform,
 )
-from components.limits import MAX_MORPH_WEIGHT
+from components.limits import MAX_FAR, MAX_MORPH_WEIGHT, MIN_SPOT_ANGLE
 from components.model import MAX_MODEL_PROBES, Animation, FromModel, Model
+from components.rendering import MAX_NORMAL_SCALE
 from components.tracking import HALF_MAX
 from engine.assets.gltf_animations import (
     Clip,
@@ -81,6 +82,11 @@ class SpawnedModel:
     # first pose of a clip that has property channels
     targets: dict[tuple[str, int], list[int]] | None = None
     light_scales: dict[int, float] = field(default_factory=dict)
+    # The file's values a written field is worked out from with others a pointer may animate
+    # apart: a part's emission (its emissiveFactor, strength and part: Emissive.power) and a
+    # spot light's cones (inner, outer, radians: PointLight.spot_angle and spot_blend).
+    emission: dict[int, list] = field(default_factory=dict)
+    cones: dict[int, list[float]] = field(default_factory=dict)
 
     @property
     def suns(self) -> bool:
@@ -431,9 +437,12 @@ def _property_targets(world: World, record: SpawnedModel) -> dict[tuple[str, int
         for part, entity in zip(loaded.parts, made, strict=False):
             if part.material is not None:
                 targets.setdefault(("materials", part.material), []).append(entity)
+                record.emission[entity] = [list(part.emissive_rgb), part.emissive_strength, part]
         for light, entity in zip(loaded.lights, made, strict=False):
             if light.light is not None:
                 targets.setdefault(("lights", light.light), []).append(entity)
+                if light.kind == "spot":
+                    record.cones[entity] = [light.inner_cone, light.outer_cone]
                 engine_light = world.try_get(entity, PointLight) or world.try_get(entity, DirectionalLight)
                 if engine_light is not None and light.intensity > 0.0:
                     record.light_scales[entity] = engine_light.intensity / light.intensity
@@ -456,41 +465,95 @@ def _pose_properties(world: World, record: SpawnedModel, clip: Clip, time: float
         kind, name = channel.path.split(".")
         value = sample_property(channel, time)
         for entity in targets.get((kind, channel.node), ()):
-            written = _property_field(world, record, entity, kind, name, value) if world.exists(entity) else None
-            if written is not None and getattr(written[0], written[1]) != written[2]:  # (a held key: no write)
-                setattr(*written)
+            if not world.exists(entity):
+                continue
+            if name in ("emissiveFactor", "emissiveStrength"):
+                _write_emission(world, record, entity, name, value)
+                continue
+            for written in _property_fields(world, record, entity, kind, name, value):
+                if getattr(written[0], written[1]) != written[2]:  # (a held key: no write)
+                    setattr(*written)
 
 
-def _property_field(world: World, record: SpawnedModel, entity: int, kind: str, name: str,
-                    value: np.ndarray) -> tuple[object, str, object] | None:
+def _write_emission(world: World, record: SpawnedModel, entity: int, name: str, value: np.ndarray) -> None:
+    """A part's emission after an ``emissiveFactor`` or ``emissiveStrength`` key: its
+    Emissive's power as the loader works it out (``ModelPart.emissive_factor``: with an emissive
+    map, the factor's largest channel x the strength; without, the factor over the diffuse
+    colour on the colour's strongest channel), an Emissive given where the part had none.  A
+    map's tint is the file's first factor's (the factor's hue is baked into its texels)."""
+    state = record.emission.get(entity)
+    if state is None:
+        return
+    if name == "emissiveFactor":
+        state[0] = [float(v) for v in value[:3]]
+    else:
+        state[1] = float(value[0])
+    rgb, strength, part = state
+    if part.emissive_map is not None:
+        power = max(rgb) * strength
+    else:
+        channel = int(np.argmax(part.color[:3]))
+        power = rgb[channel] * strength / max(part.color[channel], 1e-6)
+    power = float(np.clip(power, 0.0, min(1e4, HALF_MAX)))
+    emissive = world.try_get(entity, Emissive)
+    if emissive is None:
+        if power > 0.0:
+            world.add_component(entity, Emissive(power))
+    elif emissive.power != power:
+        emissive.power = power
+
+
+def _property_fields(world: World, record: SpawnedModel, entity: int, kind: str, name: str,
+                     value: np.ndarray) -> list[tuple[object, str, object]]:
     """(the component, its field, the value to write) for a property channel's ``value`` on
-    ``entity``, kept within what the field takes; None where the entity has nothing it sets."""
+    ``entity``, each kept within what its field takes; none where the entity has nothing it
+    sets."""
     if kind == "materials":
         material = world.try_get(entity, Material)
         if material is None:
-            return None
+            return []
         if name == "baseColorFactor":
             alpha = material.color[3] if material.blend == "transparent" else float(np.clip(value[3], 0.0, 1.0))
-            return material, "color", glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), alpha)
+            return [(material, "color", glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), alpha))]
         if name == "alphaCutoff":
-            return None if material.alpha_cutoff is None else (material, "alpha_cutoff",
-                                                               float(np.clip(value[0], 0.0, 1.0)))
-        return material, "metallic" if name == "metallicFactor" else "roughness", float(np.clip(value[0], 0.0, 1.0))
+            return [] if material.alpha_cutoff is None else [(material, "alpha_cutoff",
+                                                              float(np.clip(value[0], 0.0, 1.0)))]
+        if name == "normalScale":
+            return [(material, "normal_scale", float(np.clip(value[0], 0.0, MAX_NORMAL_SCALE)))]
+        if name == "occlusionStrength":
+            return [(material, "occlusion_strength", float(np.clip(value[0], 0.0, 1.0)))]
+        return [(material, "metallic" if name == "metallicFactor" else "roughness", float(np.clip(value[0], 0.0, 1.0)))]
     if kind == "lights":
         light = world.try_get(entity, PointLight) or world.try_get(entity, DirectionalLight)
         if light is None:
-            return None
+            return []
         if name == "color":
-            return light, "color", glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), 1.0)
-        return light, "intensity", float(np.clip(value[0] * record.light_scales.get(entity, 1.0), 0.0, HALF_MAX))
+            return [(light, "color", glm.vec4(*np.clip(value[:3], 0.0, HALF_MAX), 1.0))]
+        if name == "intensity":
+            return [(light, "intensity",
+                     float(np.clip(value[0] * record.light_scales.get(entity, 1.0), 0.0, HALF_MAX)))]
+        if not isinstance(light, PointLight):
+            return []
+        if name == "range":
+            return [(light, "range", float(np.clip(value[0], 1e-6, MAX_FAR)))]
+        cones = record.cones.get(entity)
+        if cones is None:   # (not a spot: its cones are not the file's to turn)
+            return []
+        cones[0 if name == "innerConeAngle" else 1] = float(value[0])
+        outer = float(np.clip(cones[1], math.radians(MIN_SPOT_ANGLE), math.pi / 2))
+        inner = float(np.clip(cones[0], 0.0, outer))
+        return [(light, "spot_angle", math.degrees(outer)), (light, "spot_blend", (outer - inner) / outer)]
     camera = world.try_get(entity, Camera)
-    if camera is None or camera.projection != "perspective":
-        return None
+    if camera is None or (name == "yfov" and camera.projection != "perspective") \
+            or (name == "ymag" and camera.projection != "orthographic"):
+        return []
     if name == "yfov":
-        return camera, "fov_y", float(np.clip(np.degrees(value[0]), 1.0, 179.0))
+        return [(camera, "fov_y", float(np.clip(np.degrees(value[0]), 1.0, 179.0)))]
+    if name == "ymag":
+        return [(camera, "ortho_height", float(np.clip(2.0 * value[0], 1e-3, 1e6)))]
     if name == "znear":
-        return camera, "near", float(np.clip(value[0], 1e-6, camera.far * 0.999))
-    return camera, "far", float(max(value[0], camera.near * 1.001))
+        return [(camera, "near", float(np.clip(value[0], 1e-6, camera.far * 0.999)))]
+    return [(camera, "far", float(max(value[0], camera.near * 1.001)))]
 
 
 def crossfade(animation: Animation, clip: str, seconds: float) -> None:
