@@ -284,6 +284,10 @@ class DepthOfField(TrackedComponent):
       pixel whose disc is under a pixel or so keeping its own sharp colour (a quarter of the
       gather's cost; a sharp edge before a blurred background may take a pixel's fringe);
       False: every pixel gathered at full size.
+    - ``blades`` (0, or 3..16): the aperture's blades; 0 a round aperture (round bokeh), else
+      the blurred shape is the polygon its straight blades close to (a lamp out of focus a
+      hexagon with 6), its corners on the round disc's edge, its light kept whole;
+      ``blade_rotation`` (degrees) turns it (0: a corner to the right).
     """
 
     focus_distance: float = 10.0
@@ -294,10 +298,20 @@ class DepthOfField(TrackedComponent):
     focus_point: Any = field(default_factory=lambda: glm.vec2(0.5, 0.5))
     focus_speed: float = 4.0
     half_resolution: bool = True
+    blades: int = 0
+    blade_rotation: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "half_resolution":
             return boolean(self, name, value)
+        if name == "blades":
+            blades = integer(self, name, value, low=0, high=MAX_BLADES)
+            if blades in (1, 2):
+                raise ComponentValueError(f"DepthOfField.blades must be 0 (round) or 3 to {MAX_BLADES} "
+                                          f"(an aperture's polygon), got {value!r}")
+            return blades
+        if name == "blade_rotation":
+            return finite(self, name, value, low=-360.0, high=360.0)
         if name == "focus_distance":
             return finite(self, name, value, low=MIN_FOCUS_DISTANCE, high=MAX_FOCUS_DISTANCE)
         if name == "f_stop":
@@ -315,6 +329,7 @@ class DepthOfField(TrackedComponent):
         return value
 
 
+MAX_BLADES = 16          # DepthOfField.blades: past this a polygon is as round as the disc
 MAX_MOTION_BLUR = 0.25   # MotionBlur.max_blur: a streak at most a quarter of the picture's height
 
 

@@ -11,6 +11,8 @@
 //     blurred foreground's edge covers half of an in-focus pixel beside it, and all of one
 //     well inside its disc; that share, at most 1, is laid over the layer behind.
 // The signed radius orders taps by distance (lens_rules: it grows with the distance).
+// POLYGON_BOKEH builds (DepthOfField.blades): a disc is the aperture's polygon, its corners on
+// the disc's edge: whether it covers a tap is measured in the polygon's own distance.
 
 uniform sampler2D prepared;      // dof_prepare.frag: rgb colour, a signed radius
 uniform sampler2D near_tiles;    // dof_tiles.frag
@@ -23,6 +25,23 @@ layout(location = 0) out vec4 out_back;    // rgb: the layer behind
 layout(location = 1) out vec4 out_front;   // rgb: the layer in front x its share, a: the share
 #else
 out vec4 out_color;
+#endif
+
+#ifdef POLYGON_BOKEH
+uniform vec3 bokeh;   // x: the blades, y: their turn (radians), z: the polygon's area over its circle's
+
+// How far ``offset`` is in the polygon's measure: the radius of the polygon whose edge it lies on
+// (its length where it points at a corner, more towards an edge's middle).
+float bokeh_distance(vec2 offset) {
+    if (offset == vec2(0.0)) return 0.0;   // (atan's angle is undefined there)
+    float wedge = 6.28318531 / bokeh.x;
+    float turned = mod(atan(offset.y, offset.x) - bokeh.y, wedge) - 0.5 * wedge;
+    return length(offset) * cos(turned) / cos(0.5 * wedge);
+}
+#define BOKEH_AREA bokeh.z
+#else
+#define bokeh_distance(offset) length(offset)
+#define BOKEH_AREA 1.0
 #endif
 
 const int SAMPLES = 48;
@@ -62,11 +81,11 @@ void main() {
         if (i >= taps) break;
         float angle = float(i) * GOLDEN_ANGLE;
         ivec2 offset = ivec2(round(vec2(cos(angle), sin(angle)) * (reach * sqrt((float(i) + 0.5) / float(taps)))));
-        float r = length(vec2(offset));  // (the pixel fetched: whether a disc covers this one is its distance)
+        float r = bokeh_distance(vec2(offset));  // (the pixel fetched: whether a disc covers this one is its distance)
         vec4 tap = texelFetch(prepared, clamp(px + offset, ivec2(0), last), 0);
         float size = abs(tap.a);
         if (tap.a < centre.a - NEARER) {
-            float share = clamp(size - r + 0.5, 0.0, 1.0) * cell / max(size * size, 0.25);
+            float share = clamp(size - r + 0.5, 0.0, 1.0) * cell / max(size * size * BOKEH_AREA, 0.25);
             front += tap.rgb * share;
             front_share += share;
         } else {

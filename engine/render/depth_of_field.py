@@ -69,6 +69,12 @@ def tile_size(max_radius: float) -> int:
     return max(MIN_TILE, math.ceil(max_radius))
 
 
+def bokeh_shape(blades: int, rotation: float) -> tuple[float, float, float]:
+    """The POLYGON_BOKEH gather's ``bokeh``: the blades, their turn in radians, and the
+    polygon's area over its circle's (its light spread over less: each tap brings more)."""
+    return float(blades), math.radians(rotation), blades / (2.0 * math.pi) * math.sin(2.0 * math.pi / blades)
+
+
 def focus_pixel(point: Sequence[float], size: tuple[int, int]) -> tuple[int, int]:
     """The pixel (GL's: row 0 at the bottom) of ``DepthOfField.focus_point`` (shares of the
     width and height from the top-left) in a picture of ``size``."""
@@ -86,8 +92,9 @@ class DepthOfFieldPass:
         self._prepare = self._vao("dof_prepare.frag", hdr_image=PRESENT_UNIT, seen_image=DOF_SEEN_UNIT,
                                   focus_state=DOF_FOCUS_UNIT)
         self._tiles = self._vao("dof_tiles.frag", prepared=DOF_PREPARED_UNIT)
-        self._gather = self._vao("dof_gather.frag", prepared=DOF_PREPARED_UNIT, near_tiles=DOF_TILES_UNIT)
-        self._half: tuple[moderngl.VertexArray, ...] | None = None   # downsample, split gather, compose (first use)
+        # The gathers, by (at half size: its two layers apart; a polygon's bokeh), made on first use.
+        self._gathers: dict[tuple[bool, bool], moderngl.VertexArray] = {}
+        self._half: tuple[moderngl.VertexArray, ...] | None = None   # downsample, compose (first use)
         self._images: dict[str, tuple[moderngl.Texture, moderngl.Framebuffer]] = {}
         self._size: tuple[int, int, int, bool] | None = None   # (width, height, tile, half) the images were made for
         self._state: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
@@ -119,11 +126,19 @@ class DepthOfFieldPass:
     def _half_programs(self) -> tuple[moderngl.VertexArray, ...]:
         if self._half is None:
             self._half = (self._vao("dof_downsample.frag", prepared=DOF_PREPARED_UNIT),
-                          self._vao("dof_gather.frag", {"SPLIT_LAYERS": "1"}, prepared=DOF_PREPARED_UNIT,
-                                    near_tiles=DOF_TILES_UNIT),
                           self._vao("dof_compose.frag", prepared=DOF_PREPARED_UNIT, back_layer=DOF_BACK_UNIT,
                                     front_layer=DOF_FRONT_UNIT))
         return self._half
+
+    def _gather_program(self, half: bool, blades: int) -> moderngl.VertexArray:
+        """The gather for the full or half-size path, of a round or a polygon's bokeh."""
+        key = (half, blades > 0)
+        vao = self._gathers.get(key)
+        if vao is None:
+            defines = {**({"SPLIT_LAYERS": "1"} if half else {}), **({"POLYGON_BOKEH": "1"} if blades else {})}
+            vao = self._gathers[key] = self._vao("dof_gather.frag", defines, prepared=DOF_PREPARED_UNIT,
+                                                 near_tiles=DOF_TILES_UNIT)
+        return vao
 
     def _make(self, size: tuple[int, int], tile: int, half: bool) -> None:
         if self._size != (*size, tile, half):
@@ -190,15 +205,16 @@ class DepthOfFieldPass:
         self._set(self._prepare, "lens", (f, lens_scale(f, settings.f_stop, height), max_radius))
         self._prepare.render(moderngl.TRIANGLES, vertices=3)
         source = prepared
+        gather = self._gather_program(half, settings.blades)
+        if settings.blades:
+            self._set(gather, "bokeh", bokeh_shape(settings.blades, settings.blade_rotation))
         if half:  # (the half-size image the tiles and the gather read)
-            downsample, gather, compose = self._half_programs()
+            downsample, compose = self._half_programs()
             source, half_framebuffer = self._images["half"]
             half_framebuffer.use()
             apply_pass_state(ctx, _PASS, (0, 0, *source.size))
             bind_texture(ctx, prepared, DOF_PREPARED_UNIT)
             downsample.render(moderngl.TRIANGLES, vertices=3)
-        else:
-            gather = self._gather
         # 3. The tiles' nearer reach.
         tiles, tiles_framebuffer = self._images["tiles"]
         tiles_framebuffer.use()
@@ -263,6 +279,7 @@ class DepthOfFieldPass:
 
     def release(self) -> None:
         self.release_targets()
-        for vao in (self._focus, self._prepare, self._tiles, self._gather, *(self._half or ())):
+        for vao in (self._focus, self._prepare, self._tiles, *self._gathers.values(), *(self._half or ())):
             vao.release()
+        self._gathers.clear()
         self._half = None
