@@ -349,9 +349,9 @@ class MotionBlur(TrackedComponent):
     - ``max_blur`` (0..0.25): the longest streak, as a share of the picture's height (a turn
       of the camera in one frame does not smear the picture away);
     - ``objects``: things that move streak by their own motion too (an entity's model matrix
-      since the last frame, seen directly, in mirrors and through portals as each view
-      projects it; ``engine/render/object_motion.py``).  Not its skin's or morph's pose;
-      a mirror or portal that moves streaks what it shows by the camera's motion alone.
+      since the last frame, and a skinned or morphed mesh's pose, seen directly, in mirrors
+      and through portals as each view projects it; ``engine/render/object_motion.py``); a
+      mirror or portal that moves streaks what it shows by the camera's motion alone.
     """
 
     shutter: float = 0.5

@@ -73,19 +73,35 @@ void main() {
 #if defined(SKINNED) || defined(MORPHED)
     vec3 position = in_position;
     vec3 normal = in_normal;
+#ifdef OBJECT_MOTION
+    vec3 position_before = in_position;   // (posed as last frame's rows have it: posed_before)
+    vec3 normal_before = in_normal;
+#endif
 #ifdef MORPHED
-    morph(position, normal);  // its morph targets weighed in (as shadow.vert)
+    morph(pose_rows, position, normal);  // its morph targets weighed in (as shadow.vert)
+#ifdef OBJECT_MOTION
+    morph(pose_before, position_before, normal_before);
+#endif
 #endif
 #ifdef SKINNED
-    mat4 skin = skin_matrix();  // bent by its joints, then placed
+    mat4 skin = skin_matrix(pose_rows);  // bent by its joints, then placed
     vec4 world = in_model * (skin * vec4(position, 1.0));
+#ifdef OBJECT_MOTION
+    vec4 posed_before = in_model * (skin_matrix(pose_before) * vec4(position_before, 1.0));
+#endif
     v_normal = transpose(inverse(mat3(in_model) * mat3(skin))) * normal;
 #else
     vec4 world = in_model * vec4(position, 1.0);
     v_normal = transpose(inverse(mat3(in_model))) * normal;
+#ifdef OBJECT_MOTION
+    vec4 posed_before = in_model * vec4(position_before, 1.0);
+#endif
 #endif
 #else
     vec4 world = in_model * vec4(in_position, 1.0);
+#ifdef OBJECT_MOTION
+    vec4 posed_before = world;   // (its shape does not change: only its matrix moves)
+#endif
 #ifdef VERTEX_COLOR
     v_normal = transpose(inverse(mat3(in_model))) * in_normal;
 #else
@@ -106,7 +122,7 @@ void main() {
     v_vertex_color = in_vertex_color;
 #endif
 #if defined(OBJECT_MOTION) && defined(BATCHED_VIEWS)
-    g_world_before = world_before(in_slots.w, world);
+    g_world_before = world_before(in_slots.w, posed_before);
 #endif
     gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
 #ifdef BATCHED_VIEWS
@@ -116,7 +132,7 @@ void main() {
     gl_Position = camera.view_proj * world;
 #ifdef OBJECT_MOTION
     v_clip_now = gl_Position;
-    v_clip_before = camera.view_proj * vec4(world_before(in_slots.w, world), 1.0);
+    v_clip_before = camera.view_proj * vec4(world_before(in_slots.w, posed_before), 1.0);
 #endif
     // Behind the view's plane is clipped; so is all of the surface the view looks out of
     // (a mirror's own glass, a portal's partner), which lies on that plane: the plane itself

@@ -42,10 +42,10 @@ void main() {
     vec3 position = in_position;
 #ifdef MORPHED
     vec3 normal = vec3(0.0);  // (unread: a caster's depth is all it draws)
-    morph(position, normal);  // its morph targets weighed in, as scene.vert
+    morph(pose_rows, position, normal);  // its morph targets weighed in, as scene.vert
 #endif
 #ifdef SKINNED
-    vec4 world = in_model * (skin_matrix() * vec4(position, 1.0));  // bent by its joints, as scene.vert
+    vec4 world = in_model * (skin_matrix(pose_rows) * vec4(position, 1.0));  // bent by its joints, as scene.vert
 #else
     vec4 world = in_model * vec4(position, 1.0);
 #endif

@@ -103,6 +103,7 @@ class PrepareSystem(esper.Processor):
             self._sky_sh = ambient_sh(world, self._cube_sun)
             sky_changed = True
         renderer.upload_instances()
+        renderer.pose_rows.settle_new()   # (a pose new this frame did not move)
         if renderer.object_motion.upload():   # (the movers' own motion: per-object motion blur)
             renderer.note_scene_change()
         self._probe_boxes()

@@ -16,6 +16,7 @@ from engine.assets.texture_data import checker_texture
 from engine.core.errors import GLLimitError
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.object_motion import ObjectMotion
+from engine.render.pose_rows import PoseRows
 from engine.resources import PortalCrossing
 from tests.support import look_from
 from tests.test_mirrors import base_scene
@@ -258,7 +259,7 @@ def test_the_records_take_a_point_now_back_to_where_it_was(ctx):
     """Each record's matrix carries a point of the mover's place now to its place last frame;
     a crossing's transform is put before last frame's matrix (it moved across with it); an
     unmoved or singular one leaves no record; they are sorted by entity."""
-    motion = ObjectMotion(ctx, 16384)
+    motion = ObjectMotion(ctx, 16384, PoseRows(ctx, 16384))
     carry = glm.translate(glm.vec3(10, 0, 0)) * glm.mat4_cast(glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0)))
     motion.begin(True, 1 / 60, [PortalCrossing(7, 1, 2, carry)])
     before = [glm.translate(glm.vec3(1, 2, 3)) * glm.mat4_cast(glm.angleAxis(0.3, glm.vec3(1, 0, 0))),
@@ -282,7 +283,7 @@ def test_the_records_take_a_point_now_back_to_where_it_was(ctx):
 
 
 def test_more_movers_than_the_texture_holds_are_refused(ctx):
-    motion = ObjectMotion(ctx, 1)   # (a one-row texture: 1,023 records)
+    motion = ObjectMotion(ctx, 1, PoseRows(ctx, 1))   # (a one-row texture: 1,023 records)
     motion.begin(True, 1 / 60)
     count = 1100
     models = np.tile(_columns(glm.mat4()), (count, 1))
@@ -362,3 +363,53 @@ def test_alike_motion_is_the_shutters_average_along_the_streak(scene):
     errors = {share: np.abs(blurred[rows, inner] - boxed(share * length)).mean() for share in (0.5, 0.75, 1.0, 1.25)}
     assert min(errors, key=errors.get) == 1.0, errors   # (a filter weighted to the middle fits a shorter box)
     assert np.abs(blurred[rows, inner] - sharp[rows, inner]).mean() > 2.0 * errors[1.0]
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_a_bending_arm_streaks_by_its_pose_seen_directly_and_in_a_mirror(scene, path):
+    """A skinned bar standing still bends at its elbow from one frame to the next: a point
+    near its tip streaks as the two poses put it on screen (its joints' matrices last frame
+    and now, the sum written out here), directly and in a mirror behind it; once it holds its
+    pose, nothing is left."""
+    from components import Skin
+    from tests.test_skinning import RED, elbow_matrix, skinned_bar
+
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        ents["camera"] = look_from(world, (0.0, 1.2, 5.0), (0, 1.2, 0))
+        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        world.spawn(Transform(position=(0, 1.2, -2.5)), MeshRef(quad(6.0, 3.0)), Material(color=(0.1, 0.1, 0.1)),
+                    Mirror())
+        ents["arm"] = world.spawn(Transform(position=(-0.8, 0.0, 0.0)), MeshRef(skinned_bar()), Material(color=RED),
+                                  Skin(np.stack([np.eye(4), elbow_matrix(0.2)])))
+
+    runner = scene(build, SIZE)
+    runner.engine.reflection_system.path = path
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    runner.frame()
+    runner.world.get(ents["arm"], Skin).joint_matrices = np.stack([np.eye(4), elbow_matrix(0.35)])
+    runner.frame()
+    view_proj = glm.mat4(runner.engine.main_view.view_proj)
+    local = np.array([0.0, 1.85, 0.15, 1.0])   # on the front face near its tip (the elbow's alone)
+    place = glm.translate(glm.vec3(-0.8, 0.0, 0.0))
+    now = place * glm.vec4(*(elbow_matrix(0.35) @ local))
+    was = place * glm.vec4(*(elbow_matrix(0.2) @ local))
+    pixel = gl_pixel(view_proj, glm.vec3(now))
+    assert at(runner.ids(), pixel) == ents["arm"]
+    expected = pixel - gl_pixel(view_proj, glm.vec3(was))
+    assert glm.length(expected) > 2.0
+    np.testing.assert_allclose(at(streaks(runner), pixel), expected, rtol=0.05, atol=0.1)
+    mirror = reflection_matrix(plane_from_point_normal((0, 1.2, -2.5), (0, 0, 1)))
+    back = local * np.array([1.0, 1.0, -1.0, 1.0])   # (the back face, towards the mirror)
+    image_now = glm.vec3(mirror * place * glm.vec4(*(elbow_matrix(0.35) @ back)))
+    image_was = glm.vec3(mirror * place * glm.vec4(*(elbow_matrix(0.2) @ back)))
+    reflected = gl_pixel(view_proj, image_now)
+    assert at(runner.ids(), reflected) == ents["arm"]
+    np.testing.assert_allclose(at(streaks(runner), reflected), reflected - gl_pixel(view_proj, image_was),
+                               rtol=0.05, atol=0.1)
+    runner.frame()   # (held: the pose as last frame)
+    assert np.abs(runner.engine.renderer.targets.read_motion()).max() == 0.0
+    assert runner.engine.renderer.present_pass.post_passes == 0

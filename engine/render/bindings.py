@@ -127,6 +127,7 @@ MORPH_UNIT = 27      # scene, casters (MORPHED builds): the batch's mesh's morph
 # Each mover's own motion (engine/render/object_motion.py), read by the scene builds' vertex
 # stage while the camera's motion blur streaks moving things.
 OBJECT_MOTION_UNIT = 30  # scene (OBJECT_MOTION builds): the frame's movers' records
+POSE_BEFORE_UNIT = 48    # scene (OBJECT_MOTION posed builds): last frame's pose texture (PoseRows.before)
 # Particles (engine/render/particle_draw.py): an emitter's sprite, on a unit no scene build reads.
 PARTICLE_UNIT = 28   # particles (SPRITE builds): the emitter's texture (ParticleEmitter.texture)
 PARTICLE_DEPTH_UNIT = 29  # particles (SOFT builds): a copy of the view's depth (RenderTargets.depth_copy)

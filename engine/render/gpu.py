@@ -208,7 +208,7 @@ class Gpu:
         self.pose_rows = PoseRows(ctx, caps.max_texture_size)
         # Each mover's own motion since the last frame while the camera's motion blur streaks
         # moving things (engine/render/object_motion.py; extract notes, prepare sends).
-        self.object_motion = ObjectMotion(ctx, caps.max_texture_size)
+        self.object_motion = ObjectMotion(ctx, caps.max_texture_size, self.pose_rows)
         # Debug mode: every pass checks for an OpenGL error when it ends and names itself
         # (checkpoint); glGetError is cheap on the CPU but makes no sense to pay in a game.
         self.debug = os.environ.get("SPECULUM_DEBUG", "") not in ("", "0")

@@ -135,7 +135,7 @@ class MotionBlurPass:
             self.previous = now   # (a cut: nothing moved)
         self.camera, self._size = camera, size
         objects = settings.objects and seen.components == SEEN_MOVING_CHANNELS
-        if self.previous == now and not (objects and self.moving.count):
+        if self.previous == now and not (objects and self.moving.moving):
             return hdr
         images = self._make(size)
         ctx = self.ctx

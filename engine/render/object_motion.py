@@ -17,8 +17,10 @@ moves.  The main tree's level targets get four-channel seen images only while th
 A mover carried through a portal this frame (``PortalCrossings``) has its last place carried
 with it (its crossing's transform times its last matrix), so it streaks by its motion, not
 across the room.  A frame of dt 0 (a second presentation, a paused game) keeps the last
-frame's records.  What is not followed: a skinned or morphed mesh's own pose (only its
-entity's matrix), a moving mirror or portal (the reflections move with the camera's motion
+frame's records.  A skinned or morphed mesh's pose is followed as well: the pose texture
+keeps last frame's rows while this is on (``PoseRows.track``), and the posed builds put each
+vertex where last frame's joints and weights had it before the mover's record moves it.  What
+is not followed: a moving mirror or portal (the reflections move with the camera's motion
 alone), particles.
 
 Limits: entities below 2^24 (a float holds the id exactly), ``OBJECT_MOTION_WIDTH`` x
@@ -32,6 +34,7 @@ import moderngl
 import numpy as np
 
 from engine.core.errors import GLLimitError
+from engine.render.pose_rows import PoseRows
 from engine.resources import PortalCrossing
 
 OBJECT_MOTION_WIDTH = 4096   # texels a row of the motion texture (a record is four: 1,023 a row after the count)
@@ -43,8 +46,9 @@ _SINGULAR = 1e-12            # |det| below this: a matrix with no inverse (a sca
 class ObjectMotion:
     """The frame's movers and the texture the scene programs read them from."""
 
-    def __init__(self, ctx: moderngl.Context, max_texture_size: int) -> None:
+    def __init__(self, ctx: moderngl.Context, max_texture_size: int, poses: PoseRows) -> None:
         self.ctx = ctx
+        self.poses = poses   # the posed meshes' rows (their last frame's too while on: PoseRows.track)
         self.on = False
         self.texture: moderngl.Texture | None = None
         self.version = 0   # moved on when the texture is made again (a draw record binds the new one)
@@ -55,6 +59,11 @@ class ObjectMotion:
         self._carried: dict[int, np.ndarray] = {}   # entity -> its crossings' transform this frame
         self._sent: bytes | None = None                  # the records the texture holds
         self.count = 0                                   # movers in the texture (0: nothing moved)
+
+    @property
+    def moving(self) -> bool:
+        """Whether anything moved by its own motion this frame (a mover's matrix or a pose)."""
+        return self.count > 0 or self.poses.moved
 
     @property
     def defines(self) -> tuple[tuple[str, str], ...]:

@@ -11,6 +11,11 @@ without a write a pass, and a new pose is one write a frame.  Rows are given out
 entities come and taken back as they go (the texture itself released with the last); the
 texture doubles its rows when full (its rows kept on the CPU, sent again whole) up to
 ``GL_MAX_TEXTURE_SIZE`` posed entities, past which a GLLimitError names the entity.
+
+While per-object motion blur is on (``track``: ``engine/render/object_motion.py``) a second
+texture, ``before``, holds every row as it was at the end of the last frame (a row written
+last frame is copied across when the next starts; a row new this frame starts as it is), so
+the OBJECT_MOTION builds pose each vertex where it was too: a waving arm streaks.
 """
 from __future__ import annotations
 
@@ -39,6 +44,10 @@ class PoseRows:
         self._rows: dict[int, int] = {}
         self._free: list[int] = []
         self._kept = np.zeros((0, ROW_TEXELS, 4), np.float32)  # every row, as sent
+        # Last frame's rows (track): the texture and the rows written since the frame began.
+        self.before: moderngl.Texture | None = None
+        self._written: set[int] = set()
+        self._new: set[int] = set()   # rows taken this frame (their before is their first pose)
 
     def __len__(self) -> int:
         return len(self._rows)
@@ -49,6 +58,8 @@ class PoseRows:
         row = self._rows.get(entity)
         if row is None:
             row = self._take_row(entity)
+            self._new.add(row)
+        self._written.add(row)
         kept = self._kept[row]
         if joints is not None:
             texels = np.ascontiguousarray(joints[:, :3, :], np.float32).reshape(-1, 4)  # a joint's 3 rows
@@ -60,6 +71,55 @@ class PoseRows:
             kept[WEIGHTS_AT:] = packed
             self.texture.write(packed.tobytes(), viewport=(WEIGHTS_AT, row, len(packed), 1))
         return row
+
+    @property
+    def moved(self) -> bool:
+        """Whether a pose was written this frame while ``before`` is kept (it may have moved)."""
+        return self.before is not None and bool(self._written)
+
+    def track(self, on: bool, dt: float) -> bool:
+        """Start a frame (the extract stage, before its writes): with ``on``, ``before`` gets
+        last frame's rows (those written in it copied across; ``dt`` 0 keeps it as it is);
+        without, it is released.  Returns whether ``before`` changed (what was drawn with it
+        is not kept: a pose that stopped has no streak)."""
+        if not on or self.texture is None:
+            if self.before is not None:
+                self.before.release()
+                self.before = None
+                self.version += 1
+            self._written.clear()
+            self._new.clear()
+            return False
+        changed = False
+        if self.before is None:
+            self.before = self._texture(self._kept)   # (as it is now: nothing moved yet)
+            self.version += 1
+        elif dt > 0.0 and self._written:
+            self._copy_before(self._written)
+            changed = True
+        if dt > 0.0:
+            self._written.clear()
+        self._new.clear()
+        return changed
+
+    def settle_new(self) -> None:
+        """Rows first written this frame start ``before`` as they are (the prepare stage, after
+        the extract stage's writes): a thing just posed did not move."""
+        if self.before is not None and self._new:
+            self._copy_before(self._new)
+            self._new.clear()
+
+    def _copy_before(self, rows: set[int]) -> None:
+        for row in sorted(rows):
+            if row < self.before.height:
+                self.before.write(self._kept[row].tobytes(), viewport=(0, row, ROW_TEXELS, 1))
+
+    def _texture(self, rows: np.ndarray) -> moderngl.Texture:
+        # Filled from the start (a GPU does not zero a new texture): every texel is some row's.
+        texture = self.ctx.texture((ROW_TEXELS, len(rows)), 4, rows.tobytes(), dtype="f4")
+        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        texture.repeat_x = texture.repeat_y = False
+        return texture
 
     def free(self, entity: int) -> None:
         """``entity`` has no pose drawn any more: its row is given back; the last one's takes the texture."""
@@ -89,10 +149,12 @@ class PoseRows:
         self._kept = kept
         if self.texture is not None:
             self.texture.release()
-        # Filled from the start (a GPU does not zero a new texture): every texel is some row's.
-        self.texture = self.ctx.texture((ROW_TEXELS, rows), 4, kept.tobytes(), dtype="f4")
-        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.texture.repeat_x = self.texture.repeat_y = False
+        self.texture = self._texture(kept)
+        if self.before is not None:   # (grown mid-frame: last frame's rows as the old one held them)
+            held_before = np.zeros_like(kept)
+            held_before[:held] = np.frombuffer(self.before.read(), np.float32).reshape(held, ROW_TEXELS, 4)
+            self.before.release()
+            self.before = self._texture(held_before)
         self.version += 1
         self._free.extend(range(rows - 1, held - 1, -1))  # the lowest first
 
@@ -101,6 +163,9 @@ class PoseRows:
             self.texture.release()
             self.texture = None
             self.version += 1
+        if self.before is not None:
+            self.before.release()
+            self.before = None
         self._rows.clear()
         self._free.clear()
         self._kept = self._kept[:0]

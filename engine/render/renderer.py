@@ -399,6 +399,8 @@ class Renderer(Gpu):
             self.levels.set_seen_channels(SEEN_MOVING_CHANNELS if on else SEEN_CHANNELS)
             self.level_copies.release()
             self.note_scene_change()
+        if self.pose_rows.track(on, dt):   # (last frame's poses: a posed mesh's own motion)
+            self.note_scene_change()
 
     def _note_dropped(self, box: tuple[np.ndarray, np.ndarray] | None) -> None:
         if box is not None:

@@ -39,6 +39,7 @@ from engine.render.bindings import (
     OBJECT_MOTION_UNIT,
     OCCLUSION_UNIT,
     POINT_SHADOW_UNITS,
+    POSE_BEFORE_UNIT,
     POSE_ROWS_UNIT,
     PROBE2_UNIT,
     PROBE_REST_UNIT,
@@ -279,7 +280,7 @@ class ScenePrograms:
                                ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT),
                                ("screen_occlusion", SCREEN_OCCLUSION_UNIT), ("spot_cookies", COOKIE_UNIT),
                                ("pose_rows", POSE_ROWS_UNIT), ("morph_offsets", MORPH_UNIT),
-                               ("object_motion", OBJECT_MOTION_UNIT)):
+                               ("object_motion", OBJECT_MOTION_UNIT), ("pose_before", POSE_BEFORE_UNIT)):
                 if name in program:
                     program[name].value = unit
             if "Lights" in program:
@@ -363,7 +364,9 @@ class ScenePrograms:
             (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map), (OCCLUSION_UNIT, batch.occlusion_map),
             (POSE_ROWS_UNIT, self.renderer.pose_rows.texture if batch.skinned or batch.morphed else None),
             (MORPH_UNIT, batch.mesh.morphs if batch.morphed else None),
-            (OBJECT_MOTION_UNIT, self.renderer.object_motion.texture if not layered else None))
+            (OBJECT_MOTION_UNIT, self.renderer.object_motion.texture if not layered else None),
+            (POSE_BEFORE_UNIT, self.renderer.pose_rows.before if (batch.skinned or batch.morphed) and not layered
+             else None))
             if texture is not None)
         own = None
         if not batch.probe and not batch.probe_blend and not batch.rest_probe:

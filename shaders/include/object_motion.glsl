@@ -13,7 +13,8 @@ vec4 motion_texel(int record, int texel) {
     return texelFetch(object_motion, ivec2(at % OBJECT_MOTION_WIDTH, at / OBJECT_MOTION_WIDTH), 0);
 }
 
-// Where the point ``world`` of ``entity``'s instance was last frame.
+// Where the point ``world`` of ``entity``'s instance was last frame (``world``: where this
+// frame's matrix puts the vertex as last frame's pose had it).
 vec3 world_before(uint entity, vec4 world) {
     int low = 0;
     int high = int(texelFetch(object_motion, ivec2(0, 0), 0).x) - 1;
