@@ -54,9 +54,18 @@ def tour(engine: Engine, frame: int) -> None:
     transform.rotation = yaw_pitch_rotation(math.degrees(angle), -5.0)
 
 
-def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE) -> list[dict]:
+def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE, lens: bool = False) -> list[dict]:
+    """``lens``: the camera has depth of field with autofocus and motion blur (its spinning
+    crates streaking by their own motion) as ``--dof --motion-blur`` give it."""
     ctx = create_headless_context()
     engine = Engine(HallOfMirrors(), ctx)
+    if lens:
+        from components import MotionBlur
+        from shell.app import start_lens
+
+        camera = engine.active_camera()[0]
+        engine.world.add_component(camera, start_lens())
+        engine.world.add_component(camera, MotionBlur())
     capture = CaptureTarget(ctx, size)
     output = Output(capture.framebuffer, size)
     rows, times = [], []
@@ -96,12 +105,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=10_000)
     parser.add_argument("--every", type=int, default=1000, help="frames between reports")
     parser.add_argument("--rss-slack", type=float, default=20.0, help="MiB of growth tolerated (allocator noise)")
+    parser.add_argument("--lens", action="store_true",
+                        help="depth of field and motion blur on the camera (as --dof --motion-blur)")
     add_size_argument(parser, SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
     warmup = min(60, args.frames)
-    rows = run(args.frames, args.every, warmup, args.size)
+    rows = run(args.frames, args.every, warmup, args.size, args.lens)
     for row in rows:
         print(json.dumps(row) if args.json else
               f"frame {row['frame']:>6}  rss {row['rss_mib']:>7} MiB  ms {row['frame_ms_median']}  "

@@ -13,6 +13,16 @@ def test_a_tour_of_the_sample_level_holds_its_resources_flat():
     assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
 
 
+def test_a_tour_through_a_lens_with_motion_blur_holds_its_resources_flat():
+    """The same tour with depth of field and motion blur on the camera (the spinning crates
+    streaking by their own motion): the post images, the movers' texture and the four-channel
+    seen images are made once and kept."""
+    rows = soak.run(frames=60, every=30, warmup=30, size=(160, 90), lens=True)
+    counts = rows[-1]["gl_resources"]
+    assert counts["object_motion"] == 1 and counts["post_targets"] > 4
+    assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
+
+
 def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
     rows = churn.run(entities=40, waves=2, frames=2)
     peak = rows[1]["peak_gl_resources"]
