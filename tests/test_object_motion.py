@@ -413,3 +413,31 @@ def test_a_bending_arm_streaks_by_its_pose_seen_directly_and_in_a_mirror(scene, 
     runner.frame()   # (held: the pose as last frame)
     assert np.abs(runner.engine.renderer.targets.read_motion()).max() == 0.0
     assert runner.engine.renderer.present_pass.post_passes == 0
+
+
+def test_a_morph_changing_its_weights_streaks_by_them(scene):
+    """A standing sheet's right half lifted by its morph target from one frame to the next: a
+    point on it streaks as the two weights put it on screen; the left half, which no target
+    moves, has no streak."""
+    from components import Morph
+    from tests.test_morph_targets import morphed_sheet
+    from tests.test_skinning import RED
+
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        ents["camera"] = look_from(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
+        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        ents["sheet"] = world.spawn(Transform(), MeshRef(morphed_sheet()), Material(color=RED), Morph((0.0, 0.0)))
+
+    runner = started(build)(scene)
+    runner.world.get(ents["sheet"], Morph).weights = (0.0, 0.4)
+    runner.frame()
+    view_proj = glm.mat4(runner.engine.main_view.view_proj)
+    now, was = glm.vec3(0.5, 1.2, 0.0), glm.vec3(0.5, 1.0, 0.0)   # (the lift: 0.5 x 0.4)
+    pixel = gl_pixel(view_proj, now)
+    assert at(runner.ids(), pixel) == ents["sheet"]
+    np.testing.assert_allclose(at(streaks(runner), pixel), pixel - gl_pixel(view_proj, was), rtol=0.05, atol=0.1)
+    still = gl_pixel(view_proj, glm.vec3(-0.5, 1.2, 0.0))
+    assert at(runner.ids(), still) == ents["sheet"] and np.abs(at(streaks(runner), still)).max() < 1e-3
