@@ -258,7 +258,7 @@ def _columns(matrix: glm.mat4) -> np.ndarray:
 def test_the_records_take_a_point_now_back_to_where_it_was(ctx):
     """Each record's matrix carries a point of the mover's place now to its place last frame;
     a crossing's transform is put before last frame's matrix (it moved across with it); an
-    unmoved or singular one leaves no record; they are sorted by entity."""
+    unmoved or singular one leaves no record; they are sorted by entity, any id held exactly."""
     motion = ObjectMotion(ctx, 16384, PoseRows(ctx, 16384))
     carry = glm.translate(glm.vec3(10, 0, 0)) * glm.mat4_cast(glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0)))
     motion.begin(True, 1 / 60, [PortalCrossing(7, 1, 2, carry)])
@@ -276,9 +276,13 @@ def test_the_records_take_a_point_now_back_to_where_it_was(ctx):
         np.testing.assert_allclose(matrix @ np.array(now[i] * local), np.array(was), atol=1e-5)
     assert motion.upload() and motion.count == 2
     assert not motion.upload()   # the same records: nothing sent again
-    motion.note([1 << 24], _columns(before[1])[None], _columns(now[1])[None])
-    with pytest.raises(GLLimitError, match="16777216"):
-        motion.records()
+    # An id past what one float holds exactly: its high and low bits apart, each exact.
+    big = (1 << 30) + 4097
+    motion.note([big], _columns(before[0])[None], _columns(now[0])[None])
+    assert motion.upload() and motion.count == 3
+    texels = np.frombuffer(motion.texture.read(), np.float32).reshape(-1, 4)
+    ids = texels[4 + 3: 4 + 4 * 3: 4, 2:4]   # (each record's fourth texel: z high bits, w low 12)
+    assert [int(hi) * 4096 + int(lo) for hi, lo in ids] == [7, 9, big]
     motion.release()
 
 

@@ -23,8 +23,9 @@ vertex where last frame's joints and weights had it before the mover's record mo
 is not followed: a moving mirror or portal (the reflections move with the camera's motion
 alone), particles.
 
-Limits: entities below 2^24 (a float holds the id exactly), ``OBJECT_MOTION_WIDTH`` x
-GL_MAX_TEXTURE_SIZE / 4 movers a frame (past it a ``GLLimitError``).
+Limit: ``OBJECT_MOTION_WIDTH`` x GL_MAX_TEXTURE_SIZE / 4 movers a frame (past it a
+``GLLimitError``).  An entity's id is held as its bits from 12 up and its low 12, two floats
+each exact, so any id is found.
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ from engine.resources import PortalCrossing
 
 OBJECT_MOTION_WIDTH = 4096   # texels a row of the motion texture (a record is four: 1,023 a row after the count)
 _HEADER_TEXELS = 4           # texel 0 holds the count; records start after four (whole records a row)
-_LARGEST_ID = 1 << 24        # ids a float32 holds exactly
+_LOW_BITS = 12               # an id's low bits, held apart from the rest (each part exact in a float32)
 _SINGULAR = 1e-12            # |det| below this: a matrix with no inverse (a scale of 0), no motion
 
 
@@ -111,9 +112,6 @@ class ObjectMotion:
         moved = np.flatnonzero((before != now).any(axis=1))
         if len(moved) < len(entities):
             entities, before, now = entities[moved], before[moved], now[moved]
-        if len(entities) and entities.max() >= _LARGEST_ID:
-            raise GLLimitError(f"entity {int(entities.max())}: per-object motion blur holds entity ids below "
-                               f"{_LARGEST_ID} (a float32 in the motion texture)")
         before = before.reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)   # column-major -> rows
         now = now.reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
         if self._carried:
@@ -141,7 +139,8 @@ class ObjectMotion:
         if count:
             records = texels[_HEADER_TEXELS:].reshape(count, 4, 4)
             records[:, :3] = back[:, :3]
-            records[:, 3, 3] = entities
+            records[:, 3, 2] = entities >> _LOW_BITS
+            records[:, 3, 3] = entities & ((1 << _LOW_BITS) - 1)
         data = texels.tobytes()
         rows = -(-len(texels) // OBJECT_MOTION_WIDTH)
         if self.texture is None or self.texture.height < rows:

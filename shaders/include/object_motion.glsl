@@ -2,7 +2,8 @@
 // float texture holding, at texel 0, how many moved (x), then a record of four texels each,
 // sorted by entity: the first three rows of the matrix taking where it is now to where it was
 // (its last model matrix x the inverse of this one; the fourth row is 0, 0, 0, 1) and the
-// entity (w of the fourth texel; exact: ids are below 2^24).  Records run on across rows of
+// entity (z and w of the fourth texel: its bits from 12 up and its low 12, each exact in a
+// float, so every 32-bit id is told apart).  Records run on across rows of
 // OBJECT_MOTION_WIDTH texels.  Found by a binary search (a frame's movers are few; an entity
 // not among them did not move).  Only in OBJECT_MOTION builds.
 #ifdef OBJECT_MOTION
@@ -18,15 +19,15 @@ vec4 motion_texel(int record, int texel) {
 vec3 world_before(uint entity, vec4 world) {
     int low = 0;
     int high = int(texelFetch(object_motion, ivec2(0, 0), 0).x) - 1;
-    float wanted = float(entity);
+    vec2 wanted = vec2(float(entity >> 12u), float(entity & 4095u));
     while (low <= high) {
         int middle = (low + high) / 2;
-        float found = motion_texel(middle, 3).w;
+        vec2 found = motion_texel(middle, 3).zw;
         if (found == wanted) {
             return vec3(dot(motion_texel(middle, 0), world), dot(motion_texel(middle, 1), world),
                         dot(motion_texel(middle, 2), world));
         }
-        if (found < wanted) {
+        if (found.x < wanted.x || (found.x == wanted.x && found.y < wanted.y)) {
             low = middle + 1;
         } else {
             high = middle - 1;
