@@ -93,7 +93,11 @@ class Animation(TrackedComponent):
     by what the clip travelled in that frame (turned and scaled as the root is; a loop's
     wrap carries on from where it ended), so a game steers and collides the root.  Its
     height (a walk's bob) stays in the pose.  The travel is the clip's own (``clip``'s, not
-    a fade's or a layer's)."""
+    a fade's or a layer's).  With ``root_turn`` the node's turn about the vertical since the
+    clip's first key (a turn on the spot, a walk round a corner) comes out of the pose too and
+    turns the root instead, each frame by what the clip turned in it, the travel following the
+    turned root (Unity's root rotation; off, the default, a turn stays in the pose, as a
+    walk's sway should: Unity's "Bake Into Pose")."""
 
     SHAREABLE = False
     clip: str = ""
@@ -106,6 +110,7 @@ class Animation(TrackedComponent):
     fade_seconds: float = 0.0
     faded: float = 0.0
     root_motion: str = ""
+    root_turn: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name in ("clip", "fade_from") and not isinstance(value, str):
@@ -118,7 +123,7 @@ class Animation(TrackedComponent):
             return finite(self, name, value, low=0.0, high=3600.0)
         if name == "speed":
             return finite(self, name, value, low=-1000.0, high=1000.0)
-        if name in ("playing", "loop"):
+        if name in ("playing", "loop", "root_turn"):
             return boolean(self, name, value)
         return value
 

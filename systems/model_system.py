@@ -39,7 +39,9 @@ from engine.assets.models import (
     pose_parts,
     remove_parts,
     respawn_parts,
+    root_start,
     root_travel,
+    root_turn,
     turn_suns,
 )
 from engine.core.clip_events import events_problem, passed_events
@@ -110,7 +112,7 @@ class ModelSystem(esper.Processor):
             every = root in remade or self._posed.get(root) != animation.clip or fade is not None
             walking = bool(animation.root_motion and animation.clip)
             pose_parts(world, root, animation.clip, animation.time, every, fade, laid,
-                       animation.root_motion if walking else "")
+                       animation.root_motion if walking else "", walking and animation.root_turn)
             self._posed[root] = animation.clip if layer is None else None
             if walking and moving:
                 _walk_root(world, root, animation, before, dt)
@@ -155,17 +157,60 @@ def _walk_root(world: World, root: int, animation: Animation, before: float, dt:
     """Move ``root`` by what its clip carried the root-motion node across the ground this
     frame (``Animation.root_motion``): the travel at the new time less at ``before``, plus a
     whole clip's travel for each time a loop wrapped (forwards or back), turned and scaled as
-    the root is (model space to its parent's)."""
+    the root is (model space to its parent's); with ``root_turn`` turned as well (``_turn_root``)."""
     duration = clip_duration(world, root, animation.clip)
     wraps = 0
     if animation.loop and duration > 0.0:
         wraps = math.floor((before + dt * animation.speed) / duration)
+    if animation.root_turn:
+        _turn_root(world, root, animation, before, wraps, duration)
+        return
     travel = root_travel(world, root, animation.clip, animation.root_motion, animation.time) \
         - root_travel(world, root, animation.clip, animation.root_motion, before)
     if wraps:
         travel = travel + wraps * root_travel(world, root, animation.clip, animation.root_motion, duration)
     transform = world.get(root, Transform)
     transform.position = transform.position + transform.rotation * (transform.scale * glm.vec3(*travel))
+
+
+# Clip time a step of a turning walk covers at most (``_turn_root``): a step turns the root by
+# the clip's turn less a whole turn or more, so a clip spinning fast is followed round.
+_TURN_STEP = 1.0 / 30.0
+
+
+def _turn_root(world: World, root: int, animation: Animation, before: float, wraps: int, duration: float) -> None:
+    """Move and turn ``root`` by what its clip carried and turned the root-motion node from
+    ``before`` to its time now (``Animation.root_turn``), through ``wraps`` loop wraps: in
+    steps of at most ``_TURN_STEP`` of clip time, each step's travel (model space) turned back
+    by the turn the pose has taken out at its start and then as the root stands (the two
+    together the root's turn less the clip's so far: the step goes where the clip walks it),
+    and the root turned by the step's turn about its own vertical."""
+    clip, node, now = animation.clip, animation.root_motion, animation.time
+    if wraps > 0:
+        spans = [(before, duration), *[(0.0, duration)] * (wraps - 1), (0.0, now)]
+    elif wraps < 0:
+        spans = [(before, 0.0), *[(duration, 0.0)] * (-wraps - 1), (duration, now)]
+    else:
+        spans = [(before, now)]
+    transform = world.get(root, Transform)
+    position, rotation = glm.vec3(transform.position), glm.quat(transform.rotation)
+    up = glm.vec3(0.0, 1.0, 0.0)
+    start = root_start(world, root, clip, node)
+    pivot = glm.vec3(float(start[0]), 0.0, float(start[2]))   # (the pose is turned back about it, the root about 0)
+    for start, end in spans:
+        steps = max(1, min(256, math.ceil(abs(end - start) / _TURN_STEP)))
+        times = [start + (end - start) * i / steps for i in range(steps + 1)]
+        travels = [root_travel(world, root, clip, node, t) for t in times]
+        turns = [root_turn(world, root, clip, node, t) for t in times]
+        for i in range(steps):
+            turned = math.remainder(turns[i + 1] - turns[i], 2.0 * math.pi)
+            # The step's travel, less how the root's turn about its origin moves the pivot the
+            # pose stands on, turned back as the pose has it at the step's start.
+            step = glm.vec3(*(travels[i + 1] - travels[i])) + glm.angleAxis(turns[i], up) * pivot \
+                - glm.angleAxis(turns[i] + turned, up) * pivot
+            position = position + rotation * (transform.scale * (glm.angleAxis(-turns[i], up) * step))
+            rotation = rotation * glm.angleAxis(turned, up)
+    transform.position, transform.rotation = position, glm.normalize(rotation)
 
 
 def _fire(fired: FiredEvents, root: int, cues: AnimationEvents, loaded, playback: Animation | AnimationLayer,

@@ -117,3 +117,82 @@ def test_a_level_file_walks_its_model_and_refuses_a_missing_node_by_line(tmp_pat
     with pytest.raises(LevelError, match=r"no node 'pelvis' \(its nodes: 'armature', 'hips'\)") as caught:
         load_level(tmp_path / "walk.toml")
     assert (caught.value.field, caught.value.line) == ("Animation.root_motion", 11)
+
+
+def turner(path: Path, aside: float = 0.0) -> Path:
+    """Nodes: 0 "armature" (scale 0.5) over 1 "hips" (a box); clip "Turn" (1 s) walks the hips a
+    quarter round a circle of radius 4 about (0, 2, -4) (keys every 0.125 s) while turning
+    them a quarter about +y (keys likewise, slerped): a walk round a corner, facing its way;
+    ``aside``: the whole walk that far along x (it starts off the model's middle)."""
+    write_glb(path, box((0.4, 0.8, 0.3)), {"name": "cloth", "pbrMetallicRoughness": {"baseColorFactor":
+                                                                                    [0.2, 0.4, 0.8, 1.0]}}, [])
+    times = np.linspace(0.0, 1.0, 9)
+    angles = 0.5 * math.pi * times
+    # Facing -z at the start, it walks forwards (-z) and curves left, towards -x.
+    places = np.stack([4.0 * (np.cos(angles) - 1.0) + aside, np.full_like(times, 2.0), -4.0 * np.sin(angles)], axis=1)
+    turns = np.stack([np.zeros_like(angles), np.sin(angles / 2), np.zeros_like(angles), np.cos(angles / 2)], axis=1)
+    arrays = [times.astype(np.float32), places.astype(np.float32), turns.astype(np.float32)]
+
+    def change(doc: dict) -> None:
+        first = add_accessors(doc, arrays)
+        doc["nodes"] = [{"name": "armature", "scale": [0.5, 0.5, 0.5], "children": [1]},
+                        {"name": "hips", "mesh": 0, "translation": [0.0, 2.0, 0.0]}]
+        doc["scenes"] = [{"nodes": [0]}]
+        doc["animations"] = [{"name": "Turn", "samplers": [{"input": first, "output": first + 1},
+                                                           {"input": first, "output": first + 2}],
+                              "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}},
+                                           {"sampler": 1, "target": {"node": 1, "path": "rotation"}}]}]
+    return edit_glb(path, change)
+
+
+def placed_hips(world: World, root: int, hips: int) -> glm.mat4:
+    """The hips' matrix in the world: the root's Transform times the part's (model space)."""
+    def matrix(t: Transform) -> glm.mat4:
+        return glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale)
+    return matrix(world.get(root, Transform)) * matrix(world.get(hips, Transform))
+
+
+@pytest.mark.parametrize(("steps", "aside"), [([0.1] * 10, 0.0), ([0.35, 0.35, 0.3], 0.0), ([0.1] * 10, 3.0)])
+def test_a_turn_comes_out_of_the_pose_and_turns_the_root(tmp_path, steps, aside):
+    """``root_turn``: the hips stay on the spot facing as they started while the root walks
+    and turns a quarter; at every frame the hips stand in the world where the clip alone (no
+    root motion) puts them, whatever the frames' lengths; a level file keeps the field."""
+    path = turner(tmp_path / "turner.glb", aside)
+    worlds = {}
+    for name, fields in (("walked", {"root_motion": "hips", "root_turn": True}), ("posed", {})):
+        world = World(name)
+        root = spawn_model(world, path, position=(1.0, 0.0, 2.0))
+        world.add_component(root, Animation("Turn", loop=False, **fields))
+        ((hips, _),) = list(world.query_one(FromModel))
+        worlds[name] = (world, root, hips, ModelSystem(world))
+    for dt in steps:
+        for *_, stage in worlds.values():
+            stage.process(dt)
+        walked, posed = (placed_hips(w, r, h) for w, r, h, _ in worlds.values())
+        for column in range(4):
+            np.testing.assert_allclose(list(walked[column]), list(posed[column]), atol=2e-3)
+    world, root, hips, _ = worlds["walked"]
+    assert abs(glm.angle(world.get(hips, Transform).rotation)) < 1e-4            # facing as it started
+    assert near(world.get(hips, Transform).position, (0.5 * aside, 1.0, 0.0))  # on the spot
+    quarter = glm.angleAxis(math.pi / 2, glm.vec3(0.0, 1.0, 0.0))
+    assert abs(glm.dot(world.get(root, Transform).rotation, quarter)) == pytest.approx(1.0, abs=1e-6)
+    if not aside:
+        assert near(world.get(root, Transform).position, (1.0 - 2.0, 0.0, 2.0 - 2.0))   # (the arc's end, halved)
+    with pytest.raises(ComponentValueError, match="Animation.root_turn"):
+        Animation("Turn", root_turn="yes")
+
+
+@pytest.mark.parametrize("steps", [[1.0, 1.0], [0.25] * 8, [2.0]])
+def test_a_looping_turn_carries_on_round_through_each_wrap(tmp_path, steps):
+    """The walk round a corner looped for 2 s: the root turns a half and walks the two arcs
+    one after the other (the second turned a quarter by the first), however the frames fall."""
+    world = World("loop")
+    root = spawn_model(world, turner(tmp_path / "turner.glb"), position=(1.0, 0.0, 2.0))
+    world.add_component(root, Animation("Turn", root_motion="hips", root_turn=True))
+    stage = ModelSystem(world)
+    for dt in steps:
+        stage.process(dt)
+    arc = glm.vec3(-2.0, 0.0, -2.0)   # (one arc, halved)
+    quarter = glm.angleAxis(math.pi / 2, glm.vec3(0.0, 1.0, 0.0))
+    assert near(world.get(root, Transform).position, glm.vec3(1.0, 0.0, 2.0) + arc + quarter * arc)
+    assert abs(glm.dot(world.get(root, Transform).rotation, quarter * quarter)) == pytest.approx(1.0, abs=1e-6)

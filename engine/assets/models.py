@@ -59,8 +59,8 @@ from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 
 __all__ = ["MAX_MODEL_PROBES", "SpawnedModel", "SpawnedModels", "model_components", "model_key", "pose_parts",
-           "remove_parts", "respawn_parts", "root_travel", "clip_duration", "skin_palettes", "spawn_model",
-           "spawn_parts", "turn_suns", "crossfade"]
+           "remove_parts", "respawn_parts", "root_start", "root_travel", "root_turn", "clip_duration",
+           "skin_palettes", "spawn_model", "spawn_parts", "turn_suns", "crossfade"]
 
 @dataclass
 class SpawnedModel:
@@ -351,7 +351,8 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
 
 def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True,
                fade: tuple[str, float, float] | None = None,
-               layer: tuple[str, float, float, str, str] | None = None, hold: str = "") -> None:
+               layer: tuple[str, float, float, str, str] | None = None, hold: str = "",
+               turn: bool = False) -> None:
     """Put ``root``'s parts where clip ``clip_name`` of its model puts their nodes at
     ``time`` (seconds); "" puts them at rest.  Its lights and cameras follow their nodes (a
     camera unscaled; a directional light's direction turned, as the root stands now), its
@@ -363,7 +364,9 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
     (clip, time, weight, blend, root) laid over that pose (every part written).  A clip or
     layer root the model lacks is an AssetError naming the entity and those it has.  ``hold``:
     the node whose travel across the ground ``clip_name`` carries (``Animation.root_motion``),
-    taken out of the pose with everything under it (``root_travel``)."""
+    taken out of the pose with everything under it (``root_travel``); ``turn``: its turn about
+    the vertical too (``root_turn``: the subtree turned back about the vertical through the
+    node's first place)."""
     record = world.resources.get(SpawnedModels, {}).get(root)
     if record is None or record.loaded is None:
         if clip_name:
@@ -390,7 +393,13 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
         placed = pose_all(record.loaded.node_tree, clip or _REST, time, fading, laid)
         if hold and clip is not None:  # walked on the spot: the travel moves the root instead
             travel = root_travel(world, root, clip_name, hold, time)
-            placed[_layer_mask(root, record, hold, "Animation.root_motion"), :3, 3] -= travel
+            held = _layer_mask(root, record, hold, "Animation.root_motion")
+            placed[held, :3, 3] -= travel
+            if turn:  # (and turned back: the turn turns the root instead)
+                node = _named_node(root, record, hold, "Animation.root_motion")
+                about = record.starts[(clip_name, node)]
+                back = _turn_about(-root_turn(world, root, clip_name, hold, time), about)
+                placed[held] = back @ placed[held]
         matrices = {node: placed[node] for node in record.nodes if node is not None}
     every = every or fading is not None or laid is not None
     moved = moved_nodes(record.loaded.node_tree, clip) if clip is not None and not every else None
@@ -637,6 +646,49 @@ def root_travel(world: World, root: int, clip_name: str, node_name: str, time: f
     record.travels[(clip_name, node, time)] = travel
     travel.flags.writeable = False  # (kept: callers make new arrays of it)
     return travel
+
+
+def root_start(world: World, root: int, clip_name: str, node_name: str) -> np.ndarray:
+    """Where clip ``clip_name`` of ``root``'s model puts node ``node_name`` at its start (model
+    space): what ``root_travel`` measures from, and the vertical ``root_turn``'s turn is taken
+    out about."""
+    root_travel(world, root, clip_name, node_name, 0.0)   # (kept there)
+    record = world.resources[SpawnedModels][root]
+    return record.starts[(clip_name, _named_node(root, record, node_name, "Animation.root_motion"))]
+
+
+def root_turn(world: World, root: int, clip_name: str, node_name: str, time: float) -> float:
+    """How far clip ``clip_name`` of ``root``'s model has turned node ``node_name`` about the
+    vertical at ``time`` (radians, counter-clockwise seen from above, in (-pi, pi]) from its
+    turn at the clip's start: the twist about +y of its rotation since (its swing, a lean or a
+    bow, stays in the pose): what ``Animation.root_turn`` takes out of the pose and turns the
+    root by."""
+    record = world.resources[SpawnedModels][root]
+    clip = next(c for c in record.loaded.animations if c.name == clip_name)
+    node = _named_node(root, record, node_name, "Animation.root_motion")
+    key = (clip_name, node, "turn")
+    start = record.starts.get(key)
+    if start is None:
+        start = record.starts[key] = _rotation_of(pose_all(record.loaded.node_tree, clip, 0.0)[node])
+    turned = _rotation_of(pose_all(record.loaded.node_tree, clip, time)[node]) * glm.inverse(start)
+    angle = 2.0 * math.atan2(turned.y, turned.w)
+    return math.remainder(angle, 2.0 * math.pi)
+
+
+def _rotation_of(matrix: np.ndarray) -> glm.quat:
+    """The rotation of a node's matrix (its columns' scale divided out)."""
+    axes = np.asarray(matrix, np.float64)[:3, :3]
+    axes = axes / np.linalg.norm(axes, axis=0, keepdims=True)
+    return glm.quat_cast(glm.mat3(*axes.T.reshape(-1).tolist()))
+
+
+def _turn_about(angle: float, place: np.ndarray) -> np.ndarray:
+    """The matrix (4, 4) turning by ``angle`` about the vertical through ``place`` (x, z)."""
+    c, s = math.cos(angle), math.sin(angle)
+    turn = np.array([[c, 0.0, s, 0.0], [0.0, 1.0, 0.0, 0.0], [-s, 0.0, c, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    there, back = np.eye(4), np.eye(4)
+    there[[0, 2], 3], back[[0, 2], 3] = place[[0, 2]], -place[[0, 2]]
+    return there @ turn @ back
 
 
 def clip_duration(world: World, root: int, clip_name: str) -> float:
