@@ -445,3 +445,23 @@ def test_a_morph_changing_its_weights_streaks_by_them(scene):
     np.testing.assert_allclose(at(streaks(runner), pixel), pixel - gl_pixel(view_proj, was), rtol=0.05, atol=0.1)
     still = gl_pixel(view_proj, glm.vec3(-0.5, 1.2, 0.0))
     assert at(runner.ids(), still) == ents["sheet"] and np.abs(at(streaks(runner), still)).max() < 1e-3
+
+
+def test_a_skinned_thing_spawned_while_streaking_does_not_streak_from_nowhere(scene):
+    """The first posed entity comes while motion blur streaks moving things: last frame's pose
+    texture is made for it in the same frame, its pose as it is (no streak at all)."""
+    from components import Skin
+    from tests.test_skinning import RED, elbow_matrix, skinned_bar
+
+    ents = {}
+    runner = started(lambda world: wall_scene(world, ents))(scene)
+    renderer = runner.engine.renderer
+    assert renderer.pose_rows.texture is None and renderer.object_motion.on
+    arm = runner.world.spawn(Transform(position=(1.0, 0.5, 0.5)), MeshRef(skinned_bar()), Material(color=RED),
+                             Skin(np.stack([np.eye(4), elbow_matrix(0.6)])))
+    runner.frame()
+    assert renderer.pose_rows.before is not None
+    view_proj = glm.mat4(runner.engine.main_view.view_proj)
+    pixel = gl_pixel(view_proj, glm.vec3(1.0, 0.5 + 0.4, 0.5 + 0.15))   # (low on its front: the elbow's below)
+    assert at(runner.ids(), pixel) == arm
+    assert np.abs(runner.engine.renderer.targets.read_motion()).max() == 0.0

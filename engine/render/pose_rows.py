@@ -48,6 +48,7 @@ class PoseRows:
         self.before: moderngl.Texture | None = None
         self._written: set[int] = set()
         self._new: set[int] = set()   # rows taken this frame (their before is their first pose)
+        self._tracking = False        # track's last word
 
     def __len__(self) -> int:
         return len(self._rows)
@@ -82,6 +83,7 @@ class PoseRows:
         last frame's rows (those written in it copied across; ``dt`` 0 keeps it as it is);
         without, it is released.  Returns whether ``before`` changed (what was drawn with it
         is not kept: a pose that stopped has no streak)."""
+        self._tracking = on
         if not on or self.texture is None:
             if self.before is not None:
                 self.before.release()
@@ -104,7 +106,12 @@ class PoseRows:
 
     def settle_new(self) -> None:
         """Rows first written this frame start ``before`` as they are (the prepare stage, after
-        the extract stage's writes): a thing just posed did not move."""
+        the extract stage's writes): a thing just posed did not move.  The first posed entity
+        while tracking gets ``before`` made here (no draw reads a texture not made)."""
+        if self._tracking and self.texture is not None and self.before is None:
+            self.before = self._texture(self._kept)
+            self.version += 1
+            self._new.clear()
         if self.before is not None and self._new:
             self._copy_before(self._new)
             self._new.clear()
