@@ -233,6 +233,21 @@ def glowing(path: Path, metallic: tuple[float, float] = (0.0, 1.0), camera: int 
     return edit_glb(door(path), change)
 
 
+def playing_lamp(path: Path, clip: str, **spawned) -> tuple:
+    """The door model of ``path`` spawned playing ``clip`` once: (world, its models stage, the
+    door's part, the lamp's entity, the camera's entity)."""
+    from components import Camera, PointLight
+    from systems.model_system import ModelSystem
+
+    world = World(clip)
+    root = spawn_model(world, path, **spawned)
+    world.add_component(root, Animation(clip=clip, loop=False))
+    record = world.resources[SpawnedModels][root]
+    (lamp, _), = world.query_one(PointLight)
+    (eye, _), = world.query_one(Camera)
+    return world, ModelSystem(world), record.parts[record.nodes.index(1)], lamp, eye
+
+
 def test_animation_pointers_play_a_materials_colour_a_lights_intensity_and_a_cameras_lens(tmp_path):
     """A clip of KHR_animation_pointer channels at a material's baseColorFactor (linear) and
     metallicFactor (step), a spot light's intensity (linear; the engine's is the file's times
@@ -240,17 +255,8 @@ def test_animation_pointers_play_a_materials_colour_a_lights_intensity_and_a_cam
     keys' values mixed as glTF says (worked out here); keys outside a property's range, or a
     pointer at a camera the file lacks, are refused naming the channel."""
     from components import Camera, PointLight
-    from engine.assets.models import SpawnedModels
-    from systems.model_system import ModelSystem
 
-    world = World("glowing")
-    root = spawn_model(world, glowing(tmp_path / "door.glb"), light_scale=2.0)
-    world.add_component(root, Animation(clip="Glow", loop=False))
-    stage = ModelSystem(world)
-    record = world.resources[SpawnedModels][root]
-    door_part = record.parts[record.nodes.index(1)]
-    (lamp, _), = world.query_one(PointLight)
-    (eye, _), = world.query_one(Camera)
+    world, stage, door_part, lamp, eye = playing_lamp(glowing(tmp_path / "door.glb"), "Glow", light_scale=2.0)
     for dt, t in ((0.5, 0.5), (1.0, 1.5)):
         stage.process(dt)
         s = t / 2.0
@@ -317,16 +323,8 @@ def test_animation_pointers_play_emission_map_strengths_a_spots_cones_and_range_
     ymag (half its height): at each time the components hold the keys' mix; a cone past 90
     degrees is refused naming the channel."""
     from components import Camera, Emissive, PointLight
-    from systems.model_system import ModelSystem
 
-    world = World("pulsing")
-    root = spawn_model(world, pulsing(tmp_path / "door.glb"))
-    world.add_component(root, Animation(clip="Pulse", loop=False))
-    stage = ModelSystem(world)
-    record = world.resources[SpawnedModels][root]
-    door_part = record.parts[record.nodes.index(1)]
-    (lamp, _), = world.query_one(PointLight)
-    (eye, _), = world.query_one(Camera)
+    world, stage, door_part, lamp, eye = playing_lamp(pulsing(tmp_path / "door.glb"), "Pulse")
     assert world.try_get(door_part, Emissive) is None   # (black at rest)
     red = world.get(door_part, Material).color[0]       # its diffuse's strongest channel (0.7, as the file keeps it)
     for dt, t in ((0.5, 0.5), (1.0, 1.5)):

@@ -40,11 +40,18 @@ def streaks(runner) -> np.ndarray:
     return runner.engine.renderer.present_pass.motion_blur.streaks()
 
 
+def streaking_camera(world, eye, target, shutter: float = 1.0, objects: bool = True) -> int:
+    """A lit sky and a camera at ``eye`` looking at ``target`` with a MotionBlur (streaks up
+    to a fifth of the height)."""
+    base_scene(world)
+    camera = look_from(world, tuple(eye), tuple(target))
+    world.add_component(camera, MotionBlur(shutter=shutter, max_blur=0.2, objects=objects))
+    return camera
+
+
 def wall_scene(world, ents, shutter=1.0, objects=True):
     """A still camera before a checkered wall, a red box in front of it."""
-    base_scene(world)
-    ents["camera"] = look_from(world, tuple(EYE), (0, 1.5, 0))
-    world.add_component(ents["camera"], MotionBlur(shutter=shutter, max_blur=0.2, objects=objects))
+    ents["camera"] = streaking_camera(world, EYE, (0, 1.5, 0), shutter, objects)
     world.spawn(Transform(position=(0, 1.5, -3)), MeshRef(quad(30, 12)),
                 Material(color=(0.8, 0.8, 0.8), texture=checker_texture(256, 32)))
     world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.5, 0.5, 0.5)))
@@ -137,9 +144,7 @@ def test_a_moving_box_smears_out_over_the_still_wall_round_it(scene):
 
 def mirror_scene(world, ents):
     """A mirror ahead of a still camera; a box behind the camera, seen only in the mirror."""
-    base_scene(world)
-    ents["camera"] = look_from(world, (0.0, 1.5, 2.0), (0, 1.5, 0))
-    world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+    ents["camera"] = streaking_camera(world, (0.0, 1.5, 2.0), (0, 1.5, 0))
     ents["mirror"] = world.spawn(Transform(position=(0, 1.5, 0)), MeshRef(quad(2.6, 1.8)),
                                  Material(color=(0.1, 0.1, 0.1)), Mirror())
     world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.8, 0.8, 0.8), texture=checker_texture(256, 32)))
@@ -309,9 +314,7 @@ def test_a_box_carried_through_a_portal_streaks_by_its_step_not_across_the_room(
     ents = {}
 
     def build(world):
-        base_scene(world)
-        ents["camera"] = look_from(world, (6.0, 1.5, 5.0), (6.0, 1.5, 0.0))
-        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        ents["camera"] = streaking_camera(world, (6.0, 1.5, 5.0), (6.0, 1.5, 0.0))
         spawn_portal_pair(world, (0, 1.5, 0), None, (6, 1.5, 0), None, size=(2.0, 2.0))
         world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.6, 0.6, 0.6)))
         ents["box"] = world.spawn(Transform(position=(0.0, 1.5, 0.8), scale=(0.5, 0.5, 0.5)), MeshRef(box()),
@@ -339,9 +342,7 @@ def test_alike_motion_is_the_shutters_average_along_the_streak(scene):
     ents = {}
 
     def build(world):
-        base_scene(world)
-        ents["camera"] = look_from(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
-        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        ents["camera"] = streaking_camera(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
         world.spawn(Transform(position=(0, 1.5, 0)), MeshRef(quad(40, 20)),
                     Material(color=(0.8, 0.8, 0.8), texture=checker_texture(256, 64)))
 
@@ -381,9 +382,7 @@ def test_a_bending_arm_streaks_by_its_pose_seen_directly_and_in_a_mirror(scene, 
     ents = {}
 
     def build(world):
-        base_scene(world)
-        ents["camera"] = look_from(world, (0.0, 1.2, 5.0), (0, 1.2, 0))
-        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        ents["camera"] = streaking_camera(world, (0.0, 1.2, 5.0), (0, 1.2, 0))
         world.spawn(Transform(position=(0, 1.2, -2.5)), MeshRef(quad(6.0, 3.0)), Material(color=(0.1, 0.1, 0.1)),
                     Mirror())
         ents["arm"] = world.spawn(Transform(position=(-0.8, 0.0, 0.0)), MeshRef(skinned_bar()), Material(color=RED),
@@ -430,9 +429,7 @@ def test_a_morph_changing_its_weights_streaks_by_them(scene):
     ents = {}
 
     def build(world):
-        base_scene(world)
-        ents["camera"] = look_from(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
-        world.add_component(ents["camera"], MotionBlur(shutter=1.0, max_blur=0.2))
+        ents["camera"] = streaking_camera(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
         ents["sheet"] = world.spawn(Transform(), MeshRef(morphed_sheet()), Material(color=RED), Morph((0.0, 0.0)))
 
     runner = started(build)(scene)
