@@ -38,6 +38,7 @@ from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 
 from components.post import TONEMAP_CURVES
 from engine.render.bindings import bind_texture, invalidate
+from engine.render.present import ANTIALIAS_MODES
 from shell.editor_panels import POSITION, EditorPanels
 from shell.overlay_text import overlay_lines
 
@@ -321,10 +322,9 @@ class DebugOverlay(EditorPanels):
         imgui.same_line(spacing=24)
         _, self.show_entities = imgui.checkbox("entities", self.show_entities)
         self._widget("entities")
-        changed, fxaa = imgui.checkbox("FXAA", renderer.antialias == "fxaa")
-        if changed:
-            renderer.antialias = "fxaa" if fxaa else "off"
-        self._widget("fxaa")
+        chosen = self._radios("AA", ANTIALIAS_MODES, renderer.antialias, "aa")
+        if chosen != renderer.antialias:
+            renderer.antialias = chosen
         present = engine.stages["present"]
         for label, stage, switch in (("shadows", engine.stages["shadows"], "enabled"), ("bloom", present, "bloom"),
                                      ("fog", engine.stages["prepare"], "fog"), ("grade", present, "grade"),

@@ -2,7 +2,7 @@
 
   python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR] [--level FILE.toml]
                          [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
-                         [--dt SECONDS] [--gif FILE.gif] [--aa fxaa|off] [--overlay]
+                         [--dt SECONDS] [--gif FILE.gif] [--aa fxaa|taa|off] [--overlay]
                          [--asset-root DIR ...] [--reload]
 
 With no display the runner goes headless by itself and says so.

@@ -74,7 +74,8 @@ class ExtractSystem(esper.Processor):
         renderer = self.renderer
         # Per-object motion blur: on while the camera's last presented motion blur streaked
         # moving things (the first frame of a motion blur has no last frame to streak from).
-        renderer.begin_object_motion(renderer.present_pass.streaks_objects, dt,
+        # Temporal AA reprojects by it too.
+        renderer.begin_object_motion(renderer.present_pass.streaks_objects or renderer.antialias == "taa", dt,
                                      world.resources.get(PortalCrossings, ()))
         motion = renderer.object_motion if renderer.object_motion.on else None
         # A component of probe_rules.LOOK_KINDS changed, or the probe the entity samples did (a

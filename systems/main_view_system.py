@@ -28,6 +28,7 @@ from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
 from engine.render.scene_options import TREE_ROOT, SceneOptions
 from engine.render.scene_programs import reflects_environment
+from engine.render.temporal_aa import jittered
 from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import camera_view
 from engine.resources import Surfaces, ViewBudget
@@ -80,6 +81,8 @@ class MainViewSystem(esper.Processor):
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size,
                                  ortho_height=cam.ortho_height if cam.projection == "orthographic" else None)
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
+        if self.renderer.antialias == "taa":   # (its sub-pixel offset this frame: temporal AA)
+            jittered(views.main, self.renderer.present_pass.temporal.offset(output.size))
         views.options = self._root_options()
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
         self.occluded = occlusion

@@ -159,7 +159,9 @@ def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
         assert config.engine.reflection_system.path == "batched"
         click("probe layered")
         assert config.engine.stages["probes"].path == "layered"
-        click("fxaa")
+        click("aa taa")
+        assert config.engine.renderer.antialias == "taa"
+        click("aa off")
         assert config.engine.renderer.antialias == "off"
         click("shadows")
         assert not config.engine.stages["shadows"].enabled

@@ -65,9 +65,10 @@ from engine.render.object_motion import ObjectMotion
 from engine.render.post import AutoExposure
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import CaptureTarget
+from engine.render.temporal_aa import TemporalPass
 from engine.render.views import View
 
-ANTIALIAS_MODES = ("fxaa", "off")
+ANTIALIAS_MODES = ("fxaa", "taa", "off")
 MAX_SEARCH_STEPS = 8   # the length of fxaa.frag's SEARCH table
 GPU_SEARCH_STEPS = 8
 _PRESENT = PassState()
@@ -124,6 +125,7 @@ class PresentPass:
         self._occlusion_view: moderngl.VertexArray | None = None  # the overlay's "AO only" view, made on first use
         self._depth_of_field: DepthOfFieldPass | None = None  # made when a camera first has a DepthOfField
         self._motion_blur: MotionBlurPass | None = None       # made when a camera first has a MotionBlur
+        self._temporal: TemporalPass | None = None             # made when temporal AA is first on
         self.grain_seed = 0   # film grain's frame: a new one each frame with time in it
 
     @property
@@ -132,6 +134,13 @@ class PresentPass:
         if self._motion_blur is None:
             self._motion_blur = MotionBlurPass(self.ctx, self.shaders, self.moving)
         return self._motion_blur
+
+    @property
+    def temporal(self) -> TemporalPass:
+        """The temporal anti-aliasing pass (``engine/render/temporal_aa.py``), made on first use."""
+        if self._temporal is None:
+            self._temporal = TemporalPass(self.ctx, self.shaders)
+        return self._temporal
 
     @property
     def streaks_objects(self) -> bool:
@@ -206,6 +215,11 @@ class PresentPass:
                 self._encoded.release()
             self._encoded = CaptureTarget(self.ctx, size)
         self.post_passes = 0
+        if antialias == "taa" and seen is not None and view is not None:   # (first: the lens blurs a steady picture)
+            hdr = self.temporal.draw(hdr, seen, view, camera, dt)
+            self.post_passes += 1
+        elif self._temporal is not None:
+            self._temporal.release_targets()
         if focus is not None and seen is not None:
             hdr = self.depth_of_field.draw(hdr, seen, focus, post.fov_y, camera, dt)
             self.post_passes += self.depth_of_field.passes
@@ -365,7 +379,8 @@ class PresentPass:
         return (self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
                 + (self._lut is not None)
                 + (self._depth_of_field.target_count() if self._depth_of_field is not None else 0)
-                + (self._motion_blur.target_count() if self._motion_blur is not None else 0))
+                + (self._motion_blur.target_count() if self._motion_blur is not None else 0)
+                + (self._temporal.target_count() if self._temporal is not None else 0))
 
     def release(self) -> None:
         self._lut_texture(None)
@@ -383,6 +398,9 @@ class PresentPass:
         if self._motion_blur is not None:
             self._motion_blur.release()
             self._motion_blur = None
+        if self._temporal is not None:
+            self._temporal.release()
+            self._temporal = None
         self._post.clear()
         self.bloom.release()
         self.auto_exposure.release()

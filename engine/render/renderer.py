@@ -120,7 +120,9 @@ class Renderer(Gpu):
     @property
     def antialias(self) -> str:
         """Anti-aliasing of the presented frame: "fxaa" (the default: a filter on the final
-        colour; ids, mirrors and portals untouched; ``engine/render/present.py``) or "off"."""
+        colour; ids, mirrors and portals untouched; ``engine/render/present.py``), "taa" (each
+        frame drawn from a sub-pixel offset and blended into the frames before, reprojected:
+        ``engine/render/temporal_aa.py``) or "off"."""
         return self._antialias
 
     @antialias.setter

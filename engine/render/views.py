@@ -92,6 +92,7 @@ class View:
     hide: int = 0  # an entity no view of the tree draws (a probe's own object), whatever surface it looks out of
     kinds: int = VIEW_DIRECT     # the kinds of view it is (components/limits.py): an entity hidden in one is not drawn
     layers: int = ALL_LAYERS     # the reflection layers it shows
+    jitter: tuple[float, float] = (0.0, 0.0)  # its projection's sub-pixel offset (temporal AA: temporal_aa.jittered)
     _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
 
     @property

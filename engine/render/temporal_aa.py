@@ -1,0 +1,141 @@
+"""Temporal anti-aliasing (``Renderer.antialias = "taa"``): each frame drawn from a camera
+moved by a sub-pixel offset, blended into the history of the frames before
+(``shaders/temporal_resolve.frag``), the first pass after the views are drawn.
+
+The offsets are the Halton (2, 3) sequence's first ``JITTER_SAMPLES`` points, one a frame, as
+Unreal's and Unity's temporal AA take them: over those frames every pixel has been sampled
+across its area, so an edge's pixels settle to its coverage (supersampling spread over
+time).  The main view's projection is moved (``jittered``); the mirror and portal views are
+built from it, so they move alike, and their composites stay aligned.  The history is
+fetched where each pixel's point was last frame (the light's way for the camera's motion,
+the seen image's own motion for a thing's: ``engine/render/object_motion.py`` is on while
+this is) and clipped to this frame's colours round the pixel, so moving things leave no
+trail.  A cut (another camera, a new size, the first frame) starts the history again.  A
+frame of dt 0 (a screenshot) does not move the offset on and blends as the frame before.
+
+Costs: one full-screen pass of 15 fetches a pixel; the main view changes every frame, so a
+still camera's reflection levels are drawn again each frame rather than kept
+(``systems/reflection_system.py``'s still trees), as a GPU engine's temporal AA does.
+"""
+from __future__ import annotations
+
+import moderngl
+from pyglm import glm
+
+from engine.render.bindings import (
+    DOF_SEEN_UNIT,
+    PRESENT_UNIT,
+    TEMPORAL_HISTORY_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_texture,
+)
+from engine.render.shader_library import ShaderLibrary
+from engine.render.targets import SEEN_MOVING_CHANNELS, release_framebuffer
+from engine.render.views import View
+
+JITTER_SAMPLES = 8     # offsets before the sequence repeats
+BLEND = 0.1            # this frame's share of the resolved picture
+_PASS = PassState()
+
+
+def halton(index: int, base: int) -> float:
+    """The ``index``-th (from 1) point of the radical inverse in ``base``, in (0, 1)."""
+    result, fraction = 0.0, 1.0
+    while index > 0:
+        fraction /= base
+        result += fraction * (index % base)
+        index //= base
+    return result
+
+
+def jitter_offset(frame: int, size: tuple[int, int]) -> tuple[float, float]:
+    """Frame ``frame``'s offset of the projection in normalised device units (the picture is
+    2 wide): a point of the Halton (2, 3) sequence less a half, in pixels, over the size."""
+    index = frame % JITTER_SAMPLES + 1
+    return ((halton(index, 2) - 0.5) * 2.0 / size[0], (halton(index, 3) - 0.5) * 2.0 / size[1])
+
+
+def jittered(view: View, offset: tuple[float, float]) -> View:
+    """``view`` with its projection moved by ``offset`` (normalised device units)."""
+    view.proj = glm.translate(glm.vec3(offset[0], offset[1], 0.0)) * view.proj
+    view.jitter = offset
+    return view
+
+
+class TemporalPass:
+    """The resolve and its history: ``draw`` returns the anti-aliased HDR image."""
+
+    def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
+        self.ctx = ctx
+        program = shaders.program("fullscreen.vert", "temporal_resolve.frag")
+        for name, unit in (("current_image", PRESENT_UNIT), ("history_image", TEMPORAL_HISTORY_UNIT),
+                           ("seen_image", DOF_SEEN_UNIT)):
+            program[name].value = unit
+        self._resolve = ctx.vertex_array(program, [])
+        self._history: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []   # [written last, the other]
+        self.frame = 0                              # the jitter's frame (moved on by frames of dt > 0)
+        self.previous: glm.mat4 | None = None       # last frame's view-projection without its jitter
+        self.camera: int | None = None
+        self.resolved = 0                           # frames blended into the history since its last cut
+
+    def offset(self, size: tuple[int, int]) -> tuple[float, float]:
+        """This frame's jitter for a picture of ``size``."""
+        return jitter_offset(self.frame, size)
+
+    def _make(self, size: tuple[int, int]) -> None:
+        if self._history and self._history[0][0].size == size:
+            return
+        self.release_targets(keep_view=True)
+        for _ in range(2):
+            texture = self.ctx.texture(size, 4, dtype="f2")
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)   # (the history is fetched between texels)
+            texture.repeat_x = texture.repeat_y = False
+            self._history.append((texture, self.ctx.framebuffer([texture])))
+
+    def draw(self, hdr: moderngl.Texture, seen: moderngl.Texture, view: View, camera: int | None,
+             dt: float) -> moderngl.Texture:
+        """Blend ``hdr`` (drawn through ``view``, jittered) into the history; returns the
+        resolved image (the history now, kept until the next draw)."""
+        size = hdr.size
+        offset = getattr(view, "jitter", (0.0, 0.0))
+        steady = glm.translate(glm.vec3(-offset[0], -offset[1], 0.0)) * view.view_proj
+        cut = camera != self.camera or not self._history or self._history[0][0].size != size \
+            or self.previous is None
+        self._make(size)
+        written, other = self._history
+        program = self._resolve.program
+        other[1].use()
+        apply_pass_state(self.ctx, _PASS, (0, 0, *size))
+        bind_texture(self.ctx, hdr, PRESENT_UNIT)
+        bind_texture(self.ctx, written[0], TEMPORAL_HISTORY_UNIT)
+        bind_texture(self.ctx, seen, DOF_SEEN_UNIT)
+        program["inv_view_proj"].write(glm.inverse(steady))
+        program["previous_view_proj"].write(steady if cut else self.previous)
+        program["eye"].value = tuple(view.eye)
+        program["axis"].value = tuple(view.axis)
+        program["objects"].value = seen.components == SEEN_MOVING_CHANNELS
+        program["blend"].value = 1.0 if cut else BLEND
+        self._resolve.render(moderngl.TRIANGLES, vertices=3)
+        if dt > 0.0 or cut:   # (a frame of dt 0 leaves the history as it was: the next blends from it)
+            self._history.reverse()
+            self.previous, self.camera = steady, camera
+            self.resolved = 1 if cut else self.resolved + 1
+        if dt > 0.0:
+            self.frame += 1
+        return other[0]
+
+    def release_targets(self, keep_view: bool = False) -> None:
+        for texture, framebuffer in self._history:
+            release_framebuffer(framebuffer)
+            texture.release()
+        self._history.clear()
+        if not keep_view:
+            self.previous, self.camera, self.resolved = None, None, 0
+
+    def target_count(self) -> int:
+        return len(self._history)
+
+    def release(self) -> None:
+        self.release_targets()
+        self._resolve.release()

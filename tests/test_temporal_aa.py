@@ -1,0 +1,166 @@
+"""Temporal anti-aliasing (``Renderer.antialias = "taa"``; ``engine/render/temporal_aa.py``,
+``shaders/temporal_resolve.frag``): the jitter's offsets against the Halton sequence and the
+main view's projection; a still edge settling to the picture drawn four times larger and
+averaged down (a second path); a panning camera, a reflection and a moving box reprojected
+with no trail against that reference too; a cut starting the history again."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import Camera, Material, MeshRef, Mirror, Transform
+from engine.assets.mesh import quad
+from engine.render.temporal_aa import JITTER_SAMPLES, halton, jitter_offset
+from tests.support import look_from
+from tests.test_mirrors import base_scene
+
+SIZE = (96, 72)
+SCALE = 4   # the reference is drawn this many times larger and averaged down
+
+
+def linear(rgb: np.ndarray) -> np.ndarray:
+    encoded = rgb.astype(float) / 255.0
+    return np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
+
+
+def averaged_down(rgb: np.ndarray) -> np.ndarray:
+    """A picture SCALE times larger, each SCALE x SCALE block averaged in linear light."""
+    h, w = rgb.shape[0] // SCALE, rgb.shape[1] // SCALE
+    return linear(rgb).reshape(h, SCALE, w, SCALE, 3).mean(axis=(1, 3))
+
+
+def edge_scene(world):
+    """A white square turned 12 degrees on a dark wall: long slanted edges."""
+    base_scene(world)
+    look_from(world, (0.0, 1.5, 4.0), (0, 1.5, 0))
+    world.spawn(Transform(position=(0, 1.5, -1.0)), MeshRef(quad(20, 20)), Material(color=(0.05, 0.05, 0.05)))
+    world.spawn(Transform(position=(0.2, 1.5, 0.0), rotation=glm.angleAxis(glm.radians(12.0), glm.vec3(0, 0, 1))),
+                MeshRef(quad(1.6, 1.6)), Material(color=(1.0, 1.0, 1.0)))
+
+
+def runs(scene, build, mode: str, size=SIZE):
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = mode
+    return runner
+
+
+def test_the_offsets_are_the_halton_points_and_move_the_main_projection(scene):
+    """Eight offsets, each the Halton (2, 3) point less a half pixel, all within the pixel and
+    apart; the main view's projection is the camera's moved by the frame's offset."""
+    offsets = [jitter_offset(frame, SIZE) for frame in range(JITTER_SAMPLES)]
+    assert len(set(offsets)) == JITTER_SAMPLES and jitter_offset(JITTER_SAMPLES, SIZE) == offsets[0]
+    for frame, (x, y) in enumerate(offsets):
+        assert x * SIZE[0] / 2.0 == pytest.approx(halton(frame + 1, 2) - 0.5)
+        assert y * SIZE[1] / 2.0 == pytest.approx(halton(frame + 1, 3) - 0.5)
+        assert abs(x * SIZE[0] / 2.0) < 0.5 and abs(y * SIZE[1] / 2.0) < 0.5
+    assert [halton(i, 2) for i in (1, 2, 3, 4)] == [0.5, 0.25, 0.75, 0.125]
+    plain, jittered = runs(scene, edge_scene, "off"), runs(scene, edge_scene, "taa")
+    for _ in range(3):
+        plain.frame()
+        jittered.frame()
+    x, y = jitter_offset(2, SIZE)
+    moved = glm.translate(glm.vec3(x, y, 0.0)) * plain.engine.main_view.proj
+    for column in range(4):
+        np.testing.assert_allclose(list(jittered.engine.main_view.proj[column]), list(moved[column]), atol=1e-6)
+
+
+def test_a_still_edge_settles_to_the_picture_drawn_larger_and_averaged_down(scene):
+    """Sixteen frames of a still camera: the slanted edges' pixels hold their coverage, as the
+    picture drawn four times larger and averaged down has them, much nearer than a frame
+    without anti-aliasing (and nearer than FXAA's)."""
+    reference = averaged_down(runs(scene, edge_scene, "off", (SIZE[0] * SCALE, SIZE[1] * SCALE)).frame())
+    errors = {}
+    for mode in ("off", "fxaa", "taa"):
+        runner = runs(scene, edge_scene, mode)
+        for _ in range(16):
+            picture = runner.frame()
+        errors[mode] = np.abs(linear(picture) - reference)
+    edges = errors["off"].max(axis=2) > 0.05   # (where drawing larger changes anything)
+    assert edges.sum() > 40
+    mean = {mode: float(error[edges].mean()) for mode, error in errors.items()}
+    assert mean["taa"] < 0.5 * mean["off"] and mean["taa"] < mean["fxaa"], mean
+
+
+def bright_centre(picture: np.ndarray) -> tuple[float, float]:
+    """The centre of the picture's light above the dark wall's (linear), in pixels."""
+    weight = np.clip(picture.mean(axis=2) - 0.1, 0.0, None)
+    rows, columns = np.indices(weight.shape)
+    return float((weight * columns).sum() / weight.sum()), float((weight * rows).sum() / weight.sum())
+
+
+def mirrored_square(world):
+    """The white square behind the camera, seen only in a mirror before it."""
+    base_scene(world)
+    look_from(world, (0.0, 1.5, 3.0), (0, 1.5, 0))
+    world.spawn(Transform(position=(0, 1.5, -0.5)), MeshRef(quad(20, 20)), Material(color=(0.05, 0.05, 0.05)))
+    world.spawn(Transform(position=(0, 1.5, 0.0)), MeshRef(quad(3.0, 2.4)), Material(color=(0.05, 0.05, 0.05)),
+                Mirror())
+    world.spawn(Transform(position=(0.2, 1.5, 6.0), rotation=glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0))
+                          * glm.angleAxis(glm.radians(12.0), glm.vec3(0, 0, 1))),
+                MeshRef(quad(1.6, 1.6)), Material(color=(1.0, 1.0, 1.0)))
+
+
+@pytest.mark.parametrize(("build", "moving"), [(edge_scene, "camera"), (edge_scene, "square"),
+                                               (mirrored_square, "camera")])
+def test_reprojected_history_follows_what_moves_and_leaves_no_trail(scene, build, moving):
+    """Sixteen frames of the camera panning (or the square sliding; or the camera panning
+    before a mirror that shows the square behind it): the resolved square stands where the
+    picture drawn four times larger and averaged down has it (its light's centre within a
+    third of a pixel: the history fetched where each point was, by the light's way through the
+    mirror and the thing's own motion), as near that picture as a still frame's is; nothing
+    of it stays where it was eight frames ago."""
+    def run(mode: str, size: tuple[int, int]) -> list[np.ndarray]:
+        runner = runs(scene, build, mode, size)
+        camera = next(entity for entity, _ in runner.world.query_one(Camera))
+        square = max(entity for entity, (_, material) in runner.world.query(MeshRef, Material)
+                     if material.color[0] == 1.0)
+        runner.frame()
+        pictures = []
+        for _ in range(16):
+            if moving == "camera":
+                runner.world.get(camera, Transform).position += glm.vec3(0.05, 0.0, 0.0)
+            else:
+                runner.world.get(square, Transform).position += glm.vec3(0.05, 0.0, 0.0)
+            pictures.append(runner.frame())
+        return pictures
+
+    resolved = linear(run("taa", SIZE)[-1])
+    references = [averaged_down(picture) for picture in run("off", (SIZE[0] * SCALE, SIZE[1] * SCALE))[-9::8]]
+    reference = references[-1]
+    found, wanted = bright_centre(resolved), bright_centre(reference)
+    assert abs(found[0] - wanted[0]) < 0.35 and abs(found[1] - wanted[1]) < 0.35, (found, wanted)
+    error = np.abs(resolved - reference)
+    assert error.mean() < 0.01, error.mean()
+    # Where the square was eight frames ago and is not now (two pixels clear of it): no white left.
+    now = np.pad(reference.mean(axis=2) > 0.2, 2)
+    near = np.zeros(reference.shape[:2], bool)
+    for dy in range(5):
+        for dx in range(5):
+            near |= now[dy: dy + near.shape[0], dx: dx + near.shape[1]]
+    trail = (references[0].mean(axis=2) > 0.2) & ~near
+    assert trail.sum() > 10
+    assert error.max(axis=2)[trail].max() < 0.05, error.max(axis=2)[trail].max()
+
+
+def test_a_cut_starts_the_history_again(scene):
+    """Another camera made the active one: the next frame is the new view alone, with
+    nothing of the old one's history in it (as a first frame is)."""
+    ents = {}
+
+    def build(world):
+        edge_scene(world)
+        ents["camera"] = next(entity for entity, _ in world.query_one(Camera))
+        ents["other"] = world.spawn(Transform(position=(3.0, 1.5, 3.0)), Camera(active=False))
+
+    runner = runs(scene, build, "taa")
+    for _ in range(4):
+        runner.frame()
+    assert runner.engine.renderer.present_pass.temporal.resolved == 4
+    runner.world.get(ents["camera"], Camera).active = False
+    runner.world.get(ents["other"], Camera).active = True
+    runner.frame()
+    assert runner.engine.renderer.present_pass.temporal.resolved == 1
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    assert runner.engine.renderer.present_pass.temporal.target_count() == 0
