@@ -116,7 +116,7 @@ def test_the_settings_refuse_what_they_do_not_know(scene):
     runner = scene(tilted_box(10.0), SIZE)
     renderer = runner.engine.renderer
     assert renderer.antialias == "fxaa"  # on by default
-    with pytest.raises(ValueError, match=r"antialias must be one of 'fxaa', 'off', got 'msaa'"):
+    with pytest.raises(ValueError, match=r"antialias must be one of 'fxaa', 'taa', 'off', got 'msaa'"):
         renderer.antialias = "msaa"
     with pytest.raises(ValueError, match=r"search_steps must be an int from 0 to 8, got 9"):
         renderer.present_pass.search_steps = 9
