@@ -125,18 +125,21 @@ def test_the_settings_refuse_what_they_do_not_know(scene):
 
 def test_runner_aa_flag(tmp_path):
     """``--aa off`` and ``--aa fxaa`` write the same ids; the frames differ, only at edges;
-    an unknown mode is refused by the command line."""
+    ``--aa taa`` (its third frame) likewise, its ids moved by its sub-pixel offsets at edges
+    alone; an unknown mode is refused by the command line."""
     written = {}
-    for mode in ("off", "fxaa"):
+    for mode in ("off", "fxaa", "taa"):
         out = tmp_path / mode
-        done = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "1",
+        done = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "3",
                                "--size", "160x90", "--ids", "--out", str(out), "--aa", mode],
                               cwd=ROOT, capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr
-        written[mode] = (np.asarray(Image.open(out / "frame_0000.png")).astype(int), np.load(out / "ids_0000.npy"))
+        written[mode] = (np.asarray(Image.open(out / "frame_0002.png")).astype(int), np.load(out / "ids_0002.npy"))
     np.testing.assert_array_equal(written["off"][1], written["fxaa"][1])
-    changed = np.abs(written["off"][0] - written["fxaa"][0]).max(axis=2) > 0
-    assert 0.02 < changed.mean() < 0.5
+    for mode in ("fxaa", "taa"):
+        changed = np.abs(written["off"][0] - written[mode][0]).max(axis=2) > 8
+        assert 0.005 < changed.mean() < 0.5, (mode, changed.mean())
+    assert (written["off"][1] == written["taa"][1]).mean() > 0.9
     bad = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--aa", "msaa"],
                          cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "--aa: invalid choice: 'msaa'" in bad.stderr
