@@ -164,3 +164,20 @@ def test_a_cut_starts_the_history_again(scene):
     runner.engine.renderer.antialias = "off"
     runner.frame()
     assert runner.engine.renderer.present_pass.temporal.target_count() == 0
+
+
+def test_the_offsets_are_not_motion_to_the_motion_blur(scene):
+    """A still camera with motion blur under temporal AA: the frames' sub-pixel offsets are
+    not motion, so no motion blur pass is drawn (the resolve's is the one post pass)."""
+    from components import MotionBlur
+
+    def build(world):
+        edge_scene(world)
+        camera = next(entity for entity, _ in world.query_one(Camera))
+        world.add_component(camera, MotionBlur(shutter=1.0))
+
+    runner = runs(scene, build, "taa")
+    for _ in range(4):
+        runner.frame()
+        present = runner.engine.renderer.present_pass
+        assert present.motion_blur.passes == 0 and present.post_passes == 1

@@ -128,7 +128,7 @@ class MotionBlurPass:
         frame's view for the next.  Returns the smeared image (kept until the next draw), or
         ``hdr`` itself where the view is last frame's and nothing moved (no pass)."""
         size = hdr.size
-        now = glm.mat4(view.view_proj)
+        now = glm.mat4(view.steady_view_proj)   # (temporal AA's sub-pixel offsets are no motion)
         self.objects = settings.objects
         self.passes = 0
         if camera != self.camera or size != self._size or self.previous is None:

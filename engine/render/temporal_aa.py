@@ -98,8 +98,7 @@ class TemporalPass:
         """Blend ``hdr`` (drawn through ``view``, jittered) into the history; returns the
         resolved image (the history now, kept until the next draw)."""
         size = hdr.size
-        offset = getattr(view, "jitter", (0.0, 0.0))
-        steady = glm.translate(glm.vec3(-offset[0], -offset[1], 0.0)) * view.view_proj
+        steady = view.steady_view_proj
         cut = camera != self.camera or not self._history or self._history[0][0].size != size \
             or self.previous is None
         self._make(size)

@@ -100,6 +100,14 @@ class View:
         return self.proj * self.view
 
     @property
+    def steady_view_proj(self) -> glm.mat4:
+        """Its view-projection without its sub-pixel offset (``jitter``): what motion from frame to
+        frame is measured by (temporal AA, motion blur), the offsets' own steps left out."""
+        if self.jitter == (0.0, 0.0):
+            return self.view_proj
+        return glm.translate(glm.vec3(-self.jitter[0], -self.jitter[1], 0.0)) * self.view_proj
+
+    @property
     def parallel(self) -> bool:
         """Whether it is orthographic (its rays parallel: Camera.projection "orthographic", and
         its mirror and portal views): its projection's fourth row is 0, 0, 0, 1."""
