@@ -345,6 +345,36 @@ def test_animation_pointers_play_emission_map_strengths_a_spots_cones_and_range_
         load_model_file(pulsing(tmp_path / "bad.glb", inner=2.0))
 
 
+def test_a_crossfade_mixes_the_properties_both_clips_animate(tmp_path):
+    """"Glow" fading into "Blue" (the material's colour held blue) over a second: half way the
+    colour is the two clips' colours mixed half and half, as the nodes' poses are; the lamp's
+    intensity, which "Blue" leaves alone, follows "Glow" until the fade ends and then holds."""
+    from components import PointLight
+    from engine.assets.models import crossfade
+
+    def blue(doc: dict) -> None:
+        first = add_accessors(doc, [np.array([0.0, 2.0], np.float32),
+                                    np.array([[0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 1.0, 1.0]], np.float32)])
+        doc["animations"].append({"name": "Blue", "samplers": [{"input": first, "output": first + 1}], "channels": [
+            {"sampler": 0, "target": {"path": "pointer", "extensions": {"KHR_animation_pointer": {
+                "pointer": "/materials/0/pbrMetallicRoughness/baseColorFactor"}}}}]})
+
+    world, stage, door_part, lamp, _ = playing_lamp(edit_glb(glowing(tmp_path / "door.glb"), blue), "Glow")
+    stage.process(0.5)                                   # Glow at 0.5 s
+    animation = next(a for _, a in world.query_one(Animation))
+    crossfade(animation, "Blue", 1.0)
+    stage.process(0.5)                                   # half way: Glow at 1.0 s, Blue at 0.5 s
+    glow = np.array([0.7, 0.4, 0.2, 1.0]) * 0.5 + np.array([0.1, 0.9, 0.3, 0.5]) * 0.5
+    np.testing.assert_allclose(list(world.get(door_part, Material).color), glow * 0.5 + np.array([0, 0, 1, 1]) * 0.5,
+                               atol=1e-5)
+    assert world.get(lamp, PointLight).intensity == pytest.approx(10.0)   # (Glow's at 1.0 s: 5 -> 15 over 2 s)
+    stage.process(0.75)                                  # the fade done: Blue alone, the intensity held
+    np.testing.assert_allclose(list(world.get(door_part, Material).color), [0.0, 0.0, 1.0, 1.0], atol=1e-6)
+    held = world.get(lamp, PointLight).intensity
+    stage.process(0.5)
+    assert world.get(lamp, PointLight).intensity == held
+
+
 def test_a_level_plays_a_clip_and_a_missing_one_is_refused_by_its_line(tmp_path):
     from engine.assets.level_file import LevelError, load_level
 

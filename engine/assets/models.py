@@ -409,8 +409,8 @@ def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool
     if moved is not None:
         matrices = {node: m for node, m in matrices.items() if node in moved}
     loaded = record.loaded
-    if clip is not None and clip.properties:
-        _pose_properties(world, record, clip, time)
+    if clip is not None and (clip.properties or (fading is not None and fading[0].properties)):
+        _pose_properties(world, record, clip, time, fading)
     rest = {thing.node: thing.local for thing in (*loaded.parts, *loaded.lights, *loaded.cameras)}
     for entity, node in zip(record.parts, record.nodes, strict=True):
         if node is None or not world.exists(entity) or (not every and node not in matrices):
@@ -462,17 +462,29 @@ def _property_targets(world: World, record: SpawnedModel) -> dict[tuple[str, int
     return record.targets
 
 
-def _pose_properties(world: World, record: SpawnedModel, clip: Clip, time: float) -> None:
+def _pose_properties(world: World, record: SpawnedModel, clip: Clip, time: float,
+                     fading: tuple[Clip, float, float] | None = None) -> None:
     """``clip``'s property channels (``KHR_animation_pointer``) at ``time`` written into what
     was made from what each names: a material's colour (a see-through part's alpha kept: its
     glass's), metallic, roughness and cutoff into its parts' Materials; a light's colour and
     intensity (times the light scale it was made with) into its light; a camera's field of
     view and clip planes into its Camera; each kept within what its field takes (a cubic
-    spline may overshoot between its keys)."""
+    spline may overshoot between its keys).  ``fading``: (the clip faded from, its time,
+    ``clip``'s share): a property both clips animate is mixed by the share, as a node's pose
+    is; one only the clip faded from animates follows it until the fade ends (then it holds)."""
     targets = _property_targets(world, record)
-    for channel in clip.properties:
+    channels = [(channel, sample_property(channel, time)) for channel in clip.properties]
+    if fading is not None:
+        old, old_time, share = fading
+        before = {(channel.path, channel.node): sample_property(channel, old_time) for channel in old.properties}
+        mixed = []
+        for channel, value in channels:
+            was = before.pop((channel.path, channel.node), None)
+            mixed.append((channel, value if was is None else was * (1.0 - share) + value * share))
+        channels = mixed + [(channel, before[(channel.path, channel.node)]) for channel in old.properties
+                            if (channel.path, channel.node) in before]
+    for channel, value in channels:
         kind, name = channel.path.split(".")
-        value = sample_property(channel, time)
         for entity in targets.get((kind, channel.node), ()):
             if not world.exists(entity):
                 continue
