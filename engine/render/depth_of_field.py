@@ -88,10 +88,10 @@ class DepthOfFieldPass:
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self.ctx = ctx
         self.shaders = shaders
-        self._focus = self._vao("dof_focus.frag", seen_image=DOF_SEEN_UNIT, previous=DOF_FOCUS_UNIT)
-        self._prepare = self._vao("dof_prepare.frag", hdr_image=PRESENT_UNIT, seen_image=DOF_SEEN_UNIT,
-                                  focus_state=DOF_FOCUS_UNIT)
-        self._tiles = self._vao("dof_tiles.frag", prepared=DOF_PREPARED_UNIT)
+        self._focus = shaders.fullscreen("dof_focus.frag", seen_image=DOF_SEEN_UNIT, previous=DOF_FOCUS_UNIT)
+        self._prepare = shaders.fullscreen("dof_prepare.frag", hdr_image=PRESENT_UNIT, seen_image=DOF_SEEN_UNIT,
+                                           focus_state=DOF_FOCUS_UNIT)
+        self._tiles = shaders.fullscreen("dof_tiles.frag", prepared=DOF_PREPARED_UNIT)
         # The gathers, by (at half size: its two layers apart; a polygon's bokeh), made on first use.
         self._gathers: dict[tuple[bool, bool], moderngl.VertexArray] = {}
         self._half: tuple[moderngl.VertexArray, ...] | None = None   # downsample, compose (first use)
@@ -102,12 +102,6 @@ class DepthOfFieldPass:
         self.camera: int | None = None                     # whose focus it is
         self._written: dict[tuple[int, str], object] = {}  # (vao id, uniform) -> the value last written
         self.passes = 0   # draws in the last frame's depth of field
-
-    def _vao(self, fragment: str, defines: dict[str, str] | None = None, **units: int) -> moderngl.VertexArray:
-        program = self.shaders.program("fullscreen.vert", fragment, defines=defines)
-        for name, unit in units.items():
-            program[name].value = unit
-        return self.ctx.vertex_array(program, [])
 
     def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
         """Write a uniform only when its value changes (each write is a GL call)."""
@@ -125,9 +119,10 @@ class DepthOfFieldPass:
 
     def _half_programs(self) -> tuple[moderngl.VertexArray, ...]:
         if self._half is None:
-            self._half = (self._vao("dof_downsample.frag", prepared=DOF_PREPARED_UNIT),
-                          self._vao("dof_compose.frag", prepared=DOF_PREPARED_UNIT, back_layer=DOF_BACK_UNIT,
-                                    front_layer=DOF_FRONT_UNIT))
+            fullscreen = self.shaders.fullscreen
+            self._half = (fullscreen("dof_downsample.frag", prepared=DOF_PREPARED_UNIT),
+                          fullscreen("dof_compose.frag", prepared=DOF_PREPARED_UNIT, back_layer=DOF_BACK_UNIT,
+                                     front_layer=DOF_FRONT_UNIT))
         return self._half
 
     def _gather_program(self, half: bool, blades: int) -> moderngl.VertexArray:
@@ -136,8 +131,8 @@ class DepthOfFieldPass:
         vao = self._gathers.get(key)
         if vao is None:
             defines = {**({"SPLIT_LAYERS": "1"} if half else {}), **({"POLYGON_BOKEH": "1"} if blades else {})}
-            vao = self._gathers[key] = self._vao("dof_gather.frag", defines, prepared=DOF_PREPARED_UNIT,
-                                                 near_tiles=DOF_TILES_UNIT)
+            vao = self._gathers[key] = self.shaders.fullscreen("dof_gather.frag", defines,
+                                                               prepared=DOF_PREPARED_UNIT, near_tiles=DOF_TILES_UNIT)
         return vao
 
     def _make(self, size: tuple[int, int], tile: int, half: bool) -> None:

@@ -79,24 +79,19 @@ class MotionBlurPass:
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary, moving: ObjectMotion) -> None:
         self.ctx = ctx
         self.moving = moving   # the frame's movers (their own motion)
-        self._streaks = self._vao(shaders, "motion_streaks.frag", seen_image=DOF_SEEN_UNIT)
-        self._tiles = self._vao(shaders, "motion_tiles.frag", streaks=MOTION_STREAKS_UNIT)
-        self._neighbours = self._vao(shaders, "motion_neighbours.frag", tiles=MOTION_TILES_UNIT)
-        self._blur = self._vao(shaders, "motion_blur.frag", hdr_image=PRESENT_UNIT, streaks=MOTION_STREAKS_UNIT,
-                               neighbours=MOTION_NEIGHBOURS_UNIT)
+        self._streaks = shaders.fullscreen("motion_streaks.frag", seen_image=DOF_SEEN_UNIT)
+        self._tiles = shaders.fullscreen("motion_tiles.frag", streaks=MOTION_STREAKS_UNIT)
+        self._neighbours = shaders.fullscreen("motion_neighbours.frag", tiles=MOTION_TILES_UNIT)
+        self._blur = shaders.fullscreen("motion_blur.frag", hdr_image=PRESENT_UNIT, streaks=MOTION_STREAKS_UNIT,
+                                        neighbours=MOTION_NEIGHBOURS_UNIT)
+        for vao in (self._tiles, self._blur):
+            vao.program["tile"].value = TILE   # (once: the tiles' side never changes)
         self._images: _Images | None = None
         self.previous: glm.mat4 | None = None   # last frame's view-projection (None: none yet)
         self.camera: int | None = None
         self._size: tuple[int, int] | None = None
         self.objects = False   # the last draw's MotionBlur streaks moving things (the extract stage reads it)
         self.passes = 0        # draws the last ``draw`` made
-
-    def _vao(self, shaders: ShaderLibrary, fragment: str, **units: int) -> moderngl.VertexArray:
-        program = shaders.program("fullscreen.vert", fragment)
-        for name, unit in units.items():
-            if name in program:   # (a build may not read every one)
-                program[name].value = unit
-        return self.ctx.vertex_array(program, [])
 
     def _make(self, size: tuple[int, int]) -> _Images:
         if self._images is not None and self._images.result.size == size:
@@ -151,13 +146,11 @@ class MotionBlurPass:
         program["objects"].value = objects
         self._run(self._streaks, images.framebuffers[1], size)
         bind_texture(ctx, images.streaks, MOTION_STREAKS_UNIT)
-        self._tiles.program["tile"].value = TILE
         self._run(self._tiles, images.framebuffers[2], images.tiles.size)
         bind_texture(ctx, images.tiles, MOTION_TILES_UNIT)
         self._neighbours.program["reach"].value = math.ceil(0.5 * longest / TILE)
         self._run(self._neighbours, images.framebuffers[3], images.tiles.size)
         bind_texture(ctx, images.neighbours, MOTION_NEIGHBOURS_UNIT)
-        self._blur.program["tile"].value = TILE
         self._run(self._blur, images.framebuffers[0], size)
         if dt > 0.0:
             self.previous = now

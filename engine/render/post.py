@@ -54,9 +54,8 @@ class AutoExposure:
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self.ctx = ctx
         self.shaders = shaders
-        self._luminance = self._vao("exposure_luminance.frag", hdr_image=PRESENT_UNIT)
-        self._adapt = self._vao("exposure_adapt.frag", mean_source=EXPOSURE_MEAN_UNIT,
-                                 previous=EXPOSURE_UNIT)
+        self._luminance = shaders.fullscreen("exposure_luminance.frag", hdr_image=PRESENT_UNIT)
+        self._adapt = shaders.fullscreen("exposure_adapt.frag", mean_source=EXPOSURE_MEAN_UNIT, previous=EXPOSURE_UNIT)
         self._targets: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
         self._state: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []
         self.current: moderngl.Texture | None = None   # the 1x1 exposure written last
@@ -70,12 +69,6 @@ class AutoExposure:
         if self._written.get(key) != value:
             vao.program[name].value = value
             self._written[key] = value
-
-    def _vao(self, fragment: str, **units: int) -> moderngl.VertexArray:
-        program = self.shaders.program("fullscreen.vert", fragment)
-        for name, unit in units.items():
-            program[name].value = unit
-        return self.ctx.vertex_array(program, [])
 
     def _target(self, side: int, data: bytes | None = None) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
         texture = self.ctx.texture((side, side), 1, data, dtype="f4")

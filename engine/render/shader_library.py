@@ -374,6 +374,17 @@ class ShaderLibrary:
         self._next_poll = 0.0
         self._gl: _RelinkGL | None = None
 
+    def fullscreen(self, fragment: str, defines: dict[str, str] | None = None,
+                   **units: int) -> moderngl.VertexArray:
+        """A full-screen pass (``fullscreen.vert``'s triangle, three vertices, no buffers) of
+        ``fragment``, each sampler named in ``units`` on its unit (one a build does not read is
+        passed over): what every post-processing pass draws with."""
+        program = self.program("fullscreen.vert", fragment, defines=defines)
+        for name, unit in units.items():
+            if name in program:
+                program[name].value = unit
+        return self.ctx.vertex_array(program, [])
+
     def program(self, vertex: str, fragment: str, geometry: str | None = None,
                 defines: dict[str, str] | None = None) -> moderngl.Program:
         key = (vertex, fragment, geometry, tuple(sorted((defines or {}).items())))

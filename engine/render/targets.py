@@ -178,13 +178,13 @@ class LevelStack:
         self._before: dict[int, RenderTargets] = {}  # level -> its targets of the size before
         self._made_for: dict[int, tuple[int, int]] = {}  # level -> the root's size when its set was made
         self.made = 0  # target sets made so far (tests watch it)
-        self.seen_channels = SEEN_CHANNELS  # what a set made now has (a set of other channels is made again)
+        self.seen_channels = SEEN_CHANNELS  # what a set made now has (set_seen_channels: the others released)
 
     def get(self, level: int, size: tuple[int, int]) -> RenderTargets:
         while len(self._levels) <= level:
             self._levels.append(None)
         targets = self._levels[level]
-        if targets is None or targets.size != size or targets.seen.components != self.seen_channels:
+        if targets is None or targets.size != size:
             if level == 0 and targets is not None:  # the root resized: what was kept is the old size's
                 for kept in self._before.values():
                     kept.release()
@@ -196,7 +196,7 @@ class LevelStack:
                     self._before[level] = targets
                 else:
                     targets.release()
-            if spare is not None and spare.size == size and spare.seen.components == self.seen_channels:
+            if spare is not None and spare.size == size:
                 targets = spare
             else:
                 if spare is not None:

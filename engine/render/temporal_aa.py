@@ -68,11 +68,8 @@ class TemporalPass:
 
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self.ctx = ctx
-        program = shaders.program("fullscreen.vert", "temporal_resolve.frag")
-        for name, unit in (("current_image", PRESENT_UNIT), ("history_image", TEMPORAL_HISTORY_UNIT),
-                           ("seen_image", DOF_SEEN_UNIT)):
-            program[name].value = unit
-        self._resolve = ctx.vertex_array(program, [])
+        self._resolve = shaders.fullscreen("temporal_resolve.frag", current_image=PRESENT_UNIT,
+                                           history_image=TEMPORAL_HISTORY_UNIT, seen_image=DOF_SEEN_UNIT)
         self._history: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []   # [written last, the other]
         self.frame = 0                              # the jitter's frame (moved on by frames of dt > 0)
         self.previous: glm.mat4 | None = None       # last frame's view-projection without its jitter
