@@ -13,7 +13,10 @@ out vec4 out_prepared;           // rgb: the colour, a: the signed radius
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
-    float d = max(uintBitsToFloat(texelFetch(seen_image, px, 0).g), 1e-6);
+    // (The seen image is the drawn picture's size: smaller than this one after temporal
+    // upsampling, engine/render/resample.py.)
+    ivec2 seen_px = ivec2(gl_FragCoord.xy * vec2(textureSize(seen_image, 0)) / vec2(textureSize(hdr_image, 0)));
+    float d = max(uintBitsToFloat(texelFetch(seen_image, seen_px, 0).g), 1e-6);
     float f = lens.x;
     float s = max(texelFetch(focus_state, ivec2(0), 0).r, f * NEAREST_FOCUS);
     float radius = clamp(lens.y * (1.0 - s / d) / (s - f), -lens.z, lens.z);

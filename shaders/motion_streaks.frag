@@ -15,15 +15,16 @@ uniform mat4 previous_view_proj; // last frame's (carried through a portal the c
 uniform vec3 eye;
 uniform vec3 axis;               // an orthographic view's axis (view_axis.glsl); 0: perspective
 uniform vec2 blur;               // x: the shutter's share, y: the longest streak in pixels
+uniform vec2 image_size;         // the picture's (the seen image's, or larger after temporal upsampling)
 uniform bool objects;            // the seen image holds each thing's own motion (b, a)
 
 out vec4 out_streak;  // xy: the streak in pixels (its whole length, centred on the pixel), y up;
                       // z: the way's length (a half float: the sky's and anything past 60 km as 60 km)
 
 void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    vec2 size = vec2(textureSize(seen_image, 0));
+    vec2 size = image_size;
     vec2 uv = gl_FragCoord.xy / size;
+    ivec2 px = ivec2(uv * vec2(textureSize(seen_image, 0)));
     vec4 near = inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
     vec4 far = inv_view_proj * vec4(uv * 2.0 - 1.0, 1.0, 1.0);
     vec3 start = near.xyz / near.w;

@@ -9,6 +9,7 @@
 // or changed does not ghost (its sides, a plus: five fetches, not nine, halve the pass on
 // llvmpipe); the blend weighs each by 1 / (1 + luma) so a bright speck does
 // not flicker.  A point that was off the picture, or a cut, takes this frame alone.
+#include "catmull_rom.glsl"
 #include "view_axis.glsl"
 
 uniform sampler2D current_image;   // this frame, drawn with its jitter
@@ -20,6 +21,9 @@ uniform vec3 eye;
 uniform vec3 axis;                 // an orthographic view's axis (view_axis.glsl); 0: perspective
 uniform bool objects;              // the seen image holds each thing's own motion (b, a)
 uniform float blend;               // this frame's share (1: a cut, the history dropped)
+#ifdef UPSAMPLE
+uniform vec2 jitter;               // this frame's offset (normalised device units: View.jitter)
+#endif
 
 out vec4 out_color;
 
@@ -31,41 +35,61 @@ vec3 from_ycocg(vec3 c) {
     return vec3(c.x + c.y - c.z, c.x + c.z, c.x - c.y - c.z);
 }
 
-// The history between texels by a Catmull-Rom spline (five bilinear fetches, Jimenez's
-// arrangement in "Filmic SMAA", 2016): a bilinear fetch would soften the picture a little
-// more every frame it is carried.
-vec3 history_at(vec2 uv, vec2 size) {
-    vec2 position = uv * size;
-    vec2 centre = floor(position - 0.5) + 0.5;
-    vec2 f = position - centre;
-    vec2 f2 = f * f;
-    vec2 f3 = f2 * f;
-    vec2 w0 = -0.5 * f3 + f2 - 0.5 * f;
-    vec2 w1 = 1.5 * f3 - 2.5 * f2 + 1.0;
-    vec2 w2 = -1.5 * f3 + 2.0 * f2 + 0.5 * f;
-    vec2 w3 = 0.5 * f3 - 0.5 * f2;
-    vec2 w12 = w1 + w2;
-    vec2 at12 = (centre + w2 / w12) / size;
-    vec2 at0 = (centre - 1.0) / size;
-    vec2 at3 = (centre + 2.0) / size;
-    vec4 sum = vec4(textureLod(history_image, vec2(at12.x, at0.y), 0.0).rgb, 1.0) * (w12.x * w0.y)
-             + vec4(textureLod(history_image, vec2(at0.x, at12.y), 0.0).rgb, 1.0) * (w0.x * w12.y)
-             + vec4(textureLod(history_image, at12, 0.0).rgb, 1.0) * (w12.x * w12.y)
-             + vec4(textureLod(history_image, vec2(at3.x, at12.y), 0.0).rgb, 1.0) * (w3.x * w12.y)
-             + vec4(textureLod(history_image, vec2(at12.x, at3.y), 0.0).rgb, 1.0) * (w12.x * w3.y);
-    return max(sum.rgb / sum.a, vec3(0.0));
-}
-
 float luma(vec3 c) {
     return dot(c, vec3(0.2126, 0.7152, 0.0722));
 }
 
 void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
     ivec2 last = textureSize(current_image, 0) - 1;
-    vec2 size = vec2(textureSize(current_image, 0));
+    vec2 size = vec2(textureSize(history_image, 0));   // the output's (the history's)
     vec2 uv = gl_FragCoord.xy / size;
+#ifdef UPSAMPLE
+    // Temporal upsampling: this frame has fewer samples than the output has pixels.  Each sits
+    // at its texel's centre less the jitter (the picture was drawn moved by it); the texel whose
+    // sample lies nearest this pixel's centre, and the 3x3 round it, each weighed by its
+    // distance from the centre (a Gaussian fit of a Blackman-Harris window, exp(-2.29 d^2), as
+    // Unreal's upsampling takes it): in output pixels for what this frame adds (a sample that
+    // lands in the pixel counts fully, one a pixel away a tenth: over the jitter's phases each
+    // pixel gathers the samples that fell in it), in its own pixels for the picture a cut
+    // starts from (a smooth upscale).  The same nine give the clip box.
+    vec2 input_size = vec2(last + 1);
+    vec2 at = (uv + 0.5 * jitter) * input_size - 0.5;
+    ivec2 px = ivec2(floor(at + 0.5));
+    vec2 to_output = size / input_size;
+    vec3 direct = vec3(0.0);
+    vec3 spread_out = vec3(0.0);
+    float direct_weight = 0.0;
+    float spread_weight = 0.0;
+    float nearest = 0.0;
+    vec3 mean = vec3(0.0);
+    vec3 square = vec3(0.0);
+    for (int i = 0; i < 9; ++i) {
+        ivec2 tap = px + ivec2(i % 3, i / 3) - 1;
+        vec3 c = texelFetch(current_image, clamp(tap, ivec2(0), last), 0).rgb;
+        vec2 d = vec2(tap) - at;
+        float w_input = exp(-2.29 * dot(d, d));
+        vec2 d_output = d * to_output;
+        float w_output = exp(-2.29 * dot(d_output, d_output));
+        direct += c * w_output;
+        direct_weight += w_output;
+        spread_out += c * w_input;
+        spread_weight += w_input;
+        nearest = max(nearest, w_output);
+        vec3 y = to_ycocg(c);
+        mean += y;
+        square += y * y;
+    }
+    vec3 now = direct_weight > 1e-4 ? direct / direct_weight : spread_out / spread_weight;
+    vec3 cut_picture = spread_out / spread_weight;
+    mean /= 9.0;
+    vec3 spread = sqrt(max(square / 9.0 - mean * mean, 0.0));
+    float share = blend * nearest;   // this frame's share: less where no sample fell near the pixel
+#else
+    ivec2 px = ivec2(gl_FragCoord.xy);
     vec3 now = texelFetch(current_image, px, 0).rgb;
+    vec3 cut_picture = now;
+    float share = blend;
+#endif
     // Where the pixel's point was last frame.
     vec4 near = inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
     vec4 far = inv_view_proj * vec4(uv * 2.0 - 1.0, 1.0, 1.0);
@@ -91,9 +115,10 @@ void main() {
     vec2 was = before.w > 1e-6 ? before.xy / before.w * 0.5 + 0.5 : vec2(-1.0);
     if (objects) was -= uintBitsToFloat(seen.ba);
     if (blend >= 1.0 || any(lessThan(was, vec2(0.0))) || any(greaterThan(was, vec2(1.0)))) {
-        out_color = vec4(now, 1.0);
+        out_color = vec4(cut_picture, 1.0);
         return;
     }
+#ifndef UPSAMPLE
     // This frame's colours round the pixel (it and its four sides): their mean and spread (YCoCg).
     vec3 centre = to_ycocg(now);
     vec3 mean = centre;
@@ -106,16 +131,17 @@ void main() {
     }
     mean /= 5.0;
     vec3 spread = sqrt(max(square / 5.0 - mean * mean, 0.0));
+#endif
     vec3 lo = mean - 1.25 * spread;
     vec3 hi = mean + 1.25 * spread;
     // The history, clipped towards the mean into that box (variance clipping).
-    vec3 kept = to_ycocg(history_at(was, size));
+    vec3 kept = to_ycocg(max(catmull_rom(history_image, was, size), vec3(0.0)));
     vec3 offset = kept - mean;
     vec3 reach = max(hi - mean, vec3(1e-5));
     float over = max(max(abs(offset.x) / reach.x, abs(offset.y) / reach.y), abs(offset.z) / reach.z);
     if (over > 1.0) kept = mean + offset / over;
     vec3 history = max(from_ycocg(kept), vec3(0.0));
-    float w_now = blend / (1.0 + luma(now));
-    float w_history = (1.0 - blend) / (1.0 + luma(history));
+    float w_now = share / (1.0 + luma(now));
+    float w_history = (1.0 - share) / (1.0 + luma(history));
     out_color = vec4((now * w_now + history * w_history) / (w_now + w_history), 1.0);
 }

@@ -316,15 +316,18 @@ class Engine:
 
     def start(self, antialias: str = "fxaa", camera: tuple[float, float, float, float, float] | None = None,
               occlusion: bool = False, reflections: bool = False, focus: bool = False,
-              motion: bool = False) -> None:
+              motion: bool = False, render_scale: float = 1.0, sharpness: float = 0.0) -> None:
         """The command line's start options (``shell/runner.py``), after the game is built: the
-        anti-aliasing, the camera's pose (``--camera``: ``place_camera``), and screen-space
+        anti-aliasing, the render scale and sharpening (``--render-scale``, ``--sharpen``:
+        ``engine/render/resample.py``), the camera's pose (``--camera``: ``place_camera``), and screen-space
         ambient occlusion and reflections, depth of field and motion blur (``--ao``, ``--ssr``,
         ``--dof``, ``--motion-blur``: an ``AmbientOcclusion()``, a ``ScreenReflections()``, a
         ``DepthOfField`` of an 85 mm lens at f/1.4 focusing by itself (``start_lens``) and a
         ``MotionBlur()`` on the active camera, where it has none of its own), to see any game or
         level with them without editing it."""
         self.renderer.antialias = antialias
+        self.renderer.render_scale = render_scale
+        self.renderer.sharpness = sharpness
         if camera:
             self.place_camera(*camera)
         for asked, make, flag in ((occlusion, AmbientOcclusion, "--ao"), (reflections, ScreenReflections, "--ssr"),

@@ -29,6 +29,7 @@ from engine.assets.level_assets import MESH_MAKERS
 from engine.assets.level_file import LevelGame
 from engine.assets.level_read import REFERENCE_FIELDS
 from engine.assets.values import json_value
+from engine.core.frame_io import Output
 from engine.rules.raycast import raycast_seen
 from shell.editor import AUTOMATIC_FIELDS, IMAGE_FIELDS, OFF_FIELDS, EditError, Editor
 from shell.handles import (
@@ -128,7 +129,10 @@ class EditorPanels:
             if entity is not None:
                 editor.select(entity)
                 return True
-        editor.pick(targets.read_ids(), targets.read_surface_ids(), int(x), int(y), surface)
+        # The id images are the drawn picture's size (smaller at a render scale below 1).
+        output = engine.world.resources.get(Output)
+        across, down = (targets.size[0] / output.size[0], targets.size[1] / output.size[1]) if output else (1, 1)
+        editor.pick(targets.read_ids(), targets.read_surface_ids(), int(x * across), int(y * down), surface)
         return True
 
     def _place_at(self, engine: Engine, editor: Editor, x: float, y: float) -> None:

@@ -39,6 +39,7 @@ from moderngl_window.integrations.imgui_bundle import ModernGLRenderer
 from components.post import TONEMAP_CURVES
 from engine.render.bindings import bind_texture, invalidate
 from engine.render.present import ANTIALIAS_MODES
+from engine.render.resample import RENDER_SCALE_RANGE
 from shell.editor_panels import POSITION, EditorPanels
 from shell.overlay_text import overlay_lines
 
@@ -51,6 +52,7 @@ PROBE_PATHS = ("auto", "six_pass", "layered")
 MAX_DEPTH_CAP = 16
 CURVE_CHOICES = (None, *TONEMAP_CURVES)   # None: each camera's own Tonemap curve
 CURVE_WIDTH = 100                          # pixels of the curve's drop-down
+SLIDER_WIDTH = 90                          # pixels of the render scale's and sharpening's sliders
 # moderngl-window's key names -> ImGui's keys: what typing in a field and editing its text need.
 IMGUI_KEYS = {"BACKSPACE": imgui.Key.backspace, "DELETE": imgui.Key.delete, "ENTER": imgui.Key.enter,
               "ESCAPE": imgui.Key.escape, "TAB": imgui.Key.tab, "LEFT": imgui.Key.left_arrow,
@@ -353,6 +355,18 @@ class DebugOverlay(EditorPanels):
         self._switch("DoF", present, "depth_of_field")
         imgui.same_line()
         self._switch("motion blur", present, "motion_blur")
+        lo, hi = RENDER_SCALE_RANGE   # (the picture's size and sharpening on a row of their own)
+        imgui.set_next_item_width(SLIDER_WIDTH * self.scale)
+        changed, scale = imgui.slider_float("render scale", renderer.render_scale, lo, hi, "%.2f")
+        if changed:
+            renderer.render_scale = min(max(scale, lo), hi)
+        self._widget("render scale")
+        imgui.same_line()
+        imgui.set_next_item_width(SLIDER_WIDTH * self.scale)
+        changed, sharpness = imgui.slider_float("sharpen", renderer.sharpness, 0.0, 1.0, "%.2f")
+        if changed:
+            renderer.sharpness = min(max(sharpness, 0.0), 1.0)
+        self._widget("sharpen")
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()
         width, height = self.io.display_size

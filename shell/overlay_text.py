@@ -10,6 +10,8 @@ from collections import Counter
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from engine.core.frame_io import Output
+
 if TYPE_CHECKING:  # the engine is the app's, which draws the overlay with this text
     from shell.app import Engine
 
@@ -132,4 +134,19 @@ def post_lines(engine: Engine) -> list[str]:
         reflections += "; motion blur off (set)"
     passes = renderer.present_pass.post_passes
     return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}",
-            f"screen: {occlusion}; {reflections}"]
+            f"screen: {occlusion}; {reflections}", picture_line(engine)]
+
+
+def picture_line(engine: Engine) -> str:
+    """The anti-aliasing, the size the picture is drawn at against the output's (a render
+    scale below 1: how it is brought up) and the sharpening."""
+    renderer = engine.renderer
+    output = engine.world.resources.get(Output)
+    line = f"AA {renderer.antialias}"
+    if output is not None and renderer.targets is not None and renderer.targets.size != output.size:
+        (w, h), (ow, oh) = renderer.targets.size, output.size
+        how = "temporal AA" if renderer.antialias == "taa" else "Catmull-Rom"
+        line += f"; drawn {w}x{h} of {ow}x{oh} (scale {renderer.render_scale:g}), brought up by {how}"
+    if renderer.sharpness > 0.0:
+        line += f"; sharpen {renderer.sharpness:g}"
+    return line

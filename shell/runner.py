@@ -24,6 +24,7 @@ from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.render.gl_context import create_headless_context, have_display
 from engine.render.present import ANTIALIAS_MODES
+from engine.render.resample import RENDER_SCALE_RANGE, check_render_scale, check_sharpness
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
 from shell.capture import SCENE_FORMATS, OutputPathError, prepare_out, save_ids, save_png, write_scene
@@ -47,7 +48,9 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                         help="folder for frame_NNNN.png (headless) or F12 screenshots (windowed)")
     parser.add_argument("--level", type=Path, default=None, metavar="FILE",
                         help="play this level file (.toml, docs/level_files.md) instead of the game's own")
-    parser.add_argument("--ids", action="store_true", help="headless: also write ids_NNNN.npy per frame")
+    parser.add_argument("--ids", action="store_true",
+                        help="headless: also write ids_NNNN.npy per frame (the drawn picture's size: "
+                             "--render-scale times the output's)")
     parser.add_argument("--export-scene", type=_scene_path, default=None, metavar="FILE",
                         help="write FILE.glb or FILE.gltf (world geometry) and FILE.json (camera, components) "
                              "at the end (windowed: as the window closes)")
@@ -68,6 +71,12 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                         help="camera motion blur on the active camera (a MotionBlur(), if it has none)")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
+    parser.add_argument("--render-scale", type=_render_scale, default=1.0, metavar="SHARE",
+                        help=f"draw the world at this share of the output's width and height, in "
+                             f"[{RENDER_SCALE_RANGE[0]:g}, {RENDER_SCALE_RANGE[1]:g}] (default 1), brought up to the "
+                             "output's size by temporal AA (--aa taa) or a Catmull-Rom upscale")
+    parser.add_argument("--sharpen", type=_sharpness, default=0.0, metavar="AMOUNT",
+                        help="contrast-adaptive sharpening of the final image, in [0, 1] (default 0: none)")
     parser.add_argument("--asset-root", type=_folder, action="append", default=[], metavar="DIR",
                         help="a folder a level file's meshes and textures may come from besides the level's own "
                              "(repeatable; a level's assets stay in its folder otherwise)")
@@ -140,6 +149,27 @@ def _seconds(text: str) -> float:
     if not 0.0 < value <= 1.0:
         raise argparse.ArgumentTypeError(f"--dt must be seconds in (0, 1], got {text!r}")
     return value
+
+
+def _render_scale(text: str) -> float:
+    try:
+        return check_render_scale(float(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--render-scale {text!r}: {exc}") from None
+
+
+def _sharpness(text: str) -> float:
+    try:
+        return check_sharpness(float(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--sharpen {text!r}: {exc}") from None
+
+
+def start_engine(engine: Engine, args: argparse.Namespace) -> None:
+    """``Engine.start`` with the command line's start options (headless and windowed alike)."""
+    engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
+                 getattr(args, "dof", False), getattr(args, "motion_blur", False),
+                 getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0))
 
 
 def _gif_path(text: str) -> Path:
@@ -264,8 +294,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
     overlay = None
     try:
         engine = Engine(game, ctx)
-        engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
-                     getattr(args, "dof", False), getattr(args, "motion_blur", False))
+        start_engine(engine, args)
         capture = CaptureTarget(ctx, args.size)
         output = Output(capture.framebuffer, args.size)
         if args.overlay:

@@ -26,6 +26,7 @@ from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
 from engine.render.renderer import Renderer
+from engine.render.resample import render_size
 from engine.render.scene_options import TREE_ROOT, SceneOptions
 from engine.render.scene_programs import reflects_environment
 from engine.render.temporal_aa import jittered
@@ -76,13 +77,15 @@ class MainViewSystem(esper.Processor):
             return  # minimised window or nothing to look through
         _, cam, cam_t = camera
         levels = self.renderer.levels  # the main view tree's targets (the renderer owns them)
-        targets = levels.get(0, output.size)
+        size = render_size(output.size, self.renderer.render_scale)   # (the output's, or fewer pixels)
+        targets = levels.get(0, size)
         views.levels = levels
-        views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size,
-                                 ortho_height=cam.ortho_height if cam.projection == "orthographic" else None)
+        views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, size,
+                                 ortho_height=cam.ortho_height if cam.projection == "orthographic" else None,
+                                 aspect=output.size[0] / output.size[1])
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
         if self.renderer.antialias == "taa":   # (its sub-pixel offset this frame: temporal AA)
-            jittered(views.main, self.renderer.present_pass.temporal.offset(output.size))
+            jittered(views.main, self.renderer.present_pass.temporal.offset(size, output.size))
         views.options = self._root_options()
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
         self.occluded = occlusion

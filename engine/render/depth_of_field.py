@@ -186,7 +186,7 @@ class DepthOfFieldPass:
         bind_texture(ctx, previous[0], DOF_FOCUS_UNIT)
         manual = not settings.autofocus
         self._set(self._focus, "manual_focus", settings.focus_distance if manual else 0.0)
-        self._set(self._focus, "focus_pixel", focus_pixel(settings.focus_point, size))
+        self._set(self._focus, "focus_pixel", focus_pixel(settings.focus_point, seen.size))
         self._set(self._focus, "blend", 1.0 if manual or reset else adapt_blend(settings.focus_speed, dt))
         self._focus.render(moderngl.TRIANGLES, vertices=3)
         self._state.reverse()

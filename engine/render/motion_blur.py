@@ -143,6 +143,7 @@ class MotionBlurPass:
         program["eye"].value = tuple(view.eye)
         program["axis"].value = tuple(view.axis)
         program["blur"].value = (settings.shutter, longest)
+        program["image_size"].value = (float(size[0]), float(size[1]))
         program["objects"].value = objects
         self._run(self._streaks, images.framebuffers[1], size)
         bind_texture(ctx, images.streaks, MOTION_STREAKS_UNIT)

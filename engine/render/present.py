@@ -63,6 +63,7 @@ from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
 from engine.render.motion_blur import MotionBlurPass
 from engine.render.object_motion import ObjectMotion
 from engine.render.post import AutoExposure
+from engine.render.resample import ResamplePass
 from engine.render.shader_library import ShaderLibrary
 from engine.render.targets import CaptureTarget
 from engine.render.temporal_aa import TemporalPass
@@ -114,7 +115,9 @@ class PresentPass:
         for encode in (self._encode, self._encode_luma):
             encode.program["hdr_image"].value = PRESENT_UNIT
         self._fxaa: moderngl.VertexArray | None = None
-        self._encoded: CaptureTarget | None = None   # what FXAA reads, made at the output's size
+        self._encoded: CaptureTarget | None = None    # what FXAA or the resample reads, at the drawn size
+        self._filtered: CaptureTarget | None = None   # FXAA's picture when the resample reads it
+        self.resample = ResamplePass(ctx, shaders)     # the last pass at a render scale or sharpening
         self.search_steps = 0 if software else GPU_SEARCH_STEPS
         self._post: dict[tuple, moderngl.VertexArray] = {}   # present.frag's POST builds, by their defines
         self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
@@ -197,11 +200,14 @@ class PresentPass:
 
     def draw(self, hdr: moderngl.Texture, exposure: float, antialias: str, output: moderngl.Framebuffer,
              size: tuple[int, int], post: CameraPost | None = None, curve: str | None = None,
-             camera: int | None = None, dt: float = 0.0, seen: moderngl.Texture | None = None) -> None:
-        """Present ``hdr`` into ``output`` as the active camera's ``post`` says (its
-        components; None: none): first blurred by its lens (``focus``: ``seen`` is the same
-        level's seen pair, its ways), then smeared by its motion (``motion``), then bloomed,
-        exposed, vignetted, graded and tone mapped.  ``curve`` overrides the tone curve (the
+             camera: int | None = None, dt: float = 0.0, seen: moderngl.Texture | None = None,
+             sharpness: float = 0.0) -> None:
+        """Present ``hdr`` into ``output`` (``size``; ``hdr`` may be smaller: drawn at a render
+        scale below 1) as the active camera's ``post`` says (its components; None: none): first
+        blurred by its lens (``focus``: ``seen`` is the same level's seen pair, its ways), then
+        smeared by its motion (``motion``), then bloomed, exposed, vignetted, graded and tone
+        mapped, then anti-aliased, brought up to ``size`` and sharpened by ``sharpness``
+        (``engine/render/resample.py``).  ``curve`` overrides the tone curve (the
         debug overlay's choice; None: the Tonemap's, or "none"); ``camera`` is whose image it
         is (automatic exposure, autofocus and motion blur start over when it changes) and
         ``dt`` the frame's time step (adaptation)."""
@@ -210,13 +216,9 @@ class PresentPass:
         focus, motion, view = post.focus, post.motion, post.view
         projection = view.proj if view is not None else None
         fxaa = antialias == "fxaa"
-        if fxaa and (self._encoded is None or self._encoded.size != size):
-            if self._encoded is not None:
-                self._encoded.release()
-            self._encoded = CaptureTarget(self.ctx, size)
         self.post_passes = 0
         if antialias == "taa" and seen is not None and view is not None:   # (first: the lens blurs a steady picture)
-            hdr = self.temporal.draw(hdr, seen, view, camera, dt)
+            hdr = self.temporal.draw(hdr, seen, view, camera, dt, size)   # (brought up to size on the way)
             self.post_passes += 1
         elif self._temporal is not None:
             self._temporal.release_targets()
@@ -238,12 +240,14 @@ class PresentPass:
         grain = post.grain if post.grain is not None and post.grain.intensity > 0.0 else None
         if dt > 0.0:
             self.grain_seed = (self.grain_seed + 1) % GRAIN_SEEDS   # (a screenshot's grain is its frame's)
+        drawn = hdr.size   # (the output's size, or smaller: a render scale below 1 without temporal AA)
+        resample = drawn != size or sharpness > 0.0
+        # Where the encoding goes: the output, or a picture FXAA or the resample reads.
+        encoded = self._capture("_encoded", drawn if fxaa or resample else None)
         if tonemap is None and bloom is None and curve is None and grading is None and vignette is None \
                 and aberration is None and grain is None:
             self._release_post_targets()
             encode = self._encode_luma if fxaa else self._encode
-            (self._encoded.framebuffer if fxaa else output).use()
-            apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
             bind_texture(self.ctx, hdr, PRESENT_UNIT)
             encode.program["exposure"].value = exposure
         else:
@@ -257,16 +261,36 @@ class PresentPass:
             if vignette is not None:
                 self._set(encode, "vignette_ray", _vignette_ray(projection))
                 self._set(encode, "vignette", (vignette.intensity, vignette.falloff))
-            (self._encoded.framebuffer if fxaa else output).use()
-            apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
+        (encoded.framebuffer if encoded is not None else output).use()
+        apply_pass_state(self.ctx, _PRESENT, (0, 0, *drawn))
         encode.render(moderngl.TRIANGLES, vertices=3)
+        picture = encoded
         if fxaa:
-            output.use()
+            filtered = self._capture("_filtered", drawn) if resample else None
+            (filtered.framebuffer if filtered is not None else output).use()
             # Its own pass: a framebuffer's use() brings back the viewport last set while
             # moderngl took it for bound, which raw-GL passes may have left at any size.
-            apply_pass_state(self.ctx, _PRESENT, (0, 0, *size))
-            bind_texture(self.ctx, self._encoded.texture, FXAA_UNIT)
+            apply_pass_state(self.ctx, _PRESENT, (0, 0, *drawn))
+            bind_texture(self.ctx, encoded.texture, FXAA_UNIT)
             self._fxaa.render(moderngl.TRIANGLES, vertices=3)
+            picture = filtered
+        if not resample:
+            self._capture("_filtered", None)
+        else:
+            self.resample.draw(picture.texture, output, size, sharpness)
+
+    def _capture(self, name: str, size: tuple[int, int] | None) -> CaptureTarget | None:
+        """The RGBA8 picture ``name`` ("_encoded": what FXAA or the resample reads; "_filtered":
+        FXAA's, when the resample reads it) at ``size``, made again when the size changed;
+        None: released."""
+        kept = getattr(self, name)
+        if kept is not None and (size is None or kept.size != size):
+            kept.release()
+            kept = None
+        if kept is None and size is not None:
+            kept = CaptureTarget(self.ctx, size)
+        setattr(self, name, kept)
+        return kept
 
     def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,
                      curve: str | None, camera: int | None, dt: float, luma: bool,
@@ -384,9 +408,9 @@ class PresentPass:
 
     def release(self) -> None:
         self._lut_texture(None)
-        if self._encoded is not None:
-            self._encoded.release()
-            self._encoded = None
+        self._capture("_encoded", None)
+        self._capture("_filtered", None)
+        self.resample.release()
         for vao in (self._encode, self._encode_luma, self._fxaa, *self._post.values()):
             vao.release()
         if self._occlusion_view is not None:

@@ -31,6 +31,7 @@ from engine.render.level_copies import LevelCopies
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, CameraPost, PresentPass
 from engine.render.probes import ProbeCaptures
+from engine.render.resample import check_render_scale, check_sharpness
 from engine.render.scene_pass import ScenePass
 from engine.render.screen_occlusion import ScreenOcclusion
 from engine.render.screen_reflections import ScreenReflectionPass
@@ -93,6 +94,8 @@ class Renderer(Gpu):
         self.level_copies = LevelCopies(ctx)
         self._exposure = 1.0
         self._antialias = "fxaa"
+        self._render_scale = 1.0
+        self._sharpness = 0.0
         self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.shadows = ShadowMaps(self)
         self.screen_reflections = ScreenReflectionPass(self)  # the camera's ScreenReflections
@@ -130,6 +133,29 @@ class Renderer(Gpu):
         if mode not in ANTIALIAS_MODES:
             raise ValueError(f"antialias must be one of {', '.join(map(repr, ANTIALIAS_MODES))}, got {mode!r}")
         self._antialias = mode
+
+    @property
+    def render_scale(self) -> float:
+        """The share of the output's width and height the main view (and every reflection
+        level and post-processing image sized from it) is drawn at, in
+        ``RENDER_SCALE_RANGE`` (default 1): the picture is brought up to the output's size
+        by temporal AA's resolve, or else by a Catmull-Rom upscale after FXAA
+        (``engine/render/resample.py``)."""
+        return self._render_scale
+
+    @render_scale.setter
+    def render_scale(self, value: float) -> None:
+        self._render_scale = check_render_scale(value)
+
+    @property
+    def sharpness(self) -> float:
+        """Contrast-adaptive sharpening of the presented picture, in [0, 1] (default 0: none;
+        ``shaders/resample.frag``): gives back what an upscale or temporal AA softens."""
+        return self._sharpness
+
+    @sharpness.setter
+    def sharpness(self, value: float) -> None:
+        self._sharpness = check_sharpness(value)
 
     # --- shared resources ------------------------------------------------------------------
     def batch_for(self, mesh: Mesh, texture: TextureData | None, probe: int = 0,
@@ -468,7 +494,7 @@ class Renderer(Gpu):
         image = image if image is not None else self.targets
         assert image is not None
         self.present_pass.draw(image.color, self.exposure, self._antialias, output, size, post, curve, camera, dt,
-                               image.seen)
+                               image.seen, self._sharpness)
         self.checkpoint("present")
 
     def text(self) -> TextPass:

@@ -19,6 +19,8 @@ still camera's reflection levels are drawn again each frame rather than kept
 """
 from __future__ import annotations
 
+import math
+
 import moderngl
 from pyglm import glm
 
@@ -49,10 +51,21 @@ def halton(index: int, base: int) -> float:
     return result
 
 
-def jitter_offset(frame: int, size: tuple[int, int]) -> tuple[float, float]:
+def jitter_phases(size: tuple[int, int], output: tuple[int, int] | None = None) -> int:
+    """How many offsets the sequence runs through before it repeats for a picture of ``size``
+    shown at ``output``: ``JITTER_SAMPLES``, times the output's pixels a drawn pixel covers
+    when it is brought up (temporal upsampling: each output pixel then still has samples
+    land in it, as AMD's FSR 2 counts them)."""
+    if output is None or output[1] <= size[1]:
+        return JITTER_SAMPLES
+    return math.ceil(JITTER_SAMPLES * (output[1] / size[1]) ** 2)
+
+
+def jitter_offset(frame: int, size: tuple[int, int], phases: int = JITTER_SAMPLES) -> tuple[float, float]:
     """Frame ``frame``'s offset of the projection in normalised device units (the picture is
-    2 wide): a point of the Halton (2, 3) sequence less a half, in pixels, over the size."""
-    index = frame % JITTER_SAMPLES + 1
+    2 wide): a point of the Halton (2, 3) sequence less a half, in pixels of a picture of
+    ``size``, over the size; the sequence repeats after ``phases`` points."""
+    index = frame % phases + 1
     return ((halton(index, 2) - 0.5) * 2.0 / size[0], (halton(index, 3) - 0.5) * 2.0 / size[1])
 
 
@@ -68,17 +81,17 @@ class TemporalPass:
 
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self.ctx = ctx
-        self._resolve = shaders.fullscreen("temporal_resolve.frag", current_image=PRESENT_UNIT,
-                                           history_image=TEMPORAL_HISTORY_UNIT, seen_image=DOF_SEEN_UNIT)
+        self._shaders = shaders
+        self._resolves: dict[bool, moderngl.VertexArray] = {}   # by upsampling, made on first use
         self._history: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []   # [written last, the other]
         self.frame = 0                              # the jitter's frame (moved on by frames of dt > 0)
         self.previous: glm.mat4 | None = None       # last frame's view-projection without its jitter
         self.camera: int | None = None
         self.resolved = 0                           # frames blended into the history since its last cut
 
-    def offset(self, size: tuple[int, int]) -> tuple[float, float]:
-        """This frame's jitter for a picture of ``size``."""
-        return jitter_offset(self.frame, size)
+    def offset(self, size: tuple[int, int], output: tuple[int, int] | None = None) -> tuple[float, float]:
+        """This frame's jitter for a picture of ``size`` (shown at ``output``; None: its own size)."""
+        return jitter_offset(self.frame, size, jitter_phases(size, output))
 
     def _make(self, size: tuple[int, int]) -> None:
         if self._history and self._history[0][0].size == size:
@@ -90,17 +103,28 @@ class TemporalPass:
             texture.repeat_x = texture.repeat_y = False
             self._history.append((texture, self.ctx.framebuffer([texture])))
 
+    def _resolve(self, upsample: bool) -> moderngl.VertexArray:
+        vao = self._resolves.get(upsample)
+        if vao is None:
+            vao = self._resolves[upsample] = self._shaders.fullscreen(
+                "temporal_resolve.frag", {"UPSAMPLE": "1"} if upsample else None, current_image=PRESENT_UNIT,
+                history_image=TEMPORAL_HISTORY_UNIT, seen_image=DOF_SEEN_UNIT)
+        return vao
+
     def draw(self, hdr: moderngl.Texture, seen: moderngl.Texture, view: View, camera: int | None,
-             dt: float) -> moderngl.Texture:
-        """Blend ``hdr`` (drawn through ``view``, jittered) into the history; returns the
-        resolved image (the history now, kept until the next draw)."""
-        size = hdr.size
+             dt: float, size: tuple[int, int] | None = None) -> moderngl.Texture:
+        """Blend ``hdr`` (drawn through ``view``, jittered) into the history, which is ``size``
+        (the output's; None: ``hdr``'s; larger: temporal upsampling); returns the resolved
+        image (the history now, kept until the next draw)."""
+        size = size if size is not None else hdr.size
+        upsample = size != hdr.size
         steady = view.steady_view_proj
         cut = camera != self.camera or not self._history or self._history[0][0].size != size \
             or self.previous is None
         self._make(size)
         written, other = self._history
-        program = self._resolve.program
+        resolve = self._resolve(upsample)
+        program = resolve.program
         other[1].use()
         apply_pass_state(self.ctx, _PASS, (0, 0, *size))
         bind_texture(self.ctx, hdr, PRESENT_UNIT)
@@ -112,7 +136,9 @@ class TemporalPass:
         program["axis"].value = tuple(view.axis)
         program["objects"].value = seen.components == SEEN_MOVING_CHANNELS
         program["blend"].value = 1.0 if cut else BLEND
-        self._resolve.render(moderngl.TRIANGLES, vertices=3)
+        if upsample:
+            program["jitter"].value = view.jitter
+        resolve.render(moderngl.TRIANGLES, vertices=3)
         if dt > 0.0 or cut:   # (a frame of dt 0 leaves the history as it was: the next blends from it)
             self._history.reverse()
             self.previous, self.camera = steady, camera
@@ -134,4 +160,6 @@ class TemporalPass:
 
     def release(self) -> None:
         self.release_targets()
-        self._resolve.release()
+        for vao in self._resolves.values():
+            vao.release()
+        self._resolves.clear()

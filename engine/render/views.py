@@ -212,19 +212,22 @@ PARALLEL_SORT_DISTANCE = 1.0e4
 
 
 def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: float,
-                size: tuple[int, int], name: str = "main", ortho_height: float | None = None) -> View:
+                size: tuple[int, int], name: str = "main", ortho_height: float | None = None,
+                aspect: float | None = None) -> View:
     """The view of a camera whose model-to-world matrix is ``world_matrix`` (looks down -Z).
     A matrix that mirrors (a camera under a parent with a negative scale: a negative
     determinant) has its X axis turned back first, as game engines' cameras ignore a
     mirroring in their transform: the camera looks the same way with the same up, its
     image is not mirrored and its front faces wind as any view's (else every face would be
-    culled as a back face: no floor, no mirror)."""
+    culled as a back face: no floor, no mirror).  ``aspect``: the width over the height the
+    picture is shown at, where it is not ``size``'s (drawn at a render scale, rounded)."""
     w, h = size
+    aspect = aspect if aspect is not None else w / max(h, 1)
     if ortho_height is None:
-        proj = glm.perspective(glm.radians(fov_y_deg), w / max(h, 1), near, far)
+        proj = glm.perspective(glm.radians(fov_y_deg), aspect, near, far)
     else:  # an orthographic camera: ortho_height world units top to bottom, parallel rays
         half_h = ortho_height / 2.0
-        half_w = half_h * w / max(h, 1)
+        half_w = half_h * aspect
         proj = glm.ortho(-half_w, half_w, -half_h, half_h, near, far)
     if glm.determinant(glm.mat3(world_matrix)) < 0.0:
         world_matrix = world_matrix * glm.scale(glm.vec3(-1.0, 1.0, 1.0))
