@@ -54,7 +54,7 @@ void main() {
     // starts from (a smooth upscale).  The same nine give the clip box.
     vec2 input_size = vec2(last + 1);
     vec2 at = (uv + 0.5 * jitter) * input_size - 0.5;
-    ivec2 px = ivec2(floor(at + 0.5));
+    ivec2 px = clamp(ivec2(floor(at + 0.5)), ivec2(0), last);   // (a jitter can put the nearest past an edge)
     vec2 to_output = size / input_size;
     vec3 direct = vec3(0.0);
     vec3 spread_out = vec3(0.0);
@@ -76,13 +76,13 @@ void main() {
         spread_weight += w_input;
         nearest = max(nearest, w_output);
         vec3 y = to_ycocg(c);
-        mean += y;
-        square += y * y;
+        mean += y * w_input;
+        square += y * y * w_input;
     }
     vec3 now = direct_weight > 1e-4 ? direct / direct_weight : spread_out / spread_weight;
     vec3 cut_picture = spread_out / spread_weight;
-    mean /= 9.0;
-    vec3 spread = sqrt(max(square / 9.0 - mean * mean, 0.0));
+    mean /= spread_weight;
+    vec3 spread = sqrt(max(square / spread_weight - mean * mean, 0.0));
     float share = blend * nearest;   // this frame's share: less where no sample fell near the pixel
 #else
     ivec2 px = ivec2(gl_FragCoord.xy);

@@ -360,13 +360,13 @@ class DebugOverlay(EditorPanels):
         changed, scale = imgui.slider_float("render scale", renderer.render_scale, lo, hi, "%.2f")
         if changed:
             renderer.render_scale = min(max(scale, lo), hi)
-        self._widget("render scale")
+        self._widget("render scale", SLIDER_WIDTH * self.scale)
         imgui.same_line()
         imgui.set_next_item_width(SLIDER_WIDTH * self.scale)
         changed, sharpness = imgui.slider_float("sharpen", renderer.sharpness, 0.0, 1.0, "%.2f")
         if changed:
             renderer.sharpness = min(max(sharpness, 0.0), 1.0)
-        self._widget("sharpen")
+        self._widget("sharpen", SLIDER_WIDTH * self.scale)
         x, y = imgui.get_window_pos()
         w, h = imgui.get_window_size()
         width, height = self.io.display_size
@@ -382,9 +382,12 @@ class DebugOverlay(EditorPanels):
             setattr(owner, switch, on)
         self._widget(label)
 
-    def _widget(self, name: str) -> None:
+    def _widget(self, name: str, frame: float | None = None) -> None:
+        """Note where the last item is (its middle; a slider's, ``frame`` wide, its frame's
+        middle, not its label's): what a click at it acts on (the tests click there)."""
         low, high = imgui.get_item_rect_min(), imgui.get_item_rect_max()
-        self.widgets[name] = ((low.x + high.x) / 2.0, (low.y + high.y) / 2.0)
+        x = low.x + frame / 2.0 if frame is not None else (low.x + high.x) / 2.0
+        self.widgets[name] = (x, (low.y + high.y) / 2.0)
 
     def release(self) -> None:
         if self.context is None:

@@ -133,20 +133,19 @@ def post_lines(engine: Engine) -> list[str]:
     elif not present.motion_blur:
         reflections += "; motion blur off (set)"
     passes = renderer.present_pass.post_passes
-    return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}",
-            f"screen: {occlusion}; {reflections}", picture_line(engine)]
+    return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}{picture(engine)}",
+            f"screen: {occlusion}; {reflections}"]
 
 
-def picture_line(engine: Engine) -> str:
-    """The anti-aliasing, the size the picture is drawn at against the output's (a render
-    scale below 1: how it is brought up) and the sharpening."""
+def picture(engine: Engine) -> str:
+    """At a render scale below 1, the size the picture is drawn at against the output's and
+    how it is brought up; the sharpening where there is some ("" for neither)."""
     renderer = engine.renderer
     output = engine.world.resources.get(Output)
-    line = f"AA {renderer.antialias}"
+    words = ""
     if output is not None and renderer.targets is not None and renderer.targets.size != output.size:
         (w, h), (ow, oh) = renderer.targets.size, output.size
-        how = "temporal AA" if renderer.antialias == "taa" else "Catmull-Rom"
-        line += f"; drawn {w}x{h} of {ow}x{oh} (scale {renderer.render_scale:g}), brought up by {how}"
+        words += f"; drawn {w}x{h} of {ow}x{oh} by {'TAA' if renderer.antialias == 'taa' else 'Catmull-Rom'}"
     if renderer.sharpness > 0.0:
-        line += f"; sharpen {renderer.sharpness:g}"
-    return line
+        words += f"; sharpen {renderer.sharpness:g}"
+    return words

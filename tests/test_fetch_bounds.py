@@ -9,7 +9,8 @@ and texture sizes part: odd frame sizes (161x97, 97x161), a resize mid-run, the 
 budget drawing levels downscaled (and at two sizes in turn), mirrors at resolution scales
 that divide nothing, rough mirrors (the atlas copy), water and normal-mapped composites (the
 bent lookup), end images (the fallback's look into the child level), portals, probes, post
-(present's and FXAA's fetches), the selection outline.
+(present's and FXAA's fetches), a render scale (temporal upsampling, the lens and motion
+blur reading the smaller seen image, the upscale), the selection outline.
 
 Broken on purpose: the claim reading its parent one pixel to the right (``px + ivec2(1, 0)``
 in mirror_claim.frag) fails hall_start, hall_mirror_wall and hall_doorway with the edge
@@ -103,6 +104,27 @@ def _post(ctx):
     return _run(ctx, MirrorRing(2), ODD, 3, chosen.configure, budget=0.5, step=chosen.step)
 
 
+def _render_scaled(ctx):
+    """A render scale that divides neither odd size: temporal upsampling (its nearest sample
+    past an edge), then depth of field and motion blur reading the smaller seen image; at the
+    second size FXAA and the Catmull-Rom upscale; sharpened throughout."""
+    from benchmarks.mirrors import MirrorRing
+    from components import DepthOfField, MotionBlur
+    from engine.rules.frame_rules import active_camera_parts
+
+    def setup(engine):
+        renderer = engine.renderer
+        renderer.render_scale, renderer.antialias, renderer.sharpness = 0.61, "taa", 0.4
+        camera = active_camera_parts(engine.world)[0]
+        engine.world.add_component(camera, DepthOfField(f_stop=1.4, autofocus=True))
+        engine.world.add_component(camera, MotionBlur())
+
+    def step(engine, count: int) -> None:   # (four frames a size: the second size's FXAA's)
+        engine.renderer.antialias = "fxaa" if count // 4 == 1 else "taa"
+
+    return _run(ctx, MirrorRing(2), ODD, 4, setup, budget=0.5, step=step)
+
+
 def _probes(ctx):
     from benchmarks.probes import ProbeRing
 
@@ -116,6 +138,7 @@ SCENES: dict[str, Callable[[moderngl.Context], tuple[list[np.ndarray], int]]] = 
     "portals_depth_8": _case("portals_depth_8"),
     "ring_scaled": _ring_scaled,
     "post": _post,
+    "render_scaled": _render_scaled,
     "probes": _probes,
 }
 
@@ -135,7 +158,7 @@ def test_no_fetch_leaves_its_texture(ctx, name):
                 f"{name}: {kind} of frame {index // 2} ({a.shape[1]}x{a.shape[0]}) differs at {int(differ.sum())} "
                 f"pixels with out-of-range texelFetch returning {mode} values (first at row, column "
                 f"{tuple(int(v) for v in np.argwhere(differ)[0])}): a fetch outside its texture whose value is used")
-    if name not in ("post", "probes"):
+    if name not in ("post", "probes", "render_scaled"):
         assert downscaled > 0, f"{name}: the pixel budget downscaled no level"
 
 

@@ -15,6 +15,7 @@ from PIL import Image
 
 from components import Material, MeshRef, ReflectionProbe, Transform
 from engine.assets.mesh import sphere
+from engine.render.resample import render_size
 
 pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
 from shell.overlay import POSITION, DebugOverlay  # noqa: E402
@@ -126,7 +127,7 @@ def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
 
     config = mglw.create_window_config_instance(
         make_window_config(FunctionGame(build)), args=["--window", "headless", "--backend", "egl",
-                                                       "--size", "480x480"])
+                                                       "--size", "480x640"])
     try:
         keys = config.wnd.keys
 
@@ -163,6 +164,13 @@ def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
         assert config.engine.renderer.antialias == "taa"
         click("aa off")
         assert config.engine.renderer.antialias == "off"
+        click("render scale")   # (the slider's middle: the range's)
+        assert config.engine.renderer.render_scale == pytest.approx(0.625, abs=0.03)
+        drawn = render_size((480, 640), config.engine.renderer.render_scale)
+        assert config.engine.renderer.targets.size == drawn
+        config.on_render(0.0, 1 / 60)  # the overlay's lines are written before its widgets act
+        assert any(line.startswith("post: ") and f"; drawn {drawn[0]}x{drawn[1]} of 480x640 by Catmull-Rom" in line
+                   for line in config.overlay.lines), [line for line in config.overlay.lines if "post" in line]
         click("shadows")
         assert not config.engine.stages["shadows"].enabled
         config.on_render(0.0, 1 / 60)  # the overlay's lines are written before its widgets act
@@ -206,7 +214,7 @@ def test_headless_overlay_flag_draws_into_the_png_and_nothing_else(tmp_path):
         out = tmp_path / name
         # 560 rows: the overlay's window (with its post-processing, screen, views-kept and smallest-view
         # lines, the grade, AO and curve row and the screen reflections' row) ends inside the frame.
-        result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "480x560",
+        result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "480x600",
                                  "--out", str(out), *extra], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                                 capture_output=True, text=True, timeout=120)
         assert result.returncode == 0, result.stderr
@@ -215,7 +223,7 @@ def test_headless_overlay_flag_draws_into_the_png_and_nothing_else(tmp_path):
     rows, columns = np.nonzero(changed)
     assert (columns.min(), rows.min()) == POSITION  # the overlay window's corner, nothing before it
     box = changed[rows.min():rows.max() + 1, columns.min():columns.max() + 1]
-    assert box.mean() > 0.5 and columns.max() < 470 and rows.max() < 550, (box.mean(), columns.max(), rows.max())
+    assert box.mean() > 0.5 and columns.max() < 470 and rows.max() < 590, (box.mean(), columns.max(), rows.max())
 
 
 RELEASE_TWICE = """

@@ -39,9 +39,10 @@ def edge_scene(world):
                 MeshRef(quad(1.6, 1.6)), Material(color=(1.0, 1.0, 1.0)))
 
 
-def runs(scene, build, mode: str, size=SIZE):
+def runs(scene, build, mode: str, size=SIZE, scale: float = 1.0):
     runner = scene(build, size)
     runner.engine.renderer.antialias = mode
+    runner.engine.renderer.render_scale = scale
     return runner
 
 
@@ -101,17 +102,19 @@ def mirrored_square(world):
                 MeshRef(quad(1.6, 1.6)), Material(color=(1.0, 1.0, 1.0)))
 
 
+@pytest.mark.parametrize("scale", [1.0, 0.5])
 @pytest.mark.parametrize(("build", "moving"), [(edge_scene, "camera"), (edge_scene, "square"),
                                                (mirrored_square, "camera")])
-def test_reprojected_history_follows_what_moves_and_leaves_no_trail(scene, build, moving):
+def test_reprojected_history_follows_what_moves_and_leaves_no_trail(scene, build, moving, scale):
     """Sixteen frames of the camera panning (or the square sliding; or the camera panning
     before a mirror that shows the square behind it): the resolved square stands where the
     picture drawn four times larger and averaged down has it (its light's centre within a
     third of a pixel: the history fetched where each point was, by the light's way through the
     mirror and the thing's own motion), as near that picture as a still frame's is; nothing
-    of it stays where it was eight frames ago."""
-    def run(mode: str, size: tuple[int, int]) -> list[np.ndarray]:
-        runner = runs(scene, build, mode, size)
+    of it stays where it was eight frames ago.  At half scale too (temporal upsampling: the
+    history the output's size, each frame's samples half as many a side)."""
+    def run(mode: str, size: tuple[int, int], scale: float = 1.0) -> list[np.ndarray]:
+        runner = runs(scene, build, mode, size, scale)
         camera = next(entity for entity, _ in runner.world.query_one(Camera))
         square = max(entity for entity, (_, material) in runner.world.query(MeshRef, Material)
                      if material.color[0] == 1.0)
@@ -125,7 +128,7 @@ def test_reprojected_history_follows_what_moves_and_leaves_no_trail(scene, build
             pictures.append(runner.frame())
         return pictures
 
-    resolved = linear(run("taa", SIZE)[-1])
+    resolved = linear(run("taa", SIZE, scale)[-1])
     references = [averaged_down(picture) for picture in run("off", (SIZE[0] * SCALE, SIZE[1] * SCALE))[-9::8]]
     reference = references[-1]
     found, wanted = bright_centre(resolved), bright_centre(reference)

@@ -10,7 +10,11 @@ built from it, so they move alike, and their composites stay aligned.  The histo
 fetched where each pixel's point was last frame (the light's way for the camera's motion,
 the seen image's own motion for a thing's: ``engine/render/object_motion.py`` is on while
 this is) and clipped to this frame's colours round the pixel, so moving things leave no
-trail.  A cut (another camera, a new size, the first frame) starts the history again.  A
+trail.  At a render scale below 1 (``engine/render/resample.py``) the history is the
+output's size and the resolve is temporal upsampling: each output pixel takes the frame's
+samples near its centre, weighed by their distance (a sample that lands in it counts fully),
+so over the jitter's offsets (more of them: ``jitter_phases``) it gathers what a full-size
+picture would hold.  A cut (another camera, a new size, the first frame) starts the history again.  A
 frame of dt 0 (a screenshot) does not move the offset on and blends as the frame before.
 
 Costs: one full-screen pass of 15 fetches a pixel; the main view changes every frame, so a
