@@ -22,7 +22,8 @@ way leaves what came before, with ``"complete": false``):
   targets tabled first, as "Targets", then its scenes' frames and GL calls), each run as
   ``python -m benchmarks <suite> --json --size WxH --frames N --warmup M`` would run it
   (``cpu`` without ``--size`` and with ``--report-only``: this report judges its targets;
-  in this process, or one subprocess each with ``--isolate``); the rows are the suite's own
+  ``--cpu-parts`` its ``--parts``, all by default; in this process, or one subprocess each
+  with ``--isolate``); the rows are the suite's own
   JSON lines, kept as they are, and the report's median tables are read from them.
   ``--frames`` (default 10) is per suite and size; the suites' own defaults are 30-60.
   ``profile``'s and ``cpu``'s cProfile rows (the functions a frame's CPU time goes to, per
@@ -73,6 +74,7 @@ import traceback
 from pathlib import Path
 
 from benchmarks import format_size, names_from, non_negative_int, parse_sizes, positive_int
+from benchmarks.cpu import PARTS as CPU_PARTS
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
@@ -107,6 +109,10 @@ def _suites(text: str) -> tuple[str, ...]:
     return names_from(text, BENCHMARKS, "suites")
 
 
+def _cpu_parts(text: str) -> tuple[str, ...]:
+    return names_from(text, CPU_PARTS, "cpu parts")
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, metavar="DIR",
                         help="folder for report.md and report.json (made if missing)")
@@ -117,6 +123,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warmup", type=non_negative_int, default=2, help="untimed frames first (default 2)")
     parser.add_argument("--benchmarks", type=_suites, default=BENCHMARKS, metavar="NAME[,NAME...]",
                         help=f"which suites (default {','.join(BENCHMARKS)})")
+    parser.add_argument("--cpu-parts", type=_cpu_parts, default=CPU_PARTS, metavar="NAME[,NAME...]",
+                        help=f"which parts of the cpu suite (default {','.join(CPU_PARTS)}; its --parts: a target "
+                             "of a part not run is reported as not judged)")
     parser.add_argument("--isolate", action="store_true",
                         help="run each suite in a subprocess (a driver crash costs that suite, not the report)")
     parser.add_argument("--no-tests", action="store_true",
@@ -233,11 +242,12 @@ def verdicts_of(checks, expected: tuple[str, ...] = PATHS) -> dict:
     return {name: found[name] for name in (*expected, *sorted(set(found) - set(expected)))}
 
 
-def run_suite(name: str, size: tuple[int, int] | None, frames: int, warmup: int, isolate: bool) -> dict:
+def run_suite(name: str, size: tuple[int, int] | None, frames: int, warmup: int, isolate: bool,
+              extra: tuple[str, ...] = ()) -> dict:
     """One suite at one size (None: at its own, ``FIXED_SIZE``), as ``python -m benchmarks
-    <name> --json ...``: its JSON rows."""
+    <name> --json ...`` (``extra``: the suite's own options): its JSON rows."""
     argv = [name, "--json", *(("--size", format_size(size)) if size is not None else ()), "--frames", str(frames),
-            "--warmup", str(warmup), *(("--report-only",) if name in JUDGED else ())]
+            "--warmup", str(warmup), *(("--report-only",) if name in JUDGED else ()), *extra]
     out, err = io.StringIO(), io.StringIO()
     start = time.perf_counter()
     status: int | str
@@ -559,6 +569,8 @@ def command_line(args: argparse.Namespace) -> str:
     words = ["python", "-m", "benchmarks", "gpu-report", "--out", str(args.out),
              "--size", ",".join(format_size(size) for size in args.size), "--frames", str(args.frames),
              "--warmup", str(args.warmup), "--benchmarks", ",".join(args.benchmarks)]
+    if args.cpu_parts != CPU_PARTS:
+        words += ["--cpu-parts", ",".join(args.cpu_parts)]
     if args.isolate:
         words.append("--isolate")
     if args.report_only:
@@ -607,7 +619,9 @@ def main(args: argparse.Namespace) -> int:
             progress(f"{suite} at {text}: {run['status']}, {len(run['rows'])} rows, {run['seconds']} s")
             write(report, out)
     for suite in (s for s in args.benchmarks if s in FIXED_SIZE):
-        run = report["benchmarks"][suite][FIXED] = run_suite(suite, None, args.frames, args.warmup, args.isolate)
+        extra = ("--parts", ",".join(args.cpu_parts)) if suite == "cpu" and args.cpu_parts != CPU_PARTS else ()
+        run = report["benchmarks"][suite][FIXED] = run_suite(suite, None, args.frames, args.warmup, args.isolate,
+                                                             extra)
         progress(f"{suite}: {run['status']}, {len(run['rows'])} rows, {run['seconds']} s")
         write(report, out)
     if args.no_tests:

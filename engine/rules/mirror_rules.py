@@ -74,7 +74,10 @@ def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh
     or, with a normal map (``normal_map``: one about to be set), the UVs it reads
     (``second_uv_maps``: a choice about to be set) cannot make one (``_other``: values about
     to be set that other rules check)."""
-    held = {kind: world.try_get(entity, kind) if world.exists(entity) else None for kind in (Mirror, MeshRef, Material)}
+    exists = world.exists(entity)
+    if type(joining) is not Mirror and (not exists or world.try_get(entity, Mirror) is None):
+        return  # (most entities: no mirror, nothing more to look up)
+    held = {kind: world.try_get(entity, kind) if exists else None for kind in (Mirror, MeshRef, Material)}
     if joining is not None:
         held[type(joining)] = joining
     mirror, mesh_ref, material = held[Mirror], held[MeshRef], held[Material]

@@ -17,10 +17,13 @@ def _posing(world: World, entity: int, kind: type, joining: Any, mesh: Any) -> t
     """``entity``'s ``kind`` (Skin or Morph) and the mesh it poses (``mesh``: one about to be
     set; None where it has none yet), as they will be once ``joining`` joins; a pose on a
     mirror or a portal refused."""
-    held = {k: world.try_get(entity, k) if world.exists(entity) else None for k in (kind, MeshRef, Mirror, Portal)}
+    exists = world.exists(entity)
+    pose = joining if type(joining) is kind else world.try_get(entity, kind) if exists else None
+    if pose is None:   # (most entities: nothing posed, nothing more to look up)
+        return None, None
+    held = {k: world.try_get(entity, k) if exists else None for k in (MeshRef, Mirror, Portal)}
     if joining is not None:
         held[type(joining)] = joining
-    pose = held[kind]
     surface = "Mirror" if held[Mirror] is not None else "Portal" if held[Portal] is not None else None
     if pose is not None and surface is not None:
         raise ComponentValueError(f"entity {entity}: a {kind.__name__} on a {surface}: a mirror's or portal's plane is "

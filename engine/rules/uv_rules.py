@@ -15,11 +15,16 @@ def check_second_uvs(world: World, entity: int, joining: Any = None, mesh: Any =
                      second_uv_maps: Any = None, **_other: Any) -> None:
     """Refuse ``entity``'s Material naming maps of the second UV set (``second_uv_maps``: ones
     about to be set) on a mesh (``mesh``: one about to be set) without one."""
-    held = {kind: world.try_get(entity, kind) if world.exists(entity) else None for kind in (MeshRef, Material)}
-    if joining is not None:
-        held[type(joining)] = joining
-    names = second_uv_maps if second_uv_maps is not None else getattr(held[Material], "second_uv_maps", ())
-    mesh = mesh if mesh is not None else getattr(held[MeshRef], "mesh", None)
+    exists = world.exists(entity)
+    if second_uv_maps is None:
+        material = joining if type(joining) is Material else world.try_get(entity, Material) if exists else None
+        second_uv_maps = getattr(material, "second_uv_maps", ())
+    names = second_uv_maps
+    if not names:
+        return  # (most materials: no map on the second UV set, nothing more to look up)
+    if mesh is None:
+        mesh_ref = joining if type(joining) is MeshRef else world.try_get(entity, MeshRef) if exists else None
+        mesh = getattr(mesh_ref, "mesh", None)
     if names and mesh is not None and mesh.second_uvs is None:
         raise ComponentValueError(f"entity {entity}: Material.second_uv_maps names {', '.join(names)}, but mesh "
                                   f"{mesh.name!r} has no second UV set (Mesh.second_uvs; a glTF's TEXCOORD_1)")
