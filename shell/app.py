@@ -13,6 +13,7 @@ only through its own methods.
 """
 from __future__ import annotations
 
+import argparse
 import sys
 import traceback
 from collections.abc import Callable
@@ -340,6 +341,13 @@ class Engine:
             component = make()
             if not self.world.has(active[0], type(component)):
                 self.world.add_component(active[0], component)
+
+    def start_from(self, args: argparse.Namespace) -> None:
+        """``start`` with the command line's options (``shell/runner.py``'s parser; headless and
+        windowed alike)."""
+        self.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
+                   getattr(args, "dof", False), getattr(args, "motion_blur", False),
+                   getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0))
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

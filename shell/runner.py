@@ -165,13 +165,6 @@ def _sharpness(text: str) -> float:
         raise argparse.ArgumentTypeError(f"--sharpen {text!r}: {exc}") from None
 
 
-def start_engine(engine: Engine, args: argparse.Namespace) -> None:
-    """``Engine.start`` with the command line's start options (headless and windowed alike)."""
-    engine.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
-                 getattr(args, "dof", False), getattr(args, "motion_blur", False),
-                 getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0))
-
-
 def _gif_path(text: str) -> Path:
     path = Path(text)
     if path.suffix.lower() != ".gif":
@@ -294,7 +287,7 @@ def run_headless(game: Game, args: argparse.Namespace) -> list[Path]:
     overlay = None
     try:
         engine = Engine(game, ctx)
-        start_engine(engine, args)
+        engine.start_from(args)
         capture = CaptureTarget(ctx, args.size)
         output = Output(capture.framebuffer, args.size)
         if args.overlay:

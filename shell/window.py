@@ -37,7 +37,6 @@ from engine.core.game import Game
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
 from shell.capture import save_png
-from shell.runner import start_engine
 
 if TYPE_CHECKING:
     import moderngl
@@ -127,7 +126,7 @@ class SpeculumWindow(mglw.WindowConfig):
         # (the traceback printed, the title and the overlay say so, F5 resumes).
         self.engine.game_guard.contain = True
         if args is not None:
-            start_engine(self.engine, args)
+            self.engine.start_from(args)
         self.input: Input = self.engine.world.resources[Input]
         self.screenshots = Path(args.out) if args is not None and args.out else Path("screenshots")
         self.mouse_captured = False

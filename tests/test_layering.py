@@ -33,6 +33,14 @@ def modules() -> list[str]:
 # child starts with none of the project imported, as a fresh ``python -c "import X"`` does,
 # so an import cycle or a missing import shows; the fork skips the interpreter start and the
 # library loading, which made one subprocess per module cost ~6 s on two cores.
+#
+# The modules come in groups, lowest floors first: the engine and what it stands on, then
+# systems, the shell, games, benchmarks.  Before a group's children the parent imports the
+# groups below it: every import runs down the floors (test_imports_run_only_down_the_floors_
+# transitively proves it from the source), so nothing of a lower group can take part in a
+# cycle or an order that breaks a higher module, and each child then imports only its own
+# floor's modules (a benchmark's child no longer loads the whole engine: the test's time
+# halved).  The parent checks that its preloading brought in nothing of the group it tests.
 FORK_EACH = r"""
 import importlib, json, os, sys, traceback
 import esper, moderngl, moderngl_window, numpy, PIL.Image
@@ -41,7 +49,7 @@ from pyglm import glm
 project = set(sys.argv[1].split(","))
 loaded = sorted(m for m in sys.modules if m.split(".")[0] in project)
 assert not loaded, f"the parent imported project modules: {loaded}"
-names, failed, running = sys.argv[2:], {}, {}
+groups, failed, running = json.loads(sys.argv[2]), {}, {}
 
 def reap():
     pid, status = os.wait()
@@ -51,39 +59,59 @@ def reap():
     if status:
         failed[name] = message or f"exit status {status}"
 
-for name in names:
-    while len(running) >= max(2, os.cpu_count() or 2):
-        reap()
-    read, write = os.pipe()
-    pid = os.fork()
-    if pid == 0:
-        os.close(read)
-        os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # a program's --help, not the report
-        # A package's __main__ runs its program when imported: ask it for --help, which
-        # still imports everything it uses and exits 0.
-        sys.argv = [name, "--help"] if name.endswith("__main__") else [name]
-        try:
-            importlib.import_module(name)
-        except SystemExit as exc:
-            if exc.code not in (0, None):
-                os.write(write, f"SystemExit: {exc.code}".encode())
+for index, names in enumerate(groups):
+    if index:   # the group below, imported here (its __main__ modules run programs: not those)
+        for name in groups[index - 1]:
+            if not name.endswith("__main__"):
+                try:
+                    importlib.import_module(name)
+                except BaseException:
+                    pass   # (its own child reported it)
+        early = sorted(set(names) & set(sys.modules))
+        if early:
+            failed["(preloading)"] = f"importing the floors below brought in {early}"
+            break
+    for name in names:
+        while len(running) >= max(2, os.cpu_count() or 2):
+            reap()
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.close(read)
+            os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # a program's --help, not the report
+            # A package's __main__ runs its program when imported: ask it for --help, which
+            # still imports everything it uses and exits 0.
+            sys.argv = [name, "--help"] if name.endswith("__main__") else [name]
+            try:
+                importlib.import_module(name)
+            except SystemExit as exc:
+                if exc.code not in (0, None):
+                    os.write(write, f"SystemExit: {exc.code}".encode())
+                    os._exit(1)
+            except BaseException:
+                os.write(write, traceback.format_exc().strip().splitlines()[-1].encode())
                 os._exit(1)
-        except BaseException:
-            os.write(write, traceback.format_exc().strip().splitlines()[-1].encode())
-            os._exit(1)
-        os._exit(0)
-    os.close(write)
-    running[pid] = (name, read)
-while running:
-    reap()
+            os._exit(0)
+        os.close(write)
+        running[pid] = (name, read)
+    while running:
+        reap()
 print(json.dumps(failed))
 """
+GROUPS = (("shaders", "components", "engine"), ("systems",), ("shell",), ("games",), ("benchmarks",))
+
+
+def grouped(names: list[str]) -> list[list[str]]:
+    """``names`` in ``GROUPS``' order, a list a group (by their top package)."""
+    return [[name for name in names if name.split(".")[0] in group] for group in GROUPS]
 
 
 def test_every_module_imports_first_in_a_fresh_interpreter():
     names = modules()
     assert len(names) > 40 and "systems" in names and "engine.render.renderer" in names
-    result = subprocess.run([sys.executable, "-c", FORK_EACH, ",".join(PACKAGES), *names], cwd=ROOT,
+    groups = grouped(names)
+    assert sum(map(len, groups)) == len(names), "a package no group holds"
+    result = subprocess.run([sys.executable, "-c", FORK_EACH, ",".join(PACKAGES), json.dumps(groups)], cwd=ROOT,
                             env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
     failed = json.loads(result.stdout.strip().splitlines()[-1])
