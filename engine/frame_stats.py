@@ -53,6 +53,8 @@ class RenderStats(BudgetLedger):
 
     passes: int = 0
     draw_calls: int = 0
+    render_scale: float = 1.0              # the share of the output's size the main view was drawn at
+    gpu_frame_ms: float | None = None      # the GPU's time over a recent frame (timed under ViewBudget.frame_ms)
     draws_culled: int = 0     # scene draws left out of a view their batch's boxes cannot reach (batch_cull)
     uploaded_bytes: int = 0
     instances: int = 0

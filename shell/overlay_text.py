@@ -10,6 +10,7 @@ from collections import Counter
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
+from engine.core.budget import ViewBudget
 from engine.core.frame_io import Output
 
 if TYPE_CHECKING:  # the engine is the app's, which draws the overlay with this text
@@ -139,13 +140,19 @@ def post_lines(engine: Engine) -> list[str]:
 
 def picture(engine: Engine) -> str:
     """At a render scale below 1, the size the picture is drawn at against the output's and
-    how it is brought up; the sharpening where there is some ("" for neither)."""
+    how it is brought up; under a ViewBudget's ``frame_ms`` the dynamic scale and the GPU's
+    frame time against it; the sharpening where there is some ("" for none of them)."""
     renderer = engine.renderer
     output = engine.world.resources.get(Output)
     words = ""
     if output is not None and renderer.targets is not None and renderer.targets.size != output.size:
         (w, h), (ow, oh) = renderer.targets.size, output.size
         words += f"; drawn {w}x{h} of {ow}x{oh} by {'TAA' if renderer.antialias == 'taa' else 'Catmull-Rom'}"
+    budget = engine.world.resources.get(ViewBudget)
+    if isinstance(budget, ViewBudget) and budget.frame_ms is not None:
+        gpu = renderer.stats.gpu_frame_ms
+        words += (f"; dynamic x{renderer.stats.render_scale:.2f}, GPU {'-' if gpu is None else f'{gpu:.2f}'} "
+                  f"of {budget.frame_ms:g} ms")
     if renderer.sharpness > 0.0:
         words += f"; sharpen {renderer.sharpness:g}"
     return words

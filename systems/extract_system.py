@@ -42,7 +42,7 @@ from engine.core.world import World
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.render.surface_table import SurfaceBlends
-from engine.resources import PortalCrossings, Surfaces
+from engine.resources import PortalCrossings, Surfaces, ViewBudget
 from engine.rules.probe_rules import APPEARANCE_KINDS, POSE_KINDS, LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
 from systems.material_dispatch import choose_material, layer_uniforms
@@ -72,6 +72,10 @@ class ExtractSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         renderer = self.renderer
+        budget = ViewBudget.of(world.resources)
+        if budget is not None and budget.frame_ms is not None:   # (the frame's GL work starts here: timed)
+            renderer.frame_timer.require()
+            renderer.frame_timer.begin()
         # Per-object motion blur: on while the camera's last presented motion blur streaked
         # moving things (the first frame of a motion blur has no last frame to streak from).
         # Temporal AA reprojects by it too.

@@ -77,7 +77,12 @@ class MainViewSystem(esper.Processor):
             return  # minimised window or nothing to look through
         _, cam, cam_t = camera
         levels = self.renderer.levels  # the main view tree's targets (the renderer owns them)
-        size = render_size(output.size, self.renderer.render_scale)   # (the output's, or fewer pixels)
+        # The output's size, or fewer pixels: the render scale, or dynamic resolution's under
+        # a ViewBudget's frame_ms (the GPU's frame time, measured).
+        scale = self.renderer.main_scale(ViewBudget.of(world.resources))
+        stats = self.renderer.stats
+        stats.render_scale, stats.gpu_frame_ms = scale, self.renderer.frame_timer.latest_ms
+        size = render_size(output.size, scale)
         targets = levels.get(0, size)
         views.levels = levels
         views.main = camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, size,

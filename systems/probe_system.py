@@ -193,16 +193,20 @@ class ProbeSystem(esper.Processor):
 
 class ProbeAfterPresentSystem(esper.Processor):
     """Stage "probes_after": the captures the schedule still holds undrawn (recaptures),
-    drawn after present and sampled by the next frame."""
+    drawn after present and sampled by the next frame; the last of the frame's GL work, so
+    the frame's GPU timing ends here (dynamic resolution: ``GpuFrameTimer``)."""
 
     def __init__(self, world: World, renderer: Renderer) -> None:
         self.world = world
         self.renderer = renderer
 
     def process(self, dt: float) -> None:
-        schedule = self.world.resources.get(ProbeSchedule)
-        if schedule is None or not self.world.resources.get(ProbeStates):
-            return
-        for due in schedule.undrawn():
-            capture_due(self.world, self.renderer, due)
-        report(self.world, self.renderer)
+        try:
+            schedule = self.world.resources.get(ProbeSchedule)
+            if schedule is None or not self.world.resources.get(ProbeStates):
+                return
+            for due in schedule.undrawn():
+                capture_due(self.world, self.renderer, due)
+            report(self.world, self.renderer)
+        finally:
+            self.renderer.frame_timer.end()

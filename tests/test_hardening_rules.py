@@ -308,7 +308,7 @@ class _BudgetGame(Game):
 
 @pytest.mark.parametrize("budget, expected", [
     (ViewBudget, "holds the class ViewBudget, not a budget: make one, e.g. ViewBudget(views=24)"),
-    ({"views": 4}, "must be a ViewBudget(views=..., pixels=..., probe_ms=..., min_pixels=...), got dict"),
+    ({"views": 4}, "must be a ViewBudget(views=..., pixels=..., probe_ms=..., min_pixels=..., frame_ms=...), got dict"),
     (lambda: ViewBudget(views=-2), "ViewBudget.views must be None or an int >= 0, got -2"),
     (lambda: ViewBudget(probe_ms="2"), "ViewBudget.probe_ms must be None or a finite number > 0, got '2'"),
 ], ids=["class", "dict", "negative-views", "text-probe-ms"])
@@ -699,18 +699,20 @@ def test_a_level_file_sets_the_view_budget_and_save_level_writes_it_back(tmp_pat
     path = _level(tmp_path, """\
         [level]
         name = "budgeted"
-        view_budget = { views = 12, probe_ms = 2.5, min_pixels = 64 }
+        view_budget = { views = 12, probe_ms = 2.5, min_pixels = 64, frame_ms = 8.0 }
 
         [[entity]]
         name = "floor"
         [entity.Transform]
         """)
     level = load_level(path)
+    expected = ViewBudget(views=12, probe_ms=2.5, min_pixels=64, frame_ms=8.0)
     with World("budget") as world:
         names = level.spawn(world)
-        assert world.resources[ViewBudget] == ViewBudget(views=12, probe_ms=2.5, min_pixels=64)
+        assert world.resources[ViewBudget] == expected
         saved = save_level(world, tmp_path / "again.toml", names, name="budgeted")
-    assert load_level(saved).view_budget == ViewBudget(views=12, probe_ms=2.5, min_pixels=64)
+    assert load_level(saved).view_budget == expected
+    assert "min_render_scale" not in saved.read_text()   # (a default is left out)
 
 
 @pytest.mark.parametrize("value, expected", [

@@ -123,7 +123,9 @@ def _world_tables(world: World, path: Path, names: Mapping[str, int] | None,
 
 
 def _budget_table(budget: ViewBudget) -> dict[str, Any]:
-    return {key: value for key, value in dataclasses.asdict(budget).items() if value is not None}
+    """The budget's fields that are not their defaults (a key the file leaves out)."""
+    default = dataclasses.asdict(ViewBudget())
+    return {key: value for key, value in dataclasses.asdict(budget).items() if value != default[key]}
 
 
 def _entity_text(table: Mapping[str, Any]) -> str:

@@ -15,6 +15,10 @@ import numpy as np
 
 from engine.core.errors import SpeculumError
 
+# The render scales dynamic resolution may go down to (Renderer.render_scale's range:
+# engine/render/resample.py RENDER_SCALE_RANGE, which the core cannot import).
+MIN_RENDER_SCALE_RANGE = (0.25, 1.0)
+
 
 class ViewBudgetError(SpeculumError, ValueError):
     """A ``ViewBudget`` that cannot be spent: a field out of range, or something else (the
@@ -50,12 +54,21 @@ class ViewBudget:
     tree is drawn into: the screen, or a probe's face) is not drawn, and its surface shows
     its fallback there, as a view the budget cut (a level of detail, as engines cull a mesh
     under a screen size: a scene pass for a sliver a few pixels across costs a whole pass's
-    CPU and shows what the fallback shows).  ``RenderStats.views_small`` counts them."""
+    CPU and shows what the fallback shows).  ``RenderStats.views_small`` counts them.
+
+    ``frame_ms`` is the GPU's time a frame may take: the main view (and so every reflection
+    level and post image sized from it) is drawn at a lower render scale while the GPU's
+    measured frame runs over it, down to ``min_render_scale``, and raised again, up to
+    ``Renderer.render_scale``, when it has room (dynamic resolution,
+    ``engine/render/dynamic_resolution.py``).  ``RenderStats``: ``render_scale``,
+    ``gpu_frame_ms``."""
 
     views: int | None = None
     probe_ms: float | None = None
     pixels: int | None = None
     min_pixels: int | None = None
+    frame_ms: float | None = None
+    min_render_scale: float = 0.5
 
     def __post_init__(self) -> None:
         self.check()
@@ -74,6 +87,16 @@ class ViewBudget:
         if self.probe_ms is not None and (isinstance(self.probe_ms, bool) or not isinstance(self.probe_ms, (int, float))
                                           or not 0.0 < self.probe_ms < float("inf")):
             raise ViewBudgetError(f"ViewBudget.probe_ms must be None or a finite number > 0, got {self.probe_ms!r}")
+        if self.frame_ms is not None and (isinstance(self.frame_ms, bool) or not isinstance(self.frame_ms, (int, float))
+                                          or not 0.0 < self.frame_ms < float("inf")):
+            raise ViewBudgetError(f"ViewBudget.frame_ms must be None or a finite number > 0 (the GPU's milliseconds "
+                                  f"a frame), got {self.frame_ms!r}")
+        low, high = MIN_RENDER_SCALE_RANGE
+        if isinstance(self.min_render_scale, bool) or not isinstance(self.min_render_scale, (int, float)) \
+                or not low <= self.min_render_scale <= high:
+            raise ViewBudgetError(f"ViewBudget.min_render_scale must be a number in [{low:g}, {high:g}] (the least "
+                                  f"share of the output's size dynamic resolution draws at), got "
+                                  f"{self.min_render_scale!r}")
 
     @staticmethod
     def of(world_resources: dict) -> ViewBudget | None:
@@ -88,7 +111,8 @@ class ViewBudget:
                                   "make one, e.g. ViewBudget(views=24)")
         if not isinstance(budget, ViewBudget):
             raise ViewBudgetError(f"world.resources[ViewBudget] must be a ViewBudget(views=..., pixels=..., "
-                                  f"probe_ms=..., min_pixels=...), got {type(budget).__name__} {budget!r}")
+                                  f"probe_ms=..., min_pixels=..., frame_ms=...), got "
+                                  f"{type(budget).__name__} {budget!r}")
         return budget
 
 

@@ -63,6 +63,12 @@ so there is nothing of moderngl's to re-sync afterwards.
 The function comes from the loader moderngl's own context uses (glcontext); where that is
 not reachable (another moderngl build), ``flush`` does nothing: it is never needed for a
 correct image, only for overlap.
+
+GPU timestamps (``TimestampQueries``): moderngl's queries are time-elapsed ones, which
+cannot nest (the probes' path timing runs one inside a frame), so the frame's own GPU time
+(dynamic resolution, ``engine/render/dynamic_resolution.py``) is two ``glQueryCounter``
+timestamps (GL 3.3 core), read without waiting once ``GL_QUERY_RESULT_AVAILABLE`` says so.
+They bind nothing and change no state.
 """
 from __future__ import annotations
 
@@ -154,6 +160,19 @@ _QUERY_SIGNATURES = {
     "glIsEnabled": (ctypes.c_ubyte, _u),
     "glActiveTexture": (None, _u),
 }
+
+
+# GPU timestamps (``TimestampQueries``).
+_TIMER_SIGNATURES = {
+    "glGenQueries": (None, _i, ctypes.POINTER(_u)),
+    "glDeleteQueries": (None, _i, ctypes.POINTER(_u)),
+    "glQueryCounter": (None, _u, _u),
+    "glGetQueryObjectiv": (None, _u, _u, ctypes.POINTER(_i)),
+    "glGetQueryObjectui64v": (None, _u, _u, ctypes.POINTER(ctypes.c_uint64)),
+}
+GL_TIMESTAMP = 0x8E28
+GL_QUERY_RESULT = 0x8866
+GL_QUERY_RESULT_AVAILABLE = 0x8867
 
 
 class MissingEntryPoints(RuntimeError):
@@ -695,3 +714,35 @@ def _load(ctx: moderngl.Context, name: str, prototype):
         return None
     address = loader(name)
     return prototype(address) if address else None
+
+
+class TimestampQueries:
+    """``glQueryCounter(GL_TIMESTAMP)`` queries of one context: ``make`` names, ``mark`` one
+    with the time the GPU reaches it, ``nanoseconds`` its time once available (None before:
+    never waits).  ``missing`` names the entry points the loader lacks (empty: usable)."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self._gl = {name: _load(ctx, name, ctypes.CFUNCTYPE(*signature))
+                    for name, signature in _TIMER_SIGNATURES.items()}
+        self.missing = tuple(name for name, function in self._gl.items() if function is None)
+
+    def make(self, count: int) -> list[int]:
+        names = (_u * count)()
+        self._gl["glGenQueries"](count, names)
+        return list(names)
+
+    def mark(self, query: int) -> None:
+        self._gl["glQueryCounter"](query, GL_TIMESTAMP)
+
+    def nanoseconds(self, query: int) -> int | None:
+        ready = _i(0)
+        self._gl["glGetQueryObjectiv"](query, GL_QUERY_RESULT_AVAILABLE, ctypes.byref(ready))
+        if not ready.value:
+            return None
+        value = ctypes.c_uint64(0)
+        self._gl["glGetQueryObjectui64v"](query, GL_QUERY_RESULT, ctypes.byref(value))
+        return int(value.value)
+
+    def release(self, queries: list[int]) -> None:
+        if queries:
+            self._gl["glDeleteQueries"](len(queries), (_u * len(queries))(*queries))

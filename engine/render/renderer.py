@@ -20,9 +20,11 @@ import numpy as np
 from components.post import MAX_EXPOSURE_EV
 from engine.assets.mesh import Mesh
 from engine.assets.texture_data import TextureData
+from engine.core.budget import ViewBudget
 from engine.core.color import srgb_to_linear
 from engine.core.errors import GLLimitError
 from engine.render.cutout_mips import FILTERED_TEXELS, alpha_share, keep_alpha_share
+from engine.render.dynamic_resolution import GpuFrameTimer, ResolutionController
 from engine.render.gl_context import GLCapabilities
 from engine.render.gpu import BACKGROUND, Gpu, Shared
 from engine.render.instances import MAX_CHANGED_PARTS, MORPH_TEXTURE_WIDTH, BatchKey, GpuMesh, InstanceBatch
@@ -96,6 +98,9 @@ class Renderer(Gpu):
         self._antialias = "fxaa"
         self._render_scale = 1.0
         self._sharpness = 0.0
+        self.frame_timer = GpuFrameTimer(ctx)     # the GPU's time a frame (dynamic resolution)
+        self.resolution = ResolutionController()  # the scale it chooses under a ViewBudget's frame_ms
+        self._timed_readings = 0                  # the timer's readings the controller has seen
         self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.shadows = ShadowMaps(self)
         self.screen_reflections = ScreenReflectionPass(self)  # the camera's ScreenReflections
@@ -146,6 +151,20 @@ class Renderer(Gpu):
     @render_scale.setter
     def render_scale(self, value: float) -> None:
         self._render_scale = check_render_scale(value)
+
+    def main_scale(self, budget: ViewBudget | None) -> float:
+        """The render scale this frame's main view is drawn at: ``render_scale``, or under a
+        budget's ``frame_ms`` the dynamic one between its ``min_render_scale`` and
+        ``render_scale`` (``engine/render/dynamic_resolution.py``)."""
+        if budget is None or budget.frame_ms is None:
+            self.resolution.scale = self._render_scale
+            return self._render_scale
+        self.frame_timer.require()
+        timer = self.frame_timer
+        reading = timer.latest_ms if timer.readings != self._timed_readings else None
+        self._timed_readings = timer.readings
+        return self.resolution.update(reading, budget.frame_ms, min(budget.min_render_scale, self._render_scale),
+                                      self._render_scale)
 
     @property
     def sharpness(self) -> float:
@@ -530,6 +549,7 @@ class Renderer(Gpu):
         self.screen_reflections.release()
         self.scene_pass.release()
         self.present_pass.release()
+        self.frame_timer.release()
         if self.text_pass is not None:
             self.text_pass.release()
             self.text_pass = None

@@ -26,12 +26,13 @@ import math
 import moderngl
 import numpy as np
 
+from engine.core.budget import MIN_RENDER_SCALE_RANGE
 from engine.render.bindings import FXAA_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 
 # Below a quarter the picture is too coarse to bring back; above 1 (supersampling) is not
 # offered: the resolve's and the spline's neighbourhoods are sized for bringing a picture up.
-RENDER_SCALE_RANGE = (0.25, 1.0)
+RENDER_SCALE_RANGE = MIN_RENDER_SCALE_RANGE   # (the core's, which dynamic resolution's floor shares)
 _PASS = PassState()
 
 
