@@ -3,7 +3,8 @@
 // texture's cell, or a round soft spot), premultiplied by its alpha.  ``coverage`` 1 (blend
 // "alpha") writes that alpha, so it covers what is behind; 0 (blend "additive") writes alpha
 // 0, so the premultiplied blend adds it.  Fogged as the glass is (scene.frag): the colour's
-// light through the air, and the fog's own light by the alpha written.
+// light through the air, and the fog's own light by the alpha written.  REACTIVE: the
+// main view's particles drawn again into temporal AA's reactive mask.
 #include "camera.glsl"
 #include "view_axis.glsl"
 #include "fog.glsl"
@@ -68,5 +69,13 @@ void main() {
     color = fog_view(color, eye, camera.clip_plane, v_world)
             - (1.0 - alpha) * fog_view(vec3(0.0), eye, camera.clip_plane, v_world);
 #endif
+#ifdef REACTIVE
+    // Temporal AA's reactive mask (engine/render/temporal_aa.py): how much this particle
+    // changes the pixel, its cover or its light, whichever is more, up to 1; blended as the
+    // colour is (premultiplied), so overlapping particles unite.
+    float reactive = clamp(max(alpha, max(max(color.r, color.g), color.b)), 0.0, 1.0);
+    out_color = vec4(reactive);
+#else
     out_color = vec4(hdr_store(color), alpha);
+#endif
 }

@@ -24,8 +24,12 @@ uniform float blend;               // this frame's share (1: a cut, the history 
 #ifdef UPSAMPLE
 uniform vec2 jitter;               // this frame's offset (normalised device units: View.jitter)
 #endif
+uniform sampler2D reactive_image;  // how much the main view's particles change each pixel (0 to 1)
+uniform bool reactive;             // the mask was drawn this frame (particles live)
 
 out vec4 out_color;
+
+const float REACTIVE_SHARE = 0.9;   // this frame's share where a particle covers the pixel whole
 
 vec3 to_ycocg(vec3 c) {
     return vec3(0.25 * c.r + 0.5 * c.g + 0.25 * c.b, 0.5 * c.r - 0.5 * c.b, -0.25 * c.r + 0.5 * c.g - 0.25 * c.b);
@@ -141,6 +145,10 @@ void main() {
     float over = max(max(abs(offset.x) / reach.x, abs(offset.y) / reach.y), abs(offset.z) / reach.z);
     if (over > 1.0) kept = mean + offset / over;
     vec3 history = max(from_ycocg(kept), vec3(0.0));
+    // Where particles are (the reactive mask, as AMD's FSR 2 takes one): they write no motion,
+    // so their history would be fetched from where the things behind them were: this frame
+    // takes most of the pixel, as much as the particle changes it.
+    if (reactive) share = mix(share, REACTIVE_SHARE, texelFetch(reactive_image, px, 0).r);
     float w_now = share / (1.0 + luma(now));
     float w_history = (1.0 - share) / (1.0 + luma(history));
     out_color = vec4((now * w_now + history * w_history) / (w_now + w_history), 1.0);

@@ -89,8 +89,14 @@ class MainViewSystem(esper.Processor):
                                  ortho_height=cam.ortho_height if cam.projection == "orthographic" else None,
                                  aspect=output.size[0] / output.size[1])
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
+        particles = self.renderer.scene_pass.particle_draw
+        particles.reactive = None
         if self.renderer.antialias == "taa":   # (its sub-pixel offset this frame: temporal AA)
-            jittered(views.main, self.renderer.present_pass.temporal.offset(size, output.size))
+            temporal = self.renderer.present_pass.temporal
+            jittered(views.main, temporal.offset(size, output.size))
+            if any(record.particles for record in particles.emitters.values()):
+                # Its particles drawn again into the reactive mask (they carry no motion).
+                particles.reactive = (targets, temporal.begin_reactive(targets))
         views.options = self._root_options()
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
         self.occluded = occlusion

@@ -44,7 +44,7 @@ def test_the_scale_settles_inside_the_budget_and_follows_the_load_back_up():
     assert len(set(settled)) == 1
     assert RAISE_BELOW * 10.0 < 25.0 * settled[0] ** 2 <= 10.0, settled[0]
     changes = [frame for frame in range(1, len(scales)) if scales[frame] != scales[frame - 1]]
-    assert changes and all(b - a >= COOLDOWN for a, b in zip(changes, changes[1:]))
+    assert changes and all(b - a >= COOLDOWN for a, b in zip(changes, changes[1:], strict=False))
     assert all(abs(s * 32 - round(s * 32)) < 1e-9 for s in scales)
     climb = [scales[f] / scales[f - 1] for f in changes if f > 200]
     assert climb and all(1.0 < ratio <= MAX_RAISE + 1e-9 for ratio in climb)

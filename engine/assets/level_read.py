@@ -261,17 +261,17 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
 
 
 def _view_budget(path: Path, table: Any, line: int | None) -> ViewBudget | None:
-    """``[level] view_budget = { views = 24, pixels = 400000, probe_ms = 2.0, min_pixels = 64 }``: the
+    """``[level] view_budget = { views = 24, pixels = 400000, probe_ms = 2.0, min_pixels = 64, frame_ms = 16.7 }``: the
     frame's ``ViewBudget`` (engine.core.budget), each field optional, checked as in Python."""
     if table is None:
         return None
     if not isinstance(table, dict):
         raise LevelError(path, f"[level] view_budget must be a table such as {{ views = 24 }}, got {_short(table)}",
                          line)
-    unknown = sorted(set(table) - {"views", "pixels", "probe_ms", "min_pixels"})
+    known = [f.name for f in dataclasses.fields(ViewBudget)]
+    unknown = sorted(set(table) - set(known))
     if unknown:
-        raise LevelError(path, f"[level] view_budget has unknown keys {unknown} (views, pixels, probe_ms, min_pixels)",
-                         line)
+        raise LevelError(path, f"[level] view_budget has unknown keys {unknown} ({', '.join(known)})", line)
     try:
         return ViewBudget(**table)
     except ViewBudgetError as exc:

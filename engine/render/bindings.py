@@ -164,6 +164,7 @@ MOTION_NEIGHBOURS_UNIT = 47  # each tile's longest streak near it
 # Temporal anti-aliasing (engine/render/temporal_aa.py, before depth of field): the frame on
 # PRESENT_UNIT, the seen image on DOF_SEEN_UNIT, and the history.
 TEMPORAL_HISTORY_UNIT = 49
+TEMPORAL_REACTIVE_UNIT = 50   # temporal AA: the main view's particles' reactive mask
 FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages

@@ -124,6 +124,10 @@ class ParticleDraw:
         self.emitters: dict[int, GpuEmitter] = {}
         self._programs: dict[tuple, moderngl.Program] = {}
         self._reloads = gpu.shaders.reloads
+        # Temporal AA's reactive mask this frame: (the main view's level, the mask's framebuffer:
+        # its R8 image and that level's depth), set by the main stage while TAA is on; the
+        # particles drawn into that level are drawn into it too (``REACTIVE``).  None: off.
+        self.reactive: tuple[RenderTargets, moderngl.Framebuffer] | None = None
 
     # --- what the particles stage hands over ---------------------------------------------
     def update(self, entity: int, emitter: ParticleEmitter, rows: np.ndarray, code: int) -> None:
@@ -226,6 +230,7 @@ class ParticleDraw:
         writes = framebuffer.color_mask  # (the glass slot's: back to it after)
         framebuffer.color_mask = _COLOUR_ONLY
         apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *targets.size), views[0].scissor)
+        reactive = self.reactive if self.reactive is not None and self.reactive[0] is targets and not masked else None
         try:
             for index, view in enumerate(views):
                 if not chosen[index]:
@@ -235,13 +240,20 @@ class ParticleDraw:
                     gpu.bind_view_at(first_index + index)
                     for record in chosen[index]:
                         self._draw_one(record, view, masked, ambient_probes)
+                    if reactive is not None:   # (the same again into temporal AA's reactive mask)
+                        reactive[1].use()
+                        for record in chosen[index]:
+                            self._draw_one(record, view, masked, ambient_probes, reactive=True)
+                        framebuffer.use()
         finally:
             framebuffer.color_mask = writes
 
-    def _draw_one(self, record: GpuEmitter, view: View, masked: bool, ambient_probes: bool) -> None:
+    def _draw_one(self, record: GpuEmitter, view: View, masked: bool, ambient_probes: bool,
+                  reactive: bool = False) -> None:
         """One emitter's particles in ``view``: an "alpha" emitter's rows written again for the
         view, only those whose squares can reach it (``in_view``), farthest first; an
-        "additive" one's as uploaded."""
+        "additive" one's as uploaded.  ``reactive``: its ``REACTIVE`` build (temporal AA's
+        mask), into whatever is bound."""
         count = record.particles
         if record.ribbon:  # its segments, a point to the next, drawn as a whole
             count -= 1
@@ -258,17 +270,18 @@ class ParticleDraw:
             count = record.written[2]
             if not count:
                 return
-        vao = self._vertex_array(record, masked, ambient_probes)
+        vao = self._vertex_array(record, masked, ambient_probes, reactive)
         if record.gl_texture is not None:
             bind_texture(self.ctx, record.gl_texture, PARTICLE_UNIT)
         vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
         self.gpu.stats.draw_calls += 1
 
-    def _vertex_array(self, record: GpuEmitter, masked: bool, ambient_probes: bool) -> moderngl.VertexArray:
+    def _vertex_array(self, record: GpuEmitter, masked: bool, ambient_probes: bool,
+                      reactive: bool = False) -> moderngl.VertexArray:
         if self.gpu.shaders.reloads != self._reloads:
             self.forget()
         program = self._program(record.gl_texture is not None, record.lit, masked, ambient_probes,
-                                record.softness > 0.0, record.ribbon)
+                                record.softness > 0.0, record.ribbon, reactive)
         vao = record.vertex_arrays.get(program.glo)
         if vao is None:
             if record.ribbon:
@@ -295,17 +308,21 @@ class ParticleDraw:
         return vao
 
     def _program(self, sprite: bool, lit: bool, masked: bool, ambient_probes: bool, soft: bool,
-                 ribbon: bool = False) -> moderngl.Program:
+                 ribbon: bool = False, reactive: bool = False) -> moderngl.Program:
         """The build for a textured emitter or not (``SPRITE``), lit or not (``LIT``, with the
         shadow lookups the shadows stage compiled in, and the probes' boxes where they light
         the scene: ``AMBIENT_PROBES``), soft or not (``SOFT``), a ribbon or not (``RIBBON``),
-        masked or not, fogged while the camera's fog is."""
+        masked or not, fogged while the camera's fog is (not the reactive mask's,
+        ``REACTIVE``: the particle's own cover and light)."""
         shadowing = self.shadows.program_defines if lit else ()
         virtual = lit and self.shadows.virtual_shining  # light through mirrors and portals, while one shines
-        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, self.gpu.fog.defines, ribbon, virtual)
+        fog = () if reactive else self.gpu.fog.defines
+        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, fog, ribbon, virtual, reactive)
         program = self._programs.get(key)
         if program is None:
-            defines = dict(self.gpu.fog.defines)
+            defines = dict(fog)
+            if reactive:
+                defines["REACTIVE"] = "1"
             if ribbon:
                 defines["RIBBON"] = "1"
             if sprite:

@@ -17,7 +17,15 @@ so over the jitter's offsets (more of them: ``jitter_phases``) it gathers what a
 picture would hold.  A cut (another camera, a new size, the first frame) starts the history again.  A
 frame of dt 0 (a screenshot) does not move the offset on and blends as the frame before.
 
-Costs: one full-screen pass of 15 fetches a pixel; the main view changes every frame, so a
+Particles write no motion (a cloud has no one surface to follow), so their history would be
+fetched from where the things behind them were and clipped away: the main view's particle
+draws are drawn again into a reactive mask (``begin_reactive``; ``particle.frag``'s
+``REACTIVE`` build: how much each particle changes its pixel), and where it is set this
+frame takes most of the pixel (AMD's FSR 2 takes a reactive mask the same way).  Particles
+seen in a mirror or through a portal are not in it.
+
+Costs: one full-screen pass of 15 fetches a pixel (and the main view's particles drawn
+twice while any live); the main view changes every frame, so a
 still camera's reflection levels are drawn again each frame rather than kept
 (``systems/reflection_system.py``'s still trees), as a GPU engine's temporal AA does.
 """
@@ -32,12 +40,13 @@ from engine.render.bindings import (
     DOF_SEEN_UNIT,
     PRESENT_UNIT,
     TEMPORAL_HISTORY_UNIT,
+    TEMPORAL_REACTIVE_UNIT,
     PassState,
     apply_pass_state,
     bind_texture,
 )
 from engine.render.shader_library import ShaderLibrary
-from engine.render.targets import SEEN_MOVING_CHANNELS, release_framebuffer
+from engine.render.targets import SEEN_MOVING_CHANNELS, RenderTargets, release_framebuffer
 from engine.render.views import View
 
 JITTER_SAMPLES = 8     # offsets before the sequence repeats
@@ -87,6 +96,11 @@ class TemporalPass:
         self.ctx = ctx
         self._shaders = shaders
         self._resolves: dict[bool, moderngl.VertexArray] = {}   # by upsampling, made on first use
+        # The reactive mask: an R8 image the main view's particles write how much they change
+        # each pixel into (particle_draw's REACTIVE builds), with the main view's level's depth;
+        # made for that level (its depth texture), cleared each frame it is asked for.
+        self._reactive: tuple[moderngl.Texture, moderngl.Framebuffer, moderngl.Texture] | None = None
+        self._reactive_now = False   # this frame's mask was asked for (begin_reactive)
         self._history: list[tuple[moderngl.Texture, moderngl.Framebuffer]] = []   # [written last, the other]
         self.frame = 0                              # the jitter's frame (moved on by frames of dt > 0)
         self.previous: glm.mat4 | None = None       # last frame's view-projection without its jitter
@@ -107,12 +121,35 @@ class TemporalPass:
             texture.repeat_x = texture.repeat_y = False
             self._history.append((texture, self.ctx.framebuffer([texture])))
 
+    def begin_reactive(self, targets: RenderTargets) -> moderngl.Framebuffer:
+        """This frame's reactive mask for the main view's level ``targets`` (its size, testing
+        its depth), cleared to 0: the framebuffer the level's particles are drawn into again."""
+        kept = self._reactive
+        if kept is None or kept[2] is not targets.depth or kept[0].size != targets.size:
+            self._release_reactive()
+            texture = self.ctx.texture(targets.size, 1)
+            texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            framebuffer = self.ctx.framebuffer([texture], targets.depth)
+            framebuffer.depth_mask = False   # (the level's depth: tested, never cleared or written here)
+            self._reactive = kept = (texture, framebuffer, targets.depth)
+        kept[1].use()
+        kept[1].clear(0.0, 0.0, 0.0, 0.0)
+        self._reactive_now = True
+        return kept[1]
+
+    def _release_reactive(self) -> None:
+        if self._reactive is not None:
+            release_framebuffer(self._reactive[1])
+            self._reactive[0].release()
+            self._reactive = None
+        self._reactive_now = False
+
     def _resolve(self, upsample: bool) -> moderngl.VertexArray:
         vao = self._resolves.get(upsample)
         if vao is None:
             vao = self._resolves[upsample] = self._shaders.fullscreen(
                 "temporal_resolve.frag", {"UPSAMPLE": "1"} if upsample else None, current_image=PRESENT_UNIT,
-                history_image=TEMPORAL_HISTORY_UNIT, seen_image=DOF_SEEN_UNIT)
+                history_image=TEMPORAL_HISTORY_UNIT, seen_image=DOF_SEEN_UNIT, reactive_image=TEMPORAL_REACTIVE_UNIT)
         return vao
 
     def draw(self, hdr: moderngl.Texture, seen: moderngl.Texture, view: View, camera: int | None,
@@ -142,6 +179,10 @@ class TemporalPass:
         program["blend"].value = 1.0 if cut else BLEND
         if upsample:
             program["jitter"].value = view.jitter
+        program["reactive"].value = self._reactive_now
+        if self._reactive_now:
+            bind_texture(self.ctx, self._reactive[0], TEMPORAL_REACTIVE_UNIT)
+            self._reactive_now = False
         resolve.render(moderngl.TRIANGLES, vertices=3)
         if dt > 0.0 or cut:   # (a frame of dt 0 leaves the history as it was: the next blends from it)
             self._history.reverse()
@@ -152,6 +193,8 @@ class TemporalPass:
         return other[0]
 
     def release_targets(self, keep_view: bool = False) -> None:
+        if not keep_view:
+            self._release_reactive()
         for texture, framebuffer in self._history:
             release_framebuffer(framebuffer)
             texture.release()
@@ -160,7 +203,7 @@ class TemporalPass:
             self.previous, self.camera, self.resolved = None, None, 0
 
     def target_count(self) -> int:
-        return len(self._history)
+        return len(self._history) + (self._reactive is not None)
 
     def release(self) -> None:
         self.release_targets()
