@@ -326,6 +326,26 @@ def _post_auto(engine: Engine) -> None:
     engine.world.add_component(camera_entity(engine), Bloom())
 
 
+def _temporal(engine: Engine, scale: float = 1.0) -> None:
+    _plain(engine)
+    engine.renderer.antialias = "taa"
+    engine.renderer.render_scale = scale
+
+
+def _temporal_half(engine: Engine) -> None:
+    _temporal(engine, 0.5)
+
+
+def _half_scale(engine: Engine) -> None:
+    _plain(engine)
+    engine.renderer.render_scale = 0.5
+
+
+def _sharpened(engine: Engine) -> None:
+    _plain(engine)
+    engine.renderer.sharpness = 0.5
+
+
 VARIANTS: list[Variant] = [
     Variant("off", _plain, "no shadows, no Tonemap, no Bloom (the plain look)"),
     Variant("shadows", _shadows, "the sun casts shadows; a still scene (its map kept)"),
@@ -350,6 +370,10 @@ VARIANTS: list[Variant] = [
     Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),
     Variant("reflections_low", _reflections_low, "the same with ScreenReflections(quality='low')"),
     Variant("reflections_half", _reflections_half, "the same with ScreenReflections(half_resolution=True)"),
+    Variant("taa", _temporal, "temporal AA in place of FXAA"),
+    Variant("taa_half", _temporal_half, "temporal AA at render scale 0.5 (temporal upsampling)"),
+    Variant("half_scale", _half_scale, "FXAA at render scale 0.5 (a Catmull-Rom upscale)"),
+    Variant("sharpened", _sharpened, "FXAA and contrast-adaptive sharpening 0.5"),
 ]
 BASELINE = "off"
 

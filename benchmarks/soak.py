@@ -10,6 +10,10 @@ when a resource count or the memory grew between the first report after warm-up 
 last (memory by more than ``--rss-slack`` MiB).
 
     python -m benchmarks soak --frames 10000
+
+``--lens`` puts depth of field and motion blur on the camera; ``--dynamic`` temporal AA and
+dynamic resolution driven down and back up over and over (every level's targets remade at
+each step).
 """
 from __future__ import annotations
 
@@ -24,6 +28,7 @@ from components import Transform, yaw_pitch_rotation
 from engine.core.frame_io import Output
 from engine.render.gl_context import create_headless_context
 from engine.render.targets import CaptureTarget
+from engine.resources import ViewBudget
 from games.hall_of_mirrors.level import HallOfMirrors
 from shell.app import Engine
 
@@ -54,11 +59,26 @@ def tour(engine: Engine, frame: int) -> None:
     transform.rotation = yaw_pitch_rotation(math.degrees(angle), -5.0)
 
 
-def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE, lens: bool = False) -> list[dict]:
+# --dynamic: the frame's ViewBudget.frame_ms turns between a budget nothing meets and one
+# everything does every this many frames, so dynamic resolution takes the main view down to
+# its floor and back up step by step, remaking every level's targets at each step.
+DYNAMIC_TURN = 40
+
+
+def dynamic_budget(frame: int) -> ViewBudget:
+    """The ``--dynamic`` tour's budget at ``frame``."""
+    return ViewBudget(frame_ms=1e-3 if (frame // DYNAMIC_TURN) % 2 == 0 else 1e6, min_render_scale=0.5)
+
+
+def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE, lens: bool = False,
+        dynamic: bool = False) -> list[dict]:
     """``lens``: the camera has depth of field with autofocus and motion blur (its spinning
-    crates streaking by their own motion) as ``--dof --motion-blur`` give it."""
+    crates streaking by their own motion) as ``--dof --motion-blur`` give it.  ``dynamic``:
+    temporal AA, and dynamic resolution driven down and up (``dynamic_budget``)."""
     ctx = create_headless_context()
     engine = Engine(HallOfMirrors(), ctx)
+    if dynamic:
+        engine.renderer.antialias = "taa"
     if lens:
         from components import MotionBlur
         from shell.app import start_lens
@@ -79,6 +99,8 @@ def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE,
             if frame == frames:
                 break
             tour(engine, frame)
+            if dynamic:
+                engine.world.resources[ViewBudget] = dynamic_budget(frame)
             start = time.perf_counter()
             engine.frame(DT, output)
             ctx.finish()
@@ -107,12 +129,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rss-slack", type=float, default=20.0, help="MiB of growth tolerated (allocator noise)")
     parser.add_argument("--lens", action="store_true",
                         help="depth of field and motion blur on the camera (as --dof --motion-blur)")
+    parser.add_argument("--dynamic", action="store_true",
+                        help=f"temporal AA, and dynamic resolution driven to its floor and back every "
+                             f"{DYNAMIC_TURN} frames (ViewBudget.frame_ms)")
     add_size_argument(parser, SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
     warmup = min(60, args.frames)
-    rows = run(args.frames, args.every, warmup, args.size, args.lens)
+    rows = run(args.frames, args.every, warmup, args.size, args.lens, args.dynamic)
     for row in rows:
         print(json.dumps(row) if args.json else
               f"frame {row['frame']:>6}  rss {row['rss_mib']:>7} MiB  ms {row['frame_ms_median']}  "

@@ -119,10 +119,10 @@ def _render_scaled(ctx):
         engine.world.add_component(camera, DepthOfField(f_stop=1.4, autofocus=True))
         engine.world.add_component(camera, MotionBlur())
 
-    def step(engine, count: int) -> None:   # (four frames a size: the second size's FXAA's)
-        engine.renderer.antialias = "fxaa" if count // 4 == 1 else "taa"
+    def step(engine, count: int) -> None:   # (two frames a size: the second size's FXAA's)
+        engine.renderer.antialias = "fxaa" if count // 2 == 1 else "taa"
 
-    return _run(ctx, MirrorRing(2), ODD, 4, setup, budget=0.5, step=step)
+    return _run(ctx, MirrorRing(2), ODD, 2, setup, budget=0.5, step=step)
 
 
 def _probes(ctx):

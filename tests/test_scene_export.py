@@ -134,7 +134,8 @@ def test_a_scene_rebuilt_from_scene_json_renders_the_same_frame(scene, tmp_path)
     expected = original.frame(0.0)  # the exported state, drawn again (no time passes)
     expected_ids = original.ids()
 
-    assert info["view_budget"] == {"views": None, "probe_ms": None, "pixels": None, "min_pixels": 64}  # the level's
+    assert info["view_budget"] == {"views": None, "probe_ms": None, "pixels": None, "min_pixels": 64,  # the level's
+                                   "frame_ms": None, "min_render_scale": 0.5}
 
     def build(world):
         world.resources[ViewBudget] = ViewBudget(**info["view_budget"])

@@ -7,7 +7,7 @@ from benchmarks import churn, soak
 
 
 def test_a_tour_of_the_sample_level_holds_its_resources_flat():
-    rows = soak.run(frames=90, every=30, warmup=30)
+    rows = soak.run(frames=90, every=30, warmup=30, size=(160, 90))
     assert [row["frame"] for row in rows] == [0, 30, 60, 90]
     assert rows[1]["gl_resources"]["probe_cubes"] == 3 and rows[1]["gl_resources"]["batches"] > 10
     assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
@@ -21,6 +21,15 @@ def test_a_tour_through_a_lens_with_motion_blur_holds_its_resources_flat():
     counts = rows[-1]["gl_resources"]
     assert counts["object_motion"] == 1 and counts["post_targets"] > 4
     assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
+
+
+def test_dynamic_resolution_down_and_up_again_holds_its_resources_flat():
+    """The tour with temporal AA and dynamic resolution driven to its floor (frames 0-39) and
+    back up (40-79, step by step): every level's targets and the reactive mask made again at
+    each step, the history kept (the output's size); nothing grows from the floor to the top."""
+    rows = soak.run(frames=80, every=40, warmup=40, size=(96, 54), dynamic=True)
+    assert soak.grew(rows, warmup=40, rss_slack=20.0) == []
+    assert rows[-1]["gl_resources"]["post_targets"] >= 2   # (the history, and the reactive mask where sparks live)
 
 
 def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
