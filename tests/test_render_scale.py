@@ -95,6 +95,7 @@ def test_a_smaller_picture_is_brought_up_by_a_catmull_rom_spline(scene, mode):
     runner = runner_at(scene, SIZE, 0.5, mode)
     picture = runner.frame().astype(np.float64)
     assert runner.engine.renderer.targets.size == HALF
+    assert runner.engine.renderer.present_pass.post_passes == 1   # (the upscale)
     proj = runner.engine.main_view.proj
     assert proj[1][1] / proj[0][0] == pytest.approx(SIZE[0] / SIZE[1])
     expected = catmull_rom_up(small, SIZE)

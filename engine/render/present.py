@@ -123,7 +123,7 @@ class PresentPass:
         self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
         self.bloom = BloomPass(ctx, shaders, software)
         self.auto_exposure = AutoExposure(ctx, shaders)
-        self.post_passes = 0   # bloom and exposure draws in the last frame (the tone map is the present draw)
+        self.post_passes = 0   # passes past present and FXAA last frame (TAA, lens, blur, bloom, exposure, resample)
         self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
         self._occlusion_view: moderngl.VertexArray | None = None  # the overlay's "AO only" view, made on first use
         self._depth_of_field: DepthOfFieldPass | None = None  # made when a camera first has a DepthOfField
@@ -278,6 +278,7 @@ class PresentPass:
             self._capture("_filtered", None)
         else:
             self.resample.draw(picture.texture, output, size, sharpness)
+            self.post_passes += 1
 
     def _capture(self, name: str, size: tuple[int, int] | None) -> CaptureTarget | None:
         """The RGBA8 picture ``name`` ("_encoded": what FXAA or the resample reads; "_filtered":
