@@ -17,6 +17,7 @@ import argparse
 import sys
 import traceback
 from collections.abc import Callable
+from dataclasses import replace
 
 import esper
 import moderngl
@@ -317,10 +318,12 @@ class Engine:
 
     def start(self, antialias: str = "fxaa", camera: tuple[float, float, float, float, float] | None = None,
               occlusion: bool = False, reflections: bool = False, focus: bool = False,
-              motion: bool = False, render_scale: float = 1.0, sharpness: float = 0.0) -> None:
+              motion: bool = False, render_scale: float = 1.0, sharpness: float = 0.0,
+              frame_ms: float | None = None) -> None:
         """The command line's start options (``shell/runner.py``), after the game is built: the
         anti-aliasing, the render scale and sharpening (``--render-scale``, ``--sharpen``:
-        ``engine/render/resample.py``), the camera's pose (``--camera``: ``place_camera``), and screen-space
+        ``engine/render/resample.py``), dynamic resolution's frame time (``--frame-ms``: the
+        world's ``ViewBudget.frame_ms``), the camera's pose (``--camera``: ``place_camera``), and screen-space
         ambient occlusion and reflections, depth of field and motion blur (``--ao``, ``--ssr``,
         ``--dof``, ``--motion-blur``: an ``AmbientOcclusion()``, a ``ScreenReflections()``, a
         ``DepthOfField`` of an 85 mm lens at f/1.4 focusing by itself (``start_lens``) and a
@@ -329,6 +332,9 @@ class Engine:
         self.renderer.antialias = antialias
         self.renderer.render_scale = render_scale
         self.renderer.sharpness = sharpness
+        if frame_ms is not None:   # (--frame-ms: the level's budget, if any, with it)
+            budget = ViewBudget.of(self.world.resources)
+            self.world.resources[ViewBudget] = replace(budget or ViewBudget(), frame_ms=frame_ms)
         if camera:
             self.place_camera(*camera)
         for asked, make, flag in ((occlusion, AmbientOcclusion, "--ao"), (reflections, ScreenReflections, "--ssr"),
@@ -347,7 +353,7 @@ class Engine:
         windowed alike)."""
         self.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
                    getattr(args, "dof", False), getattr(args, "motion_blur", False),
-                   getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0))
+                   getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None))
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

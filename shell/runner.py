@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from components import ComponentValueError
+from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Output
 from engine.core.game import Game
@@ -77,6 +78,9 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                              "output's size by temporal AA (--aa taa) or a Catmull-Rom upscale")
     parser.add_argument("--sharpen", type=_sharpness, default=0.0, metavar="AMOUNT",
                         help="contrast-adaptive sharpening of the final image, in [0, 1] (default 0: none)")
+    parser.add_argument("--frame-ms", type=_frame_ms, default=None, metavar="MS",
+                        help="dynamic resolution: the GPU's milliseconds a frame may take (ViewBudget.frame_ms); "
+                             "the render scale goes down to the budget's min_render_scale (0.5) while frames run over")
     parser.add_argument("--asset-root", type=_folder, action="append", default=[], metavar="DIR",
                         help="a folder a level file's meshes and textures may come from besides the level's own "
                              "(repeatable; a level's assets stay in its folder otherwise)")
@@ -163,6 +167,13 @@ def _sharpness(text: str) -> float:
         return check_sharpness(float(text))
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"--sharpen {text!r}: {exc}") from None
+
+
+def _frame_ms(text: str) -> float:
+    try:
+        return ViewBudget(frame_ms=float(text)).frame_ms
+    except (ValueError, ViewBudgetError) as exc:
+        raise argparse.ArgumentTypeError(f"--frame-ms {text!r}: {exc}") from None
 
 
 def _gif_path(text: str) -> Path:

@@ -207,9 +207,12 @@ def test_a_click_picks_at_the_drawn_size(scene, ctx):
         overlay.release()
 
 
-def test_the_command_line_scale_and_sharpening(tmp_path):
+def test_the_command_line_scale_and_sharpening(tmp_path, capsys):
     """``--render-scale 0.5 --sharpen 0.5``: frames of the output's size, ids of half of it; a
-    scale out of range is refused by the command line, naming it."""
+    scale out of range is refused by the command line, naming it; ``--frame-ms`` likewise."""
+    from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.runner import parse_args
+
     out = tmp_path / "half"
     done = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "1",
                            "--size", "160x90", "--ids", "--out", str(out), "--render-scale", "0.5",
@@ -218,6 +221,17 @@ def test_the_command_line_scale_and_sharpening(tmp_path):
     picture = np.asarray(Image.open(out / "frame_0000.png"))
     assert picture.shape[:2] == (90, 160) and picture.std() > 10.0
     assert np.load(out / "ids_0000.npy").shape == (45, 80)
-    bad = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--render-scale", "3"],
-                         cwd=ROOT, capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 2 and "--render-scale '3': Renderer.render_scale must be a number" in bad.stderr
+    for flag, value, words in (("--render-scale", "3", "Renderer.render_scale must be a number"),
+                               ("--frame-ms", "0", "ViewBudget.frame_ms must be None or a finite number > 0")):
+        with pytest.raises(SystemExit) as refused:
+            parse_args(HallOfMirrors(), ["--headless", flag, value])
+        assert refused.value.code == 2 and f"{flag} {value!r}: {words}" in capsys.readouterr().err
+    # --frame-ms: a budget no frame meets draws the level at the budget's floor (half) within
+    # the timer's lag and a cooldown.
+    out = tmp_path / "dynamic"
+    done = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "16",
+                           "--size", "160x90", "--ids", "--out", str(out), "--frame-ms", "0.001"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert np.load(out / "ids_0000.npy").shape == (90, 160) and np.load(out / "ids_0015.npy").shape == (45, 80)
+
