@@ -269,7 +269,9 @@ def _budget_value(rng: random.Random, name: str) -> Any:
     if rng.random() < 0.85:  # plausible: a small budget that starves something
         return {"views": rng.randint(0, 12), "pixels": rng.choice((0, 1, 500, 5000, 10 ** 6)),
                 "probe_ms": rng.choice((0.001, 0.05, 1.0, 50.0)),
-                "min_pixels": rng.choice((1, 16, 64, 400, 10 ** 6))}[name]
+                "min_pixels": rng.choice((1, 16, 64, 400, 10 ** 6)),
+                "frame_ms": rng.choice((0.001, 1.0, 16.7, 1e6)),
+                "min_render_scale": rng.choice((0.25, 0.5, 0.9, 1.0))}[name]
     return random_value(rng)
 
 
@@ -282,7 +284,8 @@ def _fade_value(rng: random.Random) -> Any:
 
 def random_budget_case(rng: random.Random) -> BudgetCase:
     budget = {name: _budget_value(rng, name)
-              for name in rng.sample(("views", "pixels", "probe_ms", "min_pixels"), rng.randint(1, 4))}
+              for name in rng.sample(("views", "pixels", "probe_ms", "min_pixels", "frame_ms", "min_render_scale"),
+                                     rng.randint(1, 6))}
     mirror = {name: _fade_value(rng) for name in rng.sample(("fade_distance", "fade_angle"), rng.randint(0, 2))}
     water_fields = ("ior", "speed", "direction", "tiling", "cross", "offset")
     plausible_water = {"ior": lambda: rng.uniform(1.0, 2.0), "speed": lambda: rng.uniform(0.0, 2.0),
