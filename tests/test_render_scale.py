@@ -18,6 +18,7 @@ from pyglm import glm
 
 from components import Camera, DepthOfField, MotionBlur, Transform
 from engine.render.resample import RENDER_SCALE_RANGE, check_render_scale, render_size
+from engine.resources import ViewBudget
 from tests.test_temporal_aa import SCALE, averaged_down, edge_scene, linear
 
 SIZE = (96, 72)
@@ -207,7 +208,7 @@ def test_a_click_picks_at_the_drawn_size(scene, ctx):
         overlay.release()
 
 
-def test_the_command_line_scale_and_sharpening(tmp_path, capsys):
+def test_the_command_line_scale_and_sharpening(scene, tmp_path, capsys):
     """``--render-scale 0.5 --sharpen 0.5``: frames of the output's size, ids of half of it; a
     scale out of range is refused by the command line, naming it; ``--frame-ms`` likewise."""
     from games.hall_of_mirrors.level import HallOfMirrors
@@ -226,12 +227,10 @@ def test_the_command_line_scale_and_sharpening(tmp_path, capsys):
         with pytest.raises(SystemExit) as refused:
             parse_args(HallOfMirrors(), ["--headless", flag, value])
         assert refused.value.code == 2 and f"{flag} {value!r}: {words}" in capsys.readouterr().err
-    # --frame-ms: a budget no frame meets draws the level at the budget's floor (half) within
-    # the timer's lag and a cooldown.
-    out = tmp_path / "dynamic"
-    done = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "16",
-                           "--size", "160x90", "--ids", "--out", str(out), "--frame-ms", "0.001"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    assert np.load(out / "ids_0000.npy").shape == (90, 160) and np.load(out / "ids_0015.npy").shape == (45, 80)
+    # --frame-ms: the level's budget (its other fields kept) with the frame time; its effect is
+    # tests/test_dynamic_resolution.py's.
+    engine = scene(edge_scene, HALF).engine
+    engine.world.resources[ViewBudget] = ViewBudget(views=7)
+    engine.start_from(parse_args(HallOfMirrors(), ["--headless", "--frame-ms", "12.5"]))
+    assert engine.world.resources[ViewBudget] == ViewBudget(views=7, frame_ms=12.5)
 

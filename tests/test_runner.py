@@ -268,7 +268,7 @@ def test_dof_and_motion_blur_flags_put_the_lens_and_the_shutter_on_the_active_ca
     assert steps["with"] < 0.9 * steps["plain"], steps
 
 
-def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
+def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path, capsys):
     """``--ao`` and ``--ssr`` give the sample level's camera an AmbientOcclusion() and a
     ScreenReflections() (its chrome ball and crates reflect the room where their rays find
     it; corners darken): the frame changes, the scene export lists them on the camera, and a
@@ -279,11 +279,20 @@ def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path):
     changed = np.abs(frames["with"] - frames["plain"]).max(axis=-1) > 8
     assert 0.01 < changed.mean() < 0.9  # (the picture, not a different one)
 
-    level = _no_camera_level(tmp_path)
+    # (In this process: shell.runner.main as the script's run() calls it.)
+    from components import Material, MeshRef, Transform
+    from engine import Game
+    from engine.assets.mesh import box
+    from shell.runner import main
+
+    class NoCamera(Game):
+        def build(self, world):
+            world.spawn(Transform(), MeshRef(box()), Material())
+
     for flag in (["--ssr"], ["--ao"], ["--dof"], ["--motion-blur"],
                  ["--camera", "0,1,2,0,0"]):  # (--camera: one line too, no traceback)
-        result = subprocess.run([sys.executable, str(level), "--headless", "--frames", "1", "--size", "32x32",
-                                 "--out", str(tmp_path / "none"), *flag], cwd=ROOT,
-                                env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
-                                timeout=120)
-        assert f"{flag[0]} given but the level has no active Camera" in one_error_line(result)
+        status = main(NoCamera(), ["--headless", "--frames", "1", "--size", "32x32", "--out",
+                                   str(tmp_path / "none"), *flag])
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and len(lines) == 1 and lines[0].startswith("speculum: error: "), lines
+        assert f"{flag[0]} given but the level has no active Camera" in lines[0]
