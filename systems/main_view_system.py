@@ -61,6 +61,7 @@ class MainViewSystem(esper.Processor):
         world = self.world
         views = world.resources[FrameViews] = FrameViews()
         self.occluded = self.reflected = None
+        self.renderer.scene_pass.particle_draw.reactive = None   # (set again below while TAA is on)
         output: Output | None = world.resources.get(Output)
         camera = active_camera_parts(world)
         if camera is None and output is not None and not self._said_no_camera:
@@ -90,7 +91,6 @@ class MainViewSystem(esper.Processor):
                                  aspect=output.size[0] / output.size[1])
         views.main.layers = cam.layer_mask  # its culling mask (Camera.shows_layers / hides_layers)
         particles = self.renderer.scene_pass.particle_draw
-        particles.reactive = None
         if self.renderer.antialias == "taa":   # (its sub-pixel offset this frame: temporal AA)
             temporal = self.renderer.present_pass.temporal
             jittered(views.main, temporal.offset(size, output.size))
