@@ -323,6 +323,30 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
 
 ProgramKey = tuple  # (vertex, fragment, geometry, sorted defines)
 
+# Expanded sources, for the whole process: (root, program key) -> (each stage's source, the
+# files it was built from in number order, each one's (mtime_ns, size) when it was read).
+# Every Engine has a library of its own (its context's programs), and expanding a program's
+# includes in Python was most of a new engine's first frame (~6 ms a program, 36 programs for
+# a level with a mirror); a library building a program another built from files that have not
+# changed since (the same times and sizes, as the hot reload compares them) takes its sources.
+_EXPANDED: dict[tuple, tuple[dict[str, str | None], list[str], list[tuple[int, int]]]] = {}
+
+
+# The shader files' bytes as last read, for the whole process: path -> (mtime_ns, size, bytes).
+# A library remembers every file its programs were built from (the hot reload's last good
+# copies); one whose time and size are what another library read is not read again.
+_FILE_BYTES: dict[str, tuple[int, int, bytes]] = {}
+
+
+def _stamps(root: Path, names: list[str]) -> list[tuple[int, int]] | None:
+    """Each file's (mtime_ns, size); None when one cannot be looked at."""
+    folder = str(root)
+    try:
+        return [(found.st_mtime_ns, found.st_size)
+                for found in (os.stat(os.path.join(folder, name)) for name in names)]
+    except OSError:
+        return None
+
 
 class UniformValues:
     """The values last written to a library's programs' uniforms, so a pass writes one only
@@ -420,14 +444,27 @@ class ShaderLibrary:
         read before a failure, so a fix to any of them is seen); ``contents``: bytes to build
         some files from instead of their own (``_build_before_the_edit``)."""
         vertex, fragment, geometry, defines = key
-        try:  # one numbering for every stage, so a log line names one file
-            sources = {stage: load_source(name, dict(defines), root=self.root, files=files, contents=contents)
-                       if name else None
-                       for stage, name in (("vertex_shader", vertex), ("fragment_shader", fragment),
-                                           ("geometry_shader", geometry))}
-        finally:
+        root = self.root or shader_dir()
+        expanded = _EXPANDED.get((root, key)) if contents is None else None
+        if expanded is not None and _stamps(root, expanded[1]) == expanded[2]:
+            sources = expanded[0]
+            for name in expanded[1]:
+                files.number(name)
             for name in files.names[1:]:
                 self._remember_file(name)
+        else:
+            try:  # one numbering for every stage, so a log line names one file
+                sources = {stage: load_source(name, dict(defines), root=self.root, files=files, contents=contents)
+                           if name else None
+                           for stage, name in (("vertex_shader", vertex), ("fragment_shader", fragment),
+                                               ("geometry_shader", geometry))}
+            finally:
+                for name in files.names[1:]:
+                    self._remember_file(name)
+            if contents is None:
+                stamps = _stamps(root, files.names[1:])
+                if stamps is not None and stamps == [self._seen[name][:2] for name in files.names[1:]]:
+                    _EXPANDED[(root, key)] = (sources, files.names[1:], stamps)
         try:
             return self.ctx.program(**sources)
         except moderngl.Error as exc:
@@ -451,15 +488,21 @@ class ShaderLibrary:
         """(mtime_ns, size, contents) of file ``name``: its bytes, or for something that is
         not a regular file what it is (never opened), or all None when it is gone (an editor
         saving by rename: rebuilt, and refused, until it is back)."""
-        path = self._path(name)
+        path = os.path.join(str(self.root or shader_dir()), name)
         try:
             found = os.stat(path)
-            contents = _read_bytes(path)
+            known = _FILE_BYTES.get(path)
+            if known is not None and known[:2] == (found.st_mtime_ns, found.st_size) and stat.S_ISREG(found.st_mode):
+                return known
+            contents = _read_bytes(Path(path))
         except _NotRegularFile as exc:
             contents = exc.kind
         except OSError:
             return None, None, None
-        return found.st_mtime_ns, found.st_size, contents
+        read = found.st_mtime_ns, found.st_size, contents
+        if isinstance(contents, bytes):
+            _FILE_BYTES[path] = read
+        return read
 
     def changed_files(self) -> set[str]:
         """Files some program was built from whose bytes changed since they were last read
