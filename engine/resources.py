@@ -36,8 +36,8 @@ from engine.assets.texture_data import TextureData
 from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.frame_stats import BudgetLedger, RenderStats
 
-__all__ = ["BudgetLedger", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceState",
-           "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
+__all__ = ["BudgetLedger", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceMotion",
+           "SurfaceState", "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
 
 
 
@@ -124,6 +124,17 @@ class Surfaces:
             n = glm.vec3(state.plane)
             planes[entity] = (list(-state.plane.w * n), list(n))
         return planes
+
+
+@dataclass
+class SurfaceMotion:
+    """The mirrors and portals whose view moved since the last frame (a world resource, from
+    the surfaces stage, every frame): each one's ``SurfaceState.carry`` as it was then, by
+    entity (a mirror that moved or turned; a portal that moved, or whose partner did).  Temporal
+    AA and motion blur follow what such a view shows by it (``MirrorPasses.surface_motion``):
+    a reflection moves on the picture as its mirror turns, not only as the camera does."""
+
+    before: dict[int, glm.mat4] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

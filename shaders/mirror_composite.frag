@@ -62,6 +62,22 @@ flat in vec4 v_normal;     // w: tile y
 flat in mat3 v_carry;       // a bumpy mirror's UV map: columns u's gradient, v's, (u0, v0, map scale)
 flat in uint v_view;       // fallback: the parent view's index (its pixels in the parent's node image)
 
+#ifdef SURFACE_MOTION
+// A view whose mirror or portal moved since the last frame (never a fallback's build:
+// MirrorPasses.surface_motion): what it shows moved on the picture as the surface carried it,
+// which its seen image's own motion (b, a) gains, as the way carries the camera's.
+uniform mat4 parent_view_proj;   // the parent view's, as the scene pass drew it
+uniform mat4 moved_view_proj;    // the same times the surface's motion (last frame's carry^-1 x this one's)
+
+// The motion on the picture of what a pixel's ray from ``eye`` along ``dir`` shows ``way`` on
+// (the sky, way_beyond: its direction): the point it is now, and where it was through the
+// surface as it stood last frame, both as the parent projects this frame.
+vec2 surface_moved(vec3 eye, vec3 dir, float way) {
+    vec4 point = way_beyond(way) ? vec4(dir, 0.0) : vec4(eye + dir * way, 1.0);
+    return picture_motion(parent_view_proj * point, moved_view_proj * point);
+}
+#endif
+
 #ifdef COMPOSITE_FALLBACK
 uniform usampler2D parent_nodes;     // the level composited into: which view drew each pixel
 uniform usampler2D parent_surfaces;  // and the surface there
@@ -249,5 +265,8 @@ void main() {
 #else
     out_color = vec4(hdr_store(fogged(reflected, parent_fog, view_dir)), weight);
 #endif
+#endif
+#ifdef SURFACE_MOTION
+    out_seen.ba = floatBitsToUint(uintBitsToFloat(out_seen.ba) + surface_moved(eye, view_dir, uintBitsToFloat(out_seen.g)));
 #endif
 }

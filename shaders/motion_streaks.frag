@@ -8,6 +8,7 @@
 // channels add what the thing itself moved (seen_moved: its instance's motion as the view
 // that drew it projects it).
 #include "view_axis.glsl"
+#include "way.glsl"
 
 uniform usampler2D seen_image;   // the main view's seen image (entity, way, own motion)
 uniform mat4 inv_view_proj;      // this frame's main view
@@ -31,7 +32,7 @@ void main() {
     vec3 dir = normalize(far.xyz / far.w - start);
     uvec4 seen = texelFetch(seen_image, px, 0);
     float way = uintBitsToFloat(seen.g);
-    bool beyond = way <= 0.0 || way >= 0.5 * SKY_WAY;
+    bool beyond = way_beyond(way);
     vec4 before = beyond ? previous_view_proj * vec4(dir, 0.0)
                          : previous_view_proj * vec4(ray_eye(eye, axis, start) + dir * way, 1.0);
     vec2 moved = before.w > 1e-6 ? uv - (before.xy / before.w * 0.5 + 0.5) : vec2(0.0);

@@ -11,6 +11,7 @@
 // not flicker.  A point that was off the picture, or a cut, takes this frame alone.
 #include "catmull_rom.glsl"
 #include "view_axis.glsl"
+#include "way.glsl"
 
 uniform sampler2D current_image;   // this frame, drawn with its jitter
 uniform sampler2D history_image;   // the resolved frames before (bilinear)
@@ -113,7 +114,7 @@ void main() {
             way = near_way;
         }
     }
-    bool beyond = way <= 0.0 || way >= 0.5 * SKY_WAY;
+    bool beyond = way_beyond(way);
     vec4 before = beyond ? previous_view_proj * vec4(dir, 0.0)
                          : previous_view_proj * vec4(ray_eye(eye, axis, start) + dir * way, 1.0);
     vec2 was = before.w > 1e-6 ? before.xy / before.w * 0.5 + 0.5 : vec2(-1.0);

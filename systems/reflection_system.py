@@ -31,6 +31,12 @@ the first still frame made: ``StillTree.keep``, ``engine/render/level_copies.py`
 again.  ``RenderStats.reflection_views_kept`` counts the views kept whole,
 ``reflection_end_refills`` the end views filled again over a kept tree; ``keep_still_views = False``
 draws every frame.
+
+A mirror or portal that moved since the last frame (``SurfaceMotion``, from the surfaces
+stage) moves what its view shows on the picture; while temporal AA or motion blur follows
+motion (``ObjectMotion.on``), each one's motion (last frame's carry inverted, times this
+frame's) goes to the tree's composites (``MirrorPasses.surface_motion``), which add it to
+the seen image's own motion over the view's pixels.
 """
 from __future__ import annotations
 
@@ -38,6 +44,7 @@ import weakref
 from dataclasses import replace
 
 import esper
+from pyglm import glm
 
 from engine.core.errors import MirrorError  # raised by the surfaces stage; named here as before
 from engine.core.world import World
@@ -49,7 +56,7 @@ from engine.render.tree_walk import ReflectionView, TreeSettings
 from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import ViewTree
 from engine.render.views import View
-from engine.resources import PortalCrossings, RenderStats, Surfaces
+from engine.resources import PortalCrossings, RenderStats, SurfaceMotion, Surfaces
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import ViewEyes
 
@@ -157,6 +164,7 @@ class ReflectionSystem(esper.Processor):
         surfaces: Surfaces = self.world.resources.get(Surfaces) or Surfaces({}, {})
         main = views.main if views is not None else None
         renderer = self.renderer
+        self.tree.passes.surface_motion = self._surface_motion(surfaces)
         if main is None or views.levels is None:
             self.views = []
             self.world.resources.pop(ViewEyes, None)
@@ -214,6 +222,19 @@ class ReflectionSystem(esper.Processor):
         paths = result.paths  # (a kept tree's: the paths it was drawn by)
         stats.reflection_path = next(iter(paths)) if len(paths) == 1 else ("mixed" if paths else "")
 
+    def _surface_motion(self, surfaces: Surfaces) -> dict[int, glm.mat4]:
+        """Each surface that moved since the last frame: the matrix taking where its view shows
+        a point now to where it showed it then (empty unless motion is followed)."""
+        motion = self.world.resources.get(SurfaceMotion)
+        if motion is None or not motion.before or not self.renderer.object_motion.on:
+            return {}
+        moved = {}
+        for entity, before in motion.before.items():
+            state = surfaces.mirrors.get(entity) or surfaces.portals.get(entity)
+            if state is not None:
+                moved[entity] = glm.inverse(before) * state.carry
+        return moved
+
     def _still_key(self, main: View, levels: LevelStack, table: SurfaceTable, blends: SurfaceBlends,
                    stats: RenderStats) -> tuple[tuple, tuple]:
         """What the tree's views show, as (values compared equal, objects compared as the same
@@ -227,7 +248,7 @@ class ReflectionSystem(esper.Processor):
                   main.scissor, self.settings, self.tree.unlit, renderer.texture_anisotropy,
                   renderer.reflection_anisotropy, renderer.normal_map_anisotropy, renderer.scene_pass.cull_batches,
                   stats.views_left(), stats.pixels_left(), stats.min_view_pixels,
-                  tuple(flow.offset for flow in waves[1]))
+                  tuple(flow.offset for flow in waves[1]), tuple(self.tree.passes.surface_motion))
         return values, (table, blends.by_surface, levels)
 
     def prepare(self) -> None:

@@ -15,6 +15,12 @@ A Mirror with a ``Water`` component is a water surface: its state carries a ``Wa
 ``Water.offset`` on by the frame's ``dt`` (speed x direction, in normal-map tiles) every
 frame and copies it into the flow in place, so the composite reads this frame's offset
 without the state being made again.
+
+Each frame it also publishes ``SurfaceMotion``: the surfaces whose carry (the reflection, or
+the pair's transform) is not what it was last frame, with last frame's, so temporal AA and
+motion blur follow a turning mirror's reflection (``engine/render/mirror_passes.py``).  A
+frame of dt 0 (a second presentation, a paused game) keeps the last frame's unless a surface
+moved, as the per-object motion does.
 """
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ import warnings
 
 import esper
 import numpy as np
+from pyglm import glm
 
 from components import Material, MeshRef, Mirror, Portal, Transform, Visibility, Water
 from components.visibility import DRAWN_EVERYWHERE
@@ -29,7 +36,7 @@ from engine.core.errors import MirrorError
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
 from engine.core.world import World
-from engine.resources import MirrorBumps, Surfaces, SurfaceState, WaterFlow, WaterLook
+from engine.resources import MirrorBumps, SurfaceMotion, Surfaces, SurfaceState, WaterFlow, WaterLook
 from engine.rules.frame_rules import frame_rules, world_corners
 from engine.rules.mirror_rules import MirrorMeshError, mirror_mesh
 from engine.rules.visibility_rules import drawn_code
@@ -49,16 +56,25 @@ class SurfaceSystem(esper.Processor):
         self._waiting_water: set[int] = set()  # Waters whose Mirror was removed (warned once)
 
     def process(self, dt: float) -> None:
-        changed = self._refresh_mirrors()
+        before: dict[int, glm.mat4] = {}   # the carries of the surfaces made again, as they were
+        changed = self._refresh_mirrors(before)
         self._advance_waves(dt)
-        changed |= self._refresh_portals()
+        changed |= self._refresh_portals(before)
         if changed or Surfaces not in self.world.resources:
             # A new resource only when a surface changed: the view planner's arrays made
             # from it (``engine.render.surface_table``, on first use) are kept while none does.
             self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals))
+        moved = {}
+        for entity, carry in before.items():
+            state = self.mirrors.get(entity) or self.portals.get(entity)
+            if state is not None and state.carry != carry:
+                moved[entity] = carry
+        if moved or dt > 0.0 or SurfaceMotion not in self.world.resources:
+            self.world.resources[SurfaceMotion] = SurfaceMotion(moved)
 
-    def _refresh_mirrors(self) -> bool:
-        """Mirror states redone for what changed; whether any was."""
+    def _refresh_mirrors(self, before: dict[int, glm.mat4]) -> bool:
+        """Mirror states redone for what changed (the carries of those that were there into
+        ``before``); whether any was."""
         world = self.world
         touched = world.changed(Mirror) | world.changed(MeshRef)
         touched |= {e for e in world.changed(Material) if e in self.mirrors}  # a normal map given or taken
@@ -82,6 +98,9 @@ class SurfaceSystem(esper.Processor):
             touched.add(entity)
         touched |= {e for e in world.frame.moved | world.frame.added if e in self.mirrors or e in touched}
         for entity in touched:
+            old = self.mirrors.get(entity)
+            if old is not None:
+                before[entity] = old.carry
             mirror = world.try_get(entity, Mirror) if world.exists(entity) else None
             if mirror is None:
                 self.mirrors.pop(entity, None)
@@ -120,9 +139,10 @@ class SurfaceSystem(esper.Processor):
                 water.offset = (u + water.direction[0] * step, v + water.direction[1] * step)
             flow.offset = water.offset
 
-    def _refresh_portals(self) -> bool:
+    def _refresh_portals(self, before: dict[int, glm.mat4]) -> bool:
         """Portals depend on their partner's pose too; there are few, so all are redone when
-        a portal, its pose or a pairing changed (whether they were)."""
+        a portal, its pose or a pairing changed (whether they were; the carries they had into
+        ``before``)."""
         world = self.world
         open_portals = frame_rules(world).open_portals  # the rule travel and slicing use too
         frame = world.frame
@@ -132,6 +152,7 @@ class SurfaceSystem(esper.Processor):
                 and not any(e in open_portals for e in world.changed(Visibility) | world.changed(MeshRef))):
             return False
         self._open_portals = dict(open_portals)
+        before.update((entity, state.carry) for entity, state in self.portals.items())
         self.portals = {}
         for entity, (portal, transform) in world.query(Portal, Transform):
             partner = open_portals.get(entity)

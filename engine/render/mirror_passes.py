@@ -20,6 +20,12 @@ there would cost every mirror pixel its probe lookups and need the composite to 
 again where a view is drawn, changing drawn mirrors' pixels; here a drawn view's pixels are
 never touched, and only the pixels that show a fallback pay for it.
 
+A view whose mirror or portal moved since the last frame (``surface_motion``) is composited
+by a draw of its own with the ``SURFACE_MOTION`` build, which adds to the seen image's own
+motion where last frame's surface showed each point (temporal AA's history and motion blur's
+streaks follow a turning mirror's reflection); a level's views of still surfaces stay one
+draw a build.
+
 The claims' rectangles are one buffer a level (two triangles each, every vertex with its
 claim's ids: claim.vert): the reset is one draw over all of them (rects.vert), each claim
 a draw of its own six vertices (three GL calls a claim: its query's begin and end and the
@@ -36,7 +42,7 @@ from __future__ import annotations
 import struct
 import weakref
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import moderngl
@@ -268,6 +274,10 @@ class PreparedComposites:
 
     rough: list[tuple[int, tuple[int, int, int, int]]]   # rough views to copy into the atlas
     rows: dict[tuple[str, TextureData | None], bytes]    # packed instance rows per (variant, normal map)
+    # Views whose surface moved since the last frame (MirrorPasses.surface_motion), a draw each
+    # of the SURFACE_MOTION build: ((variant, normal map), its row, the parent's view-projection
+    # and that times the surface's motion, column-major bytes: the build's two uniforms).
+    moving: list[tuple[tuple[str, TextureData | None], bytes, bytes, bytes]] = field(default_factory=list)
 
 
 # One row per composite instance: mirror_composite.vert's attributes, in order, each one or
@@ -313,6 +323,11 @@ _COLOR_UNIT, _SEEN_UNIT, _NODE_UNIT = REFLECTION_UNITS  # the composite's units 
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 # A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
 _CLAIM_VERTICES = struct.Struct("<" + "2f3I" * 6)
+# The composite and fallback builds' texture units, by sampler (a build samples some of them).
+_COMPOSITE_UNITS = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
+                    "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT,
+                    "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT,
+                    **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS, strict=True))}
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
 # A "_bumpy" build reads the mirror's normal map (MirrorBumps); its views are drawn per map.
 COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"},
@@ -529,6 +544,15 @@ class MirrorPasses:
         # the builds without fog made now, those with it the first time a frame has fog.
         self._draws: dict[tuple, tuple[dict[str, _CompositeDraw], dict[str, _CompositeDraw]]] = {}
         self.composites, self.fallbacks = self._variant_draws(())
+        # The SURFACE_MOTION builds, by the fog's defines and variant, made the first time a
+        # moved surface's view is composited.
+        self._moving_draws: dict[tuple[tuple, str], _CompositeDraw] = {}
+        # Each surface that moved since the last frame, by entity: the matrix taking a point
+        # where its view shows it now (in the world of the view that sees the surface) to where
+        # the surface showed it last frame (last frame's carry^-1 x this one's).  Set a frame
+        # by the main tree's owner (the reflect stage) while TAA or motion blur follows motion;
+        # empty: no view's composite adds any.
+        self.surface_motion: dict[int, glm.mat4] = {}
         # The fallback draws' ids and weights (FallbackRows: a chunk's, written before its draw).
         self._fallback_block = ctx.buffer(reserve=_FALLBACK_IDS_BYTES + 32 * FALLBACK_ROWS)
         self.fallback_chunk = FALLBACK_ROWS  # rows a fallback draw takes, at most FALLBACK_ROWS (fewer: more draws)
@@ -657,36 +681,33 @@ class MirrorPasses:
         made = self._draws.get(fogging)
         if made is not None:
             return made
-        ctx, shaders = self.ctx, self.renderer.shaders
-        units = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
-                 "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT}
-        composites: dict[str, _CompositeDraw] = {}
-        for variant, defines in COMPOSITE_VARIANTS.items():
-            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
-                                      defines={"ROUGH_TILE": f"{TILE}.0", **defines, **dict(fogging)})
-            for name, unit in units.items():
-                if name in program:
-                    program[name].value = unit
-            if "Fog" in program:
-                program["Fog"].binding = FOG_BINDING
-            composites[variant] = _CompositeDraw(ctx, program)
-        fallbacks: dict[str, _CompositeDraw] = {}
-        for variant, defines in FALLBACK_VARIANTS.items():
-            program = shaders.program("mirror_composite.vert", "mirror_composite.frag",
-                                      defines={"ROUGH_TILE": f"{TILE}.0", "FALLBACK_ROWS": str(FALLBACK_ROWS),
-                                               **defines, **dict(fogging)})
-            for name, unit in {**units, "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT,
-                               **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS,
-                                          strict=True))}.items():
-                if name in program:
-                    program[name].value = unit
-            if "FallbackRows" in program:
-                program["FallbackRows"].binding = FALLBACK_BINDING
-            if "Fog" in program:
-                program["Fog"].binding = FOG_BINDING
-            fallbacks[variant] = _CompositeDraw(ctx, program)
+        composites = {variant: self._composite_draw(defines, fogging)
+                      for variant, defines in COMPOSITE_VARIANTS.items()}
+        fallbacks = {variant: self._composite_draw({"FALLBACK_ROWS": str(FALLBACK_ROWS), **defines}, fogging)
+                     for variant, defines in FALLBACK_VARIANTS.items()}
         made = self._draws[fogging] = (composites, fallbacks)
         return made
+
+    def _composite_draw(self, defines: Mapping[str, str], fogging: tuple) -> _CompositeDraw:
+        """A composite build (``defines``, with ``fogging``'s) and its draw."""
+        program = self.renderer.shaders.program("mirror_composite.vert", "mirror_composite.frag",
+                                                defines={"ROUGH_TILE": f"{TILE}.0", **defines, **dict(fogging)})
+        for name, unit in _COMPOSITE_UNITS.items():
+            if name in program:
+                program[name].value = unit
+        if "FallbackRows" in program:
+            program["FallbackRows"].binding = FALLBACK_BINDING
+        if "Fog" in program:
+            program["Fog"].binding = FOG_BINDING
+        return _CompositeDraw(self.ctx, program)
+
+    def _moving_draw(self, fogging: tuple, variant: str) -> _CompositeDraw:
+        """The ``SURFACE_MOTION`` build of a composite variant, made the first time."""
+        draw = self._moving_draws.get((fogging, variant))
+        if draw is None:
+            draw = self._moving_draws[(fogging, variant)] = self._composite_draw(
+                {**COMPOSITE_VARIANTS[variant], "SURFACE_MOTION": "1"}, fogging)
+        return draw
 
     def prepare(self) -> None:
         """The reset's and every composite variant's buffers and vertex arrays, made now
@@ -705,11 +726,19 @@ class MirrorPasses:
         rough = [(c.view_index, c.level_rect) for c in composites if c.surface.variant.startswith("rough")]
         tiles = place_tiles(rough)
         groups: dict[tuple[str, TextureData | None], list[Composite]] = {}
+        moving = []
         for c in composites:
             c.tile = tiles.get(c.view_index)
-            groups.setdefault((c.surface.variant, c.surface.normal_map), []).append(c)
+            key = (c.surface.variant, c.surface.normal_map)
+            motion = self.surface_motion.get(c.surface.entity) if self.surface_motion else None
+            if motion is None:
+                groups.setdefault(key, []).append(c)
+            else:
+                view_proj = glm.mat4.from_bytes(c.parent_view.camera_block()[_BLOCK_VIEW_PROJ])
+                moving.append((key, composite_rows([c], parent_size), view_proj.to_bytes(),
+                               (view_proj * motion).to_bytes()))
         rows = {key: composite_rows(group, parent_size) for key, group in groups.items()}
-        return PreparedComposites(rough, rows)
+        return PreparedComposites(rough, rows, moving)
 
     def prepare_views(self, views: Sequence[CompositeView], rects: Sequence[tuple[int, int, int, int]],
                       parent_size: tuple[int, int]) -> PreparedComposites:
@@ -719,12 +748,14 @@ class MirrorPasses:
         view, whose tile is placed first, goes through them)."""
         if len(views) == 1:  # (a chain's level: one row, no grouping)
             view, look = views[0], surface_look(views[0].surface)
-            if not look.variant.startswith("rough"):
+            if not look.variant.startswith("rough") and view.surface.entity not in self.surface_motion:
                 return PreparedComposites([], {(look.variant, look.normal_map): _composite_row(
                     look, view.parent.view.camera_block(), rects[0], view.view.scissor, None, view.fade, view.index,
                     parent_size, {})})
         looks = [surface_look(view.surface) for view in views]
-        if any(look.variant.startswith("rough") for look in looks):
+        moved = self.surface_motion
+        if any(look.variant.startswith("rough") for look in looks) or (
+                moved and any(view.surface.entity in moved for view in views)):
             return self.prepare_composites([Composite(view.index, rect, view.view.scissor, view.parent.view, look,
                                                       fade=view.fade)
                                             for view, rect, look in zip(views, rects, looks, strict=True)],
@@ -750,7 +781,7 @@ class MirrorPasses:
         composites go to the GPU together (``ViewTree``'s step 5 flushes once after the
         last; each composite reads what the one before wrote, so a flush between them gained
         the GPU nothing and cost a GL call a level)."""
-        if not prepared.rows:
+        if not prepared.rows and not prepared.moving:
             return
         ctx = self.ctx
         fogging = self.renderer.fog.defines
@@ -763,14 +794,16 @@ class MirrorPasses:
                             (self.renderer.sky, SKY_UNIT)))
         if prepared.rough:
             bind_texture(self.ctx, self.rough_atlas.texture, ATLAS_UNIT)
-        for (variant, normal_map), variant_rows in prepared.rows.items():
+        draws = [(key, rows, None) for key, rows in prepared.rows.items()]
+        draws += [(key, row, (view_proj, moved)) for key, row, view_proj, moved in prepared.moving]
+        for (variant, normal_map), variant_rows, motion in draws:
             if normal_map is not None:
                 texture = self.renderer.normal_map_texture(normal_map)
                 if texture is None:  # the mirror's own batch holds it; none drawn: the flat build
                     variant = variant.removesuffix("_bumpy")
                 else:
                     bind_texture(self.ctx, texture, NORMAL_UNIT)
-            draw = self._variant_draws(fogging)[0][variant]
+            draw = self._variant_draws(fogging)[0][variant] if motion is None else self._moving_draw(fogging, variant)
             program = draw.program
             uniforms = self.uniforms
             if variant.startswith("rough"):
@@ -779,6 +812,9 @@ class MirrorPasses:
             uniforms.set(program, "to_reflection", (level.size[0] / parent.size[0], level.size[1] / parent.size[1]))
             if fogging:
                 uniforms.set(program, "fog_from_eye", parent_is_root)
+            if motion is not None:
+                uniforms.write(program, "parent_view_proj", motion[0])
+                uniforms.write(program, "moved_view_proj", motion[1])
             draw.draw(variant_rows, self.renderer.shaders.reloads)
         self.renderer.checkpoint("composite")
 
@@ -955,4 +991,6 @@ class MirrorPasses:
         for composites, fallbacks in self._draws.values():
             for draw in (*composites.values(), *fallbacks.values()):
                 draw.release()
+        for draw in self._moving_draws.values():
+            draw.release()
         self.rough_atlas.release()

@@ -20,8 +20,8 @@ across the room.  A frame of dt 0 (a second presentation, a paused game) keeps t
 frame's records.  A skinned or morphed mesh's pose is followed as well: the pose texture
 keeps last frame's rows while this is on (``PoseRows.track``), and the posed builds put each
 vertex where last frame's joints and weights had it before the mover's record moves it.  What
-is not followed: a moving mirror or portal (the reflections move with the camera's motion
-alone), particles.
+is followed elsewhere: a moving mirror or portal (``SurfaceMotion``: its composite adds what
+its motion moved, ``engine/render/mirror_passes.py``).  Not followed: particles.
 
 Limit: ``OBJECT_MOTION_WIDTH`` x GL_MAX_TEXTURE_SIZE / 4 movers a frame (past it a
 ``GLLimitError``).  An entity's id is held as its bits from 12 up and its low 12, two floats

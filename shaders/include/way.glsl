@@ -14,14 +14,26 @@ uvec4 seen_at(uint entity, float way) {
     return uvec4(entity, floatBitsToUint(way), 0u, 0u);
 }
 
+// Whether a seen way holds no point (nothing drawn, 0, or the sky, SKY_WAY): what is there is a
+// direction from the eye, not a point along it.
+bool way_beyond(float way) {
+    return way <= 0.0 || way >= 0.5 * SKY_WAY;
+}
+
+// How far a point moved on the picture since the last frame (``now`` and ``before``: clip
+// space, as one projection puts it now and where it was): in the picture's widths and
+// heights, now less then.  Last frame's point behind the eye: no motion.
+vec2 picture_motion(vec4 now, vec4 before) {
+    return before.w > 1e-6 ? 0.5 * (now.xy / now.w - before.xy / before.w) : vec2(0.0);
+}
+
 // The same for a point that was at ``before`` last frame (clip space, as this view projects
 // it; ``now`` where it projects it this frame): its own motion on the picture.  A view's
 // projection puts a point where the picture shows it (a mirror's view is the eye carried
 // through the glass), so a thing moving in a mirror moves as its reflection does.  Last
 // frame's point behind the eye: no motion.
 uvec4 seen_moved(uint entity, float way, vec4 now, vec4 before) {
-    vec2 moved = before.w > 1e-6 ? 0.5 * (now.xy / now.w - before.xy / before.w) : vec2(0.0);
-    return uvec4(entity, floatBitsToUint(way), floatBitsToUint(moved));
+    return uvec4(entity, floatBitsToUint(way), floatBitsToUint(picture_motion(now, before)));
 }
 
 // A view's seen pair as its composite carries it up: where the view drew nothing (its
