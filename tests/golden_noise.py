@@ -69,6 +69,10 @@ def patch_shaders(change: str) -> Callable[[], None]:
 
     old, new = change[len("shader:"):].split("=>")
     expand = library._expand
+    # The process's expanded sources (built unpatched) are set aside while the patch stands,
+    # and what is expanded under it is dropped with it.
+    expanded = library._EXPANDED
+    library._EXPANDED = {}
 
     def patched(name, stack, root, files, *contents):  # contents: the library's last good copies, if any
         text = expand(name, stack, root, files, *contents)
@@ -77,6 +81,7 @@ def patch_shaders(change: str) -> Callable[[], None]:
 
     def undo() -> None:
         library._expand = expand
+        library._EXPANDED = expanded
     return undo
 
 

@@ -7,6 +7,7 @@ system's answer) gives the owner's answers, evaluated on values."""
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import warnings
 from pathlib import Path
@@ -78,7 +79,10 @@ OWNERS = {
 }
 
 
+@functools.cache
 def top_level_names(path: Path) -> set[str]:
+    """The names ``path`` defines at its top level (parsed once a worker: each rule's case
+    reads every module)."""
     names = set()
     for node in ast.parse(path.read_text(encoding="utf-8")).body:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
@@ -293,13 +297,19 @@ FORMULAS = {
 }
 
 
+@functools.cache
+def file_text(path: Path) -> str:
+    """``path``'s text, read once a worker."""
+    return path.read_text(encoding="utf-8")
+
+
 @pytest.mark.parametrize("rule", sorted(FORMULAS))
 def test_no_copy_of_a_rules_formula(rule):
     """The rule's formula is written in its owners only (Python and GLSL; comments and
     docstrings count too, so a copy cannot hide in one)."""
     pattern, owners = FORMULAS[rule]
     found = {path.relative_to(ROOT).as_posix() for path in PY_FILES + GLSL_FILES
-             if re.search(pattern, path.read_text(encoding="utf-8"))}
+             if re.search(pattern, file_text(path))}
     assert found == owners, f"{rule}: written in {sorted(found - owners)}, owned by {sorted(owners)} only"
 
 
