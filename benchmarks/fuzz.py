@@ -57,6 +57,7 @@ from components import (
     ChromaticAberration,
     ColorGrading,
     ComponentValueError,
+    ContactShadows,
     Decal,
     DepthOfField,
     DirectionalLight,
@@ -96,8 +97,8 @@ SIZE = (48, 32)
 CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective, Refractive, Mirror, Portal,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
-                             MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ScreenReflections,
-                             Visibility, Water, ParticleEmitter, Decal)
+                             MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
+                             ScreenReflections, Visibility, Water, ParticleEmitter, Decal)
 
 @dataclasses.dataclass
 class Case:
@@ -167,7 +168,7 @@ class Fuzzer:
                 warnings.simplefilter("ignore")
                 if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                                 MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion,
-                                ScreenReflections):
+                                ContactShadows, ScreenReflections):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

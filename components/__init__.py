@@ -1,5 +1,5 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
-from components.ambient import AmbientOcclusion, HemisphereLight
+from components.ambient import AmbientOcclusion, ContactShadows, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.decal import Decal, FromDecal
 from components.detail import LevelOfDetail
@@ -31,7 +31,7 @@ from components.water import Water
 __all__ = [
     "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ChromaticAberration",
     "ColorGrading",
-    "ComponentValueError",
+    "ComponentValueError", "ContactShadows",
     "ComponentWarning", "Decal", "DepthOfField",
     "DirectionalLight", "Emissive", "FilmGrain", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
     "LevelOfDetail", "Material",

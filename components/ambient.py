@@ -1,5 +1,5 @@
 """Ambient light: a sky/ground hemisphere where there is no sky, and the camera's
-screen-space ambient occlusion."""
+screen-space ambient occlusion and contact shadows."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -7,7 +7,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import HALF_MAX, TrackedComponent, boolean, choice, color, finite
+from components.tracking import HALF_MAX, TrackedComponent, boolean, choice, color, finite, integer
 
 # The hemisphere a world with neither a Skybox nor a HemisphereLight is lit by: dim, a
 # little bluer above than below (a wall facing sideways gets their mean, 0.03 0.03 0.035).
@@ -20,6 +20,9 @@ MAX_OCCLUSION_INTENSITY = 8.0
 # AmbientOcclusion.quality: how many directions and samples a pixel looks along
 # (engine/render/screen_occlusion.py QUALITY_SAMPLES).
 OCCLUSION_QUALITIES = ("low", "medium", "high")
+# Contact shadows' rays: at most this many metres long, and between these many depth samples.
+MAX_CONTACT_LENGTH = 5.0
+CONTACT_SAMPLES = (4, 32)
 
 
 @dataclass(eq=False)
@@ -97,4 +100,53 @@ class AmbientOcclusion(TrackedComponent):
             return boolean(self, name, value)
         if name == "quality":
             return choice(self, name, value, OCCLUSION_QUALITIES)
+        return value
+
+
+@dataclass(eq=False)
+class ContactShadows(TrackedComponent):
+    """Contact shadows for the camera whose entity holds it (the active camera's is used): the
+    sun's direct light (the brightest ``DirectionalLight``'s) is taken from a point where
+    something the camera sees lies across a short ray from the point towards the sun, so a
+    thing standing on the floor, a crease or a small object casts the tight shadow its sun's
+    shadow map is too coarse to hold (Unreal's and Unity HDRP's contact shadows).
+
+    The ray is marched through the camera's depth (the depth and normals pass of
+    ``engine/render/screen_occlusion.py``, which ambient occlusion shares): a sample behind
+    what the depth image shows there, by less than ``thickness``, is in shadow.  Only what the
+    camera sees can cast one (what is off the screen or hidden behind something does not).
+
+    - ``length``: metres of the ray towards the sun (up to 5): the farthest a contact shadow
+      reaches from what casts it.
+    - ``thickness``: metres a surface in the depth image is taken to reach behind itself: a
+      sample farther behind it than this is not hidden (a thin pole does not shadow the
+      ground a long way behind it as seen from the camera).
+    - ``opacity``: the share of the sun's light a contact shadow takes (0 to 1).
+    - ``distance``: metres from the camera past which there are none (faded out over the last
+      tenth of it).
+    - ``samples``: depth samples along the ray (4 to 32), each pixel's set off by a fraction of
+      a step from its neighbours' (a 4 x 4 pattern the filter averages).
+
+    Found at the size of the ambient occlusion's images: the view's, or half of it where the
+    camera's ``AmbientOcclusion`` has ``half_resolution`` (softer).  Only the camera's own
+    view has them: mirror, portal and probe views and glass do not.
+    """
+
+    length: float = 0.3
+    thickness: float = 0.2
+    opacity: float = 1.0
+    distance: float = 50.0
+    samples: int = 12
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "length":
+            return finite(self, name, value, positive=True, high=MAX_CONTACT_LENGTH)
+        if name == "thickness":
+            return finite(self, name, value, positive=True, high=HALF_MAX)
+        if name == "opacity":
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "distance":
+            return finite(self, name, value, positive=True, high=HALF_MAX)
+        if name == "samples":
+            return integer(self, name, value, low=CONTACT_SAMPLES[0], high=CONTACT_SAMPLES[1])
         return value

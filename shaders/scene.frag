@@ -43,13 +43,14 @@ in vec4 v_vertex_color;  // the mesh's colour here (Mesh.colors, RGBA), multipli
 #ifdef SCREEN_OCCLUSION
 // The camera's screen-space ambient occlusion (engine/render/screen_occlusion.py; a root
 // view's opaque draws only), at half the view's size or all of it: r the light from all
-// round's share, g the direct light's, b the texel's distance along the view axis (-1: sky).
+// round's share, g the direct light's, b the texel's distance along the view axis (-1: sky),
+// a the sun's past the camera's contact shadows (1 without them).
 uniform sampler2D screen_occlusion;
 
 // The shares at this pixel: the four texels about it, by their bilinear weights each times
 // how near its distance lies to this pixel's (a joint bilateral upsample: across a silhouette
 // the other side's texels drop out; at full size the pixel's own texel alone).
-vec2 screen_occlusion_shares(vec3 position) {
+vec3 screen_occlusion_shares(vec3 position) {
     float here = -(camera.view * vec4(position, 1.0)).z;
     vec2 size = vec2(textureSize(screen_occlusion, 0));
     vec2 scale = size / camera.viewport.zw;
@@ -59,9 +60,9 @@ vec2 screen_occlusion_shares(vec3 position) {
     // Off by 2% of the distance, or by what a texel's step across this surface spans: another surface.
     float tolerance = 0.02 * here + 2.0 * fwidth(here) / min(scale.x, scale.y);
     ivec2 last = ivec2(size) - 1;
-    vec2 total = vec2(0.0);
+    vec3 total = vec3(0.0);
     float weights = 0.0;
-    vec2 nearest = vec2(1.0);
+    vec3 nearest = vec3(1.0);
     float nearest_gap = 1e30;
     for (int i = 0; i < 4; ++i) {
         ivec2 offset = ivec2(i & 1, i >> 1);
@@ -70,11 +71,11 @@ vec2 screen_occlusion_shares(vec3 position) {
         vec2 bilinear = mix(1.0 - f, f, vec2(offset));
         float gap = abs(texel.b - here);
         float weight = bilinear.x * bilinear.y * max(0.0, 1.0 - gap / tolerance);
-        total += weight * texel.rg;
+        total += weight * texel.rga;
         weights += weight;
         if (gap < nearest_gap) {
             nearest_gap = gap;
-            nearest = texel.rg;
+            nearest = texel.rga;
         }
     }
     return weights > 1e-4 ? total / weights : nearest;
@@ -170,6 +171,7 @@ struct Surface {
     float roughness;
     float occlusion;  // the share of the light from all round that reaches it (material_occlusion; x screen AO)
     float direct_occlusion;  // the share of the lights' direct light (1 but with AmbientOcclusion.direct_light)
+    float sun_contact;       // the share of the sun's light past the camera's contact shadows (1 without them)
     vec3 f0;
     vec3 reflect_dir;   // unit, eye ray reflected about the normal
     float reflect_lod;  // sky mip level that matches the pixel footprint of reflect_dir
@@ -433,6 +435,12 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     // no shadow (MeshRef.receives_shadows: its code's NO_RECEIVE_BIT, visibility.glsl).
     bool shadowed = !receives_no_shadow(v_tint.w);
     vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
+#ifdef SCREEN_OCCLUSION
+    // The camera's contact shadows dim the sun's light (its slot's w: lights.glsl).
+    vec4 sun_slots = vec4(lights.directional_dir[0].w, lights.directional_dir[1].w, lights.directional_dir[2].w,
+                          lights.directional_dir[3].w);
+    directional_lit *= mix(vec4(1.0), vec4(s.sun_contact), sun_slots);
+#endif
     vec4 point_lit = shadowed ? point_shadows(s.position, s.geometric_normal) : vec4(1.0);
 #ifdef DIFFUSE_TRANSMISSION
     vec4 directional_behind = shadowed ? directional_shadows(s.position, -s.geometric_normal) : vec4(1.0);
@@ -759,10 +767,12 @@ void main() {
 #endif
     s.occlusion = material_occlusion();
     s.direct_occlusion = 1.0;
+    s.sun_contact = 1.0;
 #ifdef SCREEN_OCCLUSION
-    vec2 screen_shares = screen_occlusion_shares(v_world_pos);
+    vec3 screen_shares = screen_occlusion_shares(v_world_pos);
     s.occlusion *= screen_shares.r;
     s.direct_occlusion = screen_shares.g;
+    s.sun_contact = screen_shares.b;
 #endif
     s.f0 = mix(dielectric_f0, s.albedo, s.metallic);
 #ifdef IRIDESCENCE

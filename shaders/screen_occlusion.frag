@@ -7,7 +7,9 @@
 // weighted by the cosine to the normal projected into the slice, is integrated in closed form.
 // Writes the visibility and the pixel's distance along the view axis (the filter's depth
 // test), a texel a pixel of the depth image (half the view's size, or all of it).
-// engine/render/screen_occlusion.py runs it.
+// engine/render/screen_occlusion.py runs it.  Built with AMBIENT_OCCLUSION (the camera's
+// AmbientOcclusion; without, the visibility is 1) and with CONTACT_SHADOWS (its
+// ContactShadows: contact_shadow below, into the third channel).
 #include "view_depth.glsl"
 
 #define PI 3.14159265358979
@@ -21,8 +23,12 @@ uniform float radius;           // metres (AmbientOcclusion.radius)
 uniform float pixels_per_metre; // at a distance of 1 m along the view axis
 uniform float max_radius_pixels;
 uniform ivec2 margin;           // the guard band: where the view's pixels start in the depth image
+#ifdef CONTACT_SHADOWS
+uniform vec3 sun_view;          // towards the sun, view space (unit)
+uniform vec4 contact;           // ContactShadows' length, thickness, opacity and distance
+#endif
 
-out vec2 out_occlusion;
+out vec4 out_occlusion;         // r: visibility, g: distance along the view axis (-1: the sky), b: the sun's share
 
 // A 4 x 4 ordered-dither (Bayer) matrix, 0..15: the tile's slice rotations and step offsets.
 const float BAYER[16] = float[16](0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0,
@@ -37,6 +43,7 @@ vec3 position_at(vec2 pixel) {
     return view_position(pixel, textureLod(depth_map, pixel / depth_size, 0.0).r);  // (no derivatives in the loop)
 }
 
+#ifdef AMBIENT_OCCLUSION
 // The largest cosine, to the view direction v, of the directions from p to the surface
 // within `radius` along the screen direction `omega` (pixels), down to `lowest` where nothing
 // occludes.  Where the samples cross the radius, the surface between the last sample inside
@@ -78,30 +85,43 @@ float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jit
     return best;
 }
 
-void main() {
-    ivec2 texel = ivec2(gl_FragCoord.xy);  // this image's (the view's pixels)
-    ivec2 pixel = texel + margin;          // the depth image's (the guard band about them)
-    float depth = texelFetch(depth_map, pixel, 0).r;
-    if (depth >= 1.0) {  // nothing drawn: the sky
-        out_occlusion = vec2(1.0, -1.0);
-        return;
+#endif
+
+#ifdef CONTACT_SHADOWS
+// Contact shadows (ContactShadows; Unreal's and HDRP's): the share of the sun's light that
+// reaches ``p`` (normal ``n``) past what the depth image shows.  CONTACT_SAMPLES points along
+// the ray towards the sun, ``length`` long, each set off by ``jitter`` of a step; one behind
+// the surface the image shows at its pixel (read bilinearly: a plane's depth there exactly),
+// by more than a hair (half a percent of its distance: the image's own rounding) and less
+// than ``thickness``, hides the sun.  Faded out over the last tenth of ``distance``.
+float contact_shadow(vec3 p, vec3 n, float jitter) {
+    float fade = clamp((contact.w + p.z) / (0.1 * contact.w), 0.0, 1.0);
+    if (fade <= 0.0 || dot(n, sun_view) <= 0.0) return 1.0;  // (facing away: the sun lights none of it)
+    vec3 start = p + n * (0.002 * -p.z);   // off the surface by a hair, as the shadow maps' normal offset
+    float hidden = 0.0;
+    for (int i = 0; i < CONTACT_SAMPLES; ++i) {
+        vec3 s = start + sun_view * ((float(i) + jitter) / float(CONTACT_SAMPLES) * contact.x);
+        vec2 at = view_pixel(s);
+        if (s.z >= 0.0 || any(lessThan(at, vec2(0.0))) || any(greaterThanEqual(at, depth_size))) break;
+        float behind = view_z(textureLod(depth_map, at / depth_size, 0.0).r) - s.z;
+        hidden = behind > 0.005 * -s.z && behind < contact.y ? 1.0 : hidden;
     }
-    vec2 centre = vec2(pixel) + 0.5;
-    vec3 p = view_position(centre, depth);
-    vec3 v = normalize(-p);
-    vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
+    return 1.0 - contact.z * fade * hidden;
+}
+#endif
+
+// The share of the light from all round that reaches ``p`` (GTAO; 1 without AMBIENT_OCCLUSION).
+float ambient_visibility(vec3 p, vec3 v, vec3 n, vec2 centre, int tile, float jitter) {
+#ifndef AMBIENT_OCCLUSION
+    return 1.0;
+#else
     // The reach on the screen: the radius as seen half way from the point's depth to the
     // nearest its sphere comes to the eye.  Occluders nearer the eye than the point (the floor
     // in front of a wall) lie farther out on the screen than the radius at the point's own
     // depth: seen there, a wall's foot kept 0.035 too much of its light.
     float reach = min(radius * pixels_per_metre / max(-p.z - 0.5 * radius, 0.5 * -p.z), max_radius_pixels);
-    if (reach < 1.0) {  // the radius spans under a pixel: nothing to find
-        out_occlusion = vec2(1.0, min(-p.z, HALF_MAX));
-        return;
-    }
-    int tile = (texel.x & 3) + 4 * (texel.y & 3);
+    if (reach < 1.0) return 1.0;  // the radius spans under a pixel: nothing to find
     float rotation = (BAYER[tile] + 0.5) / 16.0;
-    float jitter = (BAYER[15 - tile] + 0.5) / 16.0;
     float visibility = 0.0;
     for (int s = 0; s < SLICES; ++s) {
         float phi = (float(s) + rotation) * PI / float(SLICES);
@@ -123,5 +143,28 @@ void main() {
         float arc1 = cos_n + 2.0 * h1 * sin_n - cos(2.0 * h1 - angle_n);
         visibility += projected_length * 0.25 * (arc0 + arc1);
     }
-    out_occlusion = vec2(clamp(visibility / float(SLICES), 0.0, 1.0), min(-p.z, HALF_MAX));
+    return clamp(visibility / float(SLICES), 0.0, 1.0);
+#endif
+}
+
+void main() {
+    ivec2 texel = ivec2(gl_FragCoord.xy);  // this image's (the view's pixels)
+    ivec2 pixel = texel + margin;          // the depth image's (the guard band about them)
+    float depth = texelFetch(depth_map, pixel, 0).r;
+    if (depth >= 1.0) {  // nothing drawn: the sky
+        out_occlusion = vec4(1.0, -1.0, 1.0, 1.0);
+        return;
+    }
+    vec2 centre = vec2(pixel) + 0.5;
+    vec3 p = view_position(centre, depth);
+    vec3 v = normalize(-p);
+    vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
+    int tile = (texel.x & 3) + 4 * (texel.y & 3);
+    float jitter = (BAYER[15 - tile] + 0.5) / 16.0;
+#ifdef CONTACT_SHADOWS
+    float sun = contact_shadow(p, n, jitter);
+#else
+    float sun = 1.0;
+#endif
+    out_occlusion = vec4(ambient_visibility(p, v, n, centre, tile, jitter), min(-p.z, HALF_MAX), sun, 1.0);
 }

@@ -4,18 +4,20 @@
 // how near it lies to the plane of the texel's own surface (a joint bilateral filter: what
 // lies off that plane, across a silhouette, does not bleed over), turned into the shares the
 // scene pass multiplies (the light from all round's and the direct light's), with the
-// texel's distance, which the scene pass's upsampling weighs by (scene.frag).
+// texel's distance, which the scene pass's upsampling weighs by (scene.frag), and the sun's
+// share past the contact shadows (found with the visibility, smoothed by the same weights).
 #include "view_depth.glsl"
 
 uniform sampler2D depth_map;       // the depth and normals pass's (this image's size)
 uniform sampler2D normal_map;      // its geometric normals, world space, as n * 0.5 + 0.5
-uniform sampler2D occlusion_map;   // rg: visibility, distance along the view axis (-1: the sky)
+uniform sampler2D occlusion_map;   // rgb: visibility, distance along the view axis (-1: the sky), the sun's share
 uniform mat3 view_rotation;        // world -> view directions
 uniform float intensity;           // AmbientOcclusion.intensity: visibility ** intensity
 uniform float direct_light;        // AmbientOcclusion.direct_light
 uniform ivec2 margin;              // the guard band: where this image's texels start in the depth image
 
-out vec4 out_shares;  // r: the light from all round's share, g: the direct light's, b: the distance (-1: sky)
+out vec4 out_shares;  // r: the light from all round's share, g: the direct light's, b: the distance (-1: sky),
+                      // a: the sun's (contact shadows)
 
 void main() {
     ivec2 here = ivec2(gl_FragCoord.xy);  // this image's texel (the occlusion found is the same size)
@@ -30,27 +32,27 @@ void main() {
     float tolerance = 0.02 * -p.z;  // off the plane by 2% of the distance: another surface
     ivec2 size = textureSize(occlusion_map, 0);
     ivec2 base = here - 1;  // 4 x 4 texels, this one the 2nd of its row
-    float total = 0.0;
+    vec2 total = vec2(0.0);   // visibility, the sun's share
     float weights = 0.0;
-    float nearest = 1.0;
+    vec2 nearest = vec2(1.0);
     float nearest_gap = 1e30;
     for (int y = 0; y < 4; ++y) {
         for (int x = 0; x < 4; ++x) {
             ivec2 texel = clamp(base + ivec2(x, y), ivec2(0), size - 1);
-            vec2 found = texelFetch(occlusion_map, texel, 0).rg;
+            vec3 found = texelFetch(occlusion_map, texel, 0).rgb;
             if (found.y < 0.0) continue;  // the sky's
             vec3 q = view_at(vec2(texel + margin) + 0.5, -found.y);  // its point: along its ray, at its distance
             float gap = abs(dot(q - p, n));
             float weight = max(0.0, 1.0 - gap / tolerance);
-            total += weight * found.x;
+            total += weight * found.xz;
             weights += weight;
             if (gap < nearest_gap) {
                 nearest_gap = gap;
-                nearest = found.x;
+                nearest = found.xz;
             }
         }
     }
-    float visibility = weights > 1e-3 ? total / weights : nearest;
-    float ambient = intensity > 0.0 ? pow(max(visibility, 1e-6), intensity) : 1.0;  // (pow(0, y): undefined)
-    out_shares = vec4(ambient, mix(1.0, ambient, direct_light), min(-p.z, 65504.0), 1.0);  // (a half float)
+    vec2 smoothed = weights > 1e-3 ? total / weights : nearest;
+    float ambient = intensity > 0.0 ? pow(max(smoothed.x, 1e-6), intensity) : 1.0;  // (pow(0, y): undefined)
+    out_shares = vec4(ambient, mix(1.0, ambient, direct_light), min(-p.z, 65504.0), smoothed.y);  // (a half float)
 }

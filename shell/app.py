@@ -25,6 +25,7 @@ import moderngl
 from components import (
     AmbientOcclusion,
     Camera,
+    ContactShadows,
     DepthOfField,
     FlyController,
     Mirror,
@@ -319,16 +320,17 @@ class Engine:
     def start(self, antialias: str = "fxaa", camera: tuple[float, float, float, float, float] | None = None,
               occlusion: bool = False, reflections: bool = False, focus: bool = False,
               motion: bool = False, render_scale: float = 1.0, sharpness: float = 0.0,
-              frame_ms: float | None = None) -> None:
+              frame_ms: float | None = None, contact: bool = False) -> None:
         """The command line's start options (``shell/runner.py``), after the game is built: the
         anti-aliasing, the render scale and sharpening (``--render-scale``, ``--sharpen``:
         ``engine/render/resample.py``), dynamic resolution's frame time (``--frame-ms``: the
         world's ``ViewBudget.frame_ms``), the camera's pose (``--camera``: ``place_camera``), and screen-space
-        ambient occlusion and reflections, depth of field and motion blur (``--ao``, ``--ssr``,
-        ``--dof``, ``--motion-blur``: an ``AmbientOcclusion()``, a ``ScreenReflections()``, a
-        ``DepthOfField`` of an 85 mm lens at f/1.4 focusing by itself (``start_lens``) and a
-        ``MotionBlur()`` on the active camera, where it has none of its own), to see any game or
-        level with them without editing it."""
+        ambient occlusion and reflections, depth of field, motion blur and contact shadows
+        (``--ao``, ``--ssr``, ``--dof``, ``--motion-blur``, ``--contact-shadows``: an
+        ``AmbientOcclusion()``, a ``ScreenReflections()``, a ``DepthOfField`` of an 85 mm lens
+        at f/1.4 focusing by itself (``start_lens``), a ``MotionBlur()`` and a
+        ``ContactShadows()`` on the active camera, where it has none of its own), to see any
+        game or level with them without editing it."""
         self.renderer.antialias = antialias
         self.renderer.render_scale = render_scale
         self.renderer.sharpness = sharpness
@@ -338,7 +340,8 @@ class Engine:
         if camera:
             self.place_camera(*camera)
         for asked, make, flag in ((occlusion, AmbientOcclusion, "--ao"), (reflections, ScreenReflections, "--ssr"),
-                                  (focus, start_lens, "--dof"), (motion, MotionBlur, "--motion-blur")):
+                                  (focus, start_lens, "--dof"), (motion, MotionBlur, "--motion-blur"),
+                                  (contact, ContactShadows, "--contact-shadows")):
             if not asked:
                 continue
             active = self.active_camera()
@@ -353,7 +356,8 @@ class Engine:
         windowed alike)."""
         self.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
                    getattr(args, "dof", False), getattr(args, "motion_blur", False),
-                   getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None))
+                   getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None),
+                   getattr(args, "contact_shadows", False))
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

@@ -112,6 +112,8 @@ def post_lines(engine: Engine) -> list[str]:
                      f"{'' if occluded.half_resolution else ' full'}")
     else:
         occlusion = "AO off" + (" (set)" if not main.occlusion else "")
+    if main.contact_shadowed is not None:
+        occlusion += f"; contact shadows {main.contact_shadowed.length:g} m"
     reflected = main.reflected
     if reflected is not None:
         reflections = (f"SSR {reflected.max_distance:g} m {reflected.quality}"

@@ -63,6 +63,8 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                         help="headless: also write the frames as an animated GIF (one frame per --dt)")
     parser.add_argument("--ao", action="store_true",
                         help="ambient occlusion on the active camera (an AmbientOcclusion(), if it has none)")
+    parser.add_argument("--contact-shadows", action="store_true",
+                        help="contact shadows on the active camera (a ContactShadows(), if it has none)")
     parser.add_argument("--ssr", action="store_true",
                         help="screen-space reflections on the active camera (a ScreenReflections(), if it has none)")
     parser.add_argument("--dof", action="store_true",

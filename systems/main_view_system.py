@@ -1,7 +1,8 @@
 """Main: the active camera's view, drawn by the scene pass into the main view tree's level 0
 (all but its transparent slot, which the reflect stage's tree draws over the reflections),
-after its ambient occlusion where the camera has an ``AmbientOcclusion``
-(``engine/render/screen_occlusion.py``), and with what its screen-space reflections need where
+after its ambient occlusion and contact shadows where the camera has an ``AmbientOcclusion``
+or ``ContactShadows`` (``engine/render/screen_occlusion.py``; the contact shadows towards the
+brightest directional light), and with what its screen-space reflections need where
 it has ``ScreenReflections`` (``engine/render/screen_reflections.py``: the reflect stage's
 tree composites them before the view's glass).
 
@@ -18,7 +19,7 @@ from dataclasses import replace
 
 import esper
 
-from components.ambient import AmbientOcclusion
+from components.ambient import AmbientOcclusion, ContactShadows
 from components.screen_reflections import ScreenReflections
 from components.tracking import ComponentWarning
 from engine.core.errors import NoCameraWarning
@@ -34,6 +35,7 @@ from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import camera_view
 from engine.resources import Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
+from engine.rules.light_rules import brightest_directional
 
 
 class MainViewSystem(esper.Processor):
@@ -50,6 +52,7 @@ class MainViewSystem(esper.Processor):
         self._options: tuple[tuple, SceneOptions] = (((), ()), TREE_ROOT)  # (what it was made from, the options)
         self.occlusion = True  # the debug overlay's toggle: off, no camera's AmbientOcclusion is drawn
         self.occluded: AmbientOcclusion | None = None  # the one drawn this frame (the overlay's line)
+        self.contact_shadowed: ContactShadows | None = None  # the contact shadows drawn this frame (the same)
         # (the root's options, occlusion, reflections, the options drawn with): the last made
         self._screen_options: tuple[SceneOptions | None, bool, bool, SceneOptions] = (None, False, False, TREE_ROOT)
         self.reflections = True  # the debug overlay's toggle: off, no camera's ScreenReflections is drawn
@@ -99,9 +102,11 @@ class MainViewSystem(esper.Processor):
                 particles.reactive = (targets, temporal.begin_reactive(targets))
         views.options = self._root_options()
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
-        self.occluded = occlusion
-        if occlusion is not None:  # found before the view is drawn: its shading reads it
-            self.renderer.occlusion.draw(views.main, occlusion)
+        contact = self.world.try_get(camera[0], ContactShadows) if self.occlusion else None
+        self.occluded, self.contact_shadowed = occlusion, contact
+        if occlusion is not None or contact is not None:  # found before the view is drawn: its shading reads it
+            sun = brightest_directional(self.world) if contact is not None else None
+            self.renderer.occlusion.draw(views.main, occlusion, contact, None if sun is None else -sun.direction)
         elif self.renderer.screen_occlusion is not None:
             self.renderer.occlusion.release_targets()  # no camera asks for it now
         reflections = self.world.try_get(camera[0], ScreenReflections) if self.reflections else None
@@ -111,8 +116,9 @@ class MainViewSystem(esper.Processor):
             self._check_reflecting(camera[0], reflections)
         else:
             self.renderer.screen_reflections.release_targets()  # no camera asks for them now
-        if occlusion is not None or reflections is not None:
-            views.options = self._screen(views.options, occlusion is not None, reflections is not None)
+        if occlusion is not None or contact is not None or reflections is not None:
+            views.options = self._screen(views.options, occlusion is not None or contact is not None,
+                                         reflections is not None)
         self.renderer.scene_pass.draw([views.main], targets, views.options)
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:

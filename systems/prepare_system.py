@@ -182,12 +182,13 @@ class PrepareSystem(esper.Processor):
         """The Lights block's rows of the kept lights, slot by slot (a freed slot black)."""
         world = self.world
         directional = []
+        sun = brightest_directional(world)   # (marked: the camera's contact shadows dim its light)
         for entity in kept.directional:
             if entity is None:
                 directional.append(_NO_SUN)
                 continue
             light = world.get(entity, DirectionalLight)
-            directional.append((light.direction, light.color.xyz * light.intensity))
+            directional.append((light.direction, light.color.xyz * light.intensity, float(light is sun)))
         point = []
         for entity in kept.point:
             if entity is None:

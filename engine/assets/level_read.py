@@ -59,7 +59,7 @@ except ImportError:  # Python 3.10
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ChromaticAberration",
-        "ColorGrading",
+        "ColorGrading", "ContactShadows",
         "Decal", "DepthOfField", "DirectionalLight",
         "Emissive", "FilmGrain", "FlyController", "Fog", "HemisphereLight", "LevelOfDetail", "Material", "MeshRef",
         "Mirror", "Model", "MotionBlur", "ParticleEmitter",

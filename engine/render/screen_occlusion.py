@@ -44,6 +44,15 @@ in a full-size pass and found the occlusion from full-size depth; at 640x360 on 
 cost 1.9x the rest of a plain frame (the filter's 16 taps at every pixel nearly half of
 it), now 1.4x.
 
+**Contact shadows** (``ContactShadows`` on the camera, with or without the occlusion): the find
+pass's ``CONTACT_SHADOWS`` build also marches each texel's ray towards the sun through the
+same depth (``contact_shadow``: a sample behind the surface the image shows, by less than the
+thickness, hides the sun), the filter smooths the sun's share with the same weights and
+writes it beside the occlusion's shares, and the scene pass multiplies it into the sun's
+light (the brightest directional light, marked in the Lights block).  Without an
+``AmbientOcclusion`` the images are the view's size and the find pass is the march alone
+(``AMBIENT_OCCLUSION`` builds find the occlusion).
+
 Only the root view is occluded; mirror, portal and probe views and the transparent slot are
 drawn without it.  The targets are made at the first occluded frame of a size and released
 when no camera asks for occlusion (``release_targets``)."""
@@ -54,7 +63,7 @@ from dataclasses import dataclass
 import moderngl
 from pyglm import glm
 
-from components.ambient import OCCLUSION_QUALITIES, AmbientOcclusion
+from components.ambient import OCCLUSION_QUALITIES, AmbientOcclusion, ContactShadows
 from engine.render.bindings import (
     OCCLUSION_DEPTH_UNIT,
     OCCLUSION_IMAGE_UNIT,
@@ -125,15 +134,16 @@ def _guarded(view: View, size: tuple[int, int], margin: tuple[int, int]) -> View
 
 
 class ScreenOcclusion:
-    """The active camera's ambient occlusion: ``draw`` a view's, which returns the image the
-    main view's ``SCREEN_OCCLUSION`` builds read (and leaves it as ``Gpu.screen_occlusion``)."""
+    """The active camera's ambient occlusion and contact shadows: ``draw`` a view's, which
+    returns the image the main view's ``SCREEN_OCCLUSION`` builds read (and leaves it as
+    ``Gpu.screen_occlusion``)."""
 
     def __init__(self, gpu: Gpu, scene_pass: ScenePass) -> None:
         self.gpu = gpu
         self.ctx = gpu.ctx
         self.scene_pass = scene_pass
         self._targets: _Targets | None = None
-        self._finds: dict[str, moderngl.VertexArray] = {}  # by quality
+        self._finds: dict[tuple[str | None, int], moderngl.VertexArray] = {}  # by quality and contact samples
         self._filter: moderngl.VertexArray | None = None
         self._programs_of = -1  # the shader library's reloads when they were made
         # What the shares image was last found from (``_still_key``): equal, the passes are
@@ -141,19 +151,26 @@ class ScreenOcclusion:
         self._found_from: tuple | None = None
         self.keep_still = True  # False: found every frame (what the still fuzz compares with)
 
-    def _programs(self, quality: str) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
+    def _programs(self, quality: str | None, samples: int) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
+        """The find pass's build for ``quality`` (None: no occlusion) and ``samples`` contact
+        samples (0: no contact shadows), and the filter's."""
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
-        find = self._finds.get(quality)
+        find = self._finds.get((quality, samples))
         if find is None:
-            slices, steps = QUALITY_SAMPLES[quality]
-            program = shaders.program("fullscreen.vert", "screen_occlusion.frag",
-                                      defines={"SLICES": str(slices), "STEPS": str(steps)})
+            defines = {}
+            if quality is not None:
+                slices, steps = QUALITY_SAMPLES[quality]
+                defines.update(AMBIENT_OCCLUSION="1", SLICES=str(slices), STEPS=str(steps))
+            if samples:
+                defines.update(CONTACT_SHADOWS="1", CONTACT_SAMPLES=str(samples))
+            program = shaders.program("fullscreen.vert", "screen_occlusion.frag", defines=defines)
             program["depth_map"].value = OCCLUSION_DEPTH_UNIT
-            program["normal_map"].value = OCCLUSION_NORMAL_UNIT
-            find = self._finds[quality] = self.ctx.vertex_array(program, [])
+            if "normal_map" in program:
+                program["normal_map"].value = OCCLUSION_NORMAL_UNIT
+            find = self._finds[(quality, samples)] = self.ctx.vertex_array(program, [])
         if self._filter is None:
             smooth = shaders.program("fullscreen.vert", "screen_occlusion_filter.frag")
             smooth["depth_map"].value = OCCLUSION_DEPTH_UNIT
@@ -175,7 +192,7 @@ class ScreenOcclusion:
         depth = ctx.depth_texture(guarded)
         depth.compare_func = ""  # read as distances, not compared
         normals = ctx.texture(guarded, 4)
-        found = ctx.texture(size, 2, dtype="f2")
+        found = ctx.texture(size, 4, dtype="f2")
         shares = ctx.texture(size, 4, dtype="f2")
         for texture in (depth, normals, found, shares):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -185,17 +202,23 @@ class ScreenOcclusion:
                                  ctx.framebuffer([found]), shares, ctx.framebuffer([shares]))
         return self._targets
 
-    def draw(self, view: View, settings: AmbientOcclusion) -> moderngl.Texture:
-        """Find ``view``'s occlusion as ``settings`` say; returns the shares image (half the
-        view's size, or all of it), bound for the main view's draw."""
+    def draw(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None = None,
+             sun: glm.vec3 | None = None) -> moderngl.Texture:
+        """Find ``view``'s occlusion as ``settings`` say (None: none) and its contact shadows
+        as ``contact`` says, towards ``sun`` (world, the way to the sun; None: no sun, so no
+        contact shadow); returns the shares image (half the view's size, or all of it), bound
+        for the main view's draw."""
         gpu, ctx = self.gpu, self.ctx
-        targets = self._targets_for(view.size, settings.half_resolution)
-        key = self._still_key(view, settings)
+        if sun is None:
+            contact = None
+        targets = self._targets_for(view.size, settings is not None and settings.half_resolution)
+        key = self._still_key(view, settings, contact, sun)
         if self.keep_still and key == self._found_from:  # nothing it is found from changed: the image stands
             gpu.screen_occlusion = targets.shares
             return targets.shares
         self._found_from = key
-        find, smooth = self._programs(settings.quality)
+        find, smooth = self._programs(settings.quality if settings is not None else None,
+                                      contact.samples if contact is not None else 0)
         width, height = targets.size
         # 1. Depth and normals, at the images' size, with the guard band about them.
         guard = _guarded(view, targets.size, targets.margin)
@@ -214,11 +237,17 @@ class ScreenOcclusion:
         bind_texture(ctx, targets.normals, OCCLUSION_NORMAL_UNIT)
         program = find.program
         for name, value in unproject.items():
-            program[name].value = value
+            if name in program:
+                program[name].value = value
         program["view_rotation"].write(rotation)
-        program["radius"].value = settings.radius
-        program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * guard.size[1]
-        program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height, float(QUALITY_SAMPLES[settings.quality][1]))
+        if settings is not None:
+            program["radius"].value = settings.radius
+            program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * guard.size[1]
+            program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height,
+                                                     float(QUALITY_SAMPLES[settings.quality][1]))
+        if contact is not None:
+            program["sun_view"].value = tuple(glm.normalize(glm.mat3(view.view) * glm.vec3(sun)))
+            program["contact"].value = (contact.length, contact.thickness, contact.opacity, contact.distance)
         find.render(moderngl.TRIANGLES, vertices=3)
         # 3. Filtered into the shares.
         targets.shares_framebuffer.use()
@@ -228,8 +257,8 @@ class ScreenOcclusion:
         for name, value in unproject.items():
             program[name].value = value
         program["view_rotation"].write(rotation)
-        program["intensity"].value = settings.intensity
-        program["direct_light"].value = settings.direct_light
+        program["intensity"].value = settings.intensity if settings is not None else 1.0
+        program["direct_light"].value = settings.direct_light if settings is not None else 0.0
         smooth.render(moderngl.TRIANGLES, vertices=3)
         stats = gpu.stats
         stats.passes += 2
@@ -243,15 +272,18 @@ class ScreenOcclusion:
         """Images held now (4 while a camera asks for occlusion, else 0)."""
         return 0 if self._targets is None else 4
 
-    def _still_key(self, view: View, settings: AmbientOcclusion) -> tuple:
+    def _still_key(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None,
+                   sun: glm.vec3 | None) -> tuple:
         """What the occlusion is found from: every instance row, batch and texture the depth
         pass draws (``Gpu.scene_version``, moved on by each upload of them), the shaders, the
         view's Camera block (pose, projection, layers, the entities it leaves out) and size,
-        and the settings.  A still scene (the camera and what it sees not moving) finds it
-        once."""
-        return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size,
-                settings.radius, settings.intensity, settings.direct_light, settings.half_resolution,
-                settings.quality)
+        the settings and the sun.  A still scene (the camera and what it sees not moving)
+        finds it once."""
+        occlusion = None if settings is None else (settings.radius, settings.intensity, settings.direct_light,
+                                                   settings.half_resolution, settings.quality)
+        shadows = None if contact is None else (contact.length, contact.thickness, contact.opacity,
+                                                contact.distance, contact.samples, tuple(sun))
+        return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size, occlusion, shadows)
 
     def release_targets(self) -> None:
         """Let the images go (no camera asks for occlusion, or another size)."""

@@ -238,7 +238,8 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
                  point: list[tuple], flat_sky: bool = False, environment: bool = True) -> bytes:
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
-    [(direction, rgb)], point = [(position, range, rgb, cone[, cookie[, radius]])] (``cone``: the
+    [(direction, rgb[, sun])] (``sun``: 1 for the brightest, whose light contact shadows dim;
+    0 when left out), point = [(position, range, rgb, cone[, cookie[, radius]])] (``cone``: the
     spot cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light; ``cookie``: its two
     cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out; ``radius``: its
     sphere's, ``PointLight.radius``, 0 when left out).  ``flat_sky``: the sky cube
@@ -256,8 +257,8 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
                        int(flat_sky), int(environment)], np.int32)
     data[base:base + 4] = counts.view(np.float32)
     base += 4
-    for i, (direction, rgb) in enumerate(directional[:MAX_DIRECTIONAL_LIGHTS]):
-        data[base + 4 * i: base + 4 * i + 3] = direction
+    for i, (direction, rgb, *sun) in enumerate(directional[:MAX_DIRECTIONAL_LIGHTS]):
+        data[base + 4 * i: base + 4 * i + 4] = (*direction, sun[0] if sun else 0.0)
         data[base + 4 * (MAX_DIRECTIONAL_LIGHTS + i): base + 4 * (MAX_DIRECTIONAL_LIGHTS + i) + 3] = rgb
     base += 8 * MAX_DIRECTIONAL_LIGHTS
     for i, (position, light_range, rgb, cone, *more) in enumerate(point[:MAX_POINT_LIGHTS]):

@@ -12,6 +12,18 @@ vec3 view_at(vec2 pixel_centre, float z) {
     return vec3(-z * (ndc + unproject.zw) / unproject.xy, z);
 }
 
+// The view depth (< 0) of a depth image's value.
+float view_z(float depth) {
+    return -unproject_z.y / (depth * 2.0 - 1.0 + unproject_z.x);
+}
+
 vec3 view_position(vec2 pixel_centre, float depth) {
-    return view_at(pixel_centre, -unproject_z.y / (depth * 2.0 - 1.0 + unproject_z.x));
+    return view_at(pixel_centre, view_z(depth));
+}
+
+// Where the view-space point ``p`` (z < 0) lands in the depth image, in pixels (view_at's
+// inverse).
+vec2 view_pixel(vec3 p) {
+    vec2 ndc = -(unproject.xy * p.xy + unproject.zw * p.z) / p.z;
+    return (ndc * 0.5 + 0.5) * depth_size;
 }

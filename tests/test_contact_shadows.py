@@ -1,0 +1,157 @@
+"""Contact shadows (``ContactShadows`` on the camera; ``engine/render/screen_occlusion.py``'s
+``contact_shadow``, the find pass's ``CONTACT_SHADOWS`` build): a box on a floor under a sun
+whose shadow maps are off, so every shadow in the frame is a contact shadow.  Each floor pixel's
+ray towards the sun is cast against the box in float64 (a second path): where it meets the box
+within ``length`` the sun's light is gone, where it does not (the box's shadow past the
+ray's reach included) it stays; ``opacity`` takes that share of it; past ``distance`` there
+are none; with ambient occlusion at half size they are found there too; an orthographic
+camera refuses them; bad values are refused naming the field."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    AmbientOcclusion,
+    Camera,
+    ComponentValueError,
+    ContactShadows,
+    DirectionalLight,
+    HemisphereLight,
+    Material,
+    MeshRef,
+    Transform,
+)
+from engine.assets.mesh import box
+from engine.core.world import World
+from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
+
+SIZE = (192, 144)
+SUN = glm.normalize(glm.vec3(1.0, -1.0, 0.0))   # the way the light travels: 45 degrees down, towards +x
+BOX = (np.array([0.0, 0.2, 0.0]), np.array([0.2, 0.2, 0.2]))   # centre, half sizes: a 0.4 m cube on the floor
+MARGIN = 0.03   # metres either side of a ray's reach left out (a texel's width and the march's steps)
+
+
+def _scene(world, contact: ContactShadows | None, sun: float = 1.0, occlusion: AmbientOcclusion | None = None,
+           eye=(0.3, 2.0, 0.05)) -> dict:
+    # Looking almost straight down: what lies behind the box as the camera sees it is the box
+    # itself (a ray's sample under its top is inside it, under by at most its height), so the
+    # depth image's answer is the geometry's where the thickness spans the box.
+    camera = look_from(world, eye, (0.3, 0.0, 0.0))
+    for component in (contact, occlusion):
+        if component is not None:
+            world.add_component(camera, component)
+    world.spawn(HemisphereLight(sky=(0.3, 0.3, 0.3), ground=(0.3, 0.3, 0.3)))
+    world.spawn(DirectionalLight(direction=SUN, intensity=sun, shadows=False))
+    floor = world.spawn(Transform(position=(0.0, -0.05, 0.0)), MeshRef(box((12.0, 0.1, 12.0))),
+                        Material(color=(0.6, 0.6, 0.6), roughness=1.0))
+    world.spawn(Transform(position=tuple(BOX[0])), MeshRef(box(tuple(2.0 * BOX[1]))),
+                Material(color=(0.6, 0.6, 0.6), roughness=1.0))
+    return {"camera": camera, "floor": floor}
+
+
+def _frame(scene, **options) -> tuple[np.ndarray, object, dict]:
+    names: dict = {}
+    runner = scene(lambda world: names.update(_scene(world, **options)), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return srgb_to_linear(runner.frame()), runner, names
+
+
+def _sun_kept(scene, contact: ContactShadows, **options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each floor pixel's share of the sun's light kept under ``contact`` (linear, the mean of
+    its channels: (with - without the sun) / (no contact shadows - without the sun)), and
+    per pixel whether the ray towards the sun from its floor point meets the box within
+    ``contact.length`` less and plus the margin (the pixels to judge: surely in, surely out)."""
+    shadowed, runner, names = _frame(scene, contact=contact, **options)
+    lit, _, _ = _frame(scene, contact=None, **options)
+    dark, _, _ = _frame(scene, contact=None, sun=0.0, **options)
+    sun_light = (lit - dark).mean(axis=-1)
+    kept = (shadowed - dark).mean(axis=-1) / np.maximum(sun_light, 1e-6)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    floor = (runner.ids() == names["floor"]) & (sun_light > 0.02)
+    points = eye + rays * (-eye[1] / rays[..., 1])[..., None]
+    towards = -np.array(SUN, np.float64)
+    rows = points[floor]
+    ways = np.broadcast_to(towards, rows.shape)
+    inside = np.zeros(SIZE[::-1], bool)
+    outside = np.zeros(SIZE[::-1], bool)
+    inside[floor] = box_hits(rows, ways, *BOX, limit=contact.length - MARGIN)
+    outside[floor] = ~box_hits(rows, ways, *BOX, limit=contact.length + MARGIN)
+    # (and clear of the box's own foot, where the floor meets it: a texel's blend of the two)
+    foot = np.abs(points[..., 0] - BOX[1][0]) < MARGIN
+    return kept, inside & ~foot, outside & ~foot
+
+
+def test_the_sun_is_gone_where_its_ray_meets_the_box_within_the_length(scene):
+    """A 0.3 m ray: the floor within 0.21 m of the box's side away from the sun loses the
+    sun; the rest of the box's true shadow (0.4 m out at 45 degrees), past the ray's reach,
+    keeps it, as does the floor round it."""
+    kept, inside, outside = _sun_kept(scene, ContactShadows(length=0.3, thickness=0.5))
+    assert inside.sum() > 150 and outside.sum() > 5000, (inside.sum(), outside.sum())
+    assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.25, kept[inside]
+    assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
+    # The box's shadow past the reach (where a 2 m ray meets it and a 0.3 m one does not) stays lit.
+    longer, _, _ = _sun_kept(scene, ContactShadows(length=2.0, thickness=0.5))
+    far_part = outside & (longer < 0.5)
+    assert far_part.sum() > 100, far_part.sum()
+    assert np.median(kept[far_part]) > 0.95, np.median(kept[far_part])
+
+
+def test_opacity_takes_its_share_and_distance_ends_them(scene):
+    kept, inside, _ = _sun_kept(scene, ContactShadows(length=0.3, thickness=0.5, opacity=0.5))
+    assert abs(np.median(kept[inside]) - 0.5) < 0.05, np.median(kept[inside])
+    kept, inside, _ = _sun_kept(scene, ContactShadows(length=0.3, thickness=0.5, distance=1.2))   # the box is 2 m off
+    assert np.percentile(kept[inside], 5) > 0.97, np.percentile(kept[inside], 5)
+
+
+def test_with_half_size_ambient_occlusion_they_are_found_at_its_size(scene):
+    """The camera's AmbientOcclusion at half size (intensity 0: it darkens nothing): the
+    contact shadow is found in its images, softer at the edges but as dark within."""
+    occlusion = AmbientOcclusion(intensity=0.0)
+    kept, inside, outside = _sun_kept(scene, ContactShadows(length=0.3, thickness=0.5), occlusion=occlusion)
+    deep = inside & (np.abs(kept - np.median(kept[inside])) < 1.0)
+    assert np.median(kept[deep]) < 0.1, np.median(kept[deep])
+    assert np.percentile(kept[outside], 2) > 0.85, np.percentile(kept[outside], 2)
+
+
+def test_the_images_and_passes(scene):
+    """Contact shadows alone: the depth and normals pass, the find (the march alone) and the
+    filter, at the view's size; gone when the camera lets them go."""
+    _, runner, names = _frame(scene, contact=ContactShadows())
+    occlusion = runner.engine.renderer.occlusion
+    assert occlusion.target_count() == 4 and occlusion._targets.size == SIZE
+    runner.world.remove_component(names["camera"], ContactShadows)
+    runner.frame()
+    assert occlusion.target_count() == 0
+
+
+def test_the_command_line_flag_puts_them_on_the_active_camera(scene):
+    """``--contact-shadows``: the parser's flag, and ``Engine.start_from`` giving the active
+    camera a ``ContactShadows()`` where it has none (the overlay's line names it)."""
+    from shell.overlay_text import post_lines
+    from shell.runner import build_parser
+
+    _, runner, names = _frame(scene, contact=None)
+    args = build_parser(type(runner.engine.game)).parse_args(["--headless", "--contact-shadows"])
+    runner.engine.start_from(args)
+    given = runner.world.try_get(names["camera"], ContactShadows)
+    assert given is not None and given.length == ContactShadows().length
+    runner.frame()
+    assert any("contact shadows 0.3 m" in line for line in post_lines(runner.engine))
+
+
+def test_an_orthographic_camera_refuses_them():
+    world = World()
+    camera = world.spawn(Transform(), Camera(projection="orthographic"))
+    with pytest.raises(ComponentValueError, match="ContactShadows on an orthographic Camera"):
+        world.add_component(camera, ContactShadows())
+
+
+@pytest.mark.parametrize(("field", "value"), [("length", 0.0), ("length", 6.0), ("thickness", -1.0),
+                                              ("opacity", 1.5), ("distance", float("nan")), ("samples", 3),
+                                              ("samples", 33), ("samples", 8.0)])
+def test_bad_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=f"ContactShadows.{field}"):
+        ContactShadows(**{field: value})
