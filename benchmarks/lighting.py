@@ -46,8 +46,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   pass, the occlusion found at half size, the filter to every pixel);
 * ``occlusion_full``: the same found at full size (``half_resolution=False``);
 * ``occlusion_low``: the same at half size with ``quality="low"`` (half the find pass's samples);
-* ``contact``: the sun's shadow maps on; ``ContactShadows()`` on the camera (the depth and
-  normals pass and the march at full size, the filter);
+* ``contact``: no shadows; ``ContactShadows()`` on the camera (the depth and normals pass and
+  the march at full size, the filter);
 * ``contact_occlusion``: the same with ``AmbientOcclusion()`` (one depth pass for both, at half size);
 * ``polished``: no shadows; the checker floor reflects the sky (``Reflective(mix=0.35)``);
 * ``reflections``: the same with ``ScreenReflections()`` on the camera (the root's draw
@@ -305,6 +305,7 @@ def _occlusion_low(engine: Engine) -> None:
 
 
 def _contact(engine: Engine, occlusion: bool = False) -> None:
+    _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), ContactShadows())
     if occlusion:
         engine.world.add_component(camera_entity(engine), AmbientOcclusion())
@@ -380,8 +381,8 @@ VARIANTS: list[Variant] = [
     Variant("occlusion", _occlusion, "AmbientOcclusion() on the camera (found at half size)"),
     Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
     Variant("occlusion_low", _occlusion_low, "AmbientOcclusion(quality='low') on the camera"),
-    Variant("contact", _contact, "sun shadows and ContactShadows() on the camera"),
-    Variant("contact_occlusion", _contact_occlusion, "sun shadows, ContactShadows() and AmbientOcclusion()"),
+    Variant("contact", _contact, "ContactShadows() on the camera (found at full size)"),
+    Variant("contact_occlusion", _contact_occlusion, "ContactShadows() and AmbientOcclusion() (at half size)"),
     Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
     Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),
     Variant("reflections_low", _reflections_low, "the same with ScreenReflections(quality='low')"),
