@@ -54,8 +54,9 @@ pass of a game's own), calls it itself.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import moderngl
 
@@ -201,6 +202,9 @@ NO_CLIPS: frozenset[int] = frozenset()
 
 
 
+_NONE: Mapping[str, int] = MappingProxyType({})
+
+
 def clip_glsl_defines() -> dict[str, str]:
     """``CLIP_VIEW_PLANE``, ``CLIP_RECT_LEFT`` .. ``CLIP_RECT_TOP``, ``CLIP_SLICE``, ``CLIP_LEG_PLANE`` and
     ``CLIP_DISTANCE_COUNT`` for the GLSL, from the indices above."""
@@ -333,6 +337,20 @@ def invalidate(ctx: moderngl.Context) -> None:
         cache.rects_known = False
         cache.blocks.clear()
         cache.textures.clear()
+
+
+def assign_slots(program: moderngl.Program, units: Mapping[str, int] = _NONE,
+                 blocks: Mapping[str, int] = _NONE) -> moderngl.Program:
+    """Each sampler of ``units`` on its texture unit and each uniform block of ``blocks`` on
+    its binding, of those ``program`` has (a build may not read every one: the linker drops
+    what a variant never uses); returns the program."""
+    for name, unit in units.items():
+        if name in program:
+            program[name].value = unit
+    for name, binding in blocks.items():
+        if name in program:
+            program[name].binding = binding
+    return program
 
 
 def bind_texture(ctx: moderngl.Context, texture: Bindable, unit: int, keep_sampler: bool = False) -> None:

@@ -67,6 +67,7 @@ from engine.render.bindings import (
     SKY_UNIT,
     PassState,
     apply_pass_state,
+    assign_slots,
     bind_texture,
     bind_textures,
     bind_uniform_block,
@@ -692,13 +693,7 @@ class MirrorPasses:
         """A composite build (``defines``, with ``fogging``'s) and its draw."""
         program = self.renderer.shaders.program("mirror_composite.vert", "mirror_composite.frag",
                                                 defines={"ROUGH_TILE": f"{TILE}.0", **defines, **dict(fogging)})
-        for name, unit in _COMPOSITE_UNITS.items():
-            if name in program:
-                program[name].value = unit
-        if "FallbackRows" in program:
-            program["FallbackRows"].binding = FALLBACK_BINDING
-        if "Fog" in program:
-            program["Fog"].binding = FOG_BINDING
+        assign_slots(program, _COMPOSITE_UNITS, {"FallbackRows": FALLBACK_BINDING, "Fog": FOG_BINDING})
         return _CompositeDraw(self.ctx, program)
 
     def _moving_draw(self, fogging: tuple, variant: str) -> _CompositeDraw:

@@ -52,6 +52,7 @@ from engine.render.bindings import (
     VIEWS_BINDING,
     VIRTUAL_LIGHTS_BINDING,
     VIRTUAL_SHADOW_UNIT,
+    assign_slots,
 )
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code, forget_reads
@@ -83,6 +84,19 @@ NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, 
                     False)
 
 
+
+# The scene builds' texture units by sampler and uniform blocks by binding (a build reads some).
+_SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE_UNIT, "probe_map": PROBE_UNIT,
+                "probe2_map": PROBE2_UNIT, "probe_rest_map": PROBE_REST_UNIT, "normal_map": NORMAL_UNIT,
+                "emissive_map": EMISSIVE_MAP_UNIT, "metallic_roughness_map": METALLIC_ROUGHNESS_UNIT,
+                "shadow_atlas": SHADOW_ATLAS_UNIT, "point_shadow0": POINT_SHADOW_UNITS[0],
+                "point_shadow1": POINT_SHADOW_UNITS[1], "irradiance_table": IRRADIANCE_UNIT,
+                "virtual_atlas": VIRTUAL_SHADOW_UNIT, "spot_atlas": SPOT_SHADOW_UNIT, "occlusion_map": OCCLUSION_UNIT,
+                "screen_occlusion": SCREEN_OCCLUSION_UNIT, "spot_cookies": COOKIE_UNIT, "pose_rows": POSE_ROWS_UNIT,
+                "morph_offsets": MORPH_UNIT, "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT}
+_SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
+                 "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
+                 "Irradiance": IRRADIANCE_BINDING}
 
 # The reflect slots whose reflection is the sky's or a probe's, which screen reflections
 # replace: none (the material's environment reflection, scene.frag environment_specular) and a
@@ -264,35 +278,7 @@ class ScenePrograms:
                 if layered == "naive":
                     defines["NO_FACE_CULLING"] = "1"
             program = self.renderer.shaders.program("scene.vert", "scene.frag", geometry, defines=defines)
-            if "Camera" in program:  # the batched stages read their cameras from Views
-                program["Camera"].binding = CAMERA_BINDING
-            if invocations:
-                program["Views"].binding = VIEWS_BINDING
-            # A build may not read every input (the linker drops what a variant never uses).
-            for name, unit in (("albedo_map", ALBEDO_UNIT), ("sky_map", SKY_UNIT), ("node_map", NODE_UNIT),
-                               ("probe_map", PROBE_UNIT), ("probe2_map", PROBE2_UNIT),
-                               ("probe_rest_map", PROBE_REST_UNIT), ("normal_map", NORMAL_UNIT),
-                               ("emissive_map", EMISSIVE_MAP_UNIT),
-                               ("metallic_roughness_map", METALLIC_ROUGHNESS_UNIT),
-                               ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
-                               ("point_shadow1", POINT_SHADOW_UNITS[1]),
-                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
-                               ("spot_atlas", SPOT_SHADOW_UNIT), ("occlusion_map", OCCLUSION_UNIT),
-                               ("screen_occlusion", SCREEN_OCCLUSION_UNIT), ("spot_cookies", COOKIE_UNIT),
-                               ("pose_rows", POSE_ROWS_UNIT), ("morph_offsets", MORPH_UNIT),
-                               ("object_motion", OBJECT_MOTION_UNIT), ("pose_before", POSE_BEFORE_UNIT)):
-                if name in program:
-                    program[name].value = unit
-            if "Lights" in program:
-                program["Lights"].binding = LIGHTS_BINDING
-            if "Shadows" in program:
-                program["Shadows"].binding = SHADOWS_BINDING
-            if "Fog" in program:
-                program["Fog"].binding = FOG_BINDING
-            if "VirtualLights" in program:
-                program["VirtualLights"].binding = VIRTUAL_LIGHTS_BINDING
-            if "Irradiance" in program:
-                program["Irradiance"].binding = IRRADIANCE_BINDING
+            assign_slots(program, _SCENE_UNITS, _SCENE_BLOCKS)   # (a batched build reads Views, not Camera)
             self.built[key] = program
             self.uniforms[program.glo] = tuple(program.get(name, None) for name in PER_DRAW_UNIFORMS)
         return program
