@@ -58,6 +58,7 @@ class MainViewSystem(esper.Processor):
         self.reflections = True  # the debug overlay's toggle: off, no camera's ScreenReflections is drawn
         self.reflected: ScreenReflections | None = None  # the one drawn this frame (the overlay's line)
         self._said_nothing_reflects: ScreenReflections | None = None  # the one warned about (once)
+        self._said_no_sun: ContactShadows | None = None  # the contact shadows warned about having no sun (once)
         self._looked_at: list | None = None  # the batch list last looked through for a reflecting one
 
     def process(self, dt: float) -> None:
@@ -103,9 +104,16 @@ class MainViewSystem(esper.Processor):
         views.options = self._root_options()
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
         contact = self.world.try_get(camera[0], ContactShadows) if self.occlusion else None
+        sun = brightest_directional(self.world) if contact is not None else None
+        if contact is not None and sun is None:   # (they darken only the sun's light)
+            if self._said_no_sun is not contact:
+                self._said_no_sun = contact
+                warnings.warn(ComponentWarning(
+                    f"ContactShadows on entity {camera[0]}: the world has no DirectionalLight that shines (a sun), "
+                    "and contact shadows darken only the sun's light, so they darken nothing"), stacklevel=2)
+            contact = None
         self.occluded, self.contact_shadowed = occlusion, contact
         if occlusion is not None or contact is not None:  # found before the view is drawn: its shading reads it
-            sun = brightest_directional(self.world) if contact is not None else None
             self.renderer.occlusion.draw(views.main, occlusion, contact, None if sun is None else -sun.direction)
         elif self.renderer.screen_occlusion is not None:
             self.renderer.occlusion.release_targets()  # no camera asks for it now

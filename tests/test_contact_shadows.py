@@ -8,6 +8,8 @@ are none; with ambient occlusion at half size they are found there too; an ortho
 camera refuses them; bad values are refused naming the field."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -16,6 +18,7 @@ from components import (
     AmbientOcclusion,
     Camera,
     ComponentValueError,
+    ComponentWarning,
     ContactShadows,
     DirectionalLight,
     HemisphereLight,
@@ -140,6 +143,18 @@ def test_the_command_line_flag_puts_them_on_the_active_camera(scene):
     assert given is not None and given.length == ContactShadows().length
     runner.frame()
     assert any("contact shadows 0.3 m" in line for line in post_lines(runner.engine))
+
+
+def test_without_a_sun_they_say_so_once_and_darken_nothing(scene):
+    """No DirectionalLight that shines: a ComponentWarning naming the camera's entity, once,
+    and the frame is the one without them."""
+    with pytest.warns(ComponentWarning, match=r"ContactShadows on entity \d+: the world has no DirectionalLight"):
+        shadowed, runner, _ = _frame(scene, contact=ContactShadows(), sun=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runner.frame()
+    plain, _, _ = _frame(scene, contact=None, sun=0.0)
+    np.testing.assert_array_equal(shadowed, plain)
 
 
 def test_an_orthographic_camera_refuses_them():

@@ -211,6 +211,9 @@ class ScreenOcclusion:
         gpu, ctx = self.gpu, self.ctx
         if sun is None:
             contact = None
+        if settings is None and contact is None:
+            raise ValueError("ScreenOcclusion.draw: nothing to find (no AmbientOcclusion, and no ContactShadows "
+                             "with a sun)")
         targets = self._targets_for(view.size, settings is not None and settings.half_resolution)
         key = self._still_key(view, settings, contact, sun)
         if self.keep_still and key == self._found_from:  # nothing it is found from changed: the image stands
