@@ -11,7 +11,7 @@ import pytest
 from pyglm import glm
 
 from components import Material, MeshRef, Mirror, Transform
-from engine.assets.mesh import box, plane
+from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.portal_math import pair_transform
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix, transform_plane
@@ -56,6 +56,39 @@ def test_a_still_box_in_a_turning_mirror_streaks_as_the_mirror_turns_it(scene, p
     assert at(runner.ids(), pixel) == ents["box"]
     expected = pixel - gl_pixel(view_proj, glm.vec3(before * glm.vec4(face, 1.0)))
     assert abs(expected.x) > 8.0
+    np.testing.assert_allclose(at(streaks(runner), pixel), expected, rtol=0.03, atol=0.05)
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_a_box_seen_in_a_turning_mirror_seen_in_a_still_one_streaks_as_both_put_it(scene, path):
+    """Two mirrors face each other; the one behind the camera turns 2 degrees.  Where the front
+    mirror shows the back one showing the box (a second level), the streak is the motion of
+    the box's image through both (front x back now, against front x back last frame): the
+    second level's composite adds the turn, the first carries it up."""
+    ents = {}
+
+    def build(world):
+        ents["camera"] = streaking_camera(world, (0.3, 1.5, 1.0), (0.0, 1.5, -3.0))
+        ents["front"] = world.spawn(Transform(position=(0, 1.5, -3)), MeshRef(quad(4, 3)),
+                                    Material(color=(0.1, 0.1, 0.1)), Mirror())
+        ents["back"] = world.spawn(Transform(position=(0, 1.5, 3), rotation=glm.angleAxis(glm.radians(180.0),
+                                                                                           glm.vec3(0, 1, 0))),
+                                   MeshRef(quad(4, 3)), Material(color=(0.1, 0.1, 0.1)), Mirror())
+        world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.8, 0.8, 0.8)))
+        ents["box"] = world.spawn(Transform(position=(-0.8, 1.5, -1.0), scale=(0.4, 0.4, 0.4)), MeshRef(box()),
+                                  Material(color=(0.9, 0.1, 0.1)))
+
+    runner = started(scene, build, path)
+    front, back = (runner.world.get(ents[name], Transform) for name in ("front", "back"))
+    before = mirror_carry(front) * mirror_carry(back)
+    back.rotation = glm.angleAxis(glm.radians(2.0), glm.vec3(0, 1, 0)) * back.rotation
+    runner.frame()
+    view_proj = glm.mat4(runner.engine.main_view.view_proj)
+    face = runner.world.get(ents["box"], Transform).position + glm.vec3(0.0, 0.0, 0.2)  # the face the back mirror sees
+    pixel = gl_pixel(view_proj, glm.vec3(mirror_carry(front) * mirror_carry(back) * glm.vec4(face, 1.0)))
+    assert at(runner.ids(), pixel) == ents["box"]
+    expected = pixel - gl_pixel(view_proj, glm.vec3(before * glm.vec4(face, 1.0)))
+    assert abs(expected.x) > 2.0
     np.testing.assert_allclose(at(streaks(runner), pixel), expected, rtol=0.03, atol=0.05)
 
 
