@@ -48,6 +48,7 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``occlusion_low``: the same at half size with ``quality="low"`` (half the find pass's samples);
 * ``contact``: no shadows; ``ContactShadows()`` on the camera (the depth and normals pass and
   the march at full size, the filter);
+* ``contact_half``: the same found at half size (``half_resolution=True``);
 * ``contact_occlusion``: the same with ``AmbientOcclusion()`` (one depth pass for both, at half size);
 * ``polished``: no shadows; the checker floor reflects the sky (``Reflective(mix=0.35)``);
 * ``reflections``: the same with ``ScreenReflections()`` on the camera (the root's draw
@@ -304,11 +305,15 @@ def _occlusion_low(engine: Engine) -> None:
     _occlusion(engine, quality="low")
 
 
-def _contact(engine: Engine, occlusion: bool = False) -> None:
+def _contact(engine: Engine, occlusion: bool = False, half: bool = False) -> None:
     _sun_shadows(engine, False)
-    engine.world.add_component(camera_entity(engine), ContactShadows())
+    engine.world.add_component(camera_entity(engine), ContactShadows(half_resolution=half))
     if occlusion:
         engine.world.add_component(camera_entity(engine), AmbientOcclusion())
+
+
+def _contact_half(engine: Engine) -> None:
+    _contact(engine, half=True)
 
 
 def _contact_occlusion(engine: Engine) -> None:
@@ -382,6 +387,7 @@ VARIANTS: list[Variant] = [
     Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
     Variant("occlusion_low", _occlusion_low, "AmbientOcclusion(quality='low') on the camera"),
     Variant("contact", _contact, "ContactShadows() on the camera (found at full size)"),
+    Variant("contact_half", _contact_half, "ContactShadows(half_resolution=True) on the camera"),
     Variant("contact_occlusion", _contact_occlusion, "ContactShadows() and AmbientOcclusion() (at half size)"),
     Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
     Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),

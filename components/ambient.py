@@ -127,9 +127,12 @@ class ContactShadows(TrackedComponent):
     - ``samples``: depth samples along the ray (4 to 32), each pixel's set off by a fraction of
       a step from its neighbours' (a 4 x 4 pattern the filter averages).
 
-    Found at the size of the ambient occlusion's images: the view's, or half of it where the
-    camera's ``AmbientOcclusion`` has ``half_resolution`` (softer).  Only the camera's own
-    view has them: mirror, portal and probe views and glass do not.
+    - ``half_resolution``: found at half the screen's size in each direction (a quarter of the
+      work, the depth pass's too; softer edges), brought to full size by the ambient
+      occlusion's depth-aware filter.  With an ``AmbientOcclusion`` on the camera they share
+      its images, at its size (its ``half_resolution`` decides).
+
+    Only the camera's own view has them: mirror, portal and probe views and glass do not.
     """
 
     length: float = 0.3
@@ -137,6 +140,7 @@ class ContactShadows(TrackedComponent):
     opacity: float = 1.0
     distance: float = 50.0
     samples: int = 12
+    half_resolution: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "length":
@@ -149,4 +153,6 @@ class ContactShadows(TrackedComponent):
             return finite(self, name, value, positive=True, high=HALF_MAX)
         if name == "samples":
             return integer(self, name, value, low=CONTACT_SAMPLES[0], high=CONTACT_SAMPLES[1])
+        if name == "half_resolution":
+            return boolean(self, name, value)
         return value

@@ -119,12 +119,23 @@ def test_with_half_size_ambient_occlusion_they_are_found_at_its_size(scene):
     assert np.percentile(kept[outside], 2) > 0.85, np.percentile(kept[outside], 2)
 
 
+def test_at_half_resolution_alone_they_are_as_dark_within(scene):
+    """``half_resolution``: the images half the view's size each way; dark within the ray's
+    reach, lit outside it, as at full size (the edges softer)."""
+    kept, inside, outside = _sun_kept(scene, ContactShadows(length=0.3, thickness=0.5, half_resolution=True))
+    assert np.median(kept[inside]) < 0.1, np.median(kept[inside])
+    assert np.percentile(kept[outside], 2) > 0.85, np.percentile(kept[outside], 2)
+
+
 def test_the_images_and_passes(scene):
     """Contact shadows alone: the depth and normals pass, the find (the march alone) and the
     filter, at the view's size; gone when the camera lets them go."""
     _, runner, names = _frame(scene, contact=ContactShadows())
     occlusion = runner.engine.renderer.occlusion
     assert occlusion.target_count() == 4 and occlusion._targets.size == SIZE
+    runner.world.get(names["camera"], ContactShadows).half_resolution = True
+    runner.frame()
+    assert occlusion._targets.size == (SIZE[0] // 2, SIZE[1] // 2)
     runner.world.remove_component(names["camera"], ContactShadows)
     runner.frame()
     assert occlusion.target_count() == 0
@@ -166,7 +177,8 @@ def test_an_orthographic_camera_refuses_them():
 
 @pytest.mark.parametrize(("field", "value"), [("length", 0.0), ("length", 6.0), ("thickness", -1.0),
                                               ("opacity", 1.5), ("distance", float("nan")), ("samples", 3),
-                                              ("samples", 33), ("samples", 8.0)])
+                                              ("samples", 33), ("samples", 8.0),
+                                              ("half_resolution", 1)])
 def test_bad_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ComponentValueError, match=f"ContactShadows.{field}"):
         ContactShadows(**{field: value})

@@ -50,8 +50,9 @@ same depth (``contact_shadow``: a sample behind the surface the image shows, by 
 thickness, hides the sun), the filter smooths the sun's share with the same weights and
 writes it beside the occlusion's shares, and the scene pass multiplies it into the sun's
 light (the brightest directional light, marked in the Lights block).  Without an
-``AmbientOcclusion`` the images are the view's size and the find pass is the march alone
-(``AMBIENT_OCCLUSION`` builds find the occlusion).
+``AmbientOcclusion`` the images are the view's size (or half of it: the contact shadows'
+``half_resolution``) and the find pass is the march alone (``AMBIENT_OCCLUSION`` builds find
+the occlusion).
 
 Only the root view is occluded; mirror, portal and probe views and the transparent slot are
 drawn without it.  The targets are made at the first occluded frame of a size and released
@@ -214,7 +215,8 @@ class ScreenOcclusion:
         if settings is None and contact is None:
             raise ValueError("ScreenOcclusion.draw: nothing to find (no AmbientOcclusion, and no ContactShadows "
                              "with a sun)")
-        targets = self._targets_for(view.size, settings is not None and settings.half_resolution)
+        half = settings.half_resolution if settings is not None else contact.half_resolution
+        targets = self._targets_for(view.size, half)
         key = self._still_key(view, settings, contact, sun)
         if self.keep_still and key == self._found_from:  # nothing it is found from changed: the image stands
             gpu.screen_occlusion = targets.shares
@@ -285,7 +287,7 @@ class ScreenOcclusion:
         occlusion = None if settings is None else (settings.radius, settings.intensity, settings.direct_light,
                                                    settings.half_resolution, settings.quality)
         shadows = None if contact is None else (contact.length, contact.thickness, contact.opacity,
-                                                contact.distance, contact.samples, tuple(sun))
+                                                contact.distance, contact.samples, contact.half_resolution, tuple(sun))
         return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size, occlusion, shadows)
 
     def release_targets(self) -> None:
