@@ -113,7 +113,8 @@ def post_lines(engine: Engine) -> list[str]:
     else:
         occlusion = "AO off" + (" (set)" if not main.occlusion else "")
     if main.contact_shadowed is not None:
-        occlusion += f"; contact shadows {main.contact_shadowed.length:g} m"
+        contact = main.contact_shadowed
+        occlusion += f"; contact shadows {contact.length:g} m{' half' if contact.half_resolution else ''}"
     reflected = main.reflected
     if reflected is not None:
         reflections = (f"SSR {reflected.max_distance:g} m {reflected.quality}"

@@ -26,6 +26,7 @@ from components import (
     MeshRef,
     Transform,
 )
+from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box
 from engine.core.world import World
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
@@ -166,6 +167,31 @@ def test_without_a_sun_they_say_so_once_and_darken_nothing(scene):
         runner.frame()
     plain, _, _ = _frame(scene, contact=None, sun=0.0)
     np.testing.assert_array_equal(shadowed, plain)
+
+
+def test_a_level_file_keeps_them(tmp_path):
+    (tmp_path / "yard.toml").write_text("""[level]
+name = "yard"
+
+[[entity]]
+name = "camera"
+Transform = { position = [0.0, 1.0, 3.0] }
+Camera = {}
+ContactShadows = { length = 0.5, thickness = 0.1, opacity = 0.8, distance = 20.0, samples = 16, half_resolution = true }
+""")
+    world = World()
+    names = load_level(tmp_path / "yard.toml").spawn(world)
+    shadows = world.get(names["camera"], ContactShadows)
+    wanted = (0.5, 0.1, 0.8, 20.0, 16, True)
+    fields = ("length", "thickness", "opacity", "distance", "samples", "half_resolution")
+    assert tuple(getattr(shadows, name) for name in fields) == pytest.approx(wanted)
+    again = World()
+    names = load_level(save_level(world, tmp_path / "again.toml", names, name="yard")).spawn(again)
+    assert tuple(getattr(again.get(names["camera"], ContactShadows), name) for name in fields) == pytest.approx(wanted)
+    (tmp_path / "bad.toml").write_text(
+        '[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\nContactShadows = { samples = 64 }\n')
+    with pytest.raises(LevelError, match="samples"):
+        load_level(tmp_path / "bad.toml")
 
 
 def test_an_orthographic_camera_refuses_them():
