@@ -100,7 +100,7 @@ class MainViewSystem(esper.Processor):
             jittered(views.main, temporal.offset(size, output.size))
             if any(record.particles for record in particles.emitters.values()):
                 # Its particles drawn again into the reactive mask (they carry no motion).
-                particles.reactive = (targets, temporal.begin_reactive(targets))
+                particles.reactive = (targets, temporal.begin_reactive(targets), views.levels)
         views.options = self._root_options()
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
         contact = self.world.try_get(camera[0], ContactShadows) if self.occlusion else None

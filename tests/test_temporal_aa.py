@@ -200,15 +200,34 @@ def spark_stream(world, sparks: bool = True):
                                     size=0.12, color=(4.0, 3.0, 1.0, 1.0), blend="additive", angle=(0.0, 0.0)))
 
 
-@pytest.mark.parametrize("scale", [1.0, 0.5])
-def test_particles_keep_their_light_through_the_reactive_mask(scene, scale):
+def mirrored_sparks(world, sparks: bool = True):
+    """The same sparks flying behind the camera, seen only in a mirror before it."""
+    from components import ParticleEmitter
+
+    base_scene(world)
+    look_from(world, (0.0, 1.5, 3.0), (0, 1.5, 0))
+    world.spawn(Transform(position=(0, 1.5, -0.5)), MeshRef(quad(20, 20)), Material(color=(0.05, 0.05, 0.05)))
+    world.spawn(Transform(position=(0, 1.5, 0.0)), MeshRef(quad(3.6, 2.4)), Material(color=(0.05, 0.05, 0.05)),
+                Mirror())
+    world.spawn(Transform(position=(0, 1.5, 6.0), rotation=glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0))),
+                MeshRef(quad(20, 20)), Material(color=(0.05, 0.05, 0.05)))
+    if sparks:
+        world.spawn(Transform(position=(-2.0, 1.5, 5.0)),
+                    ParticleEmitter(rate=40.0, speed=6.0, spread=0.0, direction=(1.0, 0.0, 0.0), lifetime=0.7,
+                                    size=0.2, color=(4.0, 3.0, 1.0, 1.0), blend="additive", angle=(0.0, 0.0)))
+
+
+@pytest.mark.parametrize(("build", "scale"), [(spark_stream, 1.0), (spark_stream, 0.5), (mirrored_sparks, 1.0)],
+                         ids=["seen", "seen_half", "in_a_mirror"])
+def test_particles_keep_their_light_through_the_reactive_mask(scene, build, scale):
     """Particles write no motion, so their history is fetched from where the wall behind them
     was: the reactive mask (the main view's particles drawn again, how much each changes its
     pixel) gives this frame most of those pixels.  Twenty frames of fast sparks: the light they
-    add to the wall is most of what a frame without anti-aliasing shows (at half scale too);
-    with no live particle no mask is made."""
+    add to the wall is most of what a frame without anti-aliasing shows (at half scale too; and
+    sparks seen only in a mirror, whose level's particles are drawn into the mask too, seen
+    through the glass); with no live particle no mask is made."""
     def picture(mode: str, sparks: bool, scale: float = 1.0) -> np.ndarray:
-        runner = runs(scene, lambda world: spark_stream(world, sparks), mode, SIZE, scale)
+        runner = runs(scene, lambda world: build(world, sparks), mode, SIZE, scale)
         for _ in range(20):
             frame = linear(runner.frame())
         assert (runner.engine.renderer.present_pass.temporal._reactive is not None) == (mode == "taa" and sparks)

@@ -67,7 +67,7 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.instances import read_by
 from engine.render.shadows import ShadowMaps
-from engine.render.targets import RenderTargets
+from engine.render.targets import LevelStack, RenderTargets
 from engine.render.views import View
 from engine.rules.visibility_rules import drawn_in
 
@@ -83,6 +83,10 @@ _RIBBON_FIELDS = (("center", 0, "3f"), ("size", 12, "1f"), ("color", 16, "4f"), 
 # mirror's view turns the winding), the view's plane clipped, blended premultiplied.
 PARTICLE_PASS = PassState(depth_func="<", cull=False, clips=frozenset((CLIP_VIEW_PLANE,)),
                           blend=BLEND_PREMULTIPLIED)
+# A reflection level's particles drawn again into the main view's reactive mask: that image's
+# depth is the main view's, in front of every mirror's world, so untested; clipped by the
+# view's plane and its rectangle (scaled to the mask) only.
+_THROUGH_PASS = PassState(cull=False, clips=frozenset((CLIP_VIEW_PLANE,)), blend=BLEND_PREMULTIPLIED)
 # The colour image alone of a view's framebuffer (colour, surface ids, seen ids) takes writes.
 _COLOUR_ONLY = ((True, True, True, True), (False, False, False, False), (False, False, False, False))
 
@@ -125,9 +129,15 @@ class ParticleDraw:
         self._programs: dict[tuple, moderngl.Program] = {}
         self._reloads = gpu.shaders.reloads
         # Temporal AA's reactive mask this frame: (the main view's level, the mask's framebuffer:
-        # its R8 image and that level's depth), set by the main stage while TAA is on; the
-        # particles drawn into that level are drawn into it too (``REACTIVE``).  None: off.
-        self.reactive: tuple[RenderTargets, moderngl.Framebuffer] | None = None
+        # its R8 image and that level's depth, the main tree's levels), set by the main stage
+        # while TAA is on; the particles drawn into that level are drawn into it too
+        # (``REACTIVE``), and so are those of the tree's reflection levels, seen through their
+        # surfaces (the same build, unmasked and not soft: untested against its depth, only
+        # inside each view's rectangle, so a particle hidden in a mirror's world still marks
+        # its pixels: a pixel taking more of this frame than it needs, never a particle's light
+        # dimmed).
+        # None: off.
+        self.reactive: tuple[RenderTargets, moderngl.Framebuffer, LevelStack] | None = None
 
     # --- what the particles stage hands over ---------------------------------------------
     def update(self, entity: int, emitter: ParticleEmitter, rows: np.ndarray, code: int) -> None:
@@ -230,7 +240,9 @@ class ParticleDraw:
         writes = framebuffer.color_mask  # (the glass slot's: back to it after)
         framebuffer.color_mask = _COLOUR_ONLY
         apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *targets.size), views[0].scissor)
-        reactive = self.reactive if self.reactive is not None and self.reactive[0] is targets and not masked else None
+        mask = self.reactive
+        reactive = mask if mask is not None and mask[0] is targets and not masked else None
+        through = mask if mask is not None and mask[0] is not targets and mask[2].holds(targets) else None
         try:
             for index, view in enumerate(views):
                 if not chosen[index]:
@@ -245,15 +257,24 @@ class ParticleDraw:
                         for record in chosen[index]:
                             self._draw_one(record, view, masked, ambient_probes, reactive=True)
                         framebuffer.use()
+                    elif through is not None:   # (a reflection level's, seen through its surfaces)
+                        through[1].use()
+                        apply_pass_state(ctx, _THROUGH_PASS, (0, 0, *through[0].size),
+                                         _scaled_rect(view.scissor, targets.size, through[0].size))
+                        for record in chosen[index]:
+                            self._draw_one(record, view, False, ambient_probes, reactive=True, through=True)
+                        framebuffer.use()
+                        apply_pass_state(ctx, PARTICLE_PASS, (0, 0, *targets.size), view.scissor)
         finally:
             framebuffer.color_mask = writes
 
     def _draw_one(self, record: GpuEmitter, view: View, masked: bool, ambient_probes: bool,
-                  reactive: bool = False) -> None:
+                  reactive: bool = False, through: bool = False) -> None:
         """One emitter's particles in ``view``: an "alpha" emitter's rows written again for the
         view, only those whose squares can reach it (``in_view``), farthest first; an
         "additive" one's as uploaded.  ``reactive``: its ``REACTIVE`` build (temporal AA's
-        mask), into whatever is bound."""
+        mask), into whatever is bound; ``through``: a reflection level's into that mask (no
+        softness: the mask's depth is the main view's)."""
         count = record.particles
         if record.ribbon:  # its segments, a point to the next, drawn as a whole
             count -= 1
@@ -270,18 +291,18 @@ class ParticleDraw:
             count = record.written[2]
             if not count:
                 return
-        vao = self._vertex_array(record, masked, ambient_probes, reactive)
+        vao = self._vertex_array(record, masked, ambient_probes, reactive, through)
         if record.gl_texture is not None:
             bind_texture(self.ctx, record.gl_texture, PARTICLE_UNIT)
         vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
         self.gpu.stats.draw_calls += 1
 
     def _vertex_array(self, record: GpuEmitter, masked: bool, ambient_probes: bool,
-                      reactive: bool = False) -> moderngl.VertexArray:
+                      reactive: bool = False, through: bool = False) -> moderngl.VertexArray:
         if self.gpu.shaders.reloads != self._reloads:
             self.forget()
         program = self._program(record.gl_texture is not None, record.lit, masked, ambient_probes,
-                                record.softness > 0.0, record.ribbon, reactive)
+                                record.softness > 0.0 and not through, record.ribbon, reactive)
         vao = record.vertex_arrays.get(program.glo)
         if vao is None:
             if record.ribbon:
@@ -402,3 +423,15 @@ def in_view(rows: np.ndarray, view: View) -> np.ndarray:
 def _grown(n: int) -> int:
     """Rows a buffer holds for ``n``: the next power of two (a growing cloud reallocates a few times)."""
     return max(16, 1 << (n - 1).bit_length())
+
+
+def _scaled_rect(rect: tuple[int, int, int, int] | None, size: tuple[int, int],
+                 to: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    """``rect`` (x, y, width, height in an image of ``size`` pixels) in an image of ``to``
+    pixels showing the same picture, grown to whole pixels; None stays None."""
+    if rect is None:
+        return None
+    sx, sy = to[0] / size[0], to[1] / size[1]
+    x0, y0 = math.floor(rect[0] * sx), math.floor(rect[1] * sy)
+    x1, y1 = math.ceil((rect[0] + rect[2]) * sx), math.ceil((rect[1] + rect[3]) * sy)
+    return x0, y0, x1 - x0, y1 - y0

@@ -218,6 +218,10 @@ class LevelStack:
         """Target sets held besides the levels' own (the pixel budget's previous sizes)."""
         return len(self._before)
 
+    def holds(self, targets: RenderTargets) -> bool:
+        """Whether ``targets`` is one of its levels' sets."""
+        return any(level is targets for level in self._levels)
+
     def __getitem__(self, level: int) -> RenderTargets:
         targets = self._levels[level]
         if targets is None:
