@@ -22,7 +22,10 @@ fetched from where the things behind them were and clipped away: the main view's
 draws are drawn again into a reactive mask (``begin_reactive``; ``particle.frag``'s
 ``REACTIVE`` build: how much each particle changes its pixel), and where it is set this
 frame takes most of the pixel (AMD's FSR 2 takes a reactive mask the same way).  Particles
-seen in a mirror or through a portal are not in it.
+seen in a mirror or through a portal are drawn into it too, through their view's camera,
+untested against the main view's depth but inside the view's rectangle
+(``ParticleDraw.reactive``): a pixel there may take more of this frame than it needs (a
+particle hidden in the mirror's world), never less.
 
 Costs: one full-screen pass of 15 fetches a pixel (and the main view's particles drawn
 twice while any live); the main view changes every frame, so a
