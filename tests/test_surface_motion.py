@@ -182,3 +182,16 @@ def test_temporal_aa_keeps_a_turning_mirrors_reflection_sharp(scene, scale):
 
 
 SIZE_AA = (96, 72)   # test_temporal_aa's
+
+
+def test_every_composite_build_has_a_surface_motion_build(scene):
+    """Each composite variant's ``SURFACE_MOTION`` build, with fog and without, builds and reads
+    the two matrices (the sample scenes above reach only some of them)."""
+    from engine.render.mirror_passes import COMPOSITE_VARIANTS
+
+    runner = started(scene, lambda world: mirror_scene(world, {}))
+    passes = runner.engine.reflection_system.tree.passes
+    for fogging in ((), (("FOG", "1"),)):
+        for variant in COMPOSITE_VARIANTS:
+            program = passes._moving_draw(fogging, variant).program
+            assert "parent_view_proj" in program and "moved_view_proj" in program, (variant, fogging)
