@@ -120,7 +120,9 @@ class ContactShadows(TrackedComponent):
       reaches from what casts it.
     - ``thickness``: metres a surface in the depth image is taken to reach behind itself: a
       sample farther behind it than this is not hidden (a thin pole does not shadow the
-      ground a long way behind it as seen from the camera).
+      ground a long way behind it as seen from the camera).  The default, 0.5, keeps a prop
+      up to that deep whole (a ray entering its far side, hidden from the camera, is still
+      shadowed); less leaves holes there (at 0.2 a 0.5 m crate's contact shadow is mottled).
     - ``opacity``: the share of the sun's light a contact shadow takes (0 to 1).
     - ``distance``: metres from the camera past which there are none (faded out over the last
       tenth of it).
@@ -136,7 +138,7 @@ class ContactShadows(TrackedComponent):
     """
 
     length: float = 0.3
-    thickness: float = 0.2
+    thickness: float = 0.5
     opacity: float = 1.0
     distance: float = 50.0
     samples: int = 12
