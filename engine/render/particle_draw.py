@@ -68,6 +68,7 @@ from engine.render.gpu import Gpu
 from engine.render.instances import read_by
 from engine.render.shadows import ShadowMaps
 from engine.render.targets import LevelStack, RenderTargets
+from engine.render.view_plan import level_rects
 from engine.render.views import View
 from engine.rules.visibility_rules import drawn_in
 
@@ -260,7 +261,7 @@ class ParticleDraw:
                     elif through is not None:   # (a reflection level's, seen through its surfaces)
                         through[1].use()
                         apply_pass_state(ctx, _THROUGH_PASS, (0, 0, *through[0].size),
-                                         _scaled_rect(view.scissor, targets.size, through[0].size))
+                                         _in_mask(view.scissor, targets.size, through[0].size))
                         for record in chosen[index]:
                             self._draw_one(record, view, False, ambient_probes, reactive=True, through=True)
                         framebuffer.use()
@@ -425,13 +426,11 @@ def _grown(n: int) -> int:
     return max(16, 1 << (n - 1).bit_length())
 
 
-def _scaled_rect(rect: tuple[int, int, int, int] | None, size: tuple[int, int],
-                 to: tuple[int, int]) -> tuple[int, int, int, int] | None:
-    """``rect`` (x, y, width, height in an image of ``size`` pixels) in an image of ``to``
-    pixels showing the same picture, grown to whole pixels; None stays None."""
-    if rect is None:
+def _in_mask(scissor: tuple[int, int, int, int] | None, size: tuple[int, int],
+             mask: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    """A reflection level's view's ``scissor`` (in its level of ``size`` pixels) in the reactive
+    mask's pixels (``mask``: the main view's size), rounded outwards (``level_rects``)."""
+    if scissor is None:
         return None
-    sx, sy = to[0] / size[0], to[1] / size[1]
-    x0, y0 = math.floor(rect[0] * sx), math.floor(rect[1] * sy)
-    x1, y1 = math.ceil((rect[0] + rect[2]) * sx), math.ceil((rect[1] + rect[3]) * sy)
-    return x0, y0, x1 - x0, y1 - y0
+    x, y, w, h = scissor
+    return tuple(level_rects(np.array([[x, y, x + w, y + h]], np.float64), size, mask)[0].tolist())

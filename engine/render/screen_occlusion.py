@@ -71,6 +71,7 @@ from engine.render.bindings import (
     OCCLUSION_NORMAL_UNIT,
     PassState,
     apply_pass_state,
+    assign_slots,
     bind_texture,
 )
 from engine.render.gpu import Gpu
@@ -167,10 +168,8 @@ class ScreenOcclusion:
                 defines.update(AMBIENT_OCCLUSION="1", SLICES=str(slices), STEPS=str(steps))
             if samples:
                 defines.update(CONTACT_SHADOWS="1", CONTACT_SAMPLES=str(samples))
-            program = shaders.program("fullscreen.vert", "screen_occlusion.frag", defines=defines)
-            program["depth_map"].value = OCCLUSION_DEPTH_UNIT
-            if "normal_map" in program:
-                program["normal_map"].value = OCCLUSION_NORMAL_UNIT
+            program = assign_slots(shaders.program("fullscreen.vert", "screen_occlusion.frag", defines=defines),
+                                   {"depth_map": OCCLUSION_DEPTH_UNIT, "normal_map": OCCLUSION_NORMAL_UNIT})
             find = self._finds[(quality, samples)] = self.ctx.vertex_array(program, [])
         if self._filter is None:
             smooth = shaders.program("fullscreen.vert", "screen_occlusion_filter.frag")
