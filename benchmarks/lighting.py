@@ -44,6 +44,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   VIGNETTE build);
 * ``occlusion``: no shadows; ``AmbientOcclusion()`` on the camera (its depth and normals
   pass, the occlusion found at half size, the filter to every pixel);
+* ``occlusion_camera``: the same for the camera's own view alone (``reflection_depth=0``: the
+  mirrors' views unoccluded, as ``occlusion`` does for the first level's);
 * ``occlusion_full``: the same found at full size (``half_resolution=False``);
 * ``occlusion_low``: the same at half size with ``quality="low"`` (half the find pass's samples);
 * ``contact``: no shadows; ``ContactShadows()`` on the camera (the depth and normals pass and
@@ -292,9 +294,14 @@ def _graded(engine: Engine) -> None:
     engine.world.add_component(camera_entity(engine), Vignette(intensity=0.4))
 
 
-def _occlusion(engine: Engine, half: bool = True, quality: str = "medium") -> None:
+def _occlusion(engine: Engine, half: bool = True, quality: str = "medium", depth: int = 1) -> None:
     _sun_shadows(engine, False)
-    engine.world.add_component(camera_entity(engine), AmbientOcclusion(half_resolution=half, quality=quality))
+    engine.world.add_component(camera_entity(engine), AmbientOcclusion(half_resolution=half, quality=quality,
+                                                                       reflection_depth=depth))
+
+
+def _occlusion_camera(engine: Engine) -> None:
+    _occlusion(engine, depth=0)
 
 
 def _occlusion_full(engine: Engine) -> None:
@@ -384,6 +391,7 @@ VARIANTS: list[Variant] = [
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
     Variant("graded", _graded, "Tonemap(curve='agx') and a ColorGrading with a colour table"),
     Variant("occlusion", _occlusion, "AmbientOcclusion() on the camera (found at half size)"),
+    Variant("occlusion_camera", _occlusion_camera, "AmbientOcclusion(reflection_depth=0): the camera's view alone"),
     Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
     Variant("occlusion_low", _occlusion_low, "AmbientOcclusion(quality='low') on the camera"),
     Variant("contact", _contact, "ContactShadows() on the camera (found at full size)"),

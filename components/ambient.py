@@ -7,6 +7,7 @@ from typing import Any
 
 from pyglm import glm
 
+from components.limits import MAX_VIEW_DEPTH
 from components.tracking import HALF_MAX, TrackedComponent, boolean, choice, color, finite, integer
 
 # The hemisphere a world with neither a Skybox nor a HemisphereLight is lit by: dim, a
@@ -79,8 +80,14 @@ class AmbientOcclusion(TrackedComponent):
       high one twice it; all three within 0.02 of the ground truth on a floor and wall, the
       higher smoother where small things occlude).
 
-    Only the camera's own view is occluded: mirror, portal and probe views are not, and
-    neither is glass (the transparent slot).
+    - ``reflection_depth``: the levels of mirror and portal views below the camera's that are
+      occluded too (0 to 16; 1, the default: the views of the mirrors and portals the camera
+      sees, so the world through a portal or in a mirror looks as it does seen directly; 0:
+      the camera's own view alone).  Each level costs about what the camera's view does, its
+      pixels' share of it; a mirror's view is found from what that view shows, its outline
+      the edge of its screen.
+
+    Probe views and glass (the transparent slot) are not occluded.
     """
 
     radius: float = 1.0
@@ -88,6 +95,7 @@ class AmbientOcclusion(TrackedComponent):
     direct_light: float = 0.0
     half_resolution: bool = True
     quality: str = "medium"
+    reflection_depth: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "radius":
@@ -100,6 +108,8 @@ class AmbientOcclusion(TrackedComponent):
             return boolean(self, name, value)
         if name == "quality":
             return choice(self, name, value, OCCLUSION_QUALITIES)
+        if name == "reflection_depth":
+            return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value
 
 
@@ -134,7 +144,12 @@ class ContactShadows(TrackedComponent):
       occlusion's depth-aware filter.  With an ``AmbientOcclusion`` on the camera they share
       its images, at its size (its ``half_resolution`` decides).
 
-    Only the camera's own view has them: mirror, portal and probe views and glass do not.
+    - ``reflection_depth``: the levels of mirror and portal views below the camera's that have
+      them too (0 to 16; 1 by default: the views of the mirrors and portals the camera sees,
+      each marched through its own view's depth towards the sun as its world has it; 0: the
+      camera's own view alone).
+
+    Probe views and glass do not have them.
     """
 
     length: float = 0.3
@@ -143,6 +158,7 @@ class ContactShadows(TrackedComponent):
     distance: float = 50.0
     samples: int = 12
     half_resolution: bool = False
+    reflection_depth: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "length":
@@ -157,4 +173,6 @@ class ContactShadows(TrackedComponent):
             return integer(self, name, value, low=CONTACT_SAMPLES[0], high=CONTACT_SAMPLES[1])
         if name == "half_resolution":
             return boolean(self, name, value)
+        if name == "reflection_depth":
+            return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value

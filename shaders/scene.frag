@@ -41,17 +41,18 @@ flat in uvec4 v_slots;
 in vec4 v_vertex_color;  // the mesh's colour here (Mesh.colors, RGBA), multiplied into the material's
 #endif
 #ifdef SCREEN_OCCLUSION
-// The camera's screen-space ambient occlusion (engine/render/screen_occlusion.py; a root
-// view's opaque draws only), at half the view's size or all of it: r the light from all
-// round's share, g the direct light's, b the texel's distance along the view axis (-1: sky),
-// a the sun's past the camera's contact shadows (1 without them).
+// The camera's screen-space ambient occlusion (engine/render/screen_occlusion.py; the opaque
+// draws of the root view and of the reflection levels it reaches, each level's views drawn one
+// by one), at half the level's size or all of it: r the light from all round's share, g the
+// direct light's, b the texel's distance along its view's axis (-1: sky), a the sun's past
+// the camera's contact shadows (1 without them).
 uniform sampler2D screen_occlusion;
 
 // The shares at this pixel: the four texels about it, by their bilinear weights each times
 // how near its distance lies to this pixel's (a joint bilateral upsample: across a silhouette
 // the other side's texels drop out; at full size the pixel's own texel alone).
-vec3 screen_occlusion_shares(vec3 position) {
-    float here = -(camera.view * vec4(position, 1.0)).z;
+vec3 screen_occlusion_shares() {
+    float here = 1.0 / gl_FragCoord.w;  // the distance along the view's axis (1 / clip w)
     vec2 size = vec2(textureSize(screen_occlusion, 0));
     vec2 scale = size / camera.viewport.zw;
     vec2 at = gl_FragCoord.xy * scale - 0.5;
@@ -88,6 +89,9 @@ vec3 screen_occlusion_shares(vec3 position) {
 // test, and a program that may discard writes depth only after the shader has run).
 #ifdef MASKED
 uniform usampler2D node_map;
+#ifndef NODE_STEP
+#define NODE_STEP 1
+#endif
 #endif
 #ifdef BATCHED_VIEWS
 // The batched mirror program draws every view of a level in one draw: scene_batched.geom
@@ -697,7 +701,8 @@ vec3 checker_colour(vec2 uv) {
 
 void main() {
 #ifdef MASKED
-    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != node_index) discard;  // (the level's own size)
+    // (the level's own size; its depth and normals pass at half of it: NODE_STEP 2)
+    if (texelFetch(node_map, ivec2(gl_FragCoord.xy) * NODE_STEP, 0).r != node_index) discard;
 #endif
 #ifdef SCREEN_REFLECTION
     // Nothing reflected, for the early returns (an unlit mirror: its composite paints it).
@@ -742,9 +747,11 @@ void main() {
     if (base.a < alpha_cutoff) discard;
 #endif
 #ifdef DEPTH_NORMALS
-    // The depth and normals pass of screen-space ambient occlusion (engine/render/screen_occlusion.py):
-    // the surface's own normal (a normal map's bumps would find occluders in flat ground).
-    out_color = vec4(s.geometric_normal * 0.5 + 0.5, 1.0);
+    // The depth and normals pass of screen-space ambient occlusion (engine/render/screen_occlusion.py;
+    // shaders/include/occlusion_geometry.glsl): the surface's own normal (a normal map's bumps
+    // would find occluders in flat ground) in the view's space, and one over the distance along
+    // its axis (1 / clip w: any view's, whatever its near plane).
+    out_color = vec4(normalize(mat3(camera.view) * s.geometric_normal), gl_FragCoord.w);
     return;
 #endif
     s.albedo = base.rgb;
@@ -769,7 +776,7 @@ void main() {
     s.direct_occlusion = 1.0;
     s.sun_contact = 1.0;
 #ifdef SCREEN_OCCLUSION
-    vec3 screen_shares = screen_occlusion_shares(v_world_pos);
+    vec3 screen_shares = screen_occlusion_shares();
     s.occlusion *= screen_shares.r;
     s.direct_occlusion = screen_shares.g;
     s.sun_contact = screen_shares.b;

@@ -9,39 +9,44 @@
 // test), a texel a pixel of the depth image (half the view's size, or all of it).
 // engine/render/screen_occlusion.py runs it.  Built with AMBIENT_OCCLUSION (the camera's
 // AmbientOcclusion; without, the visibility is 1) and with CONTACT_SHADOWS (its
-// ContactShadows: contact_shadow below, into the third channel).
-#include "view_depth.glsl"
+// ContactShadows: contact_shadow below, into the third channel).  A reflection level's build
+// (LEVEL_VIEWS) is drawn once a view of the level, over its rectangle: it finds the pixels of
+// `node` alone, and a sample on another view's pixels ends the search as the image's edge does
+// (what lies there is another view's world).
+#include "occlusion_geometry.glsl"
 
 #define PI 3.14159265358979
 #define HALF_PI 1.57079632679490
 #define HALF_MAX 65504.0  // the distance is kept in a half float: a farther one is kept as this
 
-uniform sampler2D depth_map;    // the depth and normals pass's depth (no comparison; bilinear)
-uniform sampler2D normal_map;   // its geometric normals, world space, as n * 0.5 + 0.5
-uniform mat3 view_rotation;     // world -> view directions
 uniform float radius;           // metres (AmbientOcclusion.radius)
 uniform float pixels_per_metre; // at a distance of 1 m along the view axis
 uniform float max_radius_pixels;
 uniform ivec2 margin;           // the guard band: where the view's pixels start in the depth image
 #ifdef CONTACT_SHADOWS
-uniform vec3 sun_view;          // towards the sun, view space (unit)
+uniform vec3 sun_view;          // towards the sun, the view's space (unit)
 uniform vec4 contact;           // ContactShadows' length, thickness, opacity and distance
+#endif
+#ifdef LEVEL_VIEWS
+uniform uint node;              // the level's view found by this draw
 #endif
 
 out vec4 out_occlusion;         // r: visibility, g: distance along the view axis (-1: the sky), b: the sun's share
 
+// Whether a sample at `at` (the depth image's pixels) lies off the view: past the image's
+// edge, or (a level's) on another view's pixels.
+bool off_view(vec2 at) {
+    bool outside = any(lessThan(at, vec2(0.0))) || any(greaterThanEqual(at, depth_size));
+#ifdef LEVEL_VIEWS
+    return outside || node_at(at) != node;
+#else
+    return outside;
+#endif
+}
+
 // A 4 x 4 ordered-dither (Bayer) matrix, 0..15: the tile's slice rotations and step offsets.
 const float BAYER[16] = float[16](0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0,
                                   3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0);
-
-// The surface's view-space point at `pixel` (a position, not a texel): the depth image read
-// bilinearly, which on a flat surface gives its depth there exactly (a plane's depth is
-// affine in the screen).  A texel's own centre would lie off the slice, which made a flat
-// floor seen at a grazing angle occlude itself by up to 6% (its in-plane directions rising
-// above the slice's own tangent).
-vec3 position_at(vec2 pixel) {
-    return view_position(pixel, textureLod(depth_map, pixel / depth_size, 0.0).r);  // (no derivatives in the loop)
-}
 
 #ifdef AMBIENT_OCCLUSION
 // The largest cosine, to the view direction v, of the directions from p to the surface
@@ -61,7 +66,7 @@ float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jit
     for (int i = 0; i < STEPS; ++i) {
         float t = (float(i) + jitter) / float(STEPS);
         vec2 at = pixel + omega * (1.0 + t * sqrt(t) * reach);  // nearer samples closer together (t ** 1.5)
-        if (any(lessThan(at, vec2(0.0))) || any(greaterThanEqual(at, depth_size))) break;
+        if (off_view(at)) break;
         vec3 delta = position_at(at) - p;
         float gap2 = dot(delta, delta);
         // Selects, not branches: llvmpipe runs both sides of a branch, and the crossing's
@@ -102,8 +107,8 @@ float contact_shadow(vec3 p, vec3 n, float jitter) {
     for (int i = 0; i < CONTACT_SAMPLES; ++i) {
         vec3 s = start + sun_view * ((float(i) + jitter) / float(CONTACT_SAMPLES) * contact.x);
         vec2 at = view_pixel(s);
-        if (s.z >= 0.0 || any(lessThan(at, vec2(0.0))) || any(greaterThanEqual(at, depth_size))) break;
-        float behind = view_z(textureLod(depth_map, at / depth_size, 0.0).r) - s.z;
+        if (s.z >= 0.0 || off_view(at)) break;
+        float behind = surface_z(at) - s.z;
         hidden = behind > 0.005 * -s.z && behind < contact.y ? 1.0 : hidden;
     }
     return 1.0 - contact.z * fade * hidden;
@@ -150,15 +155,18 @@ float ambient_visibility(vec3 p, vec3 v, vec3 n, vec2 centre, int tile, float ji
 void main() {
     ivec2 texel = ivec2(gl_FragCoord.xy);  // this image's (the view's pixels)
     ivec2 pixel = texel + margin;          // the depth image's (the guard band about them)
-    float depth = texelFetch(depth_map, pixel, 0).r;
-    if (depth >= 1.0) {  // nothing drawn: the sky
+    vec2 centre = vec2(pixel) + 0.5;
+#ifdef LEVEL_VIEWS
+    if (node_at(centre) != node) discard;  // another view's pixel (its own draw finds it)
+#endif
+    vec4 geometry = texelFetch(geometry_map, pixel, 0);
+    if (geometry.w <= 0.0) {  // nothing drawn: the sky
         out_occlusion = vec4(1.0, -1.0, 1.0, 1.0);
         return;
     }
-    vec2 centre = vec2(pixel) + 0.5;
-    vec3 p = view_position(centre, depth);
+    vec3 p = view_at(centre, -1.0 / geometry.w);
     vec3 v = normalize(-p);
-    vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
+    vec3 n = normalize(geometry.xyz);
     int tile = (texel.x & 3) + 4 * (texel.y & 3);
     float jitter = (BAYER[15 - tile] + 0.5) / 16.0;
 #ifdef CONTACT_SHADOWS

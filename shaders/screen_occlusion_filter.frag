@@ -6,12 +6,11 @@
 // scene pass multiplies (the light from all round's and the direct light's), with the
 // texel's distance, which the scene pass's upsampling weighs by (scene.frag), and the sun's
 // share past the contact shadows (found with the visibility, smoothed by the same weights).
-#include "view_depth.glsl"
+// A reflection level's build (LEVEL_VIEWS) takes only the texels of the view that drew the
+// texel's own (the level's node image says which).
+#include "occlusion_geometry.glsl"
 
-uniform sampler2D depth_map;       // the depth and normals pass's (this image's size)
-uniform sampler2D normal_map;      // its geometric normals, world space, as n * 0.5 + 0.5
 uniform sampler2D occlusion_map;   // rgb: visibility, distance along the view axis (-1: the sky), the sun's share
-uniform mat3 view_rotation;        // world -> view directions
 uniform float intensity;           // AmbientOcclusion.intensity: visibility ** intensity
 uniform float direct_light;        // AmbientOcclusion.direct_light
 uniform ivec2 margin;              // the guard band: where this image's texels start in the depth image
@@ -22,13 +21,16 @@ out vec4 out_shares;  // r: the light from all round's share, g: the direct ligh
 void main() {
     ivec2 here = ivec2(gl_FragCoord.xy);  // this image's texel (the occlusion found is the same size)
     ivec2 pixel = here + margin;          // the depth and normals images' (a guard band about them)
-    float depth = texelFetch(depth_map, pixel, 0).r;
-    if (depth >= 1.0) {
+    vec4 geometry = texelFetch(geometry_map, pixel, 0);
+    if (geometry.w <= 0.0) {  // nothing drawn: the sky
         out_shares = vec4(1.0, 1.0, -1.0, 1.0);
         return;
     }
-    vec3 p = view_position(vec2(pixel) + 0.5, depth);
-    vec3 n = normalize(view_rotation * (texelFetch(normal_map, pixel, 0).xyz * 2.0 - 1.0));
+    vec3 p = view_at(vec2(pixel) + 0.5, -1.0 / geometry.w);
+    vec3 n = normalize(geometry.xyz);
+#ifdef LEVEL_VIEWS
+    uint own = node_at(vec2(pixel));
+#endif
     float tolerance = 0.02 * -p.z;  // off the plane by 2% of the distance: another surface
     ivec2 size = textureSize(occlusion_map, 0);
     ivec2 base = here - 1;  // 4 x 4 texels, this one the 2nd of its row
@@ -41,6 +43,9 @@ void main() {
             ivec2 texel = clamp(base + ivec2(x, y), ivec2(0), size - 1);
             vec3 found = texelFetch(occlusion_map, texel, 0).rgb;
             if (found.y < 0.0) continue;  // the sky's
+#ifdef LEVEL_VIEWS
+            if (node_at(vec2(texel + margin)) != own) continue;  // another view's world
+#endif
             vec3 q = view_at(vec2(texel + margin) + 0.5, -found.y);  // its point: along its ray, at its distance
             float gap = abs(dot(q - p, n));
             float weight = max(0.0, 1.0 - gap / tolerance);

@@ -109,12 +109,13 @@ def post_lines(engine: Engine) -> list[str]:
     occluded = main.occluded
     if occluded is not None:
         occlusion = (f"AO r {occluded.radius:g} x{occluded.intensity:g}"
-                     f"{'' if occluded.half_resolution else ' full'}")
+                     f"{'' if occluded.half_resolution else ' full'}{_levels(occluded.reflection_depth)}")
     else:
         occlusion = "AO off" + (" (set)" if not main.occlusion else "")
     if main.contact_shadowed is not None:
         contact = main.contact_shadowed
-        occlusion += f"; contact shadows {contact.length:g} m{' half' if contact.half_resolution else ''}"
+        occlusion += (f"; contact shadows {contact.length:g} m{' half' if contact.half_resolution else ''}"
+                      f"{_levels(contact.reflection_depth)}")
     reflected = main.reflected
     if reflected is not None:
         reflections = (f"SSR {reflected.max_distance:g} m {reflected.quality}"
@@ -159,3 +160,8 @@ def picture(engine: Engine) -> str:
     if renderer.sharpness > 0.0:
         words += f"; sharpen {renderer.sharpness:g}"
     return words
+
+
+def _levels(depth: int) -> str:
+    """How many mirror and portal levels a screen pass reaches (``reflection_depth``), for its line."""
+    return "" if depth == 0 else f", {depth} mirror level{'s' if depth > 1 else ''}"

@@ -24,12 +24,11 @@ from components import (
     HemisphereLight,
     Material,
     MeshRef,
-    Mirror,
     Transform,
     Visibility,
 )
 from engine.assets.level_file import LevelError, load_level, save_level
-from engine.assets.mesh import box, quad
+from engine.assets.mesh import box
 from engine.assets.texture_data import TextureData
 from engine.core.world import World
 from tests.support import look_from, pixel_rays, srgb_to_linear
@@ -238,28 +237,6 @@ def test_what_the_camera_does_not_draw_does_not_occlude(scene):
     floor = runner.ids() == names["floor"]
     assert floor.sum() > 10000
     assert shares[floor].min() > 0.95
-
-
-def test_a_mirror_shows_the_room_without_occlusion(scene):
-    """Reflection views are drawn without occlusion (the documented limit): a mirror's pixels
-    are the same with and without it, while the room seen directly changes."""
-    def build(world, occlusion):
-        names = _room(world, occlusion)
-        # A mirror on the floor's far side, facing the wall and the camera's way.
-        world.spawn(Transform(position=(-1.5, 0.8, 1.5), rotation=glm.angleAxis(glm.radians(200.0),
-                                                                                 glm.vec3(0, 1, 0))),
-                    MeshRef(quad(1.6, 1.6)), Mirror(), Material(color=GREY))
-        return names
-
-    lit, runner, names = _frame(scene, lambda world: build(world, AmbientOcclusion(radius=RADIUS)))
-    plain, _, _ = _frame(scene, lambda world: build(world, None))
-    surface = runner.engine.renderer.targets.read_surface_ids()
-    mirror = next(entity for entity, _ in runner.world.query_one(Mirror))
-    mirror_pixels = surface == mirror
-    assert mirror_pixels.sum() > 200
-    assert runner.stats.reflection_views >= 1   # its view was drawn
-    np.testing.assert_allclose(lit[mirror_pixels], plain[mirror_pixels], atol=2e-3)
-    assert np.abs(lit - plain)[~mirror_pixels].max() > 0.05
 
 
 def test_the_passes_and_their_images(scene):

@@ -112,7 +112,9 @@ def _cutouts(ctx):
     mirror throwing the sun (the virtual light's caster passes), reflected in the batched
     levels; the camera with ambient occlusion (its depth and normals pass, the find and
     filter passes, the root's SCREEN_OCCLUSION builds: the cutout with an occlusion map
-    there is the fullest build of all) and screen reflections (the root's builds with both,
+    there is the fullest build of all; and the first level's, drawn view by view: its masked
+    depth and normals, the LEVEL_VIEWS find a view and filter, the masked SCREEN_OCCLUSION
+    builds) and screen reflections (the root's builds with both,
     the unlit mirrors' reflected builds, the colour copy and composite)."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing

@@ -133,10 +133,11 @@ POSE_BEFORE_UNIT = 48    # scene (OBJECT_MOTION posed builds): last frame's pose
 PARTICLE_UNIT = 28   # particles (SPRITE builds): the emitter's texture (ParticleEmitter.texture)
 PARTICLE_DEPTH_UNIT = 29  # particles (SOFT builds): a copy of the view's depth (RenderTargets.depth_copy)
 # Screen-space ambient occlusion (engine/render/screen_occlusion.py): the root view's builds
-# that read it are never MASKED, so its sampler takes the node image's place in the count.
+# that read it are not MASKED, so its sampler takes the node image's place in the count; an
+# occluded reflection level's are (one more: ScreenOcclusion.levels_supported).
 SCREEN_OCCLUSION_UNIT = 20  # scene (SCREEN_OCCLUSION builds): the camera's occlusion image, a texel a pixel
-OCCLUSION_DEPTH_UNIT = 21   # occlusion passes: the depth and normals pass's depth
-OCCLUSION_NORMAL_UNIT = 22  # occlusion pass: its normals
+OCCLUSION_NODE_UNIT = 21   # occlusion passes of a reflection level: the level's node image
+OCCLUSION_NORMAL_UNIT = 22  # occlusion passes: the depth and normals pass's normals and distances
 OCCLUSION_IMAGE_UNIT = 23   # occlusion filter: the occlusion found (and each texel's distance)
 # Screen-space reflections' composite (engine/render/screen_reflections.py): units no other pass
 # reads, past 31: moderngl binds a texture it makes or builds mips of on its

@@ -354,28 +354,38 @@ class ScenePass:
         if renderer.debug:  # the name is made only where it is checked
             renderer.checkpoint(f"scene ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
-    def draw_depth_normals(self, view: View, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
-        """The depth and geometric normals of ``view``'s opaque batches into ``framebuffer``
-        (a normals image and a depth image of ``size``), cleared first: the first pass of
-        screen-space ambient occlusion (``engine/render/screen_occlusion.py``).  The same
-        draws as the view's (its visibility, layers and skipped entities, a cutout's holes)
-        with the ``DEPTH_NORMALS`` build, which shades nothing; no sky, no transparent slot."""
+    def draw_depth_normals(self, views: Sequence[View], framebuffer: moderngl.Framebuffer, size: tuple[int, int],
+                           nodes: moderngl.Texture | None = None, step: int = 1) -> None:
+        """The depth and geometric normals of ``views``' opaque batches into ``framebuffer``
+        (an image of ``size`` for the normals and the distance, and a depth image), cleared
+        first: the first pass of screen-space ambient occlusion
+        (``engine/render/screen_occlusion.py``).  The same draws as each view's (its
+        visibility, layers and skipped entities, a cutout's holes) with the ``DEPTH_NORMALS``
+        build, which shades nothing; no sky, no transparent slot.  A reflection level's views
+        (``nodes``: its node image) draw only their own pixels, masked by that image's every
+        ``step``-th pixel (2: the images are half the level's size, and so are the views'
+        scissors)."""
         ctx, renderer = self.ctx, self.renderer
         framebuffer.use()
         apply_pass_state(ctx, _SCENE, (0, 0, *size))
         renderer.raw_gl.clear_level(framebuffer)
-        set_scissor(ctx, view.scissor)
-        set_front_face(ctx, "cw" if view.mirrored else "ccw")
         # What every scene build may declare (a driver may keep a block the build's early
         # return leaves unread), and the albedo's plain filter: a cutout's alpha as the view reads it.
         self._bind_pass_wide(ROOT_VIEW, None)
-        renderer.upload_views([view])
-        renderer.bind_view_at(0)
-        self._draw_batches(renderer.opaque_batches(), 0, False, skip=view.skip, hide=view.hide,
-                           screen="depth_normals")
+        masked = nodes is not None
+        if masked:
+            bind_texture(ctx, nodes, NODE_UNIT)
+        screen = "depth_normals half" if step == 2 else "depth_normals"
+        renderer.upload_views(views)
+        opaque = renderer.opaque_batches()
+        for index, view in enumerate(views):
+            set_scissor(ctx, stepped_scissor(view.scissor, step, size))
+            set_front_face(ctx, "cw" if view.mirrored else "ccw")
+            renderer.bind_view_at(index)
+            self._draw_batches(opaque, 0, masked, skip=view.skip, hide=view.hide, screen=screen)
         renderer.stats.passes += 1
         if renderer.debug:
-            renderer.checkpoint(f"depth and normals ({view.name})")
+            renderer.checkpoint(f"depth and normals ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
     def finish_root(self, root: View, targets: RenderTargets, options: SceneOptions) -> None:
         """What a view tree does last in its root ``root`` (drawn into ``targets`` with
@@ -628,6 +638,10 @@ class ScenePass:
                 and len(views) * len(opaque) >= self.cull_min_draws):
             reach = batch_reach(views, targets.size, opaque)  # which batch can draw a sample in which view
         masked = options.masked
+        screen = ""
+        if options.occlusion and renderer.screen_occlusion is not None:
+            screen = "occluded"  # (the root's, or an occluded level's: the image is its pixels')
+            bind_texture(ctx, renderer.screen_occlusion, SCREEN_OCCLUSION_UNIT)
         if conditions is None and not options.sky and not now and not particles:
             # A reflection level's views (exact visibility), drawn whatever their claims
             # count: per view its scissor, winding, camera and draws, nothing else.
@@ -637,14 +651,10 @@ class ScenePass:
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 bind_view_at(index)
                 draw(opaque if reach is None else self._reaching(opaque, reach[index], view),
-                     0, masked, skip=view.skip, hide=view.hide, unlit=unlit)
+                     0, masked, skip=view.skip, hide=view.hide, unlit=unlit, screen=screen)
             renderer.stats.passes += len(views)
             return
         sky_draw = self.sky_draw
-        screen = ""
-        if options.occlusion and renderer.screen_occlusion is not None:
-            screen = "occluded"  # (a root view's one: the image is its pixels')
-            bind_texture(ctx, renderer.screen_occlusion, SCREEN_OCCLUSION_UNIT)
         reflecting = self._reflecting_framebuffer(options)
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
@@ -873,3 +883,15 @@ def _drawn_now(transparent: list, options: SceneOptions) -> list:
     if options.transparent or not transparent:
         return transparent
     return [batch for batch in transparent if see_through_surface(batch)]
+
+
+def stepped_scissor(scissor: tuple[int, int, int, int] | None, step: int,
+             size: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    """A level's scissor (its pixels) in an image ``step`` times smaller each way (of
+    ``size``): every texel any of its pixels fall in."""
+    if scissor is None or step == 1:
+        return scissor
+    x, y, width, height = scissor
+    x0, y0 = x // step, y // step
+    x1, y1 = min(-(-(x + width) // step), size[0]), min(-(-(y + height) // step), size[1])
+    return x0, y0, max(x1 - x0, 0), max(y1 - y0, 0)

@@ -131,10 +131,11 @@ class ScenePrograms:
         # ScenePass._draw_batches writes these, so a value is written only when it changes.
         self.written: dict[int, list] = {}
         self.last_own: dict[int, tuple] = {}  # program -> the batch values it last drew with
-        # The ``screen`` builds drawn so far ("" and, once a camera has ambient occlusion,
-        # "occluded" and "depth_normals", or screen reflections, "reflected"): ``prepare``
-        # builds a batch's in each of them.
-        self.screens: set[str] = {""}
+        # The ``screen`` builds drawn so far, each with whether masked ("" and, once a camera
+        # has ambient occlusion, "occluded" and "depth_normals", masked too where reflection
+        # levels are occluded, or screen reflections, "reflected"): ``prepare`` builds a
+        # batch's in each of them.
+        self.screens: set[tuple[str, bool]] = {("", False)}
 
     def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
@@ -175,7 +176,8 @@ class ScenePrograms:
         or probe added and the normal for the composite (``ScreenReflectionPass``), and
         "occluded reflected" both; "depth_normals" ``DEPTH_NORMALS``: depth and
         the surface's normal only (occlusion's first pass), one build a cutout or not, whatever
-        else the batch has."""
+        else the batch has ("depth_normals half": a reflection level's at half its size, masked
+        by every second pixel of its node image, ``NODE_STEP``)."""
         if self.renderer.shaders.reloads != self.reloads_seen:
             self.forget()
         virtual = self.shadows.virtual_shining  # the shadows stage set how many shine
@@ -186,16 +188,16 @@ class ScenePrograms:
             cookies = (*cookies, ("SPHERE_LIGHTS", "1"))
         if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
             cookies = (*cookies, *self.renderer.object_motion.defines)
-        if screen == "depth_normals":  # nothing shaded: only a cutout's discard picks the build
+        if screen.startswith("depth_normals"):  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False
             material = (False, False, material[2], "", False, False, False, False, False, False, False, False,
                         material[12], material[13],  # (a posed mesh's depth is where its pose puts it)
                         material[14] & ALBEDO_UV_BIT if material[2] else 0, False)  # (a cutout's holes: its UVs)
-            virtual, unlit, masked, shadowing, fogging, cookies = False, False, False, (), (), ()
+            virtual, unlit, shadowing, fogging, cookies = False, False, (), (), ()  # (masked: a level's)
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
-        self.screens.add(screen)
+        self.screens.add((screen, masked))
         key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
                ambient_probes, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
         program = self.built.get(key)
@@ -251,8 +253,10 @@ class ScenePrograms:
                 defines["UNLIT_SURFACE"] = "1"
             if masked:  # the claimed pixels only (a reflection level's views)
                 defines["MASKED"] = "1"
-            if screen == "depth_normals":
+            if screen.startswith("depth_normals"):
                 defines["DEPTH_NORMALS"] = "1"
+                if screen == "depth_normals half":  # a level's at half its size: its node image's every 2nd pixel
+                    defines["NODE_STEP"] = "2"
             else:
                 words = screen.split()
                 if "occluded" in words:  # the screen's ambient occlusion (a root view's)
@@ -318,14 +322,14 @@ class ScenePrograms:
                             batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
                                                    batch.checker is not None, _material_build(batch),
                                                    batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
-            for screen in self.screens - {""}:  # a root view's (not masked, one view a draw)
+            for screen, masked in self.screens - {("", False), ("", True)}:  # one view a draw
                 if "reflected" in screen.split() and not reflects_environment(batch):
                     continue  # (drawn with the builds without: ScenePass._draw_reflecting)
                 for probes in ambient:
                     for dark in unlit if "reflected" in screen.split() else (False,):  # (unlit: its own build)
                         batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,
                                                batch.checker is not None, _material_build(batch), batch.probe_blend,
-                                               probes, bool(batch.rest_probe), dark, False, screen))
+                                               probes, bool(batch.rest_probe), dark, masked, screen))
         return len(self.built) - before
 
     def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool, str], stamp: tuple,

@@ -9,9 +9,11 @@ quarter of its pixels; ``half_resolution``) or at its size:
 1. **Depth and normals**: the scene pass draws the view's opaque batches, and a guard band
    a tenth of the image wide about them, with the
    ``DEPTH_NORMALS`` build of the scene shader (``ScenePass.draw_depth_normals``: the
-   same draws, visibility and cutouts as the view, shading nothing), writing the depth and
-   each surface's own normal, as Unity's depth-normals prepass and Godot's depth prepass do.
-   The main view cannot give them: it needs the occlusion while it shades.
+   same draws, visibility and cutouts as the view, shading nothing), writing each surface's
+   own normal in the view's space and one over its distance along the view's axis
+   (``shaders/include/occlusion_geometry.glsl``: a float image, read bilinearly where the
+   passes look between texels), as Unity's depth-normals prepass and Godot's depth prepass
+   do.  The main view cannot give them: it needs the occlusion while it shades.
 2. **Find** (``shaders/screen_occlusion.frag``): ground-truth ambient occlusion (Jimenez
    et al. 2016, as Unreal's GTAO and Intel's XeGTAO): ``SLICES`` planes through the view
    direction a pixel, each searched ``STEPS`` depth samples each way for its horizons
@@ -54,29 +56,50 @@ light (the brightest directional light, marked in the Lights block).  Without an
 ``half_resolution``) and the find pass is the march alone (``AMBIENT_OCCLUSION`` builds find
 the occlusion).
 
-Only the root view is occluded; mirror, portal and probe views and the transparent slot are
-drawn without it.  The targets are made at the first occluded frame of a size and released
-when no camera asks for occlusion (``release_targets``)."""
+**Reflection levels** (``AmbientOcclusion.reflection_depth``, ``ContactShadows.reflection_depth``:
+the levels of mirror and portal views below the camera's that are found too, 1 by default):
+the main view tree hands each such level to ``draw_level`` between its claims and its draw,
+so a mirror or a portal shows its world occluded as the camera's view shows the world.  The
+same three passes over the level's images (no guard band: a view ends at its surface's
+outline, which is that view's screen edge): the depth and normals of every view of the
+level, each on its own claimed pixels (masked by the level's node image); the find drawn
+once a view over its rectangle (``LEVEL_VIEWS`` builds: its own pixels only, the sun turned
+into its space, a sample on another view's pixels ending the search as the image's edge
+does); the filter, which weighs only the texels of the view that drew each texel.  The
+level's views are then drawn one by one (not the batched path) with the ``SCREEN_OCCLUSION``
+builds, masked.  Those read one sampler more than the fullest masked build (17; 18 with
+spot cookies): a context with fewer fragment-stage texture units than that finds the
+camera's view alone and says so once (a ``GLLimitWarning``).
+
+Probe views and the transparent slot are drawn without it.  The targets are made at the
+first occluded frame of a size (a level's at the first frame that finds it) and released
+when no camera asks for occlusion (``release_targets``), a level's when the camera's depth
+no longer reaches it."""
 from __future__ import annotations
 
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import moderngl
 from pyglm import glm
 
 from components.ambient import OCCLUSION_QUALITIES, AmbientOcclusion, ContactShadows
+from engine.core.errors import GLLimitWarning
 from engine.render.bindings import (
-    OCCLUSION_DEPTH_UNIT,
     OCCLUSION_IMAGE_UNIT,
+    OCCLUSION_NODE_UNIT,
     OCCLUSION_NORMAL_UNIT,
     PassState,
     apply_pass_state,
     assign_slots,
     bind_texture,
+    set_scissor,
 )
 from engine.render.gpu import Gpu
-from engine.render.scene_pass import ScenePass
-from engine.render.targets import check_target_size, release_framebuffer
+from engine.render.scene_pass import ScenePass, stepped_scissor
+from engine.render.spot_cookies import SCENE_SAMPLERS
+from engine.render.targets import RenderTargets, check_target_size, release_framebuffer
 from engine.render.views import View
 
 # AmbientOcclusion.quality -> (slice planes a pixel, depth samples each way along a slice):
@@ -95,19 +118,25 @@ MAX_REACH_SHARE = 0.5
 # the edge of the screen is there to be found.  Only that pass is wider (its pixels cost
 # least); the find and filter passes run over the view's own pixels.
 GUARD_SHARE = 0.1
+# The fragment-stage texture units an occluded reflection level's fullest build reads: the
+# fullest masked build's, the occlusion image, and spot cookies' array.
+LEVEL_SAMPLERS = SCENE_SAMPLERS + 2
 _PASS = PassState()
+# Each texel the find leaves (another view's, or none of the level's): "nothing found there".
+_NOTHING_FOUND = (1.0, -1.0, 1.0, 1.0)
 
 
 @dataclass
 class _Targets:
-    """One size's images (half the view's, or all of it): the depth and normals pass's, the
-    occlusion found and the shares the scene pass reads."""
+    """One size's images (half the view's, or all of it): the depth and normals pass's (the
+    normals and distances, and the depth its draws test), the occlusion found and the shares
+    the scene pass reads."""
 
     size: tuple[int, int]          # the found and shares images' (half the view's, or the view's)
     view_size: tuple[int, int]
     margin: tuple[int, int]        # the guard band, each side: the depth and normals are size + 2 margin
     depth: moderngl.Texture
-    normals: moderngl.Texture
+    normals: moderngl.Texture      # occlusion_geometry.glsl's: the view-space normal, 1 / distance
     prepass: moderngl.Framebuffer
     found: moderngl.Texture
     found_framebuffer: moderngl.Framebuffer
@@ -145,61 +174,79 @@ class ScreenOcclusion:
         self.ctx = gpu.ctx
         self.scene_pass = scene_pass
         self._targets: _Targets | None = None
-        self._finds: dict[tuple[str | None, int], moderngl.VertexArray] = {}  # by quality and contact samples
-        self._filter: moderngl.VertexArray | None = None
+        self._levels: dict[int, _Targets] = {}  # a reflection level's images, by its depth
+        # The find's builds by quality, contact samples and node step (0: the root's; 1 or 2:
+        # a level's, LEVEL_VIEWS with that NODE_STEP), the filter's by node step.
+        self._finds: dict[tuple[str | None, int, int], moderngl.VertexArray] = {}
+        self._filters: dict[int, moderngl.VertexArray] = {}
+        # What the camera's view was found with this frame (draw), which its reflection levels
+        # are found with where its components' reflection_depth reaches them (draw_level):
+        # (AmbientOcclusion or None, ContactShadows or None, the way to the sun or None).
+        self.frame: tuple[AmbientOcclusion | None, ContactShadows | None, glm.vec3 | None] | None = None
+        # Whether the context has the texture units an occluded level's builds read (LEVEL_SAMPLERS).
+        self.levels_supported = gpu.caps.max_texture_image_units >= LEVEL_SAMPLERS
+        self._said_no_units = False
         self._programs_of = -1  # the shader library's reloads when they were made
         # What the shares image was last found from (``_still_key``): equal, the passes are
         # not run again and the image stands.
         self._found_from: tuple | None = None
         self.keep_still = True  # False: found every frame (what the still fuzz compares with)
 
-    def _programs(self, quality: str | None, samples: int) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
+    def _programs(self, quality: str | None, samples: int,
+                  step: int = 0) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
         """The find pass's build for ``quality`` (None: no occlusion) and ``samples`` contact
-        samples (0: no contact shadows), and the filter's."""
+        samples (0: no contact shadows), and the filter's; ``step`` 0 the root's, else a
+        reflection level's whose images are ``step`` of its pixels a texel each way."""
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
-        find = self._finds.get((quality, samples))
+        level = {"LEVEL_VIEWS": "1", "NODE_STEP": str(step)} if step else {}
+        units = {"geometry_map": OCCLUSION_NORMAL_UNIT, "node_map": OCCLUSION_NODE_UNIT,
+                 "occlusion_map": OCCLUSION_IMAGE_UNIT}
+        find = self._finds.get((quality, samples, step))
         if find is None:
-            defines = {}
+            defines = dict(level)
             if quality is not None:
                 slices, steps = QUALITY_SAMPLES[quality]
                 defines.update(AMBIENT_OCCLUSION="1", SLICES=str(slices), STEPS=str(steps))
             if samples:
                 defines.update(CONTACT_SHADOWS="1", CONTACT_SAMPLES=str(samples))
-            program = assign_slots(shaders.program("fullscreen.vert", "screen_occlusion.frag", defines=defines),
-                                   {"depth_map": OCCLUSION_DEPTH_UNIT, "normal_map": OCCLUSION_NORMAL_UNIT})
-            find = self._finds[(quality, samples)] = self.ctx.vertex_array(program, [])
-        if self._filter is None:
-            smooth = shaders.program("fullscreen.vert", "screen_occlusion_filter.frag")
-            smooth["depth_map"].value = OCCLUSION_DEPTH_UNIT
-            smooth["normal_map"].value = OCCLUSION_NORMAL_UNIT
-            smooth["occlusion_map"].value = OCCLUSION_IMAGE_UNIT
-            self._filter = self.ctx.vertex_array(smooth, [])
-        return find, self._filter
+            program = assign_slots(shaders.program("fullscreen.vert", "screen_occlusion.frag", defines=defines), units)
+            find = self._finds[(quality, samples, step)] = self.ctx.vertex_array(program, [])
+        smooth = self._filters.get(step)
+        if smooth is None:
+            program = assign_slots(shaders.program("fullscreen.vert", "screen_occlusion_filter.frag", defines=level),
+                                   units)
+            smooth = self._filters[step] = self.ctx.vertex_array(program, [])
+        return find, smooth
 
-    def _targets_for(self, view_size: tuple[int, int], half: bool) -> _Targets:
-        size = (max(1, view_size[0] // 2), max(1, view_size[1] // 2)) if half else view_size
-        kept = self._targets
-        if kept is not None and kept.size == size and kept.view_size == view_size:
-            return kept
-        self.release_targets()
+    def _make_targets(self, view_size: tuple[int, int], half: bool, guard: bool) -> _Targets:
+        """The images for a view (or level) of ``view_size``: half its size each way with
+        ``half``, and with ``guard`` a guard band about the depth and normals."""
         ctx = self.ctx
-        margin = (round(GUARD_SHARE * size[0]), round(GUARD_SHARE * size[1]))
+        size = (max(1, view_size[0] // 2), max(1, view_size[1] // 2)) if half else view_size
+        margin = (round(GUARD_SHARE * size[0]), round(GUARD_SHARE * size[1])) if guard else (0, 0)
         guarded = (size[0] + 2 * margin[0], size[1] + 2 * margin[1])
         check_target_size(ctx, guarded, "ambient occlusion's images")
         depth = ctx.depth_texture(guarded)
-        depth.compare_func = ""  # read as distances, not compared
-        normals = ctx.texture(guarded, 4)
+        normals = ctx.texture(guarded, 4, dtype="f4")
         found = ctx.texture(size, 4, dtype="f2")
         shares = ctx.texture(size, 4, dtype="f2")
         for texture in (depth, normals, found, shares):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
             texture.repeat_x = texture.repeat_y = False
-        depth.filter = (moderngl.LINEAR, moderngl.LINEAR)  # the find reads it between texels (texelFetch elsewhere)
-        self._targets = _Targets(size, view_size, margin, depth, normals, ctx.framebuffer([normals], depth), found,
-                                 ctx.framebuffer([found]), shares, ctx.framebuffer([shares]))
+        normals.filter = (moderngl.LINEAR, moderngl.LINEAR)  # the find reads it between texels (texelFetch elsewhere)
+        return _Targets(size, view_size, margin, depth, normals, ctx.framebuffer([normals], depth), found,
+                        ctx.framebuffer([found]), shares, ctx.framebuffer([shares]))
+
+    def _targets_for(self, view_size: tuple[int, int], half: bool) -> _Targets:
+        kept = self._targets
+        want = (max(1, view_size[0] // 2), max(1, view_size[1] // 2)) if half else view_size
+        if kept is not None and kept.size == want and kept.view_size == view_size:
+            return kept
+        self._release_root()
+        self._targets = self._make_targets(view_size, half, guard=True)
         return self._targets
 
     def draw(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None = None,
@@ -208,12 +255,13 @@ class ScreenOcclusion:
         as ``contact`` says, towards ``sun`` (world, the way to the sun; None: no sun, so no
         contact shadow); returns the shares image (half the view's size, or all of it), bound
         for the main view's draw."""
-        gpu, ctx = self.gpu, self.ctx
+        gpu = self.gpu
         if sun is None:
             contact = None
         if settings is None and contact is None:
             raise ValueError("ScreenOcclusion.draw: nothing to find (no AmbientOcclusion, and no ContactShadows "
                              "with a sun)")
+        self._set_frame(settings, contact, sun)
         half = settings.half_resolution if settings is not None else contact.half_resolution
         targets = self._targets_for(view.size, half)
         key = self._still_key(view, settings, contact, sun)
@@ -221,60 +269,134 @@ class ScreenOcclusion:
             gpu.screen_occlusion = targets.shares
             return targets.shares
         self._found_from = key
-        find, smooth = self._programs(settings.quality if settings is not None else None,
-                                      contact.samples if contact is not None else 0)
-        width, height = targets.size
         # 1. Depth and normals, at the images' size, with the guard band about them.
         guard = _guarded(view, targets.size, targets.margin)
-        self.scene_pass.draw_depth_normals(guard, targets.prepass, guard.size)
-        proj = guard.proj
-        # What both passes read to put a depth texel back in the view's space (view_depth.glsl),
-        # and where the view's pixels start in the guarded images.
+        self.scene_pass.draw_depth_normals([guard], targets.prepass, guard.size)
+        # 2. and 3. The occlusion found, and filtered into the shares.
+        self._find(targets, [view], guard.proj, settings, contact, sun, 0)
+        gpu.screen_occlusion = targets.shares
+        return targets.shares
+
+    def draw_level(self, depth: int, views: Sequence[View], targets: RenderTargets) -> moderngl.Texture | None:
+        """Find the occlusion and contact shadows of reflection level ``depth`` (1: the views of
+        mirrors and portals the camera sees), whose ``views`` are about to be drawn into
+        ``targets`` (its claims made: its node image says which view has which pixel), where the
+        camera's components reach that deep (``frame``); returns its shares image, left as
+        ``Gpu.screen_occlusion`` for the level's draw (``restore_root`` puts the camera's back),
+        or None: the level is drawn without."""
+        if self.frame is None or not views or not self.levels_supported:
+            return None
+        settings, contact, sun = self.frame
+        if settings is not None and depth > settings.reflection_depth:
+            settings = None
+        if contact is not None and depth > contact.reflection_depth:
+            contact = None
+        if settings is None and contact is None:
+            return None
+        half = (settings or contact).half_resolution
+        images = self._levels.get(depth)
+        want = (max(1, targets.size[0] // 2), max(1, targets.size[1] // 2)) if half else targets.size
+        if images is None or images.size != want or images.view_size != targets.size:
+            if images is not None:
+                images.release()
+            images = self._levels[depth] = self._make_targets(targets.size, half, guard=False)
+        step = 2 if half else 1
+        self.scene_pass.draw_depth_normals(views, images.prepass, images.size, targets.node, step)
+        self._find(images, views, views[0].proj, settings, contact, sun, step, targets.node)
+        self.gpu.screen_occlusion = images.shares
+        return images.shares
+
+    def restore_root(self) -> None:
+        """Put the camera's own view's shares back as ``Gpu.screen_occlusion`` (after a level's draw)."""
+        self.gpu.screen_occlusion = None if self._targets is None else self._targets.shares
+
+    def _find(self, targets: _Targets, views: Sequence[View], proj: glm.mat4, settings: AmbientOcclusion | None,
+              contact: ContactShadows | None, sun: glm.vec3 | None, step: int,
+              nodes: moderngl.Texture | None = None) -> None:
+        """Passes 2 and 3 over ``targets``' depth and normals: the find (once a view of a
+        level, ``step`` > 0, over its rectangle; the root's one view over all of it) and the
+        filter.  ``proj``: the projection the depth and normals were drawn with (its x and y
+        rows, a level's views' alike, put a texel back in its view's space)."""
+        gpu, ctx = self.gpu, self.ctx
+        find, smooth = self._programs(settings.quality if settings is not None else None,
+                                      contact.samples if contact is not None else 0, step)
+        width, height = targets.size
+        depth_size = (float(targets.size[0] + 2 * targets.margin[0]), float(targets.size[1] + 2 * targets.margin[1]))
+        # What both passes read to put a texel back in its view's space (view_depth.glsl), and
+        # where the view's pixels start in the guarded images.
         unproject = {"unproject": (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1])),
-                     "unproject_z": (float(proj[2][2]), float(proj[3][2])),
-                     "depth_size": (float(guard.size[0]), float(guard.size[1])), "margin": targets.margin}
-        rotation = glm.mat3(view.view).to_bytes()
-        # 2. The occlusion found.
+                     "depth_size": depth_size, "margin": targets.margin}
         targets.found_framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, width, height))
-        bind_texture(ctx, targets.depth, OCCLUSION_DEPTH_UNIT)
+        if step:  # (each view's draw finds its own pixels: the rest say "nothing found")
+            targets.found_framebuffer.clear(*_NOTHING_FOUND)
+            bind_texture(ctx, nodes, OCCLUSION_NODE_UNIT)
         bind_texture(ctx, targets.normals, OCCLUSION_NORMAL_UNIT)
         program = find.program
         for name, value in unproject.items():
             if name in program:
                 program[name].value = value
-        program["view_rotation"].write(rotation)
         if settings is not None:
             program["radius"].value = settings.radius
-            program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * guard.size[1]
+            program["pixels_per_metre"].value = float(proj[1][1]) * 0.5 * depth_size[1]
             program["max_radius_pixels"].value = max(MAX_REACH_SHARE * height,
                                                      float(QUALITY_SAMPLES[settings.quality][1]))
         if contact is not None:
-            program["sun_view"].value = tuple(glm.normalize(glm.mat3(view.view) * glm.vec3(sun)))
             program["contact"].value = (contact.length, contact.thickness, contact.opacity, contact.distance)
-        find.render(moderngl.TRIANGLES, vertices=3)
+        for view in views:
+            if step:
+                set_scissor(ctx, stepped_scissor(view.scissor, step, targets.size))
+                program["node"].value = view.node
+            if contact is not None:
+                program["sun_view"].value = tuple(glm.normalize(glm.mat3(view.view) * glm.vec3(sun)))
+            find.render(moderngl.TRIANGLES, vertices=3)
         # 3. Filtered into the shares.
         targets.shares_framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, width, height))
         bind_texture(ctx, targets.found, OCCLUSION_IMAGE_UNIT)
         program = smooth.program
         for name, value in unproject.items():
-            program[name].value = value
-        program["view_rotation"].write(rotation)
+            if name in program:
+                program[name].value = value
         program["intensity"].value = settings.intensity if settings is not None else 1.0
         program["direct_light"].value = settings.direct_light if settings is not None else 0.0
         smooth.render(moderngl.TRIANGLES, vertices=3)
         stats = gpu.stats
         stats.passes += 2
-        stats.draw_calls += 2
-        gpu.screen_occlusion = targets.shares
+        stats.draw_calls += len(views) + 1
         if gpu.debug:
-            gpu.checkpoint("ambient occlusion")
-        return targets.shares
+            gpu.checkpoint("ambient occlusion" if not step else f"ambient occlusion ({views[0].name} and its level)")
+
+    def _set_frame(self, settings: AmbientOcclusion | None, contact: ContactShadows | None,
+                   sun: glm.vec3 | None) -> None:
+        """What this frame's reflection levels are found with; a level the components no longer
+        reach lets its images go, and a context without the units they need says so once."""
+        self.frame = (settings, contact, sun)
+        reach = max(settings.reflection_depth if settings is not None else 0,
+                    contact.reflection_depth if contact is not None else 0)
+        for depth in [depth for depth in self._levels if depth > reach]:
+            self._levels.pop(depth).release()
+        if reach and not self.levels_supported and not self._said_no_units:
+            self._said_no_units = True
+            warnings.warn(GLLimitWarning(
+                f"ambient occlusion and contact shadows in mirror and portal views (reflection_depth {reach}) need "
+                f"{LEVEL_SAMPLERS} texture units in the fragment stage and this OpenGL has "
+                f"{self.gpu.caps.max_texture_image_units} (GL_MAX_TEXTURE_IMAGE_UNITS): only the camera's own view "
+                "has them"), stacklevel=3)
+
+    def level_key(self) -> tuple | None:
+        """What this frame's reflection levels are found with, as values (the reflect stage's
+        still key: a change draws its levels again)."""
+        if self.frame is None or not self.levels_supported:
+            return None
+        settings, contact, sun = self.frame
+        return (_occlusion_values(settings), None if settings is None else settings.reflection_depth,
+                _contact_values(contact, sun), None if contact is None else contact.reflection_depth)
 
     def target_count(self) -> int:
-        """Images held now (4 while a camera asks for occlusion, else 0)."""
-        return 0 if self._targets is None else 4
+        """Images held now (4 while a camera asks for occlusion, and 4 for each reflection
+        level found, else 0)."""
+        return 4 * ((self._targets is not None) + len(self._levels))
 
     def _still_key(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None,
                    sun: glm.vec3 | None) -> tuple:
@@ -283,27 +405,45 @@ class ScreenOcclusion:
         view's Camera block (pose, projection, layers, the entities it leaves out) and size,
         the settings and the sun.  A still scene (the camera and what it sees not moving)
         finds it once."""
-        occlusion = None if settings is None else (settings.radius, settings.intensity, settings.direct_light,
-                                                   settings.half_resolution, settings.quality)
-        shadows = None if contact is None else (contact.length, contact.thickness, contact.opacity,
-                                                contact.distance, contact.samples, contact.half_resolution, tuple(sun))
-        return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size, occlusion, shadows)
+        return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size,
+                _occlusion_values(settings), _contact_values(contact, sun))
 
-    def release_targets(self) -> None:
-        """Let the images go (no camera asks for occlusion, or another size)."""
+    def _release_root(self) -> None:
         if self._targets is not None:
             self._targets.release()
             self._targets = None
         self._found_from = None
+
+    def release_targets(self) -> None:
+        """Let the images go (no camera asks for occlusion), the levels' too."""
+        self._release_root()
+        for images in self._levels.values():
+            images.release()
+        self._levels.clear()
+        self.frame = None
         self.gpu.screen_occlusion = None
 
     def _release_programs(self) -> None:
-        for vao in (*self._finds.values(), self._filter):
-            if vao is not None:
-                vao.release()
+        for vao in (*self._finds.values(), *self._filters.values()):
+            vao.release()
         self._finds.clear()
-        self._filter = None
+        self._filters.clear()
 
     def release(self) -> None:
         self.release_targets()
         self._release_programs()
+
+
+def _occlusion_values(settings: AmbientOcclusion | None) -> tuple | None:
+    """What of ``settings`` the images are found from."""
+    if settings is None:
+        return None
+    return settings.radius, settings.intensity, settings.direct_light, settings.half_resolution, settings.quality
+
+
+def _contact_values(contact: ContactShadows | None, sun: glm.vec3 | None) -> tuple | None:
+    """What of ``contact`` (towards ``sun``) the images are found from."""
+    if contact is None:
+        return None
+    return (contact.length, contact.thickness, contact.opacity, contact.distance, contact.samples,
+            contact.half_resolution, tuple(sun))

@@ -132,6 +132,7 @@ class TreeLevel:
     unlit: frozenset[int] = frozenset()            # mirrors its views draw unlit (shading_replaced)
     options: SceneOptions = REFLECTION_LEVEL       # what its views were drawn with (their transparent slot's)
     apart: bool = False                           # its claims' rectangles overlap no other's (view_tree._APART)
+    depth: int = 1                                # its level in the tree (1: the views of the root's surfaces)
 
 
 @dataclass

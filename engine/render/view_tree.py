@@ -84,6 +84,7 @@ from engine.render.plan_ahead import plan_ahead, plan_chain
 from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_options import REFLECTION_LEVEL, TREE_ROOT, SceneOptions
 from engine.render.scene_pass import ScenePass
+from engine.render.screen_occlusion import ScreenOcclusion
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack
 from engine.render.tree_visibility import (
@@ -173,6 +174,10 @@ class ViewTree:
         # tree's own).
         self.still = StillTree(renderer, self.passes, scene_pass, self.ends,
                                copies if copies is not None else LevelCopies(renderer.ctx))
+        # The camera's screen-space ambient occlusion and contact shadows, found for each
+        # level its components reach before the level is drawn (the main view's tree; None:
+        # levels drawn without).
+        self.occlusion: ScreenOcclusion | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = _DEFAULT_SETTINGS, blends: SurfaceBlends = NO_BLENDS,
@@ -298,7 +303,7 @@ class ViewTree:
         if walk.scale < 1.0:
             self.renderer.stats.levels_downscaled += 1
         step = TreeLevel(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
-                      walk.record.take(len(candidates), self.renderer.ctx))
+                      walk.record.take(len(candidates), self.renderer.ctx), depth=level + 1)
         walk.steps.append(step)
         self._skip_empty_claims(walk, step)
         is_end = candidates.end.tolist() if candidates.end is not None else [False] * len(candidates)
@@ -349,7 +354,7 @@ class ViewTree:
         if walk.scale < 1.0:
             stats.levels_downscaled += 1
         step = TreeLevel(candidates, levels.get(level + 1, candidates.size), levels[level], walk.nodes,
-                      walk.record.take(1, renderer.ctx))
+                      walk.record.take(1, renderer.ctx), depth=level + 1)
         walk.steps.append(step)
         self._skip_empty_claims(walk, step)
         end = candidates.end is not None and bool(candidates.end[0])
@@ -628,19 +633,25 @@ class ViewTree:
         is flushed only where the next level's plan is still to be made."""
         renderer = self.renderer
         if step.views:
-            options = _BATCHED if step.path == "batched" else REFLECTION_LEVEL
+            # Its ambient occlusion and contact shadows first, where the camera's reach it: its
+            # views then read them, drawn one by one (the batched builds do not).
+            occluded = self.occlusion is not None and \
+                self.occlusion.draw_level(step.depth, step.views, step.targets) is not None
+            options = _BATCHED if step.path == "batched" and not occluded else REFLECTION_LEVEL
             if step.apart and step.conditions is None:  # depth alone tells the claimed pixels (_APART)
                 options = _APART[options]
-            if step.unlit:
-                key = (options, step.unlit)
+            if step.unlit or occluded:
+                key = (options, step.unlit, occluded)
                 options = self._level_options.get(key) or self._level_options.setdefault(
-                    key, replace(options, unlit=step.unlit))
+                    key, replace(options, unlit=step.unlit, occlusion=occluded))
             step.options = options  # its transparent slot is drawn with them (_composite)
             derived = step.candidates.derived
             run = derived.get("view_run") if self.lean_levels else None
             if run is not None and step.views is derived[("nodes", walk.root.hide)][0]:  # (the views planned)
                 renderer.upload_run(run)  # every level of one view's Camera block, at the first
             self.scene_pass.draw(step.views, step.targets, options, step.conditions, run=walk)
+            if occluded:
+                self.occlusion.restore_root()
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)
