@@ -4,7 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from components.tracking import TrackedComponent, boolean, choice, finite
+from components.limits import MAX_VIEW_DEPTH
+from components.tracking import TrackedComponent, boolean, choice, finite, integer
 
 # How far a reflected ray is followed (metres) and how thick a surface is taken to be
 # behind what the depth image shows: at most these.
@@ -48,8 +49,14 @@ class ScreenReflections(TrackedComponent):
       depth-aware filter: about a quarter of the march's work, the reflections' edges
       softer (a reflection's detail at half the screen's).  False (the default): a ray a pixel.
 
-    Only the camera's own view reflects its image: mirror, portal and probe views show the
-    probes' and sky's reflections as before, and so do glass and what is off the screen.  A
+    - ``reflection_depth``: the levels of mirror and portal views below the camera's whose
+      surfaces reflect their own view's image too (0 to 16; 1 by default: the views of the
+      mirrors and portals the camera sees, so a polished floor in a mirror or through a
+      portal reflects what stands on it as it does seen directly; 0: the camera's view
+      alone).  A level's rays are marched a pixel each (its ``half_resolution`` is the
+      camera's view's alone) and end at their view's outline.
+
+    Probe views, glass and what is off the screen show the probes' and sky's reflections.  A
     camera with it in a world where nothing reflects the sky or a probe (only mirrors and
     portals are drawn) is told so once (a ``ComponentWarning`` from the main stage).
     """
@@ -60,6 +67,7 @@ class ScreenReflections(TrackedComponent):
     edge_fade: float = 0.1
     quality: str = "medium"
     half_resolution: bool = False
+    reflection_depth: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "max_distance":
@@ -74,4 +82,6 @@ class ScreenReflections(TrackedComponent):
             return choice(self, name, value, REFLECTION_QUALITIES)
         if name == "half_resolution":
             return boolean(self, name, value)
+        if name == "reflection_depth":
+            return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value

@@ -7,7 +7,9 @@
 // the rays marched at half size (screen_reflection_trace.frag) instead of marching its own:
 // the four about the pixel, by bilinear weight times how near their surface's depth is.
 // The SHOW_FOUND build (the overlay's "SSR only") writes what the screen gave in place of the
-// picture: the colour found times the confidence, black where nothing was found.
+// picture: the colour found times the confidence, black where nothing was found.  A
+// reflection level's build (LEVEL_VIEWS) is drawn once a view of the level, over its
+// rectangle, and composites only that view's pixels.
 #include "screen_march.glsl"
 
 uniform sampler2D scene_color;     // the main view's colour (a copy), with its mip chain
@@ -92,6 +94,9 @@ vec3 reflected(ivec2 pixel, vec3 base, vec4 weight, float share, float depth) {
 
 void main() {
     ivec2 pixel = ivec2(gl_FragCoord.xy);
+#ifdef LEVEL_VIEWS
+    if (node_at(gl_FragCoord.xy) != node) discard;  // another view's pixel (its own draw composites it)
+#endif
     vec4 base = texelFetch(scene_color, pixel, 0);
 #ifdef SHOW_FOUND
     out_color = vec4(0.0, 0.0, 0.0, base.a);

@@ -119,7 +119,7 @@ def post_lines(engine: Engine) -> list[str]:
     reflected = main.reflected
     if reflected is not None:
         reflections = (f"SSR {reflected.max_distance:g} m {reflected.quality}"
-                       f"{' half' if reflected.half_resolution else ''}")
+                       f"{' half' if reflected.half_resolution else ''}{_levels(reflected.reflection_depth)}")
     else:
         reflections = "SSR off" + (" (set)" if not main.reflections else "")
     if not engine.stages["prepare"].environment_reflections:

@@ -70,7 +70,9 @@ class ReflectionSystem(esper.Processor):
         self.world = world
         self.renderer = renderer
         self.tree = ViewTree(renderer, renderer.scene_pass, end_images=True, copies=renderer.level_copies)
-        self.tree.occlusion = renderer.occlusion  # (the levels the camera's AmbientOcclusion reaches)
+        # (the levels the camera's AmbientOcclusion, ContactShadows and ScreenReflections reach)
+        self.tree.occlusion = renderer.occlusion
+        self.tree.reflections = renderer.screen_reflections
         self.settings = TreeSettings(max_depth_cap)
         self.views: list[ReflectionView] = []   # last frame's view tree, level order
         self._cut = False                        # camera_cut() was called since the last frame
@@ -250,7 +252,7 @@ class ReflectionSystem(esper.Processor):
                   renderer.reflection_anisotropy, renderer.normal_map_anisotropy, renderer.scene_pass.cull_batches,
                   stats.views_left(), stats.pixels_left(), stats.min_view_pixels,
                   tuple(flow.offset for flow in waves[1]), tuple(self.tree.passes.surface_motion),
-                  renderer.occlusion.level_key())
+                  renderer.occlusion.level_key(), renderer.screen_reflections.level_key())
         return values, (table, blends.by_surface, levels)
 
     def prepare(self) -> None:

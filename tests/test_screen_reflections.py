@@ -334,10 +334,11 @@ def test_mirrors_keep_their_view_and_the_floor_reflects_what_the_mirror_shows(sc
         return {"mirror": world.spawn(Transform(position=(0.0, 1.2, -2.0)), MeshRef(quad(3.0, 2.0)),
                                       Material(color=(1.0, 1.0, 1.0)), Mirror())}
 
-    image, runner, names = _frame(scene, reflections=ScreenReflections(), extra=wall_mirror)
+    # (reflection_depth 0: the mirror's own view keeps the sky's reflections on its floor;
+    # tests/test_reflected_reflections.py has a level's)
+    image, runner, names = _frame(scene, reflections=ScreenReflections(reflection_depth=0), extra=wall_mirror)
     plain, plain_runner, _ = _frame(scene, extra=wall_mirror)
-    mirror = _eroded(runner.ids() == names["mirror"])  # (its seen ids are what it reflects: use surfaces)
-    surfaces = runner.engine.renderer.targets.read_surface_ids()
+    surfaces = runner.engine.renderer.targets.read_surface_ids()  # (its seen ids are what it reflects)
     mirror = _eroded(surfaces == names["mirror"])
     assert mirror.sum() > 500
     assert np.abs(image[mirror] - plain[mirror]).max() <= 1  # its planar reflection, untouched
@@ -383,7 +384,8 @@ def test_water_drawn_over_the_floor_keeps_its_own_look(scene):
         return {"pond": world.spawn(Transform(position=(-0.8, 0.05, 1.3), rotation=flat), MeshRef(quad(1.4, 1.4)),
                                     Material(color=(0.1, 0.3, 0.4, 0.5), roughness=0.0), Mirror(), Water())}
 
-    with_pond, runner, names = _frame(scene, reflections=ScreenReflections(), extra=pond)
+    # (reflection_depth 0: the pond's own view, drawn the same either way)
+    with_pond, runner, names = _frame(scene, reflections=ScreenReflections(reflection_depth=0), extra=pond)
     plain_pond, _, _ = _frame(scene, extra=pond)
     without, _, _ = _frame(scene, reflections=ScreenReflections())
     plain, _, _ = _frame(scene)
@@ -465,7 +467,7 @@ def test_only_the_batches_that_reflect_get_the_reflected_builds(scene):
 def test_the_overlay_switch_turns_them_off(scene):
     image, runner, _ = _frame(scene, reflections=ScreenReflections())
     plain, _, _ = _frame(scene)
-    assert post_lines(runner.engine)[1] == "screen: AO off; SSR 30 m medium"
+    assert post_lines(runner.engine)[1] == "screen: AO off; SSR 30 m medium, 1 mirror level"
     runner.engine.stages["main"].reflections = False
     off = runner.frame().astype(np.int32)
     assert np.abs(off - plain).max() <= 1

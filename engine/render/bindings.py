@@ -151,6 +151,7 @@ REFLECTION_ADDED_UNIT = 35    # the sky's or probe's reflection the scene pass a
 REFLECTION_NORMAL_UNIT = 36   # the shading normals
 REFLECTION_SURFACE_UNIT = 37  # the main view's surface ids
 REFLECTION_HITS_UNIT = 38     # the rays marched at half size (ScreenReflections.half_resolution)
+REFLECTION_NODE_UNIT = 51     # a reflection level's composite: the level's node image
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

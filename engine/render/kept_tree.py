@@ -205,9 +205,9 @@ class StillTree:
                 passes.composite_level(targets, levels[depth + 1], refill.composites[depth], parent_is_root=depth == 0)
             if not depth:  # the screen's reflections, then the glass (none: nothing drawn)
                 self.scene_pass.finish_root(root, targets, root_options)
-            elif refill.see_through:
+            else:
                 views, options, conditions = refill.transparent[depth]
-                self.scene_pass.draw_transparent(views, targets, options, conditions)
+                self.scene_pass.finish_level(depth, views, targets, options, conditions, refill.see_through)
         self.renderer.flush()
         ends_before = self.ends_state(levels[0].size)
         self.ends.keep(levels[0], root, refill.seen, compare=True)

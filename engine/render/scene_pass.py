@@ -396,6 +396,18 @@ class ScenePass:
             self.screen_reflections.composite(targets)
         self.draw_transparent([root], targets, options)
 
+    def finish_level(self, depth: int, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
+                     conditions: Sequence[moderngl.Query] | None, glass: bool) -> None:
+        """What a view tree does last in its reflection level ``depth`` (``views`` drawn into
+        ``targets`` with ``options``), once the level below is composited into it: the
+        screen-space reflections, where the level was drawn for them
+        (``ScreenReflectionPass.composite_level``), then, with ``glass`` (something
+        see-through is drawn), the transparent slot."""
+        if self.screen_reflections is not None:
+            self.screen_reflections.composite_level(depth, views, targets)
+        if glass:
+            self.draw_transparent(views, targets, options, conditions)
+
     def draw_transparent(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                          conditions: Sequence[moderngl.Query] | None = None) -> None:
         """The rest of the transparent slot of ``views``, drawn by ``draw`` with ``options``
@@ -464,9 +476,10 @@ class ScenePass:
         self._bind_pass_wide(options, run)
 
     def _reflecting_framebuffer(self, options: SceneOptions) -> moderngl.Framebuffer | None:
-        """For the main view drawn for screen reflections, the framebuffer of the level's
-        images and theirs (``ScreenReflectionPass.framebuffer``: its node image too, which a
-        root writes 0 to, as its clear did); None otherwise."""
+        """For the main view (or a reflection level) drawn for screen reflections, the
+        framebuffer of the level's images and theirs (``ScreenReflectionPass.framebuffer``: its
+        node image too, which a root writes 0 to, as its clear did, and a level's views never
+        write: their builds do not); None otherwise."""
         if options.reflections and self.screen_reflections is not None:
             return self.screen_reflections.framebuffer
         return None
@@ -642,7 +655,8 @@ class ScenePass:
         if options.occlusion and renderer.screen_occlusion is not None:
             screen = "occluded"  # (the root's, or an occluded level's: the image is its pixels')
             bind_texture(ctx, renderer.screen_occlusion, SCREEN_OCCLUSION_UNIT)
-        if conditions is None and not options.sky and not now and not particles:
+        reflecting = self._reflecting_framebuffer(options)
+        if conditions is None and not options.sky and not now and not particles and reflecting is None:
             # A reflection level's views (exact visibility), drawn whatever their claims
             # count: per view its scissor, winding, camera and draws, nothing else.
             draw, bind_view_at = self._draw_batches, renderer.bind_view_at
@@ -655,7 +669,6 @@ class ScenePass:
             renderer.stats.passes += len(views)
             return
         sky_draw = self.sky_draw
-        reflecting = self._reflecting_framebuffer(options)
         for index, view in enumerate(views):
             if now:  # the slot, or (a tree's view) its part up to its see-through surfaces
                 if options.transparent:
@@ -673,7 +686,7 @@ class ScenePass:
                     self._draw_batches(drawn, 0, masked, skip=view.skip, hide=view.hide, unlit=view_unlit,
                                        screen=screen)
                 else:
-                    self._draw_reflecting(drawn, view, targets, reflecting, viewport, view_unlit, screen)
+                    self._draw_reflecting(drawn, view, targets, reflecting, viewport, view_unlit, screen, masked)
                 if options.sky:
                     # Into the view's own framebuffer: the sky writes id 0 (nothing) to the
                     # surface and seen images, the very values the clear put where no surface
@@ -698,8 +711,9 @@ class ScenePass:
 
     def _draw_reflecting(self, batches: list[InstanceBatch], view: View, targets: RenderTargets,
                          reflecting: moderngl.Framebuffer, viewport: tuple[int, int, int, int], unlit: frozenset | set,
-                         screen: str) -> None:
-        """The main view's opaque ``batches`` drawn for screen reflections: those that reflect
+                         screen: str, masked: bool = False) -> None:
+        """A view's opaque ``batches`` drawn for screen reflections (the main view's, or a
+        reflection level's view's, ``masked``): those that reflect
         no sky or probe first, as ever (their pixels keep the cleared "nothing reflected"),
         then those that may (``reflects_environment``) into ``reflecting``, the framebuffer
         with the reflections' images, with the builds that write them: only the surfaces
@@ -708,14 +722,17 @@ class ScenePass:
         ctx = self.ctx
         others = [batch for batch in batches if not reflects_environment(batch)]
         mirrored = [batch for batch in batches if reflects_environment(batch)]
-        self._draw_batches(others, 0, False, skip=view.skip, hide=view.hide, unlit=unlit, screen=screen)
+        self._draw_batches(others, 0, masked, skip=view.skip, hide=view.hide, unlit=unlit, screen=screen)
         if mirrored:
+            winding = "cw" if view.mirrored else "ccw"  # (the pass state's is counter-clockwise: a mirror's view's not)
             reflecting.use()
             apply_pass_state(ctx, _SCENE, viewport, view.scissor)
-            self._draw_batches(mirrored, 0, False, skip=view.skip, hide=view.hide, unlit=unlit,
+            set_front_face(ctx, winding)
+            self._draw_batches(mirrored, 0, masked, skip=view.skip, hide=view.hide, unlit=unlit,
                                screen=f"{screen} reflected".lstrip())
             targets.view_framebuffer.use()
             apply_pass_state(ctx, _SCENE, viewport, view.scissor)
+            set_front_face(ctx, winding)
 
     def _reaching(self, batches: list[InstanceBatch], reach: list[bool], view: View) -> list[InstanceBatch]:
         """The batches whose ``reach`` (batch_cull.batch_reach) in ``view`` is True; those

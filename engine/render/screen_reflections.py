@@ -33,14 +33,23 @@ With ``half_resolution`` the rays are marched in a pass of their own at half the
 reflects), and the composite takes, at each pixel, the four found about it by bilinear weight
 times how near their surfaces' depths are to its own: a quarter of the march.
 
-A pixel is left as it was where the ray leaves the screen, passes behind what is drawn by
-more than ``thickness``, meets a surface from behind, or reaches the sky; where glass or a
-see-through surface was drawn over it after its weights (the surface id there is another
-entity's); and in every view but the camera's own: mirror, portal and probe views show the
-probes' and the sky's reflections as before.
+**Reflection levels** (``ScreenReflections.reflection_depth``: the levels of mirror and
+portal views below the camera's that reflect too, 1 by default): the main view tree's level
+draws its reflecting surfaces into images of its own the same way (``begin_level``: its
+views drawn one by one, masked, with the ``SCREEN_REFLECTION`` builds), and once the levels
+below are composited into it, before its glass, ``composite_level`` copies its colour and
+draws the composite once a view over its rectangle (``LEVEL_VIEWS`` builds: that view's
+pixels only, its own projection, a ray that comes to another view's pixels found nothing).
+A level's rays are marched a pixel each (``half_resolution`` is the camera's view's alone).
 
-The images are made at the first frame a camera asks for reflections, for the level's size,
-and released when no camera does (``release_targets``)."""
+A pixel is left as it was where the ray leaves the screen (or its view), passes behind what
+is drawn by more than ``thickness``, meets a surface from behind, or reaches the sky; where
+glass or a see-through surface was drawn over it after its weights (the surface id there is
+another entity's); and in probe views, which show the probes' and the sky's reflections.
+
+The images are made at the first frame a camera asks for reflections, for the level's size
+(a reflection level's at the first frame it reflects), and released when no camera does
+(``release_targets``), a level's when the camera's depth no longer reaches it."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -55,6 +64,7 @@ from engine.render.bindings import (
     REFLECTION_COLOR_UNIT,
     REFLECTION_DEPTH_UNIT,
     REFLECTION_HITS_UNIT,
+    REFLECTION_NODE_UNIT,
     REFLECTION_NORMAL_UNIT,
     REFLECTION_SURFACE_UNIT,
     REFLECTION_WEIGHT_UNIT,
@@ -63,9 +73,13 @@ from engine.render.bindings import (
     bind_sampler,
     bind_texture,
     forget_sampler,
+    set_scissor,
 )
 from engine.render.targets import HDR_FORMAT, RenderTargets, release_framebuffer
 from engine.render.views import View
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
 
 if TYPE_CHECKING:
     from engine.render.gpu import Gpu
@@ -99,17 +113,23 @@ class _Targets:
     output: moderngl.Framebuffer           # the level's colour alone: the composite's target
     hits: moderngl.Texture | None = None   # the rays marched at half size (made on first use)
     hits_framebuffer: moderngl.Framebuffer | None = None
+    clear: moderngl.Framebuffer | None = None  # a reflection level's three images alone (cleared each draw)
+    # A reflection level's stand-in for its node image among the framebuffer's images: its
+    # masked draws read the node image, so it must not be one they draw into (a feedback
+    # loop, undefined in GL), and the scene builds write their node to the fourth image.
+    node_sink: moderngl.Texture | None = None
 
     def release(self) -> None:
-        for framebuffer in (self.framebuffer, self.color_framebuffer, self.output, self.hits_framebuffer):
+        for framebuffer in (self.framebuffer, self.color_framebuffer, self.output, self.hits_framebuffer,
+                            self.clear):
             if framebuffer is not None:
                 release_framebuffer(framebuffer)
-        for texture in (self.weight, self.added, self.normal, self.color, self.hits):
+        for texture in (self.weight, self.added, self.normal, self.color, self.hits, self.node_sink):
             if texture is not None:
                 texture.release()
 
     def count(self) -> int:
-        return 4 + (self.hits is not None)
+        return 4 + (self.hits is not None) + (self.node_sink is not None)
 
 
 class ScreenReflectionPass:
@@ -129,6 +149,8 @@ class ScreenReflectionPass:
         self._depth_sampler: moderngl.Sampler | None = None
         # This frame's: (the view, its settings), from begin until composite (None: nothing to do).
         self._pending: tuple[View, ScreenReflections] | None = None
+        self._levels: dict[int, _Targets] = {}  # a reflection level's images, by its depth
+        self._drawing: _Targets | None = None    # the level drawn now (begin_level until end_level)
         self.composites = 0  # composites drawn so far (tests count them)
         # The debug overlay's "SSR only": the composite writes what the screen gave (the colour
         # found times the confidence, black where nothing was) in place of the picture; the
@@ -139,6 +161,8 @@ class ScreenReflectionPass:
     def framebuffer(self) -> moderngl.Framebuffer | None:
         """The framebuffer the main view's reflecting surfaces draw into this frame
         (``SceneOptions.reflections``; None: none)."""
+        if self._drawing is not None:
+            return self._drawing.framebuffer
         return None if self._pending is None or self._targets is None else self._targets.framebuffer
 
     def begin(self, view: View, targets: RenderTargets, settings: ScreenReflections) -> None:
@@ -160,8 +184,37 @@ class ScreenReflectionPass:
             kept.hits.release()
             kept.hits, kept.hits_framebuffer = None, None
         self._pending = (view, settings)
+        for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
+            self._levels.pop(depth).release()
 
-    def _make(self, level: RenderTargets) -> _Targets:
+    def begin_level(self, depth: int, targets: RenderTargets) -> bool:
+        """Reflection level ``depth``, about to be drawn into ``targets`` (its claims made),
+        reflects where the camera's ``reflection_depth`` reaches it this frame: its images are
+        made (once for the targets) and cleared, and ``framebuffer`` is theirs until
+        ``end_level``.  False: the level is drawn without."""
+        if self._pending is None or depth > self._pending[1].reflection_depth:
+            return False
+        images = self._levels.get(depth)
+        if images is None or images.level is not targets:
+            if images is not None:
+                images.release()
+            sink = self.ctx.texture(targets.size, 1, dtype="u4")
+            images = self._levels[depth] = self._make(targets, sink)
+            images.node_sink = sink
+            images.clear = self.ctx.framebuffer([images.weight, images.added, images.normal])
+        images.clear.use()
+        apply_pass_state(self.ctx, _PASS, (0, 0, *targets.size))
+        images.clear.clear()  # (nothing reflected: the pixels its views do not draw keep it)
+        self._drawing = images
+        return True
+
+    def end_level(self) -> None:
+        """The level ``begin_level`` began is drawn: ``framebuffer`` is the camera's view's again."""
+        self._drawing = None
+
+    def _make(self, level: RenderTargets, node: moderngl.Texture | None = None) -> _Targets:
+        """The images for ``level``'s targets; the framebuffer's fourth image is ``node`` (a
+        reflection level's stand-in) or the level's node image (the root's, which it clears)."""
         ctx = self.ctx
         size = level.size
         weight = ctx.texture(size, 4, dtype=HDR_FORMAT)
@@ -173,8 +226,8 @@ class ScreenReflectionPass:
         color.repeat_x = color.repeat_y = False
         color.build_mipmaps(0, self._top_lod(size))  # (the chain's storage; rebuilt each composite)
         color.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        framebuffer = ctx.framebuffer([level.color, level.surface, level.seen, level.node, weight, added, normal],
-                                      level.depth)
+        framebuffer = ctx.framebuffer([level.color, level.surface, level.seen, level.node if node is None else node,
+                                       weight, added, normal], level.depth)
         return _Targets(level, weight, added, normal, framebuffer, color, ctx.framebuffer([color]),
                         ctx.framebuffer([level.color]))
 
@@ -182,12 +235,13 @@ class ScreenReflectionPass:
     def _top_lod(size: tuple[int, int]) -> int:
         return max(0, min(MAX_COLOR_LOD, max(size).bit_length() - 1))
 
-    def _program(self, shader: str, quality: str, half: bool, found_only: bool = False) -> moderngl.VertexArray:
+    def _program(self, shader: str, quality: str, half: bool, found_only: bool = False,
+                 level: bool = False) -> moderngl.VertexArray:
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
-        key = (shader, quality, half, found_only)
+        key = (shader, quality, half, found_only, level)
         vao = self._programs.get(key)
         if vao is None:
             steps, refine = QUALITY_STEPS[quality]
@@ -196,11 +250,13 @@ class ScreenReflectionPass:
                 defines["HALF_RESOLUTION"] = "1"
             if found_only:
                 defines["SHOW_FOUND"] = "1"
+            if level:  # a reflection level's: a draw a view (composite_level)
+                defines["LEVEL_VIEWS"] = "1"
             program = shaders.program("fullscreen.vert", shader, defines=defines)
             for name, unit in (("scene_color", REFLECTION_COLOR_UNIT), ("depth_map", REFLECTION_DEPTH_UNIT),
                                ("weight_map", REFLECTION_WEIGHT_UNIT), ("added_map", REFLECTION_ADDED_UNIT),
                                ("normal_map", REFLECTION_NORMAL_UNIT), ("surface_map", REFLECTION_SURFACE_UNIT),
-                               ("hits_map", REFLECTION_HITS_UNIT)):
+                               ("hits_map", REFLECTION_HITS_UNIT), ("node_map", REFLECTION_NODE_UNIT)):
                 if name in program:
                     program[name].value = unit
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
@@ -215,7 +271,26 @@ class ScreenReflectionPass:
             return  # (another tree's root: a probe face's)
         self._pending = None
         view, settings = pending
+        self._composite(targets, [view], view, settings, False)
+
+    def composite_level(self, depth: int, views: Sequence[View], level: RenderTargets) -> None:
+        """Put each of ``views``' reflections into reflection level ``depth``'s ``level`` (the
+        levels below composited into it, its glass not yet drawn), if it was drawn for them
+        (``begin_level``: a level the camera's depth reaches is, every frame it is drawn; a
+        kept tree's levels stand as they were drawn); nothing otherwise."""
+        images, pending = self._levels.get(depth), self._pending
+        if images is None or images.level is not level or pending is None or not views:
+            return
+        self._composite(images, views, pending[0], pending[1], True)
+
+    def _composite(self, targets: _Targets, views: Sequence[View], root: View, settings: ScreenReflections,
+                   level_views: bool) -> None:
+        """The composite of ``targets``' level: its colour copied with its mips, then (the
+        rays marched at half size first, the root's with ``half_resolution``) a draw over
+        the view's pixels, or with ``level_views`` one a view over its rectangle.  The near
+        plane a ray is cut at is the camera's (``root``)."""
         gpu, ctx = self.gpu, self.ctx
+        level = targets.level
         size = level.size
         viewport = (0, 0, *size)
         # The colour as it stands, with its mip chain (a blit obeys the scissor: none).
@@ -223,41 +298,45 @@ class ScreenReflectionPass:
         ctx.copy_framebuffer(targets.color_framebuffer, level.color_framebuffer)
         top = self._top_lod(size)
         targets.color.build_mipmaps(0, top)
-        proj = view.proj
-        values = {
-            "projection": proj.to_bytes(), "view_rotation": glm.mat3(view.view).to_bytes(),
-            "unproject": (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1])),
-            "unproject_z": (float(proj[2][2]), float(proj[3][2])), "depth_size": (float(size[0]), float(size[1])),
-            "near_plane": float(proj[3][2]) / (float(proj[2][2]) - 1.0), "max_distance": settings.max_distance,
-            "thickness": settings.thickness, "max_roughness": settings.max_roughness,
-            "edge_fade": settings.edge_fade, "top_lod": float(top)}
+        near = float(root.proj[3][2]) / (float(root.proj[2][2]) - 1.0)
+        shared = {"depth_size": (float(size[0]), float(size[1])), "near_plane": near,
+                  "max_distance": settings.max_distance, "thickness": settings.thickness,
+                  "max_roughness": settings.max_roughness, "edge_fade": settings.edge_fade, "top_lod": float(top)}
         if self._depth_sampler is None:  # the level's depth as distances, compared with nothing
             self._depth_sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
         for texture, unit in ((targets.color, REFLECTION_COLOR_UNIT), (level.depth, REFLECTION_DEPTH_UNIT),
                               (targets.weight, REFLECTION_WEIGHT_UNIT), (targets.added, REFLECTION_ADDED_UNIT),
                               (targets.normal, REFLECTION_NORMAL_UNIT), (level.surface, REFLECTION_SURFACE_UNIT)):
             bind_texture(ctx, texture, unit)
+        if level_views:
+            bind_texture(ctx, level.node, REFLECTION_NODE_UNIT)
         bind_sampler(ctx, self._depth_sampler, REFLECTION_DEPTH_UNIT)
-        half = settings.half_resolution and targets.hits is not None
+        half = not level_views and settings.half_resolution and targets.hits is not None
         if half:  # the rays marched at half size first
             trace = self._program("screen_reflection_trace.frag", settings.quality, False)
-            self._write(trace.program, values)
+            self._write(trace.program, {**shared, **_view_values(root)})
             targets.hits_framebuffer.use()
             apply_pass_state(ctx, _PASS, (0, 0, *targets.hits.size))
             trace.render(moderngl.TRIANGLES, vertices=3)
             bind_texture(ctx, targets.hits, REFLECTION_HITS_UNIT)
             gpu.stats.passes += 1
             gpu.stats.draw_calls += 1
-        vao = self._program("screen_reflection.frag", settings.quality, half, self.show_found)
-        self._write(vao.program, values)
+        vao = self._program("screen_reflection.frag", settings.quality, half, self.show_found, level_views)
         targets.output.use()
         apply_pass_state(ctx, _PASS, viewport)
-        vao.render(moderngl.TRIANGLES, vertices=3)
+        self._write(vao.program, shared)
+        for view in views:
+            values = _view_values(view)
+            if level_views:
+                values["node"] = view.node
+                set_scissor(ctx, view.scissor)
+            self._write(vao.program, values)
+            vao.render(moderngl.TRIANGLES, vertices=3)
         gpu.stats.passes += 1
-        gpu.stats.draw_calls += 1
+        gpu.stats.draw_calls += len(views)
         self.composites += 1
         if gpu.debug:
-            gpu.checkpoint("screen reflections")
+            gpu.checkpoint("screen reflections" if not level_views else f"screen reflections ({views[0].name} ...)")
 
     def _write(self, program: moderngl.Program, values: dict) -> None:
         """``values`` into ``program``'s uniforms of those names it has (a build drops what
@@ -272,15 +351,31 @@ class ScreenReflectionPass:
                 written[name] = value
 
     def target_count(self) -> int:
-        """Images held now (4 while a camera asks for reflections, 5 at half resolution, else 0)."""
-        return 0 if self._targets is None else self._targets.count()
+        """Images held now (4 while a camera asks for reflections, 5 at half resolution, and
+        4 for each reflection level that reflects, else 0)."""
+        return (0 if self._targets is None else self._targets.count()) + sum(
+            images.count() for images in self._levels.values())
+
+    def level_key(self) -> tuple | None:
+        """What this frame's reflection levels reflect with, as values (the reflect stage's
+        still key: a change draws its levels again)."""
+        if self._pending is None:
+            return None
+        settings = self._pending[1]
+        return (settings.max_distance, settings.thickness, settings.max_roughness, settings.edge_fade,
+                settings.quality, settings.reflection_depth, self.show_found)
 
     def release_targets(self) -> None:
-        """Let the images go (no camera asks for reflections, or the level was made again)."""
+        """Let the images go (no camera asks for reflections, or the level was made again),
+        the levels' too."""
         if self._targets is not None:
             self._targets.release()
             self._targets = None
+        for images in self._levels.values():
+            images.release()
+        self._levels.clear()
         self._pending = None
+        self._drawing = None
 
     def _release_programs(self) -> None:
         for vao in self._programs.values():
@@ -296,3 +391,13 @@ class ScreenReflectionPass:
             self._depth_sampler.release()
             self._depth_sampler = None
 
+
+def _view_values(view: View) -> dict[str, object]:
+    """What the march reads of the view it marches: its projection, the turn from world to
+    its space, and the constants that put a depth texel back in that space (view_depth.glsl)."""
+    proj = view.proj
+    x, y = float(proj[0][2]) / float(proj[0][0]), float(proj[1][2]) / float(proj[1][1])  # (0: no oblique near plane)
+    return {"projection": proj.to_bytes(), "view_rotation": glm.mat3(view.view).to_bytes(),
+            "unproject": (float(proj[0][0]), float(proj[1][1]), float(proj[2][0]), float(proj[2][1])),
+            "unproject_z": (float(proj[2][2]), float(proj[3][2])),
+            "oblique": (x, y, x * float(proj[2][0]) + y * float(proj[2][1]))}

@@ -85,6 +85,7 @@ from engine.render.plan_rows import Candidates, LevelRows
 from engine.render.scene_options import REFLECTION_LEVEL, TREE_ROOT, SceneOptions
 from engine.render.scene_pass import ScenePass
 from engine.render.screen_occlusion import ScreenOcclusion
+from engine.render.screen_reflections import ScreenReflectionPass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack
 from engine.render.tree_visibility import (
@@ -175,9 +176,11 @@ class ViewTree:
         self.still = StillTree(renderer, self.passes, scene_pass, self.ends,
                                copies if copies is not None else LevelCopies(renderer.ctx))
         # The camera's screen-space ambient occlusion and contact shadows, found for each
-        # level its components reach before the level is drawn (the main view's tree; None:
+        # level its components reach before the level is drawn, and its screen-space
+        # reflections, which such a level's views draw for (the main view's tree; None:
         # levels drawn without).
         self.occlusion: ScreenOcclusion | None = None
+        self.reflections: ScreenReflectionPass | None = None
 
     def render(self, root: View, levels: LevelStack, surfaces: SurfaceTable,
                settings: TreeSettings = _DEFAULT_SETTINGS, blends: SurfaceBlends = NO_BLENDS,
@@ -496,9 +499,10 @@ class ViewTree:
                                             parent_is_root=depth == 0)
             if not depth:  # the screen's reflections, then the glass (none: nothing drawn)
                 self.scene_pass.finish_root(walk.root, levels[0], root_options)
-            elif see_through:
+            else:
                 step = steps[depth - 1]
-                self.scene_pass.draw_transparent(step.views, step.targets, step.options, step.conditions)
+                self.scene_pass.finish_level(depth, step.views, step.targets, step.options, step.conditions,
+                                             see_through)
         if walk.level:
             self.renderer.flush()  # the composites, level after level, to the GPU at once
 
@@ -633,17 +637,19 @@ class ViewTree:
         is flushed only where the next level's plan is still to be made."""
         renderer = self.renderer
         if step.views:
-            # Its ambient occlusion and contact shadows first, where the camera's reach it: its
-            # views then read them, drawn one by one (the batched builds do not).
+            # Its ambient occlusion and contact shadows first, where the camera's reach it, and
+            # its screen reflections' images: its views then read and write them, drawn one by
+            # one (the batched builds do not).
             occluded = self.occlusion is not None and \
                 self.occlusion.draw_level(step.depth, step.views, step.targets) is not None
-            options = _BATCHED if step.path == "batched" and not occluded else REFLECTION_LEVEL
+            reflecting = self.reflections is not None and self.reflections.begin_level(step.depth, step.targets)
+            options = _BATCHED if step.path == "batched" and not (occluded or reflecting) else REFLECTION_LEVEL
             if step.apart and step.conditions is None:  # depth alone tells the claimed pixels (_APART)
                 options = _APART[options]
-            if step.unlit or occluded:
-                key = (options, step.unlit, occluded)
+            if step.unlit or occluded or reflecting:
+                key = (options, step.unlit, occluded, reflecting)
                 options = self._level_options.get(key) or self._level_options.setdefault(
-                    key, replace(options, unlit=step.unlit, occlusion=occluded))
+                    key, replace(options, unlit=step.unlit, occlusion=occluded, reflections=reflecting))
             step.options = options  # its transparent slot is drawn with them (_composite)
             derived = step.candidates.derived
             run = derived.get("view_run") if self.lean_levels else None
@@ -652,6 +658,8 @@ class ViewTree:
             self.scene_pass.draw(step.views, step.targets, options, step.conditions, run=walk)
             if occluded:
                 self.occlusion.restore_root()
+            if reflecting:
+                self.reflections.end_level()
         if step.ended:
             self.ends.draw(step.end_views, [node.surface.entity for node in step.ended], step.end_matrices,
                            step.targets, root)

@@ -24,10 +24,5 @@ float surface_z(vec2 pixel) {
 }
 
 #ifdef LEVEL_VIEWS
-uniform usampler2D node_map;  // the level's (its own size)
-
-// Which of the level's views drew the texel at `pixel` of the depth image.
-uint node_at(vec2 pixel) {
-    return texelFetch(node_map, ivec2(pixel) * NODE_STEP, 0).r;
-}
+#include "level_nodes.glsl"
 #endif

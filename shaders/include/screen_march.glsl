@@ -8,8 +8,14 @@
 // where it went behind, and taken if it lies there within ``thickness`` behind the surface;
 // where the ray went behind the plane the last two steps' ends showed but is in front at the
 // end (the surface ended within the step), the step is walked in SUBSTEPS parts.
-// Needs STEPS, REFINE and SUBSTEPS defined; view_depth.glsl's uniforms are the view's.
+// Needs STEPS, REFINE and SUBSTEPS defined; view_depth.glsl's uniforms are the view's.  A
+// reflection level's build (LEVEL_VIEWS) marches the rays of one view of the level, `node`:
+// a ray that comes to another view's pixels ends there, found nothing (as at the screen's edge).
 #include "view_depth.glsl"
+#ifdef LEVEL_VIEWS
+#include "level_nodes.glsl"
+uniform uint node;  // the view this draw marches
+#endif
 
 uniform sampler2D depth_map;       // the main view's depth (read through a sampler that compares nothing)
 uniform sampler2D normal_map;      // rgb: the shading normal (world) the reflecting surfaces wrote, a: entity bits 11-21
@@ -23,7 +29,7 @@ uniform float edge_fade;           // ScreenReflections.edge_fade
 // The view depth (> 0) drawn at a pixel; the sky's is far beyond any ray.
 float drawn_depth(vec2 pixel) {
     float depth = texelFetch(depth_map, ivec2(pixel), 0).r;
-    return depth >= 1.0 ? 1e30 : unproject_z.y / (depth * 2.0 - 1.0 + unproject_z.x);
+    return depth >= 1.0 ? 1e30 : -view_z(depth, floor(pixel) + 0.5);
 }
 
 // The screen position (pixels) of the view-space point p.
@@ -44,10 +50,11 @@ float depth_along(float t) {
 }
 
 // The ray's window depth at parameter t (what the depth image holds for a point there:
-// 0.5 + 0.5 (P[3][2] k - P[2][2]), k = 1 / view depth, linear along the screen): the march
-// compares it with the image's texels as they are, no division a sample.
+// 0.5 + 0.5 (P[3][2] k - P[2][2] + an oblique near plane's term), k = 1 / view depth, all
+// linear along the screen): the march compares it with the image's texels as they are, no
+// division a sample.
 float window_along(float t) {
-    return 0.5 + 0.5 * (unproject_z.y * mix(k0, k1, t) - unproject_z.x);
+    return 0.5 + 0.5 * (unproject_z.y * mix(k0, k1, t) - unproject_z.x + oblique_at(mix(p0, p1, t)));
 }
 
 float drawn_window(vec2 pixel) {
@@ -122,6 +129,9 @@ float march(vec2 pixel_centre, float depth, vec3 normal, out vec2 found) {
     for (int i = 0; i < STEPS; ++i) {
         if (float(i) >= steps) break;
         float next = min(t + dt, 1.0);
+#ifdef LEVEL_VIEWS
+        if (node_at(mix(p0, p1, next)) != node) break;  // into another view's world
+#endif
         float ray = window_along(next);
         float drawn_here = drawn_window(mix(p0, p1, next));
         if (ray >= drawn_here) {  // behind what is drawn at the step's end: where did it go behind?

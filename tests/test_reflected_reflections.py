@@ -1,0 +1,153 @@
+"""Screen-space reflections in mirror and portal views (``ScreenReflections.reflection_depth``;
+``ScreenReflectionPass.begin_level`` and ``composite_level``): a polished floor seen through a
+portal reflects what stands on it as it does seen directly.
+
+The second path is the camera itself: the portal pair is placed so that looking into A shows
+what a camera at ``tests/test_screen_reflections.py``'s eye sees (B stands in front of that
+eye, facing the boxes; "looking into either shows the other's front side" carries A's
+local (x, y, z) to B's (-x, y, -z), and B is turned half round, so a camera 1.5 m before A
+is carried to that eye, turned the same way).  The frame through the portal must match the
+frame of that camera in the portal's pixels whose rays meet the world past B's plane (the
+floor between the eye and B is behind the portal's view)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, Mirror, ScreenReflections, Transform, look_rotation
+from engine.assets.portals import spawn_portal_pair
+from shell.overlay_text import post_lines
+from tests.support import pixel_rays
+from tests.test_screen_reflections import EYE, SIZE, TARGET, _eroded, _scene
+
+PORTAL_A = (20.0, 1.2, 20.0)   # alone, facing +z
+PORTAL_B = (0.0, 1.2, 3.0)     # before the eye, facing the boxes (-z)
+B_PLANE_Z = 3.0
+THROUGH_A = (20.0, EYE[1], 20.0 + (EYE[2] - B_PLANE_Z))   # the camera before A that is carried to EYE
+
+
+def _frame(scene, reflections: ScreenReflections | None, portal: bool, eye=EYE) -> tuple[np.ndarray, object, dict]:
+    names: dict = {}
+
+    def build(world):
+        names.update(_scene(world, reflections=reflections))
+        if portal:
+            names["a"], names["b"] = spawn_portal_pair(
+                world, PORTAL_A, None, PORTAL_B, glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0)),
+                size=(3.0, 3.0))
+
+    runner = scene(build, SIZE)
+    transform = runner.world.get(names["camera"], Transform)
+    transform.position = glm.vec3(eye)
+    transform.rotation = look_rotation(glm.vec3(TARGET) - glm.vec3(EYE))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return runner.frame().astype(np.int32), runner, names
+
+
+def _judged(runner, direct_runner, names) -> np.ndarray:
+    """The portal's pixels (away from its outline) whose ray, cast from the eye, meets the
+    world past B's plane: the floor before it (nearer than z = 3) is not in the portal's view."""
+    through = runner.engine.renderer.targets.read_surface_ids() == names["a"]
+    eye, rays = pixel_rays(direct_runner.engine.main_view, SIZE)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_plane = (B_PLANE_Z - eye[2]) / rays[..., 2]
+        t_floor = -eye[1] / rays[..., 1]
+    past = (t_plane > 0) & ((t_floor <= 0) | (t_floor > t_plane + 0.05))
+    return _eroded(through, 3) & past
+
+
+def test_through_a_portal_the_polished_floor_reflects_as_seen_directly(scene):
+    image, runner, names = _frame(scene, ScreenReflections(), portal=True, eye=THROUGH_A)
+    direct, direct_runner, direct_names = _frame(scene, ScreenReflections(), portal=False)
+    plain, _, _ = _frame(scene, ScreenReflections(reflection_depth=0), portal=True, eye=THROUGH_A)
+    assert runner.stats.reflection_views >= 1
+    judged = _judged(runner, direct_runner, names)
+    assert judged.sum() > 8000
+    difference = np.abs(image[judged] - direct[judged]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+    # Where the direct view's floor reflects a box, the portal's view without the level's
+    # reflections shows the sky's reflection: far from it (what the test stands on).
+    floor = direct_runner.ids() == direct_names["floor"]
+    reflecting = judged & floor & (np.abs(direct - plain).max(axis=-1) > 40)
+    assert reflecting.sum() > 300, reflecting.sum()
+    difference = np.abs(image[reflecting] - direct[reflecting]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+
+
+def test_a_mirror_level_reflects_and_its_images_go_with_the_depth(scene):
+    """A mirror beside the floor: its level's images are made (the three, the colour copy and
+    the node image's stand-in), its composite drawn once a frame with the camera's, and both
+    let go when the depth no longer reaches it; the overlay says how deep they go."""
+    reflections = ScreenReflections()
+
+    def extra(world):
+        from components import Material, MeshRef
+        from engine.assets.mesh import quad
+        return {"mirror": world.spawn(Transform(position=(2.5, 1.0, -1.0), rotation=glm.angleAxis(
+            glm.radians(-60.0), glm.vec3(0, 1, 0))), MeshRef(quad(2.0, 2.0)), Material(), Mirror())}
+
+    names: dict = {}
+    runner = scene(lambda world: names.update(_scene(world, reflections=reflections, extra=extra)), SIZE)
+    runner.engine.reflection_system.keep_still_views = False  # (a still frame keeps its levels: no composite)
+    runner.frame()
+    passes = runner.engine.renderer.screen_reflections
+    assert runner.stats.reflection_views == 1
+    assert passes.target_count() == 4 + 5 and sorted(passes._levels) == [1]
+    composites = passes.composites
+    runner.frame()
+    assert passes.composites == composites + 2
+    assert any("SSR 30 m medium, 1 mirror level" in line for line in post_lines(runner.engine))
+    reflections.reflection_depth = 0
+    runner.frame()
+    assert passes.target_count() == 4 and not passes._levels
+    assert passes.composites == composites + 3
+
+
+@pytest.mark.parametrize("value", [-1, 17, 0.5, False])
+def test_a_bad_depth_is_refused_naming_the_field(value):
+    with pytest.raises(ComponentValueError, match="reflection_depth"):
+        ScreenReflections(reflection_depth=value)
+
+
+def _two_mirrors(right_reflects: bool):
+    """Two mirrors side by side over the boxes, tipped to look down and turned apart, each
+    showing the polished floor and the boxes from its side; the right one a mirror or a
+    plain quad."""
+    def extra(world):
+        from components import Material, MeshRef
+        from engine.assets.mesh import quad
+        names = {}
+        for name, x, turn in (("left", -1.05, 12.0), ("right", 1.05, -12.0)):
+            parts = (Mirror(),) if name == "left" or right_reflects else ()
+            tilt = glm.angleAxis(glm.radians(turn), glm.vec3(0, 1, 0)) * glm.angleAxis(glm.radians(30.0),
+                                                                                      glm.vec3(1, 0, 0))
+            names[name] = world.spawn(Transform(position=(x, 2.6, -2.0), rotation=tilt), MeshRef(quad(2.1, 2.0)),
+                                      Material(), *parts)
+        return names
+    return extra
+
+
+def test_two_mirrors_side_by_side_each_reflect_their_own_world(scene):
+    """Two views of one level, edge to edge on the screen: the left mirror's pixels are the
+    same whether the right one's view shares its level (a mirror) or not (a plain quad), so
+    a ray marched in one view ends at the other's pixels; and its floor does reflect the
+    boxes (its pixels differ from depth 0's)."""
+    frames = {}
+    for case, reflects, depth in (("both", True, 1), ("alone", False, 1), ("none", True, 0)):
+        names: dict = {}
+        runner = scene(lambda world, names=names, reflects=reflects, depth=depth: names.update(_scene(
+            world, reflections=ScreenReflections(reflection_depth=depth), extra=_two_mirrors(reflects))), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        frames[case] = (runner.frame().astype(np.int32), runner, names)
+    image, runner, names = frames["both"]
+    assert runner.stats.reflection_views == 2 and frames["alone"][1].stats.reflection_views == 1
+    left = runner.engine.renderer.targets.read_surface_ids() == names["left"]
+    assert left.sum() > 1500
+    np.testing.assert_array_equal(image[left], frames["alone"][0][left])
+    # Its floor reflects the boxes where its view shows them over it, and keeps the sky's
+    # reflection elsewhere (most of it: as drawn at depth 0).
+    change = np.abs(image - frames["none"][0]).max(axis=-1)[left]
+    assert (change > 20).sum() > 100 and np.mean(change <= 1) > 0.5, (np.sum(change > 20), np.mean(change <= 1))
