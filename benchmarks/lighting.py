@@ -56,6 +56,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``reflections``: the same with ``ScreenReflections()`` on the camera (the root's draw
   writes their images, the colour is copied with its mips and the composite marches the
   floor's rays): its cost is its ratio to ``polished``;
+* ``reflections_camera``: the same for the camera's own view alone (``reflection_depth=0``: the
+  mirrors' views keep the sky's reflections, as ``reflections`` does not for the first level's);
 * ``reflections_low``: the same with ``quality="low"`` (16 steps a ray, not 32);
 * ``reflections_half``: the same with ``half_resolution=True`` (a ray a 2 x 2 block).
 
@@ -334,9 +336,14 @@ def _polished(engine: Engine) -> None:
             engine.world.add_component(entity, Reflective(mode="skybox", mix=0.35))
 
 
-def _reflections(engine: Engine, quality: str = "medium", half: bool = False) -> None:
+def _reflections(engine: Engine, quality: str = "medium", half: bool = False, depth: int = 1) -> None:
     _polished(engine)
-    engine.world.add_component(camera_entity(engine), ScreenReflections(quality=quality, half_resolution=half))
+    engine.world.add_component(camera_entity(engine), ScreenReflections(quality=quality, half_resolution=half,
+                                                                        reflection_depth=depth))
+
+
+def _reflections_camera(engine: Engine) -> None:
+    _reflections(engine, depth=0)
 
 
 def _reflections_low(engine: Engine) -> None:
@@ -399,6 +406,7 @@ VARIANTS: list[Variant] = [
     Variant("contact_occlusion", _contact_occlusion, "ContactShadows() and AmbientOcclusion() (at half size)"),
     Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
     Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),
+    Variant("reflections_camera", _reflections_camera, "ScreenReflections(reflection_depth=0): the camera's view alone"),
     Variant("reflections_low", _reflections_low, "the same with ScreenReflections(quality='low')"),
     Variant("reflections_half", _reflections_half, "the same with ScreenReflections(half_resolution=True)"),
     Variant("taa", _temporal, "temporal AA in place of FXAA"),

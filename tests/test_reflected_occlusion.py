@@ -20,22 +20,21 @@ from pyglm import glm
 
 from components import (
     AmbientOcclusion,
-    Camera,
     ComponentValueError,
     ContactShadows,
-    DirectionalLight,
-    HemisphereLight,
     Material,
     MeshRef,
     Mirror,
     Transform,
     look_rotation,
 )
-from engine.assets.mesh import box, quad
+from engine.assets.mesh import quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.errors import GLLimitWarning
 from tests.support import box_hits, pixel_rays, srgb_to_linear
 from tests.test_ambient_occlusion import GREY, RADIUS, WALL_FACE, _room, open_share
+from tests.test_contact_shadows import BOX, SUN
+from tests.test_contact_shadows import _scene as contact_scene
 
 SIZE = (200, 150)
 MIRROR_X = -1.5          # the upright mirror's plane (facing +x, the wall's way)
@@ -259,8 +258,6 @@ def test_two_mirrors_side_by_side_each_find_their_own_world(scene):
         assert shares[band].mean() == pytest.approx(expected, abs=0.04), (low, high)
 
 
-SUN = glm.normalize(glm.vec3(1.0, -1.0, 0.0))
-BOX = (np.array([0.0, 0.2, 0.0]), np.array([0.2, 0.2, 0.2]))
 CEILING = 1.5   # the mirror overhead, facing down
 MARGIN = 0.03   # metres either side of the box's foot left out
 REACH_MARGIN = 0.05   # and of the ray's reach: 3 pixels of the floor there (the find's steps, a texel)
@@ -270,21 +267,12 @@ def _sun_room(world, contact: ContactShadows | None, sun: float = 1.0) -> dict:
     """``tests/test_contact_shadows.py``'s box on a floor under a sun without shadow maps,
     seen in a mirror overhead by a camera looking up at it: the mirror's view looks down on
     the box from where that test's camera stood."""
-    camera = world.spawn(Transform(position=(0.3, 1.0, 0.05),
-                                   rotation=look_rotation(glm.vec3(0.0, 0.5, -0.05))),
-                         Camera(fov_y=60.0))
-    if contact is not None:
-        world.add_component(camera, contact)
-    world.spawn(HemisphereLight(sky=(0.3, 0.3, 0.3), ground=(0.3, 0.3, 0.3)))
-    world.spawn(DirectionalLight(direction=SUN, intensity=sun, shadows=False))
-    floor = world.spawn(Transform(position=(0.0, -0.05, 0.0)), MeshRef(box((12.0, 0.1, 12.0))),
-                        Material(color=(0.6, 0.6, 0.6), roughness=1.0))
-    world.spawn(Transform(position=tuple(BOX[0])), MeshRef(box(tuple(2.0 * BOX[1]))),
-                Material(color=(0.6, 0.6, 0.6), roughness=1.0))
-    mirror = world.spawn(Transform(position=(0.3, CEILING, 0.0), rotation=glm.angleAxis(glm.radians(90.0),
-                                                                                        glm.vec3(1, 0, 0))),
-                         MeshRef(quad(4.0, 4.0)), Mirror(), Material(color=(0.5, 0.5, 0.5)))
-    return {"camera": camera, "floor": floor, "mirror": mirror}
+    names = contact_scene(world, contact, sun, eye=(0.3, 1.0, 0.05))
+    world.get(names["camera"], Transform).rotation = look_rotation(glm.vec3(0.0, 0.5, -0.05))
+    names["mirror"] = world.spawn(
+        Transform(position=(0.3, CEILING, 0.0), rotation=glm.angleAxis(glm.radians(90.0), glm.vec3(1, 0, 0))),
+        MeshRef(quad(4.0, 4.0)), Mirror(), Material(color=(0.5, 0.5, 0.5)))
+    return names
 
 
 def _sun_frame(scene, **options) -> tuple[np.ndarray, object, dict]:
