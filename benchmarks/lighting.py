@@ -406,7 +406,7 @@ VARIANTS: list[Variant] = [
     Variant("contact_occlusion", _contact_occlusion, "ContactShadows() and AmbientOcclusion() (at half size)"),
     Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
     Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),
-    Variant("reflections_camera", _reflections_camera, "ScreenReflections(reflection_depth=0): the camera's view alone"),
+    Variant("reflections_camera", _reflections_camera, "ScreenReflections(reflection_depth=0): the camera view alone"),
     Variant("reflections_low", _reflections_low, "the same with ScreenReflections(quality='low')"),
     Variant("reflections_half", _reflections_half, "the same with ScreenReflections(half_resolution=True)"),
     Variant("taa", _temporal, "temporal AA in place of FXAA"),
