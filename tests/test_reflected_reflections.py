@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, Mirror, ScreenReflections, Transform, look_rotation
+from components import ComponentValueError, MeshRef, Mirror, Reflective, ScreenReflections, Transform, look_rotation
 from engine.assets.portals import spawn_portal_pair
 from shell.overlay_text import post_lines
 from tests.support import pixel_rays
@@ -151,3 +151,28 @@ def test_two_mirrors_side_by_side_each_reflect_their_own_world(scene):
     # reflection elsewhere (most of it: as drawn at depth 0).
     change = np.abs(image - frames["none"][0]).max(axis=-1)[left]
     assert (change > 20).sum() > 100 and np.mean(change <= 1) > 0.5, (np.sum(change > 20), np.mean(change <= 1))
+
+
+def test_a_still_tree_with_end_images_keeps_its_levels_reflections_and_occlusion(scene):
+    """``tests/test_kept_views.py``'s hall (a mirror with end images, facing portals), its floor
+    polished, the camera with ambient occlusion and screen reflections reaching two levels: a
+    still tree is kept (and refilled while its end images settle) with every frame's pixels
+    those of a tree drawn whole each frame (the refill composites a level's reflections again,
+    ``ScenePass.finish_level``)."""
+    from components import AmbientOcclusion
+    from tests.support import kept_frames_equal_drawn
+    from tests.test_kept_views import _hall
+
+    def build(world):
+        _hall(world, end_image=True)
+        camera = world.resources["camera"]
+        world.add_component(camera, AmbientOcclusion(radius=0.5, reflection_depth=2))
+        world.add_component(camera, ScreenReflections(reflection_depth=2))
+        for entity, mesh in world.query_one(MeshRef):
+            if mesh.mesh.name == "plane":
+                world.add_component(entity, Reflective(mode="skybox", mix=0.5))
+
+    keeping, drawing = scene(build, (48, 32)), scene(build, (48, 32))
+    assert kept_frames_equal_drawn(keeping, drawing, frames=60) >= 2
+    assert drawing.stats.reflection_end_views > 0
+    assert keeping.engine.renderer.screen_reflections.target_count() > 5   # (a level's images: it reflects)

@@ -231,7 +231,8 @@ class StillTree:
         rects, transparent, filled = {}, {}, {}
         for level in range(1, deepest + 1):
             step = walk.steps[level - 1]
-            if see_through or not painted_whole(walk, level):
+            # (a level's screen reflections, as its glass, blend over what its pixels hold)
+            if see_through or step.options.reflections or not painted_whole(walk, level):
                 rects[level] = rect = bounds([view.scissor for view in (*step.views, *step.end_views)])
                 self.copies.save(level, step.targets, rect)
             transparent[level] = (step.views, step.options, step.conditions)
@@ -252,8 +253,8 @@ def painted_whole(walk: TreeWalk, level: int) -> bool:
     """Whether every pixel ``level``'s fallbacks and the composite of the level below write
     is written whole: a blend weight of exactly 1 (reflection x 1 + own x 0), so what the
     pixel held before does not matter (a refill need not put the level back, given no
-    transparent slot, which blends over what its pixels hold, and the end views' fill,
-    which blends nothing).  That holds for a portal (mirror_composite.frag writes alpha 1)
+    transparent slot and no screen reflections, which blend over what its pixels hold, and
+    the end views' fill, which blends nothing).  That holds for a portal (mirror_composite.frag writes alpha 1)
     and for a mirror of reflect rate 1 (times a view's fade of 1), unfaded, not water
     (Fresnel), the weights ``shading_replaced`` trusts; a partly faded share is a quotient
     of floats.  (A pixel's own colour is finite: an infinite one times 0 is no number.)"""
