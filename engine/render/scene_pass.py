@@ -477,9 +477,9 @@ class ScenePass:
 
     def _reflecting_framebuffer(self, options: SceneOptions) -> moderngl.Framebuffer | None:
         """For the main view (or a reflection level) drawn for screen reflections, the
-        framebuffer of the level's images and theirs (``ScreenReflectionPass.framebuffer``: its
-        node image too, which a root writes 0 to, as its clear did, and a level's views never
-        write: their builds do not); None otherwise."""
+        framebuffer of the level's images and theirs (``ScreenReflectionPass.framebuffer``: a
+        root's node image too, which it writes 0 to, as its clear did; a level's a stand-in for
+        it, as its masked draws read its own); None otherwise."""
         if options.reflections and self.screen_reflections is not None:
             return self.screen_reflections.framebuffer
         return None
