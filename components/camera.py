@@ -230,7 +230,15 @@ class PointLight(TrackedComponent):
     pin-point, and wider and dimmer on rough ones, the light's energy kept (the representative
     point of the sphere nearest each reflected ray, ``shaders/include/ggx.glsl``
     ``sphere_highlight``).  Its diffuse light and its shadows are a point's.  At most
-    ``MAX_LIGHT_RADIUS`` (10 m)."""
+    ``MAX_LIGHT_RADIUS`` (10 m).
+
+    ``contact_shadows`` (off by default; HDRP's per-light switch, Unreal's contact shadow
+    length): where the active camera has ``ContactShadows``, this light's light is taken from
+    a point where something the view shows lies across a short ray from it towards the light,
+    as the sun's is (the camera's component sets the ray).  At most ``MAX_CONTACT_LAMPS`` (3)
+    of the lights that reach the scene at once have them (the ones that matter most to the
+    camera); the rest are counted in ``RenderStats.contact_lamps_cut`` and a
+    ``LightLimitWarning`` says so."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
@@ -243,6 +251,7 @@ class PointLight(TrackedComponent):
     spot_blend: float = 0.15
     cookie: TextureData | None = None
     radius: float = 0.0
+    contact_shadows: bool = False
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -275,5 +284,7 @@ class PointLight(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "radius":
             return finite(self, name, value, low=0.0, high=MAX_LIGHT_RADIUS)
+        if name == "contact_shadows":
+            return boolean(self, name, value)
         shadow = _shadow_field(self, name, value)
         return value if shadow is None else shadow

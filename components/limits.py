@@ -118,3 +118,7 @@ MAX_PARTICLE_LIFETIME = 3600.0
 # A flipbook's most columns or rows (ParticleEmitter.sheet): 64 x 64 frames of a 4096 texture
 # are 64 texels each.
 MAX_SHEET_CELLS = 64
+# Point and spot lights with contact shadows at once (PointLight.contact_shadows): each a
+# colour channel of the images screen-space occlusion's march writes (engine/render/screen_occlusion.py):
+# at most 3.
+MAX_CONTACT_LAMPS = 3

@@ -138,6 +138,17 @@ class SurfaceMotion:
 
 
 @dataclass(frozen=True)
+class ContactLamps:
+    """The point and spot lights whose light the active camera's ``ContactShadows`` takes too
+    (``PointLight.contact_shadows``; a world resource, from the prepare stage): each one's
+    world position, by channel (the channel + 1 is in its Lights block row: scene.frag), at
+    most ``MAX_CONTACT_LAMPS``; ``cut``: those flagged that reach the scene past them."""
+
+    positions: tuple[tuple[float, float, float], ...] = ()
+    cut: int = 0
+
+
+@dataclass(frozen=True)
 class FiredEvent:
     """An ``AnimationEvents`` event the playback of ``clip`` passed on ``entity`` (a model's
     root): its ``name`` and ``time`` in the clip; ``layer`` True where the root's

@@ -47,6 +47,13 @@ in vec4 v_vertex_color;  // the mesh's colour here (Mesh.colors, RGBA), multipli
 // direct light's, b the texel's distance along its view's axis (-1: sky), a the sun's past
 // the camera's contact shadows (1 without them).
 uniform sampler2D screen_occlusion;
+#ifdef CONTACT_LAMPS
+// The lamps' shares past their contact shadows (PointLight.contact_shadows; the image beside the
+// occlusion's, its size): rgb a channel each, which a lamp's Lights row names.  Brought to the
+// pixel with the same weights as the shares (screen_occlusion_shares sets it).
+uniform sampler2D screen_contact_lamps;
+vec3 lamp_contact = vec3(1.0);
+#endif
 
 // The shares at this pixel: the four texels about it, by their bilinear weights each times
 // how near its distance lies to this pixel's (a joint bilateral upsample: across a silhouette
@@ -65,20 +72,32 @@ vec3 screen_occlusion_shares() {
     float weights = 0.0;
     vec3 nearest = vec3(1.0);
     float nearest_gap = 1e30;
+#ifdef CONTACT_LAMPS
+    vec3 lamps = vec3(0.0), nearest_lamps = vec3(1.0);
+#endif
     for (int i = 0; i < 4; ++i) {
         ivec2 offset = ivec2(i & 1, i >> 1);
-        vec4 texel = texelFetch(screen_occlusion, clamp(ivec2(cell) + offset, ivec2(0), last), 0);
+        ivec2 at = clamp(ivec2(cell) + offset, ivec2(0), last);
+        vec4 texel = texelFetch(screen_occlusion, at, 0);
         if (texel.b < 0.0) continue;  // the sky's
         vec2 bilinear = mix(1.0 - f, f, vec2(offset));
         float gap = abs(texel.b - here);
         float weight = bilinear.x * bilinear.y * max(0.0, 1.0 - gap / tolerance);
         total += weight * texel.rga;
         weights += weight;
+#ifdef CONTACT_LAMPS
+        vec3 lamps_here = texelFetch(screen_contact_lamps, at, 0).rgb;
+        lamps += weight * lamps_here;
+        nearest_lamps = gap < nearest_gap ? lamps_here : nearest_lamps;
+#endif
         if (gap < nearest_gap) {
             nearest_gap = gap;
             nearest = texel.rga;
         }
     }
+#ifdef CONTACT_LAMPS
+    lamp_contact = weights > 1e-4 ? lamps / weights : nearest_lamps;
+#endif
     return weights > 1e-4 ? total / weights : nearest;
 }
 #endif
@@ -482,6 +501,11 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         float nl = max(dot(s.normal, l), 0.0);
         float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);
         float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
+#if defined(SCREEN_OCCLUSION) && defined(CONTACT_LAMPS)
+        // Its contact shadows' channel, if it has them (its cookie row's w: the channel + 1).
+        int contact_channel = int(lights.point_cookie_v[i].w + 0.5) - 1;
+        if (contact_channel >= 0) falloff *= lamp_contact[contact_channel];
+#endif
 #ifdef SPOT_COOKIES
         vec3 cookie_at = cookie_place(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
         vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));

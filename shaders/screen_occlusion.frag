@@ -9,7 +9,8 @@
 // test), a texel a pixel of the depth image (half the view's size, or all of it).
 // engine/render/screen_occlusion.py runs it.  Built with AMBIENT_OCCLUSION (the camera's
 // AmbientOcclusion; without, the visibility is 1) and with CONTACT_SHADOWS (its
-// ContactShadows: contact_shadow below, into the third channel).  A reflection level's build
+// ContactShadows towards the sun: contact_shadow below, into the third channel) and
+// CONTACT_LAMPS (towards the lamps that have them, a channel each of the second image).  A reflection level's build
 // (LEVEL_VIEWS) is drawn once a view of the level, over its rectangle: it finds the pixels of
 // `node` alone, and a sample on another view's pixels ends the search as the image's edge does
 // (what lies there is another view's world).
@@ -23,15 +24,23 @@ uniform float radius;           // metres (AmbientOcclusion.radius)
 uniform float pixels_per_metre; // at a distance of 1 m along the view axis
 uniform float max_radius_pixels;
 uniform ivec2 margin;           // the guard band: where the view's pixels start in the depth image
+#if defined(CONTACT_SHADOWS) || defined(CONTACT_LAMPS)
+uniform vec4 contact;           // ContactShadows' length, thickness, opacity and distance
+#endif
 #ifdef CONTACT_SHADOWS
 uniform vec3 sun_view;          // towards the sun, the view's space (unit)
-uniform vec4 contact;           // ContactShadows' length, thickness, opacity and distance
+#endif
+#ifdef CONTACT_LAMPS
+uniform vec4 lamp_view[MAX_CONTACT_LAMPS];  // the lamps with contact shadows (PointLight.contact_shadows):
+                                            // xyz where each is in the view's space, w 1 (0: no lamp there)
 #endif
 #ifdef LEVEL_VIEWS
 uniform uint node;              // the level's view found by this draw
 #endif
 
-out vec4 out_occlusion;         // r: visibility, g: distance along the view axis (-1: the sky), b: the sun's share
+layout(location = 0) out vec4 out_occlusion;  // r: visibility, g: distance along the view axis (-1: the sky),
+                                              // b: the sun's share
+layout(location = 1) out vec4 out_lamps;      // rgb: each contact lamp channel's share (1 without)
 
 // Whether a sample at `at` (the depth image's pixels) lies off the view: past the image's
 // edge, or (a level's) on another view's pixels.
@@ -92,20 +101,21 @@ float horizon_cos(vec3 p, vec3 v, vec2 pixel, vec2 omega, float reach, float jit
 
 #endif
 
-#ifdef CONTACT_SHADOWS
-// Contact shadows (ContactShadows; Unreal's and HDRP's): the share of the sun's light that
-// reaches ``p`` (normal ``n``) past what the depth image shows.  CONTACT_SAMPLES points along
-// the ray towards the sun, ``length`` long, each set off by ``jitter`` of a step; one behind
-// the surface the image shows at its pixel (read bilinearly: a plane's depth there exactly),
-// by more than a hair (half a percent of its distance: the image's own rounding) and less
-// than ``thickness``, hides the sun.  Faded out over the last tenth of ``distance``.
-float contact_shadow(vec3 p, vec3 n, float jitter) {
+#if defined(CONTACT_SHADOWS) || defined(CONTACT_LAMPS)
+// Contact shadows (ContactShadows; Unreal's and HDRP's): the share of a light's light that
+// reaches ``p`` (normal ``n``) from the way ``to_light`` (unit) past what the depth image
+// shows.  CONTACT_SAMPLES points along the ray that way, ``reach`` long (the length, or the
+// way to a lamp if that is shorter), each set off by ``jitter`` of a step; one behind the
+// surface the image shows at its pixel (read bilinearly: a plane's depth there exactly), by
+// more than a hair (half a percent of its distance: the image's own rounding) and less than
+// ``thickness``, hides the light.  Faded out over the last tenth of ``distance``.
+float contact_shadow(vec3 p, vec3 n, vec3 to_light, float reach, float jitter) {
     float fade = clamp((contact.w + p.z) / (0.1 * contact.w), 0.0, 1.0);
-    if (fade <= 0.0 || dot(n, sun_view) <= 0.0) return 1.0;  // (facing away: the sun lights none of it)
+    if (fade <= 0.0 || dot(n, to_light) <= 0.0) return 1.0;  // (facing away: the light reaches none of it)
     vec3 start = p + n * (0.002 * -p.z);   // off the surface by a hair, as the shadow maps' normal offset
     float hidden = 0.0;
     for (int i = 0; i < CONTACT_SAMPLES; ++i) {
-        vec3 s = start + sun_view * ((float(i) + jitter) / float(CONTACT_SAMPLES) * contact.x);
+        vec3 s = start + to_light * ((float(i) + jitter) / float(CONTACT_SAMPLES) * reach);
         vec2 at = view_pixel(s);
         if (s.z >= 0.0 || off_view(at)) break;
         float behind = surface_z(at) - s.z;
@@ -162,6 +172,7 @@ void main() {
     vec4 geometry = texelFetch(geometry_map, pixel, 0);
     if (geometry.w <= 0.0) {  // nothing drawn: the sky
         out_occlusion = vec4(1.0, -1.0, 1.0, 1.0);
+        out_lamps = vec4(1.0);
         return;
     }
     vec3 p = view_at(centre, -1.0 / geometry.w);
@@ -170,9 +181,18 @@ void main() {
     int tile = (texel.x & 3) + 4 * (texel.y & 3);
     float jitter = (BAYER[15 - tile] + 0.5) / 16.0;
 #ifdef CONTACT_SHADOWS
-    float sun = contact_shadow(p, n, jitter);
+    float sun = contact_shadow(p, n, sun_view, contact.x, jitter);
 #else
     float sun = 1.0;
+#endif
+    out_lamps = vec4(1.0);
+#ifdef CONTACT_LAMPS
+    for (int i = 0; i < MAX_CONTACT_LAMPS; ++i) {  // (a channel each of the rgb: at most 3)
+        vec3 way = lamp_view[i].xyz - p;
+        float far = length(way);
+        out_lamps[i] = lamp_view[i].w > 0.0 && far > 1e-4 ? contact_shadow(p, n, way / far, min(contact.x, far), jitter)
+                                                        : 1.0;
+    }
 #endif
     out_occlusion = vec4(ambient_visibility(p, v, n, centre, tile, jitter), min(-p.z, HALF_MAX), sun, 1.0);
 }

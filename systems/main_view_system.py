@@ -33,9 +33,11 @@ from engine.render.scene_programs import reflects_environment
 from engine.render.temporal_aa import jittered
 from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import camera_view
-from engine.resources import Surfaces, ViewBudget
+from engine.resources import ContactLamps, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import brightest_directional
+
+_NO_LAMPS = ContactLamps()
 
 
 class MainViewSystem(esper.Processor):
@@ -105,16 +107,20 @@ class MainViewSystem(esper.Processor):
         occlusion = self.world.try_get(camera[0], AmbientOcclusion) if self.occlusion else None
         contact = self.world.try_get(camera[0], ContactShadows) if self.occlusion else None
         sun = brightest_directional(self.world) if contact is not None else None
-        if contact is not None and sun is None:   # (they darken only the sun's light)
-            if self._said_no_sun is not contact:
+        flagged = self.world.resources.get(ContactLamps, _NO_LAMPS).positions if contact is not None else ()
+        lamps = self.renderer.occlusion.usable_lamps(flagged)   # (none where the context lacks their unit)
+        if contact is not None and sun is None and not lamps:   # (they darken the sun's light and such lamps')
+            if self._said_no_sun is not contact and not flagged:
                 self._said_no_sun = contact
                 warnings.warn(ComponentWarning(
-                    f"ContactShadows on entity {camera[0]}: the world has no DirectionalLight that shines (a sun), "
-                    "and contact shadows darken only the sun's light, so they darken nothing"), stacklevel=2)
+                    f"ContactShadows on entity {camera[0]}: the world has no DirectionalLight that shines (a sun) and "
+                    "no PointLight with contact_shadows, and contact shadows darken only those lights, so they darken "
+                    "nothing"), stacklevel=2)
             contact = None
         self.occluded, self.contact_shadowed = occlusion, contact
         if occlusion is not None or contact is not None:  # found before the view is drawn: its shading reads it
-            self.renderer.occlusion.draw(views.main, occlusion, contact, None if sun is None else -sun.direction)
+            self.renderer.occlusion.draw(views.main, occlusion, contact, None if sun is None else -sun.direction,
+                                         lamps)
         elif self.renderer.screen_occlusion is not None:
             self.renderer.occlusion.release_targets()  # no camera asks for it now
         reflections = self.world.try_get(camera[0], ScreenReflections) if self.reflections else None

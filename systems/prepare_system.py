@@ -30,6 +30,7 @@ import numpy as np
 
 from components import DirectionalLight, Fog, HemisphereLight, PointLight, ReflectionProbe, Skybox, Transform
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
+from components.limits import MAX_CONTACT_LAMPS
 from engine.core.errors import LightLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
@@ -37,6 +38,7 @@ from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
+from engine.resources import ContactLamps
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
     ALL_ROUND,
@@ -85,6 +87,7 @@ class PrepareSystem(esper.Processor):
         self._sky_sh: np.ndarray | None = None
         self._flat_sky = True   # no Skybox: the sky cube is the flat background (lights_block's flat_sky)
         self._cut = (0, 0)   # (directional, point) lights the last block left out
+        self._contact = ContactLamps()   # the lamps with contact shadows the last block gave channels
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
@@ -126,7 +129,9 @@ class PrepareSystem(esper.Processor):
                 self._lights = block
             self._count_cut(kept)
         world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
+        world.resources[ContactLamps] = self._contact   # ... and the main stage's contact shadows
         renderer.stats.lights_cut = sum(self._cut)
+        renderer.stats.contact_lamps_cut = self._contact.cut
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
         sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
@@ -189,14 +194,28 @@ class PrepareSystem(esper.Processor):
                 continue
             light = world.get(entity, DirectionalLight)
             directional.append((light.direction, light.color.xyz * light.intensity, float(light is sun)))
-        point = []
+        point, contact, cut = [], [], 0
         for entity in kept.point:
             if entity is None:
                 point.append(_NO_LAMP)
                 continue
             light, t = world.get(entity, PointLight), world.get(entity, Transform)
+            channel = 0   # its contact shadows' channel + 1 (0: none), the first MAX_CONTACT_LAMPS by slot
+            if light.contact_shadows:
+                if len(contact) < MAX_CONTACT_LAMPS:
+                    contact.append(tuple(t.world[3].xyz))
+                    channel = len(contact)
+                else:
+                    cut += 1
             point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world),
-                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)), light.radius))
+                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)), light.radius,
+                          float(channel)))
+        if cut > self._contact.cut:
+            warnings.warn(LightLimitWarning(
+                f"{len(contact) + cut} point lights with contact_shadows light the scene: at most {MAX_CONTACT_LAMPS} "
+                f"have them at once (the first by the lights' slots: those that matter most to the active camera), "
+                f"so {cut} shine without them (RenderStats.contact_lamps_cut)"), stacklevel=3)
+        self._contact = ContactLamps(tuple(contact), cut)
         return directional, point
 
     def _cookies(self, kept: KeptLights) -> bool:

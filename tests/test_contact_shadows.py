@@ -24,10 +24,12 @@ from components import (
     HemisphereLight,
     Material,
     MeshRef,
+    PointLight,
     Transform,
 )
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box
+from engine.core.errors import GLLimitWarning, LightLimitWarning
 from engine.core.world import World
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
@@ -208,3 +210,118 @@ def test_an_orthographic_camera_refuses_them():
 def test_bad_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ComponentValueError, match=f"ContactShadows.{field}"):
         ContactShadows(**{field: value})
+
+
+LAMP = np.array([-0.8, 0.8, 0.1])   # a lamp up and to the left of the box: its contact shadow falls to the right
+
+
+def _lamp_scene(world, contact: ContactShadows | None, intensity: float = 3.0, flagged: bool = True,
+                others: int = 0) -> dict:
+    """The box on the floor lit by a lamp (a PointLight without shadow maps) and the light from
+    all round, no sun; ``others`` more lamps with contact shadows, dim, far off to the side."""
+    camera = look_from(world, (0.3, 2.0, 0.05), (0.3, 0.0, 0.0))
+    if contact is not None:
+        world.add_component(camera, contact)
+    world.spawn(HemisphereLight(sky=(0.3, 0.3, 0.3), ground=(0.3, 0.3, 0.3)))
+    world.spawn(Transform(position=tuple(LAMP)),
+                PointLight(intensity=intensity, range=8.0, contact_shadows=flagged))
+    for index in range(others):
+        world.spawn(Transform(position=(6.0 + index, 3.0, 6.0)), PointLight(intensity=0.01, range=2.0,
+                                                                           contact_shadows=True))
+    floor = world.spawn(Transform(position=(0.0, -0.05, 0.0)), MeshRef(box((12.0, 0.1, 12.0))),
+                        Material(color=(0.6, 0.6, 0.6), roughness=1.0))
+    world.spawn(Transform(position=tuple(BOX[0])), MeshRef(box(tuple(2.0 * BOX[1]))),
+                Material(color=(0.6, 0.6, 0.6), roughness=1.0))
+    return {"camera": camera, "floor": floor}
+
+
+def _lamp_frame(scene, **options) -> tuple[np.ndarray, object, dict]:
+    names: dict = {}
+    runner = scene(lambda world: names.update(_lamp_scene(world, **options)), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return srgb_to_linear(runner.frame()), runner, names
+
+
+def _lamp_kept(scene, contact: ContactShadows, **options):
+    """Each floor pixel's share of the lamp's light kept under ``contact``, and whether the ray
+    from its floor point towards the lamp meets the box within the reach (less and plus the
+    margin): as ``_sun_kept``, the lamp's way a point's own."""
+    shadowed, runner, names = _lamp_frame(scene, contact=contact, **options)
+    lit, _, _ = _lamp_frame(scene, contact=None, **options)
+    dark, _, _ = _lamp_frame(scene, contact=None, intensity=0.0, **{k: v for k, v in options.items()
+                                                                    if k != "intensity"})
+    lamp_light = (lit - dark).mean(axis=-1)
+    kept = (shadowed - dark).mean(axis=-1) / np.maximum(lamp_light, 1e-6)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    floor = (runner.ids() == names["floor"]) & (lamp_light > 0.02)
+    points = eye + rays * (-eye[1] / rays[..., 1])[..., None]
+    rows = points[floor]
+    ways = LAMP - rows
+    reach = np.linalg.norm(ways, axis=-1)
+    ways /= reach[:, None]
+    inside = np.zeros(SIZE[::-1], bool)
+    outside = np.zeros(SIZE[::-1], bool)
+    # Surely in: the ray meets the box shrunk by the margin; surely out: it misses it grown by
+    # the margin (a ray grazing a side, as those from the floor along the box's sides do, meets
+    # a texel's blend of the box's top and the floor there).
+    inside[floor] = box_hits(rows, ways, BOX[0], BOX[1] - MARGIN, limit=np.minimum(contact.length - MARGIN, reach))
+    outside[floor] = ~box_hits(rows, ways, BOX[0], BOX[1] + MARGIN, limit=np.minimum(contact.length + MARGIN, reach))
+    foot = (np.abs(points[..., 0]) < BOX[1][0] + MARGIN) & (np.abs(points[..., 2]) < BOX[1][2] + MARGIN)
+    return kept, inside & ~foot, outside & ~foot, runner
+
+
+@pytest.mark.filterwarnings("ignore:ContactShadows on entity")  # (the unflagged lamp's frame: none to darken)
+def test_a_lamp_with_contact_shadows_loses_its_light_where_its_ray_meets_the_box(scene):
+    """``PointLight.contact_shadows``: each floor point's ray towards the lamp (its own way, a
+    point light's) cast against the box in float64: within the camera's ContactShadows length
+    the lamp's light is gone, outside it kept; the same lamp without the flag keeps it all."""
+    contact = ContactShadows(length=0.3, thickness=0.5)
+    kept, inside, outside, runner = _lamp_kept(scene, contact)
+    assert inside.sum() > 100 and outside.sum() > 5000, (inside.sum(), outside.sum())
+    assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.3, kept[inside]
+    assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
+    assert runner.engine.renderer.screen_contact_lamps is not None and runner.stats.contact_lamps_cut == 0
+    unflagged, _, _, _ = _lamp_kept(scene, contact, flagged=False)   # (no sun and no lamp: they darken nothing)
+    assert np.percentile(unflagged[inside], 5) > 0.97
+
+
+@pytest.mark.filterwarnings("ignore:5 point lights with contact_shadows")  # (the ground truth's frames say it too)
+def test_past_three_lamps_the_rest_shine_without_and_it_is_said_once(scene):
+    """At most MAX_CONTACT_LAMPS (3) lamps have them: the lamp that matters most keeps its
+    contact shadow, the two lamps past the limit (of four more, dim and far) are counted and
+    a LightLimitWarning says so, once."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        shadowed, runner, _ = _lamp_frame(scene, contact=ContactShadows(length=0.3, thickness=0.5), others=4)
+        runner.frame()
+    assert runner.stats.contact_lamps_cut == 2
+    said = [w for w in caught if issubclass(w.category, LightLimitWarning) and "contact_shadows" in str(w.message)]
+    assert len(said) == 1 and "at most 3" in str(said[0].message), [str(w.message) for w in said]
+    kept, inside, _, _ = _lamp_kept(scene, ContactShadows(length=0.3, thickness=0.5), others=4)
+    assert np.median(kept[inside]) < 0.05
+
+
+def test_a_context_short_of_texture_units_lights_lamps_without_them(scene):
+    """Where the fragment stage lacks the unit the lamps' image takes (ScreenOcclusion.
+    lamps_supported False), the lamp shines as without contact shadows, and a GLLimitWarning
+    says so, once."""
+    frames = []
+    for short in (True, False):
+        names: dict = {}
+        contact = ContactShadows(length=0.3, thickness=0.5) if short else None
+        runner = scene(lambda world, names=names, contact=contact: names.update(_lamp_scene(world, contact)), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.renderer.occlusion.lamps_supported = not short
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            runner.frame()
+            frames.append(runner.frame())
+        said = [w for w in caught if issubclass(w.category, GLLimitWarning)]
+        assert len(said) == (1 if short else 0)
+    np.testing.assert_array_equal(frames[0], frames[1])
+
+
+def test_contact_shadows_is_a_bool():
+    with pytest.raises(ComponentValueError, match="PointLight.contact_shadows"):
+        PointLight(contact_shadows="yes")

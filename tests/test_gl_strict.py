@@ -114,13 +114,15 @@ def _cutouts(ctx):
     filter passes, the root's SCREEN_OCCLUSION builds: the cutout with an occlusion map
     there is the fullest build of all; and the first level's, drawn view by view: its masked
     depth and normals, the LEVEL_VIEWS find a view and filter, the masked SCREEN_OCCLUSION
-    builds) and screen reflections (the root's builds with both,
+    builds; contact shadows towards the sun and the lamp, CONTACT_LAMPS) and screen
+    reflections (the root's builds with both,
     the unlit mirrors' reflected builds, the colour copy and composite)."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
     from components import (
         AmbientOcclusion,
         Camera,
+        ContactShadows,
         Material,
         MeshRef,
         PointLight,
@@ -137,12 +139,14 @@ def _cutouts(ctx):
         world = engine.world
         for _, light in world.query_one(PointLight):
             light.shadows = True
+            light.contact_shadows = True   # (the CONTACT_LAMPS builds: the lamps' image, a sampler more)
         colours = quad(1.0, 1.0)   # a mesh with a colour a vertex (the VERTEX_COLOR builds, batched too)
         world.spawn(Transform(position=(0.0, 2.4, 0.0)), MeshRef(Mesh(
             colours.positions, colours.normals, colours.uvs, colours.indices, name="coloured",
             colors=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]]))), Material())
         for camera, _ in world.query_one(Camera):
             world.add_component(camera, AmbientOcclusion(radius=0.8))
+            world.add_component(camera, ContactShadows())
             world.add_component(camera, ScreenReflections())
         for entity, mesh in world.query_one(MeshRef):
             if mesh.mesh.name == "plane":  # the floor reflects the sky: the reflecting draws and their images

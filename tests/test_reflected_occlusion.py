@@ -346,3 +346,56 @@ def test_a_context_without_the_texture_units_finds_the_camera_view_alone(scene):
 def test_bad_depths_are_refused_naming_the_field(kind, value):
     with pytest.raises(ComponentValueError, match="reflection_depth"):
         kind(reflection_depth=value)
+
+
+def test_a_mirror_shows_a_lamps_contact_shadow_where_its_ray_meets_the_box(scene):
+    """The lamp of ``tests/test_contact_shadows.py``'s lamp scene (``PointLight.contact_shadows``)
+    seen in the overhead mirror: each floor point the mirror shows, its ray towards the lamp
+    cast against the box (shrunk and grown by the margin): within the reach the lamp's light
+    is gone, outside it kept (the lamp carried into the mirror's view's space)."""
+    from tests.test_contact_shadows import LAMP, _lamp_scene
+
+    def frame(contact, intensity=3.0):
+        names: dict = {}
+
+        def build(world):
+            names.update(_lamp_scene(world, contact, intensity=intensity))
+            transform = world.get(names["camera"], Transform)
+            transform.position = glm.vec3(0.3, 1.0, 0.05)
+            transform.rotation = look_rotation(glm.vec3(0.0, 0.5, -0.05))
+            names["mirror"] = world.spawn(
+                Transform(position=(0.3, CEILING, 0.0), rotation=glm.angleAxis(glm.radians(90.0), glm.vec3(1, 0, 0))),
+                MeshRef(quad(4.0, 4.0)), Mirror(), Material(color=(0.5, 0.5, 0.5)))
+
+        runner = scene(build, SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        return srgb_to_linear(runner.frame()), runner, names
+
+    contact = ContactShadows(length=0.3, thickness=0.5)
+    shadowed, runner, names = frame(contact)
+    lit, _, _ = frame(None)
+    dark, _, _ = frame(None, intensity=0.0)
+    lamp_light = (lit - dark).mean(axis=-1)
+    kept = (shadowed - dark).mean(axis=-1) / np.maximum(lamp_light, 1e-6)
+    assert runner.stats.reflection_views == 1
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    starts = eye + rays * ((CEILING - eye[1]) / rays[..., 1])[..., None]
+    ways = rays * np.array([1.0, -1.0, 1.0])
+    points = starts + ways * (-starts[..., 1] / ways[..., 1])[..., None]
+    mirror = runner.engine.renderer.targets.read_surface_ids() == names["mirror"]
+    floor = mirror & (lamp_light > 0.02)
+    floor &= ~((np.abs(points[..., 0]) < BOX[1][0] + MARGIN) & (np.abs(points[..., 2]) < BOX[1][2] + MARGIN))
+    rows = points[floor]
+    towards = LAMP - rows
+    reach = np.linalg.norm(towards, axis=-1)
+    towards /= reach[:, None]
+    inside = np.zeros(mirror.shape, bool)
+    outside = np.zeros(mirror.shape, bool)
+    inside[floor] = box_hits(rows, towards, BOX[0], BOX[1] - MARGIN,
+                             limit=np.minimum(contact.length - REACH_MARGIN, reach))
+    outside[floor] = ~box_hits(rows, towards, BOX[0], BOX[1] + MARGIN,
+                               limit=np.minimum(contact.length + REACH_MARGIN, reach))
+    assert inside.sum() > 80 and outside.sum() > 5000, (inside.sum(), outside.sum())
+    assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.3, kept[inside]
+    assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)

@@ -152,6 +152,9 @@ REFLECTION_NORMAL_UNIT = 36   # the shading normals
 REFLECTION_SURFACE_UNIT = 37  # the main view's surface ids
 REFLECTION_HITS_UNIT = 38     # the rays marched at half size (ScreenReflections.half_resolution)
 REFLECTION_NODE_UNIT = 51     # a reflection level's composite: the level's node image
+# Contact shadows of point lights (PointLight.contact_shadows; engine/render/screen_occlusion.py).
+SCREEN_CONTACT_UNIT = 52      # scene (SCREEN_OCCLUSION builds with CONTACT_LAMPS): the lamps' shares
+OCCLUSION_LAMPS_UNIT = 53     # occlusion filter: the lamps' shares found
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

@@ -150,6 +150,10 @@ class Gpu:
         # The active camera's ambient occlusion this frame, a texel a pixel of the main view
         # (engine/render/screen_occlusion.py; None: none): its SCREEN_OCCLUSION builds read it.
         self.screen_occlusion: moderngl.Texture | None = None
+        # Beside it, the shares of the lamps with contact shadows (None: no lamp has them), and
+        # the define of the builds that read it (ScreenOcclusion sets both).
+        self.screen_contact_lamps: moderngl.Texture | None = None
+        self.contact_lamp_defines: tuple[tuple[str, str], ...] = ()
         # Textures shared by reference count (the Renderer makes and releases them), by
         # id(TextureData); ("normal", id): uploaded linear (normal and metallic-roughness maps)
         self._textures: dict[object, Shared] = {}

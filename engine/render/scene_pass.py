@@ -62,6 +62,7 @@ from engine.render.bindings import (
     PROBE_REST_UNIT,
     PROBE_UNIT,
     SCENE_CLIPS,
+    SCREEN_CONTACT_UNIT,
     SCREEN_OCCLUSION_UNIT,
     SKY_UNIT,
     VIEWS_BINDING,
@@ -214,7 +215,7 @@ class ScenePass:
         shadows = self.shadows
         # (And the pose and motion textures: a record binds them, made again as they grow.)
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines,
-                 renderer.pose_rows.version, renderer.object_motion.version)
+                 renderer.pose_rows.version, renderer.object_motion.version, renderer.contact_lamp_defines)
         kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked, screen))
         if kinds is None:
             kinds = self._kinds[invocations, layered, self._ambient_probes, masked, screen] = (
@@ -655,6 +656,8 @@ class ScenePass:
         if options.occlusion and renderer.screen_occlusion is not None:
             screen = "occluded"  # (the root's, or an occluded level's: the image is its pixels')
             bind_texture(ctx, renderer.screen_occlusion, SCREEN_OCCLUSION_UNIT)
+            if renderer.screen_contact_lamps is not None:
+                bind_texture(ctx, renderer.screen_contact_lamps, SCREEN_CONTACT_UNIT)
         reflecting = self._reflecting_framebuffer(options)
         if conditions is None and not options.sky and not now and not particles and reflecting is None:
             # A reflection level's views (exact visibility), drawn whatever their claims

@@ -44,6 +44,7 @@ from engine.render.bindings import (
     PROBE2_UNIT,
     PROBE_REST_UNIT,
     PROBE_UNIT,
+    SCREEN_CONTACT_UNIT,
     SCREEN_OCCLUSION_UNIT,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
@@ -92,7 +93,8 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "shadow_atlas": SHADOW_ATLAS_UNIT, "point_shadow0": POINT_SHADOW_UNITS[0],
                 "point_shadow1": POINT_SHADOW_UNITS[1], "irradiance_table": IRRADIANCE_UNIT,
                 "virtual_atlas": VIRTUAL_SHADOW_UNIT, "spot_atlas": SPOT_SHADOW_UNIT, "occlusion_map": OCCLUSION_UNIT,
-                "screen_occlusion": SCREEN_OCCLUSION_UNIT, "spot_cookies": COOKIE_UNIT, "pose_rows": POSE_ROWS_UNIT,
+                "screen_occlusion": SCREEN_OCCLUSION_UNIT, "screen_contact_lamps": SCREEN_CONTACT_UNIT,
+                "spot_cookies": COOKIE_UNIT, "pose_rows": POSE_ROWS_UNIT,
                 "morph_offsets": MORPH_UNIT, "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
@@ -188,6 +190,8 @@ class ScenePrograms:
             cookies = (*cookies, ("SPHERE_LIGHTS", "1"))
         if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
             cookies = (*cookies, *self.renderer.object_motion.defines)
+        if "occluded" in screen.split():  # CONTACT_LAMPS while a lamp has contact shadows (its image read)
+            cookies = (*cookies, *self.renderer.contact_lamp_defines)
         if screen.startswith("depth_normals"):  # nothing shaded: only a cutout's discard picks the build
             variants, normal_mapped, checker, probe_blend, ambient_probes, probe_rest = None, False, False, False, \
                 False, False

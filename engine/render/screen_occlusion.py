@@ -77,6 +77,7 @@ when no camera asks for occlusion (``release_targets``), a level's when the came
 no longer reaches it."""
 from __future__ import annotations
 
+import struct
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -85,9 +86,11 @@ import moderngl
 from pyglm import glm
 
 from components.ambient import OCCLUSION_QUALITIES, AmbientOcclusion, ContactShadows
+from components.limits import MAX_CONTACT_LAMPS
 from engine.core.errors import GLLimitWarning
 from engine.render.bindings import (
     OCCLUSION_IMAGE_UNIT,
+    OCCLUSION_LAMPS_UNIT,
     OCCLUSION_NODE_UNIT,
     OCCLUSION_NORMAL_UNIT,
     PassState,
@@ -124,6 +127,8 @@ LEVEL_SAMPLERS = SCENE_SAMPLERS + 2
 _PASS = PassState()
 # Each texel the find leaves (another view's, or none of the level's): "nothing found there".
 _NOTHING_FOUND = (1.0, -1.0, 1.0, 1.0)
+# The scene builds' define where the contact lamps' image is read (Gpu.contact_lamp_defines).
+_LAMP_DEFINES = (("CONTACT_LAMPS", "1"),)
 
 
 @dataclass
@@ -139,14 +144,16 @@ class _Targets:
     normals: moderngl.Texture      # occlusion_geometry.glsl's: the view-space normal, 1 / distance
     prepass: moderngl.Framebuffer
     found: moderngl.Texture
+    found_lamps: moderngl.Texture  # the contact lamps' shares found (a channel each; 1 without)
     found_framebuffer: moderngl.Framebuffer
     shares: moderngl.Texture
+    shares_lamps: moderngl.Texture  # ... filtered: what the scene builds read beside the shares
     shares_framebuffer: moderngl.Framebuffer
 
     def release(self) -> None:
         for framebuffer in (self.prepass, self.found_framebuffer, self.shares_framebuffer):
             release_framebuffer(framebuffer)
-        for texture in (self.depth, self.normals, self.found, self.shares):
+        for texture in (self.depth, self.normals, self.found, self.found_lamps, self.shares, self.shares_lamps):
             texture.release()
 
 
@@ -181,39 +188,49 @@ class ScreenOcclusion:
         self._filters: dict[int, moderngl.VertexArray] = {}
         # What the camera's view was found with this frame (draw), which its reflection levels
         # are found with where its components' reflection_depth reaches them (draw_level):
-        # (AmbientOcclusion or None, ContactShadows or None, the way to the sun or None).
-        self.frame: tuple[AmbientOcclusion | None, ContactShadows | None, glm.vec3 | None] | None = None
-        # Whether the context has the texture units an occluded level's builds read (LEVEL_SAMPLERS).
+        # (AmbientOcclusion or None, ContactShadows or None, the way to the sun or None, the
+        # contact lamps' world positions by channel).
+        self.frame: tuple[AmbientOcclusion | None, ContactShadows | None, glm.vec3 | None, tuple] | None = None
+        # Whether the context has the texture units an occluded level's builds read
+        # (LEVEL_SAMPLERS), and one more for the contact lamps' image.
         self.levels_supported = gpu.caps.max_texture_image_units >= LEVEL_SAMPLERS
+        self.lamps_supported = gpu.caps.max_texture_image_units >= LEVEL_SAMPLERS + 1
         self._said_no_units = False
+        self._said_no_lamp_units = False
         self._programs_of = -1  # the shader library's reloads when they were made
         # What the shares image was last found from (``_still_key``): equal, the passes are
         # not run again and the image stands.
         self._found_from: tuple | None = None
         self.keep_still = True  # False: found every frame (what the still fuzz compares with)
 
-    def _programs(self, quality: str | None, samples: int,
-                  step: int = 0) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
+    def _programs(self, quality: str | None, samples: int, step: int = 0, sun: bool = True,
+                  lamps: bool = False) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
         """The find pass's build for ``quality`` (None: no occlusion) and ``samples`` contact
-        samples (0: no contact shadows), and the filter's; ``step`` 0 the root's, else a
-        reflection level's whose images are ``step`` of its pixels a texel each way."""
+        samples (0: no contact shadows) towards the ``sun`` and the ``lamps``, and the
+        filter's; ``step`` 0 the root's, else a reflection level's whose images are ``step``
+        of its pixels a texel each way."""
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
         level = {"LEVEL_VIEWS": "1", "NODE_STEP": str(step)} if step else {}
         units = {"geometry_map": OCCLUSION_NORMAL_UNIT, "node_map": OCCLUSION_NODE_UNIT,
-                 "occlusion_map": OCCLUSION_IMAGE_UNIT}
-        find = self._finds.get((quality, samples, step))
+                 "occlusion_map": OCCLUSION_IMAGE_UNIT, "lamps_map": OCCLUSION_LAMPS_UNIT}
+        key = (quality, samples, step, sun, lamps)
+        find = self._finds.get(key)
         if find is None:
             defines = dict(level)
             if quality is not None:
                 slices, steps = QUALITY_SAMPLES[quality]
                 defines.update(AMBIENT_OCCLUSION="1", SLICES=str(slices), STEPS=str(steps))
             if samples:
-                defines.update(CONTACT_SHADOWS="1", CONTACT_SAMPLES=str(samples))
+                defines["CONTACT_SAMPLES"] = str(samples)
+                if sun:
+                    defines["CONTACT_SHADOWS"] = "1"
+                if lamps:
+                    defines["CONTACT_LAMPS"] = "1"
             program = assign_slots(shaders.program("fullscreen.vert", "screen_occlusion.frag", defines=defines), units)
-            find = self._finds[(quality, samples, step)] = self.ctx.vertex_array(program, [])
+            find = self._finds[key] = self.ctx.vertex_array(program, [])
         smooth = self._filters.get(step)
         if smooth is None:
             program = assign_slots(shaders.program("fullscreen.vert", "screen_occlusion_filter.frag", defines=level),
@@ -233,12 +250,14 @@ class ScreenOcclusion:
         normals = ctx.texture(guarded, 4, dtype="f4")
         found = ctx.texture(size, 4, dtype="f2")
         shares = ctx.texture(size, 4, dtype="f2")
-        for texture in (depth, normals, found, shares):
+        found_lamps, shares_lamps = ctx.texture(size, 4), ctx.texture(size, 4)   # (shares 0 to 1: eight bits)
+        for texture in (depth, normals, found, shares, found_lamps, shares_lamps):
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
             texture.repeat_x = texture.repeat_y = False
         normals.filter = (moderngl.LINEAR, moderngl.LINEAR)  # the find reads it between texels (texelFetch elsewhere)
-        return _Targets(size, view_size, margin, depth, normals, ctx.framebuffer([normals], depth), found,
-                        ctx.framebuffer([found]), shares, ctx.framebuffer([shares]))
+        return _Targets(size, view_size, margin, depth, normals, ctx.framebuffer([normals], depth), found, found_lamps,
+                        ctx.framebuffer([found, found_lamps]), shares, shares_lamps,
+                        ctx.framebuffer([shares, shares_lamps]))
 
     def _targets_for(self, view_size: tuple[int, int], half: bool) -> _Targets:
         kept = self._targets
@@ -250,32 +269,47 @@ class ScreenOcclusion:
         return self._targets
 
     def draw(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None = None,
-             sun: glm.vec3 | None = None) -> moderngl.Texture:
+             sun: glm.vec3 | None = None, lamps: Sequence[tuple[float, float, float]] = ()) -> moderngl.Texture:
         """Find ``view``'s occlusion as ``settings`` say (None: none) and its contact shadows
-        as ``contact`` says, towards ``sun`` (world, the way to the sun; None: no sun, so no
-        contact shadow); returns the shares image (half the view's size, or all of it), bound
-        for the main view's draw."""
-        gpu = self.gpu
-        if sun is None:
+        as ``contact`` says, towards ``sun`` (world, the way to the sun; None: no sun) and the
+        ``lamps`` (world positions, a channel each: ``ContactLamps``); returns the shares image
+        (half the view's size, or all of it), bound for the main view's draw."""
+        lamps = self.usable_lamps(lamps)
+        if sun is None and not lamps:
             contact = None
         if settings is None and contact is None:
             raise ValueError("ScreenOcclusion.draw: nothing to find (no AmbientOcclusion, and no ContactShadows "
-                             "with a sun)")
-        self._set_frame(settings, contact, sun)
+                             "with a sun or a lamp that has them)")
+        if contact is None:
+            lamps = ()
+        self._set_frame(settings, contact, sun, lamps)
         half = settings.half_resolution if settings is not None else contact.half_resolution
         targets = self._targets_for(view.size, half)
-        key = self._still_key(view, settings, contact, sun)
+        key = self._still_key(view, settings, contact, sun, lamps)
         if self.keep_still and key == self._found_from:  # nothing it is found from changed: the image stands
-            gpu.screen_occlusion = targets.shares
+            self.restore_root()
             return targets.shares
         self._found_from = key
         # 1. Depth and normals, at the images' size, with the guard band about them.
         guard = _guarded(view, targets.size, targets.margin)
         self.scene_pass.draw_depth_normals([guard], targets.prepass, guard.size)
         # 2. and 3. The occlusion found, and filtered into the shares.
-        self._find(targets, [view], guard.proj, settings, contact, sun, 0)
-        gpu.screen_occlusion = targets.shares
+        self._find(targets, [view], guard.proj, settings, contact, sun, lamps, 0)
+        self.restore_root()
         return targets.shares
+
+    def usable_lamps(self, lamps: Sequence[tuple[float, float, float]]) -> tuple:
+        """``lamps`` (the contact lamps' positions), or none where the context lacks the texture
+        unit their image takes in the scene builds (said once: a ``GLLimitWarning``)."""
+        if lamps and not self.lamps_supported:
+            if not self._said_no_lamp_units:
+                self._said_no_lamp_units = True
+                warnings.warn(GLLimitWarning(
+                    f"contact shadows of point lights need {LEVEL_SAMPLERS + 1} texture units in the fragment stage "
+                    f"and this OpenGL has {self.gpu.caps.max_texture_image_units} (GL_MAX_TEXTURE_IMAGE_UNITS): the "
+                    "lights with contact_shadows shine without them"), stacklevel=4)
+            return ()
+        return tuple(lamps)
 
     def draw_level(self, depth: int, views: Sequence[View], targets: RenderTargets) -> moderngl.Texture | None:
         """Find the occlusion and contact shadows of reflection level ``depth`` (1: the views of
@@ -286,7 +320,7 @@ class ScreenOcclusion:
         or None: the level is drawn without."""
         if self.frame is None or not views or not self.levels_supported:
             return None
-        settings, contact, sun = self.frame
+        settings, contact, sun, lamps = self.frame
         if settings is not None and depth > settings.reflection_depth:
             settings = None
         if contact is not None and depth > contact.reflection_depth:
@@ -302,16 +336,28 @@ class ScreenOcclusion:
             images = self._levels[depth] = self._make_targets(targets.size, half, guard=False)
         step = 2 if half else 1
         self.scene_pass.draw_depth_normals(views, images.prepass, images.size, targets.node, step)
-        self._find(images, views, views[0].proj, settings, contact, sun, step, targets.node)
-        self.gpu.screen_occlusion = images.shares
+        if contact is None:
+            lamps = ()
+        self._find(images, views, views[0].proj, settings, contact, sun, lamps, step, targets.node)
+        self._bind_shares(images, bool(lamps))
         return images.shares
 
     def restore_root(self) -> None:
-        """Put the camera's own view's shares back as ``Gpu.screen_occlusion`` (after a level's draw)."""
-        self.gpu.screen_occlusion = None if self._targets is None else self._targets.shares
+        """Put the camera's own view's shares back as ``Gpu.screen_occlusion`` (after a level's
+        draw), and its contact lamps' image as ``Gpu.screen_contact_lamps``."""
+        lamps = self.frame is not None and bool(self.frame[3])
+        self._bind_shares(self._targets, lamps)
+
+    def _bind_shares(self, targets: _Targets | None, lamps: bool) -> None:
+        """``targets``' shares what the scene builds read (``Gpu.screen_occlusion``), with its
+        contact lamps' image and their builds (``Gpu.contact_lamp_defines``) where ``lamps``."""
+        gpu = self.gpu
+        gpu.screen_occlusion = None if targets is None else targets.shares
+        gpu.screen_contact_lamps = targets.shares_lamps if targets is not None and lamps else None
+        gpu.contact_lamp_defines = _LAMP_DEFINES if gpu.screen_contact_lamps is not None else ()
 
     def _find(self, targets: _Targets, views: Sequence[View], proj: glm.mat4, settings: AmbientOcclusion | None,
-              contact: ContactShadows | None, sun: glm.vec3 | None, step: int,
+              contact: ContactShadows | None, sun: glm.vec3 | None, lamps: tuple, step: int,
               nodes: moderngl.Texture | None = None) -> None:
         """Passes 2 and 3 over ``targets``' depth and normals: the find (once a view of a
         level, ``step`` > 0, over its rectangle; the root's one view over all of it) and the
@@ -319,7 +365,8 @@ class ScreenOcclusion:
         rows, a level's views' alike, put a texel back in its view's space)."""
         gpu, ctx = self.gpu, self.ctx
         find, smooth = self._programs(settings.quality if settings is not None else None,
-                                      contact.samples if contact is not None else 0, step)
+                                      contact.samples if contact is not None else 0, step, sun is not None,
+                                      bool(lamps))
         width, height = targets.size
         depth_size = (float(targets.size[0] + 2 * targets.margin[0]), float(targets.size[1] + 2 * targets.margin[1]))
         # What both passes read to put a texel back in its view's space (view_depth.glsl), and
@@ -347,13 +394,16 @@ class ScreenOcclusion:
             if step:
                 set_scissor(ctx, stepped_scissor(view.scissor, step, targets.size))
                 program["node"].value = view.node
-            if contact is not None:
+            if contact is not None and sun is not None:
                 program["sun_view"].value = tuple(glm.normalize(glm.mat3(view.view) * glm.vec3(sun)))
+            if lamps:
+                program["lamp_view"].write(_lamp_rows(view, lamps))
             find.render(moderngl.TRIANGLES, vertices=3)
         # 3. Filtered into the shares.
         targets.shares_framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, width, height))
         bind_texture(ctx, targets.found, OCCLUSION_IMAGE_UNIT)
+        bind_texture(ctx, targets.found_lamps, OCCLUSION_LAMPS_UNIT)
         program = smooth.program
         for name, value in unproject.items():
             if name in program:
@@ -368,10 +418,10 @@ class ScreenOcclusion:
             gpu.checkpoint("ambient occlusion" if not step else f"ambient occlusion ({views[0].name} and its level)")
 
     def _set_frame(self, settings: AmbientOcclusion | None, contact: ContactShadows | None,
-                   sun: glm.vec3 | None) -> None:
+                   sun: glm.vec3 | None, lamps: tuple) -> None:
         """What this frame's reflection levels are found with; a level the components no longer
         reach lets its images go, and a context without the units they need says so once."""
-        self.frame = (settings, contact, sun)
+        self.frame = (settings, contact, sun, lamps)
         reach = max(settings.reflection_depth if settings is not None else 0,
                     contact.reflection_depth if contact is not None else 0)
         for depth in [depth for depth in self._levels if depth > reach]:
@@ -389,9 +439,9 @@ class ScreenOcclusion:
         still key: a change draws its levels again)."""
         if self.frame is None or not self.levels_supported:
             return None
-        settings, contact, sun = self.frame
+        settings, contact, sun, lamps = self.frame
         return (_occlusion_values(settings), None if settings is None else settings.reflection_depth,
-                _contact_values(contact, sun), None if contact is None else contact.reflection_depth)
+                _contact_values(contact, sun, lamps), None if contact is None else contact.reflection_depth)
 
     def target_count(self) -> int:
         """Images held now (4 while a camera asks for occlusion, and 4 for each reflection
@@ -399,14 +449,14 @@ class ScreenOcclusion:
         return 4 * ((self._targets is not None) + len(self._levels))
 
     def _still_key(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None,
-                   sun: glm.vec3 | None) -> tuple:
+                   sun: glm.vec3 | None, lamps: tuple) -> tuple:
         """What the occlusion is found from: every instance row, batch and texture the depth
         pass draws (``Gpu.scene_version``, moved on by each upload of them), the shaders, the
         view's Camera block (pose, projection, layers, the entities it leaves out) and size,
-        the settings and the sun.  A still scene (the camera and what it sees not moving)
+        the settings, the sun and the lamps.  A still scene (the camera and what it sees not moving)
         finds it once."""
         return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size,
-                _occlusion_values(settings), _contact_values(contact, sun))
+                _occlusion_values(settings), _contact_values(contact, sun, lamps))
 
     def _release_root(self) -> None:
         if self._targets is not None:
@@ -421,7 +471,7 @@ class ScreenOcclusion:
             images.release()
         self._levels.clear()
         self.frame = None
-        self.gpu.screen_occlusion = None
+        self._bind_shares(None, False)
 
     def _release_programs(self) -> None:
         for vao in (*self._finds.values(), *self._filters.values()):
@@ -441,9 +491,17 @@ def _occlusion_values(settings: AmbientOcclusion | None) -> tuple | None:
     return settings.radius, settings.intensity, settings.direct_light, settings.half_resolution, settings.quality
 
 
-def _contact_values(contact: ContactShadows | None, sun: glm.vec3 | None) -> tuple | None:
-    """What of ``contact`` (towards ``sun``) the images are found from."""
+def _contact_values(contact: ContactShadows | None, sun: glm.vec3 | None, lamps: tuple) -> tuple | None:
+    """What of ``contact`` (towards ``sun`` and the ``lamps``) the images are found from."""
     if contact is None:
         return None
     return (contact.length, contact.thickness, contact.opacity, contact.distance, contact.samples,
-            contact.half_resolution, tuple(sun))
+            contact.half_resolution, None if sun is None else tuple(sun), lamps)
+
+
+def _lamp_rows(view: View, lamps: tuple) -> bytes:
+    """The find's ``lamp_view``: each contact lamp's place in ``view``'s space, w 1, by channel
+    (a channel with no lamp all 0)."""
+    rows = [(*(view.view * glm.vec4(*lamp, 1.0)).xyz, 1.0) for lamp in lamps]
+    rows += [(0.0, 0.0, 0.0, 0.0)] * (MAX_CONTACT_LAMPS - len(rows))
+    return struct.pack(f"{4 * MAX_CONTACT_LAMPS}f", *(value for row in rows for value in row))

@@ -63,6 +63,7 @@ from pathlib import Path
 import moderngl
 
 import shaders
+from components.limits import MAX_CONTACT_LAMPS
 from components.post import TONEMAP_CURVES
 from components.rendering import MATERIAL_IMAGES
 from engine.core import cube_faces, material_slots
@@ -270,7 +271,8 @@ def limit_glsl_defines() -> dict[str, str]:
     ``shadows``; the irradiance boxes: ``irradiance``; the environment BRDF's rows:
     ``environment_brdf``; the virtual lights and the outlines
     each one's line crosses: ``shadow_rules``; where a pose row's morph weights start:
-    ``pose_rows``; the motion texture's row: ``object_motion``), each material map's bit in a
+    ``pose_rows``; the motion texture's row: ``object_motion``; the lamps with contact
+    shadows: ``components.limits``), each material map's bit in a
     SECOND_UV_MAPS build (its index in ``MATERIAL_IMAGES``: ``UV_BIT_TEXTURE`` ...), and each
     tone curve's number (its index in ``TONEMAP_CURVES``, the number a build's ``TONEMAP_CURVE`` is)."""
     return {"MAX_DIRECTIONAL_LIGHTS": str(views.MAX_DIRECTIONAL_LIGHTS),
@@ -280,6 +282,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
+            "MAX_CONTACT_LAMPS": str(MAX_CONTACT_LAMPS),
             "POSE_WEIGHTS_AT": str(pose_rows.WEIGHTS_AT),
             **object_motion.glsl_defines(),
             **{f"UV_BIT_{name.upper()}": str(1 << index) for index, name in enumerate(MATERIAL_IMAGES)},

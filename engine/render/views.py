@@ -239,10 +239,11 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
     [(direction, rgb[, sun])] (``sun``: 1 for the brightest, whose light contact shadows dim;
-    0 when left out), point = [(position, range, rgb, cone[, cookie[, radius]])] (``cone``: the
-    spot cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light; ``cookie``: its two
-    cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out; ``radius``: its
-    sphere's, ``PointLight.radius``, 0 when left out).  ``flat_sky``: the sky cube
+    0 when left out), point = [(position, range, rgb, cone[, cookie[, radius[, contact]]])]
+    (``cone``: the spot cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light;
+    ``cookie``: its two cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out;
+    ``radius``: its sphere's, ``PointLight.radius``, 0 when left out; ``contact``: its contact
+    shadows' channel + 1, ``ContactLamps``, 0 (none) when left out).  ``flat_sky``: the sky cube
     is the flat background of a world with no Skybox, not the light ``sky_sh`` holds (the
     environment's reflection then reads the harmonics: scene.frag environment_radiance).
     ``environment`` False: no surface reflects the light from all round by its material (the
@@ -269,7 +270,8 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
         data[base + 4 * (2 * MAX_POINT_LIGHTS + i): base + 4 * (2 * MAX_POINT_LIGHTS + i) + 4] = cone
         right, up = cookie[0] if cookie else NO_COOKIE
         data[base + 4 * (3 * MAX_POINT_LIGHTS + i): base + 4 * (3 * MAX_POINT_LIGHTS + i) + 4] = right
-        data[base + 4 * (4 * MAX_POINT_LIGHTS + i): base + 4 * (4 * MAX_POINT_LIGHTS + i) + 4] = up
+        data[base + 4 * (4 * MAX_POINT_LIGHTS + i): base + 4 * (4 * MAX_POINT_LIGHTS + i) + 3] = up[:3]
+        data[base + 4 * (4 * MAX_POINT_LIGHTS + i) + 3] = more[2] if len(more) > 2 else 0.0
     return data.tobytes()
 
 

@@ -12,7 +12,8 @@ layout(std140) uniform Lights {
     vec4 point_color[MAX_POINT_LIGHTS];             // rgb: colour x intensity, w: its sphere's radius (0: a point)
     vec4 point_spot[MAX_POINT_LIGHTS];              // the spot cone (light_rules.spot_cone; 0, 0, 0, 1: all round)
     vec4 point_cookie_u[MAX_POINT_LIGHTS];          // xyz: the cookie's right / tan(angle), w: its layer (-1: none)
-    vec4 point_cookie_v[MAX_POINT_LIGHTS];          // xyz: its top / tan(angle) (light_rules.lamp_cookie)
+    vec4 point_cookie_v[MAX_POINT_LIGHTS];          // xyz: its top / tan(angle) (light_rules.lamp_cookie); w: its
+                                                    // contact shadows' channel + 1 (0: none; scene.frag)
 } lights;
 
 #include "spot_cone.glsl"
