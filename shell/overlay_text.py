@@ -114,8 +114,9 @@ def post_lines(engine: Engine) -> list[str]:
         occlusion = "AO off" + (" (set)" if not main.occlusion else "")
     if main.contact_shadowed is not None:
         contact = main.contact_shadowed
+        lamps = main.contact_lamps
         occlusion += (f"; contact shadows {contact.length:g} m{' half' if contact.half_resolution else ''}"
-                      f"{_levels(contact.reflection_depth)}")
+                      f"{_levels(contact.reflection_depth)}{f', {lamps} lamp' + 's' * (lamps > 1) if lamps else ''}")
     reflected = main.reflected
     if reflected is not None:
         reflections = (f"SSR {reflected.max_distance:g} m {reflected.quality}"

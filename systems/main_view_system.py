@@ -55,6 +55,7 @@ class MainViewSystem(esper.Processor):
         self.occlusion = True  # the debug overlay's toggle: off, no camera's AmbientOcclusion is drawn
         self.occluded: AmbientOcclusion | None = None  # the one drawn this frame (the overlay's line)
         self.contact_shadowed: ContactShadows | None = None  # the contact shadows drawn this frame (the same)
+        self.contact_lamps = 0  # ... and the lamps they darken besides the sun
         # (the root's options, occlusion, reflections, the options drawn with): the last made
         self._screen_options: tuple[SceneOptions | None, bool, bool, SceneOptions] = (None, False, False, TREE_ROOT)
         self.reflections = True  # the debug overlay's toggle: off, no camera's ScreenReflections is drawn
@@ -118,6 +119,7 @@ class MainViewSystem(esper.Processor):
                     "nothing"), stacklevel=2)
             contact = None
         self.occluded, self.contact_shadowed = occlusion, contact
+        self.contact_lamps = len(lamps) if contact is not None else 0
         if occlusion is not None or contact is not None:  # found before the view is drawn: its shading reads it
             self.renderer.occlusion.draw(views.main, occlusion, contact, None if sun is None else -sun.direction,
                                          lamps)

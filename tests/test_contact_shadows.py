@@ -31,6 +31,7 @@ from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box
 from engine.core.errors import GLLimitWarning, LightLimitWarning
 from engine.core.world import World
+from shell.overlay_text import post_lines
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
 SIZE = (192, 144)
@@ -147,7 +148,6 @@ def test_the_images_and_passes(scene):
 def test_the_command_line_flag_puts_them_on_the_active_camera(scene):
     """``--contact-shadows``: the parser's flag, and ``Engine.start_from`` giving the active
     camera a ``ContactShadows()`` where it has none (the overlay's line names it)."""
-    from shell.overlay_text import post_lines
     from shell.runner import build_parser
 
     _, runner, names = _frame(scene, contact=None)
@@ -282,6 +282,7 @@ def test_a_lamp_with_contact_shadows_loses_its_light_where_its_ray_meets_the_box
     assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.3, kept[inside]
     assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
     assert runner.engine.renderer.screen_contact_lamps is not None and runner.stats.contact_lamps_cut == 0
+    assert any("contact shadows 0.3 m, 1 mirror level, 1 lamp" in line for line in post_lines(runner.engine))
     unflagged, _, _, _ = _lamp_kept(scene, contact, flagged=False)   # (no sun and no lamp: they darken nothing)
     assert np.percentile(unflagged[inside], 5) > 0.97
 
