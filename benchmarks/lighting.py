@@ -50,6 +50,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``occlusion_low``: the same at half size with ``quality="low"`` (half the find pass's samples);
 * ``contact``: no shadows; ``ContactShadows()`` on the camera (the depth and normals pass and
   the march at full size, the filter);
+* ``contact_lamp``: the same with the scene's lamp's contact shadows too
+  (``PointLight.contact_shadows``: a second march a pixel, a second image);
 * ``contact_half``: the same found at half size (``half_resolution=True``);
 * ``contact_occlusion``: the same with ``AmbientOcclusion()`` (one depth pass for both, at half size);
 * ``polished``: no shadows; the checker floor reflects the sky (``Reflective(mix=0.35)``);
@@ -321,6 +323,12 @@ def _contact(engine: Engine, occlusion: bool = False, half: bool = False) -> Non
         engine.world.add_component(camera_entity(engine), AmbientOcclusion())
 
 
+def _contact_lamp(engine: Engine) -> None:
+    _contact(engine)
+    for _, light in engine.world.query_one(PointLight):
+        light.contact_shadows = True
+
+
 def _contact_half(engine: Engine) -> None:
     _contact(engine, half=True)
 
@@ -402,6 +410,7 @@ VARIANTS: list[Variant] = [
     Variant("occlusion_full", _occlusion_full, "AmbientOcclusion(half_resolution=False) on the camera"),
     Variant("occlusion_low", _occlusion_low, "AmbientOcclusion(quality='low') on the camera"),
     Variant("contact", _contact, "ContactShadows() on the camera (found at full size)"),
+    Variant("contact_lamp", _contact_lamp, "ContactShadows() and the lamp's contact shadows"),
     Variant("contact_half", _contact_half, "ContactShadows(half_resolution=True) on the camera"),
     Variant("contact_occlusion", _contact_occlusion, "ContactShadows() and AmbientOcclusion() (at half size)"),
     Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
