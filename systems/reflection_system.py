@@ -178,6 +178,9 @@ class ReflectionSystem(esper.Processor):
             # The main view rasterises while the CPU culls and works out the first level's
             # cameras; the same after each level's views (engine/render/raw_gl.py says why).
             renderer.flush()
+        else:  # no level to find or reflect: the screen passes' level images go (their surfaces went)
+            renderer.occlusion.release_levels()
+            renderer.screen_reflections.release_levels()
         camera = frame_rules(self.world).active_camera
         crossed = any(crossing.entity == camera for crossing in self.world.resources.get(PortalCrossings, ()))
         cut = self._cut or crossed or camera != self._camera

@@ -209,6 +209,13 @@ def test_each_level_reached_is_found_and_its_images_go_with_it(scene):
     occlusion.reflection_depth = 0
     runner.frame()
     assert found.target_count() == 4 and runner.stats.passes == passes - 6
+    occlusion.reflection_depth = 2
+    runner.frame()
+    assert found.target_count() == 12
+    for mirror in (names["mirror"], names["back"]):   # the mirrors go: their levels' images with them
+        runner.world.delete_entity(mirror)
+    runner.frame()
+    assert found.target_count() == 4
     runner.world.remove_component(names["camera"], AmbientOcclusion)
     runner.frame()
     assert found.target_count() == 0 and runner.engine.renderer.resource_counts()["occlusion_targets"] == 0

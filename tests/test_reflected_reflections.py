@@ -103,6 +103,12 @@ def test_a_mirror_level_reflects_and_its_images_go_with_the_depth(scene):
     runner.frame()
     assert passes.target_count() == 4 and not passes._levels
     assert passes.composites == composites + 3
+    reflections.reflection_depth = 1
+    runner.frame()
+    assert passes.target_count() == 9
+    runner.world.delete_entity(names["mirror"])   # the mirror goes: its level's images with it
+    runner.frame()
+    assert passes.target_count() == 4
 
 
 @pytest.mark.parametrize("value", [-1, 17, 0.5, False])

@@ -54,7 +54,11 @@ writes it beside the occlusion's shares, and the scene pass multiplies it into t
 light (the brightest directional light, marked in the Lights block).  Without an
 ``AmbientOcclusion`` the images are the view's size (or half of it: the contact shadows'
 ``half_resolution``) and the find pass is the march alone (``AMBIENT_OCCLUSION`` builds find
-the occlusion).
+the occlusion).  The lamps that ask (``PointLight.contact_shadows``, at most
+``MAX_CONTACT_LAMPS``: ``ContactLamps``, the prepare stage's, by channel) are marched
+towards too (``CONTACT_LAMPS``: each texel's ray to each lamp, no longer than the way to it)
+into a second image, a channel a lamp, which the filter smooths alike and the scene's
+``CONTACT_LAMPS`` builds read beside the shares (a sampler more: ``lamps_supported``).
 
 **Reflection levels** (``AmbientOcclusion.reflection_depth``, ``ContactShadows.reflection_depth``:
 the levels of mirror and portal views below the camera's that are found too, 1 by default):
@@ -182,9 +186,9 @@ class ScreenOcclusion:
         self.scene_pass = scene_pass
         self._targets: _Targets | None = None
         self._levels: dict[int, _Targets] = {}  # a reflection level's images, by its depth
-        # The find's builds by quality, contact samples and node step (0: the root's; 1 or 2:
-        # a level's, LEVEL_VIEWS with that NODE_STEP), the filter's by node step.
-        self._finds: dict[tuple[str | None, int, int], moderngl.VertexArray] = {}
+        # The find's builds by quality, contact samples, node step (0: the root's; 1 or 2: a
+        # level's, LEVEL_VIEWS with that NODE_STEP), sun and lamps; the filter's by node step.
+        self._finds: dict[tuple[str | None, int, int, bool, bool], moderngl.VertexArray] = {}
         self._filters: dict[int, moderngl.VertexArray] = {}
         # What the camera's view was found with this frame (draw), which its reflection levels
         # are found with where its components' reflection_depth reaches them (draw_level):
@@ -458,6 +462,12 @@ class ScreenOcclusion:
         return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), view.size,
                 _occlusion_values(settings), _contact_values(contact, sun, lamps))
 
+    def release_levels(self) -> None:
+        """Let the reflection levels' images go (the world has no mirror or portal now)."""
+        for images in self._levels.values():
+            images.release()
+        self._levels.clear()
+
     def _release_root(self) -> None:
         if self._targets is not None:
             self._targets.release()
@@ -467,9 +477,7 @@ class ScreenOcclusion:
     def release_targets(self) -> None:
         """Let the images go (no camera asks for occlusion), the levels' too."""
         self._release_root()
-        for images in self._levels.values():
-            images.release()
-        self._levels.clear()
+        self.release_levels()
         self.frame = None
         self._bind_shares(None, False)
 

@@ -365,15 +365,20 @@ class ScreenReflectionPass:
         return (settings.max_distance, settings.thickness, settings.max_roughness, settings.edge_fade,
                 settings.quality, settings.reflection_depth, self.show_found)
 
+    def release_levels(self) -> None:
+        """Let the reflection levels' images go (the world has no mirror or portal now)."""
+        for images in self._levels.values():
+            images.release()
+        self._levels.clear()
+        self._drawing = None
+
     def release_targets(self) -> None:
         """Let the images go (no camera asks for reflections, or the level was made again),
         the levels' too."""
         if self._targets is not None:
             self._targets.release()
             self._targets = None
-        for images in self._levels.values():
-            images.release()
-        self._levels.clear()
+        self.release_levels()
         self._pending = None
         self._drawing = None
 
