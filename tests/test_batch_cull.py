@@ -4,7 +4,8 @@ of its clip plane).  Checked against what it must not change and against the GL 
 
 * the frames, colours and entity ids, are the same bytes with the cull on (on every pass:
   its thresholds set to 1) and off, frame by frame over the benchmark's mirror ring (8 and
-  16 mirrors, the camera orbiting, boxes spinning), the same ring with every box its own
+  16 mirrors, the camera orbiting, boxes spinning; at 8 with ambient occlusion in the
+  mirrors' level too, whose depth and normals pass culls as its draw does), the same ring with every box its own
   mesh (its own batch: left at the scene pass's own thresholds; with auto and predicted
   visibility, the latter drawing each view conditionally on its claim) and the facing
   portal pair (exact and predicted visibility);
@@ -21,7 +22,7 @@ import pytest
 
 from benchmarks.mirrors import MirrorRing
 from benchmarks.portals import FacingPortals, set_depth
-from components import MeshRef
+from components import AmbientOcclusion, Camera, MeshRef
 from engine.assets.mesh import box
 from engine.core.frame_io import Output
 from engine.render.scene_pass import ScenePass
@@ -46,9 +47,12 @@ class BoxPerBatch(MirrorRing):
 
 def _engine(ctx, case: str, cull: bool):
     kind, arg, *visibility = case.split("_")
-    if kind in ("ring", "boxes"):
-        engine = Engine((MirrorRing if kind == "ring" else BoxPerBatch)(int(arg)), ctx)
+    if kind in ("ring", "boxes", "occluded"):
+        engine = Engine((BoxPerBatch if kind == "boxes" else MirrorRing)(int(arg)), ctx)
         engine.reflection_system.path = "per_mirror"
+        if kind == "occluded":  # the mirrors' level found too: its depth and normals pass culls alike
+            for camera, _ in engine.world.query_one(Camera):
+                engine.world.add_component(camera, AmbientOcclusion(radius=0.8))
         if visibility:  # the views' draws conditional on their claims (predicted: last frame's)
             engine.reflection_system.visibility = visibility[0]
     else:
@@ -62,7 +66,7 @@ def _engine(ctx, case: str, cull: bool):
     return engine
 
 
-CASES = ("ring_8", "ring_16", "boxes_16", "boxes_16_predicted", "portals_exact", "portals_predicted")
+CASES = ("ring_8", "ring_16", "boxes_16", "boxes_16_predicted", "portals_exact", "portals_predicted", "occluded_8")
 
 
 @pytest.mark.parametrize("case", CASES)

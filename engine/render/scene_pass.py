@@ -379,11 +379,16 @@ class ScenePass:
         screen = "depth_normals half" if step == 2 else "depth_normals"
         renderer.upload_views(views)
         opaque = renderer.opaque_batches()
+        reach = None   # a level's: which batch can draw a sample in which view (as its draw culls them)
+        if (masked and self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
+                and len(views) * len(opaque) >= self.cull_min_draws):
+            reach = batch_reach(views, nodes.size, opaque)
         for index, view in enumerate(views):
             set_scissor(ctx, stepped_scissor(view.scissor, step, size))
             set_front_face(ctx, "cw" if view.mirrored else "ccw")
             renderer.bind_view_at(index)
-            self._draw_batches(opaque, 0, masked, skip=view.skip, hide=view.hide, screen=screen)
+            self._draw_batches(opaque if reach is None else self._reaching(opaque, reach[index], view), 0, masked,
+                               skip=view.skip, hide=view.hide, screen=screen)
         renderer.stats.passes += 1
         if renderer.debug:
             renderer.checkpoint(f"depth and normals ({views[0].name}{' and others' if len(views) > 1 else ''})")
