@@ -117,7 +117,7 @@ class AmbientOcclusion(TrackedComponent):
 class ContactShadows(TrackedComponent):
     """Contact shadows for the camera whose entity holds it (the active camera's is used): the
     sun's direct light (the brightest ``DirectionalLight``'s), and that of each point or spot
-    light with ``PointLight.contact_shadows`` (at most ``MAX_CONTACT_LAMPS``, 3), is taken from
+    light with ``PointLight.contact_shadows`` (at most ``MAX_CONTACT_LAMPS``, 4), is taken from
     a point where something the camera sees lies across a short ray from the point towards
     the light (a lamp's no longer than the way to it), so a
     thing standing on the floor, a crease or a small object casts the tight shadow its sun's

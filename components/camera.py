@@ -235,7 +235,7 @@ class PointLight(TrackedComponent):
     ``contact_shadows`` (off by default; HDRP's per-light switch, Unreal's contact shadow
     length): where the active camera has ``ContactShadows``, this light's light is taken from
     a point where something the view shows lies across a short ray from it towards the light,
-    as the sun's is (the camera's component sets the ray).  At most ``MAX_CONTACT_LAMPS`` (3)
+    as the sun's is (the camera's component sets the ray).  At most ``MAX_CONTACT_LAMPS`` (4)
     of the lights that reach the scene at once have them (the ones that matter most to the
     camera); the rest are counted in ``RenderStats.contact_lamps_cut`` and a
     ``LightLimitWarning`` says so."""

@@ -119,6 +119,6 @@ MAX_PARTICLE_LIFETIME = 3600.0
 # are 64 texels each.
 MAX_SHEET_CELLS = 64
 # Point and spot lights with contact shadows at once (PointLight.contact_shadows): each a
-# colour channel of the images screen-space occlusion's march writes (engine/render/screen_occlusion.py):
-# at most 3.
-MAX_CONTACT_LAMPS = 3
+# channel of the images screen-space occlusion's march writes (engine/render/screen_occlusion.py):
+# at most 4.
+MAX_CONTACT_LAMPS = 4

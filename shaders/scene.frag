@@ -49,10 +49,10 @@ in vec4 v_vertex_color;  // the mesh's colour here (Mesh.colors, RGBA), multipli
 uniform sampler2D screen_occlusion;
 #ifdef CONTACT_LAMPS
 // The lamps' shares past their contact shadows (PointLight.contact_shadows; the image beside the
-// occlusion's, its size): rgb a channel each, which a lamp's Lights row names.  Brought to the
+// occlusion's, its size): rgba a channel each, which a lamp's Lights row names.  Brought to the
 // pixel with the same weights as the shares (screen_occlusion_shares sets it).
 uniform sampler2D screen_contact_lamps;
-vec3 lamp_contact = vec3(1.0);
+vec4 lamp_contact = vec4(1.0);
 #endif
 
 // The shares at this pixel: the four texels about it, by their bilinear weights each times
@@ -73,7 +73,7 @@ vec3 screen_occlusion_shares() {
     vec3 nearest = vec3(1.0);
     float nearest_gap = 1e30;
 #ifdef CONTACT_LAMPS
-    vec3 lamps = vec3(0.0), nearest_lamps = vec3(1.0);
+    vec4 lamps = vec4(0.0), nearest_lamps = vec4(1.0);
 #endif
     for (int i = 0; i < 4; ++i) {
         ivec2 offset = ivec2(i & 1, i >> 1);
@@ -86,7 +86,7 @@ vec3 screen_occlusion_shares() {
         total += weight * texel.rga;
         weights += weight;
 #ifdef CONTACT_LAMPS
-        vec3 lamps_here = texelFetch(screen_contact_lamps, at, 0).rgb;
+        vec4 lamps_here = texelFetch(screen_contact_lamps, at, 0);
         lamps += weight * lamps_here;
         nearest_lamps = gap < nearest_gap ? lamps_here : nearest_lamps;
 #endif

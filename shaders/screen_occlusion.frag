@@ -40,7 +40,7 @@ uniform uint node;              // the level's view found by this draw
 
 layout(location = 0) out vec4 out_occlusion;  // r: visibility, g: distance along the view axis (-1: the sky),
                                               // b: the sun's share
-layout(location = 1) out vec4 out_lamps;      // rgb: each contact lamp channel's share (1 without)
+layout(location = 1) out vec4 out_lamps;      // rgba: each contact lamp channel's share (1 without)
 
 // Whether a sample at `at` (the depth image's pixels) lies off the view: past the image's
 // edge, or (a level's) on another view's pixels.
@@ -187,7 +187,7 @@ void main() {
 #endif
     out_lamps = vec4(1.0);
 #ifdef CONTACT_LAMPS
-    for (int i = 0; i < MAX_CONTACT_LAMPS; ++i) {  // (a channel each of the rgb: at most 3)
+    for (int i = 0; i < MAX_CONTACT_LAMPS; ++i) {  // (a channel each of the rgba: at most 4)
         vec3 way = lamp_view[i].xyz - p;
         float far = length(way);
         out_lamps[i] = lamp_view[i].w > 0.0 && far > 1e-4 ? contact_shadow(p, n, way / far, min(contact.x, far), jitter)

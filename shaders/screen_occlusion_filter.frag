@@ -11,14 +11,14 @@
 #include "occlusion_geometry.glsl"
 
 uniform sampler2D occlusion_map;   // rgb: visibility, distance along the view axis (-1: the sky), the sun's share
-uniform sampler2D lamps_map;       // rgb: each contact lamp channel's share (the find's second image)
+uniform sampler2D lamps_map;       // rgba: each contact lamp channel's share (the find's second image)
 uniform float intensity;           // AmbientOcclusion.intensity: visibility ** intensity
 uniform float direct_light;        // AmbientOcclusion.direct_light
 uniform ivec2 margin;              // the guard band: where this image's texels start in the depth image
 
 layout(location = 0) out vec4 out_shares;  // r: the light from all round's share, g: the direct light's,
                                            // b: the distance (-1: sky), a: the sun's (contact shadows)
-layout(location = 1) out vec4 out_lamps;   // rgb: each contact lamp channel's share, smoothed alike
+layout(location = 1) out vec4 out_lamps;   // rgba: each contact lamp channel's share, smoothed alike
 
 void main() {
     ivec2 here = ivec2(gl_FragCoord.xy);  // this image's texel (the occlusion found is the same size)
@@ -38,10 +38,10 @@ void main() {
     ivec2 size = textureSize(occlusion_map, 0);
     ivec2 base = here - 1;  // 4 x 4 texels, this one the 2nd of its row
     vec2 total = vec2(0.0);   // visibility, the sun's share
-    vec3 lamps = vec3(0.0);   // the contact lamps' shares
+    vec4 lamps = vec4(0.0);   // the contact lamps' shares
     float weights = 0.0;
     vec2 nearest = vec2(1.0);
-    vec3 nearest_lamps = vec3(1.0);
+    vec4 nearest_lamps = vec4(1.0);
     float nearest_gap = 1e30;
     for (int y = 0; y < 4; ++y) {
         for (int x = 0; x < 4; ++x) {
@@ -54,7 +54,7 @@ void main() {
             vec3 q = view_at(vec2(texel + margin) + 0.5, -found.y);  // its point: along its ray, at its distance
             float gap = abs(dot(q - p, n));
             float weight = max(0.0, 1.0 - gap / tolerance);
-            vec3 lamps_found = texelFetch(lamps_map, texel, 0).rgb;
+            vec4 lamps_found = texelFetch(lamps_map, texel, 0);
             total += weight * found.xz;
             lamps += weight * lamps_found;
             weights += weight;
@@ -68,5 +68,5 @@ void main() {
     vec2 smoothed = weights > 1e-3 ? total / weights : nearest;
     float ambient = intensity > 0.0 ? pow(max(smoothed.x, 1e-6), intensity) : 1.0;  // (pow(0, y): undefined)
     out_shares = vec4(ambient, mix(1.0, ambient, direct_light), min(-p.z, 65504.0), smoothed.y);  // (a half float)
-    out_lamps = vec4(weights > 1e-3 ? lamps / weights : nearest_lamps, 1.0);
+    out_lamps = weights > 1e-3 ? lamps / weights : nearest_lamps;
 }

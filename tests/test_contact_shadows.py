@@ -216,15 +216,17 @@ LAMP = np.array([-0.8, 0.8, 0.1])   # a lamp up and to the left of the box: its 
 
 
 def _lamp_scene(world, contact: ContactShadows | None, intensity: float = 3.0, flagged: bool = True,
-                others: int = 0) -> dict:
-    """The box on the floor lit by a lamp (a PointLight without shadow maps) and the light from
-    all round, no sun; ``others`` more lamps with contact shadows, dim, far off to the side."""
+                others: int = 0, copies: int = 1) -> dict:
+    """The box on the floor lit by a lamp (a PointLight without shadow maps; ``copies`` lamps in
+    one place sharing its intensity) and the light from all round, no sun; ``others`` more
+    lamps with contact shadows, dim, far off to the side."""
     camera = look_from(world, (0.3, 2.0, 0.05), (0.3, 0.0, 0.0))
     if contact is not None:
         world.add_component(camera, contact)
     world.spawn(HemisphereLight(sky=(0.3, 0.3, 0.3), ground=(0.3, 0.3, 0.3)))
-    world.spawn(Transform(position=tuple(LAMP)),
-                PointLight(intensity=intensity, range=8.0, contact_shadows=flagged))
+    for _ in range(copies):
+        world.spawn(Transform(position=tuple(LAMP)),
+                    PointLight(intensity=intensity / copies, range=8.0, contact_shadows=flagged))
     for index in range(others):
         world.spawn(Transform(position=(6.0 + index, 3.0, 6.0)), PointLight(intensity=0.01, range=2.0,
                                                                            contact_shadows=True))
@@ -287,19 +289,19 @@ def test_a_lamp_with_contact_shadows_loses_its_light_where_its_ray_meets_the_box
     assert np.percentile(unflagged[inside], 5) > 0.97
 
 
-@pytest.mark.filterwarnings("ignore:5 point lights with contact_shadows")  # (the ground truth's frames say it too)
-def test_past_three_lamps_the_rest_shine_without_and_it_is_said_once(scene):
-    """At most MAX_CONTACT_LAMPS (3) lamps have them: the lamp that matters most keeps its
-    contact shadow, the two lamps past the limit (of four more, dim and far) are counted and
+@pytest.mark.filterwarnings("ignore:6 point lights with contact_shadows")  # (the ground truth's frames say it too)
+def test_past_four_lamps_the_rest_shine_without_and_it_is_said_once(scene):
+    """At most MAX_CONTACT_LAMPS (4) lamps have them: the lamp that matters most keeps its
+    contact shadow, the two lamps past the limit (of five more, dim and far) are counted and
     a LightLimitWarning says so, once."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        shadowed, runner, _ = _lamp_frame(scene, contact=ContactShadows(length=0.3, thickness=0.5), others=4)
+        shadowed, runner, _ = _lamp_frame(scene, contact=ContactShadows(length=0.3, thickness=0.5), others=5)
         runner.frame()
     assert runner.stats.contact_lamps_cut == 2
     said = [w for w in caught if issubclass(w.category, LightLimitWarning) and "contact_shadows" in str(w.message)]
-    assert len(said) == 1 and "at most 3" in str(said[0].message), [str(w.message) for w in said]
-    kept, inside, _, _ = _lamp_kept(scene, ContactShadows(length=0.3, thickness=0.5), others=4)
+    assert len(said) == 1 and "at most 4" in str(said[0].message), [str(w.message) for w in said]
+    kept, inside, _, _ = _lamp_kept(scene, ContactShadows(length=0.3, thickness=0.5), others=5)
     assert np.median(kept[inside]) < 0.05
 
 
@@ -321,6 +323,16 @@ def test_a_context_short_of_texture_units_lights_lamps_without_them(scene):
         said = [w for w in caught if issubclass(w.category, GLLimitWarning)]
         assert len(said) == (1 if short else 0)
     np.testing.assert_array_equal(frames[0], frames[1])
+
+
+def test_four_lamps_in_one_place_each_take_their_own_channel(scene):
+    """Four lamps in the lamp's place, a quarter of its light each: every channel of the lamps'
+    image (the fourth, alpha, too) darkens its own lamp, so the floor within the reach loses
+    all their light as it loses the one lamp's (one channel left out would keep a quarter)."""
+    kept, inside, outside, runner = _lamp_kept(scene, ContactShadows(length=0.3, thickness=0.5), copies=4)
+    assert runner.stats.contact_lamps_cut == 0 and inside.sum() > 100
+    assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 75) < 0.1, kept[inside]
+    assert np.percentile(kept[outside], 0.5) > 0.9
 
 
 def test_contact_shadows_is_a_bool():
