@@ -40,17 +40,17 @@ BOX = (np.array([0.0, 0.2, 0.0]), np.array([0.2, 0.2, 0.2]))   # centre, half si
 MARGIN = 0.03   # metres either side of a ray's reach left out (a texel's width and the march's steps)
 
 
-def _scene(world, contact: ContactShadows | None, sun: float = 1.0, occlusion: AmbientOcclusion | None = None,
-           eye=(0.3, 2.0, 0.05)) -> dict:
-    # Looking almost straight down: what lies behind the box as the camera sees it is the box
-    # itself (a ray's sample under its top is inside it, under by at most its height), so the
-    # depth image's answer is the geometry's where the thickness spans the box.
+def _floor_and_box(world, components, eye=(0.3, 2.0, 0.05)) -> dict:
+    """The box on the floor, the light from all round and a camera at ``eye`` with
+    ``components`` (None left out), looking almost straight down: what lies behind the box as
+    the camera sees it is the box itself (a ray's sample under its top is inside it, under by
+    at most its height), so the depth image's answer is the geometry's where the thickness
+    spans the box."""
     camera = look_from(world, eye, (0.3, 0.0, 0.0))
-    for component in (contact, occlusion):
+    for component in components:
         if component is not None:
             world.add_component(camera, component)
     world.spawn(HemisphereLight(sky=(0.3, 0.3, 0.3), ground=(0.3, 0.3, 0.3)))
-    world.spawn(DirectionalLight(direction=SUN, intensity=sun, shadows=False))
     floor = world.spawn(Transform(position=(0.0, -0.05, 0.0)), MeshRef(box((12.0, 0.1, 12.0))),
                         Material(color=(0.6, 0.6, 0.6), roughness=1.0))
     world.spawn(Transform(position=tuple(BOX[0])), MeshRef(box(tuple(2.0 * BOX[1]))),
@@ -58,9 +58,19 @@ def _scene(world, contact: ContactShadows | None, sun: float = 1.0, occlusion: A
     return {"camera": camera, "floor": floor}
 
 
-def _frame(scene, **options) -> tuple[np.ndarray, object, dict]:
+def _scene(world, contact: ContactShadows | None, sun: float = 1.0, occlusion: AmbientOcclusion | None = None,
+           eye=(0.3, 2.0, 0.05)) -> dict:
+    """The box on the floor under a sun without shadow maps."""
+    names = _floor_and_box(world, (contact, occlusion), eye)
+    world.spawn(DirectionalLight(direction=SUN, intensity=sun, shadows=False))
+    return names
+
+
+def _frame(scene, build=None, **options) -> tuple[np.ndarray, object, dict]:
+    """The second frame of ``build(world, **options)`` (the sun's scene by default), in linear
+    light, its runner and names."""
     names: dict = {}
-    runner = scene(lambda world: names.update(_scene(world, **options)), SIZE)
+    runner = scene(lambda world: names.update((build or _scene)(world, **options)), SIZE)
     runner.engine.renderer.antialias = "off"
     runner.frame()
     return srgb_to_linear(runner.frame()), runner, names
@@ -220,39 +230,23 @@ def _lamp_scene(world, contact: ContactShadows | None, intensity: float = 3.0, f
     """The box on the floor lit by a lamp (a PointLight without shadow maps; ``copies`` lamps in
     one place sharing its intensity) and the light from all round, no sun; ``others`` more
     lamps with contact shadows, dim, far off to the side."""
-    camera = look_from(world, (0.3, 2.0, 0.05), (0.3, 0.0, 0.0))
-    if contact is not None:
-        world.add_component(camera, contact)
-    world.spawn(HemisphereLight(sky=(0.3, 0.3, 0.3), ground=(0.3, 0.3, 0.3)))
+    names = _floor_and_box(world, (contact,))
     for _ in range(copies):
         world.spawn(Transform(position=tuple(LAMP)),
                     PointLight(intensity=intensity / copies, range=8.0, contact_shadows=flagged))
     for index in range(others):
         world.spawn(Transform(position=(6.0 + index, 3.0, 6.0)), PointLight(intensity=0.01, range=2.0,
                                                                            contact_shadows=True))
-    floor = world.spawn(Transform(position=(0.0, -0.05, 0.0)), MeshRef(box((12.0, 0.1, 12.0))),
-                        Material(color=(0.6, 0.6, 0.6), roughness=1.0))
-    world.spawn(Transform(position=tuple(BOX[0])), MeshRef(box(tuple(2.0 * BOX[1]))),
-                Material(color=(0.6, 0.6, 0.6), roughness=1.0))
-    return {"camera": camera, "floor": floor}
-
-
-def _lamp_frame(scene, **options) -> tuple[np.ndarray, object, dict]:
-    names: dict = {}
-    runner = scene(lambda world: names.update(_lamp_scene(world, **options)), SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    return srgb_to_linear(runner.frame()), runner, names
+    return names
 
 
 def _lamp_kept(scene, contact: ContactShadows, **options):
     """Each floor pixel's share of the lamp's light kept under ``contact``, and whether the ray
     from its floor point towards the lamp meets the box within the reach (less and plus the
     margin): as ``_sun_kept``, the lamp's way a point's own."""
-    shadowed, runner, names = _lamp_frame(scene, contact=contact, **options)
-    lit, _, _ = _lamp_frame(scene, contact=None, **options)
-    dark, _, _ = _lamp_frame(scene, contact=None, intensity=0.0, **{k: v for k, v in options.items()
-                                                                    if k != "intensity"})
+    shadowed, runner, names = _frame(scene, _lamp_scene, contact=contact, **options)
+    lit, _, _ = _frame(scene, _lamp_scene, contact=None, **options)
+    dark, _, _ = _frame(scene, _lamp_scene, contact=None, intensity=0.0, **options)
     lamp_light = (lit - dark).mean(axis=-1)
     kept = (shadowed - dark).mean(axis=-1) / np.maximum(lamp_light, 1e-6)
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
@@ -296,7 +290,7 @@ def test_past_four_lamps_the_rest_shine_without_and_it_is_said_once(scene):
     a LightLimitWarning says so, once."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        shadowed, runner, _ = _lamp_frame(scene, contact=ContactShadows(length=0.3, thickness=0.5), others=5)
+        shadowed, runner, _ = _frame(scene, _lamp_scene, contact=ContactShadows(length=0.3, thickness=0.5), others=5)
         runner.frame()
     assert runner.stats.contact_lamps_cut == 2
     said = [w for w in caught if issubclass(w.category, LightLimitWarning) and "contact_shadows" in str(w.message)]

@@ -270,24 +270,57 @@ MARGIN = 0.03   # metres either side of the box's foot left out
 REACH_MARGIN = 0.05   # and of the ray's reach: 3 pixels of the floor there (the find's steps, a texel)
 
 
-def _sun_room(world, contact: ContactShadows | None, sun: float = 1.0) -> dict:
-    """``tests/test_contact_shadows.py``'s box on a floor under a sun without shadow maps,
-    seen in a mirror overhead by a camera looking up at it: the mirror's view looks down on
-    the box from where that test's camera stood."""
-    names = contact_scene(world, contact, sun, eye=(0.3, 1.0, 0.05))
-    world.get(names["camera"], Transform).rotation = look_rotation(glm.vec3(0.0, 0.5, -0.05))
+def _overhead(names: dict, world) -> dict:
+    """A scene of ``tests/test_contact_shadows.py`` (its ``names``) seen in a mirror overhead by
+    a camera looking up at it: the mirror's view looks down on the box from where that test's
+    camera stood."""
+    transform = world.get(names["camera"], Transform)
+    transform.position = glm.vec3(0.3, 1.0, 0.05)
+    transform.rotation = look_rotation(glm.vec3(0.0, 0.5, -0.05))
     names["mirror"] = world.spawn(
         Transform(position=(0.3, CEILING, 0.0), rotation=glm.angleAxis(glm.radians(90.0), glm.vec3(1, 0, 0))),
         MeshRef(quad(4.0, 4.0)), Mirror(), Material(color=(0.5, 0.5, 0.5)))
     return names
 
 
-def _sun_frame(scene, **options) -> tuple[np.ndarray, object, dict]:
-    names: dict = {}
-    runner = scene(lambda world: names.update(_sun_room(world, **options)), SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    return srgb_to_linear(runner.frame()), runner, names
+def _kept_in_mirror(scene, build, contact: ContactShadows, dark: dict) -> tuple:
+    """The overhead mirror over ``build``'s scene (``build(world, contact, **options)``): each
+    pixel's share of the light ``dark`` turns off kept under ``contact`` (linear, as
+    ``tests/test_contact_shadows.py`` finds it), each pixel's floor point (its ray reflected
+    off the ceiling to the floor, float64), the mirror's floor pixels to judge (lit, clear of
+    the box's footprint) and the runner drawn with ``contact``."""
+    frames = []
+    for light_off, shadows in (({}, contact), ({}, None), (dark, None)):
+        names: dict = {}
+        runner = scene(lambda world, names=names, shadows=shadows, light_off=light_off: names.update(
+            _overhead(build(world, shadows, **light_off), world)), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        frames.append((srgb_to_linear(runner.frame()), runner, names))
+    (shadowed, runner, names), (lit, _, _), (off, _, _) = frames
+    light = (lit - off).mean(axis=-1)
+    kept = (shadowed - off).mean(axis=-1) / np.maximum(light, 1e-6)
+    assert runner.stats.reflection_views == 1
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    starts = eye + rays * ((CEILING - eye[1]) / rays[..., 1])[..., None]
+    ways = rays * np.array([1.0, -1.0, 1.0])
+    points = starts + ways * (-starts[..., 1] / ways[..., 1])[..., None]
+    floor = (runner.engine.renderer.targets.read_surface_ids() == names["mirror"]) & (light > 0.02)
+    floor &= ~((np.abs(points[..., 0] - BOX[0][0]) < BOX[1][0] + MARGIN)
+               & (np.abs(points[..., 2] - BOX[0][2]) < BOX[1][2] + MARGIN))
+    return kept, points, floor
+
+
+def _judged(points: np.ndarray, floor: np.ndarray, towards: np.ndarray, reach, grow: float) -> tuple:
+    """The floor pixels whose ray ``towards`` the light (unit, a row a floor pixel) meets the
+    box shrunk by ``grow`` within ``reach`` less REACH_MARGIN (surely shadowed), and those that
+    miss it grown by ``grow`` within ``reach`` plus it (surely lit)."""
+    inside = np.zeros(floor.shape, bool)
+    outside = np.zeros(floor.shape, bool)
+    rows = points[floor]
+    inside[floor] = box_hits(rows, towards, BOX[0], BOX[1] - grow, limit=reach - REACH_MARGIN)
+    outside[floor] = ~box_hits(rows, towards, BOX[0], BOX[1] + grow, limit=reach + REACH_MARGIN)
+    return inside, outside
 
 
 @pytest.mark.parametrize("depth", [1, 0])
@@ -296,26 +329,9 @@ def test_a_mirror_shows_the_contact_shadow_where_the_sun_ray_meets_the_box(scene
     the ray's reach of the box towards the sun its sun is gone, outside it kept; at
     reflection_depth 0 it is kept everywhere (the camera's own view sees only the mirror)."""
     contact = ContactShadows(length=0.3, thickness=0.5, reflection_depth=depth)
-    shadowed, runner, names = _sun_frame(scene, contact=contact)
-    lit, _, _ = _sun_frame(scene, contact=None)
-    dark, _, _ = _sun_frame(scene, contact=None, sun=0.0)
-    sun_light = (lit - dark).mean(axis=-1)
-    kept = (shadowed - dark).mean(axis=-1) / np.maximum(sun_light, 1e-6)
-    assert runner.stats.reflection_views == 1
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    starts = eye + rays * ((CEILING - eye[1]) / rays[..., 1])[..., None]
-    ways = rays * np.array([1.0, -1.0, 1.0])
-    points = starts + ways * (-starts[..., 1] / ways[..., 1])[..., None]
-    mirror = runner.engine.renderer.targets.read_surface_ids() == names["mirror"]
-    # (the floor's, outside the box's top as seen: rays meeting the floor before the box)
-    floor = mirror & (sun_light > 0.02)
-    floor &= ~((np.abs(points[..., 0] - BOX[0][0]) < BOX[1][0] + MARGIN)
-               & (np.abs(points[..., 2] - BOX[0][2]) < BOX[1][2] + MARGIN))
+    kept, points, floor = _kept_in_mirror(scene, contact_scene, contact, {"sun": 0.0})
     towards = np.broadcast_to(-np.array(SUN, np.float64), points[floor].shape)
-    inside = np.zeros(mirror.shape, bool)
-    outside = np.zeros(mirror.shape, bool)
-    inside[floor] = box_hits(points[floor], towards, *BOX, limit=contact.length - REACH_MARGIN)
-    outside[floor] = ~box_hits(points[floor], towards, *BOX, limit=contact.length + REACH_MARGIN)
+    inside, outside = _judged(points, floor, towards, contact.length, 0.0)
     assert inside.sum() > 120 and outside.sum() > 5000, (inside.sum(), outside.sum())
     if depth:
         assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.25, kept[inside]
@@ -362,47 +378,11 @@ def test_a_mirror_shows_a_lamps_contact_shadow_where_its_ray_meets_the_box(scene
     is gone, outside it kept (the lamp carried into the mirror's view's space)."""
     from tests.test_contact_shadows import LAMP, _lamp_scene
 
-    def frame(contact, intensity=3.0):
-        names: dict = {}
-
-        def build(world):
-            names.update(_lamp_scene(world, contact, intensity=intensity))
-            transform = world.get(names["camera"], Transform)
-            transform.position = glm.vec3(0.3, 1.0, 0.05)
-            transform.rotation = look_rotation(glm.vec3(0.0, 0.5, -0.05))
-            names["mirror"] = world.spawn(
-                Transform(position=(0.3, CEILING, 0.0), rotation=glm.angleAxis(glm.radians(90.0), glm.vec3(1, 0, 0))),
-                MeshRef(quad(4.0, 4.0)), Mirror(), Material(color=(0.5, 0.5, 0.5)))
-
-        runner = scene(build, SIZE)
-        runner.engine.renderer.antialias = "off"
-        runner.frame()
-        return srgb_to_linear(runner.frame()), runner, names
-
     contact = ContactShadows(length=0.3, thickness=0.5)
-    shadowed, runner, names = frame(contact)
-    lit, _, _ = frame(None)
-    dark, _, _ = frame(None, intensity=0.0)
-    lamp_light = (lit - dark).mean(axis=-1)
-    kept = (shadowed - dark).mean(axis=-1) / np.maximum(lamp_light, 1e-6)
-    assert runner.stats.reflection_views == 1
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    starts = eye + rays * ((CEILING - eye[1]) / rays[..., 1])[..., None]
-    ways = rays * np.array([1.0, -1.0, 1.0])
-    points = starts + ways * (-starts[..., 1] / ways[..., 1])[..., None]
-    mirror = runner.engine.renderer.targets.read_surface_ids() == names["mirror"]
-    floor = mirror & (lamp_light > 0.02)
-    floor &= ~((np.abs(points[..., 0]) < BOX[1][0] + MARGIN) & (np.abs(points[..., 2]) < BOX[1][2] + MARGIN))
-    rows = points[floor]
-    towards = LAMP - rows
+    kept, points, floor = _kept_in_mirror(scene, _lamp_scene, contact, {"intensity": 0.0})
+    towards = LAMP - points[floor]
     reach = np.linalg.norm(towards, axis=-1)
-    towards /= reach[:, None]
-    inside = np.zeros(mirror.shape, bool)
-    outside = np.zeros(mirror.shape, bool)
-    inside[floor] = box_hits(rows, towards, BOX[0], BOX[1] - MARGIN,
-                             limit=np.minimum(contact.length - REACH_MARGIN, reach))
-    outside[floor] = ~box_hits(rows, towards, BOX[0], BOX[1] + MARGIN,
-                               limit=np.minimum(contact.length + REACH_MARGIN, reach))
+    inside, outside = _judged(points, floor, towards / reach[:, None], np.minimum(contact.length, reach), MARGIN)
     assert inside.sum() > 80 and outside.sum() > 5000, (inside.sum(), outside.sum())
     assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.3, kept[inside]
     assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
