@@ -16,12 +16,18 @@ import pytest
 os.environ.setdefault("SPECULUM_DEBUG", "1")
 
 from engine.render.gl_context import create_headless_context
+from engine.render.shader_library import FreePrograms
 from tests.support import SceneRunner
+
+FREE_PROGRAMS_KEPT = 512
 
 
 @pytest.fixture(scope="session")
 def ctx():
     context = create_headless_context()
+    # The suite's thousands of engines take turns on this context with different programs:
+    # the free list keeps more of them than an engine holds (engine/render/shader_library.py).
+    FreePrograms.of(context).keep = FREE_PROGRAMS_KEPT
     yield context
     context.release()
 

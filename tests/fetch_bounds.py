@@ -20,6 +20,8 @@ from collections.abc import Iterator
 
 import moderngl
 
+from tests.support import programs_linked_anew
+
 POISON_FLOAT = 4093.0          # rgb far above any colour (white after the tone curve), alpha too
 POISON_UINT = 0x5EEDF00D       # no entity id, node index or NO_END_IMAGE (0xFFFFFFFF)
 
@@ -69,6 +71,7 @@ def poisoned_fetches(mode: str = "constant") -> Iterator[list[str]]:
 
     moderngl.Context.program = poisoned_program
     try:
-        yield rewritten
+        with programs_linked_anew():  # every program through the hook, none handed on
+            yield rewritten
     finally:
         moderngl.Context.program = make_program

@@ -688,6 +688,7 @@ def strict_draws(ctx: moderngl.Context) -> Iterator[StrictGL]:
     # A hot reload links the same GL program again with new shaders (ShaderLibrary's relink):
     # what is known of it (uniform locations, blocks, outputs, sources) is the old build's.
     from engine.render import shader_library
+    from tests.support import programs_linked_anew
 
     relink = shader_library._RelinkGL.relink
 
@@ -702,7 +703,8 @@ def strict_draws(ctx: moderngl.Context) -> Iterator[StrictGL]:
     moderngl.Context.program = recorded_program
     shader_library._RelinkGL.relink = forgetting_relink
     try:
-        yield checker
+        with programs_linked_anew():  # every program's sources recorded
+            yield checker
     finally:
         moderngl.VertexArray.render, moderngl.Framebuffer.clear = render, clear
         moderngl.Context.program = make_program

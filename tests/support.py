@@ -1,6 +1,9 @@
 """Helpers shared by the system tests: run a level on the test context, read pixels back."""
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -8,8 +11,25 @@ from pyglm import glm
 from components import Camera, Transform, look_rotation
 from engine.core.frame_io import Output
 from engine.core.game import Game
+from engine.render.shader_library import FreePrograms
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
+
+
+@contextlib.contextmanager
+def programs_linked_anew() -> Iterator[FreePrograms]:
+    """Inside: every shader library made links its own programs, and hands them to a free
+    list of its own, released at the end (``FreePrograms``): for hooks on
+    ``moderngl.Context.program`` that must see every program an engine uses, and whose
+    programs (rewritten, recorded) must not be handed to engines made after."""
+    own = FreePrograms()
+    of = FreePrograms.__dict__["of"]
+    FreePrograms.of = classmethod(lambda cls, ctx: own)
+    try:
+        yield own
+    finally:
+        FreePrograms.of = of
+        own.release()
 
 
 class FunctionGame(Game):

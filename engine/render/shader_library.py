@@ -49,6 +49,17 @@ bound to its old location, so every vertex array, cached program and uniform a p
 keeps working without knowing of the reload; moderngl's uniform objects get their new
 locations, and the values the engine set once (sampler units, uniform-block bindings) are
 written back.
+
+Programs outlive the library that built them, on its context (``FreePrograms``): a library
+that is released hands its programs to the context's free list, each uniform put back to
+the 0 a link gives it and each block to binding 0, and a library on the same context that
+needs a program of the same key, from the same expanded sources, takes it instead of
+compiling and linking again.  An engine closed and another opened on one context (a level
+reloaded, an editor's preview, the test suite's thousands of engines) pays for each variant
+once: on llvmpipe a link is 1 ms from Mesa's shader cache and 30 ms or more without it.  The
+list keeps at most as many programs as the fullest library given back held (a program is
+megabytes of machine code on a software rasteriser; ``FreePrograms.keep`` sets another
+number), the longest unused going first.
 """
 from __future__ import annotations
 
@@ -381,6 +392,93 @@ class UniformValues:
         self.values.clear()
 
 
+class FreePrograms:
+    """The programs of released libraries on one context, by (root, key), waiting for a
+    library that needs one built from the same sources (the module's docstring).  Kept in
+    the context's ``extra`` (as the samples queries are), so it goes with the context."""
+
+    EXTRA_KEY = "speculum.free_programs"
+
+    def __init__(self) -> None:
+        # (root, key) -> [(sources, program)], the longest unused first (dicts keep their order)
+        self._free: dict[tuple, list[tuple[dict[str, str | None], moderngl.Program]]] = {}
+        self.count = 0  # programs held
+        self.most = 0   # the most a library given back held
+        # How many the list keeps: None, as many as the fullest library given back held (a
+        # level reloaded finds its programs); more where engines with different needs take
+        # turns on one context (the test suite keeps 512: a third of its time saved).
+        self.keep: int | None = None
+        self.taken = 0  # programs handed out instead of built (for tests and benchmarks)
+        self.released = False  # after ``release``: a program given is released at once
+
+    @classmethod
+    def of(cls, ctx: moderngl.Context) -> FreePrograms:
+        """The free list of ``ctx`` (made on first use)."""
+        if not isinstance(ctx.extra, dict):
+            ctx.extra = {}
+        free = ctx.extra.get(cls.EXTRA_KEY)
+        if free is None:
+            free = ctx.extra[cls.EXTRA_KEY] = cls()
+        return free
+
+    def take(self, root: Path | None, key: ProgramKey, sources: dict[str, str | None]) -> moderngl.Program | None:
+        """A free program of ``key`` linked from ``sources`` (taken off the list), or None."""
+        entries = self._free.get((root, key))
+        if not entries:
+            return None
+        for index, (linked, program) in enumerate(entries):
+            if linked == sources:
+                del entries[index]
+                if not entries:
+                    del self._free[(root, key)]
+                self.count -= 1
+                self.taken += 1
+                return program
+        return None
+
+    def give(self, root: Path | None, key: ProgramKey, sources: dict[str, str | None],
+             program: moderngl.Program) -> None:
+        """Put ``program`` on the list as a link leaves it: every uniform 0 (no shader gives
+        one an initial value) and every block on binding 0, so the library that takes it
+        finds what a new program has, whatever the last one wrote."""
+        if self.released:
+            program.release()
+            return
+        for member in program._members.values():
+            if _is_uniform(member) and member.location >= 0:
+                data = member.read()
+                if any(data):
+                    member.write(bytes(len(data)))
+            elif _is_block(member) and member.binding != 0:
+                member.binding = 0
+        entries = self._free.pop((root, key), [])
+        entries.append((sources, program))
+        self._free[(root, key)] = entries  # to the end: the most recently used
+        self.count += 1
+
+    def trim(self, held: int) -> None:
+        """Release the longest unused programs until the list holds at most ``keep`` (by
+        default the most any library given back held; ``held``: the one given back now)."""
+        self.most = max(self.most, held)
+        keep = self.most if self.keep is None else self.keep
+        while self.count > keep:
+            first = next(iter(self._free))
+            entries = self._free[first]
+            entries.pop(0)[1].release()
+            if not entries:
+                del self._free[first]
+            self.count -= 1
+
+    def release(self) -> None:
+        """Release every free program (the context stays) and every one given from now on."""
+        self.released = True
+        for entries in self._free.values():
+            for _, program in entries:
+                program.release()
+        self._free.clear()
+        self.count = 0
+
+
 class ShaderLibrary:
     """Compiled programs of one context, cached by (files, defines), rebuilt in place when
     a file they were built from changes (``poll``)."""
@@ -393,6 +491,10 @@ class ShaderLibrary:
         self._seen: dict[str, tuple] = {}                # file -> (mtime_ns, size, text) when last read
         self._remembered: dict[ProgramKey, dict[str, tuple]] = {}  # values set once, kept across rebuilds
         self._inputs: dict[ProgramKey, dict[str, int]] = {}  # vertex input locations, kept across rebuilds
+        # The sources each program was linked from, where they are the files' own (not a
+        # variant built from the files before an edit, not one a reload relinked): those the
+        # context's free list may hand to another library (``release``).
+        self._built_from: dict[ProgramKey, dict[str, str | None]] = {}
         self.errors: dict[ProgramKey, str] = {}          # programs whose edited files do not build
         self.reloads = 0                                  # programs rebuilt by poll
         self.uniforms = UniformValues()                   # what its programs' uniforms hold, where recorded
@@ -400,6 +502,7 @@ class ShaderLibrary:
         self._news: list[str] = []                       # said by the next poll (variants built from _good)
         self._next_poll = 0.0
         self._gl: _RelinkGL | None = None
+        self.free_programs = FreePrograms.of(ctx)  # taken from and given back to (module docstring)
 
     def fullscreen(self, fragment: str, defines: dict[str, str] | None = None,
                    **units: int) -> moderngl.VertexArray:
@@ -419,7 +522,7 @@ class ShaderLibrary:
         if program is None:
             files = SourceFiles()
             try:
-                program = self._build(key, files)
+                program = self._build(key, files, free=self.free_programs)
             except ShaderError as exc:
                 program = self._build_before_the_edit(key, files, exc)
             self._programs[key] = program
@@ -442,10 +545,32 @@ class ShaderLibrary:
                           f"which does not build: {_reasons(error)[0] if _reasons(error) else error}")
         return program
 
-    def _build(self, key: ProgramKey, files: SourceFiles, contents: dict[str, bytes] | None = None) -> moderngl.Program:
+    def _build(self, key: ProgramKey, files: SourceFiles, contents: dict[str, bytes] | None = None,
+               free: FreePrograms | None = None) -> moderngl.Program:
         """A new program of ``key``; ``files`` gets the files it was built from (also those
         read before a failure, so a fix to any of them is seen); ``contents``: bytes to build
-        some files from instead of their own (``_build_before_the_edit``)."""
+        some files from instead of their own (``_build_before_the_edit``); ``free``: the
+        context's free programs, one of which built from the same sources is taken instead."""
+        sources = self._sources(key, files, contents)
+        if free is not None:
+            program = free.take(self.root, key, sources)
+            if program is not None:
+                self._built_from[key] = sources
+                return program
+        vertex, fragment, geometry, _ = key
+        try:
+            program = self.ctx.program(**sources)
+        except moderngl.Error as exc:
+            names = ", ".join(f for f in (vertex, geometry, fragment) if f)
+            log = str(exc)
+            raise ShaderBuildError(f"shader program ({names}) failed to build:\n{files.readable(log)}",
+                                   files.diagnostics(log)) from exc
+        if contents is None:
+            self._built_from[key] = sources
+        return program
+
+    def _sources(self, key: ProgramKey, files: SourceFiles, contents: dict[str, bytes] | None) -> dict[str, str | None]:
+        """Each stage's expanded source of ``key`` (``_build``'s arguments)."""
         vertex, fragment, geometry, defines = key
         root = self.root or shader_dir()
         expanded = _EXPANDED.get((root, key)) if contents is None else None
@@ -468,13 +593,7 @@ class ShaderLibrary:
                 stamps = _stamps(root, files.names[1:])
                 if stamps is not None and stamps == [self._seen[name][:2] for name in files.names[1:]]:
                     _EXPANDED[(root, key)] = (sources, files.names[1:], stamps)
-        try:
-            return self.ctx.program(**sources)
-        except moderngl.Error as exc:
-            names = ", ".join(f for f in (vertex, geometry, fragment) if f)
-            log = str(exc)
-            raise ShaderBuildError(f"shader program ({names}) failed to build:\n{files.readable(log)}",
-                                   files.diagnostics(log)) from exc
+        return sources
 
     # --- hot reload ---------------------------------------------------------------------------
     def _path(self, name: str) -> Path:
@@ -548,8 +667,10 @@ class ShaderLibrary:
             if not touched:
                 continue
             files = SourceFiles()
+            self._built_from.pop(key, None)  # relinked in place: its own library's to the end
             try:
                 built = self._build(key, files)
+                self._built_from.pop(key, None)
                 self._uses[key] = set(files.names[1:])
                 self._swap_in(key, program, built)
             except ShaderError as exc:
@@ -660,9 +781,18 @@ class ShaderLibrary:
                 member.binding = value[1]
 
     def release(self) -> None:
-        for program in self._programs.values():
-            program.release()
+        """Hand every program built from the files' own sources to the context's free list
+        (``FreePrograms``); release the others."""
+        free = self.free_programs
+        for key, program in self._programs.items():
+            sources = self._built_from.get(key)
+            if sources is None or key in self.errors:
+                program.release()
+            else:
+                free.give(self.root, key, sources, program)
+        free.trim(len(self._programs))
         self._programs.clear()
+        self._built_from.clear()
         self.uniforms.forget()
         self._uses.clear()
         self._seen.clear()
