@@ -3,7 +3,7 @@ from components.ambient import AmbientOcclusion, ContactShadows, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.decal import Decal, FromDecal
 from components.detail import LevelOfDetail
-from components.fog import Fog
+from components.fog import Fog, VolumetricFog
 from components.mirror import Mirror
 from components.model import Animation, AnimationEvents, AnimationLayer, FromModel, Model
 from components.particles import ParticleEmitter
@@ -40,6 +40,6 @@ __all__ = [
     "Reflective",
     "Refractive",
     "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice",
-    "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "Water",
+    "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",
 ]

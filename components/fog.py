@@ -18,7 +18,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.tracking import TrackedComponent, color, finite
+from components.tracking import TrackedComponent, boolean, color, finite, integer
 
 # The thickest fog: 1000 per metre is a millimetre's visibility, past which nothing is seen.
 MAX_FOG_DENSITY = 1000.0
@@ -28,6 +28,10 @@ MAX_FOG_FALLOFF = 1000.0
 MAX_FOG_HEIGHT = 1.0e6
 # The strongest sun scatter: the glow towards the sun this many times the sun's light.
 MAX_FOG_SUN_SCATTER = 100.0
+# VolumetricFog: the strongest scattering, the longest march (metres) and its most steps.
+MAX_VOLUMETRIC_INTENSITY = 100.0
+MAX_VOLUMETRIC_DISTANCE = 10_000.0
+MIN_VOLUMETRIC_STEPS, MAX_VOLUMETRIC_STEPS = 4, 128
 
 
 @dataclass(eq=False)
@@ -73,3 +77,62 @@ class Fog(TrackedComponent):
             return finite(self, name, value, low=0.0, high=MAX_FOG_SUN_SCATTER)
         return value
 
+
+
+@dataclass(eq=False)
+class VolumetricFog(TrackedComponent):
+    """Light shafts: the sun's light scattered towards the eye by the air of the camera's
+    ``Fog``, shadowed by what stands between the air and the sun, for the camera whose
+    entity holds it beside its ``Fog`` (as Unreal's volumetric fog, Godot's and HDRP's do
+    for their height fog).  Sunbeams through a window, a doorway or a portal's frame, the
+    shadow of a pillar across the haze.
+
+    Along each pixel's ray from the camera to what it shows (the sky: ``distance`` on), the
+    air's single scattering of the sun (the brightest ``DirectionalLight``) is summed in
+    ``steps`` steps (``engine/render/volumetric_fog.py``): at each, the air's density (the
+    Fog's, with its height falloff), what of it reaches the eye (the Fog's transmittance
+    from the camera), whether the sun reaches it (the sun's shadow map, its cascades
+    included) and the Henyey-Greenstein phase function of the angle between the sun's light
+    and the ray.  A step starts at a different offset each pixel (and each frame under
+    temporal AA), and a depth-aware filter brings the sum to every pixel and hides the
+    steps' banding.  It is added to what the Fog's colour and sun glow already give (set the
+    Fog's ``sun_scatter`` to 0 where the shafts should be the sun's only glow).
+
+    - ``intensity``: the share of the light the air takes away that it scatters (its
+      albedo; 1 by default: none absorbed), times any artistic boost (at most 100).
+    - ``anisotropy``: the phase function's g, from -0.95 (light scattered back towards the
+      sun) through 0 (the same every way) to 0.95 (forwards: bright shafts looking towards
+      the sun); 0.6 by default, haze.
+    - ``distance``: metres along each ray the air is summed (past that, or past what the
+      pixel shows, nothing more is added); 40 by default.
+    - ``steps``: samples along each ray (4 to 128; 32 by default): fewer are faster, more
+      resolve thinner shadows.
+    - ``half_resolution``: the rays marched at half the screen's size in each direction (a
+      ray a 2 x 2 block) and filtered up to every pixel (True, the default); False: a ray a
+      pixel.
+
+    Only the camera's own view: a mirror's or portal's view shows the fog's colour and glow
+    but no shafts (their pixels get the shafts of the air between the camera and the
+    surface), and glass in front of the shafts does not dim them.  Without a Fog with a
+    density, or without a sun, it adds nothing and says so once (a ``ComponentWarning``
+    from the main stage); a sun that casts no shadow lights the air everywhere.
+    """
+
+    intensity: float = 1.0
+    anisotropy: float = 0.6
+    distance: float = 40.0
+    steps: int = 32
+    half_resolution: bool = True
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "intensity":
+            return finite(self, name, value, low=0.0, high=MAX_VOLUMETRIC_INTENSITY)
+        if name == "anisotropy":
+            return finite(self, name, value, low=-0.95, high=0.95)
+        if name == "distance":
+            return finite(self, name, value, positive=True, high=MAX_VOLUMETRIC_DISTANCE)
+        if name == "steps":
+            return integer(self, name, value, low=MIN_VOLUMETRIC_STEPS, high=MAX_VOLUMETRIC_STEPS)
+        if name == "half_resolution":
+            return boolean(self, name, value)
+        return value

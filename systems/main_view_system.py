@@ -20,6 +20,7 @@ from dataclasses import replace
 import esper
 
 from components.ambient import AmbientOcclusion, ContactShadows
+from components.fog import Fog, VolumetricFog
 from components.screen_reflections import ScreenReflections
 from components.tracking import ComponentWarning
 from engine.core.errors import NoCameraWarning
@@ -63,11 +64,13 @@ class MainViewSystem(esper.Processor):
         self._said_nothing_reflects: ScreenReflections | None = None  # the one warned about (once)
         self._said_no_sun: ContactShadows | None = None  # the contact shadows warned about having no sun (once)
         self._looked_at: list | None = None  # the batch list last looked through for a reflecting one
+        self.shafts: VolumetricFog | None = None  # the light shafts drawn this frame
+        self._said_no_shafts: tuple[VolumetricFog, str] | None = None  # (the one warned about, why: once)
 
     def process(self, dt: float) -> None:
         world = self.world
         views = world.resources[FrameViews] = FrameViews()
-        self.occluded = self.reflected = None
+        self.occluded = self.reflected = self.shafts = None
         self.renderer.scene_pass.particle_draw.reactive = None   # (set again below while TAA is on)
         output: Output | None = world.resources.get(Output)
         camera = active_camera_parts(world)
@@ -82,6 +85,7 @@ class MainViewSystem(esper.Processor):
                 if self.renderer.screen_occlusion is not None:
                     self.renderer.occlusion.release_targets()
                 self.renderer.screen_reflections.release_targets()
+                self.renderer.volumetric_fog.release_targets()
             return  # minimised window or nothing to look through
         _, cam, cam_t = camera
         levels = self.renderer.levels  # the main view tree's targets (the renderer owns them)
@@ -136,6 +140,29 @@ class MainViewSystem(esper.Processor):
             views.options = self._screen(views.options, occlusion is not None or contact is not None,
                                          reflections is not None)
         self.renderer.scene_pass.draw([views.main], targets, views.options)
+        self._shafts(camera[0], views.main, targets)
+
+    def _shafts(self, camera: int, view, targets) -> None:
+        """The camera's ``VolumetricFog``, begun for this frame's ``view`` (drawn into
+        ``targets``) where its Fog has air and the world a sun; said once where not."""
+        shafts = self.world.try_get(camera, VolumetricFog)
+        fog = self.world.try_get(camera, Fog) if shafts is not None else None
+        why = None
+        if shafts is not None and (fog is None or fog.density <= 0.0):
+            why = "has no Fog with a density beside it (the shafts are its air's light)"
+        elif shafts is not None and brightest_directional(self.world) is None:
+            why = "lights its air with the sun, and the world has no DirectionalLight that shines"
+        if why is not None:
+            if self._said_no_shafts != (shafts, why):
+                self._said_no_shafts = (shafts, why)
+                warnings.warn(ComponentWarning(f"VolumetricFog on entity {camera} {why}, so it adds nothing"),
+                              stacklevel=3)
+            shafts = None
+        self.shafts = shafts
+        if shafts is None:
+            self.renderer.volumetric_fog.release_targets()
+            return
+        self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa")
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
         """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects

@@ -161,11 +161,12 @@ def _cutouts(ctx):
 def _fog(path: str):
     """The mirror ring seen through height fog on the camera (the FOG builds of the scene
     programs, the batched ones' geometry stage too; the sky's and the composites' reads of
-    the block), a chrome ball reflecting the sky and screen reflections on the camera (their
-    FOG builds)."""
+    the block), a chrome ball reflecting the sky, screen reflections on the camera (their
+    FOG builds) and light shafts (the march's FOG_FALLOFF build with the sun's shadow
+    lookups, its filter; at half size on the batched path, a ray a pixel on the other)."""
     def run(ctx):
         from benchmarks.mirrors import MirrorRing
-        from components import Camera, Fog, Material, MeshRef, Reflective, ScreenReflections, Transform
+        from components import Camera, Fog, Material, MeshRef, Reflective, ScreenReflections, Transform, VolumetricFog
         from engine.assets.mesh import sphere
 
         def configure(engine):
@@ -174,6 +175,7 @@ def _fog(path: str):
                 engine.world.add_component(entity, Fog(density=0.08, height=1.0, height_falloff=0.3))
                 # (batched: the rays marched at half size, their pass and the composite's build)
                 engine.world.add_component(entity, ScreenReflections(half_resolution=path == "batched"))
+                engine.world.add_component(entity, VolumetricFog(steps=8, half_resolution=path == "batched"))
             engine.world.spawn(Transform(position=(0.0, 0.6, 0.0)), MeshRef(sphere(0.5)),
                                Material(color=(0.9, 0.9, 0.9), metallic=1.0, roughness=0.1), Reflective())
         return _engine_frames(ctx, MirrorRing(4), 3, configure)

@@ -66,7 +66,7 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
         "Skybox", "Tonemap",
-        "Transform", "Traveller", "Vignette", "Visibility", "Water")}
+        "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel", "FromDecal")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner"), ("ParticleEmitter", "on_death")}

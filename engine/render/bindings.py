@@ -155,6 +155,9 @@ REFLECTION_NODE_UNIT = 51     # a reflection level's composite: the level's node
 # Contact shadows of point lights (PointLight.contact_shadows; engine/render/screen_occlusion.py).
 SCREEN_CONTACT_UNIT = 52      # scene (SCREEN_OCCLUSION builds with CONTACT_LAMPS): the lamps' shares
 OCCLUSION_LAMPS_UNIT = 53     # occlusion filter: the lamps' shares found
+# Light shafts (VolumetricFog; engine/render/volumetric_fog.py), past 31 as the reflections'.
+VOLUMETRIC_DEPTH_UNIT = 54    # the march and its filter: the main view's depth (compared with nothing)
+VOLUMETRIC_LIGHT_UNIT = 55    # the filter: the light the march found
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance
@@ -227,6 +230,8 @@ BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, mo
 # "Over" for a colour the shader already multiplied by its alpha (the scene's transparent slot:
 # Material.blend "transparent" keeps part of it whole, which SRC_ALPHA would fade).
 BLEND_PREMULTIPLIED = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+# Adding light to what a level holds, its alpha (coverage) kept: the light shafts'.
+BLEND_ADD = (moderngl.ONE, moderngl.ONE, moderngl.ZERO, moderngl.ONE)
 
 
 @dataclass(frozen=True)

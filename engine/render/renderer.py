@@ -42,6 +42,7 @@ from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.sky_bake import SkyBake
 from engine.render.targets import SEEN_CHANNELS, SEEN_MOVING_CHANNELS, LevelStack, RenderTargets
 from engine.render.text import TextPass
+from engine.render.volumetric_fog import VolumetricFogPass
 from engine.resources import PortalCrossing
 
 _MAX_EXPOSURE = 2.0 ** MAX_EXPOSURE_EV
@@ -104,7 +105,9 @@ class Renderer(Gpu):
         self.irradiance = IrradianceTable(self)  # the probes' diffuse light (engine/render/irradiance.py)
         self.shadows = ShadowMaps(self)
         self.screen_reflections = ScreenReflectionPass(self)  # the camera's ScreenReflections
-        self.scene_pass = ScenePass(self, self.shadows, self.irradiance, self.screen_reflections)
+        self.volumetric_fog = VolumetricFogPass(self, self.shadows)  # the camera's VolumetricFog
+        self.scene_pass = ScenePass(self, self.shadows, self.irradiance, self.screen_reflections,
+                                    self.volumetric_fog)
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
         self.occlusion = ScreenOcclusion(self, self.scene_pass)  # the camera's AmbientOcclusion
         self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
@@ -412,6 +415,7 @@ class Renderer(Gpu):
                 "irradiance_rows": len(self.irradiance.rows),
                 "occlusion_targets": self.occlusion.target_count(),
                 "reflection_targets": self.screen_reflections.target_count(),
+                "volumetric_targets": self.volumetric_fog.target_count(),
                 "particle_buffers": len(self.scene_pass.particle_draw.emitters)}
 
     # --- frame -----------------------------------------------------------------------------
@@ -547,6 +551,7 @@ class Renderer(Gpu):
         self.sky_bake.release()
         self.occlusion.release()
         self.screen_reflections.release()
+        self.volumetric_fog.release()
         self.scene_pass.release()
         self.present_pass.release()
         self.frame_timer.release()

@@ -115,6 +115,7 @@ from engine.render.views import View, union_rect
 if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
     from engine.render.screen_reflections import ScreenReflectionPass
+    from engine.render.volumetric_fog import VolumetricFogPass
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
@@ -142,13 +143,16 @@ class ScenePass:
     irradiance (``irradiance``) it shades with."""
 
     def __init__(self, renderer: Gpu, shadows: ShadowMaps, irradiance: IrradianceTable,
-                 screen_reflections: ScreenReflectionPass | None = None) -> None:
+                 screen_reflections: ScreenReflectionPass | None = None,
+                 volumetric_fog: VolumetricFogPass | None = None) -> None:
         self.renderer = renderer
         self.shadows = shadows
         self.irradiance = irradiance
         # The active camera's screen-space reflections: the main view draws into its
         # framebuffer (SceneOptions.reflections), its composite runs in finish_root.
         self.screen_reflections = screen_reflections
+        # The active camera's light shafts: added in finish_root, after the reflections.
+        self.volumetric_fog = volumetric_fog
         self.ctx = renderer.ctx
         self.sky_draw = SkyDraw(renderer)  # the sky's triangle behind every view
         self.particle_draw = ParticleDraw(renderer, shadows)  # every emitter's particles, in among a view's glass
@@ -396,10 +400,13 @@ class ScenePass:
     def finish_root(self, root: View, targets: RenderTargets, options: SceneOptions) -> None:
         """What a view tree does last in its root ``root`` (drawn into ``targets`` with
         ``options``), once the levels below are composited into it: the screen-space
-        reflections, where the main view was drawn for them (``ScreenReflectionPass``), then
-        the transparent slot (``draw_transparent``), so glass goes over both."""
+        reflections, where the main view was drawn for them (``ScreenReflectionPass``), the
+        light shafts, where its camera has them (``VolumetricFogPass``), then the
+        transparent slot (``draw_transparent``), so glass goes over all."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite(targets)
+        if self.volumetric_fog is not None:
+            self.volumetric_fog.composite(targets)
         self.draw_transparent([root], targets, options)
 
     def finish_level(self, depth: int, views: Sequence[View], targets: RenderTargets, options: SceneOptions,

@@ -144,6 +144,11 @@ class ShadowMaps:
         self._ring_slots[:] = -1
         # Per directional slot: its level map's uv from light space (_axes), what its rings map from.
         self._level_uv: dict[int, tuple[float, float, float, float]] = {}
+        # Per directional slot that casts: its level map's square in the atlas (corner u, v and
+        # side, in uv).  A point whose lookup falls outside it is outside the map's fit, where
+        # no caster stands between it and the light: read by the light shafts' march, whose
+        # points lie anywhere in the air (the scene pass's surfaces are all inside the fit).
+        self.directional_tiles: dict[int, tuple[float, float, float]] = {}
         self.ubo = ctx.buffer(self.block.tobytes())
         # The caster programs by (build: _DEPTH, _DISTANCE, _LAYERED or _LEG; whether for
         # cutouts): _caster_program.
@@ -240,6 +245,7 @@ class ShadowMaps:
                 * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
             self.block[16 * slot:16 * slot + 16] = np.array((to_tile * fit.view_proj).to_list(), np.float32).ravel()
             self._level_uv[slot] = _axes(to_tile * fit.proj)
+            self.directional_tiles[slot] = (x / width, y / width, scale)
             base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
             self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
             self._block_rows[slot] = written
@@ -370,6 +376,7 @@ class ShadowMaps:
         self.block[16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot + 3] = 0.0
         self._block_rows.pop(slot, None)
         self._level_uv.pop(slot, None)
+        self.directional_tiles.pop(slot, None)
         kept = self._fit_blocks.pop(slot, None)
         if kept is not None:
             kept[2].release()

@@ -43,6 +43,15 @@ float fog_depth(vec3 a, vec3 b) {
 #endif
 }
 
+// The air's density at ``x`` (per metre): what fog_depth sums along a stretch.
+float fog_density(vec3 x) {
+#ifdef FOG_FALLOFF
+    return fog.fog_params.x * exp(min(-fog.fog_params.y * (x.y - fog.fog_params.z), FOG_MAX_EXPONENT));
+#else
+    return fog.fog_params.x;
+#endif
+}
+
 // The fog's optical depth from a along the unit direction r to infinity (the sky): finite only
 // where the air thins upwards and r climbs.
 float fog_depth_to_sky(vec3 a, vec3 r) {
@@ -97,6 +106,7 @@ vec3 fog_sky(vec3 color, vec3 a, vec3 r) {
 }
 #else
 float fog_depth(vec3 a, vec3 b) { return 0.0; }
+float fog_density(vec3 x) { return 0.0; }
 float fog_depth_to_sky(vec3 a, vec3 r) { return 0.0; }
 vec3 fogged(vec3 color, float depth, vec3 dir) { return color; }
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }

@@ -1,0 +1,210 @@
+"""Light shafts: the sun's light scattered by the active camera's fog, shadowed
+(``VolumetricFog`` beside its ``Fog``; ``components/fog.py``).
+
+Ray marching through a participating medium, in screen space, as Unreal's, Godot's and
+HDRP's volumetric fog and the older "volumetric light scattering" post passes do, without
+their froxel grid (no compute in GL 4.1): two full-screen draws in the main view tree's
+root, once its mirrors and portals are composited into it and its screen-space reflections
+put in, before its glass (``ScenePass.finish_root``):
+
+1. **The march** (``shaders/volumetric_fog.frag``), at half the view's size by default: each
+   texel's ray from the near plane to what the view's depth image shows (the sky: the
+   component's ``distance`` on) sums, at ``steps`` points, the fog's density there, what of
+   the light scattered there reaches the eye (the fog's own transmittance,
+   ``shaders/include/fog.glsl``) and whether the sun reaches the point (its shadow map, read
+   as the scene pass reads it: ``shaders/include/shadows.glsl``), then scales the sum by the
+   sun's light, the Henyey-Greenstein phase function and ``intensity``.  Each texel's points
+   start at another offset (interleaved gradient noise; moved each frame under temporal AA,
+   whose history then averages them).
+2. **The filter** (``shaders/volumetric_fog_filter.frag``), at the view's size: each pixel
+   takes the march's 4 x 4 texels about it, weighed by a Gaussian of their distance and by how
+   near their rays' lengths are to its own (a shaft behind a near edge stays behind it), and
+   is added to the view's colour (``BLEND_ADD``).
+
+Added to the light the fog's colour and sun glow already give each pixel (the scene pass's
+``FOG`` builds); glass drawn after does not dim it.  Mirror and portal views get no march
+of their own: their surfaces' pixels get the shafts of the air between the camera and the
+surface.  The images are made the first frame a camera asks and let go when none does.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import moderngl
+import numpy as np
+from pyglm import glm
+
+from components.fog import VolumetricFog
+from engine.render.bindings import (
+    BLEND_ADD,
+    FOG_BINDING,
+    LIGHTS_BINDING,
+    SHADOW_ATLAS_UNIT,
+    SHADOWS_BINDING,
+    VOLUMETRIC_DEPTH_UNIT,
+    VOLUMETRIC_LIGHT_UNIT,
+    PassState,
+    apply_pass_state,
+    assign_slots,
+    bind_sampler,
+    bind_texture,
+    forget_sampler,
+)
+from engine.render.targets import RenderTargets, release_framebuffer
+from engine.render.views import MAX_DIRECTIONAL_LIGHTS, View
+
+if TYPE_CHECKING:
+    from engine.render.gpu import Gpu
+    from engine.render.shadows import ShadowMaps
+
+_MARCH = PassState()
+_ADD = PassState(blend=BLEND_ADD)
+# Each frame's offset to the points' starts under temporal AA: the golden ratio's fraction
+# steps through [0, 1) as evenly as a sequence can without knowing its length.
+_GOLDEN = 0.6180339887498949
+
+
+@dataclass
+class _Images:
+    """The march's image and the framebuffers of one set of level targets."""
+
+    level: RenderTargets
+    light: moderngl.Texture
+    light_framebuffer: moderngl.Framebuffer
+    output: moderngl.Framebuffer  # the level's colour alone (its depth is read, not attached)
+    ratio: int
+
+    def release(self) -> None:
+        release_framebuffer(self.light_framebuffer)
+        release_framebuffer(self.output)
+        self.light.release()
+
+
+class VolumetricFogPass:
+    """The active camera's light shafts: ``begin`` when its view is drawn, ``composite``
+    before its glass is (the module's docstring)."""
+
+    def __init__(self, gpu: Gpu, shadows: ShadowMaps) -> None:
+        self.gpu = gpu
+        self.ctx = gpu.ctx
+        self.shadows = shadows
+        self._images: _Images | None = None
+        self._pending: tuple[View, VolumetricFog, bool] | None = None  # (view, settings, jittered) this frame
+        self._programs: dict[tuple, moderngl.VertexArray] = {}
+        self._programs_of = -1  # the shader library's reloads when they were made
+        self._depth_sampler: moderngl.Sampler | None = None
+        self._frame = 0
+        self.composites = 0  # drawn so far (tests count them)
+
+    def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False) -> None:
+        """``view``, drawn into ``targets`` (the main tree's level 0) this frame, gets the
+        shafts ``settings`` say (``jittered``: under temporal AA, a new offset each frame);
+        the images are made for the targets (again when they or the resolution change)."""
+        ratio = 2 if settings.half_resolution else 1
+        images = self._images
+        if images is None or images.level is not targets or images.ratio != ratio:
+            self.release_targets()
+            size = (-(-targets.size[0] // ratio), -(-targets.size[1] // ratio))
+            light = self.ctx.texture(size, 4, dtype="f4")  # (the ray's length in metres beside the light)
+            light.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            images = self._images = _Images(targets, light, self.ctx.framebuffer([light]),
+                                            self.ctx.framebuffer([targets.color]), ratio)
+        self._pending = (view, settings, jittered)
+
+    def composite(self, level: RenderTargets) -> None:
+        """March and add this frame's shafts into ``level`` (the main tree's level 0, its
+        mirrors and portals composited, its glass not yet drawn), if its view was begun
+        this frame; nothing otherwise (another tree's root: a probe face's)."""
+        images, pending = self._images, self._pending
+        if pending is None or images is None or images.level is not level:
+            return
+        self._pending = None
+        view, settings, jittered = pending
+        ctx, gpu = self.ctx, self.gpu
+        if self._depth_sampler is None:  # the level's depth as values, compared with nothing
+            self._depth_sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
+        self.shadows.bind()
+        gpu.fog.bind()
+        bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
+        bind_sampler(ctx, self._depth_sampler, VOLUMETRIC_DEPTH_UNIT)
+        self._frame += 1
+        shared = {"depth_size": (float(level.size[0]), float(level.size[1])), "ratio": images.ratio,
+                  "inv_view_proj": glm.inverse(view.view_proj).to_bytes(), "max_distance": settings.distance}
+        march = self._program("volumetric_fog.frag", settings.steps)
+        tiles = np.zeros((MAX_DIRECTIONAL_LIGHTS, 4), np.float32)
+        for slot, tile in self.shadows.directional_tiles.items():
+            tiles[slot, :3] = tile
+        self._write(march.program, {**shared, "scatter": settings.intensity, "anisotropy": settings.anisotropy,
+                                    "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
+                                    "map_tiles": tiles.tobytes()})
+        images.light_framebuffer.use()
+        apply_pass_state(ctx, _MARCH, (0, 0, *images.light.size))
+        march.render(moderngl.TRIANGLES, vertices=3)
+        spread = self._program("volumetric_fog_filter.frag", 0)
+        self._write(spread.program, shared)
+        bind_texture(ctx, images.light, VOLUMETRIC_LIGHT_UNIT)
+        images.output.use()
+        apply_pass_state(ctx, _ADD, (0, 0, *level.size))
+        spread.render(moderngl.TRIANGLES, vertices=3)
+        gpu.stats.passes += 2
+        gpu.stats.draw_calls += 2
+        self.composites += 1
+        if gpu.debug:
+            gpu.checkpoint("volumetric fog")
+
+    def _program(self, shader: str, steps: int) -> moderngl.VertexArray:
+        """The march's build for ``steps`` (with the shadow lookups and fog terms the scene
+        builds have now), or the filter's (``steps`` 0)."""
+        shaders = self.gpu.shaders
+        if self._programs_of != shaders.reloads:
+            self._release_programs()
+            self._programs_of = shaders.reloads
+        extra = (self.shadows.program_defines, self.gpu.fog.defines) if steps else ()
+        key = (shader, steps, extra)
+        vao = self._programs.get(key)
+        if vao is None:
+            defines = {"STEPS": str(steps)} if steps else {}
+            for pairs in extra:
+                defines.update(pairs)
+            program = shaders.program("fullscreen.vert", shader, defines=defines)
+            assign_slots(program, {"depth_map": VOLUMETRIC_DEPTH_UNIT, "light_map": VOLUMETRIC_LIGHT_UNIT,
+                                   "shadow_atlas": SHADOW_ATLAS_UNIT},
+                         {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING})
+            vao = self._programs[key] = self.ctx.vertex_array(program, [])
+        return vao
+
+    def _write(self, program: moderngl.Program, values: dict) -> None:
+        """``values`` into ``program``'s uniforms it has, each only where it differs from what
+        the library's record says it holds."""
+        uniforms = self.gpu.shaders.uniforms
+        for name, value in values.items():
+            if name in program:
+                if isinstance(value, bytes):
+                    uniforms.write(program, name, value)
+                else:
+                    uniforms.set(program, name, value)
+
+    def target_count(self) -> int:
+        """Images held now (1 while a camera asks for shafts, else 0)."""
+        return 0 if self._images is None else 1
+
+    def release_targets(self) -> None:
+        """Let the images go (no camera asks for shafts, or its view's targets changed)."""
+        if self._images is not None:
+            self._images.release()
+            self._images = None
+        self._pending = None
+
+    def _release_programs(self) -> None:
+        for vao in self._programs.values():
+            vao.release()
+        self._programs.clear()
+
+    def release(self) -> None:
+        self.release_targets()
+        self._release_programs()
+        if self._depth_sampler is not None:
+            forget_sampler(self.ctx, self._depth_sampler)
+            self._depth_sampler.release()
+            self._depth_sampler = None

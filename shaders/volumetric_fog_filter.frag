@@ -1,0 +1,40 @@
+#version 410 core
+// The light shafts brought to every pixel of the main view (engine/render/volumetric_fog.py),
+// added to its colour: the march's texels about the pixel (4 x 4), each weighed by a
+// Gaussian of its distance in texels (which hides the steps' offsets) times how near its
+// ray's length is to the pixel's own (so a shaft behind a near edge does not bleed onto it).
+#include "volumetric_ray.glsl"
+
+uniform sampler2D light_map;  // the march's image: rgb light, a: its ray's length
+uniform int ratio;            // the view's pixels a march texel, each way
+
+out vec4 out_color;  // added to the view's colour (alpha: nothing added)
+
+void main() {
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    vec3 origin, dir;
+    float reach;
+    volumetric_ray(pixel, origin, dir, reach);
+    ivec2 size = textureSize(light_map, 0);
+    vec2 at = vec2(pixel) / float(ratio);      // the pixel in the march's texels (texel i: pixel ratio x i)
+    ivec2 base = ivec2(floor(at)) - 1;
+    float tolerance = 0.05 * reach + 0.05;     // metres of length difference that halve a weight
+    vec3 sum = vec3(0.0);
+    float weights = 0.0;
+    vec3 nearest = vec3(0.0);
+    float nearest_gap = 1e30;
+    for (int y = 0; y < 4; ++y) {
+        for (int x = 0; x < 4; ++x) {
+            ivec2 q = clamp(base + ivec2(x, y), ivec2(0), size - 1);
+            vec4 found = texelFetch(light_map, q, 0);
+            vec2 d = vec2(base + ivec2(x, y)) - at;
+            float gap = abs(found.a - reach);
+            float w = exp(-0.5 * dot(d, d)) * exp2(-gap / tolerance);
+            sum += found.rgb * w;
+            weights += w;
+            nearest = gap < nearest_gap ? found.rgb : nearest;
+            nearest_gap = min(gap, nearest_gap);
+        }
+    }
+    out_color = vec4(weights > 1e-6 ? sum / weights : nearest, 0.0);
+}

@@ -1,0 +1,278 @@
+"""Light shafts (``VolumetricFog``): the sun's single scattering by the camera's fog, in its
+shadow map's light, summed along each pixel's ray.
+
+The ground truth is its own: each march texel's ray (from the near plane through its pixel's
+centre) is cut where it meets the floor, the wall or a roof slab (slab tests in float64),
+and the integral of density x transmittance x visibility along it is summed at 1,000 points,
+each point's visibility found by casting its ray towards the sun against the slabs.  The
+pass's image is compared with that in bands away from the shadows' and the objects' edges."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    ComponentValueError,
+    ComponentWarning,
+    DirectionalLight,
+    Fog,
+    Material,
+    MeshRef,
+    Skybox,
+    Tonemap,
+    Transform,
+    VolumetricFog,
+)
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.assets.mesh import box, plane
+from engine.core.world import World
+from tests.support import look_from
+
+SIZE = (160, 96)
+EYE = (0.0, 1.6, 9.0)
+TARGET = (0.0, 2.4, 0.0)
+SUN = glm.normalize(glm.vec3(0.35, -1.0, -0.25))   # the way the sun's light travels
+SUN_LIGHT = 3.0
+DENSITY = 0.08
+# Axis-aligned boxes (centre, size) that stand in the fog: two roof slabs with a gap between
+# them, a back wall; the floor is the plane y = 0.
+ROOF = [((-3.5, 5.0, 0.0), (5.0, 0.3, 14.0)), ((3.5, 5.0, 0.0), (5.0, 0.3, 14.0))]
+WALL = ((0.0, 3.0, -7.0), (14.0, 6.0, 0.3))
+
+
+def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, sun: bool = True,
+          shadows: bool = True, cascades: int = 1) -> int:
+    camera = look_from(world, EYE, TARGET, fov=70.0)
+    world.spawn(Skybox())
+    if sun:
+        world.spawn(DirectionalLight(direction=tuple(SUN), intensity=SUN_LIGHT, shadows=shadows,
+                                     shadow_cascades=cascades))
+    world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.5, 0.5, 0.5)))
+    for centre, size in [*ROOF, WALL]:
+        world.spawn(Transform(position=centre), MeshRef(box(size)), Material(color=(0.6, 0.5, 0.4)))
+    world.add_component(camera, fog if fog is not None else Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
+    world.add_component(camera, Tonemap(curve="none"))
+    if shafts is not None:
+        world.add_component(camera, shafts)
+    return camera
+
+
+def _hits(origin: np.ndarray, way: np.ndarray, boxes) -> np.ndarray:
+    """The nearest distance along each ray (``origin`` + t ``way``, unit ``way``) at which it
+    enters one of ``boxes`` (inf: none), slab tests."""
+    nearest = np.full(len(origin), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for centre, size in boxes:
+            lo = np.array(centre) - 0.5 * np.array(size)
+            hi = np.array(centre) + 0.5 * np.array(size)
+            t1, t2 = (lo - origin) / way, (hi - origin) / way
+            t_in = np.nanmax(np.minimum(t1, t2), axis=1)
+            t_out = np.nanmin(np.maximum(t1, t2), axis=1)
+            hit = (t_out >= np.maximum(t_in, 0.0))
+            nearest = np.where(hit, np.minimum(nearest, np.maximum(t_in, 0.0)), nearest)
+    return nearest
+
+
+def _rays(runner, ratio: int, distance: float, every: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each march texel's ray (``ratio``: the view's pixels a texel each way; its first
+    pixel's centre): where it starts (the near plane), its unit direction and how far it
+    goes (to the floor, the wall or a slab, at most ``distance``), by rows of texels (of
+    every ``every``-th row and column)."""
+    view = runner.engine.main_view
+    inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T  # (numpy rows)
+    width, height = SIZE
+    rows, columns = -(-height // ratio), -(-width // ratio)
+    ys, xs = np.mgrid[0:rows:every, 0:columns:every]
+    px = np.minimum(xs * ratio, width - 1) + 0.5
+    py = np.minimum(ys * ratio, height - 1) + 0.5
+    ndc = np.stack([px / width * 2 - 1, py / height * 2 - 1], -1).reshape(-1, 2)
+
+    def unproject(z):
+        points = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], 1) @ inverse.T
+        return points[:, :3] / points[:, 3:]
+
+    origin = unproject(-1.0)
+    way = unproject(1.0) - origin
+    way /= np.linalg.norm(way, axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
+    reach = np.minimum(np.minimum(floor, _hits(origin, way, [*ROOF, WALL])), distance)
+    return origin, way, reach.reshape(xs.shape)
+
+
+def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = True,
+                  every: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Each march texel's light (the sun's colour is white: one channel) and its ray's
+    length, as the module's docstring says (``shade`` False: no point is in shadow; ``every``
+    as ``_rays``)."""
+    origin, way, reach_grid = _rays(runner, ratio, settings.distance, every)
+    reach = reach_grid.reshape(-1)
+    points = 1000
+    t = (np.arange(points) + 0.5) / points
+    light_way = -np.array(tuple(SUN))
+    total = np.zeros(len(origin))
+    for first in range(0, len(origin), 512):
+        part = slice(first, first + 512)
+        along = reach[part, None] * t[None, :]                       # (rays, points)
+        at = origin[part, None, :] + way[part, None, :] * along[..., None]
+        flat = at.reshape(-1, 3)
+        blocked = np.isfinite(_hits(flat, np.broadcast_to(light_way, flat.shape), ROOF)).reshape(along.shape)
+        blocked &= shade
+        seen = np.exp(-DENSITY * along)
+        total[part] = (DENSITY * seen * ~blocked).sum(1) * reach[part] / points
+    g = settings.anisotropy
+    c = way @ light_way
+    phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
+    light = SUN_LIGHT * settings.intensity * phase * total
+    return light.reshape(reach_grid.shape), reach_grid
+
+
+def _marched(runner) -> np.ndarray:
+    images = runner.engine.renderer.volumetric_fog._images
+    data = np.frombuffer(images.light.read(), np.float32).reshape(images.light.size[1], images.light.size[0], 4)
+    return data
+
+
+@pytest.mark.parametrize(("half", "cascades", "shadows"), [(True, 1, True), (False, 1, True), (True, 3, True),
+                                                           (True, 1, False)])
+def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows):
+    """At half and full size; with the sun's cascades (rings about the camera read where
+    they hold a point); with a sun that casts no shadow (every point lit)."""
+    settings = VolumetricFog(steps=64, half_resolution=half)
+    runner = scene(lambda world: _hall(world, settings, shadows=shadows, cascades=cascades), SIZE)
+    runner.frame()
+    every = 1 if half else 2  # (at full size every other row and column: the same rays, a quarter of the time)
+    marched = _marched(runner)[::every, ::every]
+    truth, reach = _ground_truth(runner, settings, 2 if half else 1, shade=shadows, every=every)
+    assert marched.shape[:2] == truth.shape
+    assert np.allclose(marched[..., 0], marched[..., 2], rtol=1e-4, atol=1e-6)  # a white sun
+    # The rays' lengths where they end on a surface or at the distance, away from the edges
+    # the depth image's pixels straddle.
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    assert np.median(np.abs(marched[..., 3] - reach)[steady] / reach[steady]) < 0.002
+    # The light, where the truth has some, within 7% at 90% of the texels and 2.5% in the
+    # median (the march's 64 steps against 1,000 points, the shadow map's texels at the
+    # slabs' edges).
+    lit = steady & (truth > 0.02 * truth.max())
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert lit.sum() > 0.3 * truth.size
+    assert np.median(error) < 0.025
+    assert np.quantile(error, 0.9) < 0.07
+    if shadows:  # the shaft is there: the rays through the gap's light far above the rest
+        assert truth.max() > 3 * np.median(truth[lit])
+
+
+def _linear(runner) -> np.ndarray:
+    """The main view's HDR colour (level 0), linear (rows from the bottom)."""
+    targets = runner.engine.renderer.targets
+    return np.frombuffer(targets.color.read(), np.float16).reshape(targets.size[1], targets.size[0], 4)[..., :3]
+
+
+def _filtered(marched: np.ndarray, reach: np.ndarray, ratio: int) -> np.ndarray:
+    """The filter's sum written again in numpy: each pixel's 4 x 4 texels about it, by a
+    Gaussian of the distance in texels times 2^-(length gap / (5% of its length + 5 cm))."""
+    rows, columns = reach.shape
+    ys, xs = np.mgrid[0:rows, 0:columns]
+    at_x, at_y = xs / ratio, ys / ratio
+    base_x, base_y = np.floor(at_x).astype(int) - 1, np.floor(at_y).astype(int) - 1
+    tolerance = 0.05 * reach + 0.05
+    total = np.zeros((rows, columns))
+    weights = np.zeros((rows, columns))
+    for dy in range(4):
+        for dx in range(4):
+            qx = np.clip(base_x + dx, 0, marched.shape[1] - 1)
+            qy = np.clip(base_y + dy, 0, marched.shape[0] - 1)
+            found = marched[qy, qx]
+            d2 = (base_x + dx - at_x) ** 2 + (base_y + dy - at_y) ** 2
+            w = np.exp(-0.5 * d2) * np.exp2(-np.abs(found[..., 3] - reach) / tolerance)
+            total += found[..., 0] * w
+            weights += w
+    return total / weights
+
+
+def test_the_filter_adds_the_light_to_every_pixel(scene):
+    """The view's colour with shafts less the same view's without is the march's light
+    filtered up to each pixel: by the texels about it, weighed by their distance and their
+    rays' lengths against the pixel's own (its ray's length found by the slab tests)."""
+    settings = VolumetricFog(steps=64)
+    with_shafts = scene(lambda world: _hall(world, settings), SIZE)
+    with_shafts.frame()
+    plain = scene(lambda world: _hall(world), SIZE)
+    plain.frame()
+    added = _linear(with_shafts).astype(np.float64) - _linear(plain).astype(np.float64)
+    _, _, reach = _rays(with_shafts, 1, settings.distance)
+    expected = _filtered(_marched(with_shafts).astype(np.float64), reach, 2)
+    assert np.allclose(added[..., 0], added[..., 2], atol=2e-3)
+    assert added.min() > -2e-3  # light only added
+    close = np.abs(added[..., 0] - expected) < 2e-3 + 0.02 * expected
+    assert close.mean() > 0.97   # (the rest: pixels on an edge the depth image's pixel straddles)
+    assert expected.max() > 0.1
+
+
+def test_passes_images_and_their_release(scene):
+    runner = scene(lambda world: _hall(world, VolumetricFog()), SIZE)
+    runner.frame()
+    stats_on = runner.stats.passes
+    counts = runner.engine.renderer.resource_counts()
+    assert counts["volumetric_targets"] == 1
+    assert runner.engine.renderer.volumetric_fog.composites == 1
+    camera = runner.engine.active_camera()[0]
+    runner.world.remove_component(camera, VolumetricFog)
+    runner.frame()
+    assert runner.stats.passes == stats_on - 2
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 0
+
+
+@pytest.mark.parametrize(("field", "value"), [("intensity", -1.0), ("intensity", float("nan")),
+                                              ("anisotropy", 0.99), ("distance", 0.0), ("steps", 2),
+                                              ("steps", 3.5), ("half_resolution", 1)])
+def test_bad_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(ComponentValueError, match=field):
+        VolumetricFog(**{field: value})
+
+
+@pytest.mark.parametrize("what", ["no fog", "no density", "no sun"])
+def test_without_air_or_sun_it_says_so_once_and_adds_nothing(scene, what):
+    fog = Fog(density=0.0) if what == "no density" else None
+
+    def build(world):
+        camera = _hall(world, VolumetricFog(), fog=fog, sun=what != "no sun")
+        if what == "no fog":
+            world.remove_component(camera, Fog)
+    runner = scene(build, SIZE)
+    with pytest.warns(ComponentWarning, match="VolumetricFog on entity .* adds nothing"):
+        runner.frame()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runner.frame()
+    assert runner.engine.renderer.volumetric_fog.composites == 0
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 0
+
+
+def test_a_level_file_keeps_it(tmp_path):
+    (tmp_path / "hall.toml").write_text("""[level]
+name = "hall"
+
+[[entity]]
+name = "camera"
+Transform = { position = [0.0, 1.0, 3.0] }
+Camera = {}
+Fog = { density = 0.1 }
+VolumetricFog = { intensity = 2.0, anisotropy = 0.3, distance = 25.0, steps = 16, half_resolution = false }
+""")
+    world = World()
+    names = load_level(tmp_path / "hall.toml").spawn(world)
+    shafts = world.get(names["camera"], VolumetricFog)
+    assert (shafts.intensity, shafts.anisotropy, shafts.distance, shafts.steps, shafts.half_resolution) == (
+        pytest.approx(2.0), pytest.approx(0.3), pytest.approx(25.0), 16, False)
+    saved = save_level(world, tmp_path / "again.toml", names, name="hall")
+    again = World()
+    names = load_level(saved).spawn(again)
+    assert again.get(names["camera"], VolumetricFog).steps == 16
+    (tmp_path / "bad.toml").write_text(
+        '[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\nVolumetricFog = { steps = 1 }\n')
+    with pytest.raises(LevelError, match="steps"):
+        load_level(tmp_path / "bad.toml")
