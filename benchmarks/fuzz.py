@@ -84,6 +84,7 @@ from components import (
     Traveller,
     Vignette,
     Visibility,
+    VolumetricFog,
     Water,
     look_rotation,
 )
@@ -98,7 +99,7 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
-                             ScreenReflections, Visibility, Water, ParticleEmitter, Decal)
+                             ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal)
 
 @dataclasses.dataclass
 class Case:
@@ -168,7 +169,7 @@ class Fuzzer:
                 warnings.simplefilter("ignore")
                 if case.cls in (Camera, FlyController, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                                 MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion,
-                                ContactShadows, ScreenReflections):
+                                ContactShadows, ScreenReflections, VolumetricFog):
                     restore = (self.game.camera, world.try_get(self.game.camera, case.cls))
                     world.add_component(self.game.camera, component)
                 elif case.cls is Skybox:

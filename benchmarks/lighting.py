@@ -162,6 +162,7 @@ from components import (
     Tonemap,
     Transform,
     Vignette,
+    VolumetricFog,
     look_rotation,
 )
 from engine.assets.color_lut import ColorLut, identity_lut
@@ -277,6 +278,24 @@ def _fog_uniform(engine: Engine) -> None:
     """No shadows; fog the same everywhere (its build has no falloff or glow term)."""
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Fog(density=0.04))
+
+
+def _shafts(engine: Engine, half: bool = True) -> None:
+    """Shadows, height fog and light shafts on the camera (VolumetricFog: its march, at half
+    size or a ray a pixel, and its filter)."""
+    _shadows(engine)
+    engine.world.add_component(camera_entity(engine), Fog(density=0.04, height=0.0, height_falloff=0.2))
+    engine.world.add_component(camera_entity(engine), VolumetricFog(half_resolution=half))
+
+
+def _shafts_fog(engine: Engine) -> None:
+    """What the shafts are measured against: the same shadows and fog without them."""
+    _shadows(engine)
+    engine.world.add_component(camera_entity(engine), Fog(density=0.04, height=0.0, height_falloff=0.2))
+
+
+def _shafts_full(engine: Engine) -> None:
+    _shafts(engine, half=False)
 
 
 def _post(engine: Engine) -> None:
@@ -402,6 +421,9 @@ VARIANTS: list[Variant] = [
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
+    Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),
+    Variant("shafts", _shafts, "the same with VolumetricFog() (marched at half size)"),
+    Variant("shafts_full", _shafts_full, "the same with VolumetricFog(half_resolution=False)"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
     Variant("graded", _graded, "Tonemap(curve='agx') and a ColorGrading with a colour table"),

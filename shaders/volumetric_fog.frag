@@ -3,6 +3,8 @@
 // single scattering by the fog's air along each ray of the main view, summed in STEPS steps.
 // At each step t (the step's start moved by ``start``, a different offset each texel):
 //   density(x) x exp(-fog_depth(origin, x)) x shadow(x) x step
+// (the shadow map read with one bilinear comparison, SHADOW_SINGLE_TAP: the steps' offsets
+// and the filter soften the shafts' edges as a wider filter would)
 // (the air's density, what reaches the eye of what it scatters there, whether the sun reaches
 // it: its shadow map and cascades), times the sun's light (colour x intensity), the
 // Henyey-Greenstein phase function of the angle between the sun's light and the ray, and
@@ -27,20 +29,6 @@ float interleaved_gradient_noise(vec2 p) {
     return fract(52.9829189 * fract(dot(p, vec2(0.06711056, 0.00583715))));
 }
 
-// How much of the sun (directional light ``sun``) reaches the point ``x`` of the air: its
-// shadow where its level map holds the point and the filter's taps about it, else 1 (outside
-// the map's fit no caster stands between the point and the light; the atlas's other tiles
-// there are other maps, and texels no map wrote).
-float sun_reaches(int sun, vec3 x, vec3 towards) {
-    vec4 tile = map_tiles[sun];
-    vec4 params = shadows.directional_params[sun];
-    float margin = (params.y + 2.0) * params.z;   // the filter's reach and the normal offset, in uv
-    vec2 uv = (shadows.directional_matrix[sun] * vec4(x, 1.0)).xy;
-    bool held = tile.z > 0.0 && all(greaterThanEqual(uv, tile.xy + margin))
-        && all(lessThanEqual(uv, tile.xy + tile.z - margin));
-    return held ? directional_shadow(sun, x, towards, towards) : 1.0;
-}
-
 // The share of light scattered through an angle whose cosine is ``c`` (per steradian).
 float henyey_greenstein(float c, float g) {
     float k = 1.0 + g * g - 2.0 * g * c;
@@ -60,10 +48,40 @@ void main() {
     vec3 towards = -lights.directional_dir[sun].xyz;
     float step_length = reach / float(STEPS);
     float start = fract(interleaved_gradient_noise(gl_FragCoord.xy) + frame_offset);
+    // What reaches the eye of the light scattered at each point: exact to the first, then
+    // carried from point to point by the air between them (one exponential a step; the
+    // density at a point times the step, exact where the fog is the same everywhere).
+    vec3 x = origin + dir * (start * step_length);
+    float seen = exp(-fog_depth(origin, x));
     float sum = 0.0;
+#ifdef DIRECTIONAL_SHADOWS
+    // The sun's shadow where its level map holds the point and the filter's taps about it,
+    // else 1 (outside the map's fit no caster stands between the point and the sun; the
+    // atlas's other tiles there are other maps, and texels no map wrote).  The point's
+    // coordinates in the map step along with it (they are affine in the point); it is moved
+    // off towards the sun by half the filter's reach.
+    vec4 params = shadows.directional_params[sun];
+    mat4 to_map = shadows.directional_matrix[sun];
+    vec3 at = (to_map * vec4(x, 1.0)).xyz;
+    vec3 at_step = mat3(to_map) * (dir * step_length);
+    vec3 along = mat3(to_map) * towards;
+    float grazing = 0.5 * (1.0 + params.y);
+    vec4 tile = map_tiles[sun];
+    float margin = (params.y + 2.0) * params.z;   // the filter's reach and the offset, in uv
+    vec2 low = tile.xy + margin, high = tile.xy + tile.z - margin;
+    bool casts = params.w != 0.0 && tile.z > 0.0;
+#endif
     for (int i = 0; i < STEPS; ++i) {
-        vec3 x = origin + dir * ((float(i) + start) * step_length);
-        sum += fog_density(x) * exp(-fog_depth(origin, x)) * sun_reaches(sun, x, towards);
+        float density = fog_density(x);
+        float lit = 1.0;
+#ifdef DIRECTIONAL_SHADOWS
+        bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
+        lit = held ? directional_shadow_at(sun, params, at, along, grazing) : 1.0;
+        at += at_step;
+#endif
+        sum += density * seen * lit;
+        seen *= exp(-density * step_length);
+        x += dir * step_length;
     }
     float phase = henyey_greenstein(dot(dir, towards), anisotropy);
     out_light.rgb = lights.directional_color[sun].rgb * (scatter * phase * sum * step_length);

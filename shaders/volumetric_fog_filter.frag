@@ -1,6 +1,6 @@
 #version 410 core
 // The light shafts brought to every pixel of the main view (engine/render/volumetric_fog.py),
-// added to its colour: the march's texels about the pixel (4 x 4), each weighed by a
+// added to its colour: the march's 3 x 3 texels about the pixel, each weighed by a
 // Gaussian of its distance in texels (which hides the steps' offsets) times how near its
 // ray's length is to the pixel's own (so a shaft behind a near edge does not bleed onto it).
 #include "volumetric_ray.glsl"
@@ -17,14 +17,14 @@ void main() {
     volumetric_ray(pixel, origin, dir, reach);
     ivec2 size = textureSize(light_map, 0);
     vec2 at = vec2(pixel) / float(ratio);      // the pixel in the march's texels (texel i: pixel ratio x i)
-    ivec2 base = ivec2(floor(at)) - 1;
+    ivec2 base = ivec2(floor(at + 0.5)) - 1;  // (the nearest texel in the middle)
     float tolerance = 0.05 * reach + 0.05;     // metres of length difference that halve a weight
     vec3 sum = vec3(0.0);
     float weights = 0.0;
     vec3 nearest = vec3(0.0);
     float nearest_gap = 1e30;
-    for (int y = 0; y < 4; ++y) {
-        for (int x = 0; x < 4; ++x) {
+    for (int y = 0; y < 3; ++y) {
+        for (int x = 0; x < 3; ++x) {
             ivec2 q = clamp(base + ivec2(x, y), ivec2(0), size - 1);
             vec4 found = texelFetch(light_map, q, 0);
             vec2 d = vec2(base + ivec2(x, y)) - at;

@@ -172,17 +172,17 @@ def _linear(runner) -> np.ndarray:
 
 
 def _filtered(marched: np.ndarray, reach: np.ndarray, ratio: int) -> np.ndarray:
-    """The filter's sum written again in numpy: each pixel's 4 x 4 texels about it, by a
+    """The filter's sum written again in numpy: each pixel's 3 x 3 texels about it, by a
     Gaussian of the distance in texels times 2^-(length gap / (5% of its length + 5 cm))."""
     rows, columns = reach.shape
     ys, xs = np.mgrid[0:rows, 0:columns]
     at_x, at_y = xs / ratio, ys / ratio
-    base_x, base_y = np.floor(at_x).astype(int) - 1, np.floor(at_y).astype(int) - 1
+    base_x, base_y = np.floor(at_x + 0.5).astype(int) - 1, np.floor(at_y + 0.5).astype(int) - 1
     tolerance = 0.05 * reach + 0.05
     total = np.zeros((rows, columns))
     weights = np.zeros((rows, columns))
-    for dy in range(4):
-        for dx in range(4):
+    for dy in range(3):
+        for dx in range(3):
             qx = np.clip(base_x + dx, 0, marched.shape[1] - 1)
             qy = np.clip(base_y + dy, 0, marched.shape[0] - 1)
             found = marched[qy, qx]

@@ -17,7 +17,7 @@ put in, before its glass (``ScenePass.finish_root``):
    start at another offset (interleaved gradient noise; moved each frame under temporal AA,
    whose history then averages them).
 2. **The filter** (``shaders/volumetric_fog_filter.frag``), at the view's size: each pixel
-   takes the march's 4 x 4 texels about it, weighed by a Gaussian of their distance and by how
+   takes the march's 3 x 3 texels about it, weighed by a Gaussian of their distance and by how
    near their rays' lengths are to its own (a shaft behind a near edge stays behind it), and
    is added to the view's colour (``BLEND_ADD``).
 
@@ -167,6 +167,8 @@ class VolumetricFogPass:
             defines = {"STEPS": str(steps)} if steps else {}
             for pairs in extra:
                 defines.update(pairs)
+            if steps:  # a tap a point (the march's steps and the filter soften the edges)
+                defines["SHADOW_SINGLE_TAP"] = "1"
             program = shaders.program("fullscreen.vert", shader, defines=defines)
             assign_slots(program, {"depth_map": VOLUMETRIC_DEPTH_UNIT, "light_map": VOLUMETRIC_LIGHT_UNIT,
                                    "shadow_atlas": SHADOW_ATLAS_UNIT},

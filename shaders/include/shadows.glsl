@@ -98,20 +98,13 @@ void ring_coordinates(int k, int i, vec3 at, vec3 along, float grazing, inout ve
 }
 #endif
 
-// How much of directional light i reaches a point at ``position`` whose geometric normal
-// (facing the viewer) is ``normal`` and for which the light comes from ``l``: 0 (shadowed) to 1.
-float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
-#ifndef DIRECTIONAL_SHADOWS
-    return 1.0;
-#else
-    vec4 params = shadows.directional_params[i];
-    if (params.w == 0.0) return 1.0;
-    float nl = clamp(dot(normal, l), 0.0, 1.0);
-    // Off the surface by about the filter's reach in texels, more as the light grazes it.
-    float grazing = (1.0 + params.y) * (1.5 - nl);
-    mat4 to_map = shadows.directional_matrix[i];
-    vec3 at = (to_map * vec4(position, 1.0)).xyz;  // the point in the level map's coordinates
-    vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
+// Directional light i's shadow at a point whose coordinates in its level map are ``at``, moved
+// off along ``along`` (a metre along the offset's way, in the same coordinates) by ``grazing``
+// of the map's texels (``params``: the light's directional_params, its w not 0): the ring that
+// holds the point read in place of the level's map, the map's filter, a ring's blend band.
+// The scene pass's lookup (directional_shadow) and the light shafts' march
+// (volumetric_fog.frag, which steps ``at`` along its ray) share it.
+float directional_shadow_at(int i, vec4 params, vec3 at, vec3 along, float grazing) {
     vec3 p = at + along * (params.x * grazing);
     vec3 coarser = p;   // the next larger map's coordinates (the level's, or a ring's)
     float fine = 1.0;   // the chosen ring's share, against the next larger map's (cascade blending)
@@ -142,6 +135,23 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     }
 #endif
     return lit;
+}
+
+// How much of directional light i reaches a point at ``position`` whose geometric normal
+// (facing the viewer) is ``normal`` and for which the light comes from ``l``: 0 (shadowed) to 1.
+float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
+#ifndef DIRECTIONAL_SHADOWS
+    return 1.0;
+#else
+    vec4 params = shadows.directional_params[i];
+    if (params.w == 0.0) return 1.0;
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    // Off the surface by about the filter's reach in texels, more as the light grazes it.
+    float grazing = (1.0 + params.y) * (1.5 - nl);
+    mat4 to_map = shadows.directional_matrix[i];
+    vec3 at = (to_map * vec4(position, 1.0)).xyz;  // the point in the level map's coordinates
+    vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
+    return directional_shadow_at(i, params, at, along, grazing);
 #endif
 }
 
