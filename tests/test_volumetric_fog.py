@@ -21,13 +21,14 @@ from components import (
     Fog,
     Material,
     MeshRef,
+    Mirror,
     Skybox,
     Tonemap,
     Transform,
     VolumetricFog,
 )
 from engine.assets.level_file import LevelError, load_level, save_level
-from engine.assets.mesh import box, plane
+from engine.assets.mesh import box, plane, quad
 from engine.core.world import World
 from tests.support import look_from
 
@@ -41,10 +42,11 @@ DENSITY = 0.08
 # them, a back wall; the floor is the plane y = 0.
 ROOF = [((-3.5, 5.0, 0.0), (5.0, 0.3, 14.0)), ((3.5, 5.0, 0.0), (5.0, 0.3, 14.0))]
 WALL = ((0.0, 3.0, -7.0), (14.0, 6.0, 0.3))
+MIRROR = ((1.0, 2.0, -6.8), (4.0, 3.0, 1e-4))   # a mirror on the wall (its quad, as a thin box)
 
 
 def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, sun: bool = True,
-          shadows: bool = True, cascades: int = 1) -> int:
+          shadows: bool = True, cascades: int = 1, mirror: bool = False) -> int:
     camera = look_from(world, EYE, TARGET, fov=70.0)
     world.spawn(Skybox())
     if sun:
@@ -53,6 +55,8 @@ def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, su
     world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.5, 0.5, 0.5)))
     for centre, size in [*ROOF, WALL]:
         world.spawn(Transform(position=centre), MeshRef(box(size)), Material(color=(0.6, 0.5, 0.4)))
+    if mirror:  # on the wall, facing the camera
+        world.spawn(Transform(position=MIRROR[0]), MeshRef(quad(*MIRROR[1][:2])), Material(), Mirror())
     world.add_component(camera, fog if fog is not None else Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
     world.add_component(camera, Tonemap(curve="none"))
     if shafts is not None:
@@ -76,7 +80,8 @@ def _hits(origin: np.ndarray, way: np.ndarray, boxes) -> np.ndarray:
     return nearest
 
 
-def _rays(runner, ratio: int, distance: float, every: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _rays(runner, ratio: int, distance: float, every: int = 1,
+          mirror: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each march texel's ray (``ratio``: the view's pixels a texel each way; its first
     pixel's centre): where it starts (the near plane), its unit direction and how far it
     goes (to the floor, the wall or a slab, at most ``distance``), by rows of texels (of
@@ -99,16 +104,16 @@ def _rays(runner, ratio: int, distance: float, every: int = 1) -> tuple[np.ndarr
     way /= np.linalg.norm(way, axis=1, keepdims=True)
     with np.errstate(divide="ignore", invalid="ignore"):
         floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
-    reach = np.minimum(np.minimum(floor, _hits(origin, way, [*ROOF, WALL])), distance)
+    reach = np.minimum(np.minimum(floor, _hits(origin, way, [*ROOF, WALL, *([MIRROR] if mirror else [])])), distance)
     return origin, way, reach.reshape(xs.shape)
 
 
 def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = True,
-                  every: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                  every: int = 1, mirror: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Each march texel's light (the sun's colour is white: one channel) and its ray's
     length, as the module's docstring says (``shade`` False: no point is in shadow; ``every``
     as ``_rays``)."""
-    origin, way, reach_grid = _rays(runner, ratio, settings.distance, every)
+    origin, way, reach_grid = _rays(runner, ratio, settings.distance, every, mirror)
     reach = reach_grid.reshape(-1)
     points = 1000
     t = (np.arange(points) + 0.5) / points
@@ -136,17 +141,21 @@ def _marched(runner) -> np.ndarray:
     return data
 
 
-@pytest.mark.parametrize(("half", "cascades", "shadows"), [(True, 1, True), (False, 1, True), (True, 3, True),
-                                                           (True, 1, False)])
-def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows):
+@pytest.mark.parametrize(("half", "cascades", "shadows", "mirror"), [
+    (True, 1, True, False), (False, 1, True, False), (True, 3, True, False), (True, 1, False, False),
+    (True, 1, True, True)])
+def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows, mirror):
     """At half and full size; with the sun's cascades (rings about the camera read where
-    they hold a point); with a sun that casts no shadow (every point lit)."""
+    they hold a point); with a sun that casts no shadow (every point lit); with a mirror on
+    the wall (its pixels' rays end on the glass: the air in front of it, not its image's)."""
     settings = VolumetricFog(steps=64, half_resolution=half)
-    runner = scene(lambda world: _hall(world, settings, shadows=shadows, cascades=cascades), SIZE)
+    runner = scene(lambda world: _hall(world, settings, shadows=shadows, cascades=cascades, mirror=mirror), SIZE)
     runner.frame()
+    if mirror:
+        assert runner.stats.reflection_views == 1
     every = 1 if half else 2  # (at full size every other row and column: the same rays, a quarter of the time)
     marched = _marched(runner)[::every, ::every]
-    truth, reach = _ground_truth(runner, settings, 2 if half else 1, shade=shadows, every=every)
+    truth, reach = _ground_truth(runner, settings, 2 if half else 1, shade=shadows, every=every, mirror=mirror)
     assert marched.shape[:2] == truth.shape
     assert np.allclose(marched[..., 0], marched[..., 2], rtol=1e-4, atol=1e-6)  # a white sun
     # The rays' lengths where they end on a surface or at the distance, away from the edges
@@ -276,3 +285,20 @@ VolumetricFog = { intensity = 2.0, anisotropy = 0.3, distance = 25.0, steps = 16
         '[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\nVolumetricFog = { steps = 1 }\n')
     with pytest.raises(LevelError, match="steps"):
         load_level(tmp_path / "bad.toml")
+
+
+def test_under_temporal_aa_each_frame_starts_the_points_elsewhere(scene):
+    """A still view marches the same points every frame with FXAA, and other points each
+    frame under temporal AA (whose history averages them), the light about the same."""
+    images = {}
+    for antialias in ("fxaa", "taa"):
+        runner = scene(lambda world: _hall(world, VolumetricFog(steps=16)), SIZE)
+        runner.engine.renderer.antialias = antialias
+        runner.frame()
+        first = _marched(runner).copy()
+        runner.frame()
+        images[antialias] = (first, _marched(runner).copy())
+    assert np.array_equal(*images["fxaa"])
+    first, second = images["taa"]
+    assert not np.array_equal(first[..., 0], second[..., 0])
+    assert abs(first[..., 0].mean() / second[..., 0].mean() - 1.0) < 0.03
