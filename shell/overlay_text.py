@@ -138,6 +138,8 @@ def post_lines(engine: Engine) -> list[str]:
                         + (f", {movers} moving" if present.streaked.objects else ", camera only"))
     elif not present.motion_blur:
         reflections += "; motion blur off (set)"
+    if main.shafts is not None:
+        reflections += f"; shafts {main.shafts.steps} steps{' half' if main.shafts.half_resolution else ''}"
     passes = renderer.present_pass.post_passes
     return [f"post: {curve} ({whose}), {exposure}; {glow}, {passes} passes{grade}{picture(engine)}",
             f"screen: {occlusion}; {reflections}"]

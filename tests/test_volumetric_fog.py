@@ -30,6 +30,7 @@ from components import (
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, plane, quad
 from engine.core.world import World
+from shell.overlay_text import post_lines
 from tests.support import look_from
 
 SIZE = (160, 96)
@@ -228,6 +229,7 @@ def test_passes_images_and_their_release(scene):
     counts = runner.engine.renderer.resource_counts()
     assert counts["volumetric_targets"] == 1
     assert runner.engine.renderer.volumetric_fog.composites == 1
+    assert "; shafts 32 steps half" in post_lines(runner.engine)[1]   # the overlay's screen line
     camera = runner.engine.active_camera()[0]
     runner.world.remove_component(camera, VolumetricFog)
     runner.frame()
