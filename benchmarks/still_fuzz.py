@@ -78,6 +78,7 @@ from components import (
     ScreenReflections,
     Skybox,
     Transform,
+    VolumetricFog,
     Water,
     look_rotation,
 )
@@ -145,6 +146,7 @@ class StillCase:
     fog: bool = False  # height fog on the camera (each view's stretch, each composite's)
     occlusion: bool = False  # ambient occlusion on the camera (the root's passes before its draw)
     reflections: bool = False  # screen reflections on the camera, the box reflecting the sky (its composite)
+    shafts: bool = False  # with fog: light shafts on the camera, in the root and two levels down (added)
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -154,7 +156,7 @@ class StillCase:
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
                 f"cascades {self.cascades}, spot {self.spot_angle}, fog {self.fog}, occlusion {self.occlusion}, "
-                f"reflections {self.reflections}; then "
+                f"reflections {self.reflections}, shafts {self.shafts}; then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -179,7 +181,8 @@ def random_still_case(rng: random.Random) -> StillCase:
                      point_light=rng.random() < 0.4, bloom=rng.random() < 0.3,
                      visibility="predicted" if rng.random() < 0.25 else "exact", then=then,
                      cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)),
-                     fog=rng.random() < 0.3, occlusion=rng.random() < 0.3, reflections=rng.random() < 0.3)
+                     fog=rng.random() < 0.3, occlusion=rng.random() < 0.3, reflections=rng.random() < 0.3,
+                     shafts=rng.random() < 0.5)
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -315,6 +318,8 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         world.add_component(world.resources["camera"], Bloom(intensity=0.2))
     if case.fog:
         world.add_component(world.resources["camera"], Fog(density=0.06, height=1.0, height_falloff=0.4))
+        if case.shafts:
+            world.add_component(world.resources["camera"], VolumetricFog(steps=8, reflection_depth=2))
     if case.occlusion:
         world.add_component(world.resources["camera"], AmbientOcclusion(radius=0.8))
     named["box"] = world.spawn(Transform(position=(0.8, 0.6, 0.0), scale=BOX_SCALE), MeshRef(l_mesh()),
@@ -564,7 +569,7 @@ class StillFuzzer:
             light = side.world.get(side.game.light, DirectionalLight)
             side.world.add_component(side.game.light, DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.5,
                                                                         shadow_resolution=512))
-            for post in (Bloom, Fog, AmbientOcclusion, ScreenReflections):
+            for post in (Bloom, Fog, AmbientOcclusion, ScreenReflections, VolumetricFog):
                 side.world.remove_component(side.game.camera, post)
             del light
         self.keeping.engine.reflection_system.keep_still_views = True

@@ -18,6 +18,7 @@ from typing import Any
 
 from pyglm import glm
 
+from components.limits import MAX_VIEW_DEPTH
 from components.tracking import TrackedComponent, boolean, color, finite, integer
 
 # The thickest fog: 1000 per metre is a millimetre's visibility, past which nothing is seen.
@@ -110,12 +111,18 @@ class VolumetricFog(TrackedComponent):
     - ``half_resolution``: the rays marched at half the screen's size in each direction (a
       ray a 2 x 2 block) and filtered up to every pixel (True, the default); False: a ray a
       pixel.
+    - ``reflection_depth``: the levels of mirror and portal views below the camera's whose
+      air has its shafts too (0 to 16; 1 by default: the views of the mirrors and portals the
+      camera sees, so a mirror shows the beams in the room behind the camera, and a portal
+      the beams of the hall beyond; 0: the camera's view alone, a mirror showing the fog's
+      colour and glow).  A view's rays start on the surface it looks out of; the air between
+      the eye and the surface is its parent's.  A level's rays are marched a pixel each (its
+      ``half_resolution`` is the camera's view's alone) and filtered within their own view.
 
-    Only the camera's own view: a mirror's or portal's view shows the fog's colour and glow
-    but no shafts (their pixels get the shafts of the air between the camera and the
-    surface), and glass in front of the shafts does not dim them.  Without a Fog with a
-    density, or without a sun, it adds nothing and says so once (a ``ComponentWarning``
-    from the main stage); a sun that casts no shadow lights the air everywhere.
+    Glass in front of the shafts does not dim them.  Probe views have none.  Without a Fog
+    with a density, or without a sun, it adds nothing and says so once (a
+    ``ComponentWarning`` from the main stage); a sun that casts no shadow lights the air
+    everywhere.
     """
 
     intensity: float = 1.0
@@ -123,6 +130,7 @@ class VolumetricFog(TrackedComponent):
     distance: float = 40.0
     steps: int = 32
     half_resolution: bool = True
+    reflection_depth: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "intensity":
@@ -135,4 +143,6 @@ class VolumetricFog(TrackedComponent):
             return integer(self, name, value, low=MIN_VOLUMETRIC_STEPS, high=MAX_VOLUMETRIC_STEPS)
         if name == "half_resolution":
             return boolean(self, name, value)
+        if name == "reflection_depth":
+            return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value

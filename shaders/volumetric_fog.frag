@@ -8,12 +8,17 @@
 // (the air's density, what reaches the eye of what it scatters there, whether the sun reaches
 // it: its shadow map and cascades), times the sun's light (colour x intensity), the
 // Henyey-Greenstein phase function of the angle between the sun's light and the ray, and
-// VolumetricFog.intensity.  The texel's ray is that of the first pixel of its RATIO x RATIO
-// block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag) compares.
+// VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
+// ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
+// compares.  A mirror or portal view's rays start on its oblique near plane: the surface.
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "fog.glsl"
 #include "volumetric_ray.glsl"
+#ifdef LEVEL_VIEWS  // a mirror or portal level's: drawn once a view, over its own pixels only
+#include "level_nodes.glsl"
+uniform uint node;  // the view's node (its pixels' value in the level's node image)
+#endif
 
 uniform int ratio;           // the view's pixels a march texel, each way (2 at half resolution)
 uniform float scatter;       // VolumetricFog.intensity
@@ -37,6 +42,9 @@ float henyey_greenstein(float c, float g) {
 
 void main() {
     ivec2 pixel = min(ivec2(gl_FragCoord.xy) * ratio, ivec2(depth_size) - 1);
+#ifdef LEVEL_VIEWS
+    if (node_at(vec2(pixel)) != node) discard;   // another view's pixel: another world
+#endif
     vec3 origin, dir;
     float reach;
     volumetric_ray(pixel, origin, dir, reach);

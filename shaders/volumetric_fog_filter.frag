@@ -4,6 +4,10 @@
 // Gaussian of its distance in texels (which hides the steps' offsets) times how near its
 // ray's length is to the pixel's own (so a shaft behind a near edge does not bleed onto it).
 #include "volumetric_ray.glsl"
+#ifdef LEVEL_VIEWS  // a mirror or portal level's: drawn once a view, its own pixels and texels only
+#include "level_nodes.glsl"
+uniform uint node;
+#endif
 
 uniform sampler2D light_map;  // the march's image: rgb light, a: its ray's length
 uniform int ratio;            // the view's pixels a march texel, each way
@@ -12,6 +16,9 @@ out vec4 out_color;  // added to the view's colour (alpha: nothing added)
 
 void main() {
     ivec2 pixel = ivec2(gl_FragCoord.xy);
+#ifdef LEVEL_VIEWS
+    if (node_at(vec2(pixel)) != node) discard;
+#endif
     vec3 origin, dir;
     float reach;
     volumetric_ray(pixel, origin, dir, reach);
@@ -30,6 +37,12 @@ void main() {
             vec2 d = vec2(base + ivec2(x, y)) - at;
             float gap = abs(found.a - reach);
             float w = exp(-0.5 * dot(d, d)) * exp2(-gap / tolerance);
+#ifdef LEVEL_VIEWS
+            if (node_at(vec2(q * ratio)) != node) {  // another view's texel (or one none marched)
+                w = 0.0;
+                gap = 1e30;
+            }
+#endif
             sum += found.rgb * w;
             weights += w;
             nearest = gap < nearest_gap ? found.rgb : nearest;

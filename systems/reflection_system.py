@@ -181,6 +181,7 @@ class ReflectionSystem(esper.Processor):
         else:  # no level to find or reflect: the screen passes' level images go (their surfaces went)
             renderer.occlusion.release_levels()
             renderer.screen_reflections.release_levels()
+            renderer.volumetric_fog.release_levels()
         camera = frame_rules(self.world).active_camera
         crossed = any(crossing.entity == camera for crossing in self.world.resources.get(PortalCrossings, ()))
         cut = self._cut or crossed or camera != self._camera
@@ -255,7 +256,8 @@ class ReflectionSystem(esper.Processor):
                   renderer.reflection_anisotropy, renderer.normal_map_anisotropy, renderer.scene_pass.cull_batches,
                   stats.views_left(), stats.pixels_left(), stats.min_view_pixels,
                   tuple(flow.offset for flow in waves[1]), tuple(self.tree.passes.surface_motion),
-                  renderer.occlusion.level_key(), renderer.screen_reflections.level_key())
+                  renderer.occlusion.level_key(), renderer.screen_reflections.level_key(),
+                  renderer.volumetric_fog.level_key())
         return values, (table, blends.by_surface, levels)
 
     def prepare(self) -> None:

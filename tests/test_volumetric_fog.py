@@ -43,7 +43,8 @@ DENSITY = 0.08
 # them, a back wall; the floor is the plane y = 0.
 ROOF = [((-3.5, 5.0, 0.0), (5.0, 0.3, 14.0)), ((3.5, 5.0, 0.0), (5.0, 0.3, 14.0))]
 WALL = ((0.0, 3.0, -7.0), (14.0, 6.0, 0.3))
-MIRROR = ((1.0, 2.0, -6.8), (4.0, 3.0, 1e-4))   # a mirror on the wall (its quad, as a thin box)
+FLOOR = 40.0   # the floor's side (metres), about the origin
+MIRROR = ((0.5, 2.2, -6.8), (9.0, 4.0, 1e-4))   # a mirror on the wall (its quad, as a thin box)
 
 
 def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, sun: bool = True,
@@ -53,7 +54,7 @@ def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, su
     if sun:
         world.spawn(DirectionalLight(direction=tuple(SUN), intensity=SUN_LIGHT, shadows=shadows,
                                      shadow_cascades=cascades))
-    world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.5, 0.5, 0.5)))
+    world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5, 0.5, 0.5)))
     for centre, size in [*ROOF, WALL]:
         world.spawn(Transform(position=centre), MeshRef(box(size)), Material(color=(0.6, 0.5, 0.4)))
     if mirror:  # on the wall, facing the camera
@@ -115,7 +116,13 @@ def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = Tru
     length, as the module's docstring says (``shade`` False: no point is in shadow; ``every``
     as ``_rays``)."""
     origin, way, reach_grid = _rays(runner, ratio, settings.distance, every, mirror)
-    reach = reach_grid.reshape(-1)
+    return _light(origin, way, reach_grid.reshape(-1), settings, shade).reshape(reach_grid.shape), reach_grid
+
+
+def _light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
+           shade: bool = True) -> np.ndarray:
+    """The sun's light the air sends back along each ray (``origin`` + t ``way``, t up to
+    ``reach``), summed at 1,000 points (``shade`` False: no point in shadow)."""
     points = 1000
     t = (np.arange(points) + 0.5) / points
     light_way = -np.array(tuple(SUN))
@@ -132,8 +139,7 @@ def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = Tru
     g = settings.anisotropy
     c = way @ light_way
     phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
-    light = SUN_LIGHT * settings.intensity * phase * total
-    return light.reshape(reach_grid.shape), reach_grid
+    return SUN_LIGHT * settings.intensity * phase * total
 
 
 def _marched(runner) -> np.ndarray:
@@ -181,9 +187,10 @@ def _linear(runner) -> np.ndarray:
     return np.frombuffer(targets.color.read(), np.float16).reshape(targets.size[1], targets.size[0], 4)[..., :3]
 
 
-def _filtered(marched: np.ndarray, reach: np.ndarray, ratio: int) -> np.ndarray:
+def _filtered(marched: np.ndarray, reach: np.ndarray, ratio: int, counts: np.ndarray | None = None) -> np.ndarray:
     """The filter's sum written again in numpy: each pixel's 3 x 3 texels about it, by a
-    Gaussian of the distance in texels times 2^-(length gap / (5% of its length + 5 cm))."""
+    Gaussian of the distance in texels times 2^-(length gap / (5% of its length + 5 cm))
+    (``counts``: the texels that may be taken, the others weigh 0)."""
     rows, columns = reach.shape
     ys, xs = np.mgrid[0:rows, 0:columns]
     at_x, at_y = xs / ratio, ys / ratio
@@ -198,9 +205,12 @@ def _filtered(marched: np.ndarray, reach: np.ndarray, ratio: int) -> np.ndarray:
             found = marched[qy, qx]
             d2 = (base_x + dx - at_x) ** 2 + (base_y + dy - at_y) ** 2
             w = np.exp(-0.5 * d2) * np.exp2(-np.abs(found[..., 3] - reach) / tolerance)
+            if counts is not None:
+                w = np.where(counts[qy, qx], w, 0.0)
             total += found[..., 0] * w
             weights += w
-    return total / weights
+    with np.errstate(invalid="ignore"):
+        return total / weights   # (NaN where no texel may be taken)
 
 
 def test_the_filter_adds_the_light_to_every_pixel(scene):
@@ -304,3 +314,101 @@ def test_under_temporal_aa_each_frame_starts_the_points_elsewhere(scene):
     first, second = images["taa"]
     assert not np.array_equal(first[..., 0], second[..., 0])
     assert abs(first[..., 0].mean() / second[..., 0].mean() - 1.0) < 0.03
+
+
+def _level_marched(runner, depth: int) -> np.ndarray:
+    images = runner.engine.renderer.volumetric_fog._levels[depth]
+    return np.frombuffer(images.light.read(), np.float32).reshape(images.light.size[1], images.light.size[0], 4)
+
+
+def _level_colour(runner, depth: int = 1) -> np.ndarray:
+    targets = runner.engine.renderer.levels[depth]
+    return np.frombuffer(targets.color.read(), np.float16).reshape(targets.size[1], targets.size[0], 4)[..., :3]
+
+
+def _mirror_rays(runner) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each pixel's camera ray reflected in the mirror on the wall (the plane z = MIRROR's,
+    facing +z): where it meets the glass, its reflected direction, how far it goes on (to
+    the floor or a slab, at most the shafts' distance), and whether it meets the glass well
+    inside its outline (3 pixels' worth of margin), by rows of pixels."""
+    view = runner.engine.main_view
+    inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
+    width, height = SIZE
+    ys, xs = np.mgrid[0:height, 0:width]
+    ndc = np.stack([(xs + 0.5) / width * 2 - 1, (ys + 0.5) / height * 2 - 1], -1).reshape(-1, 2)
+
+    def unproject(z):
+        points = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], 1) @ inverse.T
+        return points[:, :3] / points[:, 3:]
+
+    near = unproject(-1.0)
+    way = unproject(1.0) - near
+    way /= np.linalg.norm(way, axis=1, keepdims=True)
+    (cx, cy, cz), (w, h, _) = MIRROR
+    t = (cz - near[:, 2]) / way[:, 2]
+    glass = near + way * t[:, None]
+    margin = 3 * 2 * np.tan(np.radians(35.0)) * t / height   # 3 pixels at the glass's distance
+    inside = (np.abs(glass[:, 0] - cx) < 0.5 * w - margin) & (np.abs(glass[:, 1] - cy) < 0.5 * h - margin)
+    bounced = way * np.array([1.0, 1.0, -1.0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(bounced[:, 1] < 0, -glass[:, 1] / bounced[:, 1], np.inf)
+    landing = glass + bounced * np.where(np.isfinite(floor), floor, 0.0)[:, None]
+    floor = np.where(np.abs(landing[:, [0, 2]]).max(1) <= 0.5 * FLOOR, floor, np.inf)   # (the floor's edge)
+    reach = np.clip(np.minimum(floor, _hits(glass, bounced, ROOF)), 0.0, 40.0)   # (0: a ray that misses the glass)
+    return glass, bounced, reach, inside.reshape(height, width)
+
+
+def test_a_mirrors_view_marches_the_air_it_shows_from_the_glass(scene):
+    """The mirror's level: each of its pixels' ray starts on the glass and goes on as the
+    camera's ray reflected; its light is the ground truth's for that ray (the composite then
+    dims it with the rest of the reflection by the air in front of the glass)."""
+    settings = VolumetricFog(steps=64)
+    runner = scene(lambda world: _hall(world, settings, mirror=True), SIZE)
+    runner.frame()
+    assert runner.stats.reflection_views == 1
+    level = runner.engine.renderer.levels[1]
+    assert level.size == SIZE
+    marched = _level_marched(runner, 1)
+    nodes = np.frombuffer(level.node.read(), np.uint32).reshape(SIZE[1], SIZE[0])
+    origin, way, reach, inside = _mirror_rays(runner)
+    mirror_node = np.bincount(nodes[inside]).argmax()
+    ours = inside & (nodes == mirror_node)
+    assert ours.sum() > 300
+    truth = _light(origin, way, reach, settings).reshape(SIZE[1], SIZE[0])
+    reach = reach.reshape(SIZE[1], SIZE[0])
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    check = ours & steady
+    assert np.median(np.abs(marched[..., 3] - reach)[check] / reach[check]) < 0.002
+    error = np.abs(marched[..., 0] - truth)[check] / truth[check]
+    assert np.median(error) < 0.025
+    assert np.quantile(error, 0.9) < 0.07
+    assert truth[check].max() > 2 * np.median(truth[check])   # the reflected rays cross the shaft too
+    # Added to the level's colour by the filter, within the mirror's own pixels (against the
+    # same level at depth 0, with nothing added): its numpy twin, the texels of its own view.
+    unlit = scene(lambda world: _hall(world, VolumetricFog(steps=64, reflection_depth=0), mirror=True), SIZE)
+    unlit.frame()
+    added = _level_colour(runner).astype(np.float64) - _level_colour(unlit).astype(np.float64)
+    expected = _filtered(marched.astype(np.float64), reach, 1, counts=nodes == mirror_node)
+    close = np.abs(added[..., 0] - expected) < 2e-3 + 0.02 * expected
+    assert close[check].mean() > 0.97
+    assert np.abs(added[nodes != mirror_node]).max() < 2e-3   # nothing added to the room's pixels
+
+
+def test_reflection_depth_zero_keeps_the_shafts_to_the_camera_and_the_levels_images_go(scene):
+    runner = scene(lambda world: _hall(world, VolumetricFog(), mirror=True), SIZE)
+    runner.frame()
+    fog = runner.engine.renderer.volumetric_fog
+    assert fog.composites == 2 and runner.engine.renderer.resource_counts()["volumetric_targets"] == 2
+    passes = runner.stats.passes
+    camera = runner.engine.active_camera()[0]
+    runner.world.get(camera, VolumetricFog).reflection_depth = 0
+    runner.frame()
+    assert fog.composites == 3 and runner.stats.passes == passes - 2
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 1
+    runner.world.get(camera, VolumetricFog).reflection_depth = 1
+    runner.frame()
+    assert fog.composites == 5
+    for entity, _ in list(runner.world.query_one(Mirror)):
+        runner.world.delete_entity(entity)
+    runner.frame()
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 1

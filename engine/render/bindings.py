@@ -158,6 +158,7 @@ OCCLUSION_LAMPS_UNIT = 53     # occlusion filter: the lamps' shares found
 # Light shafts (VolumetricFog; engine/render/volumetric_fog.py), past 31 as the reflections'.
 VOLUMETRIC_DEPTH_UNIT = 54    # the march and its filter: the main view's depth (compared with nothing)
 VOLUMETRIC_LIGHT_UNIT = 55    # the filter: the light the march found
+VOLUMETRIC_NODE_UNIT = 56     # a reflection level's march and filter: the level's node image
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

@@ -414,10 +414,13 @@ class ScenePass:
         """What a view tree does last in its reflection level ``depth`` (``views`` drawn into
         ``targets`` with ``options``), once the level below is composited into it: the
         screen-space reflections, where the level was drawn for them
-        (``ScreenReflectionPass.composite_level``), then, with ``glass`` (something
+        (``ScreenReflectionPass.composite_level``), the light shafts where the camera's reach
+        it (``VolumetricFogPass.composite_level``), then, with ``glass`` (something
         see-through is drawn), the transparent slot."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite_level(depth, views, targets)
+        if self.volumetric_fog is not None:
+            self.volumetric_fog.composite_level(depth, views, targets)
         if glass:
             self.draw_transparent(views, targets, options, conditions)
 

@@ -22,9 +22,20 @@ put in, before its glass (``ScenePass.finish_root``):
    is added to the view's colour (``BLEND_ADD``).
 
 Added to the light the fog's colour and sun glow already give each pixel (the scene pass's
-``FOG`` builds); glass drawn after does not dim it.  Mirror and portal views get no march
-of their own: their surfaces' pixels get the shafts of the air between the camera and the
-surface.  The images are made the first frame a camera asks and let go when none does.
+``FOG`` builds); glass drawn after does not dim it.
+
+**Reflection levels** (``VolumetricFog.reflection_depth``, 1 by default): a level of the
+main view tree the depth reaches gets the same two draws once its levels below are
+composited into it, before its glass (``composite_level``, from ``ScenePass.finish_level``),
+once a view over its rectangle (``LEVEL_VIEWS`` builds: that view's pixels and texels only,
+its own projection, whose oblique near plane starts each ray on the surface it looks out
+of), a ray a pixel.  The air between the eye and the surface is its parent's, and the
+composite fogs the level's light as a whole over that stretch, so the shafts a mirror shows
+are dimmed as what it shows is.
+
+The images are made the first frame a camera asks (a level's the first frame it is reached)
+and let go when none does (a level's when the depth no longer reaches it or the world has
+no mirror or portal left: ``release_levels``).
 """
 from __future__ import annotations
 
@@ -44,17 +55,21 @@ from engine.render.bindings import (
     SHADOWS_BINDING,
     VOLUMETRIC_DEPTH_UNIT,
     VOLUMETRIC_LIGHT_UNIT,
+    VOLUMETRIC_NODE_UNIT,
     PassState,
     apply_pass_state,
     assign_slots,
     bind_sampler,
     bind_texture,
     forget_sampler,
+    set_scissor,
 )
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, View
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from engine.render.gpu import Gpu
     from engine.render.shadows import ShadowMaps
 
@@ -82,20 +97,25 @@ class _Images:
 
 
 class VolumetricFogPass:
-    """The active camera's light shafts: ``begin`` when its view is drawn, ``composite``
-    before its glass is (the module's docstring)."""
+    """The active camera's light shafts: ``begin`` when its view is drawn, ``composite_level``
+    before each reflection level's glass and ``composite`` before its own (the module's
+    docstring)."""
 
     def __init__(self, gpu: Gpu, shadows: ShadowMaps) -> None:
         self.gpu = gpu
         self.ctx = gpu.ctx
         self.shadows = shadows
         self._images: _Images | None = None
+        self._levels: dict[int, _Images] = {}  # a reflection level's, by its depth
         self._pending: tuple[View, VolumetricFog, bool] | None = None  # (view, settings, jittered) this frame
+        # The levels this frame's shafts reach (0: the camera's view alone; -1: no shafts): a
+        # still tree's refill copies such a level, whose shafts add to what its pixels hold.
+        self.reach = -1
         self._programs: dict[tuple, moderngl.VertexArray] = {}
         self._programs_of = -1  # the shader library's reloads when they were made
         self._depth_sampler: moderngl.Sampler | None = None
         self._frame = 0
-        self.composites = 0  # drawn so far (tests count them)
+        self.composites = 0  # drawn so far, the root's and each level's (tests count them)
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False) -> None:
         """``view``, drawn into ``targets`` (the main tree's level 0) this frame, gets the
@@ -104,13 +124,20 @@ class VolumetricFogPass:
         ratio = 2 if settings.half_resolution else 1
         images = self._images
         if images is None or images.level is not targets or images.ratio != ratio:
-            self.release_targets()
-            size = (-(-targets.size[0] // ratio), -(-targets.size[1] // ratio))
-            light = self.ctx.texture(size, 4, dtype="f4")  # (the ray's length in metres beside the light)
-            light.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            images = self._images = _Images(targets, light, self.ctx.framebuffer([light]),
-                                            self.ctx.framebuffer([targets.color]), ratio)
+            if images is not None:
+                images.release()
+            images = self._images = self._make(targets, ratio)
         self._pending = (view, settings, jittered)
+        self.reach = settings.reflection_depth
+        for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
+            self._levels.pop(depth).release()
+        self._frame += 1
+
+    def _make(self, targets: RenderTargets, ratio: int) -> _Images:
+        size = (-(-targets.size[0] // ratio), -(-targets.size[1] // ratio))
+        light = self.ctx.texture(size, 4, dtype="f4")  # (the ray's length in metres beside the light)
+        light.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        return _Images(targets, light, self.ctx.framebuffer([light]), self.ctx.framebuffer([targets.color]), ratio)
 
     def composite(self, level: RenderTargets) -> None:
         """March and add this frame's shafts into ``level`` (the main tree's level 0, its
@@ -121,17 +148,39 @@ class VolumetricFogPass:
             return
         self._pending = None
         view, settings, jittered = pending
+        self._draw(images, [view], settings, jittered, False)
+
+    def composite_level(self, depth: int, views: Sequence[View], level: RenderTargets) -> None:
+        """March and add this frame's shafts into reflection level ``depth``'s ``level``
+        (``views`` drawn into it, the levels below composited, its glass not yet drawn), where
+        the camera's ``reflection_depth`` reaches it; nothing otherwise."""
+        pending = self._pending
+        if pending is None or depth > pending[1].reflection_depth or not views:
+            return
+        images = self._levels.get(depth)
+        if images is None or images.level is not level:
+            if images is not None:
+                images.release()
+            images = self._levels[depth] = self._make(level, 1)
+        self._draw(images, views, pending[1], pending[2], True)
+
+    def _draw(self, images: _Images, views: Sequence[View], settings: VolumetricFog, jittered: bool,
+              level_views: bool) -> None:
+        """The march into ``images`` and the filter into its level's colour: one draw each
+        over the view's pixels, or with ``level_views`` one a view over its rectangle."""
         ctx, gpu = self.ctx, self.gpu
+        level = images.level
         if self._depth_sampler is None:  # the level's depth as values, compared with nothing
             self._depth_sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
         self.shadows.bind()
         gpu.fog.bind()
         bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
         bind_sampler(ctx, self._depth_sampler, VOLUMETRIC_DEPTH_UNIT)
-        self._frame += 1
+        if level_views:
+            bind_texture(ctx, level.node, VOLUMETRIC_NODE_UNIT)
         shared = {"depth_size": (float(level.size[0]), float(level.size[1])), "ratio": images.ratio,
-                  "inv_view_proj": glm.inverse(view.view_proj).to_bytes(), "max_distance": settings.distance}
-        march = self._program("volumetric_fog.frag", settings.steps)
+                  "max_distance": settings.distance}
+        march = self._program("volumetric_fog.frag", settings.steps, level_views)
         tiles = np.zeros((MAX_DIRECTIONAL_LIGHTS, 4), np.float32)
         for slot, tile in self.shadows.directional_tiles.items():
             tiles[slot, :3] = tile
@@ -140,28 +189,40 @@ class VolumetricFogPass:
                                     "map_tiles": tiles.tobytes()})
         images.light_framebuffer.use()
         apply_pass_state(ctx, _MARCH, (0, 0, *images.light.size))
-        march.render(moderngl.TRIANGLES, vertices=3)
-        spread = self._program("volumetric_fog_filter.frag", 0)
+        self._each_view(march, views, level_views)
+        spread = self._program("volumetric_fog_filter.frag", 0, level_views)
         self._write(spread.program, shared)
         bind_texture(ctx, images.light, VOLUMETRIC_LIGHT_UNIT)
         images.output.use()
         apply_pass_state(ctx, _ADD, (0, 0, *level.size))
-        spread.render(moderngl.TRIANGLES, vertices=3)
+        self._each_view(spread, views, level_views)
         gpu.stats.passes += 2
-        gpu.stats.draw_calls += 2
+        gpu.stats.draw_calls += 2 * len(views)
         self.composites += 1
         if gpu.debug:
-            gpu.checkpoint("volumetric fog")
+            gpu.checkpoint("volumetric fog" if not level_views else f"volumetric fog ({views[0].name} ...)")
 
-    def _program(self, shader: str, steps: int) -> moderngl.VertexArray:
+    def _each_view(self, vao: moderngl.VertexArray, views: Sequence[View], level_views: bool) -> None:
+        """``vao``'s full-screen triangle for each of ``views`` (its projection; with
+        ``level_views`` its node and its rectangle's scissor)."""
+        for view in views:
+            values: dict[str, object] = {"inv_view_proj": glm.inverse(view.view_proj).to_bytes()}
+            if level_views:
+                values["node"] = view.node
+                set_scissor(self.ctx, view.scissor)
+            self._write(vao.program, values)
+            vao.render(moderngl.TRIANGLES, vertices=3)
+
+    def _program(self, shader: str, steps: int, level_views: bool) -> moderngl.VertexArray:
         """The march's build for ``steps`` (with the shadow lookups and fog terms the scene
-        builds have now), or the filter's (``steps`` 0)."""
+        builds have now), or the filter's (``steps`` 0); a reflection level's with
+        ``level_views``."""
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
         extra = (self.shadows.program_defines, self.gpu.fog.defines) if steps else ()
-        key = (shader, steps, extra)
+        key = (shader, steps, extra, level_views)
         vao = self._programs.get(key)
         if vao is None:
             defines = {"STEPS": str(steps)} if steps else {}
@@ -169,9 +230,11 @@ class VolumetricFogPass:
                 defines.update(pairs)
             if steps:  # a tap a point (the march's steps and the filter soften the edges)
                 defines["SHADOW_SINGLE_TAP"] = "1"
+            if level_views:
+                defines["LEVEL_VIEWS"] = "1"
             program = shaders.program("fullscreen.vert", shader, defines=defines)
             assign_slots(program, {"depth_map": VOLUMETRIC_DEPTH_UNIT, "light_map": VOLUMETRIC_LIGHT_UNIT,
-                                   "shadow_atlas": SHADOW_ATLAS_UNIT},
+                                   "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING})
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
@@ -188,15 +251,32 @@ class VolumetricFogPass:
                     uniforms.set(program, name, value)
 
     def target_count(self) -> int:
-        """Images held now (1 while a camera asks for shafts, else 0)."""
-        return 0 if self._images is None else 1
+        """Images held now (1 while a camera asks for shafts, and 1 for each reflection level
+        they reach, else 0)."""
+        return (0 if self._images is None else 1) + len(self._levels)
+
+    def level_key(self) -> tuple | None:
+        """What this frame's reflection levels get shafts with, as values (the reflect
+        stage's still key: a change draws its levels again)."""
+        if self._pending is None:
+            return None
+        settings = self._pending[1]
+        return (settings.intensity, settings.anisotropy, settings.distance, settings.steps, settings.reflection_depth)
+
+    def release_levels(self) -> None:
+        """Let the reflection levels' images go (the world has no mirror or portal now)."""
+        for images in self._levels.values():
+            images.release()
+        self._levels.clear()
 
     def release_targets(self) -> None:
-        """Let the images go (no camera asks for shafts, or its view's targets changed)."""
+        """Let the images go (no camera asks for shafts), the levels' too."""
         if self._images is not None:
             self._images.release()
             self._images = None
+        self.release_levels()
         self._pending = None
+        self.reach = -1
 
     def _release_programs(self) -> None:
         for vao in self._programs.values():
