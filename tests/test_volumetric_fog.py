@@ -412,3 +412,21 @@ def test_reflection_depth_zero_keeps_the_shafts_to_the_camera_and_the_levels_ima
         runner.world.delete_entity(entity)
     runner.frame()
     assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 1
+
+
+@pytest.mark.parametrize("pair", ["mirrors", "portals"])
+def test_a_still_tree_with_shafts_in_its_levels_refills_as_it_draws_whole(ctx, pair):
+    """A facing pair with end images, kept and refilled by a still camera: its levels get
+    shafts (added over what their pixels hold), so a refill must put each level back before
+    adding them again.  Against an engine drawing every frame whole (the still fuzz's
+    check); with the refill's copy of such a level left out, the frames differ (both pairs)."""
+    from benchmarks.still_fuzz import StillCase, StillFuzzer
+
+    case = StillCase(pair=pair, depth=3, panes=[], water=False, see_through_mirror=False, sandwich=None, still=5,
+                     change="depth_cap", detail={"cap": 8}, after=3, rate=1.0, fog=True, shafts=True)
+    fuzzer = StillFuzzer(ctx)
+    try:
+        assert fuzzer.run(case) is None
+        assert fuzzer.refills >= 3
+    finally:
+        fuzzer.close()
