@@ -23,7 +23,7 @@ import numpy as np
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
 from engine.frame_stats import RenderStats
-from engine.render.bindings import CAMERA_BINDING, bind_uniform_range
+from engine.render.bindings import CAMERA_BINDING, bind_uniform_range, forget_sampler
 from engine.render.fog import FogBlock
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
@@ -184,6 +184,7 @@ class Gpu:
         self.blank_ids.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.colour_maps: set[moderngl.Texture] = {self.blank_color}  # (a texture leaves it when released)
         self.stats = RenderStats()  # the frame's, while a frame runs (Engine.frame gives it)
+        self._depth_values: moderngl.Sampler | None = None  # depth_values()
         # Every probe's cube map by probe key: made and released by the probe captures
         # (engine/render/probes.py), sampled by the scene pass and the composites.
         self.probe_cubes: dict[int, ProbeCube] = {}
@@ -360,6 +361,21 @@ class Gpu:
         self._draw_order = sorted((b for b in drawn if not b.transparent), key=lambda b: b.extent)
         self._transparent = [b for b in drawn if b.transparent]
         self._order_stale = False
+
+    def depth_values(self) -> moderngl.Sampler:
+        """The sampler a screen pass reads a view's depth image through as values (nearest,
+        comparing nothing: a depth texture's own state may be set for shadow comparisons):
+        screen reflections' march and the light shafts'.  One for the context, made on first
+        use, released with the Gpu (``release_depth_values``)."""
+        if self._depth_values is None:
+            self._depth_values = self.ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
+        return self._depth_values
+
+    def release_depth_values(self) -> None:
+        if self._depth_values is not None:
+            forget_sampler(self.ctx, self._depth_values)
+            self._depth_values.release()
+            self._depth_values = None
 
     def checkpoint(self, name: str) -> None:
         """In debug mode, raise ``GLPassError`` naming pass ``name`` if it left a GL error."""

@@ -552,6 +552,7 @@ class Renderer(Gpu):
         self.occlusion.release()
         self.screen_reflections.release()
         self.volumetric_fog.release()
+        self.release_depth_values()
         self.scene_pass.release()
         self.present_pass.release()
         self.frame_timer.release()

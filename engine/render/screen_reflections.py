@@ -72,7 +72,6 @@ from engine.render.bindings import (
     apply_pass_state,
     bind_sampler,
     bind_texture,
-    forget_sampler,
     set_scissor,
 )
 from engine.render.targets import HDR_FORMAT, RenderTargets, release_framebuffer
@@ -146,7 +145,6 @@ class ScreenReflectionPass:
         # program -> the uniform values last written to it (GL keeps them: a still camera's
         # frame writes none)
         self._written: dict[int, dict[str, object]] = {}
-        self._depth_sampler: moderngl.Sampler | None = None
         # This frame's: (the view, its settings), from begin until composite (None: nothing to do).
         self._pending: tuple[View, ScreenReflections] | None = None
         self._levels: dict[int, _Targets] = {}  # a reflection level's images, by its depth
@@ -302,15 +300,13 @@ class ScreenReflectionPass:
         shared = {"depth_size": (float(size[0]), float(size[1])), "near_plane": near,
                   "max_distance": settings.max_distance, "thickness": settings.thickness,
                   "max_roughness": settings.max_roughness, "edge_fade": settings.edge_fade, "top_lod": float(top)}
-        if self._depth_sampler is None:  # the level's depth as distances, compared with nothing
-            self._depth_sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
         for texture, unit in ((targets.color, REFLECTION_COLOR_UNIT), (level.depth, REFLECTION_DEPTH_UNIT),
                               (targets.weight, REFLECTION_WEIGHT_UNIT), (targets.added, REFLECTION_ADDED_UNIT),
                               (targets.normal, REFLECTION_NORMAL_UNIT), (level.surface, REFLECTION_SURFACE_UNIT)):
             bind_texture(ctx, texture, unit)
         if level_views:
             bind_texture(ctx, level.node, REFLECTION_NODE_UNIT)
-        bind_sampler(ctx, self._depth_sampler, REFLECTION_DEPTH_UNIT)
+        bind_sampler(ctx, gpu.depth_values(), REFLECTION_DEPTH_UNIT)  # (as distances, compared with nothing)
         half = not level_views and settings.half_resolution and targets.hits is not None
         if half:  # the rays marched at half size first
             trace = self._program("screen_reflection_trace.frag", settings.quality, False)
@@ -391,10 +387,6 @@ class ScreenReflectionPass:
     def release(self) -> None:
         self.release_targets()
         self._release_programs()
-        if self._depth_sampler is not None:
-            forget_sampler(self.ctx, self._depth_sampler)
-            self._depth_sampler.release()
-            self._depth_sampler = None
 
 
 def _view_values(view: View) -> dict[str, object]:

@@ -61,7 +61,6 @@ from engine.render.bindings import (
     assign_slots,
     bind_sampler,
     bind_texture,
-    forget_sampler,
     set_scissor,
 )
 from engine.render.targets import RenderTargets, release_framebuffer
@@ -113,7 +112,6 @@ class VolumetricFogPass:
         self.reach = -1
         self._programs: dict[tuple, moderngl.VertexArray] = {}
         self._programs_of = -1  # the shader library's reloads when they were made
-        self._depth_sampler: moderngl.Sampler | None = None
         self._frame = 0
         self.composites = 0  # drawn so far, the root's and each level's (tests count them)
 
@@ -170,12 +168,10 @@ class VolumetricFogPass:
         over the view's pixels, or with ``level_views`` one a view over its rectangle."""
         ctx, gpu = self.ctx, self.gpu
         level = images.level
-        if self._depth_sampler is None:  # the level's depth as values, compared with nothing
-            self._depth_sampler = ctx.sampler(filter=(moderngl.NEAREST, moderngl.NEAREST), compare_func="")
         self.shadows.bind()
         gpu.fog.bind()
         bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
-        bind_sampler(ctx, self._depth_sampler, VOLUMETRIC_DEPTH_UNIT)
+        bind_sampler(ctx, gpu.depth_values(), VOLUMETRIC_DEPTH_UNIT)  # (its values, compared with nothing)
         if level_views:
             bind_texture(ctx, level.node, VOLUMETRIC_NODE_UNIT)
         shared = {"depth_size": (float(level.size[0]), float(level.size[1])), "ratio": images.ratio,
@@ -286,7 +282,3 @@ class VolumetricFogPass:
     def release(self) -> None:
         self.release_targets()
         self._release_programs()
-        if self._depth_sampler is not None:
-            forget_sampler(self.ctx, self._depth_sampler)
-            self._depth_sampler.release()
-            self._depth_sampler = None
