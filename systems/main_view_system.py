@@ -31,9 +31,10 @@ from engine.render.renderer import Renderer
 from engine.render.resample import render_size
 from engine.render.scene_options import TREE_ROOT, SceneOptions
 from engine.render.scene_programs import reflects_environment
+from engine.render.targets import RenderTargets
 from engine.render.temporal_aa import jittered
 from engine.render.unlit_mirrors import shading_replaced
-from engine.render.views import camera_view
+from engine.render.views import View, camera_view
 from engine.resources import ContactLamps, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import brightest_directional
@@ -142,7 +143,7 @@ class MainViewSystem(esper.Processor):
         self.renderer.scene_pass.draw([views.main], targets, views.options)
         self._shafts(camera[0], views.main, targets)
 
-    def _shafts(self, camera: int, view, targets) -> None:
+    def _shafts(self, camera: int, view: View, targets: RenderTargets) -> None:
         """The camera's ``VolumetricFog``, begun for this frame's ``view`` (drawn into
         ``targets``) where its Fog has air and the world a sun; said once where not."""
         shafts = self.world.try_get(camera, VolumetricFog)
