@@ -34,15 +34,14 @@ void main() {
         for (int x = 0; x < 3; ++x) {
             ivec2 q = clamp(base + ivec2(x, y), ivec2(0), size - 1);
             vec4 found = texelFetch(light_map, q, 0);
+#ifdef LEVEL_VIEWS
+            // Another view's texel, or one no view marched (whatever it holds: not even read
+            // as a number), weighs nothing.
+            found = node_at(vec2(q * ratio)) == node ? found : vec4(0.0, 0.0, 0.0, 1e30);
+#endif
             vec2 d = vec2(base + ivec2(x, y)) - at;
             float gap = abs(found.a - reach);
             float w = exp(-0.5 * dot(d, d)) * exp2(-gap / tolerance);
-#ifdef LEVEL_VIEWS
-            if (node_at(vec2(q * ratio)) != node) {  // another view's texel (or one none marched)
-                w = 0.0;
-                gap = 1e30;
-            }
-#endif
             sum += found.rgb * w;
             weights += w;
             nearest = gap < nearest_gap ? found.rgb : nearest;
