@@ -108,6 +108,7 @@ class FlyController(TrackedComponent):
 MIN_SHADOW_RESOLUTION = 64
 MAX_SHADOW_RESOLUTION = 4096   # a 4096^2 depth map is 64 MiB: past that, fit the level instead
 MAX_SHADOW_SOFTNESS = 8.0      # texels; a wider filter would need more taps than it takes
+MAX_LAMP_SCATTER = 100.0       # PointLight.volumetric: at most this many times its light in the air
 
 
 def _shadow_field(owner: TrackedComponent, name: str, value: Any) -> Any:
@@ -238,7 +239,15 @@ class PointLight(TrackedComponent):
     as the sun's is (the camera's component sets the ray).  At most ``MAX_CONTACT_LAMPS`` (4)
     of the lights that reach the scene at once have them (the ones that matter most to the
     camera); the rest are counted in ``RenderStats.contact_lamps_cut`` and a
-    ``LightLimitWarning`` says so."""
+    ``LightLimitWarning`` says so.
+
+    ``volumetric`` (1 by default, 0 to 100; Unreal's volumetric scattering intensity, Godot's
+    volumetric fog energy): how much of its light the active camera's ``VolumetricFog``
+    scatters towards the eye, in its shadow where it casts one: a lantern's glow in the haze,
+    a torch's beam, its cone cut by what stands in it (0: none).  At most
+    ``MAX_VOLUMETRIC_LAMPS`` (4) of the lights that reach the scene at once (the first by
+    the lights' slots); the rest are counted in ``RenderStats.volumetric_lamps_cut`` and a
+    ``LightLimitWarning`` says so.  Its cookie does not shape its light in the air."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0
@@ -252,6 +261,7 @@ class PointLight(TrackedComponent):
     cookie: TextureData | None = None
     radius: float = 0.0
     contact_shadows: bool = False
+    volumetric: float = 1.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "color":
@@ -286,5 +296,7 @@ class PointLight(TrackedComponent):
             return finite(self, name, value, low=0.0, high=MAX_LIGHT_RADIUS)
         if name == "contact_shadows":
             return boolean(self, name, value)
+        if name == "volumetric":
+            return finite(self, name, value, low=0.0, high=MAX_LAMP_SCATTER)
         shadow = _shadow_field(self, name, value)
         return value if shadow is None else shadow

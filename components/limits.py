@@ -122,3 +122,6 @@ MAX_SHEET_CELLS = 64
 # channel of the images screen-space occlusion's march writes (engine/render/screen_occlusion.py):
 # at most 4.
 MAX_CONTACT_LAMPS = 4
+# The point and spot lights whose light the camera's VolumetricFog scatters at once
+# (PointLight.volumetric; the first by the Lights block's slots).
+MAX_VOLUMETRIC_LAMPS = 4

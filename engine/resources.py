@@ -149,6 +149,18 @@ class ContactLamps:
 
 
 @dataclass(frozen=True)
+class VolumetricLamps:
+    """The point and spot lights whose light the active camera's ``VolumetricFog`` scatters
+    (``PointLight.volumetric`` above 0; a world resource, from the prepare stage): each one's
+    slot in the Lights block and its ``volumetric``, at most ``MAX_VOLUMETRIC_LAMPS``, the
+    first by slot; ``cut``: those past them."""
+
+    slots: tuple[int, ...] = ()
+    scatter: tuple[float, ...] = ()
+    cut: int = 0
+
+
+@dataclass(frozen=True)
 class FiredEvent:
     """An ``AnimationEvents`` event the playback of ``clip`` passed on ``entity`` (a model's
     root): its ``name`` and ``time`` in the clip; ``layer`` True where the root's

@@ -496,11 +496,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     for (int i = 0; i < lights.counts.y; ++i) {
         vec3 d = lights.point_pos[i].xyz - s.position;
         float dist = length(d);
-        float range = lights.point_pos[i].w;
         vec3 l = d / max(dist, 1e-4);
         float nl = max(dot(s.normal, l), 0.0);
-        float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);
-        float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
+        float falloff = lamp_falloff(i, dist, l);
 #if defined(SCREEN_OCCLUSION) && defined(CONTACT_LAMPS)
         // Its contact shadows' channel, if it has them (its cookie row's w: the channel + 1).
         int contact_channel = int(lights.point_cookie_v[i].w + 0.5) - 1;

@@ -1,6 +1,7 @@
 #version 410 core
 // Light shafts (components/fog.py VolumetricFog, engine/render/volumetric_fog.py): the sun's
-// single scattering by the fog's air along each ray of the main view, summed in STEPS steps.
+// single scattering by the fog's air along each ray of the main view, summed in STEPS steps,
+// and the VOLUMETRIC_LAMPS lamps' (PointLight.volumetric; MAX_VOLUMETRIC_LAMPS at most).
 // At each step t (the step's start moved by ``start``, a different offset each texel):
 //   density(x) x exp(-fog_depth(origin, x)) x shadow(x) x step
 // (the shadow map read with one bilinear comparison, SHADOW_SINGLE_TAP: the steps' offsets
@@ -11,6 +12,9 @@
 // VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
 // ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
 // compares.  A mirror or portal view's rays start on its oblique near plane: the surface.
+#ifndef VOLUMETRIC_LAMPS
+#define VOLUMETRIC_LAMPS 0
+#endif
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "fog.glsl"
@@ -26,6 +30,10 @@ uniform float anisotropy;    // VolumetricFog.anisotropy: the phase function's g
 uniform float frame_offset;  // added to each texel's start (a new one each frame under temporal AA)
 uniform vec4 map_tiles[MAX_DIRECTIONAL_LIGHTS];  // each directional light's level map in the atlas:
                                                  // corner u, v and side (0: it casts no shadow)
+#if VOLUMETRIC_LAMPS > 0
+uniform ivec4 lamp_slots;    // the lamps the shafts scatter: their slots in the Lights block
+uniform vec4 lamp_scatter;   // ... and each one's PointLight.volumetric
+#endif
 
 out vec4 out_light;  // rgb: the light the air sends towards the eye, a: the ray's length (metres)
 
@@ -51,9 +59,8 @@ void main() {
     int sun = -1;  // the sun's slot (the Lights block marks it)
     for (int k = 0; k < MAX_DIRECTIONAL_LIGHTS; ++k)
         sun = k < lights.counts.x && lights.directional_dir[k].w > 0.5 ? k : sun;
-    out_light = vec4(0.0, 0.0, 0.0, reach);
-    if (sun < 0) return;
-    vec3 towards = -lights.directional_dir[sun].xyz;
+    int lit_by = max(sun, 0);  // (a slot to read where there is no sun: its light counts 0)
+    vec3 towards = -lights.directional_dir[lit_by].xyz;
     float step_length = reach / float(STEPS);
     float start = fract(interleaved_gradient_noise(gl_FragCoord.xy) + frame_offset);
     // What reaches the eye of the light scattered at each point: exact to the first, then
@@ -68,29 +75,53 @@ void main() {
     // atlas's other tiles there are other maps, and texels no map wrote).  The point's
     // coordinates in the map step along with it (they are affine in the point); it is moved
     // off towards the sun by half the filter's reach.
-    vec4 params = shadows.directional_params[sun];
-    mat4 to_map = shadows.directional_matrix[sun];
+    vec4 params = shadows.directional_params[lit_by];
+    mat4 to_map = shadows.directional_matrix[lit_by];
     vec3 at = (to_map * vec4(x, 1.0)).xyz;
     vec3 at_step = mat3(to_map) * (dir * step_length);
     vec3 along = mat3(to_map) * towards;
     float grazing = 0.5 * (1.0 + params.y);
-    vec4 tile = map_tiles[sun];
+    vec4 tile = map_tiles[lit_by];
     float margin = (params.y + 2.0) * params.z;   // the filter's reach and the offset, in uv
     vec2 low = tile.xy + margin, high = tile.xy + tile.z - margin;
-    bool casts = params.w != 0.0 && tile.z > 0.0;
+    bool casts = sun >= 0 && params.w != 0.0 && tile.z > 0.0;
+#endif
+#if VOLUMETRIC_LAMPS > 0
+    // The lamps the shafts scatter (PointLight.volumetric): each one's light at the point
+    // (its falloff and cone, its shadow where it casts, looked up with no offset: the air
+    // has no surface to lift the lookup off), by the phase function of the angle between its
+    // light and the ray, times its own share.
+    vec3 lamp_sum = vec3(0.0);
 #endif
     for (int i = 0; i < STEPS; ++i) {
         float density = fog_density(x);
         float lit = 1.0;
 #ifdef DIRECTIONAL_SHADOWS
         bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
-        lit = held ? directional_shadow_at(sun, params, at, along, grazing) : 1.0;
+        lit = held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0;
         at += at_step;
 #endif
         sum += density * seen * lit;
+#if VOLUMETRIC_LAMPS > 0
+        vec4 lamp_lit = point_shadows(x, vec3(0.0));
+        vec3 lamps = vec3(0.0);
+        for (int k = 0; k < VOLUMETRIC_LAMPS; ++k) {
+            int j = lamp_slots[k];
+            vec3 d = lights.point_pos[j].xyz - x;
+            float dist = length(d);
+            vec3 l = d / max(dist, 1e-4);
+            lamps += lights.point_color[j].rgb * (lamp_scatter[k] * lamp_falloff(j, dist, l)
+                     * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit));
+        }
+        lamp_sum += lamps * (density * seen);
+#endif
         seen *= exp(-density * step_length);
         x += dir * step_length;
     }
     float phase = henyey_greenstein(dot(dir, towards), anisotropy);
-    out_light.rgb = lights.directional_color[sun].rgb * (scatter * phase * sum * step_length);
+    vec3 sun_light = sun >= 0 ? lights.directional_color[lit_by].rgb * (phase * sum) : vec3(0.0);
+#if VOLUMETRIC_LAMPS > 0
+    sun_light += lamp_sum;
+#endif
+    out_light = vec4(sun_light * (scatter * step_length), reach);
 }

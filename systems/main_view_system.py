@@ -35,11 +35,12 @@ from engine.render.targets import RenderTargets
 from engine.render.temporal_aa import jittered
 from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import View, camera_view
-from engine.resources import ContactLamps, Surfaces, ViewBudget
+from engine.resources import ContactLamps, Surfaces, ViewBudget, VolumetricLamps
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import brightest_directional
 
 _NO_LAMPS = ContactLamps()
+_NO_SHAFT_LAMPS = VolumetricLamps()
 
 
 class MainViewSystem(esper.Processor):
@@ -145,14 +146,17 @@ class MainViewSystem(esper.Processor):
 
     def _shafts(self, camera: int, view: View, targets: RenderTargets) -> None:
         """The camera's ``VolumetricFog``, begun for this frame's ``view`` (drawn into
-        ``targets``) where its Fog has air and the world a sun; said once where not."""
+        ``targets``) where its Fog has air and the world a sun or a lamp that lights it (the
+        prepare stage's ``VolumetricLamps``); said once where not."""
         shafts = self.world.try_get(camera, VolumetricFog)
         fog = self.world.try_get(camera, Fog) if shafts is not None else None
         why = None
         if shafts is not None and (fog is None or fog.density <= 0.0):
             why = "has no Fog with a density beside it (the shafts are its air's light)"
-        elif shafts is not None and brightest_directional(self.world) is None:
-            why = "lights its air with the sun, and the world has no DirectionalLight that shines"
+        lamps = self.world.resources.get(VolumetricLamps, _NO_SHAFT_LAMPS)
+        if why is None and shafts is not None and brightest_directional(self.world) is None and not lamps.slots:
+            why = ("lights its air with the sun and the lamps with volumetric > 0, and the world has no "
+                   "DirectionalLight that shines and no such PointLight")
         if why is not None:
             if self._said_no_shafts != (shafts, why):
                 self._said_no_shafts = (shafts, why)
@@ -163,7 +167,7 @@ class MainViewSystem(esper.Processor):
         if shafts is None:
             self.renderer.volumetric_fog.release_targets()
             return
-        self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa")
+        self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa", lamps)
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
         """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects

@@ -30,7 +30,7 @@ import numpy as np
 
 from components import DirectionalLight, Fog, HemisphereLight, PointLight, ReflectionProbe, Skybox, Transform
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
-from components.limits import MAX_CONTACT_LAMPS
+from components.limits import MAX_CONTACT_LAMPS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import LightLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
@@ -38,7 +38,7 @@ from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
-from engine.resources import ContactLamps
+from engine.resources import ContactLamps, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
     ALL_ROUND,
@@ -88,6 +88,7 @@ class PrepareSystem(esper.Processor):
         self._flat_sky = True   # no Skybox: the sky cube is the flat background (lights_block's flat_sky)
         self._cut = (0, 0)   # (directional, point) lights the last block left out
         self._contact = ContactLamps()   # the lamps with contact shadows the last block gave channels
+        self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
@@ -130,8 +131,10 @@ class PrepareSystem(esper.Processor):
             self._count_cut(kept)
         world.resources[KeptLights] = kept   # every frame: what the shadows stage reads
         world.resources[ContactLamps] = self._contact   # ... and the main stage's contact shadows
+        world.resources[VolumetricLamps] = self._volumetric   # ... and its light shafts
         renderer.stats.lights_cut = sum(self._cut)
         renderer.stats.contact_lamps_cut = self._contact.cut
+        renderer.stats.volumetric_lamps_cut = self._volumetric.cut
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
         sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
@@ -195,11 +198,18 @@ class PrepareSystem(esper.Processor):
             light = world.get(entity, DirectionalLight)
             directional.append((light.direction, light.color.xyz * light.intensity, float(light is sun)))
         point, contact, cut = [], [], 0
-        for entity in kept.point:
+        scattered: list[tuple[int, float]] = []   # (slot, volumetric) of the lamps the shafts scatter
+        volumetric_cut = 0
+        for slot, entity in enumerate(kept.point):
             if entity is None:
                 point.append(_NO_LAMP)
                 continue
             light, t = world.get(entity, PointLight), world.get(entity, Transform)
+            if light.volumetric > 0.0 and light.intensity > 0.0:
+                if len(scattered) < MAX_VOLUMETRIC_LAMPS:
+                    scattered.append((slot, light.volumetric))
+                else:
+                    volumetric_cut += 1
             channel = 0   # its contact shadows' channel + 1 (0: none), the first MAX_CONTACT_LAMPS by slot
             if light.contact_shadows:
                 if len(contact) < MAX_CONTACT_LAMPS:
@@ -216,6 +226,13 @@ class PrepareSystem(esper.Processor):
                 f"have them at once (the first by the lights' slots: those that matter most to the active camera), "
                 f"so {cut} shine without them (RenderStats.contact_lamps_cut)"), stacklevel=3)
         self._contact = ContactLamps(tuple(contact), cut)
+        if volumetric_cut > self._volumetric.cut:
+            warnings.warn(LightLimitWarning(
+                f"{len(scattered) + volumetric_cut} point lights with volumetric > 0 light the scene: the light "
+                f"shafts scatter at most {MAX_VOLUMETRIC_LAMPS} at once (the first by the lights' slots), so "
+                f"{volumetric_cut} light no air (RenderStats.volumetric_lamps_cut)"), stacklevel=3)
+        self._volumetric = VolumetricLamps(tuple(slot for slot, _ in scattered),
+                                           tuple(scatter for _, scatter in scattered), volumetric_cut)
         return directional, point
 
     def _cookies(self, kept: KeptLights) -> bool:

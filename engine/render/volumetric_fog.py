@@ -47,12 +47,15 @@ import numpy as np
 from pyglm import glm
 
 from components.fog import VolumetricFog
+from components.limits import MAX_VOLUMETRIC_LAMPS
 from engine.render.bindings import (
     BLEND_ADD,
     FOG_BINDING,
     LIGHTS_BINDING,
+    POINT_SHADOW_UNITS,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
+    SPOT_SHADOW_UNIT,
     VOLUMETRIC_DEPTH_UNIT,
     VOLUMETRIC_LIGHT_UNIT,
     VOLUMETRIC_NODE_UNIT,
@@ -65,6 +68,7 @@ from engine.render.bindings import (
 )
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, View
+from engine.resources import VolumetricLamps
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -77,6 +81,7 @@ _ADD = PassState(blend=BLEND_ADD)
 # Each frame's offset to the points' starts under temporal AA: the golden ratio's fraction
 # steps through [0, 1) as evenly as a sequence can without knowing its length.
 _GOLDEN = 0.6180339887498949
+_NO_LAMPS = VolumetricLamps()
 
 
 @dataclass
@@ -106,7 +111,8 @@ class VolumetricFogPass:
         self.shadows = shadows
         self._images: _Images | None = None
         self._levels: dict[int, _Images] = {}  # a reflection level's, by its depth
-        self._pending: tuple[View, VolumetricFog, bool] | None = None  # (view, settings, jittered) this frame
+        # This frame's (view, settings, jittered, the lamps it scatters), from begin to the root's composite.
+        self._pending: tuple[View, VolumetricFog, bool, VolumetricLamps] | None = None
         # The levels this frame's shafts reach (0: the camera's view alone; -1: no shafts): a
         # still tree's refill copies such a level, whose shafts add to what its pixels hold.
         self.reach = -1
@@ -115,17 +121,19 @@ class VolumetricFogPass:
         self._frame = 0
         self.composites = 0  # drawn so far, the root's and each level's (tests count them)
 
-    def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False) -> None:
+    def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
+              lamps: VolumetricLamps = _NO_LAMPS) -> None:
         """``view``, drawn into ``targets`` (the main tree's level 0) this frame, gets the
-        shafts ``settings`` say (``jittered``: under temporal AA, a new offset each frame);
-        the images are made for the targets (again when they or the resolution change)."""
+        shafts ``settings`` say, of the sun and ``lamps`` (``jittered``: under temporal AA, a
+        new offset each frame); the images are made for the targets (again when they or the
+        resolution change)."""
         ratio = 2 if settings.half_resolution else 1
         images = self._images
         if images is None or images.level is not targets or images.ratio != ratio:
             if images is not None:
                 images.release()
             images = self._images = self._make(targets, ratio)
-        self._pending = (view, settings, jittered)
+        self._pending = (view, settings, jittered, lamps)
         self.reach = settings.reflection_depth
         for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
             self._levels.pop(depth).release()
@@ -145,8 +153,7 @@ class VolumetricFogPass:
         if pending is None or images is None or images.level is not level:
             return
         self._pending = None
-        view, settings, jittered = pending
-        self._draw(images, [view], settings, jittered, False)
+        self._draw(images, [pending[0]], pending, False)
 
     def composite_level(self, depth: int, views: Sequence[View], level: RenderTargets) -> None:
         """March and add this frame's shafts into reflection level ``depth``'s ``level``
@@ -160,12 +167,13 @@ class VolumetricFogPass:
             if images is not None:
                 images.release()
             images = self._levels[depth] = self._make(level, 1)
-        self._draw(images, views, pending[1], pending[2], True)
+        self._draw(images, views, pending, True)
 
-    def _draw(self, images: _Images, views: Sequence[View], settings: VolumetricFog, jittered: bool,
-              level_views: bool) -> None:
-        """The march into ``images`` and the filter into its level's colour: one draw each
-        over the view's pixels, or with ``level_views`` one a view over its rectangle."""
+    def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool) -> None:
+        """The march into ``images`` and the filter into its level's colour (``pending``:
+        ``begin``'s), one draw each over the view's pixels, or with ``level_views`` one a view
+        over its rectangle."""
+        _, settings, jittered, lamps = pending
         ctx, gpu = self.ctx, self.gpu
         level = images.level
         self.shadows.bind()
@@ -176,13 +184,16 @@ class VolumetricFogPass:
             bind_texture(ctx, level.node, VOLUMETRIC_NODE_UNIT)
         shared = {"depth_size": (float(level.size[0]), float(level.size[1])), "ratio": images.ratio,
                   "max_distance": settings.distance}
-        march = self._program("volumetric_fog.frag", settings.steps, level_views)
+        march = self._program("volumetric_fog.frag", settings.steps, level_views, len(lamps.slots))
         tiles = np.zeros((MAX_DIRECTIONAL_LIGHTS, 4), np.float32)
         for slot, tile in self.shadows.directional_tiles.items():
             tiles[slot, :3] = tile
         self._write(march.program, {**shared, "scatter": settings.intensity, "anisotropy": settings.anisotropy,
                                     "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
-                                    "map_tiles": tiles.tobytes()})
+                                    "map_tiles": tiles.tobytes(),
+                                    "lamp_slots": (*lamps.slots, *(0,) * (MAX_VOLUMETRIC_LAMPS - len(lamps.slots))),
+                                    "lamp_scatter": (*lamps.scatter,
+                                                     *(0.0,) * (MAX_VOLUMETRIC_LAMPS - len(lamps.scatter)))})
         images.light_framebuffer.use()
         apply_pass_state(ctx, _MARCH, (0, 0, *images.light.size))
         self._each_view(march, views, level_views)
@@ -209,19 +220,19 @@ class VolumetricFogPass:
             self._write(vao.program, values)
             vao.render(moderngl.TRIANGLES, vertices=3)
 
-    def _program(self, shader: str, steps: int, level_views: bool) -> moderngl.VertexArray:
-        """The march's build for ``steps`` (with the shadow lookups and fog terms the scene
-        builds have now), or the filter's (``steps`` 0); a reflection level's with
-        ``level_views``."""
+    def _program(self, shader: str, steps: int, level_views: bool, lamps: int = 0) -> moderngl.VertexArray:
+        """The march's build for ``steps`` and ``lamps`` lamps (with the shadow lookups and fog
+        terms the scene builds have now), or the filter's (``steps`` 0); a reflection level's
+        with ``level_views``."""
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
         extra = (self.shadows.program_defines, self.gpu.fog.defines) if steps else ()
-        key = (shader, steps, extra, level_views)
+        key = (shader, steps, extra, level_views, lamps)
         vao = self._programs.get(key)
         if vao is None:
-            defines = {"STEPS": str(steps)} if steps else {}
+            defines = {"STEPS": str(steps), "VOLUMETRIC_LAMPS": str(lamps)} if steps else {}
             for pairs in extra:
                 defines.update(pairs)
             if steps:  # a tap a point (the march's steps and the filter soften the edges)
@@ -230,7 +241,9 @@ class VolumetricFogPass:
                 defines["LEVEL_VIEWS"] = "1"
             program = shaders.program("fullscreen.vert", shader, defines=defines)
             assign_slots(program, {"depth_map": VOLUMETRIC_DEPTH_UNIT, "light_map": VOLUMETRIC_LIGHT_UNIT,
-                                   "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT},
+                                   "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
+                                   "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
+                                   "spot_atlas": SPOT_SHADOW_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING})
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
@@ -256,8 +269,9 @@ class VolumetricFogPass:
         stage's still key: a change draws its levels again)."""
         if self._pending is None:
             return None
-        settings = self._pending[1]
-        return (settings.intensity, settings.anisotropy, settings.distance, settings.steps, settings.reflection_depth)
+        _, settings, _, lamps = self._pending
+        return (settings.intensity, settings.anisotropy, settings.distance, settings.steps, settings.reflection_depth,
+                lamps.slots, lamps.scatter)
 
     def release_levels(self) -> None:
         """Let the reflection levels' images go (the world has no mirror or portal now)."""

@@ -18,3 +18,12 @@ layout(std140) uniform Lights {
 
 #include "spot_cone.glsl"
 #include "spot_cookie.glsl"
+
+// How much of point light i's light (its colour x intensity) reaches a point ``dist`` from it,
+// ``l`` the unit way from the point to the light: the inverse square (kept finite at the
+// light) faded smoothly to 0 at its range, times its spot cone.  The scene's lights and the
+// light shafts' lamps (volumetric_fog.frag) alike.
+float lamp_falloff(int i, float dist, vec3 l) {
+    float fade = clamp(1.0 - pow(dist / lights.point_pos[i].w, 4.0), 0.0, 1.0);
+    return fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
+}
