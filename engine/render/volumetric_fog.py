@@ -13,7 +13,9 @@ put in, before its glass (``ScenePass.finish_root``):
    the light scattered there reaches the eye (the fog's own transmittance,
    ``shaders/include/fog.glsl``) and whether the sun reaches the point (its shadow map, read
    as the scene pass reads it: ``shaders/include/shadows.glsl``), then scales the sum by the
-   sun's light, the Henyey-Greenstein phase function and ``intensity``.  Each texel's points
+   sun's light, the Henyey-Greenstein phase function and ``intensity``; and at each point the
+   light of each lamp the prepare stage lists (``VolumetricLamps``: ``PointLight.volumetric``),
+   its falloff, cone and shadow, by the phase function of its own angle.  Each texel's points
    start at another offset (interleaved gradient noise; moved each frame under temporal AA,
    whose history then averages them).
 2. **The filter** (``shaders/volumetric_fog_filter.frag``), at the view's size: each pixel
