@@ -298,6 +298,13 @@ def _shafts_full(engine: Engine) -> None:
     _shafts(engine, half=False)
 
 
+def _shafts_sun(engine: Engine) -> None:
+    """The shafts of the sun alone (the lamp's PointLight.volumetric 0)."""
+    _shafts(engine)
+    for _, light in engine.world.query_one(PointLight):
+        light.volumetric = 0.0
+
+
 def _post(engine: Engine) -> None:
     _sun_shadows(engine, False)
     engine.world.add_component(camera_entity(engine), Tonemap(curve="agx"))
@@ -422,7 +429,8 @@ VARIANTS: list[Variant] = [
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),
-    Variant("shafts", _shafts, "the same with VolumetricFog() (marched at half size)"),
+    Variant("shafts", _shafts, "the same with VolumetricFog() (marched at half size; the sun's and the lamp's)"),
+    Variant("shafts_sun", _shafts_sun, "the same with the sun's shafts alone (the lamp's volumetric 0)"),
     Variant("shafts_full", _shafts_full, "the same with VolumetricFog(half_resolution=False)"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
