@@ -28,11 +28,13 @@ from components import (
     ContactShadows,
     DepthOfField,
     FlyController,
+    Fog,
     Mirror,
     MotionBlur,
     Portal,
     ScreenReflections,
     Transform,
+    VolumetricFog,
     yaw_pitch_rotation,
 )
 from engine.core.errors import GLPassError, StartOptionError
@@ -69,6 +71,9 @@ from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.shadow_system import ShadowSystem
 from systems.surface_system import SurfaceSystem
 from systems.text_system import TextSystem
+
+# --shafts on a camera without a Fog: thin air (a thing 50 m off keeps 22% of its light).
+SHAFTS_FOG_DENSITY = 0.03
 
 
 class GameGuard:
@@ -320,7 +325,7 @@ class Engine:
     def start(self, antialias: str = "fxaa", camera: tuple[float, float, float, float, float] | None = None,
               occlusion: bool = False, reflections: bool = False, focus: bool = False,
               motion: bool = False, render_scale: float = 1.0, sharpness: float = 0.0,
-              frame_ms: float | None = None, contact: bool = False) -> None:
+              frame_ms: float | None = None, contact: bool = False, shafts: bool = False) -> None:
         """The command line's start options (``shell/runner.py``), after the game is built: the
         anti-aliasing, the render scale and sharpening (``--render-scale``, ``--sharpen``:
         ``engine/render/resample.py``), dynamic resolution's frame time (``--frame-ms``: the
@@ -329,8 +334,10 @@ class Engine:
         (``--ao``, ``--ssr``, ``--dof``, ``--motion-blur``, ``--contact-shadows``: an
         ``AmbientOcclusion()``, a ``ScreenReflections()``, a ``DepthOfField`` of an 85 mm lens
         at f/1.4 focusing by itself (``start_lens``), a ``MotionBlur()`` and a
-        ``ContactShadows()`` on the active camera, where it has none of its own), to see any
-        game or level with them without editing it."""
+        ``ContactShadows()`` on the active camera, where it has none of its own), and light
+        shafts (``--shafts``: a ``VolumetricFog()`` and, where the camera has no ``Fog``, a
+        thin one, ``Fog(density=SHAFTS_FOG_DENSITY)``), to see any game or level with them
+        without editing it."""
         self.renderer.antialias = antialias
         self.renderer.render_scale = render_scale
         self.renderer.sharpness = sharpness
@@ -350,6 +357,14 @@ class Engine:
             component = make()
             if not self.world.has(active[0], type(component)):
                 self.world.add_component(active[0], component)
+        if shafts:
+            active = self.active_camera()
+            if active is None:
+                raise StartOptionError("--shafts given but the level has no active Camera")
+            if not self.world.has(active[0], Fog):
+                self.world.add_component(active[0], Fog(density=SHAFTS_FOG_DENSITY))
+            if not self.world.has(active[0], VolumetricFog):
+                self.world.add_component(active[0], VolumetricFog())
 
     def start_from(self, args: argparse.Namespace) -> None:
         """``start`` with the command line's options (``shell/runner.py``'s parser; headless and
@@ -357,7 +372,7 @@ class Engine:
         self.start(args.aa, args.camera, getattr(args, "ao", False), getattr(args, "ssr", False),
                    getattr(args, "dof", False), getattr(args, "motion_blur", False),
                    getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None),
-                   getattr(args, "contact_shadows", False))
+                   getattr(args, "contact_shadows", False), getattr(args, "shafts", False))
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

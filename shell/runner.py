@@ -65,6 +65,8 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                         help="ambient occlusion on the active camera (an AmbientOcclusion(), if it has none)")
     parser.add_argument("--contact-shadows", action="store_true",
                         help="contact shadows on the active camera (a ContactShadows(), if it has none)")
+    parser.add_argument("--shafts", action="store_true",
+                        help="light shafts on the active camera (a VolumetricFog(), and a thin Fog where it has none)")
     parser.add_argument("--ssr", action="store_true",
                         help="screen-space reflections on the active camera (a ScreenReflections(), if it has none)")
     parser.add_argument("--dof", action="store_true",

@@ -289,7 +289,7 @@ def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path, 
         def build(self, world):
             world.spawn(Transform(), MeshRef(box()), Material())
 
-    for flag in (["--ssr"], ["--ao"], ["--dof"], ["--motion-blur"], ["--contact-shadows"],
+    for flag in (["--ssr"], ["--ao"], ["--dof"], ["--motion-blur"], ["--contact-shadows"], ["--shafts"],
                  ["--camera", "0,1,2,0,0"]):  # (--camera: one line too, no traceback)
         status = main(NoCamera(), ["--headless", "--frames", "1", "--size", "32x32", "--out",
                                    str(tmp_path / "none"), *flag])

@@ -535,3 +535,26 @@ def test_lamps_past_the_limit_are_cut_and_said_and_a_lamp_at_zero_lights_no_air(
     with pytest.warns(ComponentWarning, match="no such PointLight"):
         dark.frame()
     assert dark.engine.renderer.volumetric_fog.composites == 0
+
+
+def test_the_shafts_flag_gives_the_camera_shafts_and_thin_air_where_it_has_none(scene):
+    """``--shafts`` (``Engine.start(shafts=True)``): a ``VolumetricFog()``, and a
+    ``Fog(density=SHAFTS_FOG_DENSITY)`` on a camera with no Fog; a camera's own Fog is kept."""
+    from shell.app import SHAFTS_FOG_DENSITY
+
+    def sunlit(world) -> None:   # (a camera and a sun, no fog)
+        look_from(world, EYE, TARGET)
+        world.spawn(DirectionalLight(direction=tuple(SUN)))
+
+    bare = scene(sunlit, SIZE)
+    bare.engine.start(shafts=True)
+    camera = bare.engine.active_camera()[0]
+    assert bare.world.get(camera, Fog).density == pytest.approx(SHAFTS_FOG_DENSITY)
+    assert bare.world.has(camera, VolumetricFog)
+    bare.frame()
+    assert bare.engine.renderer.volumetric_fog.composites == 1
+    own = scene(lambda world: _hall(world), SIZE)
+    own.engine.start(shafts=True)
+    camera = own.engine.active_camera()[0]
+    assert own.world.get(camera, Fog).density == pytest.approx(DENSITY)
+    assert own.world.has(camera, VolumetricFog)
