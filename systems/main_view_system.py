@@ -21,9 +21,10 @@ import esper
 
 from components.ambient import AmbientOcclusion, ContactShadows
 from components.fog import Fog, VolumetricFog
+from components.limits import MAX_VOLUMETRIC_LAMPS
 from components.screen_reflections import ScreenReflections
 from components.tracking import ComponentWarning
-from engine.core.errors import NoCameraWarning
+from engine.core.errors import LightLimitWarning, NoCameraWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
@@ -68,6 +69,7 @@ class MainViewSystem(esper.Processor):
         self._looked_at: list | None = None  # the batch list last looked through for a reflecting one
         self.shafts: VolumetricFog | None = None  # the light shafts drawn this frame
         self._said_no_shafts: tuple[VolumetricFog, str] | None = None  # (the one warned about, why: once)
+        self._said_lamps_cut = 0  # the lamps past MAX_VOLUMETRIC_LAMPS last said
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -166,7 +168,15 @@ class MainViewSystem(esper.Processor):
         self.shafts = shafts
         if shafts is None:
             self.renderer.volumetric_fog.release_targets()
+            self._said_lamps_cut = 0
             return
+        self.renderer.stats.volumetric_lamps_cut = lamps.cut
+        if lamps.cut > self._said_lamps_cut:   # (said again only when more are cut)
+            warnings.warn(LightLimitWarning(
+                f"{len(lamps.slots) + lamps.cut} point lights with volumetric > 0 light the scene: the light shafts "
+                f"scatter at most {MAX_VOLUMETRIC_LAMPS} at once (the first by the lights' slots), so {lamps.cut} "
+                "light no air (RenderStats.volumetric_lamps_cut)"), stacklevel=3)
+        self._said_lamps_cut = lamps.cut
         self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa", lamps)
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:

@@ -134,7 +134,6 @@ class PrepareSystem(esper.Processor):
         world.resources[VolumetricLamps] = self._volumetric   # ... and its light shafts
         renderer.stats.lights_cut = sum(self._cut)
         renderer.stats.contact_lamps_cut = self._contact.cut
-        renderer.stats.volumetric_lamps_cut = self._volumetric.cut
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
         sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
@@ -226,11 +225,6 @@ class PrepareSystem(esper.Processor):
                 f"have them at once (the first by the lights' slots: those that matter most to the active camera), "
                 f"so {cut} shine without them (RenderStats.contact_lamps_cut)"), stacklevel=3)
         self._contact = ContactLamps(tuple(contact), cut)
-        if volumetric_cut > self._volumetric.cut:
-            warnings.warn(LightLimitWarning(
-                f"{len(scattered) + volumetric_cut} point lights with volumetric > 0 light the scene: the light "
-                f"shafts scatter at most {MAX_VOLUMETRIC_LAMPS} at once (the first by the lights' slots), so "
-                f"{volumetric_cut} light no air (RenderStats.volumetric_lamps_cut)"), stacklevel=3)
         self._volumetric = VolumetricLamps(tuple(slot for slot, _ in scattered),
                                            tuple(scatter for _, scatter in scattered), volumetric_cut)
         return directional, point
