@@ -246,8 +246,9 @@ class PointLight(TrackedComponent):
     scatters towards the eye, in its shadow where it casts one: a lantern's glow in the haze,
     a torch's beam, its cone cut by what stands in it (0: none).  At most
     ``MAX_VOLUMETRIC_LAMPS`` (4) of the lights that reach the scene at once (the first by
-    the lights' slots); the rest are counted in ``RenderStats.volumetric_lamps_cut`` and a
-    ``LightLimitWarning`` says so.  Its cookie does not shape its light in the air."""
+    the lights' slots); where the camera has shafts, the rest are counted in
+    ``RenderStats.volumetric_lamps_cut`` and a ``LightLimitWarning`` says so.  Its cookie
+    colours its light in the air as on a wall."""
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
     intensity: float = 1.0

@@ -120,8 +120,8 @@ class VolumetricFog(TrackedComponent):
       ``half_resolution`` is the camera's view's alone) and filtered within their own view.
 
     Point and spot lights light the air too, each by its ``PointLight.volumetric`` (1 by
-    default), at most ``MAX_VOLUMETRIC_LAMPS`` (4) of them: its falloff, cone and shadow (not
-    its cookie) at each step, by the same phase function.
+    default), at most ``MAX_VOLUMETRIC_LAMPS`` (4) of them: its falloff, cone, cookie and
+    shadow at each step, by the same phase function.
 
     Glass in front of the shafts does not dim them.  Probe views have none.  Without a Fog
     with a density, or without a sun or such a lamp, it adds nothing and says so once (a

@@ -88,9 +88,9 @@ void main() {
 #endif
 #if VOLUMETRIC_LAMPS > 0
     // The lamps the shafts scatter (PointLight.volumetric): each one's light at the point
-    // (its falloff and cone, its shadow where it casts, looked up with no offset: the air
-    // has no surface to lift the lookup off), by the phase function of the angle between its
-    // light and the ray, times its own share.
+    // (its falloff and cone, its cookie's colour, its shadow where it casts, looked up with
+    // no offset: the air has no surface to lift the lookup off), by the phase function of
+    // the angle between its light and the ray, times its own share.
     vec3 lamp_sum = vec3(0.0);
 #endif
     for (int i = 0; i < STEPS; ++i) {
@@ -110,7 +110,13 @@ void main() {
             vec3 d = lights.point_pos[j].xyz - x;
             float dist = length(d);
             vec3 l = d / max(dist, 1e-4);
-            lamps += lights.point_color[j].rgb * (lamp_scatter[k] * lamp_falloff(j, dist, l)
+#ifdef SPOT_COOKIES  // its image, as sharp as it is (the steps' offsets and the filter blur it)
+            vec3 cookie = cookie_light(cookie_place(lights.point_cookie_u[j], lights.point_cookie_v[j],
+                                                    lights.point_spot[j], l), vec2(0.0), vec2(0.0));
+#else
+            const vec3 cookie = vec3(1.0);
+#endif
+            lamps += lights.point_color[j].rgb * cookie * (lamp_scatter[k] * lamp_falloff(j, dist, l)
                      * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit));
         }
         lamp_sum += lamps * (density * seen);

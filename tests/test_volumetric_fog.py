@@ -32,12 +32,13 @@ from components import (
 from components.limits import MAX_VOLUMETRIC_LAMPS
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, plane, quad
+from engine.assets.texture_data import TextureData
 from engine.core.errors import LightLimitWarning
 from engine.core.world import World
 from engine.resources import VolumetricLamps
 from engine.rules.light_rules import spot_cone, spot_factor
 from shell.overlay_text import post_lines
-from tests.support import look_from
+from tests.support import look_from, srgb_to_linear
 
 SIZE = (160, 96)
 EYE = (0.0, 1.6, 9.0)
@@ -446,7 +447,8 @@ LAMP_ANGLE, LAMP_BLEND = 35.0, 0.2
 CAGE = ((0.7, 2.5, 0.0), (0.5, 0.5, 0.5))
 
 
-def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: float = 1.0) -> int:
+def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: float = 1.0,
+               cookie: TextureData | None = None) -> int:
     camera = look_from(world, (0.0, 2.0, 7.0), (0.0, 2.0, 0.0), fov=60.0)
     world.spawn(Skybox())
     world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5, 0.5, 0.5)))
@@ -455,7 +457,7 @@ def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: 
         at = glm.vec3(LAMP) + glm.vec3(0.0, 0.0, -3.0 * k)
         world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0))),
                     PointLight(intensity=LAMP_LIGHT, range=LAMP_RANGE, spot_angle=LAMP_ANGLE, spot_blend=LAMP_BLEND,
-                               shadows=k == 0, volumetric=volumetric))
+                               shadows=k == 0, volumetric=volumetric, cookie=cookie))
     world.add_component(camera, Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
     world.add_component(camera, Tonemap(curve="none"))
     if shafts is not None:
@@ -558,3 +560,23 @@ def test_the_shafts_flag_gives_the_camera_shafts_and_thin_air_where_it_has_none(
     camera = own.engine.active_camera()[0]
     assert own.world.get(camera, Fog).density == pytest.approx(DENSITY)
     assert own.world.has(camera, VolumetricFog)
+
+
+def test_a_lamps_cookie_colours_its_light_in_the_air(scene):
+    """A spot with an amber cookie (one colour all over, so whatever its frame): the light its
+    beam puts in the air is the plain beam's times the cookie's linear colour, channel by
+    channel."""
+    amber = (255, 96, 16)
+    pixels = np.zeros((8, 8, 4), np.uint8)
+    pixels[...] = (*amber, 255)
+    plain = scene(lambda world: _lamp_hall(world, VolumetricFog(steps=32)), SIZE)
+    plain.frame()
+    tinted = scene(lambda world: _lamp_hall(world, VolumetricFog(steps=32),
+                                           cookie=TextureData(pixels, name="amber")), SIZE)
+    tinted.frame()
+    white, coloured = _marched(plain)[..., :3], _marched(tinted)[..., :3]
+    lit = white[..., 0] > 0.1 * white[..., 0].max()
+    assert lit.sum() > 100
+    expected = srgb_to_linear(np.array(amber, np.float64))
+    ratio = np.median(coloured[lit] / white[lit], axis=0)
+    assert np.allclose(ratio, expected, rtol=0.03, atol=0.003), (ratio, expected)

@@ -15,7 +15,7 @@ put in, before its glass (``ScenePass.finish_root``):
    as the scene pass reads it: ``shaders/include/shadows.glsl``), then scales the sum by the
    sun's light, the Henyey-Greenstein phase function and ``intensity``; and at each point the
    light of each lamp the prepare stage lists (``VolumetricLamps``: ``PointLight.volumetric``),
-   its falloff, cone and shadow, by the phase function of its own angle.  Each texel's points
+   its falloff, cone, cookie and shadow, by the phase function of its own angle.  Each texel's points
    start at another offset (interleaved gradient noise; moved each frame under temporal AA,
    whose history then averages them).
 2. **The filter** (``shaders/volumetric_fog_filter.frag``), at the view's size: each pixel
@@ -52,6 +52,7 @@ from components.fog import VolumetricFog
 from components.limits import MAX_VOLUMETRIC_LAMPS
 from engine.render.bindings import (
     BLEND_ADD,
+    COOKIE_UNIT,
     FOG_BINDING,
     LIGHTS_BINDING,
     POINT_SHADOW_UNITS,
@@ -180,6 +181,8 @@ class VolumetricFogPass:
         level = images.level
         self.shadows.bind()
         gpu.fog.bind()
+        if lamps.slots:
+            gpu.spot_cookies.bind()
         bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
         bind_sampler(ctx, gpu.depth_values(), VOLUMETRIC_DEPTH_UNIT)  # (its values, compared with nothing)
         if level_views:
@@ -230,7 +233,8 @@ class VolumetricFogPass:
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
-        extra = (self.shadows.program_defines, self.gpu.fog.defines) if steps else ()
+        extra = (self.shadows.program_defines, self.gpu.fog.defines,
+                 self.gpu.spot_cookies.defines if lamps else ()) if steps else ()
         key = (shader, steps, extra, level_views, lamps)
         vao = self._programs.get(key)
         if vao is None:
@@ -245,7 +249,7 @@ class VolumetricFogPass:
             assign_slots(program, {"depth_map": VOLUMETRIC_DEPTH_UNIT, "light_map": VOLUMETRIC_LIGHT_UNIT,
                                    "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
                                    "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
-                                   "spot_atlas": SPOT_SHADOW_UNIT},
+                                   "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING})
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
