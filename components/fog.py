@@ -123,7 +123,8 @@ class VolumetricFog(TrackedComponent):
     default), at most ``MAX_VOLUMETRIC_LAMPS`` (4) of them: its falloff, cone, cookie and
     shadow at each step, by the same phase function.
 
-    Glass in front of the shafts does not dim them.  Probe views have none.  Without a Fog
+    Glass is blended over the shafts as over everything behind it: a pane dims them by its
+    opacity, the air's in front of it too.  Probe views have none.  Without a Fog
     with a density, or without a sun or such a lamp, it adds nothing and says so once (a
     ``ComponentWarning`` from the main stage); a light that casts no shadow lights the air
     everywhere it reaches.

@@ -580,3 +580,27 @@ def test_a_lamps_cookie_colours_its_light_in_the_air(scene):
     expected = srgb_to_linear(np.array(amber, np.float64))
     ratio = np.median(coloured[lit] / white[lit], axis=0)
     assert np.allclose(ratio, expected, rtol=0.03, atol=0.003), (ratio, expected)
+
+
+def test_a_pane_keeps_of_the_shafts_what_it_keeps_of_all_behind_it(scene):
+    """Glass is drawn after the shafts and blended over them: along a pane of alpha 0.5 half
+    the shafts' light stays, the air's in front of the pane too (the documented limit)."""
+    def build(shafts: bool, pane: bool):
+        def run(world) -> None:
+            _hall(world, VolumetricFog(steps=32) if shafts else None)
+            if pane:
+                world.spawn(Transform(position=(-1.5, 2.2, 5.0)), MeshRef(quad(2.0, 2.0)),
+                            Material(color=(0.5, 0.5, 0.5, 0.5), roughness=1.0))
+        return run
+
+    frames = {}
+    for shafts in (False, True):
+        for pane in (False, True):
+            runner = scene(build(shafts, pane), SIZE)
+            runner.frame()
+            frames[shafts, pane] = _linear(runner).astype(np.float64)[..., 0]
+    covered = np.abs(frames[False, True] - frames[False, False]) > 1e-3
+    assert covered.sum() > 500
+    behind = frames[True, True] - frames[False, True]
+    open_air = frames[True, False] - frames[False, False]
+    assert np.median(behind[covered] / np.maximum(open_air[covered], 1e-4)) == pytest.approx(0.5, abs=0.02)

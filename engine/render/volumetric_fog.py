@@ -24,7 +24,9 @@ put in, before its glass (``ScenePass.finish_root``):
    is added to the view's colour (``BLEND_ADD``).
 
 Added to the light the fog's colour and sun glow already give each pixel (the scene pass's
-``FOG`` builds); glass drawn after does not dim it.
+``FOG`` builds).  Glass drawn after blends over it as over the rest (a pane of alpha a
+keeps 1 - a of the shafts along its pixels, the air's in front of it too: the march ends at
+the opaque depth and does not know where the pane stands).
 
 **Reflection levels** (``VolumetricFog.reflection_depth``, 1 by default): a level of the
 main view tree the depth reaches gets the same two draws once its levels below are
