@@ -4,12 +4,11 @@
 // and the VOLUMETRIC_LAMPS lamps' (PointLight.volumetric; MAX_VOLUMETRIC_LAMPS at most).
 // At each step t (the step's start moved by ``start``, a different offset each texel):
 //   density(x) x exp(-fog_depth(origin, x)) x shadow(x) x step
-// (the shadow map read with one bilinear comparison, SHADOW_SINGLE_TAP: the steps' offsets
-// and the filter soften the shafts' edges as a wider filter would)
 // (the air's density, what reaches the eye of what it scatters there, whether the sun reaches
-// it: its shadow map and cascades), times the sun's light (colour x intensity), the
-// Henyey-Greenstein phase function of the angle between the sun's light and the ray, and
-// VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
+// it: its shadow map and cascades, read with one bilinear comparison, SHADOW_SINGLE_TAP, as
+// the steps' offsets and the filter soften the shafts' edges as a wider filter would), times
+// the sun's light (colour x intensity), the Henyey-Greenstein phase function of the angle
+// between the sun's light and the ray, and VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
 // ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
 // compares.  A mirror or portal view's rays start on its oblique near plane: the surface.
 #ifndef VOLUMETRIC_LAMPS
