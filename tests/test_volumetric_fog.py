@@ -33,7 +33,7 @@ from components.limits import MAX_VOLUMETRIC_LAMPS
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, plane, quad
 from engine.assets.texture_data import TextureData
-from engine.core.errors import LightLimitWarning
+from engine.core.errors import LightLimitWarning, NoCameraWarning
 from engine.core.world import World
 from engine.resources import VolumetricLamps
 from engine.rules.light_rules import spot_cone, spot_factor
@@ -251,6 +251,13 @@ def test_passes_images_and_their_release(scene):
     runner.world.remove_component(camera, VolumetricFog)
     runner.frame()
     assert runner.stats.passes == stats_on - 2
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 0
+    runner.world.add_component(camera, VolumetricFog())
+    runner.frame()
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 1
+    with pytest.warns(NoCameraWarning):
+        runner.world.delete_entity(camera)   # the camera goes: its images with it
+        runner.frame()
     assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 0
 
 
