@@ -375,6 +375,7 @@ class StillFuzzer:
         self.drawing.engine.reflection_system.keep_still_views = False
         self.drawing.redraw_shadows = True
         self.drawing.engine.renderer.occlusion.keep_still = False  # its ambient occlusion found every frame
+        self.drawing.engine.renderer.volumetric_fog.keep_still = False  # its light shafts marched every frame
         self.drawing.engine.reflection_system.tree.plan_ahead = False  # each level planned after its parent's claims
         for _ in range(2):
             self.keeping.frame()

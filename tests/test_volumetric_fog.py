@@ -416,8 +416,8 @@ def test_reflection_depth_zero_keeps_the_shafts_to_the_camera_and_the_levels_ima
     passes = runner.stats.passes
     camera = runner.engine.active_camera()[0]
     runner.world.get(camera, VolumetricFog).reflection_depth = 0
-    runner.frame()
-    assert fog.composites == 3 and runner.stats.passes == passes - 2
+    runner.frame()   # (the root's march stands: nothing it reads moved; its filter draws again)
+    assert fog.composites == 3 and fog.marches == 2 and runner.stats.passes == passes - 3
     assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 1
     runner.world.get(camera, VolumetricFog).reflection_depth = 1
     runner.frame()
@@ -611,3 +611,30 @@ def test_a_pane_keeps_of_the_shafts_what_it_keeps_of_all_behind_it(scene):
     behind = frames[True, True] - frames[False, True]
     open_air = frames[True, False] - frames[False, False]
     assert np.median(behind[covered] / np.maximum(open_air[covered], 1e-4)) == pytest.approx(0.5, abs=0.02)
+
+
+def test_a_still_view_marches_once_and_draws_what_marching_every_frame_draws(scene):
+    """The root's march is kept while nothing it reads moves (the scene's rows, the shadow
+    maps and blocks: ``Gpu.scene_version``; the camera; the settings; the lamps): later frames
+    draw the filter alone, the same bytes as an engine that marches every frame; a moved box
+    or a turned camera marches again, temporal AA's moving offsets every frame."""
+    keeping = scene(lambda world: _hall(world, VolumetricFog(steps=16)), SIZE)
+    marching = scene(lambda world: _hall(world, VolumetricFog(steps=16)), SIZE)
+    marching.engine.renderer.volumetric_fog.keep_still = False
+    for _ in range(3):
+        assert np.array_equal(keeping.frame(), marching.frame())
+    fog = keeping.engine.renderer.volumetric_fog
+    assert (fog.marches, fog.composites) == (1, 3)
+    assert (marching.engine.renderer.volumetric_fog.marches, keeping.stats.passes) == (3, marching.stats.passes - 1)
+    for runner in (keeping, marching):   # a slab moves: its shadow in the air with it
+        slab = next(e for e, (t, _) in runner.world.query(Transform, MeshRef) if t.position.y == 5.0)
+        runner.world.get(slab, Transform).position = glm.vec3(-3.3, 5.0, 0.0)
+    assert np.array_equal(keeping.frame(), marching.frame())
+    assert fog.marches == 2
+    keeping.engine.place_camera(0.2, 1.6, 9.0, 5.0, 0.0)
+    keeping.frame()
+    assert fog.marches == 3
+    keeping.engine.renderer.antialias = "taa"
+    keeping.frame()
+    keeping.frame()
+    assert fog.marches == 5

@@ -18,6 +18,9 @@ put in, before its glass (``ScenePass.finish_root``):
    its falloff, cone, cookie and shadow, by the phase function of its own angle.  Each texel's points
    start at another offset (interleaved gradient noise; moved each frame under temporal AA,
    whose history then averages them).
+   While nothing the root's march reads moves (``_still_key``: the scene, its shadow maps
+   and blocks, the camera, the settings, the lamps) and no temporal AA moves its offsets, its
+   image is kept and the march not drawn again: a still view's frame draws the filter alone.
 2. **The filter** (``shaders/volumetric_fog_filter.frag``), at the view's size: each pixel
    takes the march's 3 x 3 texels about it, weighed by a Gaussian of their distance and by how
    near their rays' lengths are to its own (a shaft behind a near edge stays behind it), and
@@ -125,6 +128,11 @@ class VolumetricFogPass:
         self._programs_of = -1  # the shader library's reloads when they were made
         self._frame = 0
         self.composites = 0  # drawn so far, the root's and each level's (tests count them)
+        self.marches = 0     # the marches among them (a still camera's root keeps its march)
+        # What the root's march image was last marched from (``_still_key``): equal, and not
+        # jittered, the image stands and only the filter adds it again to the view's new draw.
+        self._marched_from: tuple | None = None
+        self.keep_still = True  # False: marched every frame (what the still fuzz compares with)
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
               lamps: VolumetricLamps = _NO_LAMPS) -> None:
@@ -138,6 +146,7 @@ class VolumetricFogPass:
             if images is not None:
                 images.release()
             images = self._images = self._make(targets, ratio)
+            self._marched_from = None
         self._pending = (view, settings, jittered, lamps)
         self.reach = settings.reflection_depth
         for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
@@ -158,7 +167,11 @@ class VolumetricFogPass:
         if pending is None or images is None or images.level is not level:
             return
         self._pending = None
-        self._draw(images, [pending[0]], pending, False)
+        view, settings, jittered, lamps = pending
+        key = None if jittered else self._still_key(view, images, settings, lamps)
+        march = not (self.keep_still and key is not None and key == self._marched_from)
+        self._marched_from = key
+        self._draw(images, [view], pending, False, march)
 
     def composite_level(self, depth: int, views: Sequence[View], level: RenderTargets) -> None:
         """March and add this frame's shafts into reflection level ``depth``'s ``level``
@@ -172,12 +185,22 @@ class VolumetricFogPass:
             if images is not None:
                 images.release()
             images = self._levels[depth] = self._make(level, 1)
-        self._draw(images, views, pending, True)
+        self._draw(images, views, pending, True, True)
 
-    def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool) -> None:
-        """The march into ``images`` and the filter into its level's colour (``pending``:
-        ``begin``'s), one draw each over the view's pixels, or with ``level_views`` one a view
-        over its rectangle."""
+    def _still_key(self, view: View, images: _Images, settings: VolumetricFog, lamps: VolumetricLamps) -> tuple:
+        """What the root's march reads: the view's depth (every instance row, batch and
+        texture drawn: ``Gpu.scene_version``, which the Lights, Fog and Shadows blocks, the
+        shadow maps and the cookies move on too), the shaders, the view's Camera block and
+        size, the images' resolution, the settings and the lamps."""
+        return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), images.level.size,
+                images.ratio, settings.intensity, settings.anisotropy, settings.distance, settings.steps,
+                lamps.slots, lamps.scatter)
+
+    def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool,
+              march_again: bool) -> None:
+        """The march into ``images`` (unless not ``march_again``: the image stands) and the
+        filter into its level's colour (``pending``: ``begin``'s), one draw each over the
+        view's pixels, or with ``level_views`` one a view over its rectangle."""
         _, settings, jittered, lamps = pending
         ctx, gpu = self.ctx, self.gpu
         level = images.level
@@ -191,38 +214,43 @@ class VolumetricFogPass:
             bind_texture(ctx, level.node, VOLUMETRIC_NODE_UNIT)
         shared = {"depth_size": (float(level.size[0]), float(level.size[1])), "ratio": images.ratio,
                   "max_distance": settings.distance}
-        march = self._program("volumetric_fog.frag", settings.steps, level_views, len(lamps.slots))
-        tiles = np.zeros((MAX_DIRECTIONAL_LIGHTS, 4), np.float32)
-        for slot, tile in self.shadows.directional_tiles.items():
-            tiles[slot, :3] = tile
-        self._write(march.program, {**shared, "scatter": settings.intensity, "anisotropy": settings.anisotropy,
-                                    "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
-                                    "map_tiles": tiles.tobytes(),
-                                    "lamp_slots": (*lamps.slots, *(0,) * (MAX_VOLUMETRIC_LAMPS - len(lamps.slots))),
-                                    "lamp_scatter": (*lamps.scatter,
-                                                     *(0.0,) * (MAX_VOLUMETRIC_LAMPS - len(lamps.scatter)))})
-        images.light_framebuffer.use()
-        apply_pass_state(ctx, _MARCH, (0, 0, *images.light.size))
-        self._each_view(march, views, level_views)
+        # Each view's values, worked out once for both draws.
+        each = [{"inv_view_proj": glm.inverse(view.view_proj).to_bytes(),
+                 **({"node": view.node} if level_views else {})} for view in views]
+        if march_again:
+            march = self._program("volumetric_fog.frag", settings.steps, level_views, len(lamps.slots))
+            tiles = np.zeros((MAX_DIRECTIONAL_LIGHTS, 4), np.float32)
+            for slot, tile in self.shadows.directional_tiles.items():
+                tiles[slot, :3] = tile
+            spare = MAX_VOLUMETRIC_LAMPS - len(lamps.slots)
+            self._write(march.program, {**shared, "scatter": settings.intensity, "anisotropy": settings.anisotropy,
+                                        "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
+                                        "map_tiles": tiles.tobytes(), "lamp_slots": (*lamps.slots, *(0,) * spare),
+                                        "lamp_scatter": (*lamps.scatter, *(0.0,) * spare)})
+            images.light_framebuffer.use()
+            apply_pass_state(ctx, _MARCH, (0, 0, *images.light.size))
+            self._each_view(march, views, each, level_views)
+            gpu.stats.passes += 1
+            gpu.stats.draw_calls += len(views)
+            self.marches += 1
         spread = self._program("volumetric_fog_filter.frag", 0, level_views)
         self._write(spread.program, shared)
         bind_texture(ctx, images.light, VOLUMETRIC_LIGHT_UNIT)
         images.output.use()
         apply_pass_state(ctx, _ADD, (0, 0, *level.size))
-        self._each_view(spread, views, level_views)
-        gpu.stats.passes += 2
-        gpu.stats.draw_calls += 2 * len(views)
+        self._each_view(spread, views, each, level_views)
+        gpu.stats.passes += 1
+        gpu.stats.draw_calls += len(views)
         self.composites += 1
         if gpu.debug:
             gpu.checkpoint("volumetric fog" if not level_views else f"volumetric fog ({views[0].name} ...)")
 
-    def _each_view(self, vao: moderngl.VertexArray, views: Sequence[View], level_views: bool) -> None:
-        """``vao``'s full-screen triangle for each of ``views`` (its projection; with
-        ``level_views`` its node and its rectangle's scissor)."""
-        for view in views:
-            values: dict[str, object] = {"inv_view_proj": glm.inverse(view.view_proj).to_bytes()}
+    def _each_view(self, vao: moderngl.VertexArray, views: Sequence[View], each: list[dict],
+                   level_views: bool) -> None:
+        """``vao``'s full-screen triangle for each of ``views`` (``each``: its values; with
+        ``level_views`` over its rectangle's scissor)."""
+        for view, values in zip(views, each, strict=True):
             if level_views:
-                values["node"] = view.node
                 set_scissor(self.ctx, view.scissor)
             self._write(vao.program, values)
             vao.render(moderngl.TRIANGLES, vertices=3)
