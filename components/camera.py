@@ -11,8 +11,10 @@ from components.limits import (
     MAX_FAR,
     MAX_LIGHT_BOUNCES,
     MAX_LIGHT_RADIUS,
+    MAX_LIGHT_SIDE,
     MAX_SHADOW_CASCADE_BLEND,
     MAX_SHADOW_CASCADES,
+    MIN_LIGHT_SIDE,
     MIN_SHADOW_DISTANCE,
     MIN_SPOT_ANGLE,
     check_near_far,
@@ -233,6 +235,21 @@ class PointLight(TrackedComponent):
     ``sphere_highlight``).  Its diffuse light and its shadows are a point's.  At most
     ``MAX_LIGHT_RADIUS`` (10 m).
 
+    ``rectangle`` (metres, (width, height); default (0, 0): a point) makes it a rectangle of
+    light, as a ceiling panel, a softbox or a window's glow is (Unreal's and three.js's rect
+    lights, Unity HDRP's rectangle area light): its width along the entity's X, its height
+    along its Y, shining from its front (the entity's -Z, where a spot aims) into the half
+    space before it, each point of it as bright from every side (Lambertian), its intensity
+    spread over its area: seen from far ahead it lights as a point light of that intensity
+    does.  A surface takes the light of the whole rectangle above its horizon: its diffuse
+    light exactly (the polygon's form factor), its highlight by linearly transformed cosines
+    (Heitz et al. 2016, fitted to the engine's GGX: ``engine/render/ltc_fit.py``), so a
+    glossy floor shows the panel's stretched reflection and a mirror-smooth one its outline.
+    Its range, spot cone, cookie, shadow, contact shadows and light in the shafts' air are
+    taken from its centre, as a point light's.  Both sides from ``MIN_LIGHT_SIDE`` (1 mm) to
+    ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``.  Through a mirror or portal its image
+    is the rectangle's (``Mirror.reflects_light``).
+
     ``contact_shadows`` (off by default; HDRP's per-light switch, Unreal's contact shadow
     length): where the active camera has ``ContactShadows``, this light's light is taken from
     a point where something the view shows lies across a short ray from it towards the light,
@@ -261,6 +278,7 @@ class PointLight(TrackedComponent):
     spot_blend: float = 0.15
     cookie: TextureData | None = None
     radius: float = 0.0
+    rectangle: tuple[float, float] = (0.0, 0.0)
     contact_shadows: bool = False
     volumetric: float = 1.0
 
@@ -294,10 +312,44 @@ class PointLight(TrackedComponent):
         if name == "spot_blend":
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "radius":
-            return finite(self, name, value, low=0.0, high=MAX_LIGHT_RADIUS)
+            value = finite(self, name, value, low=0.0, high=MAX_LIGHT_RADIUS)
+            if value > 0.0 and getattr(self, "rectangle", (0.0, 0.0)) != (0.0, 0.0):
+                raise ComponentValueError(
+                    f"PointLight.radius = {value:g}: this light is a rectangle (rectangle = {self.rectangle!r}); a "
+                    "light is a sphere or a rectangle, not both: set rectangle = (0, 0) first")
+            return value
+        if name == "rectangle":
+            return self._rectangle(value)
         if name == "contact_shadows":
             return boolean(self, name, value)
         if name == "volumetric":
             return finite(self, name, value, low=0.0, high=MAX_LAMP_SCATTER)
         shadow = _shadow_field(self, name, value)
         return value if shadow is None else shadow
+
+    def _rectangle(self, value: Any) -> tuple[float, float]:
+        """(width, height), both from MIN_LIGHT_SIDE to MAX_LIGHT_SIDE metres, or (0, 0)."""
+        if _not_pair(value):
+            raise ComponentValueError(f"PointLight.rectangle must be (width, height) in metres, got {value!r}")
+        width, height = (finite(self, "rectangle", side, low=0.0, high=MAX_LIGHT_SIDE) for side in value)
+        if (width, height) == (0.0, 0.0):
+            return (0.0, 0.0)
+        if min(width, height) < MIN_LIGHT_SIDE:
+            raise ComponentValueError(
+                f"PointLight.rectangle: both sides must be at least {MIN_LIGHT_SIDE:g} m (or both 0: a point), got "
+                f"{value!r}")
+        if getattr(self, "radius", 0.0) > 0.0:
+            raise ComponentValueError(
+                f"PointLight.rectangle = {value!r}: this light is a sphere (radius = {self.radius:g}); a light is a "
+                "sphere or a rectangle, not both: set radius = 0 first")
+        return (width, height)
+
+
+def _not_pair(value: Any) -> bool:
+    """Whether ``value`` is not a sequence of exactly two items (text is not one)."""
+    if isinstance(value, (str, bytes, dict)):
+        return True
+    try:
+        return len(value) != 2
+    except TypeError:
+        return True

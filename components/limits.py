@@ -36,6 +36,11 @@ MIN_SPOT_ANGLE = 0.1
 MAX_COOKIE_SPOT_ANGLE = 80.0
 # The largest sphere a point light may be (PointLight.radius, metres): a light's size, not a room's.
 MAX_LIGHT_RADIUS = 10.0
+# A rectangle light's sides (PointLight.rectangle, metres): from a millimetre (below it the
+# rectangle's radiance, its intensity over its area, leaves float16's range) to a wall of
+# windows.
+MIN_LIGHT_SIDE = 0.001
+MAX_LIGHT_SIDE = 50.0
 # The largest index of refraction (Refractive.ior): diamond is 2.42, germanium 4.0; past it
 # almost all light is reflected (Schlick's f0 over 0.36) and the refracted ray barely bends more.
 MAX_IOR = 4.0

@@ -8,6 +8,7 @@
 #include "shadows.glsl"
 #include "ggx.glsl"
 #include "ambient.glsl"
+#include "rect_lights.glsl"
 #include "hdr.glsl"
 #include "way.glsl"
 #include "fog.glsl"
@@ -499,6 +500,16 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         vec3 l = d / max(dist, 1e-4);
         float nl = max(dot(s.normal, l), 0.0);
         float falloff = lamp_falloff(i, dist, l);
+#ifdef RECT_LIGHTS
+        // A rectangle (rect_lights.glsl): its light from all of it above the horizon, its
+        // radiance (the light's over its area) for the inverse square, n.l its form factor.
+        RectLight rect = rect_light(lights.point_rect_u[i], lights.point_rect_v[i], d);
+        float centre_nl = nl;
+        if (rect.shape) {
+            falloff = lamp_fade(i, dist, l) * rect.radiance;
+            nl = rect_form_factor(rect, s.normal);
+        }
+#endif
 #if defined(SCREEN_OCCLUSION) && defined(CONTACT_LAMPS)
         // Its contact shadows' channel, if it has them (its cookie row's w: the channel + 1).
         int contact_channel = int(lights.point_cookie_v[i].w + 0.5) - 1;
@@ -510,6 +521,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #endif
 #ifdef DIFFUSE_TRANSMISSION
         float behind = max(-dot(s.normal, l), 0.0);
+#ifdef RECT_LIGHTS
+        if (rect.shape) behind = rect_form_factor(rect, -s.normal);
+#endif
         if (behind > 0.0 && falloff > 0.0) {
 #ifdef SPOT_COOKIES
             vec3 behind_cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
@@ -532,15 +546,27 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #else
             vec3 highlight = sphere_highlight(s.normal, s.to_eye, s.reflect_dir, d, lights.point_color[i].w, s.f0,
                                               s.highlight_roughness) * s.energy_compensation;
+#ifdef RECT_LIGHTS
+            if (rect.shape) highlight = rect_highlight(rect, s.normal, s.to_eye, s.f0, s.highlight_roughness)
+                                        * s.energy_compensation;
+#endif
 #endif
             total += (diffuse * nl + highlight) * arriving;
             highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
-            coat_light += sphere_highlight(coat_normal, s.to_eye, reflect(-s.to_eye, coat_normal), d,
-                                           lights.point_color[i].w, vec3(0.04), coat_roughness) * arriving;
+            vec3 coat = sphere_highlight(coat_normal, s.to_eye, reflect(-s.to_eye, coat_normal), d,
+                                         lights.point_color[i].w, vec3(0.04), coat_roughness);
+#ifdef RECT_LIGHTS
+            if (rect.shape) coat = rect_highlight(rect, coat_normal, s.to_eye, vec3(0.04), coat_roughness);
+#endif
+            coat_light += coat * arriving;
 #endif
 #ifdef SHEEN
-            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * arriving;
+            float sheen_share = 1.0;  // a rectangle's: its form factor for n.l towards its centre
+#ifdef RECT_LIGHTS
+            if (rect.shape) sheen_share = nl / max(centre_nl, 1e-3);
+#endif
+            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * (arriving * sheen_share);
 #endif
         }
     }

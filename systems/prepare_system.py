@@ -52,6 +52,7 @@ from engine.rules.light_rules import (
     cube_serves,
     lamp_cone,
     lamp_cookie,
+    lamp_rectangle,
     sky_sun,
     view_eyes,
 )
@@ -119,9 +120,14 @@ class PrepareSystem(esper.Processor):
             self._environment_packed = self.environment_reflections
             if self._cookies(kept):
                 renderer.note_scene_change()   # an image in the cookie array changed, or its build
-            spheres = any(world.get(entity, PointLight).radius > 0.0 for entity in kept.point if entity is not None)
-            if spheres != renderer.sphere_lights:
+            lamps = [world.get(entity, PointLight) for entity in kept.point if entity is not None]
+            spheres = any(light.radius > 0.0 for light in lamps)
+            rectangles = any(light.rectangle[0] > 0.0 for light in lamps)
+            if (spheres, rectangles) != (renderer.sphere_lights, renderer.rect_lights):
                 renderer.sphere_lights = spheres   # the SPHERE_LIGHTS builds, or not
+                renderer.rect_lights = rectangles  # the RECT_LIGHTS builds, or not
+                if rectangles:
+                    renderer.irradiance.write_ltc()   # (their table, once)
                 renderer.note_scene_change()
             block = lights_block(self._sky_sh, *self._rows(kept), flat_sky=self._flat_sky,
                                  environment=self.environment_reflections)
@@ -218,7 +224,7 @@ class PrepareSystem(esper.Processor):
                     cut += 1
             point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world),
                           lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)), light.radius,
-                          float(channel)))
+                          float(channel), lamp_rectangle(light, t.world)))
         if cut > self._contact.cut:
             warnings.warn(LightLimitWarning(
                 f"{len(contact) + cut} point lights with contact_shadows light the scene: at most {MAX_CONTACT_LAMPS} "

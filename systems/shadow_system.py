@@ -60,6 +60,7 @@ from engine.rules.light_rules import (
     kept_lights,
     lamp_cone,
     lamp_cookie,
+    lamp_rectangle,
     spot_map_half_width,
 )
 from engine.rules.probe_rules import pose_bounds, world_bounds
@@ -409,7 +410,8 @@ class ShadowSystem(esper.Processor):
             cookies = renderer.spot_cookies
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,
                        lamp_cone(light, transform.world),
-                       lamp_cookie(light, transform.world, cookies.layer(light.cookie)), light.radius)
+                       lamp_cookie(light, transform.world, cookies.layer(light.cookie)), light.radius,
+                       lamp_rectangle(light, transform.world))
                       for entity, (light, transform) in lamps]
             bounces = {entity: light.bounces for entity, light in suns}
             bounces.update({entity: light.bounces for entity, (light, _) in lamps})
@@ -426,7 +428,7 @@ class ShadowSystem(esper.Processor):
                 stats.virtual_lights_cut += 1
                 continue
             key = (light.light, light.path, light.kind, light.position, light.color, light.light_range, light.cone,
-                   light.cookie, light.radius,
+                   light.cookie, light.radius, light.rectangle,
                    light.exit_plane, light.aperture, light.apertures,
                    tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
                          for leg in light.legs),

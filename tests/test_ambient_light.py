@@ -186,7 +186,11 @@ void main() {
         value = lights.point_spot[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 2 * MAX_POINT_LIGHTS];
     else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 4 * MAX_POINT_LIGHTS)
         value = lights.point_cookie_u[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 3 * MAX_POINT_LIGHTS];
-    else value = lights.point_cookie_v[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 4 * MAX_POINT_LIGHTS];
+    else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 5 * MAX_POINT_LIGHTS)
+        value = lights.point_cookie_v[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 4 * MAX_POINT_LIGHTS];
+    else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 6 * MAX_POINT_LIGHTS)
+        value = lights.point_rect_u[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 5 * MAX_POINT_LIGHTS];
+    else value = lights.point_rect_v[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 6 * MAX_POINT_LIGHTS];
 }
 """
 
@@ -200,10 +204,12 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
     rng = np.random.default_rng(7)
     sh = rng.uniform(-1, 1, (9, 3))
     directional = [(tuple(rng.uniform(-1, 1, 3)), tuple(rng.uniform(0, 4, 3))) for _ in range(MAX_DIRECTIONAL_LIGHTS)]
-    # (each with its sphere's radius and its contact shadows' channel + 1: the cookie's up row's w)
+    # (each with its sphere's radius, its contact shadows' channel + 1: the cookie's up row's w,
+    # and its rectangle's rows)
     point = [(tuple(rng.uniform(-9, 9, 3)), float(rng.uniform(1, 20)), tuple(rng.uniform(0, 4, 3)),
               tuple(rng.uniform(-5, 5, 4)), (tuple(rng.uniform(-5, 5, 4)), tuple(rng.uniform(-5, 5, 3))),
-              float(rng.uniform(0, 2)), float(rng.integers(0, 4)))
+              float(rng.uniform(0, 2)), float(rng.integers(0, 4)),
+              (tuple(rng.uniform(-5, 5, 4)), tuple(rng.uniform(-5, 5, 4))))
              for _ in range(MAX_POINT_LIGHTS)]
     block = lights_block(sh, directional, point)
     assert len(block) == LIGHTS_BLOCK_BYTES
@@ -218,7 +224,7 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
              "vec2(-1,3))[gl_VertexID], 0.0, 1.0); }"
     program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
     assert program["Lights"].size == LIGHTS_BLOCK_BYTES
-    width = 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 5 * MAX_POINT_LIGHTS
+    width = 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 7 * MAX_POINT_LIGHTS
     target = ctx.texture((width, 1), 4, dtype="f4")
     framebuffer = ctx.framebuffer([target])
     ubo = ctx.buffer(block)
@@ -246,12 +252,14 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
         np.testing.assert_allclose(read[rows + i, :3], direction, rtol=1e-6)
         np.testing.assert_allclose(read[rows + MAX_DIRECTIONAL_LIGHTS + i, :3], rgb, rtol=1e-6)
     rows += 2 * MAX_DIRECTIONAL_LIGHTS
-    for i, (position, reach, rgb, cone, (right, up), radius, contact) in enumerate(point):
+    for i, (position, reach, rgb, cone, (right, up), radius, contact, (half_u, half_v)) in enumerate(point):
         np.testing.assert_allclose(read[rows + i], (*position, reach), rtol=1e-6)
         np.testing.assert_allclose(read[rows + MAX_POINT_LIGHTS + i], (*rgb, radius), rtol=1e-6)
         np.testing.assert_allclose(read[rows + 2 * MAX_POINT_LIGHTS + i], cone, rtol=1e-6)
         np.testing.assert_allclose(read[rows + 3 * MAX_POINT_LIGHTS + i], right, rtol=1e-6)
         np.testing.assert_allclose(read[rows + 4 * MAX_POINT_LIGHTS + i], (*up, contact), rtol=1e-6)
+        np.testing.assert_allclose(read[rows + 5 * MAX_POINT_LIGHTS + i], half_u, rtol=1e-6)
+        np.testing.assert_allclose(read[rows + 6 * MAX_POINT_LIGHTS + i], half_v, rtol=1e-6)
 
 
 def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):

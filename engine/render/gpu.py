@@ -205,8 +205,11 @@ class Gpu:
         # The kept spot lights' cookies (PointLight.cookie; the prepare stage sets them), filtered
         # as normal maps are (anisotropy on a GPU).
         # Whether a kept point light is a sphere (PointLight.radius; the prepare stage sets it):
-        # the scene programs' SPHERE_LIGHTS builds.
+        # the scene programs' SPHERE_LIGHTS builds.  Whether one is a rectangle
+        # (PointLight.rectangle): the RECT_LIGHTS builds, which read the LTC table's rows of
+        # the irradiance table (IrradianceTable.write_ltc, when the first is kept).
         self.sphere_lights = False
+        self.rect_lights = False
         self.spot_cookies = SpotCookies(ctx, caps.max_texture_image_units, self.normal_map_anisotropy, caps.software)
         # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
         # the extract stage writes them): the SKINNED and MORPHED builds read them.

@@ -83,6 +83,7 @@ from engine.render.bindings import (
 )
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE, environment_brdf_table, sheen_albedo_table
 from engine.render.gpu import Gpu, ProbeCube
+from engine.render.ltc_fit import LTC_SIZE, load_table
 from engine.render.sky import (
     DISC_EDGE,
     GLOW_COLOR,
@@ -93,7 +94,7 @@ from engine.render.sky import (
     zenith_share,
 )
 from engine.render.targets import release_framebuffer
-from engine.render.views import MAX_IRRADIANCE_PROBES
+from engine.render.views import LTC_ROW, MAX_IRRADIANCE_PROBES
 
 LOG = logging.getLogger("speculum")
 
@@ -244,13 +245,15 @@ class IrradianceTable:
         # The probes' rows, then the split-sum's environment BRDF table (environment_brdf.py:
         # no sampler of its own for the scene shader), read by bilinear filtering (the rows
         # by texelFetch, which filters nothing).
-        width = max(SH_COEFFICIENTS, ENVIRONMENT_BRDF_SIZE)
-        self.table = ctx.texture((width, MAX_IRRADIANCE_PROBES + ENVIRONMENT_BRDF_SIZE), 4, dtype="f4")
+        # Below them the LTC table of rectangle lights (write_ltc), once the first is kept.
+        width = max(SH_COEFFICIENTS, ENVIRONMENT_BRDF_SIZE, LTC_SIZE)
+        self.table = ctx.texture((width, LTC_ROW + 2 * LTC_SIZE), 4, dtype="f4")
         self.table.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.table.repeat_x = self.table.repeat_y = False
         self._brdf = np.zeros((ENVIRONMENT_BRDF_SIZE, ENVIRONMENT_BRDF_SIZE, 4), np.float32)
         self._brdf[..., :2] = environment_brdf_table()
         self.has_sheen_albedo = False  # blue: the sheen's albedo (write_sheen_albedo), once a sheen is drawn
+        self.has_ltc = False           # the LTC rows (write_ltc), once a rectangle light is kept
         self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
                                                          ENVIRONMENT_BRDF_SIZE))
         self.framebuffer = ctx.framebuffer(color_attachments=[self.table])
@@ -268,6 +271,20 @@ class IrradianceTable:
         self._warned = False
         self._vao: moderngl.VertexArray | None = None
         self.projections = 0  # rows written since made (tests and the overlay read it)
+
+    def write_ltc(self) -> None:
+        """The LTC table of rectangle lights (``engine/render/ltc_fit.py``) into its rows
+        (``LTC_ROW`` on: first each entry's M^-1, then its magnitude and Fresnel share; across
+        roughness, down sqrt(1 - n.v): ``shaders/include/rect_lights.glsl`` ``ltc_entry``),
+        once: the prepare stage asks for it when the first rectangle light is kept."""
+        if self.has_ltc:
+            return
+        table = load_table()                   # (roughness, sqrt(1 - n.v), 6)
+        rows = np.zeros((2 * LTC_SIZE, LTC_SIZE, 4), np.float32)
+        rows[:LTC_SIZE] = table[..., :4].transpose(1, 0, 2)
+        rows[LTC_SIZE:, :, :2] = table[..., 4:6].transpose(1, 0, 2)
+        self.table.write(rows.tobytes(), viewport=(0, LTC_ROW, LTC_SIZE, 2 * LTC_SIZE))
+        self.has_ltc = True
 
     def write_sheen_albedo(self) -> None:
         """The sheen's albedo E(n.v) (``environment_brdf.sheen_albedo_table``) into the blue

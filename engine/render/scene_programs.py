@@ -188,6 +188,8 @@ class ScenePrograms:
         cookies = self.renderer.spot_cookies.defines  # SPOT_COOKIES while a kept spot light has a cookie
         if self.renderer.sphere_lights:  # SPHERE_LIGHTS while a kept point light has a radius
             cookies = (*cookies, ("SPHERE_LIGHTS", "1"))
+        if self.renderer.rect_lights:  # RECT_LIGHTS while a kept point light (or its image) is a rectangle
+            cookies = (*cookies, ("RECT_LIGHTS", "1"))
         if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
             cookies = (*cookies, *self.renderer.object_motion.defines)
         if "occluded" in screen.split():  # CONTACT_LAMPS while a lamp has contact shadows (its image read)

@@ -82,6 +82,7 @@ from engine.core.errors import ShaderError
 from engine.render import object_motion, pose_rows, views
 from engine.render.bindings import clip_glsl_defines
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
+from engine.render.ltc_fit import LTC_SIZE
 from engine.render.raw_gl import _load as load_gl_function
 from engine.rules import lens_rules, shadow_rules, visibility_rules
 
@@ -291,6 +292,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "MAX_SHADOW_RINGS": str(views.MAX_SHADOW_RINGS),
             "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
             "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
+            "LTC_SIZE": str(LTC_SIZE), "LTC_ROW": str(views.LTC_ROW),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
             "MAX_CONTACT_LAMPS": str(MAX_CONTACT_LAMPS),

@@ -68,7 +68,8 @@ LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_S
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
 # The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
 # matrix and ten vectors.
-VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params", "spot", "cookie_u", "cookie_v")
+VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params", "spot", "cookie_u", "cookie_v",
+                  "rect_u", "rect_v")
 # ... then, for light reflected more than once, each light's further outlines (the earlier
 # surfaces as the later ones carry them): a plane, a corner and two edges each.
 VIRTUAL_MORE = MAX_APERTURES - 1
@@ -433,6 +434,8 @@ class ShadowMaps:
             "spot": light.cone,
             "cookie_u": light.cookie[0],
             "cookie_v": (*light.cookie[1][:3], light.radius),
+            "rect_u": light.rectangle[0],
+            "rect_v": light.rectangle[1],
         }
         for index, name in enumerate(VIRTUAL_FIELDS):
             at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (index * MAX_VIRTUAL_LIGHTS + slot)

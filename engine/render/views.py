@@ -17,6 +17,7 @@ from pyglm import glm
 
 from components.limits import ALL_LAYERS, MAX_SHADOW_CASCADES, VIEW_DIRECT, VIEW_KINDS
 from components.visibility import KIND_MASK, visibility_code
+from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.rules.light_rules import NO_COOKIE
 
 # The Camera uniform block (shaders/include/camera.glsl, std140), the one schema of every
@@ -66,8 +67,11 @@ MAX_POINT_LIGHTS = 16
 MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
 MAX_SHADOW_RINGS = MAX_SHADOW_CASCADES - 1  # a sun's cascades about the camera besides its level map
 MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
+# The irradiance table's rows (engine/render/irradiance.py): the probes', the environment
+# BRDF's, then from here the LTC table's of rectangle lights (shaders/include/rect_lights.glsl).
+LTC_ROW = MAX_IRRADIANCE_PROBES + ENVIRONMENT_BRDF_SIZE
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
-LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 5 * 16 * MAX_POINT_LIGHTS
+LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 7 * 16 * MAX_POINT_LIGHTS
 
 
 @dataclass
@@ -239,11 +243,12 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
     [(direction, rgb[, sun])] (``sun``: 1 for the brightest, whose light contact shadows dim;
-    0 when left out), point = [(position, range, rgb, cone[, cookie[, radius[, contact]]])]
+    0 when left out), point = [(position, range, rgb, cone[, cookie[, radius[, contact[, rectangle]]]])]
     (``cone``: the spot cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light;
     ``cookie``: its two cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out;
     ``radius``: its sphere's, ``PointLight.radius``, 0 when left out; ``contact``: its contact
-    shadows' channel + 1, ``ContactLamps``, 0 (none) when left out).  ``flat_sky``: the sky cube
+    shadows' channel + 1, ``ContactLamps``, 0 (none) when left out; ``rectangle``: its two
+    rectangle rows, ``light_rules.lamp_rectangle``, ``NO_RECTANGLE`` when left out).  ``flat_sky``: the sky cube
     is the flat background of a world with no Skybox, not the light ``sky_sh`` holds (the
     environment's reflection then reads the harmonics: scene.frag environment_radiance).
     ``environment`` False: no surface reflects the light from all round by its material (the
@@ -272,6 +277,10 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
         data[base + 4 * (3 * MAX_POINT_LIGHTS + i): base + 4 * (3 * MAX_POINT_LIGHTS + i) + 4] = right
         data[base + 4 * (4 * MAX_POINT_LIGHTS + i): base + 4 * (4 * MAX_POINT_LIGHTS + i) + 3] = up[:3]
         data[base + 4 * (4 * MAX_POINT_LIGHTS + i) + 3] = more[2] if len(more) > 2 else 0.0
+        if len(more) > 3:
+            u, v = more[3]
+            data[base + 4 * (5 * MAX_POINT_LIGHTS + i): base + 4 * (5 * MAX_POINT_LIGHTS + i) + 4] = u
+            data[base + 4 * (6 * MAX_POINT_LIGHTS + i): base + 4 * (6 * MAX_POINT_LIGHTS + i) + 4] = v
     return data.tobytes()
 
 

@@ -360,6 +360,42 @@ def carried_cookie(rows: tuple[Sequence[float], Sequence[float]], carry: Any) ->
     return tuple(tuple(row) for row in carried)
 
 
+# A light that is no rectangle, as the Lights and VirtualLights blocks' rectangle rows hold
+# it (``lamp_rectangle``): its half sides zero.
+NO_RECTANGLE = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))
+
+
+def lamp_rectangle(light: PointLight, world: Any) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The rectangle rows of point light ``light`` (``PointLight.rectangle``) whose entity's
+    world matrix is ``world`` (glm): (U, s / A) and (V, 0), U and V the half sides (the
+    entity's unit +X times half the width, its unit +Y times half the height: the entity's
+    scale leaves them as they are, as it leaves a radius), A the area, s the side the light
+    shines from as a sign: its front is s cross(U, V) (-1 here: the entity's -Z).  The
+    shader takes the rectangle's radiance as the light's colour x intensity x |s / A|
+    (``shaders/include/rect_lights.glsl``).  ``NO_RECTANGLE`` for a point or a sphere."""
+    width, height = light.rectangle
+    if width == 0.0:
+        return NO_RECTANGLE
+    right, up = glm.normalize(world[0].xyz) * (0.5 * width), glm.normalize(world[1].xyz) * (0.5 * height)
+    return (float(right.x), float(right.y), float(right.z), -1.0 / (width * height)), \
+        (float(up.x), float(up.y), float(up.z), 0.0)
+
+
+def carried_rectangle(rows: tuple[Sequence[float], Sequence[float]], carry: Any) -> tuple[tuple[float, ...], ...]:
+    """A light's rectangle rows (``lamp_rectangle``) as its image through a mirror or portal
+    sees them: the half sides moved by ``carry``'s linear part (a glm 4x4 matrix; a portal
+    that scales scales them), the radiance kept (light keeps its radiance along a ray), and
+    where ``carry`` mirrors (a negative determinant) the front's sign turned, so the image
+    shines from the side the mirror shows lit."""
+    if rows[0][3] == 0.0:
+        return NO_RECTANGLE
+    m = np.array(carry.to_list(), np.float64).T[:3, :3]   # glm's lists are its columns
+    u, v = m @ np.asarray(rows[0][:3], np.float64), m @ np.asarray(rows[1][:3], np.float64)
+    sign = -1.0 if np.linalg.det(m) < 0.0 else 1.0
+    return (float(u[0]), float(u[1]), float(u[2]), float(rows[0][3]) * sign), \
+        (float(v[0]), float(v[1]), float(v[2]), 0.0)
+
+
 def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,
                      eye: Sequence[float] | None) -> tuple[np.ndarray, np.ndarray]:
     """(holds, importance) of point lights to a camera at ``eye``: whether each one's range

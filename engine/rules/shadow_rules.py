@@ -26,9 +26,11 @@ from engine.resources import Surfaces
 from engine.rules.light_rules import (
     ALL_ROUND,
     NO_COOKIE,
+    NO_RECTANGLE,
     SPOT_MAP_MAX_ANGLE,
     carried_cone,
     carried_cookie,
+    carried_rectangle,
     cone_half_width,
     cone_reaches,
     opened_cone,
@@ -489,6 +491,7 @@ class VirtualLight:
     cone: tuple[float, float, float, float] = ALL_ROUND   # a point image's spot cone, carried (light_rules.spot_cone)
     cookie: tuple[tuple[float, ...], ...] = NO_COOKIE   # its cookie rows, carried (light_rules.lamp_cookie)
     radius: float = 0.0              # a point light's sphere (PointLight.radius), scaled as the carry scales
+    rectangle: tuple[tuple[float, ...], ...] = NO_RECTANGLE   # its rectangle rows, carried (lamp_rectangle)
 
 
 def _outline(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -560,7 +563,8 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
     """The virtual lights of this frame's lights through the surfaces that carry light:
     ``directional`` as (entity, direction travelled, colour x intensity), ``points`` as
     (entity, position, range, colour x intensity, spot cone: ``light_rules.spot_cone``, or
-    ``ALL_ROUND``[, cookie rows: ``light_rules.lamp_cookie``[, sphere radius]]), ``surfaces`` the
+    ``ALL_ROUND``[, cookie rows: ``light_rules.lamp_cookie``[, sphere radius[, rectangle rows:
+    ``light_rules.lamp_rectangle``]]]), ``surfaces`` the
     ``Surfaces`` resource,
     ``bounces`` each light's limit (its ``bounces`` field; 1 when not given), ``depth_cap``
     the view tree's.
@@ -601,7 +605,7 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
 
     def extend(light: VirtualLight | None, entity: int, kind: str, image: glm.vec3, light_range: float,
                rgb: glm.vec3, limit: int, cone: tuple = ALL_ROUND, cookie: tuple = NO_COOKIE,
-               radius: float = 0.0) -> None:
+               radius: float = 0.0, rectangle: tuple = NO_RECTANGLE) -> None:
         depth = 1 if light is None else light.bounces + 1
         if depth > limit:
             return
@@ -644,16 +648,19 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                                 depth, path, apertures, legs,
                                 ALL_ROUND if kind == "directional" else carried_cone(cone, carry),
                                 NO_COOKIE if kind == "directional" else carried_cookie(cookie, carry),
-                                0.0 if kind == "directional" else radius * _carry_scale(carry))
+                                0.0 if kind == "directional" else radius * _carry_scale(carry),
+                                NO_RECTANGLE if kind == "directional" else carried_rectangle(rectangle, carry))
             found.append(made)
-            extend(made, entity, kind, new_image, light_range, color, limit, made.cone, made.cookie, made.radius)
+            extend(made, entity, kind, new_image, light_range, color, limit, made.cone, made.cookie, made.radius,
+                   made.rectangle)
 
     for entity, direction, rgb in directional:
         extend(None, entity, "directional", glm.normalize(glm.vec3(direction)), 0.0, glm.vec3(rgb),
                bounces.get(entity, 1))
     for entity, position, light_range, rgb, cone, *more in points:
         extend(None, entity, "point", glm.vec3(position), float(light_range), glm.vec3(rgb), bounces.get(entity, 1),
-               cone, more[0] if more else NO_COOKIE, float(more[1]) if len(more) > 1 else 0.0)
+               cone, more[0] if more else NO_COOKIE, float(more[1]) if len(more) > 1 else 0.0,
+               more[2] if len(more) > 2 else NO_RECTANGLE)
     return found
 
 

@@ -14,16 +14,25 @@ layout(std140) uniform Lights {
     vec4 point_cookie_u[MAX_POINT_LIGHTS];          // xyz: the cookie's right / tan(angle), w: its layer (-1: none)
     vec4 point_cookie_v[MAX_POINT_LIGHTS];          // xyz: its top / tan(angle) (light_rules.lamp_cookie); w: its
                                                     // contact shadows' channel + 1 (0: none; scene.frag)
+    vec4 point_rect_u[MAX_POINT_LIGHTS];            // xyz: a rectangle's half width along its side; w: its front's
+                                                    // sign over its area (0: no rectangle; light_rules.lamp_rectangle)
+    vec4 point_rect_v[MAX_POINT_LIGHTS];            // xyz: its half height along its other side
 } lights;
 
 #include "spot_cone.glsl"
 #include "spot_cookie.glsl"
+
+// Point light i's fade to 0 at its range, times its spot cone: its falloff (below) without the
+// inverse square, which a rectangle light's form factor takes the place of (rect_lights.glsl).
+float lamp_fade(int i, float dist, vec3 l) {
+    float fade = clamp(1.0 - pow(dist / lights.point_pos[i].w, 4.0), 0.0, 1.0);
+    return fade * fade * spot_factor(lights.point_spot[i], l);
+}
 
 // How much of point light i's light (its colour x intensity) reaches a point ``dist`` from it,
 // ``l`` the unit way from the point to the light: the inverse square (kept finite at the
 // light) faded smoothly to 0 at its range, times its spot cone.  The scene's lights and the
 // light shafts' lamps (volumetric_fog.frag) alike.
 float lamp_falloff(int i, float dist, vec3 l) {
-    float fade = clamp(1.0 - pow(dist / lights.point_pos[i].w, 4.0), 0.0, 1.0);
-    return fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
+    return lamp_fade(i, dist, l) / (dist * dist + 1.0);
 }

@@ -25,6 +25,8 @@ layout(std140) uniform VirtualLights {
     vec4 virtual_cookie_u[MAX_VIRTUAL_LIGHTS];      // its cookie's right / tan(angle), carried; w: layer (-1: none)
     vec4 virtual_cookie_v[MAX_VIRTUAL_LIGHTS];      // xyz: its cookie's top / tan(angle), carried (spot_cookie.glsl);
                                                     // w: a point image's sphere radius (PointLight.radius)
+    vec4 virtual_rect_u[MAX_VIRTUAL_LIGHTS];        // a point image's rectangle rows, carried (light_rules
+    vec4 virtual_rect_v[MAX_VIRTUAL_LIGHTS];        // carried_rectangle; lights.glsl point_rect_u / _v)
     vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
 } virtual_lights;
 

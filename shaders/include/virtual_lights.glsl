@@ -28,8 +28,19 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));
 #endif
         float nl = dot(normal, l);
-        if (nl <= 0.0 || falloff <= 0.0 || !virtual_comes_through(i, position, l, dist)) continue;
         vec4 image = virtual_lights.virtual_position[i];
+#ifdef RECT_LIGHTS
+        // A rectangle's image (rect_lights.glsl): its light from all of it above the horizon,
+        // through the opening as the line to its centre comes.
+        RectLight rect = rect_light(virtual_lights.virtual_rect_u[i], virtual_lights.virtual_rect_v[i],
+                                    image.xyz - position);
+        float centre_nl = nl;
+        if (rect.shape && image.w > 0.5) {
+            falloff *= (dist * dist + 1.0) * rect.radiance;  // the inverse square out: the form factor's
+            nl = rect_form_factor(rect, normal);
+        }
+#endif
+        if (nl <= 0.0 || falloff <= 0.0 || !virtual_comes_through(i, position, l, dist)) continue;
 #ifdef SPOT_COOKIES
         vec3 cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
 #else
@@ -44,17 +55,28 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         vec3 highlight = (image.w > 0.5 ? sphere_highlight(normal, to_eye, reflect(-to_eye, normal), image.xyz - position,
                                                            virtual_lights.virtual_cookie_v[i].w, f0, roughness)
                                         : ggx_specular(normal, l, to_eye, f0, roughness) * nl) * energy_compensation;
+#ifdef RECT_LIGHTS
+        if (rect.shape) highlight = rect_highlight(rect, normal, to_eye, f0, roughness) * energy_compensation;
+#endif
 #endif
         total += (diffuse * nl + highlight) * arriving;
         highlight_light += highlight * arriving;  // (scene.frag's: the highlights summed apart)
 #ifdef CLEARCOAT
-        coat_light += arriving * (image.w > 0.5  // (scene.frag's clear coat, as the highlight above)
+        vec3 coat = image.w > 0.5  // (scene.frag's clear coat, as the highlight above)
             ? sphere_highlight(coat_normal, to_eye, reflect(-to_eye, coat_normal), image.xyz - position,
                                virtual_lights.virtual_cookie_v[i].w, vec3(0.04), coat_roughness)
-            : ggx_specular(coat_normal, l, to_eye, vec3(0.04), coat_roughness) * max(dot(coat_normal, l), 0.0));
+            : ggx_specular(coat_normal, l, to_eye, vec3(0.04), coat_roughness) * max(dot(coat_normal, l), 0.0);
+#ifdef RECT_LIGHTS
+        if (rect.shape) coat = rect_highlight(rect, coat_normal, to_eye, vec3(0.04), coat_roughness);
+#endif
+        coat_light += coat * arriving;
 #endif
 #ifdef SHEEN
-        sheen_light += sheen_lobe(normal, l, to_eye) * arriving;  // (scene.frag's sheen)
+        float sheen_share = 1.0;  // (scene.frag's sheen: a rectangle's form factor for n.l)
+#ifdef RECT_LIGHTS
+        if (rect.shape) sheen_share = nl / max(centre_nl, 1e-3);
+#endif
+        sheen_light += sheen_lobe(normal, l, to_eye) * (arriving * sheen_share);  // (scene.frag's sheen)
 #endif
     }
     return total;

@@ -1,0 +1,100 @@
+// Rectangle lights (PointLight.rectangle): a rectangle of even radiance lights a point with
+// every part of it above the point's horizon.  Its rows (light_rules.lamp_rectangle, carried
+// through mirrors and portals by carried_rectangle): xyz its half sides U and V, the first
+// row's w its front's sign over its area (0: no rectangle), so the front is sign x (U x V)
+// and the radiance is the light's colour x intensity x |w|.
+//
+// - Diffuse: the polygon's form factor, the integral of n.l over the rectangle's solid angle
+//   clipped to the horizon (Lambert's edge sum), exact.
+// - Highlight: linearly transformed cosines (Heitz, Dupuy, Hill and Neubelt, "Real-Time
+//   Polygonal-Light Shading with Linearly Transformed Cosines", 2016): GGX times n.l, for a
+//   roughness and view angle, is close to a cosine lobe moved by a 3 x 3 matrix M; the
+//   rectangle moved by M^-1 is then integrated as the diffuse one is, times the lobe's
+//   magnitude and Fresnel.  The matrices were fitted to this engine's GGX (ggx.glsl) by
+//   engine/render/ltc_fit.py; they ride in rows of the irradiance table below the
+//   environment BRDF's (engine/render/irradiance.py: no sampler of their own).
+// Needs ggx.glsl (PI) and ambient.glsl (irradiance_table).  Only the RECT_LIGHTS builds hold
+// it (frames where a kept light is a rectangle).
+#ifdef RECT_LIGHTS
+
+// A rectangle light's corners as seen from a point, and its radiance there (0 behind it).
+struct RectLight {
+    vec3 corner[4];   // from the point to each corner, around the rectangle
+    float radiance;   // |w| in front of it (times the light's colour x intensity), else 0
+    bool shape;       // whether the light is a rectangle at all
+};
+
+// ``to_centre``: from the point to the rectangle's centre; ``u``, ``v``: its rows.
+RectLight rect_light(vec4 u, vec4 v, vec3 to_centre) {
+    RectLight rect;
+    rect.shape = u.w != 0.0;
+    rect.corner[0] = to_centre - u.xyz - v.xyz;
+    rect.corner[1] = to_centre + u.xyz - v.xyz;
+    rect.corner[2] = to_centre + u.xyz + v.xyz;
+    rect.corner[3] = to_centre - u.xyz + v.xyz;
+    vec3 front = sign(u.w) * cross(u.xyz, v.xyz);
+    rect.radiance = dot(-to_centre, front) > 0.0 ? abs(u.w) : 0.0;
+    return rect;
+}
+
+// The integral of max(z, 0) over the spherical polygon a, b, c, d (directions from the
+// point, any length, in a frame whose z is the normal), over pi: the quad clipped to z >= 0
+// (3 to 5 corners), then each edge's share, its angle times the z of its plane's normal.
+// The angle as atan(|a x b|, a.b): exact for the tiny angles the edges of a far light
+// subtend, where acos of a dot product near 1 loses them in float32.  Its magnitude (the
+// winding's sign taken off: rect_light tells front from back).
+float clamped_cosine_integral(vec3 a, vec3 b, vec3 c, vec3 d) {
+    vec3 quad[4] = vec3[4](a, b, c, d);
+    vec3 clipped[6];
+    int count = 0;
+    for (int k = 0; k < 4; ++k) {
+        vec3 from = quad[k], to = quad[(k + 1) & 3];
+        if (from.z >= 0.0) clipped[count++] = from;
+        if ((from.z >= 0.0) != (to.z >= 0.0)) clipped[count++] = mix(from, to, from.z / (from.z - to.z));
+    }
+    float sum = 0.0;
+    for (int k = 0; k < count; ++k) {
+        vec3 from = normalize(clipped[k]), to = normalize(clipped[k + 1 < count ? k + 1 : 0]);
+        vec3 across = cross(from, to);
+        float sine = length(across);
+        if (sine > 1e-12) sum += across.z * (atan(sine, dot(from, to)) / sine);
+    }
+    return abs(sum) / (2.0 * PI);
+}
+
+// The integral of max(n.l, 0) over the rectangle's solid angle (its irradiance per unit
+// radiance): Lambertian light is the surface's diffuse colour x this x the radiance.
+float rect_form_factor(RectLight rect, vec3 n) {
+    vec3 t = abs(n.z) < 0.999 ? normalize(cross(n, vec3(0.0, 0.0, 1.0))) : vec3(1.0, 0.0, 0.0);
+    mat3 to_frame = transpose(mat3(t, cross(n, t), n));
+    return PI * clamped_cosine_integral(to_frame * rect.corner[0], to_frame * rect.corner[1],
+                                        to_frame * rect.corner[2], to_frame * rect.corner[3]);
+}
+
+// The LTC table's entry at a roughness and n.v (ltc_fit.py's grid: roughness across,
+// sqrt(1 - n.v) down), read between entries by bilinear filtering: M^-1 and the lobe's
+// magnitude and Fresnel share.
+void ltc_entry(float roughness, float nv, out mat3 inverse, out vec2 magnitude) {
+    vec2 at = vec2(clamp(roughness, 0.0, 1.0), sqrt(clamp(1.0 - nv, 0.0, 1.0))) * float(LTC_SIZE - 1) + 0.5;
+    vec2 size = vec2(textureSize(irradiance_table, 0));
+    vec4 m = textureLod(irradiance_table, (at + vec2(0.0, float(LTC_ROW))) / size, 0.0);
+    magnitude = textureLod(irradiance_table, (at + vec2(0.0, float(LTC_ROW + LTC_SIZE))) / size, 0.0).xy;
+    inverse = mat3(vec3(m.x, 0.0, m.y), vec3(0.0, 1.0, 0.0), vec3(m.z, 0.0, m.w));  // (columns: ltc_fit.py's)
+}
+
+// The rectangle's GGX highlight per unit radiance towards ``v`` from a surface of normal
+// ``n``, reflectance ``f0`` and ``roughness`` (ggx.glsl's), n.l included.
+vec3 rect_highlight(RectLight rect, vec3 n, vec3 v, vec3 f0, float roughness) {
+    float nv = clamp(dot(n, v), 1e-4, 1.0);
+    vec3 t = v - n * dot(n, v);
+    t = dot(t, t) > 1e-10 ? normalize(t) : (abs(n.z) < 0.999 ? normalize(cross(n, vec3(0.0, 0.0, 1.0)))
+                                                               : vec3(1.0, 0.0, 0.0));
+    mat3 inverse;
+    vec2 magnitude;
+    ltc_entry(roughness, nv, inverse, magnitude);
+    mat3 to_lobe = inverse * transpose(mat3(t, cross(n, t), n));
+    float lobe = clamped_cosine_integral(to_lobe * rect.corner[0], to_lobe * rect.corner[1],
+                                         to_lobe * rect.corner[2], to_lobe * rect.corner[3]);
+    return lobe * (f0 * (magnitude.x - magnitude.y) + magnitude.y);
+}
+#endif
