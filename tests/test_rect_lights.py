@@ -311,3 +311,117 @@ def test_a_level_file_keeps_a_rectangle(tmp_path):
     (tmp_path / "bad.toml").write_text(text.replace("[1.2, 0.6]", "[1.2, 0.0]"))
     with pytest.raises(LevelError, match="rectangle"):
         load_level(tmp_path / "bad.toml").spawn(World())
+
+
+_RECT_READER = """#version 410 core
+#include "lights.glsl"
+#include "ggx.glsl"
+#include "ambient.glsl"
+#include "rect_lights.glsl"
+uniform sampler2D cases;   // a row a case: (n, roughness), (v, f0), (to the centre, 0), U row, V row
+out vec4 value;
+void main() {
+    int i = int(gl_FragCoord.x);
+    vec4 a = texelFetch(cases, ivec2(0, i), 0), b = texelFetch(cases, ivec2(1, i), 0);
+    vec4 c = texelFetch(cases, ivec2(2, i), 0);
+    RectLight rect = rect_light(texelFetch(cases, ivec2(3, i), 0), texelFetch(cases, ivec2(4, i), 0), c.xyz);
+    value = vec4(rect_form_factor(rect, a.xyz), rect_highlight(rect, a.xyz, b.xyz, vec3(b.w), a.w).r,
+                 rect.radiance, 0.0);
+}
+"""
+
+
+def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx):
+    """``rect_lights.glsl`` run on 400 random rectangles (any size, tilt and side, some through
+    the horizon, some behind the point) against float64: the form factor within 1e-4 of the
+    rectangle's solid angle integrated patch by patch (``ltc_fit.brute_force_rect_diffuse``'s
+    twin here: the panel cut into patches), the highlight within 1e-3 relative of
+    ``ltc_fit.ltc_rect_specular`` (the same table read bilinearly in numpy), and the side the
+    rectangle shines from as the front's sign says."""
+    import pathlib
+    import tempfile
+
+    from engine.render.ltc_fit import load_table, ltc_rect_specular, rect_diffuse_integral
+    from engine.render.shader_library import load_source
+
+    def build(world):   # an engine whose irradiance table holds the LTC rows
+        look_from(world, (0.0, 1.0, 3.0), (0.0, 0.0, -1.0))
+        world.spawn(Transform(position=(0.0, 2.0, 0.0)), PointLight(rectangle=(1.0, 1.0)))
+    runner = scene(build, (16, 16))
+    runner.frame()
+    table_texture = runner.engine.renderer.irradiance.table
+    rng = np.random.default_rng(11)
+    count = 400
+    rows = np.zeros((count, 5, 4), np.float32)
+    cases = []
+    for i in range(count):
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        v = rng.normal(size=3)
+        v += n * (abs(v @ n) - v @ n) + n * 0.05   # in front of the surface
+        v /= np.linalg.norm(v)
+        roughness, f0 = float(rng.uniform(0.05, 1.0)), float(rng.choice([0.04, 1.0]))
+        centre = rng.normal(size=3) * 1.5
+        u = rng.normal(size=3) * rng.uniform(0.1, 1.0)
+        w = np.cross(u, rng.normal(size=3))
+        w *= rng.uniform(0.1, 1.0) / np.linalg.norm(w)
+        sign = float(rng.choice([-1.0, 1.0]))
+        area = 4.0 * np.linalg.norm(np.cross(u, w))
+        rows[i] = [(*n, roughness), (*v, f0), (*centre, 0.0), (*u, sign / area), (*w, 0.0)]
+        cases.append((n, v, roughness, f0, centre, u, w, sign))
+    with tempfile.TemporaryDirectory() as folder:
+        path = pathlib.Path(folder) / "reader.frag"
+        path.write_text(_RECT_READER)
+        fragment = load_source(str(path), {"RECT_LIGHTS": "1"})
+    vertex = "#version 410 core\nvoid main() { gl_Position = vec4(vec2[3](vec2(-1,-1), vec2(3,-1), " \
+             "vec2(-1,3))[gl_VertexID], 0.0, 1.0); }"
+    program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
+    data = ctx.texture((5, count), 4, rows.tobytes(), dtype="f4")
+    data.filter = (ctx.NEAREST, ctx.NEAREST)
+    target = ctx.texture((count, 1), 4, dtype="f4")
+    framebuffer = ctx.framebuffer([target])
+    vao = ctx.vertex_array(program, [])
+    try:
+        program["cases"].value = 0
+        program["irradiance_table"].value = 1
+        data.use(0)
+        table_texture.use(1)
+        framebuffer.use()
+        ctx.viewport = (0, 0, count, 1)
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
+        vao.render(vertices=3)
+        read = np.frombuffer(target.read(), np.float32).reshape(count, 4)
+    finally:
+        from engine.render.bindings import invalidate
+        from engine.render.targets import release_framebuffer
+
+        release_framebuffer(framebuffer)
+        for obj in (vao, data, target, program):
+            obj.release()
+        invalidate(ctx)
+    table = load_table()
+    s = (np.arange(PATCHES * 2) + 0.5) / (PATCHES * 2) * 2.0 - 1.0
+    grid_a, grid_b = (g.reshape(-1, 1) for g in np.meshgrid(s, s))
+    fronts = lit = far = 0
+    for i, (n, v, roughness, f0, centre, u, w, sign) in enumerate(cases):
+        front = sign * np.cross(u, w)
+        shines = (-centre) @ front > 0.0
+        assert (read[i, 2] > 0.0) == shines
+        fronts += shines
+        d = centre + grid_a * u + grid_b * w
+        dist = np.linalg.norm(d, axis=1)
+        patch = 4.0 * np.linalg.norm(np.cross(u, w)) / len(d)
+        solid = patch * np.abs(d @ front) / np.linalg.norm(front) / dist ** 3
+        form_factor = float((np.maximum(d @ n, 0.0) / dist * solid).sum())
+        corners = np.array([centre - u - w, centre + u - w, centre + u + w, centre - u + w])
+        if np.cross(corners[1] - corners[0], corners[2] - corners[1]) @ -corners[0] < 0.0:
+            corners = corners[::-1]   # (ltc_fit's winding: counter-clockwise seen from the point)
+        exact = float(rect_diffuse_integral(n, corners))
+        assert read[i, 0] == pytest.approx(exact, abs=2e-5, rel=1e-4), (i, read[i, 0], exact)
+        if dist.min() > 2.0 * np.sqrt(patch * len(d)):   # far enough for the patches' sum to be exact
+            assert exact == pytest.approx(form_factor, abs=1e-5, rel=1e-3)
+            far += 1
+        twin = float(ltc_rect_specular(n, v, roughness, f0, corners, table))
+        assert read[i, 1] == pytest.approx(twin, rel=1e-3, abs=1e-5), (i, read[i, 1], twin)
+        lit += form_factor > 1e-3
+    assert fronts > 150 and lit > 100 and far > 50
