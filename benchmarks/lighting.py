@@ -32,6 +32,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``spot_shadows``: no sun shadows; the ring's lamp a 30-degree spot aimed down, casting
   from one perspective map fitted to its cone; still (the map kept);
 * ``spot_moving``: the same with the sliding box (the map drawn again each frame);
+* ``sphere_lamp``: no shadows; the ring's lamp a sphere of 0.2 m (``PointLight.radius``);
+* ``rect_lamp``: no shadows; the ring's lamp a 1 x 0.5 m panel facing down
+  (``PointLight.rectangle``): its cost is its ratio to ``off`` against ``sphere_lamp``'s;
 * ``fog``: no shadows; height fog with sun scatter on the camera (``Fog``: every view, the
   sky and the composites fogged);
 * ``fog_uniform``: the same with fog the same everywhere and no glow (the cheapest fog build);
@@ -266,6 +269,22 @@ def _spot_moving(engine: Engine) -> None:
     _moving_caster(engine)
 
 
+def _sphere_lamp(engine: Engine) -> None:
+    """No shadows; the ring's lamp a sphere of 0.2 m (PointLight.radius: the SPHERE_LIGHTS builds)."""
+    _sun_shadows(engine, False)
+    for _, light in engine.world.query_one(PointLight):
+        light.radius = 0.2
+
+
+def _rect_lamp(engine: Engine) -> None:
+    """No shadows; the ring's lamp a 1 x 0.5 m panel facing down (PointLight.rectangle: the
+    RECT_LIGHTS builds, a clipped form factor and an LTC highlight a pixel)."""
+    _sun_shadows(engine, False)
+    for entity, light in engine.world.query_one(PointLight):
+        light.rectangle = (1.0, 0.5)
+        engine.world.get(entity, Transform).rotation = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+
+
 def _fog(engine: Engine) -> None:
     """No shadows; height fog on the camera (its FOG builds: each view, the sky and the
     composites)."""
@@ -426,6 +445,8 @@ VARIANTS: list[Variant] = [
     Variant("cascades_moving", _cascades_moving, "the same with a box sliding under the sun", _slide_caster),
     Variant("spot_shadows", _spot, "the lamp a 30-degree spot casting from its map; still"),
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
+    Variant("sphere_lamp", _sphere_lamp, "no shadows; the lamp a sphere of 0.2 m (PointLight.radius)"),
+    Variant("rect_lamp", _rect_lamp, "no shadows; the lamp a 1 x 0.5 m panel (PointLight.rectangle)"),
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),
