@@ -106,6 +106,29 @@ def _spot_shadows(ctx):
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 
 
+def _rect_lights(ctx):
+    """The mirror ring's lamp a panel (PointLight.rectangle: the RECT_LIGHTS builds, the LTC
+    rows of the irradiance table) casting from its cube, with contact shadows, a mirror
+    throwing the sun and the lamp (virtual lights, one a rectangle's image), and balls with a
+    clear coat, a sheen and anisotropic highlights lit by it."""
+    from benchmarks.lighting import _mirror_light
+    from benchmarks.mirrors import MirrorRing
+    from components import Camera, ContactShadows, Material, MeshRef, PointLight, Transform
+    from engine.assets.mesh import sphere
+
+    def configure(engine):
+        _mirror_light(engine)
+        world = engine.world
+        for _, light in world.query_one(PointLight):
+            light.rectangle, light.shadows, light.contact_shadows = (1.0, 0.5), True, True
+        for camera, _ in world.query_one(Camera):
+            world.add_component(camera, ContactShadows())
+        for x, material in ((-1.0, Material(clearcoat=1.0, clearcoat_roughness=0.1, sheen_color=(0.5, 0.2, 0.2))),
+                            (1.0, Material(metallic=1.0, roughness=0.3, anisotropy=0.8))):
+            world.spawn(Transform(position=(x, 0.5, 0.5)), MeshRef(sphere(0.4)), material)
+    return _engine_frames(ctx, MirrorRing(3), 3, configure)
+
+
 def _cutouts(ctx):
     """The mirror ring with two cutout grates (two cutoffs, one double-sided, one with an
     occlusion map) and a vertex-coloured quad over its boxes, the lamp casting (the layered cube's cutout build) and a
@@ -237,6 +260,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "graded": _lighting("graded"),
     "point_shadows": _point_shadows,
     "spot_shadows": _spot_shadows,
+    "rect_lights": _rect_lights,
     "cutouts_occlusion": _cutouts,
     "fog_per_mirror": _fog("per_mirror"),
     "fog_batched": _fog("batched"),

@@ -381,7 +381,13 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
     target = ctx.texture((count, 1), 4, dtype="f4")
     framebuffer = ctx.framebuffer([target])
     vao = ctx.vertex_array(program, [])
+    from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES
+    from engine.render.views import LIGHTS_BLOCK_BYTES
+    blocks = [ctx.buffer(reserve=LIGHTS_BLOCK_BYTES), ctx.buffer(reserve=IRRADIANCE_BLOCK_BYTES)]
     try:
+        for binding, (name, block) in enumerate(zip(("Lights", "Irradiance"), blocks, strict=True), start=6):
+            program[name].binding = binding   # (bound whole, though the reader reads neither)
+            block.bind_to_uniform_block(binding)
         program["cases"].value = 0
         program["irradiance_table"].value = 1
         data.use(0)
@@ -396,7 +402,7 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
         from engine.render.targets import release_framebuffer
 
         release_framebuffer(framebuffer)
-        for obj in (vao, data, target, program):
+        for obj in (vao, data, target, program, *blocks):
             obj.release()
         invalidate(ctx)
     table = load_table()

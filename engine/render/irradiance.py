@@ -246,8 +246,12 @@ class IrradianceTable:
         # no sampler of its own for the scene shader), read by bilinear filtering (the rows
         # by texelFetch, which filters nothing).
         # Below them the LTC table of rectangle lights (write_ltc), once the first is kept.
+        # Made all zeros: the BRDF rows' last texels are filtered with their neighbours to the
+        # right and below (weight 0, but a GPU's undefined texel may be a NaN, and NaN x 0 is
+        # NaN), which the table's widening for the LTC rows put inside it.
         width = max(SH_COEFFICIENTS, ENVIRONMENT_BRDF_SIZE, LTC_SIZE)
-        self.table = ctx.texture((width, LTC_ROW + 2 * LTC_SIZE), 4, dtype="f4")
+        height = LTC_ROW + 2 * LTC_SIZE
+        self.table = ctx.texture((width, height), 4, np.zeros((height, width, 4), np.float32).tobytes(), dtype="f4")
         self.table.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.table.repeat_x = self.table.repeat_y = False
         self._brdf = np.zeros((ENVIRONMENT_BRDF_SIZE, ENVIRONMENT_BRDF_SIZE, 4), np.float32)
