@@ -232,8 +232,9 @@ class PointLight(TrackedComponent):
     sphere's reflection, a disc as wide as the bulb a chrome ball shows in a mirror, not a
     pin-point, and wider and dimmer on rough ones, the light's energy kept (the representative
     point of the sphere nearest each reflected ray, ``shaders/include/ggx.glsl``
-    ``sphere_highlight``).  Its diffuse light and its shadows are a point's.  At most
-    ``MAX_LIGHT_RADIUS`` (10 m).
+    ``sphere_highlight``).  Its diffuse light is a point's; its shadow from its cube is soft,
+    the sphere's penumbra (percentage-closer soft shadows: ``shaders/include/shadows.glsl``
+    ``soft_cube_shadow``, with the "grid" shadow filter).  At most ``MAX_LIGHT_RADIUS`` (10 m).
 
     ``rectangle`` (metres, (width, height); default (0, 0): a point) makes it a rectangle of
     light, as a ceiling panel, a softbox or a window's glow is (Unreal's and three.js's rect
@@ -245,8 +246,9 @@ class PointLight(TrackedComponent):
     light exactly (the polygon's form factor), its highlight by linearly transformed cosines
     (Heitz et al. 2016, fitted to the engine's GGX: ``engine/render/ltc_fit.py``), so a
     glossy floor shows the panel's stretched reflection and a mirror-smooth one its outline.
-    Its range, spot cone, cookie, shadow, contact shadows and light in the shafts' air are
-    taken from its centre, as a point light's.  Both sides from ``MIN_LIGHT_SIDE`` (1 mm) to
+    Its shadow from its cube is soft, as a disc of its area casts it, and nothing behind its
+    plane blocks it; its range, spot cone, cookie, contact shadows and light in the shafts'
+    air are taken from its centre, as a point light's.  Both sides from ``MIN_LIGHT_SIDE`` (1 mm) to
     ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``.  Through a mirror or portal its image
     is the rectangle's (``Mirror.reflects_light``).
 

@@ -61,6 +61,7 @@ from engine.rules.light_rules import (
     lamp_cone,
     lamp_cookie,
     lamp_rectangle,
+    light_size,
     spot_map_half_width,
 )
 from engine.rules.probe_rules import pose_bounds, world_bounds
@@ -335,8 +336,9 @@ class ShadowSystem(esper.Processor):
                 how = cube_faces_lit(lamp_cone(light, world_matrix), [face.forward for face in CUBE_FACES])
             else:                    # a spot's map: along its axis (-Z), in its atlas
                 how = (tuple(-glm.normalize(world_matrix[2].xyz)), half_width, maps.spot_tile)
+            size = light_size(light, world_matrix)
             key = (entity, tuple(position), light.range, light.shadow_resolution, light.shadow_softness, maps.filter,
-                   how)
+                   how, size)
             reached = len(changed_lo) and boxes_in_reach(changed_lo, changed_hi, np.array(position), light.range).any()
             if key == self._point.get(slot) and not reached:
                 maps.keep_point(slot, index)
@@ -344,7 +346,7 @@ class ShadowSystem(esper.Processor):
                 continue
             if half_width is None:
                 stats.shadow_path = maps.draw_point(slot, index, position, light.range, light.shadow_resolution,
-                                                    light.shadow_softness, layered, how)
+                                                    light.shadow_softness, layered, how, size)
             else:
                 stats.shadow_path = maps.draw_spot(slot, index, position, glm.vec3(how[0]), half_width, light.range,
                                                    light.shadow_resolution, light.shadow_softness)

@@ -108,7 +108,8 @@ def _spot_shadows(ctx):
 
 def _rect_lights(ctx):
     """The mirror ring's lamp a panel (PointLight.rectangle: the RECT_LIGHTS builds, the LTC
-    rows of the irradiance table) casting from its cube, with contact shadows, a mirror
+    rows of the irradiance table) casting soft shadows from its cube (the grid filter), with
+    contact shadows, a mirror
     throwing the sun and the lamp (virtual lights, one a rectangle's image), and balls with a
     clear coat, a sheen and anisotropic highlights lit by it."""
     from benchmarks.lighting import _mirror_light
@@ -121,6 +122,7 @@ def _rect_lights(ctx):
         world = engine.world
         for _, light in world.query_one(PointLight):
             light.rectangle, light.shadows, light.contact_shadows = (1.0, 0.5), True, True
+        engine.renderer.shadows.filter = "grid"   # (its soft shadows: SOFT_POINT_SHADOWS)
         for camera, _ in world.query_one(Camera):
             world.add_component(camera, ContactShadows())
         for x, material in ((-1.0, Material(clearcoat=1.0, clearcoat_roughness=0.1, sheen_color=(0.5, 0.2, 0.2))),

@@ -102,38 +102,43 @@ def expected(points, view, roughness, metallic, centre, facing, size):
     return light
 
 
-# A ceiling panel tilted towards the camera, and an upright one standing through the floor: the
-# floor before it sees its top half, the rest below its horizon (the polygon clipped), seen
-# from above (where a dielectric's highlight is small: at grazing views the LTC's Fresnel, the
-# lobe's average, is up to half a light low over the horizon calls for).
+# A ceiling panel tilted towards the camera, seen from 1 m up and at a grazing angle (0.4 m),
+# and an upright one standing through the floor: the floor before it sees its top half, the
+# rest below its horizon (the polygon clipped), seen from above (at grazing views a light
+# across the horizon is the LTC's weak spot, its tails there: 5-8% in the median).
 PANELS = {"ceiling": ((0.0, 1.4, -1.2), (0.0, -1.0, 0.35), (1.6, 0.5)),
           "through_the_floor": ((0.3, 0.2, -2.0), (0.0, 0.0, 1.0), (1.2, 1.0))}
-EYES = {"ceiling": (0.0, 1.0, 3.0), "through_the_floor": (0.0, 3.5, 1.0)}
+VIEWS = {"ceiling": ("ceiling", (0.0, 1.0, 3.0)), "ceiling_grazing": ("ceiling", (0.0, 0.4, 3.0)),
+         "through_the_floor": ("through_the_floor", (0.0, 3.5, 1.0))}
 
 
-@pytest.mark.parametrize("panel", sorted(PANELS))
-def test_a_panel_lights_a_rough_floor_with_all_of_it_above_the_horizon(scene, panel):
-    """A rough white dielectric floor (roughness 0.8): each pixel within 3% of the panel's
-    light gathered over its area in the median, 8% at the 90th percentile (the diffuse
-    light is the form factor itself; the rest is the highlight's fit)."""
+@pytest.mark.parametrize("view", sorted(VIEWS))
+def test_a_panel_lights_a_rough_floor_with_all_of_it_above_the_horizon(scene, view):
+    """A rough white dielectric floor (roughness 0.8): each pixel within 2% of the panel's
+    light gathered over its area in the median, 4% at the 90th percentile (measured 0.5-0.9%
+    and 1.1-2.1%: the diffuse light is the form factor itself, the highlight the LTC's with
+    the Fresnel of the light's mean way in)."""
+    panel, eye = VIEWS[view]
     centre, facing, size = PANELS[panel]
-    _, points, view = floor_frame(scene, 0.8, 0.0, centre, facing, size, 1.0, eye=EYES[panel])
-    reference = expected(points, view, 0.8, 0.0, centre, facing, size)
+    _, points, view_dirs = floor_frame(scene, 0.8, 0.0, centre, facing, size, 1.0, eye=eye)
+    reference = expected(points, view_dirs, 0.8, 0.0, centre, facing, size)
     intensity = 0.6 / reference.max()
-    shown, _, _ = floor_frame(scene, 0.8, 0.0, centre, facing, size, intensity, eye=EYES[panel])
+    shown, _, _ = floor_frame(scene, 0.8, 0.0, centre, facing, size, intensity, eye=eye)
     reference *= intensity
     lit = reference > 0.02
     assert lit.sum() > 300
     error = np.abs(shown[lit] / reference[lit] - 1.0)
-    assert np.median(error) < 0.03, np.median(error)
-    assert np.percentile(error, 90) < 0.08, np.percentile(error, 90)
+    assert np.median(error) < 0.02, np.median(error)
+    assert np.percentile(error, 90) < 0.04, np.percentile(error, 90)
     assert shown[reference < 1e-4].max(initial=0.0) < 0.01   # nothing where none of it is above the horizon
 
 
 @pytest.mark.parametrize("roughness", [0.15, 0.3, 0.6])
 def test_a_metal_floors_highlight_is_the_panels_light_its_lobe_gathers(scene, roughness):
     """A white metal floor: the highlight is the panel's light gathered by the GGX lobe, its
-    sum within 6% and its lit pixels within 12% in the median (the fitted lobe's shape)."""
+    sum within 6% and its lit pixels within 7% in the median (measured: the sum 0.5%, 1.7%
+    and 4.3% low at roughness 0.15, 0.3 and 0.6, the medians 1.2%, 2.3% and 4.8%: the fitted
+    lobe's shape)."""
     centre, facing, size = PANELS["ceiling"]
     _, points, view = floor_frame(scene, roughness, 1.0, centre, facing, size, 1.0)
     reference = expected(points, view, roughness, 1.0, centre, facing, size)
@@ -143,7 +148,7 @@ def test_a_metal_floors_highlight_is_the_panels_light_its_lobe_gathers(scene, ro
     lit = reference > 0.05
     assert lit.sum() > 60
     assert abs(shown.sum() / reference.sum() - 1.0) < 0.06, shown.sum() / reference.sum()
-    assert np.median(np.abs(shown[lit] / reference[lit] - 1.0)) < 0.12
+    assert np.median(np.abs(shown[lit] / reference[lit] - 1.0)) < 0.07
 
 
 def test_a_mirror_smooth_floor_shows_the_panels_outline(scene):
@@ -428,7 +433,7 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
         if dist.min() > 2.0 * np.sqrt(patch * len(d)):   # far enough for the patches' sum to be exact
             assert exact == pytest.approx(form_factor, abs=1e-5, rel=1e-3)
             far += 1
-        twin = float(ltc_rect_specular(n, v, roughness, f0, corners, table))
+        twin = float(ltc_rect_specular(n, v, roughness, f0, corners, table, light_fresnel=True))
         assert read[i, 1] == pytest.approx(twin, rel=1e-3, abs=1e-5), (i, read[i, 1], twin)
         lit += form_factor > 1e-3
     assert fronts > 150 and lit > 100 and far > 50

@@ -83,7 +83,9 @@ _POINTS_END = 64 * MAX_DIRECTIONAL_LIGHTS + 16 * MAX_DIRECTIONAL_LIGHTS + 4 * MA
 _RINGS_END = _POINTS_END + (16 + 16 + 16) * MAX_SHADOW_RINGS + 16
 # Then the spot maps (a spot within light_rules.SPOT_MAP_MAX_ANGLE): per point-shadow slot a
 # matrix (world -> the spot atlas's uv and depth) and its tile's uv corners.
-SHADOWS_BLOCK_BYTES = _RINGS_END + (64 + 16) * MAX_POINT_SHADOWS
+# Then each cube's light's size (soft shadows: shadows.glsl soft_cube_shadow).
+_SPOTS_END = _RINGS_END + (64 + 16) * MAX_POINT_SHADOWS
+SHADOWS_BLOCK_BYTES = _SPOTS_END + 16 * MAX_POINT_SHADOWS
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
 # offset in the lookup, no acne on the sample level's slanted and curved surfaces.
 SLOPE_BIAS = (1.5, 2.0)
@@ -189,7 +191,7 @@ class ShadowMaps:
         # What upload found: (the directional slots read, the last casting one's index + 1;
         # the point slots read, the last used one's index + 1; the rings read; the point
         # slots that hold a spot's map; whether a ring in use has a blend band).
-        self._casting: tuple[int, int, int, tuple[int, ...], bool] = (0, 0, 0, (), False)
+        self._casting: tuple[int, int, int, tuple[int, ...], bool, bool] = (0, 0, 0, (), False, False)
         self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
@@ -352,18 +354,21 @@ class ShadowMaps:
         light does (its value the cubes looked up, likewise), ``SHADOW_RINGS`` while a sun has
         cascades (the ring entries read), ``SHADOW_RING_BLEND`` while a ring in use has a blend
         band (a second lookup in it), ``SPOT_MAP<slot>`` where a point slot holds a spot's
-        map (its lookup instead of the cube's), ``SHADOW_SINGLE_TAP`` with the "single" filter.
+        map (its lookup instead of the cube's), ``SOFT_POINT_SHADOWS`` while a cube's light has a
+        size (a sphere or a rectangle: percentage-closer soft shadows, not with the "single"
+        filter), ``SHADOW_SINGLE_TAP`` with the "single" filter.
         The scene pass builds
         (and caches) a program per combination; a frame where nothing casts runs no lookup
         (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
         lookups that returned 1)."""
-        directional, point, rings, spots, blend = self._casting
+        directional, point, rings, spots, blend, soft = self._casting
         self.renderer.note_scene_change()
         self.program_defines = tuple((name, value) for name, value, on in (
             ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", str(point), point > 0),
             ("SHADOW_RINGS", str(rings), rings > 0 and directional > 0),
             ("SHADOW_RING_BLEND", "1", blend and rings > 0 and directional > 0),
             *((f"SPOT_MAP{slot}", "1", True) for slot in spots),
+            ("SOFT_POINT_SHADOWS", "1", soft and point > 0),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
@@ -458,11 +463,14 @@ class ShadowMaps:
 
     # --- point lights ---------------------------------------------------------------------
     def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
-                   softness: float, layered: bool, faces: tuple[bool, ...] = (True,) * 6) -> str:
+                   softness: float, layered: bool, faces: tuple[bool, ...] = (True,) * 6,
+                   size: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> str:
         """Draw point light ``light_index``'s distance cube into cube ``slot``: one layered
         pass (``layered``, every face lit) or a view a face, the faces a spot's cone does not
         light (``faces`` False: ``light_rules.cube_faces_lit``) cleared to "nothing nearer
-        than the range" and not drawn.  Returns the path taken."""
+        than the range" and not drawn; ``size``: the light's and a rectangle's front
+        (``light_rules.light_size``; above 0 its lookups are soft shadows:
+        ``SOFT_POINT_SHADOWS``).  Returns the path taken."""
         cube = self._cube(slot, resolution)
         views = [View(view=glm.lookAt(position, position + glm.vec3(forward), glm.vec3(up)),
                       proj=glm.perspective(glm.radians(90.0), 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
@@ -491,6 +499,7 @@ class ShadowMaps:
         # A texel's angle: 90 degrees over the face's texels.
         self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range,
                                      1.0 if self.filter == "single" else 4.0)
+        self.block[_SPOTS_END // 4 + 4 * slot:_SPOTS_END // 4 + 4 * slot + 4] = size
         self.renderer.checkpoint(f"shadow cube of point light {light_index}")
         return path
 
@@ -552,6 +561,7 @@ class ShadowMaps:
         base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
         # A texel's width over its distance on the map's axis, the filter's taps a side.
         self.block[base:base + 4] = (2.0 * half_width / resolution, softness, light_range, self._taps(softness))
+        self.block[_SPOTS_END // 4 + 4 * slot] = 0.0   # (a spot's map filters as a directional one's)
         self.renderer.checkpoint(f"spot shadow map of point light {light_index}")
         return "spot_map"
 
@@ -708,9 +718,11 @@ class ShadowMaps:
         cubes = np.flatnonzero(self._cube_lights >= 0)
         rings = np.flatnonzero(self._ring_slots >= 0)
         bands = self.block[_POINTS_END // 4 + 4 * MAX_SHADOW_RINGS + 2::4][:MAX_SHADOW_RINGS]
+        sizes = self.block[_SPOTS_END // 4::4][:MAX_POINT_SHADOWS]
         casting = (int(taps[-1]) + 1 if taps.size else 0, int(cubes[-1]) + 1 if cubes.size else 0,
                    int(rings[-1]) + 1 if rings.size else 0, tuple(int(c) for c in cubes if self._spot_maps[c]),
-                   bool((bands[rings] > 0.0).any()))
+                   bool((bands[rings] > 0.0).any()),
+                   bool(any(sizes[c] > 0.0 and not self._spot_maps[c] for c in cubes)) and self._filter != "single")
         if casting != self._casting:
             self._casting = casting
             self._set_program_defines()

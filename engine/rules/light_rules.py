@@ -381,6 +381,19 @@ def lamp_rectangle(light: PointLight, world: Any) -> tuple[tuple[float, ...], tu
         (float(up.x), float(up.y), float(up.z), 0.0)
 
 
+def light_size(light: PointLight, world: Any) -> tuple[float, float, float, float]:
+    """A point light's size for its soft shadows (``shaders/include/shadows.glsl``
+    ``soft_cube_shadow``), whose entity's world matrix is ``world`` (glm): the radius of a
+    disc as big, its sphere's radius or a disc of its rectangle's area (metres; 0: a point,
+    whose shadow is as hard as its map allows), then a rectangle's front (the entity's unit
+    -Z: nothing behind its plane blocks its light; 0 for a sphere)."""
+    width, height = light.rectangle
+    if width == 0.0:
+        return (float(light.radius), 0.0, 0.0, 0.0)
+    front = -glm.normalize(world[2].xyz)
+    return (math.sqrt(width * height / math.pi), float(front.x), float(front.y), float(front.z))
+
+
 def carried_rectangle(rows: tuple[Sequence[float], Sequence[float]], carry: Any) -> tuple[tuple[float, ...], ...]:
     """A light's rectangle rows (``lamp_rectangle``) as its image through a mirror or portal
     sees them: the half sides moved by ``carry``'s linear part (a glm 4x4 matrix; a portal

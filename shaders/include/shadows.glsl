@@ -47,6 +47,9 @@ layout(std140) uniform Shadows {
     // texel's width over its distance on the axis, w the filter's taps a side):
     mat4 spot_matrix[MAX_POINT_SHADOWS];              // world -> atlas uv and depth (divide by w)
     vec4 spot_box[MAX_POINT_SHADOWS];                 // its map's uv corners in the atlas (x0, y0, x1, y1)
+    vec4 point_size[MAX_POINT_SHADOWS];               // x: a cube's light's size, the radius of a disc as
+                                                      // bright (metres; 0: a point: soft_cube_shadow);
+                                                      // yzw: a rectangle's front (0: a sphere's, all round)
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -182,7 +185,71 @@ vec4 directional_shadows(vec3 position, vec3 normal) {
     return lit;
 }
 
-float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l) {
+#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
+// The shadow of a light with a size (a sphere's radius, a rectangle's disc of the same area:
+// ``size.x``, metres; a rectangle's front: ``size.yzw``) from its distance cube, by percentage-closer soft shadows (Fernando,
+// "Percentage-Closer Soft Shadows", 2005): the blockers' mean distance found among
+// SOFT_SEARCH taps where they may stand (the light's disc seen from the point, widened for
+// blockers down to a quarter of the way to the light), the penumbra that disc casts past them
+// (size x (point - blocker) / blocker, as an angle from the light), then SOFT_TAPS taps over
+// it.  Its edge hardens where the caster meets the receiver and widens away from it, as an
+// area light's does.  Taps on a Vogel disc (a golden-angle spiral), the same at every pixel.
+const int SOFT_SEARCH = 12;
+const int SOFT_TAPS = 16;
+
+vec2 vogel_tap(int k, int count) {
+    float r = sqrt((float(k) + 0.5) / float(count));
+    float a = float(k) * 2.39996323;
+    return r * vec2(cos(a), sin(a));
+}
+
+// Where the receiver's own plane (through ``p``, from the light, normal ``n``) lies along the
+// direction ``t`` from the light, over the range, less a texel's worth of its slope there: a
+// tap is a blocker only where the map holds something nearer than that, so a flat receiver
+// does not shadow itself across the wide taps (receiver-plane depth bias, the map's texels
+// sloped as the plane is); 1e9 where the direction misses the plane.
+float receiver_at(vec3 p, vec3 n, vec3 t, float range, float texel_angle) {
+    float c = dot(n, normalize(t));
+    if (c > -1e-4) return 1e9;
+    float at = dot(n, p) / c;
+    float slope = min(sqrt(max(1.0 - c * c, 0.0)) / -c, 8.0);
+    return at * (1.0 - texel_angle * (1.5 + slope)) / range;
+}
+
+float soft_cube_shadow(samplerCube cube, vec3 p, vec3 n, float d, vec4 size, float range, float texel_angle) {
+    float dist = length(p);
+    vec3 dir = p / dist;
+    vec3 side = normalize(cross(dir, abs(dir.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
+    vec3 up = cross(dir, side);
+    float search = clamp(3.0 * size.x / dist, texel_angle, 0.6);
+    float blockers = 0.0, found = 0.0;
+    for (int k = 0; k < SOFT_SEARCH; ++k) {
+        vec2 o = vogel_tap(k, SOFT_SEARCH) * search;
+        vec3 t = dir + side * o.x + up * o.y;
+        float stored = texture(cube, t).r;
+        // (a rectangle sheds no light behind its plane: what stands there, the ceiling it hangs
+        // from, blocks none of it)
+        if (dot(t, size.yzw) >= 0.0 && stored < min(d, receiver_at(p, n, t, range, texel_angle))) {
+            blockers += stored;
+            found += 1.0;
+        }
+    }
+    if (found == 0.0) return 1.0;
+    float blocker = max(blockers / found * range, 1e-3);
+    float penumbra = max(size.x * (dist - blocker) / (blocker * dist), texel_angle);
+    float lit = 0.0, taps = 0.0;
+    for (int k = 0; k < SOFT_TAPS; ++k) {
+        vec2 o = vogel_tap(k, SOFT_TAPS) * penumbra;
+        vec3 t = dir + side * o.x + up * o.y;
+        float front = dot(t, size.yzw) >= 0.0 ? 1.0 : 0.0;
+        lit += front * (texture(cube, t).r >= min(d, receiver_at(p, n, t, range, texel_angle)) ? 1.0 : 0.0);
+        taps += front;
+    }
+    return taps > 0.0 ? lit / taps : 1.0;
+}
+#endif
+
+float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l, vec4 size) {
     float dist = length(from_light);
     float nl = clamp(dot(normal, l), 0.0, 1.0);
     // The normal offset: a texel's world size at this distance (its angle x the distance).
@@ -190,6 +257,9 @@ float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 nor
     vec3 p = from_light + normal * texel * (1.0 + params.y) * (1.5 - nl);
     float d = length(p) / params.z;
     vec3 dir = normalize(p);
+#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)  // (the shafts' march: one tap, hard)
+    if (size.x > 0.0) return soft_cube_shadow(cube, p, normal, d, size, params.z, params.x);
+#endif
 #ifdef SHADOW_SINGLE_TAP
     return d <= texture(cube, dir).r ? 1.0 : 0.0;
 #else
@@ -216,7 +286,8 @@ float point_cube_light_shadow(int slot, samplerCube cube, vec3 position, vec3 no
     vec3 light_pos = lights.point_pos[i].xyz;
     vec3 d = light_pos - position;
     vec3 l = d / max(length(d), 1e-4);
-    return point_cube_shadow(cube, shadows.point_params[slot], position - light_pos, normal, l);
+    return point_cube_shadow(cube, shadows.point_params[slot], position - light_pos, normal, l,
+                             shadows.point_size[slot]);
 }
 
 #if defined(SPOT_MAP0) || defined(SPOT_MAP1)

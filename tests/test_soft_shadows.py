@@ -1,0 +1,120 @@
+"""Soft shadows of lights with a size (a sphere's ``PointLight.radius``, a rectangle's
+``PointLight.rectangle``) from their distance cubes, by percentage-closer soft shadows
+(``shaders/include/shadows.glsl`` ``soft_cube_shadow``), with the "grid" filter (the default
+on a GPU; a software rasteriser's "single" keeps one tap).  The reference: a sphere light of
+radius R, R = 0.3 m, 3 m above a floor, a thin slab with a straight edge between them; seen
+from a floor point the light is a disc, the slab's edge cuts it along a line, and the share
+of the disc left is the segment's area, in float64 (the light's disc taken level: below it,
+off by at most a few per cent)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from components import Material, MeshRef, PointLight, Skybox, Transform, look_rotation
+from engine.assets.mesh import box, plane
+from tests.support import look_from
+
+SIZE = (128, 96)
+LIGHT_HEIGHT = 3.0
+RADIUS = 0.3
+
+
+def floor_light(scene, slab_height: float | None, radius: float = RADIUS, rectangle=(0.0, 0.0),
+                ceiling: bool = False):
+    """The floor's light (linear green, the "grid" filter) under the light, the slab's edge
+    along z at x = 0 (the slab over x < 0) at ``slab_height`` (None: no slab), a ceiling 3 cm
+    over the light where asked, and each floor pixel's point and whether it is the floor's."""
+    from tests.support import pixel_rays, srgb_to_linear
+
+    def build(world):
+        look_from(world, (2.2, 1.0, 2.6), (-0.2, 0.0, 0.0), fov=55.0)
+        world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+        world.spawn(Transform(), MeshRef(plane(20.0, 20.0)),
+                    Material(color=(1.0, 1.0, 1.0), roughness=1.0, environment_reflection=0.0))
+        if slab_height is not None:
+            world.spawn(Transform(position=(-2.0, slab_height, 0.0)), MeshRef(box((4.0, 0.02, 8.0))),
+                        Material(color=(0.0, 0.0, 0.0)))
+        if ceiling:
+            world.spawn(Transform(position=(0.0, LIGHT_HEIGHT + 0.04, 0.0)), MeshRef(box((20.0, 0.02, 20.0))),
+                        Material(color=(0.0, 0.0, 0.0)))
+        down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+        world.spawn(Transform(position=(0.0, LIGHT_HEIGHT, 0.0), rotation=down),
+                    PointLight(intensity=8.0, range=20.0, shadows=True, shadow_resolution=1024, radius=radius,
+                               rectangle=rectangle))
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = "grid"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    t = -eye[1] / rays[:, 1]
+    return shown, eye + rays * np.where(t > 0, t, 0.0)[:, None], t > 0
+
+
+def disc_left(x: np.ndarray, slab_height: float, radius: float) -> np.ndarray:
+    """The share of a level disc of ``radius`` at the light's height that a floor point at
+    ``x`` sees past the slab's edge: the edge, seen from the point, meets the light's height at
+    x_L = -x (h - s) / s... (h the light's height, s the slab's): the light left of it is hidden."""
+    edge = -x * (LIGHT_HEIGHT - slab_height) / slab_height   # where the edge's line meets the light's height
+    u = np.clip(edge / radius, -1.0, 1.0)
+    hidden = (math.pi - np.arccos(u) + u * np.sqrt(1.0 - u * u)) / math.pi   # the disc's part left of x = u R
+    return 1.0 - hidden
+
+
+def shadow_share(scene, slab_height, **light):
+    lit, points, floor = floor_light(scene, slab_height, **light)
+    open_, _, _ = floor_light(scene, None, **light)
+    keep = floor & (open_ > 0.05) & (np.abs(points[:, 2]) < 2.5) & (points[:, 0] > -3.0)
+    return lit[keep] / open_[keep], points[keep]
+
+
+def penumbra_width(share: np.ndarray, x: np.ndarray) -> float:
+    """The floor's stretch where the light left goes from 20% to 80%."""
+    order = np.argsort(x)
+    x, share = x[order], share[order]
+    return float(x[np.argmax(share > 0.8)] - x[np.argmax(share > 0.2)])
+
+
+def test_a_sphere_lights_shadow_follows_its_disc_across_the_penumbra(scene):
+    """Slab 1.5 m up: the penumbra 2 R (3 - 1.5) / 1.5 = 0.6 m wide, each floor pixel's light
+    within 0.15 of the disc's share left; the 20-80% stretch within 30% of the disc's."""
+    share, points = shadow_share(scene, 1.5)
+    expected = disc_left(points[:, 0], 1.5, RADIUS)
+    band = np.abs(points[:, 0]) < 0.6
+    assert band.sum() > 200
+    error = np.abs(share - expected)
+    assert np.percentile(error[band], 90) < 0.15, np.percentile(error[band], 90)
+    assert np.median(error) < 0.05
+    measured, reference = penumbra_width(share, points[:, 0]), penumbra_width(expected, points[:, 0])
+    assert abs(measured / reference - 1.0) < 0.3, (measured, reference)
+
+
+def test_the_penumbra_hardens_where_the_caster_nears_the_floor(scene):
+    """The same slab 0.5 m up: its penumbra 2 R (3 - 0.5) / 0.5 = 0.12 m, a fifth of the one
+    at 1.5 m (contact hardening); a point light (radius 0) draws the hard edge of its map."""
+    high, high_points = shadow_share(scene, 1.5)
+    low, low_points = shadow_share(scene, 0.5)
+    hard, hard_points = shadow_share(scene, 1.5, radius=0.0)
+    wide, narrow = penumbra_width(high, high_points[:, 0]), penumbra_width(low, low_points[:, 0])
+    sharp = penumbra_width(hard, hard_points[:, 0])
+    assert narrow < wide / 3.0, (narrow, wide)
+    assert sharp < wide / 6.0, (sharp, wide)
+
+
+def test_a_rectangle_softens_its_shadow_and_nothing_behind_it_blocks(scene):
+    """A 1 x 0.3 m panel facing down: a penumbra as wide as its disc of the same area gives
+    (within 35%), and a ceiling 2 cm above it (behind its plane: it sheds no light there)
+    leaves the open floor's light as without the ceiling."""
+    share, points = shadow_share(scene, 1.5, radius=0.0, rectangle=(1.0, 0.3))
+    size = math.sqrt(0.3 / math.pi)
+    measured = penumbra_width(share, points[:, 0])
+    reference = penumbra_width(disc_left(points[:, 0], 1.5, size), points[:, 0])
+    assert abs(measured / reference - 1.0) < 0.35, (measured, reference)
+    open_, points, floor = floor_light(scene, None, radius=0.0, rectangle=(1.0, 0.3))
+    roofed, _, _ = floor_light(scene, None, radius=0.0, rectangle=(1.0, 0.3), ceiling=True)
+    lit = floor & (open_ > 0.05)
+    assert lit.sum() > 1000
+    np.testing.assert_allclose(roofed[lit], open_[lit], rtol=0.02, atol=2e-3)
