@@ -35,6 +35,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``sphere_lamp``: no shadows; the ring's lamp a sphere of 0.2 m (``PointLight.radius``);
 * ``rect_lamp``: no shadows; the ring's lamp a 1 x 0.5 m panel facing down
   (``PointLight.rectangle``): its cost is its ratio to ``off`` against ``sphere_lamp``'s;
+* ``lamp_shadows``: no sun shadows; the ring's lamp casts from its cube, the "grid" filter;
+* ``soft_lamp``: the same with the lamp a sphere of 0.2 m: its shadows soft (percentage-closer
+  soft shadows): its cost is its ratio to ``off`` against ``lamp_shadows``';
 * ``fog``: no shadows; height fog with sun scatter on the camera (``Fog``: every view, the
   sky and the composites fogged);
 * ``fog_uniform``: the same with fog the same everywhere and no glow (the cheapest fog build);
@@ -276,6 +279,22 @@ def _sphere_lamp(engine: Engine) -> None:
         light.radius = 0.2
 
 
+def _lamp_shadows(engine: Engine) -> None:
+    """No sun shadows; the ring's lamp casts from its cube, read by the "grid" filter (four taps)."""
+    _sun_shadows(engine, False)
+    engine.renderer.shadows.filter = "grid"
+    for _, light in engine.world.query_one(PointLight):
+        light.shadows = True
+
+
+def _soft_lamp(engine: Engine) -> None:
+    """The same with the lamp a sphere of 0.2 m: its cube read by percentage-closer soft
+    shadows (SOFT_POINT_SHADOWS: 12 blocker taps and 16 over the penumbra)."""
+    _lamp_shadows(engine)
+    for _, light in engine.world.query_one(PointLight):
+        light.radius = 0.2
+
+
 def _rect_lamp(engine: Engine) -> None:
     """No shadows; the ring's lamp a 1 x 0.5 m panel facing down (PointLight.rectangle: the
     RECT_LIGHTS builds, a clipped form factor and an LTC highlight a pixel)."""
@@ -447,6 +466,8 @@ VARIANTS: list[Variant] = [
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
     Variant("sphere_lamp", _sphere_lamp, "no shadows; the lamp a sphere of 0.2 m (PointLight.radius)"),
     Variant("rect_lamp", _rect_lamp, "no shadows; the lamp a 1 x 0.5 m panel (PointLight.rectangle)"),
+    Variant("lamp_shadows", _lamp_shadows, "no sun shadows; the lamp casts from its cube (the grid filter)"),
+    Variant("soft_lamp", _soft_lamp, "the same with the lamp a sphere of 0.2 m: soft shadows"),
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),

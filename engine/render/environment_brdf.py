@@ -44,6 +44,12 @@ def hammersley(count: int) -> tuple[np.ndarray, np.ndarray]:
     return (i + 0.5) / count, bits.astype(np.float64) / 2.0 ** 32
 
 
+def fresnel_weight(vh: np.ndarray | float) -> np.ndarray:
+    """Schlick's Fresnel weight (1 - v.h)^5: the reflectance is f0 + (1 - f0) times it (the
+    one Python copy of ``shaders/include/ggx.glsl``'s ``schlick_at``)."""
+    return (1.0 - np.clip(vh, 0.0, 1.0)) ** 5
+
+
 def environment_brdf(roughness: np.ndarray | float, nv: np.ndarray | float,
                      samples: int = ENVIRONMENT_BRDF_SAMPLES) -> np.ndarray:
     """(A, B) for each pair of ``roughness`` and n.v (broadcast together): shape (..., 2)."""
@@ -61,7 +67,7 @@ def environment_brdf(roughness: np.ndarray | float, nv: np.ndarray | float,
     visibility = 1.0 / ((nl + np.sqrt(a2 + (1.0 - a2) * nl * nl)) * (cos_v + np.sqrt(a2 + (1.0 - a2) * cos_v ** 2)))
     # The estimator of integral f(l) n.l dl with l's density D(h) n.h / (4 v.h): V n.l 4 v.h / n.h.
     weight = np.where(nl > 0.0, visibility * nl * 4.0 * np.maximum(vh, 0.0) / cos_h, 0.0)
-    fresnel = (1.0 - np.clip(vh, 0.0, 1.0)) ** 5
+    fresnel = fresnel_weight(vh)
     return np.stack([((1.0 - fresnel) * weight).mean(axis=-1), (fresnel * weight).mean(axis=-1)], axis=-1)
 
 

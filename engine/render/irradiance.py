@@ -374,7 +374,7 @@ class IrradianceTable:
         """The environment BRDF rows as the GPU holds them (size, size, 2) (tests; reads back)."""
         width, height = self.table.size
         data = np.frombuffer(self.table.read(), np.float32).reshape(height, width, 4)
-        return data[MAX_IRRADIANCE_PROBES:, :ENVIRONMENT_BRDF_SIZE, :2].astype(np.float64)
+        return data[MAX_IRRADIANCE_PROBES:LTC_ROW, :ENVIRONMENT_BRDF_SIZE, :2].astype(np.float64)
 
     # --- binding -------------------------------------------------------------------------------
     def has_boxes(self) -> bool:

@@ -98,6 +98,8 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.render.environment_brdf import fresnel_weight
+
 LTC_SIZE = 64                 # the table's cells along roughness and along t = sqrt(1 - cos theta)
 LTC_MIN_COS = 1e-4            # the view's cosine the last column is fitted at (cos theta = 0 there)
 LTC_MIN_ALPHA = 1e-4          # ggx.glsl's floor of alpha = roughness^2
@@ -148,7 +150,7 @@ def ggx_lobe(light: np.ndarray, view: np.ndarray, a2: np.ndarray | float) -> tup
     visibility = 1.0 / ((nl + np.sqrt(a2 + (1.0 - a2) * nl * nl)) * (nv + np.sqrt(a2 + (1.0 - a2) * nv * nv)))
     f = distribution * visibility * np.maximum(light[..., 2], 0.0)
     vh = np.clip(np.sum(view * half, axis=-1), 0.0, 1.0)
-    return f, (1.0 - vh) ** 5
+    return f, fresnel_weight(vh)
 
 
 def _smith_g1(cos: np.ndarray, a2: np.ndarray) -> np.ndarray:
@@ -267,7 +269,7 @@ def params_from_inverse(m_inv: np.ndarray, phi_mean: float) -> np.ndarray:
     (``lobe_moments``): M's xz-block decomposed into a rotation times an upper triangle (a QR)."""
     m = np.linalg.inv(np.asarray(m_inv, np.float64))
     block = m[np.ix_([0, 2], [0, 2])]
-    phi = math.atan2(-block[1, 0], block[0, 0])   # the first column is k a R (1, 0, 0)
+    phi = -math.atan2(block[1, 0], block[0, 0])   # the first column is k a R (1, 0, 0)
     cos, sin = math.cos(phi), math.sin(phi)
     upper = np.array([[cos, -sin], [sin, cos]]) @ block  # R^T block = k [[a, a s], [0, 1]]
     k = upper[1, 1]
@@ -572,7 +574,7 @@ def ltc_rect_specular(n: np.ndarray, v: np.ndarray, roughness: float, f0: float 
     light = np.linalg.solve(m_inv, vector) @ frame    # M w, back in world space
     half = light / np.linalg.norm(light) + view
     vh = float(np.clip(np.dot(view, half / np.linalg.norm(half)), 0.0, 1.0))
-    return (f0 + (1.0 - f0) * (1.0 - vh) ** 5) * magnitude * integral
+    return (f0 + (1.0 - f0) * fresnel_weight(vh)) * magnitude * integral
 
 
 def rect_diffuse_integral(n: np.ndarray, corners: np.ndarray, two_sided: bool = False) -> float:
@@ -625,7 +627,7 @@ def brute_force_rect_specular(n: np.ndarray, v: np.ndarray, roughness: float, f0
         nl_raw = light @ n
         nl, nv = np.maximum(nl_raw, 1e-4), max(float(np.dot(n, v)), 1e-4)
         visibility = 1.0 / ((nl + np.sqrt(a2 + (1 - a2) * nl * nl)) * (nv + math.sqrt(a2 + (1 - a2) * nv * nv)))
-        fresnel = f0 + (1.0 - f0) * (1.0 - np.clip(np.sum(light * half, axis=-1), 0.0, 1.0)) ** 5
+        fresnel = f0 + (1.0 - f0) * fresnel_weight(np.sum(light * half, axis=-1))
         total += float(np.sum(fresnel * distribution * visibility * np.maximum(nl_raw, 0.0) * weight))
     return total
 
