@@ -62,6 +62,7 @@ from engine.rules.light_rules import (
     lamp_cookie,
     lamp_rectangle,
     light_size,
+    spot_cone,
     spot_map_half_width,
 )
 from engine.rules.probe_rules import pose_bounds, world_bounds
@@ -333,7 +334,12 @@ class ShadowSystem(esper.Processor):
             published.points.append((tuple(position), light.range))
             half_width = spots.get(slot)
             if half_width is None:   # a cube: the faces the cone (or all round, every face) meets
-                how = cube_faces_lit(lamp_cone(light, world_matrix), [face.forward for face in CUBE_FACES])
+                axes = [face.forward for face in CUBE_FACES]
+                how = cube_faces_lit(lamp_cone(light, world_matrix), axes)
+                if light.rectangle[0] > 0.0:   # a rectangle lights the half space before it: the face behind is not
+                    front = -glm.normalize(world_matrix[2].xyz)
+                    ahead = cube_faces_lit(spot_cone(tuple(front), 90.0, 0.0), axes)
+                    how = tuple(lit and before for lit, before in zip(how, ahead, strict=True))
             else:                    # a spot's map: along its axis (-Z), in its atlas
                 how = (tuple(-glm.normalize(world_matrix[2].xyz)), half_width, maps.spot_tile)
             size = light_size(light, world_matrix)

@@ -146,3 +146,33 @@ def test_the_wall_a_panel_hangs_on_blocks_none_of_its_light(scene):
     same = (ids == walled_ids) & (open_ > 0.02)   # the back wall's and the floor's pixels, lit
     assert same.sum() > 4000
     np.testing.assert_allclose(walled[same], open_[same], rtol=0.02, atol=2e-3)
+
+
+def test_a_rectangle_draws_no_cube_face_behind_it(scene):
+    """A panel facing straight down sheds no light above its plane: its cube's upward face is
+    neither drawn nor read (five faces drawn, a sphere light's six), and the floor's light is
+    the same as with all six (a caster above the panel changes nothing)."""
+    from tests.support import srgb_to_linear
+
+    def frame(radius, rectangle, caster_above):
+        def build(world):
+            look_from(world, (2.2, 1.0, 2.6), (-0.2, 0.0, 0.0), fov=55.0)
+            world.spawn(Transform(), MeshRef(plane(20.0, 20.0)), Material(color=(1.0, 1.0, 1.0), roughness=1.0))
+            world.spawn(Transform(position=(-1.0, 0.5, 0.0)), MeshRef(box((0.5, 1.0, 0.5))), Material())
+            if caster_above:
+                world.spawn(Transform(position=(0.0, LIGHT_HEIGHT + 0.5, 0.0)), MeshRef(box((1.0, 0.1, 1.0))),
+                            Material())
+            down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+            world.spawn(Transform(position=(0.0, LIGHT_HEIGHT, 0.0), rotation=down),
+                        PointLight(intensity=8.0, range=20.0, shadows=True, shadow_resolution=256, radius=radius,
+                                   rectangle=rectangle))
+        runner = scene(build, SIZE)
+        runner.engine.renderer.shadows.filter = "grid"
+        runner.frame()
+        faces = runner.engine.renderer.stats.shadow_faces_drawn
+        return faces, srgb_to_linear(runner.frame())
+    panel_faces, panel = frame(0.0, (1.0, 0.3), False)
+    sphere_faces, _ = frame(0.3, (0.0, 0.0), False)
+    assert (panel_faces, sphere_faces) == (5, 6)
+    _, covered = frame(0.0, (1.0, 0.3), True)
+    np.testing.assert_array_equal(covered, panel)
