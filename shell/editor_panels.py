@@ -331,6 +331,10 @@ class EditorPanels:
         except Exception:
             data, kind = None, "object"
         changed, new = False, None
+        if kind == "list" and 2 <= len(data) <= 4 and not field.endswith("layers") \
+                and all(isinstance(v, int | float) and not isinstance(v, bool) for v in data) \
+                and any(isinstance(v, float) for v in data):
+            kind = f"vec{len(data)}"   # a pair of numbers (a rectangle's sides, a range): dragged as a vector
         unset = _unset_words(cls_name, field)
         if unset is not None and value is None:  # automatic or off: shown as such, a button gives it a value
             word, give, _, hint = unset

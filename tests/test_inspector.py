@@ -1325,3 +1325,32 @@ def test_an_animation_layers_clip_is_chosen_from_its_models_clips(scene, ctx, tm
         assert world.get(root, AnimationLayer).clip == "Slide"
         with pytest.raises(EditError, match=r"AnimationLayer.clip: the model file has no clip 'Wave'"):
             editor.set_field(root, "AnimationLayer", "clip", "Wave")
+
+
+def test_a_pair_of_numbers_drags_as_a_vector(scene, ctx):
+    """A field that is two numbers (``PointLight.rectangle``'s width and height) drags as a
+    vector: its first number dragged moves the width only, through the component (one undo)."""
+    from components import PointLight
+
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        ents["panel"] = world.spawn(Transform(position=(0.0, 2.5, 0.0)), PointLight(rectangle=(1.0, 0.5)))
+    runner = scene(build, SIZE)
+    world = runner.world
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, _ = _hands(runner, overlay)
+        draw()
+        editor = overlay.editing(runner.engine)
+        editor.select(ents["panel"])
+        draw()
+        x, y = _scrolled_to(overlay, draw, "PointLight.rectangle.left", SIZE)
+        _drag(overlay, draw, [(x + 8 * step, y) for step in range(6)])
+        width, height = world.get(ents["panel"], PointLight).rectangle
+        assert width > 1.0 and height == 0.5, (width, height)
+        editor.undo()
+        assert world.get(ents["panel"], PointLight).rectangle == (1.0, 0.5)
+    finally:
+        overlay.release()
