@@ -142,7 +142,7 @@ class StillCase:
     bloom: bool = False  # Bloom on the camera (its chain planned once a size: a resize changes it)
     visibility: str = "exact"  # the reflect stage's visibility mode, in both engines
     cascades: int = 1  # the sun's shadow cascades (rings about the camera besides its level map)
-    spot_angle: float = 180.0  # the point light's cone (PointLight.spot_angle; 180: all round), aimed at the box
+    spot_angle: float = 180.0  # the lamp's cone (PointLight.spot_angle; 180: all round, a panel), aimed at the box
     fog: bool = False  # height fog on the camera (each view's stretch, each composite's)
     occlusion: bool = False  # ambient occlusion on the camera (the root's passes before its draw)
     reflections: bool = False  # screen reflections on the camera, the box reflecting the sky (its composite)
@@ -313,7 +313,9 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         lamp = glm.vec3(-0.3, 2.2, 0.4)
         named["point"] = world.spawn(Transform(position=lamp, rotation=look_rotation(glm.vec3(0.8, 0.6, 0.0) - lamp)),
                                      PointLight(color=(1.0, 0.8, 0.6), intensity=3.0, range=6.0, shadows=True,
-                                                shadow_resolution=64, spot_angle=case.spot_angle))
+                                                shadow_resolution=64, spot_angle=case.spot_angle,
+                                                # (all round: a panel, its RECT_LIGHTS builds and soft shadows)
+                                                rectangle=(0.6, 0.3) if case.spot_angle >= 180.0 else (0.0, 0.0)))
     if case.bloom:
         world.add_component(world.resources["camera"], Bloom(intensity=0.2))
     if case.fog:
