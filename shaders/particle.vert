@@ -71,8 +71,7 @@ vec3 sheet_light(vec3 p, vec3 n) {
         vec3 d = lights.point_pos[i].xyz - p;
         float dist = length(d);
         vec3 l = d / max(dist, 1e-4);
-        float fade = clamp(1.0 - pow(dist / lights.point_pos[i].w, 4.0), 0.0, 1.0);
-        float falloff = fade * fade / (dist * dist + 1.0) * spot_factor(lights.point_spot[i], l);
+        float falloff = lamp_falloff(i, dist, l);
         float nl = dot(n, l);
         e += lights.point_color[i].rgb * falloff
              * (max(nl, 0.0) * front * point_shadow(i, lamp_front)

@@ -36,7 +36,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import LightLimitWarning, NoCameraWarning
 from engine.core.world import World
 from engine.resources import VolumetricLamps
-from engine.rules.light_rules import spot_cone, spot_factor
+from engine.rules.light_rules import ALL_ROUND, spot_cone, spot_factor
 from shell.overlay_text import post_lines
 from tests.support import look_from, srgb_to_linear
 
@@ -455,7 +455,7 @@ CAGE = ((0.7, 2.5, 0.0), (0.5, 0.5, 0.5))
 
 
 def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: float = 1.0,
-               cookie: TextureData | None = None) -> int:
+               cookie: TextureData | None = None, panel: bool = False) -> int:
     camera = look_from(world, (0.0, 2.0, 7.0), (0.0, 2.0, 0.0), fov=60.0)
     world.spawn(Skybox())
     world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5, 0.5, 0.5)))
@@ -463,8 +463,9 @@ def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: 
     for k in range(lamps):
         at = glm.vec3(LAMP) + glm.vec3(0.0, 0.0, -3.0 * k)
         world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0))),
-                    PointLight(intensity=LAMP_LIGHT, range=LAMP_RANGE, spot_angle=LAMP_ANGLE, spot_blend=LAMP_BLEND,
-                               shadows=k == 0, volumetric=volumetric, cookie=cookie))
+                    PointLight(intensity=LAMP_LIGHT, range=LAMP_RANGE, spot_angle=180.0 if panel else LAMP_ANGLE,
+                               spot_blend=LAMP_BLEND, shadows=k == 0, volumetric=volumetric, cookie=cookie,
+                               rectangle=(0.6, 0.6) if panel else (0.0, 0.0)))
     world.add_component(camera, Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
     world.add_component(camera, Tonemap(curve="none"))
     if shafts is not None:
@@ -472,11 +473,13 @@ def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: 
     return camera
 
 
-def _lamp_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog) -> np.ndarray:
+def _lamp_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
+                panel: bool = False) -> np.ndarray:
     """The lamp's light the air sends back along each ray, at 1,000 points: its falloff (the
     inverse square faded to 0 at its range), its cone (``light_rules.spot_factor``), the
-    phase function, the box's shadow (the point's segment to the lamp cast against it)."""
-    cone = spot_cone((0.0, -1.0, 0.0), LAMP_ANGLE, LAMP_BLEND)
+    phase function, the box's shadow (the point's segment to the lamp cast against it);
+    ``panel``: all round, a rectangle facing down (Lambert's cosine of its face, 0 above it)."""
+    cone = ALL_ROUND if panel else spot_cone((0.0, -1.0, 0.0), LAMP_ANGLE, LAMP_BLEND)
     points = 1000
     t = (np.arange(points) + 0.5) / points
     lamp = np.array(LAMP)
@@ -491,6 +494,8 @@ def _lamp_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings
         l = to_lamp / dist[:, None]
         fade = np.clip(1.0 - (dist / LAMP_RANGE) ** 4, 0.0, 1.0)
         falloff = fade * fade / (dist * dist + 1.0) * spot_factor(cone, l)
+        if panel:
+            falloff *= np.maximum(l[:, 1], 0.0)   # (-l the way from the lamp; its face looks down)
         blocked = _hits(at, l, [CAGE]) < dist
         c = np.einsum("ij,ij->i", np.repeat(way[part], points, 0), l)
         phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
@@ -507,6 +512,31 @@ def test_a_spot_lights_beam_in_the_air_is_the_ground_truths(scene):
     settings = VolumetricFog(steps=128)
     runner = scene(lambda world: _lamp_hall(world, settings), SIZE)
     runner.frame()
+    marched, truth, reach, lit, steady = _lamp_march_and_truth(runner, settings)
+    assert lit.sum() > 200
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert np.median(error) < 0.02
+    assert np.quantile(error, 0.9) < 0.06
+    assert np.abs(marched[..., 0] - truth)[steady & (truth < 0.05 * truth.max())].max() < 0.06 * truth.max()
+
+
+def test_a_panels_light_in_the_air_is_its_face_s_not_a_points(scene):
+    """No sun: the lamp a 0.6 m panel facing down (``PointLight.rectangle``): the air below it
+    lit by Lambert's cosine of its face, the air above its plane not at all (as a point light
+    all round would light it), against the same ground truth with the face's cosine."""
+    settings = VolumetricFog(steps=128)
+    runner = scene(lambda world: _lamp_hall(world, settings, panel=True), SIZE)
+    runner.frame()
+    marched, truth, reach, lit, steady = _lamp_march_and_truth(runner, settings, panel=True)
+    assert lit.sum() > 200
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert np.median(error) < 0.03, np.median(error)
+    assert np.quantile(error, 0.9) < 0.08, np.quantile(error, 0.9)
+
+
+def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False):
+    """The march's texels and the lamp's ground truth along each texel's ray, its length, the
+    texels compared (lit, steady, not within a metre of the lamp) and the steady ones."""
     marched = _marched(runner)
     view = runner.engine.main_view
     inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
@@ -520,18 +550,14 @@ def test_a_spot_lights_beam_in_the_air_is_the_ground_truths(scene):
     with np.errstate(divide="ignore", invalid="ignore"):
         floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
     reach = np.minimum(np.minimum(floor, _hits(origin, way, [CAGE])), settings.distance)
-    truth = _lamp_light(origin, way, reach, settings).reshape(xs.shape)
+    truth = _lamp_light(origin, way, reach, settings, panel).reshape(xs.shape)
     reach = reach.reshape(xs.shape)
     steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.1 * reach
     # (Not the rays that pass within a metre of the lamp: there the light peaks sharper than
     # the march's steps, 8 cm apart, can follow.)
     passing = np.linalg.norm(np.cross(np.array(LAMP) - origin, way), axis=1).reshape(xs.shape)
     lit = steady & (truth > 0.05 * truth.max()) & (passing > 1.0)
-    assert lit.sum() > 200
-    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
-    assert np.median(error) < 0.02
-    assert np.quantile(error, 0.9) < 0.06
-    assert np.abs(marched[..., 0] - truth)[steady & (truth < 0.05 * truth.max())].max() < 0.06 * truth.max()
+    return marched, truth, reach, lit, steady
 
 
 def test_lamps_past_the_limit_are_cut_and_said_and_a_lamp_at_zero_lights_no_air(scene):

@@ -29,10 +29,21 @@ float lamp_fade(int i, float dist, vec3 l) {
     return fade * fade * spot_factor(lights.point_spot[i], l);
 }
 
+// A rectangle light's share of its light along ``l``: Lambert's cosine of its face, 0 behind
+// it (so far off it lights as a point light of its intensity straight ahead of it); 1 for a
+// point or a sphere.  The light shafts' air and lit particles take a rectangle so; a surface
+// takes its form factor (rect_lights.glsl).
+float lamp_face(int i, vec3 l) {
+    vec4 u = lights.point_rect_u[i];
+    if (u.w == 0.0) return 1.0;
+    vec3 front = sign(u.w) * normalize(cross(u.xyz, lights.point_rect_v[i].xyz));
+    return max(-dot(l, front), 0.0);
+}
+
 // How much of point light i's light (its colour x intensity) reaches a point ``dist`` from it,
 // ``l`` the unit way from the point to the light: the inverse square (kept finite at the
-// light) faded smoothly to 0 at its range, times its spot cone.  The scene's lights and the
-// light shafts' lamps (volumetric_fog.frag) alike.
+// light) faded smoothly to 0 at its range, times its spot cone and a rectangle's face.  The
+// scene's lights, the light shafts' lamps (volumetric_fog.frag) and lit particles alike.
 float lamp_falloff(int i, float dist, vec3 l) {
-    return lamp_fade(i, dist, l) / (dist * dist + 1.0);
+    return lamp_fade(i, dist, l) / (dist * dist + 1.0) * lamp_face(i, l);
 }
