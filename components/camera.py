@@ -249,9 +249,9 @@ class PointLight(TrackedComponent):
     Its shadow from its cube is soft, as a disc of its area casts it, and nothing behind its
     plane blocks it; its range, spot cone, cookie and contact shadows are taken from its
     centre, as a point light's, and the shafts' air and lit particles take its light by
-    Lambert's cosine of its face (``shaders/include/lights.glsl`` ``lamp_face``).  Both sides from ``MIN_LIGHT_SIDE`` (1 mm) to
-    ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``.  Through a mirror or portal its image
-    is the rectangle's (``Mirror.reflects_light``).
+    Lambert's cosine of its face (``shaders/include/lights.glsl`` ``lamp_face``).  Both
+    sides from ``MIN_LIGHT_SIDE`` (1 mm) to ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``.
+    Through a mirror or portal its image is the rectangle's (``Mirror.reflects_light``).
 
     ``contact_shadows`` (off by default; HDRP's per-light switch, Unreal's contact shadow
     length): where the active camera has ``ContactShadows``, this light's light is taken from
