@@ -35,6 +35,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``sphere_lamp``: no shadows; the ring's lamp a sphere of 0.2 m (``PointLight.radius``);
 * ``rect_lamp``: no shadows; the ring's lamp a 1 x 0.5 m panel facing down
   (``PointLight.rectangle``): its cost is its ratio to ``off`` against ``sphere_lamp``'s;
+* ``lamps_8``: no shadows; eight more lamps in a ring over the floor;
+* ``lamps_8_rect``: the same with the first of them a panel (its cost against ``lamps_8``: the
+  rectangle's integrals paid by it alone);
 * ``lamp_shadows``: no sun shadows; the ring's lamp casts from its cube, the "grid" filter;
 * ``soft_lamp``: the same with the lamp a sphere of 0.2 m: its shadows soft (percentage-closer
   soft shadows): its cost is its ratio to ``off`` against ``lamp_shadows``';
@@ -279,6 +282,22 @@ def _sphere_lamp(engine: Engine) -> None:
         light.radius = 0.2
 
 
+def _lamps_8(engine: Engine, rect: bool = False) -> None:
+    """No shadows; eight more lamps in a ring over the floor (``rect``: the first a panel:
+    its integrals paid once, in the scene shader's loop over rectangles, not by every lamp)."""
+    _sun_shadows(engine, False)
+    down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+    for k in range(8):
+        a = k * math.tau / 8
+        panel = (0.8, 0.4) if rect and k == 0 else (0.0, 0.0)
+        engine.world.spawn(Transform(position=(3.0 * math.cos(a), 2.5, 3.0 * math.sin(a)), rotation=down),
+                           PointLight(intensity=2.0, range=8.0, rectangle=panel))
+
+
+def _lamps_8_rect(engine: Engine) -> None:
+    _lamps_8(engine, rect=True)
+
+
 def _lamp_shadows(engine: Engine) -> None:
     """No sun shadows; the ring's lamp casts from its cube, read by the "grid" filter (four taps)."""
     _sun_shadows(engine, False)
@@ -466,6 +485,8 @@ VARIANTS: list[Variant] = [
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
     Variant("sphere_lamp", _sphere_lamp, "no shadows; the lamp a sphere of 0.2 m (PointLight.radius)"),
     Variant("rect_lamp", _rect_lamp, "no shadows; the lamp a 1 x 0.5 m panel (PointLight.rectangle)"),
+    Variant("lamps_8", _lamps_8, "no shadows; eight more lamps over the floor"),
+    Variant("lamps_8_rect", _lamps_8_rect, "the same, the first of them a 0.8 x 0.4 m panel"),
     Variant("lamp_shadows", _lamp_shadows, "no sun shadows; the lamp casts from its cube (the grid filter)"),
     Variant("soft_lamp", _soft_lamp, "the same with the lamp a sphere of 0.2 m: soft shadows"),
     Variant("fog", _fog, "height fog with sun scatter on the camera"),

@@ -251,7 +251,10 @@ class PointLight(TrackedComponent):
     centre, as a point light's, and the shafts' air and lit particles take its light by
     Lambert's cosine of its face (``shaders/include/lights.glsl`` ``lamp_face``).  Both
     sides from ``MIN_LIGHT_SIDE`` (1 mm) to ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``.
-    Through a mirror or portal its image is the rectangle's (``Mirror.reflects_light``).
+    Through a mirror or portal its image is the rectangle's (``Mirror.reflects_light``).  At
+    most ``MAX_RECT_LIGHTS`` (8) of the lights that reach the scene are lit as rectangles at
+    once (the first by the lights' slots); the rest light as points from their centres,
+    counted in ``RenderStats.rect_lights_cut`` and said by a ``LightLimitWarning``.
 
     ``contact_shadows`` (off by default; HDRP's per-light switch, Unreal's contact shadow
     length): where the active camera has ``ContactShadows``, this light's light is taken from

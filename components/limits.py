@@ -41,6 +41,9 @@ MAX_LIGHT_RADIUS = 10.0
 # windows.
 MIN_LIGHT_SIDE = 0.001
 MAX_LIGHT_SIDE = 50.0
+# Rectangle lights lit as rectangles at once (of the kept point lights, the first by slot; the
+# rest light as points, said once): each one the scene shader loops over apart (a multiple of 4).
+MAX_RECT_LIGHTS = 8
 # The largest index of refraction (Refractive.ior): diamond is 2.42, germanium 4.0; past it
 # almost all light is reflected (Schlick's f0 over 0.36) and the refracted ray barely bends more.
 MAX_IOR = 4.0

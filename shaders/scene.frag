@@ -439,6 +439,99 @@ vec3 sheen_environment(Surface s, AmbientBoxes boxes, float albedo) {
 uniform vec4 diffuse_transmission;  // rgb: its batch's Material.diffuse_transmission_color, a: its share
 #endif
 
+// Point light i's light at the surface (its diffuse and highlight; the clear coat's, sheen's
+// and highlights' sums beside it).  ``rectangle``: a constant at each call (direct_lighting),
+// so each build keeps one way: a rectangle's integrals (rect_lights.glsl) only in the loop
+// over the rectangles, not paid by every lamp (llvmpipe runs a branch's body for every pixel:
+// eight lamps, one of them a panel, cost a frame 2.3 x eight points when every lamp ran it).
+vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
+#ifdef DIFFUSE_TRANSMISSION
+                , vec3 through, vec4 point_behind
+#endif
+                ) {
+    vec3 lit = vec3(0.0);
+    vec3 d = lights.point_pos[i].xyz - s.position;
+    float dist = length(d);
+    vec3 l = d / max(dist, 1e-4);
+    float nl = max(dot(s.normal, l), 0.0);
+    float falloff = lamp_falloff(i, dist, l);
+#ifdef RECT_LIGHTS
+    // A rectangle (rect_lights.glsl): its light from all of it above the horizon, its
+    // radiance (the light's over its area) for the inverse square, n.l its form factor.
+    RectLight rect = rect_light(lights.point_rect_u[i], lights.point_rect_v[i], d);
+    float centre_nl = nl;
+    if (rectangle) {
+        falloff = lamp_fade(i, dist, l) * rect.radiance;
+        nl = rect_form_factor(rect, s.normal);
+    }
+#endif
+#if defined(SCREEN_OCCLUSION) && defined(CONTACT_LAMPS)
+    // Its contact shadows' channel, if it has them (its cookie row's w: the channel + 1).
+    int contact_channel = int(lights.point_cookie_v[i].w + 0.5) - 1;
+    if (contact_channel >= 0) falloff *= lamp_contact[contact_channel];
+#endif
+#ifdef SPOT_COOKIES
+    vec3 cookie_at = cookie_place(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
+    vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));
+#endif
+#ifdef DIFFUSE_TRANSMISSION
+    float behind = max(-dot(s.normal, l), 0.0);
+#ifdef RECT_LIGHTS
+    if (rectangle) behind = rect_form_factor(rect, -s.normal);
+#endif
+    if (behind > 0.0 && falloff > 0.0) {
+#ifdef SPOT_COOKIES
+        vec3 behind_cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
+#else
+        const vec3 behind_cookie = vec3(1.0);
+#endif
+        lit += through * behind * lights.point_color[i].rgb * behind_cookie * falloff
+               * point_shadow(i, point_behind);
+    }
+#endif
+    if (nl > 0.0 && falloff > 0.0) {
+#ifdef SPOT_COOKIES
+        vec3 cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
+#else
+        const vec3 cookie = vec3(1.0);
+#endif
+        vec3 arriving = lights.point_color[i].rgb * cookie * falloff * point_shadow(i, point_lit);
+#ifdef ANISOTROPY
+        vec3 highlight = anisotropic_specular(s.normal, l, s.to_eye, s.f0) * (nl * s.energy_compensation);
+#else
+#ifdef RECT_LIGHTS
+        vec3 highlight = (rectangle ? rect_highlight(rect, s.normal, s.to_eye, s.f0, s.highlight_roughness)
+                                    : sphere_highlight(s.normal, s.to_eye, s.reflect_dir, d, lights.point_color[i].w,
+                                                       s.f0, s.highlight_roughness)) * s.energy_compensation;
+#else
+        vec3 highlight = sphere_highlight(s.normal, s.to_eye, s.reflect_dir, d, lights.point_color[i].w, s.f0,
+                                          s.highlight_roughness) * s.energy_compensation;
+#endif
+#endif
+        lit += (diffuse * nl + highlight) * arriving;
+        highlight_light += highlight * arriving;
+#ifdef CLEARCOAT
+#ifdef RECT_LIGHTS
+        vec3 coat = rectangle ? rect_highlight(rect, coat_normal, s.to_eye, vec3(0.04), coat_roughness)
+                              : sphere_highlight(coat_normal, s.to_eye, reflect(-s.to_eye, coat_normal), d,
+                                                 lights.point_color[i].w, vec3(0.04), coat_roughness);
+#else
+        vec3 coat = sphere_highlight(coat_normal, s.to_eye, reflect(-s.to_eye, coat_normal), d,
+                                     lights.point_color[i].w, vec3(0.04), coat_roughness);
+#endif
+        coat_light += coat * arriving;
+#endif
+#ifdef SHEEN
+        float sheen_share = 1.0;  // a rectangle's: its form factor for n.l towards its centre
+#ifdef RECT_LIGHTS
+        if (rectangle) sheen_share = nl / max(centre_nl, 1e-3);
+#endif
+        sheen_light += sheen_lobe(s.normal, l, s.to_eye) * (arriving * sheen_share);
+#endif
+    }
+    return lit;
+}
+
 vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec3 diffuse = s.albedo * (1.0 - s.metallic) / PI;
 #ifdef DIFFUSE_TRANSMISSION
@@ -495,81 +588,26 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         }
     }
     for (int i = 0; i < lights.counts.y; ++i) {
-        vec3 d = lights.point_pos[i].xyz - s.position;
-        float dist = length(d);
-        vec3 l = d / max(dist, 1e-4);
-        float nl = max(dot(s.normal, l), 0.0);
-        float falloff = lamp_falloff(i, dist, l);
 #ifdef RECT_LIGHTS
-        // A rectangle (rect_lights.glsl): its light from all of it above the horizon, its
-        // radiance (the light's over its area) for the inverse square, n.l its form factor.
-        RectLight rect = rect_light(lights.point_rect_u[i], lights.point_rect_v[i], d);
-        float centre_nl = nl;
-        if (rect.shape) {
-            falloff = lamp_fade(i, dist, l) * rect.radiance;
-            nl = rect_form_factor(rect, s.normal);
-        }
+        if (lights.point_rect_u[i].w != 0.0) continue;   // (a rectangle: in the loop below)
 #endif
-#if defined(SCREEN_OCCLUSION) && defined(CONTACT_LAMPS)
-        // Its contact shadows' channel, if it has them (its cookie row's w: the channel + 1).
-        int contact_channel = int(lights.point_cookie_v[i].w + 0.5) - 1;
-        if (contact_channel >= 0) falloff *= lamp_contact[contact_channel];
-#endif
-#ifdef SPOT_COOKIES
-        vec3 cookie_at = cookie_place(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l);
-        vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));
-#endif
+        total += lamp_light(i, false, s, diffuse, point_lit
 #ifdef DIFFUSE_TRANSMISSION
-        float behind = max(-dot(s.normal, l), 0.0);
-#ifdef RECT_LIGHTS
-        if (rect.shape) behind = rect_form_factor(rect, -s.normal);
+                            , through, point_behind
 #endif
-        if (behind > 0.0 && falloff > 0.0) {
-#ifdef SPOT_COOKIES
-            vec3 behind_cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
-#else
-            const vec3 behind_cookie = vec3(1.0);
-#endif
-            total += through * behind * lights.point_color[i].rgb * behind_cookie * falloff
-                     * point_shadow(i, point_behind);
-        }
-#endif
-        if (nl > 0.0 && falloff > 0.0) {
-#ifdef SPOT_COOKIES
-            vec3 cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
-#else
-            const vec3 cookie = vec3(1.0);
-#endif
-            vec3 arriving = lights.point_color[i].rgb * cookie * falloff * point_shadow(i, point_lit);
-#ifdef ANISOTROPY
-            vec3 highlight = anisotropic_specular(s.normal, l, s.to_eye, s.f0) * (nl * s.energy_compensation);
-#else
-            vec3 highlight = sphere_highlight(s.normal, s.to_eye, s.reflect_dir, d, lights.point_color[i].w, s.f0,
-                                              s.highlight_roughness) * s.energy_compensation;
-#ifdef RECT_LIGHTS
-            if (rect.shape) highlight = rect_highlight(rect, s.normal, s.to_eye, s.f0, s.highlight_roughness)
-                                        * s.energy_compensation;
-#endif
-#endif
-            total += (diffuse * nl + highlight) * arriving;
-            highlight_light += highlight * arriving;
-#ifdef CLEARCOAT
-            vec3 coat = sphere_highlight(coat_normal, s.to_eye, reflect(-s.to_eye, coat_normal), d,
-                                         lights.point_color[i].w, vec3(0.04), coat_roughness);
-#ifdef RECT_LIGHTS
-            if (rect.shape) coat = rect_highlight(rect, coat_normal, s.to_eye, vec3(0.04), coat_roughness);
-#endif
-            coat_light += coat * arriving;
-#endif
-#ifdef SHEEN
-            float sheen_share = 1.0;  // a rectangle's: its form factor for n.l towards its centre
-#ifdef RECT_LIGHTS
-            if (rect.shape) sheen_share = nl / max(centre_nl, 1e-3);
-#endif
-            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * (arriving * sheen_share);
-#endif
-        }
+                            );
     }
+#ifdef RECT_LIGHTS
+    for (int k = 0; k < MAX_RECT_LIGHTS; ++k) {   // the rectangles' slots (light_rules: the first by slot)
+        int i = lights.rect_slots[k / 4][k % 4];
+        if (i < 0) break;
+        total += lamp_light(i, true, s, diffuse, point_lit
+#ifdef DIFFUSE_TRANSMISSION
+                            , through, point_behind
+#endif
+                            );
+    }
+#endif
 #ifdef VIRTUAL_LIGHTS
     total += virtual_lighting(s.position, s.normal, s.geometric_normal, s.to_eye, diffuse, s.f0, s.highlight_roughness,
                               s.energy_compensation, shadowed);

@@ -30,7 +30,7 @@ import numpy as np
 
 from components import DirectionalLight, Fog, HemisphereLight, PointLight, ReflectionProbe, Skybox, Transform
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
-from components.limits import MAX_CONTACT_LAMPS, MAX_VOLUMETRIC_LAMPS
+from components.limits import MAX_CONTACT_LAMPS, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import LightLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
@@ -43,6 +43,7 @@ from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
     ALL_ROUND,
     NO_COOKIE,
+    NO_RECTANGLE,
     SAME_SUN_DEGREES,
     SAME_SUN_TINT,
     KeptLights,
@@ -89,6 +90,8 @@ class PrepareSystem(esper.Processor):
         self._flat_sky = True   # no Skybox: the sky cube is the flat background (lights_block's flat_sky)
         self._cut = (0, 0)   # (directional, point) lights the last block left out
         self._contact = ContactLamps()   # the lamps with contact shadows the last block gave channels
+        self._rect_slots: tuple[int, ...] = ()   # the slots lit as rectangles (lights_block's rect_slots)
+        self._rect_cut = 0                       # rectangles past MAX_RECT_LIGHTS, lit as points
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -130,7 +133,7 @@ class PrepareSystem(esper.Processor):
                     renderer.irradiance.write_ltc()   # (their table, once)
                 renderer.note_scene_change()
             block = lights_block(self._sky_sh, *self._rows(kept), flat_sky=self._flat_sky,
-                                 environment=self.environment_reflections)
+                                 environment=self.environment_reflections, rect_slots=self._rect_slots)
             if block != self._lights:
                 renderer.set_lights(block)
                 self._lights = block
@@ -140,6 +143,7 @@ class PrepareSystem(esper.Processor):
         world.resources[VolumetricLamps] = self._volumetric   # ... and its light shafts
         renderer.stats.lights_cut = sum(self._cut)
         renderer.stats.contact_lamps_cut = self._contact.cut
+        renderer.stats.rect_lights_cut = self._rect_cut
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
         sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
@@ -203,6 +207,8 @@ class PrepareSystem(esper.Processor):
             light = world.get(entity, DirectionalLight)
             directional.append((light.direction, light.color.xyz * light.intensity, float(light is sun)))
         point, contact, cut = [], [], 0
+        rect_slots: list[int] = []   # the rectangles lit as rectangles: the first MAX_RECT_LIGHTS by slot
+        rect_cut = 0
         scattered: list[tuple[int, float]] = []   # (slot, volumetric) of the lamps the shafts scatter
         volumetric_cut = 0
         for slot, entity in enumerate(kept.point):
@@ -222,15 +228,27 @@ class PrepareSystem(esper.Processor):
                     channel = len(contact)
                 else:
                     cut += 1
+            rectangle = lamp_rectangle(light, t.world)
+            if rectangle != NO_RECTANGLE:
+                if len(rect_slots) < MAX_RECT_LIGHTS:
+                    rect_slots.append(slot)
+                else:
+                    rectangle, rect_cut = NO_RECTANGLE, rect_cut + 1   # lit as a point
             point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world),
                           lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)), light.radius,
-                          float(channel), lamp_rectangle(light, t.world)))
+                          float(channel), rectangle))
         if cut > self._contact.cut:
             warnings.warn(LightLimitWarning(
                 f"{len(contact) + cut} point lights with contact_shadows light the scene: at most {MAX_CONTACT_LAMPS} "
                 f"have them at once (the first by the lights' slots: those that matter most to the active camera), "
                 f"so {cut} shine without them (RenderStats.contact_lamps_cut)"), stacklevel=3)
         self._contact = ContactLamps(tuple(contact), cut)
+        if rect_cut > self._rect_cut:
+            warnings.warn(LightLimitWarning(
+                f"{len(rect_slots) + rect_cut} rectangle lights light the scene: at most {MAX_RECT_LIGHTS} are lit as "
+                f"rectangles at once (the first by the lights' slots: those that matter most to the active camera), "
+                f"so {rect_cut} light as points from their centres (RenderStats.rect_lights_cut)"), stacklevel=3)
+        self._rect_slots, self._rect_cut = tuple(rect_slots), rect_cut
         self._volumetric = VolumetricLamps(tuple(slot for slot, _ in scattered),
                                            tuple(scatter for _, scatter in scattered), volumetric_cut)
         return directional, point

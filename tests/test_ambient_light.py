@@ -24,6 +24,7 @@ from components import (
     Skybox,
     Transform,
 )
+from components.limits import MAX_RECT_LIGHTS
 from engine.assets.mesh import box, quad
 from engine.core.cube_faces import face_directions
 from engine.render.irradiance import evaluate_sh, hemisphere_sh, project_faces
@@ -190,7 +191,9 @@ void main() {
         value = lights.point_cookie_v[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 4 * MAX_POINT_LIGHTS];
     else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 6 * MAX_POINT_LIGHTS)
         value = lights.point_rect_u[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 5 * MAX_POINT_LIGHTS];
-    else value = lights.point_rect_v[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 6 * MAX_POINT_LIGHTS];
+    else if (i < 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 7 * MAX_POINT_LIGHTS)
+        value = lights.point_rect_v[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 6 * MAX_POINT_LIGHTS];
+    else value = vec4(lights.rect_slots[i - 10 - 2 * MAX_DIRECTIONAL_LIGHTS - 7 * MAX_POINT_LIGHTS]);
 }
 """
 
@@ -211,7 +214,8 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
               float(rng.uniform(0, 2)), float(rng.integers(0, 4)),
               (tuple(rng.uniform(-5, 5, 4)), tuple(rng.uniform(-5, 5, 4))))
              for _ in range(MAX_POINT_LIGHTS)]
-    block = lights_block(sh, directional, point)
+    rect_slots = [int(v) for v in rng.choice(MAX_POINT_LIGHTS, MAX_RECT_LIGHTS - 1, replace=False)]
+    block = lights_block(sh, directional, point, rect_slots=rect_slots)
     assert len(block) == LIGHTS_BLOCK_BYTES
     import pathlib
     import tempfile
@@ -224,7 +228,7 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
              "vec2(-1,3))[gl_VertexID], 0.0, 1.0); }"
     program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
     assert program["Lights"].size == LIGHTS_BLOCK_BYTES
-    width = 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 7 * MAX_POINT_LIGHTS
+    width = 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 7 * MAX_POINT_LIGHTS + MAX_RECT_LIGHTS // 4
     target = ctx.texture((width, 1), 4, dtype="f4")
     framebuffer = ctx.framebuffer([target])
     ubo = ctx.buffer(block)
@@ -260,6 +264,8 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
         np.testing.assert_allclose(read[rows + 4 * MAX_POINT_LIGHTS + i], (*up, contact), rtol=1e-6)
         np.testing.assert_allclose(read[rows + 5 * MAX_POINT_LIGHTS + i], half_u, rtol=1e-6)
         np.testing.assert_allclose(read[rows + 6 * MAX_POINT_LIGHTS + i], half_v, rtol=1e-6)
+    # The rectangles' slots, the rest -1 (one short of the limit: the last is -1).
+    assert read[rows + 7 * MAX_POINT_LIGHTS:].reshape(-1).tolist() == [*rect_slots, -1]
 
 
 def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):

@@ -437,3 +437,35 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
         assert read[i, 1] == pytest.approx(twin, rel=1e-3, abs=1e-5), (i, read[i, 1], twin)
         lit += form_factor > 1e-3
     assert fronts > 150 and lit > 100 and far > 50
+
+
+def test_rectangles_past_the_limit_light_as_points_and_are_said_and_counted(scene):
+    """MAX_RECT_LIGHTS + 1 panels: the last by slot lights as a point from its centre (the
+    floor under it lit), the others as rectangles; one cut, counted and said once."""
+    from components.limits import MAX_RECT_LIGHTS
+    from engine.core.errors import LightLimitWarning
+
+    count = MAX_RECT_LIGHTS + 1
+
+    def build(world):
+        look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
+        world.spawn(Transform(), MeshRef(plane(30.0, 30.0)), Material(roughness=1.0))
+        down = look_rotation(glm.vec3(0.0, -1.0, 0.0), glm.vec3(0.0, 0.0, -1.0))
+        for k in range(count):
+            world.spawn(Transform(position=(-4.0 + k, 1.0, 0.0), rotation=down),
+                        PointLight(intensity=1.0, range=5.0, rectangle=(0.5, 0.5)))
+    with pytest.warns(LightLimitWarning, match=f"{count} rectangle lights"):
+        runner = scene(build, SIZE)
+        runner.frame()
+    assert runner.engine.renderer.stats.rect_lights_cut == 1
+    runner.frame()
+    assert runner.engine.renderer.stats.rect_lights_cut == 1
+    # The block: eight slots listed, the ninth lamp's rectangle rows zero (a point), the
+    # others' the rectangle's (the front's sign over its area: -1 / 0.25).
+    from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, SKY_SH_COEFFICIENTS
+    block = np.frombuffer(runner.engine.renderer.lights_ubo.read(), np.float32)
+    base = 4 * SKY_SH_COEFFICIENTS + 4 + 8 * MAX_DIRECTIONAL_LIGHTS
+    rect_w = block[base + 4 * 5 * MAX_POINT_LIGHTS:][:4 * MAX_POINT_LIGHTS].reshape(-1, 4)[:, 3]
+    slots = block[base + 4 * 7 * MAX_POINT_LIGHTS:][:MAX_RECT_LIGHTS].view(np.int32)
+    assert sorted(slots.tolist()) == sorted(np.flatnonzero(rect_w).tolist()) and len(set(slots)) == MAX_RECT_LIGHTS
+    assert sorted(rect_w[:count].tolist()) == [-4.0] * MAX_RECT_LIGHTS + [0.0]

@@ -74,7 +74,7 @@ from pathlib import Path
 import moderngl
 
 import shaders
-from components.limits import MAX_CONTACT_LAMPS
+from components.limits import MAX_CONTACT_LAMPS, MAX_RECT_LIGHTS
 from components.post import TONEMAP_CURVES
 from components.rendering import MATERIAL_IMAGES
 from engine.core import cube_faces, material_slots
@@ -295,7 +295,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "LTC_SIZE": str(LTC_SIZE), "LTC_ROW": str(views.LTC_ROW),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
-            "MAX_CONTACT_LAMPS": str(MAX_CONTACT_LAMPS),
+            "MAX_CONTACT_LAMPS": str(MAX_CONTACT_LAMPS), "MAX_RECT_LIGHTS": str(MAX_RECT_LIGHTS),
             "POSE_WEIGHTS_AT": str(pose_rows.WEIGHTS_AT),
             **object_motion.glsl_defines(),
             **{f"UV_BIT_{name.upper()}": str(1 << index) for index, name in enumerate(MATERIAL_IMAGES)},

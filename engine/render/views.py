@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pyglm import glm
 
-from components.limits import ALL_LAYERS, MAX_SHADOW_CASCADES, VIEW_DIRECT, VIEW_KINDS
+from components.limits import ALL_LAYERS, MAX_RECT_LIGHTS, MAX_SHADOW_CASCADES, VIEW_DIRECT, VIEW_KINDS
 from components.visibility import KIND_MASK, visibility_code
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.rules.light_rules import NO_COOKIE
@@ -71,7 +71,8 @@ MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (mor
 # BRDF's, then from here the LTC table's of rectangle lights (shaders/include/rect_lights.glsl).
 LTC_ROW = MAX_IRRADIANCE_PROBES + ENVIRONMENT_BRDF_SIZE
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
-LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 7 * 16 * MAX_POINT_LIGHTS
+LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 7 * 16 * MAX_POINT_LIGHTS \
+    + 4 * MAX_RECT_LIGHTS
 
 
 @dataclass
@@ -239,7 +240,8 @@ def camera_view(world_matrix: glm.mat4, fov_y_deg: float, near: float, far: floa
 
 
 def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: list[tuple],
-                 point: list[tuple], flat_sky: bool = False, environment: bool = True) -> bytes:
+                 point: list[tuple], flat_sky: bool = False, environment: bool = True,
+                 rect_slots: Sequence[int] = ()) -> bytes:
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
     [(direction, rgb[, sun])] (``sun``: 1 for the brightest, whose light contact shadows dim;
@@ -252,7 +254,8 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
     is the flat background of a world with no Skybox, not the light ``sky_sh`` holds (the
     environment's reflection then reads the harmonics: scene.frag environment_radiance).
     ``environment`` False: no surface reflects the light from all round by its material (the
-    debug overlay's switch)."""
+    debug overlay's switch).  ``rect_slots``: the slots of the point lights lit as rectangles
+    (at most ``MAX_RECT_LIGHTS``; the scene shader loops over them apart)."""
     data = np.zeros(LIGHTS_BLOCK_BYTES // 4, np.float32)
     sh = np.asarray(sky_sh, np.float64)
     if sh.shape != (SKY_SH_COEFFICIENTS, 3):
@@ -281,6 +284,12 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
             u, v = more[3]
             data[base + 4 * (5 * MAX_POINT_LIGHTS + i): base + 4 * (5 * MAX_POINT_LIGHTS + i) + 4] = u
             data[base + 4 * (6 * MAX_POINT_LIGHTS + i): base + 4 * (6 * MAX_POINT_LIGHTS + i) + 4] = v
+    base += 4 * 7 * MAX_POINT_LIGHTS
+    if len(rect_slots) > MAX_RECT_LIGHTS:
+        raise ValueError(f"lights_block: at most {MAX_RECT_LIGHTS} rectangle slots, got {len(rect_slots)}")
+    slots = np.full(MAX_RECT_LIGHTS, -1, np.int32)
+    slots[:len(rect_slots)] = rect_slots
+    data[base:base + MAX_RECT_LIGHTS] = slots.view(np.float32)
     return data.tobytes()
 
 

@@ -17,6 +17,7 @@ layout(std140) uniform Lights {
     vec4 point_rect_u[MAX_POINT_LIGHTS];            // xyz: a rectangle's half width along its side; w: its front's
                                                     // sign over its area (0: no rectangle; light_rules.lamp_rectangle)
     vec4 point_rect_v[MAX_POINT_LIGHTS];            // xyz: its half height along its other side
+    ivec4 rect_slots[MAX_RECT_LIGHTS / 4];          // the rectangles' slots, lit as rectangles (-1: no more)
 } lights;
 
 #include "spot_cone.glsl"
