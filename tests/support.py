@@ -232,3 +232,40 @@ def camera_level_round_trip(tmp_path, tables: str, bad: tuple[str, str], match: 
     with pytest.raises(LevelError, match=match):
         load_level(tmp_path / "bad.toml").spawn(World())
     return again, eye
+
+
+def fragment_row(ctx, source: str, width: int, defines: dict | None = None, bind=None) -> np.ndarray:
+    """Fragment shader ``source`` (its whole text; its includes found in ``shaders/``) run once
+    a pixel over a ``width`` x 1 float target, read back as (width, 4) float32: how a test reads
+    the GLSL's own numbers.  ``bind(program)`` binds the program's inputs and returns the GL
+    objects to release after."""
+    import pathlib
+    import tempfile
+
+    from engine.render.bindings import invalidate
+    from engine.render.shader_library import load_source
+    from engine.render.targets import release_framebuffer
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = pathlib.Path(folder) / "reader.frag"
+        path.write_text(source)
+        fragment = load_source(str(path), defines or {})
+    vertex = "#version 410 core\nvoid main() { gl_Position = vec4(vec2[3](vec2(-1,-1), vec2(3,-1), " \
+             "vec2(-1,3))[gl_VertexID], 0.0, 1.0); }"
+    program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
+    target = ctx.texture((width, 1), 4, dtype="f4")
+    framebuffer = ctx.framebuffer([target])
+    vao = ctx.vertex_array(program, [])
+    made: list = []
+    try:
+        made = list(bind(program) if bind is not None else [])
+        framebuffer.use()
+        ctx.viewport = (0, 0, width, 1)
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
+        vao.render(vertices=3)
+        return np.frombuffer(target.read(), np.float32).reshape(width, 4).copy()
+    finally:
+        release_framebuffer(framebuffer)
+        for obj in (vao, target, program, *made):
+            obj.release()
+        invalidate(ctx)

@@ -202,7 +202,7 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
     """lights_block's bytes, bound as the Lights block, read back field by field by a shader
     that includes lights.glsl: every coefficient, count, direction and colour where the GLSL
     finds it, and the block's size as the GL lays it out."""
-    from engine.render.shader_library import load_source
+    from tests.support import fragment_row
 
     rng = np.random.default_rng(7)
     sh = rng.uniform(-1, 1, (9, 3))
@@ -217,38 +217,15 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
     rect_slots = [int(v) for v in rng.choice(MAX_POINT_LIGHTS, MAX_RECT_LIGHTS - 1, replace=False)]
     block = lights_block(sh, directional, point, rect_slots=rect_slots)
     assert len(block) == LIGHTS_BLOCK_BYTES
-    import pathlib
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as folder:
-        path = pathlib.Path(folder) / "reader.frag"
-        path.write_text(_BLOCK_READER)
-        fragment = load_source(str(path), {})
-    vertex = "#version 410 core\nvoid main() { gl_Position = vec4(vec2[3](vec2(-1,-1), vec2(3,-1), " \
-             "vec2(-1,3))[gl_VertexID], 0.0, 1.0); }"
-    program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
-    assert program["Lights"].size == LIGHTS_BLOCK_BYTES
     width = 10 + 2 * MAX_DIRECTIONAL_LIGHTS + 7 * MAX_POINT_LIGHTS + MAX_RECT_LIGHTS // 4
-    target = ctx.texture((width, 1), 4, dtype="f4")
-    framebuffer = ctx.framebuffer([target])
-    ubo = ctx.buffer(block)
-    vao = ctx.vertex_array(program, [])
-    try:
+
+    def bind(program):
+        assert program["Lights"].size == LIGHTS_BLOCK_BYTES
+        ubo = ctx.buffer(block)
         program["Lights"].binding = 7
         ubo.bind_to_uniform_block(7)
-        framebuffer.use()
-        ctx.viewport = (0, 0, width, 1)
-        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
-        vao.render(vertices=3)
-        read = np.frombuffer(target.read(), np.float32).reshape(width, 4)
-    finally:
-        from engine.render.bindings import invalidate
-        from engine.render.targets import release_framebuffer
-
-        release_framebuffer(framebuffer)
-        for obj in (vao, ubo, target, program):
-            obj.release()
-        invalidate(ctx)
+        return [ubo]
+    read = fragment_row(ctx, _BLOCK_READER, width, bind=bind)
     np.testing.assert_allclose(read[:9, :3], sh, rtol=1e-6)
     assert read[9, :2].tolist() == [MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS]
     rows = 10

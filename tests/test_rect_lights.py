@@ -344,11 +344,8 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
     twin here: the panel cut into patches), the highlight within 1e-3 relative of
     ``ltc_fit.ltc_rect_specular`` (the same table read bilinearly in numpy), and the side the
     rectangle shines from as the front's sign says."""
-    import pathlib
-    import tempfile
-
     from engine.render.ltc_fit import load_table, ltc_rect_specular, rect_diffuse_integral
-    from engine.render.shader_library import load_source
+    from tests.support import fragment_row
 
     def build(world):   # an engine whose irradiance table holds the LTC rows
         look_from(world, (0.0, 1.0, 3.0), (0.0, 0.0, -1.0))
@@ -375,22 +372,13 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
         area = 4.0 * np.linalg.norm(np.cross(u, w))
         rows[i] = [(*n, roughness), (*v, f0), (*centre, 0.0), (*u, sign / area), (*w, 0.0)]
         cases.append((n, v, roughness, f0, centre, u, w, sign))
-    with tempfile.TemporaryDirectory() as folder:
-        path = pathlib.Path(folder) / "reader.frag"
-        path.write_text(_RECT_READER)
-        fragment = load_source(str(path), {"RECT_LIGHTS": "1"})
-    vertex = "#version 410 core\nvoid main() { gl_Position = vec4(vec2[3](vec2(-1,-1), vec2(3,-1), " \
-             "vec2(-1,3))[gl_VertexID], 0.0, 1.0); }"
-    program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
-    data = ctx.texture((5, count), 4, rows.tobytes(), dtype="f4")
-    data.filter = (ctx.NEAREST, ctx.NEAREST)
-    target = ctx.texture((count, 1), 4, dtype="f4")
-    framebuffer = ctx.framebuffer([target])
-    vao = ctx.vertex_array(program, [])
     from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES
     from engine.render.views import LIGHTS_BLOCK_BYTES
-    blocks = [ctx.buffer(reserve=LIGHTS_BLOCK_BYTES), ctx.buffer(reserve=IRRADIANCE_BLOCK_BYTES)]
-    try:
+
+    def bind(program):
+        data = ctx.texture((5, count), 4, rows.tobytes(), dtype="f4")
+        data.filter = (ctx.NEAREST, ctx.NEAREST)
+        blocks = [ctx.buffer(reserve=LIGHTS_BLOCK_BYTES), ctx.buffer(reserve=IRRADIANCE_BLOCK_BYTES)]
         for binding, (name, block) in enumerate(zip(("Lights", "Irradiance"), blocks, strict=True), start=6):
             program[name].binding = binding   # (bound whole, though the reader reads neither)
             block.bind_to_uniform_block(binding)
@@ -398,19 +386,8 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
         program["irradiance_table"].value = 1
         data.use(0)
         table_texture.use(1)
-        framebuffer.use()
-        ctx.viewport = (0, 0, count, 1)
-        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
-        vao.render(vertices=3)
-        read = np.frombuffer(target.read(), np.float32).reshape(count, 4)
-    finally:
-        from engine.render.bindings import invalidate
-        from engine.render.targets import release_framebuffer
-
-        release_framebuffer(framebuffer)
-        for obj in (vao, data, target, program, *blocks):
-            obj.release()
-        invalidate(ctx)
+        return [data, *blocks]
+    read = fragment_row(ctx, _RECT_READER, count, {"RECT_LIGHTS": "1"}, bind)
     table = load_table()
     s = (np.arange(PATCHES * 2) + 0.5) / (PATCHES * 2) * 2.0 - 1.0
     grid_a, grid_b = (g.reshape(-1, 1) for g in np.meshgrid(s, s))
