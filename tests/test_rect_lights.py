@@ -417,8 +417,8 @@ def test_the_shaders_form_factor_and_highlight_are_their_numpy_twins(scene, ctx)
 
 
 def test_rectangles_past_the_limit_light_as_points_and_are_said_and_counted(scene):
-    """MAX_RECT_LIGHTS + 1 panels: the last by slot lights as a point from its centre (the
-    floor under it lit), the others as rectangles; one cut, counted and said once."""
+    """MAX_RECT_LIGHTS + 1 panels: the last by slot lights as a point from its centre, the
+    others as rectangles; one cut, counted, said once and on the overlay's cut line."""
     from components.limits import MAX_RECT_LIGHTS
     from engine.core.errors import LightLimitWarning
 
@@ -437,6 +437,8 @@ def test_rectangles_past_the_limit_light_as_points_and_are_said_and_counted(scen
     assert runner.engine.renderer.stats.rect_lights_cut == 1
     runner.frame()
     assert runner.engine.renderer.stats.rect_lights_cut == 1
+    from shell.overlay_text import overlay_lines
+    assert any("rectangles (lit as points) 1" in line for line in overlay_lines(runner.engine, [1.0 / 60.0]))
     # The block: eight slots listed, the ninth lamp's rectangle rows zero (a point), the
     # others' the rectangle's (the front's sign over its area: -1 / 0.25).
     from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, SKY_SH_COEFFICIENTS
