@@ -176,3 +176,45 @@ def test_a_rectangle_draws_no_cube_face_behind_it(scene):
     assert (panel_faces, sphere_faces) == (5, 6)
     _, covered = frame(0.0, (1.0, 0.3), True)
     np.testing.assert_array_equal(covered, panel)
+
+
+def test_a_narrow_spot_with_a_size_casts_soft_from_its_cube(scene):
+    """A 30-degree spot casts from a perspective map fitted to its cone; with a radius its
+    shadow is soft, so it casts from its cube (the faces its cone lights), as wide a penumbra
+    as the all-round sphere's (within 15%)."""
+    def share(spot_angle: float, radius: float):
+        def with_cone(slab_height):
+            from tests.support import pixel_rays, srgb_to_linear
+
+            def build(world):
+                look_from(world, (2.2, 1.0, 2.6), (-0.2, 0.0, 0.0), fov=55.0)
+                world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+                world.spawn(Transform(), MeshRef(plane(20.0, 20.0)),
+                            Material(color=(1.0, 1.0, 1.0), roughness=1.0, environment_reflection=0.0))
+                if slab_height is not None:
+                    world.spawn(Transform(position=(-2.0, slab_height, 0.0)), MeshRef(box((4.0, 0.02, 8.0))),
+                                Material(color=(0.0, 0.0, 0.0)))
+                down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+                world.spawn(Transform(position=(0.0, LIGHT_HEIGHT, 0.0), rotation=down),
+                            PointLight(intensity=8.0, range=20.0, shadows=True, shadow_resolution=1024, radius=radius,
+                                       spot_angle=spot_angle, spot_blend=0.05))
+            runner = scene(build, SIZE)
+            runner.engine.renderer.antialias = "off"
+            runner.engine.renderer.shadows.filter = "grid"
+            runner.frame()
+            shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
+            eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+            rays = rays.reshape(-1, 3)
+            t = -eye[1] / rays[:, 1]
+            return shown, eye + rays * np.where(t > 0, t, 0.0)[:, None], t > 0, \
+                runner.engine.renderer.shadows.program_defines
+        lit, points, floor, defines = with_cone(1.5)
+        open_, _, _, _ = with_cone(None)
+        keep = floor & (open_ > 0.05) & (np.abs(points[:, 2]) < 0.8) & (np.abs(points[:, 0]) < 1.2)
+        return penumbra_width(lit[keep] / open_[keep], points[keep, 0]), defines
+    soft, defines = share(30.0, RADIUS)
+    assert ("SOFT_POINT_SHADOWS", "1") in defines and ("SPOT_MAP0", "1") not in defines   # its cube
+    hard, hard_defines = share(30.0, 0.0)
+    assert ("SPOT_MAP0", "1") in hard_defines   # the perspective map fitted to its cone
+    round_, _ = share(180.0, RADIUS)
+    assert soft > 4.0 * hard and abs(soft / round_ - 1.0) < 0.15, (soft, hard, round_)

@@ -276,8 +276,10 @@ SPOT_MAP_MARGIN_TEXELS = 4
 def spot_map_half_width(light: PointLight) -> float | None:
     """The half-width (the tangent of its half-angle) of the perspective shadow map fitted to
     point light ``light``'s cone with ``SPOT_MAP_MARGIN_TEXELS`` to spare, or None where the
-    light casts from a cube (all round, or wider than ``SPOT_MAP_MAX_ANGLE``)."""
-    if light.spot_angle > SPOT_MAP_MAX_ANGLE:
+    light casts from a cube (all round, wider than ``SPOT_MAP_MAX_ANGLE``, or with a size: a
+    sphere's or a rectangle's shadow is soft, which only its cube's lookup makes,
+    ``shaders/include/shadows.glsl`` ``soft_cube_shadow``; its cone's faces of it alone drawn)."""
+    if light.spot_angle > SPOT_MAP_MAX_ANGLE or light.radius > 0.0 or light.rectangle[0] > 0.0:
         return None
     return cone_half_width(light.spot_angle, light.shadow_resolution)
 
