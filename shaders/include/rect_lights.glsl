@@ -10,9 +10,9 @@
 //   Polygonal-Light Shading with Linearly Transformed Cosines", 2016): GGX times n.l, for a
 //   roughness and view angle, is close to a cosine lobe moved by a 3 x 3 matrix M; the
 //   rectangle moved by M^-1 is then integrated as the diffuse one is, times the lobe's
-//   magnitude and the Fresnel of the light's mean way in.  The matrices were fitted to this engine's GGX (ggx.glsl) by
-//   engine/render/ltc_fit.py; they ride in rows of the irradiance table below the
-//   environment BRDF's (engine/render/irradiance.py: no sampler of their own).
+//   magnitude and the Fresnel of the light's mean way in.  The matrices were fitted to this
+//   engine's GGX (ggx.glsl) by engine/render/ltc_fit.py; they ride in rows of the irradiance
+//   table below the environment BRDF's (engine/render/irradiance.py: no sampler of their own).
 // Needs ggx.glsl (PI) and ambient.glsl (irradiance_table).  Only the RECT_LIGHTS builds hold
 // it (frames where a kept light is a rectangle).
 #ifdef RECT_LIGHTS

@@ -187,13 +187,16 @@ vec4 directional_shadows(vec3 position, vec3 normal) {
 
 #if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
 // The shadow of a light with a size (a sphere's radius, a rectangle's disc of the same area:
-// ``size.x``, metres; a rectangle's front: ``size.yzw``) from its distance cube, by percentage-closer soft shadows (Fernando,
-// "Percentage-Closer Soft Shadows", 2005): the blockers' mean distance found among
+// ``size.x``, metres; a rectangle's front: ``size.yzw``) from its distance cube, by
+// percentage-closer soft shadows (Fernando, "Percentage-Closer Soft Shadows", 2005): the
+// blockers' mean distance found among
 // SOFT_SEARCH taps where they may stand (the light's disc seen from the point, widened for
 // blockers down to a quarter of the way to the light), the penumbra that disc casts past them
 // (size x (point - blocker) / blocker, as an angle from the light), then SOFT_TAPS taps over
-// it.  Its edge hardens where the caster meets the receiver and widens away from it, as an
-// area light's does.  Taps on a Vogel disc (a golden-angle spiral), the same at every pixel.
+// it (at most 45 degrees about the point's direction: a caster at the light's own surface
+// would spread it round the cube).  Its edge hardens where the caster meets the receiver and
+// widens away from it, as an area light's does.  Taps on a Vogel disc (a golden-angle
+// spiral), the same at every pixel.
 const int SOFT_SEARCH = 12;
 const int SOFT_TAPS = 16;
 
@@ -236,7 +239,7 @@ float soft_cube_shadow(samplerCube cube, vec3 p, vec3 n, float d, vec4 size, flo
     }
     if (found == 0.0) return 1.0;
     float blocker = max(blockers / found * range, 1e-3);
-    float penumbra = max(size.x * (dist - blocker) / (blocker * dist), texel_angle);
+    float penumbra = clamp(size.x * (dist - blocker) / (blocker * dist), texel_angle, 1.0);
     float lit = 0.0, taps = 0.0;
     for (int k = 0; k < SOFT_TAPS; ++k) {
         vec2 o = vogel_tap(k, SOFT_TAPS) * penumbra;
