@@ -22,10 +22,11 @@ RADIUS = 0.3
 
 
 def floor_light(scene, slab_height: float | None, radius: float = RADIUS, rectangle=(0.0, 0.0),
-                ceiling: bool = False):
+                ceiling: bool = False, spot_angle: float = 180.0, defines: list | None = None):
     """The floor's light (linear green, the "grid" filter) under the light, the slab's edge
     along z at x = 0 (the slab over x < 0) at ``slab_height`` (None: no slab), a ceiling 3 cm
-    over the light where asked, and each floor pixel's point and whether it is the floor's."""
+    over the light where asked (``spot_angle``: its cone about straight down), and each floor
+    pixel's point and whether it is the floor's; ``defines`` gets the shadow lookups' builds."""
     from tests.support import pixel_rays, srgb_to_linear
 
     def build(world):
@@ -42,12 +43,14 @@ def floor_light(scene, slab_height: float | None, radius: float = RADIUS, rectan
         down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
         world.spawn(Transform(position=(0.0, LIGHT_HEIGHT, 0.0), rotation=down),
                     PointLight(intensity=8.0, range=20.0, shadows=True, shadow_resolution=1024, radius=radius,
-                               rectangle=rectangle))
+                               rectangle=rectangle, spot_angle=spot_angle, spot_blend=0.05))
     runner = scene(build, SIZE)
     runner.engine.renderer.antialias = "off"
     runner.engine.renderer.shadows.filter = "grid"
     runner.frame()
     shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
+    if defines is not None:
+        defines.extend(runner.engine.renderer.shadows.program_defines)
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
     rays = rays.reshape(-1, 3)
     t = -eye[1] / rays[:, 1]
@@ -183,33 +186,9 @@ def test_a_narrow_spot_with_a_size_casts_soft_from_its_cube(scene):
     shadow is soft, so it casts from its cube (the faces its cone lights), as wide a penumbra
     as the all-round sphere's (within 15%)."""
     def share(spot_angle: float, radius: float):
-        def with_cone(slab_height):
-            from tests.support import pixel_rays, srgb_to_linear
-
-            def build(world):
-                look_from(world, (2.2, 1.0, 2.6), (-0.2, 0.0, 0.0), fov=55.0)
-                world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
-                world.spawn(Transform(), MeshRef(plane(20.0, 20.0)),
-                            Material(color=(1.0, 1.0, 1.0), roughness=1.0, environment_reflection=0.0))
-                if slab_height is not None:
-                    world.spawn(Transform(position=(-2.0, slab_height, 0.0)), MeshRef(box((4.0, 0.02, 8.0))),
-                                Material(color=(0.0, 0.0, 0.0)))
-                down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
-                world.spawn(Transform(position=(0.0, LIGHT_HEIGHT, 0.0), rotation=down),
-                            PointLight(intensity=8.0, range=20.0, shadows=True, shadow_resolution=1024, radius=radius,
-                                       spot_angle=spot_angle, spot_blend=0.05))
-            runner = scene(build, SIZE)
-            runner.engine.renderer.antialias = "off"
-            runner.engine.renderer.shadows.filter = "grid"
-            runner.frame()
-            shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
-            eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-            rays = rays.reshape(-1, 3)
-            t = -eye[1] / rays[:, 1]
-            return shown, eye + rays * np.where(t > 0, t, 0.0)[:, None], t > 0, \
-                runner.engine.renderer.shadows.program_defines
-        lit, points, floor, defines = with_cone(1.5)
-        open_, _, _, _ = with_cone(None)
+        defines: list = []
+        lit, points, floor = floor_light(scene, 1.5, radius=radius, spot_angle=spot_angle, defines=defines)
+        open_, _, _ = floor_light(scene, None, radius=radius, spot_angle=spot_angle)
         keep = floor & (open_ > 0.05) & (np.abs(points[:, 2]) < 0.8) & (np.abs(points[:, 0]) < 1.2)
         return penumbra_width(lit[keep] / open_[keep], points[keep, 0]), defines
     soft, defines = share(30.0, RADIUS)
