@@ -19,7 +19,7 @@ from components.post import (
     Tonemap,
     Vignette,
 )
-from components.probe import ReflectionProbe
+from components.probe import IrradianceVolume, ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
 from components.screen_reflections import ScreenReflections
@@ -34,6 +34,7 @@ __all__ = [
     "ComponentValueError", "ContactShadows",
     "ComponentWarning", "Decal", "DepthOfField",
     "DirectionalLight", "Emissive", "FilmGrain", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
+    "IrradianceVolume",
     "LevelOfDetail", "Material",
     "MeshRef", "Mirror", "Model", "Morph", "MotionBlur", "ParticleEmitter", "PointLight", "Portal", "PortalClone",
     "ReflectionProbe",

@@ -133,3 +133,8 @@ MAX_CONTACT_LAMPS = 4
 # The point and spot lights whose light the camera's VolumetricFog scatters at once
 # (PointLight.volumetric; the first by the Lights block's slots).
 MAX_VOLUMETRIC_LAMPS = 4
+# An IrradianceVolume's grid: at least 2 and at most this many points along each axis (its
+# light lives in the irradiance table's rows: nine tiles of x points across, y x z rows down,
+# engine/render/views.py VOLUME_ROW).  Each point is a six-face capture: 4096 of them are a
+# bake of seconds on a GPU and minutes on llvmpipe.
+MAX_VOLUME_AXIS_POINTS = 16

@@ -1,10 +1,13 @@
-"""Cube-map reflection probes: what a curved shiny object (or glass) sees around it."""
+"""Cube-map reflection probes (what a curved shiny object, or glass, sees around it) and
+irradiance volumes (a grid of captures that light whatever stands among them)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any
 
-from components.limits import MAX_VIEW_DEPTH, check_near_far
+from pyglm import glm
+
+from components.limits import MAX_VIEW_DEPTH, MAX_VOLUME_AXIS_POINTS, check_near_far
 from components.tracking import ComponentValueError, boolean, choice, finite, integer, vec3
 from components.visibility import LAYER_FIELDS, ShownLayers
 
@@ -122,3 +125,117 @@ class ReflectionProbe(ShownLayers):
             raise ComponentValueError(
                 f"ReflectionProbe.{name}: blend_distance ({blend}) must be at most half the influence box's "
                 f"smallest side ({half})")
+
+
+VOLUME_REFRESH = ("once", "continuous", "scripted")
+MIN_VOLUME_RESOLUTION = 16   # a capture's face: the projection reads a 16-texel level
+MAX_VOLUME_RESOLUTION = 128
+MAX_NORMAL_BIAS = 10.0
+
+
+@dataclass(eq=False)
+class IrradianceVolume(ShownLayers):
+    """A grid of light probes over a box: the light arriving at each point of the grid from
+    all round, captured as a cube map and kept as nine spherical-harmonic coefficients
+    (irradiance volumes: Greger, Shirley, Hubbard and Greenberg 1998; Unity's light probes
+    and adaptive probe volumes, Godot's LightmapGI probes, Unreal's volumetric lightmap).
+    Whatever stands inside the box takes its light from all round from the grid, blended
+    between the eight points about it (trilinear), instead of from the sky or the reflection
+    probes' boxes: a ball rolling from a sunlit courtyard under an arch darkens, a white wall
+    beside a red one turns pink. Its captures see the lights, shadows and sky (not the
+    grid itself, nor the probes' diffuse light: one bounce, and a still scene settles in one
+    bake), so light bounced off walls and floors reaches what they face.
+
+    - ``size``: the box (metres, world axes), centred on the entity's position; the grid's
+      corner points lie on its corners.
+    - ``points``: how many points along x, y and z (each 2 to ``MAX_VOLUME_AXIS_POINTS``, 16).
+    - ``resolution``: texels across each capture's face (a power of two, 16 to 128).
+    - ``near`` / ``far``: each capture's depth range.
+    - ``blend_distance``: how far inside the box's walls the grid's weight falls to nothing
+      (the sky's or the probes' light taking the rest); 0 (the default): a hard edge.
+    - ``normal_bias``: metres each shaded point is moved along its surface's normal before
+      the grid is read (Unity's normal bias): a floor reads the points above it rather than
+      the layer under it, less light leaks through thin walls.
+    - ``refresh``: ``once`` (the default: captured when it is made, and again whole when any
+      field here changes or its entity moves), ``continuous`` (round and round the grid,
+      ``points_per_frame`` a frame: light that moves, a sun that sets) or ``scripted``
+      (after ``request()``: a whole new bake, the old light kept until it is done).
+    - ``points_per_frame``: captures a frame (each six faces of the frame's view budget).
+
+    The grid lights the scene once every point has been captured; until then the sky and
+    the probes do. One a world (the lowest entity's; another is said once and ignored).
+    It dims the sky's reflection where it is darker than the sky (a room's floor does not
+    mirror the daylight), as it does the probes' boxes.
+    """
+
+    size: Any = field(default_factory=lambda: glm.vec3(4.0, 3.0, 4.0))
+    points: tuple[int, int, int] = (4, 3, 4)
+    resolution: int = 32
+    near: float = 0.05
+    far: float = _DEFAULT_FAR
+    blend_distance: float = 0.0
+    normal_bias: float = 0.1
+    refresh: str = "once"
+    points_per_frame: int = 4
+    _requests: int = field(default=0, init=False, repr=False, compare=False)
+
+    def request(self) -> None:
+        """Ask for a whole new bake (any refresh mode): the old light is kept until it is done."""
+        self._requests += 1
+        self.touch()
+
+    @property
+    def requests(self) -> int:
+        """How many times ``request()`` was called (a reader compares it with the count it saw)."""
+        return self._requests
+
+    @property
+    def point_count(self) -> int:
+        """Points in the grid."""
+        x, y, z = self.points
+        return x * y * z
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in LAYER_FIELDS:
+            return super()._validate(name, value)
+        if name == "size":
+            value = vec3(self, name, value, low=0.0)
+            if min(value) <= 0.0 or max(value) > 1e5:
+                raise ComponentValueError(f"IrradianceVolume.size must have every side in (0, 1e5] metres, "
+                                          f"got {tuple(value)!r}")
+            self._check_blend(self.__dict__.get("blend_distance"), value, name)
+            return value
+        if name == "points":
+            parts = list(value) if isinstance(value, (list, tuple)) else []
+            if len(parts) != 3:
+                raise ComponentValueError(f"IrradianceVolume.points must be three ints (along x, y and z), "
+                                          f"got {value!r}")
+            return tuple(integer(self, name, v, low=2, high=MAX_VOLUME_AXIS_POINTS) for v in parts)
+        if name == "resolution":
+            value = integer(self, name, value, low=MIN_VOLUME_RESOLUTION, high=MAX_VOLUME_RESOLUTION)
+            if value & (value - 1):
+                raise ComponentValueError(f"IrradianceVolume.resolution must be a power of two, got {value!r}")
+            return value
+        if name in ("near", "far"):
+            return check_near_far(self, name, value, _DEFAULT_FAR)
+        if name == "blend_distance":
+            value = finite(self, name, value, low=0.0, high=1e5)
+            self._check_blend(value, self.__dict__.get("size"), name)
+            return value
+        if name == "normal_bias":
+            return finite(self, name, value, low=0.0, high=MAX_NORMAL_BIAS)
+        if name == "refresh":
+            return choice(self, name, value, VOLUME_REFRESH)
+        if name == "points_per_frame":
+            return integer(self, name, value, low=1, high=MAX_VOLUME_AXIS_POINTS ** 3)
+        return value
+
+    @staticmethod
+    def _check_blend(blend: float | None, size: Any, name: str) -> None:
+        if blend is None or size is None:
+            return
+        half = min(float(size[0]), float(size[1]), float(size[2])) / 2.0
+        if blend > half:
+            raise ComponentValueError(
+                f"IrradianceVolume.{name}: blend_distance ({blend}) must be at most half the box's smallest "
+                f"side ({half})")

@@ -61,6 +61,7 @@ class RenderStats(BudgetLedger):
     reflection_views: int = 0
     probe_captures: int = 0   # probes that captured at least one face this frame
     probe_faces: int = 0      # cube faces captured this frame
+    volume_points: int = 0    # irradiance volume points captured this frame (six faces each)
     probe_path: str = ""      # the path of the last probe capture: "six_pass" or "layered" (while there are probes)
     reflection_views_dropped: int = 0   # views with pixels a level's view budget left out
     reflection_depth_capped: int = 0    # views the surfaces' own depth limits allowed below the tree's cap

@@ -4,11 +4,14 @@
 // the irradiance table, texel i sums coefficient i over every texel of one level of the
 // probe's cube map, each weighted by its solid angle, times the band's clamped-cosine
 // factor. Read at texel centres of that exact level, a lookup returns the texel itself.
+// An irradiance volume's point writes each coefficient in a tile of its own: one fragment a
+// draw, its coefficient given.
 #include "cube_faces.glsl"
 
 uniform samplerCube source;
 uniform float level;      // the level read (a 16-texel one: the mips are box averages)
 uniform int level_size;   // its texels across a face
+uniform int coefficient_index;  // the one this draw writes (-1: the fragment's column's, a probe's row)
 out vec4 coefficient;
 
 const float PI = 3.14159265358979;
@@ -19,7 +22,7 @@ float corner_area(float s, float t) {
 }
 
 void main() {
-    int i = int(gl_FragCoord.x);
+    int i = coefficient_index < 0 ? int(gl_FragCoord.x) : coefficient_index;
     float n = float(level_size);
     vec3 sum = vec3(0.0);
     for (int face = 0; face < 6; ++face) {

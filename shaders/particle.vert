@@ -55,7 +55,7 @@ SHADING_QUALIFIER out vec3 v_light;  // the light at its centre (a ribbon's: at 
 // faces the viewer), with the lights' shadows at its centre; light through mirrors and
 // portals too (VIRTUAL_LIGHTS builds, while one shines).
 vec3 sheet_light(vec3 p, vec3 n) {
-    AmbientBoxes boxes = ambient_boxes(p);
+    AmbientBoxes boxes = ambient_boxes(p, vec3(0.0));  // (no normal bias: a sheet has two sides)
     float front = 1.0 - translucency;
     vec3 e = ambient_irradiance(boxes, n) * front + ambient_irradiance(boxes, -n) * translucency;
     vec4 sun_front = directional_shadows(p, n);

@@ -895,7 +895,7 @@ void main() {
     if (SLOT_REFRACT == REFRACT_ENVIRONMENT || SLOT_REFRACT == REFRACT_SOLID)
         s.refract_lod = cube_lod(s.refract_dir, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
 
-    AmbientBoxes boxes = ambient_boxes(s.position);
+    AmbientBoxes boxes = ambient_boxes(s.position, s.geometric_normal);
 #ifdef UNLIT_MATERIAL
     vec3 lit = s.albedo;  // Material.unlit: its colour as it is, no light, shadow or reflection on it
 #else

@@ -64,6 +64,7 @@ from systems import (
 from systems.decal_system import DecalSystem
 from systems.detail_system import DetailSystem
 from systems.frame_rules_system import FrameRulesSystem
+from systems.irradiance_volume_system import IrradianceVolumeSystem
 from systems.model_system import ModelSystem
 from systems.particle_system import ParticleSystem
 from systems.portal_slice_system import PortalSliceSystem
@@ -173,6 +174,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),
     ("shadows", lambda e: ShadowSystem(e.world, e.renderer)),
     ("probes", lambda e: ProbeSystem(e.world, e.renderer)),
+    ("volume", lambda e: IrradianceVolumeSystem(e.world, e.renderer)),  # the irradiance volume's points
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
     ("present", lambda e: PresentSystem(e.world, e.renderer)),

@@ -246,8 +246,8 @@ def test_the_lights_packer_and_the_glsl_block_agree(ctx):
 
 
 def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):
-    """ambient.glsl's Irradiance block (its MAX_IRRADIANCE_PROBES boxes) has the size
-    irradiance_block packs, as the GL lays it out."""
+    """ambient.glsl's Irradiance block (its MAX_IRRADIANCE_PROBES boxes and the volume's
+    grid) has the size irradiance_block packs, as the GL lays it out."""
     import pathlib
     import tempfile
 
@@ -255,12 +255,13 @@ def test_the_irradiance_block_is_as_big_in_glsl_as_in_python(ctx):
     from engine.render.shader_library import load_source
 
     source = ('#version 410 core\n#include "lights.glsl"\n#include "ambient.glsl"\nout vec4 value;\n'
-              "void main() { value = vec4(ambient_irradiance(ambient_boxes(gl_FragCoord.xyz), vec3(0.0, 1.0, 0.0)), "
+              "void main() { value = vec4(ambient_irradiance(ambient_boxes(gl_FragCoord.xyz, vec3(0.0, 1.0, 0.0)), "
+              "vec3(0.0, 1.0, 0.0)), "
               "1.0); }\n")
     with tempfile.TemporaryDirectory() as folder:
         path = pathlib.Path(folder) / "reader.frag"
         path.write_text(source)
-        fragment = load_source(str(path), {"AMBIENT_PROBES": "1"})
+        fragment = load_source(str(path), {"AMBIENT_PROBES": "1", "IRRADIANCE_VOLUME": "1"})
     vertex = "#version 410 core\nvoid main() { gl_Position = vec4(0.0, 0.0, 0.0, 1.0); }"
     program = ctx.program(vertex_shader=vertex, fragment_shader=fragment)
     try:

@@ -288,6 +288,33 @@ def test_the_rect_builds_and_the_ltc_rows(scene):
     assert not renderer.rect_lights
 
 
+def test_a_light_made_a_rectangle_after_frames_draws_as_one_made_so_from_the_start(scene):
+    """A point light turned into a rectangle, a sphere and back after the scene's batches were
+    drawn: each frame shows what an engine made with that light from the start does (the
+    batches' draw records follow the frame's builds: with the old builds kept, the panel lit as
+    a point, 26 levels off)."""
+    def build_with(rectangle, radius=0.0):
+        def build(world):
+            look_from(world, (0.0, 3.0, 4.0), (0.0, 0.0, 0.0))
+            world.spawn(Transform(), MeshRef(plane(10.0, 10.0)), Material(roughness=0.6))
+            world.spawn(Transform(position=(0.0, 1.5, 0.0), rotation=look_rotation(glm.vec3(0.0, -1.0, 0.01))),
+                        PointLight(intensity=20.0, range=RANGE, rectangle=rectangle, radius=radius))
+        return build
+
+    late = scene(build_with((0.0, 0.0)), (64, 48))
+    late.frame()
+    late.frame()
+    light = late.world.get(late.world.query_one(PointLight)[0][0], PointLight)
+    for rectangle, radius in (((1.5, 1.5), 0.0), ((0.0, 0.0), 0.6)):
+        light.rectangle = rectangle
+        light.radius = radius
+        late.frame()
+        shown = late.frame()
+        fresh = scene(build_with(rectangle, radius), (64, 48))
+        fresh.frame()
+        np.testing.assert_array_equal(shown, fresh.frame())
+
+
 def test_rectangle_is_checked():
     assert PointLight(rectangle=(1.5, 0.25)).rectangle == (1.5, 0.25)
     assert PointLight(rectangle=[0, 0]).rectangle == (0.0, 0.0)

@@ -54,3 +54,8 @@ class ParticleLimitWarning(UserWarning):
     """An emitter asked for more living particles than its ``ParticleEmitter.max_particles``:
     those past it are not spawned (counted every frame in ``RenderStats.particles_capped``;
     said when an emitter starts to be capped)."""
+
+
+class VolumeLimitWarning(UserWarning):
+    """More than one ``IrradianceVolume`` in a world: the lowest entity's lights it, the others
+    are ignored (said once)."""

@@ -210,6 +210,10 @@ class Gpu:
         # the irradiance table (IrradianceTable.write_ltc, when the first is kept).
         self.sphere_lights = False
         self.rect_lights = False
+        # What the scene's light from all round reads besides the sky in a pass that draws
+        # with the irradiance table (IrradianceTable.bind): AMBIENT_PROBES while a probe's box
+        # has a capture, IRRADIANCE_VOLUME while an irradiance volume is baked (the table sets it).
+        self.ambient_defines: tuple[tuple[str, str], ...] = ()
         self.spot_cookies = SpotCookies(ctx, caps.max_texture_image_units, self.normal_map_anisotropy, caps.software)
         # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
         # the extract stage writes them): the SKINNED and MORPHED builds read them.

@@ -67,10 +67,12 @@ import functools
 import logging
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
+from components.limits import MAX_VOLUME_AXIS_POINTS
 from engine.core.cube_faces import face_directions
 from engine.render.bindings import (
     CUBE_MIP_UNIT,
@@ -94,7 +96,7 @@ from engine.render.sky import (
     zenith_share,
 )
 from engine.render.targets import release_framebuffer
-from engine.render.views import LTC_ROW, MAX_IRRADIANCE_PROBES
+from engine.render.views import LTC_ROW, MAX_IRRADIANCE_PROBES, VOLUME_ROW, VOLUME_ROWS
 
 LOG = logging.getLogger("speculum")
 
@@ -106,7 +108,7 @@ SH_CONSTANTS = (_Y0, _Y1, _Y1, _Y1, _Y2, _Y2, _Y20, _Y2, _Y22)
 # The clamped cosine's band factors A_l, per coefficient (Ramamoorthi and Hanrahan, eq. 8).
 BAND_FACTORS = (math.pi,) + (2.0 * math.pi / 3.0,) * 3 + (math.pi / 4.0,) * 5
 PROJECTION_FACE_SIZE = 16    # texels across a face at the cube level the GPU projection reads
-IRRADIANCE_BLOCK_BYTES = 16 + 2 * 16 * MAX_IRRADIANCE_PROBES
+IRRADIANCE_BLOCK_BYTES = 16 + 2 * 16 * MAX_IRRADIANCE_PROBES + 3 * 16
 
 
 def sh_basis(directions: np.ndarray) -> np.ndarray:
@@ -215,9 +217,37 @@ def evaluate_sh(coefficients: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return sh_basis(normals) @ np.asarray(coefficients, np.float64)
 
 
-def irradiance_block(boxes: Iterable[tuple[Iterable[float], Iterable[float], float, int]]) -> bytes:
+@dataclass(frozen=True)
+class VolumeGrid:
+    """Where an irradiance volume's grid lies (``components.probe.IrradianceVolume``): its
+    box's lowest and highest corners (the corner points), points along x, y and z, the blend
+    distance inside its walls and the normal bias."""
+
+    low: tuple[float, float, float]
+    high: tuple[float, float, float]
+    points: tuple[int, int, int]
+    blend: float = 0.0
+    normal_bias: float = 0.0
+
+    def position(self, index: tuple[int, int, int]) -> tuple[float, float, float]:
+        """Where point ``index`` (i, j, k) of the grid is."""
+        return tuple(lo + (hi - lo) * i / (n - 1)
+                     for lo, hi, i, n in zip(self.low, self.high, index, self.points, strict=True))
+
+    def texel(self, index: tuple[int, int, int], coefficient: int) -> tuple[int, int]:
+        """The table's texel (x, y) holding ``coefficient`` of point ``index``: tile (c, j)
+        at columns c x points-along-x, rows j x points-along-z below ``VOLUME_ROW``."""
+        i, j, k = index
+        nx, _, nz = self.points
+        return coefficient * nx + i, VOLUME_ROW + j * nz + k
+
+
+def irradiance_block(boxes: Iterable[tuple[Iterable[float], Iterable[float], float, int]],
+                     volume: VolumeGrid | None = None) -> bytes:
     """The std140 Irradiance block (``shaders/include/ambient.glsl``): the count, then per box
-    its centre with its blend distance, and its half size with its table row."""
+    its centre with its blend distance, and its half size with its table row; then the
+    volume's lowest corner with its blend distance, its highest with its normal bias, and its
+    points along x, y, z (w: 1 while it lights the scene)."""
     boxes = list(boxes)[:MAX_IRRADIANCE_PROBES]
     data = np.zeros(IRRADIANCE_BLOCK_BYTES // 4, np.float32)
     data[0:4] = np.array([len(boxes), 0, 0, 0], np.int32).view(np.float32)
@@ -226,6 +256,11 @@ def irradiance_block(boxes: Iterable[tuple[Iterable[float], Iterable[float], flo
         data[base + 4 * i: base + 4 * i + 4] = (*tuple(centre)[:3], blend)
         data[base + 4 * (MAX_IRRADIANCE_PROBES + i): base + 4 * (MAX_IRRADIANCE_PROBES + i) + 4] = \
             (*tuple(half)[:3], float(row))
+    if volume is not None:
+        at = base + 8 * MAX_IRRADIANCE_PROBES
+        data[at:at + 4] = (*volume.low, volume.blend)
+        data[at + 4:at + 8] = (*volume.high, volume.normal_bias)
+        data[at + 8:at + 12] = np.array([*volume.points, 1], np.int32).view(np.float32)
     return data.tobytes()
 
 
@@ -249,8 +284,10 @@ class IrradianceTable:
         # Made all zeros: the BRDF rows' last texels are filtered with their neighbours to the
         # right and below (weight 0, but a GPU's undefined texel may be a NaN, and NaN x 0 is
         # NaN), which the table's widening for the LTC rows put inside it.
-        width = max(SH_COEFFICIENTS, ENVIRONMENT_BRDF_SIZE, LTC_SIZE)
-        height = LTC_ROW + 2 * LTC_SIZE
+        # Below those the irradiance volume's tiles (VolumeGrid.texel), read by bilinear
+        # filtering within each tile.
+        width = max(SH_COEFFICIENTS * MAX_VOLUME_AXIS_POINTS, ENVIRONMENT_BRDF_SIZE, LTC_SIZE)
+        height = VOLUME_ROW + VOLUME_ROWS
         self.table = ctx.texture((width, height), 4, np.zeros((height, width, 4), np.float32).tobytes(), dtype="f4")
         self.table.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.table.repeat_x = self.table.repeat_y = False
@@ -270,6 +307,7 @@ class IrradianceTable:
         self.rows: dict[int, int] = {}   # probe owner -> its row (a capture was projected into it)
         self._boxes: list[tuple[int, tuple, tuple, float]] = []  # (owner, centre, half size, blend distance)
         self._block = irradiance_block(())
+        self.volume: VolumeGrid | None = None  # the irradiance volume lighting the scene (set_volume)
         self._stale = False
         self._count = 0  # boxes in the block
         self._warned = False
@@ -318,6 +356,14 @@ class IrradianceTable:
             self._stale = True
             self.renderer.note_scene_change()
 
+    def set_volume(self, grid: VolumeGrid | None) -> None:
+        """The irradiance volume whose tiles the table holds, baked whole (None: none lights
+        the scene): into the Irradiance block at the next ``bind``."""
+        if grid != self.volume:
+            self.volume = grid
+            self._stale = True
+            self.renderer.note_scene_change()
+
     def _row_for(self, owner: int) -> int | None:
         row = self.rows.get(owner)
         if row is None:
@@ -339,6 +385,21 @@ class IrradianceTable:
         row = self._row_for(owner)
         if row is None:
             return False
+        self._project(cube, [((0, row, SH_COEFFICIENTS, 1), -1)])
+        self.projections += 1
+        self.renderer.checkpoint("probe irradiance projection")
+        return True
+
+    def project_volume_point(self, grid: VolumeGrid, index: tuple[int, int, int], cube: ProbeCube) -> None:
+        """Project the capture of the volume's point ``index`` (its mip chain built) into its
+        nine texels, one in each coefficient's tile (``VolumeGrid.texel``): a draw of one
+        fragment a coefficient."""
+        self._project(cube, [((*grid.texel(index, c), 1, 1), c) for c in range(SH_COEFFICIENTS)])
+        self.renderer.checkpoint("volume irradiance projection")
+
+    def _project(self, cube: ProbeCube, draws: list[tuple[tuple[int, int, int, int], int]]) -> None:
+        """Draw the projection of ``cube`` into each viewport of ``draws`` with its
+        coefficient (-1: each fragment's column's, a probe's row of nine)."""
         resolution = cube.resolution
         level = max(0, resolution.bit_length() - 1 - (PROJECTION_FACE_SIZE.bit_length() - 1))
         vao = self._program()
@@ -348,14 +409,13 @@ class IrradianceTable:
         program["level_size"].value = max(1, resolution >> level)
         bind_texture(self.ctx, self._placeholder, IRRADIANCE_UNIT)  # the scene pass binds the table again
         self.framebuffer.use()
-        apply_pass_state(self.ctx, self.STATE, (0, row, SH_COEFFICIENTS, 1))
         bind_texture(self.ctx, cube.texture, CUBE_MIP_UNIT)
-        vao.render(moderngl.TRIANGLES, vertices=3)
+        for viewport, coefficient in draws:
+            program["coefficient_index"].value = coefficient
+            apply_pass_state(self.ctx, self.STATE, viewport)
+            vao.render(moderngl.TRIANGLES, vertices=3)
         bind_texture(self.ctx, self.renderer.sky, CUBE_MIP_UNIT)  # not left bound where the next capture draws into it
-        self.projections += 1
         self.renderer.note_scene_change()
-        self.renderer.checkpoint("probe irradiance projection")
-        return True
 
     def _program(self) -> moderngl.VertexArray:
         if self._vao is None:
@@ -370,6 +430,15 @@ class IrradianceTable:
         data = np.frombuffer(self.table.read(), np.float32).reshape(height, width, 4)
         return data[row, :SH_COEFFICIENTS, :3].astype(np.float64)
 
+    def read_volume(self, grid: VolumeGrid) -> np.ndarray:
+        """The volume's coefficients as the GPU holds them, (x, y, z, 9, 3) by point (tests;
+        reads back)."""
+        width, height = self.table.size
+        data = np.frombuffer(self.table.read(), np.float32).reshape(height, width, 4).astype(np.float64)
+        nx, ny, nz = grid.points
+        tiles = data[VOLUME_ROW:VOLUME_ROW + ny * nz, :SH_COEFFICIENTS * nx, :3]  # (y z, c x, rgb)
+        return tiles.reshape(ny, nz, SH_COEFFICIENTS, nx, 3).transpose(3, 0, 1, 2, 4)
+
     def read_environment_brdf(self) -> np.ndarray:
         """The environment BRDF rows as the GPU holds them (size, size, 2) (tests; reads back)."""
         width, height = self.table.size
@@ -378,36 +447,41 @@ class IrradianceTable:
 
     # --- binding -------------------------------------------------------------------------------
     def has_boxes(self) -> bool:
-        """Whether any influence box with a projected capture lights the scene (the scene
-        pass then draws its AMBIENT_PROBES builds outside captures)."""
+        """Whether any influence box with a projected capture, or a baked irradiance volume,
+        lights the scene (the scene pass then draws its AMBIENT_PROBES or IRRADIANCE_VOLUME
+        builds outside captures: ``Gpu.ambient_defines``)."""
         self._refresh()
-        return self._count > 0
+        return bool(self.renderer.ambient_defines)
 
     def _refresh(self) -> None:
         if self._stale:
             boxes = [(centre, half, blend, self.rows[owner])
                      for owner, centre, half, blend in self._boxes if owner in self.rows]
-            block = irradiance_block(boxes)
+            block = irradiance_block(boxes, self.volume)
             if block != self._block:
                 self.ubo.write(block)
                 self._block = block
                 self.renderer.note_scene_change()
-            count = min(len(boxes), MAX_IRRADIANCE_PROBES)
-            if count and not self._count:
-                self.renderer.needs_preparing = True  # the AMBIENT_PROBES builds, made before a mirror needs them
-            self._count = count
+            self._count = min(len(boxes), MAX_IRRADIANCE_PROBES)
+            defines = ((("AMBIENT_PROBES", "1"),) if self._count else ()) \
+                + ((("IRRADIANCE_VOLUME", "1"),) if self.volume is not None else ())
+            if defines != self.renderer.ambient_defines:
+                self.renderer.ambient_defines = defines
+                self.renderer.needs_preparing = True  # their builds, made before a mirror needs them
             self._stale = False
 
     def bind(self, capturing: bool) -> bool:
         """Bind the table and the Irradiance block for a scene pass: the boxes, or none while a
         probe is captured (the module docstring: captures see the sky's irradiance alone).
-        Returns whether the pass draws with the probes' builds (``AMBIENT_PROBES``: the box
-        loop and the table's reads are a build of their own, since llvmpipe runs a loop's
-        body once even when it has nothing to do: +25% of a frame of diffuse boxes)."""
+        Returns whether the pass draws with the table's builds (``Gpu.ambient_defines``:
+        ``AMBIENT_PROBES``, the box loop and the table's reads, and ``IRRADIANCE_VOLUME``
+        are builds of their own, since llvmpipe runs a loop's body once even when it has
+        nothing to do: +25% of a frame of diffuse boxes).  No volume while a probe or a
+        volume's point is captured either."""
         self._refresh()
         bind_texture(self.ctx, self.table, IRRADIANCE_UNIT)
         bind_uniform_block(self.ctx, self.empty_ubo if capturing else self.ubo, IRRADIANCE_BINDING)
-        return not capturing and self._count > 0
+        return not capturing and bool(self.renderer.ambient_defines)
 
     def drop(self, owner: int) -> None:
         """Probe ``owner`` is gone: its row is free (and no box names it)."""

@@ -332,14 +332,15 @@ class ParticleDraw:
     def _program(self, sprite: bool, lit: bool, masked: bool, ambient_probes: bool, soft: bool,
                  ribbon: bool = False, reactive: bool = False) -> moderngl.Program:
         """The build for a textured emitter or not (``SPRITE``), lit or not (``LIT``, with the
-        shadow lookups the shadows stage compiled in, and the probes' boxes where they light
-        the scene: ``AMBIENT_PROBES``), soft or not (``SOFT``), a ribbon or not (``RIBBON``),
-        masked or not, fogged while the camera's fog is (not the reactive mask's,
+        shadow lookups the shadows stage compiled in, and the probes' boxes and an irradiance
+        volume where they light the scene: ``Gpu.ambient_defines``), soft or not (``SOFT``), a
+        ribbon or not (``RIBBON``), masked or not, fogged while the camera's fog is (not the reactive mask's,
         ``REACTIVE``: the particle's own cover and light)."""
         shadowing = self.shadows.program_defines if lit else ()
         virtual = lit and self.shadows.virtual_shining  # light through mirrors and portals, while one shines
         fog = () if reactive else self.gpu.fog.defines
-        key = (sprite, lit, masked, lit and ambient_probes, soft, shadowing, fog, ribbon, virtual, reactive)
+        ambient = self.gpu.ambient_defines if lit and ambient_probes else ()  # the boxes', a volume's light
+        key = (sprite, lit, masked, ambient, soft, shadowing, fog, ribbon, virtual, reactive)
         program = self._programs.get(key)
         if program is None:
             defines = dict(fog)
@@ -356,8 +357,7 @@ class ParticleDraw:
             if lit:
                 defines["LIT"] = "1"
                 defines.update(shadowing)
-                if ambient_probes:
-                    defines["AMBIENT_PROBES"] = "1"
+                defines.update(ambient)
                 if virtual:
                     defines["VIRTUAL_LIGHTS"] = "1"
             program = self.gpu.shaders.program("particle.vert", "particle.frag", defines=defines)

@@ -215,11 +215,14 @@ class ScenePass:
         if renderer.shaders.reloads != seen:
             programs.forget()
             seen = programs.reloads_seen
-        # What else picks a batch's program: a virtual light shining, the shadow lookups compiled.
+        # What else picks a batch's program: a virtual light shining, the shadow lookups compiled,
+        # the fog, the kept lights' kinds (spheres, rectangles, cookies) and what the light from
+        # all round reads (ScenePrograms.program).
         shadows = self.shadows
         # (And the pose and motion textures: a record binds them, made again as they grow.)
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines,
-                 renderer.pose_rows.version, renderer.object_motion.version, renderer.contact_lamp_defines)
+                 renderer.pose_rows.version, renderer.object_motion.version, renderer.contact_lamp_defines,
+                 renderer.sphere_lights, renderer.rect_lights, renderer.spot_cookies.defines, renderer.ambient_defines)
         kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked, screen))
         if kinds is None:
             kinds = self._kinds[invocations, layered, self._ambient_probes, masked, screen] = (

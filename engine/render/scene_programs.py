@@ -204,8 +204,11 @@ class ScenePrograms:
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
         self.screens.add((screen, masked))
+        # The light from all round the table gives (Gpu.ambient_defines: boxes, a volume), in a
+        # pass that draws with it (IrradianceTable.bind; never a capture's).
+        ambient = self.renderer.ambient_defines if ambient_probes else ()
         key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
-               ambient_probes, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
+               ambient, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
         program = self.built.get(key)
         if program is None:
             defines = {}
@@ -253,8 +256,9 @@ class ScenePrograms:
                     defines["PROBE_REST"] = "1"
             if virtual:  # light through mirrors and portals (shaders/include/virtual_lights.glsl)
                 defines["VIRTUAL_LIGHTS"] = "1"
-            if ambient_probes:  # diffuse light from the probes' boxes too (shaders/include/ambient.glsl)
-                defines["AMBIENT_PROBES"] = "1"
+            # Diffuse light from the probes' boxes (AMBIENT_PROBES) and an irradiance volume
+            # (IRRADIANCE_VOLUME) too (shaders/include/ambient.glsl).
+            defines.update(ambient)
             if unlit:  # depth and ids only: the composites paint every pixel over (shading_replaced)
                 defines["UNLIT_SURFACE"] = "1"
             if masked:  # the claimed pixels only (a reflection level's views)

@@ -292,7 +292,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "MAX_SHADOW_RINGS": str(views.MAX_SHADOW_RINGS),
             "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
             "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
-            "LTC_SIZE": str(LTC_SIZE), "LTC_ROW": str(views.LTC_ROW),
+            "LTC_SIZE": str(LTC_SIZE), "LTC_ROW": str(views.LTC_ROW), "VOLUME_ROW": str(views.VOLUME_ROW),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
             "MAX_CONTACT_LAMPS": str(MAX_CONTACT_LAMPS), "MAX_RECT_LIGHTS": str(MAX_RECT_LIGHTS),

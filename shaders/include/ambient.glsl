@@ -1,5 +1,6 @@
 // Diffuse image lighting: the irradiance E(n) arriving at a surface from the sky (or the
-// hemisphere fallback) and the reflection probes whose influence boxes hold it, as order-2
+// hemisphere fallback), the reflection probes whose influence boxes hold it and an irradiance
+// volume's grid (IRRADIANCE_VOLUME builds), as order-2
 // spherical harmonics (Ramamoorthi and Hanrahan 2001). The convention, the sources and why
 // the boxes are weighed per pixel: engine/render/irradiance.py. Coefficients are the
 // irradiance's, E_lm = A_l L_lm, in the order (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1),
@@ -10,6 +11,9 @@ layout(std140) uniform Irradiance {
     ivec4 count;                              // x: boxes (0 while a probe is captured: sky only)
     vec4 centre[MAX_IRRADIANCE_PROBES];       // xyz: the box's centre; w: its blend distance
     vec4 half_size[MAX_IRRADIANCE_PROBES];    // xyz: half its size; w: its row of the table
+    vec4 volume_low;                          // xyz: the volume's lowest corner point; w: its blend distance
+    vec4 volume_high;                         // xyz: its highest; w: its normal bias
+    ivec4 volume_points;                      // xyz: its points along x, y, z; w: 1 while it lights
 } irradiance;
 uniform sampler2D irradiance_table;           // row r, texel i: coefficient i of the probe of row r
 
@@ -65,12 +69,58 @@ struct AmbientBoxes {
     int found;        // boxes holding p: 0, 1 or 2
     int best0, best1; // their indices in the block
     float w0, w1;     // their weights, normalised
-    float sky;        // the sky's share: 1 - w0 - w1
+    float sky;        // the sky's share: 1 - w0 - w1 (- volume)
+    float volume;     // the irradiance volume's weight (its grid takes it from the boxes and sky)
+#ifdef IRRADIANCE_VOLUME
+    // Its coefficients at the point, blended between the eight grid points about it.
+    vec3 c0, c1, c2, c3, c4, c5, c6, c7, c8;
+#endif
 };
 
-AmbientBoxes ambient_boxes(vec3 p) {
+#ifdef IRRADIANCE_VOLUME
+// Coefficient c of the volume at grid coordinates g (in points from its lowest corner): tile
+// (c, y) of the table holds layer y, x across and z down (irradiance.VolumeGrid.texel), so
+// bilinear filtering blends across x and z within a tile (g clamped to the grid: a lookup's
+// footprint never leaves its tile) and a mix the two layers about g.y.
+vec3 volume_coefficient(float c, vec2 at0, vec2 at1, float step, float fy, vec2 size) {
+    vec2 across = vec2(c * step, 0.0);
+    return mix(textureLod(irradiance_table, (at0 + across) / size, 0.0).rgb,
+               textureLod(irradiance_table, (at1 + across) / size, 0.0).rgb, fy);
+}
+
+// The volume's weight at p (0 outside its box, rising linearly from its walls to 1 at the blend
+// distance inside, as a probe's box_weight) and its coefficients there, read at p moved by the
+// normal bias along n.
+void volume_at(inout AmbientBoxes b, vec3 p, vec3 n) {
+    vec3 low = irradiance.volume_low.xyz, high = irradiance.volume_high.xyz;
+    vec3 q = p + n * irradiance.volume_high.w;
+    vec3 away = min(q - low, high - q);
+    float inside = min(min(away.x, away.y), away.z);
+    float blend = irradiance.volume_low.w;
+    b.volume = inside < 0.0 || irradiance.volume_points.w == 0 ? 0.0 : (blend <= 0.0 ? 1.0 : min(1.0, inside / blend));
+    ivec3 count = irradiance.volume_points.xyz;
+    vec3 g = clamp((q - low) / (high - low), 0.0, 1.0) * vec3(count - 1);
+    float j0 = min(floor(g.y), float(count.y - 2));
+    float fy = g.y - j0;
+    vec2 size = vec2(textureSize(irradiance_table, 0));
+    vec2 at0 = vec2(g.x + 0.5, float(VOLUME_ROW) + j0 * float(count.z) + g.z + 0.5);
+    vec2 at1 = at0 + vec2(0.0, float(count.z));
+    float step = float(count.x);
+    b.c0 = volume_coefficient(0.0, at0, at1, step, fy, size);
+    b.c1 = volume_coefficient(1.0, at0, at1, step, fy, size);
+    b.c2 = volume_coefficient(2.0, at0, at1, step, fy, size);
+    b.c3 = volume_coefficient(3.0, at0, at1, step, fy, size);
+    b.c4 = volume_coefficient(4.0, at0, at1, step, fy, size);
+    b.c5 = volume_coefficient(5.0, at0, at1, step, fy, size);
+    b.c6 = volume_coefficient(6.0, at0, at1, step, fy, size);
+    b.c7 = volume_coefficient(7.0, at0, at1, step, fy, size);
+    b.c8 = volume_coefficient(8.0, at0, at1, step, fy, size);
+}
+#endif
+
+AmbientBoxes ambient_boxes(vec3 p, vec3 n) {
     AmbientBoxes b;
-    b.found = 0; b.best0 = 0; b.best1 = 0; b.w0 = 0.0; b.w1 = 0.0; b.sky = 1.0;
+    b.found = 0; b.best0 = 0; b.best1 = 0; b.w0 = 0.0; b.w1 = 0.0; b.sky = 1.0; b.volume = 0.0;
 #ifdef AMBIENT_PROBES
     int best0 = 0, best1 = 0;
     float w0 = 0.0, w1 = 0.0, d0 = 0.0, d1 = 0.0;  // a weight of 0: no box yet
@@ -93,6 +143,12 @@ AmbientBoxes ambient_boxes(vec3 p) {
     b.w0 = w0 * scale; b.w1 = w1 * scale;
     b.sky = max(1.0 - (w0 + w1) * scale, 0.0);
 #endif
+#ifdef IRRADIANCE_VOLUME
+    // The volume takes its weight's share; the boxes and the sky keep what it leaves.
+    volume_at(b, p, n);
+    float rest = 1.0 - b.volume;
+    b.w0 *= rest; b.w1 *= rest; b.sky *= rest;
+#endif
     return b;
 }
 
@@ -103,7 +159,8 @@ vec3 sky_irradiance(vec3 n) {
                          lights.sky_sh[8].rgb, n);
 }
 
-// The boxes' part of E(n): each box's irradiance times its weight (0 outside every box).
+// The boxes' part of E(n): each box's irradiance times its weight (0 outside every box), and
+// the volume's by its weight.
 vec3 boxes_irradiance(AmbientBoxes b, vec3 n) {
     vec3 e = vec3(0.0);
 #ifdef AMBIENT_PROBES
@@ -113,6 +170,9 @@ vec3 boxes_irradiance(AmbientBoxes b, vec3 n) {
         int box = k == 0 ? b.best0 : b.best1;
         e += table_irradiance(int(irradiance.half_size[box].w), n) * (k == 0 ? b.w0 : b.w1);
     }
+#endif
+#ifdef IRRADIANCE_VOLUME
+    e += sh_irradiance(b.c0, b.c1, b.c2, b.c3, b.c4, b.c5, b.c6, b.c7, b.c8, n) * b.volume;
 #endif
     return e;
 }
