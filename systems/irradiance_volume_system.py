@@ -19,6 +19,10 @@ frame (under a budget below six views, one point a frame is drawn past it, when 
 frame's first view, so the bake ends).  Changing only ``blend_distance`` or ``normal_bias``
 captures nothing.
 
+Where each point is captured from is worked out when its bake starts: a point inside a solid
+object is captured from just outside it (``engine/rules/volume_rules.py``: a probe in a wall
+would see through it).
+
 One volume a world: the lowest entity's; another is said once (``VolumeLimitWarning``) and
 ignored.  Its scratch cube is released when the volume goes.
 """
@@ -27,6 +31,7 @@ from __future__ import annotations
 import warnings
 
 import esper
+import numpy as np
 from pyglm import glm
 
 from components import IrradianceVolume, Transform
@@ -35,6 +40,7 @@ from engine.core.world import World
 from engine.render.irradiance import VolumeGrid
 from engine.render.probes import face_view
 from engine.render.renderer import Renderer
+from engine.rules.volume_rules import capture_margin, pushed_out, solid_boxes
 
 FACES = 6  # views a point's capture spends of the view budget
 
@@ -64,6 +70,8 @@ class IrradianceVolumeSystem(esper.Processor):
         self._capture: tuple | None = None     # what places and draws its captures, as last baked
         self._grid: VolumeGrid | None = None   # the grid those captures fill
         self._due: list[tuple[int, int, int]] = []  # points still to capture, in order
+        self._from: dict[tuple[int, int, int], np.ndarray] = {}  # where each is captured from (this bake's)
+        self.points_moved = 0                  # points of the last bake captured from outside a solid object
         self._whole = False                    # every point of _grid holds a capture
         self._requests = 0
         self._said_more = False
@@ -96,7 +104,7 @@ class IrradianceVolumeSystem(esper.Processor):
             # A new grid: its tiles hold nothing it means until every point is captured.
             self._capture, self._grid, self._whole = capture, grid, False
             self._requests = volume.requests
-            self._due = grid_points(grid.points)
+            self._start(grid, volume.near)
             self.renderer.irradiance.set_volume(None)
         elif grid != self._grid:  # its blend distance or normal bias alone
             self._grid = grid
@@ -104,10 +112,22 @@ class IrradianceVolumeSystem(esper.Processor):
                 self.renderer.irradiance.set_volume(grid)
         if volume.requests != self._requests:
             self._requests = volume.requests
-            self._due = grid_points(grid.points)
+            self._start(grid, volume.near)
         if not self._due and volume.refresh == "continuous":
-            self._due = grid_points(grid.points)
+            self._start(grid, volume.near)
         self._capture_due(volume, grid)
+
+    def _start(self, grid: VolumeGrid, near: float) -> None:
+        """A bake of every point of ``grid``, each captured from its place or from outside the
+        solid object it lies in (``volume_rules.pushed_out``)."""
+        self._due = grid_points(grid.points)
+        places = np.array([grid.position(index) for index in self._due])
+        low, high = np.array(grid.low), np.array(grid.high)
+        margin = capture_margin(near)
+        taken = pushed_out(places, *solid_boxes(self.world, low, high, margin), toward=(low + high) / 2.0,
+                           margin=margin)
+        self._from = dict(zip(self._due, taken, strict=True))
+        self.points_moved = int(np.count_nonzero(np.any(taken != places, axis=1)))
 
     def _capture_due(self, volume: IrradianceVolume, grid: VolumeGrid) -> None:
         stats = self.renderer.stats
@@ -121,7 +141,7 @@ class IrradianceVolumeSystem(esper.Processor):
         probes, table = self.renderer.probes, self.renderer.irradiance
         key = self.key
         for index in self._due[:count]:
-            position = glm.vec3(grid.position(index))
+            position = glm.vec3(*self._from[index])
             views = {face: face_view(face, position, volume.near, volume.far, volume.resolution, skip=self.owner,
                                      layers=volume.layer_mask) for face in range(FACES)}
             probes.capture(key, views, None, 0)

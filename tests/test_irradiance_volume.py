@@ -1,0 +1,400 @@
+"""Irradiance volumes (``IrradianceVolume``): a grid of light probes baked into the irradiance
+table, read by the scene's light from all round.  The references are computed here, apart
+from the engine: each point's light is the room around it found by casting each direction's
+ray to the wall it meets, its colours projected on the harmonics in numpy; the shaded floor
+is the grid's coefficients as the GPU holds them, blended between points in numpy."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    ComponentValueError,
+    HemisphereLight,
+    IrradianceVolume,
+    Material,
+    MeshRef,
+    Skybox,
+    Transform,
+    Visibility,
+)
+from engine.assets.mesh import box, plane
+from engine.core.budget import ViewBudget
+from engine.core.cube_faces import face_directions
+from engine.core.errors import VolumeLimitWarning
+from engine.render.irradiance import evaluate_sh, project_faces
+from systems.irradiance_volume_system import volume_grid
+from tests.support import look_from, pixel_rays, srgb_to_linear
+
+ROOM = 1.5   # the room's inner half size: walls at +-1.5 on each axis
+# Each wall's colour (unlit: its radiance), by axis and side (-, +).
+WALLS = {(0, 0): (0.9, 0.1, 0.1), (0, 1): (0.1, 0.8, 0.2), (1, 0): (0.3, 0.3, 0.3),
+         (1, 1): (0.9, 0.9, 0.6), (2, 0): (0.1, 0.2, 0.9), (2, 1): (0.6, 0.4, 0.1)}
+
+
+def room(world, walls=WALLS, black_sky: bool = True) -> None:
+    """A closed cube room of unlit walls, each a thick box whose inner face lies on the room's
+    side (no sky reaches inside), under a black sky (``black_sky``)."""
+    if black_sky:
+        world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+    for (axis, side), colour in walls.items():
+        centre = [0.0, 0.0, 0.0]
+        centre[axis] = (ROOM + 0.1) * (1 if side else -1)
+        size = [2 * ROOM + 0.4] * 3
+        size[axis] = 0.2
+        world.spawn(Transform(position=tuple(centre)), MeshRef(box(tuple(size))),
+                    Material(color=(*colour, 1.0), unlit=True))
+
+
+def room_light(point: np.ndarray, walls=WALLS, size: int = 64) -> np.ndarray:
+    """The irradiance coefficients (9, 3) at ``point`` inside the room: every texel of a cube
+    map there shows the wall its direction's ray meets first."""
+    faces = np.zeros((6, size, size, 3))
+    for face in range(6):
+        d = face_directions(face, size)
+        with np.errstate(divide="ignore"):
+            t = np.where(d > 0, (ROOM - point) / d, (-ROOM - point) / d)  # each axis's wall along the ray
+        t = np.where(np.abs(d) < 1e-12, np.inf, t)
+        axis = np.argmin(t, axis=-1)
+        side = np.take_along_axis(d, axis[..., None], -1)[..., 0] > 0
+        for (a, s), colour in walls.items():
+            faces[face][(axis == a) & (side == bool(s))] = colour
+    return project_faces(faces)
+
+
+def volume_light(runner, volume: IrradianceVolume, centre=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The grid's coefficients as the GPU holds them, (x, y, z, 9, 3)."""
+    return runner.engine.renderer.irradiance.read_volume(volume_grid(volume, glm.vec3(centre)))
+
+
+def test_each_points_light_is_the_room_around_it(scene):
+    """A 3 x 2 x 2 grid (x, y and z told apart by their counts) in a closed room of six
+    coloured walls: each point's nine coefficients, captured and projected on the GPU into its
+    texels of the table, are those of the room seen from the point, cast and projected in
+    numpy (within 2% of the constant term's largest: the capture's 16-texel level against 64
+    texels here)."""
+    volume = IrradianceVolume(size=(2.0, 1.6, 1.2), points=(3, 2, 2), points_per_frame=12)
+
+    def build(world):
+        room(world)
+        look_from(world, (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
+        world.spawn(Transform(position=(0.2, -0.3, 0.1)), volume)
+    runner = scene(build, (32, 24))
+    runner.frame()
+    grid = volume_grid(volume, glm.vec3(0.2, -0.3, 0.1))
+    shown = runner.engine.renderer.irradiance.read_volume(grid)
+    scale = max(abs(room_light(np.zeros(3))[0]).max(), 1e-6)
+    worst = 0.0
+    for index in np.ndindex(3, 2, 2):
+        expected = room_light(np.array(grid.position(index)))
+        worst = max(worst, abs(shown[index] - expected).max() / scale)
+    assert worst < 0.02, worst
+    # The corners differ from each other (the test would pass on one point copied everywhere).
+    assert abs(shown[0, 0, 0] - shown[2, 1, 1]).max() > 0.1 * scale
+
+
+def test_points_in_the_walls_are_captured_from_inside_the_room(scene):
+    """A 2 x 2 x 2 grid whose corner points lie on the room's corners, in its walls: each is
+    captured from a tenth of a metre inside (twice the near plane past every wall it touched),
+    and its light is the room seen from there (a capture in the wall would see through it: the
+    black sky outside)."""
+    volume = IrradianceVolume(size=(3.0, 3.0, 3.0), points=(2, 2, 2), points_per_frame=8)
+
+    def build(world):
+        room(world)
+        look_from(world, (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
+        world.spawn(Transform(), volume)
+    runner = scene(build, (32, 24))
+    runner.frame()
+    assert runner.engine.stages["volume"].points_moved == 8
+    shown = volume_light(runner, volume)
+    scale = abs(room_light(np.zeros(3))[0]).max()
+    for index in np.ndindex(2, 2, 2):
+        inside = (np.array(index) * 2.0 - 1.0) * (ROOM - 0.1)
+        assert abs(shown[index] - room_light(inside)).max() < 0.02 * scale
+
+
+def test_a_point_in_a_solid_box_is_moved_out_through_its_nearest_face():
+    """``volume_rules.pushed_out`` against the box's own geometry: a turned, stretched box
+    (2 x 1 x 0.5 m after scaling); a point in it leaves through the face nearest in metres,
+    ``margin`` past it (the y faces, 0.1 m off, not the x faces 0.2 local units off: 0.4 m);
+    one as near two faces leaves towards ``toward``; one nearer the face away from ``toward``
+    (0.2 m against 0.3 m) leaves towards it all the same; one outside every box (and past the
+    margin) stays; a point in two boxes leaves both, through a face towards ``toward``."""
+    from engine.rules.volume_rules import pushed_out
+
+    turn = glm.rotate(glm.mat4(1.0), glm.radians(30.0), glm.vec3(0.0, 1.0, 0.0))
+    model = glm.translate(glm.mat4(1.0), glm.vec3(1.0, 0.0, 0.0)) * turn * glm.scale(glm.mat4(1.0),
+                                                                                       glm.vec3(2.0, 1.0, 0.5))
+    matrix = np.array(model.to_list()).T
+    lows, highs = np.array([[-0.5, -0.5, -0.5]]), np.array([[0.5, 0.5, 0.5]])
+    inverse = np.linalg.inv(matrix)
+
+    def local(p):
+        return inverse[:3, :3] @ p + inverse[:3, 3]
+
+    def world(p):
+        return matrix[:3, :3] @ p + matrix[:3, 3]
+
+    nearest = world(np.array([0.3, 0.4, 0.0]))      # 0.1 m from the +y face
+    middle = world(np.array([0.0, 0.0, 0.0]))       # 0.25 m from both z faces (and 0.5 from the y faces)
+    away = world(np.array([0.0, 0.0, -0.1]))        # 0.2 m from the -z face, 0.3 m from the +z face
+    outside = world(np.array([0.0, 0.0, 0.9]))
+    toward = world(np.array([0.0, 3.0, 3.0]))
+    moved = pushed_out(np.array([nearest, middle, away, outside]), matrix[None], lows, highs, toward, margin=0.1)
+    np.testing.assert_allclose(local(moved[0]), [0.3, 0.5 + 0.1, 0.0], atol=1e-9)
+    np.testing.assert_allclose(local(moved[1]), [0.0, 0.0, 0.5 + 0.1 / 0.5], atol=1e-9)
+    np.testing.assert_allclose(local(moved[2]), [0.0, 0.0, 0.5 + 0.1 / 0.5], atol=1e-9)
+    np.testing.assert_allclose(moved[3], outside)
+    # Two overlapping axis-aligned boxes: a point in both ends outside both.
+    two = np.stack([np.eye(4), np.eye(4)])
+    two[1, :3, 3] = (0.8, 0.0, 0.0)
+    both = pushed_out(np.array([[0.45, 0.0, 0.0]]), two, np.tile(lows, (2, 1)), np.tile(highs, (2, 1)),
+                      np.array([0.6, 5.0, 0.0]), margin=0.05)[0]
+    assert both[1] == pytest.approx(0.55)  # out of the first through +x, of the second through the top
+    for centre in ((0.0, 0.0, 0.0), (0.8, 0.0, 0.0)):
+        assert np.max(np.abs(both - centre)) > 0.5 + 0.04
+
+
+def floor_scene(volume: IrradianceVolume | None, sky=(0.5, 0.5, 0.5), reflection: float = 0.0, roughness=1.0):
+    """A white floor under a hemisphere sky, a red wall and a blue wall of light standing on
+    it (unlit: their colours are their radiance), seen from above; ``volume`` centred at
+    ``VOLUME_AT``."""
+    def build(world):
+        look_from(world, (0.0, 5.0, 2.0), (0.0, 0.0, 0.0), fov=70.0)
+        world.spawn(HemisphereLight(sky=sky, ground=(0.0, 0.0, 0.0)))
+        world.spawn(Transform(), MeshRef(plane(12.0, 12.0)),
+                    Material(color=(1.0, 1.0, 1.0, 1.0), roughness=roughness, environment_reflection=reflection))
+        world.spawn(Transform(position=(-1.5, 1.0, 0.0)), MeshRef(box((0.1, 2.0, 3.0))),
+                    Material(color=(1.0, 0.2, 0.1, 1.0), unlit=True))
+        world.spawn(Transform(position=(0.0, 1.0, -1.5)), MeshRef(box((3.0, 2.0, 0.1))),
+                    Material(color=(0.1, 0.2, 1.0, 1.0), unlit=True))
+        if volume is not None:
+            world.spawn(Transform(position=VOLUME_AT), volume)
+    return build
+
+
+# The floor volumes' centre: a box 2 m high from 0.1 m over the floor (its lowest points above
+# it; the floor within by the normal bias).
+VOLUME_AT = (0.0, 1.1, 0.0)
+
+
+def floor_pixels(runner, size) -> tuple[np.ndarray, np.ndarray]:
+    """The floor's pixels of the runner's next frame (FXAA off): linear RGB and their points."""
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame()).reshape(-1, 3)
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    rays = rays.reshape(-1, 3)
+    t = -eye[1] / rays[:, 1]
+    points = eye + rays * t[:, None]
+    ids = runner.ids().reshape(-1)
+    floor = ids == ids[np.argmax(t * (np.abs(points[:, 0]) < 0.5) * (np.abs(points[:, 2] - 1.0) < 0.5))]
+    return shown[floor], points[floor]
+
+
+def test_the_floor_reads_the_grid_between_its_points(scene):
+    """A white floor's light from all round, through a 4 x 2 x 3 grid with a blend distance:
+    the grid's coefficients as the GPU holds them, at each floor point moved up by the normal
+    bias, blended between the eight points about it (trilinear, in numpy) and weighed against
+    the sky by the distance inside the box's walls, then E(+y) / pi: within 0.02 of each
+    pixel's colour, in 99% of the floor's pixels (the rest on the box's edges and the walls'
+    feet, where a pixel straddles them)."""
+    size = (96, 72)
+    volume = IrradianceVolume(size=(3.0, 2.0, 3.0), points=(4, 2, 3), points_per_frame=24, blend_distance=0.15,
+                              normal_bias=0.3)
+    runner = scene(floor_scene(volume), size)
+    shown, points = floor_pixels(runner, size)
+    grid = volume_grid(volume, glm.vec3(VOLUME_AT))
+    coefficients = volume_light(runner, volume, VOLUME_AT)
+    low, high = np.array(grid.low), np.array(grid.high)
+    q = points + np.array([0.0, volume.normal_bias, 0.0])
+    counts = np.array(grid.points)
+    g = np.clip((q - low) / (high - low), 0.0, 1.0) * (counts - 1)
+    base = np.minimum(np.floor(g), counts - 2).astype(int)
+    f = g - base
+    blended = np.zeros((len(points), 9, 3))
+    for corner in np.ndindex(2, 2, 2):
+        weight = np.prod(np.where(np.array(corner) == 1, f, 1.0 - f), axis=1)
+        i, j, k = (base + np.array(corner)).T
+        blended += weight[:, None, None] * coefficients[i, j, k]
+    inside = np.min(np.minimum(q - low, high - q), axis=1)
+    w = np.where(inside < 0.0, 0.0, np.minimum(1.0, inside / volume.blend_distance))
+    up = np.array([0.0, 1.0, 0.0])
+    grid_e = np.stack([evaluate_sh(c, up) for c in blended])
+    expected = w[:, None] * grid_e / np.pi + (1.0 - w[:, None]) * 0.5  # a white floor under the sky shows it
+    error = np.abs(shown - expected).max(axis=1)
+    assert np.mean(error < 0.02) > 0.99, (np.mean(error < 0.02), np.percentile(error, 99))
+    # The grid's light is not one colour: the floor by the red wall (x = -1.5) is redder than
+    # by the blue one (z = -1.5).
+    near_red = (w > 0.99) & (points[:, 0] < -1.0) & (np.abs(points[:, 2]) < 0.5)
+    near_blue = (w > 0.99) & (points[:, 2] < -1.0) & (np.abs(points[:, 0]) < 0.5)
+    redness = shown[:, 0] - shown[:, 2]
+    assert near_red.sum() > 10 and near_blue.sum() > 10
+    assert redness[near_red].mean() > redness[near_blue].mean() + 0.1
+
+
+def test_a_dark_room_dims_the_skys_reflection(scene):
+    """A polished floor inside a closed black room under a bright sky reflects the sky where
+    nothing says the room is dark; with a volume whose captures see the black walls (its points
+    on the room's corners, so captured from just inside them), its reflection is the grid's
+    light over the sky's (Unreal's and HDRP's normalisation): nothing."""
+    black = {key: (0.0, 0.0, 0.0) for key in WALLS}
+
+    def build(with_volume):
+        def make(world):
+            room(world, black, black_sky=False)
+            world.spawn(HemisphereLight(sky=(2.0, 2.0, 2.0), ground=(2.0, 2.0, 2.0)))
+            world.spawn(Transform(position=(0.0, 0.01 - ROOM, 0.0)), MeshRef(plane(3.0, 3.0)),
+                        Material(color=(1.0, 1.0, 1.0, 1.0), metallic=1.0, roughness=0.2),
+                        Visibility(in_probes=False))  # (the captures see the black room alone)
+            look_from(world, (0.0, 0.0, 1.2), (0.0, -ROOM, 0.0))
+            if with_volume:
+                world.spawn(Transform(), IrradianceVolume(size=(3.0, 3.0, 3.0), points=(2, 2, 2), points_per_frame=8))
+        return make
+    bright = scene(build(False), (48, 36))
+    bright.frame()
+    plain = srgb_to_linear(bright.frame()).mean()
+    dark = scene(build(True), (48, 36))
+    dark.frame()
+    dimmed = srgb_to_linear(dark.frame()).mean()
+    assert plain > 0.3
+    assert dimmed < 0.03 * plain, (dimmed, plain)
+
+
+def test_the_bake_takes_points_per_frame_under_the_view_budget_and_lights_once_whole(scene):
+    """Twelve points, five a frame: three frames of captures (5, 5, 2), the grid lighting the
+    scene only from the third (the IRRADIANCE_VOLUME builds with it); then nothing more is
+    captured ("once").  Under a budget of 12 views, two points a frame."""
+    volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(3, 2, 2), points_per_frame=5)
+    runner = scene(floor_scene(volume), (32, 24))
+    renderer = runner.engine.renderer
+    counts, lit = [], []
+    for _ in range(5):
+        runner.frame()
+        counts.append(runner.stats.volume_points)
+        lit.append(renderer.irradiance.volume is not None)
+    assert counts == [5, 5, 2, 0, 0]
+    assert lit == [False, False, True, True, True]
+    assert ("IRRADIANCE_VOLUME", "1") in renderer.ambient_defines
+    assert runner.stats.view_budget is None
+
+    volume_budget = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(3, 2, 2), points_per_frame=5)
+    limited = scene(floor_scene(volume_budget), (32, 24))
+    limited.world.resources[ViewBudget] = ViewBudget(views=12)
+    limited.frame()
+    assert limited.stats.volume_points == 2 and limited.stats.views_spent <= 12
+
+
+def test_moving_the_volume_bakes_it_again_and_its_blend_alone_does_not(scene):
+    """Moved, the volume's grid is captured whole again (not lighting the scene meanwhile);
+    a new blend distance or normal bias reaches the block with no capture."""
+    volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=4)
+    runner = scene(floor_scene(volume), (32, 24))
+    table = runner.engine.renderer.irradiance
+    runner.frame()
+    runner.frame()
+    assert table.volume is not None
+    entity = runner.world.query_one(IrradianceVolume)[0][0]
+    runner.world.get(entity, Transform).position = glm.vec3(0.5, 0.0, 0.0)
+    runner.frame()
+    assert runner.stats.volume_points == 4 and table.volume is None
+    runner.frame()
+    assert table.volume is not None and table.volume.low[0] == pytest.approx(-0.5)
+    volume.blend_distance = 0.3
+    volume.normal_bias = 0.2
+    runner.frame()
+    assert runner.stats.volume_points == 0
+    assert (table.volume.blend, table.volume.normal_bias) == (pytest.approx(0.3), pytest.approx(0.2))
+
+
+def test_a_bake_again_gives_the_same_light_and_continuous_keeps_capturing(scene):
+    """The captures see neither the grid nor the probes' light (one bounce), so a bake after
+    ``request()`` writes the coefficients the first wrote, while the grid lights the scene; a
+    "continuous" volume captures every frame."""
+    volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8)
+    runner = scene(floor_scene(volume), (32, 24))
+    runner.frame()
+    first = volume_light(runner, volume)
+    volume.request()
+    runner.frame()
+    assert runner.stats.volume_points == 8 and runner.engine.renderer.irradiance.volume is not None
+    np.testing.assert_allclose(volume_light(runner, volume), first, rtol=1e-5, atol=1e-6)
+    assert np.abs(first).max() > 0.1
+    volume.refresh = "continuous"
+    volume.points_per_frame = 3
+    captured = []
+    for _ in range(3):
+        runner.frame()
+        captured.append(runner.stats.volume_points)
+    assert captured == [3, 3, 2] or captured == [3, 3, 3]
+
+
+def test_removing_the_volume_releases_its_cube_and_its_light(scene):
+    volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8)
+    runner = scene(floor_scene(volume), (32, 24))
+    renderer = runner.engine.renderer
+    runner.frame()
+    entity = runner.world.query_one(IrradianceVolume)[0][0]
+    assert -entity in renderer.probe_cubes and renderer.irradiance.volume is not None
+    runner.world.delete_entity(entity)
+    runner.frame()
+    assert -entity not in renderer.probe_cubes
+    assert renderer.irradiance.volume is None and renderer.ambient_defines == ()
+
+
+def test_a_second_volume_is_said_and_ignored(scene):
+    def build(world):
+        floor_scene(IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8))(world)
+        world.spawn(Transform(position=(5.0, 0.0, 0.0)), IrradianceVolume(points=(2, 2, 2)))
+    runner = scene(build, (32, 24))
+    with pytest.warns(VolumeLimitWarning, match="one lights a world"):
+        runner.frame()
+    assert runner.stats.volume_points == 8
+    assert runner.engine.renderer.irradiance.volume.low == pytest.approx((-1.0, 0.1, -1.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runner.frame()  # said once
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("points", (1, 2, 2), r"points must be an int in \[2, 16\]"),
+    ("points", (2, 2), "three ints"),
+    ("points", (2, 2, 17), r"\[2, 16\]"),
+    ("size", (1.0, 0.0, 1.0), r"every side in \(0, 1e5\]"),
+    ("resolution", 24, "power of two"),
+    ("resolution", 8, r"\[16, 128\]"),
+    ("normal_bias", -0.1, ">= 0"),
+    ("refresh", "sometimes", "must be one of"),
+    ("points_per_frame", 0, r"\[1, 4096\]"),
+    ("blend_distance", 3.0, "at most half the box's smallest side"),
+])
+def test_values_are_checked(field, value, match):
+    with pytest.raises(ComponentValueError, match=match):
+        IrradianceVolume(**{field: value})
+    volume = IrradianceVolume()
+    with pytest.raises(ComponentValueError, match=match):
+        setattr(volume, field, value)
+
+
+def test_a_level_file_keeps_a_volume(tmp_path):
+    from engine.assets.level_file import LevelError, load_level, save_level
+    from engine.core.world import World
+
+    text = ('[level]\nname = "lit"\n\n[[entity]]\nname = "grid"\nTransform = { position = [0.0, 1.5, 0.0] }\n'
+            "IrradianceVolume = { size = [6.0, 3.0, 4.0], points = [6, 3, 4], blend_distance = 0.5, "
+            'refresh = "continuous" }\n')
+    (tmp_path / "lit.toml").write_text(text)
+    world = World()
+    saved = save_level(world, tmp_path / "again.toml", load_level(tmp_path / "lit.toml").spawn(world), name="lit")
+    again = World()
+    entity = load_level(saved).spawn(again)["grid"]
+    volume = again.get(entity, IrradianceVolume)
+    assert (tuple(volume.size), volume.points, volume.blend_distance, volume.refresh) == \
+        ((6.0, 3.0, 4.0), (6, 3, 4), 0.5, "continuous")
+    (tmp_path / "bad.toml").write_text(text.replace("points = [6, 3, 4]", "points = [6, 3, 40]"))
+    with pytest.raises(LevelError, match="points"):
+        load_level(tmp_path / "bad.toml").spawn(World())
