@@ -131,6 +131,24 @@ def _rect_lights(ctx):
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 
 
+def _irradiance_volume(ctx):
+    """The mirror ring in an irradiance volume (its points captured a few a frame, one inside
+    a box moved out of it; then the IRRADIANCE_VOLUME builds, in the mirrors' levels too) with
+    a reflection probe's influence box over part of it (AMBIENT_PROBES with it), and a lit
+    particle cloud reading both."""
+    from benchmarks.mirrors import MirrorRing
+    from components import IrradianceVolume, ParticleEmitter, ReflectionProbe, Transform
+
+    def configure(engine):
+        world = engine.world
+        world.spawn(Transform(position=(0.0, 1.0, 0.0)),
+                    IrradianceVolume(size=(8.0, 2.0, 8.0), points=(3, 2, 3), points_per_frame=8, resolution=16,
+                                     blend_distance=0.5))
+        world.spawn(Transform(position=(2.0, 1.0, 0.0)), ReflectionProbe(resolution=16, influence=(3.0, 3.0, 3.0)))
+        world.spawn(Transform(position=(0.0, 0.5, 1.0)), ParticleEmitter(rate=200.0, lit=True))
+    return _engine_frames(ctx, MirrorRing(3), 4, configure)
+
+
 def _cutouts(ctx):
     """The mirror ring with two cutout grates (two cutoffs, one double-sided, one with an
     occlusion map) and a vertex-coloured quad over its boxes, the lamp casting (the layered cube's cutout build) and a
@@ -263,6 +281,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "point_shadows": _point_shadows,
     "spot_shadows": _spot_shadows,
     "rect_lights": _rect_lights,
+    "irradiance_volume": _irradiance_volume,
     "cutouts_occlusion": _cutouts,
     "fog_per_mirror": _fog("per_mirror"),
     "fog_batched": _fog("batched"),
