@@ -41,6 +41,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``lamp_shadows``: no sun shadows; the ring's lamp casts from its cube, the "grid" filter;
 * ``soft_lamp``: the same with the lamp a sphere of 0.2 m: its shadows soft (percentage-closer
   soft shadows): its cost is its ratio to ``off`` against ``lamp_shadows``';
+* ``volume``: no shadows; an ``IrradianceVolume`` of 6 x 2 x 6 points over the ring, baked in
+  the first frame (its lookups, 18 filtered reads a pixel, are the cost measured);
 * ``fog``: no shadows; height fog with sun scatter on the camera (``Fog``: every view, the
   sky and the composites fogged);
 * ``fog_uniform``: the same with fog the same everywhere and no glow (the cheapest fog build);
@@ -162,6 +164,7 @@ from components import (
     ContactShadows,
     DirectionalLight,
     Fog,
+    IrradianceVolume,
     Material,
     MeshRef,
     Mirror,
@@ -321,6 +324,14 @@ def _rect_lamp(engine: Engine) -> None:
     for entity, light in engine.world.query_one(PointLight):
         light.rectangle = (1.0, 0.5)
         engine.world.get(entity, Transform).rotation = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+
+
+def _volume(engine: Engine) -> None:
+    """No shadows; an irradiance volume of 6 x 2 x 6 points over the ring, baked whole in the
+    first frame: the frames measured read it (the IRRADIANCE_VOLUME builds)."""
+    _sun_shadows(engine, False)
+    engine.world.spawn(Transform(position=(0.0, 1.5, 0.0)),
+                       IrradianceVolume(size=(12.0, 3.0, 12.0), points=(6, 2, 6), points_per_frame=72))
 
 
 def _fog(engine: Engine) -> None:
@@ -489,6 +500,7 @@ VARIANTS: list[Variant] = [
     Variant("lamps_8_rect", _lamps_8_rect, "the same, the first of them a 0.8 x 0.4 m panel"),
     Variant("lamp_shadows", _lamp_shadows, "no sun shadows; the lamp casts from its cube (the grid filter)"),
     Variant("soft_lamp", _soft_lamp, "the same with the lamp a sphere of 0.2 m: soft shadows"),
+    Variant("volume", _volume, "no shadows; an irradiance volume of 6 x 2 x 6 points over the ring"),
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),
