@@ -532,6 +532,9 @@ class EditorPanels:
                                      imgui.ImVec2(at.x, at.y + r), imgui.ImVec2(at.x - r, at.y), emitter)
             elif marker.kind == "decal":  # a violet square
                 draw.add_rect_filled(imgui.ImVec2(at.x - r, at.y - r), imgui.ImVec2(at.x + r, at.y + r), decal)
+            elif marker.kind == "volume":  # a cyan square's outline (a probe's colour: a grid of them)
+                draw.add_rect(imgui.ImVec2(at.x - r, at.y - r), imgui.ImVec2(at.x + r, at.y + r), probe, 0.0, 0,
+                              2.0 * self.scale)
             else:
                 draw.add_circle(at, r, probe, 0, 2.0 * self.scale)
             if marker.entity == selected:

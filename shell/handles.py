@@ -16,7 +16,16 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import Decal, DirectionalLight, MeshRef, ParticleEmitter, PointLight, ReflectionProbe, Transform
+from components import (
+    Decal,
+    DirectionalLight,
+    IrradianceVolume,
+    MeshRef,
+    ParticleEmitter,
+    PointLight,
+    ReflectionProbe,
+    Transform,
+)
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.probe_rules import world_bounds
@@ -181,7 +190,8 @@ class ReachOutline:
 def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> ReachOutline | None:
     """``entity``'s ``ReachOutline`` in the view ``view_proj`` on an output of ``size``: its
     sun's arrow, its point light's reach, its particle emitter's launch cone, its decal's box
-    (and the way it throws), else its probe's influence box; None when it has
+    (and the way it throws), its irradiance volume's box (and where its blend starts), else
+    its probe's influence box; None when it has
     none of them (or no Transform, but for a sun; or a probe serving only its own entity).
     A polyline with a point behind the eye is left out (the rest still show)."""
     transform = world.try_get(entity, Transform)
@@ -198,6 +208,9 @@ def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[in
         worlds = _emitter_reach(emitter, current_world_matrix(world, transform))
     elif world.has(entity, Decal):
         worlds = _decal_box(current_world_matrix(world, transform))
+    elif (volume := world.try_get(entity, IrradianceVolume)) is not None:
+        centre = glm.vec3(current_world_matrix(world, transform)[3])
+        worlds = _influence_box(centre, glm.vec3(volume.size), volume.blend_distance)
     else:
         probe = world.try_get(entity, ReflectionProbe)
         if probe is None or probe.influence is None:
@@ -311,8 +324,8 @@ MARKER_REACH = 10.0   # pixels (at scale 1) from a marker that a click selects i
 @dataclasses.dataclass(frozen=True)
 class Marker:
     """An entity with no mesh to click (a lamp, a spot, a probe) drawn as a marker where it
-    stands: ``kind`` "light", "probe", "emitter" or "decal", ``at`` its place on screen (output pixels from the
-    top left)."""
+    stands: ``kind`` "light", "probe", "emitter", "decal" or "volume", ``at`` its place on
+    screen (output pixels from the top left)."""
 
     entity: int
     kind: str
@@ -321,13 +334,13 @@ class Marker:
 
 def markers(world: World, view_proj: glm.mat4, size: tuple[int, int]) -> list[Marker]:
     """The markers in view (in front of the eye, inside the output): each entity with a
-    Transform and a point light, a reflection probe, a particle emitter or a decal but no
-    visible mesh, which the id images cannot pick (an entity with a mesh is picked where it
-    shows; particles write no id; a decal's cut mesh is picked as the decal, but it may cut
-    nothing)."""
+    Transform and a point light, a reflection probe, a particle emitter, a decal or an
+    irradiance volume but no visible mesh, which the id images cannot pick (an entity with a
+    mesh is picked where it shows; particles write no id; a decal's cut mesh is picked as the
+    decal, but it may cut nothing)."""
     found = []
     for kind, component in (("light", PointLight), ("probe", ReflectionProbe), ("emitter", ParticleEmitter),
-                            ("decal", Decal)):
+                            ("decal", Decal), ("volume", IrradianceVolume)):
         for entity, _ in world.query_one(component):
             transform, mesh_ref = world.try_get(entity, Transform), world.try_get(entity, MeshRef)
             if transform is None or (mesh_ref is not None and mesh_ref.visible):

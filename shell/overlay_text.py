@@ -41,7 +41,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"reflection views {stats.reflection_views}, dropped {stats.reflection_views_dropped}, "
         f"capped {stats.reflection_depth_capped}, faded {stats.reflection_views_faded}, "
         f"fallbacks {stats.reflection_fallbacks}",
-        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces); shadow maps "
+        f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)"
+        f"{f', volume points {stats.volume_points}' if stats.volume_points else ''}; shadow maps "
         f"{stats.shadow_maps_drawn}{f' ({stats.shadow_faces_drawn} cube faces)' if stats.shadow_faces_drawn else ''}"
         f" + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}",
         f"cut: lights {stats.lights_cut}, shadows {stats.shadows_cut}"

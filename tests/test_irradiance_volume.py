@@ -398,3 +398,31 @@ def test_a_level_file_keeps_a_volume(tmp_path):
     (tmp_path / "bad.toml").write_text(text.replace("points = [6, 3, 4]", "points = [6, 3, 40]"))
     with pytest.raises(LevelError, match="points"):
         load_level(tmp_path / "bad.toml").spawn(World())
+
+
+def test_the_editor_outlines_the_volumes_box_and_marks_it():
+    """``reach_outline`` of a selected volume (shell/handles.py): the twelve edges of its box
+    about its entity, whose corners are the grid's corner points, and twelve of the box
+    ``blend_distance`` inside; ``markers`` marks it (it has no mesh to click)."""
+    from engine.core.world import World
+    from shell.handles import markers, reach_outline
+    from systems.transform_system import TransformSystem
+
+    world = World("volume-outline")
+    world.add_system(TransformSystem(world), priority=1)
+    volume = IrradianceVolume(size=(4.0, 2.0, 6.0), points=(3, 2, 4), blend_distance=0.5)
+    entity = world.spawn(Transform(position=(1.0, 1.0, -2.0)), volume)
+    world.step(1 / 60)
+    view_proj = glm.perspective(glm.radians(60.0), 1.0, 0.1, 100.0) * glm.lookAt(
+        glm.vec3(2.0, 6.0, 12.0), glm.vec3(1.0, 1.0, -2.0), glm.vec3(0.0, 1.0, 0.0))
+    outline = reach_outline(world, entity, view_proj, (640, 480))
+    assert len(outline.world) == 24
+    grid = volume_grid(volume, glm.vec3(1.0, 1.0, -2.0))
+    corners = {tuple(round(v, 6) for v in grid.position((i, j, k))) for i in (0, 2) for j in (0, 1) for k in (0, 3)}
+    inside = {(round(1.0 + x, 6), round(1.0 + y, 6), round(-2.0 + z, 6))
+              for x in (-1.5, 1.5) for y in (-0.5, 0.5) for z in (-2.5, 2.5)}   # half the size less the blend
+    outer = {tuple(round(float(v), 6) for v in p) for edge in outline.world[:12] for p in edge}
+    inner = {tuple(round(float(v), 6) for v in p) for edge in outline.world[12:] for p in edge}
+    assert outer == corners and inner == inside
+    assert [m.kind for m in markers(world, view_proj, (640, 480)) if m.entity == entity] == ["volume"]
+    world.close()
