@@ -335,6 +335,9 @@ class EditorPanels:
                 and all(isinstance(v, int | float) and not isinstance(v, bool) for v in data) \
                 and any(isinstance(v, float) for v in data):
             kind = f"vec{len(data)}"   # a pair of numbers (a rectangle's sides, a range): dragged as a vector
+        elif kind == "list" and 2 <= len(data) <= 4 and not field.endswith("layers") \
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in data):
+            kind = f"ivec{len(data)}"  # whole numbers (a volume's points along x, y, z): dragged in steps of 1
         unset = _unset_words(cls_name, field)
         if unset is not None and value is None:  # automatic or off: shown as such, a button gives it a value
             word, give, _, hint = unset
@@ -410,6 +413,9 @@ class EditorPanels:
             else:
                 drag = {"vec2": imgui.drag_float2, "vec3": imgui.drag_float3, "vec4": imgui.drag_float4}[kind]
                 changed, new = drag(label, list(data), DRAG_SPEED)
+        elif kind in ("ivec2", "ivec3", "ivec4"):
+            drag = {"ivec2": imgui.drag_int2, "ivec3": imgui.drag_int3, "ivec4": imgui.drag_int4}[kind]
+            changed, new = drag(label, list(data))
         elif kind == "quat":  # as Euler angles in degrees (pitch, yaw, roll: glm's x, y, z), kept by the editor
             angles = editor.angles(entity, cls_name, field)
             dragged, new_angles = imgui.drag_float3(f"{field} (deg)##{cls_name}.{field}", list(angles),
@@ -430,16 +436,16 @@ class EditorPanels:
             shown = value if kind in ("null", "int") else (getattr(value, "name", None) or kind)
             imgui.text(f"{field}: {shown}")
         self._widget(f"{cls_name}.{field}")
-        if kind in ("vec2", "vec3", "vec4", "quat"):  # where its first number is (a drag on one component)
+        if kind in ("vec2", "vec3", "vec4", "ivec2", "ivec3", "ivec4", "quat"):  # where its first number is
             self.widgets[f"{cls_name}.{field}.left"] = (imgui.get_item_rect_min().x + 8.0,
                                                         self.widgets[f"{cls_name}.{field}"][1])
-            if kind in ("vec3", "quat"):  # and its second (the middle third of the numbers' width)
+            if kind in ("vec3", "ivec3", "quat"):  # and its second (the middle third of the numbers' width)
                 self.widgets[f"{cls_name}.{field}.middle"] = (imgui.get_item_rect_min().x + imgui.calc_item_width() / 2,
                                                               self.widgets[f"{cls_name}.{field}"][1])
         lines.append(f"  {field} = {data if kind not in ('mesh', 'texture', 'object', 'array') else kind}")
         if changed:
             if isinstance(new, list | tuple) and not field.endswith("layers"):
-                new = tuple(float(v) for v in new)
+                new = tuple((int if kind.startswith("ivec") else float)(v) for v in new)
             editor.try_set_field(entity, cls_name, field, new, merge=True)
         if imgui.is_item_deactivated():
             editor.end_drag()
@@ -533,7 +539,7 @@ class EditorPanels:
             elif marker.kind == "decal":  # a violet square
                 draw.add_rect_filled(imgui.ImVec2(at.x - r, at.y - r), imgui.ImVec2(at.x + r, at.y + r), decal)
             elif marker.kind == "volume":  # a cyan square's outline (a probe's colour: a grid of them)
-                draw.add_rect(imgui.ImVec2(at.x - r, at.y - r), imgui.ImVec2(at.x + r, at.y + r), probe, 0.0, 0,
+                draw.add_rect(imgui.ImVec2(at.x - r, at.y - r), imgui.ImVec2(at.x + r, at.y + r), probe, 0.0,
                               2.0 * self.scale)
             else:
                 draw.add_circle(at, r, probe, 0, 2.0 * self.scale)

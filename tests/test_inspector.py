@@ -1354,3 +1354,33 @@ def test_a_pair_of_numbers_drags_as_a_vector(scene, ctx):
         assert world.get(ents["panel"], PointLight).rectangle == (1.0, 0.5)
     finally:
         overlay.release()
+
+
+def test_whole_numbers_drag_as_a_vector_of_ints(scene, ctx):
+    """A field of whole numbers (``IrradianceVolume.points`` along x, y and z) drags as a
+    vector of ints: its first number dragged raises the points along x only, written as ints
+    the component takes (a float there it refuses), one undo back."""
+    from components import IrradianceVolume
+
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        ents["grid"] = world.spawn(Transform(position=(0.0, 1.5, 0.0)), IrradianceVolume(points=(3, 2, 3)))
+    runner = scene(build, SIZE)
+    world = runner.world
+    overlay = DebugOverlay(ctx)
+    try:
+        draw, _ = _hands(runner, overlay)
+        draw()
+        editor = overlay.editing(runner.engine)
+        editor.select(ents["grid"])
+        draw()
+        x, y = _scrolled_to(overlay, draw, "IrradianceVolume.points.left", SIZE)
+        _drag(overlay, draw, [(x + 8 * step, y) for step in range(6)])
+        points = world.get(ents["grid"], IrradianceVolume).points
+        assert points[0] > 3 and points[1:] == (2, 3) and all(type(v) is int for v in points), points
+        editor.undo()
+        assert world.get(ents["grid"], IrradianceVolume).points == (3, 2, 3)
+    finally:
+        overlay.release()
