@@ -5,7 +5,8 @@ Each wave spawns ``--entities`` things in a ring around the camera, cycling thro
 kinds: a mirror (its own quad mesh), a portal pair, a chrome sphere (its own automatic
 probe), a box with its own new mesh, a box with its own new texture, a particle emitter
 with its own sprite (its particles' buffer and the texture), and a decal on the floor with
-its own image (its cut mesh on a part it makes, the texture); renders
+its own image (its cut mesh on a part it makes, the texture); and one irradiance volume a
+wave over the ring (its scratch cube, its grid in the irradiance table); renders
 ``--frames`` frames (320 x 180, ``--size``), deletes every one of them, renders one more frame, and
 prints the renderer's live GL resources (``resource_counts``), the entity count and the
 resident memory.  The exit status is 1 when, after the last wave, a count is not back to
@@ -31,6 +32,7 @@ from components import (
     Camera,
     Decal,
     DirectionalLight,
+    IrradianceVolume,
     Material,
     MeshRef,
     Mirror,
@@ -74,6 +76,9 @@ def of_kind(kind: int, count: int) -> int:
 
 def spawn_wave(world: World, count: int, wave: int) -> list[int]:
     made: list[int] = []
+    if count:  # one volume a wave, baked in its first frame
+        made.append(world.spawn(Transform(position=(0.0, 1.0, 0.0)), IrradianceVolume(
+            size=(20.0, 2.0, 20.0), points=(2, 2, 2), resolution=16, points_per_frame=8)))
     for i in range(count):
         angle = 2 * math.pi * i / max(count, 1)
         radius = 3 + (i % 7)
