@@ -20,7 +20,46 @@ _DEFAULT_FAR = 100.0
 
 
 @dataclass(eq=False)
-class ReflectionProbe(ShownLayers):
+class Captured(ShownLayers):
+    """What probes and irradiance volumes share: the reflection layers their captures show
+    (``ShownLayers``), a count of requests for captures again, and the checks of their
+    resolution and of a blend distance inside their box."""
+
+    _requests: int = field(default=0, init=False, repr=False, compare=False)
+
+    def request(self) -> None:
+        """Ask for everything captured again: a probe's every face next frame (a ``scripted``
+        one's only way), a volume's whole grid (its light kept until the new bake is done)."""
+        self._requests += 1
+        self.touch()
+
+    @property
+    def requests(self) -> int:
+        """How many times ``request()`` was called.  A reader (the probes scheduler, the volume
+        stage) compares it with the count it saw last: reading a request clears nothing."""
+        return self._requests
+
+    def _resolution(self, name: str, value: Any, low: int, high: int) -> int:
+        """A power of two in [low, high] (a cube face's texels across)."""
+        value = integer(self, name, value, low=low, high=high)
+        if value & (value - 1):
+            raise ComponentValueError(f"{type(self).__name__}.{name} must be a power of two, got {value!r}")
+        return value
+
+    def _check_blend(self, blend: float | None, box: Any, name: str) -> None:
+        """A falloff wider than half the box's smallest side would never reach full weight,
+        even at the centre: refused, naming the field just written."""
+        if blend is None or box is None:
+            return
+        half = min(float(box[0]), float(box[1]), float(box[2])) / 2.0
+        if blend > half:
+            raise ComponentValueError(
+                f"{type(self).__name__}.{name}: blend_distance ({blend}) must be at most half the "
+                f"{'influence box' if isinstance(self, ReflectionProbe) else 'box'}'s smallest side ({half})")
+
+
+@dataclass(eq=False)
+class ReflectionProbe(Captured):
     """A cube map captured at the entity's position (its Transform), of the scene around it.
 
     ``resolution`` texels across a face (a power of two), ``near`` / ``far`` the capture
@@ -67,18 +106,6 @@ class ReflectionProbe(ShownLayers):
     depth: int = 1
     prefilter: str = "mips"
     priority: int = 0
-    _requests: int = field(default=0, init=False, repr=False, compare=False)
-
-    def request(self) -> None:
-        """Ask a ``scripted`` probe (or any other) for a capture of every face next frame."""
-        self._requests += 1
-        self.touch()
-
-    @property
-    def requests(self) -> int:
-        """How many times ``request()`` was called.  A reader (the probes scheduler) compares
-        it with the count it saw last: reading a request clears nothing."""
-        return self._requests
 
     def _validate(self, name: str, value: Any) -> Any:
         if name in LAYER_FIELDS:
@@ -86,10 +113,7 @@ class ReflectionProbe(ShownLayers):
         if name == "priority":
             return integer(self, name, value, low=-1000, high=1000)
         if name == "resolution":
-            value = integer(self, name, value, low=MIN_PROBE_RESOLUTION, high=MAX_PROBE_RESOLUTION)
-            if value & (value - 1):
-                raise ComponentValueError(f"ReflectionProbe.resolution must be a power of two, got {value!r}")
-            return value
+            return self._resolution(name, value, MIN_PROBE_RESOLUTION, MAX_PROBE_RESOLUTION)
         if name in ("near", "far"):
             return check_near_far(self, name, value, _DEFAULT_FAR)
         if name == "refresh":
@@ -114,18 +138,6 @@ class ReflectionProbe(ShownLayers):
             return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value
 
-    @staticmethod
-    def _check_blend(blend: float | None, influence: Any, name: str) -> None:
-        """A falloff wider than half the box's smallest side would never reach full weight,
-        even at the centre: refused, naming the field just written."""
-        if blend is None or influence is None:
-            return
-        half = min(float(influence[0]), float(influence[1]), float(influence[2])) / 2.0
-        if blend > half:
-            raise ComponentValueError(
-                f"ReflectionProbe.{name}: blend_distance ({blend}) must be at most half the influence box's "
-                f"smallest side ({half})")
-
 
 VOLUME_REFRESH = ("once", "continuous", "scripted")
 MIN_VOLUME_RESOLUTION = 16   # a capture's face: the projection reads a 16-texel level
@@ -134,7 +146,7 @@ MAX_NORMAL_BIAS = 10.0
 
 
 @dataclass(eq=False)
-class IrradianceVolume(ShownLayers):
+class IrradianceVolume(Captured):
     """A grid of light probes over a box: the light arriving at each point of the grid from
     all round, captured as a cube map and kept as nine spherical-harmonic coefficients
     (irradiance volumes: Greger, Shirley, Hubbard and Greenberg 1998; Unity's light probes
@@ -177,17 +189,6 @@ class IrradianceVolume(ShownLayers):
     normal_bias: float = 0.1
     refresh: str = "once"
     points_per_frame: int = 4
-    _requests: int = field(default=0, init=False, repr=False, compare=False)
-
-    def request(self) -> None:
-        """Ask for a whole new bake (any refresh mode): the old light is kept until it is done."""
-        self._requests += 1
-        self.touch()
-
-    @property
-    def requests(self) -> int:
-        """How many times ``request()`` was called (a reader compares it with the count it saw)."""
-        return self._requests
 
     @property
     def point_count(self) -> int:
@@ -212,10 +213,7 @@ class IrradianceVolume(ShownLayers):
                                           f"got {value!r}")
             return tuple(integer(self, name, v, low=2, high=MAX_VOLUME_AXIS_POINTS) for v in parts)
         if name == "resolution":
-            value = integer(self, name, value, low=MIN_VOLUME_RESOLUTION, high=MAX_VOLUME_RESOLUTION)
-            if value & (value - 1):
-                raise ComponentValueError(f"IrradianceVolume.resolution must be a power of two, got {value!r}")
-            return value
+            return self._resolution(name, value, MIN_VOLUME_RESOLUTION, MAX_VOLUME_RESOLUTION)
         if name in ("near", "far"):
             return check_near_far(self, name, value, _DEFAULT_FAR)
         if name == "blend_distance":
@@ -229,13 +227,3 @@ class IrradianceVolume(ShownLayers):
         if name == "points_per_frame":
             return integer(self, name, value, low=1, high=MAX_VOLUME_AXIS_POINTS ** 3)
         return value
-
-    @staticmethod
-    def _check_blend(blend: float | None, size: Any, name: str) -> None:
-        if blend is None or size is None:
-            return
-        half = min(float(size[0]), float(size[1]), float(size[2])) / 2.0
-        if blend > half:
-            raise ComponentValueError(
-                f"IrradianceVolume.{name}: blend_distance ({blend}) must be at most half the box's smallest "
-                f"side ({half})")

@@ -1327,33 +1327,39 @@ def test_an_animation_layers_clip_is_chosen_from_its_models_clips(scene, ctx, tm
             editor.set_field(root, "AnimationLayer", "clip", "Wave")
 
 
-def test_a_pair_of_numbers_drags_as_a_vector(scene, ctx):
-    """A field that is two numbers (``PointLight.rectangle``'s width and height) drags as a
-    vector: its first number dragged moves the width only, through the component (one undo)."""
-    from components import PointLight
-
+def _drag_first_number(scene, ctx, component, field: str):
+    """An entity with ``component`` selected in the inspector and the first number of its
+    ``field`` dragged to the right: the field's value after the drag, and after one undo."""
     ents = {}
 
     def build(world):
         edit_scene(world, ents)
-        ents["panel"] = world.spawn(Transform(position=(0.0, 2.5, 0.0)), PointLight(rectangle=(1.0, 0.5)))
+        ents["it"] = world.spawn(Transform(position=(0.0, 2.5, 0.0)), component)
     runner = scene(build, SIZE)
-    world = runner.world
     overlay = DebugOverlay(ctx)
     try:
         draw, _ = _hands(runner, overlay)
         draw()
         editor = overlay.editing(runner.engine)
-        editor.select(ents["panel"])
+        editor.select(ents["it"])
         draw()
-        x, y = _scrolled_to(overlay, draw, "PointLight.rectangle.left", SIZE)
+        x, y = _scrolled_to(overlay, draw, f"{type(component).__name__}.{field}.left", SIZE)
         _drag(overlay, draw, [(x + 8 * step, y) for step in range(6)])
-        width, height = world.get(ents["panel"], PointLight).rectangle
-        assert width > 1.0 and height == 0.5, (width, height)
+        dragged = getattr(runner.world.get(ents["it"], type(component)), field)
         editor.undo()
-        assert world.get(ents["panel"], PointLight).rectangle == (1.0, 0.5)
+        return dragged, getattr(runner.world.get(ents["it"], type(component)), field)
     finally:
         overlay.release()
+
+
+def test_a_pair_of_numbers_drags_as_a_vector(scene, ctx):
+    """A field that is two numbers (``PointLight.rectangle``'s width and height) drags as a
+    vector: its first number dragged moves the width only, through the component (one undo)."""
+    from components import PointLight
+
+    (width, height), undone = _drag_first_number(scene, ctx, PointLight(rectangle=(1.0, 0.5)), "rectangle")
+    assert width > 1.0 and height == 0.5, (width, height)
+    assert undone == (1.0, 0.5)
 
 
 def test_whole_numbers_drag_as_a_vector_of_ints(scene, ctx):
@@ -1362,25 +1368,6 @@ def test_whole_numbers_drag_as_a_vector_of_ints(scene, ctx):
     the component takes (a float there it refuses), one undo back."""
     from components import IrradianceVolume
 
-    ents = {}
-
-    def build(world):
-        edit_scene(world, ents)
-        ents["grid"] = world.spawn(Transform(position=(0.0, 1.5, 0.0)), IrradianceVolume(points=(3, 2, 3)))
-    runner = scene(build, SIZE)
-    world = runner.world
-    overlay = DebugOverlay(ctx)
-    try:
-        draw, _ = _hands(runner, overlay)
-        draw()
-        editor = overlay.editing(runner.engine)
-        editor.select(ents["grid"])
-        draw()
-        x, y = _scrolled_to(overlay, draw, "IrradianceVolume.points.left", SIZE)
-        _drag(overlay, draw, [(x + 8 * step, y) for step in range(6)])
-        points = world.get(ents["grid"], IrradianceVolume).points
-        assert points[0] > 3 and points[1:] == (2, 3) and all(type(v) is int for v in points), points
-        editor.undo()
-        assert world.get(ents["grid"], IrradianceVolume).points == (3, 2, 3)
-    finally:
-        overlay.release()
+    points, undone = _drag_first_number(scene, ctx, IrradianceVolume(points=(3, 2, 3)), "points")
+    assert points[0] > 3 and points[1:] == (2, 3) and all(type(v) is int for v in points), points
+    assert undone == (3, 2, 3)
