@@ -65,6 +65,7 @@ from components import (
     FilmGrain,
     FlyController,
     Fog,
+    IrradianceVolume,
     Material,
     MeshRef,
     Mirror,
@@ -99,7 +100,8 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              Traveller, Slice, PortalClone, ReflectionProbe, Camera, FlyController,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
-                             ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal)
+                             ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal,
+                             IrradianceVolume)
 
 @dataclasses.dataclass
 class Case:
