@@ -250,11 +250,24 @@ class PointLight(TrackedComponent):
     plane blocks it; its range, spot cone, cookie and contact shadows are taken from its
     centre, as a point light's, and the shafts' air and lit particles take its light by
     Lambert's cosine of its face (``shaders/include/lights.glsl`` ``lamp_face``).  Both
-    sides from ``MIN_LIGHT_SIDE`` (1 mm) to ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``.
+    sides from ``MIN_LIGHT_SIDE`` (1 mm) to ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``
+    or a ``length``.
     Through a mirror or portal its image is the rectangle's (``Mirror.reflects_light``).  At
     most ``MAX_RECT_LIGHTS`` (8) of the lights that reach the scene are lit as rectangles at
     once (the first by the lights' slots); the rest light as points from their centres,
     counted in ``RenderStats.rect_lights_cut`` and said by a ``LightLimitWarning``.
+
+    ``length`` (metres; default 0: not a tube) makes it a tube of light along the entity's X,
+    centred on its position, as a fluorescent tube or a neon bar is (Unreal's source length,
+    Unity HDRP's tube light), its ``radius`` the tube's (0: a line, drawn as a tube
+    ``MIN_LIGHT_SIDE`` across): each point of its surface as bright from every side, its
+    intensity spread over its length, so seen broadside from far off it lights as a point light
+    of that intensity does, and end on not at all.  Lit as a rectangle is, through its axis and
+    turned about it to face each shaded point (the outline a thin cylinder shows from there,
+    whose light is exactly the cylinder's): its diffuse light exact, its highlight the stretched
+    streak a glossy floor shows; it shines to both sides and its shadow cube has every face.
+    It counts among the ``MAX_RECT_LIGHTS``; not with a ``rectangle``.  From ``MIN_LIGHT_SIDE``
+    to ``MAX_LIGHT_SIDE``.
 
     ``contact_shadows`` (off by default; HDRP's per-light switch, Unreal's contact shadow
     length): where the active camera has ``ContactShadows``, this light's light is taken from
@@ -285,6 +298,7 @@ class PointLight(TrackedComponent):
     cookie: TextureData | None = None
     radius: float = 0.0
     rectangle: tuple[float, float] = (0.0, 0.0)
+    length: float = 0.0
     contact_shadows: bool = False
     volumetric: float = 1.0
 
@@ -322,10 +336,20 @@ class PointLight(TrackedComponent):
             if value > 0.0 and getattr(self, "rectangle", (0.0, 0.0)) != (0.0, 0.0):
                 raise ComponentValueError(
                     f"PointLight.radius = {value:g}: this light is a rectangle (rectangle = {self.rectangle!r}); a "
-                    "light is a sphere or a rectangle, not both: set rectangle = (0, 0) first")
+                    "light is a sphere, a tube or a rectangle, not two: set rectangle = (0, 0) first")
             return value
         if name == "rectangle":
             return self._rectangle(value)
+        if name == "length":
+            value = finite(self, name, value, low=0.0, high=MAX_LIGHT_SIDE)
+            if 0.0 < value < MIN_LIGHT_SIDE:
+                raise ComponentValueError(
+                    f"PointLight.length must be at least {MIN_LIGHT_SIDE:g} m (or 0: not a tube), got {value!r}")
+            if value > 0.0 and getattr(self, "rectangle", (0.0, 0.0)) != (0.0, 0.0):
+                raise ComponentValueError(
+                    f"PointLight.length = {value:g}: this light is a rectangle (rectangle = {self.rectangle!r}); a "
+                    "light is a sphere, a tube or a rectangle, not two: set rectangle = (0, 0) first")
+            return value
         if name == "contact_shadows":
             return boolean(self, name, value)
         if name == "volumetric":
@@ -347,7 +371,11 @@ class PointLight(TrackedComponent):
         if getattr(self, "radius", 0.0) > 0.0:
             raise ComponentValueError(
                 f"PointLight.rectangle = {value!r}: this light is a sphere (radius = {self.radius:g}); a light is a "
-                "sphere or a rectangle, not both: set radius = 0 first")
+                "sphere, a tube or a rectangle, not two: set radius = 0 first")
+        if getattr(self, "length", 0.0) > 0.0:
+            raise ComponentValueError(
+                f"PointLight.rectangle = {value!r}: this light is a tube (length = {self.length:g}); a light is a "
+                "sphere, a tube or a rectangle, not two: set length = 0 first")
         return (width, height)
 
 

@@ -55,6 +55,7 @@ from engine.rules.light_rules import (
     lamp_cookie,
     lamp_rectangle,
     sky_sun,
+    sphere_radius,
     view_eyes,
 )
 
@@ -124,8 +125,9 @@ class PrepareSystem(esper.Processor):
             if self._cookies(kept):
                 renderer.note_scene_change()   # an image in the cookie array changed, or its build
             lamps = [world.get(entity, PointLight) for entity in kept.point if entity is not None]
-            spheres = any(light.radius > 0.0 for light in lamps)
-            rectangles = any(light.rectangle[0] > 0.0 for light in lamps)
+            spheres = any(sphere_radius(light) > 0.0 for light in lamps)
+            # (a tube is lit as a rectangle turned to face each point: rect_lights.glsl)
+            rectangles = any(light.rectangle[0] > 0.0 or light.length > 0.0 for light in lamps)
             if (spheres, rectangles) != (renderer.sphere_lights, renderer.rect_lights):
                 renderer.sphere_lights = spheres   # the SPHERE_LIGHTS builds, or not
                 renderer.rect_lights = rectangles  # the RECT_LIGHTS builds, or not
@@ -235,7 +237,8 @@ class PrepareSystem(esper.Processor):
                 else:
                     rectangle, rect_cut = NO_RECTANGLE, rect_cut + 1   # lit as a point
             point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world),
-                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)), light.radius,
+                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)),
+                          sphere_radius(light),
                           float(channel), rectangle))
         if cut > self._contact.cut:
             warnings.warn(LightLimitWarning(
@@ -245,9 +248,10 @@ class PrepareSystem(esper.Processor):
         self._contact = ContactLamps(tuple(contact), cut)
         if rect_cut > self._rect_cut:
             warnings.warn(LightLimitWarning(
-                f"{len(rect_slots) + rect_cut} rectangle lights light the scene: at most {MAX_RECT_LIGHTS} are lit as "
-                f"rectangles at once (the first by the lights' slots: those that matter most to the active camera), "
-                f"so {rect_cut} light as points from their centres (RenderStats.rect_lights_cut)"), stacklevel=3)
+                f"{len(rect_slots) + rect_cut} rectangle and tube lights light the scene: at most {MAX_RECT_LIGHTS} "
+                f"are lit as rectangles at once (the first by the lights' slots: those that matter most to the active "
+                f"camera), so {rect_cut} light as points from their centres (RenderStats.rect_lights_cut)"),
+                stacklevel=3)
         self._rect_slots, self._rect_cut = tuple(rect_slots), rect_cut
         self._volumetric = VolumetricLamps(tuple(slot for slot, _ in scattered),
                                            tuple(scatter for _, scatter in scattered), volumetric_cut)

@@ -62,6 +62,7 @@ from engine.rules.light_rules import (
     lamp_cookie,
     lamp_rectangle,
     light_size,
+    sphere_radius,
     spot_cone,
     spot_map_half_width,
 )
@@ -418,7 +419,7 @@ class ShadowSystem(esper.Processor):
             cookies = renderer.spot_cookies
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,
                        lamp_cone(light, transform.world),
-                       lamp_cookie(light, transform.world, cookies.layer(light.cookie)), light.radius,
+                       lamp_cookie(light, transform.world, cookies.layer(light.cookie)), sphere_radius(light),
                        lamp_rectangle(light, transform.world))
                       for entity, (light, transform) in lamps]
             bounces = {entity: light.bounces for entity, light in suns}

@@ -321,10 +321,10 @@ def test_rectangle_is_checked():
     for bad in ((1.0, 0.0), (0.0005, 1.0), (51.0, 1.0), (-1.0, 1.0), (float("nan"), 1.0), (1.0,), "1x2", 3.0):
         with pytest.raises(ComponentValueError, match="PointLight.rectangle"):
             PointLight(rectangle=bad)
-    with pytest.raises(ComponentValueError, match="sphere or a rectangle"):
+    with pytest.raises(ComponentValueError, match="a sphere, a tube or a rectangle"):
         PointLight(radius=0.2, rectangle=(1.0, 1.0))
     light = PointLight(rectangle=(1.0, 1.0))
-    with pytest.raises(ComponentValueError, match="sphere or a rectangle"):
+    with pytest.raises(ComponentValueError, match="a sphere, a tube or a rectangle"):
         light.radius = 0.2
     assert light.radius == 0.0
 
@@ -458,7 +458,7 @@ def test_rectangles_past_the_limit_light_as_points_and_are_said_and_counted(scen
         for k in range(count):
             world.spawn(Transform(position=(-4.0 + k, 1.0, 0.0), rotation=down),
                         PointLight(intensity=1.0, range=5.0, rectangle=(0.5, 0.5)))
-    with pytest.warns(LightLimitWarning, match=f"{count} rectangle lights"):
+    with pytest.warns(LightLimitWarning, match=f"{count} rectangle and tube lights"):
         runner = scene(build, SIZE)
         runner.frame()
     assert runner.engine.renderer.stats.rect_lights_cut == 1

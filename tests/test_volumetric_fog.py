@@ -455,7 +455,7 @@ CAGE = ((0.7, 2.5, 0.0), (0.5, 0.5, 0.5))
 
 
 def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: float = 1.0,
-               cookie: TextureData | None = None, panel: bool = False) -> int:
+               cookie: TextureData | None = None, panel: bool = False, tube: bool = False) -> int:
     camera = look_from(world, (0.0, 2.0, 7.0), (0.0, 2.0, 0.0), fov=60.0)
     world.spawn(Skybox())
     world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5, 0.5, 0.5)))
@@ -463,9 +463,10 @@ def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: 
     for k in range(lamps):
         at = glm.vec3(LAMP) + glm.vec3(0.0, 0.0, -3.0 * k)
         world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0))),
-                    PointLight(intensity=LAMP_LIGHT, range=LAMP_RANGE, spot_angle=180.0 if panel else LAMP_ANGLE,
-                               spot_blend=LAMP_BLEND, shadows=k == 0, volumetric=volumetric, cookie=cookie,
-                               rectangle=(0.6, 0.6) if panel else (0.0, 0.0)))
+                    PointLight(intensity=LAMP_LIGHT, range=LAMP_RANGE,
+                               spot_angle=180.0 if panel or tube else LAMP_ANGLE, spot_blend=LAMP_BLEND,
+                               shadows=k == 0, volumetric=volumetric, cookie=cookie,
+                               rectangle=(0.6, 0.6) if panel else (0.0, 0.0), length=TUBE if tube else 0.0))
     world.add_component(camera, Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
     world.add_component(camera, Tonemap(curve="none"))
     if shafts is not None:
@@ -473,13 +474,20 @@ def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: 
     return camera
 
 
+# A tube lamp's length (its axis the lamp entity's X: level, as it looks down).
+TUBE = 1.2
+
+
 def _lamp_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
-                panel: bool = False) -> np.ndarray:
+                panel: bool = False, tube: bool = False) -> np.ndarray:
     """The lamp's light the air sends back along each ray, at 1,000 points: its falloff (the
     inverse square faded to 0 at its range), its cone (``light_rules.spot_factor``), the
     phase function, the box's shadow (the point's segment to the lamp cast against it);
-    ``panel``: all round, a rectangle facing down (Lambert's cosine of its face, 0 above it)."""
-    cone = ALL_ROUND if panel else spot_cone((0.0, -1.0, 0.0), LAMP_ANGLE, LAMP_BLEND)
+    ``panel``: all round, a rectangle facing down (Lambert's cosine of its face, 0 above it);
+    ``tube``: all round, a tube along the lamp's X (the sine of the way's angle from its axis:
+    its outline's width)."""
+    cone = ALL_ROUND if panel or tube else spot_cone((0.0, -1.0, 0.0), LAMP_ANGLE, LAMP_BLEND)
+    axis = np.array(glm.mat3_cast(look_rotation(glm.vec3(0.0, -1.0, 0.0)))[0], np.float64)
     points = 1000
     t = (np.arange(points) + 0.5) / points
     lamp = np.array(LAMP)
@@ -496,6 +504,8 @@ def _lamp_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings
         falloff = fade * fade / (dist * dist + 1.0) * spot_factor(cone, l)
         if panel:
             falloff *= np.maximum(l[:, 1], 0.0)   # (-l the way from the lamp; its face looks down)
+        if tube:
+            falloff *= np.linalg.norm(np.cross(l, axis), axis=1)
         blocked = _hits(at, l, [CAGE]) < dist
         c = np.einsum("ij,ij->i", np.repeat(way[part], points, 0), l)
         phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
@@ -534,7 +544,21 @@ def test_a_panels_light_in_the_air_is_its_face_s_not_a_points(scene):
     assert np.quantile(error, 0.9) < 0.08, np.quantile(error, 0.9)
 
 
-def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False):
+def test_a_tubes_light_in_the_air_is_its_outlines(scene):
+    """No sun: the lamp a 1.2 m tube, level (``PointLight.length``): the air lit by the sine
+    of each way's angle from its axis (its outline's width; end on, nothing), against the same
+    ground truth with that sine."""
+    settings = VolumetricFog(steps=128)
+    runner = scene(lambda world: _lamp_hall(world, settings, tube=True), SIZE)
+    runner.frame()
+    marched, truth, reach, lit, steady = _lamp_march_and_truth(runner, settings, tube=True)
+    assert lit.sum() > 200
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert np.median(error) < 0.03, np.median(error)
+    assert np.quantile(error, 0.9) < 0.08, np.quantile(error, 0.9)
+
+
+def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False, tube: bool = False):
     """The march's texels and the lamp's ground truth along each texel's ray, its length, the
     texels compared (lit, steady, not within a metre of the lamp) and the steady ones."""
     marched = _marched(runner)
@@ -550,7 +574,7 @@ def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False):
     with np.errstate(divide="ignore", invalid="ignore"):
         floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
     reach = np.minimum(np.minimum(floor, _hits(origin, way, [CAGE])), settings.distance)
-    truth = _lamp_light(origin, way, reach, settings, panel).reshape(xs.shape)
+    truth = _lamp_light(origin, way, reach, settings, panel, tube).reshape(xs.shape)
     reach = reach.reshape(xs.shape)
     steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.1 * reach
     # (Not the rays that pass within a metre of the lamp: there the light peaks sharper than

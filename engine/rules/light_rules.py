@@ -68,6 +68,7 @@ import numpy as np
 from pyglm import glm
 
 from components import DirectionalLight, PointLight, Skybox, Transform
+from components.limits import MIN_LIGHT_SIDE
 from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import raw_field
 from engine.core.budget import spending_order
@@ -277,9 +278,9 @@ def spot_map_half_width(light: PointLight) -> float | None:
     """The half-width (the tangent of its half-angle) of the perspective shadow map fitted to
     point light ``light``'s cone with ``SPOT_MAP_MARGIN_TEXELS`` to spare, or None where the
     light casts from a cube (all round, wider than ``SPOT_MAP_MAX_ANGLE``, or with a size: a
-    sphere's or a rectangle's shadow is soft, which only its cube's lookup makes,
+    sphere's, a tube's or a rectangle's shadow is soft, which only its cube's lookup makes,
     ``shaders/include/shadows.glsl`` ``soft_cube_shadow``; its cone's faces of it alone drawn)."""
-    if light.spot_angle > SPOT_MAP_MAX_ANGLE or light.radius > 0.0 or light.rectangle[0] > 0.0:
+    if light.spot_angle > SPOT_MAP_MAX_ANGLE or light.radius > 0.0 or light.rectangle[0] > 0.0 or light.length > 0.0:
         return None
     return cone_half_width(light.spot_angle, light.shadow_resolution)
 
@@ -374,8 +375,17 @@ def lamp_rectangle(light: PointLight, world: Any) -> tuple[tuple[float, ...], tu
     scale leaves them as they are, as it leaves a radius), A the area, s the side the light
     shines from as a sign: its front is s cross(U, V) (-1 here: the entity's -Z).  The
     shader takes the rectangle's radiance as the light's colour x intensity x |s / A|
-    (``shaders/include/rect_lights.glsl``).  ``NO_RECTANGLE`` for a point or a sphere."""
+    (``shaders/include/rect_lights.glsl``).  A tube (``PointLight.length``): (U, 1 / A) and
+    (0, 0, 0, R), U its half length along the entity's unit +X, R its radius (at least half
+    ``MIN_LIGHT_SIDE``: a line is a tube that thin), A = 2 R x length, the rectangle through
+    its axis the shader turns to face each point (``tube_radius``).  ``NO_RECTANGLE`` for a
+    point or a sphere."""
     width, height = light.rectangle
+    if light.length > 0.0:
+        radius = tube_radius(light)
+        axis = glm.normalize(world[0].xyz) * (0.5 * light.length)
+        return (float(axis.x), float(axis.y), float(axis.z), 1.0 / (light.length * 2.0 * radius)), \
+            (0.0, 0.0, 0.0, radius)
     if width == 0.0:
         return NO_RECTANGLE
     right, up = glm.normalize(world[0].xyz) * (0.5 * width), glm.normalize(world[1].xyz) * (0.5 * height)
@@ -383,13 +393,27 @@ def lamp_rectangle(light: PointLight, world: Any) -> tuple[tuple[float, ...], tu
         (float(up.x), float(up.y), float(up.z), 0.0)
 
 
+def tube_radius(light: PointLight) -> float:
+    """A tube light's radius as drawn: its ``radius``, at least half ``MIN_LIGHT_SIDE``."""
+    return max(float(light.radius), 0.5 * MIN_LIGHT_SIDE)
+
+
+def sphere_radius(light: PointLight) -> float:
+    """The radius point light ``light``'s highlight is a sphere's of (``sphere_highlight``):
+    its ``radius``, 0 for a tube (whose radius is the tube's: ``lamp_rectangle``)."""
+    return 0.0 if light.length > 0.0 else float(light.radius)
+
+
 def light_size(light: PointLight, world: Any) -> tuple[float, float, float, float]:
     """A point light's size for its soft shadows (``shaders/include/shadows.glsl``
     ``soft_cube_shadow``), whose entity's world matrix is ``world`` (glm): the radius of a
-    disc as big, its sphere's radius or a disc of its rectangle's area (metres; 0: a point,
-    whose shadow is as hard as its map allows), then a rectangle's front (the entity's unit
-    -Z: nothing behind its plane blocks its light; 0 for a sphere)."""
+    disc as big, its sphere's radius or a disc of its rectangle's area or its tube's outline's
+    (length x diameter) (metres; 0: a point, whose shadow is as hard as its map allows), then a
+    rectangle's front (the entity's unit -Z: nothing behind its plane blocks its light; 0 for a
+    sphere or a tube, which shine all round)."""
     width, height = light.rectangle
+    if light.length > 0.0:
+        return (math.sqrt(light.length * 2.0 * tube_radius(light) / math.pi), 0.0, 0.0, 0.0)
     if width == 0.0:
         return (float(light.radius), 0.0, 0.0, 0.0)
     front = -glm.normalize(world[2].xyz)
@@ -399,16 +423,18 @@ def light_size(light: PointLight, world: Any) -> tuple[float, float, float, floa
 def carried_rectangle(rows: tuple[Sequence[float], Sequence[float]], carry: Any) -> tuple[tuple[float, ...], ...]:
     """A light's rectangle rows (``lamp_rectangle``) as its image through a mirror or portal
     sees them: the half sides moved by ``carry``'s linear part (a glm 4x4 matrix; a portal
-    that scales scales them), the radiance kept (light keeps its radiance along a ray), and
-    where ``carry`` mirrors (a negative determinant) the front's sign turned, so the image
-    shines from the side the mirror shows lit."""
+    that scales scales them, and a tube's radius), the radiance kept (light keeps its radiance
+    along a ray), and where ``carry`` mirrors (a negative determinant) the front's sign turned,
+    so the image shines from the side the mirror shows lit (a tube shines all round)."""
     if rows[0][3] == 0.0:
         return NO_RECTANGLE
     m = np.array(carry.to_list(), np.float64).T[:3, :3]   # glm's lists are its columns
     u, v = m @ np.asarray(rows[0][:3], np.float64), m @ np.asarray(rows[1][:3], np.float64)
-    sign = -1.0 if np.linalg.det(m) < 0.0 else 1.0
+    mirrored = np.linalg.det(m) < 0.0
+    sign = -1.0 if mirrored and rows[1][3] == 0.0 else 1.0
+    radius = float(rows[1][3]) * abs(np.linalg.det(m)) ** (1.0 / 3.0)
     return (float(u[0]), float(u[1]), float(u[2]), float(rows[0][3]) * sign), \
-        (float(v[0]), float(v[1]), float(v[2]), 0.0)
+        (float(v[0]), float(v[1]), float(v[2]), radius)
 
 
 def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,

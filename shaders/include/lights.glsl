@@ -16,7 +16,8 @@ layout(std140) uniform Lights {
                                                     // contact shadows' channel + 1 (0: none; scene.frag)
     vec4 point_rect_u[MAX_POINT_LIGHTS];            // xyz: a rectangle's half width along its side; w: its front's
                                                     // sign over its area (0: no rectangle; light_rules.lamp_rectangle)
-    vec4 point_rect_v[MAX_POINT_LIGHTS];            // xyz: its half height along its other side
+    vec4 point_rect_v[MAX_POINT_LIGHTS];            // xyz: its half height along its other side; w: a tube's
+                                                    // radius (its u: the half length; light_rules.lamp_rectangle)
     ivec4 rect_slots[MAX_RECT_LIGHTS / 4];          // the rectangles' slots, lit as rectangles (-1: no more)
 } lights;
 
@@ -31,13 +32,15 @@ float lamp_fade(int i, float dist, vec3 l) {
 }
 
 // A rectangle light's share of its light along ``l``: Lambert's cosine of its face, 0 behind
-// it (so far off it lights as a point light of its intensity straight ahead of it); 1 for a
-// point or a sphere.  The light shafts' air and lit particles take a rectangle so; a surface
+// it (so far off it lights as a point light of its intensity straight ahead of it); a tube's
+// the sine of l's angle from its axis (its outline's width); 1 for a point or a sphere.  The light shafts' air and lit particles take a rectangle so; a surface
 // takes its form factor (rect_lights.glsl).
 float lamp_face(int i, vec3 l) {
     vec4 u = lights.point_rect_u[i];
+    vec4 v = lights.point_rect_v[i];
     if (u.w == 0.0) return 1.0;
-    vec3 front = sign(u.w) * normalize(cross(u.xyz, lights.point_rect_v[i].xyz));
+    if (v.w > 0.0) return length(cross(normalize(u.xyz), l));  // a tube: the sine from its axis
+    vec3 front = sign(u.w) * normalize(cross(u.xyz, v.xyz));
     return max(-dot(l, front), 0.0);
 }
 

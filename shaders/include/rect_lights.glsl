@@ -1,5 +1,5 @@
 // Rectangle lights (PointLight.rectangle): a rectangle of even radiance lights a point with
-// every part of it above the point's horizon.  Its rows (light_rules.lamp_rectangle, carried
+// every part of it above the point's horizon; a tube (PointLight.length) is lit as one.  Its rows (light_rules.lamp_rectangle, carried
 // through mirrors and portals by carried_rectangle): xyz its half sides U and V, the first
 // row's w its front's sign over its area (0: no rectangle), so the front is sign x (U x V)
 // and the radiance is the light's colour x intensity x |w|.
@@ -24,16 +24,31 @@ struct RectLight {
     bool shape;       // whether the light is a rectangle at all
 };
 
-// ``to_centre``: from the point to the rectangle's centre; ``u``, ``v``: its rows.
+// ``to_centre``: from the point to the rectangle's centre; ``u``, ``v``: its rows.  A tube
+// (PointLight.length; v.w its radius R, u its half length along its axis, u.w one over its
+// length x 2 R): the rectangle through its axis, 2 R wide, turned about the axis to face the
+// point.  All of a thin Lambertian cylinder's elements and all of that rectangle's lie in the
+// plane of the axis and the point, so each sends the point the same light along the same way
+// (its projected width times sin of the way's angle from the axis): its light is the tube's.
 RectLight rect_light(vec4 u, vec4 v, vec3 to_centre) {
     RectLight rect;
     rect.shape = u.w != 0.0;
-    rect.corner[0] = to_centre - u.xyz - v.xyz;
-    rect.corner[1] = to_centre + u.xyz - v.xyz;
-    rect.corner[2] = to_centre + u.xyz + v.xyz;
-    rect.corner[3] = to_centre - u.xyz + v.xyz;
-    vec3 front = sign(u.w) * cross(u.xyz, v.xyz);
-    rect.radiance = dot(-to_centre, front) > 0.0 ? abs(u.w) : 0.0;
+    vec3 side = v.xyz;
+    bool tube = v.w > 0.0;
+    if (tube) {
+        // Across the axis and the way to the point: the rectangle's front, cross(u, side), then
+        // faces the point (u (u.c) - c |u|^2 against -c: |u|^2 |c|^2 - (u.c)^2 >= 0).
+        vec3 across = cross(u.xyz, to_centre);
+        float length2 = dot(across, across);
+        vec3 any_way = abs(u.x) < 0.9 * length(u.xyz) ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+        side = (length2 > 1e-12 ? across * inversesqrt(length2) : normalize(cross(u.xyz, any_way))) * v.w;
+    }
+    rect.corner[0] = to_centre - u.xyz - side;
+    rect.corner[1] = to_centre + u.xyz - side;
+    rect.corner[2] = to_centre + u.xyz + side;
+    rect.corner[3] = to_centre - u.xyz + side;
+    vec3 front = sign(u.w) * cross(u.xyz, side);
+    rect.radiance = tube || dot(-to_centre, front) > 0.0 ? abs(u.w) : 0.0;
     return rect;
 }
 
@@ -120,6 +135,9 @@ vec3 rect_highlight(RectLight rect, vec3 n, vec3 v, vec3 f0, float roughness) {
     ltc_entry(roughness, nv, inverse_m, magnitude);
     mat3 frame = mat3(t, cross(n, t), n);
     mat3 to_lobe = inverse_m * transpose(frame);
+    // (A tube's facing rectangle moved by M^-1 is the outline the moved tube shows from the
+    // point too: the width its integral sees is along the moved plane's normal w', and M^-T w'
+    // is across the axis and the way to the centre, as the world's rectangle's side is.)
     vec3 lobe = clamped_cosine_vector(to_lobe * rect.corner[0], to_lobe * rect.corner[1],
                                       to_lobe * rect.corner[2], to_lobe * rect.corner[3]);
     vec3 mean = frame * (inverse(inverse_m) * lobe);   // the light's mean way in, in the world
