@@ -35,6 +35,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``sphere_lamp``: no shadows; the ring's lamp a sphere of 0.2 m (``PointLight.radius``);
 * ``rect_lamp``: no shadows; the ring's lamp a 1 x 0.5 m panel facing down
   (``PointLight.rectangle``): its cost is its ratio to ``off`` against ``sphere_lamp``'s;
+* ``tube_lamp``: no shadows; the ring's lamp a 1.2 m tube of 2 cm radius (``PointLight.length``:
+  lit as a rectangle turned to face each point);
 * ``lamps_8``: no shadows; eight more lamps in a ring over the floor;
 * ``lamps_8_rect``: the same with the first of them a panel (its cost against ``lamps_8``: the
   rectangle's integrals paid by it alone);
@@ -334,6 +336,14 @@ def _volume(engine: Engine) -> None:
                        IrradianceVolume(size=(12.0, 3.0, 12.0), points=(6, 2, 6), points_per_frame=72))
 
 
+def _tube_lamp(engine: Engine) -> None:
+    """No shadows; the ring's lamp a 1.2 m tube of 2 cm radius (PointLight.length: the
+    RECT_LIGHTS builds, the rectangle through its axis facing each pixel's point)."""
+    _sun_shadows(engine, False)
+    for _, light in engine.world.query_one(PointLight):
+        light.length, light.radius = 1.2, 0.02
+
+
 def _fog(engine: Engine) -> None:
     """No shadows; height fog on the camera (its FOG builds: each view, the sky and the
     composites)."""
@@ -496,6 +506,7 @@ VARIANTS: list[Variant] = [
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
     Variant("sphere_lamp", _sphere_lamp, "no shadows; the lamp a sphere of 0.2 m (PointLight.radius)"),
     Variant("rect_lamp", _rect_lamp, "no shadows; the lamp a 1 x 0.5 m panel (PointLight.rectangle)"),
+    Variant("tube_lamp", _tube_lamp, "no shadows; the lamp a 1.2 m tube (PointLight.length)"),
     Variant("lamps_8", _lamps_8, "no shadows; eight more lamps over the floor"),
     Variant("lamps_8_rect", _lamps_8_rect, "the same, the first of them a 0.8 x 0.4 m panel"),
     Variant("lamp_shadows", _lamp_shadows, "no sun shadows; the lamp casts from its cube (the grid filter)"),
