@@ -108,7 +108,7 @@ def _spot_shadows(ctx):
 
 def _rect_lights(ctx):
     """The mirror ring's lamp a panel (PointLight.rectangle: the RECT_LIGHTS builds, the LTC
-    rows of the irradiance table) casting soft shadows from its cube (the grid filter), with
+    rows of the irradiance table) and a tube beside it, casting soft shadows from their cubes (the grid filter), with
     contact shadows, a mirror
     throwing the sun and the lamp (virtual lights, one a rectangle's image), and balls with a
     clear coat, a sheen and anisotropic highlights lit by it."""
@@ -125,6 +125,8 @@ def _rect_lights(ctx):
         engine.renderer.shadows.filter = "grid"   # (its soft shadows: SOFT_POINT_SHADOWS)
         for camera, _ in world.query_one(Camera):
             world.add_component(camera, ContactShadows())
+        world.spawn(Transform(position=(0.0, 2.0, 1.5)), PointLight(intensity=3.0, length=1.2, radius=0.02,
+                                                                     shadows=True, volumetric=0.0))  # a tube too
         for x, material in ((-1.0, Material(clearcoat=1.0, clearcoat_roughness=0.1, sheen_color=(0.5, 0.2, 0.2))),
                             (1.0, Material(metallic=1.0, roughness=0.3, anisotropy=0.8))):
             world.spawn(Transform(position=(x, 0.5, 0.5)), MeshRef(sphere(0.4)), material)
