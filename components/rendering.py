@@ -57,6 +57,7 @@ class MeshRef(TrackedComponent):
 
 
 MAX_NORMAL_SCALE = 16.0  # beyond this a normal map's bumps are all edge-on: a mistake, not a look
+MAX_PARALLAX_DEPTH = 1.0  # metres a height map reaches below its surface (Material.parallax_depth)
 
 
 MAX_SPECULAR_TINT = 10.0  # Material.specular_color: past it a dielectric's f0 is held at 1 in every channel anyway
@@ -86,6 +87,15 @@ class Material(TrackedComponent):
     flat one; and a mirror magnifies an 8-bit map's slope steps (1/127, about 0.45
     degrees), so gentle slopes show as terraces: give a mirror a 16-bit map (a 16-bit PNG
     file, or uint16 pixels: uploaded as RGBA16, steps of 1/32767) or slopes well above that.
+
+    ``parallax_depth`` (metres, default 0: none) makes the normal map's alpha a height map
+    (1 the surface, 0 that deep below it: Unity's and Unreal's height packed in the normal
+    map; glTF has none) that each pixel's view ray is marched into (parallax occlusion
+    mapping, Tatarchuk 2006: 8 to 32 steps by how grazing the view is, the last step's
+    crossing found between its two ends), every map read where the ray meets it: bricks and
+    cobbles stand out of a flat wall and hide what lies behind them as the eye moves, in
+    mirrors and portals too.  The surface itself stays flat (its outline, depth and shadow
+    are the mesh's).  At most ``MAX_PARALLAX_DEPTH`` (1 m); it needs a ``normal_map``.
 
     ``metallic_roughness_map`` (glTF's ``metallicRoughnessTexture``, read linearly): its
     green channel multiplies ``roughness`` and its blue channel ``metallic`` per pixel; the
@@ -218,6 +228,7 @@ class Material(TrackedComponent):
     roughness: float = 0.5
     normal_map: TextureData | None = None
     normal_scale: float = 1.0
+    parallax_depth: float = 0.0
     emissive_map: TextureData | None = None
     metallic_roughness_map: TextureData | None = None
     occlusion_map: TextureData | None = None
@@ -267,6 +278,8 @@ class Material(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
+        if name == "parallax_depth":
+            return finite(self, name, value, low=0.0, high=MAX_PARALLAX_DEPTH)
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
                     "sheen_roughness", "anisotropy", "iridescence", "diffuse_transmission"):
             return finite(self, name, value, low=0.0, high=1.0)

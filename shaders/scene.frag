@@ -619,12 +619,15 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 }
 
 #include "normal_map.glsl"
+#include "parallax.glsl"
 #include "material_maps.glsl"
 #ifdef NORMAL_MAP
 // The directions in which U and V grow across the surface, from screen derivatives of the
 // position and the UVs (a cotangent frame: Schüler, "Normal Mapping Without Precomputed
 // Tangents", 2013), so meshes need no tangent attribute.  Only this build of the program
 // computes it (engine/render/scene_pass.py): a batch with a normal map.
+// ``uv``: the plain UVs (the frame's); the map is read there, or where a parallax shift
+// moves it (PARALLAX builds), filtered by the plain UVs' derivatives.
 vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
     vec3 dp1 = dFdx(p), dp2 = dFdy(p);
     vec2 duv1 = dFdx(uv), duv2 = dFdy(uv);
@@ -632,7 +635,11 @@ vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
     vec3 t = dp2perp * duv1.x + dp1perp * duv2.x;  // the gradients of u and of v in the surface
     vec3 b = dp2perp * duv1.y + dp1perp * duv2.y;
     if (dot(t, t) < 1e-30 || dot(b, b) < 1e-30) return n;  // UVs that do not vary here: flat
+#ifdef PARALLAX
+    return bent_by(normalize(t), normalize(b), n, textureGrad(normal_map, uv + parallax_shift, duv1, duv2).xyz, scale);
+#else
     return bent_normal(normalize(t), normalize(b), n, uv, scale);
+#endif
 }
 #endif
 
@@ -815,14 +822,17 @@ void main() {
     s.normal = normalize(v_normal);
     if (!gl_FrontFacing) s.normal = -s.normal;
     s.geometric_normal = s.normal;
+#ifdef PARALLAX
+    parallax_shift = parallax_offset(s.geometric_normal, v_world_pos, s.to_eye, MAP_UV_PLAIN(UV_BIT_NORMAL_MAP));
+#endif
 #ifdef NORMAL_MAP
-    s.normal = mapped_normal(s.normal, v_world_pos, MAP_UV(UV_BIT_NORMAL_MAP), v_surface.w);
+    s.normal = mapped_normal(s.normal, v_world_pos, MAP_UV_PLAIN(UV_BIT_NORMAL_MAP), v_surface.w);
 #endif
     vec4 base = v_color;
 #ifdef CHECKER
     base.rgb *= checker_colour(MAP_UV(UV_BIT_TEXTURE));
 #else
-    if (has_albedo_map) base *= texture(albedo_map, MAP_UV(UV_BIT_TEXTURE));
+    if (has_albedo_map) base *= MAP_TEXTURE(albedo_map, UV_BIT_TEXTURE);
 #endif
 #ifdef VERTEX_COLOR
     base *= v_vertex_color;
@@ -852,7 +862,7 @@ void main() {
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
     s.highlight_roughness = filtered_roughness(s.roughness, s.normal);
 #ifdef ANISOTROPY
-    anisotropic_frame(s.normal, v_world_pos, MAP_UV(UV_BIT_NORMAL_MAP), anisotropy.y, s.highlight_roughness * s.highlight_roughness);
+    anisotropic_frame(s.normal, v_world_pos, MAP_UV_PLAIN(UV_BIT_NORMAL_MAP), anisotropy.y, s.highlight_roughness * s.highlight_roughness);
 #endif
 #ifdef CLEARCOAT
     coat_normal = s.geometric_normal;

@@ -87,7 +87,8 @@ def layer_uniforms(material: Material | None, refractive: Refractive | None) -> 
     clear coat (clearcoat, its roughness), a sheen (colour, roughness), diffuse transmission
     (its colour, its share), anisotropy (strength,
     direction in radians), a thin film (iridescence, its index, its thickness in nm), what
-    non-metals reflect head on and a refraction's dispersion."""
+    non-metals reflect head on, a refraction's dispersion and how deep the normal map's
+    heights reach (its PARALLAX build's; 0 without a normal map)."""
     m = material or DEFAULT_MATERIAL
     return {"clearcoat": (m.clearcoat, m.clearcoat_roughness) if m.clearcoat > 0.0 else None,
             "sheen": (*m.sheen_color, m.sheen_roughness) if max(m.sheen_color) > 0.0 else None,
@@ -95,5 +96,6 @@ def layer_uniforms(material: Material | None, refractive: Refractive | None) -> 
             if m.diffuse_transmission > 0.0 else None,
             "anisotropy": (m.anisotropy, math.radians(m.anisotropy_direction)) if m.anisotropy > 0.0 else None,
             "iridescence": (m.iridescence, m.iridescence_ior, m.iridescence_thickness) if m.iridescence > 0.0 else None,
+            "parallax_depth": m.parallax_depth if m.normal_map is not None else 0.0,
             "dielectric_f0": dielectric_f0(material),
             "dispersion": refractive.dispersion if refractive is not None else 0.0}

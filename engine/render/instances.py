@@ -268,6 +268,7 @@ class BatchKey(NamedTuple):
     diffuse_transmission: tuple[float, float, float, float] | None = None
     decal: bool = False  # a decal's cut mesh (FromDecal): drawn pulled towards the eye by a depth offset
     decal_order: int = 0  # its Decal.order: decals of higher orders blended later
+    parallax_depth: float = 0.0  # Material.parallax_depth with a normal map: its PARALLAX build's uniform (0: none)
 
 
 _NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first preparing
@@ -400,6 +401,7 @@ class InstanceBatch:
         # DIFFUSE_TRANSMISSION build's uniform.
         self.diffuse_transmission: tuple[float, float, float, float] | None = None
         self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform
+        self.parallax_depth = 0.0  # Material.parallax_depth (0: none): its PARALLAX build's uniform
         # Anisotropy (Material.anisotropy; its direction in radians; None: none): its ANISOTROPY build's uniform.
         self.anisotropy: tuple[float, float] | None = None
         # A thin film (Material.iridescence, its index, thickness; None: none): IRIDESCENCE's uniform.

@@ -195,7 +195,7 @@ class Renderer(Gpu):
                   iridescence: tuple[float, float, float] | None = None,
                   posed: tuple[int, bool, bool] = (0, False, False), second_uv_maps: int = 0,
                   diffuse_transmission: tuple[float, float, float, float] | None = None,
-                  decal: bool = False, decal_order: int = 0) -> InstanceBatch:
+                  decal: bool = False, decal_order: int = 0, parallax_depth: float = 0.0) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -227,6 +227,7 @@ class Renderer(Gpu):
         # ``decal``: a decal's cut mesh (systems/decal_system.py), lying on the surfaces it was
         # cut from: its draws' depth is offset towards the eye (ScenePass), so it wins their tie;
         # ``decal_order``: its Decal.order (the transparent slot blends higher orders later).
+        # ``parallax_depth``: Material.parallax_depth with a normal map, its PARALLAX build's (0: none).
         if second_uv_maps and mesh.second_uvs is None:
             raise GLLimitError(f"mesh {mesh.name!r}: Material.second_uv_maps reads a second UV set the mesh does "
                                "not have (Mesh.second_uvs)")
@@ -239,7 +240,7 @@ class Renderer(Gpu):
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
                        bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen,
                        dispersion, anisotropy, iridescence, posed, second_uv_maps, diffuse_transmission, decal,
-                       decal_order)
+                       decal_order, parallax_depth if normal_map is not None else 0.0)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -298,6 +299,7 @@ class Renderer(Gpu):
             batch.skinned, batch.morphed = posed[1], posed[2]
             batch.second_uv_maps = second_uv_maps
             batch.diffuse_transmission = diffuse_transmission
+            batch.parallax_depth = key.parallax_depth
             if sheen is not None:  # the sheen's albedo table, made once a sheen is drawn
                 self.irradiance.write_sheen_albedo()
             self._order_stale = True

@@ -70,7 +70,8 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
                      "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
-                     "anisotropy", "iridescence", "pose_row", "morph_targets", "diffuse_transmission")
+                     "anisotropy", "iridescence", "pose_row", "morph_targets", "diffuse_transmission",
+                     "parallax_depth")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -82,7 +83,7 @@ NO_ANISOTROPY = (0.0, 0.0)  # the anisotropy uniform of a batch without one (lik
 NO_IRIDESCENCE = (0.0, 1.0, 0.0)  # the thin film's uniform of a batch without one (likewise)
 # a batch's build with none of _material_build's
 NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False, False, 0,
-                    False)
+                    False, False)
 
 
 
@@ -199,7 +200,7 @@ class ScenePrograms:
                 False, False
             material = (False, False, material[2], "", False, False, False, False, False, False, False, False,
                         material[12], material[13],  # (a posed mesh's depth is where its pose puts it)
-                        material[14] & ALBEDO_UV_BIT if material[2] else 0, False)  # (a cutout's holes: its UVs)
+                        material[14] & ALBEDO_UV_BIT if material[2] else 0, False, False)  # (a cutout's holes: its UVs)
             virtual, unlit, shadowing, fogging, cookies = False, False, (), (), ()  # (masked: a level's)
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -250,6 +251,8 @@ class ScenePrograms:
                 defines["SECOND_UV_MAPS"] = str(material[14])
             if material[15]:  # light from behind let through (Material.diffuse_transmission: scene.frag)
                 defines["DIFFUSE_TRANSMISSION"] = "1"
+            if material[16]:  # the normal map's heights marched (Material.parallax_depth: parallax.glsl)
+                defines["PARALLAX"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -375,7 +378,7 @@ class ScenePrograms:
                    batch.occlusion_strength, batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0,
                    batch.sheen or NO_SHEEN, batch.dispersion, batch.anisotropy or NO_ANISOTROPY,
                    batch.iridescence or NO_IRIDESCENCE, batch.pose_row, batch.mesh.morph_count if batch.morphed else 0,
-                   batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION)
+                   batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION, batch.parallax_depth)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -408,11 +411,12 @@ def _material_build(batch: InstanceBatch) -> tuple:
     thin film colours its reflections (``IRIDESCENCE``), whether a Skin bends its mesh
     (``SKINNED``), whether it wears a Morph (``MORPHED``), which of its maps read the
     mesh's second UV set (``SECOND_UV_MAPS``, their bits; 0: none) and whether it lets light
-    through from behind (``DIFFUSE_TRANSMISSION``)."""
+    through from behind (``DIFFUSE_TRANSMISSION``) and whether its normal map's heights are
+    marched (``PARALLAX``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
             batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None,
             batch.iridescence is not None, batch.skinned, batch.morphed, batch.second_uv_maps,
-            batch.diffuse_transmission is not None)
+            batch.diffuse_transmission is not None, batch.parallax_depth > 0.0)
 

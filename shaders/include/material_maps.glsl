@@ -25,10 +25,10 @@ uniform float occlusion_strength;          // Material.occlusion_strength (glTF'
 // own light is not scaled (glTF: occlusion is of indirect light only).
 float material_occlusion() {
 #if defined(OCCLUSION_MAP)
-    return 1.0 + occlusion_strength * (texture(occlusion_map, MAP_UV(UV_BIT_OCCLUSION_MAP)).r - 1.0);
+    return 1.0 + occlusion_strength * (MAP_TEXTURE(occlusion_map, UV_BIT_OCCLUSION_MAP).r - 1.0);
 #elif defined(OCCLUSION_PACKED)
     // glTF's packed occlusion-roughness-metallic image: the occlusion in its red (one sampler)
-    return 1.0 + occlusion_strength * (texture(metallic_roughness_map, MAP_UV(UV_BIT_OCCLUSION_MAP)).r - 1.0);
+    return 1.0 + occlusion_strength * (MAP_TEXTURE(metallic_roughness_map, UV_BIT_OCCLUSION_MAP).r - 1.0);
 #else
     return 1.0;
 #endif
@@ -39,7 +39,7 @@ float material_occlusion() {
 // which ``mapped_reflection`` weighs a sky or probe reflection by.
 float apply_metallic_roughness(inout Surface s) {
 #ifdef METALLIC_ROUGHNESS_MAP
-    vec3 texel = texture(metallic_roughness_map, MAP_UV(UV_BIT_METALLIC_ROUGHNESS_MAP)).rgb;
+    vec3 texel = MAP_TEXTURE(metallic_roughness_map, UV_BIT_METALLIC_ROUGHNESS_MAP).rgb;
     s.roughness *= texel.g;
     s.metallic *= texel.b;
     return texel.b;
@@ -53,7 +53,7 @@ float apply_metallic_roughness(inout Surface s) {
 // colour (the engine's Emissive without a map).
 vec3 emitted_colour(Surface s) {
 #ifdef EMISSIVE_MAP
-    return texture(emissive_map, MAP_UV(UV_BIT_EMISSIVE_MAP)).rgb;
+    return MAP_TEXTURE(emissive_map, UV_BIT_EMISSIVE_MAP).rgb;
 #else
     return s.albedo;
 #endif

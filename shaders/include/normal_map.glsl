@@ -5,9 +5,15 @@
 // V grow across the surface.
 uniform sampler2D normal_map;
 
+// The normal a texel ``texel`` of the map gives in the frame (t: +U, b: +V, n: out of the
+// surface, all unit), its slope scaled by scale.
+vec3 bent_by(vec3 t, vec3 b, vec3 n, vec3 texel, float scale) {
+    vec3 m = texel * 2.0 - 1.0;
+    return normalize((t * m.x + b * m.y) * scale + n * m.z);
+}
+
 // The map's normal at uv in the frame (t: +U, b: +V, n: out of the surface, all unit), its
 // slope scaled by scale (glTF's normalTexture.scale; 0: n itself).
 vec3 bent_normal(vec3 t, vec3 b, vec3 n, vec2 uv, float scale) {
-    vec3 m = texture(normal_map, uv).xyz * 2.0 - 1.0;
-    return normalize((t * m.x + b * m.y) * scale + n * m.z);
+    return bent_by(t, b, n, texture(normal_map, uv).xyz, scale);
 }

@@ -6,8 +6,25 @@
 // branch is left in the shader.
 // Included by scene.frag after its v_uv (and v_uv2) inputs.
 
-#ifdef SECOND_UV_MAPS
-#define MAP_UV(bit) ((((SECOND_UV_MAPS) & (bit)) != 0) ? v_uv2 : v_uv)
+#ifdef PARALLAX
+// Where the view ray meets the normal map's heights (parallax.glsl; scene.frag sets it before
+// any map is read): every map is read there.
+vec2 parallax_shift = vec2(0.0);
+#define PARALLAX_SHIFT + parallax_shift
 #else
-#define MAP_UV(bit) v_uv
+#define PARALLAX_SHIFT
+#endif
+#ifdef SECOND_UV_MAPS
+#define MAP_UV_PLAIN(bit) ((((SECOND_UV_MAPS) & (bit)) != 0) ? v_uv2 : v_uv)
+#else
+#define MAP_UV_PLAIN(bit) v_uv
+#endif
+#define MAP_UV(bit) (MAP_UV_PLAIN(bit) PARALLAX_SHIFT)
+// A map's texel where it is read: with a parallax shift, filtered by the plain UVs' screen
+// derivatives (the shifted UVs jump where the ray passes a height's edge: their own would
+// pick the smallest mip there, a seam of sparkles).
+#ifdef PARALLAX
+#define MAP_TEXTURE(map, bit) textureGrad(map, MAP_UV(bit), dFdx(MAP_UV_PLAIN(bit)), dFdy(MAP_UV_PLAIN(bit)))
+#else
+#define MAP_TEXTURE(map, bit) texture(map, MAP_UV(bit))
 #endif
