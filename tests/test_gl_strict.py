@@ -274,7 +274,8 @@ def _resized(ctx):
 
 SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     **{name: _golden(name) for name in ("hall_start", "hall_mirror_wall", "hall_doorway", "hall_partner_side",
-                                        "mirror_ring_8_batched", "portals_depth_8", "portals_partner_disabled")},
+                                        "mirror_ring_8_batched", "portals_depth_8", "portals_partner_disabled",
+                                        "readme_bricks")},
     "shadows_moving": _lighting("shadows_moving"),
     "mirror_light_moving": _lighting("mirror_light_moving"),
     "post_auto_gpu_passes": _lighting("post_auto", gpu=True),
