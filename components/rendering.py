@@ -91,7 +91,7 @@ class Material(TrackedComponent):
     ``parallax_depth`` (metres, default 0: none) makes the normal map's alpha a height map
     (1 the surface, 0 that deep below it: Unity's and Unreal's height packed in the normal
     map; glTF has none) that each pixel's view ray is marched into (parallax occlusion
-    mapping, Tatarchuk 2006: 8 to 32 steps by how grazing the view is, the last step's
+    mapping, Tatarchuk 2006: 6 to 16 steps by how grazing the view is, the last step's
     crossing found between its two ends), every map read where the ray meets it: bricks and
     cobbles stand out of a flat wall and hide what lies behind them as the eye moves, in
     mirrors and portals too.  The surface itself stays flat (its outline, depth and shadow

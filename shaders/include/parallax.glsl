@@ -1,7 +1,7 @@
 // Parallax occlusion mapping (Material.parallax_depth; Tatarchuk, "Dynamic Parallax Occlusion
 // Mapping with Approximate Soft Shadows", 2006): the normal map's alpha is a height map, 1 the
 // surface and 0 parallax_depth metres below it, and each pixel's view ray is marched into it
-// from the surface in 8 to 32 steps (more the more grazing the view), the crossing found
+// from the surface in 6 to 16 steps (more the more grazing the view), the crossing found
 // between the last step above the heights and the first below (the straight line between the
 // two gaps).  Every map is then read where the ray meets the heights (uv_sets.glsl adds the
 // shift to MAP_UV).  The surface's outline, depth and shadows stay the mesh's.
@@ -12,8 +12,8 @@
 #ifdef PARALLAX
 uniform float parallax_depth;  // its batch's Material.parallax_depth: metres below the surface at alpha 0
 
-const float PARALLAX_MIN_STEPS = 8.0;
-const int PARALLAX_MAX_STEPS = 32;
+const float PARALLAX_MIN_STEPS = 6.0;
+const int PARALLAX_MAX_STEPS = 16;
 
 // The UV shift to where the ray from the eye through point p (unit geometric normal n, unit
 // way to the eye to_eye, UV uv) meets the heights.
