@@ -175,7 +175,8 @@ class IrradianceVolume(Captured):
     - ``points_per_frame``: captures a frame (each six faces of the frame's view budget).
 
     The grid lights the scene once every point has been captured; until then the sky and
-    the probes do. One a world (the lowest entity's; another is said once and ignored).
+    the probes do. At most ``MAX_IRRADIANCE_VOLUMES`` (4) a world (a room each: a point takes
+    the one weighing most there; the lowest entities', more said once and ignored).
     It dims the sky's reflection where it is darker than the sky (a room's floor does not
     mirror the daylight), as it does the probes' boxes.
     """

@@ -23,8 +23,9 @@ Where each point is captured from is worked out when its bake starts: a point in
 object is captured from just outside it (``engine/rules/volume_rules.py``: a probe in a wall
 would see through it).
 
-One volume a world: the lowest entity's; another is said once (``VolumeLimitWarning``) and
-ignored.  Its scratch cube is released when the volume goes.
+At most ``MAX_IRRADIANCE_VOLUMES`` (4) a world, each baked as above in a slot of the table's
+rows: the lowest entities'; more are said once (``VolumeLimitWarning``) and ignored.  Each
+volume's scratch cube is released when it goes.
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ import numpy as np
 from pyglm import glm
 
 from components import IrradianceVolume, Transform
+from components.limits import MAX_IRRADIANCE_VOLUMES
 from engine.core.errors import VolumeLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import VolumeGrid
@@ -45,12 +47,12 @@ from engine.rules.volume_rules import capture_margin, pushed_out, solid_boxes
 FACES = 6  # views a point's capture spends of the view budget
 
 
-def volume_grid(volume: IrradianceVolume, centre: glm.vec3) -> VolumeGrid:
-    """Where ``volume``'s grid lies with its box centred on ``centre``."""
+def volume_grid(volume: IrradianceVolume, centre: glm.vec3, slot: int = 0) -> VolumeGrid:
+    """Where ``volume``'s grid lies with its box centred on ``centre``, in table slot ``slot``."""
     half = glm.vec3(volume.size) / 2.0
     low, high = centre - half, centre + half
     return VolumeGrid(tuple(map(float, low)), tuple(map(float, high)), tuple(volume.points),
-                      float(volume.blend_distance), float(volume.normal_bias))
+                      float(volume.blend_distance), float(volume.normal_bias), slot)
 
 
 def grid_points(points: tuple[int, int, int]) -> list[tuple[int, int, int]]:
@@ -59,107 +61,125 @@ def grid_points(points: tuple[int, int, int]) -> list[tuple[int, int, int]]:
     return [(i, j, k) for k in range(nz) for j in range(ny) for i in range(nx)]
 
 
+class VolumeBake:
+    """One volume's bake: where its captures are taken and drawn, what is still due, and
+    whether its grid is whole (lights the scene)."""
+
+    def __init__(self, owner: int, slot: int) -> None:
+        self.owner = owner
+        self.slot = slot
+        self.capture: tuple | None = None    # what places and draws its captures, as last baked
+        self.grid: VolumeGrid | None = None  # the grid those captures fill
+        self.due: list[tuple[int, int, int]] = []   # points still to capture, in order
+        self.taken_from: dict[tuple[int, int, int], np.ndarray] = {}  # where each is captured from
+        self.whole = False                   # every point of the grid holds a capture
+        self.requests = 0
+        self.points_moved = 0                # points of its last bake captured from outside a solid object
+
+    @property
+    def key(self) -> int:
+        """Its scratch cube among the probes' cubes (a negative key: no entity's)."""
+        return -self.owner
+
+
 class IrradianceVolumeSystem(esper.Processor):
-    """Stage "volume" (after the probes, before the main view): the volume's due points
-    captured and projected, and the grid handed to the irradiance table once whole."""
+    """Stage "volume" (after the probes, before the main view): each volume's due points
+    captured and projected, and its grid handed to the irradiance table once whole."""
 
     def __init__(self, world: World, renderer: Renderer) -> None:
         self.world = world
         self.renderer = renderer
-        self.owner: int | None = None          # the volume's entity
-        self._capture: tuple | None = None     # what places and draws its captures, as last baked
-        self._grid: VolumeGrid | None = None   # the grid those captures fill
-        self._due: list[tuple[int, int, int]] = []  # points still to capture, in order
-        self._from: dict[tuple[int, int, int], np.ndarray] = {}  # where each is captured from (this bake's)
-        self.points_moved = 0                  # points of the last bake captured from outside a solid object
-        self._whole = False                    # every point of _grid holds a capture
-        self._requests = 0
+        self.volumes: dict[int, VolumeBake] = {}   # by owner
         self._said_more = False
         self.points_captured = 0               # over the run (tests, the overlay)
         self.bakes = 0                         # whole grids captured, over the run
 
     @property
-    def key(self) -> int:
-        """The volume's scratch cube among the probes' cubes (a negative key: no entity's)."""
-        return -(self.owner or 0)
+    def points_moved(self) -> int:
+        """Points of the volumes' last bakes captured from outside a solid object."""
+        return sum(bake.points_moved for bake in self.volumes.values())
 
     def process(self, dt: float) -> None:
         volumes = sorted(self.world.query_one(IrradianceVolume), key=lambda pair: pair[0])
-        if len(volumes) > 1 and not self._said_more:
-            warnings.warn(f"{len(volumes)} IrradianceVolume entities: one lights a world, the lowest entity's "
-                          f"({volumes[0][0]}); entities {[e for e, _ in volumes[1:]]} are ignored",
-                          VolumeLimitWarning, stacklevel=2)
+        if len(volumes) > MAX_IRRADIANCE_VOLUMES and not self._said_more:
+            warnings.warn(f"{len(volumes)} IrradianceVolume entities: at most {MAX_IRRADIANCE_VOLUMES} light a world, "
+                          f"the lowest entities'; entities {[e for e, _ in volumes[MAX_IRRADIANCE_VOLUMES:]]} are "
+                          "ignored (MAX_IRRADIANCE_VOLUMES)", VolumeLimitWarning, stacklevel=2)
             self._said_more = True
-        owner, volume = volumes[0] if volumes else (None, None)
-        if owner != self.owner:
-            self._drop()
-            self.owner = owner
-        if volume is None:
-            return
-        transform = self.world.try_get(owner, Transform)
-        centre = glm.vec3(transform.world[3]) if transform is not None else glm.vec3(0.0)
-        grid = volume_grid(volume, centre)
-        capture = (grid.low, grid.high, grid.points, volume.resolution, volume.near, volume.far, volume.layer_mask)
-        if capture != self._capture:
-            # A new grid: its tiles hold nothing it means until every point is captured.
-            self._capture, self._grid, self._whole = capture, grid, False
-            self._requests = volume.requests
-            self._start(grid, volume.near)
-            self.renderer.irradiance.set_volume(None)
-        elif grid != self._grid:  # its blend distance or normal bias alone
-            self._grid = grid
-            if self._whole:
-                self.renderer.irradiance.set_volume(grid)
-        if volume.requests != self._requests:
-            self._requests = volume.requests
-            self._start(grid, volume.near)
-        if not self._due and volume.refresh == "continuous":
-            self._start(grid, volume.near)
-        self._capture_due(volume, grid)
+        kept = dict(volumes[:MAX_IRRADIANCE_VOLUMES])
+        for owner in [owner for owner in self.volumes if owner not in kept]:
+            self._drop(self.volumes.pop(owner))
+        for owner, volume in kept.items():
+            bake = self.volumes.get(owner)
+            if bake is None:
+                taken = {b.slot for b in self.volumes.values()}
+                bake = self.volumes[owner] = VolumeBake(owner, next(s for s in range(MAX_IRRADIANCE_VOLUMES)
+                                                                    if s not in taken))
+            self._update(bake, volume)
 
-    def _start(self, grid: VolumeGrid, near: float) -> None:
-        """A bake of every point of ``grid``, each captured from its place or from outside the
+    def _update(self, bake: VolumeBake, volume: IrradianceVolume) -> None:
+        transform = self.world.try_get(bake.owner, Transform)
+        centre = glm.vec3(transform.world[3]) if transform is not None else glm.vec3(0.0)
+        grid = volume_grid(volume, centre, bake.slot)
+        capture = (grid.low, grid.high, grid.points, volume.resolution, volume.near, volume.far, volume.layer_mask)
+        table = self.renderer.irradiance
+        if capture != bake.capture:
+            # A new grid: its tiles hold nothing it means until every point is captured.
+            bake.capture, bake.grid, bake.whole = capture, grid, False
+            bake.requests = volume.requests
+            self._start(bake, volume.near)
+            table.set_volume(bake.slot, None)
+        elif grid != bake.grid:  # its blend distance or normal bias alone
+            bake.grid = grid
+            if bake.whole:
+                table.set_volume(bake.slot, grid)
+        if volume.requests != bake.requests:
+            bake.requests = volume.requests
+            self._start(bake, volume.near)
+        if not bake.due and volume.refresh == "continuous":
+            self._start(bake, volume.near)
+        self._capture_due(bake, volume)
+
+    def _start(self, bake: VolumeBake, near: float) -> None:
+        """A bake of every point of its grid, each captured from its place or from outside the
         solid object it lies in (``volume_rules.pushed_out``)."""
-        self._due = grid_points(grid.points)
-        places = np.array([grid.position(index) for index in self._due])
+        grid = bake.grid
+        bake.due = grid_points(grid.points)
+        places = np.array([grid.position(index) for index in bake.due])
         low, high = np.array(grid.low), np.array(grid.high)
         margin = capture_margin(near)
         taken = pushed_out(places, *solid_boxes(self.world, low, high, margin), toward=(low + high) / 2.0,
                            margin=margin)
-        self._from = dict(zip(self._due, taken, strict=True))
-        self.points_moved = int(np.count_nonzero(np.any(taken != places, axis=1)))
+        bake.taken_from = dict(zip(bake.due, taken, strict=True))
+        bake.points_moved = int(np.count_nonzero(np.any(taken != places, axis=1)))
 
-    def _capture_due(self, volume: IrradianceVolume, grid: VolumeGrid) -> None:
+    def _capture_due(self, bake: VolumeBake, volume: IrradianceVolume) -> None:
         stats = self.renderer.stats
         left = stats.views_left()
         count = volume.points_per_frame if left is None else min(volume.points_per_frame, left // FACES)
         if not count and left is not None and stats.view_budget < FACES and stats.views_spent == 0:
             count = 1  # a budget no point fits: one a frame past it, so the bake ends
-        count = min(count, len(self._due))
+        count = min(count, len(bake.due))
         if not count:
             return
-        probes, table = self.renderer.probes, self.renderer.irradiance
-        key = self.key
-        for index in self._due[:count]:
-            position = glm.vec3(*self._from[index])
-            views = {face: face_view(face, position, volume.near, volume.far, volume.resolution, skip=self.owner,
+        probes, table, grid = self.renderer.probes, self.renderer.irradiance, bake.grid
+        for index in bake.due[:count]:
+            position = glm.vec3(*bake.taken_from[index])
+            views = {face: face_view(face, position, volume.near, volume.far, volume.resolution, skip=bake.owner,
                                      layers=volume.layer_mask) for face in range(FACES)}
-            probes.capture(key, views, None, 0)
-            table.project_volume_point(grid, index, probes.cubes[key])
-        del self._due[:count]
+            probes.capture(bake.key, views, None, 0)
+            table.project_volume_point(grid, index, probes.cubes[bake.key])
+        del bake.due[:count]
         stats.views_spent += FACES * count
         stats.volume_points += count
         self.points_captured += count
-        if not self._due:
+        if not bake.due:
             self.bakes += 1
-            if not self._whole:
-                self._whole = True
-                table.set_volume(grid)
+            if not bake.whole:
+                bake.whole = True
+                table.set_volume(bake.slot, grid)
 
-    def _drop(self) -> None:
-        """The volume is gone (or another took its place): its cube released, the grid no
-        longer lights the scene."""
-        if self.owner is not None:
-            self.renderer.probes.drop(self.key)
-            self.renderer.irradiance.set_volume(None)
-        self.owner, self._capture, self._grid, self._due, self._whole = None, None, None, [], False
+    def _drop(self, bake: VolumeBake) -> None:
+        """A volume gone (or past the limit now): its cube released, its grid lighting nothing."""
+        self.renderer.probes.drop(bake.key)
+        self.renderer.irradiance.set_volume(bake.slot, None)

@@ -276,7 +276,7 @@ def test_the_bake_takes_points_per_frame_under_the_view_budget_and_lights_once_w
     for _ in range(5):
         runner.frame()
         counts.append(runner.stats.volume_points)
-        lit.append(renderer.irradiance.volume is not None)
+        lit.append(bool(renderer.irradiance.volumes))
     assert counts == [5, 5, 2, 0, 0]
     assert lit == [False, False, True, True, True]
     assert ("IRRADIANCE_VOLUME", "1") in renderer.ambient_defines
@@ -297,18 +297,18 @@ def test_moving_the_volume_bakes_it_again_and_its_blend_alone_does_not(scene):
     table = runner.engine.renderer.irradiance
     runner.frame()
     runner.frame()
-    assert table.volume is not None
+    assert table.volumes
     entity = runner.world.query_one(IrradianceVolume)[0][0]
     runner.world.get(entity, Transform).position = glm.vec3(0.5, 0.0, 0.0)
     runner.frame()
-    assert runner.stats.volume_points == 4 and table.volume is None
+    assert runner.stats.volume_points == 4 and not table.volumes
     runner.frame()
-    assert table.volume is not None and table.volume.low[0] == pytest.approx(-0.5)
+    assert table.volumes[0].low[0] == pytest.approx(-0.5)
     volume.blend_distance = 0.3
     volume.normal_bias = 0.2
     runner.frame()
     assert runner.stats.volume_points == 0
-    assert (table.volume.blend, table.volume.normal_bias) == (pytest.approx(0.3), pytest.approx(0.2))
+    assert (table.volumes[0].blend, table.volumes[0].normal_bias) == (pytest.approx(0.3), pytest.approx(0.2))
 
 
 def test_a_bake_again_gives_the_same_light_and_continuous_keeps_capturing(scene):
@@ -321,7 +321,7 @@ def test_a_bake_again_gives_the_same_light_and_continuous_keeps_capturing(scene)
     first = volume_light(runner, volume)
     volume.request()
     runner.frame()
-    assert runner.stats.volume_points == 8 and runner.engine.renderer.irradiance.volume is not None
+    assert runner.stats.volume_points == 8 and runner.engine.renderer.irradiance.volumes
     np.testing.assert_allclose(volume_light(runner, volume), first, rtol=1e-5, atol=1e-6)
     assert np.abs(first).max() > 0.1
     volume.refresh = "continuous"
@@ -339,25 +339,64 @@ def test_removing_the_volume_releases_its_cube_and_its_light(scene):
     renderer = runner.engine.renderer
     runner.frame()
     entity = runner.world.query_one(IrradianceVolume)[0][0]
-    assert -entity in renderer.probe_cubes and renderer.irradiance.volume is not None
+    assert -entity in renderer.probe_cubes and renderer.irradiance.volumes
     runner.world.delete_entity(entity)
     runner.frame()
     assert -entity not in renderer.probe_cubes
-    assert renderer.irradiance.volume is None and renderer.ambient_defines == ()
+    assert not renderer.irradiance.volumes and renderer.ambient_defines == ()
 
 
-def test_a_second_volume_is_said_and_ignored(scene):
-    def build(world):
-        floor_scene(IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8))(world)
-        world.spawn(Transform(position=(5.0, 0.0, 0.0)), IrradianceVolume(points=(2, 2, 2)))
-    runner = scene(build, (32, 24))
-    with pytest.warns(VolumeLimitWarning, match="one lights a world"):
-        runner.frame()
-    assert runner.stats.volume_points == 8
-    assert runner.engine.renderer.irradiance.volume.low == pytest.approx((-1.0, 0.1, -1.0))
+def test_volumes_light_their_own_rooms_and_a_fifth_is_said_and_ignored(scene):
+    """Two rooms side by side (open above, under a black sky), one with red walls and one with
+    blue, a volume filling each: each volume's coefficients are its own room's (its slot of
+    the table), and each white floor's light is its room's colour.  Five volumes: the lowest
+    four light, the fifth is said once (``VolumeLimitWarning``) and captures nothing."""
+    floors: list[int] = []
+
+    def two_rooms(count):
+        def build(world):
+            world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+            for x, colour in ((-2.0, (0.8, 0.1, 0.1)), (2.0, (0.1, 0.1, 0.8))):
+                for axis, side in ((0, -1), (0, 1), (2, -1), (2, 1)):   # (open above: the eye sees the floor)
+                    centre = [x, 1.0, 0.0]
+                    centre[axis] += 1.05 * side
+                    size = [2.2, 2.2, 2.2]
+                    size[axis] = 0.1
+                    world.spawn(Transform(position=tuple(centre)), MeshRef(box(tuple(size))),
+                                Material(color=(*colour, 1.0), unlit=True))
+                floors.append(world.spawn(Transform(position=(x, 0.0, 0.0)), MeshRef(plane(2.0, 2.0)),
+                                          Material(color=(1.0, 1.0, 1.0, 1.0), roughness=1.0,
+                                                   environment_reflection=0.0)))
+            for k in range(count):
+                world.spawn(Transform(position=(-2.0 if k == 0 else 2.0 + 10.0 * (k - 1), 1.0, 0.0)),
+                            IrradianceVolume(size=(1.8, 1.9, 1.8), points=(2, 2, 2), points_per_frame=8))
+            look_from(world, (0.0, 6.0, 0.5), (0.0, 0.0, 0.0), fov=70.0)
+        return build
+
+    runner = scene(two_rooms(2), (96, 48))
+    runner.frame()
+    table = runner.engine.renderer.irradiance
+    assert sorted(table.volumes) == [0, 1]
+    for slot, (red, blue) in ((0, (0, 2)), (1, (2, 0))):
+        light = table.read_volume(table.volumes[slot])
+        assert (light[..., 0, red] > 2.0 * light[..., 0, blue]).all()   # each point's own room's colour
+    image = srgb_to_linear(runner.frame())
+    shown = []
+    for x, floor in zip((-2.0, 2.0), floors[:2], strict=True):
+        column, row = runner.project((x, 0.0, 0.3))
+        assert (runner.ids()[row - 2:row + 3, column - 2:column + 3] == floor).all()
+        shown.append(image[row - 2:row + 3, column - 2:column + 3].reshape(-1, 3).mean(0))
+    left, right = shown
+    assert left.max() > 0.05 and right.max() > 0.05
+    assert left[0] > 2.0 * left[2] and right[2] > 2.0 * right[0], (left, right)
+
+    crowded = scene(two_rooms(5), (48, 24))
+    with pytest.warns(VolumeLimitWarning, match="at most 4 light a world"):
+        crowded.frame()
+    assert crowded.stats.volume_points == 32 and len(crowded.engine.renderer.irradiance.volumes) == 4
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        runner.frame()  # said once
+        crowded.frame()  # said once
 
 
 @pytest.mark.parametrize("field, value, match", [

@@ -72,7 +72,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from components.limits import MAX_VOLUME_AXIS_POINTS
+from components.limits import MAX_IRRADIANCE_VOLUMES, MAX_VOLUME_AXIS_POINTS
 from engine.core.cube_faces import face_directions
 from engine.render.bindings import (
     CUBE_MIP_UNIT,
@@ -96,7 +96,7 @@ from engine.render.sky import (
     zenith_share,
 )
 from engine.render.targets import release_framebuffer
-from engine.render.views import LTC_ROW, MAX_IRRADIANCE_PROBES, VOLUME_ROW, VOLUME_ROWS
+from engine.render.views import LTC_ROW, MAX_IRRADIANCE_PROBES, VOLUME_ROW, VOLUME_ROWS, VOLUME_SLOT_ROWS
 
 LOG = logging.getLogger("speculum")
 
@@ -108,7 +108,7 @@ SH_CONSTANTS = (_Y0, _Y1, _Y1, _Y1, _Y2, _Y2, _Y20, _Y2, _Y22)
 # The clamped cosine's band factors A_l, per coefficient (Ramamoorthi and Hanrahan, eq. 8).
 BAND_FACTORS = (math.pi,) + (2.0 * math.pi / 3.0,) * 3 + (math.pi / 4.0,) * 5
 PROJECTION_FACE_SIZE = 16    # texels across a face at the cube level the GPU projection reads
-IRRADIANCE_BLOCK_BYTES = 16 + 2 * 16 * MAX_IRRADIANCE_PROBES + 3 * 16
+IRRADIANCE_BLOCK_BYTES = 16 + 2 * 16 * MAX_IRRADIANCE_PROBES + 3 * 16 * MAX_IRRADIANCE_VOLUMES
 
 
 def sh_basis(directions: np.ndarray) -> np.ndarray:
@@ -221,13 +221,19 @@ def evaluate_sh(coefficients: np.ndarray, normals: np.ndarray) -> np.ndarray:
 class VolumeGrid:
     """Where an irradiance volume's grid lies (``components.probe.IrradianceVolume``): its
     box's lowest and highest corners (the corner points), points along x, y and z, the blend
-    distance inside its walls and the normal bias."""
+    distance inside its walls, the normal bias and its slot of the table's rows."""
 
     low: tuple[float, float, float]
     high: tuple[float, float, float]
     points: tuple[int, int, int]
     blend: float = 0.0
     normal_bias: float = 0.0
+    slot: int = 0
+
+    @property
+    def first_row(self) -> int:
+        """Its slot's first row of the table."""
+        return VOLUME_ROW + self.slot * VOLUME_SLOT_ROWS
 
     def position(self, index: tuple[int, int, int]) -> tuple[float, float, float]:
         """Where point ``index`` (i, j, k) of the grid is."""
@@ -236,31 +242,34 @@ class VolumeGrid:
 
     def texel(self, index: tuple[int, int, int], coefficient: int) -> tuple[int, int]:
         """The table's texel (x, y) holding ``coefficient`` of point ``index``: tile (c, j)
-        at columns c x points-along-x, rows j x points-along-z below ``VOLUME_ROW``."""
+        at columns c x points-along-x, rows j x points-along-z of its slot."""
         i, j, k = index
         nx, _, nz = self.points
-        return coefficient * nx + i, VOLUME_ROW + j * nz + k
+        return coefficient * nx + i, self.first_row + j * nz + k
 
 
 def irradiance_block(boxes: Iterable[tuple[Iterable[float], Iterable[float], float, int]],
-                     volume: VolumeGrid | None = None) -> bytes:
-    """The std140 Irradiance block (``shaders/include/ambient.glsl``): the count, then per box
-    its centre with its blend distance, and its half size with its table row; then the
-    volume's lowest corner with its blend distance, its highest with its normal bias, and its
-    points along x, y, z (w: 1 while it lights the scene)."""
+                     volumes: Iterable[VolumeGrid] = ()) -> bytes:
+    """The std140 Irradiance block (``shaders/include/ambient.glsl``): the counts (boxes,
+    volumes), then per box its centre with its blend distance, and its half size with its
+    table row; then per volume its lowest corner with its blend distance, its highest with
+    its normal bias, and its points along x, y, z with its slot's first row."""
     boxes = list(boxes)[:MAX_IRRADIANCE_PROBES]
+    volumes = list(volumes)[:MAX_IRRADIANCE_VOLUMES]
     data = np.zeros(IRRADIANCE_BLOCK_BYTES // 4, np.float32)
-    data[0:4] = np.array([len(boxes), 0, 0, 0], np.int32).view(np.float32)
+    data[0:4] = np.array([len(boxes), len(volumes), 0, 0], np.int32).view(np.float32)
     base = 4
     for i, (centre, half, blend, row) in enumerate(boxes):
         data[base + 4 * i: base + 4 * i + 4] = (*tuple(centre)[:3], blend)
         data[base + 4 * (MAX_IRRADIANCE_PROBES + i): base + 4 * (MAX_IRRADIANCE_PROBES + i) + 4] = \
             (*tuple(half)[:3], float(row))
-    if volume is not None:
-        at = base + 8 * MAX_IRRADIANCE_PROBES
-        data[at:at + 4] = (*volume.low, volume.blend)
-        data[at + 4:at + 8] = (*volume.high, volume.normal_bias)
-        data[at + 8:at + 12] = np.array([*volume.points, 1], np.int32).view(np.float32)
+    base += 8 * MAX_IRRADIANCE_PROBES
+    for i, volume in enumerate(volumes):
+        data[base + 4 * i:base + 4 * i + 4] = (*volume.low, volume.blend)
+        data[base + 4 * (MAX_IRRADIANCE_VOLUMES + i):base + 4 * (MAX_IRRADIANCE_VOLUMES + i) + 4] = \
+            (*volume.high, volume.normal_bias)
+        data[base + 4 * (2 * MAX_IRRADIANCE_VOLUMES + i):base + 4 * (2 * MAX_IRRADIANCE_VOLUMES + i) + 4] = \
+            np.array([*volume.points, volume.first_row], np.int32).view(np.float32)
     return data.tobytes()
 
 
@@ -307,7 +316,7 @@ class IrradianceTable:
         self.rows: dict[int, int] = {}   # probe owner -> its row (a capture was projected into it)
         self._boxes: list[tuple[int, tuple, tuple, float]] = []  # (owner, centre, half size, blend distance)
         self._block = irradiance_block(())
-        self.volume: VolumeGrid | None = None  # the irradiance volume lighting the scene (set_volume)
+        self.volumes: dict[int, VolumeGrid] = {}  # by slot: the irradiance volumes lighting the scene (set_volume)
         self._stale = False
         self._count = 0  # boxes in the block
         self._warned = False
@@ -356,11 +365,14 @@ class IrradianceTable:
             self._stale = True
             self.renderer.note_scene_change()
 
-    def set_volume(self, grid: VolumeGrid | None) -> None:
-        """The irradiance volume whose tiles the table holds, baked whole (None: none lights
-        the scene): into the Irradiance block at the next ``bind``."""
-        if grid != self.volume:
-            self.volume = grid
+    def set_volume(self, slot: int, grid: VolumeGrid | None) -> None:
+        """The irradiance volume whose tiles slot ``slot`` holds, baked whole (None: it lights
+        nothing): into the Irradiance block at the next ``bind``."""
+        if grid != self.volumes.get(slot):
+            if grid is None:
+                del self.volumes[slot]
+            else:
+                self.volumes[slot] = grid
             self._stale = True
             self.renderer.note_scene_change()
 
@@ -436,7 +448,7 @@ class IrradianceTable:
         width, height = self.table.size
         data = np.frombuffer(self.table.read(), np.float32).reshape(height, width, 4).astype(np.float64)
         nx, ny, nz = grid.points
-        tiles = data[VOLUME_ROW:VOLUME_ROW + ny * nz, :SH_COEFFICIENTS * nx, :3]  # (y z, c x, rgb)
+        tiles = data[grid.first_row:grid.first_row + ny * nz, :SH_COEFFICIENTS * nx, :3]  # (y z, c x, rgb)
         return tiles.reshape(ny, nz, SH_COEFFICIENTS, nx, 3).transpose(3, 0, 1, 2, 4)
 
     def read_environment_brdf(self) -> np.ndarray:
@@ -457,14 +469,14 @@ class IrradianceTable:
         if self._stale:
             boxes = [(centre, half, blend, self.rows[owner])
                      for owner, centre, half, blend in self._boxes if owner in self.rows]
-            block = irradiance_block(boxes, self.volume)
+            block = irradiance_block(boxes, [self.volumes[slot] for slot in sorted(self.volumes)])
             if block != self._block:
                 self.ubo.write(block)
                 self._block = block
                 self.renderer.note_scene_change()
             self._count = min(len(boxes), MAX_IRRADIANCE_PROBES)
             defines = ((("AMBIENT_PROBES", "1"),) if self._count else ()) \
-                + ((("IRRADIANCE_VOLUME", "1"),) if self.volume is not None else ())
+                + ((("IRRADIANCE_VOLUME", "1"),) if self.volumes else ())
             if defines != self.renderer.ambient_defines:
                 self.renderer.ambient_defines = defines
                 self.renderer.needs_preparing = True  # their builds, made before a mirror needs them

@@ -17,6 +17,7 @@ from pyglm import glm
 
 from components.limits import (
     ALL_LAYERS,
+    MAX_IRRADIANCE_VOLUMES,
     MAX_RECT_LIGHTS,
     MAX_SHADOW_CASCADES,
     MAX_VOLUME_AXIS_POINTS,
@@ -77,12 +78,14 @@ MAX_SHADOW_RINGS = MAX_SHADOW_CASCADES - 1  # a sun's cascades about the camera 
 MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
 # The irradiance table's rows (engine/render/irradiance.py): the probes', the environment
 # BRDF's, then from here the LTC table's of rectangle lights (shaders/include/rect_lights.glsl),
-# then the irradiance volume's tiles (VOLUME_ROW: tile (c, y) holds coefficient c of the grid's
-# layer y, x across and z down, at columns c x points-along-x, rows y x points-along-z; so
-# its texels are read by bilinear filtering across x and z, shaders/include/ambient.glsl).
+# then the irradiance volumes' tiles (VOLUME_ROW, a slot of VOLUME_SLOT_ROWS a volume: tile
+# (c, y) holds coefficient c of the grid's layer y, x across and z down, at columns c x
+# points-along-x, rows y x points-along-z of its slot; so its texels are read by bilinear
+# filtering across x and z, shaders/include/ambient.glsl).
 LTC_ROW = MAX_IRRADIANCE_PROBES + ENVIRONMENT_BRDF_SIZE
 VOLUME_ROW = LTC_ROW + 2 * LTC_SIZE
-VOLUME_ROWS = MAX_VOLUME_AXIS_POINTS * MAX_VOLUME_AXIS_POINTS
+VOLUME_SLOT_ROWS = MAX_VOLUME_AXIS_POINTS * MAX_VOLUME_AXIS_POINTS
+VOLUME_ROWS = MAX_IRRADIANCE_VOLUMES * VOLUME_SLOT_ROWS
 SKY_SH_COEFFICIENTS = 9  # the sky's irradiance coefficients (engine/render/irradiance.py)
 LIGHTS_BLOCK_BYTES = 16 * SKY_SH_COEFFICIENTS + 16 + 2 * 16 * MAX_DIRECTIONAL_LIGHTS + 7 * 16 * MAX_POINT_LIGHTS \
     + 4 * MAX_RECT_LIGHTS

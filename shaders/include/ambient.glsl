@@ -8,12 +8,12 @@
 // Needs lights.glsl (lights.sky_sh).  MAX_IRRADIANCE_PROBES is engine/render/irradiance.py's,
 // defined by the shader library.
 layout(std140) uniform Irradiance {
-    ivec4 count;                              // x: boxes (0 while a probe is captured: sky only)
+    ivec4 count;                              // x: boxes, y: volumes (0, 0 while a probe is captured)
     vec4 centre[MAX_IRRADIANCE_PROBES];       // xyz: the box's centre; w: its blend distance
     vec4 half_size[MAX_IRRADIANCE_PROBES];    // xyz: half its size; w: its row of the table
-    vec4 volume_low;                          // xyz: the volume's lowest corner point; w: its blend distance
-    vec4 volume_high;                         // xyz: its highest; w: its normal bias
-    ivec4 volume_points;                      // xyz: its points along x, y, z; w: 1 while it lights
+    vec4 volume_low[MAX_IRRADIANCE_VOLUMES];  // xyz: a volume's lowest corner point; w: its blend distance
+    vec4 volume_high[MAX_IRRADIANCE_VOLUMES]; // xyz: its highest; w: its normal bias
+    ivec4 volume_points[MAX_IRRADIANCE_VOLUMES];  // xyz: its points along x, y, z; w: its first row
 } irradiance;
 uniform sampler2D irradiance_table;           // row r, texel i: coefficient i of the probe of row r
 
@@ -88,22 +88,35 @@ vec3 volume_coefficient(float c, vec2 at0, vec2 at1, float step, float fy, vec2 
                textureLod(irradiance_table, (at1 + across) / size, 0.0).rgb, fy);
 }
 
-// The volume's weight at p (0 outside its box, rising linearly from its walls to 1 at the blend
-// distance inside, as a probe's box_weight) and its coefficients there, read at p moved by the
-// normal bias along n.
-void volume_at(inout AmbientBoxes b, vec3 p, vec3 n) {
-    vec3 low = irradiance.volume_low.xyz, high = irradiance.volume_high.xyz;
-    vec3 q = p + n * irradiance.volume_high.w;
-    vec3 away = min(q - low, high - q);
+// Volume i's weight at p moved by its normal bias along n (0 outside its box, rising linearly
+// from its walls to 1 at the blend distance inside, as a probe's box_weight).
+float volume_weight(int i, vec3 p, vec3 n) {
+    vec3 q = p + n * irradiance.volume_high[i].w;
+    vec3 away = min(q - irradiance.volume_low[i].xyz, irradiance.volume_high[i].xyz - q);
     float inside = min(min(away.x, away.y), away.z);
-    float blend = irradiance.volume_low.w;
-    b.volume = inside < 0.0 || irradiance.volume_points.w == 0 ? 0.0 : (blend <= 0.0 ? 1.0 : min(1.0, inside / blend));
-    ivec3 count = irradiance.volume_points.xyz;
-    vec3 g = clamp((q - low) / (high - low), 0.0, 1.0) * vec3(count - 1);
+    float blend = irradiance.volume_low[i].w;
+    return inside < 0.0 ? 0.0 : (blend <= 0.0 ? 1.0 : min(1.0, inside / blend));
+}
+
+// The volume weighing most at p (the first of equals) and its coefficients there, read at p
+// moved by its normal bias along n; where volumes overlap, the other's light is not blended in.
+void volume_at(inout AmbientBoxes b, vec3 p, vec3 n) {
+    int best = 0;
+    float weight = 0.0;
+    for (int i = 0; i < irradiance.count.y; ++i) {
+        float w = volume_weight(i, p, n);
+        best = w > weight ? i : best;
+        weight = max(w, weight);
+    }
+    b.volume = weight;
+    vec3 low = irradiance.volume_low[best].xyz, high = irradiance.volume_high[best].xyz;
+    vec3 q = p + n * irradiance.volume_high[best].w;
+    ivec3 count = max(irradiance.volume_points[best].xyz, ivec3(2));   // (none: a grid of 2 read, weighing 0)
+    vec3 g = clamp((q - low) / max(high - low, vec3(1e-6)), 0.0, 1.0) * vec3(count - 1);
     float j0 = min(floor(g.y), float(count.y - 2));
     float fy = g.y - j0;
     vec2 size = vec2(textureSize(irradiance_table, 0));
-    vec2 at0 = vec2(g.x + 0.5, float(VOLUME_ROW) + j0 * float(count.z) + g.z + 0.5);
+    vec2 at0 = vec2(g.x + 0.5, float(irradiance.volume_points[best].w) + j0 * float(count.z) + g.z + 0.5);
     vec2 at1 = at0 + vec2(0.0, float(count.z));
     float step = float(count.x);
     b.c0 = volume_coefficient(0.0, at0, at1, step, fy, size);
