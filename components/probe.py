@@ -171,7 +171,8 @@ class IrradianceVolume(Captured):
     - ``refresh``: ``once`` (the default: captured when it is made, and again whole when any
       field here changes or its entity moves), ``continuous`` (round and round the grid,
       ``points_per_frame`` a frame: light that moves, a sun that sets) or ``scripted``
-      (after ``request()``: a whole new bake, the old light kept until it is done).
+      (only after ``request()``, its first bake too).  ``request()`` bakes any of them again,
+      the grid lighting the scene meanwhile.
     - ``points_per_frame``: captures a frame (each six faces of the frame's view budget).
 
     The grid lights the scene once every point has been captured; until then the sky and

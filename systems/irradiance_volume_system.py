@@ -13,7 +13,8 @@ When points are captured: all of them when the volume is made, moved, or any fie
 places or draws its captures changes (its tiles then hold nothing the new grid means: the
 scene is lit without the grid until the new bake is whole); all of them again, the grid
 lighting the scene meanwhile, after ``request()``; and with ``refresh = "continuous"`` round
-and round the grid for as long as it stands.  ``points_per_frame`` a frame, each six views
+and round the grid for as long as it stands; with ``refresh = "scripted"`` only after
+``request()``, its first bake too.  ``points_per_frame`` a frame, each six views
 of the frame's view budget (``ViewBudget.views``): the points past it wait for the next
 frame (under a budget below six views, one point a frame is drawn past it, when it is the
 frame's first view, so the bake ends).  Changing only ``blend_distance`` or ``normal_bias``
@@ -127,7 +128,9 @@ class IrradianceVolumeSystem(esper.Processor):
             # A new grid: its tiles hold nothing it means until every point is captured.
             bake.capture, bake.grid, bake.whole = capture, grid, False
             bake.requests = volume.requests
-            self._start(bake, volume.near)
+            bake.due = []
+            if volume.refresh != "scripted":  # (a scripted one waits for its request)
+                self._start(bake, volume.near)
             table.set_volume(bake.slot, None)
         elif grid != bake.grid:  # its blend distance or normal bias alone
             bake.grid = grid

@@ -333,6 +333,18 @@ def test_a_bake_again_gives_the_same_light_and_continuous_keeps_capturing(scene)
     assert captured == [3, 3, 2] or captured == [3, 3, 3]
 
 
+def test_a_scripted_volume_bakes_only_when_asked(scene):
+    """``refresh="scripted"``: nothing captured until ``request()``, then the whole grid."""
+    volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8, refresh="scripted")
+    runner = scene(floor_scene(volume), (32, 24))
+    runner.frame()
+    runner.frame()
+    assert runner.stats.volume_points == 0 and not runner.engine.renderer.irradiance.volumes
+    volume.request()
+    runner.frame()
+    assert runner.stats.volume_points == 8 and runner.engine.renderer.irradiance.volumes
+
+
 def test_removing_the_volume_releases_its_cube_and_its_light(scene):
     volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8)
     runner = scene(floor_scene(volume), (32, 24))
