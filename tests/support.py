@@ -213,25 +213,33 @@ def green_and_rays(scene, build, size) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 
 def camera_level_round_trip(tmp_path, tables: str, bad: tuple[str, str], match: str):
-    """A level file of one camera entity, "eye", with ``tables`` (its component lines, as a
-    level file writes them) read, saved and read again: returns the world read again and the
-    eye's entity there.  The same text with ``bad`` (old, new) put in is refused on load with a
-    LevelError matching ``match`` (the field's name)."""
+    """A level file of one camera entity with ``tables`` (its component lines, as a level file
+    writes them) read, saved and read again (``entity_level_round_trip``): the world read again
+    and the camera's entity there; the same text with ``bad`` (old, new) put in is refused on
+    load with a LevelError matching ``match``."""
+    return entity_level_round_trip(tmp_path, "Transform = { position = [0.0, 1.5, 4.0] }\nCamera = {}\n" + tables,
+                                   bad, match)
+
+
+def entity_level_round_trip(tmp_path, tables: str, bad: tuple[str, str], match: str):
+    """A level file of one entity, "it", with ``tables`` (its component lines, as a level file
+    writes them) read, saved and read again: returns the world read again and the entity
+    there.  The same text with ``bad`` (old, new) put in is refused on load with a LevelError
+    matching ``match`` (the field's name)."""
     from engine.assets.level_file import LevelError, load_level, save_level
     from engine.core.world import World
 
-    text = ('[level]\nname = "eye"\n\n[[entity]]\nname = "eye"\nTransform = { position = [0.0, 1.5, 4.0] }\n'
-            "Camera = {}\n" + tables.strip() + "\n")
-    (tmp_path / "eye.toml").write_text(text)
+    text = '[level]\nname = "it"\n\n[[entity]]\nname = "it"\n' + tables.strip() + "\n"
+    (tmp_path / "it.toml").write_text(text)
     world = World()
-    saved = save_level(world, tmp_path / "again.toml", load_level(tmp_path / "eye.toml").spawn(world), name="eye")
+    saved = save_level(world, tmp_path / "again.toml", load_level(tmp_path / "it.toml").spawn(world), name="it")
     again = World()
-    eye = load_level(saved).spawn(again)["eye"]
+    entity = load_level(saved).spawn(again)["it"]
     assert bad[0] in text
     (tmp_path / "bad.toml").write_text(text.replace(*bad))
     with pytest.raises(LevelError, match=match):
         load_level(tmp_path / "bad.toml").spawn(World())
-    return again, eye
+    return again, entity
 
 
 def fragment_row(ctx, source: str, width: int, defines: dict | None = None, bind=None) -> np.ndarray:

@@ -21,6 +21,7 @@ from engine.assets.mesh import plane, quad
 from engine.render.environment_brdf import environment_brdf
 from engine.rules.light_rules import lamp_rectangle, light_size, sphere_radius
 from tests.support import green_and_rays, look_from
+from tests.test_rect_lights import floor_ggx
 
 SIZE = (96, 72)
 RANGE = 40.0
@@ -42,7 +43,6 @@ def tube_light(points, view, centre, axis, length, roughness, f0, diffuse) -> np
     s = (np.arange(ELEMENTS) + 0.5) / ELEMENTS - 0.5
     elements = centre + s[:, None] * length * axis
     step = length / ELEMENTS
-    a2 = max(roughness * roughness, 1e-4) ** 2
     out = np.zeros(len(points))
     for start in range(0, len(points), 64):
         p, eye = points[start:start + 64], view[start:start + 64]
@@ -52,15 +52,7 @@ def tube_light(points, view, centre, axis, length, roughness, f0, diffuse) -> np
         sine = np.linalg.norm(np.cross(l, axis), axis=-1)     # the slice's outline's width towards p
         nl = np.maximum(l[..., 1], 0.0)
         reach = sine * step / length / dist ** 2                # intensity over length x slice, inverse square
-        h = l + eye[:, None]
-        h /= np.linalg.norm(h, axis=-1, keepdims=True)
-        nh = h[..., 1]
-        dd = a2 / (math.pi * (nh * nh * a2 + (1.0 - nh * nh)) ** 2)
-        nl_ = np.maximum(nl, 1e-4)
-        nv = np.maximum(eye[:, 1:2], 1e-4)
-        vis = 1.0 / ((nl_ + np.sqrt(a2 + (1 - a2) * nl_ ** 2)) * (nv + np.sqrt(a2 + (1 - a2) * nv ** 2)))
-        vh = np.clip((h * eye[:, None]).sum(-1), 0.0, 1.0)
-        specular = dd * vis * (f0 + (1.0 - f0) * (1.0 - vh) ** 5)
+        specular = floor_ggx(l, eye, roughness, f0)
         out[start:start + 64] = ((diffuse / math.pi + specular) * nl * reach).sum(axis=1)
     fade = np.clip(1.0 - (np.linalg.norm(centre - points, axis=1) / RANGE) ** 4, 0.0, 1.0) ** 2
     return out * fade
@@ -130,9 +122,7 @@ def test_a_tubes_image_in_a_mirror_lights_as_the_tube_there_would(scene):
     the tube and its image as the tube alone and a real tube at the image's place light it
     (two more scenes, added), where the line to the image's centre passes through the glass;
     the VirtualLights block carries the tube's axis reflected and its radius."""
-    from engine.render.shadows import VIRTUAL_FIELDS
-    from engine.rules.shadow_rules import MAX_VIRTUAL_LIGHTS
-    from tests.support import pixel_rays, srgb_to_linear
+    from tests.test_rect_lights import through_the_mirror, virtual_rect_rows
 
     centre, mirror_z, length = (0.0, 1.2, 0.5), -2.0, 1.0
     rotation, axis = tube_frame(35.0, 20.0)
@@ -164,31 +154,12 @@ def test_a_tubes_image_in_a_mirror_lights_as_the_tube_there_would(scene):
         return build
 
     runner = scene(with_mirror, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    assert runner.engine.renderer.stats.virtual_lights == 1
-    block = runner.engine.renderer.shadows.virtual_block
-    rows = []
-    for field in ("rect_u", "rect_v"):
-        at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (VIRTUAL_FIELDS.index(field) * MAX_VIRTUAL_LIGHTS + 0)
-        rows.append(block[at:at + 4].copy())
+    rows = virtual_rect_rows(runner)
     np.testing.assert_allclose(rows[0][:3], axis * [1.0, 1.0, -1.0] * length / 2.0, atol=1e-5)
     assert rows[0][3] == pytest.approx(1.0 / (length * 0.02), rel=1e-5) and rows[1][3] == pytest.approx(0.01)
-    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    rays = rays.reshape(-1, 3)
-    other = green_and_rays(scene, scene_of(tube(image_centre, image_rotation)), SIZE)[0] \
-        + green_and_rays(scene, scene_of(tube(centre, rotation)), SIZE)[0]
-    t = -eye[1] / rays[:, 1]
-    points = eye + rays * t[:, None]
-    to_image = np.asarray(image_centre) - points
-    s = (mirror_z - points[:, 2]) / to_image[:, 2]
-    cross_at = points + to_image * s[:, None]
-    through = (t > 0) & (points[:, 2] > mirror_z + 0.05) & (s > 0) & (s < 1) \
-        & (np.abs(cross_at[:, 0]) < 1.8) & (np.abs(cross_at[:, 1] - 1.5) < 1.3)
-    lit = through & (other > 0.02)
-    assert lit.sum() > 200
-    np.testing.assert_allclose(shown[lit], other[lit], rtol=0.03, atol=2e-3)
+    shown, other = through_the_mirror(scene, runner, (scene_of(tube(image_centre, image_rotation)),
+                                                      scene_of(tube(centre, rotation))), image_centre, mirror_z)
+    np.testing.assert_allclose(shown, other, rtol=0.03, atol=2e-3)
 
 
 def test_a_tubes_rows_size_and_builds(scene):
@@ -236,17 +207,10 @@ def test_length_is_checked():
 
 
 def test_a_level_file_keeps_a_tube(tmp_path):
-    from engine.assets.level_file import LevelError, load_level, save_level
-    from engine.core.world import World
+    from tests.support import entity_level_round_trip
 
-    text = ('[level]\nname = "neon"\n\n[[entity]]\nname = "neon"\n[entity.Transform]\nposition = [0.0, 2.5, 0.0]\n'
-            "[entity.PointLight]\nintensity = 8.0\nlength = 1.2\nradius = 0.02\n")
-    (tmp_path / "neon.toml").write_text(text)
-    world = World()
-    saved = save_level(world, tmp_path / "again.toml", load_level(tmp_path / "neon.toml").spawn(world), name="neon")
-    again = World()
-    light = again.get(load_level(saved).spawn(again)["neon"], PointLight)
+    again, neon = entity_level_round_trip(
+        tmp_path, "[entity.Transform]\nposition = [0.0, 2.5, 0.0]\n[entity.PointLight]\nintensity = 8.0\n"
+        "length = 1.2\nradius = 0.02\n", ("length = 1.2", "length = -1.2"), "length")
+    light = again.get(neon, PointLight)
     assert (light.length, light.radius) == (1.2, 0.02)
-    (tmp_path / "bad.toml").write_text(text.replace("length = 1.2", "length = -1.2"))
-    with pytest.raises(LevelError, match="length"):
-        load_level(tmp_path / "bad.toml").spawn(World())

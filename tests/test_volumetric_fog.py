@@ -530,28 +530,17 @@ def test_a_spot_lights_beam_in_the_air_is_the_ground_truths(scene):
     assert np.abs(marched[..., 0] - truth)[steady & (truth < 0.05 * truth.max())].max() < 0.06 * truth.max()
 
 
-def test_a_panels_light_in_the_air_is_its_face_s_not_a_points(scene):
-    """No sun: the lamp a 0.6 m panel facing down (``PointLight.rectangle``): the air below it
-    lit by Lambert's cosine of its face, the air above its plane not at all (as a point light
-    all round would light it), against the same ground truth with the face's cosine."""
+@pytest.mark.parametrize("shape", ["panel", "tube"])
+def test_a_lamp_with_a_shape_lights_the_air_by_its_outline(scene, shape):
+    """No sun: the lamp a 0.6 m panel facing down (``PointLight.rectangle``: the air below it
+    lit by Lambert's cosine of its face, the air above its plane not at all, as a point light
+    all round would light it) or a 1.2 m level tube (``PointLight.length``: by the sine of each
+    way's angle from its axis, its outline's width; end on, nothing), against the same ground
+    truth with that cosine or sine."""
     settings = VolumetricFog(steps=128)
-    runner = scene(lambda world: _lamp_hall(world, settings, panel=True), SIZE)
+    runner = scene(lambda world: _lamp_hall(world, settings, **{shape: True}), SIZE)
     runner.frame()
-    marched, truth, reach, lit, steady = _lamp_march_and_truth(runner, settings, panel=True)
-    assert lit.sum() > 200
-    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
-    assert np.median(error) < 0.03, np.median(error)
-    assert np.quantile(error, 0.9) < 0.08, np.quantile(error, 0.9)
-
-
-def test_a_tubes_light_in_the_air_is_its_outlines(scene):
-    """No sun: the lamp a 1.2 m tube, level (``PointLight.length``): the air lit by the sine
-    of each way's angle from its axis (its outline's width; end on, nothing), against the same
-    ground truth with that sine."""
-    settings = VolumetricFog(steps=128)
-    runner = scene(lambda world: _lamp_hall(world, settings, tube=True), SIZE)
-    runner.frame()
-    marched, truth, reach, lit, steady = _lamp_march_and_truth(runner, settings, tube=True)
+    marched, truth, reach, lit, steady = _lamp_march_and_truth(runner, settings, **{shape: True})
     assert lit.sum() > 200
     error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
     assert np.median(error) < 0.03, np.median(error)
