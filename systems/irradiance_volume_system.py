@@ -17,7 +17,9 @@ and round the grid for as long as it stands; with ``refresh = "scripted"`` only 
 ``request()``, its first bake too.  ``points_per_frame`` a frame, each six views
 of the frame's view budget (``ViewBudget.views``): the points past it wait for the next
 frame (under a budget below six views, one point a frame is drawn past it, when it is the
-frame's first view, so the bake ends).  Changing only ``blend_distance`` or ``normal_bias``
+frame's first view, so the bake ends); and within its capture time (``ViewBudget.probe_ms``,
+spent with the probes' faces by each point's measured time: past it, the rest wait, one
+point a frame at least).  Changing only ``blend_distance`` or ``normal_bias``
 captures nothing.
 
 Where each point is captured from is worked out when its bake starts: a point inside a solid
@@ -30,6 +32,7 @@ volume's scratch cube is released when it goes.
 """
 from __future__ import annotations
 
+import time
 import warnings
 
 import esper
@@ -166,12 +169,19 @@ class IrradianceVolumeSystem(esper.Processor):
         if not count:
             return
         probes, table, grid = self.renderer.probes, self.renderer.irradiance, bake.grid
+        drawn = 0
         for index in bake.due[:count]:
+            if drawn and stats.probe_ms_budget is not None and stats.probe_ms_spent >= stats.probe_ms_budget:
+                break  # the frame's capture time is spent: the rest next frame (one a frame at least)
+            start = time.perf_counter()
             position = glm.vec3(*bake.taken_from[index])
             views = {face: face_view(face, position, volume.near, volume.far, volume.resolution, skip=bake.owner,
                                      layers=volume.layer_mask) for face in range(FACES)}
             probes.capture(bake.key, views, None, 0)
             table.project_volume_point(grid, index, probes.cubes[bake.key])
+            stats.probe_ms_spent += (time.perf_counter() - start) * 1e3
+            drawn += 1
+        count = drawn
         del bake.due[:count]
         stats.views_spent += FACES * count
         stats.volume_points += count

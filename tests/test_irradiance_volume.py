@@ -268,7 +268,8 @@ def test_a_dark_room_dims_the_skys_reflection(scene):
 def test_the_bake_takes_points_per_frame_under_the_view_budget_and_lights_once_whole(scene):
     """Twelve points, five a frame: three frames of captures (5, 5, 2), the grid lighting the
     scene only from the third (the IRRADIANCE_VOLUME builds with it); then nothing more is
-    captured ("once").  Under a budget of 12 views, two points a frame."""
+    captured ("once").  Under a budget of 12 views, two points a frame; under a capture time of
+    a microsecond (``ViewBudget.probe_ms``), one."""
     volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(3, 2, 2), points_per_frame=5)
     runner = scene(floor_scene(volume), (32, 24))
     renderer = runner.engine.renderer
@@ -287,6 +288,12 @@ def test_the_bake_takes_points_per_frame_under_the_view_budget_and_lights_once_w
     limited.world.resources[ViewBudget] = ViewBudget(views=12)
     limited.frame()
     assert limited.stats.volume_points == 2 and limited.stats.views_spent <= 12
+    # Within the frame's capture time: a microsecond's budget leaves one point a frame.
+    timed = scene(floor_scene(IrradianceVolume(size=(2.0, 2.0, 2.0), points=(3, 2, 2), points_per_frame=5)),
+                  (32, 24))
+    timed.world.resources[ViewBudget] = ViewBudget(probe_ms=0.001)
+    timed.frame()
+    assert timed.stats.volume_points == 1 and timed.stats.probe_ms_spent > 0.001
 
 
 def test_moving_the_volume_bakes_it_again_and_its_blend_alone_does_not(scene):
