@@ -1,6 +1,6 @@
-"""Diffuse image lighting: the irradiance of the sky, of the hemisphere fallback and of each
-probe's capture as nine spherical-harmonic coefficients (order 2), and the GPU table the
-probes' coefficients live in.
+"""Diffuse image lighting: the irradiance of the sky, of the hemisphere fallback, of each
+probe's capture and of each irradiance volume's points as nine spherical-harmonic
+coefficients (order 2), and the GPU table the probes' and volumes' coefficients live in.
 
 The representation is Ramamoorthi and Hanrahan's ("An Efficient Representation for
 Irradiance Environment Maps", SIGGRAPH 2001): the radiance L(w) arriving from every
@@ -276,10 +276,13 @@ def irradiance_block(boxes: Iterable[tuple[Iterable[float], Iterable[float], flo
 class IrradianceTable:
     """The probes' irradiance on the GPU: a texture of ``MAX_IRRADIANCE_PROBES`` rows of nine
     RGBA32F texels (row r, texel i: coefficient E_i of the probe given row r; below them the
-    environment BRDF's rows, ``engine/render/environment_brdf.py``), written by
-    ``project`` after each capture, and the Irradiance uniform block of the influence boxes
-    whose rows hold a capture (``set_boxes``).  The scene pass binds both at the start of
-    each of its passes (``bind``): units 3-5 serve other images in the passes between."""
+    environment BRDF's rows, ``engine/render/environment_brdf.py``, the LTC table's of
+    rectangle lights and the irradiance volumes' slots of tiles, ``VolumeGrid.texel``), written
+    by ``project`` after each capture (``project_volume_point`` after a volume point's), and
+    the Irradiance uniform block of the influence boxes whose rows hold a capture
+    (``set_boxes``) and of the volumes baked whole (``set_volume``).  The scene pass binds
+    both at the start of each of its passes (``bind``): units 3-5 serve other images in the
+    passes between."""
 
     STATE = PassState()  # no depth test, no blending, no clip distances
 
