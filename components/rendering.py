@@ -18,6 +18,7 @@ from components.tracking import (
     finite,
     integer,
     vec3,
+    warn_component,
 )
 
 # Assets are the engine's types (engine.assets.mesh.Mesh, engine.assets.texture_data.TextureData);
@@ -279,7 +280,10 @@ class Material(TrackedComponent):
         if name == "normal_scale":
             return finite(self, name, value, low=0.0, high=MAX_NORMAL_SCALE)
         if name == "parallax_depth":
-            return finite(self, name, value, low=0.0, high=MAX_PARALLAX_DEPTH)
+            value = finite(self, name, value, low=0.0, high=MAX_PARALLAX_DEPTH)
+            if value > 0.0:
+                _say_flat_heights(getattr(self, "normal_map", None), value)
+            return value
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
                     "sheen_roughness", "anisotropy", "iridescence", "diffuse_transmission"):
             return finite(self, name, value, low=0.0, high=1.0)
@@ -319,11 +323,26 @@ class Material(TrackedComponent):
             if getattr(type(value), "ASSET_KIND", None) != "texture":
                 raise ComponentValueError(
                     f"Material.{name} must be an engine.assets.texture_data.TextureData, got {type(value).__name__}")
+            if name == "normal_map" and getattr(self, "parallax_depth", 0.0) > 0.0:
+                _say_flat_heights(value, self.parallax_depth)
             world = getattr(self, "_world_ref", None)
             if name == "normal_map" and world is not None:
                 for entity in self._entities:  # a mirror's UVs must allow it, as at spawn
                     world.check_invariants(entity, Material, normal_map=value)
         return value
+
+
+def _say_flat_heights(normal_map: Any, depth: float) -> None:
+    """``Material.parallax_depth`` reads the normal map's alpha as heights: said (a
+    ComponentWarning) when there is no normal map, or its alpha is one value everywhere (an
+    RGB file's is): the depth then changes nothing."""
+    if normal_map is None:
+        warn_component(f"Material.parallax_depth = {depth:g} does nothing without a normal_map (its alpha holds "
+                       "the heights)")
+    elif np.ptp(np.asarray(normal_map.pixels)[..., 3]) == 0:
+        warn_component(f"Material.parallax_depth = {depth:g}: the normal map {normal_map.name!r} has no heights in "
+                       "its alpha (one value everywhere), so nothing is marched; put the heights in its alpha "
+                       "(1 the surface, 0 the deepest)")
 
 
 def second_uv_names(value: Any) -> tuple[str, ...]:

@@ -5,6 +5,8 @@ it is under the heights (the texture read as GL filters it, bilinear between tex
 the colour the albedo there."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -112,7 +114,26 @@ def test_the_floor_shows_the_stripes_where_each_ray_meets_the_heights(scene):
 
 
 def test_parallax_depth_is_checked():
-    assert Material(parallax_depth=0.05).parallax_depth == 0.05
+    assert Material(parallax_depth=0.0).parallax_depth == 0.0
     for bad in (-0.01, 1.5, float("nan"), "0.1"):
         with pytest.raises(ComponentValueError, match="Material.parallax_depth"):
             Material(parallax_depth=bad)
+
+
+def test_a_depth_with_no_heights_to_march_is_said():
+    """``parallax_depth`` without a normal map, or with one whose alpha is one value (an RGB
+    file's), would change nothing: a ComponentWarning says so; a map with heights is quiet."""
+    from components import ComponentWarning
+
+    normal, _ = stripes()
+    flat = normal.copy()
+    flat[..., 3] = 255
+    with pytest.warns(ComponentWarning, match="without a normal_map"):
+        Material(parallax_depth=0.05)
+    with pytest.warns(ComponentWarning, match="no heights in its alpha"):
+        Material(normal_map=TextureData(flat, name="flat"), parallax_depth=0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        material = Material(normal_map=TextureData(normal, name="heights"), parallax_depth=0.05)
+    with pytest.warns(ComponentWarning, match="no heights in its alpha"):
+        material.normal_map = TextureData(flat, name="flat")   # (the map given later: said then)
