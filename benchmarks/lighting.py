@@ -35,6 +35,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``sphere_lamp``: no shadows; the ring's lamp a sphere of 0.2 m (``PointLight.radius``);
 * ``rect_lamp``: no shadows; the ring's lamp a 1 x 0.5 m panel facing down
   (``PointLight.rectangle``): its cost is its ratio to ``off`` against ``sphere_lamp``'s;
+* ``picture_lamp``: ``rect_lamp`` with a picture on its face (``PointLight.cookie`` on a
+  rectangle: each integral times the picture's colour its lobe sees, a mip lookup each);
 * ``tube_lamp``: no shadows; the ring's lamp a 1.2 m tube of 2 cm radius (``PointLight.length``:
   lit as a rectangle turned to face each point);
 * ``lamps_8``: no shadows; eight more lamps in a ring over the floor;
@@ -147,6 +149,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
 from pyglm import glm
 
 from benchmarks import (
@@ -181,6 +184,7 @@ from components import (
 )
 from engine.assets.color_lut import ColorLut, identity_lut
 from engine.assets.mesh import box
+from engine.assets.texture_data import TextureData
 from engine.core.frame_io import Output
 from engine.render.bloom import level_sizes
 from engine.render.gl_context import GLCapabilities, create_headless_context
@@ -326,6 +330,18 @@ def _rect_lamp(engine: Engine) -> None:
     for entity, light in engine.world.query_one(PointLight):
         light.rectangle = (1.0, 0.5)
         engine.world.get(entity, Transform).rotation = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+
+
+def _picture_lamp(engine: Engine) -> None:
+    """``_rect_lamp`` with eight colour bars on the panel's face (PointLight.cookie on a
+    rectangle: the PANEL_PICTURES builds, two lookups of the picture a pixel)."""
+    _rect_lamp(engine)
+    pixels = np.zeros((8, 64, 4), np.uint8)
+    pixels[..., 3] = 255
+    for bar in range(8):
+        pixels[:, bar * 8:(bar + 1) * 8, :3] = (255 * (bar & 1), 255 * (bar >> 1 & 1), 255 * (bar >> 2 & 1))
+    for _, light in engine.world.query_one(PointLight):
+        light.cookie = TextureData(pixels, name="bars")
 
 
 def _volume(engine: Engine) -> None:
@@ -506,6 +522,7 @@ VARIANTS: list[Variant] = [
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),
     Variant("sphere_lamp", _sphere_lamp, "no shadows; the lamp a sphere of 0.2 m (PointLight.radius)"),
     Variant("rect_lamp", _rect_lamp, "no shadows; the lamp a 1 x 0.5 m panel (PointLight.rectangle)"),
+    Variant("picture_lamp", _picture_lamp, "rect_lamp with a picture on its face (PointLight.cookie)"),
     Variant("tube_lamp", _tube_lamp, "no shadows; the lamp a 1.2 m tube (PointLight.length)"),
     Variant("lamps_8", _lamps_8, "no shadows; eight more lamps over the floor"),
     Variant("lamps_8_rect", _lamps_8_rect, "the same, the first of them a 0.8 x 0.4 m panel"),

@@ -225,7 +225,16 @@ class PointLight(TrackedComponent):
     shade with holes, a caged bulb or a disco ball throws light all round.  Through a mirror or portal the image is
     carried with the light: a mirror shows it the other way round, as a real one does.  The
     renderer draws it from a ``COOKIE_SIZE`` (512) square copy with mipmaps
-    (``engine/render/spot_cookies.py``).
+    (``engine/render/spot_cookies.py``).  A rectangle light's cookie is the picture on its
+    face instead, a screen's or a stained-glass window's (Unity HDRP's area light cookie,
+    Unreal's rect light source texture): each part of the panel shines in its colour there,
+    the picture's right towards the entity's -X and its top towards +Y, so it reads as a
+    screen does from in front; a polished floor shows it, a rough one takes the colours of
+    the parts nearest it, the shafts' air the picture's mean colour (lit particles take no
+    cookie).  Each integral of the panel's light times the picture's colour its lobe sees,
+    read from the picture's mip chain where the lobe's mean way in meets the face
+    (``rect_face`` in ``shaders/include/rect_lights.glsl``): exact for one colour all over, an
+    approximation of the colours' weights otherwise (``tests/test_rect_light_images.py``).
 
     ``radius`` (metres, default 0: a point) makes it a sphere of light, as a bulb is (Unreal's
     source radius, Unity's and Godot's light size): its highlights on smooth surfaces are the

@@ -455,6 +455,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
     vec3 l = d / max(dist, 1e-4);
     float nl = max(dot(s.normal, l), 0.0);
     float falloff = lamp_falloff(i, dist, l);
+    vec3 face = vec3(1.0);   // a rectangle's image on its face as its diffuse light sees it (rect_face)
 #ifdef RECT_LIGHTS
     // A rectangle (rect_lights.glsl): its light from all of it above the horizon, its
     // radiance (the light's over its area) for the inverse square, n.l its form factor.
@@ -462,7 +463,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
     float centre_nl = nl;
     if (rectangle) {
         falloff = lamp_fade(i, dist, l) * rect.radiance;
-        nl = rect_form_factor(rect, s.normal);
+        nl = rect_form_factor(rect, s.normal, face);
     }
 #endif
 #if defined(SCREEN_OCCLUSION) && defined(CONTACT_LAMPS)
@@ -476,8 +477,9 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
 #endif
 #ifdef DIFFUSE_TRANSMISSION
     float behind = max(-dot(s.normal, l), 0.0);
+    vec3 behind_face = vec3(1.0);
 #ifdef RECT_LIGHTS
-    if (rectangle) behind = rect_form_factor(rect, -s.normal);
+    if (rectangle) behind = rect_form_factor(rect, -s.normal, behind_face);
 #endif
     if (behind > 0.0 && falloff > 0.0) {
 #ifdef SPOT_COOKIES
@@ -485,7 +487,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
 #else
         const vec3 behind_cookie = vec3(1.0);
 #endif
-        lit += through * behind * lights.point_color[i].rgb * behind_cookie * falloff
+        lit += through * behind * lights.point_color[i].rgb * behind_cookie * behind_face * falloff
                * point_shadow(i, point_behind);
     }
 #endif
@@ -508,7 +510,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
                                           s.highlight_roughness) * s.energy_compensation;
 #endif
 #endif
-        lit += (diffuse * nl + highlight) * arriving;
+        lit += (diffuse * nl * face + highlight) * arriving;
         highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
 #ifdef RECT_LIGHTS
@@ -526,7 +528,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
 #ifdef RECT_LIGHTS
         if (rectangle) sheen_share = nl / max(centre_nl, 1e-3);
 #endif
-        sheen_light += sheen_lobe(s.normal, l, s.to_eye) * (arriving * sheen_share);
+        sheen_light += sheen_lobe(s.normal, l, s.to_eye) * (arriving * face * sheen_share);
 #endif
     }
     return lit;

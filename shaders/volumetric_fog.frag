@@ -113,7 +113,10 @@ void main() {
             vec3 cookie = cookie_light(cookie_place(lights.point_cookie_u[j], lights.point_cookie_v[j],
                                                     lights.point_spot[j], l), vec2(0.0), vec2(0.0));
 #else
-            const vec3 cookie = vec3(1.0);
+            vec3 cookie = vec3(1.0);
+#endif
+#ifdef PANEL_PICTURES
+            cookie *= face_mean(lights.point_rect_v[j]);   // (a panel's picture: its mean colour)
 #endif
             lamps += lights.point_color[j].rgb * cookie * (lamp_scatter[k] * lamp_falloff(j, dist, l)
                      * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit));

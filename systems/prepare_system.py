@@ -51,6 +51,7 @@ from engine.rules.light_rules import (
     brightest_directional,
     choose_lights,
     cube_serves,
+    is_panel,
     lamp_cone,
     lamp_cookie,
     lamp_rectangle,
@@ -230,14 +231,15 @@ class PrepareSystem(esper.Processor):
                     channel = len(contact)
                 else:
                     cut += 1
-            rectangle = lamp_rectangle(light, t.world)
+            layer = self.renderer.spot_cookies.layer(light.cookie)
+            rectangle = lamp_rectangle(light, t.world, layer)
             if rectangle != NO_RECTANGLE:
                 if len(rect_slots) < MAX_RECT_LIGHTS:
                     rect_slots.append(slot)
                 else:
                     rectangle, rect_cut = NO_RECTANGLE, rect_cut + 1   # lit as a point
             point.append((t.world[3].xyz, light.range, light.color.xyz * light.intensity, lamp_cone(light, t.world),
-                          lamp_cookie(light, t.world, self.renderer.spot_cookies.layer(light.cookie)),
+                          lamp_cookie(light, t.world, layer),
                           sphere_radius(light),
                           float(channel), rectangle))
         if cut > self._contact.cut:
@@ -260,9 +262,10 @@ class PrepareSystem(esper.Processor):
     def _cookies(self, kept: KeptLights) -> bool:
         """The kept spot lights' cookies into the cookie array (``SpotCookies.set``); True
         when its contents changed."""
-        lamps = [entity for entity in kept.point if entity is not None]
-        cookies = [self.world.get(entity, PointLight).cookie for entity in lamps]
-        return self.renderer.spot_cookies.set(cookies, [f"the PointLight of entity {entity}" for entity in lamps])
+        lamps = [self.world.get(entity, PointLight) for entity in kept.point if entity is not None]
+        names = [f"the PointLight of entity {entity}" for entity in kept.point if entity is not None]
+        panels = [is_panel(lamp) for lamp in lamps]
+        return self.renderer.spot_cookies.set([lamp.cookie for lamp in lamps], names, panels)
 
     def _count_cut(self, kept: KeptLights) -> None:
         """Keep how many lights of each kind the block left out; warn when either grows."""

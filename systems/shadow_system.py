@@ -420,7 +420,7 @@ class ShadowSystem(esper.Processor):
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,
                        lamp_cone(light, transform.world),
                        lamp_cookie(light, transform.world, cookies.layer(light.cookie)), sphere_radius(light),
-                       lamp_rectangle(light, transform.world))
+                       lamp_rectangle(light, transform.world, cookies.layer(light.cookie)))
                       for entity, (light, transform) in lamps]
             bounces = {entity: light.bounces for entity, light in suns}
             bounces.update({entity: light.bounces for entity, (light, _) in lamps})

@@ -108,7 +108,8 @@ def _spot_shadows(ctx):
 
 def _rect_lights(ctx):
     """The mirror ring's lamp a panel (PointLight.rectangle: the RECT_LIGHTS builds, the LTC
-    rows of the irradiance table) and a tube beside it, casting soft shadows from their cubes (the grid filter), with
+    rows of the irradiance table) showing a picture on its face (PANEL_PICTURES: its mip chain
+    read by textureLod) and a tube beside it, casting soft shadows from their cubes (the grid filter), with
     contact shadows, a mirror
     throwing the sun and the lamp (virtual lights, one a rectangle's image), and balls with a
     clear coat, a sheen and anisotropic highlights lit by it."""
@@ -116,12 +117,14 @@ def _rect_lights(ctx):
     from benchmarks.mirrors import MirrorRing
     from components import Camera, ContactShadows, Material, MeshRef, PointLight, Transform
     from engine.assets.mesh import sphere
+    from tests.test_rect_light_images import quadrant_image
 
     def configure(engine):
         _mirror_light(engine)
         world = engine.world
         for _, light in world.query_one(PointLight):
             light.rectangle, light.shadows, light.contact_shadows = (1.0, 0.5), True, True
+            light.cookie = quadrant_image()
         engine.renderer.shadows.filter = "grid"   # (its soft shadows: SOFT_POINT_SHADOWS)
         for camera, _ in world.query_one(Camera):
             world.add_component(camera, ContactShadows())

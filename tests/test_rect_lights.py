@@ -370,7 +370,8 @@ void main() {
     vec4 a = texelFetch(cases, ivec2(0, i), 0), b = texelFetch(cases, ivec2(1, i), 0);
     vec4 c = texelFetch(cases, ivec2(2, i), 0);
     RectLight rect = rect_light(texelFetch(cases, ivec2(3, i), 0), texelFetch(cases, ivec2(4, i), 0), c.xyz);
-    value = vec4(rect_form_factor(rect, a.xyz), rect_highlight(rect, a.xyz, b.xyz, vec3(b.w), a.w).r,
+    vec3 face;
+    value = vec4(rect_form_factor(rect, a.xyz, face), rect_highlight(rect, a.xyz, b.xyz, vec3(b.w), a.w).r,
                  rect.radiance, 0.0);
 }
 """

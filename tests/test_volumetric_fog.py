@@ -628,6 +628,26 @@ def test_a_lamps_cookie_colours_its_light_in_the_air(scene):
     assert np.allclose(ratio, expected, rtol=0.03, atol=0.003), (ratio, expected)
 
 
+def test_a_panels_image_colours_its_light_in_the_air_by_its_mean(scene):
+    """A panel lamp showing an image on its face (``PointLight.cookie`` on a rectangle), red on
+    its left half and blue on its right: the air takes the image's mean colour (half red,
+    half blue), channel by channel, of the plain panel's light."""
+    pixels = np.zeros((16, 16, 4), np.uint8)
+    pixels[..., 3] = 255
+    pixels[:, :8, 0] = 255
+    pixels[:, 8:, 2] = 255
+    plain = scene(lambda world: _lamp_hall(world, VolumetricFog(steps=32), panel=True), SIZE)
+    plain.frame()
+    imaged = scene(lambda world: _lamp_hall(world, VolumetricFog(steps=32), panel=True,
+                                            cookie=TextureData(pixels, name="red and blue")), SIZE)
+    imaged.frame()
+    white, coloured = _marched(plain)[..., :3], _marched(imaged)[..., :3]
+    lit = white[..., 0] > 0.1 * white[..., 0].max()
+    assert lit.sum() > 100
+    ratio = np.median(coloured[lit] / white[lit], axis=0)
+    assert np.allclose(ratio, (0.5, 0.0, 0.5), rtol=0.03, atol=0.005), ratio
+
+
 def test_a_pane_keeps_of_the_shafts_what_it_keeps_of_all_behind_it(scene):
     """Glass is drawn after the shafts and blended over them: along a pane of alpha 0.5 half
     the shafts' light stays, the air's in front of the pane too (the documented limit)."""

@@ -9,7 +9,11 @@ texture array, and eight linear bits would band its dark gradients).  A non-squa
 stretched to the square.  The array holds a layer for each distinct image among the kept
 lights (at most ``MAX_POINT_LIGHTS``), grows by doubling when more come and is released when
 none is left, so a level without cookies holds nothing and its programs have no
-``SPOT_COOKIES`` build (``defines``).
+``SPOT_COOKIES`` build (``defines``).  A rectangle light's cookie is the picture on its face
+(``shaders/include/rect_lights.glsl`` ``rect_face``), a layer of the same array read by the
+``PANEL_PICTURES`` builds: a level whose only cookies are panels' pictures pays for no
+projection (on llvmpipe, which runs a branch's body for every pixel, the projection's
+lookups cost a frame lit by a pictured panel a third more).
 
 The array is one sampler more for the scene programs: their fullest build already reads 16,
 GL 4.1's least ``GL_MAX_TEXTURE_IMAGE_UNITS`` (macOS's).  On a context with no more than 16,
@@ -64,22 +68,28 @@ class SpotCookies:
         self.array: moderngl.TextureArray | None = None
         self._layers: dict[int, int] = {}        # id(TextureData) -> its layer
         self._images: dict[int, TextureData] = {}  # ... and the image (kept while it has a layer)
+        self._kinds: tuple[bool, bool] = (False, False)   # (a light projects one, a panel shows one)
         self._warned = False
 
     @property
     def defines(self) -> tuple[tuple[str, str], ...]:
-        """The scene programs' build while a kept light has a cookie: ``SPOT_COOKIES``."""
-        return (("SPOT_COOKIES", "1"),) if self._layers else ()
+        """The scene programs' builds while a kept light has a cookie: ``SPOT_COOKIES`` while one
+        projects its image, ``PANEL_PICTURES`` while a rectangle shows one on its face."""
+        projected, pictured = self._kinds
+        return ((("SPOT_COOKIES", "1"),) if projected else ()) + ((("PANEL_PICTURES", "1"),) if pictured else ())
 
     def layer(self, cookie: TextureData | None) -> int:
         """The layer ``cookie`` is in (``set`` made it one), -1 for none (no cookie, or none drawn)."""
         return -1 if cookie is None else self._layers.get(id(cookie), -1)
 
-    def set(self, cookies: list[TextureData | None], names: list[str]) -> bool:
+    def set(self, cookies: list[TextureData | None], names: list[str], panels: list[bool] | None = None) -> bool:
         """Give each distinct image of ``cookies`` (the kept point lights' ``cookie``, None
-        where a light has none; ``names``: the lights, for the warning) a layer, keeping the
-        layers of those already there; release the array when none is left.  True when the
-        array's contents or the build changed (what every view shows changes)."""
+        where a light has none; ``names``: the lights, for the warning; ``panels``: which of
+        them show theirs on a rectangle's face, ``light_rules.is_panel``, none when not given)
+        a layer, keeping the layers of those already there; release the array when none is
+        left.  True when the array's contents or the builds changed (what every view shows
+        changes)."""
+        panels = panels if panels is not None else [False] * len(cookies)
         wanted = {id(c): c for c in cookies if c is not None}
         if wanted and not self.supported:
             if not self._warned:
@@ -90,8 +100,11 @@ class SpotCookies:
                     f"stage and this OpenGL has {self.texture_units} (GL_MAX_TEXTURE_IMAGE_UNITS): the lights "
                     "shine without their cookies"), stacklevel=3)
             wanted = {}
+        kinds = (any(c is not None and not panel for c, panel in zip(cookies, panels, strict=True)) and bool(wanted),
+                 any(c is not None and panel for c, panel in zip(cookies, panels, strict=True)) and bool(wanted))
+        kinds_changed, self._kinds = kinds != self._kinds, kinds
         if wanted.keys() == self._layers.keys():
-            return False
+            return kinds_changed
         kept = {key: layer for key, layer in self._layers.items() if key in wanted}
         free = sorted(set(range(len(wanted))) - set(kept.values()))
         fresh = [key for key in wanted if key not in kept]
@@ -139,6 +152,7 @@ class SpotCookies:
         self._release_array()
         self._layers.clear()
         self._images.clear()
+        self._kinds = (False, False)
 
 
 def _capacity(need: int) -> int:

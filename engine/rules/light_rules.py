@@ -214,8 +214,10 @@ def lamp_cookie(light: PointLight, world: Any, layer: int) -> tuple[tuple[float,
     An all-round light's (``spot_angle`` 180) is wrapped about it instead, an equirectangular
     image (longitude, latitude): rows (X, -2 - layer) and (Y, 0), X and Y unit, its forward
     F = Y x X (the entity's -Z); a direction d lands at u = 0.5 + atan2(d.X, d.F) / 2 pi,
-    v = 0.5 + asin(d.Y) / pi, the image's middle ahead of the light."""
-    if light.cookie is None:
+    v = 0.5 + asin(d.Y) / pi, the image's middle ahead of the light.
+
+    A rectangle light's image is on its face, not projected (``lamp_rectangle``): ``NO_COOKIE``."""
+    if light.cookie is None or is_panel(light):
         return NO_COOKIE
     if light.spot_angle >= 180.0:
         right, up = glm.normalize(world[0].xyz), glm.normalize(world[1].xyz)
@@ -368,7 +370,12 @@ def carried_cookie(rows: tuple[Sequence[float], Sequence[float]], carry: Any) ->
 NO_RECTANGLE = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))
 
 
-def lamp_rectangle(light: PointLight, world: Any) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def is_panel(light: PointLight) -> bool:
+    """Whether point light ``light`` is a rectangle (``PointLight.rectangle``; not a tube)."""
+    return light.rectangle[0] > 0.0 and light.length == 0.0
+
+
+def lamp_rectangle(light: PointLight, world: Any, face: int = -1) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """The rectangle rows of point light ``light`` (``PointLight.rectangle``) whose entity's
     world matrix is ``world`` (glm): (U, s / A) and (V, 0), U and V the half sides (the
     entity's unit +X times half the width, its unit +Y times half the height: the entity's
@@ -379,7 +386,12 @@ def lamp_rectangle(light: PointLight, world: Any) -> tuple[tuple[float, ...], tu
     (0, 0, 0, R), U its half length along the entity's unit +X, R its radius (at least half
     ``MIN_LIGHT_SIDE``: a line is a tube that thin), A = 2 R x length, the rectangle through
     its axis the shader turns to face each point (``tube_radius``).  ``NO_RECTANGLE`` for a
-    point or a sphere."""
+    point or a sphere.
+
+    ``face``: the layer of the rectangle's ``cookie`` in the cookie array
+    (``engine/render/spot_cookies.py``; -1: none), the image on its face: V's w is then
+    -1 - ``face`` (``rect_face`` in ``shaders/include/rect_lights.glsl``; a tube's w, its
+    radius, is above 0, a plain rectangle's 0)."""
     width, height = light.rectangle
     if light.length > 0.0:
         radius = tube_radius(light)
@@ -390,7 +402,7 @@ def lamp_rectangle(light: PointLight, world: Any) -> tuple[tuple[float, ...], tu
         return NO_RECTANGLE
     right, up = glm.normalize(world[0].xyz) * (0.5 * width), glm.normalize(world[1].xyz) * (0.5 * height)
     return (float(right.x), float(right.y), float(right.z), -1.0 / (width * height)), \
-        (float(up.x), float(up.y), float(up.z), 0.0)
+        (float(up.x), float(up.y), float(up.z), -1.0 - face if face >= 0 else 0.0)
 
 
 def tube_radius(light: PointLight) -> float:
@@ -425,16 +437,18 @@ def carried_rectangle(rows: tuple[Sequence[float], Sequence[float]], carry: Any)
     sees them: the half sides moved by ``carry``'s linear part (a glm 4x4 matrix; a portal
     that scales scales them, and a tube's radius), the radiance kept (light keeps its radiance
     along a ray), and where ``carry`` mirrors (a negative determinant) the front's sign turned,
-    so the image shines from the side the mirror shows lit (a tube shines all round)."""
+    so the image shines from the side the mirror shows lit (a tube shines all round).  A face's
+    image (V's w below 0) is kept: read through the carried corners, a mirror shows it the
+    other way round, as a real one does."""
     if rows[0][3] == 0.0:
         return NO_RECTANGLE
     m = np.array(carry.to_list(), np.float64).T[:3, :3]   # glm's lists are its columns
     u, v = m @ np.asarray(rows[0][:3], np.float64), m @ np.asarray(rows[1][:3], np.float64)
-    mirrored = np.linalg.det(m) < 0.0
-    sign = -1.0 if mirrored and rows[1][3] == 0.0 else 1.0
-    radius = float(rows[1][3]) * abs(np.linalg.det(m)) ** (1.0 / 3.0)
+    tube = rows[1][3] > 0.0
+    sign = -1.0 if np.linalg.det(m) < 0.0 and not tube else 1.0
+    fourth = float(rows[1][3]) * abs(np.linalg.det(m)) ** (1.0 / 3.0) if tube else float(rows[1][3])
     return (float(u[0]), float(u[1]), float(u[2]), float(rows[0][3]) * sign), \
-        (float(v[0]), float(v[1]), float(v[2]), radius)
+        (float(v[0]), float(v[1]), float(v[2]), fourth)
 
 
 def point_importance(positions: np.ndarray, ranges: np.ndarray, rgb: np.ndarray,

@@ -13,6 +13,12 @@
 //   magnitude and the Fresnel of the light's mean way in.  The matrices were fitted to this
 //   engine's GGX (ggx.glsl) by engine/render/ltc_fit.py; they ride in rows of the irradiance
 //   table below the environment BRDF's (engine/render/irradiance.py: no sampler of their own).
+// - An image on its face (PointLight.cookie on a rectangle: a screen, a stained-glass window):
+//   each integral times the image's colour its lobe sees, the image prefiltered by its mip
+//   chain and read where the lobe's mean way in (the vector form factor) meets the face, at
+//   the level of the lobe's footprint there (Heitz et al. 2016, section 5: exact for an even
+//   image, an average weighted by the lobe's spread otherwise).  In the PANEL_PICTURES builds,
+//   the image a layer of the cookie array (the rows' v.w: -1 - layer).
 // Needs ggx.glsl (PI) and ambient.glsl (irradiance_table).  Only the RECT_LIGHTS builds hold
 // it (frames where a kept light is a rectangle).
 #ifdef RECT_LIGHTS
@@ -22,6 +28,7 @@ struct RectLight {
     vec3 corner[4];   // from the point to each corner, around the rectangle
     float radiance;   // |w| in front of it (times the light's colour x intensity), else 0
     bool shape;       // whether the light is a rectangle at all
+    float face;       // the layer of the image on its face in the cookie array (-1: none)
 };
 
 // ``to_centre``: from the point to the rectangle's centre; ``u``, ``v``: its rows.  A tube
@@ -33,6 +40,7 @@ struct RectLight {
 RectLight rect_light(vec4 u, vec4 v, vec3 to_centre) {
     RectLight rect;
     rect.shape = u.w != 0.0;
+    rect.face = v.w < 0.0 ? -v.w - 1.0 : -1.0;
     vec3 side = v.xyz;
     bool tube = v.w > 0.0;
     if (tube) {
@@ -97,13 +105,47 @@ vec3 clamped_cosine_vector(vec3 a, vec3 b, vec3 c, vec3 d) {
     return (sum.z < 0.0 ? -sum : sum) / (2.0 * PI);
 }
 
+// The colour of the image on a rectangle's face (rect.face) that a cosine lobe about z sees,
+// ``a``, ``b``, ``d`` the corners 0, 1 and 3 (rect_light's) in the lobe's frame and
+// ``towards`` the lobe's mean way in over the rectangle (clamped_cosine_vector): the image
+// where that way meets the face (inside it: a mean of directions to the face), at the mip
+// level as wide as the lobe's footprint there, twice the distance to the face's plane (half a
+// cosine lobe's weight on a plane at distance r falls within r of its foot) over its size.
+// The image's right towards the entity's -X, its top towards +Y: it reads as a screen does
+// from in front.  White without an image.
+vec3 rect_face(RectLight rect, vec3 a, vec3 b, vec3 d, vec3 towards) {
+#ifdef PANEL_PICTURES
+    if (rect.face >= 0.0) {
+        vec3 across = b - a, up = d - a;
+        vec3 w = cross(across, up);
+        float area = length(w);
+        float reach = dot(w, a);   // the distance to the face's plane x its area
+        float along = dot(w, towards);
+        vec3 q = towards * (reach / (abs(along) > 1e-30 ? along : 1e-30)) - a;
+        float aa = dot(across, across), au = dot(across, up), uu = dot(up, up);
+        vec2 st = vec2(uu * dot(q, across) - au * dot(q, up), aa * dot(q, up) - au * dot(q, across))
+                  / max(aa * uu - au * au, 1e-30);
+        float size = float(textureSize(spot_cookies, 0).x);
+        float lod = clamp(log2(1.5 * abs(reach) / (area * sqrt(area)) * size), 0.0, log2(size) - 1.0);
+        // (kept a texel of that level inside: the array wraps across for all-round lights' images)
+        float margin = 0.5 * exp2(min(ceil(lod), log2(size) - 1.0)) / size;
+        return textureLod(spot_cookies, vec3(clamp(vec2(1.0 - st.x, st.y), margin, 1.0 - margin), rect.face),
+                          lod).rgb;
+    }
+#endif
+    return vec3(1.0);
+}
+
 // The integral of max(n.l, 0) over the rectangle's solid angle (its irradiance per unit
-// radiance): Lambertian light is the surface's diffuse colour x this x the radiance.
-float rect_form_factor(RectLight rect, vec3 n) {
+// radiance): Lambertian light is the surface's diffuse colour x this x the radiance, times
+// ``tint``, the colour its face's image gives that light (rect_face; white without one).
+float rect_form_factor(RectLight rect, vec3 n, out vec3 tint) {
     vec3 t = abs(n.z) < 0.999 ? normalize(cross(n, vec3(0.0, 0.0, 1.0))) : vec3(1.0, 0.0, 0.0);
     mat3 to_frame = transpose(mat3(t, cross(n, t), n));
-    return PI * clamped_cosine_vector(to_frame * rect.corner[0], to_frame * rect.corner[1],
-                                      to_frame * rect.corner[2], to_frame * rect.corner[3]).z;
+    vec3 a = to_frame * rect.corner[0], b = to_frame * rect.corner[1], d = to_frame * rect.corner[3];
+    vec3 f = clamped_cosine_vector(a, b, to_frame * rect.corner[2], d);
+    tint = rect_face(rect, a, b, d, f);
+    return PI * f.z;
 }
 
 // The LTC table's entry at a roughness and n.v (ltc_fit.py's grid: roughness across,
@@ -138,10 +180,11 @@ vec3 rect_highlight(RectLight rect, vec3 n, vec3 v, vec3 f0, float roughness) {
     // (A tube's facing rectangle moved by M^-1 is the outline the moved tube shows from the
     // point too: the width its integral sees is along the moved plane's normal w', and M^-T w'
     // is across the axis and the way to the centre, as the world's rectangle's side is.)
-    vec3 lobe = clamped_cosine_vector(to_lobe * rect.corner[0], to_lobe * rect.corner[1],
-                                      to_lobe * rect.corner[2], to_lobe * rect.corner[3]);
+    vec3 a = to_lobe * rect.corner[0], b = to_lobe * rect.corner[1], d = to_lobe * rect.corner[3];
+    vec3 lobe = clamped_cosine_vector(a, b, to_lobe * rect.corner[2], d);
     vec3 mean = frame * (inverse(inverse_m) * lobe);   // the light's mean way in, in the world
     vec3 h = normalize(normalize(mean) + v);
-    return schlick_at(f0, dot(v, h)) * (magnitude.x * lobe.z);
+    // (the face's image in the lobe's own space: the footprint of the cosine the lobe is there)
+    return schlick_at(f0, dot(v, h)) * (magnitude.x * lobe.z) * rect_face(rect, a, b, d, lobe);
 }
 #endif

@@ -5,13 +5,23 @@
 // its spot cone (its axis along cone.xyz).  The point's place in the image is where the line
 // from the light meets the square about the cone's circle: 0.5 + 0.5 (d.right, d.up) / d.axis,
 // d = -l, a slide projector's perspective.  White where the light has no cookie.  Only the
-// SPOT_COOKIES builds hold it: frames where a kept light has one.
+// SPOT_COOKIES builds hold it: frames where a kept light projects one (not a panel's picture).
 //
 // Its place is worked out before any branch a pixel's neighbours may not take (its screen
 // derivatives choose the image's mip level), the image read only where the light reaches
 // (textureGrad in the branch): on llvmpipe a block of pixels outside every cone skips the read.
+#if defined(SPOT_COOKIES) || defined(PANEL_PICTURES)
+uniform sampler2DArray spot_cookies;   // (PANEL_PICTURES: the rectangles' pictures, rect_lights.glsl)
+#endif
+#ifdef PANEL_PICTURES
+// A rectangle light's picture on its face (rect_lights.glsl rect_face; its rectangle row v's
+// w: -1 - layer) as the light shafts' air takes it: the picture's mean colour (its last mip
+// level, one texel).  White for any other light.
+vec3 face_mean(vec4 rect_v) {
+    return rect_v.w < 0.0 ? textureLod(spot_cookies, vec3(0.5, 0.5, -rect_v.w - 1.0), 16.0).rgb : vec3(1.0);
+}
+#endif
 #ifdef SPOT_COOKIES
-uniform sampler2DArray spot_cookies;
 
 // (u, v, layer) of the image the line along ``l`` meets; a layer below 0: no cookie.  An
 // all-round light's (right.w -2 - layer, a half more where its frame is mirrored:

@@ -28,6 +28,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         vec2 cookie_dx = cookie_derivative(dFdx(cookie_at.xy)), cookie_dy = cookie_derivative(dFdy(cookie_at.xy));
 #endif
         float nl = dot(normal, l);
+        vec3 face = vec3(1.0);   // (scene.frag's: a rectangle's image on its face, rect_face)
         vec4 image = virtual_lights.virtual_position[i];
 #ifdef RECT_LIGHTS
         // A rectangle's image (rect_lights.glsl): its light from all of it above the horizon,
@@ -37,7 +38,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         float centre_nl = nl;
         if (rect.shape && image.w > 0.5) {
             falloff *= (dist * dist + 1.0) * rect.radiance;  // the inverse square out: the form factor's
-            nl = rect_form_factor(rect, normal);
+            nl = rect_form_factor(rect, normal, face);
         }
 #endif
         if (nl <= 0.0 || falloff <= 0.0 || !virtual_comes_through(i, position, l, dist)) continue;
@@ -59,7 +60,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         if (rect.shape) highlight = rect_highlight(rect, normal, to_eye, f0, roughness) * energy_compensation;
 #endif
 #endif
-        total += (diffuse * nl + highlight) * arriving;
+        total += (diffuse * nl * face + highlight) * arriving;
         highlight_light += highlight * arriving;  // (scene.frag's: the highlights summed apart)
 #ifdef CLEARCOAT
         vec3 coat = image.w > 0.5  // (scene.frag's clear coat, as the highlight above)
@@ -76,7 +77,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
 #ifdef RECT_LIGHTS
         if (rect.shape) sheen_share = nl / max(centre_nl, 1e-3);
 #endif
-        sheen_light += sheen_lobe(normal, l, to_eye) * (arriving * sheen_share);  // (scene.frag's sheen)
+        sheen_light += sheen_lobe(normal, l, to_eye) * (arriving * face * sheen_share);  // (scene.frag's sheen)
 #endif
     }
     return total;
