@@ -95,8 +95,12 @@ class Material(TrackedComponent):
     mapping, Tatarchuk 2006: 6 to 16 steps by how grazing the view is, the last step's
     crossing found between its two ends), every map read where the ray meets it: bricks and
     cobbles stand out of a flat wall and hide what lies behind them as the eye moves, in
-    mirrors and portals too.  The surface itself stays flat (its outline, depth and shadow
-    are the mesh's).  At most ``MAX_PARALLAX_DEPTH`` (1 m); it needs a ``normal_map``.
+    mirrors and portals too.  The heights shadow themselves from the directional lights: from
+    where the view ray meets them a ray towards the light is marched up to the surface in 6
+    steps, and heights above it cut the light, so a low sun throws each brick's shadow across
+    the mortar (the lamps' light is not marched: a march each).  The surface itself stays flat
+    (its outline, depth and the shadows it casts on other things are the mesh's).  At most
+    ``MAX_PARALLAX_DEPTH`` (1 m); it needs a ``normal_map``.
 
     ``metallic_roughness_map`` (glTF's ``metallicRoughnessTexture``, read linearly): its
     green channel multiplies ``roughness`` and its blue channel ``metallic`` per pixel; the

@@ -401,6 +401,17 @@ float sheen_lobe(vec3 n, vec3 l, vec3 v) {
 #include "thin_film.glsl"
 
 // Light through mirrors and portals (its loop only in the VIRTUAL_LIGHTS builds).
+// The heights' shadows in the PARALLAX builds (parallax.glsl, below): a directional light's
+// arriving light times the share the heights let through, PARALLAX_LIT(l) after it.  Not the
+// lamps' (each a march of its own: in the normal_maps benchmark the sun's and a lamp's
+// together, 8 steps each, made llvmpipe's frame 2.47 x a plain ground's, the view's march
+// alone 1.64 x, the sun's added in 6 steps 2.0 x).
+#ifdef PARALLAX
+float parallax_shadow(vec3 l);
+#define PARALLAX_LIT(l) * parallax_shadow(l)
+#else
+#define PARALLAX_LIT(l)
+#endif
 #include "virtual_lights.glsl"
 
 #ifdef CLEARCOAT
@@ -572,7 +583,7 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         total += through * (max(-dot(s.normal, l), 0.0) * directional_behind[i]) * lights.directional_color[i].rgb;
 #endif
         if (nl > 0.0) {
-            vec3 arriving = lights.directional_color[i].rgb * nl * directional_lit[i];
+            vec3 arriving = lights.directional_color[i].rgb * nl * directional_lit[i] PARALLAX_LIT(l);
 #ifdef ANISOTROPY
             vec3 highlight = anisotropic_specular(s.normal, l, s.to_eye, s.f0) * s.energy_compensation;
 #else
@@ -582,10 +593,12 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
             highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
             coat_light += ggx_specular(coat_normal, l, s.to_eye, vec3(0.04), coat_roughness)
-                          * (max(dot(coat_normal, l), 0.0) * directional_lit[i]) * lights.directional_color[i].rgb;
+                          * (max(dot(coat_normal, l), 0.0) * directional_lit[i]) * lights.directional_color[i].rgb
+                          PARALLAX_LIT(l);
 #endif
 #ifdef SHEEN
-            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * directional_lit[i] * lights.directional_color[i].rgb;
+            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * directional_lit[i] * lights.directional_color[i].rgb
+                           PARALLAX_LIT(l);
 #endif
         }
     }

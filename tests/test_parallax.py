@@ -137,3 +137,84 @@ def test_a_depth_with_no_heights_to_march_is_said():
         material = Material(normal_map=TextureData(normal, name="heights"), parallax_depth=0.05)
     with pytest.warns(ComponentWarning, match="no heights in its alpha"):
         material.normal_map = TextureData(flat, name="flat")   # (the map given later: said then)
+
+
+# Low suns across the stripes (v falls along +z), as (its way towards the sun, elevation):
+# from behind the camera, each raised stripe throws its shadow onto the sunk one beyond it,
+# the part the camera sees there half in it; from before it, towards the camera onto the
+# sunk ones before them.
+SUNS = {"behind": (1.0, 25.0), "before": (-1.0, 30.0)}
+
+
+def sun_towards(sun: str) -> np.ndarray:
+    side, elevation = SUNS[sun]
+    e = np.radians(elevation)
+    return np.array([0.0, np.sin(e), side * np.cos(e)])
+
+
+def lit_floor(scene, depth: float, sun: str):
+    """The white, rough floor of raised and sunk stripes lit by the low ``sun`` alone (no sky
+    light), as linear green a pixel, the rays' hits on the floor and the rays."""
+    from components import DirectionalLight
+
+    normal, _ = stripes()
+    towards = sun_towards(sun)
+
+    def build(world):
+        look_from(world, (0.0, 1.2, 2.0), (0.0, 0.0, 0.0), fov=50.0)
+        world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+        world.spawn(DirectionalLight(direction=tuple(float(x) for x in -towards), intensity=2.0))
+        world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)),
+                    Material(color=(1.0, 1.0, 1.0, 1.0), roughness=1.0, environment_reflection=0.0,
+                             normal_map=TextureData(normal, name="heights"), parallax_depth=depth))
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    t = -eye[1] / rays[:, 1]
+    hits = eye + rays * t[:, None]
+    on = (t > 0) & (np.abs(hits[:, 0]) < 0.8 * FLOOR / 2) & (np.abs(hits[:, 2]) < 0.8 * FLOOR / 2)
+    return shown[on], hits[on], rays[on]
+
+
+def sun_reaches(points: np.ndarray, depth: float, sun: str) -> np.ndarray:
+    """Whether the ray from each point (under the floor, on the heights) to the sun leaves
+    the heights without passing under them: 1,000 steps up to the floor's plane."""
+    normal, _ = stripes()
+    heights = normal[:, 0, 3] / 255.0
+    towards = sun_towards(sun)
+    reach = -points[:, 1] / towards[1]
+    clear = np.ones(len(points), bool)
+    for k in range(1, 1001):
+        at = points + towards * (reach * k / 1000.0)[:, None]
+        under = -at[:, 1] > (1.0 - bilinear_v(heights, uv_v(at) % 1.0)) * depth + 1e-4
+        clear &= ~under
+    return clear
+
+
+@pytest.mark.parametrize("sun", sorted(SUNS))
+def test_the_raised_stripes_shadow_the_sunk_ones_from_a_low_sun(scene, sun):
+    """A low sun across the stripes: each pixel's point on the heights (its ray cast in
+    numpy, the last point above them) in the sun or in a raised stripe's shadow, the sun's way
+    from it cast through the heights in numpy too: the floor's light, taken as lit above half
+    the lit floor's, agrees in 90% of the pixels (measured 93.9% from behind, 97.5% from
+    before; the rest the shadows' soft edges and the stripes' filtered ones); without
+    the heights' shadows every pixel is lit and agrees only where the sun reaches (82%, 40%)."""
+    shown, hits, rays = lit_floor(scene, DEPTH, sun)
+    reach = DEPTH / -rays[:, 1]
+    points = np.full_like(hits, np.nan)
+    normal, _ = stripes()
+    heights = normal[:, 0, 3] / 255.0
+    above = hits
+    for k in range(1001):   # (ray_cast's march, keeping the last point above the heights)
+        at = hits + rays * (reach * (k / 1000.0) * 1.01)[:, None]
+        below = -at[:, 1] >= (1.0 - bilinear_v(heights, uv_v(at) % 1.0)) * DEPTH
+        points = np.where(np.isnan(points[:, :1]) & below[:, None], above, points)
+        above = at
+    sunlit = sun_reaches(points, DEPTH, sun)
+    assert 0.3 < sunlit.mean() < 0.85, sunlit.mean()   # (lit all over would agree in that share)
+    bright = shown > 0.5 * np.percentile(shown, 95)
+    agree = (bright == sunlit).mean()
+    assert agree > 0.9, agree
