@@ -29,6 +29,10 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   rings of 12 and 3 metres about the camera); the orbiting camera leaves the inner ring's
   cell every few frames, which draws that ring again;
 * ``cascades_moving``: the same with the sliding box (its footprint redrawn in each map it is in);
+* ``grid_sun``: shadows, still, read by the "grid" filter (2 x 2 taps);
+* ``soft_sun``: the same with the sun 2 degrees across (``DirectionalLight.angular_diameter``:
+  percentage-closer soft shadows, 12 blocker taps and 16 over the penumbra): its cost against
+  ``grid_sun``'s;
 * ``spot_shadows``: no sun shadows; the ring's lamp a 30-degree spot aimed down, casting
   from one perspective map fitted to its cone; still (the map kept);
 * ``spot_moving``: the same with the sliding box (the map drawn again each frame);
@@ -263,6 +267,20 @@ def _cascades(engine: Engine) -> None:
     _sun_shadows(engine, True)
     for _, light in engine.world.query_one(DirectionalLight):
         light.shadow_cascades, light.shadow_distance = 3, 12.0
+
+
+def _grid_sun(engine: Engine) -> None:
+    """Shadows, still, read by the "grid" filter (the soft sun's baseline)."""
+    _sun_shadows(engine, True)
+    engine.renderer.shadows.filter = "grid"
+
+
+def _soft_sun(engine: Engine) -> None:
+    """The same with the sun 2 degrees across (DirectionalLight.angular_diameter: the
+    SOFT_SUN_SHADOWS builds, the map read as it is too)."""
+    _grid_sun(engine)
+    for _, light in engine.world.query_one(DirectionalLight):
+        light.angular_diameter = 2.0
 
 
 def _cascades_moving(engine: Engine) -> None:
@@ -517,6 +535,8 @@ VARIANTS: list[Variant] = [
     Variant("mirror_light_moving", _mirror_light_moving, "the same with a box sliding under the sun",
             _slide_caster),
     Variant("cascades", _cascades, "shadows with three cascades about the orbiting camera"),
+    Variant("grid_sun", _grid_sun, "the sun casts shadows, read by the grid filter; still"),
+    Variant("soft_sun", _soft_sun, "the same with the sun 2 degrees across (angular_diameter): soft shadows"),
     Variant("cascades_moving", _cascades_moving, "the same with a box sliding under the sun", _slide_caster),
     Variant("spot_shadows", _spot, "the lamp a 30-degree spot casting from its map; still"),
     Variant("spot_moving", _spot_moving, "the same with a box sliding under it", _slide_caster),

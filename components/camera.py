@@ -14,6 +14,7 @@ from components.limits import (
     MAX_LIGHT_SIDE,
     MAX_SHADOW_CASCADE_BLEND,
     MAX_SHADOW_CASCADES,
+    MAX_SUN_ANGULAR_DIAMETER,
     MIN_LIGHT_SIDE,
     MIN_SHADOW_DISTANCE,
     MIN_SPOT_ANGLE,
@@ -156,6 +157,20 @@ class DirectionalLight(TrackedComponent):
     without a seam (cascade blending, as Unity's cascade border and Godot's blend splits);
     0 switches maps at the edge.  A point in the band reads both maps.
 
+    ``angular_diameter`` (degrees, default 0: a point-like sun, the hardest edge the map and
+    ``shadow_softness`` allow; the real sun is 0.53): the sun's size, so its shadows are an
+    area light's (Unreal's source angle, HDRP's angular diameter, Godot's angular distance):
+    hard where the caster meets the ground, wider the farther it stands, a penumbra of
+    2 tan(angular_diameter / 2) metres a metre between them (percentage-closer soft shadows:
+    the blockers' mean depth found in 12 taps of the map read as it is, then 16 comparisons
+    over the penumbra that gives; ``shaders/include/shadows.glsl`` ``soft_sun_shadow``).  In
+    every map, the level's and the cascades'; with the "grid" shadow filter (a GPU's default;
+    a software rasteriser's "single" keeps one tap).  The map read as it is is one sampler
+    more for the scene programs (the 18th of the fullest build): on an OpenGL with fewer
+    than 18 (``GL_MAX_TEXTURE_IMAGE_UNITS``) the edge stays hard and a ``GLLimitWarning``
+    says so.  At most ``MAX_SUN_ANGULAR_DIAMETER`` (20 degrees); the penumbra is at most 64
+    of the level map's texels across (a cascade's finer texels do not narrow it).
+
     ``bounces`` (default 1): how many mirrors and portals that carry light
     (``Mirror.reflects_light``, ``Portal.carries_light``) its light goes through in a row:
     0 none, 1 one (a mirror throws it on the floor), up to ``MAX_LIGHT_BOUNCES`` = 4 (mirror
@@ -171,11 +186,14 @@ class DirectionalLight(TrackedComponent):
     shadow_cascades: int = 1
     shadow_distance: float = 20.0
     shadow_cascade_blend: float = 0.15
+    angular_diameter: float = 0.0
     bounces: int = 1
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "direction":
             return glm.normalize(vec3(self, name, value, nonzero=True))
+        if name == "angular_diameter":
+            return finite(self, name, value, low=0.0, high=MAX_SUN_ANGULAR_DIAMETER)
         if name == "shadow_cascades":
             return integer(self, name, value, low=1, high=MAX_SHADOW_CASCADES)
         if name == "shadow_distance":

@@ -25,6 +25,10 @@ MIN_SHADOW_DISTANCE = 0.5
 # The widest cascade blend (DirectionalLight.shadow_cascade_blend): the outer half of a ring's
 # square, past which the next ring in would find little of its own left unblended.
 MAX_SHADOW_CASCADE_BLEND = 0.5
+# The widest sun (DirectionalLight.angular_diameter, degrees): the real one is 0.53; past a
+# few degrees the sky is overcast rather than a disc, and the blocker search's reach (64 of
+# the level map's texels across, shaders/include/shadows.glsl) caps the penumbra before 20.
+MAX_SUN_ANGULAR_DIAMETER = 20.0
 # The narrowest spot light (PointLight.spot_angle, degrees from its axis to its edge): a
 # tenth of a degree is a 2 cm disk at ten metres, past which float32's cosines of the cone's
 # edge (1 - 1.5e-6) stop telling the edge from the axis.

@@ -206,6 +206,7 @@ class ShadowSystem(esper.Processor):
             direction = raw_field(light, "direction")  # past the in-place watch: a read, not a game's edit
             facing = tuple(direction)
             published.directional.append(facing)
+            maps.set_sun_size(slot, light.angular_diameter, f"the DirectionalLight in slot {slot}")
             key = (facing, light.shadow_resolution, light.shadow_softness, maps.tile, maps.filter, level_bytes)
             same = key == self._directional.get(slot)
             if same and not casters_changed:

@@ -72,6 +72,23 @@ def _lighting(variant: str, mirrors: int = 2, gpu: bool = False):
     return run
 
 
+def _soft_sun(ctx):
+    """The mirror ring's sun 2 degrees across with three cascades and a blend band (the
+    SOFT_SUN_SHADOWS builds: the atlas read as it is on a unit of its own through a sampler
+    that compares nothing, beside its comparisons), the grid filter, a box sliding under it."""
+    from benchmarks.lighting import _cascades, _moving_caster, _slide_caster
+    from benchmarks.mirrors import MirrorRing
+    from components import DirectionalLight
+
+    def configure(engine):
+        _cascades(engine)
+        _moving_caster(engine)
+        engine.renderer.shadows.filter = "grid"
+        for _, light in engine.world.query_one(DirectionalLight):
+            light.angular_diameter = 2.0
+    return _engine_frames(ctx, MirrorRing(2), 3, configure, _slide_caster)
+
+
 def _point_shadows(ctx):
     """The mirror ring with its lamp's shadows on (distance cube maps) and a mirror throwing
     the sun (a virtual light), the boxes spinning."""
@@ -285,6 +302,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "post": _lighting("post"),
     "graded": _lighting("graded"),
     "point_shadows": _point_shadows,
+    "soft_sun": _soft_sun,
     "spot_shadows": _spot_shadows,
     "rect_lights": _rect_lights,
     "irradiance_volume": _irradiance_volume,

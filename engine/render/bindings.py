@@ -159,6 +159,10 @@ OCCLUSION_LAMPS_UNIT = 53     # occlusion filter: the lamps' shares found
 VOLUMETRIC_DEPTH_UNIT = 54    # the march and its filter: the main view's depth (compared with nothing)
 VOLUMETRIC_LIGHT_UNIT = 55    # the filter: the light the march found
 VOLUMETRIC_NODE_UNIT = 56     # a reflection level's march and filter: the level's node image
+# The directional shadow atlas again, read as it is (no comparison: the blockers' depths) by
+# the soft suns' builds (DirectionalLight.angular_diameter): the 18th sampler of the fullest
+# build, only where the context has one (ShadowMaps.soft_sun_supported); past 31 (moderngl's).
+SUN_DEPTH_UNIT = 57           # scene (SOFT_SUN_SHADOWS builds): the shadow atlas, its depths as values
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

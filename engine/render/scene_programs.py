@@ -50,6 +50,7 @@ from engine.render.bindings import (
     SHADOWS_BINDING,
     SKY_UNIT,
     SPOT_SHADOW_UNIT,
+    SUN_DEPTH_UNIT,
     VIEWS_BINDING,
     VIRTUAL_LIGHTS_BINDING,
     VIRTUAL_SHADOW_UNIT,
@@ -95,7 +96,7 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "point_shadow1": POINT_SHADOW_UNITS[1], "irradiance_table": IRRADIANCE_UNIT,
                 "virtual_atlas": VIRTUAL_SHADOW_UNIT, "spot_atlas": SPOT_SHADOW_UNIT, "occlusion_map": OCCLUSION_UNIT,
                 "screen_occlusion": SCREEN_OCCLUSION_UNIT, "screen_contact_lamps": SCREEN_CONTACT_UNIT,
-                "spot_cookies": COOKIE_UNIT, "pose_rows": POSE_ROWS_UNIT,
+                "spot_cookies": COOKIE_UNIT, "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT,
                 "morph_offsets": MORPH_UNIT, "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,

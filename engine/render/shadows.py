@@ -23,6 +23,9 @@ a map is drawn or a light's shadows are turned off.
 """
 from __future__ import annotations
 
+import math
+import warnings
+
 import moderngl
 import numpy as np
 from pyglm import glm
@@ -30,6 +33,7 @@ from pyglm import glm
 from components.limits import ALL_LAYERS
 from components.rendering import ALBEDO_UV_BIT
 from engine.core.cube_faces import CUBE_FACES
+from engine.core.errors import GLLimitWarning
 from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
@@ -41,10 +45,12 @@ from engine.render.bindings import (
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
+    SUN_DEPTH_UNIT,
     VIRTUAL_LIGHTS_BINDING,
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
+    bind_sampler,
     bind_texture,
     bind_uniform_block,
 )
@@ -85,7 +91,15 @@ _RINGS_END = _POINTS_END + (16 + 16 + 16) * MAX_SHADOW_RINGS + 16
 # matrix (world -> the spot atlas's uv and depth) and its tile's uv corners.
 # Then each cube's light's size (soft shadows: shadows.glsl soft_cube_shadow).
 _SPOTS_END = _RINGS_END + (64 + 16) * MAX_POINT_SHADOWS
-SHADOWS_BLOCK_BYTES = _SPOTS_END + 16 * MAX_POINT_SHADOWS
+# Then each directional light's size (soft shadows: shadows.glsl soft_sun_shadow): its map's
+# depth range in metres and 2 tan(half its angular diameter), 0 for a hard edge; then its level
+# map's tile in the atlas (corner u, v and side), where the soft shadows' taps are kept.
+_SIZES_END = _SPOTS_END + 16 * MAX_POINT_SHADOWS
+_TILES_START = _SIZES_END + 16 * MAX_DIRECTIONAL_LIGHTS
+SHADOWS_BLOCK_BYTES = _TILES_START + 16 * MAX_DIRECTIONAL_LIGHTS
+# The scene programs' fullest build reads 16 samplers, 17 with the cookies: a soft sun's map
+# read as it is takes one more (SUN_DEPTH_UNIT).
+SOFT_SUN_SAMPLERS = 18
 # The casters' slope-scaled depth offset (glPolygonOffset factor, units): with the normal
 # offset in the lookup, no acne on the sample level's slanted and curved surfaces.
 SLOPE_BIAS = (1.5, 2.0)
@@ -191,7 +205,12 @@ class ShadowMaps:
         # What upload found: (the directional slots read, the last casting one's index + 1;
         # the point slots read, the last used one's index + 1; the rings read; the point
         # slots that hold a spot's map; whether a ring in use has a blend band).
-        self._casting: tuple[int, int, int, tuple[int, ...], bool, bool] = (0, 0, 0, (), False, False)
+        self._casting: tuple[int, int, int, tuple[int, ...], bool, bool, bool] = (0, 0, 0, (), False, False, False)
+        # A sun with a size (DirectionalLight.angular_diameter) reads its map's depths through a
+        # sampler of its own: only where the fragment stage has the units for it.
+        self.soft_sun_supported = renderer.caps.max_texture_image_units >= SOFT_SUN_SAMPLERS
+        self._soft_sun_warned = False
+        self._depth_ranges = np.zeros(MAX_DIRECTIONAL_LIGHTS, np.float32)   # each slot's map's, metres
         self.program_defines: tuple[tuple[str, str], ...] = ()
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
@@ -251,6 +270,9 @@ class ShadowMaps:
             self.directional_tiles[slot] = (x / width, y / width, scale)
             base = 16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot
             self.block[base:base + 4] = (fit.texel, softness, 1.0 / width, self._taps(softness))
+            self._depth_ranges[slot] = fit.depth[1] - fit.depth[0]
+            self.block[_SIZES_END // 4 + 4 * slot] = self._depth_ranges[slot]
+            self.block[_TILES_START // 4 + 4 * slot:_TILES_START // 4 + 4 * slot + 3] = self.directional_tiles[slot]
             self._block_rows[slot] = written
         if self.renderer.debug:
             self.renderer.checkpoint(f"shadow map of directional light {slot}")
@@ -356,12 +378,14 @@ class ShadowMaps:
         band (a second lookup in it), ``SPOT_MAP<slot>`` where a point slot holds a spot's
         map (its lookup instead of the cube's), ``SOFT_POINT_SHADOWS`` while a cube's light has a
         size (a sphere or a rectangle: percentage-closer soft shadows, not with the "single"
-        filter), ``SHADOW_SINGLE_TAP`` with the "single" filter.
+        filter), ``SOFT_SUN_SHADOWS`` while a casting directional light has a size (its map read
+        as it is too: ``soft_sun_shadow``, not with the "single" filter), ``SHADOW_SINGLE_TAP``
+        with the "single" filter.
         The scene pass builds
         (and caches) a program per combination; a frame where nothing casts runs no lookup
         (llvmpipe runs every branch's code: a third of such a frame at 640x360 went to
         lookups that returned 1)."""
-        directional, point, rings, spots, blend, soft = self._casting
+        directional, point, rings, spots, blend, soft, soft_sun = self._casting
         self.renderer.note_scene_change()
         self.program_defines = tuple((name, value) for name, value, on in (
             ("DIRECTIONAL_SHADOWS", str(directional), directional > 0), ("POINT_SHADOWS", str(point), point > 0),
@@ -369,6 +393,7 @@ class ShadowMaps:
             ("SHADOW_RING_BLEND", "1", blend and rings > 0 and directional > 0),
             *((f"SPOT_MAP{slot}", "1", True) for slot in spots),
             ("SOFT_POINT_SHADOWS", "1", soft and point > 0),
+            ("SOFT_SUN_SHADOWS", "1", soft_sun and directional > 0),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
@@ -377,9 +402,27 @@ class ShadowMaps:
             return 1.0
         return 3.0 if softness > 1.0 else 2.0
 
+    def set_sun_size(self, slot: int, angular_diameter: float, name: str) -> None:
+        """Directional light ``slot``'s size (``DirectionalLight.angular_diameter``, degrees;
+        ``name``: the light, for the warning): the penumbra its shadows widen by, 2 tan(half
+        of it) metres a metre from the caster (``soft_sun_shadow``).  Where the context has
+        no unit for the map read as it is, the edge stays hard and a GLLimitWarning says so
+        once."""
+        if angular_diameter > 0.0 and not self.soft_sun_supported:
+            if not self._soft_sun_warned:
+                self._soft_sun_warned = True
+                warnings.warn(GLLimitWarning(
+                    f"{name}: a sun's soft shadows (angular_diameter) need {SOFT_SUN_SAMPLERS} texture units in the "
+                    f"fragment stage and this OpenGL has {self.renderer.caps.max_texture_image_units} "
+                    "(GL_MAX_TEXTURE_IMAGE_UNITS): its shadows keep a hard edge"), stacklevel=3)
+            angular_diameter = 0.0
+        at = _SIZES_END // 4 + 4 * slot
+        self.block[at:at + 2] = (self._depth_ranges[slot], 2.0 * math.tan(math.radians(angular_diameter) / 2.0))
+
     def clear_directional(self, slot: int) -> None:
         """Directional light ``slot`` casts no shadow (off, or no light there)."""
         self.block[16 * MAX_DIRECTIONAL_LIGHTS + 4 * slot + 3] = 0.0
+        self.block[_SIZES_END // 4 + 4 * slot + 1] = 0.0
         self._block_rows.pop(slot, None)
         self._level_uv.pop(slot, None)
         self.directional_tiles.pop(slot, None)
@@ -719,10 +762,12 @@ class ShadowMaps:
         rings = np.flatnonzero(self._ring_slots >= 0)
         bands = self.block[_POINTS_END // 4 + 4 * MAX_SHADOW_RINGS + 2::4][:MAX_SHADOW_RINGS]
         sizes = self.block[_SPOTS_END // 4::4][:MAX_POINT_SHADOWS]
+        suns = self.block[_SIZES_END // 4 + 1::4][:MAX_DIRECTIONAL_LIGHTS]
         casting = (int(taps[-1]) + 1 if taps.size else 0, int(cubes[-1]) + 1 if cubes.size else 0,
                    int(rings[-1]) + 1 if rings.size else 0, tuple(int(c) for c in cubes if self._spot_maps[c]),
                    bool((bands[rings] > 0.0).any()),
-                   bool(any(sizes[c] > 0.0 and not self._spot_maps[c] for c in cubes)) and self._filter != "single")
+                   bool(any(sizes[c] > 0.0 and not self._spot_maps[c] for c in cubes)) and self._filter != "single",
+                   bool((suns[taps] > 0.0).any()) and self._filter != "single")
         if casting != self._casting:
             self._casting = casting
             self._set_program_defines()
@@ -732,6 +777,9 @@ class ShadowMaps:
         """Bind the maps and the Shadows block for a scene pass (every pass: the units are
         shared with passes that are not scene passes)."""
         bind_texture(self.ctx, self.atlas, SHADOW_ATLAS_UNIT)
+        if self._casting[6]:   # (the soft suns' builds: the atlas again, its depths as values)
+            bind_texture(self.ctx, self.atlas, SUN_DEPTH_UNIT)
+            bind_sampler(self.ctx, self.renderer.depth_values(), SUN_DEPTH_UNIT)
         for slot, unit in enumerate(POINT_SHADOW_UNITS):
             bind_texture(self.ctx, self.cubes.get(slot, self._empty_cube), unit)
         bind_uniform_block(self.ctx, self.ubo, SHADOWS_BINDING)

@@ -50,6 +50,9 @@ layout(std140) uniform Shadows {
     vec4 point_size[MAX_POINT_SHADOWS];               // x: a cube's light's size, the radius of a disc as
                                                       // bright (metres; 0: a point: soft_cube_shadow);
                                                       // yzw: a rectangle's front (0: a sphere's, all round)
+    vec4 directional_size[MAX_DIRECTIONAL_LIGHTS];    // x: its map's depth range (metres), y: 2 tan(half
+                                                      // its angular diameter) (0: a hard edge: soft_sun_shadow)
+    vec4 directional_tile[MAX_DIRECTIONAL_LIGHTS];    // its level map's tile in the atlas: corner (uv), side
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -75,6 +78,77 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float so
 #endif
 }
 
+#if (defined(SOFT_POINT_SHADOWS) || defined(SOFT_SUN_SHADOWS)) && !defined(SHADOW_SINGLE_TAP)
+// The k-th of ``count`` taps on a Vogel disc (a golden-angle spiral) of radius 1, the same at
+// every pixel: the soft shadows' blocker searches and filters.
+vec2 vogel_tap(int k, int count) {
+    float r = sqrt((float(k) + 0.5) / float(count));
+    float a = float(k) * 2.39996323;
+    return r * vec2(cos(a), sin(a));
+}
+#endif
+
+#if defined(SOFT_SUN_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
+// A sun with a size (DirectionalLight.angular_diameter) by percentage-closer soft shadows
+// (Fernando 2005), in whichever of its maps holds the point: the blockers' mean depth among
+// SUN_SEARCH taps of the map read as it is (shadow_depths: the atlas through a sampler that
+// compares nothing), within the widest penumbra a blocker up to the map's near side could
+// cast (at most SUN_SEARCH_TEXELS of the light's level map's texels, whichever map: a
+// cascade's finer texels do not narrow it), then SUN_TAPS comparisons over the penumbra the
+// mean blocker casts: its depth gap to the point times ``size.x`` (metres over the map's
+// depth) times ``size.y`` (2 tan of half the angle), across.  Each tap compared with the
+// receiver's own plane there (``slope``: its depth per uv of this map, held to a slope of 8),
+// less two texels of it, so a flat receiver does not shadow itself across the wide taps.
+// Every tap is kept inside the map's tile (``tile``: its corner and side in the atlas, less
+// half a texel): past it lie other maps, or texels no map wrote.
+uniform sampler2D shadow_depths;
+const int SUN_SEARCH = 12;
+const int SUN_TAPS = 16;
+const float SUN_SEARCH_TEXELS = 32.0;   // the search's and the penumbra's widest radius (level-map texels)
+
+// ``p``: the point in the atlas (uv, depth); ``metres_per_uv``: this map's; ``texel``: the
+// atlas's texel in uv; ``scale``: this map's uv per the level map's.
+float soft_sun_shadow(vec3 p, float metres_per_uv, float texel, float scale, vec4 size, vec2 slope, vec3 tile) {
+    vec2 low = tile.xy + 0.5 * texel, high = tile.xy + tile.z - 0.5 * texel;
+    float spread = size.x * size.y / metres_per_uv;   // the penumbra's width (uv) a unit of depth gap
+    float widest = SUN_SEARCH_TEXELS * texel * scale;
+    float search = clamp(0.5 * p.z * spread, texel, widest);
+    float steepest = 8.0 * metres_per_uv / max(size.x, 1e-6);   // a slope of 8 in depth per uv
+    slope = clamp(slope, vec2(-steepest), vec2(steepest));
+    float bias = 2.0 * texel * (abs(slope.x) + abs(slope.y)) + 1e-5;
+    float blockers = 0.0, found = 0.0;
+    for (int k = 0; k < SUN_SEARCH; ++k) {
+        vec2 o = vogel_tap(k, SUN_SEARCH) * search;
+        float stored = texture(shadow_depths, clamp(p.xy + o, low, high)).r;
+        if (stored < p.z + dot(slope, o) - bias) {
+            blockers += stored;
+            found += 1.0;
+        }
+    }
+    if (found == 0.0) return 1.0;
+    float radius = clamp(0.5 * (p.z - blockers / found) * spread, 0.5 * texel, widest);
+    float lit = 0.0;
+    for (int k = 0; k < SUN_TAPS; ++k) {
+        vec2 o = vogel_tap(k, SUN_TAPS) * radius;
+        lit += texture(shadow_atlas, vec3(clamp(p.xy + o, low, high), p.z + dot(slope, o) - bias));
+    }
+    return lit / float(SUN_TAPS);
+}
+#endif
+
+// Directional light i's lookup of its map at ``p`` (atlas uv, depth): its grid of taps, or a
+// sun with a size's soft shadow (``scale``: the map's uv per the level map's, 1 for the level
+// map, a ring's its own; ``slope``: the receiver's depth per level-map uv; ``tile``: the map's
+// tile in the atlas, corner and side).
+float directional_lookup(int i, vec3 p, vec4 params, vec2 scale, vec2 slope, vec3 tile) {
+#if defined(SOFT_SUN_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
+    vec4 size = shadows.directional_size[i];
+    if (size.y > 0.0)
+        return soft_sun_shadow(p, params.x / params.z / scale.x, params.z, scale.x, size, slope / scale, tile);
+#endif
+    return filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y);
+}
+
 #ifdef SHADOW_RINGS
 #if SHADOW_RINGS > 3
 #error "directional_shadow reads three rings"
@@ -87,7 +161,8 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float so
 // with a constant k: no array indexed by a variable, no loop (llvmpipe runs a loop's and an
 // indexed read's code slower).
 void ring_coordinates(int k, int i, vec3 at, vec3 along, float grazing, inout vec3 p, inout vec3 coarser,
-                      inout float fine) {
+                      inout float fine, inout vec2 scale, inout vec2 coarser_scale, inout vec3 map_tile,
+                      inout vec3 coarser_tile) {
     vec3 q = at + along * (shadows.ring_params[k].x * grazing);
     vec4 map = shadows.ring_map[k];
     vec2 square = q.xy * map.xy + map.zw;
@@ -96,8 +171,12 @@ void ring_coordinates(int k, int i, vec3 at, vec3 along, float grazing, inout ve
     bool inside = shadows.ring_slot[k] == i && all(greaterThan(edge, vec2(0.0)));
     float band = shadows.ring_params[k].z;
     coarser = inside ? p : coarser;
+    coarser_scale = inside ? scale : coarser_scale;
+    coarser_tile = inside ? map_tile : coarser_tile;
+    map_tile = inside ? tile.xyz : map_tile;
     fine = inside ? (band > 0.0 ? clamp(min(edge.x, edge.y) / band, 0.0, 1.0) : 1.0) : fine;
     p = inside ? vec3(tile.xy + square * tile.z, q.z) : p;
+    scale = inside ? map.xy * tile.z : scale;   // (the ring's atlas uv per the level map's)
 }
 #endif
 
@@ -107,20 +186,22 @@ void ring_coordinates(int k, int i, vec3 at, vec3 along, float grazing, inout ve
 // holds the point read in place of the level's map, the map's filter, a ring's blend band.
 // The scene pass's lookup (directional_shadow) and the light shafts' march
 // (volumetric_fog.frag, which steps ``at`` along its ray) share it.
-float directional_shadow_at(int i, vec4 params, vec3 at, vec3 along, float grazing) {
+float directional_shadow_at(int i, vec4 params, vec3 at, vec3 along, float grazing, vec2 slope) {
     vec3 p = at + along * (params.x * grazing);
     vec3 coarser = p;   // the next larger map's coordinates (the level's, or a ring's)
     float fine = 1.0;   // the chosen ring's share, against the next larger map's (cascade blending)
+    vec2 scale = vec2(1.0), coarser_scale = vec2(1.0);   // their uv per the level map's
+    vec3 map_tile = shadows.directional_tile[i].xyz, coarser_tile = map_tile;   // their tiles in the atlas
 #ifdef SHADOW_RINGS
     // The smallest of the light's rings that holds the point (outermost first: the last
     // holding it wins), read instead of the level's map; the coordinates chosen, one lookup
     // (two in a ring's blend band).
-    ring_coordinates(0, i, at, along, grazing, p, coarser, fine);
+    ring_coordinates(0, i, at, along, grazing, p, coarser, fine, scale, coarser_scale, map_tile, coarser_tile);
 #if SHADOW_RINGS > 1
-    ring_coordinates(1, i, at, along, grazing, p, coarser, fine);
+    ring_coordinates(1, i, at, along, grazing, p, coarser, fine, scale, coarser_scale, map_tile, coarser_tile);
 #endif
 #if SHADOW_RINGS > 2
-    ring_coordinates(2, i, at, along, grazing, p, coarser, fine);
+    ring_coordinates(2, i, at, along, grazing, p, coarser, fine, scale, coarser_scale, map_tile, coarser_tile);
 #endif
 #endif
     // Beside the map: no caster is between the point and the light (the map holds them all).
@@ -129,15 +210,20 @@ float directional_shadow_at(int i, vec4 params, vec3 at, vec3 along, float grazi
     // caster) it is behind every caster over it: compared at the far side (the reference is
     // clamped so whatever the depth format; in front of the near side it is lit either way).
     p.z = clamp(p.z, 0.0, 1.0);
-    float lit = filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y);
+    float lit = directional_lookup(i, p, params, scale, slope, map_tile);
 #ifdef SHADOW_RING_BLEND
     if (fine < 1.0) {   // in a ring's band: fade towards the next larger map's shadow
         bool off = any(lessThan(coarser, vec3(0.0))) || any(greaterThan(coarser, vec3(1.0)));
-        float far_lit = off ? 1.0 : filtered_shadow(shadow_atlas, coarser, int(params.w), vec2(params.z), params.y);
+        float far_lit = off ? 1.0 : directional_lookup(i, coarser, params, coarser_scale, slope, coarser_tile);
         lit = mix(far_lit, lit, fine);
     }
 #endif
     return lit;
+}
+
+// The same with no receiver's plane (the light shafts' points in the air).
+float directional_shadow_at(int i, vec4 params, vec3 at, vec3 along, float grazing) {
+    return directional_shadow_at(i, params, at, along, grazing, vec2(0.0));
 }
 
 // How much of directional light i reaches a point at ``position`` whose geometric normal
@@ -154,7 +240,15 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     mat4 to_map = shadows.directional_matrix[i];
     vec3 at = (to_map * vec4(position, 1.0)).xyz;  // the point in the level map's coordinates
     vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
-    return directional_shadow_at(i, params, at, along, grazing);
+    vec2 slope = vec2(0.0);
+#if defined(SOFT_SUN_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
+    // The receiver's plane in the map: two ways along the surface carried into it, the depth
+    // per uv of the plane they span (receiver-plane depth bias, without screen derivatives).
+    vec3 t1 = normalize(cross(normal, abs(normal.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
+    vec3 m = cross(mat3(to_map) * t1, mat3(to_map) * cross(normal, t1));
+    slope = -m.xy / (abs(m.z) > 1e-12 ? m.z : 1e-12);
+#endif
+    return directional_shadow_at(i, params, at, along, grazing, slope);
 #endif
 }
 
@@ -200,11 +294,6 @@ vec4 directional_shadows(vec3 position, vec3 normal) {
 const int SOFT_SEARCH = 12;
 const int SOFT_TAPS = 16;
 
-vec2 vogel_tap(int k, int count) {
-    float r = sqrt((float(k) + 0.5) / float(count));
-    float a = float(k) * 2.39996323;
-    return r * vec2(cos(a), sin(a));
-}
 
 // Where the receiver's own plane (through ``p``, from the light, normal ``n``) lies along the
 // direction ``t`` from the light, over the range, less a texel's worth of its slope there: a
