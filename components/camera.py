@@ -241,15 +241,16 @@ class PointLight(TrackedComponent):
     panorama (equirectangular: longitude across, latitude up), its middle ahead of the light
     (the entity's -Z), its right towards +X and its top row straight up (+Y), as a lamp
     shade with holes, a caged bulb or a disco ball throws light all round.  Through a mirror or portal the image is
-    carried with the light: a mirror shows it the other way round, as a real one does.  The
+    carried with the light: a mirror shows it the other way round, as a real one does; lit
+    particles take the colour at their centres, the shafts' air at each step.  The
     renderer draws it from a ``COOKIE_SIZE`` (512) square copy with mipmaps
     (``engine/render/spot_cookies.py``).  A rectangle light's cookie is the picture on its
     face instead, a screen's or a stained-glass window's (Unity HDRP's area light cookie,
     Unreal's rect light source texture): each part of the panel shines in its colour there,
     the picture's right towards the entity's -X and its top towards +Y, so it reads as a
     screen does from in front; a polished floor shows it, a rough one takes the colours of
-    the parts nearest it, the shafts' air the picture's mean colour (lit particles take no
-    cookie).  Each integral of the panel's light times the picture's colour its lobe sees,
+    the parts nearest it, the shafts' air and lit particles the picture's mean colour.  Each
+    integral of the panel's light times the picture's colour its lobe sees,
     read from the picture's mip chain where the lobe's mean way in meets the face
     (``rect_face`` in ``shaders/include/rect_lights.glsl``): exact for one colour all over, an
     approximation of the colours' weights otherwise (``tests/test_rect_light_images.py``).

@@ -49,11 +49,26 @@ SHADING_QUALIFIER out vec3 v_light;  // the light at its centre (a ribbon's: at 
 #endif
 
 #ifdef LIT
+// Point light i's image along ``l`` (towards the light) as the particle's centre takes it: its
+// cookie's colour there (spot_cookie.glsl, its finest level), a rectangle's picture's mean
+// colour (PANEL_PICTURES), white without either.
+vec3 lamp_image(int i, vec3 l) {
+    vec3 image = vec3(1.0);
+#ifdef SPOT_COOKIES
+    image = cookie_light(cookie_place(lights.point_cookie_u[i], lights.point_cookie_v[i], lights.point_spot[i], l),
+                         vec2(0.0), vec2(0.0));
+#endif
+#ifdef PANEL_PICTURES
+    image *= face_mean(lights.point_rect_v[i]);
+#endif
+    return image;
+}
+
 // The light a thin sheet at ``p`` facing ``n`` scatters towards the viewer, over its albedo
 // and pi: (1 - translucency) of what falls on its front, translucency of what falls on its
 // back (scene.frag's diffuse transmission, Material.diffuse_transmission, for a sheet that
-// faces the viewer), with the lights' shadows at its centre; light through mirrors and
-// portals too (VIRTUAL_LIGHTS builds, while one shines).
+// faces the viewer), with the lights' shadows and cookies at its centre; light through mirrors
+// and portals too (VIRTUAL_LIGHTS builds, while one shines).
 vec3 sheet_light(vec3 p, vec3 n) {
     AmbientBoxes boxes = ambient_boxes(p, vec3(0.0));  // (no normal bias: a sheet has two sides)
     float front = 1.0 - translucency;
@@ -73,7 +88,7 @@ vec3 sheet_light(vec3 p, vec3 n) {
         vec3 l = d / max(dist, 1e-4);
         float falloff = lamp_falloff(i, dist, l);
         float nl = dot(n, l);
-        e += lights.point_color[i].rgb * falloff
+        e += lamp_image(i, l) * lights.point_color[i].rgb * falloff
              * (max(nl, 0.0) * front * point_shadow(i, lamp_front)
                 + max(-nl, 0.0) * translucency * point_shadow(i, lamp_back));
     }
@@ -87,7 +102,16 @@ vec3 sheet_light(vec3 p, vec3 n) {
         if (falloff <= 0.0 || !virtual_comes_through(i, p, l, dist)) continue;
         float nl = dot(n, l);
         vec3 side = nl >= 0.0 ? n : -n;
-        e += virtual_lights.virtual_color[i].rgb * falloff * abs(nl) * (nl >= 0.0 ? front : translucency)
+#ifdef SPOT_COOKIES
+        vec3 cookie = cookie_light(cookie_place(virtual_lights.virtual_cookie_u[i], virtual_lights.virtual_cookie_v[i],
+                                                virtual_lights.virtual_spot[i], l), vec2(0.0), vec2(0.0));
+#else
+        const vec3 cookie = vec3(1.0);
+#endif
+#ifdef PANEL_PICTURES
+        cookie *= face_mean(virtual_lights.virtual_rect_v[i]);
+#endif
+        e += cookie * virtual_lights.virtual_color[i].rgb * falloff * abs(nl) * (nl >= 0.0 ? front : translucency)
              * virtual_shadow(i, p, side, l, dist);
     }
 #endif

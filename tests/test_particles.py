@@ -222,16 +222,24 @@ def solid(value=255) -> TextureData:
 ALBEDO = (0.6, 0.5, 0.4)
 
 
-def lit_scene(particle: bool, sun: glm.vec3, lamp: bool = False, blocker: bool = False, sun_on: bool = True):
+def lit_scene(particle: bool, sun: glm.vec3, lamp: bool = False, blocker: bool = False, sun_on: bool = True,
+              image: str | None = None):
     """A 1 m lit particle facing the camera (a solid sprite: alpha 1 all over), or in its place
     a quad of the same albedo letting the same share of light through (diffuse transmission,
     its transmission's colour the albedo), lit by a sun (or a lamp the way the sun comes from)
-    and a hemisphere; ``blocker``: a box in the sun's way."""
+    and a hemisphere; ``blocker``: a box in the sun's way; ``image``: the lamp with an amber
+    cookie wrapped about it ("cookie"), a panel facing the particle with an amber picture
+    ("picture"), one colour all over, or the same panel amber itself ("amber panel")."""
     def build(world):
         look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
         world.spawn(HemisphereLight(sky=(0.3, 0.35, 0.5), ground=(0.2, 0.15, 0.1), intensity=1.0))
         if lamp:
-            world.spawn(Transform(position=-sun * 1.5), PointLight(intensity=5.0, range=20.0))
+            amber = TextureData(np.full((4, 4, 4), (255, 140, 30, 255), np.uint8), name="amber")
+            shape = {"rectangle": (0.6, 0.4)} if image in ("picture", "amber panel") else {}
+            colour = (*srgb_to_linear(np.array([255, 140, 30]) / 255.0), 1.0) if image == "amber panel" else (1.0,) * 4
+            world.spawn(Transform(position=-sun * 1.5, rotation=look_rotation(sun)),
+                        PointLight(color=colour, intensity=5.0, range=20.0,
+                                   cookie=amber if image in ("cookie", "picture") else None, **shape))
         else:
             world.spawn(DirectionalLight(direction=sun, intensity=3.0 if sun_on else 0.0))
         if particle:
@@ -259,6 +267,25 @@ def test_a_lit_particle_is_lit_as_a_thin_sheet_letting_light_through(scene, sun,
     assert particle[middle].mean() > 0.05
     np.testing.assert_allclose(particle[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
                                atol=0.004)
+
+
+@pytest.mark.parametrize("image", ["cookie", "picture"])
+def test_a_lit_particle_takes_a_lamps_cookie_and_a_panels_picture_as_a_thin_sheet_does(scene, image):
+    """The lamp in front with an amber image, one colour all over: a cookie wrapped about it
+    (the particle's middle is the thin quad's there, whose pixels read the image as the scene's
+    surfaces do), or the picture on a panel's face (its mean colour at the particle's centre:
+    the particle as under the same panel amber itself; a panel's light on a particle is its
+    centre's, not the surface's form factor); amber, not the lamp's white."""
+    sun = glm.normalize(glm.vec3(0.3, -0.4, -1.0))
+    _, particle = render(scene, lit_scene(True, sun, lamp=True, image=image))
+    _, sheet = render(scene, lit_scene(image == "picture", sun, lamp=True,
+                                       image="amber panel" if image == "picture" else image))
+    _, white = render(scene, lit_scene(True, sun, lamp=True))
+    middle = (slice(33, 39), slice(45, 51))
+    np.testing.assert_allclose(particle[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
+                               atol=0.004)
+    tint = particle[middle].mean(axis=(0, 1)) / white[middle].mean(axis=(0, 1))
+    assert tint[2] < 0.6 * tint[0], tint
 
 
 def through_a_mirror(particle: bool, reflects: bool):

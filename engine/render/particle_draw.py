@@ -46,6 +46,7 @@ from engine.render.bindings import (
     BLEND_PREMULTIPLIED,
     CAMERA_BINDING,
     CLIP_VIEW_PLANE,
+    COOKIE_UNIT,
     FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
@@ -340,7 +341,8 @@ class ParticleDraw:
         virtual = lit and self.shadows.virtual_shining  # light through mirrors and portals, while one shines
         fog = () if reactive else self.gpu.fog.defines
         ambient = self.gpu.ambient_defines if lit and ambient_probes else ()  # the boxes', a volume's light
-        key = (sprite, lit, masked, ambient, soft, shadowing, fog, ribbon, virtual, reactive)
+        cookies = self.gpu.spot_cookies.defines if lit else ()   # the lamps' cookies and panels' pictures
+        key = (sprite, lit, masked, ambient, soft, shadowing, fog, ribbon, virtual, reactive, cookies)
         program = self._programs.get(key)
         if program is None:
             defines = dict(fog)
@@ -358,6 +360,7 @@ class ParticleDraw:
                 defines["LIT"] = "1"
                 defines.update(shadowing)
                 defines.update(ambient)
+                defines.update(cookies)
                 if virtual:
                     defines["VIRTUAL_LIGHTS"] = "1"
             program = self.gpu.shaders.program("particle.vert", "particle.frag", defines=defines)
@@ -371,7 +374,8 @@ class ParticleDraw:
                                ("scene_depth", PARTICLE_DEPTH_UNIT),
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]), ("spot_atlas", SPOT_SHADOW_UNIT),
-                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT)):
+                               ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
+                               ("spot_cookies", COOKIE_UNIT)):
                 if name in program:
                     program[name].value = unit
             self._programs[key] = program
