@@ -65,6 +65,7 @@ from components import (
     FilmGrain,
     FlyController,
     Fog,
+    FogVolume,
     IrradianceVolume,
     Material,
     MeshRef,
@@ -101,7 +102,7 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
                              ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal,
-                             IrradianceVolume)
+                             IrradianceVolume, FogVolume)
 
 @dataclasses.dataclass
 class Case:

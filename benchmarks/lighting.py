@@ -54,6 +54,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``fog``: no shadows; height fog with sun scatter on the camera (``Fog``: every view, the
   sky and the composites fogged);
 * ``fog_uniform``: the same with fog the same everywhere and no glow (the cheapest fog build);
+* ``fog_volumes``: no shadows, no camera fog; four ``FogVolume``s over the ring (each pixel of
+  every view integrates each one along its way);
 * ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels on a
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
@@ -173,6 +175,7 @@ from components import (
     ContactShadows,
     DirectionalLight,
     Fog,
+    FogVolume,
     IrradianceVolume,
     Material,
     MeshRef,
@@ -392,6 +395,15 @@ def _fog_uniform(engine: Engine) -> None:
     engine.world.add_component(camera_entity(engine), Fog(density=0.04))
 
 
+def _fog_volumes(engine: Engine) -> None:
+    """No shadows; four FogVolumes over the ring, no camera fog (the FOG_VOLUMES builds)."""
+    _sun_shadows(engine, False)
+    for k in range(4):
+        angle = k * math.pi / 2.0
+        engine.world.spawn(Transform(position=(4.0 * math.cos(angle), 0.5, 4.0 * math.sin(angle))),
+                           FogVolume(size=(5.0, 2.0, 5.0), density=0.4))
+
+
 def _shafts(engine: Engine, half: bool = True) -> None:
     """Shadows, height fog and light shafts on the camera (VolumetricFog: its march, at half
     size or a ray a pixel, and its filter)."""
@@ -551,6 +563,7 @@ VARIANTS: list[Variant] = [
     Variant("volume", _volume, "no shadows; an irradiance volume of 6 x 2 x 6 points over the ring"),
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
+    Variant("fog_volumes", _fog_volumes, "four FogVolumes over the ring, no camera fog"),
     Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),
     Variant("shafts", _shafts, "the same with VolumetricFog() (marched at half size; the sun's and the lamp's)"),
     Variant("shafts_sun", _shafts_sun, "the same with the sun's shafts alone (the lamp's volumetric 0)"),

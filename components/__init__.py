@@ -3,7 +3,7 @@ from components.ambient import AmbientOcclusion, ContactShadows, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
 from components.decal import Decal, FromDecal
 from components.detail import LevelOfDetail
-from components.fog import Fog, VolumetricFog
+from components.fog import Fog, FogVolume, VolumetricFog
 from components.mirror import Mirror
 from components.model import Animation, AnimationEvents, AnimationLayer, FromModel, Model
 from components.particles import ParticleEmitter
@@ -33,7 +33,8 @@ __all__ = [
     "ColorGrading",
     "ComponentValueError", "ContactShadows",
     "ComponentWarning", "Decal", "DepthOfField",
-    "DirectionalLight", "Emissive", "FilmGrain", "FlyController", "Fog", "FromDecal", "FromModel", "HemisphereLight",
+    "DirectionalLight", "Emissive", "FilmGrain", "FlyController", "Fog", "FogVolume", "FromDecal", "FromModel",
+    "HemisphereLight",
     "IrradianceVolume",
     "LevelOfDetail", "Material",
     "MeshRef", "Mirror", "Model", "Morph", "MotionBlur", "ParticleEmitter", "PointLight", "Portal", "PortalClone",

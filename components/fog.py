@@ -19,7 +19,7 @@ from typing import Any
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from components.tracking import TrackedComponent, boolean, color, finite, integer
+from components.tracking import ComponentValueError, TrackedComponent, boolean, color, finite, integer, vec3
 
 # The thickest fog: 1000 per metre is a millimetre's visibility, past which nothing is seen.
 MAX_FOG_DENSITY = 1000.0
@@ -29,6 +29,8 @@ MAX_FOG_FALLOFF = 1000.0
 MAX_FOG_HEIGHT = 1.0e6
 # The strongest sun scatter: the glow towards the sun this many times the sun's light.
 MAX_FOG_SUN_SCATTER = 100.0
+# A FogVolume's sides: a centimetre to ten kilometres (metres).
+MIN_FOG_VOLUME_SIDE, MAX_FOG_VOLUME_SIDE = 0.01, 1.0e4
 # VolumetricFog: the strongest scattering, the longest march (metres) and its most steps.
 MAX_VOLUMETRIC_INTENSITY = 100.0
 MAX_VOLUMETRIC_DISTANCE = 10_000.0
@@ -124,8 +126,9 @@ class VolumetricFog(TrackedComponent):
     shadow at each step, by the same phase function.
 
     Glass is blended over the shafts as over everything behind it: a pane dims them by its
-    opacity, the air's in front of it too.  Probe views have none.  Without a Fog
-    with a density, or without a sun or such a lamp, it adds nothing and says so once (a
+    opacity, the air's in front of it too.  Probe views have none.  The air is the Fog's and
+    every ``FogVolume``'s: shafts through a bank of mist.  Without a Fog with a density or a
+    FogVolume, or without a sun or such a lamp, it adds nothing and says so once (a
     ``ComponentWarning`` from the main stage); a light that casts no shadow lights the air
     everywhere it reaches.
     """
@@ -151,3 +154,48 @@ class VolumetricFog(TrackedComponent):
         if name == "reflection_depth":
             return integer(self, name, value, low=0, high=MAX_VIEW_DEPTH)
         return value
+
+
+@dataclass(eq=False)
+class FogVolume(TrackedComponent):
+    """A local fog volume: a bank of mist where its entity stands, a pit of smoke, a glowing
+    haze in a cave (Unreal's local fog volume, Godot's FogVolume, HDRP's local volumetric
+    fog), seen by every camera, in every view, with or without the camera's ``Fog``.
+
+    - ``size`` (metres, each 0.01 to 10,000; default (4, 2, 4)): an ellipsoid this wide along
+      the entity's X, Y and Z (its rotation turns it; its scale is left out), centred on its
+      position.
+    - ``density`` (per metre, 0 to 1000; default 0.5): the air's at its centre, falling
+      smoothly to 0 at its surface (as 1 - r^2, r the distance from the centre over the
+      ellipsoid's radius that way), so it has no edge: a metre through its middle at 0.5
+      takes about a third of the light away.
+    - ``color`` (linear RGB; default a pale grey): what the light it takes away becomes.
+
+    Along each stretch of a light's way (the eye to a surface, a mirror's view from its glass
+    on, the sky seen past the volume) its optical depth is the integral of that density along
+    the line, in closed form; the camera's ``Fog`` and every volume add theirs, and what they
+    take becomes their colours weighed by their shares (``shaders/include/fog.glsl``
+    ``fog_way``).  A camera's ``VolumetricFog`` scatters the sun's and the lamps' light in
+    its air too: shafts through a bank of mist.  At most ``MAX_FOG_VOLUMES`` (8) at once, the
+    nearest the active camera; the rest are counted in ``RenderStats.fog_volumes_cut`` and
+    a ``FogLimitWarning`` says so.
+    """
+
+    size: Any = field(default_factory=lambda: glm.vec3(4.0, 2.0, 4.0))
+    density: float = 0.5
+    color: Any = field(default_factory=lambda: glm.vec4(0.7, 0.72, 0.75, 1.0))
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name == "size":
+            value = vec3(self, name, value)
+            if not all(MIN_FOG_VOLUME_SIDE <= c <= MAX_FOG_VOLUME_SIDE for c in value):
+                raise ComponentValueError(
+                    f"FogVolume.size must have every side in [{MIN_FOG_VOLUME_SIDE:g}, {MAX_FOG_VOLUME_SIDE:g}] "
+                    f"metres, got {tuple(value)!r}")
+            return value
+        if name == "density":
+            return finite(self, name, value, low=0.0, high=MAX_FOG_DENSITY)
+        if name == "color":
+            return color(self, name, value)
+        return value
+

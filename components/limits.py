@@ -25,6 +25,9 @@ MIN_SHADOW_DISTANCE = 0.5
 # The widest cascade blend (DirectionalLight.shadow_cascade_blend): the outer half of a ring's
 # square, past which the next ring in would find little of its own left unblended.
 MAX_SHADOW_CASCADE_BLEND = 0.5
+# Local fog volumes at once (FogVolume): the Fog block holds each one's matrix and colour, and
+# every fogged pixel integrates each one's density along its stretch of air.
+MAX_FOG_VOLUMES = 8
 # The widest sun (DirectionalLight.angular_diameter, degrees): the real one is 0.53; past a
 # few degrees the sky is overcast rather than a disc, and the blocker search's reach (64 of
 # the level map's texels across, shaders/include/shadows.glsl) caps the penumbra before 20.

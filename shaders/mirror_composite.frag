@@ -162,7 +162,7 @@ void main() {
     // before it in the parent view: from where the parent's rays enter it (its eye for a root
     // view, else the surface it looks out of: its oblique near plane) to the surface.
     vec3 at = eye + view_dir * (-(dot(v_normal.xyz, eye) + v_params.z) / dot(v_normal.xyz, view_dir));
-    float parent_fog = fog_depth(fog_from_eye ? eye : near.xyz / near.w, at);
+    FogWay parent_fog = fog_way(fog_from_eye ? eye : near.xyz / near.w, at, view_dir);
 #ifndef COMPOSITE_FALLBACK
     uvec4 seen_pair = texelFetch(reflection_seen, px, 0);
     if (seen_pair.r == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
@@ -173,14 +173,14 @@ void main() {
 #ifdef COMPOSITE_PORTAL
 #ifdef COMPOSITE_FALLBACK
     // What lies beyond the partner along the carried ray, from the probes there or the sky.
-    out_color = vec4(hdr_store(fogged(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0),
-                                      parent_fog, view_dir)), 1.0);
+    out_color = vec4(hdr_store(fog_over(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0),
+                                        parent_fog)), 1.0);
 #else
     // (The sky beyond the partner fogged from this side's crossing: the partner's height is
     // not in the row, so height fog there is this side's.)
     vec4 through = textureLod(reflection, uv, 0.0);
     vec3 beyond = fog_sky(textureLod(sky_map, v_carry * view_dir, 0.0).rgb, at, v_carry * view_dir);
-    out_color = vec4(hdr_store(fogged(through.rgb + beyond * (1.0 - through.a), parent_fog, view_dir)), 1.0);
+    out_color = vec4(hdr_store(fog_over(through.rgb + beyond * (1.0 - through.a), parent_fog)), 1.0);
 #endif
 #else
     float reflect_rate = v_params.x;
@@ -261,9 +261,9 @@ void main() {
     // The parent's air over the reflection as a whole: blended over the surface's own pixels
     // (fogged by the same air in the parent's scene pass), the pixel is fogged all the way.
 #ifdef COMPOSITE_WATER
-    out_color = vec4(hdr_store(fogged(radiance * v_tint.rgb, parent_fog, view_dir)), weight);
+    out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);
 #else
-    out_color = vec4(hdr_store(fogged(reflected, parent_fog, view_dir)), weight);
+    out_color = vec4(hdr_store(fog_over(reflected, parent_fog)), weight);
 #endif
 #endif
 #ifdef SURFACE_MOTION

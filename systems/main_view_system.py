@@ -153,8 +153,8 @@ class MainViewSystem(esper.Processor):
         shafts = self.world.try_get(camera, VolumetricFog)
         fog = self.world.try_get(camera, Fog) if shafts is not None else None
         why = None
-        if shafts is not None and (fog is None or fog.density <= 0.0):
-            why = "has no Fog with a density beside it (the shafts are its air's light)"
+        if shafts is not None and (fog is None or fog.density <= 0.0) and not self.renderer.fog.volume_count:
+            why = "has no Fog with a density beside it and no FogVolume stands (the shafts are its air's light)"
         lamps = self.world.resources.get(VolumetricLamps, _NO_SHAFT_LAMPS)
         if why is None and shafts is not None and brightest_directional(self.world) is None and not lamps.slots:
             why = ("lights its air with the sun and the lamps with volumetric > 0, and the world has no "

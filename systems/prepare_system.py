@@ -27,11 +27,21 @@ import warnings
 
 import esper
 import numpy as np
+from pyglm import glm
 
-from components import DirectionalLight, Fog, HemisphereLight, PointLight, ReflectionProbe, Skybox, Transform
+from components import (
+    DirectionalLight,
+    Fog,
+    FogVolume,
+    HemisphereLight,
+    PointLight,
+    ReflectionProbe,
+    Skybox,
+    Transform,
+)
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
-from components.limits import MAX_CONTACT_LAMPS, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
-from engine.core.errors import LightLimitWarning
+from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
+from engine.core.errors import FogLimitWarning, LightLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
@@ -94,6 +104,7 @@ class PrepareSystem(esper.Processor):
         self._contact = ContactLamps()   # the lamps with contact shadows the last block gave channels
         self._rect_slots: tuple[int, ...] = ()   # the slots lit as rectangles (lights_block's rect_slots)
         self._rect_cut = 0                       # rectangles past MAX_RECT_LIGHTS, lit as points
+        self._fog_cut = 0                        # FogVolumes past MAX_FOG_VOLUMES, left out
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -150,8 +161,27 @@ class PrepareSystem(esper.Processor):
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
         sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
-        if renderer.fog.set(fog, sun):
+        if renderer.fog.set(fog, sun, self._fog_volumes(camera) if self.fog else ()):
             renderer.note_scene_change()   # every view's fogged pixels
+        renderer.stats.fog_volumes_cut = self._fog_cut
+
+    def _fog_volumes(self, camera: int | None) -> list[tuple[FogVolume, glm.mat4]]:
+        """The ``FogVolume``s with their world matrices, at most ``MAX_FOG_VOLUMES``: past it
+        the nearest the active camera (from its eye to each one's centre, less its largest
+        half side), the rest counted and said when their count grows."""
+        world = self.world
+        volumes = [(volume, t.world) for _, (volume, t) in world.query(FogVolume, Transform)]
+        cut = max(0, len(volumes) - MAX_FOG_VOLUMES)
+        if cut:
+            eye = world.get(camera, Transform).world[3].xyz if camera is not None else glm.vec3(0.0)
+            volumes.sort(key=lambda pair: glm.distance(pair[1][3].xyz, eye) - 0.5 * max(pair[0].size))
+            volumes = volumes[:MAX_FOG_VOLUMES]
+            if cut > self._fog_cut:
+                warnings.warn(FogLimitWarning(
+                    f"{MAX_FOG_VOLUMES + cut} FogVolumes: at most {MAX_FOG_VOLUMES} fog the views at once (the "
+                    f"nearest the active camera), so {cut} add no fog (RenderStats.fog_volumes_cut)"), stacklevel=3)
+        self._fog_cut = cut
+        return volumes
 
     def _sky(self) -> bool:
         """The sky made anew where it changed: the Skybox came, went or changed, or the light a

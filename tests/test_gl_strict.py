@@ -224,14 +224,24 @@ def _cutouts(ctx):
 
 
 def _fog(path: str):
-    """The mirror ring seen through height fog on the camera (the FOG builds of the scene
-    programs, the batched ones' geometry stage too; the sky's and the composites' reads of
-    the block), a chrome ball reflecting the sky, screen reflections on the camera (their
+    """The mirror ring seen through height fog on the camera and a local fog volume (the FOG
+    builds of the scene programs, the batched ones' geometry stage too; the sky's and the
+    composites' reads of the block), a chrome ball reflecting the sky, screen reflections on the camera (their
     FOG builds) and light shafts (the march's FOG_FALLOFF build with the sun's shadow
     lookups, its filter; at half size on the batched path, a ray a pixel on the other)."""
     def run(ctx):
         from benchmarks.mirrors import MirrorRing
-        from components import Camera, Fog, Material, MeshRef, Reflective, ScreenReflections, Transform, VolumetricFog
+        from components import (
+            Camera,
+            Fog,
+            FogVolume,
+            Material,
+            MeshRef,
+            Reflective,
+            ScreenReflections,
+            Transform,
+            VolumetricFog,
+        )
         from engine.assets.mesh import sphere
 
         def configure(engine):
@@ -243,6 +253,8 @@ def _fog(path: str):
                 engine.world.add_component(entity, VolumetricFog(steps=8, half_resolution=path == "batched"))
             engine.world.spawn(Transform(position=(0.0, 0.6, 0.0)), MeshRef(sphere(0.5)),
                                Material(color=(0.9, 0.9, 0.9), metallic=1.0, roughness=0.1), Reflective())
+            engine.world.spawn(Transform(position=(1.0, 0.8, 1.0)), FogVolume(size=(3.0, 1.6, 2.0), density=0.8,
+                                                                            color=(0.8, 0.6, 0.4)))  # (FOG_VOLUMES)
         return _engine_frames(ctx, MirrorRing(4), 3, configure)
     return run
 

@@ -57,5 +57,10 @@ class ParticleLimitWarning(UserWarning):
 
 
 class VolumeLimitWarning(UserWarning):
-    """More than one ``IrradianceVolume`` in a world: the lowest entity's lights it, the others
-    are ignored (said once)."""
+    """More than ``MAX_IRRADIANCE_VOLUMES`` ``IrradianceVolume``s in a world: the lowest
+    entities' light it, the others are ignored (said once)."""
+
+
+class FogLimitWarning(UserWarning):
+    """More ``FogVolume``s than ``MAX_FOG_VOLUMES``: those farthest from the active camera are
+    left out (said when the count grows, counted every frame in ``RenderStats.fog_volumes_cut``)."""

@@ -1,41 +1,70 @@
 """The Fog uniform block (``shaders/include/fog.glsl``): the active camera's ``Fog``
-(``components/fog.py``), written when it changes, bound for every pass that fogs (scene
-passes, the sky, the composites).
+(``components/fog.py``) and the local ``FogVolume``s, written when they change, bound for
+every pass that fogs (scene passes, the sky, the composites, particles, the light shafts).
 
 The scene, sky and composite programs fog only in their ``FOG`` builds (``defines``: while
-the fog has a density; ``FOG_FALLOFF`` and ``FOG_GLOW`` add the height falloff's and the sun
-glow's terms where it has them), so a frame without fog runs none of it: llvmpipe runs the fog's
+the fog has a density or a volume stands; ``FOG_FALLOFF`` and ``FOG_GLOW`` add the height
+falloff's and the sun glow's terms where it has them, ``FOG_VOLUMES`` the volumes' integrals,
+its value how many), so a frame without fog runs none of it: llvmpipe runs the fog's
 exponentials for every pixel a program draws (read on every sky pixel, they made the
 640x360 mirror ring's frame 1.03x dearer with no fog at all).
+
+A volume is an ellipsoid: the block holds the matrix that takes a world point into its unit
+ball (``volume_to_unit``) and its colour and density at the centre; the shader integrates its
+density, falling as 1 - r^2, along each stretch in closed form.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import moderngl
 import numpy as np
+from pyglm import glm
 
 from components import DirectionalLight
-from components.fog import Fog
+from components.fog import Fog, FogVolume
+from components.limits import MAX_FOG_VOLUMES
 from components.tracking import raw_field
 from engine.render.bindings import FOG_BINDING, bind_uniform_block
 
-FOG_BLOCK_BYTES = 64   # four vec4s: colour and sky share; density, falloff, base height; the sun's
-                       # direction (towards it); its light x the sun scatter
+# Four vec4s (colour and sky share; density, falloff, base height; the sun's direction (towards
+# it); its light x the sun scatter), then per volume its matrix and its colour and density.
+FOG_BLOCK_BYTES = 64 + (64 + 16) * MAX_FOG_VOLUMES
 _NO_FOG = (0.0,) * 16
+
+
+def volume_to_unit(volume: FogVolume, world: glm.mat4) -> np.ndarray:
+    """The matrix (4 x 4 float32, GL's column order flattened) that takes a world point into
+    ``volume``'s unit ball: its entity's rotation and position (``world``: its world matrix,
+    whose scale is left out), its ``size`` the ball's diameters."""
+    m = np.array(world.to_list(), np.float64).T   # rows: glm's lists are its columns
+    axes = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
+    half = np.array(volume.size, np.float64) / 2.0
+    to_unit = np.eye(4)
+    to_unit[:3, :3] = (axes / half).T            # row k: axis k over its half side
+    to_unit[:3, 3] = -to_unit[:3, :3] @ m[:3, 3]
+    return to_unit.T.astype(np.float32).ravel()   # (GL's columns)
 
 
 class FogBlock:
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
         self._values = _NO_FOG
+        self._volumes: tuple[float, ...] = ()
         self.ubo = ctx.buffer(np.zeros(FOG_BLOCK_BYTES // 4, np.float32).tobytes())
         self.ubo.bind_to_uniform_block(FOG_BINDING)   # (no other block uses the point: it stays)
         self.defines: tuple[tuple[str, str], ...] = ()
 
-    def set(self, fog: Fog | None, sun: DirectionalLight | None = None) -> bool:
+    def set(self, fog: Fog | None, sun: DirectionalLight | None = None,
+            volumes: Sequence[tuple[FogVolume, glm.mat4]] = ()) -> bool:
         """Write ``fog`` (None: no fog), glowing towards ``sun`` (the brightest directional
-        light: ``light_rules.brightest_directional``) by its ``sun_scatter``, into the block
-        where it differs from what it holds; True when it did (every view's fogged pixels
-        change).  Compared as plain floats: the prepare stage asks every frame."""
+        light: ``light_rules.brightest_directional``) by its ``sun_scatter``, and ``volumes``
+        (each with its entity's world matrix; at most ``MAX_FOG_VOLUMES``: the caller chose
+        them) into the block where it differs from what it holds; True when it did (every
+        view's fogged pixels change).  Compared as plain floats: the prepare stage asks every
+        frame."""
+        if len(volumes) > MAX_FOG_VOLUMES:
+            raise ValueError(f"{len(volumes)} fog volumes: the block holds {MAX_FOG_VOLUMES}")
         if fog is None or fog.density <= 0.0:
             values = _NO_FOG
         else:
@@ -47,18 +76,33 @@ class FogBlock:
                         color.x * k, color.y * k, color.z * k, 0.0)
             values = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
                       fog.height, 0.0, *glow)
-        if values == self._values:
+        shown = [(volume, world) for volume, world in volumes if volume.density > 0.0]
+        rows = tuple(float(v) for volume, world in shown for v in (
+            *volume_to_unit(volume, world), volume.color.x, volume.color.y, volume.color.z, volume.density))
+        if values == self._values and rows == self._volumes:
             return False
-        self._values = values
-        self.ubo.write(np.array(values, np.float32).tobytes())
-        self.defines = () if values[4] <= 0.0 else tuple((name, "1") for name, on in (
-            ("FOG", True), ("FOG_FALLOFF", values[5] > 0.0), ("FOG_GLOW", any(values[12:15]))) if on)
+        self._values, self._volumes = values, rows
+        block = np.zeros(FOG_BLOCK_BYTES // 4, np.float32)
+        block[:16] = values
+        matrices = np.array(rows, np.float32).reshape(-1, 20)
+        block[16:16 + 16 * len(shown)] = matrices[:, :16].ravel()
+        at = 16 + 16 * MAX_FOG_VOLUMES
+        block[at:at + 4 * len(shown)] = matrices[:, 16:].ravel()
+        self.ubo.write(block.tobytes())
+        self.defines = () if values[4] <= 0.0 and not shown else tuple((name, value) for name, value, on in (
+            ("FOG", "1", True), ("FOG_FALLOFF", "1", values[5] > 0.0), ("FOG_GLOW", "1", any(values[12:15])),
+            ("FOG_VOLUMES", str(len(shown)), bool(shown))) if on)
         return True
+
+    @property
+    def volume_count(self) -> int:
+        """The FogVolumes the block holds (with a density)."""
+        return len(self._volumes) // 20
 
     @property
     def block(self) -> tuple[float, ...]:
         """What the block holds (what a probe face drawn through it is kept for)."""
-        return self._values
+        return self._values + self._volumes
 
     def bind(self) -> None:
         bind_uniform_block(self.ctx, self.ubo, FOG_BINDING)

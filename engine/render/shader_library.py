@@ -74,7 +74,7 @@ from pathlib import Path
 import moderngl
 
 import shaders
-from components.limits import MAX_CONTACT_LAMPS, MAX_IRRADIANCE_VOLUMES, MAX_RECT_LIGHTS
+from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_IRRADIANCE_VOLUMES, MAX_RECT_LIGHTS
 from components.post import TONEMAP_CURVES
 from components.rendering import MATERIAL_IMAGES
 from engine.core import cube_faces, material_slots
@@ -293,7 +293,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
             "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
             "LTC_SIZE": str(LTC_SIZE), "LTC_ROW": str(views.LTC_ROW),
-            "MAX_IRRADIANCE_VOLUMES": str(MAX_IRRADIANCE_VOLUMES),
+            "MAX_IRRADIANCE_VOLUMES": str(MAX_IRRADIANCE_VOLUMES), "MAX_FOG_VOLUMES": str(MAX_FOG_VOLUMES),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),
             "MAX_APERTURES": str(shadow_rules.MAX_APERTURES),
             "MAX_CONTACT_LAMPS": str(MAX_CONTACT_LAMPS), "MAX_RECT_LIGHTS": str(MAX_RECT_LIGHTS),

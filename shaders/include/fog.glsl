@@ -17,6 +17,16 @@
 // function below is the identity and compiles away.  FOG_FALLOFF (a height falloff) and
 // FOG_GLOW (sun scatter with a sun) add their terms only where the fog has them: llvmpipe
 // runs every exponential for every pixel.
+//
+// Local fog volumes (components/fog.py FogVolume; FOG_VOLUMES builds, its value how many):
+// ellipsoids of air, each density_k (1 - r^2) at r, its distance from the centre over its
+// radius that way (0 outside).  Along a line p + t v in its unit ball (v per metre) that is
+// disc / A - A u^2 (A = v.v, disc = (p.v)^2 - A (p.p - 1), u = t less the closest approach),
+// so its optical depth over the chord's part [u0, u1] is disc / A (u1 - u0) - A (u1^3 - u0^3) / 3,
+// in closed form and without the cancellation of the expanded cubic far off.  Each stretch's
+// fog is the height fog's and every volume's: its depth their sum, what the air adds their
+// colours weighed by their depths (fog_way: exact where they share a colour, a blend where
+// not, whichever lies nearer).
 #ifdef FOG
 layout(std140) uniform Fog {
     vec4 fog_color;   // rgb: the fog's linear colour; a: how much of its fog the sky takes
@@ -24,13 +34,15 @@ layout(std140) uniform Fog {
                       // z: the base height, w: unused
     vec4 fog_sun;     // xyz: towards the sun (the brightest directional light)
     vec4 fog_glow;    // rgb: the sun's light x Fog.sun_scatter (0: no glow)
+    mat4 volume_to_unit[MAX_FOG_VOLUMES];  // world -> each FogVolume's unit ball (engine/render/fog.py)
+    vec4 volume_color[MAX_FOG_VOLUMES];    // rgb: its linear colour, a: its density at the centre (per metre)
 } fog;
 
 #define FOG_MAX_EXPONENT 80.0   // exp(80) ~ 5.5e34: past that the air is opaque anyway
 
-// The fog's optical depth along the straight stretch from a to b (FOG_FALLOFF builds: the
-// density changes with height; the others: the same everywhere, density x length).
-float fog_depth(vec3 a, vec3 b) {
+// The height fog's optical depth along the straight stretch from a to b (FOG_FALLOFF builds:
+// the density changes with height; the others: the same everywhere, density x length).
+float height_fog_depth(vec3 a, vec3 b) {
     float density = fog.fog_params.x;
 #ifdef FOG_FALLOFF
     float falloff = fog.fog_params.y;
@@ -43,18 +55,9 @@ float fog_depth(vec3 a, vec3 b) {
 #endif
 }
 
-// The air's density at ``x`` (per metre): what fog_depth sums along a stretch.
-float fog_density(vec3 x) {
-#ifdef FOG_FALLOFF
-    return fog.fog_params.x * exp(min(-fog.fog_params.y * (x.y - fog.fog_params.z), FOG_MAX_EXPONENT));
-#else
-    return fog.fog_params.x;
-#endif
-}
-
-// The fog's optical depth from a along the unit direction r to infinity (the sky): finite only
-// where the air thins upwards and r climbs.
-float fog_depth_to_sky(vec3 a, vec3 r) {
+// The height fog's optical depth from a along the unit direction r to infinity (the sky):
+// finite only where the air thins upwards and r climbs.
+float height_fog_depth_to_sky(vec3 a, vec3 r) {
     float density = fog.fog_params.x;
     if (density <= 0.0) return 0.0;
 #ifdef FOG_FALLOFF
@@ -64,6 +67,62 @@ float fog_depth_to_sky(vec3 a, vec3 r) {
 #else
     return 1e30;
 #endif
+}
+
+#ifdef FOG_VOLUMES
+// The integral of max(1 - |p + t v|^2, 0) over t in [0, reach]: a FogVolume's density (over
+// its density at the centre) along a line in its unit ball (above).
+float ball_depth(vec3 p, vec3 v, float reach) {
+    float a = dot(v, v), b = dot(p, v);
+    float disc = b * b - a * (dot(p, p) - 1.0);
+    if (disc <= 0.0 || a <= 0.0) return 0.0;
+    float half_chord = sqrt(disc) / a, closest = -b / a;
+    float u0 = max(-half_chord, -closest), u1 = min(half_chord, reach - closest);
+    if (u1 <= u0) return 0.0;
+    return disc / a * (u1 - u0) - a * (u1 * u1 * u1 - u0 * u0 * u0) / 3.0;
+}
+
+// The volumes' fog along the line from a along the unit direction r for ``reach`` metres:
+// rgb their colours times their depths, a the depths' sum.
+vec4 volumes_along(vec3 a, vec3 r, float reach) {
+    vec4 sum = vec4(0.0);
+    for (int k = 0; k < FOG_VOLUMES; ++k) {
+        mat4 to_unit = fog.volume_to_unit[k];
+        float depth = fog.volume_color[k].a * ball_depth((to_unit * vec4(a, 1.0)).xyz, mat3(to_unit) * r, reach);
+        sum += vec4(fog.volume_color[k].rgb * depth, depth);
+    }
+    return sum;
+}
+
+// The volumes' density at ``x`` (per metre).
+float volumes_density(vec3 x) {
+    float sum = 0.0;
+    for (int k = 0; k < FOG_VOLUMES; ++k) {
+        vec3 p = (fog.volume_to_unit[k] * vec4(x, 1.0)).xyz;
+        sum += fog.volume_color[k].a * max(1.0 - dot(p, p), 0.0);
+    }
+    return sum;
+}
+#else
+vec4 volumes_along(vec3 a, vec3 r, float reach) { return vec4(0.0); }
+float volumes_density(vec3 x) { return 0.0; }
+#endif
+
+// The fog's optical depth along the straight stretch from a to b: the height fog's and the
+// volumes'.
+float fog_depth(vec3 a, vec3 b) {
+    float reach = length(b - a);
+    return height_fog_depth(a, b) + (reach > 0.0 ? volumes_along(a, (b - a) / reach, reach).a : 0.0);
+}
+
+// The air's density at ``x`` (per metre): what fog_depth sums along a stretch.
+float fog_density(vec3 x) {
+#ifdef FOG_FALLOFF
+    float height = fog.fog_params.x * exp(min(-fog.fog_params.y * (x.y - fog.fog_params.z), FOG_MAX_EXPONENT));
+#else
+    float height = fog.fog_params.x;
+#endif
+    return height + volumes_density(x);
 }
 
 // The light the air scatters towards an eye looking along the unit direction ``dir``: the
@@ -79,7 +138,27 @@ vec3 fog_light(vec3 dir) {
 #endif
 }
 
-// ``color`` seen along the unit direction ``dir`` through the fog of optical depth ``depth``.
+// A stretch of air: its optical depth, and the light it adds times that depth (each fog's
+// light times its own depth: the weights fog_over divides out).
+struct FogWay {
+    vec3 light;
+    float depth;
+};
+
+// The stretch from a to b, seen looking along the unit direction ``dir``.
+FogWay fog_way(vec3 a, vec3 b, vec3 dir) {
+    float height = height_fog_depth(a, b);
+    float reach = length(b - a);
+    vec4 volumes = reach > 0.0 ? volumes_along(a, (b - a) / reach, reach) : vec4(0.0);
+    return FogWay(fog_light(dir) * height + volumes.rgb, height + volumes.a);
+}
+
+// ``color`` seen through ``way``.
+vec3 fog_over(vec3 color, FogWay way) {
+    return way.depth > 0.0 ? mix(way.light / way.depth, color, exp(-way.depth)) : color;
+}
+
+// ``color`` seen along the unit direction ``dir`` through the height fog of optical depth ``depth``.
 vec3 fogged(vec3 color, float depth, vec3 dir) {
     return mix(fog_light(dir), color, exp(-depth));
 }
@@ -96,18 +175,28 @@ vec3 fog_start(vec3 eye, vec4 plane, vec3 p) {
 
 // A surface at ``p`` seen in a view whose eye is ``eye`` and clip plane ``plane``.
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) {
-    vec3 start = fog_start(eye, plane, p);
-    return fogged(color, fog_depth(start, p), normalize(p - eye));
+    return fog_over(color, fog_way(fog_start(eye, plane, p), p, normalize(p - eye)));
 }
 
-// The sky seen from ``a`` along the unit direction ``r``: its share (``fog_color.a``) of the fog.
+// The sky seen from ``a`` along the unit direction ``r``: its share (``fog_color.a``) of the
+// height fog, and every volume the way passes through (a volume's far side is never the sky's).
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) {
-    return mix(color, fogged(color, fog_depth_to_sky(a, r), r), fog.fog_color.a);
+    color = mix(color, fogged(color, height_fog_depth_to_sky(a, r), r), fog.fog_color.a);
+#ifdef FOG_VOLUMES
+    vec4 volumes = volumes_along(a, r, 1e30);
+    color = fog_over(color, FogWay(volumes.rgb, volumes.a));
+#endif
+    return color;
 }
 #else
+struct FogWay {
+    vec3 light;
+    float depth;
+};
 float fog_depth(vec3 a, vec3 b) { return 0.0; }
 float fog_density(vec3 x) { return 0.0; }
-float fog_depth_to_sky(vec3 a, vec3 r) { return 0.0; }
+FogWay fog_way(vec3 a, vec3 b, vec3 dir) { return FogWay(vec3(0.0), 0.0); }
+vec3 fog_over(vec3 color, FogWay way) { return color; }
 vec3 fogged(vec3 color, float depth, vec3 dir) { return color; }
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) { return color; }
