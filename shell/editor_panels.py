@@ -528,6 +528,7 @@ class EditorPanels:
         probe = imgui.get_color_u32(imgui.ImVec4(0.3, 0.9, 1.0, 0.9))
         emitter = imgui.get_color_u32(imgui.ImVec4(1.0, 0.45, 0.1, 0.9))
         decal = imgui.get_color_u32(imgui.ImVec4(0.85, 0.4, 1.0, 0.9))
+        fog = imgui.get_color_u32(imgui.ImVec4(0.75, 0.78, 0.82, 0.8))
         white = imgui.get_color_u32(imgui.ImVec4(1.0, 1.0, 1.0, 1.0))
         for marker in self.markers:
             at = imgui.ImVec2(*marker.at)
@@ -541,6 +542,8 @@ class EditorPanels:
             elif marker.kind == "volume":  # a cyan square's outline (a probe's colour: a grid of them)
                 draw.add_rect(imgui.ImVec2(at.x - r, at.y - r), imgui.ImVec2(at.x + r, at.y + r), probe, 0.0,
                               2.0 * self.scale)
+            elif marker.kind == "fog":  # a grey disc (a puff of mist)
+                draw.add_circle_filled(at, r, fog)
             else:
                 draw.add_circle(at, r, probe, 0, 2.0 * self.scale)
             if marker.entity == selected:

@@ -19,6 +19,7 @@ from pyglm import glm
 from components import (
     Decal,
     DirectionalLight,
+    FogVolume,
     IrradianceVolume,
     MeshRef,
     ParticleEmitter,
@@ -190,7 +191,8 @@ class ReachOutline:
 def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[int, int]) -> ReachOutline | None:
     """``entity``'s ``ReachOutline`` in the view ``view_proj`` on an output of ``size``: its
     sun's arrow, its point light's reach, its particle emitter's launch cone, its decal's box
-    (and the way it throws), its irradiance volume's box (and where its blend starts), else
+    (and the way it throws), its irradiance volume's box (and where its blend starts), its fog
+    volume's ellipsoid (where its axes' planes cut it), else
     its probe's influence box; None when it has
     none of them (or no Transform, but for a sun; or a probe serving only its own entity).
     A polyline with a point behind the eye is left out (the rest still show)."""
@@ -211,6 +213,8 @@ def reach_outline(world: World, entity: int, view_proj: glm.mat4, size: tuple[in
     elif (volume := world.try_get(entity, IrradianceVolume)) is not None:
         centre = glm.vec3(current_world_matrix(world, transform)[3])
         worlds = _influence_box(centre, glm.vec3(volume.size), volume.blend_distance)
+    elif (fog := world.try_get(entity, FogVolume)) is not None:
+        worlds = _ellipsoid(current_world_matrix(world, transform), glm.vec3(fog.size))
     else:
         probe = world.try_get(entity, ReflectionProbe)
         if probe is None or probe.influence is None:
@@ -300,6 +304,17 @@ def _emitter_reach(emitter: ParticleEmitter, matrix: glm.mat4) -> list[tuple[glm
 MIN_EMITTER_REACH, MAX_EMITTER_REACH = 0.25, 100.0  # metres an emitter's outline is long, at least and at most
 
 
+def _ellipsoid(matrix: glm.mat4, size: glm.vec3) -> list[tuple[glm.vec3, ...]]:
+    """A fog volume's ellipsoid (``size`` across along the unit axes of ``matrix``, its
+    scale left out, about its position): the three ellipses where its axes' planes cut it,
+    as closed polylines."""
+    centre = glm.vec3(matrix[3])
+    axes = [glm.normalize(glm.vec3(matrix[i])) * (0.5 * size[i]) if glm.length(glm.vec3(matrix[i])) > 1e-9
+            else AXES[i] * (0.5 * size[i]) for i in range(3)]
+    steps = [2.0 * math.pi * k / OUTLINE_POINTS for k in range(OUTLINE_POINTS + 1)]
+    return [tuple(centre + math.cos(t) * axes[i] + math.sin(t) * axes[(i + 1) % 3] for t in steps) for i in range(3)]
+
+
 def _cone(apex: glm.vec3, axis: glm.vec3, half_angle: float, reach: float) -> list[tuple[glm.vec3, ...]]:
     """The cone of ``half_angle`` degrees about the unit ``axis`` from ``apex``, ``reach`` long
     (its rim circle and ``CONE_EDGES`` edges), or at 180 degrees the sphere of that radius
@@ -324,7 +339,7 @@ MARKER_REACH = 10.0   # pixels (at scale 1) from a marker that a click selects i
 @dataclasses.dataclass(frozen=True)
 class Marker:
     """An entity with no mesh to click (a lamp, a spot, a probe) drawn as a marker where it
-    stands: ``kind`` "light", "probe", "emitter", "decal" or "volume", ``at`` its place on
+    stands: ``kind`` "light", "probe", "emitter", "decal", "volume" or "fog", ``at`` its place on
     screen (output pixels from the top left)."""
 
     entity: int
@@ -335,12 +350,12 @@ class Marker:
 def markers(world: World, view_proj: glm.mat4, size: tuple[int, int]) -> list[Marker]:
     """The markers in view (in front of the eye, inside the output): each entity with a
     Transform and a point light, a reflection probe, a particle emitter, a decal or an
-    irradiance volume but no visible mesh, which the id images cannot pick (an entity with a
+    irradiance volume or a fog volume but no visible mesh, which the id images cannot pick (an entity with a
     mesh is picked where it shows; particles write no id; a decal's cut mesh is picked as the
     decal, but it may cut nothing)."""
     found = []
     for kind, component in (("light", PointLight), ("probe", ReflectionProbe), ("emitter", ParticleEmitter),
-                            ("decal", Decal), ("volume", IrradianceVolume)):
+                            ("decal", Decal), ("volume", IrradianceVolume), ("fog", FogVolume)):
         for entity, _ in world.query_one(component):
             transform, mesh_ref = world.try_get(entity, Transform), world.try_get(entity, MeshRef)
             if transform is None or (mesh_ref is not None and mesh_ref.visible):

@@ -194,3 +194,31 @@ def test_a_level_file_keeps_a_volume(tmp_path):
         "density = 0.25\n", ("density = 0.25", "density = -0.25"), "density")
     volume = world.get(it, FogVolume)
     assert volume.size == glm.vec3(4.0, 2.0, 3.0) and volume.density == pytest.approx(0.25)
+
+
+def test_the_editor_outlines_the_ellipsoid_and_marks_it():
+    """``reach_outline`` of a selected fog volume (shell/handles.py): three closed ellipses
+    where its axes' planes cut it, turned with its entity, every point on its surface;
+    ``markers`` marks it (it has no mesh to click)."""
+    from engine.core.world import World
+    from shell.handles import markers, reach_outline
+    from systems.transform_system import TransformSystem
+
+    world = World("fog-outline")
+    world.add_system(TransformSystem(world), priority=1)
+    centre, size, yaw = (1.0, 1.0, -2.0), (4.0, 2.0, 3.0), 30.0
+    entity = world.spawn(Transform(position=centre, rotation=glm.angleAxis(math.radians(yaw), glm.vec3(0, 1, 0))),
+                         FogVolume(size=size))
+    world.step(1 / 60)
+    view_proj = glm.perspective(glm.radians(60.0), 1.0, 0.1, 100.0) * glm.lookAt(
+        glm.vec3(2.0, 6.0, 12.0), glm.vec3(*centre), glm.vec3(0.0, 1.0, 0.0))
+    outline = reach_outline(world, entity, view_proj, (640, 480))
+    assert len(outline.world) == 3
+    points = np.array([[float(v) for v in p] for line in outline.world for p in line])
+    c, s = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
+    d = points - np.asarray(centre)
+    local = np.stack([d[:, 0] * c - d[:, 2] * s, d[:, 1], d[:, 0] * s + d[:, 2] * c], axis=1) / (np.asarray(size) / 2)
+    np.testing.assert_allclose((local ** 2).sum(axis=1), 1.0, atol=1e-5)
+    assert all(np.allclose(line[0], line[-1]) for line in outline.world)
+    assert [m.kind for m in markers(world, view_proj, (640, 480)) if m.entity == entity] == ["fog"]
+    world.close()
