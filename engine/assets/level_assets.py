@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from engine.assets.color_lut import MAX_LUT_FILE_BYTES, ColorLut, load_cube_lut
+from engine.assets.ies_profile import COOKIE_HEIGHT, COOKIE_WIDTH, ies_cookie, load_ies
 from engine.assets.mesh import LoadedModel, Mesh, box, load_model, load_model_file, model_bytes, plane, quad, sphere
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
@@ -203,11 +204,19 @@ def level_mesh(spec: Any, where: LevelAssets) -> Mesh:
 
 
 def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> TextureData:
-    """The texture a ``Material`` table names (``texture`` or a map), or a particle emitter's:
-    checker, ripples, puff (``puff_texture``) or an image file; ``normal_map``: a linear map,
-    which keeps a 16-bit file's 16 bits."""
-    spec, name = _asset_table(spec, "texture", '{ checker = [128, 8] }, { ripples = [256, 6] }, { puff = [64, 0] } '
-                                                   'or { file = "x.png" }')
+    """The texture a ``Material`` table names (``texture`` or a map), a particle emitter's or
+    a light's cookie: checker, ripples, puff (``puff_texture``), an image file or an IES
+    profile (``ies_cookie``: an all-round light's); ``normal_map``: a linear map, which keeps
+    a 16-bit file's 16 bits."""
+    spec, name = _asset_table(spec, "texture", '{ checker = [128, 8] }, { ripples = [256, 6] }, { puff = [64, 0] }, '
+                                                   '{ file = "x.png" } or { ies = "lamp.ies" }')
+    if "ies" in spec:   # an IES profile as an all-round light's cookie (engine/assets/ies_profile.py)
+        path = _asset_path(spec.pop("ies"), where)
+        _no_more(spec, "IES profile")
+        info = check_asset_file(path, f"IES profile {str(path)!r}")
+        key = ("ies", str(path), info.st_mtime_ns, info.st_size, info.st_ino)
+        where.budget.take(key, texture_bytes(COOKIE_WIDTH, COOKIE_HEIGHT))
+        return _cached(key, lambda: ies_cookie(load_ies(path)))
     if "file" in spec:
         path = _asset_path(spec.pop("file"), where)
         _no_more(spec, "texture file")
@@ -231,7 +240,7 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
             where.budget.take(key, texture_bytes(size, size))
         return _cached(key, lambda: puff_texture(size, seed, **options))
     if "checker" not in spec:
-        raise ValueError(f"a texture names one of checker, ripples, puff or file, got {sorted(spec)}")
+        raise ValueError(f"a texture names one of checker, ripples, puff, file or ies, got {sorted(spec)}")
     size_squares = spec.pop("checker")
     if not isinstance(size_squares, list) or len(size_squares) != 2 or not all(_is_int(v) for v in size_squares):
         raise ValueError(f"checker = [size, squares] (two integers), got {size_squares!r}")

@@ -243,7 +243,7 @@ def _keep_entity(table: Any, before: Mapping[str, dict], now: Mapping[str, Any],
                 del component[key]
                 changed = True
         for key, value in fields.items():
-            names_file = moved and isinstance(value, Mapping) and "file" in value
+            names_file = moved and isinstance(value, Mapping) and ("file" in value or "ies" in value)
             if key not in old or names_file or not _equal(value, old[key]):
                 component[key] = value if inline else _item(value)
                 changed = True
@@ -410,9 +410,12 @@ def _f32(value: float) -> float:
 
 
 def _relative(source: dict[str, Any], folder: Path) -> dict[str, Any]:
-    if "file" not in source:
+    """A source's file (an image's, a model's, a table's: ``file``; an IES profile's: ``ies``)
+    relative to the level's folder."""
+    key = next((k for k in ("file", "ies") if k in source), None)
+    if key is None:
         return dict(source)
-    return {**source, "file": Path(os.path.relpath(source["file"], folder)).as_posix()}
+    return {**source, key: Path(os.path.relpath(source[key], folder)).as_posix()}
 
 
 def same_floats(a: Any, b: Any, tolerance: float = 1e-6) -> bool:
