@@ -67,6 +67,7 @@ from components import (
     Fog,
     FogVolume,
     IrradianceVolume,
+    LensFlare,
     Material,
     MeshRef,
     Mirror,
@@ -102,7 +103,7 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
                              ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal,
-                             IrradianceVolume, FogVolume)
+                             IrradianceVolume, FogVolume, LensFlare)
 
 @dataclasses.dataclass
 class Case:

@@ -372,6 +372,52 @@ MAX_ABERRATION = 0.02   # ChromaticAberration.intensity 1: red and blue images 2
 MAX_GRAIN = 1.0
 
 
+MAX_FLARE_GHOSTS = 8
+
+
+@dataclass(eq=False)
+class LensFlare(TrackedComponent):
+    """Lens flare (on the camera's entity, beside its ``Bloom``): the ghosts a real lens's
+    inner reflections throw of bright lights, the image turned about the picture's middle and
+    repeated along the line through it, and a halo ring (image-based lens flare: Chapman's
+    pseudo lens flare, Unreal's image-based lens flares).  It is made of the bloom's blurred
+    image, so only what blooms flares (set the Bloom's ``threshold`` to flare only the sun
+    and lamps), and a light on one side of the picture throws its ghosts across the middle to
+    the other, as the sun in a real camera does.
+
+    - ``intensity`` (0 to 10, default 0.5): how bright the ghosts are, over the bloom's image.
+    - ``ghosts`` (0 to 8, default 4): how many; the k-th of a light at p in the picture stands
+      at 1 - (p - s k / 2) / (1 - s k), s the ``ghost_spacing`` (0 to 1, default 0.3): the
+      first is the light turned about the middle, each next nearer the middle; a ghost fades
+      towards the picture's edges.
+    - ``halo`` (0 to 1, default 0.45; 0: none): the halo ring's radius about each point turned
+      about the middle, as a share of the picture; ``halo_intensity`` (0 to 10, default 0.3).
+    - ``fringe`` (0 to 0.05, default 0.01): each ghost's red and blue read that far apart along
+      its line (a share of the picture): its colour fringes.
+
+    Without a ``Bloom`` with an intensity on the camera it adds nothing and says so once (a
+    ``ComponentWarning``).  One more read of the bloom's image a ghost in the present pass.
+    """
+
+    intensity: float = 0.5
+    ghosts: int = 4
+    ghost_spacing: float = 0.3
+    halo: float = 0.45
+    halo_intensity: float = 0.3
+    fringe: float = 0.01
+
+    def _validate(self, name: str, value: Any) -> Any:
+        if name in ("intensity", "halo_intensity"):
+            return finite(self, name, value, low=0.0, high=10.0)
+        if name == "ghosts":
+            return integer(self, name, value, low=0, high=MAX_FLARE_GHOSTS)
+        if name in ("ghost_spacing", "halo"):
+            return finite(self, name, value, low=0.0, high=1.0)
+        if name == "fringe":
+            return finite(self, name, value, low=0.0, high=0.05)
+        return value
+
+
 @dataclass(eq=False)
 class ChromaticAberration(TrackedComponent):
     """Colour fringes towards the picture's edges (on the camera's entity), as a real lens's

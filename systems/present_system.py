@@ -3,6 +3,8 @@ bloomed, exposed, graded and tone mapped as the active camera's ``Bloom``, ``Ton
 ``ColorGrading`` say (``components/post.py``; a camera with none of them keeps the plain look)."""
 from __future__ import annotations
 
+import warnings
+
 import esper
 import moderngl
 
@@ -13,10 +15,12 @@ from components.post import (
     ColorGrading,
     DepthOfField,
     FilmGrain,
+    LensFlare,
     MotionBlur,
     Tonemap,
     Vignette,
 )
+from components.tracking import ComponentWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.render.frame_views import FrameViews
@@ -49,6 +53,7 @@ class PresentSystem(esper.Processor):
         self.streaked: MotionBlur | None = None
         self.fringed: ChromaticAberration | None = None
         self.grained: FilmGrain | None = None
+        self._said_no_flare: tuple[int, LensFlare] | None = None   # (the camera, its flare) said to want a Bloom
         # The debug overlay's switches: False draws no camera's DepthOfField, MotionBlur.
         self.depth_of_field = True
         self.motion_blur = True
@@ -80,7 +85,7 @@ class PresentSystem(esper.Processor):
         exposure does not move on for a second presentation)."""
         parts = active_camera_parts(self.world)
         camera = parts[0] if parts is not None else None
-        tonemap = bloom = grading = vignette = focus = motion = aberration = grain = None
+        tonemap = bloom = grading = vignette = focus = motion = aberration = grain = flare = None
         fov_y = None
         if camera is not None:
             focus = self.world.try_get(camera, DepthOfField) if self.depth_of_field else None
@@ -96,12 +101,20 @@ class PresentSystem(esper.Processor):
             vignette = self.world.try_get(camera, Vignette) if self.grade else None
             aberration = self.world.try_get(camera, ChromaticAberration) if self.grade else None
             grain = self.world.try_get(camera, FilmGrain) if self.grade else None
+            flare = self.world.try_get(camera, LensFlare) if self.bloom else None
+            if flare is not None and (bloom is None or bloom.intensity <= 0.0):
+                if self._said_no_flare != (camera, flare):
+                    self._said_no_flare = (camera, flare)
+                    warnings.warn(ComponentWarning(
+                        f"LensFlare on entity {camera} has no Bloom with an intensity beside it (its ghosts are the "
+                        "bloom's image turned about the middle), so it adds nothing"), stacklevel=3)
+                flare = None
         self.tonemap, self.bloomed, self.graded, self.vignetted = tonemap, bloom, grading, vignette
         self.focused, self.streaked, self.fringed, self.grained = focus, motion, aberration, grain
         views: FrameViews | None = self.world.resources.get(FrameViews)
         main = views.main if views is not None else None
         post = CameraPost(tonemap=tonemap, bloom=bloom, grading=grading, vignette=vignette, focus=focus,
-                          motion=motion, aberration=aberration, grain=grain, view=main, fov_y=fov_y)
+                          motion=motion, aberration=aberration, grain=grain, flare=flare, view=main, fov_y=fov_y)
         self.renderer.present(framebuffer, size, post, self._curve, camera, dt,
                               views.image if views is not None else None)
         shares = self.renderer.screen_occlusion

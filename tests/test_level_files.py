@@ -528,14 +528,16 @@ def test_a_normal_map_loads_saves_and_loads_again(tmp_path):
      r"slope must be a number, got 'steep'"),
     ("{ ripples = [64, 4] }", "{ ripples = [64, 4], slop = 1.0 }", "Material.normal_map",
      r"ripples normal map: unknown keys \['slop'\]"),
-    ("{ ripples = [64, 4] }", "{ waves = 3 }", "Material.normal_map", r"names one of checker, ripples, puff or file"),
+    ("{ ripples = [64, 4] }", "{ waves = 3 }", "Material.normal_map",
+     r"names one of checker, ripples, puff, file or ies"),
+    ("{ ripples = [64, 4] }", "{ ies = \"lamp.ies\" }", "Material.normal_map", r"not a normal map"),
     ("{ ripples = [64, 4] }", "\"ripples.png\"", "Material.normal_map", r"a texture is a table"),
     ("{ ripples = [64, 4] }", "{ file = \"maps/gone.png\" }", "Material.normal_map",
      r"texture file .*gone\.png.*: no such file"),
     ("normal_scale = 0.5", "normal_scale = 20.0", "Material.normal_scale", r"normal_scale"),
     ("normal_scale = 0.5", "normal_scale = -0.5", "Material.normal_scale", r"normal_scale"),
 ], ids=["rings", "size", "one_number", "float_rings", "negative_slope", "string_slope", "unknown_key",
-        "no_generator", "not_a_table", "missing_file", "scale_too_big", "scale_negative"])
+        "no_generator", "ies", "not_a_table", "missing_file", "scale_too_big", "scale_negative"])
 def test_a_bad_normal_map_names_the_entity_and_field(tmp_path, old, new, field, reason):
     text = POND.replace(old, new, 1)
     assert text != POND

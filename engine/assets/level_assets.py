@@ -210,6 +210,8 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
     a 16-bit file's 16 bits."""
     spec, name = _asset_table(spec, "texture", '{ checker = [128, 8] }, { ripples = [256, 6] }, { puff = [64, 0] }, '
                                                    '{ file = "x.png" } or { ies = "lamp.ies" }')
+    if "ies" in spec and normal_map:
+        raise ValueError("an IES profile is a light's cookie (its candelas by direction), not a normal map")
     if "ies" in spec:   # an IES profile as an all-round light's cookie (engine/assets/ies_profile.py)
         path = _asset_path(spec.pop("ies"), where)
         _no_more(spec, "IES profile")

@@ -62,7 +62,7 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "ColorGrading", "ContactShadows",
         "Decal", "DepthOfField", "DirectionalLight",
         "Emissive", "FilmGrain", "FlyController", "Fog", "FogVolume", "HemisphereLight", "IrradianceVolume",
-        "LevelOfDetail",
+        "LensFlare", "LevelOfDetail",
         "Material", "MeshRef",
         "Mirror", "Model", "MotionBlur", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",

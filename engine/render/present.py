@@ -41,6 +41,7 @@ from components.post import (
     ColorGrading,
     DepthOfField,
     FilmGrain,
+    LensFlare,
     MotionBlur,
     Tonemap,
     Vignette,
@@ -101,6 +102,7 @@ class CameraPost:
     motion: MotionBlur | None = None      # motion blur
     aberration: ChromaticAberration | None = None
     grain: FilmGrain | None = None
+    flare: LensFlare | None = None        # lens flare (drawn from the bloom's image: with a Bloom only)
     view: View | None = None              # this frame's main view (the vignette's rays, motion blur)
     fov_y: float | None = None            # the camera's field of view (the lens's; None: orthographic)
 
@@ -179,11 +181,14 @@ class PresentPass:
 
     def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool, grade: bool = False,
                     lut: bool = False, vignette: bool = False, aberration: bool = False,
-                    grain: bool = False) -> moderngl.VertexArray:
-        key = (curve, bloom, auto, luma, grade, lut, vignette, aberration, grain)
+                    grain: bool = False, ghosts: int | None = None) -> moderngl.VertexArray:
+        """The present build for these (``ghosts``: a lens flare's, None for none)."""
+        key = (curve, bloom, auto, luma, grade, lut, vignette, aberration, grain, ghosts)
         vao = self._post.get(key)
         if vao is None:
             defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
+            if ghosts is not None:
+                defines["LENS_FLARE"] = str(ghosts)
             defines.update((name, "1") for name, on in (("BLOOM", bloom), ("AUTO_EXPOSURE", auto),
                                                         ("LUMA_IN_ALPHA", luma), ("GRADE", grade), ("LUT", lut),
                                                         ("VIGNETTE", vignette), ("ABERRATION", aberration),
@@ -252,7 +257,7 @@ class PresentPass:
             encode.program["exposure"].value = exposure
         else:
             encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa, grading,
-                                       vignette is not None, aberration is not None, grain is not None)
+                                       vignette is not None, aberration is not None, grain is not None, post.flare)
             if aberration is not None:
                 self._set(encode, "aberration", aberration.intensity * MAX_ABERRATION)
             if grain is not None:
@@ -296,8 +301,9 @@ class PresentPass:
     def _post_encode(self, hdr: moderngl.Texture, exposure: float, tonemap: Tonemap | None, bloom: Bloom | None,
                      curve: str | None, camera: int | None, dt: float, luma: bool,
                      grading: ColorGrading | None = None, vignette: bool = False, aberration: bool = False,
-                     grain: bool = False) -> moderngl.VertexArray:
-        """Run bloom and automatic exposure; the present build to draw, its inputs bound."""
+                     grain: bool = False, flare: LensFlare | None = None) -> moderngl.VertexArray:
+        """Run bloom and automatic exposure; the present build to draw, its inputs bound (a lens
+        ``flare`` drawn from the bloom's image: none without one)."""
         bloomed = None
         if bloom is not None and bloom.intensity > 0.0:
             bloomed = self.bloom.draw(hdr, bloom)
@@ -314,8 +320,12 @@ class PresentPass:
         curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
         lut = self._lut_texture(grading.lut if grading is not None and grading.lut_strength > 0.0 else None)
         graded = grades(grading)
+        flare = flare if bloomed is not None else None
         encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None, vignette,
-                                  aberration, grain)
+                                  aberration, grain, flare.ghosts if flare is not None else None)
+        if flare is not None:
+            self._set(encode, "flare", (flare.intensity, flare.ghost_spacing, flare.halo, flare.halo_intensity))
+            self._set(encode, "flare_fringe", flare.fringe)
         self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
         if graded:
             self._set_grade(encode, grading)
