@@ -59,7 +59,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``post``: no shadows, the camera gets ``Tonemap(curve="agx")`` and ``Bloom()`` (six levels on a
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
-* ``post_auto``: the same with ``Tonemap(auto_exposure=True)``;
+* ``flared``: ``post`` with a ``LensFlare`` beside the bloom (four ghosts and a halo read by the
+  present draw);
+* ``post_auto``: ``post`` with ``Tonemap(auto_exposure=True)``;
 * ``graded``: no shadows; ``Tonemap(curve="agx")``, a ``ColorGrading`` with every control
   moved and a 33-point colour table, and a ``Vignette`` (the present draw's GRADE, LUT and
   VIGNETTE build);
@@ -177,6 +179,7 @@ from components import (
     Fog,
     FogVolume,
     IrradianceVolume,
+    LensFlare,
     Material,
     MeshRef,
     Mirror,
@@ -435,6 +438,12 @@ def _post(engine: Engine) -> None:
     engine.world.add_component(camera_entity(engine), Bloom())
 
 
+def _flared(engine: Engine) -> None:
+    """``_post`` with a lens flare beside the bloom (LensFlare: its ghosts read by the present draw)."""
+    _post(engine)
+    engine.world.add_component(camera_entity(engine), LensFlare())
+
+
 def _graded(engine: Engine) -> None:
     _sun_shadows(engine, False)
     table = identity_lut(33).table.copy()
@@ -570,6 +579,7 @@ VARIANTS: list[Variant] = [
     Variant("shafts_full", _shafts_full, "the same with VolumetricFog(half_resolution=False)"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
     Variant("post_auto", _post_auto, "Tonemap(curve='agx', auto_exposure=True) and Bloom()"),
+    Variant("flared", _flared, "post with a lens flare beside the bloom"),
     Variant("graded", _graded, "Tonemap(curve='agx') and a ColorGrading with a colour table"),
     Variant("occlusion", _occlusion, "AmbientOcclusion() on the camera (found at half size)"),
     Variant("occlusion_camera", _occlusion_camera, "AmbientOcclusion(reflection_depth=0): the camera's view alone"),

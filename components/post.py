@@ -396,7 +396,7 @@ class LensFlare(TrackedComponent):
       its line (a share of the picture): its colour fringes.
 
     Without a ``Bloom`` with an intensity on the camera it adds nothing and says so once (a
-    ``ComponentWarning``).  One more read of the bloom's image a ghost in the present pass.
+    ``ComponentWarning``).  Drawn at the bloom image's size (``engine/render/lens_flare.py``).
     """
 
     intensity: float = 0.5

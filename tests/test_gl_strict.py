@@ -312,6 +312,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "mirror_light_moving": _lighting("mirror_light_moving"),
     "post_auto_gpu_passes": _lighting("post_auto", gpu=True),
     "post": _lighting("post"),
+    "flared": _lighting("flared"),
     "graded": _lighting("graded"),
     "point_shadows": _point_shadows,
     "soft_sun": _soft_sun,

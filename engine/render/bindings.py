@@ -163,6 +163,7 @@ VOLUMETRIC_NODE_UNIT = 56     # a reflection level's march and filter: the level
 # the soft suns' builds (DirectionalLight.angular_diameter): the 18th sampler of the fullest
 # build, only where the context has one (ShadowMaps.soft_sun_supported); past 31 (moderngl's).
 SUN_DEPTH_UNIT = 57           # scene (SOFT_SUN_SHADOWS builds): the shadow atlas, its depths as values
+FLARE_UNIT = 58               # present (LENS_FLARE builds): the lens flare's ghosts (engine/render/lens_flare.py)
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

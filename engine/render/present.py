@@ -50,6 +50,7 @@ from engine.assets.color_lut import ColorLut
 from engine.render.bindings import (
     BLOOM_UNIT,
     EXPOSURE_UNIT,
+    FLARE_UNIT,
     FXAA_UNIT,
     LUT_UNIT,
     OCCLUSION_IMAGE_UNIT,
@@ -61,6 +62,7 @@ from engine.render.bindings import (
 from engine.render.bloom import BloomPass
 from engine.render.depth_of_field import DepthOfFieldPass
 from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
+from engine.render.lens_flare import LensFlarePass
 from engine.render.motion_blur import MotionBlurPass
 from engine.render.object_motion import ObjectMotion
 from engine.render.post import AutoExposure
@@ -124,6 +126,7 @@ class PresentPass:
         self._post: dict[tuple, moderngl.VertexArray] = {}   # present.frag's POST builds, by their defines
         self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
         self.bloom = BloomPass(ctx, shaders, software)
+        self.lens_flare = LensFlarePass(ctx, shaders)
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # passes past present and FXAA last frame (TAA, lens, blur, bloom, exposure, resample)
         self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
@@ -181,14 +184,14 @@ class PresentPass:
 
     def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool, grade: bool = False,
                     lut: bool = False, vignette: bool = False, aberration: bool = False,
-                    grain: bool = False, ghosts: int | None = None) -> moderngl.VertexArray:
-        """The present build for these (``ghosts``: a lens flare's, None for none)."""
-        key = (curve, bloom, auto, luma, grade, lut, vignette, aberration, grain, ghosts)
+                    grain: bool = False, flare: bool = False) -> moderngl.VertexArray:
+        """The present build for these (``flare``: a lens flare's ghosts added)."""
+        key = (curve, bloom, auto, luma, grade, lut, vignette, aberration, grain, flare)
         vao = self._post.get(key)
         if vao is None:
             defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
-            if ghosts is not None:
-                defines["LENS_FLARE"] = str(ghosts)
+            if flare:
+                defines["LENS_FLARE"] = "1"
             defines.update((name, "1") for name, on in (("BLOOM", bloom), ("AUTO_EXPOSURE", auto),
                                                         ("LUMA_IN_ALPHA", luma), ("GRADE", grade), ("LUT", lut),
                                                         ("VIGNETTE", vignette), ("ABERRATION", aberration),
@@ -197,6 +200,8 @@ class PresentPass:
             vao.program["hdr_image"].value = PRESENT_UNIT
             if bloom:
                 vao.program["bloom_image"].value = BLOOM_UNIT
+            if flare:
+                vao.program["flare_image"].value = FLARE_UNIT
             if auto:
                 vao.program["exposure_state"].value = EXPOSURE_UNIT
             if lut:
@@ -320,12 +325,16 @@ class PresentPass:
         curve = curve if curve is not None else (tonemap.curve if tonemap is not None else "none")
         lut = self._lut_texture(grading.lut if grading is not None and grading.lut_strength > 0.0 else None)
         graded = grades(grading)
-        flare = flare if bloomed is not None else None
+        flared = None
+        if flare is not None and bloomed is not None:
+            flared = self.lens_flare.draw(bloomed, flare)
+            self.post_passes += 1
+        else:
+            self.lens_flare.release_targets()
         encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None, vignette,
-                                  aberration, grain, flare.ghosts if flare is not None else None)
-        if flare is not None:
-            self._set(encode, "flare", (flare.intensity, flare.ghost_spacing, flare.halo, flare.halo_intensity))
-            self._set(encode, "flare_fringe", flare.fringe)
+                                  aberration, grain, flared is not None)
+        if flared is not None:
+            bind_texture(self.ctx, flared, FLARE_UNIT)
         self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
         if graded:
             self._set_grade(encode, grading)
@@ -405,13 +414,15 @@ class PresentPass:
         self._lut_texture(None)
         if self.bloom.textures:
             self.bloom.release_targets()
+        self.lens_flare.release_targets()
         if self.auto_exposure.current is not None:
             self.auto_exposure.release_targets()
 
     def post_target_count(self) -> int:
         """Textures the bloom chain, automatic exposure, the grade and depth of field hold now
         (0 without a camera that asks for them)."""
-        return (self.bloom.target_count() + len(self.auto_exposure._targets) + len(self.auto_exposure._state)
+        return (self.bloom.target_count() + self.lens_flare.target_count() + len(self.auto_exposure._targets)
+                + len(self.auto_exposure._state)
                 + (self._lut is not None)
                 + (self._depth_of_field.target_count() if self._depth_of_field is not None else 0)
                 + (self._motion_blur.target_count() if self._motion_blur is not None else 0)
@@ -438,4 +449,5 @@ class PresentPass:
             self._temporal = None
         self._post.clear()
         self.bloom.release()
+        self.lens_flare.release()
         self.auto_exposure.release()
