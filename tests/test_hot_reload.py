@@ -309,7 +309,7 @@ def test_a_composite_column_the_first_build_dropped_is_fed_after_a_reload(scene,
     before = runner.frame()
     column, row = runner.project((0.0, 1.3, -1.5))  # the mirror's centre
     edit(shader_copy, "mirror_composite.frag",
-         "out_color = vec4(hdr_store(fogged(reflected, parent_fog, view_dir)), weight);", "    reflected = v_carry[0];")
+         "out_color = vec4(hdr_store(fog_over(reflected, parent_fog)), weight);", "    reflected = v_carry[0];")
     assert library.poll(now=1000.0) and library.errors == {}
     rgb = runner.frame().astype(int)
     red, green = rgb[row, column, 0], rgb[row, column, 1]
