@@ -58,10 +58,15 @@ def floor_frame(scene, depth: float):
         world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)),
                     Material(color=(1.0, 1.0, 1.0, 1.0), texture=TextureData(albedo, name="stripes"),
                              normal_map=TextureData(normal, name="heights"), parallax_depth=depth, unlit=True))
-    runner = scene(build, SIZE)
+    return floor_pixels(scene(build, SIZE), 0)
+
+
+def floor_pixels(runner, channel: int):
+    """``runner``'s second frame (FXAA off): the floor's middle pixels' linear ``channel``,
+    their rays' hits on the floor and the rays."""
     runner.engine.renderer.antialias = "off"
     runner.frame()
-    shown = srgb_to_linear(runner.frame())[..., 0].reshape(-1)
+    shown = srgb_to_linear(runner.frame())[..., channel].reshape(-1)
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
     rays = rays.reshape(-1, 3)
     t = -eye[1] / rays[:, 1]
@@ -167,16 +172,7 @@ def lit_floor(scene, depth: float, sun: str):
         world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)),
                     Material(color=(1.0, 1.0, 1.0, 1.0), roughness=1.0, environment_reflection=0.0,
                              normal_map=TextureData(normal, name="heights"), parallax_depth=depth))
-    runner = scene(build, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    rays = rays.reshape(-1, 3)
-    t = -eye[1] / rays[:, 1]
-    hits = eye + rays * t[:, None]
-    on = (t > 0) & (np.abs(hits[:, 0]) < 0.8 * FLOOR / 2) & (np.abs(hits[:, 2]) < 0.8 * FLOOR / 2)
-    return shown[on], hits[on], rays[on]
+    return floor_pixels(scene(build, SIZE), 1)
 
 
 def sun_reaches(points: np.ndarray, depth: float, sun: str) -> np.ndarray:

@@ -27,8 +27,6 @@ def floor_light(scene, slab_height: float | None, radius: float = RADIUS, rectan
     along z at x = 0 (the slab over x < 0) at ``slab_height`` (None: no slab), a ceiling 3 cm
     over the light where asked (``spot_angle``: its cone about straight down), and each floor
     pixel's point and whether it is the floor's; ``defines`` gets the shadow lookups' builds."""
-    from tests.support import pixel_rays, srgb_to_linear
-
     def build(world):
         look_from(world, (2.2, 1.0, 2.6), (-0.2, 0.0, 0.0), fov=55.0)
         world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
@@ -44,14 +42,22 @@ def floor_light(scene, slab_height: float | None, radius: float = RADIUS, rectan
         world.spawn(Transform(position=(0.0, LIGHT_HEIGHT, 0.0), rotation=down),
                     PointLight(intensity=8.0, range=20.0, shadows=True, shadow_resolution=1024, radius=radius,
                                rectangle=rectangle, spot_angle=spot_angle, spot_blend=0.05))
-    runner = scene(build, SIZE)
+    return grid_floor(scene(build, SIZE), defines)
+
+
+def grid_floor(runner, defines: list | None = None):
+    """``runner``'s second frame with the "grid" shadow filter (FXAA off) as linear green, each
+    pixel's point on the floor (y = 0) and whether its ray meets it; ``defines`` gets the
+    shadow lookups' builds."""
+    from tests.support import pixel_rays, srgb_to_linear
+
     runner.engine.renderer.antialias = "off"
     runner.engine.renderer.shadows.filter = "grid"
     runner.frame()
     shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
     if defines is not None:
         defines.extend(runner.engine.renderer.shadows.program_defines)
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     rays = rays.reshape(-1, 3)
     t = -eye[1] / rays[:, 1]
     return shown, eye + rays * np.where(t > 0, t, 0.0)[:, None], t > 0

@@ -17,7 +17,8 @@ import pytest
 from components import ComponentValueError, DirectionalLight, Material, MeshRef, Skybox, Transform
 from engine.assets.mesh import box, plane
 from engine.core.errors import GLLimitWarning
-from tests.support import look_from, pixel_rays, srgb_to_linear
+from tests.support import look_from, srgb_to_linear
+from tests.test_soft_shadows import grid_floor, penumbra_width
 
 SIZE = (128, 96)
 SUN = np.array([0.12, -1.0, 0.05]) / np.linalg.norm([0.12, -1.0, 0.05])   # the way its light travels
@@ -38,17 +39,7 @@ def floor_light(scene, slab_height: float | None, angular_diameter: float, casca
         world.spawn(DirectionalLight(direction=tuple(float(v) for v in SUN), intensity=2.0, shadow_resolution=2048,
                                      angular_diameter=angular_diameter, shadow_cascades=cascades,
                                      shadow_distance=8.0))
-    runner = scene(build, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.engine.renderer.shadows.filter = "grid"
-    runner.frame()
-    shown = srgb_to_linear(runner.frame())[..., 1].reshape(-1)
-    if defines is not None:
-        defines.extend(runner.engine.renderer.shadows.program_defines)
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
-    rays = rays.reshape(-1, 3)
-    t = -eye[1] / rays[:, 1]
-    return shown, eye + rays * np.where(t > 0, t, 0.0)[:, None], t > 0
+    return grid_floor(scene(build, SIZE), defines)
 
 
 def disc_left(x: np.ndarray, slab_height: float, angular_diameter: float) -> np.ndarray:
@@ -68,13 +59,6 @@ def shadow_share(scene, slab_height, angular_diameter, **kw):
     open_, _, _ = floor_light(scene, None, angular_diameter, **kw)
     keep = floor & (open_ > 0.05) & (np.abs(points[:, 2]) < 2.5) & (points[:, 0] > -2.5)
     return lit[keep] / open_[keep], points[keep]
-
-
-def penumbra_width(share: np.ndarray, x: np.ndarray) -> float:
-    """The floor's stretch where the light left goes from 20% to 80%."""
-    order = np.argsort(x)
-    x, share = x[order], share[order]
-    return float(x[np.argmax(share > 0.8)] - x[np.argmax(share > 0.2)])
 
 
 @pytest.mark.parametrize(("slab_height", "cascades"), [(1.2, 1), (0.6, 1), (1.2, 3)])
