@@ -60,7 +60,7 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   GPU; a software rasteriser's quarter-size start makes five, ending at the same smallest level:
   ``engine/render/bloom.py``);
 * ``flared``: ``post`` with a ``LensFlare`` beside the bloom (four ghosts and a halo read by the
-  present draw);
+  present draw) and lens dirt (``Bloom.dirt``);
 * ``post_auto``: ``post`` with ``Tonemap(auto_exposure=True)``;
 * ``graded``: no shadows; ``Tonemap(curve="agx")``, a ``ColorGrading`` with every control
   moved and a 33-point colour table, and a ``Vignette`` (the present draw's GRADE, LUT and
@@ -194,7 +194,7 @@ from components import (
 )
 from engine.assets.color_lut import ColorLut, identity_lut
 from engine.assets.mesh import box
-from engine.assets.texture_data import TextureData
+from engine.assets.texture_data import TextureData, puff_texture
 from engine.core.frame_io import Output
 from engine.render.bloom import level_sizes
 from engine.render.gl_context import GLCapabilities, create_headless_context
@@ -439,9 +439,11 @@ def _post(engine: Engine) -> None:
 
 
 def _flared(engine: Engine) -> None:
-    """``_post`` with a lens flare beside the bloom (LensFlare: its ghosts read by the present draw)."""
+    """``_post`` with a lens flare beside the bloom (LensFlare: its ghosts read by the present
+    draw) and lens dirt (Bloom.dirt: a puff)."""
     _post(engine)
     engine.world.add_component(camera_entity(engine), LensFlare())
+    engine.world.get(camera_entity(engine), Bloom).dirt = puff_texture(64, 3, name="smudges")
 
 
 def _graded(engine: Engine) -> None:

@@ -122,6 +122,12 @@ class Bloom(TrackedComponent):
       brighter feeds the bloom.
     - ``levels`` (1..8): how far a glow spreads (each level doubles it); fewer are made where
       the image is too small to halve that often (a level is at least 2 pixels a side).
+    - ``dirt`` (a TextureData, sRGB colour as ``Material.texture``; None: none) and
+      ``dirt_intensity`` (0 to 100, default 1): lens dirt (Unreal's bloom dirt mask, HDRP's
+      lens dirt): the picture of smudges and dust on the lens, stretched over the whole
+      frame, lit by the bloom's light (and a ``LensFlare``'s) where it falls: the glow and the
+      ghosts times the image's colour there times ``dirt_intensity`` are added on top, so the
+      dirt shows only where bright light crosses it.
     """
 
     intensity: float = 0.1
@@ -130,8 +136,17 @@ class Bloom(TrackedComponent):
     levels: int = 6
     radius: float = 1.0
     composite: str = "energy_conserving"
+    dirt: Any = None
+    dirt_intensity: float = 1.0
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "dirt" and value is not None:
+            if getattr(type(value), "ASSET_KIND", None) != "texture":
+                raise ComponentValueError(
+                    f"Bloom.dirt must be an engine.assets.texture_data.TextureData, got {type(value).__name__}")
+            return value
+        if name == "dirt_intensity":
+            return finite(self, name, value, low=0.0, high=100.0)
         if name == "intensity":
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "threshold":

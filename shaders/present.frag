@@ -26,6 +26,10 @@ uniform vec2 bloom_mix;   // (weight of the image, weight of the bloom image's s
 #ifdef LENS_FLARE
 uniform sampler2D flare_image;   // the lens flare's ghosts (engine/render/lens_flare.py), the bloom image's size
 #endif
+#ifdef LENS_DIRT
+uniform sampler2D dirt_map;      // Bloom.dirt: the lens's smudges, over the whole frame (sRGB, decoded)
+uniform float dirt_intensity;
+#endif
 #ifdef AUTO_EXPOSURE
 flat in float v_scale;   // exposure * 2^EV of the adapted 1x1 exposure texture (present.vert)
 #endif
@@ -107,10 +111,14 @@ void main() {
     hdr.b = textureLod(hdr_image, clamp(0.5 + from_middle / (1.0 - aberration), half_texel, 1.0 - half_texel), 0.0).b;
 #endif
 #ifdef BLOOM
-    hdr = hdr * bloom_mix.x + textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;
-#endif
+    vec3 lens_light = textureLod(bloom_image, v_uv, 0.0).rgb * bloom_mix.y;   // the light the lens spreads
 #ifdef LENS_FLARE
-    hdr += textureLod(flare_image, v_uv, 0.0).rgb * bloom_mix.y;   // (over the bloom image's levels, as the bloom)
+    lens_light += textureLod(flare_image, v_uv, 0.0).rgb * bloom_mix.y;   // (over the bloom image's levels, as the bloom)
+#endif
+    hdr = hdr * bloom_mix.x + lens_light;
+#ifdef LENS_DIRT
+    hdr += lens_light * textureLod(dirt_map, v_uv, 0.0).rgb * dirt_intensity;   // the dirt lit where it falls
+#endif
 #endif
 #ifdef AUTO_EXPOSURE
     float scale = v_scale;

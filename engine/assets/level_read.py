@@ -517,7 +517,8 @@ def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
         if not isinstance(value, list):
             raise ValueError(f"LevelOfDetail.meshes is a list of meshes, finest first, got {value!r}")
         return tuple(level_mesh(item, where) for item in value)
-    if field == "texture" or (cls_name, field) in _MATERIAL_MAPS or (cls_name, field) == ("PointLight", "cookie"):
+    if field == "texture" or (cls_name, field) in _MATERIAL_MAPS or (cls_name, field) in (("PointLight", "cookie"),
+                                                                                          ("Bloom", "dirt")):
         # A linear map (normal, metallic-roughness) keeps a 16-bit PNG's 16 bits; colour is 8 bits.
         return level_texture(value, where, normal_map=field in _LINEAR_MAPS)
     if cls_name == "ColorGrading" and field == "lut":

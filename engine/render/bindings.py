@@ -164,6 +164,7 @@ VOLUMETRIC_NODE_UNIT = 56     # a reflection level's march and filter: the level
 # build, only where the context has one (ShadowMaps.soft_sun_supported); past 31 (moderngl's).
 SUN_DEPTH_UNIT = 57           # scene (SOFT_SUN_SHADOWS builds): the shadow atlas, its depths as values
 FLARE_UNIT = 58               # present (LENS_FLARE builds): the lens flare's ghosts (engine/render/lens_flare.py)
+DIRT_UNIT = 59                # present (LENS_DIRT builds): the bloom's lens dirt (Bloom.dirt)
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

@@ -47,8 +47,10 @@ from components.post import (
     Vignette,
 )
 from engine.assets.color_lut import ColorLut
+from engine.assets.texture_data import TextureData
 from engine.render.bindings import (
     BLOOM_UNIT,
+    DIRT_UNIT,
     EXPOSURE_UNIT,
     FLARE_UNIT,
     FXAA_UNIT,
@@ -61,6 +63,7 @@ from engine.render.bindings import (
 )
 from engine.render.bloom import BloomPass
 from engine.render.depth_of_field import DepthOfFieldPass
+from engine.render.gpu import GL_SRGB8_ALPHA8
 from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
 from engine.render.lens_flare import LensFlarePass
 from engine.render.motion_blur import MotionBlurPass
@@ -127,6 +130,7 @@ class PresentPass:
         self._written: dict[tuple[int, str], object] = {}    # (vao id, uniform) -> the value last written
         self.bloom = BloomPass(ctx, shaders, software)
         self.lens_flare = LensFlarePass(ctx, shaders)
+        self._dirt: tuple[TextureData, moderngl.Texture] | None = None   # the bloom's lens dirt, uploaded
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # passes past present and FXAA last frame (TAA, lens, blur, bloom, exposure, resample)
         self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
@@ -184,14 +188,17 @@ class PresentPass:
 
     def _post_build(self, curve: str, bloom: bool, auto: bool, luma: bool, grade: bool = False,
                     lut: bool = False, vignette: bool = False, aberration: bool = False,
-                    grain: bool = False, flare: bool = False) -> moderngl.VertexArray:
-        """The present build for these (``flare``: a lens flare's ghosts added)."""
-        key = (curve, bloom, auto, luma, grade, lut, vignette, aberration, grain, flare)
+                    grain: bool = False, flare: bool = False, dirt: bool = False) -> moderngl.VertexArray:
+        """The present build for these (``flare``: a lens flare's ghosts added; ``dirt``: the
+        bloom's lens dirt)."""
+        key = (curve, bloom, auto, luma, grade, lut, vignette, aberration, grain, flare, dirt)
         vao = self._post.get(key)
         if vao is None:
             defines = {"POST": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(curve))}
             if flare:
                 defines["LENS_FLARE"] = "1"
+            if dirt:
+                defines["LENS_DIRT"] = "1"
             defines.update((name, "1") for name, on in (("BLOOM", bloom), ("AUTO_EXPOSURE", auto),
                                                         ("LUMA_IN_ALPHA", luma), ("GRADE", grade), ("LUT", lut),
                                                         ("VIGNETTE", vignette), ("ABERRATION", aberration),
@@ -202,6 +209,8 @@ class PresentPass:
                 vao.program["bloom_image"].value = BLOOM_UNIT
             if flare:
                 vao.program["flare_image"].value = FLARE_UNIT
+            if dirt:
+                vao.program["dirt_map"].value = DIRT_UNIT
             if auto:
                 vao.program["exposure_state"].value = EXPOSURE_UNIT
             if lut:
@@ -331,10 +340,14 @@ class PresentPass:
             self.post_passes += 1
         else:
             self.lens_flare.release_targets()
+        dirt = self._dirt_texture(bloom.dirt if bloomed is not None and bloom.dirt_intensity > 0.0 else None)
         encode = self._post_build(curve, bloomed is not None, auto, luma, graded, lut is not None, vignette,
-                                  aberration, grain, flared is not None)
+                                  aberration, grain, flared is not None, dirt is not None)
         if flared is not None:
             bind_texture(self.ctx, flared, FLARE_UNIT)
+        if dirt is not None:
+            bind_texture(self.ctx, dirt, DIRT_UNIT)
+            self._set(encode, "dirt_intensity", bloom.dirt_intensity)
         self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
         if graded:
             self._set_grade(encode, grading)
@@ -394,6 +407,23 @@ class PresentPass:
             self._lut = (lut, upload_lut(self.ctx, lut))
         return self._lut[1]
 
+    def _dirt_texture(self, dirt: TextureData | None) -> moderngl.Texture | None:
+        """The bloom's lens ``dirt`` uploaded (sRGB, with mipmaps: once while it is the
+        camera's), or None; an image no camera uses now is let go."""
+        if self._dirt is not None and self._dirt[0] is not dirt:
+            self._dirt[1].release()
+            self._dirt = None
+        if dirt is None:
+            return None
+        if self._dirt is None:
+            h, w = dirt.pixels.shape[:2]
+            texture = self.ctx.texture((w, h), 4, dirt.as_8_bits()[::-1].tobytes(), internal_format=GL_SRGB8_ALPHA8)
+            texture.build_mipmaps()
+            texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            texture.repeat_x = texture.repeat_y = False
+            self._dirt = (dirt, texture)
+        return self._dirt[1]
+
     def _set(self, vao: moderngl.VertexArray, name: str, value) -> None:
         """Write a uniform of a POST build only when its value changes (each write is a GL call)."""
         key = (id(vao), name)
@@ -412,6 +442,7 @@ class PresentPass:
 
     def _release_post_targets(self) -> None:
         self._lut_texture(None)
+        self._dirt_texture(None)
         if self.bloom.textures:
             self.bloom.release_targets()
         self.lens_flare.release_targets()
@@ -423,13 +454,14 @@ class PresentPass:
         (0 without a camera that asks for them)."""
         return (self.bloom.target_count() + self.lens_flare.target_count() + len(self.auto_exposure._targets)
                 + len(self.auto_exposure._state)
-                + (self._lut is not None)
+                + (self._lut is not None) + (self._dirt is not None)
                 + (self._depth_of_field.target_count() if self._depth_of_field is not None else 0)
                 + (self._motion_blur.target_count() if self._motion_blur is not None else 0)
                 + (self._temporal.target_count() if self._temporal is not None else 0))
 
     def release(self) -> None:
         self._lut_texture(None)
+        self._dirt_texture(None)
         self._capture("_encoded", None)
         self._capture("_filtered", None)
         self.resample.release()
