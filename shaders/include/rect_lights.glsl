@@ -109,8 +109,10 @@ vec3 clamped_cosine_vector(vec3 a, vec3 b, vec3 c, vec3 d) {
 // ``a``, ``b``, ``d`` the corners 0, 1 and 3 (rect_light's) in the lobe's frame and
 // ``towards`` the lobe's mean way in over the rectangle (clamped_cosine_vector): the image
 // where that way meets the face (inside it: a mean of directions to the face), at the mip
-// level as wide as the lobe's footprint there, twice the distance to the face's plane (half a
-// cosine lobe's weight on a plane at distance r falls within r of its foot) over its size.
+// level as wide as the lobe's footprint there: 1.5 x the distance to the face's plane over the
+// face's size (half a cosine lobe's weight on a plane at distance r falls within r of its
+// foot; 1.5 fitted against the panel cut into patches, tests/test_rect_light_images.py), at
+// most the picture's 2 x 2 level (a coarser one no longer knows which way the lobe leans).
 // The image's right towards the entity's -X, its top towards +Y: it reads as a screen does
 // from in front.  White without an image.
 vec3 rect_face(RectLight rect, vec3 a, vec3 b, vec3 d, vec3 towards) {
