@@ -275,8 +275,9 @@ class PointLight(TrackedComponent):
     (Heitz et al. 2016, fitted to the engine's GGX: ``engine/render/ltc_fit.py``), so a
     glossy floor shows the panel's stretched reflection and a mirror-smooth one its outline.
     Its shadow from its cube is soft, as a disc of its area casts it, and nothing behind its
-    plane blocks it; its range, spot cone, cookie and contact shadows are taken from its
-    centre, as a point light's, and the shafts' air and lit particles take its light by
+    plane blocks it; its range, spot cone and contact shadows are taken from its centre, as a
+    point light's, its cookie is the picture on its face (above), and the shafts' air and lit
+    particles take its light by
     Lambert's cosine of its face (``shaders/include/lights.glsl`` ``lamp_face``).  Both
     sides from ``MIN_LIGHT_SIDE`` (1 mm) to ``MAX_LIGHT_SIDE`` (50 m); not with a ``radius``
     or a ``length``.

@@ -43,6 +43,7 @@ from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import FogLimitWarning, LightLimitWarning
 from engine.core.world import World
+from engine.render.fog import volume_rows
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
@@ -105,6 +106,8 @@ class PrepareSystem(esper.Processor):
         self._rect_slots: tuple[int, ...] = ()   # the slots lit as rectangles (lights_block's rect_slots)
         self._rect_cut = 0                       # rectangles past MAX_RECT_LIGHTS, lit as points
         self._fog_cut = 0                        # FogVolumes past MAX_FOG_VOLUMES, left out
+        self._fog_entities: tuple[int, ...] = ()   # the FogVolumes' entities, and their packed rows
+        self._fog_packed: tuple[float, ...] = ()
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -161,16 +164,23 @@ class PrepareSystem(esper.Processor):
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
         sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
-        if renderer.fog.set(fog, sun, self._fog_volumes(camera) if self.fog else ()):
+        if renderer.fog.set(fog, sun, self._fog_rows(camera) if self.fog else ()):
             renderer.note_scene_change()   # every view's fogged pixels
         renderer.stats.fog_volumes_cut = self._fog_cut
 
-    def _fog_volumes(self, camera: int | None) -> list[tuple[FogVolume, glm.mat4]]:
-        """The ``FogVolume``s with their world matrices, at most ``MAX_FOG_VOLUMES``: past it
-        the nearest the active camera (from its eye to each one's centre, less its largest
-        half side), the rest counted and said when their count grows."""
+    def _fog_rows(self, camera: int | None) -> tuple[float, ...]:
+        """The Fog block's rows of the ``FogVolume``s (``fog.volume_rows``), at most
+        ``MAX_FOG_VOLUMES``: past it the nearest the active camera (from its eye to each one's
+        centre, less its largest half side), the rest counted and said when their count grows.
+        Made again only when a volume came, went, changed or moved (or, past the limit, every
+        frame: the camera's moves choose): a still world packs nothing."""
         world = self.world
-        volumes = [(volume, t.world) for _, (volume, t) in world.query(FogVolume, Transform)]
+        if not self._fog_cut and not world.changed(FogVolume) and not world.deleted() and not any(
+                entity in world.frame.moved for entity in self._fog_entities):
+            return self._fog_packed
+        found = world.query(FogVolume, Transform)
+        self._fog_entities = tuple(entity for entity, _ in found)
+        volumes = [(volume, t.world) for _, (volume, t) in found]
         cut = max(0, len(volumes) - MAX_FOG_VOLUMES)
         if cut:
             eye = world.get(camera, Transform).world[3].xyz if camera is not None else glm.vec3(0.0)
@@ -181,7 +191,8 @@ class PrepareSystem(esper.Processor):
                     f"{MAX_FOG_VOLUMES + cut} FogVolumes: at most {MAX_FOG_VOLUMES} fog the views at once (the "
                     f"nearest the active camera), so {cut} add no fog (RenderStats.fog_volumes_cut)"), stacklevel=3)
         self._fog_cut = cut
-        return volumes
+        self._fog_packed = volume_rows(volumes)
+        return self._fog_packed
 
     def _sky(self) -> bool:
         """The sky made anew where it changed: the Skybox came, went or changed, or the light a

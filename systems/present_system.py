@@ -97,6 +97,8 @@ class PresentSystem(esper.Processor):
                         self.renderer.present_pass.motion_blur.carry(crossing.carry)
             tonemap = self.world.try_get(camera, Tonemap)
             bloom = self.world.try_get(camera, Bloom) if self.bloom else None
+            if bloom is not None and bloom.dirt is not None:   # (a dirt image this OpenGL cannot hold: refused)
+                self.renderer.check_texture(bloom.dirt, "Bloom.dirt")
             grading = self.world.try_get(camera, ColorGrading) if self.grade else None
             vignette = self.world.try_get(camera, Vignette) if self.grade else None
             aberration = self.world.try_get(camera, ChromaticAberration) if self.grade else None

@@ -222,3 +222,22 @@ def test_the_editor_outlines_the_ellipsoid_and_marks_it():
     assert all(np.allclose(line[0], line[-1]) for line in outline.world)
     assert [m.kind for m in markers(world, view_proj, (640, 480)) if m.entity == entity] == ["fog"]
     world.close()
+
+
+def test_a_still_volume_is_packed_once_and_a_moved_one_again(scene):
+    """The prepare stage packs the volumes' rows when one comes, changes or moves, not on a still
+    frame (the same rows kept); moved, its matrix follows it; its density edited, the block too."""
+    runner = scene(_with([ORANGE]), (80, 50))
+    runner.frame()
+    prepare = runner.engine.stages["prepare"]
+    packed = prepare._fog_packed
+    runner.frame()
+    assert prepare._fog_packed is packed
+    (entity, volume), = runner.world.query_one(FogVolume)
+    runner.world.get(entity, Transform).position = glm.vec3(3.0, 0.6, 1.0)
+    runner.frame()
+    rows = np.array(runner.engine.renderer.fog.block[16:], np.float64).reshape(-1, 20)
+    np.testing.assert_allclose(np.linalg.inv(rows[0, :16].reshape(4, 4).T)[:3, 3], (3.0, 0.6, 1.0), atol=1e-5)
+    volume.density = 0.2
+    runner.frame()
+    assert runner.engine.renderer.fog.block[16 + 19] == pytest.approx(0.2)

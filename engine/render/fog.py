@@ -46,6 +46,14 @@ def volume_to_unit(volume: FogVolume, world: glm.mat4) -> np.ndarray:
     return to_unit.T.astype(np.float32).ravel()   # (GL's columns)
 
 
+def volume_rows(volumes: Sequence[tuple[FogVolume, glm.mat4]]) -> tuple[float, ...]:
+    """The block's rows of ``volumes`` (each with its entity's world matrix; those with no
+    density left out): per volume its ``volume_to_unit`` matrix, then its colour and density,
+    20 floats."""
+    return tuple(float(v) for volume, world in volumes if volume.density > 0.0 for v in (
+        *volume_to_unit(volume, world), volume.color.x, volume.color.y, volume.color.z, volume.density))
+
+
 class FogBlock:
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
@@ -55,16 +63,14 @@ class FogBlock:
         self.ubo.bind_to_uniform_block(FOG_BINDING)   # (no other block uses the point: it stays)
         self.defines: tuple[tuple[str, str], ...] = ()
 
-    def set(self, fog: Fog | None, sun: DirectionalLight | None = None,
-            volumes: Sequence[tuple[FogVolume, glm.mat4]] = ()) -> bool:
+    def set(self, fog: Fog | None, sun: DirectionalLight | None = None, rows: tuple[float, ...] = ()) -> bool:
         """Write ``fog`` (None: no fog), glowing towards ``sun`` (the brightest directional
-        light: ``light_rules.brightest_directional``) by its ``sun_scatter``, and ``volumes``
-        (each with its entity's world matrix; at most ``MAX_FOG_VOLUMES``: the caller chose
-        them) into the block where it differs from what it holds; True when it did (every
-        view's fogged pixels change).  Compared as plain floats: the prepare stage asks every
-        frame."""
-        if len(volumes) > MAX_FOG_VOLUMES:
-            raise ValueError(f"{len(volumes)} fog volumes: the block holds {MAX_FOG_VOLUMES}")
+        light: ``light_rules.brightest_directional``) by its ``sun_scatter``, and the fog
+        volumes' ``rows`` (``volume_rows``; at most ``MAX_FOG_VOLUMES``: the caller chose them)
+        into the block where it differs from what it holds; True when it did (every view's
+        fogged pixels change).  Compared as plain floats: the prepare stage asks every frame."""
+        if len(rows) > 20 * MAX_FOG_VOLUMES:
+            raise ValueError(f"{len(rows) // 20} fog volumes: the block holds {MAX_FOG_VOLUMES}")
         if fog is None or fog.density <= 0.0:
             values = _NO_FOG
         else:
@@ -76,22 +82,20 @@ class FogBlock:
                         color.x * k, color.y * k, color.z * k, 0.0)
             values = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
                       fog.height, 0.0, *glow)
-        shown = [(volume, world) for volume, world in volumes if volume.density > 0.0]
-        rows = tuple(float(v) for volume, world in shown for v in (
-            *volume_to_unit(volume, world), volume.color.x, volume.color.y, volume.color.z, volume.density))
+        count = len(rows) // 20
         if values == self._values and rows == self._volumes:
             return False
         self._values, self._volumes = values, rows
         block = np.zeros(FOG_BLOCK_BYTES // 4, np.float32)
         block[:16] = values
         matrices = np.array(rows, np.float32).reshape(-1, 20)
-        block[16:16 + 16 * len(shown)] = matrices[:, :16].ravel()
+        block[16:16 + 16 * count] = matrices[:, :16].ravel()
         at = 16 + 16 * MAX_FOG_VOLUMES
-        block[at:at + 4 * len(shown)] = matrices[:, 16:].ravel()
+        block[at:at + 4 * count] = matrices[:, 16:].ravel()
         self.ubo.write(block.tobytes())
-        self.defines = () if values[4] <= 0.0 and not shown else tuple((name, value) for name, value, on in (
+        self.defines = () if values[4] <= 0.0 and not count else tuple((name, value) for name, value, on in (
             ("FOG", "1", True), ("FOG_FALLOFF", "1", values[5] > 0.0), ("FOG_GLOW", "1", any(values[12:15])),
-            ("FOG_VOLUMES", str(len(shown)), bool(shown))) if on)
+            ("FOG_VOLUMES", str(count), bool(count))) if on)
         return True
 
     @property

@@ -28,6 +28,7 @@ class LensFlarePass:
         self.ctx = ctx
         self.shaders = shaders
         self._vaos: dict[int, moderngl.VertexArray] = {}   # by ghost count (the build's loop)
+        self._written: dict[int, tuple] = {}   # each build's uniforms as last written
         self.texture: moderngl.Texture | None = None
         self._framebuffer: moderngl.Framebuffer | None = None
 
@@ -46,9 +47,10 @@ class LensFlarePass:
                                            defines={"FLARE_GHOSTS": str(flare.ghosts)})
             program["bloom_image"].value = BLOOM_UNIT
             vao = self._vaos[flare.ghosts] = self.ctx.vertex_array(program, [])
-        program = vao.program
-        program["flare"].value = (flare.intensity, flare.ghost_spacing, flare.halo, flare.halo_intensity)
-        program["flare_fringe"].value = flare.fringe
+        settings = ((flare.intensity, flare.ghost_spacing, flare.halo, flare.halo_intensity), flare.fringe)
+        if self._written.get(flare.ghosts) != settings:   # (a uniform write is a GL call: only on a change)
+            vao.program["flare"].value, vao.program["flare_fringe"].value = settings
+            self._written[flare.ghosts] = settings
         self._framebuffer.use()
         apply_pass_state(self.ctx, _FLARE, (0, 0, *bloomed.size))
         bind_texture(self.ctx, bloomed, BLOOM_UNIT)
@@ -71,3 +73,4 @@ class LensFlarePass:
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
+        self._written.clear()
