@@ -54,6 +54,10 @@ MAX_RECT_LIGHTS = 8
 # The largest index of refraction (Refractive.ior): diamond is 2.42, germanium 4.0; past it
 # almost all light is reflected (Schlick's f0 over 0.36) and the refracted ray barely bends more.
 MAX_IOR = 4.0
+# Skybox.rayleigh and haze (an atmosphere's molecules and aerosols): at most this many times
+# Earth's.  Twenty times the haze is a thick fog's air, twenty times the molecules a sky
+# whose sunsets are dark red by 20 degrees up; past that the tables' steps cannot follow it.
+MAX_AIR_SCALE = 20.0
 # Refractive.dispersion (glTF's KHR_materials_dispersion, 20 / the Abbe number): 10 is an
 # Abbe number of 2, past any glass or gem (diamond's is 55, dense flint's about 20).
 MAX_DISPERSION = 10.0

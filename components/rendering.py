@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR
+from components.limits import MAX_AIR_SCALE, MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -467,6 +467,7 @@ class Refractive(TrackedComponent):
 
 # Where a generated sky's sun stands when it follows no light (``Skybox.sun_direction``):
 # high in the -z half of the sky, towards the sun.
+SKY_MODELS = ("gradient", "atmosphere")   # Skybox.model
 DEFAULT_SUN_DIRECTION: tuple[float, float, float] = tuple(glm.normalize(glm.vec3(0.4, 0.6, -0.7)))
 
 
@@ -489,6 +490,21 @@ class Skybox(TrackedComponent):
     degree, and exactly once it stands still.
     With no lit ``DirectionalLight`` the sun stands at ``DEFAULT_SUN_DIRECTION``.  A vector
     pins the sun there, whatever the lights do.
+
+    ``model``: "gradient" (the default: ``zenith``, ``horizon`` and ``ground`` colours, a warm
+    glow about the sun) or "atmosphere", a physically based sky (``engine/render/atmosphere.py``:
+    Rayleigh and Mie scattering, ozone and multiple scattering, Hillaire 2020, as Unreal's
+    SkyAtmosphere, Godot's PhysicalSkyMaterial and three.js's Sky): blue overhead at noon,
+    white at the horizon, red round a low sun, dark once it has set, all from where the sun
+    stands.  Its sky is ``sun_color`` (times the light's colour) scattered by the air, the
+    disc that light dimmed by the air; ``zenith`` and ``horizon`` are unused and ``ground`` is
+    the ground's albedo (lit by the sun and the sky below the horizon).  ``rayleigh`` and
+    ``haze`` (0 to ``MAX_AIR_SCALE``, 1: Earth's clear air) scale the air's molecules (thicker:
+    a deeper blue, redder sunsets) and its aerosols (a whiter sky, a wider glow round the
+    sun).  With ``tints_sunlight`` (the default) the DirectionalLight the sky follows is
+    dimmed and reddened by the same air on its way down, as Unreal's atmosphere sun light:
+    its ``color`` is its light with the sun overhead, and a low sun lights the world orange
+    (a pinned ``sun_direction`` follows no light and tints none).
     """
 
     zenith: Any = field(default_factory=lambda: glm.vec4(0.10, 0.25, 0.65, 1.0))
@@ -498,10 +514,20 @@ class Skybox(TrackedComponent):
     sun_color: Any = field(default_factory=lambda: glm.vec4(6.0, 5.4, 4.2, 1.0))
     face_size: int = 128
     faces: Any = None
+    model: str = "gradient"
+    rayleigh: float = 1.0
+    haze: float = 1.0
+    tints_sunlight: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
         if name in ("zenith", "horizon", "ground", "sun_color"):
             return color(self, name, value)
+        if name == "model":
+            return choice(self, name, value, SKY_MODELS)
+        if name in ("rayleigh", "haze"):
+            return finite(self, name, value, low=0.0, high=MAX_AIR_SCALE)
+        if name == "tints_sunlight":
+            return boolean(self, name, value)
         if name == "sun_direction":
             from components.tracking import vec3
 

@@ -43,11 +43,12 @@ from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import FogLimitWarning, LightLimitWarning
 from engine.core.world import World
+from engine.render.atmosphere import sunlight_share
 from engine.render.fog import volume_rows
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
-from engine.render.sky import sky_model
+from engine.render.sky import air_of, sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.resources import ContactLamps, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
@@ -113,6 +114,8 @@ class PrepareSystem(esper.Processor):
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
         self._sun_follows = False   # the generated sky's sun follows the brightest directional light
+        self._tint_key: tuple = ()   # an atmosphere's air and its sun's direction, and the sunlight's tint
+        self._tint = (1.0, 1.0, 1.0)
         self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
         # The debug overlay's toggle: off, no surface reflects the light from all round by its
         # material (its environment reflection; a Reflective's reflection stays).
@@ -164,7 +167,8 @@ class PrepareSystem(esper.Processor):
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
         sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
-        if renderer.fog.set(fog, sun, self._fog_rows(camera) if self.fog else ()):
+        if renderer.fog.set(fog, sun, self._fog_rows(camera) if self.fog else (),
+                            self._air_tint(sun) if sun is not None else (1.0, 1.0, 1.0)):
             renderer.note_scene_change()   # every view's fogged pixels
         renderer.stats.fog_volumes_cut = self._fog_cut
 
@@ -233,6 +237,24 @@ class PrepareSystem(esper.Processor):
         self._flat_sky = sky is None
         self._sun = self._cube_sun = sun
 
+    def _air_tint(self, sun: DirectionalLight) -> tuple[float, float, float]:
+        """The share of ``sun``'s light (the world's brightest DirectionalLight) an atmosphere
+        Skybox that follows it (``Skybox.tints_sunlight``) lets through on its way down,
+        over the share it lets through from straight overhead (the light's colour is its
+        colour at noon); white for any other sky.  Kept for the last air and direction."""
+        skies = self.world.query_one(Skybox)
+        sky = skies[0][1] if skies else None
+        if sky is None or sky.model != "atmosphere" or not sky.tints_sunlight or sky.faces is not None \
+                or sky.sun_direction is not None:
+            return (1.0, 1.0, 1.0)
+        key = (air_of(sky), tuple(sun.direction))
+        if key != self._tint_key:
+            towards = -np.array(key[1], np.float64)
+            share = sunlight_share(key[0], towards / np.linalg.norm(towards))
+            overhead = sunlight_share(key[0], np.array([0.0, 1.0, 0.0]))
+            self._tint_key, self._tint = key, tuple(float(c) for c in share / np.maximum(overhead, 1e-6))
+        return self._tint
+
     def _sky_sun(self) -> SkySun | None:
         """Where the world's generated sky puts its sun now, and its tint (``sky_sun``; None:
         no Skybox)."""
@@ -249,7 +271,10 @@ class PrepareSystem(esper.Processor):
                 directional.append(_NO_SUN)
                 continue
             light = world.get(entity, DirectionalLight)
-            directional.append((light.direction, light.color.xyz * light.intensity, float(light is sun)))
+            colour = light.color.xyz * light.intensity
+            if light is sun:
+                colour = colour * glm.vec3(*self._air_tint(light))
+            directional.append((light.direction, colour, float(light is sun)))
         point, contact, cut = [], [], 0
         rect_slots: list[int] = []   # the rectangles lit as rectangles: the first MAX_RECT_LIGHTS by slot
         rect_cut = 0
@@ -346,8 +371,8 @@ class PrepareSystem(esper.Processor):
         (its own or a parent's: the transform stage lists both in ``frame.moved``): last
         frame's block holds."""
         world = self.world
-        if world.changed(DirectionalLight) or world.changed(PointLight):
-            return False
+        if world.changed(DirectionalLight) or world.changed(PointLight) or world.changed(Skybox):
+            return False   # (a Skybox: an atmosphere's air tints its sun: _air_tint)
         frame = world.frame
         moved, added, removed = frame.moved, frame.added, frame.removed
         if not (moved or added or removed):

@@ -63,9 +63,11 @@ class FogBlock:
         self.ubo.bind_to_uniform_block(FOG_BINDING)   # (no other block uses the point: it stays)
         self.defines: tuple[tuple[str, str], ...] = ()
 
-    def set(self, fog: Fog | None, sun: DirectionalLight | None = None, rows: tuple[float, ...] = ()) -> bool:
+    def set(self, fog: Fog | None, sun: DirectionalLight | None = None, rows: tuple[float, ...] = (),
+            tint: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> bool:
         """Write ``fog`` (None: no fog), glowing towards ``sun`` (the brightest directional
-        light: ``light_rules.brightest_directional``) by its ``sun_scatter``, and the fog
+        light: ``light_rules.brightest_directional``; its colour times ``tint``, an atmosphere's
+        share of it: ``PrepareSystem._air_tint``) by its ``sun_scatter``, and the fog
         volumes' ``rows`` (``volume_rows``; at most ``MAX_FOG_VOLUMES``: the caller chose them)
         into the block where it differs from what it holds; True when it did (every view's
         fogged pixels change).  Compared as plain floats: the prepare stage asks every frame."""
@@ -79,7 +81,7 @@ class FogBlock:
                 color = raw_field(sun, "color")
                 k = sun.intensity * fog.sun_scatter
                 glow = (-sun.direction.x, -sun.direction.y, -sun.direction.z, 0.0,
-                        color.x * k, color.y * k, color.z * k, 0.0)
+                        color.x * k * tint[0], color.y * k * tint[1], color.z * k * tint[2], 0.0)
             values = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
                       fog.height, 0.0, *glow)
         count = len(rows) // 20

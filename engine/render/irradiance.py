@@ -93,6 +93,7 @@ from engine.render.sky import (
     disc_strength,
     glow_strength,
     ground_share,
+    model_radiance,
     zenith_share,
 )
 from engine.render.targets import release_framebuffer
@@ -169,8 +170,17 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     f(t) P_l(t) dt over [-1, 1] (the Funk-Hecke theorem; P_l the Legendre polynomials).  The
     F_l of each shape are numbers (``_zonal_integrals``), so a sky's light is a few products
     of them with its colours.  Against ``project_faces`` of its 128-texel faces it differs by
-    under 1e-4 of the largest coefficient (the faces sample the 2.6-degree disc coarsely)."""
+    under 1e-4 of the largest coefficient (the faces sample the 2.6-degree disc coarsely).
+    An atmosphere's air has no closed form: its sky is projected from ``ATMOSPHERE_FACE``
+    texels a face (smooth: the nine coefficients need no more), its disc in closed form."""
     rise, fall, glow, disc = _zonal_integrals()
+    if model.atmosphere:
+        n = ATMOSPHERE_FACE
+        faces = np.stack([model_radiance(model, face_directions(face, n), disc=False) for face in range(6)])
+        bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
+        sun = np.outer(disc, np.array(model.sun_color, np.float64))[bands]
+        return project_faces(faces) + 2.0 * np.pi * sun * sh_basis(np.array(model.sun_direction, np.float64))[:, None] \
+            * np.array(BAND_FACTORS)[:, None]
     zenith, horizon, ground = (np.array(colour, np.float64) for colour in (model.zenith, model.horizon, model.ground))
     whole = np.array([2.0, 0.0, 0.0])  # a constant's F_l
     up = np.outer(whole, horizon) + np.outer(rise, zenith - horizon) + np.outer(fall, ground - horizon)
@@ -181,6 +191,7 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     return radiance * np.array(BAND_FACTORS)[:, None]
 
 
+ATMOSPHERE_FACE = 32   # texels a face an atmosphere's sky is projected from (16: 2% off a low sun's)
 ZONAL_SAMPLES = 1 << 16  # midpoints an interval of each shape's integrals
 
 

@@ -383,28 +383,51 @@ class Renderer(Gpu):
     def set_generated_sky(self, model: SkyModel, size: int) -> None:
         """The world's sky: a generated Skybox, drawn per pixel from ``model`` by the sky pass
         and into a cube map of ``size`` texels a face for what samples it (``SkyBake``)."""
+        self._set_sky_view(model)   # (the bake reads an atmosphere's table)
         self._replace_sky(self.sky_bake.bake(model, size), model)
 
     def _replace_sky(self, cube: moderngl.TextureCube, model: SkyModel | None) -> None:
         old = self.sky
         self.sky = cube
         old.release()
-        self.sky_model = model
-        self.sky_version += 1
-        self.note_scene_change()
+        self.set_sky_model(model)
 
     def set_sky_model(self, model: SkyModel | None) -> None:
         """The ``model`` the sky pass draws a generated Skybox from, the cube map kept (its
         sun turning: the prepare stage makes the cube again a moment later)."""
+        self._set_sky_view(model)
         self.sky_model = model
         self.sky_version += 1
         self.note_scene_change()
+
+    def _set_sky_view(self, model: SkyModel | None) -> None:
+        """An atmosphere's sky-view table uploaded when it is another (its air, or the sun's
+        rounded elevation: ``SkyModel.air_key``); released with the last atmosphere."""
+        if model is None or not model.atmosphere:
+            if self.sky_view is not None:
+                self.sky_view.release()
+            self.sky_view, self.sky_view_key = None, ()
+            return
+        if self.sky_view is not None and self.sky_view_key == model.air_key:
+            return
+        table = np.asarray(model.air_table, np.float32)
+        texels = np.concatenate([table, np.ones(table.shape[:2] + (1,), np.float32)], -1).astype(np.float16)
+        rows, columns = table.shape[:2]
+        if self.sky_view is None or self.sky_view.size != (columns, rows):
+            if self.sky_view is not None:
+                self.sky_view.release()
+            self.sky_view = self.ctx.texture((columns, rows), 4, dtype="f2")
+            self.sky_view.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self.sky_view.repeat_x = self.sky_view.repeat_y = False
+        self.sky_view.write(texels.tobytes())
+        self.sky_view_key = model.air_key
 
     def resource_counts(self) -> dict[str, int]:
         """Live GL resources this renderer owns, by kind (soak and churn runs check that they
         come back to their baseline; tests that they go back to zero)."""
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
-                "probe_cubes": len(self.probes.cubes), "shadow_cubes": len(self.shadows.cubes),
+                "probe_cubes": len(self.probes.cubes),
+                "sky_view": int(self.sky_view is not None), "shadow_cubes": len(self.shadows.cubes),
                 "spot_atlases": int(self.shadows.spot_atlas is not None),
                 "spot_cookies": self.spot_cookies.count(),
                 "layered_targets": len(self.probes._layered),
@@ -561,6 +584,7 @@ class Renderer(Gpu):
         if self.text_pass is not None:
             self.text_pass.release()
             self.text_pass = None
+        self._set_sky_view(None)
         for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog,
                     self.spot_cookies, self.pose_rows, self.object_motion):
             obj.release()

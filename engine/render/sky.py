@@ -19,7 +19,7 @@ the faces with numpy: the reference the tests hold the GPU's cube to, and given 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import moderngl
@@ -28,6 +28,15 @@ import numpy as np
 from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import HALF_MAX
 from engine.core.cube_faces import face_directions
+from engine.render.atmosphere import (
+    ELEVATION_STEP_DEGREES,
+    Air,
+    air_radiance,
+    ground_light,
+    sky_view_table,
+    sun_elevation_degrees,
+    sunlight_share,
+)
 from engine.rules.light_rules import SkySun
 
 if TYPE_CHECKING:
@@ -52,7 +61,31 @@ def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: SkySun | None = No
     (``sun_of``)."""
     d = np.asarray(directions, np.float64)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    if skybox.model == "atmosphere":
+        return model_radiance(sky_model(skybox, sun), d)
     return _gradient(_colours(skybox), d) + _sun_light(skybox, d, sun)
+
+
+def air_of(skybox: Skybox) -> Air:
+    """The air of an atmosphere Skybox (``engine/render/atmosphere.py``): its ``rayleigh`` and
+    ``haze``, its ``ground`` colour the ground's albedo."""
+    return Air(rayleigh=float(skybox.rayleigh), haze=float(skybox.haze),
+               ground=tuple(float(c) for c in tuple(skybox.ground)[:3]))
+
+
+def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True) -> np.ndarray:
+    """Linear RGB of an atmosphere sky ``model`` along unit ``directions`` (..., 3), as
+    sky_model.glsl's ATMOSPHERE build draws it: the sky-view table times the sunlight above
+    the horizon, the ground fading in below it as the gradient's does, and (``disc``) the
+    sun's disc dimmed by the air."""
+    d = np.asarray(directions, np.float64)
+    towards = np.array(model.sun_direction, np.float64)
+    air = np.array(model.air_light) * air_radiance(model.air_table, d, towards)
+    y = d[..., 1:2]
+    colour = np.where(y >= 0.0, air, air + (np.array(model.ground) - air) * ground_share(y))
+    if disc:
+        colour = colour + disc_strength(np.clip(d @ towards, -1.0, 1.0)[..., None]) * np.array(model.sun_color)
+    return colour
 
 
 def _colours(skybox: Skybox) -> tuple[tuple[float, ...], ...]:
@@ -112,16 +145,30 @@ def _sun_light(skybox: Skybox, d: np.ndarray, sun: SkySun | None) -> np.ndarray:
 @dataclass(frozen=True)
 class SkyModel:
     """What ``sky_radiance`` needs of a generated Skybox: linear RGB colours and the unit
-    direction towards the sun (``shaders/include/sky_model.glsl``'s uniforms)."""
+    direction towards the sun (``shaders/include/sky_model.glsl``'s uniforms).  An atmosphere
+    (``air_table`` not None: ``engine/render/atmosphere.py``'s sky-view table, radiance per
+    unit of sunlight) has no zenith or horizon colour: ``air_light`` is the sunlight above the
+    air (the table's unit), ``ground`` the ground's radiance, ``sun_color`` the disc's colour
+    through the air; ``air_key`` (its air and the sun's rounded elevation) names its table."""
 
     zenith: tuple[float, float, float]
     horizon: tuple[float, float, float]
     ground: tuple[float, float, float]
     sun_direction: tuple[float, float, float]
     sun_color: tuple[float, float, float]
+    air_light: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    air_key: tuple = ()
+    air_table: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def atmosphere(self) -> bool:
+        return self.air_table is not None
 
     def uniforms(self) -> dict[str, tuple[float, float, float]]:
-        """The sky pass's uniforms, by name."""
+        """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
+        if self.atmosphere:
+            return {"sky_light": self.air_light, "sky_ground": self.ground,
+                    "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
         return {"sky_zenith": self.zenith, "sky_horizon": self.horizon, "sky_ground": self.ground,
                 "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
 
@@ -136,6 +183,14 @@ def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | No
         return tuple(float(c) for c in tuple(value)[:3])
 
     towards, disc_color = sun_of(skybox, sun)
+    if skybox.model == "atmosphere":
+        air = air_of(skybox)
+        elevation = sun_elevation_degrees(towards)
+        table = sky_view_table(air, elevation)
+        ground = ground_light(air, table, towards) * disc_color
+        return SkyModel((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), rgb(ground), rgb(towards),
+                        rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color),
+                        (air, round(elevation / ELEVATION_STEP_DEGREES)), table)
     return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color))
 
 

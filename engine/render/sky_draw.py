@@ -1,9 +1,10 @@
 """The sky a scene pass draws behind every view: one full-screen triangle at the far plane,
-its programs built once for each of (layered, generated, fogged).
+its programs built once for each of (layered, generated, atmosphere, fogged).
 
 A generated Skybox is evaluated per pixel (the ``GENERATED_SKY`` build of ``sky.frag``, its
 colours written to the program only when the sky changed: ``Gpu.sky_model``,
-``Gpu.sky_version``), else the cube map is sampled; ``layered``: the six-face build of a
+``Gpu.sky_version``; an atmosphere's ``ATMOSPHERE`` build reads its sky-view table,
+``Gpu.sky_view``), else the cube map is sampled; ``layered``: the six-face build of a
 one-pass cube-map capture (``sky_layered.geom``).  Apart from the pass
 (``engine/render/scene_pass.py``, which sets the sky's pass state and draws the triangle)
 because which build to draw and when to write its colours is the sky's business, not the
@@ -13,18 +14,18 @@ from __future__ import annotations
 import moderngl
 
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS
-from engine.render.bindings import CAMERA_BINDING, FOG_BINDING, SKY_UNIT, VIEWS_BINDING
+from engine.render.bindings import CAMERA_BINDING, FOG_BINDING, SKY_UNIT, SKY_VIEW_UNIT, VIEWS_BINDING, bind_texture
 from engine.render.gpu import Gpu
 
 
 class SkyDraw:
-    """The sky's vertex arrays by (layered, generated), and the sky version each one's
+    """The sky's vertex arrays by (layered, generated, atmosphere), and the sky version each one's
     program was last given (``Gpu.sky_version``)."""
 
     def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
-        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, fog defines)
+        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, atmosphere, fog defines)
         self._sky_written: dict[tuple, int] = {}
 
     def vertex_array(self, layered: bool) -> moderngl.VertexArray:
@@ -35,12 +36,15 @@ class SkyDraw:
         renderer = self.renderer
         model = renderer.sky_model
         fogging = renderer.fog.defines
-        key = (layered, model is not None, fogging)
+        air = model is not None and model.atmosphere
+        key = (layered, model is not None, air, fogging)
         vao = self._skies.get(key)
         if vao is None:
             defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
             if model is not None:
                 defines["GENERATED_SKY"] = "1"
+            if air:
+                defines["ATMOSPHERE"] = "1"
             defines.update(fogging)
             program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
                                                defines=defines)
@@ -52,11 +56,15 @@ class SkyDraw:
                 program["Fog"].binding = FOG_BINDING
             if model is None:
                 program["sky_map"].value = SKY_UNIT
+            if air:
+                program["sky_view"].value = SKY_VIEW_UNIT
             vao = self._skies[key] = self.ctx.vertex_array(program, [])
         if model is not None and self._sky_written.get(key) != renderer.sky_version:
             for name, value in model.uniforms().items():
                 vao.program[name].value = value  # (a shader reload writes them back: ShaderLibrary)
             self._sky_written[key] = renderer.sky_version
+        if air:
+            bind_texture(self.ctx, renderer.sky_view, SKY_VIEW_UNIT)
         return vao
 
     def release(self) -> None:

@@ -3,11 +3,38 @@
 // pixel by pixel, the sun's disc included).  The sky pass draws a generated Skybox with it at
 // the screen's own resolution (sky.frag's GENERATED_SKY build); a Skybox of given faces, and
 // every reflection of the sky, read the cube map made from the same function.
-uniform vec3 sky_zenith;         // linear RGB
+uniform vec3 sky_ground;          // an atmosphere's: the ground's radiance (its albedo lit)
+uniform vec3 sky_sun_direction;   // unit, towards the sun
+uniform vec3 sky_sun_color;       // the disc (an atmosphere's: through the air)
+
+// The disc: cos 0.9990 (2.6 degrees from its centre) to 0.9995 (1.8 degrees) ramps up.
+vec3 sun_disc(float cos_sun) {
+    return clamp((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * sky_sun_color;
+}
+
+#ifdef ATMOSPHERE
+// A physically based sky (engine/render/atmosphere.py, Hillaire 2020): the sky-view table's
+// radiance per unit of sunlight, by the way's elevation (rows: sqrt of it over 90 degrees) and
+// its azimuth from the sun's (columns: 0 to 180 degrees), times the sunlight above the air;
+// below the horizon the ground fades in as the gradient's does.  air_radiance is its twin.
+uniform sampler2D sky_view;
+uniform vec3 sky_light;           // the sunlight above the air (Skybox.sun_color x the light's colour)
+
+vec3 generated_sky(vec3 d) {
+    const float HALF_PI = 1.57079633;
+    float elevation = asin(clamp(d.y, 0.0, 1.0));
+    vec2 flat_way = d.xz, flat_sun = sky_sun_direction.xz;
+    float lengths = length(flat_way) * length(flat_sun);
+    float cos_azimuth = lengths > 1e-10 ? dot(flat_way, flat_sun) / lengths : 1.0;
+    vec2 at = vec2(acos(clamp(cos_azimuth, -1.0, 1.0)) / (2.0 * HALF_PI), sqrt(elevation / HALF_PI));
+    vec2 size = vec2(textureSize(sky_view, 0));
+    vec3 air = sky_light * textureLod(sky_view, (at * (size - 1.0) + 0.5) / size, 0.0).rgb;
+    vec3 color = d.y >= 0.0 ? air : air + (sky_ground - air) * clamp(-d.y * 4.0, 0.0, 1.0);
+    return color + sun_disc(clamp(dot(d, sky_sun_direction), -1.0, 1.0));
+}
+#else
+uniform vec3 sky_zenith;          // linear RGB
 uniform vec3 sky_horizon;
-uniform vec3 sky_ground;
-uniform vec3 sky_sun_direction;  // unit, towards the sun
-uniform vec3 sky_sun_color;
 
 vec3 generated_sky(vec3 d) {
     float y = d.y;
@@ -17,7 +44,6 @@ vec3 generated_sky(vec3 d) {
     // A warm band around the sun's azimuth so that left and right of the sky differ.
     float cos_sun = clamp(dot(d, sky_sun_direction), -1.0, 1.0);
     vec3 glow = 0.25 * pow(clamp(cos_sun, 0.0, 1.0), 4.0) * vec3(1.0, 0.55, 0.25);
-    // The disc: cos 0.9990 (2.6 degrees from its centre) to 0.9995 (1.8 degrees) ramps up.
-    vec3 disc = clamp((cos_sun - 0.9990) / 0.0005, 0.0, 1.0) * sky_sun_color;
-    return color + glow + disc;
+    return color + glow + sun_disc(cos_sun);
 }
+#endif
