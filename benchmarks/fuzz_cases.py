@@ -91,7 +91,7 @@ def random_value(rng: random.Random) -> Any:
     if roll < 0.88:
         return rng.choice((box(), quad(0, 0), quad(1, 1), sphere(0.5, 8, 4), checker_texture(8, 2)))
     if roll < 0.94:
-        return rng.choice(("skybox", "planar", "cube", "portal", "once", "every_frame", "never"))
+        return rng.choice(("skybox", "planar", "cube", "portal", "once", "every_frame", "never", "atmosphere"))
     return rng.uniform(-10, 10)
 
 

@@ -233,3 +233,25 @@ def test_the_air_of_a_skybox():
     air = air_of(Skybox(model="atmosphere", rayleigh=2.0, haze=0.5, ground=(0.1, 0.2, 0.3)))
     assert (air.rayleigh, air.haze) == (2.0, 0.5)
     assert air.ground == pytest.approx((0.1, 0.2, 0.3))
+
+
+def test_a_level_file_names_the_air_and_refuses_a_sky_it_does_not_know(tmp_path):
+    from engine.assets.level_read import LevelError, load_level
+    from engine.assets.level_save import save_level
+    from engine.core.world import World
+
+    good = tmp_path / "air.toml"
+    good.write_text('[level]\nname = "air"\n[[entity]]\nname = "sky"\n'
+                    'Skybox = { model = "atmosphere", haze = 2.0, rayleigh = 1.5, tints_sunlight = false }\n')
+    world = World()
+    load_level(good).spawn(world)
+    sky = world.query_one(Skybox)[0][1]
+    assert (sky.model, sky.haze, sky.rayleigh, sky.tints_sunlight) == ("atmosphere", 2.0, 1.5, False)
+    save_level(world, tmp_path / "again.toml")
+    again = World()
+    load_level(tmp_path / "again.toml").spawn(again)
+    assert again.query_one(Skybox)[0][1].model == "atmosphere" and again.query_one(Skybox)[0][1].haze == 2.0
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[level]\nname = "x"\n[[entity]]\nname = "sky"\n[entity.Skybox]\nmodel = "dusk"\n')
+    with pytest.raises(LevelError, match=r"bad.toml:6: entity 'sky': Skybox.model.* must be one of"):
+        load_level(bad)
