@@ -186,6 +186,7 @@ from components import (
     PointLight,
     Reflective,
     ScreenReflections,
+    Skybox,
     Tonemap,
     Transform,
     Vignette,
@@ -407,6 +408,22 @@ def _fog_volumes(engine: Engine) -> None:
                            FogVolume(size=(5.0, 2.0, 5.0), density=0.4))
 
 
+def _atmosphere(engine: Engine) -> None:
+    """No shadows; the scene's Skybox a physically based sky (Skybox.model "atmosphere")."""
+    _plain(engine)
+    for _, sky in engine.world.query_one(Skybox):
+        sky.model = "atmosphere"
+
+
+def _sun_setting(engine: Engine, frame: int) -> None:
+    """The sun sinking a tenth of a degree a frame from 20 degrees up (a day in a minute at
+    60 frames a second): an atmosphere's table made again every two or three frames, any
+    generated sky's cube map every ten."""
+    for _, light in engine.world.query_one(DirectionalLight):
+        elevation = math.radians(20.0 - 0.1 * frame)
+        light.direction = glm.vec3(0.3 * math.cos(elevation), -math.sin(elevation), -0.95 * math.cos(elevation))
+
+
 def _shafts(engine: Engine, half: bool = True) -> None:
     """Shadows, height fog and light shafts on the camera (VolumetricFog: its march, at half
     size or a ray a pixel, and its filter)."""
@@ -575,6 +592,10 @@ VARIANTS: list[Variant] = [
     Variant("fog", _fog, "height fog with sun scatter on the camera"),
     Variant("fog_uniform", _fog_uniform, "fog the same everywhere on the camera"),
     Variant("fog_volumes", _fog_volumes, "four FogVolumes over the ring, no camera fog"),
+    Variant("atmosphere", _atmosphere, "no shadows; a physically based sky (Skybox(model='atmosphere'))"),
+    Variant("gradient_setting", _plain, "no shadows; the sun sinking 0.1 degrees a frame", _sun_setting),
+    Variant("atmosphere_setting", _atmosphere, "the atmosphere with the sun sinking 0.1 degrees a frame",
+            _sun_setting),
     Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),
     Variant("shafts", _shafts, "the same with VolumetricFog() (marched at half size; the sun's and the lamp's)"),
     Variant("shafts_sun", _shafts_sun, "the same with the sun's shafts alone (the lamp's volumetric 0)"),

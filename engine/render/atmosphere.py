@@ -129,16 +129,22 @@ _HORIZON = math.sqrt(TOP_KM * TOP_KM - GROUND_KM * GROUND_KM)   # the top's dist
 
 def _bilinear(table: np.ndarray, row: np.ndarray, column: np.ndarray) -> np.ndarray:
     """``table`` (rows, columns, 3) between its entries at fractional ``row`` and ``column``
-    in [0, 1] (0 and 1 the first and last entries)."""
+    in [0, 1] (0 and 1 the first and last entries).  (One flat index and four takes: the
+    sky-view table's march spends most of its time here, twice as long with 2-D indexing.)"""
     rows, columns = table.shape[:2]
     y = np.clip(row, 0.0, 1.0) * (rows - 1)
     x = np.clip(column, 0.0, 1.0) * (columns - 1)
-    y0 = np.minimum(y.astype(np.int64), rows - 2)
-    x0 = np.minimum(x.astype(np.int64), columns - 2)
+    y0 = np.minimum(y.astype(np.intp), rows - 2)
+    x0 = np.minimum(x.astype(np.intp), columns - 2)
     fy, fx = (y - y0)[..., None], (x - x0)[..., None]
-    top = table[y0, x0] * (1.0 - fx) + table[y0, x0 + 1] * fx
-    bottom = table[y0 + 1, x0] * (1.0 - fx) + table[y0 + 1, x0 + 1] * fx
-    return top * (1.0 - fy) + bottom * fy
+    flat = table.reshape(-1, table.shape[2])
+    at = y0 * columns + x0
+    top = np.take(flat, at, axis=0)
+    top += (np.take(flat, at + 1, axis=0) - top) * fx
+    bottom = np.take(flat, at + columns, axis=0)
+    bottom += (np.take(flat, at + columns + 1, axis=0) - bottom) * fx
+    top += (bottom - top) * fy
+    return top
 
 
 @functools.lru_cache(maxsize=8)
