@@ -314,6 +314,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "post": _lighting("post"),
     "flared": _lighting("flared"),
     "graded": _lighting("graded"),
+    "atmosphere_setting": _lighting("atmosphere_setting"),
     "point_shadows": _point_shadows,
     "soft_sun": _soft_sun,
     "spot_shadows": _spot_shadows,
