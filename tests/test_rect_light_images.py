@@ -145,12 +145,16 @@ def test_an_even_image_lights_as_a_light_of_its_colour(scene):
 # Panels over a floor: a ceiling panel tilted towards the camera, a low one and one a
 # quarter metre over the floor, over rough white (roughness 1); the ceiling panel over white
 # metal at roughness 0.15, 0.3 and 0.5.  The bounds on the red share's error (median, 90th
-# percentile), a little over what was measured: the lookup's footprint, at most the image's
-# 2 x 2 level, is a box where the lobe's weight falls off smoothly; a rough metal's lobe that
-# takes in the whole panel reads the side it leans to too strongly (0.12 in the median).
-SPLIT_CASES = {"ceiling": (CEILING, 1.0, 0.0, 0.03, 0.09), "low": (LOW, 1.0, 0.0, 0.06, 0.12),
-               "near": (NEAR, 1.0, 0.0, 0.04, 0.12), "metal_0.15": (CEILING, 0.15, 1.0, 0.02, 0.07),
-               "metal_0.3": (CEILING, 0.3, 1.0, 0.04, 0.11), "metal_0.5": (CEILING, 0.5, 1.0, 0.15, 0.21)}
+# percentile), a little over what was measured (median / 90th: ceiling 0.0020 / 0.0049, low
+# 0.0037 / 0.0069, near 0.0028 / 0.0060, metal 0.15 0.0009 / 0.0098, metal 0.3 0.0072 /
+# 0.037, metal 0.5 0.026 / 0.080): each quarter of the face is read where the lobe's mean way
+# over it meets it, at most at the level where the quarter is one texel, and weighted by its
+# share of the integral.  One lookup for the whole face measured 0.020 / 0.072, 0.045 / 0.096,
+# 0.025 / 0.099, 0.002 / 0.044, 0.031 / 0.089 and 0.123 / 0.183: a rough metal's lobe that
+# takes in the whole panel read the side it leans to too strongly.
+SPLIT_CASES = {"ceiling": (CEILING, 1.0, 0.0, 0.008, 0.015), "low": (LOW, 1.0, 0.0, 0.01, 0.02),
+               "near": (NEAR, 1.0, 0.0, 0.01, 0.02), "metal_0.15": (CEILING, 0.15, 1.0, 0.006, 0.025),
+               "metal_0.3": (CEILING, 0.3, 1.0, 0.015, 0.06), "metal_0.5": (CEILING, 0.5, 1.0, 0.045, 0.11)}
 
 
 @pytest.mark.parametrize("case", sorted(SPLIT_CASES))
@@ -268,7 +272,9 @@ def test_a_panels_image_in_a_mirror_shows_its_picture_the_other_way_round(scene)
     unflipped = through_the_mirror(scene, scene(with_mirror, SIZE), (alone, lambda world: (
         look(world), lamp(world, image_centre, image_rotation, picture))), image_centre, mirror_z)
     mismatch = np.abs(unflipped[0] - unflipped[1]) / unflipped[1]
-    assert np.percentile(mismatch, 90) > 0.1, np.percentile(mismatch, 90)   # (the picture the same way round: not so)
+    # (the picture the same way round: not so.  Measured 0.084 at the 90th percentile, where
+    # the right picture's comes to 0.019: the floor, rough, sees the whole panel either way.)
+    assert np.percentile(mismatch, 90) > 0.05, np.percentile(mismatch, 90)
 
 
 def test_the_rows_name_the_face_and_a_mirror_keeps_it():
