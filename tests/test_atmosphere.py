@@ -185,37 +185,50 @@ def test_the_sunlight_is_reddened_by_the_air_it_crosses(scene):
     np.testing.assert_allclose(direct[True] / direct[False], want, rtol=0.03)
 
 
-def test_the_table_follows_the_suns_elevation_not_its_azimuth_and_goes_with_the_sky(scene):
-    """The sky-view table is made again only when the sun rises or sets by a step; turning
-    it about the vertical keeps it (the columns are azimuths from the sun's); the texture is
-    released once the sky is a gradient again, and with the Skybox."""
+def test_the_table_is_drawn_again_as_the_sun_moves_and_goes_with_the_sky(scene):
+    """The sky-view table is drawn on the GPU again when the sun moves (a still frame draws
+    none), the sky pass then the twin's at the new elevation; the table is released once the
+    sky is a gradient again, and with the Skybox."""
     sun = _toward(20.0)
     light = DirectionalLight(direction=tuple(-sun), intensity=3.0)
     skybox = Skybox(model="atmosphere")
     _, _, runner = _frame(scene, skybox, light, _toward(10.0))
     renderer = runner.engine.renderer
-    key = renderer.sky_view_key
-    assert renderer.resource_counts()["sky_view"] == 1
-    light.direction = tuple(-_toward(20.0, 40.0))
+    drawn = renderer.sky_view_pass.draws
+    assert drawn >= 1 and renderer.resource_counts()["sky_view"] == 1
     runner.frame()
-    assert renderer.sky_view_key == key
+    assert renderer.sky_view_pass.draws == drawn   # still: kept
     light.direction = tuple(-_toward(21.0, 40.0))
     runner.frame()
-    runner.frame()
-    assert renderer.sky_view_key != key
+    assert renderer.sky_view_pass.draws == drawn + 1
     colour, rays = _read(runner)
     np.testing.assert_allclose(colour, sky_radiance(skybox, rays, SkySun(tuple(_toward(21.0, 40.0)))),
                                rtol=1e-2, atol=2e-3)
     skybox.model = "gradient"
     runner.frame()
     assert renderer.resource_counts()["sky_view"] == 0 and renderer.sky_view is None
+    assert renderer.sky_view_pass.texture is None
     skybox.model = "atmosphere"
     runner.frame()
     assert renderer.resource_counts()["sky_view"] == 1
     world = runner.engine.world
     world.delete_entity(next(entity for entity, _ in world.query_one(Skybox)))
     runner.frame()
-    assert renderer.resource_counts()["sky_view"] == 0
+    assert renderer.resource_counts()["sky_view"] == 0 and renderer.sky_view_pass.texture is None
+
+
+def test_the_gpus_table_is_the_numpy_one(scene):
+    """The table the GPU draws (``shaders/sky_view.frag``) against ``sky_view_table``'s march
+    in float64, for a high sun and a setting one, hazy air and thick: within 1% of the light
+    (half floats, the two tables read with the GPU's filtering)."""
+    runner = scene(lambda world: None, (16, 16))
+    sky_view = runner.engine.renderer.sky_view_pass
+    for air, elevation in ((EARTH, 50.0), (EARTH, 1.5), (atm.Air(haze=4.0, rayleigh=2.0), 12.0)):
+        texture = sky_view.draw(air, elevation)
+        rows, columns = atm.VIEW_SIZE
+        got = np.frombuffer(texture.read(), np.float16).reshape(rows, columns, 4)[..., :3].astype(np.float64)
+        want = atm.sky_view_table(air, elevation)
+        np.testing.assert_allclose(got, want, rtol=0.01, atol=2e-5 * want.max())
 
 
 @pytest.mark.parametrize("field, value, words", [

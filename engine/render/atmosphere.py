@@ -27,9 +27,11 @@ Technique", EGSR 2020), computed here with numpy in three tables:
 
 The sky pass reads the sky-view table by the same rule (``shaders/include/sky_model.glsl``'s
 ATMOSPHERE build; ``air_radiance`` here is its twin, bilinear between texel centres as GL
-filters): one lookup a pixel.  The table depends on the sun's elevation alone, so it is made
-again only when the sun rises or sets by ``ELEVATION_STEP_DEGREES`` (kept for the last few
-elevations); the disc and the azimuth follow the sun exactly.  Below the horizon the ground
+filters): one lookup a pixel.  The table depends on the sun's elevation alone: the GPU draws
+it (``engine/render/sky_view.py``, held to ``sky_view_table`` here) whenever the sun rises or
+sets by ``TABLE_STEP_DEGREES``; the disc and the azimuth follow the sun exactly.  What the CPU
+needs of the sky (its light as spherical harmonics, the ground's light) comes from a small
+table made here once a degree (``coarse_view_table``).  Below the horizon the ground
 (``Air.ground`` lit by the sun and the sky) fades in as the gradient sky's does.
 
 The air's constants are Earth's (Hillaire's table 1: Rayleigh scattering of 680, 550 and
@@ -65,7 +67,10 @@ SCATTERING_DIRECTIONS = 64
 SCATTERING_STEPS = 20
 VIEW_SIZE = (48, 96)             # sky view: (elevation rows, azimuth columns)
 VIEW_STEPS = 30
-ELEVATION_STEP_DEGREES = 0.25    # the sun's elevation a sky-view table is made for, rounded to this
+COARSE_SIZE = (24, 48)           # the CPU's smaller table (the sky's light, the ground's)
+COARSE_STEPS = 20
+ELEVATION_STEP_DEGREES = 1.0     # the sun's elevation the CPU's table is made for, rounded to this
+TABLE_STEP_DEGREES = 0.02        # ... and the GPU's (a sky's colours move by less than a code value)
 
 
 @dataclass(frozen=True)
@@ -251,10 +256,10 @@ def _multiple_scattering(air: Air, height: np.ndarray, mu_sun: np.ndarray) -> np
     return _bilinear(_multiple_scattering_table(air), height / (TOP_KM - GROUND_KM), mu_sun * 0.5 + 0.5)
 
 
-def view_directions(sun_elevation: float) -> tuple[np.ndarray, np.ndarray]:
+def view_directions(sun_elevation: float, size: tuple[int, int] = VIEW_SIZE) -> tuple[np.ndarray, np.ndarray]:
     """The sky-view table's ways (rows, columns, 3) in a frame whose y is up and whose sun
     lies in the x-y plane towards +x, and that sun (3,)."""
-    rows, columns = VIEW_SIZE
+    rows, columns = size
     elevation = 0.5 * math.pi * np.linspace(0.0, 1.0, rows) ** 2
     azimuth = math.pi * np.linspace(0.0, 1.0, columns)
     e, a = np.meshgrid(elevation, azimuth, indexing="ij")
@@ -263,24 +268,30 @@ def view_directions(sun_elevation: float) -> tuple[np.ndarray, np.ndarray]:
     return ways, sun
 
 
-def sky_view_table(air: Air, sun_elevation_degrees: float) -> np.ndarray:
-    """The radiance (rows, columns, 3) float32 the eye sees along each of the table's ways
-    (``view_directions``) per unit of sunlight, with the sun ``sun_elevation_degrees`` above
-    the horizon (rounded to ``ELEVATION_STEP_DEGREES``: ``sky_view_rounded``)."""
-    return _sky_view(air, round(sun_elevation_degrees / ELEVATION_STEP_DEGREES) * ELEVATION_STEP_DEGREES)
+def coarse_view_table(air: Air, sun_elevation_degrees: float) -> np.ndarray:
+    """A small sky-view table (``COARSE_SIZE``, ``COARSE_STEPS``) for what the CPU needs of the
+    sky: its light (spherical harmonics) and the ground's; the sun's elevation rounded to
+    ``ELEVATION_STEP_DEGREES`` (the last few kept: about 7 ms of numpy on the 2-core machine,
+    once a degree of a day, as the sky's cube map is made again)."""
+    rounded = round(sun_elevation_degrees / ELEVATION_STEP_DEGREES) * ELEVATION_STEP_DEGREES
+    return sky_view_table(air, rounded, COARSE_SIZE, COARSE_STEPS)
 
 
 @functools.lru_cache(maxsize=16)
-def _sky_view(air: Air, sun_elevation_degrees: float) -> np.ndarray:
-    ways, sun = view_directions(math.radians(sun_elevation_degrees))
+def sky_view_table(air: Air, sun_elevation_degrees: float, size: tuple[int, int] = VIEW_SIZE,
+                   steps: int = VIEW_STEPS) -> np.ndarray:
+    """The radiance (rows, columns, 3) float32 the eye sees along each of the table's ways
+    (``view_directions``) per unit of sunlight, with the sun ``sun_elevation_degrees`` above
+    the horizon: the reference the GPU's table (``engine/render/sky_view.py``) is held to."""
+    ways, sun = view_directions(math.radians(sun_elevation_degrees), size)
     r0 = GROUND_KM + EYE_KM
     length = _to_top(np.float64(r0), ways[..., 1])                      # (rows, columns)
     nu = ways @ sun
     rayleigh_shape, mie_shape = rayleigh_phase(nu)[..., None], mie_phase(nu)[..., None]
     light = np.zeros(ways.shape)
     through = np.ones(ways.shape)
-    edges = (np.arange(VIEW_STEPS + 1) / VIEW_STEPS) ** 2              # finer near the eye, where the air is thick
-    for k in range(VIEW_STEPS):
+    edges = (np.arange(steps + 1) / steps) ** 2                        # finer near the eye, where the air is thick
+    for k in range(steps):
         t = length * 0.5 * (edges[k] + edges[k + 1])
         step = (length * (edges[k + 1] - edges[k]))[..., None]
         point = np.array([0.0, r0, 0.0]) + ways * t[..., None]
@@ -298,6 +309,30 @@ def _sky_view(air: Air, sun_elevation_degrees: float) -> np.ndarray:
     light = light.astype(np.float32)
     light.setflags(write=False)
     return light
+
+
+def transmittance_texels(air: Air) -> np.ndarray:
+    """The transmittance table (rows of radius, columns of mu, 3) as the GPU's table is given it."""
+    return _transmittance_table(air)
+
+
+def scattering_texels(air: Air) -> np.ndarray:
+    """The multiple-scattering table (rows of height, columns of the sun's cosine, 3), likewise."""
+    return _multiple_scattering_table(air)
+
+
+def glsl_defines() -> dict[str, str]:
+    """The air's constants for ``shaders/sky_view.frag`` (one source: this module's)."""
+    def vec3(values) -> str:
+        return "vec3(" + ", ".join(f"{float(v):.9g}" for v in values) + ")"
+
+    return {"GROUND_KM": f"{GROUND_KM:.9g}", "TOP_KM": f"{TOP_KM:.9g}", "EYE_KM": f"{EYE_KM:.9g}",
+            "RAYLEIGH_SCATTERING": vec3(RAYLEIGH_SCATTERING), "RAYLEIGH_HEIGHT_KM": f"{RAYLEIGH_HEIGHT_KM:.9g}",
+            "MIE_SCATTERING": f"{MIE_SCATTERING:.9g}", "MIE_EXTINCTION": f"{MIE_EXTINCTION:.9g}",
+            "MIE_HEIGHT_KM": f"{MIE_HEIGHT_KM:.9g}", "MIE_G": f"{MIE_G:.9g}",
+            "OZONE_ABSORPTION": vec3(OZONE_ABSORPTION), "OZONE_CENTRE_KM": f"{OZONE_CENTRE_KM:.9g}",
+            "OZONE_HALF_WIDTH_KM": f"{OZONE_HALF_WIDTH_KM:.9g}", "VIEW_STEPS": str(VIEW_STEPS),
+            "ROWS": str(VIEW_SIZE[0]), "COLUMNS": str(VIEW_SIZE[1])}
 
 
 # --- reading it, as the sky pass does ---------------------------------------------------------
@@ -336,9 +371,9 @@ def sunlight_share(air: Air, sun: np.ndarray) -> np.ndarray:
 
 def ground_light(air: Air, table: np.ndarray, sun: np.ndarray) -> np.ndarray:
     """The ground's radiance per unit of sunlight (3,): its albedo over pi times the sun's
-    light through the air on it and the sky's (the table's ways weighed by their cosine
-    and solid angle)."""
-    rows, columns = VIEW_SIZE
+    light through the air on it and the sky's (the ``table``'s ways, any size, weighed by
+    their cosine and solid angle)."""
+    rows, columns = table.shape[:2]
     v = np.linspace(0.0, 1.0, rows)
     elevation = 0.5 * math.pi * v * v
     # Each entry's share of the hemisphere: d(elevation) x d(azimuth) x cos(elevation), both

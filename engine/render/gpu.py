@@ -167,9 +167,8 @@ class Gpu:
         # count of the skies set, so a pass writes a sky's colours into its programs once.
         self.sky_model: SkyModel | None = None
         self.sky_version = 0
-        # An atmosphere's sky-view table (RGBA16F; None: no atmosphere), and the key it holds.
+        # An atmosphere's sky-view table (drawn by the renderer's SkyView; None: no atmosphere).
         self.sky_view: moderngl.Texture | None = None
-        self.sky_view_key: tuple = ()
         # Stand-ins for an image a program samples in a branch its draw does not take (a batch
         # with no albedo map; a fallback with no reflection level below it).  A sampler the
         # program uses statically must still find a complete texture of its own type on its

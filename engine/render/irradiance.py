@@ -172,11 +172,13 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     of them with its colours.  Against ``project_faces`` of its 128-texel faces it differs by
     under 1e-4 of the largest coefficient (the faces sample the 2.6-degree disc coarsely).
     An atmosphere's air has no closed form: its sky is projected from ``ATMOSPHERE_FACE``
-    texels a face (smooth: the nine coefficients need no more), its disc in closed form."""
+    texels a face of the CPU's small table (smooth: the nine coefficients need no more), its
+    disc in closed form."""
     rise, fall, glow, disc = _zonal_integrals()
     if model.atmosphere:
         n = ATMOSPHERE_FACE
-        faces = np.stack([model_radiance(model, face_directions(face, n), disc=False) for face in range(6)])
+        faces = np.stack([model_radiance(model, face_directions(face, n), disc=False, coarse=True)
+                          for face in range(6)])
         bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
         sun = np.outer(disc, np.array(model.sun_color, np.float64))[bands]
         return project_faces(faces) + 2.0 * np.pi * sun * sh_basis(np.array(model.sun_direction, np.float64))[:, None] \

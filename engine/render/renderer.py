@@ -40,6 +40,7 @@ from engine.render.screen_reflections import ScreenReflectionPass
 from engine.render.shadows import ShadowMaps
 from engine.render.sky import SkyModel, flat_cube, upload_cube
 from engine.render.sky_bake import SkyBake
+from engine.render.sky_view import SkyView
 from engine.render.targets import SEEN_CHANNELS, SEEN_MOVING_CHANNELS, LevelStack, RenderTargets
 from engine.render.text import TextPass
 from engine.render.volumetric_fog import VolumetricFogPass
@@ -111,6 +112,7 @@ class Renderer(Gpu):
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
         self.occlusion = ScreenOcclusion(self, self.scene_pass)  # the camera's AmbientOcclusion
         self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
+        self.sky_view_pass = SkyView(self)   # an atmosphere's sky-view table (engine/render/sky_view.py)
         self.path_checks: PathChecks = PathChecks(self, self.probes)
 
     @property
@@ -401,26 +403,14 @@ class Renderer(Gpu):
         self.note_scene_change()
 
     def _set_sky_view(self, model: SkyModel | None) -> None:
-        """An atmosphere's sky-view table uploaded when it is another (its air, or the sun's
-        rounded elevation: ``SkyModel.air_key``); released with the last atmosphere."""
+        """An atmosphere's sky-view table, drawn on the GPU for its air and the sun's
+        elevation (``SkyView``: again only when either changed); released with the last
+        atmosphere."""
         if model is None or not model.atmosphere:
-            if self.sky_view is not None:
-                self.sky_view.release()
-            self.sky_view, self.sky_view_key = None, ()
+            self.sky_view_pass.release()
+            self.sky_view = None
             return
-        if self.sky_view is not None and self.sky_view_key == model.air_key:
-            return
-        table = np.asarray(model.air_table, np.float32)
-        texels = np.concatenate([table, np.ones(table.shape[:2] + (1,), np.float32)], -1).astype(np.float16)
-        rows, columns = table.shape[:2]
-        if self.sky_view is None or self.sky_view.size != (columns, rows):
-            if self.sky_view is not None:
-                self.sky_view.release()
-            self.sky_view = self.ctx.texture((columns, rows), 4, dtype="f2")
-            self.sky_view.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            self.sky_view.repeat_x = self.sky_view.repeat_y = False
-        self.sky_view.write(texels.tobytes())
-        self.sky_view_key = model.air_key
+        self.sky_view = self.sky_view_pass.draw(model.air, model.air_elevation)
 
     def resource_counts(self) -> dict[str, int]:
         """Live GL resources this renderer owns, by kind (soak and churn runs check that they

@@ -29,9 +29,10 @@ from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import HALF_MAX
 from engine.core.cube_faces import face_directions
 from engine.render.atmosphere import (
-    ELEVATION_STEP_DEGREES,
+    TABLE_STEP_DEGREES,
     Air,
     air_radiance,
+    coarse_view_table,
     ground_light,
     sky_view_table,
     sun_elevation_degrees,
@@ -73,14 +74,16 @@ def air_of(skybox: Skybox) -> Air:
                ground=tuple(float(c) for c in tuple(skybox.ground)[:3]))
 
 
-def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True) -> np.ndarray:
+def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, coarse: bool = False) -> np.ndarray:
     """Linear RGB of an atmosphere sky ``model`` along unit ``directions`` (..., 3), as
-    sky_model.glsl's ATMOSPHERE build draws it: the sky-view table times the sunlight above
-    the horizon, the ground fading in below it as the gradient's does, and (``disc``) the
-    sun's disc dimmed by the air."""
+    sky_model.glsl's ATMOSPHERE build draws it: the sky-view table (``sky_view_table`` at the
+    sun's elevation, the one the GPU's is held to; ``coarse``: the CPU's small one) times the
+    sunlight above the horizon, the ground fading in below it as the gradient's does, and
+    (``disc``) the sun's disc dimmed by the air."""
     d = np.asarray(directions, np.float64)
     towards = np.array(model.sun_direction, np.float64)
-    air = np.array(model.air_light) * air_radiance(model.air_table, d, towards)
+    table = model.coarse_table if coarse else sky_view_table(model.air, model.air_elevation)
+    air = np.array(model.air_light) * air_radiance(table, d, towards)
     y = d[..., 1:2]
     colour = np.where(y >= 0.0, air, air + (np.array(model.ground) - air) * ground_share(y))
     if disc:
@@ -146,10 +149,11 @@ def _sun_light(skybox: Skybox, d: np.ndarray, sun: SkySun | None) -> np.ndarray:
 class SkyModel:
     """What ``sky_radiance`` needs of a generated Skybox: linear RGB colours and the unit
     direction towards the sun (``shaders/include/sky_model.glsl``'s uniforms).  An atmosphere
-    (``air_table`` not None: ``engine/render/atmosphere.py``'s sky-view table, radiance per
-    unit of sunlight) has no zenith or horizon colour: ``air_light`` is the sunlight above the
-    air (the table's unit), ``ground`` the ground's radiance, ``sun_color`` the disc's colour
-    through the air; ``air_key`` (its air and the sun's rounded elevation) names its table."""
+    (``air`` not None: ``engine/render/atmosphere.py``) has no zenith or horizon colour: its
+    sky is the sky-view table the GPU draws for ``air`` and the sun's ``air_elevation``
+    (degrees; ``engine/render/sky_view.py``) times ``air_light``, the sunlight above the air;
+    ``ground`` is the ground's radiance and ``sun_color`` the disc's colour through the air,
+    from ``coarse_table`` (the CPU's small table, which the sky's light is projected from)."""
 
     zenith: tuple[float, float, float]
     horizon: tuple[float, float, float]
@@ -157,12 +161,13 @@ class SkyModel:
     sun_direction: tuple[float, float, float]
     sun_color: tuple[float, float, float]
     air_light: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    air_key: tuple = ()
-    air_table: np.ndarray | None = field(default=None, compare=False, repr=False)
+    air: Air | None = None
+    air_elevation: float = 0.0
+    coarse_table: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def atmosphere(self) -> bool:
-        return self.air_table is not None
+        return self.air is not None
 
     def uniforms(self) -> dict[str, tuple[float, float, float]]:
         """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
@@ -186,11 +191,11 @@ def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | No
     if skybox.model == "atmosphere":
         air = air_of(skybox)
         elevation = sun_elevation_degrees(towards)
-        table = sky_view_table(air, elevation)
-        ground = ground_light(air, table, towards) * disc_color
+        coarse = coarse_view_table(air, elevation)
+        elevation = round(elevation / TABLE_STEP_DEGREES) * TABLE_STEP_DEGREES   # the GPU table's
+        ground = ground_light(air, coarse, towards) * disc_color
         return SkyModel((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), rgb(ground), rgb(towards),
-                        rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color),
-                        (air, round(elevation / ELEVATION_STEP_DEGREES)), table)
+                        rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color), air, elevation, coarse)
     return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color))
 
 
