@@ -63,7 +63,8 @@ MAX_PARALLAX_DEPTH = 1.0  # metres a height map reaches below its surface (Mater
 
 MAX_SPECULAR_TINT = 10.0  # Material.specular_color: past it a dielectric's f0 is held at 1 in every channel anyway
 MATERIAL_BLENDS = ("fade", "transparent")  # Material.blend: what a see-through material's alpha fades
-MATERIAL_IMAGES = ("texture", "normal_map", "emissive_map", "metallic_roughness_map", "occlusion_map")
+MATERIAL_IMAGES = ("texture", "normal_map", "emissive_map", "metallic_roughness_map", "occlusion_map", "lightmap")
+MAX_LIGHTMAP_INTENSITY = 1e4  # Material.lightmap_intensity: an 8-bit map's white at most this bright
 
 
 @dataclass(eq=False)
@@ -118,8 +119,19 @@ class Material(TrackedComponent):
     own light is not darkened, as glTF says.  A map left out costs nothing: each is sampled
     only by a build of the scene shader for batches that have it.
 
+    ``lightmap`` (three.js's ``lightMap``, Unity's and Godot's baked lightmaps; sRGB colour):
+    the light from all round baked into an image, each texel the colour a white matte surface
+    shows there (a Blender "Diffuse" bake without its colour), times ``lightmap_intensity``
+    (three.js's ``lightMapIntensity``; an 8-bit image's white, so a brighter bake is saved
+    divided by its largest value and that value given here).  It takes the place of the
+    sky's, a probe's and an irradiance volume's diffuse light on the surface (what it was
+    baked from: counted once), as a lightmapped object's in Unity and Godot; the lights'
+    own light and shadows, the environment's reflections, the occlusion map and ambient
+    occlusion still apply.  Bake it on the second UV set (``second_uv_maps=("lightmap",)``:
+    a lightmap is unwrapped without overlaps, the colour texture may tile).
+
     ``second_uv_maps`` names the maps (of ``"texture"``, ``"normal_map"``,
-    ``"emissive_map"``, ``"metallic_roughness_map"`` and ``"occlusion_map"``) that read the
+    ``"emissive_map"``, ``"metallic_roughness_map"``, ``"occlusion_map"`` and ``"lightmap"``) that read the
     mesh's second UV set (``Mesh.second_uvs``, glTF's TEXCOORD_1) instead of its first, as a
     glTF map's ``texCoord`` 1, three.js's ``Texture.channel`` and Godot's "UV2" switches: a
     baked occlusion map or lightmap unwrapped once over a model whose colour texture tiles,
@@ -238,6 +250,8 @@ class Material(TrackedComponent):
     metallic_roughness_map: TextureData | None = None
     occlusion_map: TextureData | None = None
     occlusion_strength: float = 1.0
+    lightmap: TextureData | None = None
+    lightmap_intensity: float = 1.0
     environment_reflection: float = 1.0
     alpha_cutoff: float | None = None
     double_sided: bool = False
@@ -291,6 +305,8 @@ class Material(TrackedComponent):
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
                     "sheen_roughness", "anisotropy", "iridescence", "diffuse_transmission"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "lightmap_intensity":
+            return finite(self, name, value, low=0.0, high=MAX_LIGHTMAP_INTENSITY)
         if name == "iridescence_ior":
             return finite(self, name, value, low=1.0, high=MAX_IOR)
         if name == "iridescence_thickness":

@@ -33,6 +33,7 @@ in vec2 v_uv;
 in vec2 v_uv2;  // the mesh's second UV set (Mesh.second_uvs): MAP_UV picks it for the maps that read it
 #endif
 #include "uv_sets.glsl"
+#include "lightmap.glsl"
 flat in vec4 v_color;
 flat in vec4 v_surface;
 flat in vec4 v_reflect;
@@ -552,7 +553,11 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     diffuse *= 1.0 - diffuse_transmission.a;
 #endif
     // E(n) x albedo x (1 - metallic) / pi, less what the environment's reflection took, and that reflection
+#ifdef LIGHTMAP
+    vec3 total = lightmap_irradiance() * diffuse * s.occlusion * (1.0 - s.environment_weight);  // (baked)
+#else
     vec3 total = ambient_irradiance(boxes, s.normal) * diffuse * s.occlusion * (1.0 - s.environment_weight);
+#endif
 #ifdef DIFFUSE_TRANSMISSION
     total += ambient_irradiance(boxes, -s.normal) * through * s.occlusion;  // the light from all round behind
 #endif

@@ -186,6 +186,8 @@ class ExtractSystem(esper.Processor):
                                             alpha_cutoff=material.alpha_cutoff if material else None,
                                             occlusion_map=material.occlusion_map if material else None,
                                             occlusion_strength=material.occlusion_strength if material else 1.0,
+                                            lightmap=material.lightmap if material else None,
+                                            lightmap_intensity=material.lightmap_intensity if material else 1.0,
                                             double_sided=material.double_sided if material else False,
                                             keeps_specular=material is not None and material.blend == "transparent",
                                             unlit=material is not None and material.unlit,

@@ -190,8 +190,8 @@ def test_a_bad_second_set_or_choice_is_refused_when_given():
         Mesh(positions, normals, first, triangles, second_uvs=second[:-1])
     with pytest.raises(AssetError, match="second_uvs has NaN"):
         Mesh(positions, normals, first, triangles, second_uvs=np.where(second > 0.5, np.nan, second))
-    with pytest.raises(ComponentValueError, match="names 'lightmap', which is not one of its maps"):
-        Material(second_uv_maps=("lightmap",))
+    with pytest.raises(ComponentValueError, match="names 'bump_map', which is not one of its maps"):
+        Material(second_uv_maps=("bump_map",))
     with pytest.raises(ComponentValueError, match="names a map twice"):
         Material(second_uv_maps=["texture", "texture"])
     with pytest.raises(ComponentValueError, match="must be a list of map names"):

@@ -7,7 +7,7 @@ Vectors and colours are lists, a rotation is a quaternion ``[w, x, y, z]`` or
 ``{ yaw = .., pitch = .. }`` (degrees) or ``{ look = [x, y, z] }``; a mesh is a generator
 (``{ box = [w, h, d] }``, ``{ quad = [w, h] }``, ``{ plane = [w, d], uv_repeat = r }``,
 ``{ sphere = r }``) or ``{ file = "x.obj" }``; a texture (``Material.texture``, ``normal_map``,
-``emissive_map``, ``metallic_roughness_map``, ``occlusion_map``) ``{ checker = [size, squares] }``,
+``emissive_map``, ``metallic_roughness_map``, ``occlusion_map``, ``lightmap``) ``{ checker = [size, squares] }``,
 ``{ ripples = [size, rings] }`` (a normal map) or ``{ file = "x.png" }``; paths are relative
 to the level file and stay inside its folder (or an asset root: ``LevelGame.asset_roots``,
 ``--asset-root DIR``). Entity references

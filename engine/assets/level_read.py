@@ -441,7 +441,7 @@ def _check_mirror(path: Path, index: int, name: str, parts: list[tuple[type, dic
         raise LevelError(path, str(exc).replace("Mirror on entity 0: its ", ""), line, name, "Mirror") from None
 
 
-_MATERIAL_MAPS = {("Material", name) for name in ("normal_map", "emissive_map", "metallic_roughness_map",
+_MATERIAL_MAPS = {("Material", name) for name in ("normal_map", "emissive_map", "metallic_roughness_map", "lightmap",
                                                   "occlusion_map")} | {("Decal", "normal_map")}
 _LINEAR_MAPS = ("normal_map", "metallic_roughness_map", "occlusion_map")  # data, not colour: 16 bits kept
 

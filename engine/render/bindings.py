@@ -165,6 +165,10 @@ VOLUMETRIC_NODE_UNIT = 56     # a reflection level's march and filter: the level
 SUN_DEPTH_UNIT = 57           # scene (SOFT_SUN_SHADOWS builds): the shadow atlas, its depths as values
 FLARE_UNIT = 58               # present (LENS_FLARE builds): the lens flare's ghosts (engine/render/lens_flare.py)
 DIRT_UNIT = 59                # present (LENS_DIRT builds): the bloom's lens dirt (Bloom.dirt)
+# A batch's lightmap: with an occlusion map of its own, the 17th sampler of the fullest build
+# (Renderer.batch_for refuses the pair on a 16-unit context: macOS's).
+LIGHTMAP_UNIT = 61            # scene (LIGHTMAP builds): the batch's lightmap (Material.lightmap)
+LIGHTMAP_OCCLUSION_SAMPLERS = 17
 SKY_VIEW_UNIT = 60            # sky, sky cube (ATMOSPHERE builds): the air's sky-view table (render/atmosphere.py)
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)

@@ -269,6 +269,8 @@ class BatchKey(NamedTuple):
     decal: bool = False  # a decal's cut mesh (FromDecal): drawn pulled towards the eye by a depth offset
     decal_order: int = 0  # its Decal.order: decals of higher orders blended later
     parallax_depth: float = 0.0  # Material.parallax_depth with a normal map: its PARALLAX build's uniform (0: none)
+    lightmap: int = 0                   # Material.lightmap's image id (0: none): its LIGHTMAP build's
+    lightmap_intensity: float = 1.0     # Material.lightmap_intensity: its draws' uniform
 
 
 _NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first preparing
@@ -381,6 +383,10 @@ class InstanceBatch:
         # The occlusion is its metallic-roughness map's red channel (the same image: glTF's
         # packed occlusion-roughness-metallic texture): no map, nor sampler, of its own.
         self.occlusion_packed = False
+        # The material's lightmap (sRGB; None: the build without it) and its intensity, part
+        # of the batch's key (Renderer.batch_for), the intensity its draws' uniform.
+        self.lightmap: moderngl.Texture | None = None
+        self.lightmap_intensity = 1.0
         self.double_sided = False  # Material.double_sided: its draws turn face culling off
         self.decal = False  # a decal's cut mesh (BatchKey.decal): its draws offset their depth towards the eye
         self.decal_order = 0  # its Decal.order (BatchKey.decal_order)

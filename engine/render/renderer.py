@@ -23,6 +23,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.budget import ViewBudget
 from engine.core.color import srgb_to_linear
 from engine.core.errors import GLLimitError
+from engine.render.bindings import LIGHTMAP_OCCLUSION_SAMPLERS
 from engine.render.cutout_mips import FILTERED_TEXELS, alpha_share, keep_alpha_share
 from engine.render.dynamic_resolution import GpuFrameTimer, ResolutionController
 from engine.render.gl_context import GLCapabilities
@@ -189,6 +190,7 @@ class Renderer(Gpu):
                   probe_blend: bool = False, rest_probe: int = 0,
                   mirrored: bool = False, alpha_cutoff: float | None = None,
                   occlusion_map: TextureData | None = None, occlusion_strength: float = 1.0,
+                  lightmap: TextureData | None = None, lightmap_intensity: float = 1.0,
                   double_sided: bool = False, keeps_specular: bool = False,
                   clearcoat: tuple[float, float] | None = None, unlit: bool = False,
                   dielectric_f0: tuple[float, float, float] = (0.04, 0.04, 0.04),
@@ -230,6 +232,7 @@ class Renderer(Gpu):
         # cut from: its draws' depth is offset towards the eye (ScenePass), so it wins their tie;
         # ``decal_order``: its Decal.order (the transparent slot blends higher orders later).
         # ``parallax_depth``: Material.parallax_depth with a normal map, its PARALLAX build's (0: none).
+        # ``lightmap``: Material.lightmap (sRGB, its LIGHTMAP build's) and ``lightmap_intensity`` its uniform.
         if second_uv_maps and mesh.second_uvs is None:
             raise GLLimitError(f"mesh {mesh.name!r}: Material.second_uv_maps reads a second UV set the mesh does "
                                "not have (Mesh.second_uvs)")
@@ -242,15 +245,24 @@ class Renderer(Gpu):
                        occlusion_strength if occlusion_map is not None else 1.0, double_sided,
                        bool(keeps_specular and transparent_entity), clearcoat, unlit, dielectric_f0, sheen,
                        dispersion, anisotropy, iridescence, posed, second_uv_maps, diffuse_transmission, decal,
-                       decal_order, parallax_depth if normal_map is not None else 0.0)
+                       decal_order, parallax_depth if normal_map is not None else 0.0,
+                       id(lightmap) if lightmap is not None else 0,
+                       lightmap_intensity if lightmap is not None else 1.0)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
                                 ("Material.emissive_map", emissive_map),
                                 ("Material.metallic_roughness_map", metallic_roughness_map),
-                                ("Material.occlusion_map", occlusion_map)):
+                                ("Material.occlusion_map", occlusion_map), ("Material.lightmap", lightmap)):
                 if image is not None:
                     self.check_texture(image, name)  # before anything is made: nothing half-built
+            if lightmap is not None and occlusion_map is not None and occlusion_map is not metallic_roughness_map \
+                    and self.caps.max_texture_image_units < LIGHTMAP_OCCLUSION_SAMPLERS:
+                raise GLLimitError(f"mesh {mesh.name!r}: a Material with both a lightmap and an occlusion map needs "
+                                   f"{LIGHTMAP_OCCLUSION_SAMPLERS} texture units in the fragment stage; this OpenGL "
+                                   f"({self.caps.renderer}) has {self.caps.max_texture_image_units} "
+                                   "(GL_MAX_TEXTURE_IMAGE_UNITS): bake the occlusion into the lightmap, or pack it "
+                                   "in the metallic-roughness map's red (the same image for both)")
             rows = -(-len(mesh.positions) * mesh.morph_count * 2 // MORPH_TEXTURE_WIDTH)
             if rows > self.caps.max_texture_size:  # (its offsets' texture: GpuMesh.morphs)
                 raise GLLimitError(f"mesh {mesh.name!r}: {len(mesh.positions)} vertices x {mesh.morph_count} morph "
@@ -281,6 +293,9 @@ class Renderer(Gpu):
                 batch.occlusion_map = self._acquire(self._textures, ("normal", id(occlusion_map)),
                                                     lambda: self._upload_texture(occlusion_map, linear=True))
             batch.occlusion_strength = key.occlusion_strength
+            if lightmap is not None:  # sRGB, shared with the same image used as an albedo texture
+                batch.lightmap = self._acquire(self._textures, id(lightmap), lambda: self._upload_texture(lightmap))
+            batch.lightmap_intensity = key.lightmap_intensity
             batch.key = key
             batch.mirrored = mirrored
             batch.alpha_cutoff = alpha_cutoff
@@ -359,6 +374,8 @@ class Renderer(Gpu):
             self._release(self._textures, ("normal", key.metallic_roughness_map))
         if key.occlusion_map and key.occlusion_map != key.metallic_roughness_map:  # (packed: nothing of its own)
             self._release(self._textures, ("normal", key.occlusion_map))
+        if key.lightmap:
+            self._release(self._textures, key.lightmap)
 
     def _upload_cutout_texture(self, texture: TextureData, cutoff: float) -> moderngl.Texture:
         """A cutout's albedo texture whose mip levels keep level 0's coverage at ``cutoff``

@@ -305,7 +305,7 @@ class ScenePass:
                 batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN, batch.dispersion,
                 batch.anisotropy or NO_ANISOTROPY, batch.iridescence or NO_IRIDESCENCE, batch.pose_row,
                 batch.mesh.morph_count if batch.morphed else 0, batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION,
-                batch.parallax_depth)
+                batch.parallax_depth, batch.lightmap_intensity)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The

@@ -31,6 +31,7 @@ from engine.render.bindings import (
     FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
+    LIGHTMAP_UNIT,
     LIGHTS_BINDING,
     METALLIC_ROUGHNESS_UNIT,
     MORPH_UNIT,
@@ -72,7 +73,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
                      "anisotropy", "iridescence", "pose_row", "morph_targets", "diffuse_transmission",
-                     "parallax_depth")
+                     "parallax_depth", "lightmap_intensity")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -84,7 +85,7 @@ NO_ANISOTROPY = (0.0, 0.0)  # the anisotropy uniform of a batch without one (lik
 NO_IRIDESCENCE = (0.0, 1.0, 0.0)  # the thin film's uniform of a batch without one (likewise)
 # a batch's build with none of _material_build's
 NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False, False, 0,
-                    False, False)
+                    False, False, False)
 
 
 
@@ -95,9 +96,10 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "shadow_atlas": SHADOW_ATLAS_UNIT, "point_shadow0": POINT_SHADOW_UNITS[0],
                 "point_shadow1": POINT_SHADOW_UNITS[1], "irradiance_table": IRRADIANCE_UNIT,
                 "virtual_atlas": VIRTUAL_SHADOW_UNIT, "spot_atlas": SPOT_SHADOW_UNIT, "occlusion_map": OCCLUSION_UNIT,
-                "screen_occlusion": SCREEN_OCCLUSION_UNIT, "screen_contact_lamps": SCREEN_CONTACT_UNIT,
-                "spot_cookies": COOKIE_UNIT, "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT,
-                "morph_offsets": MORPH_UNIT, "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT}
+                "lightmap": LIGHTMAP_UNIT, "screen_occlusion": SCREEN_OCCLUSION_UNIT,
+                "screen_contact_lamps": SCREEN_CONTACT_UNIT, "spot_cookies": COOKIE_UNIT,
+                "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
+                "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING}
@@ -201,7 +203,7 @@ class ScenePrograms:
                 False, False
             material = (False, False, material[2], "", False, False, False, False, False, False, False, False,
                         material[12], material[13],  # (a posed mesh's depth is where its pose puts it)
-                        material[14] & ALBEDO_UV_BIT if material[2] else 0, False, False)  # (a cutout's holes: its UVs)
+                        material[14] & ALBEDO_UV_BIT if material[2] else 0, False, False, False)  # (a cutout's holes)
             virtual, unlit, shadowing, fogging, cookies = False, False, (), (), ()  # (masked: a level's)
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -254,6 +256,8 @@ class ScenePrograms:
                 defines["DIFFUSE_TRANSMISSION"] = "1"
             if material[16]:  # the normal map's heights marched (Material.parallax_depth: parallax.glsl)
                 defines["PARALLAX"] = "1"
+            if material[17]:  # its light from all round baked (Material.lightmap: material_maps.glsl)
+                defines["LIGHTMAP"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -366,6 +370,7 @@ class ScenePrograms:
         textures = tuple((unit, texture) for unit, texture in (
             (ALBEDO_UNIT, albedo), (NORMAL_UNIT, batch.normal_map), (EMISSIVE_MAP_UNIT, batch.emissive_map),
             (METALLIC_ROUGHNESS_UNIT, batch.metallic_roughness_map), (OCCLUSION_UNIT, batch.occlusion_map),
+            (LIGHTMAP_UNIT, batch.lightmap),
             (POSE_ROWS_UNIT, self.renderer.pose_rows.texture if batch.skinned or batch.morphed else None),
             (MORPH_UNIT, batch.mesh.morphs if batch.morphed else None),
             (OBJECT_MOTION_UNIT, self.renderer.object_motion.texture if not layered else None),
@@ -379,7 +384,8 @@ class ScenePrograms:
                    batch.occlusion_strength, batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0,
                    batch.sheen or NO_SHEEN, batch.dispersion, batch.anisotropy or NO_ANISOTROPY,
                    batch.iridescence or NO_IRIDESCENCE, batch.pose_row, batch.mesh.morph_count if batch.morphed else 0,
-                   batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION, batch.parallax_depth)
+                   batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION, batch.parallax_depth,
+                   batch.lightmap_intensity)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -412,12 +418,12 @@ def _material_build(batch: InstanceBatch) -> tuple:
     thin film colours its reflections (``IRIDESCENCE``), whether a Skin bends its mesh
     (``SKINNED``), whether it wears a Morph (``MORPHED``), which of its maps read the
     mesh's second UV set (``SECOND_UV_MAPS``, their bits; 0: none) and whether it lets light
-    through from behind (``DIFFUSE_TRANSMISSION``) and whether its normal map's heights are
-    marched (``PARALLAX``)."""
+    through from behind (``DIFFUSE_TRANSMISSION``), whether its normal map's heights are
+    marched (``PARALLAX``) and whether a lightmap gives its light from all round (``LIGHTMAP``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
             batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None,
             batch.iridescence is not None, batch.skinned, batch.morphed, batch.second_uv_maps,
-            batch.diffuse_transmission is not None, batch.parallax_depth > 0.0)
+            batch.diffuse_transmission is not None, batch.parallax_depth > 0.0, batch.lightmap is not None)
 

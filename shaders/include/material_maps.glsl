@@ -1,9 +1,10 @@
 // Material maps beside the albedo and normal maps: Material.metallic_roughness_map,
 // Material.emissive_map and Material.occlusion_map, as glTF 2.0 defines its
-// metallicRoughnessTexture, emissiveTexture and occlusionTexture.  Each is sampled only in a
-// build of scene.frag for batches that have it (METALLIC_ROUGHNESS_MAP, EMISSIVE_MAP,
-// OCCLUSION_MAP: engine/render/scene_programs.py); without the define these functions are
-// the plain material's, and a map left out costs nothing.
+// metallicRoughnessTexture, emissiveTexture and occlusionTexture (Material.lightmap:
+// lightmap.glsl).  Each is sampled only in a build of scene.frag for batches that have it
+// (METALLIC_ROUGHNESS_MAP, EMISSIVE_MAP, OCCLUSION_MAP: engine/render/scene_programs.py);
+// without the define these functions are the plain material's, and a map left out costs
+// nothing.
 // Included by scene.frag after its Surface struct; reads its v_uv, or where Material.second_uv_maps
 // names the map its v_uv2 (MAP_UV: uv_sets.glsl).
 

@@ -1,0 +1,174 @@
+"""Baked lightmaps (``Material.lightmap``, ``lightmap_intensity``): the light from all round
+read from an image in place of the sky's, a probe's or a volume's, each texel the colour a
+white matte surface shows (Lambert's albedo / pi of pi x its colour).  The floor's HDR pixels
+against the image sampled in numpy where each pixel's ray meets the floor (the plane's UVs,
+GL's bilinear filter of sRGB-decoded texels), the lights' own light added on top, the second
+UV set, and the limits."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, DirectionalLight, Material, MeshRef, Skybox, Transform
+from engine.assets.mesh import Mesh, plane
+from engine.assets.texture_data import TextureData
+from engine.core.errors import GLLimitError
+from tests.support import look_from, srgb_to_linear
+from tests.test_generated_sky import SIZE, _read
+
+ALBEDO = np.array([0.8, 0.6, 0.4])
+HALF = 2.0   # the floor's half side (a 4 m plane, its UVs 0..1 across)
+
+
+def gradient_image(size: int = 32) -> TextureData:
+    """Red rising to the right, green rising to the top, a little blue: smooth, so a texel's
+    place matters little and the filter's rounding less."""
+    pixels = np.zeros((size, size, 4), np.uint8)
+    ramp = np.linspace(40, 230, size)
+    pixels[..., 0] = ramp[None, :]
+    pixels[..., 1] = ramp[::-1, None]   # (row 0 is the image's top)
+    pixels[..., 2] = 60
+    pixels[..., 3] = 255
+    return TextureData(pixels, name="gradient lightmap")
+
+
+def sample(image: TextureData, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Linear RGB of ``image`` at UVs (v = 0 its bottom row), bilinear between texel centres
+    of the sRGB-decoded texels, clamped at the edges (GL's LINEAR on the finest level)."""
+    texels = srgb_to_linear(image.as_8_bits()[::-1, :, :3])   # (rows bottom-first, as GL holds them)
+    h, w = texels.shape[:2]
+    x = np.clip(u * w - 0.5, 0.0, w - 1.0)
+    y = np.clip(v * h - 0.5, 0.0, h - 1.0)
+    x0, y0 = np.minimum(x.astype(int), w - 2), np.minimum(y.astype(int), h - 2)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    top = texels[y0, x0] * (1 - fx) + texels[y0, x0 + 1] * fx
+    bottom = texels[y0 + 1, x0] * (1 - fx) + texels[y0 + 1, x0 + 1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def floor_frame(scene, material: Material, mesh: Mesh | None = None, sky: Skybox | None = None,
+                sun: DirectionalLight | None = None):
+    """The floor seen from 4.5 m straight above: level 0's HDR colour, the floor's UVs under
+    each pixel and the mask of pixels well inside it; and the runner."""
+    def build(world):
+        look_from(world, (0.0, 4.5, 0.0), (0.0, 0.0, -0.001), fov=50.0)
+        world.spawn(sky or Skybox())
+        if sun is not None:
+            world.spawn(sun)
+        world.spawn(Transform(), MeshRef(mesh or plane(2 * HALF, 2 * HALF)), material)
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    colour, rays = _read(runner)
+    eye = np.array(runner.engine.main_view.eye, np.float64)
+    hit = eye + rays * (-eye[1] / rays[..., 1:2])
+    u, v = (hit[..., 0] + HALF) / (2 * HALF), (HALF - hit[..., 2]) / (2 * HALF)
+    inside = (np.abs(hit[..., 0]) < HALF - 0.15) & (np.abs(hit[..., 2]) < HALF - 0.15)
+    return colour, u, v, inside, runner
+
+
+def matte(**fields) -> Material:
+    return Material(color=(*ALBEDO, 1.0), roughness=1.0, environment_reflection=0.0, **fields)
+
+
+def test_the_floor_shows_its_albedo_times_the_lightmap(scene):
+    """No light but the sky's: every pixel is albedo x the image's colour there x the
+    intensity (within 2%, and 0.004 for the half floats), whatever the sky is."""
+    image = gradient_image()
+    colour, u, v, inside, _ = floor_frame(scene, matte(lightmap=image, lightmap_intensity=1.5))
+    assert inside.sum() > 5000
+    want = ALBEDO * sample(image, u, v) * 1.5
+    np.testing.assert_allclose(colour[inside], want[inside], rtol=0.02, atol=0.004)
+    bright = Skybox(zenith=(1.0, 1.0, 2.0), horizon=(2.0, 2.0, 2.0), ground=(0.5, 0.5, 0.5))
+    again, *_ = floor_frame(scene, matte(lightmap=image, lightmap_intensity=1.5), sky=bright)
+    np.testing.assert_allclose(again[inside], colour[inside], atol=1e-3)   # the sky's light is not added
+    plain, *_ = floor_frame(scene, matte(), sky=bright)
+    assert np.abs(plain[inside] - colour[inside]).mean() > 0.1                 # (without it, it is)
+
+
+def test_the_lights_own_light_adds_to_the_baked_light(scene):
+    """A sun over the lightmapped floor: the floor is the lightmap's light plus the sun's, the
+    sun's measured on a plain floor under a black sky (no light from all round at all)."""
+    image = gradient_image()
+    sun = dict(direction=(0.3, -1.0, 0.2), intensity=2.0, shadows=False)
+    black = Skybox(faces=np.zeros((6, 4, 4, 3), np.float32))
+    lit, u, v, inside, _ = floor_frame(scene, matte(lightmap=image), sun=DirectionalLight(**sun))
+    direct, *_ = floor_frame(scene, matte(), sky=black, sun=DirectionalLight(**sun))
+    assert direct[inside].min() > 0.2
+    np.testing.assert_allclose(lit[inside], direct[inside] + ALBEDO * sample(image, u, v)[inside],
+                               rtol=0.02, atol=0.004)
+
+
+def test_a_lightmap_reads_the_second_uv_set_when_told(scene):
+    """The same floor with a second UV set turned half round (u, v -> 1 - u, 1 - v) and
+    ``second_uv_maps=("lightmap",)``: the image turned half round on it; without the switch the
+    first set's."""
+    image = gradient_image()
+    base = plane(2 * HALF, 2 * HALF)
+    turned = Mesh(base.positions, base.normals, base.uvs, base.indices, name="turned",
+                  second_uvs=1.0 - np.asarray(base.uvs))
+    colour, u, v, inside, _ = floor_frame(scene, matte(lightmap=image, second_uv_maps=("lightmap",)), mesh=turned)
+    np.testing.assert_allclose(colour[inside], (ALBEDO * sample(image, 1.0 - u, 1.0 - v))[inside],
+                               rtol=0.02, atol=0.004)
+    first, *_ = floor_frame(scene, matte(lightmap=image), mesh=turned)
+    np.testing.assert_allclose(first[inside], (ALBEDO * sample(image, u, v))[inside], rtol=0.02, atol=0.004)
+
+
+def test_the_lightmap_goes_with_its_entity(scene):
+    image = gradient_image()
+    _, _, _, _, runner = floor_frame(scene, matte(lightmap=image))
+    renderer = runner.engine.renderer
+    textures = renderer.resource_counts()["textures"]
+    world = runner.engine.world
+    world.delete_entity(next(entity for entity, _ in world.query_one(Material)))
+    runner.frame()
+    assert renderer.resource_counts()["textures"] == textures - 1
+
+
+@pytest.mark.parametrize("field, value", [("lightmap_intensity", -1.0), ("lightmap_intensity", float("nan")),
+                                          ("lightmap_intensity", 1e5), ("lightmap", "lightmap.png")])
+def test_bad_lightmap_values_are_refused_when_given(field, value):
+    with pytest.raises(ComponentValueError, match=f"Material.{field}"):
+        Material(**{field: value})
+
+
+def test_a_lightmap_with_an_occlusion_map_on_a_16_unit_context_is_refused_naming_the_entity(scene):
+    """With its own occlusion map a lightmapped batch reads 17 samplers: a context with 16
+    (macOS's GL 4.1) refuses it when it is drawn, saying what to do; packed in the
+    metallic-roughness map's red it fits."""
+    image = gradient_image()
+    occlusion = TextureData(np.full((4, 4, 4), 255, np.uint8), name="occlusion")
+
+    def build(world):
+        look_from(world, (0.0, 4.5, 0.0), (0.0, 0.0, -0.001))
+        world.spawn(Transform(), MeshRef(plane(4.0, 4.0)), matte(lightmap=image, occlusion_map=occlusion))
+
+    runner = scene(build, SIZE)
+    renderer = runner.engine.renderer
+    renderer.caps = dataclasses.replace(renderer.caps, max_texture_image_units=16)
+    with pytest.raises(GLLimitError, match=r"entity \d+.*lightmap and an occlusion map needs 17 texture units"):
+        runner.frame()
+    packed = scene(lambda world: (look_from(world, (0.0, 4.5, 0.0), (0.0, 0.0, -0.001)), world.spawn(
+        Transform(), MeshRef(plane(4.0, 4.0)), matte(lightmap=image, metallic_roughness_map=occlusion,
+                                                      occlusion_map=occlusion))), SIZE)
+    packed.engine.renderer.caps = dataclasses.replace(packed.engine.renderer.caps, max_texture_image_units=16)
+    packed.frame()
+
+
+def test_a_level_file_gives_a_lightmap(tmp_path):
+    from engine.assets.level_read import load_level
+    from engine.core.world import World
+
+    level = tmp_path / "baked.toml"
+    level.write_text('[level]\nname = "baked"\n[[entity]]\nname = "floor"\nTransform = {}\n'
+                     'MeshRef = { mesh = { plane = [4.0, 4.0] } }\n'
+                     'Material = { lightmap = { checker = [8, 2] }, lightmap_intensity = 2.0 }\n')
+    world = World()
+    load_level(level).spawn(world)
+    material = world.query_one(Material)[0][1]
+    assert isinstance(material.lightmap, TextureData) and material.lightmap_intensity == 2.0
+    assert glm.vec4(material.color) == glm.vec4(0.8, 0.8, 0.8, 1.0)
