@@ -129,7 +129,8 @@ def _rect_lights(ctx):
     read by textureLod) and a tube beside it, casting soft shadows from their cubes (the grid filter), with
     contact shadows, a mirror
     throwing the sun and the lamp (virtual lights, one a rectangle's image), and balls with a
-    clear coat, a sheen and anisotropic highlights lit by it."""
+    clear coat, a sheen and anisotropic highlights lit by it, and one lightmapped (LIGHTMAP)
+    beside its own occlusion map."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
     from components import Camera, ContactShadows, Material, MeshRef, PointLight, Transform
@@ -147,8 +148,12 @@ def _rect_lights(ctx):
             world.add_component(camera, ContactShadows())
         world.spawn(Transform(position=(0.0, 2.0, 1.5)), PointLight(intensity=3.0, length=1.2, radius=0.02,
                                                                      shadows=True, volumetric=0.0))  # a tube too
+        from engine.assets.texture_data import TextureData
+        from tests.test_lightmaps import gradient_image
+        occlusion = TextureData(np.full((4, 4, 4), 200, np.uint8), name="occlusion")
         for x, material in ((-1.0, Material(clearcoat=1.0, clearcoat_roughness=0.1, sheen_color=(0.5, 0.2, 0.2))),
-                            (1.0, Material(metallic=1.0, roughness=0.3, anisotropy=0.8))):
+                            (1.0, Material(metallic=1.0, roughness=0.3, anisotropy=0.8)),
+                            (0.0, Material(lightmap=gradient_image(), occlusion_map=occlusion))):  # (17 samplers)
             world.spawn(Transform(position=(x, 0.5, 0.5)), MeshRef(sphere(0.4)), material)
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 
