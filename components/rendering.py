@@ -520,7 +520,10 @@ class Skybox(TrackedComponent):
     sun).  With ``tints_sunlight`` (the default) the DirectionalLight the sky follows is
     dimmed and reddened by the same air on its way down, as Unreal's atmosphere sun light:
     its ``color`` is its light with the sun overhead, and a low sun lights the world orange
-    (a pinned ``sun_direction`` follows no light and tints none).
+    (a pinned ``sun_direction`` follows no light and tints none).  An atmosphere's ``faces``
+    are the space beyond its air (stars, a galaxy: ``engine.assets.star_field.star_faces``),
+    shown through it where it lets them through and is itself dark: at night, fading towards
+    the horizon.
     """
 
     zenith: Any = field(default_factory=lambda: glm.vec4(0.10, 0.25, 0.65, 1.0))

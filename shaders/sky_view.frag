@@ -75,5 +75,5 @@ void main() {
         light += through * (source - source * step_through) / max(extinction, vec3(1e-12));
         through *= step_through;
     }
-    out_color = vec4(light, 1.0);
+    out_color = vec4(light, through.g);   // (and what crosses the air from beyond it: a Skybox's space)
 }

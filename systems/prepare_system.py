@@ -48,7 +48,7 @@ from engine.render.fog import volume_rows
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
-from engine.render.sky import air_of, sky_model
+from engine.render.sky import air_of, is_generated, sky_model
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.resources import ContactLamps, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
@@ -85,7 +85,7 @@ def ambient_sh(world: World, sun: SkySun | None = None) -> np.ndarray:
     skies = world.query_one(Skybox)
     if skies:
         sky = skies[0][1]
-        if sky.faces is not None:
+        if not is_generated(sky):
             return project_faces(sky.faces)
         return generated_sky_sh(sky_model(sky, sun or sky_sun(world, sky)))
     hemispheres = world.query_one(HemisphereLight)
@@ -209,7 +209,7 @@ class PrepareSystem(esper.Processor):
         if world.changed(Skybox):
             skies = world.query_one(Skybox)
             sky = skies[0][1] if skies else None
-            self._sun_follows = sky is not None and sky.faces is None and sky.sun_direction is None
+            self._sun_follows = is_generated(sky) and sky.sun_direction is None
             self._make_sky(sky, self._sky_sun())
             return True
         if not self._sun_follows or not (world.changed(DirectionalLight) or self._sun != self._cube_sun):
@@ -229,7 +229,7 @@ class PrepareSystem(esper.Processor):
 
     def _make_sky(self, sky: Skybox | None, sun: SkySun | None) -> None:
         """The sky's cube map, the sky pass's model and the sky's light, of ``sky`` with ``sun``."""
-        if sky is not None and sky.faces is None:
+        if is_generated(sky):
             self.renderer.set_generated_sky(sky_model(sky, sun), sky.face_size)
         else:
             self.renderer.set_sky_faces(None if sky is None else sky.faces)
@@ -244,8 +244,7 @@ class PrepareSystem(esper.Processor):
         colour at noon); white for any other sky.  Kept for the last air and direction."""
         skies = self.world.query_one(Skybox)
         sky = skies[0][1] if skies else None
-        if sky is None or sky.model != "atmosphere" or not sky.tints_sunlight or sky.faces is not None \
-                or sky.sun_direction is not None:
+        if sky is None or sky.model != "atmosphere" or not sky.tints_sunlight or sky.sun_direction is not None:
             return (1.0, 1.0, 1.0)
         key = (air_of(sky), tuple(sun.direction))
         if key != self._tint_key:

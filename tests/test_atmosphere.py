@@ -83,9 +83,10 @@ def test_a_sun_overhead_seen_overhead_is_the_closed_form_of_single_scattering():
     g = 0.8
     mie_phase = 3.0 / (8.0 * math.pi) * (1 - g * g) * 2.0 / ((2 + g * g) * (1 + g * g - 2 * g) ** 1.5)
     want = np.exp(-tau) * (rayleigh + 3.996e-3 * mie_phase * column(1.2))
-    np.testing.assert_allclose(table[-1, 0], want, rtol=0.02)
+    np.testing.assert_allclose(table[-1, 0, :3], want, rtol=0.02)
+    np.testing.assert_allclose(table[-1, 0, 3], np.exp(-tau[1]), rtol=0.01)   # (straight up, beyond the air: its green)
     # ... and multiple scattering only adds light (the table's other orders).
-    assert (atm.sky_view_table(EARTH, 90.0) >= table - 1e-6).all()
+    assert (atm.sky_view_table(EARTH, 90.0)[..., :3] >= table[..., :3] - 1e-6).all()
 
 
 def test_the_sky_does_what_a_real_one_does_as_the_sun_goes_down():
@@ -226,9 +227,10 @@ def test_the_gpus_table_is_the_numpy_one(scene):
     for air, elevation in ((EARTH, 50.0), (EARTH, 1.5), (atm.Air(haze=4.0, rayleigh=2.0), 12.0)):
         texture = sky_view.draw(air, elevation)
         rows, columns = atm.VIEW_SIZE
-        got = np.frombuffer(texture.read(), np.float16).reshape(rows, columns, 4)[..., :3].astype(np.float64)
+        got = np.frombuffer(texture.read(), np.float16).reshape(rows, columns, 4).astype(np.float64)
         want = atm.sky_view_table(air, elevation)
-        np.testing.assert_allclose(got, want, rtol=0.01, atol=2e-5 * want.max())
+        np.testing.assert_allclose(got[..., :3], want[..., :3], rtol=0.01, atol=2e-5 * want[..., :3].max())
+        np.testing.assert_allclose(got[..., 3], want[..., 3], rtol=0.01, atol=1e-3)   # (what crosses the air)
 
 
 @pytest.mark.parametrize("field, value, words", [
@@ -268,3 +270,95 @@ def test_a_level_file_names_the_air_and_refuses_a_sky_it_does_not_know(tmp_path)
     bad.write_text('[level]\nname = "x"\n[[entity]]\nname = "sky"\n[entity.Skybox]\nmodel = "dusk"\n')
     with pytest.raises(LevelError, match=r"bad.toml:6: entity 'sky': Skybox.model.* must be one of"):
         load_level(bad)
+
+
+# -- space beyond the air (an atmosphere's given faces) -----------------------------------------
+def space_faces(n: int = 16) -> np.ndarray:
+    """A smooth, dim space: each texel's colour from its direction (no two faces alike)."""
+    from engine.core.cube_faces import face_directions
+
+    return np.stack([0.02 + 0.03 * (face_directions(face, n) + 1.0) for face in range(6)]).astype(np.float32)
+
+
+@pytest.mark.parametrize("elevation", [-8.0, 25.0])
+def test_space_shows_through_the_air(scene, elevation):
+    """An atmosphere given faces shows them beyond its air: each sky pixel above the horizon
+    is the air's light (the twin of the same sky without them) plus the faces' colour there
+    (the same faces drawn as a plain given-faces Skybox: the cube map's own sampling) times
+    the share the air lets through (the table's fourth channel); below the horizon the
+    ground as before.  At night the faces are most of the sky; by day a trace of it."""
+    faces = space_faces()
+    sun = _toward(elevation, 20.0)
+    look = _toward(10.0, 10.0)
+    light = DirectionalLight(direction=tuple(-sun), intensity=3.0)
+    shown, rays, runner = _frame(scene, Skybox(model="atmosphere", faces=faces), light, look)
+    beyond, *_ = _frame(scene, Skybox(faces=faces), DirectionalLight(direction=tuple(-sun), intensity=3.0), look)
+    air = sky_radiance(Skybox(model="atmosphere"), rays, SkySun(tuple(sun)))
+    model = sky_model(Skybox(model="atmosphere"), SkySun(tuple(sun)))
+    through = atm.air_transmittance(atm.sky_view_table(model.air, model.air_elevation), rays, sun)
+    up = rays[..., 1] > 0.01
+    assert up.sum() > 2000 and (~up).sum() > 500
+    want = air + beyond * through * up[..., None]
+    np.testing.assert_allclose(shown, want, rtol=1e-2, atol=2e-3)
+    if elevation < 0.0:
+        assert (beyond * through)[up].sum() > 5.0 * air[up].sum()   # (the night sky is the space's)
+    assert runner.engine.renderer.resource_counts()["sky_space"] == 1
+
+
+def test_space_is_in_the_cube_map_and_the_skys_light(scene):
+    """The cube map the reflections read holds the space through the air (``build_faces``, at
+    the faces' own texels), and the sky's light counts it: its coefficients less the same
+    sky's without space are the projection of the faces times the air's share, above the
+    horizon (within 5% of that difference's largest coefficient)."""
+    from engine.core.cube_faces import face_directions
+
+    faces = space_faces(32)
+    sun = _toward(-6.0, 50.0)
+    skybox = Skybox(model="atmosphere", faces=faces, face_size=32)
+    _, _, runner = _frame(scene, skybox, DirectionalLight(direction=tuple(-sun), intensity=3.0), _toward(20.0))
+    np.testing.assert_allclose(_cube_faces(runner), build_faces(skybox, SkySun(tuple(sun))), rtol=1e-2, atol=2e-3)
+    with_space = generated_sky_sh(sky_model(skybox, SkySun(tuple(sun))))
+    without = generated_sky_sh(sky_model(Skybox(model="atmosphere"), SkySun(tuple(sun))))
+    model = sky_model(skybox, SkySun(tuple(sun)))
+    table = atm.sky_view_table(model.air, model.air_elevation)
+    through = np.stack([faces[f] * atm.air_transmittance(table, face_directions(f, 32), sun)
+                        * (face_directions(f, 32)[..., 1:2] >= 0.0) for f in range(6)])
+    want = project_faces(through)
+    assert np.abs((with_space - without) - want).max() < 0.05 * np.abs(want).max()
+
+
+def test_space_is_uploaded_once_and_goes_with_its_faces(scene):
+    faces = space_faces()
+    sun = DirectionalLight(direction=tuple(-_toward(10.0)), intensity=3.0)
+    skybox = Skybox(model="atmosphere", faces=faces)
+    _, _, runner = _frame(scene, skybox, sun, _toward(10.0))
+    renderer = runner.engine.renderer
+    space = renderer.sky_space
+    sun.direction = tuple(-_toward(12.0, 30.0))
+    runner.frame()
+    runner.frame()
+    assert renderer.sky_space is space                     # the sun moved: the same space
+    skybox.faces = space_faces(8)
+    runner.frame()
+    assert renderer.sky_space is not space and renderer.resource_counts()["sky_space"] == 1
+    skybox.faces = None
+    runner.frame()
+    assert renderer.sky_space is None and renderer.resource_counts()["sky_space"] == 0
+
+
+def test_star_faces_put_each_star_in_its_texel():
+    """``star_faces``: every star lights the texel its direction falls in (the count of lit
+    texels is the stars' less the few that share one), within the brightness range, and bad
+    arguments are refused naming them."""
+    from engine.assets.star_field import star_faces
+    from engine.core.errors import AssetError
+
+    faces = star_faces(size=64, stars=300, brightness=2.0, seed=3)
+    assert faces.shape == (6, 64, 64, 3) and faces.dtype == np.float32
+    lit = faces.max(axis=-1) > 0.0
+    assert 280 <= lit.sum() <= 300
+    assert faces.max() <= 2.0 * 0.05 * 40.0 * 1.0 + 1e-6 and faces[lit].max(axis=-1).min() >= 2.0 * 0.05 * 0.72 - 1e-6
+    assert np.array_equal(star_faces(size=64, stars=300, brightness=2.0, seed=3), faces)
+    for bad in (dict(size=8), dict(stars=-1), dict(brightness=float("nan")), dict(size=True)):
+        with pytest.raises(AssetError, match=next(iter(bad))):
+            star_faces(**bad)

@@ -46,6 +46,22 @@ def face_directions(face: int, size: int) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
+def face_texels(directions: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The face, row (t) and column (s) of the texel of a ``size``-texel cube map that each
+    unit direction (n, 3) falls in: the inverse of ``face_directions`` (GL's face selection:
+    the largest component's axis, ties to x before y before z)."""
+    d = np.asarray(directions, np.float64)
+    axis = np.argmax(np.abs(d), axis=1)
+    face = axis * 2 + (d[np.arange(len(d)), axis] < 0.0)
+    table = np.array(CUBE_FACES, np.float64)[face]           # (n, 3 axes, 3)
+    major = np.abs(np.einsum("nk,nk->n", d, table[:, 0]))
+    s = np.einsum("nk,nk->n", d, table[:, 1]) / major
+    t = np.einsum("nk,nk->n", d, table[:, 2]) / major
+    column = np.clip(((s + 1.0) * 0.5 * size).astype(int), 0, size - 1)
+    row = np.clip(((t + 1.0) * 0.5 * size).astype(int), 0, size - 1)
+    return face, row, column
+
+
 def glsl_defines() -> dict[str, str]:
     """``CUBE_FACE_FORWARD``, ``CUBE_FACE_S`` and ``CUBE_FACE_T``: the table's three columns
     as GLSL ``vec3[6]`` constructors, indexed by face."""

@@ -282,7 +282,9 @@ def sky_view_table(air: Air, sun_elevation_degrees: float, size: tuple[int, int]
                    steps: int = VIEW_STEPS) -> np.ndarray:
     """The radiance (rows, columns, 3) float32 the eye sees along each of the table's ways
     (``view_directions``) per unit of sunlight, with the sun ``sun_elevation_degrees`` above
-    the horizon: the reference the GPU's table (``engine/render/sky_view.py``) is held to."""
+    the horizon, and in a fourth channel the share of light from beyond the air that crosses
+    it along the way (green's: what a Skybox's space shows through): the reference the GPU's
+    table (``engine/render/sky_view.py``) is held to."""
     ways, sun = view_directions(math.radians(sun_elevation_degrees), size)
     r0 = GROUND_KM + EYE_KM
     length = _to_top(np.float64(r0), ways[..., 1])                      # (rows, columns)
@@ -306,9 +308,9 @@ def sky_view_table(air: Air, sun_elevation_degrees: float, size: tuple[int, int]
         added, step_through = _step(source, _extinction(air, height), step)
         light += through * added
         through *= step_through
-    light = light.astype(np.float32)
-    light.setflags(write=False)
-    return light
+    table = np.concatenate([light, through[..., 1:2]], -1).astype(np.float32)
+    table.setflags(write=False)
+    return table
 
 
 def transmittance_texels(air: Air) -> np.ndarray:
@@ -355,7 +357,14 @@ def air_radiance(table: np.ndarray, directions: np.ndarray, sun: np.ndarray) -> 
     """The sky-view ``table``'s radiance per unit of sunlight along unit ``directions``
     (..., 3), bilinear between its entries (half floats, as the GPU holds it)."""
     row, column = view_coordinates(directions, sun)
-    return _bilinear(np.asarray(table, np.float16).astype(np.float64), row, column)
+    return _bilinear(np.asarray(table[..., :3], np.float16).astype(np.float64), row, column)
+
+
+def air_transmittance(table: np.ndarray, directions: np.ndarray, sun: np.ndarray) -> np.ndarray:
+    """The sky-view ``table``'s share of light from beyond the air along unit ``directions``
+    (..., 1), read as ``air_radiance`` reads its colour."""
+    row, column = view_coordinates(directions, sun)
+    return _bilinear(np.asarray(table[..., 3:4], np.float16).astype(np.float64), row, column)
 
 
 def sun_elevation_degrees(sun: np.ndarray) -> float:
@@ -382,7 +391,7 @@ def ground_light(air: Air, table: np.ndarray, sun: np.ndarray) -> np.ndarray:
     d_azimuth = np.full(columns, math.pi / (columns - 1))
     d_azimuth[[0, -1]] *= 0.5
     weight = (np.cos(elevation) * np.sin(elevation) * d_elevation)[:, None] * d_azimuth[None, :] * 2.0
-    sky = (np.asarray(table, np.float64) * weight[..., None]).sum(axis=(0, 1))
+    sky = (np.asarray(table[..., :3], np.float64) * weight[..., None]).sum(axis=(0, 1))
     sun_cos = max(float(sun[1]), 0.0)
     direct = sunlight_share(air, sun) * sun_cos
     return np.asarray(air.ground, np.float64) / math.pi * (direct + sky)

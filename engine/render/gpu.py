@@ -169,6 +169,9 @@ class Gpu:
         self.sky_version = 0
         # An atmosphere's sky-view table (drawn by the renderer's SkyView; None: no atmosphere).
         self.sky_view: moderngl.Texture | None = None
+        # ... and its space (the Skybox's given faces, a cube map; None: none), by the faces' id.
+        self.sky_space: moderngl.TextureCube | None = None
+        self._space_key = 0
         # Stand-ins for an image a program samples in a branch its draw does not take (a batch
         # with no albedo map; a fallback with no reflection level below it).  A sampler the
         # program uses statically must still find a complete texture of its own type on its

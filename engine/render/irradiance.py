@@ -74,6 +74,7 @@ import numpy as np
 
 from components.limits import MAX_IRRADIANCE_VOLUMES, MAX_VOLUME_AXIS_POINTS
 from engine.core.cube_faces import face_directions
+from engine.render.atmosphere import air_transmittance
 from engine.render.bindings import (
     CUBE_MIP_UNIT,
     IRRADIANCE_BINDING,
@@ -181,6 +182,8 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
                           for face in range(6)])
         bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
         sun = np.outer(disc, np.array(model.sun_color, np.float64))[bands]
+        if model.space is not None:   # what lies beyond the air, through it (above the horizon)
+            faces = faces + _space_through_air(model)
         return project_faces(faces) + 2.0 * np.pi * sun * sh_basis(np.array(model.sun_direction, np.float64))[:, None] \
             * np.array(BAND_FACTORS)[:, None]
     zenith, horizon, ground = (np.array(colour, np.float64) for colour in (model.zenith, model.horizon, model.ground))
@@ -191,6 +194,26 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     radiance = 2.0 * np.pi * (up[bands] * sh_basis(np.array([0.0, 1.0, 0.0]))[:, None]
                               + sun[bands] * sh_basis(np.array(model.sun_direction, np.float64))[:, None])
     return radiance * np.array(BAND_FACTORS)[:, None]
+
+
+def _space_through_air(model: SkyModel) -> np.ndarray:
+    """An atmosphere's space (its given faces, box-filtered to ``ATMOSPHERE_FACE`` texels a
+    face, or sampled at the nearest of theirs when smaller) times the share of it the air lets
+    through (the CPU's table), above the horizon: (6, n, n, 3)."""
+    n = ATMOSPHERE_FACE
+    space = np.asarray(model.space, np.float64)
+    while space.shape[1] > n and space.shape[1] % 2 == 0:
+        half = space.shape[1] // 2
+        space = space.reshape(6, half, 2, half, 2, 3).mean(axis=(2, 4))
+    if space.shape[1] != n:   # (a size that does not halve to it: its nearest texel)
+        pick = np.minimum((np.arange(n) + 0.5) * space.shape[1] // n, space.shape[1] - 1).astype(int)
+        space = space[:, pick][:, :, pick]
+    sun = np.array(model.sun_direction, np.float64)
+    out = np.empty((6, n, n, 3))
+    for face in range(6):
+        ways = face_directions(face, n)
+        out[face] = space[face] * air_transmittance(model.coarse_table, ways, sun) * (ways[..., 1:2] >= 0.0)
+    return out
 
 
 ATMOSPHERE_FACE = 32   # texels a face an atmosphere's sky is projected from (16: 2% off a low sun's)

@@ -402,7 +402,7 @@ class Renderer(Gpu):
     def set_generated_sky(self, model: SkyModel, size: int) -> None:
         """The world's sky: a generated Skybox, drawn per pixel from ``model`` by the sky pass
         and into a cube map of ``size`` texels a face for what samples it (``SkyBake``)."""
-        self._set_sky_view(model)   # (the bake reads an atmosphere's table)
+        self._set_sky_view(model)   # (the bake reads an atmosphere's table and space)
         self._replace_sky(self.sky_bake.bake(model, size), model)
 
     def _replace_sky(self, cube: moderngl.TextureCube, model: SkyModel | None) -> None:
@@ -421,8 +421,16 @@ class Renderer(Gpu):
 
     def _set_sky_view(self, model: SkyModel | None) -> None:
         """An atmosphere's sky-view table, drawn on the GPU for its air and the sun's
-        elevation (``SkyView``: again only when either changed); released with the last
-        atmosphere."""
+        elevation (``SkyView``: again only when either changed), and the cube map of its
+        space (its Skybox's given faces: uploaded when they are others); released with the
+        last atmosphere."""
+        space = None if model is None else model.space
+        if space is None or (self.sky_space is not None and self._space_key != model.space_key):
+            if self.sky_space is not None:
+                self.sky_space.release()
+            self.sky_space, self._space_key = None, 0
+        if space is not None and self.sky_space is None:   # its space: uploaded once, kept while it stays
+            self.sky_space, self._space_key = upload_cube(self.ctx, space), model.space_key
         if model is None or not model.atmosphere:
             self.sky_view_pass.release()
             self.sky_view = None
@@ -434,7 +442,8 @@ class Renderer(Gpu):
         come back to their baseline; tests that they go back to zero)."""
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
                 "probe_cubes": len(self.probes.cubes),
-                "sky_view": int(self.sky_view is not None), "shadow_cubes": len(self.shadows.cubes),
+                "sky_view": int(self.sky_view is not None), "sky_space": int(self.sky_space is not None),
+                "shadow_cubes": len(self.shadows.cubes),
                 "spot_atlases": int(self.shadows.spot_atlas is not None),
                 "spot_cookies": self.spot_cookies.count(),
                 "layered_targets": len(self.probes._layered),

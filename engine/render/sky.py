@@ -32,6 +32,7 @@ from engine.render.atmosphere import (
     TABLE_STEP_DEGREES,
     Air,
     air_radiance,
+    air_transmittance,
     coarse_view_table,
     ground_light,
     sky_view_table,
@@ -153,7 +154,8 @@ class SkyModel:
     sky is the sky-view table the GPU draws for ``air`` and the sun's ``air_elevation``
     (degrees; ``engine/render/sky_view.py``) times ``air_light``, the sunlight above the air;
     ``ground`` is the ground's radiance and ``sun_color`` the disc's colour through the air,
-    from ``coarse_table`` (the CPU's small table, which the sky's light is projected from)."""
+    from ``coarse_table`` (the CPU's small table, which the sky's light is projected from);
+    ``space`` what lies beyond the air (given faces: stars, a galaxy)."""
 
     zenith: tuple[float, float, float]
     horizon: tuple[float, float, float]
@@ -164,6 +166,13 @@ class SkyModel:
     air: Air | None = None
     air_elevation: float = 0.0
     coarse_table: np.ndarray | None = field(default=None, compare=False, repr=False)
+    # An atmosphere's space beyond its air (the Skybox's given faces; None: black), seen
+    # through the air (the table's fourth channel): ``space_key`` names it for comparing.
+    space: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def space_key(self) -> int:
+        return 0 if self.space is None else id(self.space)
 
     @property
     def atmosphere(self) -> bool:
@@ -178,10 +187,16 @@ class SkyModel:
                 "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
 
 
+def is_generated(skybox: Skybox | None) -> bool:
+    """Whether ``skybox`` is drawn from its function (a gradient without given faces, or an
+    atmosphere, whose given faces are the space beyond its air) rather than from its faces."""
+    return skybox is not None and (skybox.faces is None or skybox.model == "atmosphere")
+
+
 def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | None:
     """The generated sky of ``skybox`` as the sky pass draws it, with ``sun`` (``sun_of``);
-    None for given faces or no Skybox (the pass samples the cube map)."""
-    if skybox is None or skybox.faces is not None:
+    None for a gradient's given faces or no Skybox (the pass samples the cube map)."""
+    if not is_generated(skybox):
         return None
 
     def rgb(value) -> tuple[float, float, float]:
@@ -195,13 +210,27 @@ def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | No
         elevation = round(elevation / TABLE_STEP_DEGREES) * TABLE_STEP_DEGREES   # the GPU table's
         ground = ground_light(air, coarse, towards) * disc_color
         return SkyModel((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), rgb(ground), rgb(towards),
-                        rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color), air, elevation, coarse)
+                        rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color), air, elevation, coarse,
+                        skybox.faces)
     return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color))
 
 
 def build_faces(skybox: Skybox, sun: SkySun | None = None) -> np.ndarray:
     """Six faces (6, size, size, 3) float32 in GL order, from ``skybox.faces`` or generated
-    (with ``sun``: ``sun_of``)."""
+    (with ``sun``: ``sun_of``).  An atmosphere's space (its given faces) is added through the
+    air at its own texels: given at ``face_size`` texels a face, as the tests give it, each of
+    the cube's texels is its own."""
+    if skybox.model == "atmosphere" and skybox.faces is not None:
+        model = sky_model(skybox, sun)
+        n = skybox.face_size
+        faces = np.asarray(skybox.faces, np.float64)
+        if faces.shape[1] != n:
+            raise ValueError(f"build_faces: an atmosphere's space of {faces.shape[1]} texels a face, the cube "
+                             f"{n}: give them at one size")
+        return np.stack([model_radiance(model, face_directions(f, n)) + faces[f]
+                         * air_transmittance(sky_view_table(model.air, model.air_elevation), face_directions(f, n),
+                                             np.array(model.sun_direction)) * (face_directions(f, n)[..., 1:2] >= 0.0)
+                         for f in range(6)]).astype(np.float32)
     if skybox.faces is not None:
         faces = np.asarray(skybox.faces, np.float32)
         if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] != 3:

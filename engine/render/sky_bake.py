@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import moderngl
 
-from engine.render.bindings import SCRATCH_UNIT, SKY_VIEW_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import SCRATCH_UNIT, SKY_VIEW_UNIT, SPACE_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.gpu import Gpu
 from engine.render.sky import SEAMLESS_CUBE_MAP, SkyModel
 from engine.render.targets import release_framebuffer
@@ -40,11 +40,15 @@ class SkyBake:
         cube = ctx.texture_cube((size, size), 4, dtype="f2")
         try:
             target = self._face_target(size)
-            vao = self._vertex_array(model.atmosphere)
+            space = model.atmosphere and model.space is not None
+            vao = self._vertex_array(model.atmosphere, space)
             program = vao.program
             if model.atmosphere:
                 program["sky_view"].value = SKY_VIEW_UNIT
                 bind_texture(ctx, self.renderer.sky_view, SKY_VIEW_UNIT)
+            if space:
+                program["sky_space"].value = SPACE_UNIT
+                bind_texture(ctx, self.renderer.sky_space, SPACE_UNIT)
             for name, value in model.uniforms().items():
                 program[name].value = value
             program["face_size"].value = float(size)
@@ -69,9 +73,9 @@ class SkyBake:
             target = self._target = self.ctx.framebuffer([self.ctx.texture((size, size), 4, dtype="f2")])
         return target
 
-    def _vertex_array(self, atmosphere: bool) -> moderngl.VertexArray:
-        program = self.renderer.shaders.program("fullscreen.vert", "sky_cube.frag",
-                                                defines={"ATMOSPHERE": "1"} if atmosphere else None)
+    def _vertex_array(self, atmosphere: bool, space: bool) -> moderngl.VertexArray:
+        defines = {"ATMOSPHERE": "1", **({"SPACE": "1"} if space else {})} if atmosphere else None
+        program = self.renderer.shaders.program("fullscreen.vert", "sky_cube.frag", defines=defines)
         if self._vao is None or self._vao.program is not program:
             if self._vao is not None:
                 self._vao.release()

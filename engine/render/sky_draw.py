@@ -14,7 +14,15 @@ from __future__ import annotations
 import moderngl
 
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS
-from engine.render.bindings import CAMERA_BINDING, FOG_BINDING, SKY_UNIT, SKY_VIEW_UNIT, VIEWS_BINDING, bind_texture
+from engine.render.bindings import (
+    CAMERA_BINDING,
+    FOG_BINDING,
+    SKY_UNIT,
+    SKY_VIEW_UNIT,
+    SPACE_UNIT,
+    VIEWS_BINDING,
+    bind_texture,
+)
 from engine.render.gpu import Gpu
 
 
@@ -37,7 +45,8 @@ class SkyDraw:
         model = renderer.sky_model
         fogging = renderer.fog.defines
         air = model is not None and model.atmosphere
-        key = (layered, model is not None, air, fogging)
+        space = air and model.space is not None
+        key = (layered, model is not None, air, space, fogging)
         vao = self._skies.get(key)
         if vao is None:
             defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
@@ -45,6 +54,8 @@ class SkyDraw:
                 defines["GENERATED_SKY"] = "1"
             if air:
                 defines["ATMOSPHERE"] = "1"
+            if space:
+                defines["SPACE"] = "1"
             defines.update(fogging)
             program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
                                                defines=defines)
@@ -58,6 +69,8 @@ class SkyDraw:
                 program["sky_map"].value = SKY_UNIT
             if air:
                 program["sky_view"].value = SKY_VIEW_UNIT
+            if space:
+                program["sky_space"].value = SPACE_UNIT
             vao = self._skies[key] = self.ctx.vertex_array(program, [])
         if model is not None and self._sky_written.get(key) != renderer.sky_version:
             for name, value in model.uniforms().items():
@@ -65,6 +78,8 @@ class SkyDraw:
             self._sky_written[key] = renderer.sky_version
         if air:
             bind_texture(self.ctx, renderer.sky_view, SKY_VIEW_UNIT)
+        if space:
+            bind_texture(self.ctx, renderer.sky_space, SPACE_UNIT)
         return vao
 
     def release(self) -> None:

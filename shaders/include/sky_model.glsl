@@ -15,10 +15,14 @@ vec3 sun_disc(float cos_sun) {
 #ifdef ATMOSPHERE
 // A physically based sky (engine/render/atmosphere.py, Hillaire 2020): the sky-view table's
 // radiance per unit of sunlight, by the way's elevation (rows: sqrt of it over 90 degrees) and
-// its azimuth from the sun's (columns: 0 to 180 degrees), times the sunlight above the air;
-// below the horizon the ground fades in as the gradient's does.  air_radiance is its twin.
-uniform sampler2D sky_view;
+// its azimuth from the sun's (columns: 0 to 180 degrees), times the sunlight above the air,
+// and (SPACE) what lies beyond the air times the share of it the air lets through; below the
+// horizon the ground fades in as the gradient's does.  air_radiance is its twin.
+uniform sampler2D sky_view;       // rgb: the air's light; a: what crosses it from beyond (green's)
 uniform vec3 sky_light;           // the sunlight above the air (Skybox.sun_color x the light's colour)
+#ifdef SPACE
+uniform samplerCube sky_space;    // what lies beyond the air (the Skybox's given faces: stars, a galaxy)
+#endif
 
 vec3 generated_sky(vec3 d) {
     const float HALF_PI = 1.57079633;
@@ -28,8 +32,14 @@ vec3 generated_sky(vec3 d) {
     float cos_azimuth = lengths > 1e-10 ? dot(flat_way, flat_sun) / lengths : 1.0;
     vec2 at = vec2(acos(clamp(cos_azimuth, -1.0, 1.0)) / (2.0 * HALF_PI), sqrt(elevation / HALF_PI));
     vec2 size = vec2(textureSize(sky_view, 0));
-    vec3 air = sky_light * textureLod(sky_view, (at * (size - 1.0) + 0.5) / size, 0.0).rgb;
-    vec3 color = d.y >= 0.0 ? air : air + (sky_ground - air) * clamp(-d.y * 4.0, 0.0, 1.0);
+    vec4 table = textureLod(sky_view, (at * (size - 1.0) + 0.5) / size, 0.0);
+    vec3 air = sky_light * table.rgb;
+#ifdef SPACE
+    vec3 beyond = textureLod(sky_space, d, 0.0).rgb * table.a;   // shows where the air is dark: at night
+#else
+    vec3 beyond = vec3(0.0);
+#endif
+    vec3 color = d.y >= 0.0 ? air + beyond : air + (sky_ground - air) * clamp(-d.y * 4.0, 0.0, 1.0);
     return color + sun_disc(clamp(dot(d, sky_sun_direction), -1.0, 1.0));
 }
 #else
