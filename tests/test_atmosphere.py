@@ -362,3 +362,31 @@ def test_star_faces_put_each_star_in_its_texel():
     for bad in (dict(size=8), dict(stars=-1), dict(brightness=float("nan")), dict(size=True)):
         with pytest.raises(AssetError, match=next(iter(bad))):
             star_faces(**bad)
+
+
+def test_a_probe_captures_the_atmosphere_and_its_space(scene, ctx):
+    """A reflection probe alone under an atmosphere with stars: its capture (the sky pass's
+    layered or per-face build, each texel the sky along its centre) is the CPU's faces of the
+    same sky at the probe's size."""
+    from components import ReflectionProbe
+    from engine.render.bindings import SCRATCH_UNIT
+    from engine.render.raw_gl import read_cube_level
+
+    faces = space_faces(32)
+    sun = _toward(-3.0, 120.0)
+    skybox = Skybox(model="atmosphere", faces=faces, face_size=32)
+
+    def build(world):
+        world.spawn(Transform(position=(0.0, 0.0, 4.0)), Camera(fov_y=60.0, near=0.1, far=100.0))
+        world.spawn(skybox)
+        world.spawn(DirectionalLight(direction=tuple(-sun), intensity=3.0))
+        world.spawn(Transform(), ReflectionProbe(resolution=32, far=10.0, refresh="every_frame"))
+
+    runner = scene(build, SIZE)
+    for _ in range(3):
+        runner.frame()
+    probes = runner.engine.renderer.probes
+    (texture,) = [cube.texture for cube in probes.cubes.values()]
+    got = np.stack([read_cube_level(ctx, texture, face, 0, SCRATCH_UNIT)[..., :3] for face in range(6)])
+    assert got.max() > 0.03 and got[:, :, :, 2].std() > 0.005   # (the space through the air: not black)
+    np.testing.assert_allclose(got, build_faces(skybox, SkySun(tuple(sun))), rtol=2e-2, atol=2e-3)
