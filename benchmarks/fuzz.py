@@ -82,6 +82,7 @@ from components import (
     ScreenReflections,
     Skybox,
     Slice,
+    TimeOfDay,
     Tonemap,
     Transform,
     Traveller,
@@ -103,7 +104,7 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
                              ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal,
-                             IrradianceVolume, FogVolume, LensFlare)
+                             IrradianceVolume, FogVolume, LensFlare, TimeOfDay)
 
 @dataclasses.dataclass
 class Case:
@@ -181,6 +182,8 @@ class Fuzzer:
                     world.add_component(self.game.sky, component)
                 elif case.cls in (DirectionalLight, PointLight):
                     spawned = world.spawn(Transform(position=(0, 2, 1)), component)
+                elif case.cls is TimeOfDay:   # (on the light it turns)
+                    spawned = world.spawn(DirectionalLight(), component)
                 else:
                     flat = case.cls in (Mirror, Portal, Water)
                     parts: dict[type, Any] = {Transform: Transform(position=(0, 0.5, 0)),

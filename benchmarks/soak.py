@@ -13,7 +13,9 @@ last (memory by more than ``--rss-slack`` MiB).
 
 ``--lens`` puts depth of field and motion blur on the camera; ``--dynamic`` temporal AA and
 dynamic resolution driven down and back up over and over (every level's targets remade at
-each step).
+each step); ``--day`` makes the hall's sky an atmosphere with stars and turns its sun round
+the sky once every ``DAY_FRAMES`` frames (the sky-view table drawn again every frame, the
+CPU's table, the cube map and the sky's light every degree, day and night).
 """
 from __future__ import annotations
 
@@ -70,13 +72,39 @@ def dynamic_budget(frame: int) -> ViewBudget:
     return ViewBudget(frame_ms=1e-3 if (frame // DYNAMIC_TURN) % 2 == 0 else 1e6, min_render_scale=0.5)
 
 
+DAY_FRAMES = 240  # --day: frames the sun takes round the sky (1.5 degrees a frame)
+
+
+def start_day(engine: Engine) -> None:
+    """``--day``: the hall's Skybox an atmosphere with a night's stars."""
+    from components import Skybox
+    from engine.assets.star_field import star_faces
+
+    for _, sky in engine.world.query_one(Skybox):
+        sky.faces = star_faces(size=64, stars=800)
+        sky.model = "atmosphere"
+
+
+def turn_sun(engine: Engine, frame: int) -> None:
+    """``--day``: the sun at ``frame`` of its day, round a tilted circle (noon 55 degrees up)."""
+    from components import DirectionalLight
+
+    angle = 2.0 * math.pi * frame / DAY_FRAMES
+    towards = (math.cos(angle) * 0.6, math.sin(angle) * 0.82, math.sin(angle) * 0.3 + 0.2)
+    for _, light in engine.world.query_one(DirectionalLight):
+        light.direction = tuple(-c for c in towards)
+
+
 def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE, lens: bool = False,
-        dynamic: bool = False) -> list[dict]:
+        dynamic: bool = False, day: bool = False) -> list[dict]:
     """``lens``: the camera has depth of field with autofocus and motion blur (its spinning
     crates streaking by their own motion) as ``--dof --motion-blur`` give it.  ``dynamic``:
-    temporal AA, and dynamic resolution driven down and up (``dynamic_budget``)."""
+    temporal AA, and dynamic resolution driven down and up (``dynamic_budget``).  ``day``: an
+    atmosphere with stars, its sun going round (``start_day``, ``turn_sun``)."""
     ctx = create_headless_context()
     engine = Engine(HallOfMirrors(), ctx)
+    if day:
+        start_day(engine)
     if dynamic:
         engine.renderer.antialias = "taa"
     if lens:
@@ -99,6 +127,8 @@ def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE,
             if frame == frames:
                 break
             tour(engine, frame)
+            if day:
+                turn_sun(engine, frame)
             if dynamic:
                 engine.world.resources[ViewBudget] = dynamic_budget(frame)
             start = time.perf_counter()
@@ -132,12 +162,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dynamic", action="store_true",
                         help=f"temporal AA, and dynamic resolution driven to its floor and back every "
                              f"{DYNAMIC_TURN} frames (ViewBudget.frame_ms)")
+    parser.add_argument("--day", action="store_true",
+                        help=f"an atmosphere sky with stars, its sun round the sky every {DAY_FRAMES} frames")
     add_size_argument(parser, SIZE)
 
 
 def main(args: argparse.Namespace) -> int:
     warmup = min(60, args.frames)
-    rows = run(args.frames, args.every, warmup, args.size, args.lens, args.dynamic)
+    rows = run(args.frames, args.every, warmup, args.size, args.lens, args.dynamic, args.day)
     for row in rows:
         print(json.dumps(row) if args.json else
               f"frame {row['frame']:>6}  rss {row['rss_mib']:>7} MiB  ms {row['frame_ms_median']}  "

@@ -24,6 +24,7 @@ from components.probe import IrradianceVolume, ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
 from components.screen import ScreenPanel, ScreenText
 from components.screen_reflections import ScreenReflections
+from components.time_of_day import TimeOfDay
 from components.tracking import ComponentValueError, ComponentWarning, TrackedComponent
 from components.transform import Transform, euler_rotation, look_rotation, yaw_pitch_of, yaw_pitch_rotation
 from components.visibility import Visibility
@@ -42,7 +43,7 @@ __all__ = [
     "ReflectionProbe",
     "Reflective",
     "Refractive",
-    "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice",
+    "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice", "TimeOfDay",
     "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",
 ]

@@ -72,6 +72,7 @@ from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
 from systems.shadow_system import ShadowSystem
 from systems.surface_system import SurfaceSystem
 from systems.text_system import TextSystem
+from systems.time_of_day_system import TimeOfDaySystem
 
 # --shafts on a camera without a Fog: thin air (a thing 50 m off keeps 22% of its light).
 SHAFTS_FOG_DENSITY = 0.03
@@ -162,6 +163,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("models", lambda e: ModelSystem(e.world)),  # the parts of each Model placed, changed or deleted
     ("rules", lambda e: FrameRulesSystem(e.world)),  # open portal pairs, active camera: FrameRules
     ("input", lambda e: FlyCameraSystem(e.world)),
+    ("sun", lambda e: TimeOfDaySystem(e.world)),  # each TimeOfDay's clock moved on, its light turned
     ("travel", lambda e: PortalTravelSystem(e.world)),
     ("slice", lambda e: PortalSliceSystem(e.world)),
     ("transform", lambda e: TransformSystem(e.world)),

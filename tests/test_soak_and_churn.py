@@ -27,6 +27,16 @@ def test_a_tour_through_a_lens_with_motion_blur_and_dynamic_resolution_holds_its
     assert soak.grew(rows, warmup=32, rss_slack=20.0) == []
 
 
+def test_a_day_and_a_night_under_an_atmosphere_hold_their_resources_flat():
+    """The tour under an atmosphere with stars, its sun going a quarter of the way round the
+    sky from frame 30 to 90 (its sky-view table drawn every frame, the cube map and the sky's
+    light every degree): nothing grows."""
+    rows = soak.run(frames=90, every=30, warmup=30, size=(96, 54), day=True)
+    counts = rows[-1]["gl_resources"]
+    assert counts["sky_view"] == 1 and counts["sky_space"] == 1
+    assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
+
+
 def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
     rows = churn.run(entities=40, waves=2, frames=2)
     peak = rows[1]["peak_gl_resources"]

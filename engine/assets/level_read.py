@@ -67,7 +67,7 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "Mirror", "Model", "MotionBlur", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
         "ScreenReflections", "ScreenText",
-        "Skybox", "Tonemap",
+        "Skybox", "TimeOfDay", "Tonemap",
         "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel", "FromDecal")
 # Fields holding another entity: a name in the file, an id in the world.
