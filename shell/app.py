@@ -27,12 +27,15 @@ from components import (
     Camera,
     ContactShadows,
     DepthOfField,
+    DirectionalLight,
     FlyController,
     Fog,
     Mirror,
     MotionBlur,
     Portal,
     ScreenReflections,
+    Skybox,
+    TimeOfDay,
     Transform,
     VolumetricFog,
     yaw_pitch_rotation,
@@ -49,6 +52,7 @@ from engine.render.renderer import Renderer
 from engine.render.views import View
 from engine.resources import RenderStats, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
+from engine.rules.light_rules import brightest_directional
 from shell.level_reload import POLL_INTERVAL as RELOAD_INTERVAL
 from shell.level_reload import LevelReload
 from systems import (
@@ -377,6 +381,30 @@ class Engine:
                    getattr(args, "dof", False), getattr(args, "motion_blur", False),
                    getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None),
                    getattr(args, "contact_shadows", False), getattr(args, "shafts", False))
+        self.start_sky(getattr(args, "sky", None), getattr(args, "time", None), getattr(args, "day_minutes", None))
+
+    def start_sky(self, model: str | None, hour: float | None = None, day_minutes: float | None = None) -> None:
+        """The command line's sky options: ``--sky`` draws the level's Skybox (one made if it has
+        none) as ``model`` ("atmosphere": a physically based sky with a night's stars beyond its
+        air, ``engine.assets.star_field.star_faces``); ``--time`` puts a ``TimeOfDay`` at ``hour``
+        (a summer's day, 45 degrees north) on the brightest ``DirectionalLight`` (one made if there
+        is none), moving a whole day on in ``day_minutes`` of game time (``--day-minutes``)."""
+        world = self.world
+        if model is not None:
+            skies = world.query_one(Skybox)
+            sky = skies[0][1] if skies else world.get(world.spawn(Skybox()), Skybox)
+            if model == "atmosphere" and sky.faces is None:
+                from engine.assets.star_field import star_faces
+
+                sky.faces = star_faces()
+            sky.model = model
+        if hour is not None:
+            light = brightest_directional(world)
+            entity = next((e for e, candidate in world.query_one(DirectionalLight) if candidate is light), None)
+            if entity is None:
+                entity = world.spawn(DirectionalLight(intensity=4.0))
+            speed = 0.0 if day_minutes is None else 24.0 / (60.0 * day_minutes)
+            world.add_component(entity, TimeOfDay(hour=hour, hours_per_second=speed))
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

@@ -10,6 +10,7 @@ With no display the runner goes headless by itself and says so.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 import warnings
@@ -19,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from components import ComponentValueError
+from components.rendering import SKY_MODELS
 from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Output
@@ -74,6 +76,14 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                              "no DepthOfField)")
     parser.add_argument("--motion-blur", action="store_true",
                         help="camera motion blur on the active camera (a MotionBlur(), if it has none)")
+    parser.add_argument("--sky", choices=SKY_MODELS, default=None,
+                        help="the level's Skybox (made if it has none) drawn as this model: 'atmosphere' a "
+                             "physically based sky, with a night's stars beyond its air")
+    parser.add_argument("--time", type=_hour, default=None, metavar="HOUR",
+                        help="the sun (the brightest DirectionalLight, made if there is none) where it stands at "
+                             "this hour of a summer's day at 45 degrees north (a TimeOfDay on it)")
+    parser.add_argument("--day-minutes", type=_day_minutes, default=None, metavar="MINUTES",
+                        help="with --time: a whole day passes in this many minutes of game time")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
                         help="anti-aliasing of the final image (default fxaa; ids are never affected)")
     parser.add_argument("--render-scale", type=_render_scale, default=1.0, metavar="SHARE",
@@ -105,6 +115,8 @@ def parse_args(game: Game, argv: Sequence[str] | None,
     args = parser.parse_args(_negative_values_joined(sys.argv[1:] if argv is None else argv))
     if args.frames is not None and args.frames < 1:
         parser.error("--frames must be >= 1")
+    if args.day_minutes is not None and args.time is None:
+        parser.error("--day-minutes needs --time (the hour the day starts at)")
     return args
 
 
@@ -178,6 +190,26 @@ def _frame_ms(text: str) -> float:
         return ViewBudget(frame_ms=float(text)).frame_ms
     except (ValueError, ViewBudgetError) as exc:
         raise argparse.ArgumentTypeError(f"--frame-ms {text!r}: {exc}") from None
+
+
+def _hour(text: str) -> float:
+    try:
+        hour = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--time must be an hour from 0 to 24, got {text!r}") from None
+    if not 0.0 <= hour <= 24.0:
+        raise argparse.ArgumentTypeError(f"--time must be an hour from 0 to 24, got {text!r}")
+    return hour
+
+
+def _day_minutes(text: str) -> float:
+    try:
+        minutes = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--day-minutes must be a number of minutes > 0, got {text!r}") from None
+    if not (minutes > 0.0 and math.isfinite(minutes)):
+        raise argparse.ArgumentTypeError(f"--day-minutes must be a number of minutes > 0, got {text!r}")
+    return minutes
 
 
 def _gif_path(text: str) -> Path:

@@ -296,3 +296,46 @@ def test_ao_and_ssr_flags_put_the_screen_effects_on_the_active_camera(tmp_path, 
         lines = capsys.readouterr().err.strip().splitlines()
         assert status == 2 and len(lines) == 1 and lines[0].startswith("speculum: error: "), lines
         assert f"{flag[0]} given but the level has no active Camera" in lines[0]
+
+
+def test_sky_and_time_flags_make_the_sample_levels_sky_an_evening(tmp_path, ctx):
+    """``--sky atmosphere --time 19 --day-minutes 10`` on a game: its Skybox is the atmosphere
+    with stars, its sun a TimeOfDay at 19:00 moving a day in ten minutes (the light's direction
+    where the clock puts it after the frames), and the frame is darker and redder than the plain
+    one; ``--day-minutes`` without ``--time`` and a bad hour are one error line each."""
+    from components import DirectionalLight, Skybox, TimeOfDay
+    from components.time_of_day import sun_towards
+    from engine import Game, spawn_camera
+    from shell.app import Engine
+
+    class Open(Game):
+        def build(self, world):
+            spawn_camera(world, position=(0.0, 1.6, 4.0), pitch=5)
+            world.spawn(DirectionalLight(intensity=3.0))
+
+    engine = Engine(Open(), ctx)
+    try:
+        engine.start_sky("atmosphere", 19.0, 10.0)
+        world = engine.world
+        sky = world.query_one(Skybox)[0][1]
+        assert sky.model == "atmosphere" and sky.faces is not None   # (made: the game had none)
+        ((entity, clock),) = world.query_one(TimeOfDay)
+        assert clock.hour == 19.0 and abs(clock.hours_per_second - 24.0 / 600.0) < 1e-12
+        engine.frame(1.0, None)
+        assert abs(clock.hour - (19.0 + 24.0 / 600.0)) < 1e-9
+        light = world.get(entity, DirectionalLight)
+        np.testing.assert_allclose(tuple(light.direction), tuple(-sun_towards(clock)), atol=1e-6)
+    finally:
+        engine.close()
+    frames = {}
+    for name, given in (("plain", ()), ("evening", ("--sky", "atmosphere", "--time", "19.5"))):
+        result = run_level("--headless", "--frames", "2", "--size", "96x54", "--aa", "off",
+                           "--out", str(tmp_path / name), *given)
+        assert result.returncode == 0, result.stderr
+        frames[name] = np.asarray(Image.open(tmp_path / name / "frame_0001.png")).astype(float)
+    assert frames["evening"].mean() < 0.8 * frames["plain"].mean()
+    red, blue = (frames["evening"][..., c].mean() / frames["plain"][..., c].mean() for c in (0, 2))
+    assert red > 1.1 * blue
+    for bad, words in ((("--day-minutes", "5"), "--day-minutes needs --time"), (("--time", "25"), "--time must be")):
+        result = run_level("--headless", "--frames", "1", "--size", "16x12", "--out", str(tmp_path / "bad"), *bad)
+        assert result.returncode != 0 and words in result.stderr, result.stderr
