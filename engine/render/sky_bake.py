@@ -17,7 +17,7 @@ import moderngl
 from engine.render.bindings import SCRATCH_UNIT, SKY_VIEW_UNIT, SPACE_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.gpu import Gpu
 from engine.render.sky import SEAMLESS_CUBE_MAP, SkyModel
-from engine.render.targets import release_framebuffer
+from engine.render.targets import release_target
 
 
 class SkyBake:
@@ -84,10 +84,7 @@ class SkyBake:
 
     def _release_target(self) -> None:
         if self._target is not None:
-            textures = list(self._target.color_attachments)
-            release_framebuffer(self._target)
-            for texture in textures:
-                texture.release()
+            release_target(self._target)
             self._target = None
 
     def release(self) -> None:

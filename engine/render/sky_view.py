@@ -24,7 +24,7 @@ from engine.render.bindings import (
     bind_texture,
 )
 from engine.render.gpu import Gpu
-from engine.render.targets import release_framebuffer
+from engine.render.targets import release_target
 
 
 def _table_texture(ctx: moderngl.Context, table: np.ndarray) -> moderngl.Texture:
@@ -109,10 +109,7 @@ class SkyView:
         """Everything it holds (the renderer's sky no longer an atmosphere, or closing)."""
         self._release_tables()
         if self._target is not None:
-            textures = list(self._target.color_attachments)
-            release_framebuffer(self._target)
-            for texture in textures:
-                texture.release()
+            release_target(self._target)
             self._target = None
         if self._vao is not None:
             self._vao.release()

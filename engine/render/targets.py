@@ -43,6 +43,14 @@ def release_framebuffer(framebuffer: moderngl.Framebuffer) -> None:
     framebuffer.release()
 
 
+def release_target(framebuffer: moderngl.Framebuffer) -> None:
+    """Release a framebuffer made for one pass's own textures, and its colour attachments."""
+    textures = list(framebuffer.color_attachments)
+    release_framebuffer(framebuffer)
+    for texture in textures:
+        texture.release()
+
+
 # Per attachment of a level's view framebuffer (colour, surface ids, the seen pair), what a
 # draw writes: everything, or (the glass slot) all but the seen pair's way.
 _WRITE_ALL = ((True, True, True, True),) * 3
