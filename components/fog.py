@@ -56,6 +56,11 @@ class Fog(TrackedComponent):
       gains the sun's light (colour x intensity) x ``sun_scatter`` x max(cos a, 0)^8, as
       Godot's fog sun scatter and Unreal's directional inscattering do.  In a mirror each
       stretch of the way glows by its own direction.
+    - ``aerial_perspective`` (0 to 1, default 0): how much of the fog's colour is the sky's
+      along each ray instead (the sky's cube map blurred to its 8-texel level), as Godot's
+      fog aerial perspective: far things dissolve into the sky behind them, blue under a blue
+      sky, orange towards a sunset, a horizon with no seam between fog and sky (1: all the
+      sky's; the sun glow above is added on top).
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(0.6, 0.65, 0.72, 1.0))
@@ -64,8 +69,11 @@ class Fog(TrackedComponent):
     height_falloff: float = 0.0
     sky_affect: float = 1.0
     sun_scatter: float = 0.0
+    aerial_perspective: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "aerial_perspective":
+            return finite(self, name, value, low=0.0, high=1.0)
         if name == "color":
             return color(self, name, value)
         if name == "density":

@@ -34,6 +34,8 @@
 #include "end_image.glsl"
 #include "probe_lookup.glsl"
 #include "hdr.glsl"
+uniform samplerCube sky_map;
+#define FOG_SKY sky_map   // (Fog.aerial_perspective reads the sky's cube map through it: fog.glsl)
 #include "fog.glsl"
 #include "view_axis.glsl"
 #include "way.glsl"
@@ -44,7 +46,6 @@ flat in mat3 v_project_dir;
 uniform sampler2D reflection;        // premultiplied: alpha 0 where nothing was reflected
 uniform usampler2D reflection_seen;
 uniform usampler2D reflection_nodes;
-uniform samplerCube sky_map;
 uniform vec2 parent_size;            // pixels of the level composited into
 uniform vec2 to_reflection;          // those pixels -> the reflection level's (resolution scales)
 uniform bool fog_from_eye;           // the parent is a root view (its rays start at its eye): the fog's

@@ -11,11 +11,12 @@
 #include "rect_lights.glsl"
 #include "hdr.glsl"
 #include "way.glsl"
+uniform samplerCube sky_map;
+#define FOG_SKY sky_map   // (Fog.aerial_perspective reads the sky's cube map through it: fog.glsl)
 #include "fog.glsl"
 
 uniform sampler2D albedo_map;
 uniform bool has_albedo_map;
-uniform samplerCube sky_map;
 uniform float sky_face_size;   // texels across one face of sky_map
 uniform int transparent;        // the transparent slot (instances.blend_code): 0 opaque; its colour
                                 // premultiplied by its alpha: 1 all of it, 2 its diffuse light only,

@@ -83,7 +83,7 @@ class FogBlock:
                 glow = (-sun.direction.x, -sun.direction.y, -sun.direction.z, 0.0,
                         color.x * k * tint[0], color.y * k * tint[1], color.z * k * tint[2], 0.0)
             values = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
-                      fog.height, 0.0, *glow)
+                      fog.height, fog.aerial_perspective, *glow)
         count = len(rows) // 20
         if values == self._values and rows == self._volumes:
             return False
@@ -97,6 +97,7 @@ class FogBlock:
         self.ubo.write(block.tobytes())
         self.defines = () if values[4] <= 0.0 and not count else tuple((name, value) for name, value, on in (
             ("FOG", "1", True), ("FOG_FALLOFF", "1", values[5] > 0.0), ("FOG_GLOW", "1", any(values[12:15])),
+            ("FOG_AERIAL", "1", values[4] > 0.0 and values[7] > 0.0),
             ("FOG_VOLUMES", str(count), bool(count))) if on)
         return True
 

@@ -57,6 +57,7 @@ from engine.render.bindings import (
     POINT_SHADOW_UNITS,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
+    SKY_UNIT,
     SPOT_SHADOW_UNIT,
     VIRTUAL_LIGHTS_BINDING,
     VIRTUAL_SHADOW_UNIT,
@@ -296,6 +297,8 @@ class ParticleDraw:
         vao = self._vertex_array(record, masked, ambient_probes, reactive, through)
         if record.gl_texture is not None:
             bind_texture(self.ctx, record.gl_texture, PARTICLE_UNIT)
+        if "fog_sky_map" in vao.program:   # (Fog.aerial_perspective's colours: the sky's cube map)
+            bind_texture(self.ctx, self.gpu.sky, SKY_UNIT)
         vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
         self.gpu.stats.draw_calls += 1
 
@@ -375,7 +378,7 @@ class ParticleDraw:
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]), ("spot_atlas", SPOT_SHADOW_UNIT),
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
-                               ("spot_cookies", COOKIE_UNIT)):
+                               ("spot_cookies", COOKIE_UNIT), ("fog_sky_map", SKY_UNIT)):
                 if name in program:
                     program[name].value = unit
             self._programs[key] = program

@@ -90,10 +90,11 @@ NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, 
 
 
 # The scene builds' texture units by sampler and uniform blocks by binding (a build reads some).
-_SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE_UNIT, "probe_map": PROBE_UNIT,
-                "probe2_map": PROBE2_UNIT, "probe_rest_map": PROBE_REST_UNIT, "normal_map": NORMAL_UNIT,
-                "emissive_map": EMISSIVE_MAP_UNIT, "metallic_roughness_map": METALLIC_ROUGHNESS_UNIT,
-                "shadow_atlas": SHADOW_ATLAS_UNIT, "point_shadow0": POINT_SHADOW_UNITS[0],
+_SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE_UNIT,
+                "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT, "probe_rest_map": PROBE_REST_UNIT,
+                "normal_map": NORMAL_UNIT, "emissive_map": EMISSIVE_MAP_UNIT,
+                "metallic_roughness_map": METALLIC_ROUGHNESS_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
+                "point_shadow0": POINT_SHADOW_UNITS[0],
                 "point_shadow1": POINT_SHADOW_UNITS[1], "irradiance_table": IRRADIANCE_UNIT,
                 "virtual_atlas": VIRTUAL_SHADOW_UNIT, "spot_atlas": SPOT_SHADOW_UNIT, "occlusion_map": OCCLUSION_UNIT,
                 "lightmap": LIGHTMAP_UNIT, "screen_occlusion": SCREEN_OCCLUSION_UNIT,

@@ -65,6 +65,8 @@ class SkyDraw:
                 program["Camera"].binding = CAMERA_BINDING
             if "Fog" in program:
                 program["Fog"].binding = FOG_BINDING
+            if "fog_sky_map" in program:   # (Fog.aerial_perspective: the scene pass binds the sky there)
+                program["fog_sky_map"].value = SKY_UNIT
             if model is None:
                 program["sky_map"].value = SKY_UNIT
             if air:

@@ -31,7 +31,7 @@
 layout(std140) uniform Fog {
     vec4 fog_color;   // rgb: the fog's linear colour; a: how much of its fog the sky takes
     vec4 fog_params;  // x: density at the base height (per metre; 0: none), y: falloff (per metre),
-                      // z: the base height, w: unused
+                      // z: the base height, w: the share of its colour that is the sky's (aerial perspective)
     vec4 fog_sun;     // xyz: towards the sun (the brightest directional light)
     vec4 fog_glow;    // rgb: the sun's light x Fog.sun_scatter (0: no glow)
     mat4 volume_to_unit[MAX_FOG_VOLUMES];  // world -> each FogVolume's unit ball (engine/render/fog.py)
@@ -125,16 +125,31 @@ float fog_density(vec3 x) {
     return height + volumes_density(x);
 }
 
+#if defined(FOG_AERIAL) && !defined(FOG_SKY)
+// The sky's cube map (the pass binds it on the sky's unit): Fog.aerial_perspective's colours
+// (a shader that declares the sky's own sampler first names it FOG_SKY: one sampler, not two).
+uniform samplerCube fog_sky_map;
+#define FOG_SKY fog_sky_map
+#endif
+
 // The light the air scatters towards an eye looking along the unit direction ``dir``: the
-// fog's colour, and a glow towards the sun (max(cos, 0)^8 of the angle from it).
+// fog's colour (FOG_AERIAL: that far mixed towards the sky's along ``dir``, its cube map at
+// the 8-texel level, as Godot's aerial perspective), and a glow towards the sun (max(cos,
+// 0)^8 of the angle from it).
 vec3 fog_light(vec3 dir) {
+#ifdef FOG_AERIAL
+    float blurred = log2(float(textureSize(FOG_SKY, 0).x)) - 3.0;
+    vec3 base = mix(fog.fog_color.rgb, textureLod(FOG_SKY, dir, max(blurred, 0.0)).rgb, fog.fog_params.w);
+#else
+    vec3 base = fog.fog_color.rgb;
+#endif
 #ifdef FOG_GLOW
     float towards = max(dot(dir, fog.fog_sun.xyz), 0.0);
     towards *= towards;
     towards *= towards;
-    return fog.fog_color.rgb + fog.fog_glow.rgb * (towards * towards);
+    return base + fog.fog_glow.rgb * (towards * towards);
 #else
-    return fog.fog_color.rgb;
+    return base;
 #endif
 }
 
