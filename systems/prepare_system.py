@@ -43,12 +43,11 @@ from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import FogLimitWarning, LightLimitWarning
 from engine.core.world import World
-from engine.render.atmosphere import sunlight_share
 from engine.render.fog import volume_rows
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
-from engine.render.sky import air_of, is_generated, sky_model
+from engine.render.sky import is_generated, sky_model, sunlight_tint
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.resources import ContactLamps, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
@@ -114,8 +113,6 @@ class PrepareSystem(esper.Processor):
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
         self._sun_follows = False   # the generated sky's sun follows the brightest directional light
-        self._tint_key: tuple = ()   # an atmosphere's air and its sun's direction, and the sunlight's tint
-        self._tint = (1.0, 1.0, 1.0)
         self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
         # The debug overlay's toggle: off, no surface reflects the light from all round by its
         # material (its environment reflection; a Reflective's reflection stays).
@@ -238,21 +235,10 @@ class PrepareSystem(esper.Processor):
         self._sun = self._cube_sun = sun
 
     def _air_tint(self, sun: DirectionalLight) -> tuple[float, float, float]:
-        """The share of ``sun``'s light (the world's brightest DirectionalLight) an atmosphere
-        Skybox that follows it (``Skybox.tints_sunlight``) lets through on its way down,
-        over the share it lets through from straight overhead (the light's colour is its
-        colour at noon); white for any other sky.  Kept for the last air and direction."""
+        """What the world's atmosphere does to ``sun``'s light (the brightest DirectionalLight:
+        ``engine.render.sky.sunlight_tint``)."""
         skies = self.world.query_one(Skybox)
-        sky = skies[0][1] if skies else None
-        if sky is None or sky.model != "atmosphere" or not sky.tints_sunlight or sky.sun_direction is not None:
-            return (1.0, 1.0, 1.0)
-        key = (air_of(sky), tuple(sun.direction))
-        if key != self._tint_key:
-            towards = -np.array(key[1], np.float64)
-            share = sunlight_share(key[0], towards / np.linalg.norm(towards))
-            overhead = sunlight_share(key[0], np.array([0.0, 1.0, 0.0]))
-            self._tint_key, self._tint = key, tuple(float(c) for c in share / np.maximum(overhead, 1e-6))
-        return self._tint
+        return sunlight_tint(skies[0][1] if skies else None, tuple(sun.direction))
 
     def _sky_sun(self) -> SkySun | None:
         """Where the world's generated sky puts its sun now, and its tint (``sky_sun``; None:

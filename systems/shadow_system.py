@@ -42,6 +42,7 @@ from components import (
     Portal,
     Refractive,
     Skin,
+    Skybox,
     Transform,
     Visibility,
 )
@@ -51,11 +52,13 @@ from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
+from engine.render.sky import sunlight_tint
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS
 from engine.resources import RenderStats, Surfaces
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import (
     KeptLights,
+    brightest_directional,
     cube_faces_lit,
     kept_lights,
     lamp_cone,
@@ -415,7 +418,12 @@ class ShadowSystem(esper.Processor):
             suns = [(entity, world.get(entity, DirectionalLight)) for entity in kept.directional if entity is not None]
             lamps = [(entity, (world.get(entity, PointLight), world.get(entity, Transform)))
                      for entity in kept.point if entity is not None]
-            directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity)
+            sun = brightest_directional(world)   # (an atmosphere reddens it as it sets: sunlight_tint)
+            skies = world.query_one(Skybox)
+            tint = glm.vec3(*sunlight_tint(skies[0][1] if skies else None, tuple(sun.direction))) \
+                if sun is not None else glm.vec3(1.0)
+            directional = [(entity, raw_field(light, "direction"),
+                            raw_field(light, "color").xyz * light.intensity * (tint if light is sun else glm.vec3(1.0)))
                            for entity, light in suns]
             cookies = renderer.spot_cookies
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,

@@ -390,3 +390,36 @@ def test_a_probe_captures_the_atmosphere_and_its_space(scene, ctx):
     got = np.stack([read_cube_level(ctx, texture, face, 0, SCRATCH_UNIT)[..., :3] for face in range(6)])
     assert got.max() > 0.03 and got[:, :, :, 2].std() > 0.005   # (the space through the air: not black)
     np.testing.assert_allclose(got, build_faces(skybox, SkySun(tuple(sun))), rtol=2e-2, atol=2e-3)
+
+
+def test_the_light_a_mirror_throws_is_reddened_as_the_suns_own(scene):
+    """A mirror throwing a low sun back onto the floor (``Mirror.reflects_light``): the thrown
+    light (the floor with the mirror throwing less the floor without) under the atmosphere over
+    the same with ``tints_sunlight`` off is the air's tint of the sun, as its direct light's."""
+    from components import Mirror
+    from engine.assets.mesh import quad
+
+    sun = _toward(20.0, 180.0)   # from +Z, its light travelling towards the mirror at -Z
+    thrown = {}
+    for tints in (True, False):
+        frames = []
+        for throws in (True, False):
+            def build(world, tints=tints, throws=throws):
+                world.spawn(Transform(position=(0.0, 7.0, 2.0), rotation=look_rotation(glm.vec3(0.0, -1.0, -0.001))),
+                            Camera(fov_y=60.0, near=0.1, far=100.0))
+                world.spawn(Skybox(model="atmosphere", tints_sunlight=tints))
+                world.spawn(DirectionalLight(direction=tuple(-sun), intensity=3.0, shadows=True))
+                world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+                world.spawn(Transform(position=(0.0, 1.5, -1.0)), MeshRef(quad(6.0, 3.0)), Material(),
+                            Mirror(reflects_light=throws))
+
+            runner = scene(build, SIZE)
+            runner.engine.renderer.antialias = "off"
+            runner.frame()
+            frames.append(_read(runner)[0])
+        thrown[tints] = frames[0] - frames[1]
+    patch = thrown[False].sum(axis=-1) > 0.1
+    assert patch.sum() > 200
+    r = atm.GROUND_KM + atm.EYE_KM
+    want = np.exp(-_optical_depth(EARTH, r, sun[1])) / np.exp(-_optical_depth(EARTH, r, 1.0))
+    np.testing.assert_allclose(thrown[True][patch].mean(axis=0) / thrown[False][patch].mean(axis=0), want, rtol=0.03)

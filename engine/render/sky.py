@@ -19,6 +19,7 @@ the faces with numpy: the reference the tests hold the GPU's cube to, and given 
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -73,6 +74,27 @@ def air_of(skybox: Skybox) -> Air:
     ``haze``, its ``ground`` colour the ground's albedo."""
     return Air(rayleigh=float(skybox.rayleigh), haze=float(skybox.haze),
                ground=tuple(float(c) for c in tuple(skybox.ground)[:3]))
+
+
+def sunlight_tint(skybox: Skybox | None, direction: tuple[float, float, float]) -> tuple[float, float, float]:
+    """What an atmosphere ``skybox`` that follows the sun and tints it (``tints_sunlight``)
+    does to the light of the sun shining along ``direction`` (the way its light travels): the
+    share of it the air lets through on its way down over the share it lets through from
+    straight overhead (the light's colour is its colour at noon); white for any other sky.
+    The lights' rows (the prepare stage) and the light mirrors throw (the shadows stage) both
+    take it."""
+    if skybox is None or skybox.model != "atmosphere" or not skybox.tints_sunlight \
+            or skybox.sun_direction is not None:
+        return (1.0, 1.0, 1.0)
+    return _sunlight_tint(air_of(skybox), tuple(float(c) for c in direction))
+
+
+@functools.lru_cache(maxsize=64)
+def _sunlight_tint(air: Air, direction: tuple[float, float, float]) -> tuple[float, float, float]:
+    towards = -np.array(direction, np.float64)
+    share = sunlight_share(air, towards / np.linalg.norm(towards))
+    overhead = sunlight_share(air, np.array([0.0, 1.0, 0.0]))
+    return tuple(float(c) for c in share / np.maximum(overhead, 1e-6))
 
 
 def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, coarse: bool = False) -> np.ndarray:
