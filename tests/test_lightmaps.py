@@ -13,7 +13,7 @@ import pytest
 from pyglm import glm
 
 from components import ComponentValueError, DirectionalLight, Material, MeshRef, Skybox, Transform
-from engine.assets.mesh import Mesh, plane
+from engine.assets.mesh import Mesh, box, plane
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError
 from tests.support import look_from, srgb_to_linear
@@ -172,3 +172,76 @@ def test_a_level_file_gives_a_lightmap(tmp_path):
     material = world.query_one(Material)[0][1]
     assert isinstance(material.lightmap, TextureData) and material.lightmap_intensity == 2.0
     assert glm.vec4(material.color) == glm.vec4(0.8, 0.8, 0.8, 1.0)
+
+
+# -- baking one (engine/render/lightmap_bake.py) ---------------------------------------------------
+def _bake_world(wall: bool):
+    """A 6 m floor under the default generated sky (no light of its own but the sky's), and
+    (``wall``) a tall red wall along its -X edge, lit by a sun above it."""
+    from components import Emissive
+
+    def build(world):
+        look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
+        world.spawn(Skybox())
+        floor = world.spawn(Transform(), MeshRef(plane(6.0, 6.0)), matte())
+        world.resources["floor"] = floor
+        if wall:
+            world.spawn(Transform(position=(-3.2, 2.0, 0.0)), MeshRef(box((0.4, 4.0, 6.0))),
+                        Material(color=(0.9, 0.1, 0.1), roughness=1.0, environment_reflection=0.0),
+                        Emissive(power=1.5))
+    return build
+
+
+def test_a_baked_open_floor_holds_the_skys_light(scene):
+    """Under an open sky each texel is the sky's irradiance on an upward face over pi (the
+    sky's spherical harmonics in closed form: ``ambient_sh``), within 4%; and the floor lit by
+    its bake shows what the sky's light showed it (within 3%)."""
+    from engine.render.irradiance import evaluate_sh
+    from engine.render.lightmap_bake import bake_lightmap
+    from systems.prepare_system import ambient_sh
+
+    runner = scene(_bake_world(False), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    floor = runner.world.resources["floor"]
+    image, intensity = bake_lightmap(runner.engine, floor, size=8, resolution=16)
+    want = evaluate_sh(ambient_sh(runner.world), np.array([0.0, 1.0, 0.0])) / np.pi
+    baked = srgb_to_linear(image.as_8_bits()[..., :3]) * intensity
+    np.testing.assert_allclose(baked.reshape(-1, 3), np.tile(want, (64, 1)), rtol=0.04)
+    before = _read(runner)[0]
+    runner.world.get(floor, Material).lightmap = image
+    runner.world.get(floor, Material).lightmap_intensity = intensity
+    runner.frame()
+    after = _read(runner)[0]
+    floor_pixels = runner.ids() == floor
+    np.testing.assert_allclose(after[floor_pixels].mean(axis=0), before[floor_pixels].mean(axis=0), rtol=0.03)
+
+
+def test_a_bake_beside_a_glowing_red_wall_is_darker_and_redder_near_it(scene):
+    """The wall hides half the sky from the floor at its foot and glows red on it: the texels
+    by the wall are darker in blue and redder than those on the far side."""
+    from engine.render.lightmap_bake import bake_lightmap
+
+    runner = scene(_bake_world(True), SIZE)
+    runner.frame()
+    image, intensity = bake_lightmap(runner.engine, runner.world.resources["floor"], size=8, resolution=16)
+    baked = srgb_to_linear(image.as_8_bits()[..., :3]) * intensity
+    near, far = baked[:, 0], baked[:, -1]   # columns: u along +X (the wall at -X)
+    assert (near[:, 2] < 0.8 * far[:, 2]).all()
+    assert (near[:, 0] / near[:, 2] > 2.0 * far[:, 0] / far[:, 2]).all()
+
+
+def test_bad_bakes_are_refused(scene):
+    from engine.core.errors import AssetError
+    from engine.render.lightmap_bake import bake_lightmap
+
+    runner = scene(_bake_world(False), SIZE)
+    runner.frame()
+    floor = runner.world.resources["floor"]
+    for kwargs, words in ((dict(size=2), "size"), (dict(resolution=1000), "resolution"),
+                          (dict(near=0.0), "near and far")):
+        with pytest.raises(AssetError, match=words):
+            bake_lightmap(runner.engine, floor, **kwargs)
+    with pytest.raises(AssetError, match="no MeshRef"):
+        bake_lightmap(runner.engine, runner.world.spawn(Transform()))
+    assert runner.engine.renderer.resource_counts()["probe_cubes"] == 0
