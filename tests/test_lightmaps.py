@@ -229,6 +229,18 @@ def test_a_bake_beside_a_glowing_red_wall_is_darker_and_redder_near_it(scene):
     near, far = baked[:, 0], baked[:, -1]   # columns: u along +X (the wall at -X)
     assert (near[:, 2] < 0.8 * far[:, 2]).all()
     assert (near[:, 0] / near[:, 2] > 2.0 * far[:, 0] / far[:, 2]).all()
+    # The set the material reads its lightmap on: a second set turned half round, named for
+    # the lightmap, turns the bake with it (the wall's side on the right).
+    world = runner.world
+    floor = world.resources["floor"]
+    base = world.get(floor, MeshRef).mesh
+    world.get(floor, MeshRef).mesh = Mesh(base.positions, base.normals, base.uvs, base.indices, name="turned",
+                                          second_uvs=1.0 - np.asarray(base.uvs))
+    world.get(floor, Material).second_uv_maps = ("lightmap",)
+    runner.frame()
+    turned, turned_intensity = bake_lightmap(runner.engine, floor, size=8, resolution=16)
+    turned = srgb_to_linear(turned.as_8_bits()[..., :3]) * turned_intensity
+    np.testing.assert_allclose(turned, baked[::-1, ::-1], rtol=0.05, atol=0.003)
 
 
 def test_bad_bakes_are_refused(scene):

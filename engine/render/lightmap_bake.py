@@ -1,8 +1,9 @@
 """Baking a lightmap (``Material.lightmap``) with the engine's own probe captures.
 
 ``bake_lightmap(engine, entity)`` finds, for each texel of a ``size`` x ``size`` image laid
-over the entity's mesh by its UVs (the second set where the mesh has one, as a lightmap is
-read: ``second_uv_maps=("lightmap",)``), the point of the surface under its centre and that
+over the entity's mesh by the UV set its Material reads a lightmap on (the second where its
+``second_uv_maps`` names "lightmap", else the first: it must lay the mesh out once, without
+overlaps, within 0..1), the point of the surface under its centre and that
 point's normal (the triangles rasterised in UV space with numpy); captures the world's light
 from just above the point as a reflection probe does (six 90-degree views of ``resolution``
 texels, the entity itself left out: ``engine/render/probes.py``), reads the cube back,
@@ -32,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
-from components import MeshRef, Transform
+from components import Material, MeshRef, Transform
 from engine.assets.texture_data import TextureData
 from engine.core.color import linear_to_srgb
 from engine.core.errors import AssetError
@@ -127,7 +128,9 @@ def bake_lightmap(engine: Engine, entity: int, size: int = 32, resolution: int =
     if mesh_ref is None or transform is None:
         raise AssetError(f"bake_lightmap: entity {entity} has no MeshRef and Transform to lay a lightmap over")
     mesh = mesh_ref.mesh
-    uvs = mesh.second_uvs if mesh.second_uvs is not None else mesh.uvs
+    material = world.try_get(entity, Material)
+    second = material is not None and "lightmap" in material.second_uv_maps
+    uvs = mesh.second_uvs if second and mesh.second_uvs is not None else mesh.uvs
     points, ways, covered = texel_points(mesh.positions, mesh.normals, uvs, mesh.indices.reshape(-1, 3), size)
     if not covered.any():
         raise AssetError(f"bake_lightmap: entity {entity}'s mesh {mesh.name!r} covers no texel of a {size} x "
