@@ -256,4 +256,12 @@ def test_bad_bakes_are_refused(scene):
             bake_lightmap(runner.engine, floor, **kwargs)
     with pytest.raises(AssetError, match="no MeshRef"):
         bake_lightmap(runner.engine, runner.world.spawn(Transform()))
+    from components import Morph
+
+    base = plane(2.0, 2.0)
+    morphed = Mesh(base.positions, base.normals, base.uvs, base.indices, name="dented",
+                    morph_positions=np.zeros((1, 4, 3)))
+    posed = runner.world.spawn(Transform(), MeshRef(morphed), matte(), Morph(weights=(0.5,)))
+    with pytest.raises(AssetError, match="is posed"):
+        bake_lightmap(runner.engine, posed)
     assert runner.engine.renderer.resource_counts()["probe_cubes"] == 0

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
-from components import Material, MeshRef, Transform
+from components import Material, MeshRef, Morph, Skin, Transform
 from engine.assets.texture_data import TextureData
 from engine.core.color import linear_to_srgb
 from engine.core.errors import AssetError
@@ -127,6 +127,9 @@ def bake_lightmap(engine: Engine, entity: int, size: int = 32, resolution: int =
     mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
     if mesh_ref is None or transform is None:
         raise AssetError(f"bake_lightmap: entity {entity} has no MeshRef and Transform to lay a lightmap over")
+    if world.has(entity, Skin) or world.has(entity, Morph):
+        raise AssetError(f"bake_lightmap: entity {entity} is posed (a Skin or a Morph bends its mesh): a lightmap "
+                         "is baked over a mesh that stays as it is")
     mesh = mesh_ref.mesh
     material = world.try_get(entity, Material)
     second = material is not None and "lightmap" in material.second_uv_maps
