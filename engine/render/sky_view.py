@@ -4,9 +4,10 @@ map read (``shaders/include/sky_model.glsl``'s ATMOSPHERE build).
 
 Why on the GPU.  The table depends on the sun's elevation, so a sun that rises or sets needs
 a new one; made with numpy (``engine.render.atmosphere.sky_view_table``, still the reference
-the tests hold this one to) it took about 30 ms of the 2-core machine's CPU, a hitch every
-quarter degree of a day.  Here it is one full-screen triangle over 48 x 96 texels, drawn
-again whenever the elevation changes at all, as Hillaire's sky-view table is each frame.
+the tests hold this one to) it took about 30 ms of the 2-core machine's CPU, a hitch each
+time the sun had moved a quarter degree.  Here it is one full-screen triangle over 48 x 96
+texels (about 3 ms of llvmpipe, a fraction of a millisecond on a GPU), drawn again whenever
+the elevation moves by ``atmosphere.TABLE_STEP_DEGREES`` (0.02), as Hillaire's is each frame.
 Its two inputs, the transmittance and multiple-scattering tables, depend on the air alone:
 made with numpy once an air and uploaded.
 """
