@@ -6,8 +6,8 @@ Why on the GPU.  The table depends on the sun's elevation, so a sun that rises o
 a new one; made with numpy (``engine.render.atmosphere.sky_view_table``, still the reference
 the tests hold this one to) it took about 30 ms of the 2-core machine's CPU, a hitch each
 time the sun had moved a quarter degree.  Here it is one full-screen triangle over 48 x 96
-texels (about 3 ms of llvmpipe, a fraction of a millisecond on a GPU), drawn again whenever
-the elevation moves by ``atmosphere.TABLE_STEP_DEGREES`` (0.02), as Hillaire's is each frame.
+texels (about 3 ms of llvmpipe's; not measured on a GPU), drawn again whenever the elevation
+moves by ``atmosphere.TABLE_STEP_DEGREES`` (0.02), as Hillaire's is each frame.
 Its two inputs, the transmittance and multiple-scattering tables, depend on the air alone:
 made with numpy once an air and uploaded.
 """
