@@ -6,12 +6,12 @@ overhead at noon, white near the horizon, red and orange round a low sun, dark a
 The method is Hillaire's ("A Scalable and Production Ready Sky and Atmosphere Rendering
 Technique", EGSR 2020), computed here with numpy in three tables:
 
-- **transmittance** (``_transmittance_table``): the share of light that crosses the air from
+- **transmittance** (``transmittance_table``): the share of light that crosses the air from
   a point at radius r along a way of cosine mu from the zenith to space, a table over
   (r, mu) in Bruneton and Neyret's parameterisation ("Precomputed Atmospheric Scattering",
   2008: the distance to the top of the air, so rays grazing the horizon get their share of
   rows); a way that meets the ground is dark.
-- **multiple scattering** (``_multiple_scattering_table``): Hillaire's Psi_ms(h, mu_sun), the
+- **multiple scattering** (``multiple_scattering_table``): Hillaire's Psi_ms(h, mu_sun), the
   light scattered twice or more that reaches a point, per unit of sunlight, from the
   second order's isotropic integral over the sphere and the geometric series 1 / (1 - f_ms)
   of the orders after it (the ground's light included, ``Air.ground``).  Without it a low
@@ -153,8 +153,9 @@ def _bilinear(table: np.ndarray, row: np.ndarray, column: np.ndarray) -> np.ndar
 
 
 @functools.lru_cache(maxsize=8)
-def _transmittance_table(air: Air) -> np.ndarray:
-    """Transmittance to space (rows of radius, columns of mu; Bruneton's mapping)."""
+def transmittance_table(air: Air) -> np.ndarray:
+    """Transmittance to space (rows of radius, columns of mu; Bruneton's mapping, 3): what
+    ``transmittance`` reads, and the GPU's table (``engine/render/sky_view.py``) is given."""
     rows, columns = TRANSMITTANCE_SIZE
     x_r = np.linspace(0.0, 1.0, rows)[:, None]
     x_mu = np.linspace(0.0, 1.0, columns)[None, :]
@@ -182,7 +183,7 @@ def transmittance(air: Air, r: np.ndarray, mu: np.ndarray) -> np.ndarray:
     rho = np.sqrt(np.maximum(r * r - GROUND_KM * GROUND_KM, 0.0))
     d_min, d_max = TOP_KM - r, rho + _HORIZON
     x_mu = (_to_top(r, mu) - d_min) / np.maximum(d_max - d_min, 1e-9)
-    through = _bilinear(_transmittance_table(air), rho / _HORIZON, x_mu)
+    through = _bilinear(transmittance_table(air), rho / _HORIZON, x_mu)
     return np.where(_meets_ground(r, mu)[..., None], 0.0, through)
 
 
@@ -209,9 +210,10 @@ def _step(scattered: np.ndarray, extinction: np.ndarray, length: np.ndarray) -> 
 
 
 @functools.lru_cache(maxsize=8)
-def _multiple_scattering_table(air: Air) -> np.ndarray:
+def multiple_scattering_table(air: Air) -> np.ndarray:
     """Hillaire's Psi_ms (rows of height 0..top, columns of the sun's cosine -1..1, 3) per
-    unit of sunlight: the second order's isotropic light at a point over 1 - f_ms."""
+    unit of sunlight: the second order's isotropic light at a point over 1 - f_ms (given to
+    the GPU's table too)."""
     rows, columns = SCATTERING_SIZE
     height = np.linspace(0.0, TOP_KM - GROUND_KM, rows)[:, None, None]
     mu_sun = np.linspace(-1.0, 1.0, columns)[None, :, None]
@@ -253,7 +255,7 @@ def _multiple_scattering_table(air: Air) -> np.ndarray:
 
 
 def _multiple_scattering(air: Air, height: np.ndarray, mu_sun: np.ndarray) -> np.ndarray:
-    return _bilinear(_multiple_scattering_table(air), height / (TOP_KM - GROUND_KM), mu_sun * 0.5 + 0.5)
+    return _bilinear(multiple_scattering_table(air), height / (TOP_KM - GROUND_KM), mu_sun * 0.5 + 0.5)
 
 
 def view_directions(sun_elevation: float, size: tuple[int, int] = VIEW_SIZE) -> tuple[np.ndarray, np.ndarray]:
@@ -311,16 +313,6 @@ def sky_view_table(air: Air, sun_elevation_degrees: float, size: tuple[int, int]
     table = np.concatenate([light, through[..., 1:2]], -1).astype(np.float32)
     table.setflags(write=False)
     return table
-
-
-def transmittance_texels(air: Air) -> np.ndarray:
-    """The transmittance table (rows of radius, columns of mu, 3) as the GPU's table is given it."""
-    return _transmittance_table(air)
-
-
-def scattering_texels(air: Air) -> np.ndarray:
-    """The multiple-scattering table (rows of height, columns of the sun's cosine, 3), likewise."""
-    return _multiple_scattering_table(air)
 
 
 def glsl_defines() -> dict[str, str]:

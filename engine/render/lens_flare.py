@@ -18,7 +18,7 @@ from components.post import LensFlare
 from engine.render.bindings import BLOOM_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.bloom import LEVEL_DTYPE
 from engine.render.shader_library import ShaderLibrary
-from engine.render.targets import release_framebuffer
+from engine.render.targets import release_target
 
 _FLARE = PassState()   # (no depth, no blending: every texel written)
 
@@ -61,12 +61,9 @@ class LensFlarePass:
         return int(self.texture is not None)
 
     def release_targets(self) -> None:
-        if self._framebuffer is not None:
-            release_framebuffer(self._framebuffer)
-            self._framebuffer = None
-        if self.texture is not None:
-            self.texture.release()
-            self.texture = None
+        if self._framebuffer is not None:   # (its one colour attachment is ``texture``)
+            release_target(self._framebuffer)
+            self._framebuffer = self.texture = None
 
     def release(self) -> None:
         self.release_targets()

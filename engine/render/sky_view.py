@@ -16,7 +16,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from engine.render.atmosphere import VIEW_SIZE, Air, glsl_defines, scattering_texels, transmittance_texels
+from engine.render.atmosphere import VIEW_SIZE, Air, glsl_defines, multiple_scattering_table, transmittance_table
 from engine.render.bindings import (
     AIR_SCATTERING_UNIT,
     AIR_TRANSMITTANCE_UNIT,
@@ -67,7 +67,8 @@ class SkyView:
         ctx = self.ctx
         if air != self._air:
             self._release_tables()
-            self._tables = (_table_texture(ctx, transmittance_texels(air)), _table_texture(ctx, scattering_texels(air)))
+            self._tables = (_table_texture(ctx, transmittance_table(air)),
+                            _table_texture(ctx, multiple_scattering_table(air)))
             self._air = air
         if self._target is None:
             rows, columns = VIEW_SIZE
