@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_AIR_SCALE, MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR
+from components.limits import MAX_AIR_SCALE, MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR, MAX_SUBSURFACE_SCALE
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -230,6 +230,19 @@ class Material(TrackedComponent):
     light from all round behind it (light through mirrors and portals lights its front only).
     Give a leaf or a sheet ``double_sided`` as well: each side is then the other's back.
 
+    ``subsurface`` (0 to 1, default 0: none) is the share of the diffuse light that wanders
+    under the surface before it leaves, as in skin, wax, marble, jade or milk (Blender's
+    Principled BSDF's subsurface weight, Godot's subsurface scattering, Unity HDRP's and
+    Unreal's subsurface profiles): where the surface curves, its shading softens towards the
+    terminator and wraps past it, in the colour of the light that travels furthest.
+    ``subsurface_radius`` (linear RGB, each 0 to 1, default ``(1.0, 0.2, 0.1)``: skin's, red
+    travelling furthest) times ``subsurface_scale`` (metres, 0 to ``MAX_SUBSURFACE_SCALE``,
+    default 0.05) is each colour's distance (Burley's diffusion profile's d).  Pre-integrated:
+    the light of a sphere curved as the surface is there (engine/render/subsurface.py), so a
+    flat surface is lit as without it and a small one scatters more than a large one of the
+    same material.  The sun's, lamps' and light through mirrors' and portals' diffuse light
+    scatter; the light from all round is already soft and does not.
+
     ``unlit`` (default False) draws the material's colour as it is, lit by nothing (glTF's
     ``KHR_materials_unlit``, Unity's Unlit shaders, three.js's ``MeshBasicMaterial``,
     Godot's unshaded mode): a sign, a backdrop, a baked or stylised asset whose texture
@@ -271,6 +284,9 @@ class Material(TrackedComponent):
     specular_color: Any = field(default_factory=lambda: glm.vec3(1.0))
     diffuse_transmission: float = 0.0
     diffuse_transmission_color: Any = field(default_factory=lambda: glm.vec3(1.0))
+    subsurface: float = 0.0
+    subsurface_radius: Any = field(default_factory=lambda: glm.vec3(1.0, 0.2, 0.1))
+    subsurface_scale: float = 0.05
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "second_uv_maps":
@@ -303,8 +319,16 @@ class Material(TrackedComponent):
                 _say_flat_heights(getattr(self, "normal_map", None), value)
             return value
         if name in ("occlusion_strength", "environment_reflection", "clearcoat", "clearcoat_roughness", "reflectance",
-                    "sheen_roughness", "anisotropy", "iridescence", "diffuse_transmission"):
+                    "sheen_roughness", "anisotropy", "iridescence", "diffuse_transmission", "subsurface"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "subsurface_scale":
+            return finite(self, name, value, low=0.0, high=MAX_SUBSURFACE_SCALE)
+        if name == "subsurface_radius":
+            radius = vec3(self, name, value, low=0.0)
+            if max(radius) > 1.0:  # a share of subsurface_scale each: the scale says how far
+                raise ComponentValueError(f"Material.subsurface_radius must have components in [0, 1] (each "
+                                          f"colour's share of subsurface_scale), got {value!r}")
+            return radius
         if name == "lightmap_intensity":
             return finite(self, name, value, low=0.0, high=MAX_LIGHTMAP_INTENSITY)
         if name == "iridescence_ior":

@@ -8,6 +8,7 @@
 #include "shadows.glsl"
 #include "ggx.glsl"
 #include "ambient.glsl"
+#include "subsurface.glsl"
 #include "rect_lights.glsl"
 #include "hdr.glsl"
 #include "way.glsl"
@@ -461,6 +462,9 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
 #ifdef DIFFUSE_TRANSMISSION
                 , vec3 through, vec4 point_behind
 #endif
+#ifdef SUBSURFACE
+                , vec4 point_under
+#endif
                 ) {
     vec3 lit = vec3(0.0);
     vec3 d = lights.point_pos[i].xyz - s.position;
@@ -504,6 +508,20 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
                * point_shadow(i, point_behind);
     }
 #endif
+#ifdef SUBSURFACE
+    // The diffuse light, scattered under the surface (subsurface.glsl): past the terminator too
+    // (a rectangle's form factor is its n.l: its light wraps no further).
+    if (falloff > 0.0) {
+#ifdef SPOT_COOKIES
+        vec3 under_cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
+#else
+        const vec3 under_cookie = vec3(1.0);
+#endif
+        lit += diffuse * face * subsurface_diffuse(rectangle ? nl : dot(s.normal, l), point_shadow(i, point_lit),
+                                                   point_shadow(i, point_under))
+               * lights.point_color[i].rgb * under_cookie * falloff;
+    }
+#endif
     if (nl > 0.0 && falloff > 0.0) {
 #ifdef SPOT_COOKIES
         vec3 cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
@@ -523,7 +541,11 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
                                           s.highlight_roughness) * s.energy_compensation;
 #endif
 #endif
+#ifdef SUBSURFACE
+        lit += highlight * arriving;  // (its diffuse light above)
+#else
         lit += (diffuse * nl * face + highlight) * arriving;
+#endif
         highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
 #ifdef RECT_LIGHTS
@@ -582,11 +604,27 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec4 directional_behind = shadowed ? directional_shadows(s.position, -s.geometric_normal) : vec4(1.0);
     vec4 point_behind = shadowed ? point_shadows(s.position, -s.geometric_normal) : vec4(1.0);
 #endif
+#ifdef SUBSURFACE
+    // The scattered share's shadows (subsurface.glsl): the lamps' slots here, the suns' in their loop.
+    vec4 point_under = shadowed ? subsurface_point_shadows(s.position, s.geometric_normal) : vec4(1.0);
+#endif
     for (int i = 0; i < lights.counts.x; ++i) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
 #ifdef DIFFUSE_TRANSMISSION
         total += through * (max(-dot(s.normal, l), 0.0) * directional_behind[i]) * lights.directional_color[i].rgb;
+#endif
+#ifdef SUBSURFACE
+        float under = directional_lit[i];  // (where the light reaches the point, its own shadow)
+        if (shadowed && dot(s.geometric_normal, l) < 0.0) {
+            under = directional_shadow(i, subsurface_shadow_point(s.position, s.geometric_normal, l),
+                                       s.geometric_normal, l);
+#ifdef SCREEN_OCCLUSION
+            under *= mix(1.0, s.sun_contact, lights.directional_dir[i].w);
+#endif
+        }
+        total += diffuse * subsurface_diffuse(dot(s.normal, l), directional_lit[i] PARALLAX_LIT(l),
+                                              under PARALLAX_LIT(l)) * lights.directional_color[i].rgb;
 #endif
         if (nl > 0.0) {
             vec3 arriving = lights.directional_color[i].rgb * nl * directional_lit[i] PARALLAX_LIT(l);
@@ -595,7 +633,11 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #else
             vec3 highlight = ggx_specular(s.normal, l, s.to_eye, s.f0, s.highlight_roughness) * s.energy_compensation;
 #endif
+#ifdef SUBSURFACE
+            total += highlight * arriving;  // (its diffuse light above)
+#else
             total += (diffuse + highlight) * arriving;
+#endif
             highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
             coat_light += ggx_specular(coat_normal, l, s.to_eye, vec3(0.04), coat_roughness)
@@ -616,6 +658,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #ifdef DIFFUSE_TRANSMISSION
                             , through, point_behind
 #endif
+#ifdef SUBSURFACE
+                            , point_under
+#endif
                             );
     }
 #ifdef RECT_LIGHTS
@@ -625,6 +670,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         total += lamp_light(i, true, s, diffuse, point_lit
 #ifdef DIFFUSE_TRANSMISSION
                             , through, point_behind
+#endif
+#ifdef SUBSURFACE
+                            , point_under
 #endif
                             );
     }
@@ -843,6 +891,9 @@ void main() {
     s.normal = normalize(v_normal);
     if (!gl_FrontFacing) s.normal = -s.normal;
     s.geometric_normal = s.normal;
+#ifdef SUBSURFACE
+    subsurface_begin(s.geometric_normal, v_world_pos);  // (the curvature: derivatives, before any branch)
+#endif
 #ifdef PARALLAX
     parallax_shift = parallax_offset(s.geometric_normal, v_world_pos, s.to_eye, MAP_UV_PLAIN(UV_BIT_NORMAL_MAP));
 #endif

@@ -85,8 +85,8 @@ def layer_uniforms(material: Material | None, refractive: Refractive | None) -> 
     """The batch arguments (``Renderer.batch_for``) of the material's optional layers, each its
     build's uniform and None (or 0) where the material has none, so it pays nothing for it: a
     clear coat (clearcoat, its roughness), a sheen (colour, roughness), diffuse transmission
-    (its colour, its share), anisotropy (strength,
-    direction in radians), a thin film (iridescence, its index, its thickness in nm), what
+    (its colour, its share), subsurface scattering (each channel's distance in metres, its
+    share), anisotropy (strength, direction in radians), a thin film (iridescence, its index, its thickness in nm), what
     non-metals reflect head on, a refraction's dispersion and how deep the normal map's
     heights reach (its PARALLAX build's; 0 without a normal map)."""
     m = material or DEFAULT_MATERIAL
@@ -94,6 +94,8 @@ def layer_uniforms(material: Material | None, refractive: Refractive | None) -> 
             "sheen": (*m.sheen_color, m.sheen_roughness) if max(m.sheen_color) > 0.0 else None,
             "diffuse_transmission": (*m.diffuse_transmission_color, m.diffuse_transmission)
             if m.diffuse_transmission > 0.0 else None,
+            "subsurface": (*(c * m.subsurface_scale for c in m.subsurface_radius), m.subsurface)
+            if m.subsurface > 0.0 and m.subsurface_scale * max(m.subsurface_radius) > 0.0 else None,
             "anisotropy": (m.anisotropy, math.radians(m.anisotropy_direction)) if m.anisotropy > 0.0 else None,
             "iridescence": (m.iridescence, m.iridescence_ior, m.iridescence_thickness) if m.iridescence > 0.0 else None,
             "parallax_depth": m.parallax_depth if m.normal_map is not None else 0.0,

@@ -271,6 +271,8 @@ class BatchKey(NamedTuple):
     parallax_depth: float = 0.0  # Material.parallax_depth with a normal map: its PARALLAX build's uniform (0: none)
     lightmap: int = 0                   # Material.lightmap's image id (0: none): its LIGHTMAP build's
     lightmap_intensity: float = 1.0     # Material.lightmap_intensity: its draws' uniform
+    # Material.subsurface_radius x subsurface_scale per channel and subsurface (None: none)
+    subsurface: tuple[float, float, float, float] | None = None
 
 
 _NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first preparing
@@ -406,6 +408,9 @@ class InstanceBatch:
         # Diffuse transmission (Material.diffuse_transmission_color, its share; None: none): its
         # DIFFUSE_TRANSMISSION build's uniform.
         self.diffuse_transmission: tuple[float, float, float, float] | None = None
+        # Subsurface scattering (each channel's profile distance in metres, its share; None:
+        # none): its SUBSURFACE build's uniform.
+        self.subsurface: tuple[float, float, float, float] | None = None
         self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform
         self.parallax_depth = 0.0  # Material.parallax_depth (0: none): its PARALLAX build's uniform
         # Anisotropy (Material.anisotropy; its direction in radians; None: none): its ANISOTROPY build's uniform.

@@ -97,6 +97,7 @@ from engine.render.sky import (
     model_radiance,
     zenith_share,
 )
+from engine.render.subsurface import subsurface_table
 from engine.render.targets import release_framebuffer
 from engine.render.views import LTC_ROW, MAX_IRRADIANCE_PROBES, VOLUME_ROW, VOLUME_ROWS, VOLUME_SLOT_ROWS
 
@@ -343,6 +344,7 @@ class IrradianceTable:
         self._brdf[..., :2] = environment_brdf_table()
         self.has_sheen_albedo = False  # blue: the sheen's albedo (write_sheen_albedo), once a sheen is drawn
         self.has_ltc = False           # the LTC rows (write_ltc), once a rectangle light is kept
+        self.has_subsurface = False    # alpha: subsurface scattering's table (write_subsurface), once one is drawn
         self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
                                                          ENVIRONMENT_BRDF_SIZE))
         self.framebuffer = ctx.framebuffer(color_attachments=[self.table])
@@ -385,6 +387,15 @@ class IrradianceTable:
             self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
                                                              ENVIRONMENT_BRDF_SIZE))
             self.has_sheen_albedo = True
+
+    def write_subsurface(self) -> None:
+        """Subsurface scattering's table (``engine/render/subsurface.py``) into the alpha of
+        the BRDF rows, once: a batch with ``Material.subsurface`` asks for it when it is made."""
+        if not self.has_subsurface:
+            self._brdf[..., 3] = subsurface_table()
+            self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
+                                                             ENVIRONMENT_BRDF_SIZE))
+            self.has_subsurface = True
 
     # --- the boxes -----------------------------------------------------------------------------
 

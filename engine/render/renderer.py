@@ -199,7 +199,8 @@ class Renderer(Gpu):
                   iridescence: tuple[float, float, float] | None = None,
                   posed: tuple[int, bool, bool] = (0, False, False), second_uv_maps: int = 0,
                   diffuse_transmission: tuple[float, float, float, float] | None = None,
-                  decal: bool = False, decal_order: int = 0, parallax_depth: float = 0.0) -> InstanceBatch:
+                  decal: bool = False, decal_order: int = 0, parallax_depth: float = 0.0,
+                  subsurface: tuple[float, float, float, float] | None = None) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -233,6 +234,8 @@ class Renderer(Gpu):
         # ``decal_order``: its Decal.order (the transparent slot blends higher orders later).
         # ``parallax_depth``: Material.parallax_depth with a normal map, its PARALLAX build's (0: none).
         # ``lightmap``: Material.lightmap (sRGB, its LIGHTMAP build's) and ``lightmap_intensity`` its uniform.
+        # ``subsurface``: (red, green, blue: each channel's profile distance in metres, share) of
+        # the light scattered under its surface, its SUBSURFACE build's uniform (None: none).
         if second_uv_maps and mesh.second_uvs is None:
             raise GLLimitError(f"mesh {mesh.name!r}: Material.second_uv_maps reads a second UV set the mesh does "
                                "not have (Mesh.second_uvs)")
@@ -247,7 +250,7 @@ class Renderer(Gpu):
                        dispersion, anisotropy, iridescence, posed, second_uv_maps, diffuse_transmission, decal,
                        decal_order, parallax_depth if normal_map is not None else 0.0,
                        id(lightmap) if lightmap is not None else 0,
-                       lightmap_intensity if lightmap is not None else 1.0)
+                       lightmap_intensity if lightmap is not None else 1.0, subsurface)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -317,8 +320,11 @@ class Renderer(Gpu):
             batch.second_uv_maps = second_uv_maps
             batch.diffuse_transmission = diffuse_transmission
             batch.parallax_depth = key.parallax_depth
+            batch.subsurface = subsurface
             if sheen is not None:  # the sheen's albedo table, made once a sheen is drawn
                 self.irradiance.write_sheen_albedo()
+            if subsurface is not None:  # the scattered light's table, made once it is drawn
+                self.irradiance.write_subsurface()
             self._order_stale = True
             self.needs_preparing = True
             self.note_scene_change()

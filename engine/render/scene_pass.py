@@ -94,6 +94,7 @@ from engine.render.scene_programs import (
     NO_IRIDESCENCE,
     NO_PROBE_LOOKUP,
     NO_SHEEN,
+    NO_SUBSURFACE,
     PER_PASS_UNIFORMS,
     ScenePrograms,
     geometry_invocations,
@@ -305,7 +306,7 @@ class ScenePass:
                 batch.clearcoat or NO_CLEARCOAT, batch.dielectric_f0, batch.sheen or NO_SHEEN, batch.dispersion,
                 batch.anisotropy or NO_ANISOTROPY, batch.iridescence or NO_IRIDESCENCE, batch.pose_row,
                 batch.mesh.morph_count if batch.morphed else 0, batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION,
-                batch.parallax_depth, batch.lightmap_intensity)
+                batch.parallax_depth, batch.lightmap_intensity, batch.subsurface or NO_SUBSURFACE)
 
     def _bind_probe(self, probe: int, unit: int, cubes) -> tuple[int, tuple]:
         """Bind the cube map of ``probe`` to ``unit``: its face size and lookup uniforms.  The

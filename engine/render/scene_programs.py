@@ -73,7 +73,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "checker_cells", "checker_even", "checker_odd", "alpha_cutoff",
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
                      "anisotropy", "iridescence", "pose_row", "morph_targets", "diffuse_transmission",
-                     "parallax_depth", "lightmap_intensity")
+                     "parallax_depth", "lightmap_intensity", "subsurface")
 PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
@@ -81,11 +81,12 @@ NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 NO_CLEARCOAT = (0.0, 0.0)  # the coat uniform of a batch without one (its builds do not read it)
 NO_SHEEN = (0.0, 0.0, 0.0, 0.0)  # the sheen uniform of a batch without one (likewise)
 NO_DIFFUSE_TRANSMISSION = (0.0, 0.0, 0.0, 0.0)  # the diffuse transmission's of a batch without one (likewise)
+NO_SUBSURFACE = (0.0, 0.0, 0.0, 0.0)  # the subsurface scattering's of a batch without one (likewise)
 NO_ANISOTROPY = (0.0, 0.0)  # the anisotropy uniform of a batch without one (likewise)
 NO_IRIDESCENCE = (0.0, 1.0, 0.0)  # the thin film's uniform of a batch without one (likewise)
 # a batch's build with none of _material_build's
 NO_MATERIAL_MAPS = (False, False, False, "", False, False, False, False, False, False, False, False, False, False, 0,
-                    False, False, False)
+                    False, False, False, False)
 
 
 
@@ -204,7 +205,8 @@ class ScenePrograms:
                 False, False
             material = (False, False, material[2], "", False, False, False, False, False, False, False, False,
                         material[12], material[13],  # (a posed mesh's depth is where its pose puts it)
-                        material[14] & ALBEDO_UV_BIT if material[2] else 0, False, False, False)  # (a cutout's holes)
+                        material[14] & ALBEDO_UV_BIT if material[2] else 0,  # (a cutout's holes)
+                        False, False, False, False)
             virtual, unlit, shadowing, fogging, cookies = False, False, (), (), ()  # (masked: a level's)
         elif unlit:  # shades nothing: no occlusion read (it still writes "nothing reflected")
             screen = "reflected" if "reflected" in screen else ""
@@ -259,6 +261,8 @@ class ScenePrograms:
                 defines["PARALLAX"] = "1"
             if material[17]:  # its light from all round baked (Material.lightmap: material_maps.glsl)
                 defines["LIGHTMAP"] = "1"
+            if material[18]:  # light scattered under its surface (Material.subsurface: subsurface.glsl)
+                defines["SUBSURFACE"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
@@ -386,7 +390,7 @@ class ScenePrograms:
                    batch.sheen or NO_SHEEN, batch.dispersion, batch.anisotropy or NO_ANISOTROPY,
                    batch.iridescence or NO_IRIDESCENCE, batch.pose_row, batch.mesh.morph_count if batch.morphed else 0,
                    batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION, batch.parallax_depth,
-                   batch.lightmap_intensity)
+                   batch.lightmap_intensity, batch.subsurface or NO_SUBSURFACE)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count)
 
@@ -420,11 +424,13 @@ def _material_build(batch: InstanceBatch) -> tuple:
     (``SKINNED``), whether it wears a Morph (``MORPHED``), which of its maps read the
     mesh's second UV set (``SECOND_UV_MAPS``, their bits; 0: none) and whether it lets light
     through from behind (``DIFFUSE_TRANSMISSION``), whether its normal map's heights are
-    marched (``PARALLAX``) and whether a lightmap gives its light from all round (``LIGHTMAP``)."""
+    marched (``PARALLAX``), whether a lightmap gives its light from all round (``LIGHTMAP``) and
+    whether light scatters under its surface (``SUBSURFACE``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
             batch.sheen is not None, batch.dispersion > 0.0, batch.anisotropy is not None,
             batch.iridescence is not None, batch.skinned, batch.morphed, batch.second_uv_maps,
-            batch.diffuse_transmission is not None, batch.parallax_depth > 0.0, batch.lightmap is not None)
+            batch.diffuse_transmission is not None, batch.parallax_depth > 0.0, batch.lightmap is not None,
+            batch.subsurface is not None)
 

@@ -412,26 +412,32 @@ float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
 // Every shadowed point light's shadow at a point (slots 0 to POINT_SHADOWS - 1, each a cube or
 // a spot's map; 1 for the rest), looked up before the lights' loop as directional_shadows is
 // (one lookup a slot, not one a slot for every point light the loop visits).
-vec4 point_shadows(vec3 position, vec3 normal) {
+// ``at0`` and ``at1``: where slot 0's and slot 1's light is looked up (point_shadows: both the
+// point; subsurface.glsl moves each towards its own light).
+vec4 point_shadows_at(vec3 at0, vec3 at1, vec3 normal) {
     vec4 lit = vec4(1.0);
 #ifdef POINT_SHADOWS
 #if MAX_POINT_SHADOWS > 2
 #error "point_shadows reads two slots"
 #endif
 #ifdef SPOT_MAP0
-    lit.x = spot_map_light_shadow(0, position, normal);
+    lit.x = spot_map_light_shadow(0, at0, normal);
 #else
-    lit.x = point_cube_light_shadow(0, point_shadow0, position, normal);
+    lit.x = point_cube_light_shadow(0, point_shadow0, at0, normal);
 #endif
 #if POINT_SHADOWS > 1
 #ifdef SPOT_MAP1
-    lit.y = spot_map_light_shadow(1, position, normal);
+    lit.y = spot_map_light_shadow(1, at1, normal);
 #else
-    lit.y = point_cube_light_shadow(1, point_shadow1, position, normal);
+    lit.y = point_cube_light_shadow(1, point_shadow1, at1, normal);
 #endif
 #endif
 #endif
     return lit;
+}
+
+vec4 point_shadows(vec3 position, vec3 normal) {
+    return point_shadows_at(position, position, normal);
 }
 
 // How much of point light i reaches the point ``point_shadows`` gave ``lit`` for.

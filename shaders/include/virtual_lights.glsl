@@ -41,14 +41,26 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
             nl = rect_form_factor(rect, normal, face);
         }
 #endif
+#ifdef SUBSURFACE
+        // (scene.frag's: the diffuse light scattered under the surface wraps past the terminator)
+        if (falloff <= 0.0 || !virtual_comes_through(i, position, l, dist)) continue;
+#else
         if (nl <= 0.0 || falloff <= 0.0 || !virtual_comes_through(i, position, l, dist)) continue;
+#endif
 #ifdef SPOT_COOKIES
         vec3 cookie = cookie_light(cookie_at, cookie_dx, cookie_dy);
 #else
         const vec3 cookie = vec3(1.0);
 #endif
-        vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * falloff
-                        * (shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0);
+        float shade = shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0;
+        vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * falloff * shade;
+#ifdef SUBSURFACE
+        float shade_under = shadowed && dot(geometric, l) < 0.0
+            ? virtual_shadow(i, subsurface_shadow_point(position, geometric, l), geometric, l, dist) : shade;
+        total += diffuse * face * subsurface_diffuse(nl, shade, shade_under)
+                 * (virtual_lights.virtual_color[i].rgb * cookie * falloff);
+        if (nl <= 0.0) continue;
+#endif
         // A point image's sphere (its light's radius, in the cookie row's w; ggx.glsl sphere_highlight)
 #ifdef ANISOTROPY
         vec3 highlight = anisotropic_specular(normal, l, to_eye, f0) * (nl * energy_compensation);  // (scene.frag's)
@@ -60,7 +72,11 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         if (rect.shape) highlight = rect_highlight(rect, normal, to_eye, f0, roughness) * energy_compensation;
 #endif
 #endif
+#ifdef SUBSURFACE
+        total += highlight * arriving;  // (its diffuse light above)
+#else
         total += (diffuse * nl * face + highlight) * arriving;
+#endif
         highlight_light += highlight * arriving;  // (scene.frag's: the highlights summed apart)
 #ifdef CLEARCOAT
         vec3 coat = image.w > 0.5  // (scene.frag's clear coat, as the highlight above)
