@@ -19,6 +19,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
   camera moves), so what a variant moves is all that moves;
 * ``shadows``: the sun casts shadows; nothing but the camera moves, so its map is drawn
   once and kept (the still scene);
+* ``subsurface``: shadows, and every box's material scatters light under its surface
+  (``Material.subsurface``): its cost against ``shadows``' (boxes are flat, so they look
+  the same: the build's lookups and shadow tests are what is measured);
 * ``shadows_moving``: the same with a box sliding to and fro under the sun every frame
   (its map drawn again each frame);
 * ``mirror_light``: shadows, and the mirror of the ring the sun reaches most throws its
@@ -415,6 +418,15 @@ def _atmosphere(engine: Engine) -> None:
         sky.model = "atmosphere"
 
 
+def _subsurface(engine: Engine) -> None:
+    """Shadows; every box scatters light under its surface (Material.subsurface): the
+    SUBSURFACE build's table lookups, and past each light's terminator its own shadow lookup."""
+    _sun_shadows(engine, True)
+    for _, material in engine.world.query_one(Material):
+        if material.texture is None and material.color[0] != 0.1:   # (the boxes: not the floor, not the glass)
+            material.subsurface, material.subsurface_scale = 1.0, 0.1
+
+
 def _sun_setting(engine: Engine, frame: int) -> None:
     """The sun sinking a tenth of a degree a frame from 20 degrees up (a day in a minute at
     60 frames a second): an atmosphere's table made again every two or three frames, any
@@ -569,6 +581,7 @@ def _sharpened(engine: Engine) -> None:
 VARIANTS: list[Variant] = [
     Variant("off", _plain, "no shadows, no Tonemap, no Bloom (the plain look)"),
     Variant("shadows", _shadows, "the sun casts shadows; a still scene (its map kept)"),
+    Variant("subsurface", _subsurface, "shadows, every box scattering light under its surface (Material.subsurface)"),
     Variant("shadows_moving", _moving_caster, "the sun casts shadows; a box slides under it every frame",
             _slide_caster),
     Variant("mirror_light", _mirror_light, "shadows, and one mirror throws the sun (a virtual light); still"),

@@ -65,9 +65,8 @@ MAX_DISPERSION = 10.0
 # than the eye's colour bands and it shows white (the thin-film model's two orders say nothing more).
 MAX_FILM_THICKNESS = 5000.0
 # Material.subsurface_scale, metres: the distance light wanders under a surface (skin's red a
-# few millimetres, wax and jade a centimetre or two).  The scattered light's shadow is looked up
-# twice that far out from the surface (shaders/include/subsurface.glsl), and past a metre it
-# would lift shadows off whole walls: a thing that large is fog, not a surface.
+# few millimetres, wax and jade a centimetre or two); past a metre the light under a wall would
+# wrap round a room's corners: a thing that large is fog, not a surface.
 MAX_SUBSURFACE_SCALE = 1.0
 # Joints one skin may have (Skin.joint_matrices, a mesh's joints a vertex): a row of the
 # pose texture, three texels a joint (engine/render/pose_rows.py); a character rig has 20

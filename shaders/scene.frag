@@ -617,8 +617,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #ifdef SUBSURFACE
         float under = directional_lit[i];  // (where the light reaches the point, its own shadow)
         if (shadowed && dot(s.geometric_normal, l) < 0.0) {
-            under = directional_shadow(i, subsurface_shadow_point(s.position, s.geometric_normal, l),
-                                       s.geometric_normal, l);
+            vec3 under_normal;
+            vec3 under_at = subsurface_shadow_point(s.position, s.geometric_normal, l, under_normal);
+            under = directional_shadow(i, under_at, under_normal, l);
 #ifdef SCREEN_OCCLUSION
             under *= mix(1.0, s.sun_contact, lights.directional_dir[i].w);
 #endif

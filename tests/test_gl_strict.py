@@ -107,9 +107,11 @@ def _spot_shadows(ctx):
     """The mirror ring's lamp made a spot aimed down and a second spot beside it (each within
     SPOT_MAP_MAX_ANGLE: both shadow slots perspective maps, tiles of the spot atlas, of two
     sizes), casting, the boxes spinning; the grid filter at the widest softness, a hard
-    edge, so lookups at the cone's edge reach into the maps' borders."""
+    edge, so lookups at the cone's edge reach into the maps' borders; a ball scattering light
+    under its surface under them (SUBSURFACE: each slot's map read again where the light enters it)."""
     from benchmarks.mirrors import MirrorRing
-    from components import PointLight, Transform, look_rotation
+    from components import Material, MeshRef, PointLight, Transform, look_rotation
+    from engine.assets.mesh import sphere
 
     def configure(engine):
         world = engine.world
@@ -119,6 +121,7 @@ def _spot_shadows(ctx):
         world.spawn(Transform(position=(3.0, 3.0, 1.0), rotation=look_rotation((-0.5, -1.0, 0.0), (0.0, 0.0, -1.0))),
                     PointLight(intensity=6.0, range=12.0, spot_angle=20.0, spot_blend=0.0, shadows=True,
                                shadow_resolution=256, shadow_softness=8.0))
+        world.spawn(Transform(position=(1.5, 0.5, 0.5)), MeshRef(sphere(0.5)), Material(subsurface=1.0))
         engine.renderer.shadows.filter = "grid"
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 
@@ -129,8 +132,8 @@ def _rect_lights(ctx):
     read by textureLod) and a tube beside it, casting soft shadows from their cubes (the grid filter), with
     contact shadows, a mirror
     throwing the sun and the lamp (virtual lights, one a rectangle's image), and balls with a
-    clear coat, a sheen and anisotropic highlights lit by it, and one lightmapped (LIGHTMAP)
-    beside its own occlusion map."""
+    clear coat, a sheen and anisotropic highlights lit by it, one lightmapped (LIGHTMAP)
+    beside its own occlusion map, and one scattering light under its surface (SUBSURFACE)."""
     from benchmarks.lighting import _mirror_light
     from benchmarks.mirrors import MirrorRing
     from components import Camera, ContactShadows, Material, MeshRef, PointLight, Transform
@@ -153,7 +156,8 @@ def _rect_lights(ctx):
         occlusion = TextureData(np.full((4, 4, 4), 200, np.uint8), name="occlusion")
         for x, material in ((-1.0, Material(clearcoat=1.0, clearcoat_roughness=0.1, sheen_color=(0.5, 0.2, 0.2))),
                             (1.0, Material(metallic=1.0, roughness=0.3, anisotropy=0.8)),
-                            (0.0, Material(lightmap=gradient_image(), occlusion_map=occlusion))):  # (17 samplers)
+                            (0.0, Material(lightmap=gradient_image(), occlusion_map=occlusion)),  # (17 samplers)
+                            (2.0, Material(color=(0.9, 0.6, 0.5), subsurface=1.0, subsurface_scale=0.2))):
             world.spawn(Transform(position=(x, 0.5, 0.5)), MeshRef(sphere(0.4)), material)
     return _engine_frames(ctx, MirrorRing(3), 3, configure)
 

@@ -412,24 +412,24 @@ float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
 // Every shadowed point light's shadow at a point (slots 0 to POINT_SHADOWS - 1, each a cube or
 // a spot's map; 1 for the rest), looked up before the lights' loop as directional_shadows is
 // (one lookup a slot, not one a slot for every point light the loop visits).
-// ``at0`` and ``at1``: where slot 0's and slot 1's light is looked up (point_shadows: both the
-// point; subsurface.glsl moves each towards its own light).
-vec4 point_shadows_at(vec3 at0, vec3 at1, vec3 normal) {
+// ``at0`` and ``at1``: where slot 0's and slot 1's light is looked up, ``n0`` and ``n1`` the
+// normals there (point_shadows: both the point's; subsurface.glsl moves each towards its own light).
+vec4 point_shadows_at(vec3 at0, vec3 n0, vec3 at1, vec3 n1) {
     vec4 lit = vec4(1.0);
 #ifdef POINT_SHADOWS
 #if MAX_POINT_SHADOWS > 2
 #error "point_shadows reads two slots"
 #endif
 #ifdef SPOT_MAP0
-    lit.x = spot_map_light_shadow(0, at0, normal);
+    lit.x = spot_map_light_shadow(0, at0, n0);
 #else
-    lit.x = point_cube_light_shadow(0, point_shadow0, at0, normal);
+    lit.x = point_cube_light_shadow(0, point_shadow0, at0, n0);
 #endif
 #if POINT_SHADOWS > 1
 #ifdef SPOT_MAP1
-    lit.y = spot_map_light_shadow(1, at1, normal);
+    lit.y = spot_map_light_shadow(1, at1, n1);
 #else
-    lit.y = point_cube_light_shadow(1, point_shadow1, at1, normal);
+    lit.y = point_cube_light_shadow(1, point_shadow1, at1, n1);
 #endif
 #endif
 #endif
@@ -437,7 +437,7 @@ vec4 point_shadows_at(vec3 at0, vec3 at1, vec3 normal) {
 }
 
 vec4 point_shadows(vec3 position, vec3 normal) {
-    return point_shadows_at(position, position, normal);
+    return point_shadows_at(position, normal, position, normal);
 }
 
 // How much of point light i reaches the point ``point_shadows`` gave ``lit`` for.

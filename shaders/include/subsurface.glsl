@@ -5,58 +5,58 @@
 // it; needs lights.glsl, shadows.glsl and ambient.glsl (the table rides in the alpha of the
 // environment BRDF's rows).
 //
-// The curvature is the normal's change over the position's across the pixel (the mesh's own
-// normal, interpolated: a normal map's bumps do not bend the light under them), found once
-// before any branch; derivatives stay within a triangle, so a flat face's is 0 up to its edges
-// and a flat wall is lit as Lambert lights it.
+// The curvature is the mesh's own normal's change (interpolated: a normal map's bumps do not
+// bend the light under them) over the position's across the pixel, taken once before any
+// branch (derivatives stay within a triangle, so a flat face's is 0 up to its edges and a flat
+// wall is lit as Lambert lights it).  Both ways on screen together: a sphere's 1 / r; less
+// than the sharper of a candle's two curvatures.
 //
 // Shadows: the table already counts the sphere's own shadow (its far side takes no light), so
-// past the terminator the scattered share is shadow-tested where the light still reaches the
-// sphere curved as the surface is here: the point moved along the surface towards the light,
-// to that sphere's terminator (subsurface_shadow_point), at most ``subsurface_reach`` (twice the
-// longest distance: the table's light past the terminator is nearly all within it), so a
-// caster's shadow still falls on it and the surface's own does not cut the wrapped light off.
-// Further round, the surface's own shadow falls.
+// past the terminator the scattered share is shadow-tested where the light enters the sphere
+// curved as the surface is here: the point moved towards the light by that sphere's chord
+// (subsurface_shadow_point; SUBSURFACE_CHORD times it, so a surface curved less one way than the
+// other, whose chord is longer, is left too).  A caster between the light and the surface still
+// shadows the light scattered from it; the surface's own body does not cut the wrapped light
+// off (where a binary shadow began it would show as an edge across the glow).
 #ifdef SUBSURFACE
+const float SUBSURFACE_CHORD = 1.25;
 uniform vec4 subsurface;  // rgb: each channel's profile distance d (metres), a: the share scattered (its weight)
-vec3 subsurface_spread = vec3(0.0);  // each channel's d / r here (r: the radius of curvature)
-float subsurface_curvature = 0.0;    // 1 / r here
-float subsurface_reach = 0.0;        // how far (metres) its share's shadow is looked up towards a light behind it
+float subsurface_curvature = 0.0;   // 1 / r here
+vec3 subsurface_spread = vec3(0.0);  // each channel's d / r here
 
 // From the mesh's normal and the position (before any branch: derivatives).
 void subsurface_begin(vec3 normal, vec3 position) {
     vec3 nx = dFdx(normal), ny = dFdy(normal), px = dFdx(position), py = dFdy(position);
-    float curvature = sqrt((dot(nx, nx) + dot(ny, ny)) / max(dot(px, px) + dot(py, py), 1e-24));
-    subsurface_curvature = curvature;
-    subsurface_spread = subsurface.rgb * curvature;
-    subsurface_reach = 2.0 * max(max(subsurface.r, subsurface.g), subsurface.b);
+    subsurface_curvature = sqrt((dot(nx, nx) + dot(ny, ny)) / max(dot(px, px) + dot(py, py), 1e-24));
+    subsurface_spread = subsurface.rgb * subsurface_curvature;
 }
 
-// Where the scattered share of the light coming from ``l`` is shadow-tested: the point where
-// the light reaches it; past the terminator, moved along the surface towards the light by the
-// arc to the terminator of the sphere of radius 1 / curvature, at most subsurface_reach.
-vec3 subsurface_shadow_point(vec3 position, vec3 normal, vec3 l) {
+// Where the scattered share of the light from ``l`` is shadow-tested (and the normal there,
+// ``at_normal``): the point where the light reaches it; past the terminator, where the light
+// enters the sphere of radius 1 / curvature on its way to the point (the chord -2 r n.l along
+// the light, its normal there the point's reflected about the light's plane), a little further
+// (the point itself where the surface is flat: the table gives it nothing there).
+vec3 subsurface_shadow_point(vec3 position, vec3 normal, vec3 l, out vec3 at_normal) {
+    at_normal = normal;
     float nl = dot(normal, l);
-    vec3 along = l - nl * normal;
-    float across = length(along);
-    if (nl >= 0.0 || across < 1e-4) return position;
-    float arc = asin(min(-nl, 1.0)) / max(subsurface_curvature, 1e-6);
-    return position + along * (min(arc, subsurface_reach) / across);
+    if (nl >= 0.0 || subsurface_curvature < 1e-6) return position;
+    at_normal = normal - 2.0 * nl * l;
+    return position + l * (-2.0 * nl * SUBSURFACE_CHORD / subsurface_curvature);
 }
 
 // The point lights' shadows (shadows.glsl's slots) for the scattered share: each slot's looked
 // up at subsurface_shadow_point for its own light.
 vec4 subsurface_point_shadows(vec3 position, vec3 normal) {
-    vec3 at0 = position, at1 = position;
+    vec3 at0 = position, at1 = position, n0 = normal, n1 = normal;
 #ifdef POINT_SHADOWS
     int i0 = shadows.point_light[0];
-    if (i0 >= 0) at0 = subsurface_shadow_point(position, normal, normalize(lights.point_pos[i0].xyz - position));
+    if (i0 >= 0) at0 = subsurface_shadow_point(position, normal, normalize(lights.point_pos[i0].xyz - position), n0);
 #if POINT_SHADOWS > 1
     int i1 = shadows.point_light[1];
-    if (i1 >= 0) at1 = subsurface_shadow_point(position, normal, normalize(lights.point_pos[i1].xyz - position));
+    if (i1 >= 0) at1 = subsurface_shadow_point(position, normal, normalize(lights.point_pos[i1].xyz - position), n1);
 #endif
 #endif
-    return point_shadows_at(at0, at1, normal);
+    return point_shadows_at(at0, n0, at1, n1);
 }
 
 // D(n.l, s) - max(n.l, 0) from the table: the columns n.l in two halves, so the kink at 0 is

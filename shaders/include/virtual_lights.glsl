@@ -55,8 +55,12 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         float shade = shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0;
         vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * falloff * shade;
 #ifdef SUBSURFACE
-        float shade_under = shadowed && dot(geometric, l) < 0.0
-            ? virtual_shadow(i, subsurface_shadow_point(position, geometric, l), geometric, l, dist) : shade;
+        float shade_under = shade;
+        if (shadowed && dot(geometric, l) < 0.0) {
+            vec3 under_normal;
+            vec3 under_at = subsurface_shadow_point(position, geometric, l, under_normal);
+            shade_under = virtual_shadow(i, under_at, under_normal, l, dist);
+        }
         total += diffuse * face * subsurface_diffuse(nl, shade, shade_under)
                  * (virtual_lights.virtual_color[i].rgb * cookie * falloff);
         if (nl <= 0.0) continue;
