@@ -288,3 +288,35 @@ def test_a_level_file_gives_a_subsurface_material(tmp_path):
     material = world.query_one(Material)[0][1]
     assert material.subsurface == pytest.approx(0.8) and material.subsurface_scale == pytest.approx(0.02)
     assert glm.vec3(material.subsurface_radius) == glm.vec3(1.0, 0.8, 0.5)
+
+
+def test_a_candle_lit_from_behind_glows_without_an_edge(scene):
+    """A standing capsule (curved round, straight up its side: the mean curvature under its
+    sharper one) against a low sun behind it: its shaded front lit evenly across, no step where
+    its own body's shadow would begin, and never darker than the plain one."""
+    import trimesh
+
+    from components import yaw_pitch_rotation
+    from engine.assets.mesh import Mesh
+
+    candle = Mesh.from_trimesh(trimesh.creation.capsule(height=0.6, radius=0.25, count=[48, 48]), name="candle")
+
+    def build(**material):
+        def make(world):
+            look_from(world, (0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=FOV)
+            world.spawn(black_sky())
+            world.spawn(DirectionalLight(direction=(0.15, -0.4, 1.0), intensity=3.0))
+            world.spawn(Transform(rotation=yaw_pitch_rotation(0, 90)), MeshRef(candle),
+                        Material(color=(0.9, 0.85, 0.7, 1.0), reflectance=0.0, roughness=1.0,
+                                 environment_reflection=0.0, **material))
+        return make
+
+    plain = _render(scene, build())
+    glowing = _render(scene, build(subsurface=1.0, subsurface_scale=0.12))
+    rows = slice(SIZE // 2 - 8, SIZE // 2 + 8)
+    body = glowing[rows, :, 0]
+    inside = np.abs(np.arange(SIZE) - SIZE / 2 + 0.5) < SIZE * 0.12   # the side's middle, away from its outline
+    assert (glowing[rows][:, inside] >= plain[rows][:, inside] - 0.003).all()
+    assert body[:, inside].mean() > plain[rows][:, inside, 0].mean() + 0.01
+    steps = np.abs(np.diff(body[:, inside], axis=1))
+    assert steps.max() < 0.012, steps.max()
