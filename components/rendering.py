@@ -516,7 +516,9 @@ class Skybox(TrackedComponent):
     """The world's background cube map: six face images, or a generated gradient sky.
 
     ``faces`` is None (generate from the colours below) or six HxWx3 float arrays in GL
-    face order +X, -X, +Y, -Y, +Z, -Z, linear colour.  A generated sky's background is
+    face order +X, -X, +Y, -Y, +Z, -Z, linear colour: a photographed or rendered sky from an
+    equirectangular panorama (a Radiance ``.hdr`` HDRI, or a PNG or JPEG) is
+    ``engine.assets.panorama.sky_faces_from_file(path, face_size, yaw)``.  A generated sky's background is
     drawn from the colours per pixel (``engine/render/sky.py``); ``face_size`` is the side of
     the cube map made from them, which reflections, refraction and the sky's light read.
 
@@ -586,7 +588,7 @@ def _sky_faces(value: Any) -> np.ndarray:
     """Six square HxWx3 linear images as one (6, n, n, 3) float32 array (checked here, not at render)."""
     try:
         with np.errstate(over="ignore"):  # past float32 becomes inf, refused just below
-            faces = np.asarray(value, np.float32)
+            faces = np.asanyarray(value, np.float32)   # (a panorama's SkyFaces keeps its source)
     except (TypeError, ValueError, OverflowError):
         raise ComponentValueError(
             f"Skybox.faces must be six square HxWx3 float images, got {type(value).__name__}") from None

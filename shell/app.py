@@ -381,15 +381,26 @@ class Engine:
                    getattr(args, "dof", False), getattr(args, "motion_blur", False),
                    getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None),
                    getattr(args, "contact_shadows", False), getattr(args, "shafts", False))
-        self.start_sky(getattr(args, "sky", None), getattr(args, "time", None), getattr(args, "day_minutes", None))
+        self.start_sky(getattr(args, "sky", None), getattr(args, "time", None), getattr(args, "day_minutes", None),
+                       getattr(args, "panorama", None), getattr(args, "panorama_yaw", 0.0))
 
-    def start_sky(self, model: str | None, hour: float | None = None, day_minutes: float | None = None) -> None:
+    def start_sky(self, model: str | None, hour: float | None = None, day_minutes: float | None = None,
+                  panorama: str | None = None, panorama_yaw: float = 0.0) -> None:
         """The command line's sky options: ``--sky`` draws the level's Skybox (one made if it has
         none) as ``model`` ("atmosphere": a physically based sky with a night's stars beyond its
-        air, ``engine.assets.star_field.star_faces``); ``--time`` puts a ``TimeOfDay`` at ``hour``
+        air, ``engine.assets.star_field.star_faces``); ``--panorama`` makes its faces an
+        equirectangular panorama file (``engine.assets.panorama.sky_faces_from_file``, 512 texels a
+        face, turned ``panorama_yaw`` degrees; a gradient sky's faces are its whole sky, an
+        atmosphere's the space beyond its air); ``--time`` puts a ``TimeOfDay`` at ``hour``
         (a summer's day, 45 degrees north) on the brightest ``DirectionalLight`` (one made if there
         is none), moving a whole day on in ``day_minutes`` of game time (``--day-minutes``)."""
         world = self.world
+        if panorama is not None:
+            from engine.assets.panorama import sky_faces_from_file
+
+            skies = world.query_one(Skybox)
+            sky = skies[0][1] if skies else world.get(world.spawn(Skybox()), Skybox)
+            sky.faces = sky_faces_from_file(panorama, 512, panorama_yaw)
         if model is not None:
             skies = world.query_one(Skybox)
             sky = skies[0][1] if skies else world.get(world.spawn(Skybox()), Skybox)

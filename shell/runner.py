@@ -79,6 +79,11 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
     parser.add_argument("--sky", choices=SKY_MODELS, default=None,
                         help="the level's Skybox (made if it has none) drawn as this model: 'atmosphere' a "
                              "physically based sky, with a night's stars beyond its air")
+    parser.add_argument("--panorama", default=None, metavar="FILE",
+                        help="the level's sky (its Skybox, made if it has none) an equirectangular panorama: a "
+                             "Radiance .hdr HDRI, or a PNG or JPEG taken as sRGB (512 texels a face)")
+    parser.add_argument("--panorama-yaw", type=_yaw, default=0.0, metavar="DEGREES",
+                        help="with --panorama: turn it this many degrees about up (default 0)")
     parser.add_argument("--time", type=_hour, default=None, metavar="HOUR",
                         help="the sun (the brightest DirectionalLight, made if there is none) where it stands at "
                              "this hour of a summer's day at 45 degrees north (a TimeOfDay on it)")
@@ -117,12 +122,14 @@ def parse_args(game: Game, argv: Sequence[str] | None,
         parser.error("--frames must be >= 1")
     if args.day_minutes is not None and args.time is None:
         parser.error("--day-minutes needs --time (the hour the day starts at)")
+    if args.panorama_yaw != 0.0 and args.panorama is None:
+        parser.error("--panorama-yaw needs --panorama (the panorama it turns)")
     return args
 
 
 # Options whose value may start with a minus sign (argparse takes "-4.5,1.6,3,90,0" for an
 # option of its own, as it is not one negative number).
-NEGATIVE_VALUE_OPTIONS = ("--camera",)
+NEGATIVE_VALUE_OPTIONS = ("--camera", "--panorama-yaw")
 
 
 def _negative_values_joined(argv: Sequence[str]) -> list[str]:
@@ -190,6 +197,16 @@ def _frame_ms(text: str) -> float:
         return ViewBudget(frame_ms=float(text)).frame_ms
     except (ValueError, ViewBudgetError) as exc:
         raise argparse.ArgumentTypeError(f"--frame-ms {text!r}: {exc}") from None
+
+
+def _yaw(text: str) -> float:
+    try:
+        yaw = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--panorama-yaw must be a number of degrees, got {text!r}") from None
+    if not math.isfinite(yaw):
+        raise argparse.ArgumentTypeError(f"--panorama-yaw must be a finite number of degrees, got {text!r}")
+    return yaw
 
 
 def _hour(text: str) -> float:

@@ -37,6 +37,7 @@ from engine.assets.level_assets import (
     level_mesh,
     level_model,
     level_model_path,
+    level_sky_faces,
     level_texture,
     user_asset_roots,
 )
@@ -528,7 +529,7 @@ def _decode(cls_name: str, field: str, value: Any, where: LevelAssets) -> Any:
     if cls_name == "Transform" and field == "rotation":
         return _rotation(value)
     if cls_name == "Skybox" and field == "faces":
-        raise ValueError("Skybox.faces (generated pixel data) is not written in level files; leave it out")
+        return level_sky_faces(value, where)
     return value
 
 

@@ -350,6 +350,8 @@ def _encode_component(path: Path, component: Any, by_id: Mapping[int, str], enti
             out[f.name] = [_asset_source(mesh, path, entity, where) for mesh in value]
         elif isinstance(value, (Mesh, TextureData, ColorLut)):
             out[f.name] = _asset_source(value, path, entity, where)
+        elif isinstance(value, np.ndarray) and getattr(value, "source", None) is not None:  # a panorama's SkyFaces
+            out[f.name] = _relative(value.source, path.parent)
         else:
             out[f.name] = _plain(value, path, entity, where)
     return out
@@ -410,9 +412,9 @@ def _f32(value: float) -> float:
 
 
 def _relative(source: dict[str, Any], folder: Path) -> dict[str, Any]:
-    """A source's file (an image's, a model's, a table's: ``file``; an IES profile's: ``ies``)
-    relative to the level's folder."""
-    key = next((k for k in ("file", "ies") if k in source), None)
+    """A source's file (an image's, a model's, a table's: ``file``; an IES profile's: ``ies``;
+    a sky's panorama: ``panorama``) relative to the level's folder."""
+    key = next((k for k in ("file", "ies", "panorama") if k in source), None)
     if key is None:
         return dict(source)
     return {**source, key: Path(os.path.relpath(source[key], folder)).as_posix()}
