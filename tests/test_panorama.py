@@ -113,6 +113,7 @@ def _bad(tmp_path, name: str, data: bytes) -> Path:
     (b"#?RADIANCE\nFORMAT=16-bit_nonsense\n\n-Y 1 +X 1\n\x00\x00\x00\x00", "neither 32-bit_rle_rgbe"),
     (b"#?RADIANCE\n\n+X 4 -Y 2\n" + bytes(32), "X first"),
     (b"#?RADIANCE\n\n-Y 20000 +X 20000\n", "a panorama may be 1 to 16384"),
+    (b"#?RADIANCE\n\n-Y 8192 +X 16384\n\x02\x02\x40\x00", "more than the 33554432"),
     (b"#?RADIANCE\n\n-Y 2 +X 4\n" + bytes(20), "cut short"),
     (b"#?RADIANCE\nEXPOSURE=-1\n\n-Y 1 +X 1\n\x10\x10\x10\x80", "EXPOSURE lines multiply"),
     (b"#?RADIANCE\n\n-Y 1 +X 4\n\x10\x10\x10\x80\x01\x01\x01\x02" + bytes(8), "old run-length encoding"),

@@ -35,6 +35,9 @@ from engine.core.cube_faces import face_directions
 from engine.core.errors import AssetError
 
 MAX_PANORAMA_FILE_BYTES = 1 << 30   # a panorama file's size on disk
+# Pixels a panorama may have: an 8K HDRI's 8192 x 4096, about 400 MiB of float32 colour while it
+# is made into faces (a run-length file declares its size in a few bytes: checked before any pixel).
+MAX_PANORAMA_PIXELS = 8192 * 4096
 MAX_FACE_SIZE = 2048                # a Skybox face's side (components.rendering's check)
 MAX_FOOTPRINT_TAPS = 8              # bilinear taps a side per face texel at most
 # CIE XYZ (an XYZE file's primaries) to linear sRGB / Rec. 709, D65.
@@ -94,6 +97,9 @@ def _resolution(text: str, what: str) -> tuple[int, int, bool, bool]:
         raise AssetError(f"{what}: resolution {text!r} has a size that is not a whole number") from None
     if not (1 <= width <= MAX_TEXTURE_SIDE and 1 <= height <= MAX_TEXTURE_SIDE):
         raise AssetError(f"{what}: {width}x{height} pixels; a panorama may be 1 to {MAX_TEXTURE_SIDE} a side")
+    if width * height > MAX_PANORAMA_PIXELS:
+        raise AssetError(f"{what}: {width}x{height} pixels, more than the {MAX_PANORAMA_PIXELS} (8192x4096) a "
+                         "panorama may have: scale it down")
     return height, width, parts[0][0] == "+", parts[2][0] == "-"
 
 
@@ -159,10 +165,12 @@ def load_hdr(path: str | Path) -> np.ndarray:
     for row in range(height):
         rows[row], at = _scanline(data, at, width, what, row)
     exponent = rows[..., 3].astype(np.int32)
-    scale = np.where(exponent > 0, np.ldexp(1.0, exponent - 136), 0.0)
-    pixels = (rows[..., :3].astype(np.float64) + 0.5) * scale[..., None] / exposure
+    scale = np.where(exponent > 0, np.ldexp(np.float32(1.0), exponent - 136), np.float32(0.0)).astype(np.float32)
+    pixels = (rows[..., :3].astype(np.float32) + np.float32(0.5)) * scale[..., None]   # (exact in float32)
+    if exposure != 1.0:
+        pixels /= np.float32(exposure)
     if form == "32-bit_rle_xyze":
-        pixels = np.maximum(pixels @ _XYZ_TO_RGB.T, 0.0)
+        pixels = np.maximum(pixels @ _XYZ_TO_RGB.T.astype(np.float32), np.float32(0.0))
     if bottom_up:
         pixels = pixels[::-1]
     if right_to_left:
