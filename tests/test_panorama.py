@@ -198,6 +198,12 @@ def test_faces_from_a_file_remember_it_and_a_view_does_not(tmp_path):
     assert faces[0].source is None and (faces * 2).source is None
     sky = Skybox(faces=faces)
     assert sky.faces.source == faces.source   # (kept as given)
+    brighter = sky_faces_from_file(path, 8, 15.0, intensity=2.5)
+    np.testing.assert_allclose(brighter, faces * 2.5, rtol=1e-6)
+    assert brighter.source["intensity"] == 2.5
+    for bad in (-1.0, float("nan"), 1e5):
+        with pytest.raises(ValueError, match="intensity must be a number"):
+            sky_faces_from_file(path, 8, intensity=bad)
 
 
 @pytest.mark.parametrize("kwargs,match", [
@@ -263,14 +269,15 @@ def test_a_level_file_names_a_panorama_and_writes_it_back(tmp_path):
     write_hdr(tmp_path / "skies" / "dusk.hdr", random_rgbe(8, 16))
     level = tmp_path / "sky.toml"
     level.write_text('[level]\nname = "sky"\n[[entity]]\nname = "sky"\n'
-                     'Skybox = { faces = { panorama = "skies/dusk.hdr", face_size = 8, yaw = 30 } }\n')
+                     'Skybox = { faces = { panorama = "skies/dusk.hdr", face_size = 8, yaw = 30, intensity = 2 } }\n')
     world = World()
     load_level(level).spawn(world)
     sky = world.query_one(Skybox)[0][1]
-    np.testing.assert_array_equal(sky.faces, sky_faces_from_file(tmp_path / "skies" / "dusk.hdr", 8, 30.0))
+    np.testing.assert_array_equal(sky.faces, sky_faces_from_file(tmp_path / "skies" / "dusk.hdr", 8, 30.0, 2.0))
     saved = tmp_path / "saved.toml"
     save_level(world, saved)
-    assert 'panorama = "skies/dusk.hdr"' in saved.read_text() and "face_size = 8" in saved.read_text()
+    text = saved.read_text()
+    assert 'panorama = "skies/dusk.hdr"' in text and "face_size = 8" in text and "intensity = 2.0" in text, text
     again = World()
     load_level(saved).spawn(again)
     np.testing.assert_array_equal(again.query_one(Skybox)[0][1].faces, sky.faces)
@@ -282,6 +289,7 @@ def test_a_level_file_names_a_panorama_and_writes_it_back(tmp_path):
     ('{ panorama = "sky.hdr", face_size = 0 }', "face_size must be an int from 1 to 2048"),
     ('{ panorama = "sky.hdr", yaw = "west" }', "yaw must be a finite number"),
     ('{ panorama = "sky.hdr", size = 4 }', "unknown keys"),
+    ('{ panorama = "sky.hdr", intensity = -2 }', "intensity must be a number from 0"),
     ('[1, 2]', "Skybox.faces in a level file is a panorama"),
 ])
 def test_a_bad_sky_panorama_in_a_level_file_is_one_error(tmp_path, table, match):

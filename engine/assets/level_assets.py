@@ -23,7 +23,7 @@ from typing import Any
 from engine.assets.color_lut import MAX_LUT_FILE_BYTES, ColorLut, load_cube_lut
 from engine.assets.ies_profile import COOKIE_HEIGHT, COOKIE_WIDTH, ies_cookie, load_ies
 from engine.assets.mesh import LoadedModel, Mesh, box, load_model, load_model_file, model_bytes, plane, quad, sphere
-from engine.assets.panorama import MAX_FACE_SIZE, MAX_PANORAMA_FILE_BYTES, SkyFaces, sky_faces_from_file
+from engine.assets.panorama import MAX_FACE_SIZE, MAX_INTENSITY, MAX_PANORAMA_FILE_BYTES, SkyFaces, sky_faces_from_file
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
     TextureData,
@@ -266,23 +266,25 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
 
 def level_sky_faces(spec: Any, where: LevelAssets) -> SkyFaces:
     """A ``Skybox.faces`` table: ``{ panorama = "sky.hdr" }`` with optional ``face_size``
-    (default 256) and ``yaw`` (degrees): the panorama made into six faces
+    (default 256), ``yaw`` (degrees) and ``intensity`` (default 1): the panorama made into six faces
     (``engine/assets/panorama.py``; a star field or faces made in code are not written in files)."""
     if not isinstance(spec, dict) or "panorama" not in spec:
         raise ValueError("Skybox.faces in a level file is a panorama: { panorama = \"sky.hdr\", face_size = 256, "
                          f"yaw = 0 }} (faces made in code are not written in files), got {spec!r}")
     spec = dict(spec)
     path = _asset_path(spec.pop("panorama"), where)
-    face_size, yaw = spec.pop("face_size", 256), spec.pop("yaw", 0.0)
+    face_size, yaw, intensity = spec.pop("face_size", 256), spec.pop("yaw", 0.0), spec.pop("intensity", 1.0)
     _no_more(spec, "sky panorama")
+    if not (is_number(intensity) and 0.0 <= intensity <= MAX_INTENSITY):
+        raise ValueError(f"sky panorama: intensity must be a number from 0 to {MAX_INTENSITY:g}, got {intensity!r}")
     if not _is_int(face_size) or not 1 <= face_size <= MAX_FACE_SIZE:
         raise ValueError(f"sky panorama: face_size must be an int from 1 to {MAX_FACE_SIZE}, got {face_size!r}")
     if not (is_number(yaw) and math.isfinite(yaw)):
         raise ValueError(f"sky panorama: yaw must be a finite number of degrees, got {yaw!r}")
     info = check_asset_file(path, f"panorama file {str(path)!r}", MAX_PANORAMA_FILE_BYTES)
-    key = ("panorama", str(path), info.st_mtime_ns, info.st_size, info.st_ino, face_size, float(yaw))
+    key = ("panorama", str(path), info.st_mtime_ns, info.st_size, info.st_ino, face_size, float(yaw), float(intensity))
     where.budget.take(key, 6 * face_size * face_size * 3 * 4)
-    return _cached(key, lambda: sky_faces_from_file(path, face_size, float(yaw)))
+    return _cached(key, lambda: sky_faces_from_file(path, face_size, float(yaw), float(intensity)))
 
 
 def level_lut(spec: Any, where: LevelAssets) -> ColorLut:

@@ -40,6 +40,7 @@ MAX_PANORAMA_FILE_BYTES = 1 << 30   # a panorama file's size on disk
 MAX_PANORAMA_PIXELS = 8192 * 4096
 MAX_FACE_SIZE = 2048                # a Skybox face's side (components.rendering's check)
 MAX_FOOTPRINT_TAPS = 8              # bilinear taps a side per face texel at most
+MAX_INTENSITY = 1e4                 # what a panorama's colours may be multiplied by
 # CIE XYZ (an XYZE file's primaries) to linear sRGB / Rec. 709, D65.
 _XYZ_TO_RGB = np.array([[3.2404542, -1.5371385, -0.4985314],
                         [-0.9692660, 1.8760108, 0.0415560],
@@ -244,9 +245,22 @@ def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
             + (image[y1, x0] * (1 - fx) + image[y1, x1] * fx) * fy)
 
 
-def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0) -> SkyFaces:
-    """A panorama file (``load_panorama``) as a Skybox's ``faces`` (``panorama_faces``),
-    remembering the file, size and turn (``SkyFaces.source``)."""
-    faces = panorama_faces(load_panorama(path), face_size, yaw).view(SkyFaces)
+def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0,
+                        intensity: float = 1.0) -> SkyFaces:
+    """A panorama file (``load_panorama``) as a Skybox's ``faces`` (``panorama_faces``), its
+    colours times ``intensity`` (three.js's ``environmentIntensity``, Godot's sky energy: a
+    photographed sky is as bright as its camera exposed it), remembering the file, size, turn
+    and intensity (``SkyFaces.source``)."""
+    if not (isinstance(intensity, (int, float)) and math.isfinite(intensity) and 0.0 <= intensity <= MAX_INTENSITY):
+        raise ValueError(f"intensity must be a number from 0 to {MAX_INTENSITY:g}, got {intensity!r}")
+    faces = panorama_faces(load_panorama(path), face_size, yaw)
+    if intensity != 1.0:
+        faces *= np.float32(intensity)
+        if faces.max(initial=0.0) > 65504.0:
+            raise AssetError(f"panorama file {str(path)!r}: times {intensity:g} its brightest texel passes 65504, "
+                             "more than the half floats a sky's faces keep")
+    faces = faces.view(SkyFaces)
     faces.source = {"panorama": str(Path(path).resolve()), "face_size": face_size, "yaw": float(yaw)}
+    if intensity != 1.0:
+        faces.source["intensity"] = float(intensity)
     return faces
