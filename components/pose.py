@@ -10,6 +10,14 @@ view and shadow map (``shaders/include/pose.glsl``; ``engine/core/skinning.py`` 
 sum on arrays).  A model file's skinned parts get theirs from the file, posed by their
 ``Animation`` each frame (``systems/model_system.py``); a game may give its own.
 
+``skinning`` says how a vertex's joints blend: "linear" (the default: their matrices summed
+by weight, as glTF viewers, three.js, Unity and Godot draw skins) or "dual_quaternion"
+(Blender's "Preserve Volume", Maya's and Unreal's dual quaternion skinning: their rotations
+and translations blended as unit dual quaternions, their scales by weight), which keeps a
+twisted wrist or a bent elbow its thickness where linear blending pinches it (the
+"candy-wrapper"); a joint scaled unevenly is taken at its mean scale, the cube root of its
+determinant.
+
 Assign a new array to pose it (``skin.joint_matrices = posed``): an array edited in place is
 not seen until ``skin.touch()``.  At most ``MAX_JOINTS`` joints; the mesh's highest joint
 must have a matrix (checked when either is given: ``engine/rules/pose_rules.py``).
@@ -29,9 +37,10 @@ from typing import Any
 import numpy as np
 
 from components.limits import MAX_JOINTS, MAX_MORPH_TARGETS, MAX_MORPH_WEIGHT
-from components.tracking import ComponentValueError, TrackedComponent
+from components.tracking import ComponentValueError, TrackedComponent, choice
 
 MAX_JOINT_VALUE = 1e18  # a matrix entry past this leaves float32 once multiplied out
+SKINNING_METHODS = ("linear", "dual_quaternion")  # Skin.skinning's
 _BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0], np.float32)  # an affine matrix's
 
 
@@ -45,8 +54,11 @@ class Skin(TrackedComponent):
 
     SHAREABLE = False  # one entity's pose
     joint_matrices: np.ndarray = field(default_factory=_identity)
+    skinning: str = "linear"
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "skinning":
+            return choice(self, name, value, SKINNING_METHODS)
         if name != "joint_matrices":
             return value
         matrices = np.asarray(value) if isinstance(value, (np.ndarray, list, tuple)) else None

@@ -174,8 +174,8 @@ class ExtractSystem(esper.Processor):
         # its own); one without is drawn as modelled.
         skin = world.try_get(entity, Skin) if drawn.skinned else None
         morph = world.try_get(entity, Morph) if drawn.morph_count else None
-        posed = (entity, skin is not None, morph is not None) if skin is not None or morph is not None \
-            else (0, False, False)
+        posed = (entity, skin.skinning if skin is not None else "", morph is not None) \
+            if skin is not None or morph is not None else (0, "", False)
         try:
             batch = self.renderer.batch_for(drawn, material.texture if material else None, probe,
                                             entity if transparent else 0, material.normal_map if material else None,
@@ -260,7 +260,8 @@ class ExtractSystem(esper.Processor):
             if batch is None or not world.exists(entity):
                 continue
             skin, morph = world.try_get(entity, Skin), world.try_get(entity, Morph)
-            if (skin is not None or morph is not None) and batch.skinned == (skin is not None) \
+            skinning = skin.skinning if skin is not None else ""
+            if (skin is not None or morph is not None) and batch.skinned == skinning \
                     and batch.morphed == (morph is not None):
                 self._pose(entity, batch, world.get(entity, MeshRef).mesh, skin, morph)
                 done.add(entity)
@@ -273,7 +274,8 @@ class ExtractSystem(esper.Processor):
         joints = skin.joint_matrices if skin is not None else None
         weights = morph.weights if morph is not None else None
         batch.pose_row = self.renderer.pose_rows.write(entity, joints, weights)  # (a limit names it)
-        batch.set_local_box(*posed_bounds(mesh, joints, weights))
+        dual_quaternion = skin is not None and skin.skinning == "dual_quaternion"
+        batch.set_local_box(*posed_bounds(mesh, joints, weights, dual_quaternion))
         self.renderer.note_scene_change()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:

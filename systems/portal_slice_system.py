@@ -71,7 +71,8 @@ class PortalSliceSystem(esper.Processor):
         (a posed mesh's as its ``skin`` and ``morph`` pose it)."""
         mesh = mesh_ref.mesh
         bounds = None if skin is None and morph is None else \
-            posed_bounds(mesh, skin.joint_matrices if skin else None, morph.weights if morph else None)
+            posed_bounds(mesh, skin.joint_matrices if skin else None, morph.weights if morph else None,
+                         skin is not None and skin.skinning == "dual_quaternion")
         corners = world_corners(mesh, model, bounds)
         for entity, portal, in_world, out_world in portals:
             plane = portal_plane(in_world)

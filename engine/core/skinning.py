@@ -40,21 +40,95 @@ class PosedMesh(Protocol):
     def morph_offset_boxes(self) -> np.ndarray: ...
 
 
-__all__ = ["INFLUENCES", "MAX_JOINTS", "PosedMesh", "blend_matrices", "joint_boxes", "morph_reach", "morphed",
-           "posed_bounds", "posed_box", "posed_positions", "skin_positions", "strongest_influences"]
+__all__ = ["INFLUENCES", "MAX_JOINTS", "PosedMesh", "blend_matrices", "dual_quaternion_matrices", "joint_boxes",
+           "joint_dual_quaternions", "morph_reach", "morphed", "posed_bounds", "posed_box", "posed_positions",
+           "skin_positions", "strongest_influences"]
 
 INFLUENCES = 4              # joints a vertex may follow (glTF's JOINTS_0: more are folded into the four largest)
 
 
-def blend_matrices(joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray) -> np.ndarray:
-    """Each vertex's blended matrix (V, 4, 4): its joints' matrices weighed by its weights."""
+def blend_matrices(joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray,
+                   dual_quaternion: bool = False) -> np.ndarray:
+    """Each vertex's blended matrix (V, 4, 4): its joints' matrices weighed by its weights, or
+    (``dual_quaternion``) their rotations and translations blended as dual quaternions
+    (``dual_quaternion_matrices``)."""
+    if dual_quaternion:
+        return dual_quaternion_matrices(joints, weights, matrices)
     return np.einsum("vi,virc->vrc", weights.astype(np.float64), matrices.astype(np.float64)[joints])
 
 
+def _quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) as (x, y, z, w), multiplied."""
+    vector = a[..., 3:] * b[..., :3] + b[..., 3:] * a[..., :3] + np.cross(a[..., :3], b[..., :3])
+    return np.concatenate([vector, a[..., 3:] * b[..., 3:] - (a[..., :3] * b[..., :3]).sum(-1, keepdims=True)], -1)
+
+
+def _rotation_quaternions(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) of rotation matrices (N, 3, 3), each from its largest
+    diagonal term (Shepperd's method)."""
+    trace = r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2]
+    cases = [np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1], trace + 1.0], -1),
+             np.stack([1.0 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2], r[:, 0, 1] + r[:, 1, 0], r[:, 0, 2] + r[:, 2, 0],
+                       r[:, 2, 1] - r[:, 1, 2]], -1),
+             np.stack([r[:, 0, 1] + r[:, 1, 0], 1.0 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2], r[:, 1, 2] + r[:, 2, 1],
+                       r[:, 0, 2] - r[:, 2, 0]], -1),
+             np.stack([r[:, 0, 2] + r[:, 2, 0], r[:, 1, 2] + r[:, 2, 1], 1.0 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1],
+                       r[:, 1, 0] - r[:, 0, 1]], -1)]
+    pick = np.where(trace > 0.0, 0, np.where((r[:, 0, 0] >= r[:, 1, 1]) & (r[:, 0, 0] >= r[:, 2, 2]), 1,
+                                             np.where(r[:, 1, 1] >= r[:, 2, 2], 2, 3)))
+    q = np.stack(cases)[pick, np.arange(len(r))]
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def joint_dual_quaternions(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each joint matrix (J, 4, 4) as a unit dual quaternion (real (J, 4), dual (J, 4), as
+    (x, y, z, w)) and a uniform scale (J): the scale the cube root of its determinant, the
+    rotation its columns over that scale made orthonormal (Gram-Schmidt), the translation its
+    last column (``shaders/include/pose.glsl`` joint_dual_quaternion)."""
+    m = np.asarray(matrices, np.float64)
+    linear = m[:, :3, :3]
+    scale = np.cbrt(np.linalg.det(linear))
+    unscale = np.where(np.abs(scale) > 1e-12, 1.0 / np.where(scale == 0.0, 1.0, scale), 1.0)[:, None]
+    x = linear[:, :, 0] * unscale
+    x /= np.linalg.norm(x, axis=-1, keepdims=True)
+    y = linear[:, :, 1] * unscale
+    y -= (y * x).sum(-1, keepdims=True) * x
+    y /= np.linalg.norm(y, axis=-1, keepdims=True)
+    real = _rotation_quaternions(np.stack([x, y, np.cross(x, y)], -1))
+    translation = np.concatenate([m[:, :3, 3], np.zeros((len(m), 1))], -1)
+    return real, 0.5 * _quaternion_product(translation, real), scale
+
+
+def dual_quaternion_matrices(joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """Each vertex's matrix (V, 4, 4) by dual quaternion skinning (Kavan, Collins, Zara and
+    O'Sullivan 2008; ``Skin.skinning`` "dual_quaternion"): its joints' dual quaternions
+    (``joint_dual_quaternions``) each turned into its first joint's hemisphere, summed by
+    weight and normalised, its rotation and translation, times its joints' scales summed by
+    weight (``shaders/include/pose.glsl``'s skin_matrix in that build)."""
+    real, dual, scale = joint_dual_quaternions(matrices)
+    w = weights.astype(np.float64)
+    r, d = real[joints], dual[joints]                                  # (V, 4 joints, 4)
+    w = np.where((r * r[:, :1]).sum(-1) < 0.0, -w, w)                  # the first joint's hemisphere
+    blend_real, blend_dual = np.einsum("vi,vik->vk", w, r), np.einsum("vi,vik->vk", w, d)
+    norm = np.linalg.norm(blend_real, axis=-1, keepdims=True)
+    q, qd = blend_real / norm, blend_dual / norm
+    translation = 2.0 * (q[:, 3:] * qd[:, :3] - qd[:, 3:] * q[:, :3] + np.cross(q[:, :3], qd[:, :3]))
+    x, y, z, s = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    rotation = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - s * z), 2 * (x * z + s * y)], -1),
+                         np.stack([2 * (x * y + s * z), 1 - 2 * (x * x + z * z), 2 * (y * z - s * x)], -1),
+                         np.stack([2 * (x * z - s * y), 2 * (y * z + s * x), 1 - 2 * (x * x + y * y)], -1)], 1)
+    out = np.zeros((len(joints), 4, 4))
+    out[:, :3, :3] = rotation * np.einsum("vi,vi->v", weights.astype(np.float64), scale[joints])[:, None, None]
+    out[:, :3, 3] = translation
+    out[:, 3, 3] = 1.0
+    return out
+
+
 def skin_positions(positions: np.ndarray, joints: np.ndarray, weights: np.ndarray,
-                   matrices: np.ndarray) -> np.ndarray:
-    """Where each vertex goes (V, 3, float64) under the joint ``matrices`` (J, 4, 4)."""
-    blended = blend_matrices(joints, weights, matrices)
+                   matrices: np.ndarray, dual_quaternion: bool = False) -> np.ndarray:
+    """Where each vertex goes (V, 3, float64) under the joint ``matrices`` (J, 4, 4), blended
+    linearly or as dual quaternions."""
+    blended = blend_matrices(joints, weights, matrices, dual_quaternion)
     return np.einsum("vrc,vc->vr", blended[:, :3, :3], positions.astype(np.float64)) + blended[:, :3, 3]
 
 
@@ -125,10 +199,15 @@ def morph_reach(offset_boxes: np.ndarray, weights: np.ndarray) -> tuple[np.ndarr
 
 
 def posed_bounds(mesh: PosedMesh, joint_matrices: np.ndarray | None,
-                 morph_weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+                 morph_weights: np.ndarray | None, dual_quaternion: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The box (lo, hi) holding ``mesh`` posed (``posed_positions``' points): its box, or each
     joint's (``joint_boxes``), grown by how far the weighed targets reach (``morph_reach``),
-    then placed by the joints (``posed_box``)."""
+    then placed by the joints (``posed_box``).  Dual quaternion skinning turns a vertex along
+    an arc between its joints' images of it, outside their hull: its box is its posed
+    vertices' own (``posed_positions``, every vertex)."""
+    if dual_quaternion and joint_matrices is not None:
+        points = posed_positions(mesh, joint_matrices, morph_weights, dual_quaternion=True)
+        return points.min(axis=0), points.max(axis=0)
     if morph_weights is None:
         return mesh.bounds if joint_matrices is None else posed_box(mesh.joint_boxes(), joint_matrices)
     low, high = morph_reach(mesh.morph_offset_boxes(), morph_weights)
@@ -138,12 +217,14 @@ def posed_bounds(mesh: PosedMesh, joint_matrices: np.ndarray | None,
     return posed_box(mesh.joint_boxes() + np.stack([low, high])[None], joint_matrices)
 
 
-def posed_positions(mesh: PosedMesh, joint_matrices: np.ndarray | None, morph_weights: np.ndarray | None) -> np.ndarray:
+def posed_positions(mesh: PosedMesh, joint_matrices: np.ndarray | None, morph_weights: np.ndarray | None,
+                    dual_quaternion: bool = False) -> np.ndarray:
     """Where ``mesh``'s vertices go (V, 3, float64): its morph targets weighed in, then bent
-    by its joints (either None: not applied), as the SKINNED and MORPHED builds draw it."""
+    by its joints (either None: not applied; ``dual_quaternion``: blended as dual
+    quaternions), as the SKINNED and MORPHED builds draw it."""
     positions = mesh.positions.astype(np.float64)
     if morph_weights is not None:
         positions = morphed(positions, mesh.morph_positions, morph_weights)
     if joint_matrices is not None:
-        positions = skin_positions(positions, mesh.joints, mesh.weights, joint_matrices)
+        positions = skin_positions(positions, mesh.joints, mesh.weights, joint_matrices, dual_quaternion)
     return positions

@@ -260,8 +260,8 @@ class BatchKey(NamedTuple):
     dispersion: float = 0.0             # Refractive.dispersion: its DISPERSION build's uniform (0: none)
     anisotropy: tuple[float, float] | None = None  # Material.anisotropy and its direction in radians (None: none)
     iridescence: tuple[float, float, float] | None = None  # Material.iridescence, its film's index and nm
-    # A posed entity's own batch: (entity, bent by a Skin, wearing a Morph); (0, False, False): none.
-    posed: tuple[int, bool, bool] = (0, False, False)
+    # A posed entity's own batch: (entity, its Skin's skinning ("": no Skin), wearing a Morph); (0, "", False): none.
+    posed: tuple[int, str, bool] = (0, "", False)
     # The maps that read the mesh's second UV set, as bits (components.rendering.second_uv_mask; 0: none).
     second_uv_maps: int = 0
     # Material.diffuse_transmission_color and diffuse_transmission (None: none)
@@ -420,7 +420,7 @@ class InstanceBatch:
         # A posed entity's batch (BatchKey.posed): drawn with the SKINNED builds (a Skin bends
         # it) and the MORPHED builds (it wears a Morph), its row of the pose texture (PoseRows)
         # their uniform.
-        self.skinned = False
+        self.skinned = ""   # its Skin's skinning ("linear", "dual_quaternion"; "": no Skin bends it)
         self.morphed = False
         self.pose_row = 0
         # The model-space box its rows' world boxes are made from, and its radius about the

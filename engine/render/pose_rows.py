@@ -33,6 +33,17 @@ ROW_TEXELS = WEIGHTS_AT + -(-MAX_MORPH_TARGETS // 4)
 FIRST_ROWS = 4  # rows the texture is made with
 
 
+def skinning_defines(skinning: str) -> dict[str, str]:
+    """The build defines of a batch bent by a Skin blending its joints by ``skinning``
+    (``Skin.skinning``; "": no Skin): ``SKINNED``, and ``DUAL_QUATERNION_SKINNING`` for
+    "dual_quaternion" (``shaders/include/pose.glsl``).  The scene's builds and the casters'."""
+    if not skinning:
+        return {}
+    if skinning == "dual_quaternion":
+        return {"SKINNED": "1", "DUAL_QUATERNION_SKINNING": "1"}
+    return {"SKINNED": "1"}
+
+
 class PoseRows:
     """The pose texture and which row each posed entity has."""
 

@@ -197,7 +197,7 @@ class Renderer(Gpu):
                   sheen: tuple[float, float, float, float] | None = None,
                   dispersion: float = 0.0, anisotropy: tuple[float, float] | None = None,
                   iridescence: tuple[float, float, float] | None = None,
-                  posed: tuple[int, bool, bool] = (0, False, False), second_uv_maps: int = 0,
+                  posed: tuple[int, str, bool] = (0, "", False), second_uv_maps: int = 0,
                   diffuse_transmission: tuple[float, float, float, float] | None = None,
                   decal: bool = False, decal_order: int = 0, parallax_depth: float = 0.0,
                   subsurface: tuple[float, float, float, float] | None = None) -> InstanceBatch:
@@ -223,7 +223,7 @@ class Renderer(Gpu):
         # ``dispersion``: a refraction's Refractive.dispersion, its DISPERSION build's (0: none).
         # ``anisotropy``: (Material.anisotropy, its direction in radians), ANISOTROPY's (None: none).
         # ``iridescence``: (Material.iridescence, the film's index, its nm), IRIDESCENCE's (None: none).
-        # ``posed``: (entity, skinned, morphed): a posed entity (a Skin bends its mesh, or it
+        # ``posed``: (entity, its Skin.skinning or "", morphed): a posed entity (a Skin bends its mesh, or it
         # wears a Morph) gets a batch of its own, drawn with the SKINNED and MORPHED builds, its
         # row of the pose texture their uniform (set by extract).  ``second_uv_maps``: the maps
         # that read the mesh's second UV set, as bits (components.rendering.second_uv_mask): its

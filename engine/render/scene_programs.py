@@ -59,6 +59,7 @@ from engine.render.bindings import (
 )
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code, forget_reads
+from engine.render.pose_rows import skinning_defines
 from engine.render.shadows import ShadowMaps
 from engine.render.unlit_mirrors import may_be_unlit
 
@@ -249,8 +250,8 @@ class ScenePrograms:
                 defines["ANISOTROPY"] = "1"
             if material[11]:  # a thin film's colours over it (Material.iridescence)
                 defines["IRIDESCENCE"] = "1"
-            if material[12]:  # its mesh bent by its joints (a Skin: shaders/include/pose.glsl)
-                defines["SKINNED"] = "1"
+            # its mesh bent by its joints (a Skin: shaders/include/pose.glsl), blended as its skinning says
+            defines.update(skinning_defines(material[12]))
             if material[13]:  # its mesh's morph targets weighed in (a Morph: shaders/include/pose.glsl)
                 defines["MORPHED"] = "1"
             if material[14]:  # maps that read the mesh's second UV set (shaders/include/uv_sets.glsl)

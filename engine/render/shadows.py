@@ -55,6 +55,7 @@ from engine.render.bindings import (
     bind_uniform_block,
 )
 from engine.render.gpu import Gpu
+from engine.render.pose_rows import skinning_defines
 from engine.render.raw_gl import LayeredCubeTarget
 from engine.render.targets import release_framebuffer
 from engine.render.views import (
@@ -673,12 +674,12 @@ class ShadowMaps:
 
     # --- drawing --------------------------------------------------------------------------
     def _caster_program(self, build: tuple[tuple[str, str], ...], cutout: bool | str,
-                        skinned: bool = False, morphed: bool = False, second_uv: bool = False) -> moderngl.Program:
+                        skinned: str = "", morphed: bool = False, second_uv: bool = False) -> moderngl.Program:
         """The caster program of ``build`` (its defines), for cutouts (``cutout``: the
         ``ALPHA_CUTOFF`` build, its albedo map read for its holes; "vertex alpha": and its
         mesh's alpha a vertex, ``VERTEX_ALPHA``; ``second_uv``: the map read at the mesh's
         second UV set, ``Material.second_uv_maps``) or whole casters, bent by a Skin or not
-        (``skinned``: the ``SKINNED`` build, its joints read from the pose texture) or wearing a
+        (``skinned``: its Skin.skinning, the ``SKINNED`` build, its joints read from the pose texture) or wearing a
         Morph or not (``morphed``: the ``MORPHED`` build, its offsets read from its mesh's)."""
         program = self._casters.get((build, cutout, skinned, morphed, second_uv))
         if program is None:
@@ -689,8 +690,7 @@ class ShadowMaps:
                 defines["SECOND_UV_MAPS"] = str(ALBEDO_UV_BIT)
             if cutout == "vertex alpha":
                 defines["VERTEX_ALPHA"] = "1"
-            if skinned:
-                defines["SKINNED"] = "1"
+            defines.update(skinning_defines(skinned))
             if morphed:
                 defines["MORPHED"] = "1"
             geometry = "shadow_layered.geom" if "LAYERED" in defines else None

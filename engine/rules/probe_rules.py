@@ -150,7 +150,8 @@ def pose_bounds(world: World, entity: int, mesh: Mesh) -> tuple[np.ndarray, np.n
     if skin is None and morph is None:
         return None
     return posed_bounds(mesh, skin.joint_matrices if skin is not None else None,
-                        morph.weights if morph is not None else None)
+                        morph.weights if morph is not None else None,
+                        skin is not None and skin.skinning == "dual_quaternion")
 
 
 MAX_BLENDED_PROBES = 2  # probes an object blends at most (two cube samplers: GL 4.1 has no cube-map arrays)

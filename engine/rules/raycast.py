@@ -80,8 +80,8 @@ class _Entry:
     e1: np.ndarray
     e2: np.ndarray
     normal: np.ndarray  # (n, 3) unit geometric normals (zero for degenerate triangles)
-    # What posed them: (its Skin.joint_matrices, its Morph.weights), each None where it has none
-    pose: tuple = (None, None)
+    # What posed them: (its Skin.joint_matrices, its Morph.weights, each None where it has none; dual quaternions)
+    pose: tuple = (None, None, False)
 
 
 class RayCaster:
@@ -180,9 +180,10 @@ class RayCaster:
             skin = world.try_get(entity, Skin) if mesh.skinned else None
             morph = world.try_get(entity, Morph) if mesh.morph_count else None
             # (a new array or tuple each pose: Skin and Morph copy what they are given)
-            pose = (skin.joint_matrices if skin is not None else None, morph.weights if morph is not None else None)
+            pose = (skin.joint_matrices if skin is not None else None, morph.weights if morph is not None else None,
+                    skin is not None and skin.skinning == "dual_quaternion")
             if entry is not None and entry.mesh_id == mesh.id and _same_key(entry.world_key, key) \
-                    and entry.pose[0] is pose[0] and entry.pose[1] is pose[1]:
+                    and entry.pose[0] is pose[0] and entry.pose[1] is pose[1] and entry.pose[2] == pose[2]:
                 continue
             matrix = _matrix_of(key)
             self._entries[entity] = _build(mesh, matrix, mesh.id, key, pose)
@@ -305,7 +306,7 @@ def _matrix_of(key: object) -> np.ndarray:
     return np.array(columns, np.float64).T
 
 
-def _build(mesh, matrix: np.ndarray, mesh_id: int, key: object, pose: tuple = (None, None)) -> _Entry:
+def _build(mesh, matrix: np.ndarray, mesh_id: int, key: object, pose: tuple = (None, None, False)) -> _Entry:
     positions = posed_positions(mesh, *pose)  # where its Morph and Skin put them, as drawn
     world = positions @ matrix[:3, :3].T + matrix[:3, 3]
     tri = world[np.asarray(mesh.indices)]

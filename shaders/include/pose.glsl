@@ -28,12 +28,83 @@ mat4 joint_matrix(sampler2D rows, uint joint) {
     return transpose(mat4(r0, r1, r2, vec4(0.0, 0.0, 0.0, 1.0)));
 }
 
+#ifdef DUAL_QUATERNION_SKINNING
+// Dual quaternion skinning (Skin.skinning "dual_quaternion"; Kavan, Collins, Zara and
+// O'Sullivan, "Geometric Skinning with Approximate Dual Quaternion Blending", 2008):
+// engine/core/skinning.py dual_quaternion_matrices is its twin.  Each joint's matrix is taken
+// as a uniform scale (the cube root of its determinant), a rotation (its columns over that
+// scale, made orthonormal) and a translation; the rotations and translations blend as unit
+// dual quaternions (each turned into the first's hemisphere, summed by weight, normalised),
+// the scales by weight, so a twisted wrist keeps its thickness where linear blending
+// collapses it.
+
+// A rotation matrix's unit quaternion (x, y, z, w), from its largest diagonal term.
+vec4 rotation_quaternion(mat3 r) {
+    float trace = r[0][0] + r[1][1] + r[2][2];
+    vec4 q;
+    if (trace > 0.0) {
+        q = vec4(r[1][2] - r[2][1], r[2][0] - r[0][2], r[0][1] - r[1][0], trace + 1.0);
+    } else if (r[0][0] >= r[1][1] && r[0][0] >= r[2][2]) {
+        q = vec4(1.0 + r[0][0] - r[1][1] - r[2][2], r[1][0] + r[0][1], r[2][0] + r[0][2], r[1][2] - r[2][1]);
+    } else if (r[1][1] >= r[2][2]) {
+        q = vec4(r[1][0] + r[0][1], 1.0 + r[1][1] - r[0][0] - r[2][2], r[2][1] + r[1][2], r[2][0] - r[0][2]);
+    } else {
+        q = vec4(r[2][0] + r[0][2], r[2][1] + r[1][2], 1.0 + r[2][2] - r[0][0] - r[1][1], r[0][1] - r[1][0]);
+    }
+    return normalize(q);
+}
+
+vec4 quaternion_product(vec4 a, vec4 b) {
+    return vec4(a.w * b.xyz + b.w * a.xyz + cross(a.xyz, b.xyz), a.w * b.w - dot(a.xyz, b.xyz));
+}
+
+// Joint j's dual quaternion (real, dual) and uniform scale.
+void joint_dual_quaternion(sampler2D rows, uint joint, out vec4 real, out vec4 dual, out float scale) {
+    mat4 m = joint_matrix(rows, joint);
+    mat3 linear = mat3(m);
+    float det = determinant(linear);
+    scale = sign(det) * pow(abs(det), 1.0 / 3.0);   // (a joint squashed flat: 0, its rotation kept below)
+    float unscale = abs(scale) > 1e-12 ? 1.0 / scale : 1.0;
+    vec3 x = normalize(linear[0] * unscale);
+    vec3 y = normalize(linear[1] * unscale - dot(linear[1] * unscale, x) * x);
+    real = rotation_quaternion(mat3(x, y, cross(x, y)));
+    dual = 0.5 * quaternion_product(vec4(m[3].xyz, 0.0), real);
+}
+
+// The vertex's blended matrix: the mesh as modelled -> as posed by ``rows`` (pose_rows;
+// pose_before: as it was), the blended rotation and translation times the blended scale.
+mat4 skin_matrix(sampler2D rows) {
+    vec4 real0, dual0, real, dual;
+    float scale0, scale;
+    joint_dual_quaternion(rows, in_joints.x, real0, dual0, scale0);
+    vec4 blend_real = in_weights.x * real0, blend_dual = in_weights.x * dual0;
+    float blend_scale = in_weights.x * scale0;
+    for (int k = 1; k < 4; ++k) {
+        joint_dual_quaternion(rows, in_joints[k], real, dual, scale);
+        float w = dot(real, real0) < 0.0 ? -in_weights[k] : in_weights[k];   // the same hemisphere
+        blend_real += w * real;
+        blend_dual += w * dual;
+        blend_scale += in_weights[k] * scale;
+    }
+    float norm = length(blend_real);
+    blend_real /= norm;
+    blend_dual /= norm;
+    vec3 t = 2.0 * (blend_real.w * blend_dual.xyz - blend_dual.w * blend_real.xyz + cross(blend_real.xyz, blend_dual.xyz));
+    vec4 q = blend_real;
+    mat3 rotation = mat3(1.0 - 2.0 * (q.y * q.y + q.z * q.z), 2.0 * (q.x * q.y + q.w * q.z), 2.0 * (q.x * q.z - q.w * q.y),
+                         2.0 * (q.x * q.y - q.w * q.z), 1.0 - 2.0 * (q.x * q.x + q.z * q.z), 2.0 * (q.y * q.z + q.w * q.x),
+                         2.0 * (q.x * q.z + q.w * q.y), 2.0 * (q.y * q.z - q.w * q.x), 1.0 - 2.0 * (q.x * q.x + q.y * q.y));
+    return mat4(vec4(rotation[0] * blend_scale, 0.0), vec4(rotation[1] * blend_scale, 0.0),
+                vec4(rotation[2] * blend_scale, 0.0), vec4(t, 1.0));
+}
+#else
 // The vertex's blended matrix (linear blend skinning): the mesh as modelled -> as posed by
 // ``rows`` (pose_rows; pose_before: as it was).
 mat4 skin_matrix(sampler2D rows) {
     return in_weights.x * joint_matrix(rows, in_joints.x) + in_weights.y * joint_matrix(rows, in_joints.y)
         + in_weights.z * joint_matrix(rows, in_joints.z) + in_weights.w * joint_matrix(rows, in_joints.w);
 }
+#endif
 #endif
 
 #ifdef MORPHED
