@@ -144,7 +144,8 @@ def make_scene(name: str, ctx):
     """The engine of scene ``name`` (``mirrors_<n>``, ``portals_d<depth>``, ``portals_d<depth>_sway``
     with a swaying camera, ``probe_none``, ``probe_dynamic``, ``glass_<panes>``: the 8-mirror ring
     with a see-through pond and that many panes, ``benchmarks.glass``; ``posed_<mirrors>_<n>``:
-    the ring with n animated skinned and morphed meshes, ``benchmarks.posed``;
+    the ring with n animated skinned and morphed meshes, ``benchmarks.posed`` (``_dq`` after:
+    blended as dual quaternions);
     ``sparks_<mirrors>_<n>``: the ring with n living particles, ``benchmarks.sparks``;
     ``decals_<mirrors>_<n>``: the ring with n stains on its floor, ``benchmarks.decals``;
     ``focus_<mirrors>``: the ring seen through a lens with autofocus (its camera's
@@ -207,11 +208,12 @@ def make_scene(name: str, ctx):
         (camera, _), = engine.world.query_one(Camera)
         engine.world.add_component(camera, MotionBlur(objects=not only))
         return engine
-    if kind == "posed":  # posed_<mirrors>_<tentacles>: the ring with animated skinned and morphed meshes
+    if kind == "posed":  # posed_<mirrors>_<tentacles>[_dq]: the ring with animated skinned and morphed meshes
         from benchmarks.posed import PosedRing
 
         mirrors, _, posed = arg.partition("_")
-        return Engine(PosedRing(int(mirrors), int(posed or 0)), ctx)
+        posed, _, blend = posed.partition("_")
+        return Engine(PosedRing(int(mirrors), int(posed or 0), "dual_quaternion" if blend == "dq" else "linear"), ctx)
     if kind == "probe":
         from benchmarks.probes import MODES, ProbeRing
 

@@ -57,9 +57,10 @@ class PosedRing(MirrorRing):
 
     title = "benchmark: posed meshes"
 
-    def __init__(self, mirrors: int, posed: int) -> None:
+    def __init__(self, mirrors: int, posed: int, skinning: str = "linear") -> None:
         super().__init__(mirrors)
         self.posed = posed
+        self.skinning = skinning   # Skin.skinning: "dual_quaternion" for posed_<m>_<n>_dq
         self.tentacles: list[tuple[Skin, Morph, float]] = []
 
     def build(self, world: World) -> None:
@@ -67,7 +68,7 @@ class PosedRing(MirrorRing):
         mesh = tentacle()
         for i in range(self.posed):
             a = 2.0 * math.pi * i / max(self.posed, 1)
-            skin, morph = Skin(pose([0.0] * JOINTS)), Morph((0.0,))
+            skin, morph = Skin(pose([0.0] * JOINTS), skinning=self.skinning), Morph((0.0,))
             world.spawn(Transform(position=(2.5 * math.cos(a), 0.0, 2.5 * math.sin(a))), MeshRef(mesh),
                         Material(color=(0.55, 0.2, 0.6)), skin, morph)
             self.tentacles.append((skin, morph, float(i)))
