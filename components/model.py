@@ -30,7 +30,9 @@ class Model(TrackedComponent):
     units to the scene's exposure); ``max_probes`` is how many of its curved reflective or
     glass parts get a cube-map probe of their own (the largest; the others reflect the sky).
     ``variant`` is the glTF material variant its parts wear (``KHR_materials_variants``: a
-    shoe's colourway, a car's paint; "" the file's default look).
+    shoe's colourway, a car's paint; "" the file's default look).  ``skinning`` is how its
+    skinned parts blend their joints (each part's ``Skin.skinning``: "linear", the default, or
+    "dual_quaternion", which keeps a twisted wrist its thickness).
     What the file holds is checked when it is loaded: by ``spawn_model`` and a level file's
     reader at once, by the models stage for a Model added or changed otherwise (naming the
     entity and the file)."""
@@ -40,8 +42,13 @@ class Model(TrackedComponent):
     light_scale: float = 1.0
     max_probes: int = MAX_MODEL_PROBES
     variant: str = ""
+    skinning: str = "linear"
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "skinning":
+            from components.pose import SKINNING_METHODS
+
+            return choice(self, name, value, SKINNING_METHODS)
         if name == "file":
             if isinstance(value, os.PathLike):
                 value = os.fspath(value)

@@ -166,3 +166,34 @@ def test_a_bad_skinning_is_refused_when_given():
     skin = Skin()
     with pytest.raises(ComponentValueError, match="Skin.skinning"):
         skin.skinning = "spherical"
+
+
+def test_a_models_skinned_parts_take_its_skinning(tmp_path):
+    """``spawn_model(..., skinning="dual_quaternion")`` and ``Model.skinning`` give each
+    skinned part's Skin that blend; changing it makes the parts again with the new one; a
+    level file names it; a bad one is refused."""
+    from components import FromModel, Model
+    from engine.assets.level_read import load_level
+    from engine.assets.models import spawn_model
+    from engine.core.errors import AssetError
+    from systems.model_system import ModelSystem
+    from tests.test_skinning import arm_glb
+
+    path = arm_glb(tmp_path / "arm.glb")
+    world = World("arm")
+    root = spawn_model(world, path, skinning="dual_quaternion")
+    ((part, _),) = list(world.query_one(FromModel))
+    assert world.get(part, Skin).skinning == "dual_quaternion"
+    world.get(root, Model).skinning = "linear"
+    ModelSystem(world).process(1 / 60)
+    skins = [world.get(entity, Skin).skinning for entity, _ in world.query_one(FromModel) if world.has(entity, Skin)]
+    assert skins == ["linear"]
+    level = tmp_path / "arm.toml"
+    level.write_text('[level]\nname = "arm"\n[[entity]]\nname = "arm"\nTransform = {}\n'
+                     'Model = { file = "arm.glb", skinning = "dual_quaternion" }\n')
+    loaded = World("level")
+    load_level(level).spawn(loaded)
+    ModelSystem(loaded).process(1 / 60)
+    assert [s.skinning for _, s in loaded.query_one(Skin)] == ["dual_quaternion"]
+    with pytest.raises(AssetError, match="Model.skinning"):
+        spawn_model(World("bad"), path, skinning="dq")

@@ -100,14 +100,14 @@ class SpawnedModels(dict):
 
 def model_key(model: Model) -> tuple:
     """The values a model's parts are made from: a change to any of them makes them again."""
-    return (os.path.abspath(model.file), model.light_scale, model.max_probes, model.variant)
+    return (os.path.abspath(model.file), model.light_scale, model.max_probes, model.variant, model.skinning)
 
 
 def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[float] = (0.0, 0.0, 0.0),
                 rotation: glm.quat | Sequence[float] | None = None,
                 scale: glm.vec3 | Sequence[float] = (1.0, 1.0, 1.0),
                 roots: Sequence[str | Path] | None = None, max_probes: int = MAX_MODEL_PROBES,
-                light_scale: float = 1.0, variant: str = "") -> int:
+                light_scale: float = 1.0, variant: str = "", skinning: str = "linear") -> int:
     """Load ``path`` and spawn it; returns the root entity.
 
     The file's material decides the components: its colour, texture, metallic and
@@ -153,9 +153,10 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
     it active (``camera.active = True``; the active camera with the lowest id renders).
 
     ``variant``: the glTF material variant the parts wear (``KHR_materials_variants``,
-    engine/assets/gltf_variants.py; "": the file's default look).
+    engine/assets/gltf_variants.py; "": the file's default look).  ``skinning``: how its
+    skinned parts blend their joints (``Skin.skinning``: "linear" or "dual_quaternion").
 
-    The root holds the file's ``Model`` (its path, ``light_scale``, ``max_probes`` and ``variant``) and
+    The root holds the file's ``Model`` (its path, ``light_scale``, ``max_probes``, ``variant`` and ``skinning``) and
     each part a ``FromModel`` naming the root: a level file saves the root alone and makes
     the parts again when it is loaded; deleting the root deletes them (the models stage).
     """
@@ -168,10 +169,11 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
                                scale=scale)
     loaded = load_model_file(path, roots=roots, variant=variant)  # (a bad path is refused here, naming it)
     try:
-        model = Model(file=os.fspath(path), light_scale=light_scale, max_probes=max_probes, variant=variant)
+        model = Model(file=os.fspath(path), light_scale=light_scale, max_probes=max_probes, variant=variant,
+                      skinning=skinning)
     except ComponentValueError as exc:
         raise AssetError(f"spawn_model: {exc}") from None
-    part_components = model_components(loaded, path, root_transform, max_probes, light_scale)
+    part_components = model_components(loaded, path, root_transform, max_probes, light_scale, skinning)
     root = world.spawn(root_transform, model)
     try:
         spawn_parts(world, root, model, part_components, loaded)
@@ -182,7 +184,7 @@ def spawn_model(world: World, path: str | Path, position: glm.vec3 | Sequence[fl
 
 
 def model_components(loaded: LoadedModel, path: str | Path, root: Transform, max_probes: int,
-                     light_scale: float) -> list[list]:
+                     light_scale: float, skinning: str = "linear") -> list[list]:
     """Each part's and light's components (a Transform first, its parent left for
     ``spawn_parts``), every one built, so checked, before anything is spawned: see
     ``spawn_model`` for what a file's materials and lights become.  ``root``: where the model
@@ -203,7 +205,7 @@ def model_components(loaded: LoadedModel, path: str | Path, root: Transform, max
         for index, part in enumerate(parts):
             part_components.append(_part_components(part, index in probed))
             if part.skin is not None:
-                part_components[-1].append(Skin(palettes[part.skin]))
+                part_components[-1].append(Skin(palettes[part.skin], skinning=skinning))
             if part.morph_weights is not None:
                 part_components[-1].append(Morph(part.morph_weights))
         for light in loaded.lights:
@@ -325,7 +327,8 @@ def respawn_parts(world: World, root: int, roots: Sequence[str | Path] | None = 
     try:
         if loaded is None:
             loaded = load_model_file(model.file, roots=roots, variant=model.variant)
-        part_components = model_components(loaded, model.file, transform, model.max_probes, model.light_scale)
+        part_components = model_components(loaded, model.file, transform, model.max_probes, model.light_scale,
+                                           model.skinning)
     except AssetError as exc:
         raise AssetError(f"entity {root}'s Model: {exc}") from exc
     remove_parts(world, root)
