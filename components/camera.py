@@ -35,6 +35,7 @@ from components.visibility import LAYER_FIELDS, ShownLayers
 
 _DEFAULT_FAR = 200.0
 CAMERA_PROJECTIONS = ("perspective", "orthographic")  # Camera.projection
+CELESTIAL_BODIES = ("sun", "moon")  # DirectionalLight.body
 
 # An image (engine.assets.texture_data.TextureData): components import none of the engine
 # (rendering.py's note), a cookie is checked by its class's ASSET_KIND.
@@ -175,7 +176,17 @@ class DirectionalLight(TrackedComponent):
     (``Mirror.reflects_light``, ``Portal.carries_light``) its light goes through in a row:
     0 none, 1 one (a mirror throws it on the floor), up to ``MAX_LIGHT_BOUNCES`` = 4 (mirror
     to mirror); never deeper than a surface's own ``max_depth`` or the view tree's depth cap.
-    Each bounce is a virtual light of its own (``engine/rules/shadow_rules.py``)."""
+    Each bounce is a virtual light of its own (``engine/rules/shadow_rules.py``).
+
+    ``body`` (default "sun"): what shines.  The brightest "sun" is the one a generated sky
+    follows (its disc, its glow, an atmosphere's colours) and a camera's contact shadows and
+    fog glow take.  A "moon" (HDRP's celestial bodies, Unreal's second atmosphere light) is
+    never the sky's sun: a generated sky draws its disc (``Skybox.moon_color``, the size of the
+    sun's) lit from the sky's sun as a ball is, so its phase follows their angle (full when
+    opposite it, half at a right angle, gone beside it); an atmosphere dims and reddens it and
+    its light as the sun's; a ``TimeOfDay`` on its entity puts it where the moon stands
+    (``TimeOfDay.moon_age``).  Its light is its own ``color`` x ``intensity`` (a full moon
+    lights a night at about 1/400,000 of the sun: a game picks what reads)."""
 
     direction: Any = field(default_factory=lambda: glm.vec3(-0.3, -1.0, -0.4))
     color: Any = field(default_factory=lambda: glm.vec4(1.0))
@@ -188,10 +199,13 @@ class DirectionalLight(TrackedComponent):
     shadow_cascade_blend: float = 0.15
     angular_diameter: float = 0.0
     bounces: int = 1
+    body: str = "sun"
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "direction":
             return glm.normalize(vec3(self, name, value, nonzero=True))
+        if name == "body":
+            return choice(self, name, value, CELESTIAL_BODIES)
         if name == "angular_diameter":
             return finite(self, name, value, low=0.0, high=MAX_SUN_ANGULAR_DIAMETER)
         if name == "shadow_cascades":

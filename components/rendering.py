@@ -550,6 +550,10 @@ class Skybox(TrackedComponent):
     are the space beyond its air (stars, a galaxy: ``engine.assets.star_field.star_faces``),
     shown through it where it lets them through and is itself dark: at night, fading towards
     the horizon.
+
+    ``moon_color`` (linear RGB): the disc of a ``DirectionalLight`` whose ``body`` is "moon",
+    lit head on, times that light's colour; drawn by a generated sky (the gradient's and the
+    atmosphere's, dimmed by its air) lit from the sky's sun, so it waxes and wanes.
     """
 
     zenith: Any = field(default_factory=lambda: glm.vec4(0.10, 0.25, 0.65, 1.0))
@@ -557,6 +561,7 @@ class Skybox(TrackedComponent):
     ground: Any = field(default_factory=lambda: glm.vec4(0.18, 0.14, 0.10, 1.0))
     sun_direction: Any = None
     sun_color: Any = field(default_factory=lambda: glm.vec4(6.0, 5.4, 4.2, 1.0))
+    moon_color: Any = field(default_factory=lambda: glm.vec4(1.0, 1.0, 1.05, 1.0))
     face_size: int = 128
     faces: Any = None
     model: str = "gradient"
@@ -565,7 +570,7 @@ class Skybox(TrackedComponent):
     tints_sunlight: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
-        if name in ("zenith", "horizon", "ground", "sun_color"):
+        if name in ("zenith", "horizon", "ground", "sun_color", "moon_color"):
             return color(self, name, value)
         if name == "model":
             return choice(self, name, value, SKY_MODELS)

@@ -10,6 +10,8 @@ from pyglm import glm
 from components.tracking import ComponentValueError, TrackedComponent, finite, integer, vec3
 
 MAX_HOURS_PER_SECOND = 1e4   # TimeOfDay.hours_per_second: faster is a flicker, not a day
+SYNODIC_MONTH = 29.530589     # days from new moon to new moon
+DAYS_A_YEAR = 365
 
 
 @dataclass(eq=False)
@@ -27,7 +29,16 @@ class TimeOfDay(TrackedComponent):
 
     The sun's place is the usual declination and hour angle (the declination -23.44 degrees x
     cos(360 / 365 x (day + 10)); no equation of time, no refraction: within a degree or so of
-    an ephemeris), good for a game's day, not for navigation."""
+    an ephemeris), good for a game's day, not for navigation.
+
+    On a moon's light (``DirectionalLight.body`` "moon") it turns the light to where the moon
+    stands instead: ``moon_age`` days since the new moon (0 to ``SYNODIC_MONTH``, 29.53;
+    default 14.77, full), moving on with the clock.  The moon is taken on the sun's path,
+    ``moon_age`` / 29.53 of a turn ahead of it (its elongation): it rises that share of a day
+    later and stands where the sun stands that share of a year later (within the 5 degrees the
+    moon's orbit leans off the sun's path), so a full moon rises at sunset opposite the sun,
+    high in winter, and a first quarter stands due south at sunset.  Give the moon's light the
+    same hour, day and speed as the sun's."""
 
     SHAREABLE = False  # one light's own clock
     hour: float = 12.0
@@ -35,6 +46,7 @@ class TimeOfDay(TrackedComponent):
     latitude: float = 45.0
     north: Any = field(default_factory=lambda: glm.vec3(0.0, 0.0, -1.0))
     hours_per_second: float = 0.0
+    moon_age: float = SYNODIC_MONTH / 2.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "hour":
@@ -51,6 +63,9 @@ class TimeOfDay(TrackedComponent):
                 raise ComponentValueError(f"TimeOfDay.north must point somewhere along the ground (its x or z "
                                           f"not 0), got {value!r}")
             return glm.normalize(flat)
+        if name == "moon_age":
+            value = finite(self, name, value, low=0.0, high=SYNODIC_MONTH)
+            return 0.0 if value == SYNODIC_MONTH else value
         if name == "hours_per_second":
             return finite(self, name, value, low=-MAX_HOURS_PER_SECOND, high=MAX_HOURS_PER_SECOND)
         return value
@@ -58,9 +73,23 @@ class TimeOfDay(TrackedComponent):
 
 def sun_towards(time: TimeOfDay) -> glm.vec3:
     """The unit way towards the sun at ``time`` (the world's y up)."""
+    return _towards(time, time.day, time.hour)
+
+
+def moon_towards(time: TimeOfDay) -> glm.vec3:
+    """The unit way towards the moon at ``time``: on the sun's path, ``moon_age`` /
+    ``SYNODIC_MONTH`` of a turn ahead of the sun (that share of a day later in the sky, where
+    the sun stands that share of a year on)."""
+    turn = time.moon_age / SYNODIC_MONTH
+    return _towards(time, time.day + turn * DAYS_A_YEAR, time.hour - 24.0 * turn)
+
+
+def _towards(time: TimeOfDay, day: float, hour: float) -> glm.vec3:
+    """The way towards a body on the sun's path standing where the sun does on ``day`` (a
+    number of days, any) at ``hour``, from ``time``'s latitude and north."""
     latitude = math.radians(time.latitude)
-    declination = math.radians(-23.44) * math.cos(2.0 * math.pi / 365.0 * (time.day + 10))
-    hour_angle = math.radians(15.0 * (time.hour - 12.0))
+    declination = math.radians(-23.44) * math.cos(2.0 * math.pi / 365.0 * (day + 10))
+    hour_angle = math.radians(15.0 * (hour - 12.0))
     east = -math.cos(declination) * math.sin(hour_angle)
     north = math.cos(latitude) * math.sin(declination) - math.sin(latitude) * math.cos(declination) \
         * math.cos(hour_angle)

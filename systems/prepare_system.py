@@ -59,6 +59,7 @@ from engine.rules.light_rules import (
     SAME_SUN_TINT,
     KeptLights,
     SkySun,
+    air_tinted,
     brightest_directional,
     choose_lights,
     cube_serves,
@@ -112,7 +113,7 @@ class PrepareSystem(esper.Processor):
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
-        self._sun_follows = False   # the generated sky's sun follows the brightest directional light
+        self._sun_follows = False   # the generated sky follows the lights (its sun, unless pinned, and its moon)
         self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
         # The debug overlay's toggle: off, no surface reflects the light from all round by its
         # material (its environment reflection; a Reflective's reflection stays).
@@ -206,7 +207,7 @@ class PrepareSystem(esper.Processor):
         if world.changed(Skybox):
             skies = world.query_one(Skybox)
             sky = skies[0][1] if skies else None
-            self._sun_follows = is_generated(sky) and sky.sun_direction is None
+            self._sun_follows = is_generated(sky)   # (a pinned sun's sky still follows its moon)
             self._make_sky(sky, self._sky_sun())
             return True
         if not self._sun_follows or not (world.changed(DirectionalLight) or self._sun != self._cube_sun):
@@ -235,8 +236,8 @@ class PrepareSystem(esper.Processor):
         self._sun = self._cube_sun = sun
 
     def _air_tint(self, sun: DirectionalLight) -> tuple[float, float, float]:
-        """What the world's atmosphere does to ``sun``'s light (the brightest DirectionalLight:
-        ``engine.render.sky.sunlight_tint``)."""
+        """What the world's atmosphere does to ``sun``'s light (the brightest DirectionalLight,
+        or a moon: ``engine.render.sky.sunlight_tint``)."""
         skies = self.world.query_one(Skybox)
         return sunlight_tint(skies[0][1] if skies else None, tuple(sun.direction))
 
@@ -257,7 +258,7 @@ class PrepareSystem(esper.Processor):
                 continue
             light = world.get(entity, DirectionalLight)
             colour = light.color.xyz * light.intensity
-            if light is sun:
+            if air_tinted(light, sun):   # (the sun and the moons: an atmosphere's air reddens them)
                 colour = colour * glm.vec3(*self._air_tint(light))
             directional.append((light.direction, colour, float(light is sun)))
         point, contact, cut = [], [], 0

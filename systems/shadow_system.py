@@ -58,6 +58,7 @@ from engine.resources import RenderStats, Surfaces
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import (
     KeptLights,
+    air_tinted,
     brightest_directional,
     cube_faces_lit,
     kept_lights,
@@ -418,12 +419,12 @@ class ShadowSystem(esper.Processor):
             suns = [(entity, world.get(entity, DirectionalLight)) for entity in kept.directional if entity is not None]
             lamps = [(entity, (world.get(entity, PointLight), world.get(entity, Transform)))
                      for entity in kept.point if entity is not None]
-            sun = brightest_directional(world)   # (an atmosphere reddens it as it sets: sunlight_tint)
+            sun = brightest_directional(world)   # (an atmosphere reddens it and the moons as they set: sunlight_tint)
             skies = world.query_one(Skybox)
-            tint = glm.vec3(*sunlight_tint(skies[0][1] if skies else None, tuple(sun.direction))) \
-                if sun is not None else glm.vec3(1.0)
-            directional = [(entity, raw_field(light, "direction"),
-                            raw_field(light, "color").xyz * light.intensity * (tint if light is sun else glm.vec3(1.0)))
+            sky = skies[0][1] if skies else None
+            directional = [(entity, raw_field(light, "direction"), raw_field(light, "color").xyz * light.intensity
+                            * (glm.vec3(*sunlight_tint(sky, tuple(light.direction))) if air_tinted(light, sun)
+                               else glm.vec3(1.0)))
                            for entity, light in suns]
             cookies = renderer.spot_cookies
             points = [(entity, transform.world[3].xyz, light.range, raw_field(light, "color").xyz * light.intensity,

@@ -13,10 +13,8 @@ import warnings
 import esper
 
 from components import ComponentWarning, DirectionalLight
-from components.time_of_day import TimeOfDay, sun_towards
+from components.time_of_day import DAYS_A_YEAR, SYNODIC_MONTH, TimeOfDay, moon_towards, sun_towards
 from engine.core.world import World
-
-DAYS_A_YEAR = 365
 
 
 class TimeOfDaySystem(esper.Processor):
@@ -36,6 +34,7 @@ class TimeOfDaySystem(esper.Processor):
                 if days:
                     time.day = (time.day - 1 + int(days)) % DAYS_A_YEAR + 1
                 time.hour = hour
+                time.moon_age = (time.moon_age + time.hours_per_second * dt / 24.0) % SYNODIC_MONTH
             light = world.try_get(entity, DirectionalLight)
             if light is None:
                 if entity not in self._said:
@@ -43,6 +42,6 @@ class TimeOfDaySystem(esper.Processor):
                     warnings.warn(f"TimeOfDay on entity {entity}, which has no DirectionalLight: it turns nothing",
                                   ComponentWarning, stacklevel=2)
                 continue
-            light.direction = -sun_towards(time)
+            light.direction = -(moon_towards(time) if light.body == "moon" else sun_towards(time))
         if self._said:
             self._said &= {entity for entity, _ in clocks}

@@ -95,6 +95,7 @@ from engine.render.sky import (
     glow_strength,
     ground_share,
     model_radiance,
+    moon_phase,
     zenith_share,
 )
 from engine.render.subsurface import subsurface_table
@@ -175,8 +176,11 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     under 1e-4 of the largest coefficient (the faces sample the 2.6-degree disc coarsely).
     An atmosphere's air has no closed form: its sky is projected from ``ATMOSPHERE_FACE``
     texels a face of the CPU's small table (smooth: the nine coefficients need no more), its
-    disc in closed form."""
+    disc in closed form.  A moon's disc is the sun's shape times its colour and the share of
+    a full moon's light its phase leaves, about the way its lit part's light comes from
+    (``moon_phase``)."""
     rise, fall, glow, disc = _zonal_integrals()
+    moon = _moon_sh(model, disc)
     if model.atmosphere:
         n = ATMOSPHERE_FACE
         faces = np.stack([model_radiance(model, face_directions(face, n), disc=False, coarse=True)
@@ -186,7 +190,7 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
         if model.space is not None:   # what lies beyond the air, through it (above the horizon)
             faces = faces + _space_through_air(model)
         return project_faces(faces) + 2.0 * np.pi * sun * sh_basis(np.array(model.sun_direction, np.float64))[:, None] \
-            * np.array(BAND_FACTORS)[:, None]
+            * np.array(BAND_FACTORS)[:, None] + moon
     zenith, horizon, ground = (np.array(colour, np.float64) for colour in (model.zenith, model.horizon, model.ground))
     whole = np.array([2.0, 0.0, 0.0])  # a constant's F_l
     up = np.outer(whole, horizon) + np.outer(rise, zenith - horizon) + np.outer(fall, ground - horizon)
@@ -194,7 +198,18 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
     radiance = 2.0 * np.pi * (up[bands] * sh_basis(np.array([0.0, 1.0, 0.0]))[:, None]
                               + sun[bands] * sh_basis(np.array(model.sun_direction, np.float64))[:, None])
-    return radiance * np.array(BAND_FACTORS)[:, None]
+    return radiance * np.array(BAND_FACTORS)[:, None] + moon
+
+
+def _moon_sh(model: SkyModel, disc: np.ndarray) -> np.ndarray:
+    """The irradiance coefficients (9, 3) of ``model``'s moon disc (0 without one)."""
+    colour = np.array(model.moon_color, np.float64)
+    if not colour.any():
+        return np.zeros((9, 3))
+    share, centre = moon_phase(np.array(model.moon_direction, np.float64), np.array(model.sun_direction, np.float64))
+    bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
+    light = np.outer(disc, colour * share)[bands]
+    return 2.0 * np.pi * light * sh_basis(centre)[:, None] * np.array(BAND_FACTORS)[:, None]
 
 
 def _space_through_air(model: SkyModel) -> np.ndarray:

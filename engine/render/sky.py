@@ -59,6 +59,16 @@ def sun_of(skybox: Skybox, sun: SkySun | None = None) -> tuple[np.ndarray, np.nd
     return direction / np.linalg.norm(direction), np.array(skybox.sun_color)[:3] * np.array(sun.tint, np.float64)
 
 
+def moon_of(skybox: Skybox, sun: SkySun | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """A generated sky's moon (``sun.moon``: the brightest DirectionalLight whose body is
+    "moon"): the unit direction towards it and its disc's linear colour lit head on
+    (``Skybox.moon_color`` times its light's colour); None: no moon."""
+    if sun is None or sun.moon is None:
+        return None
+    direction = np.array(sun.moon, np.float64)
+    return direction / np.linalg.norm(direction), np.array(skybox.moon_color)[:3] * np.array(sun.moon_tint, np.float64)
+
+
 def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: SkySun | None = None) -> np.ndarray:
     """Linear RGB of the generated sky along each unit direction (..., 3), with ``sun``
     (``sun_of``)."""
@@ -110,7 +120,8 @@ def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, c
     y = d[..., 1:2]
     colour = np.where(y >= 0.0, air, air + (np.array(model.ground) - air) * ground_share(y))
     if disc:
-        colour = colour + disc_strength(np.clip(d @ towards, -1.0, 1.0)[..., None]) * np.array(model.sun_color)
+        colour = colour + disc_strength(np.clip(d @ towards, -1.0, 1.0)[..., None]) * np.array(model.sun_color) \
+            + moon_light(d, np.array(model.moon_direction), towards, np.array(model.moon_color))
     return colour
 
 
@@ -147,8 +158,52 @@ DISC_FULL = 0.9995   # ... and at cos 1.8 degrees it is whole
 
 
 def disc_strength(cos_sun: np.ndarray) -> np.ndarray:
-    """The sun's disc, times its colour."""
+    """The sun's disc, times its colour (and the moon's, times its lit share)."""
     return np.clip((cos_sun - DISC_EDGE) / (DISC_FULL - DISC_EDGE), 0.0, 1.0)
+
+
+MOON_RADIUS_SINE = float(np.sqrt(1.0 - DISC_EDGE * DISC_EDGE))   # the disc's edge, sin of its angle from the centre
+
+
+def moon_share(d: np.ndarray, moon: np.ndarray, sun: np.ndarray) -> np.ndarray:
+    """The moon's disc along unit directions ``d`` (...): its strength (``disc_strength``)
+    times the light its ball sends back lit from ``sun`` (towards the sun), by Lommel and
+    Seeliger's law for the moon's dust, 2 mu0 / (mu0 + mu) (mu0 the sunlight's cosine at the
+    ball's point seen along ``d``, mu the eye's): 1 across a full moon (no limb darkening, as
+    the real one), a crescent's lit edge brighter than its middle, 0 past the terminator."""
+    cos_moon = np.clip(d @ moon, -1.0, 1.0)
+    across = (d - cos_moon[..., None] * moon) / MOON_RADIUS_SINE   # where on the disc, its edge at 1
+    facing = np.sqrt(np.maximum(1.0 - (across * across).sum(-1), 0.0))   # mu
+    lit = np.maximum((across - moon * facing[..., None]) @ sun, 0.0)      # mu0
+    return disc_strength(cos_moon) * 2.0 * lit / np.maximum(lit + facing, 1e-4)
+
+
+def moon_light(d: np.ndarray, moon: np.ndarray, sun: np.ndarray, colour: np.ndarray) -> np.ndarray:
+    """The moon's part of the sky along unit directions ``d`` (..., 3): ``moon_share`` times
+    its disc's ``colour`` (0: no moon)."""
+    if not np.any(colour):
+        return np.zeros(d.shape[:-1] + (3,))
+    return moon_share(d, moon, sun)[..., None] * colour
+
+
+def moon_phase(moon: np.ndarray, sun: np.ndarray, samples: int = 48) -> tuple[float, np.ndarray]:
+    """The moon's light as its phase leaves it: the sum of ``moon_share`` over its disc
+    against a full one's, and the unit way its light comes from on average (a crescent's lies
+    towards the sun), from a grid of ``samples`` x ``samples`` ways over the disc."""
+    moon = moon / np.linalg.norm(moon)
+    side = np.cross(moon, [0.0, 1.0, 0.0] if abs(moon[1]) < 0.9 else [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    up = np.cross(side, moon)
+    grid = (np.arange(samples) + 0.5) / samples * 2.0 - 1.0
+    a, b = np.meshgrid(grid, grid)
+    d = moon + (a[..., None] * side + b[..., None] * up) * MOON_RADIUS_SINE
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    full = moon_share(d, moon, -moon).sum()
+    lit = moon_share(d, moon, sun)
+    if full <= 0.0 or lit.sum() <= 0.0:
+        return 0.0, moon
+    centre = (lit[..., None] * d).sum(axis=(0, 1))
+    return float(lit.sum() / full), centre / np.linalg.norm(centre)
 
 
 def _gradient(colours: tuple[tuple[float, ...], ...], d: np.ndarray) -> np.ndarray:
@@ -162,10 +217,12 @@ def _gradient(colours: tuple[tuple[float, ...], ...], d: np.ndarray) -> np.ndarr
 
 def _sun_light(skybox: Skybox, d: np.ndarray, sun: SkySun | None) -> np.ndarray:
     """The sun's part of the sky along unit directions ``d`` (..., 3): a warm band around its
-    azimuth, so that left and right of the sky differ, and its disc."""
+    azimuth, so that left and right of the sky differ, and its disc; and its moon's disc."""
     towards, disc_color = sun_of(skybox, sun)
     cos_sun = np.clip(d @ towards, -1.0, 1.0)[..., None]
-    return glow_strength(cos_sun) * GLOW_COLOR + disc_strength(cos_sun) * disc_color
+    light = glow_strength(cos_sun) * GLOW_COLOR + disc_strength(cos_sun) * disc_color
+    moon = moon_of(skybox, sun)
+    return light if moon is None else light + moon_light(d, moon[0], towards, moon[1])
 
 
 @dataclass(frozen=True)
@@ -191,6 +248,10 @@ class SkyModel:
     # An atmosphere's space beyond its air (the Skybox's given faces; None: black), seen
     # through the air (the table's fourth channel): ``space_key`` names it for comparing.
     space: np.ndarray | None = field(default=None, compare=False, repr=False)
+    # Its moon (``moon_of``): the way towards it and its disc's colour lit head on (an
+    # atmosphere's through the air, as the sun's); black: none.
+    moon_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    moon_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def space_key(self) -> int:
@@ -202,11 +263,12 @@ class SkyModel:
 
     def uniforms(self) -> dict[str, tuple[float, float, float]]:
         """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
+        moon = {"sky_moon_direction": self.moon_direction, "sky_moon_color": self.moon_color}
         if self.atmosphere:
             return {"sky_light": self.air_light, "sky_ground": self.ground,
-                    "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
+                    "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color, **moon}
         return {"sky_zenith": self.zenith, "sky_horizon": self.horizon, "sky_ground": self.ground,
-                "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color}
+                "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color, **moon}
 
 
 def is_generated(skybox: Skybox | None) -> bool:
@@ -225,16 +287,21 @@ def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | No
         return tuple(float(c) for c in tuple(value)[:3])
 
     towards, disc_color = sun_of(skybox, sun)
+    moon = moon_of(skybox, sun)
+    moon_way, moon_color = ((0.0, 1.0, 0.0), np.zeros(3)) if moon is None else moon
     if skybox.model == "atmosphere":
         air = air_of(skybox)
         elevation = sun_elevation_degrees(towards)
         coarse = coarse_view_table(air, elevation)
         elevation = round(elevation / TABLE_STEP_DEGREES) * TABLE_STEP_DEGREES   # the GPU table's
         ground = ground_light(air, coarse, towards) * disc_color
+        if moon is not None:   # (dimmed and reddened by the air on its way, as the sun's disc)
+            moon_color = moon_color * sunlight_share(air, moon_way)
         return SkyModel((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), rgb(ground), rgb(towards),
                         rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color), air, elevation, coarse,
-                        skybox.faces)
-    return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color))
+                        skybox.faces, rgb(moon_way), rgb(moon_color))
+    return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color),
+                    moon_direction=rgb(moon_way), moon_color=rgb(moon_color))
 
 
 def build_faces(skybox: Skybox, sun: SkySun | None = None) -> np.ndarray:

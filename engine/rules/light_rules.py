@@ -578,10 +578,13 @@ def view_eyes(world: World) -> tuple[tuple[float, float, float, float], ...]:
 
 
 class SkySun(NamedTuple):
-    """Where a generated sky's sun stands and what colour its disc takes (``sky_sun``)."""
+    """Where a generated sky's sun stands and what colour its disc takes (``sky_sun``), and
+    its moon's (a ``DirectionalLight`` whose ``body`` is "moon"; None: no moon)."""
 
     direction: tuple[float, float, float]               # unit, towards the sun
     tint: tuple[float, float, float] = (1.0, 1.0, 1.0)  # times ``Skybox.sun_color``: the light's colour
+    moon: tuple[float, float, float] | None = None      # unit, towards the moon
+    moon_tint: tuple[float, float, float] = (1.0, 1.0, 1.0)  # times ``Skybox.moon_color``: its light's colour
 
 
 def sky_sun(world: World, skybox: Skybox) -> SkySun:
@@ -590,17 +593,21 @@ def sky_sun(world: World, skybox: Skybox) -> SkySun:
     rank above; ties to the first made), its disc tinted by that light's colour (a red
     evening light, a red disc; its intensity lights the scene, the disc keeps
     ``Skybox.sun_color``'s brightness); else at ``DEFAULT_SUN_DIRECTION``.  A black light
-    (luminance 0) is no sun."""
+    (luminance 0) is no sun.  The brightest moon (``brightest_directional``'s of the
+    "moon" bodies) is its moon, pinned sun or not."""
     if skybox.sun_direction is not None:
-        return SkySun(tuple(float(c) for c in skybox.sun_direction))
+        return _with_moon(world, SkySun(tuple(float(c) for c in skybox.sun_direction)))
     return followed_sun(world)
 
 
-def brightest_directional(world: World) -> DirectionalLight | None:
-    """The brightest ``DirectionalLight`` (luminance of colour x intensity; ties to the first
-    made), or None where there is none or every one is black: the scene's sun."""
+def brightest_directional(world: World, body: str = "sun") -> DirectionalLight | None:
+    """The brightest ``DirectionalLight`` of ``body`` (luminance of colour x intensity; ties
+    to the first made), or None where there is none or every one is black: the scene's sun
+    (or, ``body`` "moon", its moon)."""
     best, brightest = None, 0.0
     for _, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
+        if light.body != body:
+            continue
         bright = float(luminance(raw_field(light, "color").xyz * light.intensity))
         if bright > brightest:
             best, brightest = light, bright
@@ -611,8 +618,24 @@ def followed_sun(world: World) -> SkySun:
     """The sun of a sky that follows the lights (``sky_sun`` of an unpinned Skybox)."""
     best = brightest_directional(world)
     if best is None:
-        return SkySun(DEFAULT_SUN_DIRECTION)
-    return SkySun(tuple(-float(c) for c in best.direction), tuple(float(c) for c in raw_field(best, "color").xyz))
+        return _with_moon(world, SkySun(DEFAULT_SUN_DIRECTION))
+    return _with_moon(world, SkySun(tuple(-float(c) for c in best.direction),
+                                    tuple(float(c) for c in raw_field(best, "color").xyz)))
+
+
+def _with_moon(world: World, sun: SkySun) -> SkySun:
+    """``sun`` with the world's brightest moon, if it has one."""
+    moon = brightest_directional(world, "moon")
+    if moon is None:
+        return sun
+    return sun._replace(moon=tuple(-float(c) for c in moon.direction),
+                        moon_tint=tuple(float(c) for c in raw_field(moon, "color").xyz))
+
+
+def air_tinted(light: DirectionalLight, sun: DirectionalLight | None) -> bool:
+    """Whether an atmosphere dims and reddens ``light``'s light on its way down: the sky's
+    sun (``sun``, ``brightest_directional``) and every moon; a fill light is as it is given."""
+    return light is sun or light.body == "moon"
 
 
 # How far what is made from a turning sun may lag it: the sky's cube map and light, the
@@ -633,7 +656,10 @@ def cube_serves(made: SkySun | None, now: SkySun, degrees: float = SKY_CUBE_LAG_
     is every frame, and reflections and the sky's light, read from the cube, follow a moment
     later, not every frame of a day's turn.  With ``SAME_SUN_DEGREES`` and ``SAME_SUN_TINT``:
     whether it is the same sun, rounding apart."""
-    if made is None:
+    if made is None or (made.moon is None) != (now.moon is None):
+        return False
+    if made.moon is not None and not (turned_within(made.moon, now.moon, degrees)
+                                      and colour_within(made.moon_tint, now.moon_tint, tint)):
         return False
     return turned_within(made.direction, now.direction, degrees) and colour_within(made.tint, now.tint, tint)
 

@@ -1,0 +1,219 @@
+"""A moon (``DirectionalLight(body="moon")``): its disc drawn by a generated sky as the CPU's
+twin draws it (engine/render/sky.py moon_share: Lommel and Seeliger's ball lit from the sun),
+its phases against the lit share of a ball written out here, never the sky's sun, its light
+reddened by an atmosphere as the sun's, in the sky's light, and where a ``TimeOfDay`` puts it
+(a full moon opposite the sun, a first quarter south at sunset)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, DirectionalLight, Material, MeshRef, Skybox, TimeOfDay, Transform
+from components.time_of_day import SYNODIC_MONTH, moon_towards, sun_towards
+from engine.assets.mesh import plane
+from engine.render.irradiance import generated_sky_sh, project_faces
+from engine.render.sky import build_faces, moon_phase, sky_model, sky_radiance
+from engine.rules.light_rules import SkySun, brightest_directional, sky_sun
+from tests.support import look_from, srgb_to_linear
+from tests.test_generated_sky import SKY, SUN, _hdr_frame
+
+MOON = glm.normalize(glm.vec3(-0.2, 0.35, -0.9))
+
+
+def moon_light(towards=MOON, color=(0.9, 0.9, 1.0)) -> DirectionalLight:
+    return DirectionalLight(direction=tuple(-towards), color=color, intensity=0.3, body="moon", shadows=False)
+
+
+def _with_moon(moon=MOON, tint=(0.9, 0.9, 1.0)) -> SkySun:
+    """The sky's sun as SKY pins it, with the moon ``moon_light`` makes."""
+    return SkySun(tuple(SUN), moon=tuple(moon), moon_tint=tint)
+
+
+@pytest.mark.parametrize("model", ["gradient", "atmosphere"])
+def test_the_moon_is_drawn_as_the_twin_draws_it(scene, model):
+    """A 10-degree lens on the moon (the sun pinned 33 degrees from it: a crescent): every
+    pixel is the CPU's sky along its ray, the lit part of the disc where the twin puts it."""
+    skybox = Skybox(**SKY, model=model, moon_color=(1.2, 1.1, 1.0))
+
+    def build(world):
+        world.spawn(moon_light())
+
+    colour, rays, runner = _hdr_frame(scene, skybox, fov=10.0, look=MOON)
+    build(runner.world)
+    runner.frame()
+    from tests.test_generated_sky import _read
+    colour, rays = _read(runner)
+    want = sky_radiance(skybox, rays, _with_moon())
+    np.testing.assert_allclose(colour, want, rtol=6e-3, atol=6e-3)
+    plain = sky_radiance(skybox, rays, SkySun(tuple(SUN)))
+    lit = (want - plain).max(axis=-1) > 0.1
+    assert lit.sum() > 60   # the crescent is in view (the sun 33 degrees from it)
+
+
+def ball_share(moon: np.ndarray, sun: np.ndarray, inside: float) -> float:
+    """The share of a ball's disc within ``inside`` of its radius (0 to 1) the sun lights:
+    a grid of points over that part of the disc, each the ball's point seen there (its normal
+    the point and the way back towards the eye), lit where that normal faces the sun."""
+    side = np.cross(moon, [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    up = np.cross(side, moon)
+    grid = np.linspace(-1.0, 1.0, 401)
+    a, b = np.meshgrid(grid, grid)
+    on = a * a + b * b < 1.0
+    a, b = a[on] * inside, b[on] * inside
+    normal = a[:, None] * side + b[:, None] * up - np.sqrt(1.0 - a * a - b * b)[:, None] * moon
+    return float((normal @ sun > 0.0).mean())
+
+
+@pytest.mark.parametrize("degrees", [180.0, 120.0, 90.0, 45.0])
+def test_a_phase_lights_the_share_of_the_disc_a_ball_shows(scene, degrees):
+    """The moon's disc drawn with the sun ``degrees`` from it: the share of its pixels lit is the
+    share of a ball's face the sun lights seen from there (3 points), and the full moon's light
+    is even across it (no limb darkening: Lommel and Seeliger's law)."""
+    moon = np.array([0.0, 0.3, -1.0]) / np.linalg.norm([0.0, 0.3, -1.0])
+    side = np.cross(moon, [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    angle = math.radians(degrees)
+    sun = moon * math.cos(angle) + side * math.sin(angle)
+    skybox = Skybox(zenith=(0, 0, 0), horizon=(0, 0, 0), ground=(0, 0, 0), sun_direction=tuple(sun),
+                    sun_color=(0.0, 0.0, 0.0), moon_color=(1.0, 1.0, 1.0))
+
+    def build(world):
+        world.spawn(moon_light(glm.vec3(*moon), color=(1.0, 1.0, 1.0)))
+    colour, rays, runner = _hdr_frame(scene, skybox, fov=8.0, look=glm.vec3(*moon))
+    build(runner.world)
+    runner.frame()
+    from tests.test_generated_sky import _read
+    colour, rays = _read(runner)
+    inner = 0.99925                     # well inside the disc's ramp (cos 0.9990 to 0.9995)
+    disc = rays @ moon > inner
+    lit = colour[..., 1] - sky_radiance(skybox, rays, SkySun(tuple(sun)))[..., 1] > 0.02   # (above the sun's glow)
+    share = float((lit & disc).sum() / disc.sum())
+    radius = math.sqrt(1.0 - inner * inner) / math.sqrt(1.0 - 0.9990 ** 2)   # of the disc the phase is drawn on
+    assert share == pytest.approx(ball_share(moon, sun, radius), abs=0.03)
+    if degrees == 180.0:   # even up to where the disc's ramp begins
+        whole = rays @ moon > 0.9995
+        assert colour[whole][:, 1].min() > 0.97 and colour[whole][:, 1].max() < 1.03
+
+
+def test_a_moon_is_never_the_skys_sun():
+    """Brighter than the sun, a moon is not what the sky follows; with no sun the sky's sun is
+    the default and the moon is still the sky's moon."""
+    from engine.core.world import World
+
+    world = World()
+    sun = world.get(world.spawn(DirectionalLight(direction=(0.0, -1.0, -1.0), intensity=1.0)), DirectionalLight)
+    world.spawn(moon_light(color=(1.0, 1.0, 1.0)))
+    world.get(world.query_one(DirectionalLight)[1][0], DirectionalLight).intensity = 50.0
+    skybox = Skybox()
+    assert brightest_directional(world) is sun
+    found = sky_sun(world, skybox)
+    np.testing.assert_allclose(found.direction, tuple(-glm.normalize(glm.vec3(0.0, -1.0, -1.0))), atol=1e-6)
+    np.testing.assert_allclose(found.moon, tuple(MOON), atol=1e-6)
+    world.delete_entity(world.query_one(DirectionalLight)[0][0])
+    alone = sky_sun(world, skybox)
+    assert alone.moon is not None and brightest_directional(world) is None
+
+
+def test_the_moons_light_is_reddened_by_the_air_as_the_suns(scene):
+    """A floor lit only by a low moon: under an atmosphere its colour's red over blue is the
+    gradient sky's times the air's tint along the moon's way (the sun's rule, sunlight_tint)."""
+    from engine.render.sky import sunlight_tint
+
+    low = glm.normalize(glm.vec3(0.0, 0.12, -1.0))
+
+    def floor(model):
+        def build(world):
+            look_from(world, (0.0, 3.0, 3.0), (0.0, 0.0, 0.0))
+            world.spawn(Skybox(model=model, faces=np.zeros((6, 4, 4, 3), np.float32)) if model == "gradient"
+                        else Skybox(model=model))
+            world.spawn(DirectionalLight(direction=(0.0, 1.0, 0.2), intensity=1.0))   # a sun long set
+            world.spawn(DirectionalLight(direction=tuple(-low), intensity=4.0, body="moon", shadows=False))
+            world.spawn(Transform(), MeshRef(plane(6, 6)), Material(color=(0.8, 0.8, 0.8), roughness=1.0,
+                                                                      reflectance=0.0, environment_reflection=0.0))
+        return build
+
+    frames = {}
+    for model in ("gradient", "atmosphere"):
+        runner = scene(floor(model), (64, 48))
+        runner.frame()
+        frames[model] = srgb_to_linear(runner.frame()[30:40, 24:40]).reshape(-1, 3).mean(axis=0)
+    tint = np.array(sunlight_tint(Skybox(model="atmosphere"), tuple(-low)))
+    assert tint[0] > 1.5 * tint[2]   # (low: red)
+    want = (frames["gradient"][0] / frames["gradient"][2]) * tint[0] / tint[2]
+    got = frames["atmosphere"][0] / frames["atmosphere"][2]
+    assert got == pytest.approx(want, rel=0.08)
+
+
+@pytest.mark.parametrize("model", ["gradient", "atmosphere"])
+def test_the_skys_light_holds_the_moon(model):
+    """The sky's light (closed form, the moon's disc by its phase's share) against the
+    projection of faces fine enough to sample the disc."""
+    skybox = Skybox(**{**SKY, "face_size": 512}, model=model, moon_color=(40.0, 40.0, 40.0))
+    sun = _with_moon(MOON, (1.0, 1.0, 1.0))
+    with_moon = generated_sky_sh(sky_model(skybox, sun))
+    without = generated_sky_sh(sky_model(skybox, SkySun(tuple(SUN))))
+    if model == "gradient":
+        faces = project_faces(build_faces(skybox, sun)) - project_faces(build_faces(skybox, SkySun(tuple(SUN))))
+        np.testing.assert_allclose(with_moon - without, faces, atol=0.04 * np.abs(faces).max())   # (measured 2.3%)
+    assert np.abs(with_moon - without).max() > 1e-3
+    share, centre = moon_phase(np.array(MOON), np.array(SUN))
+    assert 0.0 < share < 1.0 and float(centre @ np.array(SUN)) > float(np.array(MOON) @ np.array(SUN))
+
+
+def test_a_time_of_day_puts_the_moon_where_it_stands():
+    """On an equinox at 45 degrees north: a full moon at midnight stands due south, 45 degrees
+    up, opposite the noon sun's way; a new moon stands with the sun; a first quarter is due
+    south at six in the evening; the clock moves its age on."""
+    full = TimeOfDay(hour=0.0, day=80, latitude=45.0, moon_age=SYNODIC_MONTH / 2.0)
+    way = moon_towards(full)
+    assert math.degrees(math.asin(way.y)) == pytest.approx(45.0, abs=1.5)
+    assert way.z > 0.99 * math.cos(math.asin(way.y))   # due south (north is -Z)
+    noon = sun_towards(TimeOfDay(hour=12.0, day=80, latitude=45.0))
+    assert glm.dot(way, noon) == pytest.approx(1.0, abs=0.01)   # the noon sun's place, half a day and year on
+    evening = TimeOfDay(hour=18.0, day=172, latitude=45.0, moon_age=0.0)
+    np.testing.assert_allclose(tuple(moon_towards(evening)), tuple(sun_towards(evening)), atol=1e-9)
+    quarter = TimeOfDay(hour=18.0, day=80, latitude=45.0, moon_age=SYNODIC_MONTH / 4.0)
+    at = moon_towards(quarter)
+    assert abs(at.x) < 0.05   # on the meridian: neither east nor west
+
+
+def test_the_clock_turns_a_moons_light_and_ages_it():
+    from engine.core.world import World
+    from systems.time_of_day_system import TimeOfDaySystem
+
+    world = World()
+    entity = world.spawn(DirectionalLight(body="moon"), TimeOfDay(hour=22.0, day=100, moon_age=3.0,
+                                                                    hours_per_second=2.4))
+    TimeOfDaySystem(world).process(1.0)
+    clock, light = world.get(entity, TimeOfDay), world.get(entity, DirectionalLight)
+    assert clock.moon_age == pytest.approx(3.1) and clock.hour == pytest.approx(0.4) and clock.day == 101
+    np.testing.assert_allclose(tuple(light.direction), tuple(-moon_towards(clock)), atol=1e-6)
+
+
+@pytest.mark.parametrize("make,match", [(lambda: DirectionalLight(body="star"), "DirectionalLight.body"),
+                                        (lambda: TimeOfDay(moon_age=40.0), "TimeOfDay.moon_age"),
+                                        (lambda: TimeOfDay(moon_age=-1.0), "TimeOfDay.moon_age"),
+                                        (lambda: Skybox(moon_color=(-1.0, 0.0, 0.0)), "Skybox.moon_color")])
+def test_bad_moon_values_are_refused(make, match):
+    with pytest.raises(ComponentValueError, match=match):
+        make()
+
+
+def test_a_level_file_gives_a_moon(tmp_path):
+    from engine.assets.level_read import load_level
+    from engine.core.world import World
+
+    level = tmp_path / "night.toml"
+    level.write_text('[level]\nname = "night"\n[[entity]]\nname = "moon"\n'
+                     'DirectionalLight = { body = "moon", intensity = 0.2 }\n'
+                     'TimeOfDay = { hour = 23.0, moon_age = 7.5 }\n'
+                     '[[entity]]\nname = "sky"\nSkybox = { model = "atmosphere", moon_color = [1.5, 1.5, 1.6] }\n')
+    world = World()
+    load_level(level).spawn(world)
+    ((_, light),) = world.query_one(DirectionalLight)
+    assert light.body == "moon" and world.query_one(TimeOfDay)[0][1].moon_age == pytest.approx(7.5)
+    assert glm.vec4(world.query_one(Skybox)[0][1].moon_color).x == pytest.approx(1.5)
