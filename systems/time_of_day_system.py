@@ -1,5 +1,6 @@
 """Stage "sun": each ``TimeOfDay`` moves its clock on and turns its ``DirectionalLight`` to
-shine from where the sun stands then (``components/time_of_day.py``).
+shine from where the sun stands then, or a moon's (``DirectionalLight.body``) from where the
+moon does, its age moved on with the clock (``components/time_of_day.py``).
 
 Before the stages that read the lights (prepare: the lights' rows, the sky's sun; shadows),
 so a frame's light, its shadows and an atmosphere's sky agree.  The light's direction is
