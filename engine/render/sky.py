@@ -261,9 +261,14 @@ class SkyModel:
     def atmosphere(self) -> bool:
         return self.air is not None
 
+    @property
+    def moon(self) -> bool:
+        """Whether it draws a moon's disc (sky_model.glsl's MOON builds)."""
+        return any(self.moon_color)
+
     def uniforms(self) -> dict[str, tuple[float, float, float]]:
         """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
-        moon = {"sky_moon_direction": self.moon_direction, "sky_moon_color": self.moon_color}
+        moon = {"sky_moon_direction": self.moon_direction, "sky_moon_color": self.moon_color} if self.moon else {}
         if self.atmosphere:
             return {"sky_light": self.air_light, "sky_ground": self.ground,
                     "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color, **moon}

@@ -41,7 +41,7 @@ class SkyBake:
         try:
             target = self._face_target(size)
             space = model.atmosphere and model.space is not None
-            vao = self._vertex_array(model.atmosphere, space)
+            vao = self._vertex_array(model.atmosphere, space, model.moon)
             program = vao.program
             if model.atmosphere:
                 program["sky_view"].value = SKY_VIEW_UNIT
@@ -73,8 +73,9 @@ class SkyBake:
             target = self._target = self.ctx.framebuffer([self.ctx.texture((size, size), 4, dtype="f2")])
         return target
 
-    def _vertex_array(self, atmosphere: bool, space: bool) -> moderngl.VertexArray:
-        defines = {"ATMOSPHERE": "1", **({"SPACE": "1"} if space else {})} if atmosphere else None
+    def _vertex_array(self, atmosphere: bool, space: bool, moon: bool) -> moderngl.VertexArray:
+        defines = {**({"ATMOSPHERE": "1"} if atmosphere else {}), **({"SPACE": "1"} if space else {}),
+                   **({"MOON": "1"} if moon else {})} or None
         program = self.renderer.shaders.program("fullscreen.vert", "sky_cube.frag", defines=defines)
         if self._vao is None or self._vao.program is not program:
             if self._vao is not None:

@@ -33,7 +33,7 @@ class SkyDraw:
     def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
-        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, atmosphere, fog defines)
+        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, atmosphere, space, moon, fog)
         self._sky_written: dict[tuple, int] = {}
 
     def vertex_array(self, layered: bool) -> moderngl.VertexArray:
@@ -46,7 +46,8 @@ class SkyDraw:
         fogging = renderer.fog.defines
         air = model is not None and model.atmosphere
         space = air and model.space is not None
-        key = (layered, model is not None, air, space, fogging)
+        moon = model is not None and model.moon
+        key = (layered, model is not None, air, space, moon, fogging)
         vao = self._skies.get(key)
         if vao is None:
             defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
@@ -56,6 +57,8 @@ class SkyDraw:
                 defines["ATMOSPHERE"] = "1"
             if space:
                 defines["SPACE"] = "1"
+            if moon:
+                defines["MOON"] = "1"
             defines.update(fogging)
             program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
                                                defines=defines)

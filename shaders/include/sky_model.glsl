@@ -7,9 +7,6 @@ uniform vec3 sky_ground;          // an atmosphere's: the ground's radiance (its
 uniform vec3 sky_sun_direction;   // unit, towards the sun
 uniform vec3 sky_sun_color;       // the disc (an atmosphere's: through the air)
 
-uniform vec3 sky_moon_direction;  // unit, towards the moon (a DirectionalLight whose body is "moon")
-uniform vec3 sky_moon_color;      // its disc lit head on (an atmosphere's: through the air); black: no moon
-
 // The disc: cos 0.9990 (2.6 degrees from its centre) to 0.9995 (1.8 degrees) ramps up.
 float disc_strength(float cosine) {
     return clamp((cosine - 0.9990) / 0.0005, 0.0, 1.0);
@@ -19,10 +16,13 @@ vec3 sun_disc(float cos_sun) {
     return disc_strength(cos_sun) * sky_sun_color;
 }
 
-// The moon's disc, the sun's size, lit from the sun as a ball of dust is (Lommel and
-// Seeliger: 2 mu0 / (mu0 + mu), mu0 the sunlight's cosine at the ball's point seen, mu the
-// eye's): a full moon even to its edge, a crescent, nothing past the terminator.  sky.py's
-// moon_share is its twin.
+#ifdef MOON
+// The moon's disc (the MOON builds: a sky with a DirectionalLight whose body is "moon"), the
+// sun's size, lit from the sun as a ball of dust is (Lommel and Seeliger: 2 mu0 / (mu0 + mu),
+// mu0 the sunlight's cosine at the ball's point seen, mu the eye's): a full moon even to its
+// edge, a crescent, nothing past the terminator.  sky.py's moon_share is its twin.
+uniform vec3 sky_moon_direction;  // unit, towards the moon
+uniform vec3 sky_moon_color;      // its disc lit head on (an atmosphere's: through the air)
 const float MOON_RADIUS_SINE = 0.0447101778;   // sin of the disc's edge from its centre (cos 0.9990)
 
 vec3 moon_disc(vec3 d) {
@@ -32,6 +32,10 @@ vec3 moon_disc(vec3 d) {
     float lit = max(dot(across - sky_moon_direction * facing, sky_sun_direction), 0.0);
     return disc_strength(cos_moon) * 2.0 * lit / max(lit + facing, 1e-4) * sky_moon_color;
 }
+#define MOON_DISC(d) + moon_disc(d)
+#else
+#define MOON_DISC(d)
+#endif
 
 #ifdef ATMOSPHERE
 // A physically based sky (engine/render/atmosphere.py, Hillaire 2020): the sky-view table's
@@ -61,7 +65,7 @@ vec3 generated_sky(vec3 d) {
     vec3 beyond = vec3(0.0);
 #endif
     vec3 color = d.y >= 0.0 ? air + beyond : air + (sky_ground - air) * clamp(-d.y * 4.0, 0.0, 1.0);
-    return color + sun_disc(clamp(dot(d, sky_sun_direction), -1.0, 1.0)) + moon_disc(d);
+    return color + sun_disc(clamp(dot(d, sky_sun_direction), -1.0, 1.0)) MOON_DISC(d);
 }
 #else
 uniform vec3 sky_zenith;          // linear RGB
@@ -75,6 +79,6 @@ vec3 generated_sky(vec3 d) {
     // A warm band around the sun's azimuth so that left and right of the sky differ.
     float cos_sun = clamp(dot(d, sky_sun_direction), -1.0, 1.0);
     vec3 glow = 0.25 * pow(clamp(cos_sun, 0.0, 1.0), 4.0) * vec3(1.0, 0.55, 0.25);
-    return color + glow + sun_disc(cos_sun) + moon_disc(d);
+    return color + glow + sun_disc(cos_sun) MOON_DISC(d);
 }
 #endif
