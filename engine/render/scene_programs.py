@@ -421,8 +421,8 @@ def _material_build(batch: InstanceBatch) -> tuple:
     whether it is clear-coated (``CLEARCOAT``), whether it is unlit (``UNLIT_MATERIAL``) and
     whether it has a sheen (``SHEEN``) and whether its refraction splits the colours
     (``DISPERSION``), whether its highlights are anisotropic (``ANISOTROPY``), whether a
-    thin film colours its reflections (``IRIDESCENCE``), whether a Skin bends its mesh
-    (``SKINNED``), whether it wears a Morph (``MORPHED``), which of its maps read the
+    thin film colours its reflections (``IRIDESCENCE``), how a Skin bends its mesh (its
+    skinning: ``SKINNED``, ``DUAL_QUATERNION_SKINNING``; "": none), whether it wears a Morph (``MORPHED``), which of its maps read the
     mesh's second UV set (``SECOND_UV_MAPS``, their bits; 0: none) and whether it lets light
     through from behind (``DIFFUSE_TRANSMISSION``), whether its normal map's heights are
     marched (``PARALLAX``), whether a lightmap gives its light from all round (``LIGHTMAP``) and
