@@ -422,11 +422,12 @@ def _material_build(batch: InstanceBatch) -> tuple:
     whether it has a sheen (``SHEEN``) and whether its refraction splits the colours
     (``DISPERSION``), whether its highlights are anisotropic (``ANISOTROPY``), whether a
     thin film colours its reflections (``IRIDESCENCE``), how a Skin bends its mesh (its
-    skinning: ``SKINNED``, ``DUAL_QUATERNION_SKINNING``; "": none), whether it wears a Morph (``MORPHED``), which of its maps read the
-    mesh's second UV set (``SECOND_UV_MAPS``, their bits; 0: none) and whether it lets light
-    through from behind (``DIFFUSE_TRANSMISSION``), whether its normal map's heights are
-    marched (``PARALLAX``), whether a lightmap gives its light from all round (``LIGHTMAP``) and
-    whether light scatters under its surface (``SUBSURFACE``)."""
+    skinning: ``SKINNED``, ``DUAL_QUATERNION_SKINNING``; "": none), whether it wears a Morph
+    (``MORPHED``), which of its maps read the mesh's second UV set (``SECOND_UV_MAPS``, their
+    bits; 0: none) and whether it lets light through from behind (``DIFFUSE_TRANSMISSION``),
+    whether its normal map's heights are marched (``PARALLAX``), whether a lightmap gives its
+    light from all round (``LIGHTMAP``) and whether light scatters under its surface
+    (``SUBSURFACE``)."""
     occlusion = "packed" if batch.occlusion_packed else "map" if batch.occlusion_map is not None else ""
     return (batch.emissive_map is not None, batch.metallic_roughness_map is not None, batch.alpha_cutoff is not None,
             occlusion, batch.mesh.colors is not None, batch.probe != 0, batch.clearcoat is not None, batch.unlit,
