@@ -382,10 +382,10 @@ class Engine:
                    getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None),
                    getattr(args, "contact_shadows", False), getattr(args, "shafts", False))
         self.start_sky(getattr(args, "sky", None), getattr(args, "time", None), getattr(args, "day_minutes", None),
-                       getattr(args, "panorama", None), getattr(args, "panorama_yaw", 0.0))
+                       getattr(args, "panorama", None), getattr(args, "panorama_yaw", 0.0), getattr(args, "moon", None))
 
     def start_sky(self, model: str | None, hour: float | None = None, day_minutes: float | None = None,
-                  panorama: str | None = None, panorama_yaw: float = 0.0) -> None:
+                  panorama: str | None = None, panorama_yaw: float = 0.0, moon_age: float | None = None) -> None:
         """The command line's sky options: ``--sky`` draws the level's Skybox (one made if it has
         none) as ``model`` ("atmosphere": a physically based sky with a night's stars beyond its
         air, ``engine.assets.star_field.star_faces``); ``--panorama`` makes its faces an
@@ -393,7 +393,9 @@ class Engine:
         face, turned ``panorama_yaw`` degrees; a gradient sky's faces are its whole sky, an
         atmosphere's the space beyond its air); ``--time`` puts a ``TimeOfDay`` at ``hour``
         (a summer's day, 45 degrees north) on the brightest ``DirectionalLight`` (one made if there
-        is none), moving a whole day on in ``day_minutes`` of game time (``--day-minutes``)."""
+        is none), moving a whole day on in ``day_minutes`` of game time (``--day-minutes``);
+        ``--moon`` adds a moon ``moon_age`` days old on the same clock (a dim, cool
+        ``DirectionalLight`` whose body is "moon", casting no shadow)."""
         world = self.world
         if panorama is not None:
             from engine.assets.panorama import sky_faces_from_file
@@ -416,6 +418,9 @@ class Engine:
                 entity = world.spawn(DirectionalLight(intensity=4.0))
             speed = 0.0 if day_minutes is None else 24.0 / (60.0 * day_minutes)
             world.add_component(entity, TimeOfDay(hour=hour, hours_per_second=speed))
+            if moon_age is not None:
+                world.spawn(DirectionalLight(color=(0.75, 0.85, 1.0), intensity=0.08, shadows=False, body="moon"),
+                            TimeOfDay(hour=hour, hours_per_second=speed, moon_age=moon_age))
 
     def close(self) -> None:
         """Delete every entity, release every GL resource, drop the world."""

@@ -87,6 +87,8 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
     parser.add_argument("--time", type=_hour, default=None, metavar="HOUR",
                         help="the sun (the brightest DirectionalLight, made if there is none) where it stands at "
                              "this hour of a summer's day at 45 degrees north (a TimeOfDay on it)")
+    parser.add_argument("--moon", type=_moon_age, default=None, metavar="DAYS",
+                        help="with --time: a moon this many days past new (14.77: full) on the same clock")
     parser.add_argument("--day-minutes", type=_day_minutes, default=None, metavar="MINUTES",
                         help="with --time: a whole day passes in this many minutes of game time")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
@@ -122,6 +124,8 @@ def parse_args(game: Game, argv: Sequence[str] | None,
         parser.error("--frames must be >= 1")
     if args.day_minutes is not None and args.time is None:
         parser.error("--day-minutes needs --time (the hour the day starts at)")
+    if args.moon is not None and args.time is None:
+        parser.error("--moon needs --time (the clock it follows)")
     if args.panorama_yaw != 0.0 and args.panorama is None:
         parser.error("--panorama-yaw needs --panorama (the panorama it turns)")
     return args
@@ -207,6 +211,16 @@ def _yaw(text: str) -> float:
     if not math.isfinite(yaw):
         raise argparse.ArgumentTypeError(f"--panorama-yaw must be a finite number of degrees, got {text!r}")
     return yaw
+
+
+def _moon_age(text: str) -> float:
+    try:
+        age = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--moon must be the moon's age in days, 0 to 29.53, got {text!r}") from None
+    if not 0.0 <= age <= 29.53:
+        raise argparse.ArgumentTypeError(f"--moon must be the moon's age in days, 0 to 29.53, got {text!r}")
+    return age
 
 
 def _hour(text: str) -> float:

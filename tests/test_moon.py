@@ -217,3 +217,32 @@ def test_a_level_file_gives_a_moon(tmp_path):
     ((_, light),) = world.query_one(DirectionalLight)
     assert light.body == "moon" and world.query_one(TimeOfDay)[0][1].moon_age == pytest.approx(7.5)
     assert glm.vec4(world.query_one(Skybox)[0][1].moon_color).x == pytest.approx(1.5)
+
+
+def test_the_runners_moon_follows_the_clock(ctx, tmp_path):
+    """``--time 23 --moon 14.77`` on a game: a moon light on the sun's clock where the moon
+    stands; ``--moon`` without ``--time`` and a bad age are one error line each."""
+    from engine import Game, spawn_camera
+    from shell.app import Engine
+    from tests.test_runner import run_level
+
+    class Open(Game):
+        def build(self, world):
+            spawn_camera(world, position=(0.0, 1.6, 4.0), pitch=5)
+            world.spawn(DirectionalLight(intensity=3.0))
+
+    engine = Engine(Open(), ctx)
+    try:
+        engine.start_sky("atmosphere", 23.0, 10.0, moon_age=14.77)
+        engine.frame(1.0, None)
+        moons = [(e, light) for e, light in engine.world.query_one(DirectionalLight) if light.body == "moon"]
+        ((entity, light),) = moons
+        clock = engine.world.get(entity, TimeOfDay)
+        assert clock.moon_age == pytest.approx(14.77 + 24.0 / 600.0 / 24.0)
+        np.testing.assert_allclose(tuple(light.direction), tuple(-moon_towards(clock)), atol=1e-6)
+        assert not light.shadows
+    finally:
+        engine.close()
+    for bad, words in ((("--moon", "3"), "--moon needs --time"), (("--time", "22", "--moon", "40"), "--moon must be")):
+        result = run_level("--headless", "--frames", "1", "--size", "16x12", "--out", str(tmp_path / "bad"), *bad)
+        assert result.returncode != 0 and words in result.stderr.splitlines()[-1], result.stderr
