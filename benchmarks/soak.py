@@ -13,7 +13,7 @@ last (memory by more than ``--rss-slack`` MiB).
 
 ``--lens`` puts depth of field and motion blur on the camera; ``--dynamic`` temporal AA and
 dynamic resolution driven down and back up over and over (every level's targets remade at
-each step); ``--day`` makes the hall's sky an atmosphere with stars and turns its sun round
+each step); ``--day`` makes the hall's sky an atmosphere with stars and a moon and turns its sun round
 the sky once every ``DAY_FRAMES`` frames (the sky-view table drawn again every frame, the
 CPU's table, the cube map and the sky's light every degree, day and night).
 """
@@ -76,23 +76,26 @@ DAY_FRAMES = 240  # --day: frames the sun takes round the sky (1.5 degrees a fra
 
 
 def start_day(engine: Engine) -> None:
-    """``--day``: the hall's Skybox an atmosphere with a night's stars."""
-    from components import Skybox
+    """``--day``: the hall's Skybox an atmosphere with a night's stars, and a moon."""
+    from components import DirectionalLight, Skybox
     from engine.assets.star_field import star_faces
 
     for _, sky in engine.world.query_one(Skybox):
         sky.faces = star_faces(size=64, stars=800)
         sky.model = "atmosphere"
+    engine.world.spawn(DirectionalLight(intensity=0.1, shadows=False, body="moon"))
 
 
 def turn_sun(engine: Engine, frame: int) -> None:
-    """``--day``: the sun at ``frame`` of its day, round a tilted circle (noon 55 degrees up)."""
+    """``--day``: the sun at ``frame`` of its day, round a tilted circle (noon 55 degrees up),
+    the moon a little behind its opposite (a gibbous moon up at night)."""
     from components import DirectionalLight
 
     angle = 2.0 * math.pi * frame / DAY_FRAMES
     towards = (math.cos(angle) * 0.6, math.sin(angle) * 0.82, math.sin(angle) * 0.3 + 0.2)
+    moon = (-math.cos(angle + 0.5) * 0.6, -math.sin(angle + 0.5) * 0.82, 0.3 - math.sin(angle + 0.5) * 0.3)
     for _, light in engine.world.query_one(DirectionalLight):
-        light.direction = tuple(-c for c in towards)
+        light.direction = tuple(-c for c in (moon if light.body == "moon" else towards))
 
 
 def run(frames: int, every: int, warmup: int = 60, size: tuple[int, int] = SIZE, lens: bool = False,
