@@ -328,3 +328,28 @@ def test_the_sample_level_takes_a_panorama_from_the_command_line(tmp_path):
                        (("--panorama", str(path), "--panorama-yaw", "west"), "--panorama-yaw must be")):
         result = run_level("--headless", "--frames", "1", "--size", "16x12", "--out", str(tmp_path / "bad"), *bad)
         assert result.returncode != 0 and words in result.stderr.splitlines()[-1], result.stderr
+
+
+def test_save_hdr_writes_what_radiance_reads(tmp_path):
+    """Colours written by ``save_hdr``, read back by a decoder of the test's own (the header,
+    then flat RGBE pixels, (m + 0.5) 2^(e - 136)): within 1/128 of each pixel's largest channel;
+    and ``load_hdr`` reads the file to the same values; bad images refused."""
+    from engine.assets.panorama import save_hdr
+
+    rng = np.random.default_rng(7)
+    image = rng.uniform(0.0, 1.0, (12, 20, 3)) * 10.0 ** rng.uniform(-3.0, 3.0, (12, 20, 1))
+    image[0, 0] = 0.0
+    path = save_hdr(tmp_path / "out.hdr", image)
+    data = path.read_bytes()
+    header, _, body = data.partition(b"\n\n")
+    assert header.startswith(b"#?RADIANCE") and b"FORMAT=32-bit_rle_rgbe" in header
+    resolution, _, pixels = body.partition(b"\n")
+    assert resolution == b"-Y 12 +X 20" and len(pixels) == 12 * 20 * 4
+    rgbe = np.frombuffer(pixels, np.uint8).reshape(12, 20, 4)
+    decoded = expected(rgbe)
+    largest = image.max(axis=-1, keepdims=True)
+    assert (np.abs(decoded - image) <= largest / 128.0 + 1e-30).all()
+    np.testing.assert_array_equal(load_hdr(path), decoded.astype(np.float32))
+    for bad in (np.zeros((4, 4)), np.full((2, 2, 3), -1.0), np.full((2, 2, 3), np.inf)):
+        with pytest.raises(ValueError, match="save_hdr"):
+            save_hdr(tmp_path / "bad.hdr", bad)

@@ -181,6 +181,31 @@ def load_hdr(path: str | Path) -> np.ndarray:
     return np.ascontiguousarray(pixels, np.float32)
 
 
+def save_hdr(path: str | Path, image: np.ndarray) -> Path:
+    """Write linear colours (height, width, 3; row 0 at the top; finite, >= 0) as a Radiance
+    ``.hdr`` file (flat RGBE scanlines, as every reader takes them): each pixel its largest
+    channel's exponent and three 8-bit mantissas (Radiance's ``setcolr``: within 1/256 of the
+    largest channel), to bake a generated sky, a capture or a lightmap for other tools.
+    Returns the path."""
+    pixels = np.asarray(image, np.float64)
+    if pixels.ndim != 3 or pixels.shape[2] != 3 or not (1 <= pixels.shape[0] <= MAX_TEXTURE_SIDE) \
+            or not (1 <= pixels.shape[1] <= MAX_TEXTURE_SIDE):
+        raise ValueError(f"save_hdr: an (height, width, 3) image of 1 to {MAX_TEXTURE_SIDE} a side, got shape "
+                         f"{pixels.shape}")
+    if not np.isfinite(pixels).all() or pixels.min() < 0.0:
+        raise ValueError("save_hdr: colours must be finite and >= 0")
+    largest = pixels.max(axis=-1)
+    mantissa, exponent = np.frexp(largest)
+    scale = np.where(largest > 1e-32, mantissa * 256.0 / np.where(largest > 1e-32, largest, 1.0), 0.0)
+    rgbe = np.zeros(pixels.shape[:2] + (4,), np.uint8)
+    rgbe[..., :3] = np.clip(np.floor(pixels * scale[..., None]), 0, 255)
+    rgbe[..., 3] = np.where(largest > 1e-32, np.clip(exponent + 128, 0, 255), 0)
+    height, width = pixels.shape[:2]
+    path = Path(path)
+    path.write_bytes(f"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {height} +X {width}\n".encode() + rgbe.tobytes())
+    return path
+
+
 def load_panorama(path: str | Path) -> np.ndarray:
     """An equirectangular image's linear colours (height, width, 3) float32, row 0 at the top:
     a ``.hdr`` file as ``load_hdr`` reads it, any other image through Pillow as sRGB."""
