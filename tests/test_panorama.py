@@ -353,3 +353,21 @@ def test_save_hdr_writes_what_radiance_reads(tmp_path):
     for bad in (np.zeros((4, 4)), np.full((2, 2, 3), -1.0), np.full((2, 2, 3), np.inf)):
         with pytest.raises(ValueError, match="save_hdr"):
             save_hdr(tmp_path / "bad.hdr", bad)
+
+
+def test_an_8_bit_panorama_is_read_as_srgb(tmp_path):
+    """A PNG panorama (four bands of sRGB colour down it) is read as linear light: its faces'
+    straight-up, level and straight-down texels hold the bands' colours made linear."""
+    from PIL import Image
+
+    from engine.core.color import srgb_to_linear as linear
+
+    bands = np.array([[200, 40, 40], [40, 200, 40], [40, 40, 200], [90, 90, 90]], np.uint8)
+    image = np.repeat(bands, 16, axis=0)[:, None, :].repeat(128, axis=1)   # 64 rows, 128 columns
+    Image.fromarray(image).save(tmp_path / "bands.png")
+    faces = sky_faces_from_file(tmp_path / "bands.png", 16)
+    np.testing.assert_allclose(faces[2][8, 8], linear(bands[0] / 255.0), rtol=1e-3)   # +Y: the top band
+    np.testing.assert_allclose(faces[3][8, 8], linear(bands[3] / 255.0), rtol=1e-3)   # -Y: the bottom band
+    above, below = faces[5][7, 8], faces[5][8, 8]   # -Z, just over and under the horizon: bands two and three
+    assert above[1] > 5 * max(above[0], above[2]) and below[2] > 5 * max(below[0], below[1])
+    assert faces.source["panorama"].endswith("bands.png")
