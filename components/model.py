@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass
 from typing import Any
 
+from components.pose import SKINNING_METHODS
 from components.tracking import ComponentValueError, TrackedComponent, boolean, choice, finite, integer
 
 MAX_MODEL_PROBES = 4  # curved reflective or glass parts of one model that get a cube-map probe each (by default)
@@ -46,8 +47,6 @@ class Model(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "skinning":
-            from components.pose import SKINNING_METHODS
-
             return choice(self, name, value, SKINNING_METHODS)
         if name == "file":
             if isinstance(value, os.PathLike):
