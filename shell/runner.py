@@ -21,6 +21,7 @@ import numpy as np
 
 from components import ComponentValueError
 from components.rendering import SKY_MODELS
+from components.time_of_day import SYNODIC_MONTH
 from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.core.errors import SpeculumError
 from engine.core.frame_io import Output
@@ -203,44 +204,24 @@ def _frame_ms(text: str) -> float:
         raise argparse.ArgumentTypeError(f"--frame-ms {text!r}: {exc}") from None
 
 
-def _yaw(text: str) -> float:
-    try:
-        yaw = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--panorama-yaw must be a number of degrees, got {text!r}") from None
-    if not math.isfinite(yaw):
-        raise argparse.ArgumentTypeError(f"--panorama-yaw must be a finite number of degrees, got {text!r}")
-    return yaw
+def _number(flag: str, what: str, accepts: Callable[[float], bool]) -> Callable[[str], float]:
+    """An option's parser: a float that ``accepts`` takes, else one error line saying what
+    ``flag`` must be (``what``)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and accepts(value)):
+            raise argparse.ArgumentTypeError(f"{flag} must be {what}, got {text!r}")
+        return value
+    return parse
 
 
-def _moon_age(text: str) -> float:
-    try:
-        age = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--moon must be the moon's age in days, 0 to 29.53, got {text!r}") from None
-    if not 0.0 <= age <= 29.53:
-        raise argparse.ArgumentTypeError(f"--moon must be the moon's age in days, 0 to 29.53, got {text!r}")
-    return age
-
-
-def _hour(text: str) -> float:
-    try:
-        hour = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--time must be an hour from 0 to 24, got {text!r}") from None
-    if not 0.0 <= hour <= 24.0:
-        raise argparse.ArgumentTypeError(f"--time must be an hour from 0 to 24, got {text!r}")
-    return hour
-
-
-def _day_minutes(text: str) -> float:
-    try:
-        minutes = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--day-minutes must be a number of minutes > 0, got {text!r}") from None
-    if not (minutes > 0.0 and math.isfinite(minutes)):
-        raise argparse.ArgumentTypeError(f"--day-minutes must be a number of minutes > 0, got {text!r}")
-    return minutes
+_yaw = _number("--panorama-yaw", "a finite number of degrees", lambda v: True)
+_moon_age = _number("--moon", f"the moon's age in days, 0 to {SYNODIC_MONTH:.2f}", lambda v: 0.0 <= v <= SYNODIC_MONTH)
+_hour = _number("--time", "an hour from 0 to 24", lambda v: 0.0 <= v <= 24.0)
+_day_minutes = _number("--day-minutes", "a number of minutes > 0", lambda v: v > 0.0)
 
 
 def _gif_path(text: str) -> Path:
