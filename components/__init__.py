@@ -1,6 +1,7 @@
 """Components: plain data attached to entities. Behaviour lives in ``systems``."""
 from components.ambient import AmbientOcclusion, ContactShadows, HemisphereLight
 from components.camera import Camera, DirectionalLight, FlyController, PointLight
+from components.clouds import CloudLayer
 from components.decal import Decal, FromDecal
 from components.detail import LevelOfDetail
 from components.fog import Fog, FogVolume, VolumetricFog
@@ -32,6 +33,7 @@ from components.water import Water
 
 __all__ = [
     "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ChromaticAberration",
+    "CloudLayer",
     "ColorGrading",
     "ComponentValueError", "ContactShadows",
     "ComponentWarning", "Decal", "DepthOfField",

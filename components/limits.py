@@ -156,3 +156,8 @@ MAX_VOLUME_AXIS_POINTS = 16
 # Irradiance volumes lighting a world at once (the lowest entities'; the rest said once and
 # ignored): each a slot of the irradiance table's rows, the scene shader weighing each at a point.
 MAX_IRRADIANCE_VOLUMES = 4
+# CloudLayer.density, the optical depth straight through its thickest cloud: 64 lets through
+# e^-64 of the sun (nothing); a storm's is a few hundred, which draws no differently.
+MAX_CLOUD_DENSITY = 64.0
+# CloudLayer.wind, metres a second: the jet stream blows at 100; past 200 the clouds flicker by.
+MAX_CLOUD_WIND = 200.0

@@ -10,6 +10,9 @@
 #include "ambient.glsl"
 #include "subsurface.glsl"
 #include "rect_lights.glsl"
+#ifdef CLOUD_SHADOWS
+#include "clouds.glsl"
+#endif
 #include "hdr.glsl"
 #include "way.glsl"
 uniform samplerCube sky_map;
@@ -599,6 +602,18 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
                           lights.directional_dir[3].w);
     directional_lit *= mix(vec4(1.0), vec4(s.sun_contact), sun_slots);
 #endif
+#ifdef CLOUD_SHADOWS
+    // A CloudLayer's shadows on the sun's light (its slot's w; clouds.glsl), on every surface
+    // (a cloud's shadow is no shadow map's: receives_shadows does not turn it off).
+    vec4 sun_clouds = vec4(1.0);
+    for (int i = 0; i < lights.counts.x; ++i) {
+        if (lights.directional_dir[i].w > 0.5) sun_clouds[i] = cloud_shadow(s.position, -lights.directional_dir[i].xyz);
+    }
+    directional_lit *= sun_clouds;
+#define CLOUDED(i) * sun_clouds[i]
+#else
+#define CLOUDED(i)
+#endif
     vec4 point_lit = shadowed ? point_shadows(s.position, s.geometric_normal) : vec4(1.0);
 #ifdef DIFFUSE_TRANSMISSION
     vec4 directional_behind = shadowed ? directional_shadows(s.position, -s.geometric_normal) : vec4(1.0);
@@ -612,14 +627,14 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
 #ifdef DIFFUSE_TRANSMISSION
-        total += through * (max(-dot(s.normal, l), 0.0) * directional_behind[i]) * lights.directional_color[i].rgb;
+        total += through * (max(-dot(s.normal, l), 0.0) * directional_behind[i] CLOUDED(i)) * lights.directional_color[i].rgb;
 #endif
 #ifdef SUBSURFACE
         float under = directional_lit[i];  // (where the light reaches the point, its own shadow)
         if (shadowed && dot(s.geometric_normal, l) < 0.0) {
             vec3 under_normal;
             vec3 under_at = subsurface_shadow_point(s.position, s.geometric_normal, l, under_normal);
-            under = directional_shadow(i, under_at, under_normal, l);
+            under = directional_shadow(i, under_at, under_normal, l) CLOUDED(i);
 #ifdef SCREEN_OCCLUSION
             under *= mix(1.0, s.sun_contact, lights.directional_dir[i].w);
 #endif

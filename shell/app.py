@@ -65,6 +65,7 @@ from systems import (
     ReflectionSystem,
     TransformSystem,
 )
+from systems.cloud_system import CloudSystem
 from systems.decal_system import DecalSystem
 from systems.detail_system import DetailSystem
 from systems.frame_rules_system import FrameRulesSystem
@@ -168,6 +169,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("rules", lambda e: FrameRulesSystem(e.world)),  # open portal pairs, active camera: FrameRules
     ("input", lambda e: FlyCameraSystem(e.world)),
     ("sun", lambda e: TimeOfDaySystem(e.world)),  # each TimeOfDay's clock moved on, its light turned
+    ("clouds", lambda e: CloudSystem(e.world)),  # each CloudLayer's clouds moved on the wind
     ("travel", lambda e: PortalTravelSystem(e.world)),
     ("slice", lambda e: PortalSliceSystem(e.world)),
     ("transform", lambda e: TransformSystem(e.world)),

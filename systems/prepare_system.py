@@ -30,6 +30,8 @@ import numpy as np
 from pyglm import glm
 
 from components import (
+    CloudLayer,
+    ComponentWarning,
     DirectionalLight,
     Fog,
     FogVolume,
@@ -43,6 +45,7 @@ from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import FogLimitWarning, LightLimitWarning
 from engine.core.world import World
+from engine.render.clouds import CloudShape, cloud_shape, drift_served
 from engine.render.fog import volume_rows
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
@@ -77,17 +80,17 @@ _NO_SUN = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 _NO_LAMP = ((0.0, 0.0, 0.0), 1.0, (0.0, 0.0, 0.0), ALL_ROUND, NO_COOKIE, 0.0)
 
 
-def ambient_sh(world: World, sun: SkySun | None = None) -> np.ndarray:
+def ambient_sh(world: World, sun: SkySun | None = None, clouds: CloudShape | None = None) -> np.ndarray:
     """The world's sky irradiance coefficients (9, 3): the Skybox's (a generated one's in
-    closed form, with ``sun`` where its cube map has it, else ``sky_sun``; given faces
-    projected), else the lowest entity's HemisphereLight, else the default dim hemisphere
-    (``components.ambient.DEFAULT_SKY`` and ``DEFAULT_GROUND``)."""
+    closed form, with ``sun`` where its cube map has it, else ``sky_sun``, and ``clouds``;
+    given faces projected), else the lowest entity's HemisphereLight, else the default dim
+    hemisphere (``components.ambient.DEFAULT_SKY`` and ``DEFAULT_GROUND``)."""
     skies = world.query_one(Skybox)
     if skies:
         sky = skies[0][1]
         if not is_generated(sky):
             return project_faces(sky.faces)
-        return generated_sky_sh(sky_model(sky, sun or sky_sun(world, sky)))
+        return generated_sky_sh(sky_model(sky, sun or sky_sun(world, sky), clouds))
     hemispheres = world.query_one(HemisphereLight)
     if hemispheres:
         light = min(hemispheres, key=lambda pair: pair[0])[1]
@@ -114,6 +117,10 @@ class PrepareSystem(esper.Processor):
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
         self._cube_sun: SkySun | None = None   # ... and where the sky's cube map and light have it
         self._sun_follows = False   # the generated sky follows the lights (its sun, unless pinned, and its moon)
+        self._clouds: CloudShape | None = None        # the world's CloudLayer now (cloud_shape)
+        self._cube_clouds: CloudShape | None = None   # ... as the sky's cube map and light have it
+        self._pass_clouds: CloudShape | None = None   # ... as the sky pass draws it
+        self._cloud_said: set[str] = set()            # what the CloudLayer was told (said once)
         self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
         # The debug overlay's toggle: off, no surface reflects the light from all round by its
         # material (its environment reflection; a Reflective's reflection stays).
@@ -125,7 +132,7 @@ class PrepareSystem(esper.Processor):
         renderer = self.renderer
         sky_changed = self._sky()
         if not sky_changed and (self._sky_sh is None or world.changed(HemisphereLight)):
-            self._sky_sh = ambient_sh(world, self._cube_sun)
+            self._sky_sh = ambient_sh(world, self._cube_sun, self._cube_clouds)
             sky_changed = True
         renderer.upload_instances()
         renderer.pose_rows.settle_new()   # (a pose new this frame did not move)
@@ -204,36 +211,76 @@ class PrepareSystem(esper.Processor):
         is past what the cube serves (``cube_serves``: a degree) or stands still again (not for a rounding:
         a direction normalised again moves a little).  True when the cube was made."""
         world = self.world
+        if world.changed(CloudLayer):
+            self._clouds = self._cloud_shape()
         if world.changed(Skybox):
             skies = world.query_one(Skybox)
             sky = skies[0][1] if skies else None
             self._sun_follows = is_generated(sky)   # (a pinned sun's sky still follows its moon)
+            self._clouds = self._cloud_shape()      # (is there a sky to draw them in)
             self._make_sky(sky, self._sky_sun())
             return True
-        if not self._sun_follows or not (world.changed(DirectionalLight) or self._sun != self._cube_sun):
+        if not self._sun_follows:
             return False
-        sun, sky = self._sky_sun(), world.query_one(Skybox)[0][1]
+        sky = world.query_one(Skybox)[0][1]
+        if self._clouds != self._cube_clouds and not drift_served(self._cube_clouds, self._clouds, sky.face_size):
+            self._make_sky(sky, self._sky_sun())   # (the clouds changed, or drifted past what the cube serves)
+            return True
+        if not (world.changed(DirectionalLight) or self._sun != self._cube_sun):
+            if self._clouds != self._pass_clouds:   # drifting: the sky pass follows every frame
+                self._show_sky(sky, self._sun)
+            return False
+        sun = self._sky_sun()
         if cube_serves(self._cube_sun, sun, SAME_SUN_DEGREES, SAME_SUN_TINT):
-            if self._sun != self._cube_sun:  # back where the cube has it (rounding apart)
-                self._sun = self._cube_sun
-                self.renderer.set_sky_model(sky_model(sky, self._cube_sun))
+            if self._sun != self._cube_sun or self._clouds != self._pass_clouds:  # back where the cube has it
+                self._show_sky(sky, self._cube_sun)
             return False
         if sun != self._sun and cube_serves(self._cube_sun, sun):  # turning: the cube a moment later
-            self._sun = sun
-            self.renderer.set_sky_model(sky_model(sky, sun))
+            self._show_sky(sky, sun)
             return False
         self._make_sky(sky, sun)
         return True
 
+    def _show_sky(self, sky: Skybox, sun: SkySun | None) -> None:
+        """The sky pass draws ``sky`` with ``sun`` and the clouds now, the cube map kept."""
+        self._sun, self._pass_clouds = sun, self._clouds
+        self.renderer.set_sky_model(sky_model(sky, sun, self._clouds))
+
     def _make_sky(self, sky: Skybox | None, sun: SkySun | None) -> None:
-        """The sky's cube map, the sky pass's model and the sky's light, of ``sky`` with ``sun``."""
+        """The sky's cube map, the sky pass's model and the sky's light, of ``sky`` with ``sun``
+        and the clouds now."""
         if is_generated(sky):
-            self.renderer.set_generated_sky(sky_model(sky, sun), sky.face_size)
+            self.renderer.set_generated_sky(sky_model(sky, sun, self._clouds), sky.face_size)
         else:
             self.renderer.set_sky_faces(None if sky is None else sky.faces)
-        self._sky_sh = ambient_sh(self.world, sun)
+        self._sky_sh = ambient_sh(self.world, sun, self._clouds)
         self._flat_sky = sky is None
         self._sun = self._cube_sun = sun
+        self._cube_clouds = self._pass_clouds = self._clouds
+
+    def _cloud_shape(self) -> CloudShape | None:
+        """The world's CloudLayer (the lowest entity's) as the GPU draws it (``cloud_shape``;
+        None: none, or no generated sky to draw it in: said once)."""
+        layers = self.world.query_one(CloudLayer)
+        if not layers:
+            self._cloud_said.clear()
+            return None
+        entity, layer = min(layers, key=lambda pair: pair[0])
+        said = set()
+        if len(layers) > 1:
+            said.add(f"{len(layers)} entities have a CloudLayer: the world has one sheet of clouds, entity "
+                     f"{entity}'s; the others are left out")
+        skies = self.world.query_one(Skybox)
+        if not skies or not is_generated(skies[0][1]):
+            said.add(f"the CloudLayer of entity {entity} draws nothing: "
+                     + ("the world has no Skybox" if not skies else "its Skybox is given faces (a photographed "
+                        "sky has its own clouds); clouds are drawn over a generated sky (gradient or atmosphere)"))
+        for message in said - self._cloud_said:
+            warnings.warn(message, ComponentWarning, stacklevel=4)
+        self._cloud_said = said
+        if not skies or not is_generated(skies[0][1]):
+            return None
+        return cloud_shape(layer)
 
     def _air_tint(self, sun: DirectionalLight) -> tuple[float, float, float]:
         """What the world's atmosphere does to ``sun``'s light (the brightest DirectionalLight,

@@ -83,7 +83,7 @@ def test_game_systems_are_ordered_in_among_the_stages_and_run_in_that_order(ctx)
     engine = Engine(game, ctx)
     try:
         names = [name for name, _ in engine.schedule]
-        assert names == ["first", "game", "physics", "models", "rules", "input", "sun", "travel", "recorder",
+        assert names == ["first", "game", "physics", "models", "rules", "input", "sun", "clouds", "travel", "recorder",
                          "slice", "transform", "surfaces", "trace", "follow", "transform_late", "detail", "decals",
                          "extract", "particles",
                          "prepare", "shadows", "probes", "volume", "main", "reflect", "present", "late", "text",

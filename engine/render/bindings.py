@@ -203,6 +203,7 @@ IRRADIANCE_BINDING = 4   # scene: the probes' influence boxes for diffuse image 
 VIRTUAL_LIGHTS_BINDING = 5  # scene: lights seen through mirrors and portals (shadow_rules.VirtualLight)
 FALLBACK_BINDING = 6     # composite (fallback): each row's ids and weights (mirror_composite.vert's FallbackRows)
 FOG_BINDING = 7          # scene (FOG builds), sky, composites: the active camera's fog (engine/render/fog.py)
+CLOUDS_BINDING = 8       # sky (CLOUDS builds), scene (CLOUD_SHADOWS): the CloudLayer (engine/render/clouds.py)
 
 # --- clip distances ------------------------------------------------------------------------
 # The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for

@@ -24,6 +24,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
 from engine.frame_stats import RenderStats
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range, forget_sampler
+from engine.render.clouds import CloudBlock
 from engine.render.fog import FogBlock
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
@@ -147,6 +148,7 @@ class Gpu:
         self._view_base = 0
         self.lights_ubo = ctx.buffer(reserve=LIGHTS_BLOCK_BYTES)
         self.fog = FogBlock(ctx)   # the active camera's Fog (the prepare stage sets it)
+        self.clouds = CloudBlock(ctx)   # the sky's CloudLayer (set with the sky: Renderer.set_sky_model)
         # The active camera's ambient occlusion this frame, a texel a pixel of the main view
         # (engine/render/screen_occlusion.py; None: none): its SCREEN_OCCLUSION builds read it.
         self.screen_occlusion: moderngl.Texture | None = None

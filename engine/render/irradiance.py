@@ -91,6 +91,8 @@ from engine.render.sky import (
     DISC_EDGE,
     GLOW_COLOR,
     SkyModel,
+    clear_radiance,
+    cloud_hidden,
     disc_strength,
     glow_strength,
     ground_share,
@@ -180,25 +182,46 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     a full moon's light its phase leaves, about the way its lit part's light comes from
     (``moon_phase``)."""
     rise, fall, glow, disc = _zonal_integrals()
-    moon = _moon_sh(model, disc)
+    sun_seen, moon_seen, clouds = _cloud_sh(model)
+    moon = _moon_sh(model, disc) * moon_seen
+    bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
+    sun_disc = np.outer(disc, np.array(model.sun_color, np.float64) * sun_seen)
     if model.atmosphere:
         n = ATMOSPHERE_FACE
         faces = np.stack([model_radiance(model, face_directions(face, n), disc=False, coarse=True)
                           for face in range(6)])
-        bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
-        sun = np.outer(disc, np.array(model.sun_color, np.float64))[bands]
         if model.space is not None:   # what lies beyond the air, through it (above the horizon)
             faces = faces + _space_through_air(model)
-        return project_faces(faces) + 2.0 * np.pi * sun * sh_basis(np.array(model.sun_direction, np.float64))[:, None] \
-            * np.array(BAND_FACTORS)[:, None] + moon
+        return project_faces(faces) + 2.0 * np.pi * sun_disc[bands] \
+            * sh_basis(np.array(model.sun_direction, np.float64))[:, None] * np.array(BAND_FACTORS)[:, None] \
+            + moon + clouds
     zenith, horizon, ground = (np.array(colour, np.float64) for colour in (model.zenith, model.horizon, model.ground))
     whole = np.array([2.0, 0.0, 0.0])  # a constant's F_l
     up = np.outer(whole, horizon) + np.outer(rise, zenith - horizon) + np.outer(fall, ground - horizon)
-    sun = np.outer(glow, GLOW_COLOR) + np.outer(disc, np.array(model.sun_color, np.float64))
-    bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
+    sun = np.outer(glow, GLOW_COLOR) + sun_disc
     radiance = 2.0 * np.pi * (up[bands] * sh_basis(np.array([0.0, 1.0, 0.0]))[:, None]
                               + sun[bands] * sh_basis(np.array(model.sun_direction, np.float64))[:, None])
-    return radiance * np.array(BAND_FACTORS)[:, None] + moon
+    return radiance * np.array(BAND_FACTORS)[:, None] + moon + clouds
+
+
+def _cloud_sh(model: SkyModel) -> tuple[float, float, np.ndarray]:
+    """What ``model``'s clouds do to its light: the share of the sun's disc and of the
+    moon's they leave (as at each disc's centre) and the irradiance coefficients (9, 3) they
+    add to the clear sky (their light less the sky they hide: projected from
+    ``ATMOSPHERE_FACE`` texels a face, smooth enough for nine coefficients; an atmosphere's
+    space behind them taken away too).  No clouds: 1, 1 and zeros."""
+    if model.clouds is None:
+        return 1.0, 1.0, np.zeros((9, 3))
+    n = ATMOSPHERE_FACE
+    ways = np.stack([face_directions(face, n) for face in range(6)])
+    clear = clear_radiance(model, ways, coarse=True)
+    hidden, light = cloud_hidden(model, ways, coarse=True)
+    change = (light - clear) * hidden[..., None]
+    if model.space is not None:
+        change = change - _space_through_air(model) * hidden[..., None]
+    at = np.array([model.sun_direction, model.moon_direction], np.float64)
+    seen = 1.0 - cloud_hidden(model, at, coarse=True)[0]
+    return float(seen[0]), float(seen[1]), project_faces(change)
 
 
 def _moon_sh(model: SkyModel, disc: np.ndarray) -> np.ndarray:

@@ -429,7 +429,9 @@ class Renderer(Gpu):
         """An atmosphere's sky-view table, drawn on the GPU for its air and the sun's
         elevation (``SkyView``: again only when either changed), and the cube map of its
         space (its Skybox's given faces: uploaded when they are others); released with the
-        last atmosphere."""
+        last atmosphere; and the clouds' block (``CloudBlock``: the bake and the scene's
+        cloud shadows read it)."""
+        self.clouds.set(None if model is None else model.clouds)
         space = None if model is None else model.space
         if space is None or (self.sky_space is not None and self._space_key != model.space_key):
             if self.sky_space is not None:
@@ -608,7 +610,7 @@ class Renderer(Gpu):
             self.text_pass = None
         self._set_sky_view(None)
         for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog,
-                    self.spot_cookies, self.pose_rows, self.object_motion):
+                    self.clouds, self.spot_cookies, self.pose_rows, self.object_motion):
             obj.release()
         self.shaders.release()
 

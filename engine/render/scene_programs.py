@@ -26,6 +26,7 @@ from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_PER_INVOCATIO
 from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
+    CLOUDS_BINDING,
     COOKIE_UNIT,
     EMISSIVE_MAP_UNIT,
     FOG_BINDING,
@@ -105,7 +106,7 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
-                 "Irradiance": IRRADIANCE_BINDING}
+                 "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING}
 
 # The reflect slots whose reflection is the sky's or a probe's, which screen reflections
 # replace: none (the material's environment reflection, scene.frag environment_specular) and a
@@ -197,6 +198,7 @@ class ScenePrograms:
             cookies = (*cookies, ("SPHERE_LIGHTS", "1"))
         if self.renderer.rect_lights:  # RECT_LIGHTS while a kept point light (or its image) is a rectangle
             cookies = (*cookies, ("RECT_LIGHTS", "1"))
+        cookies = (*cookies, *self.renderer.clouds.shadow_defines)  # CLOUD_SHADOWS while a CloudLayer shades
         if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
             cookies = (*cookies, *self.renderer.object_motion.defines)
         if "occluded" in screen.split():  # CONTACT_LAMPS while a lamp has contact shadows (its image read)

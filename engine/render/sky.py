@@ -40,6 +40,7 @@ from engine.render.atmosphere import (
     sun_elevation_degrees,
     sunlight_share,
 )
+from engine.render.clouds import CloudShape, cloud_cover
 from engine.rules.light_rules import SkySun
 
 if TYPE_CHECKING:
@@ -69,11 +70,14 @@ def moon_of(skybox: Skybox, sun: SkySun | None) -> tuple[np.ndarray, np.ndarray]
     return direction / np.linalg.norm(direction), np.array(skybox.moon_color)[:3] * np.array(sun.moon_tint, np.float64)
 
 
-def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: SkySun | None = None) -> np.ndarray:
+def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: SkySun | None = None,
+                 clouds: CloudShape | None = None) -> np.ndarray:
     """Linear RGB of the generated sky along each unit direction (..., 3), with ``sun``
-    (``sun_of``)."""
+    (``sun_of``) and ``clouds`` (``engine.render.clouds.cloud_shape`` of a CloudLayer)."""
     d = np.asarray(directions, np.float64)
     d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    if clouds is not None:
+        return model_sky(sky_model(skybox, sun, clouds), d)
     if skybox.model == "atmosphere":
         return model_radiance(sky_model(skybox, sun), d)
     return _gradient(_colours(skybox), d) + _sun_light(skybox, d, sun)
@@ -123,6 +127,50 @@ def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, c
         colour = colour + disc_strength(np.clip(d @ towards, -1.0, 1.0)[..., None]) * np.array(model.sun_color) \
             + moon_light(d, np.array(model.moon_direction), towards, np.array(model.moon_color))
     return colour
+
+
+def clear_radiance(model: SkyModel, directions: np.ndarray, coarse: bool = False) -> np.ndarray:
+    """The generated sky ``model`` along unit ``directions`` (..., 3) without its discs or
+    clouds (sky_model.glsl's ``clear_sky``; an atmosphere's space left out, as
+    ``model_radiance``)."""
+    d = np.asarray(directions, np.float64)
+    if model.atmosphere:
+        return model_radiance(model, d, disc=False, coarse=coarse)
+    cos_sun = np.clip(d @ np.array(model.sun_direction), -1.0, 1.0)[..., None]
+    return _gradient((model.zenith, model.horizon, model.ground), d) + glow_strength(cos_sun) * GLOW_COLOR
+
+
+def disc_radiance(model: SkyModel, directions: np.ndarray) -> np.ndarray:
+    """The sun's and the moon's discs of ``model`` along unit ``directions`` (..., 3)."""
+    d = np.asarray(directions, np.float64)
+    towards = np.array(model.sun_direction)
+    return disc_strength(np.clip(d @ towards, -1.0, 1.0)[..., None]) * np.array(model.sun_color) \
+        + moon_light(d, np.array(model.moon_direction), towards, np.array(model.moon_color))
+
+
+def cloud_hidden(model: SkyModel, directions: np.ndarray, coarse: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """What ``model``'s clouds do along unit ``directions`` (..., 3): the share of the sky
+    behind them they hide (0 without clouds) and their light (``clouds.cloud_cover``, lit by
+    the sun and the clear sky straight up)."""
+    d = np.asarray(directions, np.float64)
+    if model.clouds is None:
+        return np.zeros(d.shape[:-1]), np.zeros(d.shape[:-1] + (3,))
+    overhead = clear_radiance(model, np.array([0.0, 1.0, 0.0]), coarse)
+    return cloud_cover(model.clouds, d, np.array(model.sun_direction), np.array(model.sun_color), overhead)
+
+
+def model_sky(model: SkyModel, directions: np.ndarray, coarse: bool = False, disc: bool = True) -> np.ndarray:
+    """Linear RGB of the generated sky ``model`` along unit ``directions`` (..., 3), as
+    sky_model.glsl's ``generated_sky`` draws it: the clear sky and (``disc``) the discs, the
+    clouds over both (an atmosphere's space left out: ``build_faces`` adds it)."""
+    d = np.asarray(directions, np.float64)
+    clear = clear_radiance(model, d, coarse)
+    discs = disc_radiance(model, d) if disc else 0.0
+    if model.clouds is None:
+        return clear + discs
+    hidden, light = cloud_hidden(model, d, coarse)
+    hidden = hidden[..., None]
+    return clear * (1.0 - hidden) + light * hidden + discs * (1.0 - hidden)
 
 
 def _colours(skybox: Skybox) -> tuple[tuple[float, ...], ...]:
@@ -252,6 +300,8 @@ class SkyModel:
     # atmosphere's through the air, as the sun's); black: none.
     moon_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
     moon_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # Its CloudLayer's clouds (``engine/render/clouds.py``; None: a clear sky).
+    clouds: CloudShape | None = None
 
     @property
     def space_key(self) -> int:
@@ -282,9 +332,10 @@ def is_generated(skybox: Skybox | None) -> bool:
     return skybox is not None and (skybox.faces is None or skybox.model == "atmosphere")
 
 
-def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | None:
-    """The generated sky of ``skybox`` as the sky pass draws it, with ``sun`` (``sun_of``);
-    None for a gradient's given faces or no Skybox (the pass samples the cube map)."""
+def sky_model(skybox: Skybox | None, sun: SkySun | None = None, clouds: CloudShape | None = None) -> SkyModel | None:
+    """The generated sky of ``skybox`` as the sky pass draws it, with ``sun`` (``sun_of``)
+    and ``clouds``; None for a gradient's given faces or no Skybox (the pass samples the cube
+    map)."""
     if not is_generated(skybox):
         return None
 
@@ -304,26 +355,27 @@ def sky_model(skybox: Skybox | None, sun: SkySun | None = None) -> SkyModel | No
             moon_color = moon_color * sunlight_share(air, moon_way)
         return SkyModel((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), rgb(ground), rgb(towards),
                         rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color), air, elevation, coarse,
-                        skybox.faces, rgb(moon_way), rgb(moon_color))
+                        skybox.faces, rgb(moon_way), rgb(moon_color), clouds)
     return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color),
-                    moon_direction=rgb(moon_way), moon_color=rgb(moon_color))
+                    moon_direction=rgb(moon_way), moon_color=rgb(moon_color), clouds=clouds)
 
 
-def build_faces(skybox: Skybox, sun: SkySun | None = None) -> np.ndarray:
+def build_faces(skybox: Skybox, sun: SkySun | None = None, clouds: CloudShape | None = None) -> np.ndarray:
     """Six faces (6, size, size, 3) float32 in GL order, from ``skybox.faces`` or generated
-    (with ``sun``: ``sun_of``).  An atmosphere's space (its given faces) is added through the
-    air at its own texels: given at ``face_size`` texels a face, as the tests give it, each of
-    the cube's texels is its own."""
+    (with ``sun``: ``sun_of``, and ``clouds``).  An atmosphere's space (its given faces) is
+    added through the air (and what the clouds leave of it) at its own texels: given at
+    ``face_size`` texels a face, as the tests give it, each of the cube's texels is its own."""
     if skybox.model == "atmosphere" and skybox.faces is not None:
-        model = sky_model(skybox, sun)
+        model = sky_model(skybox, sun, clouds)
         n = skybox.face_size
         faces = np.asarray(skybox.faces, np.float64)
         if faces.shape[1] != n:
             raise ValueError(f"build_faces: an atmosphere's space of {faces.shape[1]} texels a face, the cube "
                              f"{n}: give them at one size")
-        return np.stack([model_radiance(model, face_directions(f, n)) + faces[f]
+        return np.stack([model_sky(model, face_directions(f, n)) + faces[f]
                          * air_transmittance(sky_view_table(model.air, model.air_elevation), face_directions(f, n),
                                              np.array(model.sun_direction)) * (face_directions(f, n)[..., 1:2] >= 0.0)
+                         * (1.0 - cloud_hidden(model, face_directions(f, n))[0][..., None])
                          for f in range(6)]).astype(np.float32)
     if skybox.faces is not None:
         faces = np.asarray(skybox.faces, np.float32)
@@ -333,7 +385,7 @@ def build_faces(skybox: Skybox, sun: SkySun | None = None) -> np.ndarray:
             raise ValueError("Skybox.faces must hold finite linear colours >= 0")
         return faces
     n = skybox.face_size
-    return np.stack([sky_radiance(skybox, face_directions(f, n), sun) for f in range(6)]).astype(np.float32)
+    return np.stack([sky_radiance(skybox, face_directions(f, n), sun, clouds) for f in range(6)]).astype(np.float32)
 
 
 def upload_cube(ctx: moderngl.Context, faces: np.ndarray) -> moderngl.TextureCube:

@@ -14,7 +14,15 @@ from __future__ import annotations
 
 import moderngl
 
-from engine.render.bindings import SCRATCH_UNIT, SKY_VIEW_UNIT, SPACE_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import (
+    CLOUDS_BINDING,
+    SCRATCH_UNIT,
+    SKY_VIEW_UNIT,
+    SPACE_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_texture,
+)
 from engine.render.gpu import Gpu
 from engine.render.sky import SEAMLESS_CUBE_MAP, SkyModel
 from engine.render.targets import release_target
@@ -41,8 +49,10 @@ class SkyBake:
         try:
             target = self._face_target(size)
             space = model.atmosphere and model.space is not None
-            vao = self._vertex_array(model.atmosphere, space, model.moon)
+            vao = self._vertex_array(model.atmosphere, space, model.moon, model.clouds is not None)
             program = vao.program
+            if model.clouds is not None:   # (the block: Renderer._set_sky_view wrote it)
+                program["Clouds"].binding = CLOUDS_BINDING
             if model.atmosphere:
                 program["sky_view"].value = SKY_VIEW_UNIT
                 bind_texture(ctx, self.renderer.sky_view, SKY_VIEW_UNIT)
@@ -73,9 +83,9 @@ class SkyBake:
             target = self._target = self.ctx.framebuffer([self.ctx.texture((size, size), 4, dtype="f2")])
         return target
 
-    def _vertex_array(self, atmosphere: bool, space: bool, moon: bool) -> moderngl.VertexArray:
-        defines = {**({"ATMOSPHERE": "1"} if atmosphere else {}), **({"SPACE": "1"} if space else {}),
-                   **({"MOON": "1"} if moon else {})} or None
+    def _vertex_array(self, atmosphere: bool, space: bool, moon: bool, clouds: bool) -> moderngl.VertexArray:
+        defines = {name: "1" for name, on in (("ATMOSPHERE", atmosphere), ("SPACE", space), ("MOON", moon),
+                                              ("CLOUDS", clouds)) if on} or None
         program = self.renderer.shaders.program("fullscreen.vert", "sky_cube.frag", defines=defines)
         if self._vao is None or self._vao.program is not program:
             if self._vao is not None:

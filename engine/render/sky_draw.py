@@ -16,6 +16,7 @@ import moderngl
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS
 from engine.render.bindings import (
     CAMERA_BINDING,
+    CLOUDS_BINDING,
     FOG_BINDING,
     SKY_UNIT,
     SKY_VIEW_UNIT,
@@ -33,7 +34,7 @@ class SkyDraw:
     def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
-        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, atmosphere, space, moon, fog)
+        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, air, space, moon, clouds, fog)
         self._sky_written: dict[tuple, int] = {}
 
     def vertex_array(self, layered: bool) -> moderngl.VertexArray:
@@ -47,7 +48,8 @@ class SkyDraw:
         air = model is not None and model.atmosphere
         space = air and model.space is not None
         moon = model is not None and model.moon
-        key = (layered, model is not None, air, space, moon, fogging)
+        clouds = model is not None and model.clouds is not None
+        key = (layered, model is not None, air, space, moon, clouds, fogging)
         vao = self._skies.get(key)
         if vao is None:
             defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
@@ -59,6 +61,8 @@ class SkyDraw:
                 defines["SPACE"] = "1"
             if moon:
                 defines["MOON"] = "1"
+            if clouds:
+                defines["CLOUDS"] = "1"
             defines.update(fogging)
             program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
                                                defines=defines)
@@ -68,6 +72,8 @@ class SkyDraw:
                 program["Camera"].binding = CAMERA_BINDING
             if "Fog" in program:
                 program["Fog"].binding = FOG_BINDING
+            if clouds:
+                program["Clouds"].binding = CLOUDS_BINDING
             if "fog_sky_map" in program:   # (Fog.aerial_perspective: the scene pass binds the sky there)
                 program["fog_sky_map"].value = SKY_UNIT
             if model is None:

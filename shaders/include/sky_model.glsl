@@ -49,7 +49,7 @@ uniform vec3 sky_light;           // the sunlight above the air (Skybox.sun_colo
 uniform samplerCube sky_space;    // what lies beyond the air (the Skybox's given faces: stars, a galaxy)
 #endif
 
-vec3 generated_sky(vec3 d) {
+vec3 clear_sky(vec3 d) {
     const float HALF_PI = 1.57079633;
     float elevation = asin(clamp(d.y, 0.0, 1.0));
     vec2 flat_way = d.xz, flat_sun = sky_sun_direction.xz;
@@ -64,14 +64,13 @@ vec3 generated_sky(vec3 d) {
 #else
     vec3 beyond = vec3(0.0);
 #endif
-    vec3 color = d.y >= 0.0 ? air + beyond : air + (sky_ground - air) * clamp(-d.y * 4.0, 0.0, 1.0);
-    return color + sun_disc(clamp(dot(d, sky_sun_direction), -1.0, 1.0)) MOON_DISC(d);
+    return d.y >= 0.0 ? air + beyond : air + (sky_ground - air) * clamp(-d.y * 4.0, 0.0, 1.0);
 }
 #else
 uniform vec3 sky_zenith;          // linear RGB
 uniform vec3 sky_horizon;
 
-vec3 generated_sky(vec3 d) {
+vec3 clear_sky(vec3 d) {
     float y = d.y;
     vec3 color = y >= 0.0
         ? sky_horizon + (sky_zenith - sky_horizon) * pow(clamp(y, 0.0, 1.0), 0.6)
@@ -79,6 +78,24 @@ vec3 generated_sky(vec3 d) {
     // A warm band around the sun's azimuth so that left and right of the sky differ.
     float cos_sun = clamp(dot(d, sky_sun_direction), -1.0, 1.0);
     vec3 glow = 0.25 * pow(clamp(cos_sun, 0.0, 1.0), 4.0) * vec3(1.0, 0.55, 0.25);
-    return color + glow + sun_disc(cos_sun) MOON_DISC(d);
+    return color + glow;
 }
 #endif
+
+#ifdef CLOUDS
+#include "clouds.glsl"
+#endif
+
+// The sky without its discs (clear_sky), the sun's and the moon's discs, and (CLOUDS) the
+// CloudLayer's clouds over both (clouds.glsl: the share of what is behind them they hide, and
+// their own light, lit by the sun and the clear sky overhead).
+vec3 generated_sky(vec3 d) {
+    vec3 discs = sun_disc(clamp(dot(d, sky_sun_direction), -1.0, 1.0)) MOON_DISC(d);
+#ifdef CLOUDS
+    vec3 light;
+    float hidden = cloud_cover(d, sky_sun_direction, sky_sun_color, clear_sky(vec3(0.0, 1.0, 0.0)), light);
+    return mix(clear_sky(d), light, hidden) + discs * (1.0 - hidden);
+#else
+    return clear_sky(d) + discs;
+#endif
+}
