@@ -55,6 +55,7 @@ from components import (
     Bloom,
     Camera,
     ChromaticAberration,
+    CloudLayer,
     ColorGrading,
     ComponentValueError,
     ContactShadows,
@@ -104,7 +105,7 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
                              ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal,
-                             IrradianceVolume, FogVolume, LensFlare, TimeOfDay)
+                             IrradianceVolume, FogVolume, LensFlare, TimeOfDay, CloudLayer)
 
 @dataclasses.dataclass
 class Case:

@@ -60,7 +60,7 @@ except ImportError:  # Python 3.10
 ENGINE_COMPONENTS: dict[str, type] = {
     name: getattr(_components, name) for name in (
         "AmbientOcclusion", "Animation", "AnimationEvents", "AnimationLayer", "Bloom", "Camera", "ChromaticAberration",
-        "ColorGrading", "ContactShadows",
+        "CloudLayer", "ColorGrading", "ContactShadows",
         "Decal", "DepthOfField", "DirectionalLight",
         "Emissive", "FilmGrain", "FlyController", "Fog", "FogVolume", "HemisphereLight", "IrradianceVolume",
         "LensFlare", "LevelOfDetail",

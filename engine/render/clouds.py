@@ -188,10 +188,11 @@ def _noise_quantiles() -> np.ndarray:
 
 def coverage_threshold(coverage: float) -> float:
     """The noise's threshold at which ``coverage`` of the sheet lies under cloud: its
-    (1 - coverage) quantile, moved by the soft edge's width towards the ends so that 0 is
+    (1 - coverage) quantile, moved by up to the soft edge's width near the ends so that 0 is
     clear sky and 1 overcast (the whole sheet past the edge)."""
     q = _noise_quantiles()
-    return float(np.interp(1.0 - coverage, np.linspace(0.0, 1.0, q.size), q) + EDGE_SOFTNESS * (1.0 - 2.0 * coverage))
+    ends = (1.0 - 2.0 * coverage) ** 5   # (the edge's width moved in only near 0 and 1)
+    return float(np.interp(1.0 - coverage, np.linspace(0.0, 1.0, q.size), q) + EDGE_SOFTNESS * ends)
 
 
 def layer_cells(shape: CloudShape, xz: np.ndarray) -> np.ndarray:

@@ -1,0 +1,303 @@
+"""Clouds (``CloudLayer``): the sky pass draws them as the CPU's twin does
+(engine/render/clouds.py owns the rules), their coverage is the share of the sheet under
+cloud, they hide the sun's disc, the cube map and the sky's light take them, they shade the
+sun's light on the world as the twin says point by point, and the wind moves them (the sky
+pass every frame, the cube map once they have drifted two of its texels)."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    CloudLayer,
+    ComponentValueError,
+    ComponentWarning,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Skybox,
+    Transform,
+    look_rotation,
+)
+from engine.assets.mesh import plane
+from engine.render.clouds import (
+    EARTH_RADIUS,
+    NOISE_PERIOD,
+    cloud_noise,
+    cloud_shadow,
+    cloud_shape,
+    cloud_thickness,
+    layer_cells,
+    layer_distance,
+)
+from engine.render.irradiance import generated_sky_sh, project_faces
+from engine.render.sky import build_faces, cloud_hidden, model_sky, sky_model, sky_radiance
+from tests.test_generated_sky import SIZE, SKY, SUN, _cube_faces, _read
+
+UP_AHEAD = glm.normalize(glm.vec3(0.2, 0.8, -0.5))
+
+
+def _cloud_frame(scene, skybox: Skybox, layer: CloudLayer | None, look: glm.vec3, fov: float = 60.0,
+                 build_more=None):
+    """A frame of ``skybox`` under ``layer`` through a camera of ``fov`` along ``look``: level
+    0's linear colour and rays, and the runner."""
+
+    def build(world):
+        world.spawn(Transform(rotation=look_rotation(look)), Camera(fov_y=fov, near=0.1, far=100.0))
+        world.spawn(skybox, *(() if layer is None else (layer,)))
+        if build_more is not None:
+            build_more(world)
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return (*_read(runner), runner)
+
+
+def _still(**values) -> CloudLayer:
+    """A CloudLayer with no wind (a test's frames leave it where it is)."""
+    return CloudLayer(**{"wind": (0.0, 0.0), **values})
+
+
+# -- the rules ----------------------------------------------------------------------------------
+
+def _bisected_distance(point: np.ndarray, way: np.ndarray, height: float) -> float:
+    """Where the ray meets the sphere of radius R + height about (0, -R, 0), by bisection on
+    the distance from the centre (exact arithmetic's answer, float64's rounding)."""
+    centre = np.array([0.0, -EARTH_RADIUS, 0.0])
+    radius = EARTH_RADIUS + height
+    low, high = 0.0, 4.0e6
+    for _ in range(200):
+        middle = (low + high) / 2.0
+        if np.linalg.norm(point + middle * way - centre) < radius:
+            low = middle
+        else:
+            high = middle
+    return (low + high) / 2.0
+
+
+@pytest.mark.parametrize("point", [(0.0, 0.0, 0.0), (300.0, 40.0, -120.0)])
+@pytest.mark.parametrize("elevation", [90.0, 30.0, 3.0, 0.0, -2.0])
+def test_a_way_meets_the_sheet_where_the_sphere_says(point, elevation):
+    """The sheet on the Earth's curve: met at the distance bisection finds (1e-7 of it), the
+    horizon's at sqrt(2 R h) about (finite: the clouds crowd there), straight up at h."""
+    way = np.array([math.cos(math.radians(elevation)) * 0.6, math.sin(math.radians(elevation)),
+                    -math.cos(math.radians(elevation)) * 0.8])
+    way /= np.linalg.norm(way)
+    p = np.array(point)
+    t, crossing = layer_distance(p, way, 1500.0)
+    want = _bisected_distance(p, way, 1500.0)
+    assert abs(t - want) <= 1e-7 * want + 1e-6
+    normal = (p + t * way - np.array([0.0, -EARTH_RADIUS, 0.0])) / (EARTH_RADIUS + 1500.0)
+    assert abs(crossing - way @ normal) < 1e-9
+    if elevation == 90.0 and point[1] == 0.0:
+        assert abs(t - 1500.0) < 1e-6
+    if elevation == 0.0 and point[1] == 0.0:
+        assert abs(t / math.sqrt(2.0 * EARTH_RADIUS * 1500.0) - 1.0) < 1e-3
+
+
+@pytest.mark.parametrize("coverage", [0.15, 0.5, 0.85])
+def test_coverage_is_the_share_of_the_sheet_under_cloud(coverage):
+    """Over places of the whole pattern (two seeds), the share thicker than half and the mean
+    thickness are the coverage (0.03); 1 is overcast (every place whole), 0 no cloud at all."""
+    rng = np.random.default_rng(7)
+    places = rng.random((100_000, 2)) * NOISE_PERIOD
+    for seed in (3, 4000):
+        shape = cloud_shape(_still(coverage=coverage, seed=seed))
+        thick = cloud_thickness(shape, cloud_noise(places, seed))
+        assert abs((thick > 0.5).mean() - coverage) < 0.03
+        assert abs(thick.mean() - coverage) < 0.03
+    overcast = cloud_shape(_still(coverage=1.0))
+    assert cloud_thickness(overcast, cloud_noise(places, 0)).min() > 0.999
+    assert cloud_shape(_still(coverage=0.0)) is None and cloud_shape(_still(density=0.0)) is None
+
+
+def test_the_pattern_wraps_with_its_period_and_moves_with_the_drift():
+    """The noise repeats every NOISE_PERIOD cells (so the drift wraps), another seed is another
+    pattern, and a drift of d metres moves the clouds by d."""
+    rng = np.random.default_rng(3)
+    places = rng.random((2000, 2)) * NOISE_PERIOD
+    np.testing.assert_allclose(cloud_noise(places + NOISE_PERIOD * np.array([1.0, -2.0]), 5),
+                               cloud_noise(places, 5), atol=1e-9)
+    assert np.abs(cloud_noise(places, 5) - cloud_noise(places, 6)).mean() > 0.05
+    still, moved = cloud_shape(_still()), cloud_shape(_still(drift=(700.0, -300.0)))
+    xz = rng.random((2000, 2)) * 5000.0
+    np.testing.assert_allclose(cloud_noise(layer_cells(moved, xz + np.array([700.0, -300.0])), 0),
+                               cloud_noise(layer_cells(still, xz), 0), atol=1e-9)
+
+
+# -- the sky ------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("model", ["gradient", "atmosphere"])
+def test_the_sky_pass_draws_the_clouds_as_the_twin(scene, model):
+    """A 60-degree lens up into a half-cloudy sky: every pixel is the CPU's sky along its ray
+    (clouds, their light and what they leave of the sky), clouds and clear sky both in view."""
+    skybox = Skybox(**SKY, model=model)
+    layer = _still(coverage=0.5, drift=(400.0, 900.0))
+    colour, rays, _ = _cloud_frame(scene, skybox, layer, UP_AHEAD)
+    shape = cloud_shape(layer)
+    want = sky_radiance(skybox, rays, None, shape)
+    np.testing.assert_allclose(colour, want, rtol=6e-3, atol=6e-3)
+    hidden = cloud_hidden(sky_model(skybox, None, shape), rays)[0]
+    assert (hidden > 0.9).mean() > 0.15 and (hidden < 0.05).mean() > 0.15
+    clear = sky_radiance(skybox, rays)
+    assert np.abs(colour - clear).max(axis=-1)[hidden > 0.9].min() > 0.02   # (the clouds show)
+
+
+def _drift_over(point: np.ndarray, thick: bool, layer_values: dict) -> tuple[float, float]:
+    """A drift that puts a cloud's thickest part (``thick``) or clear sky over the sheet's
+    place seen along unit ``point`` (found on a grid of drifts)."""
+    t, _ = layer_distance(np.zeros(3), point, layer_values.get("height", 1500.0))
+    xz = point[[0, 2]] * t
+    for x in np.arange(0.0, 20000.0, 97.0):
+        for z in (0.0, 1300.0, 2900.0):
+            shape = cloud_shape(_still(**layer_values, drift=(x, z)))
+            value = float(cloud_thickness(shape, cloud_noise(layer_cells(shape, xz), shape.seed)))
+            if (value > 0.999) if thick else (value < 1e-3):
+                return (x, z)
+    raise AssertionError("no drift found")
+
+
+def test_a_cloud_hides_the_suns_disc(scene):
+    """A 10-degree lens on the sun: under clear sky the disc is whole; with a cloud's thick part
+    over it the disc's pixels are gone (its light times exp(-depth), as the twin says)."""
+    sun = np.array(SUN, np.float64)
+    for thick in (False, True):
+        drift = _drift_over(sun, thick, {"coverage": 0.5})
+        layer = _still(coverage=0.5, drift=drift)
+        colour, rays, _ = _cloud_frame(scene, Skybox(**SKY), layer, SUN, fov=10.0)
+        np.testing.assert_allclose(colour, sky_radiance(Skybox(**SKY), rays, None, cloud_shape(layer)),
+                                   rtol=6e-3, atol=6e-3)
+        discless = model_sky(sky_model(Skybox(**SKY), None, cloud_shape(layer)), rays, disc=False)
+        disc = int(((colour - discless)[..., 0] > 1.0).sum())   # (the clouds round it shine brightly)
+        assert (disc == 0) if thick else (disc > 2000), disc
+
+
+def test_the_cube_map_and_the_skys_light_take_the_clouds(scene):
+    """The cube map reflections and probes read is the twin's faces with the clouds; the sky's
+    light (clear sky's closed form plus the clouds' change, projected coarsely) agrees with
+    the projection of the twin's 128-texel faces (2% of the largest coefficient), and white
+    clouds over a blue sky make it whiter."""
+    skybox = Skybox(**SKY, face_size=64)
+    layer = _still(coverage=0.6, drift=(1200.0, 300.0))
+    _, _, runner = _cloud_frame(scene, skybox, layer, UP_AHEAD)
+    shape = cloud_shape(layer)
+    faces = _cube_faces(runner)
+    want = build_faces(skybox, None, shape)
+    np.testing.assert_allclose(faces, want.astype(np.float16), rtol=5e-3, atol=5e-3)
+    assert np.abs(want - build_faces(skybox)).max() > 0.5   # (the clouds are in it)
+    light = generated_sky_sh(sky_model(skybox, None, shape))
+    fine = project_faces(build_faces(Skybox(**SKY, face_size=128), None, shape))
+    assert np.abs(light - fine).max() < 0.02 * np.abs(fine).max()
+    clear = generated_sky_sh(sky_model(skybox))
+    assert light[0, 2] / light[0, 0] < 0.9 * clear[0, 2] / clear[0, 0]
+
+
+# -- shadows ------------------------------------------------------------------------------------
+
+SHADOW_SUN = glm.normalize(glm.vec3(-0.3, -0.85, 0.2))   # the way the light travels
+
+
+def _floor_frame(scene, layer: CloudLayer, intensity: float = 3.0):
+    """A 70-degree lens straight down on a grey floor from 30 m, lit by a sun along
+    ``SHADOW_SUN`` (the sky's sun pinned elsewhere: its light and sky stay the same)."""
+
+    def build(world):
+        world.spawn(Transform(position=(5.0, 30.0, -3.0), rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0),
+                                                                                   glm.vec3(0.0, 0.0, -1.0))),
+                    Camera(fov_y=70.0, near=0.5, far=200.0))
+        world.spawn(Skybox(**SKY), layer)
+        world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=intensity, shadows=False))
+        world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    colour, rays = _read(runner)
+    eye = np.array(runner.engine.main_view.eye, np.float64)
+    return colour, eye + rays * (-eye[1] / rays[..., 1:2])   # each pixel's floor point
+
+
+def test_clouds_shade_the_suns_light_as_the_twin_says(scene):
+    """Clouds 40 m across 80 m up over a floor seen from 30 m: the sun's share of each pixel's
+    light (the frame less the sunless frame, over the same without cloud shadows) is the
+    twin's exp(-depth) of the cloud on the way from the pixel's floor point to the sun
+    (0.02), and both deep shadow and full sun are on the floor."""
+    values = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))
+    shaded, points = _floor_frame(scene, _still(**values))
+    lit, _ = _floor_frame(scene, _still(**values, shadows=False))
+    dark, _ = _floor_frame(scene, _still(**values), intensity=0.0)
+    share = (shaded - dark)[..., 1] / (lit - dark)[..., 1]
+    want = cloud_shadow(cloud_shape(_still(**values)), points, -np.array(SHADOW_SUN, np.float64))
+    assert np.abs(share - want).max() < 0.02
+    assert (want < 0.05).mean() > 0.1 and (want > 0.95).mean() > 0.1
+
+
+# -- the wind -----------------------------------------------------------------------------------
+
+def test_the_wind_moves_the_clouds_the_sky_pass_each_frame_the_cube_every_two_texels(scene):
+    """Wind 60 m/s at 1/60 s a frame: the drift moves a metre a frame (wrapped to the
+    pattern's period); the sky pass draws the clouds where the drift is each frame; the cube
+    map (32 texels a face, 1500 m up: two texels straight up are 147 m) is made again only
+    when they have drifted past that."""
+    skybox = Skybox(**SKY, face_size=32)
+    layer = CloudLayer(coverage=0.5, wind=(60.0, 0.0), drift=(NOISE_PERIOD * 2000.0 - 0.5, 0.0))
+    _, _, runner = _cloud_frame(scene, skybox, layer, UP_AHEAD)
+    assert layer.drift[0] == pytest.approx(0.5, abs=1e-6)   # (wrapped)
+    renderer = runner.engine.renderer
+    cubes = [renderer.sky]
+    served = 2.0 * (math.pi / 2.0) / 32 * 1500.0
+    for frame in range(1, 181):
+        runner.frame()
+        if renderer.sky is not cubes[-1]:
+            cubes.append(renderer.sky)
+        if frame % 60 == 0:
+            colour, rays = _read(runner)
+            np.testing.assert_allclose(colour, sky_radiance(skybox, rays, None, cloud_shape(layer)),
+                                       rtol=6e-3, atol=6e-3)
+    assert layer.drift[0] == pytest.approx(0.5 + 180.0, abs=1e-6)
+    assert len(cubes) == 1 + int(180.0 // served)
+
+
+# -- the world's layer --------------------------------------------------------------------------
+
+def test_a_layer_taken_away_leaves_the_clear_sky_and_misplaced_layers_are_said(scene):
+    """Deleting the CloudLayer draws the clear sky again (pixel for pixel) and the scene's
+    builds lose their cloud shadows; a second layer, a given-faces sky and no sky are each
+    said once."""
+    skybox = Skybox(**SKY)
+    colour, rays, runner = _cloud_frame(scene, skybox, _still(), UP_AHEAD)
+    renderer = runner.engine.renderer
+    assert renderer.clouds.shadow_defines
+    entity = next(e for e, _ in runner.world.query_one(CloudLayer))
+    runner.world.remove_component(entity, CloudLayer)
+    runner.frame()
+    colour, rays = _read(runner)
+    np.testing.assert_allclose(colour, sky_radiance(skybox, rays), rtol=4e-3, atol=4e-3)
+    assert renderer.clouds.shape is None and not renderer.clouds.shadow_defines
+    with pytest.warns(ComponentWarning, match="one sheet of clouds"):
+        runner.world.spawn(_still())
+        runner.world.spawn(_still(coverage=0.9))
+        runner.frame()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runner.frame()   # (said once)
+    with pytest.warns(ComponentWarning, match="given faces"):
+        _cloud_frame(scene, Skybox(faces=np.ones((6, 4, 4, 3), np.float32)), _still(), UP_AHEAD)
+    with pytest.warns(ComponentWarning, match="no Skybox"):
+        runner = scene(lambda world: (world.spawn(_still()), world.spawn(Transform(), Camera())), SIZE)
+        runner.frame()
+
+
+@pytest.mark.parametrize("field, value", [
+    ("coverage", 1.5), ("coverage", -0.1), ("density", 65.0), ("height", 5.0), ("scale", 0.0),
+    ("thickness", -1.0), ("wind", (300.0, 0.0)), ("wind", "east"), ("wind", (1.0, 2.0, 3.0)),
+    ("drift", (math.nan, 0.0)), ("seed", -1), ("seed", 70000), ("color", (-1.0, 0.0, 0.0)), ("shadows", "yes")])
+def test_bad_values_are_refused_when_given(field, value):
+    with pytest.raises(ComponentValueError, match=field):
+        CloudLayer(**{field: value})
