@@ -25,6 +25,7 @@ import moderngl
 from components import (
     AmbientOcclusion,
     Camera,
+    CloudLayer,
     ContactShadows,
     DepthOfField,
     DirectionalLight,
@@ -384,10 +385,12 @@ class Engine:
                    getattr(args, "render_scale", 1.0), getattr(args, "sharpen", 0.0), getattr(args, "frame_ms", None),
                    getattr(args, "contact_shadows", False), getattr(args, "shafts", False))
         self.start_sky(getattr(args, "sky", None), getattr(args, "time", None), getattr(args, "day_minutes", None),
-                       getattr(args, "panorama", None), getattr(args, "panorama_yaw", 0.0), getattr(args, "moon", None))
+                       getattr(args, "panorama", None), getattr(args, "panorama_yaw", 0.0), getattr(args, "moon", None),
+                       getattr(args, "clouds", None))
 
     def start_sky(self, model: str | None, hour: float | None = None, day_minutes: float | None = None,
-                  panorama: str | None = None, panorama_yaw: float = 0.0, moon_age: float | None = None) -> None:
+                  panorama: str | None = None, panorama_yaw: float = 0.0, moon_age: float | None = None,
+                  clouds: float | None = None) -> None:
         """The command line's sky options: ``--sky`` draws the level's Skybox (one made if it has
         none) as ``model`` ("atmosphere": a physically based sky with a night's stars beyond its
         air, ``engine.assets.star_field.star_faces``); ``--panorama`` makes its faces an
@@ -397,7 +400,9 @@ class Engine:
         (a summer's day, 45 degrees north) on the brightest ``DirectionalLight`` (one made if there
         is none), moving a whole day on in ``day_minutes`` of game time (``--day-minutes``);
         ``--moon`` adds a moon ``moon_age`` days old on the same clock (a dim, cool
-        ``DirectionalLight`` whose body is "moon", casting no shadow)."""
+        ``DirectionalLight`` whose body is "moon", casting no shadow); ``--clouds`` puts a
+        ``CloudLayer`` of that coverage on the Skybox (one made if it has none; a level's own
+        layer takes the coverage), drifting on a 10 m/s wind."""
         world = self.world
         if panorama is not None:
             from engine.assets.panorama import sky_faces_from_file
@@ -413,6 +418,14 @@ class Engine:
 
                 sky.faces = star_faces()
             sky.model = model
+        if clouds is not None:
+            layers = world.query_one(CloudLayer)
+            if layers:
+                layers[0][1].coverage = clouds
+            else:
+                skies = world.query_one(Skybox)
+                entity = skies[0][0] if skies else world.spawn(Skybox())
+                world.add_component(entity, CloudLayer(coverage=clouds))
         if hour is not None:
             light = brightest_directional(world)
             entity = next((e for e, candidate in world.query_one(DirectionalLight) if candidate is light), None)

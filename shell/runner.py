@@ -90,6 +90,9 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                              "this hour of a summer's day at 45 degrees north (a TimeOfDay on it)")
     parser.add_argument("--moon", type=_moon_age, default=None, metavar="DAYS",
                         help="with --time: a moon this many days past new (14.77: full) on the same clock")
+    parser.add_argument("--clouds", type=_coverage, default=None, metavar="SHARE",
+                        help="clouds over the level's generated sky (a CloudLayer on its Skybox, made if it has "
+                             "none): this share of the sky under cloud, 0 to 1, drifting on the wind")
     parser.add_argument("--day-minutes", type=_day_minutes, default=None, metavar="MINUTES",
                         help="with --time: a whole day passes in this many minutes of game time")
     parser.add_argument("--aa", choices=ANTIALIAS_MODES, default="fxaa",
@@ -127,6 +130,9 @@ def parse_args(game: Game, argv: Sequence[str] | None,
         parser.error("--day-minutes needs --time (the hour the day starts at)")
     if args.moon is not None and args.time is None:
         parser.error("--moon needs --time (the clock it follows)")
+    if args.clouds is not None and args.panorama is not None and args.sky != "atmosphere":
+        parser.error("--clouds needs a generated sky: a --panorama is a photographed sky with its own clouds "
+                     "(with --sky atmosphere it is the space beyond the air, and clouds are drawn)")
     if args.panorama_yaw != 0.0 and args.panorama is None:
         parser.error("--panorama-yaw needs --panorama (the panorama it turns)")
     return args
@@ -220,6 +226,7 @@ def _number(flag: str, what: str, accepts: Callable[[float], bool]) -> Callable[
 
 _yaw = _number("--panorama-yaw", "a finite number of degrees", lambda v: True)
 _moon_age = _number("--moon", f"the moon's age in days, 0 to {SYNODIC_MONTH:.2f}", lambda v: 0.0 <= v <= SYNODIC_MONTH)
+_coverage = _number("--clouds", "a share of the sky from 0 to 1", lambda v: 0.0 <= v <= 1.0)
 _hour = _number("--time", "an hour from 0 to 24", lambda v: 0.0 <= v <= 24.0)
 _day_minutes = _number("--day-minutes", "a number of minutes > 0", lambda v: v > 0.0)
 

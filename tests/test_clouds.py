@@ -301,3 +301,59 @@ def test_a_layer_taken_away_leaves_the_clear_sky_and_misplaced_layers_are_said(s
 def test_bad_values_are_refused_when_given(field, value):
     with pytest.raises(ComponentValueError, match=field):
         CloudLayer(**{field: value})
+
+
+def test_a_level_file_gives_clouds_and_saves_them_back(tmp_path):
+    from engine.assets.level_read import load_level
+    from engine.assets.level_save import save_level
+    from engine.core.world import World
+
+    level = tmp_path / "cloudy.toml"
+    level.write_text('[level]\nname = "cloudy"\n[[entity]]\nname = "sky"\nSkybox = { model = "atmosphere" }\n'
+                     'CloudLayer = { coverage = 0.4, wind = [6.0, 2.0], drift = [120.0, -40.0], seed = 9 }\n')
+    world = World()
+    load_level(level).spawn(world)
+    ((_, layer),) = world.query_one(CloudLayer)
+    assert (layer.coverage, layer.wind, layer.drift, layer.seed) == (0.4, (6.0, 2.0), (120.0, -40.0), 9)
+    again = World()
+    load_level(save_level(world, tmp_path / "again.toml")).spawn(again)
+    ((_, copy),) = again.query_one(CloudLayer)
+    assert (copy.coverage, copy.wind, copy.drift, copy.seed) == (0.4, (6.0, 2.0), (120.0, -40.0), 9)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[level]\nname = "bad"\n[[entity]]\nname = "sky"\nCloudLayer = { coverage = 2.0 }\n')
+    from engine.assets.level_read import LevelError
+
+    with pytest.raises(LevelError, match="coverage"):
+        load_level(bad)
+
+
+def test_the_runners_clouds_cover_the_levels_sky(ctx, tmp_path):
+    """``--clouds 0.4`` on a game: a CloudLayer of that coverage on its Skybox (one made if it
+    has none); a bad share, and clouds over a photographed sky, are one error line each."""
+    from engine import Game, spawn_camera
+    from shell.app import Engine
+    from tests.test_runner import run_level
+
+    class Open(Game):
+        def build(self, world):
+            spawn_camera(world, position=(0.0, 1.6, 4.0), pitch=5)
+            world.spawn(DirectionalLight(intensity=3.0))
+
+    engine = Engine(Open(), ctx)
+    try:
+        engine.start_sky(None, clouds=0.4)
+        engine.frame(1.0, None)
+        ((entity, layer),) = engine.world.query_one(CloudLayer)
+        assert layer.coverage == 0.4 and engine.world.try_get(entity, Skybox) is not None
+        assert layer.drift == pytest.approx((10.0, 0.0))   # (a second of a 10 m/s wind)
+        assert engine.renderer.clouds.shape is not None
+    finally:
+        engine.close()
+    panorama = tmp_path / "sky.png"
+    from PIL import Image
+
+    Image.new("RGB", (8, 4), (90, 120, 200)).save(panorama)
+    for bad, words in ((("--clouds", "1.5"), "--clouds must be"),
+                       (("--clouds", "0.5", "--panorama", str(panorama)), "--clouds needs a generated sky")):
+        result = run_level("--headless", "--frames", "1", "--size", "16x12", "--out", str(tmp_path / "bad"), *bad)
+        assert result.returncode != 0 and words in result.stderr.splitlines()[-1], result.stderr

@@ -219,7 +219,7 @@ def cloud_cover(shape: CloudShape, ways: np.ndarray, sun: np.ndarray, sunlight: 
     beside = sum(cloud_thickness(shape, cloud_noise(cells + step * f, shape.seed, detail, SUN_OCTAVES), detail)
                  for f in (0.5, 1.0)) / 2.0
     depth = shape.density * (thick + beside) / (2.0 * rise)
-    through = 0.5 * np.exp(-depth) + 0.5 * np.exp(-depth / 10.0)
+    through = 0.4 * np.exp(-depth) + 0.6 * np.exp(-depth / 16.0)
     g = SILVER_LINING
     mu = np.clip(d @ sun, -1.0, 1.0)
     phase = 0.6 + 0.4 * (1.0 - g * g) / (1.0 + g * g - 2.0 * g * mu) ** 1.5

@@ -85,7 +85,7 @@ float cloud_cover(vec3 d, vec3 sun, vec3 sunlight, vec3 overhead, out vec3 light
     float beside = 0.5 * (cloud_thickness(cloud_noise(cells + 0.5 * step, detail, SUN_OCTAVES), detail)
                           + cloud_thickness(cloud_noise(cells + step, detail, SUN_OCTAVES), detail));
     float depth = cloud_shape.z * (thick + beside) / (2.0 * rise);
-    float through = 0.5 * exp(-depth) + 0.5 * exp(-depth / 10.0);
+    float through = 0.4 * exp(-depth) + 0.6 * exp(-depth / 16.0);
     const float g = SILVER_LINING;
     float mu = clamp(dot(d, sun), -1.0, 1.0);
     float phase = 0.6 + 0.4 * (1.0 - g * g) / pow(1.0 + g * g - 2.0 * g * mu, 1.5);
