@@ -22,6 +22,9 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``subsurface``: shadows, and every box's material scatters light under its surface
   (``Material.subsurface``): its cost against ``shadows``' (boxes are flat, so they look
   the same: the build's lookups and shadow tests are what is measured);
+* ``clouds``: shadows, and a CloudLayer over the sky, half cover, drifting at 30 m/s:
+  the sky pass's clouds, the scene's cloud shadows and the cube map made again as they
+  drift: its cost against ``shadows``';
 * ``shadows_moving``: the same with a box sliding to and fro under the sun every frame
   (its map drawn again each frame);
 * ``mirror_light``: shadows, and the mirror of the ring the sun reaches most throws its
@@ -176,6 +179,7 @@ from components import (
     AmbientOcclusion,
     Bloom,
     Camera,
+    CloudLayer,
     ColorGrading,
     ContactShadows,
     DirectionalLight,
@@ -427,6 +431,15 @@ def _subsurface(engine: Engine) -> None:
             material.subsurface, material.subsurface_scale = 1.0, 0.1
 
 
+def _clouds(engine: Engine) -> None:
+    """Shadows; a CloudLayer over the sky (half cover, its shadows on: the sky pass's CLOUDS
+    build and the scene's CLOUD_SHADOWS), drifting on its wind (the cube map made again every
+    two of its texels' drift)."""
+    _sun_shadows(engine, True)
+    for entity, _ in engine.world.query_one(Skybox):
+        engine.world.add_component(entity, CloudLayer(coverage=0.5, wind=(30.0, 0.0)))
+
+
 def _sun_setting(engine: Engine, frame: int) -> None:
     """The sun sinking a tenth of a degree a frame from 20 degrees up (a day in a minute at
     60 frames a second): an atmosphere's table made again every two or three frames, any
@@ -582,6 +595,7 @@ VARIANTS: list[Variant] = [
     Variant("off", _plain, "no shadows, no Tonemap, no Bloom (the plain look)"),
     Variant("shadows", _shadows, "the sun casts shadows; a still scene (its map kept)"),
     Variant("subsurface", _subsurface, "shadows, every box scattering light under its surface (Material.subsurface)"),
+    Variant("clouds", _clouds, "shadows, a drifting CloudLayer over the sky shading the scene"),
     Variant("shadows_moving", _moving_caster, "the sun casts shadows; a box slides under it every frame",
             _slide_caster),
     Variant("mirror_light", _mirror_light, "shadows, and one mirror throws the sun (a virtual light); still"),

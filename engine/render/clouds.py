@@ -40,7 +40,7 @@ NOISE_PERIOD = 64         # the first octave's lattice cells before the pattern 
 CLOUD_OCTAVES = 5         # octaves of the cloud's thickness, each half the last one's size
 SUN_OCTAVES = 2           # ... of which the sunlight's way through the cloud beside reads
 EDGE_SOFTNESS = 0.03      # the noise's range over which a cloud's edge fades in
-LOD_ANGLE = 0.01          # radians: an octave seen under twice this fades to its mean by once it
+LOD_ANGLE = 0.005         # radians: an octave seen under twice this fades to its mean by once it
 HAZE_DISTANCE = 60000.0   # metres: a cloud's share of the sky falls by 1/e each (into the horizon's haze)
 SILVER_LINING = 0.6       # Henyey-Greenstein's g of the light scattered towards the eye
 MIN_CROSSING = 0.05       # the cosine a way crosses the sheet at, at least (20 x its depth at most)
@@ -156,7 +156,8 @@ def cloud_noise(u: np.ndarray, seed: int, detail: np.ndarray | float = np.inf,
     """The fractal noise (mean 1/2) at first-octave cells ``u`` (..., 2): ``octaves`` of
     value noise, octave k at 2^k times the frequency and 2^-k the weight, each faded to its
     mean as ``detail`` (the first octave's cell over the distance it is seen from, times the
-    crossing's cosine: the angle it spans) falls below twice ``LOD_ANGLE`` x 2^k."""
+    square root of the crossing's cosine: the angle it spans, foreshortened one way only)
+    falls below twice ``LOD_ANGLE`` x 2^k."""
     u = np.asarray(u, np.float64)
     detail = np.asarray(detail, np.float64)
     total = np.zeros(u.shape[:-1])
@@ -210,7 +211,7 @@ def cloud_cover(shape: CloudShape, ways: np.ndarray, sun: np.ndarray, sunlight: 
     t, crossing = layer_distance(np.zeros(3), d, shape.height)
     cosine = np.maximum(crossing, MIN_CROSSING)
     cells = layer_cells(shape, d[..., [0, 2]] * t[..., None])
-    detail = shape.scale * cosine / np.maximum(t, 1e-6)
+    detail = shape.scale * np.sqrt(cosine) / np.maximum(t, 1e-6)
     thick = cloud_thickness(shape, cloud_noise(cells, shape.seed, detail), detail)
     hidden = (1.0 - np.exp(-shape.density * thick / cosine)) * np.exp(-t / HAZE_DISTANCE) * (d[..., 1] >= 0.0)
     sun = np.asarray(sun, np.float64)

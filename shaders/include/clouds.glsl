@@ -12,7 +12,7 @@ const float EARTH_RADIUS = 6.36e6;
 const uint NOISE_PERIOD = 64u;
 const int CLOUD_OCTAVES = 5;
 const int SUN_OCTAVES = 2;
-const float LOD_ANGLE = 0.01;
+const float LOD_ANGLE = 0.005;
 const float HAZE_DISTANCE = 60000.0;
 const float SILVER_LINING = 0.6;
 const float MIN_CROSSING = 0.05;
@@ -77,7 +77,7 @@ float cloud_cover(vec3 d, vec3 sun, vec3 sunlight, vec3 overhead, out vec3 light
     vec2 tc = layer_distance(vec3(0.0), d);
     float cosine = max(tc.y, MIN_CROSSING);
     vec2 cells = d.xz * (tc.x / cloud_sheet.y) + cloud_offset.xy;
-    float detail = cloud_sheet.y * cosine / max(tc.x, 1e-6);
+    float detail = cloud_sheet.y * sqrt(cosine) / max(tc.x, 1e-6);
     float thick = cloud_thickness(cloud_noise(cells, detail, CLOUD_OCTAVES), detail);
     float hidden = d.y >= 0.0 ? (1.0 - exp(-cloud_shape.z * thick / cosine)) * exp(-tc.x / HAZE_DISTANCE) : 0.0;
     float rise = max(sun.y, 0.1);
