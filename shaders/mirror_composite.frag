@@ -37,6 +37,10 @@
 uniform samplerCube sky_map;
 #define FOG_SKY sky_map   // (Fog.aerial_perspective reads the sky's cube map through it: fog.glsl)
 #include "fog.glsl"
+#ifdef GENERATED_SKY
+// A sharp mirror's or water's sky, drawn per pixel as the sky pass draws it.
+#include "sky_model.glsl"
+#endif
 #include "view_axis.glsl"
 #include "way.glsl"
 #ifdef COMPOSITE_BUMPY
@@ -245,7 +249,11 @@ void main() {
     float lod = 0.0;
     vec4 seen = textureLod(reflection, uv, 0.0);
 #endif
+#if defined(GENERATED_SKY) && !defined(COMPOSITE_ROUGH)
+    vec3 environment = fog_sky(generated_sky(r), at, r);
+#else
     vec3 environment = fog_sky(textureLod(sky_map, r, lod).rgb, at, r);
+#endif
     vec3 radiance = seen.rgb + environment * (1.0 - seen.a);
 #endif
 #ifdef COMPOSITE_WATER

@@ -246,3 +246,29 @@ def test_while_the_sun_turns_the_sky_pass_follows_each_frame_and_the_cube_within
     still = renderer.sky
     runner.frame()
     assert renderer.sky is still  # and then left alone
+
+
+def test_a_sharp_mirror_shows_the_generated_sky_as_the_sky_pass_draws_it(scene):
+    """A 10-degree lens on a mirror that throws the eye's rays at the sun: every pixel is the
+    sky's function along its reflected ray (the composite evaluates it per pixel, as the sky
+    pass does: from the 128-texel cube the disc was a blob of texels), the disc whole."""
+    from components import Material, Mirror, MeshRef
+    from components.transform import yaw_pitch_rotation
+    from engine.assets.mesh import quad
+
+    skybox = Skybox(**SKY)
+    look = glm.normalize(glm.vec3(SUN.x, SUN.y, -SUN.z))   # reflected in a plane z = const: the sun
+
+    def build(world):
+        world.spawn(Transform(rotation=look_rotation(look)), Camera(fov_y=10.0, near=0.1, far=100.0))
+        world.spawn(skybox)
+        world.spawn(Transform(position=tuple(look * (2.0 / look.z)), rotation=yaw_pitch_rotation(180, 0)),
+                    MeshRef(quad(3, 3)), Material(), Mirror())
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    colour, rays = _read(runner)
+    reflected = rays * np.array([1.0, 1.0, -1.0])
+    np.testing.assert_allclose(colour, sky_radiance(skybox, reflected), rtol=6e-3, atol=6e-3)
+    assert (colour[..., 0] > 3.0).sum() > 2000   # the disc, large and sharp

@@ -74,6 +74,7 @@ from engine.render.bindings import (
 )
 from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
+from engine.render.sky_draw import bind_sky, sky_build, wire_sky, write_sky
 from engine.render.targets import RenderTargets
 from engine.render.views import (
     CAMERA_BLOCK_EYE,
@@ -336,6 +337,9 @@ COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": 
                       "rough_bumpy": {"COMPOSITE_ROUGH": "1", "COMPOSITE_BUMPY": "1"},
                       "water": {"COMPOSITE_WATER": "1"},
                       "water_bumpy": {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}}
+# The variants that read the sky along one reflected ray (no blur): under a generated sky they
+# evaluate it per pixel (MirrorPasses._composite_for).
+SKY_VARIANTS = frozenset(("sharp", "sharp_bumpy", "water", "water_bumpy"))
 
 
 # The fallback's builds (COMPOSITE_FALLBACK, mirror_composite.frag): one for sharp and rough
@@ -385,6 +389,7 @@ class _CompositeDraw:
         self.rows: moderngl.Buffer | None = None     # grown as needed
         self.vao: moderngl.VertexArray | None = None
         self.reloads = 0  # ShaderLibrary.reloads when the format and vertex array were made
+        self.sky_version = -1  # a GENERATED_SKY build's: the Gpu.sky_version its sky uniforms are of
 
     def draw(self, rows: bytes, reloads: int = 0) -> None:
         """Draw ``rows``; ``reloads`` is the shader library's count of rebuilds: after a hot
@@ -548,6 +553,9 @@ class MirrorPasses:
         # The SURFACE_MOTION builds, by the fog's defines and variant, made the first time a
         # moved surface's view is composited.
         self._moving_draws: dict[tuple[tuple, str], _CompositeDraw] = {}
+        # The sharp and water variants' builds that draw a generated sky per pixel (SKY_VARIANTS),
+        # by the fog's defines, the sky's build (sky_draw.sky_build), variant and motion.
+        self._sky_draws: dict[tuple, _CompositeDraw] = {}
         # Each surface that moved since the last frame, by entity: the matrix taking a point
         # where its view shows it now (in the world of the view that sees the surface) to where
         # the surface showed it last frame (last frame's carry^-1 x this one's).  Set a frame
@@ -696,6 +704,26 @@ class MirrorPasses:
         assign_slots(program, _COMPOSITE_UNITS, {"FallbackRows": FALLBACK_BINDING, "Fog": FOG_BINDING})
         return _CompositeDraw(self.ctx, program)
 
+    def _composite_for(self, fogging: tuple, variant: str, moving: bool) -> _CompositeDraw:
+        """The composite build of ``variant`` (``moving``: its SURFACE_MOTION build): a sharp
+        or water mirror's under a generated sky draws the sky per pixel along the reflected
+        ray (its ``sky_build``, the sky pass's function: as sharp as the sky behind the
+        mirror, where the cube map's texels showed a sun or a cloud's edge in blocks), its
+        uniforms written when the sky changed; the others sample the cube map."""
+        sky = sky_build(self.renderer.sky_model) if variant in SKY_VARIANTS else ()
+        if not sky:
+            return self._moving_draw(fogging, variant) if moving else self._variant_draws(fogging)[0][variant]
+        key = (fogging, sky, variant, moving)
+        draw = self._sky_draws.get(key)
+        if draw is None:
+            defines = {**COMPOSITE_VARIANTS[variant], **dict(sky), **({"SURFACE_MOTION": "1"} if moving else {})}
+            draw = self._sky_draws[key] = self._composite_draw(defines, fogging)
+            wire_sky(draw.program)
+        if draw.sky_version != self.renderer.sky_version:
+            write_sky(draw.program, self.renderer.sky_model)
+            draw.sky_version = self.renderer.sky_version
+        return draw
+
     def _moving_draw(self, fogging: tuple, variant: str) -> _CompositeDraw:
         """The ``SURFACE_MOTION`` build of a composite variant, made the first time."""
         draw = self._moving_draws.get((fogging, variant))
@@ -787,6 +815,7 @@ class MirrorPasses:
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
         bind_textures(ctx, ((level.color, _COLOR_UNIT), (level.seen, _SEEN_UNIT), (level.node, _NODE_UNIT),
                             (self.renderer.sky, SKY_UNIT)))
+        bind_sky(self.renderer)   # (a generated sky's table and space, for the SKY_VARIANTS builds)
         if prepared.rough:
             bind_texture(self.ctx, self.rough_atlas.texture, ATLAS_UNIT)
         draws = [(key, rows, None) for key, rows in prepared.rows.items()]
@@ -798,7 +827,7 @@ class MirrorPasses:
                     variant = variant.removesuffix("_bumpy")
                 else:
                     bind_texture(self.ctx, texture, NORMAL_UNIT)
-            draw = self._variant_draws(fogging)[0][variant] if motion is None else self._moving_draw(fogging, variant)
+            draw = self._composite_for(fogging, variant, motion is not None)
             program = draw.program
             uniforms = self.uniforms
             if variant.startswith("rough"):
@@ -986,6 +1015,6 @@ class MirrorPasses:
         for composites, fallbacks in self._draws.values():
             for draw in (*composites.values(), *fallbacks.values()):
                 draw.release()
-        for draw in self._moving_draws.values():
+        for draw in (*self._moving_draws.values(), *self._sky_draws.values()):
             draw.release()
         self.rough_atlas.release()

@@ -15,16 +15,13 @@ from __future__ import annotations
 import moderngl
 
 from engine.render.bindings import (
-    CLOUDS_BINDING,
     SCRATCH_UNIT,
-    SKY_VIEW_UNIT,
-    SPACE_UNIT,
     PassState,
     apply_pass_state,
-    bind_texture,
 )
 from engine.render.gpu import Gpu
 from engine.render.sky import SEAMLESS_CUBE_MAP, SkyModel
+from engine.render.sky_draw import bind_sky, sky_build, wire_sky, write_sky
 from engine.render.targets import release_target
 
 
@@ -48,19 +45,11 @@ class SkyBake:
         cube = ctx.texture_cube((size, size), 4, dtype="f2")
         try:
             target = self._face_target(size)
-            space = model.atmosphere and model.space is not None
-            vao = self._vertex_array(model.atmosphere, space, model.moon, model.clouds is not None)
+            vao = self._vertex_array(sky_build(model))
             program = vao.program
-            if model.clouds is not None:   # (the block: Renderer._set_sky_view wrote it)
-                program["Clouds"].binding = CLOUDS_BINDING
-            if model.atmosphere:
-                program["sky_view"].value = SKY_VIEW_UNIT
-                bind_texture(ctx, self.renderer.sky_view, SKY_VIEW_UNIT)
-            if space:
-                program["sky_space"].value = SPACE_UNIT
-                bind_texture(ctx, self.renderer.sky_space, SPACE_UNIT)
-            for name, value in model.uniforms().items():
-                program[name].value = value
+            wire_sky(program)   # (the clouds' block: Renderer._set_sky_view wrote it)
+            bind_sky(self.renderer)
+            write_sky(program, model)
             program["face_size"].value = float(size)
             for face in range(6):
                 target.use()
@@ -83,10 +72,8 @@ class SkyBake:
             target = self._target = self.ctx.framebuffer([self.ctx.texture((size, size), 4, dtype="f2")])
         return target
 
-    def _vertex_array(self, atmosphere: bool, space: bool, moon: bool, clouds: bool) -> moderngl.VertexArray:
-        defines = {name: "1" for name, on in (("ATMOSPHERE", atmosphere), ("SPACE", space), ("MOON", moon),
-                                              ("CLOUDS", clouds)) if on} or None
-        program = self.renderer.shaders.program("fullscreen.vert", "sky_cube.frag", defines=defines)
+    def _vertex_array(self, build: tuple[tuple[str, str], ...]) -> moderngl.VertexArray:
+        program = self.renderer.shaders.program("fullscreen.vert", "sky_cube.frag", defines=dict(build))
         if self._vao is None or self._vao.program is not program:
             if self._vao is not None:
                 self._vao.release()

@@ -25,6 +25,45 @@ from engine.render.bindings import (
     bind_texture,
 )
 from engine.render.gpu import Gpu
+from engine.render.sky import SkyModel
+
+
+def sky_build(model: SkyModel | None) -> tuple[tuple[str, str], ...]:
+    """The defines of a build that draws ``model`` per pixel (``shaders/include/sky_model.glsl``):
+    ``GENERATED_SKY``, and ``ATMOSPHERE``, ``SPACE``, ``MOON``, ``CLOUDS`` where it has them;
+    none for no generated sky (the build samples the cube map).  The sky pass, the sky's cube
+    map and a sharp mirror's composite build so."""
+    if model is None:
+        return ()
+    return tuple((name, "1") for name, on in (
+        ("GENERATED_SKY", True), ("ATMOSPHERE", model.atmosphere),
+        ("SPACE", model.atmosphere and model.space is not None), ("MOON", model.moon),
+        ("CLOUDS", model.clouds is not None)) if on)
+
+
+def wire_sky(program: moderngl.Program) -> None:
+    """A ``sky_build`` program's samplers and the clouds' block on their units and binding."""
+    if "sky_view" in program:
+        program["sky_view"].value = SKY_VIEW_UNIT
+    if "sky_space" in program:
+        program["sky_space"].value = SPACE_UNIT
+    if "Clouds" in program:
+        program["Clouds"].binding = CLOUDS_BINDING
+
+
+def write_sky(program: moderngl.Program, model: SkyModel) -> None:
+    """``model``'s colours and ways into a ``sky_build`` program."""
+    for name, value in model.uniforms().items():
+        program[name].value = value
+
+
+def bind_sky(renderer: Gpu) -> None:
+    """The textures a ``sky_build`` program of the renderer's sky reads: an atmosphere's
+    sky-view table and its space."""
+    if renderer.sky_view is not None:
+        bind_texture(renderer.ctx, renderer.sky_view, SKY_VIEW_UNIT)
+    if renderer.sky_space is not None:
+        bind_texture(renderer.ctx, renderer.sky_space, SPACE_UNIT)
 
 
 class SkyDraw:
@@ -34,7 +73,7 @@ class SkyDraw:
     def __init__(self, renderer: Gpu) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
-        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, generated, air, space, moon, clouds, fog)
+        self._skies: dict[tuple, moderngl.VertexArray] = {}   # by (layered, sky_build, fog)
         self._sky_written: dict[tuple, int] = {}
 
     def vertex_array(self, layered: bool) -> moderngl.VertexArray:
@@ -45,24 +84,11 @@ class SkyDraw:
         renderer = self.renderer
         model = renderer.sky_model
         fogging = renderer.fog.defines
-        air = model is not None and model.atmosphere
-        space = air and model.space is not None
-        moon = model is not None and model.moon
-        clouds = model is not None and model.clouds is not None
-        key = (layered, model is not None, air, space, moon, clouds, fogging)
+        key = (layered, sky_build(model), fogging)
         vao = self._skies.get(key)
         if vao is None:
             defines = {"LAYERED": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)} if layered else {}
-            if model is not None:
-                defines["GENERATED_SKY"] = "1"
-            if air:
-                defines["ATMOSPHERE"] = "1"
-            if space:
-                defines["SPACE"] = "1"
-            if moon:
-                defines["MOON"] = "1"
-            if clouds:
-                defines["CLOUDS"] = "1"
+            defines.update(sky_build(model))
             defines.update(fogging)
             program = renderer.shaders.program("sky.vert", "sky.frag", "sky_layered.geom" if layered else None,
                                                defines=defines)
@@ -72,25 +98,16 @@ class SkyDraw:
                 program["Camera"].binding = CAMERA_BINDING
             if "Fog" in program:
                 program["Fog"].binding = FOG_BINDING
-            if clouds:
-                program["Clouds"].binding = CLOUDS_BINDING
             if "fog_sky_map" in program:   # (Fog.aerial_perspective: the scene pass binds the sky there)
                 program["fog_sky_map"].value = SKY_UNIT
             if model is None:
                 program["sky_map"].value = SKY_UNIT
-            if air:
-                program["sky_view"].value = SKY_VIEW_UNIT
-            if space:
-                program["sky_space"].value = SPACE_UNIT
+            wire_sky(program)
             vao = self._skies[key] = self.ctx.vertex_array(program, [])
         if model is not None and self._sky_written.get(key) != renderer.sky_version:
-            for name, value in model.uniforms().items():
-                vao.program[name].value = value  # (a shader reload writes them back: ShaderLibrary)
+            write_sky(vao.program, model)   # (a shader reload writes them back: ShaderLibrary)
             self._sky_written[key] = renderer.sky_version
-        if air:
-            bind_texture(self.ctx, renderer.sky_view, SKY_VIEW_UNIT)
-        if space:
-            bind_texture(self.ctx, renderer.sky_space, SPACE_UNIT)
+        bind_sky(renderer)
         return vao
 
     def release(self) -> None:
