@@ -252,7 +252,7 @@ def test_a_sharp_mirror_shows_the_generated_sky_as_the_sky_pass_draws_it(scene):
     """A 10-degree lens on a mirror that throws the eye's rays at the sun: every pixel is the
     sky's function along its reflected ray (the composite evaluates it per pixel, as the sky
     pass does: from the 128-texel cube the disc was a blob of texels), the disc whole."""
-    from components import Material, Mirror, MeshRef
+    from components import Material, MeshRef, Mirror
     from components.transform import yaw_pitch_rotation
     from engine.assets.mesh import quad
 
