@@ -74,8 +74,8 @@ def patch_shaders(change: str) -> Callable[[], None]:
     expanded = library._EXPANDED
     library._EXPANDED = {}
 
-    def patched(name, stack, root, files, *contents):  # contents: the library's last good copies, if any
-        text = expand(name, stack, root, files, *contents)
+    def patched(name, stack, root, files, *contents, **branches):  # the library's last good copies, if any
+        text = expand(name, stack, root, files, *contents, **branches)
         return text.replace(old, new) if name.startswith("include/") else text
     library._expand = patched
 

@@ -45,6 +45,65 @@ def test_includes_resolve_in_place_and_nested(ctx, tmp_path):
     build(ctx, root)  # compiles: every function arrived before its use
 
 
+BRANCHED = """#version 410 core
+#ifdef A
+#include "a.glsl"
+#elif B_EXPRESSION
+#include "b.glsl"
+#else
+#include "c.glsl"
+#endif
+#ifndef A
+#define LOCAL
+#endif
+#ifdef LOCAL
+#include "local.glsl"
+#endif
+#if defined(A) && defined(Z)
+#include "expression.glsl"
+#endif
+#ifdef A
+#ifdef Z
+#include "nested.glsl"
+#endif
+#else
+#include "not_a.glsl"
+#endif
+out vec4 c;
+void main() { c = vec4(value()); }
+"""
+
+
+@pytest.mark.parametrize("defines, expected", [
+    ({}, {"c", "local", "expression", "not_a"}),
+    ({"A": "1"}, {"a", "expression"}),
+    ({"A": "1", "Z": "1"}, {"a", "expression", "nested"}),
+])
+def test_an_include_in_a_branch_the_build_leaves_out_is_not_one_of_its_files(ctx, tmp_path, defines, expected):
+    """An ``#include`` in an ``#ifdef`` branch the build's defines leave out is not expanded (its
+    file is none of the program's: an edit to it rebuilds nothing); one behind an ``#if``
+    expression (or an ``#elif``, unknown) is, as the driver may keep it.  The numbering still
+    names the right line: each build compiles, and an error after the branches is placed."""
+    root = write(tmp_path, {"main.frag": BRANCHED, "main.vert": VERTEX, **{
+        f"include/{name}.glsl": "#ifndef VALUE\n#define VALUE\nfloat value() { return 1.0; }\n#endif\n"
+        for name in ("a", "b", "c", "local", "expression", "nested", "not_a")}})
+    files = SourceFiles()
+    text = load_source("main.frag", defines, root=root, files=files)
+    assert {Path(name).stem for name in files.names[2:]} == expected | ({"b"} if "A" not in defines else set())
+    assert files.names[:2] == ["(generated defines)", "main.frag"]
+    assert "#include" not in text
+    library = ShaderLibrary(ctx, root)
+    try:
+        library.program("main.vert", "main.frag", None, defines)
+        (root / "main.frag").write_text(BRANCHED + "float broken = undeclared_name;\n")
+        fresh = ShaderLibrary(ctx, root)  # (no cached program)
+        with pytest.raises(ShaderBuildError, match=f"main.frag:{BRANCHED.count(chr(10)) + 1}:"):
+            fresh.program("main.vert", "main.frag", None, defines)
+        fresh.release()
+    finally:
+        library.release()
+
+
 def test_an_include_cycle_is_named(tmp_path):
     root = write(tmp_path, {
         "main.frag": '#version 410 core\n#include "a.glsl"\n',

@@ -88,6 +88,8 @@ from engine.rules import lens_rules, shadow_rules, visibility_rules
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _BRANCH = re.compile(r"^\s*#\s*(else|elif|endif)\b")  # after these the line numbering is resumed
+_CONDITION = re.compile(r"^\s*#\s*(ifdef|ifndef|if|elif|else|endif)\b\s*(\w*)")
+_DEFINITION = re.compile(r"^\s*#\s*(define|undef)\s+(\w+)")
 POLL_INTERVAL = 0.5  # seconds between two looks at the shader files (hot reload)
 _VERSION = "#version 410 core"
 HEADER = "(generated defines)"
@@ -258,11 +260,11 @@ def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path 
     bytes to use instead of a file's own (a library's last good copies)."""
     root = root or shader_dir()
     files = files if files is not None else SourceFiles()
-    text = _expand(name, (), root, files, contents or {})
+    all_defines = {**engine_defines(), **(defines or {})}
+    text = _expand(name, (), root, files, contents or {}, branches=_Branches(set(all_defines)))
     first, _, rest = text.partition("\n")
     if first.strip() != _VERSION:
         raise ShaderError(f"shader {name!r}: must start with '{_VERSION}' (the 4.1 baseline)")
-    all_defines = {**engine_defines(), **(defines or {})}
     header = "".join(f"#define {k} {v}\n" for k, v in all_defines.items())
     return f"{first}\n#line 1\n{header}{_line(2, files.number(name))}\n{rest}"
 
@@ -308,8 +310,60 @@ def _line(line: int, number: int) -> str:
     return f"#line {number * LINE_STRIDE + line}"
 
 
+class _Branches:
+    """Which ``#ifdef`` branches a build keeps, as far as the names it defines tell, so that an
+    ``#include`` in a branch the build leaves out is not expanded: the file is not one of the
+    program's (its edits rebuild nothing, a compile error cannot be in it).  A branch is kept
+    (True), left out (False) or unknown (None: an ``#if`` expression, or a name defined in an
+    unknown branch); an unknown branch's includes are expanded, as the preprocessor may keep
+    them.  ``#define`` and ``#undef`` in kept branches are followed, across included files."""
+
+    def __init__(self, defined: set[str]) -> None:
+        self.defined = defined
+        self.unsure: set[str] = set()
+        self.open: list[list] = []  # per open #if: [this branch kept?, a branch taken, a branch unknown]
+
+    def kept(self) -> bool | None:
+        states = [entry[0] for entry in self.open]
+        return False if False in states else None if None in states else True
+
+    def read(self, line: str) -> None:
+        """Follow one line of source (a directive changes the state; other lines do not)."""
+        match = _CONDITION.match(line)
+        if match is not None:
+            self._condition(match.group(1), match.group(2))
+            return
+        match = _DEFINITION.match(line)
+        kept = self.kept()
+        if match is None or kept is False:
+            return
+        if kept is None:
+            self.unsure.add(match.group(2))
+        elif match.group(1) == "define":
+            self.defined.add(match.group(2))
+        else:
+            self.defined.discard(match.group(2))
+
+    def _condition(self, directive: str, name: str) -> None:
+        if directive in ("ifdef", "ifndef", "if"):
+            state = None if directive == "if" or name in self.unsure else (name in self.defined) == (directive == "ifdef")
+            self.open.append([state, state is True, state is None])
+        elif not self.open:
+            return  # an unbalanced #else or #endif: the driver says so
+        elif directive == "endif":
+            self.open.pop()
+        else:
+            entry = self.open[-1]
+            if directive == "elif":
+                entry[0] = False if entry[1] else None
+            else:
+                entry[0] = False if entry[1] else None if entry[2] or entry[0] is None else not entry[0]
+            entry[2] = entry[2] or entry[0] is None
+
+
 def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
-            contents: dict[str, bytes] | None = None) -> str:
+            contents: dict[str, bytes] | None = None, *, branches: _Branches | None = None) -> str:
+    branches = branches if branches is not None else _Branches(set())
     if name in stack:
         raise ShaderError(f"shader include cycle: {' -> '.join(stack + (name,))}")
     where = f" (included from {stack[-1]!r})" if stack else ""
@@ -328,12 +382,16 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
         match = _INCLUDE.match(line)
         if match is None:
             out.append(line)
+            branches.read(line)
             if _BRANCH.match(line):
                 out.append(_line(index + 1, number))
             continue
+        if branches.kept() is False:
+            out.append(f"// ({match.group(1)}: in a branch this build leaves out)")  # (moderngl reads any "#include")
+            continue
         included = f"include/{match.group(1)}"
         out.append(_line(1, files.number(included)))
-        out.append(_expand(included, stack + (name,), root, files, contents))
+        out.append(_expand(included, stack + (name,), root, files, contents, branches=branches))
         out.append(_line(index + 1, number))
     return "\n".join(out)
 
