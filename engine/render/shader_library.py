@@ -346,7 +346,8 @@ class _Branches:
 
     def _condition(self, directive: str, name: str) -> None:
         if directive in ("ifdef", "ifndef", "if"):
-            state = None if directive == "if" or name in self.unsure else (name in self.defined) == (directive == "ifdef")
+            unknown = directive == "if" or name in self.unsure
+            state = None if unknown else (name in self.defined) == (directive == "ifdef")
             self.open.append([state, state is True, state is None])
         elif not self.open:
             return  # an unbalanced #else or #endif: the driver says so
