@@ -6,7 +6,8 @@
 //   density(x) x exp(-fog_depth(origin, x)) x shadow(x) x step
 // (the air's density, what reaches the eye of what it scatters there, whether the sun reaches
 // it: its shadow map and cascades, read with one bilinear comparison, SHADOW_SINGLE_TAP, as
-// the steps' offsets and the filter soften the shafts' edges as a wider filter would), times
+// the steps' offsets and the filter soften the shafts' edges as a wider filter would, and
+// under CLOUD_SHADOWS the share a CloudLayer's cloud on the way lets through), times
 // the sun's light (colour x intensity), the Henyey-Greenstein phase function of the angle
 // between the sun's light and the ray, and VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
 // ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
@@ -18,6 +19,9 @@
 #include "shadows.glsl"
 #include "fog.glsl"
 #include "volumetric_ray.glsl"
+#ifdef CLOUD_SHADOWS  // a CloudLayer's shadows: the sun's light at each point through the cloud on its way
+#include "clouds.glsl"
+#endif
 #ifdef LEVEL_VIEWS  // a mirror or portal level's: drawn once a view, over its own pixels only
 #include "level_nodes.glsl"
 uniform uint node;  // the view's node (its pixels' value in the level's node image)
@@ -99,6 +103,9 @@ void main() {
         bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
         lit = held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0;
         at += at_step;
+#endif
+#ifdef CLOUD_SHADOWS
+        lit *= cloud_shadow(x, towards);
 #endif
         sum += density * seen * lit;
 #if VOLUMETRIC_LAMPS > 0

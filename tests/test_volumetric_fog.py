@@ -15,6 +15,7 @@ import pytest
 from pyglm import glm
 
 from components import (
+    CloudLayer,
     ComponentValueError,
     ComponentWarning,
     DirectionalLight,
@@ -35,6 +36,7 @@ from engine.assets.mesh import box, plane, quad
 from engine.assets.texture_data import TextureData
 from engine.core.errors import LightLimitWarning, NoCameraWarning
 from engine.core.world import World
+from engine.render.clouds import cloud_shadow, cloud_shape
 from engine.resources import VolumetricLamps
 from engine.rules.light_rules import ALL_ROUND, spot_cone, spot_factor
 from shell.overlay_text import post_lines
@@ -55,9 +57,9 @@ MIRROR = ((0.5, 2.2, -6.8), (9.0, 4.0, 1e-4))   # a mirror on the wall (its quad
 
 
 def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, sun: bool = True,
-          shadows: bool = True, cascades: int = 1, mirror: bool = False) -> int:
+          shadows: bool = True, cascades: int = 1, mirror: bool = False, clouds: CloudLayer | None = None) -> int:
     camera = look_from(world, EYE, TARGET, fov=70.0)
-    world.spawn(Skybox())
+    world.spawn(Skybox(), *([clouds] if clouds is not None else []))
     if sun:
         world.spawn(DirectionalLight(direction=tuple(SUN), intensity=SUN_LIGHT, shadows=shadows,
                                      shadow_cascades=cascades))
@@ -117,19 +119,21 @@ def _rays(runner, ratio: int, distance: float, every: int = 1,
     return origin, way, reach.reshape(xs.shape)
 
 
-def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = True,
-                  every: int = 1, mirror: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = True, every: int = 1,
+                  mirror: bool = False, clouds: CloudLayer | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each march texel's light (the sun's colour is white: one channel) and its ray's
     length, as the module's docstring says (``shade`` False: no point is in shadow; ``every``
-    as ``_rays``)."""
+    as ``_rays``; ``clouds``: each point's light through them, their twin's)."""
     origin, way, reach_grid = _rays(runner, ratio, settings.distance, every, mirror)
-    return _light(origin, way, reach_grid.reshape(-1), settings, shade).reshape(reach_grid.shape), reach_grid
+    light = _light(origin, way, reach_grid.reshape(-1), settings, shade, clouds)
+    return light.reshape(reach_grid.shape), reach_grid
 
 
 def _light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
-           shade: bool = True) -> np.ndarray:
+           shade: bool = True, clouds: CloudLayer | None = None) -> np.ndarray:
     """The sun's light the air sends back along each ray (``origin`` + t ``way``, t up to
-    ``reach``), summed at 1,000 points (``shade`` False: no point in shadow)."""
+    ``reach``), summed at 1,000 points (``shade`` False: no point in shadow; ``clouds``: each
+    point's share of the sun through them, ``engine/render/clouds.py``'s ``cloud_shadow``)."""
     points = 1000
     t = (np.arange(points) + 0.5) / points
     light_way = -np.array(tuple(SUN))
@@ -142,7 +146,8 @@ def _light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: Vol
         blocked = np.isfinite(_hits(flat, np.broadcast_to(light_way, flat.shape), ROOF)).reshape(along.shape)
         blocked &= shade
         seen = np.exp(-DENSITY * along)
-        total[part] = (DENSITY * seen * ~blocked).sum(1) * reach[part] / points
+        through = 1.0 if clouds is None else cloud_shadow(cloud_shape(clouds), at, light_way)
+        total[part] = (DENSITY * seen * ~blocked * through).sum(1) * reach[part] / points
     g = settings.anisotropy
     c = way @ light_way
     phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
@@ -186,6 +191,28 @@ def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows, mi
     assert np.quantile(error, 0.9) < 0.07
     if shadows:  # the shaft is there: the rays through the gap's light far above the rest
         assert truth.max() > 3 * np.median(truth[lit])
+
+
+def test_a_cloud_layers_shadows_dim_the_shafts_as_their_twin_says(scene):
+    """Clouds 20 m across 20 m over the hall: each point of a ray gets the sun's light the
+    cloud on its way lets through (the twin's exp(-depth)) as well as the roof's shadow; the
+    march agrees with the truth so summed (as the test above), and the clouds take a good
+    share of the light away where they stand (the shafts are not the clear sky's)."""
+    settings = VolumetricFog(steps=64)
+    clouds = CloudLayer(coverage=0.5, scale=20.0, height=20.0, wind=(0.0, 0.0))
+    runner = scene(lambda world: _hall(world, settings, clouds=clouds), SIZE)
+    runner.frame()
+    marched = _marched(runner)
+    truth, reach = _ground_truth(runner, settings, 2, clouds=clouds)
+    clear, _ = _ground_truth(runner, settings, 2)
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    lit = steady & (truth > 0.02 * truth.max())
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert lit.sum() > 0.3 * truth.size
+    assert np.median(error) < 0.025
+    assert np.quantile(error, 0.9) < 0.07
+    share = truth[lit] / clear[lit]
+    assert share.min() < 0.3 and share.max() > 0.7   # rays under the clouds' shadows and through their gaps
 
 
 def _linear(runner) -> np.ndarray:

@@ -12,7 +12,8 @@ put in, before its glass (``ScenePass.finish_root``):
    component's ``distance`` on) sums, at ``steps`` points, the fog's density there, what of
    the light scattered there reaches the eye (the fog's own transmittance,
    ``shaders/include/fog.glsl``) and whether the sun reaches the point (its shadow map, read
-   as the scene pass reads it: ``shaders/include/shadows.glsl``), then scales the sum by the
+   as the scene pass reads it: ``shaders/include/shadows.glsl``; and a ``CloudLayer``'s
+   share, ``shaders/include/clouds.glsl``'s ``cloud_shadow``), then scales the sum by the
    sun's light, the Henyey-Greenstein phase function and ``intensity``; and at each point the
    light of each lamp the prepare stage lists (``VolumetricLamps``: ``PointLight.volumetric``),
    its falloff, cone, cookie and shadow, by the phase function of its own angle.  Each texel's points
@@ -57,6 +58,7 @@ from components.fog import VolumetricFog
 from components.limits import MAX_VOLUMETRIC_LAMPS
 from engine.render.bindings import (
     BLEND_ADD,
+    CLOUDS_BINDING,
     COOKIE_UNIT,
     FOG_BINDING,
     LIGHTS_BINDING,
@@ -263,7 +265,7 @@ class VolumetricFogPass:
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
-        extra = (self.shadows.program_defines, self.gpu.fog.defines,
+        extra = (self.shadows.program_defines, self.gpu.fog.defines, self.gpu.clouds.shadow_defines,
                  self.gpu.spot_cookies.defines if lamps else ()) if steps else ()
         key = (shader, steps, extra, level_views, lamps)
         vao = self._programs.get(key)
@@ -280,7 +282,8 @@ class VolumetricFogPass:
                                    "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
                                    "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
                                    "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT},
-                         {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING})
+                         {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING,
+                          "Clouds": CLOUDS_BINDING})
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
 
