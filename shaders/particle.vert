@@ -9,6 +9,9 @@
 #include "shadows.glsl"
 #include "ambient.glsl"
 #endif
+#ifdef CLOUD_SHADOWS
+#include "clouds.glsl"
+#endif
 #include "virtual_light_ways.glsl"
 
 in vec3 in_center;   // world
@@ -77,7 +80,11 @@ vec3 sheet_light(vec3 p, vec3 n) {
     vec4 sun_back = directional_shadows(p, -n);
     for (int i = 0; i < lights.counts.x; ++i) {
         float nl = dot(n, -lights.directional_dir[i].xyz);
-        e += lights.directional_color[i].rgb
+        float clouded = 1.0;   // a CloudLayer's shadow on the sun's and the moons' light (lights.glsl's w)
+#ifdef CLOUD_SHADOWS
+        if (lights.directional_dir[i].w != 0.0) clouded = cloud_shadow(p, -lights.directional_dir[i].xyz);
+#endif
+        e += lights.directional_color[i].rgb * clouded
              * (max(nl, 0.0) * front * sun_front[i] + max(-nl, 0.0) * translucency * sun_back[i]);
     }
     vec4 lamp_front = point_shadows(p, n);

@@ -598,16 +598,16 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
 #ifdef SCREEN_OCCLUSION
     // The camera's contact shadows dim the sun's light (its slot's w: lights.glsl).
-    vec4 sun_slots = vec4(lights.directional_dir[0].w, lights.directional_dir[1].w, lights.directional_dir[2].w,
-                          lights.directional_dir[3].w);
+    vec4 sun_slots = max(vec4(lights.directional_dir[0].w, lights.directional_dir[1].w, lights.directional_dir[2].w,
+                              lights.directional_dir[3].w), 0.0);
     directional_lit *= mix(vec4(1.0), vec4(s.sun_contact), sun_slots);
 #endif
 #ifdef CLOUD_SHADOWS
-    // A CloudLayer's shadows on the sun's light (its slot's w; clouds.glsl), on every surface
-    // (a cloud's shadow is no shadow map's: receives_shadows does not turn it off).
+    // A CloudLayer's shadows on the sun's and the moons' light (their slots' w, not 0; clouds.glsl),
+    // on every surface (a cloud's shadow is no shadow map's: receives_shadows does not turn it off).
     vec4 sun_clouds = vec4(1.0);
     for (int i = 0; i < lights.counts.x; ++i) {
-        if (lights.directional_dir[i].w > 0.5) sun_clouds[i] = cloud_shadow(s.position, -lights.directional_dir[i].xyz);
+        if (lights.directional_dir[i].w != 0.0) sun_clouds[i] = cloud_shadow(s.position, -lights.directional_dir[i].xyz);
     }
     directional_lit *= sun_clouds;
 #define CLOUDED(i) * sun_clouds[i]
@@ -636,7 +636,7 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
             vec3 under_at = subsurface_shadow_point(s.position, s.geometric_normal, l, under_normal);
             under = directional_shadow(i, under_at, under_normal, l) CLOUDED(i);
 #ifdef SCREEN_OCCLUSION
-            under *= mix(1.0, s.sun_contact, lights.directional_dir[i].w);
+            under *= mix(1.0, s.sun_contact, max(lights.directional_dir[i].w, 0.0));
 #endif
         }
         total += diffuse * subsurface_diffuse(dot(s.normal, l), directional_lit[i] PARALLAX_LIT(l),

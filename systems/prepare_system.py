@@ -307,7 +307,9 @@ class PrepareSystem(esper.Processor):
             colour = light.color.xyz * light.intensity
             if air_tinted(light, sun):   # (the sun and the moons: an atmosphere's air reddens them)
                 colour = colour * glm.vec3(*self._air_tint(light))
-            directional.append((light.direction, colour, float(light is sun)))
+            # (marked: 1 the sun, -1 a moon, 0 a fill light: the lights a CloudLayer shades, lights.glsl)
+            mark = 1.0 if light is sun else -1.0 if air_tinted(light, sun) else 0.0
+            directional.append((light.direction, colour, mark))
         point, contact, cut = [], [], 0
         rect_slots: list[int] = []   # the rectangles lit as rectangles: the first MAX_RECT_LIGHTS by slot
         rect_cut = 0

@@ -28,6 +28,7 @@ frame, so the probes' scheduler can recapture a face where a moved caster's shad
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import esper
 import numpy as np
@@ -50,6 +51,7 @@ from components.tracking import raw_field
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
+from engine.render.clouds import cloud_shadow
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
 from engine.render.sky import sunlight_tint
@@ -468,6 +470,10 @@ class ShadowSystem(esper.Processor):
                 stats.shadow_maps_drawn += 1
             else:
                 stats.shadow_maps_kept += 1
+            through = _through_clouds_at(light, world, renderer, surfaces)
+            if through != 1.0:
+                light = replace(light, color=tuple(c * through for c in light.color))
+            maps.set_virtual_color(slot, light.color, light.light_range)
             shining.append(light)
             drawn += 1
         for slot in [s for s in self._virtual if s >= drawn]:
@@ -475,6 +481,23 @@ class ShadowSystem(esper.Processor):
         stats.virtual_lights = drawn
         maps.set_virtual_count(drawn)  # the scene pass builds the virtual lights' loop while any shine
         return shining
+
+
+def _through_clouds_at(light: VirtualLight, world: World, renderer: Renderer, surfaces: Surfaces | None) -> float:
+    """The share of a directional ``light``'s light a CloudLayer lets reach the first mirror or
+    portal on its way (``cloud_shadow`` at that surface's middle, towards the light): 1 for a
+    lamp's image, a fill light's (only the sun and the moons are under the clouds:
+    ``air_tinted``) and without clouds that shade.  One share a light (taken at one point: a
+    mirror is small beside a cloud)."""
+    shape = renderer.clouds.shape
+    if shape is None or not shape.shadows or light.kind != "directional" or surfaces is None:
+        return 1.0
+    real = world.try_get(light.light, DirectionalLight)
+    first = surfaces.mirrors.get(light.path[0]) or surfaces.portals.get(light.path[0]) if light.path else None
+    if real is None or first is None or first.outline is None or not air_tinted(real, brightest_directional(world)):
+        return 1.0
+    middle = np.asarray(first.outline, np.float64).reshape(-1, np.shape(first.outline)[-1])[:, :3].mean(axis=0)
+    return float(cloud_shadow(shape, middle, -np.array(tuple(real.direction), np.float64)))
 
 
 def _with_image(lo: np.ndarray, hi: np.ndarray, carry, level_lo: np.ndarray,

@@ -201,18 +201,22 @@ def test_the_cube_map_and_the_skys_light_take_the_clouds(scene):
 # -- shadows ------------------------------------------------------------------------------------
 
 SHADOW_SUN = glm.normalize(glm.vec3(-0.3, -0.85, 0.2))   # the way the light travels
+FILL = glm.normalize(glm.vec3(0.5, -0.7, -0.3))
 
 
-def _floor_frame(scene, layer: CloudLayer, intensity: float = 3.0):
-    """A 70-degree lens straight down on a grey floor from 30 m, lit by a sun along
-    ``SHADOW_SUN`` (the sky's sun pinned elsewhere: its light and sky stay the same)."""
+def _floor_frame(scene, layer: CloudLayer, intensity: float = 3.0, body: str = "sun", fill: float = 0.0):
+    """A 70-degree lens straight down on a grey floor from 30 m, lit by a sun (or a moon:
+    ``body``) along ``SHADOW_SUN`` (the sky's sun pinned elsewhere: its light and sky stay
+    the same); ``fill``: a dimmer light of the sun's body along ``FILL`` too (a fill light)."""
 
     def build(world):
         world.spawn(Transform(position=(5.0, 30.0, -3.0), rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0),
                                                                                    glm.vec3(0.0, 0.0, -1.0))),
                     Camera(fov_y=70.0, near=0.5, far=200.0))
         world.spawn(Skybox(**SKY), layer)
-        world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=intensity, shadows=False))
+        world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=intensity, shadows=False, body=body))
+        if fill:
+            world.spawn(DirectionalLight(direction=tuple(FILL), intensity=fill, shadows=False))
         world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
 
     runner = scene(build, SIZE)
@@ -236,6 +240,69 @@ def test_clouds_shade_the_suns_light_as_the_twin_says(scene):
     want = cloud_shadow(cloud_shape(_still(**values)), points, -np.array(SHADOW_SUN, np.float64))
     assert np.abs(share - want).max() < 0.02
     assert (want < 0.05).mean() > 0.1 and (want > 0.95).mean() > 0.1
+
+
+def test_clouds_shade_a_moons_light_and_leave_a_fill_lights(scene):
+    """A moon (``DirectionalLight.body`` "moon") alone: its share of each floor pixel's light is
+    the twin's along its way, as the sun's is.  A fill light (a second, dimmer light of the
+    sun's body: not the sky's sun, not reddened by the air either) is not under the clouds:
+    its light (the frame with it less the frame without) is the same with and without the
+    clouds' shadows."""
+    values = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))
+    shaded, points = _floor_frame(scene, _still(**values), body="moon")
+    lit, _ = _floor_frame(scene, _still(**values, shadows=False), body="moon")
+    dark, _ = _floor_frame(scene, _still(**values), intensity=0.0, body="moon")
+    share = (shaded - dark)[..., 1] / (lit - dark)[..., 1]
+    want = cloud_shadow(cloud_shape(_still(**values)), points, -np.array(SHADOW_SUN, np.float64))
+    assert np.abs(share - want).max() < 0.02
+    assert (want < 0.05).mean() > 0.1
+    fill = {}
+    for shadows in (True, False):
+        with_fill, _ = _floor_frame(scene, _still(**values, shadows=shadows), fill=1.0)
+        without, _ = _floor_frame(scene, _still(**values, shadows=shadows))
+        fill[shadows] = (with_fill - without)[..., 1]
+    assert fill[False].min() > 0.02
+    assert np.abs(fill[True] / fill[False] - 1.0).max() < 0.02
+
+
+SKY_BODY_SUN = glm.normalize(glm.vec3(0.0, -0.35, -1.0))   # low, from +Z, towards the mirror at -Z
+MIRROR_MIDDLE = (0.0, 1.5, -1.0)
+
+
+def test_the_light_a_mirror_throws_is_shaded_by_the_cloud_over_the_mirror(scene):
+    """A mirror throwing a low sun back onto the floor under clouds 5 km across: the thrown
+    light (the floor with the mirror throwing less without) with the clouds' shadows over
+    the same without is the twin's share at the mirror's middle towards the sun (the light
+    reaches the floor by way of the mirror: the cloud between the mirror and the sun shades
+    it, not the one over the floor)."""
+    from components import Mirror
+    from engine.assets.mesh import quad
+
+    values = dict(coverage=0.6, scale=5000.0, height=1500.0, drift=(7844.0, 0.0))
+    thrown = {}
+    for shadows in (True, False):
+        frames = []
+        for throws in (True, False):
+            def build(world, shadows=shadows, throws=throws):
+                world.spawn(Transform(position=(0.0, 7.0, 2.0), rotation=look_rotation(glm.vec3(0.0, -1.0, -0.001))),
+                            Camera(fov_y=60.0, near=0.1, far=100.0))
+                world.spawn(Skybox(**SKY), _still(**values, shadows=shadows))
+                world.spawn(DirectionalLight(direction=tuple(SKY_BODY_SUN), intensity=3.0, shadows=True))
+                world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+                world.spawn(Transform(position=MIRROR_MIDDLE), MeshRef(quad(6.0, 3.0)), Material(),
+                            Mirror(reflects_light=throws))
+
+            runner = scene(build, SIZE)
+            runner.engine.renderer.antialias = "off"
+            runner.frame()
+            frames.append(_read(runner)[0])
+        thrown[shadows] = frames[0] - frames[1]
+    patch = thrown[False].sum(axis=-1) > 0.1
+    assert patch.sum() > 200
+    want = float(cloud_shadow(cloud_shape(_still(**values)), np.array(MIRROR_MIDDLE, np.float64),
+                              -np.array(SKY_BODY_SUN, np.float64)))
+    assert 0.15 < want < 0.7
+    np.testing.assert_allclose(thrown[True][patch].mean(axis=0) / thrown[False][patch].mean(axis=0), want, rtol=0.02)
 
 
 # -- the wind -----------------------------------------------------------------------------------

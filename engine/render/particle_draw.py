@@ -46,6 +46,7 @@ from engine.render.bindings import (
     BLEND_PREMULTIPLIED,
     CAMERA_BINDING,
     CLIP_VIEW_PLANE,
+    CLOUDS_BINDING,
     COOKIE_UNIT,
     FOG_BINDING,
     IRRADIANCE_BINDING,
@@ -345,7 +346,8 @@ class ParticleDraw:
         fog = () if reactive else self.gpu.fog.defines
         ambient = self.gpu.ambient_defines if lit and ambient_probes else ()  # the boxes', a volume's light
         cookies = self.gpu.spot_cookies.defines if lit else ()   # the lamps' cookies and panels' pictures
-        key = (sprite, lit, masked, ambient, soft, shadowing, fog, ribbon, virtual, reactive, cookies)
+        clouds = self.gpu.clouds.shadow_defines if lit else ()   # a CloudLayer's shadows on the sun and moons
+        key = (sprite, lit, masked, ambient, soft, shadowing, fog, ribbon, virtual, reactive, cookies, clouds)
         program = self._programs.get(key)
         if program is None:
             defines = dict(fog)
@@ -364,13 +366,14 @@ class ParticleDraw:
                 defines.update(shadowing)
                 defines.update(ambient)
                 defines.update(cookies)
+                defines.update(clouds)
                 if virtual:
                     defines["VIRTUAL_LIGHTS"] = "1"
             program = self.gpu.shaders.program("particle.vert", "particle.frag", defines=defines)
             program["Camera"].binding = CAMERA_BINDING
             for block, binding in (("Lights", LIGHTS_BINDING), ("Shadows", SHADOWS_BINDING),
                                    ("Irradiance", IRRADIANCE_BINDING), ("Fog", FOG_BINDING),
-                                   ("VirtualLights", VIRTUAL_LIGHTS_BINDING)):
+                                   ("VirtualLights", VIRTUAL_LIGHTS_BINDING), ("Clouds", CLOUDS_BINDING)):
                 if block in program:
                     program[block].binding = binding
             for name, unit in (("sprite_map", PARTICLE_UNIT), ("node_map", NODE_UNIT),

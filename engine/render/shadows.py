@@ -496,6 +496,12 @@ class ShadowMaps:
                                  *_over_length(aperture.v), 0.0)
         self.renderer.checkpoint(f"shadow map of virtual light {slot}")
 
+    def set_virtual_color(self, slot: int, color: tuple[float, float, float], light_range: float) -> None:
+        """Virtual light ``slot``'s colour row (what reaches its first surface changed, its map
+        not: a CloudLayer's shadow drifting over a mirror the sun lights)."""
+        at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (VIRTUAL_FIELDS.index("color") * MAX_VIRTUAL_LIGHTS + slot)
+        self.virtual_block[at:at + 4] = (*color, light_range)
+
     def set_virtual_count(self, count: int) -> None:
         """How many virtual lights shine (slots 0 to count - 1).  ``virtual_shining`` follows
         it: the scene pass builds its programs with the virtual lights' loop only while one

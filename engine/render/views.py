@@ -260,8 +260,9 @@ def lights_block(sky_sh: Sequence[Sequence[float]] | np.ndarray, directional: li
                  rect_slots: Sequence[int] = ()) -> bytes:
     """Pack the Lights block (shaders/include/lights.glsl, std140): ``sky_sh`` the sky's nine
     irradiance coefficients (9, 3) (``engine.render.irradiance``), directional =
-    [(direction, rgb[, sun])] (``sun``: 1 for the brightest, whose light contact shadows dim;
-    0 when left out), point = [(position, range, rgb, cone[, cookie[, radius[, contact[, rectangle]]]])]
+    [(direction, rgb[, sun])] (``sun``: 1 for the brightest, whose light contact shadows dim,
+    -1 for a moon, 0 for a fill light and when left out; a CloudLayer shades the first two),
+    point = [(position, range, rgb, cone[, cookie[, radius[, contact[, rectangle]]]])]
     (``cone``: the spot cone, ``light_rules.spot_cone``; ``ALL_ROUND`` for a point light;
     ``cookie``: its two cookie rows, ``light_rules.lamp_cookie``, ``NO_COOKIE`` when left out;
     ``radius``: its sphere's, ``PointLight.radius``, 0 when left out; ``contact``: its contact

@@ -6,7 +6,8 @@ layout(std140) uniform Lights {
     ivec4 counts;                                   // x: directional, y: point; z: 1 where the sky cube is a flat
                                                     // background; w: 1 where materials reflect the light from all round
     vec4 directional_dir[MAX_DIRECTIONAL_LIGHTS];   // xyz: direction the light travels; w: 1 for the sun (the
-                                                    // brightest, which contact shadows dim), else 0
+                                                    // brightest, which contact shadows dim), -1 for a moon, 0 for
+                                                    // a fill light (a CloudLayer shades the sun and moons: w != 0)
     vec4 directional_color[MAX_DIRECTIONAL_LIGHTS]; // rgb: colour x intensity
     vec4 point_pos[MAX_POINT_LIGHTS];               // xyz: position, w: range
     vec4 point_color[MAX_POINT_LIGHTS];             // rgb: colour x intensity, w: its sphere's radius (0: a point)
