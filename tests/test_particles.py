@@ -23,6 +23,7 @@ from components import (
     Mirror,
     ParticleEmitter,
     PointLight,
+    Skybox,
     Transform,
     Visibility,
     look_rotation,
@@ -223,15 +224,18 @@ ALBEDO = (0.6, 0.5, 0.4)
 
 
 def lit_scene(particle: bool, sun: glm.vec3, lamp: bool = False, blocker: bool = False, sun_on: bool = True,
-              image: str | None = None):
+              image: str | None = None, clouds=None):
     """A 1 m lit particle facing the camera (a solid sprite: alpha 1 all over), or in its place
     a quad of the same albedo letting the same share of light through (diffuse transmission,
     its transmission's colour the albedo), lit by a sun (or a lamp the way the sun comes from)
     and a hemisphere; ``blocker``: a box in the sun's way; ``image``: the lamp with an amber
     cookie wrapped about it ("cookie"), a panel facing the particle with an amber picture
-    ("picture"), one colour all over, or the same panel amber itself ("amber panel")."""
+    ("picture"), one colour all over, or the same panel amber itself ("amber panel"); ``clouds``:
+    a CloudLayer over a gradient sky."""
     def build(world):
         look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        if clouds is not None:
+            world.spawn(Skybox(sun_direction=(0.0, 1.0, 0.0)), clouds)   # (pinned: the same sky, sun on or off)
         world.spawn(HemisphereLight(sky=(0.3, 0.35, 0.5), ground=(0.2, 0.15, 0.1), intensity=1.0))
         if lamp:
             amber = TextureData(np.full((4, 4, 4), (255, 140, 30, 255), np.uint8), name="amber")
@@ -315,6 +319,32 @@ def test_a_lit_particle_is_lit_through_a_mirror_as_a_thin_sheet_is(scene, reflec
         _, without = render(scene, through_a_mirror(True, False))
         assert particle[middle].mean() > without[middle].mean() + 0.05, (particle[middle].mean(),
                                                                          without[middle].mean())
+
+
+def test_a_lit_particle_under_a_clouds_shadow_gets_the_suns_share_the_twin_says(scene):
+    """Clouds 5 km across over a low sun: the particle's sunlight (the frame less the sunless
+    one) with the clouds' shadows over the same without is the twin's share at its centre
+    (about a half here), and it is lit as the thin sheet is under them (the scene's path)."""
+    from components import CloudLayer
+    from engine.render.clouds import cloud_shadow, cloud_shape
+
+    sun = glm.normalize(glm.vec3(0.4, -0.3, -1.0))
+    values = dict(coverage=0.6, scale=5000.0, height=1500.0, wind=(0.0, 0.0), drift=(5371.0, 0.0))
+    middle = (slice(34, 38), slice(46, 50))
+    light = {}
+    for shadows in (True, False):
+        clouds = CloudLayer(**values, shadows=shadows)
+        _, lit = render(scene, lit_scene(True, sun, clouds=clouds))
+        _, dark = render(scene, lit_scene(True, sun, sun_on=False, clouds=clouds))
+        light[shadows] = (lit - dark)[middle].mean(axis=(0, 1))
+        if shadows:
+            _, sheet = render(scene, lit_scene(False, sun, clouds=clouds))
+            np.testing.assert_allclose(lit[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
+                                       atol=0.004)
+    want = float(cloud_shadow(cloud_shape(CloudLayer(**values)), np.zeros(3), -np.array(tuple(sun), np.float64)))
+    assert 0.3 < want < 0.7
+    assert light[False].min() > 0.05
+    np.testing.assert_allclose(light[True] / light[False], want, rtol=0.03)
 
 
 def test_a_lit_particle_in_a_shadow_keeps_only_the_light_from_all_round(scene):
