@@ -25,6 +25,8 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``clouds``: shadows, and a CloudLayer over the sky, half cover, drifting at 30 m/s:
   the sky pass's clouds, the scene's cloud shadows and the cube map made again as they
   drift: its cost against ``shadows``';
+* ``shafts_clouds``: the ``shafts`` variant (below) under the same drifting CloudLayer (its
+  shadow read at every step of the march): its cost against ``shafts``';
 * ``shadows_moving``: the same with a box sliding to and fro under the sun every frame
   (its map drawn again each frame);
 * ``mirror_light``: shadows, and the mirror of the ring the sun reaches most throws its
@@ -457,6 +459,13 @@ def _shafts(engine: Engine, half: bool = True) -> None:
     engine.world.add_component(camera_entity(engine), VolumetricFog(half_resolution=half))
 
 
+def _shafts_clouds(engine: Engine) -> None:
+    """The shafts under a drifting CloudLayer (its shadow read at each of the march's steps)."""
+    _shafts(engine)
+    for entity, _ in engine.world.query_one(Skybox):
+        engine.world.add_component(entity, CloudLayer(coverage=0.5, wind=(30.0, 0.0)))
+
+
 def _shafts_fog(engine: Engine) -> None:
     """What the shafts are measured against: the same shadows and fog without them."""
     _shadows(engine)
@@ -625,6 +634,7 @@ VARIANTS: list[Variant] = [
             _sun_setting),
     Variant("shafts_fog", _shafts_fog, "shadows and height fog on the camera (the shafts' baseline)"),
     Variant("shafts", _shafts, "the same with VolumetricFog() (marched at half size; the sun's and the lamp's)"),
+    Variant("shafts_clouds", _shafts_clouds, "the shafts under a drifting CloudLayer shading them and the scene"),
     Variant("shafts_sun", _shafts_sun, "the same with the sun's shafts alone (the lamp's volumetric 0)"),
     Variant("shafts_full", _shafts_full, "the same with VolumetricFog(half_resolution=False)"),
     Variant("post", _post, "Tonemap(curve='agx') and Bloom() on the camera"),
