@@ -90,7 +90,7 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                              "this hour of a summer's day at 45 degrees north (a TimeOfDay on it)")
     parser.add_argument("--moon", type=_moon_age, default=None, metavar="DAYS",
                         help="with --time: a moon this many days past new (14.77: full) on the same clock")
-    parser.add_argument("--clouds", type=_coverage, default=None, metavar="SHARE",
+    parser.add_argument("--clouds", type=_cloud_share, default=None, metavar="SHARE",
                         help="clouds over the level's generated sky (a CloudLayer on its Skybox, made if it has "
                              "none): this share of the sky under cloud, 0 to 1, drifting on the wind")
     parser.add_argument("--day-minutes", type=_day_minutes, default=None, metavar="MINUTES",
@@ -226,7 +226,7 @@ def _number(flag: str, what: str, accepts: Callable[[float], bool]) -> Callable[
 
 _yaw = _number("--panorama-yaw", "a finite number of degrees", lambda v: True)
 _moon_age = _number("--moon", f"the moon's age in days, 0 to {SYNODIC_MONTH:.2f}", lambda v: 0.0 <= v <= SYNODIC_MONTH)
-_coverage = _number("--clouds", "a share of the sky from 0 to 1", lambda v: 0.0 <= v <= 1.0)
+_cloud_share = _number("--clouds", "a share of the sky from 0 to 1", lambda v: 0.0 <= v <= 1.0)
 _hour = _number("--time", "an hour from 0 to 24", lambda v: 0.0 <= v <= 24.0)
 _day_minutes = _number("--day-minutes", "a number of minutes > 0", lambda v: v > 0.0)
 

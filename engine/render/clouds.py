@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from components.clouds import CloudLayer
 from engine.render.bindings import CLOUDS_BINDING, bind_uniform_block
 
 EARTH_RADIUS = 6.36e6     # metres: the sphere the sheet curves with (atmosphere.py's ground)
@@ -40,6 +41,7 @@ NOISE_PERIOD = 64         # the first octave's lattice cells before the pattern 
 CLOUD_OCTAVES = 5         # octaves of the cloud's thickness, each half the last one's size
 SUN_OCTAVES = 2           # ... of which the sunlight's way through the cloud beside reads
 EDGE_SOFTNESS = 0.03      # the noise's range over which a cloud's edge fades in
+EDGE_ENDS_POWER = 5       # the threshold moved by the edge's width times (1 - 2 coverage)^this
 LOD_ANGLE = 0.005         # radians: an octave seen under twice this fades to its mean by once it
 HAZE_DISTANCE = 60000.0   # metres: a cloud's share of the sky falls by 1/e each (into the horizon's haze)
 SILVER_LINING = 0.6       # Henyey-Greenstein's g of the light scattered towards the eye
@@ -73,7 +75,7 @@ class CloudShape:
                          *self.albedo, 0.0], np.float32).tobytes()
 
 
-def cloud_shape(layer) -> CloudShape | None:
+def cloud_shape(layer: CloudLayer) -> CloudShape | None:
     """The CloudShape of a ``components.clouds.CloudLayer`` (None: no cloud to draw, its
     coverage or density 0)."""
     if layer.coverage <= 0.0 or layer.density <= 0.0:
@@ -192,7 +194,7 @@ def coverage_threshold(coverage: float) -> float:
     (1 - coverage) quantile, moved by up to the soft edge's width near the ends so that 0 is
     clear sky and 1 overcast (the whole sheet past the edge)."""
     q = _noise_quantiles()
-    ends = (1.0 - 2.0 * coverage) ** 5   # (the edge's width moved in only near 0 and 1)
+    ends = (1.0 - 2.0 * coverage) ** EDGE_ENDS_POWER   # (the edge's width moved in only near 0 and 1)
     return float(np.interp(1.0 - coverage, np.linspace(0.0, 1.0, q.size), q) + EDGE_SOFTNESS * ends)
 
 

@@ -735,10 +735,12 @@ class MirrorPasses:
     def prepare(self) -> None:
         """The reset's and every composite variant's buffers and vertex arrays, made now
         (when a level loads: ``Renderer.prepare_programs``'s caller) rather than when the
-        first mirror comes into view."""
+        first mirror comes into view; under a generated sky, the sharp and water variants'
+        builds that draw it per pixel too (``_composite_for``)."""
         if self._claim_buffer is None:
             self._reserve_claims(0)
-        for draw in (*self.composites.values(), *self.fallbacks.values()):
+        sky_draws = [self._composite_for((), variant, False) for variant in sorted(SKY_VARIANTS)]
+        for draw in (*self.composites.values(), *self.fallbacks.values(), *sky_draws):
             if draw.vao is None:
                 draw.prepare()
 
