@@ -53,6 +53,77 @@ def test_the_moon_is_drawn_as_the_twin_draws_it(scene, model):
     assert lit.sum() > 60   # the crescent is in view (the sun 33 degrees from it)
 
 
+NIGHT_SUN = glm.normalize(glm.vec3(0.6, -0.3, 0.75))   # towards it: 17 degrees below the horizon
+NIGHT_MOON = glm.normalize(glm.vec3(-0.5, 0.45, -0.75))
+
+
+def test_an_atmospheres_air_scatters_the_moons_light_as_the_twin_says(scene):
+    """A night under an atmosphere (the sun 17 degrees down), a full moon 27 degrees up: the
+    sky pass, 90 degrees wide about the moon (the ground below the horizon too), is the twin
+    pixel by pixel, the sky-view table drawn a second time at the moon's elevation; the air's
+    moonlight is most of the night sky's light (blue, brightest about the moon), and it is
+    the moon's light above the air: its disc's colour times its phase's share (a second
+    model whose moon is twice as bright sees twice the air's moonlight)."""
+    skybox = Skybox(model="atmosphere", sun_direction=tuple(NIGHT_SUN))
+    sun = SkySun(tuple(NIGHT_SUN), moon=tuple(NIGHT_MOON), moon_tint=(0.9, 0.9, 1.0))
+
+    def build(world):
+        world.spawn(moon_light(NIGHT_MOON))
+
+    colour, rays, runner = _hdr_frame(scene, skybox, fov=90.0, look=NIGHT_MOON)
+    build(runner.world)
+    runner.frame()
+    from tests.test_generated_sky import _read
+    colour, rays = _read(runner)
+    renderer = runner.engine.renderer
+    assert renderer.moon_view is not None and renderer.resource_counts()["sky_view"] == 2
+    model = sky_model(skybox, sun)
+    assert model.moon_elevation == pytest.approx(math.degrees(math.asin(NIGHT_MOON.y)), abs=0.01)
+    want = sky_radiance(skybox, rays, sun)
+    np.testing.assert_allclose(colour, want, rtol=6e-3, atol=1e-3)
+    moonless = sky_radiance(skybox, rays, SkySun(tuple(NIGHT_SUN)))
+    air = (want - moonless)[..., 2]
+    assert np.median(air) > 2.0 * np.median(moonless[..., 2])   # the moon's light is the night sky's most
+    assert np.median((want - moonless)[..., 2] / np.maximum((want - moonless)[..., 0], 1e-6)) > 1.5   # blue
+    towards = rays @ np.array(NIGHT_MOON)
+    assert air[towards > 0.95].mean() > 1.5 * air[(towards < 0.8) & (rays[..., 1] > 0.2)].mean()
+    brighter = sky_model(Skybox(model="atmosphere", sun_direction=tuple(NIGHT_SUN), moon_color=(2.0, 2.0, 2.1)), sun)
+    np.testing.assert_allclose(brighter.moon_air, 2.0 * np.array(model.moon_air), rtol=1e-5)
+    share, _ = moon_phase(np.array(NIGHT_MOON), np.array(NIGHT_SUN))
+    np.testing.assert_allclose(model.moon_air, np.array([1.0, 1.0, 1.05]) * (0.9, 0.9, 1.0) * share, rtol=1e-5)
+    # The moon gone: its table is let go.
+    for entity, light in list(runner.world.query_one(DirectionalLight)):
+        if light.body == "moon":
+            runner.world.delete_entity(entity)
+    runner.frame()
+    assert renderer.moon_view is None and renderer.resource_counts()["sky_view"] == 1
+
+
+def test_the_moons_table_is_drawn_again_only_when_it_climbs_a_step(scene):
+    """The moon's table follows its elevation as the sun's does (again past
+    ``TABLE_STEP_DEGREES``; not when it only turns about the sky at the same height), the
+    sun's table drawn once while the sun stands still."""
+    from engine.render.atmosphere import TABLE_STEP_DEGREES
+
+    skybox = Skybox(model="atmosphere", sun_direction=tuple(NIGHT_SUN))
+    _, _, runner = _hdr_frame(scene, skybox, fov=60.0, look=NIGHT_MOON)
+    moon = moon_light(NIGHT_MOON)
+    runner.world.spawn(moon)
+    runner.frame()
+    renderer = runner.engine.renderer
+    sun_draws, moon_draws = renderer.sky_view_pass.draws, renderer.moon_view_pass.draws
+    runner.frame()
+    assert (renderer.sky_view_pass.draws, renderer.moon_view_pass.draws) == (sun_draws, moon_draws)
+    climb = glm.normalize(glm.cross(NIGHT_MOON, glm.vec3(0, 1, 0)))
+    for degrees, axis, drawn in ((20.0, glm.vec3(0, 1, 0), 0), (2.0 * TABLE_STEP_DEGREES, climb, 1)):
+        way = glm.vec3(glm.rotate(glm.radians(degrees), axis) * glm.vec4(-glm.vec3(*moon.direction), 0.0))
+        moon.direction = tuple(-way)
+        runner.frame()
+        assert renderer.moon_view_pass.draws == moon_draws + drawn
+        assert renderer.sky_view_pass.draws == sun_draws
+        moon_draws = renderer.moon_view_pass.draws
+
+
 def ball_share(moon: np.ndarray, sun: np.ndarray, inside: float) -> float:
     """The share of a ball's disc within ``inside`` of its radius (0 to 1) the sun lights:
     a grid of points over that part of the disc, each the ball's point seen there (its normal
@@ -119,28 +190,33 @@ def test_a_moon_is_never_the_skys_sun():
 
 
 def test_the_moons_light_is_reddened_by_the_air_as_the_suns(scene):
-    """A floor lit only by a low moon: under an atmosphere its colour's red over blue is the
-    gradient sky's times the air's tint along the moon's way (the sun's rule, sunlight_tint)."""
+    """A floor lit only by a low moon: under an atmosphere the red over blue of its direct
+    light (the frame less the frame with the moon half as bright: the air's moonlight, which
+    does not follow the light's intensity, taken out) is the gradient sky's times the air's
+    tint along the moon's way (the sun's rule, sunlight_tint)."""
     from engine.render.sky import sunlight_tint
 
     low = glm.normalize(glm.vec3(0.0, 0.12, -1.0))
 
-    def floor(model):
+    def floor(model, intensity):
         def build(world):
             look_from(world, (0.0, 3.0, 3.0), (0.0, 0.0, 0.0))
             world.spawn(Skybox(model=model, faces=np.zeros((6, 4, 4, 3), np.float32)) if model == "gradient"
                         else Skybox(model=model))
             world.spawn(DirectionalLight(direction=(0.0, 1.0, 0.2), intensity=1.0))   # a sun long set
-            world.spawn(DirectionalLight(direction=tuple(-low), intensity=4.0, body="moon", shadows=False))
+            world.spawn(DirectionalLight(direction=tuple(-low), intensity=intensity, body="moon", shadows=False))
             world.spawn(Transform(), MeshRef(plane(6, 6)), Material(color=(0.8, 0.8, 0.8), roughness=1.0,
                                                                       reflectance=0.0, environment_reflection=0.0))
         return build
 
     frames = {}
     for model in ("gradient", "atmosphere"):
-        runner = scene(floor(model), (64, 48))
-        runner.frame()
-        frames[model] = srgb_to_linear(runner.frame()[30:40, 24:40]).reshape(-1, 3).mean(axis=0)
+        lit = []
+        for intensity in (4.0, 2.0):
+            runner = scene(floor(model, intensity), (64, 48))
+            runner.frame()
+            lit.append(srgb_to_linear(runner.frame()[30:40, 24:40]).reshape(-1, 3).mean(axis=0))
+        frames[model] = lit[0] - lit[1]
     tint = np.array(sunlight_tint(Skybox(model="atmosphere"), tuple(-low)))
     assert tint[0] > 1.5 * tint[2]   # (low: red)
     want = (frames["gradient"][0] / frames["gradient"][2]) * tint[0] / tint[2]
@@ -159,6 +235,12 @@ def test_the_skys_light_holds_the_moon(model):
     if model == "gradient":
         faces = project_faces(build_faces(skybox, sun)) - project_faces(build_faces(skybox, SkySun(tuple(SUN))))
         np.testing.assert_allclose(with_moon - without, faces, atol=0.04 * np.abs(faces).max())   # (measured 2.3%)
+    else:   # the air's moonlight (from the CPU's small table at the moon's elevation) against the full one's faces
+        night = Skybox(model="atmosphere", sun_direction=tuple(NIGHT_SUN), face_size=64)
+        lit = SkySun(tuple(NIGHT_SUN), moon=tuple(NIGHT_MOON))
+        air = generated_sky_sh(sky_model(night, lit)) - generated_sky_sh(sky_model(night, SkySun(tuple(NIGHT_SUN))))
+        faces = project_faces(build_faces(night, lit)) - project_faces(build_faces(night, SkySun(tuple(NIGHT_SUN))))
+        np.testing.assert_allclose(air, faces, atol=0.04 * np.abs(faces).max())
     assert np.abs(with_moon - without).max() > 1e-3
     share, centre = moon_phase(np.array(MOON), np.array(SUN))
     assert 0.0 < share < 1.0 and float(centre @ np.array(SUN)) > float(np.array(MOON) @ np.array(SUN))

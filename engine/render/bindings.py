@@ -171,6 +171,7 @@ LIGHTMAP_UNIT = 61            # scene (LIGHTMAP builds): the batch's lightmap (M
 LIGHTMAP_OCCLUSION_SAMPLERS = 17
 SKY_VIEW_UNIT = 60            # sky, sky cube (ATMOSPHERE builds): the air's sky-view table (render/atmosphere.py)
 SPACE_UNIT = 62               # sky, sky cube (SPACE builds): an atmosphere's space, a cube map (its given faces)
+MOON_VIEW_UNIT = 63           # sky, sky cube (MOON_AIR builds): the sky-view table at the moon's elevation
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

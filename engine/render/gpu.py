@@ -171,6 +171,7 @@ class Gpu:
         self.sky_version = 0
         # An atmosphere's sky-view table (drawn by the renderer's SkyView; None: no atmosphere).
         self.sky_view: moderngl.Texture | None = None
+        self.moon_view: moderngl.Texture | None = None   # ... an atmosphere's moonlit air's (SkyModel.moon_air)
         # ... and its space (the Skybox's given faces, a cube map; None: none), by the faces' id.
         self.sky_space: moderngl.TextureCube | None = None
         self._space_key = 0

@@ -114,6 +114,7 @@ class Renderer(Gpu):
         self.occlusion = ScreenOcclusion(self, self.scene_pass)  # the camera's AmbientOcclusion
         self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
         self.sky_view_pass = SkyView(self)   # an atmosphere's sky-view table (engine/render/sky_view.py)
+        self.moon_view_pass = SkyView(self, tables_from=self.sky_view_pass)   # ... at its moon's elevation
         self.path_checks: PathChecks = PathChecks(self, self.probes)
 
     @property
@@ -439,18 +440,24 @@ class Renderer(Gpu):
             self.sky_space, self._space_key = None, 0
         if space is not None and self.sky_space is None:   # its space: uploaded once, kept while it stays
             self.sky_space, self._space_key = upload_cube(self.ctx, space), model.space_key
+        if model is None or not model.moon_lights_air:
+            self.moon_view_pass.release()
+            self.moon_view = None
         if model is None or not model.atmosphere:
             self.sky_view_pass.release()
             self.sky_view = None
             return
         self.sky_view = self.sky_view_pass.draw(model.air, model.air_elevation)
+        if model.moon_lights_air:
+            self.moon_view = self.moon_view_pass.draw(model.air, model.moon_elevation)
 
     def resource_counts(self) -> dict[str, int]:
         """Live GL resources this renderer owns, by kind (soak and churn runs check that they
         come back to their baseline; tests that they go back to zero)."""
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
                 "probe_cubes": len(self.probes.cubes),
-                "sky_view": int(self.sky_view is not None), "sky_space": int(self.sky_space is not None),
+                "sky_view": int(self.sky_view is not None) + int(self.moon_view is not None),
+                "sky_space": int(self.sky_space is not None),
                 "shadow_cubes": len(self.shadows.cubes),
                 "spot_atlases": int(self.shadows.spot_atlas is not None),
                 "spot_cookies": self.spot_cookies.count(),

@@ -121,6 +121,9 @@ def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, c
     towards = np.array(model.sun_direction, np.float64)
     table = model.coarse_table if coarse else sky_view_table(model.air, model.air_elevation)
     air = np.array(model.air_light) * air_radiance(table, d, towards)
+    if model.moon_lights_air:   # the moonlight the air scatters: the same table at the moon's elevation
+        table = model.moon_coarse_table if coarse else sky_view_table(model.air, model.moon_elevation)
+        air = air + np.array(model.moon_air) * air_radiance(table, d, np.array(model.moon_direction, np.float64))
     y = d[..., 1:2]
     colour = np.where(y >= 0.0, air, air + (np.array(model.ground) - air) * ground_share(y))
     if disc:
@@ -302,6 +305,14 @@ class SkyModel:
     moon_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
     # Its CloudLayer's clouds (``engine/render/clouds.py``; None: a clear sky).
     clouds: CloudShape | None = None
+    # An atmosphere's moonlit air: ``moon_air`` the moon's light above the air (its disc's
+    # colour lit head on times the share of a full moon's light its phase leaves: the sun's
+    # ``air_light`` is its disc's colour likewise), scattered as the sun's is by the sky-view
+    # table at the moon's elevation (``moon_elevation``, degrees, the GPU's; ``moon_coarse_table``
+    # the CPU's small one); black: no moon, or a gradient sky.
+    moon_air: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    moon_elevation: float = 0.0
+    moon_coarse_table: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def space_key(self) -> int:
@@ -316,9 +327,16 @@ class SkyModel:
         """Whether it draws a moon's disc (sky_model.glsl's MOON builds)."""
         return any(self.moon_color)
 
+    @property
+    def moon_lights_air(self) -> bool:
+        """Whether its air scatters a moon's light (sky_model.glsl's MOON_AIR builds)."""
+        return self.atmosphere and any(self.moon_air)
+
     def uniforms(self) -> dict[str, tuple[float, float, float]]:
         """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
         moon = {"sky_moon_direction": self.moon_direction, "sky_moon_color": self.moon_color} if self.moon else {}
+        if self.moon_lights_air:
+            moon["moon_air_light"] = self.moon_air
         if self.atmosphere:
             return {"sky_light": self.air_light, "sky_ground": self.ground,
                     "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color, **moon}
@@ -351,11 +369,20 @@ def sky_model(skybox: Skybox | None, sun: SkySun | None = None, clouds: CloudSha
         coarse = coarse_view_table(air, elevation)
         elevation = round(elevation / TABLE_STEP_DEGREES) * TABLE_STEP_DEGREES   # the GPU table's
         ground = ground_light(air, coarse, towards) * disc_color
-        if moon is not None:   # (dimmed and reddened by the air on its way, as the sun's disc)
-            moon_color = moon_color * sunlight_share(air, moon_way)
+        moon_air, moon_elevation, moon_coarse = np.zeros(3), 0.0, None
+        if moon is not None:
+            # The air's moonlight: the moon's light above the air (its phase's share of a
+            # full moon's), scattered by the table at its elevation as the sun's is by its own.
+            moon_air = moon_color * moon_phase(moon_way, towards)[0]
+            moon_elevation = sun_elevation_degrees(moon_way)
+            moon_coarse = coarse_view_table(air, moon_elevation)
+            moon_elevation = round(moon_elevation / TABLE_STEP_DEGREES) * TABLE_STEP_DEGREES
+            ground = ground + ground_light(air, moon_coarse, moon_way) * moon_air
+            moon_color = moon_color * sunlight_share(air, moon_way)   # (its disc dimmed and reddened, as the sun's)
         return SkyModel((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), rgb(ground), rgb(towards),
                         rgb(disc_color * sunlight_share(air, towards)), rgb(disc_color), air, elevation, coarse,
-                        skybox.faces, rgb(moon_way), rgb(moon_color), clouds)
+                        skybox.faces, rgb(moon_way), rgb(moon_color), clouds, rgb(moon_air), moon_elevation,
+                        moon_coarse)
     return SkyModel(rgb(skybox.zenith), rgb(skybox.horizon), rgb(skybox.ground), rgb(towards), rgb(disc_color),
                     moon_direction=rgb(moon_way), moon_color=rgb(moon_color), clouds=clouds)
 

@@ -18,6 +18,7 @@ from engine.render.bindings import (
     CAMERA_BINDING,
     CLOUDS_BINDING,
     FOG_BINDING,
+    MOON_VIEW_UNIT,
     SKY_UNIT,
     SKY_VIEW_UNIT,
     SPACE_UNIT,
@@ -30,7 +31,7 @@ from engine.render.sky import SkyModel
 
 def sky_build(model: SkyModel | None) -> tuple[tuple[str, str], ...]:
     """The defines of a build that draws ``model`` per pixel (``shaders/include/sky_model.glsl``):
-    ``GENERATED_SKY``, and ``ATMOSPHERE``, ``SPACE``, ``MOON``, ``CLOUDS`` where it has them;
+    ``GENERATED_SKY``, and ``ATMOSPHERE``, ``SPACE``, ``MOON``, ``MOON_AIR``, ``CLOUDS`` where it has them;
     none for no generated sky (the build samples the cube map).  The sky pass, the sky's cube
     map and a sharp mirror's composite build so."""
     if model is None:
@@ -38,7 +39,7 @@ def sky_build(model: SkyModel | None) -> tuple[tuple[str, str], ...]:
     return tuple((name, "1") for name, on in (
         ("GENERATED_SKY", True), ("ATMOSPHERE", model.atmosphere),
         ("SPACE", model.atmosphere and model.space is not None), ("MOON", model.moon),
-        ("CLOUDS", model.clouds is not None)) if on)
+        ("MOON_AIR", model.moon_lights_air), ("CLOUDS", model.clouds is not None)) if on)
 
 
 def wire_sky(program: moderngl.Program) -> None:
@@ -47,6 +48,8 @@ def wire_sky(program: moderngl.Program) -> None:
         program["sky_view"].value = SKY_VIEW_UNIT
     if "sky_space" in program:
         program["sky_space"].value = SPACE_UNIT
+    if "moon_view" in program:
+        program["moon_view"].value = MOON_VIEW_UNIT
     if "Clouds" in program:
         program["Clouds"].binding = CLOUDS_BINDING
 
@@ -59,11 +62,13 @@ def write_sky(program: moderngl.Program, model: SkyModel) -> None:
 
 def bind_sky(renderer: Gpu) -> None:
     """The textures a ``sky_build`` program of the renderer's sky reads: an atmosphere's
-    sky-view table and its space."""
+    sky-view tables (the sun's, the moon's) and its space."""
     if renderer.sky_view is not None:
         bind_texture(renderer.ctx, renderer.sky_view, SKY_VIEW_UNIT)
     if renderer.sky_space is not None:
         bind_texture(renderer.ctx, renderer.sky_space, SPACE_UNIT)
+    if renderer.moon_view is not None:
+        bind_texture(renderer.ctx, renderer.moon_view, MOON_VIEW_UNIT)
 
 
 class SkyDraw:

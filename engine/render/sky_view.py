@@ -9,7 +9,9 @@ time the sun had moved a quarter degree.  Here it is one full-screen triangle ov
 texels (about 3 ms of llvmpipe's; not measured on a GPU), drawn again whenever the elevation
 moves by ``atmosphere.TABLE_STEP_DEGREES`` (0.02), as Hillaire's is each frame.
 Its two inputs, the transmittance and multiple-scattering tables, depend on the air alone:
-made with numpy once an air and uploaded.
+made with numpy once an air and uploaded.  A moon's table (the air's moonlight, the same
+scattering for a light at the moon's elevation) is a second ``SkyView`` that borrows the
+sun's air tables (``tables_from``).
 """
 from __future__ import annotations
 
@@ -44,9 +46,10 @@ class SkyView:
 
     STATE = PassState()  # no depth test, no blending, no clip distances
 
-    def __init__(self, renderer: Gpu) -> None:
+    def __init__(self, renderer: Gpu, tables_from: SkyView | None = None) -> None:
         self.renderer = renderer
         self.ctx = renderer.ctx
+        self._lender = tables_from   # another table's SkyView whose air tables this one reads
         self._air: Air | None = None
         self._tables: tuple[moderngl.Texture, moderngl.Texture] | None = None
         self._target: moderngl.Framebuffer | None = None
@@ -65,11 +68,7 @@ class SkyView:
         if key == self.key and self._target is not None:
             return self.texture
         ctx = self.ctx
-        if air != self._air:
-            self._release_tables()
-            self._tables = (_table_texture(ctx, transmittance_table(air)),
-                            _table_texture(ctx, multiple_scattering_table(air)))
-            self._air = air
+        tables = self._air_tables(air)
         if self._target is None:
             rows, columns = VIEW_SIZE
             self._target = ctx.framebuffer([ctx.texture((columns, rows), 4, dtype="f2")])
@@ -86,12 +85,24 @@ class SkyView:
         program["scattering_table"].value = AIR_SCATTERING_UNIT
         self._target.use()
         apply_pass_state(ctx, self.STATE, (0, 0, *self._target.size))
-        bind_texture(ctx, self._tables[0], AIR_TRANSMITTANCE_UNIT)
-        bind_texture(ctx, self._tables[1], AIR_SCATTERING_UNIT)
+        bind_texture(ctx, tables[0], AIR_TRANSMITTANCE_UNIT)
+        bind_texture(ctx, tables[1], AIR_SCATTERING_UNIT)
         vao.render(moderngl.TRIANGLES, vertices=3)
         self.key = key
         self.draws += 1
         return self.texture
+
+    def _air_tables(self, air: Air) -> tuple[moderngl.Texture, moderngl.Texture]:
+        """The transmittance and multiple-scattering tables of ``air`` (the lender's, if any),
+        made and uploaded when the air is another."""
+        if self._lender is not None:
+            return self._lender._air_tables(air)
+        if air != self._air or self._tables is None:
+            self._release_tables()
+            self._tables = (_table_texture(self.ctx, transmittance_table(air)),
+                            _table_texture(self.ctx, multiple_scattering_table(air)))
+            self._air = air
+        return self._tables
 
     def _vertex_array(self) -> moderngl.VertexArray:
         program = self.renderer.shaders.program("fullscreen.vert", "sky_view.frag", defines=glsl_defines())

@@ -48,17 +48,32 @@ uniform vec3 sky_light;           // the sunlight above the air (Skybox.sun_colo
 #ifdef SPACE
 uniform samplerCube sky_space;    // what lies beyond the air (the Skybox's given faces: stars, a galaxy)
 #endif
+#ifdef MOON_AIR
+// (MOON_AIR builds: a moon's light scattered by the air as the sun's is, read from the same
+// table drawn at the moon's elevation: SkyModel.moon_air)
+uniform sampler2D moon_view;      // the sky-view table at the moon's elevation
+uniform vec3 moon_air_light;      // the moon's light above the air (its disc's colour x its phase's share)
+#endif
 
-vec3 clear_sky(vec3 d) {
+// The sky-view table ``view`` (drawn for a light at the elevation of ``towards``, the unit way
+// towards it) along unit way ``d``: by d's elevation and its azimuth from the light's.
+vec4 air_table(sampler2D view, vec3 d, vec3 towards) {
     const float HALF_PI = 1.57079633;
     float elevation = asin(clamp(d.y, 0.0, 1.0));
-    vec2 flat_way = d.xz, flat_sun = sky_sun_direction.xz;
-    float lengths = length(flat_way) * length(flat_sun);
-    float cos_azimuth = lengths > 1e-10 ? dot(flat_way, flat_sun) / lengths : 1.0;
+    vec2 flat_way = d.xz, flat_light = towards.xz;
+    float lengths = length(flat_way) * length(flat_light);
+    float cos_azimuth = lengths > 1e-10 ? dot(flat_way, flat_light) / lengths : 1.0;
     vec2 at = vec2(acos(clamp(cos_azimuth, -1.0, 1.0)) / (2.0 * HALF_PI), sqrt(elevation / HALF_PI));
-    vec2 size = vec2(textureSize(sky_view, 0));
-    vec4 table = textureLod(sky_view, (at * (size - 1.0) + 0.5) / size, 0.0);
+    vec2 size = vec2(textureSize(view, 0));
+    return textureLod(view, (at * (size - 1.0) + 0.5) / size, 0.0);
+}
+
+vec3 clear_sky(vec3 d) {
+    vec4 table = air_table(sky_view, d, sky_sun_direction);
     vec3 air = sky_light * table.rgb;
+#ifdef MOON_AIR
+    air += moon_air_light * air_table(moon_view, d, sky_moon_direction).rgb;
+#endif
 #ifdef SPACE
     vec3 beyond = textureLod(sky_space, d, 0.0).rgb * table.a;   // shows where the air is dark: at night
 #else
