@@ -59,8 +59,8 @@ NIGHT_MOON = glm.normalize(glm.vec3(-0.5, 0.45, -0.75))
 
 def test_an_atmospheres_air_scatters_the_moons_light_as_the_twin_says(scene):
     """A night under an atmosphere (the sun 17 degrees down), a full moon 27 degrees up: the
-    sky pass, 90 degrees wide about the moon (the ground below the horizon too), is the twin
-    pixel by pixel, the sky-view table drawn a second time at the moon's elevation; the air's
+    sky pass, 90 degrees wide about the moon (the ground below the horizon too), and the
+    sky's cube map are the twin pixel by pixel, the sky-view table drawn a second time at the moon's elevation; the air's
     moonlight is most of the night sky's light (blue, brightest about the moon), and it is
     the moon's light above the air: its disc's colour times its phase's share (a second
     model whose moon is twice as bright sees twice the air's moonlight)."""
@@ -81,6 +81,9 @@ def test_an_atmospheres_air_scatters_the_moons_light_as_the_twin_says(scene):
     assert model.moon_elevation == pytest.approx(math.degrees(math.asin(NIGHT_MOON.y)), abs=0.01)
     want = sky_radiance(skybox, rays, sun)
     np.testing.assert_allclose(colour, want, rtol=6e-3, atol=1e-3)
+    runner.frame()   # (the cube map made again a moment after the sky changed)
+    from tests.test_generated_sky import _cube_faces
+    np.testing.assert_allclose(_cube_faces(runner), build_faces(skybox, sun), rtol=1e-2, atol=2e-3)
     moonless = sky_radiance(skybox, rays, SkySun(tuple(NIGHT_SUN)))
     air = (want - moonless)[..., 2]
     assert np.median(air) > 2.0 * np.median(moonless[..., 2])   # the moon's light is the night sky's most
