@@ -60,8 +60,8 @@ NIGHT_MOON = glm.normalize(glm.vec3(-0.5, 0.45, -0.75))
 def test_an_atmospheres_air_scatters_the_moons_light_as_the_twin_says(scene):
     """A night under an atmosphere (the sun 17 degrees down), a full moon 27 degrees up: the
     sky pass, 90 degrees wide about the moon (the ground below the horizon too), and the
-    sky's cube map are the twin pixel by pixel, the sky-view table drawn a second time at the moon's elevation; the air's
-    moonlight is most of the night sky's light (blue, brightest about the moon), and it is
+    sky's cube map are the twin pixel by pixel, the sky-view table drawn a second time at the
+    moon's elevation; the air's moonlight is most of the night sky's light (blue, brightest about the moon), and it is
     the moon's light above the air: its disc's colour times its phase's share (a second
     model whose moon is twice as bright sees twice the air's moonlight)."""
     skybox = Skybox(model="atmosphere", sun_direction=tuple(NIGHT_SUN))
