@@ -76,7 +76,7 @@ def test_an_atmospheres_air_scatters_the_moons_light_as_the_twin_says(scene):
     from tests.test_generated_sky import _read
     colour, rays = _read(runner)
     renderer = runner.engine.renderer
-    assert renderer.moon_view is not None and renderer.resource_counts()["sky_view"] == 2
+    assert renderer.moon_view is not None and renderer.resource_counts()["moon_view"] == 1
     model = sky_model(skybox, sun)
     assert model.moon_elevation == pytest.approx(math.degrees(math.asin(NIGHT_MOON.y)), abs=0.01)
     want = sky_radiance(skybox, rays, sun)
@@ -99,7 +99,28 @@ def test_an_atmospheres_air_scatters_the_moons_light_as_the_twin_says(scene):
         if light.body == "moon":
             runner.world.delete_entity(entity)
     runner.frame()
-    assert renderer.moon_view is None and renderer.resource_counts()["sky_view"] == 1
+    assert renderer.moon_view is None and renderer.resource_counts()["moon_view"] == 0
+
+
+def test_a_moon_just_set_still_lights_the_air_over_where_it_went_down(scene):
+    """A moon 4 degrees below the horizon has no disc (the air lets none of it through) but
+    its light still reaches the air above (the twilight of a set moon): the sky pass builds
+    without the disc (``MOON_AIR`` alone) and is the twin's, brighter over where it set."""
+    set_moon = glm.normalize(glm.vec3(-0.5, -0.07, -0.75))
+    skybox = Skybox(model="atmosphere", sun_direction=tuple(NIGHT_SUN))
+    sun = SkySun(tuple(NIGHT_SUN), moon=tuple(set_moon), moon_tint=(0.9, 0.9, 1.0))
+    model = sky_model(skybox, sun)
+    assert model.moon_lights_air and not model.moon
+    _, _, runner = _hdr_frame(scene, skybox, fov=90.0, look=glm.normalize(glm.vec3(-0.5, 0.3, -0.75)))
+    runner.world.spawn(moon_light(set_moon))
+    runner.frame()
+    from tests.test_generated_sky import _read
+    colour, rays = _read(runner)
+    want = sky_radiance(skybox, rays, sun)
+    np.testing.assert_allclose(colour, want, rtol=6e-3, atol=1e-3)
+    air = (want - sky_radiance(skybox, rays, SkySun(tuple(NIGHT_SUN))))[..., 2]
+    over_it = (rays @ np.array(set_moon) > 0.9) & (rays[..., 1] > 0.0)
+    assert air.max() > 5e-4 and air[over_it].mean() > 2.0 * air[rays[..., 1] > 0.6].mean()
 
 
 def test_the_moons_table_is_drawn_again_only_when_it_climbs_a_step(scene):

@@ -456,7 +456,7 @@ class Renderer(Gpu):
         come back to their baseline; tests that they go back to zero)."""
         return {"meshes": len(self._meshes), "textures": len(self._textures), "batches": len(self.batches),
                 "probe_cubes": len(self.probes.cubes),
-                "sky_view": int(self.sky_view is not None) + int(self.moon_view is not None),
+                "sky_view": int(self.sky_view is not None), "moon_view": int(self.moon_view is not None),
                 "sky_space": int(self.sky_space is not None),
                 "shadow_cubes": len(self.shadows.cubes),
                 "spot_atlases": int(self.shadows.spot_atlas is not None),

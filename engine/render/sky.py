@@ -335,8 +335,8 @@ class SkyModel:
     def uniforms(self) -> dict[str, tuple[float, float, float]]:
         """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
         moon = {"sky_moon_direction": self.moon_direction, "sky_moon_color": self.moon_color} if self.moon else {}
-        if self.moon_lights_air:
-            moon["moon_air_light"] = self.moon_air
+        if self.moon_lights_air:   # (a moon below the horizon: no disc, its light still in the air)
+            moon.update(sky_moon_direction=self.moon_direction, moon_air_light=self.moon_air)
         if self.atmosphere:
             return {"sky_light": self.air_light, "sky_ground": self.ground,
                     "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color, **moon}

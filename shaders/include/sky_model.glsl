@@ -16,12 +16,14 @@ vec3 sun_disc(float cos_sun) {
     return disc_strength(cos_sun) * sky_sun_color;
 }
 
+#if defined(MOON) || defined(MOON_AIR)
+uniform vec3 sky_moon_direction;  // unit, towards the moon (its disc, MOON; its light in the air, MOON_AIR)
+#endif
 #ifdef MOON
 // The moon's disc (the MOON builds: a sky with a DirectionalLight whose body is "moon"), the
 // sun's size, lit from the sun as a ball of dust is (Lommel and Seeliger: 2 mu0 / (mu0 + mu),
 // mu0 the sunlight's cosine at the ball's point seen, mu the eye's): a full moon even to its
 // edge, a crescent, nothing past the terminator.  sky.py's moon_share is its twin.
-uniform vec3 sky_moon_direction;  // unit, towards the moon
 uniform vec3 sky_moon_color;      // its disc lit head on (an atmosphere's: through the air)
 const float MOON_RADIUS_SINE = 0.0447101778;   // sin of the disc's edge from its centre (cos 0.9990)
 
