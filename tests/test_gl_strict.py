@@ -303,6 +303,17 @@ def _portal_run(ctx):
     return _engine_frames(ctx, PortalRun(levels()[-1], autopilot=True, verbose=False), 3)
 
 
+def _moonlit_hall(ctx):
+    """The sample level by moonlight under an atmosphere with stars (the MOON_AIR builds: the
+    sky-view table twice), with clouds over it (CLOUDS, CLOUD_SHADOWS) and light shafts."""
+    from games.hall_of_mirrors import HallOfMirrors
+
+    def configure(engine):
+        engine.start_sky("atmosphere", 21.5, 10.0, moon_age=14.77, clouds=0.4)
+        engine.start(shafts=True)
+    return _engine_frames(ctx, HallOfMirrors(), 2, configure)
+
+
 def _resized(ctx):
     """The mirror ring resized twice, its floor polished and screen reflections at half size on
     the camera (their images made again with the level's, an odd size's half-size rays)."""
@@ -338,6 +349,9 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "mirror_beam": _mirror_beam,
     "portal_run": _portal_run,
     "resized": _resized,
+    "clouds": _lighting("clouds"),
+    "shafts_clouds": _lighting("shafts_clouds"),
+    "moonlit_hall": _moonlit_hall,
 }
 
 
