@@ -21,6 +21,7 @@
 #include "volumetric_ray.glsl"
 #ifdef CLOUD_SHADOWS  // a CloudLayer's shadows: the sun's light at each point through the cloud on its way
 #include "clouds.glsl"
+uniform int cloud_stride;    // the steps between two reads of the clouds' share (engine/render/clouds.py cloud_stride)
 #endif
 #ifdef LEVEL_VIEWS  // a mirror or portal level's: drawn once a view, over its own pixels only
 #include "level_nodes.glsl"
@@ -89,6 +90,15 @@ void main() {
     vec2 low = tile.xy + margin, high = tile.xy + tile.z - margin;
     bool casts = sun >= 0 && params.w != 0.0 && tile.z > 0.0;
 #endif
+#ifdef CLOUD_SHADOWS
+    // The clouds' share read every cloud_stride steps and taken linearly between (their finest
+    // octave spans many strides, so the line between two reads is the share within a few
+    // thousandths): the march's noise divided by the stride.
+    vec3 cloud_step = dir * (step_length * float(cloud_stride));
+    vec3 cloud_at = x;
+    float cloud_from = cloud_shadow(cloud_at, towards);
+    float cloud_to = cloud_shadow(cloud_at + cloud_step, towards);
+#endif
 #if VOLUMETRIC_LAMPS > 0
     // The lamps the shafts scatter (PointLight.volumetric): each one's light at the point
     // (its falloff and cone, its cookie's colour, its shadow where it casts, looked up with
@@ -105,7 +115,13 @@ void main() {
         at += at_step;
 #endif
 #ifdef CLOUD_SHADOWS
-        lit *= cloud_shadow(x, towards);
+        int within = i % cloud_stride;
+        if (within == 0 && i > 0) {
+            cloud_at += cloud_step;
+            cloud_from = cloud_to;
+            cloud_to = cloud_shadow(cloud_at + cloud_step, towards);
+        }
+        lit *= mix(cloud_from, cloud_to, float(within) / float(cloud_stride));
 #endif
         sum += density * seen * lit;
 #if VOLUMETRIC_LAMPS > 0

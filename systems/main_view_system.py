@@ -177,7 +177,9 @@ class MainViewSystem(esper.Processor):
                 f"scatter at most {MAX_VOLUMETRIC_LAMPS} at once (the first by the lights' slots), so {lamps.cut} "
                 "light no air (RenderStats.volumetric_lamps_cut)"), stacklevel=3)
         self._said_lamps_cut = lamps.cut
-        self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa", lamps)
+        sun = brightest_directional(self.world)   # (the march's sun: the Lights block's marked slot)
+        self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa", lamps,
+                                           None if sun is None else tuple(-float(c) for c in sun.direction))
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
         """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects

@@ -193,15 +193,20 @@ def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows, mi
         assert truth.max() > 3 * np.median(truth[lit])
 
 
-def test_a_cloud_layers_shadows_dim_the_shafts_as_their_twin_says(scene):
-    """Clouds 20 m across 20 m over the hall: each point of a ray gets the sun's light the
-    cloud on its way lets through (the twin's exp(-depth)) as well as the roof's shadow; the
-    march agrees with the truth so summed (as the test above), and the clouds take a good
-    share of the light away where they stand (the shafts are not the clear sky's)."""
+@pytest.mark.parametrize("scale, height, drift, stride", [(20.0, 20.0, (0.0, 0.0), 1),
+                                                        (600.0, 200.0, (3427.0, 0.0), 5)])
+def test_a_cloud_layers_shadows_dim_the_shafts_as_their_twin_says(scene, scale, height, drift, stride):
+    """Clouds 20 m across 20 m over the hall, and 600 m across 200 m up: each point of a ray
+    gets the sun's light the cloud on its way lets through (the twin's exp(-depth)) as well as
+    the roof's shadow; the march agrees with the truth so summed at every point (as the test
+    above), reading the clouds at every step for the small ones and every fifth for the large
+    (``clouds.cloud_stride``: linear between), and the clouds take a good share of the light
+    away where they stand (the shafts are not the clear sky's)."""
     settings = VolumetricFog(steps=64)
-    clouds = CloudLayer(coverage=0.5, scale=20.0, height=20.0, wind=(0.0, 0.0))
+    clouds = CloudLayer(coverage=0.5, scale=scale, height=height, wind=(0.0, 0.0), drift=drift)
     runner = scene(lambda world: _hall(world, settings, clouds=clouds), SIZE)
     runner.frame()
+    assert runner.engine.renderer.volumetric_fog.cloud_stride == stride
     marched = _marched(runner)
     truth, reach = _ground_truth(runner, settings, 2, clouds=clouds)
     clear, _ = _ground_truth(runner, settings, 2)
@@ -212,7 +217,7 @@ def test_a_cloud_layers_shadows_dim_the_shafts_as_their_twin_says(scene):
     assert np.median(error) < 0.025
     assert np.quantile(error, 0.9) < 0.07
     share = truth[lit] / clear[lit]
-    assert share.min() < 0.3 and share.max() > 0.7   # rays under the clouds' shadows and through their gaps
+    assert share.min() < 0.3 and share.max() > 0.6   # rays under the clouds' shadows and through their gaps
 
 
 def _linear(runner) -> np.ndarray:

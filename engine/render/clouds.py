@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from dataclasses import dataclass
 
 import moderngl
@@ -241,6 +242,22 @@ def cloud_shadow(shape: CloudShape, points: np.ndarray, sun: np.ndarray) -> np.n
     xz = p[..., [0, 2]] + t[..., None] * sun[[0, 2]]
     thick = cloud_thickness(shape, cloud_noise(layer_cells(shape, xz), shape.seed))
     return np.exp(-shape.density * thick / np.maximum(crossing, MIN_CROSSING))
+
+
+MAX_CLOUD_STRIDE = 8      # a march reads the clouds' share at least every this many steps
+STRIDE_SHARE = 8.0        # ... and a stride spans at most 1/this of the finest octave's cell
+
+
+def cloud_stride(shape: CloudShape, step_length: float, towards: np.ndarray) -> int:
+    """How many of a light shafts' march's steps (``step_length`` metres each, the longest a
+    ray takes) lie between two reads of the clouds' share of the sun's light (``towards``: unit,
+    towards it), the share taken linearly between: a stride moves the point the way to the sun
+    meets the sheet by at most its length times 1 + |horizontal| / vertical of ``towards``, and
+    that must stay within 1/``STRIDE_SHARE`` of the finest octave's cell (the sheet's ``scale``
+    over 2^(octaves - 1)); 1 to ``MAX_CLOUD_STRIDE``."""
+    finest = shape.scale / 2.0 ** (CLOUD_OCTAVES - 1)
+    spread = 1.0 + math.hypot(float(towards[0]), float(towards[2])) / max(float(towards[1]), MIN_CROSSING)
+    return int(min(max(finest / (STRIDE_SHARE * max(step_length, 1e-6) * spread), 1.0), MAX_CLOUD_STRIDE))
 
 
 class CloudBlock:

@@ -76,6 +76,7 @@ from engine.render.bindings import (
     bind_texture,
     set_scissor,
 )
+from engine.render.clouds import cloud_stride
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, View
 from engine.resources import VolumetricLamps
@@ -134,14 +135,17 @@ class VolumetricFogPass:
         # What the root's march image was last marched from (``_still_key``): equal, and not
         # jittered, the image stands and only the filter adds it again to the view's new draw.
         self._marched_from: tuple | None = None
+        self._sun: tuple[float, float, float] | None = None   # towards the sun (begin's)
+        self.cloud_stride = 1   # the march's steps between two reads of the clouds' share (the last march's)
         self.keep_still = True  # False: marched every frame (what the still fuzz compares with)
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
-              lamps: VolumetricLamps = _NO_LAMPS) -> None:
+              lamps: VolumetricLamps = _NO_LAMPS, sun: tuple[float, float, float] | None = None) -> None:
         """``view``, drawn into ``targets`` (the main tree's level 0) this frame, gets the
-        shafts ``settings`` say, of the sun and ``lamps`` (``jittered``: under temporal AA, a
-        new offset each frame); the images are made for the targets (again when they or the
-        resolution change)."""
+        shafts ``settings`` say, of the sun (``sun``: the unit way towards it, which sets how
+        often the march reads a CloudLayer's share: ``clouds.cloud_stride``) and ``lamps``
+        (``jittered``: under temporal AA, a new offset each frame); the images are made for the
+        targets (again when they or the resolution change)."""
         ratio = 2 if settings.half_resolution else 1
         images = self._images
         if images is None or images.level is not targets or images.ratio != ratio:
@@ -150,6 +154,7 @@ class VolumetricFogPass:
             images = self._images = self._make(targets, ratio)
             self._marched_from = None
         self._pending = (view, settings, jittered, lamps)
+        self._sun = sun
         self.reach = settings.reflection_depth
         for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
             self._levels.pop(depth).release()
@@ -225,7 +230,11 @@ class VolumetricFogPass:
             for slot, tile in self.shadows.directional_tiles.items():
                 tiles[slot, :3] = tile
             spare = MAX_VOLUMETRIC_LAMPS - len(lamps.slots)
+            clouds = gpu.clouds.shape
+            self.cloud_stride = 1 if clouds is None or self._sun is None else \
+                cloud_stride(clouds, settings.distance / settings.steps, np.array(self._sun, np.float64))
             self._write(march.program, {**shared, "scatter": settings.intensity, "anisotropy": settings.anisotropy,
+                                        "cloud_stride": self.cloud_stride,
                                         "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
                                         "map_tiles": tiles.tobytes(), "lamp_slots": (*lamps.slots, *(0,) * spare),
                                         "lamp_scatter": (*lamps.scatter, *(0.0,) * spare)})
