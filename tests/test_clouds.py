@@ -28,6 +28,7 @@ from engine.assets.mesh import plane
 from engine.render.clouds import (
     EARTH_RADIUS,
     NOISE_PERIOD,
+    cloud_cover,
     cloud_noise,
     cloud_shadow,
     cloud_shape,
@@ -147,6 +148,40 @@ def test_the_sky_pass_draws_the_clouds_as_the_twin(scene, model):
     assert (hidden > 0.9).mean() > 0.15 and (hidden < 0.05).mean() > 0.15
     clear = sky_radiance(skybox, rays)
     assert np.abs(colour - clear).max(axis=-1)[hidden > 0.9].min() > 0.02   # (the clouds show)
+
+
+def test_a_moon_lights_the_clouds_at_night_as_the_twin_says(scene):
+    """A night under an atmosphere, a full moon 35 degrees up and clouds about it: every pixel
+    of a lens on the moon is the CPU's sky (the clouds lit by the moon as by the sun: its
+    disc's colour times its phase's share, through the cloud beside it, a silver lining round
+    it); the moonlit clouds are brighter than the same clouds with the moon's light on them
+    taken out, most of all near the moon."""
+    from engine.rules.light_rules import SkySun
+
+    night_sun = glm.normalize(glm.vec3(0.6, -0.3, 0.75))
+    moon = glm.normalize(glm.vec3(-0.5, 0.7, -0.75))
+    skybox = Skybox(model="atmosphere", sun_direction=tuple(night_sun), moon_color=(2.0, 2.0, 2.1))
+    layer = _still(coverage=0.5, drift=(400.0, 900.0))
+
+    def moon_light(world):
+        world.spawn(DirectionalLight(direction=tuple(-moon), intensity=0.3, body="moon", shadows=False))
+    colour, rays, runner = _cloud_frame(scene, skybox, layer, moon, build_more=moon_light)
+    shape = cloud_shape(layer)
+    sun = SkySun(tuple(night_sun), moon=tuple(moon))
+    want = sky_radiance(skybox, rays, sun, shape)
+    np.testing.assert_allclose(colour, want, rtol=6e-3, atol=1e-3)
+    model = sky_model(skybox, sun, shape)
+    assert any(model.moon_light)
+    hidden, light = cloud_hidden(model, rays)
+    from engine.render.sky import clear_radiance
+    unlit = cloud_cover(shape, rays, np.array(model.sun_direction), np.array(model.sun_color),
+                        clear_radiance(model, np.array([0.0, 1.0, 0.0])))[1]
+    cloudy = hidden > 0.9
+    assert cloudy.mean() > 0.1
+    gain = (light - unlit)[..., 1]
+    assert gain[cloudy].min() >= 0.0 and np.median(gain[cloudy] / unlit[..., 1][cloudy]) > 0.5
+    near = cloudy & (rays @ np.array(moon) > 0.97)
+    assert gain[near].mean() > gain[cloudy & (rays @ np.array(moon) < 0.9)].mean()
 
 
 def _drift_over(point: np.ndarray, thick: bool, layer_values: dict) -> tuple[float, float]:

@@ -205,10 +205,12 @@ def layer_cells(shape: CloudShape, xz: np.ndarray) -> np.ndarray:
 
 
 def cloud_cover(shape: CloudShape, ways: np.ndarray, sun: np.ndarray, sunlight: np.ndarray,
-                overhead: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                overhead: np.ndarray, moon: np.ndarray | None = None,
+                moonlight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """What the clouds do to the sky along unit ``ways`` (..., 3) from the world's origin: the
     share of the sky behind them they hide (...) and their own light (..., 3), lit by the sun
-    (``sun`` the unit way towards it, ``sunlight`` its disc's colour) and the clear sky
+    (``sun`` the unit way towards it, ``sunlight`` its disc's colour), by a moon as the sun
+    (``moon``, ``moonlight``: its disc's colour times its phase's share) and the clear sky
     ``overhead`` (its radiance straight up)."""
     d = np.asarray(ways, np.float64)
     t, crossing = layer_distance(np.zeros(3), d, shape.height)
@@ -217,20 +219,32 @@ def cloud_cover(shape: CloudShape, ways: np.ndarray, sun: np.ndarray, sunlight: 
     detail = shape.scale * np.sqrt(cosine) / np.maximum(t, 1e-6)
     thick = cloud_thickness(shape, cloud_noise(cells, shape.seed, detail), detail)
     hidden = (1.0 - np.exp(-shape.density * thick / cosine)) * np.exp(-t / HAZE_DISTANCE) * (d[..., 1] >= 0.0)
-    sun = np.asarray(sun, np.float64)
-    rise = max(float(sun[1]), 0.1)
-    step = sun[[0, 2]] * (shape.thickness / rise / shape.scale)   # the sheet's depth along the sunlight, flat
+    light = np.asarray(sunlight, np.float64) / np.pi * _lit(shape, cells, detail, thick, d, sun)[..., None] \
+        + np.asarray(overhead, np.float64) * (1.0 - 0.5 * thick)[..., None]
+    if moonlight is not None and np.any(moonlight):
+        lit = _lit(shape, cells, detail, thick, d, moon)
+        light = light + np.asarray(moonlight, np.float64) / np.pi * lit[..., None]
+    return hidden, np.array(shape.albedo) * light
+
+
+def _lit(shape: CloudShape, cells: np.ndarray, detail: np.ndarray, thick: np.ndarray, d: np.ndarray,
+         towards: np.ndarray) -> np.ndarray:
+    """The share of a light from ``towards`` (unit) a cloud seen along ``d`` sends the eye:
+    what reaches it through the cloud beside it towards the light (the sheet's depth along
+    the light, two reads of its first ``SUN_OCTAVES``), by the silver lining's phase, and 0
+    once the light is well below the clouds' horizon."""
+    towards = np.asarray(towards, np.float64)
+    rise = max(float(towards[1]), 0.1)
+    step = towards[[0, 2]] * (shape.thickness / rise / shape.scale)   # the sheet's depth along the light, flat
     beside = sum(cloud_thickness(shape, cloud_noise(cells + step * f, shape.seed, detail, SUN_OCTAVES), detail)
                  for f in (0.5, 1.0)) / 2.0
     depth = shape.density * (thick + beside) / (2.0 * rise)
     through = 0.4 * np.exp(-depth) + 0.6 * np.exp(-depth / 16.0)
     g = SILVER_LINING
-    mu = np.clip(d @ sun, -1.0, 1.0)
+    mu = np.clip(d @ towards, -1.0, 1.0)
     phase = 0.6 + 0.4 * (1.0 - g * g) / (1.0 + g * g - 2.0 * g * mu) ** 1.5
-    up = np.clip((sun[1] + 0.05) / 0.1, 0.0, 1.0)   # (lit a little after sunset at their height)
-    light = np.array(shape.albedo) * (np.asarray(sunlight, np.float64) / np.pi * (through * phase * up)[..., None]
-                                      + np.asarray(overhead, np.float64) * (1.0 - 0.5 * thick)[..., None])
-    return hidden, light
+    up = np.clip((towards[1] + 0.05) / 0.1, 0.0, 1.0)   # (lit a little after sunset at their height)
+    return through * phase * up
 
 
 def cloud_shadow(shape: CloudShape, points: np.ndarray, sun: np.ndarray) -> np.ndarray:

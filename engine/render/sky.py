@@ -159,7 +159,8 @@ def cloud_hidden(model: SkyModel, directions: np.ndarray, coarse: bool = False) 
     if model.clouds is None:
         return np.zeros(d.shape[:-1]), np.zeros(d.shape[:-1] + (3,))
     overhead = clear_radiance(model, np.array([0.0, 1.0, 0.0]), coarse)
-    return cloud_cover(model.clouds, d, np.array(model.sun_direction), np.array(model.sun_color), overhead)
+    return cloud_cover(model.clouds, d, np.array(model.sun_direction), np.array(model.sun_color), overhead,
+                       np.array(model.moon_direction), np.array(model.moon_light))
 
 
 def model_sky(model: SkyModel, directions: np.ndarray, coarse: bool = False, disc: bool = True) -> np.ndarray:
@@ -257,6 +258,12 @@ def moon_phase(moon: np.ndarray, sun: np.ndarray, samples: int = 48) -> tuple[fl
     return float(lit.sum() / full), centre / np.linalg.norm(centre)
 
 
+@functools.lru_cache(maxsize=8)
+def _phase_share(moon: tuple[float, float, float], sun: tuple[float, float, float]) -> float:
+    """``moon_phase``'s share, kept for the last few ways (a sky's uniforms ask each write)."""
+    return moon_phase(np.array(moon, np.float64), np.array(sun, np.float64))[0]
+
+
 def _gradient(colours: tuple[tuple[float, ...], ...], d: np.ndarray) -> np.ndarray:
     """The sky without its sun along unit directions ``d`` (..., 3): horizon to zenith above,
     horizon to ground below (a function of the height alone)."""
@@ -328,6 +335,15 @@ class SkyModel:
         return any(self.moon_color)
 
     @property
+    def moon_light(self) -> tuple[float, float, float]:
+        """Its moon's light (its disc's colour times the share of a full moon's light its
+        phase leaves: what lights the clouds as the sun's disc colour does); black: none."""
+        if not self.moon:
+            return (0.0, 0.0, 0.0)
+        share = _phase_share(self.moon_direction, self.sun_direction)
+        return tuple(float(c) * share for c in self.moon_color)
+
+    @property
     def moon_lights_air(self) -> bool:
         """Whether its air scatters a moon's light (sky_model.glsl's MOON_AIR builds)."""
         return self.atmosphere and any(self.moon_air)
@@ -335,6 +351,8 @@ class SkyModel:
     def uniforms(self) -> dict[str, tuple[float, float, float]]:
         """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
         moon = {"sky_moon_direction": self.moon_direction, "sky_moon_color": self.moon_color} if self.moon else {}
+        if self.moon and self.clouds is not None:   # (what lights the clouds, as the sun's disc colour)
+            moon["sky_moon_light"] = self.moon_light
         if self.moon_lights_air:   # (a moon below the horizon: no disc, its light still in the air)
             moon.update(sky_moon_direction=self.moon_direction, moon_air_light=self.moon_air)
         if self.atmosphere:

@@ -70,27 +70,37 @@ float cloud_thickness(float noise, float detail) {
 }
 
 #ifdef CLOUDS
+// The share of a light from unit way ``towards`` a cloud seen along d (its cells, detail and
+// thickness) sends the eye: through the cloud beside it towards the light, by the silver
+// lining's phase, 0 once the light is well below the clouds' horizon (clouds.py _lit).
+float cloud_lit(vec2 cells, float detail, float thick, vec3 d, vec3 towards) {
+    float rise = max(towards.y, 0.1);
+    vec2 step = towards.xz * (cloud_sheet.z / rise / cloud_sheet.y);
+    float beside = 0.5 * (cloud_thickness(cloud_noise(cells + 0.5 * step, detail, SUN_OCTAVES), detail)
+                          + cloud_thickness(cloud_noise(cells + step, detail, SUN_OCTAVES), detail));
+    float depth = cloud_shape.z * (thick + beside) / (2.0 * rise);
+    float through = 0.4 * exp(-depth) + 0.6 * exp(-depth / 16.0);
+    const float g = SILVER_LINING;
+    float mu = clamp(dot(d, towards), -1.0, 1.0);
+    float phase = 0.6 + 0.4 * (1.0 - g * g) / pow(1.0 + g * g - 2.0 * g * mu, 1.5);
+    return through * phase * clamp((towards.y + 0.05) / 0.1, 0.0, 1.0);
+}
+
 // The share of the sky behind the clouds they hide along unit way d from the world's origin,
-// and (light) their own light: lit by the sun (unit way towards it, its disc's colour) and
-// the clear sky overhead.
-float cloud_cover(vec3 d, vec3 sun, vec3 sunlight, vec3 overhead, out vec3 light) {
+// and (light) their own light: lit by the sun (unit way towards it, its disc's colour), a moon
+// as the sun (its way, its disc's colour times its phase's share; black: none) and the clear
+// sky overhead.
+float cloud_cover(vec3 d, vec3 sun, vec3 sunlight, vec3 moon, vec3 moonlight, vec3 overhead, out vec3 light) {
     vec2 tc = layer_distance(vec3(0.0), d);
     float cosine = max(tc.y, MIN_CROSSING);
     vec2 cells = d.xz * (tc.x / cloud_sheet.y) + cloud_offset.xy;
     float detail = cloud_sheet.y * sqrt(cosine) / max(tc.x, 1e-6);
     float thick = cloud_thickness(cloud_noise(cells, detail, CLOUD_OCTAVES), detail);
     float hidden = d.y >= 0.0 ? (1.0 - exp(-cloud_shape.z * thick / cosine)) * exp(-tc.x / HAZE_DISTANCE) : 0.0;
-    float rise = max(sun.y, 0.1);
-    vec2 step = sun.xz * (cloud_sheet.z / rise / cloud_sheet.y);
-    float beside = 0.5 * (cloud_thickness(cloud_noise(cells + 0.5 * step, detail, SUN_OCTAVES), detail)
-                          + cloud_thickness(cloud_noise(cells + step, detail, SUN_OCTAVES), detail));
-    float depth = cloud_shape.z * (thick + beside) / (2.0 * rise);
-    float through = 0.4 * exp(-depth) + 0.6 * exp(-depth / 16.0);
-    const float g = SILVER_LINING;
-    float mu = clamp(dot(d, sun), -1.0, 1.0);
-    float phase = 0.6 + 0.4 * (1.0 - g * g) / pow(1.0 + g * g - 2.0 * g * mu, 1.5);
-    float up = clamp((sun.y + 0.05) / 0.1, 0.0, 1.0);
-    light = cloud_albedo.rgb * (sunlight * (through * phase * up / 3.14159265) + overhead * (1.0 - 0.5 * thick));
+    light = sunlight * (cloud_lit(cells, detail, thick, d, sun) / 3.14159265) + overhead * (1.0 - 0.5 * thick);
+    if (any(greaterThan(moonlight, vec3(0.0))))
+        light += moonlight * (cloud_lit(cells, detail, thick, d, moon) / 3.14159265);
+    light *= cloud_albedo.rgb;
     return hidden;
 }
 #endif

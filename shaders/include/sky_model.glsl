@@ -25,6 +25,7 @@ uniform vec3 sky_moon_direction;  // unit, towards the moon (its disc, MOON; its
 // mu0 the sunlight's cosine at the ball's point seen, mu the eye's): a full moon even to its
 // edge, a crescent, nothing past the terminator.  sky.py's moon_share is its twin.
 uniform vec3 sky_moon_color;      // its disc lit head on (an atmosphere's: through the air)
+uniform vec3 sky_moon_light;      // its light: the disc's colour times its phase's share (the clouds it lights)
 const float MOON_RADIUS_SINE = 0.0447101778;   // sin of the disc's edge from its centre (cos 0.9990)
 
 vec3 moon_disc(vec3 d) {
@@ -110,7 +111,13 @@ vec3 generated_sky(vec3 d) {
     vec3 discs = sun_disc(clamp(dot(d, sky_sun_direction), -1.0, 1.0)) MOON_DISC(d);
 #ifdef CLOUDS
     vec3 light;
-    float hidden = cloud_cover(d, sky_sun_direction, sky_sun_color, clear_sky(vec3(0.0, 1.0, 0.0)), light);
+#ifdef MOON
+    float hidden = cloud_cover(d, sky_sun_direction, sky_sun_color, sky_moon_direction, sky_moon_light,
+                               clear_sky(vec3(0.0, 1.0, 0.0)), light);
+#else
+    float hidden = cloud_cover(d, sky_sun_direction, sky_sun_color, vec3(0.0, 1.0, 0.0), vec3(0.0),
+                               clear_sky(vec3(0.0, 1.0, 0.0)), light);
+#endif
     return mix(clear_sky(d), light, hidden) + discs * (1.0 - hidden);
 #else
     return clear_sky(d) + discs;
