@@ -106,48 +106,59 @@ void main() {
     // the angle between its light and the ray, times its own share.
     vec3 lamp_sum = vec3(0.0);
 #endif
-    for (int i = 0; i < STEPS; ++i) {
-        float density = fog_density(x);
-        float lit = 1.0;
-#ifdef DIRECTIONAL_SHADOWS
-        bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
-        lit = held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0;
-        at += at_step;
-#endif
+    // The steps a stride at a time (the clouds' share read once a stride: a loop of its own,
+    // as llvmpipe runs a branch's body for every step whether or not any pixel takes it).
 #ifdef CLOUD_SHADOWS
-        int within = i % cloud_stride;
-        if (within == 0 && i > 0) {
+    int stride = cloud_stride;
+#else
+    int stride = STEPS;
+#endif
+    for (int base = 0; base < STEPS; base += stride) {
+#ifdef CLOUD_SHADOWS
+        if (base > 0) {
             cloud_at += cloud_step;
             cloud_from = cloud_to;
             cloud_to = cloud_shadow(cloud_at + cloud_step, towards);
         }
-        lit *= mix(cloud_from, cloud_to, float(within) / float(cloud_stride));
 #endif
-        sum += density * seen * lit;
+        int end = min(base + stride, STEPS);
+        for (int i = base; i < end; ++i) {
+            float density = fog_density(x);
+            float lit = 1.0;
+#ifdef DIRECTIONAL_SHADOWS
+            bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
+            lit = held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0;
+            at += at_step;
+#endif
+#ifdef CLOUD_SHADOWS
+            lit *= mix(cloud_from, cloud_to, float(i - base) / float(cloud_stride));
+#endif
+            sum += density * seen * lit;
 #if VOLUMETRIC_LAMPS > 0
-        vec4 lamp_lit = point_shadows(x, vec3(0.0));
-        vec3 lamps = vec3(0.0);
-        for (int k = 0; k < VOLUMETRIC_LAMPS; ++k) {
-            int j = lamp_slots[k];
-            vec3 d = lights.point_pos[j].xyz - x;
-            float dist = length(d);
-            vec3 l = d / max(dist, 1e-4);
+            vec4 lamp_lit = point_shadows(x, vec3(0.0));
+            vec3 lamps = vec3(0.0);
+            for (int k = 0; k < VOLUMETRIC_LAMPS; ++k) {
+                int j = lamp_slots[k];
+                vec3 d = lights.point_pos[j].xyz - x;
+                float dist = length(d);
+                vec3 l = d / max(dist, 1e-4);
 #ifdef SPOT_COOKIES  // its image, as sharp as it is (the steps' offsets and the filter blur it)
-            vec3 cookie = cookie_light(cookie_place(lights.point_cookie_u[j], lights.point_cookie_v[j],
-                                                    lights.point_spot[j], l), vec2(0.0), vec2(0.0));
+                vec3 cookie = cookie_light(cookie_place(lights.point_cookie_u[j], lights.point_cookie_v[j],
+                                                        lights.point_spot[j], l), vec2(0.0), vec2(0.0));
 #else
-            vec3 cookie = vec3(1.0);
+                vec3 cookie = vec3(1.0);
 #endif
 #ifdef PANEL_PICTURES
-            cookie *= face_mean(lights.point_rect_v[j]);   // (a panel's picture: its mean colour)
+                cookie *= face_mean(lights.point_rect_v[j]);   // (a panel's picture: its mean colour)
 #endif
-            lamps += lights.point_color[j].rgb * cookie * (lamp_scatter[k] * lamp_falloff(j, dist, l)
-                     * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit));
+                lamps += lights.point_color[j].rgb * cookie * (lamp_scatter[k] * lamp_falloff(j, dist, l)
+                         * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit));
+            }
+            lamp_sum += lamps * (density * seen);
+#endif
+            seen *= exp(-density * step_length);
+            x += dir * step_length;
         }
-        lamp_sum += lamps * (density * seen);
-#endif
-        seen *= exp(-density * step_length);
-        x += dir * step_length;
     }
     float phase = henyey_greenstein(dot(dir, towards), anisotropy);
     vec3 sun_light = sun >= 0 ? lights.directional_color[lit_by].rgb * (phase * sum) : vec3(0.0);
