@@ -316,10 +316,12 @@ class _Branches:
     program's (its edits rebuild nothing, a compile error cannot be in it).  A branch is kept
     (True), left out (False) or unknown (None: an ``#if`` expression, or a name defined in an
     unknown branch); an unknown branch's includes are expanded, as the preprocessor may keep
-    them.  ``#define`` and ``#undef`` in kept branches are followed, across included files."""
+    them.  ``#define`` and ``#undef`` in kept branches are followed, across included files.
+    ``defined`` None: the build's names are not known (every branch unknown, every include kept)."""
 
-    def __init__(self, defined: set[str]) -> None:
-        self.defined = defined
+    def __init__(self, defined: set[str] | None) -> None:
+        self.known = defined is not None
+        self.defined = defined if defined is not None else set()
         self.unsure: set[str] = set()
         self.open: list[list] = []  # per open #if: [this branch kept?, a branch taken, a branch unknown]
 
@@ -346,7 +348,7 @@ class _Branches:
 
     def _condition(self, directive: str, name: str) -> None:
         if directive in ("ifdef", "ifndef", "if"):
-            unknown = directive == "if" or name in self.unsure
+            unknown = not self.known or directive == "if" or name in self.unsure
             state = None if unknown else (name in self.defined) == (directive == "ifdef")
             self.open.append([state, state is True, state is None])
         elif not self.open:
@@ -364,7 +366,7 @@ class _Branches:
 
 def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
             contents: dict[str, bytes] | None = None, *, branches: _Branches | None = None) -> str:
-    branches = branches if branches is not None else _Branches(set())
+    branches = branches if branches is not None else _Branches(None)
     if name in stack:
         raise ShaderError(f"shader include cycle: {' -> '.join(stack + (name,))}")
     where = f" (included from {stack[-1]!r})" if stack else ""
