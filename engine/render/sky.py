@@ -391,7 +391,7 @@ def sky_model(skybox: Skybox | None, sun: SkySun | None = None, clouds: CloudSha
         if moon is not None:
             # The air's moonlight: the moon's light above the air (its phase's share of a
             # full moon's), scattered by the table at its elevation as the sun's is by its own.
-            moon_air = moon_color * moon_phase(moon_way, towards)[0]
+            moon_air = moon_color * _phase_share(tuple(moon_way), tuple(towards))
             moon_elevation = sun_elevation_degrees(moon_way)
             moon_coarse = coarse_view_table(air, moon_elevation)
             moon_elevation = round(moon_elevation / TABLE_STEP_DEGREES) * TABLE_STEP_DEGREES
