@@ -62,6 +62,8 @@ from collections.abc import Iterator
 import moderngl
 import numpy as np
 
+from engine.render.free_depth_images import FreeDepthImages
+
 _u = ctypes.c_uint
 _i = ctypes.c_int
 _P = ctypes.POINTER
@@ -775,9 +777,16 @@ def noisy_textures(seed: int = 7, nan: bool = False) -> Iterator[list[str]]:
     for name in _CONSTRUCTORS:
         setattr(moderngl.Context, name, wrap(name))
     moderngl.Context.buffer = buffer
+    # No shadow atlas of an engine released before (engine/render/free_depth_images.py): each
+    # made new, so full of noise too.
+    none_free = FreeDepthImages()
+    none_free.released = True
+    free_of = FreeDepthImages.__dict__["of"]
+    FreeDepthImages.of = classmethod(lambda cls, ctx: none_free)
     try:
         yield filled
     finally:
         for name, original in originals.items():
             setattr(moderngl.Context, name, original)
         moderngl.Context.buffer = make_buffer
+        FreeDepthImages.of = free_of

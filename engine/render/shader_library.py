@@ -382,6 +382,9 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
     number = files.number(name)
     out = []
     for index, line in enumerate(text.split("\n"), start=1):
+        if "#" not in line:   # (most lines: no directive, nothing to follow)
+            out.append(line)
+            continue
         match = _INCLUDE.match(line)
         if match is None:
             out.append(line)

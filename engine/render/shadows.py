@@ -54,6 +54,7 @@ from engine.render.bindings import (
     bind_texture,
     bind_uniform_block,
 )
+from engine.render.free_depth_images import give_depth_image, take_depth_image
 from engine.render.gpu import Gpu
 from engine.render.pose_rows import skinning_defines
 from engine.render.raw_gl import LayeredCubeTarget
@@ -228,7 +229,9 @@ class ShadowMaps:
 
     # --- the atlas --------------------------------------------------------------------------
     def _make_atlas(self, size: tuple[int, int]) -> moderngl.Texture:
-        atlas = self.ctx.depth_texture(size)
+        """A depth atlas of ``size`` read as ``sampler2DShadow``: a released engine's
+        (``free_depth_images``) or a new one, its texels undefined until drawn."""
+        atlas = take_depth_image(self.ctx, size)
         atlas.compare_func = "<="   # sampler2DShadow: each tap a bilinear percentage-closer lookup
         atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
         atlas.repeat_x = atlas.repeat_y = False
@@ -240,7 +243,7 @@ class ShadowMaps:
         if tile == self.tile:
             return
         release_framebuffer(self._atlas_framebuffer)
-        self.atlas.release()
+        give_depth_image(self.ctx, self.atlas)
         self.renderer.note_scene_change()
         self.atlas = self._make_atlas((2 * tile, 2 * tile))
         self._atlas_framebuffer = self.ctx.framebuffer(depth_attachment=self.atlas)
@@ -563,7 +566,7 @@ class ShadowMaps:
         self.renderer.note_scene_change()
         if self._spot_framebuffer is not None:
             release_framebuffer(self._spot_framebuffer)
-            self.spot_atlas.release()
+            give_depth_image(self.ctx, self.spot_atlas)
             self._spot_framebuffer = self.spot_atlas = None
         self.spot_tile = tile
         if tile:
@@ -819,6 +822,8 @@ class ShadowMaps:
         for _, _, buffer in self._fit_blocks.values():
             buffer.release()
         self._fit_blocks.clear()
-        for obj in (self.atlas, self._empty_cube, self.ubo, self.virtual_ubo, self.virtual_atlas, self._virtual_empty):
-            if obj is not None:
-                obj.release()
+        for atlas in (self.atlas, self.virtual_atlas, self._virtual_empty):   # (to the next engine on the context)
+            if atlas is not None:
+                give_depth_image(self.ctx, atlas)
+        for obj in (self._empty_cube, self.ubo, self.virtual_ubo):
+            obj.release()
