@@ -52,10 +52,12 @@ class Fog(TrackedComponent):
       infinitely far off: with the same density everywhere it is all fog colour at 1; with
       a falloff, only as much fog as the air along its direction holds.
     - ``sun_scatter`` (default 0): the air glows towards the sun (the brightest
-      ``DirectionalLight``): looking along a direction at angle a from it, the fog's colour
-      gains the sun's light (colour x intensity) x ``sun_scatter`` x max(cos a, 0)^8, as
-      Godot's fog sun scatter and Unreal's directional inscattering do.  In a mirror each
-      stretch of the way glows by its own direction.
+      ``DirectionalLight``; by night the moon, where it outshines the sun once an
+      atmosphere has dimmed each: ``engine.render.sky.air_light``): looking along a
+      direction at angle a from it, the fog's colour gains the sun's light (colour x
+      intensity) x ``sun_scatter`` x max(cos a, 0)^8, as Godot's fog sun scatter and
+      Unreal's directional inscattering do.  In a mirror each stretch of the way glows by
+      its own direction.
     - ``aerial_perspective`` (0 to 1, default 0): how much of the fog's colour is the sky's
       along each ray instead (the sky's cube map blurred to its 8-texel level), as Godot's
       fog aerial perspective: far things dissolve into the sky behind them, blue under a blue
@@ -99,7 +101,8 @@ class VolumetricFog(TrackedComponent):
     shadow of a pillar across the haze.
 
     Along each pixel's ray from the camera to what it shows (the sky: ``distance`` on), the
-    air's single scattering of the sun (the brightest ``DirectionalLight``) is summed in
+    air's single scattering of the sun (the brightest ``DirectionalLight``; by night the
+    moon, whichever is the brighter once an atmosphere has dimmed each) is summed in
     ``steps`` steps (``engine/render/volumetric_fog.py``): at each, the air's density (the
     Fog's, with its height falloff), what of it reaches the eye (the Fog's transmittance
     from the camera), whether the sun reaches it (the sun's shadow map, its cascades

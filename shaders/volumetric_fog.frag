@@ -1,5 +1,6 @@
 #version 410 core
 // Light shafts (components/fog.py VolumetricFog, engine/render/volumetric_fog.py): the sun's
+// (or by night the moon's: the directional light in slot ``sky_light``, engine/render/sky.py air_light)
 // single scattering by the fog's air along each ray of the main view, summed in STEPS steps,
 // and the VOLUMETRIC_LAMPS lamps' (PointLight.volumetric; MAX_VOLUMETRIC_LAMPS at most).
 // At each step t (the step's start moved by ``start``, a different offset each texel):
@@ -28,6 +29,7 @@ uniform int cloud_stride;    // the steps between two reads of the clouds' share
 uniform uint node;  // the view's node (its pixels' value in the level's node image)
 #endif
 
+uniform int sky_light;       // the sun's or the moon's slot in the Lights block (-1: neither lights the air)
 uniform int ratio;           // the view's pixels a march texel, each way (2 at half resolution)
 uniform float scatter;       // VolumetricFog.intensity
 uniform float anisotropy;    // VolumetricFog.anisotropy: the phase function's g
@@ -60,10 +62,8 @@ void main() {
     vec3 origin, dir;
     float reach;
     volumetric_ray(pixel, origin, dir, reach);
-    int sun = -1;  // the sun's slot (the Lights block marks it)
-    for (int k = 0; k < MAX_DIRECTIONAL_LIGHTS; ++k)
-        sun = k < lights.counts.x && lights.directional_dir[k].w > 0.5 ? k : sun;
-    int lit_by = max(sun, 0);  // (a slot to read where there is no sun: its light counts 0)
+    int sun = sky_light;        // ("the sun" below: the sun or the moon, whichever lights the air)
+    int lit_by = max(sun, 0);  // (a slot to read where there is none: its light counts 0)
     vec3 towards = -lights.directional_dir[lit_by].xyz;
     float step_length = reach / float(STEPS);
     float start = fract(interleaved_gradient_noise(gl_FragCoord.xy) + frame_offset);

@@ -32,13 +32,14 @@ from engine.render.renderer import Renderer
 from engine.render.resample import render_size
 from engine.render.scene_options import TREE_ROOT, SceneOptions
 from engine.render.scene_programs import reflects_environment
+from engine.render.sky import air_light
 from engine.render.targets import RenderTargets
 from engine.render.temporal_aa import jittered
 from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import View, camera_view
 from engine.resources import ContactLamps, Surfaces, ViewBudget, VolumetricLamps
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import brightest_directional
+from engine.rules.light_rules import KeptLights, brightest_directional
 
 _NO_LAMPS = ContactLamps()
 _NO_SHAFT_LAMPS = VolumetricLamps()
@@ -156,8 +157,9 @@ class MainViewSystem(esper.Processor):
         if shafts is not None and (fog is None or fog.density <= 0.0) and not self.renderer.fog.volume_count:
             why = "has no Fog with a density beside it and no FogVolume stands (the shafts are its air's light)"
         lamps = self.world.resources.get(VolumetricLamps, _NO_SHAFT_LAMPS)
-        if why is None and shafts is not None and brightest_directional(self.world) is None and not lamps.slots:
-            why = ("lights its air with the sun and the lamps with volumetric > 0, and the world has no "
+        lit_by = air_light(self.world) if shafts is not None else None   # (the sun, or the moon by night)
+        if why is None and shafts is not None and lit_by is None and not lamps.slots:
+            why = ("lights its air with the sun or the moon and the lamps with volumetric > 0, and the world has no "
                    "DirectionalLight that shines and no such PointLight")
         if why is not None:
             if self._said_no_shafts != (shafts, why):
@@ -177,9 +179,11 @@ class MainViewSystem(esper.Processor):
                 f"scatter at most {MAX_VOLUMETRIC_LAMPS} at once (the first by the lights' slots), so {lamps.cut} "
                 "light no air (RenderStats.volumetric_lamps_cut)"), stacklevel=3)
         self._said_lamps_cut = lamps.cut
-        sun = brightest_directional(self.world)   # (the march's sun: the Lights block's marked slot)
+        kept = self.world.resources.get(KeptLights)
+        slot = kept.directional.index(lit_by.entity) \
+            if lit_by is not None and kept is not None and lit_by.entity in kept.directional else None
         self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa", lamps,
-                                           None if sun is None else tuple(-float(c) for c in sun.direction))
+                                           None if slot is None else (slot, lit_by.towards))
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
         """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects

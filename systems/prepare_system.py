@@ -50,7 +50,7 @@ from engine.render.fog import volume_rows
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
-from engine.render.sky import is_generated, sky_model, sunlight_tint
+from engine.render.sky import air_light, is_generated, sky_model, sunlight_tint
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
 from engine.resources import ContactLamps, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
@@ -171,9 +171,9 @@ class PrepareSystem(esper.Processor):
         renderer.stats.rect_lights_cut = self._rect_cut
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
-        sun = brightest_directional(world) if fog is not None and fog.sun_scatter > 0.0 else None
-        if renderer.fog.set(fog, sun, self._fog_rows(camera) if self.fog else (),
-                            self._air_tint(sun) if sun is not None else (1.0, 1.0, 1.0)):
+        glow = air_light(world) if fog is not None and fog.sun_scatter > 0.0 else None   # (the sun or the moon)
+        if renderer.fog.set(fog, None if glow is None else glow.light, self._fog_rows(camera) if self.fog else (),
+                            (1.0, 1.0, 1.0) if glow is None else glow.tint):
             renderer.note_scene_change()   # every view's fogged pixels
         renderer.stats.fog_volumes_cut = self._fog_cut
 

@@ -37,6 +37,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import LightLimitWarning, NoCameraWarning
 from engine.core.world import World
 from engine.render.clouds import cloud_shadow, cloud_shape
+from engine.render.sky import sunlight_tint
 from engine.resources import VolumetricLamps
 from engine.rules.light_rules import ALL_ROUND, spot_cone, spot_factor
 from shell.overlay_text import post_lines
@@ -57,9 +58,10 @@ MIRROR = ((0.5, 2.2, -6.8), (9.0, 4.0, 1e-4))   # a mirror on the wall (its quad
 
 
 def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, sun: bool = True,
-          shadows: bool = True, cascades: int = 1, mirror: bool = False, clouds: CloudLayer | None = None) -> int:
+          shadows: bool = True, cascades: int = 1, mirror: bool = False, clouds: CloudLayer | None = None,
+          skybox: Skybox | None = None) -> int:
     camera = look_from(world, EYE, TARGET, fov=70.0)
-    world.spawn(Skybox(), *([clouds] if clouds is not None else []))
+    world.spawn(skybox if skybox is not None else Skybox(), *([clouds] if clouds is not None else []))
     if sun:
         world.spawn(DirectionalLight(direction=tuple(SUN), intensity=SUN_LIGHT, shadows=shadows,
                                      shadow_cascades=cascades))
@@ -191,6 +193,44 @@ def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows, mi
     assert np.quantile(error, 0.9) < 0.07
     if shadows:  # the shaft is there: the rays through the gap's light far above the rest
         assert truth.max() > 3 * np.median(truth[lit])
+
+
+ELSEWHERE = tuple(glm.normalize(glm.vec3(-0.6, -0.5, 0.6)))   # another body's way, far from SUN's
+
+
+@pytest.mark.parametrize("night", ["moon_outshines_the_sun", "sun_outshines_the_moon", "sun_set_under_air"])
+def test_the_sun_or_by_night_the_moon_lights_the_air(scene, night):
+    """The shafts and the fog's glow are the light of whichever of the sun and the moon is
+    the brighter once an atmosphere has dimmed each (``sky.air_light``): here the body along
+    ``SUN``, casting the slabs' shadows, at ``SUN_LIGHT``; the other, along ``ELSEWHERE``,
+    lights the scene but not the air.  ``sun_set_under_air``: an atmosphere, the sun (the
+    brighter light) below the horizon, where the air lets none of it through."""
+    settings = VolumetricFog(steps=64)
+    air = night == "sun_set_under_air"
+    lit_body = "sun" if night == "sun_outshines_the_moon" else "moon"
+    other = "moon" if lit_body == "sun" else "sun"
+
+    def build(world):
+        _hall(world, settings, fog=Fog(density=DENSITY, color=(0.02, 0.02, 0.02), sun_scatter=0.5), sun=False,
+              skybox=Skybox(model="atmosphere") if air else None)
+        world.spawn(DirectionalLight(direction=tuple(SUN), intensity=SUN_LIGHT, body=lit_body))
+        set_way = (0.3, 0.2, -0.93) if air else ELSEWHERE   # (below the horizon: travelling up)
+        world.spawn(DirectionalLight(direction=set_way, intensity=10.0 if air else 0.2, body=other, shadows=False))
+    runner = scene(build, SIZE)
+    runner.frame()
+    tint = sunlight_tint(Skybox(model="atmosphere"), tuple(SUN)) if air else (1.0, 1.0, 1.0)
+    marched = _marched(runner)
+    truth, reach = _ground_truth(runner, settings, 2)
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    lit = steady & (truth > 0.02 * truth.max())
+    assert lit.sum() > 0.3 * truth.size and truth.max() > 3 * np.median(truth[lit])   # (the shafts)
+    for channel in range(3):
+        error = np.abs(marched[..., channel] - truth * tint[channel])[lit] / (truth[lit] * tint[channel])
+        assert np.median(error) < 0.025 and np.quantile(error, 0.9) < 0.07, (channel, np.median(error))
+    # The fog's glow towards the same body, its light x sun_scatter (x the air's tint).
+    block = runner.engine.renderer.fog.block
+    assert np.allclose(block[8:11], -np.array(tuple(SUN)), atol=1e-6)
+    assert np.allclose(block[12:15], SUN_LIGHT * 0.5 * np.array(tint), rtol=1e-5)
 
 
 @pytest.mark.parametrize("scale, height, drift, stride", [(20.0, 20.0, (0.0, 0.0), 1),

@@ -65,9 +65,9 @@ class FogBlock:
 
     def set(self, fog: Fog | None, sun: DirectionalLight | None = None, rows: tuple[float, ...] = (),
             tint: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> bool:
-        """Write ``fog`` (None: no fog), glowing towards ``sun`` (the brightest directional
-        light: ``light_rules.brightest_directional``; its colour times ``tint``, an atmosphere's
-        share of it: ``PrepareSystem._air_tint``) by its ``sun_scatter``, and the fog
+        """Write ``fog`` (None: no fog), glowing towards ``sun`` (the sun or the moon, whichever
+        lights the air: ``sky.air_light``; its colour times ``tint``, an atmosphere's share of
+        it) by its ``sun_scatter``, and the fog
         volumes' ``rows`` (``volume_rows``; at most ``MAX_FOG_VOLUMES``: the caller chose them)
         into the block where it differs from what it holds; True when it did (every view's
         fogged pixels change).  Compared as plain floats: the prepare stage asks every frame."""

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import moderngl
 import numpy as np
 
-from components.rendering import DEFAULT_SUN_DIRECTION
-from components.tracking import HALF_MAX
+from components.rendering import DEFAULT_SUN_DIRECTION, Skybox
+from components.tracking import HALF_MAX, raw_field
 from engine.core.cube_faces import face_directions
 from engine.render.atmosphere import (
     TABLE_STEP_DEGREES,
@@ -41,10 +41,11 @@ from engine.render.atmosphere import (
     sunlight_share,
 )
 from engine.render.clouds import CloudShape, cloud_cover
-from engine.rules.light_rules import SkySun
+from engine.rules.light_rules import SkySun, brightest_directional_entity, luminance
 
 if TYPE_CHECKING:
-    from components import Skybox
+    from components import DirectionalLight
+    from engine.core.world import World
 
 SEAMLESS_CUBE_MAP = 0x884F  # GL_TEXTURE_CUBE_MAP_SEAMLESS, core since 3.2
 
@@ -109,6 +110,41 @@ def _sunlight_tint(air: Air, direction: tuple[float, float, float]) -> tuple[flo
     share = sunlight_share(air, towards / np.linalg.norm(towards))
     overhead = sunlight_share(air, np.array([0.0, 1.0, 0.0]))
     return tuple(float(c) for c in share / np.maximum(overhead, 1e-6))
+
+
+class AirLight(NamedTuple):
+    """The sky body whose light a fog's air scatters (``air_light``)."""
+
+    entity: int
+    light: DirectionalLight
+    tint: tuple[float, float, float]   # what an atmosphere's air leaves of its light (``sunlight_tint``)
+
+    @property
+    def towards(self) -> tuple[float, float, float]:
+        """The unit way towards it."""
+        return tuple(-float(c) for c in self.light.direction)
+
+
+def air_light(world: World) -> AirLight | None:
+    """The sky body whose light a fog's air scatters (its glow towards it, the light shafts):
+    the brighter, by the luminance of its colour x intensity x what an atmosphere leaves of
+    it on its way down (``sunlight_tint``), of the world's sun and its moon
+    (``brightest_directional``): the sun by day, the moon once the sun has set or wherever
+    it outshines the sun.  The light scattered changes smoothly as one takes over from the
+    other (equal where they cross); its way turns at once.  None: neither shines."""
+    skies = world.query_one(Skybox)
+    sky = skies[0][1] if skies else None
+    best, brightest = None, 0.0
+    for body in ("sun", "moon"):
+        found = brightest_directional_entity(world, body)
+        if found is None:
+            continue
+        entity, light = found
+        tint = sunlight_tint(sky, tuple(light.direction))
+        bright = float(luminance(np.array(raw_field(light, "color").xyz) * light.intensity * np.array(tint)))
+        if bright > brightest:
+            best, brightest = AirLight(entity, light, tint), bright
+    return best
 
 
 def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, coarse: bool = False) -> np.ndarray:

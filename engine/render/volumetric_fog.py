@@ -1,4 +1,5 @@
-"""Light shafts: the sun's light scattered by the active camera's fog, shadowed
+"""Light shafts: the sun's light (or by night the moon's: ``sky.air_light``, the brighter
+once an atmosphere has dimmed each) scattered by the active camera's fog, shadowed
 (``VolumetricFog`` beside its ``Fog``; ``components/fog.py``).
 
 Ray marching through a participating medium, in screen space, as Unreal's, Godot's and
@@ -11,7 +12,7 @@ put in, before its glass (``ScenePass.finish_root``):
    texel's ray from the near plane to what the view's depth image shows (the sky: the
    component's ``distance`` on) sums, at ``steps`` points, the fog's density there, what of
    the light scattered there reaches the eye (the fog's own transmittance,
-   ``shaders/include/fog.glsl``) and whether the sun reaches the point (its shadow map, read
+   ``shaders/include/fog.glsl``) and whether the sun (or moon) reaches the point (its shadow map, read
    as the scene pass reads it: ``shaders/include/shadows.glsl``; and a ``CloudLayer``'s
    share, ``shaders/include/clouds.glsl``'s ``cloud_shadow``), then scales the sum by the
    sun's light, the Henyey-Greenstein phase function and ``intensity``; and at each point the
@@ -135,15 +136,17 @@ class VolumetricFogPass:
         # What the root's march image was last marched from (``_still_key``): equal, and not
         # jittered, the image stands and only the filter adds it again to the view's new draw.
         self._marched_from: tuple | None = None
-        self._sun: tuple[float, float, float] | None = None   # towards the sun (begin's)
+        self._sky_light: tuple[int, tuple[float, float, float]] | None = None   # begin's ``sky_light``
         self.cloud_stride = 1   # the march's steps between two reads of the clouds' share (the last march's)
         self.keep_still = True  # False: marched every frame (what the still fuzz compares with)
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
-              lamps: VolumetricLamps = _NO_LAMPS, sun: tuple[float, float, float] | None = None) -> None:
+              lamps: VolumetricLamps = _NO_LAMPS,
+              sky_light: tuple[int, tuple[float, float, float]] | None = None) -> None:
         """``view``, drawn into ``targets`` (the main tree's level 0) this frame, gets the
-        shafts ``settings`` say, of the sun (``sun``: the unit way towards it, which sets how
-        often the march reads a CloudLayer's share: ``clouds.cloud_stride``) and ``lamps``
+        shafts ``settings`` say, of the sun or the moon (``sky_light``: its slot in the
+        Lights block and the unit way towards it, which sets how often the march reads a
+        CloudLayer's share: ``clouds.cloud_stride``; ``sky.air_light`` chooses it) and ``lamps``
         (``jittered``: under temporal AA, a new offset each frame); the images are made for the
         targets (again when they or the resolution change)."""
         ratio = 2 if settings.half_resolution else 1
@@ -154,7 +157,7 @@ class VolumetricFogPass:
             images = self._images = self._make(targets, ratio)
             self._marched_from = None
         self._pending = (view, settings, jittered, lamps)
-        self._sun = sun
+        self._sky_light = sky_light
         self.reach = settings.reflection_depth
         for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
             self._levels.pop(depth).release()
@@ -201,7 +204,7 @@ class VolumetricFogPass:
         size, the images' resolution, the settings and the lamps."""
         return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), images.level.size,
                 images.ratio, settings.intensity, settings.anisotropy, settings.distance, settings.steps,
-                lamps.slots, lamps.scatter)
+                lamps.slots, lamps.scatter, self._sky_light)
 
     def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool,
               march_again: bool) -> None:
@@ -231,10 +234,12 @@ class VolumetricFogPass:
                 tiles[slot, :3] = tile
             spare = MAX_VOLUMETRIC_LAMPS - len(lamps.slots)
             clouds = gpu.clouds.shape
-            self.cloud_stride = 1 if clouds is None or self._sun is None else \
-                cloud_stride(clouds, settings.distance / settings.steps, np.array(self._sun, np.float64))
+            sky_light = self._sky_light
+            self.cloud_stride = 1 if clouds is None or sky_light is None else \
+                cloud_stride(clouds, settings.distance / settings.steps, np.array(sky_light[1], np.float64))
             self._write(march.program, {**shared, "scatter": settings.intensity, "anisotropy": settings.anisotropy,
                                         "cloud_stride": self.cloud_stride,
+                                        "sky_light": -1 if sky_light is None else sky_light[0],
                                         "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
                                         "map_tiles": tiles.tobytes(), "lamp_slots": (*lamps.slots, *(0,) * spare),
                                         "lamp_scatter": (*lamps.scatter, *(0.0,) * spare)})

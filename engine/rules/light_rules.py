@@ -604,13 +604,19 @@ def brightest_directional(world: World, body: str = "sun") -> DirectionalLight |
     """The brightest ``DirectionalLight`` of ``body`` (luminance of colour x intensity; ties
     to the first made), or None where there is none or every one is black: the scene's sun
     (or, ``body`` "moon", its moon)."""
+    best = brightest_directional_entity(world, body)
+    return None if best is None else best[1]
+
+
+def brightest_directional_entity(world: World, body: str = "sun") -> tuple[int, DirectionalLight] | None:
+    """``brightest_directional``'s light with its entity."""
     best, brightest = None, 0.0
-    for _, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
+    for entity, light in sorted(world.query_one(DirectionalLight), key=lambda pair: pair[0]):
         if light.body != body:
             continue
         bright = float(luminance(raw_field(light, "color").xyz * light.intensity))
         if bright > brightest:
-            best, brightest = light, bright
+            best, brightest = (entity, light), bright
     return best
 
 
