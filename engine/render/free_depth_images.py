@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import moderngl
 
+from engine.render.context_kept import kept_on
+
 KEEP = 3  # depth images held: one engine's shadow atlases (the sun's, the spots', the virtual lights')
 
 
@@ -39,12 +41,7 @@ class FreeDepthImages:
     @classmethod
     def of(cls, ctx: moderngl.Context) -> FreeDepthImages:
         """The list of ``ctx`` (made on first use)."""
-        if not isinstance(ctx.extra, dict):
-            ctx.extra = {}
-        free = ctx.extra.get(cls.EXTRA_KEY)
-        if free is None:
-            free = ctx.extra[cls.EXTRA_KEY] = cls()
-        return free
+        return kept_on(ctx, cls.EXTRA_KEY, cls)
 
     def take(self, size: tuple[int, int]) -> moderngl.Texture | None:
         """A free depth image of ``size`` (off the list), or None (always, once released)."""

@@ -72,6 +72,7 @@ from engine.render.bindings import (
     bind_textures,
     bind_uniform_block,
 )
+from engine.render.context_kept import kept_on
 from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
 from engine.render.sky_draw import bind_sky, sky_build, wire_sky, write_sky
@@ -507,9 +508,7 @@ def take_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Que
     few): moderngl 5.13 cannot release a Query, so trees and engines made and closed on one
     context (probes, tests, editors) hand theirs back (``give_samples_queries``) instead of
     leaking them; the pool grows to the most any tree held at once."""
-    if not isinstance(ctx.extra, dict):
-        ctx.extra = {}
-    pool = ctx.extra.setdefault("speculum.samples_queries", [])
+    pool = kept_on(ctx, "speculum.samples_queries", list)
     taken = pool[len(pool) - min(count, len(pool)):]
     del pool[len(pool) - len(taken):]
     return taken + [ctx.query(samples=True) for _ in range(count - len(taken))]
@@ -517,9 +516,7 @@ def take_samples_queries(ctx: moderngl.Context, count: int) -> list[moderngl.Que
 
 def give_samples_queries(ctx: moderngl.Context, queries: list[moderngl.Query]) -> None:
     """Hand queries back to the context's free pool (``take_samples_queries``)."""
-    if not isinstance(ctx.extra, dict):
-        ctx.extra = {}
-    ctx.extra.setdefault("speculum.samples_queries", []).extend(queries)
+    kept_on(ctx, "speculum.samples_queries", list).extend(queries)
 
 
 @dataclass

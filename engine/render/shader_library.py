@@ -81,6 +81,7 @@ from engine.core import cube_faces, material_slots
 from engine.core.errors import ShaderError
 from engine.render import object_motion, pose_rows, views
 from engine.render.bindings import clip_glsl_defines
+from engine.render.context_kept import kept_on
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.render.ltc_fit import LTC_SIZE
 from engine.render.raw_gl import _load as load_gl_function
@@ -481,12 +482,7 @@ class FreePrograms:
     @classmethod
     def of(cls, ctx: moderngl.Context) -> FreePrograms:
         """The free list of ``ctx`` (made on first use)."""
-        if not isinstance(ctx.extra, dict):
-            ctx.extra = {}
-        free = ctx.extra.get(cls.EXTRA_KEY)
-        if free is None:
-            free = ctx.extra[cls.EXTRA_KEY] = cls()
-        return free
+        return kept_on(ctx, cls.EXTRA_KEY, cls)
 
     def take(self, root: Path | None, key: ProgramKey, sources: dict[str, str | None]) -> moderngl.Program | None:
         """A free program of ``key`` linked from ``sources`` (taken off the list), or None."""
