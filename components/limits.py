@@ -153,6 +153,9 @@ MAX_VOLUMETRIC_LAMPS = 4
 # engine/render/views.py VOLUME_ROW).  Each point is a six-face capture: 4096 of them are a
 # bake of seconds on a GPU and minutes on llvmpipe.
 MAX_VOLUME_AXIS_POINTS = 16
+# An IrradianceVolume's bounces: each a round of the whole grid's captures, lit by the round
+# before it (a bake of eight rounds is eight times one round's time).
+MAX_VOLUME_BOUNCES = 8
 # Irradiance volumes lighting a world at once (the lowest entities'; the rest said once and
 # ignored): each a slot of the irradiance table's rows, the scene shader weighing each at a point.
 MAX_IRRADIANCE_VOLUMES = 4

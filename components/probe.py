@@ -7,7 +7,7 @@ from typing import Any
 
 from pyglm import glm
 
-from components.limits import MAX_VIEW_DEPTH, MAX_VOLUME_AXIS_POINTS, check_near_far
+from components.limits import MAX_VIEW_DEPTH, MAX_VOLUME_AXIS_POINTS, MAX_VOLUME_BOUNCES, check_near_far
 from components.tracking import ComponentValueError, boolean, choice, finite, integer, vec3
 from components.visibility import LAYER_FIELDS, ShownLayers
 
@@ -155,8 +155,8 @@ class IrradianceVolume(Captured):
     between the eight points about it (trilinear), instead of from the sky or the reflection
     probes' boxes: a ball rolling from a sunlit courtyard under an arch darkens, a white wall
     beside a red one turns pink. Its captures see the lights, shadows and sky (not the
-    grid itself, nor the probes' diffuse light: one bounce, and a still scene settles in one
-    bake), so light bounced off walls and floors reaches what they face.
+    probes' diffuse light), so light bounced off walls and floors reaches what they face;
+    with ``bounces`` above 1 they see the grid too, so that light bounces again.
 
     - ``size``: the box (metres, world axes), centred on the entity's position; the grid's
       corner points lie on its corners.
@@ -174,6 +174,13 @@ class IrradianceVolume(Captured):
       (only after ``request()``, its first bake too).  ``request()`` bakes any of them again,
       the grid lighting the scene meanwhile.
     - ``points_per_frame``: captures a frame (each six faces of the frame's view budget).
+    - ``bounces`` (1 to ``MAX_VOLUME_BOUNCES``, 8; default 1): how many times the light the
+      grid holds has bounced.  A bake is that many rounds of the whole grid, each one's
+      captures lit by the grid as the round before left it (the first by the lights and the
+      sky alone), as Unity's and Godot's bakers add bounces: a room lit through one window
+      is lit in its far corners too.  The grid lights the scene from the first round on,
+      brighter each round.  A ``continuous`` volume with ``bounces`` above 1 keeps lighting
+      each round by the last, so its light settles to every bounce (as DDGI's does).
 
     The grid lights the scene once every point has been captured; until then the sky and
     the probes do. At most ``MAX_IRRADIANCE_VOLUMES`` (4) a world (a room each: a point takes
@@ -191,6 +198,7 @@ class IrradianceVolume(Captured):
     normal_bias: float = 0.1
     refresh: str = "once"
     points_per_frame: int = 4
+    bounces: int = 1
 
     @property
     def point_count(self) -> int:
@@ -228,4 +236,6 @@ class IrradianceVolume(Captured):
             return choice(self, name, value, VOLUME_REFRESH)
         if name == "points_per_frame":
             return integer(self, name, value, low=1, high=MAX_VOLUME_AXIS_POINTS ** 3)
+        if name == "bounces":
+            return integer(self, name, value, low=1, high=MAX_VOLUME_BOUNCES)
         return value

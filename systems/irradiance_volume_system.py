@@ -81,6 +81,7 @@ class VolumeBake:
         self.whole = False                   # every point of the grid holds a capture
         self.requests = 0
         self.points_moved = 0                # points of its last bake captured from outside a solid object
+        self.round = 1                       # the round of its bake under way (IrradianceVolume.bounces)
 
     @property
     def key(self) -> int:
@@ -144,15 +145,26 @@ class IrradianceVolumeSystem(esper.Processor):
         if volume.requests != bake.requests:
             bake.requests = volume.requests
             self._start(bake, volume.near)
-        if not bake.due and volume.refresh == "continuous":
+        if not bake.due and bake.whole and (bake.round < volume.bounces
+                                            or volume.refresh == "continuous" and volume.bounces > 1):
+            # Another bounce: a round lit by the grid as the last one left it (a continuous
+            # volume's every round past the first: its light settles to every bounce).
+            bake.round += 1
+            bake.due = grid_points(grid.points)
+            table.begin_bounce()
+        elif not bake.due and volume.refresh == "continuous":
+            bake.round = 1
             bake.due = grid_points(grid.points)  # another round, from the places this grid's bake found
         self._capture_due(bake, volume)
+        if not any(b.due and b.round > 1 for b in self.volumes.values()):
+            table.end_bounces()
 
     def _start(self, bake: VolumeBake, near: float) -> None:
         """A bake of every point of its grid, each captured from its place or from outside the
         solid object it lies in (``volume_rules.pushed_out``)."""
         grid = bake.grid
         bake.due = grid_points(grid.points)
+        bake.round = 1
         places = np.array([grid.position(index) for index in bake.due])
         low, high = np.array(grid.low), np.array(grid.high)
         margin = capture_margin(near)
@@ -179,7 +191,11 @@ class IrradianceVolumeSystem(esper.Processor):
             position = glm.vec3(*bake.taken_from[index])
             views = {face: face_view(face, position, volume.near, volume.far, volume.resolution, skip=bake.owner,
                                      layers=volume.layer_mask) for face in range(FACES)}
-            probes.capture(bake.key, views, None, 0)
+            table.bounce_lit = bake.round > 1   # (a bounce round: lit by the grid's last round)
+            try:
+                probes.capture(bake.key, views, None, 0)
+            finally:
+                table.bounce_lit = False
             table.project_volume_point(grid, index, probes.cubes[bake.key])
             stats.probe_ms_spent += (time.perf_counter() - start) * 1e3
             drawn += 1

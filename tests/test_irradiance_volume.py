@@ -13,6 +13,7 @@ from pyglm import glm
 
 from components import (
     ComponentValueError,
+    Emissive,
     HemisphereLight,
     IrradianceVolume,
     Material,
@@ -340,6 +341,66 @@ def test_a_bake_again_gives_the_same_light_and_continuous_keeps_capturing(scene)
     assert captured == [3, 3, 2] or captured == [3, 3, 3]
 
 
+def _furnace(world, albedo: float, volume: IrradianceVolume) -> None:
+    """The closed room with every wall grey ``albedo``, rough and glowing its own colour
+    (``Emissive``: radiance ``albedo``), under a black sky, the volume filling it."""
+    room(world, walls=dict.fromkeys(WALLS, (albedo,) * 3))
+    for entity, material in world.query_one(Material):
+        material.unlit, material.roughness, material.metallic = False, 1.0, 0.0
+        world.add_component(entity, Emissive(power=1.0))
+    look_from(world, (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
+    world.spawn(Transform(), volume)
+
+
+def test_each_bounce_is_a_round_lit_by_the_last_a_furnace_sums_the_series(scene):
+    """A furnace: a closed room whose walls glow e (their albedo a) and reflect a of the
+    light they take.  Round 1 sees the walls' glow, e; each later round sees the walls lit by
+    the grid as the round before left it, e + r x (the last round's light), r the walls'
+    diffuse reflectance as the scene shader has it (a, less what its Fresnel term keeps for
+    the specular).  So the grid's light after n rounds is e (1 + r + ... + r^(n-1)): the
+    steps between rounds fall by r each time, and r is the albedo within the Fresnel's share."""
+    albedo = 0.6
+    volume = IrradianceVolume(size=(3.0, 3.0, 3.0), points=(2, 2, 2), points_per_frame=8, bounces=4, near=0.02)
+    runner = scene(lambda world: _furnace(world, albedo, volume), (32, 24))
+    table = runner.engine.renderer.irradiance
+    light = []   # the grid's constant coefficient after each round (every point alike)
+    for _ in range(4):
+        runner.frame()
+        assert runner.stats.volume_points == 8
+        grid = volume_light(runner, volume)[..., 0, :]
+        assert np.allclose(grid, grid[0, 0, 0], rtol=0.01), grid   # (uniform: the furnace)
+        light.append(float(grid.mean()))
+    runner.frame()
+    assert runner.stats.volume_points == 0 and table.bounce_copies == 0   # four rounds: done, its copy let go
+    glow = room_light(np.zeros(3), walls=dict.fromkeys(WALLS, (albedo,) * 3))[0].mean()
+    assert light[0] == pytest.approx(glow, rel=0.02)   # round 1: the glow alone
+    steps = np.diff([0.0, *light])
+    ratios = steps[1:] / steps[:-1]
+    assert np.allclose(ratios, ratios[0], rtol=0.03), ratios   # a geometric series
+    assert albedo * 0.9 < ratios[0] <= albedo * 1.001, ratios  # r: the albedo less the specular's share
+    # One bounce (the default) stops after its round.
+    volume.bounces = 1
+    volume.request()
+    runner.frame()
+    runner.frame()
+    assert runner.stats.volume_points == 0
+    assert float(volume_light(runner, volume)[..., 0, :].mean()) == pytest.approx(light[0], rel=1e-4)
+
+
+def test_a_continuous_volume_with_bounces_settles_to_every_bounce(scene):
+    """``continuous`` with ``bounces`` above 1: every round after the first is lit by the
+    last, so the furnace's light climbs towards e / (1 - r)."""
+    volume = IrradianceVolume(size=(3.0, 3.0, 3.0), points=(2, 2, 2), points_per_frame=8, bounces=2,
+                              refresh="continuous", near=0.02)
+    runner = scene(lambda world: _furnace(world, 0.5, volume), (32, 24))
+    light = []
+    for _ in range(8):
+        runner.frame()
+        light.append(float(volume_light(runner, volume)[..., 0, :].mean()))
+    assert all(b > a for a, b in zip(light, light[1:], strict=False)), light
+    assert light[-1] > 1.9 * light[0] * 0.95 and light[-1] - light[-2] < 0.02 * light[-1], light
+
+
 def test_a_scripted_volume_bakes_only_when_asked(scene):
     """``refresh="scripted"``: nothing captured until ``request()``, then the whole grid."""
     volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8, refresh="scripted")
@@ -428,6 +489,8 @@ def test_volumes_light_their_own_rooms_and_a_fifth_is_said_and_ignored(scene):
     ("normal_bias", -0.1, ">= 0"),
     ("refresh", "sometimes", "must be one of"),
     ("points_per_frame", 0, r"\[1, 4096\]"),
+    ("bounces", 0, r"\[1, 8\]"),
+    ("bounces", 9, r"\[1, 8\]"),
     ("blend_distance", 3.0, "at most half the box's smallest side"),
 ])
 def test_values_are_checked(field, value, match):

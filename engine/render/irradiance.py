@@ -396,6 +396,13 @@ class IrradianceTable:
         self._boxes: list[tuple[int, tuple, tuple, float]] = []  # (owner, centre, half size, blend distance)
         self._block = irradiance_block(())
         self.volumes: dict[int, VolumeGrid] = {}  # by slot: the irradiance volumes lighting the scene (set_volume)
+        # A volume's bounces (IrradianceVolume.bounces): the table and block as a round of its
+        # bake left them (begin_bounce), which its next round's captures are lit by
+        # (bounce_lit), while the round writes the table itself.
+        self._bounce_table: moderngl.Texture | None = None
+        self._bounce_framebuffer: moderngl.Framebuffer | None = None
+        self._bounce_ubo: moderngl.Buffer | None = None
+        self.bounce_lit = False   # set about a volume point's capture that its grid's last round lights
         self._stale = False
         self._count = 0  # boxes in the block
         self._warned = False
@@ -413,7 +420,7 @@ class IrradianceTable:
         rows = np.zeros((2 * LTC_SIZE, LTC_SIZE, 4), np.float32)
         rows[:LTC_SIZE] = table[..., :4].transpose(1, 0, 2)
         rows[LTC_SIZE:, :, :2] = table[..., 4:6].transpose(1, 0, 2)
-        self.table.write(rows.tobytes(), viewport=(0, LTC_ROW, LTC_SIZE, 2 * LTC_SIZE))
+        self._write_rows(rows.tobytes(), viewport=(0, LTC_ROW, LTC_SIZE, 2 * LTC_SIZE))
         self.has_ltc = True
 
     def write_sheen_albedo(self) -> None:
@@ -422,7 +429,7 @@ class IrradianceTable:
         it is made, so a world without one never computes it."""
         if not self.has_sheen_albedo:
             self._brdf[..., 2] = sheen_albedo_table()
-            self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
+            self._write_rows(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
                                                              ENVIRONMENT_BRDF_SIZE))
             self.has_sheen_albedo = True
 
@@ -431,7 +438,7 @@ class IrradianceTable:
         the BRDF rows, once: a batch with ``Material.subsurface`` asks for it when it is made."""
         if not self.has_subsurface:
             self._brdf[..., 3] = subsurface_table()
-            self.table.write(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
+            self._write_rows(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
                                                              ENVIRONMENT_BRDF_SIZE))
             self.has_subsurface = True
 
@@ -452,6 +459,39 @@ class IrradianceTable:
             self._boxes = kept
             self._stale = True
             self.renderer.note_scene_change()
+
+    def _write_rows(self, data: bytes, viewport: tuple[int, int, int, int]) -> None:
+        """Rows that are not a probe's or a volume's (the BRDF's, the LTC's), into the table and
+        the bounce copy alike (a capture lit by the copy reads them there)."""
+        self.table.write(data, viewport=viewport)
+        if self._bounce_table is not None:
+            self._bounce_table.write(data, viewport=viewport)
+
+    def begin_bounce(self) -> None:
+        """Keep the table and the volumes as they are now (a round of a volume's bake just
+        ended), for the captures of the next round to be lit by (``bounce_lit``)."""
+        self._refresh()
+        if self._bounce_table is None:
+            self._bounce_table = self.ctx.texture(self.table.size, 4, dtype="f4")
+            self._bounce_table.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self._bounce_table.repeat_x = self._bounce_table.repeat_y = False
+            self._bounce_framebuffer = self.ctx.framebuffer(color_attachments=[self._bounce_table])
+            self._bounce_ubo = self.ctx.buffer(irradiance_block(()))
+        self.ctx.copy_framebuffer(self._bounce_framebuffer, self.framebuffer)
+        self._bounce_ubo.write(irradiance_block((), [self.volumes[slot] for slot in sorted(self.volumes)]))
+
+    def end_bounces(self) -> None:
+        """No volume's bake has a round to come lit by the last: the copy let go."""
+        if self._bounce_table is not None:
+            release_framebuffer(self._bounce_framebuffer)
+            for obj in (self._bounce_table, self._bounce_ubo):
+                obj.release()
+            self._bounce_table = self._bounce_framebuffer = self._bounce_ubo = None
+
+    @property
+    def bounce_copies(self) -> int:
+        """Bounce copies of the table held (0 or 1)."""
+        return 0 if self._bounce_table is None else 1
 
     def set_volume(self, slot: int, grid: VolumeGrid | None) -> None:
         """The irradiance volume whose tiles slot ``slot`` holds, baked whole (None: it lights
@@ -579,6 +619,11 @@ class IrradianceTable:
         nothing to do: +25% of a frame of diffuse boxes).  No volume while a probe or a
         volume's point is captured either."""
         self._refresh()
+        if capturing and self.bounce_lit and self._bounce_table is not None:
+            # A volume point's capture in a bounce round: lit by the grids as the last round left them.
+            bind_texture(self.ctx, self._bounce_table, IRRADIANCE_UNIT)
+            bind_uniform_block(self.ctx, self._bounce_ubo, IRRADIANCE_BINDING)
+            return bool(self.renderer.ambient_defines)
         bind_texture(self.ctx, self.table, IRRADIANCE_UNIT)
         bind_uniform_block(self.ctx, self.empty_ubo if capturing else self.ubo, IRRADIANCE_BINDING)
         return not capturing and bool(self.renderer.ambient_defines)
@@ -594,6 +639,7 @@ class IrradianceTable:
             self._vao.release()
             self._vao = None
         release_framebuffer(self.framebuffer)
+        self.end_bounces()
         for obj in (self.table, self._placeholder, self.ubo, self.empty_ubo):
             obj.release()
         self.rows.clear()

@@ -512,7 +512,7 @@ class ScenePass:
         the same capture state and sampler, while none of them changed
         (``bindings_epoch``)."""
         ctx, renderer = self.ctx, self.renderer
-        kept, state = self._pass_wide, (renderer.capturing, options.reflection_filter)
+        kept, state = self._pass_wide, (renderer.capturing, options.reflection_filter, self.irradiance.bounce_lit)
         if run is not None and kept is not None and kept[0] is run and kept[1] == state \
                 and kept[2] == bindings_epoch(ctx) and bindings.CACHE_STATE:
             return
