@@ -164,7 +164,8 @@ def _rect_lights(ctx):
 
 def _irradiance_volume(ctx):
     """The mirror ring in an irradiance volume (its points captured a few a frame, one inside
-    a box moved out of it; then the IRRADIANCE_VOLUME builds, in the mirrors' levels too) with
+    a box moved out of it; then the IRRADIANCE_VOLUME builds, in the mirrors' levels too, and
+    its second bounce's round: captures lit by the table's copy) with
     a reflection probe's influence box over part of it (AMBIENT_PROBES with it), and a lit
     particle cloud reading both."""
     from benchmarks.mirrors import MirrorRing
@@ -174,7 +175,7 @@ def _irradiance_volume(ctx):
         world = engine.world
         world.spawn(Transform(position=(0.0, 1.0, 0.0)),
                     IrradianceVolume(size=(8.0, 2.0, 8.0), points=(3, 2, 3), points_per_frame=8, resolution=16,
-                                     blend_distance=0.5))
+                                     blend_distance=0.5, bounces=2))
         world.spawn(Transform(position=(2.0, 1.0, 0.0)), ReflectionProbe(resolution=16, influence=(3.0, 3.0, 3.0)))
         world.spawn(Transform(position=(0.0, 0.5, 1.0)), ParticleEmitter(rate=200.0, lit=True))
     return _engine_frames(ctx, MirrorRing(3), 4, configure)

@@ -477,6 +477,8 @@ class IrradianceTable:
             self._bounce_table.repeat_x = self._bounce_table.repeat_y = False
             self._bounce_framebuffer = self.ctx.framebuffer(color_attachments=[self._bounce_table])
             self._bounce_ubo = self.ctx.buffer(irradiance_block(()))
+        self._bounce_framebuffer.use()   # (the scissor test bounds a blit: none)
+        apply_pass_state(self.ctx, self.STATE, (0, 0, *self.table.size))
         self.ctx.copy_framebuffer(self._bounce_framebuffer, self.framebuffer)
         self._bounce_ubo.write(irradiance_block((), [self.volumes[slot] for slot in sorted(self.volumes)]))
 
