@@ -123,6 +123,8 @@ class IrradianceVolumeSystem(esper.Processor):
                 bake = self.volumes[owner] = VolumeBake(owner, next(s for s in range(MAX_IRRADIANCE_VOLUMES)
                                                                     if s not in taken))
             self._update(bake, volume)
+        if not any(bake.due and bake.round > 1 for bake in self.volumes.values()):
+            self.renderer.irradiance.end_bounces()   # (no bounce round under way: the table's copy let go)
 
     def _update(self, bake: VolumeBake, volume: IrradianceVolume) -> None:
         transform = self.world.try_get(bake.owner, Transform)
@@ -156,8 +158,6 @@ class IrradianceVolumeSystem(esper.Processor):
             bake.round = 1
             bake.due = grid_points(grid.points)  # another round, from the places this grid's bake found
         self._capture_due(bake, volume)
-        if not any(b.due and b.round > 1 for b in self.volumes.values()):
-            table.end_bounces()
 
     def _start(self, bake: VolumeBake, near: float) -> None:
         """A bake of every point of its grid, each captured from its place or from outside the

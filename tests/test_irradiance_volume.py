@@ -399,6 +399,14 @@ def test_a_continuous_volume_with_bounces_settles_to_every_bounce(scene):
         light.append(float(volume_light(runner, volume)[..., 0, :].mean()))
     assert all(b > a for a, b in zip(light, light[1:], strict=False)), light
     assert light[-1] > 1.9 * light[0] * 0.95 and light[-1] - light[-2] < 0.02 * light[-1], light
+    # Removed with a round under way (two points a frame): its copy of the table goes with it.
+    volume.points_per_frame = 2
+    runner.frame()
+    table = runner.engine.renderer.irradiance
+    assert table.bounce_copies == 1
+    runner.world.delete_entity(next(e for e, _ in runner.world.query_one(IrradianceVolume)))
+    runner.frame()
+    assert table.bounce_copies == 0 and not table.volumes
 
 
 def test_a_scripted_volume_bakes_only_when_asked(scene):
