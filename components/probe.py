@@ -179,7 +179,8 @@ class IrradianceVolume(Captured):
       captures lit by the grid as the round before left it (the first by the lights and the
       sky alone), as Unity's and Godot's bakers add bounces: a room lit through one window
       is lit in its far corners too.  The grid lights the scene from the first round on,
-      brighter each round.  A ``continuous`` volume with ``bounces`` above 1 keeps lighting
+      brighter each round.  Raised after a bake, the rounds it lacks are added; lowered, it
+      is baked again.  A ``continuous`` volume with ``bounces`` above 1 keeps lighting
       each round by the last, so its light settles to every bounce (as DDGI's does).
 
     The grid lights the scene once every point has been captured; until then the sky and

@@ -147,6 +147,8 @@ class IrradianceVolumeSystem(esper.Processor):
         if volume.requests != bake.requests:
             bake.requests = volume.requests
             self._start(bake, volume.near)
+        if bake.round > volume.bounces and volume.refresh == "once":
+            self._start(bake, volume.near)   # fewer bounces than its grid holds: baked again (more: rounds added)
         if not bake.due and bake.whole and (bake.round < volume.bounces
                                             or volume.refresh == "continuous" and volume.bounces > 1):
             # Another bounce: a round lit by the grid as the last one left it (a continuous

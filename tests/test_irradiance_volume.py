@@ -378,13 +378,17 @@ def test_each_bounce_is_a_round_lit_by_the_last_a_furnace_sums_the_series(scene)
     ratios = steps[1:] / steps[:-1]
     assert np.allclose(ratios, ratios[0], rtol=0.03), ratios   # a geometric series
     assert albedo * 0.9 < ratios[0] <= albedo * 1.001, ratios  # r: the albedo less the specular's share
-    # One bounce (the default) stops after its round.
+    # Fewer bounces bake it again (one: the default, which stops after its round); more add rounds.
     volume.bounces = 1
-    volume.request()
     runner.frame()
+    assert runner.stats.volume_points == 8
     runner.frame()
     assert runner.stats.volume_points == 0
     assert float(volume_light(runner, volume)[..., 0, :].mean()) == pytest.approx(light[0], rel=1e-4)
+    volume.bounces = 2
+    runner.frame()
+    assert runner.stats.volume_points == 8
+    assert float(volume_light(runner, volume)[..., 0, :].mean()) == pytest.approx(light[1], rel=1e-3)
 
 
 def test_a_continuous_volume_with_bounces_settles_to_every_bounce(scene):
