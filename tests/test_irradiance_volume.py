@@ -407,10 +407,11 @@ def test_a_continuous_volume_with_bounces_settles_to_every_bounce(scene):
     volume.points_per_frame = 2
     runner.frame()
     table = runner.engine.renderer.irradiance
-    assert table.bounce_copies == 1
+    assert table.bounce_copies == 1 == runner.engine.renderer.resource_counts()["bounce_copies"]
     runner.world.delete_entity(next(e for e, _ in runner.world.query_one(IrradianceVolume)))
     runner.frame()
     assert table.bounce_copies == 0 and not table.volumes
+    assert runner.engine.renderer.resource_counts()["bounce_copies"] == 0
 
 
 def test_a_scripted_volume_bakes_only_when_asked(scene):

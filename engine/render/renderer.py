@@ -468,7 +468,7 @@ class Renderer(Gpu):
                 "pose_rows": int(self.pose_rows.texture is not None) + int(self.pose_rows.before is not None),
                 "object_motion": int(self.object_motion.texture is not None),
                 "programs": len(self.shaders._programs), "post_targets": self.present_pass.post_target_count(),
-                "irradiance_rows": len(self.irradiance.rows),
+                "irradiance_rows": len(self.irradiance.rows), "bounce_copies": self.irradiance.bounce_copies,
                 "occlusion_targets": self.occlusion.target_count(),
                 "reflection_targets": self.screen_reflections.target_count(),
                 "volumetric_targets": self.volumetric_fog.target_count(),
