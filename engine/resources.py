@@ -161,6 +161,15 @@ class VolumetricLamps:
 
 
 @dataclass(frozen=True)
+class CloudChanges:
+    """How many times the world's clouds have changed past what a reflection probe's capture
+    may lag them (came, went, changed, or drifted past ``clouds.shadows_served``; a world
+    resource, from the prepare stage): the probe scheduler relights every probe when it moves on."""
+
+    count: int = 0
+
+
+@dataclass(frozen=True)
 class FiredEvent:
     """An ``AnimationEvents`` event the playback of ``clip`` passed on ``entity`` (a model's
     root): its ``name`` and ``time`` in the clip; ``layer`` True where the root's

@@ -45,14 +45,14 @@ from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import FogLimitWarning, LightLimitWarning
 from engine.core.world import World
-from engine.render.clouds import CloudShape, cloud_shape, drift_served
+from engine.render.clouds import CloudShape, cloud_shape, drift_served, shadows_served
 from engine.render.fog import volume_rows
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import air_light, is_generated, sky_model, sunlight_tint
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
-from engine.resources import ContactLamps, VolumetricLamps
+from engine.resources import CloudChanges, ContactLamps, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
     ALL_ROUND,
@@ -120,6 +120,7 @@ class PrepareSystem(esper.Processor):
         self._clouds: CloudShape | None = None        # the world's CloudLayer now (cloud_shape)
         self._cube_clouds: CloudShape | None = None   # ... as the sky's cube map and light have it
         self._pass_clouds: CloudShape | None = None   # ... as the sky pass draws it
+        self._probe_clouds: CloudShape | None = None  # ... as the probes were last relit by it (CloudChanges)
         self._cloud_said: set[str] = set()            # what the CloudLayer was told (said once)
         self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
         # The debug overlay's toggle: off, no surface reflects the light from all round by its
@@ -131,6 +132,10 @@ class PrepareSystem(esper.Processor):
         world = self.world
         renderer = self.renderer
         sky_changed = self._sky()
+        if not shadows_served(self._probe_clouds, self._clouds):   # (the probes' captures relit)
+            self._probe_clouds = self._clouds
+            changes = self.world.resources.get(CloudChanges, CloudChanges())
+            self.world.resources[CloudChanges] = CloudChanges(changes.count + 1)
         if not sky_changed and (self._sky_sh is None or world.changed(HemisphereLight)):
             self._sky_sh = ambient_sh(world, self._cube_sun, self._cube_clouds)
             sky_changed = True

@@ -20,7 +20,9 @@ has a ``ProbeState``.  What is due each frame, per probe:
     entity 12, seen in mirror 5"); all six when the sun or the sky changed
     ("DirectionalLight changed": a sun turning or fading a little, as through a day, only
     once it is a degree or 2% from where it last relit them, or stands still again:
-    ``_suns_relight``) or a point light whose range reaches what the probe sees
+    ``_suns_relight``), the clouds came, went, changed or drifted an eighth of their finest
+    detail since they last relit them ("CloudLayer changed": ``clouds.shadows_served``,
+    counted by the prepare stage's ``CloudChanges``) or a point light whose range reaches what the probe sees
     changed, came, went or moved, its own Transform or a parent's ("light 7 moved");
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
     ``scripted``: all six after a request;
@@ -54,7 +56,7 @@ from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
 from engine.assets.mesh import Mesh
 from engine.core.budget import spending_order
 from engine.core.world import World
-from engine.resources import RenderStats, Surfaces, ViewBudget
+from engine.resources import CloudChanges, RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import SAME_SUN_DEGREES, SAME_SUN_TINT, shadow_texel_tangent, sun_relights, sun_states
 from engine.rules.probe_rules import (
@@ -135,6 +137,7 @@ class ProbeScheduler:
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
         self._suns: tuple = ()  # the directional lights as the probes were last relit by them (sun_states)
         self._suns_behind = False  # a sun turned a little since: the probes relight once it stands still
+        self._clouds = 0  # CloudChanges as the probes were last relit by it
 
     def update(self) -> ProbeSchedule:
         """This frame's schedule, published as the world's ``ProbeSchedule``."""
@@ -156,6 +159,10 @@ class ProbeScheduler:
             self._lights_came_or_went = any(reason.endswith((" came", " went")) for reason, _, _ in lights)
             everything = [f"{kind.__name__} changed" for kind in LIGHTING_KINDS
                           if (self._suns_relight() if kind is DirectionalLight else world.changed(kind))]
+            clouds = world.resources.get(CloudChanges, CloudChanges()).count
+            if clouds != self._clouds:   # (came, went, changed, or drifted past what a capture serves)
+                self._clouds = clouds
+                everything.append("CloudLayer changed")
             self._watching = True
         else:
             # No probe refreshes on change or periodically: what moved matters to none (a

@@ -20,6 +20,7 @@ from components import (
     DirectionalLight,
     Material,
     MeshRef,
+    ReflectionProbe,
     Skybox,
     Transform,
     look_rotation,
@@ -364,6 +365,44 @@ def test_the_wind_moves_the_clouds_the_sky_pass_each_frame_the_cube_every_two_te
                                        rtol=6e-3, atol=6e-3)
     assert layer.drift[0] == pytest.approx(0.5 + 180.0, abs=1e-6)
     assert len(cubes) == 1 + int(180.0 // served)
+
+
+def test_a_reflection_probe_is_relit_once_the_clouds_drift_past_what_its_capture_serves(scene):
+    """An on_change probe over a floor under clouds 40 m across (their finest octave 2.5 m: a
+    capture serves an eighth of it, 0.3125 m of drift) blown at 6 m/s, 0.1 m a frame: its
+    faces are captured again each time the drift passes that (every fourth frame), and not
+    between; the capture after shows the shadows moved.  (A face that shows the sky alone is
+    drawn again as the sky's cube map is, ``test_the_wind_moves_the_clouds...``.)"""
+    layer = CloudLayer(coverage=0.5, scale=40.0, height=60.0, wind=(6.0, 0.0))
+
+    def build(world):
+        world.spawn(Transform(position=(0.0, 30.0, 0.0)), Camera(fov_y=60.0, near=0.5, far=200.0))
+        world.spawn(Skybox(**SKY), layer)
+        world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=3.0, shadows=False))
+        world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
+        world.spawn(Transform(position=(0.0, 2.0, 0.0)), ReflectionProbe(resolution=16))
+    runner = scene(build, (32, 24))
+    runner.frame()
+    assert runner.stats.probe_faces >= 6   # (its first capture)
+    probe = next(e for e, _ in runner.world.query_one(ReflectionProbe))
+    cube = runner.engine.renderer.probes.cubes[probe].texture
+    before = np.frombuffer(cube.read(face=3), np.float16 if cube.dtype == "f2" else np.float32).copy()
+    faces = []
+    for _ in range(12):
+        runner.frame()
+        faces.append(runner.stats.probe_faces)
+    assert [count > 0 for count in faces] == [False, False, False, True] * 3, faces
+    assert all(count >= 5 for count in faces if count), faces   # (the face up, sky alone, as the sky's cube: below)
+    after = np.frombuffer(cube.read(face=3), np.float16 if cube.dtype == "f2" else np.float32)
+    assert not np.array_equal(before, after)   # (the floor below it: the shadows moved)
+    # Still clouds relight nothing.
+    layer.wind = (0.0, 0.0)
+    runner.frame()
+    still = []
+    for _ in range(6):
+        runner.frame()
+        still.append(runner.stats.probe_faces)
+    assert still == [0] * 6, still
 
 
 # -- the world's layer --------------------------------------------------------------------------

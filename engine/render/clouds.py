@@ -106,6 +106,24 @@ def drift_served(baked: CloudShape | None, now: CloudShape | None, face_size: in
     return bool(np.hypot(*apart) <= served)
 
 
+SHADOW_DRIFT_SHARE = 8   # a capture serves clouds drifted by 1/this of the finest octave's cell
+
+
+def shadows_served(captured: CloudShape | None, now: CloudShape | None) -> bool:
+    """Whether what a reflection probe captured under the clouds ``captured`` (their shadows
+    on its surroundings, and its sky) still serves the clouds ``now``: the same clouds,
+    drifted by at most 1/``SHADOW_DRIFT_SHARE`` of the finest octave's cell (the sheet's
+    ``scale`` over 2^(octaves - 1)): the shadows' finest edges a few metres off at most."""
+    if captured is None or now is None:
+        return captured is now
+    if dataclasses.replace(captured, offset=now.offset) != now:
+        return False
+    served = 1.0 / (SHADOW_DRIFT_SHARE * 2.0 ** (CLOUD_OCTAVES - 1))   # in first-octave cells
+    apart = (np.array(now.offset) - np.array(captured.offset) + NOISE_PERIOD / 2.0) % NOISE_PERIOD \
+        - NOISE_PERIOD / 2.0
+    return bool(np.hypot(*apart) <= served)
+
+
 def layer_distance(points: np.ndarray, ways: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray]:
     """How far along unit ``ways`` (..., 3) from ``points`` (..., 3; below the sheet) the
     sheet ``height`` metres up is met, and the cosine between the way and the sheet's normal
