@@ -619,7 +619,8 @@ class IrradianceTable:
         ``AMBIENT_PROBES``, the box loop and the table's reads, and ``IRRADIANCE_VOLUME``
         are builds of their own, since llvmpipe runs a loop's body once even when it has
         nothing to do: +25% of a frame of diffuse boxes).  No volume while a probe or a
-        volume's point is captured either."""
+        volume's point is captured either, but for a volume's bounce round (``bounce_lit``):
+        its point's captures read the grids in the table's copy."""
         self._refresh()
         if capturing and self.bounce_lit and self._bounce_table is not None:
             # A volume point's capture in a bounce round: lit by the grids as the last round left them.

@@ -840,7 +840,7 @@ class ScenePass:
         renderer.fog.bind()
         self.shadows.bind()
         renderer.spot_cookies.bind()
-        self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's irradiance alone
+        self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's light (a bounce: the grid's)
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block
         size = (0, 0, target.size, target.size)
