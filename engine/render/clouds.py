@@ -99,11 +99,18 @@ def drift_served(baked: CloudShape | None, now: CloudShape | None, face_size: in
     The sky pass draws them where they are every frame; what reflects them, a little late."""
     if baked is None or now is None:
         return baked is now
-    if dataclasses.replace(baked, offset=now.offset) != now:
+    return _drifted_within(baked, now, CUBE_DRIFT_TEXELS * (np.pi / 2.0) / face_size * now.height / now.scale)
+
+
+def _drifted_within(before: CloudShape, now: CloudShape, cells: float) -> bool:
+    """Whether ``now`` is the clouds ``before``, drifted by at most ``cells`` first-octave
+    cells (the shortest way round the pattern's period)."""
+    if before == now:
+        return True
+    if dataclasses.replace(before, offset=now.offset) != now:
         return False
-    served = CUBE_DRIFT_TEXELS * (np.pi / 2.0) / face_size * now.height / now.scale   # in cells
-    apart = (np.array(now.offset) - np.array(baked.offset) + NOISE_PERIOD / 2.0) % NOISE_PERIOD - NOISE_PERIOD / 2.0
-    return bool(np.hypot(*apart) <= served)
+    apart = (np.array(now.offset) - np.array(before.offset) + NOISE_PERIOD / 2.0) % NOISE_PERIOD - NOISE_PERIOD / 2.0
+    return bool(np.hypot(*apart) <= cells)
 
 
 SHADOW_DRIFT_SHARE = 8   # a capture serves clouds drifted by 1/this of the finest octave's cell
@@ -116,12 +123,7 @@ def shadows_served(captured: CloudShape | None, now: CloudShape | None) -> bool:
     ``scale`` over 2^(octaves - 1)): the shadows' finest edges a few metres off at most."""
     if captured is None or now is None:
         return captured is now
-    if dataclasses.replace(captured, offset=now.offset) != now:
-        return False
-    served = 1.0 / (SHADOW_DRIFT_SHARE * 2.0 ** (CLOUD_OCTAVES - 1))   # in first-octave cells
-    apart = (np.array(now.offset) - np.array(captured.offset) + NOISE_PERIOD / 2.0) % NOISE_PERIOD \
-        - NOISE_PERIOD / 2.0
-    return bool(np.hypot(*apart) <= served)
+    return _drifted_within(captured, now, 1.0 / (SHADOW_DRIFT_SHARE * 2.0 ** (CLOUD_OCTAVES - 1)))
 
 
 def layer_distance(points: np.ndarray, ways: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray]:

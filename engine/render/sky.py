@@ -122,7 +122,7 @@ class AirLight(NamedTuple):
     @property
     def towards(self) -> tuple[float, float, float]:
         """The unit way towards it."""
-        return tuple(-float(c) for c in self.light.direction)
+        return tuple(-float(c) for c in raw_field(self.light, "direction"))
 
 
 def air_light(world: World) -> AirLight | None:
@@ -140,7 +140,7 @@ def air_light(world: World) -> AirLight | None:
         if found is None:
             continue
         entity, light = found
-        tint = sunlight_tint(sky, tuple(light.direction))
+        tint = sunlight_tint(sky, tuple(raw_field(light, "direction")))   # (past the in-place watch: a read)
         bright = float(luminance(np.array(raw_field(light, "color").xyz) * light.intensity * np.array(tint)))
         if bright > brightest:
             best, brightest = AirLight(entity, light, tint), bright
