@@ -517,7 +517,7 @@ class Skybox(TrackedComponent):
 
     ``faces`` is None (generate from the colours below) or six HxWx3 float arrays in GL
     face order +X, -X, +Y, -Y, +Z, -Z, linear colour: a photographed or rendered sky from an
-    equirectangular panorama (a Radiance ``.hdr`` HDRI, or a PNG or JPEG) is
+    equirectangular panorama (a Radiance ``.hdr`` or OpenEXR ``.exr`` HDRI, or a PNG or JPEG) is
     ``engine.assets.panorama.sky_faces_from_file(path, face_size, yaw)``.  A generated sky's background is
     drawn from the colours per pixel (``engine/render/sky.py``); ``face_size`` is the side of
     the cube map made from them, which reflections, refraction and the sky's light read.

@@ -82,7 +82,7 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                              "physically based sky, with a night's stars beyond its air")
     parser.add_argument("--panorama", default=None, metavar="FILE",
                         help="the level's sky (its Skybox, made if it has none) an equirectangular panorama: a "
-                             "Radiance .hdr HDRI, or a PNG or JPEG taken as sRGB (512 texels a face)")
+                             "Radiance .hdr or OpenEXR .exr HDRI, or a PNG or JPEG taken as sRGB (512 texels a face)")
     parser.add_argument("--panorama-yaw", type=_yaw, default=0.0, metavar="DEGREES",
                         help="with --panorama: turn it this many degrees about up (default 0)")
     parser.add_argument("--time", type=_hour, default=None, metavar="HOUR",

@@ -4,7 +4,8 @@ Unity's HDRI sky), so a photographed or rendered sky lights the scene, its refle
 probes as a cube map sky does.
 
 Files: Radiance ``.hdr`` (RGBE or XYZE, the new run-length encoding or flat, as Greg Ward's
-format writes them: ``load_hdr``), linear light, the camera's exposure deciding how bright; or
+format writes them: ``load_hdr``) or OpenEXR ``.exr`` (``engine/assets/exr_image.py``), linear
+light, the camera's exposure deciding how bright; or
 any image Pillow reads (PNG, JPEG), taken as sRGB and made linear (an 8-bit panorama holds no
 sun brighter than white: its light is the sky's diffuse only).
 
@@ -29,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from engine.assets.exr_image import load_exr
 from engine.assets.texture_data import MAX_TEXTURE_SIDE, check_asset_file, load_texture
-from engine.core.color import srgb_to_linear
+from engine.core.color import srgb_to_linear, xyz_to_rec709_matrix
 from engine.core.cube_faces import face_directions
 from engine.core.errors import AssetError
 
@@ -41,10 +43,7 @@ MAX_PANORAMA_PIXELS = 8192 * 4096
 MAX_FACE_SIZE = 2048                # a Skybox face's side (components.rendering's check)
 MAX_FOOTPRINT_TAPS = 8              # bilinear taps a side per face texel at most
 MAX_INTENSITY = 1e4                 # what a panorama's colours may be multiplied by
-# CIE XYZ (an XYZE file's primaries) to linear sRGB / Rec. 709, D65.
-_XYZ_TO_RGB = np.array([[3.2404542, -1.5371385, -0.4985314],
-                        [-0.9692660, 1.8760108, 0.0415560],
-                        [0.0556434, -0.2040259, 1.0572252]])
+_XYZ_TO_RGB = xyz_to_rec709_matrix()  # an XYZE file's colours to the engine's linear Rec. 709 (D65)
 
 
 class SkyFaces(np.ndarray):
@@ -208,9 +207,13 @@ def save_hdr(path: str | Path, image: np.ndarray) -> Path:
 
 def load_panorama(path: str | Path) -> np.ndarray:
     """An equirectangular image's linear colours (height, width, 3) float32, row 0 at the top:
-    a ``.hdr`` file as ``load_hdr`` reads it, any other image through Pillow as sRGB."""
-    if Path(path).suffix.lower() in (".hdr", ".pic", ".rgbe"):
+    a ``.hdr`` file as ``load_hdr`` reads it, an ``.exr`` file as ``load_exr`` does, any other
+    image through Pillow as sRGB."""
+    suffix = Path(path).suffix.lower()
+    if suffix in (".hdr", ".pic", ".rgbe"):
         return load_hdr(path)
+    if suffix == ".exr":
+        return load_exr(path)
     texture = load_texture(path)
     return srgb_to_linear(texture.pixels[..., :3] / 255.0).astype(np.float32)
 

@@ -1,0 +1,236 @@
+"""OpenEXR panoramas (engine/assets/exr_image.py): files written here with the OpenEXR
+library's own writer (every compression, half, float and uint channels, tiles, parts, layers,
+windows, primaries) read back to the colours written (exactly where the compression is
+lossless); primaries converted to Rec. 709 as OpenColorIO's ACES config does (its published
+matrix, not the engine's derivation); bad files refused naming the file and why; ``save_exr``'s
+files read back by the library itself; and an .exr sky in a level file and the runner."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import OpenEXR
+import pytest
+
+from components import Skybox
+from engine.assets.exr_image import COMPRESSIONS, load_exr, save_exr
+from engine.assets.panorama import panorama_faces, sky_faces_from_file
+from engine.core.errors import AssetError
+from tests.support import look_from
+
+LOSSLESS = ("none", "rle", "zips", "zip", "piz")
+# OpenColorIO's ACES 1.x config, "ACES2065-1" to "Linear Rec.709 (sRGB)" (Bradford to D65).
+OCIO_AP0_TO_REC709 = np.array([[2.52168618674388, -1.13413098823972, -0.387555198504164],
+                               [-0.276479914229922, 1.37271908766826, -0.096239173438334],
+                               [-0.0153780649660342, -0.152975335867399, 1.16835340083343]])
+AP0 = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
+
+
+def _compression(name: str):
+    return getattr(OpenEXR, f"{'NO' if name == 'none' else name.upper()}_COMPRESSION")
+
+
+def write(path, channels: dict[str, np.ndarray], compression: str = "zip", **header) -> str:
+    """The OpenEXR library's writer: each channel a contiguous 2-D array (its dtype its type)."""
+    header = {"compression": _compression(compression), "type": OpenEXR.scanlineimage, **header}
+    OpenEXR.File(header, {k: np.ascontiguousarray(v) for k, v in channels.items()}).write(str(path))
+    return str(path)
+
+
+def rgb(image: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
+    return {f"{prefix}{c}": image[..., i] for i, c in enumerate("RGB")}
+
+
+def smooth(height: int = 32, width: int = 64, dtype=np.float16) -> np.ndarray:
+    """A sky-like image: smooth gradients of 0.05 to 20 across and down."""
+    y, x = np.mgrid[0:height, 0:width] / np.array([height, width])[:, None, None]
+    image = np.stack([0.05 + 20 * x * y, 0.5 + np.sin(3 * x) ** 2, 2.0 * (1 - y) + 0.1], axis=-1)
+    return image.astype(dtype)
+
+
+def noisy(height: int = 12, width: int = 20, seed: int = 0, dtype=np.float16) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return (rng.uniform(0.0, 1.0, (height, width, 3)) * 10.0 ** rng.uniform(-3, 3, (height, width, 1))).astype(dtype)
+
+
+# -- reading ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("compression", LOSSLESS)
+@pytest.mark.parametrize("dtype", [np.float16, np.float32])
+def test_a_lossless_exr_reads_back_exactly(tmp_path, compression, dtype):
+    image = noisy(dtype=dtype)
+    back = load_exr(write(tmp_path / "sky.exr", rgb(image), compression))
+    assert back.dtype == np.float32 and back.shape == image.shape
+    np.testing.assert_array_equal(back, image.astype(np.float32))
+
+
+@pytest.mark.parametrize("compression,tolerance", [("pxr24", 1e-4), ("b44", 2e-3), ("b44a", 2e-3),
+                                                   ("dwaa", 0.02), ("dwab", 0.02)])
+def test_a_lossy_exr_reads_back_within_its_codecs_error(tmp_path, compression, tolerance):
+    """PXR24 keeps 15 of a float's 23 mantissa bits; B44 and DWA (Poly Haven's) are lossy
+    codecs: a smooth sky within ``tolerance`` of each value's size."""
+    image = smooth(dtype=np.float32 if compression == "pxr24" else np.float16).astype(np.float32)
+    back = load_exr(write(tmp_path / "sky.exr", rgb(image), compression))
+    assert np.abs(back - image).max() / image.max() <= tolerance
+    assert np.median(np.abs(back - image) / image) <= tolerance
+
+
+def test_uint_channels_and_a_tiled_file_and_bottom_up_rows_read_as_written(tmp_path):
+    counts = np.arange(6 * 10 * 3, dtype=np.uint32).reshape(6, 10, 3)
+    np.testing.assert_array_equal(load_exr(write(tmp_path / "u.exr", rgb(counts))), counts.astype(np.float32))
+    tiles = OpenEXR.TileDescription()
+    tiles.xSize, tiles.ySize, tiles.mode = 8, 4, OpenEXR.ONE_LEVEL
+    image = noisy(13, 21)
+    path = write(tmp_path / "t.exr", rgb(image), "piz", type=OpenEXR.tiledimage, tiles=tiles)
+    np.testing.assert_array_equal(load_exr(path), image.astype(np.float32))
+    path = write(tmp_path / "d.exr", rgb(image), "zip", lineOrder=OpenEXR.DECREASING_Y)
+    np.testing.assert_array_equal(load_exr(path), image.astype(np.float32))   # row 0 still the top
+
+
+def test_the_colour_part_or_layer_is_found_and_alpha_and_others_left_out(tmp_path):
+    image, other = noisy(seed=1), noisy(seed=2)
+    depth = OpenEXR.Part({"type": OpenEXR.scanlineimage, "compression": OpenEXR.ZIP_COMPRESSION},
+                         {"Z": np.ascontiguousarray(image[..., 0].astype(np.float32))}, name="depth")
+    beauty = OpenEXR.Part({"type": OpenEXR.scanlineimage, "compression": OpenEXR.ZIP_COMPRESSION},
+                          {k: np.ascontiguousarray(v) for k, v in {**rgb(image), "A": image[..., 0]}.items()},
+                          name="beauty")
+    fill = OpenEXR.Part({"type": OpenEXR.scanlineimage, "compression": OpenEXR.PIZ_COMPRESSION},
+                        {k: np.ascontiguousarray(v) for k, v in rgb(other).items()}, name="fill")
+    OpenEXR.File([depth, beauty, fill]).write(str(tmp_path / "parts.exr"))
+    np.testing.assert_array_equal(load_exr(tmp_path / "parts.exr"), image.astype(np.float32))
+    np.testing.assert_array_equal(load_exr(tmp_path / "parts.exr", layer="fill"), other.astype(np.float32))
+    path = write(tmp_path / "layers.exr", {**rgb(image, "sky."), **rgb(other), "A": other[..., 0]})
+    np.testing.assert_array_equal(load_exr(path), other.astype(np.float32))
+    np.testing.assert_array_equal(load_exr(path, layer="sky"), image.astype(np.float32))
+    with pytest.raises(AssetError, match=r"layers\.exr.*no the layer 'ground'.*sky\.R"):
+        load_exr(path, layer="ground")
+    grey = write(tmp_path / "y.exr", {"Y": image[..., 1]})
+    np.testing.assert_array_equal(load_exr(grey), np.repeat(image[..., 1:2], 3, axis=-1).astype(np.float32))
+
+
+def test_the_display_window_is_the_image_and_the_data_window_sits_in_it(tmp_path):
+    """Data at (3, 2) to (22, 13) in a display window (0, 0) to (29, 15), and data partly
+    outside one: placed by its coordinates, black where there is none, cut at the edge."""
+    image = noisy(12, 20)
+    path = write(tmp_path / "w.exr", rgb(image), dataWindow=(np.array([3, 2], np.int32), np.array([22, 13], np.int32)),
+                 displayWindow=(np.array([0, 0], np.int32), np.array([29, 15], np.int32)))
+    want = np.zeros((16, 30, 3), np.float32)
+    want[2:14, 3:23] = image
+    np.testing.assert_array_equal(load_exr(path), want)
+    path = write(tmp_path / "x.exr", rgb(image), dataWindow=(np.array([-5, 4], np.int32), np.array([14, 15], np.int32)),
+                 displayWindow=(np.array([0, 0], np.int32), np.array([9, 9], np.int32)))
+    want = np.zeros((10, 10, 3), np.float32)
+    want[4:10, 0:10] = image[0:6, 5:15]
+    np.testing.assert_array_equal(load_exr(path), want)
+
+
+def test_aces_and_other_primaries_are_converted_to_rec709(tmp_path):
+    """An ACES2065-1 file (AP0 primaries, its white near D60): each colour times OpenColorIO's
+    AP0 to Rec. 709 matrix (to 1e-5), the file's white grey, colours outside Rec. 709 clipped
+    to 0; a file that names Rec. 709's own primaries is untouched."""
+    image = smooth(dtype=np.float32)
+    image[0, 0] = (1.0, 1.0, 1.0)   # the white point: grey in Rec. 709
+    back = load_exr(write(tmp_path / "aces.exr", rgb(image), chromaticities=AP0))
+    want = np.maximum(image.astype(np.float64) @ OCIO_AP0_TO_REC709.T, 0.0)
+    assert (image.astype(np.float64) @ OCIO_AP0_TO_REC709.T).min() < -0.01   # (some out of gamut, clipped)
+    np.testing.assert_allclose(back, want, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(back[0, 0], (1.0, 1.0, 1.0), atol=1e-5)
+    rec709 = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+    np.testing.assert_array_equal(load_exr(write(tmp_path / "709.exr", rgb(image), chromaticities=rec709)), image)
+
+
+def _truncated(tmp_path):
+    data = open(write(tmp_path / "whole.exr", rgb(noisy())), "rb").read()
+    (tmp_path / "cut.exr").write_bytes(data[:len(data) // 2])
+    return tmp_path / "cut.exr"
+
+
+@pytest.mark.parametrize("make,words", [
+    (lambda p: (p / "a.exr").write_bytes(b"#?RADIANCE\n") and p / "a.exr", "not an OpenEXR file"),
+    (_truncated, "cannot be read as OpenEXR"),
+    (lambda p: write(p / "z.exr", {"Z": np.ones((4, 4), np.float32)}), "no an image part with channels R, G and B"),
+    (lambda p: write(p / "n.exr", rgb(np.full((4, 4, 3), np.nan, np.float32))), "16 pixels hold NaN"),
+    (lambda p: write(p / "b.exr", rgb(np.full((4, 4, 3), 1e6, np.float32))), "past 65504"),
+    (lambda p: write(p / "c.exr", rgb(np.ones((24, 4, 3), np.float16)), envmap=OpenEXR.ENVMAP_CUBE), "cube-map"),
+    (lambda p: write(p / "h.exr", rgb(np.ones((4, 4, 3), np.float16)),
+                     displayWindow=(np.array([0, 0], np.int32), np.array([9999, 4999], np.int32))),
+     "10000 x 5000 pixels"),
+    (lambda p: p / "none.exr", "no such file"),
+])
+def test_a_bad_exr_file_is_refused_naming_it_and_why(tmp_path, make, words):
+    path = make(tmp_path)
+    with pytest.raises(AssetError, match="OpenEXR file .*" + words.replace("(", r"\(")):
+        load_exr(path)
+
+
+def test_without_the_library_an_exr_is_refused_naming_the_package(tmp_path, monkeypatch):
+    path = write(tmp_path / "sky.exr", rgb(noisy()))
+    monkeypatch.setitem(sys.modules, "OpenEXR", None)
+    with pytest.raises(AssetError, match="needs the 'openexr' package"):
+        load_exr(path)
+
+
+# -- writing ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("compression", COMPRESSIONS)
+def test_save_exr_writes_what_the_library_reads(tmp_path, compression):
+    """Every compression, read back by the OpenEXR library itself (not ``load_exr``): channels
+    R, G, B of half floats, Rec. 709 recorded; lossless ones equal to the colours rounded to
+    half floats; ``half=False`` keeps float32 exactly."""
+    image = smooth(dtype=np.float64)
+    path = save_exr(tmp_path / "out.exr", image, compression=compression)
+    exr = OpenEXR.File(str(path), separate_channels=True)
+    header = exr.header()
+    assert str(header["compression"]).endswith(f"{'NO' if compression == 'none' else compression.upper()}_COMPRESSION")
+    np.testing.assert_allclose(header["chromaticities"], (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290),
+                               atol=1e-6)
+    back = np.stack([exr.channels()[c].pixels for c in "RGB"], axis=-1)
+    assert back.dtype == np.float16
+    if compression in LOSSLESS + ("pxr24",):
+        np.testing.assert_array_equal(back, image.astype(np.float16))
+    else:
+        assert np.median(np.abs(back - image) / image) < 0.02
+    full = save_exr(tmp_path / "full.exr", image, half=False)
+    back = np.stack([OpenEXR.File(str(full), separate_channels=True).channels()[c].pixels for c in "RGB"], axis=-1)
+    np.testing.assert_array_equal(back, image.astype(np.float32))
+
+
+@pytest.mark.parametrize("image,kwargs,words", [
+    (np.zeros((4, 4)), {}, "an \\(height, width, 3\\) image"),
+    (np.full((2, 2, 3), np.nan), {}, "colours must be finite"),
+    (np.full((2, 2, 3), 1e5), {}, "colours past 65504 .*give half=False"),
+    (np.ones((2, 2, 3)), {"compression": "lzw"}, "compression must be one of"),
+    (np.ones((2, 2, 3)), {"half": 1}, "half must be True or False"),
+])
+def test_save_exr_refuses_what_it_cannot_write(tmp_path, image, kwargs, words):
+    with pytest.raises(ValueError, match="save_exr: " + words):
+        save_exr(tmp_path / "bad.exr", image, **kwargs)
+
+
+# -- as a sky --------------------------------------------------------------------------------
+def test_an_exr_panorama_makes_the_faces_its_colours_make(tmp_path):
+    image = smooth(16, 32, np.float32)
+    faces = sky_faces_from_file(write(tmp_path / "sky.exr", rgb(image)), face_size=8, yaw=30.0)
+    np.testing.assert_array_equal(faces, panorama_faces(image, 8, 30.0))
+    assert faces.source == {"panorama": str((tmp_path / "sky.exr").resolve()), "face_size": 8, "yaw": 30.0}
+
+
+def test_a_level_file_and_the_runner_take_an_exr_sky(scene, tmp_path):
+    from engine.assets.level_read import load_level
+    from engine.assets.level_save import save_level
+    from engine.core.world import World
+
+    image = smooth(16, 32, np.float32)
+    write(tmp_path / "sky.exr", rgb(image), "piz")
+    level = tmp_path / "level.toml"
+    level.write_text('[level]\nname = "exr"\n[[entity]]\nname = "sky"\n'
+                     'Skybox = { faces = { panorama = "sky.exr", face_size = 8 } }\n')
+    world = World()
+    load_level(level).spawn(world)
+    np.testing.assert_array_equal(world.query_one(Skybox)[0][1].faces, panorama_faces(image, 8))
+    save_level(world, tmp_path / "saved.toml")
+    assert 'panorama = "sky.exr"' in (tmp_path / "saved.toml").read_text()
+    runner = scene(lambda world: look_from(world, (0.0, 0.0, 0.0), (0.0, 0.0, -1.0)), (16, 16))
+    runner.engine.start_sky(None, panorama=str(tmp_path / "sky.exr"), panorama_yaw=0.0)
+    runner.frame()
+    sky = runner.world.query_one(Skybox)[0][1]
+    assert sky.faces.source["panorama"] == str((tmp_path / "sky.exr").resolve())
+    np.testing.assert_allclose(sky.faces, panorama_faces(image, 512), rtol=1e-6)
