@@ -386,17 +386,19 @@ class Engine:
                    getattr(args, "contact_shadows", False), getattr(args, "shafts", False))
         self.start_sky(getattr(args, "sky", None), getattr(args, "time", None), getattr(args, "day_minutes", None),
                        getattr(args, "panorama", None), getattr(args, "panorama_yaw", 0.0), getattr(args, "moon", None),
-                       getattr(args, "clouds", None))
+                       getattr(args, "clouds", None), getattr(args, "panorama_sun", False))
 
     def start_sky(self, model: str | None, hour: float | None = None, day_minutes: float | None = None,
                   panorama: str | None = None, panorama_yaw: float = 0.0, moon_age: float | None = None,
-                  clouds: float | None = None) -> None:
+                  clouds: float | None = None, panorama_sun: bool = False) -> None:
         """The command line's sky options: ``--sky`` draws the level's Skybox (one made if it has
         none) as ``model`` ("atmosphere": a physically based sky with a night's stars beyond its
         air, ``engine.assets.star_field.star_faces``); ``--panorama`` makes its faces an
         equirectangular panorama file (``engine.assets.panorama.sky_faces_from_file``, 512 texels a
         face, turned ``panorama_yaw`` degrees; a gradient sky's faces are its whole sky, an
-        atmosphere's the space beyond its air); ``--time`` puts a ``TimeOfDay`` at ``hour``
+        atmosphere's the space beyond its air); ``--panorama-sun`` takes the panorama's sun out
+        of it and gives its light, direction and size to the brightest ``DirectionalLight``
+        (one made if there is none; ``engine/assets/panorama_sun.py``); ``--time`` puts a ``TimeOfDay`` at ``hour``
         (a summer's day, 45 degrees north) on the brightest ``DirectionalLight`` (one made if there
         is none), moving a whole day on in ``day_minutes`` of game time (``--day-minutes``);
         ``--moon`` adds a moon ``moon_age`` days old on the same clock (a dim, cool
@@ -409,7 +411,13 @@ class Engine:
 
             skies = world.query_one(Skybox)
             sky = skies[0][1] if skies else world.get(world.spawn(Skybox()), Skybox)
-            sky.faces = sky_faces_from_file(panorama, 512, panorama_yaw)
+            sky.faces = sky_faces_from_file(panorama, 512, panorama_yaw, without_sun=panorama_sun)
+            if sky.faces.sun is not None:
+                light = brightest_directional(world)
+                if light is None:
+                    light = world.get(world.spawn(DirectionalLight()), DirectionalLight)
+                for name, value in sky.faces.sun.light_fields().items():
+                    setattr(light, name, value)
         if model is not None:
             skies = world.query_one(Skybox)
             sky = skies[0][1] if skies else world.get(world.spawn(Skybox()), Skybox)

@@ -85,6 +85,9 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
                              "Radiance .hdr or OpenEXR .exr HDRI, or a PNG or JPEG taken as sRGB (512 texels a face)")
     parser.add_argument("--panorama-yaw", type=_yaw, default=0.0, metavar="DEGREES",
                         help="with --panorama: turn it this many degrees about up (default 0)")
+    parser.add_argument("--panorama-sun", action="store_true",
+                        help="with --panorama: take its sun out of the sky and give its light, direction and size "
+                             "to the level's brightest DirectionalLight (made if there is none), so it casts shadows")
     parser.add_argument("--time", type=_hour, default=None, metavar="HOUR",
                         help="the sun (the brightest DirectionalLight, made if there is none) where it stands at "
                              "this hour of a summer's day at 45 degrees north (a TimeOfDay on it)")
@@ -135,6 +138,8 @@ def parse_args(game: Game, argv: Sequence[str] | None,
                      "(with --sky atmosphere it is the space beyond the air, and clouds are drawn)")
     if args.panorama_yaw != 0.0 and args.panorama is None:
         parser.error("--panorama-yaw needs --panorama (the panorama it turns)")
+    if args.panorama_sun and args.panorama is None:
+        parser.error("--panorama-sun needs --panorama (the panorama whose sun it takes)")
     return args
 
 

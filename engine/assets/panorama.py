@@ -25,12 +25,14 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from engine.assets.exr_image import load_exr
+from engine.assets.panorama_sun import PanoramaSun, find_sun
 from engine.assets.texture_data import MAX_TEXTURE_SIDE, check_asset_file, load_texture
 from engine.core.color import srgb_to_linear, xyz_to_rec709_matrix
 from engine.core.cube_faces import face_directions
@@ -49,12 +51,15 @@ _XYZ_TO_RGB = xyz_to_rec709_matrix()  # an XYZE file's colours to the engine's l
 class SkyFaces(np.ndarray):
     """Six float32 cube faces (6, n, n, 3) that remember how they were made: ``source``, a dict
     a level file writes as the Skybox's ``faces`` table (``{ panorama = "x.hdr", face_size = n,
-    yaw = degrees }``).  A view of it or anything numpy makes from it has no source."""
+    yaw = degrees }``), and, made ``without_sun``, the sun taken out of them (``sun``).  A view
+    of it or anything numpy makes from it has no source."""
 
     source: dict[str, Any] | None = None
+    sun: PanoramaSun | None = None   # the sun taken out of them (``without_sun``), as a light's fields
 
     def __array_finalize__(self, obj: Any) -> None:
         self.source = None   # (a view or a result of arithmetic no longer is the file's faces)
+        self.sun = None
 
 
 def _header(data: bytes, what: str) -> tuple[dict[str, str], float, str, int]:
@@ -274,14 +279,22 @@ def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0,
-                        intensity: float = 1.0) -> SkyFaces:
+                        intensity: float = 1.0, without_sun: bool = False) -> SkyFaces:
     """A panorama file (``load_panorama``) as a Skybox's ``faces`` (``panorama_faces``), its
     colours times ``intensity`` (three.js's ``environmentIntensity``, Godot's sky energy: a
     photographed sky is as bright as its camera exposed it), remembering the file, size, turn
-    and intensity (``SkyFaces.source``)."""
+    and intensity (``SkyFaces.source``).  ``without_sun``: the panorama's sun taken out first
+    (``engine.assets.panorama_sun.find_sun``) and kept as ``SkyFaces.sun``, a
+    ``DirectionalLight``'s fields (None if it has no sun), so it casts shadows and is not
+    counted twice."""
     if not (isinstance(intensity, (int, float)) and math.isfinite(intensity) and 0.0 <= intensity <= MAX_INTENSITY):
         raise ValueError(f"intensity must be a number from 0 to {MAX_INTENSITY:g}, got {intensity!r}")
-    faces = panorama_faces(load_panorama(path), face_size, yaw)
+    if not isinstance(without_sun, bool):
+        raise ValueError(f"without_sun must be True or False, got {without_sun!r}")
+    panorama, sun = load_panorama(path), None
+    if without_sun:
+        sun, panorama = find_sun(panorama, yaw)
+    faces = panorama_faces(panorama, face_size, yaw)
     if intensity != 1.0:
         faces *= np.float32(intensity)
         if faces.max(initial=0.0) > 65504.0:
@@ -291,4 +304,8 @@ def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0
     faces.source = {"panorama": str(Path(path).resolve()), "face_size": face_size, "yaw": float(yaw)}
     if intensity != 1.0:
         faces.source["intensity"] = float(intensity)
+    if without_sun:
+        faces.source["without_sun"] = True
+        if sun is not None:
+            faces.sun = replace(sun, intensity=sun.intensity * float(intensity))
     return faces
