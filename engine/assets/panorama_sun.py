@@ -7,13 +7,16 @@ What counts as the sun: the pixels within ``MAX_SUN_ANGULAR_DIAMETER`` / 2 of th
 one whose luminance is at least ``SUN_CONTRAST`` times the panorama's median (an unclipped
 sun is 10^4 to 10^5 times its sky; a disc's edge pixels, partly covered, pass too).  None
 when the brightest pixel is under that (an overcast sky).  Its light is what those pixels hold
-above the sky round them (the mean of a ring just outside): the irradiance ``color`` x
-``intensity`` = sum over them of (L - sky) x the pixel's solid angle, the engine's
+above the sky round them (the mean of a ring just outside), all but ``SUN_KEPT`` of it: the
+irradiance ``color`` x ``intensity`` = 0.99 x the sum over them of (L - sky) x the pixel's
+solid angle, the engine's
 ``DirectionalLight`` units (a surface facing it is lit ``albedo / pi`` times that).  Its
 direction is that light's mean direction, its ``angular_diameter`` the circle of the disc's
 solid angle (each pixel counted by its share of the peak: at least a pixel across).  The
-panorama handed back holds the ring's sky in the sun's place, so the sky and the light
-together give the panorama's light once, not twice.
+panorama handed back holds the ring's sky in the sun's place plus the 1% left, so the sky
+and the light together give the panorama's light once, not twice, and the sun's disc still
+shows in the sky and sharp reflections (1% of a real sun is still far past white on screen;
+1% of its light counted twice).
 
 A sun clipped in the file (an 8-bit panorama, an HDRI saved with its sun cut at some value)
 gives too little light: the file holds no more.
@@ -28,6 +31,7 @@ import numpy as np
 from components.limits import MAX_SUN_ANGULAR_DIAMETER
 
 SUN_CONTRAST = 100.0          # the sun's pixels against the panorama's median luminance
+SUN_KEPT = 0.01               # the share of the sun's light left in the sky: its disc still drawn there
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])   # Rec. 709's
 
 
@@ -87,7 +91,8 @@ def find_sun(panorama: np.ndarray, yaw: float = 0.0) -> tuple[PanoramaSun | None
     sky = image[ring].mean(axis=0) if ring.any() else np.zeros(3)
     solid = (2.0 * math.pi / width) * (math.pi / height) * np.cos(
         (0.5 - (np.arange(height) + 0.5) / height) * math.pi)[:, None] * np.ones((1, width))
-    above = np.maximum(image[sun] - sky, 0.0) * solid[sun][:, None]
+    excess = np.maximum(image[sun] - sky, 0.0)
+    above = excess * (1.0 - SUN_KEPT) * solid[sun][:, None]
     irradiance = above.sum(axis=0)
     weight = above @ _LUMINANCE
     towards = (ways[sun] * weight[:, None]).sum(axis=0)
@@ -97,7 +102,7 @@ def find_sun(panorama: np.ndarray, yaw: float = 0.0) -> tuple[PanoramaSun | None
     diameter = min(2.0 * math.degrees(math.acos(max(-1.0, 1.0 - disc / (2.0 * math.pi)))), MAX_SUN_ANGULAR_DIAMETER)
     brightest = float(irradiance.max())
     without = image.copy()
-    without[sun] = sky
+    without[sun] = sky + SUN_KEPT * excess
     found = PanoramaSun(direction=tuple(float(v) for v in -towards),
                         color=tuple(float(v) for v in irradiance / brightest), intensity=brightest,
                         angular_diameter=diameter)
