@@ -277,3 +277,21 @@ def fragment_row(ctx, source: str, width: int, defines: dict | None = None, bind
         for obj in (vao, target, program, *made):
             obj.release()
         invalidate(ctx)
+
+
+def ball_normals(size: int, fov: float = 30.0, distance: float = 3.0, radius: float = 0.5,
+                 margin: float = 0.08) -> tuple[np.ndarray, np.ndarray]:
+    """(inside, normal) for a ball of ``radius`` at the origin seen from (0, 0, ``distance``)
+    looking down -Z with a ``fov`` degree square view of ``size`` pixels: each pixel's ray met
+    with the sphere; ``inside`` the pixels whose ray meets it by more than ``margin`` (the
+    discriminant: away from the outline), ``normal`` there (size, size, 3)."""
+    half = np.tan(np.radians(fov / 2.0))
+    rows, columns = np.mgrid[0:size, 0:size]
+    ray = np.stack([((columns + 0.5) / (size / 2) - 1) * half, (1 - (rows + 0.5) / (size / 2)) * half,
+                    -np.ones((size, size))], -1)
+    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+    eye = np.array([0.0, 0.0, distance])
+    b = ray @ eye
+    disc = b * b - (eye @ eye - radius * radius)
+    normal = (eye + ray * (-b - np.sqrt(np.maximum(disc, 0.0)))[..., None]) / radius
+    return disc > margin, normal

@@ -16,7 +16,7 @@ from components import Material, MeshRef, Skybox, Transform
 from engine.assets.mesh import sphere
 from engine.assets.panorama import SkyFaces, load_hdr, panorama_faces, sky_faces_from_file
 from engine.core.errors import AssetError
-from tests.support import look_from, srgb_to_linear
+from tests.support import ball_normals, look_from, srgb_to_linear
 
 
 # -- an encoder of the tests' own -----------------------------------------------------------
@@ -244,16 +244,7 @@ def test_the_sky_and_the_light_it_gives_are_the_panoramas(scene):
     runner = scene(ball, (64, 64))
     runner.frame()
     image = srgb_to_linear(runner.frame())
-    # Each pixel's point on the ball: its ray from the eye (0, 0, 3) met with the sphere.
-    half = math.tan(math.radians(15.0))
-    rows, columns = np.mgrid[0:64, 0:64]
-    ray = np.stack([((columns + 0.5) / 32 - 1) * half, (1 - (rows + 0.5) / 32) * half, -np.ones((64, 64))], -1)
-    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
-    eye = np.array([0.0, 0.0, 3.0])
-    b = ray @ eye
-    disc = b * b - (eye @ eye - 0.25)
-    inside = disc > 0.08   # (away from the outline)
-    normal = (eye + ray * (-b - np.sqrt(np.maximum(disc, 0.0)))[..., None]) / 0.5
+    inside, normal = ball_normals(64)   # each pixel's point on the ball, away from its outline
     irradiance = np.pi * 0.5 + 2.0 * np.pi / 3.0 * 0.4 * normal   # per channel: a = 0.5, b = 0.4 along one axis
     error = np.abs(image[inside] - (0.8 / np.pi * irradiance)[inside])
     assert inside.sum() > 400 and np.percentile(error, 95) < 0.015 and error.max() < 0.03, error.max()

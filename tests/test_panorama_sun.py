@@ -16,7 +16,7 @@ from engine.assets.mesh import sphere
 from engine.assets.panorama import load_hdr, panorama_faces, save_hdr, sky_faces_from_file
 from engine.assets.panorama_sun import SUN_KEPT, find_sun, main, pixel_directions
 from engine.core.cube_faces import face_directions
-from tests.support import look_from, srgb_to_linear
+from tests.support import ball_normals, look_from, srgb_to_linear
 
 
 def sunny(sun_radiance, radius_deg: float, elevation: float, azimuth: float, sky=None,
@@ -104,15 +104,7 @@ def test_a_ball_under_the_sky_without_its_sun_and_the_sun_as_a_light_shows_both_
     runner = scene(ball, (64, 64))
     runner.frame()
     seen = srgb_to_linear(runner.frame())
-    half = math.tan(math.radians(15.0))
-    rows, columns = np.mgrid[0:64, 0:64]
-    ray = np.stack([((columns + 0.5) / 32 - 1) * half, (1 - (rows + 0.5) / 32) * half, -np.ones((64, 64))], -1)
-    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
-    eye = np.array([0.0, 0.0, 3.0])
-    b = ray @ eye
-    disc = b * b - (eye @ eye - 0.25)
-    inside = disc > 0.08
-    normal = (eye + ray * (-b - np.sqrt(np.maximum(disc, 0.0)))[..., None]) / 0.5
+    inside, normal = ball_normals(64)   # each pixel's point on the ball, away from its outline
     e_sun = (300.0 - 0.3) * 2.0 * math.pi * (1.0 - math.cos(math.radians(2.0)))   # (1% of it in the sky's light)
     want = 0.8 / math.pi * (math.pi * 0.3 + e_sun * np.maximum(normal @ towards, 0.0))
     error = np.abs(seen[inside] - want[inside][:, None])

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.assets.texture_data import MAX_TEXTURE_SIDE, check_asset_file
+from engine.assets.texture_data import check_asset_file, colour_image
 from engine.core.color import REC709_CHROMATICITIES, to_rec709_matrix
 from engine.core.errors import AssetError
 
@@ -168,13 +168,7 @@ def save_exr(path: str | Path, image: np.ndarray, half: bool = True, compression
     (one of ``COMPRESSIONS``; ZIP is lossless and what most tools write), the Rec. 709
     chromaticities recorded, to bake a generated sky, a capture or a lightmap for other tools.
     Returns the path."""
-    pixels = np.asarray(image, np.float64)
-    if pixels.ndim != 3 or pixels.shape[2] != 3 or not (1 <= pixels.shape[0] <= MAX_TEXTURE_SIDE) \
-            or not (1 <= pixels.shape[1] <= MAX_TEXTURE_SIDE):
-        raise ValueError(f"save_exr: an (height, width, 3) image of 1 to {MAX_TEXTURE_SIDE} a side, got shape "
-                         f"{pixels.shape}")
-    if not np.isfinite(pixels).all():
-        raise ValueError("save_exr: colours must be finite")
+    pixels = colour_image(image, "save_exr")
     if half and np.abs(pixels).max(initial=0.0) > HALF_MAX:
         raise ValueError(f"save_exr: colours past {HALF_MAX:g} do not fit half floats (up to "
                          f"{np.abs(pixels).max():g}): give half=False")

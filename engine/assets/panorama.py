@@ -33,7 +33,7 @@ import numpy as np
 
 from engine.assets.exr_image import load_exr
 from engine.assets.panorama_sun import PanoramaSun, find_sun
-from engine.assets.texture_data import MAX_TEXTURE_SIDE, check_asset_file, load_texture
+from engine.assets.texture_data import MAX_TEXTURE_SIDE, check_asset_file, colour_image, load_texture
 from engine.core.color import srgb_to_linear, xyz_to_rec709_matrix
 from engine.core.cube_faces import face_directions
 from engine.core.errors import AssetError
@@ -191,12 +191,8 @@ def save_hdr(path: str | Path, image: np.ndarray) -> Path:
     channel's exponent and three 8-bit mantissas (Radiance's ``setcolr``: within 1/256 of the
     largest channel), to bake a generated sky, a capture or a lightmap for other tools.
     Returns the path."""
-    pixels = np.asarray(image, np.float64)
-    if pixels.ndim != 3 or pixels.shape[2] != 3 or not (1 <= pixels.shape[0] <= MAX_TEXTURE_SIDE) \
-            or not (1 <= pixels.shape[1] <= MAX_TEXTURE_SIDE):
-        raise ValueError(f"save_hdr: an (height, width, 3) image of 1 to {MAX_TEXTURE_SIDE} a side, got shape "
-                         f"{pixels.shape}")
-    if not np.isfinite(pixels).all() or pixels.min() < 0.0:
+    pixels = colour_image(image, "save_hdr")
+    if pixels.min() < 0.0:
         raise ValueError("save_hdr: colours must be finite and >= 0")
     largest = pixels.max(axis=-1)
     mantissa, exponent = np.frexp(largest)

@@ -89,6 +89,19 @@ def check_texture_size(width: int, height: int, what: str, texel_bytes: int = 4)
                          "(engine.assets.texture_data.ASSET_MEMORY_BUDGET)")
 
 
+def colour_image(image: np.ndarray, who: str) -> np.ndarray:
+    """``image`` as float64 linear colours to write to a file, checked: (height, width, 3), 1
+    to ``MAX_TEXTURE_SIDE`` a side, finite; a ValueError starting with ``who`` otherwise."""
+    pixels = np.asarray(image, np.float64)
+    if pixels.ndim != 3 or pixels.shape[2] != 3 or not (1 <= pixels.shape[0] <= MAX_TEXTURE_SIDE) \
+            or not (1 <= pixels.shape[1] <= MAX_TEXTURE_SIDE):
+        raise ValueError(f"{who}: an (height, width, 3) image of 1 to {MAX_TEXTURE_SIDE} a side, got shape "
+                         f"{pixels.shape}")
+    if not np.isfinite(pixels).all():
+        raise ValueError(f"{who}: colours must be finite")
+    return pixels
+
+
 def texture_bytes(width: int, height: int, texel_bytes: int = 4) -> int:
     """Bytes of a ``width`` x ``height`` TextureData (RGBA8; ``texel_bytes`` 8: RGBA16)."""
     return int(width) * int(height) * int(texel_bytes)
