@@ -13,8 +13,8 @@ import pytest
 
 from components import DirectionalLight, Material, MeshRef, Skybox, Transform
 from engine.assets.mesh import sphere
-from engine.assets.panorama import load_hdr, panorama_faces, save_hdr, sky_faces_from_file
-from engine.assets.panorama_sun import SUN_KEPT, find_sun, main, pixel_directions
+from engine.assets.panorama import load_hdr, main, panorama_faces, save_hdr, sky_faces_from_file
+from engine.assets.panorama_sun import SUN_KEPT, find_sun, pixel_directions
 from engine.core.cube_faces import face_directions
 from tests.support import ball_normals, look_from, srgb_to_linear
 

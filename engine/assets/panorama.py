@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from engine.assets.exr_image import load_exr
-from engine.assets.panorama_sun import PanoramaSun, find_sun
+from engine.assets.panorama_sun import SUN_CONTRAST, PanoramaSun, find_sun
 from engine.assets.texture_data import MAX_TEXTURE_SIDE, check_asset_file, colour_image, load_texture
 from engine.core.color import srgb_to_linear, xyz_to_rec709_matrix
 from engine.core.cube_faces import face_directions
@@ -305,3 +305,36 @@ def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0
         if sun is not None:
             faces.sun = replace(sun, intensity=sun.intensity * float(intensity))
     return faces
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m engine.assets.panorama FILE [--yaw DEGREES] [--intensity X]``: prints the
+    panorama's sun (``engine.assets.panorama_sun.find_sun``) as a level file's
+    ``DirectionalLight`` line, to paste beside a Skybox whose faces table says
+    ``without_sun = true``."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m engine.assets.panorama", description=main.__doc__)
+    parser.add_argument("file")
+    parser.add_argument("--yaw", type=float, default=0.0, help="the panorama's turn about up, degrees")
+    parser.add_argument("--intensity", type=float, default=1.0, help="what the panorama's colours are multiplied by")
+    args = parser.parse_args(argv)
+    try:
+        sun, _ = find_sun(load_panorama(args.file), args.yaw)
+    except (AssetError, ValueError) as exc:
+        print(f"error: {exc}")
+        return 2
+    if sun is None:
+        print(f"{args.file}: no sun (nothing {SUN_CONTRAST:g} times brighter than the median of the sky)")
+        return 1
+
+    def numbers(values: tuple[float, ...]) -> str:
+        return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"
+
+    print(f"DirectionalLight = {{ direction = {numbers(sun.direction)}, color = {numbers(sun.color)}, "
+          f"intensity = {sun.intensity * args.intensity:.6g}, angular_diameter = {sun.angular_diameter:.4g} }}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -108,38 +108,3 @@ def find_sun(panorama: np.ndarray, yaw: float = 0.0) -> tuple[PanoramaSun | None
                         angular_diameter=diameter)
     return found, without.astype(np.float32)
 
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m engine.assets.panorama_sun FILE [--yaw DEGREES] [--intensity X]``: prints the
-    panorama's sun as a level file's ``DirectionalLight`` line, to paste beside a Skybox whose
-    faces table says ``without_sun = true``."""
-    import argparse
-
-    from engine.assets.panorama import load_panorama
-
-    parser = argparse.ArgumentParser(prog="python -m engine.assets.panorama_sun", description=main.__doc__)
-    parser.add_argument("file")
-    parser.add_argument("--yaw", type=float, default=0.0, help="the panorama's turn about up, degrees")
-    parser.add_argument("--intensity", type=float, default=1.0, help="what the panorama's colours are multiplied by")
-    args = parser.parse_args(argv)
-    from engine.core.errors import AssetError
-
-    try:
-        sun, _ = find_sun(load_panorama(args.file), args.yaw)
-    except (AssetError, ValueError) as exc:
-        print(f"error: {exc}")
-        return 2
-    if sun is None:
-        print(f"{args.file}: no sun (nothing {SUN_CONTRAST:g} times brighter than the median of the sky)")
-        return 1
-
-    def numbers(values: tuple[float, ...]) -> str:
-        return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"
-
-    print(f"DirectionalLight = {{ direction = {numbers(sun.direction)}, color = {numbers(sun.color)}, "
-          f"intensity = {sun.intensity * args.intensity:.6g}, angular_diameter = {sun.angular_diameter:.4g} }}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
