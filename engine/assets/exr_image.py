@@ -62,6 +62,14 @@ def load_exr(path: str | Path, layer: str | None = None) -> np.ndarray:
         if stream.read(4) != _MAGIC:
             raise AssetError(f"{what}: not an OpenEXR file (it does not start with the bytes 76 2f 31 01)")
     openexr = _library(what)
+    try:
+        return _load(openexr, path, layer, what)
+    except (UnicodeDecodeError, TypeError, KeyError, AttributeError, IndexError) as exc:  # the binding's
+        # attributes as a corrupt header leaves them (names that are not text, values of other types)
+        raise AssetError(f"{what}: its header is corrupt ({type(exc).__name__}: {exc})") from exc
+
+
+def _load(openexr: Any, path: Path, layer: str | None, what: str) -> np.ndarray:
     headers = _read(openexr, path, what, header_only=True)
     part_index, prefix = _choose_part(headers, layer, what)
     header = headers.parts[part_index].header
@@ -79,15 +87,31 @@ def load_exr(path: str | Path, layer: str | None = None) -> np.ndarray:
     bad = ~np.isfinite(colours)
     if bad.any():
         raise AssetError(f"{what}: {int(bad.any(axis=-1).sum())} pixels hold NaN or infinite colours")
-    chromaticities = header.get("chromaticities")
-    if chromaticities is not None and len(names) == 3 \
-            and not np.allclose(chromaticities, REC709_CHROMATICITIES, atol=1e-4):
-        colours = colours @ to_rec709_matrix(tuple(chromaticities)).T.astype(np.float32)
+    primaries = _primaries(header, what)
+    if primaries is not None and len(names) == 3 and not np.allclose(primaries, REC709_CHROMATICITIES, atol=1e-4):
+        colours = colours @ to_rec709_matrix(primaries).T.astype(np.float32)
     colours = np.maximum(colours, np.float32(0.0))
     if colours.max(initial=0.0) > HALF_MAX:
         raise AssetError(f"{what}: holds colours past {HALF_MAX:g} (up to {colours.max():g}), more than the "
                          "half floats a sky's faces keep")
     return _placed(colours, display, data_window)
+
+
+def _primaries(header: dict, what: str) -> tuple[float, ...] | None:
+    """The ``chromaticities`` attribute as 8 numbers, or None without one; refused when it is
+    not a set of primaries a matrix can be made from."""
+    given = header.get("chromaticities")
+    if given is None:
+        return None
+    try:
+        primaries = tuple(float(c) for c in given)
+        matrix = to_rec709_matrix(primaries) if len(primaries) == 8 else None
+    except (TypeError, ValueError, ZeroDivisionError, np.linalg.LinAlgError):
+        matrix = None
+    if matrix is None or not np.isfinite(matrix).all():
+        raise AssetError(f"{what}: its chromaticities attribute is not red, green, blue and white "
+                         "x, y pairs a colour conversion can be made from")
+    return primaries
 
 
 def _read(openexr: Any, path: Path, what: str, header_only: bool) -> Any:
@@ -135,8 +159,11 @@ def _windows(header: dict, what: str) -> tuple[tuple[int, int, int, int], tuple[
         raise AssetError(f"{what}: is a cube-map environment (envmap = cube), not an equirectangular panorama")
     windows = []
     for key in ("displayWindow", "dataWindow"):
-        low, high = header[key]
-        box = (int(low[0]), int(low[1]), int(high[0]), int(high[1]))
+        try:
+            low, high = header[key]
+            box = (int(low[0]), int(low[1]), int(high[0]), int(high[1]))
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise AssetError(f"{what}: its {key} attribute is missing or not a box ({exc})") from exc
         width, height = box[2] - box[0] + 1, box[3] - box[1] + 1
         if width < 1 or height < 1:
             raise AssetError(f"{what}: its {key} is empty ({box})")
