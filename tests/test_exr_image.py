@@ -264,3 +264,16 @@ def test_a_corrupt_exr_is_read_or_refused_never_anything_else(tmp_path, compress
             continue
         assert image.dtype == np.float32 and np.isfinite(image).all() and image.min() >= 0.0
     assert refused >= 10   # (every cut file among them)
+    # Two the random flips found: the chromaticities attribute given another type's name (the
+    # library hands an opaque value), a channel's name not text.
+    for old, new in ((b"chromaticities\0chromaticities\0", b"chromaticities\0xhromaticities\0"),
+                     (b"chlist\0", None)):
+        bad = bytearray(data)
+        at = bad.index(old)
+        if new is None:   # the first channel's name, just after the list's size
+            bad[at + len(old) + 4] = 0xF8
+        else:
+            bad[at:at + len(old)] = new
+        (tmp_path / "bad.exr").write_bytes(bytes(bad))
+        with pytest.raises(AssetError, match="bad.exr"):
+            load_exr(tmp_path / "bad.exr")
