@@ -140,6 +140,8 @@ def parse_args(game: Game, argv: Sequence[str] | None,
         parser.error("--panorama-yaw needs --panorama (the panorama it turns)")
     if args.panorama_sun and args.panorama is None:
         parser.error("--panorama-sun needs --panorama (the panorama whose sun it takes)")
+    if args.panorama_sun and args.time is not None:
+        parser.error("--panorama-sun and --time both place the sun: the panorama's stands where it was photographed")
     return args
 
 

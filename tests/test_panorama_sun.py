@@ -140,3 +140,14 @@ def test_the_runner_and_a_level_file_take_the_sun_out_and_the_command_line_print
     line = capsys.readouterr().out
     assert line.startswith("DirectionalLight = { direction = [") and "angular_diameter" in line
     assert main([str(tmp_path / "none.hdr")]) == 2 and "no such file" in capsys.readouterr().out
+
+
+def test_the_command_line_refuses_a_panorama_sun_without_a_panorama_or_with_a_clock(capsys):
+    from games.hall_of_mirrors.level import HallOfMirrors
+    from shell.runner import parse_args
+
+    for argv, words in ((["--panorama-sun"], "--panorama-sun needs --panorama"),
+                        (["--panorama", "sky.exr", "--panorama-sun", "--time", "9"], "both place the sun")):
+        with pytest.raises(SystemExit):
+            parse_args(HallOfMirrors(), argv)
+        assert words in capsys.readouterr().err

@@ -27,13 +27,13 @@ from typing import Any
 
 import numpy as np
 
+from components.tracking import HALF_MAX
 from engine.assets.texture_data import check_asset_file, colour_image
 from engine.core.color import REC709_CHROMATICITIES, to_rec709_matrix
 from engine.core.errors import AssetError
 
 MAX_EXR_FILE_BYTES = 1 << 30       # as a panorama file (engine/assets/panorama.py)
 MAX_EXR_PIXELS = 8192 * 4096       # an 8K HDRI: checked from the header, before any pixel is decoded
-HALF_MAX = 65504.0                 # the largest half float
 _MAGIC = b"\x76\x2f\x31\x01"       # every OpenEXR file's first four bytes
 COMPRESSIONS = ("none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab")
 

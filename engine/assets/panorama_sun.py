@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from components.limits import MAX_SUN_ANGULAR_DIAMETER
+from engine.core.color import LUMINANCE
 
 SUN_CONTRAST = 100.0          # the sun's pixels against the panorama's median luminance
 SUN_KEPT = 0.01               # the share of the sun's light left in the sky: its disc still drawn there
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])   # Rec. 709's
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ def find_sun(panorama: np.ndarray, yaw: float = 0.0) -> tuple[PanoramaSun | None
     if not math.isfinite(yaw):
         raise ValueError(f"yaw must be a finite number of degrees, got {yaw!r}")
     height, width = image.shape[:2]
-    luminance = image @ _LUMINANCE
+    luminance = image @ LUMINANCE
     peak = np.unravel_index(int(np.argmax(luminance)), luminance.shape)
     floor = float(np.median(luminance))
     if luminance[peak] <= SUN_CONTRAST * max(floor, 1e-30):
@@ -94,10 +94,10 @@ def find_sun(panorama: np.ndarray, yaw: float = 0.0) -> tuple[PanoramaSun | None
     excess = np.maximum(image[sun] - sky, 0.0)
     above = excess * (1.0 - SUN_KEPT) * solid[sun][:, None]
     irradiance = above.sum(axis=0)
-    weight = above @ _LUMINANCE
+    weight = above @ LUMINANCE
     towards = (ways[sun] * weight[:, None]).sum(axis=0)
     towards /= np.linalg.norm(towards)
-    share = np.clip((luminance[sun] - sky @ _LUMINANCE) / max(luminance[peak] - sky @ _LUMINANCE, 1e-30), 0.0, 1.0)
+    share = np.clip((luminance[sun] - sky @ LUMINANCE) / max(luminance[peak] - sky @ LUMINANCE, 1e-30), 0.0, 1.0)
     disc = max(float((share * solid[sun]).sum()), float(solid[peak]))
     diameter = min(2.0 * math.degrees(math.acos(max(-1.0, 1.0 - disc / (2.0 * math.pi)))), MAX_SUN_ANGULAR_DIAMETER)
     brightest = float(irradiance.max())

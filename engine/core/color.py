@@ -19,6 +19,8 @@ def linear_to_srgb(linear: np.ndarray | float) -> np.ndarray:
     return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1.0 / 2.4) - 0.055)
 
 
+# Rec. 709 luminance of linear RGB: how bright a colour x intensity looks.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 # Chromaticities (CIE 1931 xy) of red, green, blue and white: Rec. 709 / sRGB's, the primaries
 # the engine's linear colours are in, with the D65 white point.
 REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)

@@ -72,6 +72,7 @@ from components.limits import MIN_LIGHT_SIDE
 from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import raw_field
 from engine.core.budget import spending_order
+from engine.core.color import LUMINANCE
 from engine.core.world import World
 from engine.rules.frame_rules import frame_rules
 
@@ -79,8 +80,6 @@ from engine.rules.frame_rules import frame_rules
 HYSTERESIS = 1.25
 # A mirror or portal view counts for the lights from this share of the screen up.
 MIN_VIEW_SHARE = 0.01
-# Rec. 709 luminance of linear RGB: how bright a colour x intensity looks.
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass(frozen=True)
