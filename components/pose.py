@@ -15,8 +15,9 @@ by weight, as glTF viewers, three.js, Unity and Godot draw skins) or "dual_quate
 (Blender's "Preserve Volume", Maya's and Unreal's dual quaternion skinning: their rotations
 and translations blended as unit dual quaternions, their scales by weight), which keeps a
 twisted wrist or a bent elbow its thickness where linear blending pinches it (the
-"candy-wrapper"); a joint scaled unevenly is taken at its mean scale, the cube root of its
-determinant.
+"candy-wrapper"); a joint's stretch (its scale and shear, uneven or not) blends by weight
+apart from its turn, before it (Kavan et al.'s two-phase blend), so a joint squashed and
+stretched bends its vertices as its matrix does.
 
 Assign a new array to pose it (``skin.joint_matrices = posed``): an array edited in place is
 not seen until ``skin.touch()``.  At most ``MAX_JOINTS`` joints; the mesh's highest joint

@@ -4,7 +4,9 @@ by the normalised sum of their quaternions, 2 atan2(w sin(a / 2), 1 - w + w cos(
 weight w (the closed form written here), so a twisted bar keeps its thickness where linear
 blending pinches it; drawn (directly, in a mirror and by its shadow) as the bar turned vertex
 by vertex by that formula; a joint alone, scaled or not, moves its vertices as its matrix;
-the far way round is never taken; boxes, ray casts and bad values."""
+joints that only stretch (unevenly, sheared) and move blend as linear skinning does (their
+stretches blend apart from their turns), drawn so; the far way round is never taken; boxes,
+ray casts and bad values."""
 from __future__ import annotations
 
 import math
@@ -14,10 +16,16 @@ import pytest
 
 from components import ComponentValueError, Material, MeshRef, Mirror, Skin, Transform
 from engine.assets.mesh import Mesh, quad
-from engine.core.skinning import dual_quaternion_matrices, posed_bounds, posed_positions, skin_positions
+from engine.core.skinning import (
+    blend_matrices,
+    dual_quaternion_matrices,
+    posed_bounds,
+    posed_positions,
+    skin_positions,
+)
 from engine.core.world import World
 from engine.rules.raycast import raycast
-from tests.test_skinning import RED, bar_arrays, elbow_matrix, frame_of, lit, same_picture, skinned_bar
+from tests.test_skinning import RED, bar_arrays, bent_by_hand, elbow_matrix, frame_of, lit, same_picture, skinned_bar
 
 
 def turn(axis: np.ndarray, angle: float, about: np.ndarray | None = None) -> np.ndarray:
@@ -89,6 +97,52 @@ def test_a_joint_alone_moves_its_vertices_as_its_matrix_scaled_or_not():
     np.testing.assert_allclose(dual_quaternion_matrices(joints, weights, matrices), matrices, atol=1e-12)
 
 
+def stretch_about(scale, shear: float = 0.0, about=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """A joint that squashes and stretches, not turning: ``scale`` along x, y, z, x sheared
+    by ``shear`` along y, about the point ``about``."""
+    m = np.eye(4)
+    m[:3, :3] = np.diag(scale)
+    m[0, 1] = shear
+    m[:3, 3] = np.asarray(about, float) - m[:3, :3] @ np.asarray(about, float)
+    return m
+
+
+def test_a_joint_alone_stretched_unevenly_sheared_mirrored_or_flat_moves_its_vertices_as_its_matrix():
+    rng = np.random.default_rng(7)
+    twist = turn(rng.normal(size=3), 2.0)
+    cases = [twist @ stretch_about((2.0, 0.5, 1.0)), stretch_about((2.0, 0.5, 1.0)) @ twist,   # stretched, turned
+             twist @ stretch_about((1.5, 0.7, 1.2), shear=0.8),                                 # sheared
+             twist @ stretch_about((-1.0, 1.0, 1.0)), stretch_about((0.5, -3.0, 2.0)) @ twist,  # mirrored
+             twist @ stretch_about((0.0, 1.0, 1.0)), twist @ stretch_about((1.0, 0.0, 1.0)),    # flat
+             twist @ stretch_about((0.0, 0.0, 2.0)), stretch_about((0.0, 0.0, 0.0))]           # a line, a point
+    matrices = np.stack(cases)
+    joints = np.arange(len(cases))[:, None].repeat(4, axis=1)
+    weights = np.zeros((len(cases), 4))
+    weights[:, 0] = 1.0
+    np.testing.assert_allclose(dual_quaternion_matrices(joints, weights, matrices), matrices, atol=1e-12)
+
+
+@pytest.mark.parametrize("turned", [False, True])
+def test_joints_that_only_stretch_and_move_blend_as_linear_skinning(turned):
+    """Joints sharing one turn (or none), each stretched its own way (uneven, sheared) and
+    moved its own way: the dual quaternions blend to that turn and the weighted move, the
+    stretches by weight, so each vertex goes where the matrices' weighted sum takes it (a
+    mean scale a joint would not)."""
+    rng = np.random.default_rng(11)
+    common = turn(rng.normal(size=3), 1.3) if turned else np.eye(4)
+    matrices = []
+    for _ in range(4):
+        m = common @ stretch_about(rng.uniform(0.3, 3.0, size=3), shear=rng.uniform(-1.0, 1.0),
+                                   about=rng.normal(size=3))
+        m[:3, 3] += rng.normal(size=3)
+        matrices.append(m)
+    matrices = np.stack(matrices)
+    joints = np.stack([rng.permutation(4) for _ in range(60)])
+    weights = rng.dirichlet(np.ones(4), size=60)
+    np.testing.assert_allclose(dual_quaternion_matrices(joints, weights, matrices),
+                               blend_matrices(joints, weights, matrices), atol=1e-9)
+
+
 def test_the_short_way_round_is_taken():
     """A joint turned 350 degrees blends with one at rest as a turn of -10 degrees does (its
     quaternion, on the far side of the sphere, is turned back before the sum)."""
@@ -128,6 +182,39 @@ def test_the_gpu_draws_the_turn_the_formula_gives(scene, pose):
     assert same_picture(dual, drawn_by_hand)
     if pose == "twist":   # (a bend's linear blend differs at the elbow's inside, a few pixels here)
         assert not same_picture(linear, drawn_by_hand)
+    assert (dual[..., 0] > dual[..., 2] + 60).sum() > 300   # (the bar and its reflection: no black frame)
+
+
+def posed_by_the_twin(matrix: np.ndarray) -> Mesh:
+    """The bar posed by the numpy twin's dual quaternion blend (joint 0 at rest, the elbow
+    ``matrix``), its normals by the inverse transpose of each vertex's blended matrix."""
+    positions, normals, uvs, triangles, elbow = bar_arrays()
+    joints = np.tile([0, 1], (len(positions), 1))
+    blended = dual_quaternion_matrices(joints, np.stack([1.0 - elbow, elbow], axis=1), np.stack([np.eye(4), matrix]))
+    moved = np.einsum("vrc,vc->vr", blended[:, :3, :3], positions) + blended[:, :3, 3]
+    turned = np.einsum("vcr,vc->vr", np.linalg.inv(blended[:, :3, :3]), normals)
+    return Mesh(moved, turned / np.linalg.norm(turned, axis=1, keepdims=True), uvs, triangles, name="by the twin")
+
+
+@pytest.mark.parametrize("pose", ["stretch", "twist_and_stretch"])
+def test_a_joint_squashed_and_stretched_is_drawn_as_its_blend(scene, pose):
+    """The elbow stretched unevenly and sheared about itself (no turn), blended as dual
+    quaternions: drawn as the bar bent by linear skinning written out by hand (the same
+    blend for joints that do not turn); twisted besides: as the numpy twin poses it.  Both
+    seen directly and in a mirror behind."""
+    stretch = stretch_about((2.2, 1.4, 0.5), shear=0.6)
+    matrix = stretch if pose == "stretch" else turn(UP, TWIST) @ stretch
+    by_hand = bent_by_hand(0.0, at=matrix) if pose == "stretch" else posed_by_the_twin(matrix)
+
+    def build(mesh, *skin):
+        def spawn(world):
+            world.spawn(Transform(position=(0.0, 1.0, -1.5)), MeshRef(quad(4.0, 2.5)), Mirror())
+            world.spawn(Transform(), MeshRef(mesh), Material(color=RED), *skin)
+        return lit(spawn)
+
+    dual = frame_of(scene, build(skinned_bar(), Skin(np.stack([np.eye(4), matrix]), skinning="dual_quaternion")))
+    drawn_by_hand = frame_of(scene, build(by_hand))
+    assert same_picture(dual, drawn_by_hand)
     assert (dual[..., 0] > dual[..., 2] + 60).sum() > 300   # (the bar and its reflection: no black frame)
 
 

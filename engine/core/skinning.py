@@ -41,8 +41,8 @@ class PosedMesh(Protocol):
 
 
 __all__ = ["INFLUENCES", "MAX_JOINTS", "PosedMesh", "blend_matrices", "dual_quaternion_matrices", "joint_boxes",
-           "joint_dual_quaternions", "morph_reach", "morphed", "posed_bounds", "posed_box", "posed_positions",
-           "skin_positions", "strongest_influences"]
+           "joint_dual_quaternions", "joint_rotations", "morph_reach", "morphed", "posed_bounds", "posed_box",
+           "posed_positions", "skin_positions", "strongest_influences"]
 
 INFLUENCES = 4              # joints a vertex may follow (glTF's JOINTS_0: more are folded into the four largest)
 
@@ -80,36 +80,56 @@ def _rotation_quaternions(r: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
+def joint_rotations(linear: np.ndarray) -> np.ndarray:
+    """Each joint's rotation (J, 3, 3) from its matrix's linear part (J, 3, 3), the Q of its QR
+    decomposition by Gram-Schmidt: x its first column's way, y its second's less its x, z = x
+    cross y (so a mirrored joint's rotation is proper and its stretch holds the flip).  A
+    column squashed to nothing (a joint scaled flat) is replaced: x by the other two's cross
+    product, else the x axis; y by a way square to x.  Whatever the rotation, the joint's
+    stretch (``joint_dual_quaternions``) makes it exact: rotation x stretch is the matrix."""
+    linear = np.asarray(linear, np.float64)
+    tiny = 1e-9 * np.abs(linear).max(axis=(1, 2), initial=0.0)[:, None]
+    x = linear[:, :, 0]
+    x = np.where(np.linalg.norm(x, axis=-1, keepdims=True) > tiny, x, np.cross(linear[:, :, 1], linear[:, :, 2]))
+    x = np.where(np.linalg.norm(x, axis=-1, keepdims=True) > tiny * tiny, x, [1.0, 0.0, 0.0])
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    y = linear[:, :, 1] - (linear[:, :, 1] * x).sum(-1, keepdims=True) * x
+    square = np.cross(x, np.where(np.abs(x[:, :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]))
+    y = np.where(np.linalg.norm(y, axis=-1, keepdims=True) > tiny, y, square)
+    y = y / np.linalg.norm(y, axis=-1, keepdims=True)
+    return np.stack([x, y, np.cross(x, y)], -1)
+
+
 def joint_dual_quaternions(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each joint matrix (J, 4, 4) as a unit dual quaternion (real (J, 4), dual (J, 4), as
-    (x, y, z, w)) and a uniform scale (J): the scale the cube root of its determinant, the
-    rotation its columns over that scale made orthonormal (Gram-Schmidt), the translation its
-    last column (``shaders/include/pose.glsl`` joint_dual_quaternion)."""
+    (x, y, z, w)) and a stretch (J, 3, 3): its linear part L as a rotation R
+    (``joint_rotations``) after a stretch S = R^T L (its scale and shear, uneven or not: the
+    identity for a rigid joint, s I for a uniform scale s), so the matrix is the turn and
+    move (R, its last column) of the stretched point (``shaders/include/pose.glsl``
+    joint_dual_quaternion)."""
     m = np.asarray(matrices, np.float64)
     linear = m[:, :3, :3]
-    scale = np.cbrt(np.linalg.det(linear))
-    unscale = np.where(np.abs(scale) > 1e-12, 1.0 / np.where(scale == 0.0, 1.0, scale), 1.0)[:, None]
-    x = linear[:, :, 0] * unscale
-    x /= np.linalg.norm(x, axis=-1, keepdims=True)
-    y = linear[:, :, 1] * unscale
-    y -= (y * x).sum(-1, keepdims=True) * x
-    y /= np.linalg.norm(y, axis=-1, keepdims=True)
-    real = _rotation_quaternions(np.stack([x, y, np.cross(x, y)], -1))
+    rotation = joint_rotations(linear)
+    real = _rotation_quaternions(rotation)
     translation = np.concatenate([m[:, :3, 3], np.zeros((len(m), 1))], -1)
-    return real, 0.5 * _quaternion_product(translation, real), scale
+    return real, 0.5 * _quaternion_product(translation, real), np.einsum("jrc,jrk->jck", rotation, linear)
 
 
 def dual_quaternion_matrices(joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray) -> np.ndarray:
     """Each vertex's matrix (V, 4, 4) by dual quaternion skinning (Kavan, Collins, Zara and
-    O'Sullivan 2008; ``Skin.skinning`` "dual_quaternion"): its joints' dual quaternions
-    (``joint_dual_quaternions``) each turned into its first joint's hemisphere, summed by
-    weight and normalised, its rotation and translation, times its joints' scales summed by
-    weight (``shaders/include/pose.glsl``'s skin_matrix in that build)."""
-    real, dual, scale = joint_dual_quaternions(matrices)
+    O'Sullivan 2008; ``Skin.skinning`` "dual_quaternion") with its joints' stretches blended
+    apart, the two-phase blend of their section on non-rigid joints (Blender's and Maya's DQ
+    with scale): its joints' dual quaternions (``joint_dual_quaternions``) each turned into
+    its first joint's hemisphere, summed by weight and normalised, its rotation and
+    translation, applied after its joints' stretches summed by weight.  So a joint squashed
+    and stretched unevenly bends its vertices as its matrix does, and joints that only
+    stretch and move blend as linear skinning does (``shaders/include/pose.glsl``'s
+    skin_matrix in that build)."""
+    real, dual, stretch = joint_dual_quaternions(matrices)
     w = weights.astype(np.float64)
     r, d = real[joints], dual[joints]                                  # (V, 4 joints, 4)
-    w = np.where((r * r[:, :1]).sum(-1) < 0.0, -w, w)                  # the first joint's hemisphere
-    blend_real, blend_dual = np.einsum("vi,vik->vk", w, r), np.einsum("vi,vik->vk", w, d)
+    signed = np.where((r * r[:, :1]).sum(-1) < 0.0, -w, w)             # the first joint's hemisphere
+    blend_real, blend_dual = np.einsum("vi,vik->vk", signed, r), np.einsum("vi,vik->vk", signed, d)
     norm = np.linalg.norm(blend_real, axis=-1, keepdims=True)
     q, qd = blend_real / norm, blend_dual / norm
     translation = 2.0 * (q[:, 3:] * qd[:, :3] - qd[:, 3:] * q[:, :3] + np.cross(q[:, :3], qd[:, :3]))
@@ -118,7 +138,7 @@ def dual_quaternion_matrices(joints: np.ndarray, weights: np.ndarray, matrices: 
                          np.stack([2 * (x * y + s * z), 1 - 2 * (x * x + z * z), 2 * (y * z - s * x)], -1),
                          np.stack([2 * (x * z - s * y), 2 * (y * z + s * x), 1 - 2 * (x * x + y * y)], -1)], 1)
     out = np.zeros((len(joints), 4, 4))
-    out[:, :3, :3] = rotation * np.einsum("vi,vi->v", weights.astype(np.float64), scale[joints])[:, None, None]
+    out[:, :3, :3] = rotation @ np.einsum("vi,virc->vrc", w, stretch[joints])
     out[:, :3, 3] = translation
     out[:, 3, 3] = 1.0
     return out

@@ -30,13 +30,14 @@ mat4 joint_matrix(sampler2D rows, uint joint) {
 
 #ifdef DUAL_QUATERNION_SKINNING
 // Dual quaternion skinning (Skin.skinning "dual_quaternion"; Kavan, Collins, Zara and
-// O'Sullivan, "Geometric Skinning with Approximate Dual Quaternion Blending", 2008):
+// O'Sullivan, "Geometric Skinning with Approximate Dual Quaternion Blending", 2008), with
+// their two-phase blend for joints that are not rigid (Blender's and Maya's DQ with scale):
 // engine/core/skinning.py dual_quaternion_matrices is its twin.  Each joint's matrix is taken
-// as a uniform scale (the cube root of its determinant), a rotation (its columns over that
-// scale, made orthonormal) and a translation; the rotations and translations blend as unit
-// dual quaternions (each turned into the first's hemisphere, summed by weight, normalised),
-// the scales by weight, so a twisted wrist keeps its thickness where linear blending
-// collapses it.
+// as a stretch (its scale and shear, uneven or not), then a rotation (its columns made
+// orthonormal) and a translation; the stretches blend by weight, the rotations and
+// translations as unit dual quaternions (each turned into the first's hemisphere, summed by
+// weight, normalised), so a twisted wrist keeps its thickness where linear blending
+// collapses it, and a joint squashed and stretched bends its vertices as its matrix does.
 
 // A rotation matrix's unit quaternion (x, y, z, w), from its largest diagonal term.
 vec4 rotation_quaternion(mat3 r) {
@@ -58,33 +59,47 @@ vec4 quaternion_product(vec4 a, vec4 b) {
     return vec4(a.w * b.xyz + b.w * a.xyz + cross(a.xyz, b.xyz), a.w * b.w - dot(a.xyz, b.xyz));
 }
 
-// Joint j's dual quaternion (real, dual) and uniform scale.
-void joint_dual_quaternion(sampler2D rows, uint joint, out vec4 real, out vec4 dual, out float scale) {
+// A joint's rotation from its matrix's linear part: Gram-Schmidt on its columns (x the
+// first's way, y the second's less its x, z = x cross y), a column squashed to nothing
+// replaced (x by the other two's cross product, else the x axis; y by a way square to x).
+// Any rotation is exact with its stretch (transpose(rotation) * linear): this one blends well.
+mat3 joint_rotation(mat3 linear) {
+    float tiny = 1e-6 * max(max(length(linear[0]), length(linear[1])), length(linear[2]));
+    vec3 x = linear[0];
+    if (length(x) <= tiny) x = cross(linear[1], linear[2]);
+    if (length(x) <= tiny * tiny) x = vec3(1.0, 0.0, 0.0);
+    x = normalize(x);
+    vec3 y = linear[1] - dot(linear[1], x) * x;
+    if (length(y) <= tiny) y = cross(x, abs(x.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0));
+    y = normalize(y);
+    return mat3(x, y, cross(x, y));
+}
+
+// Joint j's dual quaternion (real, dual) and its stretch (the rotation's transpose times
+// its linear part: the identity for a rigid joint).
+void joint_dual_quaternion(sampler2D rows, uint joint, out vec4 real, out vec4 dual, out mat3 stretch) {
     mat4 m = joint_matrix(rows, joint);
     mat3 linear = mat3(m);
-    float det = determinant(linear);
-    scale = sign(det) * pow(abs(det), 1.0 / 3.0);   // (a joint squashed flat: 0, its rotation kept below)
-    float unscale = abs(scale) > 1e-12 ? 1.0 / scale : 1.0;
-    vec3 x = normalize(linear[0] * unscale);
-    vec3 y = normalize(linear[1] * unscale - dot(linear[1] * unscale, x) * x);
-    real = rotation_quaternion(mat3(x, y, cross(x, y)));
+    mat3 rotation = joint_rotation(linear);
+    stretch = transpose(rotation) * linear;
+    real = rotation_quaternion(rotation);
     dual = 0.5 * quaternion_product(vec4(m[3].xyz, 0.0), real);
 }
 
 // The vertex's blended matrix: the mesh as modelled -> as posed by ``rows`` (pose_rows;
-// pose_before: as it was), the blended rotation and translation times the blended scale.
+// pose_before: as it was), the blended rotation and translation after the blended stretch.
 mat4 skin_matrix(sampler2D rows) {
     vec4 real0, dual0, real, dual;
-    float scale0, scale;
-    joint_dual_quaternion(rows, in_joints.x, real0, dual0, scale0);
+    mat3 stretch0, stretch;
+    joint_dual_quaternion(rows, in_joints.x, real0, dual0, stretch0);
     vec4 blend_real = in_weights.x * real0, blend_dual = in_weights.x * dual0;
-    float blend_scale = in_weights.x * scale0;
+    mat3 blend_stretch = in_weights.x * stretch0;
     for (int k = 1; k < 4; ++k) {
-        joint_dual_quaternion(rows, in_joints[k], real, dual, scale);
+        joint_dual_quaternion(rows, in_joints[k], real, dual, stretch);
         float w = dot(real, real0) < 0.0 ? -in_weights[k] : in_weights[k];   // the same hemisphere
         blend_real += w * real;
         blend_dual += w * dual;
-        blend_scale += in_weights[k] * scale;
+        blend_stretch += in_weights[k] * stretch;
     }
     float norm = length(blend_real);
     blend_real /= norm;
@@ -94,8 +109,9 @@ mat4 skin_matrix(sampler2D rows) {
     mat3 rotation = mat3(1.0 - 2.0 * (q.y * q.y + q.z * q.z), 2.0 * (q.x * q.y + q.w * q.z), 2.0 * (q.x * q.z - q.w * q.y),
                          2.0 * (q.x * q.y - q.w * q.z), 1.0 - 2.0 * (q.x * q.x + q.z * q.z), 2.0 * (q.y * q.z + q.w * q.x),
                          2.0 * (q.x * q.z + q.w * q.y), 2.0 * (q.y * q.z - q.w * q.x), 1.0 - 2.0 * (q.x * q.x + q.y * q.y));
-    return mat4(vec4(rotation[0] * blend_scale, 0.0), vec4(rotation[1] * blend_scale, 0.0),
-                vec4(rotation[2] * blend_scale, 0.0), vec4(t, 1.0));
+    mat4 skin = mat4(rotation * blend_stretch);
+    skin[3] = vec4(t, 1.0);
+    return skin;
 }
 #else
 // The vertex's blended matrix (linear blend skinning): the mesh as modelled -> as posed by
