@@ -101,7 +101,7 @@ def test_the_colour_part_or_layer_is_found_and_alpha_and_others_left_out(tmp_pat
     path = write(tmp_path / "layers.exr", {**rgb(image, "sky."), **rgb(other), "A": other[..., 0]})
     np.testing.assert_array_equal(load_exr(path), other.astype(np.float32))
     np.testing.assert_array_equal(load_exr(path, layer="sky"), image.astype(np.float32))
-    with pytest.raises(AssetError, match=r"layers\.exr.*no the layer 'ground'.*sky\.R"):
+    with pytest.raises(AssetError, match=r"layers\.exr.*has no layer 'ground'.*sky\.R"):
         load_exr(path, layer="ground")
     grey = write(tmp_path / "y.exr", {"Y": image[..., 1]})
     np.testing.assert_array_equal(load_exr(grey), np.repeat(image[..., 1:2], 3, axis=-1).astype(np.float32))
@@ -234,6 +234,45 @@ def test_a_level_file_and_the_runner_take_an_exr_sky(scene, tmp_path):
     sky = runner.world.query_one(Skybox)[0][1]
     assert sky.faces.source["panorama"] == str((tmp_path / "sky.exr").resolve())
     np.testing.assert_allclose(sky.faces, panorama_faces(image, 512), rtol=1e-6)
+
+
+def test_a_level_file_names_an_exr_layer_and_writes_it_back(tmp_path):
+    """``layer`` in a sky's faces table reads that layer (a channel prefix, or a part of that
+    name), not the file's first colours, and a saved level keeps it; a layer the file lacks,
+    a layer of an .hdr file (which has none) and a layer that is not a name are refused,
+    naming the file or the field."""
+    from engine.assets.level_read import LevelError, load_level
+    from engine.assets.level_save import save_level
+    from engine.core.world import World
+
+    image, other = smooth(16, 32, np.float32), smooth(16, 32, np.float32)[:, ::-1] * 0.5
+    write(tmp_path / "sky.exr", {**rgb(image, "night."), **rgb(other)}, "zip")
+    level = tmp_path / "level.toml"
+
+    def faces_of(table: str):
+        level.write_text(f'[level]\nname = "exr"\n[[entity]]\nname = "sky"\nSkybox = {{ faces = {table} }}\n')
+        world = World()
+        load_level(level).spawn(world)
+        return world, world.query_one(Skybox)[0][1].faces
+
+    world, faces = faces_of('{ panorama = "sky.exr", face_size = 8, layer = "night" }')
+    np.testing.assert_array_equal(faces, panorama_faces(image, 8))
+    assert faces.source["layer"] == "night"
+    _, first = faces_of('{ panorama = "sky.exr", face_size = 8 }')
+    np.testing.assert_array_equal(first, panorama_faces(np.ascontiguousarray(other), 8))
+    save_level(world, tmp_path / "saved.toml")
+    assert 'layer = "night"' in (tmp_path / "saved.toml").read_text()
+    again = World()
+    load_level(tmp_path / "saved.toml").spawn(again)
+    np.testing.assert_array_equal(again.query_one(Skybox)[0][1].faces, panorama_faces(image, 8))
+    with pytest.raises(LevelError, match=r"Skybox\.faces: OpenEXR file .*sky\.exr.*has no layer 'day'.*night\.R"):
+        faces_of('{ panorama = "sky.exr", face_size = 8, layer = "day" }')
+    with pytest.raises(LevelError, match=r"Skybox\.faces: sky panorama: layer must be a non-empty string"):
+        faces_of('{ panorama = "sky.exr", face_size = 8, layer = 3 }')
+    from engine.assets.panorama import save_hdr
+    save_hdr(tmp_path / "sky.hdr", image)
+    with pytest.raises(LevelError, match=r"Skybox\.faces: panorama file .*sky\.hdr.*layer 'night' given, but only"):
+        faces_of('{ panorama = "sky.hdr", face_size = 8, layer = "night" }')
 
 
 @pytest.mark.parametrize("compression", ["none", "rle", "zip", "piz", "pxr24", "b44", "dwaa"])

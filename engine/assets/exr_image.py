@@ -141,7 +141,7 @@ def _choose_part(exr: Any, layer: str | None, what: str) -> tuple[int, str]:
             return index, ""
         elif layer is not None and {f"{layer}.R", f"{layer}.G", f"{layer}.B"} <= set(names):
             return index, f"{layer}."
-    wanted = f"the layer {layer!r} (a part of that name, or channels {layer}.R, .G, .B)" if layer is not None \
+    wanted = f"layer {layer!r} (a part of that name, or channels {layer}.R, .G, .B)" if layer is not None \
         else "an image part with channels R, G and B (or Y)"
     raise AssetError(f"{what}: has no {wanted}; its parts: {'; '.join(found)}")
 

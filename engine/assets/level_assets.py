@@ -266,8 +266,9 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
 
 def level_sky_faces(spec: Any, where: LevelAssets) -> SkyFaces:
     """A ``Skybox.faces`` table: ``{ panorama = "sky.hdr" }`` with optional ``face_size``
-    (default 256), ``yaw`` (degrees), ``intensity`` (default 1) and ``without_sun`` (default
-    false: its sun taken out, for a DirectionalLight to give): the panorama made into six faces
+    (default 256), ``yaw`` (degrees), ``intensity`` (default 1), ``without_sun`` (default
+    false: its sun taken out, for a DirectionalLight to give) and ``layer`` (an OpenEXR file's
+    part or layer of that name): the panorama made into six faces
     (``engine/assets/panorama.py``; a star field or faces made in code are not written in files)."""
     if not isinstance(spec, dict) or "panorama" not in spec:
         raise ValueError("Skybox.faces in a level file is a panorama: { panorama = \"sky.hdr\", face_size = 256, "
@@ -275,8 +276,10 @@ def level_sky_faces(spec: Any, where: LevelAssets) -> SkyFaces:
     spec = dict(spec)
     path = _asset_path(spec.pop("panorama"), where)
     face_size, yaw, intensity = spec.pop("face_size", 256), spec.pop("yaw", 0.0), spec.pop("intensity", 1.0)
-    without_sun = spec.pop("without_sun", False)
+    without_sun, layer = spec.pop("without_sun", False), spec.pop("layer", None)
     _no_more(spec, "sky panorama")
+    if layer is not None and not (isinstance(layer, str) and layer):
+        raise ValueError(f"sky panorama: layer must be a non-empty string (an OpenEXR part or layer), got {layer!r}")
     if not isinstance(without_sun, bool):
         raise ValueError(f"sky panorama: without_sun must be true or false, got {without_sun!r}")
     if not (is_number(intensity) and 0.0 <= intensity <= MAX_INTENSITY):
@@ -287,9 +290,10 @@ def level_sky_faces(spec: Any, where: LevelAssets) -> SkyFaces:
         raise ValueError(f"sky panorama: yaw must be a finite number of degrees, got {yaw!r}")
     info = check_asset_file(path, f"panorama file {str(path)!r}", MAX_PANORAMA_FILE_BYTES)
     key = ("panorama", str(path), info.st_mtime_ns, info.st_size, info.st_ino, face_size, float(yaw), float(intensity),
-           without_sun)
+           without_sun, layer)
     where.budget.take(key, 6 * face_size * face_size * 3 * 4)
-    return _cached(key, lambda: sky_faces_from_file(path, face_size, float(yaw), float(intensity), without_sun))
+    return _cached(key, lambda: sky_faces_from_file(path, face_size, float(yaw), float(intensity), without_sun,
+                                                    layer))
 
 
 def level_lut(spec: Any, where: LevelAssets) -> ColorLut:

@@ -206,15 +206,18 @@ def save_hdr(path: str | Path, image: np.ndarray) -> Path:
     return path
 
 
-def load_panorama(path: str | Path) -> np.ndarray:
+def load_panorama(path: str | Path, layer: str | None = None) -> np.ndarray:
     """An equirectangular image's linear colours (height, width, 3) float32, row 0 at the top:
-    a ``.hdr`` file as ``load_hdr`` reads it, an ``.exr`` file as ``load_exr`` does, any other
-    image through Pillow as sRGB."""
+    a ``.hdr`` file as ``load_hdr`` reads it, an ``.exr`` file as ``load_exr`` does (``layer``:
+    its part or layer of that name), any other image through Pillow as sRGB."""
     suffix = Path(path).suffix.lower()
+    if suffix == ".exr":
+        return load_exr(path, layer)
+    if layer is not None:
+        raise AssetError(f"panorama file {str(path)!r}: layer {layer!r} given, but only an OpenEXR (.exr) file "
+                         "has layers")
     if suffix in (".hdr", ".pic", ".rgbe"):
         return load_hdr(path)
-    if suffix == ".exr":
-        return load_exr(path)
     texture = load_texture(path)
     return srgb_to_linear(texture.pixels[..., :3] / 255.0).astype(np.float32)
 
@@ -275,19 +278,19 @@ def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0,
-                        intensity: float = 1.0, without_sun: bool = False) -> SkyFaces:
+                        intensity: float = 1.0, without_sun: bool = False, layer: str | None = None) -> SkyFaces:
     """A panorama file (``load_panorama``) as a Skybox's ``faces`` (``panorama_faces``), its
     colours times ``intensity`` (three.js's ``environmentIntensity``, Godot's sky energy: a
     photographed sky is as bright as its camera exposed it), remembering the file, size, turn
     and intensity (``SkyFaces.source``).  ``without_sun``: the panorama's sun taken out first
     (``engine.assets.panorama_sun.find_sun``) and kept as ``SkyFaces.sun``, a
     ``DirectionalLight``'s fields (None if it has no sun), so it casts shadows and is not
-    counted twice."""
+    counted twice.  ``layer``: an OpenEXR file's part or layer of that name (``load_exr``)."""
     if not (isinstance(intensity, (int, float)) and math.isfinite(intensity) and 0.0 <= intensity <= MAX_INTENSITY):
         raise ValueError(f"intensity must be a number from 0 to {MAX_INTENSITY:g}, got {intensity!r}")
     if not isinstance(without_sun, bool):
         raise ValueError(f"without_sun must be True or False, got {without_sun!r}")
-    panorama, sun = load_panorama(path), None
+    panorama, sun = load_panorama(path, layer), None
     if without_sun:
         sun, panorama = find_sun(panorama, yaw)
     faces = panorama_faces(panorama, face_size, yaw)
@@ -300,6 +303,8 @@ def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0
     faces.source = {"panorama": str(Path(path).resolve()), "face_size": face_size, "yaw": float(yaw)}
     if intensity != 1.0:
         faces.source["intensity"] = float(intensity)
+    if layer is not None:
+        faces.source["layer"] = layer
     if without_sun:
         faces.source["without_sun"] = True
         if sun is not None:
@@ -318,9 +323,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("file")
     parser.add_argument("--yaw", type=float, default=0.0, help="the panorama's turn about up, degrees")
     parser.add_argument("--intensity", type=float, default=1.0, help="what the panorama's colours are multiplied by")
+    parser.add_argument("--layer", default=None, help="an OpenEXR file's part or layer to read")
     args = parser.parse_args(argv)
     try:
-        sun, _ = find_sun(load_panorama(args.file), args.yaw)
+        sun, _ = find_sun(load_panorama(args.file, args.layer), args.yaw)
     except (AssetError, ValueError) as exc:
         print(f"error: {exc}")
         return 2
