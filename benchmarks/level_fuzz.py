@@ -15,7 +15,11 @@ loop, a FIFO, a directory, a link to /dev/zero, an image bomb, a glTF nested 100
 an OBJ whose faces pass its vertices or whose material reaches outside, a path outside the
 level's folder, existing or not) or a value nested thousands deep; each must be refused
 saying what it is, or (16-bit and float images) load with the texel the file holds and
-render.  ``python -m benchmarks fuzz`` also runs every file case once.
+render.  The sky's cases (``SKY_FILE_CASES``) name a panorama in its ``faces`` table: an
+OpenEXR or Radiance file of random bytes, cut short, holding NaN, past half floats, declaring
+10,000 pixels, a FIFO, outside, a layer it lacks or cannot have; each refused saying so, or
+(a plain file, a named layer) loaded as the grey it holds.  ``python -m benchmarks fuzz``
+also runs every file case once.
 
     python -m benchmarks fuzz --level-cases 2000
 """
@@ -217,7 +221,9 @@ _VALUES = ["0", "1", "-1", "0.5", "1e-30", "65505.0", "1e20", "3.4e38", "1e39", 
            "{ sphere = 0.5, segments = 100000000 }", "{ file = \"gone.png\" }", "1979-05-27",
            "[" * 3000 + "]" * 3000, "{ a = " * 1000 + "1" + " }" * 1000, "[" * 20 + "1.0" + "]" * 20,
            "{ file = \"../outside/there.png\" }", "{ file = \"assets/loop.png\" }", "{ file = \"assets/fifo.obj\" }",
-           "{ box = [-1.0, 1.0, 1.0] }", "{ plane = [1.0, 1.0], uv_repeat = \"x\" }", "{ checker = [2.5, 1] }"]
+           "{ box = [-1.0, 1.0, 1.0] }", "{ plane = [1.0, 1.0], uv_repeat = \"x\" }", "{ checker = [2.5, 1] }",
+           "{ panorama = \"assets/cut.exr\" }", "{ panorama = \"assets/plain.exr\", face_size = 4, layer = \"x\" }",
+           "{ panorama = \"assets/plain.hdr\", face_size = 4, without_sun = true }"]
 _NAMES = ["Transform", "MeshRef", "Material", "Mirror", "Portal", "Camera", "Skybox", "Emissive", "Slice",
           "PortalClone", "Nope", "transform", "ParticleEmitter", "LevelOfDetail", "AnimationEvents", "Decal",
           "FromDecal"]
@@ -237,6 +243,7 @@ class LevelCase:
     mutations: list[str]
     expect: str | None = None   # words the refusal must hold (a file case)
     texel: tuple[int, ...] | None = None  # or: it loads, and texel (0, 0) of the floor's map is this RGBA
+    sky: float | None = None    # or: it loads, and every texel of the sky's faces is this grey
 
     def describe(self) -> str:
         return "; ".join(self.mutations)
@@ -252,10 +259,16 @@ class FileCase:
     spec: str
     expect: str | None = None
     texel: tuple[int, ...] | None = None
+    sky: float | None = None
 
 
 def _file(name: str) -> str:
     return f'{{ file = "{name}" }}'
+
+
+def _sky(name: str, layer: str | None = None) -> str:
+    """A sky's faces table naming the panorama ``name`` (and ``layer``), 4 texels a face."""
+    return f'{{ panorama = "{name}", face_size = 4' + ("" if layer is None else f', layer = "{layer}"') + " }"
 
 
 _OUT = "outside the level's folder"
@@ -311,6 +324,57 @@ MODEL_FILE_CASES: tuple[FileCase, ...] = (
 )
 FILE_CASES += MODEL_FILE_CASES
 
+# Skies: a panorama a level's Skybox names (OpenEXR and Radiance files; make_sky_files).
+SKY_FILE_CASES: tuple[FileCase, ...] = (
+    FileCase("an EXR of random bytes", "faces", _sky("assets/noise.exr"), "not an OpenEXR file"),
+    FileCase("an EXR cut in half", "faces", _sky("assets/cut.exr"), "cannot be read as OpenEXR"),
+    FileCase("an EXR holding NaN", "faces", _sky("assets/nan.exr"), "hold NaN"),
+    FileCase("an EXR past half floats", "faces", _sky("assets/bright.exr"), "past 65504"),
+    FileCase("an EXR declaring 10000 x 5000", "faces", _sky("assets/huge.exr"), "10000 x 5000 pixels"),
+    FileCase("an EXR without the layer named", "faces", _sky("assets/plain.exr", "night"), "has no layer 'night'"),
+    FileCase("a FIFO (EXR sky)", "faces", _sky("assets/fifo.exr"), "is a FIFO"),
+    FileCase("an .hdr of random bytes", "faces", _sky("assets/noise.hdr"), "not a Radiance .hdr file"),
+    FileCase("an .hdr cut short", "faces", _sky("assets/cut.hdr"), "cut short"),
+    FileCase("a layer of an .hdr", "faces", _sky("assets/plain.hdr", "night"), "only an OpenEXR"),
+    FileCase("a panorama outside", "faces", _sky("../outside/there.exr"), _OUT),
+    FileCase("a plain EXR sky", "faces", _sky("assets/plain.exr"), sky=0.5),
+    FileCase("an EXR sky's layer", "faces", _sky("assets/plain.exr", "dusk"), sky=0.25),
+    # (RGBE keeps 0.5 as mantissa 128, exponent 128, which Radiance reads as (128 + 0.5) / 256)
+    FileCase("a plain .hdr sky", "faces", _sky("assets/plain.hdr"), sky=128.5 / 256),
+)
+FILE_CASES += SKY_FILE_CASES
+
+
+def make_sky_files(assets: Path, outside: Path) -> None:
+    """The panoramas SKY_FILE_CASES name, in ``assets`` (beside make_files' FIFOs) and ``outside``."""
+    import OpenEXR
+
+    from engine.assets.exr_image import save_exr
+    from engine.assets.panorama import save_hdr
+
+    grey = np.full((8, 16, 3), 0.5, np.float32)
+
+    def exr(path: Path, channels: dict[str, np.ndarray], **header) -> None:
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, **header}
+        OpenEXR.File(header, {k: np.ascontiguousarray(v) for k, v in channels.items()}).write(str(path))
+
+    def rgb(image: np.ndarray, prefix: str = "") -> dict[str, np.ndarray]:
+        return {f"{prefix}{c}": image[..., i] for i, c in enumerate("RGB")}
+
+    exr(assets / "plain.exr", {**rgb(grey.astype(np.float16)), **rgb(np.full_like(grey, 0.25, np.float16), "dusk.")})
+    save_exr(outside / "there.exr", grey)
+    save_hdr(assets / "plain.hdr", grey)
+    noise = np.random.default_rng(27).integers(0, 256, 600, dtype=np.uint8).tobytes()
+    (assets / "noise.exr").write_bytes(noise)
+    (assets / "noise.hdr").write_bytes(noise)
+    whole = (assets / "plain.exr").read_bytes()
+    (assets / "cut.exr").write_bytes(whole[: len(whole) // 2])
+    (assets / "cut.hdr").write_bytes(b"#?RADIANCE\n\n-Y 2 +X 4\n" + bytes(20))
+    exr(assets / "nan.exr", rgb(np.full((4, 4, 3), np.nan, np.float32)))
+    exr(assets / "bright.exr", rgb(np.full((4, 4, 3), 1e6, np.float32)))
+    exr(assets / "huge.exr", rgb(np.ones((4, 4, 3), np.float16)),
+        displayWindow=(np.array([0, 0], np.int32), np.array([9999, 4999], np.int32)))
+
 
 def make_model_files(assets: Path) -> None:
     """The files MODEL_FILE_CASES name, in ``assets`` (beside make_files' FIFOs)."""
@@ -354,7 +418,7 @@ def make_files(level_folder: Path, outside: Path) -> None:
     link("loop2.obj", assets / "loop.obj")
     link("zero.png", "/dev/zero")
     link("out.png", outside / "there.png")
-    for name in ("fifo.png", "fifo.obj", "fifo.mtl"):
+    for name in ("fifo.png", "fifo.obj", "fifo.mtl", "fifo.exr"):
         if not os.path.lexists(assets / name):
             os.mkfifo(assets / name)
     (assets / "folder.png").mkdir(exist_ok=True)
@@ -379,6 +443,7 @@ def make_files(level_folder: Path, outside: Path) -> None:
     Image.fromarray(np.full((2, 2), 7, np.int32)).save(assets / "int32.tiff")
     Image.new("RGB", (4, 4), (200, 100, 50)).save(assets / "plain.png")
     make_model_files(assets)
+    make_sky_files(assets, outside)
 
 
 def _png(path: Path, pixels, colour_type: int, depth: int, declared: tuple[int, int] | None = None) -> None:
@@ -396,15 +461,18 @@ def _png(path: Path, pixels, colour_type: int, depth: int, declared: tuple[int, 
 _SLOTS = {"mesh": "mesh = { box = [1.0, 1.0, 1.0] }", "texture": "texture = { checker = [32, 4] }",
           "normal_map": "texture = { checker = [32, 4] }", "emissive_map": "texture = { checker = [32, 4] }",
           "metallic_roughness_map": "texture = { checker = [32, 4] }",
-          "occlusion_map": "texture = { checker = [32, 4] }"}
+          "occlusion_map": "texture = { checker = [32, 4] }", "faces": "face_size = 8"}
 
 
 def file_level_case(case: FileCase) -> LevelCase:
     """BASE with ``case``'s file named in its slot (the crate's mesh, the floor's texture or
     normal map): one mutation, so the refusal must be the file's."""
     key = case.slot
-    text = BASE.replace(_SLOTS[case.slot], f"{key} = {case.spec}", 1)
-    return LevelCase(text, [f"file case: {case.what}"], case.expect, case.texel)
+    line = f"{key} = {case.spec}"
+    if case.slot == "faces":  # (beside the sky's face_size)
+        line = f"{_SLOTS['faces']}\n{line}"
+    text = BASE.replace(_SLOTS[case.slot], line, 1)
+    return LevelCase(text, [f"file case: {case.what}"], case.expect, case.texel, case.sky)
 
 
 def mutate(rng: random.Random, text: str) -> tuple[str, str]:
@@ -549,7 +617,7 @@ class LevelFuzzer:
                 return f"refused, but left entities {self.world.entities()} in the world"
             if case.expect is not None and case.expect not in exc.reason:
                 return f"refused, but without saying {case.expect!r}: {exc}"
-            if case.texel is not None:
+            if case.texel is not None or case.sky is not None:
                 return f"refused a file that should load: {exc}"
             self.refused += 1
             return None
@@ -562,6 +630,8 @@ class LevelFuzzer:
             problem = f"loaded, but should be refused saying {case.expect!r}"
         elif case.texel is not None:
             problem = self._check_texel(names, case.texel)
+        elif case.sky is not None:
+            problem = self._check_sky(names, case.sky)
         try:
             problem = render_checked(self.ctx, self.engine, self.capture.framebuffer, problem)
         finally:
@@ -585,6 +655,19 @@ class LevelFuzzer:
             return f"texel (0, 0) is {got}, the file holds {texel}"
         return None
 
+
+
+    def _check_sky(self, names: dict[str, int], grey: float) -> str | None:
+        """The sky's faces are the panorama's grey everywhere (its every texel ``grey``)."""
+        from components import Skybox
+
+        sky = self.world.try_get(names.get("sky", -1), Skybox)
+        if sky is None or sky.faces is None:
+            return "the sky has no faces"
+        faces = np.asarray(sky.faces)
+        if not np.allclose(faces, grey, rtol=1e-3):
+            return f"the sky's faces hold {faces.min():g} to {faces.max():g}, the file {grey:g}"
+        return None
 
 
 def fuzz_levels(ctx, folder: Path, cases: int, seed: int = 0, report=None) -> tuple[int, list, dict[str, int]]:
