@@ -241,7 +241,8 @@ class Material(TrackedComponent):
     the light of a sphere curved as the surface is there (engine/render/subsurface.py), so a
     flat surface is lit as without it and a small one scatters more than a large one of the
     same material.  The sun's, lamps' and light through mirrors' and portals' diffuse light
-    scatter; the light from all round is already soft and does not.
+    scatter, and so does the light from all round (the sky's, the probes', the irradiance
+    volumes'; a lightmap's baked light does not).
 
     ``unlit`` (default False) draws the material's colour as it is, lit by nothing (glTF's
     ``KHR_materials_unlit``, Unity's Unlit shaders, three.js's ``MeshBasicMaterial``,

@@ -582,7 +582,13 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #ifdef LIGHTMAP
     vec3 total = lightmap_irradiance() * diffuse * s.occlusion * (1.0 - s.environment_weight);  // (baked)
 #else
+#ifdef SUBSURFACE
+    subsurface_bands_begin();   // the light from all round scattered under it too (subsurface.glsl)
+#endif
     vec3 total = ambient_irradiance(boxes, s.normal) * diffuse * s.occlusion * (1.0 - s.environment_weight);
+#ifdef SUBSURFACE
+    subsurface_bands_end();
+#endif
 #endif
 #ifdef DIFFUSE_TRANSMISSION
     total += ambient_irradiance(boxes, -s.normal) * through * s.occlusion;  // the light from all round behind

@@ -4,7 +4,9 @@ Burley's profile over a sphere in 3D (a second path: no chord, no closed form ov
 azimuth), what a sphere gives back against what it takes in, rendered spheres against the
 integral per channel (by a sun, with and without its shadow map, by a lamp's cube and by a
 mirror's image of the sun), a flat wall lit as Lambert lights it, a caster's shadow still
-falling on it, the table on the GPU, bad values and level files."""
+falling on it, the light from all round (the band weights against the convolution of a sky
+with D integrated directly, and a sphere under a sky against them), the table on the GPU,
+bad values and level files."""
 from __future__ import annotations
 
 import numpy as np
@@ -24,7 +26,16 @@ from components import (
 )
 from components.limits import MAX_SUBSURFACE_SCALE
 from engine.assets.mesh import box, quad, sphere
-from engine.render.subsurface import scattered_diffuse, subsurface_table, table_lookup
+from engine.core.cube_faces import face_directions
+from engine.render.irradiance import evaluate_sh, project_faces, sh_basis
+from engine.render.subsurface import (
+    ambient_band_weights,
+    band_lookup,
+    band_rows,
+    scattered_diffuse,
+    subsurface_table,
+    table_lookup,
+)
 from tests.support import look_from, srgb_to_linear
 
 RADIUS = 0.5
@@ -71,6 +82,84 @@ def test_the_table_read_as_the_shader_reads_it_is_the_integral():
     nl, y = rng.uniform(-1.0, 1.0, 3000), rng.uniform(0.0, 0.97, 3000)
     spread = y / (1.0 - y)
     assert np.abs(table_lookup(table, nl, spread) - scattered_diffuse(nl, spread)).max() < 0.006
+
+
+def sky_radiance(directions: np.ndarray) -> np.ndarray:
+    """The tests' sky: a polynomial of degree 2 in the way's height (so order-2 spherical
+    harmonics hold it whole), bright above, dim below, a little bluer up high."""
+    y = directions[..., 1:2]
+    return np.maximum(0.5 + 0.45 * y + 0.3 * y * y, 0.0) * np.array([0.9, 1.0, 1.2])
+
+
+def fibonacci_sphere(count: int) -> np.ndarray:
+    i = np.arange(count) + 0.5
+    y = 1.0 - 2.0 * i / count
+    angle = i * np.pi * (3.0 - np.sqrt(5.0))
+    ring = np.sqrt(1.0 - y * y)
+    return np.stack([ring * np.cos(angle), y, ring * np.sin(angle)], -1)
+
+
+@pytest.mark.parametrize("spread", [0.1, 0.5, 2.0, 20.0])
+def test_the_band_weights_scatter_the_light_from_all_round_as_the_integral_does(spread):
+    """A sky's light scattered under a point (the integral over the sphere of its radiance
+    times D(n.w, d / r), summed directly over 40,000 ways) against the engine's way: the
+    sky's irradiance coefficients, bands 1 and 2 weighed by r_1 and r_2 (and as the shader
+    reads them from their rows); r_0 is 1."""
+    ways = fibonacci_sphere(40_000)
+    radiance = sky_radiance(ways)
+    mu = np.linspace(-1.0, 1.0, 2001)
+    kernel = scattered_diffuse(mu, spread)     # (D on a fine grid of n.w, read between its points)
+    normals = fibonacci_sphere(12)
+    direct = np.stack([(radiance * np.interp(ways @ n, mu, kernel)[:, None]).sum(0) * 4.0 * np.pi / len(ways)
+                       for n in normals])
+    # The irradiance's coefficients (Lambert's kernel applied) of the same sky, band by band.
+    coefficients = sh_basis(ways).T @ radiance * (4.0 * np.pi / len(ways)) * np.array(
+        [np.pi] + [2.0 * np.pi / 3.0] * 3 + [np.pi / 4.0] * 5)[:, None]
+    bands = [slice(0, 1), slice(1, 4), slice(4, 9)]
+    weights = ambient_band_weights(spread)
+    assert weights[0] == pytest.approx(1.0, abs=1e-6)
+    # Exact weights: the sum itself (to the quadrature's error); read from the rows: within 0.2%.
+    for r, tolerance in ((weights[1:], 1e-5), (band_lookup(band_rows(), spread), 2e-3)):
+        scattered = sum(w * (sh_basis(normals)[:, b] @ coefficients[b]) for w, b in zip((1.0, *r), bands, strict=True))
+        assert np.abs(scattered - direct).max() < tolerance * direct.max(), np.abs(scattered - direct).max()
+    lambert = evaluate_sh(coefficients, normals)
+    assert np.abs(lambert - direct).max() > 0.02 * direct.max()   # (scattering does change it)
+
+
+def test_a_sphere_under_a_sky_scatters_its_light_as_the_band_weights_say(scene):
+    """No light but the sky: each channel against the plain material's irradiance scale
+    (fitted on the same sphere) times the sky's irradiance with bands 1 and 2 weighed at the
+    channel's d / r, the light from above reaching round its underside, red furthest."""
+    size = 16
+    faces = np.stack([sky_radiance(face_directions(f, size)) for f in range(6)]).astype(np.float32)
+    coefficients = project_faces(faces)
+
+    def build(**material):
+        def spawn(world):
+            look_from(world, tuple(EYE), (0.0, 0.0, 0.0), fov=FOV)
+            world.spawn(Skybox(faces=faces))
+            world.spawn(Transform(), MeshRef(sphere(RADIUS, 64, 128)),
+                        Material(color=(0.8, 0.8, 0.8, 1.0), reflectance=0.0, roughness=1.0,
+                                 environment_reflection=0.0, **material))
+        return spawn
+
+    scale = 0.15
+    plain = _render(scene, build())
+    scattered = _render(scene, build(subsurface=1.0, subsurface_scale=scale))
+    _, normal, inner = _sphere_normals()
+    basis = sh_basis(normal[inner])
+    for channel, share in enumerate(SKIN):
+        irradiance = basis @ coefficients[:, channel]
+        k = (plain[inner][:, channel] / irradiance).mean()
+        assert np.abs(plain[inner][:, channel] - k * irradiance).max() < 0.01   # (the plain one: E(n))
+        r1, r2 = ambient_band_weights(share * scale / RADIUS)[1:]
+        weighed = basis @ (coefficients[:, channel] * np.array([1.0] + [r1] * 3 + [r2] * 5))
+        error = np.abs(scattered[inner][:, channel] - k * weighed)
+        assert np.percentile(error, 99) < 0.01 and error.max() < 0.02, (channel, error.max())
+    # Its underside takes more of the light from above than the plain sphere's (red the most).
+    below = inner & (normal[..., 1] < -0.6)
+    gained = scattered[below].mean(axis=0) / plain[below].mean(axis=0)
+    assert gained[0] > gained[1] > gained[2] > 0.999 and gained[0] > 1.1, gained
 
 
 # -- rendered ---------------------------------------------------------------------------------

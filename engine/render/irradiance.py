@@ -100,7 +100,7 @@ from engine.render.sky import (
     moon_phase,
     zenith_share,
 )
-from engine.render.subsurface import subsurface_table
+from engine.render.subsurface import SUBSURFACE_BANDS_COLUMN, band_rows, subsurface_table
 from engine.render.targets import release_framebuffer
 from engine.render.views import LTC_ROW, MAX_IRRADIANCE_PROBES, VOLUME_ROW, VOLUME_ROWS, VOLUME_SLOT_ROWS
 
@@ -435,11 +435,17 @@ class IrradianceTable:
 
     def write_subsurface(self) -> None:
         """Subsurface scattering's table (``engine/render/subsurface.py``) into the alpha of
-        the BRDF rows, once: a batch with ``Material.subsurface`` asks for it when it is made."""
+        the BRDF rows, and its band weights for the light from all round (``band_rows``) into
+        their column ``SUBSURFACE_BANDS_COLUMN``, once: a batch with ``Material.subsurface``
+        asks for them when it is made."""
         if not self.has_subsurface:
             self._brdf[..., 3] = subsurface_table()
             self._write_rows(self._brdf.tobytes(), viewport=(0, MAX_IRRADIANCE_PROBES, ENVIRONMENT_BRDF_SIZE,
                                                              ENVIRONMENT_BRDF_SIZE))
+            bands = np.zeros((ENVIRONMENT_BRDF_SIZE, 1, 4), np.float32)
+            bands[:, 0, :2] = band_rows()
+            self._write_rows(bands.tobytes(), viewport=(SUBSURFACE_BANDS_COLUMN, MAX_IRRADIANCE_PROBES, 1,
+                                                        ENVIRONMENT_BRDF_SIZE))
             self.has_subsurface = True
 
     # --- the boxes -----------------------------------------------------------------------------

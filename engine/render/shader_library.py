@@ -85,6 +85,7 @@ from engine.render.context_kept import kept_on
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.render.ltc_fit import LTC_SIZE
 from engine.render.raw_gl import _load as load_gl_function
+from engine.render.subsurface import SUBSURFACE_BANDS_COLUMN
 from engine.rules import lens_rules, shadow_rules, visibility_rules
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
@@ -284,7 +285,7 @@ def limit_glsl_defines() -> dict[str, str]:
     """The sizes of the arrays a uniform block or a shader's samplers hold, from the Python
     that packs them (the Lights block: ``views``; the point lights' shadow cubes:
     ``shadows``; the irradiance boxes: ``irradiance``; the environment BRDF's rows:
-    ``environment_brdf``; the virtual lights and the outlines
+    ``environment_brdf``; the subsurface band weights' column: ``subsurface``; the virtual lights and the outlines
     each one's line crosses: ``shadow_rules``; where a pose row's morph weights start:
     ``pose_rows``; the motion texture's row: ``object_motion``; the lamps with contact
     shadows: ``components.limits``), each material map's bit in a
@@ -295,6 +296,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "MAX_SHADOW_RINGS": str(views.MAX_SHADOW_RINGS),
             "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
             "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
+            "SUBSURFACE_BANDS_COLUMN": str(SUBSURFACE_BANDS_COLUMN),
             "LTC_SIZE": str(LTC_SIZE), "LTC_ROW": str(views.LTC_ROW),
             "MAX_IRRADIANCE_VOLUMES": str(MAX_IRRADIANCE_VOLUMES), "MAX_FOG_VOLUMES": str(MAX_FOG_VOLUMES),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),

@@ -29,7 +29,25 @@ each, the middle at both) so the kink max(n.l, 0) puts in it at 0 is never filte
 its rows s / (1 + s) from 0 to 1 (1: d far beyond r).  Read with bilinear filtering it is
 within 0.005 of the integral.  It is not a texture of its own: it rides in the alpha of the
 environment BRDF's rows (``engine/render/irradiance.py``, as the sheen's albedo rides in
-their blue), written once a subsurface material is drawn."""
+their blue), written once a subsurface material is drawn.
+
+**The light from all round** (the sky's, the probes' and the irradiance volumes' spherical
+harmonics) scatters under the surface by the same D: the point gives back the integral of
+the radiance round it times D(n.w, s).  D is a function of n.w alone (a zonal kernel), so by
+the Funk-Hecke theorem its convolution with spherical harmonics scales each band l by the
+kernel's Legendre moment; the engine's coefficients are the irradiance's (Lambert's kernel
+max(mu, 0) already applied), so the scattered light is the irradiance with band l weighed by
+
+    r_l(s) = integral of D(mu, s) P_l(mu) over mu in [-1, 1]
+             / integral of max(mu, 0) P_l(mu) (1/2, 1/3, 1/8 for l = 0, 1, 2)
+
+(``ambient_band_weights``): r_0 = 1 (what the sphere gives back is what it takes in), r_1
+and r_2 fall from 1 on a flat surface to about 0.34 and 0.20 where the light spreads far
+(the light from above reaches round to the sides and below, each channel as far as its own
+distance).  The same pre-integration Penner's table makes for a light, made for a sky's
+bands, as the irradiance volumes of skin renderers weigh theirs.  Its rows (``band_rows``, r_1
+and r_2 at the table's rows) ride in one more column of the BRDF rows, beside the table
+(``SUBSURFACE_BANDS_COLUMN``)."""
 from __future__ import annotations
 
 import functools
@@ -40,6 +58,11 @@ from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 
 PROFILE_STEPS = 512  # points along rho each exponential of the profile is integrated at
 FAR_SPREAD = 1e6     # the last row's d / r (its s / (1 + s) is 1)
+# The BRDF rows' column the band weights ride in (r_1, r_2 in red and green): one past a guard
+# column of zeros after the table's own, so a lookup at either's texel centres weighs the other 0.
+SUBSURFACE_BANDS_COLUMN = ENVIRONMENT_BRDF_SIZE + 1
+BAND_NODES = 32      # Gauss-Legendre nodes on each half of mu's range (D is smooth on each)
+LAMBERT_MOMENTS = (0.5, 1.0 / 3.0, 0.125)   # the integral of max(mu, 0) P_l(mu), l = 0, 1, 2
 
 
 def _around(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -109,3 +132,36 @@ def table_lookup(table: np.ndarray, nl: np.ndarray | float, spread: np.ndarray |
     value = (table[j, i] * (1 - fx) * (1 - fy) + table[j, i + 1] * fx * (1 - fy)
              + table[j + 1, i] * (1 - fx) * fy + table[j + 1, i + 1] * fx * fy)
     return value + np.maximum(nl, 0.0)
+
+
+def ambient_band_weights(spread: np.ndarray | float) -> np.ndarray:
+    """(r_0, r_1, r_2) at ``spread`` (d / r; shape (..., 3)): D's Legendre moments over
+    Lambert's (see the module), each half of mu's range by Gauss-Legendre (D bends sharply at
+    mu = 0 on a flat surface, smoothly on either side)."""
+    spread = np.asarray(spread, np.float64)
+    nodes, weights = np.polynomial.legendre.leggauss(BAND_NODES)
+    mu = np.concatenate([(nodes - 1.0) / 2.0, (nodes + 1.0) / 2.0])   # [-1, 0], then [0, 1]
+    w = np.concatenate([weights, weights]) / 2.0
+    kernel = scattered_diffuse(mu, spread[..., None])                   # (..., 2 x BAND_NODES)
+    legendre = np.stack([np.ones_like(mu), mu, 0.5 * (3.0 * mu * mu - 1.0)])
+    moments = np.einsum("...m,lm->...l", kernel * w, legendre)
+    return moments / np.asarray(LAMBERT_MOMENTS)
+
+
+@functools.cache
+def band_rows(size: int = ENVIRONMENT_BRDF_SIZE) -> np.ndarray:
+    """(size, 2) float32: r_1 and r_2 at the table's rows (``table_rows``); row 0 (a flat
+    surface) exactly 1."""
+    rows = ambient_band_weights(table_rows(size))[:, 1:]
+    rows[0] = 1.0
+    return rows.astype(np.float32)
+
+
+def band_lookup(rows: np.ndarray, spread: np.ndarray | float) -> np.ndarray:
+    """(r_1, r_2) at ``spread`` as the shader reads them from ``rows``: linearly between the
+    rows by s / (1 + s) (the Python twin of ``subsurface.glsl``'s ``subsurface_bands``)."""
+    spread = np.asarray(spread, np.float64)
+    y = spread / (1.0 + spread) * (len(rows) - 1)
+    j = np.clip(np.floor(y).astype(int), 0, len(rows) - 2)
+    f = (y - j)[..., None]
+    return rows[j] * (1.0 - f) + rows[j + 1] * f

@@ -31,14 +31,25 @@ vec2 environment_brdf(float roughness, float nv) {
     return environment_brdf_rows(roughness, nv).rg;
 }
 
+#ifdef SUBSURFACE
+// Bands 1 and 2 of every E(n) weighed per channel: subsurface.glsl sets them about the light
+// from all round on a surface that scatters it (subsurface_bands_begin), 1 elsewhere.
+vec3 sh_band1 = vec3(1.0);
+vec3 sh_band2 = vec3(1.0);
+#endif
+
 // E(n) = sum of E_lm Y_lm(n), the basis written out (an array and a loop cost llvmpipe a
 // fifth of a frame of diffuse boxes; this costs next to nothing).
 vec3 sh_irradiance(vec3 c0, vec3 c1, vec3 c2, vec3 c3, vec3 c4, vec3 c5, vec3 c6, vec3 c7, vec3 c8, vec3 n) {
-    return c0 * 0.2820948
-        + (c1 * n.y + c2 * n.z + c3 * n.x) * 0.4886025
-        + (c4 * (n.x * n.y) + c5 * (n.y * n.z) + c7 * (n.x * n.z)) * 1.0925484
+    vec3 band1 = (c1 * n.y + c2 * n.z + c3 * n.x) * 0.4886025;
+    vec3 band2 = (c4 * (n.x * n.y) + c5 * (n.y * n.z) + c7 * (n.x * n.z)) * 1.0925484
         + c6 * (0.3153916 * (3.0 * n.z * n.z - 1.0))
         + c8 * (0.5462742 * (n.x * n.x - n.y * n.y));
+#ifdef SUBSURFACE
+    band1 *= sh_band1;
+    band2 *= sh_band2;
+#endif
+    return c0 * 0.2820948 + band1 + band2;
 }
 
 vec3 table_irradiance(int row, vec3 n) {

@@ -70,6 +70,28 @@ float subsurface_delta(float nl, float spread) {
     return textureLod(irradiance_table, texel / vec2(textureSize(irradiance_table, 0)), 0.0).a;
 }
 
+// The light from all round, scattered (engine/render/subsurface.py: D's Legendre moments over
+// Lambert's, r_1 and r_2 at s / (1 + s), in the column beside the table): every E(n) read
+// between subsurface_bands_begin and subsurface_bands_end has its bands 1 and 2 weighed per
+// channel, the share not scattered as Lambert (1), the rest by r_l at its channel's d / r.
+vec2 subsurface_bands(float spread) {
+    vec2 texel = vec2(float(SUBSURFACE_BANDS_COLUMN) + 0.5,
+                      spread / (1.0 + spread) * float(ENVIRONMENT_BRDF_SIZE - 1) + 0.5 + float(MAX_IRRADIANCE_PROBES));
+    return textureLod(irradiance_table, texel / vec2(textureSize(irradiance_table, 0)), 0.0).rg;
+}
+
+void subsurface_bands_begin() {
+    vec2 r = subsurface_bands(subsurface_spread.r), g = subsurface_bands(subsurface_spread.g),
+         b = subsurface_bands(subsurface_spread.b);
+    sh_band1 = mix(vec3(1.0), vec3(r.x, g.x, b.x), subsurface.a);
+    sh_band2 = mix(vec3(1.0), vec3(r.y, g.y, b.y), subsurface.a);
+}
+
+void subsurface_bands_end() {
+    sh_band1 = vec3(1.0);
+    sh_band2 = vec3(1.0);
+}
+
 // The diffuse light's weight per channel for a light at signed ``nl`` (the shading normal's
 // cosine to it): Lambert's max(n.l, 0) x ``lit`` for the share not scattered, the table's
 // D(n.l, d / r) x ``lit_beneath`` (its shadow looked up at subsurface_shadow_point) for the rest.
