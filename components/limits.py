@@ -58,6 +58,9 @@ MAX_IOR = 4.0
 # Earth's.  Twenty times the haze is a thick fog's air, twenty times the molecules a sky
 # whose sunsets are dark red by 20 degrees up; past that the tables' steps cannot follow it.
 MAX_AIR_SCALE = 20.0
+# Skybox.altitude's largest, metres: an airliner's (the sky-view table holds the ways above the
+# horizon; from higher the horizon dips more than a few degrees below it, into the ground's fade).
+MAX_ALTITUDE = 10_000.0
 # Refractive.dispersion (glTF's KHR_materials_dispersion, 20 / the Abbe number): 10 is an
 # Abbe number of 2, past any glass or gem (diamond's is 55, dense flint's about 20).
 MAX_DISPERSION = 10.0

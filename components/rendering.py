@@ -7,7 +7,14 @@ from typing import Any
 import numpy as np
 from pyglm import glm
 
-from components.limits import MAX_AIR_SCALE, MAX_DISPERSION, MAX_FILM_THICKNESS, MAX_IOR, MAX_SUBSURFACE_SCALE
+from components.limits import (
+    MAX_AIR_SCALE,
+    MAX_ALTITUDE,
+    MAX_DISPERSION,
+    MAX_FILM_THICKNESS,
+    MAX_IOR,
+    MAX_SUBSURFACE_SCALE,
+)
 from components.tracking import (
     HALF_MAX,
     ComponentValueError,
@@ -544,8 +551,12 @@ class Skybox(TrackedComponent):
     the ground's albedo (lit by the sun and the sky below the horizon).  ``rayleigh`` and
     ``haze`` (0 to ``MAX_AIR_SCALE``, 1: Earth's clear air) scale the air's molecules (thicker:
     a deeper blue, redder sunsets) and its aerosols (a whiter sky, a wider glow round the
-    sun).  With ``tints_sunlight`` (the default) the DirectionalLight the sky follows is
-    dimmed and reddened by the same air on its way down, as Unreal's atmosphere sun light:
+    sun).  ``altitude`` (metres above sea level, 0 to ``MAX_ALTITUDE``, default 200) is how
+    high the level stands: the air above it thinner the higher (a mountain's sky a deeper,
+    darker blue, its sun whiter and brighter at sunset; the level's own heights are nothing to
+    the air's kilometres, so the whole level takes it).  With ``tints_sunlight`` (the default)
+    the DirectionalLight the sky follows is dimmed and reddened by the same air on its way
+    down, as Unreal's atmosphere sun light:
     its ``color`` is its light with the sun overhead, and a low sun lights the world orange
     (a pinned ``sun_direction`` follows no light and tints none).  An atmosphere's ``faces``
     are the space beyond its air (stars, a galaxy: ``engine.assets.star_field.star_faces``),
@@ -568,6 +579,7 @@ class Skybox(TrackedComponent):
     model: str = "gradient"
     rayleigh: float = 1.0
     haze: float = 1.0
+    altitude: float = 200.0
     tints_sunlight: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
@@ -577,6 +589,8 @@ class Skybox(TrackedComponent):
             return choice(self, name, value, SKY_MODELS)
         if name in ("rayleigh", "haze"):
             return finite(self, name, value, low=0.0, high=MAX_AIR_SCALE)
+        if name == "altitude":
+            return finite(self, name, value, low=0.0, high=MAX_ALTITUDE)
         if name == "tints_sunlight":
             return boolean(self, name, value)
         if name == "sun_direction":

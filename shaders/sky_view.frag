@@ -14,6 +14,7 @@ uniform vec3 sun;                        // (cos elevation, sin elevation, 0)
 uniform float rayleigh_scale;            // Air.rayleigh
 uniform float haze_scale;                // Air.haze
 uniform float multiple;                  // 1: count the multiple scattering (Air.multiple)
+uniform float eye_km;                    // how high the eye stands over the ground (Air.eye_km: Skybox.altitude)
 
 out vec4 out_color;
 
@@ -49,7 +50,7 @@ void main() {
     float elevation = 0.5 * PI * pow(texel.y / float(ROWS - 1), 2.0);
     float azimuth = PI * texel.x / float(COLUMNS - 1);
     vec3 way = vec3(cos(elevation) * cos(azimuth), sin(elevation), cos(elevation) * sin(azimuth));
-    float r0 = GROUND_KM + EYE_KM;
+    float r0 = GROUND_KM + eye_km;
     float reach = sqrt(max((TOP_KM - r0) * (TOP_KM + r0) + r0 * r0 * way.y * way.y, 0.0)) - r0 * way.y;
     float nu = dot(way, sun);
     float rayleigh_shape = 3.0 / (16.0 * PI) * (1.0 + nu * nu), mie_shape = mie_phase(nu);

@@ -2,7 +2,7 @@
 its tables against integrals written here (a straight march through the air's densities, and
 the closed form of a sun overhead), the sky pass and the cube map against the CPU twin pixel
 by pixel, what the light of a real sky does as the sun goes down, and the sun's own light
-reddened by the same air."""
+reddened by the same air; from a level's altitude, the thinner air above it."""
 from __future__ import annotations
 
 import math
@@ -51,29 +51,31 @@ def _optical_depth(air: atm.Air, r: float, mu: float, steps: int = 20000) -> np.
     return sigma.sum(axis=0) * (length / steps)
 
 
+@pytest.mark.parametrize("eye_km", [atm.EYE_KM, 4.0])
 @pytest.mark.parametrize("elevation", [90.0, 30.0, 8.0, 2.0, 0.3])
-def test_the_sunlight_that_crosses_the_air_is_its_optical_depths_exponential(elevation):
+def test_the_sunlight_that_crosses_the_air_is_its_optical_depths_exponential(elevation, eye_km):
     """The transmittance table (Bruneton's mapping, 40 steps a ray) against a 20,000-step
-    march from the eye: within 1% of the light (2% at the last degree, where 0.3 degrees
-    leaves a 25th of the blue)."""
-    r = atm.GROUND_KM + atm.EYE_KM
+    march from the eye (200 m up, and 4 km: the sunlight's share as ``sunlight_share`` reads
+    it for a level that high): within 1% of the light (2% at the last degree, where 0.3
+    degrees leaves a 25th of the blue)."""
+    r = atm.GROUND_KM + eye_km
     mu = math.sin(math.radians(elevation))
     want = np.exp(-_optical_depth(EARTH, r, mu))
-    got = atm.transmittance(EARTH, np.float64(r), np.float64(mu))
+    got = atm.sunlight_share(atm.Air(eye_km=eye_km), _toward(elevation))
     np.testing.assert_allclose(got, want, rtol=0.02 if elevation < 1.0 else 0.01, atol=2e-4)
     assert not atm.transmittance(EARTH, np.float64(r), np.float64(-0.2)).any()   # into the ground: none
 
 
-def test_a_sun_overhead_seen_overhead_is_the_closed_form_of_single_scattering():
+@pytest.mark.parametrize("eye", [atm.EYE_KM, 3.0])
+def test_a_sun_overhead_seen_overhead_is_the_closed_form_of_single_scattering(eye):
     """Sun and eye both on the vertical: the sun's light reaches each height through the air
     above it and the eye through the air below, so every height's light is dimmed by the
     whole column, and L = E exp(-tau) (beta_R P_R(1) H_R + beta_M P_M(1) H_M) (the
-    densities' integrals over the column).  The table (multiple scattering off) within 2%
-    (measured 1.2% in the red, where the 1.2 km of haze is crossed in a few of its 30 steps;
-    it closes as 1 / steps^2)."""
-    air = atm.Air(multiple=False)
+    densities' integrals over the column above the eye: 200 m up, and 3 km).  The table
+    (multiple scattering off) within 2% (measured 1.2% in the red, where the 1.2 km of haze
+    is crossed in a few of its 30 steps; it closes as 1 / steps^2)."""
+    air = atm.Air(multiple=False, eye_km=eye)
     table = atm.sky_view_table(air, 90.0)
-    eye = atm.EYE_KM
 
     def column(height: float) -> float:   # a density of scale ``height``'s integral from the eye up
         return height * (math.exp(-eye / height) - math.exp(-(atm.TOP_KM - atm.GROUND_KM) / height))
@@ -86,7 +88,7 @@ def test_a_sun_overhead_seen_overhead_is_the_closed_form_of_single_scattering():
     np.testing.assert_allclose(table[-1, 0, :3], want, rtol=0.02)
     np.testing.assert_allclose(table[-1, 0, 3], np.exp(-tau[1]), rtol=0.01)   # (straight up, beyond the air: its green)
     # ... and multiple scattering only adds light (the table's other orders).
-    assert (atm.sky_view_table(EARTH, 90.0)[..., :3] >= table[..., :3] - 1e-6).all()
+    assert (atm.sky_view_table(atm.Air(eye_km=eye), 90.0)[..., :3] >= table[..., :3] - 1e-6).all()
 
 
 def test_the_sky_does_what_a_real_one_does_as_the_sun_goes_down():
@@ -224,7 +226,8 @@ def test_the_gpus_table_is_the_numpy_one(scene):
     (half floats, the two tables read with the GPU's filtering)."""
     runner = scene(lambda world: None, (16, 16))
     sky_view = runner.engine.renderer.sky_view_pass
-    for air, elevation in ((EARTH, 50.0), (EARTH, 1.5), (atm.Air(haze=4.0, rayleigh=2.0), 12.0)):
+    for air, elevation in ((EARTH, 50.0), (EARTH, 1.5), (atm.Air(haze=4.0, rayleigh=2.0), 12.0),
+                           (atm.Air(eye_km=6.0), 3.0)):
         texture = sky_view.draw(air, elevation)
         rows, columns = atm.VIEW_SIZE
         got = np.frombuffer(texture.read(), np.float16).reshape(rows, columns, 4).astype(np.float64)
@@ -233,8 +236,51 @@ def test_the_gpus_table_is_the_numpy_one(scene):
         np.testing.assert_allclose(got[..., 3], want[..., 3], rtol=0.01, atol=1e-3)   # (what crosses the air)
 
 
+def test_a_higher_level_sees_the_thinner_air_above_it():
+    """From 5 km up (``Skybox.altitude``): the zenith darker and bluer than from 200 m (half
+    the molecules and almost none of the haze above), a low sun's light stronger (less air on
+    its way) and its sky redder beside it no more than from below; the air's two tables are
+    made once for every altitude (they do not depend on the eye)."""
+    low, high = Skybox(model="atmosphere"), Skybox(model="atmosphere", altitude=5000.0)
+    assert air_of(high).eye_km == 5.0 and air_of(low).eye_km == pytest.approx(atm.EYE_KM)
+    noon = SkySun(tuple(_toward(60.0)))
+    below, above = (model_radiance(sky_model(sky, noon), _toward(89.0)) for sky in (low, high))
+    assert above.sum() < 0.75 * below.sum() and above[2] / above[0] > below[2] / below[0]
+    sunset = _toward(3.0)
+    share_low, share_high = (atm.sunlight_share(air_of(sky), sunset) for sky in (low, high))
+    assert (share_high > 1.3 * share_low).all() and share_high[0] / share_high[2] < share_low[0] / share_low[2]
+    assert atm.transmittance_table(air_of(high)) is atm.transmittance_table(air_of(low))
+    assert atm.multiple_scattering_table(air_of(high)) is atm.multiple_scattering_table(air_of(low))
+
+
+def test_a_skyboxs_altitude_draws_its_sky_and_a_level_file_keeps_it(scene, tmp_path):
+    """The sky pass at 3 km draws the twin's sky for that height (not 200 m's), and a level
+    file names the altitude and writes it back."""
+    from engine.assets.level_read import load_level
+    from engine.assets.level_save import save_level
+    from engine.core.world import World
+
+    sun = _toward(25.0, 20.0)
+    skybox = Skybox(model="atmosphere", altitude=3000.0)
+    colour, rays, _ = _frame(scene, skybox, DirectionalLight(direction=tuple(-sun), intensity=3.0), _toward(20.0))
+    up = rays[..., 1] > 0.05
+    want = sky_radiance(skybox, rays, SkySun(tuple(sun)))
+    np.testing.assert_allclose(colour[up], want[up], rtol=1e-2, atol=2e-3)
+    low = sky_radiance(Skybox(model="atmosphere"), rays, SkySun(tuple(sun)))
+    assert np.abs(colour[up] - low[up]).max() > 0.05 * low[up].max()
+    level = tmp_path / "peak.toml"
+    level.write_text('[level]\nname = "peak"\n[[entity]]\nname = "sky"\n'
+                     'Skybox = { model = "atmosphere", altitude = 3000.0 }\n')
+    world = World()
+    load_level(level).spawn(world)
+    assert world.query_one(Skybox)[0][1].altitude == 3000.0
+    save_level(world, tmp_path / "again.toml")
+    assert "altitude = 3000" in (tmp_path / "again.toml").read_text()
+
+
 @pytest.mark.parametrize("field, value, words", [
     ("model", "sunset", "model"), ("haze", -1.0, "haze"), ("rayleigh", 25.0, "rayleigh"),
+    ("altitude", -1.0, "altitude"), ("altitude", 20000.0, "altitude"), ("altitude", float("inf"), "altitude"),
     ("haze", float("nan"), "haze"), ("tints_sunlight", "yes", "tints_sunlight")])
 def test_bad_air_is_refused_when_given(field, value, words):
     with pytest.raises(ComponentValueError, match=words):

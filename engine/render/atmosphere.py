@@ -16,7 +16,7 @@ Technique", EGSR 2020), computed here with numpy in three tables:
   second order's isotropic integral over the sphere and the geometric series 1 / (1 - f_ms)
   of the orders after it (the ground's light included, ``Air.ground``).  Without it a low
   sun's sky is too dark and too saturated.
-- **sky view** (``sky_view_table``): the radiance the eye at ``EYE_KM`` above the ground sees
+- **sky view** (``sky_view_table``): the radiance the eye ``Air.eye_km`` above the ground sees
   per unit of sunlight along each way above the horizon, by the way's elevation (rows,
   denser near the horizon: the row is sqrt(elevation / 90 degrees)) and its azimuth from the
   sun's (columns, 0 to 180 degrees: the sky is symmetric about the sun's vertical plane).
@@ -43,13 +43,13 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 GROUND_KM = 6360.0     # the planet's radius
 TOP_KM = 6460.0        # the top of its air
-EYE_KM = 0.2           # how high the eye stands (the scale of a game's level is nothing to it)
+EYE_KM = 0.2           # how high the eye stands by default (Skybox.altitude's; a level's own heights are nothing to it)
 RAYLEIGH_SCATTERING = np.array([5.802, 13.558, 33.1]) * 1e-3   # per km at the ground (680, 550, 440 nm)
 RAYLEIGH_HEIGHT_KM = 8.0
 MIE_SCATTERING = 3.996e-3
@@ -78,12 +78,20 @@ class Air:
     """What an atmosphere is made of: ``rayleigh`` and ``haze`` scale Earth's molecules and
     aerosols (1: a clear day), ``ground`` the ground's albedo (linear RGB: it lights the air
     from below and shows below the horizon), ``multiple`` whether light scattered more than
-    once is counted (tests compare the single scattering with its closed form)."""
+    once is counted (tests compare the single scattering with its closed form), ``eye_km`` how
+    high above the ground the eye stands (``Skybox.altitude``: the air above it thinner)."""
 
     rayleigh: float = 1.0
     haze: float = 1.0
     ground: tuple[float, float, float] = (0.3, 0.3, 0.3)
     multiple: bool = True
+    eye_km: float = EYE_KM
+
+    @property
+    def column(self) -> Air:
+        """The air without its eye (what the transmittance and multiple-scattering tables
+        depend on: the same for every altitude, so a level's altitude makes them once)."""
+        return self if self.eye_km == EYE_KM else replace(self, eye_km=EYE_KM)
 
 
 # --- the air's stuff --------------------------------------------------------------------------
@@ -152,10 +160,14 @@ def _bilinear(table: np.ndarray, row: np.ndarray, column: np.ndarray) -> np.ndar
     return top
 
 
-@functools.lru_cache(maxsize=8)
 def transmittance_table(air: Air) -> np.ndarray:
     """Transmittance to space (rows of radius, columns of mu; Bruneton's mapping, 3): what
     ``transmittance`` reads, and the GPU's table (``engine/render/sky_view.py``) is given."""
+    return _transmittance_table(air.column)
+
+
+@functools.lru_cache(maxsize=8)
+def _transmittance_table(air: Air) -> np.ndarray:
     rows, columns = TRANSMITTANCE_SIZE
     x_r = np.linspace(0.0, 1.0, rows)[:, None]
     x_mu = np.linspace(0.0, 1.0, columns)[None, :]
@@ -209,11 +221,15 @@ def _step(scattered: np.ndarray, extinction: np.ndarray, length: np.ndarray) -> 
     return (scattered - scattered * through) / np.maximum(extinction, 1e-12), through
 
 
-@functools.lru_cache(maxsize=8)
 def multiple_scattering_table(air: Air) -> np.ndarray:
     """Hillaire's Psi_ms (rows of height 0..top, columns of the sun's cosine -1..1, 3) per
     unit of sunlight: the second order's isotropic light at a point over 1 - f_ms (given to
     the GPU's table too)."""
+    return _multiple_scattering_table(air.column)
+
+
+@functools.lru_cache(maxsize=8)
+def _multiple_scattering_table(air: Air) -> np.ndarray:
     rows, columns = SCATTERING_SIZE
     height = np.linspace(0.0, TOP_KM - GROUND_KM, rows)[:, None, None]
     mu_sun = np.linspace(-1.0, 1.0, columns)[None, :, None]
@@ -288,7 +304,7 @@ def sky_view_table(air: Air, sun_elevation_degrees: float, size: tuple[int, int]
     it along the way (green's: what a Skybox's space shows through): the reference the GPU's
     table (``engine/render/sky_view.py``) is held to."""
     ways, sun = view_directions(math.radians(sun_elevation_degrees), size)
-    r0 = GROUND_KM + EYE_KM
+    r0 = GROUND_KM + air.eye_km
     length = _to_top(np.float64(r0), ways[..., 1])                      # (rows, columns)
     nu = ways @ sun
     rayleigh_shape, mie_shape = rayleigh_phase(nu)[..., None], mie_phase(nu)[..., None]
@@ -320,7 +336,7 @@ def glsl_defines() -> dict[str, str]:
     def vec3(values) -> str:
         return "vec3(" + ", ".join(f"{float(v):.9g}" for v in values) + ")"
 
-    return {"GROUND_KM": f"{GROUND_KM:.9g}", "TOP_KM": f"{TOP_KM:.9g}", "EYE_KM": f"{EYE_KM:.9g}",
+    return {"GROUND_KM": f"{GROUND_KM:.9g}", "TOP_KM": f"{TOP_KM:.9g}",
             "RAYLEIGH_SCATTERING": vec3(RAYLEIGH_SCATTERING), "RAYLEIGH_HEIGHT_KM": f"{RAYLEIGH_HEIGHT_KM:.9g}",
             "MIE_SCATTERING": f"{MIE_SCATTERING:.9g}", "MIE_EXTINCTION": f"{MIE_EXTINCTION:.9g}",
             "MIE_HEIGHT_KM": f"{MIE_HEIGHT_KM:.9g}", "MIE_G": f"{MIE_G:.9g}",
@@ -367,7 +383,7 @@ def sun_elevation_degrees(sun: np.ndarray) -> float:
 def sunlight_share(air: Air, sun: np.ndarray) -> np.ndarray:
     """The share (3,) of the sun's light the air lets reach the eye from the unit ``sun``
     way (0 once it has set)."""
-    return transmittance(air, np.float64(GROUND_KM + EYE_KM), np.float64(sun[1]))
+    return transmittance(air, np.float64(GROUND_KM + air.eye_km), np.float64(sun[1]))
 
 
 def ground_light(air: Air, table: np.ndarray, sun: np.ndarray) -> np.ndarray:

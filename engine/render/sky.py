@@ -86,9 +86,9 @@ def sky_radiance(skybox: Skybox, directions: np.ndarray, sun: SkySun | None = No
 
 def air_of(skybox: Skybox) -> Air:
     """The air of an atmosphere Skybox (``engine/render/atmosphere.py``): its ``rayleigh`` and
-    ``haze``, its ``ground`` colour the ground's albedo."""
+    ``haze``, its ``ground`` colour the ground's albedo, the eye at its ``altitude``."""
     return Air(rayleigh=float(skybox.rayleigh), haze=float(skybox.haze),
-               ground=tuple(float(c) for c in tuple(skybox.ground)[:3]))
+               ground=tuple(float(c) for c in tuple(skybox.ground)[:3]), eye_km=float(skybox.altitude) / 1000.0)
 
 
 def sunlight_tint(skybox: Skybox | None, direction: tuple[float, float, float]) -> tuple[float, float, float]:

@@ -81,6 +81,7 @@ class SkyView:
         program["rayleigh_scale"].value = air.rayleigh
         program["haze_scale"].value = air.haze
         program["multiple"].value = 1.0 if air.multiple else 0.0
+        program["eye_km"].value = air.eye_km
         program["transmittance_table"].value = AIR_TRANSMITTANCE_UNIT
         program["scattering_table"].value = AIR_SCATTERING_UNIT
         self._target.use()
@@ -97,11 +98,11 @@ class SkyView:
         made and uploaded when the air is another."""
         if self._lender is not None:
             return self._lender._air_tables(air)
-        if air != self._air or self._tables is None:
+        if air.column != self._air or self._tables is None:   # (the same for every altitude)
             self._release_tables()
             self._tables = (_table_texture(self.ctx, transmittance_table(air)),
                             _table_texture(self.ctx, multiple_scattering_table(air)))
-            self._air = air
+            self._air = air.column
         return self._tables
 
     def _vertex_array(self) -> moderngl.VertexArray:
