@@ -1,8 +1,9 @@
 """A moon (``DirectionalLight(body="moon")``): its disc drawn by a generated sky as the CPU's
 twin draws it (engine/render/sky.py moon_share: Lommel and Seeliger's ball lit from the sun),
 its phases against the lit share of a ball written out here, never the sky's sun, its light
-reddened by an atmosphere as the sun's, in the sky's light, and where a ``TimeOfDay`` puts it
-(a full moon opposite the sun, a first quarter south at sunset)."""
+reddened by an atmosphere as the sun's, in the sky's light, where a ``TimeOfDay`` puts it
+(a full moon opposite the sun, a first quarter south at sunset), and the Earth's light on its
+dark side (earthshine) against the Earth's albedo, size and phase written out here."""
 from __future__ import annotations
 
 import math
@@ -15,7 +16,7 @@ from components import ComponentValueError, DirectionalLight, Material, MeshRef,
 from components.time_of_day import SYNODIC_MONTH, moon_towards, sun_towards
 from engine.assets.mesh import plane
 from engine.render.irradiance import generated_sky_sh, project_faces
-from engine.render.sky import build_faces, moon_phase, sky_model, sky_radiance
+from engine.render.sky import build_faces, moon_phase, moon_share, sky_model, sky_radiance
 from engine.rules.light_rules import SkySun, brightest_directional, sky_sun
 from tests.support import look_from, srgb_to_linear
 from tests.test_generated_sky import SKY, SUN, _hdr_frame
@@ -192,6 +193,44 @@ def test_a_phase_lights_the_share_of_the_disc_a_ball_shows(scene, degrees):
     if degrees == 180.0:   # even up to where the disc's ramp begins
         whole = rays @ moon > 0.9995
         assert colour[whole][:, 1].min() > 0.97 and colour[whole][:, 1].max() < 1.03
+
+
+def earthshine_by_hand(degrees: float) -> float:
+    """The Earth's light on the moon over the sun's, the sun ``degrees`` from the moon: the
+    Earth's geometric albedo 0.367 x (6371 km / 384,400 km)^2 x a Lambert sphere's phase
+    function at the Earth's phase seen from the moon (the same angle)."""
+    a = math.radians(degrees)
+    return 0.367 * (6371.0 / 384400.0) ** 2 * (math.sin(a) + (math.pi - a) * math.cos(a)) / math.pi
+
+
+@pytest.mark.parametrize("degrees", [25.0, 60.0, 90.0, 120.0])
+def test_the_dark_side_takes_the_earths_light(scene, degrees):
+    """The moon's disc with the sun ``degrees`` from it, lit a thousandfold so the Earth's
+    light shows in the frame: past the terminator it is the Earth's light by hand (the twin
+    says so, and the GPU draws it within 2%), most for a young crescent, none at full."""
+    moon = np.array([0.0, 0.3, -1.0]) / np.linalg.norm([0.0, 0.3, -1.0])
+    side = np.cross(moon, [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    angle = math.radians(degrees)
+    sun = moon * math.cos(angle) + side * math.sin(angle)
+    bright = 1000.0
+    skybox = Skybox(zenith=(0, 0, 0), horizon=(0, 0, 0), ground=(0, 0, 0), sun_direction=tuple(sun),
+                    sun_color=(0.0, 0.0, 0.0), moon_color=(bright, bright, bright))
+    colour, rays, runner = _hdr_frame(scene, skybox, fov=8.0, look=glm.vec3(*moon))
+    runner.world.spawn(moon_light(glm.vec3(*moon), color=(1.0, 1.0, 1.0)))
+    runner.frame()
+    from tests.test_generated_sky import _read
+    colour, rays = _read(runner)
+    d = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    share = moon_share(d, moon, sun)
+    whole = d @ moon > 0.9995
+    dark = whole & (share < 1.5 * earthshine_by_hand(degrees) + 1e-9)   # (past the terminator)
+    assert dark.sum() > 20
+    want = earthshine_by_hand(degrees)
+    np.testing.assert_allclose(share[dark], want, rtol=1e-9)
+    plain = sky_radiance(skybox, rays, SkySun(tuple(sun)))[..., 1]   # (the gradient's glow about the sun)
+    np.testing.assert_allclose(colour[dark][:, 1] - plain[dark], bright * want, rtol=0.02)
+    assert earthshine_by_hand(25.0) > 2.5 * earthshine_by_hand(90.0) > 0.0 and earthshine_by_hand(180.0) < 1e-12
 
 
 def test_a_moon_is_never_the_skys_sun():

@@ -85,6 +85,7 @@ from engine.render.context_kept import kept_on
 from engine.render.environment_brdf import ENVIRONMENT_BRDF_SIZE
 from engine.render.ltc_fit import LTC_SIZE
 from engine.render.raw_gl import _load as load_gl_function
+from engine.render.sky import EARTHSHINE
 from engine.render.subsurface import SUBSURFACE_BANDS_COLUMN
 from engine.rules import lens_rules, shadow_rules, visibility_rules
 
@@ -296,7 +297,7 @@ def limit_glsl_defines() -> dict[str, str]:
             "MAX_SHADOW_RINGS": str(views.MAX_SHADOW_RINGS),
             "MAX_IRRADIANCE_PROBES": str(views.MAX_IRRADIANCE_PROBES),
             "ENVIRONMENT_BRDF_SIZE": str(ENVIRONMENT_BRDF_SIZE),
-            "SUBSURFACE_BANDS_COLUMN": str(SUBSURFACE_BANDS_COLUMN),
+            "SUBSURFACE_BANDS_COLUMN": str(SUBSURFACE_BANDS_COLUMN), "EARTHSHINE": f"{EARTHSHINE:.9g}",
             "LTC_SIZE": str(LTC_SIZE), "LTC_ROW": str(views.LTC_ROW),
             "MAX_IRRADIANCE_VOLUMES": str(MAX_IRRADIANCE_VOLUMES), "MAX_FOG_VOLUMES": str(MAX_FOG_VOLUMES),
             "MAX_VIRTUAL_LIGHTS": str(shadow_rules.MAX_VIRTUAL_LIGHTS),

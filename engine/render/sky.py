@@ -251,6 +251,21 @@ def disc_strength(cos_sun: np.ndarray) -> np.ndarray:
 
 
 MOON_RADIUS_SINE = float(np.sqrt(1.0 - DISC_EDGE * DISC_EDGE))   # the disc's edge, sin of its angle from the centre
+# Earthshine: the sunlight the Earth sends back onto the moon, over the sun's own, with the
+# Earth full as seen from the moon: its geometric albedo (0.367) times (its radius over the
+# moon's distance, 6371 / 384400 km) squared.
+EARTHSHINE = 0.367 * (6371.0 / 384400.0) ** 2
+
+
+def earthshine(moon: np.ndarray, sun: np.ndarray) -> float:
+    """The light the Earth sends the moon's disc, over what the sun gives a point it lights
+    head on (``moon_share``'s scale): ``EARTHSHINE`` times a Lambert sphere's phase function
+    (sin a + (pi - a) cos a) / pi at the Earth's phase seen from the moon, a the angle between
+    the ways towards the sun and the moon (the moon new, the Earth full: the most; the moon
+    full: none).  It comes from beside the eye, so Lommel and Seeliger's law gives the disc
+    the same light all across (mu0 = mu); the old moon in the new moon's arms."""
+    a = float(np.arccos(np.clip(np.dot(moon, sun), -1.0, 1.0)))
+    return EARTHSHINE * (np.sin(a) + (np.pi - a) * np.cos(a)) / np.pi
 
 
 def moon_share(d: np.ndarray, moon: np.ndarray, sun: np.ndarray) -> np.ndarray:
@@ -258,12 +273,13 @@ def moon_share(d: np.ndarray, moon: np.ndarray, sun: np.ndarray) -> np.ndarray:
     times the light its ball sends back lit from ``sun`` (towards the sun), by Lommel and
     Seeliger's law for the moon's dust, 2 mu0 / (mu0 + mu) (mu0 the sunlight's cosine at the
     ball's point seen along ``d``, mu the eye's): 1 across a full moon (no limb darkening, as
-    the real one), a crescent's lit edge brighter than its middle, 0 past the terminator."""
+    the real one), a crescent's lit edge brighter than its middle, past the terminator the
+    Earth's light (``earthshine``)."""
     cos_moon = np.clip(d @ moon, -1.0, 1.0)
     across = (d - cos_moon[..., None] * moon) / MOON_RADIUS_SINE   # where on the disc, its edge at 1
     facing = np.sqrt(np.maximum(1.0 - (across * across).sum(-1), 0.0))   # mu
     lit = np.maximum((across - moon * facing[..., None]) @ sun, 0.0)      # mu0
-    return disc_strength(cos_moon) * 2.0 * lit / np.maximum(lit + facing, 1e-4)
+    return disc_strength(cos_moon) * (2.0 * lit / np.maximum(lit + facing, 1e-4) + earthshine(moon, sun))
 
 
 def moon_light(d: np.ndarray, moon: np.ndarray, sun: np.ndarray, colour: np.ndarray) -> np.ndarray:
