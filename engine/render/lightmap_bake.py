@@ -17,8 +17,14 @@ What it captures is what a probe sees: the sky, the lit surfaces round the point
 own light on them and their shadows, their light from all round as the captures have it),
 emissive things: the light from all round, bounced once, and the sun through the surfaces
 it lights.  The lights' own light on the surface is not in it: the engine adds it (and its
-shadows) at run time, as Unity's "baked indirect" mode.  Bake again with the first bake on
-(a lightmapped neighbour's light in the captures) for a second bounce.
+shadows) at run time, as Unity's "baked indirect" mode.
+
+``bake_lightmaps(engine, entities, bounces=n)`` bakes several surfaces that light each other
+(a room's walls, floor and ceiling), each round with the last round's lightmaps on, so the
+light goes round n times (Unity's and Blender's bounces): a round's captures see each
+neighbour lit by its last lightmap as well as by the lights, which the next lightmap then
+holds.  In a closed room of albedo a glowing L all over, round n gives L (1 + a + ... +
+a^(n-1)) (the furnace test's series, ``tests/test_lightmaps.py``).
 
 The image is 8-bit sRGB: its largest value is returned as the intensity the material takes
 (``Material.lightmap_intensity``), the image divided by it.  A bake is six views a covered
@@ -28,6 +34,7 @@ a level's build, run between frames, not in one.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,6 +53,7 @@ if TYPE_CHECKING:
     from shell.app import Engine
 
 BAKE_KEY = -(1 << 30)   # the scratch cube's key among the probes' (no entity's, no volume's)
+MAX_BOUNCES = 8         # bake_lightmaps' rounds (light halved by each bounce off a grey wall: 8 leave 1/256)
 LIFT = 0.02             # metres above the surface a texel's light is captured from
 DILATE_ROUNDS = 4       # texels past a chart's edge given its neighbours' light
 
@@ -163,3 +171,36 @@ def bake_lightmap(engine: Engine, entity: int, size: int = 32, resolution: int =
     encoded = linear_to_srgb(light / intensity)
     pixels = np.concatenate([np.clip(np.round(encoded * 255.0), 0, 255), np.full((size, size, 1), 255.0)], -1)
     return TextureData(pixels.astype(np.uint8), name=f"lightmap {entity}"), intensity
+
+
+def bake_lightmaps(engine: Engine, entities: Sequence[int], bounces: int = 1, size: int = 32, resolution: int = 16,
+                   near: float = 0.01, far: float = 100.0) -> dict[int, tuple[TextureData, float]]:
+    """Lightmaps for ``entities`` that light each other, ``bounces`` rounds (1 to
+    ``MAX_BOUNCES``): their lightmaps taken off first, then each round every one baked
+    (``bake_lightmap``: ``size``, ``resolution``, ``near``, ``far``) with the last round's on,
+    and put on (``Material.lightmap``, ``lightmap_intensity``; a frame of no time between
+    rounds, so the captures see them).  Returns each entity's image and intensity, as they are
+    on its material after the last round.  Each round costs what a ``bake_lightmap`` of each
+    does."""
+    if isinstance(bounces, bool) or not isinstance(bounces, int) or not 1 <= bounces <= MAX_BOUNCES:
+        raise AssetError(f"bake_lightmaps: bounces must be a whole number from 1 to {MAX_BOUNCES}, got {bounces!r}")
+    entities = list(entities)
+    if len(set(entities)) != len(entities):
+        raise AssetError(f"bake_lightmaps: an entity is named twice in {entities}")
+    world = engine.world
+    for entity in entities:
+        if world.try_get(entity, Material) is None:
+            raise AssetError(f"bake_lightmaps: entity {entity} has no Material to put its lightmap on")
+    for entity in entities:   # (the first round sees no bake of theirs)
+        world.get(entity, Material).lightmap = None
+    engine.frame(0.0, None)
+    baked: dict[int, tuple[TextureData, float]] = {}
+    for round_ in range(bounces):
+        baked = {entity: bake_lightmap(engine, entity, size, resolution, near, far) for entity in entities}
+        for entity, (image, intensity) in baked.items():
+            material = world.get(entity, Material)
+            material.lightmap = image
+            material.lightmap_intensity = intensity
+        if round_ + 1 < bounces:
+            engine.frame(0.0, None)
+    return baked
