@@ -312,7 +312,8 @@ def test_a_closed_room_baked_for_n_bounces_holds_the_furnace_series(scene):
         light[bounces] = np.stack([srgb_to_linear(image.as_8_bits()[..., :3]) * intensity
                                    for image, intensity in baked.values()])
         for entity, (image, intensity) in baked.items():   # (each put on its wall)
-            assert runner.world.get(entity, Material).lightmap is image
+            material = runner.world.get(entity, Material)
+            assert material.lightmap is image and material.lightmap_intensity == pytest.approx(intensity)
     glow = light[1].mean()
     assert glow > 0.05 and np.abs(light[1] - glow).max() < 0.03 * glow   # (the same all round)
     for bounces in (2, 3):
