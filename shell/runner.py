@@ -103,7 +103,8 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
     parser.add_argument("--render-scale", type=_render_scale, default=1.0, metavar="SHARE",
                         help=f"draw the world at this share of the output's width and height, in "
                              f"[{RENDER_SCALE_RANGE[0]:g}, {RENDER_SCALE_RANGE[1]:g}] (default 1), brought up to the "
-                             "output's size by temporal AA (--aa taa) or a Catmull-Rom upscale")
+                             "output's size by temporal AA (--aa taa) or a Catmull-Rom upscale; above 1 "
+                             "supersampled, brought down by a box filter in linear light")
     parser.add_argument("--sharpen", type=_sharpness, default=0.0, metavar="AMOUNT",
                         help="contrast-adaptive sharpening of the final image, in [0, 1] (default 0: none)")
     parser.add_argument("--frame-ms", type=_frame_ms, default=None, metavar="MS",

@@ -4,7 +4,9 @@
 Catmull-Rom spline (against the half-size picture upscaled in numpy), sharpening against the
 same filter in numpy, temporal upsampling settling nearer the picture drawn larger than a
 spatial upscale does, depth of field and motion blur reading the smaller seen image in the
-right place, a click picking at the drawn size, and the command line."""
+right place, a click picking at the drawn size, the command line; and supersampling (a scale
+above 1) brought down by an area box in linear light, against a runner of the larger size
+averaged down in numpy."""
 from __future__ import annotations
 
 import subprocess
@@ -73,8 +75,8 @@ def test_the_scale_and_the_sharpness_are_checked_when_set(scene):
     """Out of range, not a number, NaN or a bool: refused naming the setting; the drawn size
     is each side rounded, at least a pixel."""
     renderer = runner_at(scene, SIZE).engine.renderer
-    for bad in (0.2, 1.5, float("nan"), True, "0.5"):
-        with pytest.raises(ValueError, match=r"Renderer.render_scale must be a number in \[0.25, 1\]"):
+    for bad in (0.2, 2.5, float("nan"), True, "0.5"):
+        with pytest.raises(ValueError, match=r"Renderer.render_scale must be a number in \[0.25, 2\]"):
             renderer.render_scale = bad
     for bad in (-0.1, 1.01, float("inf"), None):
         with pytest.raises(ValueError, match=r"Renderer.sharpness must be a number in \[0, 1\]"):
@@ -104,6 +106,66 @@ def test_a_smaller_picture_is_brought_up_by_a_catmull_rom_spline(scene, mode):
     error = np.abs(picture - expected)
     assert error.mean() < 1.0 and np.percentile(error, 99) < 8.0, (error.mean(), np.percentile(error, 99))
     assert np.abs(picture - nearest).mean() > 2.0 * error.mean()
+
+
+def area_box_down(picture: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``picture`` (h, w, 3, encoded) brought down to ``size`` by an area box filter in linear
+    light: each output pixel the mean of the texels under its footprint, each weighed by the
+    share of it covered; encoded again as 8-bit sRGB values (floats)."""
+    def weights(count: int, out: int) -> np.ndarray:
+        edges = np.arange(out + 1) * count / out
+        lo, hi = edges[:-1, None], edges[1:, None]
+        texels = np.arange(count)[None, :]
+        covered = np.clip(np.minimum(hi, texels + 1) - np.maximum(lo, texels), 0.0, None)
+        return covered / covered.sum(axis=1, keepdims=True)
+
+    h, w = picture.shape[:2]
+    light = np.einsum("yh,hwc,xw->yxc", weights(h, size[1]), linear(picture), weights(w, size[0]))
+    encoded = np.where(light <= 0.0031308, light * 12.92, 1.055 * np.power(light, 1.0 / 2.4) - 0.055)
+    return encoded * 255.0
+
+
+@pytest.mark.parametrize("scale", [2.0, 1.5])
+def test_a_larger_picture_is_brought_down_by_an_area_box_in_linear_light(scene, scale):
+    """Supersampled: at scale 2 (and 1.5) the main view is drawn that many times larger and
+    the output is that picture (drawn by a runner of the larger size: a second path) averaged
+    down over each pixel's footprint in linear light (numpy), within a level; its slanted
+    edges nearer the picture drawn four times larger and averaged down than a frame drawn at
+    scale 1 is."""
+    large = (round(SIZE[0] * scale), round(SIZE[1] * scale))
+    drawn_large = runner_at(scene, large).frame()
+    runner = runner_at(scene, SIZE, scale)
+    picture = runner.frame().astype(np.float64)
+    assert runner.engine.renderer.targets.size == large
+    assert runner.engine.renderer.present_pass.post_passes == 1   # (the box filter)
+    expected = area_box_down(drawn_large, SIZE)
+    assert np.abs(picture - expected).max() <= 1.01, np.abs(picture - expected).max()
+    if scale == 2.0:
+        reference = averaged_down(runner_at(scene, (SIZE[0] * SCALE, SIZE[1] * SCALE)).frame())
+        plain = runner_at(scene, SIZE).frame()
+        errors = {name: np.abs(linear(p) - reference) for name, p in (("plain", plain), ("super", picture))}
+        edges = errors["plain"].max(axis=2) > 0.05
+        assert edges.sum() > 40
+        assert errors["super"][edges].mean() < 0.6 * errors["plain"][edges].mean()
+
+
+def test_supersampling_under_temporal_aa_resolves_at_the_drawn_size(scene):
+    """Temporal AA with a scale of 2: its history is the drawn (larger) size and the last
+    pass brings the resolved picture down; forty still frames settle near the picture drawn
+    four times larger and averaged down (nearer than a supersampled frame without it), and
+    sharpening on top draws."""
+    reference = averaged_down(runner_at(scene, (SIZE[0] * SCALE, SIZE[1] * SCALE)).frame())
+    large = (SIZE[0] * 2, SIZE[1] * 2)
+    runner = runner_at(scene, SIZE, 2.0, "taa", sharpness=0.3)
+    for _ in range(40):
+        picture = runner.frame()
+    temporal = runner.engine.renderer.present_pass.temporal
+    assert temporal._history[0][0].size == large and runner.engine.renderer.targets.size == large
+    assert picture.shape[:2] == (SIZE[1], SIZE[0])
+    plain = runner_at(scene, SIZE, 2.0).frame()
+    error, plain_error = np.abs(linear(picture) - reference), np.abs(linear(plain) - reference)
+    edges = plain_error.max(axis=2) > 0.02
+    assert edges.sum() > 20 and error[edges].mean() < 0.6 * plain_error[edges].mean()
 
 
 def test_sharpening_is_the_contrast_adaptive_filter(scene):

@@ -237,7 +237,10 @@ class PresentPass:
         fxaa = antialias == "fxaa"
         self.post_passes = 0
         if antialias == "taa" and seen is not None and view is not None:   # (first: the lens blurs a steady picture)
-            hdr = self.temporal.draw(hdr, seen, view, camera, dt, size)   # (brought up to size on the way)
+            # (brought up to size on the way; a supersampled picture is resolved at its own size
+            # and brought down by the last pass)
+            supersampled = hdr.size[0] > size[0] or hdr.size[1] > size[1]
+            hdr = self.temporal.draw(hdr, seen, view, camera, dt, None if supersampled else size)
             self.post_passes += 1
         elif self._temporal is not None:
             self._temporal.release_targets()

@@ -151,7 +151,8 @@ class Renderer(Gpu):
         """The share of the output's width and height the main view (and every reflection
         level and post-processing image sized from it) is drawn at, in
         ``RENDER_SCALE_RANGE`` (default 1): the picture is brought up to the output's size
-        by temporal AA's resolve, or else by a Catmull-Rom upscale after FXAA
+        by temporal AA's resolve, or else by a Catmull-Rom upscale after FXAA; above 1
+        (supersampling) brought down by an area box filter in linear light
         (``engine/render/resample.py``)."""
         return self._render_scale
 

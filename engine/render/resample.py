@@ -1,5 +1,5 @@
-"""Render scale and sharpening: the main view drawn at fewer pixels than the output, and the
-picture brought up to the output's size at the end (``Renderer.render_scale``,
+"""Render scale and sharpening: the main view drawn at fewer (or more) pixels than the
+output, and the picture brought to the output's size at the end (``Renderer.render_scale``,
 ``Renderer.sharpness``).
 
 A GPU host whose frame is bound by its pixels (shading, the reflection levels, the
@@ -14,6 +14,14 @@ two ways, as Unreal's screen percentage and Godot's 3D scaling do:
   field, motion blur, bloom, the encoding) run at the output's size;
 - otherwise by this module's last pass (``shaders/resample.frag``): the encoded picture,
   after FXAA, read through a Catmull-Rom spline (spatial upscaling).
+
+Above 1 it is supersampling (SSAA, Unreal's screen percentage over 100, Unity's render scale
+over 1, Godot's 3D scaling over 1): every level and image that many times larger, up to
+``MAX_RENDER_SCALE`` (4 x the pixels at 2), and the picture brought down by this module's last
+pass as an area box filter in linear light (each output pixel the mean of the light under
+it), after FXAA or temporal AA, which then run at the drawn size: the reference anti-aliasing
+for still images, geometry, mirror and portal edges and shading alike, at 4 x the pixels'
+cost.
 
 Sharpening (contrast-adaptive, the same last pass) runs on the output's pixels whenever
 ``sharpness`` is above 0, at any scale: it gives back some of what an upscale or temporal
@@ -30,9 +38,11 @@ from engine.core.budget import MIN_RENDER_SCALE_RANGE
 from engine.render.bindings import FXAA_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 
-# Below a quarter the picture is too coarse to bring back; above 1 (supersampling) is not
-# offered: the resolve's and the spline's neighbourhoods are sized for bringing a picture up.
-RENDER_SCALE_RANGE = MIN_RENDER_SCALE_RANGE   # (the core's, which dynamic resolution's floor shares)
+# Below a quarter the picture is too coarse to bring back (the core's floor, which dynamic
+# resolution's shares); above 2 a supersampled frame's box would take more than 3 x 3 texels a
+# pixel, and its levels 4 x the memory already.
+MAX_RENDER_SCALE = 2.0
+RENDER_SCALE_RANGE = (MIN_RENDER_SCALE_RANGE[0], MAX_RENDER_SCALE)
 _PASS = PassState()
 
 
@@ -68,21 +78,24 @@ class ResamplePass:
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary) -> None:
         self.ctx = ctx
         self._shaders = shaders
-        self._builds: dict[tuple[bool, bool], moderngl.VertexArray] = {}   # by (upscale, sharpen)
+        self._builds: dict[tuple[str, bool], moderngl.VertexArray] = {}   # by (scaling, sharpen)
 
-    def _build(self, upscale: bool, sharpen: bool) -> moderngl.VertexArray:
-        key = (upscale, sharpen)
+    def _build(self, scaling: str, sharpen: bool) -> moderngl.VertexArray:
+        key = (scaling, sharpen)
         vao = self._builds.get(key)
         if vao is None:
-            defines = {name: "1" for name, on in (("UPSCALE", upscale), ("SHARPEN", sharpen)) if on}
+            defines = {name: "1" for name, on in (("UPSCALE", scaling == "up"), ("DOWNSCALE", scaling == "down"),
+                                                  ("SHARPEN", sharpen)) if on}
             vao = self._builds[key] = self._shaders.fullscreen("resample.frag", defines, frame=FXAA_UNIT)
         return vao
 
     def draw(self, picture: moderngl.Texture, output: moderngl.Framebuffer, size: tuple[int, int],
              sharpness: float) -> None:
         """``picture`` (encoded, linear-filtered) into ``output`` at ``size``: upscaled where it is
-        smaller, sharpened by ``sharpness`` (0: not)."""
-        vao = self._build(picture.size != size, sharpness > 0.0)
+        smaller, box-filtered down where it is larger, sharpened by ``sharpness`` (0: not)."""
+        scaling = "same" if picture.size == size else \
+            "down" if picture.size[0] >= size[0] and picture.size[1] >= size[1] else "up"
+        vao = self._build(scaling, sharpness > 0.0)
         program = vao.program
         if "output_size" in program:
             program["output_size"].value = (float(size[0]), float(size[1]))
