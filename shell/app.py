@@ -386,11 +386,12 @@ class Engine:
                    getattr(args, "contact_shadows", False), getattr(args, "shafts", False))
         self.start_sky(getattr(args, "sky", None), getattr(args, "time", None), getattr(args, "day_minutes", None),
                        getattr(args, "panorama", None), getattr(args, "panorama_yaw", 0.0), getattr(args, "moon", None),
-                       getattr(args, "clouds", None), getattr(args, "panorama_sun", False))
+                       getattr(args, "clouds", None), getattr(args, "panorama_sun", False),
+                       getattr(args, "altitude", None))
 
     def start_sky(self, model: str | None, hour: float | None = None, day_minutes: float | None = None,
                   panorama: str | None = None, panorama_yaw: float = 0.0, moon_age: float | None = None,
-                  clouds: float | None = None, panorama_sun: bool = False) -> None:
+                  clouds: float | None = None, panorama_sun: bool = False, altitude: float | None = None) -> None:
         """The command line's sky options: ``--sky`` draws the level's Skybox (one made if it has
         none) as ``model`` ("atmosphere": a physically based sky with a night's stars beyond its
         air, ``engine.assets.star_field.star_faces``); ``--panorama`` makes its faces an
@@ -404,7 +405,9 @@ class Engine:
         ``--moon`` adds a moon ``moon_age`` days old on the same clock (a dim, cool
         ``DirectionalLight`` whose body is "moon", casting no shadow); ``--clouds`` puts a
         ``CloudLayer`` of that coverage on the Skybox (one made if it has none; a level's own
-        layer takes the coverage), drifting on a 10 m/s wind."""
+        layer takes the coverage), drifting on a 10 m/s wind; ``--altitude`` stands the level
+        ``altitude`` metres above sea level under its atmosphere (``Skybox.altitude``; a
+        gradient sky has no air to thin: refused)."""
         world = self.world
         if panorama is not None:
             from engine.assets.panorama import sky_faces_from_file
@@ -426,6 +429,12 @@ class Engine:
 
                 sky.faces = star_faces()
             sky.model = model
+        if altitude is not None:
+            skies = world.query_one(Skybox)
+            if not skies or skies[0][1].model != "atmosphere":
+                raise StartOptionError(f"--altitude {altitude:g}: the level's sky is not an atmosphere (a gradient "
+                                       "sky has no air to thin): add --sky atmosphere")
+            skies[0][1].altitude = altitude
         if clouds is not None:
             layers = world.query_one(CloudLayer)
             if layers:

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from components import ComponentValueError
+from components.limits import MAX_ALTITUDE
 from components.rendering import SKY_MODELS
 from components.time_of_day import SYNODIC_MONTH
 from engine.core.budget import ViewBudget, ViewBudgetError
@@ -80,6 +81,9 @@ def build_parser(game: Game | type[Game]) -> argparse.ArgumentParser:
     parser.add_argument("--sky", choices=SKY_MODELS, default=None,
                         help="the level's Skybox (made if it has none) drawn as this model: 'atmosphere' a "
                              "physically based sky, with a night's stars beyond its air")
+    parser.add_argument("--altitude", type=_altitude, default=None, metavar="METRES",
+                        help="with an atmosphere sky (--sky atmosphere, or the level's): the level stands this "
+                             f"high above sea level, 0 to {MAX_ALTITUDE:g} (default the level's, 200)")
     parser.add_argument("--panorama", default=None, metavar="FILE",
                         help="the level's sky (its Skybox, made if it has none) an equirectangular panorama: a "
                              "Radiance .hdr or OpenEXR .exr HDRI, or a PNG or JPEG taken as sRGB (512 texels a face)")
@@ -235,6 +239,7 @@ def _number(flag: str, what: str, accepts: Callable[[float], bool]) -> Callable[
 _yaw = _number("--panorama-yaw", "a finite number of degrees", lambda v: True)
 _moon_age = _number("--moon", f"the moon's age in days, 0 to {SYNODIC_MONTH:.2f}", lambda v: 0.0 <= v <= SYNODIC_MONTH)
 _cloud_share = _number("--clouds", "a share of the sky from 0 to 1", lambda v: 0.0 <= v <= 1.0)
+_altitude = _number("--altitude", f"metres from 0 to {MAX_ALTITUDE:g}", lambda v: 0.0 <= v <= MAX_ALTITUDE)
 _hour = _number("--time", "an hour from 0 to 24", lambda v: 0.0 <= v <= 24.0)
 _day_minutes = _number("--day-minutes", "a number of minutes > 0", lambda v: v > 0.0)
 

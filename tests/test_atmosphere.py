@@ -6,6 +6,7 @@ reddened by the same air; from a level's altitude, the thinner air above it."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -276,6 +277,32 @@ def test_a_skyboxs_altitude_draws_its_sky_and_a_level_file_keeps_it(scene, tmp_p
     assert world.query_one(Skybox)[0][1].altitude == 3000.0
     save_level(world, tmp_path / "again.toml")
     assert "altitude = 3000" in (tmp_path / "again.toml").read_text()
+
+
+def test_the_runners_altitude_stands_the_level_in_its_atmosphere(tmp_path):
+    """``--altitude`` with ``--sky atmosphere`` draws the hall under the thinner air (its sky
+    darker than at 200 m); without an atmosphere, or past 10,000 m, one line says why."""
+    import subprocess
+    import sys
+
+    from PIL import Image
+
+    def run(*extra):
+        return subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "1",
+                               "--size", "64x36", "--aa", "off", *extra], capture_output=True, text=True,
+                              cwd=str(Path(__file__).resolve().parents[1]), timeout=300)
+
+    pictures = {}
+    for metres in ("200", "8000"):
+        result = run("--sky", "atmosphere", "--altitude", metres, "--out", str(tmp_path / metres))
+        assert result.returncode == 0, result.stderr
+        pictures[metres] = np.asarray(Image.open(tmp_path / metres / "frame_0000.png")).astype(float)
+    top = slice(0, 6)   # (the sky over the hall's far end)
+    assert pictures["8000"][top].mean() < pictures["200"][top].mean() - 2.0
+    for extra, words in ((("--altitude", "3000"), "the level's sky is not an atmosphere"),
+                         (("--sky", "atmosphere", "--altitude", "20000"), "--altitude must be metres from 0 to")):
+        result = run(*extra, "--out", str(tmp_path / "bad"))
+        assert result.returncode != 0 and words in result.stderr.splitlines()[-1], result.stderr
 
 
 @pytest.mark.parametrize("field, value, words", [

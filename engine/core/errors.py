@@ -30,8 +30,9 @@ class ShaderError(SpeculumError):
 
 
 class StartOptionError(SpeculumError, ValueError):
-    """A start option (``--camera``, ``--ao``, ``--ssr``) the game's world cannot take: it has
-    no active camera to place or give the effect to."""
+    """A start option (``--camera``, ``--ao``, ``--ssr``, ``--altitude``) the game's world
+    cannot take: it has no active camera to place or give the effect to, no atmosphere to
+    stand in."""
 
 
 class NoCameraWarning(UserWarning):
