@@ -254,6 +254,37 @@ def test_a_higher_level_sees_the_thinner_air_above_it():
     assert atm.multiple_scattering_table(air_of(high)) is atm.multiple_scattering_table(air_of(low))
 
 
+@pytest.mark.parametrize("eye_km", [0.2, 3.0, 8.0])
+def test_the_true_horizon_lies_where_the_grounds_tangent_does(eye_km):
+    """``horizon_sine`` against the ground's own intersection rule (``_meets_ground``): a way
+    a hair above the true horizon crosses the air to space, a hair below it meets the ground
+    (0.45 degrees down at 200 m, 2.9 at 8 km)."""
+    sine = atm.horizon_sine(atm.Air(eye_km=eye_km))
+    r = np.float64(atm.GROUND_KM + eye_km)
+    assert not atm._meets_ground(r, np.float64(-sine + 1e-6)) and atm._meets_ground(r, np.float64(-sine - 1e-6))
+    assert math.degrees(math.asin(sine)) == pytest.approx(math.degrees(math.acos(atm.GROUND_KM / float(r))))
+
+
+def test_from_up_high_the_sky_reaches_below_the_level_horizon(scene):
+    """From 8 km the ways between the level horizon and the true one, 2.9 degrees below it,
+    show the sky (the twin's, pixel by pixel: the table's horizon row), where from 200 m the
+    ground has faded in."""
+    sun = _toward(25.0, 20.0)
+    light = DirectionalLight(direction=tuple(-sun), intensity=3.0)
+    high, rays, _ = _frame(scene, Skybox(model="atmosphere", altitude=8000.0), light, _toward(-2.0, 10.0))
+    low, *_ = _frame(scene, Skybox(model="atmosphere"), DirectionalLight(direction=tuple(-sun), intensity=3.0),
+                     _toward(-2.0, 10.0))
+    peak = Skybox(model="atmosphere", altitude=8000.0)
+    np.testing.assert_allclose(high, sky_radiance(peak, rays, SkySun(tuple(sun))), rtol=1e-2, atol=2e-3)
+    between = (rays[..., 1] < -0.03) & (rays[..., 1] > -0.045)
+    assert between.sum() > 50
+    flat = rays * np.array([1.0, 0.0, 1.0])
+    flat /= np.linalg.norm(flat, axis=-1, keepdims=True)
+    level = sky_radiance(peak, flat, SkySun(tuple(sun)))   # (straight out)
+    np.testing.assert_allclose(high[between], level[between], rtol=1e-2, atol=2e-3)   # the sky, as level with the eye
+    assert (np.abs(low[between] - level[between]).max(axis=-1) > 0.1 * level[between].max()).mean() > 0.9
+
+
 def test_a_skyboxs_altitude_draws_its_sky_and_a_level_file_keeps_it(scene, tmp_path):
     """The sky pass at 3 km draws the twin's sky for that height (not 200 m's), and a level
     file names the altitude and writes it back."""

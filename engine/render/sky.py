@@ -36,6 +36,7 @@ from engine.render.atmosphere import (
     air_transmittance,
     coarse_view_table,
     ground_light,
+    horizon_sine,
     sky_view_table,
     sun_elevation_degrees,
     sunlight_share,
@@ -151,7 +152,8 @@ def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, c
     """Linear RGB of an atmosphere sky ``model`` along unit ``directions`` (..., 3), as
     sky_model.glsl's ATMOSPHERE build draws it: the sky-view table (``sky_view_table`` at the
     sun's elevation, the one the GPU's is held to; ``coarse``: the CPU's small one) times the
-    sunlight above the horizon, the ground fading in below it as the gradient's does, and
+    sunlight above the true horizon (``horizon_sine``: the ways below the level one, down to
+    it, read the table's horizon row), the ground fading in below it as the gradient's does, and
     (``disc``) the sun's disc dimmed by the air."""
     d = np.asarray(directions, np.float64)
     towards = np.array(model.sun_direction, np.float64)
@@ -160,7 +162,7 @@ def model_radiance(model: SkyModel, directions: np.ndarray, disc: bool = True, c
     if model.moon_lights_air:   # the moonlight the air scatters: the same table at the moon's elevation
         table = model.moon_coarse_table if coarse else sky_view_table(model.air, model.moon_elevation)
         air = air + np.array(model.moon_air) * air_radiance(table, d, np.array(model.moon_direction, np.float64))
-    y = d[..., 1:2]
+    y = d[..., 1:2] + horizon_sine(model.air)   # (the true horizon, below the level one from up high)
     colour = np.where(y >= 0.0, air, air + (np.array(model.ground) - air) * ground_share(y))
     if disc:
         colour = colour + disc_strength(np.clip(d @ towards, -1.0, 1.0)[..., None]) * np.array(model.sun_color) \
@@ -400,7 +402,7 @@ class SkyModel:
         """Whether its air scatters a moon's light (sky_model.glsl's MOON_AIR builds)."""
         return self.atmosphere and any(self.moon_air)
 
-    def uniforms(self) -> dict[str, tuple[float, float, float]]:
+    def uniforms(self) -> dict[str, tuple[float, float, float] | float]:
         """The sky pass's uniforms, by name (an atmosphere's build has no zenith or horizon)."""
         moon = {"sky_moon_direction": self.moon_direction, "sky_moon_color": self.moon_color} if self.moon else {}
         if self.moon and self.clouds is not None:   # (what lights the clouds, as the sun's disc colour)
@@ -408,7 +410,7 @@ class SkyModel:
         if self.moon_lights_air:   # (a moon below the horizon: no disc, its light still in the air)
             moon.update(sky_moon_direction=self.moon_direction, moon_air_light=self.moon_air)
         if self.atmosphere:
-            return {"sky_light": self.air_light, "sky_ground": self.ground,
+            return {"sky_light": self.air_light, "sky_ground": self.ground, "sky_horizon_sine": horizon_sine(self.air),
                     "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color, **moon}
         return {"sky_zenith": self.zenith, "sky_horizon": self.horizon, "sky_ground": self.ground,
                 "sky_sun_direction": self.sun_direction, "sky_sun_color": self.sun_color, **moon}
@@ -471,7 +473,8 @@ def build_faces(skybox: Skybox, sun: SkySun | None = None, clouds: CloudShape | 
                              f"{n}: give them at one size")
         return np.stack([model_sky(model, face_directions(f, n)) + faces[f]
                          * air_transmittance(sky_view_table(model.air, model.air_elevation), face_directions(f, n),
-                                             np.array(model.sun_direction)) * (face_directions(f, n)[..., 1:2] >= 0.0)
+                                             np.array(model.sun_direction))
+                         * (face_directions(f, n)[..., 1:2] >= -horizon_sine(model.air))
                          * (1.0 - cloud_hidden(model, face_directions(f, n))[0][..., None])
                          for f in range(6)]).astype(np.float32)
     if skybox.faces is not None:

@@ -53,9 +53,11 @@ vec3 moon_disc(vec3 d) {
 // radiance per unit of sunlight, by the way's elevation (rows: sqrt of it over 90 degrees) and
 // its azimuth from the sun's (columns: 0 to 180 degrees), times the sunlight above the air,
 // and (SPACE) what lies beyond the air times the share of it the air lets through; below the
-// horizon the ground fades in as the gradient's does.  air_radiance is its twin.
+// true horizon (from up high, below the level one: the ways between read the horizon's row)
+// the ground fades in as the gradient's does.  air_radiance is its twin.
 uniform sampler2D sky_view;       // rgb: the air's light; a: what crosses it from beyond (green's)
 uniform vec3 sky_light;           // the sunlight above the air (Skybox.sun_color x the light's colour)
+uniform float sky_horizon_sine;   // how far below the level the true horizon is (atmosphere.horizon_sine)
 #ifdef SPACE
 uniform samplerCube sky_space;    // what lies beyond the air (the Skybox's given faces: stars, a galaxy)
 #endif
@@ -90,7 +92,8 @@ vec3 clear_sky(vec3 d) {
 #else
     vec3 beyond = vec3(0.0);
 #endif
-    return d.y >= 0.0 ? air + beyond : air + (sky_ground - air) * clamp(-d.y * 4.0, 0.0, 1.0);
+    float below = -d.y - sky_horizon_sine;   // (under the true horizon: from up high, below the level one)
+    return below <= 0.0 ? air + beyond : air + (sky_ground - air) * clamp(below * 4.0, 0.0, 1.0);
 }
 #else
 uniform vec3 sky_zenith;          // linear RGB
