@@ -336,3 +336,13 @@ def test_bad_bounces_are_refused(scene):
     bare = runner.world.spawn(Transform(), MeshRef(_quad(1.0)))
     with pytest.raises(AssetError, match=f"entity {bare} has no Material"):
         bake_lightmaps(runner.engine, [walls[0], bare])
+    # Every surface is checked before any lightmap comes off: a wall keeps the one it had.
+    kept = gradient_image(4)
+    runner.world.get(walls[0], Material).lightmap = kept
+    meshless = runner.world.spawn(Transform(), Material())
+    with pytest.raises(AssetError, match=f"entity {meshless} has no MeshRef and Transform"):
+        bake_lightmaps(runner.engine, [walls[0], meshless])
+    assert runner.world.get(walls[0], Material).lightmap is kept
+    with pytest.raises(AssetError, match="resolution must be a whole number"):
+        bake_lightmaps(runner.engine, walls, resolution=2)
+    assert runner.world.get(walls[0], Material).lightmap is kept

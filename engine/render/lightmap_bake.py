@@ -50,6 +50,7 @@ from engine.render.probes import face_view
 from engine.render.raw_gl import read_cube_level
 
 if TYPE_CHECKING:
+    from engine.core.world import World
     from shell.app import Engine
 
 BAKE_KEY = -(1 << 30)   # the scratch cube's key among the probes' (no entity's, no volume's)
@@ -119,19 +120,18 @@ def dilate(light: np.ndarray, covered: np.ndarray, rounds: int = DILATE_ROUNDS) 
     return light
 
 
-def bake_lightmap(engine: Engine, entity: int, size: int = 32, resolution: int = 16, near: float = 0.01,
-                  far: float = 100.0) -> tuple[TextureData, float]:
-    """The lightmap of ``entity`` (a MeshRef with a Transform) as its world stands after its
-    last frame: an sRGB image of ``size`` x ``size`` texels (4 to 512) and the intensity it is
-    read at (``Material(lightmap=image, lightmap_intensity=intensity)``); each texel's light
-    captured at ``resolution`` texels a face (4 to 128) between ``near`` and ``far``."""
-    world, renderer = engine.world, engine.renderer
+def _check_settings(size: int, resolution: int, near: float, far: float) -> None:
     if isinstance(size, bool) or not isinstance(size, int) or not 4 <= size <= 512:
         raise AssetError(f"bake_lightmap: size must be a whole number of texels from 4 to 512, got {size!r}")
     if isinstance(resolution, bool) or not isinstance(resolution, int) or not 4 <= resolution <= 128:
         raise AssetError(f"bake_lightmap: resolution must be a whole number from 4 to 128, got {resolution!r}")
     if not (0.0 < near < far and math.isfinite(far)):
         raise AssetError(f"bake_lightmap: near and far must be 0 < near < far, finite, got {near!r}, {far!r}")
+
+
+def _surface(world: World, entity: int, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The world point and normal under each texel of ``entity``'s ``size`` x ``size``
+    lightmap and which texels its mesh covers; an AssetError naming what cannot be baked."""
     mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
     if mesh_ref is None or transform is None:
         raise AssetError(f"bake_lightmap: entity {entity} has no MeshRef and Transform to lay a lightmap over")
@@ -151,6 +151,18 @@ def bake_lightmap(engine: Engine, entity: int, size: int = 32, resolution: int =
     world_points = points @ matrix[:3, :3].T + matrix[:3, 3]
     world_ways = ways @ normal_matrix.T
     world_ways /= np.maximum(np.linalg.norm(world_ways, axis=-1, keepdims=True), 1e-12)
+    return world_points, world_ways, covered
+
+
+def bake_lightmap(engine: Engine, entity: int, size: int = 32, resolution: int = 16, near: float = 0.01,
+                  far: float = 100.0) -> tuple[TextureData, float]:
+    """The lightmap of ``entity`` (a MeshRef with a Transform) as its world stands after its
+    last frame: an sRGB image of ``size`` x ``size`` texels (4 to 512) and the intensity it is
+    read at (``Material(lightmap=image, lightmap_intensity=intensity)``); each texel's light
+    captured at ``resolution`` texels a face (4 to 128) between ``near`` and ``far``."""
+    _check_settings(size, resolution, near, far)
+    world_points, world_ways, covered = _surface(engine.world, entity, size)
+    renderer = engine.renderer
     light = np.zeros((size, size, 3))
     probes, ctx = renderer.probes, renderer.ctx
     try:
@@ -188,9 +200,11 @@ def bake_lightmaps(engine: Engine, entities: Sequence[int], bounces: int = 1, si
     if len(set(entities)) != len(entities):
         raise AssetError(f"bake_lightmaps: an entity is named twice in {entities}")
     world = engine.world
-    for entity in entities:
+    _check_settings(size, resolution, near, far)
+    for entity in entities:   # (every one checked before any lightmap is taken off: nothing half-baked)
         if world.try_get(entity, Material) is None:
             raise AssetError(f"bake_lightmaps: entity {entity} has no Material to put its lightmap on")
+        _surface(world, entity, size)
     for entity in entities:   # (the first round sees no bake of theirs)
         world.get(entity, Material).lightmap = None
     engine.frame(0.0, None)
