@@ -142,6 +142,24 @@ def test_the_runner_and_a_level_file_take_the_sun_out_and_the_command_line_print
     assert main([str(tmp_path / "none.hdr")]) == 2 and "no such file" in capsys.readouterr().out
 
 
+def test_the_command_line_reads_an_exr_layers_sun(tmp_path, capsys):
+    """``--layer`` picks an OpenEXR file's layer: its sun printed; the file's first colours
+    (an overcast grey) have none; a layer of an .hdr file is refused."""
+    import OpenEXR
+
+    image, _ = sunny([800.0, 700.0, 600.0], 1.5, 40.0, 10.0)
+    grey = np.full_like(image, 0.4, np.float32)
+    path = str(tmp_path / "sky.exr")
+    channels = {c: np.ascontiguousarray(grey[..., i]) for i, c in enumerate("RGB")}
+    channels.update({f"sunny.{c}": np.ascontiguousarray(image[..., i].astype(np.float32)) for i, c in enumerate("RGB")})
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, channels).write(path)
+    assert main([path, "--layer", "sunny"]) == 0
+    assert capsys.readouterr().out.startswith("DirectionalLight = { direction = [")
+    assert main([path]) == 1 and "no sun" in capsys.readouterr().out
+    hdr = save_hdr(tmp_path / "sky.hdr", image)
+    assert main([str(hdr), "--layer", "sunny"]) == 2 and "only an OpenEXR" in capsys.readouterr().out
+
+
 def test_the_command_line_refuses_a_panorama_sun_without_a_panorama_or_with_a_clock(capsys):
     from games.hall_of_mirrors.level import HallOfMirrors
     from shell.runner import parse_args
