@@ -149,15 +149,16 @@ def post_lines(engine: Engine) -> list[str]:
 
 
 def picture(engine: Engine) -> str:
-    """At a render scale below 1, the size the picture is drawn at against the output's and
-    how it is brought up; under a ViewBudget's ``frame_ms`` the dynamic scale and the GPU's
+    """At a render scale other than 1, the size the picture is drawn at against the output's
+    and how it is brought up (or, supersampled, down); under a ViewBudget's ``frame_ms`` the dynamic scale and the GPU's
     frame time against it; the sharpening where there is some ("" for none of them)."""
     renderer = engine.renderer
     output = engine.world.resources.get(Output)
     words = ""
     if output is not None and renderer.targets is not None and renderer.targets.size != output.size:
         (w, h), (ow, oh) = renderer.targets.size, output.size
-        words += f"; drawn {w}x{h} of {ow}x{oh} by {'TAA' if renderer.antialias == 'taa' else 'Catmull-Rom'}"
+        how = "a box filter" if w > ow else "TAA" if renderer.antialias == "taa" else "Catmull-Rom"
+        words += f"; drawn {w}x{h} of {ow}x{oh} by {how}"
     budget = engine.world.resources.get(ViewBudget)
     if isinstance(budget, ViewBudget) and budget.frame_ms is not None:
         gpu = renderer.stats.gpu_frame_ms

@@ -15,7 +15,7 @@ from PIL import Image
 
 from components import Material, MeshRef, ReflectionProbe, Transform
 from engine.assets.mesh import sphere
-from engine.render.resample import render_size
+from engine.render.resample import RENDER_SCALE_RANGE, render_size
 
 pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
 from shell.overlay import POSITION, DebugOverlay  # noqa: E402
@@ -164,12 +164,14 @@ def test_window_f1_shows_the_overlay_and_its_toggles_change_the_paths(tmp_path):
         assert config.engine.renderer.antialias == "taa"
         click("aa off")
         assert config.engine.renderer.antialias == "off"
-        click("render scale")   # (the slider's middle: the range's)
-        assert config.engine.renderer.render_scale == pytest.approx(0.625, abs=0.03)
+        config.engine.renderer.render_scale = RENDER_SCALE_RANGE[0]   # (its grab at the left, off the middle)
+        config.on_render(0.0, 1 / 60)
+        click("render scale")   # (the slider's middle: the range's, 1.125, supersampled)
+        assert config.engine.renderer.render_scale == pytest.approx(sum(RENDER_SCALE_RANGE) / 2, abs=0.05)
         drawn = render_size((480, 640), config.engine.renderer.render_scale)
         assert config.engine.renderer.targets.size == drawn
         config.on_render(0.0, 1 / 60)  # the overlay's lines are written before its widgets act
-        assert any(line.startswith("post: ") and f"; drawn {drawn[0]}x{drawn[1]} of 480x640 by Catmull-Rom" in line
+        assert any(line.startswith("post: ") and f"; drawn {drawn[0]}x{drawn[1]} of 480x640 by a box filter" in line
                    for line in config.overlay.lines), [line for line in config.overlay.lines if "post" in line]
         click("shadows")
         assert not config.engine.stages["shadows"].enabled
