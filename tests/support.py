@@ -295,3 +295,21 @@ def ball_normals(size: int, fov: float = 30.0, distance: float = 3.0, radius: fl
     disc = b * b - (eye @ eye - radius * radius)
     normal = (eye + ray * (-b - np.sqrt(np.maximum(disc, 0.0)))[..., None]) / radius
     return disc > margin, normal
+
+
+def grey_ball_under_sky(scene, faces: np.ndarray, *lights, size: int = 64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A matte grey ball (albedo 0.8, diffuse only, radius 0.5) under a Skybox of ``faces`` and
+    ``lights``, seen as ``ball_normals`` sees it: (the frame's linear colours, inside, normal)."""
+    from components import Material, MeshRef, Skybox
+    from engine.assets.mesh import sphere
+
+    def ball(world):
+        look_from(world, (0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=30.0)
+        world.spawn(Skybox(faces=faces))
+        for light in lights:
+            world.spawn(light)
+        world.spawn(Transform(), MeshRef(sphere(0.5, 64, 32)),
+                    Material(color=(0.8, 0.8, 0.8, 1.0), reflectance=0.0, roughness=1.0, environment_reflection=0.0))
+    runner = scene(ball, (size, size))
+    runner.frame()
+    return (srgb_to_linear(runner.frame()), *ball_normals(size))

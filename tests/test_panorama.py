@@ -12,11 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from components import Material, MeshRef, Skybox, Transform
-from engine.assets.mesh import sphere
+from components import Skybox
 from engine.assets.panorama import SkyFaces, load_hdr, panorama_faces, sky_faces_from_file
 from engine.core.errors import AssetError
-from tests.support import ball_normals, look_from, srgb_to_linear
+from tests.support import grey_ball_under_sky, look_from, srgb_to_linear
 
 
 # -- an encoder of the tests' own -----------------------------------------------------------
@@ -236,15 +235,7 @@ def test_the_sky_and_the_light_it_gives_are_the_panoramas(scene):
         d = np.array(target) / np.linalg.norm(target)
         np.testing.assert_allclose(seen, sky_function(d), atol=0.012)
 
-    def ball(world):
-        look_from(world, (0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=30.0)
-        world.spawn(Skybox(faces=faces))
-        world.spawn(Transform(), MeshRef(sphere(0.5, 64, 32)),
-                    Material(color=(0.8, 0.8, 0.8, 1.0), reflectance=0.0, roughness=1.0, environment_reflection=0.0))
-    runner = scene(ball, (64, 64))
-    runner.frame()
-    image = srgb_to_linear(runner.frame())
-    inside, normal = ball_normals(64)   # each pixel's point on the ball, away from its outline
+    image, inside, normal = grey_ball_under_sky(scene, faces)   # (inside: away from its outline)
     irradiance = np.pi * 0.5 + 2.0 * np.pi / 3.0 * 0.4 * normal   # per channel: a = 0.5, b = 0.4 along one axis
     error = np.abs(image[inside] - (0.8 / np.pi * irradiance)[inside])
     assert inside.sum() > 400 and np.percentile(error, 95) < 0.015 and error.max() < 0.03, error.max()

@@ -11,12 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from components import DirectionalLight, Material, MeshRef, Skybox, Transform
-from engine.assets.mesh import sphere
+from components import DirectionalLight, Skybox
 from engine.assets.panorama import load_hdr, main, panorama_faces, save_hdr, sky_faces_from_file
 from engine.assets.panorama_sun import SUN_KEPT, find_sun, pixel_directions
 from engine.core.cube_faces import face_directions
-from tests.support import ball_normals, look_from, srgb_to_linear
+from tests.support import grey_ball_under_sky, look_from
 
 
 def sunny(sun_radiance, radius_deg: float, elevation: float, azimuth: float, sky=None,
@@ -95,16 +94,8 @@ def test_a_ball_under_the_sky_without_its_sun_and_the_sun_as_a_light_shows_both_
     faces = sky_faces_from_file(path, 32, without_sun=True)
     assert faces.source["without_sun"] is True and faces.sun is not None
 
-    def ball(world):
-        look_from(world, (0.0, 0.0, 3.0), (0.0, 0.0, 0.0), fov=30.0)
-        world.spawn(Skybox(faces=faces))
-        world.spawn(DirectionalLight(shadows=False, **faces.sun.light_fields()))
-        world.spawn(Transform(), MeshRef(sphere(0.5, 64, 32)),
-                    Material(color=(0.8, 0.8, 0.8, 1.0), reflectance=0.0, roughness=1.0, environment_reflection=0.0))
-    runner = scene(ball, (64, 64))
-    runner.frame()
-    seen = srgb_to_linear(runner.frame())
-    inside, normal = ball_normals(64)   # each pixel's point on the ball, away from its outline
+    seen, inside, normal = grey_ball_under_sky(scene, faces, DirectionalLight(shadows=False,
+                                                                           **faces.sun.light_fields()))
     e_sun = (300.0 - 0.3) * 2.0 * math.pi * (1.0 - math.cos(math.radians(2.0)))   # (1% of it in the sky's light)
     want = 0.8 / math.pi * (math.pi * 0.3 + e_sun * np.maximum(normal @ towards, 0.0))
     error = np.abs(seen[inside] - want[inside][:, None])

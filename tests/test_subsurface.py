@@ -27,6 +27,7 @@ from components import (
 from components.limits import MAX_SUBSURFACE_SCALE
 from engine.assets.mesh import box, quad, sphere
 from engine.core.cube_faces import face_directions
+from engine.render.atmosphere import _fibonacci_sphere
 from engine.render.irradiance import evaluate_sh, project_faces, sh_basis
 from engine.render.subsurface import (
     ambient_band_weights,
@@ -91,25 +92,17 @@ def sky_radiance(directions: np.ndarray) -> np.ndarray:
     return np.maximum(0.5 + 0.45 * y + 0.3 * y * y, 0.0) * np.array([0.9, 1.0, 1.2])
 
 
-def fibonacci_sphere(count: int) -> np.ndarray:
-    i = np.arange(count) + 0.5
-    y = 1.0 - 2.0 * i / count
-    angle = i * np.pi * (3.0 - np.sqrt(5.0))
-    ring = np.sqrt(1.0 - y * y)
-    return np.stack([ring * np.cos(angle), y, ring * np.sin(angle)], -1)
-
-
 @pytest.mark.parametrize("spread", [0.1, 0.5, 2.0, 20.0])
 def test_the_band_weights_scatter_the_light_from_all_round_as_the_integral_does(spread):
     """A sky's light scattered under a point (the integral over the sphere of its radiance
     times D(n.w, d / r), summed directly over 40,000 ways) against the engine's way: the
     sky's irradiance coefficients, bands 1 and 2 weighed by r_1 and r_2 (and as the shader
     reads them from their rows); r_0 is 1."""
-    ways = fibonacci_sphere(40_000)
+    ways = _fibonacci_sphere(40_000)
     radiance = sky_radiance(ways)
     mu = np.linspace(-1.0, 1.0, 2001)
     kernel = scattered_diffuse(mu, spread)     # (D on a fine grid of n.w, read between its points)
-    normals = fibonacci_sphere(12)
+    normals = _fibonacci_sphere(12)
     direct = np.stack([(radiance * np.interp(ways @ n, mu, kernel)[:, None]).sum(0) * 4.0 * np.pi / len(ways)
                        for n in normals])
     # The irradiance's coefficients (Lambert's kernel applied) of the same sky, band by band.
