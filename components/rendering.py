@@ -497,11 +497,23 @@ class Refractive(TrackedComponent):
     number, about 0.3 for window glass, 1 for flint glass, 0.4 for diamond): each channel
     is bent by its own index, ``ior`` -/+ (ior - 1) x 0.025 x dispersion for red and blue
     (three.js's spread), green by ``ior`` itself.
+    ``screen`` (True, the default): in the camera's view and every mirror and portal view
+    below it, what lies behind along the refracted ray is what that view drew there (a
+    screen-space refraction, as three.js's transmission, Godot's refraction and HDRP's
+    screen-space refraction read the frame behind the glass): the ray is marched across a
+    copy of the view's colour and depth taken after its opaque surfaces, sky, mirrors and
+    portals and before its glass (``engine/render/screen_refraction.py``), so a box behind a
+    pane shows through it, bent; where the ray leaves the view, passes behind what is drawn
+    or finds nothing (the sky), the probe's or sky's image stays, with a fade between.
+    Glass seen through glass is not in the copy (the nearer shows the probe there), a rough
+    surface reads a blurrier level of the copy, and probe captures read the probe or sky.
+    False: the probe's or sky's image only (cheaper: no copy, no march).
     """
 
     ior: float = 1.5
     solid: bool = False
     dispersion: float = 0.0
+    screen: bool = True
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "ior":
@@ -510,6 +522,8 @@ class Refractive(TrackedComponent):
             return boolean(self, name, value)
         if name == "dispersion":
             return finite(self, name, value, low=0.0, high=MAX_DISPERSION)
+        if name == "screen":
+            return boolean(self, name, value)
         return value
 
 

@@ -803,11 +803,32 @@ vec3 solid_sphere_exit(vec3 incident, vec3 n, float ior) {
 uniform float dispersion;  // its batch's Refractive.dispersion (glTF's KHR_materials_dispersion: 20 / Abbe number)
 #endif
 
+#ifdef SCREEN_REFRACTION
+#include "screen_refraction.glsl"
+#endif
+
 // What lies behind along a refracted ray: the probe's capture when one serves the object,
-// else the sky.
+// else the sky; in SCREEN_REFRACTION builds (Refractive.screen, a view tree's views) what the
+// view drew there where the ray finds it (screen_refraction.glsl), the probe's or sky's
+// image where it does not, faded between by the find's confidence.
 vec3 refracted_light(Surface s, vec3 direction, float lod) {
-    return probe_face_size > 0.0 ? probe_radiance(s.position, direction, lod, s.roughness)
-                                 : sample_environment(direction, lod, s.roughness);
+    vec3 behind = probe_face_size > 0.0 ? probe_radiance(s.position, direction, lod, s.roughness)
+                                        : sample_environment(direction, lod, s.roughness);
+#ifdef SCREEN_REFRACTION
+    vec4 found = screen_refraction(s.position, direction, s.roughness);
+    if (found.a > 0.0) {
+        vec3 drawn = found.rgb;
+#ifdef FOG
+        // The view fogged what it drew along the whole way to it; this surface's own fog
+        // (main's fog_view) is put over what it lets through, so the stretch to the surface
+        // is taken out of the find first (exactly so where the ray runs on as the eye's).
+        float kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
+        drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, 1e-4);
+#endif
+        behind = mix(behind, drawn, found.a);
+    }
+#endif
+    return behind;
 }
 
 vec3 refract_environment(vec3 color, Surface s, bool solid) {

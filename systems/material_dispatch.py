@@ -87,8 +87,9 @@ def layer_uniforms(material: Material | None, refractive: Refractive | None) -> 
     clear coat (clearcoat, its roughness), a sheen (colour, roughness), diffuse transmission
     (its colour, its share), subsurface scattering (each channel's distance in metres, its
     share), anisotropy (strength, direction in radians), a thin film (iridescence, its index, its thickness in nm), what
-    non-metals reflect head on, a refraction's dispersion and how deep the normal map's
-    heights reach (its PARALLAX build's; 0 without a normal map)."""
+    non-metals reflect head on, a refraction's dispersion, whether it refracts the view's own
+    image (``Refractive.screen``: a batch drawn after the view's copy) and how deep the normal
+    map's heights reach (its PARALLAX build's; 0 without a normal map)."""
     m = material or DEFAULT_MATERIAL
     return {"clearcoat": (m.clearcoat, m.clearcoat_roughness) if m.clearcoat > 0.0 else None,
             "sheen": (*m.sheen_color, m.sheen_roughness) if max(m.sheen_color) > 0.0 else None,
@@ -100,4 +101,5 @@ def layer_uniforms(material: Material | None, refractive: Refractive | None) -> 
             "iridescence": (m.iridescence, m.iridescence_ior, m.iridescence_thickness) if m.iridescence > 0.0 else None,
             "parallax_depth": m.parallax_depth if m.normal_map is not None else 0.0,
             "dielectric_f0": dielectric_f0(material),
-            "dispersion": refractive.dispersion if refractive is not None else 0.0}
+            "dispersion": refractive.dispersion if refractive is not None else 0.0,
+            "refracts_screen": refractive is not None and refractive.screen}

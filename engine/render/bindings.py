@@ -172,6 +172,10 @@ LIGHTMAP_OCCLUSION_SAMPLERS = 17
 SKY_VIEW_UNIT = 60            # sky, sky cube (ATMOSPHERE builds): the air's sky-view table (render/atmosphere.py)
 SPACE_UNIT = 62               # sky, sky cube (SPACE builds): an atmosphere's space, a cube map (its given faces)
 MOON_VIEW_UNIT = 63           # sky, sky cube (MOON_AIR builds): the sky-view table at the moon's elevation
+# Screen-space refraction (engine/render/screen_refraction.py): the copy the SCREEN_REFRACTION
+# scene builds march (colour and window depth, with mips), and the copy pass's two reads.
+REFRACTION_COPY_UNIT = 64
+REFRACTION_SOURCE_UNITS = (65, 66)  # the copy pass: the view's colour and depth images
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

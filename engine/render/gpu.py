@@ -163,6 +163,9 @@ class Gpu:
         self.batches: dict[tuple[int, int, int, int, int, int, int], InstanceBatch] = {}
         self._draw_order: list[InstanceBatch] = []   # non-empty batches, smallest extent first
         self._transparent: list[InstanceBatch] = []  # the non-empty transparent ones (found with it)
+        # The draw order without the batches that refract the screen, and those (found with it).
+        self._before_copy: list[InstanceBatch] = []
+        self._refracting: list[InstanceBatch] = []
         self._order_stale = True
         self.sky = flat_cube(ctx, BACKGROUND)
         # The generated sky the sky pass evaluates per pixel (None: it samples ``sky``), and a
@@ -371,10 +374,32 @@ class Gpu:
             self._sort_batches()
         return self._transparent
 
+    def tree_opaque_batches(self) -> list[InstanceBatch]:
+        """What a view tree's views (root and levels) draw as opaque: ``opaque_batches``
+        without those that refract the screen (``refracting_batches``), which they draw after
+        their copy of colour and depth (``ScenePass.refract``).  The same list where none do."""
+        if self.scene_only is not None:
+            return self.scene_only
+        if self._order_stale:
+            self._sort_batches()
+        return self._before_copy
+
+    def refracting_batches(self) -> list[InstanceBatch]:
+        """The non-empty opaque batches that refract what their view drew behind them
+        (``Refractive.screen``), in the draw order."""
+        if self.scene_only is not None:
+            return []
+        if self._order_stale:
+            self._sort_batches()
+        return self._refracting
+
     def _sort_batches(self) -> None:
         drawn = [b for b in self.batches.values() if b.count]
         self._draw_order = sorted((b for b in drawn if not b.transparent), key=lambda b: b.extent)
         self._transparent = [b for b in drawn if b.transparent]
+        self._refracting = [b for b in self._draw_order if b.refracts_screen]
+        self._before_copy = [b for b in self._draw_order if not b.refracts_screen] if self._refracting \
+            else self._draw_order
         self._order_stale = False
 
     def depth_values(self) -> moderngl.Sampler:

@@ -273,6 +273,8 @@ class BatchKey(NamedTuple):
     lightmap_intensity: float = 1.0     # Material.lightmap_intensity: its draws' uniform
     # Material.subsurface_radius x subsurface_scale per channel and subsurface (None: none)
     subsurface: tuple[float, float, float, float] | None = None
+    # Refractive.screen: drawn after its view's copy of colour and depth (engine/render/screen_refraction.py)
+    refracts_screen: bool = False
 
 
 _NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first preparing
@@ -412,6 +414,9 @@ class InstanceBatch:
         # none): its SUBSURFACE build's uniform.
         self.subsurface: tuple[float, float, float, float] | None = None
         self.dispersion = 0.0  # Refractive.dispersion (0: none): its DISPERSION build's uniform
+        # Refractive.screen: a view tree's views draw it after their copy of colour and depth,
+        # reading what they drew behind it (engine/render/screen_refraction.py).
+        self.refracts_screen = False
         self.parallax_depth = 0.0  # Material.parallax_depth (0: none): its PARALLAX build's uniform
         # Anisotropy (Material.anisotropy; its direction in radians; None: none): its ANISOTROPY build's uniform.
         self.anisotropy: tuple[float, float] | None = None

@@ -202,7 +202,8 @@ class Renderer(Gpu):
                   posed: tuple[int, str, bool] = (0, "", False), second_uv_maps: int = 0,
                   diffuse_transmission: tuple[float, float, float, float] | None = None,
                   decal: bool = False, decal_order: int = 0, parallax_depth: float = 0.0,
-                  subsurface: tuple[float, float, float, float] | None = None) -> InstanceBatch:
+                  subsurface: tuple[float, float, float, float] | None = None,
+                  refracts_screen: bool = False) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -238,6 +239,8 @@ class Renderer(Gpu):
         # ``lightmap``: Material.lightmap (sRGB, its LIGHTMAP build's) and ``lightmap_intensity`` its uniform.
         # ``subsurface``: (red, green, blue: each channel's profile distance in metres, share) of
         # the light scattered under its surface, its SUBSURFACE build's uniform (None: none).
+        # ``refracts_screen``: a Refractive's ``screen``: a view tree's views draw it after their
+        # copy of colour and depth (engine/render/screen_refraction.py), a batch of its own.
         if second_uv_maps and mesh.second_uvs is None:
             raise GLLimitError(f"mesh {mesh.name!r}: Material.second_uv_maps reads a second UV set the mesh does "
                                "not have (Mesh.second_uvs)")
@@ -252,7 +255,7 @@ class Renderer(Gpu):
                        dispersion, anisotropy, iridescence, posed, second_uv_maps, diffuse_transmission, decal,
                        decal_order, parallax_depth if normal_map is not None else 0.0,
                        id(lightmap) if lightmap is not None else 0,
-                       lightmap_intensity if lightmap is not None else 1.0, subsurface)
+                       lightmap_intensity if lightmap is not None else 1.0, subsurface, refracts_screen)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -316,6 +319,7 @@ class Renderer(Gpu):
             batch.dielectric_f0 = dielectric_f0
             batch.sheen = sheen
             batch.dispersion = dispersion
+            batch.refracts_screen = refracts_screen
             batch.anisotropy = anisotropy
             batch.iridescence = iridescence
             batch.skinned, batch.morphed = posed[1], posed[2]

@@ -100,6 +100,7 @@ from engine.render.scene_programs import (
     geometry_invocations,
     reflects_environment,
 )
+from engine.render.screen_refraction import RefractionCopy
 from engine.render.shadows import ShadowMaps
 from engine.render.sky_draw import SkyDraw
 from engine.render.slot_order import (
@@ -158,6 +159,7 @@ class ScenePass:
         self.sky_draw = SkyDraw(renderer)  # the sky's triangle behind every view
         self.particle_draw = ParticleDraw(renderer, shadows)  # every emitter's particles, in among a view's glass
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
+        self.refraction_copy = RefractionCopy(renderer)  # what refracting surfaces march (refract)
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
@@ -387,7 +389,7 @@ class ScenePass:
             bind_texture(ctx, nodes, NODE_UNIT)
         screen = "depth_normals half" if step == 2 else "depth_normals"
         renderer.upload_views(views)
-        opaque = renderer.opaque_batches()
+        opaque = renderer.tree_opaque_batches()  # (a refracting surface's pixels: what it shows, behind it)
         reach = None   # a level's: which batch can draw a sample in which view (as its draw culls them)
         if (masked and self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
                 and len(views) * len(opaque) >= self.cull_min_draws):
@@ -406,13 +408,45 @@ class ScenePass:
         """What a view tree does last in its root ``root`` (drawn into ``targets`` with
         ``options``), once the levels below are composited into it: the screen-space
         reflections, where the main view was drawn for them (``ScreenReflectionPass``), the
-        light shafts, where its camera has them (``VolumetricFogPass``), then the
-        transparent slot (``draw_transparent``), so glass goes over all."""
+        light shafts, where its camera has them (``VolumetricFogPass``), the refracting
+        surfaces (``refract``), then the transparent slot (``draw_transparent``), so glass
+        goes over all."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite(targets)
         if self.volumetric_fog is not None:
             self.volumetric_fog.composite(targets)
+        self.refract([root], targets, options)
         self.draw_transparent([root], targets, options)
+
+    def refract(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
+                conditions: Sequence[moderngl.Query] | None = None) -> None:
+        """The refracting batches (``Gpu.refracting_batches``: ``Refractive.screen``) of a view
+        tree's ``views`` (drawn into ``targets`` with ``options``, whose opaque draws left them
+        out), once everything but the glass is in their pixels: the level's colour and depth
+        copied (``RefractionCopy.take``), then each view's draws with the ``SCREEN_REFRACTION``
+        builds, which march their refracted rays across the copy, depth tested and written as
+        opaque draws are (``engine/render/screen_refraction.py``).  ``conditions`` as for
+        ``draw``.  Nothing where none refracts, or for a view drawn whole (its
+        ``options.transparent``: a probe face's, which drew them with its opaque batches)."""
+        renderer, ctx = self.renderer, self.ctx
+        refracting = renderer.refracting_batches()
+        if not views or not refracting or options.transparent:
+            return
+        self.refraction_copy.take(targets)
+        self._sky_size = renderer.sky.size[0]
+        self._begin(views, targets, options, _SCENE)
+        bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)
+        renderer.upload_views(views)
+        for index, view in enumerate(views):
+            with _ALWAYS if conditions is None else conditions[index].crender:
+                set_scissor(ctx, view.scissor)
+                set_front_face(ctx, "cw" if view.mirrored else "ccw")
+                renderer.bind_view_at(index)
+                self._draw_batches(refracting, 0, options.masked, skip=view.skip, hide=view.hide,
+                                   screen="refracted")
+        renderer.stats.passes += 1
+        if renderer.debug:
+            renderer.checkpoint(f"refraction ({views[0].name}{' and others' if len(views) > 1 else ''})")
 
     def finish_level(self, depth: int, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                      conditions: Sequence[moderngl.Query] | None, glass: bool) -> None:
@@ -420,12 +454,13 @@ class ScenePass:
         ``targets`` with ``options``), once the level below is composited into it: the
         screen-space reflections, where the level was drawn for them
         (``ScreenReflectionPass.composite_level``), the light shafts where the camera's reach
-        it (``VolumetricFogPass.composite_level``), then, with ``glass`` (something
-        see-through is drawn), the transparent slot."""
+        it (``VolumetricFogPass.composite_level``), the refracting surfaces (``refract``),
+        then, with ``glass`` (something see-through is drawn), the transparent slot."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite_level(depth, views, targets)
         if self.volumetric_fog is not None:
             self.volumetric_fog.composite_level(depth, views, targets)
+        self.refract(views, targets, options, conditions)
         if glass:
             self.draw_transparent(views, targets, options, conditions)
 
@@ -662,7 +697,8 @@ class ScenePass:
         now = _drawn_now(transparent, options)
         geometry = self._slot_geometry(transparent) if now else None
         particles = options.transparent and self._particles_now()  # (a tree's views: draw_transparent's)
-        opaque = renderer.opaque_batches()
+        # (a tree's views draw their refracting batches after their copy: refract)
+        opaque = renderer.opaque_batches() if options.transparent else renderer.tree_opaque_batches()
         unlit = unlit_batches(opaque, options.unlit)
         # What each view keeps of them.
         check = self.unlit_boxes.views(unlit, renderer.scene_version) if now and unlit else None
@@ -781,7 +817,7 @@ class ScenePass:
         invocations = geometry_invocations(len(views))
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
-        opaque = renderer.opaque_batches()
+        opaque = renderer.opaque_batches() if options.transparent else renderer.tree_opaque_batches()
         unlit = unlit_batches(opaque, options.unlit)
         groups = None
         if now and not options.transparent:  # each group of views with the same part of the slot before the claims
@@ -914,6 +950,7 @@ class ScenePass:
                 obj.release()
         self._views_ubo = self._reflection_sampler = None
         self.programs.release()
+        self.refraction_copy.release()
 
 
 def _drawn_now(transparent: list, options: SceneOptions) -> list:

@@ -46,6 +46,7 @@ from engine.render.bindings import (
     PROBE2_UNIT,
     PROBE_REST_UNIT,
     PROBE_UNIT,
+    REFRACTION_COPY_UNIT,
     SCREEN_CONTACT_UNIT,
     SCREEN_OCCLUSION_UNIT,
     SHADOW_ATLAS_UNIT,
@@ -61,6 +62,7 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code, forget_reads
 from engine.render.pose_rows import skinning_defines
+from engine.render.screen_refraction import refuse_screen_refraction, sampler_count
 from engine.render.shadows import ShadowMaps
 from engine.render.unlit_mirrors import may_be_unlit
 
@@ -103,7 +105,8 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "lightmap": LIGHTMAP_UNIT, "screen_occlusion": SCREEN_OCCLUSION_UNIT,
                 "screen_contact_lamps": SCREEN_CONTACT_UNIT, "spot_cookies": COOKIE_UNIT,
                 "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
-                "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT}
+                "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT,
+                "refraction_copy": REFRACTION_COPY_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING}
@@ -184,7 +187,9 @@ class ScenePrograms:
         shades nothing, keeps its plain build); "reflected" (a root view with screen
         reflections) ``SCREEN_REFLECTION``: it writes the reflection's weight, what the sky
         or probe added and the normal for the composite (``ScreenReflectionPass``), and
-        "occluded reflected" both; "depth_normals" ``DEPTH_NORMALS``: depth and
+        "occluded reflected" both; "refracted" (a view tree's view, after its copy)
+        ``SCREEN_REFRACTION``: its refraction reads what the view drew behind it
+        (``engine/render/screen_refraction.py``); "depth_normals" ``DEPTH_NORMALS``: depth and
         the surface's normal only (occlusion's first pass), one build a cutout or not, whatever
         else the batch has ("depth_normals half": a reflection level's at half its size, masked
         by every second pixel of its node image, ``NODE_STEP``)."""
@@ -220,6 +225,17 @@ class ScenePrograms:
         key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
                ambient, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
         program = self.built.get(key)
+        if program is None and "refracted" in screen.split():
+            # The march reads the copy (and, unmasked, the node image): one or two samplers
+            # more than the build without.  Where that passes the fragment stage's units (a
+            # 16-unit driver's fullest builds), the build without serves, and a warning says so.
+            plain = self.program(variants, invocations, layered, normal_mapped, checker, material, probe_blend,
+                                 ambient_probes, probe_rest, unlit, masked,
+                                 " ".join(word for word in screen.split() if word != "refracted"))
+            needed = sampler_count(plain) + (1 if masked else 2)
+            if needed > self.renderer.caps.max_texture_image_units:
+                refuse_screen_refraction(needed, self.renderer.caps.max_texture_image_units)
+                program = self.built[key] = plain
         if program is None:
             defines = {}
             if variants is not None:
@@ -289,6 +305,8 @@ class ScenePrograms:
                     defines["SCREEN_OCCLUSION"] = "1"
                 if "reflected" in words:  # what the screen reflections' composite reads (a root view's)
                     defines["SCREEN_REFLECTION"] = "1"
+                if "refracted" in words:  # what the view drew behind, marched (engine/render/screen_refraction.py)
+                    defines["SCREEN_REFRACTION"] = "1"
             defines.update(shadowing)
             defines.update(fogging)
             defines.update(cookies)
@@ -351,6 +369,8 @@ class ScenePrograms:
             for screen, masked in self.screens - {("", False), ("", True)}:  # one view a draw
                 if "reflected" in screen.split() and not reflects_environment(batch):
                     continue  # (drawn with the builds without: ScenePass._draw_reflecting)
+                if "refracted" in screen.split() and not batch.refracts_screen:
+                    continue  # (only a refracting batch is drawn after the copy: ScenePass.refract)
                 for probes in ambient:
                     for dark in unlit if "reflected" in screen.split() else (False,):  # (unlit: its own build)
                         batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,

@@ -1,0 +1,153 @@
+"""Screen-space refraction: glass (``Refractive.screen``, the default) shows what its view drew
+behind it, bent, where three.js's transmission, Godot's refraction and HDRP's screen-space
+refraction read the frame behind a transparent surface.
+
+Speculum draws forward, so what lies behind a refracting surface is known only once the rest
+of the view is drawn.  Every view a view tree draws (the camera's, its mirror and portal
+views, a probe face that roots a tree) leaves its refracting batches out of its opaque draws
+(``Gpu.tree_opaque_batches``) and draws them last but its glass, in the tree's finish of its
+level (``ScenePass.refract``, from ``finish_root`` and ``finish_level``: after the levels
+below, the screen reflections and the light shafts are composited into it):
+
+1. **The copy** (``RefractionCopy.take``): the level's colour and window depth into one
+   RGBA32F image (``shaders/refraction_copy.frag``: one sampler for both, in scene builds
+   already near the fragment stage's 16), with its mip chain for rough glass.
+2. **The draws**: each view's refracting batches with their ``SCREEN_REFRACTION`` builds,
+   depth tested and written as opaque surfaces are; the refraction (``refracted_light`` in
+   ``shaders/scene.frag``) marches its refracted ray (a solid ball's: the ray out of it)
+   across the copy (``shaders/include/screen_refraction.glsl``) and reads the colour where
+   the ray goes behind what was drawn, the probe's or sky's image where it finds nothing,
+   faded between.
+
+What the copy cannot hold is not seen through the glass: what the view did not draw (off
+its edges, behind what it shows), other refracting surfaces and the transparent slot (glass
+behind glass shows the probe's image there, as three.js's transmission leaves transmissive
+objects out of its copy).  Probe captures draw every refracting batch with its opaque
+draws, reading the probe or the sky (their faces have no copy).  Where a build with the
+march would read more samplers than the fragment stage has (a 16-unit driver's fullest
+builds), the build without serves and a ``GLLimitWarning`` says so.
+
+Cost: one full-screen copy and its mips a level that draws a refracting batch, and the march
+(at most ``REFRACTION_STEPS`` steps and ``REFRACTION_REFINE`` halvings of a ray, three rays
+with dispersion) in the refracting surfaces' pixels."""
+from __future__ import annotations
+
+import warnings
+
+import moderngl
+
+from engine.core.errors import GLLimitWarning
+from engine.render.bindings import (
+    REFRACTION_COPY_UNIT,
+    REFRACTION_SOURCE_UNITS,
+    PassState,
+    apply_pass_state,
+    bind_sampler,
+    bind_texture,
+)
+from engine.render.gpu import Gpu
+from engine.render.targets import RenderTargets, release_framebuffer
+
+# The copy's mip chain for rough glass: at most this many levels above the image.
+MAX_COPY_LOD = 6
+# How many sizes' copies are kept at once (the main tree's levels share one; a probe face's
+# tree and a resized output others); the one used longest ago goes first.
+KEPT_SIZES = 3
+_PASS = PassState()
+# The GL types of sampler uniforms (GL 4.1's tables 2.10 and 2.11: the float, shadow, integer
+# and unsigned samplers of every target), for sampler_count.
+_SAMPLER_TYPES = frozenset((*range(0x8B5D, 0x8B65), *range(0x8DC0, 0x8DD9), *range(0x900C, 0x9010),
+                            *range(0x9108, 0x910E)))
+
+
+def sampler_count(program: moderngl.Program) -> int:
+    """How many sampler uniforms ``program`` reads (an array's elements each)."""
+    return sum(member.array_length for member in (program[name] for name in program)
+               if isinstance(member, moderngl.Uniform) and member.gl_type in _SAMPLER_TYPES)
+
+
+def refuse_screen_refraction(needed: int, units: int) -> None:
+    """Say that a scene build refracts the probe's or sky's image only: with the march it
+    would read ``needed`` samplers, and the fragment stage has ``units``."""
+    warnings.warn(GLLimitWarning(
+        f"Refractive.screen: a scene build with screen-space refraction reads {needed} samplers and this "
+        f"OpenGL's fragment stage has {units} (GL_MAX_TEXTURE_IMAGE_UNITS): its surfaces refract the probe's "
+        "or sky's image only (fewer maps or kinds of shadowed light on them make room)"), stacklevel=4)
+
+
+class _Copy:
+    """One size's copy image (colour and window depth, with mips) and its framebuffer."""
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
+        self.size = size
+        self.top_lod = max(0, min(MAX_COPY_LOD, max(size).bit_length() - 1))
+        self.texture = ctx.texture(size, 4, dtype="f4")
+        self.texture.repeat_x = self.texture.repeat_y = False
+        self.texture.build_mipmaps(0, self.top_lod)  # (the chain's storage; built again at each copy)
+        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.framebuffer = ctx.framebuffer([self.texture])
+
+    def release(self) -> None:
+        release_framebuffer(self.framebuffer)
+        self.texture.release()
+
+
+class RefractionCopy:
+    """The copies screen-space refraction marches, one a size, and the pass that makes them."""
+
+    def __init__(self, gpu: Gpu) -> None:
+        self.gpu = gpu
+        self.ctx = gpu.ctx
+        self._copies: dict[tuple[int, int], _Copy] = {}  # by size, the one used last at the end
+        self._vao: moderngl.VertexArray | None = None
+        self._vao_of = -1  # the shader library's reloads when it was made
+        self.copies = 0  # copies taken so far (tests count them)
+
+    def take(self, targets: RenderTargets) -> None:
+        """Copy ``targets``' colour and depth into the copy of its size, build its mips and
+        bind it at ``REFRACTION_COPY_UNIT``."""
+        ctx, gpu = self.ctx, self.gpu
+        copy = self._copies.pop(targets.size, None)
+        if copy is None:
+            copy = _Copy(ctx, targets.size)
+            while len(self._copies) >= KEPT_SIZES:
+                self._copies.pop(next(iter(self._copies))).release()
+        self._copies[targets.size] = copy
+        vao = self._program()
+        color_unit, depth_unit = REFRACTION_SOURCE_UNITS
+        bind_texture(ctx, targets.color, color_unit)
+        bind_texture(ctx, targets.depth, depth_unit)
+        bind_sampler(ctx, gpu.depth_values(), depth_unit)  # (its depths as values, compared with nothing)
+        copy.framebuffer.use()
+        apply_pass_state(ctx, _PASS, (0, 0, *targets.size))
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        copy.texture.build_mipmaps(0, copy.top_lod)
+        bind_texture(ctx, copy.texture, REFRACTION_COPY_UNIT)
+        gpu.stats.passes += 1
+        gpu.stats.draw_calls += 1
+        self.copies += 1
+        if gpu.debug:
+            gpu.checkpoint("refraction copy")
+
+    def _program(self) -> moderngl.VertexArray:
+        shaders = self.gpu.shaders
+        if self._vao is None or self._vao_of != shaders.reloads:
+            if self._vao is not None:
+                self._vao.release()
+            program = shaders.program("fullscreen.vert", "refraction_copy.frag")
+            program["level_color"].value, program["level_depth"].value = REFRACTION_SOURCE_UNITS
+            self._vao = self.ctx.vertex_array(program, [])
+            self._vao_of = shaders.reloads
+        return self._vao
+
+    def held(self) -> int:
+        """Copy images held now."""
+        return len(self._copies)
+
+    def release(self) -> None:
+        for copy in self._copies.values():
+            copy.release()
+        self._copies.clear()
+        if self._vao is not None:
+            self._vao.release()
+            self._vao = None
