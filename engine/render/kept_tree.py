@@ -228,12 +228,13 @@ class StillTree:
             return None
         deepest = max(node.level for node in result.end_views)
         see_through = self.scene_pass.slot_drawn()
+        refracting = bool(self.scene_pass.renderer.refracting_batches())  # (drawn over the level's copy: refract)
         rects, transparent, filled = {}, {}, {}
         for level in range(1, deepest + 1):
             step = walk.steps[level - 1]
             # (a level's screen reflections and light shafts, as its glass, blend over what its pixels hold)
             shafts = self.scene_pass.volumetric_fog is not None and level <= self.scene_pass.volumetric_fog.reach
-            if see_through or step.options.reflections or shafts or not painted_whole(walk, level):
+            if see_through or refracting or step.options.reflections or shafts or not painted_whole(walk, level):
                 rects[level] = rect = bounds([view.scissor for view in (*step.views, *step.end_views)])
                 self.copies.save(level, step.targets, rect)
             transparent[level] = (step.views, step.options, step.conditions)

@@ -9,10 +9,12 @@ views filled from the new image, and from the deepest level with end views up, e
 fallbacks, the composite of the level below and its transparent slot, each over the level's
 own pixels as its views drew them.  Those pixels are copied here once, on the frame that
 draws the still tree (never on a frame whose camera or scene moved), and each refill puts
-them back before the level's composites are done again: a blit of the colour, surface-id and
-seen-id images (what the end views, fallbacks, composites and transparent slot write; the
-depth and node images they only read), within the rectangle of the level's views (where
-those passes write), which glBlitFramebuffer keeps to by the scissor test.  A level whose
+them back before the level's composites are done again: a blit of the colour, surface-id,
+seen-id and depth images (what the end views, fallbacks, composites, refracting surfaces and
+transparent slot write: the refracting surfaces' depth, drawn after their copy,
+``engine/render/screen_refraction.py``, must not be in the next copy; the node image they
+only read), within the rectangle of the level's views (where those passes write), which
+glBlitFramebuffer keeps to by the scissor test.  A level whose
 composites and fallbacks paint every pixel they write whole (portals, mirrors of reflect
 rate 1 unfaded: ``kept_tree.painted_whole``) and that has no transparent slot needs no copy:
 what they write does not depend on what the pixel held.
@@ -48,7 +50,7 @@ class _Copy:
 
 
 class LevelCopies:
-    """Each level's colour, surface and seen images as a tree's views drew them, by level
+    """Each level's colour, surface, seen and depth images as a tree's views drew them, by level
     (made when first saved, remade when the level's targets are other ones)."""
 
     def __init__(self, ctx: moderngl.Context) -> None:
@@ -59,7 +61,7 @@ class LevelCopies:
         return len(self._copies)
 
     def save(self, level: int, targets: RenderTargets, rect: tuple[int, int, int, int]) -> None:
-        """Copy ``targets``' (level ``level``'s) colour and ids within ``rect`` (x, y, w, h)."""
+        """Copy ``targets``' (level ``level``'s) colour, ids and depth within ``rect`` (x, y, w, h)."""
         copy = self._copies.get(level)
         if copy is None or copy.targets is not targets:
             if copy is not None:
@@ -85,13 +87,14 @@ class LevelCopies:
                     ctx.texture(targets.size, targets.seen.components, dtype="u4"))
         for texture in textures:
             texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        return _Copy(targets, ctx.framebuffer([targets.color, targets.surface, targets.seen]), textures,
-                     ctx.framebuffer(list(textures)))
+        depth = ctx.depth_texture(targets.size)  # (a blit between the framebuffers copies depth too)
+        return _Copy(targets, ctx.framebuffer([targets.color, targets.surface, targets.seen], targets.depth),
+                     (*textures, depth), ctx.framebuffer(list(textures), depth))
 
     def _blit(self, destination: moderngl.Framebuffer, source: moderngl.Framebuffer, size: tuple[int, int],
               rect: tuple[int, int, int, int]) -> None:
-        """Every colour attachment of ``source`` into ``destination``'s, within ``rect``: the
-        scissor test bounds a blit (GL 4.1 core, 4.3.2)."""
+        """Every colour attachment of ``source`` into ``destination``'s, and its depth, within
+        ``rect``: the scissor test bounds a blit (GL 4.1 core, 4.3.2)."""
         destination.use()
         apply_pass_state(self.ctx, _COPY, (0, 0, *size), rect)
         self.ctx.copy_framebuffer(destination, source)

@@ -1,0 +1,195 @@
+"""Screen-space refraction (``Refractive.screen``, ``engine/render/screen_refraction.py``):
+glass shows what its view drew behind it, bent by Snell's law.  Checked against second paths:
+a pane of index 1 (no bend, no reflection) leaves the frame as it was drawn without it, in
+the camera's view and in a mirror's; a tilted pane of index 1.5 shows a stripe behind it
+where rays refracted in numpy meet it; the march's find fades to the probe's or sky's image
+where the ray finds nothing, and a build without room for the copy's sampler refracts the
+sky (with a warning)."""
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import ComponentValueError, Material, MeshRef, Mirror, Refractive, Skybox, Transform
+from engine.assets.mesh import box, quad, sphere
+from engine.core.errors import GLLimitWarning
+from tests.support import box_hits, linear_to_srgb8, look_from, pixel_rays, srgb_to_linear
+
+SIZE = (160, 120)
+CLEAR = dict(roughness=0.0, reflectance=0.0, environment_reflection=0.0)  # a surface that reflects nothing
+
+
+def room(world) -> None:
+    """A floor, a red post and a blue block under a gradient sky."""
+    world.spawn(Skybox())
+    world.spawn(Transform(), MeshRef(box((8.0, 0.1, 8.0))), Material(color=(0.6, 0.6, 0.6, 1.0)))
+    world.spawn(Transform(position=(0.3, 1.0, -2.0)), MeshRef(box((0.3, 2.0, 0.3))),
+                Material(color=(0.9, 0.1, 0.1, 1.0)))
+    world.spawn(Transform(position=(-0.8, 0.6, -1.5)), MeshRef(box((0.5, 1.2, 0.5))),
+                Material(color=(0.1, 0.2, 0.9, 1.0)))
+
+
+def frame(scene, build, size=SIZE) -> np.ndarray:
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return srgb_to_linear(runner.frame())
+
+
+def pane(world, ior: float, screen: bool = True, position=(0.0, 1.0, 1.0), turn: float = 0.0) -> int:
+    return world.spawn(Transform(position=position, rotation=glm.quat(glm.vec3(0.0, turn, 0.0))),
+                       MeshRef(quad(1.6, 1.6)), Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR),
+                       Refractive(ior=ior, screen=screen))
+
+
+def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene):
+    def without(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        room(world)
+
+    def through(screen):
+        def build(world):
+            without(world)
+            pane(world, 1.0, screen)
+        return build
+
+    drawn = frame(scene, without)
+    seen = frame(scene, through(True))
+    sky_only = frame(scene, through(False))
+    covered = np.abs(sky_only - drawn).max(axis=-1) > 0.05  # where the pane hides the room without it
+    assert covered.sum() > 1000
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    # (the sky through it is the sky's cube map, a level or two from the sky drawn a pixel
+    # each; a ray along the eye's may land on a pixel's neighbour at a shadow's edge)
+    assert np.quantile(levels[covered], 0.99) <= 2.0 and levels[covered].mean() < 0.3
+
+
+def test_a_tilted_pane_bends_what_is_behind_it_as_snells_law_says(scene):
+    """A thin pane (one interface: ``Refractive(solid=False)``) of index 1.5 turned 35 degrees
+    before a red stripe on a grey wall (both unlit): along the middle row, the stripe shows
+    through the pane where the pixels' rays, refracted at the pane's plane in numpy, meet it,
+    and that is well away from where it shows without the bend."""
+    turn = np.radians(35.0)
+    stripe_half = np.array([0.08, 1.5, 0.02])
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=40.0)
+        world.spawn(Skybox())
+        world.spawn(Transform(position=(0.0, 1.0, -3.0)), MeshRef(box((8.0, 6.0, 0.1))),
+                    Material(color=(0.3, 0.3, 0.3, 1.0), unlit=True))
+        world.spawn(Transform(position=(0.0, 1.0, -2.9)), MeshRef(box(tuple(2.0 * stripe_half))),
+                    Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+        pane(world, 1.5, position=(0.0, 1.0, 1.0), turn=float(turn))
+
+    size = (200, 100)
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame())
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    row = size[1] // 2
+    d = rays[row]
+    normal = np.array([np.sin(turn), 0.0, np.cos(turn)])     # the quad's +z turned about y
+    right = np.array([np.cos(turn), 0.0, -np.sin(turn)])
+    centre = np.array([0.0, 1.0, 1.0])
+    t = ((centre - eye) @ normal) / (d @ normal)
+    hit = eye + t[:, None] * d
+    across = np.abs((hit - centre) @ right)
+    through = (t > 0) & (across < 0.75)                      # (inside the 1.6 m pane, its edges left out)
+    eta = 1.0 / 1.5
+    cos_i = -(d @ normal)
+    k = 1.0 - eta ** 2 * (1.0 - cos_i ** 2)
+    bent = eta * d + (eta * cos_i - np.sqrt(k))[:, None] * normal
+    stripe = np.array([0.0, 1.0, -2.9])
+    expected = box_hits(hit, bent, stripe, stripe_half) & through
+    straight = box_hits(np.repeat(eye[None], len(d), 0), d, stripe, stripe_half) & through
+    red = (shown[row, :, 0] > 0.5) & (shown[row, :, 1] < 0.2)
+    assert expected.sum() >= 3 and straight.sum() >= 3
+    moved = abs(np.flatnonzero(expected).mean() - np.flatnonzero(straight).mean())
+    assert moved > 8                                         # the bend shows: the stripe moved that many pixels
+    assert (red[through] != expected[through]).sum() <= 2   # (a pixel each side where an edge falls)
+
+
+def test_a_pane_in_a_mirror_shows_what_the_mirrors_view_drew_behind_it(scene):
+    """Behind the camera, a red post and before it a pane of index 1, seen only in the mirror
+    the camera faces: the mirror's view refracts its own image (a reflection level's copy),
+    so the pane shows the post as the mirror shows it without the pane; refracting the sky
+    instead (``screen`` False) hides it."""
+    drawn, seen, sky_only = (frame(scene, build) for build in through_mirror())
+    red = (drawn[..., 0] > 0.3) & (drawn[..., 1] < 0.1)
+    assert red.sum() > 60                                                      # the post, in the mirror
+    assert ((sky_only[..., 0] > 0.3) & (sky_only[..., 1] < 0.1)).sum() < red.sum() / 4  # hidden by the sky's image
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    assert np.quantile(levels, 0.99) <= 2.0 and levels[red].max() <= 3.0
+
+
+def through_mirror():
+    """The mirror's scene: without the pane, with it, with it refracting the sky."""
+    def without(world):
+        look_from(world, (0.0, 1.2, 2.0), (0.0, 1.2, -2.0), fov=50.0)
+        world.spawn(Skybox())
+        world.spawn(Transform(), MeshRef(box((10.0, 0.1, 16.0))), Material(color=(0.6, 0.6, 0.6, 1.0)))
+        world.spawn(Transform(position=(0.0, 1.2, -2.0)), MeshRef(quad(3.0, 2.4)), Material(), Mirror())
+        world.spawn(Transform(position=(0.2, 1.0, 6.0)), MeshRef(box((0.8, 2.0, 0.4))),
+                    Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+
+    def through(screen):
+        def build(world):
+            without(world)
+            pane(world, 1.0, screen, position=(0.0, 1.2, 4.5), turn=float(np.pi))
+        return build
+
+    return without, through(True), through(False)
+
+
+def test_a_still_tree_keeps_refracting_surfaces_as_drawn_whole(scene):
+    """Two facing mirrors (end images that settle over frames: the still tree's refill draws
+    each level's last part again over a copy of it) and a refracting ball between: kept
+    levels give the frames a whole-drawn engine gives, bit for bit."""
+    from tests.support import kept_frames_equal_drawn
+
+    def build(world):
+        look_from(world, (0.3, 1.2, 1.5), (0.0, 1.0, -2.0), fov=60.0)
+        room(world)
+        world.spawn(Transform(position=(0.0, 1.2, -3.0)), MeshRef(quad(3.0, 2.4)), Material(), Mirror())
+        world.spawn(Transform(position=(0.0, 1.2, 3.0), rotation=glm.quat(glm.vec3(0.0, np.pi, 0.0))),
+                    MeshRef(quad(3.0, 2.4)), Material(), Mirror())
+        world.spawn(Transform(position=(0.0, 0.9, -0.5)), MeshRef(sphere(0.4)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), roughness=0.05), Refractive(ior=1.5, solid=True))
+
+    keeping, drawing = scene(build, (96, 64)), scene(build, (96, 64))
+    assert kept_frames_equal_drawn(keeping, drawing, frames=5) >= 2
+    assert keeping.engine.renderer.scene_pass.refraction_copy.copies > 0
+
+
+def test_a_build_with_no_room_for_the_copy_refracts_the_sky_and_says_so(scene):
+    """A context whose fragment stage has too few samplers for the march's (a 16-unit
+    driver's fullest builds; here the limit is lowered): the refracting surfaces keep the
+    sky's image, drawn as with ``screen`` False, and a GLLimitWarning names the field."""
+    def build(screen):
+        def make(world):
+            look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+            room(world)
+            pane(world, 1.0, screen)
+        return make
+
+    runner = scene(build(True), SIZE)
+    renderer = runner.engine.renderer
+    renderer.antialias = "off"
+    renderer.caps = dataclasses.replace(renderer.caps, max_texture_image_units=4)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        runner.frame()
+        limited = srgb_to_linear(runner.frame())
+    assert any(issubclass(w.category, GLLimitWarning) and "Refractive.screen" in str(w.message) for w in caught)
+    np.testing.assert_allclose(limited, frame(scene, build(False)), atol=1e-6)
+
+
+def test_screen_is_checked():
+    with pytest.raises(ComponentValueError, match=r"Refractive.screen"):
+        Refractive(screen="yes")
+    assert Refractive().screen
