@@ -22,6 +22,10 @@ Variants now (``VARIANTS``; add a row by appending a ``Variant``):
 * ``subsurface``: shadows, and every box's material scatters light under its surface
   (``Material.subsurface``): its cost against ``shadows``' (boxes are flat, so they look
   the same: the build's lookups and shadow tests are what is measured);
+* ``glass``: no shadows; three solid glass balls and a pane (``Refractive(screen=False)``)
+  refracting the sky; ``glass_screen``: the same refracting what each view drew behind
+  them (screen-space refraction: a copy and a march in every view that sees them): its
+  cost against ``glass``';
 * ``clouds``: shadows, and a CloudLayer over the sky, half cover, drifting at 30 m/s:
   the sky pass's clouds, the scene's cloud shadows and the cube map made again as they
   drift: its cost against ``shadows``';
@@ -194,6 +198,7 @@ from components import (
     Mirror,
     PointLight,
     Reflective,
+    Refractive,
     ScreenReflections,
     Skybox,
     Tonemap,
@@ -203,7 +208,7 @@ from components import (
     look_rotation,
 )
 from engine.assets.color_lut import ColorLut, identity_lut
-from engine.assets.mesh import box
+from engine.assets.mesh import box, sphere
 from engine.assets.texture_data import TextureData, puff_texture
 from engine.core.frame_io import Output
 from engine.render.bloom import level_sizes
@@ -556,6 +561,24 @@ def _polished(engine: Engine) -> None:
             engine.world.add_component(entity, Reflective(mode="skybox", mix=0.35))
 
 
+def _glass(engine: Engine, screen: bool = False) -> None:
+    """No shadows; three solid glass balls and a pane of glass in the ring (``Refractive``),
+    refracting the probe's or sky's image (``screen`` False) or what each view drew behind
+    them (True: screen-space refraction, its copy and march in the camera's view and every
+    level that sees them)."""
+    _sun_shadows(engine, False)
+    world = engine.world
+    for x in (-2.5, 0.0, 2.5):
+        world.spawn(Transform(position=(x, 1.0, 0.0)), MeshRef(sphere(1.0)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), roughness=0.0), Refractive(ior=1.5, solid=True, screen=screen))
+    world.spawn(Transform(position=(0.0, 1.5, 3.0)), MeshRef(box((4.0, 3.0, 0.05))),
+                Material(color=(1.0, 1.0, 1.0, 0.0), roughness=0.0), Refractive(ior=1.5, screen=screen))
+
+
+def _glass_screen(engine: Engine) -> None:
+    _glass(engine, screen=True)
+
+
 def _reflections(engine: Engine, quality: str = "medium", half: bool = False, depth: int = 1) -> None:
     _polished(engine)
     engine.world.add_component(camera_entity(engine), ScreenReflections(quality=quality, half_resolution=half,
@@ -650,6 +673,8 @@ VARIANTS: list[Variant] = [
     Variant("contact_half", _contact_half, "ContactShadows(half_resolution=True) on the camera"),
     Variant("contact_occlusion", _contact_occlusion, "ContactShadows() and AmbientOcclusion() (at half size)"),
     Variant("polished", _polished, "the floor reflects the sky (Reflective(mix=0.35))"),
+    Variant("glass", _glass, "no shadows; three glass balls and a pane refracting the sky (Refractive(screen=False))"),
+    Variant("glass_screen", _glass_screen, "the same refracting what each view drew behind them (screen-space)"),
     Variant("reflections", _reflections, "the polished floor and ScreenReflections() on the camera"),
     Variant("reflections_camera", _reflections_camera, "ScreenReflections(reflection_depth=0): the camera view alone"),
     Variant("reflections_low", _reflections_low, "the same with ScreenReflections(quality='low')"),

@@ -193,3 +193,27 @@ def test_screen_is_checked():
     with pytest.raises(ComponentValueError, match=r"Refractive.screen"):
         Refractive(screen="yes")
     assert Refractive().screen
+
+
+def test_copies_are_taken_only_where_glass_is_seen_and_go_with_the_last_of_it(scene):
+    """A level whose views no refracting surface reaches copies nothing (the pane turned out
+    of the camera's sight); one that sees it copies once a frame; deleting the last
+    refracting entity lets the copy image go."""
+    glass = []
+
+    def build(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        room(world)
+        glass.append(pane(world, 1.0, position=(0.0, 1.0, 8.0)))  # behind the camera
+
+    runner = scene(build, SIZE)
+    copy = runner.engine.renderer.scene_pass.refraction_copy
+    runner.frame()
+    assert copy.copies == 0 and copy.held() == 0
+    runner.world.get(glass[0], Transform).position = glm.vec3(0.0, 1.0, 1.0)
+    runner.frame()
+    runner.frame()
+    assert copy.copies == 2 and copy.held() == 1
+    runner.world.delete_entity(glass[0])
+    runner.frame()
+    assert copy.held() == 0

@@ -426,11 +426,21 @@ class ScenePass:
         copied (``RefractionCopy.take``), then each view's draws with the ``SCREEN_REFRACTION``
         builds, which march their refracted rays across the copy, depth tested and written as
         opaque draws are (``engine/render/screen_refraction.py``).  ``conditions`` as for
-        ``draw``.  Nothing where none refracts, or for a view drawn whole (its
-        ``options.transparent``: a probe face's, which drew them with its opaque batches)."""
+        ``draw``.  Nothing where none refracts or none reaches the views (``batch_reach``), or
+        for a view drawn whole (its ``options.transparent``: a probe face's, which drew them
+        with its opaque batches); where none refracts, the copies are let go."""
         renderer, ctx = self.renderer, self.ctx
         refracting = renderer.refracting_batches()
-        if not views or not refracting or options.transparent:
+        if not refracting:
+            if self.refraction_copy.held():  # (the last refracting surface went: its copies with it)
+                self.refraction_copy.release()
+            return
+        if not views or options.transparent:
+            return
+        # Which batch can draw a sample in which view (its boxes against the view's volume):
+        # a level none reaches copies nothing.
+        reach = batch_reach(views, targets.size, refracting)
+        if not any(any(row) for row in reach):
             return
         self.refraction_copy.take(targets)
         self._sky_size = renderer.sky.size[0]
@@ -438,12 +448,14 @@ class ScenePass:
         bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)
         renderer.upload_views(views)
         for index, view in enumerate(views):
+            if not any(reach[index]):
+                continue
             with _ALWAYS if conditions is None else conditions[index].crender:
                 set_scissor(ctx, view.scissor)
                 set_front_face(ctx, "cw" if view.mirrored else "ccw")
                 renderer.bind_view_at(index)
-                self._draw_batches(refracting, 0, options.masked, skip=view.skip, hide=view.hide,
-                                   screen="refracted")
+                self._draw_batches(self._reaching(refracting, reach[index], view), 0, options.masked,
+                                   skip=view.skip, hide=view.hide, screen="refracted")
         renderer.stats.passes += 1
         if renderer.debug:
             renderer.checkpoint(f"refraction ({views[0].name}{' and others' if len(views) > 1 else ''})")

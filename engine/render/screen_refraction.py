@@ -145,6 +145,7 @@ class RefractionCopy:
         return len(self._copies)
 
     def release(self) -> None:
+        """Let the copies go (made again when next taken) and the pass's vertex array."""
         for copy in self._copies.values():
             copy.release()
         self._copies.clear()
