@@ -217,3 +217,27 @@ def test_copies_are_taken_only_where_glass_is_seen_and_go_with_the_last_of_it(sc
     runner.world.delete_entity(glass[0])
     runner.frame()
     assert copy.held() == 0
+
+
+def test_a_rough_pane_shows_what_is_behind_it_blurred(scene):
+    """A rough pane of index 1 reads a blurrier level of the copy (its lobe's width where the
+    ray meets what is behind): the red post's edges through it spread over several pixels,
+    where a clear pane keeps them as the frame drew them (a pixel or two)."""
+    def build(roughness):
+        def make(world):
+            look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+            room(world)
+            world.spawn(Transform(position=(0.0, 1.0, 1.0)), MeshRef(quad(1.6, 1.6)),
+                        Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True,
+                                 **{**CLEAR, "roughness": roughness}), Refractive(ior=1.0))
+        return make
+
+    def edge_width(image) -> int:
+        red = image[58:62, :, 0] - image[58:62, :, 1]      # (rows through the post, behind the pane)
+        row = red.mean(axis=0)
+        top, floor = row.max(), np.median(row)
+        return int(((row > floor + 0.1 * (top - floor)) & (row < top - 0.1 * (top - floor))).sum())
+
+    clear, rough = frame(scene, build(0.0)), frame(scene, build(0.6))
+    assert edge_width(clear) <= 4
+    assert edge_width(rough) >= edge_width(clear) + 6

@@ -440,9 +440,12 @@ class ScenePass:
         # Which batch can draw a sample in which view (its boxes against the view's volume):
         # a level none reaches copies nothing.
         reach = batch_reach(views, targets.size, refracting)
-        if not any(any(row) for row in reach):
+        reached = [batch for batch, *rows in zip(refracting, *reach, strict=True) if any(rows)]
+        if not reached:
             return
-        self.refraction_copy.take(targets)
+        # (a rough one's march reads the copy's mips: made only then)
+        self.refraction_copy.take(targets, any(batch.rows["surface"][:batch.count, 1].max() > 0.0
+                                               for batch in reached))
         self._sky_size = renderer.sky.size[0]
         self._begin(views, targets, options, _SCENE)
         bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)

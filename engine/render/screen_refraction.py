@@ -103,9 +103,11 @@ class RefractionCopy:
         self._vao_of = -1  # the shader library's reloads when it was made
         self.copies = 0  # copies taken so far (tests count them)
 
-    def take(self, targets: RenderTargets) -> None:
-        """Copy ``targets``' colour and depth into the copy of its size, build its mips and
-        bind it at ``REFRACTION_COPY_UNIT``."""
+    def take(self, targets: RenderTargets, rough: bool) -> None:
+        """Copy ``targets``' colour and depth into the copy of its size and bind it at
+        ``REFRACTION_COPY_UNIT``; with ``rough`` (a surface drawn over it has a roughness)
+        build its mips, else its chain ends at the image (every lod reads it: on llvmpipe the
+        chain is about a tenth of a glass-filled frame's refraction)."""
         ctx, gpu = self.ctx, self.gpu
         copy = self._copies.pop(targets.size, None)
         if copy is None:
@@ -121,7 +123,7 @@ class RefractionCopy:
         copy.framebuffer.use()
         apply_pass_state(ctx, _PASS, (0, 0, *targets.size))
         vao.render(moderngl.TRIANGLES, vertices=3)
-        copy.texture.build_mipmaps(0, copy.top_lod)
+        copy.texture.build_mipmaps(0, copy.top_lod if rough else 0)
         bind_texture(ctx, copy.texture, REFRACTION_COPY_UNIT)
         gpu.stats.passes += 1
         gpu.stats.draw_calls += 1
