@@ -325,6 +325,22 @@ def _resized(ctx):
                           sizes=((160, 90), (95, 121), (160, 90)))
 
 
+def _glass_screen(ctx):
+    """The mirror ring with glass balls and a frosted pane refracting what each view drew
+    behind them (screen-space refraction: the copy, its mips, the march, in the camera's
+    view and its mirror levels)."""
+    from benchmarks.lighting import _glass_screen
+    from benchmarks.mirrors import MirrorRing
+    from components import Material, Refractive
+
+    def configure(engine):
+        _glass_screen(engine)
+        for entity, refractive in engine.world.query_one(Refractive):
+            if not refractive.solid:  # (the pane)
+                engine.world.get(entity, Material).roughness = 0.3
+    return _engine_frames(ctx, MirrorRing(4), 3, configure)
+
+
 SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     **{name: _golden(name) for name in ("hall_start", "hall_mirror_wall", "hall_doorway", "hall_partner_side",
                                         "mirror_ring_8_batched", "portals_depth_8", "portals_partner_disabled",
@@ -353,6 +369,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "clouds": _lighting("clouds"),
     "shafts_clouds": _lighting("shafts_clouds"),
     "moonlit_hall": _moonlit_hall,
+    "glass_screen": _glass_screen,
 }
 
 
