@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, Material, MeshRef, Mirror, Refractive, Skybox, Transform
+from components import Camera, ComponentValueError, Material, MeshRef, Mirror, Refractive, Skybox, Transform
 from engine.assets.mesh import box, quad, sphere
 from engine.core.errors import GLLimitWarning
 from tests.support import box_hits, linear_to_srgb8, look_from, pixel_rays, srgb_to_linear
@@ -46,9 +46,14 @@ def pane(world, ior: float, screen: bool = True, position=(0.0, 1.0, 1.0), turn:
                        Refractive(ior=ior, screen=screen))
 
 
-def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene):
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene, projection):
+    """(An orthographic camera's rays are parallel: the march's window depth and 1 / w are
+    affine along the screen all the same.)"""
     def without(world):
-        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        camera = look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        world.get(camera, Camera).projection = projection
+        world.get(camera, Camera).ortho_height = 3.0
         room(world)
 
     def through(screen):
