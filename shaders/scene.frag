@@ -805,17 +805,32 @@ uniform float dispersion;  // its batch's Refractive.dispersion (glTF's KHR_mate
 
 #ifdef SCREEN_REFRACTION
 #include "screen_refraction.glsl"
+flat in vec3 v_centre;  // the instance's origin in the world (scene.vert)
 #endif
+
+// Where a refracted ray leaves the surface towards what lies behind: where it enters, or a
+// solid ball's ray where it leaves the ball, 2 (c - p).d along its way in (the chord of the
+// sphere about the instance's origin c through the point p: exact for a sphere mesh).  Only
+// the screen's march needs the place; the probe's and sky's images are read by direction.
+vec3 refraction_origin(Surface s, float ior, bool solid) {
+#ifdef SCREEN_REFRACTION
+    if (solid) {
+        vec3 inside = refract(-s.to_eye, s.normal, 1.0 / ior);
+        return s.position + inside * max(2.0 * dot(v_centre - s.position, inside), 0.0);
+    }
+#endif
+    return s.position;
+}
 
 // What lies behind along a refracted ray: the probe's capture when one serves the object,
 // else the sky; in SCREEN_REFRACTION builds (Refractive.screen, a view tree's views) what the
 // view drew there where the ray finds it (screen_refraction.glsl), the probe's or sky's
 // image where it does not, faded between by the find's confidence.
-vec3 refracted_light(Surface s, vec3 direction, float lod) {
+vec3 refracted_light(Surface s, vec3 origin, vec3 direction, float lod) {
     vec3 behind = probe_face_size > 0.0 ? probe_radiance(s.position, direction, lod, s.roughness)
                                         : sample_environment(direction, lod, s.roughness);
 #ifdef SCREEN_REFRACTION
-    vec4 found = screen_refraction(s.position, direction, s.roughness);
+    vec4 found = screen_refraction(origin, direction, s.roughness);
     if (found.a > 0.0) {
         vec3 drawn = found.rgb;
 #ifdef FOG
@@ -850,12 +865,12 @@ vec3 refract_environment(vec3 color, Surface s, bool solid) {
         transmittance[c] = solid ? passed * passed : passed;
         // (its own footprint: the channels' rays spread apart)
         float lod = cube_lod(direction, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
-        behind[c] = refracted_light(s, direction, lod)[c];
+        behind[c] = refracted_light(s, refraction_origin(s, iors[c], solid), direction, lod)[c];
     }
 #else
     vec3 transmittance = vec3(1.0) - schlick_fresnel(s.to_eye, s.normal, vec3(f0_from_ior(ior)));
     if (solid) transmittance *= transmittance;  // the exit's angle is the entry's
-    vec3 behind = refracted_light(s, s.refract_dir, s.refract_lod);
+    vec3 behind = refracted_light(s, refraction_origin(s, ior, solid), s.refract_dir, s.refract_lod);
 #endif
     // The surface's own reflection of the environment lies over what it lets through, whatever
     // its alpha (Fresnel: 1 - F passes, F is reflected).

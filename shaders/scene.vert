@@ -68,6 +68,9 @@ flat out vec4 v_surface;
 flat out vec4 v_reflect;
 flat out vec4 v_tint;
 flat out uvec4 v_slots;
+#ifdef SCREEN_REFRACTION
+flat out vec3 v_centre;  // the instance's origin in the world: a solid ball's centre (scene.frag refraction_origin)
+#endif
 
 void main() {
 #if defined(SKINNED) || defined(MORPHED)
@@ -109,6 +112,9 @@ void main() {
 #endif
 #endif
     v_world_pos = world.xyz;
+#ifdef SCREEN_REFRACTION
+    v_centre = in_model[3].xyz;
+#endif
     v_uv = in_uv.xy;
 #ifdef SECOND_UV_MAPS
     v_uv2 = in_uv.zw;

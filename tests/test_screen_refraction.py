@@ -119,6 +119,58 @@ def test_a_tilted_pane_bends_what_is_behind_it_as_snells_law_says(scene):
     assert (red[through] != expected[through]).sum() <= 2   # (a pixel each side where an edge falls)
 
 
+def test_a_solid_ball_shows_what_is_behind_it_where_a_ball_lens_puts_it(scene):
+    """A solid glass ball (``Refractive(solid=True)``, index 1.5) before a red stripe on a grey
+    wall, the stripe off to one side: along the middle row the stripe shows through the ball
+    where rays traced into the sphere, along its chord and out (in numpy) meet it, on the
+    other side of the ball's middle (a ball lens turns the picture over)."""
+    radius, centre = 0.6, np.array([0.0, 1.0, 0.0])
+    stripe, stripe_half = np.array([0.35, 1.0, -2.9]), np.array([0.08, 1.5, 0.02])
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=30.0)
+        world.spawn(Skybox())
+        world.spawn(Transform(position=(0.0, 1.0, -3.0)), MeshRef(box((8.0, 6.0, 0.1))),
+                    Material(color=(0.3, 0.3, 0.3, 1.0), unlit=True))
+        world.spawn(Transform(position=tuple(stripe)), MeshRef(box(tuple(2.0 * stripe_half))),
+                    Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+        world.spawn(Transform(position=tuple(centre)), MeshRef(sphere(radius, 128, 64)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), **CLEAR), Refractive(ior=1.5, solid=True))
+
+    size = (200, 100)
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame())
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    d = rays[size[1] // 2]
+    # Into the sphere (the nearer root), along the chord, out of it.
+    b = d @ (eye - centre)
+    disc = b ** 2 - (eye - centre) @ (eye - centre) + radius ** 2
+    inside_ball = disc > 0.0
+    t = -b - np.sqrt(np.maximum(disc, 0.0))
+    entry = eye + t[:, None] * d
+    normal = (entry - centre) / radius
+    deep = np.abs(np.sum(normal * d, axis=1)) > 0.3                        # (away from the rim, where pixels straddle it)
+
+    def refract(incident, n, eta):
+        cos_i = -np.sum(incident * n, axis=1)
+        k = 1.0 - eta ** 2 * (1.0 - cos_i ** 2)
+        return eta * incident + (eta * cos_i - np.sqrt(np.maximum(k, 0.0)))[:, None] * n
+
+    inside = refract(d, normal, 1.0 / 1.5)
+    chord = 2.0 * np.sum((centre - entry) * inside, axis=1)
+    exit_point = entry + chord[:, None] * inside
+    out = refract(inside, -(exit_point - centre) / radius, 1.5)
+    expected = box_hits(exit_point, out, stripe, stripe_half) & inside_ball & deep
+    red = (shown[size[1] // 2, :, 0] > 0.5) & (shown[size[1] // 2, :, 1] < 0.2)
+    through = inside_ball & deep
+    assert expected.sum() >= 3
+    middle = np.flatnonzero(inside_ball).mean()
+    assert np.flatnonzero(expected).mean() < middle         # (the stripe is right of it: seen on the left)
+    assert (red[through] != expected[through]).sum() <= 2
+
+
 def test_a_pane_in_a_mirror_shows_what_the_mirrors_view_drew_behind_it(scene):
     """Behind the camera, a red post and before it a pane of index 1, seen only in the mirror
     the camera faces: the mirror's view refracts its own image (a reflection level's copy),
