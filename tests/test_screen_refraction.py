@@ -151,7 +151,7 @@ def test_a_solid_ball_shows_what_is_behind_it_where_a_ball_lens_puts_it(scene):
     t = -b - np.sqrt(np.maximum(disc, 0.0))
     entry = eye + t[:, None] * d
     normal = (entry - centre) / radius
-    deep = np.abs(np.sum(normal * d, axis=1)) > 0.3                        # (away from the rim, where pixels straddle it)
+    deep = np.abs(np.sum(normal * d, axis=1)) > 0.3  # (away from the rim, where pixels straddle it)
 
     def refract(incident, n, eta):
         cos_i = -np.sum(incident * n, axis=1)
