@@ -22,8 +22,11 @@ below, the screen reflections and the light shafts are composited into it):
 What the copy cannot hold is not seen through the glass: what the view did not draw (off
 its edges, behind what it shows), other refracting surfaces and the transparent slot (glass
 behind glass shows the probe's image there, as three.js's transmission leaves transmissive
-objects out of its copy).  Probe captures draw every refracting batch with its opaque
-draws, reading the probe or the sky (their faces have no copy).  Where a build with the
+objects out of its copy).  Drawn after them, a refracting surface takes no part in the
+screen reflections (its own reflection is the probe's or sky's, as HDRP's and Unity's
+transparent surfaces keep theirs) nor in the screen's ambient occlusion.  Probe captures
+draw every refracting batch with its opaque draws, reading the probe or the sky (their
+faces have no copy).  Where a build with the
 march would read more samplers than the fragment stage has (a 16-unit driver's fullest
 builds), the build without serves and a ``GLLimitWarning`` says so.
 
