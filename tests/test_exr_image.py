@@ -14,7 +14,7 @@ import pytest
 
 from components import Skybox
 from engine.assets.exr_image import COMPRESSIONS, load_exr, save_exr
-from engine.assets.panorama import panorama_faces, sky_faces_from_file
+from engine.assets.panorama import load_panorama, panorama_faces, sky_faces_from_file
 from engine.core.errors import AssetError
 from tests.support import look_from
 
@@ -150,7 +150,8 @@ def _truncated(tmp_path):
     (lambda p: write(p / "z.exr", {"Z": np.ones((4, 4), np.float32)}), "no an image part with channels R, G and B"),
     (lambda p: write(p / "n.exr", rgb(np.full((4, 4, 3), np.nan, np.float32))), "16 pixels hold NaN"),
     (lambda p: write(p / "b.exr", rgb(np.full((4, 4, 3), 1e6, np.float32))), "past 65504"),
-    (lambda p: write(p / "c.exr", rgb(np.ones((24, 4, 3), np.float16)), envmap=OpenEXR.ENVMAP_CUBE), "cube-map"),
+    (lambda p: write(p / "c.exr", rgb(np.ones((20, 4, 3), np.float16)), envmap=OpenEXR.ENVMAP_CUBE),
+     "cube-map environment .* of 4 x 20 pixels; its six faces stacked are N x 6N"),
     (lambda p: write(p / "h.exr", rgb(np.ones((4, 4, 3), np.float16)),
                      displayWindow=(np.array([0, 0], np.int32), np.array([9999, 4999], np.int32))),
      "10000 x 5000 pixels"),
@@ -211,6 +212,47 @@ def test_an_exr_panorama_makes_the_faces_its_colours_make(tmp_path):
     faces = sky_faces_from_file(write(tmp_path / "sky.exr", rgb(image)), face_size=8, yaw=30.0)
     np.testing.assert_array_equal(faces, panorama_faces(image, 8, 30.0))
     assert faces.source == {"panorama": str((tmp_path / "sky.exr").resolve()), "face_size": 8, "yaw": 30.0}
+
+
+# OpenEXR's cube-map layout as ImfEnvmap.h draws it: each face's corners (top left, top right,
+# bottom left, bottom right) as the cube's vertices, vertex v at (bit 0, bit 1, bit 2) of v for
+# (x, y, z), 1 for + and 0 for -; the faces +X, -X, +Y, -Y, +Z, -Z from the top.
+CUBE_CORNERS = ((3, 7, 1, 5), (6, 2, 4, 0), (6, 7, 2, 3), (0, 1, 4, 5), (7, 6, 5, 4), (2, 3, 0, 1))
+
+
+def cube_map_of(function, size: int) -> np.ndarray:
+    """A cube-map environment (size x 6 size) whose pixels hold ``function`` of their
+    direction: each face's pixel centres spread evenly between its corner vertices (the first
+    and last on the cube's edges), as the header's diagram places them."""
+    vertex = np.array([[1.0 if v >> axis & 1 else -1.0 for axis in range(3)] for v in range(8)])
+    t = np.linspace(0.0, 1.0, size)
+    across, down = np.meshgrid(t, t)
+    faces = []
+    for top_left, top_right, bottom_left, bottom_right in CUBE_CORNERS:
+        top = vertex[top_left] * (1 - across[..., None]) + vertex[top_right] * across[..., None]
+        bottom = vertex[bottom_left] * (1 - across[..., None]) + vertex[bottom_right] * across[..., None]
+        point = top * (1 - down[..., None]) + bottom * down[..., None]
+        faces.append(function(point / np.linalg.norm(point, axis=-1, keepdims=True)))
+    return np.concatenate(faces, axis=0)
+
+
+def test_a_cube_map_exr_makes_the_sky_its_faces_hold(tmp_path):
+    """An OpenEXR cube-map environment (``envmap`` cube, written by the library) whose pixels
+    hold a colour linear in their direction: the Skybox faces made from it hold that colour of
+    each face texel's own direction (``engine.core.cube_faces``), so every face is where
+    OpenEXR's layout puts it, the right way round; turned by yaw as a panorama is."""
+    def colour(d):
+        return 1.0 + 0.5 * d
+
+    path = write(tmp_path / "cube.exr", rgb(cube_map_of(colour, 32).astype(np.float32)), envmap=OpenEXR.ENVMAP_CUBE)
+    from engine.core.cube_faces import face_directions
+
+    faces = sky_faces_from_file(path, face_size=16)
+    for face in range(6):
+        np.testing.assert_allclose(faces[face], colour(face_directions(face, 16)), atol=0.02)
+    turned = sky_faces_from_file(path, face_size=16, yaw=90.0)
+    np.testing.assert_allclose(turned, panorama_faces(load_panorama(path), 16, 90.0), atol=1e-6)
+    assert not np.allclose(turned, faces, atol=0.1)
 
 
 def test_a_level_file_and_the_runner_take_an_exr_sky(scene, tmp_path):

@@ -17,7 +17,9 @@ parts.  What this module adds is the engine's side:
   camera's, Rec. 2020) is converted to the engine's Rec. 709 with Bradford's adaptation to D65,
   as OpenColorIO does; colours that fall outside Rec. 709 (negative) are clipped to 0;
 - what the sky can hold: a non-finite colour, or one past 65504 (a sky face's half float), is
-  refused, as the ``.hdr`` reader refuses it.
+  refused, as the ``.hdr`` reader refuses it;
+- which map: a file whose ``envmap`` attribute says cube holds a cube map's six faces stacked
+  (``load_exr_environment``; ``engine/assets/panorama.py`` makes them a panorama).
 """
 from __future__ import annotations
 
@@ -50,7 +52,17 @@ def _library(what: str):
 def load_exr(path: str | Path, layer: str | None = None) -> np.ndarray:
     """An OpenEXR file's colours, (height, width, 3) float32 linear Rec. 709, row 0 at the top
     of its display window: the first part with R, G and B (or Y alone, as grey), or ``layer``'s
-    (a part's name, or a channel prefix ``layer.``); see the module's docstring."""
+    (a part's name, or a channel prefix ``layer.``); see the module's docstring.  A cube-map
+    environment's six faces stacked as the file holds them (``load_exr_environment`` says
+    which it is)."""
+    return load_exr_environment(path, layer)[0]
+
+
+def load_exr_environment(path: str | Path, layer: str | None = None) -> tuple[np.ndarray, str]:
+    """``load_exr``'s colours and the file's environment map kind: "cube" where its ``envmap``
+    attribute says the image is a cube map's six faces (N x 6N pixels: +X, -X, +Y, -Y, +Z, -Z
+    from the top, each as OpenEXR's ``ImfEnvmap.h`` lays it out; one of another shape is
+    refused), else "latlong" (an equirectangular panorama, the attribute's other value or none)."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise AssetError(f"OpenEXR file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     if layer is not None and (not isinstance(layer, str) or not layer):
@@ -69,11 +81,16 @@ def load_exr(path: str | Path, layer: str | None = None) -> np.ndarray:
         raise AssetError(f"{what}: its header is corrupt ({type(exc).__name__}: {exc})") from exc
 
 
-def _load(openexr: Any, path: Path, layer: str | None, what: str) -> np.ndarray:
+def _load(openexr: Any, path: Path, layer: str | None, what: str) -> tuple[np.ndarray, str]:
     headers = _read(openexr, path, what, header_only=True)
     part_index, prefix = _choose_part(headers, layer, what)
     header = headers.parts[part_index].header
     display, data_window = _windows(header, what)
+    kind = "cube" if str(header.get("envmap", "")).endswith("CUBE") else "latlong"
+    width, height = display[2] - display[0] + 1, display[3] - display[1] + 1
+    if kind == "cube" and height != 6 * width:
+        raise AssetError(f"{what}: is a cube-map environment (envmap = cube) of {width} x {height} pixels; its six "
+                         f"faces stacked are N x 6N ({width} x {6 * width} here)")
     names = _colour_names(header["channels"], prefix)
     pixels = _read(openexr, path, what, header_only=False).parts[part_index].channels
     planes = []
@@ -94,7 +111,7 @@ def _load(openexr: Any, path: Path, layer: str | None, what: str) -> np.ndarray:
     if colours.max(initial=0.0) > HALF_MAX:
         raise AssetError(f"{what}: holds colours past {HALF_MAX:g} (up to {colours.max():g}), more than the "
                          "half floats a sky's faces keep")
-    return _placed(colours, display, data_window)
+    return _placed(colours, display, data_window), kind
 
 
 def _primaries(header: dict, what: str) -> tuple[float, ...] | None:
@@ -155,8 +172,6 @@ def _colour_names(channels: list[Any], prefix: str) -> list[str]:
 
 def _windows(header: dict, what: str) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int]]:
     """The display and data windows as (x min, y min, x max, y max), checked for size."""
-    if str(header.get("envmap", "")).endswith("CUBE"):
-        raise AssetError(f"{what}: is a cube-map environment (envmap = cube), not an equirectangular panorama")
     windows = []
     for key in ("displayWindow", "dataWindow"):
         try:

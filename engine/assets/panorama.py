@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from engine.assets.exr_image import load_exr
+from engine.assets.exr_image import load_exr_environment
 from engine.assets.panorama_sun import SUN_CONTRAST, PanoramaSun, find_sun
 from engine.assets.texture_data import MAX_TEXTURE_SIDE, check_asset_file, colour_image, load_texture
 from engine.core.color import srgb_to_linear, xyz_to_rec709_matrix
@@ -209,10 +209,12 @@ def save_hdr(path: str | Path, image: np.ndarray) -> Path:
 def load_panorama(path: str | Path, layer: str | None = None) -> np.ndarray:
     """An equirectangular image's linear colours (height, width, 3) float32, row 0 at the top:
     a ``.hdr`` file as ``load_hdr`` reads it, an ``.exr`` file as ``load_exr`` does (``layer``:
-    its part or layer of that name), any other image through Pillow as sRGB."""
+    its part or layer of that name; a cube-map environment made a panorama by
+    ``cube_map_panorama``), any other image through Pillow as sRGB."""
     suffix = Path(path).suffix.lower()
     if suffix == ".exr":
-        return load_exr(path, layer)
+        image, kind = load_exr_environment(path, layer)
+        return cube_map_panorama(image) if kind == "cube" else image
     if layer is not None:
         raise AssetError(f"panorama file {str(path)!r}: layer {layer!r} given, but only an OpenEXR (.exr) file "
                          "has layers")
@@ -220,6 +222,49 @@ def load_panorama(path: str | Path, layer: str | None = None) -> np.ndarray:
         return load_hdr(path)
     texture = load_texture(path)
     return srgb_to_linear(texture.pixels[..., :3] / 255.0).astype(np.float32)
+
+
+def cube_map_panorama(faces: np.ndarray) -> np.ndarray:
+    """An OpenEXR cube-map environment (N x 6N pixels: its faces +X, -X, +Y, -Y, +Z, -Z from
+    the top, laid out as ``ImfEnvmap.h`` draws them) as an equirectangular panorama of 4N x 2N
+    in the engine's wrap (the middle column -Z, a quarter to the right +X, the top row +Y):
+    each pixel's direction found on its face as OpenEXR's ``CubeMap::faceAndPixelPosition``
+    finds it (a face's first and last pixel centres on the cube's edges: positions scaled by
+    N - 1) and read there bilinearly, within the face.  The environment's axes are the
+    world's (+Y up)."""
+    image = np.asarray(faces, np.float32)
+    size = image.shape[1]
+    height, width = 2 * size, 4 * size
+    longitude = ((np.arange(width) + 0.5) / width - 0.5) * 2.0 * math.pi
+    latitude = (0.5 - (np.arange(height) + 0.5) / height) * math.pi
+    lat, lon = np.meshgrid(latitude, longitude, indexing="ij")
+    d = np.stack([np.cos(lat) * np.sin(lon), np.sin(lat), -np.cos(lat) * np.cos(lon)], axis=-1)
+    major = np.argmax(np.abs(d), axis=-1)             # the axis whose face it meets (x before y before z)
+    along = np.take_along_axis(d, major[..., None], axis=-1)[..., 0]
+    face = 2 * major + (along < 0.0)                    # CUBEFACE_POS_X, NEG_X, POS_Y, ... NEG_Z
+    # Its position in the face (faceAndPixelPosition): the other two axes over the major one.
+    first = np.where(major == 0, d[..., 1], d[..., 0]) / np.abs(along)
+    second = np.where(major == 2, d[..., 1], d[..., 2]) / np.abs(along)
+    px, py = (first + 1.0) / 2.0 * (size - 1), (second + 1.0) / 2.0 * (size - 1)
+    # The face's pixel (pixelPosition): x across, y down within its N rows.
+    last = size - 1
+    x = np.select([face == 0, face == 1, face == 4], [py, last - py, last - px], px)
+    y = np.select([face == 3], [py], last - np.where(face < 2, px, py))
+    return _face_bilinear(image, face, x, y)
+
+
+def _face_bilinear(image: np.ndarray, face: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The stacked faces at continuous pixel coordinates ``x``, ``y`` (centres at whole
+    numbers) of face ``face``, clamped to that face's pixels."""
+    size = image.shape[1]
+    x, y = np.clip(x, 0.0, size - 1.0), np.clip(y, 0.0, size - 1.0)
+    left, top = np.floor(x), np.floor(y)
+    fx, fy = (x - left)[..., None], (y - top)[..., None]
+    x0, y0 = left.astype(np.int64), top.astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, size - 1), np.minimum(y0 + 1, size - 1)
+    row = face * size
+    return ((image[row + y0, x0] * (1 - fx) + image[row + y0, x1] * fx) * (1 - fy)
+            + (image[row + y1, x0] * (1 - fx) + image[row + y1, x1] * fx) * fy).astype(np.float32)
 
 
 def panorama_faces(panorama: np.ndarray, face_size: int = 256, yaw: float = 0.0) -> np.ndarray:
