@@ -75,6 +75,7 @@ from components import (
     PointLight,
     Portal,
     Reflective,
+    Refractive,
     ScreenReflections,
     Skybox,
     Transform,
@@ -82,7 +83,7 @@ from components import (
     Water,
     look_rotation,
 )
-from engine.assets.mesh import plane, quad
+from engine.assets.mesh import plane, quad, sphere
 from engine.assets.portals import spawn_portal_pair
 from engine.core.budget import ViewBudget
 from engine.core.frame_io import Output
@@ -147,6 +148,9 @@ class StillCase:
     occlusion: bool = False  # ambient occlusion on the camera (the root's passes before its draw)
     reflections: bool = False  # screen reflections on the camera, the box reflecting the sky (its composite)
     shafts: bool = False  # with fog: light shafts on the camera, in the root and two levels down (added)
+    # A solid glass ball refracting what each view drew behind it (Refractive.screen: its copy
+    # and march in every level, drawn again by a refill over its level's copy), this rough; None: none.
+    glass: float | None = None
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -156,7 +160,7 @@ class StillCase:
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
                 f"cascades {self.cascades}, spot {self.spot_angle}, fog {self.fog}, occlusion {self.occlusion}, "
-                f"reflections {self.reflections}, shafts {self.shafts}; then "
+                f"reflections {self.reflections}, shafts {self.shafts}, glass {self.glass}; then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -182,7 +186,7 @@ def random_still_case(rng: random.Random) -> StillCase:
                      visibility="predicted" if rng.random() < 0.25 else "exact", then=then,
                      cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)),
                      fog=rng.random() < 0.3, occlusion=rng.random() < 0.3, reflections=rng.random() < 0.3,
-                     shafts=rng.random() < 0.5)
+                     shafts=rng.random() < 0.5, glass=rng.choice((0.0, 0.0, 0.3)) if rng.random() < 0.35 else None)
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -329,6 +333,10 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
     if case.reflections:  # the box reflects the sky, the screen's in its place where its rays find it
         world.add_component(named["box"], Reflective(mix=0.5))
         world.add_component(world.resources["camera"], ScreenReflections(thickness=0.5))
+    if case.glass is not None:
+        named["glass"] = world.spawn(Transform(position=(-0.6, 0.9, 0.8)), MeshRef(sphere(0.4, 24, 12)),
+                                     Material(color=(1.0, 1.0, 1.0, 0.0), roughness=case.glass),
+                                     Refractive(ior=1.5, solid=True))
     for i, pane in enumerate(case.panes):
         named[f"pane{i}"] = _spawn_pane(world, pane)
     if case.water:

@@ -13,6 +13,7 @@ from components import (
     Emissive,
     Material,
     MeshRef,
+    Mirror,
     ReflectionProbe,
     Reflective,
     Refractive,
@@ -1215,3 +1216,30 @@ def test_a_probe_that_sees_only_the_sky_draws_nothing_after_its_first_capture(sc
     runner.frame()
     assert 1 <= runner.stats.probe_faces < 6 and len(builds) == first + 2
     assert probes.read_face(owner, 5)[14:18, 14:18, 0].min() > 1.0  # -Z: the yellow box, face-on
+
+
+def test_the_levels_a_probes_faces_root_their_trees_in_go_with_the_last_probe_of_their_size(scene):
+    """A chrome ball's own probe sees a mirror: its faces root view trees of their own, drawn
+    in a level stack of the probe's resolution.  Deleting the ball (its probe with it) lets
+    that stack go; it is kept while another probe of that size needs it."""
+    balls = []
+
+    def build(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0))
+        world.spawn(Skybox())
+        world.spawn(Transform(position=(0.0, 1.2, -2.0)), MeshRef(quad(3.0, 2.4)), Material(), Mirror())
+        for x in (-0.6, 0.6):
+            balls.append(world.spawn(Transform(position=(x, 1.0, 0.0)), MeshRef(sphere(0.4)),
+                                     Material(metallic=1.0, roughness=0.05), Reflective("cube")))
+
+    runner = scene(build, (64, 48))
+    counts = runner.engine.renderer.resource_counts
+    for _ in range(3):
+        runner.frame()
+    assert counts()["probe_levels"] > 0
+    runner.world.delete_entity(balls[0])
+    runner.frame()
+    assert counts()["probe_levels"] > 0          # (the other ball's probe, the same size, draws into it)
+    runner.world.delete_entity(balls[1])
+    runner.frame()
+    assert counts()["probe_levels"] == 0

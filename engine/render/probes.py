@@ -659,7 +659,10 @@ class ProbeCaptures:
             self._mips_stale.pop(key, None)
             texture = self.ctx.texture_cube((resolution, resolution), 4, dtype="f2")
             texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-            cube = self.cubes[key] = ProbeCube(texture, resolution)
+            old, cube = cube, ProbeCube(texture, resolution)
+            self.cubes[key] = cube
+            if old is not None:
+                self._let_go_levels(old.resolution)
             self.renderer.note_scene_change()
         return cube
 
@@ -1022,6 +1025,15 @@ class ProbeCaptures:
         cube = self.cubes.pop(key, None)
         if cube is not None:
             cube.texture.release()
+            self._let_go_levels(cube.resolution)
+
+    def _let_go_levels(self, resolution: int) -> None:
+        """Release the level stack the faces of ``resolution`` root their view trees in once no
+        probe of that resolution is left (kept while one is: its next capture draws into it)."""
+        if not any(cube.resolution == resolution for cube in self.cubes.values()):
+            levels = self._stacks.pop(resolution, None)
+            if levels is not None:
+                levels.release()
 
     def release(self) -> None:
         for key in list(self.cubes):
