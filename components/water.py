@@ -30,8 +30,12 @@ class Water(TrackedComponent):
       ``Material`` with an alpha below 1 is drawn see-through (the scene pass's blended
       slot), so the pond's floor and anything under the surface show through, tinted by
       the material's colour in proportion to its alpha (the water's murk: 0 is clear).
-      What is below is seen where it is, not bent by the waves (that would need a copy of
-      the frame behind the water, which the passes do not keep).
+      What is below is seen bent by the surface (Snell's law for ``ior`` at the rippled
+      normal): the view's composite reads a copy of the level it goes into where each pixel's
+      refracted ray meets a floor as deep as the one drawn below it (refined over three
+      turns), so a still pool looks shallower than it is and a rippled one wavers
+      (``shaders/mirror_composite.frag`` ``water_below``); a surface shown by its fallback
+      (no view of its own) keeps what is below unbent.
     - **Waves.**  ``Material.normal_map`` (``normal_scale`` its strength) is read twice in
       the reflection's composite and the two heightfields summed (their slopes averaged,
       ``cross`` the second's share): once ``tiling`` times across the mirror's UVs,

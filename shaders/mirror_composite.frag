@@ -15,7 +15,9 @@
 //                     reflect_rate, and with a map, rippled by two scrolling layers of it.
 //                     Its row carries the waves' offset in the tile's x and y (v_eye.w,
 //                     v_normal.w), the second layer's share in the tile scale (v_tint.a)
-//                     and F0 in the roughness (v_params.y).
+//                     and F0 in the roughness (v_params.y).  A view's (WATER_REFRACTION, never
+//                     a fallback's) writes the pixel whole: the reflection by its weight over
+//                     what lies below, bent (water_below).
 //   COMPOSITE_FALLBACK: (with PORTAL, BUMPY, WATER or none; ROUGH never: its roughness is a
 //                     mip bias here) the fallback of a surface seen with no view of its own
 //                     (cut by the view budget, faded, past the depth limit, a mirror switched
@@ -127,6 +129,62 @@ vec3 fallback_environment(vec3 p, vec3 ray, float roughness) {
 float fallback_alpha(float rate) {
     float share = v_weights.z;
     return rate * share / max(1.0 - rate * (1.0 - share), 1e-6);
+}
+#endif
+
+#ifdef WATER_REFRACTION
+#define WATER_REFRACTION_TURNS 3
+// What lies below a water surface, bent (components/water.py): the level this composite goes
+// into, copied before its composites (rgb its colour, a its window depth; MirrorPasses.
+// composite_level), read where the pixel's ray, refracted by the rippled surface (Snell's law,
+// the index from F0), meets a floor as deep below the surface as the one drawn at the pixel
+// (the planar proxy of HDRP's and Unity's water refraction): a still pond's floor seen
+// shallower than it is, a rippled one's wavering.  Where that lands off the parent view's
+// pixels, or on what lies above the water there (a post standing in it, the sky), or where
+// nothing is drawn below, the pixel's own colour stays (what is below, unbent).
+uniform sampler2D refraction_copy;
+#ifndef COMPOSITE_FALLBACK
+uniform usampler2D parent_nodes;  // the level composited into: which view drew each pixel
+#endif
+
+// The world point the copy holds at a pixel of the parent level.
+vec3 copied_point(vec2 pixel, float window, vec2 size) {
+    vec4 world = v_inv_view_proj * vec4(pixel / size * 2.0 - 1.0, window * 2.0 - 1.0, 1.0);
+    return world.xyz / world.w;
+}
+
+vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f0) {
+    ivec2 here = ivec2(gl_FragCoord.xy);
+    vec4 unbent = texelFetch(refraction_copy, here, 0);
+    vec2 size = vec2(textureSize(refraction_copy, 0));
+    if (unbent.a >= 1.0) return unbent.rgb;  // the far plane: nothing below to bend
+    float root = sqrt(clamp(f0, 0.0, 0.98));
+    vec3 bent = refract(view_dir, normal, (1.0 - root) / (1.0 + root));  // 1 / the index
+    float down = dot(bent, -plane_normal);
+    if (down <= 1e-3) return unbent.rgb;
+    mat4 view_proj = inverse(v_inv_view_proj);
+    uint node = texelFetch(parent_nodes, here, 0).r;
+    // The depth below the surface where the bent ray meets what was drawn, found by turns
+    // (WATER_REFRACTION_TURNS): a floor as deep as the one at the last place found, then as
+    // deep as the one at the place that gives: a step of a stone on the floor is met near
+    // where it stands, not seen twice (once at its place, once where the floor's depth puts it).
+    float depth = dot(at - copied_point(gl_FragCoord.xy, unbent.a, size), plane_normal);
+    vec3 colour = unbent.rgb;
+    for (int turn = 0; turn < WATER_REFRACTION_TURNS; ++turn) {
+        if (depth <= 0.0) break;
+        vec4 clip = view_proj * vec4(at + bent * (depth / down), 1.0);
+        if (clip.w <= 0.0) break;
+        vec2 pixel = (clip.xy / clip.w * 0.5 + 0.5) * size;
+        if (any(lessThan(pixel, vec2(0.0))) || any(greaterThanEqual(pixel, size))) break;
+        ivec2 there = ivec2(pixel);
+        vec4 found = texelFetch(refraction_copy, there, 0);
+        if (texelFetch(parent_nodes, there, 0).r != node || found.a >= 1.0) break;
+        float found_depth = dot(at - copied_point(vec2(there) + 0.5, found.a, size), plane_normal);
+        if (found_depth <= 0.0) break;  // what stands above the water there
+        colour = found.rgb;
+        depth = found_depth;
+    }
+    return colour;
 }
 #endif
 
@@ -269,7 +327,11 @@ void main() {
 #endif
     // The parent's air over the reflection as a whole: blended over the surface's own pixels
     // (fogged by the same air in the parent's scene pass), the pixel is fogged all the way.
-#ifdef COMPOSITE_WATER
+#if defined(COMPOSITE_WATER) && defined(WATER_REFRACTION)
+    // (the reflection by its weight over what is below, bent: the pixel written whole)
+    out_color = vec4(hdr_store(mix(water_below(at, view_dir, normal, v_normal.xyz, v_params.y),
+                                   fog_over(radiance * v_tint.rgb, parent_fog), weight)), 1.0);
+#elif defined(COMPOSITE_WATER)
     out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);
 #else
     out_color = vec4(hdr_store(fog_over(reflected, parent_fog)), weight);

@@ -388,3 +388,39 @@ cross = 0.25
         level.write_text(text.replace(good, bad))
         with pytest.raises(LevelError, match=message):
             load_level(level)
+
+
+def test_what_is_below_is_seen_bent_where_snells_law_puts_it(scene):
+    """A red stripe across a flat pool floor a metre under clear, still water, seen from the
+    side: down a column, the stripe shows where the pixels' rays, refracted at the surface by
+    the water's index (in numpy), meet the floor: nearer the surface than where it lies (a
+    pool looks shallower), well away from where the unbent rays would show it."""
+    def build(world):
+        pool(world, True, (0.0, 1.5, 2.0), (0.0, -1.0, -1.5))
+        world.spawn(Transform(position=(0.0, -0.99, -1.5)), MeshRef(box((6.0, 0.02, 0.3))),
+                    Material(color=(0.5, 0.03, 0.03, 1.0), roughness=1.0, environment_reflection=0.0), Emissive(1.0))
+
+    size = (48, 96)
+    runner, seen = render(scene, build, size=size)
+    view = runner.engine.main_view
+    inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
+    column = size[0] // 2
+    eye = np.array(view.eye, np.float64)
+    expected, straight = [], []
+    for row in range(size[1]):
+        far = inverse @ np.array([(column + 0.5) / size[0] * 2 - 1, 1 - (row + 0.5) / size[1] * 2, 1.0, 1.0])
+        d = far[:3] / far[3] - eye
+        d /= np.linalg.norm(d)
+        t = -eye[1] / d[1]
+        at = eye + t * d
+        eta, n = 1.0 / 1.333, np.array([0.0, 1.0, 0.0])
+        cos_i = -d @ n
+        bent = eta * d + (eta * cos_i - math.sqrt(1.0 - eta ** 2 * (1.0 - cos_i ** 2))) * n
+        on_floor = at + bent * (-0.98 - at[1]) / bent[1]       # (the stripe's top)
+        expected.append(abs(on_floor[2] + 1.5) < 0.15)
+        unbent = at + d * (-0.98 - at[1]) / d[1]
+        straight.append(abs(unbent[2] + 1.5) < 0.15)
+    expected, straight = np.array(expected), np.array(straight)
+    red = (seen[:, column, 0] > 2.0 * seen[:, column, 1] + 0.05)
+    assert expected.sum() >= 3 and abs(np.flatnonzero(expected).mean() - np.flatnonzero(straight).mean()) > 4
+    assert (red != expected).sum() <= 2, (np.flatnonzero(red), np.flatnonzero(expected), np.flatnonzero(straight))

@@ -63,6 +63,7 @@ from engine.render.bindings import (
     PROBE_UNIT,
     RECT_CLIPS,
     REFLECTION_UNITS,
+    REFRACTION_COPY_UNIT,
     SCENE_CLIPS,
     SKY_UNIT,
     PassState,
@@ -75,6 +76,7 @@ from engine.render.bindings import (
 from engine.render.context_kept import kept_on
 from engine.render.gpu import Gpu
 from engine.render.rough_atlas import TILE, RoughAtlas, Tile, place_tiles
+from engine.render.screen_refraction import RefractionCopy
 from engine.render.sky_draw import bind_sky, sky_build, wire_sky, write_sky
 from engine.render.targets import RenderTargets
 from engine.render.views import (
@@ -330,14 +332,17 @@ _CLAIM_VERTICES = struct.Struct("<" + "2f3I" * 6)
 _COMPOSITE_UNITS = {**dict(zip(("reflection", "reflection_seen", "reflection_nodes"), REFLECTION_UNITS, strict=True)),
                     "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT,
                     "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT,
-                    **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS, strict=True))}
+                    **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS, strict=True)),
+                    "refraction_copy": REFRACTION_COPY_UNIT}
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
 # A "_bumpy" build reads the mirror's normal map (MirrorBumps); its views are drawn per map.
 COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"},
                       "sharp_bumpy": {"COMPOSITE_BUMPY": "1"},
                       "rough_bumpy": {"COMPOSITE_ROUGH": "1", "COMPOSITE_BUMPY": "1"},
-                      "water": {"COMPOSITE_WATER": "1"},
-                      "water_bumpy": {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}}
+                      "water": {"COMPOSITE_WATER": "1", "WATER_REFRACTION": "1"},
+                      "water_bumpy": {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1", "WATER_REFRACTION": "1"}}
+# (a water view's composite bends what lies below the surface: the level copied first, composite_level)
+WATER_VARIANTS = frozenset(("water", "water_bumpy"))
 # The variants that read the sky along one reflected ray (no blur): under a generated sky they
 # evaluate it per pixel (MirrorPasses._composite_for).
 SKY_VARIANTS = frozenset(("sharp", "sharp_bumpy", "water", "water_bumpy"))
@@ -533,8 +538,11 @@ class Claims:
 
 
 class MirrorPasses:
-    def __init__(self, renderer: Gpu) -> None:
+    def __init__(self, renderer: Gpu, refraction_copy: RefractionCopy | None = None) -> None:
         self.renderer = renderer
+        # Water's view composites read the level they go into, copied before them (its colour
+        # and depth: mirror_composite.frag's WATER_REFRACTION); the scene pass's copies serve.
+        self.refraction_copy = refraction_copy or RefractionCopy(renderer)
         ctx = renderer.ctx
         self.ctx = ctx
         shaders = renderer.shaders
@@ -809,6 +817,13 @@ class MirrorPasses:
         fogging = self.renderer.fog.defines
         if prepared.rough:
             self.rough_atlas.isolate(level, prepared.rough)
+        # Water bends what lies below it: the level as it stands (its colour and depth) copied
+        # first, read where the refracted rays meet the floor (mirror_composite.frag water_below).
+        water = any(key[0] in WATER_VARIANTS for key in prepared.rows) or any(
+            key[0] in WATER_VARIANTS for key, *_ in prepared.moving)
+        if water:
+            self.refraction_copy.take(parent, False)
+            bind_texture(ctx, parent.node, PARENT_NODE_UNIT)  # (the parent view's own pixels only)
         parent.composite_framebuffer.use()
         # Colour: reflection x rate + own x (1 - rate); alpha (coverage) is kept.
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))

@@ -136,7 +136,7 @@ class ViewTree:
                  copies: LevelCopies | None = None) -> None:
         self.renderer = renderer
         self.scene_pass = scene_pass
-        self.passes = MirrorPasses(renderer)
+        self.passes = MirrorPasses(renderer, scene_pass.refraction_copy)
         self.ends = EndImages(renderer) if end_images else None
         self.coverage: dict[int, int] = {}  # level -> its views' claimed pixels last frame (screen pixels)
         self._projections: tuple[bytes, np.ndarray, np.ndarray] | None = None  # the last root's projection
