@@ -424,3 +424,40 @@ def test_what_is_below_is_seen_bent_where_snells_law_puts_it(scene):
     red = (seen[:, column, 0] > 2.0 * seen[:, column, 1] + 0.05)
     assert expected.sum() >= 3 and abs(np.flatnonzero(expected).mean() - np.flatnonzero(straight).mean()) > 4
     assert (red != expected).sum() <= 2, (np.flatnonzero(red), np.flatnonzero(expected), np.flatnonzero(straight))
+
+
+def test_a_post_standing_in_the_water_shows_below_it_where_snells_law_puts_it(scene):
+    """A green post standing in clear, still water: across a row of the water in front of it,
+    the post shows below the surface exactly where the pixels' refracted rays meet its part
+    under water (traced in numpy), never where they would meet only the floor (narrower than
+    its part above the water: its image is bent towards the eye)."""
+    from tests.support import box_hits
+
+    post = (np.array([0.0, 0.0, -1.5]), np.array([0.15, 1.0, 0.15]))   # (from the floor, y -1, to y 1)
+
+    def build(world):
+        pool(world, True, (0.0, 1.2, 1.5), (0.0, -0.6, -1.5))
+        world.spawn(Transform(position=tuple(post[0])), MeshRef(box(tuple(2.0 * post[1]))),
+                    Material(color=(0.03, 0.5, 0.03, 1.0), roughness=1.0, environment_reflection=0.0), Emissive(1.0))
+
+    size = (96, 64)
+    runner, seen = render(scene, build, size=size)
+    view = runner.engine.main_view
+    inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
+    eye = np.array(view.eye, np.float64)
+    row = runner.project((0.0, 0.0, -1.0))[1]       # the surface just in front of the post
+    expected = []
+    for column in range(size[0]):
+        far = inverse @ np.array([(column + 0.5) / size[0] * 2 - 1, 1 - (row + 0.5) / size[1] * 2, 1.0, 1.0])
+        d = far[:3] / far[3] - eye
+        d /= np.linalg.norm(d)
+        at = eye + (-eye[1] / d[1]) * d
+        eta, n = 1.0 / 1.333, np.array([0.0, 1.0, 0.0])
+        cos_i = -d @ n
+        bent = eta * d + (eta * cos_i - math.sqrt(1.0 - eta ** 2 * (1.0 - cos_i ** 2))) * n
+        under = (post[0] + np.array([0.0, -0.5, 0.0]), post[1] * np.array([1.0, 0.5, 1.0]))  # y -1 to 0
+        expected.append(bool(box_hits(at[None], bent[None], *under)[0]))
+    expected = np.array(expected)
+    green = seen[row, :, 1] > 2.0 * seen[row, :, 0] + 0.05
+    assert expected.sum() >= 3
+    assert (green != expected).sum() <= 2, (np.flatnonzero(green), np.flatnonzero(expected))
