@@ -73,6 +73,27 @@ def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene, projectio
     assert np.quantile(levels[covered], 0.99) <= 2.0 and levels[covered].mean() < 0.3
 
 
+def striped_wall(world, stripe: np.ndarray, stripe_half: np.ndarray, fov: float) -> None:
+    """A camera 4 m before a grey wall (3 m behind the origin) with a red stripe on it (a box
+    at ``stripe`` of half sizes ``stripe_half``), both unlit: exact colours to find."""
+    look_from(world, (0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=fov)
+    world.spawn(Skybox())
+    world.spawn(Transform(position=(0.0, 1.0, -3.0)), MeshRef(box((8.0, 6.0, 0.1))),
+                Material(color=(0.3, 0.3, 0.3, 1.0), unlit=True))
+    world.spawn(Transform(position=tuple(stripe)), MeshRef(box(tuple(2.0 * stripe_half))),
+                Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+
+
+def middle_row(scene, build, size=(200, 100)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``build``'s second frame's middle row (linear, FXAA off), the eye and that row's pixel rays."""
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame())
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    return shown[size[1] // 2], eye, rays[size[1] // 2]
+
+
 def test_a_tilted_pane_bends_what_is_behind_it_as_snells_law_says(scene):
     """A thin pane (one interface: ``Refractive(solid=False)``) of index 1.5 turned 35 degrees
     before a red stripe on a grey wall (both unlit): along the middle row, the stripe shows
@@ -82,22 +103,10 @@ def test_a_tilted_pane_bends_what_is_behind_it_as_snells_law_says(scene):
     stripe_half = np.array([0.08, 1.5, 0.02])
 
     def build(world):
-        look_from(world, (0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=40.0)
-        world.spawn(Skybox())
-        world.spawn(Transform(position=(0.0, 1.0, -3.0)), MeshRef(box((8.0, 6.0, 0.1))),
-                    Material(color=(0.3, 0.3, 0.3, 1.0), unlit=True))
-        world.spawn(Transform(position=(0.0, 1.0, -2.9)), MeshRef(box(tuple(2.0 * stripe_half))),
-                    Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+        striped_wall(world, np.array([0.0, 1.0, -2.9]), stripe_half, fov=40.0)
         pane(world, 1.5, position=(0.0, 1.0, 1.0), turn=float(turn))
 
-    size = (200, 100)
-    runner = scene(build, size)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    shown = srgb_to_linear(runner.frame())
-    eye, rays = pixel_rays(runner.engine.main_view, size)
-    row = size[1] // 2
-    d = rays[row]
+    shown_row, eye, d = middle_row(scene, build)
     normal = np.array([np.sin(turn), 0.0, np.cos(turn)])     # the quad's +z turned about y
     right = np.array([np.cos(turn), 0.0, -np.sin(turn)])
     centre = np.array([0.0, 1.0, 1.0])
@@ -112,7 +121,7 @@ def test_a_tilted_pane_bends_what_is_behind_it_as_snells_law_says(scene):
     stripe = np.array([0.0, 1.0, -2.9])
     expected = box_hits(hit, bent, stripe, stripe_half) & through
     straight = box_hits(np.repeat(eye[None], len(d), 0), d, stripe, stripe_half) & through
-    red = (shown[row, :, 0] > 0.5) & (shown[row, :, 1] < 0.2)
+    red = (shown_row[:, 0] > 0.5) & (shown_row[:, 1] < 0.2)
     assert expected.sum() >= 3 and straight.sum() >= 3
     moved = abs(np.flatnonzero(expected).mean() - np.flatnonzero(straight).mean())
     assert moved > 8                                         # the bend shows: the stripe moved that many pixels
@@ -128,22 +137,11 @@ def test_a_solid_ball_shows_what_is_behind_it_where_a_ball_lens_puts_it(scene):
     stripe, stripe_half = np.array([0.35, 1.0, -2.9]), np.array([0.08, 1.5, 0.02])
 
     def build(world):
-        look_from(world, (0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=30.0)
-        world.spawn(Skybox())
-        world.spawn(Transform(position=(0.0, 1.0, -3.0)), MeshRef(box((8.0, 6.0, 0.1))),
-                    Material(color=(0.3, 0.3, 0.3, 1.0), unlit=True))
-        world.spawn(Transform(position=tuple(stripe)), MeshRef(box(tuple(2.0 * stripe_half))),
-                    Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+        striped_wall(world, stripe, stripe_half, fov=30.0)
         world.spawn(Transform(position=tuple(centre)), MeshRef(sphere(radius, 128, 64)),
                     Material(color=(1.0, 1.0, 1.0, 0.0), **CLEAR), Refractive(ior=1.5, solid=True))
 
-    size = (200, 100)
-    runner = scene(build, size)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    shown = srgb_to_linear(runner.frame())
-    eye, rays = pixel_rays(runner.engine.main_view, size)
-    d = rays[size[1] // 2]
+    shown_row, eye, d = middle_row(scene, build)
     # Into the sphere (the nearer root), along the chord, out of it.
     b = d @ (eye - centre)
     disc = b ** 2 - (eye - centre) @ (eye - centre) + radius ** 2
@@ -163,7 +161,7 @@ def test_a_solid_ball_shows_what_is_behind_it_where_a_ball_lens_puts_it(scene):
     exit_point = entry + chord[:, None] * inside
     out = refract(inside, -(exit_point - centre) / radius, 1.5)
     expected = box_hits(exit_point, out, stripe, stripe_half) & inside_ball & deep
-    red = (shown[size[1] // 2, :, 0] > 0.5) & (shown[size[1] // 2, :, 1] < 0.2)
+    red = (shown_row[:, 0] > 0.5) & (shown_row[:, 1] < 0.2)
     through = inside_ball & deep
     assert expected.sum() >= 3
     middle = np.flatnonzero(inside_ball).mean()
