@@ -98,8 +98,9 @@ vec4 screen_refraction(vec3 origin, vec3 direction, float roughness) {
     float gap = mix(d0, d1, hi) / mix(k0, k1, hi) - drawn;  // the ray's view depth there less the surface's
     if (gap > REFRACTION_THICKNESS) return vec4(0.0);
     float travelled = distance(point, origin);
-    // Pixels a metre spans at the found depth; the lobe's width there (GGX's alpha radians).
-    float pixels_a_metre = abs(camera.proj[1][1]) * 0.5 * size.y / max(drawn, 1e-4);
+    // Pixels a metre spans at the found depth (an orthographic view's, proj[3][3] 1: at any
+    // depth); the lobe's width there (GGX's alpha radians).
+    float pixels_a_metre = abs(camera.proj[1][1]) * 0.5 * size.y / mix(max(drawn, 1e-4), 1.0, camera.proj[3][3]);
     float lod = log2(max(roughness * roughness * travelled * pixels_a_metre, 1.0));  // (past its chain: its last level)
     vec2 uv = (found - corner) / size;
     vec2 edge = min(uv, 1.0 - uv);
