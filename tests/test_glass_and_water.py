@@ -14,7 +14,8 @@ whatever lies in front of it (the pond's material and its reflection, at their w
 each affine in what is under it, so with the panes at alpha ``a`` every pixel of the
 composited HDR image (level 0, linear, before present) must be
 ``a x (the panes opaque) + (1 - a) x (no panes)``, the same scene drawn twice more (no
-pane is seen through another, which would blend a x a: the scenes keep them apart).  A pane
+pane is seen through another, which would blend a x a: the scenes keep them apart; "opaque"
+is an alpha a ten-thousandth short of 1, ``SOLID``).  A pane
 blended in the wrong place (water drawn over a pane standing on it, a pane under the water
 blended over its reflection, a pane taking a far mirror's pixels before its claim) misses
 by tenths."""
@@ -35,6 +36,10 @@ from tests.support import kept_frames_equal_drawn, look_from
 
 SIZE = (240, 135)
 ALPHA = 0.5
+# The panes "opaque": as near as makes no difference, yet see-through glass in the same slot
+# as at ALPHA (an opaque pane would write its depth, and water bends what lies below it by
+# the depth drawn there: a pane at alpha 1 would be seen bent elsewhere than one at ALPHA).
+SOLID = 1.0 - 1e-4
 FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))  # a quad turned to lie flat, facing up
 Y = glm.vec3(0.0, 1.0, 0.0)
 RTOL, ATOL = 4e-3, 2e-3  # float16 images (RGBA16F), three of them and a blend
@@ -99,11 +104,11 @@ def _blend_agrees(got: np.ndarray, opaque: np.ndarray, without: np.ndarray) -> N
                            f"{np.abs(got - want).max():.4f}, e.g. got {got[bad][0]} want {want[bad][0]}")
 
 
-def _three(scene, make, **kwargs) -> tuple[dict, dict, dict]:
+def _three(scene, make, solid: float = SOLID, **kwargs) -> tuple[dict, dict, dict]:
     """The scene ``make(ents, alpha)`` builds drawn with its panes at ALPHA, without them and
-    with them opaque."""
+    with them opaque (at alpha ``solid``)."""
     out = []
-    for alpha in (ALPHA, None, 1.0):
+    for alpha in (ALPHA, None, solid):
         ents: dict = {}
         out.append(_render(scene, make(ents, alpha), ents, **kwargs))
     return out[0], out[1], out[2]
@@ -165,14 +170,14 @@ def test_panes_around_a_pond_in_a_probe_face(scene, depth, probe_path):
     order either way."""
     face = FACE_NAMES.index("-Z")
     faces = {}
-    for alpha in (ALPHA, None, 1.0):
+    for alpha in (ALPHA, None, SOLID):
         ents: dict = {}
         rendered = _render(scene, _pond(ents, alpha, probe=depth), ents, probe_path=probe_path)
         assert rendered["runner"].stats.probe_path == probe_path
         faces[alpha] = rendered["runner"].engine.renderer.probes.read_face(ents["probe"], face).astype(np.float64)
-    covered = np.abs(faces[1.0] - faces[None]).max(axis=-1) > 0.05  # where a pane is in the face
+    covered = np.abs(faces[SOLID] - faces[None]).max(axis=-1) > 0.05  # where a pane is in the face
     assert covered.sum() > 300, covered.sum()
-    _blend_agrees(faces[ALPHA], faces[1.0], faces[None])
+    _blend_agrees(faces[ALPHA], faces[SOLID], faces[None])
 
 
 def test_a_kept_pond_frame_is_the_frame_drawn_whole(scene):
@@ -271,7 +276,7 @@ def test_a_pane_under_a_pond_and_in_front_of_a_far_see_through_mirror_is_reporte
                                            Material(color=(0.9, 0.15, 0.1, alpha)), Emissive(0.6))
         return build
 
-    glass, without, opaque = _three(scene, room)
+    glass, without, opaque = _three(scene, room, solid=1.0)  # (no water: opaque panes are no glass to report)
     ents = glass["ents"]
     assert glass["runner"].stats.glass_between_surfaces >= 1
     for rendered in (without, opaque):

@@ -128,8 +128,7 @@ class RefractionCopy:
         vao.render(moderngl.TRIANGLES, vertices=3)
         copy.texture.build_mipmaps(0, copy.top_lod if rough else 0)
         bind_texture(ctx, copy.texture, REFRACTION_COPY_UNIT)
-        gpu.stats.passes += 1
-        gpu.stats.draw_calls += 1
+        gpu.stats.draw_calls += 1  # (a copy, as the screen reflections' is: not a pass of its own)
         self.copies += 1
         if gpu.debug:
             gpu.checkpoint("refraction copy")
