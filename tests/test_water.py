@@ -466,3 +466,34 @@ def test_a_post_standing_in_the_water_shows_below_it_where_snells_law_puts_it(sc
     green = seen[rows, column, 1] > 2.0 * seen[rows, column, 0] + 0.05
     assert expected.sum() >= 3 and (expected != straight).sum() >= 3, (expected.sum(), (expected != straight).sum())
     assert (green != expected).sum() <= 2, (np.flatnonzero(green), np.flatnonzero(expected), np.flatnonzero(straight))
+
+
+def test_waters_copy_of_what_is_below_is_made_once_and_goes_with_the_water(scene, monkeypatch):
+    """Water bends what is below by a copy of the level it goes into (the refraction copy):
+    one image made once and kept from frame to frame while the water is seen (with no glass
+    in the world: nothing else takes it), let go once a whole frame has taken none."""
+    from engine.render import screen_refraction
+
+    made = []
+    real = screen_refraction._Copy.__init__
+
+    def counted(self, *args, **kwargs):
+        made.append(args)
+        real(self, *args, **kwargs)
+
+    monkeypatch.setattr(screen_refraction._Copy, "__init__", counted)
+    water = []
+
+    def build(world):
+        pool(world, True, (0.0, 1.5, 2.0), (0.0, -1.0, -1.5))
+        water.append(world.query_one(Water)[0][0])
+
+    runner = scene(build, (48, 64))
+    copy = runner.engine.renderer.scene_pass.refraction_copy
+    for _ in range(5):
+        runner.frame()
+    assert copy.copies == 5 and len(made) == 1 and copy.held() == 1
+    runner.world.delete_entity(water[0])
+    runner.frame()
+    runner.frame()
+    assert copy.held() == 0 and copy.copies == 5 and len(made) == 1

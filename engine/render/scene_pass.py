@@ -428,12 +428,12 @@ class ScenePass:
         opaque draws are (``engine/render/screen_refraction.py``).  ``conditions`` as for
         ``draw``.  Nothing where none refracts or none reaches the views (``batch_reach``), or
         for a view drawn whole (its ``options.transparent``: a probe face's, which drew them
-        with its opaque batches); where none refracts, the copies are let go."""
+        with its opaque batches); where none refracts, the copies are let go once a whole
+        frame has taken none (water takes them too)."""
         renderer, ctx = self.renderer, self.ctx
         refracting = renderer.refracting_batches()
-        if not refracting:
-            if self.refraction_copy.held():  # (the last refracting surface went: its copies with it)
-                self.refraction_copy.release()
+        if not refracting:  # (the last refracting surface went: its copies with it, water's kept)
+            self.refraction_copy.let_go_unused()
             return
         if not views or options.transparent:
             return

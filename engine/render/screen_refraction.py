@@ -105,6 +105,9 @@ class RefractionCopy:
         self._vao: moderngl.VertexArray | None = None
         self._vao_of = -1  # the shader library's reloads when it was made
         self.copies = 0  # copies taken so far (tests count them)
+        # Frames are told apart by the frame's RenderStats (Engine.frame gives each its own).
+        self._frame: object = None
+        self._took_this_frame = self._took_last_frame = False
 
     def take(self, targets: RenderTargets, rough: bool) -> None:
         """Copy ``targets``' colour and depth into the copy of its size and bind it at
@@ -112,6 +115,8 @@ class RefractionCopy:
         build its mips, else its chain ends at the image (every lod reads it: on llvmpipe the
         chain is about a tenth of a glass-filled frame's refraction)."""
         ctx, gpu = self.ctx, self.gpu
+        self._count_frames()
+        self._took_this_frame = True
         copy = self._copies.pop(targets.size, None)
         if copy is None:
             copy = _Copy(ctx, targets.size)
@@ -147,6 +152,22 @@ class RefractionCopy:
     def held(self) -> int:
         """Copy images held now."""
         return len(self._copies)
+
+    def let_go_unused(self) -> None:
+        """Release the copies once a whole frame has gone by without a take: asked by a level's
+        finish where nothing refracts (``ScenePass.refract``).  Not at once: water takes its copy
+        in a composite (``MirrorPasses.composite_level``), which for the root's level comes after
+        the finishes of the levels below, and a copy let go there would be made again each
+        frame."""
+        self._count_frames()
+        if self._copies and not self._took_this_frame and not self._took_last_frame:
+            self.release()
+
+    def _count_frames(self) -> None:
+        stats = self.gpu.stats
+        if stats is not self._frame:
+            self._frame = stats
+            self._took_last_frame, self._took_this_frame = self._took_this_frame, False
 
     def release(self) -> None:
         """Let the copies go (made again when next taken) and the pass's vertex array."""
