@@ -35,7 +35,8 @@ class Water(TrackedComponent):
       refracted ray meets a floor as deep as the one drawn below it (refined over three
       turns), so a still pool looks shallower than it is and a rippled one wavers
       (``shaders/mirror_composite.frag`` ``water_below``); a surface shown by its fallback
-      (no view of its own) keeps what is below unbent.
+      (no view of its own: cut by the view budget, switched off, faded) bends it the same
+      way, and a partly faded one's view blends over its fallback's bent pixels.
     - **Waves.**  ``Material.normal_map`` (``normal_scale`` its strength) is read twice in
       the reflection's composite and the two heightfields summed (their slopes averaged,
       ``cross`` the second's share): once ``tiling`` times across the mirror's UVs,

@@ -15,9 +15,11 @@
 //                     reflect_rate, and with a map, rippled by two scrolling layers of it.
 //                     Its row carries the waves' offset in the tile's x and y (v_eye.w,
 //                     v_normal.w), the second layer's share in the tile scale (v_tint.a)
-//                     and F0 in the roughness (v_params.y).  A view's (WATER_REFRACTION, never
-//                     a fallback's) writes the pixel whole: the reflection by its weight over
-//                     what lies below, bent (water_below).
+//                     and F0 in the roughness (v_params.y; negative on the row of a partly
+//                     faded view, which blends over its fallback).  WATER_REFRACTION builds
+//                     (a view's and a fallback's) write the pixel whole: the reflection by
+//                     its weight over what lies below, bent (water_below); a partly faded
+//                     view's composite blends over its fallback's (bent by the fallback).
 //   COMPOSITE_FALLBACK: (with PORTAL, BUMPY, WATER or none; ROUGH never: its roughness is a
 //                     mip bias here) the fallback of a surface seen with no view of its own
 //                     (cut by the view budget, faded, past the depth limit, a mirror switched
@@ -247,7 +249,7 @@ void main() {
 #endif
 #else
     float reflect_rate = v_params.x;
-    float roughness = v_params.y;
+    float roughness = abs(v_params.y);  // (water: F0, negative on a partly faded view's row)
     vec3 normal = v_normal.xyz;
 #ifdef COMPOSITE_BUMPY
     // A normal map bends the mirror (seed 000's future work: the reflection texture stays as
@@ -317,7 +319,7 @@ void main() {
 #ifdef COMPOSITE_WATER
     // Water: what is reflected (tinted) over the surface's own pixels, which show what lies
     // below, by the Fresnel reflectance at this pixel's angle (reflect_rate scales it).
-    float weight = water_fresnel(normal, -view_dir, v_params.y) * reflect_rate;
+    float weight = water_fresnel(normal, -view_dir, roughness) * reflect_rate;
 #else
     vec3 reflected = ggx_reflect(normal, r, -view_dir, radiance, v_tint.rgb, roughness);
     float weight = reflect_rate;
@@ -329,7 +331,15 @@ void main() {
     // (fogged by the same air in the parent's scene pass), the pixel is fogged all the way.
 #if defined(COMPOSITE_WATER) && defined(WATER_REFRACTION)
     // (the reflection by its weight over what is below, bent: the pixel written whole)
-    out_color = vec4(hdr_store(mix(water_below(at, view_dir, normal, v_normal.xyz, v_params.y),
+#ifndef COMPOSITE_FALLBACK
+    // A partly faded water's view blends over its fallback, which bent what is below and
+    // wrote the pixel whole (a view's composite bending it again would bend the fallback's
+    // reflection too, by the Fresnel weight of the pixel its ray lands on).
+    if (v_params.y < 0.0)
+        out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);
+    else
+#endif
+    out_color = vec4(hdr_store(mix(water_below(at, view_dir, normal, v_normal.xyz, roughness),
                                    fog_over(radiance * v_tint.rgb, parent_fog), weight)), 1.0);
 #elif defined(COMPOSITE_WATER)
     out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);

@@ -341,6 +341,19 @@ def _glass_screen(ctx):
     return _engine_frames(ctx, MirrorRing(4), 3, configure)
 
 
+def _pond_faded(ctx):
+    """The sample level with its pond partly faded (the water's fallback bending what is below
+    from a copy of its level, its view's composite blended over it)."""
+    from games.hall_of_mirrors import HallOfMirrors
+
+    def configure(engine):
+        from components import Mirror, Water
+
+        for entity, _ in engine.world.query_one(Water):
+            engine.world.get(entity, Mirror).fade_distance = (0.0, 40.0)
+    return _engine_frames(ctx, HallOfMirrors(), 2, configure)
+
+
 SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     **{name: _golden(name) for name in ("hall_start", "hall_mirror_wall", "hall_doorway", "hall_partner_side",
                                         "mirror_ring_8_batched", "portals_depth_8", "portals_partner_disabled",
@@ -370,6 +383,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "shafts_clouds": _lighting("shafts_clouds"),
     "moonlit_hall": _moonlit_hall,
     "glass_screen": _glass_screen,
+    "pond_faded": _pond_faded,
 }
 
 

@@ -390,18 +390,40 @@ cross = 0.25
             load_level(level)
 
 
-def test_what_is_below_is_seen_bent_where_snells_law_puts_it(scene):
+def striped_pool(world, **mirror_values) -> None:
+    """``pool`` seen from the side, with a red stripe across its floor 1.5 m ahead (and
+    ``mirror_values`` set on the water's Mirror)."""
+    pool(world, True, (0.0, 1.5, 2.0), (0.0, -1.0, -1.5))
+    if mirror_values:
+        for _, mirror in world.query_one(Mirror):
+            for name, value in mirror_values.items():
+                setattr(mirror, name, value)
+    world.spawn(Transform(position=(0.0, -0.99, -1.5)), MeshRef(box((6.0, 0.02, 0.3))),
+                Material(color=(0.5, 0.03, 0.03, 1.0), roughness=1.0, environment_reflection=0.0), Emissive(1.0))
+
+
+SHOWN_BY = {"view": {}, "fallback": {"enabled": False},
+            # (the eye 53 degrees off the pool's normal from its middle: its view's weight about 1/2)
+            "faded": {"fade_angle": (40.0, 66.0)}}
+
+
+@pytest.mark.parametrize("shown_by", SHOWN_BY)
+def test_what_is_below_is_seen_bent_where_snells_law_puts_it(scene, shown_by):
     """A red stripe across a flat pool floor a metre under clear, still water, seen from the
     side: down a column, the stripe shows where the pixels' rays, refracted at the surface by
     the water's index (in numpy), meet the floor: nearer the surface than where it lies (a
-    pool looks shallower), well away from where the unbent rays would show it."""
-    def build(world):
-        pool(world, True, (0.0, 1.5, 2.0), (0.0, -1.0, -1.5))
-        world.spawn(Transform(position=(0.0, -0.99, -1.5)), MeshRef(box((6.0, 0.02, 0.3))),
-                    Material(color=(0.5, 0.03, 0.03, 1.0), roughness=1.0, environment_reflection=0.0), Emissive(1.0))
-
+    pool looks shallower), well away from where the unbent rays would show it.  The same where
+    the water has no view of its own (its mirror switched off: its fallback, which reflects
+    the same uniform sky, gives the view's frame), and where it is partly faded (its view's
+    composite over its fallback: what is below bent once, by the view's)."""
     size = (48, 96)
-    runner, seen = render(scene, build, size=size)
+    runner, seen = render(scene, lambda world: striped_pool(world, **SHOWN_BY[shown_by]), size=size)
+    stats = runner.engine.renderer.stats
+    assert (stats.reflection_fallbacks, stats.reflection_views) == \
+        {"view": (0, 1), "fallback": (1, 0), "faded": (1, 1)}[shown_by]
+    if shown_by != "view":
+        _, by_view = render(scene, striped_pool, size=size)
+        assert np.abs(seen - by_view).max() < 0.02
     view = runner.engine.main_view
     inverse = np.array(glm.inverse(glm.dmat4(view.view_proj)).to_list(), np.float64).T
     column = size[0] // 2

@@ -299,7 +299,7 @@ COMPOSITE_DTYPE = np.dtype([
     ("tint", "<f4", (3,)),
     ("tile_scale", "<f4"),            # the tile's scale; water: the second layer's share
     ("reflect_rate", "<f4"),          # times the view's fade
-    ("roughness", "<f4"),             # water: F0
+    ("roughness", "<f4"),             # water: F0 (negative: a partly faded view, over its fallback)
     ("params_z", "<f4"),              # CompositeSurface.params_z: the surface plane's w
     ("view_index", "<f4"),            # the view's node index
     ("normal", "<f4", (3,)),
@@ -354,8 +354,8 @@ SKY_VARIANTS = frozenset(("sharp", "sharp_bumpy", "water", "water_bumpy"))
 # box holds the draw's surfaces: on llvmpipe, the 8-mirror ring faded out at 640x360, its six
 # fallbacks took 0.8 ms a frame without the probes' lookups at weight 0, 0.9-1.2 with them).
 _FALLBACK_BUILDS = (("", {}), ("_portal", {"COMPOSITE_PORTAL": "1"}), ("_bumpy", {"COMPOSITE_BUMPY": "1"}),
-                    ("_water", {"COMPOSITE_WATER": "1"}),
-                    ("_water_bumpy", {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1"}))
+                    ("_water", {"COMPOSITE_WATER": "1", "WATER_REFRACTION": "1"}),
+                    ("_water_bumpy", {"COMPOSITE_WATER": "1", "COMPOSITE_BUMPY": "1", "WATER_REFRACTION": "1"}))
 FALLBACK_VARIANTS = {f"fallback{probes}{name}": {"COMPOSITE_FALLBACK": "1", **extra, **defines}
                      for probes, extra in (("", {}), ("_probes", {"FALLBACK_PROBES": "1"}))
                      for name, defines in _FALLBACK_BUILDS}
@@ -456,6 +456,8 @@ def _composite_row(surface: CompositeSurface, block: bytes, rect: tuple[int, int
         x, y, scale, rough = tile.x, tile.y, tile.scale, surface.roughness
     else:  # this frame's offset of the waves (the surfaces stage moves it in place)
         (x, y), scale, rough = water.flow.offset, water.cross, water.f0
+        if fade < 1.0:  # (partly faded: its fallback under it bends what is below, mirror_composite.frag)
+            rough = -rough
     return _COMPOSITE_ROW.pack(
         corners, lx, ly, lx + lw, ly + lh, block[_BLOCK_INVERSE], block[_BLOCK_EYE], x,
         surface.tint, scale, surface.reflect_rate * fade, rough, surface.params_z, float(view_index),
@@ -965,6 +967,10 @@ class MirrorPasses:
         ctx = self.ctx
         fogging = self.renderer.fog.defines
         renderer = self.renderer
+        if any("_water" in key[0] for key in prepared.groups):
+            # Water with no view over it bends what lies below it as a view's composite does
+            # (composite_level): the parent as it stands, copied first.
+            self.refraction_copy.take(parent, False)
         parent.composite_framebuffer.use()
         apply_pass_state(ctx, _COMPOSITE, (0, 0, *parent.size))
         # With no level below, the level's images are blank (``Gpu.blank_ids``): the program
