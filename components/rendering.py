@@ -505,8 +505,9 @@ class Refractive(TrackedComponent):
     portals and before its glass (``engine/render/screen_refraction.py``), so a box behind a
     pane shows through it, bent; where the ray leaves the view, passes behind what is drawn
     or finds nothing (the sky), the probe's or sky's image stays, with a fade between.
-    Glass seen through glass is not in the copy (the nearer shows the probe there), a rough
-    surface reads a blurrier level of the copy, and probe captures read the probe or sky.
+    Glass seen through glass is drawn first, in a layer of its own, and the nearer reads a
+    copy that holds it (farthest first, at most MAX_REFRACTION_LAYERS deep), a rough surface
+    reads a blurrier level of the copy, and probe captures read the probe or sky.
     False: the probe's or sky's image only (cheaper: no copy, no march).
     """
 

@@ -115,6 +115,11 @@ class RenderStats(BudgetLedger):
     # where they cover the farther surface it shows its own colour, not its reflection: one
     # per (view, batch) this frame.
     glass_between_surfaces: int = 0
+    # Screen-space refraction (engine/render/screen_refraction.py): the most layers of glass
+    # behind glass a level drew this frame (each its own copy and pass), and the refracting
+    # instances past MAX_REFRACTION_LAYERS drawn in the last layer (RefractionLimitWarning).
+    refraction_layers: int = 0
+    refraction_layers_cut: int = 0
     # Particles (systems/particle_system.py): living this frame, every emitter's; and those the
     # emitters could not spawn this frame, their max_particles reached (ParticleLimitWarning).
     particles: int = 0

@@ -70,6 +70,9 @@ flat out vec4 v_tint;
 flat out uvec4 v_slots;
 #ifdef SCREEN_REFRACTION
 flat out vec3 v_centre;  // the instance's origin in the world: a solid ball's centre (scene.frag refraction_origin)
+// The batch's rows this draw draws (first, past): a layer of glass behind glass draws its own
+// alone (engine/render/screen_refraction.py refraction_layers); the others are clipped away.
+uniform ivec2 drawn_instances;
 #endif
 
 void main() {
@@ -146,6 +149,9 @@ void main() {
     // instance hidden in this kind of view, or on none of the layers it shows, goes the same way.
     bool hidden = in_slots.w == camera.skip.x || (camera.skip.y != 0u && in_slots.w == camera.skip.y)
         || hidden_in_view(in_tint.w, camera.skip.z);
+#ifdef SCREEN_REFRACTION
+    hidden = hidden || gl_InstanceID < drawn_instances.x || gl_InstanceID >= drawn_instances.y;
+#endif
     gl_ClipDistance[CLIP_VIEW_PLANE] = hidden ? -1.0 : dot(world, camera.clip_plane);
 #endif
 }

@@ -15,7 +15,7 @@ import pytest
 from pyglm import glm
 
 from components import Camera, ComponentValueError, Material, MeshRef, Mirror, Refractive, Skybox, Transform
-from engine.assets.mesh import box, quad, sphere
+from engine.assets.mesh import Mesh, box, quad, sphere
 from engine.core.errors import GLLimitWarning
 from tests.support import box_hits, linear_to_srgb8, look_from, pixel_rays, srgb_to_linear
 
@@ -298,3 +298,96 @@ def test_a_rough_pane_shows_what_is_behind_it_blurred(scene):
     clear, rough = frame(scene, build(0.0)), frame(scene, build(0.6))
     assert edge_width(clear) <= 4
     assert edge_width(rough) >= edge_width(clear) + 6
+
+
+def tinted_pane(world, position, tint, mesh=None, material=None) -> int:
+    """A thin pane of index 1 that reflects nothing (what it lets through is times ``tint``),
+    facing the camera, 1.2 m square unless ``mesh`` says otherwise (its colour is instance
+    data: panes of one mesh are one batch)."""
+    return world.spawn(Transform(position=position), MeshRef(mesh or quad(1.2, 1.2)),
+                       material or Material(color=(*tint, 0.0), double_sided=True, **CLEAR),
+                       Refractive(ior=1.0, solid=False))
+
+
+def own_quad(side: float) -> Mesh:
+    """A square facing +Z, a mesh of its own (``quad``'s are one unit mesh, scaled: one batch)."""
+    h = side / 2.0
+    return Mesh(np.array([(-h, -h, 0.0), (h, -h, 0.0), (h, h, 0.0), (-h, h, 0.0)]), np.tile((0.0, 0.0, 1.0), (4, 1)),
+                np.array([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)]), np.array([(0, 1, 2), (0, 2, 3)]),
+                name="own_quad")
+
+
+@pytest.mark.parametrize("batches", ["two", "one"])
+def test_glass_behind_glass_shows_through_it(scene, batches):
+    """Two panes of index 1 that reflect nothing, one behind the other and offset so they
+    overlap on screen: each multiplies what it lets through by its colour, so through both
+    the room shows times both colours (the nearer pane's copy holds the farther pane: they are
+    drawn in two layers, ``refraction_layers``), through one times its own, elsewhere as drawn
+    without them; the pixels each pane covers found by casting the pixel rays at the panes in
+    numpy.  "one": panes of one mesh (one batch, its colours its instances' own), drawn a
+    layer each as runs of its rows; "two": the farther one a larger square of its own mesh (a
+    batch of its own)."""
+    near_tint, far_tint = np.array([0.4, 0.7, 1.0]), np.array([1.0, 0.6, 0.3])
+    near_at, far_at = np.array([0.3, 1.1, 1.5]), np.array([-0.6, 0.9, 0.0])
+    halves = {"near": 0.6, "far": 0.6 if batches == "one" else 0.7}
+
+    def without(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        room(world)
+
+    def with_panes(world):
+        without(world)
+        mesh = quad(1.2, 1.2)
+        tinted_pane(world, tuple(far_at), far_tint, mesh if batches == "one" else own_quad(1.4))
+        tinted_pane(world, tuple(near_at), near_tint, mesh)
+
+    drawn = frame(scene, without)
+    runner = scene(with_panes, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    seen = srgb_to_linear(runner.frame())
+    stats = runner.engine.renderer.stats
+    assert stats.refraction_layers == 2 and stats.refraction_layers_cut == 0
+    assert len(runner.engine.renderer.refracting_batches()) == (1 if batches == "one" else 2)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+
+    def covers(centre, half, margin):  # rays meeting the pane's square (z = its plane) within margin of its edge
+        t = (centre[2] - eye[2]) / rays[..., 2]
+        hit = eye + t[..., None] * rays
+        inside = (np.abs(hit[..., 0] - centre[0]) < half - margin) & (np.abs(hit[..., 1] - centre[1]) < half - margin)
+        outside = (np.abs(hit[..., 0] - centre[0]) > half + margin) | (np.abs(hit[..., 1] - centre[1]) > half + margin)
+        return inside, outside
+
+    near_in, near_out = covers(near_at, halves["near"], 0.03)
+    far_in, far_out = covers(far_at, halves["far"], 0.03)
+    both = near_in & far_in
+    assert both.sum() > 300 and (near_in & far_out).sum() > 300 and (far_in & near_out).sum() > 300
+    expected = drawn * np.where(near_in[..., None], near_tint, 1.0) * np.where(far_in[..., None], far_tint, 1.0)
+    known = (near_in | near_out) & (far_in | far_out)
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(expected)).max(axis=-1)
+    assert np.quantile(levels[known & both], 0.99) <= 3.0, np.quantile(levels[known & both], 0.99)
+    assert np.quantile(levels[known], 0.99) <= 3.0 and levels[known].mean() < 0.5
+
+
+def test_glass_past_the_layers_limit_is_said_and_counted(scene):
+    """More refracting panes behind one another on screen than MAX_REFRACTION_LAYERS: those
+    past it are drawn in the last layer, counted in RenderStats.refraction_layers_cut and
+    said once (RefractionLimitWarning)."""
+    from engine.core.errors import RefractionLimitWarning
+    from engine.render.screen_refraction import MAX_REFRACTION_LAYERS
+
+    def build(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        room(world)
+        for k in range(MAX_REFRACTION_LAYERS + 2):
+            tinted_pane(world, (0.0, 1.0, 1.5 - 0.4 * k), (0.9, 0.9, 0.9))
+
+    runner = scene(build, SIZE)
+    with pytest.warns(RefractionLimitWarning, match="MAX_REFRACTION_LAYERS"):
+        runner.frame()
+    stats = runner.engine.renderer.stats
+    assert stats.refraction_layers == MAX_REFRACTION_LAYERS and stats.refraction_layers_cut == 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RefractionLimitWarning)
+        runner.frame()  # (said once)
+    assert runner.engine.renderer.stats.refraction_layers_cut == 2

@@ -65,3 +65,10 @@ class VolumeLimitWarning(UserWarning):
 class FogLimitWarning(UserWarning):
     """More ``FogVolume``s than ``MAX_FOG_VOLUMES``: those farthest from the active camera are
     left out (said when the count grows, counted every frame in ``RenderStats.fog_volumes_cut``)."""
+
+
+class RefractionLimitWarning(UserWarning):
+    """More refracting surfaces lie behind one another on screen than
+    ``MAX_REFRACTION_LAYERS``: those past it are drawn in the last layer and do not show the
+    glass of that layer behind them (said once, counted every frame in
+    ``RenderStats.refraction_layers_cut``)."""

@@ -41,6 +41,7 @@ Mirrors whose reflection paints over every pixel of them draw unlit (``SceneOpti
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import nullcontext
 from typing import TYPE_CHECKING
@@ -48,7 +49,7 @@ from typing import TYPE_CHECKING
 import moderngl
 from pyglm import glm
 
-from engine.core.errors import GLPassError
+from engine.core.errors import GLPassError, RefractionLimitWarning
 from engine.render import bindings
 from engine.render.batch_cull import CULL_MIN_BATCHES, CULL_MIN_DRAWS, batch_reach
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, views_block
@@ -100,7 +101,7 @@ from engine.render.scene_programs import (
     geometry_invocations,
     reflects_environment,
 )
-from engine.render.screen_refraction import RefractionCopy
+from engine.render.screen_refraction import ALL_INSTANCES, MAX_REFRACTION_LAYERS, RefractionCopy, refraction_layers
 from engine.render.shadows import ShadowMaps
 from engine.render.sky_draw import SkyDraw
 from engine.render.slot_order import (
@@ -160,6 +161,7 @@ class ScenePass:
         self.particle_draw = ParticleDraw(renderer, shadows)  # every emitter's particles, in among a view's glass
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         self.refraction_copy = RefractionCopy(renderer)  # what refracting surfaces march (refract)
+        self._said_layers_cut = False  # (RefractionLimitWarning, said once)
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
@@ -193,7 +195,8 @@ class ScenePass:
 
     def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
-                      unlit: frozenset | set = frozenset(), screen: str = "") -> None:
+                      unlit: frozenset | set = frozenset(), screen: str = "",
+                      rows: tuple[int, int] = ALL_INSTANCES) -> None:
         """One instanced draw per batch, each with the program of its variants.  A program's
         uniforms are written only when their value changes (``ScenePrograms.written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
@@ -210,7 +213,9 @@ class ScenePass:
         away (0: none; entities start at 1).  A batch in ``unlit`` (``unlit_batches``: its
         mirrors all ``shading_replaced``) draws with its ``UNLIT_SURFACE`` build.  ``screen``
         "occluded" draws the builds that read the screen's ambient occlusion, "depth_normals"
-        the build that writes only depth and normals (``ScenePrograms.program``)."""
+        the build that writes only depth and normals (``ScenePrograms.program``), "refracted"
+        the screen-space refraction's, which draw the batches' ``rows`` (first, past)
+        alone (a layer's run: ``screen_refraction.refraction_layers``)."""
         ctx = self.ctx
         renderer = self.renderer
         programs = self.programs
@@ -258,6 +263,8 @@ class ScenePass:
                 bind_texture(ctx, renderer.sky, PROBE_UNIT)
             if values[0] != sky_size and uniforms[0] is not None:
                 uniforms[0].value = values[0] = sky_size
+            if values[1] != rows and uniforms[1] is not None:  # (SCREEN_REFRACTION builds')
+                uniforms[1].value = values[1] = rows
             # The batch's own values: one tuple compared (by identity first), and a uniform at
             # a time only where it differs from what this program last drew with.
             last = last_own.get(glo)
@@ -440,26 +447,47 @@ class ScenePass:
         # Which batch can draw a sample in which view (its boxes against the view's volume):
         # a level none reaches copies nothing.
         reach = batch_reach(views, targets.size, refracting)
-        reached = [batch for batch, *rows in zip(refracting, *reach, strict=True) if any(rows)]
-        if not reached:
+        if not any(any(rows) for rows in reach):
             return
-        # (a rough one's march reads the copy's mips: made only then)
-        self.refraction_copy.take(targets, any(batch.rows["surface"][:batch.count, 1].max() > 0.0
-                                               for batch in reached))
+        # Glass behind glass: each view's refracting instances in layers, farthest first, each
+        # layer drawn over a copy that holds the layers before it (refraction_layers).
+        layers = [refraction_layers(view, targets.size, self._reaching(refracting, reach[index], view))
+                  if any(reach[index]) else None for index, view in enumerate(views)]
+        stats = renderer.stats
+        count = max(len(plan.runs) for plan in layers if plan is not None)
+        cut = sum(plan.cut for plan in layers if plan is not None)
+        if cut:
+            stats.refraction_layers_cut += cut
+            if not self._said_layers_cut:
+                self._said_layers_cut = True
+                warnings.warn(RefractionLimitWarning(
+                    f"Refractive.screen: {cut} refracting surfaces lie behind {MAX_REFRACTION_LAYERS} others on "
+                    f"screen (MAX_REFRACTION_LAYERS): drawn in the last layer, they do not show the glass of that "
+                    "layer behind them (RenderStats.refraction_layers_cut)"), stacklevel=2)
+        stats.refraction_layers = max(stats.refraction_layers, count)
         self._sky_size = renderer.sky.size[0]
-        self._begin(views, targets, options, _SCENE)
-        bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)
-        renderer.upload_views(views)
-        for index, view in enumerate(views):
-            if not any(reach[index]):
-                continue
-            with _ALWAYS if conditions is None else conditions[index].crender:
-                set_scissor(ctx, view.scissor)
-                set_front_face(ctx, "cw" if view.mirrored else "ccw")
-                renderer.bind_view_at(index)
-                self._draw_batches(self._reaching(refracting, reach[index], view), 0, options.masked,
-                                   skip=view.skip, hide=view.hide, screen="refracted")
-        renderer.stats.passes += 1
+        for layer in range(count):
+            runs = [plan.runs[layer] if plan is not None and layer < len(plan.runs) else [] for plan in layers]
+            # (a rough one's march reads the copy's mips: made only then)
+            self.refraction_copy.take(targets, any(batch.rows["surface"][first:past, 1].max() > 0.0
+                                                   for view_runs in runs for batch, first, past in view_runs))
+            self._begin(views, targets, options, _SCENE)
+            bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)
+            renderer.upload_views(views)
+            for index, view in enumerate(views):
+                if not runs[index]:
+                    continue
+                with _ALWAYS if conditions is None else conditions[index].crender:
+                    set_scissor(ctx, view.scissor)
+                    set_front_face(ctx, "cw" if view.mirrored else "ccw")
+                    renderer.bind_view_at(index)
+                    whole = [batch for batch, first, past in runs[index] if first == 0 and past == batch.count]
+                    self._draw_batches(whole, 0, options.masked, skip=view.skip, hide=view.hide, screen="refracted")
+                    for batch, first, past in runs[index]:
+                        if first != 0 or past != batch.count:
+                            self._draw_batches([batch], 0, options.masked, skip=view.skip, hide=view.hide,
+                                               screen="refracted", rows=(first, past))
+            stats.passes += 1
         if renderer.debug:
             renderer.checkpoint(f"refraction ({views[0].name}{' and others' if len(views) > 1 else ''})")
 

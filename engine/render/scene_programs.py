@@ -70,7 +70,7 @@ if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
 
 # The uniforms a draw may write, in the order a draw record keeps them.
-PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
+PER_DRAW_UNIFORMS = ("sky_face_size", "drawn_instances", "has_albedo_map", "transparent",
                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
@@ -78,7 +78,7 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "has_albedo_map", "transparent",
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
                      "anisotropy", "iridescence", "pose_row", "morph_targets", "diffuse_transmission",
                      "parallax_depth", "lightmap_intensity", "subsurface")
-PER_PASS_UNIFORMS = 1  # the first changes with the pass; the rest with the batch (a view's node
+PER_PASS_UNIFORMS = 2  # the first two change with the pass; the rest with the batch (a view's node
 # index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))

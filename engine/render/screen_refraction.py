@@ -19,10 +19,17 @@ below, the screen reflections and the light shafts are composited into it):
    the ray goes behind what was drawn, the probe's or sky's image where it finds nothing,
    faded between.
 
+Glass behind glass (``refraction_layers``): a view's refracting instances are drawn in
+layers, farthest first, each instance a layer after the farther ones whose rectangles on
+screen (widened: ``LAYER_REACH``) its own overlaps, and each layer over a copy taken after
+the layers before it, so the nearer glass shows the farther (three.js's transmission leaves
+transmissive objects out of its one copy; this is depth peeling by object, at most
+``MAX_REFRACTION_LAYERS`` copies a level).  A layer's run of a batch's rows is drawn alone
+by the ``drawn_instances`` uniform of the ``SCREEN_REFRACTION`` builds (GL 4.1 has no base
+instance): the other rows' vertices are clipped away.
+
 What the copy cannot hold is not seen through the glass: what the view did not draw (off
-its edges, behind what it shows), other refracting surfaces and the transparent slot (glass
-behind glass shows the probe's image there, as three.js's transmission leaves transmissive
-objects out of its copy).  Drawn after them, a refracting surface takes no part in the
+its edges, behind what it shows) and the transparent slot.  Drawn after them, a refracting surface takes no part in the
 screen reflections (its own reflection is the probe's or sky's, as HDRP's and Unity's
 transparent surfaces keep theirs) nor in the screen's ambient occlusion.  Probe captures
 draw every refracting batch with its opaque draws, reading the probe or the sky (their
@@ -30,14 +37,18 @@ faces have no copy).  Where a build with the
 march would read more samplers than the fragment stage has (a 16-unit driver's fullest
 builds), the build without serves and a ``GLLimitWarning`` says so.
 
-Cost: one full-screen copy and its mips a level that draws a refracting batch, and the march
+Cost: one full-screen copy and its mips a level that draws a refracting batch (a layer of
+glass behind glass, one more), and the march
 (at most ``REFRACTION_STEPS`` steps and ``REFRACTION_REFINE`` halvings of a ray, three rays
 with dispersion) in the refracting surfaces' pixels."""
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
 import moderngl
+import numpy as np
 
 from engine.core.errors import GLLimitWarning
 from engine.render.bindings import (
@@ -51,12 +62,25 @@ from engine.render.bindings import (
 from engine.render.gpu import Gpu
 from engine.render.targets import RenderTargets, release_framebuffer
 
+if TYPE_CHECKING:
+    from engine.render.instances import InstanceBatch
+    from engine.render.views import View
+
 # The copy's mip chain for rough glass: at most this many levels above the image.
 MAX_COPY_LOD = 6
 # How many sizes' copies are kept at once (the main tree's levels share one; a probe face's
 # tree and a resized output others); the one used longest ago goes first.
 KEPT_SIZES = 3
 _PASS = PassState()
+# Layers of refracting surfaces a level draws at most, each over a copy that holds the layers
+# behind it (refraction_layers); surfaces past it are drawn in the last, which does not see
+# the others of that layer behind them (RenderStats.refraction_layers_cut).
+MAX_REFRACTION_LAYERS = 4
+# A surface's rectangle on screen, widened by this share of its width and height each side for
+# the layers: a lens shows what lies around it (a ball inverts and magnifies a field wider
+# than itself), so glass beside it on screen, not only behind it, goes in a layer before it.
+LAYER_REACH = 0.5
+ALL_INSTANCES = (0, 2 ** 31 - 1)   # the instances a refraction draw draws, where it is not a layer's run
 # The GL types of sampler uniforms (GL 4.1's tables 2.10 and 2.11: the float, shadow, integer
 # and unsigned samplers of every target), for sampler_count.
 _SAMPLER_TYPES = frozenset((*range(0x8B5D, 0x8B65), *range(0x8DC0, 0x8DD9), *range(0x900C, 0x9010),
@@ -76,6 +100,75 @@ def refuse_screen_refraction(needed: int, units: int) -> None:
         f"Refractive.screen: a scene build with screen-space refraction reads {needed} samplers and this "
         f"OpenGL's fragment stage has {units} (GL_MAX_TEXTURE_IMAGE_UNITS): its surfaces refract the probe's "
         "or sky's image only (fewer maps or kinds of shadowed light on them make room)"), stacklevel=4)
+
+
+class RefractionLayers(NamedTuple):
+    """A view's refracting instances in the order they are drawn (``refraction_layers``):
+    each layer's runs, a run a batch's rows ``first`` to ``past`` (drawn together), and how
+    many instances past ``MAX_REFRACTION_LAYERS`` were drawn in the last layer."""
+
+    runs: list[list[tuple[InstanceBatch, int, int]]]
+    cut: int
+
+
+def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[InstanceBatch]) -> RefractionLayers:
+    """Glass behind glass: ``batches``' instances (refracting, reaching ``view`` drawn into a
+    viewport of ``size``) in layers, farthest first by their boxes' centres, each instance one
+    layer in front of the nearest-to-it farther instances its widened rectangle on screen
+    (``LAYER_REACH``) overlaps: a layer's copy holds the layers drawn before it, so a glass ball
+    behind a pane shows through the pane (depth peeling by object, as engines sort their
+    transparent objects back to front).  One instance, or none overlapping: one layer, drawn as
+    before.  What a layer cannot see is its own layer's other glass, which none of its rectangles
+    reaches, and glass past the limit in the last layer."""
+    if sum(batch.count for batch in batches) <= 1:
+        return RefractionLayers([[(batch, 0, batch.count) for batch in batches]], 0)
+    width, height = size
+    x, y, w, h = view.scissor or (0, 0, width, height)
+    boxes = np.concatenate([batch.row_boxes for batch in batches])           # [n, lo/hi, xyz]
+    n = len(boxes)
+    unmeasured = np.isnan(boxes).any(axis=(1, 2))
+    boxes = np.where(unmeasured[:, None, None], 0.0, boxes)
+    corners = np.empty((n, 8, 4))
+    for k in range(8):
+        corners[:, k, 0] = boxes[:, (k >> 0) & 1, 0]
+        corners[:, k, 1] = boxes[:, (k >> 1) & 1, 1]
+        corners[:, k, 2] = boxes[:, (k >> 2) & 1, 2]
+    corners[:, :, 3] = 1.0
+    clip = corners @ np.asarray(view.view_proj.to_list(), np.float64)         # (column-major: rows of the transpose)
+    ahead = (clip[:, :, 3] > 1e-6).all(axis=1) & ~unmeasured
+    w_safe = np.where(clip[:, :, 3] > 1e-6, clip[:, :, 3], 1.0)
+    px = (clip[:, :, 0] / w_safe * 0.5 + 0.5) * width
+    py = (clip[:, :, 1] / w_safe * 0.5 + 0.5) * height
+    rects = np.stack([px.min(axis=1), py.min(axis=1), px.max(axis=1), py.max(axis=1)], axis=1)
+    reach = (rects[:, 2:] - rects[:, :2]) * LAYER_REACH
+    rects[:, :2] -= reach
+    rects[:, 2:] += reach
+    # (a box reaching behind the eye, or not measured: the whole view)
+    rects[~ahead] = (x, y, x + w, y + h)
+    rects[:, [0, 2]] = rects[:, [0, 2]].clip(x, x + w)
+    rects[:, [1, 3]] = rects[:, [1, 3]].clip(y, y + h)
+    centres = boxes.mean(axis=1)
+    distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1))
+    order = np.argsort(-distance, kind="stable")
+    layer = np.zeros(n, np.int64)
+    for position in range(1, n):
+        i, before = order[position], order[:position]
+        r, others = rects[i], rects[before]
+        over = (others[:, 0] < r[2]) & (r[0] < others[:, 2]) & (others[:, 1] < r[3]) & (r[1] < others[:, 3])
+        if over.any():
+            layer[i] = layer[before[over]].max() + 1
+    cut = int((layer >= MAX_REFRACTION_LAYERS).sum())
+    np.minimum(layer, MAX_REFRACTION_LAYERS - 1, out=layer)
+    runs: list[list[tuple[InstanceBatch, int, int]]] = [[] for _ in range(int(layer.max()) + 1)]
+    start = 0
+    for batch in batches:
+        rows = layer[start:start + batch.count]
+        start += batch.count
+        # (runs of rows in one layer: where the layer changes from the row before)
+        edges = [0, *(np.flatnonzero(np.diff(rows)) + 1).tolist(), batch.count]
+        for first, past in zip(edges[:-1], edges[1:], strict=True):
+            runs[int(rows[first])].append((batch, first, past))
+    return RefractionLayers(runs, cut)
 
 
 class _Copy:
