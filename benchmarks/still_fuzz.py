@@ -151,6 +151,9 @@ class StillCase:
     # A solid glass ball refracting what each view drew behind it (Refractive.screen: its copy
     # and march in every level, drawn again by a refill over its level's copy), this rough; None: none.
     glass: float | None = None
+    # With the ball, a refracting pane behind it (glass behind glass: the ball drawn in a layer
+    # after the pane's, over a copy that holds it: screen_refraction.refraction_layers).
+    glass_behind: bool = False
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -160,7 +163,8 @@ class StillCase:
                 f"see-through mirror {self.see_through_mirror}, sandwich {self.sandwich}; {self.still} still frames, "
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
                 f"cascades {self.cascades}, spot {self.spot_angle}, fog {self.fog}, occlusion {self.occlusion}, "
-                f"reflections {self.reflections}, shafts {self.shafts}, glass {self.glass}; then "
+                f"reflections {self.reflections}, shafts {self.shafts}, glass {self.glass} "
+                f"(behind {self.glass_behind}); then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -186,7 +190,8 @@ def random_still_case(rng: random.Random) -> StillCase:
                      visibility="predicted" if rng.random() < 0.25 else "exact", then=then,
                      cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)),
                      fog=rng.random() < 0.3, occlusion=rng.random() < 0.3, reflections=rng.random() < 0.3,
-                     shafts=rng.random() < 0.5, glass=rng.choice((0.0, 0.0, 0.3)) if rng.random() < 0.35 else None)
+                     shafts=rng.random() < 0.5, glass=rng.choice((0.0, 0.0, 0.3)) if rng.random() < 0.35 else None,
+                     glass_behind=rng.random() < 0.5)
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -337,6 +342,10 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         named["glass"] = world.spawn(Transform(position=(-0.6, 0.9, 0.8)), MeshRef(sphere(0.4, 24, 12)),
                                      Material(color=(1.0, 1.0, 1.0, 0.0), roughness=case.glass),
                                      Refractive(ior=1.5, solid=True))
+        if case.glass_behind:
+            named["glass_behind"] = world.spawn(
+                Transform(position=(-0.7, 1.0, -0.4)), MeshRef(quad(1.2, 1.2)),
+                Material(color=(0.8, 0.9, 1.0, 0.0), roughness=case.glass, double_sided=True), Refractive(ior=1.3))
     for i, pane in enumerate(case.panes):
         named[f"pane{i}"] = _spawn_pane(world, pane)
     if case.water:
@@ -395,6 +404,7 @@ class StillFuzzer:
         # Frames the keeping engine refilled, and frames that drew glass between see-through
         # surfaces, over all cases: that the paths were reached.
         self.refills = self.glass_between = 0
+        self.glass_layered = 0  # ... and frames that drew glass behind glass in layers (refraction_layers)
 
     def close(self) -> None:
         self.keeping.close()
@@ -428,6 +438,7 @@ class StillFuzzer:
             stats = self.keeping.engine.renderer.stats
             self.refills += stats.reflection_end_refills > 0
             self.glass_between += stats.glass_between_surfaces > 0
+            self.glass_layered += stats.refraction_layers > 1
         return None
 
     def run(self, case: StillCase, index: int = 0) -> str | None:
@@ -600,9 +611,9 @@ class StillFuzzer:
             self.close()
         except Exception:  # noqa: BLE001 - a case that broke the engine: start fresh ones
             pass
-        counts = self.refused, self.rendered, self.refills, self.glass_between
+        counts = self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered
         self.__init__(self.ctx)
-        self.refused, self.rendered, self.refills, self.glass_between = counts
+        self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered = counts
 
 
 def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
@@ -612,4 +623,5 @@ def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[t
     fuzzer = StillFuzzer(ctx)
     ran, failures, passes = run_cases(fuzzer, random_still_case, cases, seed, report)
     passes["refill_frames"], passes["glass_between_frames"] = fuzzer.refills, fuzzer.glass_between
+    passes["glass_layered_frames"] = fuzzer.glass_layered
     return ran, failures, passes
