@@ -503,8 +503,9 @@ class Refractive(TrackedComponent):
     screen-space refraction read the frame behind the glass): the ray is marched across a
     copy of the view's colour and depth taken after its opaque surfaces, sky, mirrors and
     portals and before its glass (``engine/render/screen_refraction.py``), so a box behind a
-    pane shows through it, bent; where the ray leaves the view, passes behind what is drawn
-    or finds nothing (the sky), the probe's or sky's image stays, with a fade between.
+    pane shows through it, bent, and a ray that runs on over the sky the view drew shows that
+    sky; where the ray leaves the view, passes behind what is drawn or finds nothing, the
+    probe's or sky's image stays, with a fade between.
     Glass seen through glass is drawn first, in a layer of its own, and the nearer reads a
     copy that holds it (farthest first, at most MAX_REFRACTION_LAYERS deep), a rough surface
     reads a blurrier level of the copy, and probe captures read the probe or sky.

@@ -14,7 +14,18 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import Camera, ComponentValueError, Material, MeshRef, Mirror, Refractive, Skybox, Transform
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Fog,
+    Material,
+    MeshRef,
+    Mirror,
+    Refractive,
+    Skybox,
+    Transform,
+)
 from engine.assets.mesh import Mesh, box, quad, sphere
 from engine.core.errors import GLLimitWarning
 from tests.support import box_hits, linear_to_srgb8, look_from, pixel_rays, srgb_to_linear
@@ -71,6 +82,41 @@ def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene, projectio
     # (the sky through it is the sky's cube map, a level or two from the sky drawn a pixel
     # each; a ray along the eye's may land on a pixel's neighbour at a shadow's edge)
     assert np.quantile(levels[covered], 0.99) <= 2.0 and levels[covered].mean() < 0.3
+
+
+@pytest.mark.parametrize("air", ["clear", "fog"])
+def test_glass_over_the_sky_shows_the_sky_the_view_drew(scene, air):
+    """A pane of index 1 that reflects nothing, before the sun low in the sky: its rays run
+    on to the sky along the eye's, so it shows the sky the view drew around it, fog and all
+    (read where the ray's vanishing point lies, the sky all the way there), the sun's disc
+    as sharp as the sky pass draws it per pixel, not as the sky's cube map holds it (its
+    texels blur the disc's edge)."""
+    def without(world):
+        camera = look_from(world, (0.0, 1.2, 4.0), (0.0, 2.2, 0.0), fov=50.0)
+        if air == "fog":
+            # (height fog: thinning upwards, the sky is fogged only partly; the sun's disc shows)
+            world.add_component(camera, Fog(color=(0.7, 0.7, 0.7, 1.0), density=0.08, height_falloff=0.5))
+        room(world)
+        world.spawn(DirectionalLight(direction=(0.05, -0.3, 1.0), intensity=3.0))
+
+    def with_pane(world):
+        without(world)
+        pane(world, 1.0, position=(0.0, 2.2, 1.0))
+
+    drawn = frame(scene, without)
+    runner = scene(with_pane, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    seen = srgb_to_linear(runner.frame())
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    t = (1.0 - eye[2]) / rays[..., 2]
+    hit = eye + t[..., None] * rays
+    inside = (np.abs(hit[..., 0]) < 0.75) & (np.abs(hit[..., 1] - 2.2) < 0.75)
+    sky = inside & (rays[..., 1] > 0.05)   # (the room's post and block stand lower)
+    assert sky.sum() > 1500
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    assert np.quantile(levels[sky], 0.99) <= 1.5 and levels[sky].mean() < 0.2, \
+        (np.quantile(levels[sky], 0.99), levels[sky].mean())
 
 
 def striped_wall(world, stripe: np.ndarray, stripe_half: np.ndarray, fov: float) -> None:

@@ -16,8 +16,10 @@ below, the screen reflections and the light shafts are composited into it):
    depth tested and written as opaque surfaces are; the refraction (``refracted_light`` in
    ``shaders/scene.frag``) marches its refracted ray (a solid ball's: the ray out of it)
    across the copy (``shaders/include/screen_refraction.glsl``) and reads the colour where
-   the ray goes behind what was drawn, the probe's or sky's image where it finds nothing,
-   faded between.
+   the ray goes behind what was drawn, the sky the view drew where it runs on over that
+   (``refraction_sky``: at the ray's vanishing point; a reflection level leaves its sky to
+   its composite, so its copy marks those pixels: ``shaders/refraction_copy.frag``), the
+   probe's or sky's image where it finds nothing, faded between.
 
 Glass behind glass (``refraction_layers``): a view's refracting instances are drawn in
 layers, farthest first, each instance a layer after the farther ones whose rectangles on

@@ -11,18 +11,49 @@
 // REFRACTION_REFINE times to where the ray goes behind, and taken where it lies there within
 // REFRACTION_THICKNESS of the drawn surface (else it passed behind something: nothing found).
 // A ray that comes to another view's pixels (the node image: a reflection level's views
-// share one image) or leaves the view finds nothing.  Uses the Camera block (camera.glsl).
+// share one image) or leaves the view finds nothing.  A ray that stays in the view, in front
+// of all it passes, and ends over the sky goes on to the sky: it finds the colour the view
+// drew where the sky lies along it (its vanishing point, over sky all the way there:
+// refraction_sky), the sky as the view drew it, fog and clouds and all, which the probe's or
+// the sky's cube (unfogged, a probe's seen from its centre) is not.  Uses the Camera block
+// (camera.glsl).
 #define REFRACTION_STEPS 24
 #define REFRACTION_REFINE 5
 const float REFRACTION_REACH = 25.0;     // metres a refracted ray is followed (faded over its last quarter)
 const float REFRACTION_THICKNESS = 0.5;  // metres behind a drawn surface a ray is still taken to meet it
 const float REFRACTION_EDGE = 0.05;      // the share of the view's width and height a find fades out over at its edges
 
-uniform sampler2D refraction_copy;  // rgb: the view's colour before its refracting surfaces, a: its window depth;
-                                    // with its mips (a lod past the chain reads its last level)
+uniform sampler2D refraction_copy;  // rgb: the view's colour before its refracting surfaces, a: its window depth
+                                    // (3 where it drew nothing: refraction_copy.frag); with its mips (a lod past
+                                    // the chain reads its last level)
 #ifndef MASKED
 uniform usampler2D node_map;        // which view of the level drew each pixel (a root's: all 0)
 #endif
+
+#define REFRACTION_SKY_CHECKS 4            // pixels between a ray's end and its vanishing point checked for sky
+const float REFRACTION_SKY_ROUGHNESS = 0.1;  // a rougher surface's sky is its blurred cube's (faded from a tenth of it)
+
+// Where the ray along unit ``direction`` that ended at pixel ``end`` over the sky reaches it:
+// the view's colour at the ray's vanishing point, with its confidence (faded at the view's
+// edges and as the surface roughens), where the pixels from the end to there all show the
+// sky in this view; else nothing (a: 0).
+vec4 refraction_sky(vec2 end, vec3 direction, float roughness, vec2 corner, vec2 size) {
+    vec4 v = camera.view_proj * vec4(direction, 0.0);
+    if (v.w <= 1e-6) return vec4(0.0);  // (away from the view, or across it in an orthographic one)
+    vec2 vanishing = corner + (v.xy / v.w * 0.5 + 0.5) * size;
+    if (any(lessThan(vanishing, corner + 0.5)) || any(greaterThan(vanishing, corner + size - 0.5))) return vec4(0.0);
+    for (int i = 0; i <= REFRACTION_SKY_CHECKS; ++i) {
+        ivec2 at = ivec2(mix(end, vanishing, float(i) / float(REFRACTION_SKY_CHECKS)));
+        float window = texelFetch(refraction_copy, at, 0).a;
+        if (texelFetch(node_map, at, 0).r != node_index || window < 1.0 || window > 1.5)  // (> 1.5: none drawn)
+            return vec4(0.0);
+    }
+    vec2 uv = (vanishing - corner) / size;
+    vec2 edge = min(uv, 1.0 - uv);
+    return vec4(texelFetch(refraction_copy, ivec2(vanishing), 0).rgb,
+                smoothstep(0.0, REFRACTION_EDGE, min(edge.x, edge.y))
+                * (1.0 - smoothstep(0.1 * REFRACTION_SKY_ROUGHNESS, REFRACTION_SKY_ROUGHNESS, roughness)));
+}
 
 // The world point the copy holds at a pixel (its window depth ``window``).
 vec3 refraction_drawn_point(vec2 pixel, float window) {
@@ -68,18 +99,26 @@ vec4 screen_refraction(vec3 origin, vec3 direction, float roughness) {
     float span = max(abs(p1.x - p0.x), abs(p1.y - p0.y));
     float steps = clamp(ceil(span), 1.0, float(REFRACTION_STEPS));  // (a ray along the eye's: one step, its own pixel)
     float lo = 0.0, hi = -1.0;
+    bool stayed = true;  // in this view's pixels all the way
     for (int i = 1; i <= REFRACTION_STEPS; ++i) {
         if (float(i) > steps) break;
         float next = float(i) / steps;
         vec2 at = mix(p0, p1, next);
-        if (texelFetch(node_map, ivec2(at), 0).r != node_index) break;  // another view's pixels
+        if (texelFetch(node_map, ivec2(at), 0).r != node_index) {  // another view's pixels
+            stayed = false;
+            break;
+        }
         if (mix(z0, z1, next) >= texelFetch(refraction_copy, ivec2(at), 0).a) {
             hi = next;
             break;
         }
         lo = next;
     }
-    if (hi < 0.0) return vec4(0.0);
+    if (hi < 0.0) {
+        // In front of all it passed: where it ends in the view over the sky, on to the sky.
+        bool ended_over_sky = stayed && cut >= 1.0 && texelFetch(refraction_copy, ivec2(p1), 0).a >= 1.0;
+        return ended_over_sky ? refraction_sky(p1, direction, roughness, corner, size) : vec4(0.0);
+    }
     for (int i = 0; i < REFRACTION_REFINE; ++i) {
         float mid = 0.5 * (lo + hi);
         if (mix(z0, z1, mid) >= texelFetch(refraction_copy, ivec2(mix(p0, p1, mid)), 0).a) hi = mid; else lo = mid;
