@@ -468,9 +468,15 @@ class ScenePass:
         self._sky_size = renderer.sky.size[0]
         for layer in range(count):
             runs = [plan.runs[layer] if plan is not None and layer < len(plan.runs) else [] for plan in layers]
+            # After the first, a layer's copy takes again only what the layer before drew.
+            region = None
+            if layer:
+                drawn = [plan.drawn[layer - 1] for plan in layers if plan is not None and layer - 1 < len(plan.drawn)]
+                x0, y0 = min(r[0] for r in drawn), min(r[1] for r in drawn)
+                region = (x0, y0, max(r[2] for r in drawn) - x0, max(r[3] for r in drawn) - y0)
             # (a rough one's march reads the copy's mips: made only then)
             self.refraction_copy.take(targets, any(batch.rows["surface"][first:past, 1].max() > 0.0
-                                                   for view_runs in runs for batch, first, past in view_runs))
+                                                   for view_runs in runs for batch, first, past in view_runs), region)
             self._begin(views, targets, options, _SCENE)
             bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)
             renderer.upload_views(views)

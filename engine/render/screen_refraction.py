@@ -106,10 +106,13 @@ def refuse_screen_refraction(needed: int, units: int) -> None:
 
 class RefractionLayers(NamedTuple):
     """A view's refracting instances in the order they are drawn (``refraction_layers``):
-    each layer's runs, a run a batch's rows ``first`` to ``past`` (drawn together), and how
-    many instances past ``MAX_REFRACTION_LAYERS`` were drawn in the last layer."""
+    each layer's runs, a run a batch's rows ``first`` to ``past`` (drawn together), the
+    pixels each layer can draw in (x0, y0, x1, y1: its instances' rectangles on screen, not
+    widened: what the next layer's copy must take again), and how many instances past
+    ``MAX_REFRACTION_LAYERS`` were drawn in the last layer."""
 
     runs: list[list[tuple[InstanceBatch, int, int]]]
+    drawn: list[tuple[int, int, int, int]]
     cut: int
 
 
@@ -123,7 +126,7 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
     before.  What a layer cannot see is its own layer's other glass, which none of its rectangles
     reaches, and glass past the limit in the last layer."""
     if sum(batch.count for batch in batches) <= 1:
-        return RefractionLayers([[(batch, 0, batch.count) for batch in batches]], 0)
+        return RefractionLayers([[(batch, 0, batch.count) for batch in batches]], [], 0)
     width, height = size
     x, y, w, h = view.scissor or (0, 0, width, height)
     boxes = np.concatenate([batch.row_boxes for batch in batches])           # [n, lo/hi, xyz]
@@ -141,14 +144,16 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
     w_safe = np.where(clip[:, :, 3] > 1e-6, clip[:, :, 3], 1.0)
     px = (clip[:, :, 0] / w_safe * 0.5 + 0.5) * width
     py = (clip[:, :, 1] / w_safe * 0.5 + 0.5) * height
-    rects = np.stack([px.min(axis=1), py.min(axis=1), px.max(axis=1), py.max(axis=1)], axis=1)
-    reach = (rects[:, 2:] - rects[:, :2]) * LAYER_REACH
+    drawn = np.stack([px.min(axis=1), py.min(axis=1), px.max(axis=1), py.max(axis=1)], axis=1)
+    reach = (drawn[:, 2:] - drawn[:, :2]) * LAYER_REACH
+    rects = drawn.copy()
     rects[:, :2] -= reach
     rects[:, 2:] += reach
     # (a box reaching behind the eye, or not measured: the whole view)
-    rects[~ahead] = (x, y, x + w, y + h)
-    rects[:, [0, 2]] = rects[:, [0, 2]].clip(x, x + w)
-    rects[:, [1, 3]] = rects[:, [1, 3]].clip(y, y + h)
+    for each in (rects, drawn):
+        each[~ahead] = (x, y, x + w, y + h)
+        each[:, [0, 2]] = each[:, [0, 2]].clip(x, x + w)
+        each[:, [1, 3]] = each[:, [1, 3]].clip(y, y + h)
     centres = boxes.mean(axis=1)
     distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1))
     order = np.argsort(-distance, kind="stable")
@@ -161,7 +166,13 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
             layer[i] = layer[before[over]].max() + 1
     cut = int((layer >= MAX_REFRACTION_LAYERS).sum())
     np.minimum(layer, MAX_REFRACTION_LAYERS - 1, out=layer)
-    runs: list[list[tuple[InstanceBatch, int, int]]] = [[] for _ in range(int(layer.max()) + 1)]
+    count = int(layer.max()) + 1
+    runs: list[list[tuple[InstanceBatch, int, int]]] = [[] for _ in range(count)]
+    bounds = []
+    for k in range(count):   # (a pixel more each side: the rasteriser's rounding)
+        mine = drawn[layer == k]
+        bounds.append((max(int(np.floor(mine[:, 0].min())) - 1, x), max(int(np.floor(mine[:, 1].min())) - 1, y),
+                       min(int(np.ceil(mine[:, 2].max())) + 1, x + w), min(int(np.ceil(mine[:, 3].max())) + 1, y + h)))
     start = 0
     for batch in batches:
         rows = layer[start:start + batch.count]
@@ -170,7 +181,7 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
         edges = [0, *(np.flatnonzero(np.diff(rows)) + 1).tolist(), batch.count]
         for first, past in zip(edges[:-1], edges[1:], strict=True):
             runs[int(rows[first])].append((batch, first, past))
-    return RefractionLayers(runs, cut)
+    return RefractionLayers(runs, bounds, cut)
 
 
 class _Copy:
@@ -204,11 +215,13 @@ class RefractionCopy:
         self._frame: object = None
         self._took_this_frame = self._took_last_frame = False
 
-    def take(self, targets: RenderTargets, rough: bool) -> None:
+    def take(self, targets: RenderTargets, rough: bool, region: tuple[int, int, int, int] | None = None) -> None:
         """Copy ``targets``' colour and depth into the copy of its size and bind it at
         ``REFRACTION_COPY_UNIT``; with ``rough`` (a surface drawn over it has a roughness)
         build its mips, else its chain ends at the image (every lod reads it: on llvmpipe the
-        chain is about a tenth of a glass-filled frame's refraction)."""
+        chain is about a tenth of a glass-filled frame's refraction).  ``region`` (x, y,
+        width, height): copy only those pixels again, the rest as the last copy of this size
+        took them (a layer of glass behind glass: what the layer before drew)."""
         ctx, gpu = self.ctx, self.gpu
         self._count_frames()
         self._took_this_frame = True
@@ -224,7 +237,7 @@ class RefractionCopy:
         bind_texture(ctx, targets.depth, depth_unit)
         bind_sampler(ctx, gpu.depth_values(), depth_unit)  # (its depths as values, compared with nothing)
         copy.framebuffer.use()
-        apply_pass_state(ctx, _PASS, (0, 0, *targets.size))
+        apply_pass_state(ctx, _PASS, (0, 0, *targets.size), region)
         vao.render(moderngl.TRIANGLES, vertices=3)
         copy.texture.build_mipmaps(0, copy.top_lod if rough else 0)
         bind_texture(ctx, copy.texture, REFRACTION_COPY_UNIT)
