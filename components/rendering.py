@@ -507,7 +507,8 @@ class Refractive(TrackedComponent):
     sky; where the ray leaves the view, passes behind what is drawn or finds nothing, the
     probe's or sky's image stays, with a fade between.
     Glass seen through glass is drawn first, in a layer of its own, and the nearer reads a
-    copy that holds it (farthest first, at most MAX_REFRACTION_LAYERS deep), a rough surface
+    copy that holds it (farthest first, at most MAX_REFRACTION_LAYERS deep), see-through
+    things behind it show through it (where none of them meeting it lies in front), a rough surface
     reads a blurrier level of the copy, and probe captures read the probe or sky.
     False: the probe's or sky's image only (cheaper: no copy, no march).
     """

@@ -120,6 +120,10 @@ class RenderStats(BudgetLedger):
     # instances past MAX_REFRACTION_LAYERS drawn in the last layer (RefractionLimitWarning).
     refraction_layers: int = 0
     refraction_layers_cut: int = 0
+    # Views' levels whose transparent slot was drawn after their refracting surfaces (some of it
+    # in front of the glass it meets on screen), so the glass does not show that slot behind it
+    # (ScenePass.slot_behind_glass; where all of it lies behind, it is drawn first and shown).
+    slot_after_glass: int = 0
     # Particles (systems/particle_system.py): living this frame, every emitter's; and those the
     # emitters could not spawn this frame, their max_particles reached (ParticleLimitWarning).
     particles: int = 0

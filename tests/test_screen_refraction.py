@@ -437,3 +437,45 @@ def test_glass_past_the_layers_limit_is_said_and_counted(scene):
         warnings.simplefilter("error", RefractionLimitWarning)
         runner.frame()  # (said once)
     assert runner.engine.renderer.stats.refraction_layers_cut == 2
+
+
+@pytest.mark.parametrize("in_front", [False, True])
+def test_see_through_things_behind_glass_show_through_it(scene, in_front):
+    """A see-through green pane (alpha 0.5: the transparent slot, blended) behind a refracting
+    pane of index 1 that reflects nothing: the slot lies wholly behind the glass, so it is
+    drawn first, into the copy the glass marches (``ScenePass.slot_behind_glass``), and the
+    glass shows it as the frame drawn without the glass does.  With a second see-through pane
+    in front of the glass, over part of it, the slot must blend over the glass: it is drawn
+    after (``RenderStats.slot_after_glass``) and the glass shows what is behind the green pane
+    instead of it."""
+    green_at = np.array([0.1, 1.0, -0.5])
+
+    def without(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        room(world)
+        world.spawn(Transform(position=tuple(green_at)), MeshRef(quad(1.0, 1.0)),
+                    Material(color=(0.1, 0.9, 0.1, 0.5), double_sided=True))
+        if in_front:
+            world.spawn(Transform(position=(-1.1, 1.0, 2.2)), MeshRef(quad(0.6, 0.6)),
+                        Material(color=(0.9, 0.9, 0.1, 0.5), double_sided=True))
+
+    def with_glass(world):
+        without(world)
+        pane(world, 1.0, position=(0.0, 1.0, 1.0))
+
+    drawn = frame(scene, without)
+    runner = scene(with_glass, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    seen = srgb_to_linear(runner.frame())
+    assert (runner.engine.renderer.stats.slot_after_glass > 0) == in_front
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    t = (green_at[2] - eye[2]) / rays[..., 2]
+    hit = eye + t[..., None] * rays
+    green = (np.abs(hit[..., 0] - green_at[0]) < 0.45) & (np.abs(hit[..., 1] - green_at[1]) < 0.45)
+    assert green.sum() > 500
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    if not in_front:
+        assert np.quantile(levels[green], 0.99) <= 2.0, np.quantile(levels[green], 0.99)
+    else:  # (the glass shows the room behind the green pane: far from the frame without the glass)
+        assert np.median(levels[green]) > 20, np.median(levels[green])

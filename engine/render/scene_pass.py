@@ -47,6 +47,7 @@ from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
 import moderngl
+import numpy as np
 from pyglm import glm
 
 from engine.core.errors import GLPassError, RefractionLimitWarning
@@ -101,7 +102,13 @@ from engine.render.scene_programs import (
     geometry_invocations,
     reflects_environment,
 )
-from engine.render.screen_refraction import ALL_INSTANCES, MAX_REFRACTION_LAYERS, RefractionCopy, refraction_layers
+from engine.render.screen_refraction import (
+    ALL_INSTANCES,
+    MAX_REFRACTION_LAYERS,
+    RefractionCopy,
+    behind_the_glass,
+    refraction_layers,
+)
 from engine.render.shadows import ShadowMaps
 from engine.render.sky_draw import SkyDraw
 from engine.render.slot_order import (
@@ -417,13 +424,44 @@ class ScenePass:
         reflections, where the main view was drawn for them (``ScreenReflectionPass``), the
         light shafts, where its camera has them (``VolumetricFogPass``), the refracting
         surfaces (``refract``), then the transparent slot (``draw_transparent``), so glass
-        goes over all."""
+        goes over all; the slot first where all of it the refracting surfaces could show
+        lies behind them (``slot_behind_glass``): so they show it."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite(targets)
         if self.volumetric_fog is not None:
             self.volumetric_fog.composite(targets)
-        self.refract([root], targets, options)
-        self.draw_transparent([root], targets, options)
+        if self.slot_behind_glass([root], targets.size):
+            self.draw_transparent([root], targets, options)
+            self.refract([root], targets, options)
+        else:
+            self.refract([root], targets, options)
+            self.draw_transparent([root], targets, options)
+
+    def slot_behind_glass(self, views: Sequence[View], size: tuple[int, int]) -> bool:
+        """Whether ``views``' transparent slot (see-through batches, decals and particles) is
+        to be drawn before their refracting surfaces: some refract and some of the slot is
+        there, and in every view each of its things whose rectangle on screen meets a
+        refracting surface's lies wholly behind it (``screen_refraction.behind_the_glass``),
+        so the glass, drawn over it, shows it in its copy (HDRP's "before refraction" pass,
+        chosen here by where things are).  Otherwise the glass does not show the slot (what
+        lies in front of it must blend over it; counted in ``RenderStats.slot_after_glass``)."""
+        renderer = self.renderer
+        refracting = renderer.refracting_batches()
+        transparent = renderer.transparent_batches()
+        particles = self._particles_now()
+        if not refracting or not views or not (transparent or particles):
+            return False
+        glass_reach = batch_reach(views, size, refracting)
+        slot_reach = batch_reach(views, size, transparent) if transparent else [[] for _ in views]
+        emitters = self.particle_draw.visible(views, size) if particles else [[] for _ in views]
+        for index, view in enumerate(views):
+            glass = [batch.row_boxes for batch, reaches in zip(refracting, glass_reach[index], strict=True) if reaches]
+            others = [batch.row_boxes for batch, reaches in zip(transparent, slot_reach[index], strict=True) if reaches]
+            others += [record.row_boxes for _, record in emitters[index]]
+            if glass and others and not behind_the_glass(view, size, np.concatenate(glass), np.concatenate(others)):
+                renderer.stats.slot_after_glass += 1
+                return False
+        return True
 
     def refract(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                 conditions: Sequence[moderngl.Query] | None = None) -> None:
@@ -504,11 +542,16 @@ class ScenePass:
         screen-space reflections, where the level was drawn for them
         (``ScreenReflectionPass.composite_level``), the light shafts where the camera's reach
         it (``VolumetricFogPass.composite_level``), the refracting surfaces (``refract``),
-        then, with ``glass`` (something see-through is drawn), the transparent slot."""
+        then, with ``glass`` (something see-through is drawn), the transparent slot (before
+        them where it lies behind them: ``slot_behind_glass``)."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite_level(depth, views, targets)
         if self.volumetric_fog is not None:
             self.volumetric_fog.composite_level(depth, views, targets)
+        if glass and self.slot_behind_glass(views, targets.size):
+            self.draw_transparent(views, targets, options, conditions)
+            self.refract(views, targets, options, conditions)
+            return
         self.refract(views, targets, options, conditions)
         if glass:
             self.draw_transparent(views, targets, options, conditions)

@@ -30,8 +30,11 @@ transmissive objects out of its one copy; this is depth peeling by object, at mo
 by the ``drawn_instances`` uniform of the ``SCREEN_REFRACTION`` builds (GL 4.1 has no base
 instance): the other rows' vertices are clipped away.
 
-What the copy cannot hold is not seen through the glass: what the view did not draw (off
-its edges, behind what it shows) and the transparent slot.  Drawn after them, a refracting surface takes no part in the
+The transparent slot (blended glass, decals, particles) is drawn before the refracting
+surfaces, into the copy, where all of it that meets them on screen lies behind them
+(``behind_the_glass``; ``ScenePass.slot_behind_glass``), else after them, unseen through
+them.  What the copy cannot hold is not seen through the glass: what the view did not draw
+(off its edges, behind what it shows).  Drawn after them, a refracting surface takes no part in the
 screen reflections (its own reflection is the probe's or sky's, as HDRP's and Unity's
 transparent surfaces keep theirs) nor in the screen's ambient occlusion.  Probe captures
 draw every refracting batch with its opaque draws, reading the probe or the sky (their
@@ -127,34 +130,12 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
     reaches, and glass past the limit in the last layer."""
     if sum(batch.count for batch in batches) <= 1:
         return RefractionLayers([[(batch, 0, batch.count) for batch in batches]], [], 0)
-    width, height = size
-    x, y, w, h = view.scissor or (0, 0, width, height)
+    x, y, w, h = view.scissor or (0, 0, *size)
     boxes = np.concatenate([batch.row_boxes for batch in batches])           # [n, lo/hi, xyz]
     n = len(boxes)
+    drawn, rects = box_rects(view, size, boxes), box_rects(view, size, boxes, LAYER_REACH)
     unmeasured = np.isnan(boxes).any(axis=(1, 2))
-    boxes = np.where(unmeasured[:, None, None], 0.0, boxes)
-    corners = np.empty((n, 8, 4))
-    for k in range(8):
-        corners[:, k, 0] = boxes[:, (k >> 0) & 1, 0]
-        corners[:, k, 1] = boxes[:, (k >> 1) & 1, 1]
-        corners[:, k, 2] = boxes[:, (k >> 2) & 1, 2]
-    corners[:, :, 3] = 1.0
-    clip = corners @ np.asarray(view.view_proj.to_list(), np.float64)         # (column-major: rows of the transpose)
-    ahead = (clip[:, :, 3] > 1e-6).all(axis=1) & ~unmeasured
-    w_safe = np.where(clip[:, :, 3] > 1e-6, clip[:, :, 3], 1.0)
-    px = (clip[:, :, 0] / w_safe * 0.5 + 0.5) * width
-    py = (clip[:, :, 1] / w_safe * 0.5 + 0.5) * height
-    drawn = np.stack([px.min(axis=1), py.min(axis=1), px.max(axis=1), py.max(axis=1)], axis=1)
-    reach = (drawn[:, 2:] - drawn[:, :2]) * LAYER_REACH
-    rects = drawn.copy()
-    rects[:, :2] -= reach
-    rects[:, 2:] += reach
-    # (a box reaching behind the eye, or not measured: the whole view)
-    for each in (rects, drawn):
-        each[~ahead] = (x, y, x + w, y + h)
-        each[:, [0, 2]] = each[:, [0, 2]].clip(x, x + w)
-        each[:, [1, 3]] = each[:, [1, 3]].clip(y, y + h)
-    centres = boxes.mean(axis=1)
+    centres = np.where(unmeasured[:, None], 0.0, boxes.mean(axis=1))
     distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1))
     order = np.argsort(-distance, kind="stable")
     layer = np.zeros(n, np.int64)
@@ -182,6 +163,64 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
         for first, past in zip(edges[:-1], edges[1:], strict=True):
             runs[int(rows[first])].append((batch, first, past))
     return RefractionLayers(runs, bounds, cut)
+
+
+def box_rects(view: View, size: tuple[int, int], boxes: np.ndarray, widen: float = 0.0) -> np.ndarray:
+    """The rectangles on screen (x0, y0, x1, y1 in pixels, within the view's) of world
+    ``boxes`` ([n, lo/hi, xyz]) seen by ``view`` drawn into a viewport of ``size``, each
+    widened by ``widen`` of its width and height each side; a box reaching behind the eye, or
+    not measured (NaN), the whole view."""
+    width, height = size
+    x, y, w, h = view.scissor or (0, 0, width, height)
+    unmeasured = np.isnan(boxes).any(axis=(1, 2))
+    boxes = np.where(unmeasured[:, None, None], 0.0, boxes)
+    corners = np.empty((len(boxes), 8, 4))
+    for k in range(8):
+        corners[:, k, 0] = boxes[:, (k >> 0) & 1, 0]
+        corners[:, k, 1] = boxes[:, (k >> 1) & 1, 1]
+        corners[:, k, 2] = boxes[:, (k >> 2) & 1, 2]
+    corners[:, :, 3] = 1.0
+    clip = corners @ np.asarray(view.view_proj.to_list(), np.float64)   # (column-major: rows of the transpose)
+    ahead = (clip[:, :, 3] > 1e-6).all(axis=1) & ~unmeasured
+    w_safe = np.where(clip[:, :, 3] > 1e-6, clip[:, :, 3], 1.0)
+    px = (clip[:, :, 0] / w_safe * 0.5 + 0.5) * width
+    py = (clip[:, :, 1] / w_safe * 0.5 + 0.5) * height
+    rects = np.stack([px.min(axis=1), py.min(axis=1), px.max(axis=1), py.max(axis=1)], axis=1)
+    if widen:
+        reach = (rects[:, 2:] - rects[:, :2]) * widen
+        rects[:, :2] -= reach
+        rects[:, 2:] += reach
+    rects[~ahead] = (x, y, x + w, y + h)
+    rects[:, [0, 2]] = rects[:, [0, 2]].clip(x, x + w)
+    rects[:, [1, 3]] = rects[:, [1, 3]].clip(y, y + h)
+    return rects
+
+
+def _box_distances(eye: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The nearest and farthest distances from ``eye`` of each of ``boxes`` ([n, lo/hi, xyz]);
+    a box not measured (NaN): 0 and infinity."""
+    unmeasured = np.isnan(boxes).any(axis=(1, 2))
+    lo, hi = np.where(unmeasured[:, None], 0.0, boxes[:, 0]), np.where(unmeasured[:, None], 0.0, boxes[:, 1])
+    near = np.linalg.norm(np.clip(eye, lo, hi) - eye, axis=1)
+    far = np.linalg.norm(np.maximum(np.abs(eye - lo), np.abs(eye - hi)), axis=1)
+    return np.where(unmeasured, 0.0, near), np.where(unmeasured, np.inf, far)
+
+
+def behind_the_glass(view: View, size: tuple[int, int], glass: np.ndarray, others: np.ndarray) -> bool:
+    """Whether each of the world boxes ``others`` ([n, lo/hi, xyz]: a view's see-through
+    things) whose rectangle on screen meets the widened rectangle (``LAYER_REACH``) of one of
+    the refracting ``glass`` boxes lies wholly farther from ``view``'s eye than that glass:
+    then its transparent slot may be drawn before its refracting surfaces, into the copy they
+    march (``ScenePass.finish_root``), and shows through them."""
+    if not len(glass) or not len(others):
+        return True
+    eye = np.asarray(view.eye, np.float64)
+    glass_rects, other_rects = box_rects(view, size, glass, LAYER_REACH), box_rects(view, size, others)
+    _, glass_far = _box_distances(eye, glass)
+    other_near, _ = _box_distances(eye, others)
+    a, b = other_rects[:, None], glass_rects[None, :]
+    meets = (a[..., 0] < b[..., 2]) & (b[..., 0] < a[..., 2]) & (a[..., 1] < b[..., 3]) & (b[..., 1] < a[..., 3])
+    return not (meets & (other_near[:, None] <= glass_far[None, :])).any()
 
 
 class _Copy:
