@@ -169,6 +169,7 @@ class ScenePass:
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         self.refraction_copy = RefractionCopy(renderer)  # what refracting surfaces march (refract)
         self._said_layers_cut = False  # (RefractionLimitWarning, said once)
+        self._layouts: dict = {}  # refraction_layers' answers, by view, glass and boxes
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
@@ -489,7 +490,7 @@ class ScenePass:
             return
         # Glass behind glass: each view's refracting instances in layers, farthest first, each
         # layer drawn over a copy that holds the layers before it (refraction_layers).
-        layers = [refraction_layers(view, targets.size, self._reaching(refracting, reach[index], view))
+        layers = [refraction_layers(view, targets.size, self._reaching(refracting, reach[index], view), self._layouts)
                   if any(reach[index]) else None for index, view in enumerate(views)]
         stats = renderer.stats
         count = max(len(plan.runs) for plan in layers if plan is not None)
@@ -517,7 +518,8 @@ class ScenePass:
                                                    for view_runs in runs for batch, first, past in view_runs), region)
             self._begin(views, targets, options, _SCENE)
             bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)
-            renderer.upload_views(views)
+            if not layer:  # (the views' Camera blocks stay uploaded for the layers after)
+                renderer.upload_views(views)
             for index, view in enumerate(views):
                 if not runs[index]:
                     continue

@@ -48,6 +48,7 @@ glass behind glass, one more), and the march
 with dispersion) in the refracting surfaces' pixels."""
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
@@ -86,6 +87,7 @@ MAX_REFRACTION_LAYERS = 4
 # than itself), so glass beside it on screen, not only behind it, goes in a layer before it.
 LAYER_REACH = 0.5
 ALL_INSTANCES = (0, 2 ** 31 - 1)   # the instances a refraction draw draws, where it is not a layer's run
+KEPT_LAYOUTS = 64   # refraction_layers' answers kept (a frame's views with glass behind glass)
 # The GL types of sampler uniforms (GL 4.1's tables 2.10 and 2.11: the float, shadow, integer
 # and unsigned samplers of every target), for sampler_count.
 _SAMPLER_TYPES = frozenset((*range(0x8B5D, 0x8B65), *range(0x8DC0, 0x8DD9), *range(0x900C, 0x9010),
@@ -119,7 +121,8 @@ class RefractionLayers(NamedTuple):
     cut: int
 
 
-def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[InstanceBatch]) -> RefractionLayers:
+def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[InstanceBatch],
+                      kept: dict | None = None) -> RefractionLayers:
     """Glass behind glass: ``batches``' instances (refracting, reaching ``view`` drawn into a
     viewport of ``size``) in layers, farthest first by their boxes' centres, each instance one
     layer in front of the nearest-to-it farther instances its widened rectangle on screen
@@ -127,42 +130,57 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
     behind a pane shows through the pane (depth peeling by object, as engines sort their
     transparent objects back to front).  One instance, or none overlapping: one layer, drawn as
     before.  What a layer cannot see is its own layer's other glass, which none of its rectangles
-    reaches, and glass past the limit in the last layer."""
+    reaches, and glass past the limit in the last layer.  ``kept``: answers kept by the view's
+    camera, the batches and their boxes (a still view's glass is not laid out again)."""
     if sum(batch.count for batch in batches) <= 1:
         return RefractionLayers([[(batch, 0, batch.count) for batch in batches]], [], 0)
-    x, y, w, h = view.scissor or (0, 0, *size)
     boxes = np.concatenate([batch.row_boxes for batch in batches])           # [n, lo/hi, xyz]
+    key = None
+    if kept is not None:
+        key = (view.camera_block(), size, view.scissor, tuple(batches), boxes.tobytes())
+        found = kept.get(key)
+        if found is not None:
+            return found
+    x, y, w, h = view.scissor or (0, 0, *size)
     n = len(boxes)
-    drawn, rects = box_rects(view, size, boxes), box_rects(view, size, boxes, LAYER_REACH)
+    drawn = box_rects(view, size, boxes)
+    reach = (drawn[:, 2:] - drawn[:, :2]) * LAYER_REACH
+    rects = np.concatenate([drawn[:, :2] - reach, drawn[:, 2:] + reach], axis=1)
+    over = _meets(rects, rects).tolist()
     unmeasured = np.isnan(boxes).any(axis=(1, 2))
     centres = np.where(unmeasured[:, None], 0.0, boxes.mean(axis=1))
-    distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1))
-    order = np.argsort(-distance, kind="stable")
-    layer = np.zeros(n, np.int64)
-    for position in range(1, n):
-        i, before = order[position], order[:position]
-        r, others = rects[i], rects[before]
-        over = (others[:, 0] < r[2]) & (r[0] < others[:, 2]) & (others[:, 1] < r[3]) & (r[1] < others[:, 3])
-        if over.any():
-            layer[i] = layer[before[over]].max() + 1
-    cut = int((layer >= MAX_REFRACTION_LAYERS).sum())
-    np.minimum(layer, MAX_REFRACTION_LAYERS - 1, out=layer)
-    count = int(layer.max()) + 1
+    distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1)).tolist()
+    order = sorted(range(n), key=lambda i: -distance[i])   # (stable: ties in the batches' order)
+    layer = [0] * n
+    for position, i in enumerate(order):
+        row = over[i]
+        layer[i] = max((layer[j] + 1 for j in order[:position] if row[j]), default=0)
+    cut = sum(1 for k in layer if k >= MAX_REFRACTION_LAYERS)
+    layer = [min(k, MAX_REFRACTION_LAYERS - 1) for k in layer]
+    count = max(layer) + 1
     runs: list[list[tuple[InstanceBatch, int, int]]] = [[] for _ in range(count)]
-    bounds = []
-    for k in range(count):   # (a pixel more each side: the rasteriser's rounding)
-        mine = drawn[layer == k]
-        bounds.append((max(int(np.floor(mine[:, 0].min())) - 1, x), max(int(np.floor(mine[:, 1].min())) - 1, y),
-                       min(int(np.ceil(mine[:, 2].max())) + 1, x + w), min(int(np.ceil(mine[:, 3].max())) + 1, y + h)))
+    spans = [[math.inf, math.inf, -math.inf, -math.inf] for _ in range(count)]
+    for k, (x0, y0, x1, y1) in zip(layer, drawn.tolist(), strict=True):
+        span = spans[k]
+        span[0], span[1], span[2], span[3] = min(span[0], x0), min(span[1], y0), max(span[2], x1), max(span[3], y1)
+    # (a pixel more each side: the rasteriser's rounding)
+    bounds = [(max(math.floor(x0) - 1, x), max(math.floor(y0) - 1, y), min(math.ceil(x1) + 1, x + w),
+               min(math.ceil(y1) + 1, y + h)) for x0, y0, x1, y1 in spans]
     start = 0
     for batch in batches:
         rows = layer[start:start + batch.count]
         start += batch.count
-        # (runs of rows in one layer: where the layer changes from the row before)
-        edges = [0, *(np.flatnonzero(np.diff(rows)) + 1).tolist(), batch.count]
-        for first, past in zip(edges[:-1], edges[1:], strict=True):
-            runs[int(rows[first])].append((batch, first, past))
-    return RefractionLayers(runs, bounds, cut)
+        first = 0
+        for row in range(1, batch.count + 1):   # (runs of rows in one layer)
+            if row == batch.count or rows[row] != rows[first]:
+                runs[rows[first]].append((batch, first, row))
+                first = row
+    found = RefractionLayers(runs, bounds, cut)
+    if kept is not None:
+        if len(kept) >= KEPT_LAYOUTS:
+            kept.clear()
+        kept[key] = found
+    return found
 
 
 def box_rects(view: View, size: tuple[int, int], boxes: np.ndarray, widen: float = 0.0) -> np.ndarray:
@@ -218,9 +236,13 @@ def behind_the_glass(view: View, size: tuple[int, int], glass: np.ndarray, other
     glass_rects, other_rects = box_rects(view, size, glass, LAYER_REACH), box_rects(view, size, others)
     _, glass_far = _box_distances(eye, glass)
     other_near, _ = _box_distances(eye, others)
-    a, b = other_rects[:, None], glass_rects[None, :]
-    meets = (a[..., 0] < b[..., 2]) & (b[..., 0] < a[..., 2]) & (a[..., 1] < b[..., 3]) & (b[..., 1] < a[..., 3])
-    return not (meets & (other_near[:, None] <= glass_far[None, :])).any()
+    return not (_meets(other_rects, glass_rects) & (other_near[:, None] <= glass_far[None, :])).any()
+
+
+def _meets(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """[i, j]: whether rectangle i of ``first`` and j of ``second`` (x0, y0, x1, y1) overlap."""
+    a, b = first[:, None], second[None, :]
+    return (a[..., 0] < b[..., 2]) & (b[..., 0] < a[..., 2]) & (a[..., 1] < b[..., 3]) & (b[..., 1] < a[..., 3])
 
 
 class _Copy:
