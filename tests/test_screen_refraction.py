@@ -479,3 +479,50 @@ def test_see_through_things_behind_glass_show_through_it(scene, in_front):
         assert np.quantile(levels[green], 0.99) <= 2.0, np.quantile(levels[green], 0.99)
     else:  # (the glass shows the room behind the green pane: far from the frame without the glass)
         assert np.median(levels[green]) > 20, np.median(levels[green])
+
+
+def test_the_layers_put_each_glass_after_the_farther_glass_it_meets_on_screen(monkeypatch):
+    """``refraction_layers`` on random boxes (no GL): every instance lies in a later layer
+    than each farther instance whose widened rectangle meets its own, up to the layers'
+    limit (those past it counted as cut); the runs cover every row once; the plain-Python
+    ordering of a few instances and numpy's of many give the same layers."""
+    from engine.render import screen_refraction as sr
+
+    class Boxes:  # (what refraction_layers reads of a batch)
+        def __init__(self, boxes):
+            self.row_boxes, self.count = boxes, len(boxes)
+
+    eye = glm.vec3(0.0, 1.0, 6.0)
+    view = dataclasses.make_dataclass("V", ["scissor", "eye", "view_proj"])(
+        None, eye, glm.perspective(1.0, 1.6, 0.1, 100.0) * glm.lookAt(eye, glm.vec3(0, 1, 0), glm.vec3(0, 1, 0)))
+    rng = np.random.default_rng(7)
+    for n in (2, 9, 40):
+        centres = np.column_stack([rng.uniform(-3, 3, n), rng.uniform(-1, 3, n), rng.uniform(-6, 3, n)])
+        k = max(n // 3, 1)
+        batches = [Boxes(np.stack([centres[:k] - 0.3, centres[:k] + 0.3], axis=1)),
+                   Boxes(np.stack([centres[k:] - 0.3, centres[k:] + 0.3], axis=1))]
+        layers = sr.refraction_layers(view, SIZE, batches)
+        layer_of = {}
+        for k_layer, runs in enumerate(layers.runs):
+            for batch, first, past in runs:
+                for row in range(first, past):
+                    assert (id(batch), row) not in layer_of
+                    layer_of[id(batch), row] = k_layer
+        assert len(layer_of) == n
+        rows = [(id(b), r) for b in batches for r in range(b.count)]
+        boxes = np.concatenate([b.row_boxes for b in batches])
+        drawn = sr.box_rects(view, SIZE, boxes)
+        reach = (drawn[:, 2:] - drawn[:, :2]) * sr.LAYER_REACH
+        rects = np.concatenate([drawn[:, :2] - reach, drawn[:, 2:] + reach], axis=1)
+        distance = np.linalg.norm(boxes.mean(axis=1) - np.array(eye), axis=1)
+        for i in range(n):
+            for j in range(n):
+                meets = rects[i, 0] < rects[j, 2] and rects[j, 0] < rects[i, 2] and \
+                    rects[i, 1] < rects[j, 3] and rects[j, 1] < rects[i, 3]
+                if i != j and meets and distance[j] > distance[i] and layer_of[rows[j]] < sr.MAX_REFRACTION_LAYERS - 1:
+                    assert layer_of[rows[i]] > layer_of[rows[j]], (n, i, j)
+        monkeypatch.setattr(sr, "LAYOUT_IN_PYTHON", 0 if n <= 24 else 10 ** 6)
+        other = sr.refraction_layers(view, SIZE, batches)
+        monkeypatch.undo()
+        assert [[(id(b), f, p) for b, f, p in runs] for runs in other.runs] == \
+            [[(id(b), f, p) for b, f, p in runs] for runs in layers.runs] and other.cut == layers.cut

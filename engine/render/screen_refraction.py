@@ -88,6 +88,7 @@ MAX_REFRACTION_LAYERS = 4
 LAYER_REACH = 0.5
 ALL_INSTANCES = (0, 2 ** 31 - 1)   # the instances a refraction draw draws, where it is not a layer's run
 KEPT_LAYOUTS = 64   # refraction_layers' answers kept (a frame's views with glass behind glass)
+LAYOUT_IN_PYTHON = 24   # instances up to which refraction_layers orders them in plain Python, numpy past it
 # The GL types of sampler uniforms (GL 4.1's tables 2.10 and 2.11: the float, shadow, integer
 # and unsigned samplers of every target), for sampler_count.
 _SAMPLER_TYPES = frozenset((*range(0x8B5D, 0x8B65), *range(0x8DC0, 0x8DD9), *range(0x900C, 0x9010),
@@ -146,15 +147,23 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
     drawn = box_rects(view, size, boxes)
     reach = (drawn[:, 2:] - drawn[:, :2]) * LAYER_REACH
     rects = np.concatenate([drawn[:, :2] - reach, drawn[:, 2:] + reach], axis=1)
-    over = _meets(rects, rects).tolist()
+    over = _meets(rects, rects)
     unmeasured = np.isnan(boxes).any(axis=(1, 2))
     centres = np.where(unmeasured[:, None], 0.0, boxes.mean(axis=1))
-    distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1)).tolist()
-    order = sorted(range(n), key=lambda i: -distance[i])   # (stable: ties in the batches' order)
-    layer = [0] * n
-    for position, i in enumerate(order):
-        row = over[i]
-        layer[i] = max((layer[j] + 1 for j in order[:position] if row[j]), default=0)
+    distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1))
+    order = np.argsort(-distance, kind="stable").tolist()   # (ties in the batches' order)
+    if n <= LAYOUT_IN_PYTHON:   # (a few instances: plain Python over the table is the cheaper)
+        table, layer = over.tolist(), [0] * n
+        for position, i in enumerate(order):
+            row = table[i]
+            layer[i] = max((layer[j] + 1 for j in order[:position] if row[j]), default=0)
+    else:   # (many: a row of the table at a time)
+        placed, drawn_layer = np.zeros(n, bool), np.full(n, -1, np.int64)
+        for i in order:
+            behind = over[i] & placed
+            drawn_layer[i] = drawn_layer[behind].max() + 1 if behind.any() else 0
+            placed[i] = True
+        layer = drawn_layer.tolist()
     cut = sum(1 for k in layer if k >= MAX_REFRACTION_LAYERS)
     layer = [min(k, MAX_REFRACTION_LAYERS - 1) for k in layer]
     count = max(layer) + 1
