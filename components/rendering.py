@@ -505,7 +505,8 @@ class Refractive(TrackedComponent):
     portals and before its glass (``engine/render/screen_refraction.py``), so a box behind a
     pane shows through it, bent, and a ray that runs on over the sky the view drew shows that
     sky; where the ray leaves the view, passes behind what is drawn or finds nothing, the
-    probe's or sky's image stays, with a fade between.
+    probe's or sky's image stays, with a fade between.  Its own reflection is found the same
+    way (the reflected ray marched across the copy).
     Glass seen through glass is drawn first, in a layer of its own, and the nearer reads a
     copy that holds it (farthest first, at most MAX_REFRACTION_LAYERS deep), see-through
     things behind it show through it (where none of them meeting it lies in front), a rough surface

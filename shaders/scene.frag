@@ -340,6 +340,28 @@ float specular_occlusion(float nv, float occlusion, float roughness) {
     return clamp(pow(nv + occlusion, exp2(-16.0 * alpha - 1.0)) - 1.0 + occlusion, 0.0, 1.0);
 }
 
+#ifdef SCREEN_REFRACTION
+#include "screen_refraction.glsl"
+
+// What the view drew along the ray from the refracting surface ``s`` at ``origin`` along unit
+// ``direction``, where the march finds it (screen_refraction.glsl), over ``otherwise`` (the
+// probe's or sky's radiance) by the find's confidence: what it lets through, and what it
+// reflects (a refracting surface's own screen-space reflection: HDRP's transparent SSR).
+vec3 screen_found(Surface s, vec3 origin, vec3 direction, vec3 otherwise) {
+    vec4 found = screen_refraction(origin, direction, s.roughness);
+    if (found.a <= 0.0) return otherwise;
+    vec3 drawn = found.rgb;
+#ifdef FOG
+    // The view fogged what it drew along the whole way to it; this surface's own fog (main's
+    // fog_view) is put over what it lets through and reflects, so the stretch to the surface
+    // is taken out of the find first (exactly so where the ray runs on as the eye's).
+    float kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
+    drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, 1e-4);
+#endif
+    return mix(otherwise, drawn, found.a);
+}
+#endif
+
 vec3 environment_light = vec3(0.0);  // what environment_specular added: a refraction keeps it whole
 #ifdef SCREEN_REFLECTION
 vec3 environment_reflect_weight = vec3(0.0);  // ... and its part of reflect_weight and reflect_added
@@ -351,6 +373,9 @@ vec3 environment_specular(Surface s, AmbientBoxes boxes) {
     float occlusion = specular_occlusion(max(dot(s.normal, s.to_eye), 0.0), s.occlusion, s.roughness);
     vec3 weight = s.environment_weight * (occlusion * horizon * horizon);
     vec3 radiance = environment_radiance(s, boxes);
+#ifdef SCREEN_REFRACTION
+    radiance = screen_found(s, s.position, s.reflect_dir, radiance);  // (glass reflects what its view drew)
+#endif
     environment_light = weight * radiance;
 #ifdef SCREEN_REFLECTION
     environment_reflect_weight = weight;
@@ -804,7 +829,6 @@ uniform float dispersion;  // its batch's Refractive.dispersion (glTF's KHR_mate
 #endif
 
 #ifdef SCREEN_REFRACTION
-#include "screen_refraction.glsl"
 flat in vec3 v_centre;  // the instance's origin in the world (scene.vert)
 #endif
 
@@ -830,18 +854,7 @@ vec3 refracted_light(Surface s, vec3 origin, vec3 direction, float lod) {
     vec3 behind = probe_face_size > 0.0 ? probe_radiance(s.position, direction, lod, s.roughness)
                                         : sample_environment(direction, lod, s.roughness);
 #ifdef SCREEN_REFRACTION
-    vec4 found = screen_refraction(origin, direction, s.roughness);
-    if (found.a > 0.0) {
-        vec3 drawn = found.rgb;
-#ifdef FOG
-        // The view fogged what it drew along the whole way to it; this surface's own fog
-        // (main's fog_view) is put over what it lets through, so the stretch to the surface
-        // is taken out of the find first (exactly so where the ray runs on as the eye's).
-        float kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
-        drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, 1e-4);
-#endif
-        behind = mix(behind, drawn, found.a);
-    }
+    behind = screen_found(s, origin, direction, behind);
 #endif
     return behind;
 }

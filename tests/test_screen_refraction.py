@@ -526,3 +526,57 @@ def test_the_layers_put_each_glass_after_the_farther_glass_it_meets_on_screen(mo
         monkeypatch.undo()
         assert [[(id(b), f, p) for b, f, p in runs] for runs in other.runs] == \
             [[(id(b), f, p) for b, f, p in runs] for runs in layers.runs] and other.cut == layers.cut
+
+
+def test_glass_reflects_what_its_view_drew(scene):
+    """A pane of index 1.5 turned 60 degrees and a red box (unlit) off to its side, in the
+    view: the pane's own reflection is the screen's where its reflected ray finds what the
+    view drew (a refracting surface's screen-space reflection, along the same march as what
+    it lets through), so the pixels whose rays, reflected at the pane's plane in numpy, meet
+    the box are redder than in the same frame without the box, by about the pane's Fresnel
+    reflectance there times the red it adds over the grey wall it reflected instead; the
+    pane's other pixels (those whose rays refracted through it miss the box too) are not."""
+    turn = np.radians(60.0)
+    box_at, box_half = np.array([1.9, 1.0, -1.2]), np.array([0.35, 0.5, 0.35])
+
+    def build(with_box):
+        def make(world):
+            look_from(world, (0.0, 1.2, 4.0), (0.4, 1.0, 0.0), fov=50.0)
+            world.spawn(Skybox())
+            world.spawn(Transform(position=(0.0, 1.0, -4.0)), MeshRef(box((12.0, 6.0, 0.1))),
+                        Material(color=(0.3, 0.3, 0.3, 1.0), unlit=True))
+            if with_box:
+                world.spawn(Transform(position=tuple(box_at)), MeshRef(box(tuple(2.0 * box_half))),
+                            Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+            world.spawn(Transform(position=(0.0, 1.0, 0.0), rotation=glm.quat(glm.vec3(0.0, float(turn), 0.0))),
+                        MeshRef(quad(1.6, 1.6)), Material(color=(1.0, 1.0, 1.0, 0.0), roughness=0.0),
+                        Refractive(ior=1.5))
+        return make
+
+    runner = scene(build(True), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    seen = srgb_to_linear(runner.frame())
+    without = frame(scene, build(False))
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    normal = np.array([np.sin(turn), 0.0, np.cos(turn)])
+    right = np.array([np.cos(turn), 0.0, -np.sin(turn)])
+    centre = np.array([0.0, 1.0, 0.0])
+    t = ((centre - eye) @ normal) / (rays @ normal)
+    hit = eye + t[..., None] * rays
+    on_pane = (t > 0) & (np.abs((hit - centre) @ right) < 0.72) & (np.abs(hit[..., 1] - 1.0) < 0.72)
+    flat, at = rays.reshape(-1, 3), hit.reshape(-1, 3)
+    cos_i = np.abs(flat @ normal)
+    facing = np.where((flat @ normal)[:, None] < 0.0, normal, -normal)
+    reflected = flat + 2.0 * cos_i[:, None] * facing
+    eta = 1.0 / 1.5
+    bent = eta * flat + (eta * cos_i - np.sqrt(1.0 - eta ** 2 * (1.0 - cos_i ** 2)))[:, None] * facing
+    meets = box_hits(at, reflected, box_at, box_half).reshape(on_pane.shape)
+    through = box_hits(at, bent, box_at, box_half).reshape(on_pane.shape)
+    shows_box, shows_none = on_pane & meets & ~through, on_pane & ~meets & ~through
+    assert shows_box.sum() > 100 and shows_none.sum() > 300, (shows_box.sum(), shows_none.sum())
+    redder = (seen[..., 0] - without[..., 0])
+    fresnel = (0.04 + 0.96 * (1.0 - cos_i) ** 5).reshape(on_pane.shape)   # Schlick's, F0 of index 1.5
+    share = np.median(redder[shows_box] / (0.7 * fresnel[shows_box]))
+    assert 0.3 < share < 1.5, share  # (the split sum's weight is not quite Schlick's)
+    assert np.quantile(np.abs(redder[shows_none]), 0.9) < 0.01

@@ -34,9 +34,11 @@ The transparent slot (blended glass, decals, particles) is drawn before the refr
 surfaces, into the copy, where all of it that meets them on screen lies behind them
 (``behind_the_glass``; ``ScenePass.slot_behind_glass``), else after them, unseen through
 them.  What the copy cannot hold is not seen through the glass: what the view did not draw
-(off its edges, behind what it shows).  Drawn after them, a refracting surface takes no part in the
-screen reflections (its own reflection is the probe's or sky's, as HDRP's and Unity's
-transparent surfaces keep theirs) nor in the screen's ambient occlusion.  Probe captures
+(off its edges, behind what it shows).  A refracting surface's own reflection is found the
+same way: its reflected ray marched across the copy (``screen_found`` in ``shaders/scene.frag``;
+HDRP's screen-space reflection of transparent surfaces), the probe's or sky's image where it
+finds nothing.  Drawn after them, it takes no part in the screen reflections of the surfaces
+around it (they do not show it) nor in the screen's ambient occlusion.  Probe captures
 draw every refracting batch with its opaque draws, reading the probe or the sky (their
 faces have no copy).  Where a build with the
 march would read more samplers than the fragment stage has (a 16-unit driver's fullest
