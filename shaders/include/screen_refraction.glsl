@@ -14,9 +14,9 @@
 // share one image) or leaves the view finds nothing.  A ray that stays in the view, in front
 // of all it passes, and ends over the sky goes on to the sky: it finds the colour the view
 // drew where the sky lies along it (its vanishing point, over sky all the way there:
-// refraction_sky), the sky as the view drew it, fog and clouds and all, which the probe's or
-// the sky's cube (unfogged, a probe's seen from its centre) is not.  Uses the Camera block
-// (camera.glsl).
+// refraction_sky), the sky as the view drew it, its sun's disc as sharp, fog and clouds and
+// all, which the probe's or the sky's cube (its texels, a probe's seen from its centre) is
+// not.  Uses the Camera block (camera.glsl).
 #define REFRACTION_STEPS 24
 #define REFRACTION_REFINE 5
 const float REFRACTION_REACH = 25.0;     // metres a refracted ray is followed (faded over its last quarter)
