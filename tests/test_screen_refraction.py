@@ -45,10 +45,15 @@ def room(world) -> None:
 
 
 def frame(scene, build, size=SIZE) -> np.ndarray:
+    return framed(scene, build, size)[1]
+
+
+def framed(scene, build, size=SIZE):
+    """``build``'s runner and its second frame (linear, FXAA off)."""
     runner = scene(build, size)
     runner.engine.renderer.antialias = "off"
     runner.frame()
-    return srgb_to_linear(runner.frame())
+    return runner, srgb_to_linear(runner.frame())
 
 
 def pane(world, ior: float, screen: bool = True, position=(0.0, 1.0, 1.0), turn: float = 0.0) -> int:
@@ -104,10 +109,7 @@ def test_glass_over_the_sky_shows_the_sky_the_view_drew(scene, air):
         pane(world, 1.0, position=(0.0, 2.2, 1.0))
 
     drawn = frame(scene, without)
-    runner = scene(with_pane, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    seen = srgb_to_linear(runner.frame())
+    runner, seen = framed(scene, with_pane)
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
     t = (1.0 - eye[2]) / rays[..., 2]
     hit = eye + t[..., None] * rays
@@ -388,10 +390,7 @@ def test_glass_behind_glass_shows_through_it(scene, batches):
         tinted_pane(world, tuple(near_at), near_tint, mesh)
 
     drawn = frame(scene, without)
-    runner = scene(with_panes, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    seen = srgb_to_linear(runner.frame())
+    runner, seen = framed(scene, with_panes)
     stats = runner.engine.renderer.stats
     assert stats.refraction_layers == 2 and stats.refraction_layers_cut == 0
     assert len(runner.engine.renderer.refracting_batches()) == (1 if batches == "one" else 2)
@@ -464,10 +463,7 @@ def test_see_through_things_behind_glass_show_through_it(scene, in_front):
         pane(world, 1.0, position=(0.0, 1.0, 1.0))
 
     drawn = frame(scene, without)
-    runner = scene(with_glass, SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    seen = srgb_to_linear(runner.frame())
+    runner, seen = framed(scene, with_glass)
     assert (runner.engine.renderer.stats.slot_after_glass > 0) == in_front
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
     t = (green_at[2] - eye[2]) / rays[..., 2]
@@ -553,10 +549,7 @@ def test_glass_reflects_what_its_view_drew(scene):
                         Refractive(ior=1.5))
         return make
 
-    runner = scene(build(True), SIZE)
-    runner.engine.renderer.antialias = "off"
-    runner.frame()
-    seen = srgb_to_linear(runner.frame())
+    runner, seen = framed(scene, build(True))
     without = frame(scene, build(False))
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
     normal = np.array([np.sin(turn), 0.0, np.cos(turn)])
