@@ -255,6 +255,40 @@ def test_a_cube_map_exr_makes_the_sky_its_faces_hold(tmp_path):
     assert not np.allclose(turned, faces, atol=0.1)
 
 
+def latlong_of(function, height: int, width: int) -> np.ndarray:
+    """A latlong environment of ``function(direction)`` as ``ImfEnvmap.cpp`` maps its pixels:
+    latitude +pi/2 on the first row to -pi/2 on the last, longitude +pi on the first column
+    to -pi on the last, direction (sin lon cos lat, sin lat, cos lon cos lat)."""
+    lat = -np.pi * (np.arange(height) / (height - 1) - 0.5)
+    lon = -2.0 * np.pi * (np.arange(width) / (width - 1) - 0.5)
+    lat, lon = np.meshgrid(lat, lon, indexing="ij")
+    d = np.stack([np.sin(lon) * np.cos(lat), np.sin(lat), np.cos(lon) * np.cos(lat)], axis=-1)
+    return function(d)
+
+
+def test_a_latlong_exr_makes_the_sky_its_directions_hold_as_its_cube_twin_does(tmp_path):
+    """An OpenEXR latlong environment (``envmap`` latlong) holding a colour linear in each
+    pixel's direction, as OpenEXR's ``ImfEnvmap`` maps them (its middle column +Z, where the
+    engine's panoramas have -Z): the Skybox faces made from it hold each face texel's own
+    direction's colour, and equal those made from the same environment as a cube map.  A file
+    without the attribute is a plain image, taken in the engine's wrap as an ``.hdr`` is."""
+    def colour(d):
+        return 1.0 + 0.5 * d
+
+    from engine.core.cube_faces import face_directions
+
+    image = latlong_of(colour, 64, 128).astype(np.float32)
+    latlong = write(tmp_path / "latlong.exr", rgb(image), envmap=OpenEXR.ENVMAP_LATLONG)
+    cube = write(tmp_path / "cube.exr", rgb(cube_map_of(colour, 32).astype(np.float32)), envmap=OpenEXR.ENVMAP_CUBE)
+    faces = sky_faces_from_file(latlong, face_size=16)
+    for face in range(6):
+        np.testing.assert_allclose(faces[face], colour(face_directions(face, 16)), atol=0.02)
+    np.testing.assert_allclose(faces, sky_faces_from_file(cube, face_size=16), atol=0.02)
+    plain = write(tmp_path / "plain.exr", rgb(image))
+    np.testing.assert_array_equal(load_panorama(plain), image)
+    assert not np.allclose(sky_faces_from_file(plain, face_size=16), faces, atol=0.1)
+
+
 def test_a_level_file_and_the_runner_take_an_exr_sky(scene, tmp_path):
     from engine.assets.level_read import load_level
     from engine.assets.level_save import save_level

@@ -18,8 +18,10 @@ parts.  What this module adds is the engine's side:
   as OpenColorIO does; colours that fall outside Rec. 709 (negative) are clipped to 0;
 - what the sky can hold: a non-finite colour, or one past 65504 (a sky face's half float), is
   refused, as the ``.hdr`` reader refuses it;
-- which map: a file whose ``envmap`` attribute says cube holds a cube map's six faces stacked
-  (``load_exr_environment``; ``engine/assets/panorama.py`` makes them a panorama).
+- which map: a file whose ``envmap`` attribute says cube holds a cube map's six faces stacked,
+  one whose attribute says latlong an equirectangular panorama in OpenEXR's own wrap (its middle
+  column +Z), one without the attribute an image (``load_exr_environment``;
+  ``engine/assets/panorama.py`` makes each a panorama in the engine's wrap).
 """
 from __future__ import annotations
 
@@ -59,10 +61,13 @@ def load_exr(path: str | Path, layer: str | None = None) -> np.ndarray:
 
 
 def load_exr_environment(path: str | Path, layer: str | None = None) -> tuple[np.ndarray, str]:
-    """``load_exr``'s colours and the file's environment map kind: "cube" where its ``envmap``
-    attribute says the image is a cube map's six faces (N x 6N pixels: +X, -X, +Y, -Y, +Z, -Z
-    from the top, each as OpenEXR's ``ImfEnvmap.h`` lays it out; one of another shape is
-    refused), else "latlong" (an equirectangular panorama, the attribute's other value or none)."""
+    """``load_exr``'s colours and the file's environment map kind, as its ``envmap`` attribute
+    says: "cube", a cube map's six faces (N x 6N pixels: +X, -X, +Y, -Y, +Z, -Z from the top,
+    each as OpenEXR's ``ImfEnvmap.h`` lays it out; one of another shape is refused);
+    "latlong", an equirectangular panorama as ``ImfEnvmap.h`` wraps it (longitude +pi at the
+    left edge to -pi at the right, 0 at the middle column pointing +Z, +pi/2 +X); "image"
+    where the file has no ``envmap`` attribute (a plain picture: an HDRI site's panorama, taken
+    in the engine's own wrap as an ``.hdr`` file is)."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise AssetError(f"OpenEXR file path must be a str or pathlib.Path, got {type(path).__name__} {path!r}")
     if layer is not None and (not isinstance(layer, str) or not layer):
@@ -86,7 +91,8 @@ def _load(openexr: Any, path: Path, layer: str | None, what: str) -> tuple[np.nd
     part_index, prefix = _choose_part(headers, layer, what)
     header = headers.parts[part_index].header
     display, data_window = _windows(header, what)
-    kind = "cube" if str(header.get("envmap", "")).endswith("CUBE") else "latlong"
+    envmap = header.get("envmap")
+    kind = "image" if envmap is None else "cube" if str(envmap).endswith("CUBE") else "latlong"
     width, height = display[2] - display[0] + 1, display[3] - display[1] + 1
     if kind == "cube" and height != 6 * width:
         raise AssetError(f"{what}: is a cube-map environment (envmap = cube) of {width} x {height} pixels; its six "

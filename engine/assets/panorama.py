@@ -210,11 +210,14 @@ def load_panorama(path: str | Path, layer: str | None = None) -> np.ndarray:
     """An equirectangular image's linear colours (height, width, 3) float32, row 0 at the top:
     a ``.hdr`` file as ``load_hdr`` reads it, an ``.exr`` file as ``load_exr`` does (``layer``:
     its part or layer of that name; a cube-map environment made a panorama by
-    ``cube_map_panorama``), any other image through Pillow as sRGB."""
+    ``cube_map_panorama``, a latlong one turned into the engine's wrap by
+    ``latlong_panorama``), any other image through Pillow as sRGB."""
     suffix = Path(path).suffix.lower()
     if suffix == ".exr":
         image, kind = load_exr_environment(path, layer)
-        return cube_map_panorama(image) if kind == "cube" else image
+        if kind == "cube":
+            return cube_map_panorama(image)
+        return latlong_panorama(image) if kind == "latlong" else image
     if layer is not None:
         raise AssetError(f"panorama file {str(path)!r}: layer {layer!r} given, but only an OpenEXR (.exr) file "
                          "has layers")
@@ -251,6 +254,29 @@ def cube_map_panorama(faces: np.ndarray) -> np.ndarray:
     x = np.select([face == 0, face == 1, face == 4], [py, last - py, last - px], px)
     y = np.select([face == 3], [py], last - np.where(face < 2, px, py))
     return _face_bilinear(image, face, x, y)
+
+
+def latlong_panorama(image: np.ndarray) -> np.ndarray:
+    """An OpenEXR latlong environment (``envmap`` latlong) resampled into the engine's wrap, the
+    same size.  ``ImfEnvmap.h``'s ``latLong`` puts the first and last pixel centres on the
+    edges (longitude +pi at the left column to -pi at the right, 0 at the middle pointing +Z,
+    +pi/2 +X; latitude +pi/2 on the top row, -pi/2 on the bottom), where the engine's pixel
+    centres are half a pixel in and its middle column points -Z: each engine pixel's direction
+    is found in the file (a column period of width - 1: the seam's column is there twice) and
+    read bilinearly."""
+    image = np.asarray(image, np.float32)
+    height, width = image.shape[:2]
+    x = ((np.arange(width) + 0.5) / width + 0.5) % 1.0 * (width - 1)   # longitude pi - engine's, as a column
+    y = (np.arange(height) + 0.5) / height * (height - 1)
+
+    def taps(at: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        first = np.minimum(np.floor(at).astype(np.int64), size - 1)
+        return first, np.minimum(first + 1, size - 1), (at - first).astype(np.float32)
+
+    x0, x1, fx = taps(x, width)
+    y0, y1, fy = taps(y, height)
+    across = image[:, x0] * (1.0 - fx)[None, :, None] + image[:, x1] * fx[None, :, None]
+    return (across[y0] * (1.0 - fy)[:, None, None] + across[y1] * fy[:, None, None]).astype(np.float32)
 
 
 def _face_bilinear(image: np.ndarray, face: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
