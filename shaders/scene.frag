@@ -347,8 +347,14 @@ float specular_occlusion(float nv, float occlusion, float roughness) {
 // ``direction``, where the march finds it (screen_refraction.glsl), over ``otherwise`` (the
 // probe's or sky's radiance) by the find's confidence: what it lets through, and what it
 // reflects (a refracting surface's own screen-space reflection: HDRP's transparent SSR).
-vec3 screen_found(Surface s, vec3 origin, vec3 direction, vec3 otherwise) {
-    vec4 found = screen_refraction(origin, direction, s.roughness);
+// (spread: the radians the ray turns from one pixel to the next, from its cube map's mip level
+// ``lod`` for a face of ``face_size`` texels: cube_lod)
+float ray_spread(float lod, float face_size) {
+    return exp2(lod) * 2.0 / max(face_size, 1.0);
+}
+
+vec3 screen_found(Surface s, vec3 origin, vec3 direction, float spread, vec3 otherwise) {
+    vec4 found = screen_refraction(origin, direction, s.roughness, spread);
     if (found.a <= 0.0) return otherwise;
     vec3 drawn = found.rgb;
 #ifdef FOG
@@ -374,7 +380,8 @@ vec3 environment_specular(Surface s, AmbientBoxes boxes) {
     vec3 weight = s.environment_weight * (occlusion * horizon * horizon);
     vec3 radiance = environment_radiance(s, boxes);
 #ifdef SCREEN_REFRACTION
-    radiance = screen_found(s, s.position, s.reflect_dir, radiance);  // (glass reflects what its view drew)
+    // (glass reflects what its view drew)
+    radiance = screen_found(s, s.position, s.reflect_dir, ray_spread(s.reflect_lod, sky_face_size), radiance);
 #endif
     environment_light = weight * radiance;
 #ifdef SCREEN_REFLECTION
@@ -854,7 +861,8 @@ vec3 refracted_light(Surface s, vec3 origin, vec3 direction, float lod) {
     vec3 behind = probe_face_size > 0.0 ? probe_radiance(s.position, direction, lod, s.roughness)
                                         : sample_environment(direction, lod, s.roughness);
 #ifdef SCREEN_REFRACTION
-    behind = screen_found(s, origin, direction, behind);
+    float spread = ray_spread(lod, probe_face_size > 0.0 ? probe_face_size : sky_face_size);
+    behind = screen_found(s, origin, direction, spread, behind);
 #endif
     return behind;
 }

@@ -573,3 +573,88 @@ def test_glass_reflects_what_its_view_drew(scene):
     share = np.median(redder[shows_box] / (0.7 * fresnel[shows_box]))
     assert 0.3 < share < 1.5, share  # (the split sum's weight is not quite Schlick's)
     assert np.quantile(np.abs(redder[shows_none]), 0.9) < 0.01
+
+
+def _box_distance(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """How far along each ray (rows) it enters the box (the slab test); inf where it misses."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (centre - half - origin) / direction, (centre + half - origin) / direction
+    near, far = np.nanmax(np.minimum(t1, t2), axis=1), np.nanmin(np.maximum(t1, t2), axis=1)
+    return np.where((near <= far) & (far > 1e-6), np.maximum(near, 0.0), np.inf)
+
+
+def test_a_balls_reflection_reads_the_screen_only_where_its_pixels_rays_stay_close(scene):
+    """A black glass ball of index 1.5 (what it lets through hidden: its colour's alpha 1,
+    so the pixel is its reflection) with a red box (unlit) close beside it and a wall of
+    white bars far behind: where a pixel's reflected ray, cast in numpy, meets the box and its
+    neighbours' rays land within a copy pixel or so of it there, the ball reflects the red
+    the view drew; where a pixel's ray meets the wall and its neighbours' land more than 8 of
+    the wall's pixels apart (towards its rim, where the ball's reflection is minified most),
+    one texel of the copy, a bar or the gap between, would be noise (``REFRACTION_SPREAD``,
+    4 pixels), so the ball reflects what it does without the screen (``Refractive.screen``
+    False: its probe's capture, read at the mip level of that footprint) instead."""
+    centre, radius = np.array([0.0, 1.0, 0.0]), 0.8
+    box_at, box_half = np.array([0.95, 1.0, 0.75]), np.array([0.25, 0.5, 0.25])
+    wall_z = -3.0
+
+    def build(screen, with_box=True):
+        def make(world):
+            look_from(world, (0.0, 1.2, 4.0), (0.3, 1.0, 0.0), fov=50.0)
+            world.spawn(Skybox())
+            world.spawn(Transform(position=(0.0, 1.0, wall_z)), MeshRef(box((12.0, 6.0, 0.1))),
+                        Material(color=(0.0, 0.05, 0.0, 1.0), unlit=True))
+            for x in np.arange(-5.75, 6.0, 0.5):  # white bars a quarter metre wide on it
+                world.spawn(Transform(position=(float(x), 1.0, wall_z + 0.1)), MeshRef(box((0.25, 6.0, 0.1))),
+                            Material(color=(1.0, 1.0, 1.0, 1.0), unlit=True))
+            if with_box:
+                world.spawn(Transform(position=tuple(box_at)), MeshRef(box(tuple(2.0 * box_half))),
+                            Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+            world.spawn(Transform(position=tuple(centre)), MeshRef(sphere(radius, 128, 64)),
+                        Material(color=(0.0, 0.0, 0.0, 1.0), roughness=0.0), Refractive(ior=1.5, screen=screen))
+        return make
+
+    runner, seen = framed(scene, build(True))
+    plain = frame(scene, build(False))
+    view = runner.engine.main_view
+    eye, rays = pixel_rays(view, SIZE)
+    # The nearer meeting of each pixel's ray with the ball, unless the box is in front.
+    along = eye - centre
+    b = rays @ along
+    disc = b * b - (along @ along - radius * radius)
+    t = -b - np.sqrt(np.maximum(disc, 0.0))
+    eyes = np.broadcast_to(eye, rays.shape).reshape(-1, 3)
+    on_ball = (disc > 0.0) & (_box_distance(eyes, rays.reshape(-1, 3), box_at, box_half).reshape(t.shape) > t)
+    hit = eye + t[..., None] * rays
+    normal = (hit - centre) / radius
+    cos_i = -np.sum(rays * normal, axis=-1)
+    reflected = rays + 2.0 * cos_i[..., None] * normal
+    to_box = _box_distance(hit.reshape(-1, 3), reflected.reshape(-1, 3), box_at, box_half).reshape(t.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_wall = np.where(reflected[..., 2] < 0.0, (wall_z + 0.05 - hit[..., 2]) / reflected[..., 2], np.inf)
+    way = np.minimum(to_box, to_wall)
+    # How far apart, in pixels where it lands, the reflected rays of a pixel and its next
+    # neighbours land (the rays' turn from one pixel to the next times the way).
+    turn = np.full(t.shape, np.inf)
+    turn[:-1, :-1] = np.maximum(np.linalg.norm(reflected[1:, :-1] - reflected[:-1, :-1], axis=-1),
+                                np.linalg.norm(reflected[:-1, 1:] - reflected[:-1, :-1], axis=-1))
+    to_view = np.array(view.view.to_list(), np.float64).T
+    landed = hit + np.where(np.isfinite(way), way, 0.0)[..., None] * reflected
+    depth = -(landed @ to_view[2, :3] + to_view[2, 3])
+    apart = turn * way * float(view.proj[1][1]) * 0.5 * SIZE[1] / depth
+    # (each pixel and its four neighbours on the ball; what it lands on in the view)
+    inside = on_ball.copy()
+    inside[1:-1, 1:-1] &= on_ball[:-2, 1:-1] & on_ball[2:, 1:-1] & on_ball[1:-1, :-2] & on_ball[1:-1, 2:]
+    clip = np.concatenate([landed, np.ones(t.shape + (1,))], axis=-1) @ np.array(view.view_proj.to_list()).T.T
+    in_view = (clip[..., 3] > 0.0) & np.all(np.abs(clip[..., :2] / clip[..., 3:]) < 0.95, axis=-1)
+    close = inside & in_view & (to_box < to_wall) & (apart < 1.5)
+    # (on the ball's side away from the box: a ray that passes close behind the box on screen
+    # is taken to meet it, REFRACTION_THICKNESS)
+    away = (hit[..., 0] < centre[0]) & (np.abs(landed[..., 1] - 1.0) < 3.0)
+    spread = inside & in_view & away & (to_wall < to_box) & (apart > 8.0)
+    assert close.sum() > 40 and spread.sum() > 10, (close.sum(), spread.sum())
+    redder = seen[..., 0] - plain[..., 0]
+    fresnel = 0.04 + 0.96 * (1.0 - cos_i) ** 5   # Schlick's, F0 of index 1.5
+    share = np.median(redder[close] / (0.7 * fresnel[close]))
+    assert 0.3 < share < 1.5, share
+    off = np.abs(seen - plain).max(axis=-1)[spread]
+    assert np.quantile(off, 0.9) < 0.02, np.sort(off)

@@ -21,6 +21,7 @@
 #define REFRACTION_REFINE 5
 const float REFRACTION_REACH = 25.0;     // metres a refracted ray is followed (faded over its last quarter)
 const float REFRACTION_THICKNESS = 0.5;  // metres behind a drawn surface a ray is still taken to meet it
+const float REFRACTION_SPREAD = 4.0;     // copy pixels a pixel's rays may spread over at the find (faded from half)
 const float REFRACTION_EDGE = 0.05;      // the share of the view's width and height a find fades out over at its edges
 
 uniform sampler2D refraction_copy;  // rgb: the view's colour before its refracting surfaces, a: its window depth
@@ -65,8 +66,14 @@ vec3 refraction_drawn_point(vec2 pixel, float window) {
 // What the view drew where the ray from ``origin`` (world) along the unit ``direction`` meets
 // it (rgb, read at a mip level as wide as a lobe of ``roughness`` spreads there) and the
 // confidence in it (a; 0: nothing found), faded at the view's edges, over the last quarter
-// of the reach and by how far behind the drawn surface the ray was found.
-vec4 screen_refraction(vec3 origin, vec3 direction, float roughness) {
+// of the reach, by how far behind the drawn surface the ray was found, and where the rays of
+// the pixel's neighbours land far apart: ``spread``, the radians the ray's direction turns
+// from one pixel to the next (a curved surface's: a ball's reflection is a minified image of
+// what is round it, most of all at its rim), times the way to the find, over more than
+// REFRACTION_SPREAD of the copy's pixels (one texel read for a footprint that wide is noise:
+// blocks and specks that change with every pixel's normal; the probe's or sky's image, read
+// at a mip level for that footprint, says it instead, as the screen reflections' fade does).
+vec4 screen_refraction(vec3 origin, vec3 direction, float roughness, float spread) {
     vec4 h0 = camera.view_proj * vec4(origin, 1.0);
     float reach = REFRACTION_REACH;
     vec4 h1 = camera.view_proj * vec4(origin + direction * reach, 1.0);
@@ -145,7 +152,8 @@ vec4 screen_refraction(vec3 origin, vec3 direction, float roughness) {
     vec2 edge = min(uv, 1.0 - uv);
     float confidence = smoothstep(0.0, REFRACTION_EDGE, min(edge.x, edge.y))
         * (1.0 - smoothstep(0.75 * REFRACTION_REACH, REFRACTION_REACH, travelled))
-        * (1.0 - smoothstep(0.25 * REFRACTION_THICKNESS, REFRACTION_THICKNESS, gap));
+        * (1.0 - smoothstep(0.25 * REFRACTION_THICKNESS, REFRACTION_THICKNESS, gap))
+        * (1.0 - smoothstep(0.5 * REFRACTION_SPREAD, REFRACTION_SPREAD, spread * travelled * pixels_a_metre));
     // (at the found pixel's centre: a ray along the eye's reads its own pixel, not a blend of its neighbours)
     return vec4(textureLod(refraction_copy, (floor(found) + 0.5) / vec2(textureSize(refraction_copy, 0)), lod).rgb,
                 confidence);
