@@ -37,7 +37,10 @@ them.  What the copy cannot hold is not seen through the glass: what the view di
 (off its edges, behind what it shows).  A refracting surface's own reflection is found the
 same way: its reflected ray marched across the copy (``screen_found`` in ``shaders/scene.frag``;
 HDRP's screen-space reflection of transparent surfaces), the probe's or sky's image where it
-finds nothing.  Drawn after them, it takes no part in the screen reflections of the surfaces
+finds nothing.  Either find gives way to the probe's or sky's image where the rays of
+neighbouring pixels land far apart in the copy (``REFRACTION_SPREAD``: a ball's reflection,
+minified most towards its rim, would be one texel of the copy a pixel, speckled; the cube is
+read at the mip level of that footprint).  Drawn after them, it takes no part in the screen reflections of the surfaces
 around it (they do not show it) nor in the screen's ambient occlusion.  Probe captures
 draw every refracting batch with its opaque draws, reading the probe or the sky (their
 faces have no copy).  Where a build with the
