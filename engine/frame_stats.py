@@ -120,9 +120,10 @@ class RenderStats(BudgetLedger):
     # instances past MAX_REFRACTION_LAYERS drawn in the last layer (RefractionLimitWarning).
     refraction_layers: int = 0
     refraction_layers_cut: int = 0
-    # Views' levels whose transparent slot was drawn after their refracting surfaces (some of it
-    # in front of the glass it meets on screen), so the glass does not show that slot behind it
-    # (ScenePass.slot_behind_glass; where all of it lies behind, it is drawn first and shown).
+    # Views (or batched groups of a level's views) whose transparent slot was drawn in part after
+    # their refracting surfaces: from the first of its things, back to front, that lies in front
+    # of glass it meets on screen (ScenePass._slot_and_glass; the things before it are drawn
+    # before the glass and shown through it, those after it that lie behind glass are not).
     slot_after_glass: int = 0
     # Particles (systems/particle_system.py): living this frame, every emitter's; and those the
     # emitters could not spawn this frame, their max_particles reached (ParticleLimitWarning).

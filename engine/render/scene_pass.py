@@ -424,45 +424,73 @@ class ScenePass:
         ``options``), once the levels below are composited into it: the screen-space
         reflections, where the main view was drawn for them (``ScreenReflectionPass``), the
         light shafts, where its camera has them (``VolumetricFogPass``), the refracting
-        surfaces (``refract``), then the transparent slot (``draw_transparent``), so glass
-        goes over all; the slot first where all of it the refracting surfaces could show
-        lies behind them (``slot_behind_glass``): so they show it."""
+        surfaces (``refract``) and the transparent slot (``draw_transparent``) about them
+        (``_slot_and_glass``), so glass goes over all."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite(targets)
         if self.volumetric_fog is not None:
             self.volumetric_fog.composite(targets)
-        if self.slot_behind_glass([root], targets.size):
-            self.draw_transparent([root], targets, options)
-            self.refract([root], targets, options)
-        else:
-            self.refract([root], targets, options)
-            self.draw_transparent([root], targets, options)
+        self._slot_and_glass([root], targets, options, None, True)
 
-    def slot_behind_glass(self, views: Sequence[View], size: tuple[int, int]) -> bool:
-        """Whether ``views``' transparent slot (see-through batches, decals and particles) is
-        to be drawn before their refracting surfaces: some refract and some of the slot is
-        there, and in every view each of its things whose rectangle on screen meets a
-        refracting surface's lies wholly behind it (``screen_refraction.behind_the_glass``),
-        so the glass, drawn over it, shows it in its copy (HDRP's "before refraction" pass,
-        chosen here by where things are).  Otherwise the glass does not show the slot (what
-        lies in front of it must blend over it; counted in ``RenderStats.slot_after_glass``)."""
-        renderer = self.renderer
-        refracting = renderer.refracting_batches()
-        transparent = renderer.transparent_batches()
-        particles = self._particles_now()
-        if not refracting or not views or not (transparent or particles):
-            return False
-        glass_reach = batch_reach(views, size, refracting)
-        slot_reach = batch_reach(views, size, transparent) if transparent else [[] for _ in views]
-        emitters = self.particle_draw.visible(views, size) if particles else [[] for _ in views]
+    def _slot_and_glass(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
+                        conditions: Sequence[moderngl.Query] | None, slot: bool) -> None:
+        """``views``' refracting surfaces (``refract``) and, with ``slot``, their transparent
+        slot (``draw_transparent``): where some refract and some of the slot is there, the
+        slot in two parts about them, in its back-to-front order: its farthest things up to
+        the first that lies in front of a refracting surface it meets on screen first, into
+        the copy the glass marches, so the glass shows them (HDRP's "before refraction"
+        pass, chosen here by where things are), the rest after, over the glass (what of it
+        lies behind glass is unseen through it; counted in ``RenderStats.slot_after_glass``)."""
+        glass = self._glass_boxes(views, targets.size) if slot else None
+        if glass is None:
+            self.refract(views, targets, options, conditions)
+            if slot:
+                self.draw_transparent(views, targets, options, conditions)
+            return
+        self.draw_transparent(views, targets, options, conditions, glass=glass, part="before")
+        self.refract(views, targets, options, conditions)
+        self.draw_transparent(views, targets, options, conditions, glass=glass, part="after")
+
+    def _glass_boxes(self, views: Sequence[View], size: tuple[int, int]) -> list[np.ndarray | None] | None:
+        """For each of ``views``, the world boxes ([n, lo/hi, xyz]) of the refracting
+        instances that can reach it (``batch_reach``; None: none), or None for all where none
+        refracts, none reaches them or nothing of the slot is drawn."""
+        refracting = self.renderer.refracting_batches()
+        if not refracting or not views or not self.slot_drawn():
+            return None
+        reach = batch_reach(views, size, refracting)
+        boxes = [np.concatenate([batch.row_boxes for batch, reaches in zip(refracting, rows, strict=True) if reaches])
+                 if any(rows) else None for rows in reach]
+        return boxes if any(box is not None for box in boxes) else None
+
+    def _slot_cut(self, views: Sequence[View], size: tuple[int, int], glass: Sequence[np.ndarray | None],
+                  items: list) -> int:
+        """How many of ``items`` (``_slot_items``: batches and, as lists a view, particle
+        emitters, in blending order; drawn for ``views``, ``glass`` the refracting boxes
+        that reach each) may be drawn before the refracting surfaces: those before the first
+        that, in one of the views, lies in part in front of glass it meets on screen
+        (``screen_refraction.behind_the_glass``).  A decal lies on an opaque surface: before
+        glass, it is hidden where the glass is nearer, as it should be."""
+        cut = len(items)
         for index, view in enumerate(views):
-            glass = [batch.row_boxes for batch, reaches in zip(refracting, glass_reach[index], strict=True) if reaches]
-            others = [batch.row_boxes for batch, reaches in zip(transparent, slot_reach[index], strict=True) if reaches]
-            others += [record.row_boxes for _, record in emitters[index]]
-            if glass and others and not behind_the_glass(view, size, np.concatenate(glass), np.concatenate(others)):
-                renderer.stats.slot_after_glass += 1
-                return False
-        return True
+            boxes = glass[index]
+            if boxes is None:
+                continue
+            rows, owner = [], []
+            for at, item in enumerate(items[:cut]):
+                if isinstance(item, list):
+                    for record in item[index]:
+                        rows.append(record.row_boxes)
+                        owner.append(np.full(len(record.row_boxes), at))
+                elif not item.decal:
+                    rows.append(item.row_boxes)
+                    owner.append(np.full(item.count, at))
+            if not rows:
+                continue
+            behind = behind_the_glass(view, size, boxes, np.concatenate(rows))
+            if not behind.all():
+                cut = min(cut, int(np.concatenate(owner)[~behind].min()))
+        return cut
 
     def refract(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                 conditions: Sequence[moderngl.Query] | None = None) -> None:
@@ -543,75 +571,95 @@ class ScenePass:
         ``targets`` with ``options``), once the level below is composited into it: the
         screen-space reflections, where the level was drawn for them
         (``ScreenReflectionPass.composite_level``), the light shafts where the camera's reach
-        it (``VolumetricFogPass.composite_level``), the refracting surfaces (``refract``),
-        then, with ``glass`` (something see-through is drawn), the transparent slot (before
-        them where it lies behind them: ``slot_behind_glass``)."""
+        it (``VolumetricFogPass.composite_level``), the refracting surfaces (``refract``)
+        and, with ``glass`` (something see-through is drawn), the transparent slot about
+        them (``_slot_and_glass``)."""
         if self.screen_reflections is not None:
             self.screen_reflections.composite_level(depth, views, targets)
         if self.volumetric_fog is not None:
             self.volumetric_fog.composite_level(depth, views, targets)
-        if glass and self.slot_behind_glass(views, targets.size):
-            self.draw_transparent(views, targets, options, conditions)
-            self.refract(views, targets, options, conditions)
-            return
-        self.refract(views, targets, options, conditions)
-        if glass:
-            self.draw_transparent(views, targets, options, conditions)
+        self._slot_and_glass(views, targets, options, conditions, glass)
 
     def draw_transparent(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
-                         conditions: Sequence[moderngl.Query] | None = None) -> None:
+                         conditions: Sequence[moderngl.Query] | None = None,
+                         glass: Sequence[np.ndarray | None] | None = None, part: str | None = None) -> None:
         """The rest of the transparent slot of ``views``, drawn by ``draw`` with ``options``
         (its ``transparent`` False) into ``targets``: each view's transparent batches nearer
         than its see-through mirrors and portals (all of them where there are none: glass),
-        farthest first, blended over what its pixels hold now, testing the depth its opaque
-        draws left but not writing it.  A view tree calls it for a level's views (its root's
-        too) after the levels below are composited into them, so glass blends over the
-        reflections behind it.  ``conditions`` as for ``draw``.  Nothing at all where no
-        batch is transparent."""
+        farthest first, its particle emitters in among them, blended over what its pixels
+        hold now, testing the depth its opaque draws left but not writing it.  A view tree
+        calls it for a level's views (its root's too) after the levels below are composited
+        into them, so glass blends over the reflections behind it.  ``conditions`` as for
+        ``draw``.  ``part`` "before" or "after", with ``glass`` (each view's refracting boxes:
+        ``_glass_boxes``): only the slot's things before, or from, the first that lies in
+        front of glass it meets (``_slot_cut``), drawn before and after the refracting
+        surfaces.  Nothing at all where no batch is transparent and no particle lives."""
         transparent = self.renderer.transparent_batches()
         particles = self._particles_now()
         if not views or not (transparent or particles):
             return
-        renderer = self.renderer
+        renderer, size = self.renderer, targets.size
         self._sky_size = renderer.sky.size[0]
         state = _BATCHED_TRANSPARENT if options.batched else _TRANSPARENT
         targets.begin_glass()
         self._begin(views, targets, options, state)
         try:
-            if not transparent:  # the particles alone (engine/render/particle_draw.py)
+            if not transparent and part is None:  # the particles alone (engine/render/particle_draw.py)
                 renderer.upload_views(views)
                 self.particle_draw.draw(views, targets, options.masked, self._ambient_probes, conditions=conditions)
+            elif not transparent:  # each view's particles before or after the glass
+                renderer.upload_views(views)
+                emitters = self.particle_draw.visible(views, size)
+                chosen = []
+                for index, view in enumerate(views):
+                    items = self._part(_slot_items([], [emitters[index]], view.sorting_eye), [view],
+                                       [glass[index]], part, size)
+                    chosen.append([record for item in items for record in item[0]])
+                self.particle_draw.draw(views, targets, options.masked, self._ambient_probes, conditions=conditions,
+                                        chosen=chosen)
             elif options.batched:
                 geometry = self._slot_geometry(transparent)
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
                     chunk = views[first:first + MAX_BATCHED_VIEWS]
-                    emitters = self.particle_draw.visible(chunk, targets.size) if particles else None
+                    emitters = self.particle_draw.visible(chunk, size) if particles else None
                     for group, _, rest, _ in slot_groups(transparent, chunk, geometry):
-                        if emitters is not None:  # the group's views' emitters, in among its glass
-                            at = [chunk.index(view) for view in group]
-                            self._batched_slot(group, [first + i for i in at], rest, [emitters[i] for i in at],
-                                               targets, options, state, conditions)
-                            continue
-                        if not rest:
-                            continue
-                        scissor = self._views_table(group)
-                        apply_pass_state(self.ctx, state, (0, 0, *targets.size), scissor)
-                        set_front_face(self.ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
-                        self._draw_batches(rest, geometry_invocations(len(group)), options.masked)
+                        at = [chunk.index(view) for view in group]
+                        drawn = [emitters[i] for i in at] if emitters is not None else [[] for _ in group]
+                        items = self._part(_slot_items(rest, drawn, group[0].sorting_eye), group,
+                                           None if glass is None else [glass[first + i] for i in at], part, size)
+                        if items:
+                            self._batched_slot(group, [first + i for i in at], items, targets, options, state,
+                                               conditions)
             else:
                 geometry = self._slot_geometry(transparent)
                 renderer.upload_views(views)
-                emitters = self.particle_draw.visible(views, targets.size) if particles else None
+                emitters = self.particle_draw.visible(views, size) if particles else None
                 for index, view in enumerate(views):
                     batches = split_slot(transparent, view, geometry)[1]
-                    if batches or emitters:  # (else all behind its see-through surfaces: drawn with them)
+                    items = self._part(_slot_items(batches, [emitters[index] if emitters else []], view.sorting_eye),
+                                       [view], None if glass is None else [glass[index]], part, size)
+                    if items:  # (else all behind its see-through surfaces: drawn with them)
                         with _ALWAYS if conditions is None else conditions[index].crender:
-                            self._slot_view(view, index, batches, options.masked, targets,
-                                            emitters[index] if emitters else (), _TRANSPARENT)
+                            self._slot_view(view, index, items, options.masked, targets, _TRANSPARENT)
         finally:
             targets.end_glass()
         if renderer.debug:
             renderer.checkpoint(f"transparent ({views[0].name}{' and others' if len(views) > 1 else ''})")
+
+    def _part(self, items: list, views: Sequence[View], glass: Sequence[np.ndarray | None] | None, part: str | None,
+              size: tuple[int, int]) -> list:
+        """``items`` (``_slot_items``, drawn for ``views``) as ``draw_transparent``'s ``part``
+        has them: all (None), those before the refracting surfaces ("before": before
+        ``_slot_cut``) or those after ("after"; some there counts in
+        ``RenderStats.slot_after_glass``)."""
+        if part is None or glass is None or not items:
+            return items
+        cut = self._slot_cut(views, size, glass, items)
+        if part == "before":
+            return items[:cut]
+        if cut < len(items):
+            self.renderer.stats.slot_after_glass += 1
+        return items[cut:]
 
     def _begin(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions, state: PassState,
                run: object | None = None) -> None:
@@ -697,65 +745,36 @@ class ScenePass:
         self.renderer.bind_view_at(index)
         self._draw_batches(batches, 0, masked, skip=view.skip, hide=view.hide)
 
-    def _slot_view(self, view: View, index: int, batches: list[InstanceBatch], masked: bool, targets: RenderTargets,
-                   emitters: Sequence[tuple[float, object]], state: PassState) -> None:
-        """One view's glass ``batches`` (in their order; the pass state is ``state``) with its
-        particle ``emitters`` ((squared distance from its sorting eye, record), farthest first:
-        ``ParticleDraw.visible``) each drawn in before the first batch whose middle is nearer,
-        the rest after the last, so a cloud behind a window is tinted by it and one in front
-        of it covers it."""
-        if not emitters:
-            if batches:
-                self._transparent_view(view, index, batches, masked)
-            return
-        ctx, eye = self.ctx, view.sorting_eye
-        pending, run, copied = list(emitters), [], False
-
-        def particles(records: list) -> None:
-            nonlocal copied
+    def _slot_view(self, view: View, index: int, items: list, masked: bool, targets: RenderTargets,
+                   state: PassState) -> None:
+        """One view's slot ``items`` (``_slot_items``: its glass batches, in their order, and
+        its particle emitters among them; the pass state is ``state``): the batches of a run
+        in one go, each run of emitters drawn where it stands, so a cloud behind a window is
+        tinted by it and one in front of it covers it."""
+        ctx, run, copied = self.ctx, [], False
+        for at, item in enumerate(items):
+            if not isinstance(item, list):
+                run.append(item)
+                continue
             if run:
                 self._transparent_view(view, index, run, masked)
-                run.clear()
+                run = []
+            if at and isinstance(items[at - 1], list):
+                continue  # (drawn with the run of emitters it belongs to)
+            records = [record for chosen in _emitter_run(items, at) for record in chosen[0]]
             self.particle_draw.draw([view], targets, masked, self._ambient_probes, first_index=index,
                                     chosen=[records], copy_depth=not copied)
             copied = True
             apply_pass_state(ctx, state, (0, 0, *targets.size), view.scissor)
-
-        for batch in batches:
-            # (a decal lies on an opaque surface: a cloud in front of it is drawn after it, one
-            # behind its surface is hidden by that surface's depth either way)
-            near = math.inf if batch.decal else glm.length2(batch.centre() - eye)
-            ready = []
-            while pending and pending[0][0] > near:
-                ready.append(pending.pop(0)[1])
-            if ready:
-                particles(ready)
-            run.append(batch)
         if run:
             self._transparent_view(view, index, run, masked)
-            run.clear()
-        if pending:
-            particles([record for _, record in pending])
 
-    def _batched_slot(self, group: Sequence[View], indices: list[int], rest: list[InstanceBatch],
-                      emitters: list[list[tuple[float, object]]], targets: RenderTargets, options: SceneOptions,
-                      state: PassState, conditions: Sequence[moderngl.Query] | None) -> None:
-        """A batched group's glass ``rest`` (one draw a batch for all of ``group``, its views at
-        ``indices`` of the pass) with each view's particle ``emitters`` drawn in among it: the
-        group's glass ordered by its first view's eye (as ``back_to_front`` orders it), an
-        emitter before the first batch nearer that eye than it."""
+    def _batched_slot(self, group: Sequence[View], indices: list[int], items: list, targets: RenderTargets,
+                      options: SceneOptions, state: PassState, conditions: Sequence[moderngl.Query] | None) -> None:
+        """A batched group's slot ``items`` (``_slot_items``: its glass batches, one draw a
+        batch for all of ``group``, its views at ``indices`` of the pass, and each view's
+        particle emitters in among them)."""
         renderer, ctx = self.renderer, self.ctx
-        eye = group[0].sorting_eye
-        distance = {id(record): glm.length2(glm.vec3(*record.row_boxes[0].mean(axis=0)) - eye)
-                    for drawn in emitters for _, record in drawn}
-        runs: list[tuple[list[InstanceBatch], list[list]]] = []  # (glass, then each view's emitters)
-        placed: set[int] = set()
-        for batch in [*rest, None]:
-            near = -1.0 if batch is None else math.inf if batch.decal else glm.length2(batch.centre() - eye)
-            ready = [[record for _, record in drawn if id(record) not in placed and distance[id(record)] > near]
-                     for drawn in emitters]
-            placed.update(id(record) for drawn in ready for record in drawn)
-            runs.append(([batch] if batch is not None else [], ready))
         copied, scissor, glass_run = False, None, []
 
         def flush_glass() -> None:
@@ -769,15 +788,20 @@ class ScenePass:
             self._draw_batches(glass_run, geometry_invocations(len(group)), options.masked)
             glass_run.clear()
 
-        for glass, ready in runs:
-            if any(ready):
-                flush_glass()
-                renderer.upload_views(group)
-                self.particle_draw.draw(group, targets, options.masked, self._ambient_probes, chosen=ready,
-                                        copy_depth=not copied,
-                                        conditions=None if conditions is None else [conditions[i] for i in indices])
-                copied = True
-            glass_run.extend(glass)
+        for at, item in enumerate(items):
+            if not isinstance(item, list):
+                glass_run.append(item)
+                continue
+            if at and isinstance(items[at - 1], list):
+                continue  # (drawn with the run of emitters it belongs to)
+            flush_glass()
+            run = _emitter_run(items, at)
+            chosen = [[record for ready in run for record in ready[view]] for view in range(len(group))]
+            renderer.upload_views(group)
+            self.particle_draw.draw(group, targets, options.masked, self._ambient_probes, chosen=chosen,
+                                    copy_depth=not copied,
+                                    conditions=None if conditions is None else [conditions[i] for i in indices])
+            copied = True
         flush_glass()
 
     def _draw_each(self, views: Sequence[View], targets: RenderTargets, viewport: tuple[int, int, int, int],
@@ -854,8 +878,8 @@ class ScenePass:
                     targets.begin_glass()
                     apply_pass_state(ctx, _TRANSPARENT, viewport, view.scissor)
                     emitters = self.particle_draw.visible([view], targets.size)[0] if particles else ()
-                    self._slot_view(view, index, batches if now else [], options.masked, targets, emitters,
-                                    _TRANSPARENT)
+                    items = _slot_items(batches if now else [], [emitters], view.sorting_eye)
+                    self._slot_view(view, index, items, options.masked, targets, _TRANSPARENT)
                     targets.end_glass()
                 if (options.sky or now or particles) and index + 1 < len(views):
                     # The next view's state (the pass after the last applies its own).
@@ -1066,3 +1090,38 @@ def stepped_scissor(scissor: tuple[int, int, int, int] | None, step: int,
     x0, y0 = x // step, y // step
     x1, y1 = min(-(-(x + width) // step), size[0]), min(-(-(y + height) // step), size[1])
     return x0, y0, max(x1 - x0, 0), max(y1 - y0, 0)
+
+
+def _slot_items(batches: Sequence[InstanceBatch], emitters: Sequence[Sequence[tuple[float, object]]],
+                eye: glm.vec3) -> list:
+    """A slot's things in blending order: its glass ``batches`` (in their order) and, as
+    lists of one list a view, the particle emitters of each view (``emitters``: its
+    (squared distance, record) pairs, ``ParticleDraw.visible``) each put before the first batch
+    whose middle is nearer ``eye`` than its own (a decal's: never; it lies on a surface),
+    the rest after the last.  A single view's emitters are an item each (the slot may be
+    cut between them: ``ScenePass._slot_cut``)."""
+    distance = {id(record): glm.length2(glm.vec3(*record.row_boxes[0].mean(axis=0)) - eye)
+                for drawn in emitters for _, record in drawn}
+    items: list = []
+    placed: set[int] = set()
+    for batch in [*batches, None]:
+        near = -1.0 if batch is None else math.inf if batch.decal else glm.length2(batch.centre() - eye)
+        ready = [[record for _, record in drawn if id(record) not in placed and distance[id(record)] > near]
+                 for drawn in emitters]
+        if any(ready):
+            placed.update(id(record) for drawn in ready for record in drawn)
+            if len(ready) == 1:
+                items.extend([[record]] for record in ready[0])
+            else:
+                items.append(ready)
+        if batch is not None:
+            items.append(batch)
+    return items
+
+
+def _emitter_run(items: list, at: int) -> list:
+    """The run of emitter items (lists) of ``items`` that starts at ``at``."""
+    end = at
+    while end < len(items) and isinstance(items[end], list):
+        end += 1
+    return items[at:end]

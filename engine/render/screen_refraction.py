@@ -30,22 +30,24 @@ transmissive objects out of its one copy; this is depth peeling by object, at mo
 by the ``drawn_instances`` uniform of the ``SCREEN_REFRACTION`` builds (GL 4.1 has no base
 instance): the other rows' vertices are clipped away.
 
-The transparent slot (blended glass, decals, particles) is drawn before the refracting
-surfaces, into the copy, where all of it that meets them on screen lies behind them
-(``behind_the_glass``; ``ScenePass.slot_behind_glass``), else after them, unseen through
-them.  What the copy cannot hold is not seen through the glass: what the view did not draw
-(off its edges, behind what it shows).  A refracting surface's own reflection is found the
-same way: its reflected ray marched across the copy (``screen_found`` in ``shaders/scene.frag``;
-HDRP's screen-space reflection of transparent surfaces), the probe's or sky's image where it
-finds nothing.  Either find gives way to the probe's or sky's image where the rays of
-neighbouring pixels land far apart in the copy (``REFRACTION_SPREAD``: a ball's reflection,
-minified most towards its rim, would be one texel of the copy a pixel, speckled; the cube is
-read at the mip level of that footprint).  Drawn after them, it takes no part in the screen reflections of the surfaces
-around it (they do not show it) nor in the screen's ambient occlusion.  Probe captures
-draw every refracting batch with its opaque draws, reading the probe or the sky (their
-faces have no copy).  Where a build with the
-march would read more samplers than the fragment stage has (a 16-unit driver's fullest
-builds), the build without serves and a ``GLLimitWarning`` says so.
+The transparent slot (blended glass, decals, particles), in its back-to-front order, is
+drawn in two parts about the refracting surfaces: before them, into the copy, its farthest
+things up to the first that lies in front of glass it meets on screen (``behind_the_glass``;
+``ScenePass.draw_transparent``'s ``part``), so the glass shows them; after them the rest,
+which blends over the glass (what of it lies behind glass is unseen through it). What the
+copy cannot hold is not seen through the glass: what the view did not draw (off its edges,
+behind what it shows). A refracting surface's own reflection is found the same way: its
+reflected ray marched across the copy (``screen_found`` in ``shaders/scene.frag``; HDRP's
+screen-space reflection of transparent surfaces), the probe's or sky's image where it finds
+nothing. Either find gives way to the probe's or sky's image where the rays of neighbouring
+pixels land far apart in the copy (``REFRACTION_SPREAD``: a ball's reflection, minified most
+towards its rim, would be one texel of the copy a pixel, speckled; the cube is read at the
+mip level of that footprint). Drawn after them, it takes no part in the screen reflections
+of the surfaces around it (they do not show it) nor in the screen's ambient occlusion. Probe
+captures draw every refracting batch with its opaque draws, reading the probe or the sky
+(their faces have no copy). Where a build with the march would read more samplers than the
+fragment stage has (a 16-unit driver's fullest builds), the build without serves and a
+``GLLimitWarning`` says so.
 
 Cost: one full-screen copy and its mips a level that draws a refracting batch (a layer of
 glass behind glass, one more), and the march
@@ -238,19 +240,20 @@ def _box_distances(eye: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.n
     return np.where(unmeasured, 0.0, near), np.where(unmeasured, np.inf, far)
 
 
-def behind_the_glass(view: View, size: tuple[int, int], glass: np.ndarray, others: np.ndarray) -> bool:
-    """Whether each of the world boxes ``others`` ([n, lo/hi, xyz]: a view's see-through
-    things) whose rectangle on screen meets the widened rectangle (``LAYER_REACH``) of one of
-    the refracting ``glass`` boxes lies wholly farther from ``view``'s eye than that glass:
-    then its transparent slot may be drawn before its refracting surfaces, into the copy they
-    march (``ScenePass.finish_root``), and shows through them."""
+def behind_the_glass(view: View, size: tuple[int, int], glass: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """For each of the world boxes ``others`` ([n, lo/hi, xyz]: a view's see-through things),
+    whether it may be drawn before the refracting ``glass`` boxes, into the copy they march,
+    and so show through them: whether it lies wholly farther from ``view``'s eye than every
+    glass box whose widened rectangle on screen (``LAYER_REACH``) its own rectangle meets
+    (true where it meets none).  A see-through thing in front of glass it meets must blend
+    over the glass, after it (``ScenePass.draw_transparent``'s ``part``)."""
     if not len(glass) or not len(others):
-        return True
+        return np.ones(len(others), bool)
     eye = np.asarray(view.eye, np.float64)
     glass_rects, other_rects = box_rects(view, size, glass, LAYER_REACH), box_rects(view, size, others)
     _, glass_far = _box_distances(eye, glass)
     other_near, _ = _box_distances(eye, others)
-    return not (_meets(other_rects, glass_rects) & (other_near[:, None] <= glass_far[None, :])).any()
+    return ~(_meets(other_rects, glass_rects) & (other_near[:, None] <= glass_far[None, :])).any(axis=1)
 
 
 def _meets(first: np.ndarray, second: np.ndarray) -> np.ndarray:
