@@ -354,7 +354,8 @@ float ray_spread(float lod, float face_size) {
 }
 
 vec3 screen_found(Surface s, vec3 origin, vec3 direction, float spread, vec3 otherwise) {
-    vec4 found = screen_refraction(origin, direction, s.roughness, spread);
+    float uncovered;
+    vec4 found = screen_refraction(origin, direction, s.roughness, spread, uncovered);
     if (found.a <= 0.0) return otherwise;
     vec3 drawn = found.rgb;
 #ifdef FOG
@@ -364,6 +365,7 @@ vec3 screen_found(Surface s, vec3 origin, vec3 direction, float spread, vec3 oth
     float kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
     drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, 1e-4);
 #endif
+    drawn += otherwise * uncovered;  // (a reflection level's sky under what it drew there)
     return mix(otherwise, drawn, found.a);
 }
 #endif

@@ -517,9 +517,9 @@ def test_the_slot_is_cut_about_the_glass_thing_by_thing_in_every_view(scene, pat
         runner.engine.renderer.antialias = "off"
         runner.engine.reflection_system.path = path
         runner.frame()
-        frames.append(linear_to_srgb8(srgb_to_linear(runner.frame())))
+        frames.append(runner.frame().astype(int))
     assert runner.engine.renderer.stats.slot_after_glass >= 1
-    levels = np.abs(frames[1].astype(int) - frames[0].astype(int)).max(axis=-1)
+    levels = np.abs(frames[1] - frames[0]).max(axis=-1)
     for at in [*sparks, square]:
         for seen in (at, glm.vec3(at.x, at.y, -5.0 - at.z)):  # (its image in the mirror at z = -2.5)
             col, row = runner.project(seen)

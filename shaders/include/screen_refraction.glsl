@@ -16,7 +16,11 @@
 // drew where the sky lies along it (its vanishing point, over sky all the way there:
 // refraction_sky), the sky as the view drew it, its sun's disc as sharp, fog and clouds and
 // all, which the probe's or the sky's cube (its texels, a probe's seen from its centre) is
-// not.  Uses the Camera block (camera.glsl).
+// not.  A reflection level leaves its sky to its composite: where the ray's vanishing point
+// lies over that, what the view drew there (see-through things, premultiplied, and how much
+// of the pixel they cover: refraction_copy.frag) goes over the probe's or sky's image, as
+// the level's composite lays its reflection over the environment (``uncovered``: the share
+// of that image the find lets through).  Uses the Camera block (camera.glsl).
 #define REFRACTION_STEPS 24
 #define REFRACTION_REFINE 5
 const float REFRACTION_REACH = 25.0;     // metres a refracted ray is followed (faded over its last quarter)
@@ -25,8 +29,8 @@ const float REFRACTION_SPREAD = 4.0;     // copy pixels a pixel's rays may sprea
 const float REFRACTION_EDGE = 0.05;      // the share of the view's width and height a find fades out over at its edges
 
 uniform sampler2D refraction_copy;  // rgb: the view's colour before its refracting surfaces, a: its window depth
-                                    // (3 where it drew nothing: refraction_copy.frag); with its mips (a lod past
-                                    // the chain reads its last level)
+                                    // (3 + coverage where a reflection level left its sky: refraction_copy.frag);
+                                    // with its mips (a lod past the chain reads its last level)
 #ifndef MASKED
 uniform usampler2D node_map;        // which view of the level drew each pixel (a root's: all 0)
 #endif
@@ -37,22 +41,25 @@ const float REFRACTION_SKY_ROUGHNESS = 0.1;  // a rougher surface's sky is its b
 // Where the ray along unit ``direction`` that ended at pixel ``end`` over the sky reaches it:
 // the view's colour at the ray's vanishing point, with its confidence (faded at the view's
 // edges and as the surface roughens), where the pixels from the end to there all show the
-// sky in this view; else nothing (a: 0).
-vec4 refraction_sky(vec2 end, vec3 direction, float roughness, vec2 corner, vec2 size) {
+// sky in this view; else nothing (a: 0).  ``uncovered``: the share of the probe's or sky's
+// image to add under it (a reflection level's sky, left to its composite: 1 less what the
+// level drew over it covers; 0 where the view drew its sky).
+vec4 refraction_sky(vec2 end, vec3 direction, float roughness, vec2 corner, vec2 size, out float uncovered) {
+    uncovered = 0.0;
     vec4 v = camera.view_proj * vec4(direction, 0.0);
     if (v.w <= 1e-6) return vec4(0.0);  // (away from the view, or across it in an orthographic one)
     vec2 vanishing = corner + (v.xy / v.w * 0.5 + 0.5) * size;
     if (any(lessThan(vanishing, corner + 0.5)) || any(greaterThan(vanishing, corner + size - 0.5))) return vec4(0.0);
     for (int i = 0; i <= REFRACTION_SKY_CHECKS; ++i) {
         ivec2 at = ivec2(mix(end, vanishing, float(i) / float(REFRACTION_SKY_CHECKS)));
-        float window = texelFetch(refraction_copy, at, 0).a;
-        if (texelFetch(node_map, at, 0).r != node_index || window < 1.0 || window > 1.5)  // (> 1.5: none drawn)
+        if (texelFetch(node_map, at, 0).r != node_index || texelFetch(refraction_copy, at, 0).a < 1.0)
             return vec4(0.0);
     }
     vec2 uv = (vanishing - corner) / size;
     vec2 edge = min(uv, 1.0 - uv);
-    return vec4(texelFetch(refraction_copy, ivec2(vanishing), 0).rgb,
-                smoothstep(0.0, REFRACTION_EDGE, min(edge.x, edge.y))
+    vec4 there = texelFetch(refraction_copy, ivec2(vanishing), 0);
+    if (there.a > 1.5) uncovered = clamp(4.0 - there.a, 0.0, 1.0);  // (3 + its coverage: a level's sky)
+    return vec4(there.rgb, smoothstep(0.0, REFRACTION_EDGE, min(edge.x, edge.y))
                 * (1.0 - smoothstep(0.1 * REFRACTION_SKY_ROUGHNESS, REFRACTION_SKY_ROUGHNESS, roughness)));
 }
 
@@ -73,7 +80,8 @@ vec3 refraction_drawn_point(vec2 pixel, float window) {
 // REFRACTION_SPREAD of the copy's pixels (one texel read for a footprint that wide is noise:
 // blocks and specks that change with every pixel's normal; the probe's or sky's image, read
 // at a mip level for that footprint, says it instead, as the screen reflections' fade does).
-vec4 screen_refraction(vec3 origin, vec3 direction, float roughness, float spread) {
+vec4 screen_refraction(vec3 origin, vec3 direction, float roughness, float spread, out float uncovered) {
+    uncovered = 0.0;
     vec4 h0 = camera.view_proj * vec4(origin, 1.0);
     float reach = REFRACTION_REACH;
     vec4 h1 = camera.view_proj * vec4(origin + direction * reach, 1.0);
@@ -124,7 +132,7 @@ vec4 screen_refraction(vec3 origin, vec3 direction, float roughness, float sprea
     if (hi < 0.0) {
         // In front of all it passed: where it ends in the view over the sky, on to the sky.
         bool ended_over_sky = stayed && cut >= 1.0 && texelFetch(refraction_copy, ivec2(p1), 0).a >= 1.0;
-        return ended_over_sky ? refraction_sky(p1, direction, roughness, corner, size) : vec4(0.0);
+        return ended_over_sky ? refraction_sky(p1, direction, roughness, corner, size, uncovered) : vec4(0.0);
     }
     for (int i = 0; i < REFRACTION_REFINE; ++i) {
         float mid = 0.5 * (lo + hi);
