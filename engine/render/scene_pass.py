@@ -615,8 +615,9 @@ class ScenePass:
                     items = self._part(_slot_items([], [emitters[index]], view.sorting_eye), [view],
                                        [glass[index]], part, size)
                     chosen.append([record for item in items for record in item[0]])
-                self.particle_draw.draw(views, targets, options.masked, self._ambient_probes, conditions=conditions,
-                                        chosen=chosen)
+                if any(chosen):
+                    self.particle_draw.draw(views, targets, options.masked, self._ambient_probes,
+                                            conditions=conditions, chosen=chosen)
             elif options.batched:
                 geometry = self._slot_geometry(transparent)
                 for first in range(0, len(views), MAX_BATCHED_VIEWS):
