@@ -1101,6 +1101,8 @@ def _slot_items(batches: Sequence[InstanceBatch], emitters: Sequence[Sequence[tu
     whose middle is nearer ``eye`` than its own (a decal's: never; it lies on a surface),
     the rest after the last.  A single view's emitters are an item each (the slot may be
     cut between them: ``ScenePass._slot_cut``)."""
+    if not any(emitters):
+        return list(batches)
     distance = {id(record): glm.length2(glm.vec3(*record.row_boxes[0].mean(axis=0)) - eye)
                 for drawn in emitters for _, record in drawn}
     items: list = []
