@@ -520,5 +520,6 @@ def main(args: argparse.Namespace) -> int:
               f"naming the field, {still_passes['rendered']} rendered equal to a whole-drawn engine with resources "
               f"back after; {still_passes['refill_frames']} refilled frames, {still_passes['glass_between_frames']} "
               f"with glass between see-through surfaces, {still_passes['glass_layered_frames']} with glass behind "
-              f"glass drawn in layers; seed {args.seed})")
+              f"glass drawn in layers, {still_passes['slot_cut_frames']} with see-through things drawn in part after "
+              f"the glass; seed {args.seed})")
     return 1 if failures or level_failures or file_failures or model_failures or still_failures else 0

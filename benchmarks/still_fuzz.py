@@ -405,6 +405,7 @@ class StillFuzzer:
         # surfaces, over all cases: that the paths were reached.
         self.refills = self.glass_between = 0
         self.glass_layered = 0  # ... and frames that drew glass behind glass in layers (refraction_layers)
+        self.slot_cut = 0  # ... and frames with see-through things drawn in part after the glass (slot_after_glass)
 
     def close(self) -> None:
         self.keeping.close()
@@ -439,6 +440,7 @@ class StillFuzzer:
             self.refills += stats.reflection_end_refills > 0
             self.glass_between += stats.glass_between_surfaces > 0
             self.glass_layered += stats.refraction_layers > 1
+            self.slot_cut += stats.slot_after_glass > 0
         return None
 
     def run(self, case: StillCase, index: int = 0) -> str | None:
@@ -611,9 +613,9 @@ class StillFuzzer:
             self.close()
         except Exception:  # noqa: BLE001 - a case that broke the engine: start fresh ones
             pass
-        counts = self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered
+        counts = self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut
         self.__init__(self.ctx)
-        self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered = counts
+        self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut = counts
 
 
 def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
@@ -623,5 +625,5 @@ def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[t
     fuzzer = StillFuzzer(ctx)
     ran, failures, passes = run_cases(fuzzer, random_still_case, cases, seed, report)
     passes["refill_frames"], passes["glass_between_frames"] = fuzzer.refills, fuzzer.glass_between
-    passes["glass_layered_frames"] = fuzzer.glass_layered
+    passes["glass_layered_frames"], passes["slot_cut_frames"] = fuzzer.glass_layered, fuzzer.slot_cut
     return ran, failures, passes

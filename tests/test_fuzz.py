@@ -164,16 +164,17 @@ def test_the_level_fuzzer_renders_the_base_level_and_catches_a_silent_failure(le
 
 def test_still_cases_refill_and_draw_what_a_whole_drawn_engine_draws(ctx):
     """A few seeded still-frame cases: a facing pair with end images kept and refilled by a
-    still camera, glass between see-through surfaces, glass behind glass drawn in layers, one
-    random change mid-refill; every frame bit for bit the frame of an engine drawing its whole
-    tree, resources back after each case (the big runs are ``python -m benchmarks fuzz
-    --still-cases N``)."""
+    still camera, glass between see-through surfaces, glass behind glass drawn in layers, the
+    see-through things cut about the glass, one random change mid-refill; every frame bit for
+    bit the frame of an engine drawing its whole tree, resources back after each case (the big
+    runs are ``python -m benchmarks fuzz --still-cases N``)."""
     from benchmarks.still_fuzz import fuzz_still
 
     ran, failures, passes = fuzz_still(ctx, 8, seed=5)
     assert ran == 8 and failures == [], failures
     assert passes["rendered"] > 0 and passes["refill_frames"] >= 8 and passes["glass_between_frames"] > 0, passes
     assert passes["glass_layered_frames"] > 0, passes  # (glass behind glass, its layers refilled too)
+    assert passes["slot_cut_frames"] > 0, passes  # (see-through things on both sides of the glass)
 
 
 def _glass_pair_case(change: str, detail: dict):
