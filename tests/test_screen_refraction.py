@@ -481,6 +481,88 @@ def test_see_through_things_behind_glass_show_through_it(scene, in_front):
         assert yellow.sum() > 50 and np.quantile(levels[yellow], 0.99) <= 2.0, (yellow.sum(), levels[yellow].max())
 
 
+def test_a_see_through_thing_behind_glass_goes_before_one_in_front_of_other_glass_apart_on_screen(scene):
+    """Two refracting panes of index 1, one far on the left with a yellow see-through square
+    in front of it, one near on the right with a green one behind it; the green square is
+    nearer the eye than the yellow, so it comes after it in the slot's order, but the two are
+    apart on screen (they blend in either order): the green is drawn before the glass and
+    shows through the near pane, the yellow after, over the far one; both as without the
+    panes (``ScenePass._slot_before``)."""
+    yellow_at, green_at = np.array([-0.9, 1.0, 0.5]), np.array([0.9, 1.0, 1.9])
+
+    def small_pane(world, position, side):
+        world.spawn(Transform(position=position), MeshRef(quad(side, side)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR), Refractive(ior=1.0))
+
+    def without(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        room(world)
+        world.spawn(Transform(position=tuple(yellow_at)), MeshRef(quad(0.4, 0.4)),
+                    Material(color=(0.9, 0.9, 0.1, 0.5), double_sided=True))
+        world.spawn(Transform(position=tuple(green_at)), MeshRef(quad(0.3, 0.3)),
+                    Material(color=(0.1, 0.9, 0.1, 0.5), double_sided=True))
+
+    def with_glass(world):
+        without(world)
+        small_pane(world, (-0.9, 1.0, 0.0), 0.9)
+        small_pane(world, (0.9, 1.0, 2.5), 0.6)
+
+    drawn = frame(scene, without)
+    runner, seen = framed(scene, with_glass)
+    assert runner.engine.renderer.stats.slot_after_glass > 0
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+
+    def on_quad(at, half):
+        hit = eye + ((at[2] - eye[2]) / rays[..., 2])[..., None] * rays
+        return (np.abs(hit[..., 0] - at[0]) < half) & (np.abs(hit[..., 1] - at[1]) < half)
+
+    green = on_quad(green_at, 0.13) & on_quad(np.array([0.9, 1.0, 2.5]), 0.28)
+    yellow = on_quad(yellow_at, 0.18) & on_quad(np.array([-0.9, 1.0, 0.0]), 0.43)
+    assert green.sum() > 50 and yellow.sum() > 50, (green.sum(), yellow.sum())
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    assert np.quantile(levels[green], 0.99) <= 2.0, np.quantile(levels[green], 0.99)
+    assert np.quantile(levels[yellow], 0.99) <= 2.0, np.quantile(levels[yellow], 0.99)
+
+
+def test_a_see_through_thing_that_covers_one_drawn_after_the_glass_is_drawn_after_it(scene):
+    """A yellow see-through square in front of a small far pane (so drawn after the glass) and
+    a green one nearer, behind a small near pane, over part of the yellow on screen: the
+    green must blend over the yellow, so it is drawn after the glass too, in its order, and
+    where the two overlap outside the near pane they show as without the panes (drawn before
+    the glass, the green would lie under the yellow there)."""
+    yellow_at, green_at = np.array([-0.2, 1.0, -0.5]), np.array([0.25, 1.0, 1.5])
+
+    def small_pane(world, position, side):
+        world.spawn(Transform(position=position), MeshRef(quad(side, side)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR), Refractive(ior=1.0))
+
+    def without(world):
+        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+        room(world)
+        world.spawn(Transform(position=tuple(yellow_at)), MeshRef(quad(1.0, 1.0)),
+                    Material(color=(0.9, 0.9, 0.1, 0.5), double_sided=True))
+        world.spawn(Transform(position=tuple(green_at)), MeshRef(quad(0.3, 0.3)),
+                    Material(color=(0.1, 0.3, 0.9, 0.5), double_sided=True))
+
+    def with_glass(world):
+        without(world)
+        small_pane(world, (-0.6, 1.0, -1.0), 0.4)
+        small_pane(world, (0.5, 1.0, 2.5), 0.3)
+
+    drawn = frame(scene, without)
+    runner, seen = framed(scene, with_glass)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+
+    def on_quad(at, half):
+        hit = eye + ((at[2] - eye[2]) / rays[..., 2])[..., None] * rays
+        return (np.abs(hit[..., 0] - at[0]) < half) & (np.abs(hit[..., 1] - at[1]) < half)
+
+    both = on_quad(green_at, 0.13) & on_quad(yellow_at, 0.48) & ~on_quad(np.array([0.5, 1.0, 2.5]), 0.17)
+    assert both.sum() > 20, both.sum()
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    assert np.quantile(levels[both], 0.99) <= 2.0, np.quantile(levels[both], 0.99)
+
+
 @pytest.mark.parametrize("path,with_square", [("per_mirror", True), ("batched", True), ("batched", False)])
 def test_the_slot_is_cut_about_the_glass_thing_by_thing_in_every_view(scene, path, with_square):
     """A refracting pane of index 1 that reflects nothing, a mirror behind it, and the slot on

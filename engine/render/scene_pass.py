@@ -107,6 +107,8 @@ from engine.render.screen_refraction import (
     MAX_REFRACTION_LAYERS,
     RefractionCopy,
     behind_the_glass,
+    box_rects,
+    meets,
     refraction_layers,
 )
 from engine.render.shadows import ShadowMaps
@@ -436,11 +438,12 @@ class ScenePass:
                         conditions: Sequence[moderngl.Query] | None, slot: bool) -> None:
         """``views``' refracting surfaces (``refract``) and, with ``slot``, their transparent
         slot (``draw_transparent``): where some refract and some of the slot is there, the
-        slot in two parts about them, in its back-to-front order: its farthest things up to
-        the first that lies in front of a refracting surface it meets on screen first, into
-        the copy the glass marches, so the glass shows them (HDRP's "before refraction"
-        pass, chosen here by where things are), the rest after, over the glass (what of it
-        lies behind glass is unseen through it; counted in ``RenderStats.slot_after_glass``)."""
+        slot in two parts about them, each in its back-to-front order: first, into the copy
+        the glass marches, so the glass shows them, its things that lie behind every
+        refracting surface they meet on screen and meet none drawn after (HDRP's "before
+        refraction" pass, chosen here by where things are); then, over the glass, the rest
+        (what of it lies behind glass is unseen through it; counted in
+        ``RenderStats.slot_after_glass``)."""
         glass = self._glass_boxes(views, targets.size) if slot else None
         if glass is None:
             self.refract(views, targets, options, conditions)
@@ -463,34 +466,40 @@ class ScenePass:
                  if any(rows) else None for rows in reach]
         return boxes if any(box is not None for box in boxes) else None
 
-    def _slot_cut(self, views: Sequence[View], size: tuple[int, int], glass: Sequence[np.ndarray | None],
-                  items: list) -> int:
-        """How many of ``items`` (``_slot_items``: batches and, as lists a view, particle
-        emitters, in blending order; drawn for ``views``, ``glass`` the refracting boxes
-        that reach each) may be drawn before the refracting surfaces: those before the first
-        that, in one of the views, lies in part in front of glass it meets on screen
-        (``screen_refraction.behind_the_glass``).  A decal lies on an opaque surface: before
-        glass, it is hidden where the glass is nearer, as it should be."""
-        cut = len(items)
+    def _slot_before(self, views: Sequence[View], size: tuple[int, int], glass: Sequence[np.ndarray | None],
+                     items: list) -> list[bool]:
+        """Which of ``items`` (``_slot_items``: batches and, as lists a view, particle emitters,
+        in blending order; drawn for ``views``, ``glass`` the refracting boxes that reach each)
+        are drawn before the refracting surfaces: in order, each that in every view lies
+        wholly behind the glass it meets on screen (``screen_refraction.behind_the_glass``;
+        a decal lies on an opaque surface: before glass, it is hidden where the glass is
+        nearer, as it should be) and meets on screen none of the things before it that are
+        drawn after (so drawing it first changes no blend: things apart on screen blend in
+        either order).  The rest are drawn after, in their order."""
+        rects, fine = [], []  # a view each: each item's rows' rectangles, and whether it may go first
         for index, view in enumerate(views):
-            boxes = glass[index]
-            if boxes is None:
-                continue
             rows, owner = [], []
-            for at, item in enumerate(items[:cut]):
-                if isinstance(item, list):
-                    for record in item[index]:
-                        rows.append(record.row_boxes)
-                        owner.append(np.full(len(record.row_boxes), at))
-                elif not item.decal:
-                    rows.append(item.row_boxes)
-                    owner.append(np.full(item.count, at))
-            if not rows:
-                continue
-            behind = behind_the_glass(view, size, boxes, np.concatenate(rows))
-            if not behind.all():
-                cut = min(cut, int(np.concatenate(owner)[~behind].min()))
-        return cut
+            for at, item in enumerate(items):
+                boxes = [record.row_boxes for record in item[index]] if isinstance(item, list) else [item.row_boxes]
+                for box in boxes:
+                    rows.append(box)
+                    owner.append(np.full(len(box), at))
+            owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
+            boxes = np.concatenate(rows) if rows else np.zeros((0, 2, 3))
+            rects.append([box_rects(view, size, boxes)[owner == at] for at in range(len(items))])
+            behind = (np.ones(len(boxes), bool) if glass[index] is None
+                      else behind_the_glass(view, size, glass[index], boxes))
+            fine.append([bool(behind[owner == at].all()) or (not isinstance(item, list) and item.decal)
+                         for at, item in enumerate(items)])
+        before, after = [], [[] for _ in views]
+        for at in range(len(items)):
+            first = all(fine[v][at] for v in range(len(views))) and not any(
+                len(after[v]) and meets(rects[v][at], np.concatenate(after[v])).any() for v in range(len(views)))
+            before.append(first)
+            if not first:
+                for v in range(len(views)):
+                    after[v].append(rects[v][at])
+        return before
 
     def refract(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                 conditions: Sequence[moderngl.Query] | None = None) -> None:
@@ -591,9 +600,10 @@ class ScenePass:
         calls it for a level's views (its root's too) after the levels below are composited
         into them, so glass blends over the reflections behind it.  ``conditions`` as for
         ``draw``.  ``part`` "before" or "after", with ``glass`` (each view's refracting boxes:
-        ``_glass_boxes``): only the slot's things before, or from, the first that lies in
-        front of glass it meets (``_slot_cut``), drawn before and after the refracting
-        surfaces.  Nothing at all where no batch is transparent and no particle lives."""
+        ``_glass_boxes``): only the slot's things that lie behind the glass they meet and need
+        not blend after the rest (``_slot_before``), drawn before the refracting surfaces, or
+        only the rest, after them.  Nothing at all where no batch is transparent and no
+        particle lives."""
         transparent = self.renderer.transparent_batches()
         particles = self._particles_now()
         if not views or not (transparent or particles):
@@ -650,17 +660,17 @@ class ScenePass:
     def _part(self, items: list, views: Sequence[View], glass: Sequence[np.ndarray | None] | None, part: str | None,
               size: tuple[int, int]) -> list:
         """``items`` (``_slot_items``, drawn for ``views``) as ``draw_transparent``'s ``part``
-        has them: all (None), those before the refracting surfaces ("before": before
-        ``_slot_cut``) or those after ("after"; some there counts in
+        has them: all (None), those drawn before the refracting surfaces ("before":
+        ``_slot_before``) or the rest, after them ("after"; some there counts in
         ``RenderStats.slot_after_glass``)."""
         if part is None or glass is None or not items:
             return items
-        cut = self._slot_cut(views, size, glass, items)
+        before = self._slot_before(views, size, glass, items)
         if part == "before":
-            return items[:cut]
-        if cut < len(items):
+            return [item for item, first in zip(items, before, strict=True) if first]
+        if not all(before):
             self.renderer.stats.slot_after_glass += 1
-        return items[cut:]
+        return [item for item, first in zip(items, before, strict=True) if not first]
 
     def _begin(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions, state: PassState,
                run: object | None = None) -> None:
@@ -1100,7 +1110,7 @@ def _slot_items(batches: Sequence[InstanceBatch], emitters: Sequence[Sequence[tu
     (squared distance, record) pairs, ``ParticleDraw.visible``) each put before the first batch
     whose middle is nearer ``eye`` than its own (a decal's: never; it lies on a surface),
     the rest after the last.  A single view's emitters are an item each (the slot may be
-    cut between them: ``ScenePass._slot_cut``)."""
+    cut between them: ``ScenePass._slot_before``)."""
     if not any(emitters):
         return list(batches)
     distance = {id(record): glm.length2(glm.vec3(*record.row_boxes[0].mean(axis=0)) - eye)

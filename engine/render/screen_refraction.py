@@ -30,11 +30,12 @@ transmissive objects out of its one copy; this is depth peeling by object, at mo
 by the ``drawn_instances`` uniform of the ``SCREEN_REFRACTION`` builds (GL 4.1 has no base
 instance): the other rows' vertices are clipped away.
 
-The transparent slot (blended glass, decals, particles), in its back-to-front order, is
-drawn in two parts about the refracting surfaces: before them, into the copy, its farthest
-things up to the first that lies in front of glass it meets on screen (``behind_the_glass``;
-``ScenePass.draw_transparent``'s ``part``), so the glass shows them; after them the rest,
-which blends over the glass (what of it lies behind glass is unseen through it). What the
+The transparent slot (blended glass, decals, particles) is drawn in two parts about the
+refracting surfaces, each in its back-to-front order: before them, into the copy, its things
+that lie behind every glass they meet on screen (``behind_the_glass``) and meet none of the
+things drawn after (``ScenePass._slot_before``: things apart on screen blend in either
+order), so the glass shows them; after them the rest, which blends over the glass (what of
+it lies behind glass is unseen through it). What the
 copy cannot hold is not seen through the glass: what the view did not draw (off its edges,
 behind what it shows). A refracting surface's own reflection is found the same way: its
 reflected ray marched across the copy (``screen_found`` in ``shaders/scene.frag``; HDRP's
@@ -154,7 +155,7 @@ def refraction_layers(view: View, size: tuple[int, int], batches: Sequence[Insta
     drawn = box_rects(view, size, boxes)
     reach = (drawn[:, 2:] - drawn[:, :2]) * LAYER_REACH
     rects = np.concatenate([drawn[:, :2] - reach, drawn[:, 2:] + reach], axis=1)
-    over = _meets(rects, rects)
+    over = meets(rects, rects)
     unmeasured = np.isnan(boxes).any(axis=(1, 2))
     centres = np.where(unmeasured[:, None], 0.0, boxes.mean(axis=1))
     distance = np.where(unmeasured, 0.0, np.linalg.norm(centres - np.asarray(view.eye, np.float64), axis=1))
@@ -253,10 +254,10 @@ def behind_the_glass(view: View, size: tuple[int, int], glass: np.ndarray, other
     glass_rects, other_rects = box_rects(view, size, glass, LAYER_REACH), box_rects(view, size, others)
     _, glass_far = _box_distances(eye, glass)
     other_near, _ = _box_distances(eye, others)
-    return ~(_meets(other_rects, glass_rects) & (other_near[:, None] <= glass_far[None, :])).any(axis=1)
+    return ~(meets(other_rects, glass_rects) & (other_near[:, None] <= glass_far[None, :])).any(axis=1)
 
 
-def _meets(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+def meets(first: np.ndarray, second: np.ndarray) -> np.ndarray:
     """[i, j]: whether rectangle i of ``first`` and j of ``second`` (x0, y0, x1, y1) overlap."""
     a, b = first[:, None], second[None, :]
     return (a[..., 0] < b[..., 2]) & (b[..., 0] < a[..., 2]) & (a[..., 1] < b[..., 3]) & (b[..., 1] < a[..., 3])
