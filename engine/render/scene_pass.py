@@ -130,6 +130,7 @@ if TYPE_CHECKING:
     from engine.render.volumetric_fog import VolumetricFogPass
 
 _ALWAYS = nullcontext()  # a view drawn whatever its claim counted
+_SLOT_SPLITS_KEPT = 64  # slot splits kept from a before draw to its after at most (a frame's levels)
 _SCENE = PassState(depth_func="<", cull=True, clips=SCENE_CLIPS)
 _BATCHED_SCENE = PassState(depth_func="<", cull=True, clips=BATCHED_SCENE_CLIPS)
 # The sky's shaders write no gl_ClipDistance: a clip distance left on with no value written
@@ -171,6 +172,9 @@ class ScenePass:
         self.programs = ScenePrograms(renderer, shadows)  # the builds and their per-draw uniforms
         self.refraction_copy = RefractionCopy(renderer)  # what refracting surfaces march (refract)
         self._said_layers_cut = False  # (RefractionLimitWarning, said once)
+        # A slot's split about the glass, from its "before" draw to its "after" (_part): by its
+        # views' ids, the items' ids and which go first.
+        self._slot_splits: dict[tuple[int, ...], tuple[tuple, list[bool]]] = {}
         self._layouts: dict = {}  # refraction_layers' answers, by view, glass and boxes
         # (invocations, layered, ambient probes, masked) -> a batch's draw-record keys (lit, unlit)
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
@@ -486,9 +490,10 @@ class ScenePass:
                     owner.append(np.full(len(box), at))
             owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
             boxes = np.concatenate(rows) if rows else np.zeros((0, 2, 3))
-            rects.append([box_rects(view, size, boxes)[owner == at] for at in range(len(items))])
+            drawn = box_rects(view, size, boxes)
+            rects.append([drawn[owner == at] for at in range(len(items))])
             behind = (np.ones(len(boxes), bool) if glass[index] is None
-                      else behind_the_glass(view, size, glass[index], boxes))
+                      else behind_the_glass(view, size, glass[index], boxes, drawn))
             fine.append([bool(behind[owner == at].all()) or (not isinstance(item, list) and item.decal)
                          for at, item in enumerate(items)])
         before, after = [], [[] for _ in views]
@@ -662,11 +667,22 @@ class ScenePass:
         """``items`` (``_slot_items``, drawn for ``views``) as ``draw_transparent``'s ``part``
         has them: all (None), those drawn before the refracting surfaces ("before":
         ``_slot_before``) or the rest, after them ("after"; some there counts in
-        ``RenderStats.slot_after_glass``)."""
+        ``RenderStats.slot_after_glass``).  The "before" draw's answer serves the "after"
+        draw of the same views and items (worked out once)."""
         if part is None or glass is None or not items:
             return items
-        before = self._slot_before(views, size, glass, items)
+        key = tuple(map(id, views))
+        signature = tuple(tuple(id(record) for drawn in item for record in drawn) if isinstance(item, list)
+                          else id(item) for item in items)
+        kept = self._slot_splits.pop(key, None)
+        if part == "after" and kept is not None and kept[0] == signature:
+            before = kept[1]
+        else:
+            before = self._slot_before(views, size, glass, items)
         if part == "before":
+            if len(self._slot_splits) >= _SLOT_SPLITS_KEPT:
+                self._slot_splits.clear()
+            self._slot_splits[key] = (signature, before)
             return [item for item, first in zip(items, before, strict=True) if first]
         if not all(before):
             self.renderer.stats.slot_after_glass += 1

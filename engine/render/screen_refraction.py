@@ -241,17 +241,21 @@ def _box_distances(eye: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.n
     return np.where(unmeasured, 0.0, near), np.where(unmeasured, np.inf, far)
 
 
-def behind_the_glass(view: View, size: tuple[int, int], glass: np.ndarray, others: np.ndarray) -> np.ndarray:
+def behind_the_glass(view: View, size: tuple[int, int], glass: np.ndarray, others: np.ndarray,
+                     other_rects: np.ndarray | None = None) -> np.ndarray:
     """For each of the world boxes ``others`` ([n, lo/hi, xyz]: a view's see-through things),
     whether it may be drawn before the refracting ``glass`` boxes, into the copy they march,
     and so show through them: whether it lies wholly farther from ``view``'s eye than every
     glass box whose widened rectangle on screen (``LAYER_REACH``) its own rectangle meets
     (true where it meets none).  A see-through thing in front of glass it meets must blend
-    over the glass, after it (``ScenePass.draw_transparent``'s ``part``)."""
+    over the glass, after it (``ScenePass.draw_transparent``'s ``part``).  ``other_rects``:
+    ``others``' rectangles (``box_rects``), where the caller has them."""
     if not len(glass) or not len(others):
         return np.ones(len(others), bool)
     eye = np.asarray(view.eye, np.float64)
-    glass_rects, other_rects = box_rects(view, size, glass, LAYER_REACH), box_rects(view, size, others)
+    glass_rects = box_rects(view, size, glass, LAYER_REACH)
+    if other_rects is None:
+        other_rects = box_rects(view, size, others)
     _, glass_far = _box_distances(eye, glass)
     other_near, _ = _box_distances(eye, others)
     return ~(meets(other_rects, glass_rects) & (other_near[:, None] <= glass_far[None, :])).any(axis=1)
