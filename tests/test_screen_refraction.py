@@ -62,6 +62,19 @@ def pane(world, ior: float, screen: bool = True, position=(0.0, 1.0, 1.0), turn:
                        Refractive(ior=ior, screen=screen))
 
 
+def on_quad(eye, rays, at, half) -> np.ndarray:
+    """Which of the pixel ``rays`` from ``eye`` meet the square of half-size ``half`` about
+    ``at`` that faces +z (its plane z = at.z)."""
+    hit = eye + ((at[2] - eye[2]) / rays[..., 2])[..., None] * rays
+    return (np.abs(hit[..., 0] - at[0]) < half) & (np.abs(hit[..., 1] - at[1]) < half)
+
+
+def small_pane(world, position, side: float) -> None:
+    """A square refracting pane of index 1 that reflects nothing, ``side`` metres, facing +z."""
+    world.spawn(Transform(position=position), MeshRef(quad(side, side)),
+                Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR), Refractive(ior=1.0))
+
+
 @pytest.mark.parametrize("projection", ["perspective", "orthographic"])
 def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene, projection):
     """(An orthographic camera's rays are parallel: the march's window depth and 1 / w are
@@ -467,17 +480,13 @@ def test_see_through_things_behind_glass_show_through_it(scene, in_front):
     assert (runner.engine.renderer.stats.slot_after_glass > 0) == in_front
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
 
-    def on_quad(at, half):
-        hit = eye + ((at[2] - eye[2]) / rays[..., 2])[..., None] * rays
-        return (np.abs(hit[..., 0] - at[0]) < half) & (np.abs(hit[..., 1] - at[1]) < half)
-
-    glass = on_quad(np.array([0.0, 1.0, 1.0]), 0.75)
-    green = on_quad(green_at, 0.45) & glass & ~on_quad(yellow_at, 0.17)
+    glass = on_quad(eye, rays, np.array([0.0, 1.0, 1.0]), 0.75)
+    green = on_quad(eye, rays, green_at, 0.45) & glass & ~on_quad(eye, rays, yellow_at, 0.17)
     assert green.sum() > 500
     levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
     assert np.quantile(levels[green], 0.99) <= 2.0, np.quantile(levels[green], 0.99)
     if in_front:  # (over the glass: blended after it)
-        yellow = on_quad(yellow_at, 0.13) & glass
+        yellow = on_quad(eye, rays, yellow_at, 0.13) & glass
         assert yellow.sum() > 50 and np.quantile(levels[yellow], 0.99) <= 2.0, (yellow.sum(), levels[yellow].max())
 
 
@@ -489,10 +498,6 @@ def test_a_see_through_thing_behind_glass_goes_before_one_in_front_of_other_glas
     shows through the near pane, the yellow after, over the far one; both as without the
     panes (``ScenePass._slot_before``)."""
     yellow_at, green_at = np.array([-0.9, 1.0, 0.5]), np.array([0.9, 1.0, 1.9])
-
-    def small_pane(world, position, side):
-        world.spawn(Transform(position=position), MeshRef(quad(side, side)),
-                    Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR), Refractive(ior=1.0))
 
     def without(world):
         look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
@@ -512,12 +517,8 @@ def test_a_see_through_thing_behind_glass_goes_before_one_in_front_of_other_glas
     assert runner.engine.renderer.stats.slot_after_glass > 0
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
 
-    def on_quad(at, half):
-        hit = eye + ((at[2] - eye[2]) / rays[..., 2])[..., None] * rays
-        return (np.abs(hit[..., 0] - at[0]) < half) & (np.abs(hit[..., 1] - at[1]) < half)
-
-    green = on_quad(green_at, 0.13) & on_quad(np.array([0.9, 1.0, 2.5]), 0.28)
-    yellow = on_quad(yellow_at, 0.18) & on_quad(np.array([-0.9, 1.0, 0.0]), 0.43)
+    green = on_quad(eye, rays, green_at, 0.13) & on_quad(eye, rays, np.array([0.9, 1.0, 2.5]), 0.28)
+    yellow = on_quad(eye, rays, yellow_at, 0.18) & on_quad(eye, rays, np.array([-0.9, 1.0, 0.0]), 0.43)
     assert green.sum() > 50 and yellow.sum() > 50, (green.sum(), yellow.sum())
     levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
     assert np.quantile(levels[green], 0.99) <= 2.0, np.quantile(levels[green], 0.99)
@@ -531,10 +532,6 @@ def test_a_see_through_thing_that_covers_one_drawn_after_the_glass_is_drawn_afte
     where the two overlap outside the near pane they show as without the panes (drawn before
     the glass, the green would lie under the yellow there)."""
     yellow_at, green_at = np.array([-0.2, 1.0, -0.5]), np.array([0.25, 1.0, 1.5])
-
-    def small_pane(world, position, side):
-        world.spawn(Transform(position=position), MeshRef(quad(side, side)),
-                    Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR), Refractive(ior=1.0))
 
     def without(world):
         look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
@@ -553,11 +550,8 @@ def test_a_see_through_thing_that_covers_one_drawn_after_the_glass_is_drawn_afte
     runner, seen = framed(scene, with_glass)
     eye, rays = pixel_rays(runner.engine.main_view, SIZE)
 
-    def on_quad(at, half):
-        hit = eye + ((at[2] - eye[2]) / rays[..., 2])[..., None] * rays
-        return (np.abs(hit[..., 0] - at[0]) < half) & (np.abs(hit[..., 1] - at[1]) < half)
-
-    both = on_quad(green_at, 0.13) & on_quad(yellow_at, 0.48) & ~on_quad(np.array([0.5, 1.0, 2.5]), 0.17)
+    both = on_quad(eye, rays, green_at, 0.13) & on_quad(eye, rays, yellow_at, 0.48) \
+        & ~on_quad(eye, rays, np.array([0.5, 1.0, 2.5]), 0.17)  # (outside the near pane)
     assert both.sum() > 20, both.sum()
     levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
     assert np.quantile(levels[both], 0.99) <= 2.0, np.quantile(levels[both], 0.99)

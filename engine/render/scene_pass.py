@@ -448,24 +448,25 @@ class ScenePass:
         refraction" pass, chosen here by where things are); then, over the glass, the rest
         (what of it lies behind glass is unseen through it; counted in
         ``RenderStats.slot_after_glass``)."""
-        glass = self._glass_boxes(views, targets.size) if slot else None
+        refracting = self.renderer.refracting_batches()
+        # (which refracting batch can reach which view: for the glass and the slot's split alike)
+        drawn = refracting and views and not options.transparent
+        reach = batch_reach(views, targets.size, refracting) if drawn else None
+        glass = self._glass_boxes(views, reach) if slot and reach is not None and self.slot_drawn() else None
         if glass is None:
-            self.refract(views, targets, options, conditions)
+            self.refract(views, targets, options, conditions, reach)
             if slot:
                 self.draw_transparent(views, targets, options, conditions)
             return
         self.draw_transparent(views, targets, options, conditions, glass=glass, part="before")
-        self.refract(views, targets, options, conditions)
+        self.refract(views, targets, options, conditions, reach)
         self.draw_transparent(views, targets, options, conditions, glass=glass, part="after")
 
-    def _glass_boxes(self, views: Sequence[View], size: tuple[int, int]) -> list[np.ndarray | None] | None:
+    def _glass_boxes(self, views: Sequence[View], reach: list[list[bool]]) -> list[np.ndarray | None] | None:
         """For each of ``views``, the world boxes ([n, lo/hi, xyz]) of the refracting
-        instances that can reach it (``batch_reach``; None: none), or None for all where none
-        refracts, none reaches them or nothing of the slot is drawn."""
+        instances that can reach it (``reach``: ``batch_reach`` of the refracting batches;
+        None: none), or None for all where none reaches them."""
         refracting = self.renderer.refracting_batches()
-        if not refracting or not views or not self.slot_drawn():
-            return None
-        reach = batch_reach(views, size, refracting)
         boxes = [np.concatenate([batch.row_boxes for batch, reaches in zip(refracting, rows, strict=True) if reaches])
                  if any(rows) else None for rows in reach]
         return boxes if any(box is not None for box in boxes) else None
@@ -507,14 +508,15 @@ class ScenePass:
         return before
 
     def refract(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
-                conditions: Sequence[moderngl.Query] | None = None) -> None:
+                conditions: Sequence[moderngl.Query] | None = None, reach: list[list[bool]] | None = None) -> None:
         """The refracting batches (``Gpu.refracting_batches``: ``Refractive.screen``) of a view
         tree's ``views`` (drawn into ``targets`` with ``options``, whose opaque draws left them
         out), once everything but the glass is in their pixels: the level's colour and depth
         copied (``RefractionCopy.take``), then each view's draws with the ``SCREEN_REFRACTION``
         builds, which march their refracted rays across the copy, depth tested and written as
         opaque draws are (``engine/render/screen_refraction.py``).  ``conditions`` as for
-        ``draw``.  Nothing where none refracts or none reaches the views (``batch_reach``), or
+        ``draw``; ``reach``: the refracting batches' ``batch_reach`` of ``views``, where the
+        caller has it.  Nothing where none refracts or none reaches the views, or
         for a view drawn whole (its ``options.transparent``: a probe face's, which drew them
         with its opaque batches); where none refracts, the copies are let go once a whole
         frame has taken none (water takes them too)."""
@@ -527,7 +529,8 @@ class ScenePass:
             return
         # Which batch can draw a sample in which view (its boxes against the view's volume):
         # a level none reaches copies nothing.
-        reach = batch_reach(views, targets.size, refracting)
+        if reach is None:
+            reach = batch_reach(views, targets.size, refracting)
         if not any(any(rows) for rows in reach):
             return
         # Glass behind glass: each view's refracting instances in layers, farthest first, each
