@@ -15,11 +15,19 @@ import pytest
 # for a GL error when it ends and names itself (engine.render.renderer.Renderer.checkpoint).
 os.environ.setdefault("SPECULUM_DEBUG", "1")
 
-from engine.render.gl_context import create_headless_context
+from engine.render.gl_context import GLCapabilities, create_headless_context
 from engine.render.shader_library import FreePrograms
 from tests.support import SceneRunner
 
 FREE_PROGRAMS_KEPT = 512
+
+# With SPECULUM_AS_GPU=1, every engine the tests make takes a GPU's branches on llvmpipe
+# (``GLCapabilities.software`` False: predicted visibility, the GPU's auto-path thresholds,
+# FXAA's edge search, bloom's half-size start, the grid shadow filter, anisotropic
+# filtering), so a machine without a GPU runs the code paths only a GPU user's engine takes.
+# (The tests' own renderer checks read it too: a golden frame is judged by the hardware rule.)
+if os.environ.get("SPECULUM_AS_GPU", "") not in ("", "0"):
+    GLCapabilities.software = property(lambda self: False)
 
 
 @pytest.fixture(scope="session")
@@ -118,7 +126,8 @@ def x_display():
 
 # A failing test's pictures, kept for a machine one cannot look at while it runs (a GPU host
 # lent for minutes): with SPECULUM_FAIL_OUT set, the numpy arrays and frames (``.rgb`` /
-# ``.ids``) a failing test held in its own frames are saved to <that folder>/<test id>.npz.
+# ``.ids``) a failing test held in its own frames are saved to <that folder>/<test id>.npz,
+# and its traceback to <test id>.txt.
 # ``python -m benchmarks gpu-report`` sets it to <report>/failures.
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
@@ -127,6 +136,12 @@ def pytest_runtest_makereport(item, call):
     folder = os.environ.get("SPECULUM_FAIL_OUT")
     if not folder or not report.failed or call.excinfo is None:
         return
+    stem = os.path.join(folder, re.sub(r"[^A-Za-z0-9_.-]", "_", item.nodeid)[-150:])
+    # Its traceback as pytest reports it, at once: a run stopped before its summary (a lent
+    # machine's time running out) still says why each test failed.
+    os.makedirs(folder, exist_ok=True)
+    with open(stem + ".txt", "w") as text:
+        text.write(f"{item.nodeid}\n{report.longreprtext}\n")
     arrays: dict[str, np.ndarray] = {}
     for entry in call.excinfo.traceback:
         if "tests" not in str(entry.path):
@@ -140,6 +155,4 @@ def pytest_runtest_makereport(item, call):
                         suffix = f"_{i}" if len(values) > 1 else ""
                         arrays[f"line{entry.lineno + 1}_{name}{suffix}{part}"] = array
     if arrays:
-        os.makedirs(folder, exist_ok=True)
-        np.savez_compressed(os.path.join(folder, re.sub(r"[^A-Za-z0-9_.-]", "_", item.nodeid)[-150:] + ".npz"),
-                            **arrays)
+        np.savez_compressed(stem + ".npz", **arrays)

@@ -121,6 +121,18 @@ def skip_unless_trusted(renderer, path: str) -> None:
         pytest.skip(f"{path} is {verdict.status} on {renderer.ctx.info['GL_RENDERER']}: {verdict.detail}")
 
 
+# The largest motion on the picture (0.5 x NDC) a still thing may carry: a GPU's fused
+# multiply-adds project one point by two equal matrices a little apart (the NVIDIA H200's
+# driver 580: 1.5e-8), where llvmpipe gives exactly 0.  A millionth of the picture is a
+# hundredth of a pixel at the largest target a context allows (16384 pixels a side).
+STILL_MOTION = 1e-6
+
+
+def still_motion(motion: np.ndarray) -> bool:
+    """Whether a motion image (``RenderTargets.read_motion``) moves nothing (``STILL_MOTION``)."""
+    return float(np.abs(motion).max()) < STILL_MOTION
+
+
 def pixel_rays(view, size) -> tuple[np.ndarray, np.ndarray]:
     """Eye and unit direction (float64) through each pixel centre of ``view`` at ``size``,
     rows from the top: the primary rays a second computation casts."""

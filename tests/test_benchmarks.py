@@ -604,8 +604,9 @@ def test_a_frame_that_is_right():
 
 def test_a_failing_tests_frames_are_kept_where_speculum_fail_out_says(tmp_path):
     """What a GPU session cannot look at while the machine is lent: with SPECULUM_FAIL_OUT
-    set (gpu-report sets it), each failing test's numpy arrays are saved there as .npz, the
-    passing tests' are not."""
+    set (gpu-report sets it), each failing test's numpy arrays are saved there as .npz and
+    its traceback as .txt (written when it fails: a run stopped before its summary keeps
+    them), the passing tests' are not."""
     folder = tmp_path / "tests"
     folder.mkdir()
     (folder / "conftest.py").write_text((ROOT / "tests" / "conftest.py").read_text())
@@ -616,7 +617,9 @@ def test_a_failing_tests_frames_are_kept_where_speculum_fail_out_says(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert "1 failed, 1 passed" in done.stdout, done.stdout[-2000:] + done.stderr[-2000:]
     saved = sorted(out.iterdir())
-    assert len(saved) == 1 and "test_a_frame_that_is_wrong" in saved[0].name
+    assert [path.suffix for path in saved] == [".npz", ".txt"]
+    assert all("test_a_frame_that_is_wrong" in path.name for path in saved)
+    assert "assert frame.mean() == 0" in saved[1].read_text()  # (the failing line, in its traceback)
     with np.load(saved[0]) as arrays:
         frame = next(arrays[key] for key in arrays.files if key.endswith("_frame"))
         assert frame.shape == (4, 6, 3) and (frame == 7).all()

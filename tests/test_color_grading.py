@@ -108,7 +108,12 @@ def test_a_colour_table_is_looked_up_trilinearly_in_the_encoded_picture(known, s
     got = _present(known, image, ColorGrading(lut=lut))
     encoded = linear_to_srgb8(np.clip(image[..., :3].astype(np.float64), 0, 1)) / 255.0  # (before rounding)
     want = np.rint(np.clip(lut.apply(encoded), 0, 1) * 255.0)
-    assert np.abs(got - want).max() <= 1
+    # A GPU filters with fixed-point weights (8 bits of a texel's step): in the 2-texel
+    # table, whose texels lie a whole range apart, that is a level more here and there (the
+    # NVIDIA H200: 26 of 9216 values 2 levels off; llvmpipe: none).  A nearest lookup is tens
+    # of levels off.
+    off = np.abs(got - want)
+    assert off.max() <= 2 and (off > 1).mean() < 0.01
     half = _present(known, image, ColorGrading(lut=lut, lut_strength=0.5))
     want_half = np.rint(np.clip(0.5 * lut.apply(encoded) + 0.5 * encoded, 0, 1) * 255.0)
     assert np.abs(half - want_half).max() <= 1

@@ -521,8 +521,10 @@ def test_srgb_is_decoded_as_the_gl_does_and_encoded_as_the_present_shader_does(c
     srgb = ctx.texture((256, 1), 4, texels.tobytes(), internal_format=GL_SRGB8_ALPHA8)
     decoded = evaluate_glsl(ctx, tmp_path, [], "color = a;", np.zeros((256, 4)), source_texture=srgb)
     # llvmpipe decodes sRGB with an approximation (1.2e-3 at most from the formula, measured);
-    # a drifted copy (a plain 2.2 gamma, say) is 8.5e-3 off.
-    np.testing.assert_allclose(decoded[:, 0], srgb_to_linear(levels / 255.0), atol=3e-3)
+    # the NVIDIA H200 (driver 580) to 8 significant bits (steps of 1/128 near 1: 3.7e-3 off at
+    # level 251, within 2^-8 of the value).  A drifted copy (a plain 2.2 gamma, say) is 8.5e-3
+    # off, 5e-3 past this tolerance.
+    np.testing.assert_allclose(decoded[:, 0], srgb_to_linear(levels / 255.0), rtol=4e-3, atol=1.5e-3)
     linear = np.concatenate([np.linspace(0.0, 0.01, 33), np.linspace(0.01, 1.2, 97), [-0.5]])
     rows = np.zeros((len(linear), 4))
     rows[:, 0] = linear

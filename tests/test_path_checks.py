@@ -224,7 +224,8 @@ def test_where_only_the_cube_map_target_is_refused_probes_draw_one_pass_into_the
     six_pass = cube_faces(ctx, probes, owner)
     for face in range(6):
         assert six_pass[face].max() < SENTINEL / 2 and six_pass[face].std() > 0.01  # a marker or the wall
-        np.testing.assert_allclose(layered[face], six_pass[face], atol=2e-3, err_msg=f"face {face}")
+        # (a half float's step is 2^-10 of its value: 0.0039 at 6.4, where the H200's faces differ by one)
+        np.testing.assert_allclose(layered[face], six_pass[face], atol=2e-3, rtol=1e-3, err_msg=f"face {face}")
     # Auto times six_pass against the array capture (the layered path this context has).
     auto = scene(marked_chrome_scene({}), (64, 48))
     auto.frame()
