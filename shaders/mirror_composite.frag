@@ -212,6 +212,13 @@ void main() {
     if (texelFetch(reflection_nodes, px, 0).r != v_view) discard;
 #endif
     vec2 uv = gl_FragCoord.xy / parent_size;
+    // A level drawn at the parent's resolution is read texel for texel where the pixel's own
+    // texel is what it shows: a GPU's filter weights at a texel's centre are not exactly 0
+    // (fixed point), so a bilinear read there pulls in a little of the texels beside it,
+    // which may be pixels this view did not draw (the NVIDIA H200: a pane's edge in front of
+    // a mirror showed a seam of what lay under it).  Scaled levels, and a bumpy mirror's bent
+    // lookup, are filtered.
+    bool texel_for_texel = to_reflection == vec2(1.0);
     // A point on the near plane along this pixel's ray (for an oblique projection that is
     // the parent mirror's plane: still in front of the eye, unlike its tilted far plane).
     vec4 near = v_inv_view_proj * vec4(uv * 2.0 - 1.0, -1.0, 1.0);
@@ -243,7 +250,7 @@ void main() {
 #else
     // (The sky beyond the partner fogged from this side's crossing: the partner's height is
     // not in the row, so height fog there is this side's.)
-    vec4 through = textureLod(reflection, uv, 0.0);
+    vec4 through = texel_for_texel ? texelFetch(reflection, px, 0) : textureLod(reflection, uv, 0.0);
     vec3 beyond = fog_sky(textureLod(sky_map, v_carry * view_dir, 0.0).rgb, at, v_carry * view_dir);
     out_color = vec4(hdr_store(fog_over(through.rgb + beyond * (1.0 - through.a), parent_fog)), 1.0);
 #endif
@@ -283,6 +290,7 @@ void main() {
                 && texelFetch(reflection_nodes, bent_px, 0).r == v_view
                 && texelFetch(reflection_seen, bent_px, 0).r != NO_END_IMAGE) {
             uv = bent_uv;
+            texel_for_texel = false;
             level_px = bent_level_px;
             px = bent_px;
             out_seen = carried_seen(texelFetch(reflection_seen, px, 0));
@@ -307,7 +315,7 @@ void main() {
 #else
     // A perfect mirror reads its image 1:1.
     float lod = 0.0;
-    vec4 seen = textureLod(reflection, uv, 0.0);
+    vec4 seen = texel_for_texel ? texelFetch(reflection, px, 0) : textureLod(reflection, uv, 0.0);
 #endif
 #if defined(GENERATED_SKY) && !defined(COMPOSITE_ROUGH)
     vec3 environment = fog_sky(generated_sky(r), at, r);

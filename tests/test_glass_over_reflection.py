@@ -16,10 +16,13 @@ own colour dark, so glass over the mirror's own colour misses by far more than t
 tolerance."""
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
 from pyglm import glm
 
+import engine.render.shader_library as shader_library
 from components import Emissive, Material, MeshRef, Mirror, ReflectionProbe, Skybox, Transform
 from engine.assets.mesh import quad
 from engine.core.cube_faces import FACE_NAMES
@@ -116,6 +119,25 @@ def test_glass_blends_over_the_reflection_directly_and_in_a_mirror(scene, path, 
     assert np.array_equal(glass["seen"][~pane], without["seen"][~pane])
     assert np.array_equal(glass["surface"][~direct], without["surface"][~direct])
     assert glass["rgb"].max() > 100  # a picture, not a black frame
+
+
+def test_the_blend_holds_where_the_filter_weighs_a_texels_neighbours_a_little(scene, monkeypatch, tmp_path):
+    """A GPU filters with fixed-point weights: a bilinear read at a texel's centre weighs
+    the texels beside it a little (the NVIDIA H200 showed the mirror's level under the
+    pane's edge as a seam there).  The composite reads a level drawn at its parent's
+    resolution texel for texel, so its lookups moved by 3% of a texel (shaders copied, the
+    line changed) leave every pixel the pane's blend over what is behind it."""
+    shaders = tmp_path / "shaders"
+    shutil.copytree(shader_library.shader_dir(), shaders)
+    composite = shaders / "mirror_composite.frag"
+    line = "vec2 uv = gl_FragCoord.xy / parent_size;"
+    assert line in composite.read_text()
+    moved = "vec2 uv = (gl_FragCoord.xy + vec2(0.03, -0.03)) / parent_size;"
+    composite.write_text(composite.read_text().replace(line, moved))
+    monkeypatch.setattr(shader_library, "shader_dir", lambda: shaders)
+    glass, without, opaque = (_render(scene, alpha) for alpha in (ALPHA, None, 1.0))
+    assert (glass["seen"] == glass["ents"]["glass"]).sum() > 200
+    _blend_agrees(glass["colour"], opaque["colour"], without["colour"])
 
 
 def test_glass_in_front_of_a_mirror_in_a_probe_face(scene):
