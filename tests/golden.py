@@ -197,6 +197,11 @@ def render_case(ctx: moderngl.Context, case: GoldenCase) -> Frame:
     # (engine/render/spot_cookies.py SpotCookies.filter).
     engine.renderer.spot_cookies.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
     engine.renderer.spot_cookies.anisotropy = SOFTWARE_ANISOTROPY
+    # And shadows: a software rasteriser takes one tap of a map, a GPU a grid of them and a
+    # sized light's percentage-closer soft shadows (engine/render/shadows.py ShadowMaps.filter):
+    # the README's Cornell box and panels lit by their panels' soft shadows on the H200 were
+    # not the references' hard ones.
+    engine.renderer.shadows.filter = "single"
     capture = CaptureTarget(ctx, SIZE)
     try:
         if case.camera is not None:

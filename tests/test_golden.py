@@ -158,19 +158,21 @@ def test_hardware_rule_catches_real_changes(ctx, change, name, measure):
 
 def test_goldens_render_with_the_software_filtering_policy(ctx, monkeypatch):
     """render_case gives every machine llvmpipe's filtering policy before the first frame: a
-    renderer that starts with a GPU's (8x anisotropy in reflections and on normal maps)
-    uploads the sample level's normal map trilinear, draws reflections trilinear, and
-    renders the reference's frame (held to the rule of the machine it runs on)."""
+    renderer that starts with a GPU's (8x anisotropy in reflections and on normal maps, the
+    "grid" shadow filter) uploads the sample level's normal map trilinear, draws reflections
+    trilinear, looks its shadows up with one tap, and renders the reference's frame (held to
+    the rule of the machine it runs on)."""
     import shell.app
     from engine.render.renderer import Renderer
 
-    uploads, reflections = [], []
+    uploads, reflections, shadow_filters = [], [], []
 
     class GpuPolicyRenderer(Renderer):
         def __init__(self, *args, **kwargs) -> None:
             super().__init__(*args, **kwargs)
             self.reflection_anisotropy = self.normal_map_anisotropy = self.texture_anisotropy
             assert self.texture_anisotropy > golden.SOFTWARE_ANISOTROPY
+            self.shadows.filter = "grid"
 
         def _upload_texture(self, texture, linear=False):
             uploads.append((linear, self.normal_map_anisotropy if linear else self.texture_anisotropy))
@@ -178,6 +180,8 @@ def test_goldens_render_with_the_software_filtering_policy(ctx, monkeypatch):
 
         def checkpoint(self, name: str) -> None:
             reflections.append(self.reflection_anisotropy)
+            if self.shadows.filter not in shadow_filters:
+                shadow_filters.append(self.shadows.filter)
             super().checkpoint(name)
 
     monkeypatch.setattr(shell.app, "Renderer", GpuPolicyRenderer)
@@ -185,5 +189,6 @@ def test_goldens_render_with_the_software_filtering_policy(ctx, monkeypatch):
     assert (True, golden.SOFTWARE_ANISOTROPY) in uploads and all(a == golden.SOFTWARE_ANISOTROPY
                                                                   for linear, a in uploads if linear)
     assert reflections and set(reflections) == {golden.SOFTWARE_ANISOTROPY}
+    assert shadow_filters == ["single"]
     # The reference's frame: by the software rule on llvmpipe, by the hardware rule on a GPU.
     assert not golden.failures(frame, golden.load_reference("hall_start"), software=prepare_context(ctx).software)
