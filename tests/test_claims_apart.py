@@ -56,6 +56,9 @@ def _frames(ctx, mirrors: int, size: tuple[int, int], masked_always: bool, monke
         if masked_always:
             patch.setattr(view_tree, "_claims_apart", lambda rects: False)
         engine = Engine(MirrorRing(mirrors), ctx)
+        # (exact visibility, a GPU's "auto" predicting: a level drawn on its claims' conditions
+        # keeps the node test, view_tree._APART)
+        engine.reflection_system.visibility = "exact"
         capture = CaptureTarget(ctx, size)
         frames = []
         try:
