@@ -127,6 +127,26 @@ def test_a_shader_without_the_baseline_version_is_refused(tmp_path):
         load_source("main.frag", root=root)
 
 
+def test_no_program_text_ends_with_a_line_directive(ctx, tmp_path):
+    """The numbering is resumed after each ``#endif``; a stage file ending with one left a
+    ``#line`` as the last line of its program's text, with no line to number, which NVIDIA's
+    compiler refuses ("#line line number invalid": particle.vert on the H200).  The text of
+    every stage file, with and without its switches, ends with a line of its own, and a file
+    ending with ``#endif`` builds."""
+    for path in sorted(shader_dir().glob("*.*")):
+        if path.suffix not in (".vert", ".frag", ".geom"):
+            continue
+        switches = set(re.findall(r"^\s*#\s*if(?:n?def)?\s+(\w+)", path.read_text(), re.MULTILINE))
+        for defines in ({}, dict.fromkeys(switches, "1")):
+            last = load_source(path.name, defines).rstrip("\n").rsplit("\n", 1)[-1]
+            assert not last.startswith("#line"), (path.name, defines, last)
+    root = write(tmp_path, {"main.vert": VERTEX,
+                            "main.frag": "#version 410 core\nout vec4 c;\n#ifdef RED\nvoid main() { c = vec4(1.0); }\n"
+                                         "#else\nvoid main() { c = vec4(0.5); }\n#endif\n"})
+    assert load_source("main.frag", root=root).endswith("#endif\n")
+    build(ctx, root)
+
+
 def test_an_error_after_an_include_names_the_files_own_line(ctx, tmp_path):
     root = write(tmp_path, {
         "main.vert": VERTEX,

@@ -91,6 +91,10 @@ from engine.rules import lens_rules, shadow_rules, visibility_rules
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _BRANCH = re.compile(r"^\s*#\s*(else|elif|endif)\b")  # after these the line numbering is resumed
+# A ``#line`` resuming a file's numbering with no line of it left to number: a stage file
+# ending with ``#endif`` leaves one at the end of the program's text, which NVIDIA's compiler
+# refuses ("#line line number invalid", C0115: particle.vert on the H200, driver 580).
+_TRAILING_LINES = re.compile(r"(?:\n#line \d+)+\n*\Z")
 _CONDITION = re.compile(r"^\s*#\s*(ifdef|ifndef|if|elif|else|endif)\b\s*(\w*)")
 _DEFINITION = re.compile(r"^\s*#\s*(define|undef)\s+(\w+)")
 POLL_INTERVAL = 0.5  # seconds between two looks at the shader files (hot reload)
@@ -269,6 +273,7 @@ def load_source(name: str, defines: dict[str, str] | None = None, *, root: Path 
     if first.strip() != _VERSION:
         raise ShaderError(f"shader {name!r}: must start with '{_VERSION}' (the 4.1 baseline)")
     header = "".join(f"#define {k} {v}\n" for k, v in all_defines.items())
+    rest = _TRAILING_LINES.sub("\n", rest)
     return f"{first}\n#line 1\n{header}{_line(2, files.number(name))}\n{rest}"
 
 
