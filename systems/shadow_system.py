@@ -52,6 +52,7 @@ from engine.core.cube_faces import CUBE_FACES
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.render.clouds import cloud_shadow
+from engine.render.gpu import layered_target
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS, VIRTUAL_RESOLUTION
 from engine.render.sky import sunlight_tint
@@ -331,7 +332,7 @@ class ShadowSystem(esper.Processor):
         maps.clear_points()
         self._points_clear = False
         changed_lo, changed_hi = self._changed_boxes()
-        layered = self.renderer.path_checks.trusted("layered_capture")
+        layered = layered_target(self.renderer.path_checks)  # (into the cube, or an array copied into it)
         spots = {slot: half_width for slot, _, _, light, _ in casting
                  if (half_width := spot_map_half_width(light)) is not None}
         maps.fit_spot_atlas(max((light.shadow_resolution for slot, _, _, light, _ in casting if slot in spots),

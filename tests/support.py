@@ -133,6 +133,16 @@ def still_motion(motion: np.ndarray) -> bool:
     return float(np.abs(motion).max()) < STILL_MOTION
 
 
+def six_pass_only(monkeypatch) -> None:
+    """Make every renderer refuse both layered cube draws (into the cube map and into a 2D
+    array copied into it: ``gpu.layered_target`` None), so cubes are drawn a face a pass."""
+    from engine.render.path_checks import PathChecks
+
+    real = PathChecks.trusted
+    monkeypatch.setattr(PathChecks, "trusted", lambda self, name: False if name in (
+        "layered_capture", "layered_array_capture") else real(self, name))
+
+
 def pixel_rays(view, size) -> tuple[np.ndarray, np.ndarray]:
     """Eye and unit direction (float64) through each pixel centre of ``view`` at ``size``,
     rows from the top: the primary rays a second computation casts."""

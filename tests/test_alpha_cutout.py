@@ -33,7 +33,7 @@ from engine.assets.models import spawn_model
 from engine.assets.texture_data import TextureData
 from engine.core.errors import AssetError
 from engine.core.world import World
-from tests.support import look_from, pixel_rays, skip_unless_trusted, srgb_to_linear
+from tests.support import look_from, pixel_rays, six_pass_only, skip_unless_trusted, srgb_to_linear
 from tests.test_materials_from_files import write_glb, write_obj
 
 GRATE_Y, GRATE_HALF, SLATS = 1.2, 1.2, 8
@@ -163,10 +163,7 @@ def test_a_cutouts_shadow_falls_only_under_its_slats(scene, monkeypatch, light, 
     there; one whose way crosses a gap, or misses the grate, is as lit as with no grate.  The
     grate drawn whole shadows the gaps' points too: the shadow maps read the cutout."""
     if path == "six_pass":
-        from engine.render.path_checks import PathChecks
-        real = PathChecks.trusted
-        monkeypatch.setattr(PathChecks, "trusted", lambda self, name: False if name == "layered_capture"
-                            else real(self, name))
+        six_pass_only(monkeypatch)
     cut = scene(lambda w: _grate(w, light), SIZE)
     bare = scene(lambda w: _grate(w, light, grate=False), SIZE)
     whole = scene(lambda w: _grate(w, light, cutoff=None), SIZE)

@@ -443,3 +443,42 @@ def test_paths_that_both_draw_only_the_sky_prove_nothing_and_are_refused(scene, 
         assert verdict.status == "refused" and "shows no check quad" in verdict.detail, verdict
     monkeypatch.setattr(path_checks, "_fill_row", original)
     assert checks.check("direct_faces").status == "verified"  # with its quads shown, the check passes again
+
+
+def test_where_only_the_cube_map_target_is_refused_point_shadows_draw_one_pass_into_the_2d_array(
+        scene, ctx, fresh_checks, monkeypatch):
+    """The H200's case for a point light's distance cube: not six passes but one layered
+    pass into a six-layer R32F array whose layers are copied into the cube's faces; every
+    face is the six-pass cube's (each face filled with a sentinel before either draw, so a
+    face the copy missed shows)."""
+    from pyglm import glm
+
+    from components import PointLight
+    from tests.test_shadows import _floor_scene
+
+    face_zero_only(monkeypatch)
+    lamp = (3.2, 1.3, 0.9)
+    runner = scene(lambda world: _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False, point=lamp),
+                   (64, 48))
+    runner.frame()
+    renderer = runner.engine.renderer
+    verdicts = renderer.path_checks.verdicts
+    assert verdicts["layered_capture"].status == "refused"
+    assert verdicts["layered_array_capture"].status == "verified", verdicts["layered_array_capture"]
+    assert runner.stats.shadow_path == "layered" and runner.stats.shadow_faces_drawn == 6
+    maps = renderer.shadows
+    (slot, cube), = maps.cubes.items()
+    assert isinstance(maps._layered[slot], LayeredArrayTarget)
+    light = next(light for _, light in runner.world.query_one(PointLight))
+    faces = {}
+    for into in ("array", None):
+        for face in range(6):
+            cube.write(face, np.full((cube.size[0], cube.size[1]), SENTINEL, np.float32).tobytes())
+        assert maps.draw_point(slot, 0, glm.vec3(lamp), light.range, light.shadow_resolution, light.shadow_softness,
+                               into) == ("layered" if into else "six_pass")
+        faces[into] = [read_cube_level(ctx, cube, face, 0, SCRATCH_UNIT)[..., 0] for face in range(6)]
+    assert sum(faces[None][face].min() < 1.0 for face in range(6)) >= 2  # the floor, the box: something casts
+    for face in range(6):
+        assert faces[None][face].max() < SENTINEL / 2
+        np.testing.assert_allclose(faces["array"][face], faces[None][face], rtol=1e-6, atol=1e-7,
+                                   err_msg=f"face {face}")

@@ -24,7 +24,7 @@ from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.portals import spawn_portal_pair
 from engine.core.portal_math import pair_transform
 from engine.rules.probe_schedule import ProbeSchedule
-from tests.support import box_hits, look_from, pixel_rays, skip_unless_trusted, srgb_to_linear
+from tests.support import box_hits, look_from, pixel_rays, six_pass_only, skip_unless_trusted, srgb_to_linear
 
 LIGHT = glm.normalize(glm.vec3(-1.0, -0.75, -0.5))
 BOX_CENTRE, BOX_HALF = np.array([-1.0, 0.5, 0.0]), 0.5
@@ -337,10 +337,7 @@ def _lamp_rays_agree(runner, ids, without, with_shadows, lamp: np.ndarray, caste
 def test_point_light_shadows_agree_with_shadow_rays(scene, monkeypatch, path, shadow_filter):
     lamp = np.array([3.2, 1.3, 0.9])
     if path == "six_pass":
-        from engine.render.path_checks import PathChecks
-        real = PathChecks.trusted
-        monkeypatch.setattr(PathChecks, "trusted", lambda self, name: False if name == "layered_capture"
-                            else real(self, name))
+        six_pass_only(monkeypatch)
 
     def build(world):
         world.resources["ids"] = _floor_scene(world, (0.0, 5.5, 6.0), (0.0, 0.0, 0.0), sun=False,

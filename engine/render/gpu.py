@@ -93,6 +93,19 @@ class _TrustNone:
 _TRUST_NONE = _TrustNone()
 
 
+def layered_target(trust: PathTrust) -> str | None:
+    """Where a layered pass over a cube map's six faces draws on this context: "cube" (into
+    the cube map, ``layered_capture`` verified), "array" (a six-layer 2D array copied into its
+    faces, ``layered_array_capture`` verified where the other was refused: the NVIDIA H200's
+    driver draws a layered cube-map attachment's face 0 alone), or None (neither: a pass a
+    face).  Each check runs at its first need, the array's only where the cube's was refused."""
+    if trust.trusted("layered_capture"):
+        return "cube"
+    if trust.trusted("layered_array_capture"):
+        return "array"
+    return None
+
+
 class Shared:
     """A GL object shared by reference count."""
 

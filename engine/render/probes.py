@@ -45,7 +45,7 @@ from engine.render.bindings import (
     apply_pass_state,
     bind_texture,
 )
-from engine.render.gpu import Gpu, ProbeCube
+from engine.render.gpu import Gpu, ProbeCube, layered_target
 from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_options import SceneOptions
@@ -551,17 +551,9 @@ class ProbePaths:
         return path
 
     def layered_target(self) -> str | None:
-        """The target the layered path draws into on this context: "cube" (the cube map,
-        ``layered_capture`` verified), "array" (a 2D array copied into it,
-        ``layered_array_capture`` verified where the other was refused), or None (neither:
-        six_pass only).  Each check runs at its first need, the array's only where the
-        cube's was refused."""
-        checks = self.renderer.path_checks
-        if checks.trusted("layered_capture"):
-            return "cube"
-        if checks.trusted("layered_array_capture"):
-            return "array"
-        return None
+        """The target the layered path draws into on this context (``gpu.layered_target``):
+        "cube", "array", or None (six_pass only)."""
+        return layered_target(self.renderer.path_checks)
 
     def settle(self) -> None:
         """Read the timed captures' queries, if any wait, and choose (the class docstring)."""

@@ -121,6 +121,8 @@ GL_TEXTURE_BINDING_2D_ARRAY = 0x8C1D
 GL_READ_FRAMEBUFFER = 0x8CA8
 GL_RGBA16F = 0x881A
 GL_HALF_FLOAT = 0x140B
+GL_R32F = 0x822E
+GL_RED = 0x1903
 _u = ctypes.c_uint
 _i = ctypes.c_int
 _SIGNATURES = {
@@ -375,14 +377,23 @@ class LayeredCubeTarget:
             self.depth = 0
 
 
+# A layered array's colour formats (internal format, format, type): a probe's cube, a point
+# light's distance cube.
+ARRAY_RGBA16F = (GL_RGBA16F, GL_RGBA, GL_HALF_FLOAT)
+ARRAY_R32F = (GL_R32F, GL_RED, GL_FLOAT)
+
+
 class LayeredArrayTarget:
     """A framebuffer drawing into the six layers of a 2D array texture at once (``gl_Layer`` =
     face), with a depth array of its own, whose layers ``copy_to_cube`` then copies into the
     faces of ``cube``'s level 0: ``LayeredCubeTarget``'s draw for a driver that takes a
     layered array attachment but not a layered cube map (the module's docstring).  The same
-    ``bind``, ``clear`` and ``unbind`` as ``LayeredCubeTarget``; the copy follows the draw."""
+    ``bind``, ``clear`` and ``unbind`` as ``LayeredCubeTarget``; the copy follows the draw.
+    ``colour``: the array's (internal format, format, type), the cube's own (a probe's
+    ``ARRAY_RGBA16F``, a point light's distance cube ``ARRAY_R32F``)."""
 
-    def __init__(self, ctx: moderngl.Context, cube: moderngl.TextureCube) -> None:
+    def __init__(self, ctx: moderngl.Context, cube: moderngl.TextureCube,
+                 colour: tuple[int, int, int] | None = None) -> None:
         self.ctx = ctx
         self.cube = cube
         self.size = cube.size[0]
@@ -398,7 +409,7 @@ class LayeredArrayTarget:
         gl["glGetError"]()  # start clean: what follows is checked
         problems = []
         try:
-            self.texture = self._array(GL_RGBA16F, GL_RGBA, GL_HALF_FLOAT)
+            self.texture = self._array(*(colour or ARRAY_RGBA16F))
             self.depth = self._array(GL_DEPTH_COMPONENT24, GL_DEPTH_COMPONENT, GL_UNSIGNED_INT)
             self.framebuffer = self._framebuffer()
             gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)

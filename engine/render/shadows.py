@@ -42,6 +42,7 @@ from engine.render.bindings import (
     POINT_SHADOW_UNITS,
     POSE_ROWS_UNIT,
     SCENE_CLIPS,
+    SCRATCH_UNIT,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
@@ -57,7 +58,7 @@ from engine.render.bindings import (
 from engine.render.free_depth_images import give_depth_image, take_depth_image
 from engine.render.gpu import Gpu
 from engine.render.pose_rows import skinning_defines
-from engine.render.raw_gl import LayeredCubeTarget
+from engine.render.raw_gl import ARRAY_R32F, LayeredArrayTarget, LayeredCubeTarget
 from engine.render.targets import release_framebuffer
 from engine.render.views import (
     CAMERA_BLOCK_BYTES,
@@ -187,7 +188,7 @@ class ShadowMaps:
         self.cubes: dict[int, moderngl.TextureCube] = {}        # slot -> the light's distance cube
         self._face_framebuffers: dict[int, list[moderngl.Framebuffer]] = {}
         self._face_depth: dict[int, moderngl.Texture] = {}
-        self._layered: dict[int, LayeredCubeTarget] = {}
+        self._layered: dict[int, LayeredCubeTarget | LayeredArrayTarget] = {}
         # Spot maps: slot -> whether it holds a spot's perspective map (draw_spot) rather than a
         # cube; the atlas holds a tile a slot, side by side, ``spot_tile`` texels a side (0: none).
         self._spot_maps = np.zeros(MAX_POINT_SHADOWS, bool)
@@ -516,10 +517,11 @@ class ShadowMaps:
 
     # --- point lights ---------------------------------------------------------------------
     def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
-                   softness: float, layered: bool, faces: tuple[bool, ...] = (True,) * 6,
+                   softness: float, layered: str | None, faces: tuple[bool, ...] = (True,) * 6,
                    size: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> str:
         """Draw point light ``light_index``'s distance cube into cube ``slot``: one layered
-        pass (``layered``, every face lit) or a view a face, the faces a spot's cone does not
+        pass (every face lit; ``layered``: into the cube, "cube", or into a 2D array copied
+        into it, "array": ``gpu.layered_target``; None: never) or a view a face, the faces a spot's cone does not
         light (``faces`` False: ``light_rules.cube_faces_lit``) cleared to "nothing nearer
         than the range" and not drawn; ``size``: the light's and a rectangle's front
         (``light_rules.light_size``; above 0 its lookups are soft shadows:
@@ -531,7 +533,8 @@ class ShadowMaps:
                       kinds=0, layers=ALL_LAYERS)
                  for face, (forward, _, up) in enumerate(CUBE_FACES)]
         every = all(faces)
-        path = "layered" if every and layered and self._draw_layered(slot, cube, views, light_range) else "six_pass"
+        path = "layered" if every and layered and self._draw_layered(slot, cube, views, light_range, layered) \
+            else "six_pass"
         stats = self.renderer.stats
         if path == "six_pass":
             for face, view in enumerate(views):
@@ -659,17 +662,22 @@ class ShadowMaps:
             placeholder.release()
         return cube
 
-    def _draw_layered(self, slot: int, cube: moderngl.TextureCube, views: list[View], light_range: float) -> bool:
-        """The six faces in one pass through ``shadow_layered.geom``; False where the
-        layered target cannot be made (the caller draws six views)."""
+    def _draw_layered(self, slot: int, cube: moderngl.TextureCube, views: list[View], light_range: float,
+                      into: str) -> bool:
+        """The six faces in one pass through ``shadow_layered.geom``, into the cube ("cube")
+        or into a six-layer array whose layers are then copied into its faces ("array");
+        False where the layered target cannot be made (the caller draws six views)."""
         target = self._layered.get(slot)
-        if target is None or target.cube is not cube:
+        array = into == "array"
+        if target is None or target.cube is not cube or isinstance(target, LayeredArrayTarget) != array:
             if target is not None:
                 target.release()
+                del self._layered[slot]
             try:
-                target = self._layered[slot] = LayeredCubeTarget(self.ctx, cube)
+                target = LayeredArrayTarget(self.ctx, cube, ARRAY_R32F) if array else LayeredCubeTarget(self.ctx, cube)
             except RuntimeError:
                 return False
+            self._layered[slot] = target
         faces = b"".join(v.view_proj.to_bytes() for v in views)
         size = (0, 0, target.size, target.size)
         apply_pass_state(self.ctx, _CASTERS, size)
@@ -679,6 +687,10 @@ class ShadowMaps:
             self._draw_casters(views[0], _LAYERED, {"light_range": light_range, "face_view_proj": faces})
         finally:
             target.unbind()
+        if array:
+            target.copy_to_cube(SCRATCH_UNIT)  # (a unit no pass reads: the sky goes back there)
+            bind_texture(self.ctx, self.renderer.sky, SCRATCH_UNIT)
+            self.renderer.checkpoint("point shadow's copy into its cube")
         return True
 
     # --- drawing --------------------------------------------------------------------------
