@@ -133,6 +133,17 @@ def still_motion(motion: np.ndarray) -> bool:
     return float(np.abs(motion).max()) < STILL_MOTION
 
 
+def skip_unless_layered(renderer) -> None:
+    """Skip a test of a layered cube draw where this context draws cubes a face a pass (both
+    layered targets refused by the self-check: ``gpu.layered_target`` None)."""
+    from engine.render.gpu import layered_target
+
+    if layered_target(renderer.path_checks) is None:
+        verdicts = renderer.path_checks.verdicts
+        pytest.skip(f"no layered cube draw on {renderer.ctx.info['GL_RENDERER']}: "
+                    f"{verdicts['layered_capture'].detail}; {verdicts['layered_array_capture'].detail}")
+
+
 def six_pass_only(monkeypatch) -> None:
     """Make every renderer refuse both layered cube draws (into the cube map and into a 2D
     array copied into it: ``gpu.layered_target`` None), so cubes are drawn a face a pass."""
