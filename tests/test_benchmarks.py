@@ -985,3 +985,20 @@ def test_the_focus_scene_blurs_the_ring_through_its_lens(ctx):
         capture.release()
     assert frames["focus_2"][1] >= frames["mirrors_2"][1] + 4
     assert (np.abs(frames["focus_2"][0] - frames["mirrors_2"][0]).max(axis=2) > 8).sum() >= 20
+
+
+def test_the_gpu_reports_suite_runs_on_the_machines_cores_less_two_where_xdist_is_there(tmp_path):
+    """A lent GPU machine's minutes are few: the report's test section runs the suite on
+    pytest-xdist workers, the cores less two (at most 14), one process on a small machine
+    or without xdist, or what ``--tests-workers`` says; the failures' files are kept."""
+    from benchmarks.gpu_report import suite_workers, tests_section
+
+    assert suite_workers(None, cores=16, xdist=True) == 14
+    assert suite_workers(None, cores=64, xdist=True) == 14
+    assert suite_workers(None, cores=6, xdist=True) == 4
+    assert suite_workers(None, cores=2, xdist=True) == 0 and suite_workers(None, cores=16, xdist=False) == 0
+    assert suite_workers(3, cores=2, xdist=False) == 3
+    result = tests_section(["tests/test_claims_apart.py::test_claims_apart_matches_a_pixel_count"], 300,
+                           tmp_path / "failures", workers=2)
+    assert " -n 2 " in result["command"] and result["exit"] == 0, result
+    assert result["summary"].startswith("1 passed"), result["summary"]
