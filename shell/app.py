@@ -309,7 +309,8 @@ class Engine:
             # program a view may draw them with now, not when a mirror first comes into view.
             surfaces = [s for _, s in self.world.query_one(Mirror)] + [s for _, s in self.world.query_one(Portal)]
             scale = max((getattr(s, "resolution_scale", 1.0) for s in surfaces), default=None)
-            self.renderer.prepare_programs(bool(surfaces) and self.reflection_system.path != "per_mirror", scale)
+            self.renderer.prepare_programs(bool(surfaces) and self.reflection_system.path != "per_mirror", scale,
+                                           levels=bool(surfaces))
             if surfaces:
                 self.reflection_system.prepare()
         error = self.ctx.error

@@ -366,15 +366,18 @@ def _compiles(runner) -> list:
 
 
 @pytest.mark.parametrize("path", ["batched", "per_mirror", "auto"])
-def test_a_mirror_coming_into_view_compiles_no_program(scene, path, monkeypatch):
+@pytest.mark.parametrize("visibility", ["exact", "predicted"])
+def test_a_mirror_coming_into_view_compiles_no_program(scene, path, visibility, monkeypatch):
     """After the engine is made and one frame drawn looking away from the mirror, turning to
     it builds nothing: the level's batches got their programs (every batched invocation
-    count too) and vertex arrays, and the first reflection level its targets, after that
-    first frame (``Renderer.prepare_programs``)."""
+    count too, and the masked builds a predicted level draws with, a GPU's default) and
+    vertex arrays, and the first reflection level its targets, after that first frame
+    (``Renderer.prepare_programs``)."""
     from tests.test_hot_reload import room
 
     runner = scene(room, (160, 120))
     runner.engine.reflection_system.path = path
+    runner.engine.reflection_system.visibility = visibility
     runner.engine.place_camera(0.0, 1.4, 4.0, 180.0, 0.0)  # the mirror is behind
     runner.frame()
     assert runner.stats.reflection_views == 0
@@ -401,7 +404,7 @@ def test_without_preparing_the_first_mirror_compiles(scene):
 
     runner = scene(room, (160, 120))
     runner.engine.reflection_system.path = "batched"
-    runner.engine.renderer.prepare_programs = lambda *args: 0
+    runner.engine.renderer.prepare_programs = lambda *args, **kwargs: 0
     runner.engine.place_camera(0.0, 1.4, 4.0, 180.0, 0.0)
     runner.frame()
     built = _compiles(runner)

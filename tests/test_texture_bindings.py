@@ -129,10 +129,16 @@ def test_after_invalidate_every_texture_is_bound_again(ctx, sampling):
 
 
 def _ring(ctx, mirrors: int) -> Engine:
+    """The ring of ``mirrors``, its sun casting, nothing spinning, drawn as llvmpipe's auto
+    draws it on every machine (per mirror, exactly known; reflections filtered trilinearly):
+    a pass a view, each binding what it reads."""
     engine = Engine(MirrorRing(mirrors), ctx)
     for _, light in engine.world.query_one(DirectionalLight):
         light.shadows = True
     engine.game.spinning.clear()
+    engine.reflection_system.path = "per_mirror"
+    engine.reflection_system.visibility = "exact"
+    engine.renderer.reflection_anisotropy = 1.0
     return engine
 
 

@@ -218,6 +218,7 @@ def test_a_chain_planned_in_one_run_draws_the_tree_planned_level_by_level(scene,
     runners = {chains: scene(_facing_pair(ents[chains], kind, end_image), (160, 120)) for chains in (True, False)}
     for chains, runner in runners.items():
         runner.engine.reflection_system.tree.plan_ahead = chains
+        runner.engine.reflection_system.visibility = "exact"  # (a GPU's auto predicts: no counts to plan from)
     runs = []
     for frame in range(4):
         trees, images = {}, {}
@@ -259,6 +260,7 @@ def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkey
                for ahead in (True, False)}
     for ahead, runner in runners.items():
         runner.engine.reflection_system.tree.plan_ahead = ahead
+        runner.engine.reflection_system.visibility = "exact"  # (a GPU's auto predicts: no counts to plan from)
     orders: dict[bool, list[list[str]]] = {True: [], False: []}
     for frame in range(4):
         trees, images = {}, {}
@@ -332,6 +334,7 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
     runners = {lean_levels: scene(build(game), (160, 120)) for lean_levels, game in games.items()}
     for lean_levels, runner in runners.items():
         runner.engine.reflection_system.tree.lean_levels = lean_levels
+        runner.engine.reflection_system.visibility = "exact"  # (the lean path is exact visibility's)
     kept = 0
     for frame in range(11):
         trees, images, stats, uploads = {}, {}, {}, {}

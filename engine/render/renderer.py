@@ -336,12 +336,14 @@ class Renderer(Gpu):
             self.note_scene_change()
         return batch
 
-    def prepare_programs(self, reflections: bool, level_scale: float | None = None) -> int:
+    def prepare_programs(self, reflections: bool, level_scale: float | None = None, levels: bool = False) -> int:
         """Build now what drawing the current batches will need, rather than when it is first
         drawn: each batch's scene program (and vertex array) for root and per-mirror views,
-        and, with ``reflections`` (the world has mirrors or portals and the batched path may
-        be taken), its builds for every geometry-shader invocation count a level's batched
-        draw can take, the level's view table and the reflection sampler.  With
+        with ``levels`` (the world has mirrors or portals) its builds for a reflection level
+        drawn masked too (claims that overlap, or predicted visibility: a GPU's default), and,
+        with ``reflections`` (the batched path may be taken too), its builds for every
+        geometry-shader invocation count a level's batched draw can take, the level's view
+        table and the reflection sampler.  With
         ``level_scale`` (the largest ``resolution_scale`` of the world's surfaces), the first
         reflection level's targets too, at the root's size times it (the size the view tree
         gives a level when that surface is in it).  A mirror coming into view for the first
@@ -353,11 +355,11 @@ class Renderer(Gpu):
         # path's coming or going, the ambient probes' boxes), else only those not prepared as
         # they are now (made since, or drawn with other variants): a frame that makes one new
         # batch (a decal cut again, a level of detail switched) does not walk every other.
-        everything = (reflections, self.irradiance.has_boxes())
+        everything = (reflections, levels, self.irradiance.has_boxes())
         whole = everything != self._prepared_for
         self._prepared_for = everything
         batches = [b for b in self.batches.values() if b.count and (whole or b.prepared_variants != b.variants)]
-        built = self.scene_pass.prepare(batches, reflections)
+        built = self.scene_pass.prepare(batches, reflections, levels or reflections)
         for batch in batches:
             batch.prepared_variants = batch.variants
         if level_scale is not None and len(self.levels) and self.targets is not None:

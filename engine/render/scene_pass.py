@@ -195,12 +195,12 @@ class ScenePass:
         # after them), or None.
         self._pass_wide: tuple | None = None
 
-    def prepare(self, batches: Iterable[InstanceBatch], reflections: bool) -> int:
+    def prepare(self, batches: Iterable[InstanceBatch], reflections: bool, levels: bool = False) -> int:
         """Build the programs and vertex arrays ``batches`` will be drawn with
-        (``ScenePrograms.prepare``) and, with ``reflections``, the batched path's view table
-        and the reflection sampler.  Returns how many programs were built (0 when all were
-        there)."""
-        built = self.programs.prepare(batches, reflections, self.irradiance.has_boxes())
+        (``ScenePrograms.prepare``; ``levels``: their masked builds too) and, with
+        ``reflections``, the batched path's view table and the reflection sampler.  Returns
+        how many programs were built (0 when all were there)."""
+        built = self.programs.prepare(batches, reflections, self.irradiance.has_boxes(), levels or reflections)
         if reflections:
             if self._views_ubo is None:
                 self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)

@@ -344,15 +344,17 @@ class ScenePrograms:
         forget_reads()  # (what each program reads: a relinked one may read more)
         self.reloads_seen = self.renderer.shaders.reloads
 
-    def prepare(self, batches: Iterable[InstanceBatch], reflections: bool, ambient_boxes: bool) -> int:
+    def prepare(self, batches: Iterable[InstanceBatch], reflections: bool, ambient_boxes: bool,
+                levels: bool = False) -> int:
         """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
         (root and per-mirror views) and, with ``reflections``, every invocation count of the
         batched path (``BATCHED_INVOCATIONS``); each without the
         ``AMBIENT_PROBES`` lookups and, given ``ambient_boxes`` (``IrradianceTable.has_boxes``),
         with them.
-        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``reflections``
-        the ``MASKED`` builds (a level whose claims overlap draws masked, one whose claims
-        lie apart unmasked: ``view_tree._APART``).  Returns how many programs
+        A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``levels`` (the
+        world has reflection levels) the ``MASKED`` builds (a level whose claims overlap, or
+        any drawn by predicted visibility, draws masked; one whose claims lie apart, exactly
+        known, unmasked: ``view_tree._APART``).  Returns how many programs
         were built (0 when all were there)."""
         before = len(self.built)
         counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
@@ -360,7 +362,7 @@ class ScenePrograms:
         for batch in batches:
             unlit = (False, True) if may_be_unlit(batch) else (False,)
             for invocations in counts:
-                for masked in (False, True) if reflections else (False,):
+                for masked in (False, True) if levels or reflections else (False,):
                     for probes in ambient:
                         for dark in unlit:
                             batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
