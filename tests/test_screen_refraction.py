@@ -75,6 +75,17 @@ def small_pane(world, position, side: float) -> None:
                 Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR), Refractive(ior=1.0))
 
 
+def two_squares(world, yellow_at, yellow_side: float, green_at, green_side: float, green_colour) -> None:
+    """The room seen from (0, 1.2, 4), a half see-through yellow square of ``yellow_side``
+    metres at ``yellow_at`` and one of ``green_colour`` at ``green_at``, both facing +z."""
+    look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+    room(world)
+    world.spawn(Transform(position=tuple(yellow_at)), MeshRef(quad(yellow_side, yellow_side)),
+                Material(color=(0.9, 0.9, 0.1, 0.5), double_sided=True))
+    world.spawn(Transform(position=tuple(green_at)), MeshRef(quad(green_side, green_side)),
+                Material(color=(*green_colour, 0.5), double_sided=True))
+
+
 @pytest.mark.parametrize("projection", ["perspective", "orthographic"])
 def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene, projection):
     """(An orthographic camera's rays are parallel: the march's window depth and 1 / w are
@@ -500,12 +511,7 @@ def test_a_see_through_thing_behind_glass_goes_before_one_in_front_of_other_glas
     yellow_at, green_at = np.array([-0.9, 1.0, 0.5]), np.array([0.9, 1.0, 1.9])
 
     def without(world):
-        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
-        room(world)
-        world.spawn(Transform(position=tuple(yellow_at)), MeshRef(quad(0.4, 0.4)),
-                    Material(color=(0.9, 0.9, 0.1, 0.5), double_sided=True))
-        world.spawn(Transform(position=tuple(green_at)), MeshRef(quad(0.3, 0.3)),
-                    Material(color=(0.1, 0.9, 0.1, 0.5), double_sided=True))
+        two_squares(world, yellow_at, 0.4, green_at, 0.3, (0.1, 0.9, 0.1))
 
     def with_glass(world):
         without(world)
@@ -534,12 +540,7 @@ def test_a_see_through_thing_that_covers_one_drawn_after_the_glass_is_drawn_afte
     yellow_at, green_at = np.array([-0.2, 1.0, -0.5]), np.array([0.25, 1.0, 1.5])
 
     def without(world):
-        look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
-        room(world)
-        world.spawn(Transform(position=tuple(yellow_at)), MeshRef(quad(1.0, 1.0)),
-                    Material(color=(0.9, 0.9, 0.1, 0.5), double_sided=True))
-        world.spawn(Transform(position=tuple(green_at)), MeshRef(quad(0.3, 0.3)),
-                    Material(color=(0.1, 0.3, 0.9, 0.5), double_sided=True))
+        two_squares(world, yellow_at, 1.0, green_at, 0.3, (0.1, 0.3, 0.9))
 
     def with_glass(world):
         without(world)
