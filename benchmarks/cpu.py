@@ -42,6 +42,14 @@ another), each of which reaches the driver, plus every raw GL call
 (``engine/render/raw_gl.py``'s ctypes functions); ``gl_calls_top`` names the most made.
 One moderngl call may issue a few GL functions (a draw binds its program and vertex array
 first), so it is the count of the engine's requests to the driver, not of GL entry points.
+The counter also times each call it counts: ``gl_share`` is the median share of a counted
+frame's CPU (until ``Engine.frame`` returns) spent inside them, ``gl_ms_top`` where (ms a
+frame, by label), and ``engine_ms`` the ``cpu_ms_median`` less that share: the engine's own
+Python and numpy.  On llvmpipe the time in GL is not what a GPU's driver takes: even with
+``LP_NUM_THREADS=0`` each draw shades its vertices on the calling thread (at 16 mirrors
+about half the frame is inside ``VertexArray.render``, a box batch's draw in a view ~30 us
+against a claim's ~4), and a flush or a query's read rasterises what is queued.  On a GPU
+host the same columns give the driver's own cost a call.
 
 Targets, each against its limit (``met``) on the kind of machine it is set for
 (``applies``; the others are reported, not judged):
@@ -91,6 +99,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from time import perf_counter
 
 from benchmarks import format_size, names_from, non_negative_int, positive_int, rows_without_rasteriser
 
@@ -100,7 +109,7 @@ SMALL = (640, 360)
 LARGE = (1920, 1080)
 ECS_ENTITIES = 100_000
 DT = 1.0 / 60.0
-COUNTED_FRAMES = 3  # frames per scene with the GL call counter on, after the timed ones
+COUNTED_FRAMES = 10  # frames per scene with the GL call counter on, after the timed ones
 PARTS = ("cpu", "frames", "hd", "ecs", "sample")
 CPU_SCENES = ("mirrors_0", "mirrors_8", "mirrors_16", "portals_d0", "portals_d8", "portals_d0_sway",
               "portals_d8_sway")
@@ -255,6 +264,11 @@ class GLCallCounter:
 
     def __init__(self) -> None:
         self.calls: Counter[str] = Counter()
+        # Seconds spent inside the calls counted (the outermost, wall clock), by label as
+        # ``calls``: what a frame spends in the driver (on llvmpipe with LP_NUM_THREADS=0 that
+        # includes the vertex work each draw does on the calling thread and the rasterising a
+        # flush or a query's read waits for; on a GPU, the driver's CPU and its waits).
+        self.seconds: Counter[str] = Counter()
         self.count_raw = False
         self._depth = 0
         self._saved: list[tuple[type, str, object]] = []
@@ -273,8 +287,13 @@ class GLCallCounter:
     def total(self) -> int:
         return sum(self.calls.values())
 
+    @property
+    def total_seconds(self) -> float:
+        return sum(self.seconds.values())
+
     def reset(self) -> None:
         self.calls.clear()
+        self.seconds.clear()
 
     def open(self) -> GLCallCounter:
         if self._saved:
@@ -321,9 +340,11 @@ class GLCallCounter:
                 return function(*args, **kwargs)
             counter.calls[label] += 1
             counter._depth += 1
+            start = perf_counter()
             try:
                 return function(*args, **kwargs)
             finally:
+                counter.seconds[label] += perf_counter() - start
                 counter._depth -= 1
         return counted
 
@@ -349,6 +370,11 @@ class GLCallCounter:
                 def raw(*args):
                     if counter.count_raw and not counter._depth:
                         counter.calls[label] += 1
+                        start = perf_counter()
+                        try:
+                            return function(*args)
+                        finally:
+                            counter.seconds[label] += perf_counter() - start
                     return function(*args)
                 raw.__code__ = raw.__code__.replace(co_name=name)  # a profile names the GL function
                 return raw
@@ -407,13 +433,21 @@ def run_scenes(ctx, names: tuple[str, ...], size: tuple[int, int], frames: int, 
                     stats[i].append(engines[i].renderer.stats)
         counted: list[list[int]] = [[] for _ in names]
         kinds: list[Counter] = [Counter() for _ in names]
+        in_gl: list[list[float]] = [[] for _ in names]  # each counted frame's share of its CPU in GL calls
+        gl_ms: list[list[float]] = [[] for _ in names]
+        spent: list[Counter] = [Counter() for _ in names]
         with counter:
             for _ in range(COUNTED_FRAMES):
                 for i in range(len(names)):
                     counter.reset()
+                    start = perf_counter()
                     engines[i].frame(DT, outputs[i])
+                    took = perf_counter() - start
                     counted[i].append(counter.total)
                     kinds[i].update(counter.calls)
+                    spent[i].update(counter.seconds)
+                    gl_ms[i].append(counter.total_seconds * 1e3)
+                    in_gl[i].append(counter.total_seconds / took)
                     ctx.finish()
         if ctx.error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error: {ctx.error}")
@@ -428,6 +462,10 @@ def run_scenes(ctx, names: tuple[str, ...], size: tuple[int, int], frames: int, 
                  "draw_calls": round(statistics.median(s.draw_calls for s in stats[i])),
                  "gl_calls": round(statistics.median(counted[i])),
                  "gl_calls_top": {label: round(n / COUNTED_FRAMES, 1) for label, n in kinds[i].most_common(8)},
+                 "gl_ms_median": round(statistics.median(gl_ms[i]), 3),
+                 "gl_share": round(statistics.median(in_gl[i]), 3),
+                 "engine_ms": round(statistics.median(cpu[i]) * (1.0 - statistics.median(in_gl[i])), 3),
+                 "gl_ms_top": {label: round(t * 1e3 / COUNTED_FRAMES, 3) for label, t in spent[i].most_common(8)},
                  "lp_num_threads": lp}
                 for i, name in enumerate(names)]
         if profile_top:
@@ -567,15 +605,20 @@ def measure(args: argparse.Namespace) -> tuple[list[dict], bool, str]:
 def print_tables(rows: list[dict], targets: list[dict], renderer: str, frames: int, warmup: int,
                  out: Callable[[str], None] = print) -> None:
     out(f"CPU frames and targets on {renderer} ({frames} frames after {warmup} warm-up, interleaved)")
-    out(f"{'scene':<14} {'size':>9} {'LP':>3} {'frame ms':>9} {'cpu ms':>8} {'thread ms':>9} {'views':>5} "
-        f"{'passes':>6} {'draws':>5} {'GL calls':>8}")
-    for row in rows:
-        if "rank" in row or "frames" not in row or row.get("scene") == "ecs" or "frame_ms_profiled" in row:
-            continue
-        out(f"{row['scene']:<14} {row['size']:>9} {row['lp_num_threads'] or '-':>3} {row['frame_ms_median']:>9} "
+    out(f"{'scene':<15} {'size':>9} {'LP':>3} {'frame ms':>9} {'cpu ms':>8} {'thread ms':>9} {'views':>5} "
+        f"{'passes':>6} {'draws':>5} {'GL calls':>8} {'in GL':>6} {'engine ms':>9}")
+    scenes = [row for row in rows if not ("rank" in row or "frames" not in row or row.get("scene") == "ecs"
+                                          or "frame_ms_profiled" in row)]
+    for row in scenes:
+        out(f"{row['scene']:<15} {row['size']:>9} {row['lp_num_threads'] or '-':>3} {row['frame_ms_median']:>9} "
             f"{row['cpu_ms_median']:>8} {row['thread_ms_median']:>9} {row['views']:>5} {row['passes']:>6} "
-            f"{row['draw_calls']:>5} "
-            f"{row['gl_calls']:>8}")
+            f"{row['draw_calls']:>5} {row['gl_calls']:>8} {row['gl_share']:>6.0%} {row['engine_ms']:>9}")
+    if scenes:
+        out("in GL: the share of a frame's CPU (until Engine.frame returns) spent inside GL calls, over "
+            f"{COUNTED_FRAMES} counted frames; engine ms: cpu ms less that share (Python and numpy).  Where the GL "
+            "time goes, ms a frame:")
+        for row in scenes:
+            out(f"  {row['scene']:<15} " + ", ".join(f"{label} {ms}" for label, ms in row["gl_ms_top"].items()))
     for row in rows:
         if row.get("scene") == "ecs":
             out(f"ecs: {row['entities']} entities, {row['moving']} moving: CPU {row['cpu_ms_median']} ms, "

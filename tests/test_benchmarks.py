@@ -747,8 +747,11 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
             assert counter.calls == {"Framebuffer.use": 1, "Buffer.write": 1, "Uniform.value": 1,
                                      "VertexArray.render": 2, "raw glFlush": 1, "Context.error": 1}
             assert counter.total == 7
+            # Each counted call's time, under its label; the outermost only, as the counts.
+            assert set(counter.seconds) == set(counter.calls) and min(counter.seconds.values()) > 0
+            assert counter.total_seconds == pytest.approx(sum(counter.seconds.values()))
             counter.reset()
-            assert counter.total == 0
+            assert counter.total == 0 and counter.total_seconds == 0
         vao.render(moderngl.TRIANGLES)
         flush()
         assert counter.total == 0
@@ -777,8 +780,13 @@ def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys,
     assert list(scenes) == list(cpu.CPU_SCENES)
     for row in scenes.values():
         assert row["size"] == "32x18" and row["lp_num_threads"] == "0" and row["frames"] == 1
-        assert row["gl_calls"] >= row["gl_calls_top"]["VertexArray.render"] >= row["draw_calls"] > 0, row
+        # (the draws counted over later frames than the one timed: a first frame draws more)
+        assert row["gl_calls"] >= row["gl_calls_top"]["VertexArray.render"] > 0 and row["draw_calls"] > 0, row
         assert 0 < row["cpu_ms_median"] <= row["frame_ms_median"] and row["thread_ms_median"] > 0
+        # Time in GL calls is measured inside the frame's: a share of it, the engine's the rest.
+        assert 0 < row["gl_share"] < 1 and 0 < row["engine_ms"] < row["cpu_ms_median"], row
+        assert "VertexArray.render" in row["gl_ms_top"], row
+        assert sum(row["gl_ms_top"].values()) <= row["gl_ms_median"] * cpu.COUNTED_FRAMES + 1e-3, row
     assert scenes["mirrors_0"]["views"] == scenes["portals_d0"]["views"] == 0
     assert scenes["portals_d8"]["views"] == 8 and 0 < scenes["mirrors_8"]["views"] < scenes["mirrors_16"]["views"]
     profiled = [row for row in rows if "rank" in row]
