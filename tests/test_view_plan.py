@@ -289,9 +289,12 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
         computed.append(args[1])  # the depth
         return plan(self, *args, **kwargs)
 
+    chained = []  # the levels planned in one run
+
     def counting_chain(self, *args, **kwargs):  # the levels of one view each, planned in one run
         levels = chain(self, *args, **kwargs)
         computed.extend(range(args[1] + 1, args[1] + 1 + len(levels)))
+        chained.extend(range(args[1] + 1, args[1] + 1 + len(levels)))
         return levels
     monkeypatch.setattr(view_plan.SurfaceTable, "_plan", counting)
     monkeypatch.setattr(view_plan.SurfaceTable, "plan_chain", counting_chain)
@@ -330,6 +333,21 @@ def test_a_level_planned_from_the_same_rows_is_found_again_read_only(scene, monk
     assert np.array_equal(runner.frame(), moving) and computed and len(table._plans) > kept_plans  # kept now
     computed.clear()
     assert np.array_equal(runner.frame(), moving) and computed == []  # and found
+    # A camera going back and forth (a loop: each frame where it stood two frames before)
+    # moves every frame: it keeps no plan, and its pair is planned in one run each frame;
+    # a kept row's levels were planned one by one, and a loop longer than the plans kept
+    # found none of them again.
+    kept_plans = len(table._plans)
+    frames = []
+    for step in range(5):
+        runner.world.get(ents["camera"], Transform).position = glm.vec3(0.6 if step % 2 else 0.5, 1.5, 2.5)
+        computed.clear()
+        chained.clear()
+        frames.append(runner.frame())
+        assert computed and len(table._plans) == kept_plans, step
+        assert step == 0 or len(chained) >= 2, (step, chained)
+    assert np.array_equal(frames[0], frames[2]) and np.array_equal(frames[1], frames[3])
+    assert not np.array_equal(frames[0], frames[1])
     # A mirror moves: a new table, planned afresh.
     runner.world.get(ents["back"], Transform).position = glm.vec3(0.0, 1.5, 4.2)
     runner.frame()
