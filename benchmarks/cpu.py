@@ -602,6 +602,10 @@ def measure(args: argparse.Namespace) -> tuple[list[dict], bool, str]:
     return rows, software, renderer
 
 
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{value:.0%}"
+
+
 def print_tables(rows: list[dict], targets: list[dict], renderer: str, frames: int, warmup: int,
                  out: Callable[[str], None] = print) -> None:
     out(f"CPU frames and targets on {renderer} ({frames} frames after {warmup} warm-up, interleaved)")
@@ -612,13 +616,14 @@ def print_tables(rows: list[dict], targets: list[dict], renderer: str, frames: i
     for row in scenes:
         out(f"{row['scene']:<15} {row['size']:>9} {row['lp_num_threads'] or '-':>3} {row['frame_ms_median']:>9} "
             f"{row['cpu_ms_median']:>8} {row['thread_ms_median']:>9} {row['views']:>5} {row['passes']:>6} "
-            f"{row['draw_calls']:>5} {row['gl_calls']:>8} {row['gl_share']:>6.0%} {row['engine_ms']:>9}")
-    if scenes:
+            f"{row['draw_calls']:>5} {row['gl_calls']:>8} {_share(row.get('gl_share')):>6} "
+            f"{row.get('engine_ms', '-')!s:>9}")
+    if any("gl_ms_top" in row for row in scenes):
         out("in GL: the share of a frame's CPU (until Engine.frame returns) spent inside GL calls, over "
             f"{COUNTED_FRAMES} counted frames; engine ms: cpu ms less that share (Python and numpy).  Where the GL "
             "time goes, ms a frame:")
         for row in scenes:
-            out(f"  {row['scene']:<15} " + ", ".join(f"{label} {ms}" for label, ms in row["gl_ms_top"].items()))
+            out(f"  {row['scene']:<15} " + ", ".join(f"{label} {ms}" for label, ms in row.get("gl_ms_top", {}).items()))
     for row in rows:
         if row.get("scene") == "ecs":
             out(f"ecs: {row['entities']} entities, {row['moving']} moving: CPU {row['cpu_ms_median']} ms, "

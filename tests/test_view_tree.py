@@ -291,8 +291,11 @@ def test_levels_planned_ahead_are_the_levels_planned_one_at_a_time(scene, monkey
 
 
 
-@pytest.mark.parametrize("pair", ("portals", "mirrors", "portals_closed"))
-def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(scene, monkeypatch, pair):
+@pytest.mark.parametrize(("pair", "visibility"), (("portals", "exact"), ("mirrors", "exact"),
+                                                  ("portals_closed", "exact"), ("portals", "predicted"),
+                                                  ("mirrors", "predicted")))
+def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(scene, monkeypatch, pair,
+                                                                              visibility):
     """A facing pair seen head on is a chain of one view a level, which the view tree
     chooses, descends from and plans on a lean path (``ViewTree._choose_one``: none of the
     lists a level of many views is chosen through), packing each level's composite row
@@ -301,7 +304,8 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
     frames equal, frame by frame, those of a tree that chooses every level through the
     general path (``lean_levels`` False): the benchmark's portal pair at depth 8 (its floor
     and crates in every level), as mirrors, and with its end images off (the fallback past
-    the depth limit)."""
+    the depth limit); in exact visibility (this frame's counts) and predicted (last
+    frame's: the levels' claims then drawn after the whole chain is planned)."""
     import dataclasses
 
     from benchmarks.portals import FacingPortals
@@ -318,6 +322,14 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
     prepare = MirrorPasses.prepare_level
     monkeypatch.setattr(MirrorPasses, "prepare_level", lambda self, *a: lean.append(
         "claims" if len(a) > 4 else "claim") or prepare(self, *a))
+    # How each level's views are drawn (not the root's): on their claims' conditions
+    # (predicted) or not, masked or not.
+    from engine.render.scene_pass import ScenePass
+    draw = ScenePass.draw
+    monkeypatch.setattr(ScenePass, "draw", lambda self, views, targets, options, conditions=None, **k: (
+        options.reflection_filter and lean.append(
+            ("draw", len(views), None if conditions is None else len(conditions), options.masked))) or
+        draw(self, views, targets, options, conditions, **k))
 
     def build(game):
         def level(world):
@@ -334,10 +346,10 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
     runners = {lean_levels: scene(build(game), (160, 120)) for lean_levels, game in games.items()}
     for lean_levels, runner in runners.items():
         runner.engine.reflection_system.tree.lean_levels = lean_levels
-        runner.engine.reflection_system.visibility = "exact"  # (the lean path is exact visibility's)
+        runner.engine.reflection_system.visibility = visibility
     kept = 0
     for frame in range(11):
-        trees, images, stats, uploads = {}, {}, {}, {}
+        trees, images, stats, uploads, draws = {}, {}, {}, {}, {}
         for lean_levels, runner in runners.items():
             if frame < 5:  # the camera sways, then stands still (the tree kept, its end images refilled)
                 games[lean_levels].update(runner.world, 1.0 / 60.0)
@@ -346,8 +358,9 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
             stats[lean_levels] = dataclasses.asdict(runner.stats)
             trees[lean_levels] = _planned_tree(runner)
             uploads[lean_levels] = lean.count("views")
+            draws[lean_levels] = [event for event in lean if isinstance(event, tuple)]
             if not lean_levels:
-                assert set(lean) <= {"claim", "views"}, lean
+                assert {event for event in lean if isinstance(event, str)} <= {"claim", "views"}, lean
             elif not (runner.stats.reflection_views_kept or runner.stats.reflection_end_refills):  # drawn
                 if 0 < frame < 5:  # moving (a first render plans nothing ahead; a still camera's plans are kept)
                     assert lean.count("claims") >= 4, (frame, lean)
@@ -358,5 +371,7 @@ def test_levels_of_one_view_on_the_lean_path_draw_what_the_general_path_draws(sc
         assert len(trees[True]) >= 6, (frame, len(trees[True]))
         assert trees[True] == trees[False], f"frame {frame}: the trees differ"
         assert stats[True] == stats[False], f"frame {frame}: the counts differ"
+        assert draws[True] == draws[False], f"frame {frame}: the levels drawn differ"
+        assert all((conditions is None) == (visibility == "exact") for *_, conditions, _ in draws[True]), draws
         assert images[True].std() > 5.0 and np.array_equal(images[True], images[False]), f"frame {frame}"
     assert kept >= 3, kept

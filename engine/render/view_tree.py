@@ -259,7 +259,7 @@ class ViewTree:
         settings, surfaces, root = walk.settings, walk.surfaces, walk.root
         walk.scale = level_scale(self.renderer.stats, self.coverage, depth)
         ahead = walk.ahead.pop(depth, None) if walk.ahead else None
-        if ahead is None and len(walk.rows.data) == 1 and walk.whole_before.get(depth) and walk.exact \
+        if ahead is None and len(walk.rows.data) == 1 and walk.whole_before.get(depth) \
                 and self.plan_ahead and self.plan_chains and walk.rows.data.flags.writeable \
                 and not surfaces.fading and self.renderer.stats.pixels_left() is None:
             # One parent (a moving root's row), and its level a chain last render: planned as
@@ -275,7 +275,7 @@ class ViewTree:
             candidates, faded = surfaces.plan(walk.rows, depth, root, walk.root_proj, walk.inv_root_proj,
                                               first_index, settings.depth_cap, root.hide,
                                               ends=ends_at(walk.ends, depth), scale=walk.scale, lazy=True)
-            if candidates is not None and walk.whole_before.get(depth) and walk.exact and self.plan_ahead \
+            if candidates is not None and walk.whole_before.get(depth) and self.plan_ahead \
                     and not surfaces.fading and self.renderer.stats.pixels_left() is None:
                 plan_ahead(walk, depth, candidates, self.coverage, self.plan_chains)
         if unviewed is None:
@@ -298,7 +298,7 @@ class ViewTree:
         below, its end views and fallbacks, and its drawing path; None where it has no view
         (the tree ends there)."""
         surfaces, settings, result, root = walk.surfaces, walk.settings, walk.result, walk.root
-        if walk.exact and len(candidates) == 1 and self.lean_levels and settings.level_budget is None:
+        if len(candidates) == 1 and self.lean_levels and settings.level_budget is None:
             stats = self.renderer.stats
             if stats.view_budget is None and stats.pixels_left() is None and stats.min_view_pixels is None:
                 return self._choose_one(walk, levels, candidates)
@@ -344,13 +344,17 @@ class ViewTree:
         return step
 
     def _choose_one(self, walk: TreeWalk, levels: LevelStack, candidates: Candidates) -> TreeLevel | None:
-        """``_choose`` for a level of one candidate, exact visibility, no budget (a chain's
-        levels): the same steps and the same level, without the lists a level of many views
-        is chosen through (its node straight from what its planning kept, the path and the
-        unlit mirrors found once a render: the same for every level of one view).  At portal
-        depth 8 with a swaying camera, 32x18, ``lean_levels`` in all (this path, the lean
-        descent and plan, the claims' and Camera blocks' runs, the composite rows in step 5)
-        takes about 11% off the frame (measured: one process, frames alternating)."""
+        """``_choose`` for a level of one candidate with no budget (a chain's levels): the
+        same steps and the same level, without the lists a level of many views is chosen
+        through (its node straight from what its planning kept, the path and the unlit
+        mirrors found once a render: the same for every level of one view).  Exact
+        visibility reads its claim's count now; predicted visibility takes last frame's, as
+        ``chosen_by_prediction`` does for a level of many (a view unless its claim is known
+        empty or it is an end view; it grows unless hidden last frame).  At portal depth 8
+        with a swaying camera, 32x18, ``lean_levels`` in all (this path, the lean descent
+        and plan, the claims' and Camera blocks' runs, the composite rows in step 5) takes
+        about 11% off the frame in exact visibility (measured: one process, frames
+        alternating)."""
         renderer = self.renderer
         stats = renderer.stats
         level = walk.level
@@ -362,17 +366,33 @@ class ViewTree:
         self._skip_empty_claims(walk, step)
         end = candidates.end is not None and bool(candidates.end[0])
         surfaces = walk.surfaces
-        self._claim(surfaces, step)
         query = step.queries[0]
-        pixels = 0 if query is self.passes.no_pixels else query.samples
-        step.pixels = [pixels]
-        drawn = 0 if end else pixels
+        claimed = query is not self.passes.no_pixels
+        if walk.exact:  # this frame's count: the CPU waits for the GPU to draw the claim
+            self._claim(surfaces, step)
+            pixels = query.samples if claimed else 0
+            step.pixels = [pixels]
+            drawn = 0 if end else pixels
+            viewed, grows = drawn > 0, True
+        else:  # last frame's count; the GPU counts this frame's for the next (chosen_by_prediction)
+            one = candidates.derived.get("one") or parent_and_surface(candidates)
+            key = walk.keys[one[0]] + (surfaces.entity_list[one[1]],)
+            record = walk.record
+            record.pending.append(key)
+            record.counted.append(query)
+            step.claim_keys = [key]
+            seen = record.seen.get(key)
+            viewed = claimed and not end
+            pixels = (seen or 0) if claimed else 0
+            drawn = pixels if viewed else 0
+            grows = seen != 0
+            step.conditions = [query] if viewed else []
         root = walk.root
         self.coverage[level + 1] = screen_coverage(drawn, candidates.size, root.size)
-        if drawn:
+        if viewed:
             stats.views_spent += 1
             stats.pixels_spent += drawn
-            step.keep, step.grow, step.chosen = [0], range(1), candidates
+            step.keep, step.grow, step.chosen = [0], range(1) if grows else range(0), candidates
             kept = candidates.derived.get(("nodes", root.hide))  # (planned ahead: ahead_columns)
             if kept is not None:
                 (view,), ((node, rect, state, p, fade),) = kept
@@ -381,6 +401,10 @@ class ViewTree:
             else:
                 step.views, children = level_nodes(surfaces, candidates, walk.nodes, level + 1, root.hide)
             step.children = children
+            if not grows:  # predicted: drawn, hidden last frame; its surfaces wait for a count (as _choose)
+                children[0].unseen = True
+                self._unviewed(walk.fallbacks, surfaces, candidates.rows, children, level + 1, walk.root_proj, root,
+                               0, None)
             if children[0].fade < 1.0:  # its faded share shows the fallback
                 fallbacks_at(walk.fallbacks, level, surfaces).add(step.parents, candidates.parent, candidates.surface,
                                                                    1.0 - candidates.fade)
@@ -392,7 +416,7 @@ class ViewTree:
             step.composite = children
             return step
         step.keep, step.grow, step.chosen = [], range(0), candidates.select(_NO_ROWS)
-        if not (end and pixels):
+        if not (end and (pixels if walk.exact else claimed)):
             return None
         end_views(walk, step, [0])
         step.composite = list(step.ended)
@@ -443,9 +467,11 @@ class ViewTree:
         walk.level += 1
         if not grow:
             return None
-        if step.chosen is step.candidates and len(children) == 1 and walk.exact and self.lean_levels:
+        if step.chosen is step.candidates and len(children) == 1 and self.lean_levels:
             # A level of one candidate that became a view (a chain's): the same, for one row.
             walk.whole[walk.level] = True
+            if not walk.exact:
+                walk.keys = step.claim_keys
             if walk.seers is not None:
                 p, s = parent_and_surface(step.candidates)
                 row = walk.seers[p].copy()
