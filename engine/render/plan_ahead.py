@@ -12,6 +12,9 @@ rows (else it plans afresh: the result is the same either way).  A chain of leve
 view each (a facing pair) is planned in one run through the surfaces it went through
 (``plan_chain``, ``SurfaceTable.plan_chain``), and the Camera blocks, nodes and claims of
 the levels planned ahead are worked out for all of them at once (``ahead_columns``).
+Predicted visibility plans every level before any claim anyway; there what this saves is
+the level-by-level plan's own calls (a swaying portal pair at depth 8, its levels on the
+lean path too: 0.76 of the frame without them, measured interleaved in one process).
 """
 from __future__ import annotations
 
