@@ -26,6 +26,7 @@ scenes hold ``mirrors_0`` and ``mirrors_8`` a last line gives each side's 8/0 wa
     python -m benchmarks ab /tmp/old . --scenes mirrors_1,mirrors_2,portals_d8
     python -m benchmarks ab /tmp/old . --scenes mirrors_0,mirrors_8 --size 640x360 --procs 1
     python -m benchmarks ab /tmp/old . --scenes glass_0,glass_20,glass_50   # many see-through batches
+    python -m benchmarks ab /tmp/old . --scenes portals_d8_sway_predicted,mirrors_16_predicted  # a GPU's visibility
 """
 from __future__ import annotations
 

@@ -157,6 +157,8 @@ def make_scene(name: str, ctx):
     blended as dual quaternions);
     ``sparks_<mirrors>_<n>``: the ring with n living particles, ``benchmarks.sparks``;
     ``decals_<mirrors>_<n>``: the ring with n stains on its floor, ``benchmarks.decals``;
+    any of them with ``_predicted`` after: its reflections with predicted visibility (a
+    GPU's "auto": last frame's claim counts, no wait a level; ``ReflectionSystem.visibility``);
     ``focus_<mirrors>``: the ring seen through a lens with autofocus (its camera's
     ``DepthOfField``: 85 mm at f/1.4, the widest disc 0.05 of the height);
     ``streaks_<mirrors>``: the ring with motion blur on its orbiting camera, its spinning boxes
@@ -165,6 +167,10 @@ def make_scene(name: str, ctx):
     the sample level), each with its suite's default settings."""
     from shell.app import Engine
 
+    if name.endswith("_predicted"):  # (any scene, as a GPU's default draws its reflections)
+        engine = make_scene(name.removesuffix("_predicted"), ctx)
+        engine.reflection_system.visibility = "predicted"
+        return engine
     if name == "hall":
         from games.hall_of_mirrors.level import HallOfMirrors
 

@@ -971,6 +971,33 @@ def test_the_streaks_scenes_blur_the_ring_by_the_camera_and_the_spinning_boxes(c
         make_scene("streaks_2_other", ctx)
 
 
+def test_a_scene_named_predicted_draws_its_reflections_with_last_frames_counts(ctx):
+    """``<scene>_predicted``: the scene with predicted visibility (a GPU's default); its tree
+    says so, the plain scene's is exact on llvmpipe (auto), and with the camera still their
+    third frames are equal (last frame's counts are this frame's)."""
+    from benchmarks.cpu import make_scene
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    capture = CaptureTarget(ctx, (96, 54))
+    found = {}
+    try:
+        for name in ("portals_d4", "portals_d4_predicted"):
+            engine = make_scene(name, ctx)
+            try:
+                for _ in range(3):
+                    engine.frame(1.0 / 60.0, Output(capture.framebuffer, (96, 54)))
+                found[name] = (engine.reflection_system.visibility, engine.renderer.stats.reflection_visibility,
+                               capture.read_rgb())
+            finally:
+                engine.close()
+    finally:
+        capture.release()
+    assert found["portals_d4_predicted"][:2] == ("predicted", "predicted")
+    assert found["portals_d4"][:2] == ("auto", "exact")
+    assert np.array_equal(found["portals_d4"][2], found["portals_d4_predicted"][2])
+
+
 def test_the_focus_scene_blurs_the_ring_through_its_lens(ctx):
     """``focus_<mirrors>``: the ring's camera has a DepthOfField with autofocus; its four
     passes run and the frame differs from the plain ring's."""
