@@ -463,6 +463,40 @@ def test_a_rough_mirror_blurs_only_its_own_reflection(scene, roughness):
     assert np.abs(with_lamp - without_lamp)[left].max() <= 2  # the lamp changes nothing on the left
 
 
+def test_rough_views_blur_in_an_atlas_as_wide_as_their_level_needs(scene, monkeypatch):
+    """Each rough view of a level is copied into its own tile of an atlas whose mips it is
+    blurred from (``engine/render/rough_atlas.py``); the atlas holds as many columns of tiles
+    as the level's rough views need (``glGenerateMipmap`` filters all of it): one mirror a
+    tile's width, three four tiles', each size kept.  The frames equal those drawn with an
+    atlas of eight columns whatever the count."""
+    from engine.render import rough_atlas
+    from engine.render.rough_atlas import TILE
+
+    def build_with(count):
+        def build(world):
+            base_scene(world)
+            look_from(world, (0.0, 1.5, 5.0))
+            world.spawn(Transform(), MeshRef(plane(20, 20, uv_repeat=8)), Material(texture=checker_texture(64, 8)))
+            world.spawn(Transform(position=(0.0, 0.6, 1.0), scale=(0.6, 0.6, 0.6)), MeshRef(box()),
+                        Material(color=(0.9, 0.3, 0.1)))
+            for i in range(count):
+                mirror_wall(world, position=(-2.2 + 2.2 * i, 1.5, -2), size=(2, 3), roughness=0.3)
+        return build
+
+    def frames(count):
+        runner = scene(build_with(count), SIZE)
+        runner.frame()
+        atlas = runner.engine.reflection_system.tree.passes.rough_atlas
+        return runner.frame().astype(int), atlas.texture.size, atlas.held()
+
+    one, three = frames(1), frames(3)
+    assert one[1:] == ((TILE, TILE), 1) and three[1:] == ((4 * TILE, TILE), 1)
+    monkeypatch.setattr(rough_atlas, "atlas_grid", lambda count: (rough_atlas.COLUMNS, 1))
+    for drawn, (wide, size, _) in ((one, frames(1)), (three, frames(3))):
+        assert size == (8 * TILE, TILE) and np.array_equal(drawn[0], wide)
+    assert one[0].std() > 5.0 and np.abs(one[0] - three[0]).max() > 50  # (two scenes, both drawn)
+
+
 def test_pixels_a_mirror_owned_last_frame_are_not_reflected_into_once_something_hides_them(scene):
     """A level's node image and depth mask keep what the last frame's claims wrote. When a
     box moves in front of the mirror, the pixels it now covers must lose their reflection:

@@ -10,6 +10,10 @@ rough views is copied into its own T x T tile of an atlas - its own pixels only,
 else empty - and the atlas is mipmapped.  Tiles sit on a power-of-two grid, so up to mip
 log2(T) no texel straddles two tiles; the composite keeps its samples half a texel inside.
 A rectangle larger than T is scaled down into its tile (a rough mirror is blurred anyway).
+The atlas is as wide as the level's rough views need (1, 2, 4 or 8 tiles, ``atlas_grid``),
+one image kept for each size a tree uses: ``glGenerateMipmap`` filters the whole image, and
+an atlas of eight columns for one rough view mipmapped seven empty tiles (the sample level,
+640x360 on llvmpipe: four atlases a frame of 2048x256 texels, 9.5 ms of its frame).
 """
 from __future__ import annotations
 
@@ -24,6 +28,7 @@ from engine.render.targets import RenderTargets, release_framebuffer
 
 TILE = 256
 COLUMNS = 8
+KEPT_SIZES = 4  # atlas sizes a tree keeps (RoughAtlas._use_size): 1, 2, 4 and 8 columns of one row
 
 _ROW_DTYPE = np.dtype([("tile", "<f4", (4,)), ("source", "<f4", (4,)), ("place", "<f4", (2,)),
                        ("scale", "<f4"), ("view", "<f4")])
@@ -42,10 +47,18 @@ class Tile:
     scale: float
 
 
+def atlas_grid(count: int) -> tuple[int, int]:
+    """The atlas's columns and rows of tiles for ``count`` rough views: as many columns as the
+    views need up to ``COLUMNS``, a power of two (few sizes, each kept), then rows."""
+    columns = min(COLUMNS, 1 << max(0, count - 1).bit_length())
+    return columns, -(-count // columns)
+
+
 def place_tiles(views: list[tuple[int, tuple[int, int, int, int]]]) -> dict[int, Tile]:
     """Each (view index, rectangle) its tile, in list order on the atlas grid (no GL: the
     composite's rows are built from this before the level's pixels are ready)."""
-    return {view: Tile((i % COLUMNS) * TILE, (i // COLUMNS) * TILE, min(1.0, TILE / max(w, h)))
+    columns = atlas_grid(len(views))[0]
+    return {view: Tile((i % columns) * TILE, (i // columns) * TILE, min(1.0, TILE / max(w, h)))
             for i, (view, (_, _, w, h)) in enumerate(views)}
 
 
@@ -55,8 +68,9 @@ class RoughAtlas:
         self.ctx = renderer.ctx
         self.program = renderer.shaders.program("rough_isolate.vert", "rough_isolate.frag")
         self.program["level_color"].value, self.program["level_nodes"].value = LEVEL_UNITS
-        self.texture: moderngl.Texture | None = None
+        self.texture: moderngl.Texture | None = None  # the atlas the last isolate drew (its size: atlas_grid)
         self._framebuffer: moderngl.Framebuffer | None = None
+        self._atlases: dict[tuple[int, int], tuple[moderngl.Texture, moderngl.Framebuffer]] = {}  # by size
         self._rows: moderngl.Buffer | None = None
         self._vao: moderngl.VertexArray | None = None
 
@@ -66,8 +80,8 @@ class RoughAtlas:
         if not views:
             return {}
         ctx = self.ctx
-        rows_needed = -(-len(views) // COLUMNS)
-        self._ensure_size(COLUMNS * TILE, rows_needed * TILE)
+        columns, rows_needed = atlas_grid(len(views))
+        self._use_size(columns * TILE, rows_needed * TILE)
         width, height = self.texture.size
         rows = np.zeros(len(views), _ROW_DTYPE)
         tiles = place_tiles(views)
@@ -95,25 +109,36 @@ class RoughAtlas:
         self.renderer.checkpoint("rough atlas")
         return tiles
 
-    def _ensure_size(self, width: int, height: int) -> None:
-        if self.texture is not None and self.texture.size[0] >= width and self.texture.size[1] >= height:
-            return
-        self._release_texture()
-        self.texture = self.ctx.texture((width, height), 4, dtype="f2")
-        self.texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        self.texture.repeat_x = self.texture.repeat_y = False
-        self._framebuffer = self.ctx.framebuffer([self.texture])
+    def _use_size(self, width: int, height: int) -> None:
+        """The atlas of exactly this size, made the first time (at most ``KEPT_SIZES`` kept:
+        the one used longest ago goes)."""
+        size = (width, height)
+        found = self._atlases.pop(size, None)
+        if found is None:
+            while len(self._atlases) >= KEPT_SIZES:
+                self._release(self._atlases.pop(next(iter(self._atlases))))
+            texture = self.ctx.texture(size, 4, dtype="f2")
+            texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            texture.repeat_x = texture.repeat_y = False
+            found = (texture, self.ctx.framebuffer([texture]))
+        self._atlases[size] = found  # (the most recently used last)
+        self.texture, self._framebuffer = found
 
-    def _release_texture(self) -> None:
-        if self._framebuffer is not None:
-            release_framebuffer(self._framebuffer)
-            self._framebuffer = None
-        if self.texture is not None:
-            self.texture.release()
-            self.texture = None
+    @staticmethod
+    def _release(atlas: tuple[moderngl.Texture, moderngl.Framebuffer]) -> None:
+        texture, framebuffer = atlas
+        release_framebuffer(framebuffer)
+        texture.release()
+
+    def held(self) -> int:
+        """Atlas images held now."""
+        return len(self._atlases)
 
     def release(self) -> None:
-        self._release_texture()
+        for atlas in self._atlases.values():
+            self._release(atlas)
+        self._atlases.clear()
+        self.texture = self._framebuffer = None
         for obj in (self._vao, self._rows):
             if obj is not None:
                 obj.release()
