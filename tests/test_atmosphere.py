@@ -389,8 +389,9 @@ def test_space_shows_through_the_air(scene, elevation):
     """An atmosphere given faces shows them beyond its air: each sky pixel above the horizon
     is the air's light (the twin of the same sky without them) plus the faces' colour there
     (the same faces drawn as a plain given-faces Skybox: the cube map's own sampling) times
-    the share the air lets through (the table's fourth channel); below the horizon the
-    ground as before.  At night the faces are most of the sky; by day a trace of it."""
+    the share the air lets through (the table's fourth channel) and the share that shows
+    through air that bright (``space_shown``); below the horizon the ground as before.  At
+    night the faces are most of the sky; by day nothing of them shows."""
     faces = space_faces()
     sun = _toward(elevation, 20.0)
     look = _toward(10.0, 10.0)
@@ -399,14 +400,41 @@ def test_space_shows_through_the_air(scene, elevation):
     beyond, *_ = _frame(scene, Skybox(faces=faces), DirectionalLight(direction=tuple(-sun), intensity=3.0), look)
     air = sky_radiance(Skybox(model="atmosphere"), rays, SkySun(tuple(sun)))
     model = sky_model(Skybox(model="atmosphere"), SkySun(tuple(sun)))
-    through = atm.air_transmittance(atm.sky_view_table(model.air, model.air_elevation), rays, sun)
+    table = atm.sky_view_table(model.air, model.air_elevation)
+    through = atm.air_transmittance(table, rays, sun) * atm.space_shown(atm.air_radiance(table, rays, sun))
     up = rays[..., 1] > 0.01
     assert up.sum() > 2000 and (~up).sum() > 500
     want = air + beyond * through * up[..., None]
     np.testing.assert_allclose(shown, want, rtol=1e-2, atol=2e-3)
     if elevation < 0.0:
         assert (beyond * through)[up].sum() > 5.0 * air[up].sum()   # (the night sky is the space's)
+    else:
+        assert (beyond * through)[up].max() < 1e-5 * air[up].mean()   # (lost in the day's sky)
     assert runner.engine.renderer.resource_counts()["sky_space"] == 1
+
+
+@pytest.mark.parametrize("elevation", [60.0, 20.0, -2.0, -13.0])
+def test_the_stars_come_out_at_night_and_are_lost_in_the_days_sky(scene, elevation):
+    """The night sky the window's ``--sky atmosphere`` gives (``star_faces``: stars bright
+    enough to see at night, 0.05 to 2 against a noon zenith's 0.05 to 0.15) looking up:
+    with the sun up, or just set, no star adds a fifth of the sky's light where it stands
+    (the day's blue with the stars added showed dots at noon); past dusk they stand out,
+    the brightest at nearly their own light (the air lets most of it through)."""
+    from engine.assets.star_field import star_faces
+
+    sun = _toward(elevation, 40.0)
+    look = _toward(70.0, 200.0)
+    stars = star_faces(size=128, stars=2000, seed=3)
+    with_stars, _, _ = _frame(scene, Skybox(model="atmosphere", faces=stars),
+                              DirectionalLight(direction=tuple(-sun), intensity=3.0), look)
+    without, _, _ = _frame(scene, Skybox(model="atmosphere"), DirectionalLight(direction=tuple(-sun), intensity=3.0),
+                           look)
+    added = (with_stars - without).max(axis=2)
+    if elevation > -5.0:
+        contrast = added / without.max(axis=2)
+        assert contrast.max() < 0.2, (elevation, contrast.max())
+    else:
+        assert added.max() > 0.5 and (added > 0.05).sum() >= 20, (added.max(), (added > 0.05).sum())
 
 
 def test_space_is_in_the_cube_map_and_the_skys_light(scene):
@@ -426,6 +454,7 @@ def test_space_is_in_the_cube_map_and_the_skys_light(scene):
     model = sky_model(skybox, SkySun(tuple(sun)))
     table = atm.sky_view_table(model.air, model.air_elevation)
     through = np.stack([faces[f] * atm.air_transmittance(table, face_directions(f, 32), sun)
+                        * atm.space_shown(atm.air_radiance(table, face_directions(f, 32), sun))
                         * (face_directions(f, 32)[..., 1:2] >= 0.0) for f in range(6)])
     want = project_faces(through)
     assert np.abs((with_space - without) - want).max() < 0.05 * np.abs(want).max()
@@ -477,7 +506,7 @@ def test_a_probe_captures_the_atmosphere_and_its_space(scene, ctx):
     from engine.render.raw_gl import read_cube_level
 
     faces = space_faces(32)
-    sun = _toward(-3.0, 120.0)
+    sun = _toward(-9.0, 120.0)   # (a night sky: the space shows)
     skybox = Skybox(model="atmosphere", faces=faces, face_size=32)
 
     def build(world):

@@ -375,6 +375,27 @@ def air_transmittance(table: np.ndarray, directions: np.ndarray, sun: np.ndarray
     return _bilinear(np.asarray(table[..., 3:4], np.float16).astype(np.float64), row, column)
 
 
+# How dark the air must be for what lies beyond it to show (``space_shown``): the luminance of
+# its light per unit of sunlight (the sky-view table's) at which half of the space shows.
+# The zenith's, a clear Earth sky: 0.0145 at noon, 0.0023 with the sun 2 degrees up, 4.3e-4
+# at 2 down, 1e-4 at 4, 3.6e-5 at 5, 8e-6 at 6 (civil dusk), 1.6e-6 at 8: the brightest of
+# ``star_faces`` come out about 4 degrees down, most by 8.
+SPACE_DARK = 5e-6
+_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def space_shown(air: np.ndarray) -> np.ndarray:
+    """The share (..., 1) of what lies beyond the air (an atmosphere's given faces: stars, a
+    galaxy) that shows through air whose light per unit of sunlight is ``air`` (..., 3):
+    1 / (1 + (L / SPACE_DARK)^2) of its luminance L.  A star is lost in a bright sky although
+    its light still crosses the air: the eye sees it against the sky, not its light alone,
+    and given faces bright enough to show at night (``star_faces``) outshine a day sky's
+    blue by tens of times.  Drawn by sky_model.glsl's SPACE build (``clear_sky``); the moon's
+    light in the air is left out (a full moon's sky is far under SPACE_DARK)."""
+    lum = np.asarray(air, np.float64) @ _LUMINANCE
+    return (1.0 / (1.0 + (lum / SPACE_DARK) ** 2))[..., None]
+
+
 def horizon_sine(air: Air) -> float:
     """The sine of how far the true horizon lies below the level one, seen from the eye
     ``air.eye_km`` up: the ground's tangent from there, acos(R / (R + h)) (0.45 degrees at

@@ -74,7 +74,7 @@ import numpy as np
 
 from components.limits import MAX_IRRADIANCE_VOLUMES, MAX_VOLUME_AXIS_POINTS
 from engine.core.cube_faces import face_directions
-from engine.render.atmosphere import air_transmittance
+from engine.render.atmosphere import air_radiance, air_transmittance, space_shown
 from engine.render.bindings import (
     CUBE_MIP_UNIT,
     IRRADIANCE_BINDING,
@@ -238,7 +238,8 @@ def _moon_sh(model: SkyModel, disc: np.ndarray) -> np.ndarray:
 def _space_through_air(model: SkyModel) -> np.ndarray:
     """An atmosphere's space (its given faces, box-filtered to ``ATMOSPHERE_FACE`` texels a
     face, or sampled at the nearest of theirs when smaller) times the share of it the air lets
-    through (the CPU's table), above the horizon: (6, n, n, 3)."""
+    through and the share that shows where the air is bright (``space_shown``; the CPU's
+    table), above the horizon: (6, n, n, 3)."""
     n = ATMOSPHERE_FACE
     space = np.asarray(model.space, np.float64)
     while space.shape[1] > n and space.shape[1] % 2 == 0:
@@ -251,7 +252,8 @@ def _space_through_air(model: SkyModel) -> np.ndarray:
     out = np.empty((6, n, n, 3))
     for face in range(6):
         ways = face_directions(face, n)
-        out[face] = space[face] * air_transmittance(model.coarse_table, ways, sun) * (ways[..., 1:2] >= 0.0)
+        out[face] = space[face] * air_transmittance(model.coarse_table, ways, sun) \
+            * space_shown(air_radiance(model.coarse_table, ways, sun)) * (ways[..., 1:2] >= 0.0)
     return out
 
 

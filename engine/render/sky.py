@@ -38,6 +38,7 @@ from engine.render.atmosphere import (
     ground_light,
     horizon_sine,
     sky_view_table,
+    space_shown,
     sun_elevation_degrees,
     sunlight_share,
 )
@@ -471,9 +472,10 @@ def build_faces(skybox: Skybox, sun: SkySun | None = None, clouds: CloudShape | 
         if faces.shape[1] != n:
             raise ValueError(f"build_faces: an atmosphere's space of {faces.shape[1]} texels a face, the cube "
                              f"{n}: give them at one size")
+        table, towards = sky_view_table(model.air, model.air_elevation), np.array(model.sun_direction)
         return np.stack([model_sky(model, face_directions(f, n)) + faces[f]
-                         * air_transmittance(sky_view_table(model.air, model.air_elevation), face_directions(f, n),
-                                             np.array(model.sun_direction))
+                         * air_transmittance(table, face_directions(f, n), towards)
+                         * space_shown(air_radiance(table, face_directions(f, n), towards))
                          * (face_directions(f, n)[..., 1:2] >= -horizon_sine(model.air))
                          * (1.0 - cloud_hidden(model, face_directions(f, n))[0][..., None])
                          for f in range(6)]).astype(np.float32)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import moderngl
 
+from engine.render.atmosphere import SPACE_DARK
 from engine.render.batched_mirrors import MAX_BATCHED_VIEWS
 from engine.render.bindings import (
     CAMERA_BINDING,
@@ -31,15 +32,18 @@ from engine.render.sky import SkyModel
 
 def sky_build(model: SkyModel | None) -> tuple[tuple[str, str], ...]:
     """The defines of a build that draws ``model`` per pixel (``shaders/include/sky_model.glsl``):
-    ``GENERATED_SKY``, and ``ATMOSPHERE``, ``SPACE``, ``MOON``, ``MOON_AIR``, ``CLOUDS`` where it has them;
+    ``GENERATED_SKY``, and ``ATMOSPHERE``, ``SPACE`` (with ``SPACE_DARK``, ``atmosphere.space_shown``'s),
+    ``MOON``, ``MOON_AIR``, ``CLOUDS`` where it has them;
     none for no generated sky (the build samples the cube map).  The sky pass, the sky's cube
     map and a sharp mirror's composite build so."""
     if model is None:
         return ()
+    space = model.atmosphere and model.space is not None
     return tuple((name, "1") for name, on in (
         ("GENERATED_SKY", True), ("ATMOSPHERE", model.atmosphere),
-        ("SPACE", model.atmosphere and model.space is not None), ("MOON", model.moon),
-        ("MOON_AIR", model.moon_lights_air), ("CLOUDS", model.clouds is not None)) if on)
+        ("SPACE", space), ("MOON", model.moon),
+        ("MOON_AIR", model.moon_lights_air), ("CLOUDS", model.clouds is not None)) if on) + \
+        ((("SPACE_DARK", f"{SPACE_DARK:.6e}"),) if space else ())
 
 
 def wire_sky(program: moderngl.Program) -> None:

@@ -88,7 +88,10 @@ vec3 clear_sky(vec3 d) {
     air += moon_air_light * air_table(moon_view, d, sky_moon_direction).rgb;
 #endif
 #ifdef SPACE
-    vec3 beyond = textureLod(sky_space, d, 0.0).rgb * table.a;   // shows where the air is dark: at night
+    // It crosses the air by the table's share, and shows where the air is dark: at night
+    // (atmosphere.space_shown, SPACE_DARK from engine/render/sky_draw.py sky_build).
+    float bright = dot(table.rgb, vec3(0.2126, 0.7152, 0.0722)) / SPACE_DARK;
+    vec3 beyond = textureLod(sky_space, d, 0.0).rgb * (table.a / (1.0 + bright * bright));
 #else
     vec3 beyond = vec3(0.0);
 #endif
