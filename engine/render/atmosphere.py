@@ -47,6 +47,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from engine.core.color import LUMINANCE
+
 GROUND_KM = 6360.0     # the planet's radius
 TOP_KM = 6460.0        # the top of its air
 EYE_KM = 0.2           # how high the eye stands by default (Skybox.altitude's; a level's own heights are nothing to it)
@@ -381,7 +383,6 @@ def air_transmittance(table: np.ndarray, directions: np.ndarray, sun: np.ndarray
 # at 2 down, 1e-4 at 4, 3.6e-5 at 5, 8e-6 at 6 (civil dusk), 1.6e-6 at 8: the brightest of
 # ``star_faces`` come out about 4 degrees down, most by 8.
 SPACE_DARK = 5e-6
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def space_shown(air: np.ndarray) -> np.ndarray:
@@ -392,7 +393,7 @@ def space_shown(air: np.ndarray) -> np.ndarray:
     and given faces bright enough to show at night (``star_faces``) outshine a day sky's
     blue by tens of times.  Drawn by sky_model.glsl's SPACE build (``clear_sky``); the moon's
     light in the air is left out (a full moon's sky is far under SPACE_DARK)."""
-    lum = np.asarray(air, np.float64) @ _LUMINANCE
+    lum = np.asarray(air, np.float64) @ LUMINANCE
     return (1.0 / (1.0 + (lum / SPACE_DARK) ** 2))[..., None]
 
 

@@ -473,12 +473,14 @@ def build_faces(skybox: Skybox, sun: SkySun | None = None, clouds: CloudShape | 
             raise ValueError(f"build_faces: an atmosphere's space of {faces.shape[1]} texels a face, the cube "
                              f"{n}: give them at one size")
         table, towards = sky_view_table(model.air, model.air_elevation), np.array(model.sun_direction)
-        return np.stack([model_sky(model, face_directions(f, n)) + faces[f]
-                         * air_transmittance(table, face_directions(f, n), towards)
-                         * space_shown(air_radiance(table, face_directions(f, n), towards))
-                         * (face_directions(f, n)[..., 1:2] >= -horizon_sine(model.air))
-                         * (1.0 - cloud_hidden(model, face_directions(f, n))[0][..., None])
-                         for f in range(6)]).astype(np.float32)
+        built = []
+        for f in range(6):
+            ways = face_directions(f, n)
+            built.append(model_sky(model, ways) + faces[f] * air_transmittance(table, ways, towards)
+                         * space_shown(air_radiance(table, ways, towards))
+                         * (ways[..., 1:2] >= -horizon_sine(model.air))
+                         * (1.0 - cloud_hidden(model, ways)[0][..., None]))
+        return np.stack(built).astype(np.float32)
     if skybox.faces is not None:
         faces = np.asarray(skybox.faces, np.float32)
         if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] != 3:
