@@ -765,6 +765,41 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
     assert now == originals and vars(_moderngl.Uniform)["value"] is originals[_moderngl.Uniform, "value"]
 
 
+def test_cpu_scenes_run_their_frames_back_to_back_and_time_the_cold_one_apart(ctx, monkeypatch):
+    """The cpu suite's engines take turns in runs (``RUN_FRAMES``): each run's first frame
+    follows another engine's and is the cold one, timed apart; the rest follow their own
+    engine's frame and are the timed frames, ``frames`` of them a scene.  The GL calls are
+    counted on frames that follow their own too."""
+    from benchmarks import cpu
+    from shell.app import Engine
+
+    order: list[int] = []
+    frame = Engine.frame
+
+    def recorded(self, dt, output):
+        order.append(id(self))
+        return frame(self, dt, output)
+
+    monkeypatch.setattr(Engine, "frame", recorded)
+    frames, warmup = 12, 2
+    rows = cpu.run_scenes(ctx, ("mirrors_0", "portals_d0"), cpu.CPU_SIZE, frames, warmup)
+    runs: list[tuple[int, int]] = []  # (engine, frames back to back)
+    for engine in order:
+        if runs and runs[-1][0] == engine:
+            runs[-1] = (engine, runs[-1][1] + 1)
+        else:
+            runs.append((engine, 1))
+    timed = cpu.RUN_FRAMES - 1
+    # Warm-up, then the timed rounds (a cold frame and up to nine timed: 9 + 3), then the
+    # counted frames (a cold one and COUNTED_FRAMES).  (The default seed's shuffles never
+    # put an engine's run next to its own, where two runs would read as one.)
+    expected = [warmup, warmup, timed + 1, timed + 1, frames - timed + 1, frames - timed + 1,
+                cpu.COUNTED_FRAMES + 1, cpu.COUNTED_FRAMES + 1]
+    assert [length for _, length in runs] == expected and len({engine for engine, _ in runs}) == 2
+    for row in rows:
+        assert row["frames"] == frames and row["cold_frame_ms_median"] > 0 and row["frame_ms_median"] > 0
+
+
 def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys, own_contexts):
     """``--parts cpu`` on tiny frame counts: each 32x18 scene's row comes from the
     LP_NUM_THREADS=0 process with its views (none without mirrors, a view a portal level),
