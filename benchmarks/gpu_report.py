@@ -483,12 +483,14 @@ def markdown(report: dict) -> str:
         if scenes:
             out += ["## CPU frames", "",
                     "The 32x18 scenes run in a process with `LP_NUM_THREADS=0` (`lp_num_threads`): on llvmpipe "
-                    "their frame is the engine's CPU.  Medians, ms; `gl_calls`: calls into moderngl and raw GL "
-                    "calls a frame (`python -m benchmarks cpu --help` says what counts); `gl_share`: the share of "
-                    "the frame's CPU spent inside them (`gl_ms_top`: in which), `engine_ms`: the rest (Python and "
-                    "numpy).", ""]
-            out += _table(["scene", "size", "lp_num_threads", "frame_ms_median", "cpu_ms_median", "thread_ms_median",
-                           "views", "passes", "draw_calls", "gl_calls", "gl_share", "engine_ms", "gl_calls_top",
+                    "their frame is the engine's CPU.  Medians, ms, of frames that follow their own engine's "
+                    "(`cold_frame_ms_median`: the first of each run of ten, after another engine's); `gl_calls`: "
+                    "calls into moderngl and raw GL calls a frame (`python -m benchmarks cpu --help` says what "
+                    "counts); `gl_share`: the share of the frame's CPU spent inside them (`gl_ms_top`: in which), "
+                    "`engine_ms`: the rest (Python and numpy).", ""]
+            out += _table(["scene", "size", "lp_num_threads", "frame_ms_median", "cold_frame_ms_median",
+                           "cpu_ms_median", "thread_ms_median", "views", "passes", "draw_calls", "gl_calls",
+                           "gl_share", "engine_ms", "gl_calls_top",
                            "gl_ms_top"], scenes)
         ecs = [row for row in cpu["rows"] if row.get("scene") == "ecs"]
         if ecs:
