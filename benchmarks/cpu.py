@@ -33,7 +33,7 @@ A run's first frame follows another engine's on the same context and finds the C
 full of that engine's code and data, and its GL state displaced: it is the ``cold`` frame
 (``cold_frame_ms_median``), reported and not judged; the others follow their own engine's
 frame, as a game's frames follow each other, and are the frames the targets read (at 0
-mirrors on 32x18 a cold frame is about 1.5x a following one: 2026-12-04, 0.94 against 0.65
+mirrors on 32x18 a cold frame is about 1.5x a following one: 2026-12-04, 0.99 against 0.64
 ms, 50 GL calls against 37).  Scene rows: ``frame_ms_median`` (wall clock
 around ``Engine.frame`` and ``ctx.finish()``), ``cpu_ms_median`` (until ``Engine.frame``
 returns), ``thread_ms_median`` (the CPU time this thread spent in the frame, finish
