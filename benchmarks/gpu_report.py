@@ -75,6 +75,7 @@ from pathlib import Path
 
 from benchmarks import format_size, names_from, non_negative_int, parse_sizes, positive_int
 from benchmarks.cpu import PARTS as CPU_PARTS
+from benchmarks.cpu import RUN_FRAMES
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SIZES = ((640, 360), (1920, 1080))
@@ -484,7 +485,8 @@ def markdown(report: dict) -> str:
             out += ["## CPU frames", "",
                     "The 32x18 scenes run in a process with `LP_NUM_THREADS=0` (`lp_num_threads`): on llvmpipe "
                     "their frame is the engine's CPU.  Medians, ms, of frames that follow their own engine's "
-                    "(`cold_frame_ms_median`: the first of each run of ten, after another engine's); `gl_calls`: "
+                    f"(`cold_frame_ms_median`: the first of each run of {RUN_FRAMES}, after another engine's); "
+                    "`gl_calls`: "
                     "calls into moderngl and raw GL calls a frame (`python -m benchmarks cpu --help` says what "
                     "counts); `gl_share`: the share of the frame's CPU spent inside them (`gl_ms_top`: in which), "
                     "`engine_ms`: the rest (Python and numpy).", ""]
