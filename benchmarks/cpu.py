@@ -29,8 +29,8 @@ almost nothing to rasterise), so the frame is the engine's CPU.  Parts (``--part
 Each part's engines run their frames interleaved in runs (``RUN_FRAMES``): every engine,
 in a shuffled order, draws a run of frames back to back, then the next, so a shared
 machine's drift falls on every scene alike and the ratios hold when absolute times drift.
-A run's first frame follows another engine's on the same context and finds the CPU's caches
-full of that engine's code and data, and its GL state displaced: it is the ``cold`` frame
+A run's first frame follows the other engines' runs on the same context and finds the CPU's
+caches full of their code and data, and its GL state displaced: it is the ``cold`` frame
 (``cold_frame_ms_median``), reported and not judged; the others follow their own engine's
 frame, as a game's frames follow each other, and are the frames the targets read (at 0
 mirrors on 32x18 a cold frame is about 1.5x a following one: 2026-12-04, 0.99 against 0.64
@@ -429,7 +429,7 @@ def run_scenes(ctx, names: tuple[str, ...], size: tuple[int, int], frames: int, 
                 captures.append(CaptureTarget(ctx, size))
         outputs = [Output(capture.framebuffer, size) for capture in captures]
         times: list[list[float]] = [[] for _ in names]
-        cold: list[list[float]] = [[] for _ in names]  # each run's first frame, after another engine's
+        cold: list[list[float]] = [[] for _ in names]  # each run's first frame, after the others' runs
         cpu: list[list[float]] = [[] for _ in names]
         thread: list[list[float]] = [[] for _ in names]
         stats: list[list] = [[] for _ in names]
@@ -636,7 +636,7 @@ def _share(value: float | None) -> str:
 def print_tables(rows: list[dict], targets: list[dict], renderer: str, frames: int, warmup: int,
                  out: Callable[[str], None] = print) -> None:
     out(f"CPU frames and targets on {renderer} ({frames} frames after {warmup} warm-up, interleaved in runs of "
-        f"{RUN_FRAMES}; cold: a run's first frame, after another engine's)")
+        f"{RUN_FRAMES}; cold: a run's first frame, after the other engines' runs)")
     out(f"{'scene':<15} {'size':>9} {'LP':>3} {'frame ms':>9} {'cold ms':>8} {'cpu ms':>8} {'thread ms':>9} "
         f"{'views':>5} {'passes':>6} {'draws':>5} {'GL calls':>8} {'in GL':>6} {'engine ms':>9}")
     scenes = [row for row in rows if not ("rank" in row or "frames" not in row or row.get("scene") == "ecs"

@@ -485,7 +485,7 @@ def markdown(report: dict) -> str:
             out += ["## CPU frames", "",
                     "The 32x18 scenes run in a process with `LP_NUM_THREADS=0` (`lp_num_threads`): on llvmpipe "
                     "their frame is the engine's CPU.  Medians, ms, of frames that follow their own engine's "
-                    f"(`cold_frame_ms_median`: the first of each run of {RUN_FRAMES}, after another engine's); "
+                    f"(`cold_frame_ms_median`: the first of each run of {RUN_FRAMES}, after the other engines' runs); "
                     "`gl_calls`: "
                     "calls into moderngl and raw GL calls a frame (`python -m benchmarks cpu --help` says what "
                     "counts); `gl_share`: the share of the frame's CPU spent inside them (`gl_ms_top`: in which), "

@@ -767,7 +767,7 @@ def test_the_gl_call_counter_counts_each_call_the_engine_makes_once_and_puts_mod
 
 def test_cpu_scenes_run_their_frames_back_to_back_and_time_the_cold_one_apart(ctx, monkeypatch):
     """The cpu suite's engines take turns in runs (``RUN_FRAMES``): each run's first frame
-    follows another engine's and is the cold one, timed apart; the rest follow their own
+    follows the other engines' runs and is the cold one, timed apart; the rest follow their own
     engine's frame and are the timed frames, ``frames`` of them a scene.  The GL calls are
     counted on frames that follow their own too."""
     from benchmarks import cpu
