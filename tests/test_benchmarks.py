@@ -922,29 +922,39 @@ def test_the_posed_scene_poses_its_meshes_every_frame_and_draws_them(ctx):
         engine.close()
 
 
-def test_the_sparks_scene_keeps_about_its_particles_alive_and_draws_them(ctx):
-    """``sparks_<mirrors>_<n>``: two emitters at the ring's centre, about n living after a
-    lifetime (their rates n / 2 / LIFETIME each), drawn: the frame differs from the same ring's
-    without them, frame for frame (the camera's orbit the same)."""
+def _scenes_after(ctx, names: tuple[str, ...], size: tuple[int, int], frames: int, dt: float, look) -> dict:
+    """Each of the cpu suite's scenes ``names`` (``benchmarks.cpu.make_scene``) drawn ``frames``
+    frames of ``dt`` into one capture target of ``size``, one engine after another: what
+    ``look(engine, capture)`` finds in each then, by name."""
     from benchmarks.cpu import make_scene
-    from benchmarks.sparks import LIFETIME
     from engine.core.frame_io import Output
     from engine.render.targets import CaptureTarget
 
-    capture = CaptureTarget(ctx, (96, 54))
-    frames = {}
+    capture = CaptureTarget(ctx, size)
+    found = {}
     try:
-        for name in ("sparks_2_400", "sparks_2_0"):
+        for name in names:
             engine = make_scene(name, ctx)
             try:
-                for _ in range(int(LIFETIME * 30) + 5):
-                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (96, 54)))
-                frames[name] = (capture.read_rgb().astype(int), engine.renderer.stats.particles,
-                                engine.renderer.stats.reflection_views)
+                for _ in range(frames):
+                    engine.frame(dt, Output(capture.framebuffer, size))
+                found[name] = look(engine, capture)
             finally:
                 engine.close()
     finally:
         capture.release()
+    return found
+
+
+def test_the_sparks_scene_keeps_about_its_particles_alive_and_draws_them(ctx):
+    """``sparks_<mirrors>_<n>``: two emitters at the ring's centre, about n living after a
+    lifetime (their rates n / 2 / LIFETIME each), drawn: the frame differs from the same ring's
+    without them, frame for frame (the camera's orbit the same)."""
+    from benchmarks.sparks import LIFETIME
+
+    frames = _scenes_after(ctx, ("sparks_2_400", "sparks_2_0"), (96, 54), int(LIFETIME * 30) + 5, 1.0 / 30.0,
+                           lambda engine, capture: (capture.read_rgb().astype(int), engine.renderer.stats.particles,
+                                                    engine.renderer.stats.reflection_views))
     assert 360 <= frames["sparks_2_400"][1] <= 400 and frames["sparks_2_0"][1] == 0
     assert frames["sparks_2_400"][2] > 0
     assert (np.abs(frames["sparks_2_400"][0] - frames["sparks_2_0"][0]).max(axis=2) > 8).sum() >= 5
@@ -954,26 +964,13 @@ def test_the_decals_scene_throws_its_stains_and_draws_them(ctx):
     """``decals_<mirrors>_<n>``: n decals on the ring's floor, each cut into a part of its own
     (the floor under every one, some boxes too), drawn: the frame differs from the same ring's
     without them, frame for frame."""
-    from benchmarks.cpu import make_scene
     from components.decal import FromDecal
-    from engine.core.frame_io import Output
-    from engine.render.targets import CaptureTarget
 
-    capture = CaptureTarget(ctx, (96, 54))
-    frames = {}
-    try:
-        for name in ("decals_2_12", "decals_2_0"):
-            engine = make_scene(name, ctx)
-            try:
-                for _ in range(3):
-                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (96, 54)))
-                stage = engine.stages["decals"]
-                frames[name] = (capture.read_rgb().astype(int), len(engine.world.query_one(FromDecal)),
-                                sum(len(state.pieces) for state in stage.states.values()))
-            finally:
-                engine.close()
-    finally:
-        capture.release()
+    frames = _scenes_after(ctx, ("decals_2_12", "decals_2_0"), (96, 54), 3, 1.0 / 30.0,
+                           lambda engine, capture: (capture.read_rgb().astype(int),
+                                                    len(engine.world.query_one(FromDecal)),
+                                                    sum(len(state.pieces)
+                                                        for state in engine.stages["decals"].states.values())))
     assert frames["decals_2_12"][1] == 12 and frames["decals_2_0"][1] == 0
     assert frames["decals_2_12"][2] > 12  # each on the floor, and some on boxes
     assert (np.abs(frames["decals_2_12"][0] - frames["decals_2_0"][0]).max(axis=2) > 8).sum() >= 20
@@ -983,23 +980,10 @@ def test_the_streaks_scenes_blur_the_ring_by_the_camera_and_the_spinning_boxes(c
     """``streaks_<mirrors>``: the orbiting camera's MotionBlur streaks the spinning boxes by their
     own motion too (movers in the motion table, four passes); ``_camera``: by the camera's alone."""
     from benchmarks.cpu import make_scene
-    from engine.core.frame_io import Output
-    from engine.render.targets import CaptureTarget
 
-    capture = CaptureTarget(ctx, (192, 108))
-    seen = {}
-    try:
-        for name in ("streaks_2", "streaks_2_camera"):
-            engine = make_scene(name, ctx)
-            try:
-                for _ in range(3):
-                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (192, 108)))
-                renderer = engine.renderer
-                seen[name] = (renderer.object_motion.count, renderer.present_pass.motion_blur.passes)
-            finally:
-                engine.close()
-    finally:
-        capture.release()
+    seen = _scenes_after(ctx, ("streaks_2", "streaks_2_camera"), (192, 108), 3, 1.0 / 30.0,
+                         lambda engine, capture: (engine.renderer.object_motion.count,
+                                                  engine.renderer.present_pass.motion_blur.passes))
     assert seen["streaks_2"][0] > 0 and seen["streaks_2"][1] == 4
     assert seen["streaks_2_camera"] == (0, 4)
     with pytest.raises(ValueError, match="streaks_2_other"):
@@ -1010,24 +994,9 @@ def test_a_scene_named_predicted_draws_its_reflections_with_last_frames_counts(c
     """``<scene>_predicted``: the scene with predicted visibility (a GPU's default); its tree
     says so, the plain scene's is exact on llvmpipe (auto), and with the camera still their
     third frames are equal (last frame's counts are this frame's)."""
-    from benchmarks.cpu import make_scene
-    from engine.core.frame_io import Output
-    from engine.render.targets import CaptureTarget
-
-    capture = CaptureTarget(ctx, (96, 54))
-    found = {}
-    try:
-        for name in ("portals_d4", "portals_d4_predicted"):
-            engine = make_scene(name, ctx)
-            try:
-                for _ in range(3):
-                    engine.frame(1.0 / 60.0, Output(capture.framebuffer, (96, 54)))
-                found[name] = (engine.reflection_system.visibility, engine.renderer.stats.reflection_visibility,
-                               capture.read_rgb())
-            finally:
-                engine.close()
-    finally:
-        capture.release()
+    found = _scenes_after(ctx, ("portals_d4", "portals_d4_predicted"), (96, 54), 3, 1.0 / 60.0,
+                          lambda engine, capture: (engine.reflection_system.visibility,
+                                                   engine.renderer.stats.reflection_visibility, capture.read_rgb()))
     assert found["portals_d4_predicted"][:2] == ("predicted", "predicted")
     assert found["portals_d4"][:2] == ("auto", "exact")
     assert np.array_equal(found["portals_d4"][2], found["portals_d4_predicted"][2])
@@ -1036,23 +1005,9 @@ def test_a_scene_named_predicted_draws_its_reflections_with_last_frames_counts(c
 def test_the_focus_scene_blurs_the_ring_through_its_lens(ctx):
     """``focus_<mirrors>``: the ring's camera has a DepthOfField with autofocus; its four
     passes run and the frame differs from the plain ring's."""
-    from benchmarks.cpu import make_scene
-    from engine.core.frame_io import Output
-    from engine.render.targets import CaptureTarget
-
-    capture = CaptureTarget(ctx, (192, 108))
-    frames = {}
-    try:
-        for name in ("focus_2", "mirrors_2"):
-            engine = make_scene(name, ctx)
-            try:
-                for _ in range(3):
-                    engine.frame(1.0 / 30.0, Output(capture.framebuffer, (192, 108)))
-                frames[name] = (capture.read_rgb().astype(int), engine.renderer.present_pass.post_passes)
-            finally:
-                engine.close()
-    finally:
-        capture.release()
+    frames = _scenes_after(ctx, ("focus_2", "mirrors_2"), (192, 108), 3, 1.0 / 30.0,
+                           lambda engine, capture: (capture.read_rgb().astype(int),
+                                                    engine.renderer.present_pass.post_passes))
     assert frames["focus_2"][1] >= frames["mirrors_2"][1] + 4
     assert (np.abs(frames["focus_2"][0] - frames["mirrors_2"][0]).max(axis=2) > 8).sum() >= 20
 
