@@ -26,6 +26,7 @@ from engine.render.mirror_passes import MirrorPasses, PreparedComposites, Prepar
 from engine.render.scene_options import TREE_ROOT, SceneOptions
 from engine.render.scene_pass import ScenePass
 from engine.render.targets import LevelStack, RenderTargets
+from engine.render.tree_visibility import claimed_pixels
 from engine.render.tree_walk import TreeResult, TreeWalk, seen_surfaces
 from engine.render.views import PlannedView, View
 from engine.resources import SurfaceState
@@ -47,14 +48,28 @@ class KeptTree:
     composite: PreparedComposites | None               # level 1 into the root (None: no views)
     fallbacks: tuple[RenderTargets | None, PreparedFallbacks] | None  # the root's own, with level 1
     spent: tuple[int, int, int, int, int, int]         # views, pixels, cut, downscaled, fallbacks, small
-    # Nothing of it depends on last frame (exact visibility, or predicted from last frame's
-    # counts with no view drawn unseen: a first or cut frame's tree is not the one the next
-    # frame draws; and no end view drawn, or ``history``: end views drawn from an image the
-    # settle check may find this one equal to).
+    # Nothing of it depends on last frame (exact visibility, or predicted from counts that
+    # ``prediction`` checks; and no end view drawn, or ``history``: end views drawn from an
+    # image the settle check may find this one equal to).
     settled: bool
     history: moderngl.Query | None = None  # the settle check of its end images (EndImages.compared)
     ends: tuple | None = None  # the end images' state it was drawn with (StillTree.ends_state): the same, or redraw
     refill: Refill | None = None  # with end views not settled yet: what a kept frame does again (keep)
+    prediction: Prediction | None = None  # predicted visibility: the counts it was drawn on, checked once
+
+
+@dataclass
+class Prediction:
+    """What a tree drawn on predicted visibility took from last frame's claim counts: for
+    each candidate they decided (a view: whether it grows, the pixels it spends; one left
+    out for being under the budget's smallest), the count it read (None: not counted then)
+    and the query counting its claim this frame.  The next frame draws the same tree only
+    if this frame's counts are those: a first or cut frame's tree, or one drawn after the
+    camera moved, is not the one the next frame draws (``StillTree.keep`` reads them).  An
+    end view's count decides nothing (it is drawn if claimed, and never grows)."""
+
+    queries: list[moderngl.Query]
+    read: list[int | None]
 
 
 @dataclass
@@ -119,7 +134,8 @@ class StillTree:
                              tuple(getattr(stats, name) - at_start for name, at_start in zip(LEDGER, ledger,
                                                                                              strict=True)),
                              (not result.end_views or history is not None) and drawn_on_counts(walk),
-                             history, ends_before, refill if history is not None else None)
+                             history, ends_before, refill if history is not None else None,
+                             None if walk.exact else prediction_of(walk))
 
     def ends_state(self, size: tuple[int, int]) -> tuple | None:
         """What end views would be drawn from: whether an image is kept, the surfaces it
@@ -159,6 +175,11 @@ class StillTree:
                 self.ends_state(levels[0].size) != kept.ends:
             self.kept = None
             return None
+        if kept.prediction is not None:  # drawn on last frame's counts: were they its own?
+            if claimed_pixels(self.passes, kept.prediction.queries) != kept.prediction.read:
+                self.kept = None
+                return None
+            self.kept = kept = replace(kept, prediction=None)
         unsettled = kept.history is not None and not EndImages.settled(kept.history)
         if unsettled and kept.refill is None:
             self.kept = None
@@ -244,11 +265,21 @@ class StillTree:
         return Refill(deepest, rects, filled, transparent, seen_surfaces(result), see_through)
 
 
+def prediction_of(walk: TreeWalk) -> Prediction:
+    """The counts a predicted ``walk`` decided its views by, and their claims' queries now."""
+    seen, queries, read = walk.record.seen, [], []
+    for step in walk.steps:
+        for row in (*step.keep, *step.small):
+            queries.append(step.queries[row])
+            read.append(seen.get(step.claim_keys[row]))
+    return Prediction(queries, read)
+
+
 def drawn_on_counts(walk: TreeWalk) -> bool:
-    """Whether the views drawn depend on nothing of last frame's counts (exact, or
-    predicted from last frame's with no view drawn unseen: a first or cut frame's tree is
-    not the one the next frame draws)."""
-    return (walk.exact or bool(walk.record.seen)) and not any(node.unseen for node in walk.result.views)
+    """Whether the views drawn may be the next frame's: exact, or predicted from last
+    frame's counts (not a first or cut frame's, which has none), which the next frame checks
+    (``Prediction``)."""
+    return walk.exact or bool(walk.record.seen)
 
 
 def painted_whole(walk: TreeWalk, level: int) -> bool:
