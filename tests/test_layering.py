@@ -115,8 +115,9 @@ def test_every_module_imports_first_in_a_fresh_interpreter():
                             env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
     failed = json.loads(result.stdout.strip().splitlines()[-1])
-    if "imgui_bundle" in failed.get("shell.overlay", "") and importlib.util.find_spec("imgui_bundle") is None:
-        del failed["shell.overlay"]  # the overlay's own dependency, not installed on this machine (a GPU host's)
+    if importlib.util.find_spec("imgui_bundle") is None:  # the overlay's and editor panels' own dependency,
+        failed = {name: error for name, error in failed.items()  # not installed on this machine (a GPU host's)
+                  if error != "ModuleNotFoundError: No module named 'imgui_bundle'"}
     assert not failed, failed
 
 
