@@ -38,14 +38,15 @@ SHADING_QUALIFIER in vec3 v_light;
 layout(location = 0) out vec4 out_color;
 
 void main() {
-#ifdef MASKED
-    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != camera.skip.w) discard;
-#endif
 #ifdef SPRITE
     vec4 sprite = texture(sprite_map, v_uv);
 #else
     float round_spot = max(1.0 - dot(v_corner, v_corner), 0.0);
     vec4 sprite = vec4(1.0, 1.0, 1.0, round_spot * round_spot);
+#endif
+#ifdef MASKED
+    // (after the sprite's lookup: a discard leaves its quad's derivatives undefined, scene.frag)
+    if (texelFetch(node_map, ivec2(gl_FragCoord.xy), 0).r != camera.skip.w) discard;
 #endif
     float a = v_color.a * sprite.a;
 #ifdef SOFT

@@ -118,6 +118,14 @@ uniform usampler2D node_map;
 #ifndef NODE_STEP
 #define NODE_STEP 1
 #endif
+// Another view's pixel: read first, discarded last (DISCARD_FOREIGN before every write of
+// the outputs).  A discard ends its pixel's invocation, and the derivatives of the others
+// in its 2x2 quad (the checker's filter, every implicit texture level) are undefined after
+// it: an H200 shaded the pixels beside another view's otherwise than the unmasked build.
+bool foreign_pixel = false;
+#define DISCARD_FOREIGN() if (foreign_pixel) discard
+#else
+#define DISCARD_FOREIGN()
 #endif
 #ifdef BATCHED_VIEWS
 // The batched mirror program draws every view of a level in one draw: scene_batched.geom
@@ -945,7 +953,7 @@ vec3 checker_colour(vec2 uv) {
 void main() {
 #ifdef MASKED
     // (the level's own size; its depth and normals pass at half of it: NODE_STEP 2)
-    if (texelFetch(node_map, ivec2(gl_FragCoord.xy) * NODE_STEP, 0).r != node_index) discard;
+    foreign_pixel = texelFetch(node_map, ivec2(gl_FragCoord.xy) * NODE_STEP, 0).r != node_index;
 #endif
 #ifdef SCREEN_REFLECTION
     // Nothing reflected, for the early returns (an unlit mirror: its composite paints it).
@@ -960,9 +968,11 @@ void main() {
     out_surface = v_slots.w;
     out_seen = SEEN(v_slots.w, length(v_world_pos - ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos)));
     out_node = node_index;
+    DISCARD_FOREIGN();
     return;
 #endif
 #ifdef TRIVIAL
+    DISCARD_FOREIGN();
     out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = uvec4(v_slots.w, 0u, 0u, 0u); out_node = node_index; return;
 #endif
     view_eye = ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos);
@@ -1001,6 +1011,7 @@ void main() {
     // would find occluders in flat ground) in the view's space, and one over the distance along
     // its axis (1 / clip w: any view's, whatever its near plane).
     out_color = vec4(normalize(mat3(camera.view) * s.geometric_normal), gl_FragCoord.w);
+    DISCARD_FOREIGN();
     return;
 #endif
     s.albedo = base.rgb;
@@ -1148,4 +1159,5 @@ void main() {
     out_surface = v_slots.w;
     out_seen = SEEN(v_slots.w, length(v_world_pos - VIEW_EYE));
     out_node = node_index;
+    DISCARD_FOREIGN();
 }

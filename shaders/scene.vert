@@ -5,6 +5,13 @@
 #include "pose.glsl"
 #include "object_motion.glsl"
 
+// Invariant: every build of this program (glass or opaque, masked or not, unlit, with or
+// without each effect) puts a vertex at the same position, so their triangles cover the
+// same pixels and depths.  GLSL promises that across programs only for an output declared
+// invariant in both (4.10 section 4.6.1); a GPU compiler may otherwise fuse the two matrix
+// products differently in each build (llvmpipe happens not to).
+invariant gl_Position;
+
 // Clip distances (indices defined from engine/render/bindings.py): CLIP_VIEW_PLANE is the
 // view's plane (mirror and portal views), CLIP_RECT_* the batched mirror path's per-view
 // rectangle (scene_batched.geom), CLIP_SLICE the instance's slice plane.

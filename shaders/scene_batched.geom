@@ -25,6 +25,7 @@
 
 layout(triangles, invocations = GS_INVOCATIONS) in;
 layout(triangle_strip, max_vertices = GS_MAX_VERTICES) out;  // 3 x VIEWS_PER_INVOCATION
+invariant gl_Position;  // every build the same pixels and depths (scene.vert says why)
 
 struct MirrorView {
     mat4 view_proj;   // the reflected camera's projection x view

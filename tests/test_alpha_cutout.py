@@ -427,8 +427,9 @@ def test_every_mip_level_of_a_cutouts_texture_keeps_its_coverage(scene):
 
 def test_a_far_cutout_keeps_its_leaves(scene, monkeypatch):
     """A 30%-opaque leafy cutout 30 m away (its texture 1.5 mip levels down) still covers
-    more than a tenth of the pixels it spans (14% here); with the driver's plain mip chain
-    it all but vanishes (1%)."""
+    more than a tenth of the pixels it spans (14% here, 25% on an H200); with the driver's
+    plain mip chain it all but vanishes (1% here, 3% on the H200, whose anisotropic
+    filtering reads finer levels)."""
     from engine.render import renderer as renderer_module
 
     leaves = TextureData(dots_pixels(), name="leaves")
@@ -453,4 +454,4 @@ def test_a_far_cutout_keeps_its_leaves(scene, monkeypatch):
     plain = share(scene(build, (320, 240)))
     # Level 0, as the sampler sees it, covers 28%; a far pixel reads two small levels blended
     # (trilinear), which thins any pattern, so the far share is under that, but not gone.
-    assert kept > 0.1 and plain < 0.03, (kept, plain)
+    assert kept > 0.1 and plain < 0.05 and kept > 4 * plain, (kept, plain)

@@ -37,6 +37,7 @@ from engine.assets.texture_data import TextureData, checker_texture
 from engine.core.budget import ViewBudget
 from shell.overlay_text import overlay_lines
 from tests.support import look_from
+from tests.test_predicted_visibility import _covered_mirrors
 
 SIZE = (96, 64)
 TURN = glm.angleAxis(math.pi / 2, glm.vec3(0, 1, 0))  # a quad facing +X
@@ -287,6 +288,28 @@ def test_a_predicted_tree_is_kept_from_the_first_frame_drawn_on_counts(scene):
         runner.engine.reflection_system.visibility = "predicted"
     assert [pair.frame() for _ in range(4)] == [False, False, True, True]
     assert pair.keeping.stats.reflection_visibility == "predicted"
+
+
+def _covered(world) -> None:
+    """tests/test_predicted_visibility.py's mirror behind a cover (its view: no pixels)."""
+    ents: dict = {}
+    _covered_mirrors(world, ents, False)
+    world.resources["cover"] = ents["cover"]
+
+
+def test_a_predicted_tree_with_a_view_drawn_unseen_is_kept_once_its_counts_hold(scene):
+    """Predicted visibility, a mirror behind a cover: its view is drawn unseen every frame
+    (hidden last frame: on its claim's condition).  The second frame's tree is the one the
+    third would draw once its counts are read the same (``StillTree.keep``): the third keeps,
+    with a drawn frame's pixels and report; the cover moved aside, the tree draws again."""
+    pair = _Pair(scene, _covered, size=(80, 60), visibility="predicted")
+    assert [pair.frame() for _ in range(4)] == [False, False, True, True]
+    assert pair.keeping.stats.reflection_views == pair.keeping.stats.reflection_views_unseen == 1
+
+    def uncover(world) -> None:
+        world.get(world.resources["cover"], Transform).position = (0.0, 1.5, 30.0)
+    pair.both(uncover)
+    assert not pair.frame()
 
 
 @pytest.mark.parametrize("seed", [3, 7])
