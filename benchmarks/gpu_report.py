@@ -14,6 +14,11 @@ way leaves what came before, with ``"complete": false``):
   ``direct_faces`` and any other path ``engine.render.path_checks.PATH_NAMES`` lists; each
   ``verified``, ``refused``, ``unavailable`` or ``unchecked``, with its detail).  A checkout
   without the self-check reports each path ``unchecked``.
+* ``agreement``: frames two paths must draw alike, drawn now (``agreement_section``): the
+  ring of mirrors with exact and with predicted visibility, and per mirror and batched; the
+  pixels of the third frame that differ by more than 1, and by how much at most.  Where a
+  GPU parts them (derivatives, rounding, a read of what no pass wrote) it shows here first,
+  without the test suite.
 * ``benchmarks``: ``mirrors``, ``portals``, ``probes``, ``stages``, ``profile`` and ``lighting``
   (shadows and post-processing on and off, and its LP_NUM_THREADS=0 stand-in of a GPU's
   640x360 frame; its targets are ``target`` rows, judged here: it runs with
@@ -33,7 +38,8 @@ way leaves what came before, with ``"complete": false``):
   counts, the failing tests' ids and why tests were skipped; each failing test's arrays
   and frames go to ``DIR/failures/<test>.npz``.  ``--no-tests`` leaves it out.
 
-Exit status 0 when every section ran clean, 1 when a benchmark failed, a test failed or a
+Exit status 0 when every section ran clean, 1 when a benchmark failed, a test failed, two
+second paths parted (``agreement``) or a
 speed target that applies to this kind of machine is not met (``--report-only``: targets
 are reported only; the report is written either way), 2 for a bad command line.  The test
 suite is the longest section (about 5 minutes on a GPU machine's CPU, longer on a slow one;
@@ -222,6 +228,70 @@ def layered_target_section(ctx) -> dict:
         return {"error": f"{type(exc).__name__}: {exc}"}
     finally:
         engine.close()
+
+
+AGREEMENT_SIZE = (192, 108)
+AGREEMENT_FRAMES = 3
+# (scene, first settings, second settings): ReflectionSystem attributes of two engines that
+# must draw the same frame.  A predicted level keeps the node-image test where an exact one
+# whose claims lie apart draws without it (view_tree._APART), so the first pair also holds
+# the masked build against the unmasked one: on an H200 they parted at 269 pixels by up
+# to 54 until a masked level's discard moved last (scene.frag), 2026-12-04.
+AGREEMENT_PAIRS = (
+    ("mirrors_8", {"visibility": "exact"}, {"visibility": "predicted"}),
+    ("mirrors_16", {"visibility": "exact"}, {"visibility": "predicted"}),
+    ("mirrors_8", {"path": "per_mirror"}, {"path": "batched"}),
+)
+
+
+def agreement_rows(ctx, pairs=AGREEMENT_PAIRS, size: tuple[int, int] = AGREEMENT_SIZE,
+                   frames: int = AGREEMENT_FRAMES) -> list[dict]:
+    """For each (scene, settings, settings) of ``pairs`` (``benchmarks.cpu.make_scene``'s
+    scenes; ReflectionSystem attributes, or a function of the engine): both engines'
+    ``frames``-th frame at ``size``, the pixels whose colour differs by more than 1 (of
+    255) and the largest difference."""
+    import numpy as np
+
+    from benchmarks.cpu import make_scene
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    rows = []
+    for scene, first, second in pairs:
+        frames_of = []
+        for settings in (first, second):
+            engine = make_scene(scene, ctx)
+            capture = CaptureTarget(ctx, size)
+            try:
+                if callable(settings):
+                    settings(engine)
+                else:
+                    for name, value in settings.items():
+                        setattr(engine.reflection_system, name, value)
+                for _ in range(frames):
+                    engine.frame(1.0 / 60.0, Output(capture.framebuffer, size))
+                frames_of.append(capture.read_rgb().astype(np.int16))
+            finally:
+                capture.release()
+                engine.close()
+        delta = np.abs(frames_of[0] - frames_of[1]).max(axis=-1)
+        rows.append({"scene": scene, "first": _settings_text(first), "second": _settings_text(second),
+                     "pixels": int((delta > 1).sum()), "max": int(delta.max())})
+    return rows
+
+
+def _settings_text(settings) -> str:
+    if callable(settings):
+        return getattr(settings, "__name__", "a function")
+    return ", ".join(f"{name} {value}" for name, value in settings.items()) or "as made"
+
+
+def agreement_section(ctx) -> dict:
+    """``agreement_rows`` on ``ctx``, or why they could not be drawn."""
+    try:
+        return {"size": format_size(AGREEMENT_SIZE), "frames": AGREEMENT_FRAMES, "rows": agreement_rows(ctx)}
+    except Exception as exc:  # the report goes on
+        return {"error": f"{type(exc).__name__}: {exc}", "rows": []}
 
 
 def verdicts_of(checks, expected: tuple[str, ...] = PATHS) -> dict:
@@ -472,6 +542,15 @@ def markdown(report: dict) -> str:
     if "layered_target" in report:
         out += ["## A layered cube-map target as the driver reports it", ""]
         out += _table(["field", "value"], [{"field": k, "value": v} for k, v in report["layered_target"].items()])
+    if "agreement" in report:
+        agreement = report["agreement"]
+        out += ["## Second paths (frames that must agree)", "",
+                f"Each pair of engines' frame {agreement.get('frames')} at {agreement.get('size')}: the pixels "
+                "whose colour differs by more than 1 of 255 (`pixels`, 0 where they agree) and the largest "
+                "difference (`max`).", ""]
+        if "error" in agreement:
+            out += [f"Not drawn: {agreement['error']}", ""]
+        out += _table(["scene", "first", "second", "pixels", "max"], agreement["rows"])
     cpu = report.get("benchmarks", {}).get("cpu", {}).get(FIXED)
     if cpu is not None:
         out += ["## Targets", "",
@@ -585,6 +664,11 @@ def failed(report: dict, targets: bool = True) -> list[str]:
         found += [f"target {row['target']} not met: {row['value']} {row['unit']} over {row['limit']}"
                   for runs in report.get("benchmarks", {}).values() for run in runs.values()
                   for row in run.get("rows", ()) if "target" in row and row.get("applies") and not row.get("met")]
+    agreement = report.get("agreement") or {}
+    if "error" in agreement:
+        found.append(f"second paths: {agreement['error']}")
+    found += [f"second paths disagree: {row['scene']} {row['first']} / {row['second']}: {row['pixels']} pixels, "
+              f"by up to {row['max']}" for row in agreement.get("rows", ()) if row["pixels"]]
     tests = report.get("tests") or {}
     if tests.get("ran") and (tests["exit"] != 0 or tests["failed"] or tests["errors"]):
         found.append(f"tests: {tests['summary'] or 'exit ' + str(tests['exit'])}")
@@ -636,6 +720,11 @@ def main(args: argparse.Namespace) -> int:
                 for name in PATHS}
         progress("paths: " + ", ".join(f"{name} {v['status']}" for name, v in report["paths"].items()))
         report["layered_target"] = layered_target_section(ctx)
+        write(report, out)
+        report["agreement"] = agreement_section(ctx)
+        progress("agreement: " + ("; ".join(f"{row['scene']} {row['first']} / {row['second']}: {row['pixels']} px"
+                                            for row in report["agreement"]["rows"])
+                                  or report["agreement"].get("error", "")))
         write(report, out)
     finally:
         ctx.release()

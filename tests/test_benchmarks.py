@@ -225,6 +225,11 @@ def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
         assert set(report["paths"]) == {"layered_capture", "layered_mips", "direct_faces", *PATH_NAMES}
         assert "unchecked" not in {v["status"] for v in report["paths"].values()}, report["paths"]
     assert report["tests"] == {"ran": False, "reason": "--no-tests"}
+    # The second paths agree (an exit status of 0 says so too: a disagreement fails the report).
+    from benchmarks.gpu_report import AGREEMENT_PAIRS
+    assert [(row["scene"], row["pixels"]) for row in report["agreement"]["rows"]] == \
+        [(scene, 0) for scene, _, _ in AGREEMENT_PAIRS]
+    assert "## Second paths (frames that must agree)" in markdown
 
     runs = report["benchmarks"]
     assert set(runs) == {"mirrors", "portals", "probes", "stages", "profile", "lighting", "cpu"}
@@ -831,6 +836,25 @@ def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys,
     assert list(targets) == list(cpu.TARGETS)
     assert {name for name, row in targets.items() if row["value"] is not None} == \
         {name for name, target in cpu.TARGETS.items() if target.part == "cpu"}
+
+
+def test_second_paths_that_part_are_counted_and_fail_the_report(ctx):
+    """``agreement_rows`` counts the pixels two engines draw otherwise: a ring whose second
+    engine's mirrors reflect half (``Mirror.reflect_rate``) parts at every mirror pixel,
+    and the report names the pair among what failed; the same settings twice agree."""
+    from benchmarks.gpu_report import agreement_rows, failed
+    from components import Mirror
+
+    def half_mirrors(engine) -> None:
+        for _, mirror in engine.world.query_one(Mirror):
+            mirror.reflect_rate = 0.5
+
+    rows = agreement_rows(ctx, (("mirrors_8", {}, half_mirrors), ("mirrors_8", {}, {})), size=(96, 54), frames=2)
+    parted, same = rows
+    assert parted["second"] == "half_mirrors" and parted["pixels"] > 200 and parted["max"] > 5, parted
+    assert same["pixels"] == 0 and same["max"] == 0, same
+    assert failed({"agreement": {"rows": rows}}) == [
+        f"second paths disagree: mirrors_8 as made / half_mirrors: {parted['pixels']} pixels, by up to {parted['max']}"]
 
 
 def test_the_sample_part_draws_the_sample_level_with_its_probes_and_views(capsys, ctx, own_contexts):
