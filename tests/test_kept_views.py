@@ -69,7 +69,9 @@ def _hall(world, end_image=False) -> None:
 
 
 class _Pair:
-    """The same level in two engines, keeping and drawing every frame."""
+    """The same level in two engines, keeping and drawing every frame, in ``visibility``:
+    exact unless a test says otherwise, so each test counts the same frames to the first
+    keep on llvmpipe and on a GPU (whose "auto" predicts, and keeps a frame later)."""
 
     def __init__(self, scene, build, size=SIZE, visibility: str = "exact") -> None:
         self.keeping = scene(build, size)
