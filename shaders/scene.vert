@@ -13,13 +13,33 @@
 invariant gl_Position;
 
 // Clip distances (indices defined from engine/render/bindings.py): CLIP_VIEW_PLANE is the
-// view's plane (mirror and portal views), CLIP_RECT_* the batched mirror path's per-view
-// rectangle (scene_batched.geom), CLIP_SLICE the instance's slice plane.
+// view's plane (mirror and portal views), CLIP_RECT_* a view's rectangle where several views
+// share a draw, CLIP_SLICE the instance's slice plane.
+//
+// Three ways to the views: one view, the Camera block's (plain builds); with BATCHED_VIEWS
+// and INSTANCED_VIEWS, every view of a reflection level in one draw, each instance drawn once
+// a view (instanced views, as single-pass instanced stereo draws two eyes: the instance
+// attributes advance every view_count.x instances, so instance i is row i / n seen by view
+// i % n: engine/render/batched_mirrors.py); with BATCHED_VIEWS alone, the six faces of a
+// one-pass cube-map capture, projected by scene_layered.geom (a capture draws no
+// OBJECT_MOTION build).
+#if defined(BATCHED_VIEWS) && !defined(INSTANCED_VIEWS)
+#define VIEWS_BY_GEOMETRY
+#endif
+#ifdef INSTANCED_VIEWS
+#include "views_block.glsl"
+#include "view_axis.glsl"
+flat out uint v_node;     // the view's node index, its eye and axis (scene.frag's BATCHED_VIEWS inputs)
+flat out vec3 v_eye;
+flat out vec3 v_eye_axis;
+#ifdef FOG
+flat out vec4 v_clip;     // the view's clip plane: where its rays enter it (fog.glsl)
+#endif
+#endif
 
-#ifdef BATCHED_VIEWS
-// The batched mirror program (engine/render/batched_mirrors.py): scene_batched.geom projects
-// each triangle once per view, reading these outputs under their g_ names and writing the
-// v_ names scene.frag reads.
+#ifdef VIEWS_BY_GEOMETRY
+// The one-pass capture: scene_layered.geom projects each triangle once per face, reading
+// these outputs under their g_ names and writing the v_ names scene.frag reads.
 #define v_world_pos g_world_pos
 #define v_normal g_normal
 #define v_uv g_uv
@@ -31,9 +51,7 @@ invariant gl_Position;
 #define v_slots g_slots
 #define v_vertex_color g_vertex_color
 #endif
-#if defined(OBJECT_MOTION) && defined(BATCHED_VIEWS)
-out vec3 g_world_before;  // last frame's place (the geometry shader projects it for each view)
-#elif defined(OBJECT_MOTION)
+#ifdef OBJECT_MOTION
 out vec4 v_clip_now;      // where the view projects the point this frame and last (way.glsl seen_moved)
 out vec4 v_clip_before;
 #endif
@@ -61,7 +79,7 @@ in vec4 in_vertex_color;
 out vec4 v_vertex_color;
 #endif
 
-#ifdef BATCHED_VIEWS
+#ifdef VIEWS_BY_GEOMETRY
 out float g_slice_distance;  // the geometry shader re-emits it as gl_ClipDistance[CLIP_SLICE]
 #endif
 out vec3 v_world_pos;
@@ -137,14 +155,34 @@ void main() {
 #ifdef VERTEX_COLOR
     v_vertex_color = in_vertex_color;
 #endif
-#if defined(OBJECT_MOTION) && defined(BATCHED_VIEWS)
-    g_world_before = world_before(in_slots.w, posed_before);
-#endif
     gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);
-#ifdef BATCHED_VIEWS
+#ifdef VIEWS_BY_GEOMETRY
     g_slice_distance = dot(world, in_slice);
+#elif defined(INSTANCED_VIEWS)
+    // This instance's view: its camera, and its rectangle as four clip planes through the
+    // eye (x >= x0 w, x <= x1 w, y >= y0 w, y <= y1 w), which stand in for the per-view
+    // scissor of a view drawn alone.  The view's own surface, and an instance hidden in
+    // this kind of view or on none of its layers, are clipped away, as there.
+    MirrorView v = views[gl_InstanceID % view_count.x];
+    gl_Position = v.view_proj * world;
+#ifdef OBJECT_MOTION
+    v_clip_now = gl_Position;
+    v_clip_before = v.view_proj * vec4(world_before(in_slots.w, posed_before), 1.0);
 #endif
-#ifndef BATCHED_VIEWS
+    bool hidden = in_slots.w == v.node.y || (v.node.z != 0u && in_slots.w == v.node.z)
+        || hidden_in_view(in_tint.w, v.node.w);
+    gl_ClipDistance[CLIP_VIEW_PLANE] = hidden ? -1.0 : dot(world, v.clip_plane);
+    gl_ClipDistance[CLIP_RECT_LEFT] = gl_Position.x - v.rect.x * gl_Position.w;
+    gl_ClipDistance[CLIP_RECT_RIGHT] = v.rect.z * gl_Position.w - gl_Position.x;
+    gl_ClipDistance[CLIP_RECT_BOTTOM] = gl_Position.y - v.rect.y * gl_Position.w;
+    gl_ClipDistance[CLIP_RECT_TOP] = v.rect.w * gl_Position.w - gl_Position.y;
+    v_node = v.node.x;
+    v_eye = v.eye.xyz;
+    v_eye_axis = view_axis(v.view_proj);
+#ifdef FOG
+    v_clip = v.clip_plane;
+#endif
+#else
     gl_Position = camera.view_proj * world;
 #ifdef OBJECT_MOTION
     v_clip_now = gl_Position;

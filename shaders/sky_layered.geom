@@ -6,25 +6,14 @@
 layout(triangles, invocations = 6) in;
 layout(triangle_strip, max_vertices = 3) out;
 
-struct FaceView {
-    mat4 view_proj;
-    vec4 clip_plane;
-    vec4 eye;
-    vec4 rect;
-    uvec4 node;
-};
-
-layout(std140) uniform Views {
-    ivec4 view_count;
-    FaceView views[MAX_LEVEL_VIEWS];
-};
+#include "views_block.glsl"
 
 in vec2 v_ndc[];
 out vec3 g_direction;
 flat out vec3 g_eye;
 
 void main() {
-    FaceView v = views[gl_InvocationID];
+    MirrorView v = views[gl_InvocationID];
     mat4 to_world = inverse(v.view_proj);
     for (int c = 0; c < 3; ++c) {
         vec4 far_point = to_world * vec4(v_ndc[c], 1.0, 1.0);

@@ -111,7 +111,7 @@ class ReflectionSystem(esper.Processor):
     @property
     def path(self) -> str:
         """How a level's views are drawn: "per_mirror" (each view its own draws), "batched"
-        (one geometry-shader draw per mesh for the whole level) or "auto" (chosen per level
+        (one instanced draw per mesh for the whole level's views) or "auto" (chosen per level
         by view and triangle count; the rule and its numbers: batched_mirrors.choose_path)."""
         return self.settings.path
 

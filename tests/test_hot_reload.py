@@ -206,7 +206,7 @@ def test_every_program_the_engine_builds_reports_errors_at_the_edited_file_and_l
     programs = list(dict.fromkeys([*runner.engine.renderer.shaders._programs,
                                    *layered.engine.renderer.shaders._programs]))
     geometry = {key[2] for key in programs}
-    assert {"scene_batched.geom", "sky_layered.geom", "cube_mip.geom"} <= geometry, geometry
+    assert {"scene_layered.geom", "sky_layered.geom", "cube_mip.geom"} <= geometry, geometry
     assert any(key[3] for key in programs)  # specialised with defines
     originals = {p.relative_to(shader_copy).as_posix(): p.read_text()
                  for p in shader_copy.rglob("*") if p.suffix in (".vert", ".frag", ".geom", ".glsl")}

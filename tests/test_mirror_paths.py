@@ -1,6 +1,6 @@
 """The two ways of drawing a reflection level give the same frame: each view its own draws
-("per_mirror") and one draw per mesh for all views ("batched": a geometry shader emits each
-triangle once per view)."""
+("per_mirror") and one draw per mesh for all views ("batched": each instance drawn once a
+view, scene.vert's INSTANCED_VIEWS build)."""
 from __future__ import annotations
 
 import numpy as np
@@ -20,6 +20,7 @@ from components import (
     look_rotation,
 )
 from engine.assets.mesh import box, plane, quad, sphere
+from engine.assets.portals import spawn_portal_pair
 from engine.assets.texture_data import checker_texture
 from engine.render.batched_mirrors import (
     AUTO_GPU_MAX_TRIANGLES,
@@ -113,7 +114,7 @@ def test_batched_draws_the_per_mirror_frame_in_fewer_passes(scene):
     reflected = batched["ids"][in_mirrors]
     for name in ("box", "ball", "post"):
         assert (reflected == ents[name]).sum() > 20, name
-    assert batched["levels"] == [5, 5, 9]  # 2 and 4 geometry-shader invocations; mirrored and not
+    assert batched["levels"] == [5, 5, 9]  # mirrored, not, mirrored: one winding a level
     assert {m for _, _, _, m in batched["views"][1:]} == {True, False}
 
     assert_same_frame(per_mirror, batched)
@@ -155,7 +156,7 @@ def test_auto_rule_boundaries():
     assert choose_path("auto", AUTO_MIN_VIEWS, AUTO_MAX_TRIANGLES) == "batched"
     assert choose_path("auto", 32, AUTO_MAX_TRIANGLES) == "batched"
     assert choose_path("auto", 32, AUTO_MAX_TRIANGLES + 1) == "per_mirror"
-    # On a GPU the geometry shader's amplification is cheap up to a larger scene.
+    # On a GPU a view's draws cost more than its vertex stage up to a larger scene.
     assert choose_path("auto", AUTO_MIN_VIEWS, AUTO_GPU_MAX_TRIANGLES, software=False) == "batched"
     assert choose_path("auto", AUTO_MIN_VIEWS - 1, 10, software=False) == "per_mirror"
     assert choose_path("auto", 32, AUTO_GPU_MAX_TRIANGLES + 1, software=False) == "per_mirror"
@@ -215,3 +216,45 @@ def test_an_unknown_path_is_a_clear_error(scene):
     assert runner.engine.reflection_system.path == "auto"
     runner.frame()
     assert runner.stats.reflection_views > 0
+
+
+def mirror_and_portal(ents):
+    """A mirror on the left and a portal on the right, both in front of the camera: level 1
+    holds a mirrored view (the mirror's: its front faces clockwise) and one that is not (the
+    portal's), each showing the box and the post."""
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+        world.spawn(Skybox())
+        world.spawn(Transform(position=(0, 1.6, 4), rotation=look_rotation(glm.vec3(0, -0.15, -1))),
+                    Camera(fov_y=75.0))
+        world.spawn(Transform(), MeshRef(plane(30, 30, uv_repeat=10)), Material(texture=checker_texture(64, 8)))
+        ents["mirror"] = world.spawn(Transform(position=(-1.6, 1.4, -1), rotation=yaw(25)), MeshRef(quad(2.2, 2.6)),
+                                     Material(), Mirror(color=(0.95, 0.95, 1.0)))
+        ents["portals"] = spawn_portal_pair(world, (1.6, 1.4, -1), yaw(-25), (8, 1.4, 2), yaw(-90), size=(2.2, 2.6))
+        ents["box"] = world.spawn(Transform(position=(0.0, 0.6, 2.0), rotation=yaw(30), scale=(0.8, 1.2, 0.8)),
+                                  MeshRef(box()), Material(color=(0.9, 0.1, 0.1)))
+        ents["post"] = world.spawn(Transform(position=(5.0, 0.8, 2.0), scale=(0.6, 1.6, 0.6)), MeshRef(box()),
+                                   Material(color=(0.1, 0.3, 0.9)))
+
+    return build
+
+
+def test_a_level_of_mirrored_and_unmirrored_views_batches_once_per_winding(scene):
+    """One draw culls by one winding, so the batched path draws a level whose views are
+    mirrored and not (a mirror's and a portal's) once for each (``instanced_groups``), and
+    its frame is the per-mirror path's."""
+    ents = {}
+    build = mirror_and_portal(ents)
+    per_mirror = render(scene, build, "per_mirror")
+    batched = render(scene, build, "batched")
+    first = [mirrored for level, _, _, mirrored in batched["views"] if level == 1]
+    assert sorted(first) == [False, True]
+    assert_same_frame(per_mirror, batched)
+    surface, ids = batched["surface"], batched["ids"]
+    for entity in (ents["mirror"], ents["portals"][0]):  # each view shows the box or the post
+        shown = ids[surface == entity]
+        assert shown.size > 200 and np.isin(shown, (ents["box"], ents["post"])).sum() > 30, entity
+    levels = batched["levels"]
+    assert batched["stats"].passes == 1 + 2 + sum(
+        len({m for lvl, _, _, m in batched["views"] if lvl == level}) for level in range(2, len(levels) + 1))

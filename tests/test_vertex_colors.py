@@ -6,7 +6,7 @@ Second computations: each pixel's place on a quad coloured red at its left edge 
 at its right, found by casting its ray in float64, gives the share of red its linear
 colour must have; a face-coloured PLY box draws as the engine's own box with that colour
 as its material (sRGB decoded, as PLY colours are kept); a mirror shows the same colours by
-its batched geometry-shader path as by its per-mirror one."""
+its batched (instanced) path as by its per-mirror one."""
 from __future__ import annotations
 
 import numpy as np

@@ -40,7 +40,7 @@ def _reference(parent: View, state, root: View, node: View) -> View:
 
 def batched_row(view: View) -> np.ndarray:
     """The Views block row of ``view`` from its glm matrices and fields, one at a time (the
-    layout of scene_batched.geom's MirrorView)."""
+    layout of shaders/include/views_block.glsl's MirrorView)."""
     width, height = view.size
     x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
     row = np.zeros(32, np.float32)

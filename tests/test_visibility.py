@@ -272,8 +272,8 @@ def test_a_mirror_seen_by_a_probe_face_is_a_probe_view_and_a_mirror_view(scene, 
 
 @pytest.mark.parametrize("case", ["vampire", "ghost", "layers", "hidden_layer_box"])
 def test_the_batched_path_draws_the_same_ids_as_the_per_mirror_path(scene, case):
-    """One draw per mesh for a whole level (the geometry shader's per-view loop) leaves out
-    the same instances as a draw per view (the vertex shader's clip distance)."""
+    """One draw per mesh for a whole level (each instance once a view) leaves out the same
+    instances as a draw per view (the vertex shader's clip distance, in both)."""
     results = {}
     for path in ("per_mirror", "batched"):
         ents = {}

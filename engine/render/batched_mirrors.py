@@ -1,21 +1,28 @@
 """The batched mirror path's rule and data: which path draws a reflection level, and the
-table of views the geometry shader reads.
+table of views its draws read.
 
 The per-mirror path draws a level with ``ScenePass.draw`` view by view: every batch once
 per view, each with its own camera block and scissor.  The batched path (the same pass with
-``SceneOptions.batched``) draws each batch once per level: ``shaders/scene_batched.geom``
-emits every triangle once for each view of the level that can see it, reading the views
-from the ``Views`` uniform block (std140, up to MAX_BATCHED_VIEWS), and ``scene.frag``
-(built with BATCHED_VIEWS) takes the view's node index and eye from the geometry shader.
-The pixels drawn and their values are those of the per-mirror path: the same view_proj,
-clip plane, eye, node mask and faces (tests/test_mirror_paths.py).  The geometry shader
-culls, per view, triangles behind the mirror or outside the view's frustum or screen
-rectangle, and clips the rest to that rectangle with clip distances (the per-mirror
-path's scissor).  This is the one-draw technique of the "Multiple Mirrors" OpenGL project.
+``SceneOptions.batched``) draws each batch once for a group of the level's views
+(``instanced_groups``: one winding, at most MAX_BATCHED_VIEWS): instanced views, the
+technique of single-pass instanced stereo.  The draw has count x n instances, and the
+batch's vertex array advances its instance rows every n instances (``InstanceBatch.vao``),
+so instance i is row i / n drawn by view i % n; ``scene.vert`` (its ``INSTANCED_VIEWS``
+build) reads that view from the ``Views`` uniform block (std140, ``views_block``), clips
+to its mirror plane and to its screen rectangle with clip distances (the per-mirror path's
+scissor), and hands ``scene.frag`` (built with BATCHED_VIEWS) the view's node index and
+eye.  The pixels drawn and their values are those of the per-mirror path: the same
+view_proj, clip plane, eye, node mask and faces (tests/test_mirror_paths.py).  Each
+triangle costs what it costs there, a pass through the vertex stage a view; what the path
+saves is a view's draws, state and camera block.
 
-Which path a level takes is ``choose_path`` (``ReflectionSystem.path``).  On llvmpipe the
-batched path is rarely faster (see the measurements above AUTO_MIN_VIEWS), so "auto" takes
-it only for the lightest scenes there.
+(It replaced a geometry shader that emitted each triangle once per view, the one-draw
+technique of the "Multiple Mirrors" OpenGL project: on an H200 that shader cost ~30 ns a
+triangle a view against the vertex stage's ~4, and on llvmpipe it ran on the app thread; a
+one-pass cube-map capture still takes its faces that way, ``shaders/scene_layered.geom``.)
+
+Which path a level takes is ``choose_path`` (``ReflectionSystem.path``; the measurements
+are above AUTO_MIN_VIEWS).
 """
 from __future__ import annotations
 
@@ -30,11 +37,6 @@ PATHS = ("auto", "per_mirror", "batched")
 # Views one batched draw takes (a level with more is drawn in groups of this many).  The
 # Views block is 16 + 128 bytes a view, well under GL 4.1's 16 KiB minimum block size.
 MAX_BATCHED_VIEWS = 32
-# Views per geometry-shader invocation.  One view is 3 vertices of 41 output components (48
-# where whole vec4 slots count; 49 and 56 in the OBJECT_MOTION builds, two clip positions
-# more); 4 keeps 12 vertices under GL 4.1's 1024 total output components, and 8 invocations
-# x 4 views cover MAX_BATCHED_VIEWS (32 invocations guaranteed).
-VIEWS_PER_INVOCATION = 4
 # std140 layout of the Views block: ivec4 count, then per view (128 bytes)
 # mat4 view_proj, vec4 clip_plane, vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 node (node,
 # skip, hide, view mask: View.view_mask).
@@ -50,47 +52,42 @@ _VIEW_FLOATS = _VIEW_DTYPE.itemsize // 4
 
 # The "auto" rule: batched when a level has at least AUTO_MIN_VIEWS views and the scene
 # submits at most AUTO_MAX_TRIANGLES triangles (each batch's mesh triangles x instances,
-# what both paths push through geometry once per view); per_mirror otherwise.
+# what both paths push through the vertex stage once per view); per_mirror otherwise.
 #
-# Measured on llvmpipe (Mesa 22.3, LLVM 15, 2 cores, 640x360; the machine was shared, so
-# the paths ran interleaved frame by frame).  Whole frames of ``python -m benchmarks
-# mirrors`` (incl. ctx.finish(), median ms, per_mirror / batched):
+# Measured on llvmpipe (Mesa 22.3, LLVM 15, 2 cores, shared; every case's engines in one
+# process, interleaved 4 frames at a time, exact visibility, nothing kept; 2026-12-04),
+# whole frames incl. ctx.finish(), median ms, per_mirror / batched:
 #
-#   scene (triangles)                   4 mirrors      8 mirrors      16 mirrors
-#   benchmark, 20 boxes (~260)          57.0 / 57.6    70.3 / 73.1    120.7 / 126.4
-#   boxes as 20 meshes (22 batches)     35.6 / 38.3    49.0 / 51.4     99.2 / 111.4
-#   no boxes (18-34)                         -         47.2 / 44.8    106.5 / 107.7
+#   scene (triangles, views)              32x18, LP_NUM_THREADS=0    640x360
+#   hall of tests/test_mirror_paths (38)  2.23 / 2.13 (15 views)    21.0 / 21.0 (19)
+#   the same with its sphere (262)        2.52 / 2.45               22.0 / 21.2
+#   benchmark ring, 8 mirrors (258)       3.11 / 3.17 (14)          21.4 / 22.1 (19)
+#   benchmark ring, 16 mirrors (274)      5.72 / 5.45 (40)          37.0 / 36.0 (98)
+#   ring of 8 and 4 glass panes (268)     5.16 / 5.96 (14)          29.0 / 29.6 (23)
 #
-# Per level, the app-thread time of the level's draws (where the paths differ: both
-# rasterise the same pixels), mean ms per_mirror / batched:
-#
-#   triangles     1 view       2 views      3-8 views    11-12 views   28-32 views
-#     <= 34       0.32 / 0.37  0.83 / 0.89  2.43 / 2.29  3.75 / 3.75   3.71 / 3.40
-#     60-95       0.39 / 0.51  0.72 / 0.70  2.12 / 2.25  3.74 / 3.83   3.69 / 4.63
-#     120-155     0.40 / 0.51  0.78 / 0.94  2.41 / 2.56  4.54 / 4.96   4.91 / 5.87
-#     250-274          -       0.73 / 0.91  2.06 / 2.59  5.78 / 7.14   6.29 / 9.29
-#     ~1300            -       1.17 / 2.03  3.17 / 3.64  5.15 / 12.95  5.93 / 21.28
-#
-# A per-mirror view costs ~0.1 ms of its own (state, camera block, ~7 us a draw).  The
-# batched draw's geometry shader runs on llvmpipe's app thread: with the lightest geometry
-# a 28-32 view level still costs ~1 ms a draw (8 invocations), and each triangle adds
-# ~0.4 us per view against ~0.06 us in the per-mirror vertex stage.  So batching pays only
-# for the lightest geometry with several views, and there by ~5-8% of the level's draw
-# time, a few percent of a frame.  On a GPU, where geometry amplification is cheap and a
-# pass's CPU overhead is the bottleneck, the balance is likely the other way: re-measure.
+# At 16 mirrors and 32x18 the batched path makes 13 draws where the per-mirror one makes
+# 112, but its draws' time falls only from 1.67 to 1.46 ms: on llvmpipe a view's vertex
+# stage (~7.5 us a batch here), which both paths run, outweighs its draw's state (~6.5 us).
+# So the paths are within the machine's noise of each other except where the glass slot
+# is drawn in groups (15% dearer), and "auto" keeps llvmpipe's old rule: the lightest
+# scenes only, with several views.
 AUTO_MIN_VIEWS = 3
 AUTO_MAX_TRIANGLES = 40
 #
 # On a GPU (NVIDIA H200, 2026-11-26, .whl/vis_exp.py in one process, engines interleaved,
-# predicted visibility; whole frames, median ms, per_mirror / batched):
+# predicted visibility; whole frames, median ms, per_mirror / batched, the batched path
+# then a geometry shader's):
 #
 #   scene (triangles a view)        4 mirrors     8 mirrors     16 mirrors
 #   benchmark ring (274), 640x360       -         5.37 / 5.19   10.89 / 8.98
 #   benchmark ring (274), 1080p         -         5.99 / 5.81   10.86 / 9.24
 #   ring + five 64x32 spheres (20754)   3.17 / 3.81      -       9.63 / 70.67
 #
-# The batched draw saves ~16 us of CPU a view; its geometry shader costs ~30 ns a triangle a
-# view against ~4 ns through the per-mirror vertex stage, so it pays below ~600 triangles.
+# The batched draw saved ~16 us of CPU a view; that geometry shader cost ~30 ns a triangle a
+# view against ~4 ns through the per-mirror vertex stage, so it paid below ~600 triangles.
+# The instanced draw runs the vertex stage as the per-mirror path does, so its limit lies
+# higher (where the batches the per-mirror path culls view by view, ``batch_cull``, cost
+# more than the draws it saves): measure it on the next GPU lent, until then the old one.
 AUTO_GPU_MAX_TRIANGLES = 512
 
 
@@ -109,6 +106,17 @@ def choose_path(setting: str, view_count: int, triangles: int | Callable[[], int
     if (triangles() if callable(triangles) else triangles) <= limit:
         return "batched"
     return "per_mirror"
+
+
+def instanced_groups(views: Sequence[View]) -> list[list[int]]:
+    """The positions in ``views`` of each group one batched draw takes: views of one winding
+    (a mirrored view's front faces are clockwise, and a draw culls by one winding) and at
+    most MAX_BATCHED_VIEWS of them; those not mirrored first."""
+    groups = []
+    for mirrored in (False, True):
+        same = [at for at, view in enumerate(views) if view.mirrored == mirrored]
+        groups += [same[first:first + MAX_BATCHED_VIEWS] for first in range(0, len(same), MAX_BATCHED_VIEWS)]
+    return groups
 
 
 def submitted_triangles(renderer: Gpu) -> int:

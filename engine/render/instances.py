@@ -42,6 +42,26 @@ INSTANCE_ATTRIBUTES = ("in_model", "in_normal_matrix", "in_color", "in_surface",
                        "in_slice", "in_slots")
 
 
+def _instance_columns() -> tuple[tuple[str, int, str, str, int], ...]:
+    """Each instance input's vertex attributes: (input, column, moderngl's class, format,
+    byte offset in a row); a matrix takes one location a column (in_model four, in_normal_matrix
+    three), the entity's uvec4 an integer one."""
+    columns = []
+    for name, field in zip(INSTANCE_ATTRIBUTES, INSTANCE_DTYPE.names, strict=True):
+        dtype, offset = INSTANCE_DTYPE.fields[field][:2]
+        count = dtype.shape[0]
+        side = {16: 4, 9: 3}.get(count)
+        if side is not None:
+            columns += [(name, column, "f", f"{side}f", offset + 4 * side * column) for column in range(side)]
+        else:
+            integer = dtype.base.kind == "u"
+            columns.append((name, 0, "i" if integer else "f", f"{count}{'u' if integer else 'f'}", offset))
+    return tuple(columns)
+
+
+_INSTANCE_COLUMNS = _instance_columns()
+
+
 # An instance's ``tint`` w is where it is drawn: ``engine.rules.visibility_rules.entity_code``,
 # the kinds of view it is hidden in and the reflection layers it belongs to.  Every vertex
 # attribute GL 4.1 guarantees is in use, so it rides in a float slot the scene shaders do not
@@ -894,19 +914,28 @@ class InstanceBatch:
             sent += end - start
         return sent
 
-    def vao(self, program: moderngl.Program) -> moderngl.VertexArray:
-        """This batch's vertex array for ``program`` (made once per program and buffer)."""
-        key = program.glo
+    def vao(self, program: moderngl.Program, views: int = 1) -> moderngl.VertexArray:
+        """This batch's vertex array for ``program`` (made once per program, buffer and
+        ``views``).  With ``views`` n > 1 its instance rows advance every n instances (the
+        divisor), so a draw of count x n instances draws each row once for each of n views:
+        instance i is row i / n in view i % n (the instanced-views builds: scene.vert)."""
+        key = program.glo if views == 1 else (program.glo, views)
         vao = self._vaos.get(key)
         if vao is None:
-            buffers = [(self.mesh.vertices, self.mesh.vertex_format, *VERTEX_ATTRIBUTES),
-                       (self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES)]
+            buffers = [(self.mesh.vertices, self.mesh.vertex_format, *VERTEX_ATTRIBUTES)]
+            if views == 1:
+                buffers.append((self._buffer, INSTANCE_FORMAT, *INSTANCE_ATTRIBUTES))
             if self.mesh.colors is not None:
                 buffers.append((self.mesh.colors, "4f", "in_vertex_color"))
             if self.skinned and self.mesh.skin is not None:
                 buffers.append((self.mesh.skin, "4u2 4f", "in_joints", "in_weights"))
             content = [fitted for entry in buffers if (fitted := read_by(program, *entry)) is not None]
             vao = self.ctx.vertex_array(program, content, index_buffer=self.mesh.indices, index_element_size=4)
+            if views != 1:  # (moderngl's formats say only "per instance": the rows bound one input column at a time)
+                for name, column, kind, layout, offset in _INSTANCE_COLUMNS:
+                    if name in program:
+                        vao.bind(program[name].location + column, kind, self._buffer, layout, offset=offset,
+                                 stride=INSTANCE_DTYPE.itemsize, divisor=views)
             self._vaos[key] = vao
         return vao
 

@@ -341,8 +341,8 @@ class Renderer(Gpu):
         drawn: each batch's scene program (and vertex array) for root and per-mirror views,
         with ``levels`` (the world has mirrors or portals) its builds for a reflection level
         drawn masked too (claims that overlap, or predicted visibility: a GPU's default), and,
-        with ``reflections`` (the batched path may be taken too), its builds for every
-        geometry-shader invocation count a level's batched draw can take, the level's view
+        with ``reflections`` (the batched path may be taken too), its instanced-views builds
+        (their vertex arrays, one a view count, made as levels ask), the level's view
         table and the reflection sampler.  With
         ``level_scale`` (the largest ``resolution_scale`` of the world's surfaces), the first
         reflection level's targets too, at the root's size times it (the size the view tree

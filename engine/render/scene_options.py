@@ -16,7 +16,7 @@ class SceneOptions:
     clear: bool = True          # clear colour, ids and depth first; False keeps a level's claim mask
     masked: bool = False        # only pixels whose node image names the view (the claimed pixels)
     sky: bool = True            # the sky behind; reflection views leave it to their composite
-    batched: bool = False       # all views in one draw per batch (the geometry-shader path)
+    batched: bool = False       # all views in one draw per batch (instanced views: batched_mirrors.py)
     reflection_filter: bool = False  # albedo filtered as reflections are (Gpu.reflection_anisotropy)
     unlit: frozenset[int] = frozenset()  # mirrors whose own shading the composites replace (shading_replaced)
     # Draw the transparent slot now; False: a view tree's root or level view, whose slot the

@@ -30,10 +30,10 @@ records the pass keeps on each batch), all built by ``prepare`` before a view ne
 ``SceneOptions`` says how: clear the target first (a root view) or keep the depth mask a
 reflection level's claims wrote; draw only the pixels the target's node image gives each
 view (the claimed-pixels mask); draw the sky or leave it to the composite; and whether a
-level's views are drawn each with their own draws or all at once through the geometry
-shader (``batched``: each triangle is emitted once per view that can see it, the one-draw
-path of the "Multiple Mirrors" OpenGL project; at most
-``MAX_BATCHED_VIEWS`` views a draw, more are drawn in groups of that many).
+level's views are drawn each with their own draws or all at once (``batched``: each
+instance drawn once a view, as single-pass instanced stereo draws two eyes; views of one
+winding and at most ``MAX_BATCHED_VIEWS`` a draw, more in groups:
+``engine/render/batched_mirrors.py``).
 
 Mirrors whose reflection paints over every pixel of them draw unlit (``SceneOptions.unlit``;
 ``engine/render/unlit_mirrors.py`` says which, view by view).
@@ -53,7 +53,7 @@ from pyglm import glm
 from engine.core.errors import GLPassError, RefractionLimitWarning
 from engine.render import bindings
 from engine.render.batch_cull import CULL_MIN_BATCHES, CULL_MIN_DRAWS, batch_reach
-from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_BLOCK_BYTES, views_block
+from engine.render.batched_mirrors import VIEWS_BLOCK_BYTES, instanced_groups, views_block
 from engine.render.bindings import (
     ALBEDO_UNIT,
     BATCHED_SCENE_CLIPS,
@@ -99,7 +99,6 @@ from engine.render.scene_programs import (
     NO_SUBSURFACE,
     PER_PASS_UNIFORMS,
     ScenePrograms,
-    geometry_invocations,
     reflects_environment,
 )
 from engine.render.screen_refraction import (
@@ -207,11 +206,14 @@ class ScenePass:
             self._reflection_filter()
         return built
 
-    def _draw_batches(self, batches, invocations: int, masked: bool, layered: str = "",
+    def _draw_batches(self, batches, views: int, masked: bool, layered: str = "",
                       skip: int = 0, before_draw: Callable[[], None] | None = None, hide: int = 0,
                       unlit: frozenset | set = frozenset(), screen: str = "",
                       rows: tuple[int, int] = ALL_INSTANCES) -> None:
-        """One instanced draw per batch, each with the program of its variants.  A program's
+        """One instanced draw per batch, each with the program of its variants: for one view
+        (``views`` 0: the Camera block's), for ``views`` views of a level at once (their Views
+        block: each instance drawn once a view, ``InstanceBatch.vao``) or, with ``layered``, for
+        the ``views`` faces of a one-pass capture (the geometry shader's).  A program's
         uniforms are written only when their value changes (``ScenePrograms.written``, kept for the
         program's life): each write is a moderngl call of a few microseconds on a view's
         critical path (about 490 a frame at 16 mirrors when they were written again every pass).
@@ -245,11 +247,13 @@ class ScenePass:
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines,
                  renderer.pose_rows.version, renderer.object_motion.version, renderer.contact_lamp_defines,
                  renderer.sphere_lights, renderer.rect_lights, renderer.spot_cookies.defines, renderer.ambient_defines)
-        kinds = self._kinds.get((invocations, layered, self._ambient_probes, masked, screen))
+        build = views if layered else min(views, 1)  # (one instanced-views build serves any view count)
+        per_view = views if views > 1 and not layered else 0
+        kinds = self._kinds.get((build, layered, self._ambient_probes, masked, screen))
         if kinds is None:
-            kinds = self._kinds[invocations, layered, self._ambient_probes, masked, screen] = (
-                (invocations, layered, self._ambient_probes, False, masked, screen),
-                (invocations, layered, self._ambient_probes, True, masked, screen))
+            kinds = self._kinds[build, layered, self._ambient_probes, masked, screen] = (
+                (build, layered, self._ambient_probes, False, masked, screen),
+                (build, layered, self._ambient_probes, True, masked, screen))
         kind, unlit_kind = kinds
         sky_size = self._sky_size
         last_own = programs.last_own
@@ -266,7 +270,10 @@ class ScenePass:
             record = batch.draw_records.get(drawn_as)
             if record is None or record[0] != stamp or record[1] != variants:
                 record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, variants)
-            _, _, glo, vao, uniforms, values, textures, own, vertices = record
+            _, _, glo, vao, uniforms, values, textures, own, vertices, program = record
+            if per_view:  # (its rows advancing every per_view instances)
+                vao = batch.vao(program, per_view)
+                count *= per_view
             for unit, texture in textures:
                 if texture is blank and recorded.get(_ALBEDO_KEY) in colour_maps:
                     continue  # (no map: any colour map there serves, unread)
@@ -380,8 +387,8 @@ class ScenePass:
         # Per-view draws start with the first view's scissor (set once, not reset then set).
         self._begin(views, targets, options, _BATCHED_SCENE if options.batched else _SCENE, run)
         if options.batched:
-            for first in range(0, len(views), MAX_BATCHED_VIEWS):
-                self._draw_batched(views[first:first + MAX_BATCHED_VIEWS], options)
+            for group in instanced_groups(views):
+                self._draw_batched([views[i] for i in group], options)
         else:
             self._draw_each(views, targets, viewport, options, conditions)
         if renderer.debug:  # the name is made only where it is checked
@@ -638,16 +645,16 @@ class ScenePass:
                                             conditions=conditions, chosen=chosen)
             elif options.batched:
                 geometry = self._slot_geometry(transparent)
-                for first in range(0, len(views), MAX_BATCHED_VIEWS):
-                    chunk = views[first:first + MAX_BATCHED_VIEWS]
+                for indices in instanced_groups(views):
+                    chunk = [views[i] for i in indices]
                     emitters = self.particle_draw.visible(chunk, size) if particles else None
                     for group, _, rest, _ in slot_groups(transparent, chunk, geometry):
                         at = [chunk.index(view) for view in group]
                         drawn = [emitters[i] for i in at] if emitters is not None else [[] for _ in group]
                         items = self._part(_slot_items(rest, drawn, group[0].sorting_eye), group,
-                                           None if glass is None else [glass[first + i] for i in at], part, size)
+                                           None if glass is None else [glass[indices[i]] for i in at], part, size)
                         if items:
-                            self._batched_slot(group, [first + i for i in at], items, targets, options, state,
+                            self._batched_slot(group, [indices[i] for i in at], items, targets, options, state,
                                                conditions)
             else:
                 geometry = self._slot_geometry(transparent)
@@ -814,8 +821,8 @@ class ScenePass:
             if scissor is None:  # (the group's view table, written once)
                 scissor = self._views_table(group)
             apply_pass_state(ctx, state, (0, 0, *targets.size), scissor)
-            set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
-            self._draw_batches(glass_run, geometry_invocations(len(group)), options.masked)
+            set_front_face(ctx, "cw" if group[0].mirrored else "ccw")  # (a group has one winding: instanced_groups)
+            self._draw_batches(glass_run, len(group), options.masked)
             glass_run.clear()
 
         for at, item in enumerate(items):
@@ -954,15 +961,17 @@ class ScenePass:
         return kept
 
     def _draw_batched(self, views: Sequence[View], options: SceneOptions) -> None:
-        """Every batch once for all ``views`` (at most MAX_BATCHED_VIEWS): the geometry
-        shader emits each triangle for each view that can see it, clipped to the view's
-        rectangle by clip distances 1-4 (the per-view scissor of ``_draw_each``)."""
+        """Every batch once for all ``views`` (a group of ``instanced_groups``: at most
+        MAX_BATCHED_VIEWS, one winding): each instance drawn once a view, its view's camera
+        from the Views block, clipped to the view's rectangle by clip distances 1-4 (the
+        per-view scissor of ``_draw_each``)."""
         renderer = self.renderer
         ctx = self.ctx
         scissor = self._views_table(views)
         ctx.scissor = scissor
-        set_front_face(ctx, "ccw")  # mirrored views reverse their vertices in the geometry shader
-        invocations = geometry_invocations(len(views))
+        winding = "cw" if views[0].mirrored else "ccw"
+        set_front_face(ctx, winding)
+        count = len(views)
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
         opaque = renderer.opaque_batches() if options.transparent else renderer.tree_opaque_batches()
@@ -976,13 +985,14 @@ class ScenePass:
                 for view in group:
                     check.unlit = check.keep(view, first)
             unlit = check.unlit
-        self._draw_batches(opaque, invocations, options.masked, unlit=unlit)
+        self._draw_batches(opaque, count, options.masked, unlit=unlit)
         if now:
             viewport = (0, 0, *views[0].size)
             if groups is None:  # farthest from the first view's eye first (the views of a level are close)
                 apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
+                set_front_face(ctx, winding)
                 ordered = back_to_front(transparent, views[0].sorting_eye, None, self._slot_geometry(transparent))
-                self._draw_batches(ordered, invocations, options.masked)
+                self._draw_batches(ordered, count, options.masked)
             else:  # in one draw a batch a group
                 for group, first, _, torn in groups:
                     renderer.stats.glass_between_surfaces += torn
@@ -991,13 +1001,14 @@ class ScenePass:
                     if len(groups) > 1:
                         scissor = self._views_table(group)
                     apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
-                    self._draw_batches(first, geometry_invocations(len(group)), options.masked)
+                    set_front_face(ctx, winding)
+                    self._draw_batches(first, len(group), options.masked)
             apply_pass_state(ctx, _BATCHED_SCENE, viewport)
         renderer.stats.passes += 1
 
     def _views_table(self, views: Sequence[View]) -> tuple[int, int, int, int]:
-        """The batched geometry shader's table of ``views`` (at most MAX_BATCHED_VIEWS)
-        written and bound; the union of their rectangles (the pass's scissor)."""
+        """The Views block of ``views`` (at most MAX_BATCHED_VIEWS) written and bound; the
+        union of their rectangles (the pass's scissor)."""
         if self._views_ubo is None:
             self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
         self._views_ubo.write(views_block(views))
@@ -1041,12 +1052,13 @@ class ScenePass:
         draw_check = (lambda: check("draw")) if check is not None else None
         try:
             layered = "culled" if culled else "naive"
-            self._draw_batches(renderer.opaque_batches(), 6, False, layered, skip=skip, before_draw=draw_check)
+            self._draw_batches(renderer.opaque_batches(), len(views), False, layered, skip=skip,
+                               before_draw=draw_check)
             transparent = renderer.transparent_batches()
             if transparent:
                 apply_pass_state(ctx, _LAYERED_TRANSPARENT, size)
                 ordered = back_to_front(transparent, views[0].sorting_eye, None, self._slot_geometry(transparent))
-                self._draw_batches(ordered, 6, False, layered, skip=skip,
+                self._draw_batches(ordered, len(views), False, layered, skip=skip,
                                    before_draw=draw_check)
             apply_pass_state(ctx, _LAYERED_SKY, size)
             if check is not None:

@@ -22,7 +22,7 @@ import moderngl
 
 from components.rendering import ALBEDO_UV_BIT
 from engine.core.material_slots import SLOTS, ReflectVariant
-from engine.render.batched_mirrors import MAX_BATCHED_VIEWS, VIEWS_PER_INVOCATION
+from engine.render.batched_mirrors import MAX_BATCHED_VIEWS
 from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
@@ -133,8 +133,9 @@ class ScenePrograms:
     def __init__(self, renderer: Gpu, shadows: ShadowMaps) -> None:
         self.renderer = renderer
         self.shadows = shadows
-        # Scene programs by (geometry-shader invocations or 0, "" / "culled" / "naive" for a
-        # layered capture, the batch's variants or None, whether it reads a normal map, draws
+        # Scene programs by (1 for every view of a level in one draw, the geometry shader's
+        # invocations for a layered capture, else 0; "" / "culled" / "naive" for a layered
+        # capture, the batch's variants or None, whether it reads a normal map, draws
         # the analytic checker, reads an emissive map, a metallic-roughness map, ...: ``program``).
         self.built: dict[tuple, moderngl.Program] = {}
         self.uniforms: dict[int, tuple] = {}  # program -> its PER_DRAW_UNIFORMS (None where dropped)
@@ -150,15 +151,17 @@ class ScenePrograms:
         # batch's in each of them.
         self.screens: set[tuple[str, bool]] = {("", False)}
 
-    def program(self, variants: tuple[int, int, int] | None = None, invocations: int = 0,
+    def program(self, variants: tuple[int, int, int] | None = None, views: int = 0,
                 layered: str = "", normal_mapped: bool = False, checker: bool = False,
                 material: tuple = NO_MATERIAL_MAPS,
                 probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
                 masked: bool = False, screen: str = "") -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
-        instance): plain, batched (``invocations`` > 0: the geometry shader's) or a one-pass
-        cube-map capture (``layered`` "culled" or "naive"), with or without a normal map
+        instance): plain (``views`` 0: the one view of the Camera block), a reflection
+        level's views in one draw (``views`` > 0: ``INSTANCED_VIEWS``, each instance drawn
+        once a view, any count of views) or a one-pass cube-map capture (``layered``
+        "culled" or "naive": ``views`` faces, the geometry shader's invocations), with or without a normal map
         (a build of its own: llvmpipe would run the map's derivatives and fetch for every
         pixel behind a uniform branch), and with or without the analytic checker (``CHECKER``:
         a generated checker texture drawn from its cells, filtered by the pixel's footprint,
@@ -222,14 +225,14 @@ class ScenePrograms:
         # The light from all round the table gives (Gpu.ambient_defines: boxes, a volume), in a
         # pass that draws with it (IrradianceTable.bind; never a capture's).
         ambient = self.renderer.ambient_defines if ambient_probes else ()
-        key = (invocations, layered, variants, normal_mapped, checker, material, probe_blend, virtual,
-               ambient, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
+        key = (views if layered else min(views, 1), layered, variants, normal_mapped, checker, material, probe_blend,
+               virtual, ambient, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
         program = self.built.get(key)
         if program is None and "refracted" in screen.split():
             # The march reads the copy (and, unmasked, the node image): one or two samplers
             # more than the build without.  Where that passes the fragment stage's units (a
             # 16-unit driver's fullest builds), the build without serves, and a warning says so.
-            plain = self.program(variants, invocations, layered, normal_mapped, checker, material, probe_blend,
+            plain = self.program(variants, views, layered, normal_mapped, checker, material, probe_blend,
                                  ambient_probes, probe_rest, unlit, masked,
                                  " ".join(word for word in screen.split() if word != "refracted"))
             needed = sampler_count(plain) + (1 if masked else 2)
@@ -311,18 +314,13 @@ class ScenePrograms:
             defines.update(fogging)
             defines.update(cookies)
             geometry = None
-            if invocations:
-                geometry = "scene_batched.geom"
-                per_invocation = 1 if layered else VIEWS_PER_INVOCATION
-                defines.update({
-                    "BATCHED_VIEWS": "1",
-                    "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS),
-                    "VIEWS_PER_INVOCATION": str(per_invocation),
-                    "GS_INVOCATIONS": str(invocations),
-                    "GS_MAX_VERTICES": str(3 * per_invocation),
-                })
-                if layered:
-                    defines["LAYERED"] = "1"
+            if views:  # scene.frag reads the view's node and eye from the stage before
+                defines.update({"BATCHED_VIEWS": "1", "MAX_LEVEL_VIEWS": str(MAX_BATCHED_VIEWS)})
+            if views and not layered:  # the vertex stage takes its view from the instance (scene.vert)
+                defines["INSTANCED_VIEWS"] = "1"
+            elif layered:  # a face an invocation of the geometry shader, which culls by face
+                geometry = "scene_layered.geom"
+                defines["GS_INVOCATIONS"] = str(views)
                 if layered == "naive":
                     defines["NO_FACE_CULLING"] = "1"
             program = self.renderer.shaders.program("scene.vert", "scene.frag", geometry, defines=defines)
@@ -346,9 +344,9 @@ class ScenePrograms:
 
     def prepare(self, batches: Iterable[InstanceBatch], reflections: bool, ambient_boxes: bool,
                 levels: bool = False) -> int:
-        """Build the programs and vertex arrays ``batches`` will be drawn with: invocations 0
-        (root and per-mirror views) and, with ``reflections``, every invocation count of the
-        batched path (``BATCHED_INVOCATIONS``); each without the
+        """Build the programs and vertex arrays ``batches`` will be drawn with: one view a draw
+        (root and per-mirror views) and, with ``reflections``, the batched path's
+        (``INSTANCED_VIEWS``; its vertex arrays by view count are made as levels ask); each without the
         ``AMBIENT_PROBES`` lookups and, given ``ambient_boxes`` (``IrradianceTable.has_boxes``),
         with them.
         A batch of mirrors gets its ``UNLIT_SURFACE`` builds too, and with ``levels`` (the
@@ -357,15 +355,15 @@ class ScenePrograms:
         known, unmasked: ``view_tree._APART``).  Returns how many programs
         were built (0 when all were there)."""
         before = len(self.built)
-        counts = (0, *BATCHED_INVOCATIONS) if reflections else (0,)
+        counts = (0, 1) if reflections else (0,)
         ambient = (False, True) if ambient_boxes else (False,)  # captures: False
         for batch in batches:
             unlit = (False, True) if may_be_unlit(batch) else (False,)
-            for invocations in counts:
+            for views in counts:
                 for masked in (False, True) if levels or reflections else (False,):
                     for probes in ambient:
                         for dark in unlit:
-                            batch.vao(self.program(batch.variants, invocations, "", batch.normal_map is not None,
+                            batch.vao(self.program(batch.variants, views, "", batch.normal_map is not None,
                                                    batch.checker is not None, _material_build(batch),
                                                    batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
             for screen, masked in self.screens - {("", False), ("", True)}:  # one view a draw
@@ -382,12 +380,13 @@ class ScenePrograms:
 
     def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool, str], stamp: tuple,
                variants: tuple[int, int, int] | None) -> tuple:
-        """What ``batch`` draws with in passes of ``kind`` (invocations, layered, ambient
+        """What ``batch`` draws with in passes of ``kind`` (views, layered, ambient
         probes, unlit, masked, screen): (stamp, variants, program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
-        or None where probes give them per draw, its mesh's vertex count)."""
-        invocations, layered, ambient, unlit, masked, screen = kind
-        program = self.program(variants, invocations, layered, batch.normal_map is not None,
+        or None where probes give them per draw, its mesh's vertex count, the program: an
+        instanced-views draw asks the batch for its array by view count, ``InstanceBatch.vao``)."""
+        views, layered, ambient, unlit, masked, screen = kind
+        program = self.program(variants, views, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_build(batch), batch.probe_blend,
                                ambient, bool(batch.rest_probe), unlit, masked, screen)
         glo = program.glo
@@ -417,23 +416,11 @@ class ScenePrograms:
                    batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION, batch.parallax_depth,
                    batch.lightmap_intensity, batch.subsurface or NO_SUBSURFACE)
         return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
-                batch.mesh.index_count)
+                batch.mesh.index_count, program)
 
     def release(self) -> None:
         """Forget the programs (the shader library owns and releases them)."""
         self.built.clear()
-
-
-def geometry_invocations(view_count: int) -> int:
-    """Invocations of the batched geometry shader for ``view_count`` views:
-    ceil(view_count / VIEWS_PER_INVOCATION) rounded up to a power of two (invocations with
-    no view still cost a pass over the triangles; the rounding bounds the programs built)."""
-    needed = -(-view_count // VIEWS_PER_INVOCATION)
-    return min(1 << max(0, needed - 1).bit_length(), -(-MAX_BATCHED_VIEWS // VIEWS_PER_INVOCATION))
-
-
-# Every invocation count ``geometry_invocations`` gives (1 to MAX_BATCHED_VIEWS views).
-BATCHED_INVOCATIONS = tuple(sorted({geometry_invocations(n) for n in range(1, MAX_BATCHED_VIEWS + 1)}))
 
 
 def _material_build(batch: InstanceBatch) -> tuple:

@@ -19,7 +19,7 @@ and portals:
   3. render - the level's views through the scene pass (``ScenePass.draw``): the parent's
               camera carried through the surface, oblique near plane (or clip distance
               close up), only its claimed pixels; view by view, or all in one draw per
-              mesh through the geometry shader (the batched path);
+              mesh, each instance drawn once a view (the batched path);
   4. repeat for surfaces seen in those views, up to the depth limits (exact: plan, claim,
               read, render, level after level, the levels below one whose candidates all
               grew last frame planned ahead; predicted: every level planned first, back
