@@ -194,23 +194,6 @@ layout(location = 0) out vec4 out_color;  // blended: rgb x reflect_rate + own x
 layout(location = 1) out uvec4 out_seen;  // the view's entity and way, carried up (way.glsl)
 
 void main() {
-    // Only this frame's claims wrote the node image, inside the views' rectangles.
-    vec2 level_px = gl_FragCoord.xy * to_reflection;
-    if (any(lessThan(level_px, v_rect.xy)) || any(greaterThanEqual(level_px, v_rect.zw))) discard;
-    ivec2 px = ivec2(level_px);  // inside the level: a pixel centre scaled (mirror_claim.frag), in v_rect
-#ifdef COMPOSITE_FALLBACK
-    // The parent view's own pixels of the surface; for an end view, those of them its image
-    // from last frame did not hold.
-    if (texelFetch(parent_nodes, px, 0).r != v_view || texelFetch(parent_surfaces, px, 0).r != v_ids.x) discard;
-    if (v_ids.y != 0u) {  // (an end view's: its level was drawn, so the child images are its, not blank)
-        ivec2 child = ivec2(gl_FragCoord.xy * to_child);
-        if (texelFetch(reflection_nodes, child, 0).r != v_ids.y - 1u
-                || texelFetch(reflection_seen, child, 0).r != NO_END_IMAGE) discard;
-    }
-    // (its seen pair is written below, once the ray's point on the surface is known)
-#else
-    if (texelFetch(reflection_nodes, px, 0).r != v_view) discard;
-#endif
     vec2 uv = gl_FragCoord.xy / parent_size;
     // A level drawn at the parent's resolution is read texel for texel where the pixel's own
     // texel is what it shows: a GPU's filter weights at a texel's centre are not exactly 0
@@ -234,6 +217,32 @@ void main() {
     // before it in the parent view: from where the parent's rays enter it (its eye for a root
     // view, else the surface it looks out of: its oblique near plane) to the surface.
     vec3 at = eye + view_dir * (-(dot(v_normal.xyz, eye) + v_params.z) / dot(v_normal.xyz, view_dir));
+#ifdef COMPOSITE_BUMPY
+    // The mirror's UVs where the pixel's ray meets it, with their screen derivatives, taken
+    // here, before a pixel is left out below: a discard leaves the derivatives of the rest of
+    // its 2x2 quad undefined (GLSL 4.10, section 8.9), and the normal map's filter needs them
+    // (bent_normal).
+    vec3 flat_normal = v_normal.xyz;
+    vec2 mirror_uv = vec2(dot(v_carry[0], at), dot(v_carry[1], at)) + v_carry[2].xy;
+    vec2 mirror_uv_dx = dFdx(mirror_uv), mirror_uv_dy = dFdy(mirror_uv);
+#endif
+    // Only this frame's claims wrote the node image, inside the views' rectangles.
+    vec2 level_px = gl_FragCoord.xy * to_reflection;
+    if (any(lessThan(level_px, v_rect.xy)) || any(greaterThanEqual(level_px, v_rect.zw))) discard;
+    ivec2 px = ivec2(level_px);  // inside the level: a pixel centre scaled (mirror_claim.frag), in v_rect
+#ifdef COMPOSITE_FALLBACK
+    // The parent view's own pixels of the surface; for an end view, those of them its image
+    // from last frame did not hold.
+    if (texelFetch(parent_nodes, px, 0).r != v_view || texelFetch(parent_surfaces, px, 0).r != v_ids.x) discard;
+    if (v_ids.y != 0u) {  // (an end view's: its level was drawn, so the child images are its, not blank)
+        ivec2 child = ivec2(gl_FragCoord.xy * to_child);
+        if (texelFetch(reflection_nodes, child, 0).r != v_ids.y - 1u
+                || texelFetch(reflection_seen, child, 0).r != NO_END_IMAGE) discard;
+    }
+    // (its seen pair is written below, once the ray's point on the surface is known)
+#else
+    if (texelFetch(reflection_nodes, px, 0).r != v_view) discard;
+#endif
     FogWay parent_fog = fog_way(fog_from_eye ? eye : near.xyz / near.w, at, view_dir);
 #ifndef COMPOSITE_FALLBACK
     uvec4 seen_pair = texelFetch(reflection_seen, px, 0);
@@ -265,16 +274,13 @@ void main() {
     // is the direction the mirror's image shows it in: its vanishing point in the parent view
     // is where the image holds what lies far along it (exact for distant things, overstated
     // for near ones).  A lookup that leaves this view's pixels keeps the flat one.
-    vec3 flat_normal = normal;
-    vec3 p = eye + view_dir * (-(dot(flat_normal, eye) + v_params.z) / dot(flat_normal, view_dir));
-    vec2 mirror_uv = vec2(dot(v_carry[0], p), dot(v_carry[1], p)) + v_carry[2].xy;
     vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
     vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);
 #ifdef COMPOSITE_WATER
-    normal = water_normal(along_u, along_v, flat_normal, mirror_uv, vec2(v_eye.w, v_normal.w), v_tint.a,
-                          v_carry[2].z);
+    normal = water_normal(along_u, along_v, flat_normal, mirror_uv, mirror_uv_dx, mirror_uv_dy, vec2(v_eye.w, v_normal.w),
+                          v_tint.a, v_carry[2].z);
 #else
-    normal = bent_normal(along_u, along_v, flat_normal, mirror_uv, v_carry[2].z);
+    normal = bent_normal(along_u, along_v, flat_normal, mirror_uv, mirror_uv_dx, mirror_uv_dy, v_carry[2].z);
 #endif
 #ifndef COMPOSITE_FALLBACK  // (a fallback has no image to look up)
     vec3 seen_dir = reflect(reflect(view_dir, normal), flat_normal);

@@ -110,26 +110,27 @@ vec3 screen_occlusion_shares() {
 #endif
 
 // Reflection levels draw only the pixels of their own view (the node image mirror_claim.frag
-// wrote): the MASKED build (engine/render/scene_pass.py), so a root view's program has neither
-// the fetch nor the discard (llvmpipe would run the fetch for every pixel behind a uniform
-// test, and a program that may discard writes depth only after the shader has run).
+// wrote): the MASKED build (engine/render/scene_pass.py), so a root view's program has no
+// fetch (llvmpipe would run it for every pixel behind a uniform test).
 #ifdef MASKED
 uniform usampler2D node_map;
 #ifndef NODE_STEP
 #define NODE_STEP 1
 #endif
-// Another view's pixel: read first, discarded last (DISCARD_FOREIGN before every write of
-// the outputs).  A discard ends its pixel's invocation, and the derivatives of the others
-// in its 2x2 quad (the checker's filter, every implicit texture level) are undefined after
-// it: an H200 shaded the pixels beside another view's otherwise than the unmasked build.
-bool foreign_pixel = false;
-#define DISCARD_FOREIGN() if (foreign_pixel) discard
-#else
-#define DISCARD_FOREIGN()
 #endif
+// A pixel the draw leaves out: another view's (MASKED, read from the node image) or a
+// cutout's hole (ALPHA_CUTOFF).  Known early, discarded last
+// (DISCARD_DROPPED before every write of the outputs): a discard ends its pixel's invocation,
+// and the derivatives of the others in its 2x2 quad (the checker's filter, the filtered
+// roughness, every implicit texture level) are undefined after it (GLSL 4.10, section 8.9:
+// implicit derivatives in non-uniform control flow).  An H200 shaded the pixels beside
+// another view's otherwise than the unmasked build while the node test discarded first.
+bool dropped_pixel = false;
+#define DISCARD_DROPPED() if (dropped_pixel) discard
 #ifdef BATCHED_VIEWS
-// The batched mirror program draws every view of a level in one draw: scene_batched.geom
-// says which view (node index and eye) each triangle was emitted for.
+// Several views in one draw (a reflection level's, a cube map's faces): scene.vert's
+// INSTANCED_VIEWS build or scene_layered.geom says which view (node index and eye) each
+// triangle was drawn for.
 flat in uint v_node;
 flat in vec3 v_eye;
 flat in vec3 v_eye_axis;  // its axis where it is orthographic (0: perspective; view_axis.glsl)
@@ -768,11 +769,7 @@ vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
     vec3 t = dp2perp * duv1.x + dp1perp * duv2.x;  // the gradients of u and of v in the surface
     vec3 b = dp2perp * duv1.y + dp1perp * duv2.y;
     if (dot(t, t) < 1e-30 || dot(b, b) < 1e-30) return n;  // UVs that do not vary here: flat
-#ifdef PARALLAX
-    return bent_by(normalize(t), normalize(b), n, textureGrad(normal_map, uv + parallax_shift, duv1, duv2).xyz, scale);
-#else
-    return bent_normal(normalize(t), normalize(b), n, uv, scale);
-#endif
+    return bent_normal(normalize(t), normalize(b), n, uv PARALLAX_SHIFT, duv1, duv2, scale);
 }
 #endif
 
@@ -953,7 +950,7 @@ vec3 checker_colour(vec2 uv) {
 void main() {
 #ifdef MASKED
     // (the level's own size; its depth and normals pass at half of it: NODE_STEP 2)
-    foreign_pixel = texelFetch(node_map, ivec2(gl_FragCoord.xy) * NODE_STEP, 0).r != node_index;
+    dropped_pixel = texelFetch(node_map, ivec2(gl_FragCoord.xy) * NODE_STEP, 0).r != node_index;
 #endif
 #ifdef SCREEN_REFLECTION
     // Nothing reflected, for the early returns (an unlit mirror: its composite paints it).
@@ -968,11 +965,11 @@ void main() {
     out_surface = v_slots.w;
     out_seen = SEEN(v_slots.w, length(v_world_pos - ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos)));
     out_node = node_index;
-    DISCARD_FOREIGN();
+    DISCARD_DROPPED();
     return;
 #endif
 #ifdef TRIVIAL
-    DISCARD_FOREIGN();
+    DISCARD_DROPPED();
     out_color = vec4(1000.0, 0.0, 1000.0, 1.0); out_surface = v_slots.w; out_seen = uvec4(v_slots.w, 0u, 0u, 0u); out_node = node_index; return;
 #endif
     view_eye = ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos);
@@ -1003,7 +1000,7 @@ void main() {
 #ifdef ALPHA_CUTOFF
     // A cutout (Material.alpha_cutoff): nothing where the alpha falls below it; the shadow
     // maps leave the same texels out (shadow.frag).
-    if (base.a < alpha_cutoff) discard;
+    dropped_pixel = dropped_pixel || base.a < alpha_cutoff;
 #endif
 #ifdef DEPTH_NORMALS
     // The depth and normals pass of screen-space ambient occlusion (engine/render/screen_occlusion.py;
@@ -1011,7 +1008,7 @@ void main() {
     // would find occluders in flat ground) in the view's space, and one over the distance along
     // its axis (1 / clip w: any view's, whatever its near plane).
     out_color = vec4(normalize(mat3(camera.view) * s.geometric_normal), gl_FragCoord.w);
-    DISCARD_FOREIGN();
+    DISCARD_DROPPED();
     return;
 #endif
     s.albedo = base.rgb;
@@ -1019,7 +1016,10 @@ void main() {
     // A decal's cut (the transparent slot's code 3) with no alpha left shows nothing: it writes
     // nothing either (its id would take a click through a clear part of its image, its
     // corners), and costs no shading.  (Water and see-through surfaces keep their ids at any
-    // alpha: the view tree claims their pixels by them.)
+    // alpha: the view tree claims their pixels by them.)  Discarded here, not with the
+    // dropped pixels: the test is in every build, and on llvmpipe every frame drew 5% slower
+    // with it last (measured, issue 40); the price is a GPU's undefined derivatives beside a
+    // decal's clear part, where its own alpha is near 0.
     if (transparent == 3 && s.alpha < 0.5 / 255.0) discard;
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
@@ -1159,5 +1159,5 @@ void main() {
     out_surface = v_slots.w;
     out_seen = SEEN(v_slots.w, length(v_world_pos - VIEW_EYE));
     out_node = node_index;
-    DISCARD_FOREIGN();
+    DISCARD_DROPPED();
 }

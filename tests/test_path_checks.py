@@ -409,6 +409,30 @@ def test_every_layered_geometry_shader_writes_gl_layer_before_each_vertex():
             assert len(last) == 2 and "EndPrimitive" not in last[1], f"{path.name}: a vertex emitted without gl_Layer"
 
 
+def test_scene_and_composite_pixels_are_left_out_only_after_their_derivatives_are_taken():
+    """A discard ends its pixel's invocation, and GLSL leaves the derivatives of the rest of
+    its 2x2 quad undefined after it (an H200 shaded the pixels beside another view's
+    otherwise while the node test discarded first; llvmpipe keeps every pixel of a quad
+    running, so no frame here can show it).  scene.frag leaves another view's pixels and a
+    cutout's holes out at DISCARD_DROPPED only, with nothing after it that takes a
+    derivative (its one early discard is a decal's clear part, which says why); the bumpy
+    composite takes its map's UV derivatives before its first discard and reads the map
+    through them."""
+    scene = (SHADERS / "scene.frag").read_text()
+    main = scene[scene.index("void main() {"):]
+    early = [line.strip() for line in main.splitlines() if "discard" in line and not line.strip().startswith("//")]
+    assert early == ["if (transparent == 3 && s.alpha < 0.5 / 255.0) discard;"], early
+    derivatives = re.compile(r"dFdx|dFdy|fwidth|texture\(|MAP_TEXTURE|textureQueryLod")
+    for after in main.split("DISCARD_DROPPED();")[1:]:
+        rest = re.split(r"\breturn\b|\n}", after, maxsplit=1)[0]
+        assert not derivatives.search(rest), rest
+    composite = (SHADERS / "mirror_composite.frag").read_text()
+    body = composite[composite.index("void main() {"):]
+    assert body.index("dFdx(mirror_uv)") < body.index("discard;")
+    for name in ("normal_map.glsl", "water.glsl"):
+        assert "texture(normal_map" not in (SHADERS / "include" / name).read_text(), name
+
+
 def test_the_layered_target_state_is_what_a_layered_draw_needs_here_and_names_a_face_attachment(
         scene, ctx, monkeypatch):
     """What ``gpu-report`` prints where the layered capture is refused: llvmpipe binds and

@@ -13,7 +13,9 @@ vec3 bent_by(vec3 t, vec3 b, vec3 n, vec3 texel, float scale) {
 }
 
 // The map's normal at uv in the frame (t: +U, b: +V, n: out of the surface, all unit), its
-// slope scaled by scale (glTF's normalTexture.scale; 0: n itself).
-vec3 bent_normal(vec3 t, vec3 b, vec3 n, vec2 uv, float scale) {
-    return bent_by(t, b, n, texture(normal_map, uv).xyz, scale);
+// slope scaled by scale (glTF's normalTexture.scale; 0: n itself), filtered by the UVs'
+// screen derivatives uv_dx and uv_dy: a caller takes them before anything may discard or
+// branch by pixel, where GLSL still defines them (both callers may leave pixels out first).
+vec3 bent_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 uv_dx, vec2 uv_dy, float scale) {
+    return bent_by(t, b, n, textureGrad(normal_map, uv, uv_dx, uv_dy).xyz, scale);
 }

@@ -17,10 +17,14 @@
 // partial-derivative blending, the slope of the summed height), then scaled by ``scale``
 // (normal_scale) in the frame t (+U), b (+V), n (out of the surface).  With share 0 it is
 // bent_normal's.
-vec3 water_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 flow, float share, float scale) {
-    vec3 first = texture(normal_map, uv - flow).xyz * 2.0 - 1.0;
+// Filtered by the UVs' screen derivatives uv_dx and uv_dy, taken before the composite
+// leaves any pixel out (bent_normal says why).
+vec3 water_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 uv_dx, vec2 uv_dy, vec2 flow, float share, float scale) {
+    vec3 first = textureGrad(normal_map, uv - flow, uv_dx, uv_dy).xyz * 2.0 - 1.0;
     // Turned coordinates (v, -u): the map's +U runs along the surface's +V.
-    vec3 second = texture(normal_map, vec2(uv.y, -uv.x) * WATER_CROSS_TILING - flow).xyz * 2.0 - 1.0;
+    vec3 second = textureGrad(normal_map, vec2(uv.y, -uv.x) * WATER_CROSS_TILING - flow,
+                              vec2(uv_dx.y, -uv_dx.x) * WATER_CROSS_TILING,
+                              vec2(uv_dy.y, -uv_dy.x) * WATER_CROSS_TILING).xyz * 2.0 - 1.0;
     vec2 slope = mix(first.xy / max(first.z, 0.05), vec2(-second.y, second.x) / max(second.z, 0.05), share);
     return normalize((t * slope.x + b * slope.y) * scale + n);
 }
