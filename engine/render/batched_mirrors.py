@@ -26,12 +26,13 @@ are above AUTO_MIN_VIEWS).
 """
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from engine.render.gpu import Gpu
-from engine.render.views import CAMERA_BLOCK_CLIP, CAMERA_BLOCK_EYE, CAMERA_BLOCK_IDS, CAMERA_BLOCK_VIEW_PROJ, View
+from engine.render.views import CAMERA_BYTES, View
 
 PATHS = ("auto", "per_mirror", "batched")
 # Views one batched draw takes (a level with more is drawn in groups of this many).  The
@@ -48,7 +49,12 @@ _VIEW_DTYPE = np.dtype([
     ("node", "<u4", (4,)),
 ])
 VIEWS_BLOCK_BYTES = 16 + MAX_BATCHED_VIEWS * _VIEW_DTYPE.itemsize
-_VIEW_FLOATS = _VIEW_DTYPE.itemsize // 4
+_ROW_BYTES = _VIEW_DTYPE.itemsize
+_NO_ROWS = bytes(MAX_BATCHED_VIEWS * _ROW_BYTES)
+_COUNT, _RECT = struct.Struct("<4i"), struct.Struct("<4f")
+_MIRRORED, _UNMIRRORED = struct.pack("<f", 1.0), struct.pack("<f", 0.0)  # the eye's w
+_VIEW_PROJ, _CLIP, _IDS = CAMERA_BYTES["view_proj"], CAMERA_BYTES["clip_plane"], CAMERA_BYTES["skip"]
+_EYE = slice(CAMERA_BYTES["eye"].start, CAMERA_BYTES["eye"].start + 12)  # xyz
 
 # The "auto" rule: batched when a level has at least AUTO_MIN_VIEWS views and the scene
 # submits at most AUTO_MAX_TRIANGLES triangles (each batch's mesh triangles x instances,
@@ -68,9 +74,12 @@ _VIEW_FLOATS = _VIEW_DTYPE.itemsize // 4
 # At 16 mirrors and 32x18 the batched path makes 13 draws where the per-mirror one makes
 # 112, but its draws' time falls only from 1.67 to 1.46 ms: on llvmpipe a view's vertex
 # stage (~7.5 us a batch here), which both paths run, outweighs its draw's state (~6.5 us).
-# So the paths are within the machine's noise of each other except where the glass slot
-# is drawn in groups (15% dearer), and "auto" keeps llvmpipe's old rule: the lightest
-# scenes only, with several views.
+# The glass slot, drawn in groups of views, wrote a Views table a group (26 a frame for the
+# panes, ~29 us each): with each view's row packed once (``views_row``) and a table the
+# buffer holds not written again, the same run at 32x18 gave 0.88 (hall), 0.90 (with its
+# sphere), 0.99 (the panes) and 0.95 (16 mirrors), batched over per mirror; at 640x360 the
+# paths stay within 5% either way, 13% at 16 mirrors in one run and 3% the other way in
+# another.  So "auto" keeps llvmpipe's rule: the lightest scenes only, with several views.
 AUTO_MIN_VIEWS = 3
 AUTO_MAX_TRIANGLES = 40
 #
@@ -125,25 +134,28 @@ def submitted_triangles(renderer: Gpu) -> int:
 
 
 def views_block(views: Sequence[View]) -> bytes:
-    """The Views uniform block for ``views`` (at most MAX_BATCHED_VIEWS), read from their
-    packed Camera blocks in a few array operations (a level's views come with their blocks
-    packed by the planner: one numpy row a view cost ~10 us a view)."""
+    """The Views uniform block for ``views`` (at most MAX_BATCHED_VIEWS): the count, each
+    view's row (``views_row``), then zeros."""
     count = len(views)
     if count > MAX_BATCHED_VIEWS:
         raise ValueError(f"{count} mirror views in one level; at most {MAX_BATCHED_VIEWS}")
-    rows = np.zeros((MAX_BATCHED_VIEWS, _VIEW_FLOATS), np.float32)
-    if count:
-        blocks = np.frombuffer(b"".join(view.camera_block() for view in views), np.float32).reshape(count, -1)
-        rows[:count, 0:16] = blocks[:, CAMERA_BLOCK_VIEW_PROJ]
-        rows[:count, 16:20] = blocks[:, CAMERA_BLOCK_CLIP]
-        rows[:count, 20:23] = blocks[:, CAMERA_BLOCK_EYE]
-        rows[:count, 23] = [1.0 if view.mirrored else 0.0 for view in views]
-        # The screen rectangle in NDC: the scissor, or the whole target.
-        rects = np.array([view.scissor if view.scissor is not None else (0, 0, *view.size) for view in views],
-                         np.float64)
-        sizes = np.array([(*view.size, *view.size) for view in views], np.float64)
-        rects[:, 2:4] += rects[:, 0:2]  # x0, y0, x1, y1
-        rows[:count, 24:28] = 2.0 * rects / sizes - 1.0
-        # (skip, hide, view mask, node) in the block; (node, skip, hide, view mask) in the row.
-        rows[:count, 28:32].view(np.uint32)[:] = blocks[:, CAMERA_BLOCK_IDS].view(np.uint32)[:, (3, 0, 1, 2)]
-    return np.array([count, 0, 0, 0], np.int32).tobytes() + rows.tobytes()
+    rest = _NO_ROWS[:(MAX_BATCHED_VIEWS - count) * _ROW_BYTES]
+    return b"".join((_COUNT.pack(count, 0, 0, 0), *map(views_row, views), rest))
+
+
+def views_row(view: View) -> bytes:
+    """``view``'s row of the Views block, packed once a view (a View is made for one pass and
+    not changed after) from its Camera block's bytes: a level drawn in groups (the glass
+    slot's) writes a table a group, and numpy rows cost ~25 us a table (issue 40)."""
+    row = view._views_row
+    if row is None:
+        block = view.camera_block()
+        width, height = view.size
+        x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
+        ids = block[_IDS]  # (skip, hide, view mask, node) in the block; (node, skip, hide, view mask) in the row
+        row = view._views_row = b"".join((
+            block[_VIEW_PROJ], block[_CLIP], block[_EYE], _MIRRORED if view.mirrored else _UNMIRRORED,
+            _RECT.pack(2.0 * x / width - 1.0, 2.0 * y / height - 1.0, 2.0 * (x + w) / width - 1.0,
+                       2.0 * (y + h) / height - 1.0),  # the screen rectangle in NDC: the scissor, or the whole target
+            ids[12:16], ids[0:12]))
+    return row

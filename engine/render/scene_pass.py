@@ -179,6 +179,7 @@ class ScenePass:
         self._kinds: dict[tuple, tuple[tuple, tuple]] = {}
         self._sky_size = 0
         self._views_ubo: moderngl.Buffer | None = None
+        self._views_written: bytes | None = None  # what _views_table last wrote into it
         self._ambient_probes = False  # this pass draws the AMBIENT_PROBES builds (IrradianceTable.bind)
         self._reflection_sampler: moderngl.Sampler | None = None
         # Per-view passes leave out the draws a batch's boxes cannot reach (batch_cull), where
@@ -201,8 +202,7 @@ class ScenePass:
         how many programs were built (0 when all were there)."""
         built = self.programs.prepare(batches, reflections, self.irradiance.has_boxes(), levels or reflections)
         if reflections:
-            if self._views_ubo is None:
-                self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
+            self._views_buffer()
             self._reflection_filter()
         return built
 
@@ -1008,12 +1008,21 @@ class ScenePass:
 
     def _views_table(self, views: Sequence[View]) -> tuple[int, int, int, int]:
         """The Views block of ``views`` (at most MAX_BATCHED_VIEWS) written and bound; the
-        union of their rectangles (the pass's scissor)."""
+        union of their rectangles (the pass's scissor).  A block the buffer holds already
+        (a level's glass drawn for the group its opaque draws were) is not written again."""
+        buffer, block = self._views_buffer(), views_block(views)
+        if block != self._views_written:
+            buffer.write(block)
+            self._views_written = block
+        bind_uniform_block(self.ctx, buffer, VIEWS_BINDING)
+        return union_rect([v.scissor or (0, 0, *v.size) for v in views])
+
+    def _views_buffer(self) -> moderngl.Buffer:
+        """The Views block's buffer, made the first time it is asked for (holding nothing yet)."""
         if self._views_ubo is None:
             self._views_ubo = self.ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
-        self._views_ubo.write(views_block(views))
-        bind_uniform_block(self.ctx, self._views_ubo, VIEWS_BINDING)
-        return union_rect([v.scissor or (0, 0, *v.size) for v in views])
+            self._views_written = None
+        return self._views_ubo
 
     def draw_layered(self, views: Sequence[View], target: LayeredCubeTarget | LayeredArrayTarget,
                      culled: bool = True) -> None:
@@ -1027,10 +1036,7 @@ class ScenePass:
         renderer = self.renderer
         ctx = self.ctx
         self._sky_size = renderer.sky.size[0]
-        if self._views_ubo is None:
-            self._views_ubo = ctx.buffer(reserve=VIEWS_BLOCK_BYTES)
-        self._views_ubo.write(views_block(views))
-        bind_uniform_block(ctx, self._views_ubo, VIEWS_BINDING)
+        self._views_table(views)
         bind_uniform_block(self.ctx, renderer.lights_ubo, LIGHTS_BINDING)
         renderer.fog.bind()
         self.shadows.bind()
@@ -1108,7 +1114,7 @@ class ScenePass:
         for obj in (self._views_ubo, self._reflection_sampler):
             if obj is not None:
                 obj.release()
-        self._views_ubo = self._reflection_sampler = None
+        self._views_ubo = self._reflection_sampler = self._views_written = None
         self.programs.release()
         self.refraction_copy.release()
 

@@ -115,6 +115,7 @@ class View:
     layers: int = ALL_LAYERS     # the reflection layers it shows
     jitter: tuple[float, float] = (0.0, 0.0)  # its projection's sub-pixel offset (temporal AA: temporal_aa.jittered)
     _block: bytes | None = field(default=None, init=False, repr=False, compare=False)
+    _views_row: bytes | None = field(default=None, init=False, repr=False, compare=False)  # (batched_mirrors.views_row)
 
     @property
     def view_proj(self) -> glm.mat4:
