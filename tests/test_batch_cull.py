@@ -1,6 +1,7 @@
 """Per-view batch culling (engine/render/batch_cull.py): a per-view pass leaves out a batch
 whose instances' boxes cannot reach a view (its frustum within its scissor rectangle, in front
-of its clip plane).  Checked against what it must not change and against the GL itself:
+of its clip plane), a batched level's draw one that reaches none of its views.  Checked
+against what it must not change and against the GL itself:
 
 * the frames, colours and entity ids, are the same bytes with the cull on (on every pass:
   its thresholds set to 1) and off, frame by frame over the benchmark's mirror ring (8 and
@@ -8,7 +9,8 @@ of its clip plane).  Checked against what it must not change and against the GL 
   mirrors' level too, whose depth and normals pass culls as its draw does), the same ring with every box its own
   mesh (its own batch: left at the scene pass's own thresholds; with auto and predicted
   visibility, the latter drawing each view conditionally on its claim) and the facing
-  portal pair (exact and predicted visibility);
+  portal pair (exact and predicted visibility), and that ring of boxes with 4 mirrors drawn
+  batched, where a level's views leave some boxes out;
 * every draw it leaves out is one the unculled frame made (draw calls on + culled == draw
   calls off), and on the ring with a batch a box it leaves out draws
   (``RenderStats.draws_culled``);
@@ -47,9 +49,9 @@ class BoxPerBatch(MirrorRing):
 
 def _engine(ctx, case: str, cull: bool):
     kind, arg, *visibility = case.split("_")
-    if kind in ("ring", "boxes", "occluded"):
-        engine = Engine((BoxPerBatch if kind == "boxes" else MirrorRing)(int(arg)), ctx)
-        engine.reflection_system.path = "per_mirror"
+    if kind in ("ring", "boxes", "occluded", "batched"):
+        engine = Engine((BoxPerBatch if kind in ("boxes", "batched") else MirrorRing)(int(arg)), ctx)
+        engine.reflection_system.path = "batched" if kind == "batched" else "per_mirror"
         if kind == "occluded":  # the mirrors' level found too: its depth and normals pass culls alike
             for camera, _ in engine.world.query_one(Camera):
                 engine.world.add_component(camera, AmbientOcclusion(radius=0.8))
@@ -66,7 +68,8 @@ def _engine(ctx, case: str, cull: bool):
     return engine
 
 
-CASES = ("ring_8", "ring_16", "boxes_16", "boxes_16_predicted", "portals_exact", "portals_predicted", "occluded_8")
+CASES = ("ring_8", "ring_16", "boxes_16", "boxes_16_predicted", "batched_4", "portals_exact", "portals_predicted",
+         "occluded_8")
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -99,6 +102,8 @@ def test_frames_are_the_same_with_the_cull_on_and_off(ctx, case):
             engine.close()
     if case.startswith("boxes"):
         assert culled > FRAMES * 16, culled  # a mirror's view reaches only some of the boxes
+    if case.startswith("batched"):
+        assert culled > 0  # a box that none of a level's views reaches
 
 
 @pytest.mark.parametrize("case", ("ring_16", "boxes_16"))

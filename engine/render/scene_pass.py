@@ -960,11 +960,19 @@ class ScenePass:
                 if not reaches and not (batch.count == 1 and batch.entity_at[0] in skipped))
         return kept
 
+    def _reaching_any(self, batches: list[InstanceBatch], reach: list[list[bool]]) -> list[InstanceBatch]:
+        """The batches that ``reach`` (``batch_reach`` of a batched draw's views) says reach
+        some view; those left out count in ``RenderStats.draws_culled``, a draw each."""
+        kept = [batch for batch, reaches in zip(batches, zip(*reach, strict=True), strict=True) if any(reaches)]
+        self.renderer.stats.draws_culled += len(batches) - len(kept)
+        return kept
+
     def _draw_batched(self, views: Sequence[View], options: SceneOptions) -> None:
         """Every batch once for all ``views`` (a group of ``instanced_groups``: at most
         MAX_BATCHED_VIEWS, one winding): each instance drawn once a view, its view's camera
         from the Views block, clipped to the view's rectangle by clip distances 1-4 (the
-        per-view scissor of ``_draw_each``)."""
+        per-view scissor of ``_draw_each``).  A batch whose boxes reach none of the views is
+        left out (``batch_reach``, at the per-view pass's thresholds)."""
         renderer = self.renderer
         ctx = self.ctx
         scissor = self._views_table(views)
@@ -975,6 +983,9 @@ class ScenePass:
         transparent = renderer.transparent_batches()
         now = _drawn_now(transparent, options)
         opaque = renderer.opaque_batches() if options.transparent else renderer.tree_opaque_batches()
+        if (self.cull_batches and opaque and len(opaque) >= self.cull_min_batches
+                and count * len(opaque) >= self.cull_min_draws):
+            opaque = self._reaching_any(opaque, batch_reach(views, views[0].size, opaque))
         unlit = unlit_batches(opaque, options.unlit)
         groups = None
         if now and not options.transparent:  # each group of views with the same part of the slot before the claims
