@@ -26,9 +26,12 @@ from engine.render.batched_mirrors import (
     AUTO_GPU_MAX_TRIANGLES,
     AUTO_MAX_TRIANGLES,
     AUTO_MIN_VIEWS,
+    MAX_BATCHED_VIEWS,
     choose_path,
+    instanced_groups,
     submitted_triangles,
 )
+from engine.render.views import View
 
 SIZE = (200, 150)
 
@@ -258,3 +261,15 @@ def test_a_level_of_mirrored_and_unmirrored_views_batches_once_per_winding(scene
     levels = batched["levels"]
     assert batched["stats"].passes == 1 + 2 + sum(
         len({m for lvl, _, _, m in batched["views"] if lvl == level}) for level in range(2, len(levels) + 1))
+
+
+def test_instanced_groups_hold_each_view_once_one_winding_and_at_most_the_limit():
+    """A level's views in the groups one batched draw each takes: every view once, each group
+    of one winding and at most MAX_BATCHED_VIEWS views (a level of 70: 46 mirrored and 24 not)."""
+    views = [View(glm.mat4(1.0), glm.mat4(1.0), glm.vec3(0.0), (64, 48), mirrored=i % 3 != 0) for i in range(70)]
+    groups = instanced_groups(views)
+    assert sorted(i for group in groups for i in group) == list(range(70))
+    assert all(0 < len(group) <= MAX_BATCHED_VIEWS for group in groups)
+    assert all(len({views[i].mirrored for i in group}) == 1 for group in groups)
+    assert [len(group) for group in groups] == [24, 32, 14]  # not mirrored first, then mirrored in two
+    assert instanced_groups([]) == []
