@@ -25,9 +25,11 @@ is the time the view trees spent planning the frame's reflection views (``PlanCl
 candidate search and culling, claims, each view's camera and view block, ordering, the
 level budget), over the views they made, median over the frames that had views (None
 when no frame had one).
-``--aa fxaa,off`` runs every case once per anti-aliasing mode (``Renderer.antialias``),
-interleaved like the rest, and ends with each case's ratio of the two medians: the cost
-of the FXAA pass.
+``--spheres N`` puts N spheres of 4096 triangles each in every ring (five of them: the
+20754-triangle scene the batched path's GPU limit was measured on); each row gives the
+``triangles`` a view's pass submits.  ``--aa fxaa,off`` runs every case once per
+anti-aliasing mode (``Renderer.antialias``), interleaved like the rest, and ends with each
+case's ratio of the two medians: the cost of the FXAA pass.
 
     python -m benchmarks mirrors               # table
     python -m benchmarks mirrors --json        # one JSON object per line
@@ -61,11 +63,12 @@ from components import (
     Transform,
     look_rotation,
 )
-from engine.assets.mesh import box, plane, quad
+from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.texture_data import checker_texture
 from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.core.world import World
+from engine.render.batched_mirrors import submitted_triangles
 from engine.render.end_images import EndImages
 from engine.render.gl_context import create_headless_context
 from engine.render.gpu import Gpu
@@ -89,6 +92,9 @@ ORBIT_HEIGHT = 3.0
 ORBIT_STEP = math.radians(0.5)   # per frame
 START_ANGLE = math.radians(170.0)  # across the ring from the first mirror, which faces the camera
 RING_RADIUS = 9.0
+# ``--spheres``: each a 64 x 32 sphere, 4096 triangles (five of them and the ring: the scene
+# the batched path's GPU limit was measured on, engine/render/batched_mirrors.py).
+SPHERE_DETAIL = (64, 32)
 CENTRE = glm.vec3(0.0, 1.0, 0.0)
 
 
@@ -97,9 +103,10 @@ class MirrorRing(Game):
 
     title = "benchmark: mirrors"
 
-    def __init__(self, mirrors: int, faded: bool = False) -> None:
+    def __init__(self, mirrors: int, faded: bool = False, spheres: int = 0) -> None:
         self.mirrors = mirrors
         self.faded = faded  # every mirror past its distance fade: it should cost no view
+        self.spheres = spheres  # heavy spheres (SPHERE_DETAIL) about the centre: ``--spheres``
         self.camera: Transform | None = None
         self.spinning: list[tuple[Transform, float]] = []
         self.angle = START_ANGLE
@@ -124,6 +131,11 @@ class MirrorRing(Game):
                                                            roughness=float(rng.uniform(0.2, 0.8))))
             if i < SPINNING:
                 self.spinning.append((transform, float(rng.uniform(0.5, 1.5))))
+        ball = sphere(0.8, *SPHERE_DETAIL, name="bench sphere")
+        for i in range(self.spheres):
+            a = 2.0 * math.pi * (i + 0.5) / self.spheres
+            world.spawn(Transform(position=(4.0 * math.cos(a), 1.2, 4.0 * math.sin(a))), MeshRef(ball),
+                        Material(color=(0.8, 0.8, 0.85), roughness=0.3))
         glass = quad(4, 3, name="mirror")
         for i in range(self.mirrors):
             a = 2.0 * math.pi * i / self.mirrors
@@ -273,6 +285,8 @@ class Result:
     visibility: str = "auto"  # ReflectionSystem.visibility (``--visibility``); what the frames used: ``used``
     used: str = ""
     unseen: int = 0           # views drawn on last frame's word with no pixels then (median)
+    spheres: int = 0          # heavy spheres in the ring (``--spheres``)
+    triangles: int = 0        # what a view's pass submits (batched_mirrors.submitted_triangles)
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -283,13 +297,14 @@ def _percentile(values: list[float], q: float) -> float:
 def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], frames: int,
                warmup: int, aa_modes: tuple[str, ...] = ("fxaa",),
                size: tuple[int, int] = OUTPUT_SIZE, faded: bool = False,
-               visibilities: tuple[str, ...] = ("auto",)) -> list[Result]:
+               visibilities: tuple[str, ...] = ("auto",), spheres: int = 0) -> list[Result]:
     """One engine per (mirror count, path, anti-aliasing mode) on the same scene, their
     frames interleaved (frame i of every engine, then frame i + 1), so load from outside the
     benchmark, and the drift of a shared machine, land on every engine alike and the ratios
     between them hold.  ``size`` is the output's (width, height); ``faded`` adds, for each
     mirror count, the same ring with every mirror faded out (``Mirror.fade_distance``);
-    ``visibilities``: the ``ReflectionSystem.visibility`` modes, an engine each."""
+    ``visibilities``: the ``ReflectionSystem.visibility`` modes, an engine each; ``spheres``
+    heavy spheres in every ring (``MirrorRing``)."""
     cases = [(mirrors, path, aa, fade, visibility) for mirrors in mirror_counts for path in paths
              for aa in aa_modes for fade in ((False, True) if faded and mirrors else (False,))
              for visibility in visibilities]
@@ -298,7 +313,7 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
     try:
         clock.open()
         for mirrors, path, aa, fade, visibility in cases:
-            engine = Engine(MirrorRing(mirrors, fade), ctx)
+            engine = Engine(MirrorRing(mirrors, fade, spheres), ctx)
             engine.reflection_system.path = path
             engine.reflection_system.visibility = visibility
             engine.renderer.antialias = aa
@@ -340,6 +355,8 @@ def run_scenes(ctx, mirror_counts: tuple[int, ...], paths: tuple[str, ...], fram
             visibility=visibility,
             used=",".join(sorted({s.reflection_visibility for s in stats[i]} - {""})),
             unseen=round(statistics.median(s.reflection_views_unseen for s in stats[i])),
+            spheres=spheres,
+            triangles=submitted_triangles(engines[i].renderer),
         ) for i, (mirrors, path, aa, fade, visibility) in enumerate(cases)]
     finally:
         clock.close()
@@ -367,18 +384,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--visibility", type=lambda text: tuple(text.split(",")), default=("auto",),
                         help="comma-separated ReflectionSystem.visibility modes (default auto; "
                              "exact,predicted compares them)")
+    parser.add_argument("--spheres", type=int, default=0,
+                        help="heavy spheres (4096 triangles each) in every ring: a scene past the auto rule's "
+                             "triangle limits (default 0)")
     add_size_argument(parser, OUTPUT_SIZE)
 
 
 COLUMNS = (("n_mirrors", "mirrors", 8), ("path", "path", 11), ("aa", "aa", 5), ("frame_ms_median", "ms med", 8),
            ("frame_ms_p95", "ms p95", 8), ("cpu_ms_median", "cpu ms", 8), ("plan_us_per_view", "plan us/v", 10),
            ("passes", "passes", 7), ("draw_calls", "draws", 6), ("reflection_views", "views", 6),
-           ("faded", "faded", 6), ("used", "visibility", 10), ("unseen", "unseen", 6))
+           ("faded", "faded", 6), ("used", "visibility", 10), ("unseen", "unseen", 6), ("triangles", "tris", 6))
 
 
 def main(args: argparse.Namespace) -> int:
-    if args.frames < 1 or args.warmup < 0 or any(n < 0 for n in args.mirrors):
-        raise SystemExit("--frames must be >= 1, --warmup and --mirrors >= 0")
+    if args.frames < 1 or args.warmup < 0 or args.spheres < 0 or any(n < 0 for n in args.mirrors):
+        raise SystemExit("--frames must be >= 1, --warmup, --spheres and --mirrors >= 0")
     unknown = set(args.paths) - set(PATHS)
     if unknown:
         raise SystemExit(f"unknown paths {sorted(unknown)}; choose from {PATHS}")
@@ -396,7 +416,7 @@ def main(args: argparse.Namespace) -> int:
                   f"({ctx.info.get('GL_RENDERER', '?')}, {args.frames} frames after {args.warmup} warm-up)")
             print(" ".join(f"{title:>{width}}" for _, title, width in COLUMNS) + "  chosen")
         for result in run_scenes(ctx, args.mirrors, args.paths, args.frames, args.warmup, args.aa, args.size,
-                                 args.faded, args.visibility):
+                                 args.faded, args.visibility, args.spheres):
             results.append(result)
             if args.json:
                 print(json.dumps(asdict(result)), flush=True)

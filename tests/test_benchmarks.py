@@ -164,6 +164,23 @@ def test_visibility_modes_run_side_by_side(argv, capsys, own_contexts):
         modules[argv[0]].main(parser.parse_args([*argv, "--visibility", "sometimes"]))
 
 
+def test_the_mirror_suite_puts_heavy_spheres_in_the_ring(capsys, own_contexts):
+    """``--spheres N``: every ring holds N more spheres of 64 x 32 segments (two triangles a
+    quad, 4096 each), and each row says how many triangles a view's pass submits: the
+    plain ring's, counted from its meshes here, and the spheres'."""
+    from benchmarks.mirrors import BOXES
+
+    parser, modules = build_parser()
+    args = parser.parse_args(["mirrors", "--json", "--size", "48x27", "--mirrors", "2", "--paths", "auto",
+                              "--frames", "1", "--warmup", "0", "--spheres", "2"])
+    assert modules["mirrors"].main(args) == 0
+    row, = [row for row in map(json.loads, capsys.readouterr().out.splitlines()) if "triangles" in row]
+    ring = 2 + BOXES * 12 + 2 * 2  # the ground's two, a box's twelve, each mirror's two
+    assert (row["spheres"], row["triangles"]) == (2, ring + 2 * 64 * 32 * 2)
+    with pytest.raises(SystemExit, match="spheres"):
+        modules["mirrors"].main(parser.parse_args(["mirrors", "--spheres", "-1"]))
+
+
 def test_the_probe_suite_draws_every_part_at_the_size(monkeypatch, capsys, own_contexts):
     """Captures and prefilters run at 128 and 512 texels a face whatever the size (seconds on
     llvmpipe): each part is stood in for by a recorder here; the whole frames run for real."""
