@@ -15,7 +15,8 @@ vec3 bent_by(vec3 t, vec3 b, vec3 n, vec3 texel, float scale) {
 // The map's normal at uv in the frame (t: +U, b: +V, n: out of the surface, all unit), its
 // slope scaled by scale (glTF's normalTexture.scale; 0: n itself), filtered by the UVs'
 // screen derivatives uv_dx and uv_dy: a caller takes them before anything may discard or
-// branch by pixel, where GLSL still defines them (both callers may leave pixels out first).
+// branch by pixel, where GLSL still defines them (the composite leaves pixels out first;
+// the scene pass's parallax builds read the map where the ray meets the heights).
 vec3 bent_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 uv_dx, vec2 uv_dy, float scale) {
     return bent_by(t, b, n, textureGrad(normal_map, uv, uv_dx, uv_dy).xyz, scale);
 }
