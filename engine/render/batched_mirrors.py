@@ -32,7 +32,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from engine.render.gpu import Gpu
-from engine.render.views import CAMERA_BYTES, View
+from engine.render.views import CAMERA_BYTES, CAMERA_EYE_BYTES, View
 
 PATHS = ("auto", "per_mirror", "batched")
 # Views one batched draw takes (a level with more is drawn in groups of this many).  The
@@ -54,7 +54,6 @@ _NO_ROWS = bytes(MAX_BATCHED_VIEWS * _ROW_BYTES)
 _COUNT, _RECT = struct.Struct("<4i"), struct.Struct("<4f")
 _MIRRORED, _UNMIRRORED = struct.pack("<f", 1.0), struct.pack("<f", 0.0)  # the eye's w
 _VIEW_PROJ, _CLIP, _IDS = CAMERA_BYTES["view_proj"], CAMERA_BYTES["clip_plane"], CAMERA_BYTES["skip"]
-_EYE = slice(CAMERA_BYTES["eye"].start, CAMERA_BYTES["eye"].start + 12)  # xyz
 
 # The "auto" rule: batched when a level has at least AUTO_MIN_VIEWS views and the scene
 # submits at most AUTO_MAX_TRIANGLES triangles (each batch's mesh triangles x instances,
@@ -157,7 +156,7 @@ def views_row(view: View) -> bytes:
         x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
         ids = block[_IDS]  # (skip, hide, view mask, node) in the block; (node, skip, hide, view mask) in the row
         row = view._views_row = b"".join((
-            block[_VIEW_PROJ], block[_CLIP], block[_EYE], _MIRRORED if view.mirrored else _UNMIRRORED,
+            block[_VIEW_PROJ], block[_CLIP], block[CAMERA_EYE_BYTES], _MIRRORED if view.mirrored else _UNMIRRORED,
             _RECT.pack(2.0 * x / width - 1.0, 2.0 * y / height - 1.0, 2.0 * (x + w) / width - 1.0,
                        2.0 * (y + h) / height - 1.0),  # the screen rectangle in NDC: the scissor, or the whole target
             ids[12:16], ids[0:12]))

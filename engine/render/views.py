@@ -63,10 +63,9 @@ CAMERA_BLOCK_VIEW_PROJ = CAMERA_FLOATS["view_proj"]
 CAMERA_BLOCK_INVERSE = CAMERA_FLOATS["inv_view_proj"]
 CAMERA_BLOCK_EYE = slice(CAMERA_FLOATS["eye"].start, CAMERA_FLOATS["eye"].start + 3)  # xyz
 CAMERA_BLOCK_CLIP = CAMERA_FLOATS["clip_plane"]
-CAMERA_BLOCK_IDS = CAMERA_FLOATS["skip"]  # uint32, CAMERA_IDS
 _VIEW_MASK_BYTES = slice(CAMERA_BYTES["skip"].start + 4 * CAMERA_IDS.index("view_mask"),
                          CAMERA_BYTES["skip"].start + 4 * CAMERA_IDS.index("view_mask") + 4)
-_EYE_BYTES = slice(CAMERA_BYTES["eye"].start, CAMERA_BYTES["eye"].start + 12)  # xyz
+CAMERA_EYE_BYTES = slice(CAMERA_BYTES["eye"].start, CAMERA_BYTES["eye"].start + 12)  # xyz
 NO_CLIP = glm.vec4(0.0, 0.0, 0.0, 1.0)
 # The shaders' array sizes (the shader library makes them defines): lights, point lights that
 # cast shadows (engine/render/shadows.py), probes whose irradiance the scene blends
@@ -213,7 +212,7 @@ class PlannedView(View):
 
     @property
     def eye(self) -> glm.vec3:
-        return glm.vec3.from_bytes(self._block[_EYE_BYTES])
+        return glm.vec3.from_bytes(self._block[CAMERA_EYE_BYTES])
 
     @property
     def kinds(self) -> int:
