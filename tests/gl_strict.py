@@ -705,7 +705,7 @@ def strict_draws(ctx: moderngl.Context) -> Iterator[StrictGL]:
     moderngl.Context.program = recorded_program
     shader_library._RelinkGL.relink = forgetting_relink
     try:
-        with programs_linked_anew():  # every program's sources recorded
+        with programs_linked_anew(ctx):  # every program's sources recorded
             yield checker
     finally:
         moderngl.VertexArray.render, moderngl.Framebuffer.clear = render, clear

@@ -4,6 +4,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 
+import moderngl
 import numpy as np
 import pytest
 from pyglm import glm
@@ -17,14 +18,29 @@ from shell.app import Engine
 
 
 @contextlib.contextmanager
-def programs_linked_anew() -> Iterator[FreePrograms]:
+def programs_linked_anew(ctx: moderngl.Context | None = None) -> Iterator[FreePrograms]:
     """Inside: every shader library made links its own programs, and hands them to a free
     list of its own, released at the end (``FreePrograms``): for hooks on
     ``moderngl.Context.program`` that must see every program an engine uses, and whose
-    programs (rewritten, recorded) must not be handed to engines made after."""
+    programs (rewritten, recorded) must not be handed to engines made after.  The list
+    yielded is ``ctx``'s (None: the first context an engine asks for); an engine on any
+    other context (a test's own, a benchmark's) gives its programs back to a list that
+    releases them at once: one list for two contexts handed a program linked on one to an
+    engine on the other (moderngl: "the program belongs to a different context")."""
     own = FreePrograms()
+    owner = [ctx] if ctx is not None else []
     of = FreePrograms.__dict__["of"]
-    FreePrograms.of = classmethod(lambda cls, ctx: own)
+
+    def per_context(cls, asking: moderngl.Context) -> FreePrograms:
+        if not owner:
+            owner.append(asking)
+        if asking is owner[0]:
+            return own
+        unkept = FreePrograms()
+        unkept.released = True  # (given back, released: none kept for another engine)
+        return unkept
+
+    FreePrograms.of = classmethod(per_context)
     try:
         yield own
     finally:

@@ -7,11 +7,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import moderngl
 import numpy as np
 import pytest
 
 from components import Bloom, DirectionalLight, Fog, Material, MeshRef, Mirror, Skybox, Tonemap, Transform
 from engine.assets.mesh import box, plane, quad
+from engine.render.gl_context import create_headless_context
 from engine.render.shader_library import FreePrograms, ShaderLibrary
 from tests.support import SceneRunner, look_from, programs_linked_anew
 
@@ -80,6 +82,31 @@ def test_a_released_librarys_program_is_taken_by_the_next_with_every_uniform_at_
     finally:
         fresh.release()
     second.release()
+
+
+def test_inside_the_hook_a_library_on_another_context_never_takes_this_ones_programs(ctx, root):
+    """``programs_linked_anew`` (the strict GL sweep's and the fetch-bounds check's hook) holds
+    the list of one context: a library on a second context (a benchmark's, a test's own
+    window) links its own programs and keeps none of them, where one list for both handed it
+    the first context's program ("the program belongs to a different context")."""
+    other = create_headless_context()
+    try:
+        with programs_linked_anew(ctx) as own:
+            first = ShaderLibrary(ctx, root)
+            program = first.program("main.vert", "main.frag")
+            first.release()
+            assert own.count == 1
+            elsewhere = ShaderLibrary(other, root)
+            linked = elsewhere.program("main.vert", "main.frag")
+            assert linked is not program and own.count == 1 and own.taken == 0
+            elsewhere.release()
+            assert linked.mglo is None or isinstance(linked.mglo, moderngl.InvalidObject)  # released, not kept
+            assert own.count == 1
+            again = ShaderLibrary(ctx, root)
+            assert again.program("main.vert", "main.frag") is program and own.taken == 1
+            again.release()
+    finally:
+        other.release()
 
 
 def test_another_key_or_edited_sources_are_linked_anew(ctx, free, root):
