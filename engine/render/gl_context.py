@@ -41,6 +41,19 @@ class GLCapabilities:
         name = self.renderer.lower()
         return any(word in name for word in SOFTWARE_RENDERERS)
 
+    @property
+    def filters_anisotropically(self) -> bool:
+        """Whether reflections, normal and height maps and the lights' images filter
+        anisotropically (``Gpu.reflection_anisotropy``, ``normal_map_anisotropy``): on a GPU
+        yes; on a software rasteriser no.  There the filter costs about 60% of a reflection
+        view, and llvmpipe's (Mesa 22.3) is not the GL's: it stretches its taps along the
+        screen's derivatives where the shader gives the level or the gradients itself (a
+        textureLod at 8x differs from 1x at every pixel, where GLSL makes its derivatives 0),
+        and these reads do.  Read from the renderer's name alone, not ``software``: the tests'
+        ``SPECULUM_AS_GPU`` runs take a GPU's other branches on llvmpipe, with its filtering."""
+        name = self.renderer.lower()
+        return not any(word in name for word in SOFTWARE_RENDERERS)
+
     @classmethod
     def read(cls, ctx: moderngl.Context) -> GLCapabilities:
         info = ctx.info

@@ -221,11 +221,11 @@ class Gpu:
         # about 60% of a reflection view's time in the anisotropic filter (measured on
         # llvmpipe, benchmarks/mirrors.py), so there reflections filter trilinearly; a GPU
         # filters them like the main view.  Set it to texture_anisotropy for equal quality.
-        self.reflection_anisotropy = 1.0 if caps.software else self.texture_anisotropy
+        self.reflection_anisotropy = self.texture_anisotropy if caps.filters_anisotropically else 1.0
         # Normal maps likewise: on llvmpipe an 8x anisotropic normal map on the benchmark
         # ground cost +36-41% of the frame, trilinear +4-5% (benchmarks/normal_maps.py).  Set
         # before the first normal map is uploaded.
-        self.normal_map_anisotropy = 1.0 if caps.software else self.texture_anisotropy
+        self.normal_map_anisotropy = self.texture_anisotropy if caps.filters_anisotropically else 1.0
         # The kept spot lights' cookies (PointLight.cookie; the prepare stage sets them), filtered
         # as normal maps are (anisotropy on a GPU).
         # Whether a kept point light is a sphere (PointLight.radius; the prepare stage sets it):
