@@ -187,7 +187,8 @@ def test_normal_maps_are_shared_uploaded_linear_and_released(scene):
         assert normal is not None and normal.dtype == "f1" and normal.components == 4
         # Trilinear on a software rasteriser (8x anisotropic cost llvmpipe a third of a frame).
         assert normal.anisotropy == renderer.normal_map_anisotropy
-        assert renderer.normal_map_anisotropy == (1.0 if renderer.caps.software else renderer.texture_anisotropy)
+        assert renderer.normal_map_anisotropy == (renderer.texture_anisotropy
+                                                  if renderer.caps.filters_anisotropically else 1.0)
         for e in spawned:
             runner.world.delete_entity(e)
         runner.frame()
