@@ -1022,12 +1022,17 @@ void main() {
     s.alpha = base.a;
     // A decal's cut (the transparent slot's code 3) with no alpha left shows nothing: it writes
     // nothing either (its id would take a click through a clear part of its image, its
-    // corners), and costs no shading.  (Water and see-through surfaces keep their ids at any
-    // alpha: the view tree claims their pixels by them.)  Discarded here, not with the
-    // dropped pixels: the test is in every build, and on llvmpipe every frame drew 5% slower
-    // with it last (measured, issue 40); the price is a GPU's undefined derivatives beside a
-    // decal's clear part, where its own alpha is near 0.
+    // corners).  (Water and see-through surfaces keep their ids at any alpha: the view tree
+    // claims their pixels by them.)  A GPU's builds (DISCARDS_LAST: Gpu.discards_last) drop
+    // it with the other left-out pixels, after the derivatives the rest of its quad takes; a
+    // software rasteriser's discard it here, unshaded: llvmpipe keeps every pixel of a quad
+    // running, so its derivatives stay defined, and there every frame drew 5% slower with
+    // the test last (measured, issue 40).
+#ifdef DISCARDS_LAST
+    dropped_pixel = dropped_pixel || (transparent == 3 && s.alpha < 0.5 / 255.0);
+#else
     if (transparent == 3 && s.alpha < 0.5 / 255.0) discard;
+#endif
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map

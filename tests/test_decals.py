@@ -527,6 +527,38 @@ def test_where_its_image_is_clear_a_decal_writes_no_id_and_a_click_goes_through(
     assert ids[cy, cx] == part and ids[ky, kx] == made["wall"]
 
 
+def test_a_gpus_builds_drop_a_clear_part_last_and_draw_the_same_frame_and_ids(scene):
+    """A GPU's scene builds (``Gpu.discards_last``: scene.frag's DISCARDS_LAST) leave a
+    decal's clear part out with the other dropped pixels, after the derivatives the rest of
+    its quad takes, not at once; llvmpipe keeps a quad's pixels running either way, so the
+    two builds draw the same colours and ids here (the clear corners the wall's)."""
+    from engine.assets.texture_data import puff_texture
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        wall(world)
+        world.spawn(Transform(scale=glm.vec3(1.2, 1.2, 0.5)), Decal(texture=puff_texture(32, 1)))
+
+    seen = []
+    for last in (False, True):
+        runner = scene(build, SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.renderer.discards_last = last
+        for _ in range(2):
+            image = runner.frame()
+        builds = [dict(key[3]) for key in runner.engine.renderer.shaders._programs if key[1] == "scene.frag"]
+        assert builds and all(("DISCARDS_LAST" in defines) is last for defines in builds)
+        ids = runner.ids()
+        part = [e for e, _ in runner.world.query_one(FromDecal)][0]
+        (cx, cy), (kx, ky) = runner.project((0.0, 0.0, 0.0)), runner.project((0.55, 0.55, 0.0))
+        assert ids[cy, cx] == part and ids[ky, kx] != part  # its middle the cut's, a clear corner the wall's
+        seen.append((image, ids))
+    (plain, plain_ids), (last, last_ids) = seen
+    assert np.array_equal(plain_ids, last_ids)
+    assert np.array_equal(plain, last)
+
+
 def test_glass_in_front_of_a_decal_blends_over_it_wherever_their_boxes_centres_are(scene):
     """A pane standing on a floor's big decal, farther from the eye by its centre than the
     decal's is: the decal (on an opaque surface) is blended first, so the pane tints it as

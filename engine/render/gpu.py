@@ -226,6 +226,11 @@ class Gpu:
         # ground cost +36-41% of the frame, trilinear +4-5% (benchmarks/normal_maps.py).  Set
         # before the first normal map is uploaded.
         self.normal_map_anisotropy = self.texture_anisotropy if caps.filters_anisotropically else 1.0
+        # Where the scene programs discard a decal's clear part (scene.frag's DISCARDS_LAST): on
+        # a GPU after every derivative its quad's other pixels take (GLSL leaves them undefined
+        # after a discard); on a software rasteriser first, unshaded (llvmpipe keeps a quad's
+        # pixels running, and drew every frame 5% slower with it last).  Set before the first frame.
+        self.discards_last = not caps.software
         # The kept spot lights' cookies (PointLight.cookie; the prepare stage sets them), filtered
         # as normal maps are (anisotropy on a GPU).
         # Whether a kept point light is a sphere (PointLight.radius; the prepare stage sets it):

@@ -225,8 +225,9 @@ class ScenePrograms:
         # The light from all round the table gives (Gpu.ambient_defines: boxes, a volume), in a
         # pass that draws with it (IrradianceTable.bind; never a capture's).
         ambient = self.renderer.ambient_defines if ambient_probes else ()
+        last = self.renderer.discards_last  # DISCARDS_LAST: a decal's clear part dropped after the derivatives
         key = (views if layered else min(views, 1), layered, variants, normal_mapped, checker, material, probe_blend,
-               virtual, ambient, probe_rest, unlit, masked, screen, shadowing, fogging, cookies)
+               virtual, ambient, probe_rest, unlit, masked, screen, shadowing, fogging, cookies, last)
         program = self.built.get(key)
         if program is None and "refracted" in screen.split():
             # The march reads the copy (and, unmasked, the node image): one or two samplers
@@ -285,6 +286,8 @@ class ScenePrograms:
                 defines["LIGHTMAP"] = "1"
             if material[18]:  # light scattered under its surface (Material.subsurface: subsurface.glsl)
                 defines["SUBSURFACE"] = "1"
+            if last:
+                defines["DISCARDS_LAST"] = "1"
             if probe_blend:  # two probes and the sky by the instances' weights (shaders/include/probe.glsl)
                 defines["PROBE_BLEND"] = "1"
                 if probe_rest:  # a probe, not the sky, takes what the weights leave
