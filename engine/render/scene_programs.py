@@ -227,7 +227,7 @@ class ScenePrograms:
         ambient = self.renderer.ambient_defines if ambient_probes else ()
         last = self.renderer.discards_last  # DISCARDS_LAST: a decal's clear part dropped after the derivatives
         key = (views if layered else min(views, 1), layered, variants, normal_mapped, checker, material, probe_blend,
-               virtual, ambient, probe_rest, unlit, masked, screen, shadowing, fogging, cookies, last)
+               virtual, ambient, probe_rest, unlit, masked, screen, last, shadowing, fogging, cookies)
         program = self.built.get(key)
         if program is None and "refracted" in screen.split():
             # The march reads the copy (and, unmasked, the node image): one or two samplers
