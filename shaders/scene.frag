@@ -1025,7 +1025,7 @@ void main() {
     // corners).  (Water and see-through surfaces keep their ids at any alpha: the view tree
     // claims their pixels by them.)  A GPU's builds (DISCARDS_LAST: Gpu.discards_last) drop
     // it with the other left-out pixels, after the derivatives the rest of its quad takes; a
-    // software rasteriser's discard it here, unshaded: llvmpipe keeps every pixel of a quad
+    // software rasteriser's builds discard it here, unshaded: llvmpipe keeps every pixel of a quad
     // running, so its derivatives stay defined, and there every frame drew 5% slower with
     // the test last (measured, issue 40).
 #ifdef DISCARDS_LAST

@@ -554,9 +554,9 @@ def test_a_gpus_builds_drop_a_clear_part_last_and_draw_the_same_frame_and_ids(sc
         (cx, cy), (kx, ky) = runner.project((0.0, 0.0, 0.0)), runner.project((0.55, 0.55, 0.0))
         assert ids[cy, cx] == part and ids[ky, kx] != part  # its middle the cut's, a clear corner the wall's
         seen.append((image, ids))
-    (plain, plain_ids), (last, last_ids) = seen
-    assert np.array_equal(plain_ids, last_ids)
-    assert np.array_equal(plain, last)
+    (plain, plain_ids), (deferred, deferred_ids) = seen
+    assert np.array_equal(plain_ids, deferred_ids)
+    assert np.array_equal(plain, deferred)
 
 
 def test_glass_in_front_of_a_decal_blends_over_it_wherever_their_boxes_centres_are(scene):
