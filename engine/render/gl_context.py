@@ -18,6 +18,12 @@ REQUIRED_VERSION = 410
 SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software rasterizer")
 
 
+def software_renderer(renderer: str) -> bool:
+    """Whether the GL_RENDERER string ``renderer`` names a software rasteriser."""
+    name = renderer.lower()
+    return any(word in name for word in SOFTWARE_RENDERERS)
+
+
 @dataclass(frozen=True)
 class GLCapabilities:
     """What the context offers, read once from GL."""
@@ -38,8 +44,7 @@ class GLCapabilities:
     @property
     def software(self) -> bool:
         """A software rasteriser (llvmpipe, softpipe, SwiftShader): shading is CPU time."""
-        name = self.renderer.lower()
-        return any(word in name for word in SOFTWARE_RENDERERS)
+        return software_renderer(self.renderer)
 
     @property
     def filters_anisotropically(self) -> bool:
@@ -51,8 +56,7 @@ class GLCapabilities:
         textureLod at 8x differs from 1x at every pixel, where GLSL makes its derivatives 0),
         and these reads do.  Read from the renderer's name alone, not ``software``: the tests'
         ``SPECULUM_AS_GPU`` runs take a GPU's other branches on llvmpipe, with its filtering."""
-        name = self.renderer.lower()
-        return not any(word in name for word in SOFTWARE_RENDERERS)
+        return not software_renderer(self.renderer)
 
     @classmethod
     def read(cls, ctx: moderngl.Context) -> GLCapabilities:
