@@ -24,6 +24,7 @@ from components import (
 from components.decal import Decal, FromDecal
 from engine.assets.mesh import box, quad
 from engine.assets.texture_data import TextureData
+from engine.render.gl_context import GLCapabilities
 from tests.support import look_from
 
 SIZE = (96, 72)
@@ -556,7 +557,12 @@ def test_a_gpus_builds_drop_a_clear_part_last_and_draw_the_same_frame_and_ids(sc
         seen.append((image, ids))
     (plain, plain_ids), (deferred, deferred_ids) = seen
     assert np.array_equal(plain_ids, deferred_ids)
-    assert np.array_equal(plain, deferred)
+    # The same colours where the early discard's derivatives are defined too (llvmpipe); on a
+    # GPU the early build's rim beside the clear part may take other texture levels (what
+    # DISCARDS_LAST is for): at most 1% of the cut's pixels there.
+    apart = int((np.abs(plain.astype(np.int64) - deferred).max(axis=2) > 0).sum())
+    software = GLCapabilities.read(runner.engine.ctx).software
+    assert apart == 0 if software else apart <= 0.01 * int((plain_ids == part).sum()), apart
 
 
 def test_glass_in_front_of_a_decal_blends_over_it_wherever_their_boxes_centres_are(scene):
