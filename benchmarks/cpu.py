@@ -19,6 +19,11 @@ almost nothing to rasterise), so the frame is the engine's CPU.  Parts (``--part
   ring with 0 and 8 mirrors, the probes suite's sphere with no probe and with a probe
   recaptured every frame, the portal pair at depth 0 and 8.
 * ``hd``: 16 mirrors at 1920x1080.
+* ``views``: 16 mirrors at 128x72 in a subprocess with ``LP_NUM_THREADS=0``, as ``cpu``:
+  about the views a GPU's 1920x1080 frame has (a view needs a claimed pixel: 34 at 32x18,
+  about 90 here, 92-112 at 1920x1080), with llvmpipe's rasterising still small, so its
+  ``engine_ms`` is the engine's Python and numpy at a GPU frame's view count; no target
+  (``benchmarks/README.md``, "What the 32x18 frame leaves out").
 * ``ecs``: the ECS suite's grid of 100,000 entities, 1% moving: the ECS frame's CPU.
 * ``sample``: the sample level (``hall``: ``games.hall_of_mirrors`` from its start pose,
   crates spinning, three probes recaptured as they see them move, each face a view tree of
@@ -117,11 +122,13 @@ ECS_ENTITIES = 100_000
 DT = 1.0 / 60.0
 COUNTED_FRAMES = 10  # frames per scene with the GL call counter on, after the timed ones
 RUN_FRAMES = 10  # an engine's frames back to back in a round: one cold frame, then nine timed
-PARTS = ("cpu", "frames", "hd", "ecs", "sample")
+VIEWS_SIZE = (128, 72)  # the views part: about as many views as a GPU's 1920x1080 frame
+PARTS = ("cpu", "frames", "hd", "views", "ecs", "sample")
 CPU_SCENES = ("mirrors_0", "mirrors_8", "mirrors_16", "portals_d0", "portals_d8", "portals_d0_sway",
               "portals_d8_sway")
 FRAME_SCENES = ("mirrors_0", "mirrors_8", "probe_none", "probe_dynamic", "portals_d0", "portals_d8")
 HD_SCENES = ("mirrors_16",)
+VIEWS_SCENES = ("mirrors_16",)
 SAMPLE_SCENES = ("hall",)
 
 
@@ -525,10 +532,10 @@ def run_ecs(ctx, frames: int, warmup: int) -> list[dict]:
              "draw_calls": result.draw_calls}]
 
 
-def cpu_part(frames: int, warmup: int, top: int) -> list[dict]:
-    """The ``cpu`` part's rows, from a subprocess started with ``LP_NUM_THREADS=0``."""
-    return rows_without_rasteriser(["cpu", "--json", "--child", "--frames", str(frames), "--warmup", str(warmup),
-                                    "--top", str(top)])
+def cpu_part(frames: int, warmup: int, top: int, part: str = "cpu") -> list[dict]:
+    """The ``cpu`` (or ``views``) part's rows, from a subprocess started with ``LP_NUM_THREADS=0``."""
+    return rows_without_rasteriser(["cpu", "--json", "--child", "--parts", part, "--frames", str(frames),
+                                    "--warmup", str(warmup), "--top", str(top)])
 
 
 # -- targets ----------------------------------------------------------------------------------
@@ -609,6 +616,8 @@ def measure(args: argparse.Namespace) -> tuple[list[dict], bool, str]:
     rows: list[dict] = []
     if "cpu" in args.parts:
         rows += cpu_part(args.frames, args.warmup, args.top)
+    if "views" in args.parts:
+        rows += cpu_part(args.frames, args.warmup, 0, "views")
     ctx = create_headless_context()
     try:
         software = GLCapabilities.read(ctx).software
@@ -676,13 +685,16 @@ def print_tables(rows: list[dict], targets: list[dict], renderer: str, frames: i
 
 
 def main(args: argparse.Namespace) -> int:
-    if args.child:  # the LP_NUM_THREADS=0 process: the 32x18 scenes' rows
+    if args.child:  # the LP_NUM_THREADS=0 process: the 32x18 scenes' rows (the views part's: 128x72)
         from engine.render.gl_context import create_headless_context
 
         ctx = create_headless_context()
         try:
-            rows = run_scenes(ctx, CPU_SCENES, CPU_SIZE, args.frames, args.warmup, args.top,
-                              args.frames if args.top else 0)
+            if args.parts == ("views",):
+                rows = run_scenes(ctx, VIEWS_SCENES, VIEWS_SIZE, args.frames, args.warmup)
+            else:
+                rows = run_scenes(ctx, CPU_SCENES, CPU_SIZE, args.frames, args.warmup, args.top,
+                                  args.frames if args.top else 0)
         finally:
             ctx.release()
         for row in rows:

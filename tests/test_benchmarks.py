@@ -857,6 +857,39 @@ def test_the_cpu_part_runs_in_its_own_process_with_no_rasteriser_threads(capsys,
         {name for name, target in cpu.TARGETS.items() if target.part == "cpu"}
 
 
+def test_the_views_part_draws_the_16_mirror_ring_with_a_gpu_frames_views_in_a_process_of_its_own(
+        ctx, capsys, own_contexts):
+    """``--parts views``: the 16-mirror ring at 128x72 from the LP_NUM_THREADS=0 process, one
+    row with its engine's share and no target.  A view needs a claimed pixel, so the ring drawn
+    here at 32x18 (the cpu part's size, the same camera and frame) has fewer views than that
+    row: the part stands for a larger frame's view count."""
+    from benchmarks import cpu
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+
+    parser, _ = build_parser()
+    assert cpu.main(parser.parse_args(["cpu", "--parts", "views", "--frames", "2", "--warmup", "0", "--top", "0",
+                                       "--json", "--report-only"])) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    scenes = [row for row in rows if "gl_calls" in row]
+    size = "{}x{}".format(*cpu.VIEWS_SIZE)
+    assert [(row["scene"], row["size"], row["lp_num_threads"]) for row in scenes] == [("mirrors_16", size, "0")]
+    row = scenes[0]
+    assert 0 < row["engine_ms"] < row["cpu_ms_median"] <= row["frame_ms_median"] and row["draw_calls"] > 0, row
+    make_current(ctx)
+    small = cpu.make_scene("mirrors_16", ctx)
+    cpu.scale_shadows_down(small)
+    capture = CaptureTarget(ctx, cpu.CPU_SIZE)
+    try:
+        for _ in range(2):
+            small.frame(cpu.DT, Output(capture.framebuffer, cpu.CPU_SIZE))
+        assert 0 < small.renderer.stats.reflection_views < row["views"], (small.renderer.stats.reflection_views, row)
+    finally:
+        capture.release()
+        small.close()
+    assert all(target["value"] is None for target in rows if "target" in target)  # (it feeds none)
+
+
 def test_second_paths_that_part_are_counted_and_fail_the_report(ctx):
     """``agreement_rows`` counts the pixels two engines draw otherwise: a ring whose second
     engine's mirrors reflect half (``Mirror.reflect_rate``) parts at every mirror pixel,
