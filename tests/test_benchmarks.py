@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks import RENDERING_SUITES, SUITES, parse_size
+from benchmarks import RENDERING_SUITES, SUITES, format_size, parse_size
 from benchmarks.__main__ import build_parser
 from engine.render.gl_context import GLCapabilities, software_renderer
 from engine.render.raw_gl import make_current
@@ -872,7 +872,7 @@ def test_the_views_part_draws_the_16_mirror_ring_with_a_gpu_frames_views_in_a_pr
                                        "--json", "--report-only"])) == 0
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     scenes = [row for row in rows if "gl_calls" in row]
-    size = "{}x{}".format(*cpu.VIEWS_SIZE)
+    size = format_size(cpu.VIEWS_SIZE)
     assert [(row["scene"], row["size"], row["lp_num_threads"]) for row in scenes] == [("mirrors_16", size, "0")]
     row = scenes[0]
     assert 0 < row["engine_ms"] < row["cpu_ms_median"] <= row["frame_ms_median"] and row["draw_calls"] > 0, row
