@@ -229,7 +229,9 @@ class PointLight(TrackedComponent):
 
     ``shadows`` (off by default, as in most engines: six views a light): things within its
     range cast shadows, from a cube shadow map of ``shadow_resolution`` texels a face,
-    redrawn only when a caster in its range or the light changed.  ``bounces`` as
+    redrawn only when a caster in its range or the light changed.  The light's own entity's
+    mesh is its body (a glowing bulb with the light on it, the sample level's lamp) and casts
+    none of its shadow, nor its image's through a mirror or portal; other lights' maps keep it.  ``bounces`` as
     ``DirectionalLight.bounces`` (default 1; 0 to 4 mirrors and portals in a row).
 
     ``spot_angle`` (degrees, default 180: all round) makes it a spot light: it shines only

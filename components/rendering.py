@@ -41,7 +41,8 @@ class MeshRef(TrackedComponent):
 
     ``visible`` False: drawn nowhere, and no shadow.  ``casts_shadows`` False: drawn, but in
     no light's shadow map (the sun's, a lamp's, a light's through a mirror or portal), as
-    Unity's and Godot's per-renderer cast-shadows switch: a laser beam, a light's own bulb.
+    Unity's and Godot's per-renderer cast-shadows switch: a laser beam, a bulb beside its
+    light's entity (a light's own entity's mesh casts none of that light's shadow anyway).
     It still receives shadows.  ``receives_shadows`` False: lit by every light as though
     nothing stood in its way (no map is looked up for it: Unity's receive-shadows switch,
     three.js's ``receiveShadow``): a glowing sign, a sky dome, a surface whose own bumps would

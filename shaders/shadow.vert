@@ -27,6 +27,9 @@ out float v_alpha;
 #ifdef VERTEX_ALPHA
 in vec4 in_vertex_color;  // a. the mesh's share a vertex (Mesh.colors), as scene.frag multiplies it in
 #endif
+// The light's own entity (0: none): its mesh is the light's body (a bulb round a lamp), which
+// casts no shadow of its own light (engine/render/shadows.py, Shadows._draw_casters).
+uniform uint light_body;
 #ifdef LEG
 // A middle stretch of a virtual light's way (between two surfaces): its second plane, world.
 uniform vec4 leg_plane;
@@ -52,10 +55,10 @@ void main() {
     gl_Position = camera.view_proj * world;
     // A virtual light's map (light through a mirror or portal) leaves out the surfaces it
     // passes through (camera.skip) and what lies behind them (camera.clip_plane); a light's
-    // own map has neither.
+    // own map has neither.  Every map leaves out the light's own body.
     bool casts = (in_slots.z != REFLECT_PORTAL || opening_casts(in_tint.w)) && in_slots.y == REFRACT_NONE
         && !casts_no_shadow(in_tint.w)
-        && in_slots.w != camera.skip.x && in_slots.w != camera.skip.y;
+        && in_slots.w != camera.skip.x && in_slots.w != camera.skip.y && in_slots.w != light_body;
     float plane = dot(world, camera.clip_plane);
     gl_ClipDistance[CLIP_VIEW_PLANE] = casts ? plane : -1.0;
     gl_ClipDistance[CLIP_SLICE] = dot(world, in_slice);

@@ -361,10 +361,10 @@ class ShadowSystem(esper.Processor):
                 continue
             if half_width is None:
                 stats.shadow_path = maps.draw_point(slot, index, position, light.range, light.shadow_resolution,
-                                                    light.shadow_softness, layered, how, size)
+                                                    light.shadow_softness, layered, how, size, entity)
             else:
                 stats.shadow_path = maps.draw_spot(slot, index, position, glm.vec3(how[0]), half_width, light.range,
-                                                   light.shadow_resolution, light.shadow_softness)
+                                                   light.shadow_resolution, light.shadow_softness, entity)
             self._point[slot] = key
             stats.shadow_maps_drawn += 1
         maps.drop_unused_cubes({row[0] for row in casting if row[0] not in spots})

@@ -254,13 +254,13 @@ class ShadowMaps:
         return (slot % 2) * self.tile, (slot // 2) * self.tile
 
     def draw_directional(self, slot: int, fit: DirectionalFit, resolution: int, softness: float,
-                         region: tuple[int, int, int, int] | None = None) -> int:
+                         region: tuple[int, int, int, int] | None = None, body: int = 0) -> int:
         """Draw directional light ``slot``'s map (its tile of the atlas, ``resolution`` texels
         a side) from ``fit``, and write its row of the Shadows block.  With ``region`` (x, y,
         width, height in the tile's texels) only those texels are cleared and drawn again (the
         casters' draws scissored to them: the same depths a whole redraw writes there).
-        Returns the texels drawn."""
-        texels = self._draw_tile(slot, slot, fit, resolution, region)
+        ``body``: the light's entity (``_draw_casters``).  Returns the texels drawn."""
+        texels = self._draw_tile(slot, slot, fit, resolution, region, body)
         # World -> the tile's uv and depth in [0, 1]; the block's rows written again only when
         # what they are made of changed (a frame redrawing a region under moved casters keeps them).
         width = self.atlas.size[0]
@@ -284,14 +284,14 @@ class ShadowMaps:
         return texels
 
     def draw_ring(self, ring: int, tile: int, slot: int, fit: DirectionalFit, resolution: int, softness: float,
-                  region: tuple[int, int, int, int] | None = None) -> int:
+                  region: tuple[int, int, int, int] | None = None, body: int = 0) -> int:
         """Draw ring ``ring`` (a cascade about the camera, ``DirectionalLight.shadow_cascades``)
         of directional light ``slot`` into atlas tile ``tile`` from ``fit``, as
         ``draw_directional`` draws a level map (the light's own, drawn first), and write its
         rows of the Shadows block: the map from the level map's uv to the ring's own [0, 1]
         square (the lookup tests a point is inside it before it reads the atlas), its texel,
         where the tile lies and the filter's margin."""
-        texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region)
+        texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region, body)
         width = self.atlas.size[0]
         key = MAX_DIRECTIONAL_LIGHTS + ring
         level = self._level_uv[slot]   # the light's level map, drawn before its rings
@@ -334,9 +334,10 @@ class ShadowMaps:
                     kept[2].release()
 
     def _draw_tile(self, tile: int, camera: int, fit: DirectionalFit, resolution: int,
-                   region: tuple[int, int, int, int] | None) -> int:
+                   region: tuple[int, int, int, int] | None, body: int) -> int:
         """The casters' depths into atlas ``tile`` (``resolution`` texels a side) from ``fit``
-        (its Camera block kept under ``camera``), all of it or only ``region``; the texels drawn."""
+        (its Camera block kept under ``camera``), all of it or only ``region``, light ``body``'s
+        mesh left out; the texels drawn."""
         x, y = self.tile_origin(tile)
         square = (x, y, resolution, resolution)
         rect = square if region is None else (x + region[0], y + region[1], region[2], region[3])
@@ -345,7 +346,7 @@ class ShadowMaps:
         apply_pass_state(self.ctx, _CASTERS, square, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
         self._bind_fit(camera, fit, resolution)
-        self._draw_casters(None, _DEPTH)
+        self._draw_casters(None, _DEPTH, body=body)
         return rect[2] * rect[3]
 
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
@@ -455,6 +456,7 @@ class ShadowMaps:
         apply_pass_state(self.ctx, _CASTERS, rect, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
         size = (VIRTUAL_RESOLUTION, VIRTUAL_RESOLUTION)
+        body = light.light if light.kind == "point" else 0   # a lamp's image leaves its bulb's image out too
         legs = light.legs or (Leg(glm.mat4(1.0), (glm.vec4(*light.exit_plane),), (light.exit_entity, light.surface)),
                               Leg(light.carry, (glm.vec4(light.entry_plane),), (light.surface, light.exit_entity)))
         for index, leg in enumerate(legs):
@@ -462,10 +464,10 @@ class ShadowMaps:
                         name=f"virtual light {slot} (stretch {index})", clip_plane=glm.vec4(leg.planes[0]),
                         skip=leg.skip[0], hide=leg.skip[1], kinds=0, layers=ALL_LAYERS)
             if len(leg.planes) == 1:
-                self._draw_casters(view, _DEPTH)
+                self._draw_casters(view, _DEPTH, body=body)
                 continue
             apply_pass_state(self.ctx, _LEG_CASTERS, rect, rect)
-            self._draw_casters(view, _LEG, {"leg_plane": tuple(glm.vec4(leg.planes[1]))})
+            self._draw_casters(view, _LEG, {"leg_plane": tuple(glm.vec4(leg.planes[1]))}, body)
             apply_pass_state(self.ctx, _CASTERS, rect, rect)
         width = 2 * VIRTUAL_RESOLUTION
         scale = VIRTUAL_RESOLUTION / width
@@ -518,14 +520,15 @@ class ShadowMaps:
     # --- point lights ---------------------------------------------------------------------
     def draw_point(self, slot: int, light_index: int, position: glm.vec3, light_range: float, resolution: int,
                    softness: float, layered: str | None, faces: tuple[bool, ...] = (True,) * 6,
-                   size: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> str:
+                   size: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0), body: int = 0) -> str:
         """Draw point light ``light_index``'s distance cube into cube ``slot``: one layered
         pass (every face lit; ``layered``: into the cube, "cube", or into a 2D array copied
         into it, "array": ``gpu.layered_target``; None: never) or a view a face, the faces a spot's cone does not
         light (``faces`` False: ``light_rules.cube_faces_lit``) cleared to "nothing nearer
         than the range" and not drawn; ``size``: the light's and a rectangle's front
         (``light_rules.light_size``; above 0 its lookups are soft shadows:
-        ``SOFT_POINT_SHADOWS``).  Returns the path taken."""
+        ``SOFT_POINT_SHADOWS``); ``body``: the light's entity (``_draw_casters``).  Returns
+        the path taken."""
         cube = self._cube(slot, resolution)
         views = [View(view=glm.lookAt(position, position + glm.vec3(forward), glm.vec3(up)),
                       proj=glm.perspective(glm.radians(90.0), 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
@@ -533,7 +536,7 @@ class ShadowMaps:
                       kinds=0, layers=ALL_LAYERS)
                  for face, (forward, _, up) in enumerate(CUBE_FACES)]
         every = all(faces)
-        path = "layered" if every and layered and self._draw_layered(slot, cube, views, light_range, layered) \
+        path = "layered" if every and layered and self._draw_layered(slot, cube, views, light_range, layered, body) \
             else "six_pass"
         stats = self.renderer.stats
         if path == "six_pass":
@@ -544,7 +547,7 @@ class ShadowMaps:
                 apply_pass_state(self.ctx, _CASTERS, rect)
                 framebuffer.clear(1.0, 1.0, 1.0, 1.0, depth=1.0)
                 if faces[face]:
-                    self._draw_casters(view, _DISTANCE, {"light_range": light_range})
+                    self._draw_casters(view, _DISTANCE, {"light_range": light_range}, body)
                     stats.shadow_faces_drawn += 1
         else:
             stats.shadow_faces_drawn += 6
@@ -578,15 +581,15 @@ class ShadowMaps:
             self._spot_framebuffer = self.ctx.framebuffer(depth_attachment=self.spot_atlas)
 
     def draw_spot(self, slot: int, light_index: int, position: glm.vec3, axis: glm.vec3, half_width: float,
-                  light_range: float, resolution: int, softness: float) -> str:
+                  light_range: float, resolution: int, softness: float, body: int = 0) -> str:
         """Draw spot light ``light_index``'s shadow into tile ``slot`` of the spot atlas (made
         by ``fit_spot_atlas``, at least ``resolution`` a side): one perspective depth map from
         the light along ``axis``, ``half_width`` (the tangent of its half-angle:
         ``light_rules.spot_map_half_width``) each side, out to the range, read by the lookup
         in place of cube ``slot``.  The whole tile is cleared to the far depth first: a lookup
         near the map's edge, moved off the surface and spread by the filter, reads its border
-        (lit), never texels no pass wrote or the other slot's map.  Returns the path taken
-        ("spot_map")."""
+        (lit), never texels no pass wrote or the other slot's map.  ``body``: the light's
+        entity (``_draw_casters``).  Returns the path taken ("spot_map")."""
         side = self.spot_tile + 2 * SPOT_GUTTER
         tile = (slot * side, 0, side, side)
         x, y = slot * side + SPOT_GUTTER, SPOT_GUTTER
@@ -602,7 +605,7 @@ class ShadowMaps:
                     proj=glm.perspective(fov, 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
                     eye=glm.vec3(position), size=(resolution, resolution), name=f"spot shadow {slot}",
                     kinds=0, layers=ALL_LAYERS)
-        self._draw_casters(view, _DEPTH)
+        self._draw_casters(view, _DEPTH, body=body)
         width, height = self.spot_atlas.size
         sx, sy = resolution / width, resolution / height
         to_tile = glm.translate(glm.vec3(x / width + 0.5 * sx, y / height + 0.5 * sy, 0.5)) \
@@ -663,7 +666,7 @@ class ShadowMaps:
         return cube
 
     def _draw_layered(self, slot: int, cube: moderngl.TextureCube, views: list[View], light_range: float,
-                      into: str) -> bool:
+                      into: str, body: int) -> bool:
         """The six faces in one pass through ``shadow_layered.geom``, into the cube ("cube")
         or into a six-layer array whose layers are then copied into its faces ("array");
         False where the layered target cannot be made (the caller draws six views)."""
@@ -684,7 +687,7 @@ class ShadowMaps:
         target.bind()
         try:
             target.clear((1.0, 1.0, 1.0, 1.0))  # distance / range: nothing nearer than the range
-            self._draw_casters(views[0], _LAYERED, {"light_range": light_range, "face_view_proj": faces})
+            self._draw_casters(views[0], _LAYERED, {"light_range": light_range, "face_view_proj": faces}, body)
         finally:
             target.unbind()
         if array:
@@ -727,10 +730,15 @@ class ShadowMaps:
         return program
 
     def _draw_casters(self, view: View | None, build: tuple[tuple[str, str], ...],
-                      uniforms: dict[str, object] | None = None) -> None:
+                      uniforms: dict[str, object] | None = None, body: int = 0) -> None:
         """Every opaque batch into the bound map, from ``view`` (None: the Camera block bound
         already), with the caster programs of ``build`` given ``uniforms`` (bytes: an array,
-        written whole); a cutout with the cutout build, its albedo map bound and its cutoff set."""
+        written whole); a cutout with the cutout build, its albedo map bound and its cutoff set.
+
+        ``body`` is the light's own entity (0: none), whose mesh casts none of this light's
+        shadow (shadow.vert's ``light_body``): a light on the entity of the mesh that shows it
+        (a lamp's glowing bulb, a panel's box) sits inside that mesh, and a closed caster round
+        a light would leave everything outside it dark.  Other lights' maps keep it."""
         renderer = self.renderer
         ctx = self.ctx
         renderer.note_scene_change()  # a map drawn again: what the views' shadows read
@@ -740,7 +748,8 @@ class ShadowMaps:
         whole = self._caster_program(build, False)
         # The other builds (a cutout's, a posed mesh's), made and given ``uniforms`` at their first batch.
         others: dict[tuple[bool | str, bool, bool, bool], moderngl.Program] = {}
-        for name, value in (uniforms or {}).items():
+        uniforms = {**(uniforms or {}), "light_body": body}
+        for name, value in uniforms.items():
             _set_uniform(whole, name, value)
         stats = renderer.stats
         try:
@@ -757,7 +766,7 @@ class ShadowMaps:
                     program = others.get((kind, *posed))
                     if program is None:
                         program = others[(kind, *posed)] = self._caster_program(build, kind, *posed)
-                        for name, value in (uniforms or {}).items():
+                        for name, value in uniforms.items():
                             _set_uniform(program, name, value)
                     if cutoff is not None:
                         bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color,

@@ -1,0 +1,115 @@
+"""A light's own mesh is its body: it casts none of that light's shadow.
+
+A lamp is built the obvious way as one entity, a glowing bulb with a ``PointLight`` on it
+(the sample level's lamp is). The light then sits inside its bulb, and a closed caster round a
+light leaves everything outside it in shadow. With ``shadows=True`` such a lamp lit nothing at
+all: its frame was the frame with the lamp off, bit for bit. Every map a light draws (its
+cube, a spot's map, its image through a mirror) now leaves out its own entity's mesh
+(``shadow.vert``'s ``light_body``, set by ``Shadows._draw_casters``). Other lights' maps keep it.
+
+The second path: the same level with the bulb made a non-caster (``MeshRef.casts_shadows``
+False, the way around it before) must be the same frame, bit for bit. The lamp must light the
+floor under it, and the block beside it must still cast the lamp's shadow where the line from
+the lamp over the block's top meets the floor. Broken on purpose: with ``light_body`` left at 0
+(no body passed to the caster programs), the bulb's frames are the frames with the lamp off and
+every test here fails.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import DirectionalLight, Emissive, Material, MeshRef, Mirror, PointLight, Transform, look_rotation
+from engine.assets.mesh import box, plane, quad, sphere
+from tests.support import look_from, six_pass_only
+
+SIZE = (320, 240)
+LAMP = glm.vec3(0.0, 2.0, 0.0)
+BULB = 0.15                      # the bulb's radius: the light at its centre
+BLOCK = glm.vec3(1.2, 0.4, 0.3)  # a 0.8 m block beside the lamp, on the floor
+SUN = glm.vec3(-0.5, -1.0, -0.3)
+# The spot aims down and a little out; 40 degrees: at most SPOT_MAP_MAX_ANGLE, one map of its own.
+# "point_six_pass": the point light's cube drawn a face a pass where the context draws it layered.
+KINDS = {"point": {}, "point_six_pass": {}, "spot": {"spot_angle": 40.0, "spot_blend": 0.1}}
+PATHS = {"point": ("layered", "six_pass"), "point_six_pass": ("six_pass",), "spot": ("spot_map",)}
+
+
+def _level(kind: str, bulb_casts: bool = True, lamp: float = 12.0, shadows: bool = True, sun: bool = False,
+           mirror: bool = False, carries: bool = True):
+    def build(world):
+        look_from(world, (0.0, 4.5, 6.5), (0.0, 0.0, 0.0))
+        world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        world.spawn(Transform(position=BLOCK), MeshRef(box((0.8, 0.8, 0.8))), Material(color=(0.3, 0.5, 0.8)))
+        world.spawn(Transform(position=LAMP, rotation=look_rotation(glm.vec3(0.15, -1.0, 0.1))),
+                    MeshRef(sphere(BULB), casts_shadows=bulb_casts), Material(color=(1.0, 0.9, 0.7)), Emissive(2.0),
+                    PointLight(intensity=lamp, range=9.0, shadows=shadows, **KINDS[kind]))
+        if sun:
+            world.spawn(DirectionalLight(direction=tuple(SUN), intensity=2.0))
+        if mirror:  # its back to -x, facing the lamp: the lamp's image lights the floor before it
+            world.spawn(Transform(position=(-3.0, 1.5, 0.0), rotation=look_rotation(glm.vec3(-1.0, 0.0, 0.0))),
+                        MeshRef(quad(3.0, 2.5)), Material(), Mirror(reflects_light=carries))
+    return build
+
+
+def _frame(scene, build) -> tuple[np.ndarray, object, tuple[int, str]]:
+    """The second frame of ``build`` (the first draws the maps: their count and the path of
+    the last, with it), its runner."""
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    first = (runner.stats.shadow_maps_drawn, runner.stats.shadow_path)
+    return runner.frame().astype(np.int32), runner, first
+
+
+def _on_floor(origin: glm.vec3, through: glm.vec3) -> glm.vec3:
+    """Where the line from ``origin`` through ``through`` meets the floor (y = 0)."""
+    way = through - origin
+    return origin + way * (-origin.y / way.y)
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_a_lamp_on_its_glowing_bulb_lights_as_if_the_bulb_cast_nothing(scene, kind, monkeypatch):
+    if kind == "point_six_pass":
+        six_pass_only(monkeypatch)
+    own, runner, (drawn, path) = _frame(scene, _level(kind))
+    assert drawn == 1 and path in PATHS[kind], (drawn, path)
+    no_caster, _, _ = _frame(scene, _level(kind, bulb_casts=False))
+    np.testing.assert_array_equal(own, no_caster)
+
+    # The lamp lights the floor under it (against the lamp off)...
+    off, _, _ = _frame(scene, _level(kind, lamp=0.0))
+    x, y = runner.project(glm.vec3(LAMP.x, 0.0, LAMP.z) + glm.vec3(0.3, 0.0, 0.3))
+    assert own[y, x].sum() > off[y, x].sum() + 60, (own[y, x], off[y, x])
+    # ...and the block still casts its shadow, beyond the block from the lamp (against the
+    # lamp casting no shadows).
+    unshadowed, _, _ = _frame(scene, _level(kind, shadows=False))
+    x, y = runner.project(_on_floor(LAMP, BLOCK + glm.vec3(0.0, 0.3, 0.0)))
+    assert own[y, x].sum() + 30 < unshadowed[y, x].sum(), (own[y, x], unshadowed[y, x])
+
+
+def test_the_suns_map_keeps_the_bulbs_shadow(scene):
+    """The sun casts the bulb's shadow on the floor: the frame differs from the one with the
+    bulb a non-caster only there, darker."""
+    own, runner, _ = _frame(scene, _level("point", sun=True))
+    no_caster, _, _ = _frame(scene, _level("point", bulb_casts=False, sun=True))
+    x, y = runner.project(_on_floor(LAMP, LAMP + SUN))
+    differ = np.argwhere(np.abs(own - no_caster).sum(axis=2) > 0)
+    assert len(differ) > 0
+    assert np.abs(differ - (y, x)).max() <= 8, (differ.min(axis=0), differ.max(axis=0), (y, x))
+    assert own[y, x].sum() + 30 < no_caster[y, x].sum(), (own[y, x], no_caster[y, x])
+
+
+def test_a_lamps_image_in_a_mirror_leaves_its_bulbs_image_out(scene):
+    """The lamp's image through a mirror that carries light has a map of its own, drawn with
+    the scene carried through the mirror, where the bulb's image surrounds the lamp's image as
+    the bulb surrounds the lamp: left out too, the image lights the floor before the mirror."""
+    own, runner, (drawn, _) = _frame(scene, _level("point", mirror=True))
+    assert runner.stats.virtual_lights == 1 and drawn == 2, (runner.stats.virtual_lights, drawn)
+    no_caster, _, _ = _frame(scene, _level("point", bulb_casts=False, mirror=True))
+    np.testing.assert_array_equal(own, no_caster)
+    # A floor point whose line to the lamp's image (-6, 2, 0) passes through the mirror's
+    # outline: brighter than with the mirror carrying no light.
+    dark, _, _ = _frame(scene, _level("point", mirror=True, carries=False))
+    x, y = runner.project(glm.vec3(-2.0, 0.0, -0.5))
+    assert own[y, x].sum() > dark[y, x].sum() + 30, (own[y, x], dark[y, x])
