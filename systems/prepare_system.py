@@ -17,7 +17,9 @@ stable slot.  It is asked again when a light came, went, changed or moved, or, w
 answer depends on the camera (more point lights than slots), when the camera moved; the
 answer is published as ``KeptLights`` for the shadows stage.  Lights left out light
 nothing: they are counted in ``RenderStats.lights_cut`` every frame, and a
-``LightLimitWarning`` names them when the count goes up.
+``LightLimitWarning`` names them when the count goes up; so do the point lights that cast
+shadows past the shadow cubes (``LIGHT_LIMITS.point_shadows``; they cast none:
+``RenderStats.shadows_cut``).
 The probes' influence boxes go to the irradiance table when a probe comes, goes, changes or
 moves; their coefficients are projected on the GPU after each capture (the probes stages).
 """
@@ -106,6 +108,7 @@ class PrepareSystem(esper.Processor):
         self._sky_sh: np.ndarray | None = None
         self._flat_sky = True   # no Skybox: the sky cube is the flat background (lights_block's flat_sky)
         self._cut = (0, 0)   # (directional, point) lights the last block left out
+        self._shadows_cut = 0   # point lights casting shadows the last block gave no cube
         self._contact = ContactLamps()   # the lamps with contact shadows the last block gave channels
         self._rect_slots: tuple[int, ...] = ()   # the slots lit as rectangles (lights_block's rect_slots)
         self._rect_cut = 0                       # rectangles past MAX_RECT_LIGHTS, lit as points
@@ -374,7 +377,8 @@ class PrepareSystem(esper.Processor):
         return self.renderer.spot_cookies.set([lamp.cookie for lamp in lamps], names, panels)
 
     def _count_cut(self, kept: KeptLights) -> None:
-        """Keep how many lights of each kind the block left out; warn when either grows."""
+        """Keep how many lights of each kind the block left out, and how many casting point
+        lights it gave no shadow cube; warn when one grows."""
         cut = kept.cut
         if cut[0] > self._cut[0] or cut[1] > self._cut[1]:
             directional = cut[0] + sum(entity is not None for entity in kept.directional)
@@ -385,6 +389,14 @@ class PrepareSystem(esper.Processor):
                 f"active camera, the brightest directional ones: engine/rules/light_rules.py), so {cut[0]} "
                 f"directional and {cut[1]} point lights light nothing (RenderStats.lights_cut)"), stacklevel=2)
         self._cut = cut
+        if kept.shadows_cut > self._shadows_cut:
+            cubes = sum(entity is not None for entity in kept.point_shadows)
+            warnings.warn(LightLimitWarning(
+                f"{cubes + kept.shadows_cut} point lights cast shadows: at most {LIGHT_LIMITS.point_shadows} have "
+                f"shadow cubes at once (those that matter most to the active camera among the lit ones: "
+                f"engine/rules/light_rules.py), so {kept.shadows_cut} cast none (RenderStats.shadows_cut)"),
+                stacklevel=2)
+        self._shadows_cut = kept.shadows_cut
 
     def _probe_boxes(self) -> None:
         """The influence boxes to the irradiance table when a probe came, went, changed or

@@ -4,6 +4,8 @@ maps' caching (a still scene draws no shadow pass); a probe face recaptured when
 it shows moves; the components' checks."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -22,6 +24,7 @@ from components import (
 from components.limits import MAX_FAR
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.portals import spawn_portal_pair
+from engine.core.errors import LightLimitWarning
 from engine.core.portal_math import pair_transform
 from engine.rules.probe_schedule import ProbeSchedule
 from tests.support import box_hits, look_from, pixel_rays, six_pass_only, skip_unless_layered, srgb_to_linear
@@ -647,7 +650,10 @@ def test_a_point_light_ignores_changes_outside_its_reach(scene):
     assert runner.stats.shadow_maps_drawn == 1
 
 
-def test_point_lights_past_the_limit_are_counted_as_cut(scene):
+def test_point_lights_past_the_limit_are_counted_as_cut_and_said_once(scene):
+    """Three lamps cast shadows and two cubes hold them: the third casts none, counted in
+    ``shadows_cut`` every frame and said by a LightLimitWarning when it comes (not again when
+    the lights are chosen again with the same cut)."""
     def build(world):
         look_from(world, (0, 3, 5), (0, 0, 0))
         world.spawn(Transform(), MeshRef(plane(6, 6)), Material())
@@ -655,8 +661,16 @@ def test_point_lights_past_the_limit_are_counted_as_cut(scene):
             world.spawn(Transform(position=(x, 1.5, 0.0)), PointLight(range=5.0, shadows=True))
 
     runner = scene(build)
-    runner.frame()
+    with pytest.warns(LightLimitWarning, match="3 point lights cast shadows: at most 2 have shadow cubes .* so 1 cast "
+                                               r"none \(RenderStats.shadows_cut\)"):
+        runner.frame()
     assert (runner.stats.shadow_maps_drawn, runner.stats.shadows_cut) == (2, 1)
+    lamp = next(entity for entity, _ in runner.world.query_one(PointLight))
+    runner.world.get(lamp, Transform).position += glm.vec3(0.0, 0.1, 0.0)   # (the lights chosen again)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LightLimitWarning)
+        runner.frame()
+    assert runner.stats.shadows_cut == 1
 
 
 @pytest.mark.parametrize("hidden_from_probes", [False, True])
