@@ -21,6 +21,10 @@ one the prepare stage filled the Lights block with (``KeptLights``): a direction
 slot is its light's slot in the block, and the point lights' cubes go to the kept lights the
 rule gives them to (the most important to the camera that cast), each kept in its cube while
 it stays chosen; a light left out of the block casts nothing (``RenderStats.shadows_cut``).
+A light's own entity's mesh casts none of its shadow (``Shadows._draw_casters``); a closed
+caster made apart round a casting point light, small beside its range (a bulb beside its
+lamp's entity, which leaves all the lamp reaches dark), is named once in a ComponentWarning
+(``ShadowSystem._say_enclosed``).
 
 It publishes ``ShadowCasters`` (``engine/rules/shadow_rules.py``): the lights casting this
 frame, so the probes' scheduler can recapture a face where a moved caster's shadow falls.
@@ -47,7 +51,7 @@ from components import (
     Transform,
     Visibility,
 )
-from components.tracking import raw_field
+from components.tracking import raw_field, warn_component
 from engine.core.cube_faces import CUBE_FACES
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
@@ -75,6 +79,7 @@ from engine.rules.light_rules import (
 )
 from engine.rules.probe_rules import pose_bounds, world_bounds
 from engine.rules.shadow_rules import (
+    ENCLOSING_SHARE,
     MAX_VIRTUAL_LIGHTS,
     DirectionalFit,
     ShadowCasters,
@@ -82,6 +87,7 @@ from engine.rules.shadow_rules import (
     boxes_in_reach,
     changed_region,
     directional_fit,
+    holds_point,
     rank_virtual_lights,
     ring_cell,
     ring_fit,
@@ -111,6 +117,7 @@ class ShadowSystem(esper.Processor):
         self._point: dict[int, tuple] = {}         # cube slot -> what its cube was drawn from
         self._casters_seen = -1
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> world box (point lights only)
+        self._enclosed_said: set[tuple[int, int]] = set()   # (light, mesh entity) pairs warned of (_say_enclosed)
         self._uploaded = b""
         self._points_clear = False  # no point light cast since the slots and cubes were last cleared
         self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
@@ -359,6 +366,7 @@ class ShadowSystem(esper.Processor):
                 maps.keep_point(slot, index)
                 stats.shadow_maps_kept += 1
                 continue
+            self._say_enclosed(entity, position, light.range)
             if half_width is None:
                 stats.shadow_path = maps.draw_point(slot, index, position, light.range, light.shadow_resolution,
                                                     light.shadow_softness, layered, how, size, entity)
@@ -371,6 +379,41 @@ class ShadowSystem(esper.Processor):
         used = {row[0] for row in casting}
         for slot in [s for s in self._point if s not in used]:
             del self._point[slot]
+
+    def _say_enclosed(self, light: int, position: glm.vec3, light_range: float) -> None:
+        """Warn, once a pair, where casting point light ``light`` stands inside another
+        entity's mesh that casts, closes round it (``shadow_rules.holds_point``) and is small
+        beside its range (``ENCLOSING_SHARE``): a bulb made apart from its light, whose shadow
+        leaves all the light reaches outside it dark.  (A light's own mesh casts none of its
+        shadow: ``Shadows._draw_casters``.)  Asked when its map is drawn; a batch whose box
+        misses the light costs a comparison, a bent or cut-out mesh is not asked about."""
+        point = np.array(tuple(position), np.float64)
+        for batch in self.renderer.opaque_batches():
+            box = batch.box
+            if box is None or batch.skinned or batch.morphed or batch.alpha_cutoff is not None \
+                    or not (np.all(box[0] <= point) and np.all(point <= box[1])):
+                continue
+            boxes = batch.row_boxes
+            around = np.all((boxes[:, 0] <= point) & (point <= boxes[:, 1]), axis=1) \
+                & (np.max(boxes[:, 1] - boxes[:, 0], axis=1) <= ENCLOSING_SHARE * light_range)
+            if not around.any():
+                continue
+            around &= batch.casting(slice(0, batch.count))
+            for row in np.flatnonzero(around).tolist():
+                entity = batch.entity_at[row]
+                if entity == light or (light, entity) in self._enclosed_said:
+                    continue
+                mesh = self.world.get(entity, MeshRef).mesh
+                model = glm.mat4(*batch.rows["model"][row].tolist())
+                local = glm.inverse(model) * glm.vec4(position, 1.0)
+                if holds_point(mesh.positions, mesh.indices, tuple(glm.vec3(local))):
+                    self._enclosed_said.add((light, entity))
+                    warn_component(
+                        f"PointLight on entity {light} casts shadows from inside the mesh of entity {entity} "
+                        f"({mesh.name!r}), which closes round it and casts shadows too: the light reaches "
+                        f"nothing outside that mesh. If it is the light's bulb, put the PointLight on entity "
+                        f"{entity} (a light's own mesh casts none of its shadow) or give it "
+                        f"MeshRef(casts_shadows=False)")
 
     def _changed_boxes(self) -> tuple[np.ndarray, np.ndarray]:
         """The old and new world boxes of every drawable that moved, came, went or changed

@@ -248,6 +248,50 @@ def boxes_in_reach(lo: np.ndarray, hi: np.ndarray, position: np.ndarray, light_r
     return np.linalg.norm(nearest - position, axis=1) <= light_range
 
 
+# The rays ``holds_point`` casts: fourteen spread round the sphere (the six towards a cube's
+# faces and the eight towards its corners, each turned a little off the axes and diagonals, so
+# a ray along a box's face or through a sphere's pole, an edge or vertex crossed twice or not at
+# all, is the rare case), so an opening of any size (a lampshade's open bottom) lets one out.
+_PARITY_RAYS = np.array([[1.0, 0.1163, 0.0731], [-1.0, 0.0917, -0.1289], [0.1307, 1.0, 0.0617],
+                         [-0.0853, -1.0, 0.1171], [0.0691, -0.1237, 1.0], [0.1033, 0.0779, -1.0],
+                         [1.0, 1.09, 0.93], [1.07, 0.95, -1.0], [1.0, -0.92, 1.06], [0.94, -1.0, -1.08],
+                         [-1.0, 1.05, 0.97], [-0.96, 1.0, -1.07], [-1.04, -0.97, 1.0], [-1.0, -1.06, -0.95]])
+_PARITY_RAYS /= np.linalg.norm(_PARITY_RAYS, axis=1, keepdims=True)
+
+
+# A mesh round a casting point light, at most this share of the light's range across, is
+# taken for a bulb made apart from its light (the shadows stage says so): a room round its
+# lamp is far larger.
+ENCLOSING_SHARE = 0.25
+
+
+def holds_point(positions: np.ndarray, triangles: np.ndarray, point) -> bool:
+    """Whether the surface of ``triangles`` (rows of indices into ``positions``) closes round
+    ``point`` (the same space): each of fourteen rays from the point crosses it an odd number
+    of times (the even-odd rule; Moller and Trumbore's ray-triangle test, in float64).  An
+    open surface (a lampshade, a bowl) lets some ray out with an even count: not held."""
+    corners = np.asarray(positions, np.float64)[np.asarray(triangles, np.int64)]   # (T, 3 corners, xyz)
+    if not len(corners):
+        return False
+    origin = np.asarray(point, np.float64)
+    a = corners[:, 0]
+    e1, e2 = corners[:, 1] - a, corners[:, 2] - a
+    s = origin - a
+    q = np.cross(s, e1)
+    for way in _PARITY_RAYS:
+        p = np.cross(way, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            u = np.einsum("ij,ij->i", s, p) * inv
+            v = (q @ way) * inv
+            t = np.einsum("ij,ij->i", e2, q) * inv
+            crossed = (np.abs(det) > 1e-14) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0)
+        if int(np.count_nonzero(crossed)) % 2 == 0:
+            return False
+    return True
+
+
 def directional_shadow_bounds(lo: np.ndarray, hi: np.ndarray, direction: glm.vec3 | np.ndarray,
                               level_lo: np.ndarray, level_hi: np.ndarray,
                               sweep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
