@@ -15,6 +15,7 @@ block.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -265,7 +266,7 @@ _PARITY_RAYS /= np.linalg.norm(_PARITY_RAYS, axis=1, keepdims=True)
 ENCLOSING_SHARE = 0.25
 
 
-def holds_point(positions: np.ndarray, triangles: np.ndarray, point) -> bool:
+def holds_point(positions: np.ndarray, triangles: np.ndarray, point: Sequence[float] | np.ndarray) -> bool:
     """Whether the surface of ``triangles`` (rows of indices into ``positions``) closes round
     ``point`` (the same space): each of fourteen rays from the point crosses it an odd number
     of times (the even-odd rule; Moller and Trumbore's ray-triangle test, in float64).  An
