@@ -56,7 +56,9 @@ class Decal(TrackedComponent):
 
     Mirrors and portals take no decal (their picture is the view beyond them), nor water,
     see-through surfaces (a Material faded by its alpha: glass is blended after every decal),
-    skinned or morphed meshes (the GPU poses them), nor particles.  A surface that moves
+    skinned or morphed meshes (the GPU poses them), nor particles (a decal that meets a mirror
+    or portal and no surface that takes it, a sticker put on a mirror, is said once in a
+    ComponentWarning: it shows nowhere).  A surface that moves
     through the box, or changes its mesh, is cut again the frame it does; one parented with
     the decal under the same mover is not (nothing moved between them)."""
 

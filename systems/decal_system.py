@@ -33,10 +33,12 @@ from pyglm import glm
 
 from components import Emissive, Material, MeshRef, Mirror, Portal, PortalClone, Refractive, Transform, Visibility
 from components.decal import Decal, FromDecal
+from components.tracking import warn_component
 from components.visibility import DEFAULT_LAYERS
 from engine.assets.mesh import Mesh
 from engine.core.decal_clip import DecalGeometry, decal_geometry, join_geometry, soup
 from engine.core.world import World
+from engine.rules.probe_rules import world_bounds
 
 # How far a surface's pose relative to its decal may drift (box-space units, matrix entries)
 # before its cut is made again: float32 world matrices of two entities moved together agree
@@ -131,6 +133,7 @@ class DecalSystem(esper.Processor):
         self._mesh_bounds: weakref.WeakKeyDictionary[Mesh, np.ndarray] = weakref.WeakKeyDictionary()
         self.cuts = 0  # decals' meshes made (or made again) since the start: what tests count
         self.pieces_cut = 0  # surfaces' pieces cut since the start
+        self._said_alone: set[int] = set()  # decals said to show nowhere (_say_on_views_alone)
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -267,6 +270,8 @@ class DecalSystem(esper.Processor):
             changed = True
         changed |= pieces.keys() != state.pieces.keys()
         state.pieces = pieces
+        if not pieces and look_changed:
+            self._say_on_views_alone(entity, low, high)
         if not changed:
             return False
         self.cuts += 1
@@ -289,6 +294,27 @@ class DecalSystem(esper.Processor):
                                  FromDecal(decal=entity, order=decal.order))
         self._dress(state.part, entity, decal)
         return True
+
+    def _say_on_views_alone(self, entity: int, low: np.ndarray, high: np.ndarray) -> None:
+        """Where a decal, made or changed, reaches no surface that takes one but meets a
+        mirror or portal (a sticker put on a mirror), say once that it shows nowhere: such a
+        surface's picture is the view beyond it (the Decal's docstring)."""
+        if entity in self._said_alone:
+            return
+        world = self.world
+        for kind in (Mirror, Portal):
+            for surface, _ in world.query_one(kind):
+                mesh_ref, transform = world.try_get(surface, MeshRef), world.try_get(surface, Transform)
+                if mesh_ref is None or transform is None:
+                    continue
+                lo, hi = world_bounds(mesh_ref.mesh, transform.world)
+                if np.all(lo <= high) and np.all(hi >= low):
+                    self._said_alone.add(entity)
+                    warn_component(f"Decal on entity {entity}: its box meets the {kind.__name__} of entity {surface} "
+                                   f"and no surface that takes a decal: mirrors and portals take none (their picture "
+                                   f"is the view beyond them), nor water, see-through or posed surfaces, so it "
+                                   f"shows nowhere")
+                    return
 
     def _cut(self, decal: Decal, box_world: np.ndarray, surface: int, mesh: Mesh,
              pose: np.ndarray) -> DecalGeometry | None:
@@ -344,6 +370,7 @@ class DecalSystem(esper.Processor):
 
     def _drop(self, entity: int) -> None:
         self._delete_part(self.states.pop(entity))
+        self._said_alone.discard(entity)
 
     def close(self) -> None:
         self.states.clear()

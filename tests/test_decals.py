@@ -6,11 +6,14 @@ move together), a surface on another layer, turned away, or a mirror left bare, 
 Visibility honoured, emission, and its part and GPU mesh gone with it."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from pyglm import glm
 
 from components import (
+    ComponentWarning,
     DirectionalLight,
     Emissive,
     Material,
@@ -668,3 +671,49 @@ def test_on_a_dense_mesh_the_cut_is_the_whole_soups_cut(scene):
     assert len(cut.positions) == len(whole.positions) > 100
     assert area(cut.positions) == pytest.approx(area(whole.positions), rel=1e-5)
     np.testing.assert_allclose(np.sort(cut.colors[:, 3]), np.sort(whole.alphas), atol=1e-6)
+
+
+def _sticker(behind: bool, portal: bool = False):
+    """A decal thrown onto a mirror (or a portal's opening), with a wall just behind the
+    glass inside its box (``behind``) or none."""
+    def make(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=50.0)
+        if portal:
+            from engine.assets.portals import spawn_portal_pair
+            world.resources["surface"] = spawn_portal_pair(world, (0.0, 0.0, 0.0), None, (8.0, 0.0, 0.0), None,
+                                                           size=(2.0, 2.0))[0]
+        else:
+            world.resources["surface"] = world.spawn(Transform(), MeshRef(quad(2.0, 2.0)), Material(), Mirror())
+        if behind:
+            wall(world, position=(0.0, 0.0, -0.1))
+        world.resources["decal"] = world.spawn(Transform(scale=glm.vec3(0.5, 0.5, 0.5)), Decal(color=LOOK))
+    return make
+
+
+@pytest.mark.parametrize("portal", [False, True])
+def test_a_decal_on_a_mirror_alone_is_said_to_show_nowhere_once(scene, portal):
+    """Mirrors and portals take no decal (their picture is the view beyond them): a sticker
+    put on one alone makes no part, and a ComponentWarning names the decal and the surface,
+    once (not again when it is moved and cut again)."""
+    runner = scene(_sticker(behind=False, portal=portal), SIZE)
+    decal, surface = runner.world.resources["decal"], runner.world.resources["surface"]
+    kind = "Portal" if portal else "Mirror"
+    with pytest.warns(ComponentWarning, match=f"Decal on entity {decal}: its box meets the {kind} of entity "
+                                              f"{surface} .* shows nowhere"):
+        runner.frame()
+    assert not runner.world.query_one(FromDecal)
+    runner.world.get(decal, Decal).color = (0.2, 0.8, 0.1, 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ComponentWarning)
+        runner.frame()
+
+
+def test_no_word_where_a_surface_in_the_box_takes_the_decal(scene):
+    """The same sticker with a wall behind the mirror inside its box: the wall takes it (a
+    part is made), and nothing is said."""
+    runner = scene(_sticker(behind=True), SIZE)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ComponentWarning)
+        runner.frame()
+    assert len(runner.world.query_one(FromDecal)) == 1
