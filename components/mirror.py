@@ -23,7 +23,8 @@ from components.visibility import LAYER_FIELDS, ShownLayers
 @dataclass(eq=False)
 class Mirror(ShownLayers):
     """Reflects the scene in the plane of its flat mesh (a virtual camera reflected in the plane,
-    with an oblique near plane on it, as in Lengyel's "Oblique View Frustum" 2005).
+    with an oblique near plane on it, as in Lengyel's "Oblique View Frustum" 2005).  Not on an
+    entity with a Portal (refused: ``mirror_rules.check_one_surface``).
 
     ``color`` tints the reflection, ``reflect_rate`` mixes it with the mirror's own shading,
     ``roughness`` blurs it (a mip bias on the reflection image), ``resolution_scale`` renders its reflection

@@ -540,7 +540,8 @@ DEFAULT_SUN_DIRECTION: tuple[float, float, float] = tuple(glm.normalize(glm.vec3
 
 @dataclass(eq=False)
 class Skybox(TrackedComponent):
-    """The world's background cube map: six face images, or a generated gradient sky.
+    """The world's background cube map: six face images, or a generated gradient sky.  A world
+    has one: a second is refused (``light_rules.check_one_sky``); change its fields instead.
 
     ``faces`` is None (generate from the colours below) or six HxWx3 float arrays in GL
     face order +X, -X, +Y, -Y, +Z, -Z, linear colour: a photographed or rendered sky from an

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import engine.rules.camera_rules  # noqa: F401  (registers the orthographic camera's rule with every world)
 import engine.rules.detail_rules  # noqa: F401  (registers the level-of-detail rule with every world)
-import engine.rules.mirror_rules  # noqa: F401  (registers the mirror-mesh invariant with every world)
+import engine.rules.light_rules  # noqa: F401  (registers the one-sky rule with every world)
+import engine.rules.mirror_rules  # noqa: F401  (registers the mirror-mesh and one-surface invariants with every world)
 import engine.rules.particle_rules  # noqa: F401  (registers the mesh-emitter rule with every world)
 import engine.rules.pose_rules  # noqa: F401  (registers the Skin and Morph rules with every world)
 import engine.rules.uv_rules  # noqa: F401  (registers the second-UV rule with every world)

@@ -18,6 +18,8 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Portal,
+    Skybox,
     Transform,
     Water,
 )
@@ -67,6 +69,42 @@ def test_water_added_to_an_entity_without_a_mirror_is_refused_at_that_call(world
     world.add_component(entity, Mirror())
     world.add_component(entity, Water())
     assert world.has(entity, Water)
+
+
+def test_a_mirror_and_a_portal_on_one_entity_are_refused_in_either_order_and_nothing_is_made(world):
+    """Each makes the surface's pixels show a view of its own: which one showed was left to
+    the order the systems met them in."""
+    before = set(world.entities())
+    for parts in ((Mirror(), Portal()), (Portal(), Mirror())):
+        joining = type(parts[1]).__name__
+        with pytest.raises(ComponentValueError, match=rf"entity \d+: a {joining} on an entity with a "
+                                                      f"{type(parts[0]).__name__}: its pixels show one view"):
+            world.spawn(Transform(), MeshRef(quad()), Material(), *parts)
+        assert set(world.entities()) == before
+    mirror = world.spawn(Transform(), MeshRef(quad()), Material(), Mirror())
+    with pytest.raises(ComponentValueError, match="a Portal on an entity with a Mirror"):
+        world.add_component(mirror, Portal())
+    assert not world.has(mirror, Portal)
+    world.remove_component(mirror, Mirror)
+    world.add_component(mirror, Portal())   # (a surface may change from one to the other)
+    assert world.has(mirror, Portal)
+
+
+def test_a_second_skybox_is_refused_naming_the_first_and_after_it_goes_one_is_taken(world):
+    first = world.spawn(Skybox())
+    before = set(world.entities())
+    with pytest.raises(ComponentValueError, match=rf"Skybox on entity \d+: entity {first} holds the world's Skybox "
+                                                  "already, and a world has one sky"):
+        world.spawn(Skybox(face_size=16))
+    assert set(world.entities()) == before
+    other = world.spawn(Transform())
+    with pytest.raises(ComponentValueError, match=f"entity {first} holds the world's Skybox"):
+        world.add_component(other, Skybox())
+    world.add_component(first, Skybox(face_size=16))   # (its own sky replaced: still one)
+    world.delete_entity(first)
+    world.step(0.0)
+    world.add_component(other, Skybox())
+    assert [entity for entity, _ in world.query_one(Skybox)] == [other]
 
 
 def test_a_rough_mirror_and_water_are_refused_together_at_spawn_join_and_write(world):

@@ -332,12 +332,11 @@ class _RandomGlassAndMirrors(Game):
     def build(self, world) -> None:
         import random
 
-        from components import Camera, DirectionalLight, Skybox
+        from components import Camera, DirectionalLight
         from tests.test_slot_order import _random_level
         rng = random.Random(self.seed)
-        _random_level(self.seed, 10, 2, 1, {})(world)
+        _random_level(self.seed, 10, 2, 1, {})(world)   # (its sky too)
         world.spawn(DirectionalLight(direction=(-0.4, -1.0, -0.3), intensity=1.5))
-        world.spawn(Skybox())
         for _ in range(6):
             yaw = glm.angleAxis(rng.uniform(0, 2 * math.pi), glm.vec3(0, 1, 0))
             world.spawn(Transform(position=(rng.uniform(-4, 4), rng.uniform(-1, 2), rng.uniform(-5, 3)), rotation=yaw),

@@ -67,13 +67,13 @@ from typing import Any, NamedTuple
 import numpy as np
 from pyglm import glm
 
-from components import DirectionalLight, PointLight, Skybox, Transform
+from components import ComponentValueError, DirectionalLight, PointLight, Skybox, Transform
 from components.limits import MIN_LIGHT_SIDE
 from components.rendering import DEFAULT_SUN_DIRECTION
 from components.tracking import raw_field
 from engine.core.budget import spending_order
 from engine.core.color import LUMINANCE
-from engine.core.world import World
+from engine.core.world import World, world_invariant
 from engine.rules.frame_rules import frame_rules
 
 # A light left out replaces a kept one only at more than this times its importance.
@@ -722,3 +722,16 @@ def kept_lights(world: World, limits: LightLimits) -> KeptLights:
     run alone), a first choice made now (not stored)."""
     kept = world.resources.get(KeptLights)
     return kept if kept is not None else choose_lights(world, None, limits)
+
+
+@world_invariant(Skybox)
+def check_one_sky(world: World, entity: int, joining: Any = None, **_other: Any) -> None:
+    """Refuse a second Skybox in a world: the sky drawn, its light from all round and its sun
+    are the world's one sky's (a Skybox's fields change it; another would leave which one
+    shows to chance)."""
+    if not isinstance(joining, Skybox):
+        return
+    others = [other for other, _ in world.query_one(Skybox) if other != entity]
+    if others:
+        raise ComponentValueError(f"Skybox on entity {entity}: entity {min(others)} holds the world's Skybox "
+                                  "already, and a world has one sky; change that one's fields, or remove it first")

@@ -116,3 +116,17 @@ def check_surface_material(world: World, entity: int, joining: Any = None, alpha
     if sides and surface is not None:
         raise ComponentValueError(f"entity {entity}: Material.double_sided on a {surface}: a mirror or portal is "
                                   "seen from its front only (give its back an entity of its own)")
+
+
+@world_invariant(Mirror, Portal)
+def check_one_surface(world: World, entity: int, joining: Any = None, **_other: Any) -> None:
+    """Refuse a Mirror and a Portal on one entity: each makes the surface's pixels show a view
+    of its own (a mirror's reflection, a portal's partner's side), so a surface is one or the
+    other."""
+    if not isinstance(joining, (Mirror, Portal)) or not world.exists(entity):
+        return
+    other = Portal if isinstance(joining, Mirror) else Mirror
+    if world.try_get(entity, other) is not None:
+        raise ComponentValueError(f"entity {entity}: a {type(joining).__name__} on an entity with a {other.__name__}: "
+                                  "its pixels show one view, a mirror's reflection or a portal's partner's side; "
+                                  "make the other an entity of its own")
