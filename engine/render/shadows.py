@@ -254,13 +254,13 @@ class ShadowMaps:
         return (slot % 2) * self.tile, (slot // 2) * self.tile
 
     def draw_directional(self, slot: int, fit: DirectionalFit, resolution: int, softness: float,
-                         region: tuple[int, int, int, int] | None = None, body: int = 0) -> int:
+                         region: tuple[int, int, int, int] | None = None) -> int:
         """Draw directional light ``slot``'s map (its tile of the atlas, ``resolution`` texels
         a side) from ``fit``, and write its row of the Shadows block.  With ``region`` (x, y,
         width, height in the tile's texels) only those texels are cleared and drawn again (the
         casters' draws scissored to them: the same depths a whole redraw writes there).
-        ``body``: the light's entity (``_draw_casters``).  Returns the texels drawn."""
-        texels = self._draw_tile(slot, slot, fit, resolution, region, body)
+        Returns the texels drawn."""
+        texels = self._draw_tile(slot, slot, fit, resolution, region)
         # World -> the tile's uv and depth in [0, 1]; the block's rows written again only when
         # what they are made of changed (a frame redrawing a region under moved casters keeps them).
         width = self.atlas.size[0]
@@ -284,14 +284,14 @@ class ShadowMaps:
         return texels
 
     def draw_ring(self, ring: int, tile: int, slot: int, fit: DirectionalFit, resolution: int, softness: float,
-                  region: tuple[int, int, int, int] | None = None, body: int = 0) -> int:
+                  region: tuple[int, int, int, int] | None = None) -> int:
         """Draw ring ``ring`` (a cascade about the camera, ``DirectionalLight.shadow_cascades``)
         of directional light ``slot`` into atlas tile ``tile`` from ``fit``, as
         ``draw_directional`` draws a level map (the light's own, drawn first), and write its
         rows of the Shadows block: the map from the level map's uv to the ring's own [0, 1]
         square (the lookup tests a point is inside it before it reads the atlas), its texel,
         where the tile lies and the filter's margin."""
-        texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region, body)
+        texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region)
         width = self.atlas.size[0]
         key = MAX_DIRECTIONAL_LIGHTS + ring
         level = self._level_uv[slot]   # the light's level map, drawn before its rings
@@ -334,10 +334,10 @@ class ShadowMaps:
                     kept[2].release()
 
     def _draw_tile(self, tile: int, camera: int, fit: DirectionalFit, resolution: int,
-                   region: tuple[int, int, int, int] | None, body: int) -> int:
+                   region: tuple[int, int, int, int] | None) -> int:
         """The casters' depths into atlas ``tile`` (``resolution`` texels a side) from ``fit``
-        (its Camera block kept under ``camera``), all of it or only ``region``, light ``body``'s
-        mesh left out; the texels drawn."""
+        (its Camera block kept under ``camera``), all of it or only ``region``; the texels drawn
+        (a sun has no body: ``_draw_casters``)."""
         x, y = self.tile_origin(tile)
         square = (x, y, resolution, resolution)
         rect = square if region is None else (x + region[0], y + region[1], region[2], region[3])
@@ -346,7 +346,7 @@ class ShadowMaps:
         apply_pass_state(self.ctx, _CASTERS, square, rect)
         framebuffer.clear(depth=1.0, viewport=rect)
         self._bind_fit(camera, fit, resolution)
-        self._draw_casters(None, _DEPTH, body=body)
+        self._draw_casters(None, _DEPTH)
         return rect[2] * rect[3]
 
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
