@@ -403,7 +403,10 @@ class ShadowSystem(esper.Processor):
                 entity = batch.entity_at[row]
                 if entity == light or (light, entity) in self._enclosed_said:
                     continue
-                mesh = self.world.get(entity, MeshRef).mesh
+                mesh_ref = self.world.try_get(entity, MeshRef)
+                if mesh_ref is None:
+                    continue
+                mesh = mesh_ref.mesh
                 model = glm.mat4(*batch.rows["model"][row].tolist())
                 local = glm.inverse(model) * glm.vec4(position, 1.0)
                 if holds_point(mesh.positions, mesh.indices, tuple(glm.vec3(local))):
