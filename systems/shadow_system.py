@@ -118,6 +118,7 @@ class ShadowSystem(esper.Processor):
         self._casters_seen = -1
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> world box (point lights only)
         self._enclosed_said: set[tuple[int, int]] = set()   # (light, mesh entity) pairs warned of (_say_enclosed)
+        self._enclosure_asked: set[int] = set()   # the casting point lights asked about every mesh (_say_enclosed)
         self._uploaded = b""
         self._points_clear = False  # no point light cast since the slots and cubes were last cleared
         self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
@@ -332,6 +333,7 @@ class ShadowSystem(esper.Processor):
                 maps.clear_points()
                 self._point.clear()
                 self._bounds.clear()
+                self._enclosure_asked.clear()
                 maps.drop_unused_cubes(set())
                 maps.fit_spot_atlas(0)
                 self._points_clear = True
@@ -366,7 +368,6 @@ class ShadowSystem(esper.Processor):
                 maps.keep_point(slot, index)
                 stats.shadow_maps_kept += 1
                 continue
-            self._say_enclosed(entity, position, light.range)
             if half_width is None:
                 stats.shadow_path = maps.draw_point(slot, index, position, light.range, light.shadow_resolution,
                                                     light.shadow_softness, layered, how, size, entity)
@@ -375,40 +376,48 @@ class ShadowSystem(esper.Processor):
                                                    light.shadow_resolution, light.shadow_softness, entity)
             self._point[slot] = key
             stats.shadow_maps_drawn += 1
+        self._say_enclosed([(entity, transform.world[3].xyz, light.range)
+                            for _, _, entity, light, transform in casting])
         maps.drop_unused_cubes({row[0] for row in casting if row[0] not in spots})
         used = {row[0] for row in casting}
         for slot in [s for s in self._point if s not in used]:
             del self._point[slot]
 
-    def _say_enclosed(self, light: int, position: glm.vec3, light_range: float) -> None:
-        """Warn, once a pair, where casting point light ``light`` stands inside another
-        entity's mesh that casts, closes round it (``shadow_rules.holds_point``) and is small
-        beside its range (``ENCLOSING_SHARE``): a bulb made apart from its light, whose shadow
-        leaves all the light reaches outside it dark.  (A light's own mesh casts none of its
-        shadow: ``Shadows._draw_casters``.)  Asked when its map is drawn; a batch whose box
-        misses the light costs a comparison, a bent or cut-out mesh is not asked about."""
-        point = np.array(tuple(position), np.float64)
-        for batch in self.renderer.opaque_batches():
-            box = batch.box
-            if box is None or batch.skinned or batch.morphed or batch.alpha_cutoff is not None \
-                    or not (np.all(box[0] <= point) and np.all(point <= box[1])):
-                continue
-            boxes = batch.row_boxes
-            around = np.all((boxes[:, 0] <= point) & (point <= boxes[:, 1]), axis=1) \
-                & (np.max(boxes[:, 1] - boxes[:, 0], axis=1) <= ENCLOSING_SHARE * light_range)
-            if not around.any():
-                continue
-            around &= batch.casting(slice(0, batch.count))
-            for row in np.flatnonzero(around).tolist():
-                entity = batch.entity_at[row]
-                if entity == light or (light, entity) in self._enclosed_said:
+    def _say_enclosed(self, casting: list[tuple[int, glm.vec3, float]]) -> None:
+        """Warn, once a pair, where a casting point light (``casting``: entity, position,
+        range) stands inside another entity's mesh that casts, closes round it
+        (``shadow_rules.holds_point``) and is small beside its range (``ENCLOSING_SHARE``): a
+        bulb made apart from its light, whose shadow leaves all the light reaches outside it
+        dark.  (A light's own mesh casts none of its shadow: ``Shadows._draw_casters``.)  A
+        light is asked about every mesh when it starts to cast, and each mesh that came this
+        frame about every casting light (the world boxes ``_changed_boxes`` keeps): a still
+        scene, and one whose things only move, asks nothing.  A bent or cut-out mesh is not
+        asked about."""
+        fresh = {entity for entity, _, _ in casting if entity not in self._enclosure_asked}
+        self._enclosure_asked = {entity for entity, _, _ in casting}
+        added = [entity for entity in self.world.frame.added if entity in self._bounds]
+        if not fresh and not added:
+            return
+        world = self.world
+        judge: ShadowCasting | None = None
+        for light, position, light_range in casting:
+            point = tuple(position)
+            for entity in (self._bounds if light in fresh else added):
+                lo, hi = self._bounds[entity]
+                if entity == light or (light, entity) in self._enclosed_said \
+                        or not all(a <= p <= b for a, p, b in zip(lo.tolist(), point, hi.tolist(), strict=True)) \
+                        or max((hi - lo).tolist()) > ENCLOSING_SHARE * light_range:
                     continue
-                mesh_ref = self.world.try_get(entity, MeshRef)
-                if mesh_ref is None:
+                mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
+                if mesh_ref is None or transform is None:
                     continue
-                mesh = mesh_ref.mesh
-                model = glm.mat4(*batch.rows["model"][row].tolist())
-                local = glm.inverse(model) * glm.vec4(position, 1.0)
+                mesh, material = mesh_ref.mesh, world.try_get(entity, Material)
+                if mesh.skinned or mesh.morph_count or (material is not None and material.alpha_cutoff is not None):
+                    continue
+                judge = judge or ShadowCasting(world)
+                if not judge.casts(entity, mesh_ref, world.try_get(entity, Visibility)):
+                    continue
+                local = glm.inverse(transform.world) * glm.vec4(position, 1.0)
                 if holds_point(mesh.positions, mesh.indices, tuple(glm.vec3(local))):
                     self._enclosed_said.add((light, entity))
                     warn_component(

@@ -17,9 +17,11 @@ every test of it fails.
 A bulb made as an entity of its own round a lamp that casts is a mistake the engine cannot
 undo (it may be a shade meant to block), so the shadows stage names it in a ComponentWarning
 (``ShadowSystem._say_enclosed``): a closed caster round the light (``shadow_rules.holds_point``,
-held to the distance from a sphere's centre below), small beside its range. Broken on purpose:
-without the size test a closed room round its lamp is named; with any odd ray taken for "held",
-an open lampshade is; without the pairs remembered, the bulb is named again.
+held to the distance from a sphere's centre below), small beside its range, asked when the light
+starts to cast and when a mesh comes. Broken on purpose: without the size test a closed room
+round its lamp is named; with any odd ray taken for "held", an open lampshade is; with the
+meshes that came not asked, a bulb made after its lamp is not named; with a light that starts
+to cast not asked, a bulb made before it is not.
 """
 from __future__ import annotations
 
@@ -177,6 +179,39 @@ def test_a_closed_caster_round_a_lamp_made_apart_from_it_is_said_once(scene):
         warnings.simplefilter("error", ComponentWarning)
         runner.frame()
     assert runner.stats.shadow_maps_drawn == 1
+
+
+def test_a_bulb_that_comes_round_a_casting_lamp_later_is_said_the_frame_it_comes(scene):
+    """The lamp casts alone for a frame; the closed bulb made round it after is said then
+    (the meshes that came are asked about every casting light)."""
+    def build(world):
+        look_from(world, (0.0, 4.5, 6.5), (0.0, 0.0, 0.0))
+        world.spawn(Transform(), MeshRef(plane(14, 14)), Material())
+        world.resources["lamp"] = world.spawn(Transform(position=LAMP), PointLight(range=9.0, shadows=True))
+
+    runner = scene(build, SIZE)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ComponentWarning)
+        runner.frame()
+    bulb = runner.world.spawn(Transform(position=LAMP), MeshRef(sphere(BULB)), Material(), Emissive(2.0))
+    with pytest.warns(ComponentWarning, match=f"PointLight on entity {runner.world.resources['lamp']} casts "
+                                              f"shadows from inside the mesh of entity {bulb} "):
+        runner.frame()
+
+
+def test_a_lamp_that_starts_to_cast_inside_a_bulb_made_before_is_said(scene):
+    """The bulb and its lamp stand a frame with the lamp's shadows off; turned on, the lamp
+    is asked about every mesh (none came this frame) and the bulb is said."""
+    runner = scene(_bulb_apart("bulb"), SIZE)
+    lamp, bulb = runner.world.resources["lamp"], runner.world.resources["mesh"]
+    runner.world.get(lamp, PointLight).shadows = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ComponentWarning)
+        runner.frame()
+        runner.frame()
+    runner.world.get(lamp, PointLight).shadows = True
+    with pytest.warns(ComponentWarning, match=f"entity {lamp} casts shadows from inside the mesh of entity {bulb} "):
+        runner.frame()
 
 
 @pytest.mark.parametrize("how", ["no_caster", "shade", "room", "beside"])

@@ -582,7 +582,7 @@ class InstanceBatch:
     def remove(self, entity: int) -> None:
         index = self.row_of.pop(entity)
         last = self.count - 1
-        cast = not self.may_not_cast or bool(self.casting(slice(index, index + 1))[0])
+        cast = not self.may_not_cast or bool(self._casting(slice(index, index + 1))[0])
         if self._non_casters:
             self._non_casters.discard(entity)
             self.may_not_cast = bool(self._non_casters)
@@ -683,7 +683,7 @@ class InstanceBatch:
         changed |= (kept[rows] != written).any(axis=1)  # turned inside the same box
         kept[rows] = written
         if self.may_not_cast:
-            changed &= self.casting(rows)  # a move of what casts nothing changes no shadow
+            changed &= self._casting(rows)  # a move of what casts nothing changes no shadow
         if changed.any():
             # The old boxes (NaN: never measured, left out by fmin/fmax) and the new ones.
             both = np.concatenate((old, box) if changed.all() else (old[changed], box[changed]))
@@ -711,7 +711,7 @@ class InstanceBatch:
         lx, ly, lz = lo_ends
         hx, hy, hz = hi_ends
         # Which rows cast, where some may not (a move of what casts nothing changes no shadow).
-        casting = self.casting(rows).tolist() if self.may_not_cast else None
+        casting = self._casting(rows).tolist() if self.may_not_cast else None
         parts: list[tuple[list[float], list[float]]] = []   # each changed row's old and new box
         written = self.rows["model"][rows]
         kept = self._row_models
@@ -792,7 +792,7 @@ class InstanceBatch:
         lo, hi = self._boxes_for(len(self.rows))[self.row_of[entity]].tolist()
         self._note_changed(lo, hi)
 
-    def casting(self, rows: np.ndarray | slice) -> np.ndarray:
+    def _casting(self, rows: np.ndarray | slice) -> np.ndarray:
         """Whether each of ``rows`` is drawn into the shadow maps, by its fields as written
         (``visibility_rules.row_casts_shadow``)."""
         slots = self.rows["slots"][rows]
