@@ -2,9 +2,10 @@
 
 A Traveller whose bounds straddle an open portal's rectangle (open as
 ``engine.rules.frame_rules.open_portal_pairs`` says, the rule travel and the views use: a portal
-with a disabled, deleted or Transform-less partner slices nothing) is drawn only in front of
-that portal (a Slice clip plane), and a clone, carried by the pair transform, draws the
-part that went through in front of the partner.  Clones are made when straddling starts
+with a disabled, deleted or Transform-less partner slices nothing), its origin in front of it
+(a portal is one-way: a thing pushed into its back is not going through and is drawn whole),
+is drawn only in front of that portal (a Slice clip plane), and a clone, carried by the
+pair transform, draws the part that went through in front of the partner.  Clones are made when straddling starts
 and deleted when it ends, so entities are not spawned every frame.  It runs before the
 TransformSystem (on this frame's poses) so clones get their world matrices this frame.
 """
@@ -68,14 +69,19 @@ class PortalSliceSystem(esper.Processor):
     @staticmethod
     def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals, skin: Skin | None = None, morph: Morph | None = None):
         """(slice plane, carry, partner's plane, portal) of the first portal cutting the bounds
-        (a posed mesh's as its ``skin`` and ``morph`` pose it)."""
+        (a posed mesh's as its ``skin`` and ``morph`` pose it) with the entity's origin in
+        front of it, the point travel carries (or on it): a portal is one-way, so a thing
+        pushed into its back is not going through it and is drawn whole, with no clone."""
         mesh = mesh_ref.mesh
         bounds = None if skin is None and morph is None else \
             posed_bounds(mesh, skin.joint_matrices if skin else None, morph.weights if morph else None,
                          skin is not None and skin.skinning == "dual_quaternion")
         corners = world_corners(mesh, model, bounds)
+        origin = glm.vec3(model[3])
         for entity, portal, in_world, out_world in portals:
             plane = portal_plane(in_world)
+            if glm.dot(glm.vec3(plane), origin) + plane.w < 0.0:
+                continue  # behind the portal: it came in by the back, which carries nothing
             distances = corners[:, :3] @ np.array(glm.vec3(plane)) + plane.w
             if distances.min() >= 0.0 or distances.max() <= 0.0:
                 continue

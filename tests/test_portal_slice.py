@@ -94,3 +94,28 @@ def test_slice_and_clone_go_when_the_box_is_pulled_back_out(scene):
     kinds = ("meshes", "textures", "batches")  # (programs built differ: slicing needed other variants)
     counts = runner.engine.renderer.resource_counts()
     assert [counts[k] for k in kinds] == [never_through.engine.renderer.resource_counts()[k] for k in kinds]
+
+
+def test_a_box_pushed_into_the_back_of_a_portal_is_drawn_whole(scene):
+    """A portal is one-way (travel carries what crosses its front): a bar pushed into A
+    from behind, its origin behind A, is not going through, so it is not sliced and has no
+    clone beyond B; seen from the side, both its halves show where they are."""
+    ents = {}
+
+    def build(world):
+        build_pair(world, ents, (-7.0, 1.6, -0.5), (-2.8, 1.5, -0.5))
+        world.get(ents["bar"], Transform).position = (-2.8, 1.5, -0.2)  # origin 0.2 m behind A
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    assert not runner.world.has(ents["bar"], Slice)
+    assert runner.world.query_one(PortalClone) == []
+    ids = runner.ids()
+    for z in (0.6, -0.6):  # the half through A's plane (in front) and the half behind it
+        col, row = runner.project((-2.8, 1.5, z))
+        assert ids[row, col] == ents["bar"]
+    # Moved so its origin is in front of A (by as much), the same bar is sliced again.
+    runner.world.get(ents["bar"], Transform).position = (-2.8, 1.5, 0.2)
+    runner.frame()
+    assert runner.world.get(ents["bar"], Slice).plane == glm.vec4(0, 0, 1, 0)
+    assert len(runner.world.query_one(PortalClone)) == 1
