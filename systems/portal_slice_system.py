@@ -17,12 +17,29 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import Material, MeshRef, Morph, Portal, PortalClone, Skin, Slice, Transform, Traveller
+from components import (
+    Emissive,
+    Material,
+    MeshRef,
+    Morph,
+    Portal,
+    PortalClone,
+    Reflective,
+    Refractive,
+    Skin,
+    Slice,
+    Transform,
+    Traveller,
+)
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.skinning import posed_bounds
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.rules.frame_rules import frame_rules, world_corners
+
+# What a clone copies from its source to look as it does (kept the same while it lasts); where
+# it is drawn (Visibility) and whether it casts shadows (MeshRef) its row reads off the source.
+CLONE_LOOKS = (Material, Emissive, Reflective, Refractive)
 
 
 class PortalSliceSystem(esper.Processor):
@@ -33,8 +50,11 @@ class PortalSliceSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         portals = self._open_portals()
-        bent, morphs = world.changed(Skin), world.changed(Morph)
+        bent, morphs, meshes = world.changed(Skin), world.changed(Morph), world.changed(MeshRef)
+        restyled = [(kind, world.changed(kind)) for kind in CLONE_LOOKS]
+        travelling = set()
         for entity, (_, mesh_ref, transform) in world.query(Traveller, MeshRef, Transform):
+            travelling.add(entity)
             skin = world.try_get(entity, Skin) if mesh_ref.mesh.skinned else None
             morph = world.try_get(entity, Morph) if mesh_ref.mesh.morph_count else None
             straddled = self._straddled(mesh_ref, current_world_matrix(world, transform), portals, skin, morph) \
@@ -45,9 +65,15 @@ class PortalSliceSystem(esper.Processor):
             plane, carry, exit_plane, portal = straddled
             self._slice(entity, plane)
             clone = self.clones.get(entity)
+            if clone is not None and world.exists(clone) and entity in meshes \
+                    and world.get(clone, MeshRef).mesh is not mesh_ref.mesh:  # a new mesh (a level of detail)
+                world.delete_entity(clone)
             if clone is None or not world.exists(clone):
                 clone = self.clones[entity] = self._spawn_clone(entity, mesh_ref, portal)
-            else:  # posed as its source is, this frame
+            else:  # looks and is posed as its source does, this frame
+                for kind, changed in restyled:
+                    if entity in changed:
+                        self._copy_look(entity, clone, kind)
                 if skin is not None and entity in bent:
                     world.get(clone, Skin).joint_matrices = skin.joint_matrices
                 if morph is not None and entity in morphs:
@@ -56,7 +82,8 @@ class PortalSliceSystem(esper.Processor):
             position, rotation, scale = _decompose(carry * current_world_matrix(world, transform))
             clone_t.position, clone_t.rotation, clone_t.scale = position, rotation, scale
             self._slice(clone, exit_plane)
-        for source in [s for s in self.clones if not world.exists(s) or not world.has(s, Traveller)]:
+        # Deleted, or no longer a Traveller with a mesh and a place: its clone goes too.
+        for source in [s for s in self.clones if s not in travelling]:
             self._release(source)
 
     def _open_portals(self) -> list[tuple[int, Portal, glm.mat4, glm.mat4]]:
@@ -102,10 +129,11 @@ class PortalSliceSystem(esper.Processor):
 
     def _spawn_clone(self, source: int, mesh_ref: MeshRef, portal: int) -> int:
         world = self.world
-        material = world.try_get(source, Material)
         components = [Transform(), MeshRef(mesh_ref.mesh), PortalClone(source=source, portal=portal)]
-        if material is not None:
-            components.append(replace(material))  # its own copy: components belong to one entity
+        for kind in CLONE_LOOKS:
+            look = world.try_get(source, kind)
+            if look is not None:
+                components.append(replace(look))  # its own copy: components belong to one entity
         skin = world.try_get(source, Skin) if mesh_ref.mesh.skinned else None
         if skin is not None:  # bent as its source is (kept so each frame its source's pose changes)
             components.append(Skin(skin.joint_matrices))
@@ -113,6 +141,15 @@ class PortalSliceSystem(esper.Processor):
         if morph is not None:
             components.append(Morph(morph.weights))
         return world.spawn(*components)
+
+    def _copy_look(self, source: int, clone: int, kind: type) -> None:
+        """The clone's ``kind`` made its source's again (a copy), or taken off with it."""
+        world = self.world
+        if world.has(clone, kind):
+            world.remove_component(clone, kind)
+        look = world.try_get(source, kind)
+        if look is not None:
+            world.add_component(clone, replace(look))
 
     def _release(self, source: int) -> None:
         world = self.world

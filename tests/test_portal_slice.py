@@ -119,3 +119,57 @@ def test_a_box_pushed_into_the_back_of_a_portal_is_drawn_whole(scene):
     runner.frame()
     assert runner.world.get(ents["bar"], Slice).plane == glm.vec4(0, 0, 1, 0)
     assert len(runner.world.query_one(PortalClone)) == 1
+
+
+def _top_faces(runner) -> tuple[np.ndarray, np.ndarray]:
+    """The frame's colour on the bar's top face in front of A and on its clone's beyond B:
+    the same face of the same box (a half turn about +Y keeps it facing up), under the same
+    sun and sky, so the same colour when the clone looks as its source does."""
+    rgb = runner.frame()
+    front, beyond = (runner.project(point) for point in ((-2.8, 1.7, 0.4), (2.8, 1.7, 0.4)))
+    return rgb[front[1], front[0]].astype(int), rgb[beyond[1], beyond[0]].astype(int)
+
+
+def test_the_clone_looks_as_its_source_does_and_follows_its_changes(scene):
+    """The clone beyond B takes its source's Material, Emissive, Reflective and Refractive,
+    and keeps them the same while it lasts: the bar glows (it was drawn unlit there) and,
+    recoloured, dimmed or given a new mesh while halfway through, is drawn so on both sides."""
+    ents = {}
+    runner = scene(lambda world: build_pair(world, ents, (0, 3.0, 7.0), (0, 1.5, 0)), SIZE)
+    runner.frame()
+    front, beyond = _top_faces(runner)
+    assert np.abs(front - beyond).max() <= 3, (front, beyond)
+    world = runner.world
+    (clone, _), = world.query_one(PortalClone)
+    assert world.get(clone, Emissive).power == 1.0
+
+    world.get(ents["bar"], Material).color = (0.1, 0.3, 0.9)
+    world.get(ents["bar"], Emissive).power = 0.2
+    front_after, beyond_after = _top_faces(runner)
+    assert np.abs(front_after - beyond_after).max() <= 3, (front_after, beyond_after)
+    assert front_after[2] > front_after[0] + 40 and np.abs(front_after - front).max() > 40  # it did change
+
+    world.remove_component(ents["bar"], Emissive)
+    runner.frame()
+    assert not world.has(clone, Emissive)
+
+    longer = box((0.4, 0.4, 3.0))
+    world.get(ents["bar"], MeshRef).mesh = longer
+    runner.frame()
+    (clone, _), = world.query_one(PortalClone)
+    assert world.get(clone, MeshRef).mesh is longer
+    ids = runner.ids()
+    col, row = runner.project((2.8, 1.5, 1.3))  # the longer bar's far end, 1.3 m out of B
+    assert ids[row, col] == ents["bar"]
+
+
+def test_the_clone_goes_when_its_source_loses_its_mesh(scene):
+    ents = {}
+    runner = scene(lambda world: build_pair(world, ents, (0, 3.0, 7.0), (0, 1.5, 0)), SIZE)
+    runner.frame()
+    assert runner.world.query_one(PortalClone)
+    runner.world.remove_component(ents["bar"], MeshRef)
+    runner.frame()
+    assert runner.world.query_one(PortalClone) == []
+    assert not runner.world.has(ents["bar"], Slice)
+    assert not (runner.ids() == ents["bar"]).any()
