@@ -34,7 +34,9 @@ class Water(TrackedComponent):
       normal): the view's composite reads a copy of the level it goes into where each pixel's
       refracted ray meets a floor as deep as the one drawn below it (refined over three
       turns), so a still pool looks shallower than it is and a rippled one wavers
-      (``shaders/mirror_composite.frag`` ``water_below``); a surface shown by its fallback
+      (``shaders/mirror_composite.frag`` ``water_below``); what is below a pixel whose bent
+      ray meets it off the picture is seen unbent (the copy holds nothing there), and the
+      two blend over a band along the edge, so a deep pool seen steeply shows no seam; a surface shown by its fallback
       (no view of its own: cut by the view budget, switched off, faded) bends it the same
       way, and a partly faded one's view blends over its fallback's bent pixels.
     - **Waves.**  ``Material.normal_map`` (``normal_scale`` its strength) is read twice in

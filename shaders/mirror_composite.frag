@@ -136,6 +136,13 @@ float fallback_alpha(float rate) {
 
 #ifdef WATER_REFRACTION
 #define WATER_REFRACTION_TURNS 3
+// The band along the picture's edges, as a share of its smaller side, over which what is
+// below fades from bent to unbent as the place read nears the edge (a screen-edge fade, as
+// screen-space reflections fade): past the edge the copy holds nothing, and an abrupt switch
+// to the unbent pixel drew a seam across a deep pool's floor, where the bent rays left it.
+// Only a bend towards the edge fades (water_edge_share): a pixel at the edge whose bend runs
+// along it keeps it.
+#define WATER_EDGE_BAND 0.08
 // What lies below a water surface, bent (components/water.py): the level this composite goes
 // into, copied before its composites (rgb its colour, a its window depth; MirrorPasses.
 // composite_level), read where the pixel's ray, refracted by the rippled surface (Snell's law,
@@ -143,11 +150,23 @@ float fallback_alpha(float rate) {
 // (the planar proxy of HDRP's and Unity's water refraction): a still pond's floor seen
 // shallower than it is, a rippled one's wavering.  Where that lands off the parent view's
 // pixels, or on what lies above the water there (a post standing in it, the sky), or where
-// nothing is drawn below, the pixel's own colour stays (what is below, unbent).
+// nothing is drawn below, the pixel's own colour stays (what is below, unbent); near the
+// picture's edge it fades to it (WATER_EDGE_BAND).
 uniform sampler2D refraction_copy;
 #ifndef COMPOSITE_FALLBACK
 uniform usampler2D parent_nodes;  // the level composited into: which view drew each pixel
 #endif
+
+// The share of the bent colour read at ``there`` for the pixel ``here`` (both in pixels of a
+// picture of ``size``): 1 where it lies WATER_EDGE_BAND in from every edge, or no nearer an
+// edge than the pixel itself, falling to 0 at the edge, so the place crossing the edge blends
+// into the unbent pixel the copy shows past it with no step.
+float water_edge_share(vec2 here, vec2 there, vec2 size) {
+    vec2 band = vec2(WATER_EDGE_BAND * min(size.x, size.y));
+    vec2 low = clamp(there / max(min(band, here), vec2(0.5)), 0.0, 1.0);
+    vec2 high = clamp((size - there) / max(min(band, size - here), vec2(0.5)), 0.0, 1.0);
+    return min(min(low.x, low.y), min(high.x, high.y));
+}
 
 // The world point the copy holds at a pixel of the parent level.
 vec3 copied_point(vec2 pixel, float window, vec2 size) {
@@ -172,6 +191,7 @@ vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f
     // where it stands, not seen twice (once at its place, once where the floor's depth puts it).
     float depth = dot(at - copied_point(gl_FragCoord.xy, unbent.a, size), plane_normal);
     vec3 colour = unbent.rgb;
+    float kept = 0.0;  // the share of the bent colour (water_edge_share)
     for (int turn = 0; turn < WATER_REFRACTION_TURNS; ++turn) {
         if (depth <= 0.0) break;
         vec4 clip = view_proj * vec4(at + bent * (depth / down), 1.0);
@@ -185,8 +205,9 @@ vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f
         if (found_depth <= 0.0) break;  // what stands above the water there
         colour = found.rgb;
         depth = found_depth;
+        kept = water_edge_share(gl_FragCoord.xy, pixel, size);
     }
-    return colour;
+    return mix(unbent.rgb, colour, kept);
 }
 #endif
 

@@ -519,3 +519,63 @@ def test_waters_copy_of_what_is_below_is_made_once_and_goes_with_the_water(scene
     runner.frame()
     runner.frame()
     assert copy.held() == 0 and copy.copies == 5 and len(made) == 1
+
+
+def test_near_the_pictures_edge_what_is_below_fades_from_bent_to_unbent(scene):
+    """Where a pixel's bent ray meets the floor off the picture, the copy of what is below
+    holds nothing there and the pixel shows it unbent; within WATER_EDGE_BAND (a share of the
+    picture's smaller side) of the edge the two blend by how far in the bent place lies (or,
+    for a pixel nearer the edge than that, by its share of the pixel's own distance), so a
+    deep pool seen steeply has no seam across its floor where the bent rays leave the picture.
+    The floor is red beyond a line and grey on the near side; near the bottom edge a column's
+    bent rays meet the grey and its unbent rays the red: down the column, each pixel's share of
+    the red is what numpy's Snell refraction and the fade's rule give (1 where the bent place is
+    well inside, falling with the band, then the unbent floor's colour past the edge)."""
+    size, band_share, line = (96, 64), 0.08, 0.645
+
+    def build(world):
+        eye = glm.vec3(0.0, 1.5, 2.0)
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.0, -1.0, -1.5) - eye)),
+                    Camera(fov_y=60.0))
+        world.spawn(uniform_sky(SKY))
+        for z0, z1, colour in ((-100.0, line, (0.5, 0.03, 0.03)), (line, 100.0, (FLOOR, FLOOR, FLOOR))):
+            world.spawn(Transform(position=(0.0, -1.0, (z0 + z1) / 2), rotation=FLAT), MeshRef(quad(200.0, z1 - z0)),
+                        Material(color=(*colour, 1.0), roughness=1.0, environment_reflection=0.0), Emissive(1.0))
+        world.spawn(Transform(rotation=FLAT), MeshRef(quad(200.0, 200.0)), Material(color=(1.0, 1.0, 1.0, 0.0)),
+                    Mirror(), Water())
+
+    runner, seen = render(scene, build, size=size)
+    view = runner.engine.main_view
+    view_proj = np.array(glm.dmat4(view.view_proj).to_list(), np.float64).T
+    inverse = np.linalg.inv(view_proj)
+    column, eye = size[0] // 2, np.array(view.eye, np.float64)
+    band = band_share * min(size)
+    rows = []  # (row, the red share expected, F)
+    for row in range(size[1]):
+        far = inverse @ np.array([(column + 0.5) / size[0] * 2 - 1, 1 - (row + 0.5) / size[1] * 2, 1.0, 1.0])
+        d = far[:3] / far[3] - eye
+        d /= np.linalg.norm(d)
+        at = eye + d * (-eye[1] / d[1])
+        eta, cos_i = 1.0 / 1.333, -d[1]
+        bent = eta * d + (eta * cos_i - math.sqrt(1.0 - eta ** 2 * (1.0 - cos_i ** 2))) * np.array([0.0, 1.0, 0.0])
+        bent_hit, unbent_hit = at + bent * (-1.0 - at[1]) / bent[1], at + d * (-1.0 - at[1]) / d[1]
+        if min(abs(bent_hit[2] - line), abs(unbent_hit[2] - line)) < 0.02:
+            continue  # too near the line to say which side a texel shows
+        clip = view_proj @ np.array([*bent_hit, 1.0])
+        pixel = (clip[:2] / clip[3] * 0.5 + 0.5) * np.array(size)
+        here = np.array([column + 0.5, size[1] - row - 0.5])  # (GL's rows count up)
+        reach = np.maximum(np.minimum(band, np.concatenate([here, np.array(size) - here])), 0.5)
+        kept = float(np.clip(np.concatenate([pixel, np.array(size) - pixel]) / reach, 0.0, 1.0).min())
+        red = kept * (bent_hit[2] < line) + (1.0 - kept) * (unbent_hit[2] < line)
+        rows.append((row, red, schlick(0.02, cos_i), kept))
+    # The red floor's red over green, seen through the water: what the rows showing it whole
+    # give (the sky's reflection, grey, adds nothing to it), against which each row's is a share.
+    excess = np.array([seen[row, column, 0] - seen[row, column, 1] for row, *_ in rows]) / \
+        np.array([1.0 - f for _, _, f, _ in rows])
+    expected = np.array([red for _, red, _, _ in rows])
+    whole = np.median(excess[expected > 0.99])
+    assert whole > 0.3
+    between = (expected > 0.05) & (expected < 0.95)
+    assert between.sum() >= 3, rows  # the band's rows: bent and unbent both show there
+    assert (expected < 0.01).any() and (expected > 0.99).any()
+    np.testing.assert_allclose(excess / whole, expected, atol=0.12)
