@@ -149,6 +149,51 @@ def test_a_traveller_spawned_with_a_velocity_crosses_in_its_first_frame(world):
     np.testing.assert_allclose(world.get(mover, Transform).position, carry_point((0, 1.5, -0.2)), atol=1e-5)
 
 
+def test_a_portal_sliding_over_a_thing_standing_still_swallows_it(world):
+    """A portal is a door that may move: one sliding forwards over a traveller standing still
+    takes it in when the traveller's origin passes from its front to its back as the portal
+    stood then, and it comes out of the partner where the pair puts it (the same as walking
+    in); beside the rectangle the portal slides by it."""
+    a, b = pair(world)
+    still = world.spawn(Transform(position=(0.4, 1.2, 0.5)), Traveller())
+    beside = world.spawn(Transform(position=(1.4, 1.2, 0.5)), Traveller())
+    world.step(DT)
+    door = world.get(a, Transform)
+    for step in range(1, 4):  # A slides forwards 0.2 m a frame: 0.2, 0.4, 0.6
+        door.position = glm.vec3(0.0, 1.5, 0.2 * step)
+        world.step(DT)
+        if step < 3:
+            assert crossings(world) == []
+    assert crossings(world) == [PortalCrossing(still, a, b)]
+    # 0.1 m behind A (at z 0.6): A-local (0.4, -0.3, -0.1) comes out 0.1 m in front of B.
+    np.testing.assert_allclose(world.get(still, Transform).position, (10.1, 1.2, 0.4), atol=1e-5)
+    np.testing.assert_allclose(world.get(beside, Transform).position, (1.4, 1.2, 0.5), atol=1e-6)
+
+
+@pytest.mark.parametrize("move", ["placed", "backwards", "turned"])
+def test_a_portal_placed_anew_or_moving_away_swallows_nothing(world, move):
+    """A portal that jumps further than SLIDE of its rectangle's larger side in a frame (shot
+    to another place) or turns past SLIDE_TURN was placed anew: what stood in front of where it
+    was, and is now behind it, stays.  One moving away from a thing behind it takes nothing."""
+    from systems.portal_travel_system import SLIDE, SLIDE_TURN
+
+    a, _ = pair(world)
+    start = {"placed": (0.0, 1.5, 0.5), "backwards": (0.0, 1.5, -0.1), "turned": (0.0, 1.5, 0.3)}[move]
+    mover = world.spawn(Transform(position=start), Traveller())
+    world.step(DT)
+    door = world.get(a, Transform)
+    if move == "placed":  # further than the slide in one frame: 2 x SLIDE x 3 m
+        door.position = glm.vec3(0.0, 1.5, 0.5 + 2.0 * SLIDE * max(SIZE) + 0.1)
+    elif move == "backwards":  # A slides back, away from what stands behind it
+        door.position = glm.vec3(0.0, 1.5, -0.3)
+    else:  # about the vertical through the mover, past the turn a slide may make
+        door.position = glm.vec3(0.0, 1.5, 0.6)
+        door.rotation = glm.angleAxis(glm.radians(SLIDE_TURN + 5.0), glm.vec3(1, 0, 0))
+    world.step(DT)
+    assert crossings(world) == []
+    np.testing.assert_allclose(world.get(mover, Transform).position, start, atol=1e-6)
+
+
 # --- (b) what does not travel ---------------------------------------------------------------------
 @pytest.mark.parametrize("start, velocity", [
     ((1.3, 1.5, 1.0), (0, 0, -6)),   # beside the rectangle (half width 1)
