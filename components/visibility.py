@@ -134,7 +134,9 @@ class Visibility(TrackedComponent):
     Kinds accumulate along a chain of views: a view through a portal then a mirror is both,
     so an entity hidden in either is not drawn there; a probe's capture, and every mirror and
     portal seen in it, is a probe view.  Without the component an entity is drawn everywhere,
-    on layer 0."""
+    on layer 0.  Its shadow is the world's, not a view's: hidden in a view, it still casts
+    its shadow there (a ghost seen only in a mirror darkens the floor in front of it too);
+    ``MeshRef(casts_shadows=False)`` takes the shadow away everywhere."""
 
     direct: bool = True
     in_mirrors: bool = True
