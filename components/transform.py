@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from numbers import Integral
+from numbers import Integral, Real
 from typing import Any
 
 from pyglm import glm
@@ -174,18 +174,48 @@ def euler_rotation(pitch_deg: float, yaw_deg: float, roll_deg: float = 0.0) -> g
 
     Named so that angles are never mistaken for a quaternion or for radians.
     """
-    for name, v in (("pitch_deg", pitch_deg), ("yaw_deg", yaw_deg), ("roll_deg", roll_deg)):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-            raise ComponentValueError(f"euler_rotation {name} must be a finite number of degrees, got {v!r}")
+    _check_degrees("euler_rotation", pitch_deg=pitch_deg, yaw_deg=yaw_deg, roll_deg=roll_deg)
     return (glm.angleAxis(glm.radians(float(yaw_deg)), glm.vec3(0, 1, 0))
             * glm.angleAxis(glm.radians(float(pitch_deg)), glm.vec3(1, 0, 0))
             * glm.angleAxis(glm.radians(float(roll_deg)), glm.vec3(0, 0, 1)))
 
 
+# The largest angle a rotation is made from, in degrees: glm turns it in float32, where a
+# larger one loses every digit of its turn (1e300 is infinite there, and the quaternion NaN).
+MAX_DEGREES = 1e7
+
+
+def _check_degrees(function: str, **angles: Any) -> None:
+    """Each of ``angles`` a number of degrees within MAX_DEGREES, or an error naming
+    ``function`` and it."""
+    for name, v in angles.items():
+        if isinstance(v, bool) or not isinstance(v, Real) or not abs(float(v)) <= MAX_DEGREES:
+            raise ComponentValueError(f"{function} {name} must be a finite number of degrees "
+                                      f"(at most {MAX_DEGREES:.0e} either way), got {v!r}")
+
+
+def _direction(function: str, name: str, value: Any) -> glm.vec3:
+    """``value`` as a direction: three finite numbers, not all zero (a zero or infinite one
+    has no way to point, and would turn a rotation made from it into NaNs)."""
+    parts = _parts(value)
+    if len(parts) != 3 or any(isinstance(c, (str, bytes, bool)) for c in parts):
+        raise ComponentValueError(f"{function} {name} must be a direction of three numbers, got {value!r}")
+    try:
+        x, y, z = (float(c) for c in parts)
+    except (TypeError, ValueError, OverflowError):
+        raise ComponentValueError(f"{function} {name} must be a direction of three numbers, got {value!r}") from None
+    length = math.sqrt(x * x + y * y + z * z)
+    if not math.isfinite(length) or length == 0.0:
+        raise ComponentValueError(f"{function} {name} must be a finite direction, not zero, got {value!r}")
+    return glm.vec3(x / length, y / length, z / length)
+
+
 def look_rotation(forward: Any, up: Any = (0.0, 1.0, 0.0)) -> glm.quat:
-    """The rotation whose -Z axis points along ``forward`` (GL's camera convention)."""
-    f = glm.normalize(glm.vec3(forward))
-    u = glm.vec3(up)
+    """The rotation whose -Z axis points along ``forward`` (GL's camera convention); ``up``
+    (any length but zero) says which way the turn keeps its +Y, as near as it can (along
+    ``forward``, another axis stands in)."""
+    f = _direction("look_rotation", "forward", forward)
+    u = _direction("look_rotation", "up", up)
     if abs(glm.dot(f, glm.normalize(u))) > 0.999:
         u = glm.vec3(0.0, 0.0, 1.0) if abs(f.z) < 0.9 else glm.vec3(1.0, 0.0, 0.0)
     return glm.quat_cast(glm.inverse(glm.lookAt(glm.vec3(0.0), f, u)))
@@ -193,6 +223,9 @@ def look_rotation(forward: Any, up: Any = (0.0, 1.0, 0.0)) -> glm.quat:
 
 def yaw_pitch_rotation(yaw_deg: float, pitch_deg: float) -> glm.quat:
     """Yaw about +Y then pitch about the local +X, in degrees (yaw 0 looks down -Z)."""
+    if type(yaw_deg) is not float or type(pitch_deg) is not float or not (
+            abs(yaw_deg) <= MAX_DEGREES and abs(pitch_deg) <= MAX_DEGREES):  # (the fly camera's floats: one test)
+        _check_degrees("yaw_pitch_rotation", yaw_deg=yaw_deg, pitch_deg=pitch_deg)
     return glm.angleAxis(glm.radians(yaw_deg), glm.vec3(0, 1, 0)) * glm.angleAxis(
         glm.radians(pitch_deg), glm.vec3(1, 0, 0))
 

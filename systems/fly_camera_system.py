@@ -4,6 +4,8 @@ step) and zooms an orthographic one (its ``ortho_height`` a tenth smaller a step
 an editor's view does."""
 from __future__ import annotations
 
+import math
+
 import esper
 from pyglm import glm
 
@@ -21,7 +23,9 @@ class FlyCameraSystem(esper.Processor):
         state: Input = self.world.resources[Input]
         for entity, (fly, transform) in self.world.query(FlyController, Transform):
             if state.mouse_dx or state.mouse_dy:
-                fly.yaw -= state.mouse_dx * fly.mouse_sensitivity
+                # Kept within a half turn either way (the same rotation): a player turning round and
+                # round would otherwise reach FlyController's bound on yaw and be refused.
+                fly.yaw = math.remainder(fly.yaw - state.mouse_dx * fly.mouse_sensitivity, 360.0)
                 fly.pitch = max(-89.0, min(89.0, fly.pitch - state.mouse_dy * fly.mouse_sensitivity))
                 transform.rotation = yaw_pitch_rotation(fly.yaw, fly.pitch)
             if state.wheel:

@@ -153,6 +153,7 @@ def test_the_base_level_loads_and_spawns(tmp_path):
 @pytest.mark.parametrize("case", [
     "unknown_component", "unknown_field", "wrong_type", "bad_value", "missing_mesh", "missing_texture",
     "partner_names_nothing", "parent_names_nothing", "duplicate_name", "bad_rotation", "parent_cycle",
+    "yaw_as_text", "look_nowhere", "pitch_past_float",
 ])
 def test_a_mistake_names_file_line_entity_and_field_and_makes_nothing(tmp_path, case):
     edits = {
@@ -181,6 +182,13 @@ def test_a_mistake_names_file_line_entity_and_field_and_makes_nothing(tmp_path, 
                          "Transform.rotation", "roll = 3", r"a rotation table is"),
         "parent_cycle": ("position = [3.0, 1.0, 0.0]", "position = [3.0, 1.0, 0.0]\nparent = \"door_a\"",
                          "door_a", "Transform.parent", None, r"parents make a cycle"),
+        # (a string was read as its number, and a zero direction or a huge angle made NaNs)
+        "yaw_as_text": ("rotation = { yaw = 90, pitch = 0 }", "rotation = { yaw = \"90\", pitch = 0 }", "door_b",
+                        "Transform.rotation", "yaw = \"90\"", r"a rotation's yaw is a number of degrees, got '90'"),
+        "look_nowhere": ("rotation = { yaw = 90, pitch = 0 }", "rotation = { look = [0, 0, 0] }", "door_b",
+                         "Transform.rotation", "look = [0, 0, 0]", r"look_rotation forward must be a finite direction"),
+        "pitch_past_float": ("rotation = { yaw = 90, pitch = 0 }", "rotation = { yaw = 90, pitch = 1e300 }",
+                             "door_b", "Transform.rotation", "pitch = 1e300", r"pitch_deg must be a finite number"),
     }
     old, new, entity, field, line_text, reason = edits[case]
     text = BASE

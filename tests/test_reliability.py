@@ -6,6 +6,8 @@ value names ``Class.field``, a refused spawn leaves no entity behind.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -27,6 +29,8 @@ from components import (
     Transform,
     Traveller,
     euler_rotation,
+    look_rotation,
+    yaw_pitch_rotation,
 )
 from engine.assets.mesh import box, load_model, quad
 from engine.assets.texture_data import load_texture
@@ -173,6 +177,60 @@ def test_euler_rotation_takes_degrees_by_name():
     q = euler_rotation(0, 90, 0)
     forward = q * glm.vec3(0, 0, -1)
     assert np.allclose(list(forward), [-1, 0, 0], atol=1e-6)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: look_rotation((0, 0, 0)), r"look_rotation forward must be a finite direction, not zero"),
+    (lambda: look_rotation((math.inf, 0, 0)), r"look_rotation forward must be a finite direction"),
+    (lambda: look_rotation((0, 0, -1), up=(0, 0, 0)), r"look_rotation up must be a finite direction"),
+    (lambda: look_rotation((0, "1", 0)), r"look_rotation forward must be a direction of three numbers"),
+    (lambda: look_rotation((0, 1)), r"look_rotation forward must be a direction of three numbers"),
+    (lambda: yaw_pitch_rotation(math.nan, 0.0), r"yaw_pitch_rotation yaw_deg must be a finite number"),
+    (lambda: yaw_pitch_rotation(0.0, 1e300), r"yaw_pitch_rotation pitch_deg must be a finite number"),
+    (lambda: yaw_pitch_rotation("90", 0), r"yaw_pitch_rotation yaw_deg must be a finite number"),
+    (lambda: yaw_pitch_rotation(True, 0), r"yaw_pitch_rotation yaw_deg must be a finite number"),
+    (lambda: euler_rotation(0, 2e7, 0), r"euler_rotation yaw_deg must be a finite number"),
+])
+def test_a_rotation_that_cannot_be_made_is_refused_where_it_is_made(make, match):
+    """A direction of no length (a camera told to look at where it stands), or an angle that
+    is not a number or past float32's reach, would make a NaN quaternion, refused only later
+    by the Transform it reaches, far from the call: the helper names itself and the argument."""
+    with pytest.raises(ComponentValueError, match=match):
+        make()
+
+
+def test_rotations_made_of_any_real_numbers_agree_with_the_floats():
+    expected = yaw_pitch_rotation(30.0, -10.0)
+    for yaw, pitch in ((30, -10), (np.float32(30.0), np.float64(-10.0)), (np.int64(30), -10.0)):
+        assert np.allclose(list(yaw_pitch_rotation(yaw, pitch)), list(expected), atol=1e-6)
+    assert np.allclose(list(look_rotation(np.array([0.0, 0.0, -5.0]))), list(look_rotation(glm.vec3(0, 0, -1))))
+    forward = look_rotation((1, 0, 0), up=(0, 7, 0)) * glm.vec3(0, 0, -1)  # up of any length
+    assert np.allclose(list(forward), [1, 0, 0], atol=1e-6)
+
+
+def test_a_fly_camera_turned_round_and_round_keeps_its_yaw_within_a_half_turn():
+    """Mouse look keeps FlyController.yaw within a half turn either way, the same rotation:
+    a player spinning round (a thousand turns here) would otherwise pass the yaw's bound
+    (1e6 degrees) and have the frame refused."""
+    from components import Camera, FlyController
+    from engine.core.frame_io import Input
+    from systems.fly_camera_system import FlyCameraSystem
+
+    world = World("spin")
+    camera = world.spawn(Transform(), Camera(), FlyController(yaw=179.0, pitch=10.0, mouse_sensitivity=0.15))
+    stage = FlyCameraSystem(world)
+    fly = world.get(camera, FlyController)
+    world.resources[Input].mouse_dx = -100.0  # 15 degrees to the left: past +180
+    stage.process(1 / 60)
+    assert fly.yaw == pytest.approx(-166.0)
+    turned, expected = world.get(camera, Transform).rotation, yaw_pitch_rotation(194.0, 10.0)
+    for axis in (glm.vec3(0, 0, -1), glm.vec3(0, 1, 0)):  # the same rotation (a quaternion or its negative)
+        assert np.allclose(list(turned * axis), list(expected * axis), atol=1e-6)
+    world.resources[Input].mouse_dx = -2400.0  # a turn a frame, a thousand frames
+    for _ in range(1000):
+        stage.process(1 / 60)
+    assert -180.0 <= fly.yaw <= 180.0 and fly.yaw == pytest.approx(-166.0, abs=1e-6)
+    world.close()
 
 
 # --- 4. spawn is all or nothing ----------------------------------------------------------------

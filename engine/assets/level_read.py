@@ -100,8 +100,11 @@ def _rotation(value: Any) -> glm.quat:
             raise ValueError(f"a rotation table is {{ yaw = deg, pitch = deg }} or {{ look = [x, y, z] }}, "
                              f"got {dict(value)!r}")
         if "look" in value:
-            return look_rotation(tuple(value["look"]), tuple(value.get("up", (0.0, 1.0, 0.0))))
-        return yaw_pitch_rotation(float(value.get("yaw", 0.0)), float(value.get("pitch", 0.0)))
+            return look_rotation(value["look"], value.get("up", (0.0, 1.0, 0.0)))
+        for key in ("yaw", "pitch"):  # numbers as written: a string or true is a mistake, not an angle
+            if isinstance(value.get(key, 0.0), (bool, str)):
+                raise ValueError(f"a rotation's {key} is a number of degrees, got {value[key]!r}")
+        return yaw_pitch_rotation(value.get("yaw", 0.0), value.get("pitch", 0.0))
     if isinstance(value, (list, tuple)) and len(value) == 4 and not any(isinstance(v, (bool, str)) for v in value):
         return glm.quat(*(float(v) for v in value))
     raise ValueError(f"a rotation is [w, x, y, z] or {{ yaw = .., pitch = .. }} or {{ look = [..] }}, got {value!r}")
