@@ -293,7 +293,7 @@ def test_a_mirror_on_a_mesh_that_is_not_flat_is_a_clear_error(scene):
         world.spawn(Transform(), MeshRef(box(name="crate")), Material(), Mirror())
 
     # Refused when the entity is made (the level's build), not on the first frame.
-    with pytest.raises(ComponentValueError, match=r"Mirror on entity \d+: its MeshRef\.mesh 'crate' which is not flat"):
+    with pytest.raises(ComponentValueError, match=r"Mirror on entity \d+: its MeshRef\.mesh 'crate' is not flat"):
         scene(build, (32, 32))
 
 

@@ -118,7 +118,7 @@ def test_a_bad_level_stops_cleanly_with_one_line(tmp_path):
                              "--out", str(tmp_path)], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
-    assert "speculum: error: Mirror on entity" in result.stderr and "'crate' which is not flat" in result.stderr
+    assert "speculum: error: Mirror on entity" in result.stderr and "'crate' is not flat" in result.stderr
     assert "Traceback" not in result.stderr
 
 

@@ -62,7 +62,7 @@ def mirror_mesh(mirror: Mirror, mesh: Mesh, normal_map: bool = False, second_uvs
     found = flat_plane(mesh)
     if found is None:
         lo, hi = mesh.bounds
-        raise MirrorMeshError(f"its MeshRef.mesh {mesh.name!r} which is not flat (model-space extents "
+        raise MirrorMeshError(f"its MeshRef.mesh {mesh.name!r} is not flat (model-space extents "
                               f"{[round(float(v), 3) for v in hi - lo]}); give the mirror a flat mesh or plane_normal")
     return MirrorMesh(found[0], found[1], uv_rows)
 
