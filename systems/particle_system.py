@@ -50,6 +50,9 @@ class ParticleSystem(esper.Processor):
         self._capped: set[int] = set()  # emitters capped last frame (warned once a run of capped frames)
         self._meshless: set[int] = set()  # "mesh" emitters whose MeshRef went (warned once)
         self._targetless: set[tuple[int, int]] = set()  # (emitter, on_death) pairs said to name no emitter
+        # The open portals' gates of the last frame, by portal (portal_gates: a portal that slid
+        # since swallows the particles it passed over); empty after a frame that made none.
+        self._gates_last: dict[int, PortalGate] = {}
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -60,6 +63,7 @@ class ParticleSystem(esper.Processor):
         seen = set()
         living = capped = 0
         stepped = []  # (entity, emitter, cloud, matrix): stepped this frame
+        gates_last, self._gates_last = self._gates_last, {}
         for entity, emitter in emitters:
             seen.add(entity)
             kept = self.clouds.get(entity)
@@ -76,7 +80,9 @@ class ParticleSystem(esper.Processor):
                 for _ in range(round(seconds * PREWARM_RATE)):
                     cloud.step(emitter, matrix, 1.0 / PREWARM_RATE, mesh=mesh)
             if gates is None and cloud.count and emitter.space == "world":
-                gates = _numpy_gates(portal_gates(world, frame_rules(world).open_portals))
+                made = portal_gates(world, frame_rules(world).open_portals, gates_last)
+                self._gates_last = {gate.entity: gate for gate in made}
+                gates = _numpy_gates(made)
             mesh_ref = world.try_get(entity, MeshRef) if emitter.shape == "mesh" else None
             if emitter.shape == "mesh" and mesh_ref is None and entity not in self._meshless:
                 self._meshless.add(entity)
@@ -148,6 +154,11 @@ class ParticleSystem(esper.Processor):
 
 def _numpy_gates(gates: list[PortalGate]) -> list[Gate]:
     """The gates as the particle step reads them (``particle_cloud.Gate``: numpy, row by row)."""
-    return [(np.array(gate.plane, np.float64), np.array(gate.to_local, np.float64),
-             gate.half, np.array(gate.carry, np.float64), np.array(glm.mat3_cast(gate.turn), np.float64))
-            for gate in gates]
+    rows = []
+    for gate in gates:
+        plane, to_local = np.array(gate.plane, np.float64), np.array(gate.to_local, np.float64)
+        rows.append((plane, to_local, gate.half, np.array(gate.carry, np.float64),
+                     np.array(glm.mat3_cast(gate.turn), np.float64),
+                     plane if gate.was_plane is None else np.array(gate.was_plane, np.float64),
+                     to_local if gate.was_to_local is None else np.array(gate.was_to_local, np.float64)))
+    return rows

@@ -11,10 +11,8 @@ with it).
 
 A crossing is the segment from where the traveller was at the end of the last frame to where
 it is now going from a portal's front (local +Z) to its back inside its rectangle, in the
-portal's own space: where it was against the portal as it stood then, where it is against the
-portal now, so a portal that slides (a door moving, a platform carrying it) swallows what it
-passes over, standing still or not; a portal moved further than a slide in one frame
-(``SLIDE``, ``SLIDE_TURN``) was placed anew, and what stood in front of where it was stays.  Only
+portal's own space, so a portal that slides over a thing standing still swallows it
+(``engine.rules.portal_gates``, the rule particles cross by too).  Only
 open pairs count (``engine.rules.frame_rules.open_portal_pairs``, the rule the views and slicing
 use too): a portal that is disabled, or whose partner is deleted, disabled or has no
 Portal or Transform, is just a quad.  The new pose is ``pair_transform(in, out)``
@@ -42,8 +40,6 @@ the very next frame.  Each frame's crossings are published as ``world.resources[
 """
 from __future__ import annotations
 
-import math
-
 import esper
 from pyglm import glm
 
@@ -59,11 +55,6 @@ from engine.rules.portal_gates import PortalGate, portal_gates
 DEFAULT_ASPECT = 16.0 / 9.0
 TOUCH = 0.02  # the frustum tip "touches" a portal within TOUCH x near of its plane
 CLEAR = 0.1  # after a teleport the whole tip is at least CLEAR x near in front of the exit
-# A portal that moved at most this share of its rectangle's larger side and turned at most
-# SLIDE_TURN degrees since the last frame slid there (what it passed over went in); further,
-# it was placed anew (_slid).
-SLIDE = 0.5
-SLIDE_TURN = 30.0
 # Edges of the frustum tip: points are [eye, corner 0..3] (corners go round the rectangle).
 _TIP_EDGES = ((0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1))
 
@@ -105,16 +96,15 @@ class PortalTravelSystem(esper.Processor):
             movers[entity] = (transform, world.get(entity, Camera))
             start.setdefault(entity, glm.vec3(transform.position))
 
-        gates = portal_gates(self.world, rules.open_portals)
-        gates_last, self._gates_last = self._gates_last, {gate.entity: gate for gate in gates}
-        moving = {gate.entity: was for gate in gates
-                  if (was := gates_last.get(gate.entity)) is not None and _slid(was, gate)}
+        gates = portal_gates(self.world, rules.open_portals, self._gates_last)
+        self._gates_last = {gate.entity: gate for gate in gates}
+        moving = any(gate.was_plane is not None for gate in gates)
         last, exited = self._last, self._exited
         self._last, self._exited = {}, {}
         for entity, (transform, cam) in movers.items():
             before = last.get(entity, start[entity])
             if transform.parent is None and gates and (cam is not None or moving or before != transform.position):
-                gate = self._crossed(gates, before, transform, cam, exited.get(entity), moving)
+                gate = self._crossed(gates, before, transform, cam, exited.get(entity))
                 if gate is not None:
                     self._carry(entity, transform, cam, gate)
                     crossings.append(PortalCrossing(entity, gate.entity, gate.partner, gate.carry, gate.turn))
@@ -130,30 +120,23 @@ class PortalTravelSystem(esper.Processor):
 
     # --- crossing tests ------------------------------------------------------------------------
     def _crossed(self, gates: list[PortalGate], before: glm.vec3, transform: Transform, cam: Camera | None,
-                 skip: int | None, moving: dict[int, PortalGate]) -> PortalGate | None:
-        """The portal this traveller went into this frame (the earliest along its path): its
-        path in each portal's own space, from where it was against the portal as it stood at
-        the end of the last frame (``moving``: those that slid since) to where it is against
-        the portal now, so a portal that slides over a thing standing still swallows it."""
+                 skip: int | None) -> PortalGate | None:
+        """The portal this traveller went into this frame (the earliest along its path)."""
         now = glm.vec3(transform.position)
         tip = None
         best: tuple[float, float, PortalGate] | None = None
         for gate in gates:
             if gate.entity == skip:
                 continue
-            was = moving.get(gate.entity, gate)
-            d0 = signed_distance(was.plane, before)
+            d0 = signed_distance(gate.plane if gate.was_plane is None else gate.was_plane, before)
             d1 = signed_distance(gate.plane, now)
             if d0 < 0.0:
                 continue  # came from behind (or walks behind it): no travel
             if d1 < 0.0:
-                t = d0 / (d0 - d1)
-                local = glm.mix(glm.vec3(was.to_local * glm.vec4(before, 1.0)),
-                                glm.vec3(gate.to_local * glm.vec4(now, 1.0)), t)
-                if abs(local.x) <= gate.half[0] and abs(local.y) <= gate.half[1]:
-                    key = (t, 0.0)
-                else:
-                    continue
+                t = gate.path_in(before, now)
+                if t is None:
+                    continue  # passed beside the rectangle
+                key = (t, 0.0)
             elif cam is not None and d1 <= d0 + 1e-9:  # not while backing away from its front
                 if tip is None:
                     tip = [now, *near_plane_corners(now, transform.rotation, cam.fov_y, cam.near,
@@ -208,18 +191,6 @@ class PortalTravelSystem(esper.Processor):
             if abs(forward.y) < 0.9999:  # straight up or down keeps the old yaw
                 fly.yaw = fly.yaw + (yaw - fly.yaw + 180.0) % 360.0 - 180.0  # nearest turn: no jump
             fly.pitch = max(-89.0, min(89.0, pitch))
-
-
-def _slid(was: PortalGate, gate: PortalGate) -> bool:
-    """Whether a portal moved since the last frame by a slide (``SLIDE`` of its rectangle's
-    larger side at most, ``SLIDE_TURN`` degrees): a portal moved further was placed anew (a
-    portal shot to another wall), and what stood in front of where it was does not go in."""
-    if was.to_local == gate.to_local:
-        return False
-    was_world, now_world = glm.inverse(was.to_local), glm.inverse(gate.to_local)
-    step = glm.length(glm.vec3(now_world[3]) - glm.vec3(was_world[3]))
-    facing = glm.dot(glm.vec3(was.plane), glm.vec3(gate.plane))
-    return step <= SLIDE * 2.0 * max(gate.half) and facing >= math.cos(math.radians(SLIDE_TURN))
 
 
 def _ortho_height(cam: Camera) -> float | None:

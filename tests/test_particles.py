@@ -705,6 +705,37 @@ def test_world_space_particles_go_through_open_portals(scene):
     assert into.rows(emitter, glm.mat4(1.0))[0, ROW_FRAME] == 1.0
 
 
+def test_a_portal_sliding_over_hanging_particles_swallows_those_in_its_rectangle(scene):
+    """Particles hanging still (no speed, no gravity) in front of portal A, one inside its
+    rectangle's reach and one beside it: A slides forwards over both, 0.25 m a frame (a slide,
+    engine.rules.portal_gates), and takes in the one it passes over, as it takes a traveller:
+    carried to B (half a metre behind A then, half a metre in front of B, x mirrored), counted
+    as crossed; the one beside it stays where it hangs."""
+    from engine.assets.portals import spawn_portal_pair
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0), fov=FOV)
+        world.a, _ = spawn_portal_pair(world, (0.0, 1.0, 0.0), None, (10.0, 1.0, 0.0), None, size=(2.0, 3.0))
+        hang = dict(rate=0.0, burst=1, speed=0.0, spread=0.0, gravity=0.0, lifetime=100.0)
+        world.inside = world.spawn(Transform(position=glm.vec3(0.3, 1.2, 0.5)), ParticleEmitter(**hang))
+        world.beside = world.spawn(Transform(position=glm.vec3(1.6, 1.2, 0.5)), ParticleEmitter(**hang))
+    runner = scene(build, (64, 48))
+    runner.frame(1.0 / 60.0)
+    runner.frame(1.0 / 60.0)  # born
+    door = runner.world.get(runner.world.a, Transform)
+    for step in range(1, 5):  # A at z 0.25, 0.5, 0.75, 1.0: past the particles at 0.5
+        door.position = glm.vec3(0.0, 1.0, 0.25 * step)
+        runner.frame(1.0 / 60.0)
+    clouds = runner.engine.stages["particles"].clouds
+    inside, beside = (clouds[getattr(runner.world, name)][0] for name in ("inside", "beside"))
+    # Carried when A stood at 0.75: 0.25 m behind it, A-local (0.3, 0.2, -0.25), so 0.25 m in
+    # front of B with x mirrored.
+    np.testing.assert_allclose(inside.position[0], [10.0 - 0.3, 1.2, 0.25], atol=1e-4)
+    assert list(inside.crossed) == [1.0]
+    np.testing.assert_allclose(beside.position[0], [1.6, 1.2, 0.5], atol=1e-5)
+    assert list(beside.crossed) == [0.0]
+
+
 @pytest.mark.parametrize("drag", [0.0, 0.5])
 def test_the_editors_outline_is_the_launch_cone_as_far_as_a_particle_flies(drag):
     """``reach_outline`` of a selected emitter (shell/handles.py): a cone from the emitter

@@ -175,7 +175,7 @@ def test_a_portal_placed_anew_or_moving_away_swallows_nothing(world, move):
     """A portal that jumps further than SLIDE of its rectangle's larger side in a frame (shot
     to another place) or turns past SLIDE_TURN was placed anew: what stood in front of where it
     was, and is now behind it, stays.  One moving away from a thing behind it takes nothing."""
-    from systems.portal_travel_system import SLIDE, SLIDE_TURN
+    from engine.rules.portal_gates import SLIDE, SLIDE_TURN
 
     a, _ = pair(world)
     start = {"placed": (0.0, 1.5, 0.5), "backwards": (0.0, 1.5, -0.1), "turned": (0.0, 1.5, 0.3)}[move]

@@ -31,7 +31,9 @@ _NONE = np.zeros((0, 3))  # no particle died
 # An open portal as the step's crossing test reads it: its world plane (4,), world -> its local
 # space (4, 4), half its rectangle (2,), the pair transform (4, 4) and its rotation (3, 3), as
 # numpy arrays of engine/rules/portal_gates.PortalGate's (the particles stage makes them).
-Gate = tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray, np.ndarray]
+# (plane, to_local, half, carry, turn, the plane and to_local as it stood at the end of the
+# last frame: the same arrays where it did not slide since)
+Gate = tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 # A drawn particle: x, y, z, size, r, g, b, a, angle, frame, and its streak (x, y, z: its
 # velocity x ParticleEmitter.stretch, world; 0 for a square).  A ribbon's point (ParticleEmitter.
@@ -163,24 +165,27 @@ class ParticleCloud:
 
     def _through(self, before: np.ndarray, gates: Sequence[Gate]) -> None:
         """Carry each particle whose step from ``before`` went into a portal (from its front
-        to its back, meeting its plane inside its rectangle) to the partner: its position and
-        velocity by the pair transform, as a traveller is (the earliest gate a path meets)."""
+        to its back, meeting its plane inside its rectangle, in the portal's own space: a
+        portal that slid since the last frame from where it stood then) to the partner: its
+        position and velocity by the pair transform, as a traveller is (the earliest gate a
+        path meets; ``engine.rules.portal_gates``)."""
         n = len(before)
         best = np.full(n, np.inf)
         which = np.full(n, -1)
-        for index, (plane, to_local, half, _, _) in enumerate(gates):
-            d0 = before @ plane[:3] + plane[3]
+        for index, (plane, to_local, half, _, _, was_plane, was_to_local) in enumerate(gates):
+            d0 = before @ was_plane[:3] + was_plane[3]
             d1 = self.position @ plane[:3] + plane[3]
             crossing = (d0 >= 0.0) & (d1 < 0.0)
             if not crossing.any():
                 continue
             t = np.where(crossing, d0 / np.where(crossing, d0 - d1, 1.0), np.inf)
-            met = before + (self.position - before) * np.minimum(t, 1.0)[:, None]
-            local = met @ to_local[:3, :3].T + to_local[:3, 3]
+            step = np.minimum(t, 1.0)[:, None]
+            local = (before @ was_to_local[:3, :3].T + was_to_local[:3, 3]) * (1.0 - step) \
+                + (self.position @ to_local[:3, :3].T + to_local[:3, 3]) * step
             inside = crossing & (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1]) & (t < best)
             best[inside] = t[inside]
             which[inside] = index
-        for index, (_, _, _, carry, turn) in enumerate(gates):
+        for index, (_, _, _, carry, turn, _, _) in enumerate(gates):
             carried = which == index
             if carried.any():
                 self.position[carried] = self.position[carried] @ carry[:3, :3].T + carry[:3, 3]
