@@ -91,8 +91,9 @@ MAX_SPEED = 1e6  # m/s; a Traveller faster than this leaves float32 range within
 
 @dataclass(eq=False)
 class Traveller(TrackedComponent):
-    """An entity that goes through portals; ``velocity`` (world, m/s) moves it each frame
-    and is turned with it when it travels."""
+    """An entity that goes through portals, with everything below it (a model's root: its
+    parts go with it, sliced at the portal while they straddle it); ``velocity`` (world,
+    m/s) moves it each frame and is turned with it when it travels."""
 
     SHAREABLE = False  # one entity's own state: see components.tracking
     velocity: Any = field(default_factory=glm.vec3)

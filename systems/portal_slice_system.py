@@ -1,13 +1,16 @@
 """Things partly through a portal (the visible seam where an object crosses a portal): sliced, with a clone beyond.
 
-A Traveller whose bounds straddle an open portal's rectangle (open as
-``engine.rules.frame_rules.open_portal_pairs`` says, the rule travel and the views use: a portal
-with a disabled, deleted or Transform-less partner slices nothing), its origin in front of it
-(a portal is one-way: a thing pushed into its back is not going through and is drawn whole),
-is drawn only in front of that portal (a Slice clip plane), and a clone, carried by the
-pair transform, draws the part that went through in front of the partner.  Clones are made when straddling starts
-and deleted when it ends, so entities are not spawned every frame.  It runs before the
-TransformSystem (on this frame's poses) so clones get their world matrices this frame.
+A Traveller whose meshes (its own and every one below it: a model's parts, a decal's cut, a
+held lamp's bulb; ``TransformTree``, with this frame's new links) straddle an open portal's
+rectangle in the box about them all (open as ``engine.rules.frame_rules.open_portal_pairs``
+says, the rule travel and the views use: a portal with a disabled, deleted or
+Transform-less partner slices nothing), its origin in front of it (a portal is one-way: a
+thing pushed into its back is not going through and is drawn whole), has each of those
+meshes drawn only in front of that portal (a Slice clip plane), a part already wholly
+through too, and a clone of each, carried by the pair transform, draws what went through in
+front of the partner.  Clones are made when straddling starts and deleted when it ends, so
+entities are not spawned every frame.  It runs before the TransformSystem (on this frame's
+poses) so clones get their world matrices this frame.
 """
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ from pyglm import glm
 
 from components import (
     Emissive,
+    FromDecal,
     Material,
     MeshRef,
     Morph,
@@ -34,57 +38,102 @@ from components import (
 from engine.core.portal_math import pair_transform, portal_plane
 from engine.core.skinning import posed_bounds
 from engine.core.transforms import current_world_matrix
-from engine.core.world import World
+from engine.core.world import TransformTree, World
 from engine.rules.frame_rules import frame_rules, world_corners
 
-# What a clone copies from its source to look as it does (kept the same while it lasts); where
-# it is drawn (Visibility) and whether it casts shadows (MeshRef) its row reads off the source.
-CLONE_LOOKS = (Material, Emissive, Reflective, Refractive)
+# What a clone copies from its source to look as it does (kept the same while it lasts: a
+# decal's cut, FromDecal, is drawn as one); where it is drawn (Visibility) and whether it
+# casts shadows (MeshRef) its row reads off the source.
+CLONE_LOOKS = (Material, Emissive, Reflective, Refractive, FromDecal)
 
 
 class PortalSliceSystem(esper.Processor):
     def __init__(self, world: World) -> None:
         self.world = world
-        self.clones: dict[int, int] = {}   # source entity -> its clone
+        self.clones: dict[int, int] = {}   # source entity (a traveller or a part below it) -> its clone
 
     def process(self, dt: float) -> None:
         world = self.world
         portals = self._open_portals()
-        bent, morphs, meshes = world.changed(Skin), world.changed(Morph), world.changed(MeshRef)
-        restyled = [(kind, world.changed(kind)) for kind in CLONE_LOOKS]
-        travelling = set()
-        for entity, (_, mesh_ref, transform) in world.query(Traveller, MeshRef, Transform):
-            travelling.add(entity)
-            skin = world.try_get(entity, Skin) if mesh_ref.mesh.skinned else None
-            morph = world.try_get(entity, Morph) if mesh_ref.mesh.morph_count else None
-            straddled = self._straddled(mesh_ref, current_world_matrix(world, transform), portals, skin, morph) \
-                if portals else None
+        tree = world.resources.get(TransformTree)
+        changes = (world.changed(Skin), world.changed(Morph), world.changed(MeshRef),
+                   [(kind, world.changed(kind)) for kind in CLONE_LOOKS])
+        sliced = set()  # the parts cut this frame: they keep their clones
+        linked = None  # this frame's parent links (the transform stage, after this one, has not seen them)
+        for root, (_, transform) in world.query(Traveller, Transform) if portals else ():
+            if linked is None:
+                linked = self._linked_now()
+            parts = self._parts(root, transform, tree, linked)
+            if not parts:
+                continue
+            straddled = self._straddled(glm.vec3(current_world_matrix(world, transform)[3]), parts, portals)
             if straddled is None:
-                self._release(entity)
                 continue
             plane, carry, exit_plane, portal = straddled
-            self._slice(entity, plane)
-            clone = self.clones.get(entity)
-            if clone is not None and world.exists(clone) and entity in meshes \
-                    and world.get(clone, MeshRef).mesh is not mesh_ref.mesh:  # a new mesh (a level of detail)
-                world.delete_entity(clone)
-            if clone is None or not world.exists(clone):
-                clone = self.clones[entity] = self._spawn_clone(entity, mesh_ref, portal)
-            else:  # looks and is posed as its source does, this frame
-                for kind, changed in restyled:
-                    if entity in changed:
-                        self._copy_look(entity, clone, kind)
-                if skin is not None and entity in bent:
-                    world.get(clone, Skin).joint_matrices = skin.joint_matrices
-                if morph is not None and entity in morphs:
-                    world.get(clone, Morph).weights = morph.weights
-            clone_t = world.get(clone, Transform)
-            position, rotation, scale = _decompose(carry * current_world_matrix(world, transform))
-            clone_t.position, clone_t.rotation, clone_t.scale = position, rotation, scale
-            self._slice(clone, exit_plane)
-        # Deleted, or no longer a Traveller with a mesh and a place: its clone goes too.
-        for source in [s for s in self.clones if s not in travelling]:
+            for part, mesh_ref, model, skin, morph in parts:
+                sliced.add(part)
+                self._slice(part, plane)
+                clone = self._clone(part, mesh_ref, skin, morph, portal, changes)
+                clone_t = world.get(clone, Transform)
+                clone_t.position, clone_t.rotation, clone_t.scale = _decompose(carry * model)
+                self._slice(clone, exit_plane)
+        # Out of the portal, deleted, or no longer a traveller's part with a mesh and a place:
+        # whole again, and its clone goes.
+        for source in [s for s in self.clones if s not in sliced]:
             self._release(source)
+
+    def _linked_now(self) -> dict[int, set[int]]:
+        """The children given a parent this frame, by parent (a model spawned this frame: its
+        parts), which ``TransformTree`` holds from the transform stage on."""
+        world = self.world
+        linked: dict[int, set[int]] = {}
+        for entity in world.changed(Transform):
+            transform = world.try_get(entity, Transform) if world.exists(entity) else None
+            if transform is not None and transform.parent is not None:
+                linked.setdefault(transform.parent, set()).add(entity)
+        return linked
+
+    def _parts(self, root: int, transform: Transform, tree: TransformTree | None,
+               linked: dict[int, set[int]]) -> list[tuple]:
+        """(entity, MeshRef, world matrix, Skin, Morph) of the traveller ``root`` and of each
+        entity below it with a mesh (a model's parts, a decal's cut, a held lamp's bulb): what
+        goes through a portal with it, sliced and cloned together.  Skin and Morph only where
+        the mesh is posed by them."""
+        world = self.world
+        found = []
+        below = tree.descendants(root, linked) if tree is not None else TransformTree(linked).descendants(root)
+        for entity in (root, *below):
+            mesh_ref = world.try_get(entity, MeshRef)
+            part_t = transform if entity == root else world.try_get(entity, Transform)
+            if mesh_ref is None or part_t is None or not world.exists(entity) or world.has(entity, PortalClone):
+                continue
+            mesh = mesh_ref.mesh
+            found.append((entity, mesh_ref, current_world_matrix(world, part_t),
+                          world.try_get(entity, Skin) if mesh.skinned else None,
+                          world.try_get(entity, Morph) if mesh.morph_count else None))
+        return found
+
+    def _clone(self, part: int, mesh_ref: MeshRef, skin: Skin | None, morph: Morph | None, portal: int,
+               changes: tuple) -> int:
+        """The part's clone beyond the partner: made when it starts to straddle (again, for a
+        new mesh: a level of detail), then kept looking and posed as its source is."""
+        world = self.world
+        bent, morphs, meshes, restyled = changes
+        clone = self.clones.get(part)
+        if clone is not None and world.exists(clone) and part in meshes \
+                and world.get(clone, MeshRef).mesh is not mesh_ref.mesh:
+            world.delete_entity(clone)
+        if clone is None or not world.exists(clone):
+            clone = self.clones[part] = self._spawn_clone(part, mesh_ref, portal)
+            return clone
+        for kind, changed in restyled:
+            if part in changed:
+                self._copy_look(part, clone, kind)
+        if skin is not None and part in bent:
+            world.get(clone, Skin).joint_matrices = skin.joint_matrices
+        if morph is not None and part in morphs:
+            world.get(clone, Morph).weights = morph.weights
+        return clone
 
     def _open_portals(self) -> list[tuple[int, Portal, glm.mat4, glm.mat4]]:
         """(portal, its Portal, its world matrix, its partner's) of every open pair."""
@@ -94,17 +143,17 @@ class PortalSliceSystem(esper.Processor):
                 for entity, partner in frame_rules(world).open_portals.items()]
 
     @staticmethod
-    def _straddled(mesh_ref: MeshRef, model: glm.mat4, portals, skin: Skin | None = None, morph: Morph | None = None):
-        """(slice plane, carry, partner's plane, portal) of the first portal cutting the bounds
-        (a posed mesh's as its ``skin`` and ``morph`` pose it) with the entity's origin in
-        front of it, the point travel carries (or on it): a portal is one-way, so a thing
-        pushed into its back is not going through it and is drawn whole, with no clone."""
-        mesh = mesh_ref.mesh
-        bounds = None if skin is None and morph is None else \
-            posed_bounds(mesh, skin.joint_matrices if skin else None, morph.weights if morph else None,
-                         skin is not None and skin.skinning == "dual_quaternion")
-        corners = world_corners(mesh, model, bounds)
-        origin = glm.vec3(model[3])
+    def _straddled(origin: glm.vec3, parts: list[tuple], portals):
+        """(slice plane, carry, partner's plane, portal) of the first portal cutting the box
+        about the traveller's parts (each posed mesh's as its Skin and Morph pose it) with the
+        traveller's origin in front of it, the point travel carries (or on it): a portal is
+        one-way, so a thing pushed into its back is not going through it and is drawn whole,
+        with no clone."""
+        corners = np.concatenate([
+            world_corners(mesh_ref.mesh, model, None if skin is None and morph is None else posed_bounds(
+                mesh_ref.mesh, skin.joint_matrices if skin else None, morph.weights if morph else None,
+                skin is not None and skin.skinning == "dual_quaternion"))
+            for _, mesh_ref, model, skin, morph in parts])
         for entity, portal, in_world, out_world in portals:
             plane = portal_plane(in_world)
             if glm.dot(glm.vec3(plane), origin) + plane.w < 0.0:

@@ -5,7 +5,7 @@ import esper
 from pyglm import glm
 
 from components import Transform
-from engine.core.world import FrameEvents, World
+from engine.core.world import FrameEvents, TransformTree, World
 
 _NEW = object()  # not yet seen by the system (its parent_of has no entry)
 
@@ -13,9 +13,10 @@ _NEW = object()  # not yet seen by the system (its parent_of has no entry)
 class TransformSystem(esper.Processor):
     """Updates ``Transform.world`` for changed entities and their descendants.
 
-    Publishes ``world.frame`` (moved / added / removed entity sets) for later systems:
-    the renderer re-uploads only moved instances and probes re-render only when something
-    near them moved.  Code that runs before this stage works the same matrix out from the
+    Publishes ``world.frame`` (moved / added / removed entity sets) for later systems: the
+    renderer re-uploads only moved instances and probes re-render only when something near
+    them moved; and its index of each parent's children (``TransformTree``: a traveller's
+    parts, for portal slicing).  Code that runs before this stage works the same matrix out from the
     components with ``engine.core.transforms.current_world_matrix`` (a parent that does not
     exist or has no Transform is no parent, here and there).
     """
@@ -24,6 +25,7 @@ class TransformSystem(esper.Processor):
         self.world = world
         self._parent_of: dict[int, int | None] = {}
         self._children: dict[int, set[int]] = {}
+        world.resources[TransformTree] = TransformTree(self._children)  # (the same dict: kept as it changes)
 
     def process(self, dt: float) -> None:
         world = self.world

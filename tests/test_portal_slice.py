@@ -8,6 +8,7 @@ from components import (
     Camera,
     DirectionalLight,
     Emissive,
+    FromDecal,
     Material,
     MeshRef,
     PortalClone,
@@ -17,6 +18,7 @@ from components import (
     Traveller,
     look_rotation,
 )
+from components.decal import Decal
 from engine.assets.mesh import box
 from engine.assets.portals import spawn_portal_pair
 
@@ -173,3 +175,83 @@ def test_the_clone_goes_when_its_source_loses_its_mesh(scene):
     assert runner.world.query_one(PortalClone) == []
     assert not runner.world.has(ents["bar"], Slice)
     assert not (runner.ids() == ents["bar"]).any()
+
+
+def build_model_like(world, ents, eye, target):
+    """``build_pair``'s portals and camera, and a traveller with no mesh of its own (a model's
+    root) whose two parts are below it: the bar halfway into A, and a block a metre further
+    on, wholly through A's plane."""
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+    eye = glm.vec3(eye)
+    ents["camera"] = world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera())
+    ents["a"], ents["b"] = spawn_portal_pair(world, (-3, 1.5, 0), None, (3, 1.5, 0), None)
+    ents["root"] = root = world.spawn(Transform(position=(-2.8, 1.5, 0.0)), Traveller())
+    ents["bar"] = world.spawn(Transform(parent=root), MeshRef(box((0.4, 0.4, 2.0))),
+                              Material(color=(0.9, 0.5, 0.1)), Emissive(1.0))
+    ents["block"] = world.spawn(Transform(position=(0.0, 0.0, -1.5), parent=root), MeshRef(box((0.3, 0.3, 0.3))),
+                                Material(color=(0.1, 0.8, 0.2)))
+
+
+def test_a_travellers_parts_are_sliced_and_cloned_with_it(scene):
+    """A traveller's meshes below it (a model's parts) go through a portal with it: the box
+    about them all straddles A, so each part is cut at A, a part wholly through included (it is
+    not drawn behind A), and each comes out of B as a clone, carried by the pair."""
+    ents = {}
+    side = scene(lambda world: build_model_like(world, ents, (-7.0, 1.6, -0.5), (-2.8, 1.5, -0.5)), SIZE)
+    side.frame()  # (its first: the parts are found below the traveller before the transform stage links them)
+    ids = side.ids()
+    col, row = side.project((-2.8, 1.5, 0.6))
+    assert ids[row, col] == ents["bar"]            # in front of A: drawn
+    for point in ((-2.8, 1.5, -0.6), (-2.8, 1.5, -1.5)):
+        col, row = side.project(point)
+        assert ids[row, col] not in (ents["bar"], ents["block"])  # behind A: the bar's far half, the block
+    world = side.world
+    for part in ("bar", "block"):
+        assert world.get(ents[part], Slice).plane == glm.vec4(0, 0, 1, 0)
+    assert not world.has(ents["root"], Slice)
+    clones = {clone.source: entity for entity, clone in world.query_one(PortalClone)}
+    assert set(clones) == {ents["bar"], ents["block"]}
+    # A-local (0.2, 0, -1.5) comes out of B (half turned) at (2.8, 1.5, 1.5).
+    np.testing.assert_allclose(world.get(clones[ents["block"]], Transform).position, (2.8, 1.5, 1.5), atol=1e-5)
+
+    front = scene(lambda world: build_model_like(world, {}, (0, 3.0, 7.0), (0, 1.5, 0)), SIZE)
+    front.frame()
+    ids = front.ids()
+    for point, part in (((2.8, 1.65, 1.5), "block"), ((2.8, 1.7, 0.6), "bar")):
+        col, row = front.project(point)
+        assert ids[row, col] == ents[part], part   # the clones report their sources
+
+    # Taken out of the portal, every part is whole again and every clone goes.
+    world.get(ents["root"], Transform).position = (-2.8, 1.5, 3.0)
+    side.frame()
+    assert not world.query_one(PortalClone)
+    assert not world.has(ents["bar"], Slice) and not world.has(ents["block"], Slice)
+
+
+def test_a_decal_on_a_traveller_is_cut_at_the_portal_with_it(scene):
+    """A sticker on the bar's side (a Decal parented to the bar; its cut is an entity below it)
+    goes through with the bar: cut at A (it does not float where the bar's far half is cut
+    away), and drawn beyond B as a decal's cut (the clone takes its FromDecal)."""
+    ents = {}
+
+    def build(world):
+        build_pair(world, ents, (-7.0, 1.6, -0.5), (-2.8, 1.5, -0.5))
+        ents["decal"] = world.spawn(Transform(position=(-0.4, 0.0, 0.0), rotation=look_rotation((1, 0, 0)),
+                                              scale=(1.8, 0.3, 0.5), parent=ents["bar"]),
+                                    Decal(color=(0.1, 0.2, 1.0, 1.0)))
+
+    runner = scene(build, SIZE)
+    for _ in range(3):
+        runner.frame()
+    world = runner.world
+    (cut, _), = [(e, c) for e, c in world.query_one(FromDecal) if not world.has(e, PortalClone)]
+    ids = runner.ids()
+    col, row = runner.project((-3.0, 1.5, 0.6))
+    assert ids[row, col] == cut                    # the sticker in front of A
+    col, row = runner.project((-3.0, 1.5, -0.6))
+    assert ids[row, col] not in (cut, ents["bar"])  # nothing behind A: the sky
+    assert world.get(cut, Slice).plane == glm.vec4(0, 0, 1, 0)
+    clones = {clone.source: entity for entity, clone in world.query_one(PortalClone)}
+    assert set(clones) == {ents["bar"], cut}
+    assert world.get(clones[cut], FromDecal).decal == ents["decal"]

@@ -11,7 +11,7 @@ import itertools
 import sys
 import warnings
 from collections import defaultdict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -85,6 +85,28 @@ class FrameEvents:
     # handed on so the extract stage does not look a thousand movers' components up again);
     # an entity missing here is read from its Transform.
     worlds: dict[int, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TransformTree:
+    """Each parent's children as the TransformSystem last linked them (its own index, kept by
+    it: read it, never write it), published as a world resource.  A stage that runs before
+    the transform stage (portal slicing) adds the links made this frame (``more``)."""
+
+    children: Mapping[int, set[int]]
+
+    def descendants(self, entity: int, more: Mapping[int, set[int]] | None = None) -> list[int]:
+        """Every entity below ``entity``, nearest first (none for an entity with no children);
+        ``more``: links the index does not hold yet (this frame's, before the transform stage)."""
+        children = self.children
+        found = list(children.get(entity, ()))
+        if more:
+            found += [child for child in more.get(entity, ()) if child not in found]
+        for below in found:  # (grows as it goes: a breadth-first walk)
+            found.extend(children.get(below, ()))
+            if more:
+                found += [child for child in more.get(below, ()) if child not in found]
+        return found
 
 
 class World:
