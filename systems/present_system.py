@@ -73,8 +73,11 @@ class PresentSystem(esper.Processor):
         views: FrameViews | None = self.world.resources.get(FrameViews)
         if output is None or views is None or views.main is None:
             if views is not None and views.main is None and active_camera_parts(self.world) is None:
-                # No camera (not a minimised window): its bloom, exposure and colour table go.
+                # No camera (not a minimised window): its bloom, exposure and colour table go,
+                # and the frame shows nothing (black, under any screen text).
                 self.renderer.present_pass.release_post_targets()
+                if output is not None and output.size[0] > 0 and output.size[1] > 0:
+                    self.renderer.present_pass.show_nothing(output.framebuffer, output.size)
             return
         self.present_into(output.framebuffer, output.size, dt)
 

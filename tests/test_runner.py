@@ -222,9 +222,16 @@ def test_no_camera_is_said_once_and_again_when_it_goes_away(ctx):
             rgb = scene.frame()
             assert rgb.std() > 0 or rgb.mean() > 0  # the sky shows once there is a camera
             scene.world.get(camera, Camera).active = False
-            scene.frame()
+            rgb = scene.frame()
             said = [w for w in caught if issubclass(w.category, NoCameraWarning)]
             assert len(said) == 2 and "frame 4:" in str(said[1].message)
+            # Black: not the last frame with a camera left in the output (nor a window's old
+            # back buffer); screen text is still drawn over it.
+            assert rgb.max() == 0
+            from components import ScreenText
+            scene.world.spawn(ScreenText("x", position=(1.0, 1.0)))
+            rgb = scene.frame()
+            assert rgb.max() > 200 and (rgb == 0).all(axis=2).any()
     finally:
         scene.close()
 

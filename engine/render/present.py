@@ -370,6 +370,14 @@ class PresentPass:
             bind_texture(self.ctx, state, EXPOSURE_UNIT)
         return encode
 
+    def show_nothing(self, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+        """``output`` cleared to black: the frame of a world with no active camera, which
+        otherwise kept the last frame drawn into it (a window's back buffer: whatever it held)."""
+        output.use()
+        whole = (0, 0, *size)
+        apply_pass_state(self.ctx, _PRESENT, whole, whole)
+        output.clear(0.0, 0.0, 0.0, 1.0, viewport=whole)
+
     def draw_occlusion(self, shares: moderngl.Texture, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
         """The debug view of ambient occlusion: ``shares`` (the camera's occlusion image,
         ``Gpu.screen_occlusion``) as grey into ``output``, in place of the picture."""
