@@ -761,7 +761,7 @@ class Editor:
             missing = " and no ".join(k for k in ("MeshRef", "Transform") if k not in held)
             raise ComponentValueError(f"{self.name_of(entity)}: a Mirror needs a MeshRef and a Transform "
                                       f"(it would have no {missing})")
-        check_components(components)
+        check_components(components, entity)
 
     def _push(self, edit: Edit) -> None:
         self._everything.append(edit)

@@ -199,6 +199,10 @@ def test_a_drag_is_one_undo_and_components_come_and_go_with_undo(tmp_path):
     with pytest.raises(EditError, match="Mirror"):
         editor.add_component(names["sun"], "Mirror")
     assert not world.has(names["sun"], Mirror)
+    # A Mirror on the crate's box is refused by the mirror rule, naming the crate (not entity 0).
+    with pytest.raises(EditError, match=rf"Mirror on entity {crate}: its MeshRef.mesh .* is not flat"):
+        editor.add_component(crate, "Mirror")
+    assert not world.has(crate, Mirror)
     # Saved: the file's diff is the edits left (Visibility added; roughness back as it was).
     editor.set_field(crate, "Material", "roughness", 0.3)
     # Play is not an edit: the camera flown and the crate spun are not saved.

@@ -33,15 +33,17 @@ _INVARIANTS: dict[type, list[Invariant]] = defaultdict(list)
 _WHOLE_INVARIANTS: dict[type, list[Invariant]] = defaultdict(list)
 
 
-def check_components(components: Iterable[Any]) -> None:
+def check_components(components: Iterable[Any], entity: int = 0) -> None:
     """Run the registered invariants over ``components`` that are to make one entity, before
     any world holds them (a level file checks each entity when it loads, so a refusal names
-    the file and line): the checks see them as one entity's components."""
+    the file and line; the editor an entity's components as an edit would leave them): the
+    checks see them as one entity's components, and a refusal names ``entity`` (0: one not
+    made yet)."""
     held = {type(component): component for component in components}
     detached = _Detached(held)
     for kind in held:
         for check in (*_INVARIANTS.get(kind, ()), *_WHOLE_INVARIANTS.get(kind, ())):
-            check(detached, 0, None)
+            check(detached, entity, None)
 
 
 class _Detached:
