@@ -22,7 +22,9 @@ class Portal(ShownLayers):
     ``mirror_rules.check_one_surface``).
 
     The rectangle is ``size`` (width, height) in the entity's local XY plane, facing local
-    +Z; looking into its front shows what lies in front of the partner.  ``closed_color``
+    +Z; looking into its front shows what lies in front of the partner, on the pixels of the
+    entity's mesh: a quad of ``size`` (one with depth along local Z, a box, is said in a
+    ComponentWarning: its sides would show the view too).  ``closed_color``
     is what it shows when it has no working partner (deleted, disabled); cut by the view
     budget or past the recursion limit, it shows what lies beyond the partner as the probes
     there (or the sky) saw it, its fallback.  A ``partner`` that names an entity never made in its world is a

@@ -850,3 +850,26 @@ def test_a_camera_under_a_mirrored_parent_sees_the_floor_and_the_mirror(scene):
     assert shown.mean() > 20
     np.testing.assert_allclose(shown.astype(int), expected.astype(int), atol=2)
     assert parented.stats.reflection_views >= 1
+
+
+def test_a_portal_on_a_mesh_not_flat_in_its_plane_is_said_once_per_join(world):
+    """A Portal's rectangle lies in its local XY plane; a mesh with depth along local Z (a
+    box: the editor's first mesh; a plane lying flat) shows the view on every pixel, its sides
+    too: a ComponentWarning names the entity and the mesh when the Portal or the MeshRef
+    joins or the mesh is replaced; a quad says nothing."""
+    from components import ComponentWarning
+    from engine.assets.mesh import box
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        door = world.spawn(Transform(), MeshRef(quad(2.0, 3.0)), Material(), Portal())
+        assert not [w for w in caught if issubclass(w.category, ComponentWarning)]
+        crate = world.spawn(Transform(), Portal(), MeshRef(box(name="crate")), Material())  # (either order)
+        lying = world.spawn(Transform(), MeshRef(plane(2.0, 3.0)), Material(), Portal())
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+        assert len(said) == 2, said
+        assert said[0].startswith(f"Portal on entity {crate}: its MeshRef.mesh 'crate' is not flat in its local XY")
+        assert said[1].startswith(f"Portal on entity {lying}: ")
+        world.get(door, MeshRef).mesh = box(name="deep")
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+        assert len(said) == 3 and said[2].startswith(f"Portal on entity {door}: its MeshRef.mesh 'deep'")

@@ -13,7 +13,8 @@ reason.
 
 A mirror or portal is drawn whole and from its front: its claim of its pixels has no holes,
 so a cutout material (``Material.alpha_cutoff``) or a double-sided one
-(``Material.double_sided``) is refused on one (``check_surface_material``).
+(``Material.double_sided``) is refused on one (``check_surface_material``).  A portal's
+mesh not flat in its rectangle's plane is said, not refused (``warn_portal_not_flat``).
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from components import ComponentValueError, Material, MeshRef, Mirror, Portal
+from components.tracking import warn_component
 from engine.assets.mesh import Mesh, flat_plane, planar_uv_map
 from engine.core.world import World, world_invariant
 
@@ -93,6 +95,36 @@ def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh
                     "normal_map" in second)
     except MirrorMeshError as exc:
         raise ComponentValueError(f"Mirror on entity {entity}: {exc}") from None
+
+
+# A portal's mesh deeper than this share of its widest side along its local Z is not flat in
+# the XY plane its rectangle lies in (``warn_portal_not_flat``).
+PORTAL_FLAT_SHARE = 1e-3
+
+
+@world_invariant(Portal, MeshRef)
+def warn_portal_not_flat(world: World, entity: int, joining: Any = None, mesh: Mesh | None = None,
+                         **_other: Any) -> None:
+    """Say (a ComponentWarning, when a Portal or a MeshRef joins, or the mesh is replaced) a
+    portal whose mesh is not flat in its local XY plane, where its rectangle lies: every pixel
+    of the mesh shows the view through the portal (a box's sides and back too), while things go
+    through the rectangle alone.  Allowed (a frame with depth drawn as the opening is a choice),
+    but a unit box (the editor's first mesh) is usually a mesh not yet made a quad."""
+    exists = world.exists(entity)
+    if type(joining) is not Portal and (not exists or world.try_get(entity, Portal) is None):
+        return  # (most entities: no portal, nothing more to look up)
+    if mesh is None:
+        mesh_ref = joining if type(joining) is MeshRef else world.try_get(entity, MeshRef) if exists else None
+        mesh = mesh_ref.mesh if mesh_ref is not None else None
+    if mesh is None:
+        return
+    lo, hi = mesh.bounds
+    depth, widest = float(hi[2] - lo[2]), float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    if depth > PORTAL_FLAT_SHARE * max(widest, 1e-9):
+        warn_component(f"Portal on entity {entity}: its MeshRef.mesh {mesh.name!r} is not flat in its local XY "
+                       f"plane (z from {float(lo[2]):.3g} to {float(hi[2]):.3g}), where the portal's rectangle lies: "
+                       "every pixel of it shows the view through the portal, its sides and back too; give it a "
+                       "quad (engine.assets.mesh.quad(width, height), the size of Portal.size)")
 
 
 @world_invariant(Mirror, Portal, Material)
