@@ -258,6 +258,9 @@ def _folder(text: str) -> Path:
     return path
 
 
+MAX_POSE = 1e6  # --camera's largest coordinate or angle: well inside a Transform's and a rotation's range
+
+
 def _pose(text: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(","))
@@ -265,6 +268,9 @@ def _pose(text: str) -> tuple[float, ...]:
         values = ()
     if len(values) != 5:
         raise argparse.ArgumentTypeError(f"--camera must be x,y,z,yaw,pitch, got {text!r}")
+    if not all(math.isfinite(v) for v in values) or any(abs(v) > MAX_POSE for v in values):
+        raise argparse.ArgumentTypeError(f"--camera must be five finite numbers (metres, degrees; at most "
+                                         f"{MAX_POSE:g} either way), got {text!r}")
     return values
 
 

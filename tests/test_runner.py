@@ -64,6 +64,9 @@ def test_bad_arguments_give_clear_errors(tmp_path):
     assert result.returncode != 0 and "--size must look like 640x360" in result.stderr
     result = run_level("--headless", "--camera", "1,2", "--out", str(tmp_path))
     assert result.returncode != 0 and "--camera must be x,y,z,yaw,pitch" in result.stderr
+    for pose in ("0,1,5,nan,0", "0,1,5,0,1e300"):  # refused as an argument, not later inside a rotation
+        result = run_level("--headless", "--camera", pose, "--out", str(tmp_path))
+        assert result.returncode == 2 and "argument --camera: --camera must be five finite numbers" in result.stderr
 
 
 def test_window_shell_runs_under_moderngl_window_headless(tmp_path):
