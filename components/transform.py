@@ -95,6 +95,10 @@ class Transform(TrackedComponent):
             low, high = SCALE_RANGE
             if v.x < 0.0 or v.y < 0.0 or v.z < 0.0:
                 _MIRRORING[0] = True
+                world = getattr(self, "_world_ref", None)
+                if world is not None:  # (a scale with a negative part: the rules about mirroring, a portal's)
+                    for entity in self._entities:
+                        world.check_invariants(entity, Transform, scale=v)
             if not all(low <= abs(c) <= high for c in v):
                 raise ComponentValueError(f"Transform.scale components must be {low:g} to {high:g} in size "
                                           f"(the normal matrix is their inverse), got {value!r}")

@@ -873,3 +873,23 @@ def test_a_portal_on_a_mesh_not_flat_in_its_plane_is_said_once_per_join(world):
         world.get(door, MeshRef).mesh = box(name="deep")
         said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
         assert len(said) == 3 and said[2].startswith(f"Portal on entity {door}: its MeshRef.mesh 'deep'")
+
+
+def test_a_mirrored_portal_is_refused_when_given(world):
+    """A portal's pair carries a turn and a move: a Transform.scale with an odd number of
+    negative parts (a scale of -1 to face it the other way) would make its view and what goes
+    through it mirror images.  Refused at spawn, when the scale is set, and when a Portal joins
+    a mirrored entity; two negative parts (a half turn) are a turn, and allowed."""
+    with pytest.raises(ComponentValueError, match=r"Portal on entity \d+: Transform.scale \(-1.0, 1.0, 1.0\) "
+                                                  r"mirrors it .* half turn"):
+        world.spawn(Transform(scale=(-1.0, 1.0, 1.0)), MeshRef(quad(2.0, 3.0)), Material(), Portal())
+    assert not world.query_one(Portal)
+    door = world.spawn(Transform(scale=(-1.0, -1.0, 1.0)), MeshRef(quad(2.0, 3.0)), Material(), Portal())
+    with pytest.raises(ComponentValueError, match=rf"Portal on entity {door}: Transform.scale \(1.0, 1.0, -2.0\)"):
+        world.get(door, Transform).scale = (1.0, 1.0, -2.0)
+    assert tuple(world.get(door, Transform).scale) == (-1.0, -1.0, 1.0)
+    flipped = world.spawn(Transform(scale=(1.0, 1.0, -1.0)), MeshRef(quad(2.0, 3.0)), Material())
+    with pytest.raises(ComponentValueError, match=rf"Portal on entity {flipped}: .* mirrors it"):
+        world.add_component(flipped, Portal())
+    assert not world.has(flipped, Portal)
+    world.get(flipped, Transform).scale = (1.0, 1.0, -1.0)  # (no portal: a mirrored mesh is allowed)

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from components import ComponentValueError, Material, MeshRef, Mirror, Portal
+from components import ComponentValueError, Material, MeshRef, Mirror, Portal, Transform
 from components.tracking import warn_component
 from engine.assets.mesh import Mesh, flat_plane, planar_uv_map
 from engine.core.world import World, world_invariant
@@ -95,6 +95,28 @@ def check_mirror_mesh(world: World, entity: int, joining: Any = None, mesh: Mesh
                     "normal_map" in second)
     except MirrorMeshError as exc:
         raise ComponentValueError(f"Mirror on entity {entity}: {exc}") from None
+
+
+@world_invariant(Portal, Transform)
+def check_portal_not_mirrored(world: World, entity: int, joining: Any = None, scale: Any = None,
+                              **_other: Any) -> None:
+    """Refuse a portal whose own Transform mirrors it (``scale``: one about to be set; an odd
+    number of negative parts): what a pair carries is a turn and a move, so its view and what
+    goes through it cannot be a mirror image (the usual mistake: a scale of -1 to face a portal
+    the other way, which a half turn does)."""
+    exists = world.exists(entity)
+    if type(joining) is not Portal and (not exists or world.try_get(entity, Portal) is None):
+        return  # (most entities: no portal, nothing more to look up)
+    if scale is None:
+        transform = joining if type(joining) is Transform else world.try_get(entity, Transform) if exists else None
+        scale = transform.scale if transform is not None else None
+    if scale is None:
+        return
+    if sum(1 for part in scale if part < 0.0) % 2:
+        raise ComponentValueError(
+            f"Portal on entity {entity}: Transform.scale {tuple(float(v) for v in scale)} mirrors it (an odd number "
+            "of negative parts), and a portal's view and what goes through it cannot be mirror images; turn it "
+            "to face the other way (a half turn about its up axis), or make it a Mirror")
 
 
 # A portal's mesh deeper than this share of its widest side along its local Z is not flat in
