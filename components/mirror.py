@@ -24,7 +24,9 @@ from components.visibility import LAYER_FIELDS, ShownLayers
 class Mirror(ShownLayers):
     """Reflects the scene in the plane of its flat mesh (a virtual camera reflected in the plane,
     with an oblique near plane on it, as in Lengyel's "Oblique View Frustum" 2005).  Not on an
-    entity with a Portal (refused: ``mirror_rules.check_one_surface``).
+    entity with a Portal (refused: ``mirror_rules.check_one_surface``), nor with a Reflective,
+    Refractive or Emissive (refused: ``mirror_rules.check_surface_looks``; its look is
+    ``color`` and ``reflect_rate``).
 
     ``color`` tints the reflection, ``reflect_rate`` mixes it with the mirror's own shading,
     ``roughness`` blurs it (a mip bias on the reflection image), ``resolution_scale`` renders its reflection

@@ -19,7 +19,8 @@ class PortalPartnerWarning(UserWarning):
 @dataclass(eq=False)
 class Portal(ShownLayers):
     """A rectangular window onto the partner portal (not on an entity with a Mirror: refused,
-    ``mirror_rules.check_one_surface``).
+    ``mirror_rules.check_one_surface``; nor with a Reflective, Refractive or Emissive:
+    ``mirror_rules.check_surface_looks``).
 
     The rectangle is ``size`` (width, height) in the entity's local XY plane, facing local
     +Z; looking into its front shows what lies in front of the partner, on the pixels of the

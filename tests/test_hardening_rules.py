@@ -893,3 +893,30 @@ def test_a_mirrored_portal_is_refused_when_given(world):
         world.add_component(flipped, Portal())
     assert not world.has(flipped, Portal)
     world.get(flipped, Transform).scale = (1.0, 1.0, -1.0)  # (no portal: a mirrored mesh is allowed)
+
+
+@pytest.mark.parametrize("surface", ["Mirror", "Portal"])
+@pytest.mark.parametrize("look", ["Reflective", "Refractive", "Emissive"])
+def test_an_objects_look_on_a_mirror_or_portal_is_refused_when_given(world, surface, look):
+    """A mirror's or portal's pixels show a view: a Reflective or an Emissive there changed
+    nothing in the frame, and a Refractive drew the material's colour in place of the view,
+    each silently.  Refused whichever comes first, at spawn or when added, naming both."""
+    from components import Emissive, Reflective, Refractive
+
+    make = {"Reflective": lambda: Reflective("skybox"), "Refractive": lambda: Refractive(ior=1.5),
+            "Emissive": lambda: Emissive(2.0)}[look]
+    kind = {"Mirror": Mirror, "Portal": Portal}[surface]
+    pattern = rf"an? {look} on a {surface} (changes nothing|would hide)"
+    with pytest.raises(ComponentValueError, match=pattern):
+        world.spawn(Transform(), MeshRef(quad(2.0, 3.0)), Material(), kind(), make())
+    with pytest.raises(ComponentValueError, match=pattern):
+        world.spawn(Transform(), MeshRef(quad(2.0, 3.0)), Material(), make(), kind())
+    assert not world.entities()
+    pane = world.spawn(Transform(), MeshRef(quad(2.0, 3.0)), Material(), kind())
+    with pytest.raises(ComponentValueError, match=rf"entity {pane}: " + pattern):
+        world.add_component(pane, make())
+    assert not world.has(pane, type(make()))
+    lamp = world.spawn(Transform(), MeshRef(quad(2.0, 3.0)), Material(), make())
+    with pytest.raises(ComponentValueError, match=pattern):
+        world.add_component(lamp, kind())
+    assert not world.has(lamp, kind)

@@ -23,7 +23,17 @@ from typing import Any
 
 import numpy as np
 
-from components import ComponentValueError, Material, MeshRef, Mirror, Portal, Transform
+from components import (
+    ComponentValueError,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    Portal,
+    Reflective,
+    Refractive,
+    Transform,
+)
 from components.tracking import warn_component
 from engine.assets.mesh import Mesh, flat_plane, planar_uv_map
 from engine.core.world import World, world_invariant
@@ -184,3 +194,32 @@ def check_one_surface(world: World, entity: int, joining: Any = None, **_other: 
         raise ComponentValueError(f"entity {entity}: a {type(joining).__name__} on an entity with a {other.__name__}: "
                                   "its pixels show one view, a mirror's reflection or a portal's partner's side; "
                                   "make the other an entity of its own")
+
+
+# An object's own looks, which a mirror's or portal's pixels cannot also have: the view they
+# show leaves a Reflective's reflection and an Emissive's glow out (nothing changed), and a
+# Refractive draws the material's colour in place of the view (the view gone).
+_OBJECT_LOOKS = (Reflective, Refractive, Emissive)
+
+
+@world_invariant(Mirror, Portal, *_OBJECT_LOOKS)
+def check_surface_looks(world: World, entity: int, joining: Any = None, **_other: Any) -> None:
+    """Refuse a Reflective, Refractive or Emissive on an entity with a Mirror or Portal (either
+    joining the other): its pixels show a view (a mirror's reflection, a portal's partner's
+    side), which the object look would leave unchanged or hide."""
+    if not isinstance(joining, (Mirror, Portal, *_OBJECT_LOOKS)) or not world.exists(entity):
+        return
+    if isinstance(joining, (Mirror, Portal)):
+        surface, looks = joining, [kind for kind in _OBJECT_LOOKS if world.try_get(entity, kind) is not None]
+    else:
+        surface, looks = world.try_get(entity, Mirror) or world.try_get(entity, Portal), [type(joining)]
+    if surface is None or not looks:
+        return
+    kind, look = type(surface).__name__, looks[0].__name__
+    view = "its reflection" if isinstance(surface, Mirror) else "its partner's side"
+    effect = f"would hide {view} (the material's colour drawn in its place)" if looks[0] is Refractive else \
+        f"changes nothing (its pixels show {view}, not a look of their own)"
+    own_look = "; or set a mirror's own look with Mirror.color and reflect_rate" if isinstance(surface, Mirror) else ""
+    article = "an" if look[0] in "AEIOU" else "a"
+    raise ComponentValueError(f"entity {entity}: {article} {look} on a {kind} {effect}: give the {look} an entity "
+                              f"of its own (a glowing frame, a pane of glass in front){own_look}")
