@@ -4,7 +4,8 @@ Runs right after the game's update (which may enable, disable, delete or re-pair
 and switch cameras) and before input and travel, and publishes
 ``world.resources[FrameRules]`` (``engine/rules/frame_rules.py``) so travel, slicing, the
 surfaces and the main view all act on the same answer this frame.
-It also says, once a portal and id, when a portal's ``partner`` names an entity the world
+It also says, once, a portal its parents mirror (closed: ``frame_rules.mirrored_by_parents``),
+and, once a portal and id, when a portal's ``partner`` names an entity the world
 never made (``PortalPartnerWarning``: the portal stays closed): at the frame, not when the
 component is made, so a pair spawned one after the other is no mistake.
 """
@@ -14,20 +15,29 @@ import warnings
 
 import esper
 
-from components import Portal
+from components import Portal, Transform
 from components.portal import PortalPartnerWarning
+from components.tracking import warn_component
 from engine.core.world import World
-from engine.rules.frame_rules import FrameRules, compute_frame_rules
+from engine.rules.frame_rules import FrameRules, compute_frame_rules, mirrored_portals
 
 
 class FrameRulesSystem(esper.Processor):
     def __init__(self, world: World) -> None:
         self.world = world
         self._said: set[tuple[int, int]] = set()  # (portal, partner) already warned about
+        self._mirrored_said: set[int] = set()  # portals mirrored by their parents, already said
 
     def process(self, dt: float) -> None:
         world = self.world
         world.resources[FrameRules] = compute_frame_rules(world)
+        if world.changed(Transform) or world.changed(Portal):  # (a parent's scale, a portal added)
+            mirrored = set(mirrored_portals(world))
+            for entity in sorted(mirrored - self._mirrored_said):
+                warn_component(f"Portal on entity {entity}: its parents' Transform.scale mirror it (an odd number of "
+                               "negative parts), and a portal's view and what goes through it cannot be mirror "
+                               "images: it stays closed; turn the parent instead of mirroring it")
+            self._mirrored_said = mirrored
         for entity in world.changed(Portal):  # a portal added or re-paired: no loop over every portal a frame
             portal = world.try_get(entity, Portal) if world.exists(entity) else None
             partner = portal.partner if portal is not None else None

@@ -920,3 +920,29 @@ def test_an_objects_look_on_a_mirror_or_portal_is_refused_when_given(world, surf
     with pytest.raises(ComponentValueError, match=pattern):
         world.add_component(lamp, kind())
     assert not world.has(lamp, kind)
+
+
+def test_a_portal_mirrored_by_its_parent_stays_closed_and_is_said_once(world):
+    """A parent's scale can mirror a portal below it (its own Transform cannot: refused):
+    the pair stays closed (no view, no travel, no slicing) and the rules stage says so once;
+    the parent turned back, the pair opens."""
+    from components import ComponentWarning
+    from engine.rules.frame_rules import open_portal_pairs
+    from systems.frame_rules_system import FrameRulesSystem
+
+    world.add_system(FrameRulesSystem(world), 100)
+    frame = world.spawn(Transform(scale=(-1.0, 1.0, 1.0)))
+    a = world.spawn(Transform(parent=frame), MeshRef(quad(2.0, 3.0)), Material(), Portal())
+    b = world.spawn(Transform(position=(5.0, 0.0, 0.0)), MeshRef(quad(2.0, 3.0)), Material(), Portal(partner=a))
+    world.get(a, Portal).partner = b
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        world.step(1 / 60)
+        world.step(1 / 60)
+        world.get(frame, Transform).position = (0.0, 0.0, 1.0)  # (a move: the rule asked again)
+        world.step(1 / 60)
+    said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+    assert len(said) == 1 and said[0].startswith(f"Portal on entity {a}: its parents' Transform.scale mirror it")
+    assert open_portal_pairs(world) == {}  # b looks out of a, mirrored: closed too
+    world.get(frame, Transform).scale = (1.0, 1.0, 1.0)
+    assert open_portal_pairs(world) == {a: b, b: a}

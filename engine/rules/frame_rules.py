@@ -21,6 +21,7 @@ import numpy as np
 from pyglm import glm
 
 from components import Camera, Portal, Transform
+from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 
 if TYPE_CHECKING:
@@ -31,7 +32,8 @@ def open_portal_pairs(world: World) -> dict[int, int]:
     """Every open portal, mapped to the partner it looks out of.
 
     A portal is open when it is enabled and has a Transform, and its partner is set, is not
-    the portal itself, exists (not deleted), has a Portal and a Transform, and is enabled.
+    the portal itself, exists (not deleted), has a Portal and a Transform, and is enabled,
+    and neither is mirrored by its parents (``mirrored_by_parents``).
     Anything else is closed: the portal shows its ``closed_color``, nothing travels through
     it and nothing is sliced at it.
 
@@ -41,15 +43,35 @@ def open_portal_pairs(world: World) -> dict[int, int]:
     (view, travel, slice) only needs the entry portal and the one it looks out of.
     """
     pairs: dict[int, int] = {}
-    for entity, (portal, _) in world.query(Portal, Transform):
+    for entity, (portal, transform) in world.query(Portal, Transform):
         partner = portal.partner
         if not portal.enabled or partner is None or partner == entity or not world.exists(partner):
             continue
         out = world.try_get(partner, Portal)
-        if out is None or not out.enabled or world.try_get(partner, Transform) is None:
+        out_transform = world.try_get(partner, Transform)
+        if out is None or not out.enabled or out_transform is None:
+            continue
+        if mirrored_by_parents(world, transform) or mirrored_by_parents(world, out_transform):
             continue
         pairs[entity] = partner
     return pairs
+
+
+def mirrored_by_parents(world: World, transform: Transform) -> bool:
+    """Whether a portal's parents mirror it (their scales' negative parts, with its own, odd
+    in number): closed, as a pair carries a turn and a move, not a mirror image.  Its own
+    Transform cannot mirror it (``mirror_rules.check_portal_not_mirrored`` refuses that when
+    given); a root portal asks nothing more."""
+    if transform.parent is None:
+        return False
+    return glm.determinant(glm.mat3(current_world_matrix(world, transform))) < 0.0
+
+
+def mirrored_portals(world: World) -> list[int]:
+    """The enabled portals their parents mirror (``mirrored_by_parents``): closed, each said by
+    the rules stage."""
+    return [entity for entity, (portal, transform) in world.query(Portal, Transform)
+            if portal.enabled and mirrored_by_parents(world, transform)]
 
 
 def active_camera(world: World) -> int | None:
