@@ -6,8 +6,9 @@ and switch cameras) and before input and travel, and publishes
 surfaces and the main view all act on the same answer this frame.
 It also says, once, a portal its parents mirror (closed: ``frame_rules.mirrored_by_parents``),
 and, once a portal and id, when a portal's ``partner`` names an entity the world
-never made (``PortalPartnerWarning``: the portal stays closed): at the frame, not when the
-component is made, so a pair spawned one after the other is no mistake.
+never made (``PortalPartnerWarning``: the portal stays closed), and a portal whose size is
+not its partner's (``_say_sizes``): at the frame, not when the component is made, so a pair
+spawned one after the other is no mistake.
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ class FrameRulesSystem(esper.Processor):
         self.world = world
         self._said: set[tuple[int, int]] = set()  # (portal, partner) already warned about
         self._mirrored_said: set[int] = set()  # portals mirrored by their parents, already said
+        self._sizes_said: set[tuple] = set()  # (portal, partner, their sizes) said not to match
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -46,3 +48,24 @@ class FrameRulesSystem(esper.Processor):
                 warnings.warn(PortalPartnerWarning(
                     f"Portal on entity {entity}: partner {partner} names no entity in this world, so the portal "
                     "stays closed (it shows closed_color) until partner names a portal"), stacklevel=2)
+            self._say_sizes(entity, portal)
+
+    def _say_sizes(self, entity: int, portal: Portal | None) -> None:
+        """Say (once a portal, partner and sizes) a portal whose ``size`` is not its partner's:
+        the pair carries by the portals' transforms alone, so what goes through the larger
+        rectangle outside the smaller comes out beside the partner's opening, out of its wall,
+        and the view shows it so.  (A pair meant to differ in size scales a Transform: the
+        carry scales then, view and travellers alike.)"""
+        world = self.world
+        partner = portal.partner if portal is not None else None
+        out = world.try_get(partner, Portal) if partner is not None and world.exists(partner) else None
+        for a, a_portal, b, b_portal in ((entity, portal, partner, out), (partner, out, entity, portal)):
+            if a_portal is None or b_portal is None or a_portal.partner != b:
+                continue
+            key = (min(a, b), max(a, b), *sorted((tuple(a_portal.size), tuple(b_portal.size))))  # (a pair: once)
+            if tuple(a_portal.size) != tuple(b_portal.size) and key not in self._sizes_said:
+                self._sizes_said.add(key)
+                warn_component(f"Portal on entity {a}: its size {tuple(a_portal.size)} is not its partner's "
+                               f"{tuple(b_portal.size)} (entity {b}): what goes through the one outside the "
+                               "other's rectangle comes out beside it, out of its wall; give both one size (a pair "
+                               "larger on one side: scale that portal's Transform)")

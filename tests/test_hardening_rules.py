@@ -946,3 +946,31 @@ def test_a_portal_mirrored_by_its_parent_stays_closed_and_is_said_once(world):
     assert open_portal_pairs(world) == {}  # b looks out of a, mirrored: closed too
     world.get(frame, Transform).scale = (1.0, 1.0, 1.0)
     assert open_portal_pairs(world) == {a: b, b: a}
+
+
+def test_a_portal_pair_of_two_sizes_is_said_once(world):
+    """A pair carries by its portals' transforms alone: with sizes that differ, what goes
+    through the larger outside the smaller's rectangle comes out of the partner's wall.  The
+    rules stage says it once for the pair (not again a frame later, nor from the partner's
+    side), again for new sizes that still differ, and not once they match."""
+    from components import ComponentWarning
+    from systems.frame_rules_system import FrameRulesSystem
+
+    world.add_system(FrameRulesSystem(world), 100)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        a = world.spawn(Transform(), MeshRef(quad(2.0, 3.0)), Material(), Portal(size=(2.0, 3.0)))
+        b = world.spawn(Transform(position=(5.0, 0.0, 0.0)), MeshRef(quad(1.0, 1.5)), Material(),
+                        Portal(size=(1.0, 1.5), partner=a))
+        world.get(a, Portal).partner = b
+        world.step(1 / 60)
+        world.step(1 / 60)
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+        assert len(said) == 1, said
+        assert "its partner's" in said[0] and said[0].startswith((f"Portal on entity {a}:", f"Portal on entity {b}:"))
+        world.get(b, Portal).size = (1.5, 2.0)
+        world.step(1 / 60)
+        world.get(b, Portal).size = (2.0, 3.0)
+        world.step(1 / 60)
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+        assert len(said) == 2 and "(1.5, 2.0)" in said[1]
