@@ -158,7 +158,6 @@ def _numpy_gates(gates: list[PortalGate]) -> list[Gate]:
     for gate in gates:
         plane, to_local = np.array(gate.plane, np.float64), np.array(gate.to_local, np.float64)
         rows.append((plane, to_local, gate.half, np.array(gate.carry, np.float64),
-                     np.array(glm.mat3_cast(gate.turn), np.float64),
                      plane if gate.was_plane is None else np.array(gate.was_plane, np.float64),
                      to_local if gate.was_to_local is None else np.array(gate.was_to_local, np.float64)))
     return rows

@@ -35,7 +35,7 @@ from components import (
     Transform,
     Traveller,
 )
-from engine.core.portal_math import pair_transform, portal_plane
+from engine.core.portal_math import decompose_pose, pair_transform, portal_plane
 from engine.core.skinning import posed_bounds
 from engine.core.transforms import current_world_matrix
 from engine.core.world import TransformTree, World
@@ -75,7 +75,7 @@ class PortalSliceSystem(esper.Processor):
                 self._slice(part, plane)
                 clone = self._clone(part, mesh_ref, skin, morph, portal, changes)
                 clone_t = world.get(clone, Transform)
-                clone_t.position, clone_t.rotation, clone_t.scale = _decompose(carry * model)
+                clone_t.position, clone_t.rotation, clone_t.scale = decompose_pose(carry * model)
                 self._slice(clone, exit_plane)
         # Out of the portal, deleted, or no longer a traveller's part with a mesh and a place:
         # whole again, and its clone goes.
@@ -210,9 +210,3 @@ class PortalSliceSystem(esper.Processor):
 
     def close(self) -> None:
         self.clones.clear()
-
-
-def _decompose(matrix: glm.mat4) -> tuple[glm.vec3, glm.quat, glm.vec3]:
-    scale, rotation, translation = glm.vec3(), glm.quat(), glm.vec3()
-    glm.decompose(matrix, scale, rotation, translation, glm.vec3(), glm.vec4())
-    return translation, rotation, scale

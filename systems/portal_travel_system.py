@@ -16,8 +16,11 @@ portal's own space, so a portal that slides over a thing standing still swallows
 open pairs count (``engine.rules.frame_rules.open_portal_pairs``, the rule the views and slicing
 use too): a portal that is disabled, or whose partner is deleted, disabled or has no
 Portal or Transform, is just a quad.  The new pose is ``pair_transform(in, out)``
-applied to the old one (position and orientation; scale is kept); the Traveller's velocity
-turns with it and a FlyController's yaw / pitch are recomputed from the new orientation (a
+applied to the old one (``portal_math.carried_pose``: the pose the partner's view showed, which
+the slice's clone had; a pair whose portals differ in scale scales it, a pair of one scale keeps
+it bit for bit); the Traveller's velocity goes with it (turned, and scaled by such a pair), the
+camera's frustum tip is measured as its scaled view has it, and a FlyController's yaw / pitch
+are recomputed from the new orientation (a
 pair not related by a turn about the vertical leaves a roll in the Transform, which the fly
 camera drops at the next mouse move, as it keeps no roll).
 
@@ -45,7 +48,7 @@ from pyglm import glm
 
 from components import Camera, FlyController, Transform, Traveller, yaw_pitch_of
 from engine.core.frame_io import Output
-from engine.core.portal_math import near_plane_corners
+from engine.core.portal_math import carried_pose, near_plane_corners
 from engine.core.reflection_math import signed_distance
 from engine.core.world import World
 from engine.resources import PortalCrossing, PortalCrossings
@@ -111,6 +114,13 @@ class PortalTravelSystem(esper.Processor):
                     self._exited[entity] = gate.partner
             self._last[entity] = glm.vec3(transform.position)
 
+    def _tip(self, position: glm.vec3, rotation: glm.quat, scale: glm.vec3, cam: Camera) -> list[glm.vec3]:
+        """The camera's frustum tip in the world: its eye and near rectangle, as its view
+        has them (a scaled camera, one a scaled portal pair carried, reaches that much further)."""
+        corners = near_plane_corners(glm.vec3(0.0), glm.quat(), cam.fov_y, cam.near, self.near_aspect(),
+                                     _ortho_height(cam))
+        return [glm.vec3(position), *(position + rotation * (scale * c) for c in corners)]
+
     def near_aspect(self) -> float:
         """Aspect of the camera's near rectangle: the frame being rendered, else ``aspect``."""
         output = self.world.resources.get(Output)
@@ -139,9 +149,8 @@ class PortalTravelSystem(esper.Processor):
                 key = (t, 0.0)
             elif cam is not None and d1 <= d0 + 1e-9:  # not while backing away from its front
                 if tip is None:
-                    tip = [now, *near_plane_corners(now, transform.rotation, cam.fov_y, cam.near,
-                                                    self.near_aspect(), _ortho_height(cam))]
-                if not self._tip_touches(gate, tip, TOUCH * cam.near):
+                    tip = self._tip(now, transform.rotation, transform.scale, cam)
+                if not self._tip_touches(gate, tip, TOUCH * cam.near * _size(transform.scale)):
                     continue
                 key = (1.0, d1)
             else:
@@ -170,20 +179,21 @@ class PortalTravelSystem(esper.Processor):
     # --- teleport ------------------------------------------------------------------------------
     def _carry(self, entity: int, transform: Transform, cam: Camera | None, gate: PortalGate) -> None:
         world = self.world
-        position = glm.vec3(gate.carry * glm.vec4(transform.position, 1.0))
-        rotation = glm.normalize(gate.turn * transform.rotation)
+        position, rotation, scale = carried_pose(gate.carry, gate.turn, transform.position, transform.rotation,
+                                                 transform.scale)
         if cam is not None:
-            tip = [position, *near_plane_corners(position, rotation, cam.fov_y, cam.near, self.near_aspect(),
-                                                 _ortho_height(cam))]
+            tip = self._tip(position, rotation, scale, cam)
             lowest = min(signed_distance(gate.exit_plane, p) for p in tip)
-            clear = CLEAR * cam.near
+            clear = CLEAR * cam.near * _size(scale)
             if lowest < clear:
                 position += glm.vec3(gate.exit_plane) * (clear - lowest)
         transform.position = position
         transform.rotation = rotation
+        if scale != transform.scale:
+            transform.scale = scale
         traveller = world.try_get(entity, Traveller)
         if traveller is not None:
-            traveller.velocity = gate.turn * traveller.velocity
+            traveller.velocity = glm.mat3(gate.carry) * traveller.velocity
         fly = world.try_get(entity, FlyController)
         if fly is not None:
             forward = rotation * glm.vec3(0.0, 0.0, -1.0)
@@ -191,6 +201,11 @@ class PortalTravelSystem(esper.Processor):
             if abs(forward.y) < 0.9999:  # straight up or down keeps the old yaw
                 fly.yaw = fly.yaw + (yaw - fly.yaw + 180.0) % 360.0 - 180.0  # nearest turn: no jump
             fly.pitch = max(-89.0, min(89.0, pitch))
+
+
+def _size(scale: glm.vec3) -> float:
+    """How much a (camera's) scale stretches its near plane's reach: its largest part."""
+    return max(abs(scale.x), abs(scale.y), abs(scale.z))
 
 
 def _ortho_height(cam: Camera) -> float | None:

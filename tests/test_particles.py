@@ -705,6 +705,28 @@ def test_world_space_particles_go_through_open_portals(scene):
     assert into.rows(emitter, glm.mat4(1.0))[0, ROW_FRAME] == 1.0
 
 
+def test_particles_through_a_pair_of_two_scales_fly_on_at_the_speed_its_view_showed(scene):
+    """B scaled 2 by its Transform: the view through A shows B's side at half size, so a
+    particle carried comes out twice as far from B's centre and twice as fast, as a traveller
+    does.  Wherever in the frame it crossed, 1 s of flight (0.5 s to A at 2 m/s, the rest at
+    4 m/s, its overshoot doubled) ends 2 m in front of B."""
+    from engine.assets.portals import spawn_portal_pair
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0), fov=FOV)
+        _, b = spawn_portal_pair(world, (0.0, 1.0, 0.0), None, (10.0, 1.0, 0.0), None, size=(2.0, 3.0))
+        world.get(b, Transform).scale = glm.vec3(2.0)
+        flight = dict(rate=0.0, burst=1, speed=2.0, spread=0.0, direction=(0.0, 0.0, -1.0), lifetime=100.0)
+        world.into = world.spawn(Transform(position=glm.vec3(0.2, 1.1, 1.0)), ParticleEmitter(**flight))
+    runner = scene(build, (64, 48))
+    for _ in range(61):
+        runner.frame(1.0 / 60.0)
+    into = runner.engine.stages["particles"].clouds[runner.world.into][0]
+    # A-local (0.2, 0.1) comes out mirrored and doubled about B: (10 - 0.4, 1 + 0.2).
+    np.testing.assert_allclose(into.position[0], [10.0 - 0.4, 1.2, 2.0], atol=1e-4)
+    np.testing.assert_allclose(into.velocity[0], [0.0, 0.0, 4.0], atol=1e-5)
+
+
 def test_a_portal_sliding_over_hanging_particles_swallows_those_in_its_rectangle(scene):
     """Particles hanging still (no speed, no gravity) in front of portal A, one inside its
     rectangle's reach and one beside it: A slides forwards over both, 0.25 m a frame (a slide,

@@ -25,6 +25,7 @@ from components import (
     Skybox,
     Transform,
     Traveller,
+    look_rotation,
     yaw_pitch_rotation,
 )
 from engine.assets.mesh import box, sphere
@@ -432,3 +433,115 @@ def test_the_image_through_the_portal_matches_the_image_after_the_teleport(scene
     diff = np.abs(frames[-1] - frames[-2])
     assert diff.mean() < 1.5 and np.percentile(diff, 99) < 12, (diff.mean(), np.percentile(diff, 99))
     assert np.abs(frames[-2] - frames[0]).mean() < 5  # the whole approach showed B's side through A
+
+
+# --- (e) a pair of two scales -----------------------------------------------------------------------
+def scaled_pair(world, scale_b=2.0):
+    a, b = pair(world)
+    world.get(b, Transform).scale = glm.vec3(scale_b)
+    return a, b
+
+
+def carry_point_scaled(p, k=2.0):
+    """The pair's carry with B scaled ``k``: the unscaled carry, then ``k`` times as far from B."""
+    return glm.vec3(B_POS) + k * (carry_point(p) - glm.vec3(B_POS))
+
+
+def test_a_pair_of_two_scales_carries_a_traveller_at_the_size_and_speed_its_view_showed(world):
+    """B twice A's size by its Transform: the view through A shows B's side at half size, so
+    what goes in comes out twice as big and twice as fast (the pose the slice's clone had),
+    and going back through B halves it again."""
+    a, b = scaled_pair(world)
+    ball = world.spawn(Transform(position=(0.3, 1.8, 0.5), rotation=yaw_pitch_rotation(10.0, 0.0),
+                                 scale=(1.0, 0.5, 1.0)), Traveller(velocity=(0, 0, -6)))
+    world.step(0.1)  # z 0.5 -> -0.1: inside A's rectangle
+    assert crossings(world) == [PortalCrossing(ball, a, b)]
+    t = world.get(ball, Transform)
+    np.testing.assert_allclose(t.position, carry_point_scaled((0.3, 1.8, -0.1)), atol=1e-5)
+    np.testing.assert_allclose(t.scale, (2.0, 1.0, 2.0), atol=1e-5)
+    np.testing.assert_allclose(world.get(ball, Traveller).velocity, 2.0 * carry_dir((0, 0, -6)), atol=1e-5)
+    np.testing.assert_allclose(forward(t.rotation), carry_dir(forward(yaw_pitch_rotation(10.0, 0.0))), atol=1e-5)
+    # Back in through B's front (after a step out, as no exit takes it back in the next frame):
+    # half the size again, as it was (to float precision: a scaled carry is decomposed).
+    world.get(ball, Traveller).velocity = glm.vec3(6, 0, 0)
+    world.step(0.1)
+    world.get(ball, Traveller).velocity = glm.vec3(-6, 0, 0)
+    for _ in range(6):
+        world.step(0.1)
+        if crossings(world):
+            break
+    assert crossings(world) == [PortalCrossing(ball, b, a)]
+    np.testing.assert_allclose(world.get(ball, Transform).scale, (1.0, 0.5, 1.0), rtol=1e-6)
+    np.testing.assert_allclose(world.get(ball, Traveller).velocity, (0, 0, 3), atol=1e-5)  # half as fast
+
+
+def test_a_pair_of_one_scale_keeps_a_travellers_scale_bit_for_bit(world):
+    a, b = pair(world)
+    ball = world.spawn(Transform(position=(0.3, 1.8, 0.5), scale=(0.7, 1.3, 0.9)), Traveller(velocity=(0, 0, -6)))
+    world.step(0.1)
+    assert crossings(world) == [PortalCrossing(ball, a, b)]
+    assert tuple(world.get(ball, Transform).scale) == tuple(glm.vec3(0.7, 1.3, 0.9))
+
+
+@pytest.mark.parametrize("yaw, pitch, target, move", [
+    (35.0, -20.0, (0.6, 2.5), "forward"),  # at a slant: the near rectangle meets A's plane before the eye
+    (90.0, 0.0, (0.3, 1.5), "sideways"),   # looking along the portal: the rectangle reaches out of B's front
+])
+def test_a_scaled_camera_goes_through_before_its_longer_near_plane_cuts_a_portal(world, yaw, pitch, target, move):
+    """A camera scaled 2 (as a scaled pair leaves one) sees nothing nearer than twice its
+    ``near``: it goes through when that longer tip touches, and comes out that far clear."""
+    a, b = pair(world)
+    rotation = yaw_pitch_rotation(yaw, pitch)
+    direction = glm.normalize(forward(rotation)) if move == "forward" else glm.vec3(0, 0, -1)
+    velocity = direction * 1.5
+    start = glm.vec3(target[0], target[1], 0.0) - direction * 0.6
+    cam = world.spawn(Transform(position=start, rotation=rotation, scale=(2.0, 2.0, 2.0)),
+                      Camera(fov_y=70.0, near=0.05), Traveller(velocity=velocity))
+    crossed = False
+    for _ in range(40):
+        world.step(DT)
+        t = world.get(cam, Transform)
+        corners = near_corners(t.position, t.rotation, 70.0, 2 * 0.05, ASPECT)  # the view's near plane
+        assert not any(near_plane_cuts_quad(corners, world.get(p, Transform).world, SIZE) for p in (a, b)), \
+            f"frame {world.frame_index}"
+        if crossings(world):
+            crossed = True
+            assert crossings(world) == [PortalCrossing(cam, a, b)]
+            assert t.position.x > 10.0 and tuple(t.scale) == (2.0, 2.0, 2.0)
+            break
+    assert crossed
+
+
+def test_what_went_into_a_scaled_pair_is_the_size_its_clone_showed(scene):
+    """A bar walking into A, B scaled 2: its clone beyond B is twice its size, and the frame
+    after it crosses shows it at that size there, not popping back to its own.  (The id
+    target gives a clone its source's id, so the bar is counted by where it is on the screen:
+    the side of B's picture.)"""
+    ents = {}
+
+    def build(world):
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+        eye = glm.vec3(13.0, 3.5, 8.0)  # before both fronts (A faces +Z, B +X)
+        ents["cam"] = world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(5.0, 1.5, 0.0) - eye)),
+                                  Camera())
+        ents["a"], ents["b"] = scaled_pair(world)
+        ents["bar"] = world.spawn(Transform(position=(0.2, 1.5, 0.6)), MeshRef(box((0.4, 0.4, 1.0))),
+                                  Material(color=(0.9, 0.5, 0.1)), Emissive(1.0), Traveller(velocity=(0, 0, -1.2)))
+
+    runner = scene(build, (200, 150))
+    world = runner.world
+    seen = []  # (the bar's pixels on B's side of the screen, crossed this frame)
+    for _ in range(60):
+        runner.frame(DT)
+        split = (runner.project(A_POS)[0] + runner.project(B_POS)[0]) // 2
+        on_b = runner.ids()[:, split:] == ents["bar"]
+        seen.append((int(on_b.sum()), bool(crossings(world))))
+        if len(seen) > 3 and seen[-3][1]:
+            break
+    crossed = [i for i, (_, c) in enumerate(seen) if c]
+    assert len(crossed) == 1, seen
+    i = crossed[0]
+    before, after = seen[i - 1][0], seen[i][0]
+    assert before > 40, seen  # the clone beyond B was seen
+    assert 0.75 < after / before < 1.35, seen[i - 3:i + 3]

@@ -29,11 +29,12 @@ from components.particles import ParticleEmitter
 _NONE = np.zeros((0, 3))  # no particle died
 
 # An open portal as the step's crossing test reads it: its world plane (4,), world -> its local
-# space (4, 4), half its rectangle (2,), the pair transform (4, 4) and its rotation (3, 3), as
-# numpy arrays of engine/rules/portal_gates.PortalGate's (the particles stage makes them).
-# (plane, to_local, half, carry, turn, the plane and to_local as it stood at the end of the
+# space (4, 4), half its rectangle (2,) and the pair transform (4, 4: it carries positions,
+# and its 3x3 part velocities, scaled where the pair's portals differ in scale), as numpy
+# arrays of engine/rules/portal_gates.PortalGate's (the particles stage makes them).
+# (plane, to_local, half, carry, the plane and to_local as it stood at the end of the
 # last frame: the same arrays where it did not slide since)
-Gate = tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+Gate = tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray, np.ndarray, np.ndarray]
 
 # A drawn particle: x, y, z, size, r, g, b, a, angle, frame, and its streak (x, y, z: its
 # velocity x ParticleEmitter.stretch, world; 0 for a square).  A ribbon's point (ParticleEmitter.
@@ -172,7 +173,7 @@ class ParticleCloud:
         n = len(before)
         best = np.full(n, np.inf)
         which = np.full(n, -1)
-        for index, (plane, to_local, half, _, _, was_plane, was_to_local) in enumerate(gates):
+        for index, (plane, to_local, half, _, was_plane, was_to_local) in enumerate(gates):
             d0 = before @ was_plane[:3] + was_plane[3]
             d1 = self.position @ plane[:3] + plane[3]
             crossing = (d0 >= 0.0) & (d1 < 0.0)
@@ -185,11 +186,11 @@ class ParticleCloud:
             inside = crossing & (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1]) & (t < best)
             best[inside] = t[inside]
             which[inside] = index
-        for index, (_, _, _, carry, turn, _, _) in enumerate(gates):
+        for index, (_, _, _, carry, _, _) in enumerate(gates):
             carried = which == index
             if carried.any():
                 self.position[carried] = self.position[carried] @ carry[:3, :3].T + carry[:3, 3]
-                self.velocity[carried] = self.velocity[carried] @ turn.T
+                self.velocity[carried] = self.velocity[carried] @ carry[:3, :3].T  # a scaled pair scales it
                 self.crossed[carried] += 1.0
 
     def _bounce(self, which, ground: float, keep: float) -> None:

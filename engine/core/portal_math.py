@@ -28,6 +28,37 @@ def pair_rotation(carry: glm.mat4) -> glm.quat:
     return glm.normalize(glm.quat_cast(glm.mat3(glm.normalize(m[0]), glm.normalize(m[1]), glm.normalize(m[2]))))
 
 
+RIGID = 1e-6  # a pair transform whose axes are all this close to unit length carries no scale
+
+
+def carries_scale(carry: glm.mat4) -> bool:
+    """Whether a pair transform changes sizes: its portals' world scales differ (a portal
+    twice its partner's size by its Transform), so what goes through grows or shrinks."""
+    m = glm.mat3(carry)
+    return any(abs(glm.length(m[i]) - 1.0) > RIGID for i in range(3))
+
+
+def decompose_pose(matrix: glm.mat4) -> tuple[glm.vec3, glm.quat, glm.vec3]:
+    """Position, rotation and scale of a model matrix (``glm.decompose``; a shear, which a
+    pair of unevenly scaled portals can give a turned thing, is dropped)."""
+    scale, rotation, translation = glm.vec3(), glm.quat(), glm.vec3()
+    glm.decompose(matrix, scale, rotation, translation, glm.vec3(), glm.vec4())
+    return translation, rotation, scale
+
+
+def carried_pose(carry: glm.mat4, turn: glm.quat, position: glm.vec3, rotation: glm.quat,
+                 scale: glm.vec3) -> tuple[glm.vec3, glm.quat, glm.vec3]:
+    """A root pose carried through a portal pair: ``carry`` applied to its model matrix, the
+    pose the partner's view showed it at.  A pair of one size keeps the scale exactly (its
+    rotation is ``turn``, the carry's), so crossing back and forth never drifts it."""
+    moved = glm.vec3(carry * glm.vec4(position, 1.0))
+    if not carries_scale(carry):
+        return moved, glm.normalize(turn * rotation), glm.vec3(scale)
+    model = glm.translate(position) * glm.mat4_cast(rotation) * glm.scale(scale)
+    _, rotation, scale = decompose_pose(carry * model)
+    return moved, glm.normalize(rotation), scale
+
+
 def near_plane_corners(position: glm.vec3 | Sequence[float], rotation: glm.quat, fov_y_deg: float, near: float,
                        aspect: float, ortho_height: float | None = None) -> list[glm.vec3]:
     """World corners of a camera's near-plane rectangle (the camera looks down its -Z;
