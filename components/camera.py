@@ -89,7 +89,8 @@ class Camera(ShownLayers):
 
 @dataclass(eq=False)
 class FlyController(TrackedComponent):
-    """WASD + mouse fly controls for the entity's Transform (used by windowed runs)."""
+    """WASD + mouse fly controls for the entity's Transform (used by windowed runs).
+    ``speed`` is in the entity's own units a second: its Transform's scale multiplies it."""
 
     SHAREABLE = False  # one entity's own state: see components.tracking
     speed: float = 4.0

@@ -1,7 +1,9 @@
 """WASD + mouse fly camera for windowed runs: reads the Input resource, writes the Transform.
 The mouse wheel flies a perspective camera forward or back (a quarter second's flight a
 step) and zooms an orthographic one (its ``ortho_height`` a tenth smaller a step away), as
-an editor's view does."""
+an editor's view does.  It flies in the entity's own units (its Transform's scale): a camera
+that a portal pair of two scales made twice as big flies twice as fast, as the view through
+that portal showed it moving."""
 from __future__ import annotations
 
 import math
@@ -34,7 +36,7 @@ class FlyCameraSystem(esper.Processor):
                             ("s" in state.held) - ("w" in state.held))
             if glm.length(move) > 0.0:
                 speed = fly.speed * (3.0 if "shift" in state.held else 1.0)
-                transform.position += transform.rotation * glm.normalize(move) * speed * dt
+                transform.position += transform.rotation * (transform.scale * glm.normalize(move)) * (speed * dt)
 
     def _wheel(self, entity: int, fly: FlyController, transform: Transform, steps: float) -> None:
         """The wheel's ``steps``: an orthographic camera zooms (0.9 of its height a step
@@ -43,7 +45,8 @@ class FlyCameraSystem(esper.Processor):
         if camera is not None and camera.projection == "orthographic":
             camera.ortho_height = min(max(camera.ortho_height * WHEEL_ZOOM ** steps, 1e-3), 1e6)
         else:
-            transform.position += transform.rotation * glm.vec3(0.0, 0.0, -1.0) * (fly.speed * WHEEL_FLIGHT * steps)
+            transform.position += transform.rotation * (transform.scale * glm.vec3(0.0, 0.0, -1.0)) \
+                * (fly.speed * WHEEL_FLIGHT * steps)
 
 
 WHEEL_ZOOM = 0.9     # an orthographic camera's height a wheel step away

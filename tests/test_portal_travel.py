@@ -545,3 +545,30 @@ def test_what_went_into_a_scaled_pair_is_the_size_its_clone_showed(scene):
     before, after = seen[i - 1][0], seen[i][0]
     assert before > 40, seen  # the clone beyond B was seen
     assert 0.75 < after / before < 1.35, seen[i - 3:i + 3]
+
+
+def test_the_fly_camera_out_of_a_portal_scaled_2_flies_twice_as_fast(scene):
+    """Seen through A, B's side is at half size, so the camera flying in at 1 m/s seemed to
+    cover it at 2 m/s: out of B (scaled 2) it is twice as big and keeps that pace, its
+    FlyController's speed in its own units."""
+    ents = {}
+    build = portal_scene(ents)
+
+    def scaled(world):
+        build(world)
+        world.get(ents["b"], Transform).scale = glm.vec3(2.0)
+
+    runner = scene(scaled, (64, 48))
+    world, cam = runner.world, ents["cam"]
+    for _ in range(40):
+        before = glm.vec3(world.get(cam, Transform).position)
+        runner.frame(DT)
+        step = glm.vec3(world.get(cam, Transform).position) - before
+        if crossings(world):
+            break
+        np.testing.assert_allclose(step, (0, 0, -DT), atol=1e-6)  # 1 m/s down -Z towards A
+    assert crossings(world) == [PortalCrossing(cam, ents["a"], ents["b"])]
+    np.testing.assert_allclose(world.get(cam, Transform).scale, (2, 2, 2), rtol=1e-6)
+    before = glm.vec3(world.get(cam, Transform).position)
+    runner.frame(DT)
+    np.testing.assert_allclose(glm.vec3(world.get(cam, Transform).position) - before, (2 * DT, 0, 0), atol=1e-5)
