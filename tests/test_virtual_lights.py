@@ -249,6 +249,53 @@ def test_a_lamp_lights_the_floor_beyond_a_portal(scene):
     assert min(shadows[0]) > 100, shadows   # both boxes' shadows fall in the light out of B
 
 
+def test_a_lamp_out_of_a_portal_scaled_2_lights_as_the_lamp_twice_its_size_there(scene):
+    """B scaled 2 by its Transform: the view through A shows B's side at half size, so the
+    lamp's image out of B is the lamp twice as large: 2 m behind B where the lamp is 1 m before
+    A, twice its range and (its radiance kept, from four times the area) four times its
+    intensity.  The floor beyond B, through B's opening, is lit as a real lamp made so lights
+    it (the same frame there, within 8 bits), and not as the lamp itself would."""
+    lamp = np.array([0.0, 1.5, 5.0])
+    image = np.array([-8.0, 1.5, 0.0])   # by hand: A-local (0, 0, 1) -> B-local (0, 0, -1) x 2
+
+    def build(lit):
+        def make(world):
+            look_from(world, (-1.0, 7.0, 6.0), (-3.0, 0.0, 0.0))
+            ids = world.resources["ids"] = {}
+            ids["floor"] = world.spawn(Transform(), MeshRef(plane(24, 24)),
+                                       Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+            ids["lamp"] = world.spawn(Transform(position=lamp.tolist()), PointLight(intensity=20.0, range=6.0))
+            ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                                   look_rotation(glm.vec3(-1, 0, 0)))
+            world.get(ids["b"], Transform).scale = glm.vec3(2.0)
+            world.get(ids["a"], Portal).carries_light = lit == "through"
+            if lit in ("twice", "same"):  # a real lamp at the image: made twice the size, or as it is
+                k = 2.0 if lit == "twice" else 1.0
+                world.spawn(Transform(position=image.tolist()), PointLight(intensity=20.0 * k * k, range=6.0 * k))
+        return make
+
+    frames = {}
+    for lit in ("through", "twice", "same"):
+        runner = scene(build(lit), (240, 180))
+        runner.engine.renderer.antialias = "off"
+        frames[lit] = runner.frame().astype(int)
+        if lit == "through":
+            assert runner.stats.virtual_lights == 1
+            ids = runner.world.resources["ids"]
+            points = _floor_points(runner)
+            seen = (runner.ids() == ids["floor"]).reshape(-1)
+    # Floor points beyond B (x > -6) whose line to the image crosses B's 4 x 6 m opening well inside.
+    to_image = image - points
+    t = (-6.0 - points[:, 0]) / to_image[:, 0]
+    crossing = points + to_image * t[:, None]
+    through = seen & (points[:, 0] > -6.0) & (t > 0) & (t < 1) & (np.abs(crossing[:, 1] - 1.5) < 2.7) & \
+        (np.abs(crossing[:, 2]) < 1.7)
+    assert through.sum() > 2000, int(through.sum())
+    flat = {name: frame.reshape(-1, 3)[through] for name, frame in frames.items()}
+    assert np.abs(flat["through"] - flat["twice"]).mean() < 1.0, np.abs(flat["through"] - flat["twice"]).mean()
+    assert np.abs(flat["through"] - flat["same"]).mean() > 10.0   # the check tells the two apart
+
+
 def test_level_files_carry_the_light_fields(tmp_path):
     from engine.assets.level_file import LevelError, load_level, save_level
     from engine.core.world import World

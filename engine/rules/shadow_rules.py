@@ -23,6 +23,7 @@ from pyglm import glm
 
 from components.limits import MAX_LIGHT_BOUNCES
 from engine.core.budget import spending_order
+from engine.core.portal_math import carries_scale
 from engine.resources import Surfaces
 from engine.rules.light_rules import (
     ALL_ROUND,
@@ -512,7 +513,10 @@ class VirtualLight:
     line from the point to the image passes through every surface's outline on the way, in
     order, each entered from its front (``apertures``: the last surface's outline first, as
     it is, then each earlier one as the later surfaces carry it); its colour is the light's
-    times each surface's tint and reflect rate.  ``legs`` are the stretches of its way its
+    times each surface's tint and reflect rate.  Out of a portal pair of two scales (k times
+    the size on the way out) a lamp's image is the lamp k times as large, as the view through
+    shows it: its range and radius times k and, a point or sphere, its colour times k squared
+    (a rectangle's carried rows keep its radiance over k squared the area).  ``legs`` are the stretches of its way its
     shadow map holds: the last (way out) as the scene is, each earlier carried to where the
     image sees it.  ``exit_plane``, ``aperture``, ``carry`` and ``entry_plane`` are the last
     surface's: the one-bounce light's whole description."""
@@ -522,7 +526,7 @@ class VirtualLight:
     kind: str                        # "directional" or "point"
     position: tuple[float, float, float]   # the image's position (point), or the direction it travels
     color: tuple[float, float, float]
-    light_range: float               # a point light's range (along the whole path); 0 for directional
+    light_range: float               # a point light's range (the whole path, times a scaled pair's k); 0: directional
     exit_plane: tuple[float, float, float, float]   # lit points lie in front of it
     aperture: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]  # origin, u, v of the exit outline
     carry: glm.mat4                  # the last surface's carry (the real scene before it -> as the image sees it)
@@ -674,6 +678,15 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                     continue  # a spot aimed away from the surface
                 new_image = glm.vec3(carry * glm.vec4(glm.vec3(image), 1.0))
             color = glm.vec3(rgb) * tint
+            image_range = light_range
+            if kind != "directional" and carries_scale(carry):
+                # Out of a pair of two scales the image is the lamp that much larger: its reach
+                # scaled, and (as its rectangle keeps its radiance) a point's or a sphere's power
+                # by the area, so what it lights beyond looks as lit as the view shows it.
+                grow = _carry_scale(carry)
+                image_range = light_range * grow
+                if rectangle[0][3] == 0.0:
+                    color = color * (grow * grow)
             way_out = Leg(glm.mat4(1.0), (glm.vec4(surface.exit_plane),), (exit_surface.entity, surface.entity))
             if light is None:
                 legs = (way_out, Leg(carry, (entry,), (surface.entity, exit_surface.entity)))
@@ -687,7 +700,7 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                 apertures = (aperture, *(_carry_aperture(a, carry) for a in light.apertures))
                 path = (*light.path, surface.entity)
             made = VirtualLight(entity, surface.entity, kind, tuple(float(v) for v in new_image),
-                                tuple(float(v) for v in color), float(light_range),
+                                tuple(float(v) for v in color), float(image_range),
                                 aperture.plane, (aperture.origin, aperture.u, aperture.v), carry, entry,
                                 exit_surface.entity, surface.priority + (0 if light is None else light.priority),
                                 depth, path, apertures, legs,
@@ -696,7 +709,7 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
                                 0.0 if kind == "directional" else radius * _carry_scale(carry),
                                 NO_RECTANGLE if kind == "directional" else carried_rectangle(rectangle, carry))
             found.append(made)
-            extend(made, entity, kind, new_image, light_range, color, limit, made.cone, made.cookie, made.radius,
+            extend(made, entity, kind, new_image, image_range, color, limit, made.cone, made.cookie, made.radius,
                    made.rectangle)
 
     for entity, direction, rgb in directional:
