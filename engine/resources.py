@@ -194,7 +194,8 @@ class FiredEvents(list):
 class PortalCrossing:
     """``entity`` went into ``from_portal`` and came out of ``to_portal``; ``carry`` took it
     there (world to world: the pair's transform) and ``turn`` is carry's rotation, what a
-    game turns a velocity or a facing it keeps itself by."""
+    game turns a facing it keeps itself by.  A velocity it keeps goes by ``glm.mat3(carry)``:
+    turned, and scaled where the pair's portals differ in scale (as a Traveller's is)."""
 
     entity: int
     from_portal: int
