@@ -65,6 +65,39 @@ def test_box_beyond_the_look_out_portal_shows_where_the_math_says(scene):
     assert view.surface.kind == "portal" and not view.view.mirrored
 
 
+def test_a_portal_scaled_2_shows_its_side_at_half_size_where_the_math_says(scene):
+    """B scaled 2 by its Transform (4 x 6 m): through A, B's side is carried back by the
+    pair's inverse, so a box 1.2 m across 3 m in front of B shows as one 0.6 m across 1.5 m
+    behind A, where carry^-1 puts it: its centre is the box, a point 0.45 m off it is not
+    (it would be, at the box's own size)."""
+    ents = {}
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.5, 1.6, 6.0), (0, 1.5, 0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), TURN_Y_90)
+        world.get(ents["b"], Transform).scale = glm.vec3(2.0)
+        ents["green"] = glowing_box(world, (13.0, 1.5, 0.4), (0.1, 0.9, 0.1), size=1.2)
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    ids = runner.ids()
+    # By hand: B-local (x right, z out of B's front +X) of (13, 1.5, 0.4) is (-0.2, 0, 1.5) at
+    # scale 2; out of A's front side that is A-local (0.2, 0, -1.5): behind A, half as far.
+    centre = glm.vec3(0.2, 1.5, -1.5)
+    a_world, b_world = (glm.dmat4(runner.world.get(ents[e], Transform).world) for e in "ab")
+    carry = b_world * glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))) * glm.inverse(a_world)
+    np.testing.assert_allclose(glm.dvec3(carry * glm.dvec4(glm.dvec3(centre), 1.0)), (13.0, 1.5, 0.4), atol=1e-5)
+    col, row = runner.project(centre)
+    assert ids[row, col] == ents["green"]
+    for offset in ((0.2, 0.0, 0.0), (0.0, 0.2, 0.0)):   # within the half-size box's 0.3 half side
+        col, row = runner.project(centre + glm.vec3(offset))
+        assert ids[row, col] == ents["green"], offset
+    for offset in ((0.45, 0.0, 0.0), (0.0, 0.45, 0.0), (0.0, -0.45, 0.0)):   # past it, within the box's own 0.6
+        col, row = runner.project(centre + glm.vec3(offset))
+        assert ids[row, col] != ents["green"], offset
+
+
 def test_facing_portals_recurse_to_max_depth_then_fill(scene):
     def build(world):
         lit(world)
