@@ -48,7 +48,7 @@ from pyglm import glm
 
 from components import Camera, FlyController, Transform, Traveller, yaw_pitch_of
 from engine.core.frame_io import Output
-from engine.core.portal_math import carried_pose, near_plane_corners
+from engine.core.portal_math import carried_pose, carries_scale, near_plane_corners
 from engine.core.reflection_math import signed_distance
 from engine.core.world import World
 from engine.resources import PortalCrossing, PortalCrossings
@@ -189,11 +189,12 @@ class PortalTravelSystem(esper.Processor):
                 position += glm.vec3(gate.exit_plane) * (clear - lowest)
         transform.position = position
         transform.rotation = rotation
-        if scale != transform.scale:
+        scaled = carries_scale(gate.carry)
+        if scaled:
             transform.scale = scale
         traveller = world.try_get(entity, Traveller)
-        if traveller is not None:
-            traveller.velocity = glm.mat3(gate.carry) * traveller.velocity
+        if traveller is not None:  # (a pair of one size: turned, as the rotation is, bit for bit)
+            traveller.velocity = glm.mat3(gate.carry) * traveller.velocity if scaled else gate.turn * traveller.velocity
         fly = world.try_get(entity, FlyController)
         if fly is not None:
             forward = rotation * glm.vec3(0.0, 0.0, -1.0)

@@ -450,7 +450,7 @@ def carry_point_scaled(p, k=2.0):
 def test_a_pair_of_two_scales_carries_a_traveller_at_the_size_and_speed_its_view_showed(world):
     """B twice A's size by its Transform: the view through A shows B's side at half size, so
     what goes in comes out twice as big and twice as fast (the pose the slice's clone had),
-    and going back through B halves it again."""
+    and going back through B halves it again, exactly."""
     a, b = scaled_pair(world)
     ball = world.spawn(Transform(position=(0.3, 1.8, 0.5), rotation=yaw_pitch_rotation(10.0, 0.0),
                                  scale=(1.0, 0.5, 1.0)), Traveller(velocity=(0, 0, -6)))
@@ -462,7 +462,7 @@ def test_a_pair_of_two_scales_carries_a_traveller_at_the_size_and_speed_its_view
     np.testing.assert_allclose(world.get(ball, Traveller).velocity, 2.0 * carry_dir((0, 0, -6)), atol=1e-5)
     np.testing.assert_allclose(forward(t.rotation), carry_dir(forward(yaw_pitch_rotation(10.0, 0.0))), atol=1e-5)
     # Back in through B's front (after a step out, as no exit takes it back in the next frame):
-    # half the size again, as it was (to float precision: a scaled carry is decomposed).
+    # half the size again, exactly as it was (portal_math.even_scale: 2 and 0.5, not 1.9999998).
     world.get(ball, Traveller).velocity = glm.vec3(6, 0, 0)
     world.step(0.1)
     world.get(ball, Traveller).velocity = glm.vec3(-6, 0, 0)
@@ -471,8 +471,27 @@ def test_a_pair_of_two_scales_carries_a_traveller_at_the_size_and_speed_its_view
         if crossings(world):
             break
     assert crossings(world) == [PortalCrossing(ball, b, a)]
-    np.testing.assert_allclose(world.get(ball, Transform).scale, (1.0, 0.5, 1.0), rtol=1e-6)
+    assert tuple(world.get(ball, Transform).scale) == (1.0, 0.5, 1.0)
     np.testing.assert_allclose(world.get(ball, Traveller).velocity, (0, 0, 3), atol=1e-5)  # half as fast
+
+
+def test_a_pair_scaled_unevenly_carries_the_model_matrix_as_its_view_does(world):
+    """B scaled (2, 1, 0.5): what goes in comes out with the carry applied to its model
+    matrix (its world matrix after is the carry times its world matrix before, the pose the
+    clone had), stretched 2 across B and flattened to half along B's facing."""
+    a, b = pair(world)
+    world.get(b, Transform).scale = glm.vec3(2.0, 1.0, 0.5)
+    ball = world.spawn(Transform(position=(0.3, 1.8, 0.5), scale=(0.5, 1.0, 1.0)), Traveller(velocity=(0, 0, -6)))
+    world.step(0.05)
+    model = glm.translate(glm.vec3(0.3, 1.8, 0.2)) * glm.scale(glm.vec3(0.5, 1.0, 1.0))  # where it is before
+    world.step(0.05)  # z 0.2 -> -0.1: in
+    assert crossings(world) == [PortalCrossing(ball, a, b)]
+    crossing = crossings(world)[0]
+    t = world.get(ball, Transform)
+    after = glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale)
+    expected = crossing.carry * glm.translate(glm.vec3(0, 0, -0.3)) * model  # moved on 0.3, then carried
+    np.testing.assert_allclose(np.array(after), np.array(expected), atol=1e-5)
+    np.testing.assert_allclose(t.scale, (1.0, 1.0, 0.5), atol=1e-6)  # across B (z here) x 2, along its facing x 0.5
 
 
 def test_a_pair_of_one_scale_keeps_a_travellers_scale_bit_for_bit(world):
@@ -568,7 +587,7 @@ def test_the_fly_camera_out_of_a_portal_scaled_2_flies_twice_as_fast(scene):
             break
         np.testing.assert_allclose(step, (0, 0, -DT), atol=1e-6)  # 1 m/s down -Z towards A
     assert crossings(world) == [PortalCrossing(cam, ents["a"], ents["b"])]
-    np.testing.assert_allclose(world.get(cam, Transform).scale, (2, 2, 2), rtol=1e-6)
+    assert tuple(world.get(cam, Transform).scale) == (2.0, 2.0, 2.0)
     before = glm.vec3(world.get(cam, Transform).position)
     runner.frame(DT)
     np.testing.assert_allclose(glm.vec3(world.get(cam, Transform).position) - before, (2 * DT, 0, 0), atol=1e-5)

@@ -38,6 +38,17 @@ def carries_scale(carry: glm.mat4) -> bool:
     return any(abs(glm.length(m[i]) - 1.0) > RIGID for i in range(3))
 
 
+def even_scale(carry: glm.mat4) -> float | None:
+    """The one factor a pair transform scales every length by (1 for a pair of one size), or
+    None where it scales its axes unevenly (portals scaled unevenly by their Transforms).
+    Read to seven significant digits (about what float32's carry holds): a designer's 2 is 2,
+    not 1.9999998, and its way back 0.5, so a thing crossing there and back is its own size again."""
+    m = glm.mat3(carry)
+    lengths = [glm.length(m[i]) for i in range(3)]
+    k = lengths[0]
+    return float(f"{k:.6e}") if all(abs(length - k) <= RIGID * k for length in lengths) else None
+
+
 def decompose_pose(matrix: glm.mat4) -> tuple[glm.vec3, glm.quat, glm.vec3]:
     """Position, rotation and scale of a model matrix (``glm.decompose``; a shear, which a
     pair of unevenly scaled portals can give a turned thing, is dropped)."""
@@ -49,11 +60,15 @@ def decompose_pose(matrix: glm.mat4) -> tuple[glm.vec3, glm.quat, glm.vec3]:
 def carried_pose(carry: glm.mat4, turn: glm.quat, position: glm.vec3, rotation: glm.quat,
                  scale: glm.vec3) -> tuple[glm.vec3, glm.quat, glm.vec3]:
     """A root pose carried through a portal pair: ``carry`` applied to its model matrix, the
-    pose the partner's view showed it at.  A pair of one size keeps the scale exactly (its
-    rotation is ``turn``, the carry's), so crossing back and forth never drifts it."""
+    pose the partner's view showed it at.  A pair that scales evenly (one size, or a portal
+    k times its partner) turns it by ``turn`` (the carry's rotation) and multiplies its scale
+    by k, so crossing back and forth never drifts it; an uneven one is decomposed."""
     moved = glm.vec3(carry * glm.vec4(position, 1.0))
     if not carries_scale(carry):
         return moved, glm.normalize(turn * rotation), glm.vec3(scale)
+    k = even_scale(carry)
+    if k is not None:
+        return moved, glm.normalize(turn * rotation), glm.vec3(scale) * k
     model = glm.translate(position) * glm.mat4_cast(rotation) * glm.scale(scale)
     _, rotation, scale = decompose_pose(carry * model)
     return moved, glm.normalize(rotation), scale
