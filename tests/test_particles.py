@@ -31,7 +31,7 @@ from components import (
 from engine.assets.mesh import box, quad
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
-from engine.core.particle_cloud import ROW_FRAME
+from engine.core.particle_cloud import ROW_FRAME, ROW_SIZE
 from tests.support import look_from
 
 SIZE = (96, 72)
@@ -707,8 +707,8 @@ def test_world_space_particles_go_through_open_portals(scene):
 
 def test_particles_through_a_pair_of_two_scales_fly_on_at_the_speed_its_view_showed(scene):
     """B scaled 2 by its Transform: the view through A shows B's side at half size, so a
-    particle carried comes out twice as far from B's centre and twice as fast, as a traveller
-    does.  Wherever in the frame it crossed, 1 s of flight (0.5 s to A at 2 m/s, the rest at
+    particle carried comes out twice as far from B's centre, twice as fast and drawn twice
+    as big, as a traveller does.  Wherever in the frame it crossed, 1 s of flight (0.5 s to A at 2 m/s, the rest at
     4 m/s, its overshoot doubled) ends 2 m in front of B."""
     from engine.assets.portals import spawn_portal_pair
 
@@ -718,13 +718,19 @@ def test_particles_through_a_pair_of_two_scales_fly_on_at_the_speed_its_view_sho
         world.get(b, Transform).scale = glm.vec3(2.0)
         flight = dict(rate=0.0, burst=1, speed=2.0, spread=0.0, direction=(0.0, 0.0, -1.0), lifetime=100.0)
         world.into = world.spawn(Transform(position=glm.vec3(0.2, 1.1, 1.0)), ParticleEmitter(**flight))
+        world.past = world.spawn(Transform(position=glm.vec3(3.0, 1.1, 1.0)), ParticleEmitter(**flight))
     runner = scene(build, (64, 48))
     for _ in range(61):
         runner.frame(1.0 / 60.0)
-    into = runner.engine.stages["particles"].clouds[runner.world.into][0]
+    clouds = runner.engine.stages["particles"].clouds
+    into, past = (clouds[getattr(runner.world, name)][0] for name in ("into", "past"))
     # A-local (0.2, 0.1) comes out mirrored and doubled about B: (10 - 0.4, 1 + 0.2).
     np.testing.assert_allclose(into.position[0], [10.0 - 0.4, 1.2, 2.0], atol=1e-4)
     np.testing.assert_allclose(into.velocity[0], [0.0, 0.0, 4.0], atol=1e-5)
+    # Drawn twice the size of its twin that flew past A's edge (the same age, the same emitter).
+    emitter = runner.world.get(runner.world.into, ParticleEmitter)
+    sizes = [cloud.rows(emitter, glm.mat4(1.0))[0, ROW_SIZE] for cloud in (into, past)]
+    assert sizes[1] > 0.0 and sizes[0] == pytest.approx(2.0 * sizes[1], rel=1e-6)
 
 
 def test_a_portal_sliding_over_hanging_particles_swallows_those_in_its_rectangle(scene):

@@ -58,6 +58,7 @@ class ParticleCloud:
         self.angle = np.zeros(0)
         self.spin = np.zeros(0)
         self.crossed = np.zeros(0)  # portals each has been carried through (a ribbon breaks between counts)
+        self.grow = np.ones(0)     # each one's size over the emitter's: a portal pair of two scales scaled it
         self.carry = 0.0       # the part of a particle the rate owes (spawned once it reaches 1)
         self.capacity = capacity
         self.capped = 0        # particles the last step could not spawn (max_particles reached)
@@ -132,7 +133,7 @@ class ParticleCloud:
             self._spawn(emitter, ages[len(ages) - room:] if len(ages) > room else ages, matrix, previous, dt, local)
 
     def _keep(self, which) -> None:
-        for name in ("position", "velocity", "age", "life", "angle", "spin", "crossed"):
+        for name in ("position", "velocity", "age", "life", "angle", "spin", "crossed", "grow"):
             setattr(self, name, getattr(self, name)[which])
 
     def _move(self, which, dt, gravity: np.ndarray, drag: float) -> None:
@@ -192,6 +193,9 @@ class ParticleCloud:
                 self.position[carried] = self.position[carried] @ carry[:3, :3].T + carry[:3, 3]
                 self.velocity[carried] = self.velocity[carried] @ carry[:3, :3].T  # a scaled pair scales it
                 self.crossed[carried] += 1.0
+                k = abs(np.linalg.det(carry[:3, :3])) ** (1.0 / 3.0)
+                if abs(k - 1.0) > 1e-6:  # out of a pair of two scales: as big as its view showed it
+                    self.grow[carried] *= k
 
     def _bounce(self, which, ground: float, keep: float) -> None:
         """Particles ``which`` that went below ``ground`` this step: put back above it by
@@ -264,6 +268,7 @@ class ParticleCloud:
         self.angle = np.concatenate([self.angle, angle])
         self.spin = np.concatenate([self.spin, spin])
         self.crossed = np.concatenate([self.crossed, np.zeros(n)])
+        self.grow = np.concatenate([self.grow, np.ones(n)])
         born = slice(first, first + n)
         if age.any():  # each moved on for its part of the frame
             gravity = np.array(emitter.gravity, dtype=np.float64)
@@ -345,7 +350,7 @@ class ParticleCloud:
             grow = scale ** (1.0 / 3.0)  # (a scaled emitter's cloud is scaled, its sprites with it)
         else:
             out[:, ROW_POSITION] = self.position
-            grow = 1.0
+            grow = self.grow  # (1, but where a portal pair of two scales carried it)
         first, last = emitter.size
         if emitter.size_keys:
             keys = np.array(emitter.size_keys)
