@@ -25,7 +25,9 @@ class Portal(ShownLayers):
     The rectangle is ``size`` (width, height) in the entity's local XY plane, facing local
     +Z; looking into its front shows what lies in front of the partner, on the pixels of the
     entity's mesh: a quad of ``size`` (one with depth along local Z, a box, is said in a
-    ComponentWarning: its sides would show the view too).  ``closed_color``
+    ComponentWarning: its sides would show the view too; so is a flat mesh whose outline is
+    not ``size``'s rectangle: the view would show where nothing goes through, or the other
+    way round: ``mirror_rules.warn_portal_not_flat``).  ``closed_color``
     is what it shows when it has no working partner (deleted, disabled); cut by the view
     budget or past the recursion limit, it shows what lies beyond the partner as the probes
     there (or the sky) saw it, its fallback.  A ``partner`` that names an entity never made in its world is a
@@ -72,6 +74,10 @@ class Portal(ShownLayers):
                 if isinstance(exc, ComponentValueError):
                     raise
                 raise ComponentValueError(f"Portal.size must be (width, height) > 0, got {value!r}") from None
+            world = getattr(self, "_world_ref", None)
+            if world is not None:
+                for entity in self._entities:  # a size that is not its mesh's outline is said at the write
+                    world.check_invariants(entity, Portal, size=(w, h))
             return (w, h)
         if name == "max_depth":
             if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= MAX_VIEW_DEPTH:

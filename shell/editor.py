@@ -598,6 +598,8 @@ class Editor:
             raise EditError(f"{self.name_of(entity)} already has a {name}")
         if name == "MeshRef" and "mesh" not in fields:
             fields = {**fields, "mesh": MESH_MAKERS[NEW_MESH]()}  # a shape to start from (``set_mesh_shape``)
+        if name == "Portal" and "size" not in fields:  # the opening the mesh shows: its outline, as drawn
+            fields = {**fields, **_portal_size_of(self.world.try_get(entity, MeshRef))}
         if name == "LevelOfDetail" and "meshes" not in fields:  # a chain of one to start from: the mesh it has
             mesh_ref = self.world.try_get(entity, MeshRef)
             if mesh_ref is None:
@@ -842,3 +844,18 @@ class Editor:
         added = {name for name in whole if name in self.names and self.world.exists(self.names[name])}
         return save_level(self.world, target, self.names, extra_components=self.game_components, keep=keep,
                           only=edited, added=added, removed=whole - added)
+
+
+def _portal_size_of(mesh_ref: MeshRef | None) -> dict[str, tuple[float, float]]:
+    """``size`` for a Portal added to an entity whose mesh is a flat rectangle centred on it
+    (a quad): its width and height, so the rectangle things go through is the one the view
+    shows on (``mirror_rules.warn_portal_not_flat`` says a mismatch); nothing otherwise (the
+    Portal's default, and the rule says why where the mesh is not a quad)."""
+    if mesh_ref is None:
+        return {}
+    lo, hi = mesh_ref.mesh.bounds
+    w, h, depth = (float(hi[i] - lo[i]) for i in range(3))
+    centred = max(abs(float(lo[0] + hi[0])), abs(float(lo[1] + hi[1]))) <= 1e-6 * max(w, h, 1e-9)
+    if not (w > 0.0 and h > 0.0 and depth <= 1e-6 * max(w, h) and centred):
+        return {}
+    return {"size": (float(f"{w:.6e}"), float(f"{h:.6e}"))}  # (float32 bounds: 1.6, not 1.600000023841858)

@@ -712,3 +712,39 @@ def test_a_level_game_keeps_what_its_rules_name(tmp_path):
         assert not world.exists(game.names["crate"])
     finally:
         world.close()
+
+
+def test_a_portal_added_in_the_editor_takes_its_quads_outline_as_its_size(tmp_path):
+    """The editor's way to a doorway: an entity, a MeshRef made a quad, a Portal. The Portal
+    takes the quad's width and height as its size, so things go through the rectangle the
+    view shows on (a Portal of the default (2, 3) on the 1 x 1 quad was said by the rule);
+    on a box it keeps its default, and the rule says the box is not flat."""
+    import warnings
+
+    from components import ComponentWarning, MeshRef, Portal
+    from engine.assets.mesh import quad
+    from shell.editor import Editor
+
+    world, names, _ = loaded(_copy_hall(tmp_path), "edit_portal")
+    editor = Editor(world, EXTRA, dict(names), tmp_path / "hall.toml")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        door = editor.create(name="door")
+        editor.add_component(door, "MeshRef")
+        editor.add_component(door, "Material")
+        editor.set_mesh_shape(door, "quad")
+        editor.add_component(door, "Portal")
+        assert world.get(door, Portal).size == (1.0, 1.0)
+        wide = editor.create(name="wide")
+        editor.add_component(wide, "MeshRef", mesh=quad(1.6, 2.5))
+        editor.add_component(wide, "Portal")
+        assert world.get(wide, Portal).size == (1.6, 2.5)
+        assert not [w for w in caught if issubclass(w.category, ComponentWarning)]
+        crate = editor.create(name="crate")
+        editor.add_component(crate, "MeshRef")  # the editor's first mesh: a box
+        editor.add_component(crate, "Portal")
+        assert world.get(crate, Portal).size == (2.0, 3.0)
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+        assert len(said) == 1 and "is not flat" in said[0], said
+    assert world.get(door, MeshRef).mesh.name == "quad"
+    world.close()

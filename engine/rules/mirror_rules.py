@@ -132,18 +132,27 @@ def check_portal_not_mirrored(world: World, entity: int, joining: Any = None, sc
 # A portal's mesh deeper than this share of its widest side along its local Z is not flat in
 # the XY plane its rectangle lies in (``warn_portal_not_flat``).
 PORTAL_FLAT_SHARE = 1e-3
+# A portal's flat mesh whose outline's edges lie further than this share of its rectangle's
+# larger side from Portal.size's rectangle's is not that rectangle (``warn_portal_not_flat``).
+PORTAL_OUTLINE_SHARE = 0.01
 
 
 @world_invariant(Portal, MeshRef)
 def warn_portal_not_flat(world: World, entity: int, joining: Any = None, mesh: Mesh | None = None,
-                         **_other: Any) -> None:
-    """Say (a ComponentWarning, when a Portal or a MeshRef joins, or the mesh is replaced) a
-    portal whose mesh is not flat in its local XY plane, where its rectangle lies: every pixel
-    of the mesh shows the view through the portal (a box's sides and back too), while things go
-    through the rectangle alone.  Allowed (a frame with depth drawn as the opening is a choice),
-    but a unit box (the editor's first mesh) is usually a mesh not yet made a quad."""
+                         size: Any = None, **_other: Any) -> None:
+    """Say (a ComponentWarning, when a Portal or a MeshRef joins, the mesh is replaced or the
+    portal's ``size`` set) a portal whose mesh is not flat in its local XY plane, where its
+    rectangle lies: every pixel of the mesh shows the view through the portal (a box's sides
+    and back too), while things go through the rectangle alone.  Allowed (a frame with depth
+    drawn as the opening is a choice), but a unit box (the editor's first mesh) is usually a
+    mesh not yet made a quad.  And a flat mesh whose outline is not ``Portal.size``'s
+    rectangle (centred on the entity: ``engine.assets.mesh.quad``'s): the view shows on the
+    mesh's pixels and things go through (and are cut at) the rectangle, so where only one of
+    them reaches, something walks into a wall the view shows open, or through a doorway it
+    shows shut: a quad of one size with a Portal of the default size (2, 3) is the usual way."""
     exists = world.exists(entity)
-    if type(joining) is not Portal and (not exists or world.try_get(entity, Portal) is None):
+    portal = joining if type(joining) is Portal else world.try_get(entity, Portal) if exists else None
+    if portal is None:
         return  # (most entities: no portal, nothing more to look up)
     if mesh is None:
         mesh_ref = joining if type(joining) is MeshRef else world.try_get(entity, MeshRef) if exists else None
@@ -157,6 +166,16 @@ def warn_portal_not_flat(world: World, entity: int, joining: Any = None, mesh: M
                        f"plane (z from {float(lo[2]):.3g} to {float(hi[2]):.3g}), where the portal's rectangle lies: "
                        "every pixel of it shows the view through the portal, its sides and back too; give it a "
                        "quad (engine.assets.mesh.quad(width, height), the size of Portal.size)")
+        return
+    w, h = size if size is not None else portal.size
+    edges = (float(lo[0]) + w / 2, float(hi[0]) - w / 2, float(lo[1]) + h / 2, float(hi[1]) - h / 2)
+    if max(abs(e) for e in edges) > PORTAL_OUTLINE_SHARE * max(w, h):
+        warn_component(f"Portal on entity {entity}: its MeshRef.mesh {mesh.name!r} spans x {float(lo[0]):.3g} to "
+                       f"{float(hi[0]):.3g}, y {float(lo[1]):.3g} to {float(hi[1]):.3g}, but Portal.size "
+                       f"{(float(w), float(h))} is the rectangle x {-w / 2:.3g} to {w / 2:.3g}, y {-h / 2:.3g} to "
+                       f"{h / 2:.3g}: the view shows on the mesh and things go through the rectangle, so where one "
+                       "reaches and the other not, a thing walks through a wall the view shows shut or into one it "
+                       "shows open; give the Portal the quad's size (or the quad the Portal's)")
 
 
 @world_invariant(Mirror, Portal, Material)
