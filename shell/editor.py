@@ -16,9 +16,11 @@ file's diff is the edit.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import os
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,6 +32,7 @@ from pyglm import glm
 from components import (
     Camera,
     ComponentValueError,
+    ComponentWarning,
     Decal,
     FromDecal,
     FromModel,
@@ -159,6 +162,27 @@ def pick(ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int, surfac
     entity = int(image[y, x])
     return entity or None
 
+
+def _says_warnings(edit: Callable[..., Any]) -> Callable[..., Any]:
+    """An edit whose write a rule answers with a ``ComponentWarning`` (a portal's mesh that is
+    not its size, a water with no waves: allowed, but likely not meant) shows the warning as the
+    editor's message, as a refusal's is shown: the overlay's user sees it, not only the console,
+    where it is passed on too."""
+    @functools.wraps(edit)
+    def heard(self: Editor, *args: Any, **kwargs: Any) -> Any:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                result = edit(self, *args, **kwargs)
+            finally:
+                passed_on = list(caught)
+        for w in passed_on:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+        said = [str(w.message) for w in passed_on if issubclass(w.category, ComponentWarning)]
+        if said:
+            self.message = said[-1]
+        return result
+    return heard
 
 class Editor:
     """Edits of one world, with undo and redo, and the selected entity.
@@ -315,6 +339,7 @@ class Editor:
         return sorted(n for n in self.components if n not in held)
 
     # --- edits -----------------------------------------------------------------------------
+    @_says_warnings
     def set_field(self, entity: int, component: str | type, field: str, value: Any, merge: bool = False) -> None:
         """Write ``value`` into a field as code would (``setattr``): the component's checks
         and the world's invariants refuse a bad value with their own ComponentValueError,
@@ -351,6 +376,7 @@ class Editor:
             self._push(Edit("set", entity, type(target), target, field, before, after))
         self._done[-1].open = merge
 
+    @_says_warnings
     def set_fields(self, entity: int, component: str | type, values: Mapping[str, Any]) -> None:
         """Write several fields of one component as one undo step (``set_field`` for each; a
         refused value leaves every field as it was)."""
@@ -585,6 +611,7 @@ class Editor:
         if self._done:
             self._done[-1].open = False
 
+    @_says_warnings
     def add_component(self, entity: int, name: str, **fields: Any) -> Any:
         """Give the entity a new component of class ``name`` (one of ``components``), made
         from ``fields`` (its defaults otherwise) and checked as a spawn would check it."""

@@ -718,7 +718,8 @@ def test_a_portal_added_in_the_editor_takes_its_quads_outline_as_its_size(tmp_pa
     """The editor's way to a doorway: an entity, a MeshRef made a quad, a Portal. The Portal
     takes the quad's width and height as its size, so things go through the rectangle the
     view shows on (a Portal of the default (2, 3) on the 1 x 1 quad was said by the rule);
-    on a box it keeps its default, and the rule says the box is not flat."""
+    on a box it keeps its default, and the rule says the box is not flat: in the editor's
+    message (the overlay's line), as a refusal is, and to the console."""
     import warnings
 
     from components import ComponentWarning, MeshRef, Portal
@@ -746,5 +747,11 @@ def test_a_portal_added_in_the_editor_takes_its_quads_outline_as_its_size(tmp_pa
         assert world.get(crate, Portal).size == (2.0, 3.0)
         said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
         assert len(said) == 1 and "is not flat" in said[0], said
+        assert editor.message == said[0]   # the overlay shows it, as it shows a refusal
+        editor.set_field(door, "Portal", "size", (2.0, 1.0))   # a size the quad is not: said at the write
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+        assert len(said) == 2 and editor.message == said[1] and "spans x -0.5 to 0.5" in said[1]
+        editor.set_field(door, "Portal", "size", (1.0, 1.0))   # put right: the message goes
+        assert editor.message is None and len([w for w in caught if issubclass(w.category, ComponentWarning)]) == 2
     assert world.get(door, MeshRef).mesh.name == "quad"
     world.close()
