@@ -170,19 +170,20 @@ def _says_warnings(edit: Callable[..., Any]) -> Callable[..., Any]:
     where it is passed on too."""
     @functools.wraps(edit)
     def heard(self: Editor, *args: Any, **kwargs: Any) -> Any:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
+        caught: list[warnings.WarningMessage] = []
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
                 result = edit(self, *args, **kwargs)
-            finally:
-                passed_on = list(caught)
-        for w in passed_on:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
-        said = [str(w.message) for w in passed_on if issubclass(w.category, ComponentWarning)]
+        finally:  # (a refused edit's warnings reach the console too)
+            for w in caught:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
         if said:
             self.message = said[-1]
         return result
     return heard
+
 
 class Editor:
     """Edits of one world, with undo and redo, and the selected entity.
