@@ -163,6 +163,9 @@ def pick(ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int, surfac
     return entity or None
 
 
+_PASSED_ON: dict = {}  # the warnings _says_warnings has passed on to the console (warnings' own registry)
+
+
 def _says_warnings(edit: Callable[..., Any]) -> Callable[..., Any]:
     """An edit whose write a rule answers with a ``ComponentWarning`` (a portal's mesh that is
     not its size, a water with no waves: allowed, but likely not meant) shows the warning as the
@@ -176,8 +179,9 @@ def _says_warnings(edit: Callable[..., Any]) -> Callable[..., Any]:
                 warnings.simplefilter("always")
                 result = edit(self, *args, **kwargs)
         finally:  # (a refused edit's warnings reach the console too)
-            for w in caught:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+            for w in caught:  # (the console's filter as for any warning: a drag's hundred writes say it once)
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, registry=_PASSED_ON,
+                                       source=w.source)
         said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
         if said:
             self.message = said[-1]

@@ -59,13 +59,12 @@ class FrameRulesSystem(esper.Processor):
         world = self.world
         partner = portal.partner if portal is not None else None
         out = world.try_get(partner, Portal) if partner is not None and world.exists(partner) else None
-        for a, a_portal, b, b_portal in ((entity, portal, partner, out), (partner, out, entity, portal)):
-            if a_portal is None or b_portal is None or a_portal.partner != b:
-                continue
-            key = (min(a, b), max(a, b), *sorted((tuple(a_portal.size), tuple(b_portal.size))))  # (a pair: once)
-            if tuple(a_portal.size) != tuple(b_portal.size) and key not in self._sizes_said:
-                self._sizes_said.add(key)
-                warn_component(f"Portal on entity {a}: its size {tuple(a_portal.size)} is not its partner's "
-                               f"{tuple(b_portal.size)} (entity {b}): what goes through the one outside the "
-                               "other's rectangle comes out beside it, out of its wall; give both one size (a pair "
-                               "larger on one side: scale that portal's Transform)")
+        if out is None or tuple(portal.size) == tuple(out.size):
+            return
+        key = (min(entity, partner), max(entity, partner), *sorted((tuple(portal.size), tuple(out.size))))
+        if key not in self._sizes_said:  # (a pair: once, from either side)
+            self._sizes_said.add(key)
+            warn_component(f"Portal on entity {entity}: its size {tuple(portal.size)} is not its partner's "
+                           f"{tuple(out.size)} (entity {partner}): what goes through the one outside the "
+                           "other's rectangle comes out beside it, out of its wall; give both one size (a pair "
+                           "larger on one side: scale that portal's Transform)")

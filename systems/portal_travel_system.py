@@ -19,7 +19,9 @@ Portal or Transform, is just a quad.  The new pose is ``pair_transform(in, out)`
 applied to the old one (``portal_math.carried_pose``: the pose the partner's view showed, which
 the slice's clone had; a pair whose portals differ in scale scales it, a pair of one scale keeps
 it bit for bit); the Traveller's velocity goes with it (turned, and scaled by such a pair), the
-camera's frustum tip is measured as its scaled view has it, and a FlyController's yaw / pitch
+camera's frustum tip is measured as its scaled view has it (a crossing that would take a scale
+past ``Transform``'s ``SCALE_RANGE`` or a speed past ``MAX_SPEED``, a pair of two scales gone
+through again and again, is not made: said once, it goes on behind the portal), and a FlyController's yaw / pitch
 are recomputed from the new orientation (a
 pair not related by a turn about the vertical leaves a roll in the Transform, which the fly
 camera drops at the next mouse move, as it keeps no roll).
@@ -47,6 +49,9 @@ import esper
 from pyglm import glm
 
 from components import Camera, FlyController, Transform, Traveller, yaw_pitch_of
+from components.portal import MAX_SPEED
+from components.tracking import warn_component
+from components.transform import SCALE_RANGE
 from engine.core.frame_io import Output
 from engine.core.portal_math import carried_pose, carries_scale, near_plane_corners
 from engine.core.reflection_math import signed_distance
@@ -75,6 +80,7 @@ class PortalTravelSystem(esper.Processor):
         self._last: dict[int, glm.vec3] = {}  # world position at the end of the last frame
         self._exited: dict[int, int] = {}  # entity -> portal it came out of last frame
         self._gates_last: dict[int, PortalGate] = {}  # each open portal's gate as the last frame used it
+        self._too_far_said: set[tuple[int, int]] = set()  # (entity, portal) a crossing refused for its scale
         world.resources[PortalCrossings] = PortalCrossings()
 
     # --- frame -----------------------------------------------------------------------------
@@ -108,8 +114,7 @@ class PortalTravelSystem(esper.Processor):
             before = last.get(entity, start[entity])
             if transform.parent is None and gates and (cam is not None or moving or before != transform.position):
                 gate = self._crossed(gates, before, transform, cam, exited.get(entity))
-                if gate is not None:
-                    self._carry(entity, transform, cam, gate)
+                if gate is not None and self._carry(entity, transform, cam, gate):
                     crossings.append(PortalCrossing(entity, gate.entity, gate.partner, gate.carry, gate.turn))
                     self._exited[entity] = gate.partner
             self._last[entity] = glm.vec3(transform.position)
@@ -177,10 +182,16 @@ class PortalTravelSystem(esper.Processor):
         return min(xs) <= hw and max(xs) >= -hw and min(ys) <= hh and max(ys) >= -hh
 
     # --- teleport ------------------------------------------------------------------------------
-    def _carry(self, entity: int, transform: Transform, cam: Camera | None, gate: PortalGate) -> None:
+    def _carry(self, entity: int, transform: Transform, cam: Camera | None, gate: PortalGate) -> bool:
+        """Carry it through ``gate``: True, or False (nothing changed, said once) where a pair of
+        two scales would take its scale or speed past what a Transform or Traveller holds."""
         world = self.world
         position, rotation, scale = carried_pose(gate.carry, gate.turn, transform.position, transform.rotation,
                                                  transform.scale)
+        scaled = carries_scale(gate.carry)
+        traveller = world.try_get(entity, Traveller)
+        if scaled and self._too_far(entity, gate, scale, traveller):
+            return False
         if cam is not None:
             tip = self._tip(position, rotation, scale, cam)
             lowest = min(signed_distance(gate.exit_plane, p) for p in tip)
@@ -189,10 +200,8 @@ class PortalTravelSystem(esper.Processor):
                 position += glm.vec3(gate.exit_plane) * (clear - lowest)
         transform.position = position
         transform.rotation = rotation
-        scaled = carries_scale(gate.carry)
         if scaled:
             transform.scale = scale
-        traveller = world.try_get(entity, Traveller)
         if traveller is not None:  # (a pair of one size: turned, as the rotation is, bit for bit)
             traveller.velocity = glm.mat3(gate.carry) * traveller.velocity if scaled else gate.turn * traveller.velocity
         fly = world.try_get(entity, FlyController)
@@ -202,6 +211,23 @@ class PortalTravelSystem(esper.Processor):
             if abs(forward.y) < 0.9999:  # straight up or down keeps the old yaw
                 fly.yaw = fly.yaw + (yaw - fly.yaw + 180.0) % 360.0 - 180.0  # nearest turn: no jump
             fly.pitch = max(-89.0, min(89.0, pitch))
+        return True
+
+    def _too_far(self, entity: int, gate: PortalGate, scale: glm.vec3, traveller: Traveller | None) -> bool:
+        """Whether going through ``gate`` (a pair of two scales, again and again) would take a
+        scale past ``SCALE_RANGE`` or a speed past ``MAX_SPEED``: then it is not carried and
+        goes on behind the portal as through a closed one, said once for it and that portal."""
+        low, high = SCALE_RANGE
+        speed = glm.length(glm.mat3(gate.carry) * traveller.velocity) if traveller is not None else 0.0
+        if all(low <= abs(c) <= high for c in scale) and speed <= MAX_SPEED:
+            return False
+        if (entity, gate.entity) not in self._too_far_said:
+            self._too_far_said.add((entity, gate.entity))
+            warn_component(f"entity {entity}: going through portal {gate.entity} (its pair scales by its portals' "
+                           f"Transforms) would make its Transform.scale {tuple(round(float(c), 9) for c in scale)} "
+                           f"and its speed {float(speed):.6g} m/s, past what they hold ({low:g} to {high:g}, at most "
+                           f"{MAX_SPEED:g} m/s): it is not carried, and goes on behind the portal")
+        return True
 
 
 def _size(scale: glm.vec3) -> float:

@@ -591,3 +591,30 @@ def test_the_fly_camera_out_of_a_portal_scaled_2_flies_twice_as_fast(scene):
     before = glm.vec3(world.get(cam, Transform).position)
     runner.frame(DT)
     np.testing.assert_allclose(glm.vec3(world.get(cam, Transform).position) - before, (2 * DT, 0, 0), atol=1e-5)
+
+
+def test_a_crossing_past_what_a_transform_holds_is_not_made_and_is_said_once(world):
+    """Through a pair scaled 2, a ball of scale 6e5 would come out at 1.2e6, past
+    Transform's SCALE_RANGE (1e6): the crossing is not made (no error inside the frame), the
+    ball goes on behind A as through a closed portal, and that is said once; a ball that
+    fits goes through the same frame."""
+    import warnings
+
+    from components import ComponentWarning
+    from components.transform import SCALE_RANGE
+
+    a, b = scaled_pair(world)
+    big = world.spawn(Transform(position=(0.3, 1.8, 0.5), scale=(6e5, 1.0, 1.0)), Traveller(velocity=(0, 0, -6)))
+    small = world.spawn(Transform(position=(-0.3, 1.8, 0.5)), Traveller(velocity=(0, 0, -6)))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        world.step(0.1)
+        assert crossings(world) == [PortalCrossing(small, a, b)]
+        t = world.get(big, Transform)
+        np.testing.assert_allclose(t.position, (0.3, 1.8, -0.1), atol=1e-6)   # behind A, not carried
+        assert tuple(t.scale) == (6e5, 1.0, 1.0) and 2 * 6e5 > SCALE_RANGE[1]
+        said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
+        assert len(said) == 1 and said[0].startswith(f"entity {big}: going through portal {a}"), said
+        world.get(big, Transform).position = glm.vec3(0.3, 1.8, 0.5)   # again: not said again
+        world.step(0.1)
+        assert crossings(world) == [] and len([w for w in caught if issubclass(w.category, ComponentWarning)]) == 1

@@ -25,6 +25,7 @@ import numpy as np
 from pyglm import glm
 
 from components.particles import ParticleEmitter
+from components.transform import SCALE_RANGE
 
 _NONE = np.zeros((0, 3))  # no particle died
 
@@ -195,7 +196,7 @@ class ParticleCloud:
                 self.crossed[carried] += 1.0
                 k = abs(np.linalg.det(carry[:3, :3])) ** (1.0 / 3.0)
                 if abs(k - 1.0) > 1e-6:  # out of a pair of two scales: as big as its view showed it
-                    self.grow[carried] *= k
+                    self.grow[carried] = np.clip(self.grow[carried] * k, *SCALE_RANGE)  # (a float32 row's size)
 
     def _bounce(self, which, ground: float, keep: float) -> None:
         """Particles ``which`` that went below ``ground`` this step: put back above it by
