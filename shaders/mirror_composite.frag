@@ -143,6 +143,9 @@ float fallback_alpha(float rate) {
 // Only a bend towards the edge fades (water_edge_share): a pixel at the edge whose bend runs
 // along it keeps it.
 #define WATER_EDGE_BAND 0.08
+// How far along the bent ray the sky is looked for, seen from below (water_below), in metres:
+// far enough that a point there projects as the direction does.
+#define WATER_FAR_DEPTH 1.0e5
 // What lies below a water surface, bent (components/water.py): the level this composite goes
 // into, copied before its composites (rgb its colour, a its window depth; MirrorPasses.
 // composite_level), read where the pixel's ray, refracted by the rippled surface (Snell's law,
@@ -174,13 +177,22 @@ vec3 copied_point(vec2 pixel, float window, vec2 size) {
     return world.xyz / world.w;
 }
 
-vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f0) {
+// Seen from below (``underside``), what lies beyond is the air above, the ray bent away from
+// the normal (index over 1): past the critical angle it does not leave the water (refract
+// gives 0) and the reflection's weight is 1 (water_fresnel_inside), so the pixel keeps
+// what the copy shows, unbent, under a full reflection.
+vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f0, bool underside) {
     ivec2 here = ivec2(gl_FragCoord.xy);
     vec4 unbent = texelFetch(refraction_copy, here, 0);
     vec2 size = vec2(textureSize(refraction_copy, 0));
-    if (unbent.a >= 1.0) return unbent.rgb;  // the far plane: nothing below to bend
+    // The far plane: from above, nothing below to bend; from below, the sky, and the bent ray
+    // is followed to what the copy shows far along it (the sky there, or a thing it meets on
+    // the way: a post standing in the pond seen squeezed towards the window's rim).
+    bool far = unbent.a >= 1.0;
+    if (far && !underside) return unbent.rgb;
     float root = sqrt(clamp(f0, 0.0, 0.98));
-    vec3 bent = refract(view_dir, normal, (1.0 - root) / (1.0 + root));  // 1 / the index
+    float index_ratio = (1.0 - root) / (1.0 + root);  // 1 / the index: air into water
+    vec3 bent = refract(view_dir, normal, underside ? 1.0 / index_ratio : index_ratio);
     float down = dot(bent, -plane_normal);
     if (down <= 1e-3) return unbent.rgb;
     mat4 view_proj = inverse(v_inv_view_proj);
@@ -189,7 +201,7 @@ vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f
     // (WATER_REFRACTION_TURNS): a floor as deep as the one at the last place found, then as
     // deep as the one at the place that gives: a step of a stone on the floor is met near
     // where it stands, not seen twice (once at its place, once where the floor's depth puts it).
-    float depth = dot(at - copied_point(gl_FragCoord.xy, unbent.a, size), plane_normal);
+    float depth = far ? WATER_FAR_DEPTH * down : dot(at - copied_point(gl_FragCoord.xy, unbent.a, size), plane_normal);
     vec3 colour = unbent.rgb;
     float kept = 0.0;  // the share of the bent colour (water_edge_share)
     for (int turn = 0; turn < WATER_REFRACTION_TURNS; ++turn) {
@@ -200,7 +212,14 @@ vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f
         if (any(lessThan(pixel, vec2(0.0))) || any(greaterThanEqual(pixel, size))) break;
         ivec2 there = ivec2(pixel);
         vec4 found = texelFetch(refraction_copy, there, 0);
-        if (texelFetch(parent_nodes, there, 0).r != node || found.a >= 1.0) break;
+        if (texelFetch(parent_nodes, there, 0).r != node) break;
+        if (found.a >= 1.0) {  // the sky along the bent ray: from below, what is seen there
+            if (far) {
+                colour = found.rgb;
+                kept = water_edge_share(gl_FragCoord.xy, pixel, size);
+            }
+            break;
+        }
         float found_depth = dot(at - copied_point(vec2(there) + 0.5, found.a, size), plane_normal);
         if (found_depth <= 0.0) break;  // what stands above the water there
         colour = found.rgb;
@@ -288,6 +307,12 @@ void main() {
     float reflect_rate = v_params.x;
     float roughness = abs(v_params.y);  // (water: F0, negative on a partly faded view's row)
     vec3 normal = v_normal.xyz;
+#ifdef COMPOSITE_WATER
+    // Water seen from below (the camera under it): its row's F0 plus WATER_UNDERSIDE
+    // (mirror_passes.water_row_f0); its normal faces down, towards the eye.
+    bool underside = roughness >= WATER_UNDERSIDE;
+    if (underside) roughness -= WATER_UNDERSIDE;
+#endif
 #ifdef COMPOSITE_BUMPY
     // A normal map bends the mirror (seed 000's future work: the reflection texture stays as
     // it is, only its lookup moves).  The pixel's ray meets the mirror's plane at p, whose UVs
@@ -298,8 +323,11 @@ void main() {
     vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
     vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);
 #ifdef COMPOSITE_WATER
-    normal = water_normal(along_u, along_v, flat_normal, mirror_uv, mirror_uv_dx, mirror_uv_dy, vec2(v_eye.w, v_normal.w),
+    // (the waves' normal is the top's: from below it is that normal turned over)
+    vec3 top = underside ? -flat_normal : flat_normal;
+    normal = water_normal(along_u, along_v, top, mirror_uv, mirror_uv_dx, mirror_uv_dy, vec2(v_eye.w, v_normal.w),
                           v_tint.a, v_carry[2].z);
+    if (underside) normal = -normal;
 #else
     normal = bent_normal(along_u, along_v, flat_normal, mirror_uv, mirror_uv_dx, mirror_uv_dy, v_carry[2].z);
 #endif
@@ -354,7 +382,8 @@ void main() {
 #ifdef COMPOSITE_WATER
     // Water: what is reflected (tinted) over the surface's own pixels, which show what lies
     // below, by the Fresnel reflectance at this pixel's angle (reflect_rate scales it).
-    float weight = water_fresnel(normal, -view_dir, roughness) * reflect_rate;
+    float weight = (underside ? water_fresnel_inside(normal, -view_dir, roughness)
+                              : water_fresnel(normal, -view_dir, roughness)) * reflect_rate;
 #else
     vec3 reflected = ggx_reflect(normal, r, -view_dir, radiance, v_tint.rgb, roughness);
     float weight = reflect_rate;
@@ -374,7 +403,7 @@ void main() {
         out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);
     else
 #endif
-    out_color = vec4(hdr_store(mix(water_below(at, view_dir, normal, v_normal.xyz, roughness),
+    out_color = vec4(hdr_store(mix(water_below(at, view_dir, normal, v_normal.xyz, roughness, underside),
                                    fog_over(radiance * v_tint.rgb, parent_fog), weight)), 1.0);
 #elif defined(COMPOSITE_WATER)
     out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);

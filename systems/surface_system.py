@@ -54,6 +54,7 @@ class SurfaceSystem(esper.Processor):
         self.flows: dict[int, WaterFlow] = {}  # each water mirror's waves, for the entity's life
         self._open_portals: dict[int, int] | None = None  # the pairs the portal states were made for
         self._waiting_water: set[int] = set()  # Waters whose Mirror was removed (warned once)
+        self.undersides: set[int] = set()  # the waters whose state is their underside (the camera below them)
 
     def process(self, dt: float) -> None:
         before: dict[int, glm.mat4] = {}   # the carries of the surfaces made again, as they were
@@ -97,6 +98,7 @@ class SurfaceSystem(esper.Processor):
                 continue  # only the waves moved (this stage writes Water.offset each frame): the state stands
             touched.add(entity)
         touched |= {e for e in world.frame.moved | world.frame.added if e in self.mirrors or e in touched}
+        touched |= self._turned_waters()
         for entity in touched:
             old = self.mirrors.get(entity)
             if old is not None:
@@ -119,10 +121,42 @@ class SurfaceSystem(esper.Processor):
                     raise MirrorError(f"Water on entity {entity}: a water surface is sharp (its waves break up the "
                                       f"image), so its Mirror.roughness must be 0, got {mirror.roughness}")
                 flow = self.flows.setdefault(entity, WaterFlow())
-            self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform,
-                                                      world.try_get(entity, Material), water, flow,
-                                                      drawn_code(world, entity))
+            state = self._mirror_state(entity, mirror, mesh_ref, transform, world.try_get(entity, Material), water,
+                                       flow, drawn_code(world, entity))
+            if water is not None and self._eye_below(state.plane):
+                state = self._mirror_state(entity, mirror, mesh_ref, transform, world.try_get(entity, Material),
+                                           water, flow, drawn_code(world, entity), underside=True)
+                self.undersides.add(entity)
+            else:
+                self.undersides.discard(entity)
+            self.mirrors[entity] = state
         return bool(touched)
+
+    def _eye(self) -> glm.vec3 | None:
+        """The active camera's eye in the world (after the transform stage), None without one."""
+        camera = frame_rules(self.world).active_camera
+        transform = self.world.try_get(camera, Transform) if camera is not None else None
+        return None if transform is None else glm.vec3(transform.world[3])
+
+    def _eye_below(self, plane: glm.vec4) -> bool:
+        """Whether the active camera's eye is behind ``plane`` (a water's, facing up)."""
+        eye = self._eye()
+        return eye is not None and glm.dot(glm.vec3(plane), eye) + plane.w < 0.0
+
+    def _turned_waters(self) -> set[int]:
+        """The waters whose side the active camera is on is not the side their state shows:
+        it went under one (or came up out of it) since the last frame."""
+        if not self.flows:
+            return set()
+        eye = self._eye()
+        if eye is None:
+            return set(self.undersides)
+        turned = set()
+        for entity in self.flows:
+            state = self.mirrors.get(entity)
+            if state is not None and (glm.dot(glm.vec3(state.plane), eye) + state.plane.w < 0.0):
+                turned.add(entity)  # its state's front faces away from the eye: the other side now
+        return turned
 
     def _advance_waves(self, dt: float) -> None:
         """Every water's waves move on by this frame's ``dt`` at its speed and direction now
@@ -172,7 +206,10 @@ class SurfaceSystem(esper.Processor):
     @staticmethod
     def _mirror_state(entity: int, mirror: Mirror, mesh_ref: MeshRef, transform: Transform,
                       material: Material | None = None, water: Water | None = None,
-                      flow: WaterFlow | None = None, drawn: int = DRAWN_EVERYWHERE) -> SurfaceState:
+                      flow: WaterFlow | None = None, drawn: int = DRAWN_EVERYWHERE,
+                      underside: bool = False) -> SurfaceState:
+        """A mirror's state; ``underside``: a water's seen from below (its plane turned to face
+        down, its look ``WaterLook.underside``)."""
         mesh = mesh_ref.mesh
         bumpy = material is not None and material.normal_map is not None
         try:
@@ -183,6 +220,8 @@ class SurfaceSystem(esper.Processor):
         model = transform.world
         local_plane = plane_from_point_normal(tuple(float(v) for v in point), tuple(float(v) for v in normal))
         plane = transform_plane(model, local_plane)
+        if underside:
+            plane = -plane
         lo, hi = mesh.bounds
         corners = world_corners(mesh, model)  # x, then y, then z: the outline below picks by bit
         # A flat mesh's box has its corners in pairs across the flat axis: one of each pair is
@@ -200,7 +239,7 @@ class SurfaceSystem(esper.Processor):
             bumps = MirrorBumps(material.normal_map, material.normal_scale, uv_rows, float(plane.w))
         look = None
         if water is not None:
-            look = WaterLook(water.f0, water.cross, water.tiling, flow if flow is not None else WaterFlow())
+            look = WaterLook(water.f0, water.cross, water.tiling, flow if flow is not None else WaterFlow(), underside)
         return SurfaceState(entity, "mirror", plane, corners, outline,
                             reflection_matrix(plane), plane, entity, mirror.max_depth, mirror.enabled,
                             mirror.color, mirror.reflect_rate, mirror.roughness, mirror.resolution_scale, bumps, look,

@@ -93,6 +93,9 @@ from engine.rules.probe_rules import ProbeBlend
 # the scene pass's culling and clip distances (their rectangles face the front, their
 # vertices keep every clip distance: claim.vert, rects.vert), so between a level's claims and
 # its views only the depth function changes: 2 GL calls a level, not 8.
+# Added to a water's F0 in its composite row where the camera is below it (water_row_f0;
+# the composite's WATER_UNDERSIDE define).
+WATER_UNDERSIDE = 2.0
 _CLAIM = PassState(depth_func="1", cull=True, clips=SCENE_CLIPS)
 _COMPOSITE = PassState(blend=BLEND_OVER, clips=RECT_CLIPS)
 
@@ -455,7 +458,7 @@ def _composite_row(surface: CompositeSurface, block: bytes, rect: tuple[int, int
         tile = tile or _NO_TILE
         x, y, scale, rough = tile.x, tile.y, tile.scale, surface.roughness
     else:  # this frame's offset of the waves (the surfaces stage moves it in place)
-        (x, y), scale, rough = water.flow.offset, water.cross, water.f0
+        (x, y), scale, rough = water.flow.offset, water.cross, water_row_f0(water)
         if fade < 1.0:  # (partly faded: its fallback under it bends what is below, mirror_composite.frag)
             rough = -rough
     return _COMPOSITE_ROW.pack(
@@ -494,11 +497,18 @@ def fallback_surfaces(states: Sequence[SurfaceState]) -> list[_FallbackSurface]:
     return found
 
 
+def water_row_f0(water: WaterLook) -> float:
+    """A water's F0 as its composite row carries it (in the roughness's place): F0, plus
+    WATER_UNDERSIDE where it is seen from below (mirror_composite.frag tells the two apart;
+    F0 is at most 0.36, an index of 4)."""
+    return water.f0 + WATER_UNDERSIDE if water.underside else water.f0
+
+
 def _water_pieces(look: CompositeSurface) -> tuple[bytes, bytes]:
     """A water surface's head and tail: this frame's waves where the tile goes and F0 where
     the roughness goes (as ``composite_rows`` packs them)."""
     water = look.water
-    (x, y), scale, rough = water.flow.offset, water.cross, water.f0
+    (x, y), scale, rough = water.flow.offset, water.cross, water_row_f0(water)
     return (_PIECE_HEAD.pack(x, look.tint, scale, look.reflect_rate, rough, look.params_z),
             _PIECE_TAIL.pack(look.normal, y, look.carry))
 
@@ -707,7 +717,9 @@ class MirrorPasses:
     def _composite_draw(self, defines: Mapping[str, str], fogging: tuple) -> _CompositeDraw:
         """A composite build (``defines``, with ``fogging``'s) and its draw."""
         program = self.renderer.shaders.program("mirror_composite.vert", "mirror_composite.frag",
-                                                defines={"ROUGH_TILE": f"{TILE}.0", **defines, **dict(fogging)})
+                                                defines={"ROUGH_TILE": f"{TILE}.0",
+                                                         "WATER_UNDERSIDE": str(WATER_UNDERSIDE),
+                                                         **defines, **dict(fogging)})
         assign_slots(program, _COMPOSITE_UNITS, {"FallbackRows": FALLBACK_BINDING, "Fog": FOG_BINDING})
         return _CompositeDraw(self.ctx, program)
 

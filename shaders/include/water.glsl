@@ -34,3 +34,16 @@ vec3 water_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 uv_dx, vec2 uv_dy, vec2 
 float water_fresnel(vec3 n, vec3 to_eye, float f0) {
     return schlick_fresnel(n, to_eye, vec3(f0)).x;
 }
+
+// The reflectance of the water's underside, seen from the water (the camera under it): past
+// the critical angle (sin > 1 / index) all of it (total internal reflection, the bright ring
+// about Snell's window); inside the window Schlick's approximation at the angle the light
+// makes in the air (the larger of the two: the same reflectance either way through).
+float water_fresnel_inside(vec3 n, vec3 to_eye, float f0) {
+    float root = sqrt(clamp(f0, 0.0, 0.98));
+    float index = (1.0 + root) / (1.0 - root);
+    float cos_water = clamp(dot(n, to_eye), 0.0, 1.0);
+    float sin_air_2 = index * index * (1.0 - cos_water * cos_water);
+    if (sin_air_2 >= 1.0) return 1.0;
+    return schlick_at(vec3(f0), sqrt(1.0 - sin_air_2)).x;
+}

@@ -1,0 +1,146 @@
+"""Water seen from below (the camera under the surface): the underside reflects everything
+past the critical angle (total internal reflection) and shows the air above through Snell's
+window, bent away from the normal.  Each is measured in rendered frames against the optics
+worked out here, ray by ray."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pyglm import glm
+
+from components import Camera, Emissive, Material, MeshRef, Transform, look_rotation
+from engine.assets.mesh import quad
+from systems.surface_system import SurfaceSystem
+from tests.test_water import FLOOR_SEEN, SKY, pool, render, schlick
+
+INDEX = 1.333
+F0 = ((INDEX - 1.0) / (INDEX + 1.0)) ** 2
+CRITICAL = math.asin(1.0 / INDEX)  # from the normal, in the water
+# A quad faces +Z; turned this way it lies flat, facing down.
+FACING_DOWN = glm.angleAxis(math.pi / 2, glm.vec3(1, 0, 0))
+
+
+def under(eye, target):
+    """``pool``'s clear pond with the camera at ``eye`` (under the surface) looking at ``target``."""
+    return lambda world: pool(world, True, eye, target)
+
+
+def pixel_ray(runner, column: int, row: int) -> tuple[glm.vec3, glm.vec3]:
+    """The eye and unit direction of a pixel centre's ray in the main view."""
+    view = runner.engine.main_view
+    w, h = runner.size
+    ndc = glm.vec4((column + 0.5) / w * 2.0 - 1.0, 1.0 - (row + 0.5) / h * 2.0, -1.0, 1.0)
+    near = glm.inverse(view.view_proj) * ndc
+    return view.eye, glm.normalize(glm.vec3(near) / near.w - view.eye)
+
+
+def underside_weight(cos_water: float) -> float:
+    """The underside's reflectance for a ray meeting it at ``cos_water`` (to the normal, in
+    the water): 1 past the critical angle, else Schlick's at the angle in the air."""
+    sin_air = INDEX * math.sqrt(max(0.0, 1.0 - cos_water * cos_water))
+    if sin_air >= 1.0:
+        return 1.0
+    return schlick(F0, math.sqrt(1.0 - sin_air * sin_air))
+
+
+def test_from_below_all_is_reflected_past_the_critical_angle_and_the_sky_shows_inside_snells_window(scene):
+    """Half a metre under a clear pond over a floor a metre down, looking up at a slant: a
+    pixel whose ray meets the surface past the critical angle (48.6 degrees for 1.333) shows
+    the floor's mirror image, all of it; one inside Snell's window shows the uniform sky
+    through the surface, F x floor + (1 - F) x sky by Schlick's formula at the angle in the
+    air."""
+    runner, seen = render(scene, under((0.0, -0.5, 0.0), (0.0, 1.5, -2.0)), size=(64, 96))
+    assert runner.stats.views_spent == 1  # its reflection, seen from below (its mesh drawn with both faces)
+    column = runner.size[0] // 2
+    inside = outside = 0
+    for row in range(runner.size[1]):
+        _, direction = pixel_ray(runner, column, row)
+        if direction.y < 0.02:
+            continue  # on the floor, or along the surface
+        angle = math.acos(direction.y)
+        if abs(angle - CRITICAL) < math.radians(2.5):
+            continue  # the rim: the weight leaps there, within a pixel
+        weight = underside_weight(direction.y)
+        expected = weight * FLOOR_SEEN + (1.0 - weight) * SKY
+        assert abs(seen[row, column, 0] - expected) < 0.015, (row, math.degrees(angle), seen[row, column, 0], expected)
+        if angle > CRITICAL:
+            outside += 1
+        else:
+            inside += 1
+    assert inside > 10 and outside > 10, (inside, outside)
+
+
+def refracted_hit(eye: glm.vec3, direction: glm.vec3, height: float) -> glm.vec3 | None:
+    """Where a ray from ``eye`` under the water (y < 0) along ``direction`` meets the plane y
+    = ``height`` above it, bent at y = 0 by Snell's law (None: reflected whole)."""
+    at = eye + direction * (-eye.y / direction.y)
+    sin_water = math.sqrt(max(0.0, 1.0 - direction.y * direction.y))
+    sin_air = INDEX * sin_water
+    if sin_air >= 1.0:
+        return None
+    level = glm.normalize(glm.vec3(direction.x, 0.0, direction.z)) if sin_water > 1e-9 else glm.vec3(0.0)
+    bent = level * sin_air + glm.vec3(0.0, math.sqrt(1.0 - sin_air * sin_air), 0.0)
+    return at + bent * (height / bent.y)
+
+
+def test_a_panel_above_the_water_is_seen_through_snells_window_where_refraction_puts_it(scene):
+    """A red panel two metres above the pond, facing down: from under the water it is seen
+    where the pixels' rays, bent at the surface, meet it (nearer the middle of the window
+    than the straight line to it), and the straight line to it lies past the critical
+    angle, where the surface shows the floor's reflection, not the panel."""
+    eye = glm.vec3(0.0, -0.5, 0.0)
+    centre = glm.vec3(0.0, 2.0, -4.0)
+    red = np.array([0.9, 0.05, 0.05])
+
+    def build(world):
+        pool(world, True, eye, (0.0, 1.5, -1.5))
+        world.spawn(Transform(position=centre, rotation=FACING_DOWN), MeshRef(quad(2.0, 2.0)),
+                    Material(color=(*red, 1.0), roughness=1.0), Emissive(1.0))
+
+    runner, seen = render(scene, build, size=(64, 96))
+    column = runner.size[0] // 2
+    traced = []
+    for row in range(runner.size[1]):
+        origin, direction = pixel_ray(runner, column, row)
+        if direction.y <= 0.02:
+            continue
+        hit = refracted_hit(origin, direction, centre.y)
+        if hit is not None and abs(hit.x - centre.x) < 1.0 and abs(hit.z - centre.z) < 1.0:
+            traced.append(row)
+    assert len(traced) >= 6, traced
+    red_rows = [row for row in range(runner.size[1]) if seen[row, column, 0] > 0.5 and seen[row, column, 1] < 0.2]
+    # Every row the bent rays say shows the panel does (a row at each end may be split).
+    assert set(traced[1:-1]) <= set(red_rows), (traced, red_rows)
+    assert len(red_rows) <= len(traced) + 2, (traced, red_rows)
+    # The straight line to the panel's middle: past the critical angle, the floor's reflection.
+    straight = glm.normalize(centre - eye)
+    assert math.acos(straight.y) > CRITICAL + math.radians(3.0)
+    col, row = runner.project(centre)
+    assert 0 <= row < runner.size[1] and row not in red_rows
+    assert abs(seen[row, col, 0] - FLOOR_SEEN) < 0.015, seen[row, col]
+
+
+def test_going_under_turns_the_surface_and_coming_up_turns_it_back(scene):
+    """The surfaces stage turns a water's state to face down while the camera is under it
+    (its plane facing the eye, its look the underside's), and back when it comes up: the
+    frame above after a dive is the frame of an engine that never went under, bit for bit."""
+    above_eye, above_target = (0.0, 0.4, 0.0), (0.0, 0.05, -10.0)
+    runner, _ = render(scene, under((0.0, -0.5, 0.0), (0.0, 1.5, -2.0)))
+    system = runner.world.get_system(SurfaceSystem)
+    (entity,) = system.flows
+    state = system.mirrors[entity]
+    assert state.water.underside and state.plane.y < 0.0 and entity in system.undersides
+    ((_, transform),) = [(e, runner.world.get(e, Transform)) for e, _ in runner.world.query_one(Camera)]
+    eye = glm.vec3(above_eye)
+    transform.position = eye
+    transform.rotation = look_rotation(glm.vec3(above_target) - eye)
+    for _ in range(2):
+        dived = runner.frame()
+    state = system.mirrors[entity]
+    assert not state.water.underside and state.plane.y > 0.0 and entity not in system.undersides
+    never = scene(under(above_eye, above_target), runner.size)
+    for _ in range(4):
+        fresh = never.frame()
+    assert np.array_equal(dived, fresh)
+
