@@ -2,10 +2,13 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
-from components.tracking import ComponentValueError, TrackedComponent, finite
+from pyglm import glm
+
+from components.fog import MAX_FOG_DENSITY, MAX_FOG_VOLUME_SIDE, MIN_FOG_VOLUME_SIDE
+from components.tracking import ComponentValueError, TrackedComponent, color, finite
 
 MAX_WATER_SPEED = 100.0    # normal-map tiles a second; faster is a strobe, not a wave
 MAX_WATER_TILING = 1000.0  # repeats of the map across the mirror's UV square
@@ -54,6 +57,21 @@ class Water(TrackedComponent):
       it too).  The waves bend the reflection (the
       bumpy-mirror lookup) and the Fresnel angle.  Without a normal map the water is
       still: a Fresnel-weighted mirror.
+    - **From below.**  With the camera under the surface (behind its plane) the surface is
+      seen from the water: past the critical angle (48.6 degrees from straight up for 1.333)
+      it reflects all of what is under it (total internal reflection), and inside that cone,
+      Snell's window, it shows the air above, bent away from the normal (the whole sky and
+      what stands over the pond squeezed into the cone, brightest and most bent at its rim),
+      under the reflection by Fresnel's weight from the water's side.  The surfaces stage
+      turns the water's state to face down while the active camera is under it; the
+      planner, claims and composites then take it as any mirror.
+    - **The water's body** (``fog_density`` per metre, 0 by default: clear; ``fog_color``
+      linear; ``depth`` metres): the light's way through the water below the surface, down
+      to ``depth`` under its outline, is fogged as a FogVolume's is, at the same density
+      everywhere in that box: a thing under a murky pond fades into ``fog_color`` with its
+      distance through the water, from above as from below (a camera under the surface sees
+      the pond's far side lost in it).  It fogs every view, as a ``FogVolume`` does, and
+      counts among their ``MAX_FOG_VOLUMES`` (a flat water mesh only: its outline is the box's top).
     """
 
     ior: float = 1.333
@@ -62,8 +80,17 @@ class Water(TrackedComponent):
     tiling: float = 1.0
     cross: float = 0.5
     offset: Any = (0.0, 0.0)
+    fog_density: float = 0.0
+    fog_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.12, 0.14, 1.0))
+    depth: float = 10.0
 
     def _validate(self, name: str, value: Any) -> Any:
+        if name == "fog_density":
+            return finite(self, name, value, low=0.0, high=MAX_FOG_DENSITY)
+        if name == "fog_color":
+            return color(self, name, value)
+        if name == "depth":
+            return finite(self, name, value, low=MIN_FOG_VOLUME_SIDE, high=MAX_FOG_VOLUME_SIDE)
         if name == "ior":
             return finite(self, name, value, low=1.0, high=4.0)
         if name == "speed":

@@ -66,7 +66,6 @@ class ExtractSystem(esper.Processor):
         self._joined: set[int] = set()
         self._surface_probes = SurfaceProbes()  # each mirror's and portal's fallback probes
         self._see_through: dict[int, InstanceBatch] = {}  # see-through mirrors' and portals' batches (water)
-        self._waters: set[int] = set()  # entities drawn as water: both faces (seen from below too)
         self._layout = 0  # counts changes of _batch_of (an entity given, moved to or taken from a batch)
         # (layout, the entities, them by batch) of the last frame's movers (process).
         self._moved_groups: tuple[int, set[int], dict[InstanceBatch, list[int]]] | None = None
@@ -87,8 +86,6 @@ class ExtractSystem(esper.Processor):
         # A component of probe_rules.LOOK_KINDS changed, or the probe the entity samples did (a
         # probe came, went, changed or moved, or the entity moved into or out of an influence box).
         touched = self._looks.entities(world)
-        # A Water come or gone turns its mirror's face culling (its offset, written every frame, does not).
-        touched |= {e for e in world.changed(Water) if (world.exists(e) and world.has(e, Water)) != (e in self._waters)}
         shown = world.changed(Visibility)
         if shown:  # a portal clone is drawn where its source is (its row reads the source's Visibility)
             touched |= {entity for entity, clone in world.query_one(PortalClone) if clone.source in shown}
@@ -154,17 +151,12 @@ class ExtractSystem(esper.Processor):
         transform = world.try_get(entity, Transform) if mesh_ref is not None else None
         old = self._batch_of.get(entity)
         if mesh_ref is None or transform is None or not mesh_ref.visible:
-            self._waters.discard(entity)
             if old is not None:
                 self._remove_instance(entity, old)
             return
         material = world.try_get(entity, Material)
         # Water is seen from below too (the camera under it: the surfaces stage turns its state).
         water = world.has(entity, Water)
-        if water:
-            self._waters.add(entity)
-        else:
-            self._waters.discard(entity)
         blend = probe_blend(world, entity)  # the probes it samples, and their weights
         probe = blend.probes[0] if blend.probes else 0
         second = blend.probes[1] if len(blend.probes) > 1 else 0

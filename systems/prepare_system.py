@@ -42,19 +42,20 @@ from components import (
     ReflectionProbe,
     Skybox,
     Transform,
+    Water,
 )
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import FogLimitWarning, LightLimitWarning
 from engine.core.world import World
 from engine.render.clouds import CloudShape, cloud_shape, drift_served, shadows_served
-from engine.render.fog import volume_rows
+from engine.render.fog import volume_rows, water_body_row
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import air_light, is_generated, sky_model, sunlight_tint
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
-from engine.resources import CloudChanges, ContactLamps, VolumetricLamps
+from engine.resources import CloudChanges, ContactLamps, Surfaces, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
     ALL_ROUND,
@@ -115,6 +116,8 @@ class PrepareSystem(esper.Processor):
         self._fog_cut = 0                        # FogVolumes past MAX_FOG_VOLUMES, left out
         self._fog_entities: tuple[int, ...] = ()   # the FogVolumes' entities, and their packed rows
         self._fog_packed: tuple[float, ...] = ()
+        self._bodies: tuple = ()   # the water bodies the rows were packed for (_water_bodies)
+        self._unboxed: set[int] = set()   # waters with a fog and no flat outline (said once)
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -186,30 +189,73 @@ class PrepareSystem(esper.Processor):
         renderer.stats.fog_volumes_cut = self._fog_cut
 
     def _fog_rows(self, camera: int | None) -> tuple[float, ...]:
-        """The Fog block's rows of the ``FogVolume``s (``fog.volume_rows``), at most
-        ``MAX_FOG_VOLUMES``: past it the nearest the active camera (from its eye to each one's
-        centre, less its largest half side), the rest counted and said when their count grows.
-        Made again only when a volume came, went, changed or moved (or, past the limit, every
-        frame: the camera's moves choose): a still world packs nothing."""
+        """The Fog block's rows of the ``FogVolume``s (``fog.volume_rows``) and the water bodies
+        (``Water.fog_density``: ``fog.water_body_row``), at most ``MAX_FOG_VOLUMES``: past it
+        the nearest the active camera (from its eye to each one's centre, less its largest half
+        side), the rest counted and said when their count grows.  Made again only when a volume
+        or a water's body came, went, changed or moved (or, past the limit, every frame: the
+        camera's moves choose): a still world packs nothing."""
         world = self.world
-        if not self._fog_cut and not world.changed(FogVolume) and not world.deleted() and not any(
-                entity in world.frame.moved for entity in self._fog_entities):
+        bodies = self._water_bodies()
+        if not self._fog_cut and bodies == self._bodies and not world.changed(FogVolume) and not world.deleted() \
+                and not any(entity in world.frame.moved for entity in self._fog_entities):
             return self._fog_packed
+        self._bodies = bodies
         found = world.query(FogVolume, Transform)
         self._fog_entities = tuple(entity for entity, _ in found)
-        volumes = [(volume, t.world) for _, (volume, t) in found]
-        cut = max(0, len(volumes) - MAX_FOG_VOLUMES)
+        # (row, centre, largest half side) of each: a volume's, then each water body's
+        fogs = [(volume_rows([(volume, t.world)]), t.world[3].xyz, 0.5 * max(volume.size))
+                for _, (volume, t) in found if volume.density > 0.0]
+        fogs += [(row, centre, reach) for _, _, _, row, centre, reach in bodies]
+        cut = max(0, len(fogs) - MAX_FOG_VOLUMES)
         if cut:
             eye = world.get(camera, Transform).world[3].xyz if camera is not None else glm.vec3(0.0)
-            volumes.sort(key=lambda pair: glm.distance(pair[1][3].xyz, eye) - 0.5 * max(pair[0].size))
-            volumes = volumes[:MAX_FOG_VOLUMES]
+            fogs.sort(key=lambda fog: glm.distance(fog[1], eye) - fog[2])
+            fogs = fogs[:MAX_FOG_VOLUMES]
             if cut > self._fog_cut:
                 warnings.warn(FogLimitWarning(
-                    f"{MAX_FOG_VOLUMES + cut} FogVolumes: at most {MAX_FOG_VOLUMES} fog the views at once (the "
-                    f"nearest the active camera), so {cut} add no fog (RenderStats.fog_volumes_cut)"), stacklevel=3)
+                    f"{MAX_FOG_VOLUMES + cut} FogVolumes and water bodies: at most {MAX_FOG_VOLUMES} fog the views "
+                    f"at once (the nearest the active camera), so {cut} add no fog (RenderStats.fog_volumes_cut)"),
+                    stacklevel=3)
         self._fog_cut = cut
-        self._fog_packed = volume_rows(volumes)
+        self._fog_packed = tuple(value for row, _, _ in fogs for value in row)
         return self._fog_packed
+
+    def _water_bodies(self) -> tuple:
+        """Each water with a ``fog_density``: (entity, its surface state, its fog fields, its
+        block row, the box's centre, its largest half side); the row packed again only for a
+        state or a field that changed.  A water whose mesh has no flat outline (the box's top)
+        has no body, said once."""
+        surfaces = self.world.resources.get(Surfaces)
+        if surfaces is None:
+            return ()
+        old = {body[0]: body for body in self._bodies}
+        bodies = []
+        for entity, state in surfaces.mirrors.items():
+            if state.water is None:
+                continue
+            water = self.world.try_get(entity, Water)
+            if water is None or water.fog_density <= 0.0:
+                continue
+            fields = (water.fog_density, tuple(water.fog_color), water.depth)
+            body = old.get(entity)
+            if body is not None and body[1] is state and body[2] == fields:
+                bodies.append(body)
+                continue
+            if state.outline is None:
+                if entity not in self._unboxed:
+                    self._unboxed.add(entity)
+                    warnings.warn(ComponentWarning(
+                        f"Water on entity {entity}: its fog_density fogs a box under the water's outline, and its "
+                        "mesh is not flat (no outline), so its body adds no fog; give the Mirror a flat mesh"),
+                        stacklevel=4)
+                continue
+            down = -glm.vec3(state.plane) if not state.water.underside else glm.vec3(state.plane)
+            centre = glm.vec3(*np.asarray(state.outline, np.float64)[:, :3].mean(axis=0)) + down * (water.depth / 2)
+            reach = 0.5 * max(water.depth, float(np.ptp(np.asarray(state.outline)[:, :3], axis=0).max()))
+            bodies.append((entity, state, fields, water_body_row(state.outline, down, water.depth, water.fog_color,
+                                                                 water.fog_density), centre, reach))
+        return tuple(bodies)
 
     def _sky(self) -> bool:
         """The sky made anew where it changed: the Skybox came, went or changed, or the light a

@@ -24,7 +24,7 @@ from components import (
 )
 from engine.assets.mesh import box, quad
 from engine.core.world import World
-from engine.rules.probe_rules import ALL_FACES, LOOK_KINDS, LookChanges, probe_for
+from engine.rules.probe_rules import ALL_FACES, LOOK_KINDS, PRESENCE_KINDS, LookChanges, probe_for
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
 from systems.frame_rules_system import FrameRulesSystem
 from systems.probe_scheduler import ProbeScheduler
@@ -248,9 +248,9 @@ def test_every_component_the_extract_stage_draws_an_instance_from_is_a_look_kind
                                          and node.name == "_refresh_instance"))
     read = set(re.findall(r"(?:try_get|has|get)\(entity, (\w+)\)", source))
     assert read, "no component reads found: the pattern no longer matches the extract stage"
-    kinds = {kind.__name__ for kind in LOOK_KINDS}
+    kinds = {kind.__name__ for kind in (*LOOK_KINDS, *PRESENCE_KINDS)}
     assert read - {"Transform"} <= kinds, read - {"Transform"} - kinds
-    assert all(isinstance(why, str) and why for why in LOOK_KINDS.values())
+    assert all(isinstance(why, str) and why for why in (*LOOK_KINDS.values(), *PRESENCE_KINDS.values()))
 
 
 def test_probes_that_refresh_by_request_watch_no_changes_until_one_turns_on_change(gl_free_world):

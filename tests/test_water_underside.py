@@ -9,7 +9,7 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import Camera, Emissive, Material, MeshRef, Transform, look_rotation
+from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, Water, look_rotation
 from engine.assets.mesh import quad
 from systems.surface_system import SurfaceSystem
 from tests.test_water import FLOOR_SEEN, SKY, pool, render, schlick
@@ -144,3 +144,22 @@ def test_going_under_turns_the_surface_and_coming_up_turns_it_back(scene):
         fresh = never.frame()
     assert np.array_equal(dived, fresh)
 
+
+
+def test_a_water_given_to_a_mirror_later_is_seen_from_below_and_taken_off_is_not(scene):
+    """A plain mirror has no back: from under it, no view.  Given a Water it is drawn with
+    both faces and its underside's view is made; with the Water taken off, none again."""
+    def build(world):
+        pool(world, True, (0.0, -0.5, 0.0), (0.0, 1.5, -2.0))
+        (entity,) = [e for e, _ in world.query_one(Water)]
+        world.remove_component(entity, Water)
+
+    runner, _ = render(scene, build)
+    assert runner.stats.views_spent == 0
+    (entity,) = [e for e, _ in runner.world.query_one(Mirror)]
+    runner.world.add_component(entity, Water())
+    runner.frame()
+    assert runner.stats.views_spent == 1
+    runner.world.remove_component(entity, Water)
+    runner.frame()
+    assert runner.stats.views_spent == 0

@@ -11,7 +11,9 @@ exponentials for every pixel a program draws (read on every sky pixel, they made
 
 A volume is an ellipsoid: the block holds the matrix that takes a world point into its unit
 ball (``volume_to_unit``) and its colour and density at the centre; the shader integrates its
-density, falling as 1 - r^2, along each stretch in closed form.
+density, falling as 1 - r^2, along each stretch in closed form.  A water's body
+(``Water.fog_density``) is a box of one density in a volume's row, its density negated
+(``water_body_row``): the length of each stretch inside it, times its density.
 """
 from __future__ import annotations
 
@@ -52,6 +54,29 @@ def volume_rows(volumes: Sequence[tuple[FogVolume, glm.mat4]]) -> tuple[float, .
     20 floats."""
     return tuple(float(v) for volume, world in volumes if volume.density > 0.0 for v in (
         *volume_to_unit(volume, world), volume.color.x, volume.color.y, volume.color.z, volume.density))
+
+
+def box_to_unit(top: np.ndarray, down: glm.vec3, depth: float) -> np.ndarray:
+    """The matrix (as ``volume_to_unit``'s) that takes a world point into the cube [-1, 1]^3
+    of a water's body (``components.Water``): the box under its outline ``top`` (4 world
+    corners, homogeneous rows in 2 x 2 grid order), ``depth`` metres along the unit ``down``."""
+    corners = np.asarray(top, np.float64)[:, :3]
+    half_u = (corners[2] - corners[0]) / 2.0
+    half_v = (corners[1] - corners[0]) / 2.0
+    half_w = np.array(tuple(down), np.float64) * depth / 2.0
+    centre = corners.mean(axis=0) + half_w
+    to_unit = np.eye(4)
+    to_unit[:3, :3] = np.linalg.inv(np.column_stack((half_u, half_v, half_w)))
+    to_unit[:3, 3] = -to_unit[:3, :3] @ centre
+    return to_unit.T.astype(np.float32).ravel()   # (GL's columns)
+
+
+def water_body_row(top: np.ndarray, down: glm.vec3, depth: float, color: glm.vec4, density: float) -> tuple[float, ...]:
+    """A water body's row of the block, 20 floats as a volume's: its ``box_to_unit`` matrix,
+    its colour and its density negated (fog.glsl: a box of that density throughout, not a
+    ball falling off)."""
+    return (*(float(v) for v in box_to_unit(top, down, depth)), float(color.x), float(color.y), float(color.z),
+            -float(density))
 
 
 class FogBlock:

@@ -61,6 +61,7 @@ from components import (
     Slice,
     Transform,
     Visibility,
+    Water,
 )
 from engine.assets.mesh import Mesh, flat_plane
 from engine.core.cube_faces import CUBE_FACES
@@ -381,6 +382,12 @@ LOOK_KINDS: dict[type, str] = {
 # The look kinds that pose a mesh: a new pose alone is written to the pose texture, not the
 # instance's whole row (the extract stage's ``_pose``).
 POSE_KINDS = (Skin, Morph)
+# What changes a look by coming or going only, not by its writes (why, per kind): its
+# coming or going is followed as a LOOK_KINDS change is, its writes are not.
+PRESENCE_KINDS: dict[type, str] = {
+    Water: "a mirror's surface drawn with both faces (water is seen from below too); its offset, written every "
+           "frame as the waves move, changes only its composite, not its instance",
+}
 APPEARANCE_KINDS = tuple(kind for kind in LOOK_KINDS if kind not in POSE_KINDS)
 
 
@@ -397,11 +404,17 @@ class LookChanges:
         self.last_resampled: set[int] = set()
         self._sampled: dict[int, ProbeBlend] = {}  # entity -> what it sampled (not NO_PROBE), when last asked
         self._influences: dict[int, tuple | None] = {}  # probe owner -> its influence box and falloff, when last asked
+        self._present: dict[type, set[int]] = {kind: set() for kind in PRESENCE_KINDS}  # who held each, when last asked
 
     def entities(self, world: World) -> set[int]:
         """This frame's entities whose look may have changed (each call follows on from the
         last: ask once a frame)."""
         looks = world.changed_any(LOOK_KINDS)
+        for kind, holders in self._present.items():
+            for entity in world.changed(kind):
+                if (world.exists(entity) and world.has(entity, kind)) != (entity in holders):
+                    holders.symmetric_difference_update((entity,))
+                    looks.add(entity)
         self.last_resampled = self.resampled(world, looks)
         return looks | self.last_resampled
 

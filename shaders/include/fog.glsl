@@ -82,13 +82,28 @@ float ball_depth(vec3 p, vec3 v, float reach) {
     return disc / a * (u1 - u0) - a * (u1 * u1 * u1 - u0 * u0 * u0) / 3.0;
 }
 
+// The length of the line p + t v, t in [0, reach], inside the cube [-1, 1]^3: a water's body
+// (Water.fog_density, its row's density negated: the same density throughout), by the slab
+// test (v's components kept off 0: the GLSL spec leaves x / 0 undefined).
+float box_depth(vec3 p, vec3 v, float reach) {
+    vec3 towards = mix(vec3(-1.0), vec3(1.0), greaterThanEqual(v, vec3(0.0)));
+    vec3 inverse = towards / max(abs(v), vec3(1e-12));
+    vec3 t0 = (-1.0 - p) * inverse, t1 = (1.0 - p) * inverse;
+    vec3 lo = min(t0, t1), hi = max(t0, t1);
+    float enter = max(max(max(lo.x, lo.y), lo.z), 0.0);
+    float leave = min(min(min(hi.x, hi.y), hi.z), reach);
+    return max(leave - enter, 0.0);
+}
+
 // The volumes' fog along the line from a along the unit direction r for ``reach`` metres:
 // rgb their colours times their depths, a the depths' sum.
 vec4 volumes_along(vec3 a, vec3 r, float reach) {
     vec4 sum = vec4(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         mat4 to_unit = fog.volume_to_unit[k];
-        float depth = fog.volume_color[k].a * ball_depth((to_unit * vec4(a, 1.0)).xyz, mat3(to_unit) * r, reach);
+        float density = fog.volume_color[k].a;
+        vec3 p = (to_unit * vec4(a, 1.0)).xyz, v = mat3(to_unit) * r;
+        float depth = density >= 0.0 ? density * ball_depth(p, v, reach) : -density * box_depth(p, v, reach);
         sum += vec4(fog.volume_color[k].rgb * depth, depth);
     }
     return sum;
@@ -99,7 +114,9 @@ float volumes_density(vec3 x) {
     float sum = 0.0;
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         vec3 p = (fog.volume_to_unit[k] * vec4(x, 1.0)).xyz;
-        sum += fog.volume_color[k].a * max(1.0 - dot(p, p), 0.0);
+        float density = fog.volume_color[k].a;
+        sum += density >= 0.0 ? density * max(1.0 - dot(p, p), 0.0)
+                              : (all(lessThanEqual(abs(p), vec3(1.0))) ? -density : 0.0);
     }
     return sum;
 }

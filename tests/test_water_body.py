@@ -1,0 +1,140 @@
+"""A water's body (Water.fog_density, fog_color, depth): the light's way through the water
+below the surface, down to ``depth`` under its outline, fogged at one density.  Measured in
+rendered frames against the same frame without it: what is seen keeps exp(-density x the
+length of its way in the box) of its light, the rest becomes the fog's colour."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    ComponentValueError,
+    ComponentWarning,
+    Emissive,
+    FogVolume,
+    Material,
+    MeshRef,
+    Mirror,
+    Transform,
+    Water,
+)
+from engine.assets.mesh import box, quad
+from engine.core.errors import FogLimitWarning
+from tests.test_water import FLAT, pool, render
+
+FOG = (0.1, 0.3, 0.35)
+DENSITY = 0.4
+
+
+def murky(world, eye, target, density: float, *, depth: float = 10.0, reflect_rate: float = 1.0) -> int:
+    """``pool``'s pond (its floor a metre down), its water fogged by ``density``, with a white
+    wall standing in the water four metres off along -Z and a red block on the bank beside
+    the pond; the water's entity."""
+    pool(world, True, eye, target, reflect_rate=reflect_rate)
+    world.spawn(Transform(position=(0.0, -0.5, -4.0)), MeshRef(box((6.0, 0.98, 0.2))),
+                Material(color=(0.25, 0.25, 0.25, 1.0), roughness=1.0), Emissive(1.0))
+    water = max(entity for entity, _ in world.query_one(Water))
+    world.get(water, Water).fog_density = density
+    world.get(water, Water).fog_color = FOG
+    world.get(water, Water).depth = depth
+    return water
+
+
+def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_through_the_water(scene):
+    """Under the surface looking along it at a wall four metres off in the water: each pixel
+    of the wall is the clear frame's x exp(-density x d) plus the fog's colour x (1 - that),
+    d the length of the pixel's ray from the eye to the wall."""
+    eye, target = (0.0, -0.5, 0.0), (0.0, -0.5, -4.0)
+    runner, fogged = render(scene, lambda w: murky(w, eye, target, DENSITY), size=(64, 48))
+    _, clear = render(scene, lambda w: murky(w, eye, target, 0.0), size=(64, 48))
+    assert runner.engine.renderer.fog.volume_count == 1
+    checked = 0
+    for column in range(0, 64, 7):
+        for row in range(0, 48, 5):
+            view = runner.engine.main_view
+            ndc = glm.vec4((column + 0.5) / 64 * 2.0 - 1.0, 1.0 - (row + 0.5) / 48 * 2.0, -1.0, 1.0)
+            near = glm.inverse(view.view_proj) * ndc
+            direction = glm.normalize(glm.vec3(near) / near.w - view.eye)
+            t = (-3.9 - view.eye.z) / direction.z  # the wall's near face
+            hit = view.eye + direction * t
+            if not (-0.95 < hit.y < -0.05 and abs(hit.x) < 2.5):
+                continue  # off the wall, or too near its edges
+            kept = math.exp(-DENSITY * t)
+            expected = clear[row, column] * kept + np.array(FOG) * (1.0 - kept)
+            np.testing.assert_allclose(fogged[row, column], expected, atol=0.012, err_msg=f"{row}, {column}")
+            assert np.abs(fogged[row, column] - clear[row, column]).max() > 0.1  # the fog is seen
+            checked += 1
+    assert checked > 15
+
+
+def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(scene):
+    """Looking straight down through a pond that reflects nothing (reflect_rate 0): the floor
+    a metre down keeps exp(-density) of its light; with the body only half a metre deep
+    (``depth``), exp(-density / 2); a red block on the bank, out of the box, is the clear
+    frame's, pixel for pixel."""
+    eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
+
+    def build(density: float, depth: float = 10.0):
+        def b(world):
+            murky(world, eye, target, density, depth=depth, reflect_rate=0.0)
+            world.spawn(Transform(position=(0.0, 0.25, -0.6), rotation=FLAT), MeshRef(quad(0.4, 0.4)),
+                        Material(color=(0.7, 0.05, 0.05, 1.0), roughness=1.0), Emissive(1.0))
+        return b
+
+    runner, fogged = render(scene, build(DENSITY))
+    _, shallow = render(scene, build(DENSITY, depth=0.5))
+    _, clear = render(scene, build(0.0))
+    col, row = runner.project((0.0, -1.0, 0.0))
+    for image, through in ((fogged, 1.0), (shallow, 0.5)):
+        kept = math.exp(-DENSITY * through)
+        np.testing.assert_allclose(image[row, col], clear[row, col] * kept + np.array(FOG) * (1.0 - kept), atol=0.01)
+    col, row = runner.project((0.0, 0.25, -0.6))
+    assert clear[row, col][0] > 0.5
+    np.testing.assert_array_equal(fogged[row, col], clear[row, col])
+
+
+def test_water_body_values_are_checked_when_given():
+    for field, value in (("fog_density", -0.1), ("fog_density", math.nan), ("depth", 0.0), ("depth", 1e9),
+                         ("fog_color", (1.0, 2.0))):
+        with pytest.raises(ComponentValueError, match=f"Water.{field}"):
+            Water(**{field: value})
+        water = Water()
+        with pytest.raises(ComponentValueError, match=f"Water.{field}"):
+            setattr(water, field, value)
+
+
+def test_a_water_body_counts_among_the_fog_volumes_and_past_them_the_farthest_is_left_out(scene):
+    """Eight FogVolumes far off and a murky pond under the camera: nine fogs, one left out (a
+    volume, the farthest), said in a FogLimitWarning and counted in the stats."""
+    def build(world):
+        murky(world, (0.0, -0.5, 0.0), (0.0, -0.5, -4.0), DENSITY)
+        for k in range(8):
+            world.spawn(Transform(position=(30.0 + 5.0 * k, 1.0, 0.0)), FogVolume())
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        runner, _ = render(scene, build, size=(32, 24))
+    assert [w for w in caught if issubclass(w.category, FogLimitWarning)]
+    assert runner.stats.fog_volumes_cut == 1
+    assert runner.engine.renderer.fog.volume_count == 8
+    block = runner.engine.renderer.fog.block  # 16 floats, then 20 a fog: its density last (a body's negated)
+    assert [block[16 + 20 * k + 19] < 0.0 for k in range(8)].count(True) == 1  # the body, nearest, is kept
+
+
+def test_a_water_body_on_a_mesh_with_no_flat_outline_is_said(scene):
+    def build(world):
+        murky(world, (0.0, 2.0, 3.0), (0.0, 0.0, 0.0), 0.0)
+        world.spawn(Transform(position=(5.0, 0.0, 0.0)), MeshRef(box((2.0, 0.2, 2.0))),
+                    Material(color=(1.0, 1.0, 1.0, 0.5)),
+                    Mirror(plane_point=(0.0, 0.1, 0.0), plane_normal=(0.0, 1.0, 0.0)), Water(fog_density=0.5))
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        runner, _ = render(scene, build, size=(32, 24))
+    said = [str(w.message) for w in caught if issubclass(w.category, ComponentWarning) and "fog_density" in str(
+        w.message)]
+    assert len(said) == 1 and "not flat" in said[0]
