@@ -102,9 +102,14 @@ class PortalSliceSystem(esper.Processor):
         world = self.world
         found = []
         below = tree.descendants(root, linked) if tree is not None else TransformTree(linked).descendants(root)
+        inside = {root}  # the entities found below the root by their parents now (the tree is last frame's links)
         for entity in (root, *below):
-            mesh_ref = world.try_get(entity, MeshRef)
             part_t = transform if entity == root else world.try_get(entity, Transform)
+            if entity != root:
+                if part_t is None or part_t.parent not in inside:
+                    continue  # taken from under the root this frame (the tree keeps its old link until the transforms)
+                inside.add(entity)
+            mesh_ref = world.try_get(entity, MeshRef)
             if mesh_ref is None or part_t is None or not world.exists(entity) or world.has(entity, PortalClone):
                 continue
             mesh = mesh_ref.mesh

@@ -229,6 +229,25 @@ def test_a_travellers_parts_are_sliced_and_cloned_with_it(scene):
     assert not world.has(ents["bar"], Slice) and not world.has(ents["block"], Slice)
 
 
+def test_a_part_taken_from_under_a_traveller_is_whole_on_the_frame_it_goes(scene):
+    """The block, re-parented to a still entity of its own (placed where it was, wholly
+    through A's plane), is no longer the traveller's part on that very frame: not cut, no
+    clone beyond B (the transform stage's index of children still held its old link), while
+    the bar, still a part, stays cut."""
+    ents = {}
+    side = scene(lambda world: build_model_like(world, ents, (-7.0, 1.6, -0.5), (-2.8, 1.5, -0.5)), SIZE)
+    side.frame()
+    side.frame()
+    world = side.world
+    assert world.has(ents["block"], Slice)
+    holder = world.spawn(Transform(position=(-2.8, 1.5, 0.0)))
+    world.get(ents["block"], Transform).parent = holder
+    side.frame()
+    assert not world.has(ents["block"], Slice)
+    assert {clone.source for _, clone in world.query_one(PortalClone)} == {ents["bar"]}
+    assert world.has(ents["bar"], Slice)
+
+
 def test_a_decal_on_a_traveller_is_cut_at_the_portal_with_it(scene):
     """A sticker on the bar's side (a Decal parented to the bar; its cut is an entity below it)
     goes through with the bar: cut at A (it does not float where the bar's far half is cut
