@@ -213,8 +213,8 @@ vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f
         ivec2 there = ivec2(pixel);
         vec4 found = texelFetch(refraction_copy, there, 0);
         if (texelFetch(parent_nodes, there, 0).r != node) break;
-        if (found.a >= 1.0) {  // the sky along the bent ray: from below, what is seen there
-            if (far) {
+        if (found.a >= 1.0) {  // the sky along the bent ray: from below, what is seen there (from
+            if (underside) {       // above, nothing drawn below there: the pixel keeps what is below it)
                 colour = found.rgb;
                 kept = water_edge_share(gl_FragCoord.xy, pixel, size);
             }

@@ -10,7 +10,7 @@ import numpy as np
 from pyglm import glm
 
 from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, Water, look_rotation
-from engine.assets.mesh import quad
+from engine.assets.mesh import quad, sphere
 from systems.surface_system import SurfaceSystem
 from tests.test_water import FLOOR_SEEN, SKY, pool, render, schlick
 
@@ -163,3 +163,50 @@ def test_a_water_given_to_a_mirror_later_is_seen_from_below_and_taken_off_is_not
     runner.world.remove_component(entity, Water)
     runner.frame()
     assert runner.stats.views_spent == 0
+
+
+def test_a_ball_over_the_pond_is_seen_once_through_the_window_inside_where_the_bent_rays_meet_it(scene):
+    """A red ball two metres over the pond, seen from a metre under it: its pixels lie where
+    the pixels' rays, bent at the surface, meet it (the ray-traced image, a pixel's slack at
+    its edge), and cover most of that; none lies where the straight line meets it only (its
+    unbent image, lower in the picture: a ghost there would be red outside the traced image)."""
+    centre, radius = np.array([0.8, 2.0, 0.5]), 0.5
+
+    def build(world):
+        pool(world, True, (0.0, -1.0, 3.0), (0.0, 1.5, -0.7))
+        world.spawn(Transform(position=tuple(centre)), MeshRef(sphere(radius)),
+                    Material(color=(0.9, 0.05, 0.05, 1.0), roughness=1.0), Emissive(1.0))
+
+    runner, seen = render(scene, build, size=(96, 64))
+    w, h = runner.size
+    traced = np.zeros((h, w), bool)
+    straight = np.zeros((h, w), bool)
+    for row in range(h):
+        for column in range(w):
+            eye, direction = pixel_ray(runner, column, row)
+            if direction.y <= 0.0:
+                continue
+            o, d = np.array(eye), np.array(direction)
+            straight[row, column] = sphere_hit(o, d, centre, radius)
+            at = o + d * (-o[1] / d[1])
+            sin_air = INDEX * math.sqrt(max(0.0, 1.0 - d[1] * d[1]))
+            if sin_air >= 1.0:
+                continue
+            level = np.array([d[0], 0.0, d[2]]) / math.hypot(d[0], d[2])
+            traced[row, column] = sphere_hit(at, level * sin_air + np.array([0.0, math.sqrt(1.0 - sin_air ** 2), 0.0]),
+                                             centre, radius)
+    red = (seen[..., 0] > 0.4) & (seen[..., 1] < 0.2)
+    slack = traced.copy()
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        slack |= np.roll(traced, (dy, dx), axis=(0, 1))
+    assert traced.sum() > 20 and (straight & ~slack).sum() > 20  # the two images lie apart
+    assert not (red & ~slack).any(), np.argwhere(red & ~slack)[:5]
+    assert red.sum() > 0.5 * traced.sum(), (red.sum(), traced.sum())
+
+
+def sphere_hit(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, radius: float) -> bool:
+    """Whether the ray from ``origin`` along the unit ``direction`` meets the sphere."""
+    to_origin = origin - centre
+    b = to_origin @ direction
+    disc = b * b - (to_origin @ to_origin - radius * radius)
+    return disc > 0.0 and -b + math.sqrt(disc) > 0.0
