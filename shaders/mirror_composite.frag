@@ -181,6 +181,37 @@ vec3 copied_point(vec2 pixel, float window, vec2 size) {
 // the normal (index over 1): past the critical angle it does not leave the water (refract
 // gives 0) and the reflection's weight is 1 (water_fresnel_inside), so the pixel keeps
 // what the copy shows, unbent, under a full reflection.
+// From below, where the pixel shows the sky: the first thing the bent ray passes behind, found
+// by marching out along it (WATER_MARCH_STEPS places, each twice as far above the surface as
+// the last, from WATER_MARCH_FIRST metres): a place whose pixel shows something no farther above
+// the surface than the place, but farther than the last place was (so the ray crossed behind
+// it between the two, not behind something standing nearer the eye), gives that thing's height
+// to start the turns from; none: ``otherwise`` (the sky, far along the ray).  Without it, a
+// thing over the pond near the eye, whose straight-line image lies elsewhere on the picture,
+// was met only where the direction's far point happened to fall on it.
+#define WATER_MARCH_STEPS 10
+#define WATER_MARCH_FIRST 0.125
+float water_march(vec3 at, vec3 bent, float down, vec3 plane_normal, mat4 view_proj, uint node, vec2 size,
+                  float otherwise) {
+    float last = 0.0;
+    float height = WATER_MARCH_FIRST;
+    for (int step = 0; step < WATER_MARCH_STEPS; ++step, height *= 2.0) {
+        vec4 clip = view_proj * vec4(at + bent * (height / down), 1.0);
+        if (clip.w <= 0.0) break;
+        vec2 pixel = (clip.xy / clip.w * 0.5 + 0.5) * size;
+        if (any(lessThan(pixel, vec2(0.0))) || any(greaterThanEqual(pixel, size))) break;
+        ivec2 there = ivec2(pixel);
+        if (texelFetch(parent_nodes, there, 0).r != node) break;
+        vec4 found = texelFetch(refraction_copy, there, 0);
+        if (found.a < 1.0) {
+            float found_height = dot(at - copied_point(vec2(there) + 0.5, found.a, size), plane_normal);
+            if (found_height > last && found_height <= height) return found_height;
+        }
+        last = height;
+    }
+    return otherwise;
+}
+
 vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f0, bool underside) {
     ivec2 here = ivec2(gl_FragCoord.xy);
     vec4 unbent = texelFetch(refraction_copy, here, 0);
@@ -202,6 +233,7 @@ vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f
     // deep as the one at the place that gives: a step of a stone on the floor is met near
     // where it stands, not seen twice (once at its place, once where the floor's depth puts it).
     float depth = far ? WATER_FAR_DEPTH * down : dot(at - copied_point(gl_FragCoord.xy, unbent.a, size), plane_normal);
+    if (far) depth = water_march(at, bent, down, plane_normal, view_proj, node, size, depth);
     vec3 colour = unbent.rgb;
     float kept = 0.0;  // the share of the bent colour (water_edge_share)
     for (int turn = 0; turn < WATER_REFRACTION_TURNS; ++turn) {

@@ -169,7 +169,9 @@ def test_a_ball_over_the_pond_is_seen_once_through_the_window_inside_where_the_b
     """A red ball two metres over the pond, seen from a metre under it: its pixels lie where
     the pixels' rays, bent at the surface, meet it (the ray-traced image, a pixel's slack at
     its edge), and cover most of that; none lies where the straight line meets it only (its
-    unbent image, lower in the picture: a ghost there would be red outside the traced image)."""
+    unbent image, lower in the picture: a ghost there would be red outside the traced image).
+    Where the pixel itself shows the sky, the ball is found by marching out along the bent ray
+    (water_march in mirror_composite.frag)."""
     centre, radius = np.array([0.8, 2.0, 0.5]), 0.5
 
     def build(world):
@@ -201,7 +203,9 @@ def test_a_ball_over_the_pond_is_seen_once_through_the_window_inside_where_the_b
         slack |= np.roll(traced, (dy, dx), axis=(0, 1))
     assert traced.sum() > 20 and (straight & ~slack).sum() > 20  # the two images lie apart
     assert not (red & ~slack).any(), np.argwhere(red & ~slack)[:5]
-    assert red.sum() > 0.5 * traced.sum(), (red.sum(), traced.sum())
+    # (the march out along the bent ray: 114 of 124 here; starting from the direction's far point
+    # alone, 88)
+    assert red.sum() > 0.85 * traced.sum(), (red.sum(), traced.sum())
 
 
 def sphere_hit(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, radius: float) -> bool:
