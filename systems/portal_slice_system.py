@@ -63,7 +63,8 @@ class PortalSliceSystem(esper.Processor):
         for root, (_, transform) in world.query(Traveller, Transform) if portals else ():
             if linked is None:
                 linked = self._linked_now()
-            parts = self._parts(root, transform, tree, linked)
+            # (a traveller below another that straddles is already cut with it: its parts once)
+            parts = [part for part in self._parts(root, transform, tree, linked) if part[0] not in sliced]
             if not parts:
                 continue
             straddled = self._straddled(glm.vec3(current_world_matrix(world, transform)[3]), parts, portals)

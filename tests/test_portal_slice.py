@@ -248,6 +248,26 @@ def test_a_part_taken_from_under_a_traveller_is_whole_on_the_frame_it_goes(scene
     assert world.has(ents["bar"], Slice)
 
 
+def test_a_traveller_below_a_traveller_is_cut_once_a_frame(scene):
+    """The bar below the model-like root made a Traveller too (a thing a traveller carries
+    that travels alone once dropped): both straddle A, and each part is cut, and its clone
+    posed, once a frame, not once for each traveller above it."""
+    from systems.portal_slice_system import PortalSliceSystem
+
+    ents = {}
+    side = scene(lambda world: build_model_like(world, ents, (-7.0, 1.6, -0.5), (-2.8, 1.5, -0.5)), SIZE)
+    side.world.add_component(ents["bar"], Traveller())
+    side.frame()
+    system = side.world.get_system(PortalSliceSystem)
+    cuts = []
+    cut = system._slice
+    system._slice = lambda entity, plane: (cuts.append(entity), cut(entity, plane))[1]
+    side.frame()
+    clones = {clone.source: entity for entity, clone in side.world.query_one(PortalClone)}
+    assert sorted(cuts) == sorted([ents["bar"], ents["block"], clones[ents["bar"]], clones[ents["block"]]])
+    assert side.world.get(ents["bar"], Slice).plane == glm.vec4(0, 0, 1, 0)
+
+
 def test_a_decal_on_a_traveller_is_cut_at_the_portal_with_it(scene):
     """A sticker on the bar's side (a Decal parented to the bar; its cut is an entity below it)
     goes through with the bar: cut at A (it does not float where the bar's far half is cut
