@@ -250,7 +250,7 @@ class PrepareSystem(esper.Processor):
                         "mesh is not flat (no outline), so its body adds no fog; give the Mirror a flat mesh"),
                         stacklevel=4)
                 continue
-            down = -glm.vec3(state.plane) if not state.water.underside else glm.vec3(state.plane)
+            down = -glm.vec3(state.plane)  # (the published state is the water's top: Surfaces.undersides)
             centre = glm.vec3(*np.asarray(state.outline, np.float64)[:, :3].mean(axis=0)) + down * (water.depth / 2)
             reach = 0.5 * max(water.depth, float(np.ptp(np.asarray(state.outline)[:, :3], axis=0).max()))
             bodies.append((entity, state, fields, water_body_row(state.outline, down, water.depth, water.fog_color,

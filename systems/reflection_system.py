@@ -189,7 +189,8 @@ class ReflectionSystem(esper.Processor):
             self.tree.visibility.forget()
         self._cut, self._camera = False, camera
         settings = self.settings
-        table = surface_table(self.world.resources, surfaces)
+        # (a water the camera is under seen by its underside: Surfaces.seen_from)
+        table = surface_table(self.world.resources, surfaces.seen_from(main.eye))
         blends = self.world.resources.get(SurfaceBlends, NO_BLENDS)
         stats: RenderStats = self.world.resources[RenderStats]
         world = self.world

@@ -54,7 +54,7 @@ class SurfaceSystem(esper.Processor):
         self.flows: dict[int, WaterFlow] = {}  # each water mirror's waves, for the entity's life
         self._open_portals: dict[int, int] | None = None  # the pairs the portal states were made for
         self._waiting_water: set[int] = set()  # Waters whose Mirror was removed (warned once)
-        self.undersides: set[int] = set()  # the waters whose state is their underside (the camera below them)
+        self.undersides: dict[int, SurfaceState] = {}  # each water's state seen from below (Surfaces.undersides)
 
     def process(self, dt: float) -> None:
         before: dict[int, glm.mat4] = {}   # the carries of the surfaces made again, as they were
@@ -64,7 +64,7 @@ class SurfaceSystem(esper.Processor):
         if changed or Surfaces not in self.world.resources:
             # A new resource only when a surface changed: the view planner's arrays made
             # from it (``engine.render.surface_table``, on first use) are kept while none does.
-            self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals))
+            self.world.resources[Surfaces] = Surfaces(dict(self.mirrors), dict(self.portals), dict(self.undersides))
         moved = {}
         for entity, carry in before.items():
             state = self.mirrors.get(entity) or self.portals.get(entity)
@@ -98,7 +98,6 @@ class SurfaceSystem(esper.Processor):
                 continue  # only the waves moved (this stage writes Water.offset each frame): the state stands
             touched.add(entity)
         touched |= {e for e in world.frame.moved | world.frame.added if e in self.mirrors or e in touched}
-        touched |= self._turned_waters()
         for entity in touched:
             old = self.mirrors.get(entity)
             if old is not None:
@@ -106,6 +105,7 @@ class SurfaceSystem(esper.Processor):
             mirror = world.try_get(entity, Mirror) if world.exists(entity) else None
             if mirror is None:
                 self.mirrors.pop(entity, None)
+                self.undersides.pop(entity, None)
                 self.flows.pop(entity, None)
                 continue
             mesh_ref = world.try_get(entity, MeshRef)
@@ -121,42 +121,15 @@ class SurfaceSystem(esper.Processor):
                     raise MirrorError(f"Water on entity {entity}: a water surface is sharp (its waves break up the "
                                       f"image), so its Mirror.roughness must be 0, got {mirror.roughness}")
                 flow = self.flows.setdefault(entity, WaterFlow())
-            state = self._mirror_state(entity, mirror, mesh_ref, transform, world.try_get(entity, Material), water,
-                                       flow, drawn_code(world, entity))
-            if water is not None and self._eye_below(state.plane):
-                state = self._mirror_state(entity, mirror, mesh_ref, transform, world.try_get(entity, Material),
-                                           water, flow, drawn_code(world, entity), underside=True)
-                self.undersides.add(entity)
+            material = world.try_get(entity, Material)
+            self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform, material, water, flow,
+                                                      drawn_code(world, entity))
+            if water is not None:  # (a view tree rooted under it sees it so: Surfaces.seen_from)
+                self.undersides[entity] = self._mirror_state(entity, mirror, mesh_ref, transform, material, water,
+                                                             flow, drawn_code(world, entity), underside=True)
             else:
-                self.undersides.discard(entity)
-            self.mirrors[entity] = state
+                self.undersides.pop(entity, None)
         return bool(touched)
-
-    def _eye(self) -> glm.vec3 | None:
-        """The active camera's eye in the world (after the transform stage), None without one."""
-        camera = frame_rules(self.world).active_camera
-        transform = self.world.try_get(camera, Transform) if camera is not None else None
-        return None if transform is None else glm.vec3(transform.world[3])
-
-    def _eye_below(self, plane: glm.vec4) -> bool:
-        """Whether the active camera's eye is behind ``plane`` (a water's, facing up)."""
-        eye = self._eye()
-        return eye is not None and glm.dot(glm.vec3(plane), eye) + plane.w < 0.0
-
-    def _turned_waters(self) -> set[int]:
-        """The waters whose side the active camera is on is not the side their state shows:
-        it went under one (or came up out of it) since the last frame."""
-        if not self.flows:
-            return set()
-        eye = self._eye()
-        if eye is None:
-            return set(self.undersides)
-        turned = set()
-        for entity in self.flows:
-            state = self.mirrors.get(entity)
-            if state is not None and (glm.dot(glm.vec3(state.plane), eye) + state.plane.w < 0.0):
-                turned.add(entity)  # its state's front faces away from the eye: the other side now
-        return turned
 
     def _advance_waves(self, dt: float) -> None:
         """Every water's waves move on by this frame's ``dt`` at its speed and direction now

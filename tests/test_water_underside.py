@@ -9,9 +9,9 @@ import math
 import numpy as np
 from pyglm import glm
 
-from components import Camera, Emissive, Material, MeshRef, Mirror, Transform, Water, look_rotation
+from components import Camera, Emissive, Material, MeshRef, Mirror, ReflectionProbe, Transform, Water, look_rotation
 from engine.assets.mesh import quad, sphere
-from systems.surface_system import SurfaceSystem
+from engine.resources import Surfaces
 from tests.test_water import FLOOR_SEEN, SKY, pool, render, schlick
 
 INDEX = 1.333
@@ -121,29 +121,57 @@ def test_a_panel_above_the_water_is_seen_through_snells_window_where_refraction_
     assert abs(seen[row, col, 0] - FLOOR_SEEN) < 0.015, seen[row, col]
 
 
-def test_going_under_turns_the_surface_and_coming_up_turns_it_back(scene):
-    """The surfaces stage turns a water's state to face down while the camera is under it
-    (its plane facing the eye, its look the underside's), and back when it comes up: the
-    frame above after a dive is the frame of an engine that never went under, bit for bit."""
+def test_the_main_tree_sees_a_water_by_the_side_its_camera_is_on_and_the_frame_above_is_unchanged(scene):
+    """The published state of a water is its top whatever the camera does; the main view's
+    tree takes the surfaces seen from its eye (``Surfaces.seen_from``): under the water, its
+    underside (plane facing down, the underside's look), the same object frame after frame.
+    Come up again, the frame is the frame of an engine that never went under, bit for bit."""
     above_eye, above_target = (0.0, 0.4, 0.0), (0.0, 0.05, -10.0)
     runner, _ = render(scene, under((0.0, -0.5, 0.0), (0.0, 1.5, -2.0)))
-    system = runner.world.get_system(SurfaceSystem)
-    (entity,) = system.flows
-    state = system.mirrors[entity]
-    assert state.water.underside and state.plane.y < 0.0 and entity in system.undersides
+    surfaces = runner.world.resources[Surfaces]
+    (entity,) = surfaces.undersides
+    assert not surfaces.mirrors[entity].water.underside and surfaces.mirrors[entity].plane.y > 0.0
+    seen = surfaces.seen_from(runner.engine.main_view.eye)
+    assert seen.mirrors[entity] is surfaces.undersides[entity] and seen.mirrors[entity].plane.y < 0.0
+    assert seen.mirrors[entity].water.underside and seen.base is surfaces
+    assert surfaces.seen_from(runner.engine.main_view.eye) is seen
+    assert surfaces.seen_from(glm.vec3(0.0, 2.0, 0.0)) is surfaces
     ((_, transform),) = [(e, runner.world.get(e, Transform)) for e, _ in runner.world.query_one(Camera)]
     eye = glm.vec3(above_eye)
     transform.position = eye
     transform.rotation = look_rotation(glm.vec3(above_target) - eye)
     for _ in range(2):
         dived = runner.frame()
-    state = system.mirrors[entity]
-    assert not state.water.underside and state.plane.y > 0.0 and entity not in system.undersides
     never = scene(under(above_eye, above_target), runner.size)
     for _ in range(4):
         fresh = never.frame()
     assert np.array_equal(dived, fresh)
 
+
+def test_a_probe_sees_the_water_by_the_side_it_is_on_wherever_the_camera_is(scene):
+    """A probe over the pond captures the same faces with the camera above the water as under
+    it (the probe's tree sees the water's top, not the side the camera is on), and a probe
+    under the water captures its underside: its upward face shows Snell's window (the sky
+    straight up), its sideways faces the floor's mirror image past the critical angle."""
+    def build(camera_y: float, probe_y: float):
+        def b(world):
+            pool(world, True, (0.0, camera_y, 3.0), (0.0, camera_y, 0.0))
+            world.spawn(Transform(position=(0.0, probe_y, 0.0)),
+                        ReflectionProbe(resolution=16, refresh="on_change", depth=1))
+        return b
+
+    def faces(runner) -> list[np.ndarray]:
+        (probe,) = [e for e, _ in runner.world.query_one(ReflectionProbe)]
+        return [runner.engine.renderer.probes.read_face(probe, face) for face in range(6)]
+
+    above, _ = render(scene, build(1.0, 1.5), frames=3)
+    below, _ = render(scene, build(-0.5, 1.5), frames=3)
+    for face_above, face_below in zip(faces(above), faces(below), strict=True):
+        np.testing.assert_array_equal(face_above, face_below)
+    under_probe, _ = render(scene, build(1.0, -0.5), frames=3)
+    up, side = faces(under_probe)[2], faces(under_probe)[0]  # +Y, +X
+    assert abs(float(up[8, 8, 0]) - SKY) < 0.05, up[8, 8]           # straight up: the sky through the window
+    assert abs(float(side[2, 8, 0]) - FLOOR_SEEN) < 0.03, side[2, 8]  # up and sideways: the floor, mirrored whole
 
 
 def test_a_water_given_to_a_mirror_later_is_seen_from_below_and_taken_off_is_not(scene):

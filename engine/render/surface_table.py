@@ -23,10 +23,12 @@ __all__ = ["NO_BLENDS", "PlannerSurfaces", "SurfaceBlends", "surface_table"]
 @dataclass(frozen=True, eq=False)
 class PlannerSurfaces:
     """The table (``world.resources[PlannerSurfaces].table``) and the ``Surfaces`` it was made
-    from (by identity: the surfaces stage makes a new one when a surface changes)."""
+    from (by identity: the surfaces stage makes a new one when a surface changes), and the
+    tables of its variants seen from under a water (``Surfaces.seen_from``), by variant."""
 
     surfaces: Surfaces
     table: SurfaceTable
+    seen_from: dict[int, tuple[Surfaces, SurfaceTable]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,10 +45,20 @@ NO_BLENDS = SurfaceBlends()  # every surface without a view shows the sky (a tre
 
 
 def surface_table(resources: dict[type, Any], surfaces: Surfaces) -> SurfaceTable:
-    """The table of ``surfaces`` (this frame's ``Surfaces`` resource): the published one when
-    it was made from them, else made now and published."""
+    """The table of ``surfaces`` (this frame's ``Surfaces`` resource, or a variant of it seen
+    from under a water): the published one when it was made from them, else made now and
+    published (a variant's kept beside its base's while the base stands)."""
+    base = surfaces.base or surfaces
     held: PlannerSurfaces | None = resources.get(PlannerSurfaces)
-    if held is None or held.surfaces is not surfaces:
-        held = resources[PlannerSurfaces] = PlannerSurfaces(
-            surfaces, SurfaceTable([*surfaces.mirrors.values(), *surfaces.portals.values()]))
-    return held.table
+    if held is None or held.surfaces is not base:
+        held = resources[PlannerSurfaces] = PlannerSurfaces(base, _table(base))
+    if surfaces is base:
+        return held.table
+    found = held.seen_from.get(id(surfaces))
+    if found is None or found[0] is not surfaces:
+        found = held.seen_from[id(surfaces)] = (surfaces, _table(surfaces))
+    return found[1]
+
+
+def _table(surfaces: Surfaces) -> SurfaceTable:
+    return SurfaceTable([*surfaces.mirrors.values(), *surfaces.portals.values()])
