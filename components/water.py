@@ -71,7 +71,9 @@ class Water(TrackedComponent):
       to ``depth`` under its outline, is fogged as a FogVolume's is, at the same density
       everywhere in that box: a thing under a murky pond fades into ``fog_color`` with its
       distance through the water, from above as from below (a camera under the surface sees
-      the pond's far side lost in it).  It fogs every view, as a ``FogVolume`` does, and
+      the pond's far side lost in it), and the light reaching what is under the surface
+      comes through it too (the sun's and the lamps' along their way, the sky's down through
+      the water over the point).  It fogs every view, as a ``FogVolume`` does, and
       counts among their ``MAX_FOG_VOLUMES`` (a flat water mesh only: its outline is the box's top).
     """
 

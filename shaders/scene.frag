@@ -517,7 +517,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
     float dist = length(d);
     vec3 l = d / max(dist, 1e-4);
     float nl = max(dot(s.normal, l), 0.0);
-    float falloff = lamp_falloff(i, dist, l);
+    float falloff = lamp_falloff(i, dist, l) * water_light(s.position, l, dist);  // (a water's body on its way)
     vec3 face = vec3(1.0);   // a rectangle's image on its face as its diffuse light sees it (rect_face)
 #ifdef RECT_LIGHTS
     // A rectangle (rect_lights.glsl): its light from all of it above the horizon, its
@@ -637,6 +637,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     total += ambient_irradiance(boxes, -s.normal) * through * s.occlusion;  // the light from all round behind
 #endif
     if (environment_reflected()) total += environment_specular(s, boxes);
+    // Under a water's body (Water.fog_density) the light from all round comes down through the
+    // water over the point, the suns' along their way (fog.glsl water_skylight, water_light).
+    total *= water_skylight(s.position);
 #ifdef SCREEN_OCCLUSION
     vec3 ambient = total;  // the direct light, summed apart, takes its own share of the occlusion
     total = vec3(0.0);
@@ -645,6 +648,9 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     // no shadow (MeshRef.receives_shadows: its code's NO_RECEIVE_BIT, visibility.glsl).
     bool shadowed = !receives_no_shadow(v_tint.w);
     vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
+#ifdef FOG_WATER
+    for (int i = 0; i < lights.counts.x; ++i) directional_lit[i] *= water_light(s.position, -lights.directional_dir[i].xyz, 1e30);
+#endif
 #ifdef SCREEN_OCCLUSION
     // The camera's contact shadows dim the sun's light (its slot's w: lights.glsl).
     vec4 sun_slots = max(vec4(lights.directional_dir[0].w, lights.directional_dir[1].w, lights.directional_dir[2].w,

@@ -14,17 +14,20 @@ from pyglm import glm
 from components import (
     ComponentValueError,
     ComponentWarning,
+    DirectionalLight,
     Emissive,
     FogVolume,
     Material,
     MeshRef,
     Mirror,
+    PointLight,
+    Skybox,
     Transform,
     Water,
 )
 from engine.assets.mesh import box, quad
 from engine.core.errors import FogLimitWarning
-from tests.test_water import FLAT, pool, render
+from tests.test_water import FLAT, SKY, pool, render
 
 FOG = (0.1, 0.3, 0.35)
 DENSITY = 0.4
@@ -46,8 +49,10 @@ def murky(world, eye, target, density: float, *, depth: float = 10.0, reflect_ra
 
 def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_through_the_water(scene):
     """Under the surface looking along it at a wall four metres off in the water: each pixel
-    of the wall is the clear frame's x exp(-density x d) plus the fog's colour x (1 - that),
-    d the length of the pixel's ray from the eye to the wall."""
+    of the wall is what it gives off, plus the sky's light on it dimmed by the water over it
+    (exp(-density x its depth)), all times exp(-density x d), plus the fog's colour x (1 -
+    that), d the length of the pixel's ray from the eye to the wall.  (The clear frame's wall
+    is its emission and the uniform sky's light on it, E x (1 + SKY).)"""
     eye, target = (0.0, -0.5, 0.0), (0.0, -0.5, -4.0)
     runner, fogged = render(scene, lambda w: murky(w, eye, target, DENSITY), size=(64, 48))
     _, clear = render(scene, lambda w: murky(w, eye, target, 0.0), size=(64, 48))
@@ -64,7 +69,8 @@ def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_thr
             if not (-0.95 < hit.y < -0.05 and abs(hit.x) < 2.5):
                 continue  # off the wall, or too near its edges
             kept = math.exp(-DENSITY * t)
-            expected = clear[row, column] * kept + np.array(FOG) * (1.0 - kept)
+            lit = clear[row, column] / (1.0 + SKY) * (1.0 + SKY * math.exp(DENSITY * hit.y))  # hit.y: -its depth
+            expected = lit * kept + np.array(FOG) * (1.0 - kept)
             np.testing.assert_allclose(fogged[row, column], expected, atol=0.012, err_msg=f"{row}, {column}")
             assert np.abs(fogged[row, column] - clear[row, column]).max() > 0.1  # the fog is seen
             checked += 1
@@ -73,8 +79,9 @@ def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_thr
 
 def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(scene):
     """Looking straight down through a pond that reflects nothing (reflect_rate 0): the floor
-    a metre down keeps exp(-density) of its light; with the body only half a metre deep
-    (``depth``), exp(-density / 2); a red block on the bank, out of the box, is the clear
+    a metre down keeps exp(-density) of its light on the way up to the eye, and the sky's
+    light on it came down through the same metre; with the body only half a metre deep
+    (``depth``), half a metre each way; a red block on the bank, out of the box, is the clear
     frame's, pixel for pixel."""
     eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
 
@@ -91,10 +98,44 @@ def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(sc
     col, row = runner.project((0.0, -1.0, 0.0))
     for image, through in ((fogged, 1.0), (shallow, 0.5)):
         kept = math.exp(-DENSITY * through)
-        np.testing.assert_allclose(image[row, col], clear[row, col] * kept + np.array(FOG) * (1.0 - kept), atol=0.01)
+        lit = clear[row, col] / (1.0 + SKY) * (1.0 + SKY * kept)  # its emission, and the sky's light through the water
+        np.testing.assert_allclose(image[row, col], lit * kept + np.array(FOG) * (1.0 - kept), atol=0.01)
     col, row = runner.project((0.0, 0.25, -0.6))
     assert clear[row, col][0] > 0.5
     np.testing.assert_array_equal(fogged[row, col], clear[row, col])
+
+
+@pytest.mark.parametrize("light", ["sun", "lamp", "sky"])
+def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light):
+    """A grey floor a metre under a murky pond, lit by one light: a sun straight down, a lamp
+    a metre over the pond, or the uniform sky alone.  Its light came down through the metre
+    of water (exp(-density)), and keeps exp(-density) on the way up to the eye looking
+    straight down (the pond reflecting nothing)."""
+    eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
+
+    def build(density: float):
+        def b(world):
+            murky(world, eye, target, density, reflect_rate=0.0)
+            for entity, _ in world.query_one(Emissive):
+                world.remove_component(entity, Emissive)
+                world.get(entity, Material).color = (0.6, 0.6, 0.6, 1.0)
+            if light != "sky":
+                for entity, _ in world.query_one(Skybox):
+                    world.delete_entity(entity)
+                world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+            if light == "lamp":
+                world.spawn(Transform(position=(0.0, 1.0, 0.0)), PointLight(intensity=5.0, range=20.0))
+            elif light == "sun":
+                world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.0), intensity=1.0))
+        return b
+
+    runner, fogged = render(scene, build(DENSITY))
+    _, clear = render(scene, build(0.0))
+    col, row = runner.project((0.0, -1.0, 0.0))
+    assert 0.1 < clear[row, col].max() < 0.9, clear[row, col]  # lit, not clipped
+    kept = math.exp(-DENSITY)
+    np.testing.assert_allclose(fogged[row, col], clear[row, col] * kept * kept + np.array(FOG) * (1.0 - kept),
+                               atol=0.01)
 
 
 def test_water_body_values_are_checked_when_given():

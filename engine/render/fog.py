@@ -5,7 +5,8 @@ every pass that fogs (scene passes, the sky, the composites, particles, the ligh
 The scene, sky and composite programs fog only in their ``FOG`` builds (``defines``: while
 the fog has a density or a volume stands; ``FOG_FALLOFF`` and ``FOG_GLOW`` add the height
 falloff's and the sun glow's terms where it has them, ``FOG_VOLUMES`` the volumes' integrals,
-its value how many), so a frame without fog runs none of it: llvmpipe runs the fog's
+its value how many, ``FOG_WATER`` a water's body among them: the light to each point dimmed
+through it too), so a frame without fog runs none of it: llvmpipe runs the fog's
 exponentials for every pixel a program draws (read on every sky pixel, they made the
 640x360 mirror ring's frame 1.03x dearer with no fog at all).
 
@@ -123,7 +124,8 @@ class FogBlock:
         self.defines = () if values[4] <= 0.0 and not count else tuple((name, value) for name, value, on in (
             ("FOG", "1", True), ("FOG_FALLOFF", "1", values[5] > 0.0), ("FOG_GLOW", "1", any(values[12:15])),
             ("FOG_AERIAL", "1", values[4] > 0.0 and values[7] > 0.0),
-            ("FOG_VOLUMES", str(count), bool(count))) if on)
+            ("FOG_VOLUMES", str(count), bool(count)),
+            ("FOG_WATER", "1", any(rows[at + 19] < 0.0 for at in range(0, len(rows), 20)))) if on)
         return True
 
     @property

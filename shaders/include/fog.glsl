@@ -109,6 +109,40 @@ vec4 volumes_along(vec3 a, vec3 r, float reach) {
     return sum;
 }
 
+#ifdef FOG_WATER
+// What of the light a water's body (Water.fog_density, a volume of negative density) leaves
+// on its way to ``x``: from along the unit direction r, ``reach`` metres off (the suns', 1e30;
+// a lamp's, its distance), exp(-density x the length of the way in each body).  The
+// ellipsoid volumes (mist) take none: their air is thin.
+float water_light(vec3 x, vec3 r, float reach) {
+    float depth = 0.0;
+    for (int k = 0; k < FOG_VOLUMES; ++k) {
+        float density = fog.volume_color[k].a;
+        if (density >= 0.0) continue;
+        mat4 to_unit = fog.volume_to_unit[k];
+        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * r, reach);
+    }
+    return exp(-min(depth, FOG_MAX_EXPONENT));
+}
+
+// What of the sky's light a water's body leaves at ``x``: along the way up to its surface
+// (the box's top: its unit cube's -w face, the third row of its matrix the way down).
+float water_skylight(vec3 x) {
+    float depth = 0.0;
+    for (int k = 0; k < FOG_VOLUMES; ++k) {
+        float density = fog.volume_color[k].a;
+        if (density >= 0.0) continue;
+        mat4 to_unit = fog.volume_to_unit[k];
+        vec3 up = -normalize(vec3(to_unit[0][2], to_unit[1][2], to_unit[2][2]));
+        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * up, 1e30);
+    }
+    return exp(-min(depth, FOG_MAX_EXPONENT));
+}
+#else  // (no water's body among the volumes: FOG_WATER builds only, engine/render/fog.py)
+float water_light(vec3 x, vec3 r, float reach) { return 1.0; }
+float water_skylight(vec3 x) { return 1.0; }
+#endif
+
 // The volumes' density at ``x`` (per metre).
 float volumes_density(vec3 x) {
     float sum = 0.0;
@@ -123,6 +157,8 @@ float volumes_density(vec3 x) {
 #else
 vec4 volumes_along(vec3 a, vec3 r, float reach) { return vec4(0.0); }
 float volumes_density(vec3 x) { return 0.0; }
+float water_light(vec3 x, vec3 r, float reach) { return 1.0; }
+float water_skylight(vec3 x) { return 1.0; }
 #endif
 
 // The fog's optical depth along the straight stretch from a to b: the height fog's and the
@@ -232,4 +268,6 @@ vec3 fog_over(vec3 color, FogWay way) { return color; }
 vec3 fogged(vec3 color, float depth, vec3 dir) { return color; }
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) { return color; }
+float water_light(vec3 x, vec3 r, float reach) { return 1.0; }
+float water_skylight(vec3 x) { return 1.0; }
 #endif
