@@ -74,7 +74,7 @@ class WaterLook:
     cross: float
     tiling: float
     flow: WaterFlow
-    underside: bool = False  # seen from below (the camera under it): reflectance from the water's side
+    underside: bool = False  # seen from below (Surfaces.undersides): its reflectance from the water's side
 
 
 @dataclass(eq=False)

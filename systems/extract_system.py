@@ -155,7 +155,7 @@ class ExtractSystem(esper.Processor):
                 self._remove_instance(entity, old)
             return
         material = world.try_get(entity, Material)
-        # Water is seen from below too (the camera under it: the surfaces stage turns its state).
+        # Water is seen from below too (a view tree rooted under it takes its underside: Surfaces.seen_from).
         water = world.has(entity, Water)
         blend = probe_blend(world, entity)  # the probes it samples, and their weights
         probe = blend.probes[0] if blend.probes else 0
