@@ -177,10 +177,6 @@ vec3 copied_point(vec2 pixel, float window, vec2 size) {
     return world.xyz / world.w;
 }
 
-// Seen from below (``underside``), what lies beyond is the air above, the ray bent away from
-// the normal (index over 1): past the critical angle it does not leave the water (refract
-// gives 0) and the reflection's weight is 1 (water_fresnel_inside), so the pixel keeps
-// what the copy shows, unbent, under a full reflection.
 // From below, where the pixel shows the sky: the first thing the bent ray passes behind, found
 // by marching out along it (WATER_MARCH_STEPS places, each twice as far above the surface as
 // the last, from WATER_MARCH_FIRST metres): a place whose pixel shows something no farther above
@@ -195,7 +191,7 @@ float water_march(vec3 at, vec3 bent, float down, vec3 plane_normal, mat4 view_p
                   float otherwise) {
     float last = 0.0;
     float height = WATER_MARCH_FIRST;
-    for (int step = 0; step < WATER_MARCH_STEPS; ++step, height *= 2.0) {
+    for (int place = 0; place < WATER_MARCH_STEPS; ++place, height *= 2.0) {
         vec4 clip = view_proj * vec4(at + bent * (height / down), 1.0);
         if (clip.w <= 0.0) break;
         vec2 pixel = (clip.xy / clip.w * 0.5 + 0.5) * size;
@@ -212,6 +208,10 @@ float water_march(vec3 at, vec3 bent, float down, vec3 plane_normal, mat4 view_p
     return otherwise;
 }
 
+// Seen from below (``underside``), what lies beyond is the air above, the ray bent away from
+// the normal (index over 1): past the critical angle it does not leave the water (refract
+// gives 0) and the reflection's weight is 1 (water_fresnel_inside), so the pixel keeps
+// what the copy shows, unbent, under a full reflection.
 vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f0, bool underside) {
     ivec2 here = ivec2(gl_FragCoord.xy);
     vec4 unbent = texelFetch(refraction_copy, here, 0);

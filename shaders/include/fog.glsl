@@ -87,8 +87,8 @@ float ball_depth(vec3 p, vec3 v, float reach) {
 // test (v's components kept off 0: the GLSL spec leaves x / 0 undefined).
 float box_depth(vec3 p, vec3 v, float reach) {
     vec3 towards = mix(vec3(-1.0), vec3(1.0), greaterThanEqual(v, vec3(0.0)));
-    vec3 inverse = towards / max(abs(v), vec3(1e-12));
-    vec3 t0 = (-1.0 - p) * inverse, t1 = (1.0 - p) * inverse;
+    vec3 per_unit = towards / max(abs(v), vec3(1e-12));  // 1 / v, sign kept
+    vec3 t0 = (-1.0 - p) * per_unit, t1 = (1.0 - p) * per_unit;
     vec3 lo = min(t0, t1), hi = max(t0, t1);
     float enter = max(max(max(lo.x, lo.y), lo.z), 0.0);
     float leave = min(min(min(hi.x, hi.y), hi.z), reach);
