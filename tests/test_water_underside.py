@@ -12,6 +12,7 @@ from pyglm import glm
 from components import Camera, Emissive, Material, MeshRef, Mirror, ReflectionProbe, Transform, Water, look_rotation
 from engine.assets.mesh import quad, sphere
 from engine.resources import Surfaces
+from tests.support import kept_frames_equal_drawn
 from tests.test_water import FLOOR_SEEN, SKY, pool, render, schlick
 
 INDEX = 1.333
@@ -242,3 +243,22 @@ def sphere_hit(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, ra
     b = to_origin @ direction
     disc = b * b - (to_origin @ to_origin - radius * radius)
     return disc > 0.0 and -b + math.sqrt(disc) > 0.0
+
+
+def test_a_still_camera_under_the_water_keeps_its_views_and_they_are_the_drawn_ones(scene):
+    """A still camera under a still pond (no waves, nothing moving): the reflect stage keeps
+    the underside's view once it settles, and every frame, kept or drawn, is bit for bit an
+    engine's that draws its whole tree each frame; the frames after the camera comes up too."""
+    def build(world):
+        pool(world, True, (0.0, -0.5, 0.0), (0.0, 1.5, -2.0))
+        for _, water in world.query_one(Water):
+            water.speed = 0.0
+        world.spawn(Transform(position=(0.8, 1.5, -1.5)), MeshRef(sphere(0.4)),
+                    Material(color=(0.9, 0.05, 0.05, 1.0), roughness=1.0), Emissive(1.0))
+
+    keeping, drawing = scene(build, (64, 48)), scene(build, (64, 48))
+    assert kept_frames_equal_drawn(keeping, drawing, frames=6) > 0
+    for runner in (keeping, drawing):
+        ((_, transform),) = [(e, runner.world.get(e, Transform)) for e, _ in runner.world.query_one(Camera)]
+        transform.position = glm.vec3(0.0, 0.5, 0.0)
+    kept_frames_equal_drawn(keeping, drawing, frames=4)
