@@ -227,7 +227,7 @@ class PrepareSystem(esper.Processor):
         state or a field that changed.  A water whose mesh has no flat outline (the box's top)
         has no body, said once."""
         surfaces = self.world.resources.get(Surfaces)
-        if surfaces is None:
+        if surfaces is None or not surfaces.undersides:  # (undersides: one a water; none, no loop a frame)
             return ()
         old = {body[0]: body for body in self._bodies}
         bodies = []
