@@ -75,6 +75,13 @@ class Water(TrackedComponent):
       comes through it too (the sun's and the lamps' along their way, the sky's down through
       the water over the point).  It fogs every view, as a ``FogVolume`` does, and
       counts among their ``MAX_FOG_VOLUMES`` (a flat water mesh only: its outline is the box's top).
+    - **Caustics** (``caustics``, 0 by default: none; 1: all of them): the suns' light through
+      the waves is bent by each one and gathers where the bent rays converge, so what lies
+      under the water, inside its outline and down to ``depth``, is lit in the bright
+      moving net of a sunny pool: each point's sunlight times the ratio of the surface's
+      area its light came through to the area it spreads over (``shaders/include/caustics.glsl``),
+      blurred with depth by the sun's disc.  Needs waves (``Material.normal_map``); one water
+      gathers the sun at a time, the nearest the active camera (``engine/render/caustics.py``).
     """
 
     ior: float = 1.333
@@ -86,6 +93,7 @@ class Water(TrackedComponent):
     fog_density: float = 0.0
     fog_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.12, 0.14, 1.0))
     depth: float = 10.0
+    caustics: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "fog_density":
@@ -94,6 +102,8 @@ class Water(TrackedComponent):
             return color(self, name, value)
         if name == "depth":
             return finite(self, name, value, low=MIN_FOG_VOLUME_SIDE, high=MAX_FOG_VOLUME_SIDE)
+        if name == "caustics":
+            return finite(self, name, value, low=0.0, high=1.0)
         if name == "ior":
             return finite(self, name, value, low=1.0, high=4.0)
         if name == "speed":

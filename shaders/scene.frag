@@ -13,6 +13,10 @@
 #ifdef CLOUD_SHADOWS
 #include "clouds.glsl"
 #endif
+#ifdef CAUSTICS
+#include "water_waves.glsl"
+#include "caustics.glsl"
+#endif
 #include "hdr.glsl"
 #include "way.glsl"
 uniform samplerCube sky_map;
@@ -650,6 +654,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
 #ifdef FOG_WATER
     for (int i = 0; i < lights.counts.x; ++i) directional_lit[i] *= water_light(s.position, -lights.directional_dir[i].xyz, 1e30);
+#endif
+#ifdef CAUSTICS
+    // The suns' light through a rippled water gathered by its waves (caustics.glsl).
+    for (int i = 0; i < lights.counts.x; ++i) directional_lit[i] *= caustic_light(s.position, -lights.directional_dir[i].xyz);
 #endif
 #ifdef SCREEN_OCCLUSION
     // The camera's contact shadows dim the sun's light (its slot's w: lights.glsl).

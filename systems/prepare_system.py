@@ -22,6 +22,8 @@ shadows past the shadow cubes (``LIGHT_LIMITS.point_shadows``; they cast none:
 ``RenderStats.shadows_cut``).
 The probes' influence boxes go to the irradiance table when a probe comes, goes, changes or
 moves; their coefficients are projected on the GPU after each capture (the probes stages).
+The water whose waves gather the sun (``Water.caustics``; ``engine/render/caustics.py``) goes
+to its block every frame its waves move.
 """
 from __future__ import annotations
 
@@ -46,8 +48,9 @@ from components import (
 )
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
-from engine.core.errors import FogLimitWarning, LightLimitWarning
+from engine.core.errors import CausticLimitWarning, FogLimitWarning, LightLimitWarning
 from engine.core.world import World
+from engine.render.caustics import MAX_CAUSTIC_WATERS, CausticWater, caustic_rows, nearest
 from engine.render.clouds import CloudShape, cloud_shape, drift_served, shadows_served
 from engine.render.fog import volume_rows, water_body_row
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
@@ -118,6 +121,7 @@ class PrepareSystem(esper.Processor):
         self._fog_packed: tuple[float, ...] = ()
         self._bodies: tuple = ()   # the water bodies the rows were packed for (_water_bodies)
         self._unboxed: set[int] = set()   # waters with a fog and no flat outline (said once)
+        self._caustic_cut = 0                     # waters with caustics past MAX_CAUSTIC_WATERS, left out
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -187,6 +191,48 @@ class PrepareSystem(esper.Processor):
                             (1.0, 1.0, 1.0) if glow is None else glow.tint):
             renderer.note_scene_change()   # every view's fogged pixels
         renderer.stats.fog_volumes_cut = self._fog_cut
+        self._caustics(camera)
+
+    def _caustics(self, camera: int | None) -> None:
+        """Give the caustics' block the water that gathers the sun: of the waters with
+        ``caustics`` and waves (a normal map), the nearest the active camera (the rest counted
+        and said when their count grows).  Its rows are packed every frame (its waves move);
+        the block is written, and the views drawn again, only when they changed."""
+        renderer = self.renderer
+        surfaces = self.world.resources.get(Surfaces)
+        found = []
+        if surfaces is not None and surfaces.undersides:   # (undersides: one a water; none, no loop a frame)
+            for entity, state in surfaces.mirrors.items():
+                if state.water is None or state.bumps is None:
+                    continue
+                water = self.world.try_get(entity, Water)
+                if water is not None and water.caustics > 0.0:
+                    found.append((entity, state, water))
+        cut = max(0, len(found) - MAX_CAUSTIC_WATERS)
+        if cut:
+            eye = np.zeros(3) if camera is None else np.array(self.world.get(camera, Transform).world[3].xyz)
+            chosen = nearest([(entity, state.corners) for entity, state, _ in found], eye)
+            found = [entry for entry in found if entry[0] == chosen]
+            if cut > self._caustic_cut:
+                warnings.warn(CausticLimitWarning(
+                    f"{MAX_CAUSTIC_WATERS + cut} waters have caustics: {MAX_CAUSTIC_WATERS} gathers the sun at a time "
+                    f"(the nearest the active camera, entity {chosen}), so {cut} do not "
+                    "(RenderStats.caustic_waters_cut)"), stacklevel=3)
+        self._caustic_cut = cut
+        renderer.stats.caustic_waters_cut = cut
+        held = None
+        if found:
+            entity, state, water = found[0]
+            rows = caustic_rows(tuple(state.plane), state.bumps, tiling=water.tiling, cross=water.cross,
+                                offset=state.water.flow.offset, ior=water.ior, strength=water.caustics,
+                                depth=water.depth)
+            held = renderer.caustics.water
+            if held is None or held.entity != entity or held.rows != rows \
+                    or held.normal_map is not state.bumps.normal_map:
+                held = CausticWater(entity, state.bumps.normal_map, rows)
+        texture = None if held is None else renderer.normal_map_texture(held.normal_map)
+        if renderer.caustics.set(held, texture):
+            renderer.note_scene_change()   # what every view shows under the water
 
     def _fog_rows(self, camera: int | None) -> tuple[float, ...]:
         """The Fog block's rows of the ``FogVolume``s (``fog.volume_rows``) and the water bodies

@@ -432,7 +432,7 @@ def test_scene_and_composite_pixels_are_left_out_only_after_their_derivatives_ar
     composite = (SHADERS / "mirror_composite.frag").read_text()
     body = composite[composite.index("void main() {"):]
     assert body.index("dFdx(mirror_uv)") < body.index("discard;")
-    for name in ("normal_map.glsl", "water.glsl"):
+    for name in ("normal_map.glsl", "water.glsl", "water_waves.glsl"):
         assert "texture(normal_map" not in (SHADERS / "include" / name).read_text(), name
 
 

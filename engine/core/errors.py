@@ -67,6 +67,12 @@ class FogLimitWarning(UserWarning):
     left out (said when the count grows, counted every frame in ``RenderStats.fog_volumes_cut``)."""
 
 
+class CausticLimitWarning(UserWarning):
+    """More waters with caustics than ``MAX_CAUSTIC_WATERS``: only the nearest the active
+    camera gathers the sun (said when the count grows, counted every frame in
+    ``RenderStats.caustic_waters_cut``)."""
+
+
 class RefractionLimitWarning(UserWarning):
     """More refracting surfaces lie behind one another on screen than
     ``MAX_REFRACTION_LAYERS``: those past it are drawn in the last layer and do not show the

@@ -24,6 +24,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError, GLPassError
 from engine.frame_stats import RenderStats
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range, forget_sampler
+from engine.render.caustics import CausticBlock
 from engine.render.clouds import CloudBlock
 from engine.render.fog import FogBlock
 from engine.render.gl_context import GLCapabilities
@@ -244,6 +245,8 @@ class Gpu:
         # has a capture, IRRADIANCE_VOLUME while an irradiance volume is baked (the table sets it).
         self.ambient_defines: tuple[tuple[str, str], ...] = ()
         self.spot_cookies = SpotCookies(ctx, caps.max_texture_image_units, self.normal_map_anisotropy, caps.software)
+        # The water whose waves gather the sun under it (the prepare stage sets it): CAUSTICS builds.
+        self.caustics = CausticBlock(ctx, caps.max_texture_image_units)
         # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
         # the extract stage writes them): the SKINNED and MORPHED builds read them.
         self.pose_rows = PoseRows(ctx, caps.max_texture_size)

@@ -744,6 +744,7 @@ class ScenePass:
         renderer.fog.bind()
         self.shadows.bind()
         renderer.spot_cookies.bind()
+        renderer.caustics.bind()
         # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
         # capture, and a world without boxes, draw the build without them (sky only).
         self._ambient_probes = self.irradiance.bind(capturing=renderer.capturing != 0)
@@ -1052,6 +1053,7 @@ class ScenePass:
         renderer.fog.bind()
         self.shadows.bind()
         renderer.spot_cookies.bind()
+        renderer.caustics.bind()
         self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's light (a bounce: the grid's)
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block

@@ -26,6 +26,8 @@ from engine.render.batched_mirrors import MAX_BATCHED_VIEWS
 from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
+    CAUSTIC_UNIT,
+    CAUSTICS_BINDING,
     CLOUDS_BINDING,
     COOKIE_UNIT,
     EMISSIVE_MAP_UNIT,
@@ -106,10 +108,11 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "screen_contact_lamps": SCREEN_CONTACT_UNIT, "spot_cookies": COOKIE_UNIT,
                 "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
                 "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT,
-                "refraction_copy": REFRACTION_COPY_UNIT}
+                "refraction_copy": REFRACTION_COPY_UNIT, "caustic_map": CAUSTIC_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
-                 "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING}
+                 "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING,
+                 "Caustics": CAUSTICS_BINDING}
 
 # The reflect slots whose reflection is the sky's or a probe's, which screen reflections
 # replace: none (the material's environment reflection, scene.frag environment_specular) and a
@@ -207,6 +210,7 @@ class ScenePrograms:
         if self.renderer.rect_lights:  # RECT_LIGHTS while a kept point light (or its image) is a rectangle
             cookies = (*cookies, ("RECT_LIGHTS", "1"))
         cookies = (*cookies, *self.renderer.clouds.shadow_defines)  # CLOUD_SHADOWS while a CloudLayer shades
+        cookies = (*cookies, *self.renderer.caustics.defines)  # CAUSTICS while a water gathers the sun
         if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
             cookies = (*cookies, *self.renderer.object_motion.defines)
         if "occluded" in screen.split():  # CONTACT_LAMPS while a lamp has contact shadows (its image read)

@@ -4,28 +4,14 @@
 // COMPOSITE_WATER calls it: an include inside an #ifdef would hide its errors from every
 // build that leaves it out.
 
-// The second layer's repeats relative to the first: not a whole number or a simple ratio,
-// so the two patterns do not line up again for many tiles.
-#define WATER_CROSS_TILING 1.7
+#include "water_waves.glsl"
 
-// The normal of two heightfields summed: the map read at uv moving along flow (map tiles,
-// the first layer), and read turned a quarter turn at WATER_CROSS_TILING times the repeats,
-// so its waves cross the first's and move across them (the same flow in its own turned
-// coordinates is flow turned a quarter turn on the surface).  Each layer's tangent-space
-// normal m is its heightfield's slope (m.x, m.y) / m.z (the turned layer's slope turned
-// back), and the slopes are averaged by ``share`` (the second layer's weight:
-// partial-derivative blending, the slope of the summed height), then scaled by ``scale``
-// (normal_scale) in the frame t (+U), b (+V), n (out of the surface).  With share 0 it is
-// bent_normal's.
-// Filtered by the UVs' screen derivatives uv_dx and uv_dy, taken before the composite
-// leaves any pixel out (bent_normal says why).
+// The normal of the waves (water_waves.glsl water_slope: the two layers of the mirror's
+// normal map) scaled by ``scale`` (normal_scale) in the frame t (+U), b (+V), n (out of the
+// surface).  With share 0 it is bent_normal's.  Filtered by the UVs' screen derivatives uv_dx
+// and uv_dy, taken before the composite leaves any pixel out (bent_normal says why).
 vec3 water_normal(vec3 t, vec3 b, vec3 n, vec2 uv, vec2 uv_dx, vec2 uv_dy, vec2 flow, float share, float scale) {
-    vec3 first = textureGrad(normal_map, uv - flow, uv_dx, uv_dy).xyz * 2.0 - 1.0;
-    // Turned coordinates (v, -u): the map's +U runs along the surface's +V.
-    vec3 second = textureGrad(normal_map, vec2(uv.y, -uv.x) * WATER_CROSS_TILING - flow,
-                              vec2(uv_dx.y, -uv_dx.x) * WATER_CROSS_TILING,
-                              vec2(uv_dy.y, -uv_dy.x) * WATER_CROSS_TILING).xyz * 2.0 - 1.0;
-    vec2 slope = mix(first.xy / max(first.z, 0.05), vec2(-second.y, second.x) / max(second.z, 0.05), share);
+    vec2 slope = water_slope(normal_map, uv, uv_dx, uv_dy, flow, share);
     return normalize((t * slope.x + b * slope.y) * scale + n);
 }
 

@@ -1,0 +1,123 @@
+"""Caustics under a water (``components.Water.caustics``): the uniform block and the normal
+map the scene's ``CAUSTICS`` builds read (``shaders/include/caustics.glsl``, which says how
+the light is gathered), and the rules of what they hold.
+
+One water at a time gathers the sun (``MAX_CAUSTIC_WATERS``: its normal map takes a sampler
+of its own, the 19th of the fullest scene build): the prepare stage gives the block the
+nearest the active camera of the waters that have caustics and waves (a normal map), and
+says when others are left out.  A still water (no normal map) bends no light: it has none.
+A context with fewer than ``CAUSTIC_SAMPLERS`` texture units in the fragment stage draws
+none, said once (``GLLimitWarning``).
+
+The waves move every frame, so while a water gathers the sun its block is written every
+frame, and the views that show what is under it are drawn again (``Gpu.note_scene_change``);
+a probe shows them as they were when it captured its faces.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from engine.assets.texture_data import TextureData
+from engine.core.errors import GLLimitWarning
+from engine.render.bindings import CAUSTIC_UNIT, CAUSTICS_BINDING, bind_texture
+from engine.render.spot_cookies import SCENE_SAMPLERS
+from engine.resources import MirrorBumps
+
+MAX_CAUSTIC_WATERS = 1      # waters whose caustics are drawn at once (the nearest the active camera)
+CAUSTIC_SAMPLERS = SCENE_SAMPLERS + 3   # the fullest build with cookies, soft suns' depths and caustics
+CAUSTIC_SUN_SPREAD = 0.0093  # radians: the sun's disc (0.53 degrees), how a caustic blurs with depth
+_BLOCK_FLOATS = 28          # seven vec4s (caustics.glsl's Caustics block)
+
+
+@dataclass(frozen=True, eq=False)
+class CausticWater:
+    """The water whose caustics the block holds: its entity, its normal map and the block's
+    rows (``caustic_rows``)."""
+
+    entity: int
+    normal_map: TextureData
+    rows: tuple[float, ...]
+
+
+def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *, tiling: float, cross: float,
+                 offset: tuple[float, float], ior: float, strength: float, depth: float) -> tuple[float, ...]:
+    """The ``Caustics`` block (caustics.glsl) of a water: its top ``plane`` (normal up, out of
+    the water), its mirror's UV rows, the surface's unit directions of +U and +V (each UV
+    row's direction laid on the plane, as the composite's frame), the waves' layers
+    (``tiling``, ``cross``, ``offset``, ``bumps.scale``), 1 / ``ior``, the ``strength``
+    (``Water.caustics``), a map texel's size in metres along U, the body's ``depth`` and the
+    sun's spread."""
+    normal = np.array(plane[:3], np.float64)
+    u_row, v_row = (np.asarray(row, np.float64) for row in bumps.uv_rows)
+
+    def along(row: np.ndarray) -> np.ndarray:
+        flat = row[:3] - np.dot(row[:3], normal) * normal
+        return flat / np.linalg.norm(flat)
+
+    width = bumps.normal_map.size[0]
+    texel = 1.0 / (width * tiling * float(np.linalg.norm(u_row[:3])))
+    return tuple(float(v) for v in (*normal, plane[3], *u_row, *v_row, *along(u_row), cross, *along(v_row),
+                                    bumps.scale, *offset, 1.0 / ior, strength, tiling, texel, depth,
+                                    CAUSTIC_SUN_SPREAD))
+
+
+class CausticBlock:
+    """The ``Caustics`` uniform block on the GPU (bound once at ``CAUSTICS_BINDING``), written
+    when its water's rows change, the ``CAUSTICS`` define while it holds one, and its normal
+    map bound for each scene pass (``bind``)."""
+
+    def __init__(self, ctx: moderngl.Context, texture_units: int) -> None:
+        self.ctx = ctx
+        self.ubo = ctx.buffer(reserve=4 * _BLOCK_FLOATS)
+        self.ubo.bind_to_uniform_block(CAUSTICS_BINDING)   # (no other block uses the point: it stays)
+        self.supported = texture_units >= CAUSTIC_SAMPLERS
+        self.texture_units = texture_units
+        self.water: CausticWater | None = None
+        self._texture: moderngl.Texture | None = None
+        self.defines: tuple[tuple[str, str], ...] = ()
+        self._warned = False
+
+    def set(self, water: CausticWater | None, texture: moderngl.Texture | None = None) -> bool:
+        """Hold ``water`` (None: none) with ``texture``, its normal map on the GPU (None: not
+        uploaded, so none drawn); True when what the scene shows changed."""
+        if water is not None and not self.supported:
+            if not self._warned:
+                self._warned = True
+                warnings.warn(GLLimitWarning(
+                    f"Water on entity {water.entity}: caustics need {CAUSTIC_SAMPLERS} texture units in the fragment "
+                    f"stage and this OpenGL has {self.texture_units} (GL_MAX_TEXTURE_IMAGE_UNITS): the water gathers "
+                    "no light"), stacklevel=3)
+            water = None
+        if water is not None and texture is None:
+            water = None
+        self._texture = texture if water is not None else None
+        old = self.water
+        if water is None:
+            self.water, self.defines = None, ()
+            return old is not None
+        self.water, self.defines = water, (("CAUSTICS", "1"),)
+        if old is not None and old.rows == water.rows:
+            return False
+        self.ubo.write(np.array(water.rows, np.float32).tobytes())
+        return True
+
+    def bind(self) -> None:
+        """Bind the water's normal map for a scene pass (while there is one)."""
+        if self.water is not None:
+            bind_texture(self.ctx, self._texture, CAUSTIC_UNIT)
+
+    def release(self) -> None:
+        self.ubo.release()
+        self.water, self.defines, self._texture = None, (), None
+
+
+def nearest(candidates: list[tuple[int, np.ndarray]], eye: np.ndarray) -> int:
+    """The entity of ``candidates`` ((entity, outline corners) each) whose outline's centre is
+    nearest ``eye``."""
+    return min(candidates, key=lambda c: (float(np.linalg.norm(np.asarray(c[1], np.float64)[:, :3].mean(axis=0)
+                                                               - eye)), c[0]))[0]
+

@@ -1,0 +1,70 @@
+// Caustics under a water (components/water.py Water.caustics; CAUSTICS builds of the scene;
+// engine/render/caustics.py writes the block and owns the rules, tests/test_caustics.py
+// holds them against a ray tracer).  The sun's light through a rippled surface is bent
+// by each wave and gathers where the bent rays converge: what reaches a point under the
+// water is the light through a patch of surface spread over the patch of floor it lands on,
+// so the point's light is the flat water's times the ratio of the two areas, 1 / |det J|,
+// J the derivative of where the rays land with respect to where they crossed (the Jacobian
+// of the refraction map, as in Evan Wallace's WebGL water; here evaluated per shaded point
+// from the waves' normal map, not by a mesh of rays).
+//
+// For a point x at depth h under the plane: the surface point s its light came through is
+// found by fixed-point iteration s <- x' - D(s) (x' is x on the plane, D(s) the sideways
+// offset of the bent ray from s down to depth h), started from the flat surface's ray, then
+// J from D half a step either side of s along each axis of the surface.  The step is the larger of a
+// map texel and the sun's disc at that depth (CAUSTIC_SUN_SPREAD x h): the sun is no point,
+// so a caustic blurs with its depth.  Outside the water's outline, above its plane or deeper
+// than its body (Water.depth), the light is the flat water's: 1.
+layout(std140) uniform Caustics {
+    vec4 caustic_plane;   // xyz: the water's up normal (out of its top), w: its plane's d
+    vec4 caustic_u;       // the mirror's UV u as dot(xyz, p) + w (the UV square, before tiling)
+    vec4 caustic_v;       // ... and v
+    vec4 caustic_axis_u;  // xyz: the unit world direction of +U on the surface, w: the second layer's share
+    vec4 caustic_axis_v;  // xyz: +V, w: normal_scale
+    vec4 caustic_flow;    // xy: the waves' offset (Water.offset), z: 1 / ior, w: strength (Water.caustics)
+    vec4 caustic_sizes;   // x: tiling, y: a map texel in metres, z: the body's depth, w: the sun's spread (radians)
+};
+uniform sampler2D caustic_map;   // the water's normal map (Material.normal_map)
+
+#define CAUSTIC_MAX_FOCUS 16.0   // the most a caustic gathers (1 / |det J| where rays cross)
+// Turns of the search for the crossing: each shrinks its error by |1 - J| (measured against
+// tests/test_caustics.py's tracer: two left the brightest lines a texel off, four do not).
+#define CAUSTIC_ITERATIONS 4
+
+// The sideways offset (along the plane) of the light refracted at surface point s, on its
+// way down to depth h, coming from the unit direction l (towards the light).
+vec3 caustic_offset(vec3 s, vec3 l, float h, vec2 uv_dx, vec2 uv_dy) {
+    vec3 up = caustic_plane.xyz;
+    vec2 uv = vec2(dot(caustic_u.xyz, s) + caustic_u.w, dot(caustic_v.xyz, s) + caustic_v.w) * caustic_sizes.x;
+    vec2 slope = water_slope(caustic_map, uv, uv_dx, uv_dy, caustic_flow.xy, caustic_axis_u.w);
+    vec3 n = normalize((caustic_axis_u.xyz * slope.x + caustic_axis_v.xyz * slope.y) * caustic_axis_v.w + up);
+    vec3 t = refract(-l, n, caustic_flow.z);
+    float down = max(-dot(up, t), 0.05);
+    return (t + up * down) * (h / down);
+}
+
+// The share of the flat water's light from the direction l (unit, towards the light) that
+// reaches x: 1 / |det J| mixed in by the strength (1: all of it), 1 off the water.
+float caustic_light(vec3 x, vec3 l) {
+    vec3 up = caustic_plane.xyz;
+    float h = -(dot(up, x) + caustic_plane.w);
+    if (h <= 0.0 || h > caustic_sizes.z || dot(l, up) <= 0.0) return 1.0;
+    vec3 on_plane = x + up * h;
+    vec3 t0 = refract(-l, up, caustic_flow.z);
+    vec3 s = on_plane - (t0 + up * -dot(up, t0)) * (h / -dot(up, t0));   // the flat water's crossing
+    vec2 uv0 = vec2(dot(caustic_u.xyz, s) + caustic_u.w, dot(caustic_v.xyz, s) + caustic_v.w);
+    if (any(lessThan(uv0, vec2(0.0))) || any(greaterThan(uv0, vec2(1.0)))) return 1.0;
+    // The surface's two axes, the second made square to the first (J's frame).
+    vec3 e1 = caustic_axis_u.xyz;
+    vec3 e2 = normalize(caustic_axis_v.xyz - dot(caustic_axis_v.xyz, e1) * e1);
+    float stride = max(caustic_sizes.y, h * caustic_sizes.w);
+    vec2 uv_dx = vec2(dot(caustic_u.xyz, e1), dot(caustic_v.xyz, e1)) * (caustic_sizes.x * stride);
+    vec2 uv_dy = vec2(dot(caustic_u.xyz, e2), dot(caustic_v.xyz, e2)) * (caustic_sizes.x * stride);
+    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(s, l, h, uv_dx, uv_dy);
+    // (central differences: the derivative at s itself, not half a step on)
+    vec3 half1 = e1 * (0.5 * stride), half2 = e2 * (0.5 * stride);
+    vec3 d1 = caustic_offset(s + half1, l, h, uv_dx, uv_dy) - caustic_offset(s - half1, l, h, uv_dx, uv_dy);
+    vec3 d2 = caustic_offset(s + half2, l, h, uv_dx, uv_dy) - caustic_offset(s - half2, l, h, uv_dx, uv_dy);
+    float det = (1.0 + dot(d1, e1) / stride) * (1.0 + dot(d2, e2) / stride) - dot(d1, e2) / stride * (dot(d2, e1) / stride);
+    return mix(1.0, 1.0 / max(abs(det), 1.0 / CAUSTIC_MAX_FOCUS), caustic_flow.w);
+}

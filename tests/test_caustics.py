@@ -1,0 +1,225 @@
+"""Caustics under a water (Water.caustics): the sun's light through the waves gathers where
+the bent rays converge.  Measured in rendered frames against a ray tracer written here: rays
+of sunlight refracted by Snell's law at the waves' normal map (its texels, read as the GPU
+filters them) and followed down to the floor, the light on each stretch of floor the share of
+the surface whose rays land on it."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Skybox,
+    Transform,
+    Water,
+)
+from engine.assets.mesh import quad
+from engine.core.errors import CausticLimitWarning, GLLimitWarning
+from engine.render.caustics import CausticBlock
+from tests.support import look_rotation, srgb_to_linear
+from tests.test_water import FLAT, wave_map
+
+SIDE = 4.0        # the pool's quad, metres (its UVs span it once)
+TILING = 3.0      # map repeats across it
+PERIODS = 4       # wave periods a map tile: waves SIDE / (TILING x PERIODS) = 1/3 m apart
+SLOPE = 0.15      # the waves' steepest slope (the map's)
+DEPTH = 1.0       # the floor under the surface
+ALBEDO = 0.6
+SUN = glm.normalize(glm.vec3(0.3, -1.0, 0.0))   # the light's way: slanting along the waves' U (+x)
+IOR = 1.333
+EYE = (0.0, -0.05, 0.0)   # just under the surface, looking straight down at the floor
+
+
+def pool(caustics: float, *, eye=EYE, target=(0.0, -DEPTH, -0.001), cross: float = 0.0, scale: float = 1.0,
+         position=(0.0, 0.0, 0.0), normal_map=True, sun=SUN, depth: float = 10.0):
+    """A sunlit grey floor DEPTH under a SIDE-metre water of straight waves along x (the
+    water's U), under a black sky (the sun is the only light)."""
+    def build(world):
+        at = glm.vec3(eye)
+        world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(target) - at)), Camera(fov_y=60.0))
+        world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+        world.spawn(DirectionalLight(direction=tuple(sun), intensity=1.0))
+        world.spawn(Transform(position=(0.0, -DEPTH, 0.0), rotation=FLAT), MeshRef(quad(60.0, 60.0)),
+                    Material(color=(ALBEDO, ALBEDO, ALBEDO, 1.0), roughness=1.0, environment_reflection=0.0))
+        world.spawn(Transform(position=position, rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE) if normal_map
+                             else None, normal_scale=scale),
+                    Mirror(), Water(ior=IOR, tiling=TILING, speed=0.0, cross=cross, caustics=caustics, depth=depth))
+    return build
+
+
+def render(scene, build, size=(96, 96)):
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    for _ in range(2):
+        rgb = runner.frame(1.0 / 60.0)
+    return runner, srgb_to_linear(rgb)
+
+
+def floor_points(runner) -> np.ndarray:
+    """Where each pixel centre's ray meets the floor (x, z), [row, column, 2]."""
+    view = runner.engine.main_view
+    inverse = glm.inverse(view.view_proj)
+    w, h = runner.size
+    out = np.zeros((h, w, 2))
+    for row in range(h):
+        for column in range(w):
+            ndc = glm.vec4((column + 0.5) / w * 2.0 - 1.0, 1.0 - (row + 0.5) / h * 2.0, -1.0, 1.0)
+            near = inverse * ndc
+            direction = glm.normalize(glm.vec3(near) / near.w - view.eye)
+            t = (-DEPTH - view.eye.y) / direction.y
+            out[row, column] = (view.eye.x + direction.x * t, view.eye.z + direction.z * t)
+    return out
+
+
+def refract(incident: np.ndarray, normal: np.ndarray, eta: float) -> np.ndarray:
+    """Snell's law for unit rays (rows) through unit normals (rows): the transmitted ray."""
+    cos_i = -np.sum(incident * normal, axis=-1, keepdims=True)
+    sin_t2 = eta * eta * (1.0 - cos_i * cos_i)
+    return eta * incident + (eta * cos_i - np.sqrt(1.0 - sin_t2)) * normal
+
+
+def traced_light(xs: np.ndarray) -> np.ndarray:
+    """The share of the flat water's sunlight reaching the floor at each x, by tracing: rays
+    cross the surface at a fine row of points, each bent by the map's normal there (its
+    texels' values, filtered linearly between texel centres and wrapped), land on the floor,
+    and the light at a landing is the spacing of the crossings over the spacing of the
+    landings (the light through each stretch of surface spread over where it lands)."""
+    texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
+    size = len(texels)
+    step = SIDE / (TILING * size)   # a texel: the finest stretch the renderer tells apart
+    centres = np.linspace(xs.min() - 0.5, xs.max() + 0.5, 20001)
+    crossings = np.concatenate([centres - step / 2.0, centres + step / 2.0])
+    u = (crossings + SIDE / 2.0) / SIDE * TILING * size - 0.5   # texel coordinates (the quad's U runs along +x)
+    low = np.floor(u).astype(int)
+    share = (u - low)[:, None]
+    m = texels[low % size] * (1.0 - share) + texels[(low + 1) % size] * share
+    slope_u, slope_v = m[:, 0] / m[:, 2], m[:, 1] / m[:, 2]
+    # +U along +x; +V along -z (the quad's +y turned flat)
+    normals = np.stack([slope_u, np.ones_like(slope_u), -slope_v], axis=1)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    rays = refract(np.tile(np.array(tuple(SUN)), (len(crossings), 1)), normals, 1.0 / IOR)
+    landings = crossings + rays[:, 0] * DEPTH / -rays[:, 1]
+    before, after = landings[:len(centres)], landings[len(centres):]
+    spread = (after - before) / step
+    landings = (before + after) / 2.0
+    assert (spread > 0.0).all()   # no fold: each stretch of floor is lit through one stretch of surface
+    return np.interp(xs, landings, 1.0 / spread)
+
+
+def test_the_light_under_rippled_water_is_where_a_ray_tracer_gathers_it(scene):
+    """Each floor pixel's light over the same pixel under water that gathers nothing
+    (``caustics`` 0) is the traced share at its floor point: their profiles across the waves
+    match (within the map's one-texel difference step), the brightest lines where the tracer
+    puts them, and the light's mean over the picture is kept (refraction moves light, it does
+    not make it)."""
+    runner, lit = render(scene, pool(1.0))
+    _, flat = render(scene, pool(0.0))
+    assert 0.1 < flat.min() and flat.max() < 0.3, (flat.min(), flat.max())   # lit by the sun alone, not clipped
+    share = lit[..., 0] / flat[..., 0]
+    xs = floor_points(runner)[..., 0]
+    traced = traced_light(xs.ravel()).reshape(xs.shape)
+    assert traced.max() > 2.0 and traced.min() < 0.7   # strong caustics
+    assert np.corrcoef(share.ravel(), traced.ravel())[0, 1] > 0.985
+    assert np.median(np.abs(share - traced)) < 0.04
+    assert abs(share.mean() - traced.mean()) < 0.03
+
+
+def test_half_strength_is_half_way_to_the_gathered_light(scene):
+    """``caustics`` 0.5: each pixel half way between the water that gathers nothing and the
+    one that gathers all (within the output's 8-bit steps)."""
+    _, full = render(scene, pool(1.0))
+    _, half = render(scene, pool(0.5))
+    _, flat = render(scene, pool(0.0))
+    np.testing.assert_allclose(half, (full + flat) / 2.0, atol=0.006)
+    assert np.abs(full - flat).max() > 0.1
+
+
+@pytest.mark.parametrize("case", ["off the outline", "no slope", "below the body", "off"])
+def test_where_no_wave_bends_the_light_it_is_the_flat_waters_to_the_bit(scene, case):
+    """The floor is the frame of a water that gathers nothing, bit for bit: seen beside the
+    pool (out of its outline), under waves of no slope (``normal_scale`` 0: every ray bent
+    alike), under a body half a metre deep (``Water.depth``: the floor is below it); and with
+    ``caustics`` 0 (no CAUSTICS build at all)."""
+    values = {"off the outline": {"position": (SIDE + 2.0, 0.0, 0.0)}, "no slope": {"scale": 0.0},
+              "below the body": {"depth": 0.5}, "off": {}}[case]
+    runner, with_caustics = render(scene, pool(0.0 if case == "off" else 1.0, **values))
+    _, without = render(scene, pool(0.0, **values))
+    assert bool(runner.engine.renderer.caustics.defines) == (case != "off")
+    np.testing.assert_array_equal(with_caustics, without)
+
+
+def test_the_caustics_move_with_the_waves(scene):
+    """Waves moving at ``speed``: after each frame the light on the floor is that under still
+    waves placed where the moving ones are (``Water.offset``), and it moved."""
+    runner = scene(pool(1.0), (64, 64))
+    runner.engine.renderer.antialias = "off"
+    water = max(entity for entity, _ in runner.world.query_one(Water))
+    runner.world.get(water, Water).speed = 0.5
+    frames = [runner.frame(0.1) for _ in range(3)]
+    offset = runner.world.get(water, Water).offset
+    assert offset[0] > 0.0
+    still = scene(pool(1.0), (64, 64))
+    still.engine.renderer.antialias = "off"
+    still.world.get(max(entity for entity, _ in still.world.query_one(Water)), Water).offset = offset
+    for _ in range(2):
+        placed = still.frame(0.1)
+    np.testing.assert_array_equal(frames[-1], placed)
+    assert np.abs(frames[-1].astype(int) - frames[-2].astype(int)).max() > 20
+
+
+def test_one_water_gathers_the_sun_at_a_time_the_nearest_and_the_rest_are_said(scene):
+    """Two pools with caustics: the one under the camera gathers the sun, the other (far off)
+    is counted and said in a CausticLimitWarning."""
+    def build(world):
+        pool(1.0)(world)
+        world.spawn(Transform(position=(30.0, 0.0, 0.0), rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE)),
+                    Mirror(), Water(tiling=TILING, speed=0.0, caustics=1.0))
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        runner, image = render(scene, build)
+    assert [w for w in caught if issubclass(w.category, CausticLimitWarning)]
+    assert runner.stats.caustic_waters_cut == 1
+    near = min(entity for entity, _ in runner.world.query_one(Water))
+    assert runner.engine.renderer.caustics.water.entity == near
+    _, alone = render(scene, pool(1.0))
+    np.testing.assert_array_equal(image, alone)
+
+
+def test_a_context_with_too_few_texture_units_draws_no_caustics_and_says_so(scene, ctx):
+    """On a context with 16 fragment texture units (macOS's OpenGL 4.1) the water gathers no
+    light, and a GLLimitWarning names the water and the limit, once."""
+    runner = scene(pool(1.0), (48, 48))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.caustics.release()
+    runner.engine.renderer.caustics = CausticBlock(ctx, texture_units=16)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(3):
+            image = runner.frame(1.0 / 60.0)
+    said = [w for w in caught if issubclass(w.category, GLLimitWarning)]
+    assert len(said) == 1 and "caustics need 19 texture units" in str(said[0].message)
+    assert runner.engine.renderer.caustics.defines == ()
+    _, flat = render(scene, pool(0.0), size=(48, 48))
+    np.testing.assert_array_equal(srgb_to_linear(image), flat)
+
+
+def test_caustics_values_are_checked_when_given():
+    for value in (-0.1, 1.5, math.nan):
+        with pytest.raises(ComponentValueError, match="Water.caustics"):
+            Water(caustics=value)
+        water = Water()
+        with pytest.raises(ComponentValueError, match="Water.caustics"):
+            water.caustics = value
