@@ -373,6 +373,7 @@ cross = 0.25
 fog_density = 0.3
 fog_color = [0.1, 0.2, 0.25]
 depth = 1.5
+caustics = 0.8
 """)
     world = World("pond")
     names = load_level(level).spawn(world)
@@ -380,15 +381,18 @@ depth = 1.5
     assert (water.ior, water.speed, water.tiling, water.cross) == (1.33, 0.2, 4.0, 0.25)
     assert water.direction == pytest.approx((0.0, 1.0))
     assert (water.fog_density, water.depth, *water.fog_color) == pytest.approx((0.3, 1.5, 0.1, 0.2, 0.25, 1.0))
+    assert water.caustics == 0.8
     saved = save_level(world, tmp_path / "again.toml", names, name="pond")
     again = World("again")
     names_again = load_level(saved).spawn(again)
     kept = again.get(names_again["pond"], Water)
     assert kept.direction == pytest.approx((0.0, 1.0))
     assert (kept.fog_density, kept.depth, *kept.fog_color) == pytest.approx((0.3, 1.5, 0.1, 0.2, 0.25, 1.0))
+    assert kept.caustics == 0.8
     text = level.read_text()
     for good, bad, message in (("ior = 1.33", "ior = 0.5", r"Water.ior must be >= 1.0"),
                                ("depth = 1.5", "depth = -1.5", r"Water.depth must be >= 0.01"),
+                               ("caustics = 0.8", "caustics = 2.0", r"Water.caustics must be <= 1.0"),
                                ("[entity.Mirror]\n", "", "a Water needs a Mirror"),
                                ("[entity.Mirror]\n", "[entity.Mirror]\nroughness = 0.2\n",
                                 "Mirror.roughness must be 0")):
