@@ -656,8 +656,11 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     for (int i = 0; i < lights.counts.x; ++i) directional_lit[i] *= water_light(s.position, -lights.directional_dir[i].xyz, 1e30);
 #endif
 #ifdef CAUSTICS
-    // The suns' light through a rippled water gathered by its waves (caustics.glsl).
-    for (int i = 0; i < lights.counts.x; ++i) directional_lit[i] *= caustic_light(s.position, -lights.directional_dir[i].xyz);
+    // The suns' light through a rippled water gathered by its waves (caustics.glsl), over the
+    // pixel's footprint (taken here, in uniform control flow: the caustic returns early off the water).
+    float caustic_footprint = max(length(dFdx(s.position)), length(dFdy(s.position)));
+    for (int i = 0; i < lights.counts.x; ++i)
+        directional_lit[i] *= caustic_light(s.position, -lights.directional_dir[i].xyz, caustic_footprint);
 #endif
 #ifdef SCREEN_OCCLUSION
     // The camera's contact shadows dim the sun's light (its slot's w: lights.glsl).

@@ -41,7 +41,7 @@ EYE = (0.0, -0.05, 0.0)   # just under the surface, looking straight down at the
 
 
 def pool(caustics: float, *, eye=EYE, target=(0.0, -DEPTH, -0.001), cross: float = 0.0, scale: float = 1.0,
-         position=(0.0, 0.0, 0.0), normal_map=True, sun=SUN, depth: float = 10.0):
+         position=(0.0, 0.0, 0.0), normal_map=True, sun=SUN, depth: float = 10.0, tiles: float = 1.0):
     """A sunlit grey floor DEPTH under a SIDE-metre water of straight waves along x (the
     water's U), under a black sky (the sun is the only light)."""
     def build(world):
@@ -51,10 +51,10 @@ def pool(caustics: float, *, eye=EYE, target=(0.0, -DEPTH, -0.001), cross: float
         world.spawn(DirectionalLight(direction=tuple(sun), intensity=1.0))
         world.spawn(Transform(position=(0.0, -DEPTH, 0.0), rotation=FLAT), MeshRef(quad(60.0, 60.0)),
                     Material(color=(ALBEDO, ALBEDO, ALBEDO, 1.0), roughness=1.0, environment_reflection=0.0))
-        world.spawn(Transform(position=position, rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+        world.spawn(Transform(position=position, rotation=FLAT), MeshRef(quad(SIDE * tiles, SIDE * tiles)),
                     Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE) if normal_map
                              else None, normal_scale=scale),
-                    Mirror(), Water(ior=IOR, tiling=TILING, speed=0.0, cross=cross, caustics=caustics, depth=depth))
+                    Mirror(), Water(ior=IOR, tiling=TILING * tiles, speed=0.0, cross=cross, caustics=caustics, depth=depth))
     return build
 
 
@@ -67,7 +67,7 @@ def render(scene, build, size=(96, 96)):
 
 
 def floor_points(runner) -> np.ndarray:
-    """Where each pixel centre's ray meets the floor (x, z), [row, column, 2]."""
+    """Where each pixel centre's ray meets the floor (x, z), [row, column, 2] (NaN: it does not)."""
     view = runner.engine.main_view
     inverse = glm.inverse(view.view_proj)
     w, h = runner.size
@@ -78,7 +78,7 @@ def floor_points(runner) -> np.ndarray:
             near = inverse * ndc
             direction = glm.normalize(glm.vec3(near) / near.w - view.eye)
             t = (-DEPTH - view.eye.y) / direction.y
-            out[row, column] = (view.eye.x + direction.x * t, view.eye.z + direction.z * t)
+            out[row, column] = (view.eye.x + direction.x * t, view.eye.z + direction.z * t) if t > 0.0 else math.nan
     return out
 
 
@@ -144,6 +144,23 @@ def test_half_strength_is_half_way_to_the_gathered_light(scene):
     np.testing.assert_allclose(half, (full + flat) / 2.0, atol=0.006)
     assert np.abs(full - flat).max() > 0.1
 
+
+
+def test_far_off_the_caustics_are_their_mean_over_the_pixel_not_a_shimmer(scene):
+    """A pool ten times as wide, seen from under its surface along the floor: near the eye
+    the waves' light is gathered in lines, far off (a pixel's footprint past a wave's length)
+    each pixel shows the light's mean over it, close to the flat water's."""
+    eye, target = (0.0, -0.05, 0.0), (0.0, -1.0, -10.0)
+    runner, lit = render(scene, pool(1.0, eye=eye, target=target, tiles=10.0), size=(64, 64))
+    _, flat = render(scene, pool(0.0, eye=eye, target=target, tiles=10.0), size=(64, 64))
+    points = floor_points(runner)
+    distance = np.hypot(points[..., 0], points[..., 1])
+    share = lit[..., 0] / np.maximum(flat[..., 0], 1e-3)
+    lit_floor = flat[..., 0] > 0.05
+    near, far = lit_floor & (distance < 2.0), lit_floor & (distance > 8.0) & (distance < 18.0)
+    assert near.sum() > 100 and far.sum() > 100
+    assert np.ptp(share[near]) > 1.0   # the lines
+    assert np.abs(share[far] - 1.0).max() < 0.15, np.abs(share[far] - 1.0).max()
 
 @pytest.mark.parametrize("case", ["off the outline", "no slope", "below the body", "off"])
 def test_where_no_wave_bends_the_light_it_is_the_flat_waters_to_the_bit(scene, case):

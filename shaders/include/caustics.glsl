@@ -11,9 +11,10 @@
 // For a point x at depth h under the plane: the surface point s its light came through is
 // found by fixed-point iteration s <- x' - D(s) (x' is x on the plane, D(s) the sideways
 // offset of the bent ray from s down to depth h), started from the flat surface's ray, then
-// J from D half a step either side of s along each axis of the surface.  The step is the larger of a
-// map texel and the sun's disc at that depth (CAUSTIC_SUN_SPREAD x h): the sun is no point,
-// so a caustic blurs with its depth.  Outside the water's outline, above its plane or deeper
+// J from D half a step either side of s along each axis of the surface.  The step is the largest of a
+// map texel, the sun's disc at that depth (CAUSTIC_SUN_SPREAD x h: the sun is no point, so a
+// caustic blurs with its depth) and the pixel's footprint (a far floor shows the caustics'
+// mean over its pixel, not a shimmer of samples).  Outside the water's outline, above its plane or deeper
 // than its body (Water.depth), the light is the flat water's: 1.
 layout(std140) uniform Caustics {
     vec4 caustic_plane;   // xyz: the water's up normal (out of its top), w: its plane's d
@@ -44,8 +45,9 @@ vec3 caustic_offset(vec3 s, vec3 l, float h, vec2 uv_dx, vec2 uv_dy) {
 }
 
 // The share of the flat water's light from the direction l (unit, towards the light) that
-// reaches x: 1 / |det J| mixed in by the strength (1: all of it), 1 off the water.
-float caustic_light(vec3 x, vec3 l) {
+// reaches x: 1 / |det J| mixed in by the strength (1: all of it), 1 off the water; over
+// ``footprint`` metres at least (the pixel's).
+float caustic_light(vec3 x, vec3 l, float footprint) {
     vec3 up = caustic_plane.xyz;
     float h = -(dot(up, x) + caustic_plane.w);
     if (h <= 0.0 || h > caustic_sizes.z || dot(l, up) <= 0.0) return 1.0;
@@ -57,7 +59,7 @@ float caustic_light(vec3 x, vec3 l) {
     // The surface's two axes, the second made square to the first (J's frame).
     vec3 e1 = caustic_axis_u.xyz;
     vec3 e2 = normalize(caustic_axis_v.xyz - dot(caustic_axis_v.xyz, e1) * e1);
-    float stride = max(caustic_sizes.y, h * caustic_sizes.w);
+    float stride = max(max(caustic_sizes.y, h * caustic_sizes.w), footprint);
     vec2 uv_dx = vec2(dot(caustic_u.xyz, e1), dot(caustic_v.xyz, e1)) * (caustic_sizes.x * stride);
     vec2 uv_dy = vec2(dot(caustic_u.xyz, e2), dot(caustic_v.xyz, e2)) * (caustic_sizes.x * stride);
     for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(s, l, h, uv_dx, uv_dy);
