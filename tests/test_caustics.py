@@ -54,7 +54,8 @@ def pool(caustics: float, *, eye=EYE, target=(0.0, -DEPTH, -0.001), cross: float
         world.spawn(Transform(position=position, rotation=FLAT), MeshRef(quad(SIDE * tiles, SIDE * tiles)),
                     Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE) if normal_map
                              else None, normal_scale=scale),
-                    Mirror(), Water(ior=IOR, tiling=TILING * tiles, speed=0.0, cross=cross, caustics=caustics, depth=depth))
+                    Mirror(), Water(ior=IOR, tiling=TILING * tiles, speed=0.0, cross=cross, caustics=caustics,
+                                    depth=depth))
     return build
 
 
