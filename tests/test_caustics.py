@@ -163,17 +163,17 @@ def test_far_off_the_caustics_are_their_mean_over_the_pixel_not_a_shimmer(scene)
     assert np.ptp(share[near]) > 1.0   # the lines
     assert np.abs(share[far] - 1.0).max() < 0.15, np.abs(share[far] - 1.0).max()
 
-@pytest.mark.parametrize("case", ["off the outline", "no slope", "below the body", "off"])
+@pytest.mark.parametrize("case", ["off the outline", "no slope", "below the body", "still water", "off"])
 def test_where_no_wave_bends_the_light_it_is_the_flat_waters_to_the_bit(scene, case):
     """The floor is the frame of a water that gathers nothing, bit for bit: seen beside the
     pool (out of its outline), under waves of no slope (``normal_scale`` 0: every ray bent
-    alike), under a body half a metre deep (``Water.depth``: the floor is below it); and with
-    ``caustics`` 0 (no CAUSTICS build at all)."""
+    alike), under a body half a metre deep (``Water.depth``: the floor is below it); and, with
+    no CAUSTICS build at all, under still water (no normal map: no waves) and with ``caustics`` 0."""
     values = {"off the outline": {"position": (SIDE + 2.0, 0.0, 0.0)}, "no slope": {"scale": 0.0},
-              "below the body": {"depth": 0.5}, "off": {}}[case]
+              "below the body": {"depth": 0.5}, "still water": {"normal_map": False}, "off": {}}[case]
     runner, with_caustics = render(scene, pool(0.0 if case == "off" else 1.0, **values))
     _, without = render(scene, pool(0.0, **values))
-    assert bool(runner.engine.renderer.caustics.defines) == (case != "off")
+    assert bool(runner.engine.renderer.caustics.defines) == (case not in ("off", "still water"))
     np.testing.assert_array_equal(with_caustics, without)
 
 
