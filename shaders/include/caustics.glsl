@@ -34,10 +34,10 @@ uniform sampler2D caustic_map;   // the water's normal map (Material.normal_map)
 
 // The sideways offset (along the plane) of the light refracted at surface point s, on its
 // way down to depth h, coming from the unit direction l (towards the light).
-vec3 caustic_offset(vec3 s, vec3 l, float h, vec2 uv_dx, vec2 uv_dy) {
+vec3 caustic_offset(vec3 s, vec3 l, float h, float lod) {
     vec3 up = caustic_plane.xyz;
     vec2 uv = vec2(dot(caustic_u.xyz, s) + caustic_u.w, dot(caustic_v.xyz, s) + caustic_v.w) * caustic_sizes.x;
-    vec2 slope = water_slope(caustic_map, uv, uv_dx, uv_dy, caustic_flow.xy, caustic_axis_u.w);
+    vec2 slope = water_slope_lod(caustic_map, uv, lod, caustic_flow.xy, caustic_axis_u.w);
     vec3 n = normalize((caustic_axis_u.xyz * slope.x + caustic_axis_v.xyz * slope.y) * caustic_axis_v.w + up);
     vec3 t = refract(-l, n, caustic_flow.z);
     float down = max(-dot(up, t), 0.05);
@@ -60,13 +60,12 @@ float caustic_light(vec3 x, vec3 l, float footprint) {
     vec3 e1 = caustic_axis_u.xyz;
     vec3 e2 = normalize(caustic_axis_v.xyz - dot(caustic_axis_v.xyz, e1) * e1);
     float stride = max(max(caustic_sizes.y, h * caustic_sizes.w), footprint);
-    vec2 uv_dx = vec2(dot(caustic_u.xyz, e1), dot(caustic_v.xyz, e1)) * (caustic_sizes.x * stride);
-    vec2 uv_dy = vec2(dot(caustic_u.xyz, e2), dot(caustic_v.xyz, e2)) * (caustic_sizes.x * stride);
-    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(s, l, h, uv_dx, uv_dy);
+    float lod = log2(stride / caustic_sizes.y);   // (the map's texels a step spans, along U)
+    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(s, l, h, lod);
     // (central differences: the derivative at s itself, not half a step on)
     vec3 half1 = e1 * (0.5 * stride), half2 = e2 * (0.5 * stride);
-    vec3 d1 = caustic_offset(s + half1, l, h, uv_dx, uv_dy) - caustic_offset(s - half1, l, h, uv_dx, uv_dy);
-    vec3 d2 = caustic_offset(s + half2, l, h, uv_dx, uv_dy) - caustic_offset(s - half2, l, h, uv_dx, uv_dy);
+    vec3 d1 = caustic_offset(s + half1, l, h, lod) - caustic_offset(s - half1, l, h, lod);
+    vec3 d2 = caustic_offset(s + half2, l, h, lod) - caustic_offset(s - half2, l, h, lod);
     float det = (1.0 + dot(d1, e1) / stride) * (1.0 + dot(d2, e2) / stride) - dot(d1, e2) / stride * (dot(d2, e1) / stride);
     return mix(1.0, 1.0 / max(abs(det), 1.0 / CAUSTIC_MAX_FOCUS), caustic_flow.w);
 }
