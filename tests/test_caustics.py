@@ -241,3 +241,19 @@ def test_caustics_values_are_checked_when_given():
         water = Water()
         with pytest.raises(ComponentValueError, match="Water.caustics"):
             water.caustics = value
+
+
+def test_caustics_given_and_taken_while_running_are_drawn_from_that_frame(scene):
+    """A water whose ``caustics`` is set after some frames shows them from the next frame as a
+    pool that had them from the start does; set to 0 again, the flat water's frame."""
+    runner = scene(pool(0.0), (48, 48))
+    runner.engine.renderer.antialias = "off"
+    water = max(entity for entity, _ in runner.world.query_one(Water))
+    flat = [runner.frame(1.0 / 60.0) for _ in range(2)][-1]
+    runner.world.get(water, Water).caustics = 1.0
+    gathered = runner.frame(1.0 / 60.0)
+    started = scene(pool(1.0), (48, 48))
+    started.engine.renderer.antialias = "off"
+    np.testing.assert_array_equal(gathered, [started.frame(1.0 / 60.0) for _ in range(2)][-1])
+    runner.world.get(water, Water).caustics = 0.0
+    np.testing.assert_array_equal(runner.frame(1.0 / 60.0), flat)

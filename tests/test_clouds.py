@@ -498,3 +498,29 @@ def test_the_runners_clouds_cover_the_levels_sky(ctx, tmp_path):
                        (("--clouds", "0.5", "--panorama", str(panorama)), "--clouds needs a generated sky")):
         result = run_level("--headless", "--frames", "1", "--size", "16x12", "--out", str(tmp_path / "bad"), *bad)
         assert result.returncode != 0 and words in result.stderr.splitlines()[-1], result.stderr
+
+
+def test_clouds_given_while_running_shade_the_floor_from_that_frame(scene):
+    """A CloudLayer put on the sky after some frames shades the floor from the next frame as a
+    world that had it from the start does (each batch's build takes its cloud shadows)."""
+    values = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))
+
+    def build(layer):
+        def b(world):
+            world.spawn(Transform(position=(5.0, 30.0, -3.0), rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0),
+                                                                                       glm.vec3(0.0, 0.0, -1.0))),
+                        Camera(fov_y=70.0, near=0.5, far=200.0))
+            world.spawn(Skybox(**SKY), *([layer] if layer is not None else []))
+            world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=3.0, shadows=False))
+            world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
+        return b
+
+    late = scene(build(None), SIZE)
+    late.frame()
+    late.frame()
+    sky = next(e for e, _ in late.world.query_one(Skybox))
+    late.world.add_component(sky, _still(**values))
+    shaded = late.frame()
+    early = scene(build(_still(**values)), SIZE)
+    early.frame()
+    np.testing.assert_array_equal(shaded, early.frame())

@@ -240,13 +240,15 @@ class ScenePass:
             programs.forget()
             seen = programs.reloads_seen
         # What else picks a batch's program: a virtual light shining, the shadow lookups compiled,
-        # the fog, the kept lights' kinds (spheres, rectangles, cookies) and what the light from
-        # all round reads (ScenePrograms.program).
+        # the fog, the kept lights' kinds (spheres, rectangles, cookies), what the light from
+        # all round reads, the clouds' shadows, the caustics and the motion blur's own motion
+        # (ScenePrograms.program).
         shadows = self.shadows
         # (And the pose and motion textures: a record binds them, made again as they grow.)
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines,
                  renderer.pose_rows.version, renderer.object_motion.version, renderer.contact_lamp_defines,
-                 renderer.sphere_lights, renderer.rect_lights, renderer.spot_cookies.defines, renderer.ambient_defines)
+                 renderer.sphere_lights, renderer.rect_lights, renderer.spot_cookies.defines, renderer.ambient_defines,
+                 renderer.clouds.shadow_defines, renderer.caustics.defines, renderer.object_motion.defines)
         build = views if layered else min(views, 1)  # (one instanced-views build serves any view count)
         per_view = views if views > 1 and not layered else 0
         kinds = self._kinds.get((build, layered, self._ambient_probes, masked, screen))
