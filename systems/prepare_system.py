@@ -50,7 +50,7 @@ from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import CausticLimitWarning, FogLimitWarning, LightLimitWarning
 from engine.core.world import World
-from engine.render.caustics import MAX_CAUSTIC_WATERS, CausticWater, caustic_rows, nearest
+from engine.render.caustics import MAX_CAUSTIC_WATERS, CausticWater, body_box, caustic_rows, nearest
 from engine.render.clouds import CloudShape, cloud_shape, drift_served, shadows_served
 from engine.render.fog import volume_rows, water_body_row
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
@@ -229,7 +229,8 @@ class PrepareSystem(esper.Processor):
             held = renderer.caustics.water
             if held is None or held.entity != entity or held.rows != rows \
                     or held.normal_map is not state.bumps.normal_map:
-                held = CausticWater(entity, state.bumps.normal_map, rows)
+                held = CausticWater(entity, state.bumps.normal_map, rows,
+                                    body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth))
         texture = None if held is None else renderer.normal_map_texture(held.normal_map)
         if renderer.caustics.set(held, texture):
             renderer.note_scene_change()   # what every view shows under the water

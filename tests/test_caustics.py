@@ -23,7 +23,7 @@ from components import (
     Transform,
     Water,
 )
-from engine.assets.mesh import quad
+from engine.assets.mesh import box, quad
 from engine.core.errors import CausticLimitWarning, GLLimitWarning
 from engine.render.caustics import CausticBlock
 from tests.support import look_rotation, srgb_to_linear
@@ -257,3 +257,28 @@ def test_caustics_given_and_taken_while_running_are_drawn_from_that_frame(scene)
     np.testing.assert_array_equal(gathered, [started.frame(1.0 / 60.0) for _ in range(2)][-1])
     runner.world.get(water, Water).caustics = 0.0
     np.testing.assert_array_equal(runner.frame(1.0 / 60.0), flat)
+
+
+def test_only_what_reaches_into_the_waters_body_is_drawn_with_caustics(scene):
+    """The floor under the pool is drawn with the CAUSTICS build; a box standing far off
+    (out of the box under the water's outline) with the build without (on llvmpipe every
+    pixel of a build pays for its caustics, on the water or not), and it looks the same as
+    with no caustics at all."""
+    def build(caustics):
+        def b(world):
+            pool(caustics, eye=(0.0, 3.0, 6.0), target=(0.0, -1.0, 0.0))(world)
+            world.spawn(Transform(position=(9.0, 0.0, 0.0)), MeshRef(box((1.0, 2.0, 1.0))),
+                        Material(color=(0.8, 0.3, 0.2), roughness=1.0))
+        return b
+
+    runner, lit = render(scene, build(1.0), size=(96, 64))
+    drawn = {}
+    for batch in runner.engine.renderer.batches.values():
+        for record in batch.draw_records.values():
+            drawn.setdefault(batch.entity_at[0], set()).add(record[1][1])
+    floor = next(e for e, (t, _) in runner.world.query(Transform, MeshRef) if t.position.y == -DEPTH)
+    far = next(e for e, (t, _) in runner.world.query(Transform, MeshRef) if t.position.x == 9.0)
+    assert drawn[floor] == {True} and drawn[far] == {False}
+    _, flat = render(scene, build(0.0), size=(96, 64))
+    col, row = runner.project((9.0, 0.0, 0.0))
+    np.testing.assert_array_equal(lit[row - 2:row + 3, col - 2:col + 3], flat[row - 2:row + 3, col - 2:col + 3])

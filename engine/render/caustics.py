@@ -2,6 +2,11 @@
 map the scene's ``CAUSTICS`` builds read (``shaders/include/caustics.glsl``, which says how
 the light is gathered), and the rules of what they hold.
 
+Only the batches whose world boxes reach into the water's body box (``reaches``, ``box``)
+are drawn with the CAUSTICS builds: on llvmpipe every pixel of a build runs its caustics, on
+the water or off it, behind a branch or not (measured: a build whose caustics return at once
+cost as much as one that works them out), so a level with a pond pays only where the pond is.
+
 One water at a time gathers the sun (``MAX_CAUSTIC_WATERS``: its normal map takes a sampler
 of its own, the 19th of the fullest scene build): the prepare stage gives the block the
 nearest the active camera of the waters that have caustics and waves (a normal map), and
@@ -41,6 +46,16 @@ class CausticWater:
     entity: int
     normal_map: TextureData
     rows: tuple[float, ...]
+    box: tuple[tuple[float, float, float], tuple[float, float, float]]   # the body's world box (body_box)
+
+
+def body_box(corners: np.ndarray, down: tuple[float, float, float],
+             depth: float) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The world box [lo, hi] of what a water can light: its surface's ``corners``
+    (homogeneous rows) and the same ``depth`` metres along the unit ``down``."""
+    top = np.asarray(corners, np.float64)[:, :3]
+    ends = np.concatenate([top, top + np.asarray(down, np.float64) * depth])
+    return tuple(ends.min(axis=0).tolist()), tuple(ends.max(axis=0).tolist())
 
 
 def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *, tiling: float, cross: float,
@@ -105,6 +120,13 @@ class CausticBlock:
         self.ubo.write(np.array(water.rows, np.float32).tobytes())
         return True
 
+    @property
+    def box(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+        """The world box of what the held water lights (None: none held): the batches that
+        reach into it are drawn with the CAUSTICS builds (``reaches``), the rest without (on
+        llvmpipe every pixel of a build pays for its caustics, on or off the water)."""
+        return None if self.water is None else self.water.box
+
     def bind(self) -> None:
         """Bind the water's normal map for a scene pass (while there is one)."""
         if self.water is not None:
@@ -113,6 +135,17 @@ class CausticBlock:
     def release(self) -> None:
         self.ubo.release()
         self.water, self.defines, self._texture = None, (), None
+
+
+def reaches(batch_box: tuple[np.ndarray, np.ndarray] | None,
+            box: tuple[tuple[float, float, float], tuple[float, float, float]]) -> bool:
+    """Whether a batch's world box (``InstanceBatch.box``; None: empty) overlaps ``box`` (a
+    box not measured yet, NaN, counts as reaching it)."""
+    if batch_box is None:
+        return False
+    (lx, ly, lz), (hx, hy, hz) = box
+    lo, hi = batch_box
+    return not (hi[0] < lx or hi[1] < ly or hi[2] < lz or lo[0] > hx or lo[1] > hy or lo[2] > hz)
 
 
 def nearest(candidates: list[tuple[int, np.ndarray]], eye: np.ndarray) -> int:

@@ -82,6 +82,7 @@ from engine.render.bindings import (
     texture_record,
     watching,
 )
+from engine.render.caustics import reaches as caustic_reaches
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code
 from engine.render.irradiance import IrradianceTable
@@ -263,6 +264,7 @@ class ScenePass:
         draws = instances = 0
         skipped = (skip, hide)
         offset = False  # the decals' depth offset on (their cuts come in one run: set once for it)
+        caustic_box = renderer.caustics.box   # (the batches reaching into it draw with caustics)
         for batch in batches:
             count = batch.count
             if not count or (count == 1 and batch.entity_at[0] in skipped):
@@ -270,8 +272,9 @@ class ScenePass:
             variants = batch.variants
             drawn_as = unlit_kind if unlit and batch in unlit else kind  # a batch the composites paint over
             record = batch.draw_records.get(drawn_as)
-            if record is None or record[0] != stamp or record[1] != variants:
-                record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, variants)
+            built = (variants, caustic_box is not None and caustic_reaches(batch.box, caustic_box))
+            if record is None or record[0] != stamp or record[1] != built:
+                record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, *built)
             _, _, glo, vao, uniforms, values, textures, own, vertices, program = record
             if per_view:  # (its rows advancing every per_view instances)
                 vao = batch.vao(program, per_view)

@@ -61,6 +61,7 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
     assign_slots,
 )
+from engine.render.caustics import reaches as caustic_reaches
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code, forget_reads
 from engine.render.pose_rows import skinning_defines
@@ -159,7 +160,7 @@ class ScenePrograms:
                 material: tuple = NO_MATERIAL_MAPS,
                 probe_blend: bool = False,
                 ambient_probes: bool = False, probe_rest: bool = False, unlit: bool = False,
-                masked: bool = False, screen: str = "") -> moderngl.Program:
+                masked: bool = False, screen: str = "", caustic: bool = False) -> moderngl.Program:
         """The scene program for a batch of ``variants`` (None: mixed, switched per
         instance): plain (``views`` 0: the one view of the Camera block), a reflection
         level's views in one draw (``views`` > 0: ``INSTANCED_VIEWS``, each instance drawn
@@ -210,7 +211,8 @@ class ScenePrograms:
         if self.renderer.rect_lights:  # RECT_LIGHTS while a kept point light (or its image) is a rectangle
             cookies = (*cookies, ("RECT_LIGHTS", "1"))
         cookies = (*cookies, *self.renderer.clouds.shadow_defines)  # CLOUD_SHADOWS while a CloudLayer shades
-        cookies = (*cookies, *self.renderer.caustics.defines)  # CAUSTICS while a water gathers the sun
+        if caustic:  # CAUSTICS for a batch reaching into the body of a water that gathers the sun
+            cookies = (*cookies, *self.renderer.caustics.defines)
         if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
             cookies = (*cookies, *self.renderer.object_motion.defines)
         if "occluded" in screen.split():  # CONTACT_LAMPS while a lamp has contact shadows (its image read)
@@ -239,7 +241,7 @@ class ScenePrograms:
             # 16-unit driver's fullest builds), the build without serves, and a warning says so.
             plain = self.program(variants, views, layered, normal_mapped, checker, material, probe_blend,
                                  ambient_probes, probe_rest, unlit, masked,
-                                 " ".join(word for word in screen.split() if word != "refracted"))
+                                 " ".join(word for word in screen.split() if word != "refracted"), caustic)
             needed = sampler_count(plain) + (1 if masked else 2)
             if needed > self.renderer.caps.max_texture_image_units:
                 refuse_screen_refraction(needed, self.renderer.caps.max_texture_image_units)
@@ -364,15 +366,18 @@ class ScenePrograms:
         before = len(self.built)
         counts = (0, 1) if reflections else (0,)
         ambient = (False, True) if ambient_boxes else (False,)  # captures: False
+        caustic_box = self.renderer.caustics.box
         for batch in batches:
             unlit = (False, True) if may_be_unlit(batch) else (False,)
+            caustic = caustic_box is not None and caustic_reaches(batch.box, caustic_box)
             for views in counts:
                 for masked in (False, True) if levels or reflections else (False,):
                     for probes in ambient:
                         for dark in unlit:
                             batch.vao(self.program(batch.variants, views, "", batch.normal_map is not None,
                                                    batch.checker is not None, _material_build(batch),
-                                                   batch.probe_blend, probes, bool(batch.rest_probe), dark, masked))
+                                                   batch.probe_blend, probes, bool(batch.rest_probe), dark, masked,
+                                                   caustic=caustic))
             for screen, masked in self.screens - {("", False), ("", True)}:  # one view a draw
                 if "reflected" in screen.split() and not reflects_environment(batch):
                     continue  # (drawn with the builds without: ScenePass._draw_reflecting)
@@ -382,11 +387,11 @@ class ScenePrograms:
                     for dark in unlit if "reflected" in screen.split() else (False,):  # (unlit: its own build)
                         batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,
                                                batch.checker is not None, _material_build(batch), batch.probe_blend,
-                                               probes, bool(batch.rest_probe), dark, masked, screen))
+                                               probes, bool(batch.rest_probe), dark, masked, screen, caustic))
         return len(self.built) - before
 
     def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool, str], stamp: tuple,
-               variants: tuple[int, int, int] | None) -> tuple:
+               variants: tuple[int, int, int] | None, caustic: bool = False) -> tuple:
         """What ``batch`` draws with in passes of ``kind`` (views, layered, ambient
         probes, unlit, masked, screen): (stamp, variants, program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
@@ -395,7 +400,7 @@ class ScenePrograms:
         views, layered, ambient, unlit, masked, screen = kind
         program = self.program(variants, views, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_build(batch), batch.probe_blend,
-                               ambient, bool(batch.rest_probe), unlit, masked, screen)
+                               ambient, bool(batch.rest_probe), unlit, masked, screen, caustic)
         glo = program.glo
         values = self.written.get(glo)
         if values is None:
@@ -422,7 +427,7 @@ class ScenePrograms:
                    batch.iridescence or NO_IRIDESCENCE, batch.pose_row, batch.mesh.morph_count if batch.morphed else 0,
                    batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION, batch.parallax_depth,
                    batch.lightmap_intensity, batch.subsurface or NO_SUBSURFACE)
-        return (stamp, variants, glo, batch.vao(program), self.uniforms[glo], values, textures, own,
+        return (stamp, (variants, caustic), glo, batch.vao(program), self.uniforms[glo], values, textures, own,
                 batch.mesh.index_count, program)
 
     def release(self) -> None:
