@@ -122,6 +122,7 @@ class PrepareSystem(esper.Processor):
         self._bodies: tuple = ()   # the water bodies the rows were packed for (_water_bodies)
         self._unboxed: set[int] = set()   # waters with a fog and no flat outline (said once)
         self._caustic_cut = 0                     # waters with caustics past MAX_CAUSTIC_WATERS, left out
+        self._caustic_still: set[int] = set()     # waters with caustics and no waves to gather with (said once)
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -203,11 +204,20 @@ class PrepareSystem(esper.Processor):
         found = []
         if surfaces is not None and surfaces.undersides:   # (undersides: one a water; none, no loop a frame)
             for entity, state in surfaces.mirrors.items():
-                if state.water is None or state.bumps is None:
+                if state.water is None:
                     continue
                 water = self.world.try_get(entity, Water)
-                if water is not None and water.caustics > 0.0:
-                    found.append((entity, state, water))
+                if water is None or water.caustics <= 0.0:
+                    continue
+                if state.bumps is None:   # (no normal map, or one the surface cannot read: no waves)
+                    if entity not in self._caustic_still:
+                        self._caustic_still.add(entity)
+                        warnings.warn(ComponentWarning(
+                            f"Water on entity {entity}: its caustics are the sun's light gathered by its waves, and it "
+                            "has none (no Material.normal_map, or a mesh whose UVs do not lie flat), so it gathers no "
+                            "light"), stacklevel=4)
+                    continue
+                found.append((entity, state, water))
         cut = max(0, len(found) - MAX_CAUSTIC_WATERS)
         if cut:
             eye = np.zeros(3) if camera is None else np.array(self.world.get(camera, Transform).world[3].xyz)

@@ -15,6 +15,7 @@ from pyglm import glm
 from components import (
     Camera,
     ComponentValueError,
+    ComponentWarning,
     DirectionalLight,
     Material,
     MeshRef,
@@ -168,10 +169,15 @@ def test_where_no_wave_bends_the_light_it_is_the_flat_waters_to_the_bit(scene, c
     """The floor is the frame of a water that gathers nothing, bit for bit: seen beside the
     pool (out of its outline), under waves of no slope (``normal_scale`` 0: every ray bent
     alike), under a body half a metre deep (``Water.depth``: the floor is below it); and, with
-    no CAUSTICS build at all, under still water (no normal map: no waves) and with ``caustics`` 0."""
+    no CAUSTICS build at all, under still water (no normal map: no waves, which is said once) and
+    with ``caustics`` 0."""
     values = {"off the outline": {"position": (SIDE + 2.0, 0.0, 0.0)}, "no slope": {"scale": 0.0},
               "below the body": {"depth": 0.5}, "still water": {"normal_map": False}, "off": {}}[case]
-    runner, with_caustics = render(scene, pool(0.0 if case == "off" else 1.0, **values))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        runner, with_caustics = render(scene, pool(0.0 if case == "off" else 1.0, **values))
+    said = [w for w in caught if issubclass(w.category, ComponentWarning) and "gathers no light" in str(w.message)]
+    assert len(said) == (case == "still water")   # (said once, though asked every frame)
     _, without = render(scene, pool(0.0, **values))
     assert bool(runner.engine.renderer.caustics.defines) == (case not in ("off", "still water"))
     np.testing.assert_array_equal(with_caustics, without)
