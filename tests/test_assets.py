@@ -19,7 +19,7 @@ from trimesh.visual.material import PBRMaterial
 from components import ComponentValueError, Emissive, Material, MeshRef, Mirror, Reflective, Transform
 from engine.assets.mesh import Mesh, box, load_model
 from engine.assets.models import spawn_model
-from engine.assets.texture_data import TextureData, load_texture, ripple_normal_map
+from engine.assets.texture_data import TextureData, load_texture, ripple_normal_map, wave_normal_map
 from engine.core.errors import AssetError
 from engine.core.world import World
 from tests.support import srgb_to_linear
@@ -550,6 +550,50 @@ def test_ripple_normal_map_source_and_flat_slope():
 def test_ripple_normal_map_bad_arguments_are_named(kwargs, argument):
     with pytest.raises(AssetError, match=rf"^ripples normal map 'lake': {argument} must be "):
         ripple_normal_map(**{"name": "lake", **kwargs})
+
+
+def test_wave_normal_map_is_the_slope_of_a_tileable_sum_of_wave_trains():
+    """Read back as slopes (-n.x / n.z along U, -n.y / n.z along V), the map is a height
+    field's gradient made of ``waves`` trains, each a whole number of cycles across the tile
+    (so it repeats without a seam): the slopes' discrete spectrum holds nearly all its power
+    at no more than ``waves`` frequencies, every one within 2 to 2 + waves cycles a tile and
+    60 degrees of +U (or its opposite), the two slope components' spectra are a gradient's
+    (V's is U's times n / m at each frequency), and the steepest texel leans by ``slope``."""
+    size, waves, slope = 128, 10, 0.6
+    n = decoded(wave_normal_map(size, waves, slope, seed=7))
+    slope_u, slope_v = -n[..., 0] / n[..., 2], n[..., 1] / n[..., 2]   # (rows run down: v's sign turned)
+    spectrum_u, spectrum_v = np.fft.fft2(slope_u), np.fft.fft2(slope_v)
+    power = np.abs(spectrum_u) ** 2 + np.abs(spectrum_v) ** 2
+    strongest = np.argsort(power.ravel())[::-1][:2 * waves]   # each train: a frequency and its conjugate
+    assert power.ravel()[strongest].sum() > 0.995 * power.sum()
+    cycles_v, cycles_u = np.unravel_index(strongest, power.shape)
+    cycles_u = np.where(cycles_u > size // 2, cycles_u - size, cycles_u)
+    cycles_v = np.where(cycles_v > size // 2, cycles_v - size, cycles_v)
+    strong = power.ravel()[strongest] > 1e-3 * power.max()
+    frequency = np.hypot(cycles_u, cycles_v)[strong]
+    assert frequency.min() >= 1.0 and frequency.max() <= 3.0 + waves
+    angle = np.degrees(np.arctan2(np.abs(cycles_v), np.abs(cycles_u)))[strong]
+    assert angle.max() <= 60.0 + 1.0
+    for k in np.flatnonzero(strong):   # a gradient: (du, dv) of one sine train lean along its (m, n)
+        m, w = cycles_u[k], cycles_v[k]
+        row, col = np.unravel_index(strongest[k], power.shape)
+        if m != 0:
+            assert abs(spectrum_v[row, col] - spectrum_u[row, col] * w / m) < 0.05 * abs(spectrum_u[row, col]) + 1.0
+    steepest = np.hypot(slope_u, slope_v).max()
+    assert abs(steepest - slope) < 0.02
+
+
+def test_wave_normal_map_source_seed_and_bad_arguments():
+    assert wave_normal_map(32).source == {"waves": [32, 12]}
+    assert wave_normal_map(32, 4, slope=0.25, seed=3, name="sea").source == {"waves": [32, 4], "slope": 0.25,
+                                                                              "seed": 3, "name": "sea"}
+    np.testing.assert_array_equal(wave_normal_map(32, 4, seed=3).pixels, wave_normal_map(32, 4, seed=3).pixels)
+    assert (wave_normal_map(32, 4, seed=3).pixels != wave_normal_map(32, 4, seed=4).pixels).any()
+    assert (wave_normal_map(16, 3, slope=0).pixels == [128, 128, 255, 255]).all()
+    for kwargs, argument in (({"size": 0}, "size"), ({"waves": 0}, "waves"), ({"waves": 65}, "waves"),
+                             ({"slope": float("nan")}, "slope"), ({"seed": -1}, "seed"), ({"seed": 1.5}, "seed")):
+        with pytest.raises(AssetError, match=rf"^waves normal map 'sea': {argument} must be "):
+            wave_normal_map(**{"name": "sea", **kwargs})
 
 
 def test_a_normal_map_file_loads_as_its_pixels(tmp_path):

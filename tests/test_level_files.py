@@ -477,6 +477,32 @@ normal_scale = 2.0
 """
 
 
+def test_a_wave_normal_map_loads_and_saves_as_it_was_made(tmp_path):
+    """Material.normal_map = { waves = [size, trains] } (optional slope, seed, name) is
+    ``wave_normal_map``'s map, saved back as it was asked for; a wrong kind is refused."""
+    from components import Material
+    from engine.assets.texture_data import wave_normal_map
+
+    text = BASE + textwrap.dedent("""
+        [[entity]]
+        name = "sea"
+        [entity.Transform]
+        [entity.MeshRef]
+        mesh = { quad = [1.0, 1.0] }
+        [entity.Material]
+        normal_map = { waves = [64, 8], seed = 3, slope = 0.25 }
+        """)
+    world = World("sea")
+    names = load_level(write(tmp_path, text)).spawn(world)
+    material = world.get(names["sea"], Material)
+    np.testing.assert_array_equal(material.normal_map.pixels, wave_normal_map(64, 8, 0.25, seed=3).pixels)
+    (tmp_path / "out").mkdir()
+    written = save_level(world, tmp_path / "out" / "saved.toml", names, name="sea").read_text()
+    assert "normal_map = { waves = [64, 8], slope = 0.25, seed = 3 }" in written
+    with pytest.raises(LevelError, match=r"seed must be an integer"):
+        load_level(write(tmp_path, text.replace("seed = 3", "seed = 'x'")))
+
+
 def test_a_normal_map_loads_saves_and_loads_again(tmp_path):
     """Material.normal_map = { ripples = [size, rings] } (optional slope, name) is the
     generator's map, one object for one call (the default slope written or not), and
@@ -536,8 +562,10 @@ def test_a_normal_map_loads_saves_and_loads_again(tmp_path):
      r"slope must be a number, got 'steep'"),
     ("{ ripples = [64, 4] }", "{ ripples = [64, 4], slop = 1.0 }", "Material.normal_map",
      r"ripples normal map: unknown keys \['slop'\]"),
-    ("{ ripples = [64, 4] }", "{ waves = 3 }", "Material.normal_map",
-     r"names one of checker, ripples, puff, file or ies"),
+    ("{ ripples = [64, 4] }", "{ swells = 3 }", "Material.normal_map",
+     r"names one of checker, ripples, waves, puff, file or ies"),
+    ("{ ripples = [64, 4] }", "{ waves = 3 }", "Material.normal_map", r"waves = \[size, trains\] \(two integers\)"),
+    ("{ ripples = [64, 4] }", "{ waves = [64, 0] }", "Material.normal_map", r"waves must be an int in \[1, 64\]"),
     ("{ ripples = [64, 4] }", "{ ies = \"lamp.ies\" }", "Material.normal_map", r"not a normal map"),
     ("{ ripples = [64, 4] }", "\"ripples.png\"", "Material.normal_map", r"a texture is a table"),
     ("{ ripples = [64, 4] }", "{ file = \"maps/gone.png\" }", "Material.normal_map",
@@ -545,7 +573,8 @@ def test_a_normal_map_loads_saves_and_loads_again(tmp_path):
     ("normal_scale = 0.5", "normal_scale = 20.0", "Material.normal_scale", r"normal_scale"),
     ("normal_scale = 0.5", "normal_scale = -0.5", "Material.normal_scale", r"normal_scale"),
 ], ids=["rings", "size", "one_number", "float_rings", "negative_slope", "string_slope", "unknown_key",
-        "no_generator", "ies", "not_a_table", "missing_file", "scale_too_big", "scale_negative"])
+        "no_generator", "waves_one_number", "waves_none", "ies", "not_a_table", "missing_file", "scale_too_big",
+        "scale_negative"])
 def test_a_bad_normal_map_names_the_entity_and_field(tmp_path, old, new, field, reason):
     text = POND.replace(old, new, 1)
     assert text != POND

@@ -34,6 +34,7 @@ from engine.assets.texture_data import (
     puff_texture,
     ripple_normal_map,
     texture_bytes,
+    wave_normal_map,
 )
 
 # The meshes a level file (and the editor's shape choice) makes by name, at their default sizes unless told.
@@ -231,6 +232,8 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
         return texture
     if "ripples" in spec and "checker" not in spec:
         return _ripples(spec, name, where)
+    if "waves" in spec and "checker" not in spec:
+        return _waves(spec, name, where)
     if "puff" in spec and "checker" not in spec:
         size_seed = spec.pop("puff")
         if not isinstance(size_seed, list) or len(size_seed) != 2 or not all(_is_int(v) for v in size_seed):
@@ -243,7 +246,7 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
             where.budget.take(key, texture_bytes(size, size))
         return _cached(key, lambda: puff_texture(size, seed, **options))
     if "checker" not in spec:
-        raise ValueError(f"a texture names one of checker, ripples, puff, file or ies, got {sorted(spec)}")
+        raise ValueError(f"a texture names one of checker, ripples, waves, puff, file or ies, got {sorted(spec)}")
     size_squares = spec.pop("checker")
     if not isinstance(size_squares, list) or len(size_squares) != 2 or not all(_is_int(v) for v in size_squares):
         raise ValueError(f"checker = [size, squares] (two integers), got {size_squares!r}")
@@ -333,6 +336,35 @@ def _ripples(spec: dict, name: Any, where: LevelAssets) -> TextureData:
     if 1 <= size <= MAX_TEXTURE_SIDE:
         where.budget.take(key, texture_bytes(size, size))
     return _cached(key, lambda: ripple_normal_map(size, rings, **options))
+
+
+def _waves(spec: dict, name: Any, where: LevelAssets) -> TextureData:
+    """``{ waves = [size, trains] }`` with optional ``slope``, ``seed`` and ``name``:
+    engine.assets.texture_data's wave_normal_map (it checks the ranges; here only the kinds)."""
+    size_trains = spec.pop("waves")
+    if not isinstance(size_trains, list) or len(size_trains) != 2 or not all(_is_int(v) for v in size_trains):
+        raise ValueError(f"waves = [size, trains] (two integers), got {size_trains!r}")
+    options: dict[str, Any] = {}
+    if "slope" in spec:
+        slope = spec.pop("slope")
+        if not is_number(slope):
+            raise ValueError(f"waves normal map: slope must be a number, got {slope!r}")
+        options["slope"] = float(slope)
+    if "seed" in spec:
+        seed = spec.pop("seed")
+        if not _is_int(seed):
+            raise ValueError(f"waves normal map: seed must be an integer, got {seed!r}")
+        options["seed"] = seed
+    _no_more(spec, "waves normal map")
+    if name is not None:
+        options["name"] = name
+    size, trains = size_trains
+    defaults = {"slope": 0.5, "seed": 0, "name": "waves"}  # written or left out: one map
+    options = {k: v for k, v in options.items() if v != defaults[k]}
+    key = ("waves", size, trains, tuple(sorted(options.items())))
+    if 1 <= size <= MAX_TEXTURE_SIDE:
+        where.budget.take(key, texture_bytes(size, size))
+    return _cached(key, lambda: wave_normal_map(size, trains, **options))
 
 
 def _asset_path(value: Any, where: LevelAssets) -> Path:

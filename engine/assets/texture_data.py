@@ -434,6 +434,72 @@ def ripple_normal_map(size: int = 256, rings: int = 6, slope: float = 0.5, name:
     return TextureData(pixels, name=name, source=source)
 
 
+MAX_WAVE_TRAINS = 64   # a wave normal map's trains at most (each a sum's term, every texel)
+
+
+def wave_normal_map(size: int = 256, waves: int = 12, slope: float = 0.5, seed: int = 0,
+                    name: str = "waves") -> TextureData:
+    """A tileable tangent-space normal map of a wind-blown water surface: ``waves`` trains of
+    sine waves summed (a sum of sines, the oldest ocean-surface model), their directions
+    spread about +U, each a whole number of wavelengths across the tile along U and V (so it
+    repeats seamlessly), from 2 to 2 + ``waves`` cycles a tile, each as high as its length
+    (amplitude ~ 1 / frequency: every train as steep), their phases random from ``seed``.
+    The sum is scaled so its steepest gradient over the texels is ``slope``.  Each texel
+    holds, at its centre, ``n = normalize(-dh/du, -dh/dv, 1)`` from the sum's analytic
+    gradient, encoded as ``ripple_normal_map``'s (red +U, green +V, row 0 the top).  Where
+    the ripples' rings are a test pattern, this is water: under ``Water`` its two scrolling
+    layers cross into a moving net, and the caustics it gathers are the net of a sunlit pool."""
+    if isinstance(size, bool) or not isinstance(size, int) or not 1 <= size <= MAX_GENERATED_SIZE:
+        raise AssetError(f"waves normal map {name!r}: size must be an int in [1, {MAX_GENERATED_SIZE}], got {size!r}")
+    if isinstance(waves, bool) or not isinstance(waves, int) or not 1 <= waves <= MAX_WAVE_TRAINS:
+        raise AssetError(f"waves normal map {name!r}: waves must be an int in [1, {MAX_WAVE_TRAINS}], got {waves!r}")
+    if isinstance(slope, bool) or not isinstance(slope, numbers.Real) or not 0 <= slope <= MAX_RIPPLE_SLOPE:
+        raise AssetError(f"waves normal map {name!r}: slope must be a number in [0, {MAX_RIPPLE_SLOPE:g}], "
+                         f"got {slope!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise AssetError(f"waves normal map {name!r}: seed must be an int >= 0, got {seed!r}")
+    if not isinstance(name, str):
+        raise AssetError(f"waves normal map: name must be a string, got {name!r}")
+    check_texture_size(size, size, f"waves normal map {name!r}")
+    trains = wave_trains(waves, seed)
+    centres = (np.arange(size, dtype=np.float64) + 0.5) / size
+    u = centres[np.newaxis, :]                  # columns: u grows to the right
+    v = (1.0 - centres)[:, np.newaxis]          # rows: row 0 is the top
+    gradient = np.zeros((size, size, 2))
+    block = max(1, WORK_BLOCK // size)          # rows at a time: the float work stays small at any size
+    for top in range(0, size, block):
+        rows = v[top:top + block]
+        for m, n, amplitude, phase in trains:   # dh/du, dh/dv of amplitude sin(2 pi (m u + n v) + phase)
+            wave = amplitude * 2.0 * math.pi * np.cos(2.0 * math.pi * (m * u + n * rows) + phase)
+            gradient[top:top + block, :, 0] += m * wave
+            gradient[top:top + block, :, 1] += n * wave
+    steepest = float(np.sqrt((gradient ** 2).sum(axis=-1)).max())
+    gradient *= float(slope) / steepest if steepest > 0.0 else 0.0
+    n = np.concatenate([-gradient, np.ones((size, size, 1))], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    pixels = np.full((size, size, 4), 255, np.uint8)
+    pixels[..., :3] = np.clip(np.rint(n * 127.5 + 127.5), 0, 255).astype(np.uint8)
+    source = {"waves": [int(size), int(waves)], **({} if float(slope) == 0.5 else {"slope": float(slope)}),
+              **({} if seed == 0 else {"seed": int(seed)}), **({} if name == "waves" else {"name": name})}
+    return TextureData(pixels, name=name, source=source)
+
+
+def wave_trains(waves: int, seed: int) -> list[tuple[int, int, float, float]]:
+    """The (m, n, amplitude, phase) of each of ``wave_normal_map``'s trains: cycles a tile
+    along U and V (whole numbers, not both 0), the height's amplitude (1 / frequency) and its
+    phase, from ``seed``; directions within 60 degrees of +U, as a wind's."""
+    rng = np.random.default_rng(seed)
+    trains = []
+    for k in range(waves):
+        frequency = 2.0 + k + rng.uniform(0.0, 1.0)
+        angle = rng.uniform(-math.pi / 3.0, math.pi / 3.0)
+        m, n = round(frequency * math.cos(angle)), round(frequency * math.sin(angle))
+        if m == 0 and n == 0:
+            m = 1
+        trains.append((m, n, 1.0 / math.hypot(m, n), float(rng.uniform(0.0, 2.0 * math.pi))))
+    return trains
+
+
 def is_grey(texture: TextureData) -> bool:
     """Every texel's red, green and blue are equal: a height (bump) map, not a normal map."""
     p = texture.pixels

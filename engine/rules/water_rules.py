@@ -48,4 +48,4 @@ def warn_still_water(world: World, entity: int, joining: Any = None, **_other: A
     material = world.try_get(entity, Material) if world.exists(entity) else None
     if material is None or material.normal_map is None:
         warn_component(f"Water on entity {entity}: its Material has no normal_map, so the water has no waves (a "
-                       "still, Fresnel-weighted mirror); give it one, e.g. Material(normal_map=ripple_normal_map())")
+                       "still, Fresnel-weighted mirror); give it one, e.g. Material(normal_map=wave_normal_map())")
