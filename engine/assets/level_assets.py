@@ -316,55 +316,42 @@ def level_lut(spec: Any, where: LevelAssets) -> ColorLut:
 
 def _ripples(spec: dict, name: Any, where: LevelAssets) -> TextureData:
     """``{ ripples = [size, rings] }`` with optional ``slope`` and ``name``: engine.assets.texture_data's
-    ripple_normal_map (it checks the ranges; here only the kinds, so the cache key is plain)."""
-    size_rings = spec.pop("ripples")
-    if not isinstance(size_rings, list) or len(size_rings) != 2 or not all(_is_int(v) for v in size_rings):
-        raise ValueError(f"ripples = [size, rings] (two integers), got {size_rings!r}")
-    options: dict[str, Any] = {}
-    if "slope" in spec:
-        slope = spec.pop("slope")
-        if not is_number(slope):
-            raise ValueError(f"ripples normal map: slope must be a number, got {slope!r}")
-        options["slope"] = float(slope)
-    _no_more(spec, "ripples normal map")
-    if name is not None:
-        options["name"] = name
-    size, rings = size_rings
-    defaults = {"slope": 0.5, "name": "ripples"}  # written or left out: one map
-    options = {k: v for k, v in options.items() if v != defaults[k]}
-    key = ("ripples", size, rings, tuple(sorted(options.items())))
-    if 1 <= size <= MAX_TEXTURE_SIDE:
-        where.budget.take(key, texture_bytes(size, size))
-    return _cached(key, lambda: ripple_normal_map(size, rings, **options))
+    ripple_normal_map."""
+    return _generated_normal_map(spec, name, where, "ripples", "rings", {"slope": 0.5, "name": "ripples"},
+                                 ripple_normal_map)
 
 
 def _waves(spec: dict, name: Any, where: LevelAssets) -> TextureData:
     """``{ waves = [size, trains] }`` with optional ``slope``, ``seed`` and ``name``:
-    engine.assets.texture_data's wave_normal_map (it checks the ranges; here only the kinds)."""
-    size_trains = spec.pop("waves")
-    if not isinstance(size_trains, list) or len(size_trains) != 2 or not all(_is_int(v) for v in size_trains):
-        raise ValueError(f"waves = [size, trains] (two integers), got {size_trains!r}")
+    engine.assets.texture_data's wave_normal_map."""
+    return _generated_normal_map(spec, name, where, "waves", "trains", {"slope": 0.5, "seed": 0, "name": "waves"},
+                                 wave_normal_map)
+
+
+def _generated_normal_map(spec: dict, name: Any, where: LevelAssets, kind: str, count: str,
+                          defaults: dict[str, Any], make: Callable[..., TextureData]) -> TextureData:
+    """``{ <kind> = [size, <count>] }`` and the options ``defaults`` names (``slope`` a number,
+    ``seed`` an integer, and ``name``): the generator ``make``'s map, one object for one call
+    (it checks the ranges; here only the kinds, so the cache key is plain)."""
+    size_count = spec.pop(kind)
+    if not isinstance(size_count, list) or len(size_count) != 2 or not all(_is_int(v) for v in size_count):
+        raise ValueError(f"{kind} = [size, {count}] (two integers), got {size_count!r}")
     options: dict[str, Any] = {}
-    if "slope" in spec:
-        slope = spec.pop("slope")
-        if not is_number(slope):
-            raise ValueError(f"waves normal map: slope must be a number, got {slope!r}")
-        options["slope"] = float(slope)
-    if "seed" in spec:
-        seed = spec.pop("seed")
-        if not _is_int(seed):
-            raise ValueError(f"waves normal map: seed must be an integer, got {seed!r}")
-        options["seed"] = seed
-    _no_more(spec, "waves normal map")
+    for option, fits, what in (("slope", is_number, "a number"), ("seed", _is_int, "an integer")):
+        if option in defaults and option in spec:
+            value = spec.pop(option)
+            if not fits(value):
+                raise ValueError(f"{kind} normal map: {option} must be {what}, got {value!r}")
+            options[option] = float(value) if option == "slope" else value
+    _no_more(spec, f"{kind} normal map")
     if name is not None:
         options["name"] = name
-    size, trains = size_trains
-    defaults = {"slope": 0.5, "seed": 0, "name": "waves"}  # written or left out: one map
-    options = {k: v for k, v in options.items() if v != defaults[k]}
-    key = ("waves", size, trains, tuple(sorted(options.items())))
+    size, number = size_count
+    options = {k: v for k, v in options.items() if v != defaults[k]}  # written or left out: one map
+    key = (kind, size, number, tuple(sorted(options.items())))
     if 1 <= size <= MAX_TEXTURE_SIDE:
         where.budget.take(key, texture_bytes(size, size))
-    return _cached(key, lambda: wave_normal_map(size, trains, **options))
+    return _cached(key, lambda: make(size, number, **options))
 
 
 def _asset_path(value: Any, where: LevelAssets) -> Path:
