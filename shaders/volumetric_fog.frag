@@ -8,7 +8,8 @@
 // (the air's density, what reaches the eye of what it scatters there, whether the sun reaches
 // it: its shadow map and cascades, read with one bilinear comparison, SHADOW_SINGLE_TAP, as
 // the steps' offsets and the filter soften the shafts' edges as a wider filter would, and
-// under CLOUD_SHADOWS the share a CloudLayer's cloud on the way lets through), times
+// under CLOUD_SHADOWS the share a CloudLayer's cloud on the way lets through, and under
+// FOG_WATER what a water's body on the way leaves, fog.glsl water_light), times
 // the sun's light (colour x intensity), the Henyey-Greenstein phase function of the angle
 // between the sun's light and the ray, and VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
 // ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
@@ -133,6 +134,9 @@ void main() {
 #ifdef CLOUD_SHADOWS
             lit *= mix(cloud_from, cloud_to, float(i - base) / float(cloud_stride));
 #endif
+#ifdef FOG_WATER
+            lit *= water_light(x, towards, 1e30);   // (under a water's body: the light down through it)
+#endif
             sum += density * seen * lit;
 #if VOLUMETRIC_LAMPS > 0
             vec4 lamp_lit = point_shadows(x, vec3(0.0));
@@ -152,7 +156,8 @@ void main() {
                 cookie *= face_mean(lights.point_rect_v[j]);   // (a panel's picture: its mean colour)
 #endif
                 lamps += lights.point_color[j].rgb * cookie * (lamp_scatter[k] * lamp_falloff(j, dist, l)
-                         * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit));
+                         * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit)
+                         * water_light(x, l, dist));   // (1 but in FOG_WATER builds: a water's body on the way)
             }
             lamp_sum += lamps * (density * seen);
 #endif

@@ -769,3 +769,71 @@ def test_a_still_view_marches_once_and_draws_what_marching_every_frame_draws(sce
     keeping.frame()
     keeping.frame()
     assert fog.marches == 5
+
+
+WATER_DENSITY = 0.3   # a murky pond's body (Water.fog_density), its surface at y = 0, 6 m deep
+AIR_DENSITY = 0.002   # the camera's own thin air
+
+
+def test_under_a_waters_body_the_shafts_light_comes_down_through_the_water(scene):
+    """A camera under a murky pond (a water's body, as a volume of the fog) with light shafts
+    and a sun straight down: each march texel's light is the ground truth's sum along its ray
+    of density x transmittance x the sun's light at the point, which came down through the
+    water over it (exp(-density x its depth)), not the sun's whole light."""
+    from components import Camera, Water
+
+    settings = VolumetricFog(steps=64, half_resolution=True)
+    eye = glm.vec3(0.0, -1.0, 0.0)
+
+    def build(world):
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.0, -0.3, -1.0))),
+                    Camera(fov_y=60.0, far=60.0), Fog(density=AIR_DENSITY, color=(0.0, 0.0, 0.0)), settings,
+                    Tonemap(curve="none"))
+        world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+        world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.0), intensity=SUN_LIGHT, shadows=False))
+        world.spawn(Transform(position=(0.0, -6.0, 0.0)), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5,) * 3))
+        world.spawn(Transform(rotation=glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))), MeshRef(quad(FLOOR, FLOOR)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0)), Mirror(),
+                    Water(fog_density=WATER_DENSITY, fog_color=(0.0, 0.0, 0.0), depth=6.0))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # (a still water: no waves, said)
+        runner = scene(build, SIZE)
+        runner.frame()
+    marched = _marched(runner)
+    view = runner.engine.main_view
+    inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
+    rows, columns = marched.shape[:2]
+    ys, xs = np.mgrid[0:rows, 0:columns]
+    px, py = np.minimum(xs * 2, SIZE[0] - 1) + 0.5, np.minimum(ys * 2, SIZE[1] - 1) + 0.5
+    ndc = np.stack([px / SIZE[0] * 2 - 1, py / SIZE[1] * 2 - 1], -1).reshape(-1, 2)
+
+    def unproject(z):
+        points = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], 1) @ inverse.T
+        return points[:, :3] / points[:, 3:]
+
+    origin = unproject(-1.0)
+    way = unproject(1.0) - origin
+    way /= np.linalg.norm(way, axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):   # to the floor (y = -6), the surface or the distance
+        floor = np.where(way[:, 1] < 0, (-6.0 - origin[:, 1]) / way[:, 1], np.inf)
+        surface = np.where(way[:, 1] > 0, -origin[:, 1] / way[:, 1], np.inf)
+    reach = np.minimum(np.minimum(floor, surface), settings.distance)
+    points = 1000
+    t = (np.arange(points) + 0.5) / points
+    along = reach[:, None] * t[None, :]
+    height = origin[:, 1:2] + way[:, 1:2] * along     # every point is in the body (under the surface, over the floor)
+    density = AIR_DENSITY + WATER_DENSITY
+    seen = np.exp(-density * along)
+    g = settings.anisotropy
+    c = way @ np.array([0.0, 1.0, 0.0])
+    phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
+    light = SUN_LIGHT * settings.intensity * phase * (density * seen * np.exp(-WATER_DENSITY * -height)).sum(1) \
+        * reach / points
+    truth = light.reshape(rows, columns)
+    undimmed = (SUN_LIGHT * settings.intensity * phase * (density * seen).sum(1) * reach / points).reshape(truth.shape)
+    lit = truth > 0.02 * truth.max()
+    assert lit.mean() > 0.5
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert np.median(error) < 0.03, np.median(error)
+    assert np.median(undimmed[lit] / truth[lit]) > 1.5   # (what the sun's whole light would give)
