@@ -352,6 +352,8 @@ class DebugOverlay(EditorPanels):
         imgui.same_line()
         self._switch("sky refl", engine.stages["prepare"], "environment_reflections")
         imgui.same_line()
+        self._switch("caustics", engine.stages["prepare"], "caustics")
+        imgui.same_line()
         self._switch("DoF", present, "depth_of_field")
         imgui.same_line()
         self._switch("motion blur", present, "motion_blur")

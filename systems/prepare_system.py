@@ -134,6 +134,7 @@ class PrepareSystem(esper.Processor):
         self._probe_clouds: CloudShape | None = None  # ... as the probes were last relit by it (CloudChanges)
         self._cloud_said: set[str] = set()            # what the CloudLayer was told (said once)
         self.fog = True   # the debug overlay's toggle: off, no camera's Fog is drawn
+        self.caustics = True   # the debug overlay's toggle: off, no water gathers the sun (Water.caustics)
         # The debug overlay's toggle: off, no surface reflects the light from all round by its
         # material (its environment reflection; a Reflective's reflection stays).
         self.environment_reflections = True
@@ -202,7 +203,7 @@ class PrepareSystem(esper.Processor):
         renderer = self.renderer
         surfaces = self.world.resources.get(Surfaces)
         found = []
-        if surfaces is not None and surfaces.undersides:   # (undersides: one a water; none, no loop a frame)
+        if self.caustics and surfaces is not None and surfaces.undersides:   # (undersides: one a water)
             for entity, state in surfaces.mirrors.items():
                 if state.water is None:
                     continue

@@ -288,3 +288,16 @@ def test_only_what_reaches_into_the_waters_body_is_drawn_with_caustics(scene):
     _, flat = render(scene, build(0.0), size=(96, 64))
     col, row = runner.project((9.0, 0.0, 0.0))
     np.testing.assert_array_equal(lit[row - 2:row + 3, col - 2:col + 3], flat[row - 2:row + 3, col - 2:col + 3])
+
+
+def test_the_overlays_switch_takes_the_caustics_off_and_on(scene):
+    """The prepare stage's ``caustics`` (the overlay's "caustics" switch): off, the frame of a
+    water that gathers nothing; on again, the caustics' frame."""
+    runner, lit = render(scene, pool(1.0), size=(48, 48))
+    _, flat = render(scene, pool(0.0), size=(48, 48))
+    prepare = runner.engine.stages["prepare"]
+    prepare.caustics = False
+    np.testing.assert_array_equal(srgb_to_linear(runner.frame(1.0 / 60.0)), flat)
+    assert runner.engine.renderer.caustics.defines == ()
+    prepare.caustics = True
+    np.testing.assert_array_equal(srgb_to_linear(runner.frame(1.0 / 60.0)), lit)

@@ -524,3 +524,26 @@ def test_clouds_given_while_running_shade_the_floor_from_that_frame(scene):
     early = scene(build(_still(**values)), SIZE)
     early.frame()
     np.testing.assert_array_equal(shaded, early.frame())
+
+
+def test_an_engine_keeps_its_clouds_beside_another_engine_on_the_context(scene):
+    """Two engines on one GL context (an editor's level and its preview, a test's scenes):
+    one with clouds draws its sky and their shadows from its own block whatever the other
+    has, frame for frame as it drew alone."""
+    values = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))
+
+    def build(layer):
+        def b(world):
+            world.spawn(Transform(position=(5.0, 30.0, -3.0), rotation=look_rotation(glm.vec3(0.3, -1.0, 0.0),
+                                                                                       glm.vec3(0.0, 0.0, -1.0))),
+                        Camera(fov_y=70.0, near=0.5, far=200.0))
+            world.spawn(Skybox(**SKY), *([layer] if layer is not None else []))
+            world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=3.0, shadows=False))
+            world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
+        return b
+
+    clouded = scene(build(_still(**values)), SIZE)
+    alone = [clouded.frame() for _ in range(2)][-1]
+    clear = scene(build(_still(**{**values, "coverage": 0.9, "seed": 5})), SIZE)
+    clear.frame()
+    np.testing.assert_array_equal(clouded.frame(), alone)

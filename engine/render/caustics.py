@@ -28,7 +28,7 @@ import numpy as np
 
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitWarning
-from engine.render.bindings import CAUSTIC_UNIT, CAUSTICS_BINDING, bind_texture
+from engine.render.bindings import CAUSTIC_UNIT, CAUSTICS_BINDING, bind_texture, bind_uniform_block
 from engine.render.spot_cookies import SCENE_SAMPLERS
 from engine.resources import MirrorBumps
 
@@ -88,7 +88,6 @@ class CausticBlock:
     def __init__(self, ctx: moderngl.Context, texture_units: int) -> None:
         self.ctx = ctx
         self.ubo = ctx.buffer(reserve=4 * _BLOCK_FLOATS)
-        self.ubo.bind_to_uniform_block(CAUSTICS_BINDING)   # (no other block uses the point: it stays)
         self.supported = texture_units >= CAUSTIC_SAMPLERS
         self.texture_units = texture_units
         self.water: CausticWater | None = None
@@ -128,8 +127,10 @@ class CausticBlock:
         return None if self.water is None else self.water.box
 
     def bind(self) -> None:
-        """Bind the water's normal map for a scene pass (while there is one)."""
+        """Bind the block and the water's normal map for a scene pass (while there is one):
+        each pass, as another engine on the context binds its own block at the same point."""
         if self.water is not None:
+            bind_uniform_block(self.ctx, self.ubo, CAUSTICS_BINDING)
             bind_texture(self.ctx, self._texture, CAUSTIC_UNIT)
 
     def release(self) -> None:

@@ -295,9 +295,9 @@ def cloud_stride(shape: CloudShape, step_length: float, towards: np.ndarray) -> 
 
 
 class CloudBlock:
-    """The ``Clouds`` uniform block on the GPU (bound once at ``CLOUDS_BINDING``), written when
-    the shape changes, and the defines of the builds that read it: ``CLOUDS`` (the sky's) and
-    ``CLOUD_SHADOWS`` (the scene's, while it shades)."""
+    """The ``Clouds`` uniform block on the GPU (bound at ``CLOUDS_BINDING`` by each pass that
+    reads it: ``bind``), written when the shape changes, and the defines of the builds that
+    read it: ``CLOUDS`` (the sky's) and ``CLOUD_SHADOWS`` (the scene's, while it shades)."""
 
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx

@@ -750,6 +750,7 @@ class ScenePass:
         self.shadows.bind()
         renderer.spot_cookies.bind()
         renderer.caustics.bind()
+        renderer.clouds.bind()
         # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
         # capture, and a world without boxes, draw the build without them (sky only).
         self._ambient_probes = self.irradiance.bind(capturing=renderer.capturing != 0)
@@ -1059,6 +1060,7 @@ class ScenePass:
         self.shadows.bind()
         renderer.spot_cookies.bind()
         renderer.caustics.bind()
+        renderer.clouds.bind()
         self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's light (a bounce: the grid's)
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)
         renderer.bind_view(views[0])  # the shared eye, for what reads the Camera block

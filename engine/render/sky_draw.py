@@ -66,7 +66,9 @@ def write_sky(program: moderngl.Program, model: SkyModel) -> None:
 
 def bind_sky(renderer: Gpu) -> None:
     """The textures a ``sky_build`` program of the renderer's sky reads: an atmosphere's
-    sky-view tables (the sun's, the moon's) and its space."""
+    sky-view tables (the sun's, the moon's) and its space; and its clouds' block (another
+    engine on the context binds its own at the same point)."""
+    renderer.clouds.bind()
     if renderer.sky_view is not None:
         bind_texture(renderer.ctx, renderer.sky_view, SKY_VIEW_UNIT)
     if renderer.sky_space is not None:

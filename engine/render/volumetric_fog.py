@@ -216,6 +216,7 @@ class VolumetricFogPass:
         level = images.level
         self.shadows.bind()
         gpu.fog.bind()
+        gpu.clouds.bind()   # (another engine on the context binds its own block at the same point)
         if lamps.slots:
             gpu.spot_cookies.bind()
         bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
