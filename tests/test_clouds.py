@@ -544,6 +544,7 @@ def test_an_engine_keeps_its_clouds_beside_another_engine_on_the_context(scene):
 
     clouded = scene(build(_still(**values)), SIZE)
     alone = [clouded.frame() for _ in range(2)][-1]
-    clear = scene(build(_still(**{**values, "coverage": 0.9, "seed": 5})), SIZE)
-    clear.frame()
-    np.testing.assert_array_equal(clouded.frame(), alone)
+    other = scene(build(_still(**{**values, "coverage": 0.9, "seed": 5})), SIZE)
+    np.testing.assert_array_equal(clouded.frame(), alone)   # the other made, not drawn yet
+    other.frame()
+    np.testing.assert_array_equal(clouded.frame(), alone)   # ... and drawn

@@ -303,7 +303,7 @@ class CloudBlock:
         self.ctx = ctx
         self.shape: CloudShape | None = None
         self.ubo = ctx.buffer(reserve=64)
-        self.ubo.bind_to_uniform_block(CLOUDS_BINDING)
+        bind_uniform_block(ctx, self.ubo, CLOUDS_BINDING)   # (through the record: each pass binds it again)
         self.shadow_defines: tuple[tuple[str, str], ...] = ()
 
     def set(self, shape: CloudShape | None) -> bool:

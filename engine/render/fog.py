@@ -86,7 +86,7 @@ class FogBlock:
         self._values = _NO_FOG
         self._volumes: tuple[float, ...] = ()
         self.ubo = ctx.buffer(np.zeros(FOG_BLOCK_BYTES // 4, np.float32).tobytes())
-        self.ubo.bind_to_uniform_block(FOG_BINDING)   # (no other block uses the point: it stays)
+        bind_uniform_block(ctx, self.ubo, FOG_BINDING)   # (through the record: each pass binds it again, bind)
         self.defines: tuple[tuple[str, str], ...] = ()
 
     def set(self, fog: Fog | None, sun: DirectionalLight | None = None, rows: tuple[float, ...] = (),
