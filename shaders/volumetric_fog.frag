@@ -9,7 +9,8 @@
 // it: its shadow map and cascades, read with one bilinear comparison, SHADOW_SINGLE_TAP, as
 // the steps' offsets and the filter soften the shafts' edges as a wider filter would, and
 // under CLOUD_SHADOWS the share a CloudLayer's cloud on the way lets through, and under
-// FOG_WATER what a water's body on the way leaves, fog.glsl water_light), times
+// FOG_WATER what a water's body on the way leaves, fog.glsl water_light, and under CAUSTICS
+// what a rippled water over it gathers there, caustics.glsl), times
 // the sun's light (colour x intensity), the Henyey-Greenstein phase function of the angle
 // between the sun's light and the ray, and VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
 // ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
@@ -21,6 +22,10 @@
 #include "shadows.glsl"
 #include "fog.glsl"
 #include "volumetric_ray.glsl"
+#ifdef CAUSTICS  // a water's caustics: the sun's light at each point under it, gathered by its waves
+#include "water_waves.glsl"
+#include "caustics.glsl"
+#endif
 #ifdef CLOUD_SHADOWS  // a CloudLayer's shadows: the sun's light at each point through the cloud on its way
 #include "clouds.glsl"
 uniform int cloud_stride;    // the steps between two reads of the clouds' share (engine/render/clouds.py cloud_stride)
@@ -136,6 +141,9 @@ void main() {
 #endif
 #ifdef FOG_WATER
             lit *= water_light(x, towards, 1e30);   // (under a water's body: the light down through it)
+#endif
+#ifdef CAUSTICS
+            lit *= caustic_light(x, towards, 0.0);   // (the shafts under rippled water: its caustics)
 #endif
             sum += density * seen * lit;
 #if VOLUMETRIC_LAMPS > 0

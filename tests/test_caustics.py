@@ -26,7 +26,7 @@ from components import (
 )
 from engine.assets.mesh import box, quad
 from engine.core.errors import CausticLimitWarning, GLLimitWarning
-from engine.render.caustics import CausticBlock
+from engine.render.caustics import CAUSTIC_SUN_SPREAD, CausticBlock
 from tests.support import look_rotation, srgb_to_linear
 from tests.test_water import FLAT, wave_map
 
@@ -301,3 +301,97 @@ def test_the_overlays_switch_takes_the_caustics_off_and_on(scene):
     assert runner.engine.renderer.caustics.defines == ()
     prepare.caustics = True
     np.testing.assert_array_equal(srgb_to_linear(runner.frame(1.0 / 60.0)), lit)
+
+
+def traced_light_at(xs: np.ndarray, depth: float, tiles: float = 1.0) -> np.ndarray:
+    """``traced_light`` for a floor ``depth`` down under a sun straight down, the pool
+    ``tiles`` times as wide (as many more map repeats), the crossings spaced by the larger of
+    a texel and the sun's disc at that depth (the renderer's step: caustics.glsl)."""
+    texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
+    size = len(texels)
+    side = SIDE * tiles
+    step = max(side / (TILING * tiles * size), depth * CAUSTIC_SUN_SPREAD)
+    centres = np.linspace(xs.min() - 0.5, xs.max() + 0.5, 20001)
+    crossings = np.concatenate([centres - step / 2.0, centres + step / 2.0])
+    u = (crossings + side / 2.0) / side * TILING * tiles * size - 0.5
+    low = np.floor(u).astype(int)
+    share = (u - low)[:, None]
+    m = texels[low % size] * (1.0 - share) + texels[(low + 1) % size] * share
+    normals = np.stack([m[:, 0] / m[:, 2], np.ones(len(m)), -m[:, 1] / m[:, 2]], axis=1)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    rays = refract(np.tile(np.array([0.0, -1.0, 0.0]), (len(crossings), 1)), normals, 1.0 / IOR)
+    landings = crossings + rays[:, 0] * depth / -rays[:, 1]
+    before, after = landings[:len(centres)], landings[len(centres):]
+    spread = (after - before) / step
+    assert (spread > 0.0).all()   # no fold: above the depth where the bent rays first cross
+    return np.interp(xs, (before + after) / 2.0, 1.0 / spread)
+
+
+def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene):
+    """Looking straight down from under a sunlit, murky pool 1.2 m deep with light shafts: each march
+    texel's light is the ground truth's sum along its ray of density x transmittance x the
+    sun's light at each point (through the water over it, times the traced caustic at its
+    depth): the bright columns where the waves gather the sun, where the tracer puts them."""
+    from components import Fog, VolumetricFog
+
+    body, air = 0.3, 0.002
+    settings = VolumetricFog(steps=64, half_resolution=True)
+    DEEP = 1.2   # (the floor, and the body's depth: above where these waves' bent rays first cross)
+    tiles = 10.0
+
+    def build(caustics):
+        def b(world):
+            pool(caustics, eye=(0.0, -0.2, 0.0), target=(0.0, -DEEP, -0.001), sun=glm.vec3(0.0, -1.0, 0.0),
+                 tiles=tiles, depth=DEEP)(world)
+            camera = next(e for e, _ in world.query_one(Camera))
+            world.add_component(camera, Fog(density=air, color=(0.0, 0.0, 0.0)))
+            world.add_component(camera, settings)
+            water = next(e for e, _ in world.query_one(Water))
+            world.get(water, Water).fog_density = body
+            world.get(water, Water).fog_color = (0.0, 0.0, 0.0)
+            floor = next(e for e, (t, _) in world.query(Transform, MeshRef) if t.position.y == -DEPTH)
+            world.get(floor, Transform).position = (0.0, -DEEP, 0.0)
+        return b
+
+    runner = scene(build(1.0), (96, 64))
+    runner.frame()
+    images = runner.engine.renderer.volumetric_fog._images
+    marched = np.frombuffer(images.light.read(), np.float32).reshape(images.light.size[1], images.light.size[0], 4)
+    view = runner.engine.main_view
+    inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
+    rows, columns = marched.shape[:2]
+    ys, xs = np.mgrid[0:rows, 0:columns]
+    px, py = np.minimum(xs * 2, 95) + 0.5, np.minimum(ys * 2, 63) + 0.5
+    ndc = np.stack([px / 96 * 2 - 1, py / 64 * 2 - 1], -1).reshape(-1, 2)
+
+    def unproject(z):
+        points = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], 1) @ inverse.T
+        return points[:, :3] / points[:, 3:]
+
+    origin = unproject(-1.0)
+    way = unproject(1.0) - origin
+    way /= np.linalg.norm(way, axis=1, keepdims=True)
+    reach = np.minimum((-DEEP - origin[:, 1]) / way[:, 1], settings.distance)
+    points = 400
+    t = (np.arange(points) + 0.5) / points
+    along = reach[:, None] * t[None, :]
+    at = origin[:, None, :] + way[:, None, :] * along[..., None]
+    depths = np.linspace(0.0, DEEP, 25)
+    grid_x = np.linspace(at[..., 0].min() - 0.1, at[..., 0].max() + 0.1, 4001)
+    table = np.stack([traced_light_at(grid_x, d, tiles) for d in depths])   # [depth, x]
+    h = -at[..., 1]
+    k = np.clip(np.searchsorted(depths, h) - 1, 0, len(depths) - 2)
+    w = np.clip((h - depths[k]) / (depths[k + 1] - depths[k]), 0.0, 1.0)
+    fx = (at[..., 0] - grid_x[0]) / (grid_x[1] - grid_x[0])
+    i = np.clip(np.floor(fx).astype(int), 0, len(grid_x) - 2)
+    f = fx - i
+    gathered = ((table[k, i] * (1.0 - f) + table[k, i + 1] * f) * (1.0 - w)
+                + (table[k + 1, i] * (1.0 - f) + table[k + 1, i + 1] * f) * w)   # (bilinear in depth and x)
+    density = air + body
+    g = settings.anisotropy
+    phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * (way @ np.array([0.0, 1.0, 0.0]))) ** 1.5)
+    truth = (1.0 * settings.intensity * phase * (density * np.exp(-density * along) * np.exp(-body * h)
+                                                   * gathered).sum(1) * reach / points).reshape(rows, columns)
+    assert np.corrcoef(marched[..., 0].ravel(), truth.ravel())[0, 1] > 0.98
+    assert np.median(np.abs(marched[..., 0] / truth - 1.0)) < 0.03
+    assert truth.max() > 1.5 * np.median(truth)   # the columns

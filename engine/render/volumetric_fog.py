@@ -59,6 +59,8 @@ from components.fog import VolumetricFog
 from components.limits import MAX_VOLUMETRIC_LAMPS
 from engine.render.bindings import (
     BLEND_ADD,
+    CAUSTIC_UNIT,
+    CAUSTICS_BINDING,
     CLOUDS_BINDING,
     COOKIE_UNIT,
     FOG_BINDING,
@@ -217,6 +219,7 @@ class VolumetricFogPass:
         self.shadows.bind()
         gpu.fog.bind()
         gpu.clouds.bind()   # (another engine on the context binds its own block at the same point)
+        gpu.caustics.bind()
         if lamps.slots:
             gpu.spot_cookies.bind()
         bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
@@ -281,7 +284,7 @@ class VolumetricFogPass:
             self._release_programs()
             self._programs_of = shaders.reloads
         extra = (self.shadows.program_defines, self.gpu.fog.defines, self.gpu.clouds.shadow_defines,
-                 self.gpu.spot_cookies.defines if lamps else ()) if steps else ()
+                 self.gpu.spot_cookies.defines if lamps else (), self.gpu.caustics.defines) if steps else ()
         key = (shader, steps, extra, level_views, lamps)
         vao = self._programs.get(key)
         if vao is None:
@@ -296,9 +299,10 @@ class VolumetricFogPass:
             assign_slots(program, {"depth_map": VOLUMETRIC_DEPTH_UNIT, "light_map": VOLUMETRIC_LIGHT_UNIT,
                                    "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
                                    "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
-                                   "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT},
+                                   "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT,
+                                   "caustic_map": CAUSTIC_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING,
-                          "Clouds": CLOUDS_BINDING})
+                          "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING})
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
 

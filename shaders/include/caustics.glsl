@@ -11,11 +11,14 @@
 // For a point x at depth h under the plane: the surface point s its light came through is
 // found by fixed-point iteration s <- x' - D(s) (x' is x on the plane, D(s) the sideways
 // offset of the bent ray from s down to depth h), started from the flat surface's ray, then
-// J from D half a step either side of s along each axis of the surface.  The step is the largest of a
-// map texel, the sun's disc at that depth (CAUSTIC_SUN_SPREAD x h: the sun is no point, so a
-// caustic blurs with its depth) and the pixel's footprint (a far floor shows the caustics'
-// mean over its pixel, not a shimmer of samples).  Outside the water's outline, above its plane or deeper
-// than its body (Water.depth), the light is the flat water's: 1.
+// J from D half a step either side of s along each axis of the surface.  The step is the
+// largest of a map texel, the sun's disc at that depth (CAUSTIC_SUN_SPREAD x h: the sun is no
+// point, so a caustic blurs with its depth) and the pixel's footprint (a far floor shows the
+// caustics' mean over its pixel, not a shimmer of samples).  Outside the water's outline,
+// above its plane or deeper than its body (Water.depth), the light is the flat water's: 1.
+// Deeper than where the bent rays first cross (the focal depth) a point is lit through
+// several places on the surface and the search finds one: the net stays, its brightness
+// there is that branch's, not the sum's.
 layout(std140) uniform Caustics {
     vec4 caustic_plane;   // xyz: the water's up normal (out of its top), w: its plane's d
     vec4 caustic_u;       // the mirror's UV u as dot(xyz, p) + w (the UV square, before tiling)
