@@ -211,12 +211,7 @@ class PrepareSystem(esper.Processor):
                 if water is None or water.caustics <= 0.0:
                     continue
                 if state.bumps is None:   # (no normal map, or one the surface cannot read: no waves)
-                    if entity not in self._caustic_still:
-                        self._caustic_still.add(entity)
-                        warnings.warn(ComponentWarning(
-                            f"Water on entity {entity}: its caustics are the sun's light gathered by its waves, and it "
-                            "has none (no Material.normal_map, or a mesh whose UVs do not lie flat), so it gathers no "
-                            "light"), stacklevel=4)
+                    self._say_still(entity)
                     continue
                 found.append((entity, state, water))
         cut = max(0, len(found) - MAX_CAUSTIC_WATERS)
@@ -238,13 +233,25 @@ class PrepareSystem(esper.Processor):
                                 offset=state.water.flow.offset, ior=water.ior, strength=water.caustics,
                                 depth=water.depth)
             held = renderer.caustics.water
-            if held is None or held.entity != entity or held.rows != rows \
+            if rows is None:   # (UVs square to the surface: no frame to read the waves in)
+                self._say_still(entity)
+                held = None
+            elif held is None or held.entity != entity or held.rows != rows \
                     or held.normal_map is not state.bumps.normal_map:
                 held = CausticWater(entity, state.bumps.normal_map, rows,
                                     body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth))
         texture = None if held is None else renderer.normal_map_texture(held.normal_map)
         if renderer.caustics.set(held, texture):
             renderer.note_scene_change()   # what every view shows under the water
+
+    def _say_still(self, entity: int) -> None:
+        """Say, once, that the water on ``entity`` has caustics and no waves to gather with."""
+        if entity not in self._caustic_still:
+            self._caustic_still.add(entity)
+            warnings.warn(ComponentWarning(
+                f"Water on entity {entity}: its caustics are the sun's light gathered by its waves, and it has none "
+                "(no Material.normal_map, or a mesh whose UVs do not run along it), so it gathers no light"),
+                stacklevel=5)
 
     def _fog_rows(self, camera: int | None) -> tuple[float, ...]:
         """The Fog block's rows of the ``FogVolume``s (``fog.volume_rows``) and the water bodies

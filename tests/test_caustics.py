@@ -395,3 +395,22 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene):
     assert np.corrcoef(marched[..., 0].ravel(), truth.ravel())[0, 1] > 0.98
     assert np.median(np.abs(marched[..., 0] / truth - 1.0)) < 0.03
     assert truth.max() > 1.5 * np.median(truth)   # the columns
+
+
+def test_uvs_square_to_the_surface_give_no_caustic_rows():
+    """A water whose UV rows have no part along its plane (no frame to read the waves in)
+    gives no rows (the prepare stage then says it gathers no light); a level one gives rows
+    whose axes are the rows' directions along the plane, unit length."""
+    from engine.render.caustics import caustic_rows
+    from engine.resources import MirrorBumps
+
+    level = MirrorBumps(wave_map(), 1.0, np.array([[0.25, 0.0, 0.0, 0.5], [0.0, 0.0, -0.25, 0.5]]), 0.0)
+    rows = caustic_rows((0.0, 1.0, 0.0, 0.0), level, tiling=3.0, cross=0.5, offset=(0.1, 0.2), ior=1.333,
+                        strength=1.0, depth=2.0)
+    assert rows is not None and len(rows) == 28
+    np.testing.assert_allclose(rows[12:15], (1.0, 0.0, 0.0))   # +U along x
+    np.testing.assert_allclose(rows[16:19], (0.0, 0.0, -1.0))  # +V along -z
+    np.testing.assert_allclose(rows[25], SIDE / (TILING * 64))  # a map texel, metres
+    square = MirrorBumps(wave_map(), 1.0, np.array([[0.0, 0.25, 0.0, 0.5], [0.0, 0.0, -0.25, 0.5]]), 0.0)
+    assert caustic_rows((0.0, 1.0, 0.0, 0.0), square, tiling=3.0, cross=0.5, offset=(0.0, 0.0), ior=1.333,
+                        strength=1.0, depth=2.0) is None

@@ -59,15 +59,19 @@ def body_box(corners: np.ndarray, down: tuple[float, float, float],
 
 
 def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *, tiling: float, cross: float,
-                 offset: tuple[float, float], ior: float, strength: float, depth: float) -> tuple[float, ...]:
+                 offset: tuple[float, float], ior: float, strength: float, depth: float) -> tuple[float, ...] | None:
     """The ``Caustics`` block (caustics.glsl) of a water: its top ``plane`` (normal up, out of
     the water), its mirror's UV rows, the surface's unit directions of +U and +V (each UV
     row's direction laid on the plane, as the composite's frame), the waves' layers
     (``tiling``, ``cross``, ``offset``, ``bumps.scale``), 1 / ``ior``, the ``strength``
     (``Water.caustics``), a map texel's size in metres along U, the body's ``depth`` and the
-    sun's spread."""
+    sun's spread.  None where the UVs do not run along the surface (a row square to it: no
+    frame to read the waves in)."""
     normal = np.array(plane[:3], np.float64)
     u_row, v_row = (np.asarray(row, np.float64) for row in bumps.uv_rows)
+    flats = [row[:3] - np.dot(row[:3], normal) * normal for row in (u_row, v_row)]
+    if min(float(np.linalg.norm(flat)) for flat in flats) < 1e-9:
+        return None
 
     def along(row: np.ndarray) -> np.ndarray:
         flat = row[:3] - np.dot(row[:3], normal) * normal
