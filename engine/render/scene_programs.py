@@ -188,6 +188,10 @@ class ScenePrograms:
         relinked program may read uniforms, samplers and vertex inputs the first build
         dropped).
 
+        ``caustic``: with the frame's ``CAUSTICS`` (a batch reaching into the body of the water
+        that gathers the sun: ``engine/render/caustics.py``; the others are built without, as
+        llvmpipe runs a build's caustics on every pixel).
+
         ``screen``: "" the plain builds; "occluded" (a root view with ambient occlusion)
         ``SCREEN_OCCLUSION``: it multiplies the screen's occlusion image
         (``Gpu.screen_occlusion``) into its light from all round (an unlit mirror, which
@@ -393,7 +397,8 @@ class ScenePrograms:
     def record(self, batch: InstanceBatch, kind: tuple[int, str, bool, bool, bool, str], stamp: tuple,
                variants: tuple[int, int, int] | None, caustic: bool = False) -> tuple:
         """What ``batch`` draws with in passes of ``kind`` (views, layered, ambient
-        probes, unlit, masked, screen): (stamp, variants, program name, vertex array, per-draw uniforms, the
+        probes, unlit, masked, screen), with ``caustic`` (the batch reaches into the caustic water's
+        body: its CAUSTICS build): (stamp, (variants, caustic), program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
         or None where probes give them per draw, its mesh's vertex count, the program: an
         instanced-views draw asks the batch for its array by view count, ``InstanceBatch.vao``)."""
