@@ -331,7 +331,8 @@ class DebugOverlay(EditorPanels):
         for label, stage, switch in (("shadows", engine.stages["shadows"], "enabled"), ("bloom", present, "bloom"),
                                      ("fog", engine.stages["prepare"], "fog"), ("grade", present, "grade"),
                                      ("AO", engine.stages["main"], "occlusion"),
-                                     ("AO only", present, "show_occlusion")):
+                                     ("AO only", present, "show_occlusion"),
+                                     ("caustics", engine.stages["prepare"], "caustics")):
             if label != "grade":  # (the grade, AO and the curve on a row of their own: the window stays narrow)
                 imgui.same_line()
             self._switch(label, stage, switch)
@@ -351,8 +352,6 @@ class DebugOverlay(EditorPanels):
         self._switch("SSR only", engine.renderer.screen_reflections, "show_found")
         imgui.same_line()
         self._switch("sky refl", engine.stages["prepare"], "environment_reflections")
-        imgui.same_line()
-        self._switch("caustics", engine.stages["prepare"], "caustics")
         imgui.same_line()
         self._switch("DoF", present, "depth_of_field")
         imgui.same_line()
