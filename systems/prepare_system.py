@@ -123,6 +123,7 @@ class PrepareSystem(esper.Processor):
         self._unboxed: set[int] = set()   # waters with a fog and no flat outline (said once)
         self._caustic_cut = 0                     # waters with caustics past MAX_CAUSTIC_WATERS, left out
         self._caustic_still: set[int] = set()     # waters with caustics and no waves to gather with (said once)
+        self._caustic_key: tuple | None = None    # what the held water's rows were packed from (_caustics)
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -198,8 +199,9 @@ class PrepareSystem(esper.Processor):
     def _caustics(self, camera: int | None) -> None:
         """Give the caustics' block the water that gathers the sun: of the waters with
         ``caustics`` and waves (a normal map), the nearest the active camera (the rest counted
-        and said when their count grows).  Its rows are packed every frame (its waves move);
-        the block is written, and the views drawn again, only when they changed."""
+        and said when their count grows).  Its rows are packed again when its state, its waves'
+        offset or its fields changed (every frame while the waves move); the block is written,
+        and the views drawn again, only when they changed."""
         renderer = self.renderer
         surfaces = self.world.resources.get(Surfaces)
         found = []
@@ -229,10 +231,15 @@ class PrepareSystem(esper.Processor):
         held = None
         if found:
             entity, state, water = found[0]
-            rows = caustic_rows(tuple(state.plane), state.bumps, tiling=water.tiling, cross=water.cross,
-                                offset=state.water.flow.offset, ior=water.ior, strength=water.caustics,
-                                depth=water.depth)
+            key = (state, state.water.flow.offset, water.tiling, water.cross, water.ior, water.caustics, water.depth)
             held = renderer.caustics.water
+            if key == self._caustic_key and held is not None and held.entity == entity:
+                rows = held.rows   # (a still water, as it was: nothing packed)
+            else:
+                rows = caustic_rows(tuple(state.plane), state.bumps, tiling=water.tiling, cross=water.cross,
+                                    offset=state.water.flow.offset, ior=water.ior, strength=water.caustics,
+                                    depth=water.depth)
+            self._caustic_key = key
             if rows is None:   # (UVs square to the surface: no frame to read the waves in)
                 self._say_still(entity)
                 held = None

@@ -333,6 +333,7 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene):
     sun's light at each point (through the water over it, times the traced caustic at its
     depth): the bright columns where the waves gather the sun, where the tracer puts them."""
     from components import Fog, VolumetricFog
+    from tests.test_volumetric_fog import march_rays, marched_light
 
     body, air = 0.3, 0.002
     settings = VolumetricFog(steps=64, half_resolution=True)
@@ -355,22 +356,8 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene):
 
     runner = scene(build(1.0), (96, 64))
     runner.frame()
-    images = runner.engine.renderer.volumetric_fog._images
-    marched = np.frombuffer(images.light.read(), np.float32).reshape(images.light.size[1], images.light.size[0], 4)
-    view = runner.engine.main_view
-    inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
-    rows, columns = marched.shape[:2]
-    ys, xs = np.mgrid[0:rows, 0:columns]
-    px, py = np.minimum(xs * 2, 95) + 0.5, np.minimum(ys * 2, 63) + 0.5
-    ndc = np.stack([px / 96 * 2 - 1, py / 64 * 2 - 1], -1).reshape(-1, 2)
-
-    def unproject(z):
-        points = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], 1) @ inverse.T
-        return points[:, :3] / points[:, 3:]
-
-    origin = unproject(-1.0)
-    way = unproject(1.0) - origin
-    way /= np.linalg.norm(way, axis=1, keepdims=True)
+    marched = marched_light(runner)
+    origin, way, (rows, columns) = march_rays(runner, (96, 64), 2)
     reach = np.minimum((-DEEP - origin[:, 1]) / way[:, 1], settings.distance)
     points = 400
     t = (np.arange(points) + 0.5) / points

@@ -500,28 +500,32 @@ def test_the_runners_clouds_cover_the_levels_sky(ctx, tmp_path):
         assert result.returncode != 0 and words in result.stderr.splitlines()[-1], result.stderr
 
 
+SHADING = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))   # the two tests below
+
+
+def _sunlit_floor(layer: CloudLayer | None, look=(0.0, -1.0, 0.0)):
+    """A grey floor under the sun along ``SHADOW_SUN``, seen from 30 m along ``look``, its sky
+    with ``layer`` (None: none)."""
+    def build(world):
+        world.spawn(Transform(position=(5.0, 30.0, -3.0), rotation=look_rotation(glm.vec3(*look),
+                                                                                   glm.vec3(0.0, 0.0, -1.0))),
+                    Camera(fov_y=70.0, near=0.5, far=200.0))
+        world.spawn(Skybox(**SKY), *([layer] if layer is not None else []))
+        world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=3.0, shadows=False))
+        world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
+    return build
+
+
 def test_clouds_given_while_running_shade_the_floor_from_that_frame(scene):
     """A CloudLayer put on the sky after some frames shades the floor from the next frame as a
     world that had it from the start does (each batch's build takes its cloud shadows)."""
-    values = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))
-
-    def build(layer):
-        def b(world):
-            world.spawn(Transform(position=(5.0, 30.0, -3.0), rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0),
-                                                                                       glm.vec3(0.0, 0.0, -1.0))),
-                        Camera(fov_y=70.0, near=0.5, far=200.0))
-            world.spawn(Skybox(**SKY), *([layer] if layer is not None else []))
-            world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=3.0, shadows=False))
-            world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
-        return b
-
-    late = scene(build(None), SIZE)
+    late = scene(_sunlit_floor(None), SIZE)
     late.frame()
     late.frame()
     sky = next(e for e, _ in late.world.query_one(Skybox))
-    late.world.add_component(sky, _still(**values))
+    late.world.add_component(sky, _still(**SHADING))
     shaded = late.frame()
-    early = scene(build(_still(**values)), SIZE)
+    early = scene(_sunlit_floor(_still(**SHADING)), SIZE)
     early.frame()
     np.testing.assert_array_equal(shaded, early.frame())
 
@@ -530,21 +534,10 @@ def test_an_engine_keeps_its_clouds_beside_another_engine_on_the_context(scene):
     """Two engines on one GL context (an editor's level and its preview, a test's scenes):
     one with clouds draws its sky and their shadows from its own block whatever the other
     has, frame for frame as it drew alone."""
-    values = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))
-
-    def build(layer):
-        def b(world):
-            world.spawn(Transform(position=(5.0, 30.0, -3.0), rotation=look_rotation(glm.vec3(0.3, -1.0, 0.0),
-                                                                                       glm.vec3(0.0, 0.0, -1.0))),
-                        Camera(fov_y=70.0, near=0.5, far=200.0))
-            world.spawn(Skybox(**SKY), *([layer] if layer is not None else []))
-            world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=3.0, shadows=False))
-            world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
-        return b
-
-    clouded = scene(build(_still(**values)), SIZE)
+    look = (0.3, -1.0, 0.0)   # (some sky in the picture)
+    clouded = scene(_sunlit_floor(_still(**SHADING), look), SIZE)
     alone = [clouded.frame() for _ in range(2)][-1]
-    other = scene(build(_still(**{**values, "coverage": 0.9, "seed": 5})), SIZE)
+    other = scene(_sunlit_floor(_still(**{**SHADING, "coverage": 0.9, "seed": 5}), look), SIZE)
     np.testing.assert_array_equal(clouded.frame(), alone)   # the other made, not drawn yet
     other.frame()
     np.testing.assert_array_equal(clouded.frame(), alone)   # ... and drawn

@@ -93,15 +93,14 @@ def _hits(origin: np.ndarray, way: np.ndarray, boxes) -> np.ndarray:
     return nearest
 
 
-def _rays(runner, ratio: int, distance: float, every: int = 1,
-          mirror: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each march texel's ray (``ratio``: the view's pixels a texel each way; its first
-    pixel's centre): where it starts (the near plane), its unit direction and how far it
-    goes (to the floor, the wall or a slab, at most ``distance``), by rows of texels (of
-    every ``every``-th row and column)."""
+def march_rays(runner, size: tuple[int, int], ratio: int,
+               every: int = 1) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+    """Each march texel's ray (``ratio``: the view's pixels a texel each way, of a ``size``
+    view; its first pixel's centre): where it starts (the near plane) and its unit direction,
+    rows of (of every ``every``-th row and column of) texels, and the grid's shape."""
     view = runner.engine.main_view
     inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T  # (numpy rows)
-    width, height = SIZE
+    width, height = size
     rows, columns = -(-height // ratio), -(-width // ratio)
     ys, xs = np.mgrid[0:rows:every, 0:columns:every]
     px = np.minimum(xs * ratio, width - 1) + 0.5
@@ -115,10 +114,18 @@ def _rays(runner, ratio: int, distance: float, every: int = 1,
     origin = unproject(-1.0)
     way = unproject(1.0) - origin
     way /= np.linalg.norm(way, axis=1, keepdims=True)
+    return origin, way, xs.shape
+
+
+def _rays(runner, ratio: int, distance: float, every: int = 1,
+          mirror: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``march_rays`` of the hall, and how far each goes (to the floor, the wall or a slab, at
+    most ``distance``), by rows of texels."""
+    origin, way, shape = march_rays(runner, SIZE, ratio, every)
     with np.errstate(divide="ignore", invalid="ignore"):
         floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
     reach = np.minimum(np.minimum(floor, _hits(origin, way, [*ROOF, WALL, *([MIRROR] if mirror else [])])), distance)
-    return origin, way, reach.reshape(xs.shape)
+    return origin, way, reach.reshape(shape)
 
 
 def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = True, every: int = 1,
@@ -156,7 +163,7 @@ def _light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: Vol
     return SUN_LIGHT * settings.intensity * phase * total
 
 
-def _marched(runner) -> np.ndarray:
+def marched_light(runner) -> np.ndarray:
     images = runner.engine.renderer.volumetric_fog._images
     data = np.frombuffer(images.light.read(), np.float32).reshape(images.light.size[1], images.light.size[0], 4)
     return data
@@ -175,7 +182,7 @@ def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows, mi
     if mirror:
         assert runner.stats.reflection_views == 1
     every = 1 if half else 2  # (at full size every other row and column: the same rays, a quarter of the time)
-    marched = _marched(runner)[::every, ::every]
+    marched = marched_light(runner)[::every, ::every]
     truth, reach = _ground_truth(runner, settings, 2 if half else 1, shade=shadows, every=every, mirror=mirror)
     assert marched.shape[:2] == truth.shape
     assert np.allclose(marched[..., 0], marched[..., 2], rtol=1e-4, atol=1e-6)  # a white sun
@@ -219,7 +226,7 @@ def test_the_sun_or_by_night_the_moon_lights_the_air(scene, night):
     runner = scene(build, SIZE)
     runner.frame()
     tint = sunlight_tint(Skybox(model="atmosphere"), tuple(SUN)) if air else (1.0, 1.0, 1.0)
-    marched = _marched(runner)
+    marched = marched_light(runner)
     truth, reach = _ground_truth(runner, settings, 2)
     steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
     lit = steady & (truth > 0.02 * truth.max())
@@ -247,7 +254,7 @@ def test_a_cloud_layers_shadows_dim_the_shafts_as_their_twin_says(scene, scale, 
     runner = scene(lambda world: _hall(world, settings, clouds=clouds), SIZE)
     runner.frame()
     assert runner.engine.renderer.volumetric_fog.cloud_stride == stride
-    marched = _marched(runner)
+    marched = marched_light(runner)
     truth, reach = _ground_truth(runner, settings, 2, clouds=clouds)
     clear, _ = _ground_truth(runner, settings, 2)
     steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
@@ -303,7 +310,7 @@ def test_the_filter_adds_the_light_to_every_pixel(scene):
     plain.frame()
     added = _linear(with_shafts).astype(np.float64) - _linear(plain).astype(np.float64)
     _, _, reach = _rays(with_shafts, 1, settings.distance)
-    expected = _filtered(_marched(with_shafts).astype(np.float64), reach, 2)
+    expected = _filtered(marched_light(with_shafts).astype(np.float64), reach, 2)
     assert np.allclose(added[..., 0], added[..., 2], atol=2e-3)
     assert added.min() > -2e-3  # light only added
     close = np.abs(added[..., 0] - expected) < 2e-3 + 0.02 * expected
@@ -393,9 +400,9 @@ def test_under_temporal_aa_each_frame_starts_the_points_elsewhere(scene):
         runner = scene(lambda world: _hall(world, VolumetricFog(steps=16)), SIZE)
         runner.engine.renderer.antialias = antialias
         runner.frame()
-        first = _marched(runner).copy()
+        first = marched_light(runner).copy()
         runner.frame()
-        images[antialias] = (first, _marched(runner).copy())
+        images[antialias] = (first, marched_light(runner).copy())
     assert np.array_equal(*images["fxaa"])
     first, second = images["taa"]
     assert not np.array_equal(first[..., 0], second[..., 0])
@@ -622,7 +629,7 @@ def test_a_lamp_with_a_shape_lights_the_air_by_its_outline(scene, shape):
 def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False, tube: bool = False):
     """The march's texels and the lamp's ground truth along each texel's ray, its length, the
     texels compared (lit, steady, not within a metre of the lamp) and the steady ones."""
-    marched = _marched(runner)
+    marched = marched_light(runner)
     view = runner.engine.main_view
     inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
     width, height = SIZE
@@ -692,7 +699,7 @@ def test_a_lamps_cookie_colours_its_light_in_the_air(scene):
     tinted = scene(lambda world: _lamp_hall(world, VolumetricFog(steps=32),
                                            cookie=TextureData(pixels, name="amber")), SIZE)
     tinted.frame()
-    white, coloured = _marched(plain)[..., :3], _marched(tinted)[..., :3]
+    white, coloured = marched_light(plain)[..., :3], marched_light(tinted)[..., :3]
     lit = white[..., 0] > 0.1 * white[..., 0].max()
     assert lit.sum() > 100
     expected = srgb_to_linear(np.array(amber, np.float64))
@@ -713,7 +720,7 @@ def test_a_panels_image_colours_its_light_in_the_air_by_its_mean(scene):
     imaged = scene(lambda world: _lamp_hall(world, VolumetricFog(steps=32), panel=True,
                                             cookie=TextureData(pixels, name="red and blue")), SIZE)
     imaged.frame()
-    white, coloured = _marched(plain)[..., :3], _marched(imaged)[..., :3]
+    white, coloured = marched_light(plain)[..., :3], marched_light(imaged)[..., :3]
     lit = white[..., 0] > 0.1 * white[..., 0].max()
     assert lit.sum() > 100
     ratio = np.median(coloured[lit] / white[lit], axis=0)
@@ -800,21 +807,8 @@ def test_under_a_waters_body_the_shafts_light_comes_down_through_the_water(scene
         warnings.simplefilter("ignore")   # (a still water: no waves, said)
         runner = scene(build, SIZE)
         runner.frame()
-    marched = _marched(runner)
-    view = runner.engine.main_view
-    inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
-    rows, columns = marched.shape[:2]
-    ys, xs = np.mgrid[0:rows, 0:columns]
-    px, py = np.minimum(xs * 2, SIZE[0] - 1) + 0.5, np.minimum(ys * 2, SIZE[1] - 1) + 0.5
-    ndc = np.stack([px / SIZE[0] * 2 - 1, py / SIZE[1] * 2 - 1], -1).reshape(-1, 2)
-
-    def unproject(z):
-        points = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], 1) @ inverse.T
-        return points[:, :3] / points[:, 3:]
-
-    origin = unproject(-1.0)
-    way = unproject(1.0) - origin
-    way /= np.linalg.norm(way, axis=1, keepdims=True)
+    marched = marched_light(runner)
+    origin, way, (rows, columns) = march_rays(runner, SIZE, 2)
     with np.errstate(divide="ignore", invalid="ignore"):   # to the floor (y = -6), the surface or the distance
         floor = np.where(way[:, 1] < 0, (-6.0 - origin[:, 1]) / way[:, 1], np.inf)
         surface = np.where(way[:, 1] > 0, -origin[:, 1] / way[:, 1], np.inf)
