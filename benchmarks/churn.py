@@ -5,8 +5,10 @@ Each wave spawns ``--entities`` things in a ring around the camera, cycling thro
 kinds: a mirror (its own quad mesh), a portal pair, a chrome sphere (its own automatic
 probe), a box with its own new mesh, a box with its own new texture, a particle emitter
 with its own sprite (its particles' buffer and the texture), and a decal on the floor with
-its own image (its cut mesh on a part it makes, the texture); and one irradiance volume a
-wave over the ring (its scratch cube, its grid in the irradiance table); renders
+its own image (its cut mesh on a part it makes, the texture); and once a wave: an irradiance
+volume over the ring (its scratch cube, its grid in the irradiance table), and the weather
+(``spawn_weather``: a pond with caustics and a murky body under its own wave map, a shadowed
+lamp, a spot projecting its own cookie, a cloud layer and a fog volume); renders
 ``--frames`` frames (320 x 180, ``--size``), deletes every one of them, renders one more frame, and
 prints the renderer's live GL resources (``resource_counts``), the entity count and the
 resident memory.  The exit status is 1 when, after the last wave, a count is not back to
@@ -30,22 +32,27 @@ from benchmarks import add_size_argument
 from benchmarks.soak import resident_mib
 from components import (
     Camera,
+    CloudLayer,
     Decal,
     DirectionalLight,
+    FogVolume,
     IrradianceVolume,
     Material,
     MeshRef,
     Mirror,
     ParticleEmitter,
+    PointLight,
     ReflectionProbe,
     Reflective,
     Skybox,
     Transform,
+    Water,
     look_rotation,
+    yaw_pitch_rotation,
 )
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.portals import spawn_portal_pair
-from engine.assets.texture_data import TextureData, checker_texture
+from engine.assets.texture_data import TextureData, checker_texture, wave_normal_map
 from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.core.world import World
@@ -76,9 +83,10 @@ def of_kind(kind: int, count: int) -> int:
 
 def spawn_wave(world: World, count: int, wave: int) -> list[int]:
     made: list[int] = []
-    if count:  # one volume a wave, baked in its first frame
+    if count:  # one volume a wave, baked in its first frame, and the weather
         made.append(world.spawn(Transform(position=(0.0, 1.0, 0.0)), IrradianceVolume(
             size=(20.0, 2.0, 20.0), points=(2, 2, 2), resolution=16, points_per_frame=8)))
+        made += spawn_weather(world, wave)
     for i in range(count):
         angle = 2 * math.pi * i / max(count, 1)
         radius = 3 + (i % 7)
@@ -112,6 +120,33 @@ def spawn_wave(world: World, count: int, wave: int) -> list[int]:
             made.append(world.spawn(Transform(position=(at[0], 0.0, at[2]), rotation=down, scale=(1.0, 1.0, 0.5)),
                                     Decal(texture=TextureData(pixels, name=f"decal {wave}.{i}"))))
     return made
+
+
+WEATHER_TEXTURES = 1  # the pond's wave map (spawn_weather; the spot's cookie is drawn into the cookie atlas)
+
+
+def spawn_weather(world: World, wave: int) -> list[int]:
+    """A wave's weather, each thing owning what it is drawn with: a pond (a Water mirror with
+    caustics and a murky body: its fog row, its caustic block, the level copy its refraction
+    reads) under a wave map of its own, a lamp with a shadow cube, a spot projecting a cookie
+    of its own (its spot map and cookie atlas), a cloud layer (its shadows on the floor) and
+    a fog volume."""
+    waves = wave_normal_map(16, 3, seed=wave, name=f"waves {wave}")
+    cookie = TextureData(np.full((8, 8, 4), 40 * wave % 256, np.uint8), name=f"cookie {wave}")
+    down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+    return [
+        world.spawn(Transform(position=(0.0, 0.05, 0.0), rotation=yaw_pitch_rotation(0.0, -90.0)),  # facing up
+                    MeshRef(quad(3.0, 3.0, name=f"pond {wave}")),
+                    Material(color=(0.1, 0.3, 0.35, 0.3), normal_map=waves), Mirror(max_depth=1),
+                    Water(caustics=1.0, fog_density=0.5, depth=1.0)),
+        world.spawn(Transform(position=(2.0, 2.0, 2.0)), PointLight(intensity=3.0, range=8.0, shadows=True,
+                                                                    shadow_resolution=64)),
+        world.spawn(Transform(position=(-2.0, 4.0, 0.0), rotation=down),
+                    PointLight(intensity=5.0, range=8.0, spot_angle=50.0, shadows=True, shadow_resolution=64,
+                               cookie=cookie)),
+        world.spawn(CloudLayer(seed=wave)),
+        world.spawn(Transform(position=(0.0, 1.0, 3.0)), FogVolume(size=(3.0, 2.0, 3.0), density=0.3)),
+    ]
 
 
 def snapshot(engine: Engine) -> dict:

@@ -1,6 +1,7 @@
 """Short soak and churn runs (the benchmarks ``soak`` and ``churn`` at small sizes): nothing
 the engine holds grows over a tour of the sample level, and everything made in waves of
-mirrors, portals, probes, meshes, textures, particle emitters and decals goes back when they are deleted."""
+mirrors, portals, probes, meshes, textures, particle emitters, decals and weather (a pond with
+caustics, lamps that cast, a spot's cookie, clouds, a fog volume) goes back when they are deleted."""
 from __future__ import annotations
 
 from benchmarks import churn, soak
@@ -41,8 +42,11 @@ def test_waves_of_mirrors_portals_probes_meshes_and_textures_all_go_back():
     rows = churn.run(entities=40, waves=2, frames=2)
     peak = rows[1]["peak_gl_resources"]
     mirrors, spheres, boxes, textured, emitters, decals = (churn.of_kind(kind, 40) for kind in (0, 2, 3, 4, 5, 6))
-    # (A probe cube a chrome sphere, and the wave's irradiance volume's scratch cube.)
-    assert peak["probe_cubes"] == spheres + 1 and peak["textures"] == 1 + textured + emitters + decals
+    # (A probe cube a chrome sphere, and the wave's irradiance volume's scratch cube; the
+    # weather's pond has its wave map; its spot's cookie is in the cookie atlas.)
+    assert peak["probe_cubes"] == spheres + 1
+    assert peak["textures"] == 1 + textured + emitters + decals + churn.WEATHER_TEXTURES
+    assert peak["shadow_cubes"] >= 1 and peak["spot_cookies"] == 1
     assert peak["meshes"] >= 1 + mirrors + boxes + decals and peak["particle_buffers"] == emitters
     assert churn.leftovers(rows, rss_slack=40.0) == []
     assert rows[-1]["gl_resources"]["batches"] == rows[0]["gl_resources"]["batches"]
