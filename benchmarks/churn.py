@@ -122,6 +122,7 @@ def spawn_wave(world: World, count: int, wave: int) -> list[int]:
     return made
 
 
+WEATHER_MIRRORS = 1  # the pond (spawn_weather: a Water on a Mirror)
 WEATHER_TEXTURES = 1  # the pond's wave map (spawn_weather; the spot's cookie is drawn into the cookie atlas)
 
 

@@ -8,10 +8,11 @@ from typing import Any
 from pyglm import glm
 
 from components.fog import MAX_FOG_DENSITY, MAX_FOG_VOLUME_SIDE, MIN_FOG_VOLUME_SIDE
-from components.tracking import ComponentValueError, TrackedComponent, color, finite
+from components.tracking import ComponentValueError, TrackedComponent, color, finite, vec3
 
 MAX_WATER_SPEED = 100.0    # normal-map tiles a second; faster is a strobe, not a wave
 MAX_WATER_TILING = 1000.0  # repeats of the map across the mirror's UV square
+MAX_WATER_ABSORPTION = 64.0  # a channel's share of fog_density: past it the channel is gone within millimetres
 
 
 @dataclass(eq=False)
@@ -75,6 +76,15 @@ class Water(TrackedComponent):
       comes through it too (the sun's and the lamps' along their way, the sky's down through
       the water over the point).  It fogs every view, as a ``FogVolume`` does, and
       counts among their ``MAX_FOG_VOLUMES`` (a flat water mesh only: its outline is the box's top).
+      ``absorption`` (linear RGB, each channel 0 to ``MAX_WATER_ABSORPTION``; (1, 1, 1) by
+      default: every colour alike) is each channel's share of that density: real water takes
+      red within a few metres, green slower and blue slowest (Pope and Fry's pure water:
+      about 0.35, 0.06 and 0.01 per metre at 650, 550 and 450 nm), so with ``absorption=(3,
+      1, 0.5)`` a white stone 2 m down looks blue-green and the light reaching it comes down
+      tinted so.  A channel's light through d metres keeps exp(-fog_density x its share x
+      d), on the view's way (what is seen becomes ``fog_color`` as its light goes) and on
+      the light's (the suns', the lamps', the sky's, and the light shafts'), as HDRP's water
+      takes its absorption and Crest its colour with depth.
     - **Caustics** (``caustics``, 0 by default: none; 1: all of them): the suns' light through
       the waves is bent by each one and gathers where the bent rays converge, so what lies
       under the water, inside its outline and down to ``depth``, is lit in the bright
@@ -93,6 +103,7 @@ class Water(TrackedComponent):
     fog_density: float = 0.0
     fog_color: Any = field(default_factory=lambda: glm.vec4(0.02, 0.12, 0.14, 1.0))
     depth: float = 10.0
+    absorption: Any = (1.0, 1.0, 1.0)
     caustics: float = 0.0
 
     def _validate(self, name: str, value: Any) -> Any:
@@ -104,6 +115,12 @@ class Water(TrackedComponent):
             return finite(self, name, value, low=MIN_FOG_VOLUME_SIDE, high=MAX_FOG_VOLUME_SIDE)
         if name == "caustics":
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "absorption":
+            v = vec3(self, name, value, low=0.0)
+            if max(v) > MAX_WATER_ABSORPTION:
+                raise ComponentValueError(f"Water.absorption must have every channel <= {MAX_WATER_ABSORPTION:g} "
+                                          f"(its share of fog_density), got {value!r}")
+            return v
         if name == "ior":
             return finite(self, name, value, low=1.0, high=4.0)
         if name == "speed":

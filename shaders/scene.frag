@@ -375,8 +375,8 @@ vec3 screen_found(Surface s, vec3 origin, vec3 direction, float spread, vec3 oth
     // The view fogged what it drew along the whole way to it; this surface's own fog (main's
     // fog_view) is put over what it lets through and reflects, so the stretch to the surface
     // is taken out of the find first (exactly so where the ray runs on as the eye's).
-    float kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
-    drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, 1e-4);
+    vec3 kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
+    drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, vec3(1e-4));
 #endif
     drawn += otherwise * uncovered;  // (a reflection level's sky under what it drew there)
     return mix(otherwise, drawn, found.a);
@@ -521,7 +521,9 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
     float dist = length(d);
     vec3 l = d / max(dist, 1e-4);
     float nl = max(dot(s.normal, l), 0.0);
-    float falloff = lamp_falloff(i, dist, l) * water_light(s.position, l, dist);  // (a water's body on its way)
+    float falloff = lamp_falloff(i, dist, l);
+    // Its colour as it arrives: dimmed channel by channel by a water's body on its way.
+    vec3 color = lights.point_color[i].rgb * water_light(s.position, l, dist);
     vec3 face = vec3(1.0);   // a rectangle's image on its face as its diffuse light sees it (rect_face)
 #ifdef RECT_LIGHTS
     // A rectangle (rect_lights.glsl): its light from all of it above the horizon, its
@@ -554,7 +556,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
 #else
         const vec3 behind_cookie = vec3(1.0);
 #endif
-        lit += through * behind * lights.point_color[i].rgb * behind_cookie * behind_face * falloff
+        lit += through * behind * color * behind_cookie * behind_face * falloff
                * point_shadow(i, point_behind);
     }
 #endif
@@ -569,7 +571,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
 #endif
         lit += diffuse * face * subsurface_diffuse(rectangle ? nl : dot(s.normal, l), point_shadow(i, point_lit),
                                                    point_shadow(i, point_under))
-               * lights.point_color[i].rgb * under_cookie * falloff;
+               * color * under_cookie * falloff;
     }
 #endif
     if (nl > 0.0 && falloff > 0.0) {
@@ -578,7 +580,7 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
 #else
         const vec3 cookie = vec3(1.0);
 #endif
-        vec3 arriving = lights.point_color[i].rgb * cookie * falloff * point_shadow(i, point_lit);
+        vec3 arriving = color * cookie * falloff * point_shadow(i, point_lit);
 #ifdef ANISOTROPY
         vec3 highlight = anisotropic_specular(s.normal, l, s.to_eye, s.f0) * (nl * s.energy_compensation);
 #else
@@ -652,9 +654,6 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     // no shadow (MeshRef.receives_shadows: its code's NO_RECEIVE_BIT, visibility.glsl).
     bool shadowed = !receives_no_shadow(v_tint.w);
     vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
-#ifdef FOG_WATER
-    for (int i = 0; i < lights.counts.x; ++i) directional_lit[i] *= water_light(s.position, -lights.directional_dir[i].xyz, 1e30);
-#endif
 #ifdef CAUSTICS
     // The suns' light through a rippled water gathered by its waves (caustics.glsl), over the
     // pixel's footprint (taken here, in uniform control flow: the caustic returns early off the water).
@@ -692,8 +691,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     for (int i = 0; i < lights.counts.x; ++i) {
         vec3 l = -lights.directional_dir[i].xyz;
         float nl = max(dot(s.normal, l), 0.0);
+        // Its colour as it arrives: dimmed channel by channel by a water's body on its way.
+        vec3 sun_color = lights.directional_color[i].rgb * water_light(s.position, l, 1e30);
 #ifdef DIFFUSE_TRANSMISSION
-        total += through * (max(-dot(s.normal, l), 0.0) * directional_behind[i] CLOUDED(i)) * lights.directional_color[i].rgb;
+        total += through * (max(-dot(s.normal, l), 0.0) * directional_behind[i] CLOUDED(i)) * sun_color;
 #endif
 #ifdef SUBSURFACE
         float under = directional_lit[i];  // (where the light reaches the point, its own shadow)
@@ -706,10 +707,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 #endif
         }
         total += diffuse * subsurface_diffuse(dot(s.normal, l), directional_lit[i] PARALLAX_LIT(l),
-                                              under PARALLAX_LIT(l)) * lights.directional_color[i].rgb;
+                                              under PARALLAX_LIT(l)) * sun_color;
 #endif
         if (nl > 0.0) {
-            vec3 arriving = lights.directional_color[i].rgb * nl * directional_lit[i] PARALLAX_LIT(l);
+            vec3 arriving = sun_color * nl * directional_lit[i] PARALLAX_LIT(l);
 #ifdef ANISOTROPY
             vec3 highlight = anisotropic_specular(s.normal, l, s.to_eye, s.f0) * s.energy_compensation;
 #else
@@ -723,11 +724,11 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
             highlight_light += highlight * arriving;
 #ifdef CLEARCOAT
             coat_light += ggx_specular(coat_normal, l, s.to_eye, vec3(0.04), coat_roughness)
-                          * (max(dot(coat_normal, l), 0.0) * directional_lit[i]) * lights.directional_color[i].rgb
+                          * (max(dot(coat_normal, l), 0.0) * directional_lit[i]) * sun_color
                           PARALLAX_LIT(l);
 #endif
 #ifdef SHEEN
-            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * directional_lit[i] * lights.directional_color[i].rgb
+            sheen_light += sheen_lobe(s.normal, l, s.to_eye) * directional_lit[i] * sun_color
                            PARALLAX_LIT(l);
 #endif
         }
@@ -1156,7 +1157,7 @@ void main() {
         reflect_added = mix(lit_added, reflect_added, metal_share);
     }
 #endif
-    float kept = 1.0;
+    vec3 kept = vec3(1.0);
 #ifdef FOG
     kept *= exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, v_world_pos), v_world_pos));
 #endif

@@ -5,7 +5,8 @@
 // and the VOLUMETRIC_LAMPS lamps' (PointLight.volumetric; MAX_VOLUMETRIC_LAMPS at most).
 // At each step t (the step's start moved by ``start``, a different offset each texel):
 //   density(x) x exp(-fog_depth(origin, x)) x shadow(x) x step
-// (the air's density, what reaches the eye of what it scatters there, whether the sun reaches
+// (the air's density, what reaches the eye of what it scatters there (in each channel: a
+// water's body takes some colours faster, Water.absorption), whether the sun reaches
 // it: its shadow map and cascades, read with one bilinear comparison, SHADOW_SINGLE_TAP, as
 // the steps' offsets and the filter soften the shafts' edges as a wider filter would, and
 // under CLOUD_SHADOWS the share a CloudLayer's cloud on the way lets through, and under
@@ -77,8 +78,8 @@ void main() {
     // carried from point to point by the air between them (one exponential a step; the
     // density at a point times the step, exact where the fog is the same everywhere).
     vec3 x = origin + dir * (start * step_length);
-    float seen = exp(-fog_depth(origin, x));
-    float sum = 0.0;
+    vec3 seen = exp(-fog_depth(origin, x));
+    vec3 sum = vec3(0.0);
 #ifdef DIRECTIONAL_SHADOWS
     // The sun's shadow where its level map holds the point and the filter's taps about it,
     // else 1 (outside the map's fit no caster stands between the point and the sun; the
@@ -129,11 +130,11 @@ void main() {
 #endif
         int end = min(base + stride, STEPS);
         for (int i = base; i < end; ++i) {
-            float density = fog_density(x);
-            float lit = 1.0;
+            vec3 density = fog_extinction(x);
+            vec3 lit = vec3(1.0);
 #ifdef DIRECTIONAL_SHADOWS
             bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
-            lit = held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0;
+            lit = vec3(held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0);
             at += at_step;
 #endif
 #ifdef CLOUD_SHADOWS

@@ -309,7 +309,7 @@ class PrepareSystem(esper.Processor):
             water = self.world.try_get(entity, Water)
             if water is None or water.fog_density <= 0.0:
                 continue
-            fields = (water.fog_density, tuple(water.fog_color), water.depth)
+            fields = (water.fog_density, tuple(water.fog_color), water.depth, tuple(water.absorption))
             body = old.get(entity)
             if body is not None and body[1] is state and body[2] == fields:
                 bodies.append(body)
@@ -326,7 +326,7 @@ class PrepareSystem(esper.Processor):
             centre = glm.vec3(*np.asarray(state.outline, np.float64)[:, :3].mean(axis=0)) + down * (water.depth / 2)
             reach = 0.5 * max(water.depth, float(np.ptp(np.asarray(state.outline)[:, :3], axis=0).max()))
             bodies.append((entity, state, fields, water_body_row(state.outline, down, water.depth, water.fog_color,
-                                                                 water.fog_density), centre, reach))
+                                                                 water.fog_density, water.absorption), centre, reach))
         return tuple(bodies)
 
     def _sky(self) -> bool:

@@ -17,6 +17,7 @@ from pyglm import glm
 from components import ComponentValueError, Fog, FogVolume, Transform, VolumetricFog
 from components.limits import MAX_FOG_VOLUMES
 from engine.core.errors import FogLimitWarning
+from engine.render.fog import ROW_FLOATS
 from tests.support import pixel_rays, srgb_to_linear
 from tests.test_fog import FOG_COLOR, MIRROR_Z, _close, _depth, _floor_hits, _scene
 
@@ -141,7 +142,7 @@ def test_past_the_limit_the_nearest_fog_and_the_rest_are_said_and_counted(scene)
         runner.frame()
     assert runner.stats.fog_volumes_cut == 1
     assert runner.engine.renderer.fog.volume_count == MAX_FOG_VOLUMES
-    rows = np.array(runner.engine.renderer.fog.block[16:], np.float64).reshape(-1, 20)
+    rows = np.array(runner.engine.renderer.fog.block[16:], np.float64).reshape(-1, ROW_FLOATS)
     centres = [np.linalg.inv(row[:16].reshape(4, 4).T)[:3, 3] for row in rows]   # (GL's columns)
     assert sorted(round(c[2], 3) for c in centres) == sorted(round(4.0 - 1.5 * k, 3) for k in range(MAX_FOG_VOLUMES))
     nearest = [e for e, (v,) in runner.world.query(FogVolume)][0]
@@ -236,7 +237,7 @@ def test_a_still_volume_is_packed_once_and_a_moved_one_again(scene):
     (entity, volume), = runner.world.query_one(FogVolume)
     runner.world.get(entity, Transform).position = glm.vec3(3.0, 0.6, 1.0)
     runner.frame()
-    rows = np.array(runner.engine.renderer.fog.block[16:], np.float64).reshape(-1, 20)
+    rows = np.array(runner.engine.renderer.fog.block[16:], np.float64).reshape(-1, ROW_FLOATS)
     np.testing.assert_allclose(np.linalg.inv(rows[0, :16].reshape(4, 4).T)[:3, 3], (3.0, 0.6, 1.0), atol=1e-5)
     volume.density = 0.2
     runner.frame()

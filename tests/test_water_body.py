@@ -1,7 +1,9 @@
-"""A water's body (Water.fog_density, fog_color, depth): the light's way through the water
-below the surface, down to ``depth`` under its outline, fogged at one density.  Measured in
-rendered frames against the same frame without it: what is seen keeps exp(-density x the
-length of its way in the box) of its light, the rest becomes the fog's colour."""
+"""A water's body (Water.fog_density, fog_color, depth, absorption): the light's way through
+the water below the surface, down to ``depth`` under its outline, fogged at one density.
+Measured in rendered frames against the same frame without it: what is seen keeps, in each
+channel, exp(-density x the channel's absorption x the length of its way in the box) of its
+light, the rest becomes the fog's colour; each test is run with grey water (absorption 1 in
+every channel) and with water that takes red fastest and blue slowest (``TINTED``)."""
 from __future__ import annotations
 
 import math
@@ -31,12 +33,15 @@ from tests.test_water import FLAT, SKY, pool, render
 
 FOG = (0.1, 0.3, 0.35)
 DENSITY = 0.4
+GREY, TINTED = (1.0, 1.0, 1.0), (2.5, 1.0, 0.3)
+ABSORPTIONS = pytest.mark.parametrize("absorption", [GREY, TINTED], ids=["grey", "tinted"])
 
 
-def murky(world, eye, target, density: float, *, depth: float = 10.0, reflect_rate: float = 1.0) -> int:
-    """``pool``'s pond (its floor a metre down), its water fogged by ``density``, with a white
-    wall standing in the water four metres off along -Z and a red block on the bank beside
-    the pond; the water's entity."""
+def murky(world, eye, target, density: float, *, depth: float = 10.0, reflect_rate: float = 1.0,
+          absorption: tuple[float, float, float] = GREY) -> int:
+    """``pool``'s pond (its floor a metre down), its water fogged by ``density`` (each channel
+    by its share, ``absorption``), with a white wall standing in the water four metres off
+    along -Z and a red block on the bank beside the pond; the water's entity."""
     pool(world, True, eye, target, reflect_rate=reflect_rate)
     world.spawn(Transform(position=(0.0, -0.5, -4.0)), MeshRef(box((6.0, 0.98, 0.2))),
                 Material(color=(0.25, 0.25, 0.25, 1.0), roughness=1.0), Emissive(1.0))
@@ -44,17 +49,24 @@ def murky(world, eye, target, density: float, *, depth: float = 10.0, reflect_ra
     world.get(water, Water).fog_density = density
     world.get(water, Water).fog_color = FOG
     world.get(water, Water).depth = depth
+    world.get(water, Water).absorption = absorption
     return water
 
 
-def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_through_the_water(scene):
+def kept_through(metres: float, absorption: tuple[float, float, float]) -> np.ndarray:
+    """What of each channel's light ``metres`` of the water keep (Beer-Lambert, channel by channel)."""
+    return np.exp(-DENSITY * np.array(absorption) * metres)
+
+
+@ABSORPTIONS
+def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_through_the_water(scene, absorption):
     """Under the surface looking along it at a wall four metres off in the water: each pixel
     of the wall is what it gives off, plus the sky's light on it dimmed by the water over it
     (exp(-density x its depth)), all times exp(-density x d), plus the fog's colour x (1 -
     that), d the length of the pixel's ray from the eye to the wall.  (The clear frame's wall
     is its emission and the uniform sky's light on it, E x (1 + SKY).)"""
     eye, target = (0.0, -0.5, 0.0), (0.0, -0.5, -4.0)
-    runner, fogged = render(scene, lambda w: murky(w, eye, target, DENSITY), size=(64, 48))
+    runner, fogged = render(scene, lambda w: murky(w, eye, target, DENSITY, absorption=absorption), size=(64, 48))
     _, clear = render(scene, lambda w: murky(w, eye, target, 0.0), size=(64, 48))
     assert runner.engine.renderer.fog.volume_count == 1
     checked = 0
@@ -68,8 +80,8 @@ def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_thr
             hit = view.eye + direction * t
             if not (-0.95 < hit.y < -0.05 and abs(hit.x) < 2.5):
                 continue  # off the wall, or too near its edges
-            kept = math.exp(-DENSITY * t)
-            lit = clear[row, column] / (1.0 + SKY) * (1.0 + SKY * math.exp(DENSITY * hit.y))  # hit.y: -its depth
+            kept = kept_through(t, absorption)
+            lit = clear[row, column] / (1.0 + SKY) * (1.0 + SKY * kept_through(-hit.y, absorption))  # -hit.y: its depth
             expected = lit * kept + np.array(FOG) * (1.0 - kept)
             np.testing.assert_allclose(fogged[row, column], expected, atol=0.012, err_msg=f"{row}, {column}")
             assert np.abs(fogged[row, column] - clear[row, column]).max() > 0.1  # the fog is seen
@@ -77,7 +89,8 @@ def test_under_the_water_a_thing_fades_into_the_fog_colour_with_its_distance_thr
     assert checked > 15
 
 
-def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(scene):
+@ABSORPTIONS
+def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(scene, absorption):
     """Looking straight down through a pond that reflects nothing (reflect_rate 0): the floor
     a metre down keeps exp(-density) of its light on the way up to the eye, and the sky's
     light on it came down through the same metre; with the body only half a metre deep
@@ -87,7 +100,7 @@ def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(sc
 
     def build(density: float, depth: float = 10.0):
         def b(world):
-            murky(world, eye, target, density, depth=depth, reflect_rate=0.0)
+            murky(world, eye, target, density, depth=depth, reflect_rate=0.0, absorption=absorption)
             world.spawn(Transform(position=(0.0, 0.25, -0.6), rotation=FLAT), MeshRef(quad(0.4, 0.4)),
                         Material(color=(0.7, 0.05, 0.05, 1.0), roughness=1.0), Emissive(1.0))
         return b
@@ -97,7 +110,7 @@ def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(sc
     _, clear = render(scene, build(0.0))
     col, row = runner.project((0.0, -1.0, 0.0))
     for image, through in ((fogged, 1.0), (shallow, 0.5)):
-        kept = math.exp(-DENSITY * through)
+        kept = kept_through(through, absorption)
         lit = clear[row, col] / (1.0 + SKY) * (1.0 + SKY * kept)  # its emission, and the sky's light through the water
         np.testing.assert_allclose(image[row, col], lit * kept + np.array(FOG) * (1.0 - kept), atol=0.01)
     col, row = runner.project((0.0, 0.25, -0.6))
@@ -105,17 +118,19 @@ def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(sc
     np.testing.assert_array_equal(fogged[row, col], clear[row, col])
 
 
-@pytest.mark.parametrize("light", ["sun", "lamp", "sky"])
-def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light):
+@ABSORPTIONS
+@pytest.mark.parametrize("light", ["sun", "lamp", "panel", "sky"])
+def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light, absorption):
     """A grey floor a metre under a murky pond, lit by one light: a sun straight down, a lamp
-    a metre over the pond, or the uniform sky alone.  Its light came down through the metre
+    a metre over the pond, a small panel there facing down (a rectangle light's own falloff:
+    its light through the water lost once), or the uniform sky alone.  Its light came down through the metre
     of water (exp(-density)), and keeps exp(-density) on the way up to the eye looking
     straight down (the pond reflecting nothing)."""
     eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
 
     def build(density: float):
         def b(world):
-            murky(world, eye, target, density, reflect_rate=0.0)
+            murky(world, eye, target, density, reflect_rate=0.0, absorption=absorption)
             for entity, _ in world.query_one(Emissive):
                 world.remove_component(entity, Emissive)
                 world.get(entity, Material).color = (0.6, 0.6, 0.6, 1.0)
@@ -125,6 +140,10 @@ def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light
                 world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
             if light == "lamp":
                 world.spawn(Transform(position=(0.0, 1.0, 0.0)), PointLight(intensity=5.0, range=20.0))
+            elif light == "panel":  # (its front, -Z, turned down)
+                down = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
+                world.spawn(Transform(position=(0.0, 1.0, 0.0), rotation=down),
+                            PointLight(intensity=5.0, range=20.0, rectangle=(0.2, 0.2)))
             elif light == "sun":
                 world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.0), intensity=1.0))
         return b
@@ -133,7 +152,7 @@ def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light
     _, clear = render(scene, build(0.0))
     col, row = runner.project((0.0, -1.0, 0.0))
     assert 0.1 < clear[row, col].max() < 0.9, clear[row, col]  # lit, not clipped
-    kept = math.exp(-DENSITY)
+    kept = kept_through(1.0, absorption)
     np.testing.assert_allclose(fogged[row, col], clear[row, col] * kept * kept + np.array(FOG) * (1.0 - kept),
                                atol=0.01)
 

@@ -14,7 +14,10 @@ A volume is an ellipsoid: the block holds the matrix that takes a world point in
 ball (``volume_to_unit``) and its colour and density at the centre; the shader integrates its
 density, falling as 1 - r^2, along each stretch in closed form.  A water's body
 (``Water.fog_density``) is a box of one density in a volume's row, its density negated
-(``water_body_row``): the length of each stretch inside it, times its density.
+(``water_body_row``): the length of each stretch inside it, times its density.  Each row
+carries its channels' shares of its density too (``volume_absorption``: a water's
+``Water.absorption``, a volume's 1 in each), so a stretch's optical depth is a colour: what
+is seen through water keeps more blue than red, and so does the light coming down through it.
 """
 from __future__ import annotations
 
@@ -31,8 +34,11 @@ from components.tracking import raw_field
 from engine.render.bindings import FOG_BINDING, bind_uniform_block
 
 # Four vec4s (colour and sky share; density, falloff, base height; the sun's direction (towards
-# it); its light x the sun scatter), then per volume its matrix and its colour and density.
-FOG_BLOCK_BYTES = 64 + (64 + 16) * MAX_FOG_VOLUMES
+# it); its light x the sun scatter), then per volume its matrix, its colour and density, and
+# its channels' shares of that density (each an array of its own in the block).
+FOG_BLOCK_BYTES = 64 + (64 + 16 + 16) * MAX_FOG_VOLUMES
+ROW_FLOATS = 24  # a volume's row: its matrix (16), colour and density (4), channels' shares (4)
+_EVERY_CHANNEL = (1.0, 1.0, 1.0, 0.0)  # a FogVolume's shares: its density in every channel alike
 _NO_FOG = (0.0,) * 16
 
 
@@ -52,9 +58,10 @@ def volume_to_unit(volume: FogVolume, world: glm.mat4) -> np.ndarray:
 def volume_rows(volumes: Sequence[tuple[FogVolume, glm.mat4]]) -> tuple[float, ...]:
     """The block's rows of ``volumes`` (each with its entity's world matrix; those with no
     density left out): per volume its ``volume_to_unit`` matrix, then its colour and density,
-    20 floats."""
+    then its channels' shares (1 each: mist takes every colour alike), ``ROW_FLOATS`` floats."""
     return tuple(float(v) for volume, world in volumes if volume.density > 0.0 for v in (
-        *volume_to_unit(volume, world), volume.color.x, volume.color.y, volume.color.z, volume.density))
+        *volume_to_unit(volume, world), volume.color.x, volume.color.y, volume.color.z, volume.density,
+        *_EVERY_CHANNEL))
 
 
 def box_to_unit(top: np.ndarray, down: glm.vec3, depth: float) -> np.ndarray:
@@ -72,12 +79,14 @@ def box_to_unit(top: np.ndarray, down: glm.vec3, depth: float) -> np.ndarray:
     return to_unit.T.astype(np.float32).ravel()   # (GL's columns)
 
 
-def water_body_row(top: np.ndarray, down: glm.vec3, depth: float, color: glm.vec4, density: float) -> tuple[float, ...]:
-    """A water body's row of the block, 20 floats as a volume's: its ``box_to_unit`` matrix,
-    its colour and its density negated (fog.glsl: a box of that density throughout, not a
-    ball falling off)."""
+def water_body_row(top: np.ndarray, down: glm.vec3, depth: float, color: glm.vec4, density: float,
+                   absorption: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> tuple[float, ...]:
+    """A water body's row of the block, ``ROW_FLOATS`` floats as a volume's: its
+    ``box_to_unit`` matrix, its colour and its density negated (fog.glsl: a box of that
+    density throughout, not a ball falling off), and each channel's share of the density
+    (``Water.absorption``)."""
     return (*(float(v) for v in box_to_unit(top, down, depth)), float(color.x), float(color.y), float(color.z),
-            -float(density))
+            -float(density), *(float(share) for share in absorption), 0.0)
 
 
 class FogBlock:
@@ -97,8 +106,8 @@ class FogBlock:
         volumes' ``rows`` (``volume_rows``; at most ``MAX_FOG_VOLUMES``: the caller chose them)
         into the block where it differs from what it holds; True when it did (every view's
         fogged pixels change).  Compared as plain floats: the prepare stage asks every frame."""
-        if len(rows) > 20 * MAX_FOG_VOLUMES:
-            raise ValueError(f"{len(rows) // 20} fog volumes: the block holds {MAX_FOG_VOLUMES}")
+        if len(rows) > ROW_FLOATS * MAX_FOG_VOLUMES:
+            raise ValueError(f"{len(rows) // ROW_FLOATS} fog volumes: the block holds {MAX_FOG_VOLUMES}")
         if fog is None or fog.density <= 0.0:
             values = _NO_FOG
         else:
@@ -110,28 +119,30 @@ class FogBlock:
                         color.x * k * tint[0], color.y * k * tint[1], color.z * k * tint[2], 0.0)
             values = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
                       fog.height, fog.aerial_perspective, *glow)
-        count = len(rows) // 20
+        count = len(rows) // ROW_FLOATS
         if values == self._values and rows == self._volumes:
             return False
         self._values, self._volumes = values, rows
         block = np.zeros(FOG_BLOCK_BYTES // 4, np.float32)
         block[:16] = values
-        matrices = np.array(rows, np.float32).reshape(-1, 20)
+        matrices = np.array(rows, np.float32).reshape(-1, ROW_FLOATS)
         block[16:16 + 16 * count] = matrices[:, :16].ravel()
         at = 16 + 16 * MAX_FOG_VOLUMES
-        block[at:at + 4 * count] = matrices[:, 16:].ravel()
+        block[at:at + 4 * count] = matrices[:, 16:20].ravel()
+        at += 4 * MAX_FOG_VOLUMES
+        block[at:at + 4 * count] = matrices[:, 20:24].ravel()
         self.ubo.write(block.tobytes())
         self.defines = () if values[4] <= 0.0 and not count else tuple((name, value) for name, value, on in (
             ("FOG", "1", True), ("FOG_FALLOFF", "1", values[5] > 0.0), ("FOG_GLOW", "1", any(values[12:15])),
             ("FOG_AERIAL", "1", values[4] > 0.0 and values[7] > 0.0),
             ("FOG_VOLUMES", str(count), bool(count)),
-            ("FOG_WATER", "1", any(rows[at + 19] < 0.0 for at in range(0, len(rows), 20)))) if on)
+            ("FOG_WATER", "1", any(rows[at + 19] < 0.0 for at in range(0, len(rows), ROW_FLOATS)))) if on)
         return True
 
     @property
     def volume_count(self) -> int:
         """The FogVolumes the block holds (with a density)."""
-        return len(self._volumes) // 20
+        return len(self._volumes) // ROW_FLOATS
 
     @property
     def block(self) -> tuple[float, ...]:

@@ -26,7 +26,10 @@
 // in closed form and without the cancellation of the expanded cubic far off.  Each stretch's
 // fog is the height fog's and every volume's: its depth their sum, what the air adds their
 // colours weighed by their depths (fog_way: exact where they share a colour, a blend where
-// not, whichever lies nearer).
+// not, whichever lies nearer).  An optical depth is a colour: a volume's density in each
+// channel is its density times that channel's share (volume_absorption: a water's
+// Water.absorption, a mist's 1 in each), so water seen through, and light come down through
+// it, keeps more of one colour than another; the height fog takes every channel alike.
 #ifdef FOG
 layout(std140) uniform Fog {
     vec4 fog_color;   // rgb: the fog's linear colour; a: how much of its fog the sky takes
@@ -36,7 +39,15 @@ layout(std140) uniform Fog {
     vec4 fog_glow;    // rgb: the sun's light x Fog.sun_scatter (0: no glow)
     mat4 volume_to_unit[MAX_FOG_VOLUMES];  // world -> each FogVolume's unit ball (engine/render/fog.py)
     vec4 volume_color[MAX_FOG_VOLUMES];    // rgb: its linear colour, a: its density at the centre (per metre)
+    vec4 volume_absorption[MAX_FOG_VOLUMES];  // rgb: each channel's share of that density
 } fog;
+
+// A stretch of air: its optical depth in each channel, and the light it adds times that
+// depth (each fog's light times its own depth: the weights fog_over divides out).
+struct FogWay {
+    vec3 light;
+    vec3 depth;
+};
 
 #define FOG_MAX_EXPONENT 80.0   // exp(80) ~ 5.5e34: past that the air is opaque anyway
 
@@ -96,86 +107,92 @@ float box_depth(vec3 p, vec3 v, float reach) {
 }
 
 // The volumes' fog along the line from a along the unit direction r for ``reach`` metres:
-// rgb their colours times their depths, a the depths' sum.
-vec4 volumes_along(vec3 a, vec3 r, float reach) {
-    vec4 sum = vec4(0.0);
+// their depths in each channel, and their colours times those depths.
+FogWay volumes_along(vec3 a, vec3 r, float reach) {
+    FogWay sum = FogWay(vec3(0.0), vec3(0.0));
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         mat4 to_unit = fog.volume_to_unit[k];
         float density = fog.volume_color[k].a;
         vec3 p = (to_unit * vec4(a, 1.0)).xyz, v = mat3(to_unit) * r;
-        float depth = density >= 0.0 ? density * ball_depth(p, v, reach) : -density * box_depth(p, v, reach);
-        sum += vec4(fog.volume_color[k].rgb * depth, depth);
+        vec3 depth = (density >= 0.0 ? density * ball_depth(p, v, reach) : -density * box_depth(p, v, reach))
+                     * fog.volume_absorption[k].rgb;
+        sum.light += fog.volume_color[k].rgb * depth;
+        sum.depth += depth;
     }
     return sum;
 }
 
 #ifdef FOG_WATER
 // What of the light a water's body (Water.fog_density, a volume of negative density) leaves
-// on its way to ``x``: from along the unit direction r, ``reach`` metres off (the suns', 1e30;
-// a lamp's, its distance), exp(-density x the length of the way in each body).  The
-// ellipsoid volumes (mist) take none: their air is thin.
-float water_light(vec3 x, vec3 r, float reach) {
-    float depth = 0.0;
+// on its way to ``x``, in each channel: from along the unit direction r, ``reach`` metres off
+// (the suns', 1e30; a lamp's, its distance), exp(-density x the channel's share x the length
+// of the way in each body).  The ellipsoid volumes (mist) take none: their air is thin.
+vec3 water_light(vec3 x, vec3 r, float reach) {
+    vec3 depth = vec3(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         float density = fog.volume_color[k].a;
         if (density >= 0.0) continue;
         mat4 to_unit = fog.volume_to_unit[k];
-        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * r, reach);
+        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * r, reach)
+                 * fog.volume_absorption[k].rgb;
     }
-    return exp(-min(depth, FOG_MAX_EXPONENT));
+    return exp(-min(depth, vec3(FOG_MAX_EXPONENT)));
 }
 
-// What of the sky's light a water's body leaves at ``x``: along the way up to its surface
-// (the box's top: its unit cube's -w face, the third row of its matrix the way down).
-float water_skylight(vec3 x) {
-    float depth = 0.0;
+// What of the sky's light a water's body leaves at ``x``, in each channel: along the way up
+// to its surface (the box's top: its unit cube's -w face, the third row of its matrix the way down).
+vec3 water_skylight(vec3 x) {
+    vec3 depth = vec3(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         float density = fog.volume_color[k].a;
         if (density >= 0.0) continue;
         mat4 to_unit = fog.volume_to_unit[k];
         vec3 up = -normalize(vec3(to_unit[0][2], to_unit[1][2], to_unit[2][2]));
-        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * up, 1e30);
+        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * up, 1e30)
+                 * fog.volume_absorption[k].rgb;
     }
-    return exp(-min(depth, FOG_MAX_EXPONENT));
+    return exp(-min(depth, vec3(FOG_MAX_EXPONENT)));
 }
 #else  // (no water's body among the volumes: FOG_WATER builds only, engine/render/fog.py)
-float water_light(vec3 x, vec3 r, float reach) { return 1.0; }
-float water_skylight(vec3 x) { return 1.0; }
+vec3 water_light(vec3 x, vec3 r, float reach) { return vec3(1.0); }
+vec3 water_skylight(vec3 x) { return vec3(1.0); }
 #endif
 
-// The volumes' density at ``x`` (per metre).
-float volumes_density(vec3 x) {
-    float sum = 0.0;
+// The volumes' density at ``x`` in each channel (per metre).
+vec3 volumes_extinction(vec3 x) {
+    vec3 sum = vec3(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         vec3 p = (fog.volume_to_unit[k] * vec4(x, 1.0)).xyz;
         float density = fog.volume_color[k].a;
-        sum += density >= 0.0 ? density * max(1.0 - dot(p, p), 0.0)
-                              : (all(lessThanEqual(abs(p), vec3(1.0))) ? -density : 0.0);
+        sum += (density >= 0.0 ? density * max(1.0 - dot(p, p), 0.0)
+                               : (all(lessThanEqual(abs(p), vec3(1.0))) ? -density : 0.0))
+               * fog.volume_absorption[k].rgb;
     }
     return sum;
 }
 #else
-vec4 volumes_along(vec3 a, vec3 r, float reach) { return vec4(0.0); }
-float volumes_density(vec3 x) { return 0.0; }
-float water_light(vec3 x, vec3 r, float reach) { return 1.0; }
-float water_skylight(vec3 x) { return 1.0; }
+FogWay volumes_along(vec3 a, vec3 r, float reach) { return FogWay(vec3(0.0), vec3(0.0)); }
+vec3 volumes_extinction(vec3 x) { return vec3(0.0); }
+vec3 water_light(vec3 x, vec3 r, float reach) { return vec3(1.0); }
+vec3 water_skylight(vec3 x) { return vec3(1.0); }
 #endif
 
-// The fog's optical depth along the straight stretch from a to b: the height fog's and the
-// volumes'.
-float fog_depth(vec3 a, vec3 b) {
+// The fog's optical depth in each channel along the straight stretch from a to b: the height
+// fog's and the volumes'.
+vec3 fog_depth(vec3 a, vec3 b) {
     float reach = length(b - a);
-    return height_fog_depth(a, b) + (reach > 0.0 ? volumes_along(a, (b - a) / reach, reach).a : 0.0);
+    return height_fog_depth(a, b) + (reach > 0.0 ? volumes_along(a, (b - a) / reach, reach).depth : vec3(0.0));
 }
 
-// The air's density at ``x`` (per metre): what fog_depth sums along a stretch.
-float fog_density(vec3 x) {
+// The air's density at ``x`` in each channel (per metre): what fog_depth sums along a stretch,
+// and what a light shaft's march scatters and loses there.
+vec3 fog_extinction(vec3 x) {
 #ifdef FOG_FALLOFF
     float height = fog.fog_params.x * exp(min(-fog.fog_params.y * (x.y - fog.fog_params.z), FOG_MAX_EXPONENT));
 #else
     float height = fog.fog_params.x;
 #endif
-    return height + volumes_density(x);
+    return height + volumes_extinction(x);
 }
 
 #if defined(FOG_AERIAL) && !defined(FOG_SKY)
@@ -206,24 +223,18 @@ vec3 fog_light(vec3 dir) {
 #endif
 }
 
-// A stretch of air: its optical depth, and the light it adds times that depth (each fog's
-// light times its own depth: the weights fog_over divides out).
-struct FogWay {
-    vec3 light;
-    float depth;
-};
-
 // The stretch from a to b, seen looking along the unit direction ``dir``.
 FogWay fog_way(vec3 a, vec3 b, vec3 dir) {
     float height = height_fog_depth(a, b);
     float reach = length(b - a);
-    vec4 volumes = reach > 0.0 ? volumes_along(a, (b - a) / reach, reach) : vec4(0.0);
-    return FogWay(fog_light(dir) * height + volumes.rgb, height + volumes.a);
+    FogWay volumes = reach > 0.0 ? volumes_along(a, (b - a) / reach, reach) : FogWay(vec3(0.0), vec3(0.0));
+    return FogWay(fog_light(dir) * height + volumes.light, height + volumes.depth);
 }
 
-// ``color`` seen through ``way``.
+// ``color`` seen through ``way``, channel by channel: where a channel's depth is 0 the colour
+// (the fog's colour there, 0 / tiny, is any finite number: mix by 1 takes none of it).
 vec3 fog_over(vec3 color, FogWay way) {
-    return way.depth > 0.0 ? mix(way.light / way.depth, color, exp(-way.depth)) : color;
+    return mix(way.light / max(way.depth, vec3(1e-30)), color, exp(-way.depth));
 }
 
 // ``color`` seen along the unit direction ``dir`` through the height fog of optical depth ``depth``.
@@ -251,23 +262,22 @@ vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) {
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) {
     color = mix(color, fogged(color, height_fog_depth_to_sky(a, r), r), fog.fog_color.a);
 #ifdef FOG_VOLUMES
-    vec4 volumes = volumes_along(a, r, 1e30);
-    color = fog_over(color, FogWay(volumes.rgb, volumes.a));
+    color = fog_over(color, volumes_along(a, r, 1e30));
 #endif
     return color;
 }
 #else
 struct FogWay {
     vec3 light;
-    float depth;
+    vec3 depth;
 };
-float fog_depth(vec3 a, vec3 b) { return 0.0; }
-float fog_density(vec3 x) { return 0.0; }
-FogWay fog_way(vec3 a, vec3 b, vec3 dir) { return FogWay(vec3(0.0), 0.0); }
+vec3 fog_depth(vec3 a, vec3 b) { return vec3(0.0); }
+vec3 fog_extinction(vec3 x) { return vec3(0.0); }
+FogWay fog_way(vec3 a, vec3 b, vec3 dir) { return FogWay(vec3(0.0), vec3(0.0)); }
 vec3 fog_over(vec3 color, FogWay way) { return color; }
 vec3 fogged(vec3 color, float depth, vec3 dir) { return color; }
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) { return color; }
-float water_light(vec3 x, vec3 r, float reach) { return 1.0; }
-float water_skylight(vec3 x) { return 1.0; }
+vec3 water_light(vec3 x, vec3 r, float reach) { return vec3(1.0); }
+vec3 water_skylight(vec3 x) { return vec3(1.0); }
 #endif
