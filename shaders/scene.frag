@@ -375,8 +375,8 @@ vec3 screen_found(Surface s, vec3 origin, vec3 direction, float spread, vec3 oth
     // The view fogged what it drew along the whole way to it; this surface's own fog (main's
     // fog_view) is put over what it lets through and reflects, so the stretch to the surface
     // is taken out of the find first (exactly so where the ray runs on as the eye's).
-    vec3 kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
-    drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, vec3(1e-4));
+    FogDepth kept = exp(-fog_depth(fog_start(VIEW_EYE, VIEW_ENTRY, s.position), s.position));
+    drawn = max(drawn - fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, s.position), vec3(0.0)) / max(kept, FogDepth(1e-4));
 #endif
     drawn += otherwise * uncovered;  // (a reflection level's sky under what it drew there)
     return mix(otherwise, drawn, found.a);

@@ -78,8 +78,8 @@ void main() {
     // carried from point to point by the air between them (one exponential a step; the
     // density at a point times the step, exact where the fog is the same everywhere).
     vec3 x = origin + dir * (start * step_length);
-    vec3 seen = exp(-fog_depth(origin, x));
-    vec3 sum = vec3(0.0);
+    FogDepth seen = exp(-fog_depth(origin, x));   // (in each channel in FOG_TINTED builds: fog.glsl)
+    FogDepth sum = FogDepth(0.0);
 #ifdef DIRECTIONAL_SHADOWS
     // The sun's shadow where its level map holds the point and the filter's taps about it,
     // else 1 (outside the map's fit no caster stands between the point and the sun; the
@@ -130,11 +130,11 @@ void main() {
 #endif
         int end = min(base + stride, STEPS);
         for (int i = base; i < end; ++i) {
-            vec3 density = fog_extinction(x);
-            vec3 lit = vec3(1.0);
+            FogDepth density = fog_extinction(x);
+            FogDepth lit = FogDepth(1.0);
 #ifdef DIRECTIONAL_SHADOWS
             bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
-            lit = vec3(held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0);
+            lit = FogDepth(held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0);
             at += at_step;
 #endif
 #ifdef CLOUD_SHADOWS

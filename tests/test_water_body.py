@@ -29,6 +29,7 @@ from components import (
 )
 from engine.assets.mesh import box, quad
 from engine.core.errors import FogLimitWarning
+from tests.support import srgb_to_linear
 from tests.test_water import FLAT, SKY, pool, render
 
 FOG = (0.1, 0.3, 0.35)
@@ -157,9 +158,33 @@ def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light
                                atol=0.01)
 
 
+def test_absorption_given_and_taken_while_running_shows_from_the_next_frame(scene):
+    """Grey water draws with one optical depth for every channel (no FOG_TINTED build: a vec3's
+    exponentials cost llvmpipe three times one's); absorption given to it while running tints
+    the next frame, as an engine built with it draws it, and taken back, the grey frame again."""
+    eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
+
+    def build(absorption):
+        return lambda world: murky(world, eye, target, DENSITY, reflect_rate=0.0, absorption=absorption)
+
+    runner, grey = render(scene, build(GREY))
+    assert "FOG_WATER" in dict(runner.engine.renderer.fog.defines)
+    assert "FOG_TINTED" not in dict(runner.engine.renderer.fog.defines)
+    _, tinted = render(scene, build(TINTED))
+    assert np.abs(tinted - grey).max() > 0.05
+    water = max(entity for entity, _ in runner.world.query_one(Water))
+    runner.world.get(water, Water).absorption = TINTED
+    np.testing.assert_array_equal(srgb_to_linear(runner.frame()), tinted)
+    assert "FOG_TINTED" in dict(runner.engine.renderer.fog.defines)
+    runner.world.get(water, Water).absorption = GREY
+    np.testing.assert_array_equal(srgb_to_linear(runner.frame()), grey)
+    assert "FOG_TINTED" not in dict(runner.engine.renderer.fog.defines)
+
+
 def test_water_body_values_are_checked_when_given():
     for field, value in (("fog_density", -0.1), ("fog_density", math.nan), ("depth", 0.0), ("depth", 1e9),
-                         ("fog_color", (1.0, 2.0))):
+                         ("fog_color", (1.0, 2.0)), ("absorption", (1.0, -0.5, 1.0)), ("absorption", (100.0, 1.0, 1.0)),
+                         ("absorption", (1.0, 1.0)), ("absorption", (math.inf, 1.0, 1.0))):
         with pytest.raises(ComponentValueError, match=f"Water.{field}"):
             Water(**{field: value})
         water = Water()

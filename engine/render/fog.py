@@ -6,7 +6,8 @@ The scene, sky and composite programs fog only in their ``FOG`` builds (``define
 the fog has a density or a volume stands; ``FOG_FALLOFF`` and ``FOG_GLOW`` add the height
 falloff's and the sun glow's terms where it has them, ``FOG_VOLUMES`` the volumes' integrals,
 its value how many, ``FOG_WATER`` a water's body among them: the light to each point dimmed
-through it too), so a frame without fog runs none of it: llvmpipe runs the fog's
+through it too, ``FOG_TINTED`` a water whose ``absorption`` takes its channels apart: each
+optical depth a colour), so a frame without fog runs none of it: llvmpipe runs the fog's
 exponentials for every pixel a program draws (read on every sky pixel, they made the
 640x360 mirror ring's frame 1.03x dearer with no fog at all).
 
@@ -132,11 +133,13 @@ class FogBlock:
         at += 4 * MAX_FOG_VOLUMES
         block[at:at + 4 * count] = matrices[:, 20:24].ravel()
         self.ubo.write(block.tobytes())
+        starts = range(0, len(rows), ROW_FLOATS)
         self.defines = () if values[4] <= 0.0 and not count else tuple((name, value) for name, value, on in (
             ("FOG", "1", True), ("FOG_FALLOFF", "1", values[5] > 0.0), ("FOG_GLOW", "1", any(values[12:15])),
             ("FOG_AERIAL", "1", values[4] > 0.0 and values[7] > 0.0),
             ("FOG_VOLUMES", str(count), bool(count)),
-            ("FOG_WATER", "1", any(rows[at + 19] < 0.0 for at in range(0, len(rows), ROW_FLOATS)))) if on)
+            ("FOG_WATER", "1", any(rows[at + 19] < 0.0 for at in starts)),
+            ("FOG_TINTED", "1", any(rows[at + 20:at + 23] != _EVERY_CHANNEL[:3] for at in starts))) if on)
         return True
 
     @property

@@ -26,10 +26,20 @@
 // in closed form and without the cancellation of the expanded cubic far off.  Each stretch's
 // fog is the height fog's and every volume's: its depth their sum, what the air adds their
 // colours weighed by their depths (fog_way: exact where they share a colour, a blend where
-// not, whichever lies nearer).  An optical depth is a colour: a volume's density in each
-// channel is its density times that channel's share (volume_absorption: a water's
-// Water.absorption, a mist's 1 in each), so water seen through, and light come down through
-// it, keeps more of one colour than another; the height fog takes every channel alike.
+// not, whichever lies nearer).  An optical depth is a colour in FOG_TINTED builds (while a
+// water's body takes its channels apart, Water.absorption): a volume's density in each
+// channel is its density times that channel's share (volume_absorption; a mist's 1 in each),
+// so water seen through, and light come down through it, keeps more of one colour than
+// another (the height fog takes every channel alike).  In the other builds it is one number
+// for every channel (FogDepth: llvmpipe runs a vec3's exponential three times over, and the
+// fogged examples' frames cost 3-4% more so).
+#ifdef FOG_TINTED
+#define FogDepth vec3
+#define FOG_SHARE(k) fog.volume_absorption[k].rgb
+#else
+#define FogDepth float
+#define FOG_SHARE(k) 1.0
+#endif
 #ifdef FOG
 layout(std140) uniform Fog {
     vec4 fog_color;   // rgb: the fog's linear colour; a: how much of its fog the sky takes
@@ -39,14 +49,14 @@ layout(std140) uniform Fog {
     vec4 fog_glow;    // rgb: the sun's light x Fog.sun_scatter (0: no glow)
     mat4 volume_to_unit[MAX_FOG_VOLUMES];  // world -> each FogVolume's unit ball (engine/render/fog.py)
     vec4 volume_color[MAX_FOG_VOLUMES];    // rgb: its linear colour, a: its density at the centre (per metre)
-    vec4 volume_absorption[MAX_FOG_VOLUMES];  // rgb: each channel's share of that density
+    vec4 volume_absorption[MAX_FOG_VOLUMES];  // rgb: each channel's share of that density (FOG_TINTED builds)
 } fog;
 
-// A stretch of air: its optical depth in each channel, and the light it adds times that
-// depth (each fog's light times its own depth: the weights fog_over divides out).
+// A stretch of air: its optical depth (in each channel, FOG_TINTED), and the light it adds
+// times that depth (each fog's light times its own depth: the weights fog_over divides out).
 struct FogWay {
     vec3 light;
-    vec3 depth;
+    FogDepth depth;
 };
 
 #define FOG_MAX_EXPONENT 80.0   // exp(80) ~ 5.5e34: past that the air is opaque anyway
@@ -109,13 +119,13 @@ float box_depth(vec3 p, vec3 v, float reach) {
 // The volumes' fog along the line from a along the unit direction r for ``reach`` metres:
 // their depths in each channel, and their colours times those depths.
 FogWay volumes_along(vec3 a, vec3 r, float reach) {
-    FogWay sum = FogWay(vec3(0.0), vec3(0.0));
+    FogWay sum = FogWay(vec3(0.0), FogDepth(0.0));
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         mat4 to_unit = fog.volume_to_unit[k];
         float density = fog.volume_color[k].a;
         vec3 p = (to_unit * vec4(a, 1.0)).xyz, v = mat3(to_unit) * r;
-        vec3 depth = (density >= 0.0 ? density * ball_depth(p, v, reach) : -density * box_depth(p, v, reach))
-                     * fog.volume_absorption[k].rgb;
+        FogDepth depth = (density >= 0.0 ? density * ball_depth(p, v, reach) : -density * box_depth(p, v, reach))
+                         * FOG_SHARE(k);
         sum.light += fog.volume_color[k].rgb * depth;
         sum.depth += depth;
     }
@@ -127,66 +137,64 @@ FogWay volumes_along(vec3 a, vec3 r, float reach) {
 // on its way to ``x``, in each channel: from along the unit direction r, ``reach`` metres off
 // (the suns', 1e30; a lamp's, its distance), exp(-density x the channel's share x the length
 // of the way in each body).  The ellipsoid volumes (mist) take none: their air is thin.
-vec3 water_light(vec3 x, vec3 r, float reach) {
-    vec3 depth = vec3(0.0);
+FogDepth water_light(vec3 x, vec3 r, float reach) {
+    FogDepth depth = FogDepth(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         float density = fog.volume_color[k].a;
         if (density >= 0.0) continue;
         mat4 to_unit = fog.volume_to_unit[k];
-        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * r, reach)
-                 * fog.volume_absorption[k].rgb;
+        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * r, reach) * FOG_SHARE(k);
     }
-    return exp(-min(depth, vec3(FOG_MAX_EXPONENT)));
+    return exp(-min(depth, FogDepth(FOG_MAX_EXPONENT)));
 }
 
 // What of the sky's light a water's body leaves at ``x``, in each channel: along the way up
 // to its surface (the box's top: its unit cube's -w face, the third row of its matrix the way down).
-vec3 water_skylight(vec3 x) {
-    vec3 depth = vec3(0.0);
+FogDepth water_skylight(vec3 x) {
+    FogDepth depth = FogDepth(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         float density = fog.volume_color[k].a;
         if (density >= 0.0) continue;
         mat4 to_unit = fog.volume_to_unit[k];
         vec3 up = -normalize(vec3(to_unit[0][2], to_unit[1][2], to_unit[2][2]));
-        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * up, 1e30)
-                 * fog.volume_absorption[k].rgb;
+        depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * up, 1e30) * FOG_SHARE(k);
     }
-    return exp(-min(depth, vec3(FOG_MAX_EXPONENT)));
+    return exp(-min(depth, FogDepth(FOG_MAX_EXPONENT)));
 }
 #else  // (no water's body among the volumes: FOG_WATER builds only, engine/render/fog.py)
-vec3 water_light(vec3 x, vec3 r, float reach) { return vec3(1.0); }
-vec3 water_skylight(vec3 x) { return vec3(1.0); }
+FogDepth water_light(vec3 x, vec3 r, float reach) { return FogDepth(1.0); }
+FogDepth water_skylight(vec3 x) { return FogDepth(1.0); }
 #endif
 
 // The volumes' density at ``x`` in each channel (per metre).
-vec3 volumes_extinction(vec3 x) {
-    vec3 sum = vec3(0.0);
+FogDepth volumes_extinction(vec3 x) {
+    FogDepth sum = FogDepth(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         vec3 p = (fog.volume_to_unit[k] * vec4(x, 1.0)).xyz;
         float density = fog.volume_color[k].a;
         sum += (density >= 0.0 ? density * max(1.0 - dot(p, p), 0.0)
                                : (all(lessThanEqual(abs(p), vec3(1.0))) ? -density : 0.0))
-               * fog.volume_absorption[k].rgb;
+               * FOG_SHARE(k);
     }
     return sum;
 }
 #else
-FogWay volumes_along(vec3 a, vec3 r, float reach) { return FogWay(vec3(0.0), vec3(0.0)); }
-vec3 volumes_extinction(vec3 x) { return vec3(0.0); }
-vec3 water_light(vec3 x, vec3 r, float reach) { return vec3(1.0); }
-vec3 water_skylight(vec3 x) { return vec3(1.0); }
+FogWay volumes_along(vec3 a, vec3 r, float reach) { return FogWay(vec3(0.0), FogDepth(0.0)); }
+FogDepth volumes_extinction(vec3 x) { return FogDepth(0.0); }
+FogDepth water_light(vec3 x, vec3 r, float reach) { return FogDepth(1.0); }
+FogDepth water_skylight(vec3 x) { return FogDepth(1.0); }
 #endif
 
 // The fog's optical depth in each channel along the straight stretch from a to b: the height
 // fog's and the volumes'.
-vec3 fog_depth(vec3 a, vec3 b) {
+FogDepth fog_depth(vec3 a, vec3 b) {
     float reach = length(b - a);
-    return height_fog_depth(a, b) + (reach > 0.0 ? volumes_along(a, (b - a) / reach, reach).depth : vec3(0.0));
+    return height_fog_depth(a, b) + (reach > 0.0 ? volumes_along(a, (b - a) / reach, reach).depth : FogDepth(0.0));
 }
 
 // The air's density at ``x`` in each channel (per metre): what fog_depth sums along a stretch,
 // and what a light shaft's march scatters and loses there.
-vec3 fog_extinction(vec3 x) {
+FogDepth fog_extinction(vec3 x) {
 #ifdef FOG_FALLOFF
     float height = fog.fog_params.x * exp(min(-fog.fog_params.y * (x.y - fog.fog_params.z), FOG_MAX_EXPONENT));
 #else
@@ -227,14 +235,14 @@ vec3 fog_light(vec3 dir) {
 FogWay fog_way(vec3 a, vec3 b, vec3 dir) {
     float height = height_fog_depth(a, b);
     float reach = length(b - a);
-    FogWay volumes = reach > 0.0 ? volumes_along(a, (b - a) / reach, reach) : FogWay(vec3(0.0), vec3(0.0));
+    FogWay volumes = reach > 0.0 ? volumes_along(a, (b - a) / reach, reach) : FogWay(vec3(0.0), FogDepth(0.0));
     return FogWay(fog_light(dir) * height + volumes.light, height + volumes.depth);
 }
 
-// ``color`` seen through ``way``, channel by channel: where a channel's depth is 0 the colour
-// (the fog's colour there, 0 / tiny, is any finite number: mix by 1 takes none of it).
+// ``color`` seen through ``way`` (channel by channel, FOG_TINTED): where a depth is 0 the
+// colour (the fog's colour there, 0 / tiny, is any finite number: mix by 1 takes none of it).
 vec3 fog_over(vec3 color, FogWay way) {
-    return mix(way.light / max(way.depth, vec3(1e-30)), color, exp(-way.depth));
+    return mix(way.light / max(way.depth, FogDepth(1e-30)), color, exp(-way.depth));
 }
 
 // ``color`` seen along the unit direction ``dir`` through the height fog of optical depth ``depth``.
@@ -269,15 +277,15 @@ vec3 fog_sky(vec3 color, vec3 a, vec3 r) {
 #else
 struct FogWay {
     vec3 light;
-    vec3 depth;
+    FogDepth depth;
 };
-vec3 fog_depth(vec3 a, vec3 b) { return vec3(0.0); }
-vec3 fog_extinction(vec3 x) { return vec3(0.0); }
-FogWay fog_way(vec3 a, vec3 b, vec3 dir) { return FogWay(vec3(0.0), vec3(0.0)); }
+FogDepth fog_depth(vec3 a, vec3 b) { return FogDepth(0.0); }
+FogDepth fog_extinction(vec3 x) { return FogDepth(0.0); }
+FogWay fog_way(vec3 a, vec3 b, vec3 dir) { return FogWay(vec3(0.0), FogDepth(0.0)); }
 vec3 fog_over(vec3 color, FogWay way) { return color; }
 vec3 fogged(vec3 color, float depth, vec3 dir) { return color; }
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) { return color; }
-vec3 water_light(vec3 x, vec3 r, float reach) { return vec3(1.0); }
-vec3 water_skylight(vec3 x) { return vec3(1.0); }
+FogDepth water_light(vec3 x, vec3 r, float reach) { return FogDepth(1.0); }
+FogDepth water_skylight(vec3 x) { return FogDepth(1.0); }
 #endif
