@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import re
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -141,6 +142,36 @@ def test_every_path_is_checked_once_per_context_and_verified_on_llvmpipe(scene, 
     second = scene(marked_chrome_scene({}), (64, 48))  # another engine on the same context
     second.frame()
     assert len(ran) == len(expected) and set(second.stats.paths_verified) == set(runner.stats.paths_verified)
+
+
+def test_the_checks_draw_through_no_fog(scene, ctx, fresh_checks):
+    """The check quads stand about the origin, where a pond usually lies: a tinted water's
+    body there (red taken five times faster than blue) took the yellow quad below off its
+    hue, and the plain path, drawn through it, was said to show no quad.  The checks' scene is
+    drawn through no fog, so each capture path is verified there (on llvmpipe, which draws
+    them all right), and the frame after draws through the water's fog as before."""
+    from components import MeshRef, Mirror, Transform, Water, yaw_pitch_rotation
+    from engine.assets.mesh import quad
+
+    def build(world):
+        marked_chrome_scene({})(world)
+        world.spawn(Transform(position=(0.0, 0.05, 0.0), rotation=yaw_pitch_rotation(0.0, -90.0)),
+                    MeshRef(quad(3.0, 3.0)), Material(color=(0.1, 0.3, 0.35, 0.3)), Mirror(max_depth=1),
+                    Water(fog_density=0.5, depth=2.0, absorption=(2.5, 1.0, 0.5)))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (a still water: no waves, said)
+        runner = scene(build, (64, 48))
+        before = runner.frame()
+    fog = runner.engine.renderer.fog
+    assert "FOG_TINTED" in dict(fog.defines)
+    if not prepare_context(ctx).software:
+        pytest.skip("on a GPU a path may be refused for its own faults")
+    checks = runner.engine.renderer.path_checks
+    for path in ("direct_faces", "layered_capture", "layered_array_capture"):
+        assert checks.check(path).status == "verified", (path, checks.verdicts[path])
+    assert "FOG_TINTED" in dict(fog.defines)
+    np.testing.assert_array_equal(runner.frame(), before)
 
 
 def test_a_layered_capture_that_writes_one_face_is_refused_and_the_sphere_stays_right(

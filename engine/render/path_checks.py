@@ -264,7 +264,9 @@ class PathChecks:
     @contextmanager
     def _scene(self):
         """Inside the block every scene pass draws the check scene only, lit by no light,
-        and the frame's counters and stack of probe targets are as they were after it."""
+        through no fog (the world's fog builds read the world's block: a water's body about
+        the origin, where the quads stand, took a tinted water's colours off their hues), and
+        the frame's counters and stack of probe targets are as they were after it."""
         renderer = self.renderer
         probes = self.probes
         batch = InstanceBatch(self.ctx, _check_mesh(self.ctx), None)
@@ -273,6 +275,7 @@ class PathChecks:
         batch.upload()
         lights = self.ctx.buffer(lights_block(np.zeros((9, 3)), [], []))
         saved_lights, renderer.lights_ubo = renderer.lights_ubo, lights
+        saved_fog, renderer.fog.defines = renderer.fog.defines, ()
         stats = renderer.stats
         saved_stats = {f.name: getattr(stats, f.name) for f in fields(stats)}
         stacks = set(probes._stacks)
@@ -282,6 +285,7 @@ class PathChecks:
         finally:
             renderer.scene_only = None
             renderer.lights_ubo = saved_lights
+            renderer.fog.defines = saved_fog
             for name, value in saved_stats.items():
                 setattr(stats, name, value)
             for resolution in set(probes._stacks) - stacks:
