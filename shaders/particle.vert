@@ -8,6 +8,8 @@
 #include "lights.glsl"
 #include "shadows.glsl"
 #include "ambient.glsl"
+// (a water's body over the sheet: the light down through it, fog.glsl water_light)
+#include "fog.glsl"
 #endif
 #ifdef CLOUD_SHADOWS
 #include "clouds.glsl"
@@ -75,7 +77,10 @@ vec3 lamp_image(int i, vec3 l) {
 vec3 sheet_light(vec3 p, vec3 n) {
     AmbientBoxes boxes = ambient_boxes(p, vec3(0.0));  // (no normal bias: a sheet has two sides)
     float front = 1.0 - translucency;
-    vec3 e = ambient_irradiance(boxes, n) * front + ambient_irradiance(boxes, -n) * translucency;
+    // (the light from all round, and each light below, through a water's body on its way, as
+    // scene.frag's; 1 but in FOG_WATER builds)
+    vec3 e = (ambient_irradiance(boxes, n) * front + ambient_irradiance(boxes, -n) * translucency)
+             * water_skylight(p);
     vec4 sun_front = directional_shadows(p, n);
     vec4 sun_back = directional_shadows(p, -n);
     for (int i = 0; i < lights.counts.x; ++i) {
@@ -84,7 +89,7 @@ vec3 sheet_light(vec3 p, vec3 n) {
 #ifdef CLOUD_SHADOWS
         if (lights.directional_dir[i].w != 0.0) clouded = cloud_shadow(p, -lights.directional_dir[i].xyz);
 #endif
-        e += lights.directional_color[i].rgb * clouded
+        e += lights.directional_color[i].rgb * water_light(p, -lights.directional_dir[i].xyz, 1e30) * clouded
              * (max(nl, 0.0) * front * sun_front[i] + max(-nl, 0.0) * translucency * sun_back[i]);
     }
     vec4 lamp_front = point_shadows(p, n);
@@ -95,7 +100,7 @@ vec3 sheet_light(vec3 p, vec3 n) {
         vec3 l = d / max(dist, 1e-4);
         float falloff = lamp_falloff(i, dist, l);
         float nl = dot(n, l);
-        e += lamp_image(i, l) * lights.point_color[i].rgb * falloff
+        e += lamp_image(i, l) * lights.point_color[i].rgb * water_light(p, l, dist) * falloff
              * (max(nl, 0.0) * front * point_shadow(i, lamp_front)
                 + max(-nl, 0.0) * translucency * point_shadow(i, lamp_back));
     }

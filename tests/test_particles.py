@@ -321,6 +321,41 @@ def test_a_lit_particle_is_lit_through_a_mirror_as_a_thin_sheet_is(scene, reflec
                                                                          without[middle].mean())
 
 
+@pytest.mark.parametrize("lamp", [False, True], ids=["sun", "lamp"])
+def test_a_lit_particle_in_a_waters_body_is_lit_through_it_as_a_thin_sheet_is(scene, lamp):
+    """The particle and the camera a metre under a tinted pond (red taken four times faster
+    than blue), the light coming down through the water: the particle's middle is the thin
+    quad's there (the scene's path: fog.glsl water_light and water_skylight), and bluer than
+    the same particle with the water clear."""
+    import warnings
+
+    from components import Water, yaw_pitch_rotation
+
+    sun = glm.normalize(glm.vec3(0.3, -0.8, -0.5))
+
+    def under_water(particle: bool, density: float):
+        base = lit_scene(particle, sun, lamp)
+
+        def build(world):
+            base(world)
+            world.spawn(Transform(position=(0.0, 1.0, 0.0), rotation=yaw_pitch_rotation(0.0, -90.0)),
+                        MeshRef(quad(30.0, 30.0)), Material(color=(0.1, 0.3, 0.35, 0.2)), Mirror(max_depth=1),
+                        Water(fog_density=density, fog_color=(0.05, 0.2, 0.25), depth=6.0, absorption=(2.0, 1.0, 0.5)))
+        return build
+
+    middle = (slice(33, 39), slice(45, 51))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (a still water: no waves, said)
+        _, particle = render(scene, under_water(True, 0.4))
+        _, sheet = render(scene, under_water(False, 0.4))
+        _, clear = render(scene, under_water(True, 0.0))
+    assert particle[middle].mean() > 0.02
+    np.testing.assert_allclose(particle[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
+                               atol=0.004)
+    tint = particle[middle].mean(axis=(0, 1)) / clear[middle].mean(axis=(0, 1))
+    assert tint[2] > 1.3 * tint[0], tint
+
+
 def test_a_lit_particle_under_a_clouds_shadow_gets_the_suns_share_the_twin_says(scene):
     """Clouds 5 km across over a low sun: the particle's sunlight (the frame less the sunless
     one) with the clouds' shadows over the same without is the twin's share at its centre
