@@ -333,11 +333,8 @@ class Material(TrackedComponent):
         if name == "subsurface_scale":
             return finite(self, name, value, low=0.0, high=MAX_SUBSURFACE_SCALE)
         if name == "subsurface_radius":
-            radius = vec3(self, name, value, low=0.0)
-            if max(radius) > 1.0:  # a share of subsurface_scale each: the scale says how far
-                raise ComponentValueError(f"Material.subsurface_radius must have components in [0, 1] (each "
-                                          f"colour's share of subsurface_scale), got {value!r}")
-            return radius
+            # (a share of subsurface_scale each: the scale says how far)
+            return vec3(self, name, value, low=0.0, high=1.0, why=" (each colour's share of subsurface_scale)")
         if name == "lightmap_intensity":
             return finite(self, name, value, low=0.0, high=MAX_LIGHTMAP_INTENSITY)
         if name == "iridescence_ior":
@@ -347,22 +344,13 @@ class Material(TrackedComponent):
         if name == "anisotropy_direction":
             return finite(self, name, value, low=-360.0, high=360.0)
         if name == "specular_color":
-            tint = vec3(self, name, value, low=0.0)
-            if max(tint) > MAX_SPECULAR_TINT:
-                raise ComponentValueError(f"Material.specular_color must have components in "
-                                          f"[0, {MAX_SPECULAR_TINT:g}], got {value!r}")
-            return tint
+            return vec3(self, name, value, low=0.0, high=MAX_SPECULAR_TINT)
         if name == "diffuse_transmission_color":
-            passed = vec3(self, name, value, low=0.0)
-            if max(passed) > 1.0:  # what passes: more than arrives would make light
-                raise ComponentValueError(f"Material.diffuse_transmission_color must have components in [0, 1], "
-                                          f"got {value!r}")
-            return passed
+            # (what passes: more than arrives would make light)
+            return vec3(self, name, value, low=0.0, high=1.0)
         if name == "sheen_color":
-            sheen = vec3(self, name, value, low=0.0)
-            if max(sheen) > 1.0:  # a layer's albedo: more than 1 would reflect more light than arrives
-                raise ComponentValueError(f"Material.sheen_color must have components in [0, 1], got {value!r}")
-            return sheen
+            # (a layer's albedo: more than 1 would reflect more light than arrives)
+            return vec3(self, name, value, low=0.0, high=1.0)
         if name == "unlit":
             return boolean(self, name, value)
         if name == "double_sided":

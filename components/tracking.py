@@ -203,10 +203,11 @@ def finite(owner: object, name: str, value: Any, *, low: float | None = None,
     return number
 
 
-def vec3(owner: object, name: str, value: Any, *, low: float | None = None,
-         nonzero: bool = False) -> glm.vec3:
-    """A glm.vec3 of finite components (each >= low when given)."""
-    if type(value) is glm.vec3 and low is None and not nonzero:
+def vec3(owner: object, name: str, value: Any, *, low: float | None = None, high: float | None = None,
+         why: str = "", nonzero: bool = False) -> glm.vec3:
+    """A glm.vec3 of finite components (each >= low and <= high when given; ``why``: what the
+    bounds are, said after them when one is crossed)."""
+    if type(value) is glm.vec3 and low is None and high is None and not nonzero:
         # The per-frame case (``t.position += step``): a glm vector needs only the finite test.
         x, y, z = value
         if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
@@ -230,6 +231,9 @@ def vec3(owner: object, name: str, value: Any, *, low: float | None = None,
             raise _fail(owner, name, value, "must be finite")
         if low is not None and c < low:
             raise _fail(owner, name, value, f"must have every component >= {low}")
+        if high is not None and c > high:
+            raise _fail(owner, name, value, f"must have every component in [{'-inf' if low is None else f'{low:g}'}, "
+                                            f"{high:g}]{why}")
     if nonzero and glm.length(v) == 0.0:
         raise _fail(owner, name, value, "must not be the zero vector")
     return v

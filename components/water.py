@@ -116,11 +116,7 @@ class Water(TrackedComponent):
         if name == "caustics":
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "absorption":
-            v = vec3(self, name, value, low=0.0)
-            if max(v) > MAX_WATER_ABSORPTION:
-                raise ComponentValueError(f"Water.absorption must have every channel <= {MAX_WATER_ABSORPTION:g} "
-                                          f"(its share of fog_density), got {value!r}")
-            return v
+            return vec3(self, name, value, low=0.0, high=MAX_WATER_ABSORPTION, why=" (its share of fog_density)")
         if name == "ior":
             return finite(self, name, value, low=1.0, high=4.0)
         if name == "speed":

@@ -183,7 +183,7 @@ def test_a_tinted_dielectrics_reflectance_is_a_coloured_metals_f0(scene):
                                      specular_color=(10.0, 1.0, 1.0)), sun=True)
     white_red, _ = render(scene, Material(color=(1.0, 0.16, 0.16, 1.0), metallic=1.0, roughness=0.3), sun=True)
     np.testing.assert_allclose(held[inside], white_red[inside], atol=0.004, rtol=0.01)
-    with pytest.raises(ComponentValueError, match=r"Material.specular_color must have components in \[0, 10\]"):
+    with pytest.raises(ComponentValueError, match=r"Material.specular_color must have every component in \[0, 10\]"):
         Material(specular_color=(11.0, 1.0, 1.0))
 
 

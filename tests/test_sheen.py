@@ -151,7 +151,7 @@ def test_a_lamp_through_a_mirror_lights_a_sheen_as_a_lamp_at_its_image(scene):
 
 
 def test_sheen_values_are_checked():
-    with pytest.raises(ComponentValueError, match=r"Material.sheen_color must have components in \[0, 1\]"):
+    with pytest.raises(ComponentValueError, match=r"Material.sheen_color must have every component in \[0, 1\]"):
         Material(sheen_color=(1.5, 0.0, 0.0))
     with pytest.raises(ComponentValueError, match=r"Material.sheen_color"):
         Material(sheen_color=(-0.1, 0.0, 0.0))
