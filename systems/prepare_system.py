@@ -28,6 +28,7 @@ to its block every frame its waves move.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator
 
 import esper
 import numpy as np
@@ -58,7 +59,7 @@ from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
 from engine.render.sky import air_light, is_generated, sky_model, sunlight_tint
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, lights_block
-from engine.resources import CloudChanges, ContactLamps, Surfaces, VolumetricLamps
+from engine.resources import CloudChanges, ContactLamps, Surfaces, SurfaceState, VolumetricLamps
 from engine.rules.frame_rules import frame_rules
 from engine.rules.light_rules import (
     ALL_ROUND,
@@ -203,14 +204,10 @@ class PrepareSystem(esper.Processor):
         offset or its fields changed (every frame while the waves move); the block is written,
         and the views drawn again, only when they changed."""
         renderer = self.renderer
-        surfaces = self.world.resources.get(Surfaces)
         found = []
-        if self.caustics and surfaces is not None and surfaces.undersides:   # (undersides: one a water)
-            for entity, state in surfaces.mirrors.items():
-                if state.water is None:
-                    continue
-                water = self.world.try_get(entity, Water)
-                if water is None or water.caustics <= 0.0:
+        if self.caustics:
+            for entity, state, water in self._waters():
+                if water.caustics <= 0.0:
                     continue
                 if state.bumps is None:   # (no normal map, or one the surface cannot read: no waves)
                     self._say_still(entity)
@@ -250,6 +247,16 @@ class PrepareSystem(esper.Processor):
         texture = None if held is None else renderer.normal_map_texture(held.normal_map)
         if renderer.caustics.set(held, texture):
             renderer.note_scene_change()   # what every view shows under the water
+
+    def _waters(self) -> Iterator[tuple[int, SurfaceState, Water]]:
+        """Each water surface this frame: its entity, its published state (the top) and its
+        Water (none, and no loop, in a world without water: ``Surfaces.undersides`` holds one a water)."""
+        surfaces = self.world.resources.get(Surfaces)
+        if surfaces is None or not surfaces.undersides:
+            return
+        for entity, state in surfaces.mirrors.items():
+            if state.water is not None and (water := self.world.try_get(entity, Water)) is not None:
+                yield entity, state, water
 
     def _say_still(self, entity: int) -> None:
         """Say, once, that the water on ``entity`` has caustics and no waves to gather with."""
@@ -298,16 +305,10 @@ class PrepareSystem(esper.Processor):
         block row, the box's centre, its largest half side); the row packed again only for a
         state or a field that changed.  A water whose mesh has no flat outline (the box's top)
         has no body, said once."""
-        surfaces = self.world.resources.get(Surfaces)
-        if surfaces is None or not surfaces.undersides:  # (undersides: one a water; none, no loop a frame)
-            return ()
         old = {body[0]: body for body in self._bodies}
         bodies = []
-        for entity, state in surfaces.mirrors.items():
-            if state.water is None:
-                continue
-            water = self.world.try_get(entity, Water)
-            if water is None or water.fog_density <= 0.0:
+        for entity, state, water in self._waters():
+            if water.fog_density <= 0.0:
                 continue
             fields = (water.fog_density, tuple(water.fog_color), water.depth, tuple(water.absorption))
             body = old.get(entity)
