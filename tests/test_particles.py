@@ -321,12 +321,14 @@ def test_a_lit_particle_is_lit_through_a_mirror_as_a_thin_sheet_is(scene, reflec
                                                                          without[middle].mean())
 
 
-@pytest.mark.parametrize("lamp", [False, True], ids=["sun", "lamp"])
-def test_a_lit_particle_in_a_waters_body_is_lit_through_it_as_a_thin_sheet_is(scene, lamp):
+@pytest.mark.parametrize("light", ["sun", "lamp", "mirror"])
+def test_a_lit_particle_in_a_waters_body_is_lit_through_it_as_a_thin_sheet_is(scene, light):
     """The particle and the camera a metre under a tinted pond (red taken four times faster
-    than blue), the light coming down through the water: the particle's middle is the thin
-    quad's there (the scene's path: fog.glsl water_light and water_skylight), and bluer than
-    the same particle with the water clear."""
+    than blue), the light coming down through the water (``mirror``: through_a_mirror's lamp
+    and its image in the mirror, every way under water): the particle's middle is the thin
+    quad's there (the scene's path: fog.glsl water_light and water_skylight,
+    virtual_light_ways.glsl virtual_water), and bluer than the same particle with the water
+    clear."""
     import warnings
 
     from components import Water, yaw_pitch_rotation
@@ -334,7 +336,7 @@ def test_a_lit_particle_in_a_waters_body_is_lit_through_it_as_a_thin_sheet_is(sc
     sun = glm.normalize(glm.vec3(0.3, -0.8, -0.5))
 
     def under_water(particle: bool, density: float):
-        base = lit_scene(particle, sun, lamp)
+        base = through_a_mirror(particle, True) if light == "mirror" else lit_scene(particle, sun, light == "lamp")
 
         def build(world):
             base(world)

@@ -26,6 +26,7 @@ from components import (
     Skybox,
     Transform,
     Water,
+    look_rotation,
 )
 from engine.assets.mesh import box, quad
 from engine.core.errors import FogLimitWarning
@@ -156,6 +157,60 @@ def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light
     kept = kept_through(1.0, absorption)
     np.testing.assert_allclose(fogged[row, col], clear[row, col] * kept * kept + np.array(FOG) * (1.0 - kept),
                                atol=0.01)
+
+
+@ABSORPTIONS
+@pytest.mark.parametrize("way", ["down_from_a_mirror", "up_from_a_mirror_under_it"])
+def test_light_through_a_mirror_is_dimmed_by_the_water_on_every_stretch_of_its_way(scene, way, absorption):
+    """A sun's light turned by a mirror (a virtual light) through a murky pond, against the
+    same frame with clear water, no light from the sky.  ``down_from_a_mirror``: the sun level
+    with the pond (it lights nothing under it itself), turned down at 45 degrees by a mirror
+    over the bank onto the floor a metre under the water: sqrt(2) metres of water after the
+    mirror, and the metre up to the eye looking straight down.  ``up_from_a_mirror_under_it``:
+    the sun at 45 degrees down into the pond onto a mirror lying on its floor, turned up onto
+    the underside of a board over the water, seen through the air: sqrt(2) x 0.99 metres of
+    water before the mirror and as much after it (the stretch before is the line to the
+    image taken back through the mirror)."""
+    if way == "down_from_a_mirror":
+        eye, target, seen = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01), (0.0, -1.0, 0.0)
+        light_way, view_way = math.sqrt(2.0), 1.0
+    else:
+        eye, target, seen = (3.0, 0.6, 4.0), (3.0, 2.0, 0.0), (3.0, 2.0, 0.0)
+        light_way, view_way = 2.0 * 0.99 * math.sqrt(2.0), 0.0
+
+    def build(density: float):
+        def b(world):
+            murky(world, eye, target, density, reflect_rate=0.0, absorption=absorption)
+            for entity, _ in world.query_one(Emissive):
+                world.remove_component(entity, Emissive)
+                world.get(entity, Material).color = (0.6, 0.6, 0.6, 1.0)
+            for entity, _ in world.query_one(Skybox):
+                world.delete_entity(entity)
+            world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+            if way == "down_from_a_mirror":
+                sun = glm.vec3(1.0, 0.0, 0.0)
+                turned = glm.normalize(glm.vec3(1.0, -1.0, 0.0))
+                at = glm.vec3(-3.0, 2.0, 0.0)            # on the line up from the floor's (0, -1, 0)
+            else:
+                sun = glm.normalize(glm.vec3(1.0, -1.0, 0.0))
+                turned = glm.normalize(glm.vec3(1.0, 1.0, 0.0))
+                at = glm.vec3(0.0, -0.99, 0.0)           # on the pond's floor
+                world.spawn(Transform(position=(3.0, 2.1, 0.0)), MeshRef(box((2.0, 0.2, 2.0))),
+                            Material(color=(0.6, 0.6, 0.6, 1.0), roughness=1.0))
+            facing = glm.normalize(turned - sun)       # the mirror's front: against the sun, towards where it turns it
+            world.spawn(Transform(position=at, rotation=look_rotation(-facing)), MeshRef(quad(1.5, 1.5)),
+                        Material(), Mirror(reflects_light=True))
+            world.spawn(DirectionalLight(direction=tuple(sun), intensity=1.0))
+        return b
+
+    runner, fogged = render(scene, build(DENSITY))
+    _, clear = render(scene, build(0.0))
+    col, row = runner.project(seen)
+    assert 0.05 < clear[row, col].max() < 0.9, clear[row, col]  # lit by the mirror, not clipped
+    lit = kept_through(light_way, absorption)
+    seen_through = kept_through(view_way, absorption)
+    np.testing.assert_allclose(fogged[row, col], clear[row, col] * lit * seen_through
+                               + np.array(FOG) * (1.0 - seen_through), atol=0.01)
 
 
 def test_absorption_given_and_taken_while_running_shows_from_the_next_frame(scene):

@@ -75,15 +75,19 @@ SHADOW_FILTERS = ("grid", "single")
 # The slots the light rule (engine/rules/light_rules.py) fills: the Lights block's and the cubes.
 LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS)
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
-# The VirtualLights block (shaders/include/virtual_lights.glsl): a count, then per light a
-# matrix and ten vectors.
+# The VirtualLights block (shaders/include/virtual_light_ways.glsl): a count, then per light a
+# matrix and twelve vectors.
 VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params", "spot", "cookie_u", "cookie_v",
                   "rect_u", "rect_v")
 # ... then, for light reflected more than once, each light's further outlines (the earlier
 # surfaces as the later ones carry them): a plane, a corner and two edges each.
 VIRTUAL_MORE = MAX_APERTURES - 1
-VIRTUAL_BLOCK_BYTES = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS) \
+# ... then, per light and outline, the matrix that takes the line from a lit point to the image,
+# past that outline, back to where that stretch of the light's way runs (the inverse of its
+# leg's carry; virtual_water: a water's body on the way).
+VIRTUAL_UNFOLD_AT = 16 + 64 * MAX_VIRTUAL_LIGHTS + 16 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS) \
     + 16 * 4 * MAX_VIRTUAL_LIGHTS * VIRTUAL_MORE
+VIRTUAL_BLOCK_BYTES = VIRTUAL_UNFOLD_AT + 64 * MAX_VIRTUAL_LIGHTS * MAX_APERTURES
 # Then the shadow cascades (DirectionalLight.shadow_cascades): rings about the camera, each in
 # an atlas tile no light's level map takes; per ring its map from the level's uv, its texel, its
 # tile, its light's slot.
@@ -500,6 +504,9 @@ class ShadowMaps:
             at = start + 16 * (slot * VIRTUAL_MORE + index)
             block[at:at + 16] = (*aperture.plane, *aperture.origin, 0.0, *_over_length(aperture.u), 0.0,
                                  *_over_length(aperture.v), 0.0)
+        for index, leg in enumerate(legs[1:]):
+            at = VIRTUAL_UNFOLD_AT // 4 + 16 * (slot * MAX_APERTURES + index)
+            block[at:at + 16] = np.array(glm.inverse(leg.carry).to_list(), np.float32).ravel()
         self.renderer.checkpoint(f"shadow map of virtual light {slot}")
 
     def set_virtual_color(self, slot: int, color: tuple[float, float, float], light_range: float) -> None:

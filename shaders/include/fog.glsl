@@ -136,8 +136,10 @@ FogWay volumes_along(vec3 a, vec3 r, float reach) {
 // What of the light a water's body (Water.fog_density, a volume of negative density) leaves
 // on its way to ``x``, in each channel: from along the unit direction r, ``reach`` metres off
 // (the suns', 1e30; a lamp's, its distance), exp(-density x the channel's share x the length
-// of the way in each body).  The ellipsoid volumes (mist) take none: their air is thin.
-FogDepth water_light(vec3 x, vec3 r, float reach) {
+// of the way in each body); water_depth: that exponent, for a way of several straight
+// stretches (a light through mirrors and portals: virtual_light_ways.glsl virtual_water).
+// The ellipsoid volumes (mist) take none: their air is thin.
+FogDepth water_depth(vec3 x, vec3 r, float reach) {
     FogDepth depth = FogDepth(0.0);
     for (int k = 0; k < FOG_VOLUMES; ++k) {
         float density = fog.volume_color[k].a;
@@ -145,7 +147,11 @@ FogDepth water_light(vec3 x, vec3 r, float reach) {
         mat4 to_unit = fog.volume_to_unit[k];
         depth -= density * box_depth((to_unit * vec4(x, 1.0)).xyz, mat3(to_unit) * r, reach) * FOG_SHARE(k);
     }
-    return exp(-min(depth, FogDepth(FOG_MAX_EXPONENT)));
+    return depth;
+}
+
+FogDepth water_light(vec3 x, vec3 r, float reach) {
+    return exp(-min(water_depth(x, r, reach), FogDepth(FOG_MAX_EXPONENT)));
 }
 
 // What of the sky's light a water's body leaves at ``x``, in each channel: along the way up
@@ -162,6 +168,7 @@ FogDepth water_skylight(vec3 x) {
     return exp(-min(depth, FogDepth(FOG_MAX_EXPONENT)));
 }
 #else  // (no water's body among the volumes: FOG_WATER builds only, engine/render/fog.py)
+FogDepth water_depth(vec3 x, vec3 r, float reach) { return FogDepth(0.0); }
 FogDepth water_light(vec3 x, vec3 r, float reach) { return FogDepth(1.0); }
 FogDepth water_skylight(vec3 x) { return FogDepth(1.0); }
 #endif
@@ -181,6 +188,7 @@ FogDepth volumes_extinction(vec3 x) {
 #else
 FogWay volumes_along(vec3 a, vec3 r, float reach) { return FogWay(vec3(0.0), FogDepth(0.0)); }
 FogDepth volumes_extinction(vec3 x) { return FogDepth(0.0); }
+FogDepth water_depth(vec3 x, vec3 r, float reach) { return FogDepth(0.0); }
 FogDepth water_light(vec3 x, vec3 r, float reach) { return FogDepth(1.0); }
 FogDepth water_skylight(vec3 x) { return FogDepth(1.0); }
 #endif
@@ -286,6 +294,7 @@ vec3 fog_over(vec3 color, FogWay way) { return color; }
 vec3 fogged(vec3 color, float depth, vec3 dir) { return color; }
 vec3 fog_view(vec3 color, vec3 eye, vec4 plane, vec3 p) { return color; }
 vec3 fog_sky(vec3 color, vec3 a, vec3 r) { return color; }
+FogDepth water_depth(vec3 x, vec3 r, float reach) { return FogDepth(0.0); }
 FogDepth water_light(vec3 x, vec3 r, float reach) { return FogDepth(1.0); }
 FogDepth water_skylight(vec3 x) { return FogDepth(1.0); }
 #endif

@@ -28,6 +28,8 @@ layout(std140) uniform VirtualLights {
     vec4 virtual_rect_u[MAX_VIRTUAL_LIGHTS];        // a point image's rectangle rows, carried (light_rules
     vec4 virtual_rect_v[MAX_VIRTUAL_LIGHTS];        // carried_rectangle; lights.glsl point_rect_u / _v)
     vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
+    mat4 virtual_unfold[MAX_VIRTUAL_LIGHTS * MAX_APERTURES];  // per outline: the line past it -> where that
+                                                              // stretch of the light's way runs (virtual_water)
 } virtual_lights;
 
 // Whether the line from ``position`` along ``l`` (towards the image), already through the
@@ -79,6 +81,36 @@ float virtual_falloff(int i, vec3 position, out vec3 l, out float dist) {
     float range = virtual_lights.virtual_color[i].w;
     float fade = clamp(1.0 - pow(dist / range, 4.0), 0.0, 1.0);  // lights.glsl's falloff, along the whole path
     return fade * fade / (dist * dist + 1.0) * spot_factor(virtual_lights.virtual_spot[i], l);
+}
+
+// What of virtual light ``i``'s light a water's body leaves on its way to ``position``, in
+// each channel (fog.glsl water_light's, 1 but in FOG_WATER builds): the line from the point
+// towards the image is the way unfolded, each stretch past an outline (the exit's at t, then
+// virtual_through's) taken back to where the light ran by that stretch's virtual_unfold (a
+// mirror's reflection, a portal's carry back), the water's depth summed over every stretch,
+// the last to the image (``dist``; 1e30 for a directional one).  Past virtual_comes_through.
+FogDepth virtual_water(int i, vec3 position, vec3 l, float dist) {
+#ifdef FOG_WATER
+    vec4 plane = virtual_lights.virtual_exit[i];
+    float t = (dot(plane.xyz, position) + plane.w) / -dot(plane.xyz, l);
+    FogDepth depth = water_depth(position, l, t);
+    int count = int(virtual_lights.virtual_params[i].w);
+    for (int k = 0; k <= count; ++k) {
+        float s = dist;
+        if (k < count) {
+            plane = virtual_lights.virtual_more[(i * (MAX_APERTURES - 1) + k) * 4];
+            s = (dot(plane.xyz, position) + plane.w) / -dot(plane.xyz, l);
+        }
+        mat4 back = virtual_lights.virtual_unfold[i * MAX_APERTURES + k];
+        vec3 r = mat3(back) * l;
+        float stretch = length(r);   // (a portal pair of two scales: its lengths over k)
+        depth += water_depth((back * vec4(position + l * t, 1.0)).xyz, r / stretch, (s - t) * stretch);
+        t = s;
+    }
+    return exp(-min(depth, FogDepth(FOG_MAX_EXPONENT)));
+#else
+    return FogDepth(1.0);
+#endif
 }
 
 // Whether virtual light ``i``'s line from ``position`` along ``l`` (towards its image,

@@ -52,8 +52,10 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
 #else
         const vec3 cookie = vec3(1.0);
 #endif
+        // (a water's body on its way: fog.glsl water_light's, virtual_light_ways.glsl)
+        vec3 color = virtual_lights.virtual_color[i].rgb * virtual_water(i, position, l, dist);
         float shade = shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0;
-        vec3 arriving = virtual_lights.virtual_color[i].rgb * cookie * falloff * shade;
+        vec3 arriving = color * cookie * falloff * shade;
 #ifdef SUBSURFACE
         float shade_under = shade;
         if (shadowed && dot(geometric, l) < 0.0) {
@@ -62,7 +64,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
             shade_under = virtual_shadow(i, under_at, under_normal, l, dist);
         }
         total += diffuse * face * subsurface_diffuse(nl, shade, shade_under)
-                 * (virtual_lights.virtual_color[i].rgb * cookie * falloff);
+                 * (color * cookie * falloff);
         if (nl <= 0.0) continue;
 #endif
         // A point image's sphere (its light's radius, in the cookie row's w; ggx.glsl sphere_highlight)
