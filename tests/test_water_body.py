@@ -23,12 +23,13 @@ from components import (
     MeshRef,
     Mirror,
     PointLight,
+    Portal,
     Skybox,
     Transform,
     Water,
     look_rotation,
 )
-from engine.assets.mesh import box, quad
+from engine.assets.mesh import box, plane, quad
 from engine.core.errors import FogLimitWarning
 from tests.support import srgb_to_linear
 from tests.test_water import FLAT, SKY, pool, render
@@ -211,6 +212,66 @@ def test_light_through_a_mirror_is_dimmed_by_the_water_on_every_stretch_of_its_w
     seen_through = kept_through(view_way, absorption)
     np.testing.assert_allclose(fogged[row, col], clear[row, col] * lit * seen_through
                                + np.array(FOG) * (1.0 - seen_through), atol=0.01)
+
+
+def test_a_lamp_through_a_portal_pair_of_two_scales_is_dimmed_by_the_water_before_it(scene):
+    """test_virtual_lights' lamp in front of portal A, shining out of B (B scaled 2: its image
+    is the lamp twice as large, 2 m behind B), the lamp and A's opening in a tinted water's
+    body.  On the floor beyond B, out of the water, what the lamp's image adds (the frame less
+    the one with A carrying no light) is, channel by channel, the clear water's times
+    exp(-density x share x the real length of the way from the lamp to where the line to the
+    image crosses A, carried back through the pair): a line twice as long on B's side is the
+    same water on A's."""
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+    from tests.support import look_from, pixel_rays
+
+    lamp = np.array([0.0, 1.5, 5.0])
+
+    def build(density: float):
+        def make(world):
+            look_from(world, (-1.0, 7.0, 6.0), (-3.0, 0.0, 0.0))
+            world.spawn(Transform(), MeshRef(plane(24, 24)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+            world.spawn(Transform(position=lamp.tolist()), PointLight(intensity=20.0, range=8.0))
+            ids = world.resources["ids"] = dict(zip("ab", spawn_portal_pair(
+                world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0), look_rotation(glm.vec3(-1, 0, 0))), strict=True))
+            world.get(ids["b"], Transform).scale = glm.vec3(2.0)
+            world.get(ids["a"], Portal).carries_light = True
+            # A pond over the lamp: its body a box 4 m deep, x in [-1, 1], z in [3, 6], y in [-1, 3].
+            world.spawn(Transform(position=(0.0, 3.0, 4.5), rotation=FLAT), MeshRef(quad(2.0, 3.0)),
+                        Material(color=(1.0, 1.0, 1.0, 0.0)), Mirror(reflect_rate=0.0),
+                        Water(fog_density=density, fog_color=FOG, depth=4.0, absorption=TINTED))
+        return make
+
+    def light(density: float):
+        runner = scene(build(density), (160, 120))
+        runner.engine.renderer.antialias = "off"
+        on = srgb_to_linear(runner.frame())
+        runner.world.get(runner.world.resources["ids"]["a"], Portal).carries_light = False
+        return runner, on - srgb_to_linear(runner.frame())
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (a still water: no waves, said)
+        runner, murky = light(DENSITY)
+        _, clear = light(0.0)
+    assert runner.stats.virtual_lights == 0  # (carries no light in the last frame)
+    ids = runner.world.resources["ids"]
+    carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                     runner.world.get(ids["b"], Transform).world))
+    image = np.array(glm.dvec3(carry * glm.dvec4(*lamp, 1.0)))
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    points = (eye + rays * (-eye[1] / rays[..., 1])[..., None]).reshape(-1, 3)   # on the floor, y = 0
+    back = np.linalg.inv(np.array(carry.to_list(), np.float64).T)   # B's side -> A's side
+    t = (-6.0 - points[:, 0]) / (image - points)[:, 0]
+    crossing = points + (image - points) * t[:, None]   # on B's 4 x 6 m opening, well inside
+    at_a = crossing @ back[:3, :3].T + back[:3, 3]
+    way = np.linalg.norm(lamp - at_a, axis=1)   # the lamp to A, all of it in the water
+    lit = clear.reshape(-1, 3)
+    sure = (points[:, 0] > -5.8) & (points[:, 0] < -1.5) & (np.abs(crossing[:, 1] - 1.5) < 2.7) \
+        & (np.abs(crossing[:, 2]) < 1.7) & (lit.min(axis=1) > 0.05) & (lit.max(axis=1) < 0.8)
+    assert sure.sum() > 200, int(sure.sum())
+    want = lit[sure] * np.exp(-DENSITY * np.array(TINTED) * way[sure, None])
+    np.testing.assert_allclose(murky.reshape(-1, 3)[sure], want, atol=0.012)
 
 
 def test_absorption_given_and_taken_while_running_shows_from_the_next_frame(scene):
