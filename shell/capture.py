@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -10,7 +11,21 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pyglm import glm
 
-from components import Camera, MeshRef, Portal, Transform
+from components import (
+    Camera,
+    DirectionalLight,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Portal,
+    Refractive,
+    Transform,
+    Water,
+    look_rotation,
+)
+from engine.assets.gltf_export import ExportCamera, ExportLight, ExportPart, write_gltf
 from engine.assets.values import VALUE_KINDS, json_value, public_fields
 from engine.core.budget import ViewBudget
 from engine.core.errors import SpeculumError
@@ -39,30 +54,21 @@ def save_ids(ids: np.ndarray, path: str | Path) -> None:
 
 def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple[int, int],
                  mirror_planes: dict[int, tuple[list[float], list[float]]] | None = None) -> Path:
-    """Write world-space geometry (one GLB node per renderable entity, named by its id) and,
+    """Write world-space geometry with its materials (one glTF node per renderable entity,
+    named by its id: ``engine/assets/gltf_export.py``, which the engine's loader reads back) and,
     beside it, a JSON of the camera, each entity's component types and their field values
     (``component_values``: enough to rebuild the scene), each mirror's world
     plane (a point on it and its unit normal, towards the reflecting side), each portal's
     partner, each reflection probe and which probe each entity samples, and the frame's
     ``ViewBudget`` (its fields; None: none), which decides which views are drawn.  The geometry's
     format follows the extension (``SCENE_FORMATS``); any other is refused."""
-    import trimesh
-
     path = Path(path)
     if path.suffix.lower() not in SCENE_FORMATS:
         raise ValueError(f"export_scene: {str(path)!r} must end in {' or '.join(SCENE_FORMATS)}")
     path.parent.mkdir(parents=True, exist_ok=True)
-    scene = trimesh.Scene()
-    for entity, (mesh_ref, transform) in world.query(MeshRef, Transform):
-        mesh = mesh_ref.mesh
-        matrix = np.array(transform.world.to_list(), np.float64).T  # glm is column-major
-        positions = mesh.positions @ matrix[:3, :3].T + matrix[:3, 3]
-        geometry = trimesh.Trimesh(positions, mesh.indices, process=False)
-        scene.add_geometry(geometry, node_name=str(entity), geom_name=str(entity))
-    if path.suffix.lower() == ".glb":
-        scene.export(str(path), file_type="glb")
-    else:
-        path.write_bytes(trimesh.exchange.gltf.export_gltf(scene, embed_buffers=True)["model.gltf"])
+    write_gltf(path, [_export_part(world, entity, mesh_ref, transform)
+                      for entity, (mesh_ref, transform) in sorted(world.query(MeshRef, Transform))],
+               _export_lights(world), _export_cameras(world))
 
     camera = world.get(camera_entity, Camera)
     cam_world = world.get(camera_entity, Transform).world
@@ -95,6 +101,69 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
     }
     path.with_suffix(".json").write_text(json.dumps(info, indent=1))
     return path
+
+
+def _export_part(world: World, entity: int, mesh_ref: MeshRef, transform: Transform) -> ExportPart:
+    """An entity's mesh in world space (its normals by the inverse transpose, turned back
+    where the transform mirrors: the winding flips too) with what it is drawn with."""
+    mesh = mesh_ref.mesh
+    matrix = np.array(transform.world.to_list(), np.float64).T  # glm is column-major
+    linear = matrix[:3, :3]
+    normals = np.asarray(mesh.normals, np.float64) @ np.linalg.inv(linear)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    indices = np.asarray(mesh.indices).reshape(-1, 3)
+    if np.linalg.det(linear) < 0.0:
+        indices = indices[:, ::-1]
+    glass = world.try_get(entity, Refractive)
+    water = world.try_get(entity, Water)
+    mirror = world.try_get(entity, Mirror)
+    emissive = world.try_get(entity, Emissive)
+    return ExportPart(
+        str(entity), mesh.positions @ linear.T + matrix[:3, 3], normals, mesh.uvs, indices,
+        material=world.try_get(entity, Material), second_uvs=mesh.second_uvs, colors=mesh.colors,
+        emission=emissive.power if emissive is not None else 0.0,
+        glass=(glass.ior, glass.solid, glass.dispersion) if glass is not None else None,
+        water_ior=water.ior if water is not None and mirror is not None else None,
+        mirror=(tuple(mirror.color)[:3], mirror.reflect_rate, mirror.roughness)
+        if mirror is not None and water is None else None)
+
+
+def _placement(matrix: glm.mat4) -> list[float]:
+    """A world matrix's place and turn, its scale left out (a light or camera node's; glTF
+    column-major)."""
+    turn = glm.mat3(matrix)
+    rotation = glm.mat4(glm.mat3(*(glm.normalize(turn[i]) for i in range(3))))
+    rotation[3] = glm.vec4(glm.vec3(matrix[3]), 1.0)
+    return [float(v) for column in rotation.to_list() for v in column]
+
+
+def _export_lights(world: World) -> list[ExportLight]:
+    """The suns, lamps and spots as ``KHR_lights_punctual`` lights (named by entity), a colour
+    past 1 folded into the intensity; a spot wider than glTF's 90 degrees at 90."""
+    def colour(rgb, intensity: float) -> tuple[tuple[float, float, float], float]:
+        rgb = [float(c) for c in tuple(rgb)[:3]]
+        most = max(max(rgb), 1.0)
+        return (rgb[0] / most, rgb[1] / most, rgb[2] / most), float(intensity) * most
+
+    lights = []
+    for entity, sun in sorted(world.query_one(DirectionalLight)):
+        rgb, intensity = colour(sun.color, sun.intensity)
+        lights.append(ExportLight(str(entity), "directional", rgb, intensity,
+                                  _placement(glm.mat4_cast(look_rotation(glm.vec3(sun.direction))))))
+    for entity, (lamp, transform) in sorted(world.query(PointLight, Transform)):
+        rgb, intensity = colour(lamp.color, lamp.intensity)
+        spot = lamp.spot_angle < 180.0
+        outer = math.radians(min(lamp.spot_angle, 90.0))
+        lights.append(ExportLight(str(entity), "spot" if spot else "point", rgb, intensity,
+                                  _placement(transform.world), float(lamp.range),
+                                  outer * (1.0 - lamp.spot_blend), outer))
+    return lights
+
+
+def _export_cameras(world: World) -> list[ExportCamera]:
+    return [ExportCamera(str(entity), camera.fov_y, camera.near, camera.far, _placement(transform.world),
+                         camera.ortho_height if camera.projection == "orthographic" else None)
+            for entity, (camera, transform) in sorted(world.query(Camera, Transform))]
 
 
 def _probes(world: World) -> dict[str, dict]:

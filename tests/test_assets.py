@@ -213,6 +213,27 @@ def test_glb_pbr_material_normals_uvs_texture(tmp_path, world):
     assert world.get(child, Material).texture is not None
 
 
+def test_glb_base_colour_is_read_as_the_file_writes_it_not_in_8_bits(tmp_path):
+    """trimesh keeps baseColorFactor as uint8: a step of 1/255 in linear light, 18% of a dark
+    0.01.  The loader reads the file's own floats; a factor that is not four finite numbers
+    is an error naming the material."""
+    from tests.test_model_variants import edit_glb
+
+    write_glb(tmp_path / "dark.glb", texture=None)
+
+    def dark(doc):
+        doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.01, 0.004, 0.5, 1.0]
+
+    (part,) = load_model(edit_glb(tmp_path / "dark.glb", dark))
+    assert part.color == pytest.approx((0.01, 0.004, 0.5, 1.0), abs=1e-9)
+
+    def bad(doc):
+        doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.01, 0.5, 1.0]   # (three)
+
+    with pytest.raises(AssetError, match="baseColorFactor must be four finite numbers"):
+        load_model(edit_glb(tmp_path / "dark.glb", bad))
+
+
 def test_glb_dielectric_without_emission(tmp_path, world):
     write_glb(tmp_path / "dull.glb", metallic=0.0, emissive=(0.0, 0.0, 0.0), texture=None)
     (part,) = load_model(tmp_path / "dull.glb")

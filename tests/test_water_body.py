@@ -56,6 +56,21 @@ def murky(world, eye, target, density: float, *, depth: float = 10.0, reflect_ra
     return water
 
 
+def unlit_murky(world, eye, target, density: float, absorption: tuple[float, float, float],
+                dark_sky: bool = True) -> None:
+    """``murky``'s pond reflecting nothing, its floor and wall a grey 0.6 that emits nothing
+    (lit only by the lights a test adds), and with ``dark_sky`` a black sky (no light from
+    all round)."""
+    murky(world, eye, target, density, reflect_rate=0.0, absorption=absorption)
+    for entity, _ in world.query_one(Emissive):
+        world.remove_component(entity, Emissive)
+        world.get(entity, Material).color = (0.6, 0.6, 0.6, 1.0)
+    if dark_sky:
+        for entity, _ in world.query_one(Skybox):
+            world.delete_entity(entity)
+        world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+
+
 def kept_through(metres: float, absorption: tuple[float, float, float]) -> np.ndarray:
     """What of each channel's light ``metres`` of the water keep (Beer-Lambert, channel by channel)."""
     return np.exp(-DENSITY * np.array(absorption) * metres)
@@ -133,14 +148,7 @@ def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light
 
     def build(density: float):
         def b(world):
-            murky(world, eye, target, density, reflect_rate=0.0, absorption=absorption)
-            for entity, _ in world.query_one(Emissive):
-                world.remove_component(entity, Emissive)
-                world.get(entity, Material).color = (0.6, 0.6, 0.6, 1.0)
-            if light != "sky":
-                for entity, _ in world.query_one(Skybox):
-                    world.delete_entity(entity)
-                world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+            unlit_murky(world, eye, target, density, absorption, dark_sky=light != "sky")
             if light == "lamp":
                 world.spawn(Transform(position=(0.0, 1.0, 0.0)), PointLight(intensity=5.0, range=20.0))
             elif light == "panel":  # (its front, -Z, turned down)
@@ -181,13 +189,7 @@ def test_light_through_a_mirror_is_dimmed_by_the_water_on_every_stretch_of_its_w
 
     def build(density: float):
         def b(world):
-            murky(world, eye, target, density, reflect_rate=0.0, absorption=absorption)
-            for entity, _ in world.query_one(Emissive):
-                world.remove_component(entity, Emissive)
-                world.get(entity, Material).color = (0.6, 0.6, 0.6, 1.0)
-            for entity, _ in world.query_one(Skybox):
-                world.delete_entity(entity)
-            world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+            unlit_murky(world, eye, target, density, absorption)
             if way == "down_from_a_mirror":
                 sun = glm.vec3(1.0, 0.0, 0.0)
                 turned = glm.normalize(glm.vec3(1.0, -1.0, 0.0))

@@ -859,9 +859,11 @@ def _read_material(tm, part: ModelPart, path: Path, maps: _MaterialMaps) -> None
             part.color = (1.0, 1.0, 1.0, 1.0)  # the mesh's own colours, a vertex or a face (Mesh.colors)
         return
     if hasattr(material, "baseColorFactor"):  # glTF PBR
-        base = material.baseColorFactor
+        base = maps.gltf_base_color(material)   # (the file's floats; trimesh's are 8 bits)
+        if base is None and material.baseColorFactor is not None:
+            base = _unit_color(material.baseColorFactor)
         if base is not None:
-            part.color = tuple(float(c) for c in _unit_color(base))
+            part.color = tuple(float(c) for c in base)
         image = maps.gltf_image(material, "baseColorTexture")
         maps.check_gltf_slot(material, "baseColorTexture", image)
         image_what = f"{maps.gltf_label(material)}: baseColorTexture"
@@ -1242,6 +1244,20 @@ class _MaterialMaps:
             return f"material {material.name!r}"
         index, _ = self.gltf.material(material.name)
         return self.gltf.label(index) if index is not None else f"material {material.name!r}"
+
+    def gltf_base_color(self, material) -> list[float] | None:
+        """The file's ``baseColorFactor`` of this material as it wrote it (None: it has none):
+        trimesh keeps it in 8 bits, a step of 1/255 in linear light (18% of a dark 0.01)."""
+        _, doc_material = self.gltf.material(material.name) if self.gltf else (None, {})
+        pbr = doc_material.get("pbrMetallicRoughness") if isinstance(doc_material, dict) else None
+        factor = pbr.get("baseColorFactor") if isinstance(pbr, dict) else None
+        if factor is None:
+            return None
+        if not (isinstance(factor, list) and len(factor) == 4 and all(
+                isinstance(c, numbers.Real) and not isinstance(c, bool) and math.isfinite(c) for c in factor)):
+            raise AssetError(f"{self.gltf_label(material)}: baseColorFactor must be four finite numbers, "
+                             f"got {factor!r}")
+        return [float(c) for c in factor]
 
     def gltf_emissive_strength(self, material) -> float:
         """The file's ``KHR_materials_emissive_strength`` of this material (1 without it):
