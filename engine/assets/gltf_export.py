@@ -3,7 +3,8 @@ with its buffer embedded (one file either way), for ``--export-scene``.
 
 Each part is one node (named as the caller says: ``shell/capture.py`` names them by entity)
 holding one mesh in world space (its transform already applied, the node's own the
-identity), with its normals, UV sets, vertex colours and a metallic-roughness material
+identity; a skinned or morphed mesh at rest, as the file is a still scene), with its
+normals, UV sets, vertex colours and a metallic-roughness material
 written as this engine's own glTF loader (``engine/assets/mesh.py``) reads them back:
 
 * ``Material``: the base colour and its texture, metallic, roughness and their map, the
