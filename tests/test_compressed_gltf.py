@@ -138,6 +138,8 @@ def test_without_the_decoder_a_requiring_file_is_refused_and_a_using_one_reads_i
     ({"byteLength": 10 ** 6}, r"its 1000000 bytes at 0 lie outside buffer 0"),
     ({"byteOffset": 4}, r"bufferView 0 \(EXT_meshopt_compression\): its data does not decode"),
     ({"count": -1}, r"count must be a whole number >= 0, got -1"),
+    # refused before the decoder allocates 1.2 GB (the model fuzz's seed 10206, case 71: 39 s)
+    ({"count": 10 ** 8}, r"count x byteStride is 1200000000 bytes, but the view's byteLength is 288"),
 ])
 def test_malformed_packed_views_are_refused_naming_them(tmp_path, spoil, message):
     with pytest.raises(AssetError, match=message):
@@ -237,3 +239,18 @@ def test_without_dracopy_a_draco_file_is_refused_naming_the_package(tmp_path, mo
     with pytest.raises(AssetError, match=r"KHR_draco_mesh_compression \(needs the DracoPy package: pip install "
                                          r"DracoPy\)"):
         load_model_file(path)
+
+
+def test_a_packed_view_past_the_asset_budget_is_refused_before_it_is_decoded(tmp_path):
+    """A count that agrees with its view's byteLength but decodes past ASSET_MEMORY_BUDGET:
+    refused naming the view, before the decoder allocates it."""
+    from tests.test_model_variants import edit_glb
+
+    path = packed_box(tmp_path / "huge.glb", spoil={"count": 10 ** 8})
+
+    def agree(doc):
+        doc["bufferViews"][0]["byteLength"] = 12 * 10 ** 8
+
+    with pytest.raises(AssetError, match=r"bufferView 0 \(EXT_meshopt_compression\): decodes to 1200000000 bytes, "
+                                         r"past the \d+-byte budget"):
+        load_model_file(edit_glb(path, agree))

@@ -23,6 +23,7 @@ from collections.abc import Callable
 import numpy as np
 
 from engine.assets.gltf_accessors import BufferBytes
+from engine.assets.texture_data import ASSET_MEMORY_BUDGET
 from engine.core.errors import AssetError
 
 MESHOPT = "EXT_meshopt_compression"
@@ -166,6 +167,14 @@ def decode_meshopt_views(doc: dict, buffer_bytes: BufferBytes, what: str) -> int
                 (mode != "ATTRIBUTES" and stride not in (2, 4)):
             raise AssetError(f"{label}: byteStride {stride} does not suit mode {mode} (attributes: a multiple of 4 "
                              "up to 256; triangles and indices: 2 or 4)")
+        if count * stride != view.get("byteLength"):
+            # (checked before decoding: the decoder allocates count x byteStride bytes, which a
+            # spoilt count makes gigabytes, zeroed for tens of seconds before it fails)
+            raise AssetError(f"{label}: count x byteStride is {count * stride} bytes, but the view's byteLength is "
+                             f"{view.get('byteLength')!r} (the extension decodes to the view's length)")
+        if count * stride > ASSET_MEMORY_BUDGET:
+            raise AssetError(f"{label}: decodes to {count * stride} bytes, past the {ASSET_MEMORY_BUDGET}-byte "
+                             "budget of one asset's arrays")
         source = buffer_bytes(buffer)
         if source is None or offset + length > len(source):
             raise AssetError(f"{label}: its {length} bytes at {offset} lie outside buffer {buffer}")
