@@ -185,10 +185,10 @@ def material_json(part: ExportPart, images: _Images, used: set[str]) -> dict:
             info["texCoord"] = 1
         return info
 
-    for field, where in (("texture", pbr), ("metallic_roughness_map", pbr)):
+    for field in ("texture", "metallic_roughness_map"):
         info = slot(field, getattr(material, field))
         if info is not None:
-            where[MAP_SLOTS[field]] = info
+            pbr[MAP_SLOTS[field]] = info
     normal = slot("normal_map", material.normal_map, {"scale": float(material.normal_scale)})
     if normal is not None:
         out["normalTexture"] = normal
@@ -203,10 +203,8 @@ def material_json(part: ExportPart, images: _Images, used: set[str]) -> dict:
         else:
             emitted, image, field = [c * part.emission for c in color[:3]], material.texture, "texture"
         strength = max(emitted)
-        if image is not None:
-            info = {"index": images.texture(image)}
-            if field in second:
-                info["texCoord"] = 1
+        info = slot(field, image)
+        if info is not None:
             out["emissiveTexture"] = info
         if strength > 1.0:
             emitted = [e / strength for e in emitted]
