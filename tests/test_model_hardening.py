@@ -510,12 +510,14 @@ def test_what_is_truly_broken_is_still_refused(tmp_path, text, reason):
 
 def test_the_model_fuzz_refuses_by_name_or_renders_clean(ctx, tmp_path):
     """80 model files made at random (benchmarks/model_fuzz.py), spawned outside any level,
-    FRAMES frames each: no case fails, and both outcomes happen (the cases reach a frame)."""
+    FRAMES frames each: no case fails, and both outcomes happen, each in a tenth of the cases
+    at least (the cases reach a frame).  (A meshopt view whose count x byteStride is not its
+    byteLength is refused since 0f43747, as the extension says: seed 3 renders 10.)"""
     from benchmarks.model_fuzz import fuzz_models
 
     ran, failures, passes = fuzz_models(ctx, tmp_path, 80, seed=3)
     assert ran == 80 and not failures, failures[:3]
-    assert passes["refused"] > 10 and passes["rendered"] > 10, passes
+    assert passes["refused"] >= 8 and passes["rendered"] >= 8, passes
 
 
 def test_the_model_fuzz_reports_what_is_not_an_asset_error(ctx, tmp_path, monkeypatch):
