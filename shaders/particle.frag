@@ -9,6 +9,7 @@
 #include "view_axis.glsl"
 #include "fog.glsl"
 #include "hdr.glsl"
+#include "footprint.glsl"
 
 #ifdef MASKED
 uniform usampler2D node_map;  // a reflection level's claims: only this view's pixels
@@ -39,7 +40,7 @@ layout(location = 0) out vec4 out_color;
 
 void main() {
 #ifdef SPRITE
-    vec4 sprite = texture(sprite_map, v_uv);
+    vec4 sprite = texture(sprite_map, bounded_footprint(v_uv));
 #else
     float round_spot = max(1.0 - dot(v_corner, v_corner), 0.0);
     vec4 sprite = vec4(1.0, 1.0, 1.0, round_spot * round_spot);

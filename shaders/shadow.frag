@@ -8,6 +8,7 @@
 // the albedo map's (a batch without one binds the blank white image).
 uniform sampler2D albedo_map;
 uniform float alpha_cutoff;
+#include "footprint.glsl"
 #ifdef LAYERED
 in vec2 g_uv;
 in float g_alpha;
@@ -32,7 +33,7 @@ layout(location = 0) out float out_distance;
 
 void main() {
 #ifdef ALPHA_CUTOFF
-    if (v_alpha * texture(albedo_map, v_uv).a < alpha_cutoff) discard;
+    if (v_alpha * texture(albedo_map, bounded_footprint(v_uv)).a < alpha_cutoff) discard;
 #endif
 #ifdef DISTANCE
     out_distance = length(v_world_pos - camera.eye.xyz) / light_range;

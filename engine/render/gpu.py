@@ -150,7 +150,10 @@ class Gpu:
         self.ctx = ctx
         self.caps = caps
         self.raw_gl = RawGL(ctx)
-        self.shaders = ShaderLibrary(ctx)
+        # A software rasteriser's anisotropic filter has no bound on its taps: its builds hold
+        # each map read's footprint to one texture a pixel (shaders/include/footprint.glsl).
+        self.shaders = ShaderLibrary(ctx, driver_defines={} if caps.filters_anisotropically
+                                     else {"BOUNDED_FOOTPRINT": "1"})
         # A pass's Camera blocks, one after another at the alignment a uniform range needs.
         align = max(1, int(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)))
         self.camera_stride = -(-CAMERA_BLOCK_BYTES // align) * align

@@ -554,9 +554,13 @@ class ShaderLibrary:
     """Compiled programs of one context, cached by (files, defines), rebuilt in place when
     a file they were built from changes (``poll``)."""
 
-    def __init__(self, ctx: moderngl.Context, root: Path | None = None) -> None:
+    def __init__(self, ctx: moderngl.Context, root: Path | None = None,
+                 driver_defines: dict[str, str] | None = None) -> None:
         self.ctx = ctx
         self.root = root
+        # Defines every program of this context is built with, for what its driver needs
+        # (Gpu: BOUNDED_FOOTPRINT on a software rasteriser, shaders/include/footprint.glsl).
+        self.driver_defines = dict(driver_defines or {})
         self._programs: dict[ProgramKey, moderngl.Program] = {}
         self._uses: dict[ProgramKey, set[str]] = {}       # the files each program was built from
         self._seen: dict[str, tuple] = {}                # file -> (mtime_ns, size, text) when last read
@@ -588,7 +592,7 @@ class ShaderLibrary:
 
     def program(self, vertex: str, fragment: str, geometry: str | None = None,
                 defines: dict[str, str] | None = None) -> moderngl.Program:
-        key = (vertex, fragment, geometry, tuple(sorted((defines or {}).items())))
+        key = (vertex, fragment, geometry, tuple(sorted({**self.driver_defines, **(defines or {})}.items())))
         program = self._programs.get(key)
         if program is None:
             files = SourceFiles()

@@ -23,8 +23,11 @@ vec2 parallax_shift = vec2(0.0);
 // A map's texel where it is read: with a parallax shift, filtered by the plain UVs' screen
 // derivatives (the shifted UVs jump where the ray passes a height's edge: their own would
 // pick the smallest mip there, a seam of sparkles).
+// (bounded_footprint: footprint.glsl; a software rasteriser filters by the coordinates' own
+// derivatives, the gradients given or not.)
+#include "footprint.glsl"
 #ifdef PARALLAX
-#define MAP_TEXTURE(map, bit) textureGrad(map, MAP_UV(bit), dFdx(MAP_UV_PLAIN(bit)), dFdy(MAP_UV_PLAIN(bit)))
+#define MAP_TEXTURE(map, bit) textureGrad(map, bounded_footprint(MAP_UV(bit)), dFdx(MAP_UV_PLAIN(bit)), dFdy(MAP_UV_PLAIN(bit)))
 #else
-#define MAP_TEXTURE(map, bit) texture(map, MAP_UV(bit))
+#define MAP_TEXTURE(map, bit) texture(map, bounded_footprint(MAP_UV(bit)))
 #endif
