@@ -13,7 +13,10 @@
 // FOG_WATER what a water's body on the way leaves, fog.glsl water_light, and under CAUSTICS
 // what a rippled water over it gathers there, caustics.glsl), times
 // the sun's light (colour x intensity), the Henyey-Greenstein phase function of the angle
-// between the sun's light and the ray, and VolumetricFog.intensity.  The texel's ray is that of the first pixel of its ``ratio`` x
+// between the sun's light and the ray, and VolumetricFog.intensity.  Under VIRTUAL_LIGHTS the
+// light of those lights through mirrors and portals (shadow_rules.VirtualLight: the sun's
+// image, a volumetric lamp's) is scattered as theirs is, where it comes out of its exit's
+// outline (virtual_light_ways.glsl), in its own shadow map.  The texel's ray is that of the first pixel of its ``ratio`` x
 // ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
 // compares.  A mirror or portal view's rays start on its oblique near plane: the surface.
 #ifndef VOLUMETRIC_LAMPS
@@ -30,6 +33,10 @@
 #ifdef CLOUD_SHADOWS  // a CloudLayer's shadows: the sun's light at each point through the cloud on its way
 #include "clouds.glsl"
 uniform int cloud_stride;    // the steps between two reads of the clouds' share (engine/render/clouds.py cloud_stride)
+#endif
+#ifdef VIRTUAL_LIGHTS  // light through mirrors and portals: the images of the lights the shafts scatter
+#include "virtual_light_ways.glsl"
+uniform float virtual_scatter[MAX_VIRTUAL_LIGHTS];  // each image's share: its light's (0: it lights no air)
 #endif
 #ifdef LEVEL_VIEWS  // a mirror or portal level's: drawn once a view, over its own pixels only
 #include "level_nodes.glsl"
@@ -113,6 +120,13 @@ void main() {
     // the angle between its light and the ray, times its own share.
     vec3 lamp_sum = vec3(0.0);
 #endif
+#ifdef VIRTUAL_LIGHTS
+    // The lights' images through mirrors and portals, as the lamps: each one's light where
+    // the line towards it comes out of its exit (else none), its falloff, cone and cookie (a
+    // lamp's image), its own map's shadow (no offset), a water's body on its way, by the
+    // phase function of the angle to it, times its light's share.
+    vec3 image_sum = vec3(0.0);
+#endif
     // The steps a stride at a time (the clouds' share read once a stride: a loop of its own,
     // as llvmpipe runs a branch's body for every step whether or not any pixel takes it).
 #ifdef CLOUD_SHADOWS
@@ -170,6 +184,25 @@ void main() {
             }
             lamp_sum += lamps * (density * seen);
 #endif
+#ifdef VIRTUAL_LIGHTS
+            vec3 images = vec3(0.0);
+            for (int k = 0; k < virtual_lights.virtual_count.x; ++k) {
+                vec3 l;
+                float dist;
+                float falloff = virtual_falloff(k, x, l, dist) * virtual_scatter[k];
+                if (falloff <= 0.0 || !virtual_comes_through(k, x, l, dist)) continue;
+#ifdef SPOT_COOKIES
+                vec3 cookie = cookie_light(cookie_place(virtual_lights.virtual_cookie_u[k],
+                                                        virtual_lights.virtual_cookie_v[k],
+                                                        virtual_lights.virtual_spot[k], l), vec2(0.0), vec2(0.0));
+#else
+                vec3 cookie = vec3(1.0);
+#endif
+                images += virtual_lights.virtual_color[k].rgb * cookie * virtual_water(k, x, l, dist)
+                          * (falloff * henyey_greenstein(dot(dir, l), anisotropy) * virtual_shadow(k, x, vec3(0.0), l, dist));
+            }
+            image_sum += images * (density * seen);
+#endif
             seen *= exp(-density * step_length);
             x += dir * step_length;
         }
@@ -178,6 +211,9 @@ void main() {
     vec3 sun_light = sun >= 0 ? lights.directional_color[lit_by].rgb * (phase * sum) : vec3(0.0);
 #if VOLUMETRIC_LAMPS > 0
     sun_light += lamp_sum;
+#endif
+#ifdef VIRTUAL_LIGHTS
+    sun_light += image_sum;
 #endif
     out_light = vec4(sun_light * (scatter * step_length), reach);
 }

@@ -40,6 +40,7 @@ from engine.render.views import View, camera_view
 from engine.resources import ContactLamps, Surfaces, ViewBudget, VolumetricLamps
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import KeptLights, brightest_directional
+from engine.rules.shadow_rules import ShadowCasters
 
 _NO_LAMPS = ContactLamps()
 _NO_SHAFT_LAMPS = VolumetricLamps()
@@ -183,7 +184,23 @@ class MainViewSystem(esper.Processor):
         slot = kept.directional.index(lit_by.entity) \
             if lit_by is not None and kept is not None and lit_by.entity in kept.directional else None
         self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa", lamps,
-                                           None if slot is None else (slot, lit_by.towards))
+                                           None if slot is None else (slot, lit_by.towards),
+                                           self._image_shares(None if slot is None else lit_by.entity, lamps, kept))
+
+    def _image_shares(self, air: int | None, lamps: VolumetricLamps, kept: KeptLights | None) -> tuple[float, ...]:
+        """Each light through a mirror or portal this frame (the shadows stage's
+        ``ShadowCasters.virtual``, by slot): its share of the shafts, its light's: 1 for the
+        image of the sun or moon that lights the air (``air``), a scattered lamp's
+        ``volumetric`` for the lamp's (one of ``lamps``: those past the limit scatter neither),
+        0 for the rest."""
+        casters = self.world.resources.get(ShadowCasters)
+        if casters is None or not casters.virtual:
+            return ()
+        scattered = {kept.point[slot]: share for slot, share in zip(lamps.slots, lamps.scatter, strict=True)} \
+            if kept is not None else {}
+        return tuple(1.0 if light.kind == "directional" and light.light == air
+                     else scattered.get(light.light, 0.0) if light.kind == "point" else 0.0
+                     for light in casters.virtual)
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
         """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects

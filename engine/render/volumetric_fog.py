@@ -69,6 +69,8 @@ from engine.render.bindings import (
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
+    VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SHADOW_UNIT,
     VOLUMETRIC_DEPTH_UNIT,
     VOLUMETRIC_LIGHT_UNIT,
     VOLUMETRIC_NODE_UNIT,
@@ -83,6 +85,7 @@ from engine.render.clouds import cloud_stride
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, View
 from engine.resources import VolumetricLamps
+from engine.rules.shadow_rules import MAX_VIRTUAL_LIGHTS
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -125,8 +128,9 @@ class VolumetricFogPass:
         self.shadows = shadows
         self._images: _Images | None = None
         self._levels: dict[int, _Images] = {}  # a reflection level's, by its depth
-        # This frame's (view, settings, jittered, the lamps it scatters), from begin to the root's composite.
-        self._pending: tuple[View, VolumetricFog, bool, VolumetricLamps] | None = None
+        # This frame's (view, settings, jittered, the lamps it scatters, the share of each light
+        # through a mirror or portal, by its slot), from begin to the root's composite.
+        self._pending: tuple[View, VolumetricFog, bool, VolumetricLamps, tuple[float, ...]] | None = None
         # The levels this frame's shafts reach (0: the camera's view alone; -1: no shafts): a
         # still tree's refill copies such a level, whose shafts add to what its pixels hold.
         self.reach = -1
@@ -144,12 +148,16 @@ class VolumetricFogPass:
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
               lamps: VolumetricLamps = _NO_LAMPS,
-              sky_light: tuple[int, tuple[float, float, float]] | None = None) -> None:
+              sky_light: tuple[int, tuple[float, float, float]] | None = None,
+              image_shares: tuple[float, ...] = ()) -> None:
         """``view``, drawn into ``targets`` (the main tree's level 0) this frame, gets the
         shafts ``settings`` say, of the sun or the moon (``sky_light``: its slot in the
         Lights block and the unit way towards it, which sets how often the march reads a
-        CloudLayer's share: ``clouds.cloud_stride``; ``sky.air_light`` chooses it) and ``lamps``
-        (``jittered``: under temporal AA, a new offset each frame); the images are made for the
+        CloudLayer's share: ``clouds.cloud_stride``; ``sky.air_light`` chooses it) and ``lamps``,
+        and of the lights through mirrors and portals (``image_shares``: each virtual light's share by
+        its slot in the VirtualLights block, 1 for the sun's or moon's image, a lamp's
+        ``volumetric`` for its, 0 for one whose light scatters in no air: none scatter, no
+        loop is built) (``jittered``: under temporal AA, a new offset each frame); the images are made for the
         targets (again when they or the resolution change)."""
         ratio = 2 if settings.half_resolution else 1
         images = self._images
@@ -158,7 +166,7 @@ class VolumetricFogPass:
                 images.release()
             images = self._images = self._make(targets, ratio)
             self._marched_from = None
-        self._pending = (view, settings, jittered, lamps)
+        self._pending = (view, settings, jittered, lamps, image_shares if any(image_shares) else ())
         self._sky_light = sky_light
         self.reach = settings.reflection_depth
         for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
@@ -179,8 +187,8 @@ class VolumetricFogPass:
         if pending is None or images is None or images.level is not level:
             return
         self._pending = None
-        view, settings, jittered, lamps = pending
-        key = None if jittered else self._still_key(view, images, settings, lamps)
+        view, settings, jittered, lamps, shares = pending
+        key = None if jittered else self._still_key(view, images, settings, lamps, shares)
         march = not (self.keep_still and key is not None and key == self._marched_from)
         self._marched_from = key
         self._draw(images, [view], pending, False, march)
@@ -199,28 +207,29 @@ class VolumetricFogPass:
             images = self._levels[depth] = self._make(level, 1)
         self._draw(images, views, pending, True, True)
 
-    def _still_key(self, view: View, images: _Images, settings: VolumetricFog, lamps: VolumetricLamps) -> tuple:
+    def _still_key(self, view: View, images: _Images, settings: VolumetricFog, lamps: VolumetricLamps,
+                   shares: tuple[float, ...]) -> tuple:
         """What the root's march reads: the view's depth (every instance row, batch and
-        texture drawn: ``Gpu.scene_version``, which the Lights, Fog and Shadows blocks, the
-        shadow maps and the cookies move on too), the shaders, the view's Camera block and
-        size, the images' resolution, the settings and the lamps."""
+        texture drawn: ``Gpu.scene_version``, which the Lights, Fog, Shadows and VirtualLights
+        blocks, the shadow maps and the cookies move on too), the shaders, the view's Camera
+        block and size, the images' resolution, the settings, the lamps and the images' shares."""
         return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), images.level.size,
                 images.ratio, settings.intensity, settings.anisotropy, settings.distance, settings.steps,
-                lamps.slots, lamps.scatter, self._sky_light)
+                lamps.slots, lamps.scatter, self._sky_light, shares)
 
     def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool,
               march_again: bool) -> None:
         """The march into ``images`` (unless not ``march_again``: the image stands) and the
         filter into its level's colour (``pending``: ``begin``'s), one draw each over the
         view's pixels, or with ``level_views`` one a view over its rectangle."""
-        _, settings, jittered, lamps = pending
+        _, settings, jittered, lamps, shares = pending
         ctx, gpu = self.ctx, self.gpu
         level = images.level
         self.shadows.bind()
         gpu.fog.bind()
         gpu.clouds.bind()   # (another engine on the context binds its own block at the same point)
         gpu.caustics.bind()
-        if lamps.slots:
+        if lamps.slots or shares:
             gpu.spot_cookies.bind()
         bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
         bind_sampler(ctx, gpu.depth_values(), VOLUMETRIC_DEPTH_UNIT)  # (its values, compared with nothing)
@@ -232,7 +241,7 @@ class VolumetricFogPass:
         each = [{"inv_view_proj": glm.inverse(view.view_proj).to_bytes(),
                  **({"node": view.node} if level_views else {})} for view in views]
         if march_again:
-            march = self._program("volumetric_fog.frag", settings.steps, level_views, len(lamps.slots))
+            march = self._program("volumetric_fog.frag", settings.steps, level_views, len(lamps.slots), bool(shares))
             tiles = np.zeros((MAX_DIRECTIONAL_LIGHTS, 4), np.float32)
             for slot, tile in self.shadows.directional_tiles.items():
                 tiles[slot, :3] = tile
@@ -246,7 +255,8 @@ class VolumetricFogPass:
                                         "sky_light": -1 if sky_light is None else sky_light[0],
                                         "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
                                         "map_tiles": tiles.tobytes(), "lamp_slots": (*lamps.slots, *(0,) * spare),
-                                        "lamp_scatter": (*lamps.scatter, *(0.0,) * spare)})
+                                        "lamp_scatter": (*lamps.scatter, *(0.0,) * spare),
+                                        "virtual_scatter": _shares_bytes(shares)})
             images.light_framebuffer.use()
             apply_pass_state(ctx, _MARCH, (0, 0, *images.light.size))
             self._each_view(march, views, each, level_views)
@@ -275,17 +285,18 @@ class VolumetricFogPass:
             self._write(vao.program, values)
             vao.render(moderngl.TRIANGLES, vertices=3)
 
-    def _program(self, shader: str, steps: int, level_views: bool, lamps: int = 0) -> moderngl.VertexArray:
-        """The march's build for ``steps`` and ``lamps`` lamps (with the shadow lookups and fog
-        terms the scene builds have now), or the filter's (``steps`` 0); a reflection level's
-        with ``level_views``."""
+    def _program(self, shader: str, steps: int, level_views: bool, lamps: int = 0,
+                 images: bool = False) -> moderngl.VertexArray:
+        """The march's build for ``steps`` and ``lamps`` lamps, and with ``images`` the lights
+        through mirrors and portals (with the shadow lookups and fog terms the scene builds
+        have now), or the filter's (``steps`` 0); a reflection level's with ``level_views``."""
         shaders = self.gpu.shaders
         if self._programs_of != shaders.reloads:
             self._release_programs()
             self._programs_of = shaders.reloads
         extra = (self.shadows.program_defines, self.gpu.fog.defines, self.gpu.clouds.shadow_defines,
-                 self.gpu.spot_cookies.defines if lamps else (), self.gpu.caustics.defines) if steps else ()
-        key = (shader, steps, extra, level_views, lamps)
+                 self.gpu.spot_cookies.defines if lamps or images else (), self.gpu.caustics.defines) if steps else ()
+        key = (shader, steps, extra, level_views, lamps, images)
         vao = self._programs.get(key)
         if vao is None:
             defines = {"STEPS": str(steps), "VOLUMETRIC_LAMPS": str(lamps)} if steps else {}
@@ -295,14 +306,17 @@ class VolumetricFogPass:
                 defines["SHADOW_SINGLE_TAP"] = "1"
             if level_views:
                 defines["LEVEL_VIEWS"] = "1"
+            if images:
+                defines["VIRTUAL_LIGHTS"] = "1"
             program = shaders.program("fullscreen.vert", shader, defines=defines)
             assign_slots(program, {"depth_map": VOLUMETRIC_DEPTH_UNIT, "light_map": VOLUMETRIC_LIGHT_UNIT,
                                    "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
                                    "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
                                    "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT,
-                                   "caustic_map": CAUSTIC_UNIT},
+                                   "caustic_map": CAUSTIC_UNIT, "virtual_atlas": VIRTUAL_SHADOW_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING,
-                          "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING})
+                          "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING,
+                          "VirtualLights": VIRTUAL_LIGHTS_BINDING})
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
 
@@ -327,9 +341,9 @@ class VolumetricFogPass:
         stage's still key: a change draws its levels again)."""
         if self._pending is None:
             return None
-        _, settings, _, lamps = self._pending
+        _, settings, _, lamps, shares = self._pending
         return (settings.intensity, settings.anisotropy, settings.distance, settings.steps, settings.reflection_depth,
-                lamps.slots, lamps.scatter)
+                lamps.slots, lamps.scatter, shares)
 
     def release_levels(self) -> None:
         """Let the reflection levels' images go (the world has no mirror or portal now)."""
@@ -354,3 +368,10 @@ class VolumetricFogPass:
     def release(self) -> None:
         self.release_targets()
         self._release_programs()
+
+
+def _shares_bytes(shares: tuple[float, ...]) -> bytes:
+    """The march's ``virtual_scatter``: each virtual light's share, by slot, 0 past them."""
+    values = np.zeros(MAX_VIRTUAL_LIGHTS, np.float32)
+    values[:len(shares)] = shares[:MAX_VIRTUAL_LIGHTS]
+    return values.tobytes()
