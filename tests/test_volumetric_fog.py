@@ -922,3 +922,88 @@ def test_the_suns_light_off_a_mirror_lights_the_air_as_the_sun_at_its_image(scen
     assert np.median(column_error) < 0.05, np.median(column_error)
     assert np.quantile(column_error, 0.9) < 0.15, np.quantile(column_error, 0.9)
     assert np.abs(added[steady & (image == 0.0)]).max() < 0.01 * image.max()
+
+
+WALL_MIRROR = ((-3.0, 2.0, -1.0), (6.0, 4.0))   # a standing mirror facing +x (centre, z and y sides)
+IMAGED_LAMP, IMAGED_RANGE, IMAGED_LIGHT = (-1.2, 2.6, -0.5), 12.0, 4.0
+
+
+def _lamp_image_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
+                      volumetric: float) -> np.ndarray:
+    """A lamp's image in the standing mirror (the lamp reflected in its plane), scattered
+    back along each ray at 1,000 points: lit where the line from the point to the image
+    crosses the glass, by the falloff over the whole way (the distance to the image) and the
+    phase function, times the lamp's ``volumetric``."""
+    (mx, my, mz), (depth, height) = WALL_MIRROR
+    image = np.array(IMAGED_LAMP) * np.array([-1.0, 1.0, 1.0]) + np.array([2.0 * mx, 0.0, 0.0])
+    points = 1000
+    t = (np.arange(points) + 0.5) / points
+    g = settings.anisotropy
+    total = np.zeros(len(origin))
+    for first in range(0, len(origin), 256):
+        part = slice(first, first + 256)
+        along = reach[part, None] * t[None, :]
+        at = (origin[part, None, :] + way[part, None, :] * along[..., None]).reshape(-1, 3)
+        to_image = image - at
+        dist = np.linalg.norm(to_image, axis=1)
+        l = to_image / dist[:, None]
+        s = (mx - at[:, 0]) / l[:, 0]                      # along the line to the glass's plane
+        cross = at + l * s[:, None]
+        through = (at[:, 0] > mx) & (np.abs(cross[:, 1] - my) <= height / 2) & (np.abs(cross[:, 2] - mz) <= depth / 2)
+        fade = np.clip(1.0 - (dist / IMAGED_RANGE) ** 4, 0.0, 1.0)
+        c = np.einsum("ij,ij->i", np.repeat(way[part], points, 0), l)
+        phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
+        light = (fade * fade / (dist * dist + 1.0) * phase * through).reshape(along.shape)
+        total[part] = (DENSITY * np.exp(-DENSITY * along) * light).sum(1) * reach[part] / points
+    return IMAGED_LIGHT * volumetric * settings.intensity * total
+
+
+@pytest.mark.parametrize("volumetric", [0.7, 0.0])
+def test_a_volumetric_lamps_image_in_a_mirror_lights_the_air_by_its_share(scene, volumetric):
+    """A lamp before a standing mirror that reflects light: its image scatters in the air as
+    the lamp would from the image's place, through the glass's outline, times the lamp's
+    ``PointLight.volumetric`` (0: the lamp lights no air, nor does its image).  What the
+    march adds over the same room whose mirror reflects no light, against
+    ``_lamp_image_light``.  A sun lights the air too (its light meets the glass's back: no
+    image of it), so the shafts stand at 0."""
+    settings = VolumetricFog(steps=128, anisotropy=0.0)
+
+    def room(reflects: bool):
+        def build(world):
+            camera = look_from(world, (0.0, 2.0, 7.0), (-0.5, 2.0, 0.0), fov=60.0)
+            world.spawn(Skybox())
+            world.spawn(DirectionalLight(direction=(1.0, -1.0, 0.0), intensity=0.5, shadows=False))
+            world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5, 0.5, 0.5)))
+            centre, sides = WALL_MIRROR   # (the quad's +z turned to +x)
+            world.spawn(Transform(position=centre, rotation=glm.angleAxis(np.pi / 2, glm.vec3(0, 1, 0))),
+                        MeshRef(quad(*sides)), Material(), Mirror(reflects_light=reflects))
+            world.spawn(Transform(position=IMAGED_LAMP),
+                        PointLight(intensity=IMAGED_LIGHT, range=IMAGED_RANGE, volumetric=volumetric, shadows=False))
+            world.add_component(camera, Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
+            world.add_component(camera, Tonemap(curve="none"))
+            world.add_component(camera, settings)
+        runner = scene(build, SIZE)
+        runner.frame()
+        assert runner.stats.virtual_lights == int(reflects)
+        return runner, marched_light(runner)
+
+    runner, marched = room(True)
+    _, without = room(False)
+    added = marched[..., 0].astype(np.float64) - without[..., 0]
+    origin, way, shape = march_rays(runner, SIZE, 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
+    centre, (depth, height) = WALL_MIRROR
+    reach = np.minimum(np.minimum(floor, _hits(origin, way, [(centre, (2e-4, height, depth))])), settings.distance)
+    image = _lamp_image_light(origin, way, reach, settings, 0.7).reshape(shape)
+    reach = reach.reshape(shape)
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    if volumetric == 0.0:
+        assert np.abs(added).max() == 0.0   # (no image is marched: the same build and sum as without)
+        return
+    lit = steady & (image > 0.05 * image.max())
+    assert lit.sum() > 300, lit.sum()
+    error = np.abs(added - image)[lit] / image[lit]
+    assert np.median(error) < 0.03, np.median(error)
+    assert np.quantile(error, 0.9) < 0.1, np.quantile(error, 0.9)
+    assert np.abs(added[steady & (image == 0.0)]).max() < 0.02 * image.max()
