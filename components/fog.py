@@ -110,7 +110,11 @@ class VolumetricFog(TrackedComponent):
     and the ray.  A step starts at a different offset each pixel (and each frame under
     temporal AA), and a depth-aware filter brings the sum to every pixel and hides the
     steps' banding.  It is added to what the Fog's colour and sun glow already give (set the
-    Fog's ``sun_scatter`` to 0 where the shafts should be the sun's only glow).
+    Fog's ``sun_scatter`` to 0 where the shafts should be the sun's only glow).  The lamps
+    with ``PointLight.volumetric`` scatter likewise, and so does the light of the sun (or
+    moon) and of those lamps through mirrors and portals that carry light
+    (``Mirror.reflects_light``, ``Portal.carries_light``): a beam off a mirror, by its own
+    shadow map, from where it leaves the glass or the opening.
 
     - ``intensity``: the share of the light the air takes away that it scatters (its
       albedo; 1 by default: none absorbed), times any artistic boost (at most 100).

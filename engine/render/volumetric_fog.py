@@ -17,7 +17,10 @@ put in, before its glass (``ScenePass.finish_root``):
    share, ``shaders/include/clouds.glsl``'s ``cloud_shadow``), then scales the sum by the
    sun's light, the Henyey-Greenstein phase function and ``intensity``; and at each point the
    light of each lamp the prepare stage lists (``VolumetricLamps``: ``PointLight.volumetric``),
-   its falloff, cone, cookie and shadow, by the phase function of its own angle.  Each texel's points
+   its falloff, cone, cookie and shadow, by the phase function of its own angle; and the
+   light of either through mirrors and portals (the shadows stage's virtual lights whose light
+   is the air's sun or moon or a scattered lamp: ``begin``'s ``image_shares``), where the line
+   towards the image comes out of its exit, in its own shadow map.  Each texel's points
    start at another offset (interleaved gradient noise; moved each frame under temporal AA,
    whose history then averages them).
    While nothing the root's march reads moves (``_still_key``: the scene, its shadow maps
