@@ -8,11 +8,17 @@ kinds in ``LOOK_KINDS``), with the probes each one samples (``probe_rules.probe_
 A posed entity (a ``Skin`` bends its mesh, or it wears a ``Morph``) gets a batch of its own,
 its joint matrices and morph weights written to its row of the pose texture
 (``engine/render/pose_rows.py``) and the box holding the pose given to its batch.
+Where a water gathers the sun (``Water.caustics``), a row whose box reaches into its body
+goes to a batch of its own (``BatchKey.under_caustics``): the CAUSTICS builds cost every
+pixel of a batch on a software rasteriser, and a mesh's rows across a level (the boxes of a
+hall) would all pay for a pond's; a mover is re-keyed as it goes in or out.
 It also publishes which probes each mirror and portal shows where it gets no view
 (``SurfaceBlends``, ``probe_rules.surface_blend``), which the view trees' fallbacks draw.
 Nothing here writes game state.
 """
 from __future__ import annotations
+
+import weakref
 
 import esper
 from pyglm import glm
@@ -40,6 +46,7 @@ from engine.assets.mesh import Mesh
 from engine.core.errors import GLLimitError
 from engine.core.skinning import posed_bounds
 from engine.core.world import World
+from engine.render.caustics import Box, body_box, placed_box, under_caustics
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.render.surface_table import SurfaceBlends
@@ -69,6 +76,9 @@ class ExtractSystem(esper.Processor):
         self._layout = 0  # counts changes of _batch_of (an entity given, moved to or taken from a batch)
         # (layout, the entities, them by batch) of the last frame's movers (process).
         self._moved_groups: tuple[int, set[int], dict[InstanceBatch, list[int]]] | None = None
+        # The bodies of the waters that gather the sun (_caustic_bodies), and each mesh's model box.
+        self._bodies: tuple[Box, ...] = ()
+        self._mesh_boxes: weakref.WeakKeyDictionary[Mesh, Box] = weakref.WeakKeyDictionary()
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -91,6 +101,10 @@ class ExtractSystem(esper.Processor):
             touched |= {entity for entity, clone in world.query_one(PortalClone) if clone.source in shown}
         if world.changed(Skin) or world.changed(Morph):
             touched = self._posed_only(touched)
+        bodies = self._caustic_bodies()
+        if bodies != self._bodies:   # a water that gathers the sun came, went or changed: every row looked at again
+            self._bodies = bodies
+            touched = touched | set(self._batch_of)
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)
@@ -114,6 +128,13 @@ class ExtractSystem(esper.Processor):
                 batch = self._batch_of.get(entity)
                 if batch is not None and batch.mirrored != _mirrors(component(entity, Transform).world):
                     self._refresh_instance(entity)
+        if bodies:
+            # A mover that went into a caustic water's body (or came out) goes to the batch drawn
+            # with (or without) the CAUSTICS builds.
+            for entity in frame.moved - touched:
+                batch = self._batch_of.get(entity)
+                if batch is not None and batch.under_caustics != self._under_caustics(entity):
+                    self._refresh_instance(entity)
         worlds = frame.worlds  # the matrices the transform stage wrote (the others: their Transform's)
         # The movers by batch: last frame's grouping again when the same entities moved and no
         # entity changed batch since (a game's movers are mostly the same every frame: a
@@ -130,6 +151,32 @@ class ExtractSystem(esper.Processor):
                 models = [worlds[entity] if entity in worlds else component(entity, Transform).world
                           for entity in group]
                 batch.write_transforms(group, models, moving, motion)
+
+    def _caustic_bodies(self) -> tuple[Box, ...]:
+        """The world boxes of the bodies of this frame's waters that gather the sun (a
+        ``Water`` with ``caustics`` and waves: the prepare stage's candidates, before it picks
+        the nearest), in a fixed order; none, and no loop, in a world without water."""
+        surfaces = self.world.resources.get(Surfaces)
+        if surfaces is None or not surfaces.undersides:
+            return ()
+        bodies = []
+        for entity, state in surfaces.mirrors.items():
+            if state.water is None or state.bumps is None:
+                continue
+            water = self.world.try_get(entity, Water)
+            if water is not None and water.caustics > 0.0:
+                bodies.append(body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth))
+        return tuple(sorted(bodies))
+
+    def _under_caustics(self, entity: int) -> bool:
+        """Whether ``entity``'s mesh, where its Transform places it, reaches into a caustic
+        water's body (``caustics.under_caustics``; its model box kept a mesh)."""
+        mesh = self.world.get(entity, MeshRef).mesh
+        box = self._mesh_boxes.get(mesh)
+        if box is None:
+            lo, hi = mesh.bounds
+            box = self._mesh_boxes[mesh] = (tuple(float(v) for v in lo), tuple(float(v) for v in hi))
+        return under_caustics(placed_box(self.world.get(entity, Transform).world, *box), self._bodies)
 
     def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
         """``entities`` that have a row, by their batch."""
@@ -196,6 +243,7 @@ class ExtractSystem(esper.Processor):
                                             unlit=material is not None and material.unlit,
                                             posed=posed, second_uv_maps=second_uv_mask(material), decal=decal,
                                             decal_order=cut.order if cut is not None else 0,
+                                            under_caustics=bool(self._bodies) and self._under_caustics(entity),
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}{f' (the cut of the Decal on entity {cut.decal})' if cut else ''}: "

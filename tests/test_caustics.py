@@ -290,6 +290,57 @@ def test_only_what_reaches_into_the_waters_body_is_drawn_with_caustics(scene):
     np.testing.assert_array_equal(lit[row - 2:row + 3, col - 2:col + 3], flat[row - 2:row + 3, col - 2:col + 3])
 
 
+def test_a_meshs_rows_under_the_water_are_a_batch_of_their_own_and_a_mover_changes_batch(scene):
+    """Two boxes of one mesh and material (one batch, were it not for the water): the one
+    standing in the pool is drawn with the CAUSTICS build in a batch of its own
+    (``BatchKey.under_caustics``), the one far off with the build without, so a level's boxes
+    do not all pay for a pond's caustics.  Carried into the pool, the far one joins the
+    caustic batch and shows the caustics; carried out again, it goes back."""
+    inside, far = (0.8, -0.95, 0.6), (9.0, -0.95, 0.0)   # slabs on the floor
+    ids = {}
+
+    def build(world):
+        pool(1.0, eye=(0.0, 3.0, 6.0), target=(0.0, -1.0, 0.0))(world)
+        for name, at in (("inside", inside), ("far", far)):
+            ids[name] = world.spawn(Transform(position=at), MeshRef(box((0.8, 0.1, 0.8))),
+                                    Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+
+    runner, _ = render(scene, build, size=(160, 120))
+    renderer = runner.engine.renderer
+
+    def batch_of(entity):
+        return next(b for b in renderer.batches.values() if entity in b.entity_at[:b.count])
+
+    def builds(batch):
+        return {record[1][1] for record in batch.draw_records.values()}
+
+    first, second = batch_of(ids["inside"]), batch_of(ids["far"])
+    assert first is not second and first.mesh is second.mesh
+    assert (first.under_caustics, second.under_caustics) == (True, False)
+    assert builds(first) == {True} and builds(second) == {False}
+    moved = (-0.8, -0.95, 0.9)   # into the pool's near half (the far half's floor shows the surface's reflection)
+    runner.world.get(ids["far"], Transform).position = moved
+    for _ in range(2):
+        rgb = srgb_to_linear(runner.frame(1.0 / 60.0))
+    assert batch_of(ids["far"]) is first and first.count == 2 and builds(first) == {True}
+    water = runner.world.get(next(e for e, _ in runner.world.query_one(Water)), Water)
+    water.caustics = 0.0
+    flat = srgb_to_linear(runner.frame(1.0 / 60.0))
+    runner.world.get(ids["far"], MeshRef).visible = False
+    gone = srgb_to_linear(runner.frame(1.0 / 60.0))
+    runner.world.get(ids["far"], MeshRef).visible = True
+    seen = np.abs(flat - gone).max(axis=-1) > 0.02   # its pixels, seen through the water
+    assert seen.sum() > 30, seen.sum()
+    assert np.abs(rgb - flat).max(axis=-1)[seen].max() > 0.05   # the caustics on it
+    runner.frame(1.0 / 60.0)
+    assert batch_of(ids["far"]) is batch_of(ids["inside"]) is not first   # no water gathers: one batch again
+    water.caustics = 1.0
+    runner.world.get(ids["far"], Transform).position = far
+    runner.frame(1.0 / 60.0)
+    assert batch_of(ids["far"]) is not batch_of(ids["inside"])
+    assert (batch_of(ids["inside"]).under_caustics, batch_of(ids["far"]).under_caustics) == (True, False)
+
+
 def test_the_overlays_switch_takes_the_caustics_off_and_on(scene):
     """The prepare stage's ``caustics`` (the overlay's "caustics" switch): off, the frame of a
     water that gathers nothing; on again, the caustics' frame."""

@@ -58,6 +58,35 @@ def body_box(corners: np.ndarray, down: tuple[float, float, float],
     return tuple(ends.min(axis=0).tolist()), tuple(ends.max(axis=0).tolist())
 
 
+Box = tuple[tuple[float, float, float], tuple[float, float, float]]   # a world box (lo, hi)
+
+
+def placed_box(matrix, lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Box:
+    """The world box of the model box [``lo``, ``hi``] placed by ``matrix`` (a glm mat4):
+    along each world axis the translation plus, for each model axis, the lower (higher) of
+    its two ends' terms (as ``InstanceBatch`` measures its rows)."""
+    low, high = [], []
+    for r in range(3):
+        a = b = float(matrix[3][r])
+        for c in range(3):
+            m = float(matrix[c][r])
+            p, q = m * lo[c], m * hi[c]
+            a += p if p < q else q
+            b += q if p < q else p
+        low.append(a)
+        high.append(b)
+    return (low[0], low[1], low[2]), (high[0], high[1], high[2])
+
+
+def under_caustics(box: Box, bodies: tuple[Box, ...]) -> bool:
+    """Whether the world ``box`` reaches into any of ``bodies`` (the boxes of the waters that
+    gather the sun: ``body_box``): a row drawn with the CAUSTICS builds (in a batch of its own,
+    ``BatchKey.under_caustics``), so that a mesh's other rows across a level do not pay for them."""
+    (lx, ly, lz), (hx, hy, hz) = box
+    return any(not (hx < bx or hy < by or hz < bz or lx > cx or ly > cy or lz > cz)
+               for (bx, by, bz), (cx, cy, cz) in bodies)
+
+
 def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *, tiling: float, cross: float,
                  offset: tuple[float, float], ior: float, strength: float, depth: float) -> tuple[float, ...] | None:
     """The ``Caustics`` block (caustics.glsl) of a water: its top ``plane`` (normal up, out of

@@ -272,7 +272,10 @@ class ScenePass:
             variants = batch.variants
             drawn_as = unlit_kind if unlit and batch in unlit else kind  # a batch the composites paint over
             record = batch.draw_records.get(drawn_as)
-            built = (variants, caustic_box is not None and caustic_reaches(batch.box, caustic_box))
+            # (a batch's rows reach into a caustic water's body: extract keys them apart, by their
+            # meshes' rest boxes; a posed batch, its own, by the box its pose holds)
+            built = (variants, caustic_box is not None and (batch.under_caustics or batch.skinned or batch.morphed)
+                     and caustic_reaches(batch.box, caustic_box))
             if record is None or record[0] != stamp or record[1] != built:
                 record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, *built)
             _, _, glo, vao, uniforms, values, textures, own, vertices, program = record
