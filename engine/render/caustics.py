@@ -6,6 +6,11 @@ Only the batches whose world boxes reach into the water's body box (``reaches``,
 are drawn with the CAUSTICS builds: on llvmpipe every pixel of a build runs its caustics, on
 the water or off it, behind a branch or not (measured: a build whose caustics return at once
 cost as much as one that works them out), so a level with a pond pays only where the pond is.
+A batch's box is the union of its rows', and one mesh's rows across a level (a hall's boxes)
+span any pond in it; so the extract stage puts the rows that reach into the body of any
+water that gathers the sun in batches of their own (``under_caustics``,
+``BatchKey.under_caustics``), and only those are drawn with the builds (measured on the
+sample level with caustics on its pond, 640x360 on llvmpipe: +24% a frame before, about +9% after).
 
 One water at a time gathers the sun (``MAX_CAUSTIC_WATERS``: its normal map takes a sampler
 of its own, the 19th of the fullest scene build): the prepare stage gives the block the
