@@ -9,8 +9,9 @@ stands half in it and half out of its partner, and a facing pair of portals that
 tunnel to the recursion limit; a chrome ball whose probe is captured every frame, a brass
 statue hammered by a normal map whose probe follows what moves near it, a glass ball in
 front of a red crate, a pond in the foreground (a Water surface: Fresnel-weighted
-reflection, moving ripples, a koi turning under it), and before the mirror wall a vampire
-that no mirror or probe shows and a ghost that only the mirrors show (Visibility).
+reflection, moving ripples, the sun's caustics on its tiles, a koi turning under it), and
+before the mirror wall a vampire that no mirror or probe shows and a ghost that only the
+mirrors show (Visibility).
 
 Headless runs follow a camera tour (the level's ``[rules] tour``: poses ``[x, y, z, yaw,
 pitch]``, each held ``tour_seconds`` while the camera pans ``tour_pan`` degrees) unless
