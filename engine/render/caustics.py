@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import moderngl
 import numpy as np
+from pyglm import glm
 
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitWarning
@@ -41,6 +42,7 @@ MAX_CAUSTIC_WATERS = 1      # waters whose caustics are drawn at once (the neare
 CAUSTIC_SAMPLERS = SCENE_SAMPLERS + 3   # the fullest build with cookies, soft suns' depths and caustics
 CAUSTIC_SUN_SPREAD = 0.0093  # radians: the sun's disc (0.53 degrees), how a caustic blurs with depth
 _BLOCK_FLOATS = 28          # seven vec4s (caustics.glsl's Caustics block)
+CAUSTICS_BLOCK_BYTES = 4 * _BLOCK_FLOATS
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,7 +68,7 @@ def body_box(corners: np.ndarray, down: tuple[float, float, float],
 Box = tuple[tuple[float, float, float], tuple[float, float, float]]   # a world box (lo, hi)
 
 
-def placed_box(matrix, lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Box:
+def placed_box(matrix: glm.mat4, lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Box:
     """The world box of the model box [``lo``, ``hi``] placed by ``matrix`` (a glm mat4):
     along each world axis the translation plus, for each model axis, the lower (higher) of
     its two ends' terms (as ``InstanceBatch`` measures its rows)."""
@@ -125,7 +127,7 @@ class CausticBlock:
 
     def __init__(self, ctx: moderngl.Context, texture_units: int) -> None:
         self.ctx = ctx
-        self.ubo = ctx.buffer(reserve=4 * _BLOCK_FLOATS)
+        self.ubo = ctx.buffer(reserve=CAUSTICS_BLOCK_BYTES)
         self.supported = texture_units >= CAUSTIC_SAMPLERS
         self.texture_units = texture_units
         self.water: CausticWater | None = None
