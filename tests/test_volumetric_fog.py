@@ -1007,3 +1007,75 @@ def test_a_volumetric_lamps_image_in_a_mirror_lights_the_air_by_its_share(scene,
     assert np.median(error) < 0.03, np.median(error)
     assert np.quantile(error, 0.9) < 0.1, np.quantile(error, 0.9)
     assert np.abs(added[steady & (image == 0.0)]).max() < 0.02 * image.max()
+
+
+def test_a_lamps_image_through_a_portal_pair_of_two_scales_lights_the_air_beyond_it(scene):
+    """A volumetric lamp before portal A, which carries light (``Portal.carries_light``), out
+    of B scaled 2: the lamp's image (carried through the pair: 2 m behind B, its range and
+    size twice the lamp's, its light four times) scatters in the air in front of B where the
+    line to it crosses B's opening.  What the march adds over the frame whose A carries no
+    light, against the ground truth of a lamp of that range and light at the image."""
+    from components import Portal
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    lamp, lamp_range, lamp_light, k = np.array([0.0, 1.5, 5.0]), 6.0, 3.0, 2.0
+    exit_at, opening = np.array([-6.0, 1.5, 0.0]), (2.0 * k, 3.0 * k)   # B's centre and (z, y) sides
+    settings = VolumetricFog(steps=128, anisotropy=0.0)
+    ids = {}
+
+    def build(world):
+        camera = look_from(world, (2.0, 2.5, 7.0), (-3.5, 1.5, 0.0), fov=60.0)
+        world.spawn(Skybox())
+        world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5, 0.5, 0.5)))
+        world.spawn(Transform(position=tuple(lamp)), PointLight(intensity=lamp_light, range=lamp_range, shadows=False))
+        ids.update(zip("ab", spawn_portal_pair(world, (0.0, 1.5, 4.0), None, tuple(exit_at),
+                                               look_rotation(glm.vec3(-1, 0, 0))), strict=True))
+        world.get(ids["b"], Transform).scale = glm.vec3(k)
+        world.get(ids["a"], Portal).carries_light = True
+        world.add_component(camera, Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
+        world.add_component(camera, Tonemap(curve="none"))
+        world.add_component(camera, settings)
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    assert runner.stats.virtual_lights == 1
+    carried = marched_light(runner)[..., 0].astype(np.float64)
+    runner.world.get(ids["a"], Portal).carries_light = False
+    runner.frame()
+    assert runner.stats.virtual_lights == 0
+    added = carried - marched_light(runner)[..., 0]
+    carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                     runner.world.get(ids["b"], Transform).world))
+    image = np.array(glm.dvec3(carry * glm.dvec4(*lamp, 1.0)))
+    assert np.allclose(image, exit_at + np.array([-k, 0.0, 0.0]), atol=1e-5)   # 2 m behind B
+    origin, way, shape = march_rays(runner, SIZE, 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
+    portals = [(tuple(exit_at), (2e-4, opening[1], opening[0])), ((0.0, 1.5, 4.0), (2.0, 3.0, 2e-4))]
+    reach = np.minimum(np.minimum(floor, _hits(origin, way, portals)), settings.distance)
+    points = 1000
+    t = (np.arange(points) + 0.5) / points
+    truth = np.zeros(len(origin))
+    for first in range(0, len(origin), 256):
+        part = slice(first, first + 256)
+        along = reach[part, None] * t[None, :]
+        at = (origin[part, None, :] + way[part, None, :] * along[..., None]).reshape(-1, 3)
+        to_image = image - at
+        dist = np.linalg.norm(to_image, axis=1)
+        l = to_image / dist[:, None]
+        s = (exit_at[0] - at[:, 0]) / l[:, 0]
+        cross = at + l * s[:, None]
+        through = (at[:, 0] > exit_at[0]) & (np.abs(cross[:, 1] - exit_at[1]) <= opening[1] / 2) \
+            & (np.abs(cross[:, 2] - exit_at[2]) <= opening[0] / 2)
+        fade = np.clip(1.0 - (dist / (lamp_range * k)) ** 4, 0.0, 1.0)
+        light = (fade * fade / (dist * dist + 1.0) / (4 * np.pi) * through).reshape(along.shape)
+        truth[part] = (DENSITY * np.exp(-DENSITY * along) * light).sum(1) * reach[part] / points
+    truth = (lamp_light * k * k * settings.intensity * truth).reshape(shape)
+    reach = reach.reshape(shape)
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    lit = steady & (truth > 0.05 * truth.max())
+    assert lit.sum() > 300, lit.sum()
+    error = np.abs(added - truth)[lit] / truth[lit]
+    assert np.median(error) < 0.03, np.median(error)
+    assert np.quantile(error, 0.9) < 0.1, np.quantile(error, 0.9)
