@@ -118,6 +118,9 @@ class VolumetricFog(TrackedComponent):
 
     - ``intensity``: the share of the light the air takes away that it scatters (its
       albedo; 1 by default: none absorbed), times any artistic boost (at most 100).
+    - ``albedo`` (linear RGB, each channel 0 to 1; white by default): that share colour by
+      colour, as Unreal's and Godot's volumetric fog albedo: (1, 0.85, 0.6) a dusty, amber
+      haze whose shafts are warmer than the light that makes them; times ``intensity``.
     - ``anisotropy``: the phase function's g, from -0.95 (light scattered back towards the
       sun) through 0 (the same every way) to 0.95 (forwards: bright shafts looking towards
       the sun); 0.6 by default, haze.
@@ -149,6 +152,7 @@ class VolumetricFog(TrackedComponent):
     """
 
     intensity: float = 1.0
+    albedo: Any = field(default_factory=lambda: glm.vec3(1.0))
     anisotropy: float = 0.6
     distance: float = 40.0
     steps: int = 32
@@ -158,6 +162,8 @@ class VolumetricFog(TrackedComponent):
     def _validate(self, name: str, value: Any) -> Any:
         if name == "intensity":
             return finite(self, name, value, low=0.0, high=MAX_VOLUMETRIC_INTENSITY)
+        if name == "albedo":
+            return vec3(self, name, value, low=0.0, high=1.0, why=" (the share of each colour it scatters)")
         if name == "anisotropy":
             return finite(self, name, value, low=-0.95, high=0.95)
         if name == "distance":

@@ -46,6 +46,7 @@ uniform uint node;  // the view's node (its pixels' value in the level's node im
 uniform int sky_light;       // the sun's or the moon's slot in the Lights block (-1: neither lights the air)
 uniform int ratio;           // the view's pixels a march texel, each way (2 at half resolution)
 uniform float scatter;       // VolumetricFog.intensity
+uniform vec3 albedo;         // VolumetricFog.albedo: the share of each colour scattered
 uniform float anisotropy;    // VolumetricFog.anisotropy: the phase function's g
 uniform float frame_offset;  // added to each texel's start (a new one each frame under temporal AA)
 uniform vec4 map_tiles[MAX_DIRECTIONAL_LIGHTS];  // each directional light's level map in the atlas:
@@ -215,5 +216,5 @@ void main() {
 #ifdef VIRTUAL_LIGHTS
     sun_light += image_sum;
 #endif
-    out_light = vec4(sun_light * (scatter * step_length), reach);
+    out_light = vec4(sun_light * albedo * (scatter * step_length), reach);
 }

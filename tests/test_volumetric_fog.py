@@ -342,10 +342,34 @@ def test_passes_images_and_their_release(scene):
 
 @pytest.mark.parametrize(("field", "value"), [("intensity", -1.0), ("intensity", float("nan")),
                                               ("anisotropy", 0.99), ("distance", 0.0), ("steps", 2),
-                                              ("steps", 3.5), ("half_resolution", 1)])
+                                              ("steps", 3.5), ("half_resolution", 1), ("albedo", (1.0, 1.2, 0.5)),
+                                              ("albedo", (1.0, -0.1, 0.5)), ("albedo", (1.0, 0.5)),
+                                              ("albedo", (float("nan"), 0.5, 0.5))])
 def test_bad_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ComponentValueError, match=field):
         VolumetricFog(**{field: value})
+
+
+def test_the_albedo_scatters_each_colour_by_its_share(scene):
+    """``VolumetricFog.albedo``: each channel of the march is the white air's times its share
+    (the same steps at the same points: to float rounding), the sun's shafts and the
+    lamps' alike; given while running (a still camera, its march kept) it is marched again
+    the next frame."""
+    white = scene(lambda world: _hall(world, VolumetricFog(steps=32)), SIZE)
+    white.frame()
+    plain = marched_light(white)[..., :3].astype(np.float64)
+    share = np.array([1.0, 0.5, 0.25])
+    tinted = scene(lambda world: _hall(world, VolumetricFog(steps=32, albedo=tuple(share))), SIZE)
+    tinted.frame()
+    np.testing.assert_allclose(marched_light(tinted)[..., :3], plain * share, rtol=1e-5, atol=1e-8)
+    assert plain.max() > 0.05
+    white.frame()   # (still: the march kept)
+    marches = white.engine.renderer.volumetric_fog.marches
+    camera = next(entity for entity, _ in white.world.query_one(VolumetricFog))
+    white.world.get(camera, VolumetricFog).albedo = (0.25, 0.5, 1.0)
+    white.frame()
+    assert white.engine.renderer.volumetric_fog.marches == marches + 1
+    np.testing.assert_allclose(marched_light(white)[..., :3], plain * share[::-1], rtol=1e-5, atol=1e-8)
 
 
 @pytest.mark.parametrize("what", ["no fog", "no density", "no sun"])
@@ -375,7 +399,14 @@ name = "camera"
 Transform = { position = [0.0, 1.0, 3.0] }
 Camera = {}
 Fog = { density = 0.1 }
-VolumetricFog = { intensity = 2.0, anisotropy = 0.3, distance = 25.0, steps = 16, half_resolution = false }
+
+[entity.VolumetricFog]
+intensity = 2.0
+anisotropy = 0.3
+distance = 25.0
+steps = 16
+half_resolution = false
+albedo = [1.0, 0.8, 0.5]
 """)
     world = World()
     names = load_level(tmp_path / "hall.toml").spawn(world)
@@ -386,6 +417,7 @@ VolumetricFog = { intensity = 2.0, anisotropy = 0.3, distance = 25.0, steps = 16
     again = World()
     names = load_level(saved).spawn(again)
     assert again.get(names["camera"], VolumetricFog).steps == 16
+    assert tuple(again.get(names["camera"], VolumetricFog).albedo) == pytest.approx((1.0, 0.8, 0.5))
     (tmp_path / "bad.toml").write_text(
         '[level]\nname = "bad"\n\n[[entity]]\nname = "camera"\nCamera = {}\nVolumetricFog = { steps = 1 }\n')
     with pytest.raises(LevelError, match="steps"):

@@ -217,8 +217,8 @@ class VolumetricFogPass:
         blocks, the shadow maps and the cookies move on too), the shaders, the view's Camera
         block and size, the images' resolution, the settings, the lamps and the images' shares."""
         return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), images.level.size,
-                images.ratio, settings.intensity, settings.anisotropy, settings.distance, settings.steps,
-                lamps.slots, lamps.scatter, self._sky_light, shares)
+                images.ratio, settings.intensity, tuple(settings.albedo), settings.anisotropy, settings.distance,
+                settings.steps, lamps.slots, lamps.scatter, self._sky_light, shares)
 
     def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool,
               march_again: bool) -> None:
@@ -253,7 +253,8 @@ class VolumetricFogPass:
             sky_light = self._sky_light
             self.cloud_stride = 1 if clouds is None or sky_light is None else \
                 cloud_stride(clouds, settings.distance / settings.steps, np.array(sky_light[1], np.float64))
-            self._write(march.program, {**shared, "scatter": settings.intensity, "anisotropy": settings.anisotropy,
+            self._write(march.program, {**shared, "scatter": settings.intensity, "albedo": tuple(settings.albedo),
+                                        "anisotropy": settings.anisotropy,
                                         "cloud_stride": self.cloud_stride,
                                         "sky_light": -1 if sky_light is None else sky_light[0],
                                         "frame_offset": (self._frame * _GOLDEN) % 1.0 if jittered else 0.0,
@@ -345,8 +346,8 @@ class VolumetricFogPass:
         if self._pending is None:
             return None
         _, settings, _, lamps, shares = self._pending
-        return (settings.intensity, settings.anisotropy, settings.distance, settings.steps, settings.reflection_depth,
-                lamps.slots, lamps.scatter, shares)
+        return (settings.intensity, tuple(settings.albedo), settings.anisotropy, settings.distance, settings.steps,
+                settings.reflection_depth, lamps.slots, lamps.scatter, shares)
 
     def release_levels(self) -> None:
         """Let the reflection levels' images go (the world has no mirror or portal now)."""
