@@ -21,6 +21,7 @@ from __future__ import annotations
 import weakref
 
 import esper
+import numpy as np
 from pyglm import glm
 
 from components import (
@@ -102,9 +103,9 @@ class ExtractSystem(esper.Processor):
         if world.changed(Skin) or world.changed(Morph):
             touched = self._posed_only(touched)
         bodies = self._caustic_bodies()
-        if bodies != self._bodies:   # a water that gathers the sun came, went or changed: every row looked at again
+        if bodies != self._bodies:   # a water that gathers the sun came, went, moved or changed
             self._bodies = bodies
-            touched = touched | set(self._batch_of)
+            touched = touched | self._keyed_apart_wrongly(bodies)
         joined = self._joined = set()  # entities given a row by a refresh: their transform is written below
         for entity in touched:
             self._refresh_instance(entity)
@@ -167,6 +168,24 @@ class ExtractSystem(esper.Processor):
             if water is not None and water.caustics > 0.0:
                 bodies.append(body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth))
         return tuple(sorted(bodies))
+
+    def _keyed_apart_wrongly(self, bodies: tuple[Box, ...]) -> set[int]:
+        """The entities whose rows' boxes (``InstanceBatch.row_boxes``: each batch's at once)
+        reach into ``bodies`` while their batch is not keyed under the caustics, or the other
+        way, and those whose rows were never measured: the rows to key again when the
+        caustic waters change (a tide rising moves its body every frame: not every row)."""
+        found: set[int] = set()
+        for batch in set(self._batch_of.values()):
+            boxes = batch.row_boxes   # (as of the last upload: a mover this frame is looked at below)
+            if not len(boxes):
+                continue
+            lo, hi = boxes[:, 0], boxes[:, 1]
+            reach = np.zeros(len(boxes), bool)
+            for body_lo, body_hi in bodies:
+                reach |= ~((hi < body_lo).any(axis=1) | (lo > body_hi).any(axis=1))
+            wrong = (reach != batch.under_caustics) | np.isnan(lo).any(axis=1)
+            found.update(batch.entity_at[row] for row in np.flatnonzero(wrong).tolist())
+        return found
 
     def _under_caustics(self, entity: int) -> bool:
         """Whether ``entity``'s mesh, where its Transform places it, reaches into a caustic

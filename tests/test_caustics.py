@@ -295,7 +295,8 @@ def test_a_meshs_rows_under_the_water_are_a_batch_of_their_own_and_a_mover_chang
     standing in the pool is drawn with the CAUSTICS build in a batch of its own
     (``BatchKey.under_caustics``), the one far off with the build without, so a level's boxes
     do not all pay for a pond's caustics.  Carried into the pool, the far one joins the
-    caustic batch and shows the caustics; carried out again, it goes back."""
+    caustic batch and shows the caustics; carried out again, it goes back; the pool carried
+    over it, the two change places."""
     inside, far = (0.8, -0.95, 0.6), (9.0, -0.95, 0.0)   # slabs on the floor
     ids = {}
 
@@ -339,6 +340,11 @@ def test_a_meshs_rows_under_the_water_are_a_batch_of_their_own_and_a_mover_chang
     runner.frame(1.0 / 60.0)
     assert batch_of(ids["far"]) is not batch_of(ids["inside"])
     assert (batch_of(ids["inside"]).under_caustics, batch_of(ids["far"]).under_caustics) == (True, False)
+    # The water carried over the far slab (its body moves: the rows keyed again by their boxes).
+    pool_entity = next(e for e, _ in runner.world.query_one(Water))
+    runner.world.get(pool_entity, Transform).position = (far[0], 0.0, far[2])
+    runner.frame(1.0 / 60.0)
+    assert (batch_of(ids["inside"]).under_caustics, batch_of(ids["far"]).under_caustics) == (False, True)
 
 
 def test_the_overlays_switch_takes_the_caustics_off_and_on(scene):
