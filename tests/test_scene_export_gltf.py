@@ -245,6 +245,31 @@ def test_the_exported_scene_spawned_again_draws_the_same_frame(scene, tmp_path):
     assert (difference > 0.05).mean() < 0.01, (difference > 0.05).mean()
 
 
+def test_a_spot_under_a_mirroring_transform_is_read_back_where_it_shines(scene, tmp_path):
+    """A spot whose Transform mirrors and stretches it (scale (-1, 2, 1), turned): its node keeps
+    the turn and the reflection, its scale left out (``_placement``), and the loader reads
+    it back at the lamp's place, shining the way the engine aims it (its world -Z)."""
+    ids: dict = {}
+
+    def mirrored(world):
+        build(world, ids)
+        transform = world.get(ids["spot"], Transform)
+        transform.rotation = glm.angleAxis(0.7, glm.normalize(glm.vec3(1.0, 0.5, -0.3))) * transform.rotation
+        transform.scale = glm.vec3(-1.0, 2.0, 1.0)
+
+    runner = scene(mirrored, (64, 48))
+    runner.frame()
+    camera = next(entity for entity, _ in runner.world.query_one(Camera))
+    loaded = load_model_file(export_scene(runner.world, tmp_path / "scene.glb", camera, (64, 48)))
+    light = {light.name: light for light in loaded.lights}[str(ids["spot"])]
+    world_matrix = runner.world.get(ids["spot"], Transform).world
+    assert glm.determinant(glm.mat3(world_matrix)) < 0.0
+    np.testing.assert_allclose(glm.vec3(light.local[3]), glm.vec3(world_matrix[3]), atol=1e-6)
+    np.testing.assert_allclose(glm.normalize(glm.vec3(light.local * glm.vec4(0, 0, -1, 0))),
+                               glm.normalize(glm.vec3(world_matrix * glm.vec4(0, 0, -1, 0))), atol=1e-6)
+    assert light.spot_angle() == pytest.approx(runner.world.get(ids["spot"], PointLight).spot_angle)
+
+
 def test_the_loader_reads_back_the_lights_and_the_camera(scene, tmp_path):
     """KHR_lights_punctual's sun, lamp and spot and core glTF's camera, where the world has
     them: kind, colour, intensity, range, cone, place and the way each shines or looks.
