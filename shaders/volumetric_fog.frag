@@ -13,12 +13,12 @@
 // FOG_WATER what a water's body on the way leaves, fog.glsl water_light, and under CAUSTICS
 // what a rippled water over it gathers there, caustics.glsl), times
 // the sun's light (colour x intensity), the Henyey-Greenstein phase function of the angle
-// between the sun's light and the ray, and VolumetricFog.intensity.  Under VIRTUAL_LIGHTS the
-// light of those lights through mirrors and portals (shadow_rules.VirtualLight: the sun's
-// image, a volumetric lamp's) is scattered as theirs is, where it comes out of its exit's
-// outline (virtual_light_ways.glsl), in its own shadow map.  The texel's ray is that of the first pixel of its ``ratio`` x
-// ``ratio`` block; alpha keeps how far it went, which the filter (volumetric_fog_filter.frag)
-// compares.  A mirror or portal view's rays start on its oblique near plane: the surface.
+// between the sun's light and the ray, and VolumetricFog.intensity and albedo.  Under
+// VIRTUAL_LIGHTS the light of those lights through mirrors and portals
+// (shadow_rules.VirtualLight: the sun's image, a volumetric lamp's) is scattered as theirs
+// is, where it comes out of its exit's outline (virtual_light_ways.glsl), in its own shadow
+// map.  The texel's ray is that of the first pixel of its ``ratio`` x ``ratio`` block; alpha
+// keeps how far it went, which the filter (volumetric_fog_filter.frag) compares.  A mirror or portal view's rays start on its oblique near plane: the surface.
 #ifndef VOLUMETRIC_LAMPS
 #define VOLUMETRIC_LAMPS 0
 #endif
