@@ -877,6 +877,24 @@ def test_under_a_waters_body_the_shafts_light_comes_down_through_the_water(scene
         assert np.median(np.abs(truths[2][lit] / truths[0][lit] - 1.0)) > 0.1
 
 
+def _added_by_images(scene, build_for) -> tuple:
+    """The runner of the world ``build_for(True)`` builds (a surface that carries light), its
+    march, and what that adds over the march of ``build_for(False)`` (the same world whose
+    surface carries none: the same steps at the same points), and each march texel's ray
+    (``march_rays``: origins, ways, the grid's shape) with its distance to the floor y = 0."""
+    marches = []
+    for carries in (True, False):
+        runner = scene(build_for(carries), SIZE)
+        runner.frame()
+        assert runner.stats.virtual_lights == int(carries)
+        marches.append((runner, marched_light(runner)))
+    (runner, marched), (_, without) = marches
+    origin, way, shape = march_rays(runner, SIZE, 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
+    return runner, marched, marched[..., 0].astype(np.float64) - without[..., 0], origin, way, shape, floor
+
+
 FLOOR_MIRROR = ((1.75, 0.01, -1.25), (2.6, 6.0))   # a floor mirror across the shaft's patch (centre, x and z sides)
 
 
@@ -925,16 +943,9 @@ def test_the_suns_light_off_a_mirror_lights_the_air_as_the_sun_at_its_image(scen
             centre, sides = FLOOR_MIRROR   # (the quad's +y turned to -z)
             world.spawn(Transform(position=centre, rotation=glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))),
                         MeshRef(quad(*sides)), Material(), Mirror(reflects_light=reflects))
-        runner = scene(build, SIZE)
-        runner.frame()
-        assert runner.stats.virtual_lights == int(reflects)
-        return runner, marched_light(runner)
+        return build
 
-    runner, marched = hall(True)
-    _, without = hall(False)
-    origin, way, shape = march_rays(runner, SIZE, 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
+    runner, marched, added, origin, way, shape, floor = _added_by_images(scene, hall)
     centre, (width, depth) = FLOOR_MIRROR
     ends = np.minimum(floor, _hits(origin, way, [*ROOF, WALL, (centre, (width, 2e-4, depth))]))   # (the glass too)
     reach = np.minimum(ends, settings.distance)
@@ -947,7 +958,6 @@ def test_the_suns_light_off_a_mirror_lights_the_air_as_the_sun_at_its_image(scen
     assert np.quantile(error, 0.9) < 0.08, np.quantile(error, 0.9)
     # The image's own light: the column, within 5% in the median and 15% at 90% of its texels
     # (its edges in the image's shadow map's texels), and nothing elsewhere.
-    added = marched[..., 0].astype(np.float64) - without[..., 0]
     column = steady & (image > 0.05 * image.max())
     assert column.sum() > 60, column.sum()
     column_error = np.abs(added - image)[column] / image[column]
@@ -961,13 +971,13 @@ IMAGED_LAMP, IMAGED_RANGE, IMAGED_LIGHT = (-1.2, 2.6, -0.5), 12.0, 4.0
 
 
 def _lamp_image_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
-                      volumetric: float) -> np.ndarray:
-    """A lamp's image in the standing mirror (the lamp reflected in its plane), scattered
-    back along each ray at 1,000 points: lit where the line from the point to the image
-    crosses the glass, by the falloff over the whole way (the distance to the image) and the
-    phase function, times the lamp's ``volumetric``."""
-    (mx, my, mz), (depth, height) = WALL_MIRROR
-    image = np.array(IMAGED_LAMP) * np.array([-1.0, 1.0, 1.0]) + np.array([2.0 * mx, 0.0, 0.0])
+                      image: np.ndarray, exit_x: float, centre_yz: tuple[float, float], sides_yz: tuple[float, float],
+                      light_range: float, light: float) -> np.ndarray:
+    """A lamp's image (at ``image``, of ``light_range`` and ``light``) seen through an opening
+    on the plane x = ``exit_x`` facing +x (centred on ``centre_yz``, ``sides_yz`` across),
+    scattered back along each ray at 1,000 points: lit where the point is in front of the
+    opening and the line from it to the image crosses the opening, by the falloff over the
+    whole way (the distance to the image: lights.glsl's) and the phase function."""
     points = 1000
     t = (np.arange(points) + 0.5) / points
     g = settings.anisotropy
@@ -979,15 +989,15 @@ def _lamp_image_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, se
         to_image = image - at
         dist = np.linalg.norm(to_image, axis=1)
         l = to_image / dist[:, None]
-        s = (mx - at[:, 0]) / l[:, 0]                      # along the line to the glass's plane
-        cross = at + l * s[:, None]
-        through = (at[:, 0] > mx) & (np.abs(cross[:, 1] - my) <= height / 2) & (np.abs(cross[:, 2] - mz) <= depth / 2)
-        fade = np.clip(1.0 - (dist / IMAGED_RANGE) ** 4, 0.0, 1.0)
+        cross = at + l * ((exit_x - at[:, 0]) / l[:, 0])[:, None]   # where the line meets the opening's plane
+        through = (at[:, 0] > exit_x) & (np.abs(cross[:, 1] - centre_yz[0]) <= sides_yz[0] / 2) \
+            & (np.abs(cross[:, 2] - centre_yz[1]) <= sides_yz[1] / 2)
+        fade = np.clip(1.0 - (dist / light_range) ** 4, 0.0, 1.0)
         c = np.einsum("ij,ij->i", np.repeat(way[part], points, 0), l)
         phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
-        light = (fade * fade / (dist * dist + 1.0) * phase * through).reshape(along.shape)
-        total[part] = (DENSITY * np.exp(-DENSITY * along) * light).sum(1) * reach[part] / points
-    return IMAGED_LIGHT * volumetric * settings.intensity * total
+        lit = (fade * fade / (dist * dist + 1.0) * phase * through).reshape(along.shape)
+        total[part] = (DENSITY * np.exp(-DENSITY * along) * lit).sum(1) * reach[part] / points
+    return light * settings.intensity * total
 
 
 @pytest.mark.parametrize("volumetric", [0.7, 0.0])
@@ -996,8 +1006,8 @@ def test_a_volumetric_lamps_image_in_a_mirror_lights_the_air_by_its_share(scene,
     the lamp would from the image's place, through the glass's outline, times the lamp's
     ``PointLight.volumetric`` (0: the lamp lights no air, nor does its image).  What the
     march adds over the same room whose mirror reflects no light, against
-    ``_lamp_image_light``.  A sun lights the air too (its light meets the glass's back: no
-    image of it), so the shafts stand at 0."""
+    ``_lamp_image_light`` of the lamp reflected in the glass's plane.  A sun lights the air
+    too (its light meets the glass's back: no image of it), so the shafts stand at 0."""
     settings = VolumetricFog(steps=128, anisotropy=0.0)
 
     def room(reflects: bool):
@@ -1014,20 +1024,15 @@ def test_a_volumetric_lamps_image_in_a_mirror_lights_the_air_by_its_share(scene,
             world.add_component(camera, Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
             world.add_component(camera, Tonemap(curve="none"))
             world.add_component(camera, settings)
-        runner = scene(build, SIZE)
-        runner.frame()
-        assert runner.stats.virtual_lights == int(reflects)
-        return runner, marched_light(runner)
+        return build
 
-    runner, marched = room(True)
-    _, without = room(False)
-    added = marched[..., 0].astype(np.float64) - without[..., 0]
-    origin, way, shape = march_rays(runner, SIZE, 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
+    _, _, added, origin, way, shape, floor = _added_by_images(scene, room)
     centre, (depth, height) = WALL_MIRROR
     reach = np.minimum(np.minimum(floor, _hits(origin, way, [(centre, (2e-4, height, depth))])), settings.distance)
-    image = _lamp_image_light(origin, way, reach, settings, 0.7).reshape(shape)
+    (mx, my, mz), _ = WALL_MIRROR   # the lamp reflected in the glass's plane, seen through it
+    image_at = np.array(IMAGED_LAMP) * np.array([-1.0, 1.0, 1.0]) + np.array([2.0 * mx, 0.0, 0.0])
+    image = _lamp_image_light(origin, way, reach, settings, image_at, mx, (my, mz), (height, depth), IMAGED_RANGE,
+                              IMAGED_LIGHT * 0.7).reshape(shape)
     reach = reach.reshape(shape)
     steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
     if volumetric == 0.0:
@@ -1086,24 +1091,8 @@ def test_a_lamps_image_through_a_portal_pair_of_two_scales_lights_the_air_beyond
         floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
     portals = [(tuple(exit_at), (2e-4, opening[1], opening[0])), ((0.0, 1.5, 4.0), (2.0, 3.0, 2e-4))]
     reach = np.minimum(np.minimum(floor, _hits(origin, way, portals)), settings.distance)
-    points = 1000
-    t = (np.arange(points) + 0.5) / points
-    truth = np.zeros(len(origin))
-    for first in range(0, len(origin), 256):
-        part = slice(first, first + 256)
-        along = reach[part, None] * t[None, :]
-        at = (origin[part, None, :] + way[part, None, :] * along[..., None]).reshape(-1, 3)
-        to_image = image - at
-        dist = np.linalg.norm(to_image, axis=1)
-        l = to_image / dist[:, None]
-        s = (exit_at[0] - at[:, 0]) / l[:, 0]
-        cross = at + l * s[:, None]
-        through = (at[:, 0] > exit_at[0]) & (np.abs(cross[:, 1] - exit_at[1]) <= opening[1] / 2) \
-            & (np.abs(cross[:, 2] - exit_at[2]) <= opening[0] / 2)
-        fade = np.clip(1.0 - (dist / (lamp_range * k)) ** 4, 0.0, 1.0)
-        light = (fade * fade / (dist * dist + 1.0) / (4 * np.pi) * through).reshape(along.shape)
-        truth[part] = (DENSITY * np.exp(-DENSITY * along) * light).sum(1) * reach[part] / points
-    truth = (lamp_light * k * k * settings.intensity * truth).reshape(shape)
+    truth = _lamp_image_light(origin, way, reach, settings, image, exit_at[0], (exit_at[1], exit_at[2]),
+                              (opening[1], opening[0]), lamp_range * k, lamp_light * k * k).reshape(shape)
     reach = reach.reshape(shape)
     steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
     lit = steady & (truth > 0.05 * truth.max())
