@@ -89,9 +89,7 @@ def under_caustics(box: Box, bodies: tuple[Box, ...]) -> bool:
     """Whether the world ``box`` reaches into any of ``bodies`` (the boxes of the waters that
     gather the sun: ``body_box``): a row drawn with the CAUSTICS builds (in a batch of its own,
     ``BatchKey.under_caustics``), so that a mesh's other rows across a level do not pay for them."""
-    (lx, ly, lz), (hx, hy, hz) = box
-    return any(not (hx < bx or hy < by or hz < bz or lx > cx or ly > cy or lz > cz)
-               for (bx, by, bz), (cx, cy, cz) in bodies)
+    return any(reaches(box, body) for body in bodies)
 
 
 def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *, tiling: float, cross: float,
