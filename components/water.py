@@ -90,8 +90,9 @@ class Water(TrackedComponent):
       under the water, inside its outline and down to ``depth``, is lit in the bright
       moving net of a sunny pool: each point's sunlight times the ratio of the surface's
       area its light came through to the area it spreads over (``shaders/include/caustics.glsl``),
-      blurred with depth by the sun's disc.  Needs waves (``Material.normal_map``); one water
-      gathers the sun at a time, the nearest the active camera (``engine/render/caustics.py``).
+      blurred with depth by the sun's disc.  Needs waves (``Material.normal_map``); up to
+      four waters gather the sun at once, the nearest the active camera
+      (``engine/render/caustics.py``).
     """
 
     ior: float = 1.333

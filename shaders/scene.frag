@@ -16,6 +16,9 @@
 #ifdef CAUSTICS
 #include "water_waves.glsl"
 #include "caustics.glsl"
+// The waters (the Caustics block's slots) this draw's batch reaches into, -1 after the last
+// (engine/render/caustics.py CausticBlock.slots_of).
+uniform ivec4 caustic_waters;
 #endif
 #include "hdr.glsl"
 #include "way.glsl"
@@ -658,8 +661,15 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     // The suns' light through a rippled water gathered by its waves (caustics.glsl), over the
     // pixel's footprint (taken here, in uniform control flow: the caustic returns early off the water).
     float caustic_footprint = max(length(dFdx(s.position)), length(dFdy(s.position)));
-    for (int i = 0; i < lights.counts.x; ++i)
-        directional_lit[i] *= caustic_light(s.position, -lights.directional_dir[i].xyz, caustic_footprint);
+    // Through each water the batch reaches into (caustic_waters; a point under two bodies at once
+    // takes both's).
+    for (int i = 0; i < lights.counts.x; ++i) {
+        for (int k = 0; k < MAX_CAUSTIC_WATERS; ++k) {
+            if (caustic_waters[k] < 0) break;
+            directional_lit[i] *= caustic_light(caustic_waters[k], s.position, -lights.directional_dir[i].xyz,
+                                                caustic_footprint);
+        }
+    }
 #endif
 #ifdef SCREEN_OCCLUSION
     // The camera's contact shadows dim the sun's light (its slot's w: lights.glsl).

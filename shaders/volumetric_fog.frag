@@ -159,7 +159,8 @@ void main() {
             lit *= water_light(x, towards, 1e30);   // (under a water's body: the light down through it)
 #endif
 #ifdef CAUSTICS
-            lit *= caustic_light(x, towards, 0.0);   // (the shafts under rippled water: its caustics)
+            for (int w = 0; w < caustic_held.x; ++w)   // (the shafts under rippled water: its caustics)
+                lit *= caustic_light(w, x, towards, 0.0);
 #endif
             sum += density * seen * lit;
 #if VOLUMETRIC_LAMPS > 0

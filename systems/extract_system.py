@@ -9,7 +9,7 @@ A posed entity (a ``Skin`` bends its mesh, or it wears a ``Morph``) gets a batch
 its joint matrices and morph weights written to its row of the pose texture
 (``engine/render/pose_rows.py``) and the box holding the pose given to its batch.
 Where a water gathers the sun (``Water.caustics``), a row whose box reaches into its body
-goes to a batch of its own (``BatchKey.under_caustics``): the CAUSTICS builds cost every
+goes to a batch of its own (``BatchKey.caustic_waters``): the CAUSTICS builds cost every
 pixel of a batch on a software rasteriser, and a mesh's rows across a level (the boxes of a
 hall) would all pay for a pond's; a mover is re-keyed as it goes in or out.
 It also publishes which probes each mirror and portal shows where it gets no view
@@ -47,7 +47,7 @@ from engine.assets.mesh import Mesh
 from engine.core.errors import GLLimitError
 from engine.core.skinning import posed_bounds
 from engine.core.world import World
-from engine.render.caustics import Box, body_box, placed_box, under_caustics
+from engine.render.caustics import Box, body_box, caustic_waters_of, placed_box
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.render.surface_table import SurfaceBlends
@@ -78,7 +78,7 @@ class ExtractSystem(esper.Processor):
         # (layout, the entities, them by batch) of the last frame's movers (process).
         self._moved_groups: tuple[int, set[int], dict[InstanceBatch, list[int]]] | None = None
         # The bodies of the waters that gather the sun (_caustic_bodies), and each mesh's model box.
-        self._bodies: tuple[Box, ...] = ()
+        self._bodies: tuple[tuple[int, Box], ...] = ()
         self._mesh_boxes: weakref.WeakKeyDictionary[Mesh, Box] = weakref.WeakKeyDictionary()
 
     def process(self, dt: float) -> None:
@@ -134,7 +134,7 @@ class ExtractSystem(esper.Processor):
             # with (or without) the CAUSTICS builds.
             for entity in frame.moved - touched:
                 batch = self._batch_of.get(entity)
-                if batch is not None and batch.under_caustics != self._under_caustics(entity):
+                if batch is not None and batch.caustic_waters != self._caustic_waters(entity):
                     self._refresh_instance(entity)
         worlds = frame.worlds  # the matrices the transform stage wrote (the others: their Transform's)
         # The movers by batch: last frame's grouping again when the same entities moved and no
@@ -153,10 +153,10 @@ class ExtractSystem(esper.Processor):
                           for entity in group]
                 batch.write_transforms(group, models, moving, motion)
 
-    def _caustic_bodies(self) -> tuple[Box, ...]:
-        """The world boxes of the bodies of this frame's waters that gather the sun (a
-        ``Water`` with ``caustics`` and waves: the prepare stage's candidates, before it picks
-        the nearest), in a fixed order; none, and no loop, in a world without water."""
+    def _caustic_bodies(self) -> tuple[tuple[int, Box], ...]:
+        """Each of this frame's waters that gather the sun (a ``Water`` with ``caustics`` and
+        waves: the prepare stage's candidates, before it picks the nearest) and the world box of
+        its body, by entity; none, and no loop, in a world without water."""
         surfaces = self.world.resources.get(Surfaces)
         if surfaces is None or not surfaces.undersides:
             return ()
@@ -166,36 +166,39 @@ class ExtractSystem(esper.Processor):
                 continue
             water = self.world.try_get(entity, Water)
             if water is not None and water.caustics > 0.0:
-                bodies.append(body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth))
+                bodies.append((entity, body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth)))
         return tuple(sorted(bodies))
 
-    def _keyed_apart_wrongly(self, bodies: tuple[Box, ...]) -> set[int]:
+    def _keyed_apart_wrongly(self, bodies: tuple[tuple[int, Box], ...]) -> set[int]:
         """The entities whose rows' boxes (``InstanceBatch.row_boxes``: each batch's at once)
-        reach into ``bodies`` while their batch is not keyed under the caustics, or the other
-        way, and those whose rows were never measured: the rows to key again when the
-        caustic waters change (a tide rising moves its body every frame: not every row)."""
+        reach into other ``bodies`` than their batch is keyed under, and those whose rows were
+        never measured: the rows to key again when the caustic waters change (a tide rising
+        moves its body every frame: not every row)."""
         found: set[int] = set()
+        present = {entity for entity, _ in bodies}
         for batch in set(self._batch_of.values()):
             boxes = batch.row_boxes   # (as of the last upload: a mover this frame is looked at below)
             if not len(boxes):
                 continue
             lo, hi = boxes[:, 0], boxes[:, 1]
-            reach = np.zeros(len(boxes), bool)
-            for body_lo, body_hi in bodies:
-                reach |= ~((hi < body_lo).any(axis=1) | (lo > body_hi).any(axis=1))
-            wrong = (reach != batch.under_caustics) | np.isnan(lo).any(axis=1)
+            wrong = np.isnan(lo).any(axis=1)
+            for entity, (body_lo, body_hi) in bodies:
+                reach = ~((hi < body_lo).any(axis=1) | (lo > body_hi).any(axis=1))
+                wrong |= reach != (entity in batch.caustic_waters)
+            if not present.issuperset(batch.caustic_waters):
+                wrong[:] = True   # (keyed under a water that no longer gathers the sun)
             found.update(batch.entity_at[row] for row in np.flatnonzero(wrong).tolist())
         return found
 
-    def _under_caustics(self, entity: int) -> bool:
-        """Whether ``entity``'s mesh, where its Transform places it, reaches into a caustic
-        water's body (``caustics.under_caustics``; its model box kept a mesh)."""
+    def _caustic_waters(self, entity: int) -> tuple[int, ...]:
+        """The caustic waters whose bodies ``entity``'s mesh, where its Transform places it,
+        reaches into (``caustics.caustic_waters_of``; its model box kept a mesh)."""
         mesh = self.world.get(entity, MeshRef).mesh
         box = self._mesh_boxes.get(mesh)
         if box is None:
             lo, hi = mesh.bounds
             box = self._mesh_boxes[mesh] = (tuple(float(v) for v in lo), tuple(float(v) for v in hi))
-        return under_caustics(placed_box(self.world.get(entity, Transform).world, *box), self._bodies)
+        return caustic_waters_of(placed_box(self.world.get(entity, Transform).world, *box), self._bodies)
 
     def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
         """``entities`` that have a row, by their batch."""
@@ -262,7 +265,7 @@ class ExtractSystem(esper.Processor):
                                             unlit=material is not None and material.unlit,
                                             posed=posed, second_uv_maps=second_uv_mask(material), decal=decal,
                                             decal_order=cut.order if cut is not None else 0,
-                                            under_caustics=bool(self._bodies) and self._under_caustics(entity),
+                                            caustic_waters=self._caustic_waters(entity) if self._bodies else (),
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}{f' (the cut of the Decal on entity {cut.decal})' if cut else ''}: "

@@ -22,8 +22,8 @@ shadows past the shadow cubes (``LIGHT_LIMITS.point_shadows``; they cast none:
 ``RenderStats.shadows_cut``).
 The probes' influence boxes go to the irradiance table when a probe comes, goes, changes or
 moves; their coefficients are projected on the GPU after each capture (the probes stages).
-The water whose waves gather the sun (``Water.caustics``; ``engine/render/caustics.py``) goes
-to its block every frame its waves move.
+The waters whose waves gather the sun (``Water.caustics``; ``engine/render/caustics.py``: the
+four nearest the camera) go to their block every frame their waves move.
 """
 from __future__ import annotations
 
@@ -51,7 +51,14 @@ from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
 from engine.core.errors import CausticLimitWarning, FogLimitWarning, LightLimitWarning
 from engine.core.world import World
-from engine.render.caustics import MAX_CAUSTIC_WATERS, CausticWater, body_box, caustic_rows, nearest
+from engine.render.caustics import (
+    MAX_CAUSTIC_WATERS,
+    CausticWater,
+    body_box,
+    caustic_map_size,
+    caustic_rows,
+    nearest_first,
+)
 from engine.render.clouds import CloudShape, cloud_shape, drift_served, shadows_served
 from engine.render.fog import volume_rows, water_body_row
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
@@ -124,7 +131,7 @@ class PrepareSystem(esper.Processor):
         self._unboxed: set[int] = set()   # waters with a fog and no flat outline (said once)
         self._caustic_cut = 0                     # waters with caustics past MAX_CAUSTIC_WATERS, left out
         self._caustic_still: set[int] = set()     # waters with caustics and no waves to gather with (said once)
-        self._caustic_key: tuple | None = None    # what the held water's rows were packed from (_caustics)
+        self._caustic_keys: dict[int, tuple] = {}  # what each held water's rows were packed from (_caustics)
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -198,11 +205,12 @@ class PrepareSystem(esper.Processor):
         self._caustics(camera)
 
     def _caustics(self, camera: int | None) -> None:
-        """Give the caustics' block the water that gathers the sun: of the waters with
-        ``caustics`` and waves (a normal map), the nearest the active camera (the rest counted
-        and said when their count grows).  Its rows are packed again when its state, its waves'
-        offset or its fields changed (every frame while the waves move); the block is written,
-        and the views drawn again, only when they changed."""
+        """Give the caustics' block the waters that gather the sun: of the waters with
+        ``caustics`` and waves (a normal map), the ``MAX_CAUSTIC_WATERS`` nearest the active
+        camera, nearest first (the rest counted and said when their count grows).  A water's
+        rows are packed again when its state, its waves' offset, its fields or the maps'
+        layer size changed (every frame while the waves move); the block is written, and the
+        views drawn again, only when they changed."""
         renderer = self.renderer
         found = []
         if self.caustics:
@@ -213,40 +221,43 @@ class PrepareSystem(esper.Processor):
                     self._say_still(entity)
                     continue
                 found.append((entity, state, water))
+        if len(found) > 1:
+            eye = np.zeros(3) if camera is None else np.array(self.world.get(camera, Transform).world[3].xyz)
+            order = nearest_first([(entity, state.corners) for entity, state, _ in found], eye)
+            found.sort(key=lambda entry: order.index(entry[0]))
         cut = max(0, len(found) - MAX_CAUSTIC_WATERS)
         if cut:
-            eye = np.zeros(3) if camera is None else np.array(self.world.get(camera, Transform).world[3].xyz)
-            chosen = nearest([(entity, state.corners) for entity, state, _ in found], eye)
-            found = [entry for entry in found if entry[0] == chosen]
+            found = found[:MAX_CAUSTIC_WATERS]
             if cut > self._caustic_cut:
                 warnings.warn(CausticLimitWarning(
-                    f"{MAX_CAUSTIC_WATERS + cut} waters have caustics: {MAX_CAUSTIC_WATERS} gathers the sun at a time "
-                    f"(the nearest the active camera, entity {chosen}), so {cut} do not "
-                    "(RenderStats.caustic_waters_cut)"), stacklevel=3)
+                    f"{MAX_CAUSTIC_WATERS + cut} waters have caustics: {MAX_CAUSTIC_WATERS} gather the sun at a time "
+                    f"(the nearest the active camera, entities {sorted(entry[0] for entry in found)}), so {cut} "
+                    "do not (RenderStats.caustic_waters_cut)"), stacklevel=3)
         self._caustic_cut = cut
         renderer.stats.caustic_waters_cut = cut
-        held = None
-        if found:
-            entity, state, water = found[0]
-            key = (state, state.water.flow.offset, water.tiling, water.cross, water.ior, water.caustics, water.depth)
-            held = renderer.caustics.water
-            if key == self._caustic_key and held is not None and held.entity == entity:
-                rows = held.rows   # (a still water, as it was: nothing packed)
-            else:
-                rows = caustic_rows(tuple(state.plane), state.bumps, tiling=water.tiling, cross=water.cross,
-                                    offset=state.water.flow.offset, ior=water.ior, strength=water.caustics,
-                                    depth=water.depth)
-            self._caustic_key = key
+        held = {water.entity: water for water in renderer.caustics.waters}
+        width = caustic_map_size([state.bumps.normal_map for _, state, _ in found])[0] if found else 0
+        chosen = []
+        for entity, state, water in found:
+            key = (state, state.water.flow.offset, water.tiling, water.cross, water.ior, water.caustics, water.depth,
+                   width)
+            kept = held.get(entity)
+            if key == self._caustic_keys.get(entity) and kept is not None:
+                chosen.append(kept)   # (a still water, as it was: nothing packed)
+                continue
+            rows = caustic_rows(tuple(state.plane), state.bumps, tiling=water.tiling, cross=water.cross,
+                                offset=state.water.flow.offset, ior=water.ior, strength=water.caustics,
+                                depth=water.depth, map_width=width)
+            self._caustic_keys[entity] = key
             if rows is None:   # (UVs square to the surface: no frame to read the waves in)
                 self._say_still(entity)
-                held = None
-            elif held is None or held.entity != entity or held.rows != rows \
-                    or held.normal_map is not state.bumps.normal_map:
-                held = CausticWater(entity, state.bumps.normal_map, rows,
-                                    body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth))
-        texture = None if held is None else renderer.normal_map_texture(held.normal_map)
-        if renderer.caustics.set(held, texture):
-            renderer.note_scene_change()   # what every view shows under the water
+                continue
+            chosen.append(CausticWater(entity, state.bumps.normal_map, rows,
+                                       body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth)))
+        for entity in set(self._caustic_keys) - {entry[0] for entry in found}:
+            del self._caustic_keys[entity]
+        if renderer.caustics.set(chosen):
+            renderer.note_scene_change()   # what every view shows under the waters
 
     def _waters(self) -> Iterator[tuple[int, SurfaceState, Water]]:
         """Each water surface this frame: its entity, its published state (the top) and its

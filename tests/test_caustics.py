@@ -42,12 +42,13 @@ EYE = (0.0, -0.05, 0.0)   # just under the surface, looking straight down at the
 
 
 def pool(caustics: float, *, eye=EYE, target=(0.0, -DEPTH, -0.001), cross: float = 0.0, scale: float = 1.0,
-         position=(0.0, 0.0, 0.0), normal_map=True, sun=SUN, depth: float = 10.0, tiles: float = 1.0):
+         position=(0.0, 0.0, 0.0), normal_map=True, sun=SUN, depth: float = 10.0, tiles: float = 1.0,
+         fov_y: float = 60.0):
     """A sunlit grey floor DEPTH under a SIDE-metre water of straight waves along x (the
     water's U), under a black sky (the sun is the only light)."""
     def build(world):
         at = glm.vec3(eye)
-        world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(target) - at)), Camera(fov_y=60.0))
+        world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(target) - at)), Camera(fov_y=fov_y))
         world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
         world.spawn(DirectionalLight(direction=tuple(sun), intensity=1.0))
         world.spawn(Transform(position=(0.0, -DEPTH, 0.0), rotation=FLAT), MeshRef(quad(60.0, 60.0)),
@@ -202,24 +203,114 @@ def test_the_caustics_move_with_the_waves(scene):
     assert np.abs(frames[-1].astype(int) - frames[-2].astype(int)).max() > 20
 
 
-def test_one_water_gathers_the_sun_at_a_time_the_nearest_and_the_rest_are_said(scene):
-    """Two pools with caustics: the one under the camera gathers the sun, the other (far off)
-    is counted and said in a CausticLimitWarning."""
+def another_pool(world, position, *, periods: int = PERIODS, size: int = 64, caustics: float = 1.0) -> int:
+    """One more SIDE-metre pool of straight waves (``periods`` a tile, its map ``size`` texels
+    a side) at ``position``: its entity."""
+    return world.spawn(Transform(position=position, rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+                       Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(periods, size=size, slope=SLOPE)),
+                       Mirror(), Water(ior=IOR, tiling=TILING, speed=0.0, caustics=caustics))
+
+
+LEFT, RIGHT = (-SIDE / 2.0 - 0.05, 0.0, 0.0), (SIDE / 2.0 + 0.05, 0.0, 0.0)   # two pools, a hand's width apart
+
+
+def side_by_side(left: bool, right: bool, caustics: float = 1.0, right_size: int = 64):
+    """Pools to the LEFT and RIGHT of the eye over one floor (its one row reaches into both
+    bodies), the eye between them just under their plane, looking straight down wide: the
+    left pool's waves PERIODS a tile, the right one's 3 (its map ``right_size`` texels)."""
+    def build(world):
+        pool(0.0, fov_y=100.0, position=(0.0, 40.0, 0.0))(world)   # (its own pool far above: no caustics)
+        if left:
+            another_pool(world, LEFT, caustics=caustics)
+        if right:
+            another_pool(world, RIGHT, periods=3, size=right_size, caustics=caustics)
+    return build
+
+
+@pytest.mark.parametrize("right_size", [64, 32])
+def test_two_pools_over_one_floor_each_gather_the_sun_through_their_own_waves(scene, right_size):
+    """Two pools side by side over one floor, both in the picture: the floor lit through each
+    is the floor lit through that pool alone, to the bit (a map of the other's size, resampled to it in
+    the maps' array, within its filtering's difference), and each half shows caustics; the
+    floor's row reaches into both bodies, so its batch is keyed under both waters."""
+    runner, both = render(scene, side_by_side(True, True, right_size=right_size))
+    _, left = render(scene, side_by_side(True, False, right_size=right_size))
+    _, right = render(scene, side_by_side(False, True, right_size=right_size))
+    _, flat = render(scene, side_by_side(True, True, 0.0))
+    # Where the light on each floor point crossed the surfaces' plane (the flat water's ray:
+    # the sun slants along +x, so light landing just right of the gap came through the left pool).
+    t = refract(np.array([tuple(SUN)]), np.array([[0.0, 1.0, 0.0]]), 1.0 / IOR)[0]
+    crossed = floor_points(runner)[..., 0] - DEPTH * t[0] / -t[1]
+    under_left, under_right = crossed < LEFT[0] + SIDE / 2.0 - 0.01, crossed > RIGHT[0] - SIDE / 2.0 + 0.01
+    assert under_left.sum() > 2000 and under_right.sum() > 2000
+    assert [water.entity for water in runner.engine.renderer.caustics.waters] == sorted(
+        e for e, water in runner.world.query_one(Water) if water.caustics > 0.0)
+    np.testing.assert_array_equal(both[under_left], left[under_left])
+    if right_size == 64:
+        np.testing.assert_array_equal(both[under_right], right[under_right])
+    else:
+        assert np.median(np.abs(both[under_right] - right[under_right])) < 0.01
+        assert np.corrcoef(both[under_right][:, 0], right[under_right][:, 0])[0, 1] > 0.98
+    for half in (under_left, under_right):
+        assert np.ptp(both[half][:, 0] / flat[half][:, 0]) > 1.0   # its caustics' lines
+    np.testing.assert_array_equal(left[under_right], flat[under_right])   # (no light gathered with no pool over it)
+    floor = next(e for e, (t, _) in runner.world.query(Transform, MeshRef) if t.position.y == -DEPTH)
+    waters = tuple(sorted(e for e, water in runner.world.query_one(Water) if water.caustics > 0.0))
+    batch = next(b for b in runner.engine.renderer.batches.values() if floor in b.entity_at[:b.count])
+    assert batch.caustic_waters == waters
+
+
+def test_the_nearest_four_waters_gather_the_sun_and_the_rest_are_said(scene):
+    """Six pools with caustics, one under the camera and five farther off in a row: the four
+    nearest gather the sun, nearest first; the farthest is counted and said in a
+    CausticLimitWarning; under the camera the floor is as under its pool alone."""
+    far = {}
+
     def build(world):
         pool(1.0)(world)
-        world.spawn(Transform(position=(30.0, 0.0, 0.0), rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
-                    Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE)),
-                    Mirror(), Water(tiling=TILING, speed=0.0, caustics=1.0))
+        for k, x in enumerate((30.0, 40.0, 50.0, 60.0, 70.0)):
+            far[x] = another_pool(world, (x, 0.0, 0.0), periods=2 + k % 3)
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         runner, image = render(scene, build)
-    assert [w for w in caught if issubclass(w.category, CausticLimitWarning)]
-    assert runner.stats.caustic_waters_cut == 1
+    said = [w for w in caught if issubclass(w.category, CausticLimitWarning)]
+    assert len(said) == 1 and "4 gather the sun at a time" in str(said[0].message)
+    assert runner.stats.caustic_waters_cut == 2
     near = min(entity for entity, _ in runner.world.query_one(Water))
-    assert runner.engine.renderer.caustics.water.entity == near
+    assert [water.entity for water in runner.engine.renderer.caustics.waters] == [
+        near, far[30.0], far[40.0], far[50.0]]
     _, alone = render(scene, pool(1.0))
     np.testing.assert_array_equal(image, alone)
+
+
+def test_the_waters_normal_maps_are_the_layers_of_one_array(ctx):
+    """CausticMaps: a map of the layers' size is its layer texel for texel (rows flipped to
+    GL's); a smaller one is resampled, wrapping, each new texel the bilinear mean of the old
+    ones about its centre; with a 16-bit map among them the layers are 16 bits and an 8-bit
+    map's values are scaled to them."""
+    from engine.assets.texture_data import TextureData
+    from engine.render.caustics import CausticMaps, wrapped_resample
+
+    rng = np.random.default_rng(3)
+    big = TextureData(rng.integers(0, 256, (8, 8, 4), dtype=np.uint8), name="big")
+    small = TextureData(rng.integers(0, 256, (4, 4, 4), dtype=np.uint8), name="small")
+    maps = CausticMaps(ctx)
+    assert maps.hold([big, small]) and not maps.hold([big, small])
+    layers = np.frombuffer(maps.array.read(), np.uint8).reshape(2, 8, 8, 4)
+    np.testing.assert_array_equal(layers[0], big.pixels[::-1])
+    p = small.pixels.astype(float)
+    # New texel 0 of 8 sits at old coordinate -0.25: 3/4 of old texel 0 and 1/4 of texel 3 (wrapped).
+    expect = 0.75 * (0.75 * p[0, 0] + 0.25 * p[0, 3]) + 0.25 * (0.75 * p[3, 0] + 0.25 * p[3, 3])
+    np.testing.assert_array_equal(wrapped_resample(small.pixels, (8, 8))[0, 0], np.rint(expect))
+    np.testing.assert_array_equal(layers[1], wrapped_resample(small.pixels, (8, 8))[::-1])
+    fine = TextureData(rng.integers(0, 65536, (8, 8, 4), dtype=np.uint16), name="fine")
+    assert maps.hold([big, fine])
+    layers = np.frombuffer(maps.array.read(), np.uint16).reshape(2, 8, 8, 4)
+    np.testing.assert_array_equal(layers[0], big.pixels[::-1].astype(np.uint16) * 257)
+    np.testing.assert_array_equal(layers[1], fine.pixels[::-1])
+    maps.release()
+    assert maps.array is None
 
 
 def test_a_context_with_too_few_texture_units_draws_no_caustics_and_says_so(scene, ctx):
@@ -293,7 +384,7 @@ def test_only_what_reaches_into_the_waters_body_is_drawn_with_caustics(scene):
 def test_a_meshs_rows_under_the_water_are_a_batch_of_their_own_and_a_mover_changes_batch(scene):
     """Two boxes of one mesh and material (one batch, were it not for the water): the one
     standing in the pool is drawn with the CAUSTICS build in a batch of its own
-    (``BatchKey.under_caustics``), the one far off with the build without, so a level's boxes
+    (``BatchKey.caustic_waters``), the one far off with the build without, so a level's boxes
     do not all pay for a pond's caustics.  Carried into the pool, the far one joins the
     caustic batch and shows the caustics; carried out again, it goes back; the pool carried
     over it, the two change places."""
@@ -317,7 +408,8 @@ def test_a_meshs_rows_under_the_water_are_a_batch_of_their_own_and_a_mover_chang
 
     first, second = batch_of(ids["inside"]), batch_of(ids["far"])
     assert first is not second and first.mesh is second.mesh
-    assert (first.under_caustics, second.under_caustics) == (True, False)
+    pool_entity = next(e for e, _ in runner.world.query_one(Water))
+    assert (first.caustic_waters, second.caustic_waters) == ((pool_entity,), ())
     assert builds(first) == {True} and builds(second) == {False}
     moved = (-0.8, -0.95, 0.9)   # into the pool's near half (the far half's floor shows the surface's reflection)
     runner.world.get(ids["far"], Transform).position = moved
@@ -339,12 +431,11 @@ def test_a_meshs_rows_under_the_water_are_a_batch_of_their_own_and_a_mover_chang
     runner.world.get(ids["far"], Transform).position = far
     runner.frame(1.0 / 60.0)
     assert batch_of(ids["far"]) is not batch_of(ids["inside"])
-    assert (batch_of(ids["inside"]).under_caustics, batch_of(ids["far"]).under_caustics) == (True, False)
+    assert (batch_of(ids["inside"]).caustic_waters, batch_of(ids["far"]).caustic_waters) == ((pool_entity,), ())
     # The water carried over the far slab (its body moves: the rows keyed again by their boxes).
-    pool_entity = next(e for e, _ in runner.world.query_one(Water))
     runner.world.get(pool_entity, Transform).position = (far[0], 0.0, far[2])
     runner.frame(1.0 / 60.0)
-    assert (batch_of(ids["inside"]).under_caustics, batch_of(ids["far"]).under_caustics) == (False, True)
+    assert (batch_of(ids["inside"]).caustic_waters, batch_of(ids["far"]).caustic_waters) == ((), (pool_entity,))
 
 
 def test_the_overlays_switch_takes_the_caustics_off_and_on(scene):
@@ -384,11 +475,15 @@ def traced_light_at(xs: np.ndarray, depth: float, tiles: float = 1.0) -> np.ndar
     return np.interp(xs, (before + after) / 2.0, 1.0 / spread)
 
 
-def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene):
+@pytest.mark.parametrize("nearer", [False, True])
+def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene, nearer):
     """Looking straight down from under a sunlit, murky pool 1.2 m deep with light shafts: each march
     texel's light is the ground truth's sum along its ray of density x transmittance x the
     sun's light at each point (through the water over it, times the traced caustic at its
-    depth): the bright columns where the waves gather the sun, where the tracer puts them."""
+    depth): the bright columns where the waves gather the sun, where the tracer puts them.
+    ``nearer``: the pool moved 12 of its wave tiles along (the same waves over the eye) and
+    another pool with caustics nearer the eye, out of the picture, so that the block holds
+    this one second: the march reads every water it holds."""
     from components import Fog, VolumetricFog
     from tests.test_volumetric_fog import march_rays, marched_light
 
@@ -400,11 +495,13 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene):
     def build(caustics):
         def b(world):
             pool(caustics, eye=(0.0, -0.2, 0.0), target=(0.0, -DEEP, -0.001), sun=glm.vec3(0.0, -1.0, 0.0),
-                 tiles=tiles, depth=DEEP)(world)
+                 tiles=tiles, depth=DEEP, position=(16.0, 0.0, 0.0) if nearer else (0.0, 0.0, 0.0))(world)
+            if nearer:
+                another_pool(world, (3.0, 0.0, 3.0), periods=3)
             camera = next(e for e, _ in world.query_one(Camera))
             world.add_component(camera, Fog(density=air, color=(0.0, 0.0, 0.0)))
             world.add_component(camera, settings)
-            water = next(e for e, _ in world.query_one(Water))
+            water = min(e for e, _ in world.query_one(Water))
             world.get(water, Water).fog_density = body
             world.get(water, Water).fog_color = (0.0, 0.0, 0.0)
             floor = next(e for e, (t, _) in world.query(Transform, MeshRef) if t.position.y == -DEPTH)
@@ -414,6 +511,8 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene):
     runner = scene(build(1.0), (96, 64))
     runner.frame()
     marched = marched_light(runner)
+    held = [water.entity for water in runner.engine.renderer.caustics.waters]
+    assert len(held) == 1 + nearer and held[-1] == min(e for e, _ in runner.world.query_one(Water))
     origin, way, (rows, columns) = march_rays(runner, (96, 64), 2)
     reach = np.minimum((-DEEP - origin[:, 1]) / way[:, 1], settings.distance)
     points = 400
@@ -450,11 +549,11 @@ def test_uvs_square_to_the_surface_give_no_caustic_rows():
 
     level = MirrorBumps(wave_map(), 1.0, np.array([[0.25, 0.0, 0.0, 0.5], [0.0, 0.0, -0.25, 0.5]]), 0.0)
     rows = caustic_rows((0.0, 1.0, 0.0, 0.0), level, tiling=3.0, cross=0.5, offset=(0.1, 0.2), ior=1.333,
-                        strength=1.0, depth=2.0)
+                        strength=1.0, depth=2.0, map_width=64)
     assert rows is not None and len(rows) == 28
     np.testing.assert_allclose(rows[12:15], (1.0, 0.0, 0.0))   # +U along x
     np.testing.assert_allclose(rows[16:19], (0.0, 0.0, -1.0))  # +V along -z
     np.testing.assert_allclose(rows[25], SIDE / (TILING * 64))  # a map texel, metres
     square = MirrorBumps(wave_map(), 1.0, np.array([[0.0, 0.25, 0.0, 0.5], [0.0, 0.0, -0.25, 0.5]]), 0.0)
     assert caustic_rows((0.0, 1.0, 0.0, 0.0), square, tiling=3.0, cross=0.5, offset=(0.0, 0.0), ior=1.333,
-                        strength=1.0, depth=2.0) is None
+                        strength=1.0, depth=2.0, map_width=64) is None

@@ -68,8 +68,8 @@ class FogLimitWarning(UserWarning):
 
 
 class CausticLimitWarning(UserWarning):
-    """More waters with caustics than ``MAX_CAUSTIC_WATERS``: only the nearest the active
-    camera gathers the sun (said when the count grows, counted every frame in
+    """More waters with caustics than ``MAX_CAUSTIC_WATERS``: only that many, the nearest the
+    active camera, gather the sun (said when the count grows, counted every frame in
     ``RenderStats.caustic_waters_cut``)."""
 
 

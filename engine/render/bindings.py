@@ -176,9 +176,9 @@ MOON_VIEW_UNIT = 63           # sky, sky cube (MOON_AIR builds): the sky-view ta
 # scene builds march (colour and window depth, with mips), and the copy pass's two reads.
 REFRACTION_COPY_UNIT = 64
 REFRACTION_SOURCE_UNITS = (65, 66)  # the copy pass: the view's colour and depth images
-# Caustics under a water (engine/render/caustics.py): its normal map, the 19th sampler of the
-# fullest build, only where the context has one (CausticBlock.supported).
-CAUSTIC_UNIT = 67             # scene (CAUSTICS builds): the caustic water's normal map (Material.normal_map)
+# Caustics under waters (engine/render/caustics.py): their normal maps' array, the 19th sampler
+# of the fullest build, only where the context has one (CausticBlock.supported).
+CAUSTIC_UNIT = 67             # scene (CAUSTICS builds): the caustic waters' normal maps (CausticMaps)
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance
@@ -212,7 +212,7 @@ VIRTUAL_LIGHTS_BINDING = 5  # scene: lights seen through mirrors and portals (sh
 FALLBACK_BINDING = 6     # composite (fallback): each row's ids and weights (mirror_composite.vert's FallbackRows)
 FOG_BINDING = 7          # scene (FOG builds), sky, composites: the active camera's fog (engine/render/fog.py)
 CLOUDS_BINDING = 8       # sky (CLOUDS builds), scene (CLOUD_SHADOWS): the CloudLayer (engine/render/clouds.py)
-CAUSTICS_BINDING = 9     # scene (CAUSTICS builds): the water whose waves gather the sun (engine/render/caustics.py)
+CAUSTICS_BINDING = 9     # scene (CAUSTICS builds): the waters whose waves gather the sun (engine/render/caustics.py)
 
 # --- clip distances ------------------------------------------------------------------------
 # The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for

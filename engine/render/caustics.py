@@ -1,21 +1,27 @@
-"""Caustics under a water (``components.Water.caustics``): the uniform block and the normal
-map the scene's ``CAUSTICS`` builds read (``shaders/include/caustics.glsl``, which says how
-the light is gathered), and the rules of what they hold.
+"""Caustics under waters (``components.Water.caustics``): the uniform block and the normal
+maps' array the scene's ``CAUSTICS`` builds read (``shaders/include/caustics.glsl``, which
+says how the light is gathered), and the rules of what they hold.
 
-Only the batches whose world boxes reach into the water's body box (``reaches``, ``box``)
-are drawn with the CAUSTICS builds: on llvmpipe every pixel of a build runs its caustics, on
+Only the batches whose world boxes reach into a held water's body box (``reaches``,
+``CausticBlock.slots_of``) are drawn with the CAUSTICS builds: on llvmpipe every pixel of a build runs its caustics, on
 the water or off it, behind a branch or not (measured: a build whose caustics return at once
 cost as much as one that works them out), so a level with a pond pays only where the pond is.
 A batch's box is the union of its rows', and one mesh's rows across a level (a hall's boxes)
-span any pond in it; so the extract stage puts the rows that reach into the body of any
-water that gathers the sun in batches of their own (``under_caustics``,
-``BatchKey.under_caustics``), and only those are drawn with the builds (measured on the
-sample level with caustics on its pond, 640x360 on llvmpipe: +24% a frame before, about +9% after).
+span any pond in it; so the extract stage puts the rows that reach into the body of a
+water that gathers the sun in batches of their own, keyed by the waters they reach
+(``caustic_waters_of``, ``BatchKey.caustic_waters``), and only those are drawn with the
+builds (measured on the sample level with caustics on its pond, 640x360 on llvmpipe: +24% a
+frame before, about +9% after).
 
-One water at a time gathers the sun (``MAX_CAUSTIC_WATERS``: its normal map takes a sampler
-of its own, the 19th of the fullest scene build): the prepare stage gives the block the
-nearest the active camera of the waters that have caustics and waves (a normal map), and
-says when others are left out.  A still water (no normal map) bends no light: it has none.
+Up to ``MAX_CAUSTIC_WATERS`` waters gather the sun at once: the prepare stage gives the block
+the nearest the active camera of the waters that have caustics and waves (a normal map),
+nearest first, and says when others are left out.  Each draw names the held waters its batch
+reaches into (scene.frag's ``caustic_waters``, at most four: an ivec4), and each of its
+points takes the light of every one of them (one off its outline or below its body gives 1),
+so one floor under two ponds is lit through each.  The waters' normal maps are the layers of
+one array texture (``CausticMaps``: one sampler, the 19th of the fullest scene build, for
+every water).  The light shafts march every held water.  A still water (no normal map)
+bends no light: it has none.
 A context with fewer than ``CAUSTIC_SAMPLERS`` texture units in the fragment stage draws
 none, said once (``GLLimitWarning``).
 
@@ -26,6 +32,7 @@ a probe shows them as they were when it captured its faces.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import moderngl
@@ -38,16 +45,20 @@ from engine.render.bindings import CAUSTIC_UNIT, CAUSTICS_BINDING, bind_texture,
 from engine.render.spot_cookies import SCENE_SAMPLERS
 from engine.resources import MirrorBumps
 
-MAX_CAUSTIC_WATERS = 1      # waters whose caustics are drawn at once (the nearest the active camera)
+MAX_CAUSTIC_WATERS = 4      # waters whose caustics are drawn at once (the nearest the active camera; at most 4:
+#                             a draw names its waters in an ivec4, scene.frag's caustic_waters)
 CAUSTIC_SAMPLERS = SCENE_SAMPLERS + 3   # the fullest build with cookies, soft suns' depths and caustics
 CAUSTIC_SUN_SPREAD = 0.0093  # radians: the sun's disc (0.53 degrees), how a caustic blurs with depth
-_BLOCK_FLOATS = 28          # seven vec4s (caustics.glsl's Caustics block)
+CAUSTIC_MAP_MAX_SIDE = 2048  # the most texels along a side of the waters' normal maps' array (CausticMaps)
+_ROWS = 7                   # a water's vec4s in the block (caustics.glsl's Caustics block: one array each)
+_BLOCK_FLOATS = 4 * _ROWS * MAX_CAUSTIC_WATERS + 4   # the arrays, then the ivec4 of how many are held
 CAUSTICS_BLOCK_BYTES = 4 * _BLOCK_FLOATS
+NO_CAUSTIC_WATERS = (-1, -1, -1, -1)   # scene.frag's caustic_waters for a batch under none
 
 
 @dataclass(frozen=True, eq=False)
 class CausticWater:
-    """The water whose caustics the block holds: its entity, its normal map and the block's
+    """A water whose caustics the block holds: its entity, its normal map and the block's
     rows (``caustic_rows``)."""
 
     entity: int
@@ -85,22 +96,25 @@ def placed_box(matrix: glm.mat4, lo: tuple[float, float, float], hi: tuple[float
     return (low[0], low[1], low[2]), (high[0], high[1], high[2])
 
 
-def under_caustics(box: Box, bodies: tuple[Box, ...]) -> bool:
-    """Whether the world ``box`` reaches into any of ``bodies`` (the boxes of the waters that
-    gather the sun: ``body_box``): a row drawn with the CAUSTICS builds (in a batch of its own,
-    ``BatchKey.under_caustics``), so that a mesh's other rows across a level do not pay for them."""
-    return any(reaches(box, body) for body in bodies)
+def caustic_waters_of(box: Box, bodies: tuple[tuple[int, Box], ...]) -> tuple[int, ...]:
+    """The entities of the waters among ``bodies`` ((entity, body box) each: ``body_box``) whose
+    body the world ``box`` reaches into: a row drawn with the CAUSTICS builds under them (in a
+    batch of its own, ``BatchKey.caustic_waters``), so that a mesh's other rows across a level
+    do not pay for them."""
+    return tuple(entity for entity, body in bodies if reaches(box, body))
 
 
 def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *, tiling: float, cross: float,
-                 offset: tuple[float, float], ior: float, strength: float, depth: float) -> tuple[float, ...] | None:
-    """The ``Caustics`` block (caustics.glsl) of a water: its top ``plane`` (normal up, out of
-    the water), its mirror's UV rows, the surface's unit directions of +U and +V (each UV
+                 offset: tuple[float, float], ior: float, strength: float, depth: float,
+                 map_width: int) -> tuple[float, ...] | None:
+    """A water's rows of the ``Caustics`` block (caustics.glsl): its top ``plane`` (normal up,
+    out of the water), its mirror's UV rows, the surface's unit directions of +U and +V (each UV
     row's direction laid on the plane, as the composite's frame), the waves' layers
     (``tiling``, ``cross``, ``offset``, ``bumps.scale``), 1 / ``ior``, the ``strength``
-    (``Water.caustics``), a map texel's size in metres along U, the body's ``depth`` and the
-    sun's spread.  None where the UVs do not run along the surface (a row square to it: no
-    frame to read the waves in)."""
+    (``Water.caustics``), a map texel's size in metres along U (the texels of its layer in
+    ``CausticMaps``: ``map_width`` across), the body's ``depth`` and the sun's spread.  None
+    where the UVs do not run along the surface (a row square to it: no frame to read the
+    waves in)."""
     normal = np.array(plane[:3], np.float64)
     u_row, v_row = (np.asarray(row, np.float64) for row in bumps.uv_rows)
     flats = [row[:3] - np.dot(row[:3], normal) * normal for row in (u_row, v_row)]
@@ -111,69 +125,148 @@ def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *
         flat = row[:3] - np.dot(row[:3], normal) * normal
         return flat / np.linalg.norm(flat)
 
-    width = bumps.normal_map.size[0]
-    texel = 1.0 / (width * tiling * float(np.linalg.norm(u_row[:3])))
+    texel = 1.0 / (map_width * tiling * float(np.linalg.norm(u_row[:3])))
     return tuple(float(v) for v in (*normal, plane[3], *u_row, *v_row, *along(u_row), cross, *along(v_row),
                                     bumps.scale, *offset, 1.0 / ior, strength, tiling, texel, depth,
                                     CAUSTIC_SUN_SPREAD))
 
 
+def caustic_map_size(maps: Sequence[TextureData]) -> tuple[int, int]:
+    """The size of the layers of the waters' normal maps' array (``CausticMaps``): the widest
+    and the tallest of ``maps``, at most ``CAUSTIC_MAP_MAX_SIDE`` a side (maps of one size, the
+    usual case, are copied texel for texel)."""
+    return (min(max(m.size[0] for m in maps), CAUSTIC_MAP_MAX_SIDE),
+            min(max(m.size[1] for m in maps), CAUSTIC_MAP_MAX_SIDE))
+
+
+def wrapped_resample(pixels: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``pixels`` (rows, columns, channels) resampled bilinearly to ``size`` (width, height),
+    wrapping at the edges as a repeating normal map does (the same array where the size is
+    its own)."""
+    h, w = pixels.shape[:2]
+    if (w, h) == tuple(size):
+        return pixels
+
+    def axis(n: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        x = (np.arange(count) + 0.5) * n / count - 0.5   # each new texel's centre in the old texels
+        low = np.floor(x).astype(np.int64)
+        return low % n, (low + 1) % n, x - low
+
+    y0, y1, ty = axis(h, size[1])
+    x0, x1, tx = axis(w, size[0])
+    p = pixels.astype(np.float64)
+    rows = p[y0] * (1.0 - ty)[:, None, None] + p[y1] * ty[:, None, None]
+    out = rows[:, x0] * (1.0 - tx)[None, :, None] + rows[:, x1] * tx[None, :, None]
+    return np.rint(out).astype(pixels.dtype)
+
+
+class CausticMaps:
+    """The held waters' normal maps as the layers of one array texture (``caustics.glsl``'s
+    ``caustic_maps``): one sampler for every water, whatever their number (the fullest scene
+    build already takes the 19th unit for it).  Layers are of one size (``caustic_map_size``);
+    a map of another size is resampled to it, wrapping.  16 bits a channel where any map has
+    them (an 8-bit map's values scaled to them), else 8.  Made again when the held maps change."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self.array: moderngl.TextureArray | None = None
+        self._held: tuple[TextureData, ...] = ()
+
+    def hold(self, maps: Sequence[TextureData]) -> bool:
+        """Hold ``maps``, a layer each in their order; True when the array was made again."""
+        if len(maps) == len(self._held) and all(a is b for a, b in zip(maps, self._held, strict=True)):
+            return False
+        self.release()
+        if not maps:
+            return True
+        size = caustic_map_size(maps)
+        sixteen = any(m.pixels.dtype == np.uint16 for m in maps)
+        layers = []
+        for m in maps:
+            pixels = m.pixels.astype(np.uint16) * 257 if sixteen and m.pixels.dtype == np.uint8 else m.pixels
+            layers.append(wrapped_resample(pixels, size)[::-1])   # (rows top-first; GL's bottom-first)
+        self.array = self.ctx.texture_array((*size, len(maps)), 4, np.ascontiguousarray(np.stack(layers)).tobytes(),
+                                            dtype="nu2" if sixteen else "f1")
+        self.array.build_mipmaps()
+        self.array.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self._held = tuple(maps)
+        return True
+
+    def release(self) -> None:
+        if self.array is not None:
+            self.array.release()
+        self.array, self._held = None, ()
+
+
 class CausticBlock:
-    """The ``Caustics`` uniform block on the GPU (bound once at ``CAUSTICS_BINDING``), written
-    when its water's rows change, the ``CAUSTICS`` define while it holds one, and its normal
-    map bound for each scene pass (``bind``)."""
+    """The ``Caustics`` uniform block on the GPU (bound at ``CAUSTICS_BINDING``: up to
+    ``MAX_CAUSTIC_WATERS`` waters' rows, the nearest the camera first), written when a held
+    water's rows change; the ``CAUSTICS`` defines while it holds any; their normal maps'
+    array (``CausticMaps``) bound for each scene pass (``bind``); and which waters a batch's
+    draw reads (``slots_of``)."""
 
     def __init__(self, ctx: moderngl.Context, texture_units: int) -> None:
         self.ctx = ctx
         self.ubo = ctx.buffer(reserve=CAUSTICS_BLOCK_BYTES)
         self.supported = texture_units >= CAUSTIC_SAMPLERS
         self.texture_units = texture_units
-        self.water: CausticWater | None = None
-        self._texture: moderngl.Texture | None = None
+        self.waters: tuple[CausticWater, ...] = ()
+        self.maps = CausticMaps(ctx)
         self.defines: tuple[tuple[str, str], ...] = ()
         self._warned = False
 
-    def set(self, water: CausticWater | None, texture: moderngl.Texture | None = None) -> bool:
-        """Hold ``water`` (None: none) with ``texture``, its normal map on the GPU (None: not
-        uploaded, so none drawn); True when what the scene shows changed."""
-        if water is not None and not self.supported:
+    def set(self, waters: Sequence[CausticWater]) -> bool:
+        """Hold ``waters`` (at most ``MAX_CAUSTIC_WATERS``, nearest the camera first; none:
+        none); True when what the scene shows changed."""
+        if len(waters) > MAX_CAUSTIC_WATERS:
+            raise ValueError(f"{len(waters)} caustic waters given; the block holds {MAX_CAUSTIC_WATERS}")
+        if waters and not self.supported:
             if not self._warned:
                 self._warned = True
                 warnings.warn(GLLimitWarning(
-                    f"Water on entity {water.entity}: caustics need {CAUSTIC_SAMPLERS} texture units in the fragment "
-                    f"stage and this OpenGL has {self.texture_units} (GL_MAX_TEXTURE_IMAGE_UNITS): the water gathers "
-                    "no light"), stacklevel=3)
-            water = None
-        if water is not None and texture is None:
-            water = None
-        self._texture = texture if water is not None else None
-        old = self.water
-        if water is None:
-            self.water, self.defines = None, ()
-            return old is not None
-        self.water, self.defines = water, (("CAUSTICS", "1"),)
-        if old is not None and old.rows == water.rows:
+                    f"Water on entity {waters[0].entity}: caustics need {CAUSTIC_SAMPLERS} texture units in the "
+                    f"fragment stage and this OpenGL has {self.texture_units} (GL_MAX_TEXTURE_IMAGE_UNITS): the "
+                    "water gathers no light"), stacklevel=3)
+            waters = ()
+        old, waters = self.waters, tuple(waters)
+        if not waters:
+            self.waters, self.defines = (), ()
+            self.maps.release()
+            return bool(old)
+        remade = self.maps.hold([water.normal_map for water in waters])
+        self.waters = waters
+        self.defines = (("CAUSTICS", "1"), ("MAX_CAUSTIC_WATERS", str(MAX_CAUSTIC_WATERS)))
+        if not remade and len(old) == len(waters) and all(
+                a.entity == b.entity and a.rows == b.rows and a.box == b.box for a, b in zip(old, waters, strict=True)):
             return False
-        self.ubo.write(np.array(water.rows, np.float32).tobytes())
+        block = np.zeros((_ROWS, MAX_CAUSTIC_WATERS, 4), np.float32)
+        for slot, water in enumerate(waters):
+            block[:, slot] = np.asarray(water.rows, np.float32).reshape(_ROWS, 4)
+        self.ubo.write(block.tobytes() + np.array([len(waters), 0, 0, 0], np.int32).tobytes())
         return True
 
-    @property
-    def box(self) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
-        """The world box of what the held water lights (None: none held): the batches that
-        reach into it are drawn with the CAUSTICS builds (``reaches``), the rest without (on
-        llvmpipe every pixel of a build pays for its caustics, on or off the water)."""
-        return None if self.water is None else self.water.box
+    def slots_of(self, box: tuple[np.ndarray, np.ndarray] | None, keyed: tuple[int, ...],
+                 posed: bool = False) -> tuple[int, int, int, int]:
+        """scene.frag's ``caustic_waters`` for a batch of world ``box`` keyed under the waters
+        ``keyed`` (``BatchKey.caustic_waters``; a ``posed`` batch, its own, under any whose
+        body its pose's box reaches): the slots of the held waters among them whose bodies
+        the box reaches, -1 after the last (``NO_CAUSTIC_WATERS``: none, drawn without the
+        CAUSTICS build)."""
+        found = [slot for slot, water in enumerate(self.waters)
+                 if (posed or water.entity in keyed) and reaches(box, water.box)]
+        return (*found, *NO_CAUSTIC_WATERS[len(found):]) if found else NO_CAUSTIC_WATERS
 
     def bind(self) -> None:
-        """Bind the block and the water's normal map for a scene pass (while there is one):
-        each pass, as another engine on the context binds its own block at the same point."""
-        if self.water is not None:
+        """Bind the block and the waters' maps for a scene pass (while it holds any): each
+        pass, as another engine on the context binds its own block at the same point."""
+        if self.waters:
             bind_uniform_block(self.ctx, self.ubo, CAUSTICS_BINDING)
-            bind_texture(self.ctx, self._texture, CAUSTIC_UNIT)
+            bind_texture(self.ctx, self.maps.array, CAUSTIC_UNIT)
 
     def release(self) -> None:
         self.ubo.release()
-        self.water, self.defines, self._texture = None, (), None
+        self.maps.release()
+        self.waters, self.defines = (), ()
 
 
 def reaches(batch_box: tuple[np.ndarray, np.ndarray] | None,
@@ -187,9 +280,8 @@ def reaches(batch_box: tuple[np.ndarray, np.ndarray] | None,
     return not (hi[0] < lx or hi[1] < ly or hi[2] < lz or lo[0] > hx or lo[1] > hy or lo[2] > hz)
 
 
-def nearest(candidates: list[tuple[int, np.ndarray]], eye: np.ndarray) -> int:
-    """The entity of ``candidates`` ((entity, outline corners) each) whose outline's centre is
-    nearest ``eye``."""
-    return min(candidates, key=lambda c: (float(np.linalg.norm(np.asarray(c[1], np.float64)[:, :3].mean(axis=0)
-                                                               - eye)), c[0]))[0]
-
+def nearest_first(candidates: list[tuple[int, np.ndarray]], eye: np.ndarray) -> list[int]:
+    """The entities of ``candidates`` ((entity, outline corners) each), the one whose outline's
+    centre is nearest ``eye`` first (ties: the lower entity)."""
+    return [c[0] for c in sorted(candidates, key=lambda c: (float(np.linalg.norm(
+        np.asarray(c[1], np.float64)[:, :3].mean(axis=0) - eye)), c[0]))]

@@ -295,9 +295,9 @@ class BatchKey(NamedTuple):
     subsurface: tuple[float, float, float, float] | None = None
     # Refractive.screen: drawn after its view's copy of colour and depth (engine/render/screen_refraction.py)
     refracts_screen: bool = False
-    # Reaching into the body of a water that gathers the sun (engine/render/caustics.py
-    # under_caustics): its own batch, so that only such rows are drawn with the CAUSTICS builds.
-    under_caustics: bool = False
+    # The waters that gather the sun whose bodies its rows reach into (engine/render/caustics.py
+    # caustic_waters_of; () none): its own batch, so that only such rows are drawn with the CAUSTICS builds.
+    caustic_waters: tuple[int, ...] = ()
 
 
 _NOT_PREPARED = object()  # InstanceBatch.prepared_variants before its first preparing
@@ -368,7 +368,7 @@ class InstanceBatch:
         self._sizes = np.ones((capacity, 3), np.float32)
         self.probe = 0  # the entity owning the reflection probe its instances sample (0: none)
         self.mirrored = False  # its instances' model matrices mirror them (drawn with the other winding)
-        self.under_caustics = False  # its instances reach into a caustic water's body (BatchKey.under_caustics)
+        self.caustic_waters: tuple[int, ...] = ()  # the caustic waters its instances reach into (BatchKey's)
         # Probe blending (probe_rules.probe_blend): a second probe (0: none), and whether the
         # instances blend (their rows' ``reflect`` z and w weigh the two probes, the sky the rest).
         self.second_probe = 0

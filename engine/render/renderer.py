@@ -203,7 +203,7 @@ class Renderer(Gpu):
                   diffuse_transmission: tuple[float, float, float, float] | None = None,
                   decal: bool = False, decal_order: int = 0, parallax_depth: float = 0.0,
                   subsurface: tuple[float, float, float, float] | None = None,
-                  refracts_screen: bool = False, under_caustics: bool = False) -> InstanceBatch:
+                  refracts_screen: bool = False, caustic_waters: tuple[int, ...] = ()) -> InstanceBatch:
         """The batch of (mesh, albedo texture, normal map, emissive map, metallic-roughness
         map, the probe its instances sample (0: none), a cutout's cutoff, an occlusion map and
         its strength, double-sidedness).  A transparent entity gets a batch of its own
@@ -241,8 +241,8 @@ class Renderer(Gpu):
         # the light scattered under its surface, its SUBSURFACE build's uniform (None: none).
         # ``refracts_screen``: a Refractive's ``screen``: a view tree's views draw it after their
         # copy of colour and depth (engine/render/screen_refraction.py), a batch of its own.
-        # ``under_caustics``: reaching into the body of a water that gathers the sun
-        # (caustics.under_caustics), a batch of its own: only its rows pay for the CAUSTICS builds.
+        # ``caustic_waters``: the waters that gather the sun whose bodies its rows reach into
+        # (caustics.caustic_waters_of), a batch of its own: only its rows pay for the CAUSTICS builds.
         if second_uv_maps and mesh.second_uvs is None:
             raise GLLimitError(f"mesh {mesh.name!r}: Material.second_uv_maps reads a second UV set the mesh does "
                                "not have (Mesh.second_uvs)")
@@ -258,7 +258,7 @@ class Renderer(Gpu):
                        decal_order, parallax_depth if normal_map is not None else 0.0,
                        id(lightmap) if lightmap is not None else 0,
                        lightmap_intensity if lightmap is not None else 1.0, subsurface, refracts_screen,
-                       under_caustics)
+                       caustic_waters)
         batch = self.batches.get(key)
         if batch is None:
             for name, image in (("Material.texture", texture), ("Material.normal_map", normal_map),
@@ -309,7 +309,7 @@ class Renderer(Gpu):
             batch.lightmap_intensity = key.lightmap_intensity
             batch.key = key
             batch.mirrored = mirrored
-            batch.under_caustics = under_caustics
+            batch.caustic_waters = caustic_waters
             batch.alpha_cutoff = alpha_cutoff
             batch.double_sided = double_sided
             batch.decal, batch.decal_order = decal, decal_order

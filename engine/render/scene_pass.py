@@ -82,7 +82,7 @@ from engine.render.bindings import (
     texture_record,
     watching,
 )
-from engine.render.caustics import reaches as caustic_reaches
+from engine.render.caustics import NO_CAUSTIC_WATERS
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code
 from engine.render.irradiance import IrradianceTable
@@ -264,7 +264,8 @@ class ScenePass:
         draws = instances = 0
         skipped = (skip, hide)
         offset = False  # the decals' depth offset on (their cuts come in one run: set once for it)
-        caustic_box = renderer.caustics.box   # (the batches reaching into it draw with caustics)
+        caustics = renderer.caustics   # (the batches reaching into its waters' bodies draw with caustics)
+        caustic_waters = caustics.waters
         for batch in batches:
             count = batch.count
             if not count or (count == 1 and batch.entity_at[0] in skipped):
@@ -274,8 +275,10 @@ class ScenePass:
             record = batch.draw_records.get(drawn_as)
             # (a batch's rows reach into a caustic water's body: extract keys them apart, by their
             # meshes' rest boxes; a posed batch, its own, by the box its pose holds)
-            built = (variants, caustic_box is not None and (batch.under_caustics or batch.skinned or batch.morphed)
-                     and caustic_reaches(batch.box, caustic_box))
+            under = NO_CAUSTIC_WATERS
+            if caustic_waters and (batch.caustic_waters or batch.skinned or batch.morphed):
+                under = caustics.slots_of(batch.box, batch.caustic_waters, batch.skinned or batch.morphed)
+            built = (variants, under is not NO_CAUSTIC_WATERS)
             if record is None or record[0] != stamp or record[1] != built:
                 record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, *built)
             _, _, glo, vao, uniforms, values, textures, own, vertices, program = record
@@ -294,6 +297,8 @@ class ScenePass:
                 uniforms[0].value = values[0] = sky_size
             if values[1] != rows and uniforms[1] is not None:  # (SCREEN_REFRACTION builds')
                 uniforms[1].value = values[1] = rows
+            if values[2] != under and uniforms[2] is not None:  # (CAUSTICS builds': the waters it is under)
+                uniforms[2].value = values[2] = under
             # The batch's own values: one tuple compared (by identity first), and a uniform at
             # a time only where it differs from what this program last drew with.
             last = last_own.get(glo)

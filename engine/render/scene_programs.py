@@ -61,7 +61,7 @@ from engine.render.bindings import (
     VIRTUAL_SHADOW_UNIT,
     assign_slots,
 )
-from engine.render.caustics import reaches as caustic_reaches
+from engine.render.caustics import NO_CAUSTIC_WATERS
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code, forget_reads
 from engine.render.pose_rows import skinning_defines
@@ -73,7 +73,7 @@ if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
 
 # The uniforms a draw may write, in the order a draw record keeps them.
-PER_DRAW_UNIFORMS = ("sky_face_size", "drawn_instances", "has_albedo_map", "transparent",
+PER_DRAW_UNIFORMS = ("sky_face_size", "drawn_instances", "caustic_waters", "has_albedo_map", "transparent",
                      "probe_face_size", "probe_position", "probe_box_min", "probe_box_max",
                      "probe2_face_size", "probe2_position", "probe2_box_min", "probe2_box_max",
                      "probe_rest_face_size", "probe_rest_position", "probe_rest_box_min", "probe_rest_box_max",
@@ -81,8 +81,8 @@ PER_DRAW_UNIFORMS = ("sky_face_size", "drawn_instances", "has_albedo_map", "tran
                      "occlusion_strength", "clearcoat", "dielectric_f0", "sheen", "dispersion",
                      "anisotropy", "iridescence", "pose_row", "morph_targets", "diffuse_transmission",
                      "parallax_depth", "lightmap_intensity", "subsurface")
-PER_PASS_UNIFORMS = 2  # the first two change with the pass; the rest with the batch (a view's node
-# index is its Camera block's: nothing is written per view)
+PER_PASS_UNIFORMS = 3  # the first three change with the pass (or the caustic waters a batch is under); the rest
+# with the batch (a view's node index is its Camera block's: nothing is written per view)
 NO_PROBE_LOOKUP = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 NO_CHECKER = (0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 NO_CLEARCOAT = (0.0, 0.0)  # the coat uniform of a batch without one (its builds do not read it)
@@ -109,7 +109,7 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "screen_contact_lamps": SCREEN_CONTACT_UNIT, "spot_cookies": COOKIE_UNIT,
                 "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
                 "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT,
-                "refraction_copy": REFRACTION_COPY_UNIT, "caustic_map": CAUSTIC_UNIT}
+                "refraction_copy": REFRACTION_COPY_UNIT, "caustic_maps": CAUSTIC_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING,
@@ -370,10 +370,11 @@ class ScenePrograms:
         before = len(self.built)
         counts = (0, 1) if reflections else (0,)
         ambient = (False, True) if ambient_boxes else (False,)  # captures: False
-        caustic_box = self.renderer.caustics.box
+        caustics = self.renderer.caustics
         for batch in batches:
             unlit = (False, True) if may_be_unlit(batch) else (False,)
-            caustic = caustic_box is not None and caustic_reaches(batch.box, caustic_box)
+            caustic = bool(caustics.waters) and caustics.slots_of(
+                batch.box, batch.caustic_waters, batch.skinned or batch.morphed) is not NO_CAUSTIC_WATERS
             for views in counts:
                 for masked in (False, True) if levels or reflections else (False,):
                     for probes in ambient:

@@ -317,7 +317,7 @@ class VolumetricFogPass:
                                    "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
                                    "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
                                    "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT,
-                                   "caustic_map": CAUSTIC_UNIT, "virtual_atlas": VIRTUAL_SHADOW_UNIT},
+                                   "caustic_maps": CAUSTIC_UNIT, "virtual_atlas": VIRTUAL_SHADOW_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING,
                           "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING,
                           "VirtualLights": VIRTUAL_LIGHTS_BINDING})

@@ -19,56 +19,61 @@
 // Deeper than where the bent rays first cross (the focal depth) a point is lit through
 // several places on the surface and the search finds one: the net stays, its brightness
 // there is that branch's, not the sum's.
+// Up to MAX_CAUSTIC_WATERS waters (a define the block's owner gives), nearest the camera
+// first; a draw names the ones its batch reaches into (caustic_waters).
 layout(std140) uniform Caustics {
-    vec4 caustic_plane;   // xyz: the water's up normal (out of its top), w: its plane's d
-    vec4 caustic_u;       // the mirror's UV u as dot(xyz, p) + w (the UV square, before tiling)
-    vec4 caustic_v;       // ... and v
-    vec4 caustic_axis_u;  // xyz: the unit world direction of +U on the surface, w: the second layer's share
-    vec4 caustic_axis_v;  // xyz: +V, w: normal_scale
-    vec4 caustic_flow;    // xy: the waves' offset (Water.offset), z: 1 / ior, w: strength (Water.caustics)
-    vec4 caustic_sizes;   // x: tiling, y: a map texel in metres, z: the body's depth, w: the sun's spread (radians)
+    vec4 caustic_plane[MAX_CAUSTIC_WATERS];   // xyz: the water's up normal (out of its top), w: its plane's d
+    vec4 caustic_u[MAX_CAUSTIC_WATERS];       // the mirror's UV u as dot(xyz, p) + w (the UV square, before tiling)
+    vec4 caustic_v[MAX_CAUSTIC_WATERS];       // ... and v
+    vec4 caustic_axis_u[MAX_CAUSTIC_WATERS];  // xyz: the unit world direction of +U on the surface, w: the second layer's share
+    vec4 caustic_axis_v[MAX_CAUSTIC_WATERS];  // xyz: +V, w: normal_scale
+    vec4 caustic_flow[MAX_CAUSTIC_WATERS];    // xy: the waves' offset (Water.offset), z: 1 / ior, w: strength (Water.caustics)
+    vec4 caustic_sizes[MAX_CAUSTIC_WATERS];   // x: tiling, y: a map texel in metres, z: the body's depth, w: the sun's spread (radians)
+    ivec4 caustic_held;                       // x: how many waters the block holds
 };
-uniform sampler2D caustic_map;   // the water's normal map (Material.normal_map)
+// Each water's normal map (Material.normal_map) a layer, at one size (engine/render/caustics.py CausticMaps).
+uniform sampler2DArray caustic_maps;
 
 #define CAUSTIC_MAX_FOCUS 16.0   // the most a caustic gathers (1 / |det J| where rays cross)
 // Turns of the search for the crossing: each shrinks its error by |1 - J| (measured against
 // tests/test_caustics.py's tracer: two left the brightest lines a texel off, four do not).
 #define CAUSTIC_ITERATIONS 4
 
-// The sideways offset (along the plane) of the light refracted at surface point s, on its
+// The sideways offset (along the plane) of the light refracted at surface point s of water w, on its
 // way down to depth h, coming from the unit direction l (towards the light).
-vec3 caustic_offset(vec3 s, vec3 l, float h, float lod) {
-    vec3 up = caustic_plane.xyz;
-    vec2 uv = vec2(dot(caustic_u.xyz, s) + caustic_u.w, dot(caustic_v.xyz, s) + caustic_v.w) * caustic_sizes.x;
-    vec2 slope = water_slope_lod(caustic_map, uv, lod, caustic_flow.xy, caustic_axis_u.w);
-    vec3 n = normalize((caustic_axis_u.xyz * slope.x + caustic_axis_v.xyz * slope.y) * caustic_axis_v.w + up);
-    vec3 t = refract(-l, n, caustic_flow.z);
+vec3 caustic_offset(int w, vec3 s, vec3 l, float h, float lod) {
+    vec3 up = caustic_plane[w].xyz;
+    vec2 uv = vec2(dot(caustic_u[w].xyz, s) + caustic_u[w].w, dot(caustic_v[w].xyz, s) + caustic_v[w].w)
+              * caustic_sizes[w].x;
+    vec2 slope = water_slope_lod(caustic_maps, float(w), uv, lod, caustic_flow[w].xy, caustic_axis_u[w].w);
+    vec3 n = normalize((caustic_axis_u[w].xyz * slope.x + caustic_axis_v[w].xyz * slope.y) * caustic_axis_v[w].w + up);
+    vec3 t = refract(-l, n, caustic_flow[w].z);
     float down = max(-dot(up, t), 0.05);
     return (t + up * down) * (h / down);
 }
 
 // The share of the flat water's light from the direction l (unit, towards the light) that
-// reaches x: 1 / |det J| mixed in by the strength (1: all of it), 1 off the water; over
-// ``footprint`` metres at least (the pixel's).
-float caustic_light(vec3 x, vec3 l, float footprint) {
-    vec3 up = caustic_plane.xyz;
-    float h = -(dot(up, x) + caustic_plane.w);
-    if (h <= 0.0 || h > caustic_sizes.z || dot(l, up) <= 0.0) return 1.0;
+// reaches x under water w: 1 / |det J| mixed in by the strength (1: all of it), 1 off the
+// water; over ``footprint`` metres at least (the pixel's).
+float caustic_light(int w, vec3 x, vec3 l, float footprint) {
+    vec3 up = caustic_plane[w].xyz;
+    float h = -(dot(up, x) + caustic_plane[w].w);
+    if (h <= 0.0 || h > caustic_sizes[w].z || dot(l, up) <= 0.0) return 1.0;
     vec3 on_plane = x + up * h;
-    vec3 t0 = refract(-l, up, caustic_flow.z);
+    vec3 t0 = refract(-l, up, caustic_flow[w].z);
     vec3 s = on_plane - (t0 + up * -dot(up, t0)) * (h / -dot(up, t0));   // the flat water's crossing
-    vec2 uv0 = vec2(dot(caustic_u.xyz, s) + caustic_u.w, dot(caustic_v.xyz, s) + caustic_v.w);
+    vec2 uv0 = vec2(dot(caustic_u[w].xyz, s) + caustic_u[w].w, dot(caustic_v[w].xyz, s) + caustic_v[w].w);
     if (any(lessThan(uv0, vec2(0.0))) || any(greaterThan(uv0, vec2(1.0)))) return 1.0;
     // The surface's two axes, the second made square to the first (J's frame).
-    vec3 e1 = caustic_axis_u.xyz;
-    vec3 e2 = normalize(caustic_axis_v.xyz - dot(caustic_axis_v.xyz, e1) * e1);
-    float stride = max(max(caustic_sizes.y, h * caustic_sizes.w), footprint);
-    float lod = log2(stride / caustic_sizes.y);   // (the map's texels a step spans, along U)
-    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(s, l, h, lod);
+    vec3 e1 = caustic_axis_u[w].xyz;
+    vec3 e2 = normalize(caustic_axis_v[w].xyz - dot(caustic_axis_v[w].xyz, e1) * e1);
+    float stride = max(max(caustic_sizes[w].y, h * caustic_sizes[w].w), footprint);
+    float lod = log2(stride / caustic_sizes[w].y);   // (the map's texels a step spans, along U)
+    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(w, s, l, h, lod);
     // (central differences: the derivative at s itself, not half a step on)
     vec3 half1 = e1 * (0.5 * stride), half2 = e2 * (0.5 * stride);
-    vec3 d1 = caustic_offset(s + half1, l, h, lod) - caustic_offset(s - half1, l, h, lod);
-    vec3 d2 = caustic_offset(s + half2, l, h, lod) - caustic_offset(s - half2, l, h, lod);
+    vec3 d1 = caustic_offset(w, s + half1, l, h, lod) - caustic_offset(w, s - half1, l, h, lod);
+    vec3 d2 = caustic_offset(w, s + half2, l, h, lod) - caustic_offset(w, s - half2, l, h, lod);
     float det = (1.0 + dot(d1, e1) / stride) * (1.0 + dot(d2, e2) / stride) - dot(d1, e2) / stride * (dot(d2, e1) / stride);
-    return mix(1.0, 1.0 / max(abs(det), 1.0 / CAUSTIC_MAX_FOCUS), caustic_flow.w);
+    return mix(1.0, 1.0 / max(abs(det), 1.0 / CAUSTIC_MAX_FOCUS), caustic_flow[w].w);
 }

@@ -31,10 +31,12 @@ vec2 water_slope(sampler2D map, vec2 uv, vec2 uv_dx, vec2 uv_dy, vec2 flow, floa
                               share);
 }
 
-// The waves' slope at uv, the first layer's texels read at mip level ``lod`` (the second's,
-// finer by WATER_CROSS_TILING, a level that much higher): a footprint the same along every
-// axis (the caustics', caustics.glsl), one level a read, cheaper than derivatives on llvmpipe.
-vec2 water_slope_lod(sampler2D map, vec2 uv, float lod, vec2 flow, float share) {
-    return water_layers_slope(textureLod(map, uv - flow, lod),
-                              textureLod(map, water_turned(uv) - flow, lod + log2(WATER_CROSS_TILING)), share);
+// The waves' slope at uv on ``layer`` of ``maps``, the first layer's texels read at mip level
+// ``lod`` (the second's, finer by WATER_CROSS_TILING, a level that much higher): a footprint
+// the same along every axis (the caustics', caustics.glsl, whose waters' maps are the layers
+// of one array), one level a read, cheaper than derivatives on llvmpipe.
+vec2 water_slope_lod(sampler2DArray maps, float layer, vec2 uv, float lod, vec2 flow, float share) {
+    return water_layers_slope(textureLod(maps, vec3(uv - flow, layer), lod),
+                              textureLod(maps, vec3(water_turned(uv) - flow, layer), lod + log2(WATER_CROSS_TILING)),
+                              share);
 }
