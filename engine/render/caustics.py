@@ -214,6 +214,9 @@ class CausticBlock:
         self.maps = CausticMaps(ctx)
         self.defines: tuple[tuple[str, str], ...] = ()
         self._warned = False
+        # slots_of's answers while the held waters' entities and bodies stay: id(box) -> (box, keyed, posed, slots)
+        self._slots: dict[int, tuple] = {}
+        self._layout: tuple = ()
 
     def set(self, waters: Sequence[CausticWater]) -> bool:
         """Hold ``waters`` (at most ``MAX_CAUSTIC_WATERS``, nearest the camera first; none:
@@ -229,6 +232,10 @@ class CausticBlock:
                     "water gathers no light"), stacklevel=3)
             waters = ()
         old, waters = self.waters, tuple(waters)
+        layout = tuple((water.entity, water.box) for water in waters)
+        if layout != self._layout:
+            self._layout = layout
+            self._slots.clear()
         if not waters:
             self.waters, self.defines = (), ()
             self.maps.release()
@@ -252,9 +259,17 @@ class CausticBlock:
         body its pose's box reaches): the slots of the held waters among them whose bodies
         the box reaches, -1 after the last (``NO_CAUSTIC_WATERS``: none, drawn without the
         CAUSTICS build)."""
+        known = self._slots.get(id(box))
+        if known is not None and known[0] is box and known[1] == keyed and known[2] == posed:
+            return known[3]   # (a batch's box is made anew when its rows move)
         found = [slot for slot, water in enumerate(self.waters)
                  if (posed or water.entity in keyed) and reaches(box, water.box)]
-        return (*found, *NO_CAUSTIC_WATERS[len(found):]) if found else NO_CAUSTIC_WATERS
+        slots = (*found, *NO_CAUSTIC_WATERS[len(found):]) if found else NO_CAUSTIC_WATERS
+        if box is not None:
+            if len(self._slots) >= 256:   # (the boxes of batches whose rows moved: gone)
+                self._slots.clear()
+            self._slots[id(box)] = (box, keyed, posed, slots)
+        return slots
 
     def bind(self) -> None:
         """Bind the block and the waters' maps for a scene pass (while it holds any): each
