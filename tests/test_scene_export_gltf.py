@@ -270,6 +270,34 @@ def test_a_spot_under_a_mirroring_transform_is_read_back_where_it_shines(scene, 
     assert light.spot_angle() == pytest.approx(runner.world.get(ids["spot"], PointLight).spot_angle)
 
 
+def test_a_camera_under_a_mirroring_transform_is_read_back_where_it_looks(scene, tmp_path):
+    """The camera's Transform mirrors and stretches it (scale (1, -1.5, 1), turned): its node
+    keeps the turn and the reflection, its scale left out (``_placement``), and the loader
+    reads it back at the camera's place, looking the way the engine looks (its world -Z) with
+    its world +Y up, the lens as it was."""
+    ids: dict = {}
+
+    def mirrored(world):
+        build(world, ids)
+        camera = next(entity for entity, _ in world.query_one(Camera))
+        transform = world.get(camera, Transform)
+        transform.rotation = glm.angleAxis(0.4, glm.normalize(glm.vec3(0.2, 1.0, 0.1))) * transform.rotation
+        transform.scale = glm.vec3(1.0, -1.5, 1.0)
+
+    runner = scene(mirrored, (64, 48))
+    runner.frame()
+    camera = next(entity for entity, _ in runner.world.query_one(Camera))
+    (view,) = load_model_file(export_scene(runner.world, tmp_path / "scene.glb", camera, (64, 48))).cameras
+    world_matrix = runner.world.get(camera, Transform).world
+    assert glm.determinant(glm.mat3(world_matrix)) < 0.0
+    np.testing.assert_allclose(glm.vec3(view.local[3]), glm.vec3(world_matrix[3]), atol=1e-6)
+    for axis in (glm.vec4(0, 0, -1, 0), glm.vec4(0, 1, 0, 0)):
+        np.testing.assert_allclose(glm.normalize(glm.vec3(view.local * axis)),
+                                   glm.normalize(glm.vec3(world_matrix * axis)), atol=1e-6)
+    lens = runner.world.get(camera, Camera)
+    assert (view.fov_y, view.near, view.far) == pytest.approx((lens.fov_y, lens.near, lens.far))
+
+
 def test_the_loader_reads_back_the_lights_and_the_camera(scene, tmp_path):
     """KHR_lights_punctual's sun, lamp and spot and core glTF's camera, where the world has
     them: kind, colour, intensity, range, cone, place and the way each shines or looks.
