@@ -64,9 +64,9 @@ class Water(TrackedComponent):
       Snell's window, it shows the air above, bent away from the normal (the whole sky and
       what stands over the pond squeezed into the cone, brightest and most bent at its rim),
       under the reflection by Fresnel's weight from the water's side.  The surfaces stage
-      makes each water's state for both sides; a view tree rooted under it (the main
-      view's, a probe's) takes its underside (``Surfaces.seen_from``), and the planner,
-      claims and composites then take it as any mirror.
+      makes each water's state for both sides; the view trees' planner holds both, and each
+      view, at any level (a portal's view out under the pond, a mirror's under it), sees the
+      side facing its eye; the planner, claims and composites then take it as any mirror.
     - **The water's body** (``fog_density`` per metre, 0 by default: clear; ``fog_color``
       linear; ``depth`` metres): the light's way through the water below the surface, down
       to ``depth`` under its outline, is fogged as a FogVolume's is, at the same density

@@ -116,33 +116,13 @@ class Surfaces:
     """This frame's mirrors and portals by entity (a world resource, from the surfaces stage).
 
     A water's state faces up, its top; ``undersides`` holds each water's state seen from
-    below (its plane turned to face down, ``WaterLook.underside``).  A view tree takes the
-    surfaces as its root's eye sees them (``seen_from``): a water that eye is under, by its
-    underside.  Lights, probes' fallbacks and the other stages read the tops."""
+    below (its plane turned to face down, ``WaterLook.underside``).  The view trees' planner
+    holds both (``engine/render/surface_table.py``): each view, at any level, sees the side
+    facing its eye.  Lights, probes' fallbacks and the other stages read the tops."""
 
     mirrors: dict[int, SurfaceState]
     portals: dict[int, SurfaceState]
     undersides: dict[int, SurfaceState] = field(default_factory=dict)
-    base: Surfaces | None = field(default=None, repr=False)  # a ``seen_from`` variant's published surfaces
-    _seen: dict[frozenset, Surfaces] = field(default_factory=dict, init=False, repr=False, compare=False)
-
-    def seen_from(self, eye: glm.vec3 | None) -> Surfaces:
-        """These surfaces as a view tree rooted at ``eye`` sees them: each water whose plane the
-        eye is behind (under its surface) by its underside.  Self where there is none (or no
-        eye); the same object for the same waters turned, while these surfaces stand (a view
-        tree's planner table is kept by it)."""
-        if not self.undersides or eye is None:
-            return self
-        under = frozenset(entity for entity, state in self.mirrors.items()
-                          if entity in self.undersides and glm.dot(glm.vec3(state.plane), eye) + state.plane.w < 0.0)
-        if not under:
-            return self
-        seen = self._seen.get(under)
-        if seen is None:
-            mirrors = {entity: self.undersides[entity] if entity in under else state
-                       for entity, state in self.mirrors.items()}
-            seen = self._seen[under] = Surfaces(mirrors, self.portals, base=self)
-        return seen
 
     def mirror_planes(self) -> dict[int, tuple[list[float], list[float]]]:
         """Each mirror's world plane as (point on it, unit normal towards its front)."""

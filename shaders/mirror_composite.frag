@@ -208,13 +208,29 @@ float water_march(vec3 at, vec3 bent, float down, vec3 plane_normal, mat4 view_p
     return otherwise;
 }
 
+// What the copy shows at a texel seen along ``ray`` from the surface point ``at``: its colour,
+// or, where it holds the sky (far) and the view composited into drew none (a reflection
+// level: its composite into its own parent adds the sky, and a pixel the water wrote would
+// keep none), the sky along the ray, fogged from the surface on and by the parent's way to it.
+vec3 copied_colour(vec4 texel, vec3 at, vec3 ray, FogWay parent_fog) {
+    if (texel.a < 1.0 || fog_from_eye) return texel.rgb;   // (a root view drew its sky: fog_from_eye)
+#ifdef GENERATED_SKY
+    vec3 sky = generated_sky(ray);
+#else
+    vec3 sky = textureLod(sky_map, ray, 0.0).rgb;
+#endif
+    return fog_over(fog_sky(sky, at, ray), parent_fog);
+}
+
 // Seen from below (``underside``), what lies beyond is the air above, the ray bent away from
 // the normal (index over 1): past the critical angle it does not leave the water (refract
 // gives 0) and the reflection's weight is 1 (water_fresnel_inside), so the pixel keeps
 // what the copy shows, unbent, under a full reflection.
-vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f0, bool underside) {
+vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f0, bool underside,
+                 FogWay parent_fog) {
     ivec2 here = ivec2(gl_FragCoord.xy);
-    vec4 unbent = texelFetch(refraction_copy, here, 0);
+    vec4 texel = texelFetch(refraction_copy, here, 0);
+    vec4 unbent = vec4(copied_colour(texel, at, view_dir, parent_fog), texel.a);
     vec2 size = vec2(textureSize(refraction_copy, 0));
     // The far plane: from above, nothing below to bend; from below, the sky, and the bent ray
     // is followed to what the copy shows far along it (the sky there, or a thing it meets on
@@ -247,7 +263,7 @@ vec3 water_below(vec3 at, vec3 view_dir, vec3 normal, vec3 plane_normal, float f
         if (texelFetch(parent_nodes, there, 0).r != node) break;
         if (found.a >= 1.0) {  // the sky along the bent ray: from below, what is seen there (from
             if (underside) {       // above, nothing drawn below there: the pixel keeps what is below it)
-                colour = found.rgb;
+                colour = copied_colour(found, at, bent, parent_fog);
                 kept = water_edge_share(gl_FragCoord.xy, pixel, size);
             }
             break;
@@ -435,7 +451,7 @@ void main() {
         out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);
     else
 #endif
-    out_color = vec4(hdr_store(mix(water_below(at, view_dir, normal, v_normal.xyz, roughness, underside),
+    out_color = vec4(hdr_store(mix(water_below(at, view_dir, normal, v_normal.xyz, roughness, underside, parent_fog),
                                    fog_over(radiance * v_tint.rgb, parent_fog), weight)), 1.0);
 #elif defined(COMPOSITE_WATER)
     out_color = vec4(hdr_store(fog_over(radiance * v_tint.rgb, parent_fog)), weight);

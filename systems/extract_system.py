@@ -224,7 +224,7 @@ class ExtractSystem(esper.Processor):
                 self._remove_instance(entity, old)
             return
         material = world.try_get(entity, Material)
-        # Water is seen from below too (a view tree rooted under it takes its underside: Surfaces.seen_from).
+        # Water is seen from below too (a view under it sees its underside: Surfaces.undersides).
         water = world.has(entity, Water)
         blend = probe_blend(world, entity)  # the probes it samples, and their weights
         probe = blend.probes[0] if blend.probes else 0

@@ -189,8 +189,8 @@ class ReflectionSystem(esper.Processor):
             self.tree.visibility.forget()
         self._cut, self._camera = False, camera
         settings = self.settings
-        # (a water the camera is under seen by its underside: Surfaces.seen_from)
-        table = surface_table(self.world.resources, surfaces.seen_from(main.eye))
+        # (a water seen by the side each view's eye is on: its top and underside both in the table)
+        table = surface_table(self.world.resources, surfaces)
         blends = self.world.resources.get(SurfaceBlends, NO_BLENDS)
         stats: RenderStats = self.world.resources[RenderStats]
         world = self.world

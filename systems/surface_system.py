@@ -124,7 +124,7 @@ class SurfaceSystem(esper.Processor):
             material = world.try_get(entity, Material)
             self.mirrors[entity] = self._mirror_state(entity, mirror, mesh_ref, transform, material, water, flow,
                                                       drawn_code(world, entity))
-            if water is not None:  # (a view tree rooted under it sees it so: Surfaces.seen_from)
+            if water is not None:  # (a view under it sees it so: the planner holds both sides)
                 self.undersides[entity] = self._mirror_state(entity, mirror, mesh_ref, transform, material, water,
                                                              flow, drawn_code(world, entity), underside=True)
             else:

@@ -123,20 +123,22 @@ def test_a_panel_above_the_water_is_seen_through_snells_window_where_refraction_
 
 
 def test_the_main_tree_sees_a_water_by_the_side_its_camera_is_on_and_the_frame_above_is_unchanged(scene):
-    """The published state of a water is its top whatever the camera does; the main view's
-    tree takes the surfaces seen from its eye (``Surfaces.seen_from``): under the water, its
-    underside (plane facing down, the underside's look), the same object frame after frame.
-    Come up again, the frame is the frame of an engine that never went under, bit for bit."""
+    """The published state of a water is its top whatever the camera does; the planner's table
+    holds its top and its underside (plane facing down, the underside's look), and the main
+    view under the water gets the underside's view alone.  Come up again, the frame is the
+    frame of an engine that never went under, bit for bit."""
+    from engine.render.surface_table import PlannerSurfaces
+
     above_eye, above_target = (0.0, 0.4, 0.0), (0.0, 0.05, -10.0)
     runner, _ = render(scene, under((0.0, -0.5, 0.0), (0.0, 1.5, -2.0)))
     surfaces = runner.world.resources[Surfaces]
     (entity,) = surfaces.undersides
     assert not surfaces.mirrors[entity].water.underside and surfaces.mirrors[entity].plane.y > 0.0
-    seen = surfaces.seen_from(runner.engine.main_view.eye)
-    assert seen.mirrors[entity] is surfaces.undersides[entity] and seen.mirrors[entity].plane.y < 0.0
-    assert seen.mirrors[entity].water.underside and seen.base is surfaces
-    assert surfaces.seen_from(runner.engine.main_view.eye) is seen
-    assert surfaces.seen_from(glm.vec3(0.0, 2.0, 0.0)) is surfaces
+    table = runner.world.resources[PlannerSurfaces].table
+    assert table.states == [surfaces.mirrors[entity], surfaces.undersides[entity]]
+    assert list(table.exit_rows) == [0, 1]   # (each side's views look out of that side)
+    (view,) = runner.engine.reflection_system.views[1:]
+    assert view.surface.water.underside and view.surface.plane.y < 0.0
     ((_, transform),) = [(e, runner.world.get(e, Transform)) for e, _ in runner.world.query_one(Camera)]
     eye = glm.vec3(above_eye)
     transform.position = eye
@@ -262,3 +264,43 @@ def test_a_still_camera_under_the_water_keeps_its_views_and_they_are_the_drawn_o
         ((_, transform),) = [(e, runner.world.get(e, Transform)) for e, _ in runner.world.query_one(Camera)]
         transform.position = glm.vec3(0.0, 0.5, 0.0)
     kept_frames_equal_drawn(keeping, drawing, frames=4)
+
+
+def test_a_view_through_a_portal_into_the_water_sees_its_underside_as_a_camera_there_does(scene):
+    """A portal in the air whose partner stands under the pond, turned to look up at the
+    surface at a slant: the view through it (a level of a tree whose root is above the water)
+    sees the water by the side its own eye is on, its underside: the floor's mirror image past
+    the critical angle, the sky through Snell's window.  Its picture is the picture of a camera
+    standing where the portal carries the eye, under the water, to within a few 8-bit steps
+    (the portal's view is a level deeper, and drawn through its clip plane)."""
+    from engine.assets.portals import spawn_portal_pair
+
+    up_slant = glm.angleAxis(-math.radians(50.0), glm.vec3(1.0, 0.0, 0.0))   # +Z tipped up 50 degrees
+    entrance, exit_at = glm.vec3(30.0, 1.5, 0.0), glm.vec3(0.0, -0.55, 0.0)
+    eye = entrance + glm.vec3(0.0, 0.0, 0.6)
+
+    def through(world):
+        pool(world, True, eye, entrance)
+        spawn_portal_pair(world, entrance, None, exit_at, up_slant, size=(1.6, 1.6))
+
+    runner, seen = render(scene, through, size=(48, 48), frames=3)
+    surfaces = runner.world.resources[Surfaces]
+    (a,) = [e for e, state in surfaces.portals.items() if glm.length(glm.vec3(state.corners[:, :3].mean(axis=0))
+                                                                     - entrance) < 1e-3]
+    carried = surfaces.portals[a].carry * runner.world.get(
+        next(e for e, _ in runner.world.query_one(Camera)), Transform).world
+    there, turned = glm.vec3(carried[3]), glm.quat_cast(glm.mat3(carried))
+    assert there.y < -0.6   # (the eye carried under the water, below the portal)
+
+    def direct(world):
+        pool(world, True, (0.0, 0.0, 0.0), (0.0, 0.0, -1.0))
+        camera = next(e for e, _ in world.query_one(Camera))
+        world.get(camera, Transform).position = there
+        world.get(camera, Transform).rotation = turned
+
+    _, expected = render(scene, direct, size=(48, 48), frames=3)
+    tir = np.abs(expected[..., 0] - FLOOR_SEEN) < 0.02    # the floor's mirror image, all of it (past the critical)
+    window = np.abs(expected[..., 0] - SKY) < 0.1         # the sky through Snell's window
+    assert tir.sum() > 100 and window.sum() > 50, (tir.sum(), window.sum())
+    assert np.median(np.abs(seen - expected)) < 0.01
+    assert np.abs(seen[tir] - expected[tir]).max() < 0.03

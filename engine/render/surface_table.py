@@ -23,12 +23,10 @@ __all__ = ["NO_BLENDS", "PlannerSurfaces", "SurfaceBlends", "surface_table"]
 @dataclass(frozen=True, eq=False)
 class PlannerSurfaces:
     """The table (``world.resources[PlannerSurfaces].table``) and the ``Surfaces`` it was made
-    from (by identity: the surfaces stage makes a new one when a surface changes), and the
-    tables of its variants seen from under a water (``Surfaces.seen_from``), by variant."""
+    from (by identity: the surfaces stage makes a new one when a surface changes)."""
 
     surfaces: Surfaces
     table: SurfaceTable
-    seen_from: dict[int, tuple[Surfaces, SurfaceTable]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,20 +43,16 @@ NO_BLENDS = SurfaceBlends()  # every surface without a view shows the sky (a tre
 
 
 def surface_table(resources: dict[type, Any], surfaces: Surfaces) -> SurfaceTable:
-    """The table of ``surfaces`` (this frame's ``Surfaces`` resource, or a variant of it seen
-    from under a water): the published one when it was made from them, else made now and
-    published (a variant's kept beside its base's while the base stands)."""
-    base = surfaces.base or surfaces
+    """The table of ``surfaces`` (this frame's ``Surfaces`` resource): the published one when
+    it was made from them, else made now and published."""
     held: PlannerSurfaces | None = resources.get(PlannerSurfaces)
-    if held is None or held.surfaces is not base:
-        held = resources[PlannerSurfaces] = PlannerSurfaces(base, _table(base))
-    if surfaces is base:
-        return held.table
-    found = held.seen_from.get(id(surfaces))
-    if found is None or found[0] is not surfaces:
-        found = held.seen_from[id(surfaces)] = (surfaces, _table(surfaces))
-    return found[1]
+    if held is None or held.surfaces is not surfaces:
+        held = resources[PlannerSurfaces] = PlannerSurfaces(surfaces, _table(surfaces))
+    return held.table
 
 
 def _table(surfaces: Surfaces) -> SurfaceTable:
-    return SurfaceTable([*surfaces.mirrors.values(), *surfaces.portals.values()])
+    """Every mirror, each water's underside beside its top, and every portal: a water is two
+    surfaces of one entity facing opposite ways, and a view sees the one facing its eye (the
+    cull's facing test), so a view under the water, at any level, sees its underside."""
+    return SurfaceTable([*surfaces.mirrors.values(), *surfaces.undersides.values(), *surfaces.portals.values()])

@@ -143,10 +143,15 @@ class SurfaceTable:
         self.inv_carry = np.linalg.inv(self.carry) if count else self.carry
         self.exit_planes = np.array([tuple(s.exit_plane) for s in states], np.float64).reshape(count, 4)
         self.exit_entities = np.array([s.exit_entity for s in states], np.int64)
-        row_of = {entity: i for i, entity in enumerate(self.entity_list)}
-        # The row of the surface each view through a surface looks out of (a mirror: itself; a
-        # portal: its partner; -1: not in the table), which that view cannot see.
-        self.exit_rows = np.array([row_of.get(e, -1) for e in self.exit_entities.tolist()], np.int64)
+        row_of: dict[int, int] = {}
+        for i, entity in enumerate(self.entity_list):
+            row_of.setdefault(entity, i)
+        # The row of the surface each view through a surface looks out of (a mirror: itself, a
+        # water's side its own row; a portal: its partner; -1: not in the table), which that
+        # view cannot see.  (The other side of a water it looks out of lies on its clip plane
+        # and is not drawn in it: ``ID_SKIP`` is the entity.)
+        self.exit_rows = np.array([i if e == entity else row_of.get(e, -1) for i, (e, entity) in enumerate(
+            zip(self.exit_entities.tolist(), self.entity_list, strict=True))], np.int64)
         self.is_mirror = np.array([s.kind == "mirror" for s in states], bool)
         # The surfaces that show a fallback (the probe's or the sky's reflection, drawn by the
         # composite) where they are seen without a view of their own: every mirror, switched
