@@ -19,6 +19,7 @@ Nothing here writes game state.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Callable
 
 import esper
 import numpy as np
@@ -63,6 +64,9 @@ def _mirrors(world_matrix) -> bool:
     """Whether a model matrix mirrors what it places (a negative determinant: an odd number
     of negative scales along its chain), so its front faces wind the other way on screen."""
     return glm.determinant(glm.mat3(world_matrix)) < 0.0
+
+
+_STRAYED_ON_ARRAYS = 40   # a batch's movers from which ExtractSystem._strayed checks them on arrays
 
 
 class ExtractSystem(esper.Processor):
@@ -129,14 +133,12 @@ class ExtractSystem(esper.Processor):
                 batch = self._batch_of.get(entity)
                 if batch is not None and batch.mirrored != _mirrors(component(entity, Transform).world):
                     self._refresh_instance(entity)
+        worlds = frame.worlds  # the matrices the transform stage wrote (the others: their Transform's)
         if bodies:
             # A mover that went into a caustic water's body (or came out) goes to the batch drawn
             # with (or without) the CAUSTICS builds.
-            for entity in frame.moved - touched:
-                batch = self._batch_of.get(entity)
-                if batch is not None and batch.caustic_waters != self._caustic_waters(entity):
-                    self._refresh_instance(entity)
-        worlds = frame.worlds  # the matrices the transform stage wrote (the others: their Transform's)
+            for entity in self._strayed(frame.moved - touched, worlds, component):
+                self._refresh_instance(entity)
         # The movers by batch: last frame's grouping again when the same entities moved and no
         # entity changed batch since (a game's movers are mostly the same every frame: a
         # thousand batch look-ups saved, and each batch finds the same list, InstanceBatch.write_transforms).
@@ -190,14 +192,46 @@ class ExtractSystem(esper.Processor):
             found.update(batch.entity_at[row] for row in np.flatnonzero(wrong).tolist())
         return found
 
-    def _caustic_waters(self, entity: int) -> tuple[int, ...]:
-        """The caustic waters whose bodies ``entity``'s mesh, where its Transform places it,
-        reaches into (``caustics.caustic_waters_of``; its model box kept a mesh)."""
-        mesh = self.world.get(entity, MeshRef).mesh
+    def _strayed(self, movers: set[int], worlds: dict, component: Callable) -> list[int]:
+        """The ``movers`` whose mesh, where it is now, reaches into other caustic waters' bodies
+        than their batch is keyed under.  A batch's few movers one by one (``_caustic_waters``:
+        about 6 microseconds a mover); its many (``_STRAYED_ON_ARRAYS``) at once on arrays,
+        their boxes as ``caustics.placed_box`` sums them, term by term in the same order, so
+        both find the same (measured, ``_caustic_waters`` against this, one process: 1,000
+        movers 8.0 against 1.9 ms, 50 about even, 5 0.03 against 0.11)."""
+        bodies = self._bodies
+        body_lo = np.array([lo for _, (lo, _) in bodies])[None]
+        body_hi = np.array([hi for _, (_, hi) in bodies])[None]
+        strayed: list[int] = []
+        for batch, group in self._by_batch(movers).items():
+            if len(group) < _STRAYED_ON_ARRAYS:
+                strayed += [entity for entity in group if batch.caustic_waters != self._caustic_waters(entity)]
+                continue
+            models = [worlds[entity] if entity in worlds else component(entity, Transform).world for entity in group]
+            m = np.frombuffer(glm.array(models).to_bytes(), np.float32).reshape(-1, 4, 4).astype(np.float64)
+            boxes = np.array([self._mesh_box(component(entity, MeshRef).mesh) for entity in group])  # [n, lo/hi, 3]
+            low, high = m[:, 3, :3].copy(), m[:, 3, :3].copy()   # (m[i, c, r]: model axis c's world axis r)
+            for c in range(3):
+                p, q = m[:, c, :3] * boxes[:, 0, c:c + 1], m[:, c, :3] * boxes[:, 1, c:c + 1]
+                low += np.minimum(p, q)
+                high += np.maximum(p, q)
+            reach = ~((high[:, None] < body_lo).any(axis=2) | (low[:, None] > body_hi).any(axis=2))
+            keyed = np.array([entity in batch.caustic_waters for entity, _ in bodies])
+            strayed += [group[i] for i in np.flatnonzero((reach != keyed).any(axis=1)).tolist()]
+        return strayed
+
+    def _mesh_box(self, mesh: Mesh) -> Box:
+        """``mesh``'s model box as Python floats, kept a mesh."""
         box = self._mesh_boxes.get(mesh)
         if box is None:
             lo, hi = mesh.bounds
             box = self._mesh_boxes[mesh] = (tuple(float(v) for v in lo), tuple(float(v) for v in hi))
+        return box
+
+    def _caustic_waters(self, entity: int) -> tuple[int, ...]:
+        """The caustic waters whose bodies ``entity``'s mesh, where its Transform places it,
+        reaches into (``caustics.caustic_waters_of``; its model box kept a mesh)."""
+        box = self._mesh_box(self.world.get(entity, MeshRef).mesh)
         return caustic_waters_of(placed_box(self.world.get(entity, Transform).world, *box), self._bodies)
 
     def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:

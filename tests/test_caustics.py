@@ -557,3 +557,56 @@ def test_uvs_square_to_the_surface_give_no_caustic_rows():
     square = MirrorBumps(wave_map(), 1.0, np.array([[0.0, 0.25, 0.0, 0.5], [0.0, 0.0, -0.25, 0.5]]), 0.0)
     assert caustic_rows((0.0, 1.0, 0.0, 0.0), square, tiling=3.0, cross=0.5, offset=(0.0, 0.0), ior=1.333,
                         strength=1.0, depth=2.0, map_width=64) is None
+
+
+def test_many_movers_are_keyed_under_the_waters_their_boxes_reach_frame_after_frame(scene):
+    """Ninety things wandering in and out of two pools, boxes of several sizes (one batch of 60:
+    its movers checked on arrays) and spheres (30: one by one): after every frame each one's
+    batch is keyed under exactly the caustic waters whose bodies its world box reaches, the
+    box worked out here from its mesh's eight corners through its world matrix."""
+    from engine.assets.mesh import sphere
+    from engine.resources import Surfaces
+
+    rng = np.random.default_rng(7)
+    boxes = {}
+    meshes = [box((0.3, 0.3, 0.3)), sphere(0.2, 8, 6)]
+
+    def build(world):
+        pool(1.0, eye=(0.0, 6.0, 9.0), target=(2.0, -1.0, 0.0), depth=1.0)(world)
+        another_pool(world, (6.0, 0.0, 0.0))
+        for k in range(90):
+            mesh = box((0.2 + 0.05 * (k % 4), 0.3, 0.4)) if k % 3 == 0 else meshes[k % 2]
+            boxes[world.spawn(Transform(position=(float(rng.uniform(-3, 9)), float(rng.uniform(-2, 1)),
+                                                  float(rng.uniform(-3, 3)))), MeshRef(mesh),
+                              Material(color=(0.8, 0.8, 0.8), roughness=1.0))] = mesh
+
+    runner = scene(build, (32, 24))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    surfaces = runner.world.resources[Surfaces]
+    bodies = {}
+    for entity, water in runner.world.query_one(Water):
+        state = surfaces.mirrors[entity]
+        top = np.asarray(state.corners)[:, :3]
+        ends = np.concatenate([top, top - np.array(glm.vec3(state.plane)) * water.depth])
+        bodies[entity] = (ends.min(axis=0), ends.max(axis=0))
+    renderer = runner.engine.renderer
+    seen_keys = set()
+    for _ in range(6):
+        for entity in boxes:
+            t = runner.world.get(entity, Transform)
+            t.position = t.position + glm.vec3(*rng.uniform(-0.8, 0.8, 3))
+            t.rotation = glm.angleAxis(float(rng.uniform(0, 3)), glm.normalize(glm.vec3(*rng.uniform(0.1, 1, 3))))
+        runner.frame()
+        for entity, mesh in boxes.items():
+            lo, hi = (np.asarray(v, np.float64) for v in mesh.bounds)
+            corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+            world = np.array(runner.world.get(entity, Transform).world.to_list(), np.float64)   # rows: columns
+            placed = corners @ world
+            low, high = placed[:, :3].min(axis=0), placed[:, :3].max(axis=0)
+            expected = tuple(sorted(w for w, (body_lo, body_hi) in bodies.items()
+                                    if (high >= body_lo).all() and (low <= body_hi).all()))
+            batch = next(b for b in renderer.batches.values() if entity in b.entity_at[:b.count])
+            assert batch.caustic_waters == expected, (entity, batch.caustic_waters, expected)
+            seen_keys.add(expected)
+    assert len(seen_keys) >= 3   # (in neither, in one, in the other: the movers changed batch)
