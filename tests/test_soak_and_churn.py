@@ -105,6 +105,7 @@ def test_the_cull_keeps_a_bias_row_a_class_of_view_not_a_row_a_surface_looked_ou
     by tests/test_view_plan_grids.py against the rule written out."""
     from engine.render.plan_rows import CLASS_OF, IDS_OF
     from engine.render.surface_table import PlannerSurfaces
+    from engine.resources import Surfaces
 
     ctx, engine, capture, output = _churn_arena()
     try:
@@ -113,7 +114,8 @@ def test_the_cull_keeps_a_bias_row_a_class_of_view_not_a_row_a_surface_looked_ou
             engine.frame(1 / 60, output)
         table = engine.world.resources[PlannerSurfaces].table
         surfaces = len(table.states)
-        assert surfaces == churn.of_kind(0, 100) + 2 * churn.of_kind(1, 100) + churn.WEATHER_MIRRORS
+        undersides = len(engine.world.resources[Surfaces].undersides)   # (a water's: its second row)
+        assert surfaces == churn.of_kind(0, 100) + 2 * churn.of_kind(1, 100) + churn.WEATHER_MIRRORS + undersides
         assert engine.renderer.stats.reflection_views > 0
         assert len(IDS_OF) > 2 * len(CLASS_OF)  # (numbers were many: a row each would show)
         tables = [rows for _, rows in table._bias_tables.values()]
