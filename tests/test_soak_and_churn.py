@@ -135,6 +135,7 @@ def test_deleting_every_mirror_and_portal_lets_the_planners_table_go():
     import weakref
 
     from engine.render.surface_table import PlannerSurfaces
+    from engine.resources import Surfaces
 
     ctx, engine, capture, output = _churn_arena()
     try:
@@ -142,7 +143,9 @@ def test_deleting_every_mirror_and_portal_lets_the_planners_table_go():
         for _ in range(2):
             engine.frame(1 / 60, output)
         table = weakref.ref(engine.world.resources[PlannerSurfaces].table)
-        assert len(table().states) == churn.of_kind(0, 40) + 2 * churn.of_kind(1, 40) + churn.WEATHER_MIRRORS
+        undersides = len(engine.world.resources[Surfaces].undersides)   # (a water's: its second row)
+        assert len(table().states) == (churn.of_kind(0, 40) + 2 * churn.of_kind(1, 40) + churn.WEATHER_MIRRORS
+                                       + undersides)
         for entity in made:
             engine.world.delete_entity(entity)
         for _ in range(2):
