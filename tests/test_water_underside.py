@@ -13,7 +13,7 @@ from components import Camera, Emissive, Material, MeshRef, Mirror, ReflectionPr
 from engine.assets.mesh import quad, sphere
 from engine.resources import Surfaces
 from tests.support import kept_frames_equal_drawn
-from tests.test_water import FLOOR_SEEN, SKY, pool, render, schlick
+from tests.test_water import FLAT, FLOOR_SEEN, SKY, pool, render, schlick, uniform_sky
 
 INDEX = 1.333
 F0 = ((INDEX - 1.0) / (INDEX + 1.0)) ** 2
@@ -304,3 +304,43 @@ def test_a_view_through_a_portal_into_the_water_sees_its_underside_as_a_camera_t
     assert tir.sum() > 100 and window.sum() > 50, (tir.sum(), window.sum())
     assert np.median(np.abs(seen - expected)) < 0.01
     assert np.abs(seen[tir] - expected[tir]).max() < 0.03
+
+
+def test_a_lamp_under_the_water_is_reflected_by_its_underside_onto_the_floor(scene):
+    """A lamp 0.3 m under a pond that reflects light (``Mirror.reflects_light``), seen from under
+    the surface: what its underside's image adds to the floor (the frame less the one whose
+    water reflects no light) is the light of the same lamp standing at the image, 0.3 m over
+    the surface, times the water's reflect rate (as any mirror's image: no Fresnel weight),
+    pixel by pixel; the sky is black, the floor lit by the lamps alone."""
+    from components import PointLight
+
+    rate = 0.6
+    lamp_at, image_at = (0.0, -0.3, 0.0), (0.0, 0.3, 0.0)
+
+    def build(reflects: bool, image_lamp: bool):
+        def b(world):
+            eye = glm.vec3(0.0, -0.15, 2.5)
+            world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0) - eye)),
+                        Camera(fov_y=70.0))
+            world.spawn(uniform_sky(0.0))
+            world.spawn(Transform(position=(0.0, -1.0, 0.0), rotation=FLAT), MeshRef(quad(40.0, 40.0)),
+                        Material(color=(0.7, 0.7, 0.7, 1.0), roughness=1.0, environment_reflection=0.0))
+            world.spawn(Transform(rotation=FLAT), MeshRef(quad(40.0, 40.0)), Material(color=(1.0, 1.0, 1.0, 0.0)),
+                        Mirror(reflect_rate=rate, reflects_light=reflects), Water(ior=INDEX))
+            world.spawn(Transform(position=lamp_at), PointLight(intensity=2.0, range=6.0))
+            if image_lamp:
+                world.spawn(Transform(position=image_at), PointLight(intensity=2.0 * rate, range=6.0))
+        return b
+
+    runner, reflected = render(scene, build(True, False), size=(64, 48), frames=3)
+    _, alone = render(scene, build(False, False), size=(64, 48), frames=3)
+    _, beside = render(scene, build(False, True), size=(64, 48), frames=3)
+    assert runner.stats.virtual_lights == 1
+    floor = np.zeros(runner.size[::-1], bool)
+    for row in range(runner.size[1]):
+        for column in range(runner.size[0]):
+            eye, direction = pixel_ray(runner, column, row)
+            floor[row, column] = direction.y < 0.0 and glm.length(eye + direction * ((-1.0 - eye.y) / direction.y)) < 4
+    added, truth = (reflected - alone)[floor], (beside - alone)[floor]
+    assert floor.sum() > 500 and truth.max() > 0.05, (floor.sum(), truth.max())
+    assert np.abs(added - truth).max() < 0.01, np.abs(added - truth).max()

@@ -631,7 +631,9 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
     if surfaces is None:
         return found
     bounces = bounces or {}
-    shown = [s for s in (*surfaces.mirrors.values(), *surfaces.portals.values()) if s.carries_light and s.enabled]
+    # (a water's underside beside its top: a lamp under the water is reflected down by it)
+    shown = [s for s in (*surfaces.mirrors.values(), *surfaces.undersides.values(), *surfaces.portals.values())
+             if s.carries_light and s.enabled]
     steps = []   # (surface, its exit outline as an aperture, corners of its entry outline, tint)
     for surface in shown:
         exit_surface = surface if surface.kind == "mirror" else surfaces.portals.get(surface.exit_entity)
