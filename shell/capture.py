@@ -154,9 +154,14 @@ def _export_lights(world: World) -> list[ExportLight]:
         rgb, intensity = colour(lamp.color, lamp.intensity)
         spot = lamp.spot_angle < 180.0
         outer = math.radians(min(lamp.spot_angle, 90.0))
+        # (its shape, which the extension has no word for, in the light's extras: gltf_export)
+        shape = {name: value for name, value, given in (
+            ("radius", float(lamp.radius), lamp.radius > 0.0),
+            ("rectangle", [float(side) for side in lamp.rectangle], any(side > 0.0 for side in lamp.rectangle)),
+            ("length", float(lamp.length), lamp.length > 0.0)) if given}
         lights.append(ExportLight(str(entity), "spot" if spot else "point", rgb, intensity,
                                   _placement(transform.world), float(lamp.range),
-                                  outer * (1.0 - lamp.spot_blend), outer))
+                                  outer * (1.0 - lamp.spot_blend), outer, shape))
     return lights
 
 

@@ -122,11 +122,30 @@ def test_a_files_lights_become_entities_placed_by_their_nodes(tmp_path):
     ({"type": "spot", "name": "cone", "spot": {"innerConeAngle": 0.5, "outerConeAngle": 0.3}},
      r"light 0 \('cone'\): its cone angles must satisfy 0 <= innerConeAngle < outerConeAngle <= pi/2"),
     ({"type": "spot"}, r"a spot light needs its spot object"),
+    ({"type": "point", "extras": {"speculum": {"radius": "big"}}},
+     r"extras\.speculum\.radius must be a number \(metres\), got 'big'"),
+    ({"type": "point", "extras": {"speculum": {"rectangle": [1.0]}}},
+     r"extras\.speculum\.rectangle must be two numbers"),
+    ({"type": "point", "extras": {"speculum": {"width": 1.0}}},
+     r"extras\.speculum must be an object of \('radius', 'rectangle', 'length'\)"),
+    ({"type": "directional", "extras": {"speculum": {"radius": 1.0}}}, r"a directional light has no shape"),
 ])
 def test_a_bad_light_is_refused_naming_it(tmp_path, light, message):
     path = lit_file(tmp_path / "bad.glb", [light])
     with pytest.raises(AssetError, match=rf"bad\.glb.*{message}"):
         load_model_file(path)
+
+
+def test_a_lamps_shape_the_engine_refuses_is_refused_at_spawn_naming_the_light(tmp_path):
+    """A shape whose types are right and whose values PointLight refuses (a radius with a
+    rectangle, a negative length) is an error naming the file, its light and the field,
+    nothing spawned."""
+    for shape, field in (({"radius": 0.2, "rectangle": [1.0, 1.0]}, "radius"), ({"length": -1.0}, "length")):
+        world = World("shaped")
+        path = lit_file(tmp_path / "shaped.glb", [{"type": "point", "name": "bulb", "extras": {"speculum": shape}}])
+        with pytest.raises(AssetError, match=rf"shaped\.glb.*light 'bulb'.*{field}"):
+            spawn_model(world, path)
+        assert not list(world.query_one(Transform))
 
 
 def test_a_missing_light_or_one_past_half_floats_is_refused(tmp_path):

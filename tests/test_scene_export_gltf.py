@@ -334,3 +334,60 @@ def test_the_loader_reads_back_the_lights_and_the_camera(scene, tmp_path):
     np.testing.assert_allclose(glm.vec3(view.local[3]), placed.position, atol=1e-6)
     np.testing.assert_allclose(glm.vec3(view.local * glm.vec4(0, 0, -1, 0)),
                                glm.vec3(placed.world * glm.vec4(0, 0, -1, 0)), atol=1e-6)
+
+
+def test_a_lamps_shape_is_read_back_from_its_extras_and_lights_as_it_did(scene, tmp_path):
+    """A sphere lamp, a rectangle and a tube over a glossy floor: each exported light's
+    ``extras`` hold its shape (KHR_lights_punctual has no word for one), the loader reads them
+    back onto the spawned PointLights, and the file spawned again draws what the world drew
+    (each highlight's shape on the floor); with the extras taken out of the file it does not."""
+    import json
+
+    lamps = {"sphere": dict(radius=0.4), "rectangle": dict(rectangle=(1.6, 0.5)), "tube": dict(length=1.6)}
+    down = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+
+    def build_lamps(world):
+        look_from(world, (0.0, 2.2, 4.5), (0.0, 0.0, 0.0))
+        world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
+        world.spawn(Transform(rotation=look_rotation((0, -1, 0), (0, 0, -1))), MeshRef(quad(12.0, 12.0)),
+                    Material(color=(0.5, 0.5, 0.5, 1.0), roughness=0.2, metallic=0.0))
+        for x, shape in zip((-2.2, 0.0, 2.2), lamps.values(), strict=True):
+            world.spawn(Transform(position=(x, 1.0, -0.5), rotation=down),
+                        PointLight(intensity=2.0, range=8.0, **shape))
+
+    def spawned(path):
+        def again(world):   # the sky alone by hand: glTF has none
+            world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
+            spawn_model(world, path)
+            (camera,) = [entity for entity, _ in world.query_one(Camera)]
+            world.get(camera, Camera).active = True
+        return again
+
+    def frame(runner):
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        return srgb_to_linear(runner.frame())
+
+    original = scene(build_lamps, (128, 96))
+    before = frame(original)
+    camera = next(entity for entity, _ in original.world.query_one(Camera))
+    path = export_scene(original.world, tmp_path / "lamps.gltf", camera, (128, 96))
+    doc = json.loads(path.read_text())
+    written = [light.get("extras", {}).get("speculum") for light in doc["extensions"]["KHR_lights_punctual"]["lights"]]
+    assert written == [{"radius": 0.4}, {"rectangle": [1.6, 0.5]}, {"length": 1.6}]
+    copy = scene(spawned(path), (128, 96))
+    after = frame(copy)
+    made = sorted(((t.position.x, lamp) for _, (lamp, t) in copy.world.query(PointLight, Transform)),
+                  key=lambda pair: pair[0])
+    for (_, lamp), shape in zip(made, lamps.values(), strict=True):
+        for name, value in shape.items():
+            assert getattr(lamp, name) == pytest.approx(value), (name, getattr(lamp, name))
+    difference = np.abs(after - before).max(axis=-1)
+    assert np.median(difference) < 0.004 and (difference > 0.05).mean() < 0.01, (np.median(difference),
+                                                                                 (difference > 0.05).mean())
+    for light in doc["extensions"]["KHR_lights_punctual"]["lights"]:
+        light.pop("extras")
+    bare = tmp_path / "bare.gltf"
+    bare.write_text(json.dumps(doc))   # (beside the first: any buffer file it names is there too)
+    points = frame(scene(spawned(bare), (128, 96)))
+    assert np.abs(points - before).max(axis=-1).max() > 0.1   # (the shapes show in the frame)

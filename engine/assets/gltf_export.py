@@ -22,14 +22,18 @@ written as this engine's own glTF loader (``engine/assets/mesh.py``) reads them 
   reflects (the loader makes a flat metal a mirror again).
 
 Lights are ``KHR_lights_punctual``'s (``ExportLight``): a sun, a lamp, a spot up to 90 degrees
-(glTF's widest cone); what the extension has no word for (a lamp's size, rectangle, cookie,
-shadows) is left out.  Cameras are core glTF's (``ExportCamera``).
+(glTF's widest cone).  A lamp's shape, which the extension has no word for (a sphere's
+``radius``, a ``rectangle``, a tube's ``length``), goes in the light's ``extras`` under
+``"speculum"``, where the loader reads it back (``engine/assets/model_lights.py``; other
+readers see the point light the extension describes); its cookie and shadows are left out.
+Cameras are core glTF's (``ExportCamera``).
 
 Images are PNGs in the buffer (16-bit maps rounded to 8 bits).  glTF puts the UVs' origin at
 the image's top left, the engine at its bottom left: v is written as 1 - v."""
 from __future__ import annotations
 
 import base64
+import dataclasses
 import io
 import json
 import math
@@ -41,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from components import Material
+from engine.assets.model_lights import LIGHT_EXTRAS
 from engine.assets.texture_data import TextureData
 
 # glTF constants
@@ -91,6 +96,7 @@ class ExportLight:
     range: float | None = None
     inner_cone: float = 0.0
     outer_cone: float = math.pi / 4.0
+    shape: dict[str, object] = dataclasses.field(default_factory=dict)   # a lamp's radius, rectangle, length (extras)
 
 
 @dataclass
@@ -259,6 +265,8 @@ def _light_json(light: ExportLight) -> dict:
         entry["range"] = light.range
     if light.kind == "spot":
         entry["spot"] = {"innerConeAngle": light.inner_cone, "outerConeAngle": light.outer_cone}
+    if light.shape:
+        entry["extras"] = {LIGHT_EXTRAS: dict(light.shape)}
     return entry
 
 

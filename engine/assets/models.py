@@ -348,8 +348,12 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
         if glm.length(travel) == 0.0:
             raise ComponentValueError(f"light {light.name!r}: its node's transform has no -Z direction")
         return [placed, DirectionalLight(direction=travel, color=colour, intensity=intensity)]
-    return [placed, PointLight(color=colour, intensity=intensity, range=light.reach(scale),
-                               spot_angle=light.spot_angle(), spot_blend=light.spot_blend())]
+    try:
+        lamp = PointLight(color=colour, intensity=intensity, range=light.reach(scale),
+                          spot_angle=light.spot_angle(), spot_blend=light.spot_blend(), **(light.shape or {}))
+    except ComponentValueError as exc:
+        raise ComponentValueError(f"light {light.name!r}: {exc}") from None
+    return [placed, lamp]
 
 
 def pose_parts(world: World, root: int, clip_name: str, time: float, every: bool = True,
