@@ -207,7 +207,8 @@ class PrepareSystem(esper.Processor):
     def _caustics(self, camera: int | None) -> None:
         """Give the caustics' block the waters that gather the sun: of the waters with
         ``caustics`` and waves (a normal map), the ``MAX_CAUSTIC_WATERS`` nearest the active
-        camera, nearest first (the rest counted and said when their count grows).  A water's
+        camera, in the order of their entities (the rest counted and said when their count
+        grows; the same waters nearer or farther keep their slots and maps).  A water's
         rows are packed again when its state, its waves' offset, its fields or the maps'
         layer size changed (every frame while the waves move); the block is written, and the
         views drawn again, only when they changed."""
@@ -221,18 +222,17 @@ class PrepareSystem(esper.Processor):
                     self._say_still(entity)
                     continue
                 found.append((entity, state, water))
-        if len(found) > 1:
-            eye = np.zeros(3) if camera is None else np.array(self.world.get(camera, Transform).world[3].xyz)
-            order = nearest_first([(entity, state.corners) for entity, state, _ in found], eye)
-            found.sort(key=lambda entry: order.index(entry[0]))
         cut = max(0, len(found) - MAX_CAUSTIC_WATERS)
         if cut:
-            found = found[:MAX_CAUSTIC_WATERS]
+            eye = np.zeros(3) if camera is None else np.array(self.world.get(camera, Transform).world[3].xyz)
+            kept = set(nearest_first([(entity, state.corners) for entity, state, _ in found], eye)[:MAX_CAUSTIC_WATERS])
+            found = [entry for entry in found if entry[0] in kept]
             if cut > self._caustic_cut:
                 warnings.warn(CausticLimitWarning(
                     f"{MAX_CAUSTIC_WATERS + cut} waters have caustics: {MAX_CAUSTIC_WATERS} gather the sun at a time "
                     f"(the nearest the active camera, entities {sorted(entry[0] for entry in found)}), so {cut} "
                     "do not (RenderStats.caustic_waters_cut)"), stacklevel=3)
+        found.sort(key=lambda entry: entry[0])
         self._caustic_cut = cut
         renderer.stats.caustic_waters_cut = cut
         held = {water.entity: water for water in renderer.caustics.waters}

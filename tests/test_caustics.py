@@ -262,7 +262,7 @@ def test_two_pools_over_one_floor_each_gather_the_sun_through_their_own_waves(sc
 
 def test_the_nearest_four_waters_gather_the_sun_and_the_rest_are_said(scene):
     """Six pools with caustics, one under the camera and five farther off in a row: the four
-    nearest gather the sun, nearest first; the farthest is counted and said in a
+    nearest gather the sun, held by entity; the two farthest are counted and said in a
     CausticLimitWarning; under the camera the floor is as under its pool alone."""
     far = {}
 
@@ -475,15 +475,15 @@ def traced_light_at(xs: np.ndarray, depth: float, tiles: float = 1.0) -> np.ndar
     return np.interp(xs, (before + after) / 2.0, 1.0 / spread)
 
 
-@pytest.mark.parametrize("nearer", [False, True])
-def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene, nearer):
+@pytest.mark.parametrize("second", [False, True])
+def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene, second):
     """Looking straight down from under a sunlit, murky pool 1.2 m deep with light shafts: each march
     texel's light is the ground truth's sum along its ray of density x transmittance x the
     sun's light at each point (through the water over it, times the traced caustic at its
     depth): the bright columns where the waves gather the sun, where the tracer puts them.
-    ``nearer``: the pool moved 12 of its wave tiles along (the same waves over the eye) and
-    another pool with caustics nearer the eye, out of the picture, so that the block holds
-    this one second: the march reads every water it holds."""
+    ``second``: the pool moved 12 of its wave tiles along (the same waves over the eye) and
+    another pool with caustics, out of the picture, made before it, so that the block (by
+    entity) holds this one second: the march reads every water it holds."""
     from components import Fog, VolumetricFog
     from tests.test_volumetric_fog import march_rays, marched_light
 
@@ -494,14 +494,14 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene, nearer):
 
     def build(caustics):
         def b(world):
-            pool(caustics, eye=(0.0, -0.2, 0.0), target=(0.0, -DEEP, -0.001), sun=glm.vec3(0.0, -1.0, 0.0),
-                 tiles=tiles, depth=DEEP, position=(16.0, 0.0, 0.0) if nearer else (0.0, 0.0, 0.0))(world)
-            if nearer:
+            if second:
                 another_pool(world, (3.0, 0.0, 3.0), periods=3)
+            pool(caustics, eye=(0.0, -0.2, 0.0), target=(0.0, -DEEP, -0.001), sun=glm.vec3(0.0, -1.0, 0.0),
+                 tiles=tiles, depth=DEEP, position=(16.0, 0.0, 0.0) if second else (0.0, 0.0, 0.0))(world)
             camera = next(e for e, _ in world.query_one(Camera))
             world.add_component(camera, Fog(density=air, color=(0.0, 0.0, 0.0)))
             world.add_component(camera, settings)
-            water = min(e for e, _ in world.query_one(Water))
+            water = max(e for e, _ in world.query_one(Water))   # (the pool over the eye)
             world.get(water, Water).fog_density = body
             world.get(water, Water).fog_color = (0.0, 0.0, 0.0)
             floor = next(e for e, (t, _) in world.query(Transform, MeshRef) if t.position.y == -DEPTH)
@@ -512,7 +512,7 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene, nearer):
     runner.frame()
     marched = marched_light(runner)
     held = [water.entity for water in runner.engine.renderer.caustics.waters]
-    assert len(held) == 1 + nearer and held[-1] == min(e for e, _ in runner.world.query_one(Water))
+    assert len(held) == 1 + second and held[-1] == max(e for e, _ in runner.world.query_one(Water))
     origin, way, (rows, columns) = march_rays(runner, (96, 64), 2)
     reach = np.minimum((-DEEP - origin[:, 1]) / way[:, 1], settings.distance)
     points = 400
@@ -610,3 +610,16 @@ def test_many_movers_are_keyed_under_the_waters_their_boxes_reach_frame_after_fr
             assert batch.caustic_waters == expected, (entity, batch.caustic_waters, expected)
             seen_keys.add(expected)
     assert len(seen_keys) >= 3   # (in neither, in one, in the other: the movers changed batch)
+
+
+def test_the_camera_walking_from_one_held_pool_to_another_keeps_the_block_and_maps(scene):
+    """Two pools, both held: the camera moved from over one to over the other keeps their slots
+    (by entity) and the maps' array (not made again and uploaded as the nearer one changes)."""
+    runner, _ = render(scene, side_by_side(True, True), size=(32, 32))
+    caustics = runner.engine.renderer.caustics
+    slots, array = [water.entity for water in caustics.waters], caustics.maps.array
+    camera = next(e for e, _ in runner.world.query_one(Camera))
+    for x in (LEFT[0], RIGHT[0], LEFT[0]):
+        runner.world.get(camera, Transform).position = (x, -0.05, 0.0)
+        runner.frame()
+        assert [water.entity for water in caustics.waters] == slots and caustics.maps.array is array

@@ -14,8 +14,9 @@ builds (measured on the sample level with caustics on its pond, 640x360 on llvmp
 frame before, about +9% after).
 
 Up to ``MAX_CAUSTIC_WATERS`` waters gather the sun at once: the prepare stage gives the block
-the nearest the active camera of the waters that have caustics and waves (a normal map),
-nearest first, and says when others are left out.  Each draw names the held waters its batch
+the nearest the active camera of the waters that have caustics and waves (a normal map), in
+the order of their entities (a camera walking between two ponds does not reorder the block
+and remake the maps' array), and says when others are left out.  Each draw names the held waters its batch
 reaches into (scene.frag's ``caustic_waters``, at most four: an ivec4), and each of its
 points takes the light of every one of them (one off its outline or below its body gives 1),
 so one floor under two ponds is lit through each.  The waters' normal maps are the layers of
@@ -200,7 +201,7 @@ class CausticMaps:
 
 class CausticBlock:
     """The ``Caustics`` uniform block on the GPU (bound at ``CAUSTICS_BINDING``: up to
-    ``MAX_CAUSTIC_WATERS`` waters' rows, the nearest the camera first), written when a held
+    ``MAX_CAUSTIC_WATERS`` waters' rows, by entity), written when a held
     water's rows change; the ``CAUSTICS`` defines while it holds any; their normal maps'
     array (``CausticMaps``) bound for each scene pass (``bind``); and which waters a batch's
     draw reads (``slots_of``)."""
@@ -219,7 +220,7 @@ class CausticBlock:
         self._layout: tuple = ()
 
     def set(self, waters: Sequence[CausticWater]) -> bool:
-        """Hold ``waters`` (at most ``MAX_CAUSTIC_WATERS``, nearest the camera first; none:
+        """Hold ``waters`` (at most ``MAX_CAUSTIC_WATERS``, a slot each in their order; none:
         none); True when what the scene shows changed."""
         if len(waters) > MAX_CAUSTIC_WATERS:
             raise ValueError(f"{len(waters)} caustic waters given; the block holds {MAX_CAUSTIC_WATERS}")

@@ -19,8 +19,8 @@
 // Deeper than where the bent rays first cross (the focal depth) a point is lit through
 // several places on the surface and the search finds one: the net stays, its brightness
 // there is that branch's, not the sum's.
-// Up to MAX_CAUSTIC_WATERS waters (a define the block's owner gives), nearest the camera
-// first; a draw names the ones its batch reaches into (caustic_waters).
+// Up to MAX_CAUSTIC_WATERS waters (a define the block's owner gives), by entity; a draw names
+// the ones its batch reaches into (caustic_waters).
 layout(std140) uniform Caustics {
     vec4 caustic_plane[MAX_CAUSTIC_WATERS];   // xyz: the water's up normal (out of its top), w: its plane's d
     vec4 caustic_u[MAX_CAUSTIC_WATERS];       // the mirror's UV u as dot(xyz, p) + w (the UV square, before tiling)
