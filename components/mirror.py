@@ -60,7 +60,8 @@ class Mirror(ShownLayers):
     ``reflects_light`` (off by default): the lights that reach its front are reflected onto
     what it faces, through its outline, tinted by ``color`` and scaled by ``reflect_rate``
     (a virtual light: the light's mirror image, with a shadow map of its own; one bounce;
-    ``engine/rules/shadow_rules.py``).
+    ``engine/rules/shadow_rules.py``); a ``Water``'s, also by Fresnel's reflectance at the
+    angle the light meets it, as its reflection is weighed.
     """
 
     color: Any = field(default_factory=lambda: glm.vec4(1.0))

@@ -29,7 +29,9 @@ class Water(TrackedComponent):
       between the eye ray and the (rippled) surface normal: a few percent looking straight
       down, everything at grazing angles.  It replaces the Mirror's fixed mix:
       ``Mirror.reflect_rate`` scales it (1, the default, is the physical weight) and
-      ``Mirror.color`` tints what is reflected.
+      ``Mirror.color`` tints what is reflected.  The light a water reflects
+      (``Mirror.reflects_light``) is weighed the same way, at the angle each lit point's
+      light met the (flat) surface.
     - **What is below.**  The water quad's own shading is what the weight leaves: its
       ``Material`` with an alpha below 1 is drawn see-through (the scene pass's blended
       slot), so the pond's floor and anything under the surface show through, tinted by

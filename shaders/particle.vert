@@ -123,7 +123,7 @@ vec3 sheet_light(vec3 p, vec3 n) {
 #ifdef PANEL_PICTURES
         cookie *= face_mean(virtual_lights.virtual_rect_v[i]);
 #endif
-        e += cookie * virtual_lights.virtual_color[i].rgb * virtual_water(i, p, l, dist) * falloff * abs(nl)
+        e += cookie * virtual_lights.virtual_color[i].rgb * virtual_kept(i, p, l, dist) * falloff * abs(nl)
              * (nl >= 0.0 ? front : translucency)
              * virtual_shadow(i, p, side, l, dist);
     }

@@ -200,7 +200,7 @@ void main() {
 #else
                 vec3 cookie = vec3(1.0);
 #endif
-                images += virtual_lights.virtual_color[k].rgb * cookie * virtual_water(k, x, l, dist)
+                images += virtual_lights.virtual_color[k].rgb * cookie * virtual_kept(k, x, l, dist)
                           * (falloff * henyey_greenstein(dot(dir, l), anisotropy) * virtual_shadow(k, x, vec3(0.0), l, dist));
             }
             image_sum += images * (density * seen);

@@ -487,7 +487,7 @@ class ShadowMaps:
             "color": (*light.color, light.light_range),
             "exit": light.exit_plane,
             "origin": (*light.aperture[0], fit.texel),
-            "u": (*_over_length(light.aperture[1]), 0.0),
+            "u": (*_over_length(light.aperture[1]), light.apertures[0].water if light.apertures else 0.0),
             "v": (*_over_length(light.aperture[2]), 0.0),
             "params": (1.0 / width, 1.0, self._taps(1.0), float(len(more))),
             "spot": light.cone,
@@ -502,7 +502,7 @@ class ShadowMaps:
         start = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * MAX_VIRTUAL_LIGHTS * len(VIRTUAL_FIELDS)
         for index, aperture in enumerate(more):
             at = start + 16 * (slot * VIRTUAL_MORE + index)
-            block[at:at + 16] = (*aperture.plane, *aperture.origin, 0.0, *_over_length(aperture.u), 0.0,
+            block[at:at + 16] = (*aperture.plane, *aperture.origin, 0.0, *_over_length(aperture.u), aperture.water,
                                  *_over_length(aperture.v), 0.0)
         for index, leg in enumerate(legs[1:]):
             at = VIRTUAL_UNFOLD_AT // 4 + 16 * (slot * MAX_APERTURES + index)

@@ -24,7 +24,7 @@ from pyglm import glm
 from components.limits import MAX_LIGHT_BOUNCES
 from engine.core.budget import spending_order
 from engine.core.portal_math import carries_scale
-from engine.resources import Surfaces
+from engine.resources import Surfaces, SurfaceState
 from engine.rules.light_rules import (
     ALL_ROUND,
     NO_COOKIE,
@@ -470,6 +470,7 @@ def _carried_boxes(lo: np.ndarray, hi: np.ndarray, carry: glm.mat4) -> tuple[np.
 # --- light through mirrors and portals -------------------------------------------------------
 MAX_VIRTUAL_LIGHTS = 4   # virtual lights a frame (shaders/include/virtual_lights.glsl)
 VIRTUAL_NEAR = 0.05      # metres: a virtual point light's shadow camera sees casters from here on
+VIRTUAL_MAX_FOV = 170.0  # degrees: the widest a virtual point light's shadow camera opens
 MAX_APERTURES = MAX_LIGHT_BOUNCES   # outlines a virtual light's line must cross (one a bounce)
 
 
@@ -479,13 +480,27 @@ class Aperture:
     line from a lit point to the image is straight): ``plane`` (its front positive: the line
     enters it from the front), ``origin`` (a corner) and its edges ``u``, ``v``; ``to_image``
     takes the real outline (world) to where it is here, so a crossing found here is
-    ``inverse(to_image)`` of the real one."""
+    ``inverse(to_image)`` of the real one.  ``water`` is the surface's water as the light's
+    weight reads it (``water_code``): a water reflects the share of the light Fresnel's
+    equations give at the angle the line meets it, a mirror or a portal all of it."""
 
     plane: tuple[float, float, float, float]
     origin: tuple[float, float, float]
     u: tuple[float, float, float]
     v: tuple[float, float, float]
     to_image: glm.mat4
+    water: float = 0.0
+
+
+def water_code(surface: SurfaceState) -> float:
+    """A surface's water as a virtual light's outline carries it to the shaders
+    (``shaders/include/virtual_light_ways.glsl`` virtual_fresnel): 0 for a mirror that is no
+    water and for a portal; 1 + F0 for a water's top; -(1 + F0) for its underside, whose
+    light meets it from the water (total internal reflection past the critical angle)."""
+    water = surface.water if surface.kind == "mirror" else None
+    if water is None:
+        return 0.0
+    return -(1.0 + water.f0) if water.underside else 1.0 + water.f0
 
 
 @dataclass(frozen=True)
@@ -570,7 +585,7 @@ def _carry_aperture(aperture: Aperture, carry: glm.mat4) -> Aperture:
     plane /= glm.length(glm.dvec3(plane))
     return Aperture(tuple(float(x) for x in plane), tuple(float(x) for x in origin.xyz),
                     tuple(float(x) for x in u.xyz), tuple(float(x) for x in v.xyz),
-                    glm.mat4(m * glm.dmat4(aperture.to_image)))
+                    glm.mat4(m * glm.dmat4(aperture.to_image)), aperture.water)
 
 
 def _reaches_through(image: glm.vec3, kind: str, aperture: Aperture, corners: np.ndarray) -> bool:
@@ -646,7 +661,7 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
         exit_plane = glm.dvec4(surface.exit_plane)
         exit_plane /= glm.length(glm.dvec3(exit_plane))
         aperture = Aperture(tuple(float(v) for v in exit_plane), *(tuple(float(v) for v in part) for part in outline),
-                            glm.mat4(1.0))
+                            glm.mat4(1.0), water_code(surface))
         o, u, v = entry
         corners = np.array([o, o + u, o + u + v, o + v])
         tint = glm.vec3(surface.tint) * surface.reflect_rate if surface.kind == "mirror" else glm.vec3(1.0)
@@ -835,7 +850,13 @@ def virtual_shadow_camera(light: VirtualLight, level_lo: np.ndarray, level_hi: n
             view = glm.lookAt(eye, eye + axis, up)
             half = narrow
             fov = 2.0 * np.degrees(np.arctan(narrow))
-    fov = float(min(fov, 170.0))
+    if fov > VIRTUAL_MAX_FOV:
+        # A lamp near a wide outline: the map stops short of the outline's edge (what lies
+        # past it is unshadowed), and a texel is the clamped map's, not the outline's
+        # (the normal offset scales with it: sized by the outline, it was metres wide).
+        fov = VIRTUAL_MAX_FOV
+        half = math.tan(math.radians(fov) / 2.0)
+    fov = float(fov)
     proj = glm.perspective(glm.radians(fov), 1.0, VIRTUAL_NEAR, max(light.light_range * 1.5, VIRTUAL_NEAR * 4))
     texel = 2.0 * half / resolution   # a texel's angle (radians, small): the lookup scales it by distance
     return DirectionalFit(glm.mat4(view), glm.mat4(proj), float(texel))

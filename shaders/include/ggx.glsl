@@ -1,6 +1,9 @@
 // GGX microfacet specular (Walter et al. 2007, "Microfacet Models for Refraction through Rough
 // Surfaces"): Schlick Fresnel, GGX distribution, Smith visibility.  The one Schlick Fresnel and
 // F0-from-index of the shaders (water.glsl and scene.frag's refraction call these).
+// Guarded: water_fresnel.glsl includes it for the shaders that have no GGX of their own.
+#ifndef GGX_GLSL
+#define GGX_GLSL
 const float PI = 3.14159265358979;
 
 // Schlick's approximation of the reflectance with reflectance f0 at normal incidence, at the
@@ -100,3 +103,4 @@ float roughness_lod_bias(float m) {
     float gloss = max(1.0 - m, 0.05);
     return 2.0 / (gloss * gloss) - 2.0 + smoothstep(0.0, 0.25, m);
 }
+#endif

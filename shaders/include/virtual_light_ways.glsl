@@ -6,6 +6,7 @@
 // virtual_lights.glsl (the scene's lighting) and particle.vert (a lit particle's sheet).
 // Only builds with VIRTUAL_LIGHTS hold it: frames where one shines.
 #ifdef VIRTUAL_LIGHTS
+#include "water_fresnel.glsl"
 // MAX_VIRTUAL_LIGHTS: engine/rules/shadow_rules.py's, defined by the shader library; so is
 // MAX_APERTURES (components/limits.py MAX_LIGHT_BOUNCES): the exit's outline and
 // MAX_APERTURES - 1 more a light.
@@ -17,7 +18,8 @@ layout(std140) uniform VirtualLights {
     vec4 virtual_exit[MAX_VIRTUAL_LIGHTS];          // the exit surface's plane, its front positive
     vec4 virtual_origin[MAX_VIRTUAL_LIGHTS];        // xyz: a corner of the exit's outline; w: a texel's size
                                                     // (metres for a directional image, radians for a point)
-    vec4 virtual_u[MAX_VIRTUAL_LIGHTS];             // xyz: an edge of the outline over its length squared
+    vec4 virtual_u[MAX_VIRTUAL_LIGHTS];             // xyz: an edge of the outline over its length squared;
+                                                    // w: its water (shadow_rules.water_code: virtual_fresnel)
     vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
     vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
                                                     // w: how many further outlines (virtual_more)
@@ -27,7 +29,8 @@ layout(std140) uniform VirtualLights {
                                                     // w: a point image's sphere radius (PointLight.radius)
     vec4 virtual_rect_u[MAX_VIRTUAL_LIGHTS];        // a point image's rectangle rows, carried (light_rules
     vec4 virtual_rect_v[MAX_VIRTUAL_LIGHTS];        // carried_rectangle; lights.glsl point_rect_u / _v)
-    vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above)
+    vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above,
+                                                                      // u's w its water)
     mat4 virtual_unfold[MAX_VIRTUAL_LIGHTS * MAX_APERTURES];  // per outline: the line past it -> where that
                                                               // stretch of the light's way runs (virtual_water)
 } virtual_lights;
@@ -111,6 +114,36 @@ FogDepth virtual_water(int i, vec3 position, vec3 l, float dist) {
 #else
     return FogDepth(1.0);
 #endif
+}
+
+// The share of the light a surface on the way reflects, the line towards the image meeting it
+// ``towards`` (the dot of its plane's normal and the line, negative: from its front): all of
+// it for a mirror or a portal (``code`` 0: their tint and rate are in the colour), for a water
+// Fresnel's at that angle (1 + F0 its top's, -(1 + F0) its underside's: shadow_rules.water_code).
+float virtual_surface_share(float code, float towards) {
+    if (code == 0.0) return 1.0;
+    return water_reflectance(abs(code) - 1.0, -towards, code < 0.0);
+}
+
+// What the surfaces on virtual light ``i``'s way (the exit's outline and every further one)
+// leave of its light along ``l``: the line from a point to an image crosses each as the light
+// met the real surface, at the same angle (a reflection and a pair's carry keep angles), so a
+// water reflects a lamp's light as it reflects a view of it: a few percent straight down, all
+// of it at grazing angles and, from below, past the critical angle.
+float virtual_fresnel(int i, vec3 l) {
+    float share = virtual_surface_share(virtual_lights.virtual_u[i].w, dot(virtual_lights.virtual_exit[i].xyz, l));
+    int count = int(virtual_lights.virtual_params[i].w);
+    for (int k = 0; k < count; ++k) {
+        int at = (i * (MAX_APERTURES - 1) + k) * 4;
+        share *= virtual_surface_share(virtual_lights.virtual_more[at + 2].w, dot(virtual_lights.virtual_more[at].xyz, l));
+    }
+    return share;
+}
+
+// What reaches ``position`` of virtual light ``i``'s colour through the surfaces and waters on
+// its way (virtual_fresnel, virtual_water), before its distance, cone, cookie and shadow.
+FogDepth virtual_kept(int i, vec3 position, vec3 l, float dist) {
+    return virtual_water(i, position, l, dist) * virtual_fresnel(i, l);
 }
 
 // Whether virtual light ``i``'s line from ``position`` along ``l`` (towards its image,

@@ -53,7 +53,7 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         const vec3 cookie = vec3(1.0);
 #endif
         // (a water's body on its way: fog.glsl water_light's, virtual_light_ways.glsl)
-        vec3 color = virtual_lights.virtual_color[i].rgb * virtual_water(i, position, l, dist);
+        vec3 color = virtual_lights.virtual_color[i].rgb * virtual_kept(i, position, l, dist);
         float shade = shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0;
         vec3 arriving = color * cookie * falloff * shade;
 #ifdef SUBSURFACE
