@@ -92,7 +92,10 @@ class Water(TrackedComponent):
       under the water, inside its outline and down to ``depth``, is lit in the bright
       moving net of a sunny pool: each point's sunlight times the ratio of the surface's
       area its light came through to the area it spreads over (``shaders/include/caustics.glsl``),
-      blurred with depth by the sun's disc.  Needs waves (``Material.normal_map``); up to
+      blurred with depth by the sun's disc.  A water that also reflects light
+      (``Mirror.reflects_light``) throws what its waves gather of the sun's light back up, onto
+      what lies up to ``depth`` over it (the net of light on the walls over a sunlit pool).
+      Needs waves (``Material.normal_map``); up to
       four waters gather the sun at once, the nearest the active camera
       (``engine/render/caustics.py``).
     """

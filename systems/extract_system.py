@@ -48,7 +48,7 @@ from engine.assets.mesh import Mesh
 from engine.core.errors import GLLimitError
 from engine.core.skinning import posed_bounds
 from engine.core.world import World
-from engine.render.caustics import Box, body_box, caustic_waters_of, placed_box
+from engine.render.caustics import Box, caustic_waters_of, placed_box, reach_box
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.render.surface_table import SurfaceBlends
@@ -168,7 +168,8 @@ class ExtractSystem(esper.Processor):
                 continue
             water = self.world.try_get(entity, Water)
             if water is not None and water.caustics > 0.0:
-                bodies.append((entity, body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth)))
+                bodies.append((entity, reach_box(state.corners, tuple(glm.vec3(state.plane)), water.depth,
+                                                 state.carries_light)))
         return tuple(sorted(bodies))
 
     def _keyed_apart_wrongly(self, bodies: tuple[tuple[int, Box], ...]) -> set[int]:

@@ -54,10 +54,10 @@ from engine.core.world import World
 from engine.render.caustics import (
     MAX_CAUSTIC_WATERS,
     CausticWater,
-    body_box,
     caustic_map_size,
     caustic_rows,
     nearest_first,
+    reach_box,
 )
 from engine.render.clouds import CloudShape, cloud_shape, drift_served, shadows_served
 from engine.render.fog import volume_rows, water_body_row
@@ -253,7 +253,8 @@ class PrepareSystem(esper.Processor):
                 self._say_still(entity)
                 continue
             chosen.append(CausticWater(entity, state.bumps.normal_map, rows,
-                                       body_box(state.corners, tuple(-glm.vec3(state.plane)), water.depth)))
+                                       reach_box(state.corners, tuple(glm.vec3(state.plane)), water.depth,
+                                                 state.carries_light)))
         for entity in set(self._caustic_keys) - {entry[0] for entry in found}:
             del self._caustic_keys[entity]
         if renderer.caustics.set(chosen):

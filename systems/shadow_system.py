@@ -89,6 +89,7 @@ from engine.rules.shadow_rules import (
     directional_fit,
     holds_point,
     rank_virtual_lights,
+    reflected_caustic_water,
     ring_cell,
     ring_fit,
     ring_radii,
@@ -499,6 +500,7 @@ class ShadowSystem(esper.Processor):
             return []
         drawn = 0
         shining: list[VirtualLight] = []
+        caustic_slots = {water.entity: slot for slot, water in enumerate(renderer.caustics.waters)}
         for light in found:
             slot = drawn
             if slot == MAX_VIRTUAL_LIGHTS:
@@ -530,6 +532,7 @@ class ShadowSystem(esper.Processor):
             if through != 1.0:
                 light = replace(light, color=tuple(c * through for c in light.color))
             maps.set_virtual_color(slot, light.color, light.light_range)
+            maps.set_virtual_caustic(slot, caustic_slots.get(reflected_caustic_water(light), -1))
             shining.append(light)
             drawn += 1
         for slot in [s for s in self._virtual if s >= drawn]:

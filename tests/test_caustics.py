@@ -623,3 +623,120 @@ def test_the_camera_walking_from_one_held_pool_to_another_keeps_the_block_and_ma
         runner.world.get(camera, Transform).position = (x, -0.05, 0.0)
         runner.frame()
         assert [water.entity for water in caustics.waters] == slots and caustics.maps.array is array
+
+
+CEILING = 1.0     # the ceiling over the pool, for the light its waves throw back up
+CALM = 0.1        # normal_scale for the waves thrown up: a reflection turns a ray twice the slope's
+#                   angle, so the map's full slope folds the light within a few centimetres
+
+
+def reflect(incident: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """The mirror law for unit rays (rows) off unit normals (rows)."""
+    return incident - 2.0 * np.sum(incident * normal, axis=-1, keepdims=True) * normal
+
+
+def traced_reflected_light(xs: np.ndarray, height: float) -> np.ndarray:
+    """``traced_light`` for the light the waves throw back up (scaled by CALM) onto a plane
+    ``height`` over the surface: rays of sunlight reflected at a fine row of crossings, landed
+    on the plane, the light at a landing the spacing of the crossings over that of the landings."""
+    texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
+    size = len(texels)
+    step = SIDE / (TILING * size)
+    centres = np.linspace(xs.min() - 1.0, xs.max() + 0.5, 20001)
+    crossings = np.concatenate([centres - step / 2.0, centres + step / 2.0])
+    u = (crossings + SIDE / 2.0) / SIDE * TILING * size - 0.5
+    low = np.floor(u).astype(int)
+    share = (u - low)[:, None]
+    m = texels[low % size] * (1.0 - share) + texels[(low + 1) % size] * share
+    slope_u, slope_v = m[:, 0] / m[:, 2] * CALM, m[:, 1] / m[:, 2] * CALM
+    normals = np.stack([slope_u, np.ones_like(slope_u), -slope_v], axis=1)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    rays = reflect(np.tile(np.array(tuple(SUN)), (len(crossings), 1)), normals)
+    landings = crossings + rays[:, 0] * height / rays[:, 1]
+    before, after = landings[:len(centres)], landings[len(centres):]
+    spread = (after - before) / step
+    landings = (before + after) / 2.0
+    assert (spread > 0.0).all()   # no fold
+    return np.interp(xs, landings, 1.0 / spread)
+
+
+def ceiling_pool(caustics: float, reflects: bool = True):
+    """``pool``'s water reflecting the sun (``Mirror.reflects_light``), its waves CALM, under a
+    grey ceiling CEILING over it that casts no shadow (the sun reaches the water through it),
+    the camera between them looking up: the ceiling is lit by the water's image of the sun alone."""
+    def build(world):
+        at = glm.vec3(0.0, 0.05, 0.0)
+        world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(0.0, CEILING, -0.001) - at)),
+                    Camera(fov_y=70.0))
+        world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+        world.spawn(DirectionalLight(direction=tuple(SUN), intensity=30.0))
+        world.spawn(Transform(position=(0.0, CEILING, 0.0), rotation=glm.angleAxis(math.pi / 2, glm.vec3(1, 0, 0))),
+                    MeshRef(quad(60.0, 60.0), casts_shadows=False),
+                    Material(color=(ALBEDO, ALBEDO, ALBEDO, 1.0), roughness=1.0, environment_reflection=0.0))
+        world.spawn(Transform(rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE), normal_scale=CALM),
+                    Mirror(reflects_light=reflects),
+                    Water(ior=IOR, tiling=TILING, speed=0.0, cross=0.0, caustics=caustics))
+    return build
+
+
+def ceiling_points(runner) -> np.ndarray:
+    """Where each pixel centre's ray meets the ceiling (x), [row, column] (NaN: it does not)."""
+    from tests.support import pixel_rays
+
+    eye, directions = pixel_rays(runner.engine.main_view, runner.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (CEILING - eye[1]) / directions[..., 1]
+    return np.where(t > 0.0, eye[0] + directions[..., 0] * t, np.nan)
+
+
+def test_the_light_a_rippled_water_throws_up_is_where_a_ray_tracer_gathers_it(scene):
+    """A water that reflects the sun (``Mirror.reflects_light``) and has caustics throws the
+    bright moving net of a sunlit pool on the ceiling over it: each ceiling pixel's light over
+    the same pixel with ``caustics`` 0 (the flat water's image of the sun, weighed by
+    Fresnel's reflectance) is the share a ray tracer reflecting the sunlight off the waves
+    gathers at its point, and the mean is kept.  Without the water's light (reflects_light
+    off) the ceiling is black: what is measured is the reflection's."""
+    runner, lit = render(scene, ceiling_pool(1.0))
+    _, flat = render(scene, ceiling_pool(0.0))
+    _, dark = render(scene, ceiling_pool(1.0, reflects=False))
+    assert runner.stats.virtual_lights == 1
+    assert dark.max() < 0.01 and 0.04 < flat.min() and flat.max() < 0.3, (dark.max(), flat.min(), flat.max())
+    share = lit[..., 0] / flat[..., 0]
+    xs = ceiling_points(runner)
+    traced = traced_reflected_light(xs.ravel(), CEILING).reshape(xs.shape)
+    assert traced.max() > 1.6 and traced.min() < 0.7, (traced.min(), traced.max())   # marked caustics
+    assert np.corrcoef(share.ravel(), traced.ravel())[0, 1] > 0.98, np.corrcoef(share.ravel(), traced.ravel())[0, 1]
+    assert np.median(np.abs(share - traced)) < 0.04, np.median(np.abs(share - traced))
+    assert abs(share.mean() - traced.mean()) < 0.03
+
+
+def test_what_stands_over_a_water_that_reflects_light_is_drawn_with_its_caustics(scene):
+    """A water that reflects light throws its caustics up too, so its reach (``reach_box``)
+    is its body and the air up to ``depth`` over it, widened by ``depth`` along its plane:
+    a slab hanging over the pool is keyed under it (drawn with the CAUSTICS build), one far
+    off is not; with ``reflects_light`` off only the body is, and the slab over it is not."""
+    from engine.render.caustics import body_box, reach_box
+
+    corners = np.array([[-2.0, 0.0, -2.0, 1.0], [2.0, 0.0, -2.0, 1.0], [-2.0, 0.0, 2.0, 1.0], [2.0, 0.0, 2.0, 1.0]])
+    assert reach_box(corners, (0.0, 1.0, 0.0), 3.0, False) == body_box(corners, (0.0, -1.0, 0.0), 3.0)
+    assert reach_box(corners, (0.0, 1.0, 0.0), 3.0, True) == ((-5.0, -3.0, -5.0), (5.0, 3.0, 5.0))
+    ids = {}
+
+    def build(reflects: bool):
+        def b(world):
+            pool(1.0, eye=(0.0, 3.0, 6.0), target=(0.0, -1.0, 0.0), depth=3.0)(world)
+            world.get(next(e for e, _ in world.query_one(Water)), Mirror).reflects_light = reflects
+            for name, at in (("over", (3.5, 2.0, 0.0)), ("far", (9.0, 2.0, 0.0))):
+                ids[name] = world.spawn(Transform(position=at), MeshRef(box((0.8, 0.1, 0.8))),
+                                        Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        return b
+
+    for reflects in (True, False):
+        runner, _ = render(scene, build(reflects), size=(64, 48))
+        pool_entity = next(e for e, _ in runner.world.query_one(Water))
+
+        batches = list(runner.engine.renderer.batches.values())
+        over, far = (next(b for b in batches if ids[name] in b.entity_at[:b.count]).caustic_waters
+                     for name in ("over", "far"))
+        assert (over, far) == (((pool_entity,), ()) if reflects else ((), ()))

@@ -2,9 +2,15 @@
 maps' array the scene's ``CAUSTICS`` builds read (``shaders/include/caustics.glsl``, which
 says how the light is gathered), and the rules of what they hold.
 
-Only the batches whose world boxes reach into a held water's body box (``reaches``,
-``CausticBlock.slots_of``) are drawn with the CAUSTICS builds: on llvmpipe every pixel of a build runs its caustics, on
-the water or off it, behind a branch or not (measured: a build whose caustics return at once
+A water that also reflects light (``Mirror.reflects_light``) throws what its waves gather of
+the sun's light back up: the scene's virtual light for the sun's image in it names its slot
+(``shadow_rules.reflected_caustic_water``, ``Shadows.set_virtual_caustic``) and the points it
+lights over the water take ``caustic_reflected_light``.
+
+Only the batches whose world boxes reach into a held water's reach (``reach_box``: its body,
+and the air over one that reflects light; ``reaches``, ``CausticBlock.slots_of``) are drawn
+with the CAUSTICS builds: on llvmpipe every pixel of a build runs its caustics, on the water
+or off it, behind a branch or not (measured: a build whose caustics return at once
 cost as much as one that works them out), so a level with a pond pays only where the pond is.
 A batch's box is the union of its rows', and one mesh's rows across a level (a hall's boxes)
 span any pond in it; so the extract stage puts the rows that reach into the body of a
@@ -65,7 +71,7 @@ class CausticWater:
     entity: int
     normal_map: TextureData
     rows: tuple[float, ...]
-    box: tuple[tuple[float, float, float], tuple[float, float, float]]   # the body's world box (body_box)
+    box: tuple[tuple[float, float, float], tuple[float, float, float]]   # what it can light (reach_box)
 
 
 def body_box(corners: np.ndarray, down: tuple[float, float, float],
@@ -78,6 +84,24 @@ def body_box(corners: np.ndarray, down: tuple[float, float, float],
 
 
 Box = tuple[tuple[float, float, float], tuple[float, float, float]]   # a world box (lo, hi)
+
+
+def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float, reflects: bool) -> Box:
+    """The world box [lo, hi] of what a water's caustics can light: its body (``body_box``:
+    down to ``depth`` under its surface ``corners``) and, for a water that reflects light
+    (``Mirror.reflects_light``: its waves gather the sun's light they throw back up), the air
+    up to ``depth`` over it too, widened by ``depth`` every way along its plane (the light
+    leans out as it rises: as far as it rises, for a sun 45 degrees or more over the
+    surface).  What lies in it is drawn with the caustics (``reaches``)."""
+    up_vector = np.asarray(up, np.float64)
+    lo, hi = body_box(corners, tuple(-up_vector), depth)
+    if not reflects:
+        return lo, hi
+    top = np.asarray(corners, np.float64)[:, :3]
+    ends = np.concatenate([top, top + up_vector * depth])
+    widen = depth * np.sqrt(np.clip(1.0 - up_vector * up_vector, 0.0, 1.0))   # along the plane, per axis
+    return (tuple(np.minimum(lo, ends.min(axis=0) - widen).tolist()),
+            tuple(np.maximum(hi, ends.max(axis=0) + widen).tolist()))
 
 
 def placed_box(matrix: glm.mat4, lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Box:

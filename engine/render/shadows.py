@@ -515,6 +515,13 @@ class ShadowMaps:
         at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (VIRTUAL_FIELDS.index("color") * MAX_VIRTUAL_LIGHTS + slot)
         self.virtual_block[at:at + 4] = (*color, light_range)
 
+    def set_virtual_caustic(self, slot: int, water_slot: int) -> None:
+        """Virtual light ``slot``'s caustic water: the slot in the caustics' block of the
+        water it is the sun's image in, whose waves gather what it reflects (-1: none; the v
+        row's w holds it plus 1: virtual_lights.glsl)."""
+        at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (VIRTUAL_FIELDS.index("v") * MAX_VIRTUAL_LIGHTS + slot)
+        self.virtual_block[at + 3] = water_slot + 1
+
     def set_virtual_count(self, count: int) -> None:
         """How many virtual lights shine (slots 0 to count - 1).  ``virtual_shining`` follows
         it: the scene pass builds its programs with the virtual lights' loop only while one

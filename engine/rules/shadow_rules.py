@@ -739,6 +739,15 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
     return found
 
 
+def reflected_caustic_water(light: VirtualLight) -> int | None:
+    """The water whose waves gather what ``light`` reflects (``shaders/include/caustics.glsl``
+    caustic_reflected_light): the sun's image in one water's top, its entity; None for any
+    other (a lamp's image, light off two surfaces, a water's underside, a mirror)."""
+    if light.kind != "directional" or len(light.apertures) != 1 or light.apertures[0].water <= 0.0:
+        return None
+    return light.surface
+
+
 def light_path(light: VirtualLight, point: np.ndarray) -> list[np.ndarray] | None:
     """The way the light of ``light`` takes to ``point`` (world), as the shader's aperture
     test decides it (``shaders/include/virtual_lights.glsl``; no shadows): None when it does

@@ -39,29 +39,40 @@ uniform sampler2DArray caustic_maps;
 // tests/test_caustics.py's tracer: two left the brightest lines a texel off, four do not).
 #define CAUSTIC_ITERATIONS 4
 
-// The sideways offset (along the plane) of the light refracted at surface point s of water w, on its
-// way down to depth h, coming from the unit direction l (towards the light).
-vec3 caustic_offset(int w, vec3 s, vec3 l, float h, float lod) {
-    vec3 up = caustic_plane[w].xyz;
+// The normal of water w's waves at surface point s (its map read at mip ``lod``).
+vec3 caustic_normal(int w, vec3 s, float lod) {
     vec2 uv = vec2(dot(caustic_u[w].xyz, s) + caustic_u[w].w, dot(caustic_v[w].xyz, s) + caustic_v[w].w)
               * caustic_sizes[w].x;
     vec2 slope = water_slope_lod(caustic_maps, float(w), uv, lod, caustic_flow[w].xy, caustic_axis_u[w].w);
-    vec3 n = normalize((caustic_axis_u[w].xyz * slope.x + caustic_axis_v[w].xyz * slope.y) * caustic_axis_v[w].w + up);
-    vec3 t = refract(-l, n, caustic_flow[w].z);
-    float down = max(-dot(up, t), 0.05);
-    return (t + up * down) * (h / down);
+    return normalize((caustic_axis_u[w].xyz * slope.x + caustic_axis_v[w].xyz * slope.y) * caustic_axis_v[w].w
+                     + caustic_plane[w].xyz);
+}
+
+// The sideways offset (along the plane) of the light met at surface point s of water w,
+// coming from the unit direction l (towards the light), on its way to h metres from the
+// plane: down through the water, refracted (``reflected`` false), or back up off it,
+// reflected (true).  (Called with a constant ``reflected``: each build keeps one way.)
+vec3 caustic_offset(int w, vec3 s, vec3 l, float h, float lod, bool reflected) {
+    vec3 up = caustic_plane[w].xyz;
+    vec3 n = caustic_normal(w, s, lod);
+    vec3 t = reflected ? reflect(-l, n) : refract(-l, n, caustic_flow[w].z);
+    vec3 along = reflected ? up : -up;   // the way the light leaves the surface
+    float away = max(dot(along, t), 0.05);
+    return (t - along * away) * (h / away);
 }
 
 // The share of the flat water's light from the direction l (unit, towards the light) that
-// reaches x under water w: 1 / |det J| mixed in by the strength (1: all of it), 1 off the
-// water; over ``footprint`` metres at least (the pixel's).
-float caustic_light(int w, vec3 x, vec3 l, float footprint) {
+// reaches x, h metres from water w's plane on the side the light leaves it by (under it,
+// ``reflected`` false; over it, true): 1 / |det J| mixed in by the strength (1: all of
+// it), 1 off the water or past its reach; over ``footprint`` metres at least (the pixel's).
+float caustic_gather(int w, vec3 x, vec3 l, float footprint, bool reflected) {
     vec3 up = caustic_plane[w].xyz;
-    float h = -(dot(up, x) + caustic_plane[w].w);
+    vec3 along = reflected ? up : -up;
+    float h = dot(along, x) + (reflected ? caustic_plane[w].w : -caustic_plane[w].w);
     if (h <= 0.0 || h > caustic_sizes[w].z || dot(l, up) <= 0.0) return 1.0;
-    vec3 on_plane = x + up * h;
-    vec3 t0 = refract(-l, up, caustic_flow[w].z);
-    vec3 s = on_plane - (t0 + up * -dot(up, t0)) * (h / -dot(up, t0));   // the flat water's crossing
+    vec3 on_plane = x - along * h;
+    vec3 t0 = reflected ? reflect(-l, up) : refract(-l, up, caustic_flow[w].z);
+    vec3 s = on_plane - (t0 - along * dot(along, t0)) * (h / dot(along, t0));   // the flat water's crossing
     vec2 uv0 = vec2(dot(caustic_u[w].xyz, s) + caustic_u[w].w, dot(caustic_v[w].xyz, s) + caustic_v[w].w);
     if (any(lessThan(uv0, vec2(0.0))) || any(greaterThan(uv0, vec2(1.0)))) return 1.0;
     // The surface's two axes, the second made square to the first (J's frame).
@@ -69,11 +80,25 @@ float caustic_light(int w, vec3 x, vec3 l, float footprint) {
     vec3 e2 = normalize(caustic_axis_v[w].xyz - dot(caustic_axis_v[w].xyz, e1) * e1);
     float stride = max(max(caustic_sizes[w].y, h * caustic_sizes[w].w), footprint);
     float lod = log2(stride / caustic_sizes[w].y);   // (the map's texels a step spans, along U)
-    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(w, s, l, h, lod);
+    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) s = on_plane - caustic_offset(w, s, l, h, lod, reflected);
     // (central differences: the derivative at s itself, not half a step on)
     vec3 half1 = e1 * (0.5 * stride), half2 = e2 * (0.5 * stride);
-    vec3 d1 = caustic_offset(w, s + half1, l, h, lod) - caustic_offset(w, s - half1, l, h, lod);
-    vec3 d2 = caustic_offset(w, s + half2, l, h, lod) - caustic_offset(w, s - half2, l, h, lod);
+    vec3 d1 = caustic_offset(w, s + half1, l, h, lod, reflected) - caustic_offset(w, s - half1, l, h, lod, reflected);
+    vec3 d2 = caustic_offset(w, s + half2, l, h, lod, reflected) - caustic_offset(w, s - half2, l, h, lod, reflected);
     float det = (1.0 + dot(d1, e1) / stride) * (1.0 + dot(d2, e2) / stride) - dot(d1, e2) / stride * (dot(d2, e1) / stride);
     return mix(1.0, 1.0 / max(abs(det), 1.0 / CAUSTIC_MAX_FOCUS), caustic_flow[w].w);
+}
+
+// Under water w: the share of the flat water's light from l (towards the light) the waves
+// gather at x (caustic_gather, refracted).
+float caustic_light(int w, vec3 x, vec3 l, float footprint) {
+    return caustic_gather(w, x, l, footprint, false);
+}
+
+// Over water w: the share of the light it reflects from l (towards the light: the sun, not
+// its image) that its waves gather at x (caustic_gather, reflected), up to its depth over it:
+// the bright net a sunlit pool throws on the walls and ceilings over it
+// (virtual_lights.glsl, for a water that reflects light).
+float caustic_reflected_light(int w, vec3 x, vec3 l, float footprint) {
+    return caustic_gather(w, x, l, footprint, true);
 }

@@ -20,7 +20,8 @@ layout(std140) uniform VirtualLights {
                                                     // (metres for a directional image, radians for a point)
     vec4 virtual_u[MAX_VIRTUAL_LIGHTS];             // xyz: an edge of the outline over its length squared;
                                                     // w: its water (shadow_rules.water_code: virtual_fresnel)
-    vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise
+    vec4 virtual_v[MAX_VIRTUAL_LIGHTS];             // xyz: the other edge likewise; w: the caustic water
+                                                    // it is the sun's image in, its slot + 1 (0: none)
     vec4 virtual_params[MAX_VIRTUAL_LIGHTS];        // x: an atlas texel in uv, y: softness, z: taps a side,
                                                     // w: how many further outlines (virtual_more)
     vec4 virtual_spot[MAX_VIRTUAL_LIGHTS];          // a point image's spot cone, carried (spot_cone.glsl spot_factor)

@@ -17,6 +17,10 @@
 vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, vec3 diffuse, vec3 f0,
                       float roughness, vec3 energy_compensation, bool shadowed) {
     vec3 total = vec3(0.0);
+#ifdef CAUSTICS
+    // (the pixel's footprint, for a water's reflected caustics: taken before any branch, caustics.glsl)
+    float caustic_footprint = max(length(dFdx(position)), length(dFdy(position)));
+#endif
     for (int i = 0; i < virtual_lights.virtual_count.x; ++i) {
         vec3 l;
         float dist;
@@ -54,6 +58,14 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
 #endif
         // (a water's body on its way: fog.glsl water_light's, virtual_light_ways.glsl)
         vec3 color = virtual_lights.virtual_color[i].rgb * virtual_kept(i, position, l, dist);
+#ifdef CAUSTICS
+        // The sun's image in a rippled water that gathers it: the light its waves throw up
+        // (caustics.glsl caustic_reflected_light, from the sun itself: l turned back up through
+        // the plane); the water's slot + 1 in the v row's w (shadow_system), 0 none.
+        int caustic = int(virtual_lights.virtual_v[i].w) - 1;
+        if (caustic >= 0)
+            color *= caustic_reflected_light(caustic, position, reflect(l, caustic_plane[caustic].xyz), caustic_footprint);
+#endif
         float shade = shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0;
         vec3 arriving = color * cookie * falloff * shade;
 #ifdef SUBSURFACE
