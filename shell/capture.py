@@ -26,6 +26,7 @@ from components import (
     look_rotation,
 )
 from engine.assets.gltf_export import ExportCamera, ExportLight, ExportPart, write_gltf
+from engine.assets.model_lights import LAMP_FIELDS, SUN_FIELDS
 from engine.assets.values import VALUE_KINDS, json_value, public_fields
 from engine.core.budget import ViewBudget
 from engine.core.errors import SpeculumError
@@ -149,20 +150,35 @@ def _export_lights(world: World) -> list[ExportLight]:
     for entity, sun in sorted(world.query_one(DirectionalLight)):
         rgb, intensity = colour(sun.color, sun.intensity)
         lights.append(ExportLight(str(entity), "directional", rgb, intensity,
-                                  _placement(glm.mat4_cast(look_rotation(glm.vec3(sun.direction))))))
+                                  _placement(glm.mat4_cast(look_rotation(glm.vec3(sun.direction)))),
+                                  fields=_light_fields(sun, SUN_FIELDS)))
     for entity, (lamp, transform) in sorted(world.query(PointLight, Transform)):
         rgb, intensity = colour(lamp.color, lamp.intensity)
         spot = lamp.spot_angle < 180.0
         outer = math.radians(min(lamp.spot_angle, 90.0))
-        # (its shape, which the extension has no word for, in the light's extras: gltf_export)
-        shape = {name: value for name, value, given in (
-            ("radius", float(lamp.radius), lamp.radius > 0.0),
-            ("rectangle", [float(side) for side in lamp.rectangle], any(side > 0.0 for side in lamp.rectangle)),
-            ("length", float(lamp.length), lamp.length > 0.0)) if given}
+        fields = _light_fields(lamp, LAMP_FIELDS)
+        if lamp.spot_angle <= 90.0 or not spot:   # (the extension's cone says these exactly)
+            fields.pop("spot_angle", None)
+            fields.pop("spot_blend", None)
         lights.append(ExportLight(str(entity), "spot" if spot else "point", rgb, intensity,
                                   _placement(transform.world), float(lamp.range),
-                                  outer * (1.0 - lamp.spot_blend), outer, shape))
+                                  outer * (1.0 - lamp.spot_blend), outer, fields))
     return lights
+
+
+def _light_fields(light: object, names: dict[str, str]) -> dict[str, object]:
+    """``light``'s fields of ``names`` (the extras the loader reads back) that differ from their
+    defaults, as JSON values."""
+    fields = {}
+    for field in dataclasses.fields(light):
+        if field.name not in names:
+            continue
+        value = getattr(light, field.name)
+        default = field.default if field.default is not dataclasses.MISSING else field.default_factory()
+        if value == default or (isinstance(value, tuple) and tuple(value) == tuple(default)):
+            continue
+        fields[field.name] = [float(v) for v in value] if names[field.name] == "pair" else value
+    return fields
 
 
 def _export_cameras(world: World) -> list[ExportCamera]:

@@ -123,12 +123,19 @@ def test_a_files_lights_become_entities_placed_by_their_nodes(tmp_path):
      r"light 0 \('cone'\): its cone angles must satisfy 0 <= innerConeAngle < outerConeAngle <= pi/2"),
     ({"type": "spot"}, r"a spot light needs its spot object"),
     ({"type": "point", "extras": {"speculum": {"radius": "big"}}},
-     r"extras\.speculum\.radius must be a number \(metres\), got 'big'"),
+     r"extras\.speculum\.radius must be a number \(PointLight\.radius\), got 'big'"),
     ({"type": "point", "extras": {"speculum": {"rectangle": [1.0]}}},
      r"extras\.speculum\.rectangle must be two numbers"),
     ({"type": "point", "extras": {"speculum": {"width": 1.0}}},
-     r"extras\.speculum must be an object of \('radius', 'rectangle', 'length'\)"),
-    ({"type": "directional", "extras": {"speculum": {"radius": 1.0}}}, r"a directional light has no shape"),
+     r"extras\.speculum must be an object of PointLight's fields \('radius', 'rectangle', 'length', 'shadows'"),
+    ({"type": "directional", "extras": {"speculum": {"radius": 1.0}}},
+     r"extras\.speculum must be an object of DirectionalLight's fields \('shadows'"),
+    ({"type": "spot", "spot": {}, "extras": {"speculum": {"shadows": 1}}},
+     r"extras\.speculum\.shadows must be true or false \(PointLight\.shadows\), got 1"),
+    ({"type": "point", "extras": {"speculum": {"shadow_resolution": 512.5}}},
+     r"extras\.speculum\.shadow_resolution must be a whole number \(PointLight\.shadow_resolution\), got 512\.5"),
+    ({"type": "directional", "extras": {"speculum": {"body": 3}}},
+     r"extras\.speculum\.body must be a string \(DirectionalLight\.body\), got 3"),
 ])
 def test_a_bad_light_is_refused_naming_it(tmp_path, light, message):
     path = lit_file(tmp_path / "bad.glb", [light])
@@ -185,3 +192,15 @@ def test_a_models_sun_turns_with_an_entity_it_hangs_under(tmp_path):
     world.get(table, Transform).rotation = turn
     stage.process(0.0)
     np.testing.assert_allclose(list(sun.direction), list(turn * glm.vec3(0.0, 0.0, -1.0)), atol=1e-6)
+
+
+def test_a_suns_field_the_engine_refuses_is_refused_at_spawn_naming_the_light(tmp_path):
+    """A sun's extras whose types are right and whose value DirectionalLight refuses (nine
+    cascades) is an error naming the file, its light and the field, nothing spawned."""
+    world = World("sunny")
+    path = lit_file(tmp_path / "cascades.glb", [{"type": "directional", "name": "noon",
+                                                 "extras": {"speculum": {"shadow_cascades": 9}}}],
+                    [{"extensions": {"KHR_lights_punctual": {"light": 0}}}])
+    with pytest.raises(AssetError, match=r"cascades\.glb.*light 'noon'.*shadow_cascades"):
+        spawn_model(world, path)
+    assert not list(world.query_one(Transform))

@@ -391,3 +391,70 @@ def test_a_lamps_shape_is_read_back_from_its_extras_and_lights_as_it_did(scene, 
     bare.write_text(json.dumps(doc))   # (beside the first: any buffer file it names is there too)
     points = frame(scene(spawned(bare), (128, 96)))
     assert np.abs(points - before).max(axis=-1).max() > 0.1   # (the shapes show in the frame)
+
+
+def test_a_lights_engine_fields_are_read_back_from_its_extras_and_light_as_they_did(scene, tmp_path):
+    """A spot wider than glTF's 90 degrees that casts shadows (a cube map, softened) and a sun
+    with two cascades, a disc and no shadows: each light's ``extras`` hold what the
+    extension has no word for (the fields other than their defaults), the loader makes the
+    same lights again field by field, and the file spawned again draws what the world drew (a
+    box's shadow and the cone's edge past 90 degrees); with the extras taken out it does not."""
+    import dataclasses
+    import json
+
+    lamp_fields = dict(spot_angle=120.0, spot_blend=0.3, shadows=True, shadow_resolution=256, shadow_softness=2.0,
+                       bounces=2, volumetric=0.5)
+    sun_fields = dict(shadows=False, shadow_cascades=2, shadow_distance=30.0, angular_diameter=0.53)
+
+    def build(world):
+        look_from(world, (0.5, 2.6, 2.6), (0.8, 0.0, 0.0))
+        world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
+        world.spawn(Transform(rotation=look_rotation((0, -1, 0), (0, 0, -1))), MeshRef(quad(12.0, 12.0)),
+                    Material(color=(0.5, 0.5, 0.5, 1.0), roughness=0.9))
+        world.spawn(Transform(position=(0.6, 0.4, 0.0)), MeshRef(box((0.8, 0.8, 0.8))),
+                    Material(color=(0.6, 0.3, 0.2, 1.0), roughness=0.9))
+        world.spawn(Transform(position=(0.0, 1.2, 0.0), rotation=look_rotation((0.3, -1.0, 0.0), (0, 0, -1))),
+                    PointLight(intensity=3.0, range=10.0, **lamp_fields))
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.3), intensity=0.2, **sun_fields))
+
+    def spawned(path):
+        def again(world):
+            world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
+            spawn_model(world, path)
+            (camera,) = [entity for entity, _ in world.query_one(Camera)]
+            world.get(camera, Camera).active = True
+        return again
+
+    def frame(runner):
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        return srgb_to_linear(runner.frame())
+
+    original = scene(build, (128, 96))
+    before = frame(original)
+    camera = next(entity for entity, _ in original.world.query_one(Camera))
+    path = export_scene(original.world, tmp_path / "lights.gltf", camera, (128, 96))
+    doc = json.loads(path.read_text())
+    written = {light["type"]: light.get("extras", {}).get("speculum")
+               for light in doc["extensions"]["KHR_lights_punctual"]["lights"]}
+    assert written == {"spot": lamp_fields, "directional": sun_fields}, written
+    copy = scene(spawned(path), (128, 96))
+    after = frame(copy)
+    ((_, lamp),) = list(copy.world.query_one(PointLight))
+    ((_, sun),) = list(copy.world.query_one(DirectionalLight))
+    ((_, lamp_was),) = list(original.world.query_one(PointLight))
+    ((_, sun_was),) = list(original.world.query_one(DirectionalLight))
+    for made, was, names in ((lamp, lamp_was, [*lamp_fields, "radius", "contact_shadows"]),
+                             (sun, sun_was, [*sun_fields, "body", "bounces", "shadow_resolution"])):
+        for name in names:
+            assert getattr(made, name) == pytest.approx(getattr(was, name)), (name, getattr(made, name))
+    assert {f.name for f in dataclasses.fields(PointLight)} >= set(lamp_fields)
+    difference = np.abs(after - before).max(axis=-1)
+    assert np.median(difference) < 0.004 and (difference > 0.05).mean() < 0.01, (np.median(difference),
+                                                                                 (difference > 0.05).mean())
+    for light in doc["extensions"]["KHR_lights_punctual"]["lights"]:
+        light.pop("extras")
+    bare = tmp_path / "bare.gltf"
+    bare.write_text(json.dumps(doc))
+    plain = frame(scene(spawned(bare), (128, 96)))
+    assert ((plain - before).max(axis=-1) > 0.05).mean() > 0.05   # (the box's shadow gone)

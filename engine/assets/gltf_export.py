@@ -22,10 +22,13 @@ written as this engine's own glTF loader (``engine/assets/mesh.py``) reads them 
   reflects (the loader makes a flat metal a mirror again).
 
 Lights are ``KHR_lights_punctual``'s (``ExportLight``): a sun, a lamp, a spot up to 90 degrees
-(glTF's widest cone).  A lamp's shape, which the extension has no word for (a sphere's
-``radius``, a ``rectangle``, a tube's ``length``), goes in the light's ``extras`` under
-``"speculum"``, where the loader reads it back (``engine/assets/model_lights.py``; other
-readers see the point light the extension describes); its cookie and shadows are left out.
+(glTF's widest cone).  What the extension has no word for goes in the light's ``extras``
+under ``"speculum"``, each field the engine's light gives other than its default, by its
+name there (``model_lights.LAMP_FIELDS``, ``SUN_FIELDS``): a lamp's shape (a sphere's
+``radius``, a ``rectangle``, a tube's ``length``), its shadows and how many mirrors its light
+bounces off, a spot wider than 90 degrees, a sun's cascades, disc and body; the loader reads
+them back (``engine/assets/model_lights.py``; other readers see the light the extension
+describes).  A lamp's cookie (an image) is left out.
 Cameras are core glTF's (``ExportCamera``).
 
 Images are PNGs in the buffer (16-bit maps rounded to 8 bits).  glTF puts the UVs' origin at
@@ -96,7 +99,8 @@ class ExportLight:
     range: float | None = None
     inner_cone: float = 0.0
     outer_cone: float = math.pi / 4.0
-    shape: dict[str, object] = dataclasses.field(default_factory=dict)   # a lamp's radius, rectangle, length (extras)
+    # The engine's fields the extension has no word for (extras: model_lights.LAMP_FIELDS, SUN_FIELDS)
+    fields: dict[str, object] = dataclasses.field(default_factory=dict)
 
 
 @dataclass
@@ -265,8 +269,8 @@ def _light_json(light: ExportLight) -> dict:
         entry["range"] = light.range
     if light.kind == "spot":
         entry["spot"] = {"innerConeAngle": light.inner_cone, "outerConeAngle": light.outer_cone}
-    if light.shape:
-        entry["extras"] = {LIGHT_EXTRAS: dict(light.shape)}
+    if light.fields:
+        entry["extras"] = {LIGHT_EXTRAS: dict(light.fields)}
     return entry
 
 

@@ -24,11 +24,22 @@ from components.tracking import HALF_MAX
 from engine.core.errors import AssetError
 
 LIGHT_KINDS = ("directional", "point", "spot")
-# A lamp's shape, which KHR_lights_punctual has no word for, in its light's extras under this
-# key (written by engine/assets/gltf_export.py): "radius" (metres: a sphere), "rectangle"
-# ([width, height] metres), "length" (metres: a tube), as PointLight has them.
+# What the engine's lights have and KHR_lights_punctual has no word for, in a light's extras
+# under this key (written by engine/assets/gltf_export.py), by name as the engine's light
+# (PointLight for a point or spot, DirectionalLight for a directional one) has it, each with
+# the kind of value it takes: a lamp's shape ("radius" metres: a sphere, "rectangle" [width,
+# height] metres, "length" metres: a tube), its shadows, how many mirrors its light bounces
+# off, a spot's cone past glTF's 90 degrees and its blend as given; a sun's shadow cascades,
+# its disc, what body it is.  Their values are the components' to check (at spawn).
 LIGHT_EXTRAS = "speculum"
-LIGHT_SHAPES = ("radius", "rectangle", "length")
+LAMP_FIELDS = {"radius": "number", "rectangle": "pair", "length": "number", "shadows": "bool",
+               "shadow_resolution": "integer", "shadow_softness": "number", "bounces": "integer",
+               "spot_angle": "number", "spot_blend": "number", "contact_shadows": "bool", "volumetric": "number"}
+SUN_FIELDS = {"shadows": "bool", "shadow_resolution": "integer", "shadow_softness": "number",
+              "shadow_cascades": "integer", "shadow_distance": "number", "shadow_cascade_blend": "number",
+              "angular_diameter": "number", "bounces": "integer", "body": "text"}
+_KINDS_SAID = {"number": "a number", "integer": "a whole number", "bool": "true or false",
+               "pair": "two numbers", "text": "a string"}
 # A light without a range reaches as far as its inverse-square light stays above this many
 # lux (1/256: under half a level of 255 on white paper at exposure 0), the engine's lights
 # having a range to fade out at (their shadow cube's far plane, and what culls them).
@@ -56,8 +67,8 @@ class ModelLight:
     name: str
     node: int | None = None  # its node's index (what an animation moves)
     light: int | None = None  # its KHR_lights_punctual light's index (what an animation pointer names)
-    # A lamp's shape from its extras (LIGHT_EXTRAS): PointLight's radius, rectangle, length as given.
-    shape: dict[str, object] | None = None
+    # The engine's fields from its extras (LIGHT_EXTRAS: LAMP_FIELDS, SUN_FIELDS) as given.
+    fields: dict[str, object] | None = None
 
     def reach(self, scale: float = 1.0) -> float:
         """The engine light's range: the file's, or where its light at ``scale`` falls to
@@ -107,7 +118,7 @@ def read_gltf_lights(doc: dict | None) -> list[ModelLight]:
         light = lights[light_index]
         found.append(ModelLight(light.kind, light.color, light.intensity, light.range, light.inner_cone,
                                 light.outer_cone, glm.mat4(*matrix.astype(np.float32).T.ravel()), light.name,
-                                index, light_index, light.shape))
+                                index, light_index, light.fields))
     return found
 
 
@@ -156,32 +167,43 @@ def _light(defined: list, index: int) -> ModelLight:
         outer = min(outer, math.pi / 2.0)
     return ModelLight(kind, tuple(float(c) for c in color), float(intensity),
                       None if reach is None else float(reach), float(inner), float(outer), glm.mat4(),
-                      name or f"light {index}", shape=_shape(entry, kind, what))
+                      name or f"light {index}", fields=_engine_fields(entry, kind, what))
 
 
-def _shape(entry: dict, kind: str, what: str) -> dict[str, object] | None:
-    """A lamp's shape from the light's ``extras`` (``LIGHT_EXTRAS``), its fields' types checked
-    here (their values by ``PointLight`` when the light is made: ``spawn_model``); None where
-    the file gives none."""
+def _engine_fields(entry: dict, kind: str, what: str) -> dict[str, object] | None:
+    """The engine's fields from the light's ``extras`` (``LIGHT_EXTRAS``: ``LAMP_FIELDS`` for
+    a point or spot, ``SUN_FIELDS`` for a directional light), their names and kinds of value
+    checked here (their values by the light when it is made: ``spawn_model``); None where the
+    file gives none."""
     extras = entry.get("extras")
-    shape = extras.get(LIGHT_EXTRAS) if isinstance(extras, dict) else None
-    if shape is None:
+    given = extras.get(LIGHT_EXTRAS) if isinstance(extras, dict) else None
+    if given is None:
         return None
-    if not isinstance(shape, dict) or not set(shape) <= set(LIGHT_SHAPES):
-        raise AssetError(f"{what}: extras.{LIGHT_EXTRAS} must be an object of {LIGHT_SHAPES}, got {shape!r}")
-    if kind == "directional":
-        raise AssetError(f"{what}: a directional light has no shape, got extras.{LIGHT_EXTRAS} {shape!r}")
-    for field_name in ("radius", "length"):
-        if field_name in shape and not finite_number(shape[field_name]):
-            raise AssetError(f"{what}: extras.{LIGHT_EXTRAS}.{field_name} must be a number (metres), "
-                             f"got {shape[field_name]!r}")
-    rectangle = shape.get("rectangle")
-    if rectangle is not None and not (isinstance(rectangle, list) and len(rectangle) == 2
-                                      and all(finite_number(side) for side in rectangle)):
-        raise AssetError(f"{what}: extras.{LIGHT_EXTRAS}.rectangle must be two numbers (width, height in metres), "
-                         f"got {rectangle!r}")
-    return {name: (tuple(float(side) for side in value) if name == "rectangle" else float(value))
-            for name, value in shape.items()}
+    allowed = SUN_FIELDS if kind == "directional" else LAMP_FIELDS
+    light_class = "DirectionalLight" if kind == "directional" else "PointLight"
+    if not isinstance(given, dict) or not set(given) <= set(allowed):
+        raise AssetError(f"{what}: extras.{LIGHT_EXTRAS} must be an object of {light_class}'s fields "
+                         f"{tuple(allowed)}, got {given!r}")
+    fields: dict[str, object] = {}
+    for name, value in given.items():
+        want = allowed[name]
+        if want == "bool":
+            ok = isinstance(value, bool)
+        elif want == "integer":
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        elif want == "text":
+            ok = isinstance(value, str)
+        elif want == "pair":
+            ok = isinstance(value, list) and len(value) == 2 and all(finite_number(side) for side in value)
+            value = tuple(float(side) for side in value) if ok else value
+        else:
+            ok = finite_number(value)
+            value = float(value) if ok else value
+        if not ok:
+            raise AssetError(f"{what}: extras.{LIGHT_EXTRAS}.{name} must be {_KINDS_SAID[want]} "
+                             f"({light_class}.{name}), got {given[name]!r}")
+        fields[name] = value
+    return fields
 
 
 def check_light_intensity(light: ModelLight, scale: float) -> float:

@@ -347,10 +347,15 @@ def _light_components(light: ModelLight, root: Transform, scale: float) -> list:
         travel = glm.vec3((model * light.local) * glm.vec4(0.0, 0.0, -1.0, 0.0))
         if glm.length(travel) == 0.0:
             raise ComponentValueError(f"light {light.name!r}: its node's transform has no -Z direction")
-        return [placed, DirectionalLight(direction=travel, color=colour, intensity=intensity)]
+        try:
+            return [placed, DirectionalLight(direction=travel, color=colour, intensity=intensity,
+                                             **(light.fields or {}))]
+        except ComponentValueError as exc:
+            raise ComponentValueError(f"light {light.name!r}: {exc}") from None
+    # (the extras' fields over the extension's: a spot's cone past 90 degrees, its blend as given)
+    settings = {"spot_angle": light.spot_angle(), "spot_blend": light.spot_blend(), **(light.fields or {})}
     try:
-        lamp = PointLight(color=colour, intensity=intensity, range=light.reach(scale),
-                          spot_angle=light.spot_angle(), spot_blend=light.spot_blend(), **(light.shape or {}))
+        lamp = PointLight(color=colour, intensity=intensity, range=light.reach(scale), **settings)
     except ComponentValueError as exc:
         raise ComponentValueError(f"light {light.name!r}: {exc}") from None
     return [placed, lamp]
