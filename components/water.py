@@ -87,8 +87,9 @@ class Water(TrackedComponent):
       d), on the view's way (what is seen becomes ``fog_color`` as its light goes) and on
       the light's (the suns', the lamps', the sky's, and the light shafts'), as HDRP's water
       takes its absorption and Crest its colour with depth.
-    - **Caustics** (``caustics``, 0 by default: none; 1: all of them): the suns' light through
-      the waves is bent by each one and gathers where the bent rays converge, so what lies
+    - **Caustics** (``caustics``, 0 by default: none; 1: all of them): the suns' light (and
+      the lamps' over the water: up to four) through the waves is bent by each one and
+      gathers where the bent rays converge, so what lies
       under the water, inside its outline and down to ``depth``, is lit in the bright
       moving net of a sunny pool: each point's sunlight times the ratio of the surface's
       area its light came through to the area it spreads over (``shaders/include/caustics.glsl``),

@@ -19,6 +19,11 @@
 // The waters (the Caustics block's slots) this draw's batch reaches into, -1 after the last
 // (engine/render/caustics.py CausticBlock.slots_of).
 uniform ivec4 caustic_waters;
+#ifdef CAUSTIC_LAMPS
+// The share of each lamp of the block's caustic_lamps that the waters gather at the pixel
+// (caustic_lamp_light), set before the lamps' loops; lamp_light reads its lamp's.
+vec4 lamp_caustic = vec4(1.0);
+#endif
 #endif
 #include "hdr.glsl"
 #include "way.glsl"
@@ -538,6 +543,12 @@ vec3 lamp_light(int i, bool rectangle, Surface s, vec3 diffuse, vec4 point_lit
         nl = rect_form_factor(rect, s.normal, face);
     }
 #endif
+#ifdef CAUSTIC_LAMPS
+    // The light a water over the point gathers of it (caustics.glsl caustic_lamp_light).
+    for (int j = 0; j < 4; ++j) {
+        if (caustic_lamps[j] == i) falloff *= lamp_caustic[j];
+    }
+#endif
 #if defined(SCREEN_OCCLUSION) && defined(CONTACT_LAMPS)
     // Its contact shadows' channel, if it has them (its cookie row's w: the channel + 1).
     int contact_channel = int(lights.point_cookie_v[i].w + 0.5) - 1;
@@ -670,6 +681,19 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
                                                 caustic_footprint);
         }
     }
+#ifdef CAUSTIC_LAMPS
+    // ... and the lamps' over them (the block's caustic_lamps: lamps over a held water).
+    for (int j = 0; j < 4; ++j) {
+        int lamp = caustic_lamps[j];
+        if (lamp < 0) break;
+        lamp_caustic[j] = 1.0;
+        for (int k = 0; k < MAX_CAUSTIC_WATERS; ++k) {
+            if (caustic_waters[k] < 0) break;
+            lamp_caustic[j] *= caustic_lamp_light(caustic_waters[k], s.position, lights.point_pos[lamp].xyz,
+                                                  lights.point_color[lamp].w, caustic_footprint);
+        }
+    }
+#endif
 #endif
 #ifdef SCREEN_OCCLUSION
     // The camera's contact shadows dim the sun's light (its slot's w: lights.glsl).

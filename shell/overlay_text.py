@@ -49,7 +49,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"{f', cascades {stats.shadow_cascades_cut}' if stats.shadow_cascades_cut else ''}"
         f"{f', rectangles (lit as points) {stats.rect_lights_cut}' if stats.rect_lights_cut else ''}"
         f"{f', fog volumes {stats.fog_volumes_cut}' if stats.fog_volumes_cut else ''}"
-        f"{f', caustic waters {stats.caustic_waters_cut}' if stats.caustic_waters_cut else ''}, "
+        f"{f', caustic waters {stats.caustic_waters_cut}' if stats.caustic_waters_cut else ''}"
+        f"{f', caustic lamps {stats.caustic_lamps_cut}' if stats.caustic_lamps_cut else ''}, "
         f"lights through mirrors {stats.virtual_lights_cut} (shining {stats.virtual_lights})",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",

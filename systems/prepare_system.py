@@ -52,10 +52,12 @@ from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHT
 from engine.core.errors import CausticLimitWarning, FogLimitWarning, LightLimitWarning
 from engine.core.world import World
 from engine.render.caustics import (
+    MAX_CAUSTIC_LAMPS,
     MAX_CAUSTIC_WATERS,
     CausticWater,
     caustic_map_size,
     caustic_rows,
+    lamps_over,
     nearest_first,
     reach_box,
 )
@@ -130,6 +132,7 @@ class PrepareSystem(esper.Processor):
         self._bodies: tuple = ()   # the water bodies the rows were packed for (_water_bodies)
         self._unboxed: set[int] = set()   # waters with a fog and no flat outline (said once)
         self._caustic_cut = 0                     # waters with caustics past MAX_CAUSTIC_WATERS, left out
+        self._caustic_lamps_cut = 0               # lamps over them past MAX_CAUSTIC_LAMPS, left out
         self._caustic_still: set[int] = set()     # waters with caustics and no waves to gather with (said once)
         self._caustic_keys: dict[int, tuple] = {}  # what each held water's rows were packed from (_caustics)
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
@@ -257,8 +260,31 @@ class PrepareSystem(esper.Processor):
                                                  state.carries_light)))
         for entity in set(self._caustic_keys) - {entry[0] for entry in found}:
             del self._caustic_keys[entity]
-        if renderer.caustics.set(chosen):
+        lamps = self._caustic_lamps(chosen)
+        if renderer.caustics.set(chosen, lamps):
             renderer.note_scene_change()   # what every view shows under the waters
+
+    def _caustic_lamps(self, chosen: list[CausticWater]) -> list[int]:
+        """The kept lamps (their Lights block slots) over the held ``chosen`` waters whose light
+        the waves gather (``caustics.lamps_over``): the first ``MAX_CAUSTIC_LAMPS`` by slot, the
+        rest counted and said when their count grows."""
+        kept = self._kept
+        if not chosen or kept is None:
+            self.renderer.stats.caustic_lamps_cut = 0
+            return []
+        world = self.world
+        lamps = [(slot, np.array(world.get(entity, Transform).world[3].xyz), world.get(entity, PointLight).range)
+                 for slot, entity in enumerate(kept.point) if entity is not None]
+        found = lamps_over(chosen, lamps)
+        cut = max(0, len(found) - MAX_CAUSTIC_LAMPS)
+        if cut > self._caustic_lamps_cut:
+            warnings.warn(CausticLimitWarning(
+                f"{len(found)} lamps stand over waters with caustics: the light of {MAX_CAUSTIC_LAMPS} is gathered "
+                f"(entities {[kept.point[slot] for slot in found[:MAX_CAUSTIC_LAMPS]]}), so {cut} light the water's "
+                "floor evenly (RenderStats.caustic_lamps_cut)"), stacklevel=4)
+        self._caustic_lamps_cut = cut
+        self.renderer.stats.caustic_lamps_cut = cut
+        return found[:MAX_CAUSTIC_LAMPS]
 
     def _waters(self) -> Iterator[tuple[int, SurfaceState, Water]]:
         """Each water surface this frame: its entity, its published state (the top) and its

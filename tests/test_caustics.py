@@ -20,6 +20,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    PointLight,
     Skybox,
     Transform,
     Water,
@@ -27,6 +28,7 @@ from components import (
 from engine.assets.mesh import box, quad
 from engine.core.errors import CausticLimitWarning, GLLimitWarning
 from engine.render.caustics import CAUSTIC_SUN_SPREAD, CausticBlock
+from engine.rules.light_rules import KeptLights
 from tests.support import look_rotation, srgb_to_linear
 from tests.test_water import FLAT, wave_map
 
@@ -740,3 +742,112 @@ def test_what_stands_over_a_water_that_reflects_light_is_drawn_with_its_caustics
         over, far = (next(b for b in batches if ids[name] in b.entity_at[:b.count]).caustic_waters
                      for name in ("over", "far"))
         assert (over, far) == (((pool_entity,), ()) if reflects else ((), ()))
+
+
+LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics
+
+
+def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT) -> np.ndarray:
+    """The light at floor points ``xs`` (on the line under the lamp, along the waves' U) of a
+    lamp ``lamp_height`` over the pool, through the waves, over the same through flat water,
+    by tracing: rays from the lamp cross the surface at a fine row of points, each bent by the
+    map's normal there (as ``traced_light``), and land on the floor; the light at a landing is
+    the light through the crossing (the lamp's cos / distance^2 there, and Fresnel's
+    transmission) over the area it lands on (the spacing of the landings along the line, and
+    across it the spread of two rays a millimetre either side)."""
+    texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
+    size = len(texels)
+    lamp = np.array([0.0, lamp_height, 0.0])
+
+    def light(flat: bool) -> np.ndarray:
+        crossings = np.linspace(xs.min() - 0.05, xs.max() + 0.05, 40001)   # (each lands farther out)
+        u = (crossings + SIDE / 2.0) / SIDE * TILING * size - 0.5
+        low = np.floor(u).astype(int)
+        share = (u - low)[:, None]
+        m = texels[low % size] * (1.0 - share) + texels[(low + 1) % size] * share
+        slope_u = np.zeros(len(crossings)) if flat else m[:, 0] / m[:, 2]
+        normal = np.stack([slope_u, np.ones_like(slope_u), np.zeros_like(slope_u)], axis=1)
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+
+        def land(z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            at = np.stack([crossings, np.zeros_like(crossings), np.full_like(crossings, z)], axis=1)
+            incident = at - lamp
+            distance = np.linalg.norm(incident, axis=1)
+            incident /= distance[:, None]
+            ray = refract(incident, normal, 1.0 / IOR)
+            t = DEPTH / -ray[:, 1]
+            cos_i = -np.sum(incident * normal, axis=1)
+            # (Fresnel's transmission, unpolarised, at the crossing)
+            cos_t = -np.sum(ray * normal, axis=1)
+            rs = ((cos_i - IOR * cos_t) / (cos_i + IOR * cos_t)) ** 2
+            rp = ((IOR * cos_i - cos_t) / (IOR * cos_i + cos_t)) ** 2
+            flux = -incident[:, 1] / distance ** 2 * (1.0 - 0.5 * (rs + rp))   # per unit of surface
+            return at[:, 0] + ray[:, 0] * t, at[:, 2] + ray[:, 2] * t, flux
+
+        landed, _, flux = land(0.0)
+        _, aside, _ = land(1e-3)
+        along = np.gradient(landed, crossings)
+        assert (along > 0.0).all()   # no fold
+        return np.interp(xs, landed, flux / (along * (aside / 1e-3)))
+
+    return light(False) / light(True)
+
+
+def lamp_pool(caustics: float, height: float = LAMP_HEIGHT):
+    """``pool``'s floor and waves lit by a lamp ``height`` over the surface's centre instead
+    of the sun, the camera just under the surface looking down at the floor under the lamp."""
+    def build(world):
+        pool(caustics, sun=(0.0, -1.0, 0.0))(world)
+        (sun,) = [entity for entity, _ in world.query_one(DirectionalLight)]
+        world.delete_entity(sun)
+        world.spawn(Transform(position=(0.0, height, 0.0)),
+                    PointLight(intensity=12.0 * ((height + DEPTH) / (LAMP_HEIGHT + DEPTH)) ** 2, range=20.0))
+    return build
+
+
+@pytest.mark.parametrize("height", [LAMP_HEIGHT, 0.6])
+def test_a_lamps_light_under_rippled_water_is_where_a_ray_tracer_gathers_it(scene, height):
+    """A lamp over the pool: its rays fan out from it, and the waves gather them as they
+    gather the sun's.  Along the line under the lamp (across the waves), each floor pixel's
+    light over the same pixel with ``caustics`` 0 is the traced light through the waves over
+    the traced light through flat water (each the light through a crossing over the area it
+    lands on): their profiles match, the brightest lines where the tracer puts them.  A lamp
+    0.6 m over a floor a metre down spreads its rays more through the water than the waves
+    move them (the sun's fixed-point search would run away there; the chord method does not)."""
+    runner, lit = render(scene, lamp_pool(1.0, height))
+    _, flat = render(scene, lamp_pool(0.0, height))
+    assert runner.engine.renderer.caustics.lamps == (0,)
+    assert 0.05 < flat.min() and flat.max() < 0.6, (flat.min(), flat.max())
+    points = floor_points(runner)
+    line = np.abs(points[..., 1]) < 0.04   # floor pixels on the line under the lamp
+    assert line.sum() > 100
+    share = lit[..., 0][line] / flat[..., 0][line]
+    traced = traced_lamp_light(points[..., 0][line], height)
+    assert traced.max() > 1.5 and traced.min() < 0.75, (traced.min(), traced.max())
+    assert np.corrcoef(share, traced)[0, 1] > 0.98, np.corrcoef(share, traced)[0, 1]
+    assert np.median(np.abs(share - traced)) < 0.04, np.median(np.abs(share - traced))
+
+
+def test_the_lamps_over_a_water_are_held_up_to_four_and_the_rest_are_said(scene):
+    """Six lamps over the pool and one beside it whose range stops short of it: the first four
+    over it by slot are held (``CausticBlock.lamps``, the CAUSTIC_LAMPS builds), the other two
+    counted and said once; a lamp under the surface or out of reach is not held."""
+    from engine.render.caustics import MAX_CAUSTIC_LAMPS
+
+    def build(world):
+        pool(1.0)(world)
+        for k in range(6):
+            world.spawn(Transform(position=(-1.5 + 0.6 * k, 1.0, 0.0)), PointLight(intensity=0.1, range=5.0))
+        world.spawn(Transform(position=(9.0, 1.0, 0.0)), PointLight(intensity=0.1, range=3.0))   # short of it
+        world.spawn(Transform(position=(0.5, -0.5, 0.5)), PointLight(intensity=0.1, range=5.0))   # under it
+
+    with pytest.warns(CausticLimitWarning, match=r"8 lamps|6 lamps stand over waters with caustics: the light of 4"):
+        runner, _ = render(scene, build, size=(32, 32))
+    kept = runner.world.resources[KeptLights]
+    held = runner.engine.renderer.caustics.lamps
+    assert len(held) == MAX_CAUSTIC_LAMPS and runner.stats.caustic_lamps_cut == 2
+    over = sorted(slot for slot, entity in enumerate(kept.point) if entity is not None
+                  and 0.9 < runner.world.get(entity, Transform).position.y and
+                  runner.world.get(entity, Transform).position.x < 5.0)
+    assert list(held) == over[:MAX_CAUSTIC_LAMPS]
+    assert ("CAUSTIC_LAMPS", "1") in runner.engine.renderer.caustics.defines

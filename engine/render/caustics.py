@@ -2,6 +2,11 @@
 maps' array the scene's ``CAUSTICS`` builds read (``shaders/include/caustics.glsl``, which
 says how the light is gathered), and the rules of what they hold.
 
+The lamps' light is gathered too: the prepare stage names the kept lamps that stand over a
+held water within their range (``lamps_over``, at most ``MAX_CAUSTIC_LAMPS``, by slot; the
+block's ``caustic_lamps``, the ``CAUSTIC_LAMPS`` builds while any), and scene.frag's lamps
+take ``caustic_lamp_light`` under the waters a draw names.
+
 A water that also reflects light (``Mirror.reflects_light``) throws what its waves gather of
 the sun's light back up: the scene's virtual light for the sun's image in it names its slot
 (``shadow_rules.reflected_caustic_water``, ``Shadows.set_virtual_caustic``) and the points it
@@ -57,8 +62,10 @@ MAX_CAUSTIC_WATERS = 4      # waters whose caustics are drawn at once (the neare
 CAUSTIC_SAMPLERS = SCENE_SAMPLERS + 3   # the fullest build with cookies, soft suns' depths and caustics
 CAUSTIC_SUN_SPREAD = 0.0093  # radians: the sun's disc (0.53 degrees), how a caustic blurs with depth
 CAUSTIC_MAP_MAX_SIDE = 2048  # the most texels along a side of the waters' normal maps' array (CausticMaps)
+MAX_CAUSTIC_LAMPS = 4       # lamps over a held water whose light is gathered too (the block's caustic_lamps, an ivec4)
 _ROWS = 7                   # a water's vec4s in the block (caustics.glsl's Caustics block: one array each)
-_BLOCK_FLOATS = 4 * _ROWS * MAX_CAUSTIC_WATERS + 4   # the arrays, then the ivec4 of how many are held
+# the arrays, then the ivec4 of how many are held, then the lamps' slots
+_BLOCK_FLOATS = 4 * _ROWS * MAX_CAUSTIC_WATERS + 4 + 4
 CAUSTICS_BLOCK_BYTES = 4 * _BLOCK_FLOATS
 NO_CAUSTIC_WATERS = (-1, -1, -1, -1)   # scene.frag's caustic_waters for a batch under none
 
@@ -119,6 +126,22 @@ def placed_box(matrix: glm.mat4, lo: tuple[float, float, float], hi: tuple[float
         low.append(a)
         high.append(b)
     return (low[0], low[1], low[2]), (high[0], high[1], high[2])
+
+
+def lamps_over(waters: Sequence[CausticWater], lamps: Sequence[tuple[int, np.ndarray, float]]) -> list[int]:
+    """The Lights block slots of ``lamps`` ((slot, world position, range) each, by slot) that
+    stand over one of ``waters`` (in front of its plane) and reach its box
+    (``CausticWater.box``) within their range: the lamps whose light the waves gather."""
+    found = []
+    for slot, position, reach in lamps:
+        p = np.asarray(position, np.float64)
+        for water in waters:
+            plane = np.asarray(water.rows[:4], np.float64)
+            lo, hi = np.asarray(water.box[0]), np.asarray(water.box[1])
+            if plane[:3] @ p + plane[3] > 0.0 and np.linalg.norm(p - np.clip(p, lo, hi)) < reach:
+                found.append(slot)
+                break
+    return found
 
 
 def caustic_waters_of(box: Box, bodies: tuple[tuple[int, Box], ...]) -> tuple[int, ...]:
@@ -236,6 +259,7 @@ class CausticBlock:
         self.supported = texture_units >= CAUSTIC_SAMPLERS
         self.texture_units = texture_units
         self.waters: tuple[CausticWater, ...] = ()
+        self.lamps: tuple[int, ...] = ()   # the Lights block slots of the lamps whose light is gathered
         self.maps = CausticMaps(ctx)
         self.defines: tuple[tuple[str, str], ...] = ()
         self._warned = False
@@ -243,9 +267,13 @@ class CausticBlock:
         self._slots: dict[int, tuple] = {}
         self._layout: tuple = ()
 
-    def set(self, waters: Sequence[CausticWater]) -> bool:
+    def set(self, waters: Sequence[CausticWater], lamps: Sequence[int] = ()) -> bool:
         """Hold ``waters`` (at most ``MAX_CAUSTIC_WATERS``, a slot each in their order; none:
-        none); True when what the scene shows changed."""
+        none) and the Lights block slots of the ``lamps`` over them whose light they gather
+        (at most ``MAX_CAUSTIC_LAMPS``: ``lamps_over``; the CAUSTIC_LAMPS builds while any);
+        True when what the scene shows changed."""
+        if len(lamps) > MAX_CAUSTIC_LAMPS:
+            raise ValueError(f"{len(lamps)} caustic lamps given; the block holds {MAX_CAUSTIC_LAMPS}")
         if len(waters) > MAX_CAUSTIC_WATERS:
             raise ValueError(f"{len(waters)} caustic waters given; the block holds {MAX_CAUSTIC_WATERS}")
         if waters and not self.supported:
@@ -262,19 +290,22 @@ class CausticBlock:
             self._layout = layout
             self._slots.clear()
         if not waters:
-            self.waters, self.defines = (), ()
+            self.waters, self.defines, self.lamps = (), (), ()
             self.maps.release()
             return bool(old)
         remade = self.maps.hold([water.normal_map for water in waters])
+        old_lamps, self.lamps = self.lamps, tuple(lamps)
         self.waters = waters
-        self.defines = (("CAUSTICS", "1"), ("MAX_CAUSTIC_WATERS", str(MAX_CAUSTIC_WATERS)))
-        if not remade and len(old) == len(waters) and all(
+        self.defines = (("CAUSTICS", "1"), ("MAX_CAUSTIC_WATERS", str(MAX_CAUSTIC_WATERS)),
+                        *((("CAUSTIC_LAMPS", "1"),) if lamps else ()))
+        if not remade and old_lamps == self.lamps and len(old) == len(waters) and all(
                 a.entity == b.entity and a.rows == b.rows and a.box == b.box for a, b in zip(old, waters, strict=True)):
             return False
         block = np.zeros((_ROWS, MAX_CAUSTIC_WATERS, 4), np.float32)
         for slot, water in enumerate(waters):
             block[:, slot] = np.asarray(water.rows, np.float32).reshape(_ROWS, 4)
-        self.ubo.write(block.tobytes() + np.array([len(waters), 0, 0, 0], np.int32).tobytes())
+        slots = [*self.lamps, *[-1] * (MAX_CAUSTIC_LAMPS - len(self.lamps))]
+        self.ubo.write(block.tobytes() + np.array([len(waters), 0, 0, 0, *slots], np.int32).tobytes())
         return True
 
     def slots_of(self, box: tuple[np.ndarray, np.ndarray] | None, keyed: tuple[int, ...],
@@ -306,7 +337,7 @@ class CausticBlock:
     def release(self) -> None:
         self.ubo.release()
         self.maps.release()
-        self.waters, self.defines = (), ()
+        self.waters, self.defines, self.lamps = (), (), ()
 
 
 def reaches(batch_box: tuple[np.ndarray, np.ndarray] | None,

@@ -20,7 +20,9 @@
 // several places on the surface and the search finds one: the net stays, its brightness
 // there is that branch's, not the sum's.
 // Up to MAX_CAUSTIC_WATERS waters (a define the block's owner gives), by entity; a draw names
-// the ones its batch reaches into (caustic_waters).
+// the ones its batch reaches into (caustic_waters).  A lamp's light is gathered the same way
+// (caustic_lamp_light, CAUSTIC_LAMPS builds: up to four lamps over a held water, caustic_lamps),
+// its rays fanning out from it: the ratio is the flat water's spread over the waves'.
 layout(std140) uniform Caustics {
     vec4 caustic_plane[MAX_CAUSTIC_WATERS];   // xyz: the water's up normal (out of its top), w: its plane's d
     vec4 caustic_u[MAX_CAUSTIC_WATERS];       // the mirror's UV u as dot(xyz, p) + w (the UV square, before tiling)
@@ -30,6 +32,7 @@ layout(std140) uniform Caustics {
     vec4 caustic_flow[MAX_CAUSTIC_WATERS];    // xy: the waves' offset (Water.offset), z: 1 / ior, w: strength (Water.caustics)
     vec4 caustic_sizes[MAX_CAUSTIC_WATERS];   // x: tiling, y: a map texel in metres, z: the body's depth, w: the sun's spread (radians)
     ivec4 caustic_held;                       // x: how many waters the block holds
+    ivec4 caustic_lamps;                      // the Lights block's slots of the lamps over a held water, -1 after
 };
 // Each water's normal map (Material.normal_map) a layer, at one size (engine/render/caustics.py CausticMaps).
 uniform sampler2DArray caustic_maps;
@@ -102,3 +105,62 @@ float caustic_light(int w, vec3 x, vec3 l, float footprint) {
 float caustic_reflected_light(int w, vec3 x, vec3 l, float footprint) {
     return caustic_gather(w, x, l, footprint, true);
 }
+
+#ifdef CAUSTIC_LAMPS
+// The share of a lamp's light that reaches x under water w (the lamp at ``lamp``, world, over
+// the water; ``radius`` its sphere's, which blurs the net as the sun's disc does): the flat
+// water's spread of the lamp's rays at x over the waves' (|det J_flat| / |det J|: its rays fan
+// out through a flat surface too), mixed in by the strength; 1 off the water, past its body,
+// or with the lamp under it.  The flat water's crossing is found along the line from the
+// lamp's foot through x's (Snell's law is symmetric about it: Newton's method on r + h tan t
+// = R), and J_flat there in closed form (across the line its stretch is R / r); the waves'
+// crossing then by the chord method with J_flat (the sun's fixed-point search, whose J_flat
+// is 1), from the flat one.
+float caustic_lamp_light(int w, vec3 x, vec3 lamp, float radius, float footprint) {
+    vec3 up = caustic_plane[w].xyz;
+    float h = -(dot(up, x) + caustic_plane[w].w);
+    float a = dot(up, lamp) + caustic_plane[w].w;   // the lamp's height over the plane
+    if (h <= 0.0 || h > caustic_sizes[w].z || a <= 1e-4) return 1.0;
+    float eta = caustic_flow[w].z;
+    vec3 on_plane = x + up * h;
+    vec3 foot = lamp - up * a;
+    vec3 outward = on_plane - foot;
+    float far_out = length(outward);   // R
+    vec3 radial = far_out > 1e-6 ? outward / far_out : caustic_axis_u[w].xyz;
+    vec3 across = cross(up, radial);
+    float r = far_out * a / (a + h);   // the straight line's crossing
+    float stretch_along = 1.0;
+    for (int k = 0; k < 5; ++k) {
+        float hyp = sqrt(r * r + a * a);
+        float sin_t = r / hyp * eta;
+        float cos_t = sqrt(max(1.0 - sin_t * sin_t, 1e-6));
+        stretch_along = 1.0 + h * (a * a / (hyp * hyp * hyp) * eta) / (cos_t * cos_t * cos_t);
+        r = max(r - (r + h * sin_t / cos_t - far_out) / stretch_along, 0.0);
+    }
+    float hyp = sqrt(r * r + a * a);   // (the stretch where the search ended)
+    float sin_t = r / hyp * eta;
+    float cos_t = sqrt(max(1.0 - sin_t * sin_t, 1e-6));
+    stretch_along = 1.0 + h * (a * a / (hyp * hyp * hyp) * eta) / (cos_t * cos_t * cos_t);
+    float stretch_across = r > 1e-4 * (a + h) ? far_out / r : stretch_along;
+    vec3 s = foot + radial * r;
+    vec2 uv0 = vec2(dot(caustic_u[w].xyz, s) + caustic_u[w].w, dot(caustic_v[w].xyz, s) + caustic_v[w].w);
+    if (any(lessThan(uv0, vec2(0.0))) || any(greaterThan(uv0, vec2(1.0)))) return 1.0;
+    vec3 e1 = caustic_axis_u[w].xyz;
+    vec3 e2 = normalize(caustic_axis_v[w].xyz - dot(caustic_axis_v[w].xyz, e1) * e1);
+    float spread = h * radius / max(length(lamp - s), 1e-3);   // the lamp's sphere seen from the surface
+    float stride = max(max(caustic_sizes[w].y, spread), footprint);
+    float lod = log2(stride / caustic_sizes[w].y);
+    for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) {
+        vec3 miss = s + caustic_offset(w, s, normalize(lamp - s), h, lod, false) - on_plane;
+        s -= radial * (dot(radial, miss) / stretch_along) + across * (dot(across, miss) / stretch_across);
+    }
+    vec3 half1 = e1 * (0.5 * stride), half2 = e2 * (0.5 * stride);
+    vec3 d1 = caustic_offset(w, s + half1, normalize(lamp - s - half1), h, lod, false)
+              - caustic_offset(w, s - half1, normalize(lamp - s + half1), h, lod, false);
+    vec3 d2 = caustic_offset(w, s + half2, normalize(lamp - s - half2), h, lod, false)
+              - caustic_offset(w, s - half2, normalize(lamp - s + half2), h, lod, false);
+    float det = (1.0 + dot(d1, e1) / stride) * (1.0 + dot(d2, e2) / stride) - dot(d1, e2) / stride * (dot(d2, e1) / stride);
+    float flat_det = stretch_along * stretch_across;
+    return mix(1.0, flat_det / max(abs(det), flat_det / CAUSTIC_MAX_FOCUS), caustic_flow[w].w);
+}
+#endif
