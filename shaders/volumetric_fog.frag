@@ -180,6 +180,13 @@ void main() {
 #ifdef PANEL_PICTURES
                 cookie *= face_mean(lights.point_rect_v[j]);   // (a panel's picture: its mean colour)
 #endif
+#ifdef CAUSTIC_LAMPS
+                for (int c = 0; c < 4; ++c) {   // (a lamp over rippled water: the columns its waves gather)
+                    if (caustic_lamps[c] != j) continue;
+                    for (int w = 0; w < caustic_held.x; ++w)
+                        cookie *= caustic_lamp_light(w, x, lights.point_pos[j].xyz, lights.point_color[j].w, 0.0);
+                }
+#endif
                 lamps += lights.point_color[j].rgb * cookie * (lamp_scatter[k] * lamp_falloff(j, dist, l)
                          * henyey_greenstein(dot(dir, l), anisotropy) * point_shadow(j, lamp_lit)
                          * water_light(x, l, dist));   // (1 but in FOG_WATER builds: a water's body on the way)

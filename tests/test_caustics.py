@@ -747,9 +747,10 @@ def test_what_stands_over_a_water_that_reflects_light_is_drawn_with_its_caustics
 LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics
 
 
-def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT) -> np.ndarray:
-    """The light at floor points ``xs`` (on the line under the lamp, along the waves' U) of a
-    lamp ``lamp_height`` over the pool, through the waves, over the same through flat water,
+def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, depth: float = DEPTH) -> np.ndarray:
+    """The light at points ``xs`` ``depth`` under the surface (on the line under the lamp,
+    along the waves' U) of a lamp ``lamp_height`` over the pool, through the waves, over the
+    same through flat water,
     by tracing: rays from the lamp cross the surface at a fine row of points, each bent by the
     map's normal there (as ``traced_light``), and land on the floor; the light at a landing is
     the light through the crossing (the lamp's cos / distance^2 there, and Fresnel's
@@ -775,7 +776,7 @@ def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT) -> np.nd
             distance = np.linalg.norm(incident, axis=1)
             incident /= distance[:, None]
             ray = refract(incident, normal, 1.0 / IOR)
-            t = DEPTH / -ray[:, 1]
+            t = depth / -ray[:, 1]
             cos_i = -np.sum(incident * normal, axis=1)
             # (Fresnel's transmission, unpolarised, at the crossing)
             cos_t = -np.sum(ray * normal, axis=1)
@@ -851,3 +852,71 @@ def test_the_lamps_over_a_water_are_held_up_to_four_and_the_rest_are_said(scene)
                   runner.world.get(entity, Transform).position.x < 5.0)
     assert list(held) == over[:MAX_CAUSTIC_LAMPS]
     assert ("CAUSTIC_LAMPS", "1") in runner.engine.renderer.caustics.defines
+
+
+def test_the_light_shafts_under_rippled_water_carry_a_lamps_caustics(scene):
+    """Looking straight down from under a murky pool lit by a lamp over it, with light shafts:
+    along the line under the lamp, each march texel's light with caustics over its light
+    without is the ground truth's: the sum along its ray of density x transmittance x the
+    lamp's light at each point (its falloff, the phase function, the water over it on its way)
+    times the traced caustic at the point's depth, over the same sum without the caustic."""
+    from components import Fog, VolumetricFog
+    from tests.test_volumetric_fog import march_rays, marched_light
+
+    body, air = 0.3, 0.002
+    settings = VolumetricFog(steps=64, half_resolution=True)
+    deep, lamp_range = 1.0, 20.0
+
+    def build(caustics):
+        def b(world):
+            lamp_pool(caustics)(world)
+            camera = next(e for e, _ in world.query_one(Camera))
+            world.get(camera, Transform).position = glm.vec3(0.0, -0.2, 0.0)
+            world.add_component(camera, Fog(density=air, color=(0.0, 0.0, 0.0)))
+            world.add_component(camera, settings)
+            water = next(e for e, _ in world.query_one(Water))
+            world.get(water, Water).fog_density = body
+            world.get(water, Water).fog_color = (0.0, 0.0, 0.0)
+        return b
+
+    marched = {}
+    for caustics in (1.0, 0.0):
+        runner = scene(build(caustics), (96, 64))
+        runner.frame()
+        marched[caustics] = marched_light(runner)[..., 0]
+    assert runner.engine.renderer.caustics.lamps == ()   # (caustics 0: the last runner holds none)
+    origin, way, (rows, columns) = march_rays(runner, (96, 64), 2)
+    reach = np.minimum((-deep - origin[:, 1]) / way[:, 1], settings.distance)
+    line = np.abs(origin[:, 2] + way[:, 2] * reach) < 0.03   # the texels whose rays stay near z = 0
+    points = 300
+    t = (np.arange(points) + 0.5) / points
+    along = reach[line, None] * t[None, :]
+    at = origin[line, None, :] + way[line, None, :] * along[..., None]
+    lamp = np.array([0.0, LAMP_HEIGHT, 0.0])
+    to_lamp = lamp - at
+    dist = np.linalg.norm(to_lamp, axis=-1)
+    l = to_lamp / dist[..., None]
+    fade = np.clip(1.0 - (dist / lamp_range) ** 4, 0.0, 1.0)
+    g = settings.anisotropy
+    c = np.einsum("ij,ikj->ik", way[line], l)
+    phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
+    h = -at[..., 1]
+    density = air + body
+    through = np.exp(-body * h / l[..., 1])   # (the lamp's light down through the water over the point)
+    weight = density * np.exp(-density * along) * fade * fade / (dist * dist + 1.0) * phase * through
+    depths = np.linspace(0.02, deep, 20)
+    grid_x = np.linspace(at[..., 0].min() - 0.05, at[..., 0].max() + 0.05, 801)
+    table = np.stack([traced_lamp_light(grid_x, LAMP_HEIGHT, d) for d in depths])   # [depth, x]
+    k = np.clip(np.searchsorted(depths, h) - 1, 0, len(depths) - 2)
+    w = np.clip((h - depths[k]) / (depths[k + 1] - depths[k]), 0.0, 1.0)
+    fx = (at[..., 0] - grid_x[0]) / (grid_x[1] - grid_x[0])
+    i = np.clip(np.floor(fx).astype(int), 0, len(grid_x) - 2)
+    f = fx - i
+    gathered = ((table[k, i] * (1.0 - f) + table[k, i + 1] * f) * (1.0 - w)
+                + (table[k + 1, i] * (1.0 - f) + table[k + 1, i + 1] * f) * w)
+    gathered = np.where(h < depths[0], 1.0, gathered)   # (at the surface: the flat water's light)
+    truth = (weight * gathered).sum(1) / weight.sum(1)
+    ratio = (marched[1.0] / marched[0.0]).ravel()[line]
+    assert line.sum() > 30 and truth.max() > 1.2, (line.sum(), truth.max())
+    assert np.corrcoef(ratio, truth)[0, 1] > 0.99, np.corrcoef(ratio, truth)[0, 1]
+    assert np.median(np.abs(ratio - truth)) < 0.01, np.median(np.abs(ratio - truth))
