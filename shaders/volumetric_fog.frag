@@ -207,6 +207,11 @@ void main() {
 #else
                 vec3 cookie = vec3(1.0);
 #endif
+#ifdef CAUSTICS
+                // (the sun's image in a rippled water: the light its waves throw up, virtual_lights.glsl's)
+                int caustic = int(virtual_lights.virtual_v[k].w) - 1;
+                if (caustic >= 0) cookie *= caustic_reflected_light(caustic, x, reflect(l, caustic_plane[caustic].xyz), 0.0);
+#endif
                 images += virtual_lights.virtual_color[k].rgb * cookie * virtual_kept(k, x, l, dist)
                           * (falloff * henyey_greenstein(dot(dir, l), anisotropy) * virtual_shadow(k, x, vec3(0.0), l, dist));
             }

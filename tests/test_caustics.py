@@ -920,3 +920,72 @@ def test_the_light_shafts_under_rippled_water_carry_a_lamps_caustics(scene):
     assert line.sum() > 30 and truth.max() > 1.2, (line.sum(), truth.max())
     assert np.corrcoef(ratio, truth)[0, 1] > 0.99, np.corrcoef(ratio, truth)[0, 1]
     assert np.median(np.abs(ratio - truth)) < 0.01, np.median(np.abs(ratio - truth))
+
+
+def test_the_light_shafts_over_a_rippled_water_carry_the_light_it_throws_up(scene):
+    """A sunlit pool that reflects light, seen through the foggy air over it with light shafts:
+    what the water's image of the sun adds to each march texel (the march less the one with
+    ``reflects_light`` off), with caustics over without, is the ground truth's: along the
+    texel's ray, density x transmittance x the phase function where the line to the image
+    crosses the pool (the image lights nothing else), times the reflected light a ray tracer
+    gathers at the point's height, over the same sum without it."""
+    from components import Fog, VolumetricFog
+    from tests.test_volumetric_fog import march_rays, marched_light
+
+    air = 0.05
+    settings = VolumetricFog(steps=64, half_resolution=True)
+    wall = 2.5   # (along the waves' lines, +z: each ray keeps to the lines it starts among)
+
+    def build(caustics: float, reflects: bool):
+        def b(world):
+            eye = glm.vec3(0.0, 0.3, -2.5)
+            world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.0, 0.55, wall) - eye)),
+                        Camera(fov_y=20.0), Fog(density=air, color=(0.0, 0.0, 0.0)), settings)
+            world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+            world.spawn(DirectionalLight(direction=tuple(SUN), intensity=30.0))
+            world.spawn(Transform(position=(0.0, 0.0, wall), rotation=glm.angleAxis(math.pi, glm.vec3(0, 1, 0))),
+                        MeshRef(quad(20.0, 20.0)), Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0))
+            world.spawn(Transform(rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+                        Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE),
+                                 normal_scale=CALM),
+                        Mirror(reflects_light=reflects),
+                        Water(ior=IOR, tiling=TILING, speed=0.0, cross=0.0, caustics=caustics))
+        return b
+
+    marched = {}
+    for caustics, reflects in ((1.0, True), (0.0, True), (1.0, False)):
+        runner = scene(build(caustics, reflects), (96, 64))
+        runner.frame()
+        marched[caustics, reflects] = marched_light(runner)[..., 0]
+    origin, way, (rows, columns) = march_rays(runner, (96, 64), 2)
+    reach = np.minimum((wall - origin[:, 2]) / way[:, 2], settings.distance)
+    line = way[:, 1] > 0.02   # the texels over the water
+    points = 600
+    t = (np.arange(points) + 0.5) / points
+    along = reach[line, None] * t[None, :]
+    at = origin[line, None, :] + way[line, None, :] * along[..., None]
+    thrown = reflect(np.array([tuple(SUN)]), np.array([[0.0, 1.0, 0.0]]))[0]   # the image's light's way
+    crossed = at - thrown[None, None, :] * (at[..., 1:2] / thrown[1])   # where its line meets the plane
+    lit = (np.abs(crossed[..., 0]) < SIDE / 2.0) & (np.abs(crossed[..., 2]) < SIDE / 2.0)
+    g = settings.anisotropy
+    c = way[line] @ -thrown
+    phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
+    weight = air * np.exp(-air * along) * phase[:, None] * lit
+    heights = np.linspace(0.02, at[..., 1].max() + 0.05, 24)
+    grid_x = np.linspace(at[..., 0].min() - 0.05, at[..., 0].max() + 0.05, 801)
+    table = np.stack([traced_reflected_light(grid_x, height) for height in heights])   # [height, x]
+    y = at[..., 1]
+    k = np.clip(np.searchsorted(heights, y) - 1, 0, len(heights) - 2)
+    w = np.clip((y - heights[k]) / (heights[k + 1] - heights[k]), 0.0, 1.0)
+    fx = (at[..., 0] - grid_x[0]) / (grid_x[1] - grid_x[0])
+    i = np.clip(np.floor(fx).astype(int), 0, len(grid_x) - 2)
+    f = fx - i
+    gathered = ((table[k, i] * (1.0 - f) + table[k, i + 1] * f) * (1.0 - w)
+                + (table[k + 1, i] * (1.0 - f) + table[k + 1, i + 1] * f) * w)
+    kept = weight.sum(1) > 0.0
+    truth = (weight * gathered).sum(1)[kept] / weight.sum(1)[kept]
+    off = marched[1.0, False].ravel()[line][kept]
+    ratio = (marched[1.0, True].ravel()[line][kept] - off) / (marched[0.0, True].ravel()[line][kept] - off)
+    assert kept.sum() > 200 and truth.max() > 1.5, (kept.sum(), truth.max())
+    assert np.corrcoef(ratio, truth)[0, 1] > 0.99, np.corrcoef(ratio, truth)[0, 1]
+    assert np.median(np.abs(ratio - truth)) < 0.01, np.median(np.abs(ratio - truth))
