@@ -453,6 +453,19 @@ def test_the_overlays_switch_takes_the_caustics_off_and_on(scene):
     np.testing.assert_array_equal(srgb_to_linear(runner.frame(1.0 / 60.0)), lit)
 
 
+def table_at(table: np.ndarray, levels: np.ndarray, grid_x: np.ndarray, level: np.ndarray,
+             x: np.ndarray) -> np.ndarray:
+    """``table`` ([level, x]: a traced light at each of ``levels``, depths or heights, over
+    ``grid_x``) read at points ``level``, ``x`` (any shape), bilinearly."""
+    k = np.clip(np.searchsorted(levels, level) - 1, 0, len(levels) - 2)
+    w = np.clip((level - levels[k]) / (levels[k + 1] - levels[k]), 0.0, 1.0)
+    fx = (x - grid_x[0]) / (grid_x[1] - grid_x[0])
+    i = np.clip(np.floor(fx).astype(int), 0, len(grid_x) - 2)
+    f = fx - i
+    return ((table[k, i] * (1.0 - f) + table[k, i + 1] * f) * (1.0 - w)
+            + (table[k + 1, i] * (1.0 - f) + table[k + 1, i + 1] * f) * w)
+
+
 def traced_light_at(xs: np.ndarray, depth: float, tiles: float = 1.0) -> np.ndarray:
     """``traced_light`` for a floor ``depth`` down under a sun straight down, the pool
     ``tiles`` times as wide (as many more map repeats), the crossings spaced by the larger of
@@ -525,13 +538,7 @@ def test_the_light_shafts_under_rippled_water_carry_its_caustics(scene, second):
     grid_x = np.linspace(at[..., 0].min() - 0.1, at[..., 0].max() + 0.1, 4001)
     table = np.stack([traced_light_at(grid_x, d, tiles) for d in depths])   # [depth, x]
     h = -at[..., 1]
-    k = np.clip(np.searchsorted(depths, h) - 1, 0, len(depths) - 2)
-    w = np.clip((h - depths[k]) / (depths[k + 1] - depths[k]), 0.0, 1.0)
-    fx = (at[..., 0] - grid_x[0]) / (grid_x[1] - grid_x[0])
-    i = np.clip(np.floor(fx).astype(int), 0, len(grid_x) - 2)
-    f = fx - i
-    gathered = ((table[k, i] * (1.0 - f) + table[k, i + 1] * f) * (1.0 - w)
-                + (table[k + 1, i] * (1.0 - f) + table[k + 1, i + 1] * f) * w)   # (bilinear in depth and x)
+    gathered = table_at(table, depths, grid_x, h, at[..., 0])
     density = air + body
     g = settings.anisotropy
     phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * (way @ np.array([0.0, 1.0, 0.0]))) ** 1.5)
@@ -907,13 +914,7 @@ def test_the_light_shafts_under_rippled_water_carry_a_lamps_caustics(scene):
     depths = np.linspace(0.02, deep, 20)
     grid_x = np.linspace(at[..., 0].min() - 0.05, at[..., 0].max() + 0.05, 801)
     table = np.stack([traced_lamp_light(grid_x, LAMP_HEIGHT, d) for d in depths])   # [depth, x]
-    k = np.clip(np.searchsorted(depths, h) - 1, 0, len(depths) - 2)
-    w = np.clip((h - depths[k]) / (depths[k + 1] - depths[k]), 0.0, 1.0)
-    fx = (at[..., 0] - grid_x[0]) / (grid_x[1] - grid_x[0])
-    i = np.clip(np.floor(fx).astype(int), 0, len(grid_x) - 2)
-    f = fx - i
-    gathered = ((table[k, i] * (1.0 - f) + table[k, i + 1] * f) * (1.0 - w)
-                + (table[k + 1, i] * (1.0 - f) + table[k + 1, i + 1] * f) * w)
+    gathered = table_at(table, depths, grid_x, h, at[..., 0])
     gathered = np.where(h < depths[0], 1.0, gathered)   # (at the surface: the flat water's light)
     truth = (weight * gathered).sum(1) / weight.sum(1)
     ratio = (marched[1.0] / marched[0.0]).ravel()[line]
@@ -974,14 +975,7 @@ def test_the_light_shafts_over_a_rippled_water_carry_the_light_it_throws_up(scen
     heights = np.linspace(0.02, at[..., 1].max() + 0.05, 24)
     grid_x = np.linspace(at[..., 0].min() - 0.05, at[..., 0].max() + 0.05, 801)
     table = np.stack([traced_reflected_light(grid_x, height) for height in heights])   # [height, x]
-    y = at[..., 1]
-    k = np.clip(np.searchsorted(heights, y) - 1, 0, len(heights) - 2)
-    w = np.clip((y - heights[k]) / (heights[k + 1] - heights[k]), 0.0, 1.0)
-    fx = (at[..., 0] - grid_x[0]) / (grid_x[1] - grid_x[0])
-    i = np.clip(np.floor(fx).astype(int), 0, len(grid_x) - 2)
-    f = fx - i
-    gathered = ((table[k, i] * (1.0 - f) + table[k, i + 1] * f) * (1.0 - w)
-                + (table[k + 1, i] * (1.0 - f) + table[k + 1, i + 1] * f) * w)
+    gathered = table_at(table, heights, grid_x, at[..., 1], at[..., 0])
     kept = weight.sum(1) > 0.0
     truth = (weight * gathered).sum(1)[kept] / weight.sum(1)[kept]
     off = marched[1.0, False].ravel()[line][kept]

@@ -336,6 +336,43 @@ def test_the_loader_reads_back_the_lights_and_the_camera(scene, tmp_path):
                                glm.vec3(placed.world * glm.vec4(0, 0, -1, 0)), atol=1e-6)
 
 
+def spawned(path):
+    """A world that spawns the exported file ``path`` under a dim sky (glTF has none) and looks
+    through its camera."""
+    def again(world):
+        world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
+        spawn_model(world, path)
+        (camera,) = [entity for entity, _ in world.query_one(Camera)]
+        world.get(camera, Camera).active = True
+    return again
+
+
+def frame(runner):
+    """The second frame, linear, without anti-aliasing."""
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return srgb_to_linear(runner.frame())
+
+
+def assert_drawn_as_before(after: np.ndarray, before: np.ndarray) -> None:
+    """The file spawned again draws what the world drew: all but a few edge pixels alike."""
+    difference = np.abs(after - before).max(axis=-1)
+    assert np.median(difference) < 0.004 and (difference > 0.05).mean() < 0.01, (np.median(difference),
+                                                                                 (difference > 0.05).mean())
+
+
+def drawn_without_extras(scene, doc: dict, tmp_path) -> np.ndarray:
+    """The frame of the exported file ``doc`` (its JSON) with its lights' extras taken out,
+    written beside the first (any buffer file it names is there too)."""
+    import json
+
+    for light in doc["extensions"]["KHR_lights_punctual"]["lights"]:
+        light.pop("extras", None)
+    bare = tmp_path / "bare.gltf"
+    bare.write_text(json.dumps(doc))
+    return frame(scene(spawned(bare), (128, 96)))
+
+
 def test_a_lamps_shape_is_read_back_from_its_extras_and_lights_as_it_did(scene, tmp_path):
     """A sphere lamp, a rectangle and a tube over a glossy floor: each exported light's
     ``extras`` hold its shape (KHR_lights_punctual has no word for one), the loader reads them
@@ -355,19 +392,6 @@ def test_a_lamps_shape_is_read_back_from_its_extras_and_lights_as_it_did(scene, 
             world.spawn(Transform(position=(x, 1.0, -0.5), rotation=down),
                         PointLight(intensity=2.0, range=8.0, **shape))
 
-    def spawned(path):
-        def again(world):   # the sky alone by hand: glTF has none
-            world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
-            spawn_model(world, path)
-            (camera,) = [entity for entity, _ in world.query_one(Camera)]
-            world.get(camera, Camera).active = True
-        return again
-
-    def frame(runner):
-        runner.engine.renderer.antialias = "off"
-        runner.frame()
-        return srgb_to_linear(runner.frame())
-
     original = scene(build_lamps, (128, 96))
     before = frame(original)
     camera = next(entity for entity, _ in original.world.query_one(Camera))
@@ -382,14 +406,8 @@ def test_a_lamps_shape_is_read_back_from_its_extras_and_lights_as_it_did(scene, 
     for (_, lamp), shape in zip(made, lamps.values(), strict=True):
         for name, value in shape.items():
             assert getattr(lamp, name) == pytest.approx(value), (name, getattr(lamp, name))
-    difference = np.abs(after - before).max(axis=-1)
-    assert np.median(difference) < 0.004 and (difference > 0.05).mean() < 0.01, (np.median(difference),
-                                                                                 (difference > 0.05).mean())
-    for light in doc["extensions"]["KHR_lights_punctual"]["lights"]:
-        light.pop("extras")
-    bare = tmp_path / "bare.gltf"
-    bare.write_text(json.dumps(doc))   # (beside the first: any buffer file it names is there too)
-    points = frame(scene(spawned(bare), (128, 96)))
+    assert_drawn_as_before(after, before)
+    points = drawn_without_extras(scene, doc, tmp_path)
     assert np.abs(points - before).max(axis=-1).max() > 0.1   # (the shapes show in the frame)
 
 
@@ -417,19 +435,6 @@ def test_a_lights_engine_fields_are_read_back_from_its_extras_and_light_as_they_
                     PointLight(intensity=3.0, range=10.0, **lamp_fields))
         world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.3), intensity=0.2, **sun_fields))
 
-    def spawned(path):
-        def again(world):
-            world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
-            spawn_model(world, path)
-            (camera,) = [entity for entity, _ in world.query_one(Camera)]
-            world.get(camera, Camera).active = True
-        return again
-
-    def frame(runner):
-        runner.engine.renderer.antialias = "off"
-        runner.frame()
-        return srgb_to_linear(runner.frame())
-
     original = scene(build, (128, 96))
     before = frame(original)
     camera = next(entity for entity, _ in original.world.query_one(Camera))
@@ -449,12 +454,6 @@ def test_a_lights_engine_fields_are_read_back_from_its_extras_and_light_as_they_
         for name in names:
             assert getattr(made, name) == pytest.approx(getattr(was, name)), (name, getattr(made, name))
     assert {f.name for f in dataclasses.fields(PointLight)} >= set(lamp_fields)
-    difference = np.abs(after - before).max(axis=-1)
-    assert np.median(difference) < 0.004 and (difference > 0.05).mean() < 0.01, (np.median(difference),
-                                                                                 (difference > 0.05).mean())
-    for light in doc["extensions"]["KHR_lights_punctual"]["lights"]:
-        light.pop("extras")
-    bare = tmp_path / "bare.gltf"
-    bare.write_text(json.dumps(doc))
-    plain = frame(scene(spawned(bare), (128, 96)))
+    assert_drawn_as_before(after, before)
+    plain = drawn_without_extras(scene, doc, tmp_path)
     assert ((plain - before).max(axis=-1) > 0.05).mean() > 0.05   # (the box's shadow gone)
