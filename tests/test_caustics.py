@@ -859,6 +859,9 @@ def test_the_lamps_over_a_water_are_held_up_to_four_and_the_rest_are_said(scene)
                   runner.world.get(entity, Transform).position.x < 5.0)
     assert list(held) == over[:MAX_CAUSTIC_LAMPS]
     assert ("CAUSTIC_LAMPS", "1") in runner.engine.renderer.caustics.defines
+    from shell.overlay_text import overlay_lines
+
+    assert any("caustic lamps 2" in line for line in overlay_lines(runner.engine, [0.016]))   # (the overlay says it)
 
 
 def test_the_light_shafts_under_rippled_water_carry_a_lamps_caustics(scene):
