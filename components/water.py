@@ -13,6 +13,8 @@ from components.tracking import ComponentValueError, TrackedComponent, color, fi
 MAX_WATER_SPEED = 100.0    # normal-map tiles a second; faster is a strobe, not a wave
 MAX_WATER_TILING = 1000.0  # repeats of the map across the mirror's UV square
 MAX_WATER_ABSORPTION = 64.0  # a channel's share of fog_density: past it the channel is gone within millimetres
+MIN_FOAM_SIZE = 0.001        # metres: the least foam_depth and foam_scale
+MAX_FOAM_SCALE = 100.0       # metres across a foam cell
 
 
 @dataclass(eq=False)
@@ -87,6 +89,16 @@ class Water(TrackedComponent):
       d), on the view's way (what is seen becomes ``fog_color`` as its light goes) and on
       the light's (the suns', the lamps', the sky's, and the light shafts'), as HDRP's water
       takes its absorption and Crest its colour with depth.
+    - **Shore foam** (``foam``, 0 by default: none; 1: all of it): white water where the
+      water is shallow: where what the view sees under a point of the surface is less than
+      ``foam_depth`` metres below it (along the shore, and beside what stands in the water on
+      the sides the view sees under the surface), a pattern of cells ``foam_scale`` metres
+      across (carried with the waves' ``offset``; a still water's stays) covers the
+      surface, all of it at the water's edge and less of it deeper, in ``foam_color`` (a
+      linear albedo), lit as any surface is (the suns and their shadows, the lamps, the light
+      from all round), over the water's reflection and what is seen through it
+      (``shaders/include/foam.glsl``).  Drawn in every view the view trees draw; a probe's
+      faces show the water without it.
     - **Caustics** (``caustics``, 0 by default: none; 1: all of them): the suns' light (and
       the lamps' over the water: up to four) through the waves is bent by each one and
       gathers where the bent rays converge, so what lies
@@ -112,6 +124,10 @@ class Water(TrackedComponent):
     depth: float = 10.0
     absorption: Any = (1.0, 1.0, 1.0)
     caustics: float = 0.0
+    foam: float = 0.0
+    foam_depth: float = 0.3
+    foam_scale: float = 0.2
+    foam_color: Any = field(default_factory=lambda: glm.vec4(0.85, 0.88, 0.9, 1.0))
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "fog_density":
@@ -120,8 +136,14 @@ class Water(TrackedComponent):
             return color(self, name, value)
         if name == "depth":
             return finite(self, name, value, low=MIN_FOG_VOLUME_SIDE, high=MAX_FOG_VOLUME_SIDE)
-        if name == "caustics":
+        if name in ("caustics", "foam"):
             return finite(self, name, value, low=0.0, high=1.0)
+        if name == "foam_depth":
+            return finite(self, name, value, low=MIN_FOAM_SIZE, high=MAX_FOG_VOLUME_SIDE)
+        if name == "foam_scale":
+            return finite(self, name, value, low=MIN_FOAM_SIZE, high=MAX_FOAM_SCALE)
+        if name == "foam_color":
+            return color(self, name, value)
         if name == "absorption":
             return vec3(self, name, value, low=0.0, high=MAX_WATER_ABSORPTION, why=" (its share of fog_density)")
         if name == "ior":

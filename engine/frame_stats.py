@@ -103,6 +103,7 @@ class RenderStats(BudgetLedger):
     fog_volumes_cut: int = 0             # FogVolumes past MAX_FOG_VOLUMES (the farthest from the camera: no fog)
     caustic_waters_cut: int = 0          # waters with caustics past MAX_CAUSTIC_WATERS (the farthest: no caustics)
     caustic_lamps_cut: int = 0           # lamps over caustic waters past MAX_CAUSTIC_LAMPS (the last slots: none)
+    foam_waters_cut: int = 0             # waters with foam past MAX_FOAM_WATERS (the last by entity: none)
     volumetric_lamps_cut: int = 0        # point lights with volumetric past MAX_VOLUMETRIC_LAMPS (not in the air)
     virtual_lights: int = 0              # lights shining through mirrors and portals this frame
     virtual_lights_cut: int = 0          # ... that the limit or the view budget left out

@@ -25,6 +25,9 @@ uniform ivec4 caustic_waters;
 vec4 lamp_caustic = vec4(1.0);
 #endif
 #endif
+#ifdef FOAM
+#include "foam.glsl"
+#endif
 #include "hdr.glsl"
 #include "way.glsl"
 uniform samplerCube sky_map;
@@ -1072,6 +1075,18 @@ void main() {
 #endif
     s.albedo = base.rgb;
     s.alpha = base.a;
+#ifdef FOAM
+    // A water's shore foam, drawn over its view's level (foam.glsl): its own colour, covering
+    // as much of the surface as the shore and the pattern leave; none, nothing drawn.
+    int foam_k = foam_slot(v_slots.w);
+    s.albedo = foam_k >= 0 ? foam_colour[foam_k].rgb : vec3(0.0);
+    s.alpha = foam_k >= 0 ? foam_cover(foam_k, v_world_pos, gl_FragCoord.xy) : 0.0;
+#ifdef DISCARDS_LAST
+    dropped_pixel = dropped_pixel || s.alpha <= 0.0;
+#else
+    if (s.alpha <= 0.0) discard;
+#endif
+#endif
     // A decal's cut (the transparent slot's code 3) with no alpha left shows nothing: it writes
     // nothing either (its id would take a click through a clear part of its image, its
     // corners).  (Water and see-through surfaces keep their ids at any alpha: the view tree
@@ -1087,6 +1102,10 @@ void main() {
 #endif
     s.metallic = v_surface.x;
     s.roughness = v_surface.y;
+#ifdef FOAM
+    s.metallic = 0.0;   // (foam scatters: white water is rough and no metal)
+    s.roughness = 1.0;
+#endif
     float metal_share = apply_metallic_roughness(s);  // x the metallic-roughness map
     s.highlight_roughness = filtered_roughness(s.roughness, s.normal);
 #ifdef ANISOTROPY
@@ -1200,6 +1219,10 @@ void main() {
     out_reflect_normal = vec4(s.normal, float((v_slots.w >> 11u) & 2047u));
 #endif
     float alpha = 1.0;
+#ifdef FOAM
+    color *= s.alpha;   // (premultiplied whole: foam has no light of its own over what shows through)
+    alpha = s.alpha;
+#else
     if (transparent != 0) {
         // Premultiplied by the alpha (the transparent slot blends ONE, ONE_MINUS_SRC_ALPHA):
         // all of the colour (fade), or all but its reflected and emitted light (kept_light:
@@ -1210,13 +1233,18 @@ void main() {
         color = (color - kept) * s.alpha + kept;
         alpha = s.alpha;
     }
+#endif
 #ifdef FOG
     // The air between where this view's rays enter it (its eye, or the surface it looks out
     // of) and the point; a composite fogs the stretch before (fog.glsl).  fog_view is the
     // colour x the transmittance plus the fog's own light: of that light a see-through
     // surface gives its alpha's share (what shows through was fogged on its own way).
     vec3 fogged_color = fog_view(color, VIEW_EYE, VIEW_ENTRY, v_world_pos);
+#ifdef FOAM
+    fogged_color -= (1.0 - alpha) * fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, v_world_pos);
+#else
     if (transparent != 0) fogged_color -= (1.0 - alpha) * fog_view(vec3(0.0), VIEW_EYE, VIEW_ENTRY, v_world_pos);
+#endif
     color = fogged_color;
 #endif
     out_color = vec4(hdr_store(color), alpha);

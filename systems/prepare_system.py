@@ -28,7 +28,7 @@ four nearest the camera) go to their block every frame their waves move.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import esper
 import numpy as np
@@ -49,7 +49,7 @@ from components import (
 )
 from components.ambient import DEFAULT_GROUND, DEFAULT_SKY
 from components.limits import MAX_CONTACT_LAMPS, MAX_FOG_VOLUMES, MAX_RECT_LIGHTS, MAX_VOLUMETRIC_LAMPS
-from engine.core.errors import CausticLimitWarning, FogLimitWarning, LightLimitWarning
+from engine.core.errors import CausticLimitWarning, FogLimitWarning, LightLimitWarning, WaterLimitWarning
 from engine.core.world import World
 from engine.render.caustics import (
     MAX_CAUSTIC_LAMPS,
@@ -62,6 +62,7 @@ from engine.render.caustics import (
     reach_box,
 )
 from engine.render.clouds import CloudShape, cloud_shape, drift_served, shadows_served
+from engine.render.foam import MAX_FOAM_WATERS, FoamWater, foam_frame, foam_rows
 from engine.render.fog import volume_rows, water_body_row
 from engine.render.irradiance import generated_sky_sh, hemisphere_sh, project_faces
 from engine.render.renderer import Renderer
@@ -132,7 +133,7 @@ class PrepareSystem(esper.Processor):
         self._bodies: tuple = ()   # the water bodies the rows were packed for (_water_bodies)
         self._unboxed: set[int] = set()   # waters with a fog and no flat outline (said once)
         self._caustic_cut = 0                     # waters with caustics past MAX_CAUSTIC_WATERS, left out
-        self._caustic_lamps_cut = 0               # lamps over them past MAX_CAUSTIC_LAMPS, left out
+        self._cuts: dict[str, int] = {}           # RenderStats field -> what a limit left out last frame (_say_cut)
         self._caustic_still: set[int] = set()     # waters with caustics and no waves to gather with (said once)
         self._caustic_keys: dict[int, tuple] = {}  # what each held water's rows were packed from (_caustics)
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
@@ -206,6 +207,7 @@ class PrepareSystem(esper.Processor):
             renderer.note_scene_change()   # every view's fogged pixels
         renderer.stats.fog_volumes_cut = self._fog_cut
         self._caustics(camera)
+        self._foam()
 
     def _caustics(self, camera: int | None) -> None:
         """Give the caustics' block the waters that gather the sun: of the waters with
@@ -264,27 +266,50 @@ class PrepareSystem(esper.Processor):
         if renderer.caustics.set(chosen, lamps):
             renderer.note_scene_change()   # what every view shows under the waters
 
+    def _foam(self) -> None:
+        """Give the foam's block the waters with shore foam (``Water.foam``), the first
+        ``MAX_FOAM_WATERS`` by entity (the rest counted and said when their count grows);
+        their rows packed again every frame (the pattern drifts with the waves)."""
+        renderer = self.renderer
+        found = sorted((entry for entry in self._waters() if entry[2].foam > 0.0), key=lambda entry: entry[0])
+        cut = max(0, len(found) - MAX_FOAM_WATERS)
+        self._say_cut("foam_waters_cut", cut, lambda: WaterLimitWarning(
+            f"{len(found)} waters have foam: {MAX_FOAM_WATERS} are drawn with it at a time (the first by entity: "
+            f"{[entry[0] for entry in found[:MAX_FOAM_WATERS]]}), so {cut} are not (RenderStats.foam_waters_cut)"))
+        waters = [FoamWater(entity, foam_rows(tuple(state.plane),
+                                              foam_frame(tuple(state.plane), state.bumps, state.water.flow.offset,
+                                                         water.tiling),
+                                              water.foam, water.foam_depth, water.foam_scale, water.foam_color))
+                  for entity, state, water in found[:MAX_FOAM_WATERS]]
+        if renderer.foam.set(waters):
+            renderer.note_scene_change()   # what every view shows of the waters
+
     def _caustic_lamps(self, chosen: list[CausticWater]) -> list[int]:
         """The kept lamps (their Lights block slots) over the held ``chosen`` waters whose light
         the waves gather (``caustics.lamps_over``): the first ``MAX_CAUSTIC_LAMPS`` by slot, the
         rest counted and said when their count grows."""
         kept = self._kept
         if not chosen or kept is None:
-            self.renderer.stats.caustic_lamps_cut = 0
+            self._say_cut("caustic_lamps_cut", 0, Warning)
             return []
         world = self.world
         lamps = [(slot, np.array(world.get(entity, Transform).world[3].xyz), world.get(entity, PointLight).range)
                  for slot, entity in enumerate(kept.point) if entity is not None]
         found = lamps_over(chosen, lamps)
         cut = max(0, len(found) - MAX_CAUSTIC_LAMPS)
-        if cut > self._caustic_lamps_cut:
-            warnings.warn(CausticLimitWarning(
-                f"{len(found)} lamps stand over waters with caustics: the light of {MAX_CAUSTIC_LAMPS} is gathered "
-                f"(entities {[kept.point[slot] for slot in found[:MAX_CAUSTIC_LAMPS]]}), so {cut} light the water's "
-                "floor evenly (RenderStats.caustic_lamps_cut)"), stacklevel=4)
-        self._caustic_lamps_cut = cut
-        self.renderer.stats.caustic_lamps_cut = cut
+        self._say_cut("caustic_lamps_cut", cut, lambda: CausticLimitWarning(
+            f"{len(found)} lamps stand over waters with caustics: the light of {MAX_CAUSTIC_LAMPS} is gathered "
+            f"(entities {[kept.point[slot] for slot in found[:MAX_CAUSTIC_LAMPS]]}), so {cut} light the water's "
+            "floor evenly (RenderStats.caustic_lamps_cut)"))
         return found[:MAX_CAUSTIC_LAMPS]
+
+    def _say_cut(self, stat: str, cut: int, warning: Callable[[], Warning]) -> None:
+        """Count ``cut`` (what a limit left out this frame) in ``RenderStats.<stat>``, and say
+        it (the ``warning`` made) when the count grows past the last frame's."""
+        if cut > self._cuts.get(stat, 0):
+            warnings.warn(warning(), stacklevel=4)
+        self._cuts[stat] = cut
+        setattr(self.renderer.stats, stat, cut)
 
     def _waters(self) -> Iterator[tuple[int, SurfaceState, Water]]:
         """Each water surface this frame: its entity, its published state (the top) and its

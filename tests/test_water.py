@@ -374,6 +374,10 @@ fog_density = 0.3
 fog_color = [0.1, 0.2, 0.25]
 depth = 1.5
 caustics = 0.8
+foam = 0.6
+foam_depth = 0.4
+foam_scale = 0.3
+foam_color = [0.7, 0.8, 0.9]
 """)
     world = World("pond")
     names = load_level(level).spawn(world)
@@ -382,6 +386,8 @@ caustics = 0.8
     assert water.direction == pytest.approx((0.0, 1.0))
     assert (water.fog_density, water.depth, *water.fog_color) == pytest.approx((0.3, 1.5, 0.1, 0.2, 0.25, 1.0))
     assert water.caustics == 0.8
+    assert (water.foam, water.foam_depth, water.foam_scale, *water.foam_color) == pytest.approx(
+        (0.6, 0.4, 0.3, 0.7, 0.8, 0.9, 1.0))
     saved = save_level(world, tmp_path / "again.toml", names, name="pond")
     again = World("again")
     names_again = load_level(saved).spawn(again)
@@ -389,6 +395,8 @@ caustics = 0.8
     assert kept.direction == pytest.approx((0.0, 1.0))
     assert (kept.fog_density, kept.depth, *kept.fog_color) == pytest.approx((0.3, 1.5, 0.1, 0.2, 0.25, 1.0))
     assert kept.caustics == 0.8
+    assert (kept.foam, kept.foam_depth, kept.foam_scale, *kept.foam_color) == pytest.approx(
+        (0.6, 0.4, 0.3, 0.7, 0.8, 0.9, 1.0))
     text = level.read_text()
     for good, bad, message in (("ior = 1.33", "ior = 0.5", r"Water.ior must be >= 1.0"),
                                ("depth = 1.5", "depth = -1.5", r"Water.depth must be >= 0.01"),

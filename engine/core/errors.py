@@ -73,6 +73,12 @@ class CausticLimitWarning(UserWarning):
     ``RenderStats.caustic_waters_cut``)."""
 
 
+class WaterLimitWarning(UserWarning):
+    """More waters with foam than ``MAX_FOAM_WATERS`` (engine/render/foam.py): only that
+    many, the first by entity, are drawn with it (said when the count grows, counted every
+    frame in ``RenderStats.foam_waters_cut``)."""
+
+
 class RefractionLimitWarning(UserWarning):
     """More refracting surfaces lie behind one another on screen than
     ``MAX_REFRACTION_LAYERS``: those past it are drawn in the last layer and do not show the

@@ -213,6 +213,7 @@ FALLBACK_BINDING = 6     # composite (fallback): each row's ids and weights (mir
 FOG_BINDING = 7          # scene (FOG builds), sky, composites: the active camera's fog (engine/render/fog.py)
 CLOUDS_BINDING = 8       # sky (CLOUDS builds), scene (CLOUD_SHADOWS): the CloudLayer (engine/render/clouds.py)
 CAUSTICS_BINDING = 9     # scene (CAUSTICS builds): the waters whose waves gather the sun (engine/render/caustics.py)
+FOAM_BINDING = 10        # scene (FOAM builds): the waters with shore foam (engine/render/foam.py)
 
 # --- clip distances ------------------------------------------------------------------------
 # The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for

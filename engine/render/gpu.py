@@ -26,6 +26,7 @@ from engine.frame_stats import RenderStats
 from engine.render.bindings import CAMERA_BINDING, bind_uniform_range, forget_sampler
 from engine.render.caustics import CausticBlock
 from engine.render.clouds import CloudBlock
+from engine.render.foam import FoamBlock
 from engine.render.fog import FogBlock
 from engine.render.gl_context import GLCapabilities
 from engine.render.instances import GpuMesh, InstanceBatch
@@ -250,6 +251,7 @@ class Gpu:
         self.spot_cookies = SpotCookies(ctx, caps.max_texture_image_units, self.normal_map_anisotropy, caps.software)
         # The water whose waves gather the sun under it (the prepare stage sets it): CAUSTICS builds.
         self.caustics = CausticBlock(ctx, caps.max_texture_image_units)
+        self.foam = FoamBlock(ctx, caps.max_texture_image_units)   # the waters with shore foam (engine/render/foam.py)
         # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
         # the extract stage writes them): the SKINNED and MORPHED builds read them.
         self.pose_rows = PoseRows(ctx, caps.max_texture_size)

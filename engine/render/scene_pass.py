@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
@@ -460,14 +460,16 @@ class ScenePass:
 
     def _slot_and_glass(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                         conditions: Sequence[moderngl.Query] | None, slot: bool) -> None:
-        """``views``' refracting surfaces (``refract``) and, with ``slot``, their transparent
-        slot (``draw_transparent``): where some refract and some of the slot is there, the
+        """``views``' waters' shore foam (``draw_foam``), their refracting surfaces
+        (``refract``) and, with ``slot``, their transparent slot (``draw_transparent``):
+        where some refract and some of the slot is there, the
         slot in two parts about them, each in its back-to-front order: first, into the copy
         the glass marches, so the glass shows them, its things that lie behind every
         refracting surface they meet on screen and meet none drawn after (HDRP's "before
         refraction" pass, chosen here by where things are); then, over the glass, the rest
         (what of it lies behind glass is unseen through it; counted in
         ``RenderStats.slot_after_glass``)."""
+        self.draw_foam(views, targets, options, conditions)
         refracting = self.renderer.refracting_batches()
         # (which refracting batch can reach which view: for the glass and the slot's split alike)
         drawn = refracting and views and not options.transparent
@@ -527,6 +529,58 @@ class ScenePass:
                     after[v].append(rects[v][at])
         return before
 
+    def draw_foam(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
+                  conditions: Sequence[moderngl.Query] | None = None) -> None:
+        """The shore foam of the waters that have it (``Water.foam``: ``engine/render/foam.py``)
+        in a view tree's ``views`` (drawn into ``targets`` with ``options``), once the level
+        below is composited into them, before their glass: the level's depth from the copy
+        its water's composite took (``RefractionCopy.holds_depth_of``; else copied now: the
+        water wrote no depth, so the copy holds what lies under it), then each view's foamy
+        waters drawn again with their ``FOAM`` builds,
+        blended over the water's reflection as glass is (``shaders/include/foam.glsl``).
+        Nothing where no water has foam or none reaches the views, nor for a view drawn whole
+        (a probe face's: it has no copy)."""
+        renderer = self.renderer
+        entities = renderer.foam.entities
+        if not entities or not views or options.transparent:
+            return
+        foamy = [batch for batch in renderer.batches.values()
+                 if batch.count and not entities.isdisjoint(batch.entity_at[:batch.count])]
+        if not foamy:
+            return
+        reach = batch_reach(views, targets.size, foamy)
+        # (a water's own reflection or refraction view, which looks out of it, shows no foam of its own)
+        shown = [any(rows) and bool(entities - {view.skip}) for rows, view in zip(reach, views, strict=True)]
+        if not any(shown):
+            return
+        if not self.refraction_copy.holds_depth_of(targets):   # (the water's composite took it: its depth is as it is)
+            self.refraction_copy.take(targets, False)
+        targets.begin_glass()
+        self._begin(views, targets, options, _TRANSPARENT)
+        renderer.foam.bind()
+        renderer.upload_views(views)
+        self._sky_size = renderer.sky.size[0]
+        for index, view in self._each_view(views, conditions, shown):
+            self._draw_batches(self._reaching(foamy, reach[index], view), 0, options.masked, skip=view.skip,
+                               hide=view.hide, screen="foam")
+        targets.end_glass()
+        renderer.stats.passes += 1
+
+    def _each_view(self, views: Sequence[View], conditions: Sequence[moderngl.Query] | None,
+                   chosen: Sequence[object]) -> Iterator[tuple[int, View]]:
+        """Each of ``views`` whose ``chosen`` entry is true, with its index: inside its
+        conditional render (``conditions``, where given), its scissor, winding and Camera
+        block set for the draws the caller makes."""
+        ctx, renderer = self.ctx, self.renderer
+        for index, view in enumerate(views):
+            if not chosen[index]:
+                continue
+            with _ALWAYS if conditions is None else conditions[index].crender:
+                set_scissor(ctx, view.scissor)
+                set_front_face(ctx, "cw" if view.mirrored else "ccw")
+                renderer.bind_view_at(index)
+                yield index, view
+
     def refract(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions,
                 conditions: Sequence[moderngl.Query] | None = None, reach: list[list[bool]] | None = None) -> None:
         """The refracting batches (``Gpu.refracting_batches``: ``Refractive.screen``) of a view
@@ -585,19 +639,13 @@ class ScenePass:
             bind_texture(ctx, targets.node, NODE_UNIT)  # (the march keeps to its view's pixels, masked or not)
             if not layer:  # (the views' Camera blocks stay uploaded for the layers after)
                 renderer.upload_views(views)
-            for index, view in enumerate(views):
-                if not runs[index]:
-                    continue
-                with _ALWAYS if conditions is None else conditions[index].crender:
-                    set_scissor(ctx, view.scissor)
-                    set_front_face(ctx, "cw" if view.mirrored else "ccw")
-                    renderer.bind_view_at(index)
-                    whole = [batch for batch, first, past in runs[index] if first == 0 and past == batch.count]
-                    self._draw_batches(whole, 0, options.masked, skip=view.skip, hide=view.hide, screen="refracted")
-                    for batch, first, past in runs[index]:
-                        if first != 0 or past != batch.count:
-                            self._draw_batches([batch], 0, options.masked, skip=view.skip, hide=view.hide,
-                                               screen="refracted", rows=(first, past))
+            for index, view in self._each_view(views, conditions, runs):
+                whole = [batch for batch, first, past in runs[index] if first == 0 and past == batch.count]
+                self._draw_batches(whole, 0, options.masked, skip=view.skip, hide=view.hide, screen="refracted")
+                for batch, first, past in runs[index]:
+                    if first != 0 or past != batch.count:
+                        self._draw_batches([batch], 0, options.masked, skip=view.skip, hide=view.hide,
+                                           screen="refracted", rows=(first, past))
             stats.passes += 1
         if renderer.debug:
             renderer.checkpoint(f"refraction ({views[0].name}{' and others' if len(views) > 1 else ''})")

@@ -31,6 +31,7 @@ from engine.render.bindings import (
     CLOUDS_BINDING,
     COOKIE_UNIT,
     EMISSIVE_MAP_UNIT,
+    FOAM_BINDING,
     FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
@@ -62,6 +63,7 @@ from engine.render.bindings import (
     assign_slots,
 )
 from engine.render.caustics import NO_CAUSTIC_WATERS
+from engine.render.foam import MAX_FOAM_WATERS
 from engine.render.gpu import Gpu
 from engine.render.instances import blend_code, forget_reads
 from engine.render.pose_rows import skinning_defines
@@ -113,7 +115,7 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING,
-                 "Caustics": CAUSTICS_BINDING}
+                 "Caustics": CAUSTICS_BINDING, "Foam": FOAM_BINDING}
 
 # The reflect slots whose reflection is the sky's or a probe's, which screen reflections
 # replace: none (the material's environment reflection, scene.frag environment_specular) and a
@@ -323,6 +325,9 @@ class ScenePrograms:
                     defines["SCREEN_REFLECTION"] = "1"
                 if "refracted" in words:  # what the view drew behind, marched (engine/render/screen_refraction.py)
                     defines["SCREEN_REFRACTION"] = "1"
+                if "foam" in words:  # a water's shore foam over its level (engine/render/foam.py)
+                    defines["FOAM"] = "1"
+                    defines["MAX_FOAM_WATERS"] = str(MAX_FOAM_WATERS)
             defines.update(shadowing)
             defines.update(fogging)
             defines.update(cookies)
@@ -388,6 +393,8 @@ class ScenePrograms:
                     continue  # (drawn with the builds without: ScenePass._draw_reflecting)
                 if "refracted" in screen.split() and not batch.refracts_screen:
                     continue  # (only a refracting batch is drawn after the copy: ScenePass.refract)
+                if "foam" in screen.split() and self.renderer.foam.entities.isdisjoint(batch.entity_at[:batch.count]):
+                    continue  # (only a foamy water's batch is drawn with it: ScenePass.draw_foam)
                 for probes in ambient:
                     for dark in unlit if "reflected" in screen.split() else (False,):  # (unlit: its own build)
                         batch.vao(self.program(batch.variants, 0, "", batch.normal_map is not None,

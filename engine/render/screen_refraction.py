@@ -297,6 +297,8 @@ class RefractionCopy:
         # Frames are told apart by the frame's RenderStats (Engine.frame gives each its own).
         self._frame: object = None
         self._took_this_frame = self._took_last_frame = False
+        self._whole_of: RenderTargets | None = None   # the targets the last whole copy was of, and its frame
+        self._whole_frame: object = None
 
     def take(self, targets: RenderTargets, rough: bool, region: tuple[int, int, int, int] | None = None) -> None:
         """Copy ``targets``' colour and depth into the copy of its size and bind it at
@@ -326,6 +328,8 @@ class RefractionCopy:
         bind_texture(ctx, copy.texture, REFRACTION_COPY_UNIT)
         gpu.stats.draw_calls += 1  # (a copy, as the screen reflections' is: not a pass of its own)
         self.copies += 1
+        self._whole_of = targets if region is None else None   # (holds_depth_of)
+        self._whole_frame = self._frame
         if gpu.debug:
             gpu.checkpoint("refraction copy")
 
@@ -339,6 +343,14 @@ class RefractionCopy:
             self._vao = self.ctx.vertex_array(program, [])
             self._vao_of = shaders.reloads
         return self._vao
+
+    def holds_depth_of(self, targets: RenderTargets) -> bool:
+        """Whether the copy last taken, this frame, was of all of ``targets`` (so its depth is
+        theirs now, while nothing has written depth there since: a level's composites and its
+        foam write colour alone).  The foam pass reads it so rather than copy again
+        (``ScenePass.draw_foam``)."""
+        self._count_frames()
+        return self._whole_of is targets and self._whole_frame is self._frame
 
     def held(self) -> int:
         """Copy images held now."""
@@ -362,6 +374,7 @@ class RefractionCopy:
 
     def release(self) -> None:
         """Let the copies go (made again when next taken) and the pass's vertex array."""
+        self._whole_of = None
         for copy in self._copies.values():
             copy.release()
         self._copies.clear()

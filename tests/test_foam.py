@@ -1,0 +1,223 @@
+"""Shore foam (``Water.foam``): white water where a pond is shallow, drawn over the water's
+reflection and what is seen through it, lit as any surface is.  Measured in rendered frames
+against where the water's depth puts it (each pixel's ray to the surface and on to the pool's
+floor, worked out here) and against a plain surface of the foam's colour lit by the same
+lights."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Skybox,
+    Transform,
+    Water,
+    look_rotation,
+)
+from engine.assets.mesh import box, quad
+from engine.assets.texture_data import wave_normal_map
+from engine.core.errors import WaterLimitWarning
+from tests.support import pixel_rays, srgb_to_linear
+
+FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
+RISE, RUN = 1.2, 4.0                 # the pool's floor rises 1.2 m over 4 m along +x ...
+SLOPE = math.atan2(RISE, RUN)
+FLOOR_AT = (0.0, -0.4, 0.0)           # ... through this point: it meets the surface at x = 1.33
+FOAM_DEPTH = 0.3
+FOAM_COLOR = (0.8, 0.85, 0.9)
+POST = (1.7, 0.0, 0.9)               # a post on the shore, whose shadow falls across the foam
+
+
+def floor_height(x: np.ndarray) -> np.ndarray:
+    """The pool's floor under x (the ramp's plane)."""
+    return FLOOR_AT[1] + (x - FLOOR_AT[0]) * math.tan(SLOPE)
+
+
+def pool(foam: float, *, water: bool = True, offset=(0.0, 0.0), post: bool = False, waves: bool = False):
+    """A still pond 4 m square over a floor that rises out of it along +x, lit by a sun and a
+    grey sky, seen from above; ``water`` False: an opaque quad of the foam's colour in its
+    place (what the foam's light is measured against)."""
+    def build(world):
+        eye = glm.vec3(0.6, 2.2, 1.6)
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.8, 0.0, 0.0) - eye)), Camera(fov_y=55.0))
+        world.spawn(Skybox(faces=[np.full((8, 8, 3), 0.25, np.float32) for _ in range(6)]))
+        world.spawn(DirectionalLight(direction=(-0.8, -1.0, -0.2), intensity=1.5))
+        world.spawn(Transform(position=FLOOR_AT, rotation=glm.angleAxis(SLOPE, glm.vec3(0, 0, 1)) * FLAT),
+                    MeshRef(quad(RUN / math.cos(SLOPE) + 0.4, 4.0)),
+                    Material(color=(0.5, 0.4, 0.3, 1.0), roughness=1.0))
+        if post:
+            world.spawn(Transform(position=POST), MeshRef(box((0.2, 2.4, 0.2))),
+                        Material(color=(0.6, 0.6, 0.6, 1.0), roughness=1.0))
+        if water:
+            world.spawn(Transform(rotation=FLAT), MeshRef(quad(4.0, 4.0)),
+                        Material(color=(0.05, 0.2, 0.25, 0.3), roughness=0.2,
+                                 normal_map=wave_normal_map() if waves else None, normal_scale=0.2), Mirror(),
+                        Water(foam=foam, foam_depth=FOAM_DEPTH, foam_scale=0.1, foam_color=FOAM_COLOR, offset=offset))
+        else:
+            world.spawn(Transform(rotation=FLAT), MeshRef(quad(4.0, 4.0)),
+                        Material(color=(*FOAM_COLOR, 1.0), roughness=1.0, environment_reflection=0.0))
+    return build
+
+
+def render(scene, build, size=(160, 120)):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # (a still water: no waves, said)
+        runner = scene(build, size)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        rgb = runner.frame()
+    return runner, srgb_to_linear(rgb)
+
+
+def water_under(runner) -> np.ndarray:
+    """Each pixel's metres of water between the surface and the floor along its ray (NaN: the
+    ray does not meet the pond's surface, or meets the floor first)."""
+    eye, directions = pixel_rays(runner.engine.main_view, runner.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -eye[1] / directions[..., 1]
+    at = eye + directions * t[..., None]
+    on = (t > 0) & (np.abs(at[..., 0]) < 2.0) & (np.abs(at[..., 2]) < 2.0)
+    # The floor along the ray: eye.y + d.y s = floor_height(eye.x + d.x s).
+    k = math.tan(SLOPE)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (FLOOR_AT[1] + (eye[0] - FLOOR_AT[0]) * k - eye[1]) / (directions[..., 1] - directions[..., 0] * k)
+    floor = eye + directions * s[..., None]
+    depth = at[..., 1] - floor[..., 1]
+    return np.where(on & (s > t), depth, np.nan)
+
+
+def test_foam_lies_where_the_water_is_shallow_and_thins_out_with_its_depth(scene):
+    """Along the shore where the floor rises out of the pond: where a pixel's ray finds more
+    than ``foam_depth`` of water under the surface the frame is the one without foam, bit for
+    bit; near the water's edge almost all of the surface is foam (brighter); in between, the
+    share of the surface the foam covers falls as the water deepens."""
+    runner, foamy = render(scene, pool(1.0))
+    _, plain = render(scene, pool(0.0))
+    under = water_under(runner)
+    deep = under > FOAM_DEPTH * 1.05
+    assert deep.sum() > 2000
+    np.testing.assert_array_equal(foamy[deep], plain[deep])
+    changed = np.abs(foamy - plain).max(axis=-1) > 0.02
+    shares = []
+    for low, high in ((0.0, 0.05), (0.05, 0.12), (0.12, 0.2), (0.2, 0.28)):
+        band = (under >= low * FOAM_DEPTH / 0.3) & (under < high * FOAM_DEPTH / 0.3)
+        assert band.sum() > 40, (low, band.sum())
+        shares.append(changed[band].mean())
+    assert shares[0] > 0.9, shares
+    assert all(a > b for a, b in zip(shares, shares[1:], strict=False)), shares   # thinning out with the depth
+    assert shares[-1] < 0.5, shares
+    assert (foamy[changed & (under < 0.05)] > plain[changed & (under < 0.05)]).all(axis=-1).mean() > 0.95
+    # The Foam block as the GLSL lays it out (std140) is the size the engine packs.
+    from engine.render.foam import FOAM_BLOCK_BYTES
+
+    built = [program for program in runner.engine.renderer.scene_pass.programs.built.values() if "Foam" in program]
+    assert built and {program["Foam"].size for program in built} == {FOAM_BLOCK_BYTES}
+    # The foam reads the depth the water's composite copied: no copy of its own a frame (nor in
+    # the water's own reflection, which shows none of its foam).
+    copy = runner.engine.renderer.scene_pass.refraction_copy
+    before = copy.copies
+    runner.frame()
+    assert copy.copies - before == 1
+
+
+def test_foam_is_lit_as_a_surface_of_its_colour_with_its_shadows(scene):
+    """At the water's edge, where the foam covers the surface whole, a foam pixel is the pixel
+    of an opaque quad of the foam's colour in the water's place, lit by the same sun and sky:
+    in the sun, and in the post's shadow across the shallows, as dark as the quad is there."""
+    runner, foamy = render(scene, pool(1.0, post=True))
+    _, quad_frame = render(scene, pool(1.0, water=False, post=True))
+    under = water_under(runner)
+    edge = under < 0.02
+    ratio = foamy[..., 1] / np.maximum(quad_frame[..., 1], 1e-4)
+    whole = edge & (np.abs(ratio - 1.0) < 0.25)   # (those the pattern covers whole: most at the edge)
+    assert whole.sum() > 0.6 * edge.sum() > 30, (whole.sum(), edge.sum())
+    assert abs(np.median(ratio[whole]) - 1.0) < 0.02, np.median(ratio[whole])
+    lit_level = np.median(quad_frame[..., 1][edge])
+    shaded = whole & (quad_frame[..., 1] < 0.6 * lit_level)   # the post's shadow on the foam
+    assert shaded.sum() > 5, shaded.sum()
+    assert np.median(foamy[..., 1][shaded]) < 0.6 * np.median(foamy[..., 1][whole & ~shaded])
+
+
+def test_the_foam_drifts_with_the_waves_offset(scene):
+    """The pattern is carried with the waves (``Water.offset``): a quarter tile on, the foam
+    lies elsewhere along the shore; back at the start, exactly where it was."""
+    _, first = render(scene, pool(1.0, offset=(0.0, 0.0), waves=True))
+    runner, moved = render(scene, pool(1.0, offset=(0.25, 0.1), waves=True))
+    _, again = render(scene, pool(1.0, offset=(0.0, 0.0), waves=True))
+    shallow = water_under(runner) < FOAM_DEPTH * 0.8
+    assert (np.abs(moved - first).max(axis=-1)[shallow] > 0.05).mean() > 0.1
+    np.testing.assert_array_equal(first, again)
+
+
+def test_a_mirror_shows_the_ponds_foam(scene):
+    """A mirror standing over the pond, facing the shallows, shows the foam in its reflection
+    (the foam is drawn in every view the view tree draws): its pixels with foam differ from
+    those without."""
+    def with_mirror(foam):
+        def build(world):
+            pool(foam)(world)
+            world.spawn(Transform(position=(0.8, 0.8, -1.9)), MeshRef(quad(2.4, 1.6)), Material(), Mirror())
+        return build
+
+    runner, foamy = render(scene, with_mirror(1.0))
+    _, plain = render(scene, with_mirror(0.0))
+    assert runner.stats.views_spent >= 2   # (the mirror's view and the pond's)
+    eye, directions = pixel_rays(runner.engine.main_view, runner.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (-1.9 - eye[2]) / directions[..., 2]
+    at = eye + directions * t[..., None]
+    on_mirror = (t > 0) & (np.abs(at[..., 0] - 0.8) < 1.2) & (np.abs(at[..., 1] - 0.8) < 0.8)
+    under = water_under(runner)
+    in_front = ~(under < np.inf)   # (pixels the pond does not cover: the mirror's own)
+    changed = np.abs(foamy - plain).max(axis=-1) > 0.05
+    assert (changed & on_mirror & in_front).sum() > 20, (changed & on_mirror & in_front).sum()
+
+
+def test_foam_values_are_checked_and_waters_past_the_limit_are_said(scene):
+    for field, value in (("foam", 1.5), ("foam", -0.1), ("foam_depth", 0.0), ("foam_scale", -1.0),
+                         ("foam_color", (2.0, 0.0))):
+        with pytest.raises(ComponentValueError, match=rf"Water\.{field}"):
+            Water(**{field: value})
+
+    def five(world):
+        pool(1.0)(world)
+        for k in range(4):
+            world.spawn(Transform(position=(6.0 + 3.0 * k, 0.0, 0.0), rotation=FLAT), MeshRef(quad(2.0, 2.0)),
+                        Material(color=(0.1, 0.2, 0.2, 0.3)), Mirror(), Water(foam=0.5))
+
+    with pytest.warns(WaterLimitWarning, match=r"5 waters have foam: 4 are drawn"):
+        runner = scene(five, (32, 24))
+        runner.frame()
+    assert runner.stats.foam_waters_cut == 1
+    assert len(runner.engine.renderer.foam.waters) == 4
+
+
+def test_a_context_with_too_few_texture_units_draws_no_foam_and_says_so(scene, ctx):
+    """On a context with 16 fragment texture units (macOS's OpenGL 4.1) the water has no foam:
+    the frame is the one without it, and a GLLimitWarning names the water and the limit, once."""
+    from engine.core.errors import GLLimitWarning
+    from engine.render.foam import FOAM_SAMPLERS, FoamBlock
+
+    _, plain = render(scene, pool(0.0))
+    runner = scene(pool(1.0), (160, 120))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.foam.release()
+    runner.engine.renderer.foam = FoamBlock(ctx, texture_units=16)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(2):
+            image = runner.frame()
+    said = [w for w in caught if issubclass(w.category, GLLimitWarning)]
+    assert len(said) == 1 and f"foam needs {FOAM_SAMPLERS} texture units" in str(said[0].message)
+    assert runner.engine.renderer.foam.waters == ()
+    np.testing.assert_array_equal(srgb_to_linear(image), plain)
