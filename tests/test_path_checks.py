@@ -446,16 +446,20 @@ def test_scene_and_composite_pixels_are_left_out_only_after_their_derivatives_ar
     otherwise while the node test discarded first; llvmpipe keeps every pixel of a quad
     running, so no frame here can show it).  scene.frag leaves another view's pixels and a
     cutout's holes out at DISCARD_DROPPED only, with nothing after it that takes a
-    derivative (its one early discard is a decal's clear part in a software rasteriser's
-    builds, which says why; a GPU's, DISCARDS_LAST, drop it there too); the bumpy
+    derivative (its early discards, a decal's clear part and a water's surface with no foam
+    in the FOAM builds, are a software rasteriser's builds', which says why; a GPU's,
+    DISCARDS_LAST, drop them there too); the bumpy
     composite takes its map's UV derivatives before its first discard and reads the map
     through them."""
     scene = (SHADERS / "scene.frag").read_text()
     main = scene[scene.index("void main() {"):]
     early = [line.strip() for line in main.splitlines() if "discard" in line and not line.strip().startswith("//")]
-    assert early == ["if (transparent == 3 && s.alpha < 0.5 / 255.0) discard;"], early
+    assert early == ["if (s.alpha <= 0.0) discard;",   # (FOAM builds' only)
+                     "if (transparent == 3 && s.alpha < 0.5 / 255.0) discard;"], early
     assert ("#ifdef DISCARDS_LAST\n    dropped_pixel = dropped_pixel || (transparent == 3 && s.alpha < 0.5 / 255.0);"
             "\n#else\n    if (transparent == 3") in main
+    assert ("#ifdef DISCARDS_LAST\n    dropped_pixel = dropped_pixel || s.alpha <= 0.0;\n#else\n"
+            "    if (s.alpha <= 0.0)") in main
     derivatives = re.compile(r"dFdx|dFdy|fwidth|texture\(|MAP_TEXTURE|textureQueryLod")
     for after in main.split("DISCARD_DROPPED();")[1:]:
         rest = re.split(r"\breturn\b|\n}", after, maxsplit=1)[0]
