@@ -286,19 +286,22 @@ class PrepareSystem(esper.Processor):
 
     def _caustic_lamps(self, chosen: list[CausticWater]) -> list[int]:
         """The kept lamps (their Lights block slots) over the held ``chosen`` waters whose light
-        the waves gather (``caustics.lamps_over``): the first ``MAX_CAUSTIC_LAMPS`` by slot, the
-        rest counted and said when their count grows."""
+        the waves gather (``caustics.lamps_over``): the ``MAX_CAUSTIC_LAMPS`` whose light at the
+        water is brightest, the rest counted and said when their count grows."""
         kept = self._kept
         if not chosen or kept is None:
             self._say_cut("caustic_lamps_cut", 0, Warning)
             return []
         world = self.world
-        lamps = [(slot, np.array(world.get(entity, Transform).world[3].xyz), world.get(entity, PointLight).range)
-                 for slot, entity in enumerate(kept.point) if entity is not None]
+        lamps = [(slot, np.array(world.get(entity, Transform).world[3].xyz), light.range,
+                  light.intensity * max(tuple(light.color)[:3]))
+                 for slot, entity in enumerate(kept.point) if entity is not None
+                 for light in (world.get(entity, PointLight),)]
         found = lamps_over(chosen, lamps)
         cut = max(0, len(found) - MAX_CAUSTIC_LAMPS)
         self._say_cut("caustic_lamps_cut", cut, lambda: CausticLimitWarning(
-            f"{len(found)} lamps stand over waters with caustics: the light of {MAX_CAUSTIC_LAMPS} is gathered "
+            f"{len(found)} lamps stand over waters with caustics: the light of the {MAX_CAUSTIC_LAMPS} brightest there "
+            "is gathered "
             f"(entities {[kept.point[slot] for slot in found[:MAX_CAUSTIC_LAMPS]]}), so {cut} light the water's "
             "floor evenly (RenderStats.caustic_lamps_cut)"))
         return found[:MAX_CAUSTIC_LAMPS]

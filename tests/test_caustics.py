@@ -837,27 +837,29 @@ def test_a_lamps_light_under_rippled_water_is_where_a_ray_tracer_gathers_it(scen
 
 
 def test_the_lamps_over_a_water_are_held_up_to_four_and_the_rest_are_said(scene):
-    """Six lamps over the pool and one beside it whose range stops short of it: the first four
-    over it by slot are held (``CausticBlock.lamps``, the CAUSTIC_LAMPS builds), the other two
-    counted and said once; a lamp under the surface or out of reach is not held."""
+    """Six lamps over the pool, each brighter than the one before, and one beside it whose
+    range stops short of it: the four brightest over it are held (``CausticBlock.lamps``, the
+    CAUSTIC_LAMPS builds), the other two counted and said once; a lamp under the surface or
+    out of reach is not held."""
     from engine.render.caustics import MAX_CAUSTIC_LAMPS
 
     def build(world):
         pool(1.0)(world)
         for k in range(6):
-            world.spawn(Transform(position=(-1.5 + 0.6 * k, 1.0, 0.0)), PointLight(intensity=0.1, range=5.0))
+            world.spawn(Transform(position=(-1.5 + 0.6 * k, 1.0, 0.0)),
+                        PointLight(intensity=0.1 * (1 + k), range=5.0))
         world.spawn(Transform(position=(9.0, 1.0, 0.0)), PointLight(intensity=0.1, range=3.0))   # short of it
         world.spawn(Transform(position=(0.5, -0.5, 0.5)), PointLight(intensity=0.1, range=5.0))   # under it
 
-    with pytest.warns(CausticLimitWarning, match=r"8 lamps|6 lamps stand over waters with caustics: the light of 4"):
+    with pytest.warns(CausticLimitWarning, match=r"6 lamps stand over waters with caustics: the light of the 4 bright"):
         runner, _ = render(scene, build, size=(32, 32))
     kept = runner.world.resources[KeptLights]
     held = runner.engine.renderer.caustics.lamps
     assert len(held) == MAX_CAUSTIC_LAMPS and runner.stats.caustic_lamps_cut == 2
-    over = sorted(slot for slot, entity in enumerate(kept.point) if entity is not None
-                  and 0.9 < runner.world.get(entity, Transform).position.y and
-                  runner.world.get(entity, Transform).position.x < 5.0)
-    assert list(held) == over[:MAX_CAUSTIC_LAMPS]
+    over = sorted((-runner.world.get(entity, PointLight).intensity, slot) for slot, entity in enumerate(kept.point)
+                  if entity is not None and 0.9 < runner.world.get(entity, Transform).position.y
+                  and runner.world.get(entity, Transform).position.x < 5.0)
+    assert len(over) == 6 and list(held) == [slot for _, slot in over[:MAX_CAUSTIC_LAMPS]]
     assert ("CAUSTIC_LAMPS", "1") in runner.engine.renderer.caustics.defines
     from shell.overlay_text import overlay_lines
 

@@ -3,9 +3,9 @@ maps' array the scene's ``CAUSTICS`` builds read (``shaders/include/caustics.gls
 says how the light is gathered), and the rules of what they hold.
 
 The lamps' light is gathered too: the prepare stage names the kept lamps that stand over a
-held water within their range (``lamps_over``, at most ``MAX_CAUSTIC_LAMPS``, by slot; the
-block's ``caustic_lamps``, the ``CAUSTIC_LAMPS`` builds while any), and scene.frag's lamps
-take ``caustic_lamp_light`` under the waters a draw names.
+held water within their range (``lamps_over``, at most ``MAX_CAUSTIC_LAMPS``, those whose light
+at the water is brightest; the block's ``caustic_lamps``, the ``CAUSTIC_LAMPS`` builds while
+any), and scene.frag's lamps take ``caustic_lamp_light`` under the waters a draw names.
 
 A water that also reflects light (``Mirror.reflects_light``) throws what its waves gather of
 the sun's light back up: the scene's virtual light for the sun's image in it names its slot
@@ -128,20 +128,25 @@ def placed_box(matrix: glm.mat4, lo: tuple[float, float, float], hi: tuple[float
     return (low[0], low[1], low[2]), (high[0], high[1], high[2])
 
 
-def lamps_over(waters: Sequence[CausticWater], lamps: Sequence[tuple[int, np.ndarray, float]]) -> list[int]:
-    """The Lights block slots of ``lamps`` ((slot, world position, range) each, by slot) that
-    stand over one of ``waters`` (in front of its plane) and reach its box
-    (``CausticWater.box``) within their range: the lamps whose light the waves gather."""
+def lamps_over(waters: Sequence[CausticWater], lamps: Sequence[tuple[int, np.ndarray, float, float]]) -> list[int]:
+    """The Lights block slots of ``lamps`` ((slot, world position, range, power: intensity x
+    its colour's brightest channel) each) that stand over one of ``waters`` (in front of its
+    plane) and reach its box (``CausticWater.box``) within their range: the lamps whose light
+    the waves gather, the one whose light at the nearest of those boxes is brightest (power
+    over the engine's distance falloff, d^2 + 1) first, a tie by slot."""
     found = []
-    for slot, position, reach in lamps:
+    for slot, position, reach, power in lamps:
         p = np.asarray(position, np.float64)
+        brightest = -1.0
         for water in waters:
             plane = np.asarray(water.rows[:4], np.float64)
             lo, hi = np.asarray(water.box[0]), np.asarray(water.box[1])
-            if plane[:3] @ p + plane[3] > 0.0 and np.linalg.norm(p - np.clip(p, lo, hi)) < reach:
-                found.append(slot)
-                break
-    return found
+            distance = float(np.linalg.norm(p - np.clip(p, lo, hi)))
+            if plane[:3] @ p + plane[3] > 0.0 and distance < reach:
+                brightest = max(brightest, power / (distance * distance + 1.0))
+        if brightest >= 0.0:
+            found.append((-brightest, slot))
+    return [slot for _, slot in sorted(found)]
 
 
 def caustic_waters_of(box: Box, bodies: tuple[tuple[int, Box], ...]) -> tuple[int, ...]:
