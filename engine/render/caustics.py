@@ -157,6 +157,19 @@ def caustic_waters_of(box: Box, bodies: tuple[tuple[int, Box], ...]) -> tuple[in
     return tuple(entity for entity, body in bodies if reaches(box, body))
 
 
+def uv_axes(normal: np.ndarray, uv_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float] | None:
+    """A surface's UVs laid on its plane (unit ``normal``): the unit directions of +U and +V
+    along it (each UV row's gradient with its part along the normal taken out) and the
+    gradients' lengths there (UV units a metre); None where a row runs square to the
+    surface (no frame to lay anything on it by)."""
+    flats = [np.asarray(row, np.float64)[:3] for row in uv_rows]
+    flats = [row - np.dot(row, normal) * normal for row in flats]
+    lengths = [float(np.linalg.norm(flat)) for flat in flats]
+    if min(lengths) < 1e-9:
+        return None
+    return flats[0] / lengths[0], flats[1] / lengths[1], lengths[0], lengths[1]
+
+
 def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *, tiling: float, cross: float,
                  offset: tuple[float, float], ior: float, strength: float, depth: float,
                  map_width: int) -> tuple[float, ...] | None:
@@ -170,16 +183,11 @@ def caustic_rows(plane: tuple[float, float, float, float], bumps: MirrorBumps, *
     waves in)."""
     normal = np.array(plane[:3], np.float64)
     u_row, v_row = (np.asarray(row, np.float64) for row in bumps.uv_rows)
-    flats = [row[:3] - np.dot(row[:3], normal) * normal for row in (u_row, v_row)]
-    if min(float(np.linalg.norm(flat)) for flat in flats) < 1e-9:
+    axes = uv_axes(normal, bumps.uv_rows)
+    if axes is None:
         return None
-
-    def along(row: np.ndarray) -> np.ndarray:
-        flat = row[:3] - np.dot(row[:3], normal) * normal
-        return flat / np.linalg.norm(flat)
-
     texel = 1.0 / (map_width * tiling * float(np.linalg.norm(u_row[:3])))
-    return tuple(float(v) for v in (*normal, plane[3], *u_row, *v_row, *along(u_row), cross, *along(v_row),
+    return tuple(float(v) for v in (*normal, plane[3], *u_row, *v_row, *axes[0], cross, *axes[1],
                                     bumps.scale, *offset, 1.0 / ior, strength, tiling, texel, depth,
                                     CAUSTIC_SUN_SPREAD))
 

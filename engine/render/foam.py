@@ -25,7 +25,7 @@ import numpy as np
 
 from engine.core.errors import GLLimitWarning
 from engine.render.bindings import FOAM_BINDING, bind_uniform_block
-from engine.render.caustics import CAUSTIC_SAMPLERS
+from engine.render.caustics import CAUSTIC_SAMPLERS, uv_axes
 from engine.resources import MirrorBumps
 
 MAX_FOAM_WATERS = 4   # waters whose foam is drawn at once (the block's arrays; foam_entities an uvec4)
@@ -50,13 +50,10 @@ def foam_frame(plane: Sequence[float], bumps: MirrorBumps | None, offset: tuple[
     ``offset`` in map tiles times a tile's metres along each: the pattern moves with the
     waves)."""
     normal = np.asarray(plane[:3], np.float64)
-    if bumps is not None:
-        flats = [np.asarray(row, np.float64)[:3] for row in bumps.uv_rows]
-        flats = [row - np.dot(row, normal) * normal for row in flats]
-        lengths = [float(np.linalg.norm(flat)) for flat in flats]
-        if min(lengths) > 1e-9:   # (UVs running along the surface: their tiles have a size there)
-            return (flats[0] / lengths[0], flats[1] / lengths[1],
-                    (offset[0] / (tiling * lengths[0]), offset[1] / (tiling * lengths[1])))
+    axes = uv_axes(normal, bumps.uv_rows) if bumps is not None else None
+    if axes is not None:   # (UVs running along the surface: their tiles have a size there)
+        unit_u, unit_v, per_metre_u, per_metre_v = axes
+        return unit_u, unit_v, (offset[0] / (tiling * per_metre_u), offset[1] / (tiling * per_metre_v))
     side = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
     unit_u = np.cross(normal, side)
     unit_u /= np.linalg.norm(unit_u)

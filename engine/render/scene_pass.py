@@ -545,7 +545,7 @@ class ScenePass:
         if not entities or not views or options.transparent:
             return
         foamy = [batch for batch in renderer.batches.values()
-                 if batch.count and not entities.isdisjoint(batch.entity_at[:batch.count])]
+                 if batch.count and any(entity in batch.row_of for entity in entities)]
         if not foamy:
             return
         reach = batch_reach(views, targets.size, foamy)

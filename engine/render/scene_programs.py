@@ -393,7 +393,8 @@ class ScenePrograms:
                     continue  # (drawn with the builds without: ScenePass._draw_reflecting)
                 if "refracted" in screen.split() and not batch.refracts_screen:
                     continue  # (only a refracting batch is drawn after the copy: ScenePass.refract)
-                if "foam" in screen.split() and self.renderer.foam.entities.isdisjoint(batch.entity_at[:batch.count]):
+                foam = self.renderer.foam.entities
+                if "foam" in screen.split() and not any(entity in batch.row_of for entity in foam):
                     continue  # (only a foamy water's batch is drawn with it: ScenePass.draw_foam)
                 for probes in ambient:
                     for dark in unlit if "reflected" in screen.split() else (False,):  # (unlit: its own build)
