@@ -23,6 +23,7 @@ from components.post import (
 )
 from components.probe import IrradianceVolume, ReflectionProbe
 from components.rendering import Emissive, Material, MeshRef, Reflective, Refractive, Skybox
+from components.ripples import Ripples, Splash, Wake
 from components.screen import ScreenPanel, ScreenText
 from components.screen_reflections import ScreenReflections
 from components.time_of_day import TimeOfDay
@@ -44,8 +45,8 @@ __all__ = [
     "MeshRef", "Mirror", "Model", "Morph", "MotionBlur", "ParticleEmitter", "PointLight", "Portal", "PortalClone",
     "ReflectionProbe",
     "Reflective",
-    "Refractive",
-    "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice", "TimeOfDay",
-    "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Water",
+    "Refractive", "Ripples",
+    "ScreenPanel", "ScreenReflections", "ScreenText", "Skin", "Skybox", "Slice", "Splash", "TimeOfDay",
+    "Tonemap", "TrackedComponent", "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Wake", "Water",
     "euler_rotation", "look_rotation", "yaw_pitch_of", "yaw_pitch_rotation",
 ]

@@ -104,6 +104,10 @@ class RenderStats(BudgetLedger):
     caustic_waters_cut: int = 0          # waters with caustics past MAX_CAUSTIC_WATERS (the farthest: no caustics)
     caustic_lamps_cut: int = 0           # lamps over caustic waters past MAX_CAUSTIC_LAMPS (the last slots: none)
     foam_waters_cut: int = 0             # waters with foam past MAX_FOAM_WATERS (the last by entity: none)
+    ripple_waters_cut: int = 0           # waters with Ripples past MAX_RIPPLE_WATERS (the last by entity: still)
+    ripple_drops: int = 0                # drops pushed into the waters' ripples this frame (Wakes', rain's)
+    ripple_drops_cut: int = 0            # a water's drops this frame past MAX_RIPPLE_DROPS (left out)
+    ripple_steps: int = 0                # simulation steps of the waters' ripples this frame (0: all calm)
     volumetric_lamps_cut: int = 0        # point lights with volumetric past MAX_VOLUMETRIC_LAMPS (not in the air)
     virtual_lights: int = 0              # lights shining through mirrors and portals this frame
     virtual_lights_cut: int = 0          # ... that the limit or the view budget left out

@@ -35,6 +35,8 @@
 #include "ggx.glsl"
 #include "normal_map.glsl"
 #include "water.glsl"
+#include "ripples.glsl"
+#include "composite_bent.glsl"
 #include "end_image.glsl"
 #include "probe_lookup.glsl"
 #include "hdr.glsl"
@@ -47,7 +49,7 @@ uniform samplerCube sky_map;
 #endif
 #include "view_axis.glsl"
 #include "way.glsl"
-#ifdef COMPOSITE_BUMPY
+#ifdef COMPOSITE_BENT
 flat in mat3 v_project_dir;
 #endif
 
@@ -305,12 +307,14 @@ void main() {
     // before it in the parent view: from where the parent's rays enter it (its eye for a root
     // view, else the surface it looks out of: its oblique near plane) to the surface.
     vec3 at = eye + view_dir * (-(dot(v_normal.xyz, eye) + v_params.z) / dot(v_normal.xyz, view_dir));
+#ifdef COMPOSITE_BENT
+    vec3 flat_normal = v_normal.xyz;
+#endif
 #ifdef COMPOSITE_BUMPY
     // The mirror's UVs where the pixel's ray meets it, with their screen derivatives, taken
     // here, before a pixel is left out below: a discard leaves the derivatives of the rest of
     // its 2x2 quad undefined (GLSL 4.10, section 8.9), and the normal map's filter needs them
     // (bent_normal).
-    vec3 flat_normal = v_normal.xyz;
     vec2 mirror_uv = vec2(dot(v_carry[0], at), dot(v_carry[1], at)) + v_carry[2].xy;
     vec2 mirror_uv_dx = dFdx(mirror_uv), mirror_uv_dy = dFdy(mirror_uv);
 #endif
@@ -361,22 +365,32 @@ void main() {
     bool underside = roughness >= WATER_UNDERSIDE;
     if (underside) roughness -= WATER_UNDERSIDE;
 #endif
-#ifdef COMPOSITE_BUMPY
+#ifdef COMPOSITE_BENT
     // A normal map bends the mirror (seed 000's future work: the reflection texture stays as
-    // it is, only its lookup moves).  The pixel's ray meets the mirror's plane at p, whose UVs
-    // give the map's normal.  The bent reflected ray, carried back through the flat mirror,
-    // is the direction the mirror's image shows it in: its vanishing point in the parent view
-    // is where the image holds what lies far along it (exact for distant things, overstated
-    // for near ones).  A lookup that leaves this view's pixels keeps the flat one.
-    vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
-    vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);
+    // it is, only its lookup moves), and so do a water's ripples.  The pixel's ray meets the
+    // mirror's plane at p, whose UVs give the map's normal.  The bent reflected ray, carried
+    // back through the flat mirror, is the direction the mirror's image shows it in: its
+    // vanishing point in the parent view is where the image holds what lies far along it
+    // (exact for distant things, overstated for near ones).  A lookup that leaves this view's
+    // pixels keeps the flat one.
 #ifdef COMPOSITE_WATER
     // (the waves' normal is the top's: from below it is that normal turned over)
     vec3 top = underside ? -flat_normal : flat_normal;
+#ifdef COMPOSITE_BUMPY
+    vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
+    vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);
     normal = water_normal(along_u, along_v, top, mirror_uv, mirror_uv_dx, mirror_uv_dy, vec2(v_eye.w, v_normal.w),
                           v_tint.a, v_carry[2].z);
+#else
+    normal = top;
+#endif
+#ifdef RIPPLES
+    normal = rippled_normal(normal, at);
+#endif
     if (underside) normal = -normal;
 #else
+    vec3 along_u = normalize(v_carry[0] - dot(v_carry[0], flat_normal) * flat_normal);
+    vec3 along_v = normalize(v_carry[1] - dot(v_carry[1], flat_normal) * flat_normal);
     normal = bent_normal(along_u, along_v, flat_normal, mirror_uv, mirror_uv_dx, mirror_uv_dy, v_carry[2].z);
 #endif
 #ifndef COMPOSITE_FALLBACK  // (a fallback has no image to look up)

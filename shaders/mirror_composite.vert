@@ -14,6 +14,7 @@ in vec4 in_params;           // reflect_rate, roughness, the surface plane's w (
                              // second layer's share, params.y F0: mirror_passes.composite_rows)
 in vec4 in_normal;           // xyz: the mirror's normal, world, facing the parent eye; w: tile y
 in mat3 in_carry;            // a portal's rotation: directions here -> beyond the partner
+#include "composite_bent.glsl"
 
 flat out vec4 v_rect;
 flat out mat4 v_inv_view_proj;
@@ -23,7 +24,7 @@ flat out vec4 v_params;
 flat out vec4 v_normal;
 flat out mat3 v_carry;
 flat out uint v_view;        // the view's index (its pixels in the level's node image)
-#ifdef COMPOSITE_BUMPY
+#ifdef COMPOSITE_BENT
 flat out mat3 v_project_dir; // rows x, y, w of the parent's view-projection for directions (w = 0)
 #endif
 #ifdef COMPOSITE_FALLBACK
@@ -116,7 +117,7 @@ void main() {
     v_weights = fallback_weights[2 * gl_InstanceID];
     v_place = fallback_weights[2 * gl_InstanceID + 1];
 #endif
-#ifdef COMPOSITE_BUMPY
+#ifdef COMPOSITE_BENT
     mat4 view_proj = inverse(in_inv_view_proj);
     v_project_dir = mat3(view_proj[0].xyw, view_proj[1].xyw, view_proj[2].xyw);
 #endif

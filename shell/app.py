@@ -75,6 +75,7 @@ from systems.model_system import ModelSystem
 from systems.particle_system import ParticleSystem
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
+from systems.ripple_system import RippleSystem
 from systems.shadow_system import ShadowSystem
 from systems.surface_system import SurfaceSystem
 from systems.text_system import TextSystem
@@ -181,6 +182,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("extract", lambda e: ExtractSystem(e.world, e.renderer)),
     ("particles", lambda e: ParticleSystem(e.world, e.renderer)),  # every emitter's particles stepped and uploaded
     ("prepare", lambda e: PrepareSystem(e.world, e.renderer)),
+    ("ripples", lambda e: RippleSystem(e.world, e.renderer)),  # each rippling water's height field stepped
     ("shadows", lambda e: ShadowSystem(e.world, e.renderer)),
     ("probes", lambda e: ProbeSystem(e.world, e.renderer)),
     ("volume", lambda e: IrradianceVolumeSystem(e.world, e.renderer)),  # the irradiance volume's points

@@ -258,7 +258,7 @@ class ReflectionSystem(esper.Processor):
                   stats.views_left(), stats.pixels_left(), stats.min_view_pixels,
                   tuple(flow.offset for flow in waves[1]), tuple(self.tree.passes.surface_motion),
                   renderer.occlusion.level_key(), renderer.screen_reflections.level_key(),
-                  renderer.volumetric_fog.level_key())
+                  renderer.volumetric_fog.level_key(), renderer.ripples.version)
         return values, (table, blends.by_surface, levels)
 
     def prepare(self) -> None:

@@ -66,10 +66,10 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "LensFlare", "LevelOfDetail",
         "Material", "MeshRef",
         "Mirror", "Model", "MotionBlur", "ParticleEmitter",
-        "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "ScreenPanel",
+        "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "Ripples", "ScreenPanel",
         "ScreenReflections", "ScreenText",
-        "Skybox", "TimeOfDay", "Tonemap",
-        "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Water")}
+        "Skybox", "Splash", "TimeOfDay", "Tonemap",
+        "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Wake", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel", "FromDecal")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner"), ("ParticleEmitter", "on_death")}
@@ -359,6 +359,9 @@ def _check_water(path: Path, index: int, name: str, parts: list[tuple[type, dict
     """A Water makes its entity's Mirror water (systems/surface_system.py refuses the same in
     a world): it needs one, and a sharp one (the waves break up the image, not a blur)."""
     fields = {cls.__name__: decoded for cls, decoded in parts}
+    if "Ripples" in fields and "Water" not in fields:
+        raise LevelError(path, "Ripples need a Water on the same entity (the surface that ripples)",
+                         lines.get((index, "Ripples")), name, "Ripples")
     if "Water" not in fields:
         return
     if "Mirror" not in fields:

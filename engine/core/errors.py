@@ -76,7 +76,10 @@ class CausticLimitWarning(UserWarning):
 class WaterLimitWarning(UserWarning):
     """More waters with foam than ``MAX_FOAM_WATERS`` (engine/render/foam.py): only that
     many, the first by entity, are drawn with it (said when the count grows, counted every
-    frame in ``RenderStats.foam_waters_cut``)."""
+    frame in ``RenderStats.foam_waters_cut``); the same for ``Ripples`` past
+    ``MAX_RIPPLE_WATERS`` (``RenderStats.ripple_waters_cut``), a water's drops past
+    ``MAX_RIPPLE_DROPS`` a frame, and a ripple field too fine for ``MAX_RIPPLE_TEXELS``
+    (engine/render/ripples.py)."""
 
 
 class RefractionLimitWarning(UserWarning):

@@ -179,6 +179,9 @@ REFRACTION_SOURCE_UNITS = (65, 66)  # the copy pass: the view's colour and depth
 # Caustics under waters (engine/render/caustics.py): their normal maps' array, the 19th sampler
 # of the fullest build, only where the context has one (CausticBlock.supported).
 CAUSTIC_UNIT = 67             # scene (CAUSTICS builds): the caustic waters' normal maps (CausticMaps)
+# Ripples on waters (engine/render/ripples.py): their height fields' atlas.
+RIPPLE_UNIT = 68              # composite (RIPPLES builds): the latest heights
+RIPPLE_STEP_UNIT = 69         # the ripples' step: the heights it moves on
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance
@@ -214,6 +217,7 @@ FOG_BINDING = 7          # scene (FOG builds), sky, composites: the active camer
 CLOUDS_BINDING = 8       # sky (CLOUDS builds), scene (CLOUD_SHADOWS): the CloudLayer (engine/render/clouds.py)
 CAUSTICS_BINDING = 9     # scene (CAUSTICS builds): the waters whose waves gather the sun (engine/render/caustics.py)
 FOAM_BINDING = 10        # scene (FOAM builds): the waters with shore foam (engine/render/foam.py)
+RIPPLES_BINDING = 11     # composite (RIPPLES builds): the rippling waters' tiles (engine/render/ripples.py)
 
 # --- clip distances ------------------------------------------------------------------------
 # The GLSL writes gl_ClipDistance[CLIP_VIEW_PLANE] and so on: the names below, defined for

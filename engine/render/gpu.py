@@ -33,6 +33,7 @@ from engine.render.instances import GpuMesh, InstanceBatch
 from engine.render.object_motion import ObjectMotion
 from engine.render.pose_rows import PoseRows
 from engine.render.raw_gl import RawGL
+from engine.render.ripples import RippleAtlas
 from engine.render.shader_library import ShaderLibrary
 from engine.render.sky import SkyModel, flat_cube
 from engine.render.spot_cookies import SpotCookies
@@ -252,6 +253,7 @@ class Gpu:
         # The water whose waves gather the sun under it (the prepare stage sets it): CAUSTICS builds.
         self.caustics = CausticBlock(ctx, caps.max_texture_image_units)
         self.foam = FoamBlock(ctx, caps.max_texture_image_units)   # the waters with shore foam (engine/render/foam.py)
+        self.ripples = RippleAtlas(ctx)   # the rippling waters' height fields (engine/render/ripples.py)
         # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
         # the extract stage writes them): the SKINNED and MORPHED builds read them.
         self.pose_rows = PoseRows(ctx, caps.max_texture_size)

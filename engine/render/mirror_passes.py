@@ -64,6 +64,8 @@ from engine.render.bindings import (
     RECT_CLIPS,
     REFLECTION_UNITS,
     REFRACTION_COPY_UNIT,
+    RIPPLE_UNIT,
+    RIPPLES_BINDING,
     SCENE_CLIPS,
     SKY_UNIT,
     PassState,
@@ -336,7 +338,7 @@ _COMPOSITE_UNITS = {**dict(zip(("reflection", "reflection_seen", "reflection_nod
                     "sky_map": SKY_UNIT, "rough_atlas": ATLAS_UNIT, "normal_map": NORMAL_UNIT,
                     "probe_map": PROBE_UNIT, "probe2_map": PROBE2_UNIT,
                     **dict(zip(("parent_nodes", "parent_surfaces"), FALLBACK_PARENT_UNITS, strict=True)),
-                    "refraction_copy": REFRACTION_COPY_UNIT}
+                    "refraction_copy": REFRACTION_COPY_UNIT, "ripple_atlas": RIPPLE_UNIT}
 # The composite's variants (mirror_composite.frag); a level's views are drawn grouped by them.
 # A "_bumpy" build reads the mirror's normal map (MirrorBumps); its views are drawn per map.
 COMPOSITE_VARIANTS = {"sharp": {}, "rough": {"COMPOSITE_ROUGH": "1"}, "portal": {"COMPOSITE_PORTAL": "1"},
@@ -701,6 +703,16 @@ class MirrorPasses:
         self._claim_vao = self.ctx.vertex_array(self.claim, [(self._claim_buffer, "2f 3u", "in_position",
                                                               "in_claim")])
 
+    def _builds(self) -> tuple[tuple[str, str], ...]:
+        """The defines every composite and fallback build takes this frame: the fog's
+        (``FogBlock.defines``) and the ripples' (``RippleAtlas.defines``: while a water's rings
+        are alive, its block and heights bound for them)."""
+        ripples = self.renderer.ripples
+        if ripples.defines:
+            ripples.bind()
+            return self.renderer.fog.defines + ripples.defines
+        return self.renderer.fog.defines
+
     def _variant_draws(self, fogging: tuple) -> tuple[dict[str, _CompositeDraw], dict[str, _CompositeDraw]]:
         """The composite and fallback variants' draws built with ``fogging`` (the fog's
         defines: ``FOG`` while the active camera's fog has a density), made the first time."""
@@ -720,7 +732,8 @@ class MirrorPasses:
                                                 defines={"ROUGH_TILE": f"{TILE}.0",
                                                          "WATER_UNDERSIDE": str(WATER_UNDERSIDE),
                                                          **defines, **dict(fogging)})
-        assign_slots(program, _COMPOSITE_UNITS, {"FallbackRows": FALLBACK_BINDING, "Fog": FOG_BINDING})
+        assign_slots(program, _COMPOSITE_UNITS, {"FallbackRows": FALLBACK_BINDING, "Fog": FOG_BINDING,
+                                                        "Ripples": RIPPLES_BINDING})
         return _CompositeDraw(self.ctx, program)
 
     def _composite_for(self, fogging: tuple, variant: str, moving: bool) -> _CompositeDraw:
@@ -828,7 +841,7 @@ class MirrorPasses:
         if not prepared.rows and not prepared.moving:
             return
         ctx = self.ctx
-        fogging = self.renderer.fog.defines
+        fogging = self._builds()
         if prepared.rough:
             self.rough_atlas.isolate(level, prepared.rough)
         # Water bends what lies below it: the level as it stands (its colour and depth) copied
@@ -977,7 +990,7 @@ class MirrorPasses:
         if not prepared.groups:
             return
         ctx = self.ctx
-        fogging = self.renderer.fog.defines
+        fogging = self._builds()
         renderer = self.renderer
         if any("_water" in key[0] for key in prepared.groups):
             # Water with no view over it bends what lies below it as a view's composite does

@@ -628,7 +628,8 @@ class Renderer(Gpu):
             self.text_pass = None
         self._set_sky_view(None)
         for obj in (self.sky, self.blank_color, self.blank_ids, self.cameras_ubo, self.lights_ubo, self.fog,
-                    self.clouds, self.caustics, self.foam, self.spot_cookies, self.pose_rows, self.object_motion):
+                    self.clouds, self.caustics, self.foam, self.ripples, self.spot_cookies, self.pose_rows,
+                    self.object_motion):
             obj.release()
         self.shaders.release()
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from components import Material, Mirror, Water
+from components import Material, Mirror, Ripples, Water
 from components.tracking import ComponentValueError, warn_component
 from engine.core.world import World, world_invariant
 
@@ -21,6 +21,19 @@ def check_water_has_mirror(world: World, entity: int, joining: Any = None, **_ot
     if mirror is None:
         raise ComponentValueError(f"Water on entity {entity}: a Water needs a Mirror on the same entity (the "
                                   "surface it makes water); give the entity a Mirror(roughness=0) too")
+
+
+@world_invariant(Ripples, Water, whole=True)
+def check_ripples_on_water(world: World, entity: int, joining: Any = None, **_other: Any) -> None:
+    """Ripples need a Water on their entity (the surface that ripples): at the end of a spawn,
+    or on an ``add_component`` of Ripples (the Water first).  A Water taken off later leaves
+    them still (the ripple stage finds no water there)."""
+    held = {kind: world.try_get(entity, kind) if world.exists(entity) else None for kind in (Ripples, Water)}
+    if joining is not None:
+        held[type(joining)] = joining
+    if held[Ripples] is not None and held[Water] is None:
+        raise ComponentValueError(f"Ripples on entity {entity}: Ripples need a Water on the same entity (the "
+                                  "surface that ripples); give the entity a Water (and its Mirror) too")
 
 
 @world_invariant(Water, Mirror)

@@ -1,0 +1,235 @@
+"""Stage "ripples": each rippling water's height field moved on by the frame's seconds, with
+the drops its ``Wake``s and its rain push in (``components/ripples.py``).
+
+After the prepare stage, before any view is drawn: the composites of this frame's views read
+the fields as this stage leaves them (``engine/render/ripples.py``: the atlas, the step, and
+how the composites see it).  What is decided here, on the CPU:
+
+- which waters ripple: those with ``Ripples`` and a water surface with an outline (a flat
+  quad), at most ``MAX_RIPPLE_WATERS`` (the first by entity; the rest counted and said once),
+  each field's texels (``cell`` apart, square, coarser where a side would pass
+  ``MAX_RIPPLE_TEXELS``: said once);
+- the frame's drops: where each ``Wake`` crosses a water's plane inside its outline, pushed
+  down by its strength times the metres it moved since the last frame, and the rain (its
+  drops a second over the water's area, the fraction carried to the next frame, placed at
+  random), at most ``MAX_RIPPLE_DROPS`` a water a frame;
+- how many steps the frame takes (each at most ``MAX_COURANT`` texels of travel) and when a
+  water's rings have died away: the height its drops could still have (their depths summed,
+  falling by exp(-damping t): the rings only ever spread and fade) under ``RIPPLE_CALM``,
+  its tile is cleared and no longer stepped, and the composites' plain builds come back.
+A paused frame (dt 0) moves nothing."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import esper
+import numpy as np
+
+from components import MeshRef, Ripples, Splash, Transform, Wake
+from components.tracking import ComponentWarning
+from engine.core.errors import WaterLimitWarning
+from engine.core.world import World
+from engine.render.caustics import placed_box
+from engine.render.gpu import Gpu
+from engine.render.ripples import (
+    MAX_COURANT,
+    MAX_RIPPLE_DROPS,
+    MAX_RIPPLE_STEPS,
+    MAX_RIPPLE_WATERS,
+    RippleWater,
+    field_texels,
+    outline_edges,
+)
+from engine.resources import Surfaces
+
+RIPPLE_CALM = 1e-5        # metres: rings whose height may be no more than this are gone (a 0.01 mm swell)
+MAX_RIPPLE_FRAME = 1.0 / 15.0   # seconds a frame moves the ripples at most (a hitch is not a flood of steps)
+MIN_DROP_TEXELS = 1.5     # a drop's radius in texels at least (a narrower one would miss every texel's centre)
+RAIN_SEED = 20261206      # where the rain falls: the same on every run
+
+
+class RippleSystem(esper.Processor):
+    """Moves every rippling water's rings on, with the frame's drops."""
+
+    def __init__(self, world: World, renderer: Gpu) -> None:
+        super().__init__()
+        self.world = world
+        self.renderer = renderer
+        self.loudness: dict[int, float] = {}      # water -> the height its rings may still have (metres)
+        self._crossed: dict[int, np.ndarray] = {}  # Wake entity -> its box's centre last frame
+        self._owed: dict[int, float] = {}          # water -> the rain's fraction of a drop carried over
+        self._rain = np.random.default_rng(RAIN_SEED)
+        self._said: set[tuple[str, int]] = set()   # (what, entity) said once
+        self._cut = 0
+
+    def process(self, dt: float) -> None:
+        stats = self.renderer.stats
+        atlas = self.renderer.ripples
+        found = sorted(self.world.query_one(Ripples), key=lambda pair: pair[0])
+        if not found:
+            if atlas.waters:
+                atlas.release()
+            self.loudness.clear()
+            self._crossed.clear()
+            return
+        waters = self._waters(found)
+        cut = max(0, len(waters) - MAX_RIPPLE_WATERS)
+        if cut > self._cut:
+            warnings.warn(WaterLimitWarning(
+                f"{len(waters)} waters have Ripples: {MAX_RIPPLE_WATERS} ripple at a time (the first by entity: "
+                f"{[w.entity for w, _ in waters[:MAX_RIPPLE_WATERS]]}), so {cut} stay still "
+                "(RenderStats.ripple_waters_cut)"), stacklevel=2)
+        self._cut = stats.ripple_waters_cut = cut
+        waters = waters[:MAX_RIPPLE_WATERS]
+        atlas.set([water for water, _ in waters], self.renderer.shaders)
+        for entity in list(self.loudness):
+            if atlas.tile_of(entity) is None:
+                del self.loudness[entity]
+        if dt <= 0.0:
+            return
+        dt = min(dt, MAX_RIPPLE_FRAME)
+        drops = self._drops(waters, dt)
+        for water, ripples in waters:
+            entity = water.entity
+            these = drops.get(entity, [])
+            if len(these) > MAX_RIPPLE_DROPS:
+                stats.ripple_drops_cut += len(these) - MAX_RIPPLE_DROPS
+                if ("drops", entity) not in self._said:
+                    self._said.add(("drops", entity))
+                    warnings.warn(WaterLimitWarning(
+                        f"Ripples on entity {entity}: {len(these)} drops in one frame, {MAX_RIPPLE_DROPS} are taken "
+                        "(the rest counted in RenderStats.ripple_drops_cut)"), stacklevel=2)
+                drops[entity] = these = these[:MAX_RIPPLE_DROPS]
+            stats.ripple_drops += len(these)
+            loud = self.loudness.get(entity, 0.0) * math.exp(-ripples.damping * dt) + sum(d[3] for d in these)
+            if loud > RIPPLE_CALM:
+                self.loudness[entity] = loud
+                atlas.wake(entity)
+            else:
+                self.loudness.pop(entity, None)
+                atlas.sleep(entity)
+        awake = [(water, ripples) for water, ripples in waters if water.entity in atlas.awake]
+        if not awake:
+            return
+        fastest = max(ripples.speed / min(_spacing(water)) for water, ripples in awake)
+        steps = min(MAX_RIPPLE_STEPS, max(1, math.ceil(fastest * dt / MAX_COURANT)))
+        step = dt / steps
+        rates = {}
+        for water, ripples in awake:
+            du, dv = _spacing(water)
+            rates[water.entity] = ((ripples.speed * step / du) ** 2, (ripples.speed * step / dv) ** 2,
+                                   math.exp(-2.0 * ripples.damping * step))
+        atlas.step(rates, drops, steps)
+        stats.ripple_steps = steps
+
+    def _waters(self, found: list[tuple[int, Ripples]]) -> list[tuple[RippleWater, Ripples]]:
+        """Each water of ``found`` that can ripple, as the atlas holds it."""
+        surfaces = self.world.resources.get(Surfaces)
+        waters = []
+        for entity, ripples in found:
+            state = surfaces.mirrors.get(entity) if surfaces is not None else None
+            if state is None or state.water is None:
+                continue   # (its Water or Mirror taken off: the water rule says so)
+            if state.outline is None:
+                self._say_once("flat", entity, ComponentWarning(
+                    f"Ripples on entity {entity}: its water's mesh is not one flat quad (no outline), so it does not "
+                    "ripple; give the water a quad mesh"))
+                continue
+            origin, edge_u, edge_v = outline_edges(state.outline)
+            texels, coarse = field_texels(edge_u, edge_v, ripples.cell)
+            if coarse:
+                self._say_once("coarse", entity, WaterLimitWarning(
+                    f"Ripples on entity {entity}: a field {ripples.cell} m a texel over this water would pass "
+                    f"{max(texels)} texels a side, so its texels are coarser ({texels[0]} x {texels[1]})"))
+            plane = tuple(float(v) for v in state.plane)
+            waters.append((RippleWater(entity, plane, tuple(map(float, origin)), tuple(map(float, edge_u)),
+                                       tuple(map(float, edge_v)), texels, ripples.strength), ripples))
+        return waters
+
+    def _drops(self, waters: list[tuple[RippleWater, Ripples]], dt: float) -> dict[int, list[tuple[float, ...]]]:
+        """The frame's drops on each water (texel x, y in its tile, radius in texels, depth in
+        metres): its Wakes' and its rain's."""
+        drops: dict[int, list[tuple[float, ...]]] = {water.entity: [] for water, _ in waters}
+        atlas = self.renderer.ripples
+        crossed: dict[int, np.ndarray] = {}
+        for entity, (wake, transform) in self.world.query(Wake, Transform):
+            centre, half = self._placed(entity, transform)
+            last = self._crossed.get(entity)
+            crossed[entity] = centre
+            moved = 0.0 if last is None else float(np.linalg.norm(centre - last))
+            if moved <= 0.0 or wake.strength <= 0.0:
+                continue
+            for water, _ in waters:
+                normal, w = np.asarray(water.plane[:3]), water.plane[3]
+                height = float(normal @ centre + w)
+                reach = float(np.abs(normal) @ half)
+                if abs(height) > max(reach, wake.radius):
+                    continue   # not across this water's plane
+                point = centre - height * normal
+                x, y = atlas.to_texels(water.entity, point)[0]
+                nu, nv = water.texels
+                if not (0.0 <= x <= nu and 0.0 <= y <= nv):
+                    continue   # beside its outline
+                radius = wake.radius or max(float(np.abs(edge) @ half) / float(np.linalg.norm(edge))
+                                            for edge in (np.asarray(water.edge_u), np.asarray(water.edge_v)))
+                drops[water.entity].append((x, y, max(radius / min(_spacing(water)), MIN_DROP_TEXELS),
+                                            wake.strength * moved))
+        self._crossed = crossed
+        for entity, (splash, transform) in self.world.query(Splash, Transform):
+            self.world.remove_component(entity, Splash)   # (one frame's: taken in now, or nowhere)
+            place = np.array([float(transform.world[3][r]) for r in range(3)])
+            landed = self._landing(waters, place)
+            if landed is not None:
+                water, x, y = landed
+                drops[water.entity].append((x, y, max(splash.radius / min(_spacing(water)), MIN_DROP_TEXELS),
+                                            splash.depth))
+        for water, ripples in waters:
+            if ripples.rain <= 0.0 or ripples.drop_depth <= 0.0:
+                continue
+            area = float(np.linalg.norm(np.cross(water.edge_u, water.edge_v)))
+            owed = self._owed.get(water.entity, 0.0) + ripples.rain * area * dt
+            count = int(owed)
+            self._owed[water.entity] = owed - count
+            if count:
+                nu, nv = water.texels
+                places = self._rain.random((count, 2)) * (nu, nv)
+                radius = max(ripples.drop_radius / min(_spacing(water)), MIN_DROP_TEXELS)
+                drops[water.entity] += [(float(x), float(y), radius, ripples.drop_depth) for x, y in places]
+        return drops
+
+    def _landing(self, waters: list[tuple[RippleWater, Ripples]], place: np.ndarray
+                 ) -> tuple[RippleWater, float, float] | None:
+        """Where a point lands on the nearest rippling water straight across its plane (the
+        water and the texel there), or None where no outline holds it."""
+        best = None
+        for water, _ in waters:
+            normal = np.asarray(water.plane[:3])
+            height = float(normal @ place + water.plane[3])
+            x, y = self.renderer.ripples.to_texels(water.entity, place - height * normal)[0]
+            nu, nv = water.texels
+            if 0.0 <= x <= nu and 0.0 <= y <= nv and (best is None or abs(height) < best[0]):
+                best = (abs(height), water, x, y)
+        return None if best is None else best[1:]
+
+    def _placed(self, entity: int, transform: Transform) -> tuple[np.ndarray, np.ndarray]:
+        """Where a Wake's entity stands: its mesh's box as placed (its centre and half sides),
+        or its Transform's point with no box."""
+        ref = self.world.try_get(entity, MeshRef)
+        matrix = transform.world
+        if ref is None or ref.mesh is None:
+            return np.array([float(matrix[3][r]) for r in range(3)]), np.zeros(3)
+        lo, hi = (tuple(float(v) for v in end) for end in ref.mesh.bounds)
+        low, high = (np.asarray(end) for end in placed_box(matrix, lo, hi))
+        return (low + high) * 0.5, (high - low) * 0.5
+
+    def _say_once(self, what: str, entity: int, warning: Warning) -> None:
+        if (what, entity) not in self._said:
+            self._said.add((what, entity))
+            warnings.warn(warning, stacklevel=4)
+
+
+def _spacing(water: RippleWater) -> tuple[float, float]:
+    """Metres between a water's texels along its outline's two edges."""
+    return (float(np.linalg.norm(water.edge_u)) / water.texels[0],
+            float(np.linalg.norm(water.edge_v)) / water.texels[1])
