@@ -875,7 +875,7 @@ class MirrorPasses:
                 uniforms.set(program, "atlas_size", self.rough_atlas.texture.size)
             uniforms.set(program, "parent_size", parent.size)
             uniforms.set(program, "to_reflection", (level.size[0] / parent.size[0], level.size[1] / parent.size[1]))
-            if fogging:
+            if self.renderer.fog.defines:   # (FOG builds: the ripples' defines ride in ``fogging`` too)
                 uniforms.set(program, "fog_from_eye", parent_is_root)
             if motion is not None:
                 uniforms.write(program, "parent_view_proj", motion[0])
@@ -1028,7 +1028,7 @@ class MirrorPasses:
                         uniforms.set(program, f"{prefix}_{name}", value)
             uniforms.set(program, "parent_size", parent.size)
             uniforms.set(program, "to_reflection", (1.0, 1.0))
-            if fogging:
+            if self.renderer.fog.defines:   # (FOG builds: the ripples' defines ride in ``fogging`` too)
                 uniforms.set(program, "fog_from_eye", parent_is_root)
             if "to_child" in program:
                 uniforms.set(program, "to_child", to_child)

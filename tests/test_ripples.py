@@ -1,0 +1,336 @@
+"""Ripples on water (``Ripples``, ``Wake``, ``Splash``): the height field the ripple stage
+steps on the GPU, read back and held to the wave equation's own facts (a ring spreads at the
+ripples' speed, dies out by exp(-damping t), and a wall reflects it as a second drop beyond
+the wall would), and the frames the composites draw from it (the reflection bent where the
+rings are and only there; the plain frame back once they die away)."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Ripples,
+    Skybox,
+    Splash,
+    Transform,
+    Wake,
+    Water,
+    look_rotation,
+)
+from engine.assets.mesh import box, quad
+from engine.core.errors import WaterLimitWarning
+from engine.render.ripples import MAX_RIPPLE_TEXELS, MAX_RIPPLE_WATERS, RIPPLES_BLOCK_BYTES
+from tests.support import pixel_rays
+
+FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
+DT = 1.0 / 60.0
+
+
+def pond(ripples: Ripples | None, size=(4.0, 4.0), centre=(0.0, 0.0, 0.0), splashes=(), wall: bool = False,
+         things=()):
+    """A still pond (a quad ``size`` metres about ``centre``, y up) with ``ripples``, a
+    ``Splash`` at each of ``splashes`` (radius, depth, point), ``things`` (components of an
+    entity each); ``wall``: a checkered wall behind it for the water to reflect, under a sun,
+    seen low over the water.  Returns the build and a dict it fills with the water's entity."""
+    held = {}
+
+    def build(world):
+        eye = glm.vec3(0.0, 0.8, 3.0)
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.0, 0.3, -2.0) - eye)),
+                    Camera(fov_y=55.0))
+        if wall:
+            world.spawn(Skybox(faces=[np.full((8, 8, 3), 0.3, np.float32) for _ in range(6)]))
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.4), intensity=1.5))
+            for i in range(8):
+                for j in range(4):
+                    world.spawn(Transform(position=(-2.0 + i * 0.5 + 0.25, 0.25 + j * 0.5, -2.0)),
+                                MeshRef(quad(0.5, 0.5)),
+                                Material(color=(0.9, 0.2, 0.1, 1) if (i + j) % 2 else (0.1, 0.3, 0.9, 1),
+                                         roughness=1.0))
+        parts = [Transform(position=centre, rotation=FLAT), MeshRef(quad(*size)),
+                 Material(color=(0.05, 0.2, 0.25, 0.3), roughness=0.2), Mirror(), Water()]
+        held["water"] = world.spawn(*parts, *([ripples] if ripples is not None else []))
+        for radius, depth, point in splashes:
+            world.spawn(Transform(position=point), Splash(radius=radius, depth=depth))
+        held["things"] = [world.spawn(*components) for components in things]
+    return build, held
+
+
+def run(scene, build, frames: int, size=(32, 24)):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # (a still water: no waves, said)
+        runner = scene(build, size)
+        rgb = None
+        for _ in range(frames):
+            rgb = runner.frame(DT)
+    return runner, rgb
+
+
+def heights(runner, held) -> np.ndarray:
+    return runner.engine.renderer.ripples.heights(held["water"])
+
+
+def test_a_drop_spreads_as_a_ring_at_the_ripples_speed_and_dies_out_by_the_damping(scene):
+    """A splash in the middle of a pond: the ring's crest stands ``speed`` x t from where it
+    fell, at two times (the ring's radius grows with time as the wave equation's front does),
+    and a pond with ``damping`` holds the undamped pond's field times exp(-damping t)."""
+    cell, speed = 0.02, 0.5
+    drop = [(0.1, 0.01, (0.0, 0.0, 0.0))]
+    still_build, still = pond(Ripples(speed=speed, damping=0.0, cell=cell), splashes=drop)
+    damped_build, damped = pond(Ripples(speed=speed, damping=0.8, cell=cell), splashes=drop)
+    runners = [scene(still_build, (32, 24)), scene(damped_build, (32, 24))]
+    texels = int(4.0 / cell)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for runner in runners:
+            runner.frame(DT)
+    centre = runners[0].engine.renderer.ripples.to_texels(still["water"], (0.0, 0.0, 0.0))[0]
+    yy, xx = np.mgrid[0:texels, 0:texels] + 0.5
+    radius = np.hypot(xx - centre[0], yy - centre[1]) * cell
+    rings = np.round(radius / cell).astype(int)
+    seen = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for frame in range(2, 61):
+            for runner in runners:
+                runner.frame(DT)
+            if frame in (30, 60):
+                t = frame * DT
+                field, weaker = heights(runners[0], still), heights(runners[1], damped)
+                profile = np.bincount(rings.ravel(), np.abs(field).ravel()) / np.bincount(rings.ravel())
+                crest = (np.argmax(profile[4:]) + 4) * cell   # (past the middle, where the drop fell)
+                seen.append((t, crest))
+                assert abs(crest - speed * t) < 0.06, (t, crest, speed * t)
+                strong = np.abs(field) > 0.2 * np.abs(field).max()
+                kept = float((weaker[strong] * field[strong]).sum() / (field[strong] ** 2).sum())
+                assert kept == pytest.approx(math.exp(-0.8 * t), rel=0.04), (t, kept)
+    assert seen[1][1] > 1.6 * seen[0][1]
+    assert runners[0].stats.ripple_steps == 1   # (0.5 m/s over 2 cm texels: one step a frame keeps it stable)
+
+
+def test_a_wall_reflects_the_rings_as_a_drop_beyond_it_would(scene):
+    """A drop 0.3 m from a pond's edge, against a pond twice as long with a second drop as far
+    beyond where that edge was: by symmetry the wave equation's field with a reflecting wall
+    is the two drops' field on the wall's side, texel for texel, where the rings have met the
+    wall and come back; without the reflected drop it is not."""
+    cell, d = 0.04, 0.3
+    near = pond(Ripples(speed=0.5, damping=0.0, cell=cell), splashes=[(0.12, 0.01, (-2.0 + d, 0.0, 0.0))])
+    long_pond = dict(size=(8.0, 4.0), centre=(-2.0, 0.0, 0.0))
+    both = pond(Ripples(speed=0.5, damping=0.0, cell=cell),
+                splashes=[(0.12, 0.01, (-2.0 + d, 0.0, 0.0)), (0.12, 0.01, (-2.0 - d, 0.0, 0.0))], **long_pond)
+    alone = pond(Ripples(speed=0.5, damping=0.0, cell=cell), splashes=[(0.12, 0.01, (-2.0 + d, 0.0, 0.0))],
+                 **long_pond)
+    runners = [(scene(build, (32, 24)), held) for build, held in (near, both, alone)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(75):
+            for runner, _ in runners:
+                runner.frame(DT)
+    fields = []
+    for runner, held in runners:
+        atlas = runner.engine.renderer.ripples
+        # Each field over the near pond's square, [-2, 2] along x: its texels' columns there.
+        xs = -2.0 + cell * (np.arange(int(4.0 / cell)) + 0.5)
+        ts = atlas.to_texels(held["water"], np.stack([xs, 0 * xs, 0 * xs], axis=1))
+        axis = int(np.argmax(np.abs(ts[-1] - ts[0])))   # (the texel axis x runs along)
+        field = heights(runner, held)
+        field = field if axis == 0 else field.T   # (x along columns)
+        columns = np.floor(ts[:, axis]).astype(int)
+        fields.append(field[:, columns])
+    walled, mirrored, free = fields
+    scale = np.abs(walled).max()
+    assert np.abs(walled - mirrored).max() < 1e-4 * scale
+    assert np.abs(walled - free).max() > 0.2 * scale
+
+
+def test_a_wading_thing_leaves_rings_and_a_still_one_none(scene):
+    """A box with a ``Wake`` moving through the pond makes rings along its way, growing as it
+    goes; the same box standing still makes none (no step, a calm field); a moving box with no
+    Wake makes none."""
+    def moving(wake: bool):
+        parts = (Transform(position=(-1.0, 0.0, 0.3)), MeshRef(box((0.2, 0.3, 0.2))),
+                 Material(color=(0.9, 0.9, 0.2, 1.0)), *([Wake(strength=0.5)] if wake else []))
+        return pond(Ripples(speed=0.35, damping=0.5, cell=0.03), things=[parts])
+
+    results = {}
+    for name, wake, speed in (("wading", True, 1.0), ("standing", True, 0.0), ("no wake", False, 1.0)):
+        build, held = moving(wake)
+        runner = scene(build, (32, 24))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for _ in range(40):
+                thing = runner.world.get(held["things"][0], Transform)
+                thing.position = thing.position + glm.vec3(speed * DT, 0.0, 0.0)
+                runner.frame(DT)
+        atlas = runner.engine.renderer.ripples
+        results[name] = (heights(runner, held), runner.stats.ripple_steps, set(atlas.awake), runner, held)
+    field, steps, awake, runner, held = results["wading"]
+    assert steps >= 1 and awake
+    atlas = runner.engine.renderer.ripples
+    # Along its way (x from -1 to -0.33 at z = 0.3) the water is stirred; far from it, calm.
+    way = atlas.to_texels(held["water"], [(-0.7, 0.0, 0.3)])[0].astype(int)
+    far = atlas.to_texels(held["water"], [(1.5, 0.0, -1.5)])[0].astype(int)
+    assert np.abs(field[way[1] - 3:way[1] + 4, way[0] - 3:way[0] + 4]).max() > 1e-3
+    assert np.abs(field[far[1] - 3:far[1] + 4, far[0] - 3:far[0] + 4]).max() < 1e-6
+    for name in ("standing", "no wake"):
+        field, steps, awake, *_ = results[name]
+        assert steps == 0 and not awake, name
+        assert np.abs(field).max() == 0.0, name
+
+
+def test_ripples_bend_the_reflection_where_the_rings_are_and_nowhere_else(scene):
+    """A pond reflecting a checkered wall, a splash in it: against the same pond with no
+    Ripples, the frame changes where the rings tilt the surface (each pixel's point on the
+    water found along its ray, the field's slope there read back) and is the same (within a
+    filter's rounding) wherever the field is flat.  Two frames in a row differ while the rings
+    spread, the camera standing still (a kept frame would not)."""
+    drop = [(0.1, 0.03, (0.3, 0.0, -0.6))]
+    size = (240, 180)
+    rippled_build, held = pond(Ripples(speed=0.5, damping=0.0, cell=0.02), splashes=drop, wall=True)
+    plain_build, _ = pond(None, splashes=drop, wall=True)
+    rippled, frame = run(scene, rippled_build, 24, size)
+    _, plain = run(scene, plain_build, 24, size)
+    field = heights(rippled, held)
+    slope = np.hypot(*np.gradient(field.astype(np.float64), 0.02))
+    # The field's slope under each pixel (a pixel's ray to the plane y = 0), the largest near it.
+    eye, directions = pixel_rays(rippled.engine.main_view, size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -eye[1] / directions[..., 1]
+    on = (t > 0) & np.isfinite(t)
+    at = eye + directions * np.where(on, t, 0.0)[..., None]
+    on &= (np.abs(at[..., 0]) < 1.9) & (np.abs(at[..., 2]) < 1.9)
+    texel = rippled.engine.renderer.ripples.to_texels(held["water"], at.reshape(-1, 3)).reshape(*size[::-1], 2)
+    ix = np.clip(texel[..., 0].astype(int), 0, field.shape[1] - 1)
+    iy = np.clip(texel[..., 1].astype(int), 0, field.shape[0] - 1)
+    near = slope.copy()
+    for axis in (0, 1):
+        for shift in (-2, -1, 1, 2):
+            near = np.maximum(near, np.roll(slope, shift, axis=axis))
+    under = near[iy, ix]
+    changed = np.abs(frame.astype(int) - plain.astype(int)).max(axis=-1)
+    flat = on & (under < 1e-5)
+    tilted = on & (under > 0.02)
+    assert flat.sum() > 10000 and tilted.sum() > 120, (flat.sum(), tilted.sum())
+    assert changed[flat].max() <= 2
+    assert (changed[tilted] > 2).mean() > 0.5
+    assert (changed > 2)[on].sum() > 80
+    # Still camera, spreading rings: the frames are drawn again (not kept: StillTree), and move.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(6):
+            after = rippled.frame(DT)
+    assert (np.abs(after.astype(int) - frame.astype(int)).max(axis=-1) > 2).sum() > 30
+
+
+def test_the_rings_fall_calm_and_then_cost_nothing(scene):
+    """With damping, once a splash's rings have died away (their height under 0.01 mm) the
+    water is no longer stepped, the composites' plain builds come back, and the frame is the
+    frame with no Ripples at all, bit for bit."""
+    drop = [(0.08, 0.001, (0.3, 0.0, -0.6))]
+    rippled_build, held = pond(Ripples(speed=0.5, damping=4.0, cell=0.02), splashes=drop, wall=True)
+    plain_build, _ = pond(None, wall=True)
+    rippled, _ = run(scene, rippled_build, 2, (64, 48))
+    atlas = rippled.engine.renderer.ripples
+    assert rippled.stats.ripple_steps == 1 and atlas.defines
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for frame in range(200):
+            last = rippled.frame(DT)
+            if not atlas.awake:
+                break
+    assert not atlas.awake and frame > 40   # (0.001 x exp(-4 t) < 1e-5: t > 1.15 s)
+    assert rippled.stats.ripple_steps == 0 and atlas.defines == ()
+    assert np.abs(heights(rippled, held)).max() == 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        last = rippled.frame(DT)
+    _, plain = run(scene, plain_build, 3, (64, 48))
+    np.testing.assert_array_equal(last, plain)
+
+
+def test_rain_falls_at_its_rate_over_the_waters_area(scene):
+    """``rain`` drops a square metre a second over the pond's 16 square metres: a second of
+    frames takes in rain x 16 drops (the fraction carried over), each ringing the field."""
+    build, held = pond(Ripples(rain=5.0, damping=0.0))
+    runner = scene(build, (32, 24))
+    drops = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(60):
+            runner.frame(DT)
+            drops += runner.stats.ripple_drops
+    assert abs(drops - 5.0 * 16.0) <= 1
+    field = heights(runner, held)
+    assert (np.abs(field) > 1e-5).mean() > 0.3   # (rings all over the pond)
+
+
+def test_ripple_values_and_limits_are_checked_and_said(scene):
+    """Bad values are refused naming the field; Ripples without a Water are refused; past
+    ``MAX_RIPPLE_WATERS`` waters the rest stay still, counted and said; a field finer than
+    ``MAX_RIPPLE_TEXELS`` a side is made coarser and said; the block's size is the GLSL's."""
+    for field, value in (("speed", 0.0), ("speed", float("nan")), ("damping", -1.0), ("cell", 0.0),
+                         ("rain", -1.0), ("drop_depth", 2.0)):
+        with pytest.raises(ComponentValueError, match=f"Ripples.{field}"):
+            Ripples(**{field: value})
+    with pytest.raises(ComponentValueError, match="Wake.strength"):
+        Wake(strength=-1.0)
+    with pytest.raises(ComponentValueError, match="Splash.radius"):
+        Splash(radius=0.0)
+
+    def no_water(world):
+        world.spawn(Transform(), Camera())
+        world.spawn(Transform(rotation=FLAT), MeshRef(quad(1.0, 1.0)), Mirror(), Ripples())
+    with pytest.raises(ComponentValueError, match="Ripples need a Water"):
+        scene(no_water, (32, 24)).frame(DT)
+
+    def many(world):
+        world.spawn(Transform(position=(0, 3, 3), rotation=look_rotation(glm.vec3(0, -3, -3))), Camera())
+        for i in range(MAX_RIPPLE_WATERS + 2):
+            world.spawn(Transform(position=(i * 1.5, 0.0, 0.0), rotation=FLAT), MeshRef(quad(1.0, 1.0)),
+                        Material(color=(0.1, 0.2, 0.3, 0.5)), Mirror(), Water(),
+                        Ripples(cell=0.001 if i == 0 else 0.03))
+    runner = scene(many, (32, 24))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        runner.frame(DT)
+    messages = [str(w.message) for w in said if issubclass(w.category, WaterLimitWarning)]
+    assert any("6 waters have Ripples" in m and "so 2 stay still" in m for m in messages), messages
+    assert any(f"{MAX_RIPPLE_TEXELS} texels a side" in m for m in messages), messages
+    assert runner.stats.ripple_waters_cut == 2
+    atlas = runner.engine.renderer.ripples
+    assert len(atlas.waters) == MAX_RIPPLE_WATERS
+    assert max(max(water.texels) for _, water in atlas.waters.values()) == MAX_RIPPLE_TEXELS
+    # The block as ripples.glsl lays it out (std140) is what the atlas writes.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runner.world.spawn(Transform(position=(1.5, 0.0, 0.0)), Splash())
+        runner.frame(DT)
+    programs = [draw.program for draws in runner.engine.reflection_system.tree.passes._draws.values()
+                for draw in draws[0].values() if "Ripples" in draw.program]
+    assert programs and all(program["Ripples"].size == RIPPLES_BLOCK_BYTES for program in programs)
+
+
+def test_ripples_release_their_fields_when_they_go(scene):
+    """Taking the Ripples off the last rippling water releases the atlas's textures and block;
+    a Splash is taken off its entity the frame it lands (on water or not)."""
+    build, held = pond(Ripples(), splashes=[(0.05, 0.01, (0.0, 0.0, 0.0)), (0.05, 0.01, (9.0, 0.0, 0.0))])
+    runner, _ = run(scene, build, 2)
+    atlas = runner.engine.renderer.ripples
+    assert atlas._images and atlas.awake
+    world = runner.world
+    assert not [entity for entity, _ in world.query_one(Splash)]
+    world.remove_component(held["water"], Ripples)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runner.frame(DT)
+    assert atlas._images == [] and atlas._ubo is None and atlas.waters == {} and atlas.defines == ()
