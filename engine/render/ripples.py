@@ -42,6 +42,7 @@ from engine.render.bindings import (
     bind_texture,
     bind_uniform_block,
 )
+from engine.render.shader_library import ShaderLibrary
 
 RIPPLE_TILE = 256          # a water's field: at most this many texels a side (MAX_RIPPLE_TEXELS)
 MAX_RIPPLE_TEXELS = RIPPLE_TILE
@@ -116,11 +117,11 @@ class RippleAtlas:
         self._ubo: moderngl.Buffer | None = None
         self._vao: moderngl.VertexArray | None = None
         self._program: moderngl.Program | None = None
-        self._shaders = None
+        self._shaders: ShaderLibrary | None = None
 
     # -- the waters ------------------------------------------------------------------------
 
-    def set(self, waters: Sequence[RippleWater], shaders) -> None:
+    def set(self, waters: Sequence[RippleWater], shaders: ShaderLibrary) -> None:
         """Hold ``waters`` (at most ``MAX_RIPPLE_WATERS``): one that stays keeps its tile and
         its rings; one new, or whose outline or texels changed, gets a cleared tile, asleep."""
         if len(waters) > MAX_RIPPLE_WATERS:
