@@ -99,6 +99,9 @@ class Water(TrackedComponent):
       from all round), over the water's reflection and what is seen through it
       (``shaders/include/foam.glsl``).  Drawn in every view the view trees draw; a probe's
       faces show the water without it.
+    - **Ripples**: a ``Ripples`` component beside it makes it ripple (rings from drops, rain,
+      and what wades through it with a ``Wake``: ``components/ripples.py``), their slopes
+      bending the reflection and what is seen through the surface as the waves do.
     - **Caustics** (``caustics``, 0 by default: none; 1: all of them): the suns' light (and
       the lamps' over the water: up to four) through the waves is bent by each one and
       gathers where the bent rays converge, so what lies
