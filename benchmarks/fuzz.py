@@ -80,9 +80,11 @@ from components import (
     ReflectionProbe,
     Reflective,
     Refractive,
+    Ripples,
     ScreenReflections,
     Skybox,
     Slice,
+    Splash,
     TimeOfDay,
     Tonemap,
     Transform,
@@ -90,6 +92,7 @@ from components import (
     Vignette,
     Visibility,
     VolumetricFog,
+    Wake,
     Water,
     look_rotation,
 )
@@ -105,7 +108,7 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
                              ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal,
-                             IrradianceVolume, FogVolume, LensFlare, TimeOfDay, CloudLayer)
+                             IrradianceVolume, FogVolume, LensFlare, TimeOfDay, CloudLayer, Ripples, Wake, Splash)
 
 @dataclasses.dataclass
 class Case:
@@ -186,13 +189,16 @@ class Fuzzer:
                 elif case.cls is TimeOfDay:   # (on the light it turns)
                     spawned = world.spawn(DirectionalLight(), component)
                 else:
-                    flat = case.cls in (Mirror, Portal, Water)
+                    flat = case.cls in (Mirror, Portal, Water, Ripples)
                     parts: dict[type, Any] = {Transform: Transform(position=(0, 0.5, 0)),
                                               MeshRef: MeshRef(quad(1.5, 1.5) if flat else box()),
                                               Material: Material()}
-                    if case.cls is Water:  # the surface it makes water, with waves
+                    if case.cls in (Water, Ripples):  # the surface it makes water, with waves
                         parts[Mirror] = Mirror()
                         parts[Material] = Material(color=(0.2, 0.3, 0.4, 0.6), normal_map=fuzz_ripples())
+                    if case.cls is Ripples:   # (rippling from the start: a stone dropped in its middle)
+                        parts[Water] = Water()
+                        parts[Splash] = Splash()
                     parts[case.cls] = component
                     spawned = world.spawn(*parts.values())
         except ComponentValueError as exc:

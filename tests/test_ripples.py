@@ -27,8 +27,10 @@ from components import (
     Water,
     look_rotation,
 )
+from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, quad
 from engine.core.errors import WaterLimitWarning
+from engine.core.world import World
 from engine.render.ripples import MAX_RIPPLE_TEXELS, MAX_RIPPLE_WATERS, RIPPLES_BLOCK_BYTES
 from tests.support import pixel_rays
 
@@ -334,3 +336,84 @@ def test_ripples_release_their_fields_when_they_go(scene):
         warnings.simplefilter("ignore")
         runner.frame(DT)
     assert atlas._images == [] and atlas._ubo is None and atlas.waters == {} and atlas.defines == ()
+
+
+def test_level_files_carry_ripples_and_wakes(tmp_path):
+    """A level file's Ripples and Wake are loaded, checked (Ripples with no Water refused,
+    naming the line) and saved again; a Splash in a file is loaded too (dropped on the first
+    frame)."""
+    level = tmp_path / "pond.toml"
+    level.write_text("""
+[level]
+name = "pond"
+
+[[entity]]
+name = "pond"
+[entity.Transform]
+[entity.MeshRef]
+mesh = { quad = [2.0, 2.0] }
+[entity.Mirror]
+[entity.Water]
+[entity.Ripples]
+speed = 0.4
+damping = 1.5
+cell = 0.05
+rain = 8.0
+
+[[entity]]
+name = "boat"
+[entity.Transform]
+position = [0.0, 0.0, 0.5]
+[entity.Wake]
+radius = 0.2
+strength = 0.8
+
+[[entity]]
+name = "stone"
+[entity.Transform]
+[entity.Splash]
+depth = 0.02
+""")
+    world = World("pond")
+    names = load_level(level).spawn(world)
+    ripples = world.get(names["pond"], Ripples)
+    assert (ripples.speed, ripples.damping, ripples.cell, ripples.rain) == (0.4, 1.5, 0.05, 8.0)
+    assert (world.get(names["boat"], Wake).radius, world.get(names["boat"], Wake).strength) == (0.2, 0.8)
+    assert world.get(names["stone"], Splash).depth == 0.02
+    saved = save_level(world, tmp_path / "again.toml", names, name="pond")
+    again = World("again")
+    names_again = load_level(saved).spawn(again)
+    kept = again.get(names_again["pond"], Ripples)
+    assert (kept.speed, kept.damping, kept.cell, kept.rain) == (0.4, 1.5, 0.05, 8.0)
+    assert again.get(names_again["boat"], Wake).strength == 0.8
+    text = level.read_text()
+    for good, bad, message in (("rain = 8.0", "rain = -8.0", r"Ripples.rain must be >= 0.0"),
+                               ("[entity.Water]\n", "", "Ripples need a Water")):
+        level.write_text(text.replace(good, bad))
+        with pytest.raises(LevelError, match=message):
+            load_level(level)
+
+
+def test_a_moving_water_carries_its_rings_along(scene):
+    """A water that moves (a pond on a moving platform) keeps its rings in its own frame: the
+    field after the move is the field a still pond has one step later, and the composites
+    read it where the water now is."""
+    drop = [(0.1, 0.01, (0.5, 0.0, 0.3))]
+    moving_build, moving = pond(Ripples(damping=0.0), splashes=drop)
+    still_build, still = pond(Ripples(damping=0.0), splashes=drop)
+    runners = [(scene(moving_build, (32, 24)), moving), (scene(still_build, (32, 24)), still)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(10):
+            for runner, _ in runners:
+                runner.frame(DT)
+        runners[0][0].world.get(moving["water"], Transform).position = glm.vec3(1.0, 0.0, 0.0)
+        for runner, _ in runners:
+            runner.frame(DT)
+    carried, kept = (heights(runner, held) for runner, held in runners)
+    assert np.abs(kept).max() > 1e-4
+    np.testing.assert_array_equal(carried, kept)
+    atlas = runners[0][0].engine.renderer.ripples
+    _, water = atlas.waters[moving["water"]]
+    assert water.origin[0] == pytest.approx(runners[1][0].engine.renderer.ripples.waters[still["water"]][1].origin[0]
+                                            + 1.0)

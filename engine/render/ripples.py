@@ -122,8 +122,9 @@ class RippleAtlas:
     # -- the waters ------------------------------------------------------------------------
 
     def set(self, waters: Sequence[RippleWater], shaders: ShaderLibrary) -> None:
-        """Hold ``waters`` (at most ``MAX_RIPPLE_WATERS``): one that stays keeps its tile and
-        its rings; one new, or whose outline or texels changed, gets a cleared tile, asleep."""
+        """Hold ``waters`` (at most ``MAX_RIPPLE_WATERS``): one that stays with the same texels
+        keeps its tile and its rings (a water that moves carries them along: the field lies in
+        its outline's frame); one new, or whose texels changed, gets a cleared tile, asleep."""
         if len(waters) > MAX_RIPPLE_WATERS:
             raise ValueError(f"RippleAtlas.set: at most {MAX_RIPPLE_WATERS} waters, got {len(waters)}")
         self._shaders = shaders
@@ -132,7 +133,7 @@ class RippleAtlas:
             return
         self._make()
         kept = {w.entity: self.waters[w.entity] for w in waters if w.entity in self.waters
-                and _same_field(self.waters[w.entity][1], w)}
+                and self.waters[w.entity][1].texels == w.texels}
         free = [tile for tile in range(MAX_RIPPLE_WATERS) if tile not in {t for t, _ in kept.values()}]
         held: dict[int, tuple[int, RippleWater]] = {}
         for water in waters:
@@ -282,9 +283,3 @@ class RippleAtlas:
         self.waters, self.awake = {}, set()
         self._say_awake()
 
-
-def _same_field(held: RippleWater, water: RippleWater) -> bool:
-    """Whether ``water`` keeps ``held``'s rings: the same outline, within a millimetre, and texels."""
-    return held.texels == water.texels and all(
-        np.allclose(a, b, atol=1e-3) for a, b in ((held.origin, water.origin), (held.edge_u, water.edge_u),
-                                                   (held.edge_v, water.edge_v)))
