@@ -55,6 +55,8 @@ _ORIGINS = ((0, 0), (RIPPLE_TILE, 0), (0, RIPPLE_TILE), (RIPPLE_TILE, RIPPLE_TIL
 _ROWS = 5                  # a water's vec4s in the block (ripples.glsl's arrays)
 RIPPLES_BLOCK_BYTES = 4 * (4 * _ROWS * MAX_RIPPLE_WATERS + 4)   # the arrays, then the count
 _STEP = PassState()        # no depth test, no blending, no clip distances
+# The composites' defines while a water's rings are alive (RippleAtlas.defines).
+RIPPLE_DEFINES = (("RIPPLES", "1"), ("MAX_RIPPLE_WATERS", str(MAX_RIPPLE_WATERS)))
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,7 @@ class RippleAtlas:
             self.release()
             return
         self._make()
+        self._step_program()   # (built with the first water, not at its first drop)
         kept = {w.entity: self.waters[w.entity] for w in waters if w.entity in self.waters
                 and self.waters[w.entity][1].texels == w.texels}
         free = [tile for tile in range(MAX_RIPPLE_WATERS) if tile not in {t for t, _ in kept.values()}]
@@ -272,7 +275,7 @@ class RippleAtlas:
         self._ubo.write(rows.tobytes() + struct.pack("<4i", len(self.waters), 0, 0, 0))
 
     def _say_awake(self) -> None:
-        self.defines = (("RIPPLES", "1"), ("MAX_RIPPLE_WATERS", str(MAX_RIPPLE_WATERS))) if self.awake else ()
+        self.defines = RIPPLE_DEFINES if self.awake else ()
 
     def release(self) -> None:
         """Every GL object it holds (the last rippling water gone, or closing)."""
