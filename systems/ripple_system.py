@@ -155,6 +155,11 @@ class RippleSystem(esper.Processor):
         crossed: dict[int, np.ndarray] = {}
         for entity, (wake, transform) in self.world.query(Wake, Transform):
             centre, half = self._placed(entity, transform)
+            if not half.any() and wake.radius <= 0.0:
+                self._say_once("point", entity, ComponentWarning(
+                    f"Wake on entity {entity}: it has no mesh to take a size from and its radius is 0, so it makes "
+                    "no ripples; give it a MeshRef or a Wake.radius"))
+                continue
             last = self._crossed.get(entity)
             crossed[entity] = centre
             moved = 0.0 if last is None else float(np.linalg.norm(centre - last))

@@ -315,6 +315,13 @@ def test_ripple_values_and_limits_are_checked_and_said(scene):
     atlas = runner.engine.renderer.ripples
     assert len(atlas.waters) == MAX_RIPPLE_WATERS
     assert max(max(water.texels) for _, water in atlas.waters.values()) == MAX_RIPPLE_TEXELS
+    # A Wake with no mesh and no radius has no size: said, once.
+    runner.world.spawn(Transform(position=(0.0, 0.0, 0.0)), Wake())
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        runner.frame(DT)
+        runner.frame(DT)
+    assert sum("no mesh to take a size from" in str(w.message) for w in said) == 1
     # The block as ripples.glsl lays it out (std140) is what the atlas writes.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
