@@ -15,6 +15,7 @@
 #endif
 #ifdef CAUSTICS
 #include "water_waves.glsl"
+#include "ripples.glsl"
 #include "caustics.glsl"
 // The waters (the Caustics block's slots) this draw's batch reaches into, -1 after the last
 // (engine/render/caustics.py CausticBlock.slots_of).

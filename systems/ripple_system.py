@@ -26,9 +26,9 @@ import warnings
 import esper
 import numpy as np
 
-from components import MeshRef, Ripples, Splash, Transform, Wake
+from components import MeshRef, Ripples, Splash, Transform, Wake, Water
 from components.tracking import ComponentWarning
-from engine.core.errors import WaterLimitWarning
+from engine.core.errors import GLLimitWarning, WaterLimitWarning
 from engine.core.world import World
 from engine.render.caustics import placed_box
 from engine.render.gpu import Gpu
@@ -37,6 +37,7 @@ from engine.render.ripples import (
     MAX_RIPPLE_DROPS,
     MAX_RIPPLE_STEPS,
     MAX_RIPPLE_WATERS,
+    RIPPLE_CAUSTIC_SAMPLERS,
     RippleWater,
     field_texels,
     outline_edges,
@@ -136,6 +137,12 @@ class RippleSystem(esper.Processor):
                     f"Ripples on entity {entity}: its water's mesh is not one flat quad (no outline), so it does not "
                     "ripple; give the water a quad mesh"))
                 continue
+            if not self.renderer.ripples.in_caustics and (water := self.world.try_get(entity, Water)) is not None \
+                    and water.caustics > 0.0:
+                self._say_once("caustics", entity, GLLimitWarning(
+                    f"Ripples on entity {entity}: its caustics would need {RIPPLE_CAUSTIC_SAMPLERS} fragment texture "
+                    f"units to gather the rings' light too and this OpenGL has {self.renderer.ripples.texture_units} "
+                    "(GL_MAX_TEXTURE_IMAGE_UNITS): its caustics are its waves' alone"))
             origin, edge_u, edge_v = outline_edges(state.outline)
             texels, coarse = field_texels(edge_u, edge_v, ripples.cell)
             if coarse:

@@ -29,9 +29,15 @@ from components import (
 )
 from engine.assets.level_file import LevelError, load_level, save_level
 from engine.assets.mesh import box, quad
-from engine.core.errors import WaterLimitWarning
+from engine.core.errors import GLLimitWarning, WaterLimitWarning
 from engine.core.world import World
-from engine.render.ripples import MAX_RIPPLE_TEXELS, MAX_RIPPLE_WATERS, RIPPLES_BLOCK_BYTES
+from engine.render.ripples import (
+    MAX_RIPPLE_TEXELS,
+    MAX_RIPPLE_WATERS,
+    RIPPLE_CAUSTIC_SAMPLERS,
+    RIPPLES_BLOCK_BYTES,
+    RippleAtlas,
+)
 from tests.support import pixel_rays, srgb_to_linear
 
 FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
@@ -478,3 +484,104 @@ def test_the_rings_tilt_the_surface_the_way_their_slopes_go(scene):
     assert ringed.sum() > 150, ringed.sum()
     correlation = np.corrcoef(predicted[ringed], seen[ringed])[0, 1]
     assert correlation > 0.8, correlation
+
+
+def test_the_rings_gather_the_suns_light_under_the_water_where_a_ray_tracer_does(scene):
+    """A pool whose caustics gather the sun (its waves flattened: ``normal_scale`` 0, so the
+    rings alone bend the light) and a splash in it: each floor pixel's light over the same
+    pool's with no Ripples is, where the rings bend the light, the traced share where the
+    rays crossing the surface there land (Snell's law at the normal the field read back
+    gives, the light through each texel of surface over the area its rays land on: 1 / |det
+    J| of the landings on the texel grid)."""
+    from tests.test_caustics import DEPTH, IOR, SUN, pool, refract, render
+
+    def rippling(on: bool):
+        build = pool(1.0, scale=0.0)
+        held = {}
+
+        def with_ripples(world):
+            build(world)
+            (entity, _), = world.query_one(Water)
+            held["water"] = entity
+            if on:
+                world.add_component(entity, Ripples(speed=0.4, damping=0.0, cell=0.02))
+            world.spawn(Transform(position=(0.0, 0.0, 0.0)), Splash(radius=0.12, depth=0.006))
+        return with_ripples, held
+
+    size = (128, 128)
+    ripple_build, held = rippling(True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runner, lit = render(scene, ripple_build, size)
+        for _ in range(28):
+            frame = runner.frame(DT)
+        _, flat = render(scene, rippling(False)[0], size)
+    lit = srgb_to_linear(frame)
+    assert runner.engine.renderer.ripples.caustic_defines
+    atlas = runner.engine.renderer.ripples
+    field = heights(runner, held).astype(np.float64)
+    tile, water = atlas.waters[held["water"]]
+    u_row, v_row = water.texel_rows(tile)
+    along_v, along_u = np.gradient(field)
+    gradient = along_u[..., None] * u_row[:3] + along_v[..., None] * v_row[:3]
+    normal = np.array([0.0, 1.0, 0.0]) - gradient
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    # Each texel's centre on the surface (the atlas's rows taken back to the world: y = 0).
+    rows, columns = np.mgrid[0:field.shape[0], 0:field.shape[1]] + 0.5
+    corner = atlas.to_texels(held["water"], np.zeros((1, 3)))[0]
+    dx = atlas.to_texels(held["water"], np.array([[1.0, 0.0, 0.0]]))[0] - corner
+    dz = atlas.to_texels(held["water"], np.array([[0.0, 0.0, 1.0]]))[0] - corner
+    to_world = np.linalg.inv(np.array([[dx[0], dz[0]], [dx[1], dz[1]]]))
+    xz = np.stack([columns - corner[0], rows - corner[1]], axis=-1) @ to_world.T
+    rays = refract(np.broadcast_to(np.array(tuple(SUN)), normal.shape), normal, 1.0 / IOR)
+    landed = xz + rays[..., [0, 2]] * (DEPTH / -rays[..., 1:2])
+    d_rows = np.gradient(landed, axis=0)
+    d_columns = np.gradient(landed, axis=1)
+    spacing = abs(np.linalg.det(to_world))   # (a texel's area in square metres)
+    det = (d_rows[..., 0] * d_columns[..., 1] - d_rows[..., 1] * d_columns[..., 0]) / spacing
+    traced = 1.0 / np.abs(det)
+    bent = np.abs(traced - 1.0) > 0.05
+    pixels = np.array([runner.project((x, -DEPTH, z)) for x, z in landed[bent]])
+    inside = (pixels >= 0).all(axis=1) & (pixels[:, 0] < size[0]) & (pixels[:, 1] < size[1])
+    share = lit[pixels[inside, 1], pixels[inside, 0], 0] / flat[pixels[inside, 1], pixels[inside, 0], 0]
+    expected = traced[bent][inside]
+    assert inside.sum() > 300, inside.sum()
+    correlation = np.corrcoef(share, expected)[0, 1]
+    assert np.median(np.abs(share - expected)) < 0.02
+    assert correlation > 0.9, correlation
+
+
+def test_a_context_one_unit_short_keeps_the_caustics_the_waves_alone_and_says_so(scene, ctx):
+    """On a context with texture units enough for the caustics and the foam but not the
+    heights too (``RIPPLE_CAUSTIC_SAMPLERS``) the water still ripples (its composites) while
+    its caustics are its waves' alone: the floor's light is the ripple-less pool's, bit for
+    bit, and a GLLimitWarning names the water and the limit, once."""
+    from tests.test_caustics import pool, render
+
+    def rippling(on: bool):
+        build = pool(1.0, scale=0.0)
+
+        def with_ripples(world):
+            build(world)
+            (entity, _), = world.query_one(Water)
+            if on:
+                world.add_component(entity, Ripples(speed=0.4, damping=0.0, cell=0.02))
+            world.spawn(Transform(position=(0.0, 0.0, 0.0)), Splash(radius=0.12, depth=0.006))
+        return with_ripples
+
+    runner = scene(rippling(True), (48, 48))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.ripples.release()
+    runner.engine.renderer.ripples = RippleAtlas(ctx, texture_units=RIPPLE_CAUSTIC_SAMPLERS - 1)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(10):
+            image = runner.frame(DT)
+    said = [w for w in caught if issubclass(w.category, GLLimitWarning)]
+    assert len(said) == 1 and f"would need {RIPPLE_CAUSTIC_SAMPLERS} fragment texture units" in str(said[0].message)
+    atlas = runner.engine.renderer.ripples
+    assert atlas.awake and atlas.defines and atlas.caustic_defines == ()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, flat = render(scene, rippling(False), size=(48, 48))
+    np.testing.assert_array_equal(srgb_to_linear(image), flat)

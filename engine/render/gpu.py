@@ -253,7 +253,7 @@ class Gpu:
         # The water whose waves gather the sun under it (the prepare stage sets it): CAUSTICS builds.
         self.caustics = CausticBlock(ctx, caps.max_texture_image_units)
         self.foam = FoamBlock(ctx, caps.max_texture_image_units)   # the waters with shore foam (engine/render/foam.py)
-        self.ripples = RippleAtlas(ctx)   # the rippling waters' height fields (engine/render/ripples.py)
+        self.ripples = RippleAtlas(ctx, caps.max_texture_image_units)   # rippling waters' heights (render/ripples.py)
         # Every posed entity's joint matrices and morph weights (engine/render/pose_rows.py;
         # the extract stage writes them): the SKINNED and MORPHED builds read them.
         self.pose_rows = PoseRows(ctx, caps.max_texture_size)

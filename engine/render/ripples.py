@@ -22,7 +22,9 @@ and a step ago, in metres.  A step draws each awake tile's rectangle with
 **How it is seen.**  ``shaders/include/ripples.glsl``: the composites of water (a view's and
 a fallback's, in ``RIPPLES`` builds while any tile is awake) find the water a point lies on
 by its plane and outline in the ``Ripples`` block, read the height's slope there (central
-differences of the filtered field) and tilt the water's normal by it (``defines``)."""
+differences of the filtered field) and tilt the water's normal by it (``defines``); the
+scene's CAUSTICS builds tilt the normal their light crosses the surface by the same way
+(``caustic_defines``: where the context has ``RIPPLE_CAUSTIC_SAMPLERS`` units)."""
 from __future__ import annotations
 
 import math
@@ -42,6 +44,7 @@ from engine.render.bindings import (
     bind_texture,
     bind_uniform_block,
 )
+from engine.render.foam import FOAM_SAMPLERS
 from engine.render.shader_library import ShaderLibrary
 
 RIPPLE_TILE = 256          # a water's field: at most this many texels a side (MAX_RIPPLE_TEXELS)
@@ -57,6 +60,9 @@ RIPPLES_BLOCK_BYTES = 4 * (4 * _ROWS * MAX_RIPPLE_WATERS + 4)   # the arrays, th
 _STEP = PassState()        # no depth test, no blending, no clip distances
 # The composites' defines while a water's rings are alive (RippleAtlas.defines).
 RIPPLE_DEFINES = (("RIPPLES", "1"), ("MAX_RIPPLE_WATERS", str(MAX_RIPPLE_WATERS)))
+# The caustics gather the rings' light too where the fullest scene build (a water's caustics,
+# its foam's copy) has one more texture unit for the heights (RippleAtlas.caustic_defines).
+RIPPLE_CAUSTIC_SAMPLERS = FOAM_SAMPLERS + 1
 
 
 @dataclass(frozen=True)
@@ -106,8 +112,12 @@ class RippleAtlas:
     ``RIPPLES_BINDING``).  ``defines``: the composite's ``RIPPLES`` builds while any tile is
     awake; ``version`` counts the frames stepped (what a still frame compares)."""
 
-    def __init__(self, ctx: moderngl.Context) -> None:
+    def __init__(self, ctx: moderngl.Context, texture_units: int = RIPPLE_CAUSTIC_SAMPLERS) -> None:
         self.ctx = ctx
+        # Whether the scene's caustics builds can read the heights too (RIPPLE_CAUSTIC_SAMPLERS).
+        self.in_caustics = texture_units >= RIPPLE_CAUSTIC_SAMPLERS
+        self.texture_units = texture_units
+        self.caustic_defines: tuple[tuple[str, str], ...] = ()   # the CAUSTICS builds' (defines, when they can)
         self.waters: dict[int, tuple[int, RippleWater]] = {}   # entity -> (tile, water)
         self.awake: set[int] = set()                            # entities whose tiles are stepped
         self.defines: tuple[tuple[str, str], ...] = ()
@@ -276,6 +286,7 @@ class RippleAtlas:
 
     def _say_awake(self) -> None:
         self.defines = RIPPLE_DEFINES if self.awake else ()
+        self.caustic_defines = self.defines if self.in_caustics else ()
 
     def release(self) -> None:
         """Every GL object it holds (the last rippling water gone, or closing)."""

@@ -249,7 +249,8 @@ class ScenePass:
         stamp = (seen, shadows.virtual_shining, shadows.program_defines, renderer.fog.defines,
                  renderer.pose_rows.version, renderer.object_motion.version, renderer.contact_lamp_defines,
                  renderer.sphere_lights, renderer.rect_lights, renderer.spot_cookies.defines, renderer.ambient_defines,
-                 renderer.clouds.shadow_defines, renderer.caustics.defines, renderer.object_motion.defines)
+                 renderer.clouds.shadow_defines, renderer.caustics.defines, renderer.ripples.caustic_defines,
+                 renderer.object_motion.defines)
         build = views if layered else min(views, 1)  # (one instanced-views build serves any view count)
         per_view = views if views > 1 and not layered else 0
         kinds = self._kinds.get((build, layered, self._ambient_probes, masked, screen))
@@ -806,6 +807,7 @@ class ScenePass:
         self.shadows.bind()
         renderer.spot_cookies.bind()
         renderer.caustics.bind()
+        renderer.ripples.bind()
         renderer.clouds.bind()
         # The irradiance table (unit 5 serves other passes between) and the boxes; a probe's
         # capture, and a world without boxes, draw the build without them (sky only).
@@ -1116,6 +1118,7 @@ class ScenePass:
         self.shadows.bind()
         renderer.spot_cookies.bind()
         renderer.caustics.bind()
+        renderer.ripples.bind()
         renderer.clouds.bind()
         self._ambient_probes = self.irradiance.bind(capturing=True)  # a capture: the sky's light (a bounce: the grid's)
         bind_texture(self.ctx, renderer.sky, SKY_UNIT)

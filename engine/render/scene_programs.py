@@ -50,6 +50,8 @@ from engine.render.bindings import (
     PROBE_REST_UNIT,
     PROBE_UNIT,
     REFRACTION_COPY_UNIT,
+    RIPPLE_UNIT,
+    RIPPLES_BINDING,
     SCREEN_CONTACT_UNIT,
     SCREEN_OCCLUSION_UNIT,
     SHADOW_ATLAS_UNIT,
@@ -111,11 +113,11 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "screen_contact_lamps": SCREEN_CONTACT_UNIT, "spot_cookies": COOKIE_UNIT,
                 "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
                 "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT,
-                "refraction_copy": REFRACTION_COPY_UNIT, "caustic_maps": CAUSTIC_UNIT}
+                "refraction_copy": REFRACTION_COPY_UNIT, "caustic_maps": CAUSTIC_UNIT, "ripple_atlas": RIPPLE_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING,
-                 "Caustics": CAUSTICS_BINDING, "Foam": FOAM_BINDING}
+                 "Caustics": CAUSTICS_BINDING, "Foam": FOAM_BINDING, "Ripples": RIPPLES_BINDING}
 
 # The reflect slots whose reflection is the sky's or a probe's, which screen reflections
 # replace: none (the material's environment reflection, scene.frag environment_specular) and a
@@ -218,7 +220,8 @@ class ScenePrograms:
             cookies = (*cookies, ("RECT_LIGHTS", "1"))
         cookies = (*cookies, *self.renderer.clouds.shadow_defines)  # CLOUD_SHADOWS while a CloudLayer shades
         if caustic:  # CAUSTICS for a batch reaching into the body of a water that gathers the sun
-            cookies = (*cookies, *self.renderer.caustics.defines)
+            # (and RIPPLES while a water's rings are alive: they gather the light too)
+            cookies = (*cookies, *self.renderer.caustics.defines, *self.renderer.ripples.caustic_defines)
         if not layered:  # OBJECT_MOTION while the camera's motion blur streaks moving things (not in probes)
             cookies = (*cookies, *self.renderer.object_motion.defines)
         if "occluded" in screen.split():  # CONTACT_LAMPS while a lamp has contact shadows (its image read)

@@ -42,13 +42,18 @@ uniform sampler2DArray caustic_maps;
 // tests/test_caustics.py's tracer: two left the brightest lines a texel off, four do not).
 #define CAUSTIC_ITERATIONS 4
 
-// The normal of water w's waves at surface point s (its map read at mip ``lod``).
+// The normal of water w's waves at surface point s (its map read at mip ``lod``), and, in
+// RIPPLES builds, its ripples' (ripples.glsl: the height field's slope there, if it ripples).
 vec3 caustic_normal(int w, vec3 s, float lod) {
     vec2 uv = vec2(dot(caustic_u[w].xyz, s) + caustic_u[w].w, dot(caustic_v[w].xyz, s) + caustic_v[w].w)
               * caustic_sizes[w].x;
     vec2 slope = water_slope_lod(caustic_maps, float(w), uv, lod, caustic_flow[w].xy, caustic_axis_u[w].w);
-    return normalize((caustic_axis_u[w].xyz * slope.x + caustic_axis_v[w].xyz * slope.y) * caustic_axis_v[w].w
-                     + caustic_plane[w].xyz);
+    vec3 tilted = (caustic_axis_u[w].xyz * slope.x + caustic_axis_v[w].xyz * slope.y) * caustic_axis_v[w].w
+                  + caustic_plane[w].xyz;
+#ifdef RIPPLES
+    tilted -= ripple_gradient(s);
+#endif
+    return normalize(tilted);
 }
 
 // The sideways offset (along the plane) of the light met at surface point s of water w,
