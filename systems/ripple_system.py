@@ -114,8 +114,16 @@ class RippleSystem(esper.Processor):
         if not awake:
             return
         fastest = max(ripples.speed / min(_spacing(water)) for water, ripples in awake)
-        steps = min(MAX_RIPPLE_STEPS, max(1, math.ceil(fastest * dt / MAX_COURANT)))
-        step = dt / steps
+        wanted = max(1, math.ceil(fastest * dt / MAX_COURANT))
+        steps = min(MAX_RIPPLE_STEPS, wanted)
+        # Past the most steps a frame, each stays a stable one: the rings spread slower than
+        # their speed (said once), never blow up.
+        step = min(dt / steps, MAX_COURANT / fastest)
+        if wanted > MAX_RIPPLE_STEPS:
+            self._say_once("steps", awake[0][0].entity, WaterLimitWarning(
+                f"Ripples: {wanted} steps this frame would keep the fastest rings (speed / cell "
+                f"{fastest:.0f} texels a second) stable, {MAX_RIPPLE_STEPS} are taken, so they spread slower than "
+                "their speed; a larger Ripples.cell or a lower speed keeps up"))
         rates = {}
         for water, ripples in awake:
             du, dv = _spacing(water)

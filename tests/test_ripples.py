@@ -321,6 +321,23 @@ def test_ripple_values_and_limits_are_checked_and_said(scene):
     atlas = runner.engine.renderer.ripples
     assert len(atlas.waters) == MAX_RIPPLE_WATERS
     assert max(max(water.texels) for _, water in atlas.waters.values()) == MAX_RIPPLE_TEXELS
+    # Rings too fast for their cell: the most steps a frame, each stable (the field stays
+    # bounded), said once.
+    def fast(world):
+        world.spawn(Transform(position=(0, 3, 3), rotation=look_rotation(glm.vec3(0, -3, -3))), Camera())
+        held["fast"] = world.spawn(Transform(rotation=FLAT), MeshRef(quad(0.5, 0.5)), Material(), Mirror(), Water(),
+                                   Ripples(speed=20.0, cell=0.002, damping=0.0))
+        world.spawn(Transform(), Splash(radius=0.02, depth=0.01))
+    held = {}
+    quick = scene(fast, (32, 24))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        for _ in range(30):
+            quick.frame(DT)
+    assert sum("steps this frame would keep the fastest rings" in str(w.message) for w in said) == 1
+    assert quick.stats.ripple_steps == 16
+    field = heights(quick, held | {"water": held["fast"]})
+    assert np.isfinite(field).all() and np.abs(field).max() <= 0.01 and np.abs(field).max() > 1e-4
     # A Wake with no mesh and no radius has no size: said, once.
     runner.world.spawn(Transform(position=(0.0, 0.0, 0.0)), Wake())
     with warnings.catch_warnings(record=True) as said:
