@@ -28,6 +28,7 @@
 #include "volumetric_ray.glsl"
 #ifdef CAUSTICS  // a water's caustics: the sun's light at each point under it, gathered by its waves
 #include "water_waves.glsl"
+#include "ripples.glsl"
 #include "caustics.glsl"
 #endif
 #ifdef CLOUD_SHADOWS  // a CloudLayer's shadows: the sun's light at each point through the cloud on its way

@@ -602,3 +602,95 @@ def test_a_context_one_unit_short_keeps_the_caustics_the_waves_alone_and_says_so
         warnings.simplefilter("ignore")
         _, flat = render(scene, rippling(False), size=(48, 48))
     np.testing.assert_array_equal(srgb_to_linear(image), flat)
+
+
+def test_the_light_shafts_under_the_rings_carry_the_light_they_gather(scene):
+    """Looking straight down from under a sunlit, murky pool with light shafts and a splash in
+    it (its waves flattened: the rings alone bend the light): each march texel's light over
+    the same pool's with no splash is the ground truth's ratio, its sum along its ray of
+    density x transmittance x the sun's light at each point with the light the rings gather
+    at the point's depth (traced as the floor's is: Snell's law at the field read back, 1 /
+    |det J| of the landings on the texel grid, at each of 13 depths) over the sum with none.
+    The camera stands still: the march's kept image must follow the rings (its still key)."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    from components import Camera, Fog, MeshRef, VolumetricFog
+    from tests.test_caustics import DEPTH, IOR, pool, refract
+    from tests.test_volumetric_fog import march_rays, marched_light
+
+    body, air, deep = 0.3, 0.002, 1.2
+    settings = VolumetricFog(steps=64, half_resolution=True)
+    splash = (0.1, 0.0, -0.05)
+
+    def build(held, splashed: bool):
+        def b(world):
+            pool(1.0, scale=0.0, eye=(0.0, -0.2, 0.0), target=(0.0, -deep, -0.001), sun=glm.vec3(0.0, -1.0, 0.0),
+                 depth=deep)(world)
+            camera = next(e for e, _ in world.query_one(Camera))
+            world.add_component(camera, Fog(density=air, color=(0.0, 0.0, 0.0)))
+            world.add_component(camera, settings)
+            (water, _), = world.query_one(Water)
+            held["water"] = water
+            world.get(water, Water).fog_density = body
+            world.get(water, Water).fog_color = (0.0, 0.0, 0.0)
+            world.add_component(water, Ripples(speed=0.4, damping=0.0, cell=0.02))
+            if splashed:
+                world.spawn(Transform(position=splash), Splash(radius=0.12, depth=0.006))
+            floor = next(e for e, (t, _) in world.query(Transform, MeshRef) if t.position.y == -DEPTH)
+            world.get(floor, Transform).position = (0.0, -deep, 0.0)
+        return b
+
+    held = {}
+    runners = [scene(build(held, True), (96, 64)), scene(build({}, False), (96, 64))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(24):
+            for runner in runners:
+                runner.frame(DT)
+    runner = runners[0]
+    assert runner.engine.renderer.ripples.caustic_defines and not runners[1].engine.renderer.ripples.awake
+    seen = marched_light(runner)[..., 0] / marched_light(runners[1])[..., 0]
+    atlas = runner.engine.renderer.ripples
+    # The field about the splash (the rings' reach and more), its normals and texel centres.
+    corner = atlas.to_texels(held["water"], np.zeros((1, 3)))[0]
+    dx = atlas.to_texels(held["water"], np.array([[1.0, 0.0, 0.0]]))[0] - corner
+    dz = atlas.to_texels(held["water"], np.array([[0.0, 0.0, 1.0]]))[0] - corner
+    to_world = np.linalg.inv(np.array([[dx[0], dz[0]], [dx[1], dz[1]]]))
+    centre = atlas.to_texels(held["water"], np.array([splash]))[0].astype(int)
+    near = (slice(centre[1] - 35, centre[1] + 35), slice(centre[0] - 35, centre[0] + 35))
+    field = heights(runner, held).astype(np.float64)
+    tile, water = atlas.waters[held["water"]]
+    u_row, v_row = water.texel_rows(tile)
+    along_v, along_u = np.gradient(field)
+    normal = np.array([0.0, 1.0, 0.0]) - (along_u[..., None] * u_row[:3] + along_v[..., None] * v_row[:3])
+    normal = (normal / np.linalg.norm(normal, axis=-1, keepdims=True))[near]
+    rows, columns = np.mgrid[0:field.shape[0], 0:field.shape[1]] + 0.5
+    xz = (np.stack([columns - corner[0], rows - corner[1]], axis=-1) @ to_world.T)[near]
+    rays = refract(np.broadcast_to(np.array([0.0, -1.0, 0.0]), normal.shape), normal, 1.0 / IOR)
+    spacing = abs(np.linalg.det(to_world))
+    origin, way, (grid_rows, grid_columns) = march_rays(runner, (96, 64), 2)
+    depths = np.linspace(0.0, deep, 13)
+    table = []
+    for d in depths:   # the traced light where each march ray is at depth d
+        landed = xz + rays[..., [0, 2]] * (d / -rays[..., 1:2])
+        d_rows, d_columns = np.gradient(landed, axis=0), np.gradient(landed, axis=1)
+        det = (d_rows[..., 0] * d_columns[..., 1] - d_rows[..., 1] * d_columns[..., 0]) / spacing
+        light = LinearNDInterpolator(landed.reshape(-1, 2), (1.0 / np.abs(det)).ravel(), fill_value=1.0)
+        t = (-d - origin[:, 1]) / way[:, 1]
+        table.append(light(origin[:, [0, 2]] + way[:, [0, 2]] * t[:, None]))
+    table = np.array(table)   # [depth, ray]
+    reach = np.minimum((-deep - origin[:, 1]) / way[:, 1], settings.distance)
+    points = 400
+    along = reach[:, None] * ((np.arange(points) + 0.5) / points)[None, :]
+    h = -(origin[:, 1:2] + way[:, 1:2] * along)
+    level = np.clip(h / deep * (len(depths) - 1), 0.0, len(depths) - 1 - 1e-9)
+    k = np.floor(level).astype(int)
+    w = level - k
+    ray = np.arange(len(origin))[:, None]
+    gathered = table[k, ray] * (1.0 - w) + table[k + 1, ray] * w
+    weight = (air + body) * np.exp(-(air + body) * along) * np.exp(-body * h)
+    truth = ((weight * gathered).sum(1) / weight.sum(1)).reshape(grid_rows, grid_columns)
+    ringed = np.abs(truth - 1.0) > 0.005
+    assert ringed.sum() > 100, ringed.sum()
+    assert np.corrcoef(seen[ringed], truth[ringed])[0, 1] > 0.98
+    assert np.median(np.abs(seen - truth)) < 0.005

@@ -23,8 +23,9 @@ and a step ago, in metres.  A step draws each awake tile's rectangle with
 a fallback's, in ``RIPPLES`` builds while any tile is awake) find the water a point lies on
 by its plane and outline in the ``Ripples`` block, read the height's slope there (central
 differences of the filtered field) and tilt the water's normal by it (``defines``); the
-scene's CAUSTICS builds tilt the normal their light crosses the surface by the same way
-(``caustic_defines``: where the context has ``RIPPLE_CAUSTIC_SAMPLERS`` units)."""
+scene's CAUSTICS builds, and the light shafts' march, tilt the normal their light crosses
+the surface by the same way (``caustic_defines``: where the context has
+``RIPPLE_CAUSTIC_SAMPLERS`` units)."""
 from __future__ import annotations
 
 import math

@@ -69,6 +69,8 @@ from engine.render.bindings import (
     FOG_BINDING,
     LIGHTS_BINDING,
     POINT_SHADOW_UNITS,
+    RIPPLE_UNIT,
+    RIPPLES_BINDING,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
@@ -215,10 +217,13 @@ class VolumetricFogPass:
         """What the root's march reads: the view's depth (every instance row, batch and
         texture drawn: ``Gpu.scene_version``, which the Lights, Fog, Shadows and VirtualLights
         blocks, the shadow maps and the cookies move on too), the shaders, the view's Camera
-        block and size, the images' resolution, the settings, the lamps and the images' shares."""
+        block and size, the images' resolution, the settings, the lamps and the images' shares,
+        and the rings of a rippling water whose caustics it reads (``RippleAtlas.version``)."""
+        ripples = self.gpu.ripples
         return (self.gpu.scene_version, self.gpu.shaders.reloads, view.camera_block(), images.level.size,
                 images.ratio, settings.intensity, tuple(settings.albedo), settings.anisotropy, settings.distance,
-                settings.steps, lamps.slots, lamps.scatter, self._sky_light, shares)
+                settings.steps, lamps.slots, lamps.scatter, self._sky_light, shares,
+                ripples.version if ripples.caustic_defines else -1)
 
     def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool,
               march_again: bool) -> None:
@@ -232,6 +237,7 @@ class VolumetricFogPass:
         gpu.fog.bind()
         gpu.clouds.bind()   # (another engine on the context binds its own block at the same point)
         gpu.caustics.bind()
+        gpu.ripples.bind()   # (the caustics' rings, in their RIPPLES builds)
         if lamps.slots or shares:
             gpu.spot_cookies.bind()
         bind_texture(ctx, level.depth, VOLUMETRIC_DEPTH_UNIT)
@@ -299,7 +305,8 @@ class VolumetricFogPass:
             self._release_programs()
             self._programs_of = shaders.reloads
         extra = (self.shadows.program_defines, self.gpu.fog.defines, self.gpu.clouds.shadow_defines,
-                 self.gpu.spot_cookies.defines if lamps or images else (), self.gpu.caustics.defines) if steps else ()
+                 self.gpu.spot_cookies.defines if lamps or images else (), self.gpu.caustics.defines,
+                 self.gpu.ripples.caustic_defines if self.gpu.caustics.defines else ()) if steps else ()
         key = (shader, steps, extra, level_views, lamps, images)
         vao = self._programs.get(key)
         if vao is None:
@@ -317,9 +324,10 @@ class VolumetricFogPass:
                                    "node_map": VOLUMETRIC_NODE_UNIT, "shadow_atlas": SHADOW_ATLAS_UNIT,
                                    "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
                                    "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT,
-                                   "caustic_maps": CAUSTIC_UNIT, "virtual_atlas": VIRTUAL_SHADOW_UNIT},
+                                   "caustic_maps": CAUSTIC_UNIT, "virtual_atlas": VIRTUAL_SHADOW_UNIT,
+                                   "ripple_atlas": RIPPLE_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING,
-                          "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING,
+                          "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING, "Ripples": RIPPLES_BINDING,
                           "VirtualLights": VIRTUAL_LIGHTS_BINDING})
             vao = self._programs[key] = self.ctx.vertex_array(program, [])
         return vao
