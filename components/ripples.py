@@ -20,7 +20,8 @@ class Ripples(TrackedComponent):
     reflection, what is seen through the surface and Fresnel's weight all move with the
     rings, from above and from below, in every view (mirrors and portals that see the water
     included), and a water with ``caustics`` gathers the light through them too (rings of
-    light on a sunny pool's floor, and in the light shafts under it).  The waves of ``Material.normal_map`` carry on under them.
+    light on a sunny pool's floor, and in the light shafts under it).  The waves of
+    ``Material.normal_map`` carry on under them.
 
     - ``speed``: metres a second the rings spread (0.25 to 0.5 for ripples on a pond).
     - ``damping``: how fast they die out: their height falls by exp(-damping x seconds).

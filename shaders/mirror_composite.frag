@@ -20,6 +20,9 @@
 //                     (a view's and a fallback's) write the pixel whole: the reflection by
 //                     its weight over what lies below, bent (water_below); a partly faded
 //                     view's composite blends over its fallback's (bent by the fallback).
+//   RIPPLES:          (with WATER) the rippling waters' height fields tilt the normal too
+//                     (ripples.glsl), bumpy or not: a still water then reads its image
+//                     along the bent ray as a bumpy one does (composite_bent.glsl).
 //   COMPOSITE_FALLBACK: (with PORTAL, BUMPY, WATER or none; ROUGH never: its roughness is a
 //                     mip bias here) the fallback of a surface seen with no view of its own
 //                     (cut by the view budget, faded, past the depth limit, a mirror switched

@@ -7,8 +7,8 @@ how the composites see it).  What is decided here, on the CPU:
 
 - which waters ripple: those with ``Ripples`` and a water surface with an outline (a flat
   quad), at most ``MAX_RIPPLE_WATERS`` (the first by entity; the rest counted and said once),
-  each field's texels (``cell`` apart, square, coarser where a side would pass
-  ``MAX_RIPPLE_TEXELS``: said once);
+  each field's texels (about ``cell`` apart along each edge of the outline, coarser where a
+  side would pass ``MAX_RIPPLE_TEXELS``: said once);
 - the frame's drops: where each ``Wake`` crosses a water's plane inside its outline, pushed
   down by its strength times the metres it moved since the last frame, and the rain (its
   drops a second over the water's area, the fraction carried to the next frame, placed at
