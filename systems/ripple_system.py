@@ -17,7 +17,8 @@ how the composites see it).  What is decided here, on the CPU:
   water's rings have died away: the height its drops could still have (their depths summed,
   falling by exp(-damping t): the rings only ever spread and fade) under ``RIPPLE_CALM``,
   its tile is cleared and no longer stepped, and the composites' plain builds come back.
-A paused frame (dt 0) moves nothing."""
+A paused frame (dt 0) moves nothing (a ``Splash`` waits for the next frame that does); with no
+rippling water a Splash is taken off as it comes, landing nowhere."""
 from __future__ import annotations
 
 import math
@@ -73,6 +74,8 @@ class RippleSystem(esper.Processor):
                 atlas.release()
             self.loudness.clear()
             self._crossed.clear()
+            for entity, _ in self.world.query_one(Splash):   # (no rippling water to land in)
+                self.world.remove_component(entity, Splash)
             return
         waters = self._waters(found)
         cut = max(0, len(waters) - MAX_RIPPLE_WATERS)
@@ -196,8 +199,14 @@ class RippleSystem(esper.Processor):
                 drops[water.entity].append((x, y, max(radius / min(_spacing(water)), MIN_DROP_TEXELS),
                                             wake.strength * moved))
         self._crossed = crossed
-        for entity, (splash, transform) in self.world.query(Splash, Transform):
+        for entity, splash in self.world.query_one(Splash):
             self.world.remove_component(entity, Splash)   # (one frame's: taken in now, or nowhere)
+            transform = self.world.try_get(entity, Transform)
+            if transform is None:
+                self._say_once("splash", entity, ComponentWarning(
+                    f"Splash on entity {entity}: it has no Transform to say where it lands, so it makes no ripples "
+                    "(it was taken off)"))
+                continue
             place = np.array([float(transform.world[3][r]) for r in range(3)])
             landed = self._landing(waters, place)
             if landed is not None:

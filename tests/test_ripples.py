@@ -338,6 +338,13 @@ def test_ripple_values_and_limits_are_checked_and_said(scene):
     assert quick.stats.ripple_steps == 16
     field = heights(quick, held | {"water": held["fast"]})
     assert np.isfinite(field).all() and np.abs(field).max() <= 0.01 and np.abs(field).max() > 1e-4
+    # A Splash with no Transform has no place: said and taken off.
+    lost = runner.world.spawn(Splash())
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        runner.frame(DT)
+    assert sum("no Transform to say where it lands" in str(w.message) for w in said) == 1
+    assert not runner.world.has(lost, Splash)
     # A Wake with no mesh and no radius has no size: said, once.
     runner.world.spawn(Transform(position=(0.0, 0.0, 0.0)), Wake())
     with warnings.catch_warnings(record=True) as said:
@@ -365,10 +372,12 @@ def test_ripples_release_their_fields_when_they_go(scene):
     world = runner.world
     assert not [entity for entity, _ in world.query_one(Splash)]
     world.remove_component(held["water"], Ripples)
+    stone = world.spawn(Transform(), Splash())   # (no rippling water left: it lands nowhere)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         runner.frame(DT)
     assert atlas._images == [] and atlas._ubo is None and atlas.waters == {} and atlas.defines == ()
+    assert not world.has(stone, Splash)
 
 
 def test_level_files_carry_ripples_and_wakes(tmp_path):
