@@ -50,7 +50,9 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"{f', rectangles (lit as points) {stats.rect_lights_cut}' if stats.rect_lights_cut else ''}"
         f"{f', fog volumes {stats.fog_volumes_cut}' if stats.fog_volumes_cut else ''}"
         f"{f', caustic waters {stats.caustic_waters_cut}' if stats.caustic_waters_cut else ''}"
-        f"{f', caustic lamps {stats.caustic_lamps_cut}' if stats.caustic_lamps_cut else ''}, "
+        f"{f', caustic lamps {stats.caustic_lamps_cut}' if stats.caustic_lamps_cut else ''}"
+        f"{f', rippling waters {stats.ripple_waters_cut}' if stats.ripple_waters_cut else ''}"
+        f"{f', ripple drops {stats.ripple_drops_cut}' if stats.ripple_drops_cut else ''}, "
         f"lights through mirrors {stats.virtual_lights_cut} (shining {stats.virtual_lights})",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",

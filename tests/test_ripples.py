@@ -38,6 +38,7 @@ from engine.render.ripples import (
     RIPPLES_BLOCK_BYTES,
     RippleAtlas,
 )
+from shell.overlay_text import overlay_lines
 from tests.support import pixel_rays, srgb_to_linear
 
 FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
@@ -318,6 +319,7 @@ def test_ripple_values_and_limits_are_checked_and_said(scene):
     assert any("6 waters have Ripples" in m and "so 2 stay still" in m for m in messages), messages
     assert any(f"{MAX_RIPPLE_TEXELS} texels a side" in m for m in messages), messages
     assert runner.stats.ripple_waters_cut == 2
+    assert any("rippling waters 2" in line for line in overlay_lines(runner.engine, [0.016]))   # (the overlay says it)
     atlas = runner.engine.renderer.ripples
     assert len(atlas.waters) == MAX_RIPPLE_WATERS
     assert max(max(water.texels) for _, water in atlas.waters.values()) == MAX_RIPPLE_TEXELS
