@@ -358,7 +358,15 @@ def test_ripple_values_and_limits_are_checked_and_said(scene):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         runner.world.spawn(Transform(position=(1.5, 0.0, 0.0)), Splash())
-        runner.frame(DT)
+        for _ in range(30):
+            runner.frame(DT)
+    # Each water's tile is its own: the splash rings the second water's field alone, out to its
+    # edges, and the others' stay flat.
+    stirred = {entity: np.abs(atlas.heights(entity)).max() for entity in atlas.waters}
+    splashed = max(stirred, key=stirred.get)
+    water = atlas.waters[splashed][1]
+    assert water.origin[0] + (water.edge_u[0] + water.edge_v[0]) / 2 == pytest.approx(1.5)   # (the one at x = 1.5)
+    assert stirred[splashed] > 1e-4 and all(v == 0.0 for e, v in stirred.items() if e != splashed), stirred
     programs = [draw.program for draws in runner.engine.reflection_system.tree.passes._draws.values()
                 for draw in draws[0].values() if "Ripples" in draw.program]
     assert programs and all(program["Ripples"].size == RIPPLES_BLOCK_BYTES for program in programs)
