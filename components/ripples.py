@@ -27,7 +27,8 @@ class Ripples(TrackedComponent):
     - ``damping``: how fast they die out: their height falls by exp(-damping x seconds).
     - ``cell``: metres between the grid's points (finer: smaller ripples, more texels; a
       side of the outline over ``MAX_RIPPLE_TEXELS`` points is drawn coarser and said once).
-    - ``strength``: scales the slopes the composite reads (1: as simulated; 0: none drawn).
+    - ``strength``: scales the slopes drawn, in the reflection and in the caustics alike (1: as
+      simulated; 0: none drawn).
     - ``rain``: drops a square metre a second falling on the whole surface, each pushing it
       down ``drop_depth`` metres over a disc of ``drop_radius`` metres.
 
