@@ -171,7 +171,12 @@ class RippleSystem(esper.Processor):
         drops: dict[int, list[tuple[float, ...]]] = {water.entity: [] for water, _ in waters}
         atlas = self.renderer.ripples
         crossed: dict[int, np.ndarray] = {}
-        for entity, (wake, transform) in self.world.query(Wake, Transform):
+        for entity, wake in self.world.query_one(Wake):
+            transform = self.world.try_get(entity, Transform)
+            if transform is None:
+                self._say_once("wake", entity, ComponentWarning(
+                    f"Wake on entity {entity}: it has no Transform to say where it is, so it makes no ripples"))
+                continue
             centre, half = self._placed(entity, transform)
             if not half.any() and wake.radius <= 0.0:
                 self._say_once("point", entity, ComponentWarning(

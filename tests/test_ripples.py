@@ -89,6 +89,65 @@ def heights(runner, held) -> np.ndarray:
     return runner.engine.renderer.ripples.heights(held["water"])
 
 
+def field_normals(runner, held) -> np.ndarray:
+    """The normal of a flat water's surface (y up) at each texel of its field read back: up
+    less the height's world gradient (central differences, each texel axis taken to the world
+    by the atlas's texel rows), [row, column, 3]."""
+    atlas = runner.engine.renderer.ripples
+    tile, water = atlas.waters[held["water"]]
+    u_row, v_row = water.texel_rows(tile)
+    along_v, along_u = np.gradient(heights(runner, held).astype(np.float64))   # (metres a texel)
+    normal = np.array([0.0, 1.0, 0.0]) - (along_u[..., None] * u_row[:3] + along_v[..., None] * v_row[:3])
+    return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
+
+
+def texel_centres(runner, held) -> tuple[np.ndarray, float]:
+    """Each texel centre of a water at y = 0 as world (x, z), [row, column, 2] (the atlas's
+    rows taken back to the world), and a texel's area in square metres."""
+    atlas = runner.engine.renderer.ripples
+    water = held["water"]
+    corner = atlas.to_texels(water, np.zeros((1, 3)))[0]
+    dx = atlas.to_texels(water, np.array([[1.0, 0.0, 0.0]]))[0] - corner
+    dz = atlas.to_texels(water, np.array([[0.0, 0.0, 1.0]]))[0] - corner
+    to_world = np.linalg.inv(np.array([[dx[0], dz[0]], [dx[1], dz[1]]]))
+    rows, columns = np.mgrid[0:atlas.waters[water][1].texels[1], 0:atlas.waters[water][1].texels[0]] + 0.5
+    return np.stack([columns - corner[0], rows - corner[1]], axis=-1) @ to_world.T, abs(np.linalg.det(to_world))
+
+
+def traced_gathering(xz: np.ndarray, normal: np.ndarray, sun, depth: float, area: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Where the sun's rays (``sun``, the light's way) crossing the surface at texel centres
+    ``xz`` with ``normal``s land ``depth`` under it (Snell's law for water's index), and the
+    light there over the flat water's: 1 / |det J| of the landings on the texel grid (a texel
+    of ``area`` square metres)."""
+    from tests.test_caustics import IOR, refract
+
+    rays = refract(np.broadcast_to(np.array(tuple(sun), np.float64), normal.shape), normal, 1.0 / IOR)
+    landed = xz + rays[..., [0, 2]] * (depth / -rays[..., 1:2])
+    d_rows, d_columns = np.gradient(landed, axis=0), np.gradient(landed, axis=1)
+    det = (d_rows[..., 0] * d_columns[..., 1] - d_rows[..., 1] * d_columns[..., 0]) / area
+    return landed, 1.0 / np.abs(det)
+
+
+def splashed_pool(on: bool, held: dict | None = None, **pool_values):
+    """``tests.test_caustics``'s sunlit pool gathering the sun (its waves flattened:
+    ``normal_scale`` 0, so rings alone bend the light), with Ripples (``on``) and a splash in
+    its middle; ``held`` gets the water's entity."""
+    from tests.test_caustics import pool
+
+    build = pool(1.0, scale=0.0, **pool_values)
+
+    def with_ripples(world):
+        build(world)
+        (entity, _), = world.query_one(Water)
+        if held is not None:
+            held["water"] = entity
+        if on:
+            world.add_component(entity, Ripples(speed=0.4, damping=0.0, cell=0.02))
+        world.spawn(Transform(position=(0.0, 0.0, 0.0)), Splash(radius=0.12, depth=0.006))
+    return with_ripples
+
+
 def test_a_drop_spreads_as_a_ring_at_the_ripples_speed_and_dies_out_by_the_damping(scene):
     """A splash in the middle of a pond: the ring's crest stands ``speed`` x t from where it
     fell, at two times (the ring's radius grows with time as the wave equation's front does),
@@ -347,6 +406,13 @@ def test_ripple_values_and_limits_are_checked_and_said(scene):
         runner.frame(DT)
     assert sum("no Transform to say where it lands" in str(w.message) for w in said) == 1
     assert not runner.world.has(lost, Splash)
+    # A Wake with no Transform has no place: said, once.
+    runner.world.spawn(Wake(radius=0.1))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        runner.frame(DT)
+        runner.frame(DT)
+    assert sum("Wake on entity" in str(w.message) and "no Transform" in str(w.message) for w in said) == 1
     # A Wake with no mesh and no radius has no size: said, once.
     runner.world.spawn(Transform(position=(0.0, 0.0, 0.0)), Wake())
     with warnings.catch_warnings(record=True) as said:
@@ -495,20 +561,15 @@ def test_the_rings_tilt_the_surface_the_way_their_slopes_go(scene):
     rippled, frame = run(scene, rippled_build, 20, size)
     _, plain = run(scene, plain_build, 20, size)
     atlas = rippled.engine.renderer.ripples
-    field = heights(rippled, held).astype(np.float64)
-    tile, water = atlas.waters[held["water"]]
-    u_row, v_row = water.texel_rows(tile)
-    along_v, along_u = np.gradient(field)   # (metres a texel: rows run along v)
+    normals = field_normals(rippled, held)
     eye, directions = pixel_rays(rippled.engine.main_view, size)
     t = -eye[1] / directions[..., 1]
     at = eye + directions * t[..., None]
     on = (t > 0) & (np.abs(at[..., 0]) < 1.9) & (np.abs(at[..., 2]) < 1.9)
     texel = atlas.to_texels(held["water"], at.reshape(-1, 3)).reshape(*size[::-1], 2)
-    ix = np.clip(texel[..., 0].astype(int), 1, field.shape[1] - 2)
-    iy = np.clip(texel[..., 1].astype(int), 1, field.shape[0] - 2)
-    gradient = along_u[iy, ix][..., None] * u_row[:3] + along_v[iy, ix][..., None] * v_row[:3]
-    normal = np.array([0.0, 1.0, 0.0]) - gradient
-    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    ix = np.clip(texel[..., 0].astype(int), 1, normals.shape[1] - 2)
+    iy = np.clip(texel[..., 1].astype(int), 1, normals.shape[0] - 2)
+    normal = normals[iy, ix]
 
     def schlick(n):
         cosine = np.clip(np.sum(n * -directions, axis=-1), 0.0, 1.0)
@@ -529,53 +590,20 @@ def test_the_rings_gather_the_suns_light_under_the_water_where_a_ray_tracer_does
     rays crossing the surface there land (Snell's law at the normal the field read back
     gives, the light through each texel of surface over the area its rays land on: 1 / |det
     J| of the landings on the texel grid)."""
-    from tests.test_caustics import DEPTH, IOR, SUN, pool, refract, render
-
-    def rippling(on: bool):
-        build = pool(1.0, scale=0.0)
-        held = {}
-
-        def with_ripples(world):
-            build(world)
-            (entity, _), = world.query_one(Water)
-            held["water"] = entity
-            if on:
-                world.add_component(entity, Ripples(speed=0.4, damping=0.0, cell=0.02))
-            world.spawn(Transform(position=(0.0, 0.0, 0.0)), Splash(radius=0.12, depth=0.006))
-        return with_ripples, held
+    from tests.test_caustics import DEPTH, SUN, render
 
     size = (128, 128)
-    ripple_build, held = rippling(True)
+    held = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        runner, lit = render(scene, ripple_build, size)
+        runner, _ = render(scene, splashed_pool(True, held), size)
         for _ in range(28):
             frame = runner.frame(DT)
-        _, flat = render(scene, rippling(False)[0], size)
+        _, flat = render(scene, splashed_pool(False), size)
     lit = srgb_to_linear(frame)
     assert runner.engine.renderer.ripples.caustic_defines
-    atlas = runner.engine.renderer.ripples
-    field = heights(runner, held).astype(np.float64)
-    tile, water = atlas.waters[held["water"]]
-    u_row, v_row = water.texel_rows(tile)
-    along_v, along_u = np.gradient(field)
-    gradient = along_u[..., None] * u_row[:3] + along_v[..., None] * v_row[:3]
-    normal = np.array([0.0, 1.0, 0.0]) - gradient
-    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
-    # Each texel's centre on the surface (the atlas's rows taken back to the world: y = 0).
-    rows, columns = np.mgrid[0:field.shape[0], 0:field.shape[1]] + 0.5
-    corner = atlas.to_texels(held["water"], np.zeros((1, 3)))[0]
-    dx = atlas.to_texels(held["water"], np.array([[1.0, 0.0, 0.0]]))[0] - corner
-    dz = atlas.to_texels(held["water"], np.array([[0.0, 0.0, 1.0]]))[0] - corner
-    to_world = np.linalg.inv(np.array([[dx[0], dz[0]], [dx[1], dz[1]]]))
-    xz = np.stack([columns - corner[0], rows - corner[1]], axis=-1) @ to_world.T
-    rays = refract(np.broadcast_to(np.array(tuple(SUN)), normal.shape), normal, 1.0 / IOR)
-    landed = xz + rays[..., [0, 2]] * (DEPTH / -rays[..., 1:2])
-    d_rows = np.gradient(landed, axis=0)
-    d_columns = np.gradient(landed, axis=1)
-    spacing = abs(np.linalg.det(to_world))   # (a texel's area in square metres)
-    det = (d_rows[..., 0] * d_columns[..., 1] - d_rows[..., 1] * d_columns[..., 0]) / spacing
-    traced = 1.0 / np.abs(det)
+    xz, area = texel_centres(runner, held)
+    landed, traced = traced_gathering(xz, field_normals(runner, held), SUN, DEPTH, area)
     bent = np.abs(traced - 1.0) > 0.05
     pixels = np.array([runner.project((x, -DEPTH, z)) for x, z in landed[bent]])
     inside = (pixels >= 0).all(axis=1) & (pixels[:, 0] < size[0]) & (pixels[:, 1] < size[1])
@@ -592,20 +620,9 @@ def test_a_context_one_unit_short_keeps_the_caustics_the_waves_alone_and_says_so
     heights too (``RIPPLE_CAUSTIC_SAMPLERS``) the water still ripples (its composites) while
     its caustics are its waves' alone: the floor's light is the ripple-less pool's, bit for
     bit, and a GLLimitWarning names the water and the limit, once."""
-    from tests.test_caustics import pool, render
+    from tests.test_caustics import render
 
-    def rippling(on: bool):
-        build = pool(1.0, scale=0.0)
-
-        def with_ripples(world):
-            build(world)
-            (entity, _), = world.query_one(Water)
-            if on:
-                world.add_component(entity, Ripples(speed=0.4, damping=0.0, cell=0.02))
-            world.spawn(Transform(position=(0.0, 0.0, 0.0)), Splash(radius=0.12, depth=0.006))
-        return with_ripples
-
-    runner = scene(rippling(True), (48, 48))
+    runner = scene(splashed_pool(True), (48, 48))
     runner.engine.renderer.antialias = "off"
     runner.engine.renderer.ripples.release()
     runner.engine.renderer.ripples = RippleAtlas(ctx, texture_units=RIPPLE_CAUSTIC_SAMPLERS - 1)
@@ -619,7 +636,7 @@ def test_a_context_one_unit_short_keeps_the_caustics_the_waves_alone_and_says_so
     assert atlas.awake and atlas.defines and atlas.caustic_defines == ()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        _, flat = render(scene, rippling(False), size=(48, 48))
+        _, flat = render(scene, splashed_pool(False), size=(48, 48))
     np.testing.assert_array_equal(srgb_to_linear(image), flat)
 
 
@@ -634,7 +651,7 @@ def test_the_light_shafts_under_the_rings_carry_the_light_they_gather(scene):
     from scipy.interpolate import LinearNDInterpolator
 
     from components import Camera, Fog, MeshRef, VolumetricFog
-    from tests.test_caustics import DEPTH, IOR, pool, refract
+    from tests.test_caustics import DEPTH
     from tests.test_volumetric_fog import march_rays, marched_light
 
     body, air, deep = 0.3, 0.002, 1.2
@@ -642,19 +659,21 @@ def test_the_light_shafts_under_the_rings_carry_the_light_they_gather(scene):
     splash = (0.1, 0.0, -0.05)
 
     def build(held, splashed: bool):
+        pool = splashed_pool(True, held, eye=(0.0, -0.2, 0.0), target=(0.0, -deep, -0.001),
+                             sun=glm.vec3(0.0, -1.0, 0.0), depth=deep)
+
         def b(world):
-            pool(1.0, scale=0.0, eye=(0.0, -0.2, 0.0), target=(0.0, -deep, -0.001), sun=glm.vec3(0.0, -1.0, 0.0),
-                 depth=deep)(world)
+            pool(world)
             camera = next(e for e, _ in world.query_one(Camera))
             world.add_component(camera, Fog(density=air, color=(0.0, 0.0, 0.0)))
             world.add_component(camera, settings)
-            (water, _), = world.query_one(Water)
-            held["water"] = water
-            world.get(water, Water).fog_density = body
-            world.get(water, Water).fog_color = (0.0, 0.0, 0.0)
-            world.add_component(water, Ripples(speed=0.4, damping=0.0, cell=0.02))
+            world.get(held["water"], Water).fog_density = body
+            world.get(held["water"], Water).fog_color = (0.0, 0.0, 0.0)
+            stone = next(e for e, _ in world.query_one(Splash))
             if splashed:
-                world.spawn(Transform(position=splash), Splash(radius=0.12, depth=0.006))
+                world.get(stone, Transform).position = splash
+            else:
+                world.remove_component(stone, Splash)
             floor = next(e for e, (t, _) in world.query(Transform, MeshRef) if t.position.y == -DEPTH)
             world.get(floor, Transform).position = (0.0, -deep, 0.0)
         return b
@@ -670,31 +689,17 @@ def test_the_light_shafts_under_the_rings_carry_the_light_they_gather(scene):
     assert runner.engine.renderer.ripples.caustic_defines and not runners[1].engine.renderer.ripples.awake
     seen = marched_light(runner)[..., 0] / marched_light(runners[1])[..., 0]
     atlas = runner.engine.renderer.ripples
-    # The field about the splash (the rings' reach and more), its normals and texel centres.
-    corner = atlas.to_texels(held["water"], np.zeros((1, 3)))[0]
-    dx = atlas.to_texels(held["water"], np.array([[1.0, 0.0, 0.0]]))[0] - corner
-    dz = atlas.to_texels(held["water"], np.array([[0.0, 0.0, 1.0]]))[0] - corner
-    to_world = np.linalg.inv(np.array([[dx[0], dz[0]], [dx[1], dz[1]]]))
+    # The field about the splash (the rings' reach and more): its normals and texel centres.
     centre = atlas.to_texels(held["water"], np.array([splash]))[0].astype(int)
     near = (slice(centre[1] - 35, centre[1] + 35), slice(centre[0] - 35, centre[0] + 35))
-    field = heights(runner, held).astype(np.float64)
-    tile, water = atlas.waters[held["water"]]
-    u_row, v_row = water.texel_rows(tile)
-    along_v, along_u = np.gradient(field)
-    normal = np.array([0.0, 1.0, 0.0]) - (along_u[..., None] * u_row[:3] + along_v[..., None] * v_row[:3])
-    normal = (normal / np.linalg.norm(normal, axis=-1, keepdims=True))[near]
-    rows, columns = np.mgrid[0:field.shape[0], 0:field.shape[1]] + 0.5
-    xz = (np.stack([columns - corner[0], rows - corner[1]], axis=-1) @ to_world.T)[near]
-    rays = refract(np.broadcast_to(np.array([0.0, -1.0, 0.0]), normal.shape), normal, 1.0 / IOR)
-    spacing = abs(np.linalg.det(to_world))
+    xz, area = texel_centres(runner, held)
+    xz, normal = xz[near], field_normals(runner, held)[near]
     origin, way, (grid_rows, grid_columns) = march_rays(runner, (96, 64), 2)
     depths = np.linspace(0.0, deep, 13)
     table = []
     for d in depths:   # the traced light where each march ray is at depth d
-        landed = xz + rays[..., [0, 2]] * (d / -rays[..., 1:2])
-        d_rows, d_columns = np.gradient(landed, axis=0), np.gradient(landed, axis=1)
-        det = (d_rows[..., 0] * d_columns[..., 1] - d_rows[..., 1] * d_columns[..., 0]) / spacing
-        light = LinearNDInterpolator(landed.reshape(-1, 2), (1.0 / np.abs(det)).ravel(), fill_value=1.0)
+        landed, gathered = traced_gathering(xz, normal, (0.0, -1.0, 0.0), d, area)
+        light = LinearNDInterpolator(landed.reshape(-1, 2), gathered.ravel(), fill_value=1.0)
         t = (-d - origin[:, 1]) / way[:, 1]
         table.append(light(origin[:, [0, 2]] + way[:, [0, 2]] * t[:, None]))
     table = np.array(table)   # [depth, ray]
