@@ -72,8 +72,10 @@ class Wake(TrackedComponent):
     """Makes its entity ripple any water with ``Ripples`` it moves through: each frame it
     stands across the surface (its mesh's box reaching both sides of the plane, inside the
     outline), the surface over a disc of ``radius`` metres about where it crosses is pushed
-    down by ``strength`` times the metres it moved since the last frame, so a thing that
-    wades leaves rings behind it and a thing standing still makes none.  ``radius`` 0: half
+    down by ``strength`` times the metres it moved since the last frame (the farthest any
+    corner of its mesh's box went: a boat swinging its stern, a top spinning where it
+    stands, stir the water as one that wades), so a thing that wades leaves rings behind it
+    and a thing standing still makes none.  ``radius`` 0: half
     the widest side of its mesh's box as placed (an entity with no mesh needs a radius)."""
 
     radius: float = 0.0

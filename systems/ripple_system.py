@@ -31,7 +31,6 @@ from components import MeshRef, Ripples, Splash, Transform, Wake, Water
 from components.tracking import ComponentWarning
 from engine.core.errors import GLLimitWarning, WaterLimitWarning
 from engine.core.world import World
-from engine.render.caustics import placed_box
 from engine.render.gpu import Gpu
 from engine.render.ripples import (
     MAX_COURANT,
@@ -44,6 +43,7 @@ from engine.render.ripples import (
     outline_edges,
 )
 from engine.resources import Surfaces
+from engine.rules.frame_rules import world_corners
 
 RIPPLE_CALM = 1e-5        # metres: rings whose height may be no more than this are gone (a 0.01 mm swell)
 MAX_RIPPLE_FRAME = 1.0 / 15.0   # seconds a frame moves the ripples at most (a hitch is not a flood of steps)
@@ -59,7 +59,7 @@ class RippleSystem(esper.Processor):
         self.world = world
         self.renderer = renderer
         self.loudness: dict[int, float] = {}      # water -> the height its rings may still have (metres)
-        self._crossed: dict[int, np.ndarray] = {}  # Wake entity -> its box's centre last frame
+        self._crossed: dict[int, np.ndarray] = {}  # Wake entity -> its box's corners last frame
         self._owed: dict[int, float] = {}          # water -> the rain's fraction of a drop carried over
         self._rain = np.random.default_rng(RAIN_SEED)
         self._said: set[tuple[str, int]] = set()   # (what, entity) said once
@@ -177,15 +177,18 @@ class RippleSystem(esper.Processor):
                 self._say_once("wake", entity, ComponentWarning(
                     f"Wake on entity {entity}: it has no Transform to say where it is, so it makes no ripples"))
                 continue
-            centre, half = self._placed(entity, transform)
+            centre, half, corners = self._placed(entity, transform)
             if not half.any() and wake.radius <= 0.0:
                 self._say_once("point", entity, ComponentWarning(
                     f"Wake on entity {entity}: it has no mesh to take a size from and its radius is 0, so it makes "
                     "no ripples; give it a MeshRef or a Wake.radius"))
                 continue
             last = self._crossed.get(entity)
-            crossed[entity] = centre
-            moved = 0.0 if last is None else float(np.linalg.norm(centre - last))
+            crossed[entity] = corners
+            # The farthest any corner of its box went: a thing that turns where it stands
+            # (a spinning top, a boat swinging its stern) stirs the water as one that wades.
+            moved = 0.0 if last is None or last.shape != corners.shape \
+                else float(np.sqrt(((corners - last) ** 2).sum(axis=1).max()))
             if moved <= 0.0 or wake.strength <= 0.0:
                 continue
             for water, _ in waters:
@@ -246,16 +249,18 @@ class RippleSystem(esper.Processor):
                 best = (abs(height), water, x, y)
         return None if best is None else best[1:]
 
-    def _placed(self, entity: int, transform: Transform) -> tuple[np.ndarray, np.ndarray]:
-        """Where a Wake's entity stands: its mesh's box as placed (its centre and half sides),
-        or its Transform's point with no box."""
+    def _placed(self, entity: int, transform: Transform) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Where a Wake's entity stands: its mesh's box as placed (the world box's centre and
+        half sides, and the mesh box's 8 corners in the world, (8, 3)), or its Transform's
+        point with no box (half sides 0, the point its one corner)."""
         ref = self.world.try_get(entity, MeshRef)
         matrix = transform.world
         if ref is None or ref.mesh is None:
-            return np.array([float(matrix[3][r]) for r in range(3)]), np.zeros(3)
-        lo, hi = (tuple(float(v) for v in end) for end in ref.mesh.bounds)
-        low, high = (np.asarray(end) for end in placed_box(matrix, lo, hi))
-        return (low + high) * 0.5, (high - low) * 0.5
+            point = np.array([float(matrix[3][r]) for r in range(3)])
+            return point, np.zeros(3), point[None, :]
+        corners = world_corners(ref.mesh, matrix)[:, :3]
+        low, high = corners.min(axis=0), corners.max(axis=0)
+        return (low + high) * 0.5, (high - low) * 0.5, corners
 
     def _say_once(self, what: str, entity: int, warning: Warning) -> None:
         if (what, entity) not in self._said:

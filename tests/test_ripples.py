@@ -256,6 +256,37 @@ def test_a_wading_thing_leaves_rings_and_a_still_one_none(scene):
         assert np.abs(field).max() == 0.0, name
 
 
+def test_a_thing_turning_where_it_stands_stirs_the_water_as_far_as_its_corners_went(scene):
+    """A box with a ``Wake`` that turns about its upright axis without moving stirs the water
+    by the farthest any corner of its box went: the field is the one a ``Splash`` makes at
+    its place, of the Wake's radius (half its turned box's side) and its strength times the
+    corners' chord, 2 r sin(turn / 2) at r = the corners' distance from the axis."""
+    place, turn = (0.3, 0.0, -0.2), math.radians(20.0)
+    half_side, strength = 0.1, 0.5
+
+    def field(turning: bool) -> np.ndarray:
+        things = [(Transform(position=place), MeshRef(box((2 * half_side, 0.3, 2 * half_side))),
+                   Material(color=(0.9, 0.9, 0.2, 1.0)), Wake(strength=strength))] if turning else []
+        build, held = pond(Ripples(speed=0.35, damping=0.5, cell=0.03), things=things)
+        runner, _ = run(scene, build, 1)   # (its corners' first place: nothing stirred yet)
+        if turning:
+            runner.world.get(held["things"][0], Transform).rotation = glm.angleAxis(turn, glm.vec3(0.0, 1.0, 0.0))
+        else:
+            chord = 2.0 * math.hypot(half_side, half_side) * math.sin(turn / 2.0)
+            radius = half_side * (math.cos(turn) + math.sin(turn))
+            runner.world.spawn(Transform(position=place), Splash(radius=radius, depth=strength * chord))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for _ in range(5):
+                runner.frame(DT)
+        assert runner.stats.ripple_steps >= 1
+        return heights(runner, held).astype(np.float64)
+
+    turned, splashed = field(True), field(False)
+    assert np.abs(splashed).max() > 1e-4
+    assert np.abs(turned - splashed).max() < 1e-3 * np.abs(splashed).max()
+
+
 @pytest.mark.parametrize("side", ["above", "below"])
 def test_ripples_bend_the_reflection_where_the_rings_are_and_nowhere_else(scene, side):
     """A pond reflecting a checkered wall, a splash in it, seen from above and from under the
