@@ -17,12 +17,12 @@ from engine.assets.level_file import load_level, save_level
 from engine.assets.level_save import same_floats
 from engine.assets.mesh import box
 from engine.core.world import World
-from games.hall_of_mirrors.level import Spin
+from games.hall_of_mirrors.level import Rise, Spin
 from tests.test_level_files import fields_by_name
 
 ROOT = Path(__file__).resolve().parents[1]
 HALL = ROOT / "games/hall_of_mirrors/hall.toml"
-EXTRA = {"Spin": Spin}
+EXTRA = {"Spin": Spin, "Rise": Rise}
 
 
 def loaded(path: Path, name: str) -> tuple[World, dict[str, int], object]:
@@ -78,17 +78,18 @@ def test_added_and_removed_components_and_entities_are_their_tables_only(tmp_pat
     world, names, level = loaded(path, "edit_tables")
     world.remove_component(names["koi"], Spin)  # the last table of its entity
     world.add_component(names["lamp_post"], Visibility(in_mirrors=False))
-    world.delete_entity(names.pop("oil_stain"))  # (the file's last entity)
+    world.delete_entity(names.pop("oil_stain"))  # (the file's last entity but the koi's mouth)
     extra = world.spawn(Material(roughness=0.25))
     names["new_one"] = extra
     save_level(world, path, names, extra_components=EXTRA, keep=path)
     text = path.read_text()
     removed = [line for line in diff(original, text) if line.startswith("-")]
     added = [line for line in diff(original, text) if line.startswith("+")]
-    last = original[original.index('name = "oil_stain"'):].splitlines()
-    assert removed == ["-[entity.Spin]", "-speed = 35.0"] + [f"-{line}" for line in last]
-    assert added == ["+[entity.Visibility]", "+in_mirrors = false",
-                     '+name = "new_one"', "+[entity.Material]", "+roughness = 0.25"]
+    start = original.index('name = "oil_stain"')
+    last = original[start:original.index("\n\n", start)].splitlines()   # (its table, to the blank line)
+    assert removed == ["-[entity.Spin]", "-speed = 35.0", "-[[entity]]"] + [f"-{line}" for line in last] + ["-"]
+    assert added == ["+[entity.Visibility]", "+in_mirrors = false",   # (difflib pairs the [[entity]] lines anew)
+                     "+", "+[[entity]]", '+name = "new_one"', "+[entity.Material]", "+roughness = 0.25"]
     # Every comment of the original is still there, and blank lines still part the entities.
     comments = [line for line in original.splitlines() if line.lstrip().startswith("#")]
     assert all(c in text.splitlines() for c in comments)
@@ -213,6 +214,34 @@ def test_a_drag_is_one_undo_and_components_come_and_go_with_undo(tmp_path):
     changed = diff(original, (tmp_path / "hall.toml").read_text())
     assert changed == ["-roughness = 0.6", "+roughness = 0.3", "+[entity.Visibility]"]
     world.close()
+
+
+@pytest.mark.parametrize("gone", ["first", "middle", "last"])
+def test_a_deleted_entity_takes_the_comment_above_it_and_leaves_its_neighbours(tmp_path, gone):
+    """The comments above an entity's header are its own (tomlkit keeps them at the end of the
+    table before): saved after a deletion, the file is the original less the deleted entity's
+    table and the comment above it, every other comment where it was (one commented-out field
+    at the end of a table, before a blank line, stays that table's)."""
+    parts = {
+        "first": '# The first, a red one.\n[[entity]]\nname = "first"\n[entity.Material]\nroughness = 0.5\n'
+                 '# metallic = 1.0\n\n',
+        "middle": '# The middle one: rough.\n# (two lines of it)\n[[entity]]\nname = "middle"\n'
+                  '[entity.Material]\nroughness = 0.9\n\n',
+        "last": '# The last.\n[[entity]]\nname = "last"\n[entity.Material]\nroughness = 0.1\n',
+    }
+    head = '[level]\nname = "comments"\n\n'
+    path = tmp_path / "level.toml"
+    path.write_text(head + "".join(parts.values()))
+    world, names, _ = loaded(path, f"comments_{gone}")
+    world.delete_entity(names.pop(gone))
+    save_level(world, path, names, extra_components=EXTRA, keep=path)
+    saved = path.read_text()
+    expected = head + "".join(text for name, text in parts.items() if name != gone)
+    assert saved.rstrip("\n") == expected.rstrip("\n")
+    again, names_again, _ = loaded(path, f"comments_{gone}_again")
+    assert set(names_again) == set(names)
+    world.close()
+    again.close()
 
 
 def _copy_hall(tmp_path: Path) -> Path:
@@ -369,7 +398,7 @@ def test_undo_of_an_edit_to_an_entity_gone_since_says_so(tmp_path):
 
 def test_entities_made_copied_and_deleted_in_the_editor_are_their_tables_in_the_save(tmp_path):
     """A new entity (a Transform 3 m before the camera, given a PointLight), a copy of a
-    crate and the deletion of the koi are, saved, exactly those tables; undo and redo make a
+    crate and the deletion of the pond's back kerb are, saved, exactly those tables; undo and redo make a
     deleted entity again (a new id) with the very same components, and the edits made to it
     before follow it there; a portal's partner comes back with it."""
     from components import PointLight, Portal
@@ -396,14 +425,14 @@ def test_entities_made_copied_and_deleted_in_the_editor_are_their_tables_in_the_
     assert world.get(copy, Transform).position is not world.get(crate, Transform).position  # its own vectors
     editor.set_field(copy, "Transform", "position", (0.0, 0.6, 2.5))
     assert world.get(crate, Transform).position != glm.vec3(0.0, 0.6, 2.5)
-    koi = names["koi"]
-    editor.set_field(koi, "Material", "roughness", 0.1)
-    koi_material = world.get(koi, Material)
-    editor.delete(koi)
-    assert not world.exists(koi) and "koi" not in editor.names
+    kerb = names["pond_kerb_back"]
+    editor.set_field(kerb, "Material", "roughness", 0.1)
+    kerb_material = world.get(kerb, Material)
+    editor.delete(kerb)
+    assert not world.exists(kerb) and "pond_kerb_back" not in editor.names
     assert editor.undo()
-    back = editor.names["koi"]
-    assert back != koi and world.get(back, Material) is koi_material and koi_material.roughness == 0.1
+    back = editor.names["pond_kerb_back"]
+    assert back != kerb and world.get(back, Material) is kerb_material and kerb_material.roughness == 0.1
     assert editor.redo() and not world.exists(back)
 
     editor.save()
@@ -411,15 +440,15 @@ def test_entities_made_copied_and_deleted_in_the_editor_are_their_tables_in_the_
     again = load_level(path, EXTRA)
     spawned = World("edit_whole_again")
     ids = again.spawn(spawned)
-    assert "koi" not in ids and {"torch", "red_crate_copy"} <= set(ids) and "lamp_2" not in ids
+    assert "pond_kerb_back" not in ids and {"torch", "red_crate_copy"} <= set(ids) and "lamp_2" not in ids
     assert spawned.get(ids["torch"], PointLight).intensity == 3.0
     assert glm.length(spawned.get(ids["torch"], Transform).position - expected) < 1e-5
     assert spawned.get(ids["red_crate_copy"], Transform).position == glm.vec3(0.0, 0.6, 2.5)
-    start = original.index('[[entity]]\nname = "koi"')
-    without_koi = original[:start] + original[original.index("[[entity]]", start + 1):]
+    start = original.index('[[entity]]\nname = "pond_kerb_back"')
+    without_kerb = original[:start] + original[original.index("[[entity]]", start + 1):]
     saved = path.read_text()
-    assert saved.startswith(without_koi.rstrip("\n") + "\n")  # the koi's table out, the rest as it was
-    added = saved[len(without_koi.rstrip("\n")) + 1:]
+    assert saved.startswith(without_kerb.rstrip("\n") + "\n")  # the kerb's table out, the rest as it was
+    added = saved[len(without_kerb.rstrip("\n")) + 1:]
     assert added.count("[[entity]]") == 2 and 'name = "torch"' in added and 'name = "red_crate_copy"' in added
     assert changed and all(line[1:] in original for line in changed if line.startswith("-"))
     # A portal's partner: deleting one portal leaves the other closed; undo pairs them again.

@@ -16,12 +16,12 @@ from engine.assets.mesh import load_model
 from engine.assets.texture_data import ripple_normal_map
 from engine.core.world import World
 from games.hall_of_mirrors.level import LEVEL as HALL
-from games.hall_of_mirrors.level import HallOfMirrors, Spin
+from games.hall_of_mirrors.level import HallOfMirrors, Rise, Spin
 from tests.support import SceneRunner
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(ROOT.glob("games/**/*.toml"))
-EXTRA = {"Spin": Spin}  # the hall's own component; the games' levels use engine components only
+EXTRA = {"Spin": Spin, "Rise": Rise}  # the hall's own component; the games' levels use engine components only
 
 
 def fields_by_name(world: World, names: dict[str, int]) -> dict[str, dict]:

@@ -749,3 +749,50 @@ def test_the_light_shafts_under_the_rings_carry_the_light_they_gather(scene):
     assert ringed.sum() > 100, ringed.sum()
     assert np.corrcoef(seen[ringed], truth[ringed])[0, 1] > 0.98
     assert np.median(np.abs(seen - truth)) < 0.005
+
+
+def test_the_sample_levels_koi_rings_its_pond_each_time_it_rises(ctx):
+    """The hall's koi breaks the pond's surface at its mouth (``Rise``: first at 1 s, then every
+    2.5 s; the script drops a Splash there): no drop before 1 s, one on the frame that reaches
+    it, the deepest dent of the field straight under the mouth as the koi has turned by then,
+    the next drop not before 3.5 s.  A bad Rise is refused naming its field."""
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from games.hall_of_mirrors.level import HallOfMirrors, Rise
+    from shell.app import Engine
+
+    with pytest.raises(ValueError, match="Rise.every"):
+        Rise(every=0.0)
+    with pytest.raises(ValueError, match="Rise.depth"):
+        Rise(depth=float("nan"))
+    game = HallOfMirrors()
+    engine = Engine(game, ctx)
+    capture = CaptureTarget(ctx, (32, 18))
+    try:
+        pond, mouth = game.names["pond"], game.names["koi_mouth"]
+        rise = engine.world.get(mouth, Rise)
+        drops, step = [], 0.1
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for _ in range(40):   # 4 seconds
+                engine.frame(step, Output(capture.framebuffer, (32, 18)))
+                drops.append(engine.renderer.stats.ripple_drops)
+                if drops[-1] and len([count for count in drops if count]) == 1:
+                    # Where the mouth is now (the koi has turned 35 degrees a second), straight
+                    # across the pond's plane: the field's deepest texel.
+                    mouth_at = [float(engine.world.get(mouth, Transform).world[3][r]) for r in range(3)]
+                    atlas = engine.renderer.ripples
+                    field = atlas.heights(pond)
+                    row, column = np.unravel_index(np.argmin(field), field.shape)
+                    x, y = atlas.to_texels(pond, [mouth_at])[0]
+                    assert field.min() < -1e-4
+                    assert math.hypot(column + 0.5 - x, row + 0.5 - y) < 2.0
+        # (the game's clock sums each frame's 0.1 s: a time due may fall a rounding after a frame)
+        times = [(n + 1) * step for n, count in enumerate(drops) if count]
+        assert len(times) == 2
+        assert rise.first - 1e-9 <= times[0] < rise.first + step + 1e-9
+        assert rise.first + rise.every - 1e-9 <= times[1] < rise.first + rise.every + step + 1e-9
+        assert all(drops[n] == 1 for n, count in enumerate(drops) if count)
+    finally:
+        capture.release()
+        engine.close()

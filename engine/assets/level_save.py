@@ -172,6 +172,7 @@ def _kept_text(world: World, path: Path, keep: Path, by_id: Mapping[int, str], t
     added, removed = added or set(), removed or set()
     for index in reversed(range(len(level._entities))):  # the file's entities the world no longer has
         if level._entities[index].name not in now and (only is None or level._entities[index].name in removed):
+            _pass_on_lead_comments(doc, files, index)
             del files[index]
     if files is not None and len(files) == 0:  # every entity of the file gone: no empty `entity = []`
         del doc["entity"]                       # left for the new ones' [[entity]] tables to clash with
@@ -249,6 +250,49 @@ def _keep_entity(table: Any, before: Mapping[str, dict], now: Mapping[str, Any],
                 changed = True
         if inline and changed:
             table[cls_name] = _item(component)
+
+
+def _last_body(item: Any) -> list:
+    """The body list a table's text ends in: its last sub-table's (an entity's last component),
+    or its own."""
+    tables = [v for _, v in item.value.body if isinstance(v, dict)] if hasattr(item, "value") else []
+    return tables[-1].value.body if tables else item.value.body
+
+
+def _lead_start(body: list) -> int:
+    """Where the comments leading the next table begin at the end of ``body``: after the last
+    blank line of its closing run of blank lines and comments (tomlkit keeps the comments
+    above an ``[[entity]]`` header in the table before it; those before a blank line are that
+    table's own, a commented-out field)."""
+    from tomlkit.items import Comment, Whitespace
+
+    start = len(body)
+    while start and body[start - 1][0] is None and isinstance(body[start - 1][1], (Whitespace, Comment)):
+        start -= 1
+    lead = len(body)
+    for position in range(start, len(body)):
+        if isinstance(body[position][1], Whitespace):
+            lead = position + 1
+    return lead if lead < len(body) else len(body)
+
+
+def _pass_on_lead_comments(doc: Any, files: Any, index: int) -> None:
+    """Before the file's entity ``index`` is deleted: the comments above its header (at the end
+    of the table before it) go with it, and those above the next entity's header (at the end
+    of its own last table) take their place, so a deleted entity takes its own comments and
+    leaves its neighbour's."""
+    if index > 0:
+        before = _last_body(files[index - 1])
+    else:  # the first entity: the comments above it end the top-level table before the entities
+        tables = [v for k, v in doc.body if k is not None and k.key != "entity" and isinstance(v, dict)]
+        if not tables:
+            return
+        before = _last_body(tables[-1])
+    own = _last_body(files[index])
+    del before[_lead_start(before):]
+    start = _lead_start(own)
+    before.extend(own[start:])
+    del own[start:]
 
 
 def _move_trailing(entity: Any, source: str, target: str | None) -> None:

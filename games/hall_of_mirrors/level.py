@@ -9,7 +9,8 @@ stands half in it and half out of its partner, and a facing pair of portals that
 tunnel to the recursion limit; a chrome ball whose probe is captured every frame, a brass
 statue hammered by a normal map whose probe follows what moves near it, a glass ball in
 front of a red crate, a pond in the foreground (a Water surface: Fresnel-weighted
-reflection, moving ripples, the sun's caustics on its tiles, a koi turning under it), and
+reflection, moving waves, the sun's caustics on its tiles, a koi turning under it that
+breaks the surface every few seconds and rings it: ``Rise``, ``Ripples``), and
 before the mirror wall a vampire that no mirror or probe shows and a ghost that only the
 mirrors show (Visibility).
 
@@ -24,7 +25,7 @@ from pathlib import Path
 
 from pyglm import glm
 
-from components import FlyController, Transform, yaw_pitch_rotation
+from components import FlyController, Splash, Transform, yaw_pitch_rotation
 from engine.assets.level_file import LevelError, LevelGame
 from engine.core.world import World
 
@@ -38,11 +39,33 @@ class Spin:
     speed: float = 20.0
 
 
+@dataclass
+class Rise:
+    """Marks a point under a rippling water that breaks its surface every ``every`` seconds
+    (``first`` the first time): the koi's mouth taking a breath.  Each time the script drops a
+    ``Splash`` of ``radius`` and ``depth`` metres there, and the pond's ``Ripples`` ring out
+    from it (the ripple stage: a Splash lands straight across the water from its entity)."""
+
+    every: float = 3.0
+    first: float = 1.0
+    radius: float = 0.03
+    depth: float = 0.003
+
+    def __post_init__(self) -> None:
+        for name in ("every", "first", "radius", "depth"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value < 1e4 \
+                    or (name in ("every", "radius") and not value > 0.0):
+                raise ValueError(f"Rise.{name} must be a {'positive' if name in ('every', 'radius') else 'finite'} "
+                                 f"number of {'seconds' if name in ('every', 'first') else 'metres'} "
+                                 f"in [0, 1e4), got {value!r}")
+
+
 class HallOfMirrors(LevelGame):
     title = "Speculum: hall of mirrors"
     size = (960, 540)
     game = "hall_of_mirrors"  # a level file's [level] game
-    components = {"Spin": Spin}
+    components = {"Spin": Spin, "Rise": Rise}
 
     def __init__(self, level_path: str | Path = LEVEL, tour: bool = False) -> None:
         super().__init__(level_path)
@@ -55,10 +78,16 @@ class HallOfMirrors(LevelGame):
         self.seconds = float(self.level.rules.get("tour_seconds", 2.0))
         self.pan = float(self.level.rules.get("tour_pan", 0.0))
         self.time = 0.0
+        self.rises: dict[int, float] = {}   # Rise entity -> the game time of its next breath
 
     def update(self, world: World, dt: float) -> None:
         for _, (spin, transform) in world.query(Spin, Transform):
             transform.rotation = glm.angleAxis(glm.radians(spin.speed * dt), glm.vec3(0, 1, 0)) * transform.rotation
+        for entity, rise in world.query_one(Rise):
+            due = self.rises.setdefault(entity, rise.first)
+            if self.time + dt >= due:   # (this frame's seconds reach its next breath)
+                world.add_component(entity, Splash(radius=rise.radius, depth=rise.depth))
+                self.rises[entity] = due + rise.every * (1 + int((self.time + dt - due) // rise.every))
         if self.tour and self.poses:
             self._follow_tour(world)
         self.time += dt
