@@ -114,16 +114,18 @@ def texel_centres(runner, held) -> tuple[np.ndarray, float]:
     return np.stack([columns - corner[0], rows - corner[1]], axis=-1) @ to_world.T, abs(np.linalg.det(to_world))
 
 
-def traced_gathering(xz: np.ndarray, normal: np.ndarray, sun, depth: float, area: float
+def traced_gathering(xz: np.ndarray, normal: np.ndarray, sun, depth: float, area: float, reflected: bool = False
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Where the sun's rays (``sun``, the light's way) crossing the surface at texel centres
-    ``xz`` with ``normal``s land ``depth`` under it (Snell's law for water's index), and the
-    light there over the flat water's: 1 / |det J| of the landings on the texel grid (a texel
-    of ``area`` square metres)."""
-    from tests.test_caustics import IOR, refract
+    ``xz`` with ``normal``s land ``depth`` under it (Snell's law for water's index; with
+    ``reflected``, thrown back up off it, ``depth`` over it), and the light there over the
+    flat water's: 1 / |det J| of the landings on the texel grid (a texel of ``area`` square
+    metres)."""
+    from tests.test_caustics import IOR, reflect, refract
 
-    rays = refract(np.broadcast_to(np.array(tuple(sun), np.float64), normal.shape), normal, 1.0 / IOR)
-    landed = xz + rays[..., [0, 2]] * (depth / -rays[..., 1:2])
+    light = np.broadcast_to(np.array(tuple(sun), np.float64), normal.shape)
+    rays = reflect(light, normal) if reflected else refract(light, normal, 1.0 / IOR)
+    landed = xz + rays[..., [0, 2]] * (depth / np.abs(rays[..., 1:2]))
     d_rows, d_columns = np.gradient(landed, axis=0), np.gradient(landed, axis=1)
     det = (d_rows[..., 0] * d_columns[..., 1] - d_rows[..., 1] * d_columns[..., 0]) / area
     return landed, 1.0 / np.abs(det)
@@ -643,6 +645,51 @@ def test_the_rings_gather_the_suns_light_under_the_water_where_a_ray_tracer_does
     assert inside.sum() > 300, inside.sum()
     correlation = np.corrcoef(share, expected)[0, 1]
     assert np.median(np.abs(share - expected)) < 0.02
+    assert correlation > 0.9, correlation
+
+
+def test_the_rings_throw_the_suns_light_up_where_a_ray_tracer_does(scene):
+    """A water that reflects the sun (``Mirror.reflects_light``) under a ceiling, its waves
+    flattened (so the rings alone bend the light), a splash in it: each ceiling pixel's light
+    over the same pool's with no Ripples is, where the rings bend the light, the traced share
+    where the sun's rays reflected off the surface there land on the ceiling (the mirror law
+    at the normal the field read back gives, 1 / |det J| of the landings on the texel grid)."""
+    from tests.test_caustics import CEILING, SUN, ceiling_pool, render
+
+    def splashed(on: bool, held: dict | None = None):
+        build = ceiling_pool(1.0)
+
+        def with_ripples(world):
+            build(world)
+            (entity, _), = world.query_one(Water)
+            world.get(entity, Material).normal_scale = 0.0
+            if held is not None:
+                held["water"] = entity
+            if on:
+                world.add_component(entity, Ripples(speed=0.4, damping=0.0, cell=0.02))
+            world.spawn(Transform(position=(0.0, 0.0, 0.0)), Splash(radius=0.12, depth=0.003))
+        return with_ripples
+
+    size = (128, 128)
+    held = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runner, _ = render(scene, splashed(True, held), size)
+        for _ in range(28):
+            frame = runner.frame(DT)
+        _, flat = render(scene, splashed(False), size)
+    lit = srgb_to_linear(frame)
+    assert runner.engine.renderer.ripples.caustic_defines and runner.stats.virtual_lights == 1
+    xz, area = texel_centres(runner, held)
+    landed, traced = traced_gathering(xz, field_normals(runner, held), SUN, CEILING, area, reflected=True)
+    bent = np.abs(traced - 1.0) > 0.05
+    pixels = np.array([runner.project((x, CEILING, z)) for x, z in landed[bent]])
+    inside = (pixels >= 0).all(axis=1) & (pixels[:, 0] < size[0]) & (pixels[:, 1] < size[1])
+    share = lit[pixels[inside, 1], pixels[inside, 0], 0] / flat[pixels[inside, 1], pixels[inside, 0], 0]
+    expected = traced[bent][inside]
+    assert inside.sum() > 300, inside.sum()
+    correlation = np.corrcoef(share, expected)[0, 1]
+    assert np.median(np.abs(share - expected)) < 0.03, np.median(np.abs(share - expected))
     assert correlation > 0.9, correlation
 
 
