@@ -72,6 +72,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Monitor,
     MotionBlur,
     ParticleEmitter,
     PointLight,
@@ -108,7 +109,8 @@ CLASSES: tuple[type, ...] = (Transform, MeshRef, Material, Emissive, Reflective,
                              DirectionalLight, PointLight, Skybox, Tonemap, Bloom, ColorGrading, Vignette, DepthOfField,
                              MotionBlur, ChromaticAberration, FilmGrain, Fog, AmbientOcclusion, ContactShadows,
                              ScreenReflections, Visibility, VolumetricFog, Water, ParticleEmitter, Decal,
-                             IrradianceVolume, FogVolume, LensFlare, TimeOfDay, CloudLayer, Ripples, Wake, Splash)
+                             IrradianceVolume, FogVolume, LensFlare, TimeOfDay, CloudLayer, Ripples, Wake, Splash,
+                             Monitor)
 
 @dataclasses.dataclass
 class Case:
@@ -199,6 +201,8 @@ class Fuzzer:
                     if case.cls is Ripples:   # (rippling from the start: a stone dropped in its middle)
                         parts[Water] = Water()
                         parts[Splash] = Splash()
+                    if case.cls is Monitor and "camera" not in case.values:   # (a screen showing the camera)
+                        component.camera = self.game.camera
                     parts[case.cls] = component
                     spawned = world.spawn(*parts.values())
         except ComponentValueError as exc:

@@ -7,6 +7,7 @@ from components.detail import LevelOfDetail
 from components.fog import Fog, FogVolume, VolumetricFog
 from components.mirror import Mirror
 from components.model import Animation, AnimationEvents, AnimationLayer, FromModel, Model
+from components.monitor import Monitor
 from components.particles import ParticleEmitter
 from components.portal import Portal, PortalClone, Slice, Traveller
 from components.pose import Morph, Skin
@@ -42,7 +43,8 @@ __all__ = [
     "HemisphereLight",
     "IrradianceVolume",
     "LensFlare", "LevelOfDetail", "Material",
-    "MeshRef", "Mirror", "Model", "Morph", "MotionBlur", "ParticleEmitter", "PointLight", "Portal", "PortalClone",
+    "MeshRef", "Mirror", "Model", "Monitor", "Morph", "MotionBlur", "ParticleEmitter", "PointLight", "Portal",
+    "PortalClone",
     "ReflectionProbe",
     "Reflective",
     "Refractive", "Ripples",

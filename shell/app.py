@@ -72,6 +72,7 @@ from systems.detail_system import DetailSystem
 from systems.frame_rules_system import FrameRulesSystem
 from systems.irradiance_volume_system import IrradianceVolumeSystem
 from systems.model_system import ModelSystem
+from systems.monitor_system import MonitorSystem
 from systems.particle_system import ParticleSystem
 from systems.portal_slice_system import PortalSliceSystem
 from systems.probe_system import ProbeAfterPresentSystem, ProbeSystem
@@ -186,6 +187,7 @@ FRAME_STAGES: tuple[tuple[str, Callable[[Engine], esper.Processor]], ...] = (
     ("shadows", lambda e: ShadowSystem(e.world, e.renderer)),
     ("probes", lambda e: ProbeSystem(e.world, e.renderer)),
     ("volume", lambda e: IrradianceVolumeSystem(e.world, e.renderer)),  # the irradiance volume's points
+    ("monitors", lambda e: MonitorSystem(e.world, e.renderer)),  # each Monitor's picture, from its camera
     ("main", lambda e: MainViewSystem(e.world, e.renderer)),
     ("reflect", lambda e: ReflectionSystem(e.world, e.renderer)),
     ("present", lambda e: PresentSystem(e.world, e.renderer)),

@@ -52,7 +52,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"{f', caustic waters {stats.caustic_waters_cut}' if stats.caustic_waters_cut else ''}"
         f"{f', caustic lamps {stats.caustic_lamps_cut}' if stats.caustic_lamps_cut else ''}"
         f"{f', rippling waters {stats.ripple_waters_cut}' if stats.ripple_waters_cut else ''}"
-        f"{f', ripple drops {stats.ripple_drops_cut}' if stats.ripple_drops_cut else ''}, "
+        f"{f', ripple drops {stats.ripple_drops_cut}' if stats.ripple_drops_cut else ''}"
+        f"{f', monitors {stats.monitors_cut}' if stats.monitors_cut else ''}, "
         f"lights through mirrors {stats.virtual_lights_cut} (shining {stats.virtual_lights})",
         f"view budget {'none' if stats.view_budget is None else stats.view_budget}: spent {stats.views_spent}, "
         f"cut {stats.views_cut}",

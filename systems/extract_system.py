@@ -31,6 +31,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Monitor,
     Morph,
     Portal,
     PortalClone,
@@ -283,10 +284,15 @@ class ExtractSystem(esper.Processor):
         morph = world.try_get(entity, Morph) if drawn.morph_count else None
         posed = (entity, skin.skinning if skin is not None else "", morph is not None) \
             if skin is not None or morph is not None else (0, "", False)
+        # A Monitor's screen gives off its picture (engine/render/monitors.py: the picture's
+        # stand-in is its emissive map, the monitor's brightness its emission).
+        monitor = world.try_get(entity, Monitor)
+        emissive_map = self.renderer.monitors.picture(entity, monitor.size) if monitor is not None \
+            else material.emissive_map if material else None
         try:
             batch = self.renderer.batch_for(drawn, material.texture if material else None, probe,
                                             entity if transparent else 0, material.normal_map if material else None,
-                                            material.emissive_map if material else None,
+                                            emissive_map,
                                             material.metallic_roughness_map if material else None,
                                             second_probe=second, probe_blend=blend.blended, rest_probe=blend.rest,
                                             mirrored=mirroring_seen() and _mirrors(transform.world),
@@ -325,7 +331,8 @@ class ExtractSystem(esper.Processor):
         if batch.set_size(entity, None if drawn is mesh_ref.mesh else mesh_ref.mesh.unit_scale):
             self._joined.add(entity)  # its model matrix is written again below, with its size
         casting_before = batch.shadow_fields(row) if old is batch else None
-        choice = choose_material(material, world.try_get(entity, Emissive), world.try_get(entity, Reflective),
+        emissive = Emissive(power=monitor.brightness) if monitor is not None else world.try_get(entity, Emissive)
+        choice = choose_material(material, emissive, world.try_get(entity, Reflective),
                                  world.try_get(entity, Refractive), world.try_get(entity, Mirror),
                                  world.try_get(entity, Portal), probe=bool(probe))
         row["color"] = choice.color

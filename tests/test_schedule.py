@@ -86,8 +86,8 @@ def test_game_systems_are_ordered_in_among_the_stages_and_run_in_that_order(ctx)
         assert names == ["first", "game", "physics", "models", "rules", "input", "sun", "clouds", "travel", "recorder",
                          "slice", "transform", "surfaces", "trace", "follow", "transform_late", "detail", "decals",
                          "extract", "particles",
-                         "prepare", "ripples", "shadows", "probes", "volume", "main", "reflect", "present", "late",
-                         "text", "probes_after"]
+                         "prepare", "ripples", "shadows", "probes", "volume", "monitors", "main", "reflect", "present",
+                         "late", "text", "probes_after"]
         assert dict(engine.schedule)["recorder"].calls is game.calls  # a processor is scheduled as it is
         assert game.built
         capture = CaptureTarget(ctx, (32, 18))

@@ -65,14 +65,15 @@ ENGINE_COMPONENTS: dict[str, type] = {
         "Emissive", "FilmGrain", "FlyController", "Fog", "FogVolume", "HemisphereLight", "IrradianceVolume",
         "LensFlare", "LevelOfDetail",
         "Material", "MeshRef",
-        "Mirror", "Model", "MotionBlur", "ParticleEmitter",
+        "Mirror", "Model", "Monitor", "MotionBlur", "ParticleEmitter",
         "PointLight", "Portal", "ReflectionProbe", "Reflective", "Refractive", "Ripples", "ScreenPanel",
         "ScreenReflections", "ScreenText",
         "Skybox", "Splash", "TimeOfDay", "Tonemap",
         "Transform", "Traveller", "Vignette", "Visibility", "VolumetricFog", "Wake", "Water")}
 DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel", "FromDecal")
 # Fields holding another entity: a name in the file, an id in the world.
-REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner"), ("ParticleEmitter", "on_death")}
+REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner"), ("ParticleEmitter", "on_death"),
+                    ("Monitor", "camera")}
 # Fields holding a file's path: relative to the level's folder in the file, absolute in the world.
 FILE_FIELDS = {("Model", "file")}
 MAX_LEVEL_BYTES = 4 << 20  # a level file's size (the shipped ones are a few KB)

@@ -82,6 +82,12 @@ class WaterLimitWarning(UserWarning):
     (engine/render/ripples.py)."""
 
 
+class MonitorLimitWarning(UserWarning):
+    """More monitors due to be drawn in a frame than ``MAX_MONITORS`` (engine/render/monitors.py):
+    those that have waited longest are drawn, the others keep their pictures a frame longer
+    (said when the count grows, counted every frame in ``RenderStats.monitors_cut``)."""
+
+
 class RefractionLimitWarning(UserWarning):
     """More refracting surfaces lie behind one another on screen than
     ``MAX_REFRACTION_LAYERS``: those past it are drawn in the last layer and do not show the

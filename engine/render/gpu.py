@@ -328,6 +328,15 @@ class Gpu:
             self.check_texture(texture, field)
         return self._acquire(self._textures, id(texture), lambda: self._upload_texture(texture))
 
+    def hold_texture(self, stand_in: TextureData, texture: moderngl.Texture) -> None:
+        """Make ``texture``, drawn on the GPU (a monitor's picture: ``engine/render/monitors.py``),
+        what ``stand_in`` is there: a batch whose map is ``stand_in`` samples it, shared and
+        counted as an uploaded texture is.  The caller holds it once, let go by
+        ``let_go_texture``; it is released with its last user."""
+        if id(stand_in) in self._textures:
+            raise ValueError(f"texture {stand_in.name!r} is on the GPU already: a stand-in is held once, when made")
+        self._acquire(self._textures, id(stand_in), lambda: texture)
+
     def let_go_texture(self, texture: TextureData) -> None:
         """One user fewer of ``shared_texture(texture)``: released with its last."""
         self._release(self._textures, id(texture))

@@ -31,6 +31,7 @@ from engine.render.gpu import BACKGROUND, Gpu, Shared
 from engine.render.instances import MAX_CHANGED_PARTS, MORPH_TEXTURE_WIDTH, BatchKey, GpuMesh, InstanceBatch
 from engine.render.irradiance import IrradianceTable
 from engine.render.level_copies import LevelCopies
+from engine.render.monitors import MonitorPictures
 from engine.render.path_checks import PathChecks
 from engine.render.present import ANTIALIAS_MODES, CameraPost, PresentPass
 from engine.render.probes import ProbeCaptures
@@ -111,6 +112,7 @@ class Renderer(Gpu):
         self.scene_pass = ScenePass(self, self.shadows, self.irradiance, self.screen_reflections,
                                     self.volumetric_fog)
         self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
+        self.monitors = MonitorPictures(self, self.scene_pass)  # each Monitor's picture (engine/render/monitors.py)
         self.occlusion = ScreenOcclusion(self, self.scene_pass)  # the camera's AmbientOcclusion
         self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
         self.sky_view_pass = SkyView(self)   # an atmosphere's sky-view table (engine/render/sky_view.py)
@@ -602,6 +604,7 @@ class Renderer(Gpu):
             self.checkpoint("screen text")
 
     def release(self) -> None:
+        self.monitors.release()   # (its holds of the pictures first: the table below releases what batches hold)
         for batch in list(self.batches.values()):
             batch.release()
         self.batches.clear()

@@ -50,6 +50,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Monitor,
     Morph,
     Portal,
     PortalClone,
@@ -378,6 +379,7 @@ LOOK_KINDS: dict[type, str] = {
     FromDecal: "a decal's cut: blended in the transparent slot whatever its alpha, its depth offset",
     Skin: "where its joints bend its mesh (a new pose, a Skin come or gone: its own batch or a shared one)",
     Morph: "how much of each morph target it wears",
+    Monitor: "a screen's picture: its size (a picture of its own) and brightness (the light it gives off)",
 }
 # The look kinds that pose a mesh: a new pose alone is written to the pose texture, not the
 # instance's whole row (the extract stage's ``_pose``).

@@ -1,0 +1,132 @@
+"""Monitors' pictures (``components.Monitor``): what a camera sees, drawn into a texture its
+screen shows (render to texture, as a security camera's feed in a game).
+
+**How a picture is drawn.**  The monitor stage (``systems/monitor_system.py``) gives each due
+monitor its camera's ``View``; ``MonitorPictures.draw`` draws it with the scene pass every
+view is drawn with, into a level stack of the picture's size (the same targets as the main
+view's: colour, ids, depth), as a root: the mirrors and portals in it get their own view
+tree to the monitor's ``depth`` (``ViewTree``, one for every monitor: its per-root records are
+kept by the view's name), or show their fallbacks at depth 0.  The colour (linear HDR, what
+the camera sees before any tone curve) is then copied into the picture and its mips built.
+
+**How it is shown.**  Each picture has a stand-in ``TextureData`` (a texel; never uploaded)
+that the GPU holds as the picture (``Gpu.hold_texture``): the extract stage gives the
+monitor's screen that stand-in as its emissive map (and ``Monitor.brightness`` as its
+emission), so the screen's batch samples the picture as any batch samples its emissive map,
+in every view (a mirror that sees the screen shows its picture).  The picture a screen shows
+is copied at the end of its drawing, so a monitor its own camera sees shows its picture of
+the draw before, never the one being drawn (no texture is read while it is written).
+
+A picture is made black (a GPU hands back new textures holding anything), remade at a new
+size, and let go with its monitor; the batch that samples it keeps it until it goes too."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from engine.assets.texture_data import TextureData
+from engine.core.errors import GLLimitError
+from engine.render.gpu import Gpu
+from engine.render.scene_options import ROOT_VIEW, TREE_ROOT
+from engine.render.scene_pass import ScenePass
+from engine.render.surface_table import NO_BLENDS, SurfaceBlends
+from engine.render.targets import HDR_FORMAT, LevelStack
+from engine.render.tree_walk import TreeSettings
+from engine.render.view_plan import SurfaceTable
+from engine.render.view_tree import ViewTree
+from engine.render.views import View
+
+MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait a frame: monitors_cut)
+
+
+@dataclass
+class _Picture:
+    """One monitor's picture: the texture its screen samples, the stand-in it is known by, the
+    targets its view is drawn into."""
+
+    texture: moderngl.Texture
+    stand_in: TextureData
+    levels: LevelStack
+    size: tuple[int, int]
+
+
+class MonitorPictures:
+    """Every monitor's picture, by its entity, drawn through ``scene_pass``."""
+
+    def __init__(self, renderer: Gpu, scene_pass: ScenePass) -> None:
+        self.renderer = renderer
+        self.ctx = renderer.ctx
+        self.scene_pass = scene_pass
+        self.tree = ViewTree(renderer, scene_pass)
+        self._pictures: dict[int, _Picture] = {}
+
+    @property
+    def entities(self) -> set[int]:
+        """The monitors that have a picture."""
+        return set(self._pictures)
+
+    def picture(self, entity: int, size: tuple[int, int]) -> TextureData:
+        """The stand-in of monitor ``entity``'s picture of ``size`` (width, height): made black
+        the first time, made again at another size (the old one let go)."""
+        held = self._pictures.get(entity)
+        if held is not None and held.size == tuple(size):
+            return held.stand_in
+        self.drop(entity)
+        limit = self.renderer.caps.max_texture_size
+        if max(size) > limit:
+            raise GLLimitError(f"Monitor on entity {entity}: a picture of {size[0]}x{size[1]} pixels is over this "
+                               f"OpenGL's ({self.renderer.caps.renderer}) {limit} (GL_MAX_TEXTURE_SIZE); make "
+                               "Monitor.size smaller")
+        texture = self.ctx.texture(tuple(size), 4, dtype=HDR_FORMAT)
+        texture.write(np.zeros((size[1], size[0], 4), np.float16).tobytes())
+        texture.build_mipmaps()
+        texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        stand_in = TextureData(np.zeros((1, 1, 4), np.uint8), name=f"monitor {entity}'s picture")
+        self.renderer.hold_texture(stand_in, texture)
+        self._pictures[entity] = _Picture(texture, stand_in, LevelStack(self.ctx), tuple(size))
+        return stand_in
+
+    def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
+             blends: SurfaceBlends = NO_BLENDS) -> int:
+        """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
+        pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
+        mirrors and portals), then the colour copied into the picture and its mips built.
+        Returns the views drawn (the root and its tree's)."""
+        held = self._pictures[entity]
+        if view.size != held.size:
+            raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
+        targets = held.levels.get(0, held.size)
+        views = 1
+        if surfaces is not None and depth > 0:
+            self.scene_pass.draw([view], targets, TREE_ROOT)
+            views = len(self.tree.render(view, held.levels, surfaces, TreeSettings(depth_cap=depth), blends,
+                                         TREE_ROOT).views)
+        else:
+            self.scene_pass.draw([view], targets, ROOT_VIEW)
+        self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
+        held.texture.build_mipmaps()
+        self.renderer.checkpoint(f"monitor {entity}")
+        return views
+
+    def read(self, entity: int) -> np.ndarray:
+        """Monitor ``entity``'s picture, linear RGBA float32 (height, width, 4), row 0 at the top."""
+        held = self._pictures[entity]
+        w, h = held.size
+        pixels = np.frombuffer(held.texture.read(), np.float16).reshape(h, w, 4)
+        return pixels[::-1].astype(np.float32)
+
+    def drop(self, entity: int) -> None:
+        """Let go of monitor ``entity``'s picture (the GPU keeps it while a batch samples it)."""
+        held = self._pictures.pop(entity, None)
+        if held is not None:
+            held.levels.release()
+            self.renderer.let_go_texture(held.stand_in)
+
+    def release(self) -> None:
+        """Let go of every picture and the tree (at the renderer's release: the textures go with
+        its table of shared textures)."""
+        for entity in list(self._pictures):
+            self.drop(entity)
+        self.tree.release()

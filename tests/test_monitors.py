@@ -1,0 +1,327 @@
+"""Monitors (``Monitor``): a screen showing what a camera sees, drawn by the scene pass into a
+picture its screen gives off (``engine/render/monitors.py``, ``systems/monitor_system.py``).
+
+The pictures are read back and checked against rays cast from the monitor's camera (which
+pixels meet the box, or its image in a mirror), and the frame's screen against the picture
+read back, sampled where each pixel's ray meets the screen."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from pyglm import glm
+
+from components import (
+    Camera,
+    ComponentValueError,
+    ComponentWarning,
+    Material,
+    MeshRef,
+    Mirror,
+    Monitor,
+    Skybox,
+    Transform,
+    look_rotation,
+)
+from engine.assets.level_file import LevelError, load_level, save_level
+from engine.assets.mesh import box, quad
+from engine.core.errors import MonitorLimitWarning
+from engine.core.world import World
+from engine.render.monitors import MAX_MONITORS
+from engine.render.views import camera_view
+from tests.support import box_hits, pixel_rays, srgb_to_linear
+
+DT = 1.0 / 60.0
+RED = (0.3, 0.05, 0.05)           # the box's light (unlit: its colour as it is), linear
+BOX_AT, BOX_HALF = np.array([0.7, 1.5, -4.0]), np.array([0.6, 0.45, 0.4])   # off the picture's middle: up and right
+LENS_AT, LENS_FOV = (0.0, 1.0, 0.0), 60.0   # the monitor's camera, looking down -z
+SCREEN_AT, SCREEN_SIZE = (0.0, 1.0, 6.0), (1.6, 0.9)   # facing +z, behind the lens
+PICTURE = (96, 54)
+
+
+def black_sky():
+    return Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)])
+
+
+def studio(monitor: Monitor | None = None, eye=(0.0, 1.0, 7.5), mirror: bool = False, box_at=BOX_AT,
+           box_half=BOX_HALF):
+    """A black world (no light: what shows is the unlit box's colour and the screen's light):
+    a red unlit box, a camera (not active) at LENS_AT looking down -z, a screen quad facing +z
+    behind it with ``monitor`` (its camera set to the lens), and the active camera at ``eye``
+    looking at the screen; ``mirror``: a mirror 3 m in front of the lens, facing it.  Returns
+    the build and a dict it fills (lens, screen, box)."""
+    held = {}
+
+    def build(world):
+        world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(SCREEN_AT) - glm.vec3(eye))),
+                    Camera(fov_y=40.0))
+        world.spawn(black_sky())
+        held["box"] = world.spawn(Transform(position=tuple(box_at)), MeshRef(box(tuple(2 * np.asarray(box_half)))),
+                                  Material(color=(*RED, 1.0), unlit=True))
+        held["lens"] = world.spawn(Transform(position=LENS_AT), Camera(fov_y=LENS_FOV, active=False))
+        if mirror:
+            held["mirror"] = world.spawn(Transform(position=(0.0, 1.0, -3.0)), MeshRef(quad(3.0, 2.0)),
+                                         Material(color=(1.0, 1.0, 1.0, 1.0)), Mirror())
+        if monitor is not None:
+            if monitor.camera is None:
+                monitor.camera = held["lens"]
+            held["screen"] = world.spawn(Transform(position=SCREEN_AT), MeshRef(quad(*SCREEN_SIZE)),
+                                         Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0,
+                                                  environment_reflection=0.0), monitor)
+    return build, held
+
+
+def run(scene, build, frames: int, size=(160, 120)):
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    rgb = None
+    for _ in range(frames):
+        rgb = runner.frame(DT)
+    return runner, rgb
+
+
+def picture(runner, held) -> np.ndarray:
+    return runner.engine.renderer.monitors.read(held["screen"])
+
+
+def lens_rays(size=PICTURE):
+    """The monitor camera's primary rays through each picture pixel (rows from the top)."""
+    view = camera_view(glm.translate(glm.vec3(LENS_AT)), LENS_FOV, 0.1, 100.0, size)
+    return pixel_rays(view, size)
+
+
+def test_a_monitor_shows_what_its_camera_sees_on_its_screen(scene):
+    """The picture is red exactly where the monitor camera's rays meet the box (the box up and
+    to the right of the picture's middle: the picture is the right way up and round); on the
+    frame, each pixel whose ray meets the screen gives off brightness x the picture there
+    (its texel at the screen point's UV, filtered), against the frame drawn with the
+    picture's brightness doubled: twice the light."""
+    frames = {}
+    for brightness in (1.0, 2.0):
+        build, held = studio(Monitor(size=PICTURE, brightness=brightness))
+        runner, rgb = run(scene, build, 2)
+        frames[brightness] = srgb_to_linear(rgb)
+        assert runner.stats.monitor_views == 1
+    shown = picture(runner, held)
+    eye, rays = lens_rays()
+    hits = box_hits(eye, rays.reshape(-1, 3), BOX_AT, BOX_HALF).reshape(PICTURE[1], PICTURE[0])
+    red = shown[..., 0] > RED[0] / 2
+    assert hits.sum() > 150 and (~hits).sum() > 150
+    assert np.mean(red != hits) < 0.005, np.mean(red != hits)
+    assert np.allclose(shown[hits][:, :3], RED, atol=0.01) and np.abs(shown[~hits][:, :3]).max() < 0.01
+    # The box stands up and right of the lens's axis: its pixels are in the picture's top right.
+    rows, columns = np.nonzero(hits)
+    assert rows.mean() < PICTURE[1] / 2 and columns.mean() > PICTURE[0] / 2
+    # Where each frame pixel's ray meets the screen (facing +z at SCREEN_AT), its UV, the
+    # picture sampled there bilinearly (texel centres at (i + 0.5) / size).
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = (SCREEN_AT[2] - eye[2]) / rays[..., 2]
+    point = eye + rays * t[..., None]
+    u = (point[..., 0] - SCREEN_AT[0]) / SCREEN_SIZE[0] + 0.5
+    v = (point[..., 1] - SCREEN_AT[1]) / SCREEN_SIZE[1] + 0.5
+    inside = (u > 0.02) & (u < 0.98) & (v > 0.02) & (v < 0.98)
+    assert inside.sum() > 2000
+    x = np.clip(u[inside] * PICTURE[0] - 0.5, 0, PICTURE[0] - 1.001)
+    y = np.clip((1.0 - v[inside]) * PICTURE[1] - 0.5, 0, PICTURE[1] - 1.001)
+    x0, y0 = x.astype(int), y.astype(int)
+    fx, fy = x - x0, y - y0
+    texels = shown[..., 0]
+    sampled = (texels[y0, x0] * (1 - fx) * (1 - fy) + texels[y0, x0 + 1] * fx * (1 - fy)
+               + texels[y0 + 1, x0] * (1 - fx) * fy + texels[y0 + 1, x0 + 1] * fx * fy)
+    for brightness, linear in frames.items():
+        seen = linear[..., 0][inside]
+        assert np.corrcoef(seen, sampled)[0, 1] > 0.97, (brightness, np.corrcoef(seen, sampled)[0, 1])
+        assert np.median(np.abs(seen - brightness * sampled)) < 0.01, brightness
+        assert abs(seen.mean() - brightness * sampled.mean()) < 0.02 * brightness, brightness
+    # Off the screen the frame is black (nothing else gives light but the box, not in view).
+    assert frames[1.0][~((u > -0.05) & (u < 1.05) & (v > -0.05) & (v < 1.05))].max() < 0.02
+
+
+@pytest.mark.parametrize("depth", [0, 1])
+def test_a_monitors_picture_shows_the_mirrors_its_camera_sees_to_its_depth(scene, depth):
+    """The lens looks at a mirror; the box stands behind the lens, out of its sight.  With
+    ``depth`` 1 the picture is red where the lens's rays, reflected off the mirror, meet the
+    box; with 0 the mirror shows its fallback (the black sky): no red at all."""
+    behind, half = np.array([0.5, 1.2, 1.5]), np.array([0.8, 0.6, 0.3])
+    build, held = studio(Monitor(size=PICTURE, depth=depth), mirror=True, box_at=behind, box_half=half)
+    runner, _ = run(scene, build, 2)
+    shown = picture(runner, held)
+    red = shown[..., 0] > RED[0] / 2
+    eye, rays = lens_rays()
+    rays = rays.reshape(-1, 3)
+    t = (-3.0 - eye[2]) / rays[:, 2]
+    point = eye + rays * t[:, None]
+    on_mirror = (t > 0) & (np.abs(point[:, 0]) < 1.5) & (np.abs(point[:, 1] - 1.0) < 1.0)
+    reflected = rays * np.array([1.0, 1.0, -1.0])
+    hits = np.zeros(len(rays), bool)
+    hits[on_mirror] = box_hits(point[on_mirror], reflected[on_mirror], behind, half)
+    hits = hits.reshape(PICTURE[1], PICTURE[0])
+    if depth == 0:
+        assert not red.any()
+        assert runner.stats.monitor_views == 1
+    else:
+        assert hits.sum() > 60, hits.sum()
+        assert np.sum(red != hits) < 0.05 * hits.sum(), (np.sum(red != hits), hits.sum())
+        assert runner.stats.monitor_views == 2
+
+
+def test_a_slow_monitor_is_drawn_every_few_frames_and_keeps_its_picture_between(scene):
+    """``every`` 3: drawn on its first frame and every third after; the box moving every frame,
+    the picture changes on those frames alone."""
+    build, held = studio(Monitor(size=PICTURE, every=3))
+    runner = scene(build, (64, 48))
+    drawn, pictures = [], []
+    for _ in range(7):
+        transform = runner.world.get(held["box"], Transform)
+        transform.position = transform.position + glm.vec3(0.05, 0.0, 0.0)
+        runner.frame(DT)
+        drawn.append(runner.stats.monitor_views)
+        pictures.append(picture(runner, held))
+    assert drawn == [1, 0, 0, 1, 0, 0, 1]
+    changed = [not np.array_equal(a, b) for a, b in zip(pictures, pictures[1:], strict=False)]
+    assert changed == [False, False, True, False, False, True]
+
+
+def test_a_monitor_its_own_camera_sees_shows_its_picture_of_the_draw_before(scene):
+    """The lens turned to look at its own screen's face (the box beside it, in sight): the first
+    picture shows the screen black (nothing drawn on it yet); the second shows the first
+    picture on it: the box's red inside the screen's rectangle."""
+    build, held = studio(Monitor(size=PICTURE))
+
+    def turned(world):
+        build(world)
+        world.get(held["box"], Transform).position = (-1.7, 1.0, 6.0)
+        lens = world.get(held["lens"], Transform)
+        lens.position = (0.3, 1.0, 9.0)
+        lens.rotation = look_rotation(glm.vec3(-0.25, 0.0, -1.0))
+
+    runner = scene(turned, (64, 48))
+    runner.frame(DT)
+    first = picture(runner, held)
+    runner.frame(DT)
+    second = picture(runner, held)
+    assert runner.engine.ctx.error == "GL_NO_ERROR"
+    eye, rays = pixel_rays(camera_view(runner.world.get(held["lens"], Transform).world, LENS_FOV, 0.1, 100.0,
+                                       PICTURE), PICTURE)
+    t = (SCREEN_AT[2] - eye[2]) / rays[..., 2]
+    point = eye + rays * t[..., None]
+    screen = (t > 0) & (np.abs(point[..., 0] - SCREEN_AT[0]) < 0.75) & (np.abs(point[..., 1] - SCREEN_AT[1]) < 0.4)
+    assert screen.sum() > 100
+    box_red = (first[..., 0] > RED[0] / 2) & ~screen
+    assert box_red.sum() > 20   # the box beside the screen, in both
+    assert first[screen][:, :3].max() < 0.01            # the screen black in the first picture
+    assert (second[screen][:, 0] > RED[0] / 4).sum() > 5   # the first picture's box on it in the second
+
+
+def test_monitors_past_the_limit_wait_a_frame_and_are_drawn_first_the_next(scene):
+    """MAX_MONITORS + 2 monitors, all due every frame: each frame draws MAX_MONITORS, the two
+    left over are said once and counted, and are the first drawn the next frame; after two
+    frames every picture has been drawn."""
+    count = MAX_MONITORS + 2
+    build, held = studio(None)
+
+    def many(world):
+        build(world)
+        held["screens"] = [world.spawn(Transform(position=(i * 0.3, 0.5, 6.0)), MeshRef(quad(0.2, 0.2)),
+                                       Material(color=(0, 0, 0, 1)), Monitor(camera=held["lens"], size=(16, 16)))
+                           for i in range(count)]
+
+    runner = scene(many, (64, 48))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        runner.frame(DT)
+        first = dict(runner.engine.stages["monitors"]._drawn)
+        assert runner.stats.monitor_views == MAX_MONITORS and runner.stats.monitors_cut == 2
+        runner.frame(DT)
+        second = dict(runner.engine.stages["monitors"]._drawn)
+    assert sum(issubclass(w.category, MonitorLimitWarning) for w in said) == 1
+    assert sorted(first) == held["screens"][:MAX_MONITORS]   # the first by entity
+    waited = held["screens"][MAX_MONITORS:]
+    assert all(second[entity] == second[waited[0]] for entity in waited) and set(second) == set(held["screens"])
+    assert runner.stats.monitors_cut == 2 and runner.stats.monitor_views == MAX_MONITORS
+
+
+def test_a_monitor_with_no_camera_is_said_once_and_its_picture_goes_with_it(scene):
+    """A Monitor naming no camera, or an entity that is not one, is said once (its picture
+    black, not drawn); named again it is drawn.  Taken off, its picture is let go (with its
+    screen's batch, the texture); put back, it has a new one; its entity deleted, likewise."""
+    build, held = studio(Monitor(size=PICTURE, camera=None))
+
+    def nameless(world):
+        build(world)
+        world.get(held["screen"], Monitor).camera = None
+
+    runner = scene(nameless, (64, 48))
+    monitors = runner.engine.renderer.monitors
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        for _ in range(2):
+            runner.frame(DT)
+        runner.world.get(held["screen"], Monitor).camera = held["box"]
+        for _ in range(2):
+            runner.frame(DT)
+    messages = [str(w.message) for w in said if issubclass(w.category, ComponentWarning)]
+    assert sum("names no camera" in m for m in messages) == 1
+    assert sum(f"names entity {held['box']}, which has no Camera" in m for m in messages) == 1
+    assert runner.stats.monitor_views == 0 and np.abs(picture(runner, held)).max() == 0.0
+    runner.world.get(held["screen"], Monitor).camera = held["lens"]
+    runner.frame(DT)
+    assert runner.stats.monitor_views == 1 and picture(runner, held)[..., 0].max() > RED[0] / 2
+    texture = monitors._pictures[held["screen"]].texture
+    runner.world.remove_component(held["screen"], Monitor)
+    runner.frame(DT)
+    assert monitors.entities == set()
+    assert not _alive(texture)
+    runner.world.add_component(held["screen"], Monitor(camera=held["lens"], size=PICTURE))
+    runner.frame(DT)
+    again = monitors._pictures[held["screen"]].texture
+    assert again is not texture and _alive(again)
+    runner.world.delete_entity(held["screen"])
+    runner.frame(DT)
+    assert monitors.entities == set() and not _alive(again)
+
+
+def _alive(texture) -> bool:
+    """Whether a moderngl texture is still a GL object (its release leaves an invalid object)."""
+    return type(texture.mglo).__name__ != "InvalidObject"
+
+
+def test_bad_monitor_values_are_refused_naming_the_field():
+    with pytest.raises(ComponentValueError, match="Monitor.size"):
+        Monitor(size=(4, 100))
+    with pytest.raises(ComponentValueError, match="Monitor.size"):
+        Monitor(size=100)
+    with pytest.raises(ComponentValueError, match="Monitor.brightness"):
+        Monitor(brightness=math.nan)
+    with pytest.raises(ComponentValueError, match="Monitor.every"):
+        Monitor(every=0)
+    with pytest.raises(ComponentValueError, match="Monitor.depth"):
+        Monitor(depth=-1)
+    with pytest.raises(ComponentValueError, match="Monitor.camera"):
+        Monitor(camera=True)
+
+
+def test_a_level_file_names_a_monitors_camera_by_its_entity(tmp_path):
+    """``camera = "lobby"`` in a level file is that entity's id in the world, saved as its name
+    again; a name no entity has is refused naming Monitor.camera."""
+    text = ('[level]\nname = "cctv"\n\n[[entity]]\nname = "lobby"\n[entity.Transform]\nposition = [0.0, 2.0, 0.0]\n'
+            '[entity.Camera]\nactive = false\n\n[[entity]]\nname = "screen"\n[entity.MeshRef]\n'
+            'mesh = { quad = [1.6, 0.9] }\n[entity.Monitor]\ncamera = "lobby"\nsize = [320, 180]\nevery = 2\n')
+    path = tmp_path / "cctv.toml"
+    path.write_text(text)
+    world = World("cctv")
+    names = load_level(path).spawn(world)
+    monitor = world.get(names["screen"], Monitor)
+    assert (monitor.camera, monitor.size, monitor.every) == (names["lobby"], (320, 180), 2)
+    saved = save_level(world, tmp_path / "again.toml", names, name="cctv")
+    assert 'camera = "lobby"' in saved.read_text()
+    again = World("cctv again")
+    names_again = load_level(saved).spawn(again)
+    assert again.get(names_again["screen"], Monitor).camera == names_again["lobby"]
+    (tmp_path / "bad.toml").write_text(text.replace('camera = "lobby"', 'camera = "hall"'))
+    with pytest.raises(LevelError, match="Monitor.camera"):
+        load_level(tmp_path / "bad.toml")
+    for w in (world, again):
+        w.close()
