@@ -799,10 +799,11 @@ def test_the_light_shafts_under_the_rings_carry_the_light_they_gather(scene):
 
 
 def test_the_sample_levels_koi_rings_its_pond_each_time_it_rises(ctx):
-    """The hall's koi breaks the pond's surface at its mouth (``Rise``: first at 1 s, then every
-    2.5 s; the script drops a Splash there): no drop before 1 s, one on the frame that reaches
-    it, the deepest dent of the field straight under the mouth as the koi has turned by then,
-    the next drop not before 3.5 s.  A bad Rise is refused naming its field."""
+    """The hall's koi breaks the pond's surface at its mouth (``Rise``: first at ``first``
+    seconds, then every ``every``; the script drops a Splash there): no drop before ``first``,
+    one on the frame that reaches it, the deepest dent of the field straight under the mouth
+    as the koi has turned by then, the next drop not before ``first + every``.  A bad Rise is
+    refused naming its field."""
     from engine.core.frame_io import Output
     from engine.render.targets import CaptureTarget
     from games.hall_of_mirrors.level import HallOfMirrors, Rise

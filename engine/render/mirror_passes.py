@@ -769,14 +769,17 @@ class MirrorPasses:
         """The reset's and every composite variant's buffers and vertex arrays, made now
         (when a level loads: ``Renderer.prepare_programs``'s caller) rather than when the
         first mirror comes into view; under a generated sky, the sharp and water variants'
-        builds that draw it per pixel too (``_composite_for``); with a rippling water, the
-        ``RIPPLES`` builds (its first drop would otherwise build them: ~90 ms on llvmpipe)."""
+        builds that draw it per pixel too (``_composite_for``; with the fog's defines as they are
+        now); with a rippling water, the ``RIPPLES`` builds of them all (its first drop would
+        otherwise build them: ~90 ms on llvmpipe)."""
         if self._claim_buffer is None:
             self._reserve_claims(0)
         # A rippling water's builds too: made with the level, not at its first drop.
-        rippling = self._variant_draws(self.renderer.fog.defines + RIPPLE_DEFINES) if self.renderer.ripples.waters \
-            else ({}, {})
-        sky_draws = [self._composite_for((), variant, False) for variant in sorted(SKY_VARIANTS)]
+        fog = self.renderer.fog.defines
+        rippling = self._variant_draws(fog + RIPPLE_DEFINES) if self.renderer.ripples.waters else ({}, {})
+        builds = (fog, fog + RIPPLE_DEFINES) if self.renderer.ripples.waters else (fog,)
+        sky_draws = [self._composite_for(fogging, variant, False)
+                     for fogging in builds for variant in sorted(SKY_VARIANTS)]
         for draw in (*self.composites.values(), *self.fallbacks.values(), *sky_draws, *rippling[0].values(),
                      *rippling[1].values()):
             if draw.vao is None:

@@ -366,6 +366,11 @@ class Renderer(Gpu):
         self._prepared_for = everything
         batches = [b for b in self.batches.values() if b.count and (whole or b.prepared_variants != b.variants)]
         built = self.scene_pass.prepare(batches, reflections, levels or reflections)
+        if self.ripples.waters and self.caustics.waters and self.ripples.in_caustics:
+            # The builds a rippling water's first drop would make: its caustics' with RIPPLES.
+            with self.ripples.as_rippling():
+                built += self.scene_pass.prepare([batch for batch in batches if batch.caustic_waters], reflections,
+                                                 levels or reflections)
         for batch in batches:
             batch.prepared_variants = batch.variants
         if level_scale is not None and len(self.levels) and self.targets is not None:

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import moderngl
@@ -288,6 +289,20 @@ class RippleAtlas:
     def _say_awake(self) -> None:
         self.defines = RIPPLE_DEFINES if self.awake else ()
         self.caustic_defines = self.defines if self.in_caustics else ()
+
+    @contextmanager
+    def as_rippling(self) -> Iterator[None]:
+        """Within the block, ``defines`` and ``caustic_defines`` are those of a ring alive: what a
+        level's programs are built with ahead (``Renderer.prepare_programs``), so that the first
+        drop builds none (the scene's CAUSTICS builds with RIPPLES: several of them, each a
+        shader compile of a few tens of ms on llvmpipe, in the frame the drop lands)."""
+        kept = self.defines, self.caustic_defines
+        self.defines = RIPPLE_DEFINES
+        self.caustic_defines = RIPPLE_DEFINES if self.in_caustics else ()
+        try:
+            yield
+        finally:
+            self.defines, self.caustic_defines = kept
 
     def release(self) -> None:
         """Every GL object it holds (the last rippling water gone, or closing)."""
