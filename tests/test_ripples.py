@@ -844,3 +844,32 @@ def test_the_sample_levels_koi_rings_its_pond_each_time_it_rises(ctx):
     finally:
         capture.release()
         engine.close()
+
+
+def test_a_first_drop_builds_no_program(scene):
+    """A level with a rippling water whose waves gather the sun builds its RIPPLES programs with
+    the level (the scene's CAUSTICS builds, the composites', the generated sky's): the frames of
+    the first drop, and the rings after it, build none."""
+    from tests.test_caustics import pool
+
+    build = pool(1.0, scale=0.0)
+    held = {}
+
+    def rippling(world):
+        build(world)
+        (held["water"], _), = world.query_one(Water)
+        world.add_component(held["water"], Ripples(speed=0.4, damping=0.0, cell=0.02))
+
+    runner = scene(rippling, (48, 48))
+    shaders = runner.engine.renderer.shaders
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(3):
+            runner.frame(DT)
+        before = len(shaders._programs)
+        assert not runner.engine.renderer.ripples.defines   # (calm: the plain builds drawn so far)
+        runner.world.spawn(Transform(position=(0.0, 0.0, 0.0)), Splash(radius=0.12, depth=0.006))
+        for _ in range(3):
+            runner.frame(DT)
+    assert runner.engine.renderer.ripples.caustic_defines and runner.stats.ripple_steps >= 1
+    assert len(shaders._programs) == before
