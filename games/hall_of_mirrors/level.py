@@ -10,7 +10,8 @@ tunnel to the recursion limit; a chrome ball whose probe is captured every frame
 statue hammered by a normal map whose probe follows what moves near it, a glass ball in
 front of a red crate, a pond in the foreground (a Water surface: Fresnel-weighted
 reflection, moving waves, the sun's caustics on its tiles, a koi turning under it that
-breaks the surface every few seconds and rings it: ``Rise``, ``Ripples``), and
+breaks the surface every few seconds and rings it: ``Rise``, ``Ripples``), a security
+camera whose monitor by the start shows the tunnel of portals (``Monitor``), and
 before the mirror wall a vampire that no mirror or probe shows and a ghost that only the
 mirrors show (Visibility).
 
