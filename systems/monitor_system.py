@@ -41,7 +41,7 @@ class MonitorSystem(esper.Processor):
         super().__init__()
         self.world = world
         self.renderer = renderer
-        self._drawn: dict[int, int] = {}        # monitor -> the frame its picture was last drawn
+        self.drawn: dict[int, int] = {}         # monitor -> the frame its picture was last drawn
         self._said: set[tuple[int, int | None]] = set()  # (monitor, the camera it named) said once
         self._cut = 0
 
@@ -53,15 +53,15 @@ class MonitorSystem(esper.Processor):
         present = {entity for entity, _ in monitors}
         for gone in pictures.entities - present:
             pictures.drop(gone)
-        for gone in set(self._drawn) - present:
-            del self._drawn[gone]
+        for gone in set(self.drawn) - present:
+            del self.drawn[gone]
         self._said = {(entity, camera) for entity, camera in self._said if entity in present}
         frame = world.frame_index
         # The longest waiting first (a new one first of all), then by entity: past MAX_MONITORS
         # those left wait a frame and are drawn first the next.
         due = sorted(((entity, monitor) for entity, monitor in monitors
-                      if entity not in self._drawn or frame - self._drawn[entity] >= monitor.every),
-                     key=lambda pair: (self._drawn.get(pair[0], -1), pair[0]))
+                      if entity not in self.drawn or frame - self.drawn[entity] >= monitor.every),
+                     key=lambda pair: (self.drawn.get(pair[0], -1), pair[0]))
         cut = max(0, len(due) - MAX_MONITORS)
         if cut > self._cut:
             warnings.warn(MonitorLimitWarning(
@@ -85,7 +85,7 @@ class MonitorSystem(esper.Processor):
                 table = surface_table(world.resources, surfaces)
             stats.monitor_views += pictures.draw(entity, view, table if trees else None, monitor.depth,
                                                  world.resources.get(SurfaceBlends, NO_BLENDS))
-            self._drawn[entity] = frame
+            self.drawn[entity] = frame
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
         """The Camera and Transform of the entity ``monitor`` shows, or None, said once for each

@@ -232,10 +232,10 @@ def test_monitors_past_the_limit_wait_a_frame_and_are_drawn_first_the_next(scene
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         runner.frame(DT)
-        first = dict(runner.engine.stages["monitors"]._drawn)
+        first = dict(runner.engine.stages["monitors"].drawn)
         assert runner.stats.monitor_views == MAX_MONITORS and runner.stats.monitors_cut == 2
         runner.frame(DT)
-        second = dict(runner.engine.stages["monitors"]._drawn)
+        second = dict(runner.engine.stages["monitors"].drawn)
     assert sum(issubclass(w.category, MonitorLimitWarning) for w in said) == 1
     assert sorted(first) == held["screens"][:MAX_MONITORS]   # the first by entity
     waited = held["screens"][MAX_MONITORS:]
@@ -269,14 +269,14 @@ def test_a_monitor_with_no_camera_is_said_once_and_its_picture_goes_with_it(scen
     runner.world.get(held["screen"], Monitor).camera = held["lens"]
     runner.frame(DT)
     assert runner.stats.monitor_views == 1 and picture(runner, held)[..., 0].max() > RED[0] / 2
-    texture = monitors._pictures[held["screen"]].texture
+    texture = monitors.texture(held["screen"])
     runner.world.remove_component(held["screen"], Monitor)
     runner.frame(DT)
     assert monitors.entities == set()
     assert not _alive(texture)
     runner.world.add_component(held["screen"], Monitor(camera=held["lens"], size=PICTURE))
     runner.frame(DT)
-    again = monitors._pictures[held["screen"]].texture
+    again = monitors.texture(held["screen"])
     assert again is not texture and _alive(again)
     runner.world.delete_entity(held["screen"])
     runner.frame(DT)

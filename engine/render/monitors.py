@@ -110,6 +110,10 @@ class MonitorPictures:
         self.renderer.checkpoint(f"monitor {entity}")
         return views
 
+    def texture(self, entity: int) -> moderngl.Texture:
+        """The texture of monitor ``entity``'s picture (what its screen's batch samples)."""
+        return self._pictures[entity].texture
+
     def read(self, entity: int) -> np.ndarray:
         """Monitor ``entity``'s picture, linear RGBA float32 (height, width, 4), row 0 at the top."""
         held = self._pictures[entity]
