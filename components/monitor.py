@@ -31,6 +31,9 @@ class Monitor(TrackedComponent):
     - ``depth``: the mirror and portal levels its picture shows (0: each mirror and portal in
       it shows its fallback; at most ``MAX_MONITOR_DEPTH``).
 
+    On an entity with a ``ScreenPanel`` the panel is filled with the picture, over the frame
+    (a rear-view mirror on the screen; the panel's colour multiplies it).
+
     A monitor that its own camera sees shows its picture of the frame before (a corridor of
     screens, as a real camera filming its monitor makes).  Up to ``MAX_MONITORS`` are drawn a
     frame (those that have waited longest; more keep their picture a frame longer, counted in

@@ -98,7 +98,8 @@ class ScreenText(TrackedComponent):
 class ScreenPanel(TrackedComponent):
     """A filled rectangle on the screen (behind text, a bar, a fade): ``size`` pixels, placed
     as ``ScreenText`` is (``position`` from the ``anchor``), in ``color`` (linear RGBA; alpha
-    lets the picture show through)."""
+    lets the picture show through).  With a ``Monitor`` on its entity it is filled with the
+    monitor's picture times ``color`` (a rear-view mirror, a minimap)."""
 
     size: Any = field(default_factory=lambda: glm.vec2(200.0, 40.0))
     position: Any = field(default_factory=lambda: glm.vec2(0.0, 0.0))

@@ -309,7 +309,7 @@ class SpeculumWindow(mglw.WindowConfig):
         try:
             self.engine.stages["present"].present_into(capture.framebuffer, size)  # as the frame was
             if len(renderer.screen_quads):  # the game's screen text, drawn over the frame as it was
-                renderer.text().draw(renderer.screen_quads, capture.framebuffer, size)
+                renderer.text().draw(renderer.screen_quads, capture.framebuffer, size, renderer.screen_pictures)
             rgb = capture.read_rgb()
         finally:
             capture.release()

@@ -325,3 +325,42 @@ def test_a_level_file_names_a_monitors_camera_by_its_entity(tmp_path):
         load_level(tmp_path / "bad.toml")
     for w in (world, again):
         w.close()
+
+
+def test_a_screen_panel_with_a_monitor_shows_its_picture_over_the_frame(scene):
+    """A ``ScreenPanel`` with a ``Monitor`` on its entity (a rear-view mirror on the screen) is
+    filled with the monitor's picture: where the panel lies each output pixel is the picture's
+    texel there (the panel as large as the picture: texel for pixel) times the panel's
+    colour, sRGB-encoded; text of a higher order is drawn over it, and with no camera the
+    panel keeps its plain colour."""
+    from components import ScreenPanel, ScreenText
+    from tests.support import linear_to_srgb8
+
+    held = {}
+    build, parts = studio(None, eye=(0.0, 1.0, 30.0))   # (the main camera sees black: the box is far off)
+
+    def hud(world):
+        build(world)
+        held["panel"] = world.spawn(ScreenPanel(size=PICTURE, position=(10, 6), color=(1.0, 0.5, 1.0, 1.0)),
+                                    Monitor(camera=parts["lens"], size=PICTURE))
+        world.spawn(ScreenText("REAR", position=(14, 8), color=(0.0, 1.0, 0.0, 1.0), order=1))
+
+    runner, rgb = run(scene, hud, 2, size=(160, 120))
+    shown = runner.engine.renderer.monitors.read(held["panel"])
+    assert shown[..., 0].max() > RED[0] / 2   # the box is in the picture
+    expected = linear_to_srgb8(np.clip(shown[..., :3] * np.array([1.0, 0.5, 1.0]), 0.0, 1.0))
+    drawn = rgb[6:6 + PICTURE[1], 10:10 + PICTURE[0]].astype(int)
+    text = (drawn[..., 1] > 200) & (drawn[..., 0] < 50)
+    assert 20 < text.sum() < 400   # the text over it
+    ys, xs = np.nonzero(text)
+    clear = np.ones(text.shape, bool)
+    clear[ys.min() - 2:ys.max() + 3, xs.min() - 2:xs.max() + 3] = False   # (the text's box: its edges blend)
+    assert np.abs(drawn[clear] - expected[clear]).max() <= 1
+    assert rgb[:6].max() == 0 and rgb[6 + PICTURE[1]:].max() == 0   # the frame about it black
+    # With no camera the panel is its colour alone.
+    runner.world.get(held["panel"], Monitor).camera = None
+    runner.engine.renderer.monitors.drop(held["panel"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plain = runner.frame(DT)
+    assert np.abs(plain[40, 60].astype(int) - linear_to_srgb8(np.array([1.0, 0.5, 1.0]))).max() <= 1

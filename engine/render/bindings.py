@@ -202,6 +202,7 @@ FXAA_UNIT = 0            # FXAA: the encoded frame (engine/render/present.py)
 EXPOSURE_UNIT = 2        # present, exposure adaptation: the 1x1 adapted exposure (engine/render/post.py)
 EXPOSURE_MEAN_UNIT = 0   # exposure adaptation: the 64x64 log-luminance image it averages
 TEXT_UNIT = 0            # screen text (after present): the font atlas (engine/render/text.py)
+PICTURE_UNIT = 1         # screen text: a picture panel's monitor picture (engine/render/text.py)
 AIR_TRANSMITTANCE_UNIT = 0   # sky view (engine/render/sky_view.py): the air's transmittance table
 AIR_SCATTERING_UNIT = 1      # ... and its multiple-scattering table
 

@@ -94,6 +94,7 @@ class Renderer(Gpu):
         self.present_pass = PresentPass(ctx, self.shaders, caps.software, self.object_motion)
         self.text_pass: TextPass | None = None  # made when text is first drawn (its atlas costs a few ms)
         self.screen_quads = np.zeros((0, 12), np.float32)  # the last frame's screen text (a screenshot draws it again)
+        self.screen_pictures: tuple[moderngl.Texture, ...] = ()   # ... and the pictures its panels show
         self.levels = LevelStack(ctx)   # the main view tree's: [0] the main view, then its reflection levels
         # Copies of the main view tree's levels while a still tree's end images settle (the
         # reflect stage's tree makes and lets go of them: StillTree.keep, level_copies.py).
@@ -600,12 +601,14 @@ class Renderer(Gpu):
             self.text_pass = TextPass(self.ctx, self.shaders)
         return self.text_pass
 
-    def draw_screen_text(self, quads: np.ndarray, output: moderngl.Framebuffer, size: tuple[int, int]) -> None:
+    def draw_screen_text(self, quads: np.ndarray, output: moderngl.Framebuffer, size: tuple[int, int],
+                         pictures: tuple[moderngl.Texture, ...] = ()) -> None:
         """Blend the screen text's ``quads`` (``engine.render.text.layout``) over ``output``,
-        after present; kept in ``screen_quads`` so a screenshot shows them too."""
-        self.screen_quads = quads
+        after present (a picture panel's from ``pictures``); kept in ``screen_quads`` and
+        ``screen_pictures`` so a screenshot shows them too."""
+        self.screen_quads, self.screen_pictures = quads, pictures
         if len(quads):
-            self.text().draw(quads, output, size)
+            self.text().draw(quads, output, size, pictures)
             self.checkpoint("screen text")
 
     def release(self) -> None:

@@ -15,10 +15,18 @@ quads in output pixels from the top-left: (x, y, w, h) on the screen, the atlas 
 present stage encoded them), alpha kept.  Every corner is a whole pixel and a glyph's cell is
 ``scale`` pixels a texel, so each pixel shows exactly one texel (``texelFetch``, no filtering).
 
+**Pictures.**  A panel with a ``Monitor`` on its entity (a rear-view mirror, a minimap) is
+filled with the monitor's picture (``engine/render/monitors.py``): its quad's atlas rect is
+(index, 0, -1, 0), the index into the frame's pictures, its colour linear, and the shader
+reads the picture filtered across the quad, times the colour, clamped to 1 and sRGB-encoded
+there (the picture is the camera's linear light, as the screens in the world show it; the
+output's tone curve was applied before the text: the picture has none).
+
 **The pass** (``TextPass.draw``) runs after the present stage, into the output: one instanced
 draw of a unit quad, a row of attributes a quad, in order (later quads blend over earlier
 ones: GL draws instances in order), blended ``src * a + dst * (1 - a)`` with ``a`` the colour's
-alpha times the texel's coverage.  It is drawn over the final image, so mirrors, portals and
+alpha times the texel's coverage; a picture panel is a draw of its own between the runs of
+quads before and after it (its picture bound).  It is drawn over the final image, so mirrors, portals and
 probes (drawn before it, into their own images) never show it, and ids are untouched.
 Limit: ``MAX_QUADS`` quads a frame (glyphs and panels); past it the rest are left out and a
 warning says how many.
@@ -32,7 +40,7 @@ import moderngl
 import numpy as np
 
 from engine.core.color import linear_to_srgb
-from engine.render.bindings import TEXT_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import PICTURE_UNIT, TEXT_UNIT, PassState, apply_pass_state, bind_texture
 from engine.render.shader_library import ShaderLibrary
 
 FONT_SIZE = 16              # pixels of the atlas's font (ScreenText.scale multiplies them)
@@ -114,6 +122,7 @@ class ScreenItem:
     size: tuple[float, float] = (0.0, 0.0)  # a panel's
     background: tuple[float, float, float, float] | None = None  # a text's panel (ScreenText.background)
     padding: float = 0.0
+    picture: int = 0   # a panel filled with a monitor's picture: 1 + its index in the draw's pictures (0: none)
 
 
 def text_size(atlas: FontAtlas, text: str, scale: int = 1) -> tuple[int, int]:
@@ -139,8 +148,9 @@ def _encoded(color: tuple[float, ...]) -> list[float]:
 
 def layout(atlas: FontAtlas, items: list[ScreenItem], output: tuple[int, int]) -> np.ndarray:
     """Quads of ``items`` in drawing order: float32 rows of (x, y, w, h screen pixels from the
-    top-left, atlas x, y, w, h texels, r, g, b sRGB-encoded, a).  Spaces and empty lines make
-    no quad; a text's background is a quad just before its glyphs."""
+    top-left, atlas x, y, w, h texels, r, g, b sRGB-encoded, a; a picture panel's: its
+    picture's index, 0, -1, 0 and its colour linear).  Spaces and empty lines make no quad; a
+    text's background is a quad just before its glyphs."""
     rows: list[list[float]] = []
     cw, ch = atlas.cell
     sx, sy = atlas.cell_of(SOLID)
@@ -150,7 +160,10 @@ def layout(atlas: FontAtlas, items: list[ScreenItem], output: tuple[int, int]) -
             w, h = int(round(item.size[0])), int(round(item.size[1]))
             if w > 0 and h > 0 and item.color[3] > 0.0:
                 x, y = box_corner(item, (w, h), output)
-                rows.append([x, y, w, h, sx, sy, 0.0, 0.0, *colour])
+                if item.picture:   # (its picture's index, marked by a width of -1; its colour linear)
+                    rows.append([x, y, w, h, item.picture - 1, 0.0, -1.0, 0.0, *item.color])
+                else:
+                    rows.append([x, y, w, h, sx, sy, 0.0, 0.0, *colour])
             continue
         if not item.text:
             continue
@@ -187,6 +200,7 @@ class TextPass:
         self.texture.repeat_x = self.texture.repeat_y = False
         self.program = shaders.program("screen_text.vert", "screen_text.frag")
         self.program["atlas"].value = TEXT_UNIT
+        self.program["picture"].value = PICTURE_UNIT
         self.corners = ctx.buffer(np.array([0, 0, 1, 0, 0, 1, 1, 1], np.float32).tobytes())
         self.quads = ctx.buffer(reserve=MAX_QUADS * QUAD_FLOATS * 4, dynamic=True)
         self.vao = ctx.vertex_array(self.program, [
@@ -196,8 +210,10 @@ class TextPass:
         self.drawn = 0  # quads drawn in the last draw
         self.cut = 0    # quads left out (past MAX_QUADS) in the last draw
 
-    def draw(self, quads: np.ndarray, framebuffer: moderngl.Framebuffer, size: tuple[int, int]) -> None:
-        """Blend ``quads`` (``layout``'s rows) over ``framebuffer`` (``size`` pixels)."""
+    def draw(self, quads: np.ndarray, framebuffer: moderngl.Framebuffer, size: tuple[int, int],
+             pictures: tuple[moderngl.Texture, ...] = ()) -> None:
+        """Blend ``quads`` (``layout``'s rows) over ``framebuffer`` (``size`` pixels); a picture
+        panel's row samples ``pictures[its index]``."""
         self.cut = max(0, len(quads) - MAX_QUADS)
         if self.cut:
             warnings.warn(f"screen text: {len(quads)} quads this frame, {self.cut} left out (at most {MAX_QUADS} "
@@ -206,12 +222,33 @@ class TextPass:
         self.drawn = len(quads)
         if not self.drawn or size[0] <= 0 or size[1] <= 0:
             return
-        self.quads.write(np.ascontiguousarray(quads, np.float32).tobytes())
+        quads = np.ascontiguousarray(quads, np.float32)
         framebuffer.use()
         apply_pass_state(self.ctx, _TEXT, (0, 0, *size))
         bind_texture(self.ctx, self.texture, TEXT_UNIT)
         self.program["output_size"].value = (float(size[0]), float(size[1]))
-        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=self.drawn)
+        marked = np.flatnonzero(quads[:, 6] < 0.0)   # the picture panels' rows
+        if not len(marked):
+            self._run(quads, False)
+            return
+        start = 0
+        for row in marked:   # the runs of quads before each picture, then the picture alone
+            if row > start:
+                self._run(quads[start:row], False)
+            index = int(quads[row, 4])
+            if 0 <= index < len(pictures):
+                bind_texture(self.ctx, pictures[index], PICTURE_UNIT)
+                self._run(quads[row:row + 1], True)
+            start = row + 1
+        if start < len(quads):
+            self._run(quads[start:], False)
+
+    def _run(self, quads: np.ndarray, picture: bool) -> None:
+        """One instanced draw of ``quads`` (written at the buffer's start), with the picture
+        read (``picture``) or the atlas."""
+        self.quads.write(quads.tobytes())
+        self.program["showing_picture"].value = picture
+        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(quads))
 
     def release(self) -> None:
         for obj in (self.vao, self.quads, self.corners, self.texture):
