@@ -14,19 +14,25 @@ decided here:
   is missing (no entity, no ``Camera`` or no ``Transform`` on it) is said once, and the
   picture kept as it is (black at first);
 - whether its mirrors and portals get views: to ``Monitor.depth`` levels, planned with the
-  frame's surfaces as a probe face's tree is.
+  frame's surfaces as a probe face's tree is, outside the frame's ``ViewBudget``
+  (``outside_the_budget``: the monitors' own limits bound them, and drawn before the main
+  view they would take the budget the frame's reflections share first).
 
 The pictures of monitors gone (or deleted) are let go here; the extract stage makes a
 screen's picture when it first draws the screen (its emissive map is the picture)."""
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import fields
 
 import esper
 
 from components import Camera, ComponentWarning, Monitor, Transform
 from engine.core.errors import MonitorLimitWarning
 from engine.core.world import World
+from engine.frame_stats import BudgetLedger
 from engine.render.monitors import MAX_MONITORS
 from engine.render.renderer import Renderer
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
@@ -83,8 +89,10 @@ class MonitorSystem(esper.Processor):
             trees = monitor.depth > 0 and surfaces is not None and bool(surfaces.mirrors or surfaces.portals)
             if trees and table is None:
                 table = surface_table(world.resources, surfaces)
-            stats.monitor_views += pictures.draw(entity, view, table if trees else None, monitor.depth,
-                                                 world.resources.get(SurfaceBlends, NO_BLENDS))
+            with outside_the_budget(stats):
+                views = pictures.draw(entity, view, table if trees else None, monitor.depth,
+                                      world.resources.get(SurfaceBlends, NO_BLENDS))
+            stats.monitor_views += views
             self.drawn[entity] = frame
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
@@ -105,3 +113,18 @@ class MonitorSystem(esper.Processor):
             warnings.warn(ComponentWarning(f"Monitor on entity {entity} {why}: its picture is not drawn (it keeps "
                                            "what it showed, black at first)"), stacklevel=3)
         return None
+
+
+@contextmanager
+def outside_the_budget(ledger: BudgetLedger) -> Iterator[None]:
+    """Within the block the view trees drawn see no ``ViewBudget`` (no view, pixel or
+    smallest-view limit) and what they spend is not kept: a monitor's picture has limits of
+    its own (its size and depth, ``every``, ``MAX_MONITORS``), and drawn before the main
+    view it would otherwise take the budget the frame's reflections share first."""
+    kept = {field.name: getattr(ledger, field.name) for field in fields(BudgetLedger)}
+    ledger.view_budget = ledger.pixel_budget = ledger.min_view_pixels = None
+    try:
+        yield
+    finally:
+        for name, value in kept.items():
+            setattr(ledger, name, value)

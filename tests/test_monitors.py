@@ -46,12 +46,13 @@ def black_sky():
 
 
 def studio(monitor: Monitor | None = None, eye=(0.0, 1.0, 7.5), mirror: bool = False, box_at=BOX_AT,
-           box_half=BOX_HALF):
+           box_half=BOX_HALF, bare_screen: bool = False):
     """A black world (no light: what shows is the unlit box's colour and the screen's light):
     a red unlit box, a camera (not active) at LENS_AT looking down -z, a screen quad facing +z
     behind it with ``monitor`` (its camera set to the lens), and the active camera at ``eye``
-    looking at the screen; ``mirror``: a mirror 3 m in front of the lens, facing it.  Returns
-    the build and a dict it fills (lens, screen, box)."""
+    looking at the screen; ``mirror``: a mirror 3 m in front of the lens, facing it;
+    ``bare_screen``: the screen without a monitor.  Returns the build and a dict it fills
+    (lens, screen, box)."""
     held = {}
 
     def build(world):
@@ -64,12 +65,12 @@ def studio(monitor: Monitor | None = None, eye=(0.0, 1.0, 7.5), mirror: bool = F
         if mirror:
             held["mirror"] = world.spawn(Transform(position=(0.0, 1.0, -3.0)), MeshRef(quad(3.0, 2.0)),
                                          Material(color=(1.0, 1.0, 1.0, 1.0)), Mirror())
-        if monitor is not None:
-            if monitor.camera is None:
+        if monitor is not None or bare_screen:
+            if monitor is not None and monitor.camera is None:
                 monitor.camera = held["lens"]
             held["screen"] = world.spawn(Transform(position=SCREEN_AT), MeshRef(quad(*SCREEN_SIZE)),
                                          Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0,
-                                                  environment_reflection=0.0), monitor)
+                                                  environment_reflection=0.0), *([monitor] if monitor else []))
     return build, held
 
 
@@ -364,3 +365,29 @@ def test_a_screen_panel_with_a_monitor_shows_its_picture_over_the_frame(scene):
         warnings.simplefilter("ignore")
         plain = runner.frame(DT)
     assert np.abs(plain[40, 60].astype(int) - linear_to_srgb8(np.array([1.0, 0.5, 1.0]))).max() <= 1
+
+
+def test_a_monitor_spends_none_of_the_frames_view_budget(scene):
+    """Under a ViewBudget that allows one view, one pixel and no view under a million pixels,
+    the monitor's mirror still gets its view (its picture red where the box's image is) and
+    the frame's ledger is what it is with no monitor at all: the monitors draw outside it."""
+    from dataclasses import asdict
+
+    from engine.frame_stats import BudgetLedger
+    from engine.resources import ViewBudget
+
+    ledgers = {}
+    for monitored in (True, False):
+        build, held = studio(Monitor(size=PICTURE, depth=1) if monitored else None, mirror=True,
+                             box_at=np.array([0.5, 1.2, 1.5]), box_half=np.array([0.8, 0.6, 0.3]), bare_screen=True)
+
+        def tight(world, build=build):
+            build(world)
+            world.resources[ViewBudget] = ViewBudget(views=1, pixels=1, min_pixels=10**6)
+
+        runner, _ = run(scene, tight, 2)
+        ledger = asdict(runner.stats)
+        ledgers[monitored] = {name: ledger[name] for name in BudgetLedger.__dataclass_fields__}
+        if monitored:
+            assert runner.stats.monitor_views == 2 and (picture(runner, held)[..., 0] > RED[0] / 2).sum() > 60
+    assert ledgers[True] == ledgers[False]

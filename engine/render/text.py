@@ -226,6 +226,7 @@ class TextPass:
         framebuffer.use()
         apply_pass_state(self.ctx, _TEXT, (0, 0, *size))
         bind_texture(self.ctx, self.texture, TEXT_UNIT)
+        bind_texture(self.ctx, self.texture, PICTURE_UNIT)   # (a texture on every sampler: the text runs' is unread)
         self.program["output_size"].value = (float(size[0]), float(size[1]))
         marked = np.flatnonzero(quads[:, 6] < 0.0)   # the picture panels' rows
         if not len(marked):
