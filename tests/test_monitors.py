@@ -247,7 +247,8 @@ def test_monitors_past_the_limit_wait_a_frame_and_are_drawn_first_the_next(scene
 def test_a_monitor_with_no_camera_is_said_once_and_its_picture_goes_with_it(scene):
     """A Monitor naming no camera, or an entity that is not one, is said once (its picture
     black, not drawn); named again it is drawn.  Taken off, its picture is let go (with its
-    screen's batch, the texture); put back, it has a new one; its entity deleted, likewise."""
+    screen's batch, the texture); put back, it has a new one; given a new size, a new one of
+    that size (the old let go); its entity deleted, let go."""
     build, held = studio(Monitor(size=PICTURE, camera=None))
 
     def nameless(world):
@@ -279,6 +280,12 @@ def test_a_monitor_with_no_camera_is_said_once_and_its_picture_goes_with_it(scen
     runner.frame(DT)
     again = monitors.texture(held["screen"])
     assert again is not texture and _alive(again)
+    # A new size: a new picture of it, drawn; the old one let go.
+    runner.world.get(held["screen"], Monitor).size = (48, 27)
+    runner.frame(DT)
+    resized = monitors.texture(held["screen"])
+    assert resized.size == (48, 27) and not _alive(again) and picture(runner, held)[..., 0].max() > RED[0] / 2
+    again = resized
     runner.world.delete_entity(held["screen"])
     runner.frame(DT)
     assert monitors.entities == set() and not _alive(again)
