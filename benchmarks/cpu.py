@@ -175,6 +175,8 @@ def make_scene(name: str, ctx):
     GPU's "auto": last frame's claim counts, no wait a level; ``ReflectionSystem.visibility``);
     ``focus_<mirrors>``: the ring seen through a lens with autofocus (its camera's
     ``DepthOfField``: 85 mm at f/1.4, the widest disc 0.05 of the height);
+    ``monitor_<mirrors>``: the ring with a box of 256x144 monitor screens (depth 1) over its
+    middle, fed by a camera over the ring (``components.Monitor``);
     ``streaks_<mirrors>``: the ring with motion blur on its orbiting camera, its spinning boxes
     streaking by their own motion (``MotionBlur()``; ``streaks_<mirrors>_camera``: by the
     camera's alone, ``objects=False``); ``hall``:
@@ -236,6 +238,22 @@ def make_scene(name: str, ctx):
         engine = Engine(MirrorRing(int(mirrors)), ctx)
         (camera, _), = engine.world.query_one(Camera)
         engine.world.add_component(camera, MotionBlur(objects=not only))
+        return engine
+    if kind == "monitor":  # monitor_<mirrors>: the ring with a monitor over its middle (components.Monitor)
+        from pyglm import glm
+
+        from benchmarks.mirrors import MirrorRing
+        from components import Camera, Material, MeshRef, Monitor, Transform, look_rotation
+        from engine.assets.mesh import box
+
+        engine = Engine(MirrorRing(int(arg)), ctx)
+        eye = glm.vec3(9.0, 6.0, 9.0)   # a feed over the ring, looking at its middle, its mirrors in sight
+        feed = engine.world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.0, 1.0, 0.0) - eye)),
+                                  Camera(fov_y=60.0, active=False))
+        # A box of screens over the middle (each side shows the picture): the orbiting camera
+        # sees one or two of them all the way round.
+        engine.world.spawn(Transform(position=(0.0, 4.5, 0.0)), MeshRef(box((1.6, 0.9, 1.6))),
+                           Material(color=(0.01, 0.01, 0.01)), Monitor(camera=feed, size=(256, 144)))
         return engine
     if kind == "posed":  # posed_<mirrors>_<tentacles>[_dq]: the ring with animated skinned and morphed meshes
         from benchmarks.posed import PosedRing

@@ -88,6 +88,7 @@ from engine.rules.shadow_rules import (
     changed_region,
     directional_fit,
     holds_point,
+    level_on_grid,
     rank_virtual_lights,
     reflected_caustic_water,
     ring_cell,
@@ -154,7 +155,8 @@ class ShadowSystem(esper.Processor):
         elif casters_changed or changed_box is not None or self._level is None:
             # A batch's box changes only with an upload that writes rows (which moves
             # ``casters_version`` on) or a row or batch gone (a changed box): else last frame's.
-            level = self._level = renderer.level_bounds()
+            bounds = renderer.level_bounds()
+            level = self._level = None if bounds is None else level_on_grid(bounds)
         else:
             level = self._level
         published = ShadowCasters(level=level)

@@ -11,6 +11,7 @@ import pytest
 from pyglm import glm
 
 from components import (
+    Camera,
     ComponentValueError,
     DirectionalLight,
     Material,
@@ -892,3 +893,35 @@ def test_a_batch_reads_its_rows_casting_only_while_one_casts_nothing(scene):
     runner.world.delete_entity(ids["other"])
     runner.frame()
     assert not batch.may_not_cast and ids["box"] in batch.row_of
+
+
+def test_a_thing_that_casts_nothing_moving_at_the_levels_top_does_not_redraw_the_suns_map(ctx):
+    """A screen that casts no shadow, held before the orbiting camera of the mirrors ring at the
+    level's top: its box's top wobbles by float noise as the camera turns (the level's box
+    with it, by about 2e-7 m), which fitted the sun's level map anew and drew it whole every
+    frame (4,194,304 texels against about 170,000).  The level's box is on a millimetre grid
+    (``level_on_grid``): after the first frames only the spinning boxes' texels are drawn, and
+    the box read from the batches does wobble (what the grid absorbs)."""
+    from benchmarks.cpu import make_scene
+    from engine.core.frame_io import Output
+    from engine.render.targets import CaptureTarget
+    from engine.rules.shadow_rules import LEVEL_GRID
+
+    engine = make_scene("mirrors_0", ctx)
+    (camera, _), = engine.world.query_one(Camera)
+    engine.world.spawn(Transform(position=(0.9, -0.45, -2.0), parent=camera),
+                       MeshRef(quad(0.64, 0.36), casts_shadows=False), Material(color=(0.01, 0.01, 0.01)))
+    capture = CaptureTarget(ctx, (64, 36))
+    try:
+        drawn, tops = [], []
+        for _ in range(10):
+            engine.frame(1.0 / 60.0, Output(capture.framebuffer, (64, 36)))
+            drawn.append(engine.renderer.stats.shadow_texels_drawn)
+            tops.append(float(engine.renderer.level_bounds()[1][1]))
+        whole = engine.renderer.shadows.tile ** 2
+        assert max(drawn[:2]) >= whole   # (the first frames draw the map whole)
+        assert len(set(tops[2:])) > 1 and max(tops) - min(tops) < LEVEL_GRID / 100   # it wobbles, by noise
+        assert all(0 < texels < whole / 4 for texels in drawn[2:]), drawn
+    finally:
+        capture.release()
+        engine.close()

@@ -62,6 +62,20 @@ class DirectionalFit:
         return self.proj * self.view
 
 
+LEVEL_GRID = 2.0 ** -10   # metres: the level's box is fitted outward to this grid (level_on_grid)
+
+
+def level_on_grid(level: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The level's box grown outward to the next multiple of ``LEVEL_GRID`` (about a
+    millimetre) on each side: what a sun's level map is fitted to.  A thing moving at the
+    level's edge (a screen held before the camera, a bird at a fixed height) changes the box
+    by float noise every frame (2e-7 m measured), which fitted the map anew and drew all of
+    it again; on the grid the box changes only when the edge crosses a millimetre line.  A
+    box already on the grid (a floor from -20 to 20) is itself."""
+    lo, hi = level
+    return np.floor(lo / LEVEL_GRID) * LEVEL_GRID, np.ceil(hi / LEVEL_GRID) * LEVEL_GRID
+
+
 def directional_fit(direction: glm.vec3, lo: np.ndarray, hi: np.ndarray, resolution: int) -> DirectionalFit:
     """The orthographic shadow camera of a light travelling along ``direction`` that holds the
     whole world box [lo, hi] (grown by the margin), for a map of ``resolution`` texels a side.
