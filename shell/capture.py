@@ -5,6 +5,7 @@ import dataclasses
 import json
 import math
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +19,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Monitor,
     PointLight,
     Portal,
     Refractive,
@@ -27,8 +29,10 @@ from components import (
 )
 from engine.assets.gltf_export import ExportCamera, ExportLight, ExportPart, write_gltf
 from engine.assets.model_lights import LAMP_FIELDS, SUN_FIELDS
+from engine.assets.texture_data import TextureData
 from engine.assets.values import VALUE_KINDS, json_value, public_fields
 from engine.core.budget import ViewBudget
+from engine.core.color import linear_to_srgb
 from engine.core.errors import SpeculumError
 from engine.core.portal_math import pair_transform
 from engine.core.world import World
@@ -54,7 +58,8 @@ def save_ids(ids: np.ndarray, path: str | Path) -> None:
 
 
 def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple[int, int],
-                 mirror_planes: dict[int, tuple[list[float], list[float]]] | None = None) -> Path:
+                 mirror_planes: dict[int, tuple[list[float], list[float]]] | None = None,
+                 pictures: Mapping[int, np.ndarray] | None = None) -> Path:
     """Write world-space geometry with its materials (one glTF node per renderable entity,
     named by its id: ``engine/assets/gltf_export.py``, which the engine's loader reads back) and,
     beside it, a JSON of the camera, each entity's component types and their field values
@@ -62,12 +67,16 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
     plane (a point on it and its unit normal, towards the reflecting side), each portal's
     partner, each reflection probe and which probe each entity samples, and the frame's
     ``ViewBudget`` (its fields; None: none), which decides which views are drawn.  The geometry's
-    format follows the extension (``SCENE_FORMATS``); any other is refused."""
+    format follows the extension (``SCENE_FORMATS``); any other is refused.  ``pictures``: the
+    monitors' pictures by entity (linear RGB(A), rows from the top:
+    ``MonitorPictures.read``), each written as its screen's emissive map at its brightness
+    (clamped at white, sRGB: the screen as it stands at the export)."""
     path = Path(path)
     if path.suffix.lower() not in SCENE_FORMATS:
         raise ValueError(f"export_scene: {str(path)!r} must end in {' or '.join(SCENE_FORMATS)}")
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_gltf(path, [_export_part(world, entity, mesh_ref, transform)
+    pictures = pictures or {}
+    write_gltf(path, [_export_part(world, entity, mesh_ref, transform, pictures.get(entity))
                       for entity, (mesh_ref, transform) in sorted(world.query(MeshRef, Transform))],
                _export_lights(world), _export_cameras(world))
 
@@ -104,9 +113,11 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
     return path
 
 
-def _export_part(world: World, entity: int, mesh_ref: MeshRef, transform: Transform) -> ExportPart:
+def _export_part(world: World, entity: int, mesh_ref: MeshRef, transform: Transform,
+                 picture: np.ndarray | None = None) -> ExportPart:
     """An entity's mesh in world space (its normals by the inverse transpose, turned back
-    where the transform mirrors: the winding flips too) with what it is drawn with."""
+    where the transform mirrors: the winding flips too) with what it is drawn with (a
+    monitor's screen: its ``picture`` as its emissive map, at its brightness)."""
     mesh = mesh_ref.mesh
     matrix = np.array(transform.world.to_list(), np.float64).T  # glm is column-major
     linear = matrix[:3, :3]
@@ -119,10 +130,18 @@ def _export_part(world: World, entity: int, mesh_ref: MeshRef, transform: Transf
     water = world.try_get(entity, Water)
     mirror = world.try_get(entity, Mirror)
     emissive = world.try_get(entity, Emissive)
+    emission = emissive.power if emissive is not None else 0.0
+    material = world.try_get(entity, Material)
+    monitor = world.try_get(entity, Monitor)
+    if monitor is not None and picture is not None:
+        encoded = np.round(linear_to_srgb(np.clip(np.asarray(picture, np.float64)[..., :3], 0.0, 1.0)) * 255.0)
+        material = dataclasses.replace(material or Material(), emissive_map=TextureData(
+            encoded.astype(np.uint8), name=f"monitor {entity}'s picture"))
+        emission = monitor.brightness
     return ExportPart(
         str(entity), mesh.positions @ linear.T + matrix[:3, 3], normals, mesh.uvs, indices,
-        material=world.try_get(entity, Material), second_uvs=mesh.second_uvs, colors=mesh.colors,
-        emission=emissive.power if emissive is not None else 0.0,
+        material=material, second_uvs=mesh.second_uvs, colors=mesh.colors,
+        emission=emission,
         glass=(glass.ior, glass.solid, glass.dispersion) if glass is not None else None,
         water_ior=water.ior if water is not None and mirror is not None else None,
         mirror=(tuple(mirror.color)[:3], mirror.reflect_rate, mirror.roughness)
@@ -272,7 +291,9 @@ def write_scene(engine: Engine, path: Path, size: tuple[int, int]) -> list[Path]
         raise SpeculumError(f"--export-scene {str(path)!r}: the world has no active camera "
                             "(spawn one with engine.spawn_camera), so there is no view to export")
     try:
-        geometry = export_scene(engine.world, path, camera[0], size, engine.reflection_system.mirror_planes())
+        monitors = engine.renderer.monitors
+        geometry = export_scene(engine.world, path, camera[0], size, engine.reflection_system.mirror_planes(),
+                                {entity: monitors.read(entity) for entity in monitors.entities})
     except OSError as exc:
         raise OutputPathError(f"--export-scene {str(path)!r} cannot be written: {exc.strerror or exc}") from None
     return [geometry, geometry.with_suffix(".json")]

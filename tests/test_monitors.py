@@ -398,3 +398,25 @@ def test_a_monitor_spends_none_of_the_frames_view_budget(scene):
         if monitored:
             assert runner.stats.monitor_views == 2 and (picture(runner, held)[..., 0] > RED[0] / 2).sum() > 60
     assert ledgers[True] == ledgers[False]
+
+
+def test_an_exported_scene_holds_a_screens_picture_as_its_emissive_map(scene, tmp_path):
+    """``--export-scene`` (``write_scene``) writes a monitor's screen with its picture as it
+    stands as its emissive map (sRGB, clamped at white) at its brightness: loaded back with
+    the engine's glTF loader, the screen's part emits that image, texel for texel."""
+    from engine.assets.mesh import load_model
+    from shell.capture import write_scene
+    from tests.support import linear_to_srgb8
+
+    build, held = studio(Monitor(size=PICTURE, brightness=1.5))
+    runner, _ = run(scene, build, 2)
+    shown = picture(runner, held)
+    write_scene(runner.engine, tmp_path / "scene.glb", runner.size)
+    parts = load_model(tmp_path / "scene.glb")
+    emitting = [part for part in parts if part.emissive_map is not None]
+    assert len(emitting) == 1
+    written = emitting[0].emissive_map.as_8_bits()[..., :3].astype(int)
+    assert written.shape == (PICTURE[1], PICTURE[0], 3)
+    assert np.abs(written - np.round(linear_to_srgb8(shown[..., :3]))).max() <= 1
+    assert (written[..., 0] > 100).sum() > 100   # the box's red in it
+    assert emitting[0].emissive_factor == pytest.approx(1.5)
