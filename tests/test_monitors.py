@@ -420,3 +420,40 @@ def test_an_exported_scene_holds_a_screens_picture_as_its_emissive_map(scene, tm
     assert np.abs(written - np.round(linear_to_srgb8(shown[..., :3]))).max() <= 1
     assert (written[..., 0] > 100).sum() > 100   # the box's red in it
     assert emitting[0].emissive_factor == pytest.approx(1.5)
+
+
+def test_a_mirror_showing_a_screen_keeps_no_stale_picture_while_the_camera_stands_still(scene):
+    """A still camera looking into a mirror that shows the screen (its tree kept while nothing
+    changes: ``keep_still_views``); the box the monitor watches moves once, and the monitor,
+    drawn every second frame, shows it a frame later: every frame equals an engine that draws
+    its whole tree (a picture drawn moves the scene on, as any texture written does)."""
+    from tests.support import look_from
+
+    def build_with_mirror(world):
+        build(world)
+        world.spawn(Transform(position=(0.0, 1.0, 9.5), rotation=look_rotation(glm.vec3(0.0, 0.0, 1.0))),
+                    MeshRef(quad(3.0, 2.0)), Material(color=(1.0, 1.0, 1.0, 1.0)), Mirror())
+        (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
+        world.delete_entity(camera)
+        look_from(world, (0.4, 1.0, 7.0), target=(0.0, 1.0, 9.5), fov=50.0)
+
+    runners = []
+    for _ in range(2):
+        build, held = studio(Monitor(size=PICTURE, every=2))
+        runners.append((scene(build_with_mirror, (96, 72)), held))
+    (keeping, held_k), (drawing, held_d) = runners
+    drawing.engine.reflection_system.keep_still_views = False
+    kept = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for frame in range(9):
+            if frame == 5:   # (the monitor is drawn on even frames: its picture shows it on the next)
+                for runner, held in runners:
+                    transform = runner.world.get(held["box"], Transform)
+                    transform.position = transform.position + glm.vec3(-1.2, 0.0, 0.0)
+            frames = [runner.frame(DT) for runner, _ in runners]
+            assert np.array_equal(frames[0], frames[1]), frame
+            kept += keeping.stats.reflection_views_kept > 0
+    assert drawing.stats.reflection_views_kept == 0
+    assert kept >= 3   # (the frames the monitor is not drawn on keep the tree)
+    assert (frames[0][..., 0] > 60).sum() > 5   # the box, on the screen, in the mirror

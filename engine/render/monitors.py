@@ -107,6 +107,7 @@ class MonitorPictures:
             self.scene_pass.draw([view], targets, ROOT_VIEW)
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
+        self.renderer.note_scene_change()   # (a screen's picture is what views show: no tree kept over it)
         self.renderer.checkpoint(f"monitor {entity}")
         return views
 
