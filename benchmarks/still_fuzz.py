@@ -39,6 +39,12 @@ the camera (the box then reflecting the sky).  The change is one of:
 - ``min_pixels``: the frame's ``ViewBudget(min_pixels=...)`` set, 1 to 5000 pixels (the
   views under it show their fallback).
 
+Now and then a monitor stands in the level too: a screen the camera sees, its picture drawn
+from a lens watching the box and the pair, to depth 0-2 (``monitor``); the drawing engine
+draws every due picture (``MonitorSystem.keep_still_pictures`` off), so a picture kept must
+equal one drawn again.  Its Monitor, Material and Transform, and the lens's Camera and
+Transform, are among the components written, and both among the entities removed.
+
 A case passes when a refused write is refused with a ``ComponentValueError`` naming
 ``Class.field`` in both engines, and every frame of both renders with no NaN in the HDR
 colour target and ``ctx.error`` clean, the keeping engine's colour, HDR image and
@@ -72,6 +78,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Monitor,
     PointLight,
     Portal,
     Reflective,
@@ -154,6 +161,10 @@ class StillCase:
     # With the ball, a refracting pane behind it (glass behind glass: the ball drawn in a layer
     # after the pane's, over a copy that holds it: screen_refraction.refraction_layers).
     glass_behind: bool = False
+    # A monitor the camera sees, fed by a lens watching the box and the pair, its picture drawn
+    # to this depth (0-2), every frame or every second; None: none.  The drawing engine draws
+    # every due picture (``MonitorSystem.keep_still_pictures`` off).
+    monitor: int | None = None
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
     then: list[tuple[str, dict[str, Any]]] = dataclasses.field(default_factory=list)
@@ -164,7 +175,7 @@ class StillCase:
                 f"rate {self.rate}, point light {self.point_light}, bloom {self.bloom}, {self.visibility}, "
                 f"cascades {self.cascades}, spot {self.spot_angle}, fog {self.fog}, occlusion {self.occlusion}, "
                 f"reflections {self.reflections}, shafts {self.shafts}, glass {self.glass} "
-                f"(behind {self.glass_behind}); then "
+                f"(behind {self.glass_behind}), monitor {self.monitor}; then "
                 f"{self.change} {self.detail}, {self.after} frames" + "".join(
                     f"; then {change} {detail}, {self.after} frames" for change, detail in self.then))
 
@@ -191,7 +202,7 @@ def random_still_case(rng: random.Random) -> StillCase:
                      cascades=rng.choice((1, 1, 2, 3, 4)), spot_angle=rng.choice((180.0, 180.0, 25.0, 60.0, 110.0)),
                      fog=rng.random() < 0.3, occlusion=rng.random() < 0.3, reflections=rng.random() < 0.3,
                      shafts=rng.random() < 0.5, glass=rng.choice((0.0, 0.0, 0.3)) if rng.random() < 0.35 else None,
-                     glass_behind=rng.random() < 0.5)
+                     glass_behind=rng.random() < 0.5, monitor=rng.choice((None, None, 0, 1, 2)))
 
 
 def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
@@ -200,8 +211,10 @@ def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
     change = rng.choice(CHANGES)
     detail: dict[str, Any] = {}
     if change == "component":
-        target = rng.choice(("pair", "pane", "water", "light", "box", "light_in_place", "point", "point_in_place"))
+        target = rng.choice(("pair", "pane", "water", "light", "box", "light_in_place", "point", "point_in_place",
+                             "monitor", "lens"))
         classes = {"pair": (Mirror, Material, Transform), "pane": (Material, Transform),
+                   "monitor": (Monitor, Material, Transform), "lens": (Camera, Transform),
                    "water": (Water, Mirror, Material), "light": (DirectionalLight,), "box": (Transform, Material),
                    "light_in_place": (DirectionalLight,), "point": (PointLight, Transform),
                    "point_in_place": (Transform,)}[target]
@@ -219,7 +232,7 @@ def _random_change(rng: random.Random) -> tuple[str, dict[str, Any]]:
             detail = {"target": target, "cls": cls.__name__, "field": field, "value": value}
     elif change == "remove":
         detail = {"target": rng.choice(("first", "second", "pane", "water", "box", "far_glass_mirror", "pond",
-                                        "pane_between"))}
+                                        "pane_between", "monitor", "lens"))}
     elif change == "resize":
         detail = {"size": rng.choice(((56, 38), (32, 24), (48, 33), (1, 1), (97, 61)))}
     elif change == "depth_cap":
@@ -348,6 +361,16 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
                 Material(color=(0.8, 0.9, 1.0, 0.0), roughness=case.glass, double_sided=True), Refractive(ior=1.3))
     for i, pane in enumerate(case.panes):
         named[f"pane{i}"] = _spawn_pane(world, pane)
+    if case.monitor is not None:   # a lens by the first of the pair watching the box, its screen out of its sight
+        lens = glm.vec3(1.5, 1.8, -2.0)
+        named["lens"] = world.spawn(Transform(position=lens, rotation=look_rotation(glm.vec3(0.8, 0.6, 0.0) - lens)),
+                                    Camera(fov_y=50.0, active=False))
+        screen = glm.vec3(-0.9, 1.5, -1.4)
+        facing = look_rotation(screen - glm.vec3(0.4, 1.5, 1.2))   # (its +z, its face, to the camera)
+        named["monitor"] = world.spawn(Transform(position=screen, rotation=facing),
+                                       MeshRef(quad(0.8, 0.45)), Material(color=(0.0, 0.0, 0.0, 1.0)),
+                                       Monitor(camera=named["lens"], size=(32, 18), depth=case.monitor,
+                                               every=1 + case.still % 2))
     if case.water:
         named["water"] = _spawn_water(world, 0.3)
     if case.see_through_mirror:
@@ -396,6 +419,7 @@ class StillFuzzer:
         self.drawing.engine.renderer.occlusion.keep_still = False  # its ambient occlusion found every frame
         self.drawing.engine.renderer.volumetric_fog.keep_still = False  # its light shafts marched every frame
         self.drawing.engine.reflection_system.tree.plan_ahead = False  # each level planned after its parent's claims
+        self.drawing.engine.stages["monitors"].keep_still_pictures = False  # every due picture drawn
         for _ in range(2):
             self.keeping.frame()
             self.drawing.frame()
@@ -406,6 +430,7 @@ class StillFuzzer:
         self.refills = self.glass_between = 0
         self.glass_layered = 0  # ... and frames that drew glass behind glass in layers (refraction_layers)
         self.slot_cut = 0  # ... and frames with see-through things drawn in part after the glass (slot_after_glass)
+        self.pictures_kept = 0  # ... and frames that kept a monitor's picture (RenderStats.monitors_kept)
 
     def close(self) -> None:
         self.keeping.close()
@@ -441,6 +466,7 @@ class StillFuzzer:
             self.glass_between += stats.glass_between_surfaces > 0
             self.glass_layered += stats.refraction_layers > 1
             self.slot_cut += stats.slot_after_glass > 0
+            self.pictures_kept += stats.monitors_kept > 0
         return None
 
     def run(self, case: StillCase, index: int = 0) -> str | None:
@@ -558,7 +584,8 @@ class StillFuzzer:
             transform.position.x = detail["value"]  # the light moved, in place
             return None
         cls = {"Mirror": Mirror, "Material": Material, "Transform": Transform, "Water": Water,
-               "DirectionalLight": DirectionalLight, "PointLight": PointLight}[detail["cls"]]
+               "DirectionalLight": DirectionalLight, "PointLight": PointLight, "Monitor": Monitor,
+               "Camera": Camera}[detail["cls"]]
         if cls is Mirror and case.pair == "portals" and target == "pair":
             cls = Portal
         component = world.try_get(entity, cls)
@@ -613,9 +640,11 @@ class StillFuzzer:
             self.close()
         except Exception:  # noqa: BLE001 - a case that broke the engine: start fresh ones
             pass
-        counts = self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut
+        counts = (self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut,
+                  self.pictures_kept)
         self.__init__(self.ctx)
-        self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut = counts
+        (self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut,
+         self.pictures_kept) = counts
 
 
 def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
@@ -626,4 +655,5 @@ def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[t
     ran, failures, passes = run_cases(fuzzer, random_still_case, cases, seed, report)
     passes["refill_frames"], passes["glass_between_frames"] = fuzzer.refills, fuzzer.glass_between
     passes["glass_layered_frames"], passes["slot_cut_frames"] = fuzzer.glass_layered, fuzzer.slot_cut
+    passes["pictures_kept_frames"] = fuzzer.pictures_kept
     return ran, failures, passes

@@ -6,9 +6,10 @@ does), before the main view (which shows the screens with this frame's pictures)
 decided here:
 
 - which monitors are due: a monitor is drawn on the frame it comes and then every
-  ``every`` frames; at most ``MAX_MONITORS`` a frame, those that have waited longest first
-  (then by entity): the rest keep their pictures a frame more and are drawn first the next
-  (counted in ``RenderStats.monitors_cut``, said when the count grows);
+  ``every`` frames; at most ``MAX_MONITORS`` drawn a frame, those that have waited longest
+  first (then by entity): the rest keep their pictures a frame more and are drawn first the
+  next (counted in ``RenderStats.monitors_cut``, said when the count grows; a picture kept,
+  below, is not drawn and not counted);
 - each one's view: its camera entity's ``Camera`` (field of view or orthographic height,
   near, far, layers) from its ``Transform``, at the picture's size and aspect; a camera that
   is missing (no entity, no ``Camera`` or no ``Transform`` on it) is said once, and the
@@ -17,6 +18,20 @@ decided here:
   frame's surfaces as a probe face's tree is, outside the frame's ``ViewBudget``
   (``outside_the_budget``: the monitors' own limits bound them, and drawn before the main
   view they would take the budget the frame's reflections share first).
+
+A due monitor whose picture would come out as it is is kept, not drawn (dirty flags, as a
+still camera's mirror views are kept: ``keep_still_pictures``; ``RenderStats.monitors_kept``
+counts them).  "As it is" is one comparison with its last drawing (``_still_key``): the
+scene's version less the pictures' (``MonitorPictures.scene_version``: every upload or
+redraw of what a view shows but a picture), what every view's drawing depends on
+(``Renderer.drawing_settings``), its camera's view, size, layers and depth, the waters' waves,
+the surfaces' table and blends as the same objects, and no component of the world written,
+added or removed since; besides, its drawing read nothing
+from the frame before (``MonitorPictures.repeatable``), and each picture it showed (a screen
+its views drew) is the one it showed.  So a camera that sees its own screen draws every time
+it is due (its picture moved on, a picture in a picture a level deeper each time), and one
+that sees another's draws again after the other's changes.  Kept, a picture moves no version
+on: a still camera's mirrors that show it keep their views too.
 
 The pictures of monitors gone (or deleted) are let go here; the extract stage makes a
 screen's picture when it first draws the screen (its emissive map is the picture)."""
@@ -36,7 +51,8 @@ from engine.frame_stats import BudgetLedger
 from engine.render.monitors import MAX_MONITORS
 from engine.render.renderer import Renderer
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
-from engine.render.views import camera_view
+from engine.render.view_plan import SurfaceTable
+from engine.render.views import View, camera_view
 from engine.resources import Surfaces
 
 
@@ -47,9 +63,25 @@ class MonitorSystem(esper.Processor):
         super().__init__()
         self.world = world
         self.renderer = renderer
-        self.drawn: dict[int, int] = {}         # monitor -> the frame its picture was last drawn
+        self.drawn: dict[int, int] = {}         # monitor -> the frame its picture was last drawn (or kept)
         self._said: set[tuple[int, int | None]] = set()  # (monitor, the camera it named) said once
         self._cut = 0
+        self._keep_still_pictures = True
+        self._keys: dict[int, tuple[tuple, tuple]] = {}   # monitor -> _still_key at its last drawing
+        self._world_version = 0   # moved on by every change to the world's components (World.change_count)
+        self._changes_seen = 0    # World.change_count when this stage last looked
+
+    @property
+    def keep_still_pictures(self) -> bool:
+        """Keep a due monitor's picture when nothing it shows changed since it was drawn (the
+        module docstring); False: draw every due picture (what the tests compare with)."""
+        return self._keep_still_pictures
+
+    @keep_still_pictures.setter
+    def keep_still_pictures(self, value: bool) -> None:
+        if not isinstance(value, bool):
+            raise TypeError(f"MonitorSystem.keep_still_pictures must be True or False, got {value!r}")
+        self._keep_still_pictures = value
 
     def process(self, dt: float) -> None:
         world = self.world
@@ -61,22 +93,25 @@ class MonitorSystem(esper.Processor):
             pictures.drop(gone)
         for gone in set(self.drawn) - present:
             del self.drawn[gone]
+        for gone in set(self._keys) - present:
+            del self._keys[gone]
+        # Changes since the last look: after this stage in the last frame, and before it in this one.
+        changes = world.change_count()
+        self._world_version += world.last_step_changes - self._changes_seen + changes
+        self._changes_seen = changes
         self._said = {(entity, camera) for entity, camera in self._said if entity in present}
         frame = world.frame_index
         # The longest waiting first (a new one first of all), then by entity: past MAX_MONITORS
-        # those left wait a frame and are drawn first the next.
+        # drawn, those left wait a frame and are drawn first the next (a kept one costs none).
         due = sorted(((entity, monitor) for entity, monitor in monitors
                       if entity not in self.drawn or frame - self.drawn[entity] >= monitor.every),
                      key=lambda pair: (self.drawn.get(pair[0], -1), pair[0]))
-        cut = max(0, len(due) - MAX_MONITORS)
-        if cut > self._cut:
-            warnings.warn(MonitorLimitWarning(
-                f"{len(due)} monitors are due this frame: {MAX_MONITORS} are drawn a frame (those waiting longest), "
-                f"so {cut} keep their pictures a frame more (RenderStats.monitors_cut)"), stacklevel=2)
-        self._cut = stats.monitors_cut = cut
         surfaces: Surfaces | None = world.resources.get(Surfaces)
-        table = None
-        for entity, monitor in due[:MAX_MONITORS]:
+        table = surface_table(world.resources, surfaces) if due and surfaces is not None and \
+            (surfaces.mirrors or surfaces.portals) else None
+        blends = world.resources.get(SurfaceBlends, NO_BLENDS)
+        drawn = cut = 0
+        for entity, monitor in due:
             parts = self._camera(entity, monitor)
             if parts is None:
                 continue
@@ -86,14 +121,39 @@ class MonitorSystem(esper.Processor):
                                name=f"monitor {entity}",
                                ortho_height=camera.ortho_height if camera.projection == "orthographic" else None)
             view.layers = camera.layer_mask
-            trees = monitor.depth > 0 and surfaces is not None and bool(surfaces.mirrors or surfaces.portals)
-            if trees and table is None:
-                table = surface_table(world.resources, surfaces)
+            key = self._still_key(monitor, view, table, blends)
+            kept = self._keys.get(entity)
+            if self.keep_still_pictures and kept is not None and _same(key, kept) and pictures.repeatable(entity) \
+                    and pictures.shown_unchanged(entity):
+                stats.monitors_kept += 1
+                self.drawn[entity] = frame
+                continue
+            if drawn == MAX_MONITORS:
+                cut += 1
+                continue
+            trees = monitor.depth > 0 and table is not None
             with outside_the_budget(stats):
-                views = pictures.draw(entity, view, table if trees else None, monitor.depth,
-                                      world.resources.get(SurfaceBlends, NO_BLENDS))
+                views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends)
             stats.monitor_views += views
+            drawn += 1
             self.drawn[entity] = frame
+            self._keys[entity] = key
+        if cut > self._cut:
+            warnings.warn(MonitorLimitWarning(
+                f"{drawn + cut} monitors were to be drawn this frame: {MAX_MONITORS} are drawn a frame (those "
+                f"waiting longest), so {cut} keep their pictures a frame more (RenderStats.monitors_cut)"),
+                stacklevel=2)
+        self._cut = stats.monitors_cut = cut
+
+    def _still_key(self, monitor: Monitor, view: View, table: SurfaceTable | None,
+                   blends: SurfaceBlends) -> tuple[tuple, tuple]:
+        """What a monitor's picture shows, as (values compared equal, objects compared as the
+        same object): the module docstring's list, less the pictures'."""
+        flows = () if table is None else tuple(state.water.flow.offset for state in table.states
+                                               if state.water is not None)
+        values = (self.renderer.monitors.scene_version, self.renderer.drawing_settings(), view.camera_block(),
+                  view.layers, monitor.size, monitor.depth, flows, self._world_version)
+        return values, (table, blends.by_surface)
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
         """The Camera and Transform of the entity ``monitor`` shows, or None, said once for each
@@ -113,6 +173,11 @@ class MonitorSystem(esper.Processor):
             warnings.warn(ComponentWarning(f"Monitor on entity {entity} {why}: its picture is not drawn (it keeps "
                                            "what it showed, black at first)"), stacklevel=3)
         return None
+
+
+def _same(key: tuple[tuple, tuple], other: tuple[tuple, tuple]) -> bool:
+    """Two ``_still_key``s agree: values equal, objects the same."""
+    return key[0] == other[0] and all(a is b for a, b in zip(key[1], other[1], strict=True))
 
 
 @contextmanager

@@ -252,13 +252,10 @@ class ReflectionSystem(esper.Processor):
         if waves[0] is None or waves[0]() is not table:
             flows = [state.water.flow for state in table.states if state.water is not None]
             waves = self._waves = (weakref.ref(table), flows)
-        values = (renderer.scene_version, renderer.shaders.reloads, main.camera_block(), main.name, main.mirrored,
-                  main.scissor, self.settings, self.tree.unlit, renderer.texture_anisotropy,
-                  renderer.reflection_anisotropy, renderer.normal_map_anisotropy, renderer.scene_pass.cull_batches,
-                  stats.views_left(), stats.pixels_left(), stats.min_view_pixels,
-                  tuple(flow.offset for flow in waves[1]), tuple(self.tree.passes.surface_motion),
-                  renderer.occlusion.level_key(), renderer.screen_reflections.level_key(),
-                  renderer.volumetric_fog.level_key(), renderer.ripples.version)
+        values = (renderer.scene_version, renderer.drawing_settings(), main.camera_block(), main.name, main.mirrored,
+                  main.scissor, self.settings, self.tree.unlit, stats.views_left(), stats.pixels_left(),
+                  stats.min_view_pixels, tuple(flow.offset for flow in waves[1]),
+                  tuple(self.tree.passes.surface_motion))
         return values, (table, blends.by_surface, levels)
 
     def prepare(self) -> None:

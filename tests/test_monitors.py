@@ -104,7 +104,7 @@ def test_a_monitor_shows_what_its_camera_sees_on_its_screen(scene):
         build, held = studio(Monitor(size=PICTURE, brightness=brightness))
         runner, rgb = run(scene, build, 2)
         frames[brightness] = srgb_to_linear(rgb)
-        assert runner.stats.monitor_views == 1
+        assert runner.stats.monitor_views == 0 and runner.stats.monitors_kept == 1   # (the first frame's, kept)
     shown = picture(runner, held)
     eye, rays = lens_rays()
     hits = box_hits(eye, rays.reshape(-1, 3), BOX_AT, BOX_HALF).reshape(PICTURE[1], PICTURE[0])
@@ -161,10 +161,11 @@ def test_a_monitors_picture_shows_the_mirrors_its_camera_sees_to_its_depth(scene
     hits = hits.reshape(PICTURE[1], PICTURE[0])
     if depth == 0:
         assert not red.any()
-        assert runner.stats.monitor_views == 1
+        assert (runner.stats.monitor_views, runner.stats.monitors_kept) == (0, 1)   # (the first frame's, kept)
     else:
         assert hits.sum() > 60, hits.sum()
         assert np.sum(red != hits) < 0.05 * hits.sum(), (np.sum(red != hits), hits.sum())
+        # (drawn again: the mirror's view may see its own screen, from behind, by the boxes' test)
         assert runner.stats.monitor_views == 2
 
 
@@ -217,9 +218,10 @@ def test_a_monitor_its_own_camera_sees_shows_its_picture_of_the_draw_before(scen
 
 
 def test_monitors_past_the_limit_wait_a_frame_and_are_drawn_first_the_next(scene):
-    """MAX_MONITORS + 2 monitors, all due every frame: each frame draws MAX_MONITORS, the two
-    left over are said once and counted, and are the first drawn the next frame; after two
-    frames every picture has been drawn."""
+    """MAX_MONITORS + 2 monitors, all due every frame and the box they watch moving: each
+    frame draws MAX_MONITORS, the two left over are said once and counted, and are the first
+    drawn the next frame; after two frames every picture has been drawn.  With nothing moving
+    the third frame keeps every picture, and cuts none."""
     count = MAX_MONITORS + 2
     build, held = studio(None)
 
@@ -230,11 +232,13 @@ def test_monitors_past_the_limit_wait_a_frame_and_are_drawn_first_the_next(scene
                            for i in range(count)]
 
     runner = scene(many, (64, 48))
+    box = runner.world.get(held["box"], Transform)
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         runner.frame(DT)
         first = dict(runner.engine.stages["monitors"].drawn)
         assert runner.stats.monitor_views == MAX_MONITORS and runner.stats.monitors_cut == 2
+        box.position = box.position + glm.vec3(0.05, 0.0, 0.0)
         runner.frame(DT)
         second = dict(runner.engine.stages["monitors"].drawn)
     assert sum(issubclass(w.category, MonitorLimitWarning) for w in said) == 1
@@ -242,6 +246,10 @@ def test_monitors_past_the_limit_wait_a_frame_and_are_drawn_first_the_next(scene
     waited = held["screens"][MAX_MONITORS:]
     assert all(second[entity] == second[waited[0]] for entity in waited) and set(second) == set(held["screens"])
     assert runner.stats.monitors_cut == 2 and runner.stats.monitor_views == MAX_MONITORS
+    runner.frame(DT)
+    assert runner.stats.monitors_cut == 0 and runner.stats.monitor_views == 2   # (the two that waited)
+    runner.frame(DT)
+    assert (runner.stats.monitors_cut, runner.stats.monitor_views, runner.stats.monitors_kept) == (0, 0, count)
 
 
 def test_a_monitor_with_no_camera_is_said_once_and_its_picture_goes_with_it(scene):
@@ -457,3 +465,134 @@ def test_a_mirror_showing_a_screen_keeps_no_stale_picture_while_the_camera_stand
     assert drawing.stats.reflection_views_kept == 0
     assert kept >= 3   # (the frames the monitor is not drawn on keep the tree)
     assert (frames[0][..., 0] > 60).sum() > 5   # the box, on the screen, in the mirror
+
+
+def _monitor_system(runner):
+    from systems.monitor_system import MonitorSystem
+    return runner.world.get_system(MonitorSystem)
+
+
+def _keeping_and_drawing(scene, make_build, size=(96, 72)):
+    """Two engines of one scene: the first keeps still pictures and views (as a game does), the
+    second draws every due picture and its whole tree each frame."""
+    runners = []
+    for _ in range(2):
+        build, held = make_build()
+        runners.append((scene(build, size), held))
+    drawing = runners[1][0]
+    drawing.engine.reflection_system.keep_still_views = False
+    _monitor_system(drawing).keep_still_pictures = False
+    return runners
+
+
+def test_a_still_monitor_keeps_its_picture_and_the_mirror_showing_it_keeps_its_view(scene):
+    """A still camera looking into a mirror that shows the screen; the lens still, the box it
+    watches moved on one frame and the lens turned on another.  The picture is drawn on the
+    first frame and on those two alone (kept, ``monitors_kept``, on the others), and the
+    mirror's view is kept on the frames after; every frame and picture equals an engine that
+    draws every picture and its whole tree each frame."""
+    from tests.support import look_from
+
+    def make_build():
+        build, held = studio(Monitor(size=PICTURE))
+
+        def with_mirror(world):
+            build(world)
+            world.spawn(Transform(position=(0.0, 1.0, 9.5), rotation=look_rotation(glm.vec3(0.0, 0.0, 1.0))),
+                        MeshRef(quad(3.0, 2.0)), Material(color=(1.0, 1.0, 1.0, 1.0)), Mirror())
+            (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
+            world.delete_entity(camera)
+            look_from(world, (0.4, 1.0, 7.0), target=(0.0, 1.0, 9.5), fov=50.0)
+        return with_mirror, held
+
+    runners = _keeping_and_drawing(scene, make_build)
+    keeping = runners[0][0]
+    drawn, kept, views_kept = [], [], []
+    for frame in range(12):
+        for runner, held in runners:
+            if frame == 5:
+                transform = runner.world.get(held["box"], Transform)
+                transform.position = transform.position + glm.vec3(-1.2, 0.0, 0.0)
+            if frame == 9:
+                transform = runner.world.get(held["lens"], Transform)
+                transform.rotation = look_rotation(glm.vec3(0.1, 0.0, -1.0))
+        frames = [runner.frame(DT) for runner, _ in runners]
+        assert np.array_equal(frames[0], frames[1]), frame
+        assert np.array_equal(picture(*runners[0]), picture(*runners[1])), frame
+        drawn.append(keeping.stats.monitor_views)
+        kept.append(keeping.stats.monitors_kept)
+        views_kept.append(keeping.stats.reflection_views_kept)
+    assert drawn == [1, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0]
+    assert kept == [1 - count for count in drawn]
+    assert all(views_kept[frame] > 0 for frame in (1, 2, 3, 4, 6, 7, 8, 10, 11))
+    assert not any(views_kept[frame] for frame in (0, 5, 9))
+    assert runners[1][0].stats.monitors_kept == 0 and runners[1][0].stats.monitor_views == 1
+    assert (frames[0][..., 0] > 60).sum() > 5   # the box, on the screen, in the mirror
+
+
+def test_a_monitor_whose_camera_sees_its_own_screen_draws_every_time_it_is_due(scene):
+    """The lens looking at its own screen: each picture shows the one before (a picture in a
+    picture, a level deeper each time), so nothing is kept, and every picture equals an engine
+    that draws every one."""
+    def make_build():
+        build, held = studio(Monitor(size=PICTURE))
+
+        def turned(world):
+            build(world)
+            world.get(held["box"], Transform).position = (-1.7, 1.0, 6.0)
+            lens = world.get(held["lens"], Transform)
+            lens.position = (0.3, 1.0, 9.0)
+            lens.rotation = look_rotation(glm.vec3(-0.25, 0.0, -1.0))
+        return turned, held
+
+    runners = _keeping_and_drawing(scene, make_build, (64, 48))
+    keeping = runners[0][0]
+    pictures = []
+    for frame in range(5):
+        frames = [runner.frame(DT) for runner, _ in runners]
+        assert np.array_equal(frames[0], frames[1]), frame
+        pictures.append(picture(*runners[0]))
+        assert np.array_equal(pictures[-1], picture(*runners[1])), frame
+        assert keeping.stats.monitor_views == 1 and keeping.stats.monitors_kept == 0, frame
+    assert not np.array_equal(pictures[1], pictures[2])   # (a level deeper: it did change)
+
+
+def test_a_monitor_watching_another_draws_again_once_the_other_changed(scene):
+    """Monitor A's camera sees monitor B's screen (and the box), B's sees the box; A is drawn
+    before B.  The first frame draws A (B's screen black) then B; the second draws A again
+    (B's picture changed after A drew it) and keeps B; the next keep both, until the box
+    moves: both draw, and A again the frame after.  Every frame and picture equals an engine
+    that draws every one."""
+    def make_build():
+        build, held = studio(Monitor(size=PICTURE))
+
+        def two(world):
+            lens = world.spawn(Transform(position=(0.0, 1.0, 8.5), rotation=look_rotation(glm.vec3(0.0, 0.0, -1.0))),
+                               Camera(fov_y=LENS_FOV, active=False))
+            held["watcher"] = world.spawn(Transform(position=(4.0, 1.0, 6.0)), MeshRef(quad(*SCREEN_SIZE)),
+                                          Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0,
+                                                   environment_reflection=0.0),
+                                          Monitor(camera=lens, size=PICTURE))
+            build(world)
+        return two, held
+
+    runners = _keeping_and_drawing(scene, make_build, (64, 48))
+    (keeping, held), (drawing, held_d) = runners
+    assert held["watcher"] < held["screen"]   # (drawn first: the lower entity, when both wait as long)
+    drawn, kept = [], []
+    for frame in range(7):
+        if frame == 4:
+            for runner, each in runners:
+                transform = runner.world.get(each["box"], Transform)
+                transform.position = transform.position + glm.vec3(-0.6, 0.0, 0.0)
+        frames = [runner.frame(DT) for runner, _ in runners]
+        assert np.array_equal(frames[0], frames[1]), frame
+        for name in ("screen", "watcher"):
+            assert np.array_equal(keeping.engine.renderer.monitors.read(held[name]),
+                                  drawing.engine.renderer.monitors.read(held_d[name])), (frame, name)
+        drawn.append(keeping.stats.monitor_views)
+        kept.append(keeping.stats.monitors_kept)
+    assert drawn == [2, 1, 0, 0, 2, 1, 0]
+    assert kept == [0, 1, 2, 2, 0, 1, 2]
+    watched = keeping.engine.renderer.monitors.read(held["watcher"])
+    assert (watched[..., 0] > RED[0] / 4).sum() > 10   # B's picture of the box, on B's screen (hiding the box)

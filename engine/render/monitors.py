@@ -17,17 +17,30 @@ in every view (a mirror that sees the screen shows its picture).  The picture a 
 is copied at the end of its drawing, so a monitor its own camera sees shows its picture of
 the draw before, never the one being drawn (no texture is read while it is written).
 
+**What a drawing read.**  Each drawing of a picture gives it a new ``version`` (a new
+picture, black, has one too), and notes the pictures its views may have shown, with their
+versions then (``shown``: the screens, batches whose emissive map is a picture, whose
+instances' boxes reach any of its views' volumes: ``batch_cull.batch_reach``, conservative),
+and whether it read anything from
+before the frame (``repeatable``: no end view showing last frame's image, no level drawn on
+last frame's visibility counts).  What the drawings moved ``Gpu.scene_version`` on by is kept
+apart (``scene_version``: the scene's version less the pictures'), so the monitor stage
+can tell a picture whose camera, scene and shown pictures are as they were at its last
+drawing, and keep it rather than draw it again (``MonitorSystem.keep_still_pictures``).
+
 A picture is made black (a GPU hands back new textures holding anything), remade at a new
 size, and let go with its monitor; the batch that samples it keeps it until it goes too."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+import itertools
+from dataclasses import dataclass, field
 
 import moderngl
 import numpy as np
 
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError
+from engine.render.batch_cull import batch_reach
 from engine.render.gpu import Gpu
 from engine.render.scene_options import ROOT_VIEW, TREE_ROOT
 from engine.render.scene_pass import ScenePass
@@ -50,6 +63,9 @@ class _Picture:
     stand_in: TextureData
     levels: LevelStack
     size: tuple[int, int]
+    version: int                     # moved on by each drawing (a number no other picture had)
+    shown: dict[int, int] = field(default_factory=dict)   # pictures its last drawing showed: their versions
+    repeatable: bool = False         # its last drawing read nothing from the frame before
 
 
 class MonitorPictures:
@@ -61,6 +77,31 @@ class MonitorPictures:
         self.scene_pass = scene_pass
         self.tree = ViewTree(renderer, scene_pass)
         self._pictures: dict[int, _Picture] = {}
+        self._versions = itertools.count(1)
+        self._moved_on = 0   # what the drawings moved Gpu.scene_version on by
+
+    @property
+    def scene_version(self) -> int:
+        """``Gpu.scene_version`` less what drawing pictures moved it on by: the version of
+        everything a picture shows but the pictures (which each has its own ``version``)."""
+        return self.renderer.scene_version - self._moved_on
+
+    def shown(self, entity: int) -> dict[int, int]:
+        """The monitors whose pictures the last drawing of ``entity``'s showed (its views drew
+        their screens), each with the version it had then."""
+        return self._pictures[entity].shown
+
+    def shown_unchanged(self, entity: int) -> bool:
+        """Whether each picture the last drawing of ``entity``'s showed is still the one it showed."""
+        pictures = self._pictures
+        return all(other in pictures and pictures[other].version == version
+                   for other, version in pictures[entity].shown.items())
+
+    def repeatable(self, entity: int) -> bool:
+        """Whether the last drawing of ``entity``'s picture read nothing from before its frame
+        (no end view showing last frame's image, no level drawn on last frame's counts): drawn
+        again from the same inputs it would be the same."""
+        return self._pictures[entity].repeatable
 
     @property
     def entities(self) -> set[int]:
@@ -85,7 +126,7 @@ class MonitorPictures:
         texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         stand_in = TextureData(np.zeros((1, 1, 4), np.uint8), name=f"monitor {entity}'s picture")
         self.renderer.hold_texture(stand_in, texture)
-        self._pictures[entity] = _Picture(texture, stand_in, LevelStack(self.ctx), tuple(size))
+        self._pictures[entity] = _Picture(texture, stand_in, LevelStack(self.ctx), tuple(size), next(self._versions))
         return stand_in
 
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
@@ -98,18 +139,38 @@ class MonitorPictures:
         if view.size != held.size:
             raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
         targets = held.levels.get(0, held.size)
-        views = 1
+        drawn, repeatable = [view], True
+        before = self.renderer.scene_version
         if surfaces is not None and depth > 0:
             self.scene_pass.draw([view], targets, TREE_ROOT)
-            views = len(self.tree.render(view, held.levels, surfaces, TreeSettings(depth_cap=depth), blends,
-                                         TREE_ROOT).views)
+            result = self.tree.render(view, held.levels, surfaces, TreeSettings(depth_cap=depth), blends, TREE_ROOT)
+            drawn += [node.view for node in result.views[1:]]
+            repeatable = not result.end_views and result.visibility != "predicted"
         else:
             self.scene_pass.draw([view], targets, ROOT_VIEW)
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
+        held.shown = {other: self._pictures[other].version for other in self._screens_reaching(drawn)}
+        held.version, held.repeatable = next(self._versions), repeatable
         self.renderer.note_scene_change()   # (a screen's picture is what views show: no tree kept over it)
+        self._moved_on += self.renderer.scene_version - before
         self.renderer.checkpoint(f"monitor {entity}")
-        return views
+        return len(drawn)
+
+    def _screens_reaching(self, views: list[View]) -> set[int]:
+        """The monitors whose screens can draw a sample in any of ``views`` (each drawn into a
+        viewport of its own size): the batches whose emissive map is their picture, tested
+        by their instances' boxes against each view's volume (``batch_reach``, conservative)."""
+        pictures = {id(held.texture): entity for entity, held in self._pictures.items()}
+        screens = [batch for batch in self.renderer.batches.values()
+                   if batch.count and batch.emissive_map is not None and id(batch.emissive_map) in pictures]
+        if not screens:
+            return set()
+        reached = set()
+        for view in views:
+            reach = batch_reach([view], view.size, screens)[0]
+            reached.update(pictures[id(batch.emissive_map)] for batch, hit in zip(screens, reach, strict=True) if hit)
+        return reached
 
     def texture(self, entity: int) -> moderngl.Texture:
         """The texture of monitor ``entity``'s picture (what its screen's batch samples)."""

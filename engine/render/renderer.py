@@ -577,6 +577,15 @@ class Renderer(Gpu):
         self._level_union = (boxes, union)
         return union
 
+    def drawing_settings(self) -> tuple:
+        """Besides ``scene_version``, what every view's drawing depends on, as values: shader
+        reloads, the texture filters, the batch cull, the screen passes' reflection-level
+        keys, the water rings.  Part of each still key (the main tree's, a monitor's
+        picture's): equal to the last, nothing of these changed."""
+        return (self.shaders.reloads, self.texture_anisotropy, self.reflection_anisotropy, self.normal_map_anisotropy,
+                self.scene_pass.cull_batches, self.occlusion.level_key(), self.screen_reflections.level_key(),
+                self.volumetric_fog.level_key(), self.ripples.version)
+
     def set_lights(self, block: bytes) -> None:
         self.lights_ubo.write(block)
         self.note_scene_change()
