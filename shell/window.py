@@ -309,7 +309,8 @@ class SpeculumWindow(mglw.WindowConfig):
         try:
             self.engine.stages["present"].present_into(capture.framebuffer, size)  # as the frame was
             if len(renderer.screen_quads):  # the game's screen text, drawn over the frame as it was
-                renderer.text().draw(renderer.screen_quads, capture.framebuffer, size, renderer.screen_pictures)
+                renderer.text().draw(renderer.screen_quads, capture.framebuffer, size, renderer.screen_pictures,
+                                     renderer.present_pass.look)
             rgb = capture.read_rgb()
         finally:
             capture.release()

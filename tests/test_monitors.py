@@ -382,6 +382,47 @@ def test_a_screen_panel_with_a_monitor_shows_its_picture_over_the_frame(scene):
     assert np.abs(plain[40, 60].astype(int) - linear_to_srgb8(np.array([1.0, 0.5, 1.0]))).max() <= 1
 
 
+@pytest.mark.parametrize("curve, auto", [("aces", False), ("agx", True)])
+def test_a_picture_panel_is_exposed_and_tone_mapped_as_the_frame_under_it(scene, curve, auto):
+    """With a ``Tonemap`` on the active camera (its curve, a stop up, and in the second case
+    automatic exposure), a picture panel's pixels are that curve of picture x colour x the
+    frame's exposure (2^1, times 2^EV of the adapted exposure read back, at most 0.5 here),
+    sRGB-encoded, within one 8-bit step: the rear view looks as the view does, not as the
+    plain clamp would."""
+    from components import ScreenPanel
+    from components.post import Tonemap
+    from tests.support import linear_to_srgb8
+    from tests.test_post_processing import CURVES, expected_srgb8
+
+    held = {}
+    build, parts = studio(None, eye=(0.0, 1.0, 30.0))
+    tint = np.array([1.0, 0.5, 1.0])
+
+    def hud(world):
+        build(world)
+        (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
+        world.add_component(camera, Tonemap(curve=curve, exposure=1.0, auto_exposure=auto, min_ev=-2.0, max_ev=0.5))
+        held["panel"] = world.spawn(ScreenPanel(size=PICTURE, position=(10, 6), color=(*tint, 1.0)),
+                                    Monitor(camera=parts["lens"], size=PICTURE))
+
+    runner, rgb = run(scene, hud, 3)
+    shown = runner.engine.renderer.monitors.read(held["panel"])[..., :3] * tint
+    look = runner.engine.renderer.present_pass.look
+    scale = 2.0
+    if auto:
+        ev = float(np.frombuffer(look.exposure_state.read(), np.float32)[0])
+        assert 0.05 < ev <= 0.5 + 1e-6   # (a dark frame: the adapted exposure brightens it, up to max_ev)
+        scale *= 2.0 ** ev
+    else:
+        assert look.exposure_state is None
+    drawn = rgb[6:6 + PICTURE[1], 10:10 + PICTURE[0]].astype(np.int16)
+    expected = expected_srgb8(CURVES[curve](shown * scale))
+    assert np.abs(drawn - expected).max() <= 1
+    # (and the curve and the exposure each show: without either the pixels are not these)
+    assert np.abs(expected - linear_to_srgb8(np.clip(shown * scale, 0.0, 1.0))).max() > 8
+    assert np.abs(expected - expected_srgb8(CURVES[curve](shown * scale / (2.0 ** ev if auto else 2.0)))).max() > 5
+
+
 def test_a_monitor_spends_none_of_the_frames_view_budget(scene):
     """Under a ViewBudget that allows one view, one pixel and no view under a million pixels,
     the monitor's mirror still gets its view (its picture red where the box's image is) and
@@ -451,6 +492,8 @@ def test_a_mirror_showing_a_screen_keeps_no_stale_picture_while_the_camera_stand
         runners.append((scene(build_with_mirror, (96, 72)), held))
     (keeping, held_k), (drawing, held_d) = runners
     drawing.engine.reflection_system.keep_still_views = False
+    for runner, _ in runners:
+        exact_visibility(runner)
     kept = 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -482,7 +525,15 @@ def _keeping_and_drawing(scene, make_build, size=(96, 72)):
     drawing = runners[1][0]
     drawing.engine.reflection_system.keep_still_views = False
     _monitor_system(drawing).keep_still_pictures = False
+    for runner, _ in runners:   # (exact, so the frames to the first keep are a GPU's too: its "auto" predicts)
+        exact_visibility(runner)
     return runners
+
+
+def exact_visibility(runner) -> None:
+    """The main tree's and the monitors' trees' visibility exact."""
+    runner.engine.reflection_system.visibility = "exact"
+    runner.engine.renderer.monitors.visibility = "exact"
 
 
 def test_a_still_monitor_keeps_its_picture_and_the_mirror_showing_it_keeps_its_view(scene):
@@ -596,3 +647,25 @@ def test_a_monitor_watching_another_draws_again_once_the_other_changed(scene):
     assert kept == [0, 1, 2, 2, 0, 1, 2]
     watched = keeping.engine.renderer.monitors.read(held["watcher"])
     assert (watched[..., 0] > RED[0] / 4).sum() > 10   # B's picture of the box, on B's screen (hiding the box)
+
+
+def test_a_picture_drawn_on_predicted_counts_is_drawn_again_each_time_it_is_due(scene):
+    """Predicted visibility (a GPU's "auto"): a picture whose tree was drawn on its last
+    drawing's counts is never kept (the counts may not be its own), and every frame still
+    equals an engine that draws every picture; at depth 0 (no tree) it is kept."""
+    def make_build(depth):
+        def make():
+            build, held = studio(Monitor(size=PICTURE, depth=depth), mirror=True,
+                                 box_at=np.array([0.5, 1.2, 1.5]), box_half=np.array([0.8, 0.6, 0.3]))
+            return build, held
+        return make
+
+    for depth, kept in ((1, 0), (0, 1)):
+        runners = _keeping_and_drawing(scene, make_build(depth), (64, 48))
+        for runner, _ in runners:
+            runner.engine.renderer.monitors.visibility = "predicted"
+        for frame in range(4):
+            frames = [runner.frame(DT) for runner, _ in runners]
+            assert np.array_equal(frames[0], frames[1]), (depth, frame)
+            assert np.array_equal(picture(*runners[0]), picture(*runners[1])), (depth, frame)
+        assert runners[0][0].stats.monitors_kept == kept, depth

@@ -78,6 +78,10 @@ class MonitorPictures:
         self.tree = ViewTree(renderer, scene_pass)
         self._pictures: dict[int, _Picture] = {}
         self._versions = itertools.count(1)
+        # How the pictures' trees learn their views' pixels (``ReflectionSystem.visibility``'s
+        # choices; "auto": exact on a software rasteriser, predicted on a GPU).  A drawing on
+        # predicted counts (last drawing's) is never kept (``repeatable``).
+        self.visibility = "auto"
         self._moved_on = 0   # what the drawings moved Gpu.scene_version on by
 
     @property
@@ -143,7 +147,8 @@ class MonitorPictures:
         before = self.renderer.scene_version
         if surfaces is not None and depth > 0:
             self.scene_pass.draw([view], targets, TREE_ROOT)
-            result = self.tree.render(view, held.levels, surfaces, TreeSettings(depth_cap=depth), blends, TREE_ROOT)
+            settings = TreeSettings(depth_cap=depth, visibility=self.visibility)
+            result = self.tree.render(view, held.levels, surfaces, settings, blends, TREE_ROOT)
             drawn += [node.view for node in result.views[1:]]
             repeatable = not result.end_views and result.visibility != "predicted"
         else:

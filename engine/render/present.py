@@ -112,6 +112,19 @@ class CameraPost:
     fov_y: float | None = None            # the camera's field of view (the lens's; None: orthographic)
 
 
+@dataclass(frozen=True)
+class PictureLook:
+    """How the last present exposed and tone-mapped the frame: what a picture panel over it
+    (``engine/render/text.py``: a monitor's picture on the HUD) goes through too, so it looks
+    as the view does.  ``scale``: the linear exposure (the Tonemap's ``2^exposure``, else the
+    renderer's); ``curve``: the tone curve ("none" clamps); ``exposure_state``: the adapted
+    automatic exposure's 1x1 texture (its EV multiplies the scale), or None."""
+
+    scale: float = 1.0
+    curve: str = "none"
+    exposure_state: moderngl.Texture | None = None
+
+
 class PresentPass:
     def __init__(self, ctx: moderngl.Context, shaders: ShaderLibrary, software: bool, moving: ObjectMotion) -> None:
         self.ctx = ctx
@@ -133,6 +146,7 @@ class PresentPass:
         self._dirt: tuple[TextureData, moderngl.Texture] | None = None   # the bloom's lens dirt, uploaded
         self.auto_exposure = AutoExposure(ctx, shaders)
         self.post_passes = 0   # passes past present and FXAA last frame (TAA, lens, blur, bloom, exposure, resample)
+        self.look = PictureLook()   # the last frame's exposure and tone curve (a picture panel's)
         self._lut: tuple[ColorLut, moderngl.Texture3D] | None = None  # the grade's table, uploaded
         self._occlusion_view: moderngl.VertexArray | None = None  # the overlay's "AO only" view, made on first use
         self._depth_of_field: DepthOfFieldPass | None = None  # made when a camera first has a DepthOfField
@@ -272,6 +286,7 @@ class PresentPass:
             encode = self._encode_luma if fxaa else self._encode
             bind_texture(self.ctx, hdr, PRESENT_UNIT)
             encode.program["exposure"].value = exposure
+            self.look = PictureLook(exposure)
         else:
             encode = self._post_encode(hdr, exposure, tonemap, bloom, curve, camera, dt, fxaa, grading,
                                        vignette is not None, aberration is not None, grain is not None, post.flare)
@@ -351,7 +366,9 @@ class PresentPass:
         if dirt is not None:
             bind_texture(self.ctx, dirt, DIRT_UNIT)
             self._set(encode, "dirt_intensity", bloom.dirt_intensity)
-        self._set(encode, "exposure", 2.0 ** tonemap.exposure if tonemap is not None else exposure)
+        scale = 2.0 ** tonemap.exposure if tonemap is not None else exposure
+        self._set(encode, "exposure", scale)
+        self.look = PictureLook(scale, curve, state)
         if graded:
             self._set_grade(encode, grading)
         if lut is not None:

@@ -613,11 +613,12 @@ class Renderer(Gpu):
     def draw_screen_text(self, quads: np.ndarray, output: moderngl.Framebuffer, size: tuple[int, int],
                          pictures: tuple[moderngl.Texture, ...] = ()) -> None:
         """Blend the screen text's ``quads`` (``engine.render.text.layout``) over ``output``,
-        after present (a picture panel's from ``pictures``); kept in ``screen_quads`` and
+        after present (a picture panel's from ``pictures``, exposed and tone-mapped as the
+        present did the frame: ``PresentPass.look``); kept in ``screen_quads`` and
         ``screen_pictures`` so a screenshot shows them too."""
         self.screen_quads, self.screen_pictures = quads, pictures
         if len(quads):
-            self.text().draw(quads, output, size, pictures)
+            self.text().draw(quads, output, size, pictures, self.present_pass.look)
             self.checkpoint("screen text")
 
     def release(self) -> None:

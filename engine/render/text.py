@@ -18,9 +18,11 @@ present stage encoded them), alpha kept.  Every corner is a whole pixel and a gl
 **Pictures.**  A panel with a ``Monitor`` on its entity (a rear-view mirror, a minimap) is
 filled with the monitor's picture (``engine/render/monitors.py``): its quad's atlas rect is
 (index, 0, -1, 0), the index into the frame's pictures, its colour linear, and the shader
-reads the picture filtered across the quad, times the colour, clamped to 1 and sRGB-encoded
-there (the picture is the camera's linear light, as the screens in the world show it; the
-output's tone curve was applied before the text: the picture has none).
+(its PICTURE build) reads the picture filtered across the quad, times the colour, then
+exposes and tone-maps it as the present did the frame under it (``PresentPass.look``: the
+exposure, the adapted automatic exposure, the tone curve; not the bloom, grade or vignette)
+and sRGB-encodes it there: the picture is the camera's linear light, as the screens in the
+world show it, and on the HUD it looks as the view does.
 
 **The pass** (``TextPass.draw``) runs after the present stage, into the output: one instanced
 draw of a unit quad, a row of attributes a quad, in order (later quads blend over earlier
@@ -39,8 +41,10 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from components.post import TONEMAP_CURVES
 from engine.core.color import linear_to_srgb
-from engine.render.bindings import PICTURE_UNIT, TEXT_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import EXPOSURE_UNIT, PICTURE_UNIT, TEXT_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.present import PictureLook
 from engine.render.shader_library import ShaderLibrary
 
 FONT_SIZE = 16              # pixels of the atlas's font (ScreenText.scale multiplies them)
@@ -52,6 +56,7 @@ MAX_QUADS = 16384
 QUAD_FLOATS = 12             # screen rect 4, atlas rect 4, colour 4
 _BLEND_OVER = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA)
 _TEXT = PassState(blend=_BLEND_OVER)
+PLAIN_LOOK = PictureLook()   # exposure 1, no tone curve: a picture panel clamped and encoded as it is
 
 
 @dataclass(frozen=True)
@@ -198,22 +203,43 @@ class TextPass:
         self.texture = ctx.texture((w, h), 1, self.atlas.pixels.tobytes(), alignment=1)
         self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.texture.repeat_x = self.texture.repeat_y = False
+        self.shaders = shaders
         self.program = shaders.program("screen_text.vert", "screen_text.frag")
         self.program["atlas"].value = TEXT_UNIT
-        self.program["picture"].value = PICTURE_UNIT
         self.corners = ctx.buffer(np.array([0, 0, 1, 0, 0, 1, 1, 1], np.float32).tobytes())
         self.quads = ctx.buffer(reserve=MAX_QUADS * QUAD_FLOATS * 4, dynamic=True)
-        self.vao = ctx.vertex_array(self.program, [
-            (self.corners, "2f", "corner"),
-            (self.quads, "4f 4f 4f/i", "screen_rect", "atlas_rect", "color"),
-        ])
+        self.vao = self._vertex_array(self.program)
+        # The picture panels' builds, by (tone curve, automatic exposure): program, vertex array.
+        self._pictures: dict[tuple[str, bool], tuple[moderngl.Program, moderngl.VertexArray]] = {}
         self.drawn = 0  # quads drawn in the last draw
         self.cut = 0    # quads left out (past MAX_QUADS) in the last draw
 
+    def _vertex_array(self, program: moderngl.Program, atlas: bool = True) -> moderngl.VertexArray:
+        """The quad and the rows read by ``program`` (a picture's build reads no atlas rect)."""
+        rows = (self.quads, "4f 4f 4f/i", "screen_rect", "atlas_rect", "color") if atlas else \
+            (self.quads, "4f 16x 4f/i", "screen_rect", "color")
+        return self.ctx.vertex_array(program, [(self.corners, "2f", "corner"), rows])
+
+    def _picture_build(self, look: PictureLook) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        """The picture panels' build for ``look``'s curve and automatic exposure, made once."""
+        key = (look.curve, look.exposure_state is not None)
+        build = self._pictures.get(key)
+        if build is None:
+            defines = {"PICTURE": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(look.curve))}
+            if key[1]:
+                defines["AUTO_EXPOSURE"] = "1"
+            program = self.shaders.program("screen_text.vert", "screen_text.frag", defines=defines)
+            program["picture"].value = PICTURE_UNIT
+            if key[1]:
+                program["exposure_state"].value = EXPOSURE_UNIT
+            build = self._pictures[key] = (program, self._vertex_array(program, atlas=False))
+        return build
+
     def draw(self, quads: np.ndarray, framebuffer: moderngl.Framebuffer, size: tuple[int, int],
-             pictures: tuple[moderngl.Texture, ...] = ()) -> None:
+             pictures: tuple[moderngl.Texture, ...] = (), look: PictureLook = PLAIN_LOOK) -> None:
         """Blend ``quads`` (``layout``'s rows) over ``framebuffer`` (``size`` pixels); a picture
-        panel's row samples ``pictures[its index]``."""
+        panel's row samples ``pictures[its index]``, exposed and tone-mapped by ``look`` (the
+        present's, of the frame under it)."""
         self.cut = max(0, len(quads) - MAX_QUADS)
         if self.cut:
             warnings.warn(f"screen text: {len(quads)} quads this frame, {self.cut} left out (at most {MAX_QUADS} "
@@ -226,31 +252,37 @@ class TextPass:
         framebuffer.use()
         apply_pass_state(self.ctx, _TEXT, (0, 0, *size))
         bind_texture(self.ctx, self.texture, TEXT_UNIT)
-        bind_texture(self.ctx, self.texture, PICTURE_UNIT)   # (a texture on every sampler: the text runs' is unread)
-        self.program["output_size"].value = (float(size[0]), float(size[1]))
+        output_size = (float(size[0]), float(size[1]))
+        self.program["output_size"].value = output_size
         marked = np.flatnonzero(quads[:, 6] < 0.0)   # the picture panels' rows
         if not len(marked):
-            self._run(quads, False)
+            self._run(quads, self.vao)
             return
+        program, vao = self._picture_build(look)
+        program["output_size"].value = output_size
+        program["exposure"].value = look.scale
+        if look.exposure_state is not None:
+            bind_texture(self.ctx, look.exposure_state, EXPOSURE_UNIT)
         start = 0
         for row in marked:   # the runs of quads before each picture, then the picture alone
             if row > start:
-                self._run(quads[start:row], False)
+                self._run(quads[start:row], self.vao)
             index = int(quads[row, 4])
             if 0 <= index < len(pictures):
                 bind_texture(self.ctx, pictures[index], PICTURE_UNIT)
-                self._run(quads[row:row + 1], True)
+                self._run(quads[row:row + 1], vao)
             start = row + 1
         if start < len(quads):
-            self._run(quads[start:], False)
+            self._run(quads[start:], self.vao)
 
-    def _run(self, quads: np.ndarray, picture: bool) -> None:
-        """One instanced draw of ``quads`` (written at the buffer's start), with the picture
-        read (``picture``) or the atlas."""
+    def _run(self, quads: np.ndarray, vao: moderngl.VertexArray) -> None:
+        """One instanced draw of ``quads`` (written at the buffer's start) by ``vao``'s build
+        (the atlas's, or a picture's)."""
         self.quads.write(quads.tobytes())
-        self.program["showing_picture"].value = picture
-        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(quads))
+        vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(quads))
 
     def release(self) -> None:
+        for _, vao in self._pictures.values():
+            vao.release()
         for obj in (self.vao, self.quads, self.corners, self.texture):
             obj.release()
