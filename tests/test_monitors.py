@@ -657,10 +657,14 @@ def test_a_picture_drawn_on_predicted_counts_is_drawn_again_each_time_it_is_due(
         def make():
             build, held = studio(Monitor(size=PICTURE, depth=depth), mirror=True,
                                  box_at=np.array([0.5, 1.2, 1.5]), box_half=np.array([0.8, 0.6, 0.3]))
-            return build, held
+
+            def aside(world):   # (the screen far to the side: out of the mirror's view, so not its own input)
+                build(world)
+                world.get(held["screen"], Transform).position = (30.0, 1.0, 6.0)
+            return aside, held
         return make
 
-    for depth, kept in ((1, 0), (0, 1)):
+    for depth, kept in ((1, 0), (0, 1)):   # (taken for its own counts, depth 1 here would keep: 1)
         runners = _keeping_and_drawing(scene, make_build(depth), (64, 48))
         for runner, _ in runners:
             runner.engine.renderer.monitors.visibility = "predicted"
