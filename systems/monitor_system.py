@@ -26,11 +26,14 @@ scene's version less the pictures' (``MonitorPictures.scene_version``: every upl
 redraw of what a view shows but a picture), what every view's drawing depends on
 (``Renderer.drawing_settings``), its camera's view, size, layers and depth, the waters' waves,
 the surfaces' table and blends as the same objects, and no component of the world written,
-added or removed since; besides, its drawing read nothing
-from the frame before (``MonitorPictures.repeatable``), and each picture it showed (a screen
-its views drew) is the one it showed.  So a camera that sees its own screen draws every time
-it is due (its picture moved on, a picture in a picture a level deeper each time), and one
-that sees another's draws again after the other's changes.  Kept, a picture moves no version
+added or removed since; besides, its drawing read nothing from the frame before
+(``MonitorPictures.repeatable``: no end view, no level drawn on the last drawing's counts),
+and each picture it showed (a screen its views may have drawn) is the one it showed.  A
+picture still but drawn on predicted counts (a GPU's "auto") is drawn once more with exact
+ones (the CPU waits for the GPU once a level, that once), and kept from then on.  So a
+camera that sees its own screen draws every time it is due (its picture moved on, a picture
+in a picture a level deeper each time), and one that sees another's draws again after the
+other's changes.  Kept, a picture moves no version
 on: a still camera's mirrors that show it keep their views too.
 
 The pictures of monitors gone (or deleted) are let go here; the extract stage makes a
@@ -123,8 +126,9 @@ class MonitorSystem(esper.Processor):
             view.layers = camera.layer_mask
             key = self._still_key(monitor, view, table, blends)
             kept = self._keys.get(entity)
-            if self.keep_still_pictures and kept is not None and _same(key, kept) and pictures.repeatable(entity) \
-                    and pictures.shown_unchanged(entity):
+            still = self.keep_still_pictures and kept is not None and _same(key, kept) \
+                and pictures.shown_unchanged(entity)
+            if still and pictures.repeatable(entity):
                 stats.monitors_kept += 1
                 self.drawn[entity] = frame
                 continue
@@ -132,8 +136,8 @@ class MonitorSystem(esper.Processor):
                 cut += 1
                 continue
             trees = monitor.depth > 0 and table is not None
-            with outside_the_budget(stats):
-                views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends)
+            with outside_the_budget(stats):   # (still, but drawn on predicted counts: once more exactly, to keep)
+                views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still)
             stats.monitor_views += views
             drawn += 1
             self.drawn[entity] = frame

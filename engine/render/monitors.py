@@ -80,7 +80,8 @@ class MonitorPictures:
         self._versions = itertools.count(1)
         # How the pictures' trees learn their views' pixels (``ReflectionSystem.visibility``'s
         # choices; "auto": exact on a software rasteriser, predicted on a GPU).  A drawing on
-        # predicted counts (last drawing's) is never kept (``repeatable``).
+        # predicted counts (last drawing's) is not kept (``repeatable``): the monitor stage
+        # draws a picture whose inputs did not change once more with exact counts, then keeps it.
         self.visibility = "auto"
         self._moved_on = 0   # what the drawings moved Gpu.scene_version on by
 
@@ -134,11 +135,12 @@ class MonitorPictures:
         return stand_in
 
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
-             blends: SurfaceBlends = NO_BLENDS) -> int:
+             blends: SurfaceBlends = NO_BLENDS, exact: bool = False) -> int:
         """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
         pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
-        mirrors and portals), then the colour copied into the picture and its mips built.
-        Returns the views drawn (the root and its tree's)."""
+        mirrors and portals; ``exact``: its visibility exact whatever ``visibility`` says),
+        then the colour copied into the picture and its mips built.  Returns the views drawn
+        (the root and its tree's)."""
         held = self._pictures[entity]
         if view.size != held.size:
             raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
@@ -147,7 +149,7 @@ class MonitorPictures:
         before = self.renderer.scene_version
         if surfaces is not None and depth > 0:
             self.scene_pass.draw([view], targets, TREE_ROOT)
-            settings = TreeSettings(depth_cap=depth, visibility=self.visibility)
+            settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
             result = self.tree.render(view, held.levels, surfaces, settings, blends, TREE_ROOT)
             drawn += [node.view for node in result.views[1:]]
             repeatable = not result.end_views and result.visibility != "predicted"
