@@ -46,8 +46,10 @@ from contextlib import contextmanager
 from dataclasses import fields
 
 import esper
+import numpy as np
+from pyglm import glm
 
-from components import Camera, ComponentWarning, Monitor, Transform
+from components import Camera, ComponentWarning, Material, MeshRef, Monitor, Morph, Skin, Transform
 from engine.core.errors import MonitorLimitWarning
 from engine.core.world import World
 from engine.frame_stats import BudgetLedger
@@ -73,6 +75,7 @@ class MonitorSystem(esper.Processor):
         self._keys: dict[int, tuple[tuple, tuple]] = {}   # monitor -> _still_key at its last drawing
         self._world_version = 0   # moved on by every change to the world's components (World.change_count)
         self._changes_seen = 0    # World.change_count when this stage last looked
+        self._flat: dict[int, tuple | bool] = {}   # mesh id -> its one face (point, normal), or False
 
     @property
     def keep_still_pictures(self) -> bool:
@@ -114,6 +117,7 @@ class MonitorSystem(esper.Processor):
             (surfaces.mirrors or surfaces.portals) else None
         blends = world.resources.get(SurfaceBlends, NO_BLENDS)
         drawn = cut = 0
+        faces = None   # (the screens' planes, found when a picture is first drawn this frame)
         for entity, monitor in due:
             parts = self._camera(entity, monitor)
             if parts is None:
@@ -136,8 +140,11 @@ class MonitorSystem(esper.Processor):
                 cut += 1
                 continue
             trees = monitor.depth > 0 and table is not None
+            if faces is None:
+                faces = self._screen_faces(monitors)
             with outside_the_budget(stats):   # (still, but drawn on predicted counts: once more exactly, to keep)
-                views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still)
+                views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still,
+                                      faces=faces)
             stats.monitor_views += views
             drawn += 1
             self.drawn[entity] = frame
@@ -148,6 +155,32 @@ class MonitorSystem(esper.Processor):
                 f"waiting longest), so {cut} keep their pictures a frame more (RenderStats.monitors_cut)"),
                 stacklevel=2)
         self._cut = stats.monitors_cut = cut
+
+    def _screen_faces(self, monitors: list[tuple[int, Monitor]]) -> dict[int, tuple[glm.vec3, glm.vec3]]:
+        """Each screen that shows its picture on one side only, as (a point, its front's unit
+        normal) in the world: a flat mesh (every triangle wound to face one way) that is not
+        double-sided, skinned or morphed.  A view whose eye is behind that plane cannot draw
+        the picture (its faces are culled), so the picture is not an input of the view's."""
+        world = self.world
+        faces = {}
+        for entity, _ in monitors:
+            mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
+            material = world.try_get(entity, Material)
+            if mesh_ref is None or transform is None or (material is not None and material.double_sided) \
+                    or world.try_get(entity, Skin) is not None or world.try_get(entity, Morph) is not None:
+                continue
+            local = self._flat.get(mesh_ref.mesh.id)
+            if local is None:
+                local = self._flat[mesh_ref.mesh.id] = flat_face(mesh_ref.mesh.positions, mesh_ref.mesh.indices)
+            if local is False:
+                continue
+            matrix = transform.world
+            # The front is where the local normal goes under the inverse transpose: a mirroring
+            # matrix turns the winding, and its batch's front face is turned with it.
+            normal = glm.transpose(glm.inverse(glm.mat3(matrix))) * glm.vec3(*local[1])
+            if glm.length(normal) > 0.0:
+                faces[entity] = (glm.vec3(matrix * glm.vec4(*local[0], 1.0)), glm.normalize(normal))
+        return faces
 
     def _still_key(self, monitor: Monitor, view: View, table: SurfaceTable | None,
                    blends: SurfaceBlends) -> tuple[tuple, tuple]:
@@ -197,3 +230,20 @@ def outside_the_budget(ledger: BudgetLedger) -> Iterator[None]:
     finally:
         for name, value in kept.items():
             setattr(ledger, name, value)
+
+
+def flat_face(positions: np.ndarray, indices: np.ndarray) -> tuple[tuple, tuple] | bool:
+    """(A point, the unit normal its triangles' winding faces) of a mesh whose triangles all
+    lie in one plane and face one way (a quad, a disc), else False."""
+    corners = positions[indices]                         # [triangle, corner, xyz]
+    crossed = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    lengths = np.linalg.norm(crossed, axis=1)
+    if not len(lengths) or lengths.max() <= 0.0:
+        return False
+    normal = crossed[lengths.argmax()] / lengths.max()
+    size = max(float(np.abs(positions).max()), 1e-6)
+    facing = crossed @ normal   # (each triangle's doubled area along the normal: >= 0 for the one way)
+    off_plane = np.abs((positions - positions[0]) @ normal)
+    if facing.min() < -1e-9 * size * size or off_plane.max() > 1e-6 * size:
+        return False
+    return tuple(map(float, positions[0])), tuple(map(float, normal))

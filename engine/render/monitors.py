@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 
 import moderngl
 import numpy as np
+from pyglm import glm
 
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError
@@ -135,12 +136,15 @@ class MonitorPictures:
         return stand_in
 
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
-             blends: SurfaceBlends = NO_BLENDS, exact: bool = False) -> int:
+             blends: SurfaceBlends = NO_BLENDS, exact: bool = False,
+             faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None) -> int:
         """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
         pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
         mirrors and portals; ``exact``: its visibility exact whatever ``visibility`` says),
-        then the colour copied into the picture and its mips built.  Returns the views drawn
-        (the root and its tree's)."""
+        then the colour copied into the picture and its mips built.  ``faces``: the screens
+        seen from one side only, as (point, front normal), by monitor (what ``shown`` leaves
+        out where a view's eye is behind one).  Returns the views drawn (the root and its
+        tree's)."""
         held = self._pictures[entity]
         if view.size != held.size:
             raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
@@ -157,17 +161,18 @@ class MonitorPictures:
             self.scene_pass.draw([view], targets, ROOT_VIEW)
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
-        held.shown = {other: self._pictures[other].version for other in self._screens_reaching(drawn)}
+        held.shown = {other: self._pictures[other].version for other in self._screens_reaching(drawn, faces or {})}
         held.version, held.repeatable = next(self._versions), repeatable
         self.renderer.note_scene_change()   # (a screen's picture is what views show: no tree kept over it)
         self._moved_on += self.renderer.scene_version - before
         self.renderer.checkpoint(f"monitor {entity}")
         return len(drawn)
 
-    def _screens_reaching(self, views: list[View]) -> set[int]:
+    def _screens_reaching(self, views: list[View], faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> set[int]:
         """The monitors whose screens can draw a sample in any of ``views`` (each drawn into a
         viewport of its own size): the batches whose emissive map is their picture, tested
-        by their instances' boxes against each view's volume (``batch_reach``, conservative)."""
+        by their instances' boxes against each view's volume (``batch_reach``, conservative),
+        less a one-sided screen (``faces``) whose front the view's eye is behind."""
         pictures = {id(held.texture): entity for entity, held in self._pictures.items()}
         screens = [batch for batch in self.renderer.batches.values()
                    if batch.count and batch.emissive_map is not None and id(batch.emissive_map) in pictures]
@@ -176,7 +181,10 @@ class MonitorPictures:
         reached = set()
         for view in views:
             reach = batch_reach([view], view.size, screens)[0]
-            reached.update(pictures[id(batch.emissive_map)] for batch, hit in zip(screens, reach, strict=True) if hit)
+            for batch, hit in zip(screens, reach, strict=True):
+                entity = pictures[id(batch.emissive_map)]
+                if hit and not _behind(view, faces.get(entity)):
+                    reached.add(entity)
         return reached
 
     def texture(self, entity: int) -> moderngl.Texture:
@@ -203,3 +211,16 @@ class MonitorPictures:
         for entity in list(self._pictures):
             self.drop(entity)
         self.tree.release()
+
+
+def _behind(view: View, face: tuple[glm.vec3, glm.vec3] | None) -> bool:
+    """Whether ``view`` sees only the back of a one-sided ``face`` (point, front normal): its
+    eye behind the plane (an orthographic view: looking along the normal's way), by a margin
+    (a face seen edge on counts as seen)."""
+    if face is None:
+        return False
+    point, normal = face
+    if view.parallel:
+        return glm.dot(view.axis, normal) < -1e-6
+    offset = view.eye - point
+    return glm.dot(offset, normal) < -1e-6 * max(glm.length(offset), 1.0)
