@@ -24,7 +24,7 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
     reflect = engine.reflection_system
     probes = engine.stages["probes"]
     shadows_on = engine.stages["shadows"].enabled
-    monitors = stats.monitor_views or stats.monitors_kept
+    monitors = bool(engine.renderer.monitors.entities)   # (a line while there are monitors, not only when drawn)
     seconds = sum(frame_times) / len(frame_times) if frame_times else 0.0
     fps = 1.0 / seconds if seconds > 0 else 0.0
     levels = Counter(view.level for view in reflect.views)
@@ -45,8 +45,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"probe captures {stats.probe_captures} ({stats.probe_faces} faces)"
         f"{f', volume points {stats.volume_points}' if stats.volume_points else ''}; shadow maps "
         f"{stats.shadow_maps_drawn}{f' ({stats.shadow_faces_drawn} cube faces)' if stats.shadow_faces_drawn else ''}"
-        f" + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}"
-        f"{f'; monitor views {stats.monitor_views} + {stats.monitors_kept} pictures kept' if monitors else ''}",
+        f" + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}",
+        *([f"monitors: views {stats.monitor_views}, pictures kept {stats.monitors_kept}"] if monitors else []),
         f"cut: lights {stats.lights_cut}, shadows {stats.shadows_cut}"
         f"{f', cascades {stats.shadow_cascades_cut}' if stats.shadow_cascades_cut else ''}"
         f"{f', rectangles (lit as points) {stats.rect_lights_cut}' if stats.rect_lights_cut else ''}"

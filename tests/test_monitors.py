@@ -580,6 +580,8 @@ def test_a_still_monitor_keeps_its_picture_and_the_mirror_showing_it_keeps_its_v
         views_kept.append(keeping.stats.reflection_views_kept)
     assert drawn == [1, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0]
     assert kept == [1 - count for count in drawn]
+    from shell.overlay_text import overlay_lines
+    assert "monitors: views 0, pictures kept 1" in overlay_lines(keeping.engine, [0.016])   # (the overlay says it)
     assert all(views_kept[frame] > 0 for frame in (1, 2, 3, 4, 6, 7, 8, 10, 11))
     assert not any(views_kept[frame] for frame in (0, 5, 9))
     assert runners[1][0].stats.monitors_kept == 0 and runners[1][0].stats.monitor_views == 1
