@@ -94,6 +94,9 @@ class MonitorSystem(esper.Processor):
         pictures = self.renderer.monitors
         stats = self.renderer.stats
         monitors = sorted(world.query_one(Monitor), key=lambda pair: pair[0])
+        if not monitors and not self.drawn and not pictures.entities:
+            self._cut = 0   # (no monitor, none kept: nothing to look at; a new one is drawn first and keyed then)
+            return
         present = {entity for entity, _ in monitors}
         for gone in pictures.entities - present:
             pictures.drop(gone)
