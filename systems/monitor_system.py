@@ -33,8 +33,9 @@ picture still but drawn on predicted counts (a GPU's "auto") is drawn once more 
 ones (the CPU waits for the GPU once a level, that once), and kept from then on.  So a
 camera that sees its own screen draws every time it is due (its picture moved on, a picture
 in a picture a level deeper each time), and one that sees another's draws again after the
-other's changes.  Kept, a picture moves no version
-on: a still camera's mirrors that show it keep their views too.
+other's changes; a flat one-sided screen a view sees from behind shows it nothing
+(``_screen_faces``).  Kept, a picture moves no version on: a still camera's mirrors that show
+it keep their views too.
 
 The pictures of monitors gone (or deleted) are let go here; the extract stage makes a
 screen's picture when it first draws the screen (its emissive map is the picture)."""
