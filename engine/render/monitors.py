@@ -20,8 +20,8 @@ the draw before, never the one being drawn (no texture is read while it is writt
 **What a drawing read.**  Each drawing of a picture gives it a new ``version`` (a new
 picture, black, has one too), and notes the pictures its views may have shown, with their
 versions then (``shown``: the screens, batches whose emissive map is a picture, whose
-instances' boxes reach any of its views' volumes: ``batch_cull.batch_reach``, conservative),
-and whether it read anything from
+instances' boxes reach any of its views' volumes, ``batch_cull.batch_reach``, conservative,
+less a flat one-sided screen a view sees from behind), and whether it read anything from
 before the frame (``repeatable``: no end view showing last frame's image, no level drawn on
 last frame's visibility counts).  What the drawings moved ``Gpu.scene_version`` on by is kept
 apart (``scene_version``: the scene's version less the pictures'), so the monitor stage
