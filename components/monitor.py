@@ -5,11 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from components.tracking import HALF_MAX, TrackedComponent, _fail, finite, integer
+from components.tracking import HALF_MAX, TrackedComponent, _fail, choice, finite, integer
 
 MIN_MONITOR_SIDE = 8       # pixels a side of a Monitor's picture at least
 MAX_MONITOR_SIDE = 2048    # and at most (the GL context's own texture limit may be lower: said when drawn)
 MAX_MONITOR_DEPTH = 8      # mirror and portal levels a monitor's picture may show
+MONITOR_UPDATES = ("always", "when_seen")   # Monitor.update: when a due picture is drawn
 
 
 @dataclass(eq=False)
@@ -30,6 +31,12 @@ class Monitor(TrackedComponent):
       costs a view every few frames), the first on the frame it is added.
     - ``depth``: the mirror and portal levels its picture shows (0: each mirror and portal in
       it shows its fallback; at most ``MAX_MONITOR_DEPTH``).
+    - ``update``: "always" (each time it is due) or "when_seen" (as Godot's viewports' "when
+      visible"): a due picture is drawn only while its screen can be seen, by this frame's
+      main view, a mirror's or portal's view of the frame before (so a screen first seen in a
+      mirror shows its older picture for that one frame) or a monitor's last drawing, or on a
+      ``ScreenPanel``; a monitor in another room costs nothing.  A probe that captures the
+      screen while it is unseen keeps its older picture.
 
     On an entity with a ``ScreenPanel`` the panel is filled with the picture, over the frame
     (a rear-view mirror on the screen; the panel's colour multiplies it).
@@ -45,6 +52,7 @@ class Monitor(TrackedComponent):
     brightness: float = 1.0
     every: int = 1
     depth: int = 1
+    update: str = "always"
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "camera":
@@ -62,4 +70,6 @@ class Monitor(TrackedComponent):
             return integer(self, name, value, low=1, high=10000)
         if name == "depth":
             return integer(self, name, value, low=0, high=MAX_MONITOR_DEPTH)
+        if name == "update":
+            return choice(self, name, value, MONITOR_UPDATES)
         return value

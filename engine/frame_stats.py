@@ -111,6 +111,7 @@ class RenderStats(BudgetLedger):
     monitor_views: int = 0               # views drawn for monitors' pictures this frame (each picture's and its tree's)
     monitors_cut: int = 0                # monitors due this frame past MAX_MONITORS (their pictures kept)
     monitors_kept: int = 0               # monitors due this frame whose pictures nothing changed (kept, not drawn)
+    monitors_unseen: int = 0             # monitors due this frame not drawn: update "when_seen", no view sees them
     volumetric_lamps_cut: int = 0        # point lights with volumetric past MAX_VOLUMETRIC_LAMPS (not in the air)
     virtual_lights: int = 0              # lights shining through mirrors and portals this frame
     virtual_lights_cut: int = 0          # ... that the limit or the view budget left out

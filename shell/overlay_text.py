@@ -46,7 +46,8 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
         f"{f', volume points {stats.volume_points}' if stats.volume_points else ''}; shadow maps "
         f"{stats.shadow_maps_drawn}{f' ({stats.shadow_faces_drawn} cube faces)' if stats.shadow_faces_drawn else ''}"
         f" + {stats.shadow_maps_kept} kept{'' if shadows_on else ' (off)'}",
-        *([f"monitors: views {stats.monitor_views}, pictures kept {stats.monitors_kept}"] if monitors else []),
+        *([f"monitors: views {stats.monitor_views}, pictures kept {stats.monitors_kept}, unseen "
+            f"{stats.monitors_unseen}"] if monitors else []),
         f"cut: lights {stats.lights_cut}, shadows {stats.shadows_cut}"
         f"{f', cascades {stats.shadow_cascades_cut}' if stats.shadow_cascades_cut else ''}"
         f"{f', rectangles (lit as points) {stats.rect_lights_cut}' if stats.rect_lights_cut else ''}"

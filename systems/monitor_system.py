@@ -10,6 +10,10 @@ decided here:
   first (then by entity): the rest keep their pictures a frame more and are drawn first the
   next (counted in ``RenderStats.monitors_cut``, said when the count grows; a picture kept,
   below, is not drawn and not counted);
+- whether it can be seen, for a ``Monitor.update`` "when_seen" (``_seen``): its screen
+  reached by this frame's main view, last frame's mirror and portal views (``ViewEyes``) or
+  a monitor's last drawing's views, or shown on a ``ScreenPanel``; unseen, it is not drawn
+  and stays due (``RenderStats.monitors_unseen``);
 - each one's view: its camera entity's ``Camera`` (field of view or orthographic height,
   near, far, layers) from its ``Transform``, at the picture's size and aspect; a camera that
   is missing (no entity, no ``Camera`` or no ``Transform`` on it) is said once, and the
@@ -50,8 +54,9 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import Camera, ComponentWarning, Material, MeshRef, Monitor, Morph, Skin, Transform
+from components import Camera, ComponentWarning, Material, MeshRef, Monitor, Morph, ScreenPanel, Skin, Transform
 from engine.core.errors import MonitorLimitWarning
+from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.frame_stats import BudgetLedger
 from engine.render.monitors import MAX_MONITORS
@@ -60,6 +65,8 @@ from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View, camera_view
 from engine.resources import Surfaces
+from engine.rules.frame_rules import active_camera_parts
+from engine.rules.light_rules import ViewEyes
 
 
 class MonitorSystem(esper.Processor):
@@ -122,10 +129,19 @@ class MonitorSystem(esper.Processor):
         blends = world.resources.get(SurfaceBlends, NO_BLENDS)
         drawn = cut = 0
         faces = None   # (the screens' planes, found when a picture is first drawn this frame)
+        seen = None    # (the screens some view sees, found when a "when_seen" one is first due)
         for entity, monitor in due:
             parts = self._camera(entity, monitor)
             if parts is None:
                 continue
+            if monitor.update == "when_seen":
+                if faces is None:
+                    faces = self._screen_faces(monitors)
+                if seen is None:
+                    seen = self._seen(faces)
+                if entity not in seen:   # (it stays due: drawn the first frame a view sees it)
+                    stats.monitors_unseen += 1
+                    continue
             camera, transform = parts
             pictures.picture(entity, monitor.size)   # (made here too for a monitor with no screen yet)
             view = camera_view(transform.world, camera.fov_y, camera.near, camera.far, monitor.size,
@@ -159,6 +175,25 @@ class MonitorSystem(esper.Processor):
                 f"waiting longest), so {cut} keep their pictures a frame more (RenderStats.monitors_cut)"),
                 stacklevel=2)
         self._cut = stats.monitors_cut = cut
+
+    def _seen(self, faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> set[int]:
+        """The monitors whose screens a view may see: this frame's main view (the active
+        camera's, at the output's aspect), last frame's mirror and portal views
+        (``ViewEyes``) and the monitors' views of their last drawings; and every monitor
+        shown on a ``ScreenPanel``."""
+        world = self.world
+        views = []
+        output, camera = world.resources.get(Output), active_camera_parts(world)
+        if output is not None and camera is not None and output.size[0] > 0 and output.size[1] > 0:
+            _, cam, cam_t = camera
+            views.append(camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size,
+                                     ortho_height=cam.ortho_height if cam.projection == "orthographic" else None))
+        eyes = world.resources.get(ViewEyes)
+        if eyes is not None:
+            views += [node.view for node in eyes.views if node.level > 0]
+        views += self.renderer.monitors.last_views()
+        seen = self.renderer.monitors.screens_reaching(views, faces)
+        return seen | {entity for entity, _ in world.query(Monitor, ScreenPanel)}
 
     def _screen_faces(self, monitors: list[tuple[int, Monitor]]) -> dict[int, tuple[glm.vec3, glm.vec3]]:
         """Each screen that shows its picture on one side only, as (a point, its front's unit

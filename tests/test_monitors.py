@@ -334,6 +334,8 @@ def test_bad_monitor_values_are_refused_naming_the_field():
         Monitor(depth=-1)
     with pytest.raises(ComponentValueError, match="Monitor.camera"):
         Monitor(camera=True)
+    with pytest.raises(ComponentValueError, match="Monitor.update"):
+        Monitor(update="sometimes")
 
 
 def test_a_level_file_names_a_monitors_camera_by_its_entity(tmp_path):
@@ -581,7 +583,7 @@ def test_a_still_monitor_keeps_its_picture_and_the_mirror_showing_it_keeps_its_v
     assert drawn == [1, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0]
     assert kept == [1 - count for count in drawn]
     from shell.overlay_text import overlay_lines
-    assert "monitors: views 0, pictures kept 1" in overlay_lines(keeping.engine, [0.016])   # (the overlay says it)
+    assert "monitors: views 0, pictures kept 1, unseen 0" in overlay_lines(keeping.engine, [0.016])
     assert all(views_kept[frame] > 0 for frame in (1, 2, 3, 4, 6, 7, 8, 10, 11))
     assert not any(views_kept[frame] for frame in (0, 5, 9))
     assert runners[1][0].stats.monitors_kept == 0 and runners[1][0].stats.monitor_views == 1
@@ -711,3 +713,123 @@ def test_only_a_flat_mesh_wound_one_way_has_one_face():
     turned = square.indices.copy()
     turned[1] = turned[1][::-1]
     assert flat_face(square.positions, turned) is False
+
+
+
+def _moving_box(runners) -> None:
+    """The box each monitor watches moved a little (so a picture drawn differs from the last)."""
+    for runner, held in runners:
+        transform = runner.world.get(held["box"], Transform)
+        transform.position = transform.position + glm.vec3(0.03, 0.0, 0.0)
+
+
+def test_a_monitor_drawn_when_seen_is_drawn_from_the_frame_the_camera_turns_to_it(scene):
+    """``update="when_seen"``: while the camera looks away from the screen the picture is not
+    drawn (``monitors_unseen``), though the box it watches moves; on the frame the camera turns
+    to it, it is drawn (this frame's main view sees it), and every frame equals an engine whose
+    monitor is drawn always."""
+    def make_build(update):
+        def make():
+            build, held = studio(Monitor(size=PICTURE, update=update))
+
+            def away(world):
+                build(world)
+                (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
+                held["camera"] = camera
+                world.get(camera, Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
+            return away, held
+        return make
+
+    runners = []
+    for update in ("when_seen", "always"):
+        build, held = make_build(update)()
+        runners.append((scene(build, (64, 48)), held))
+    seeing, always = runners[0][0], runners[1][0]
+    drawn, unseen = [], []
+    for frame in range(6):
+        _moving_box(runners)
+        if frame == 3:
+            for runner, held in runners:
+                runner.world.get(held["camera"], Transform).rotation = \
+                    look_rotation(glm.vec3(SCREEN_AT) - glm.vec3(0.0, 1.0, 7.5))
+        frames = [runner.frame(DT) for runner, _ in runners]
+        assert np.array_equal(frames[0], frames[1]), frame
+        drawn.append(seeing.stats.monitor_views)
+        unseen.append(seeing.stats.monitors_unseen)
+        assert always.stats.monitor_views == 1
+    assert drawn == [0, 0, 0, 1, 1, 1] and unseen == [1, 1, 1, 0, 0, 0]
+    assert (frames[0][..., 0] > 60).sum() > 5   # the box, on the screen
+    from shell.overlay_text import overlay_lines
+    runners[0][0].world.get(runners[0][1]["camera"], Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
+    seeing.frame(DT)
+    assert "monitors: views 0, pictures kept 0, unseen 1" in overlay_lines(seeing.engine, [0.016])
+
+
+def test_a_monitor_drawn_when_seen_through_a_mirror_is_a_frame_late_the_first_time(scene):
+    """The screen seen only in a mirror behind it: on the first frame no view of the last saw
+    it, so its picture is not drawn (the mirror shows it black); from the next frame the
+    mirror's view of the frame before sees it and it is drawn each frame, every frame then
+    equal to an engine whose monitor is drawn always.  On a screen panel it is always seen."""
+    def make_build(update):
+        def make():
+            build, held = studio(Monitor(size=PICTURE, update=update))
+
+            def mirrored(world):
+                build(world)
+                seen_in_a_mirror(world)
+            return mirrored, held
+        return make
+
+    runners = []
+    for update in ("when_seen", "always"):
+        build, held = make_build(update)()
+        runners.append((scene(build, (96, 72)), held))
+    seeing = runners[0][0]
+    drawn, same = [], []
+    for _ in range(4):
+        _moving_box(runners)
+        frames = [runner.frame(DT) for runner, _ in runners]
+        same.append(np.array_equal(frames[0], frames[1]))
+        drawn.append(seeing.stats.monitor_views)
+    assert drawn == [0, 1, 1, 1] and same == [False, True, True, True]
+    assert (frames[0][..., 0] > 60).sum() > 5   # the box, on the screen, in the mirror
+    from components import ScreenPanel
+
+    held = {}
+    build, parts = studio(None, eye=(0.0, 1.0, 30.0))
+
+    def hud(world):
+        build(world)
+        held["panel"] = world.spawn(ScreenPanel(size=PICTURE, position=(10, 6)),
+                                    Monitor(camera=parts["lens"], size=PICTURE, update="when_seen"))
+
+    runner, _ = run(scene, hud, 1)
+    assert runner.stats.monitor_views == 1 and runner.stats.monitors_unseen == 0
+
+
+def test_a_monitor_drawn_when_seen_by_another_monitor_is_drawn(scene):
+    """Monitor B (``when_seen``) is seen by monitor A's camera alone (the active camera looks
+    away): A, the lower entity, is drawn first each frame, and its view (its last drawing's)
+    sees B's screen, so B is drawn each frame too; and with B's picture in A's."""
+    build, held = studio(Monitor(size=PICTURE, update="when_seen"))
+
+    def watched(world):
+        lens = world.spawn(Transform(position=(0.0, 1.0, 8.5), rotation=look_rotation(glm.vec3(0.0, 0.0, -1.0))),
+                           Camera(fov_y=LENS_FOV, active=False))
+        held["watcher"] = world.spawn(Transform(position=(4.0, 1.0, 6.0)), MeshRef(quad(*SCREEN_SIZE)),
+                                      Material(color=(0.0, 0.0, 0.0, 1.0)), Monitor(camera=lens, size=PICTURE))
+        build(world)
+        (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
+        world.get(camera, Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, -0.2))
+
+    runner = scene(watched, (64, 48))
+    drawn, unseen = [], []
+    for _ in range(3):
+        box = runner.world.get(held["box"], Transform)
+        box.position = box.position + glm.vec3(0.03, 0.0, 0.0)
+        runner.frame(DT)
+        drawn.append(runner.stats.monitor_views)
+        unseen.append(runner.stats.monitors_unseen)
+    assert drawn == [2, 2, 2] and unseen == [0, 0, 0]
+    watched_picture = runner.engine.renderer.monitors.read(held["watcher"])
+    assert (watched_picture[..., 0] > RED[0] / 4).sum() > 10   # B's picture of the box, on B's screen

@@ -67,6 +67,7 @@ class _Picture:
     version: int                     # moved on by each drawing (a number no other picture had)
     shown: dict[int, int] = field(default_factory=dict)   # pictures its last drawing showed: their versions
     repeatable: bool = False         # its last drawing read nothing from the frame before
+    views: list[View] = field(default_factory=list)   # its last drawing's views (the root, its tree's)
 
 
 class MonitorPictures:
@@ -102,6 +103,10 @@ class MonitorPictures:
         pictures = self._pictures
         return all(other in pictures and pictures[other].version == version
                    for other, version in pictures[entity].shown.items())
+
+    def last_views(self) -> list[View]:
+        """Every picture's last drawing's views (what a screen seen by a monitor was seen by)."""
+        return [view for held in self._pictures.values() for view in held.views]
 
     def repeatable(self, entity: int) -> bool:
         """Whether the last drawing of ``entity``'s picture read nothing from before its frame
@@ -161,14 +166,14 @@ class MonitorPictures:
             self.scene_pass.draw([view], targets, ROOT_VIEW)
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
-        held.shown = {other: self._pictures[other].version for other in self._screens_reaching(drawn, faces or {})}
-        held.version, held.repeatable = next(self._versions), repeatable
+        held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}
+        held.version, held.repeatable, held.views = next(self._versions), repeatable, drawn
         self.renderer.note_scene_change()   # (a screen's picture is what views show: no tree kept over it)
         self._moved_on += self.renderer.scene_version - before
         self.renderer.checkpoint(f"monitor {entity}")
         return len(drawn)
 
-    def _screens_reaching(self, views: list[View], faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> set[int]:
+    def screens_reaching(self, views: list[View], faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> set[int]:
         """The monitors whose screens can draw a sample in any of ``views`` (each drawn into a
         viewport of its own size): the batches whose emissive map is their picture, tested
         by their instances' boxes against each view's volume (``batch_reach``, conservative),
