@@ -183,13 +183,16 @@ class MonitorPictures:
                    if batch.count and batch.emissive_map is not None and id(batch.emissive_map) in pictures]
         if not screens:
             return set()
+        by_size: dict[tuple[int, int], list[View]] = {}
+        for view in views:   # (one test for the views of a size: a level's, the main view's)
+            by_size.setdefault(tuple(view.size), []).append(view)
         reached = set()
-        for view in views:
-            reach = batch_reach([view], view.size, screens)[0]
-            for batch, hit in zip(screens, reach, strict=True):
-                entity = pictures[id(batch.emissive_map)]
-                if hit and not _behind(view, faces.get(entity)):
-                    reached.add(entity)
+        for size, group in by_size.items():
+            for view, reach in zip(group, batch_reach(group, size, screens), strict=True):
+                for batch, hit in zip(screens, reach, strict=True):
+                    entity = pictures[id(batch.emissive_map)]
+                    if hit and entity not in reached and not _behind(view, faces.get(entity)):
+                        reached.add(entity)
         return reached
 
     def texture(self, entity: int) -> moderngl.Texture:
