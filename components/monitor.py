@@ -34,8 +34,9 @@ class Monitor(TrackedComponent):
     - ``update``: "always" (each time it is due) or "when_seen" (as Godot's viewports' "when
       visible"): a due picture is drawn only while its screen can be seen, by this frame's
       main view, a mirror's or portal's view of the frame before (so a screen first seen in a
-      mirror shows its older picture for that one frame) or a monitor's last drawing, or on a
-      ``ScreenPanel``; a monitor in another room costs nothing.  A probe that captures the
+      mirror shows its older picture for that one frame) or the last drawing of a monitor
+      itself seen (its own camera's alone does not count), or on a ``ScreenPanel``; a
+      monitor in another room costs nothing.  A probe that captures the
       screen while it is unseen keeps its older picture.
 
     On an entity with a ``ScreenPanel`` the panel is filled with the picture, over the frame

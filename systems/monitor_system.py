@@ -12,8 +12,8 @@ decided here:
   below, is not drawn and not counted);
 - whether it can be seen, for a ``Monitor.update`` "when_seen" (``_seen``): its screen
   reached by this frame's main view, last frame's mirror and portal views (``ViewEyes``) or
-  a monitor's last drawing's views, or shown on a ``ScreenPanel``; unseen, it is not drawn
-  and stays due (``RenderStats.monitors_unseen``);
+  the last drawing's views of a monitor itself seen, or shown on a ``ScreenPanel``; unseen,
+  it is not drawn and stays due (``RenderStats.monitors_unseen``);
 - each one's view: its camera entity's ``Camera`` (field of view or orthographic height,
   near, far, layers) from its ``Transform``, at the picture's size and aspect; a camera that
   is missing (no entity, no ``Camera`` or no ``Transform`` on it) is said once, and the
@@ -178,9 +178,9 @@ class MonitorSystem(esper.Processor):
 
     def _seen(self, faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> set[int]:
         """The monitors whose screens a view may see: this frame's main view (the active
-        camera's, at the output's aspect), last frame's mirror and portal views
-        (``ViewEyes``) and the monitors' views of their last drawings; and every monitor
-        shown on a ``ScreenPanel``."""
+        camera's, at the output's aspect) or last frame's mirror and portal views
+        (``ViewEyes``) may see them, or they are on a ``ScreenPanel``; then, over and over,
+        those the last drawings of the pictures seen may see."""
         world = self.world
         views = []
         output, camera = world.resources.get(Output), active_camera_parts(world)
@@ -191,9 +191,15 @@ class MonitorSystem(esper.Processor):
         eyes = world.resources.get(ViewEyes)
         if eyes is not None:
             views += [node.view for node in eyes.views if node.level > 0]
-        views += self.renderer.monitors.last_views()
-        seen = self.renderer.monitors.screens_reaching(views, faces)
-        return seen | {entity for entity, _ in world.query(Monitor, ScreenPanel)}
+        pictures = self.renderer.monitors
+        seen = pictures.screens_reaching(views, faces) | {entity for entity, _ in world.query(Monitor, ScreenPanel)}
+        # ... and what the pictures seen show, and so on: a screen seen only by its own camera,
+        # or by monitors nobody sees, is not seen.
+        found = seen
+        while found:
+            found = pictures.screens_reaching(pictures.last_views(found), faces) - seen
+            seen = seen | found
+        return seen
 
     def _screen_faces(self, monitors: list[tuple[int, Monitor]]) -> dict[int, tuple[glm.vec3, glm.vec3]]:
         """Each screen that shows its picture on one side only, as (a point, its front's unit

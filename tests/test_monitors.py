@@ -833,3 +833,26 @@ def test_a_monitor_drawn_when_seen_by_another_monitor_is_drawn(scene):
     assert drawn == [2, 2, 2] and unseen == [0, 0, 0]
     watched_picture = runner.engine.renderer.monitors.read(held["watcher"])
     assert (watched_picture[..., 0] > RED[0] / 4).sum() > 10   # B's picture of the box, on B's screen
+
+
+def test_a_monitor_drawn_when_seen_that_only_its_own_camera_sees_is_not_drawn(scene):
+    """The lens looks at its own screen (``when_seen``): drawn while the active camera sees
+    the screen too; once the camera turns away, only the picture's own view sees it, which
+    counts for nothing (nobody sees that picture), so it is not drawn."""
+    build, held = studio(Monitor(size=PICTURE, update="when_seen"))
+
+    def own(world):
+        build(world)
+        facing_own_screen(world, held)
+        (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
+        held["camera"] = camera
+
+    runner = scene(own, (64, 48))
+    drawn, unseen = [], []
+    for frame in range(4):
+        if frame == 2:
+            runner.world.get(held["camera"], Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
+        runner.frame(DT)
+        drawn.append(runner.stats.monitor_views)
+        unseen.append(runner.stats.monitors_unseen)
+    assert drawn == [1, 1, 0, 0] and unseen == [0, 0, 1, 1]

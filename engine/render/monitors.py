@@ -104,9 +104,9 @@ class MonitorPictures:
         return all(other in pictures and pictures[other].version == version
                    for other, version in pictures[entity].shown.items())
 
-    def last_views(self) -> list[View]:
-        """Every picture's last drawing's views (what a screen seen by a monitor was seen by)."""
-        return [view for held in self._pictures.values() for view in held.views]
+    def last_views(self, entities: set[int]) -> list[View]:
+        """The views of the last drawings of ``entities``' pictures (what their cameras saw)."""
+        return [view for entity in entities if entity in self._pictures for view in self._pictures[entity].views]
 
     def repeatable(self, entity: int) -> bool:
         """Whether the last drawing of ``entity``'s picture read nothing from before its frame
