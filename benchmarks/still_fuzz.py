@@ -40,9 +40,9 @@ the camera (the box then reflecting the sky).  The change is one of:
   views under it show their fallback).
 
 Now and then a monitor stands in the level too: a screen the camera sees, its picture drawn
-from a lens watching the box and the pair, to depth 0-2 (``monitor``); the drawing engine
-draws every due picture (``MonitorSystem.keep_still_pictures`` off), so a picture kept must
-equal one drawn again.  Its Monitor, Material and Transform, and the lens's Camera and
+from a lens watching the box and the pair, to depth 0-2, drawn always or when seen
+(``monitor``); the drawing engine draws every due picture (``MonitorSystem.keep_still_pictures``
+off), so a picture kept must equal one drawn again.  Its Monitor, Material and Transform, and the lens's Camera and
 Transform, are among the components written, and both among the entities removed.
 
 A case passes when a refused write is refused with a ``ComponentValueError`` naming
@@ -162,8 +162,8 @@ class StillCase:
     # after the pane's, over a copy that holds it: screen_refraction.refraction_layers).
     glass_behind: bool = False
     # A monitor the camera sees, fed by a lens watching the box and the pair, its picture drawn
-    # to this depth (0-2), every frame or every second; None: none.  The drawing engine draws
-    # every due picture (``MonitorSystem.keep_still_pictures`` off).
+    # to this depth (0-2), every frame or every second, always or when seen; None: none.  The
+    # drawing engine draws every due picture (``MonitorSystem.keep_still_pictures`` off).
     monitor: int | None = None
     # Further changes, each (change, detail) after the last one's ``after`` frames (the tree
     # kept again, or refilling again, when the next comes); none after a refused one.
@@ -370,7 +370,8 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         named["monitor"] = world.spawn(Transform(position=screen, rotation=facing),
                                        MeshRef(quad(0.8, 0.45)), Material(color=(0.0, 0.0, 0.0, 1.0)),
                                        Monitor(camera=named["lens"], size=(32, 18), depth=case.monitor,
-                                               every=1 + case.still % 2))
+                                               every=1 + case.still % 2,
+                                               update="when_seen" if case.after % 2 else "always"))
     if case.water:
         named["water"] = _spawn_water(world, 0.3)
     if case.see_through_mirror:
