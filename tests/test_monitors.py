@@ -93,6 +93,22 @@ def lens_rays(size=PICTURE):
     return pixel_rays(view, size)
 
 
+def active_camera(world) -> int:
+    """The world's active camera entity."""
+    (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
+    return camera
+
+
+def spawn_watcher(world, held) -> None:
+    """Monitor A (``held["watcher"]``): a screen at x = 4 fed by a lens behind the studio's
+    screen (B's), looking at it and, past it, the box."""
+    lens = world.spawn(Transform(position=(0.0, 1.0, 8.5), rotation=look_rotation(glm.vec3(0.0, 0.0, -1.0))),
+                       Camera(fov_y=LENS_FOV, active=False))
+    held["watcher"] = world.spawn(Transform(position=(4.0, 1.0, 6.0)), MeshRef(quad(*SCREEN_SIZE)),
+                                  Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0, environment_reflection=0.0),
+                                  Monitor(camera=lens, size=PICTURE))
+
+
 def facing_own_screen(world, held, in_front: bool = True) -> None:
     """The box moved beside the screen and the lens turned to the screen, from in front of
     it (+z, its face) or from behind."""
@@ -109,8 +125,7 @@ def seen_in_a_mirror(world) -> None:
 
     world.spawn(Transform(position=(0.0, 1.0, 9.5), rotation=look_rotation(glm.vec3(0.0, 0.0, 1.0))),
                 MeshRef(quad(3.0, 2.0)), Material(color=(1.0, 1.0, 1.0, 1.0)), Mirror())
-    (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
-    world.delete_entity(camera)
+    world.delete_entity(active_camera(world))
     look_from(world, (0.4, 1.0, 7.0), target=(0.0, 1.0, 9.5), fov=50.0)
 
 
@@ -419,8 +434,8 @@ def test_a_picture_panel_is_exposed_and_tone_mapped_as_the_frame_under_it(scene,
 
     def hud(world):
         build(world)
-        (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
-        world.add_component(camera, Tonemap(curve=curve, exposure=1.0, auto_exposure=auto, min_ev=-2.0, max_ev=0.5))
+        world.add_component(active_camera(world),
+                            Tonemap(curve=curve, exposure=1.0, auto_exposure=auto, min_ev=-2.0, max_ev=0.5))
         held["panel"] = world.spawn(ScreenPanel(size=PICTURE, position=(10, 6), color=(*tint, 1.0)),
                                     Monitor(camera=parts["lens"], size=PICTURE))
 
@@ -600,12 +615,7 @@ def test_a_monitor_watching_another_draws_again_once_the_other_changed(scene):
         build, held = studio(Monitor(size=PICTURE))
 
         def two(world):
-            lens = world.spawn(Transform(position=(0.0, 1.0, 8.5), rotation=look_rotation(glm.vec3(0.0, 0.0, -1.0))),
-                               Camera(fov_y=LENS_FOV, active=False))
-            held["watcher"] = world.spawn(Transform(position=(4.0, 1.0, 6.0)), MeshRef(quad(*SCREEN_SIZE)),
-                                          Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0,
-                                                   environment_reflection=0.0),
-                                          Monitor(camera=lens, size=PICTURE))
+            spawn_watcher(world, held)
             build(world)
         return two, held
 
@@ -734,8 +744,7 @@ def test_a_monitor_drawn_when_seen_is_drawn_from_the_frame_the_camera_turns_to_i
 
             def away(world):
                 build(world)
-                (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
-                held["camera"] = camera
+                held["camera"] = camera = active_camera(world)
                 world.get(camera, Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
             return away, held
         return make
@@ -814,19 +823,14 @@ def test_a_monitor_drawn_when_seen_by_another_monitor_is_drawn(scene):
     build, held = studio(Monitor(size=PICTURE, update="when_seen"))
 
     def watched(world):
-        lens = world.spawn(Transform(position=(0.0, 1.0, 8.5), rotation=look_rotation(glm.vec3(0.0, 0.0, -1.0))),
-                           Camera(fov_y=LENS_FOV, active=False))
-        held["watcher"] = world.spawn(Transform(position=(4.0, 1.0, 6.0)), MeshRef(quad(*SCREEN_SIZE)),
-                                      Material(color=(0.0, 0.0, 0.0, 1.0)), Monitor(camera=lens, size=PICTURE))
+        spawn_watcher(world, held)
         build(world)
-        (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
-        world.get(camera, Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, -0.2))
+        world.get(active_camera(world), Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, -0.2))
 
     runner = scene(watched, (64, 48))
     drawn, unseen = [], []
     for _ in range(3):
-        box = runner.world.get(held["box"], Transform)
-        box.position = box.position + glm.vec3(0.03, 0.0, 0.0)
+        _moving_box([(runner, held)])
         runner.frame(DT)
         drawn.append(runner.stats.monitor_views)
         unseen.append(runner.stats.monitors_unseen)
@@ -844,8 +848,7 @@ def test_a_monitor_drawn_when_seen_that_only_its_own_camera_sees_is_not_drawn(sc
     def own(world):
         build(world)
         facing_own_screen(world, held)
-        (camera, _), = [(e, c) for e, c in world.query_one(Camera) if c.active]
-        held["camera"] = camera
+        held["camera"] = active_camera(world)
 
     runner = scene(own, (64, 48))
     drawn, unseen = [], []

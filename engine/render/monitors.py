@@ -93,11 +93,6 @@ class MonitorPictures:
         everything a picture shows but the pictures (which each has its own ``version``)."""
         return self.renderer.scene_version - self._moved_on
 
-    def shown(self, entity: int) -> dict[int, int]:
-        """The monitors whose pictures the last drawing of ``entity``'s showed (its views drew
-        their screens), each with the version it had then."""
-        return self._pictures[entity].shown
-
     def shown_unchanged(self, entity: int) -> bool:
         """Whether each picture the last drawing of ``entity``'s showed is still the one it showed."""
         pictures = self._pictures
