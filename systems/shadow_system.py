@@ -12,7 +12,9 @@ where they were and are (``shadow_rules.changed_region``: the rectangle holding 
 changed box's footprint in the map, the casters' draws scissored there, the same depths a
 whole redraw writes).  A sun's cascades (rings about the active camera,
 ``shadow_rules.ring_fit``) are kept the same way, and drawn whole again when the camera
-strays a grid step from a ring's centre (``shadow_rules.ring_cell``).  Virtual lights (``shadow_rules.virtual_lights``:
+strays a grid step from a ring's centre (``shadow_rules.ring_cell``).  A sun's map is
+fitted to the level's box with slack (``shadow_rules.level_fit_box``): a thing moving out
+past the level's edge fits it anew a few times, not every frame.  Virtual lights (``shadow_rules.virtual_lights``:
 lights through mirrors and portals) get their maps here too, each a view of the frame's
 ``ViewBudget``, at most ``MAX_VIRTUAL_LIGHTS`` (the rest: ``RenderStats.virtual_lights_cut``).
 
@@ -88,6 +90,7 @@ from engine.rules.shadow_rules import (
     changed_region,
     directional_fit,
     holds_point,
+    level_fit_box,
     level_on_grid,
     rank_virtual_lights,
     reflected_caustic_water,
@@ -125,6 +128,9 @@ class ShadowSystem(esper.Processor):
         self._points_clear = False  # no point light cast since the slots and cubes were last cleared
         self._level_seen: tuple = (None, (b"", b""))  # (level box, its bytes): _level_bytes
         self._level: tuple[np.ndarray, np.ndarray] | None = None  # the level's box as last asked (process)
+        # The box the suns' maps are fitted to (``level_fit_box``) and the level's box it was worked from.
+        self._fitted: tuple[np.ndarray, np.ndarray] | None = None
+        self._fitted_from: tuple[np.ndarray, np.ndarray] | None = None
         # What the directional maps were last made or kept from: (level box, the lights, (atlas
         # tile, filter, enabled), the casting lights' directions as published); None: look again.
         self._still: tuple | None = None
@@ -160,11 +166,18 @@ class ShadowSystem(esper.Processor):
         else:
             level = self._level
         published = ShadowCasters(level=level)
-        self._directional_maps(suns, casters_changed, (changed_box, changed_parts), level, published)
+        # The suns' maps are fitted to the level's box with slack (``level_fit_box``): a thing
+        # moving out past the level's edge does not fit them anew every frame.
+        fitted = self._fitted = None if level is None else \
+            self._fitted if level is self._fitted_from else level_fit_box(self._fitted, level)
+        self._fitted_from = level
+        # (A batch's last row gone writes no row, so ``casters_version`` stays: its box says it.)
+        self._directional_maps(suns, casters_changed or changed_box is not None, (changed_box, changed_parts),
+                               fitted, published)
         self._point_maps(kept, published)
         # A virtual light's map is drawn whole: again only when what casts changed (the
         # changed box: a row that casts moved, came, went or started or stopped casting).
-        published.virtual = self._virtual_maps(kept, changed_box is not None, level, carrying)
+        published.virtual = self._virtual_maps(kept, changed_box is not None, fitted, carrying)
         world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
@@ -183,7 +196,8 @@ class ShadowSystem(esper.Processor):
     def _directional_maps(self, lights: list[DirectionalLight | None], casters_changed: bool, changes, level,
                           published: ShadowCasters) -> None:
         """Each of ``lights`` (the kept ones, slot by slot as in the Lights block; None: a
-        freed slot) that casts (``changes``: the renderer's changed box and its parts):
+        freed slot) that casts, fitted to the box ``level`` (``level_fit_box``'s; None: no
+        level) (``changes``: the renderer's changed box and its parts):
         its map kept, drawn again where casters changed, or drawn whole for a new fit; a slot
         that stopped casting cleared."""
         maps = self.renderer.shadows
@@ -469,7 +483,8 @@ class ShadowSystem(esper.Processor):
         (``shadow_rules.virtual_lights``), brightest and highest priority first, at most
         ``MAX_VIRTUAL_LIGHTS``: a map each, drawn when it or a caster changed, a view of the
         frame's ``ViewBudget`` each time it is drawn; one the limit or the budget leaves out
-        lights nothing and is counted in ``RenderStats.virtual_lights_cut``."""
+        lights nothing and is counted in ``RenderStats.virtual_lights_cut``.  ``level``: the box the
+        suns' maps are fitted to (``level_fit_box``'s), which each map holds."""
         world = self.world
         renderer = self.renderer
         maps = renderer.shadows

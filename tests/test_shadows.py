@@ -593,39 +593,75 @@ _TURNS = {"half_turn": (glm.quat(0.0, 0.0, 1.0, 0.0), glm.vec3(2.0)),
           "flipped": (glm.quat(), glm.vec3(-2.0, 2.0, -2.0))}
 
 
-@pytest.mark.parametrize("change", ["raised", "removed"])
+@pytest.mark.parametrize("change", ["raised", "removed_near", "removed_far"])
 def test_a_caster_that_grows_or_shrinks_the_level_fits_the_map_again(scene, change):
-    """The map covers the level's box, which the shadows stage keeps from frame to frame
-    while no upload wrote a row and no row or batch went: a box raised above the level's top
-    (a row written), or the tallest box removed (its batch's last row: nothing is written,
-    its old box is what changed), fits the map to the new box, a whole map is drawn again,
-    and the frame is the one an engine built that way draws."""
-    def build_with(tall: bool, raised: bool = False):
+    """The map covers the level's box (with slack: ``level_fit_box``), which the shadows
+    stage keeps from frame to frame while no upload wrote a row and no row or batch went.
+
+    - A box raised above the level's top (a row written) fits the map anew, with slack: a
+      whole map is drawn, and the floor's shadows agree with float64 shadow rays from the
+      raised box and the sphere.
+    - The tallest box removed (its batch's last row: nothing is written, its old box is what
+      changed), 4 m up: the level shrinks a little, so the fit is kept and only the texels
+      under the removed box are drawn; the shadows agree with the rays.
+    - The same 40 m up: the fit is over FIT_LOOSE times the level left, so it is fitted tight
+      again (a whole map), and the frame is the one an engine built that way draws."""
+    raised_centre = np.array([-1.0, 4.0, 0.0])
+    tall_height = 40.0 if change == "removed_far" else 4.0
+
+    def build_with(tall: bool, raised: bool = False, shadows: bool = True):
         def build(world):
             ids = world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+            world.get(ids["sun"], DirectionalLight).shadows = shadows
             if raised:
-                world.get(ids["box"], Transform).position = glm.vec3(-1.0, 4.0, 0.0)
+                world.get(ids["box"], Transform).position = glm.vec3(*raised_centre)
             if tall:  # the box's twin (its batch), high over the floor: the level's top
-                ids["tall"] = world.spawn(Transform(position=(2.0, 4.0, -2.0)),
+                ids["tall"] = world.spawn(Transform(position=(2.0, tall_height, -2.0)),
                                           MeshRef(world.get(ids["box"], MeshRef).mesh), world.get(ids["box"], Material))
         return build
 
-    runner = scene(build_with(change == "removed"), (320, 240))
-    runner.engine.renderer.antialias = "off"
+    def fresh(**how):
+        runner = scene(build_with(**how), (320, 240))
+        runner.engine.renderer.antialias = "off"
+        return runner
+
+    runner = fresh(tall=change != "raised")
     runner.frame()
     runner.frame()
     assert runner.stats.shadow_maps_drawn == 0 and runner.stats.shadow_maps_kept == 1
     ids = runner.world.resources["ids"]
     if change == "raised":
-        runner.world.get(ids["box"], Transform).position = glm.vec3(-1.0, 4.0, 0.0)
+        runner.world.get(ids["box"], Transform).position = glm.vec3(*raised_centre)
     else:
         runner.world.delete_entity(ids["tall"])
     changed = runner.frame()
     resolution = DirectionalLight().shadow_resolution
-    assert runner.stats.shadow_maps_drawn == 1 and runner.stats.shadow_texels_drawn == resolution * resolution
-    fresh = scene(build_with(False, raised=change == "raised"), (320, 240))
-    fresh.engine.renderer.antialias = "off"
-    assert np.array_equal(changed, fresh.frame())
+    assert runner.stats.shadow_maps_drawn == 1
+    if change == "removed_far":
+        assert runner.stats.shadow_texels_drawn == resolution * resolution
+        assert np.array_equal(changed, fresh(tall=False).frame())
+        return
+    if change == "raised":
+        assert runner.stats.shadow_texels_drawn == resolution * resolution
+    else:
+        assert 0 < runner.stats.shadow_texels_drawn < resolution * resolution / 4
+    runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0   # kept from here on
+    raised = change == "raised"
+    without = fresh(tall=False, raised=raised, shadows=False).frame()
+    shadowed, lit = _classified(without, changed)
+    floor = runner.ids() == ids["floor"]
+    points = _floor_points_seen(runner)
+    to_light = np.tile(-np.array(LIGHT, np.float64), (len(points), 1))
+
+    def occluded(grow):
+        box_centre = raised_centre if raised else BOX_CENTRE
+        return (_hits(points, to_light, grow, casters=("sphere",))
+                | box_hits(points, to_light, box_centre, BOX_HALF + grow)).reshape(floor.shape)
+
+    share, counted, in_shadow = _agreement(shadowed, lit, floor, occluded(-PENUMBRA), occluded(PENUMBRA))
+    assert counted > 40000 and in_shadow > 800, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays"
 
 
 def test_a_point_light_ignores_changes_outside_its_reach(scene):
@@ -925,3 +961,82 @@ def test_a_thing_that_casts_nothing_moving_at_the_levels_top_does_not_redraw_the
     finally:
         capture.release()
         engine.close()
+
+
+def test_the_suns_fit_follows_a_growing_level_with_slack_and_shrinks_back():
+    """``level_fit_box`` against its own rules, on boxes worked out here: the first fit and a
+    still level are the level's box; the fit always holds the level; a side the level
+    outgrew moves FIT_SLACK of the diagonal past it; a thing climbing 10 cm a frame for 200
+    frames refits a handful of times, not 200; a level back to its first size is fitted
+    tight again once the fit is more than FIT_LOOSE times it."""
+    from engine.rules.shadow_rules import FIT_LOOSE, FIT_SLACK, LEVEL_GRID, level_fit_box, level_on_grid
+
+    def diagonal(box):
+        return float(np.linalg.norm(box[1] - box[0]))
+
+    floor = level_on_grid((np.array([-7.0, 0.0, -7.0]), np.array([7.0, 1.4, 7.0])))
+    fitted = level_fit_box(None, floor)
+    assert fitted is floor and level_fit_box(fitted, floor) is floor
+    fits = [fitted]
+    for frame in range(200):
+        top = 1.5 + 0.1 * frame
+        level = level_on_grid((floor[0], np.array([7.0, max(1.4, top), 7.0])))
+        fitted = level_fit_box(fitted, level)
+        assert np.all(fitted[0] <= level[0]) and np.all(fitted[1] >= level[1])
+        assert diagonal(fitted) <= FIT_LOOSE * diagonal(level) + 4 * LEVEL_GRID
+        if fitted is not fits[-1]:
+            fits.append(fitted)
+            # The side it outgrew moved FIT_SLACK of the level's diagonal past the level.
+            assert abs(fitted[1][1] - (level[1][1] + FIT_SLACK * diagonal(level))) <= 2 * LEVEL_GRID
+            assert np.array_equal(fitted[0], level[0]) and fitted[1][0] == 7.0 and fitted[1][2] == 7.0
+    assert 3 <= len(fits) <= 8, len(fits)   # 1.4 m to 21.4 m: a handful of fits (each a quarter or more wider)
+    # The thing gone: a fit within FIT_LOOSE times the level's diagonal is kept (the floor's
+    # level: 1.6 times), one over it is the level's box again (a 6 m room's: 3.5 times).
+    assert 1.0 < diagonal(fitted) / diagonal(floor) <= FIT_LOOSE and level_fit_box(fitted, floor) is fitted
+    room = level_on_grid((np.array([-3.0, 0.0, -3.0]), np.array([3.0, 1.4, 3.0])))
+    assert diagonal(fitted) / diagonal(room) > FIT_LOOSE and level_fit_box(fitted, room) is room
+    # A level that shrinks a little keeps its fit (no refit for a thing that sank 10 cm).
+    lower = level_on_grid((floor[0], np.array([7.0, 1.3, 7.0])))
+    assert level_fit_box(floor, lower) is floor
+
+
+@pytest.mark.parametrize("casts", [True, False], ids=["casting", "casting_nothing"])
+def test_a_ball_thrown_up_out_of_the_level_does_not_redraw_the_suns_map_every_frame(scene, casts):
+    """A ball rising 15 cm a frame out of the top of the level (its box's top is the level's):
+    fitted to the level's box the sun's map was fitted anew and drawn whole every frame, and
+    every shadow in the level slid with its texels.  With the fit's slack
+    (``level_fit_box``) it is drawn whole on the first frame and once when the ball first
+    outgrows the level; after that only the ball's texels (a casting ball) or nothing (one
+    that casts nothing).  At the end the box's and sphere's shadows on the floor agree with
+    float64 shadow rays (the ball stands where its shadow misses the floor)."""
+    def build(world):
+        ids = world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+        ids["ball"] = world.spawn(Transform(position=(-6.5, 1.0, -6.5)),
+                                  MeshRef(sphere(0.2, segments=16), casts_shadows=casts),
+                                  Material(color=(0.9, 0.9, 0.2)))
+
+    runner = scene(build, (320, 240))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = "single"
+    ids = runner.world.resources["ids"]
+    sun = runner.world.get(ids["sun"], DirectionalLight)
+    sun.shadows = False
+    without = runner.frame()
+    sun.shadows = True
+    whole = sun.shadow_resolution ** 2
+    drawn = []
+    for frame in range(24):
+        runner.world.get(ids["ball"], Transform).position = (-6.5, 1.0 + 0.15 * frame, -6.5)
+        with_shadows = runner.frame()
+        drawn.append(runner.stats.shadow_texels_drawn)
+    wholes = [frame for frame, texels in enumerate(drawn) if texels >= whole]
+    assert wholes[0] == 0 and len(wholes) == 2, drawn   # the first frame, then the ball outgrowing the level
+    later = drawn[wholes[1] + 1:]
+    assert len(later) >= 18
+    assert all(0 < texels < whole / 20 for texels in later) if casts else all(texels == 0 for texels in later), drawn
+    shadowed, lit = _classified(without, with_shadows)
+    floor = runner.ids() == ids["floor"]
+    share, counted, in_shadow, umbra = _sun_rays_agree(shadowed, lit, floor, _floor_points_seen(runner))
+    assert counted > 40000 and in_shadow > 800, (counted, in_shadow, share)
+    assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays"
+    assert shadowed[umbra].mean() >= 0.95

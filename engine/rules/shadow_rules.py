@@ -76,6 +76,49 @@ def level_on_grid(level: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.
     return np.floor(lo / LEVEL_GRID) * LEVEL_GRID, np.ceil(hi / LEVEL_GRID) * LEVEL_GRID
 
 
+# How a sun's level map follows a level that grows or shrinks (``level_fit_box``): a side the
+# level outgrew is given this share of the level's diagonal beyond it, and a fitted box whose
+# diagonal is more than FIT_LOOSE times the level's is fitted tight again.
+FIT_SLACK = 0.25
+FIT_LOOSE = 2.0
+
+
+def _diagonal(box: tuple[np.ndarray, np.ndarray]) -> float:
+    return float(np.linalg.norm(box[1] - box[0]))
+
+
+def level_fit_box(fitted: tuple[np.ndarray, np.ndarray] | None,
+                  level: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The box a sun's level map is fitted to, given the one it was fitted to (``fitted``,
+    None: none yet) and the level's box now (``level_on_grid``'s): a fit with slack, as a
+    cascade's texel snapping keeps a map still under a moving camera.
+
+    Fitted to the level's box itself, a thing moving out past the level's edge (a ball
+    thrown, a bird climbing, a screen that casts nothing carried off) fits the map anew every
+    frame: the whole map is drawn again each frame, and every shadow in the level swims as
+    its texels slide.  So the fit is kept while the level's box stays inside it and it is
+    not more than FIT_LOOSE times the level's size; a side the level outgrew is moved
+    FIT_SLACK of the level's diagonal past the new edge (the others stay), so a thing
+    flying off refits the map a few times (the box grows by a quarter or more each time),
+    not every frame.  The first fit, and a level that never grows, is the level's box:
+    a still level's map is what it was.  The cost is resolution: at most about a quarter
+    coarser until the level shrinks back (a box twice the level's is fitted tight again)."""
+    if fitted is None:
+        return level
+    lo, hi = level
+    fitted_lo, fitted_hi = fitted
+    reach = max(_diagonal(level), LEVEL_GRID)
+    grew_lo, grew_hi = lo < fitted_lo, hi > fitted_hi
+    if not grew_lo.any() and not grew_hi.any():
+        return fitted if _diagonal(fitted) <= FIT_LOOSE * reach else level
+    slack = FIT_SLACK * reach
+    grown = level_on_grid((np.where(grew_lo, lo - slack, fitted_lo), np.where(grew_hi, hi + slack, fitted_hi)))
+    if _diagonal(grown) <= FIT_LOOSE * reach:
+        return grown
+    # It grew on one side and shrank far on another: the level's box, with slack where it grew.
+    return level_on_grid((np.where(grew_lo, lo - slack, lo), np.where(grew_hi, hi + slack, hi)))
+
+
 def directional_fit(direction: glm.vec3, lo: np.ndarray, hi: np.ndarray, resolution: int) -> DirectionalFit:
     """The orthographic shadow camera of a light travelling along ``direction`` that holds the
     whole world box [lo, hi] (grown by the margin), for a map of ``resolution`` texels a side.
