@@ -35,9 +35,10 @@ class Monitor(TrackedComponent):
       visible"): a due picture is drawn only while its screen can be seen, by this frame's
       main view, a mirror's or portal's view of the frame before (so a screen first seen in a
       mirror shows its older picture for that one frame) or the last drawing of a monitor
-      itself seen (its own camera's alone does not count), or on a ``ScreenPanel``; a
-      monitor in another room costs nothing.  A probe that captures the
-      screen while it is unseen keeps its older picture.
+      itself seen (its own camera's alone does not count), a probe's faces recaptured
+      after the frame (a chrome ball by the screen reflects it), or on a ``ScreenPanel``; a
+      monitor in another room costs nothing.  A probe's first capture (drawn before the
+      monitors) and an irradiance volume's points keep the older picture of a screen unseen.
 
     On an entity with a ``ScreenPanel`` the panel is filled with the picture, over the frame
     (a rear-view mirror on the screen; the panel's colour multiplies it).

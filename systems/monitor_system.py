@@ -11,8 +11,9 @@ decided here:
   next (counted in ``RenderStats.monitors_cut``, said when the count grows; a picture kept,
   below, is not drawn and not counted);
 - whether it can be seen, for a ``Monitor.update`` "when_seen" (``_seen``): its screen
-  reached by this frame's main view, last frame's mirror and portal views (``ViewEyes``) or
-  the last drawing's views of a monitor itself seen, or shown on a ``ScreenPanel``; unseen,
+  reached by this frame's main view, last frame's mirror and portal views (``ViewEyes``), the
+  probes' faces recaptured after this frame's present (``ProbeSchedule``) or the last
+  drawing's views of a monitor itself seen, or shown on a ``ScreenPanel``; unseen,
   it is not drawn and stays due (``RenderStats.monitors_unseen``);
 - each one's view: its camera entity's ``Camera`` (field of view or orthographic height,
   near, far, layers) from its ``Transform``, at the picture's size and aspect; a camera that
@@ -67,6 +68,7 @@ from engine.render.views import View, camera_view
 from engine.resources import Surfaces
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import ViewEyes
+from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
 
 
 class MonitorSystem(esper.Processor):
@@ -178,9 +180,11 @@ class MonitorSystem(esper.Processor):
 
     def _seen(self, faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> set[int]:
         """The monitors whose screens a view may see: this frame's main view (the active
-        camera's, at the output's aspect) or last frame's mirror and portal views
-        (``ViewEyes``) may see them, or they are on a ``ScreenPanel``; then, over and over,
-        those the last drawings of the pictures seen may see."""
+        camera's, at the output's aspect), last frame's mirror and portal views
+        (``ViewEyes``) or the probes' faces recaptured after this frame's present (the
+        schedule's undrawn faces: a chrome ball's reflection of the screen) may see them, or
+        they are on a ``ScreenPanel``; then, over and over, those the last drawings of the
+        pictures seen may see."""
         world = self.world
         views = []
         output, camera = world.resources.get(Output), active_camera_parts(world)
@@ -191,6 +195,13 @@ class MonitorSystem(esper.Processor):
         eyes = world.resources.get(ViewEyes)
         if eyes is not None:
             views += [node.view for node in eyes.views if node.level > 0]
+        schedule, probes = world.resources.get(ProbeSchedule), world.resources.get(ProbeStates)
+        if schedule is not None and probes:
+            for due in schedule.undrawn():   # (first captures were drawn in the probes stage, before this one)
+                state = probes.get(due.owner)
+                if state is not None and due.faces:
+                    views += self.renderer.probes.face_views(due.owner, due.faces, state.position,
+                                                             state.settings).values()
         pictures = self.renderer.monitors
         seen = pictures.screens_reaching(views, faces) | {entity for entity, _ in world.query(Monitor, ScreenPanel)}
         # ... and what the pictures seen show, and so on: a screen seen only by its own camera,

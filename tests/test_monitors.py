@@ -859,3 +859,43 @@ def test_a_monitor_drawn_when_seen_that_only_its_own_camera_sees_is_not_drawn(sc
         drawn.append(runner.stats.monitor_views)
         unseen.append(runner.stats.monitors_unseen)
     assert drawn == [1, 1, 0, 0] and unseen == [0, 0, 1, 1]
+
+
+def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene):
+    """The active camera looks away from the screen, but a probe recaptured every frame stands
+    before it (what a chrome ball by the screen reflects): its faces recaptured after the
+    frame's present (``ProbeSchedule``'s undrawn faces) see the screen, so a ``when_seen``
+    picture is drawn for them, and the probe's face towards the screen equals that of an
+    engine whose monitor is drawn always, frame by frame, as the box it watches moves.  (On
+    the first frame the probe's first capture, drawn before the monitors, sees it in neither.)"""
+    from components import ReflectionProbe
+    from engine.core.cube_faces import CUBE_FACES
+
+    towards_screen = next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
+
+    def make(update):
+        build, held = studio(Monitor(size=PICTURE, update=update))
+
+        def probed(world):
+            build(world)
+            world.get(active_camera(world), Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
+            held["probe"] = world.spawn(Transform(position=(0.0, 1.0, 7.0)),
+                                        ReflectionProbe(resolution=32, refresh="every_frame"))
+        return probed, held
+
+    runners = []
+    for update in ("when_seen", "always"):
+        build, held = make(update)
+        runners.append((scene(build, (64, 48)), held))
+    seeing = runners[0][0]
+    drawn, unseen = [], []
+    for frame in range(5):
+        _moving_box(runners)
+        for runner, _ in runners:
+            runner.frame(DT)
+        faces = [runner.engine.renderer.probes.read_face(held["probe"], towards_screen) for runner, held in runners]
+        np.testing.assert_array_equal(faces[0], faces[1], err_msg=f"frame {frame}")
+        drawn.append(seeing.stats.monitor_views)
+        unseen.append(seeing.stats.monitors_unseen)
+    assert drawn == [0, 1, 1, 1, 1] and unseen == [1, 0, 0, 0, 0]
+    assert (faces[1][..., 0] > 0.1).sum() > 5   # the red box, on the screen, in the probe's face
