@@ -1040,3 +1040,35 @@ def test_a_ball_thrown_up_out_of_the_level_does_not_redraw_the_suns_map_every_fr
     assert counted > 40000 and in_shadow > 800, (counted, in_shadow, share)
     assert share >= 0.99, f"{share:.4f} of {counted} floor pixels agree with the shadow rays"
     assert shadowed[umbra].mean() >= 0.95
+
+
+@pytest.mark.parametrize("cascades", [1, 3])
+def test_the_second_of_two_crates_removed_takes_its_shadow_with_it(scene, cascades):
+    """Two crates of one mesh (one batch), the second removed inside the level: its batch's
+    last row goes, no row is written (``casters_version`` stays), only the changed box says
+    so.  The sun's map (and its cascades) kept it: the crate's shadow stayed on the floor
+    (145 pixels at 160x120 before the fix).  Now the texels under it are drawn again and
+    the frame is the one an engine built without the second crate draws."""
+    def build_with(twin: bool):
+        def build(world):
+            ids = world.resources["ids"] = _floor_scene(world, (0.5, 5.0, 6.5), (0.0, 0.0, 0.0))
+            world.get(ids["sun"], DirectionalLight).shadow_cascades = cascades
+            if twin:
+                ids["twin"] = world.spawn(Transform(position=(2.5, 0.5, -2.0)),
+                                          MeshRef(world.get(ids["box"], MeshRef).mesh), world.get(ids["box"], Material))
+        return build
+
+    runner = scene(build_with(True))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    before = runner.frame()
+    assert runner.stats.shadow_maps_drawn == 0
+    runner.world.delete_entity(runner.world.resources["ids"]["twin"])
+    after = runner.frame()
+    resolution = DirectionalLight().shadow_resolution
+    assert runner.stats.shadow_maps_drawn >= 1 and 0 < runner.stats.shadow_texels_drawn < resolution * resolution
+    fresh = scene(build_with(False))
+    fresh.engine.renderer.antialias = "off"
+    without = fresh.frame()
+    assert (np.abs(before.astype(int) - without).max(axis=-1) > 3).sum() > 100   # the crate and its shadow were there
+    assert np.array_equal(after, without)
