@@ -672,6 +672,10 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
     // no shadow (MeshRef.receives_shadows: its code's NO_RECEIVE_BIT, visibility.glsl).
     bool shadowed = !receives_no_shadow(v_tint.w);
     vec4 directional_lit = shadowed ? directional_shadows(s.position, s.geometric_normal) : vec4(1.0);
+#ifdef SEE_THROUGH_SHADOWS
+    // The share of the suns' light see-through things over the point let through (shadows.glsl).
+    if (shadowed) directional_lit *= see_through_shadows(s.position, s.geometric_normal);
+#endif
 #ifdef CAUSTICS
     // The suns' light through a rippled water gathered by its waves (caustics.glsl), over the
     // pixel's footprint (taken here, in uniform control flow: the caustic returns early off the water).

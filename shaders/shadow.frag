@@ -19,6 +19,15 @@ in vec2 v_uv;
 in float v_alpha;
 #endif
 #endif
+#ifdef SEE_THROUGH
+// A see-through caster (a batch of the transparent slot) into a sun's see-through map
+// (engine/render/shadows.py): the share of the light it lets through, 1 - its alpha (what
+// shows through it in every view), multiplied into the texel's (the target blends by the
+// destination colour: every layer's share), and its depth, the nearest kept (the alpha
+// channel blends by MIN): a point lit through it lies deeper than that (shadows.glsl
+// see_through_shadows).
+layout(location = 0) out vec4 out_through;
+#endif
 #ifdef DISTANCE
 #include "camera.glsl"
 #ifdef LAYERED
@@ -32,7 +41,10 @@ layout(location = 0) out float out_distance;
 #endif
 
 void main() {
-#ifdef ALPHA_CUTOFF
+#ifdef SEE_THROUGH
+    float alpha = clamp(v_alpha * texture(albedo_map, bounded_footprint(v_uv)).a, 0.0, 1.0);
+    out_through = vec4(vec3(1.0 - alpha), gl_FragCoord.z);
+#elif defined(ALPHA_CUTOFF)
     if (v_alpha * texture(albedo_map, bounded_footprint(v_uv)).a < alpha_cutoff) discard;
 #endif
 #ifdef DISTANCE

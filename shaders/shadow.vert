@@ -3,7 +3,8 @@
 // batch, the light's camera in the Camera block.  What casts is what a person sees as solid:
 // not a portal's opening (unless it carries light: what goes in leaves by its partner), not
 // glass (a refracting instance), not something hidden in every kind of view or with
-// MeshRef.casts_shadows off; the transparent slot is not drawn at all.
+// MeshRef.casts_shadows off.  The transparent slot's batches (see-through paint and glass)
+// are drawn by the SEE_THROUGH build into a sun's see-through map (shadow.frag), glass too.
 // Things partly through a portal are cut at their slice plane, as in every view, so the part
 // that came out of the partner casts its own shadow there.  A cutout (the ALPHA_CUTOFF
 // build, a batch's Material.alpha_cutoff its uniform) casts only where it is drawn:
@@ -30,6 +31,9 @@ in vec4 in_vertex_color;  // a. the mesh's share a vertex (Mesh.colors), as scen
 // The light's own entity (0: none): its mesh is the light's body (a bulb round a lamp), which
 // casts no shadow of its own light (engine/render/shadows.py, Shadows._draw_casters).
 uniform uint light_body;
+#ifdef SEE_THROUGH
+uniform bool glass_only;  // an opaque batch's refracting instances only (engine/render/shadows.py)
+#endif
 #ifdef LEG
 // A middle stretch of a virtual light's way (between two surfaces): its second plane, world.
 uniform vec4 leg_plane;
@@ -56,7 +60,13 @@ void main() {
     // A virtual light's map (light through a mirror or portal) leaves out the surfaces it
     // passes through (camera.skip) and what lies behind them (camera.clip_plane); a light's
     // own map has neither.  Every map leaves out the light's own body.
-    bool casts = (in_slots.z != REFLECT_PORTAL || opening_casts(in_tint.w)) && in_slots.y == REFRACT_NONE
+#ifdef SEE_THROUGH
+    // A see-through batch whole; of an opaque batch, its glass alone (the depth map holds the rest).
+    bool solid = !glass_only || in_slots.y != REFRACT_NONE;
+#else
+    bool solid = in_slots.y == REFRACT_NONE;
+#endif
+    bool casts = (in_slots.z != REFLECT_PORTAL || opening_casts(in_tint.w)) && solid
         && !casts_no_shadow(in_tint.w)
         && in_slots.w != camera.skip.x && in_slots.w != camera.skip.y && in_slots.w != light_body;
     float plane = dot(world, camera.clip_plane);

@@ -226,6 +226,7 @@ class ShadowSystem(esper.Processor):
                 del kept[slot]
                 maps.clear_directional(slot)
         if not casting:
+            maps.fit_see_through(False)
             self._draw_rings([], eye, casters_changed, changes)
             self._still = (level, lights, (maps.tile, maps.filter, self.enabled), (), cells, 0)
             return
@@ -233,6 +234,8 @@ class ShadowSystem(esper.Processor):
             casting[0][1].shadow_resolution
         if tile != maps.tile:
             maps.fit_atlas(tile)
+        if maps.fit_see_through(bool(self.renderer.see_through_casters())):
+            self._directional.clear()   # (each sun's map drawn whole again, its see-through tile with it)
         level_bytes = self._level_bytes(level)
         for slot, light in casting:
             direction = raw_field(light, "direction")  # past the in-place watch: a read, not a game's edit

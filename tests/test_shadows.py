@@ -4,6 +4,7 @@ maps' caching (a still scene draws no shadow pass); a probe face recaptured when
 it shows moves; the components' checks."""
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -19,6 +20,7 @@ from components import (
     Mirror,
     PointLight,
     ReflectionProbe,
+    Refractive,
     Transform,
     Visibility,
 )
@@ -1072,3 +1074,170 @@ def test_the_second_of_two_crates_removed_takes_its_shadow_with_it(scene, cascad
     without = fresh.frame()
     assert (np.abs(before.astype(int) - without).max(axis=-1) > 3).sum() > 100   # the crate and its shadow were there
     assert np.array_equal(after, without)
+
+
+# --- see-through things: the share of a sun's light they let through (ShadowMaps.see_through_atlas)
+PANE_AT, PANE_HALF = np.array([0.0, 2.0, 0.0]), 1.0    # a 2 m square pane, flat, 2 m over the floor
+SUN_DOWN = glm.normalize(glm.vec3(0.0, -1.0, -0.3))
+
+
+def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=False, post=True):
+    """A floor, a sun nearly overhead, a flat see-through pane (``alpha``; ``glass``: a
+    Refractive, drawn with the opaque batches), a second one under it (``second``: its alpha;
+    both cast or neither: ``casts``),
+    a box hanging over the pane (``above``) and a 3 m post (the level's top, so the pane
+    moving or going leaves the level's box as it is)."""
+    def build(world):
+        ids = world.resources["ids"] = {}
+        look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
+        world.spawn(DirectionalLight(direction=tuple(SUN_DOWN), intensity=sun))
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        flat = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
+        parts = [Transform(position=tuple(PANE_AT), rotation=flat),
+                 MeshRef(quad(2 * PANE_HALF, 2 * PANE_HALF), casts_shadows=casts),
+                 Material(color=(0.2, 0.3, 0.9, alpha), double_sided=True)]
+        ids["pane"] = world.spawn(*parts, *([Refractive(screen=False)] if glass else []))
+        if second is not None:
+            ids["second"] = world.spawn(Transform(position=tuple(PANE_AT - [0.0, 1.0, 0.0]), rotation=flat),
+                                        MeshRef(quad(2 * PANE_HALF, 2 * PANE_HALF), casts_shadows=casts),
+                                        Material(color=(0.9, 0.3, 0.2, second), double_sided=True))
+        if above:
+            ids["above"] = world.spawn(Transform(position=(0.0, 2.6, 0.0)), MeshRef(box((0.5, 0.2, 0.5))),
+                                       Material(color=(0.9, 0.8, 0.2)))
+        if post:
+            world.spawn(Transform(position=(-5.0, 1.5, -5.0)), MeshRef(box((0.2, 3.0, 0.2))), Material())
+    return build
+
+
+def _pane_frames(scene, shadow_filter="single", **how):
+    """The frame with the pane (``how``), and the floor's share of the direct sunlight the
+    pane's dimming took away at each pixel: (without - with) / (without - sunless), where
+    "without" has a pane that casts nothing and "sunless" no sun: engines built apart."""
+    frames = {}
+    for name, extra in (("with", {}), ("without", {"casts": False}), ("sunless", {"casts": False, "sun": 0.0})):
+        runner = scene(_pane_scene(**{**how, **extra}), (320, 240))
+        runner.engine.renderer.antialias = "off"
+        runner.engine.renderer.shadows.filter = shadow_filter
+        runner.frame()
+        frames[name] = (runner, srgb_to_linear(runner.frame()).mean(axis=-1))
+    with_, without, sunless = (frames[name][1] for name in ("with", "without", "sunless"))
+    return frames["with"][0], (without - with_) / np.maximum(without - sunless, 1e-6)
+
+
+def _under_pane(runner, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The floor pixels whose ray to the sun meets the pane (shrunk by ``margin`` metres), and
+    those whose ray misses it grown by ``margin``, worked out in float64."""
+    ids = runner.world.resources["ids"]
+    floor = runner.ids() == ids["floor"]
+    points = _floor_points_seen(runner)
+    to_sun = -np.array(SUN_DOWN, np.float64)
+    t = (PANE_AT[1] - points[:, 1]) / to_sun[1]
+    at = points + to_sun * t[:, None]
+    reach = np.maximum(np.abs(at[:, 0] - PANE_AT[0]), np.abs(at[:, 2] - PANE_AT[2])).reshape(floor.shape)
+    return floor & (reach < PANE_HALF - margin), floor & (reach > PANE_HALF + margin)
+
+
+@pytest.mark.parametrize("alpha, glass, shadow_filter", [(0.25, False, "single"), (0.7, False, "grid"),
+                                                        (0.4, True, "single")])
+def test_a_see_through_pane_takes_its_alpha_of_the_suns_light(scene, alpha, glass, shadow_filter):
+    """A see-through pane (the transparent slot's; or glass, drawn with the opaque batches)
+    lets 1 - alpha of the sun's light through, as much as shows through it: under it, by the
+    rays, the floor loses alpha of its direct sunlight (to 0.03: the map's half floats and the
+    8-bit frames); beside it, nothing."""
+    runner, taken = _pane_frames(scene, shadow_filter, alpha=alpha, glass=glass)
+    under, beside = _under_pane(runner, 0.08)
+    assert under.sum() > 800 and beside.sum() > 20000, (under.sum(), beside.sum())
+    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
+    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05
+    assert np.abs(taken[beside]).max() < 0.02
+    assert ("SEE_THROUGH_SHADOWS", "1") in runner.engine.renderer.shadows.program_defines
+
+
+def test_two_see_through_panes_let_through_the_product_and_what_is_over_them_keeps_its_light(scene):
+    """Two panes one over the other (alphas 0.5 and 0.4): the floor under both keeps
+    (1 - 0.5) x (1 - 0.4) = 0.3 of its sunlight, a share of 0.7 taken; a box hanging over
+    the upper pane (nearer the sun than either) loses none of its light."""
+    runner, taken = _pane_frames(scene, alpha=0.5, second=0.4, above=True)
+    under, _ = _under_pane(runner, 0.15)
+    # (under the box's own shadow too: only where the box does not shade)
+    ids = runner.world.resources["ids"]
+    assert abs(float(np.median(taken[under & (taken < 0.9)])) - 0.7) < 0.03
+    top = runner.ids() == ids["above"]
+    assert top.sum() > 50 and np.abs(taken[top]).max() < 0.02
+
+
+def test_a_see_through_pane_moved_or_removed_redraws_its_texels_and_draws_what_a_fresh_engine_draws(scene):
+    """The pane slides 1.5 m: its share is drawn again under where it was and is (a region of
+    the map), and the frame is the one an engine built with the pane there draws; then it is
+    removed: the frame is one with no pane at all."""
+    runner = scene(_pane_scene(0.6), (160, 120))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    runner.frame()
+    ids = runner.world.resources["ids"]
+    runner.world.get(ids["pane"], Transform).position = (1.5, 2.0, 0.0)
+    moved = runner.frame()
+    resolution = DirectionalLight().shadow_resolution
+    assert runner.stats.shadow_maps_drawn == 1 and 0 < runner.stats.shadow_texels_drawn < resolution ** 2 / 4
+
+    def there(world):
+        _pane_scene(0.6)(world)
+        world.get(world.resources["ids"]["pane"], Transform).position = (1.5, 2.0, 0.0)
+
+    fresh = scene(there, (160, 120))
+    fresh.engine.renderer.antialias = "off"
+    assert np.array_equal(moved, fresh.frame())
+    runner.world.delete_entity(ids["pane"])
+    gone = runner.frame()
+    bare = scene(_pane_scene(0.6, casts=False), (160, 120))
+    bare.engine.renderer.antialias = "off"
+    bare.world.delete_entity(bare.world.resources["ids"]["pane"])
+    assert np.array_equal(gone, bare.frame())
+    assert runner.engine.renderer.shadows.see_through_atlas is None   # none casts: its atlas let go
+
+
+def test_without_a_unit_for_the_see_through_map_the_pane_casts_nothing_and_says_so(scene):
+    """A context whose fragment stage has too few texture units (macOS's 16) for the
+    see-through map: a GLLimitWarning names the count, once, and the pane dims nothing."""
+    from engine.core.errors import GLLimitWarning
+    from engine.render.bindings import SEE_THROUGH_SAMPLERS
+
+    runner = scene(_pane_scene(0.6), (160, 120))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.see_through_supported = False
+    with pytest.warns(GLLimitWarning, match=f"needs {SEE_THROUGH_SAMPLERS} texture units"):
+        frame = runner.frame()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GLLimitWarning)
+        runner.frame()
+    bare = scene(_pane_scene(0.6, casts=False), (160, 120))
+    bare.engine.renderer.antialias = "off"
+    assert np.array_equal(frame, bare.frame())
+    assert not any(name == "SEE_THROUGH_SHADOWS" for name, _ in runner.engine.renderer.shadows.program_defines)
+
+
+def test_only_the_glass_of_an_opaque_batch_goes_into_the_see_through_map(scene):
+    """Glass is drawn with the opaque batches: a glass pane and a solid pane of the same mesh
+    share a batch, and only the glass's instance is drawn into the see-through map (the solid
+    one is the depth map's): the texels it dims are those of the glass pane alone."""
+    mesh = quad(2 * PANE_HALF, 2 * PANE_HALF)
+    flat = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
+
+    def dimmed_texels(solid_twin: bool) -> int:
+        def build(world):
+            _pane_scene(0.0, casts=False)(world)
+            world.spawn(Transform(position=(-2.5, 2.0, 0.0), rotation=flat), MeshRef(mesh),
+                        Material(color=(0.2, 0.3, 0.9, 0.4), double_sided=True), Refractive(screen=False))
+            if solid_twin:
+                world.spawn(Transform(position=(2.5, 2.0, 0.0), rotation=flat), MeshRef(mesh),
+                            Material(color=(0.2, 0.3, 0.9, 1.0), double_sided=True))
+        runner = scene(build, (64, 48))
+        runner.frame()
+        glass = [batch for batch in runner.engine.renderer.see_through_casters() if not batch.transparent]
+        assert len(glass) == 1 and glass[0].count == (2 if solid_twin else 1)
+        atlas = runner.engine.renderer.shadows.see_through_atlas
+        texels = np.frombuffer(atlas.read(), np.float16).reshape(atlas.size[1], atlas.size[0], 4)
+        return int((texels[..., 0] < 0.99).sum())
+
+    alone = dimmed_texels(False)
+    assert alone > 1000 and dimmed_texels(True) == alone

@@ -182,6 +182,11 @@ CAUSTIC_UNIT = 67             # scene (CAUSTICS builds): the caustic waters' nor
 # Ripples on waters (engine/render/ripples.py): their height fields' atlas.
 RIPPLE_UNIT = 68              # composite (RIPPLES builds): the latest heights
 RIPPLE_STEP_UNIT = 69         # the ripples' step: the heights it moves on
+# The suns' see-through maps (engine/render/shadows.py: the light see-through things let
+# through): the 20th sampler of the fullest build, only where the context has one
+# (ShadowMaps.see_through_supported).
+SEE_THROUGH_UNIT = 70         # scene (SEE_THROUGH_SHADOWS builds): ShadowMaps.see_through_atlas
+SEE_THROUGH_SAMPLERS = 20
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

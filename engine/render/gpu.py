@@ -411,6 +411,22 @@ class Gpu:
             self._sort_batches()
         return self._transparent
 
+    def shadow_casting_batches(self) -> list[InstanceBatch]:
+        """What the shadow maps hold: the opaque batches (the depth maps; glass among them
+        in a sun's see-through map), then the transparent slot's see-through ones (its
+        see-through map: ``see_through_casters``)."""
+        see_through = [batch for batch in self.transparent_batches() if not batch.surface and not batch.decal]
+        return self.opaque_batches() + see_through if see_through else self.opaque_batches()
+
+    def see_through_casters(self) -> list[InstanceBatch]:
+        """The batches that dim a sun's light by their alpha (its see-through map:
+        ``ShadowMaps.see_through_atlas``): the transparent slot's see-through paint, not a
+        surface the view trees draw (a water, a see-through mirror: ``InstanceBatch.surface``)
+        and not a decal's cut; then the opaque batches with glass in them
+        (``InstanceBatch.refracts``: their refracting instances alone are drawn there)."""
+        return [batch for batch in self.transparent_batches() if not batch.surface and not batch.decal] + \
+            [batch for batch in self.opaque_batches() if batch.refracts]
+
     def tree_opaque_batches(self) -> list[InstanceBatch]:
         """What a view tree's views (root and levels) draw as opaque: ``opaque_batches``
         without those that refract the screen (``refracting_batches``), which they draw after

@@ -375,6 +375,7 @@ class InstanceBatch:
         self.probe_blend = False
         self.rest_probe = 0  # the probe taking what the weights leave (0: the sky; a curved object's own)
         self._variants: tuple[int, int, int] | None = None
+        self._refracts = False   # (found with _variants)
         self._variants_stale = True
         # Drawn in the scene pass's transparent slot (blended, farthest first) instead of
         # with the opaque batches: a material whose alpha is below 1 (Renderer.batch_for).
@@ -632,11 +633,23 @@ class InstanceBatch:
         """The (emissive, refract, reflect) variants every instance uses, or None when they
         differ: the scene pass draws a uniform batch with a program built for its variants."""
         if self._variants_stale:
-            slots = self.rows["slots"][: self.count, :3]
-            same = self.count and bool((slots == slots[0]).all())
-            self._variants = tuple(int(v) for v in slots[0]) if same else None
-            self._variants_stale = False
+            self._find_variants()
         return self._variants
+
+    @property
+    def refracts(self) -> bool:
+        """Whether some instance refracts (its refract variant is not NONE: glass, which lets
+        its share of the light through: a sun's see-through map holds it)."""
+        if self._variants_stale:
+            self._find_variants()
+        return self._refracts
+
+    def _find_variants(self) -> None:
+        slots = self.rows["slots"][: self.count, :3]
+        same = self.count and bool((slots == slots[0]).all())
+        self._variants = tuple(int(v) for v in slots[0]) if same else None
+        self._refracts = bool(self.count) and bool((slots[:, 1] != 0).any())   # (RefractVariant.NONE: 0)
+        self._variants_stale = False
 
     # --- GPU -----------------------------------------------------------------------------
     @property

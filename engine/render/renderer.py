@@ -535,9 +535,9 @@ class Renderer(Gpu):
             self._dropped_changes = box if old is None else (np.minimum(old[0], box[0]), np.maximum(old[1], box[1]))
 
     def take_changed_box(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The box holding where opaque instances were and are whose rows changed since the
-        last call (moved, came, went, changed their look), forgotten; None: none.  What a
-        shadow map redraws (engine/render/shadows.py)."""
+        """The box holding where casting instances (``shadow_casting_batches``) were and are
+        whose rows changed since the last call (moved, came, went, changed their look),
+        forgotten; None: none.  What a shadow map redraws (engine/render/shadows.py)."""
         return self.take_changes()[0]
 
     def take_changes(self) -> tuple[tuple[np.ndarray, np.ndarray] | None, list | None]:
@@ -548,7 +548,7 @@ class Renderer(Gpu):
         boxes, parts = [], []
         for batch in self.batches.values():
             box, batch_parts = batch.take_changes()
-            if box is None or batch.transparent:
+            if box is None or (batch.transparent and (batch.surface or batch.decal)):   # (casts nothing)
                 continue
             boxes.append(box)
             parts = None if parts is None or batch_parts is None else parts + batch_parts
@@ -562,9 +562,10 @@ class Renderer(Gpu):
         return _union(boxes), parts
 
     def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The world box holding every opaque instance as of the last upload (None: none):
-        what a directional light's shadow map is fitted to."""
-        batches = self.opaque_batches()
+        """The world box holding every instance that casts (opaque, and see-through ones:
+        ``shadow_casting_batches``) as of the last upload (None: none): what a directional
+        light's shadow map is fitted to."""
+        batches = self.shadow_casting_batches()
         kept = self._level_union
         if kept is not None and len(kept[0]) == len(batches):
             for batch, box in zip(batches, kept[0], strict=True):

@@ -54,6 +54,7 @@ from engine.render.bindings import (
     RIPPLES_BINDING,
     SCREEN_CONTACT_UNIT,
     SCREEN_OCCLUSION_UNIT,
+    SEE_THROUGH_UNIT,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SKY_UNIT,
@@ -113,7 +114,8 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "screen_contact_lamps": SCREEN_CONTACT_UNIT, "spot_cookies": COOKIE_UNIT,
                 "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
                 "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT,
-                "refraction_copy": REFRACTION_COPY_UNIT, "caustic_maps": CAUSTIC_UNIT, "ripple_atlas": RIPPLE_UNIT}
+                "refraction_copy": REFRACTION_COPY_UNIT, "caustic_maps": CAUSTIC_UNIT, "ripple_atlas": RIPPLE_UNIT,
+                "see_through_atlas": SEE_THROUGH_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING,

@@ -16,6 +16,13 @@ times sharper for a narrow cone at the same resolution.  At most ``MAX_POINT_SHA
 lights cast shadows (two slots, each a cube sampler or a spot tile), the rest light without
 and are counted in ``RenderStats.shadows_cut``.
 
+See-through things (the transparent slot's batches, and glass among the opaque ones) are
+not in the depth maps: a sun's level map has a see-through map beside it
+(``see_through_atlas``, ``fit_see_through``), half its texels a side, holding the share of the
+light they let through (1 - alpha each, multiplied) and the nearest one's depth, drawn with
+the level map (``_draw_see_through``) and read by the scene pass's SEE_THROUGH_SHADOWS builds
+(``shaders/include/shadows.glsl`` see_through_shadows).
+
 Nothing here decides when a map is drawn again: the shadows stage does
 (``systems/shadow_system.py``, from the frame's change sets).  The Shadows uniform block
 (``shaders/include/shadows.glsl``) holds each light's atlas matrix and filter, written when
@@ -43,6 +50,8 @@ from engine.render.bindings import (
     POSE_ROWS_UNIT,
     SCENE_CLIPS,
     SCRATCH_UNIT,
+    SEE_THROUGH_SAMPLERS,
+    SEE_THROUGH_UNIT,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
@@ -122,11 +131,19 @@ _DEPTH: tuple[tuple[str, str], ...] = ()
 _DISTANCE = (("DISTANCE", "1"),)
 _LAYERED = (("DISTANCE", "1"), ("LAYERED", "1"))
 _LEG = (("LEG", "1"),)
+# A see-through caster into a sun's see-through map (drawn with the cutout build: its alpha).
+_SEE_THROUGH = (("SEE_THROUGH", "1"),)
 # Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
 # light reaches; the normal offset keeps a closed mesh's lit side off its own back.
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
 # A virtual light's stretch between two surfaces: kept between both planes.
 _LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
+# The see-through casters into a sun's see-through map: no depth test, both faces, the share
+# let through multiplied into the texel's (its alpha, the depth, by MIN: _draw_see_through).
+_SEE_THROUGH_CASTERS = PassState(cull=False, blend=(moderngl.DST_COLOR, moderngl.ZERO, moderngl.ONE, moderngl.ONE),
+                                 clips=SCENE_CLIPS)
+# The see-through map's texels against the depth map's, a side (a soft dimming needs fewer).
+SEE_THROUGH_SCALE = 2
 
 
 def _set_uniform(program: moderngl.Program, name: str, value: object) -> None:
@@ -219,6 +236,12 @@ class ShadowMaps:
         self._soft_sun_warned = False
         self._depth_ranges = np.zeros(MAX_DIRECTIONAL_LIGHTS, np.float32)   # each slot's map's, metres
         self.program_defines: tuple[tuple[str, str], ...] = ()
+        # The suns' see-through maps (``fit_see_through``): the light the see-through things let
+        # through, a tile for each level map's, where the context has a unit for it.
+        self.see_through_supported = renderer.caps.max_texture_image_units >= SEE_THROUGH_SAMPLERS
+        self._see_through_warned = False
+        self.see_through_atlas: moderngl.Texture | None = None
+        self._see_through_framebuffer: moderngl.Framebuffer | None = None
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
         self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
@@ -254,6 +277,47 @@ class ShadowMaps:
         self._atlas_framebuffer = self.ctx.framebuffer(depth_attachment=self.atlas)
         self.tile = tile
 
+    def fit_see_through(self, casting: bool) -> bool:
+        """Make the see-through atlas (``see_through_atlas``) while see-through things cast
+        (``casting``: ``Gpu.see_through_casters``), the depth atlas's layout at
+        1 / SEE_THROUGH_SCALE its texels a side, RGBA half floats: for each casting sun's level
+        map, the share of its light the see-through things over a texel let through (red) and
+        the nearest one's depth (alpha); drop it when none does.  True when it was made,
+        remade or dropped (every sun's map is to be drawn again with it).  Where the context
+        has no unit for it, see-through things cast nothing, said once in a GLLimitWarning."""
+        if casting and not self.see_through_supported:
+            if not self._see_through_warned:
+                self._see_through_warned = True
+                warnings.warn(GLLimitWarning(
+                    f"see-through things dim the sun's light through a map of their own that needs "
+                    f"{SEE_THROUGH_SAMPLERS} texture units in the fragment stage, and this OpenGL has "
+                    f"{self.renderer.caps.max_texture_image_units} (GL_MAX_TEXTURE_IMAGE_UNITS): they cast no "
+                    "shadow"), stacklevel=3)
+            casting = False
+        size = (max(self.atlas.size[0] // SEE_THROUGH_SCALE, 1), max(self.atlas.size[1] // SEE_THROUGH_SCALE, 1))
+        atlas = self.see_through_atlas
+        if casting and atlas is not None and atlas.size == size or not casting and atlas is None:
+            return False
+        self._drop_see_through()
+        if casting:
+            atlas = self.see_through_atlas = self.ctx.texture(size, 4, dtype="f2")
+            atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            atlas.repeat_x = atlas.repeat_y = False
+            self._see_through_framebuffer = self.ctx.framebuffer(color_attachments=[atlas])
+            # Nothing in the way (a new texture's texels are undefined until written).
+            self._see_through_framebuffer.clear(1.0, 1.0, 1.0, 1.0)
+        self._set_program_defines()
+        return True
+
+    def _drop_see_through(self) -> None:
+        if self._see_through_framebuffer is not None:
+            release_framebuffer(self._see_through_framebuffer)
+            self._see_through_framebuffer = None
+        if self.see_through_atlas is not None:
+            self.see_through_atlas.release()
+            self.see_through_atlas = None
+            self.renderer.note_scene_change()
+
     def tile_origin(self, slot: int) -> tuple[int, int]:
         return (slot % 2) * self.tile, (slot // 2) * self.tile
 
@@ -263,8 +327,11 @@ class ShadowMaps:
         a side) from ``fit``, and write its row of the Shadows block.  With ``region`` (x, y,
         width, height in the tile's texels) only those texels are cleared and drawn again (the
         casters' draws scissored to them: the same depths a whole redraw writes there).
-        Returns the texels drawn."""
+        Returns the texels drawn.  With a see-through atlas its tile is drawn too, over the
+        same texels (``_draw_see_through``)."""
         texels = self._draw_tile(slot, slot, fit, resolution, region)
+        if self.see_through_atlas is not None:
+            self._draw_see_through(slot, resolution, region)
         # World -> the tile's uv and depth in [0, 1]; the block's rows written again only when
         # what they are made of changed (a frame redrawing a region under moved casters keeps them).
         width = self.atlas.size[0]
@@ -353,6 +420,51 @@ class ShadowMaps:
         self._draw_casters(None, _DEPTH)
         return rect[2] * rect[3]
 
+    def _draw_see_through(self, slot: int, resolution: int, region: tuple[int, int, int, int] | None) -> None:
+        """Directional light ``slot``'s see-through tile (its level map's, ``resolution`` /
+        SEE_THROUGH_SCALE texels a side; ``region``: only the texels under the depth map's
+        region, grown to whole see-through texels) from the Camera block ``_draw_tile`` bound:
+        cleared to all the light let through, then each see-through caster multiplies in its
+        share and keeps the nearest depth (the alpha channel blends by MIN: the blend equation
+        is set for this pass and given back)."""
+        ctx = self.ctx
+        x, y = self.tile_origin(slot)
+        scale = SEE_THROUGH_SCALE
+        side = max(resolution // scale, 1)
+        square = (x // scale, y // scale, side, side)
+        if region is None:
+            rect = square
+        else:
+            x0, y0 = region[0] // scale, region[1] // scale
+            x1, y1 = -(-(region[0] + region[2]) // scale), -(-(region[1] + region[3]) // scale)
+            rect = (square[0] + x0, square[1] + y0, min(x1, side) - x0, min(y1, side) - y0)
+        framebuffer = self._see_through_framebuffer
+        framebuffer.use()
+        apply_pass_state(ctx, _SEE_THROUGH_CASTERS, square, rect)
+        framebuffer.clear(1.0, 1.0, 1.0, 1.0, viewport=rect)
+        renderer = self.renderer
+        ctx.blend_equation = moderngl.FUNC_ADD, moderngl.MIN
+        try:
+            for batch in renderer.see_through_casters():
+                if not batch.count:
+                    continue
+                kind = "vertex alpha" if batch.mesh.has_alpha else True
+                second_uv = bool(batch.second_uv_maps & ALBEDO_UV_BIT)
+                program = self._caster_program(_SEE_THROUGH, kind, batch.skinned, batch.morphed, second_uv)
+                _set_uniform(program, "light_body", 0)
+                _set_uniform(program, "glass_only", not batch.transparent)
+                bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color, ALBEDO_UNIT)
+                if batch.skinned or batch.morphed:
+                    bind_texture(ctx, renderer.pose_rows.texture, POSE_ROWS_UNIT)
+                    program["pose_row"].value = batch.pose_row
+                if batch.morphed:
+                    bind_texture(ctx, batch.mesh.morphs, MORPH_UNIT)
+                    program["morph_targets"].value = batch.mesh.morph_count
+                batch.draw(program)
+                renderer.stats.shadow_draw_calls += 1
+        finally:
+            ctx.blend_equation = moderngl.FUNC_ADD
+
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
         """Bind the Camera block of directional light ``slot``'s map (a ring's: past the
         lights' slots), drawn from ``fit``: a buffer of the slot's own, packed and written
@@ -388,7 +500,8 @@ class ShadowMaps:
         band (a second lookup in it), ``SPOT_MAP<slot>`` where a point slot holds a spot's
         map (its lookup instead of the cube's), ``SOFT_POINT_SHADOWS`` while a cube's light has a
         size (a sphere or a rectangle: percentage-closer soft shadows, not with the "single"
-        filter), ``SOFT_SUN_SHADOWS`` while a casting directional light has a size (its map read
+        filter), ``SEE_THROUGH_SHADOWS`` while see-through things cast (``fit_see_through``),
+        ``SOFT_SUN_SHADOWS`` while a casting directional light has a size (its map read
         as it is too: ``soft_sun_shadow``, not with the "single" filter), ``SHADOW_SINGLE_TAP``
         with the "single" filter.
         The scene pass builds
@@ -404,6 +517,7 @@ class ShadowMaps:
             *((f"SPOT_MAP{slot}", "1", True) for slot in spots),
             ("SOFT_POINT_SHADOWS", "1", soft and point > 0),
             ("SOFT_SUN_SHADOWS", "1", soft_sun and directional > 0),
+            ("SEE_THROUGH_SHADOWS", "1", self.see_through_atlas is not None and directional > 0),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
@@ -821,6 +935,8 @@ class ShadowMaps:
         """Bind the maps and the Shadows block for a scene pass (every pass: the units are
         shared with passes that are not scene passes)."""
         bind_texture(self.ctx, self.atlas, SHADOW_ATLAS_UNIT)
+        if self.see_through_atlas is not None:   # (the SEE_THROUGH_SHADOWS builds)
+            bind_texture(self.ctx, self.see_through_atlas, SEE_THROUGH_UNIT)
         if self._casting[6]:   # (the soft suns' builds: the atlas again, its depths as values)
             bind_texture(self.ctx, self.atlas, SUN_DEPTH_UNIT)
             bind_sampler(self.ctx, self.renderer.depth_values(), SUN_DEPTH_UNIT)
@@ -854,6 +970,7 @@ class ShadowMaps:
         release_framebuffer(self._atlas_framebuffer)
         if self._virtual_framebuffer is not None:
             release_framebuffer(self._virtual_framebuffer)
+        self._drop_see_through()
         for _, _, buffer in self._fit_blocks.values():
             buffer.release()
         self._fit_blocks.clear()

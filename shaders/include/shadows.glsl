@@ -279,6 +279,50 @@ vec4 directional_shadows(vec3 position, vec3 normal) {
     return lit;
 }
 
+#ifdef SEE_THROUGH_SHADOWS
+// The suns' see-through maps (engine/render/shadows.py, ShadowMaps.see_through_atlas): each
+// casting sun's level map has a tile of its own here, half its texels a side, laid out as the
+// depth atlas's (the same uv), holding the share of the light the see-through things over a
+// texel let through (red: the product of each one's 1 - alpha) and the nearest one's depth
+// (alpha).  Filtered bilinearly: a soft edge, one lookup.
+uniform sampler2D see_through_atlas;
+// How much deeper than the nearest see-through caster a point lies before its light is
+// dimmed (depth units: a half float's step near 1 and more, so a pane does not dim itself).
+const float SEE_THROUGH_BIAS = 2e-3;
+
+// The share of sun i's light that the see-through things between it and a point let through
+// (1 where none is, or the point lies in front of them): the point moved off its surface as
+// the depth lookup moves it, twice as far (the map's texels are twice as big).
+float see_through_shadow(int i, vec3 position, vec3 normal, vec3 l) {
+    vec4 params = shadows.directional_params[i];
+    if (params.w == 0.0) return 1.0;
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    mat4 to_map = shadows.directional_matrix[i];
+    vec3 p = (to_map * vec4(position, 1.0)).xyz + mat3(to_map) * normal * (2.0 * params.x * (1.5 - nl));
+    vec3 tile = shadows.directional_tile[i].xyz;
+    if (any(lessThan(p.xy, tile.xy)) || any(greaterThan(p.xy, tile.xy + tile.z))) return 1.0;
+    vec4 through = texture(see_through_atlas, p.xy);
+    return p.z > through.a + SEE_THROUGH_BIAS ? through.r : 1.0;
+}
+
+// ``see_through_shadow`` for directional slots 0 to DIRECTIONAL_SHADOWS - 1 (as
+// ``directional_shadows``: one lookup a slot, before the lights' loop).
+vec4 see_through_shadows(vec3 position, vec3 normal) {
+    vec4 through = vec4(1.0);
+    through.x = see_through_shadow(0, position, normal, -lights.directional_dir[0].xyz);
+#if DIRECTIONAL_SHADOWS > 1
+    through.y = see_through_shadow(1, position, normal, -lights.directional_dir[1].xyz);
+#endif
+#if DIRECTIONAL_SHADOWS > 2
+    through.z = see_through_shadow(2, position, normal, -lights.directional_dir[2].xyz);
+#endif
+#if DIRECTIONAL_SHADOWS > 3
+    through.w = see_through_shadow(3, position, normal, -lights.directional_dir[3].xyz);
+#endif
+    return through;
+}
+#endif
+
 #if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
 // The shadow of a light with a size (a sphere's radius, a rectangle's disc of the same area:
 // ``size.x``, metres; a rectangle's front: ``size.yzw``) from its distance cube, by
