@@ -814,14 +814,14 @@ class InstanceBatch:
         (``visibility_rules.row_casts_shadow``)."""
         slots = self.rows["slots"][rows]
         codes = (self.rows["tint"][rows, TINT_VISIBILITY] + 0.5).astype(np.int64)
-        return row_casts_shadow(slots[:, 1], slots[:, 2], codes)
+        return row_casts_shadow(slots[:, 2], codes)
 
     def note_row_casts(self, entity: int, row: np.void) -> None:
         """The extract stage wrote ``entity``'s ``row``: while some row casts no shadow, the
         changed box reads the rows' fields (``may_not_cast``); once none does (it casts again,
         or went), it reads none."""
         code = int(row["tint"][TINT_VISIBILITY] + 0.5)
-        if row_casts_shadow(row["slots"][1], row["slots"][2], code):
+        if row_casts_shadow(row["slots"][2], code):
             self._non_casters.discard(entity)
         else:
             self._non_casters.add(entity)
@@ -830,10 +830,12 @@ class InstanceBatch:
     def shadow_fields(self, row: np.void) -> tuple:
         """What of a row the shadow pass reads besides its model matrix (which moves its box):
         where it is drawn and casts (tint.w, less whether it receives shadows, which the maps
-        do not hold), its refract and reflect variants, its slice, and a cutout's alpha (its
-        holes are where the colour's alpha times the texture's falls below the cutoff)."""
+        do not hold), its refract and reflect variants, its slice, and the alpha of a cutout
+        (its holes are where the colour's alpha times the texture's falls below the cutoff), of
+        a see-through batch's row and of glass (the share of a sun's light they let through)."""
+        reads_alpha = self.alpha_cutoff is not None or self.transparent or int(row["slots"][1]) != 0
         return int(row["tint"][TINT_VISIBILITY] + 0.5) & ~NO_RECEIVE_BIT, int(row["slots"][1]), int(row["slots"][2]), \
-            tuple(row["slice"].tolist()), float(row["color"][3]) if self.alpha_cutoff is not None else None
+            tuple(row["slice"].tolist()), float(row["color"][3]) if reads_alpha else None
 
     def _note_changed(self, lo: list[float], hi: list[float],
                       parts: list[tuple[list[float], list[float]]] | None = None) -> None:

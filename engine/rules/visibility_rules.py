@@ -32,7 +32,7 @@ import numpy as np
 from components import MeshRef, Portal, PortalClone, Refractive, Visibility
 from components.limits import NO_RECEIVE_BIT, NO_SHADOW_BIT, OPENING_CASTS_BIT, VIEW_KINDS
 from components.visibility import DRAWN_EVERYWHERE, KIND_MASK, visibility_code
-from engine.core.material_slots import ReflectVariant, RefractVariant
+from engine.core.material_slots import ReflectVariant
 from engine.core.world import World
 
 Code = TypeVar("Code", int, np.ndarray)
@@ -95,13 +95,13 @@ def opening_casts(codes: Code) -> bool | np.ndarray:
     return (codes & OPENING_CASTS_BIT) != 0
 
 
-def row_casts_shadow(refract: np.ndarray, reflect: np.ndarray, codes: np.ndarray) -> np.ndarray:
-    """Whether each instance row (its refract and reflect variants, its code) is drawn into
-    the lights' shadow maps: ``casts`` in ``shaders/shadow.vert``, on arrays.  Glass lets the
-    light through, and a portal's surface is an opening that casts only when it carries light
-    (``opening_casts``: the light goes in there and out of its partner)."""
-    return ((reflect != ReflectVariant.PORTAL) | opening_casts(codes)) & (refract == RefractVariant.NONE) \
-        & casts_shadow(codes)
+def row_casts_shadow(reflect: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Whether each instance row (its reflect variant and its code) is drawn into the lights'
+    shadow maps: ``casts`` in ``shaders/shadow.vert``, on arrays; glass, which lets its share
+    of the light through, is drawn into a sun's see-through map (its SEE_THROUGH build:
+    ``engine/render/shadows.py``).  A portal's surface is an opening that casts only when it
+    carries light (``opening_casts``: the light goes in there and out of its partner)."""
+    return ((reflect != ReflectVariant.PORTAL) | opening_casts(codes)) & casts_shadow(codes)
 
 
 class ShadowCasting:
