@@ -279,7 +279,8 @@ def test_a_mesh_that_casts_no_shadow_leaves_a_lamps_light_on_the_floor(scene):
 @pytest.mark.parametrize("change", ["casts_shadows", "hidden_everywhere", "glass"])
 def test_a_caster_that_stops_casting_where_it_stands_draws_the_kept_maps_again(scene, change):
     """A caster whose box stays where it was but stops casting (its MeshRef's
-    ``casts_shadows`` off, hidden in every kind of view, made glass): the kept sun's map is
+    ``casts_shadows`` off, hidden in every kind of view, made glass: its shadow then lies in
+    the sun's see-through map, softer, alpha 1 letting none through): the kept sun's map is
     drawn again, and the frame is the one an engine given that world from the start draws.
     (The maps were drawn again only where a box changed, so hiding the box left its shadow.)"""
     import warnings
