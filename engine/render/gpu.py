@@ -415,16 +415,15 @@ class Gpu:
         """What the shadow maps hold: the opaque batches (the depth maps; glass among them
         in a sun's see-through map), then the transparent slot's see-through ones (its
         see-through map: ``see_through_casters``)."""
-        see_through = [batch for batch in self.transparent_batches() if not batch.surface and not batch.decal]
+        see_through = [batch for batch in self.transparent_batches() if batch.see_through_paint]
         return self.opaque_batches() + see_through if see_through else self.opaque_batches()
 
     def see_through_casters(self) -> list[InstanceBatch]:
         """The batches that dim a sun's light by their alpha (its see-through map:
-        ``ShadowMaps.see_through_atlas``): the transparent slot's see-through paint, not a
-        surface the view trees draw (a water, a see-through mirror: ``InstanceBatch.surface``)
-        and not a decal's cut; then the opaque batches with glass in them
+        ``ShadowMaps.see_through_atlas``): the transparent slot's see-through paint
+        (``InstanceBatch.see_through_paint``), then the opaque batches with glass in them
         (``InstanceBatch.refracts``: their refracting instances alone are drawn there)."""
-        return [batch for batch in self.transparent_batches() if not batch.surface and not batch.decal] + \
+        return [batch for batch in self.transparent_batches() if batch.see_through_paint] + \
             [batch for batch in self.opaque_batches() if batch.refracts]
 
     def tree_opaque_batches(self) -> list[InstanceBatch]:

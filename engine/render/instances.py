@@ -637,6 +637,13 @@ class InstanceBatch:
         return self._variants
 
     @property
+    def see_through_paint(self) -> bool:
+        """A transparent batch that dims a sun's light by its alpha (its see-through map):
+        not a surface the view trees draw (a water, a see-through mirror: ``surface``) and not
+        a decal's cut."""
+        return self.transparent and not self.surface and not self.decal
+
+    @property
     def refracts(self) -> bool:
         """Whether some instance refracts (its refract variant is not NONE: glass, which lets
         its share of the light through: a sun's see-through map holds it)."""

@@ -548,7 +548,7 @@ class Renderer(Gpu):
         boxes, parts = [], []
         for batch in self.batches.values():
             box, batch_parts = batch.take_changes()
-            if box is None or (batch.transparent and (batch.surface or batch.decal)):   # (casts nothing)
+            if box is None or (batch.transparent and not batch.see_through_paint):   # (casts nothing)
                 continue
             boxes.append(box)
             parts = None if parts is None or batch_parts is None else parts + batch_parts
