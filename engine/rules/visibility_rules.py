@@ -18,7 +18,8 @@ A view draws an entity when it is of no kind the entity is hidden in and they sh
 none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``);
 one whose ``MeshRef.receives_shadows`` is off has ``NO_RECEIVE_BIT`` (``receives_shadow``):
 the scene shader looks up no map for it.
-Glass casts none, whatever its code, and a portal's surface is an opening that casts none
+Glass casts into no depth map, whatever its code (it lets its share of a sun's light through:
+the sun's see-through map holds it), and a portal's surface is an opening that casts none
 unless it carries light (``Portal.carries_light``: ``OPENING_CASTS_BIT`` in its code,
 ``opening_casts``), when the light it takes in leaves by its partner, not on behind it
 (``row_casts_shadow`` on instance rows, ``ShadowCasting`` from the world): the shadow pass's
@@ -106,16 +107,20 @@ def row_casts_shadow(reflect: np.ndarray, codes: np.ndarray) -> np.ndarray:
 
 class ShadowCasting:
     """Whether entities, read from the world, are drawn into the lights' shadow maps (the rule
-    ``row_casts_shadow`` applies to their instance rows): a visible mesh, not glass nor a
-    portal that carries no light, drawn somewhere and not ``casts_shadows = False``; a portal's clone of an entity
+    ``row_casts_shadow`` applies to their instance rows): a visible mesh, not a portal that
+    carries no light, drawn somewhere and not ``casts_shadows = False``; a portal's clone of an entity
     by its source's Visibility and ``casts_shadows``, as the extract stage writes its row.
+    Glass is in a sun's see-through map and no lamp's cube: ``glass_casts`` says whether it
+    counts (True where a sun casts and the question is "did a shadow move", as the probes'
+    scheduler asks; False for the lamps' cubes).
     Made once for a frame's many movers: the glass, the portals and the clones are looked up
     once, then each mover by the MeshRef and Visibility its caller holds already."""
 
-    def __init__(self, world: World) -> None:
+    def __init__(self, world: World, glass_casts: bool = False) -> None:
         self.world = world
-        self._see_through = {entity for entity, _ in world.query_one(Refractive)} | \
-            {entity for entity, portal in world.query_one(Portal) if not portal.carries_light}
+        self._see_through = {entity for entity, portal in world.query_one(Portal) if not portal.carries_light}
+        if not glass_casts:
+            self._see_through |= {entity for entity, _ in world.query_one(Refractive)}
         self._clones = {entity: clone.source for entity, clone in world.query_one(PortalClone)}
 
     def casts(self, entity: int, mesh_ref: MeshRef, visibility: Visibility | None) -> bool:
