@@ -20,12 +20,13 @@ in float v_alpha;
 #endif
 #endif
 #ifdef SEE_THROUGH
-// A see-through caster (a batch of the transparent slot) into a sun's see-through map
-// (engine/render/shadows.py): the share of the light it lets through, 1 - its alpha (what
-// shows through it in every view), multiplied into the texel's (the target blends by the
-// destination colour: every layer's share), and its depth, the nearest kept (the alpha
+// A see-through caster (a batch of the transparent slot, or glass) into a sun's see-through
+// map (engine/render/shadows.py): the share of the light it lets through, 1 - its alpha
+// (what shows through it in every view), multiplied into the texel's (the target blends by
+// the destination colour: every layer's share), and its depth, the nearest kept (the alpha
 // channel blends by MIN): a point lit through it lies deeper than that (shadows.glsl
-// see_through_shadows).
+// see_through_shadows).  With DISTANCE, into a point or spot light's: its distance over the
+// range in place of the depth (lamp_see_through_cube, lamp_see_through_spot).
 layout(location = 0) out vec4 out_through;
 #endif
 #ifdef DISTANCE
@@ -37,17 +38,27 @@ in vec3 g_world_pos;
 in vec3 v_world_pos;
 #endif
 uniform float light_range;
+#ifndef SEE_THROUGH
 layout(location = 0) out float out_distance;
+#endif
 #endif
 
 void main() {
+    // What the map compares: the distance from the light over its range, or the depth.
+#ifdef DISTANCE
+    float depth = length(v_world_pos - camera.eye.xyz) / light_range;
+#else
+    float depth = gl_FragCoord.z;
+#endif
 #ifdef SEE_THROUGH
     float alpha = clamp(v_alpha * texture(albedo_map, bounded_footprint(v_uv)).a, 0.0, 1.0);
-    out_through = vec4(vec3(1.0 - alpha), gl_FragCoord.z);
-#elif defined(ALPHA_CUTOFF)
+    out_through = vec4(vec3(1.0 - alpha), depth);
+#else
+#ifdef ALPHA_CUTOFF
     if (v_alpha * texture(albedo_map, bounded_footprint(v_uv)).a < alpha_cutoff) discard;
 #endif
 #ifdef DISTANCE
-    out_distance = length(v_world_pos - camera.eye.xyz) / light_range;
+    out_distance = depth;
+#endif
 #endif
 }

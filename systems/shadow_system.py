@@ -356,11 +356,17 @@ class ShadowSystem(esper.Processor):
                 self._enclosure_asked.clear()
                 maps.drop_unused_cubes(set())
                 maps.fit_spot_atlas(0)
+                maps.fit_lamp_see_through(False, 0)
                 self._points_clear = True
             return
         maps.clear_points()
         self._points_clear = False
-        changed_lo, changed_hi = self._changed_boxes()
+        # See-through things dim the lamps too (their see-through tiles, drawn with each map):
+        # a new atlas draws every map again.
+        if maps.fit_lamp_see_through(bool(self.renderer.see_through_casters()),
+                                     max(light.shadow_resolution for _, _, _, light, _ in casting)):
+            self._point.clear()
+        changed_lo, changed_hi = self._changed_boxes(glass_casts=maps.lamp_see_through_atlas is not None)
         layered = layered_target(self.renderer.path_checks)  # (into the cube, or an array copied into it)
         spots = {slot: half_width for slot, _, _, light, _ in casting
                  if (half_width := spot_map_half_width(light)) is not None}
@@ -447,11 +453,12 @@ class ShadowSystem(esper.Processor):
                         f"{entity} (a light's own mesh casts none of its shadow) or give it "
                         f"MeshRef(casts_shadows=False)")
 
-    def _changed_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+    def _changed_boxes(self, glass_casts: bool) -> tuple[np.ndarray, np.ndarray]:
         """The old and new world boxes of every drawable that moved, came, went or changed
         its look this frame (all boxes are measured the first time: every cube is new then),
         but for one that only moved and casts no shadow (``ShadowCasting``: its look as
-        before, it cast none where it was either)."""
+        before, it cast none where it was either; ``glass_casts``: glass dims the lamps, in
+        their see-through maps)."""
         world = self.world
         frame = world.frame
         if not self._bounds:
@@ -472,7 +479,7 @@ class ShadowSystem(esper.Processor):
                     new = self._bounds[entity] = world_bounds(mesh_ref.mesh, transform.world,
                                                               pose_bounds(world, entity, mesh_ref.mesh))
             if entity not in looks and entity not in frame.added and entity not in gone and new is not None:
-                casting = casting or ShadowCasting(world)
+                casting = casting or ShadowCasting(world, glass_casts)
                 if not casting.casts(entity, mesh_ref, world.try_get(entity, Visibility)):
                     continue  # moved alone, casting nothing here nor where it was
             boxes.extend(box for box in (old, new) if box is not None)

@@ -1082,16 +1082,29 @@ PANE_AT, PANE_HALF = np.array([0.0, 2.0, 0.0]), 1.0    # a 2 m square pane, flat
 SUN_DOWN = glm.normalize(glm.vec3(0.0, -1.0, -0.3))
 
 
-def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=False, post=True):
+# Where ``_pane_scene``'s ``lamp`` stands: a point light 0.9 m over the pane (which spans
+# three of its cube's faces), a spot 4 m over it (its cone reaches past the pane's shadow).
+LAMPS_AT = {"point": np.array([-0.3, 2.9, 0.2]), "spot": np.array([-0.3, 6.0, 0.2])}
+
+
+def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=False, post=True, lamp=None):
     """A floor, a sun nearly overhead, a flat see-through pane (``alpha``; ``glass``: a
     Refractive, drawn with the opaque batches), a second one under it (``second``: its alpha;
     both cast or neither: ``casts``),
     a box hanging over the pane (``above``) and a 3 m post (the level's top, so the pane
-    moving or going leaves the level's box as it is)."""
+    moving or going leaves the level's box as it is).  ``lamp`` ("point", or "spot": a cone
+    40 degrees a side, looking down) lights it instead of the sun, from LAMPS_AT (``sun``:
+    its intensity over 2.5, the sun's)."""
     def build(world):
         ids = world.resources["ids"] = {}
         look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
-        world.spawn(DirectionalLight(direction=tuple(SUN_DOWN), intensity=sun))
+        if lamp is None:
+            world.spawn(DirectionalLight(direction=tuple(SUN_DOWN), intensity=sun))
+        else:
+            down = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))   # its -Z (a spot's axis) down
+            ids["lamp"] = world.spawn(Transform(position=tuple(LAMPS_AT[lamp]), rotation=down),
+                                      PointLight(intensity=(12.0 if lamp == "point" else 40.0) * sun, range=14.0,
+                                                 shadows=True, **({"spot_angle": 40.0} if lamp == "spot" else {})))
         ids["floor"] = world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
         flat = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
         parts = [Transform(position=tuple(PANE_AT), rotation=flat),
@@ -1111,9 +1124,10 @@ def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=Fals
 
 
 def _pane_frames(scene, shadow_filter="single", **how):
-    """The frame with the pane (``how``), and the floor's share of the direct sunlight the
-    pane's dimming took away at each pixel: (without - with) / (without - sunless), where
-    "without" has a pane that casts nothing and "sunless" no sun: engines built apart."""
+    """The frame with the pane (``how``), and the floor's share of the direct sunlight (or
+    lamplight) the pane's dimming took away at each pixel: (without - with) / (without -
+    sunless), where "without" has a pane that casts nothing and "sunless" no light: engines
+    built apart.  (A pixel the light does not reach: 0.)"""
     frames = {}
     for name, extra in (("with", {}), ("without", {"casts": False}), ("sunless", {"casts": False, "sun": 0.0})):
         runner = scene(_pane_scene(**{**how, **extra}), (320, 240))
@@ -1122,17 +1136,18 @@ def _pane_frames(scene, shadow_filter="single", **how):
         runner.frame()
         frames[name] = (runner, srgb_to_linear(runner.frame()).mean(axis=-1))
     with_, without, sunless = (frames[name][1] for name in ("with", "without", "sunless"))
-    return frames["with"][0], (without - with_) / np.maximum(without - sunless, 1e-6)
+    lit = without - sunless
+    return frames["with"][0], np.where(lit > 0.02, (without - with_) / np.maximum(lit, 1e-6), 0.0), lit > 0.02
 
 
-def _under_pane(runner, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """The floor pixels whose ray to the sun meets the pane (shrunk by ``margin`` metres), and
-    those whose ray misses it grown by ``margin``, worked out in float64."""
+def _under_pane(runner, margin: float, lamp: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The floor pixels whose ray to the sun (``lamp``: to LAMPS_AT's) meets the pane (shrunk by
+    ``margin`` metres), and those whose ray misses it grown by ``margin``, worked out in float64."""
     ids = runner.world.resources["ids"]
     floor = runner.ids() == ids["floor"]
     points = _floor_points_seen(runner)
-    to_sun = -np.array(SUN_DOWN, np.float64)
-    t = (PANE_AT[1] - points[:, 1]) / to_sun[1]
+    to_sun = LAMPS_AT[lamp] - points if lamp else -np.array(SUN_DOWN, np.float64)[None, :]
+    t = (PANE_AT[1] - points[:, 1]) / to_sun[:, 1]
     at = points + to_sun * t[:, None]
     reach = np.maximum(np.abs(at[:, 0] - PANE_AT[0]), np.abs(at[:, 2] - PANE_AT[2])).reshape(floor.shape)
     return floor & (reach < PANE_HALF - margin), floor & (reach > PANE_HALF + margin)
@@ -1145,7 +1160,7 @@ def test_a_see_through_pane_takes_its_alpha_of_the_suns_light(scene, alpha, glas
     lets 1 - alpha of the sun's light through, as much as shows through it: under it, by the
     rays, the floor loses alpha of its direct sunlight (to 0.03: the map's half floats and the
     8-bit frames); beside it, nothing."""
-    runner, taken = _pane_frames(scene, shadow_filter, alpha=alpha, glass=glass)
+    runner, taken, _ = _pane_frames(scene, shadow_filter, alpha=alpha, glass=glass)
     under, beside = _under_pane(runner, 0.08)
     assert under.sum() > 800 and beside.sum() > 20000, (under.sum(), beside.sum())
     assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
@@ -1154,11 +1169,30 @@ def test_a_see_through_pane_takes_its_alpha_of_the_suns_light(scene, alpha, glas
     assert ("SEE_THROUGH_SHADOWS", "1") in runner.engine.renderer.shadows.program_defines
 
 
+@pytest.mark.parametrize("lamp, alpha, glass, shadow_filter", [("point", 0.5, False, "single"),
+                                                              ("point", 0.4, True, "grid"),
+                                                              ("spot", 0.6, False, "single")])
+def test_a_see_through_pane_takes_its_alpha_of_a_lamps_light(scene, lamp, alpha, glass, shadow_filter):
+    """The same under a point light 0.9 m over the pane, which spans three of its cube's faces
+    (the lamps' see-through tiles: a face each, the one GL's cube lookup takes), and under a
+    spot's map 4 m over it: under the pane, by the rays to the lamp, the floor the lamp reaches loses
+    alpha of its light; beside it, nothing."""
+    runner, taken, lit = _pane_frames(scene, shadow_filter, alpha=alpha, glass=glass, lamp=lamp)
+    under, beside = _under_pane(runner, 0.08, lamp=lamp)
+    under, beside = under & lit, beside & lit
+    assert under.sum() > 3000 and beside.sum() > 3000, (under.sum(), beside.sum())
+    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
+    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05, np.percentile(taken[under], [5, 50, 95])
+    assert np.abs(taken[beside]).max() < 0.02
+    defines = dict(runner.engine.renderer.shadows.program_defines)
+    assert defines.get("LAMP_SEE_THROUGH_SHADOWS") == "1" and ("SPOT_MAP0" in defines) == (lamp == "spot")
+
+
 def test_two_see_through_panes_let_through_the_product_and_what_is_over_them_keeps_its_light(scene):
     """Two panes one over the other (alphas 0.5 and 0.4): the floor under both keeps
     (1 - 0.5) x (1 - 0.4) = 0.3 of its sunlight, a share of 0.7 taken; a box hanging over
     the upper pane (nearer the sun than either) loses none of its light."""
-    runner, taken = _pane_frames(scene, alpha=0.5, second=0.4, above=True)
+    runner, taken, _ = _pane_frames(scene, alpha=0.5, second=0.4, above=True)
     under, _ = _under_pane(runner, 0.15)
     # (under the box's own shadow too: only where the box does not shade)
     ids = runner.world.resources["ids"]
@@ -1167,15 +1201,17 @@ def test_two_see_through_panes_let_through_the_product_and_what_is_over_them_kee
     assert top.sum() > 50 and np.abs(taken[top]).max() < 0.02
 
 
-@pytest.mark.parametrize("glass", [False, True])
-def test_a_see_through_pane_moved_faded_or_removed_draws_what_a_fresh_engine_draws(scene, glass):
+@pytest.mark.parametrize("lamp, glass", [(None, False), (None, True), ("point", False), ("point", True),
+                                         ("spot", False)])
+def test_a_see_through_pane_moved_faded_or_removed_draws_what_a_fresh_engine_draws(scene, lamp, glass):
     """The pane (or a glass one, among the opaque batches) slides 1.5 m: its share is drawn
-    again under where it was and is (a region of the map), and the frame is the one an engine
-    built with the pane there draws; its alpha goes from 0.6 to 0.3 (a row's alpha, the share
-    it lets through: the map's region drawn again), the same; then it is removed: the frame is
-    one with no pane at all.  (The alpha's change was kept out of the map at first: the still
-    fuzz's seed 12, case 16.)"""
-    runner = scene(_pane_scene(0.6, glass=glass), (160, 120))
+    again under where it was and is (a sun's: a region of the map; a lamp's: its map whole),
+    and the frame is the one an engine built with the pane there draws; its alpha goes from
+    0.6 to 0.3 (a row's alpha, the share it lets through: the map drawn again), the same;
+    then it is removed: the frame is one with no pane at all, and the see-through atlas is
+    let go.  (The alpha's change was kept out of the map at first: the still fuzz's seed 12,
+    case 16.)"""
+    runner = scene(_pane_scene(0.6, glass=glass, lamp=lamp), (160, 120))
     runner.engine.renderer.antialias = "off"
     runner.frame()
     runner.frame()
@@ -1183,11 +1219,17 @@ def test_a_see_through_pane_moved_faded_or_removed_draws_what_a_fresh_engine_dra
     runner.world.get(ids["pane"], Transform).position = (1.5, 2.0, 0.0)
     moved = runner.frame()
     resolution = DirectionalLight().shadow_resolution
-    assert runner.stats.shadow_maps_drawn == 1 and 0 < runner.stats.shadow_texels_drawn < resolution ** 2 / 4
+
+    def drawn_again() -> bool:
+        if lamp is not None:
+            return runner.stats.shadow_maps_drawn == 1
+        return runner.stats.shadow_maps_drawn == 1 and 0 < runner.stats.shadow_texels_drawn < resolution ** 2 / 4
+
+    assert drawn_again()
 
     def there(alpha):
         def build(world):
-            _pane_scene(alpha, glass=glass)(world)
+            _pane_scene(alpha, glass=glass, lamp=lamp)(world)
             world.get(world.resources["ids"]["pane"], Transform).position = (1.5, 2.0, 0.0)
         return build
 
@@ -1196,37 +1238,74 @@ def test_a_see_through_pane_moved_faded_or_removed_draws_what_a_fresh_engine_dra
     assert np.array_equal(moved, fresh.frame())
     runner.world.get(ids["pane"], Material).color = (0.2, 0.3, 0.9, 0.3)
     faded = runner.frame()
-    assert runner.stats.shadow_maps_drawn == 1 and 0 < runner.stats.shadow_texels_drawn < resolution ** 2 / 4
+    assert drawn_again()
     fresh = scene(there(0.3), (160, 120))
     fresh.engine.renderer.antialias = "off"
     assert np.array_equal(faded, fresh.frame())
     runner.world.delete_entity(ids["pane"])
     gone = runner.frame()
-    bare = scene(_pane_scene(0.6, casts=False), (160, 120))
+    bare = scene(_pane_scene(0.6, casts=False, lamp=lamp), (160, 120))
     bare.engine.renderer.antialias = "off"
     bare.world.delete_entity(bare.world.resources["ids"]["pane"])
     assert np.array_equal(gone, bare.frame())
-    assert runner.engine.renderer.shadows.see_through_atlas is None   # none casts: its atlas let go
+    shadows = runner.engine.renderer.shadows   # none casts: its atlas let go
+    assert shadows.see_through_atlas is None and shadows.lamp_see_through_atlas is None
 
 
-def test_without_a_unit_for_the_see_through_map_the_pane_casts_nothing_and_says_so(scene):
+@pytest.mark.parametrize("lamp", [None, "point"])
+def test_without_a_unit_for_the_see_through_map_the_pane_casts_nothing_and_says_so(scene, lamp):
     """A context whose fragment stage has too few texture units (macOS's 16) for the
-    see-through map: a GLLimitWarning names the count, once, and the pane dims nothing."""
+    see-through map (a sun's; a lamp's, one more): a GLLimitWarning names the count, once,
+    and the pane dims nothing."""
     from engine.core.errors import GLLimitWarning
-    from engine.render.bindings import SEE_THROUGH_SAMPLERS
+    from engine.render.bindings import LAMP_SEE_THROUGH_SAMPLERS, SEE_THROUGH_SAMPLERS
 
-    runner = scene(_pane_scene(0.6), (160, 120))
+    runner = scene(_pane_scene(0.6, lamp=lamp), (160, 120))
     runner.engine.renderer.antialias = "off"
-    runner.engine.renderer.shadows.see_through_supported = False
-    with pytest.warns(GLLimitWarning, match=f"needs {SEE_THROUGH_SAMPLERS} texture units"):
+    shadows = runner.engine.renderer.shadows
+    if lamp is None:
+        shadows.see_through_supported, needed, define = False, SEE_THROUGH_SAMPLERS, "SEE_THROUGH_SHADOWS"
+    else:
+        shadows.lamp_see_through_supported, needed, define = False, LAMP_SEE_THROUGH_SAMPLERS, \
+            "LAMP_SEE_THROUGH_SHADOWS"
+    with pytest.warns(GLLimitWarning, match=f"need[s]? {needed} texture units"):
         frame = runner.frame()
     with warnings.catch_warnings():
         warnings.simplefilter("error", GLLimitWarning)
         runner.frame()
-    bare = scene(_pane_scene(0.6, casts=False), (160, 120))
+    bare = scene(_pane_scene(0.6, casts=False, lamp=lamp), (160, 120))
     bare.engine.renderer.antialias = "off"
     assert np.array_equal(frame, bare.frame())
-    assert not any(name == "SEE_THROUGH_SHADOWS" for name, _ in runner.engine.renderer.shadows.program_defines)
+    assert not any(name == define for name, _ in shadows.program_defines)
+
+
+def test_a_lamps_own_glass_bulb_dims_none_of_its_light(scene):
+    """A point light on the entity of a glass sphere round it (its bulb: a light's own mesh
+    casts none of its shadow) lights the floor as the light alone does, though the bulb is in
+    the lamps' see-through map (which the pane under it keeps in use)."""
+    def build(bulb: bool):
+        def make(world):
+            _pane_scene(0.6, lamp="point")(world)
+            lamp = world.resources["ids"]["lamp"]
+            if bulb:
+                world.add_component(lamp, MeshRef(sphere(0.15)))
+                world.add_component(lamp, Material(color=(1.0, 1.0, 1.0, 0.5)))
+                world.add_component(lamp, Refractive(screen=False))
+        return make
+
+    frames = []
+    for bulb in (False, True):
+        runner = scene(build(bulb), (160, 120))
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        frame = runner.frame()
+        assert runner.engine.renderer.shadows.lamp_see_through_atlas is not None
+        floor = runner.ids() == runner.world.resources["ids"]["floor"]
+        frames.append((frame, floor))
+    (alone, floor), (with_bulb, floor_with) = frames
+    both = floor & floor_with
+    assert both.sum() > 5000
+    assert np.array_equal(alone[both], with_bulb[both])
 
 
 def test_only_the_glass_of_an_opaque_batch_goes_into_the_see_through_map(scene):

@@ -187,6 +187,9 @@ RIPPLE_STEP_UNIT = 69         # the ripples' step: the heights it moves on
 # (ShadowMaps.see_through_supported).
 SEE_THROUGH_UNIT = 70         # scene (SEE_THROUGH_SHADOWS builds): ShadowMaps.see_through_atlas
 SEE_THROUGH_SAMPLERS = 20
+# The lamps' see-through maps (the same, for the point and spot lights' maps): the 21st.
+LAMP_SEE_THROUGH_UNIT = 71    # scene (LAMP_SEE_THROUGH_SHADOWS builds): ShadowMaps.lamp_see_through_atlas
+LAMP_SEE_THROUGH_SAMPLERS = 21
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

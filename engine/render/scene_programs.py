@@ -35,6 +35,7 @@ from engine.render.bindings import (
     FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
+    LAMP_SEE_THROUGH_UNIT,
     LIGHTMAP_UNIT,
     LIGHTS_BINDING,
     METALLIC_ROUGHNESS_UNIT,
@@ -115,7 +116,7 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
                 "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT,
                 "refraction_copy": REFRACTION_COPY_UNIT, "caustic_maps": CAUSTIC_UNIT, "ripple_atlas": RIPPLE_UNIT,
-                "see_through_atlas": SEE_THROUGH_UNIT}
+                "see_through_atlas": SEE_THROUGH_UNIT, "lamp_see_through_atlas": LAMP_SEE_THROUGH_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING,

@@ -21,7 +21,11 @@ not in the depth maps: a sun's level map has a see-through map beside it
 (``see_through_atlas``, ``fit_see_through``), half its texels a side, holding the share of the
 light they let through (1 - alpha each, multiplied) and the nearest one's depth, drawn with
 the level map (``_draw_see_through``) and read by the scene pass's SEE_THROUGH_SHADOWS builds
-(``shaders/include/shadows.glsl`` see_through_shadows).
+(``shaders/include/shadows.glsl`` see_through_shadows).  A casting point or spot light has the
+same beside its cube or spot map (``lamp_see_through_atlas``, ``fit_lamp_see_through``): six
+face tiles (a spot: one), half the map's texels a side, the nearest one's distance over the
+range in place of a depth, drawn with the map (``_draw_lamp_see_through``) and read by the
+LAMP_SEE_THROUGH_SHADOWS builds (lamp_see_through_cube, lamp_see_through_spot).
 
 Nothing here decides when a map is drawn again: the shadows stage does
 (``systems/shadow_system.py``, from the frame's change sets).  The Shadows uniform block
@@ -45,6 +49,8 @@ from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
     CLIP_LEG_PLANE,
+    LAMP_SEE_THROUGH_SAMPLERS,
+    LAMP_SEE_THROUGH_UNIT,
     MORPH_UNIT,
     POINT_SHADOW_UNITS,
     POSE_ROWS_UNIT,
@@ -112,7 +118,10 @@ _SPOTS_END = _RINGS_END + (64 + 16) * MAX_POINT_SHADOWS
 # map's tile in the atlas (corner u, v and side), where the soft shadows' taps are kept.
 _SIZES_END = _SPOTS_END + 16 * MAX_POINT_SHADOWS
 _TILES_START = _SIZES_END + 16 * MAX_DIRECTIONAL_LIGHTS
-SHADOWS_BLOCK_BYTES = _TILES_START + 16 * MAX_DIRECTIONAL_LIGHTS
+# Then each point-shadow slot's see-through tiles in the lamps' see-through atlas: the first
+# one's corner and a face's side (texels; 0: none) and the gutter round it.
+_LAMP_THROUGH_START = _TILES_START + 16 * MAX_DIRECTIONAL_LIGHTS
+SHADOWS_BLOCK_BYTES = _LAMP_THROUGH_START + 16 * MAX_POINT_SHADOWS
 # The scene programs' fullest build reads 16 samplers, 17 with the cookies: a soft sun's map
 # read as it is takes one more (SUN_DEPTH_UNIT).
 SOFT_SUN_SAMPLERS = 18
@@ -131,8 +140,10 @@ _DEPTH: tuple[tuple[str, str], ...] = ()
 _DISTANCE = (("DISTANCE", "1"),)
 _LAYERED = (("DISTANCE", "1"), ("LAYERED", "1"))
 _LEG = (("LEG", "1"),)
-# A see-through caster into a sun's see-through map (drawn with the cutout build: its alpha).
+# A see-through caster into a sun's see-through map (drawn with the cutout build: its alpha);
+# into a lamp's, its distance over the range in place of the depth.
 _SEE_THROUGH = (("SEE_THROUGH", "1"),)
+_LAMP_SEE_THROUGH = (("SEE_THROUGH", "1"), ("DISTANCE", "1"))
 # Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
 # light reaches; the normal offset keeps a closed mesh's lit side off its own back.
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
@@ -144,6 +155,9 @@ _SEE_THROUGH_CASTERS = PassState(cull=False, blend=(moderngl.DST_COLOR, moderngl
                                  clips=SCENE_CLIPS)
 # The see-through map's texels against the depth map's, a side (a soft dimming needs fewer).
 SEE_THROUGH_SCALE = 2
+# Texels round each lamp see-through tile, drawn by a face view widened to cover them: the
+# bilinear lookup at a face's edge reads texels of its own face's view.
+LAMP_SEE_THROUGH_GUTTER = 2
 
 
 def _set_uniform(program: moderngl.Program, name: str, value: object) -> None:
@@ -242,6 +256,13 @@ class ShadowMaps:
         self._see_through_warned = False
         self.see_through_atlas: moderngl.Texture | None = None
         self._see_through_framebuffer: moderngl.Framebuffer | None = None
+        # The lamps' (``fit_lamp_see_through``): a row of six face tiles a point-shadow slot.
+        self.lamp_see_through_supported = renderer.caps.max_texture_image_units >= LAMP_SEE_THROUGH_SAMPLERS
+        self._lamp_see_through_warned = False
+        self.lamp_see_through_atlas: moderngl.Texture | None = None
+        self._lamp_see_through_framebuffer: moderngl.Framebuffer | None = None
+        self.lamp_see_through_face = 0   # a face tile's texels a side, gutter left out (0: no atlas)
+        self._lamp_through = self.block[_LAMP_THROUGH_START // 4:][:4 * MAX_POINT_SHADOWS].reshape(-1, 4)
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
         self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
@@ -308,6 +329,85 @@ class ShadowMaps:
             self._see_through_framebuffer.clear(1.0, 1.0, 1.0, 1.0)
         self._set_program_defines()
         return True
+
+    def fit_lamp_see_through(self, casting: bool, resolution: int) -> bool:
+        """Make the lamps' see-through atlas (``lamp_see_through_atlas``) while see-through
+        things cast and a point or spot light casts (``casting``), for maps of up to
+        ``resolution`` texels a side: a row for each point-shadow slot of six face tiles (a
+        spot uses the first), each ``resolution`` / SEE_THROUGH_SCALE texels a side and a
+        gutter of LAMP_SEE_THROUGH_GUTTER round it, RGBA half floats (the share let through
+        in red, the nearest one's distance over the range in alpha); drop it when none casts.
+        True when it was made, remade or dropped (every lamp's map is to be drawn again with
+        it).  Where the context has no unit for it, see-through things dim no lamp, said once
+        in a GLLimitWarning."""
+        if casting and not self.lamp_see_through_supported:
+            if not self._lamp_see_through_warned:
+                self._lamp_see_through_warned = True
+                warnings.warn(GLLimitWarning(
+                    f"see-through things dim the point and spot lights' light through maps of their own that "
+                    f"need {LAMP_SEE_THROUGH_SAMPLERS} texture units in the fragment stage, and this OpenGL has "
+                    f"{self.renderer.caps.max_texture_image_units} (GL_MAX_TEXTURE_IMAGE_UNITS): they cast no "
+                    "shadow in those lights"), stacklevel=3)
+            casting = False
+        face = max(resolution // SEE_THROUGH_SCALE, 1) if casting else 0
+        if face == self.lamp_see_through_face:
+            return False
+        self._drop_lamp_see_through()
+        if face:
+            tile = face + 2 * LAMP_SEE_THROUGH_GUTTER
+            atlas = self.lamp_see_through_atlas = self.ctx.texture((6 * tile, MAX_POINT_SHADOWS * tile), 4,
+                                                                   dtype="f2")
+            atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            atlas.repeat_x = atlas.repeat_y = False
+            self._lamp_see_through_framebuffer = self.ctx.framebuffer(color_attachments=[atlas])
+            self._lamp_see_through_framebuffer.clear(1.0, 1.0, 1.0, 1.0)   # (texels undefined until written)
+        self.lamp_see_through_face = face
+        self._set_program_defines()
+        return True
+
+    def _drop_lamp_see_through(self) -> None:
+        if self._lamp_see_through_framebuffer is not None:
+            release_framebuffer(self._lamp_see_through_framebuffer)
+            self._lamp_see_through_framebuffer = None
+        if self.lamp_see_through_atlas is not None:
+            self.lamp_see_through_atlas.release()
+            self.lamp_see_through_atlas = None
+            self.renderer.note_scene_change()
+        self.lamp_see_through_face = 0
+        self._lamp_through[:] = 0.0
+
+    def _draw_lamp_see_through(self, slot: int, views: list[View], lit: tuple[bool, ...], half_tan: float,
+                               light_range: float, body: int) -> None:
+        """Point-shadow slot ``slot``'s see-through tiles: for each of ``views`` (a cube's six
+        faces, or a spot's one; ``half_tan``: the tangent of its half-angle), a tile cleared
+        to all the light let through, then, where ``lit``, each see-through caster multiplies
+        in its share and keeps the nearest distance over ``light_range`` (MIN, as the suns'),
+        drawn from the view widened over the tile's gutter.  ``body``: the light's own entity
+        (its mesh dims none of its light).  Without an atlas the slot reads none."""
+        face = self.lamp_see_through_face
+        if not face:
+            return
+        ctx = self.ctx
+        gutter = LAMP_SEE_THROUGH_GUTTER
+        tile = face + 2 * gutter
+        widened = 2.0 * math.atan(half_tan * tile / face)
+        framebuffer = self._lamp_see_through_framebuffer
+        framebuffer.use()
+        ctx.blend_equation = moderngl.FUNC_ADD, moderngl.MIN
+        try:
+            for k, view in enumerate(views):
+                rect = (k * tile, slot * tile, tile, tile)
+                apply_pass_state(ctx, _SEE_THROUGH_CASTERS, rect, rect)
+                framebuffer.clear(1.0, 1.0, 1.0, 1.0, viewport=rect)
+                if not lit[k]:
+                    continue
+                self.renderer.bind_view(View(
+                    view=view.view, proj=glm.perspective(widened, 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
+                    eye=view.eye, size=(tile, tile), name=f"{view.name} see-through", kinds=0, layers=ALL_LAYERS))
+                self._draw_see_through_casters(_LAMP_SEE_THROUGH, {"light_range": light_range}, body)
+        finally:
+            ctx.blend_equation = moderngl.FUNC_ADD
+        self._lamp_through[slot] = (0.0, slot * tile, face, gutter)
 
     def _drop_see_through(self) -> None:
         if self._see_through_framebuffer is not None:
@@ -442,28 +542,37 @@ class ShadowMaps:
         framebuffer.use()
         apply_pass_state(ctx, _SEE_THROUGH_CASTERS, square, rect)
         framebuffer.clear(1.0, 1.0, 1.0, 1.0, viewport=rect)
-        renderer = self.renderer
         ctx.blend_equation = moderngl.FUNC_ADD, moderngl.MIN
         try:
-            for batch in renderer.see_through_casters():
-                if not batch.count:
-                    continue
-                kind = "vertex alpha" if batch.mesh.has_alpha else True
-                second_uv = bool(batch.second_uv_maps & ALBEDO_UV_BIT)
-                program = self._caster_program(_SEE_THROUGH, kind, batch.skinned, batch.morphed, second_uv)
-                _set_uniform(program, "light_body", 0)
-                _set_uniform(program, "glass_only", not batch.transparent)
-                bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color, ALBEDO_UNIT)
-                if batch.skinned or batch.morphed:
-                    bind_texture(ctx, renderer.pose_rows.texture, POSE_ROWS_UNIT)
-                    program["pose_row"].value = batch.pose_row
-                if batch.morphed:
-                    bind_texture(ctx, batch.mesh.morphs, MORPH_UNIT)
-                    program["morph_targets"].value = batch.mesh.morph_count
-                batch.draw(program)
-                renderer.stats.shadow_draw_calls += 1
+            self._draw_see_through_casters(_SEE_THROUGH, {}, 0)
         finally:
             ctx.blend_equation = moderngl.FUNC_ADD
+
+    def _draw_see_through_casters(self, build: tuple[tuple[str, str], ...], uniforms: dict[str, object],
+                                  body: int) -> None:
+        """Every see-through caster (``Gpu.see_through_casters``) into the bound see-through
+        map, from the Camera block bound, with the caster programs of ``build`` given
+        ``uniforms`` (the blend set by the caller); ``body``: the light's entity, whose mesh
+        dims none of its light (as ``_draw_casters``)."""
+        ctx = self.ctx
+        renderer = self.renderer
+        for batch in renderer.see_through_casters():
+            if not batch.count:
+                continue
+            kind = "vertex alpha" if batch.mesh.has_alpha else True
+            second_uv = bool(batch.second_uv_maps & ALBEDO_UV_BIT)
+            program = self._caster_program(build, kind, batch.skinned, batch.morphed, second_uv)
+            for name, value in {**uniforms, "light_body": body, "glass_only": not batch.transparent}.items():
+                _set_uniform(program, name, value)
+            bind_texture(ctx, batch.texture if batch.texture is not None else renderer.blank_color, ALBEDO_UNIT)
+            if batch.skinned or batch.morphed:
+                bind_texture(ctx, renderer.pose_rows.texture, POSE_ROWS_UNIT)
+                program["pose_row"].value = batch.pose_row
+            if batch.morphed:
+                bind_texture(ctx, batch.mesh.morphs, MORPH_UNIT)
+                program["morph_targets"].value = batch.mesh.morph_count
+            batch.draw(program)
+            renderer.stats.shadow_draw_calls += 1
 
     def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
         """Bind the Camera block of directional light ``slot``'s map (a ring's: past the
@@ -501,6 +610,7 @@ class ShadowMaps:
         map (its lookup instead of the cube's), ``SOFT_POINT_SHADOWS`` while a cube's light has a
         size (a sphere or a rectangle: percentage-closer soft shadows, not with the "single"
         filter), ``SEE_THROUGH_SHADOWS`` while see-through things cast (``fit_see_through``),
+        ``LAMP_SEE_THROUGH_SHADOWS`` while they do in a point or spot light's (``fit_lamp_see_through``),
         ``SOFT_SUN_SHADOWS`` while a casting directional light has a size (its map read
         as it is too: ``soft_sun_shadow``, not with the "single" filter), ``SHADOW_SINGLE_TAP``
         with the "single" filter.
@@ -518,6 +628,7 @@ class ShadowMaps:
             ("SOFT_POINT_SHADOWS", "1", soft and point > 0),
             ("SOFT_SUN_SHADOWS", "1", soft_sun and directional > 0),
             ("SEE_THROUGH_SHADOWS", "1", self.see_through_atlas is not None and directional > 0),
+            ("LAMP_SEE_THROUGH_SHADOWS", "1", self.lamp_see_through_atlas is not None and point > 0),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
@@ -679,6 +790,7 @@ class ShadowMaps:
                     stats.shadow_faces_drawn += 1
         else:
             stats.shadow_faces_drawn += 6
+        self._draw_lamp_see_through(slot, views, faces, 1.0, light_range, body)
         self._slots[light_index] = slot
         self._cube_lights[slot] = light_index
         self._spot_maps[slot] = False
@@ -734,6 +846,7 @@ class ShadowMaps:
                     eye=glm.vec3(position), size=(resolution, resolution), name=f"spot shadow {slot}",
                     kinds=0, layers=ALL_LAYERS)
         self._draw_casters(view, _DEPTH, body=body)
+        self._draw_lamp_see_through(slot, [view], (True,), half_width, light_range, body)
         width, height = self.spot_atlas.size
         sx, sy = resolution / width, resolution / height
         to_tile = glm.translate(glm.vec3(x / width + 0.5 * sx, y / height + 0.5 * sy, 0.5)) \
@@ -937,6 +1050,8 @@ class ShadowMaps:
         bind_texture(self.ctx, self.atlas, SHADOW_ATLAS_UNIT)
         if self.see_through_atlas is not None:   # (the SEE_THROUGH_SHADOWS builds)
             bind_texture(self.ctx, self.see_through_atlas, SEE_THROUGH_UNIT)
+        if self.lamp_see_through_atlas is not None:   # (the LAMP_SEE_THROUGH_SHADOWS builds)
+            bind_texture(self.ctx, self.lamp_see_through_atlas, LAMP_SEE_THROUGH_UNIT)
         if self._casting[6]:   # (the soft suns' builds: the atlas again, its depths as values)
             bind_texture(self.ctx, self.atlas, SUN_DEPTH_UNIT)
             bind_sampler(self.ctx, self.renderer.depth_values(), SUN_DEPTH_UNIT)
@@ -971,6 +1086,7 @@ class ShadowMaps:
         if self._virtual_framebuffer is not None:
             release_framebuffer(self._virtual_framebuffer)
         self._drop_see_through()
+        self._drop_lamp_see_through()
         for _, _, buffer in self._fit_blocks.values():
             buffer.release()
         self._fit_blocks.clear()

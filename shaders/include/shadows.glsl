@@ -53,6 +53,9 @@ layout(std140) uniform Shadows {
     vec4 directional_size[MAX_DIRECTIONAL_LIGHTS];    // x: its map's depth range (metres), y: 2 tan(half
                                                       // its angular diameter) (0: a hard edge: soft_sun_shadow)
     vec4 directional_tile[MAX_DIRECTIONAL_LIGHTS];    // its level map's tile in the atlas: corner (uv), side
+    vec4 lamp_through[MAX_POINT_SHADOWS];             // per slot, its see-through tiles in the lamps' atlas:
+                                                      // xy: the first one's corner, z: a face's side (0: none),
+                                                      // w: the gutter round each (texels)
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -385,6 +388,47 @@ float soft_cube_shadow(samplerCube cube, vec3 p, vec3 n, float d, vec4 size, flo
 }
 #endif
 
+#ifdef LAMP_SEE_THROUGH_SHADOWS
+// The lamps' see-through maps (engine/render/shadows.py, ShadowMaps.lamp_see_through_atlas):
+// a casting point light's six cube faces (a spot's map: the first), each a tile drawn as the
+// face's view (CUBE_FACE_*: looking along its axis, up its t axis) widened over a gutter,
+// half its map's texels a side, holding the share of the light the see-through things let
+// through (red) and the nearest one's distance over the range (alpha).  Bilinear, one lookup.
+uniform sampler2D lamp_see_through_atlas;
+// How much farther than the nearest see-through caster (over the range) a point lies before
+// its light is dimmed: a half float's step near 1 and more, so a pane does not dim itself.
+const float LAMP_SEE_THROUGH_BIAS = 2e-3;
+
+// The share let through at ``ndc`` (-1 to 1 across the face's view) of face ``face``'s tile of
+// slot ``slot``, for a point ``d`` (distance over range) from the light.
+float lamp_see_through_at(int slot, int face, vec2 ndc, float d) {
+    vec4 tile = shadows.lamp_through[slot];
+    if (tile.z == 0.0) return 1.0;
+    vec2 texel = tile.xy + vec2(float(face) * (tile.z + 2.0 * tile.w) + tile.w, tile.w)
+        + (clamp(ndc, -1.0, 1.0) * 0.5 + 0.5) * tile.z;
+    vec4 through = texture(lamp_see_through_atlas, texel / vec2(textureSize(lamp_see_through_atlas, 0)));
+    return d > through.a + LAMP_SEE_THROUGH_BIAS ? through.r : 1.0;
+}
+
+// The share of slot ``slot``'s point light that reaches a point ``from_light`` from it (its
+// geometric ``normal``, ``l`` towards the light) through the see-through things: moved off its
+// surface as the cube's lookup moves it, twice as far (the tiles' texels are twice as big),
+// and looked up in the face GL's cube-map selection takes (the largest axis).
+float lamp_see_through_cube(int slot, vec3 from_light, vec3 normal, vec3 l) {
+    vec4 params = shadows.point_params[slot];
+    float nl = clamp(dot(normal, l), 0.0, 1.0);
+    vec3 p = from_light + normal * (2.0 * params.x * length(from_light) * (1.0 + params.y) * (1.5 - nl));
+    vec3 a = abs(p);
+    int axis = a.x >= a.y && a.x >= a.z ? 0 : a.y >= a.z ? 1 : 2;
+    int face = axis * 2 + (p[axis] < 0.0 ? 1 : 0);
+    const vec3 forward[6] = CUBE_FACE_FORWARD;
+    const vec3 s_axis[6] = CUBE_FACE_S;
+    const vec3 t_axis[6] = CUBE_FACE_T;
+    vec2 ndc = vec2(dot(p, s_axis[face]), dot(p, t_axis[face])) / max(dot(p, forward[face]), 1e-6);
+    return lamp_see_through_at(slot, face, ndc, length(p) / params.z);
+}
+#endif
+
 float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l, vec4 size) {
     float dist = length(from_light);
     float nl = clamp(dot(normal, l), 0.0, 1.0);
@@ -422,8 +466,12 @@ float point_cube_light_shadow(int slot, samplerCube cube, vec3 position, vec3 no
     vec3 light_pos = lights.point_pos[i].xyz;
     vec3 d = light_pos - position;
     vec3 l = d / max(length(d), 1e-4);
-    return point_cube_shadow(cube, shadows.point_params[slot], position - light_pos, normal, l,
-                             shadows.point_size[slot]);
+    float lit = point_cube_shadow(cube, shadows.point_params[slot], position - light_pos, normal, l,
+                                  shadows.point_size[slot]);
+#ifdef LAMP_SEE_THROUGH_SHADOWS
+    lit *= lamp_see_through_cube(slot, position - light_pos, normal, l);
+#endif
+    return lit;
 }
 
 #if defined(SPOT_MAP0) || defined(SPOT_MAP1)
@@ -449,7 +497,18 @@ float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
     p.xyz /= p.w;
     vec4 box = shadows.spot_box[slot];
     if (any(lessThan(p.xyz, vec3(box.xy, 0.0))) || any(greaterThan(p.xyz, vec3(box.zw, 1.0)))) return 1.0;
-    return filtered_shadow(spot_atlas, p.xyz, int(params.w), 1.0 / vec2(textureSize(spot_atlas, 0)), params.y);
+    float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), 1.0 / vec2(textureSize(spot_atlas, 0)), params.y);
+#ifdef LAMP_SEE_THROUGH_SHADOWS
+    // Its see-through tile is the map's view widened over the gutter: the map's square is the
+    // tile's inside.  The point moved twice as far off its surface (the tiles' texels are twice as big).
+    vec3 twice = position + normal * (2.0 * params.x * dist * (1.0 + params.y) * (1.5 - nl));
+    vec4 q = shadows.spot_matrix[slot] * vec4(twice, 1.0);
+    if (q.w > 0.0) {
+        vec2 ndc = ((q.xy / q.w - box.xy) / (box.zw - box.xy)) * 2.0 - 1.0;
+        lit *= lamp_see_through_at(slot, 0, ndc, length(twice - lights.point_pos[i].xyz) / params.z);
+    }
+#endif
+    return lit;
 }
 #endif
 
