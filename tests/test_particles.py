@@ -224,14 +224,15 @@ ALBEDO = (0.6, 0.5, 0.4)
 
 
 def lit_scene(particle: bool, sun: glm.vec3, lamp: bool = False, blocker: bool = False, sun_on: bool = True,
-              image: str | None = None, clouds=None):
+              image: str | None = None, clouds=None, pane: float | None = None):
     """A 1 m lit particle facing the camera (a solid sprite: alpha 1 all over), or in its place
     a quad of the same albedo letting the same share of light through (diffuse transmission,
     its transmission's colour the albedo), lit by a sun (or a lamp the way the sun comes from)
     and a hemisphere; ``blocker``: a box in the sun's way; ``image``: the lamp with an amber
     cookie wrapped about it ("cookie"), a panel facing the particle with an amber picture
     ("picture"), one colour all over, or the same panel amber itself ("amber panel"); ``clouds``:
-    a CloudLayer over a gradient sky."""
+    a CloudLayer over a gradient sky; ``pane``: a see-through pane of that alpha in the way
+    (the lamp casting: its see-through map; a negative alpha: the pane casting nothing)."""
     def build(world):
         look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
         if clouds is not None:
@@ -242,8 +243,9 @@ def lit_scene(particle: bool, sun: glm.vec3, lamp: bool = False, blocker: bool =
             shape = {"rectangle": (0.6, 0.4)} if image in ("picture", "amber panel") else {}
             colour = (*srgb_to_linear(np.array([255, 140, 30]) / 255.0), 1.0) if image == "amber panel" else (1.0,) * 4
             world.spawn(Transform(position=-sun * 1.5, rotation=look_rotation(sun)),
-                        PointLight(color=colour, intensity=5.0, range=20.0,
-                                   cookie=amber if image in ("cookie", "picture") else None, **shape))
+                        PointLight(color=colour, intensity=5.0 if sun_on else 0.0, range=20.0,
+                                   cookie=amber if image in ("cookie", "picture") else None, shadows=pane is not None,
+                                   **shape))
         else:
             world.spawn(DirectionalLight(direction=sun, intensity=3.0 if sun_on else 0.0))
         if particle:
@@ -256,6 +258,10 @@ def lit_scene(particle: bool, sun: glm.vec3, lamp: bool = False, blocker: bool =
         if blocker:
             world.spawn(Transform(position=-sun * 1.2), MeshRef(box((0.8, 0.8, 0.8))),
                         Material(color=(0.1, 0.1, 0.1, 1.0)))
+        if pane is not None:
+            world.spawn(Transform(position=-sun * 1.2, rotation=look_rotation(sun)),
+                        MeshRef(quad(0.8, 0.8), casts_shadows=pane >= 0.0),
+                        Material(color=(0.1, 0.1, 0.1, abs(pane)), double_sided=True))
     return build
 
 
@@ -393,6 +399,21 @@ def test_a_lit_particle_in_a_shadow_keeps_only_the_light_from_all_round(scene):
     np.testing.assert_allclose(shaded[middle].mean(axis=(0, 1)), unlit_sun[middle].mean(axis=(0, 1)), rtol=0.05,
                                atol=0.005)
     assert open_sun[middle].mean() > shaded[middle].mean() + 0.1
+
+
+def test_a_lit_particle_behind_a_see_through_pane_takes_the_lamps_share_it_lets_through(scene):
+    """A casting lamp and a see-through pane (alpha 0.6) between it and the particle: the
+    lamp's light on the particle (less what it has with the lamp dark) is 0.4 of what it is
+    with the pane casting nothing (the lamps' see-through map, read by the particles' lighting
+    as by the scene pass)."""
+    sun = glm.normalize(glm.vec3(0.7, -0.3, -0.6))  # (as the shadow's test: the pane off the camera's line)
+    _, through = render(scene, lit_scene(True, sun, lamp=True, pane=0.6))
+    _, open_lamp = render(scene, lit_scene(True, sun, lamp=True, pane=-0.6))
+    _, dark = render(scene, lit_scene(True, sun, lamp=True, pane=-0.6, sun_on=False))
+    middle = (slice(34, 38), slice(46, 50))
+    lamp_light = (open_lamp - dark)[middle].mean(axis=(0, 1))
+    assert lamp_light.min() > 0.05
+    np.testing.assert_allclose((through - dark)[middle].mean(axis=(0, 1)) / lamp_light, 0.4, rtol=0.05)
 
 
 def test_a_flipbooks_frames_play_over_its_life_the_right_way_up(scene):

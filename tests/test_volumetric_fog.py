@@ -565,9 +565,17 @@ LAMP_ANGLE, LAMP_BLEND = 35.0, 0.2
 CAGE = ((0.7, 2.5, 0.0), (0.5, 0.5, 0.5))
 
 
+# A see-through pane level in the beam over the box (``_lamp_hall``'s ``pane``): its centre, its side.
+PANE = ((0.0, 3.2, 0.0), 1.2)
+
+
 def _lamp_hall(world, shafts: VolumetricFog | None, lamps: int = 1, volumetric: float = 1.0,
-               cookie: TextureData | None = None, panel: bool = False, tube: bool = False) -> int:
+               cookie: TextureData | None = None, panel: bool = False, tube: bool = False,
+               pane: float | None = None) -> int:
     camera = look_from(world, (0.0, 2.0, 7.0), (0.0, 2.0, 0.0), fov=60.0)
+    if pane is not None:   # its alpha: it lets 1 - alpha of the lamp's light through
+        world.spawn(Transform(position=PANE[0], rotation=glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))),
+                    MeshRef(quad(PANE[1], PANE[1])), Material(color=(0.3, 0.4, 0.9, pane), double_sided=True))
     world.spawn(Skybox())
     world.spawn(Transform(), MeshRef(plane(FLOOR, FLOOR)), Material(color=(0.5, 0.5, 0.5)))
     world.spawn(Transform(position=CAGE[0]), MeshRef(box(CAGE[1])), Material(color=(0.6, 0.5, 0.4)))
@@ -590,13 +598,14 @@ TUBE = 1.2
 
 
 def _lamp_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
-                panel: bool = False, tube: bool = False) -> np.ndarray:
+                panel: bool = False, tube: bool = False, pane: float | None = None) -> np.ndarray:
     """The lamp's light the air sends back along each ray, at 1,000 points: its falloff (the
     inverse square faded to 0 at its range), its cone (``light_rules.spot_factor``), the
     phase function, the box's shadow (the point's segment to the lamp cast against it);
     ``panel``: all round, a rectangle facing down (Lambert's cosine of its face, 0 above it);
     ``tube``: all round, a tube along the lamp's X (the sine of the way's angle from its axis:
-    its outline's width)."""
+    its outline's width); ``pane``: the see-through pane's alpha, its share of the light taken
+    where the segment to the lamp crosses it."""
     cone = ALL_ROUND if panel or tube else spot_cone((0.0, -1.0, 0.0), LAMP_ANGLE, LAMP_BLEND)
     axis = np.array(glm.mat3_cast(look_rotation(glm.vec3(0.0, -1.0, 0.0)))[0], np.float64)
     points = 1000
@@ -618,6 +627,13 @@ def _lamp_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings
         if tube:
             falloff *= np.linalg.norm(np.cross(l, axis), axis=1)
         blocked = _hits(at, l, [CAGE]) < dist
+        if pane is not None:   # where the segment to the lamp crosses the pane's plane
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_pane = (PANE[0][1] - at[:, 1]) / l[:, 1]
+            cross = at + l * t_pane[:, None]
+            through = (t_pane > 0) & (t_pane < dist) & (np.abs(cross[:, 0] - PANE[0][0]) < PANE[1] / 2) \
+                & (np.abs(cross[:, 2] - PANE[0][2]) < PANE[1] / 2)
+            falloff = falloff * np.where(through, 1.0 - pane, 1.0)
         c = np.einsum("ij,ij->i", np.repeat(way[part], points, 0), l)
         phase = (1 - g * g) / (4 * np.pi * (1 + g * g - 2 * g * c) ** 1.5)
         light = (falloff * phase * ~blocked).reshape(along.shape)
@@ -641,6 +657,22 @@ def test_a_spot_lights_beam_in_the_air_is_the_ground_truths(scene):
     assert np.abs(marched[..., 0] - truth)[steady & (truth < 0.05 * truth.max())].max() < 0.06 * truth.max()
 
 
+def test_a_see_through_pane_in_a_spots_beam_lets_its_share_through_the_air_below(scene):
+    """A see-through pane (alpha 0.6) across the beam over the box: the air below it takes
+    0.4 of the lamp's light (the lamps' see-through map, read by the march as by the scene
+    pass), against the same ground truth with the pane's share taken where the way to the
+    lamp crosses it."""
+    settings = VolumetricFog(steps=128)
+    runner = scene(lambda world: _lamp_hall(world, settings, pane=0.6), SIZE)
+    runner.frame()
+    assert runner.engine.renderer.shadows.lamp_see_through_atlas is not None
+    marched, truth, reach, lit, steady = _lamp_march_and_truth(runner, settings, pane=0.6)
+    assert lit.sum() > 100
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert np.median(error) < 0.03, np.median(error)
+    assert np.quantile(error, 0.9) < 0.08, np.quantile(error, 0.9)
+
+
 @pytest.mark.parametrize("shape", ["panel", "tube"])
 def test_a_lamp_with_a_shape_lights_the_air_by_its_outline(scene, shape):
     """No sun: the lamp a 0.6 m panel facing down (``PointLight.rectangle``: the air below it
@@ -658,7 +690,8 @@ def test_a_lamp_with_a_shape_lights_the_air_by_its_outline(scene, shape):
     assert np.quantile(error, 0.9) < 0.08, np.quantile(error, 0.9)
 
 
-def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False, tube: bool = False):
+def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False, tube: bool = False,
+                          pane: float | None = None):
     """The march's texels and the lamp's ground truth along each texel's ray, its length, the
     texels compared (lit, steady, not within a metre of the lamp) and the steady ones."""
     marched = marched_light(runner)
@@ -674,7 +707,7 @@ def _lamp_march_and_truth(runner, settings: VolumetricFog, panel: bool = False, 
     with np.errstate(divide="ignore", invalid="ignore"):
         floor = np.where(way[:, 1] < 0, -origin[:, 1] / way[:, 1], np.inf)
     reach = np.minimum(np.minimum(floor, _hits(origin, way, [CAGE])), settings.distance)
-    truth = _lamp_light(origin, way, reach, settings, panel, tube).reshape(xs.shape)
+    truth = _lamp_light(origin, way, reach, settings, panel, tube, pane).reshape(xs.shape)
     reach = reach.reshape(xs.shape)
     steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.1 * reach
     # (Not the rays that pass within a metre of the lamp: there the light peaks sharper than

@@ -51,6 +51,7 @@ from engine.render.bindings import (
     FOG_BINDING,
     IRRADIANCE_BINDING,
     IRRADIANCE_UNIT,
+    LAMP_SEE_THROUGH_UNIT,
     LIGHTS_BINDING,
     NODE_UNIT,
     PARTICLE_DEPTH_UNIT,
@@ -381,7 +382,8 @@ class ParticleDraw:
                                ("shadow_atlas", SHADOW_ATLAS_UNIT), ("point_shadow0", POINT_SHADOW_UNITS[0]),
                                ("point_shadow1", POINT_SHADOW_UNITS[1]), ("spot_atlas", SPOT_SHADOW_UNIT),
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
-                               ("spot_cookies", COOKIE_UNIT), ("fog_sky_map", SKY_UNIT)):
+                               ("spot_cookies", COOKIE_UNIT), ("fog_sky_map", SKY_UNIT),
+                               ("lamp_see_through_atlas", LAMP_SEE_THROUGH_UNIT)):
                 if name in program:
                     program[name].value = unit
             self._programs[key] = program
