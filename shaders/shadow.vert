@@ -4,7 +4,7 @@
 // not a portal's opening (unless it carries light: what goes in leaves by its partner), not
 // glass (a refracting instance), not something hidden in every kind of view or with
 // MeshRef.casts_shadows off.  The transparent slot's batches (see-through paint and glass)
-// are drawn by the SEE_THROUGH build into a sun's see-through map (shadow.frag), glass too.
+// are drawn by the SEE_THROUGH build into the lights' see-through maps (shadow.frag), glass too.
 // Things partly through a portal are cut at their slice plane, as in every view, so the part
 // that came out of the partner casts its own shadow there.  A cutout (the ALPHA_CUTOFF
 // build, a batch's Material.alpha_cutoff its uniform) casts only where it is drawn:

@@ -93,9 +93,8 @@ class ChangedBoxes:
     one where it is.  ``code``: for a row of an entity that only moved (its look unchanged), where it is drawn
     (``visibility_rules.entity_code`` of its ``Visibility``: a probe whose captures do not draw
     it cannot see it move), with ``NO_SHADOW_BIT`` where it casts no shadow
-    (``ShadowCasting``: no shadow of it moved; glass moves its share of a sun's light, so casts
-    while a sun does, its row then reaching the lamps' shadow bounds too, more than it
-    needs); every other row counts as seen by all
+    (``ShadowCasting``: no shadow of it moved; glass moves the share of a sun's or a lamp's
+    light it lets through, so casts while one casts); every other row counts as seen by all
     and casting (``SEEN_BY_EVERY_VIEW``: a look change may be the Visibility itself or
     whether it casts, and what was seen before must go)."""
 
@@ -320,9 +319,10 @@ class ProbeScheduler:
                 visibility = world.try_get(entity, Visibility)
                 if visibility is not None:
                     code = entity_code(visibility)
-                if casting is None:  # glass dims a sun's light: its move moves that share
-                    suns = world.resources.get(ShadowCasters)
-                    casting = ShadowCasting(world, glass_casts=suns is not None and bool(suns.directional))
+                if casting is None:  # glass dims a sun's or a lamp's light: its move moves that share
+                    lights = world.resources.get(ShadowCasters)
+                    casting = ShadowCasting(world, glass_casts=lights is not None
+                                            and bool(lights.directional or lights.points))
                 if mesh_ref is not None and not casting.casts(entity, mesh_ref, visibility):
                     code |= NO_SHADOW_BIT  # as it was: its shadow moved nowhere (ChangedBoxes.casting)
             old = self._bounds.pop(entity, None)

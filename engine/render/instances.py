@@ -839,7 +839,7 @@ class InstanceBatch:
         where it is drawn and casts (tint.w, less whether it receives shadows, which the maps
         do not hold), its refract and reflect variants, its slice, and the alpha of a cutout
         (its holes are where the colour's alpha times the texture's falls below the cutoff), of
-        a see-through batch's row and of glass (the share of a sun's light they let through)."""
+        a see-through batch's row and of glass (the share of a light they let through)."""
         reads_alpha = self.alpha_cutoff is not None or self.transparent or int(row["slots"][1]) != 0
         return int(row["tint"][TINT_VISIBILITY] + 0.5) & ~NO_RECEIVE_BIT, int(row["slots"][1]), int(row["slots"][2]), \
             tuple(row["slice"].tolist()), float(row["color"][3]) if reads_alpha else None

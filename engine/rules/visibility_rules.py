@@ -18,8 +18,8 @@ A view draws an entity when it is of no kind the entity is hidden in and they sh
 none (``NO_SHADOW_BIT`` in its code, above the layers, which no view's mask has: ``casts_shadow``);
 one whose ``MeshRef.receives_shadows`` is off has ``NO_RECEIVE_BIT`` (``receives_shadow``):
 the scene shader looks up no map for it.
-Glass casts into no depth map, whatever its code (it lets its share of a sun's light through:
-the sun's see-through map holds it), and a portal's surface is an opening that casts none
+Glass casts into no depth map, whatever its code (it lets its share of a light through: the
+light's see-through map holds it), and a portal's surface is an opening that casts none
 unless it carries light (``Portal.carries_light``: ``OPENING_CASTS_BIT`` in its code,
 ``opening_casts``), when the light it takes in leaves by its partner, not on behind it
 (``row_casts_shadow`` on instance rows, ``ShadowCasting`` from the world): the shadow pass's
@@ -99,7 +99,7 @@ def opening_casts(codes: Code) -> bool | np.ndarray:
 def row_casts_shadow(reflect: np.ndarray, codes: np.ndarray) -> np.ndarray:
     """Whether each instance row (its reflect variant and its code) is drawn into the lights'
     shadow maps: ``casts`` in ``shaders/shadow.vert``, on arrays; glass, which lets its share
-    of the light through, is drawn into a sun's see-through map (its SEE_THROUGH build:
+    of the light through, is drawn into the lights' see-through maps (its SEE_THROUGH build:
     ``engine/render/shadows.py``).  A portal's surface is an opening that casts only when it
     carries light (``opening_casts``: the light goes in there and out of its partner)."""
     return ((reflect != ReflectVariant.PORTAL) | opening_casts(codes)) & casts_shadow(codes)
@@ -110,9 +110,9 @@ class ShadowCasting:
     ``row_casts_shadow`` applies to their instance rows): a visible mesh, not a portal that
     carries no light, drawn somewhere and not ``casts_shadows = False``; a portal's clone of an entity
     by its source's Visibility and ``casts_shadows``, as the extract stage writes its row.
-    Glass is in a sun's see-through map and no lamp's cube: ``glass_casts`` says whether it
-    counts (True where a sun casts and the question is "did a shadow move", as the probes'
-    scheduler asks; False for the lamps' cubes).
+    Glass is in the lights' see-through maps, not their depth maps: ``glass_casts`` says
+    whether it counts (True where its share of a light's light is asked about too: the
+    probes' scheduler, the lamps' maps while they have see-through maps).
     Made once for a frame's many movers: the glass, the portals and the clones are looked up
     once, then each mover by the MeshRef and Visibility its caller holds already."""
 
