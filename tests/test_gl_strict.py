@@ -354,6 +354,45 @@ def _pond_faded(ctx):
     return _engine_frames(ctx, HallOfMirrors(), 2, configure)
 
 
+def _see_through_lamps(ctx):
+    """The mirror ring's lamp casting (a cube), a spot casting from its map beside it, the sun,
+    a see-through pane and a glass one over the boxes (each light's see-through map: the
+    suns' atlas, the lamps' six face tiles and a spot's one, read by the scene pass), light
+    shafts from both lamps (the march reads the lamps' maps) and lit particles (their
+    lighting too), the boxes spinning."""
+    from benchmarks.mirrors import MirrorRing
+    from components import (
+        Camera,
+        Fog,
+        Material,
+        MeshRef,
+        ParticleEmitter,
+        PointLight,
+        Refractive,
+        Transform,
+        VolumetricFog,
+        look_rotation,
+    )
+    from engine.assets.mesh import quad
+
+    def configure(engine):
+        world = engine.world
+        for _, light in world.query_one(PointLight):
+            light.shadows, light.volumetric = True, 1.0
+        world.spawn(Transform(position=(2.5, 3.5, 1.0), rotation=look_rotation((-0.3, -1.0, 0.0), (0.0, 0.0, -1.0))),
+                    PointLight(intensity=6.0, range=12.0, spot_angle=30.0, shadows=True, volumetric=1.0))
+        flat = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
+        world.spawn(Transform(position=(0.8, 2.2, 0.3), rotation=flat), MeshRef(quad(1.5, 1.5)),
+                    Material(color=(0.3, 0.5, 0.9, 0.5), double_sided=True))
+        world.spawn(Transform(position=(-0.8, 2.0, -0.3), rotation=flat), MeshRef(quad(1.2, 1.2)),
+                    Material(color=(0.9, 0.9, 0.9, 0.3), double_sided=True), Refractive(screen=False))
+        world.spawn(Transform(position=(0.0, 0.5, 1.0)), ParticleEmitter(rate=200.0, lit=True))
+        for camera, _ in world.query_one(Camera):
+            world.add_component(camera, Fog(density=0.06))
+            world.add_component(camera, VolumetricFog())
+    return _engine_frames(ctx, MirrorRing(3), 3, configure)
+
+
 SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     **{name: _golden(name) for name in ("hall_start", "hall_mirror_wall", "hall_doorway", "hall_partner_side",
                                         "mirror_ring_8_batched", "portals_depth_8", "portals_partner_disabled",
@@ -384,6 +423,7 @@ SCENES: dict[str, Callable[[moderngl.Context], list[np.ndarray]]] = {
     "moonlit_hall": _moonlit_hall,
     "glass_screen": _glass_screen,
     "pond_faded": _pond_faded,
+    "see_through_lamps": _see_through_lamps,
 }
 
 
