@@ -220,6 +220,55 @@ def test_the_glsl_cube_face_directions_are_the_tables_texel_by_texel(ctx, tmp_pa
             thing.release()
 
 
+CUBE_FACE_OF_FRAG = """#version 410 core
+#include "cube_faces.glsl"
+uniform int face;
+uniform float level_size;
+out vec4 color;
+void main() {
+    vec2 st = gl_FragCoord.xy / level_size * 2.0 - 1.0;
+    vec2 found;
+    int found_face = cube_face_of(cube_face_direction(face, st) * 3.7, found);
+    color = vec4(float(found_face), found, 1.0);
+}
+"""
+
+
+def test_the_glsl_cube_face_of_a_direction_is_the_tables_inverse(ctx, tmp_path):
+    """``cube_face_of`` (shaders/include/cube_faces.glsl: the lamps' see-through lookup
+    picks a face tile with it) takes each texel's direction of each face, scaled, back to
+    that face and that texel's (s, t): the table's axes, written out axis by axis, agree
+    with it."""
+    (tmp_path / "include").mkdir()
+    (tmp_path / "include" / "cube_faces.glsl").write_bytes((shader_dir() / "include" / "cube_faces.glsl").read_bytes())
+    (tmp_path / "probe.frag").write_text(CUBE_FACE_OF_FRAG)
+    (tmp_path / "probe.vert").write_text(CUBE_PROBE_VERT)
+    n = 16
+    program = ctx.program(vertex_shader=load_source("probe.vert", root=tmp_path),
+                          fragment_shader=load_source("probe.frag", root=tmp_path))
+    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
+    vao = ctx.vertex_array(program, [(quad, "2f", "in_position")])
+    target = ctx.texture((n, n), 4, dtype="f4")
+    fbo = ctx.framebuffer([target])
+    c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    t, s = np.meshgrid(c, c, indexing="ij")
+    try:
+        fbo.use()
+        bindings.apply_pass_state(ctx, bindings.PassState(), (0, 0, n, n))
+        program["level_size"].value = float(n)
+        for face in range(6):
+            program["face"].value = face
+            vao.render(mode=ctx.TRIANGLE_STRIP)
+            drawn = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(n, n, 4)
+            assert (drawn[..., 0] == face).all(), FACE_NAMES[face]
+            np.testing.assert_allclose(drawn[..., 1], s, atol=1e-5, err_msg=FACE_NAMES[face])
+            np.testing.assert_allclose(drawn[..., 2], t, atol=1e-5, err_msg=FACE_NAMES[face])
+    finally:
+        release_framebuffer(fbo)
+        for thing in (vao, target, quad, program):
+            thing.release()
+
+
 def test_the_glsl_names_every_clip_distance_and_numbers_none():
     """Every gl_ClipDistance a shader writes is indexed by a name the shader library defines
     from engine/render/bindings.py (never a number, never a define of the shader's own), and

@@ -118,8 +118,8 @@ _SPOTS_END = _RINGS_END + (64 + 16) * MAX_POINT_SHADOWS
 # map's tile in the atlas (corner u, v and side), where the soft shadows' taps are kept.
 _SIZES_END = _SPOTS_END + 16 * MAX_POINT_SHADOWS
 _TILES_START = _SIZES_END + 16 * MAX_DIRECTIONAL_LIGHTS
-# Then each point-shadow slot's see-through tiles in the lamps' see-through atlas: the first
-# one's corner and a face's side (texels; 0: none) and the gutter round it.
+# Then each point-shadow slot's see-through tiles in the lamps' see-through atlas (a row a
+# slot, a tile a face): 1 / the atlas's size, a face's side (texels; 0: none), the gutter.
 _LAMP_THROUGH_START = _TILES_START + 16 * MAX_DIRECTIONAL_LIGHTS
 SHADOWS_BLOCK_BYTES = _LAMP_THROUGH_START + 16 * MAX_POINT_SHADOWS
 # The scene programs' fullest build reads 16 samplers, 17 with the cookies: a soft sun's map
@@ -407,7 +407,8 @@ class ShadowMaps:
                 self._draw_see_through_casters(_LAMP_SEE_THROUGH, {"light_range": light_range}, body)
         finally:
             ctx.blend_equation = moderngl.FUNC_ADD
-        self._lamp_through[slot] = (0.0, slot * tile, face, gutter)
+        width, height = self.lamp_see_through_atlas.size
+        self._lamp_through[slot] = (1.0 / width, 1.0 / height, face, gutter)
 
     def _drop_see_through(self) -> None:
         if self._see_through_framebuffer is not None:

@@ -53,9 +53,9 @@ layout(std140) uniform Shadows {
     vec4 directional_size[MAX_DIRECTIONAL_LIGHTS];    // x: its map's depth range (metres), y: 2 tan(half
                                                       // its angular diameter) (0: a hard edge: soft_sun_shadow)
     vec4 directional_tile[MAX_DIRECTIONAL_LIGHTS];    // its level map's tile in the atlas: corner (uv), side
-    vec4 lamp_through[MAX_POINT_SHADOWS];             // per slot, its see-through tiles in the lamps' atlas:
-                                                      // xy: the first one's corner, z: a face's side (0: none),
-                                                      // w: the gutter round each (texels)
+    vec4 lamp_through[MAX_POINT_SHADOWS];             // per slot, its see-through tiles in the lamps' atlas (a
+                                                      // row a slot, a tile a face): xy: 1 / the atlas's size,
+                                                      // z: a face's side (texels; 0: none), w: the gutter round it
 } shadows;
 
 uniform sampler2DShadow shadow_atlas;
@@ -389,6 +389,7 @@ float soft_cube_shadow(samplerCube cube, vec3 p, vec3 n, float d, vec4 size, flo
 #endif
 
 #ifdef LAMP_SEE_THROUGH_SHADOWS
+#include "cube_faces.glsl"
 // The lamps' see-through maps (engine/render/shadows.py, ShadowMaps.lamp_see_through_atlas):
 // a casting point light's six cube faces (a spot's map: the first), each a tile drawn as the
 // face's view (CUBE_FACE_*: looking along its axis, up its t axis) widened over a gutter,
@@ -404,9 +405,9 @@ const float LAMP_SEE_THROUGH_BIAS = 2e-3;
 float lamp_see_through_at(int slot, int face, vec2 ndc, float d) {
     vec4 tile = shadows.lamp_through[slot];
     if (tile.z == 0.0) return 1.0;
-    vec2 texel = tile.xy + vec2(float(face) * (tile.z + 2.0 * tile.w) + tile.w, tile.w)
-        + (clamp(ndc, -1.0, 1.0) * 0.5 + 0.5) * tile.z;
-    vec4 through = texture(lamp_see_through_atlas, texel / vec2(textureSize(lamp_see_through_atlas, 0)));
+    float pitch = tile.z + 2.0 * tile.w;   // a tile's side, gutter and all (texels)
+    vec2 texel = vec2(float(face), float(slot)) * pitch + tile.w + (clamp(ndc, -1.0, 1.0) * 0.5 + 0.5) * tile.z;
+    vec4 through = texture(lamp_see_through_atlas, texel * tile.xy);
     return d > through.a + LAMP_SEE_THROUGH_BIAS ? through.r : 1.0;
 }
 
@@ -418,14 +419,9 @@ float lamp_see_through_cube(int slot, vec3 from_light, vec3 normal, vec3 l) {
     vec4 params = shadows.point_params[slot];
     float nl = clamp(dot(normal, l), 0.0, 1.0);
     vec3 p = from_light + normal * (2.0 * params.x * length(from_light) * (1.0 + params.y) * (1.5 - nl));
-    vec3 a = abs(p);
-    int axis = a.x >= a.y && a.x >= a.z ? 0 : a.y >= a.z ? 1 : 2;
-    int face = axis * 2 + (p[axis] < 0.0 ? 1 : 0);
-    const vec3 forward[6] = CUBE_FACE_FORWARD;
-    const vec3 s_axis[6] = CUBE_FACE_S;
-    const vec3 t_axis[6] = CUBE_FACE_T;
-    vec2 ndc = vec2(dot(p, s_axis[face]), dot(p, t_axis[face])) / max(dot(p, forward[face]), 1e-6);
-    return lamp_see_through_at(slot, face, ndc, length(p) / params.z);
+    vec2 st;
+    int face = cube_face_of(p, st);
+    return lamp_see_through_at(slot, face, st, length(p) / params.z);
 }
 #endif
 
