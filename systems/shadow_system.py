@@ -417,8 +417,8 @@ class ShadowSystem(esper.Processor):
         dark.  (A light's own mesh casts none of its shadow: ``Shadows._draw_casters``.)  A
         light is asked about every mesh when it starts to cast, and each mesh that came this
         frame about every casting light (the world boxes ``_changed_boxes`` keeps): a still
-        scene, and one whose things only move, asks nothing.  A bent or cut-out mesh is not
-        asked about."""
+        scene, and one whose things only move, asks nothing.  A bent, cut-out or see-through
+        mesh (glass too: ``ShadowCasting``) is not asked about: it lets light out."""
         fresh = {entity for entity, _, _ in casting if entity not in self._enclosure_asked}
         self._enclosure_asked = {entity for entity, _, _ in casting}
         added = [entity for entity in self.world.frame.added if entity in self._bounds]
@@ -438,7 +438,8 @@ class ShadowSystem(esper.Processor):
                 if mesh_ref is None or transform is None:
                     continue
                 mesh, material = mesh_ref.mesh, world.try_get(entity, Material)
-                if mesh.skinned or mesh.morph_count or (material is not None and material.alpha_cutoff is not None):
+                if mesh.skinned or mesh.morph_count or (material is not None and material.alpha_cutoff is not None) \
+                        or (material is not None and material.color.w < 1.0):   # (see-through: it lets its share out)
                     continue
                 judge = judge or ShadowCasting(world)
                 if not judge.casts(entity, mesh_ref, world.try_get(entity, Visibility)):

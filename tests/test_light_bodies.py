@@ -39,6 +39,7 @@ from components import (
     MeshRef,
     Mirror,
     PointLight,
+    Refractive,
     Transform,
     look_rotation,
 )
@@ -142,7 +143,8 @@ def _bulb_apart(how: str):
     "bulb" a closed glowing sphere (the mistake to say), "no_caster" the same casting none,
     "shade" a box open at the bottom (light leaves by it), "room" a closed box far larger
     than a bulb beside the range (its inside is the lit room), "beside" the sphere next to
-    the light, not round it."""
+    the light, not round it, "see_through" the sphere see-through (alpha 0.5: it lets half the
+    light through, in the lamp's see-through map) and "glass" the sphere glass."""
     def build(world):
         look_from(world, (0.0, 4.5, 6.5), (0.0, 0.0, 0.0))
         world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
@@ -159,7 +161,8 @@ def _bulb_apart(how: str):
             at = LAMP + glm.vec3(0.5, 0.0, 0.0) if how == "beside" else LAMP
             world.resources["mesh"] = world.spawn(Transform(position=at),
                                                   MeshRef(sphere(BULB), casts_shadows=how != "no_caster"),
-                                                  Material(color=(1.0, 0.9, 0.7)), Emissive(2.0))
+                                                  Material(color=(1.0, 0.9, 0.7, 0.5 if how == "see_through" else 1.0)),
+                                                  Emissive(2.0), *([Refractive()] if how == "glass" else []))
     return build
 
 
@@ -214,7 +217,7 @@ def test_a_lamp_that_starts_to_cast_inside_a_bulb_made_before_is_said(scene):
         runner.frame()
 
 
-@pytest.mark.parametrize("how", ["no_caster", "shade", "room", "beside"])
+@pytest.mark.parametrize("how", ["no_caster", "shade", "room", "beside", "see_through", "glass"])
 def test_no_word_where_the_mesh_casts_nothing_is_open_is_a_room_or_stands_beside(scene, how):
     runner = scene(_bulb_apart(how), SIZE)
     with warnings.catch_warnings():
