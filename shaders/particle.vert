@@ -83,6 +83,10 @@ vec3 sheet_light(vec3 p, vec3 n) {
              * water_skylight(p);
     vec4 sun_front = directional_shadows(p, n);
     vec4 sun_back = directional_shadows(p, -n);
+#ifdef SEE_THROUGH_SHADOWS   // (the share the see-through things over it let through)
+    sun_front *= see_through_shadows(p, n);
+    sun_back *= see_through_shadows(p, -n);
+#endif
     for (int i = 0; i < lights.counts.x; ++i) {
         float nl = dot(n, -lights.directional_dir[i].xyz);
         float clouded = 1.0;   // a CloudLayer's shadow on the sun's and the moons' light (lights.glsl's w)

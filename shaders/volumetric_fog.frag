@@ -151,6 +151,9 @@ void main() {
 #ifdef DIRECTIONAL_SHADOWS
             bool held = casts && all(greaterThanEqual(at.xy, low)) && all(lessThanEqual(at.xy, high));
             lit = FogDepth(held ? directional_shadow_at(lit_by, params, at, along, grazing) : 1.0);
+#ifdef SEE_THROUGH_SHADOWS   // (the share of it the see-through things over the point let through)
+            lit *= held ? see_through_in_map(at) : 1.0;
+#endif
             at += at_step;
 #endif
 #ifdef CLOUD_SHADOWS

@@ -401,15 +401,16 @@ def test_a_lit_particle_in_a_shadow_keeps_only_the_light_from_all_round(scene):
     assert open_sun[middle].mean() > shaded[middle].mean() + 0.1
 
 
-def test_a_lit_particle_behind_a_see_through_pane_takes_the_lamps_share_it_lets_through(scene):
-    """A casting lamp and a see-through pane (alpha 0.6) between it and the particle: the
-    lamp's light on the particle (less what it has with the lamp dark) is 0.4 of what it is
-    with the pane casting nothing (the lamps' see-through map, read by the particles' lighting
-    as by the scene pass)."""
+@pytest.mark.parametrize("lamp", [True, False])
+def test_a_lit_particle_behind_a_see_through_pane_takes_the_lights_share_it_lets_through(scene, lamp):
+    """A casting lamp (or the sun) and a see-through pane (alpha 0.6) between it and the
+    particle: the light's light on the particle (less what it has with the light dark) is 0.4
+    of what it is with the pane casting nothing (the lights' see-through maps, read by the
+    particles' lighting as by the scene pass)."""
     sun = glm.normalize(glm.vec3(0.7, -0.3, -0.6))  # (as the shadow's test: the pane off the camera's line)
-    _, through = render(scene, lit_scene(True, sun, lamp=True, pane=0.6))
-    _, open_lamp = render(scene, lit_scene(True, sun, lamp=True, pane=-0.6))
-    _, dark = render(scene, lit_scene(True, sun, lamp=True, pane=-0.6, sun_on=False))
+    _, through = render(scene, lit_scene(True, sun, lamp=lamp, pane=0.6))
+    _, open_lamp = render(scene, lit_scene(True, sun, lamp=lamp, pane=-0.6))
+    _, dark = render(scene, lit_scene(True, sun, lamp=lamp, pane=-0.6, sun_on=False))
     middle = (slice(34, 38), slice(46, 50))
     lamp_light = (open_lamp - dark)[middle].mean(axis=(0, 1))
     assert lamp_light.min() > 0.05

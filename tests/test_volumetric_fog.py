@@ -57,10 +57,16 @@ FLOOR = 40.0   # the floor's side (metres), about the origin
 MIRROR = ((0.5, 2.2, -6.8), (9.0, 4.0, 1e-4))   # a mirror on the wall (its quad, as a thin box)
 
 
+GAP = ((0.0, 5.0, 0.0), (2.0, 14.0))   # the roof's gap (its middle, its size in x and z): ``_hall``'s ``pane``
+
+
 def _hall(world, shafts: VolumetricFog | None = None, fog: Fog | None = None, sun: bool = True,
           shadows: bool = True, cascades: int = 1, mirror: bool = False, clouds: CloudLayer | None = None,
-          skybox: Skybox | None = None) -> int:
+          skybox: Skybox | None = None, pane: float | None = None) -> int:
     camera = look_from(world, EYE, TARGET, fov=70.0)
+    if pane is not None:   # a see-through pane over the gap, its alpha
+        world.spawn(Transform(position=GAP[0], rotation=glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))),
+                    MeshRef(quad(*GAP[1])), Material(color=(0.3, 0.4, 0.9, pane), double_sided=True))
     world.spawn(skybox if skybox is not None else Skybox(), *([clouds] if clouds is not None else []))
     if sun:
         world.spawn(DirectionalLight(direction=tuple(SUN), intensity=SUN_LIGHT, shadows=shadows,
@@ -129,20 +135,23 @@ def _rays(runner, ratio: int, distance: float, every: int = 1,
 
 
 def _ground_truth(runner, settings: VolumetricFog, ratio: int, shade: bool = True, every: int = 1,
-                  mirror: bool = False, clouds: CloudLayer | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  mirror: bool = False, clouds: CloudLayer | None = None,
+                  pane: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each march texel's light (the sun's colour is white: one channel) and its ray's
     length, as the module's docstring says (``shade`` False: no point is in shadow; ``every``
-    as ``_rays``; ``clouds``: each point's light through them, their twin's)."""
+    as ``_rays``; ``clouds``: each point's light through them, their twin's; ``pane``: the
+    gap's pane's alpha)."""
     origin, way, reach_grid = _rays(runner, ratio, settings.distance, every, mirror)
-    light = _light(origin, way, reach_grid.reshape(-1), settings, shade, clouds)
+    light = _light(origin, way, reach_grid.reshape(-1), settings, shade, clouds, pane)
     return light.reshape(reach_grid.shape), reach_grid
 
 
 def _light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
-           shade: bool = True, clouds: CloudLayer | None = None) -> np.ndarray:
+           shade: bool = True, clouds: CloudLayer | None = None, pane: float | None = None) -> np.ndarray:
     """The sun's light the air sends back along each ray (``origin`` + t ``way``, t up to
     ``reach``), summed at 1,000 points (``shade`` False: no point in shadow; ``clouds``: each
-    point's share of the sun through them, ``engine/render/clouds.py``'s ``cloud_shadow``)."""
+    point's share of the sun through them, ``engine/render/clouds.py``'s ``cloud_shadow``;
+    ``pane``: 1 - that alpha where the way to the sun crosses the gap's pane)."""
     points = 1000
     t = (np.arange(points) + 0.5) / points
     light_way = -np.array(tuple(SUN))
@@ -156,6 +165,12 @@ def _light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: Vol
         blocked &= shade
         seen = np.exp(-DENSITY * along)
         through = 1.0 if clouds is None else cloud_shadow(cloud_shape(clouds), at, light_way)
+        if pane is not None:   # below the gap's plane, the way to the sun through the pane
+            t_pane = (GAP[0][1] - flat[:, 1]) / light_way[1]
+            cross = flat + light_way * t_pane[:, None]
+            under = (t_pane > 0) & (np.abs(cross[:, 0] - GAP[0][0]) < GAP[1][0] / 2) \
+                & (np.abs(cross[:, 2] - GAP[0][2]) < GAP[1][1] / 2)
+            through = through * np.where(under, 1.0 - pane, 1.0).reshape(along.shape)
         total[part] = (DENSITY * seen * ~blocked * through).sum(1) * reach[part] / points
     g = settings.anisotropy
     c = way @ light_way
@@ -200,6 +215,24 @@ def test_each_rays_light_is_the_ground_truths(scene, half, cascades, shadows, mi
     assert np.quantile(error, 0.9) < 0.07
     if shadows:  # the shaft is there: the rays through the gap's light far above the rest
         assert truth.max() > 3 * np.median(truth[lit])
+
+
+def test_a_see_through_pane_over_the_gap_lets_its_share_of_the_sun_into_the_shaft(scene):
+    """A see-through pane (alpha 0.6) across the roof's gap: the shaft below it takes 0.4 of
+    the sun (the sun's see-through map, read by the march at each step), against the ground
+    truth with the pane's share taken where the way to the sun crosses it."""
+    settings = VolumetricFog(steps=64)
+    runner = scene(lambda world: _hall(world, settings, pane=0.6), SIZE)
+    runner.frame()
+    assert runner.engine.renderer.shadows.see_through_atlas is not None
+    marched = marched_light(runner)
+    truth, reach = _ground_truth(runner, settings, 2, pane=0.6)
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    lit = steady & (truth > 0.02 * truth.max())
+    error = np.abs(marched[..., 0] - truth)[lit] / truth[lit]
+    assert lit.sum() > 0.3 * truth.size
+    assert np.median(error) < 0.025, np.median(error)
+    assert np.quantile(error, 0.9) < 0.07, np.quantile(error, 0.9)
 
 
 ELSEWHERE = tuple(glm.normalize(glm.vec3(-0.6, -0.5, 0.6)))   # another body's way, far from SUN's

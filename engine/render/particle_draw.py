@@ -57,6 +57,7 @@ from engine.render.bindings import (
     PARTICLE_DEPTH_UNIT,
     PARTICLE_UNIT,
     POINT_SHADOW_UNITS,
+    SEE_THROUGH_UNIT,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SKY_UNIT,
@@ -383,7 +384,8 @@ class ParticleDraw:
                                ("point_shadow1", POINT_SHADOW_UNITS[1]), ("spot_atlas", SPOT_SHADOW_UNIT),
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
                                ("spot_cookies", COOKIE_UNIT), ("fog_sky_map", SKY_UNIT),
-                               ("lamp_see_through_atlas", LAMP_SEE_THROUGH_UNIT)):
+                               ("lamp_see_through_atlas", LAMP_SEE_THROUGH_UNIT),
+                               ("see_through_atlas", SEE_THROUGH_UNIT)):
                 if name in program:
                     program[name].value = unit
             self._programs[key] = program

@@ -72,6 +72,7 @@ from engine.render.bindings import (
     POINT_SHADOW_UNITS,
     RIPPLE_UNIT,
     RIPPLES_BINDING,
+    SEE_THROUGH_UNIT,
     SHADOW_ATLAS_UNIT,
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
@@ -326,7 +327,8 @@ class VolumetricFogPass:
                                    "point_shadow0": POINT_SHADOW_UNITS[0], "point_shadow1": POINT_SHADOW_UNITS[1],
                                    "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT,
                                    "caustic_maps": CAUSTIC_UNIT, "virtual_atlas": VIRTUAL_SHADOW_UNIT,
-                                   "ripple_atlas": RIPPLE_UNIT, "lamp_see_through_atlas": LAMP_SEE_THROUGH_UNIT},
+                                   "ripple_atlas": RIPPLE_UNIT, "lamp_see_through_atlas": LAMP_SEE_THROUGH_UNIT,
+                                   "see_through_atlas": SEE_THROUGH_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING,
                           "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING, "Ripples": RIPPLES_BINDING,
                           "VirtualLights": VIRTUAL_LIGHTS_BINDING})

@@ -293,6 +293,13 @@ uniform sampler2D see_through_atlas;
 // dimmed (depth units: a half float's step near 1 and more, so a pane does not dim itself).
 const float SEE_THROUGH_BIAS = 2e-3;
 
+// The share let through to a point whose coordinates in a sun's level map (the depth atlas's
+// uv, its depth) are ``p``: where it lies deeper than the nearest see-through caster there.
+float see_through_in_map(vec3 p) {
+    vec4 through = texture(see_through_atlas, p.xy);
+    return p.z > through.a + SEE_THROUGH_BIAS ? through.r : 1.0;
+}
+
 // The share of sun i's light that the see-through things between it and a point let through
 // (1 where none is, or the point lies in front of them): the point moved off its surface as
 // the depth lookup moves it, twice as far (the map's texels are twice as big).
@@ -304,8 +311,7 @@ float see_through_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     vec3 p = (to_map * vec4(position, 1.0)).xyz + mat3(to_map) * normal * (2.0 * params.x * (1.5 - nl));
     vec3 tile = shadows.directional_tile[i].xyz;
     if (any(lessThan(p.xy, tile.xy)) || any(greaterThan(p.xy, tile.xy + tile.z))) return 1.0;
-    vec4 through = texture(see_through_atlas, p.xy);
-    return p.z > through.a + SEE_THROUGH_BIAS ? through.r : 1.0;
+    return see_through_in_map(p);
 }
 
 // ``see_through_shadow`` for directional slots 0 to DIRECTIONAL_SHADOWS - 1 (as
