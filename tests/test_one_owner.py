@@ -188,21 +188,21 @@ void main() { gl_Position = vec4(in_position, 0.0, 1.0); }
 """
 
 
-def test_the_glsl_cube_face_directions_are_the_tables_texel_by_texel(ctx, tmp_path):
-    """shaders/include/cube_faces.glsl, built as every program is (its table from the
-    defines the shader library makes of CUBE_FACES), gives each texel of each face the
-    direction ``face_directions`` gives it."""
+def _faces_drawn(ctx, tmp_path, fragment: str, n: int = 16):
+    """Each face's n x n texels (RGBA floats) drawn by ``fragment`` (given its ``face`` and
+    ``level_size``), with shaders/include/cube_faces.glsl built as every program is (its
+    table from the defines the shader library makes of CUBE_FACES)."""
     (tmp_path / "include").mkdir()
     (tmp_path / "include" / "cube_faces.glsl").write_bytes((shader_dir() / "include" / "cube_faces.glsl").read_bytes())
-    (tmp_path / "probe.frag").write_text(CUBE_PROBE_FRAG)
+    (tmp_path / "probe.frag").write_text(fragment)
     (tmp_path / "probe.vert").write_text(CUBE_PROBE_VERT)
-    n = 16
     program = ctx.program(vertex_shader=load_source("probe.vert", root=tmp_path),
                           fragment_shader=load_source("probe.frag", root=tmp_path))
     quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
     vao = ctx.vertex_array(program, [(quad, "2f", "in_position")])
     target = ctx.texture((n, n), 4, dtype="f4")
     fbo = ctx.framebuffer([target])
+    faces = []
     try:
         fbo.use()
         # No blend, depth test, cull or clip distance another test left on: with blending,
@@ -212,12 +212,19 @@ def test_the_glsl_cube_face_directions_are_the_tables_texel_by_texel(ctx, tmp_pa
         for face in range(6):
             program["face"].value = face
             vao.render(mode=ctx.TRIANGLE_STRIP)
-            drawn = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(n, n, 4)[..., :3]
-            np.testing.assert_allclose(drawn, face_directions(face, n), atol=1e-6, err_msg=FACE_NAMES[face])
+            faces.append(np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(n, n, 4))
     finally:
         release_framebuffer(fbo)  # binds framebuffer 0 first: no deleted name left bound
         for thing in (vao, target, quad, program):
             thing.release()
+    return faces
+
+
+def test_the_glsl_cube_face_directions_are_the_tables_texel_by_texel(ctx, tmp_path):
+    """shaders/include/cube_faces.glsl gives each texel of each face the direction
+    ``face_directions`` gives it."""
+    for face, drawn in enumerate(_faces_drawn(ctx, tmp_path, CUBE_PROBE_FRAG)):
+        np.testing.assert_allclose(drawn[..., :3], face_directions(face, 16), atol=1e-6, err_msg=FACE_NAMES[face])
 
 
 CUBE_FACE_OF_FRAG = """#version 410 core
@@ -239,34 +246,12 @@ def test_the_glsl_cube_face_of_a_direction_is_the_tables_inverse(ctx, tmp_path):
     picks a face tile with it) takes each texel's direction of each face, scaled, back to
     that face and that texel's (s, t): the table's axes, written out axis by axis, agree
     with it."""
-    (tmp_path / "include").mkdir()
-    (tmp_path / "include" / "cube_faces.glsl").write_bytes((shader_dir() / "include" / "cube_faces.glsl").read_bytes())
-    (tmp_path / "probe.frag").write_text(CUBE_FACE_OF_FRAG)
-    (tmp_path / "probe.vert").write_text(CUBE_PROBE_VERT)
-    n = 16
-    program = ctx.program(vertex_shader=load_source("probe.vert", root=tmp_path),
-                          fragment_shader=load_source("probe.frag", root=tmp_path))
-    quad = ctx.buffer(np.array([-1, -1, 1, -1, -1, 1, 1, 1], np.float32).tobytes())
-    vao = ctx.vertex_array(program, [(quad, "2f", "in_position")])
-    target = ctx.texture((n, n), 4, dtype="f4")
-    fbo = ctx.framebuffer([target])
-    c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    c = (np.arange(16) + 0.5) / 16 * 2.0 - 1.0
     t, s = np.meshgrid(c, c, indexing="ij")
-    try:
-        fbo.use()
-        bindings.apply_pass_state(ctx, bindings.PassState(), (0, 0, n, n))
-        program["level_size"].value = float(n)
-        for face in range(6):
-            program["face"].value = face
-            vao.render(mode=ctx.TRIANGLE_STRIP)
-            drawn = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(n, n, 4)
-            assert (drawn[..., 0] == face).all(), FACE_NAMES[face]
-            np.testing.assert_allclose(drawn[..., 1], s, atol=1e-5, err_msg=FACE_NAMES[face])
-            np.testing.assert_allclose(drawn[..., 2], t, atol=1e-5, err_msg=FACE_NAMES[face])
-    finally:
-        release_framebuffer(fbo)
-        for thing in (vao, target, quad, program):
-            thing.release()
+    for face, drawn in enumerate(_faces_drawn(ctx, tmp_path, CUBE_FACE_OF_FRAG)):
+        assert (drawn[..., 0] == face).all(), FACE_NAMES[face]
+        np.testing.assert_allclose(drawn[..., 1], s, atol=1e-5, err_msg=FACE_NAMES[face])
+        np.testing.assert_allclose(drawn[..., 2], t, atol=1e-5, err_msg=FACE_NAMES[face])
 
 
 def test_the_glsl_names_every_clip_distance_and_numbers_none():
