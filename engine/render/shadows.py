@@ -321,14 +321,20 @@ class ShadowMaps:
             return False
         self._drop_see_through()
         if casting:
-            atlas = self.see_through_atlas = self.ctx.texture(size, 4, dtype="f2")
-            atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            atlas.repeat_x = atlas.repeat_y = False
-            self._see_through_framebuffer = self.ctx.framebuffer(color_attachments=[atlas])
-            # Nothing in the way (a new texture's texels are undefined until written).
-            self._see_through_framebuffer.clear(1.0, 1.0, 1.0, 1.0)
+            self.see_through_atlas, self._see_through_framebuffer = self._see_through_target(size)
         self._set_program_defines()
         return True
+
+    def _see_through_target(self, size: tuple[int, int]) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
+        """A see-through atlas of ``size`` (RGBA half floats, filtered linearly, clamped) and
+        its framebuffer, cleared to nothing in the way (a new texture's texels are undefined
+        until written)."""
+        atlas = self.ctx.texture(size, 4, dtype="f2")
+        atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        atlas.repeat_x = atlas.repeat_y = False
+        framebuffer = self.ctx.framebuffer(color_attachments=[atlas])
+        framebuffer.clear(1.0, 1.0, 1.0, 1.0)
+        return atlas, framebuffer
 
     def fit_lamp_see_through(self, casting: bool, resolution: int) -> bool:
         """Make the lamps' see-through atlas (``lamp_see_through_atlas``) while see-through
@@ -355,12 +361,8 @@ class ShadowMaps:
         self._drop_lamp_see_through()
         if face:
             tile = face + 2 * LAMP_SEE_THROUGH_GUTTER
-            atlas = self.lamp_see_through_atlas = self.ctx.texture((6 * tile, MAX_POINT_SHADOWS * tile), 4,
-                                                                   dtype="f2")
-            atlas.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            atlas.repeat_x = atlas.repeat_y = False
-            self._lamp_see_through_framebuffer = self.ctx.framebuffer(color_attachments=[atlas])
-            self._lamp_see_through_framebuffer.clear(1.0, 1.0, 1.0, 1.0)   # (texels undefined until written)
+            self.lamp_see_through_atlas, self._lamp_see_through_framebuffer = \
+                self._see_through_target((6 * tile, MAX_POINT_SHADOWS * tile))
         self.lamp_see_through_face = face
         self._set_program_defines()
         return True
