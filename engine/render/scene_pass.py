@@ -282,7 +282,7 @@ class ScenePass:
             built = (variants, under is not NO_CAUSTIC_WATERS)
             if record is None or record[0] != stamp or record[1] != built:
                 record = batch.draw_records[drawn_as] = programs.record(batch, drawn_as, stamp, *built)
-            _, _, glo, vao, uniforms, values, textures, own, vertices, program = record
+            _, _, glo, vao, uniforms, values, textures, own, vertices, program, sky_at_probe = record
             if per_view:  # (its rows advancing every per_view instances)
                 vao = batch.vao(program, per_view)
                 count *= per_view
@@ -292,7 +292,7 @@ class ScenePass:
                 bind_texture(ctx, texture, unit, True)  # the pass's albedo sampler stays (bind_sampler)
             if own is None:  # probes bound now: their lookups are read each draw
                 own = self._probe_values(batch)
-            elif variants is None:  # no probe, but a mixed build declares its sampler: the sky there
+            elif variants is None or sky_at_probe:  # no probe, but the build declares its sampler: the sky there
                 bind_texture(ctx, renderer.sky, PROBE_UNIT)
             if values[0] != sky_size and uniforms[0] is not None:
                 uniforms[0].value = values[0] = sky_size

@@ -415,8 +415,9 @@ class ScenePrograms:
         probes, unlit, masked, screen), with ``caustic`` (the batch reaches into the caustic water's
         body: its CAUSTICS build): (stamp, (variants, caustic), program name, vertex array, per-draw uniforms, the
         program's written values, the (unit, texture) pairs to bind, its own uniform values
-        or None where probes give them per draw, its mesh's vertex count, the program: an
-        instanced-views draw asks the batch for its array by view count, ``InstanceBatch.vao``)."""
+        or None where probes give them per draw, its mesh's vertex count, the program (an
+        instanced-views draw asks the batch for its array by view count, ``InstanceBatch.vao``),
+        whether the sky is bound at the probe's unit for it)."""
         views, layered, ambient, unlit, masked, screen = kind
         program = self.program(variants, views, layered, batch.normal_map is not None,
                                batch.checker is not None, _material_build(batch), batch.probe_blend,
@@ -447,8 +448,11 @@ class ScenePrograms:
                    batch.iridescence or NO_IRIDESCENCE, batch.pose_row, batch.mesh.morph_count if batch.morphed else 0,
                    batch.diffuse_transmission or NO_DIFFUSE_TRANSMISSION, batch.parallax_depth,
                    batch.lightmap_intensity, batch.subsurface or NO_SUBSURFACE)
+        # A build that declares the probe's sampler, drawing a batch with no probe: the sky
+        # there (GL reads an active sampler's unit whether or not a branch samples it).
+        sky_at_probe = own is not None and "probe_map" in program
         return (stamp, (variants, caustic), glo, batch.vao(program), self.uniforms[glo], values, textures, own,
-                batch.mesh.index_count, program)
+                batch.mesh.index_count, program, sky_at_probe)
 
     def release(self) -> None:
         """Forget the programs (the shader library owns and releases them)."""
