@@ -545,6 +545,36 @@ def test_no_texel_is_read_before_it_is_written(ctx, name, nan):
                                   "written")
 
 
+def test_a_batch_without_a_probe_finds_a_cube_on_the_probes_unit_after_an_engine_with_one(scene, ctx):
+    """An engine whose chrome ball read its reflection probe from unit 7 is closed (its cube
+    released there); the next engine's glass pane, with no probe and a uniform build that
+    declares the probe's sampler, finds the sky bound there, not an empty unit.  (Found by
+    the see-through lamps scene after probes_dynamic: its pane was the frame's first draw
+    reading unit 7.)"""
+    from components import Material, MeshRef, ReflectionProbe, Reflective, Refractive, Transform
+    from engine.assets.mesh import plane, quad, sphere
+    from tests.support import look_from
+
+    def probed(world):
+        look_from(world, (0.0, 2.0, 5.0), (0.0, 0.5, 0.0))
+        world.spawn(Transform(), MeshRef(plane(8, 8)), Material())
+        world.spawn(Transform(position=(0.0, 1.0, 0.0)), MeshRef(sphere(0.5)), Material(metallic=1.0),
+                    Reflective(), ReflectionProbe(resolution=16))
+
+    def pane(world):
+        look_from(world, (0.0, 2.0, 5.0), (0.0, 0.5, 0.0))
+        world.spawn(Transform(position=(0.0, 1.0, 0.0)), MeshRef(quad(2.0, 2.0)),
+                    Material(color=(0.8, 0.9, 1.0, 0.2)), Refractive(screen=False))
+
+    first = scene(probed, (64, 48))
+    first.frame()
+    first.close()
+    with strict_draws(ctx) as strict:
+        scene(pane, (64, 48)).frame()
+    found = {**strict.problems, **strict.unbound}
+    assert strict.draws > 0 and not found, "\n".join(f"{where}: {problem}" for problem, where in found.items())
+
+
 def test_the_debug_overlay_draws_legal_gl_after_a_frame(scene, ctx):
     """The overlay draws after the engine's frame, which leaves the reflections' mipmapped
     albedo sampler object on unit 0: the overlay's font atlas (no mip levels) must not be
