@@ -26,7 +26,7 @@ in float v_alpha;
 // the destination colour: every layer's share), and its depth, the nearest kept (the alpha
 // channel blends by MIN): a point lit through it lies deeper than that (shadows.glsl
 // see_through_shadows).  With DISTANCE, into a point or spot light's: its distance over the
-// range in place of the depth (lamp_see_through_cube, lamp_see_through_spot).
+// range in place of the depth (shadows.glsl lamp_see_through_at).
 layout(location = 0) out vec4 out_through;
 #endif
 #ifdef DISTANCE

@@ -25,7 +25,7 @@ the level map (``_draw_see_through``) and read by the scene pass's SEE_THROUGH_S
 same beside its cube or spot map (``lamp_see_through_atlas``, ``fit_lamp_see_through``): six
 face tiles (a spot: one), half the map's texels a side, the nearest one's distance over the
 range in place of a depth, drawn with the map (``_draw_lamp_see_through``) and read by the
-LAMP_SEE_THROUGH_SHADOWS builds (lamp_see_through_cube, lamp_see_through_spot).
+LAMP_SEE_THROUGH_SHADOWS builds (lamp_see_through_cube; a spot's in spot_map_light_shadow).
 
 Nothing here decides when a map is drawn again: the shadows stage does
 (``systems/shadow_system.py``, from the frame's change sets).  The Shadows uniform block
