@@ -1279,6 +1279,29 @@ def test_without_a_unit_for_the_see_through_map_the_pane_casts_nothing_and_says_
     assert not any(name == define for name, _ in shadows.program_defines)
 
 
+def test_a_lamp_draws_only_the_see_through_things_in_its_reach(scene):
+    """The pane 20 m from a point light of range 14: the lamps' see-through map is made (a
+    see-through thing and a casting lamp), but the lamp's tiles draw nothing and its slot
+    reads none; the same pane under it costs its six faces' draws, one a face."""
+    def build(far: bool):
+        def make(world):
+            _pane_scene(0.6, lamp="point")(world)
+            if far:
+                world.get(world.resources["ids"]["pane"], Transform).position = (20.0, 2.0, 0.0)
+        return make
+
+    draws = {}
+    for far in (False, True):
+        runner = scene(build(far), (64, 48))
+        runner.frame()
+        shadows = runner.engine.renderer.shadows
+        assert shadows.lamp_see_through_atlas is not None
+        lamp_row = shadows._lamp_through[0]
+        assert (lamp_row[2] == 0.0) == far, lamp_row
+        draws[far] = runner.stats.shadow_draw_calls
+    assert draws[False] - draws[True] == 6, draws
+
+
 def test_a_lamps_own_glass_bulb_dims_none_of_its_light(scene):
     """A point light on the entity of a glass sphere round it (its bulb: a light's own mesh
     casts none of its shadow) lights the floor as the light alone does, though the bulb is in

@@ -72,6 +72,7 @@ from engine.render.bindings import (
 )
 from engine.render.free_depth_images import give_depth_image, take_depth_image
 from engine.render.gpu import Gpu
+from engine.render.instances import InstanceBatch
 from engine.render.pose_rows import skinning_defines
 from engine.render.raw_gl import ARRAY_R32F, LayeredArrayTarget, LayeredCubeTarget
 from engine.render.targets import release_framebuffer
@@ -84,7 +85,14 @@ from engine.render.views import (
     View,
 )
 from engine.rules.light_rules import LightLimits
-from engine.rules.shadow_rules import MAX_APERTURES, MAX_VIRTUAL_LIGHTS, DirectionalFit, Leg, VirtualLight
+from engine.rules.shadow_rules import (
+    MAX_APERTURES,
+    MAX_VIRTUAL_LIGHTS,
+    DirectionalFit,
+    Leg,
+    VirtualLight,
+    boxes_in_reach,
+)
 
 SHADOW_FILTERS = ("grid", "single")
 # The slots the light rule (engine/rules/light_rules.py) fills: the Lights block's and the cubes.
@@ -385,9 +393,15 @@ class ShadowMaps:
         to all the light let through, then, where ``lit``, each see-through caster multiplies
         in its share and keeps the nearest distance over ``light_range`` (MIN, as the suns'),
         drawn from the view widened over the tile's gutter.  ``body``: the light's own entity
-        (its mesh dims none of its light).  Without an atlas the slot reads none."""
+        (its mesh dims none of its light).  Only the see-through batches whose boxes reach into
+        the light's range are drawn; with none, or without an atlas, the slot reads none (its
+        lookup returns before the texture)."""
         face = self.lamp_see_through_face
-        if not face:
+        position = np.array(tuple(views[0].eye), np.float64)
+        reaching = [batch for batch in self.renderer.see_through_casters()
+                    if batch.count and boxes_in_reach(*batch.box, position, light_range)[0]] if face else []
+        if not reaching:
+            self._lamp_through[slot] = 0.0
             return
         ctx = self.ctx
         gutter = LAMP_SEE_THROUGH_GUTTER
@@ -406,7 +420,7 @@ class ShadowMaps:
                 self.renderer.bind_view(View(
                     view=view.view, proj=glm.perspective(widened, 1.0, POINT_NEAR, max(light_range, POINT_NEAR * 2)),
                     eye=view.eye, size=(tile, tile), name=f"{view.name} see-through", kinds=0, layers=ALL_LAYERS))
-                self._draw_see_through_casters(_LAMP_SEE_THROUGH, {"light_range": light_range}, body)
+                self._draw_see_through_casters(_LAMP_SEE_THROUGH, {"light_range": light_range}, body, reaching)
         finally:
             ctx.blend_equation = moderngl.FUNC_ADD
         width, height = self.lamp_see_through_atlas.size
@@ -547,19 +561,19 @@ class ShadowMaps:
         framebuffer.clear(1.0, 1.0, 1.0, 1.0, viewport=rect)
         ctx.blend_equation = moderngl.FUNC_ADD, moderngl.MIN
         try:
-            self._draw_see_through_casters(_SEE_THROUGH, {}, 0)
+            self._draw_see_through_casters(_SEE_THROUGH, {}, 0, self.renderer.see_through_casters())
         finally:
             ctx.blend_equation = moderngl.FUNC_ADD
 
     def _draw_see_through_casters(self, build: tuple[tuple[str, str], ...], uniforms: dict[str, object],
-                                  body: int) -> None:
-        """Every see-through caster (``Gpu.see_through_casters``) into the bound see-through
-        map, from the Camera block bound, with the caster programs of ``build`` given
-        ``uniforms`` (the blend set by the caller); ``body``: the light's entity, whose mesh
-        dims none of its light (as ``_draw_casters``)."""
+                                  body: int, batches: list[InstanceBatch]) -> None:
+        """See-through casters (``batches``, of ``Gpu.see_through_casters``) into the bound
+        see-through map, from the Camera block bound, with the caster programs of ``build``
+        given ``uniforms`` (the blend set by the caller); ``body``: the light's entity, whose
+        mesh dims none of its light (as ``_draw_casters``)."""
         ctx = self.ctx
         renderer = self.renderer
-        for batch in renderer.see_through_casters():
+        for batch in batches:
             if not batch.count:
                 continue
             kind = "vertex alpha" if batch.mesh.has_alpha else True
