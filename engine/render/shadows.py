@@ -261,12 +261,11 @@ class ShadowMaps:
         # The suns' see-through maps (``fit_see_through``): the light the see-through things let
         # through, a tile for each level map's, where the context has a unit for it.
         self.see_through_supported = renderer.caps.max_texture_image_units >= SEE_THROUGH_SAMPLERS
-        self._see_through_warned = False
+        self._no_units_said: set[str] = set()   # the lights whose see-through maps had no unit, said
         self.see_through_atlas: moderngl.Texture | None = None
         self._see_through_framebuffer: moderngl.Framebuffer | None = None
         # The lamps' (``fit_lamp_see_through``): a row of six face tiles a point-shadow slot.
         self.lamp_see_through_supported = renderer.caps.max_texture_image_units >= LAMP_SEE_THROUGH_SAMPLERS
-        self._lamp_see_through_warned = False
         self.lamp_see_through_atlas: moderngl.Texture | None = None
         self._lamp_see_through_framebuffer: moderngl.Framebuffer | None = None
         self.lamp_see_through_face = 0   # a face tile's texels a side, gutter left out (0: no atlas)
@@ -315,13 +314,7 @@ class ShadowMaps:
         remade or dropped (every sun's map is to be drawn again with it).  Where the context
         has no unit for it, see-through things cast nothing, said once in a GLLimitWarning."""
         if casting and not self.see_through_supported:
-            if not self._see_through_warned:
-                self._see_through_warned = True
-                warnings.warn(GLLimitWarning(
-                    f"see-through things dim the sun's light through a map of their own that needs "
-                    f"{SEE_THROUGH_SAMPLERS} texture units in the fragment stage, and this OpenGL has "
-                    f"{self.renderer.caps.max_texture_image_units} (GL_MAX_TEXTURE_IMAGE_UNITS): they cast no "
-                    "shadow"), stacklevel=3)
+            self._say_no_units("the suns'", SEE_THROUGH_SAMPLERS)
             casting = False
         size = (max(self.atlas.size[0] // SEE_THROUGH_SCALE, 1), max(self.atlas.size[1] // SEE_THROUGH_SCALE, 1))
         atlas = self.see_through_atlas
@@ -332,6 +325,25 @@ class ShadowMaps:
             self.see_through_atlas, self._see_through_framebuffer = self._see_through_target(size)
         self._set_program_defines()
         return True
+
+    def _say_no_units(self, lights: str, needed: int) -> None:
+        """Say once for ``lights`` that see-through things dim none of their light: their
+        see-through maps need ``needed`` fragment texture units and the context has fewer."""
+        if lights in self._no_units_said:
+            return
+        self._no_units_said.add(lights)
+        warnings.warn(GLLimitWarning(
+            f"see-through things dim {lights} light through maps of their own that need {needed} texture units "
+            f"in the fragment stage, and this OpenGL has {self.renderer.caps.max_texture_image_units} "
+            "(GL_MAX_TEXTURE_IMAGE_UNITS): they cast no shadow in those lights"), stacklevel=4)
+
+    def _release_target(self, atlas: moderngl.Texture | None, framebuffer: moderngl.Framebuffer | None) -> None:
+        """Let a see-through atlas and its framebuffer go (either may be None)."""
+        if framebuffer is not None:
+            release_framebuffer(framebuffer)
+        if atlas is not None:
+            atlas.release()
+            self.renderer.note_scene_change()
 
     def _see_through_target(self, size: tuple[int, int]) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
         """A see-through atlas of ``size`` (RGBA half floats, filtered linearly, clamped) and
@@ -355,13 +367,7 @@ class ShadowMaps:
         it).  Where the context has no unit for it, see-through things dim no lamp, said once
         in a GLLimitWarning."""
         if casting and not self.lamp_see_through_supported:
-            if not self._lamp_see_through_warned:
-                self._lamp_see_through_warned = True
-                warnings.warn(GLLimitWarning(
-                    f"see-through things dim the point and spot lights' light through maps of their own that "
-                    f"need {LAMP_SEE_THROUGH_SAMPLERS} texture units in the fragment stage, and this OpenGL has "
-                    f"{self.renderer.caps.max_texture_image_units} (GL_MAX_TEXTURE_IMAGE_UNITS): they cast no "
-                    "shadow in those lights"), stacklevel=3)
+            self._say_no_units("the point and spot lights'", LAMP_SEE_THROUGH_SAMPLERS)
             casting = False
         face = max(resolution // SEE_THROUGH_SCALE, 1) if casting else 0
         if face == self.lamp_see_through_face:
@@ -376,13 +382,8 @@ class ShadowMaps:
         return True
 
     def _drop_lamp_see_through(self) -> None:
-        if self._lamp_see_through_framebuffer is not None:
-            release_framebuffer(self._lamp_see_through_framebuffer)
-            self._lamp_see_through_framebuffer = None
-        if self.lamp_see_through_atlas is not None:
-            self.lamp_see_through_atlas.release()
-            self.lamp_see_through_atlas = None
-            self.renderer.note_scene_change()
+        self._release_target(self.lamp_see_through_atlas, self._lamp_see_through_framebuffer)
+        self.lamp_see_through_atlas = self._lamp_see_through_framebuffer = None
         self.lamp_see_through_face = 0
         self._lamp_through[:] = 0.0
 
@@ -427,13 +428,8 @@ class ShadowMaps:
         self._lamp_through[slot] = (1.0 / width, 1.0 / height, face, gutter)
 
     def _drop_see_through(self) -> None:
-        if self._see_through_framebuffer is not None:
-            release_framebuffer(self._see_through_framebuffer)
-            self._see_through_framebuffer = None
-        if self.see_through_atlas is not None:
-            self.see_through_atlas.release()
-            self.see_through_atlas = None
-            self.renderer.note_scene_change()
+        self._release_target(self.see_through_atlas, self._see_through_framebuffer)
+        self.see_through_atlas = self._see_through_framebuffer = None
 
     def tile_origin(self, slot: int) -> tuple[int, int]:
         return (slot % 2) * self.tile, (slot // 2) * self.tile
