@@ -36,8 +36,8 @@ from engine.assets.texture_data import TextureData
 from engine.core.budget import ViewBudget, ViewBudgetError
 from engine.frame_stats import BudgetLedger, RenderStats
 
-__all__ = ["BudgetLedger", "MirrorBumps", "PortalCrossing", "PortalCrossings", "RenderStats", "SurfaceMotion",
-           "SurfaceState", "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
+__all__ = ["BudgetLedger", "MirrorBumps", "PicturesDrawn", "PortalCrossing", "PortalCrossings", "RenderStats",
+           "SurfaceMotion", "SurfaceState", "Surfaces", "ViewBudget", "ViewBudgetError", "WaterFlow", "WaterLook"]
 
 
 
@@ -174,6 +174,18 @@ class CloudChanges:
     resource, from the prepare stage): the probe scheduler relights every probe when it moves on."""
 
     count: int = 0
+
+
+@dataclass(frozen=True)
+class PicturesDrawn:
+    """The screens whose ``Monitor`` pictures were drawn (a world resource, from the monitor
+    stage): ``count`` moves on each frame it draws any, ``screens`` are that frame's.  A picture
+    drawn again changes what its screen looks like, as a new material would: the probe
+    scheduler, which runs before the monitor stage, counts those screens as changed looks at
+    its next update (an ``on_change`` probe recaptures the faces that see them)."""
+
+    count: int = 0
+    screens: frozenset[int] = frozenset()
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,13 @@ other's changes; a flat one-sided screen a view sees from behind shows it nothin
 (``_screen_faces``).  Kept, a picture moves no version on: a still camera's mirrors that show
 it keep their views too.
 
+A picture drawn is published (``PicturesDrawn``) for the probes' scheduler, whose
+``on_change`` probes recapture the faces that see its screen; not one drawn again for
+nothing but reflection probes' captures since (``ProbeCaptures.moved_on``): a probe that
+recaptured the screen would draw it again, and that drawing recapture the probe, forever in a
+still scene.  So an ``on_change`` probe shows a screen whose picture shows that probe's own
+reflection as it was a capture before.
+
 The pictures of monitors gone (or deleted) are let go here; the extract stage makes a
 screen's picture when it first draws the screen (its emissive map is the picture)."""
 from __future__ import annotations
@@ -65,7 +72,7 @@ from engine.render.renderer import Renderer
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View, camera_view
-from engine.resources import Surfaces
+from engine.resources import PicturesDrawn, Surfaces
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import ViewEyes
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
@@ -82,7 +89,7 @@ class MonitorSystem(esper.Processor):
         self._said: set[tuple[int, int | None]] = set()  # (monitor, the camera it named) said once
         self._cut = 0
         self._keep_still_pictures = True
-        self._keys: dict[int, tuple[tuple, tuple]] = {}   # monitor -> _still_key at its last drawing
+        self._keys: dict[int, tuple[tuple, tuple, int]] = {}   # monitor -> _still_key at its last drawing
         self._world_version = 0   # moved on by every change to the world's components (World.change_count)
         self._changes_seen = 0    # World.change_count when this stage last looked
         self._flat: dict[int, tuple | bool] = {}   # mesh id -> its one face (point, normal), or False
@@ -130,6 +137,7 @@ class MonitorSystem(esper.Processor):
             (surfaces.mirrors or surfaces.portals) else None
         blends = world.resources.get(SurfaceBlends, NO_BLENDS)
         drawn = cut = 0
+        screens: set[int] = set()   # the monitors whose pictures are drawn now
         faces = None   # (the screens' planes, found when a picture is first drawn this frame)
         seen = None    # (the screens some view sees, found when a "when_seen" one is first due)
         for entity, monitor in due:
@@ -152,8 +160,11 @@ class MonitorSystem(esper.Processor):
             view.layers = camera.layer_mask
             key = self._still_key(monitor, view, table, blends)
             kept = self._keys.get(entity)
-            still = self.keep_still_pictures and kept is not None and _same(key, kept) \
-                and pictures.shown_unchanged(entity)
+            # As it was but for the reflection probes' captures since (``alike``): drawn again, it
+            # is not published as a new look of its screen (the probes that see the screen
+            # would recapture it, moving the version on that drew it: a loop in a still scene).
+            alike = kept is not None and _same(key, kept) and pictures.shown_unchanged(entity)
+            still = self.keep_still_pictures and alike and key[2] == kept[2]
             if still and pictures.repeatable(entity):
                 stats.monitors_kept += 1
                 self.drawn[entity] = frame
@@ -169,8 +180,13 @@ class MonitorSystem(esper.Processor):
                                       faces=faces)
             stats.monitor_views += views
             drawn += 1
+            if not alike:
+                screens.add(entity)
             self.drawn[entity] = frame
             self._keys[entity] = key
+        if screens:
+            published = world.resources.get(PicturesDrawn, PicturesDrawn())
+            world.resources[PicturesDrawn] = PicturesDrawn(published.count + 1, frozenset(screens))
         if cut > self._cut:
             warnings.warn(MonitorLimitWarning(
                 f"{drawn + cut} monitors were to be drawn this frame: {MAX_MONITORS} are drawn a frame (those "
@@ -239,14 +255,16 @@ class MonitorSystem(esper.Processor):
         return faces
 
     def _still_key(self, monitor: Monitor, view: View, table: SurfaceTable | None,
-                   blends: SurfaceBlends) -> tuple[tuple, tuple]:
+                   blends: SurfaceBlends) -> tuple[tuple, tuple, int]:
         """What a monitor's picture shows, as (values compared equal, objects compared as the
-        same object): the module docstring's list, less the pictures'."""
+        same object, the reflection probes' captures): the module docstring's list, less the
+        pictures'."""
         flows = () if table is None else tuple(state.water.flow.offset for state in table.states
                                                if state.water is not None)
-        values = (self.renderer.monitors.scene_version, self.renderer.drawing_settings(), view.camera_block(),
-                  view.layers, monitor.size, monitor.depth, flows, self._world_version)
-        return values, (table, blends.by_surface)
+        captures = self.renderer.probes.moved_on
+        values = (self.renderer.monitors.scene_version - captures, self.renderer.drawing_settings(),
+                  view.camera_block(), view.layers, monitor.size, monitor.depth, flows, self._world_version)
+        return values, (table, blends.by_surface), captures
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
         """The Camera and Transform of the entity ``monitor`` shows, or None, said once for each
@@ -268,8 +286,8 @@ class MonitorSystem(esper.Processor):
         return None
 
 
-def _same(key: tuple[tuple, tuple], other: tuple[tuple, tuple]) -> bool:
-    """Two ``_still_key``s agree: values equal, objects the same."""
+def _same(key: tuple[tuple, tuple, int], other: tuple[tuple, tuple, int]) -> bool:
+    """Two ``_still_key``s agree but for the probes' captures: values equal, objects the same."""
     return key[0] == other[0] and all(a is b for a, b in zip(key[1], other[1], strict=True))
 
 

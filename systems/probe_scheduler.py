@@ -14,7 +14,8 @@ has a ``ProbeState``.  What is due each frame, per probe:
     requests and the scheduler compares the count with the one it last saw);
   - ``on_change`` (the default): only the faces whose frustum holds the old or the new
     bounds of an entity that was added, removed or moved (the transform stage's frame sets)
-    or whose look changed (``probe_rules.LookChanges``), within the probe's range, either
+    or whose look changed (``probe_rules.LookChanges``, and the screens whose ``Monitor``
+    pictures were drawn since the last update: ``PicturesDrawn``), within the probe's range, either
     directly ("moved: entity 12") or as seen in a mirror or through a portal (the boxes'
     images, up to the probe's ``depth``: ``probe_rules.images_through_surfaces``; "moved:
     entity 12, seen in mirror 5"); all six when the sun or the sky changed
@@ -56,7 +57,7 @@ from components.visibility import SEEN_BY_EVERY_VIEW, visibility_code
 from engine.assets.mesh import Mesh
 from engine.core.budget import spending_order
 from engine.core.world import World
-from engine.resources import CloudChanges, RenderStats, Surfaces, ViewBudget
+from engine.resources import CloudChanges, PicturesDrawn, RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import SAME_SUN_DEGREES, SAME_SUN_TINT, shadow_texel_tangent, sun_relights, sun_states
 from engine.rules.probe_rules import (
@@ -139,12 +140,18 @@ class ProbeScheduler:
         self._suns: tuple = ()  # the directional lights as the probes were last relit by them (sun_states)
         self._suns_behind = False  # a sun turned a little since: the probes relight once it stands still
         self._clouds = 0  # CloudChanges as the probes were last relit by it
+        self._pictures = 0  # PicturesDrawn.count when last looked at
 
     def update(self) -> ProbeSchedule:
         """This frame's schedule, published as the world's ``ProbeSchedule``."""
         world = self.world
         had_probes = bool(self.probes)
         looks = self._looks.entities(world)  # asked every frame: it follows what each object samples
+        pictures = world.resources.get(PicturesDrawn)
+        if pictures is not None and pictures.count != self._pictures:
+            # Screens whose pictures were drawn after the last update (the monitor stage is later in the frame).
+            self._pictures = pictures.count
+            looks |= pictures.screens
         schedule = world.resources[ProbeSchedule] = ProbeSchedule(gone=self._refresh_probes())
         if not self.probes:
             self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)

@@ -861,15 +861,20 @@ def test_a_monitor_drawn_when_seen_that_only_its_own_camera_sees_is_not_drawn(sc
     assert drawn == [1, 1, 0, 0] and unseen == [0, 0, 1, 1]
 
 
-def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene):
+@pytest.mark.parametrize("gpu_ms", [(5.0, 0.1), (0.1, 5.0)], ids=["parts_when_seen", "parts_always"])
+def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene, gpu_ms):
     """The active camera looks away from the screen, but a probe recaptured every frame stands
     before it (what a chrome ball by the screen reflects): its faces recaptured after the
     frame's present (``ProbeSchedule``'s undrawn faces) see the screen, so a ``when_seen``
     picture is drawn for them, and the probe's face towards the screen equals that of an
     engine whose monitor is drawn always, frame by frame, as the box it watches moves.  (On
-    the first frame the probe's first capture, drawn before the monitors, sees it in neither.)"""
+    the first frame the probe's first capture, drawn before the monitors, sees it in neither.)
+    One engine's host draws faces in part (its GPU took longer over the timed captures than
+    issuing them: ``ProbePaths.fill_bound``), the other's does not, as two runs' timings may
+    say: the faces are the same (a part holds the screen whose picture was drawn since)."""
     from components import ReflectionProbe
     from engine.core.cube_faces import CUBE_FACES
+    from tests.test_probe_keeping import _probe_stage
 
     towards_screen = next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
 
@@ -887,6 +892,11 @@ def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene):
     for update in ("when_seen", "always"):
         build, held = make(update)
         runners.append((scene(build, (64, 48)), held))
+    for (runner, _), gpu in zip(runners, gpu_ms, strict=True):
+        _probe_stage(runner).path = "six_pass"   # (nothing timed: the timings below stand)
+        paths = runner.engine.renderer.probes.paths
+        paths.samples, paths.thread_ms = {"six_pass": [(gpu, 6.0)] * 3}, {"six_pass": [1.0] * 3}
+    assert [runner.engine.renderer.probes.paths.fill_bound for runner, _ in runners] == [gpu > 1.0 for gpu in gpu_ms]
     seeing = runners[0][0]
     drawn, unseen = [], []
     for frame in range(5):
@@ -899,3 +909,53 @@ def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene):
         unseen.append(seeing.stats.monitors_unseen)
     assert drawn == [0, 1, 1, 1, 1] and unseen == [1, 0, 0, 0, 0]
     assert (faces[1][..., 0] > 0.1).sum() > 5   # the red box, on the screen, in the probe's face
+
+
+@pytest.mark.parametrize("refresh", ["every_frame", "on_change"])
+@pytest.mark.parametrize("box_in_probes", [True, False], ids=["box_seen", "box_hidden_from_probes"])
+def test_a_probe_face_showing_a_screen_shows_the_picture_drawn_since(scene, refresh, box_in_probes):
+    """A probe before the screen, on a host that draws faces in part (the six-pass path,
+    nothing timed): the box the monitor watches moves, so the picture is drawn again every
+    other frame (``every=2``), and a face showing the screen is then no longer what it was
+    drawn with, though the scheduler, which runs before the monitors, knows only of the
+    drawing a frame before.  No change the
+    probe's scheduler follows need reach the screen's part of the face (the box may move
+    elsewhere in it, or be hidden from probes): the face is neither kept nor drawn in part
+    where the picture it shows was drawn since (``ProbeCaptures._keep_plan``), so an
+    ``every_frame`` probe's cube is, bit for bit, a capture of all six drawn whole, every
+    frame.  An ``on_change`` probe recaptures the faces that see a screen whose picture was
+    drawn (``PicturesDrawn``, the scheduler's next update): once the box stands still, its
+    cube is too, and then it draws nothing."""
+    from components import ReflectionProbe, Visibility
+    from engine.core.cube_faces import CUBE_FACES
+    from tests.test_probe_keeping import _Cube, _probe_stage
+
+    towards_screen = next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
+    build, held = studio(Monitor(size=PICTURE, every=2))
+
+    def probed(world):
+        build(world)
+        if not box_in_probes:
+            world.add_component(held["box"], Visibility(in_probes=False))
+        world.resources["probe"] = held["probe"] = world.spawn(
+            Transform(position=(0.0, 1.0, 7.0)), ReflectionProbe(resolution=32, refresh=refresh))
+
+    runner = scene(probed, (64, 48))
+    _probe_stage(runner).path = "six_pass"
+    cube = _Cube(runner)
+    runner.frame(DT)
+    first = cube.probes.read_face(held["probe"], towards_screen).copy()
+    for _ in range(4):
+        _moving_box([(runner, held)])
+        runner.frame(DT)
+        if refresh == "every_frame":
+            assert cube.as_if_drawn_whole()
+    for _ in range(4):   # the box stands still (the last frame one the monitor is due on)
+        runner.frame(DT)
+    if refresh == "on_change":
+        # Still: the picture is kept and the probe draws nothing (the screen recaptured once
+        # after its last drawing, and the picture drawn again for that capture alone is no
+        # new look of the screen's: no loop).
+        assert runner.stats.monitors_kept == 1 and runner.stats.probe_faces == 0
+    assert not np.array_equal(cube.probes.read_face(held["probe"], towards_screen), first)
+    assert cube.as_if_drawn_whole()

@@ -173,22 +173,39 @@ class MonitorPictures:
         viewport of its own size): the batches whose emissive map is their picture, tested
         by their instances' boxes against each view's volume (``batch_reach``, conservative),
         less a one-sided screen (``faces``) whose front the view's eye is behind."""
+        return set().union(*self.screens_reaching_each(views, faces))
+
+    def screens_reaching_each(self, views: list[View],
+                              faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> list[set[int]]:
+        """``screens_reaching`` view by view: for each of ``views``, the monitors whose screens
+        it can draw a sample of."""
+        reached: list[set[int]] = [set() for _ in views]
         pictures = {id(held.texture): entity for entity, held in self._pictures.items()}
         screens = [batch for batch in self.renderer.batches.values()
                    if batch.count and batch.emissive_map is not None and id(batch.emissive_map) in pictures]
         if not screens:
-            return set()
-        by_size: dict[tuple[int, int], list[View]] = {}
-        for view in views:   # (one test for the views of a size: a level's, the main view's)
-            by_size.setdefault(tuple(view.size), []).append(view)
-        reached = set()
-        for size, group in by_size.items():
-            for view, reach in zip(group, batch_reach(group, size, screens), strict=True):
+            return reached
+        by_size: dict[tuple[int, int], list[int]] = {}
+        for index, view in enumerate(views):   # (one test for the views of a size: a level's, the main view's)
+            by_size.setdefault(tuple(view.size), []).append(index)
+        for size, indices in by_size.items():
+            group = [views[index] for index in indices]
+            for index, view, reach in zip(indices, group, batch_reach(group, size, screens), strict=True):
                 for batch, hit in zip(screens, reach, strict=True):
                     entity = pictures[id(batch.emissive_map)]
-                    if hit and entity not in reached and not _behind(view, faces.get(entity)):
-                        reached.add(entity)
+                    if hit and not _behind(view, faces.get(entity)):
+                        reached[index].add(entity)
         return reached
+
+    def versions_shown(self, views: list[View]) -> list[tuple[tuple[int, int], ...]]:
+        """For each of ``views``, the pictures its drawing now may show, with their versions
+        ((monitor, version), by monitor; a one-sided screen counts from behind too): a
+        drawing kept as it is shows what it showed only while these are as they were (a
+        probe face's record, ``ProbeCaptures._keep_plan``)."""
+        if not self._pictures:
+            return [() for _ in views]
+        return [tuple(sorted((entity, self._pictures[entity].version) for entity in reached))
+                for reached in self.screens_reaching_each(views, {})]
 
     def texture(self, entity: int) -> moderngl.Texture:
         """The texture of monitor ``entity``'s picture (what its screen's batch samples)."""

@@ -60,6 +60,7 @@ from engine.rules.probe_rules import projection_box
 
 if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
+    from engine.render.monitors import MonitorPictures
     from engine.render.raw_gl import RawGL
 
 LOG = logging.getLogger("speculum")
@@ -219,7 +220,8 @@ class _KeepPlan:
     """A six-pass capture's faces kept as they are (``kept``), those showing the sky alone
     (``sky_only``), what every face is drawn with (``scene``: ``ProbeCaptures._scene_record``,
     None where faces draw view trees), each face's own record (``records``:
-    ``ProbeCaptures._sky_record``) and the faces drawn in part (``parts``: face -> the
+    ``ProbeCaptures._sky_record``, with the monitors' pictures it may show where there are
+    any) and the faces drawn in part (``parts``: face -> the
     scissor rectangle, x, y, width, height in texels, where the changes since it was drawn lie)."""
 
     kept: frozenset[int]
@@ -603,12 +605,15 @@ class ProbeCaptures:
     """The GPU side of every probe: cube maps by probe key (``Gpu.probe_cubes``, which the
     passes sample), and the targets faces draw into (one LevelStack per resolution, shared
     by all probes: captures run one after another).  Faces are drawn through ``scene_pass``;
-    a probe with an influence box gets its irradiance from ``irradiance``."""
+    a probe with an influence box gets its irradiance from ``irradiance``; the monitors'
+    ``pictures`` a face may show are part of what it was drawn with (None: none is)."""
 
-    def __init__(self, renderer: Gpu, scene_pass: ScenePass, irradiance: IrradianceTable) -> None:
+    def __init__(self, renderer: Gpu, scene_pass: ScenePass, irradiance: IrradianceTable,
+                 pictures: MonitorPictures | None = None) -> None:
         self.renderer = renderer
         self.scene_pass = scene_pass
         self.irradiance = irradiance
+        self.pictures = pictures
         self.ctx = renderer.ctx
         self.cubes = renderer.probe_cubes  # made and released here alone
         # the one-pass path's targets, by probe (the cube map itself, or a 2D array copied into it)
@@ -634,6 +639,7 @@ class ProbeCaptures:
         # chains are built again; absent: the whole chain is).
         self._mips_stale: dict[int, set[int]] = {}
         self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
+        self.moved_on = 0  # what the reflection probes' captures moved Gpu.scene_version on by (capture_probe)
         self.faces_in_part = 0  # faces drawn in part (within the changes' rectangle), over the run
         self.texels_in_part = 0  # the texels those parts covered
 
@@ -696,6 +702,7 @@ class ProbeCaptures:
         second capture on, whichever path ``auto`` timed faster on its first (at 128 texels
         on llvmpipe the two are within a few per cent there, which is why ``auto``'s choice
         flips from run to run: the choice no longer changes such a probe's frames)."""
+        before = self.renderer.scene_version
         views = self.face_views(key, faces, position, settings)
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
@@ -723,6 +730,7 @@ class ProbeCaptures:
             if self.irradiance.project(key, cube):
                 self._projected[key] = self._versions.get(key, 0)
         self.renderer.stats.probe_captures += 1
+        self.moved_on += self.renderer.scene_version - before
         return path
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
@@ -868,6 +876,14 @@ class ProbeCaptures:
         cameras = made[2] if made is not None else {}
         records = {face: self._sky_record(view, direct, cameras.get(face) if made[1][face] is view else None)
                    if made is not None else self._sky_record(view, direct) for face, view in views.items()}
+        if self.pictures is not None and self.pictures.entities:
+            # A monitor's picture drawn again since a face was drawn changes the face where
+            # its screen shows, a change no scheduler's box or rectangle follows (the picture
+            # may be drawn after the schedule, this frame): the pictures a face may show, with
+            # their versions, are in its record, and a face showing one drawn since is drawn whole.
+            faces = list(views)
+            shown = self.pictures.versions_shown([views[face] for face in faces])
+            records = {face: (records[face], pictures) for face, pictures in zip(faces, shown, strict=True)}
         kept = set()
         scene = None if trees else self._scene_record(key)
         if scene is not None and unchanged:

@@ -112,8 +112,8 @@ class Renderer(Gpu):
         self.volumetric_fog = VolumetricFogPass(self, self.shadows)  # the camera's VolumetricFog
         self.scene_pass = ScenePass(self, self.shadows, self.irradiance, self.screen_reflections,
                                     self.volumetric_fog)
-        self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance)
         self.monitors = MonitorPictures(self, self.scene_pass)  # each Monitor's picture (engine/render/monitors.py)
+        self.probes = ProbeCaptures(self, self.scene_pass, self.irradiance, self.monitors)
         self.occlusion = ScreenOcclusion(self, self.scene_pass)  # the camera's AmbientOcclusion
         self.sky_bake = SkyBake(self)  # a generated sky's cube map, drawn (engine/render/sky_bake.py)
         self.sky_view_pass = SkyView(self)   # an atmosphere's sky-view table (engine/render/sky_view.py)
