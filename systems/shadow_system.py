@@ -524,8 +524,13 @@ class ShadowSystem(esper.Processor):
             cap = self.depth_cap() if callable(self.depth_cap) else self.depth_cap
             found = rank_virtual_lights(virtual_lights(directional, points, surfaces, bounces, cap))
         if not found and not self._virtual and not maps.virtual_shining:
+            maps.fit_virtual_see_through(False)
             stats.virtual_lights = 0   # none shines, none did: nothing to draw, clear or count
             return []
+        # See-through things dim them too (a see-through tile beside each map): a new atlas
+        # draws every map again.
+        if maps.fit_virtual_see_through(bool(found) and bool(renderer.see_through_casters())):
+            self._virtual.clear()
         drawn = 0
         shining: list[VirtualLight] = []
         caustic_slots = {water.entity: slot for slot, water in enumerate(renderer.caustics.waters)}

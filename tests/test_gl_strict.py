@@ -357,15 +357,17 @@ def _pond_faded(ctx):
 def _see_through_lamps(ctx):
     """The mirror ring's lamp casting (a cube), a spot casting from its map beside it, the sun,
     a see-through pane and a glass one over the boxes (each light's see-through map: the
-    suns' atlas, the lamps' six face tiles and a spot's one, read by the scene pass), light
-    shafts from both lamps (the march reads the lamps' maps) and lit particles (their
-    lighting too), the boxes spinning."""
+    suns' atlas, the lamps' six face tiles and a spot's one, read by the scene pass), the
+    mirrors throwing the lights (the virtual lights' see-through tiles), light shafts from
+    both lamps (the march reads the lamps' maps) and lit particles (their lighting too), the
+    boxes spinning."""
     from benchmarks.mirrors import MirrorRing
     from components import (
         Camera,
         Fog,
         Material,
         MeshRef,
+        Mirror,
         ParticleEmitter,
         PointLight,
         Refractive,
@@ -379,6 +381,8 @@ def _see_through_lamps(ctx):
         world = engine.world
         for _, light in world.query_one(PointLight):
             light.shadows, light.volumetric = True, 1.0
+        for _, mirror in world.query_one(Mirror):
+            mirror.reflects_light = True
         world.spawn(Transform(position=(2.5, 3.5, 1.0), rotation=look_rotation((-0.3, -1.0, 0.0), (0.0, 0.0, -1.0))),
                     PointLight(intensity=6.0, range=12.0, spot_angle=30.0, shadows=True, volumetric=1.0))
         flat = look_rotation((0.0, -1.0, 0.0), (0.0, 0.0, -1.0))

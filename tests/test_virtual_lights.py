@@ -401,12 +401,9 @@ def _mirror_box(x, y, half):
     return np.array([x, y, 0.0]), np.array([THIN, half[0], half[1]])
 
 
-def _twice_lit(points: np.ndarray, grow: float, boxes=(TWICE_CUBE, ON_THE_WAY)) -> np.ndarray:
-    """Whether the sun reaches ``points`` (rows) by A then B (float64 rays, occluders grown by
-    ``grow``, outlines shrunk by it): the line from the point towards the doubly reflected
-    sun (it travels as the sun: the line runs along -SUN) crosses B's plane inside B from its
-    front, then A's image in B's plane (x = 2 B_X - A_X) inside A's outline; each real leg,
-    point to B, B to A, A to the sun, meets no box and no other mirror."""
+def _twice_way(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The way back from ``points`` (rows) towards the doubly reflected sun: the direction
+    (-SUN), how far to B's plane, where it meets it and where the way from there meets A's."""
     back = np.tile(-SUN, (len(points), 1))
     t_b = (B_X - points[:, 0]) / back[:, 0]
     at_b = points + back * t_b[:, None]
@@ -414,6 +411,16 @@ def _twice_lit(points: np.ndarray, grow: float, boxes=(TWICE_CUBE, ON_THE_WAY)) 
     t_a = (a_image_x - points[:, 0]) / back[:, 0]
     at_a_image = points + back * t_a[:, None]
     at_a = at_a_image * np.array([-1.0, 1.0, 1.0]) + np.array([2 * B_X, 0.0, 0.0])   # reflected back in B
+    return back, t_b, at_b, at_a
+
+
+def _twice_lit(points: np.ndarray, grow: float, boxes=(TWICE_CUBE, ON_THE_WAY)) -> np.ndarray:
+    """Whether the sun reaches ``points`` (rows) by A then B (float64 rays, occluders grown by
+    ``grow``, outlines shrunk by it): the line from the point towards the doubly reflected
+    sun (it travels as the sun: the line runs along -SUN) crosses B's plane inside B from its
+    front, then A's image in B's plane (x = 2 B_X - A_X) inside A's outline; each real leg,
+    point to B, B to A, A to the sun, meets no box and no other mirror."""
+    back, t_b, at_b, at_a = _twice_way(points)
     inside = (points[:, 0] > B_X) & (t_b > 0) & \
         (np.abs(at_b[:, 1] - B_Y) < B_HALF[0] - grow) & (np.abs(at_b[:, 2]) < B_HALF[1] - grow) & \
         (np.abs(at_a[:, 1] - A_Y) < A_HALF[0] - grow) & (np.abs(at_a[:, 2]) < A_HALF[1] - grow)
@@ -718,3 +725,166 @@ def test_a_portal_that_carries_light_shades_what_lies_behind_its_opening(scene):
     lit_beside = srgb_to_linear(carried[outside]).mean(-1) > srgb_to_linear(dark[outside]).mean(-1) + 0.005
     assert lit_beside.mean() > 0.97, lit_beside.mean()
     assert np.array_equal(carried[outside], through[outside])        # beside the opening: the same either way
+
+
+# See-through panes (plane meshes, facing up) in the mirror's light: one on its way out (between
+# the mirror and the floor it lights) and one on its way in (between the sun and the mirror).
+PANE_ALPHA, PANE_HALF = 0.6, np.array([0.5, 0.6])   # half sizes along x and z
+PANES = {"way_out": np.array([1.5, 1.0, 0.0]), "way_in": np.array([2.0, 3.5, 0.0])}
+
+
+def _pane_crossed(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, grow: float,
+                  limit: np.ndarray | None = None) -> np.ndarray:
+    """Whether each ray (rows) meets the pane at ``centre`` (a level rectangle) grown by ``grow``,
+    ahead of it and short of ``limit``."""
+    t = (centre[1] - origin[:, 1]) / direction[:, 1]
+    at = origin + direction * t[:, None]
+    inside = (np.abs(at[:, 0] - centre[0]) < PANE_HALF[0] + grow) & (np.abs(at[:, 2] - centre[2]) < PANE_HALF[1] + grow)
+    return inside & (t > 0) & (t < (np.inf if limit is None else limit))
+
+
+def _one_mirror_with_pane(centre: np.ndarray, alpha: float = PANE_ALPHA):
+    def build(world):
+        ids = _scene(world)
+        ids["pane"] = world.spawn(Transform(position=centre.tolist()), MeshRef(plane(*(2 * PANE_HALF))),
+                                  Material(color=(0.7, 0.8, 0.9, alpha)))
+        world.resources["ids"] = ids
+    return build
+
+
+def _share_behind_the_pane(runner, off, on, centre: np.ndarray) -> np.ndarray:
+    """The mirror's light on the floor where the rays from it towards the sun's image cross
+    the pane at ``centre`` (on either stretch of the way), over where they do not: the
+    medians of the frames' difference (the mirror's light on, less off), per channel; floor
+    seen through the pane left out."""
+    ids = runner.world.resources["ids"]
+    floor = (runner.ids() == ids["floor"]).ravel()
+    points = _floor_points(runner)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)
+    seen_through_pane = _pane_crossed(np.tile(eye, (len(points), 1)), rays, centre, 0.1,
+                                      np.linalg.norm(points - eye, axis=1) / np.linalg.norm(rays, axis=1))
+    image = SUN * np.array([-1.0, 1.0, 1.0])
+    to_image = np.tile(-image, (len(points), 1))
+    t = (MIRROR_X - points[:, 0]) / to_image[:, 0]
+    crossing = points + to_image * t[:, None]
+    to_sun = np.tile(-SUN, (len(points), 1))
+
+    def crossed(grow):
+        return _pane_crossed(points, to_image, centre, grow, t) | _pane_crossed(crossing, to_sun, centre, grow)
+
+    lit = _mirror_lit(points, 0.1) & floor & ~seen_through_pane
+    behind, beside = lit & crossed(-0.1), lit & ~crossed(0.1)
+    assert behind.sum() > 100 and beside.sum() > 1000, (int(behind.sum()), int(beside.sum()))
+    share = (srgb_to_linear(on) - srgb_to_linear(off)).reshape(-1, 3)
+    return np.median(share[behind], axis=0) / np.median(share[beside], axis=0)
+
+
+@pytest.mark.parametrize("where", list(PANES))
+def test_a_see_through_pane_on_the_mirrors_way_lets_through_its_share(scene, where):
+    """A see-through pane (alpha 0.6) in the mirror's light, on its way from the mirror to the
+    floor, or from the sun to the mirror (the stretch the virtual light's map draws carried to
+    where the sun's image sees it): where the rays from the floor towards the sun's image
+    cross it, the mirror's light on the Lambertian floor is 1 - alpha of what it is beside
+    (``VIRTUAL_SEE_THROUGH_SHADOWS``)."""
+    runner, off, on = _frames(scene, _one_mirror_with_pane(PANES[where]), size=(480, 360))
+    assert runner.engine.renderer.shadows.virtual_see_through_atlas is not None
+    np.testing.assert_allclose(_share_behind_the_pane(runner, off, on, PANES[where]), 1.0 - PANE_ALPHA, rtol=0.06)
+
+
+def test_without_a_unit_for_the_virtual_see_through_map_the_pane_dims_no_mirror_light_and_says_so(scene):
+    """A context whose fragment stage has too few texture units for the virtual lights'
+    see-through map (one more than the lamps'): a GLLimitWarning names the count, once, no
+    atlas is made, and the mirror's light behind the pane is as beside it."""
+    import warnings
+
+    from engine.core.errors import GLLimitWarning
+    from engine.render.bindings import VIRTUAL_SEE_THROUGH_SAMPLERS
+
+    runner = scene(_one_mirror_with_pane(PANES["way_out"]), (480, 360))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.renderer.shadows.filter = "single"
+    shadows = runner.engine.renderer.shadows
+    shadows.virtual_see_through_supported = False
+    mirror = runner.world.get(runner.world.resources["ids"]["mirror"], Mirror)
+    mirror.reflects_light = False
+    off = runner.frame()
+    mirror.reflects_light = True
+    with pytest.warns(GLLimitWarning, match=f"need {VIRTUAL_SEE_THROUGH_SAMPLERS} texture units"):
+        on = runner.frame()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GLLimitWarning)
+        runner.frame()
+    assert shadows.virtual_see_through_atlas is None
+    assert not any(name == "VIRTUAL_SEE_THROUGH_SHADOWS" for name, _ in shadows.program_defines)
+    np.testing.assert_allclose(_share_behind_the_pane(runner, off, on, PANES["way_out"]), 1.0, rtol=0.06)
+
+
+def test_a_pane_in_the_mirrors_light_moved_faded_or_removed_draws_what_a_fresh_engine_draws(scene):
+    """The pane on the mirror's way out slides 0.6 m: the virtual light's map is drawn again, and
+    the frame is the one an engine built with the pane there draws; its alpha goes from 0.6
+    to 0.3, the same; then it is removed: the frame is one with no pane at all, and the
+    virtual lights' see-through atlas is let go."""
+    size = (240, 180)
+
+    def engine(build):
+        runner = scene(build, size)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.renderer.shadows.filter = "single"
+        return runner
+
+    runner = engine(_one_mirror_with_pane(PANES["way_out"]))
+    runner.frame()
+    runner.frame()
+    pane = runner.world.resources["ids"]["pane"]
+    moved_to = PANES["way_out"] + np.array([-0.6, 0.0, 0.3])
+    runner.world.get(pane, Transform).position = moved_to.tolist()
+    moved = runner.frame()
+    assert runner.stats.shadow_maps_drawn >= 1
+    assert np.array_equal(moved, engine(_one_mirror_with_pane(moved_to)).frame())
+    runner.world.get(pane, Material).color = (0.7, 0.8, 0.9, 0.3)
+    faded = runner.frame()
+    assert np.array_equal(faded, engine(_one_mirror_with_pane(moved_to, 0.3)).frame())
+    runner.world.delete_entity(pane)
+    gone = runner.frame()
+
+    def bare(world):
+        world.resources["ids"] = _scene(world)
+
+    assert np.array_equal(gone, engine(bare).frame())
+    assert runner.engine.renderer.shadows.virtual_see_through_atlas is None
+
+
+def test_a_see_through_pane_between_two_mirrors_lets_through_its_share(scene):
+    """A see-through pane (alpha 0.6) on the way from A to B (the middle stretch of A-through-B's
+    way, drawn between both mirrors' planes: ``_LEG_SEE_THROUGH``): where the way back from the
+    floor crosses it between the mirrors, the twice-reflected light is 1 - alpha of what it is
+    beside."""
+    centre = np.array([0.3, 3.2, 0.6])
+
+    def build(world):
+        ids = _two_mirror_scene(world)
+        ids["pane"] = world.spawn(Transform(position=centre.tolist()), MeshRef(plane(*(2 * PANE_HALF))),
+                                  Material(color=(0.7, 0.8, 0.9, PANE_ALPHA)))
+        world.resources["ids"] = ids
+
+    runner, once, twice, _ = _bounce_frames(scene, build, size=(480, 360))
+    ids = runner.world.resources["ids"]
+    points = _floor_points(runner)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)
+    seen_through_pane = _pane_crossed(np.tile(eye, (len(points), 1)), rays, centre, 0.1,
+                                      np.linalg.norm(points - eye, axis=1) / np.linalg.norm(rays, axis=1))
+    floor = (runner.ids() == ids["floor"]).ravel() & ~_seen_in_a_mirror(runner).ravel() & ~seen_through_pane
+    _, _, at_b, at_a = _twice_way(points)
+    ones = np.ones(len(points))
+
+    def crossed(grow):
+        return _pane_crossed(at_b, at_a - at_b, centre, grow, ones)
+
+    lit = _twice_lit(points, 0.1) & floor
+    behind, beside = lit & crossed(-0.1), lit & ~crossed(0.1)
+    assert behind.sum() > 100 and beside.sum() > 500, (int(behind.sum()), int(beside.sum()))
+    share = (srgb_to_linear(twice) - srgb_to_linear(once)).reshape(-1, 3)
+    ratio = np.median(share[behind], axis=0) / np.median(share[beside], axis=0)
+    np.testing.assert_allclose(ratio, 1.0 - PANE_ALPHA, rtol=0.06)

@@ -190,6 +190,9 @@ SEE_THROUGH_SAMPLERS = 20
 # The lamps' see-through maps (the same, for the point and spot lights' maps): the 21st.
 LAMP_SEE_THROUGH_UNIT = 71    # scene (LAMP_SEE_THROUGH_SHADOWS builds): ShadowMaps.lamp_see_through_atlas
 LAMP_SEE_THROUGH_SAMPLERS = 21
+# The virtual lights' see-through maps (lights through mirrors and portals): the 22nd.
+VIRTUAL_SEE_THROUGH_UNIT = 72   # scene (VIRTUAL_SEE_THROUGH_SHADOWS builds): ShadowMaps.virtual_see_through_atlas
+VIRTUAL_SEE_THROUGH_SAMPLERS = 22
 # Depth of field (engine/render/depth_of_field.py, before bloom): units past the reflections'.
 DOF_SEEN_UNIT = 39       # the main view's seen pair (the way's length: shaders/include/way.glsl)
 DOF_FOCUS_UNIT = 40      # the 1x1 focus distance

@@ -63,6 +63,7 @@ from engine.render.bindings import (
     SKY_UNIT,
     SPOT_SHADOW_UNIT,
     VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SEE_THROUGH_UNIT,
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
@@ -385,7 +386,8 @@ class ParticleDraw:
                                ("irradiance_table", IRRADIANCE_UNIT), ("virtual_atlas", VIRTUAL_SHADOW_UNIT),
                                ("spot_cookies", COOKIE_UNIT), ("fog_sky_map", SKY_UNIT),
                                ("lamp_see_through_atlas", LAMP_SEE_THROUGH_UNIT),
-                               ("see_through_atlas", SEE_THROUGH_UNIT)):
+                               ("see_through_atlas", SEE_THROUGH_UNIT),
+                               ("virtual_see_through_atlas", VIRTUAL_SEE_THROUGH_UNIT)):
                 if name in program:
                     program[name].value = unit
             self._programs[key] = program

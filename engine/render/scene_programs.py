@@ -63,6 +63,7 @@ from engine.render.bindings import (
     SUN_DEPTH_UNIT,
     VIEWS_BINDING,
     VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SEE_THROUGH_UNIT,
     VIRTUAL_SHADOW_UNIT,
     assign_slots,
 )
@@ -116,7 +117,8 @@ _SCENE_UNITS = {"albedo_map": ALBEDO_UNIT, "sky_map": SKY_UNIT, "node_map": NODE
                 "shadow_depths": SUN_DEPTH_UNIT, "pose_rows": POSE_ROWS_UNIT, "morph_offsets": MORPH_UNIT,
                 "object_motion": OBJECT_MOTION_UNIT, "pose_before": POSE_BEFORE_UNIT,
                 "refraction_copy": REFRACTION_COPY_UNIT, "caustic_maps": CAUSTIC_UNIT, "ripple_atlas": RIPPLE_UNIT,
-                "see_through_atlas": SEE_THROUGH_UNIT, "lamp_see_through_atlas": LAMP_SEE_THROUGH_UNIT}
+                "see_through_atlas": SEE_THROUGH_UNIT, "lamp_see_through_atlas": LAMP_SEE_THROUGH_UNIT,
+                "virtual_see_through_atlas": VIRTUAL_SEE_THROUGH_UNIT}
 _SCENE_BLOCKS = {"Camera": CAMERA_BINDING, "Views": VIEWS_BINDING, "Lights": LIGHTS_BINDING,
                  "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING, "VirtualLights": VIRTUAL_LIGHTS_BINDING,
                  "Irradiance": IRRADIANCE_BINDING, "Clouds": CLOUDS_BINDING,

@@ -26,6 +26,11 @@ same beside its cube or spot map (``lamp_see_through_atlas``, ``fit_lamp_see_thr
 face tiles (a spot: one), half the map's texels a side, the nearest one's distance over the
 range in place of a depth, drawn with the map (``_draw_lamp_see_through``) and read by the
 LAMP_SEE_THROUGH_SHADOWS builds (lamp_see_through_cube; a spot's in spot_map_light_shadow).
+A light through mirrors and portals (a virtual light) has one beside its tile of the virtual
+atlas (``virtual_see_through_atlas``, ``fit_virtual_see_through``), laid out as that atlas at
+half its texels, its casters drawn stretch by stretch as the depth map's
+(``_draw_virtual_see_through``), read by the VIRTUAL_SEE_THROUGH_SHADOWS builds in
+``virtual_shadow`` (``shaders/include/virtual_light_ways.glsl``).
 
 Nothing here decides when a map is drawn again: the shadows stage does
 (``systems/shadow_system.py``, from the frame's change sets).  The Shadows uniform block
@@ -36,6 +41,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import moderngl
 import numpy as np
@@ -63,6 +69,8 @@ from engine.render.bindings import (
     SPOT_SHADOW_UNIT,
     SUN_DEPTH_UNIT,
     VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SEE_THROUGH_SAMPLERS,
+    VIRTUAL_SEE_THROUGH_UNIT,
     VIRTUAL_SHADOW_UNIT,
     PassState,
     apply_pass_state,
@@ -152,6 +160,7 @@ _LEG = (("LEG", "1"),)
 # into a lamp's, its distance over the range in place of the depth.
 _SEE_THROUGH = (("SEE_THROUGH", "1"),)
 _LAMP_SEE_THROUGH = (("SEE_THROUGH", "1"), ("DISTANCE", "1"))
+_LEG_SEE_THROUGH = (("SEE_THROUGH", "1"), ("LEG", "1"))   # ... a virtual light's middle stretch
 # Depth only, both faces: a quad (a mirror, a wall of one face) casts whichever side the
 # light reaches; the normal offset keeps a closed mesh's lit side off its own back.
 _CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS)
@@ -161,6 +170,7 @@ _LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozens
 # let through multiplied into the texel's (its alpha, the depth, by MIN: _draw_see_through).
 _SEE_THROUGH_CASTERS = PassState(cull=False, blend=(moderngl.DST_COLOR, moderngl.ZERO, moderngl.ONE, moderngl.ONE),
                                  clips=SCENE_CLIPS)
+_LEG_SEE_THROUGH_CASTERS = replace(_SEE_THROUGH_CASTERS, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
 # The see-through map's texels against the depth map's, a side (a soft dimming needs fewer).
 SEE_THROUGH_SCALE = 2
 # Texels round each lamp see-through tile, drawn by a face view widened to cover them: the
@@ -270,6 +280,12 @@ class ShadowMaps:
         self._lamp_see_through_framebuffer: moderngl.Framebuffer | None = None
         self.lamp_see_through_face = 0   # a face tile's texels a side, gutter left out (0: no atlas)
         self._lamp_through = self.block[_LAMP_THROUGH_START // 4:][:4 * MAX_POINT_SHADOWS].reshape(-1, 4)
+        # The lights' through mirrors and portals (``fit_virtual_see_through``): the virtual atlas's
+        # layout at half its texels.
+        self.virtual_see_through_supported = \
+            renderer.caps.max_texture_image_units >= VIRTUAL_SEE_THROUGH_SAMPLERS
+        self.virtual_see_through_atlas: moderngl.Texture | None = None
+        self._virtual_see_through_framebuffer: moderngl.Framebuffer | None = None
         self.filter = "single" if renderer.caps.software else "grid"
         # Lights through mirrors and portals: a depth atlas of 2 x 2 tiles and their block.
         self.virtual_block = np.zeros(VIRTUAL_BLOCK_BYTES // 4, np.float32)
@@ -430,6 +446,27 @@ class ShadowMaps:
     def _drop_see_through(self) -> None:
         self._release_target(self.see_through_atlas, self._see_through_framebuffer)
         self.see_through_atlas = self._see_through_framebuffer = None
+
+    def fit_virtual_see_through(self, casting: bool) -> bool:
+        """Make the virtual lights' see-through atlas (``virtual_see_through_atlas``) while
+        see-through things and a virtual light's map exist (``casting``), the virtual atlas's
+        2 x 2 tiles at 1 / SEE_THROUGH_SCALE its texels a side (the same uv), RGBA half floats as
+        the suns'; drop it when not.  True when it was made or dropped (every virtual light's
+        map is to be drawn again with it).  Where the context has no unit for it, see-through
+        things dim no virtual light, said once in a GLLimitWarning."""
+        if casting and not self.virtual_see_through_supported:
+            self._say_no_units("the lights through mirrors and portals'", VIRTUAL_SEE_THROUGH_SAMPLERS)
+            casting = False
+        if casting == (self.virtual_see_through_atlas is not None):
+            return False
+        self._release_target(self.virtual_see_through_atlas, self._virtual_see_through_framebuffer)
+        self.virtual_see_through_atlas = self._virtual_see_through_framebuffer = None
+        if casting:
+            side = 2 * VIRTUAL_RESOLUTION // SEE_THROUGH_SCALE
+            self.virtual_see_through_atlas, self._virtual_see_through_framebuffer = \
+                self._see_through_target((side, side))
+        self._set_program_defines()
+        return True
 
     def tile_origin(self, slot: int) -> tuple[int, int]:
         return (slot % 2) * self.tile, (slot // 2) * self.tile
@@ -624,6 +661,7 @@ class ShadowMaps:
         size (a sphere or a rectangle: percentage-closer soft shadows, not with the "single"
         filter), ``SEE_THROUGH_SHADOWS`` while see-through things cast (``fit_see_through``),
         ``LAMP_SEE_THROUGH_SHADOWS`` while they do in a point or spot light's (``fit_lamp_see_through``),
+        ``VIRTUAL_SEE_THROUGH_SHADOWS`` while they do in a virtual light's (``fit_virtual_see_through``),
         ``SOFT_SUN_SHADOWS`` while a casting directional light has a size (its map read
         as it is too: ``soft_sun_shadow``, not with the "single" filter), ``SHADOW_SINGLE_TAP``
         with the "single" filter.
@@ -642,6 +680,7 @@ class ShadowMaps:
             ("SOFT_SUN_SHADOWS", "1", soft_sun and directional > 0),
             ("SEE_THROUGH_SHADOWS", "1", self.see_through_atlas is not None and directional > 0),
             ("LAMP_SEE_THROUGH_SHADOWS", "1", self.lamp_see_through_atlas is not None and point > 0),
+            ("VIRTUAL_SEE_THROUGH_SHADOWS", "1", self.virtual_see_through_atlas is not None),
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
@@ -701,16 +740,19 @@ class ShadowMaps:
         body = light.light if light.kind == "point" else 0   # a lamp's image leaves its bulb's image out too
         legs = light.legs or (Leg(glm.mat4(1.0), (glm.vec4(*light.exit_plane),), (light.exit_entity, light.surface)),
                               Leg(light.carry, (glm.vec4(light.entry_plane),), (light.surface, light.exit_entity)))
-        for index, leg in enumerate(legs):
-            view = View(view=fit.view * leg.carry, proj=fit.proj, eye=glm.vec3(light.position), size=size,
-                        name=f"virtual light {slot} (stretch {index})", clip_plane=glm.vec4(leg.planes[0]),
-                        skip=leg.skip[0], hide=leg.skip[1], kinds=0, layers=ALL_LAYERS)
+        views = [View(view=fit.view * leg.carry, proj=fit.proj, eye=glm.vec3(light.position), size=size,
+                      name=f"virtual light {slot} (stretch {index})", clip_plane=glm.vec4(leg.planes[0]),
+                      skip=leg.skip[0], hide=leg.skip[1], kinds=0, layers=ALL_LAYERS)
+                 for index, leg in enumerate(legs)]
+        for view, leg in zip(views, legs, strict=True):
             if len(leg.planes) == 1:
                 self._draw_casters(view, _DEPTH, body=body)
                 continue
             apply_pass_state(self.ctx, _LEG_CASTERS, rect, rect)
             self._draw_casters(view, _LEG, {"leg_plane": tuple(glm.vec4(leg.planes[1]))}, body)
             apply_pass_state(self.ctx, _CASTERS, rect, rect)
+        if self.virtual_see_through_atlas is not None:
+            self._draw_virtual_see_through(slot, views, legs, body)
         width = 2 * VIRTUAL_RESOLUTION
         scale = VIRTUAL_RESOLUTION / width
         to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
@@ -746,6 +788,34 @@ class ShadowMaps:
             at = VIRTUAL_UNFOLD_AT // 4 + 16 * (slot * MAX_APERTURES + index)
             block[at:at + 16] = np.array(glm.inverse(leg.carry).to_list(), np.float32).ravel()
         self.renderer.checkpoint(f"shadow map of virtual light {slot}")
+
+    def _draw_virtual_see_through(self, slot: int, views: list[View], legs: list[Leg], body: int) -> None:
+        """Virtual light ``slot``'s see-through tile (its depth tile's, at 1 / SEE_THROUGH_SCALE
+        the texels): cleared to all the light let through, then the see-through casters drawn
+        from each stretch's view of ``views`` as the depth map's casters were (the same clip
+        planes: in front of a stretch's surfaces, carried to where the image sees them), each
+        multiplying in its share and keeping the nearest depth (MIN, as the suns')."""
+        ctx = self.ctx
+        side = VIRTUAL_RESOLUTION // SEE_THROUGH_SCALE
+        rect = ((slot % 2) * side, (slot // 2) * side, side, side)
+        framebuffer = self._virtual_see_through_framebuffer
+        framebuffer.use()
+        apply_pass_state(ctx, _SEE_THROUGH_CASTERS, rect, rect)
+        framebuffer.clear(1.0, 1.0, 1.0, 1.0, viewport=rect)
+        batches = self.renderer.see_through_casters()
+        ctx.blend_equation = moderngl.FUNC_ADD, moderngl.MIN
+        try:
+            for view, leg in zip(views, legs, strict=True):
+                self.renderer.bind_view(replace(view, size=(side, side)))
+                if len(leg.planes) == 1:
+                    apply_pass_state(ctx, _SEE_THROUGH_CASTERS, rect, rect)
+                    self._draw_see_through_casters(_SEE_THROUGH, {}, body, batches)
+                else:
+                    apply_pass_state(ctx, _LEG_SEE_THROUGH_CASTERS, rect, rect)
+                    self._draw_see_through_casters(_LEG_SEE_THROUGH, {"leg_plane": tuple(glm.vec4(leg.planes[1]))},
+                                                   body, batches)
+        finally:
+            ctx.blend_equation = moderngl.FUNC_ADD
 
     def set_virtual_color(self, slot: int, color: tuple[float, float, float], light_range: float) -> None:
         """Virtual light ``slot``'s colour row (what reaches its first surface changed, its map
@@ -1065,6 +1135,8 @@ class ShadowMaps:
             bind_texture(self.ctx, self.see_through_atlas, SEE_THROUGH_UNIT)
         if self.lamp_see_through_atlas is not None:   # (the LAMP_SEE_THROUGH_SHADOWS builds)
             bind_texture(self.ctx, self.lamp_see_through_atlas, LAMP_SEE_THROUGH_UNIT)
+        if self.virtual_see_through_atlas is not None:   # (the VIRTUAL_SEE_THROUGH_SHADOWS builds)
+            bind_texture(self.ctx, self.virtual_see_through_atlas, VIRTUAL_SEE_THROUGH_UNIT)
         if self._casting[6]:   # (the soft suns' builds: the atlas again, its depths as values)
             bind_texture(self.ctx, self.atlas, SUN_DEPTH_UNIT)
             bind_sampler(self.ctx, self.renderer.depth_values(), SUN_DEPTH_UNIT)
@@ -1100,6 +1172,7 @@ class ShadowMaps:
             release_framebuffer(self._virtual_framebuffer)
         self._drop_see_through()
         self._drop_lamp_see_through()
+        self.fit_virtual_see_through(False)
         for _, _, buffer in self._fit_blocks.values():
             buffer.release()
         self._fit_blocks.clear()

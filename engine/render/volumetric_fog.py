@@ -77,6 +77,7 @@ from engine.render.bindings import (
     SHADOWS_BINDING,
     SPOT_SHADOW_UNIT,
     VIRTUAL_LIGHTS_BINDING,
+    VIRTUAL_SEE_THROUGH_UNIT,
     VIRTUAL_SHADOW_UNIT,
     VOLUMETRIC_DEPTH_UNIT,
     VOLUMETRIC_LIGHT_UNIT,
@@ -328,7 +329,8 @@ class VolumetricFogPass:
                                    "spot_atlas": SPOT_SHADOW_UNIT, "spot_cookies": COOKIE_UNIT,
                                    "caustic_maps": CAUSTIC_UNIT, "virtual_atlas": VIRTUAL_SHADOW_UNIT,
                                    "ripple_atlas": RIPPLE_UNIT, "lamp_see_through_atlas": LAMP_SEE_THROUGH_UNIT,
-                                   "see_through_atlas": SEE_THROUGH_UNIT},
+                                   "see_through_atlas": SEE_THROUGH_UNIT,
+                                   "virtual_see_through_atlas": VIRTUAL_SEE_THROUGH_UNIT},
                          {"Lights": LIGHTS_BINDING, "Shadows": SHADOWS_BINDING, "Fog": FOG_BINDING,
                           "Clouds": CLOUDS_BINDING, "Caustics": CAUSTICS_BINDING, "Ripples": RIPPLES_BINDING,
                           "VirtualLights": VIRTUAL_LIGHTS_BINDING})

@@ -282,6 +282,26 @@ vec4 directional_shadows(vec3 position, vec3 normal) {
     return lit;
 }
 
+#if defined(SEE_THROUGH_SHADOWS) || defined(VIRTUAL_SEE_THROUGH_SHADOWS)
+// How much deeper than the nearest see-through caster a point lies before its light is
+// dimmed (depth units: a half float's step near 1 and more, so a pane does not dim itself).
+const float SEE_THROUGH_BIAS = 2e-3;
+
+// The share let through to a point whose coordinates in a depth map (its atlas's uv, its
+// depth) are ``p``, read from ``map``, the see-through map laid out as that atlas: where it
+// lies deeper than the nearest see-through caster there, the share they let through.
+float see_through_at(sampler2D map, vec3 p) {
+    vec4 through = texture(map, p.xy);
+    return p.z > through.a + SEE_THROUGH_BIAS ? through.r : 1.0;
+}
+#endif
+
+#ifdef VIRTUAL_SEE_THROUGH_SHADOWS
+// The lights through mirrors and portals' see-through maps (ShadowMaps.virtual_see_through_atlas),
+// laid out as the virtual atlas: read in virtual_shadow (virtual_light_ways.glsl).
+uniform sampler2D virtual_see_through_atlas;
+#endif
+
 #ifdef SEE_THROUGH_SHADOWS
 // The suns' see-through maps (engine/render/shadows.py, ShadowMaps.see_through_atlas): each
 // casting sun's level map has a tile of its own here, half its texels a side, laid out as the
@@ -289,15 +309,10 @@ vec4 directional_shadows(vec3 position, vec3 normal) {
 // texel let through (red: the product of each one's 1 - alpha) and the nearest one's depth
 // (alpha).  Filtered bilinearly: a soft edge, one lookup.
 uniform sampler2D see_through_atlas;
-// How much deeper than the nearest see-through caster a point lies before its light is
-// dimmed (depth units: a half float's step near 1 and more, so a pane does not dim itself).
-const float SEE_THROUGH_BIAS = 2e-3;
 
-// The share let through to a point whose coordinates in a sun's level map (the depth atlas's
-// uv, its depth) are ``p``: where it lies deeper than the nearest see-through caster there.
+// The share let through to a point whose coordinates in a sun's level map are ``p``.
 float see_through_in_map(vec3 p) {
-    vec4 through = texture(see_through_atlas, p.xy);
-    return p.z > through.a + SEE_THROUGH_BIAS ? through.r : 1.0;
+    return see_through_at(see_through_atlas, p);
 }
 
 // The share of sun i's light that the see-through things between it and a point let through

@@ -68,7 +68,11 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
     vec4 p = virtual_lights.virtual_matrix[i] * vec4(position + normal * texel * (1.0 + params.y) * (1.5 - nl), 1.0);
     p.xyz /= p.w;
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
-    return filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y);  // shadows.glsl
+    float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y);  // shadows.glsl
+#ifdef VIRTUAL_SEE_THROUGH_SHADOWS
+    lit *= see_through_at(virtual_see_through_atlas, p.xyz);  // what see-through things on its way let through
+#endif
+    return lit;
 }
 
 // How much of virtual light ``i``'s light reaches ``position`` by distance and spot cone
