@@ -326,10 +326,10 @@ class ProbeScheduler:
                 visibility = world.try_get(entity, Visibility)
                 if visibility is not None:
                     code = entity_code(visibility)
-                if casting is None:  # glass dims a sun's or a lamp's light: its move moves that share
+                if casting is None:  # glass dims a sun's, a lamp's or a mirror's light: its move moves that share
                     lights = world.resources.get(ShadowCasters)
                     casting = ShadowCasting(world, glass_casts=lights is not None
-                                            and bool(lights.directional or lights.points))
+                                            and bool(lights.directional or lights.points or lights.virtual))
                 if mesh_ref is not None and not casting.casts(entity, mesh_ref, visibility):
                     code |= NO_SHADOW_BIT  # as it was: its shadow moved nowhere (ChangedBoxes.casting)
             old = self._bounds.pop(entity, None)

@@ -342,19 +342,24 @@ partner = "a"
         load_level(path)
 
 
-def test_a_probe_face_recaptures_when_a_shadow_in_the_mirrors_light_moves(scene):
+@pytest.mark.parametrize("glass", [False, True], ids=["box", "glass_sun_casting_none"])
+def test_a_probe_face_recaptures_when_a_shadow_in_the_mirrors_light_moves(scene, glass):
     """The probe's -Y face sees the floor where the mirror throws the sun; a box on the
     light's way in (between the sun and the mirror, out of the probe's reach and out of that
     face even as the sun's own shadow) moves: its shadow in the thrown light moves in that
-    face, which is captured again, for that reason."""
-    from components import ReflectionProbe
+    face, which is captured again, for that reason.  So does a glass box's (the share it
+    lets through), where the sun itself casts no shadow: the mirror's light alone has a map."""
+    from components import ReflectionProbe, Refractive
     from engine.rules.probe_schedule import ProbeSchedule
 
     def build(world):
         ids = world.resources["ids"] = _scene(world)
+        if glass:
+            world.get(ids["sun"], DirectionalLight).shadows = False
         ids["probe"] = world.spawn(Transform(position=(0.7, 0.6, 0.0)), ReflectionProbe(resolution=16, far=1.5))
         ids["way_in"] = world.spawn(Transform(position=(2.0, 3.25, 0.0)), MeshRef(box((0.3, 0.3, 0.3))),
-                                    Material())
+                                    Material(color=(1.0, 1.0, 1.0, 0.2) if glass else (1.0, 1.0, 1.0, 1.0)),
+                                    *([Refractive(screen=False)] if glass else []))
 
     runner = scene(build)
     runner.frame()
