@@ -39,8 +39,8 @@ MIN_VOLUMETRIC_STEPS, MAX_VOLUMETRIC_STEPS = 4, 128
 
 @dataclass(eq=False)
 class Fog(TrackedComponent):
-    """Fog seen by the camera whose entity holds it (the active camera's is used; without
-    one, no fog).
+    """Fog seen by the camera whose entity holds it: the active camera's fogs the frame (without
+    one, no fog), and a monitor's camera's its picture (without one, the active camera's does).
 
     - ``color``: the linear colour the air's light tends to (its alpha is not used).
     - ``density``: how much of the light a metre of air at ``height`` takes away (per metre:

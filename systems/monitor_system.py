@@ -55,20 +55,32 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import fields
 
 import esper
 import numpy as np
 from pyglm import glm
 
-from components import Camera, ComponentWarning, Material, MeshRef, Monitor, Morph, ScreenPanel, Skin, Transform
+from components import (
+    Camera,
+    ComponentWarning,
+    Fog,
+    Material,
+    MeshRef,
+    Monitor,
+    Morph,
+    ScreenPanel,
+    Skin,
+    Transform,
+)
 from engine.core.errors import MonitorLimitWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.frame_stats import BudgetLedger
 from engine.render.monitors import MAX_MONITORS
 from engine.render.renderer import Renderer
+from engine.render.sky import air_light
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View, camera_view
@@ -175,7 +187,8 @@ class MonitorSystem(esper.Processor):
             trees = monitor.depth > 0 and table is not None
             if faces is None:
                 faces = self._screen_faces(monitors)
-            with outside_the_budget(stats):   # (still, but drawn on predicted counts: once more exactly, to keep)
+            with outside_the_budget(stats), self._camera_fog(monitor.camera):
+                # (still, but drawn on predicted counts: once more exactly, to keep)
                 views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still,
                                       faces=faces)
             stats.monitor_views += views
@@ -265,6 +278,18 @@ class MonitorSystem(esper.Processor):
         values = (self.renderer.monitors.scene_version - captures, self.renderer.drawing_settings(),
                   view.camera_block(), view.layers, monitor.size, monitor.depth, flows, self._world_version)
         return values, (table, blends.by_surface), captures
+
+    def _camera_fog(self, camera: int | None) -> AbstractContextManager[None]:
+        """The fog a picture from ``camera`` is drawn through: the camera's own ``Fog`` where it
+        has one (the frame's given back after), else the frame's, the active camera's (none
+        while the frame draws none: the overlay's toggle, ``FogBlock.shown``)."""
+        fog = self.renderer.fog
+        own = self.world.try_get(camera, Fog) if camera is not None and fog.shown and self.world.exists(camera) \
+            else None
+        if own is None:
+            return nullcontext()
+        glow = air_light(self.world) if own.sun_scatter > 0.0 else None
+        return fog.camera_fog(own, None if glow is None else glow.light, (1.0, 1.0, 1.0) if glow is None else glow.tint)
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
         """The Camera and Transform of the entity ``monitor`` shows, or None, said once for each

@@ -201,6 +201,7 @@ class PrepareSystem(esper.Processor):
         renderer.stats.rect_lights_cut = self._rect_cut
         camera = frame_rules(world).active_camera
         fog = None if camera is None or not self.fog else world.try_get(camera, Fog)
+        renderer.fog.shown = self.fog   # (a monitor's camera's own Fog too: MonitorSystem._camera_fog)
         glow = air_light(world) if fog is not None and fog.sun_scatter > 0.0 else None   # (the sun or the moon)
         if renderer.fog.set(fog, None if glow is None else glow.light, self._fog_rows(camera) if self.fog else (),
                             (1.0, 1.0, 1.0) if glow is None else glow.tint):

@@ -959,3 +959,46 @@ def test_a_probe_face_showing_a_screen_shows_the_picture_drawn_since(scene, refr
         assert runner.stats.monitors_kept == 1 and runner.stats.probe_faces == 0
     assert not np.array_equal(cube.probes.read_face(held["probe"], towards_screen), first)
     assert cube.as_if_drawn_whole()
+
+
+def test_a_monitors_camera_draws_its_picture_through_its_own_fog(scene):
+    """A monitor whose camera has a ``Fog`` of its own draws its picture through that fog, not
+    the active camera's (none, or another); a camera without one takes the active camera's
+    (the frame's).  The picture equals the one drawn where the active camera has that fog and
+    the lens none, differs from the one drawn with no fog anywhere, and the frame's own fog
+    is given back after it (the Fog block holds the active camera's).  With the frame's fog
+    turned off (the overlay's toggle), no picture has any."""
+    from components import Fog
+
+    def thick():
+        return Fog(color=(0.1, 0.2, 0.6), density=0.25)
+
+    def thin():
+        return Fog(color=(0.6, 0.2, 0.1), density=0.1)
+
+    def picture(lens_fog, eye_fog, shown=True):
+        build, held = studio(Monitor(size=PICTURE))
+
+        def fogged(world):
+            build(world)
+            if lens_fog is not None:
+                world.add_component(held["lens"], lens_fog())
+            if eye_fog is not None:
+                world.add_component(active_camera(world), eye_fog())
+
+        runner = scene(fogged, (64, 48))
+        runner.engine.stages["prepare"].fog = shown
+        runner.frame(DT)
+        return runner, runner.engine.renderer.monitors.read(held["screen"])
+
+    own_runner, own = picture(thick, None)
+    _, inherited = picture(None, thick)
+    over_runner, over = picture(thick, thin)
+    _, bare = picture(None, None)
+    np.testing.assert_array_equal(own, inherited)
+    np.testing.assert_array_equal(over, inherited)
+    assert np.abs(own - bare).max() > 0.05
+    assert own_runner.engine.renderer.fog.block[4] == 0.0            # the active camera has none
+    assert over_runner.engine.renderer.fog.block[4] == np.float32(0.1)   # ... and here the thin one
+    _, hidden = picture(thick, thin, shown=False)
+    np.testing.assert_array_equal(hidden, bare)

@@ -1,6 +1,7 @@
 """The Fog uniform block (``shaders/include/fog.glsl``): the active camera's ``Fog``
-(``components/fog.py``) and the local ``FogVolume``s, written when they change, bound for
-every pass that fogs (scene passes, the sky, the composites, particles, the light shafts).
+(``components/fog.py``; a monitor's camera's own while its picture is drawn: ``camera_fog``)
+and the local ``FogVolume``s, written when they change, bound for every pass that fogs
+(scene passes, the sky, the composites, particles, the light shafts).
 
 The scene, sky and composite programs fog only in their ``FOG`` builds (``defines``: while
 the fog has a density or a volume stands; ``FOG_FALLOFF`` and ``FOG_GLOW`` add the height
@@ -22,7 +23,8 @@ is seen through water keeps more blue than red, and so does the light coming dow
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 import moderngl
 import numpy as np
@@ -90,6 +92,21 @@ def water_body_row(top: np.ndarray, down: glm.vec3, depth: float, color: glm.vec
             -float(density), *(float(share) for share in absorption), 0.0)
 
 
+def _fog_values(fog: Fog | None, sun: DirectionalLight | None, tint: tuple[float, float, float]) -> tuple[float, ...]:
+    """The block's first rows for a camera's ``fog`` (``FogBlock.set``): its colour, density,
+    falloff and the sun glow's direction and light."""
+    if fog is None or fog.density <= 0.0:
+        return _NO_FOG
+    glow = (0.0,) * 8
+    if sun is not None and fog.sun_scatter > 0.0:
+        color = raw_field(sun, "color")
+        k = sun.intensity * fog.sun_scatter
+        glow = (-sun.direction.x, -sun.direction.y, -sun.direction.z, 0.0,
+                color.x * k * tint[0], color.y * k * tint[1], color.z * k * tint[2], 0.0)
+    return (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
+            fog.height, fog.aerial_perspective, *glow)
+
+
 class FogBlock:
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
@@ -98,6 +115,7 @@ class FogBlock:
         self.ubo = ctx.buffer(np.zeros(FOG_BLOCK_BYTES // 4, np.float32).tobytes())
         bind_uniform_block(ctx, self.ubo, FOG_BINDING)   # (through the record: each pass binds it again, bind)
         self.defines: tuple[tuple[str, str], ...] = ()
+        self.shown = True   # the frame draws a camera's Fog (the overlay's toggle: the prepare stage's)
 
     def set(self, fog: Fog | None, sun: DirectionalLight | None = None, rows: tuple[float, ...] = (),
             tint: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> bool:
@@ -109,17 +127,24 @@ class FogBlock:
         fogged pixels change).  Compared as plain floats: the prepare stage asks every frame."""
         if len(rows) > ROW_FLOATS * MAX_FOG_VOLUMES:
             raise ValueError(f"{len(rows) // ROW_FLOATS} fog volumes: the block holds {MAX_FOG_VOLUMES}")
-        if fog is None or fog.density <= 0.0:
-            values = _NO_FOG
-        else:
-            glow = (0.0,) * 8
-            if sun is not None and fog.sun_scatter > 0.0:
-                color = raw_field(sun, "color")
-                k = sun.intensity * fog.sun_scatter
-                glow = (-sun.direction.x, -sun.direction.y, -sun.direction.z, 0.0,
-                        color.x * k * tint[0], color.y * k * tint[1], color.z * k * tint[2], 0.0)
-            values = (fog.color.x, fog.color.y, fog.color.z, fog.sky_affect, fog.density, fog.height_falloff,
-                      fog.height, fog.aerial_perspective, *glow)
+        return self._write(_fog_values(fog, sun, tint), rows)
+
+    @contextmanager
+    def camera_fog(self, fog: Fog | None, sun: DirectionalLight | None = None,
+                   tint: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Iterator[None]:
+        """Within the block, ``fog`` (another camera's own: a monitor's) in place of the frame's,
+        glowing towards ``sun`` as ``set`` says, the fog volumes as they are; the frame's given
+        back after (the block written twice where they differ, not at all where not)."""
+        values, volumes = self._values, self._volumes
+        self._write(_fog_values(fog, sun, tint), volumes)
+        try:
+            yield
+        finally:
+            self._write(values, volumes)
+
+    def _write(self, values: tuple[float, ...], rows: tuple[float, ...]) -> bool:
+        """Write the camera's ``values`` and the volumes' ``rows`` where they differ from what the
+        block holds, and the builds they need (``defines``); True when it did."""
         count = len(rows) // ROW_FLOATS
         if values == self._values and rows == self._volumes:
             return False
