@@ -893,3 +893,59 @@ def test_a_see_through_pane_between_two_mirrors_lets_through_its_share(scene):
     share = (srgb_to_linear(twice) - srgb_to_linear(once)).reshape(-1, 3)
     ratio = np.median(share[behind], axis=0) / np.median(share[beside], axis=0)
     np.testing.assert_allclose(ratio, 1.0 - PANE_ALPHA, rtol=0.06)
+
+
+def test_a_see_through_pane_in_a_lamps_light_out_of_a_portal_lets_through_its_share(scene):
+    """A lamp shines out of portal B (its image's map a perspective one, depths not linear in
+    distance); a see-through pane (alpha 0.6) lies level beyond B, 0.5 m over the floor: where
+    the line from the floor to the lamp's image crosses it, the image's light on the floor
+    is 1 - alpha of what an engine whose pane casts nothing gives, pixel by pixel, and where
+    it does not, the same."""
+    lamp = np.array([0.0, 1.5, 5.5])
+    centre = np.array([-3.8, 0.5, 0.2])
+
+    def build(casts):
+        def make(world):
+            look_from(world, (-3.0, 7.0, 6.0), (-3.5, 0.0, 0.0))
+            ids = world.resources["ids"] = {}
+            ids["floor"] = world.spawn(Transform(), MeshRef(plane(20, 20)),
+                                       Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+            world.spawn(Transform(position=lamp.tolist()), PointLight(intensity=20.0, range=14.0))
+            ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                                   look_rotation(glm.vec3(-1, 0, 0)))
+            world.get(ids["a"], Portal).carries_light = True
+            world.spawn(Transform(position=centre.tolist()), MeshRef(plane(*(2 * PANE_HALF)), casts_shadows=casts),
+                        Material(color=(0.7, 0.8, 0.9, PANE_ALPHA)))
+        return make
+
+    shares = []
+    for casts in (True, False):
+        runner = scene(build(casts), (320, 240))
+        runner.engine.renderer.antialias = "off"
+        portal = runner.world.get(runner.world.resources["ids"]["a"], Portal)
+        portal.carries_light = False
+        off = runner.frame()
+        portal.carries_light = True
+        on = runner.frame()
+        assert runner.stats.virtual_lights == 1
+        shares.append((srgb_to_linear(on) - srgb_to_linear(off)).mean(-1).reshape(-1))
+    ids = runner.world.resources["ids"]
+    carry = glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                     runner.world.get(ids["b"], Transform).world))
+    image = np.array(glm.dvec3(carry * glm.dvec4(*lamp, 1.0)))
+    points = _floor_points(runner)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)
+    seen_through_pane = _pane_crossed(np.tile(eye, (len(points), 1)), rays, centre, 0.1,
+                                      np.linalg.norm(points - eye, axis=1) / np.linalg.norm(rays, axis=1))
+    lit = (runner.ids() == ids["floor"]).reshape(-1) & ~seen_through_pane & (shares[1] > 0.02)
+    to_image = image - points
+
+    def crossed(grow):
+        return _pane_crossed(points, to_image, centre, grow, np.ones(len(points)))
+
+    behind, beside = lit & crossed(-0.1), lit & ~crossed(0.1)
+    assert behind.sum() > 300 and beside.sum() > 1000, (int(behind.sum()), int(beside.sum()))
+    ratio = shares[0] / np.maximum(shares[1], 1e-6)
+    assert abs(float(np.median(ratio[behind])) - (1.0 - PANE_ALPHA)) < 0.03, float(np.median(ratio[behind]))
+    assert abs(float(np.median(ratio[beside])) - 1.0) < 0.01, float(np.median(ratio[beside]))
