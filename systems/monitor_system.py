@@ -211,7 +211,8 @@ class MonitorSystem(esper.Processor):
         """The monitors whose screens a view may see: this frame's main view (the active
         camera's, at the output's aspect), last frame's mirror and portal views
         (``ViewEyes``) or the probes' faces recaptured after this frame's present (the
-        schedule's undrawn faces: a chrome ball's reflection of the screen) may see them, or
+        schedule's undrawn faces: a chrome ball's reflection of the screen) or captured first
+        this frame (their faces are asked for again once the picture is: ``PicturesDrawn``) may see them, or
         they are on a ``ScreenPanel``; then, over and over, those the last drawings of the
         pictures seen may see."""
         world = self.world
@@ -226,7 +227,9 @@ class MonitorSystem(esper.Processor):
             views += [node.view for node in eyes.views if node.level > 0]
         schedule, probes = world.resources.get(ProbeSchedule), world.resources.get(ProbeStates)
         if schedule is not None and probes:
-            for due in schedule.undrawn():   # (first captures were drawn in the probes stage, before this one)
+            # (A first capture was drawn in the probes stage, before this one: seen there, the
+            # picture drawn now is published, and the scheduler asks for the faces again.)
+            for due in [due for due in schedule.due.values() if due.first or not due.drawn]:
                 state = probes.get(due.owner)
                 if state is not None and due.faces:
                     views += self.renderer.probes.face_views(due.owner, due.faces, state.position,

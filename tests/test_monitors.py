@@ -868,10 +868,11 @@ def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene, 
     frame's present (``ProbeSchedule``'s undrawn faces) see the screen, so a ``when_seen``
     picture is drawn for them, and the probe's face towards the screen equals that of an
     engine whose monitor is drawn always, frame by frame, as the box it watches moves.  (On
-    the first frame the probe's first capture, drawn before the monitors, sees it in neither.)
-    One engine's host draws faces in part (its GPU took longer over the timed captures than
-    issuing them: ``ProbePaths.fill_bound``), the other's does not, as two runs' timings may
-    say: the faces are the same (a part holds the screen whose picture was drawn since)."""
+    the first frame the probe's first capture, drawn before the monitors, shows it black in
+    both, but sees it: the picture is drawn for it too.)  One engine's host draws faces in
+    part (its GPU took longer over the timed captures than issuing them:
+    ``ProbePaths.fill_bound``), the other's does not, as two runs' timings may say: the faces
+    are the same (a face showing a picture drawn since is drawn whole)."""
     from components import ReflectionProbe
     from engine.core.cube_faces import CUBE_FACES
     from tests.test_probe_keeping import _probe_stage
@@ -907,7 +908,7 @@ def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene, 
         np.testing.assert_array_equal(faces[0], faces[1], err_msg=f"frame {frame}")
         drawn.append(seeing.stats.monitor_views)
         unseen.append(seeing.stats.monitors_unseen)
-    assert drawn == [0, 1, 1, 1, 1] and unseen == [1, 0, 0, 0, 0]
+    assert drawn == [1, 1, 1, 1, 1] and unseen == [0, 0, 0, 0, 0]
     assert (faces[1][..., 0] > 0.1).sum() > 5   # the red box, on the screen, in the probe's face
 
 
@@ -1002,3 +1003,39 @@ def test_a_monitors_camera_draws_its_picture_through_its_own_fog(scene):
     assert over_runner.engine.renderer.fog.block[4] == np.float32(0.1)   # ... and here the thin one
     _, hidden = picture(thick, thin, shown=False)
     np.testing.assert_array_equal(hidden, bare)
+
+
+def test_an_unseen_monitor_seen_by_a_probes_first_capture_is_drawn_and_the_probe_shows_it(scene):
+    """The active camera looks away from a ``when_seen`` screen; an ``on_change`` probe stands
+    before it.  Its first capture (drawn before the monitors: the screen still black) sees the
+    screen, so the picture is drawn that frame, and the faces that show the screen are asked
+    for again the next (``PicturesDrawn``): from then on the probe's face towards the screen
+    equals that of an engine whose monitor is drawn always, and shows the red box."""
+    from components import ReflectionProbe
+    from engine.core.cube_faces import CUBE_FACES
+
+    towards_screen = next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
+
+    def make(update):
+        build, held = studio(Monitor(size=PICTURE, update=update))
+
+        def probed(world):
+            build(world)
+            world.get(active_camera(world), Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
+            held["probe"] = world.spawn(Transform(position=(0.0, 1.0, 7.0)), ReflectionProbe(resolution=32))
+        return probed, held
+
+    runners = []
+    for update in ("when_seen", "always"):
+        build, held = make(update)
+        runners.append((scene(build, (64, 48)), held))
+    drawn = []
+    for frame in range(3):
+        for runner, _ in runners:
+            runner.frame(DT)
+        drawn.append(runners[0][0].stats.monitor_views)
+        faces = [runner.engine.renderer.probes.read_face(held["probe"], towards_screen) for runner, held in runners]
+        if frame:
+            np.testing.assert_array_equal(faces[0], faces[1], err_msg=f"frame {frame}")
+    assert drawn[0] == 1 and drawn[2] == 0   # drawn for the first capture; not once nothing sees it
+    assert (faces[0][..., 0] > 0.1).sum() > 5   # the red box, on the screen, in the probe's face
