@@ -861,6 +861,32 @@ def test_a_monitor_drawn_when_seen_that_only_its_own_camera_sees_is_not_drawn(sc
     assert drawn == [1, 1, 0, 0] and unseen == [0, 0, 1, 1]
 
 
+def _towards_screen() -> int:
+    """The cube face of a probe before the screen that looks at it (-z)."""
+    from engine.core.cube_faces import CUBE_FACES
+
+    return next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
+
+
+def _probe_before_an_unseen_screen(scene, refresh: str) -> list[tuple]:
+    """Two engines, (runner, held) each, the screen's monitor "when_seen" in the first and
+    "always" in the second: the active camera turned away from the screen, and a probe
+    (``refresh``, 32 texels) 1 m before it (``held["probe"]``)."""
+    from components import ReflectionProbe
+
+    runners = []
+    for update in ("when_seen", "always"):
+        build, held = studio(Monitor(size=PICTURE, update=update))
+
+        def probed(world, build=build, held=held):
+            build(world)
+            world.get(active_camera(world), Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
+            held["probe"] = world.spawn(Transform(position=(0.0, 1.0, 7.0)),
+                                        ReflectionProbe(resolution=32, refresh=refresh))
+        runners.append((scene(probed, (64, 48)), held))
+    return runners
+
+
 @pytest.mark.parametrize("gpu_ms", [(5.0, 0.1), (0.1, 5.0)], ids=["parts_when_seen", "parts_always"])
 def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene, gpu_ms):
     """The active camera looks away from the screen, but a probe recaptured every frame stands
@@ -873,26 +899,10 @@ def test_a_monitor_drawn_when_seen_by_a_probes_recapture_is_drawn_for_it(scene, 
     part (its GPU took longer over the timed captures than issuing them:
     ``ProbePaths.fill_bound``), the other's does not, as two runs' timings may say: the faces
     are the same (a face showing a picture drawn since is drawn whole)."""
-    from components import ReflectionProbe
-    from engine.core.cube_faces import CUBE_FACES
     from tests.test_probe_keeping import _probe_stage
 
-    towards_screen = next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
-
-    def make(update):
-        build, held = studio(Monitor(size=PICTURE, update=update))
-
-        def probed(world):
-            build(world)
-            world.get(active_camera(world), Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
-            held["probe"] = world.spawn(Transform(position=(0.0, 1.0, 7.0)),
-                                        ReflectionProbe(resolution=32, refresh="every_frame"))
-        return probed, held
-
-    runners = []
-    for update in ("when_seen", "always"):
-        build, held = make(update)
-        runners.append((scene(build, (64, 48)), held))
+    towards_screen = _towards_screen()
+    runners = _probe_before_an_unseen_screen(scene, "every_frame")
     for (runner, _), gpu in zip(runners, gpu_ms, strict=True):
         _probe_stage(runner).path = "six_pass"   # (nothing timed: the timings below stand)
         paths = runner.engine.renderer.probes.paths
@@ -928,10 +938,9 @@ def test_a_probe_face_showing_a_screen_shows_the_picture_drawn_since(scene, refr
     drawn (``PicturesDrawn``, the scheduler's next update): once the box stands still, its
     cube is too, and then it draws nothing."""
     from components import ReflectionProbe, Visibility
-    from engine.core.cube_faces import CUBE_FACES
     from tests.test_probe_keeping import _Cube, _probe_stage
 
-    towards_screen = next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
+    towards_screen = _towards_screen()
     build, held = studio(Monitor(size=PICTURE, every=2))
 
     def probed(world):
@@ -1011,24 +1020,8 @@ def test_an_unseen_monitor_seen_by_a_probes_first_capture_is_drawn_and_the_probe
     screen, so the picture is drawn that frame, and the faces that show the screen are asked
     for again the next (``PicturesDrawn``): from then on the probe's face towards the screen
     equals that of an engine whose monitor is drawn always, and shows the red box."""
-    from components import ReflectionProbe
-    from engine.core.cube_faces import CUBE_FACES
-
-    towards_screen = next(face for face, (forward, _, _) in enumerate(CUBE_FACES) if tuple(forward) == (0, 0, -1))
-
-    def make(update):
-        build, held = studio(Monitor(size=PICTURE, update=update))
-
-        def probed(world):
-            build(world)
-            world.get(active_camera(world), Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
-            held["probe"] = world.spawn(Transform(position=(0.0, 1.0, 7.0)), ReflectionProbe(resolution=32))
-        return probed, held
-
-    runners = []
-    for update in ("when_seen", "always"):
-        build, held = make(update)
-        runners.append((scene(build, (64, 48)), held))
+    towards_screen = _towards_screen()
+    runners = _probe_before_an_unseen_screen(scene, "on_change")
     drawn = []
     for frame in range(3):
         for runner, _ in runners:
