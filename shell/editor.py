@@ -39,14 +39,12 @@ from components import (
     Material,
     MeshRef,
     Model,
-    ParticleEmitter,
-    Portal,
     Transform,
     look_rotation,
 )
 from components.rendering import MATERIAL_IMAGES, automatic_mix
 from engine.assets.level_assets import MESH_MAKERS, LevelAssets, level_model, level_texture, user_asset_roots
-from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS
+from engine.assets.level_read import DERIVED_COMPONENTS, ENGINE_COMPONENTS, REFERENCE_FIELDS, REFERENCE_KINDS
 from engine.assets.level_save import save_level
 from engine.assets.mesh import load_model_file
 from engine.core.errors import SpeculumError
@@ -273,16 +271,16 @@ class Editor:
     def reference_choices(self, entity: int, component: str | type, field: str,
                           limit: int = MAX_LISTED) -> tuple[list[tuple[int | None, str]], bool]:
         """What a field naming another entity (``REFERENCE_FIELDS``: a Transform's parent, a
-        Portal's partner, a ParticleEmitter's sub-emitter) may name, for the inspector's choice:
-        none, then the other entities holding what it names (a Transform; a Portal; a
-        ParticleEmitter) by ``label``, at most ``limit``; and
+        Portal's partner, a ParticleEmitter's sub-emitter, a Monitor's camera) may name, for the
+        inspector's choice: none, then the other entities holding what it names (a Transform;
+        ``REFERENCE_KINDS``: a Portal, a ParticleEmitter, a Camera) by ``label``, at most ``limit``; and
         whether there were more.  The component's own checks still judge the choice (a
         parent that descends from the entity is a cycle, refused)."""
         name = component if isinstance(component, str) else component.__name__
         if (name, field) not in REFERENCE_FIELDS:
             raise EditError(f"{name}.{field} does not name an entity")
         by_id = {e: n for n, e in self.names.items()}
-        kind = {"Portal": Portal, "ParticleEmitter": ParticleEmitter}.get(name, Transform)
+        kind = ENGINE_COMPONENTS[REFERENCE_KINDS.get((name, field), "Transform")]
         others = sorted(e for e, _ in self.world.query_one(kind) if e != entity)
         choices = [(None, "none"), *((e, self.label(e, by_id.get(e))) for e in others[:limit])]
         return choices, len(others) > limit
@@ -765,12 +763,16 @@ class Editor:
         return entity
 
     def _remove(self, edit: Edit) -> None:
-        """Delete ``edit``'s entity, clearing the partner of each portal paired with it (kept in
-        ``edit.before`` to be given back)."""
-        edit.before = [portal for e, portal in self.world.query_one(Portal)
-                       if portal.partner == edit.entity and e != edit.entity]
-        for portal in edit.before:
-            portal.partner = None
+        """Delete ``edit``'s entity, clearing each field that names it and may name none (a
+        portal's partner, a monitor's camera, a sub-emitter: ``REFERENCE_KINDS``; each kept
+        in ``edit.before`` as (component, field) to be given back): the world behaves as it
+        did (a field naming an entity gone names none), and the level file saved names no
+        entity it lacks."""
+        edit.before = [(component, field) for cls_name, field in sorted(REFERENCE_KINDS)
+                       for e, component in self.world.query_one(ENGINE_COMPONENTS[cls_name])
+                       if e != edit.entity and getattr(component, field) == edit.entity]
+        for component, field in edit.before:
+            setattr(component, field, None)
         self.world.delete_entity(edit.entity)
         self.names.pop(edit.field, None)
         if self.selected == edit.entity:
@@ -780,8 +782,8 @@ class Editor:
         """Make ``edit``'s entity again from its components, under a new id: every edit and
         portal that named the old id names the new one."""
         old, entity = edit.entity, self._spawn(edit.component, edit.field)
-        for portal in edit.before or ():
-            portal.partner = entity
+        for component, field in edit.before or ():
+            setattr(component, field, entity)
         for moved in (*self._done, *self._undone, *self._everything):
             if moved.entity == old:
                 moved.entity = entity
@@ -870,8 +872,9 @@ class Editor:
         if keep is None:
             return save_level(self.world, target, self.names, extra_components=self.game_components)
         edited = {(self.name_of(e.entity), e.kind.__name__) for e in self._everything if e.kind is not None}
-        unpaired = {id(p) for e in self._everything if e.action == "delete" for p in e.before or ()}
-        edited |= {(self.name_of(e), "Portal") for e, p in self.world.query_one(Portal) if id(p) in unpaired}
+        unpaired = {id(c) for e in self._everything if e.action == "delete" for c, _ in e.before or ()}
+        edited |= {(self.name_of(e), cls_name) for cls_name, _ in REFERENCE_KINDS
+                   for e, c in self.world.query_one(ENGINE_COMPONENTS[cls_name]) if id(c) in unpaired}
         whole = {e.field for e in self._everything if e.kind is None}  # entities made or deleted
         added = {name for name in whole if name in self.names and self.world.exists(self.names[name])}
         return save_level(self.world, target, self.names, extra_components=self.game_components, keep=keep,

@@ -471,6 +471,43 @@ def test_entities_made_copied_and_deleted_in_the_editor_are_their_tables_in_the_
     spawned.close()
 
 
+def test_deleting_the_camera_a_monitor_shows_clears_its_camera_and_the_save_loads(tmp_path):
+    """The hall's security camera, which its monitor shows, deleted in the editor: the
+    monitor's ``camera`` is cleared (as a portal's partner is), undo gives it back the camera
+    made again, redo clears it again, and the save writes the monitor without one and loads.
+    The inspector offers cameras alone for ``Monitor.camera``.  A save of a world whose field
+    names an entity gone, or one without what the field wants, is refused, saying so."""
+    from components import Camera, Monitor
+    from engine.assets.level_read import LevelError
+    from shell.editor import Editor
+
+    path = _copy_hall(tmp_path)
+    world, names, _ = loaded(path, "edit_monitor")
+    editor = Editor(world, EXTRA, dict(names), path)
+    screen = next(entity for entity, _ in world.query_one(Monitor))
+    feed = names["security_camera"]
+    assert world.get(screen, Monitor).camera == feed
+    choices, _ = editor.reference_choices(screen, "Monitor", "camera")
+    assert {c for c, _ in choices} - {None} == {e for e, _ in world.query_one(Camera)} - {screen}
+    editor.delete(feed)
+    assert world.get(screen, Monitor).camera is None
+    assert editor.undo() and world.get(screen, Monitor).camera == editor.names["security_camera"]
+    assert editor.redo() and world.get(screen, Monitor).camera is None
+    editor.save()
+    again = World("edit_monitor_again")
+    ids = load_level(path, EXTRA).spawn(again)
+    assert "security_camera" not in ids and again.get(ids[editor.name_of(screen)], Monitor).camera is None
+    again.close()
+    world.get(screen, Monitor).camera = names["red_crate"]   # (set in code: not a camera)
+    with pytest.raises(LevelError, match=r"Monitor\.camera: names entity \d+, which has no Camera"):
+        save_level(world, tmp_path / "wrong.toml", editor.names, extra_components=EXTRA)
+    world.get(screen, Monitor).camera = 10_000
+    with pytest.raises(LevelError, match=r"names entity 10000, which no longer exists"):
+        save_level(world, tmp_path / "gone.toml", editor.names, extra_components=EXTRA)
+    assert not (tmp_path / "wrong.toml").exists() and not (tmp_path / "gone.toml").exists()
+    world.close()
+
+
 EDIT_OPERATIONS = ("create", "duplicate", "delete", "delete", "move", "rough", "add", "remove", "undo", "undo", "redo")
 
 

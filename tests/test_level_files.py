@@ -153,7 +153,8 @@ def test_the_base_level_loads_and_spawns(tmp_path):
 @pytest.mark.parametrize("case", [
     "unknown_component", "unknown_field", "wrong_type", "bad_value", "missing_mesh", "missing_texture",
     "partner_names_nothing", "parent_names_nothing", "duplicate_name", "bad_rotation", "parent_cycle",
-    "yaw_as_text", "look_nowhere", "pitch_past_float",
+    "yaw_as_text", "look_nowhere", "pitch_past_float", "partner_no_portal", "monitor_camera_no_camera",
+    "on_death_no_emitter",
 ])
 def test_a_mistake_names_file_line_entity_and_field_and_makes_nothing(tmp_path, case):
     edits = {
@@ -176,6 +177,18 @@ def test_a_mistake_names_file_line_entity_and_field_and_makes_nothing(tmp_path, 
         "parent_names_nothing": ("position = [3.0, 1.0, 0.0]", "position = [3.0, 1.0, 0.0]\nparent = \"table\"",
                                  "door_b", "Transform.parent", "parent = \"table\"",
                                  r"names no entity in this file, got 'table'"),
+        # (each names an entity of the file that is not of the kind the field wants)
+        "partner_no_portal": ("partner = \"door_a\"", "partner = \"floor\"", "door_b", "Portal.partner",
+                              "partner = \"floor\"", r"names 'floor', which has no Portal"),
+        "monitor_camera_no_camera": ("[entity.Material]\n[entity.Portal]\npartner = \"door_a\"",
+                                     "[entity.Material]\n[entity.Monitor]\ncamera = \"floor\"\n"
+                                     "[entity.Portal]\npartner = \"door_a\"", "door_b", "Monitor.camera",
+                                     "camera = \"floor\"", r"names 'floor', which has no Camera"),
+        "on_death_no_emitter": ("partner = \"door_a\"\nsize = [1.0, 2.0]\n",
+                                "partner = \"door_a\"\nsize = [1.0, 2.0]\n[entity.ParticleEmitter]\n"
+                                "on_death = \"floor\"\n",
+                                "door_b", "ParticleEmitter.on_death", "on_death = \"floor\"",
+                                r"names 'floor', which has no ParticleEmitter"),
         "duplicate_name": ("name = \"door_b\"", "name = \"door_a\"", "door_a", None, None,
                            r"the name is used twice"),
         "bad_rotation": ("rotation = { yaw = 90, pitch = 0 }", "rotation = { yaw = 90, roll = 3 }", "door_b",

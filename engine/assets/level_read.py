@@ -74,6 +74,10 @@ DERIVED_COMPONENTS = ("PortalClone", "Slice", "FromModel", "FromDecal")
 # Fields holding another entity: a name in the file, an id in the world.
 REFERENCE_FIELDS = {("Transform", "parent"), ("Portal", "partner"), ("ParticleEmitter", "on_death"),
                     ("Monitor", "camera")}
+# What the entity such a field names must hold in the file (a world that lacks it says so each
+# frame it looks; a file is whole when read, so it is refused there).
+REFERENCE_KINDS = {("Portal", "partner"): "Portal", ("ParticleEmitter", "on_death"): "ParticleEmitter",
+                   ("Monitor", "camera"): "Camera"}
 # Fields holding a file's path: relative to the level's folder in the file, absolute in the world.
 FILE_FIELDS = {("Model", "file")}
 MAX_LEVEL_BYTES = 4 << 20  # a level file's size (the shipped ones are a few KB)
@@ -263,6 +267,11 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
             if target == spec.name:
                 raise LevelError(path, "names the entity itself", lines.get((spec.index, cls_name, field)), spec.name,
                                  f"{cls_name}.{field}")
+            kind = REFERENCE_KINDS.get((cls_name, field))
+            if kind is not None and all(cls.__name__ != kind for cls, _ in entities[names[target]].components):
+                raise LevelError(path, f"names {target!r}, which has no {kind} (it must be one)",
+                                 lines.get((spec.index, cls_name, field), lines.get((spec.index, cls_name))),
+                                 spec.name, f"{cls_name}.{field}")
     _check_parent_cycles(path, entities, lines)
     return Level(path, header["name"], game, rules, entities, lines, budget, where)
 

@@ -30,6 +30,7 @@ from engine.assets.level_read import (
     ENGINE_COMPONENTS,
     FILE_FIELDS,
     REFERENCE_FIELDS,
+    REFERENCE_KINDS,
     LevelError,
     load_level,
 )
@@ -110,6 +111,9 @@ def _world_tables(world: World, path: Path, names: Mapping[str, int] | None,
                                        "with extra_components)", entity=by_id[entity])
             for field in (f for c, f in REFERENCE_FIELDS if c == cls_name):
                 target = getattr(component, field, None)
+                if target is not None:
+                    _check_reference(world, path, target, REFERENCE_KINDS.get((cls_name, field)), by_id[entity],
+                                     f"{cls_name}.{field}")
                 if target in made_again and world.has(target, FromModel):
                     root = world.get(target, FromModel).model
                     raise LevelError(path, f"names entity {target}, a part of the model on "
@@ -120,6 +124,18 @@ def _world_tables(world: World, path: Path, names: Mapping[str, int] | None,
             table[cls_name] = _encode_component(path, component, by_id, by_id[entity])
         tables[entity] = table
     return by_id, tables
+
+
+def _check_reference(world: World, path: Path, target: int, kind: str | None, entity: str, field: str) -> None:
+    """Refuse a field naming an entity the file could not name back as it reads: one gone from
+    the world, or one without the component ``kind`` the field wants (a Monitor's camera, a
+    portal's partner, a sub-emitter), which the file would be refused for as it loads."""
+    if not world.exists(target):
+        raise LevelError(path, f"names entity {target}, which no longer exists: a level file cannot name it "
+                               "(set it to None or to an entity that exists)", None, entity, field)
+    if kind is not None and all(type(c).__name__ != kind for c in world.components_of(target)):
+        raise LevelError(path, f"names entity {target}, which has no {kind}: a level file's {field} names one "
+                               f"(give it a {kind}, or set the field to None)", None, entity, field)
 
 
 def _budget_table(budget: ViewBudget) -> dict[str, Any]:
