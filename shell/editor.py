@@ -363,6 +363,11 @@ class Editor:
         if dataclasses.is_dataclass(target) and field not in {f.name for f in dataclasses.fields(target)}:
             raise EditError(f"{type(target).__name__} has no field {field!r} "
                             f"(fields: {', '.join(n for n, _ in self.fields(target))})")
+        wanted = REFERENCE_KINDS.get((kind, field))
+        if wanted is not None and isinstance(value, int) and not (
+                self.world.exists(value) and self.world.has(value, ENGINE_COMPONENTS[wanted])):
+            self.message = f"{kind}.{field}: {self.name_of(value)} has no {wanted} (it names one, or none)"
+            raise EditError(self.message)
         before = _copy(getattr(target, field))
         try:
             setattr(target, field, value)
@@ -653,6 +658,13 @@ class Editor:
         self._refuse_made_again(entity)
         component = self.component(entity, name)
         self._refuse_if_needed(entity, type(component).__name__)
+        kind = type(component).__name__
+        for (holder_kind, field), wanted in sorted(REFERENCE_KINDS.items()):
+            for holder, held in self.world.query_one(ENGINE_COMPONENTS[holder_kind]) if wanted == kind else ():
+                if holder != entity and getattr(held, field) == entity:
+                    self.message = (f"{self.name_of(entity)}'s {kind} is what {self.name_of(holder)}'s "
+                                    f"{holder_kind}.{field} names: set that to none first")
+                    raise EditError(self.message)
         try:
             self._check_whole(entity, [c for c in self.world.components_of(entity) if c is not component])
         except ComponentValueError as exc:

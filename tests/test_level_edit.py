@@ -476,10 +476,11 @@ def test_deleting_the_camera_a_monitor_shows_clears_its_camera_and_the_save_load
     monitor's ``camera`` is cleared (as a portal's partner is), undo gives it back the camera
     made again, redo clears it again, and the save writes the monitor without one and loads.
     The inspector offers cameras alone for ``Monitor.camera``.  A save of a world whose field
-    names an entity gone, or one without what the field wants, is refused, saying so."""
+    names an entity gone, or one without what the field wants, is refused, saying so; the
+    editor refuses to set such a field, or to take away the component one names."""
     from components import Camera, Monitor
     from engine.assets.level_read import LevelError
-    from shell.editor import Editor
+    from shell.editor import EditError, Editor
 
     path = _copy_hall(tmp_path)
     world, names, _ = loaded(path, "edit_monitor")
@@ -498,6 +499,12 @@ def test_deleting_the_camera_a_monitor_shows_clears_its_camera_and_the_save_load
     ids = load_level(path, EXTRA).spawn(again)
     assert "security_camera" not in ids and again.get(ids[editor.name_of(screen)], Monitor).camera is None
     again.close()
+    # The editor refuses to make such a field (a crate is no camera), or to take away what one names.
+    with pytest.raises(EditError, match=r"Monitor\.camera: red_crate has no Camera"):
+        editor.set_field(screen, "Monitor", "camera", names["red_crate"])
+    editor.undo()   # (the camera back)
+    with pytest.raises(EditError, match=r"security_camera's Camera is what .* Monitor\.camera names"):
+        editor.remove_component(editor.names["security_camera"], "Camera")
     world.get(screen, Monitor).camera = names["red_crate"]   # (set in code: not a camera)
     with pytest.raises(LevelError, match=r"Monitor\.camera: names entity \d+, which has no Camera"):
         save_level(world, tmp_path / "wrong.toml", editor.names, extra_components=EXTRA)
