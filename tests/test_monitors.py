@@ -1032,3 +1032,34 @@ def test_an_unseen_monitor_seen_by_a_probes_first_capture_is_drawn_and_the_probe
             np.testing.assert_array_equal(faces[0], faces[1], err_msg=f"frame {frame}")
     assert drawn[0] == 1 and drawn[2] == 0   # drawn for the first capture; not once nothing sees it
     assert (faces[0][..., 0] > 0.1).sum() > 5   # the red box, on the screen, in the probe's face
+
+
+def test_a_kept_picture_is_drawn_again_when_its_cameras_own_fog_changes(scene):
+    """A still picture is kept frame after frame; its camera's own ``Fog`` thickened (a write
+    no upload follows: only the key's count of the world's changes sees it) draws it again,
+    equal to a fresh engine's picture through the thicker fog, and it is kept again after."""
+    from components import Fog
+
+    def build_with(density):
+        build, held = studio(Monitor(size=PICTURE))
+
+        def fogged(world):
+            build(world)
+            world.add_component(held["lens"], Fog(color=(0.1, 0.2, 0.6), density=density))
+        return fogged, held
+
+    build, held = build_with(0.05)
+    runner = scene(build, (64, 48))
+    for _ in range(3):
+        runner.frame(DT)
+    assert runner.stats.monitors_kept == 1
+    runner.world.get(held["lens"], Fog).density = 0.3
+    runner.frame(DT)
+    assert runner.stats.monitors_kept == 0 and runner.stats.monitor_views == 1
+    fresh_build, fresh_held = build_with(0.3)
+    fresh = scene(fresh_build, (64, 48))
+    fresh.frame(DT)
+    np.testing.assert_array_equal(runner.engine.renderer.monitors.read(held["screen"]),
+                                  fresh.engine.renderer.monitors.read(fresh_held["screen"]))
+    runner.frame(DT)
+    assert runner.stats.monitors_kept == 1
