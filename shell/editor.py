@@ -791,8 +791,9 @@ class Editor:
             self.selected = None
 
     def _restore(self, edit: Edit) -> None:
-        """Make ``edit``'s entity again from its components, under a new id: every edit and
-        portal that named the old id names the new one."""
+        """Make ``edit``'s entity again from its components, under a new id: every edit, and
+        every field its deletion cleared (a portal's partner, a monitor's camera, a
+        sub-emitter), that named the old id names the new one."""
         old, entity = edit.entity, self._spawn(edit.component, edit.field)
         for component, field in edit.before or ():
             setattr(component, field, entity)
