@@ -94,8 +94,8 @@ class ChangedBoxes:
     one where it is.  ``code``: for a row of an entity that only moved (its look unchanged), where it is drawn
     (``visibility_rules.entity_code`` of its ``Visibility``: a probe whose captures do not draw
     it cannot see it move), with ``NO_SHADOW_BIT`` where it casts no shadow
-    (``ShadowCasting``: no shadow of it moved; glass moves the share of a sun's or a lamp's
-    light it lets through, so casts while one casts); every other row counts as seen by all
+    (``ShadowCasting``: no shadow of it moved; glass moves the share of a sun's, a lamp's or a
+    mirror's light it lets through, so casts while one casts); every other row counts as seen by all
     and casting (``SEEN_BY_EVERY_VIEW``: a look change may be the Visibility itself or
     whether it casts, and what was seen before must go)."""
 
