@@ -182,10 +182,13 @@ class PicturesDrawn:
     stage): ``count`` moves on each frame it draws any, ``screens`` are that frame's.  A picture
     drawn again changes what its screen looks like, as a new material would: the probe
     scheduler, which runs before the monitor stage, counts those screens as changed looks at
-    its next update (an ``on_change`` probe recaptures the faces that see them)."""
+    its next update (an ``on_change`` probe recaptures the faces that see them).  ``first``:
+    those of ``screens`` drawn for the first time (their screens were black till then: a
+    ``once`` or ``scripted`` probe captured before recaptures the faces that see them)."""
 
     count: int = 0
     screens: frozenset[int] = frozenset()
+    first: frozenset[int] = frozenset()
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,8 @@ other's changes; a flat one-sided screen a view sees from behind shows it nothin
 it keep their views too.
 
 A picture drawn is published (``PicturesDrawn``) for the probes' scheduler, whose
-``on_change`` probes recapture the faces that see its screen; not one drawn again for
+``on_change`` probes recapture the faces that see its screen (and ``once`` and ``scripted``
+probes those that showed it black, before its first drawing); not one drawn again for
 nothing but reflection probes' captures since (``ProbeCaptures.moved_on``): a probe that
 recaptured the screen would draw it again, and that drawing recapture the probe, forever in a
 still scene.  So an ``on_change`` probe shows a screen whose picture shows that probe's own
@@ -150,6 +151,7 @@ class MonitorSystem(esper.Processor):
         blends = world.resources.get(SurfaceBlends, NO_BLENDS)
         drawn = cut = 0
         screens: set[int] = set()   # the monitors whose pictures are drawn now
+        first: set[int] = set()     # ... of those, the ones drawn for the first time
         faces = None   # (the screens' planes, found when a picture is first drawn this frame)
         seen = None    # (the screens some view sees, found when a "when_seen" one is first due)
         for entity, monitor in due:
@@ -195,11 +197,14 @@ class MonitorSystem(esper.Processor):
             drawn += 1
             if not alike:
                 screens.add(entity)
+            if kept is None:
+                first.add(entity)
             self.drawn[entity] = frame
             self._keys[entity] = key
         if screens:
             published = world.resources.get(PicturesDrawn, PicturesDrawn())
-            world.resources[PicturesDrawn] = PicturesDrawn(published.count + 1, frozenset(screens))
+            world.resources[PicturesDrawn] = PicturesDrawn(published.count + 1, frozenset(screens),
+                                                          frozenset(first))
         if cut > self._cut:
             warnings.warn(MonitorLimitWarning(
                 f"{drawn + cut} monitors were to be drawn this frame: {MAX_MONITORS} are drawn a frame (those "

@@ -26,7 +26,9 @@ has a ``ProbeState``.  What is due each frame, per probe:
     counted by the prepare stage's ``CloudChanges``) or a point light whose range reaches what the probe sees
     changed, came, went or moved, its own Transform or a parent's ("light 7 moved");
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
-    ``scripted``: all six after a request;
+    ``scripted``: all six after a request; but a ``once`` or ``scripted`` probe's faces that
+    may see a screen whose ``Monitor`` picture was first drawn after its capture (it showed
+    the screen black: ``PicturesDrawn.first``) are asked for again ("first picture: entity N");
   - a face due for ``every_frame`` or ``every_n`` alone that no change has reached since it
     was last drawn is published ``unchanged`` (``ProbeDue.unchanged``: the captures keep it
     as it is where nothing they draw with changed either, ``ProbeCaptures.capture``).  What
@@ -76,7 +78,16 @@ from engine.rules.probe_rules import (
     probe_samplers,
     world_bounds,
 )
-from engine.rules.probe_schedule import MAX_NAMED, PERIODIC, WATCHING, ProbeDue, ProbeSchedule, ProbeState, ProbeStates
+from engine.rules.probe_schedule import (
+    CAPTURED_ONCE,
+    MAX_NAMED,
+    PERIODIC,
+    WATCHING,
+    ProbeDue,
+    ProbeSchedule,
+    ProbeState,
+    ProbeStates,
+)
 from engine.rules.shadow_rules import (
     SHADOW_MARGIN,
     SHADOW_MARGIN_SHARE,
@@ -148,10 +159,12 @@ class ProbeScheduler:
         had_probes = bool(self.probes)
         looks = self._looks.entities(world)  # asked every frame: it follows what each object samples
         pictures = world.resources.get(PicturesDrawn)
+        first_pictures: frozenset[int] = frozenset()
         if pictures is not None and pictures.count != self._pictures:
             # Screens whose pictures were drawn after the last update (the monitor stage is later in the frame).
             self._pictures = pictures.count
             looks |= pictures.screens
+            first_pictures = pictures.first
         schedule = world.resources[ProbeSchedule] = ProbeSchedule(gone=self._refresh_probes())
         if not self.probes:
             self._bounds.clear()  # nothing to keep boxes for (a world without probes pays nothing)
@@ -187,6 +200,9 @@ class ProbeScheduler:
             reach = lights_reaching(state.position, state.settings.far, [(p, r) for _, p, r in lights])
             relit = everything + sorted({lights[index][0] for index in reach})
             self._schedule(state, boxes, relit, surfaces)
+        if first_pictures:
+            self._ask_for_first_pictures(first_pictures, surfaces)
+        for state in self.probes.values():
             faces = self._due_faces(state)
             if faces:
                 due.append((state, faces))
@@ -441,13 +457,7 @@ class ProbeScheduler:
                 return
             if state.pending == ALL_FACES or not len(boxes.entity):
                 return  # every face waits already, or nothing changed
-            # Its own object is in none of its faces; what its captures hide moves unseen.
-            own = (boxes.entity != state.owner) & boxes.seen_by(settings)
-            lo, hi, entity, what = boxes.lo[own], boxes.hi[own], boxes.entity[own], \
-                [w for w, keep in zip(boxes.what, own, strict=True) if keep]
-            if len(entity):
-                _ask_named(state, face_hits(state.position, settings.far, lo, hi), entity,
-                           lambda row: f"{what[row]}: entity {entity[row]}")
+            self._ask_seeing(state, boxes, surfaces)
             casters = self.world.resources.get(ShadowCasters)
             if casters is not None and (casters.directional or casters.points or casters.virtual):
                 # Where the shadows of what casts fall: a face showing that place changes even
@@ -460,8 +470,46 @@ class ProbeScheduler:
                     _ask_named(state, face_hits(state.position, settings.far, shadow_lo, shadow_hi),
                                boxes.entity[of],
                                lambda row: f"shadow of entity {boxes.entity[of[row]]} ({boxes.what[of[row]]})")
-            if len(entity) and settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
-                self._through_surfaces(state, lo, hi, entity, what, surfaces)
+
+    def _ask_seeing(self, state: ProbeState, boxes: ChangedBoxes, surfaces: Surfaces | None) -> None:
+        """Ask for the faces of ``state``'s probe that may see a row of ``boxes``, directly or
+        in a mirror or through a portal (to the probe's ``depth``), each for the row's reason;
+        not the probe's own object (in none of its faces) or what its captures hide."""
+        settings = state.settings
+        own = (boxes.entity != state.owner) & boxes.seen_by(settings)
+        lo, hi, entity = boxes.lo[own], boxes.hi[own], boxes.entity[own]
+        what = [w for w, keep in zip(boxes.what, own, strict=True) if keep]
+        if not len(entity):
+            return
+        _ask_named(state, face_hits(state.position, settings.far, lo, hi), entity,
+                   lambda row: f"{what[row]}: entity {entity[row]}")
+        if settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals):
+            self._through_surfaces(state, lo, hi, entity, what, surfaces)
+
+    def _ask_for_first_pictures(self, screens: frozenset[int], surfaces: Surfaces | None) -> None:
+        """A ``once`` or ``scripted`` probe captured before a screen's first picture was drawn
+        (the monitor stage comes after the captures, and a ``when_seen`` screen is drawn only
+        once something sees it) shows the screen black, and would for good: the faces that
+        may see ``screens`` (``PicturesDrawn.first``) are asked for again, for "first
+        picture: entity N".  An ``on_change`` probe asks for them as for any picture drawn,
+        a periodic one at its next period."""
+        probes = [state for state in self.probes.values() if state.settings.refresh in CAPTURED_ONCE and state.captures]
+        if not probes:
+            return
+        world = self.world
+        rows = []
+        for entity in sorted(screens):
+            mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
+            transform = world.try_get(entity, Transform) if mesh_ref is not None else None
+            if transform is None:
+                continue
+            visibility = world.try_get(entity, Visibility)
+            code = SEEN_BY_EVERY_VIEW if visibility is None else entity_code(visibility)
+            lo, hi = world_bounds(mesh_ref.mesh, transform.world, pose_bounds(world, entity, mesh_ref.mesh))
+            rows.append((entity, "first picture", lo, hi, code))
+        boxes = ChangedBoxes(rows)
+        for state in probes:
+            self._ask_seeing(state, boxes, surfaces)
 
     def _mark_changes(self, state: ProbeState, boxes: ChangedBoxes, relit: list[str],
                       surfaces: Surfaces | None) -> None:

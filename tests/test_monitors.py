@@ -1034,6 +1034,52 @@ def test_an_unseen_monitor_seen_by_a_probes_first_capture_is_drawn_and_the_probe
     assert (faces[0][..., 0] > 0.1).sum() > 5   # the red box, on the screen, in the probe's face
 
 
+@pytest.mark.parametrize("refresh", ["once", "scripted"])
+@pytest.mark.parametrize("update", ["when_seen", "always"])
+def test_a_probe_captured_before_a_screens_first_picture_is_drawn_again_for_it(scene, refresh, update):
+    """A ``once`` (or ``scripted``) probe stands before a screen the active camera does not see.
+    Its first capture, on the first frame, is drawn before the monitors: the screen black in
+    it (a ``when_seen`` picture is drawn then because the capture sees it).  The next frame the
+    faces that may see the screen are drawn again ("first picture: entity N",
+    ``PicturesDrawn.first``): the face towards the screen equals the first capture of a probe
+    made only after the picture was drawn (in an engine whose monitor is drawn always), and
+    shows the red box; after that the probe draws nothing more, as its mode says."""
+    from components import ReflectionProbe
+    from engine.rules.probe_schedule import ProbeSchedule
+
+    towards_screen = _towards_screen()
+    runs = []
+    for late in (False, True):
+        build, held = studio(Monitor(size=PICTURE, update="always" if late else update))
+
+        def probed(world, build=build, held=held, late=late):
+            build(world)
+            world.get(active_camera(world), Transform).rotation = look_rotation(glm.vec3(1.0, 0.0, 0.0))
+            if not late:
+                held["probe"] = world.spawn(Transform(position=(0.0, 1.0, 7.0)),
+                                            ReflectionProbe(resolution=32, refresh=refresh))
+        runs.append((scene(probed, (64, 48)), held))
+    (runner, held), (late_runner, late_held) = runs
+    for run, _ in runs:
+        run.frame(DT)
+    early = runner.engine.renderer.probes.read_face(held["probe"], towards_screen)
+    assert (early[..., 0] > 0.1).sum() == 0   # the screen black: its picture came after the capture
+    late_held["probe"] = late_runner.world.spawn(Transform(position=(0.0, 1.0, 7.0)),
+                                                 ReflectionProbe(resolution=32, refresh=refresh))
+    for run, _ in runs:
+        run.frame(DT)
+    due = runner.world.resources[ProbeSchedule].due[held["probe"]]
+    assert towards_screen in due.reasons[f"first picture: entity {held['screen']}"]
+    assert not due.first and due.faces != frozenset(range(6))   # (only the faces that may see the screen)
+    face = runner.engine.renderer.probes.read_face(held["probe"], towards_screen)
+    np.testing.assert_array_equal(face, late_runner.engine.renderer.probes.read_face(late_held["probe"],
+                                                                                     towards_screen))
+    assert (face[..., 0] > 0.1).sum() > 5   # the red box, on the screen, in the probe's face
+    for _ in range(2):
+        runner.frame(DT)
+        assert runner.stats.probe_faces == 0
+
+
 def test_a_kept_picture_is_drawn_again_when_its_cameras_own_fog_changes(scene):
     """A still picture is kept frame after frame; its camera's own ``Fog`` thickened (a write
     no upload follows: only the key's count of the world's changes sees it) draws it again,

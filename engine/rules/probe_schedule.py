@@ -24,6 +24,7 @@ MAX_NAMED = 8  # entities named in a probe's reasons a frame; the rest are count
 # them alone that no change reached since it was drawn is ``ProbeDue.unchanged``.
 PERIODIC = ("every_frame", "every_n")
 WATCHING = ("on_change", *PERIODIC)  # the modes whose probes follow what changed each frame
+CAPTURED_ONCE = ("once", "scripted")  # the modes whose probes draw again only when asked (or a first picture comes)
 
 
 @dataclass
