@@ -54,10 +54,11 @@ class HemisphereLight(TrackedComponent):
 @dataclass(eq=False)
 class AmbientOcclusion(TrackedComponent):
     """Screen-space ambient occlusion for the camera whose entity holds it (the active
-    camera's is used): the light from all round (the sky's or a probe's irradiance, and
-    the sky's and probes' reflections) is dimmed where nearby geometry hides part of the
-    sky from a point, in corners, creases and under things, as every engine ships it (Unity's
-    and Godot's SSAO, three.js's GTAOPass, Panda3D's ambient occlusion filter).
+    camera's, and a ``Monitor`` camera's for its picture): the light from all round (the
+    sky's or a probe's irradiance, and the sky's and probes' reflections) is dimmed where
+    nearby geometry hides part of the sky from a point, in corners, creases and under
+    things, as every engine ships it (Unity's and Godot's SSAO, three.js's GTAOPass,
+    Panda3D's ambient occlusion filter).
 
     Ground-truth ambient occlusion (Jimenez et al., "Practical Real-Time Strategies for
     Accurate Indirect Occlusion", 2016): the share of the cosine-weighted hemisphere over

@@ -58,7 +58,6 @@ class MainViewSystem(esper.Processor):
         # or fallback at weight 1 too); None: every mirror is shaded.
         self.depth_cap: Callable[[], int] | None = None
         self._options: tuple[tuple, SceneOptions] = (((), ()), TREE_ROOT)  # (what it was made from, the options)
-        self.occlusion = True  # the debug overlay's toggle: off, no camera's AmbientOcclusion is drawn
         self.occluded: AmbientOcclusion | None = None  # the one drawn this frame (the overlay's line)
         self.contact_shadowed: ContactShadows | None = None  # the contact shadows drawn this frame (the same)
         self.contact_lamps = 0  # ... and the lamps they darken besides the sun
@@ -72,6 +71,18 @@ class MainViewSystem(esper.Processor):
         self.shafts: VolumetricFog | None = None  # the light shafts drawn this frame
         self._said_no_shafts: tuple[VolumetricFog, str] | None = None  # (the one warned about, why: once)
         self._said_lamps_cut = 0  # the lamps past MAX_VOLUMETRIC_LAMPS last said
+
+    @property
+    def occlusion(self) -> bool:
+        """The debug overlay's toggle: off, no camera's ``AmbientOcclusion`` or ``ContactShadows``
+        is drawn, the active camera's or a monitor's (``ScreenOcclusion.shown``)."""
+        return self.renderer.occlusion.shown
+
+    @occlusion.setter
+    def occlusion(self, value: bool) -> None:
+        if not isinstance(value, bool):
+            raise TypeError(f"MainViewSystem.occlusion must be True or False, got {value!r}")
+        self.renderer.occlusion.shown = value
 
     def process(self, dt: float) -> None:
         world = self.world

@@ -18,7 +18,9 @@ decided here:
 - each one's view: its camera entity's ``Camera`` (field of view or orthographic height,
   near, far, layers) from its ``Transform``, at the picture's size and aspect; a camera that
   is missing (no entity, no ``Camera`` or no ``Transform`` on it) is said once, and the
-  picture kept as it is (black at first);
+  picture kept as it is (black at first); the camera's own ``Fog`` (``_camera_fog``), and
+  its ``AmbientOcclusion`` and ``ContactShadows``, found for the picture before its root is
+  drawn (``_occlusion``: ``ScreenOcclusion.draw_picture``);
 - whether its mirrors and portals get views: to ``Monitor.depth`` levels, planned with the
   frame's surfaces as a probe face's tree is, outside the frame's ``ViewBudget``
   (``outside_the_budget``: the monitors' own limits bound them, and drawn before the main
@@ -64,8 +66,10 @@ import numpy as np
 from pyglm import glm
 
 from components import (
+    AmbientOcclusion,
     Camera,
     ComponentWarning,
+    ContactShadows,
     Fog,
     Material,
     MeshRef,
@@ -85,9 +89,9 @@ from engine.render.sky import air_light
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View, camera_view
-from engine.resources import PicturesDrawn, Surfaces
+from engine.resources import ContactLamps, PicturesDrawn, Surfaces
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import ViewEyes
+from engine.rules.light_rules import ViewEyes, brightest_directional
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
 
 
@@ -134,6 +138,7 @@ class MonitorSystem(esper.Processor):
             del self.drawn[gone]
         for gone in set(self._keys) - present:
             del self._keys[gone]
+            self.renderer.occlusion.drop_picture(gone)
         # Changes since the last look: after this stage in the last frame, and before it in this one.
         changes = world.change_count()
         self._world_version += world.last_step_changes - self._changes_seen + changes
@@ -190,9 +195,12 @@ class MonitorSystem(esper.Processor):
             if faces is None:
                 faces = self._screen_faces(monitors)
             with outside_the_budget(stats), self._camera_fog(monitor.camera):
+                occluded = self._occlusion(entity, monitor.camera, view)
                 # (still, but drawn on predicted counts: once more exactly, to keep)
                 views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still,
-                                      faces=faces)
+                                      faces=faces, occluded=occluded)
+                if occluded:
+                    self.renderer.occlusion.restore_root()
             stats.monitor_views += views
             drawn += 1
             if not alike:
@@ -284,7 +292,8 @@ class MonitorSystem(esper.Processor):
                                                if state.water is not None)
         captures = self.renderer.probes.moved_on
         values = (self.renderer.monitors.scene_version - captures, self.renderer.drawing_settings(),
-                  view.camera_block(), view.layers, monitor.size, monitor.depth, flows, self._world_version)
+                  view.camera_block(), view.layers, monitor.size, monitor.depth, flows, self._world_version,
+                  self.renderer.occlusion.shown)
         return values, (table, blends.by_surface), captures
 
     def _camera_fog(self, camera: int | None) -> AbstractContextManager[None]:
@@ -298,6 +307,21 @@ class MonitorSystem(esper.Processor):
             return nullcontext()
         glow = air_light(self.world) if own.sun_scatter > 0.0 else None
         return fog.camera_fog(own, None if glow is None else glow.light, (1.0, 1.0, 1.0) if glow is None else glow.tint)
+
+    def _occlusion(self, monitor: int, camera: int | None, view: View) -> bool:
+        """Find the ambient occlusion and contact shadows of ``monitor``'s picture, where its
+        ``camera`` has them (``ScreenOcclusion.draw_picture``; none while the overlay's toggle
+        is off, ``ScreenOcclusion.shown``); returns whether its draw reads them."""
+        world, occlusion = self.world, self.renderer.occlusion
+        own = occlusion.shown and camera is not None and world.exists(camera)
+        settings = world.try_get(camera, AmbientOcclusion) if own else None
+        contact = world.try_get(camera, ContactShadows) if own else None
+        if settings is None and contact is None:
+            occlusion.drop_picture(monitor)
+            return False
+        sun = brightest_directional(world) if contact is not None else None
+        lamps = world.resources.get(ContactLamps, ContactLamps()).positions if contact is not None else ()
+        return occlusion.draw_picture(monitor, view, settings, contact, None if sun is None else -sun.direction, lamps)
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
         """The Camera and Transform of the entity ``monitor`` shows, or None, said once for each

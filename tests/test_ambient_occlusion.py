@@ -367,3 +367,69 @@ def test_a_still_scene_finds_its_occlusion_once(scene):
     fresh.frame()
     assert np.abs(moved.astype(np.int16) - fresh.frame().astype(np.int16)).max() <= 1
     assert np.abs(moved.astype(np.int16) - still.astype(np.int16)).max() > 10
+
+
+def _watched_room(world, occlusion: AmbientOcclusion | None) -> dict:
+    """``_room`` without occlusion on the active camera, and a monitor whose camera (not active)
+    stands where the active one does with ``occlusion``, its picture the frame's size; the
+    screen behind both cameras, out of their sight."""
+    from components import Camera, Monitor
+    from engine.assets.mesh import quad
+
+    names = _room(world, None)
+    active = world.get(names["camera"], Transform)
+    camera = world.get(names["camera"], Camera)
+    names["lens"] = world.spawn(Transform(position=active.position, rotation=active.rotation),
+                                Camera(fov_y=camera.fov_y, near=camera.near, far=camera.far, active=False),
+                                *([occlusion] if occlusion is not None else []))
+    names["screen"] = world.spawn(Transform(position=(-6.0, 1.0, -3.0)), MeshRef(quad(1.6, 0.9)),
+                                  Material(color=(0.0, 0.0, 0.0), roughness=1.0),
+                                  Monitor(camera=names["lens"], size=SIZE))
+    return names
+
+
+def test_a_monitors_camera_finds_its_pictures_occlusion(scene):
+    """A monitor whose camera has an ``AmbientOcclusion`` (the active camera none) has its
+    picture's found as the active camera's view's is: the picture with it over the picture
+    without keeps the ground truth's share on the floor by the wall (``open_share``), and
+    nothing far from it; its images are the picture's own (4), let go when its camera's
+    component goes, and with the monitor.  The overlay's toggle off leaves the picture bare."""
+    from components import Monitor
+
+    def picture(occlusion):
+        names: dict = {}
+        runner = scene(lambda world: names.update(_watched_room(world, occlusion)), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        return runner.engine.renderer.monitors.read(names["screen"])[..., :3], runner, names
+
+    lit, runner, names = picture(AmbientOcclusion(radius=RADIUS))
+    plain, _, _ = picture(None)
+    shares = (lit / np.maximum(plain, 1e-6)).mean(axis=-1)
+    floor, distance, _, _ = _surfaces(runner, names)   # (the main view's rays and ids: the lens's pose and size)
+    for low, high in ((0.0, 0.1), (0.1, 0.25), (0.25, 0.45), (0.45, 0.65)):
+        band = floor & (distance > low) & (distance <= high)
+        assert band.sum() > 30, (low, high)
+        assert shares[band].mean() == pytest.approx(open_share(distance[band] / RADIUS).mean(), abs=0.03), \
+            f"floor {low}-{high} m from the wall"
+    far = floor & (distance > 1.3 * RADIUS)
+    assert far.sum() > 500 and shares[far].mean() > 0.985
+    occlusion = runner.engine.renderer.occlusion
+    assert occlusion.target_count() == 4   # the picture's alone: the active camera has none
+    runner.engine.stages["main"].occlusion = False   # (the overlay's toggle: the picture drawn again, bare)
+    runner.frame()
+    np.testing.assert_allclose(runner.engine.renderer.monitors.read(names["screen"])[..., :3], plain, atol=1e-3)
+    assert occlusion.target_count() == 0
+    runner.engine.stages["main"].occlusion = True
+    runner.frame()
+    assert occlusion.target_count() == 4
+    runner.world.remove_component(names["lens"], AmbientOcclusion)
+    runner.frame()
+    assert occlusion.target_count() == 0
+    np.testing.assert_allclose(runner.engine.renderer.monitors.read(names["screen"])[..., :3], plain, atol=1e-3)
+    runner.world.add_component(names["lens"], AmbientOcclusion(radius=RADIUS))
+    runner.frame()
+    assert occlusion.target_count() == 4
+    runner.world.remove_component(names["screen"], Monitor)
+    runner.frame()
+    assert occlusion.target_count() == 0

@@ -59,21 +59,35 @@ def _floor_and_box(world, components, eye=(0.3, 2.0, 0.05)) -> dict:
 
 
 def _scene(world, contact: ContactShadows | None, sun: float = 1.0, occlusion: AmbientOcclusion | None = None,
-           eye=(0.3, 2.0, 0.05)) -> dict:
-    """The box on the floor under a sun without shadow maps."""
-    names = _floor_and_box(world, (contact, occlusion), eye)
+           eye=(0.3, 2.0, 0.05), watched: bool = False) -> dict:
+    """The box on the floor under a sun without shadow maps; ``watched``: ``contact`` and
+    ``occlusion`` on a monitor's camera where the active one stands instead (the active camera
+    none), its picture the frame's size, the screen out of both cameras' sight."""
+    names = _floor_and_box(world, () if watched else (contact, occlusion), eye)
     world.spawn(DirectionalLight(direction=SUN, intensity=sun, shadows=False))
+    if watched:
+        from components import Monitor
+
+        active = world.get(names["camera"], Transform)
+        lens = world.spawn(Transform(position=active.position, rotation=active.rotation),
+                           Camera(fov_y=world.get(names["camera"], Camera).fov_y, active=False),
+                           *[component for component in (contact, occlusion) if component is not None])
+        names["screen"] = world.spawn(Transform(position=(-6.0, 1.0, 0.0)), MeshRef(box((0.1, 0.9, 1.6))),
+                                      Material(color=(0.0, 0.0, 0.0), roughness=1.0), Monitor(camera=lens, size=SIZE))
     return names
 
 
 def _frame(scene, build=None, **options) -> tuple[np.ndarray, object, dict]:
     """The second frame of ``build(world, **options)`` (the sun's scene by default), in linear
-    light, its runner and names."""
+    light, its runner and names (``watched``: the monitor's picture, linear as drawn)."""
     names: dict = {}
     runner = scene(lambda world: names.update((build or _scene)(world, **options)), SIZE)
     runner.engine.renderer.antialias = "off"
     runner.frame()
-    return srgb_to_linear(runner.frame()), runner, names
+    frame = srgb_to_linear(runner.frame())
+    if options.get("watched"):
+        frame = runner.engine.renderer.monitors.read(names["screen"])[..., :3]
+    return frame, runner, names
 
 
 def _sun_kept(scene, contact: ContactShadows, **options) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -223,6 +237,17 @@ def test_bad_values_are_refused_naming_the_field(field, value):
 
 
 LAMP = np.array([-0.8, 0.8, 0.1])   # a lamp up and to the left of the box: its contact shadow falls to the right
+
+
+def test_a_monitors_camera_finds_its_pictures_contact_shadows(scene):
+    """A monitor's camera with ``ContactShadows`` (the active camera, at the same place, none):
+    its picture loses the sun where the floor point's ray meets the box within the length, as
+    the active camera's view does (``_sun_kept``'s rays, cast in float64), and keeps it
+    elsewhere."""
+    kept, inside, outside = _sun_kept(scene, ContactShadows(length=0.3, thickness=0.5), watched=True)
+    assert inside.sum() > 150 and outside.sum() > 5000, (inside.sum(), outside.sum())
+    assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.25, kept[inside]
+    assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
 
 
 def _lamp_scene(world, contact: ContactShadows | None, intensity: float = 3.0, flagged: bool = True,

@@ -33,7 +33,7 @@ size, and let go with its monitor; the batch that samples it keeps it until it g
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import moderngl
 import numpy as np
@@ -53,6 +53,9 @@ from engine.render.view_tree import ViewTree
 from engine.render.views import View
 
 MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait a frame: monitors_cut)
+# A picture's root drawn with its camera's ambient occlusion (made once: options are compared by identity).
+_OCCLUDED_ROOT_VIEW = replace(ROOT_VIEW, occlusion=True)
+_OCCLUDED_TREE_ROOT = replace(TREE_ROOT, occlusion=True)
 
 
 @dataclass
@@ -137,14 +140,15 @@ class MonitorPictures:
 
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
              blends: SurfaceBlends = NO_BLENDS, exact: bool = False,
-             faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None) -> int:
+             faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None, occluded: bool = False) -> int:
         """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
         pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
         mirrors and portals; ``exact``: its visibility exact whatever ``visibility`` says),
         then the colour copied into the picture and its mips built.  ``faces``: the screens
         seen from one side only, as (point, front normal), by monitor (what ``shown`` leaves
-        out where a view's eye is behind one).  Returns the views drawn (the root and its
-        tree's)."""
+        out where a view's eye is behind one).  ``occluded``: the root's ambient occlusion and
+        contact shadows were found (``ScreenOcclusion.draw_picture``), and its draw reads them.
+        Returns the views drawn (the root and its tree's)."""
         held = self._pictures[entity]
         if view.size != held.size:
             raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
@@ -152,13 +156,14 @@ class MonitorPictures:
         drawn, repeatable = [view], True
         before = self.renderer.scene_version
         if surfaces is not None and depth > 0:
-            self.scene_pass.draw([view], targets, TREE_ROOT)
+            options = _OCCLUDED_TREE_ROOT if occluded else TREE_ROOT
+            self.scene_pass.draw([view], targets, options)
             settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
-            result = self.tree.render(view, held.levels, surfaces, settings, blends, TREE_ROOT)
+            result = self.tree.render(view, held.levels, surfaces, settings, blends, options)
             drawn += [node.view for node in result.views[1:]]
             repeatable = not result.end_views and result.visibility != "predicted"
         else:
-            self.scene_pass.draw([view], targets, ROOT_VIEW)
+            self.scene_pass.draw([view], targets, _OCCLUDED_ROOT_VIEW if occluded else ROOT_VIEW)
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
         held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}

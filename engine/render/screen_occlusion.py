@@ -75,6 +75,11 @@ builds, masked.  Those read one sampler more than the fullest masked build (17; 
 spot cookies): a context with fewer fragment-stage texture units than that finds the
 camera's view alone and says so once (a ``GLLimitWarning``).
 
+**Monitors' pictures** (``draw_picture``): a monitor's camera with an ``AmbientOcclusion`` or
+``ContactShadows`` of its own has its picture's found as the active camera's view's is (the
+same three passes, the guard band, images of the picture's size kept by monitor), before
+the picture's root view is drawn; its mirror and portal levels are drawn without.
+
 Probe views and the transparent slot are drawn without it.  The targets are made at the
 first occluded frame of a size (a level's at the first frame that finds it) and released
 when no camera asks for occlusion (``release_targets``), a level's when the camera's depth
@@ -206,6 +211,10 @@ class ScreenOcclusion:
         # not run again and the image stands.
         self._found_from: tuple | None = None
         self.keep_still = True  # False: found every frame (what the still fuzz compares with)
+        self._pictures: dict[int, _Targets] = {}  # a monitor's picture's images, by its monitor (draw_picture)
+        # The debug overlay's toggle (``MainViewSystem.occlusion``): off, no camera's occlusion
+        # or contact shadows are found, the active camera's or a monitor's.
+        self.shown = True
 
     def _programs(self, quality: str | None, samples: int, step: int = 0, sun: bool = True,
                   lamps: bool = False) -> tuple[moderngl.VertexArray, moderngl.VertexArray]:
@@ -301,6 +310,42 @@ class ScreenOcclusion:
         self._find(targets, [view], guard.proj, settings, contact, sun, lamps, 0)
         self.restore_root()
         return targets.shares
+
+    def draw_picture(self, monitor: int, view: View, settings: AmbientOcclusion | None,
+                     contact: ContactShadows | None = None, sun: glm.vec3 | None = None,
+                     lamps: Sequence[tuple[float, float, float]] = ()) -> bool:
+        """Find the occlusion and contact shadows of monitor ``monitor``'s picture, whose camera's
+        ``view`` is about to be drawn (``settings``, ``contact``, ``sun`` and ``lamps`` as for
+        ``draw``: its camera's components), into images of the picture's own, with the guard
+        band, and leave them as ``Gpu.screen_occlusion`` for its draw (``restore_root`` puts
+        the active camera's back after).  Returns whether there was anything to find (with
+        nothing, the picture's images are let go).  Found every time: a picture nothing it
+        shows changed is kept whole by the monitor stage, so a drawing is a change."""
+        lamps = self.usable_lamps(lamps)
+        if sun is None and not lamps:
+            contact = None
+        if settings is None and contact is None:
+            self.drop_picture(monitor)
+            return False
+        if contact is None:
+            lamps = ()
+        half = (settings or contact).half_resolution
+        want = (max(1, view.size[0] // 2), max(1, view.size[1] // 2)) if half else view.size
+        images = self._pictures.get(monitor)
+        if images is None or images.size != want or images.view_size != view.size:
+            self.drop_picture(monitor)
+            images = self._pictures[monitor] = self._make_targets(view.size, half, guard=True)
+        guard = _guarded(view, images.size, images.margin)
+        self.scene_pass.draw_depth_normals([guard], images.prepass, guard.size)
+        self._find(images, [view], guard.proj, settings, contact, sun, lamps, 0)
+        self._bind_shares(images, bool(lamps))
+        return True
+
+    def drop_picture(self, monitor: int) -> None:
+        """Let go of monitor ``monitor``'s picture's images (it went, or its camera finds none)."""
+        images = self._pictures.pop(monitor, None)
+        if images is not None:
+            images.release()
 
     def usable_lamps(self, lamps: Sequence[tuple[float, float, float]]) -> tuple:
         """``lamps`` (the contact lamps' positions), or none where the context lacks the texture
@@ -449,8 +494,8 @@ class ScreenOcclusion:
 
     def target_count(self) -> int:
         """Images held now (4 while a camera asks for occlusion, and 4 for each reflection
-        level found, else 0)."""
-        return 4 * ((self._targets is not None) + len(self._levels))
+        level found and each monitor's picture found, else 0)."""
+        return 4 * ((self._targets is not None) + len(self._levels) + len(self._pictures))
 
     def _still_key(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None,
                    sun: glm.vec3 | None, lamps: tuple) -> tuple:
@@ -489,6 +534,8 @@ class ScreenOcclusion:
 
     def release(self) -> None:
         self.release_targets()
+        for monitor in list(self._pictures):
+            self.drop_picture(monitor)
         self._release_programs()
 
 
