@@ -116,7 +116,8 @@ class AmbientOcclusion(TrackedComponent):
 
 @dataclass(eq=False)
 class ContactShadows(TrackedComponent):
-    """Contact shadows for the camera whose entity holds it (the active camera's is used): the
+    """Contact shadows for the camera whose entity holds it (the active camera's, and a
+    ``Monitor`` camera's for its picture): the
     sun's direct light (the brightest ``DirectionalLight``'s), and that of each point or spot
     light with ``PointLight.contact_shadows`` (at most ``MAX_CONTACT_LAMPS``, 4), is taken from
     a point where something the camera sees lies across a short ray from the point towards

@@ -104,6 +104,7 @@ class MonitorSystem(esper.Processor):
         self.renderer = renderer
         self.drawn: dict[int, int] = {}         # monitor -> the frame its picture was last drawn (or kept)
         self._said: set[tuple[int, int | None]] = set()  # (monitor, the camera it named) said once
+        self._said_no_light: ContactShadows | None = None  # a camera's contact shadows that darken nothing, said
         self._cut = 0
         self._keep_still_pictures = True
         self._keys: dict[int, tuple[tuple, tuple, int]] = {}   # monitor -> _still_key at its last drawing
@@ -321,6 +322,12 @@ class MonitorSystem(esper.Processor):
             return False
         sun = brightest_directional(world) if contact is not None else None
         lamps = world.resources.get(ContactLamps, ContactLamps()).positions if contact is not None else ()
+        if contact is not None and sun is None and not lamps and self._said_no_light is not contact:
+            self._said_no_light = contact   # (once for each component: the active camera's is said by the main view)
+            warnings.warn(ComponentWarning(
+                f"ContactShadows on entity {camera}, the camera of monitor {monitor}: the world has no "
+                "DirectionalLight that shines (a sun) and no PointLight with contact_shadows, and contact shadows "
+                "darken only those lights, so they darken nothing in its picture"), stacklevel=3)
         return occlusion.draw_picture(monitor, view, settings, contact, None if sun is None else -sun.direction, lamps)
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:

@@ -24,6 +24,7 @@ from components import (
     HemisphereLight,
     Material,
     MeshRef,
+    Monitor,
     PointLight,
     Transform,
 )
@@ -66,8 +67,6 @@ def _scene(world, contact: ContactShadows | None, sun: float = 1.0, occlusion: A
     names = _floor_and_box(world, () if watched else (contact, occlusion), eye)
     world.spawn(DirectionalLight(direction=SUN, intensity=sun, shadows=False))
     if watched:
-        from components import Monitor
-
         active = world.get(names["camera"], Transform)
         lens = world.spawn(Transform(position=active.position, rotation=active.rotation),
                            Camera(fov_y=world.get(names["camera"], Camera).fov_y, active=False),
@@ -248,6 +247,15 @@ def test_a_monitors_camera_finds_its_pictures_contact_shadows(scene):
     assert inside.sum() > 150 and outside.sum() > 5000, (inside.sum(), outside.sum())
     assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.25, kept[inside]
     assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
+    # With no sun and no lamp that has them they darken nothing, and that is said once.
+    names: dict = {}
+    runner = scene(lambda world: names.update(_scene(world, ContactShadows(), sun=0.0, watched=True)), SIZE)
+    with pytest.warns(ComponentWarning, match=r"the camera of monitor \d+.*darken nothing in its picture"):
+        runner.frame()
+    runner.world.get(names["screen"], Monitor).every = 1   # (drawn again: nothing more said)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runner.frame()
 
 
 def _lamp_scene(world, contact: ContactShadows | None, intensity: float = 3.0, flagged: bool = True,
