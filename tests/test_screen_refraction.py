@@ -787,3 +787,51 @@ def test_a_balls_reflection_reads_the_screen_only_where_its_pixels_rays_stay_clo
     assert 0.3 < share < 1.5, share
     off = np.abs(seen - plain).max(axis=-1)[spread]
     assert np.quantile(off, 0.9) < 0.02, np.sort(off)
+
+
+@pytest.mark.parametrize("depth", [0, 1])
+def test_a_monitors_picture_bends_what_is_behind_a_pane_as_the_cameras_view_does(scene, depth):
+    """A monitor's camera where the active camera stands, before the tilted pane of index 1.5
+    and the red stripe (a world with no mirror or portal; the monitor's ``depth`` 0 or 1): its
+    picture's middle row shows the stripe where the rays refracted in numpy meet it, as the
+    camera's view does (``test_a_tilted_pane_bends_what_is_behind_it_as_snells_law_says``), and
+    equals the frame's own middle row, both drawn by the scene pass and ``finish_root``."""
+    from components import Monitor
+
+    turn = np.radians(35.0)
+    stripe_half = np.array([0.08, 1.5, 0.02])
+    size = (200, 100)
+    held = {}
+
+    def build(world):
+        striped_wall(world, np.array([0.0, 1.0, -2.9]), stripe_half, fov=40.0)
+        pane(world, 1.5, position=(0.0, 1.0, 1.0), turn=float(turn))
+        lens = look_from(world, (0.0, 1.0, 4.0), (0.0, 1.0, 0.0), fov=40.0)
+        world.get(lens, Camera).active = False
+        held["screen"] = world.spawn(Transform(position=(0.0, 1.0, 8.0)), MeshRef(quad(1.6, 0.8)),
+                                     Material(color=(0.0, 0.0, 0.0, 1.0), **CLEAR),
+                                     Monitor(camera=lens, size=size, depth=depth))
+
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame())[size[1] // 2]
+    picture = runner.engine.renderer.monitors.read(held["screen"])[size[1] // 2, :, :3]
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    d = rays[size[1] // 2]
+    normal = np.array([np.sin(turn), 0.0, np.cos(turn)])     # the quad's +z turned about y
+    right = np.array([np.cos(turn), 0.0, -np.sin(turn)])
+    centre = np.array([0.0, 1.0, 1.0])
+    t = ((centre - eye) @ normal) / (d @ normal)
+    hit = eye + t[:, None] * d
+    through = (t > 0) & (np.abs((hit - centre) @ right) < 0.75)
+    eta = 1.0 / 1.5
+    cos_i = -(d @ normal)
+    bent = eta * d + (eta * cos_i - np.sqrt(1.0 - eta ** 2 * (1.0 - cos_i ** 2)))[:, None] * normal
+    expected = box_hits(hit, bent, np.array([0.0, 1.0, -2.9]), stripe_half) & through
+    assert expected.sum() >= 3
+    red = (picture[:, 0] > 0.5) & (picture[:, 1] < 0.2)
+    assert (red[through] != expected[through]).sum() <= 2, (np.flatnonzero(red), np.flatnonzero(expected))
+    # (the frame is tone-mapped and 8-bit: the picture, linear and half-float, within that)
+    np.testing.assert_allclose(linear_to_srgb8(np.clip(picture, 0.0, 1.0)).astype(float),
+                               linear_to_srgb8(np.clip(shown, 0.0, 1.0)).astype(float), atol=3)

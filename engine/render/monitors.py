@@ -6,7 +6,9 @@ monitor its camera's ``View``; ``MonitorPictures.draw`` draws it with the scene 
 view is drawn with, into a level stack of the picture's size (the same targets as the main
 view's: colour, ids, depth), as a root: the mirrors and portals in it get their own view
 tree to the monitor's ``depth`` (``ViewTree``, one for every monitor: its per-root records are
-kept by the view's name), or show their fallbacks at depth 0.  The colour (linear HDR, what
+kept by the view's name), or show their fallbacks at depth 0; then, as the main view's root,
+its waters' foam, its refracting surfaces and its glass (``ScenePass.finish_root``: a
+picture at depth 0, or of a world with no mirror, refracts as the camera's view does).  The colour (linear HDR, what
 the camera sees before any tone curve) is then copied into the picture and its mips built.
 
 **How it is shown.**  Each picture has a stand-in ``TextureData`` (a texel; never uploaded)
@@ -43,7 +45,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError
 from engine.render.batch_cull import batch_reach
 from engine.render.gpu import Gpu
-from engine.render.scene_options import ROOT_VIEW, TREE_ROOT
+from engine.render.scene_options import TREE_ROOT
 from engine.render.scene_pass import ScenePass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import HDR_FORMAT, LevelStack
@@ -54,7 +56,6 @@ from engine.render.views import View
 
 MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait a frame: monitors_cut)
 # A picture's root drawn with its camera's ambient occlusion (made once: options are compared by identity).
-_OCCLUDED_ROOT_VIEW = replace(ROOT_VIEW, occlusion=True)
 _OCCLUDED_TREE_ROOT = replace(TREE_ROOT, occlusion=True)
 
 
@@ -155,15 +156,17 @@ class MonitorPictures:
         targets = held.levels.get(0, held.size)
         drawn, repeatable = [view], True
         before = self.renderer.scene_version
+        # As the main view: the root without its glass, then (after its tree, if any) what
+        # a root does last: its waters' foam, its refracting surfaces and its glass.
+        options = _OCCLUDED_TREE_ROOT if occluded else TREE_ROOT
+        self.scene_pass.draw([view], targets, options)
         if surfaces is not None and depth > 0:
-            options = _OCCLUDED_TREE_ROOT if occluded else TREE_ROOT
-            self.scene_pass.draw([view], targets, options)
             settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
             result = self.tree.render(view, held.levels, surfaces, settings, blends, options)
             drawn += [node.view for node in result.views[1:]]
             repeatable = not result.end_views and result.visibility != "predicted"
         else:
-            self.scene_pass.draw([view], targets, _OCCLUDED_ROOT_VIEW if occluded else ROOT_VIEW)
+            self.scene_pass.finish_root(view, targets, options)
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
         held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}
