@@ -18,8 +18,8 @@ REFLECTION_QUALITIES = ("low", "medium", "high")
 
 @dataclass(eq=False)
 class ScreenReflections(TrackedComponent):
-    """Screen-space reflections for the camera whose entity holds it (the active camera's is
-    used): a surface that reflects the sky or a probe (every material's environment
+    """Screen-space reflections for the camera whose entity holds it (the active camera's, and
+    a ``Monitor`` camera's for its picture): a surface that reflects the sky or a probe (every material's environment
     reflection, ``Material.environment_reflection``, and a ``Reflective`` with mode "skybox"
     or "cube") shows what the camera's own image holds along its reflected ray, where the ray
     finds it, in place of the sky's or probe's reflection there: the box standing on a

@@ -63,7 +63,6 @@ class MainViewSystem(esper.Processor):
         self.contact_lamps = 0  # ... and the lamps they darken besides the sun
         # (the root's options, occlusion, reflections, the options drawn with): the last made
         self._screen_options: tuple[SceneOptions | None, bool, bool, SceneOptions] = (None, False, False, TREE_ROOT)
-        self.reflections = True  # the debug overlay's toggle: off, no camera's ScreenReflections is drawn
         self.reflected: ScreenReflections | None = None  # the one drawn this frame (the overlay's line)
         self._said_nothing_reflects: ScreenReflections | None = None  # the one warned about (once)
         self._said_no_sun: ContactShadows | None = None  # the contact shadows warned about having no sun (once)
@@ -83,6 +82,18 @@ class MainViewSystem(esper.Processor):
         if not isinstance(value, bool):
             raise TypeError(f"MainViewSystem.occlusion must be True or False, got {value!r}")
         self.renderer.occlusion.shown = value
+
+    @property
+    def reflections(self) -> bool:
+        """The debug overlay's toggle: off, no camera's ``ScreenReflections`` is drawn, the active
+        camera's or a monitor's (``ScreenReflectionPass.shown``)."""
+        return self.renderer.screen_reflections.shown
+
+    @reflections.setter
+    def reflections(self, value: bool) -> None:
+        if not isinstance(value, bool):
+            raise TypeError(f"MainViewSystem.reflections must be True or False, got {value!r}")
+        self.renderer.screen_reflections.shown = value
 
     def process(self, dt: float) -> None:
         world = self.world

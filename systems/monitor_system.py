@@ -20,7 +20,8 @@ decided here:
   is missing (no entity, no ``Camera`` or no ``Transform`` on it) is said once, and the
   picture kept as it is (black at first); the camera's own ``Fog`` (``_camera_fog``), and
   its ``AmbientOcclusion`` and ``ContactShadows``, found for the picture before its root is
-  drawn (``_occlusion``: ``ScreenOcclusion.draw_picture``);
+  drawn (``_occlusion``: ``ScreenOcclusion.draw_picture``), and its ``ScreenReflections``
+  (``ScreenReflectionPass.begin_picture``);
 - whether its mirrors and portals get views: to ``Monitor.depth`` levels, planned with the
   frame's surfaces as a probe face's tree is, outside the frame's ``ViewBudget``
   (``outside_the_budget``: the monitors' own limits bound them, and drawn before the main
@@ -76,6 +77,7 @@ from components import (
     Monitor,
     Morph,
     ScreenPanel,
+    ScreenReflections,
     Skin,
     Transform,
 )
@@ -197,9 +199,12 @@ class MonitorSystem(esper.Processor):
                 faces = self._screen_faces(monitors)
             with outside_the_budget(stats), self._camera_fog(monitor.camera):
                 occluded = self._occlusion(entity, monitor.camera, view)
+                reflections = self.world.try_get(monitor.camera, ScreenReflections) \
+                    if self.renderer.screen_reflections.shown and monitor.camera is not None \
+                    and self.world.exists(monitor.camera) else None
                 # (still, but drawn on predicted counts: once more exactly, to keep)
                 views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still,
-                                      faces=faces, occluded=occluded)
+                                      faces=faces, occluded=occluded, reflections=reflections)
                 if occluded:
                     self.renderer.occlusion.restore_root()
             stats.monitor_views += views
@@ -294,7 +299,7 @@ class MonitorSystem(esper.Processor):
         captures = self.renderer.probes.moved_on
         values = (self.renderer.monitors.scene_version - captures, self.renderer.drawing_settings(),
                   view.camera_block(), view.layers, monitor.size, monitor.depth, flows, self._world_version,
-                  self.renderer.occlusion.shown)
+                  self.renderer.occlusion.shown, self.renderer.screen_reflections.shown)
         return values, (table, blends.by_surface), captures
 
     def _camera_fog(self, camera: int | None) -> AbstractContextManager[None]:

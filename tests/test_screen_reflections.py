@@ -537,3 +537,68 @@ half_resolution = true
         'ScreenReflections = { quality = "ultra" }\n')
     with pytest.raises(LevelError, match="quality"):
         load_level(tmp_path / "bad.toml")
+
+
+def _watched(world, reflections: ScreenReflections | None) -> dict:
+    """``_scene`` with no reflections on the active camera, and a monitor whose camera (not
+    active) stands where it does with ``reflections``, its picture the frame's size; the
+    screen behind both cameras, out of their sight."""
+    from components import Monitor
+
+    lens = look_from(world, EYE, TARGET)
+    world.get(lens, Camera).active = False
+    if reflections is not None:
+        world.add_component(lens, reflections)
+    names = _scene(world)
+    names["lens"] = lens
+    names["screen"] = world.spawn(Transform(position=(0.0, 1.0, 9.0)), MeshRef(quad(1.6, 0.9)),
+                                  Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0, environment_reflection=0.0),
+                                  Monitor(camera=lens, size=SIZE))
+    return names
+
+
+def test_a_monitors_camera_reflects_in_its_picture_as_the_cameras_view_does(scene):
+    """A monitor's camera with ``ScreenReflections`` (the active camera, at the same place,
+    none): its picture's floor shows the boxes where the ray caster finds them, with the
+    colours the camera sees there, as the active camera's view does with the component; its
+    images are the picture's own (4), let go with the component and with the monitor; the
+    overlay's switch turns them off in the picture too."""
+    from components import Monitor
+    from tests.support import linear_to_srgb8
+
+    def picture(runner, names):
+        return linear_to_srgb8(np.clip(runner.engine.renderer.monitors.read(names["screen"])[..., :3], 0.0, 1.0)
+                               ).astype(np.int32)
+
+    names: dict = {}
+    runner = scene(lambda world: names.update(_watched(world, ScreenReflections())), SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    plain = runner.frame().astype(np.int32)   # (the active camera's frame: no reflections)
+    image = picture(runner, names)
+    _, which, _, _ = _cast(runner)
+    floor = runner.ids() == names["floor"]
+    for index, mask, hit in _reflected_boxes(runner, names, runner.ids()):
+        assert mask.sum() > 150, index
+        difference = np.abs(image[mask] - plain[hit]).max(axis=-1)
+        assert np.mean(difference <= 3) > 0.97, (index, np.percentile(difference, [50, 90, 99]))
+        assert np.mean(np.abs(plain[mask] - plain[hit]).max(axis=-1) > 40) > 0.97
+    misses = _eroded(floor & (which < 0), 2)
+    assert np.abs(image[misses] - plain[misses]).max() <= 2
+    counts = runner.engine.renderer.resource_counts
+    assert counts()["reflection_targets"] == 4   # the picture's alone
+    runner.engine.stages["main"].reflections = False
+    runner.frame()
+    assert np.abs(picture(runner, names) - plain).max() <= 2 and counts()["reflection_targets"] == 0
+    runner.engine.stages["main"].reflections = True
+    runner.frame()
+    assert counts()["reflection_targets"] == 4
+    runner.world.remove_component(names["lens"], ScreenReflections)
+    runner.frame()
+    assert np.abs(picture(runner, names) - plain).max() <= 2 and counts()["reflection_targets"] == 0
+    runner.world.add_component(names["lens"], ScreenReflections(half_resolution=True))
+    runner.frame()
+    assert counts()["reflection_targets"] == 5
+    runner.world.remove_component(names["screen"], Monitor)
+    runner.frame()
+    assert counts()["reflection_targets"] == 0

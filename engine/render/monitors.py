@@ -41,6 +41,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from components.screen_reflections import ScreenReflections
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError
 from engine.render.batch_cull import batch_reach
@@ -55,8 +56,10 @@ from engine.render.view_tree import ViewTree
 from engine.render.views import View
 
 MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait a frame: monitors_cut)
-# A picture's root drawn with its camera's ambient occlusion (made once: options are compared by identity).
-_OCCLUDED_TREE_ROOT = replace(TREE_ROOT, occlusion=True)
+# A picture's root, by (its camera's ambient occlusion found, its screen reflections drawn):
+# made once, as options are compared by identity.
+_ROOTS = {(occluded, reflecting): replace(TREE_ROOT, occlusion=occluded, reflections=reflecting)
+          for occluded in (False, True) for reflecting in (False, True)}
 
 
 @dataclass
@@ -141,15 +144,17 @@ class MonitorPictures:
 
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
              blends: SurfaceBlends = NO_BLENDS, exact: bool = False,
-             faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None, occluded: bool = False) -> int:
+             faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None, occluded: bool = False,
+             reflections: ScreenReflections | None = None) -> int:
         """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
         pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
         mirrors and portals; ``exact``: its visibility exact whatever ``visibility`` says),
         then the colour copied into the picture and its mips built.  ``faces``: the screens
         seen from one side only, as (point, front normal), by monitor (what ``shown`` leaves
         out where a view's eye is behind one).  ``occluded``: the root's ambient occlusion and
-        contact shadows were found (``ScreenOcclusion.draw_picture``), and its draw reads them.
-        Returns the views drawn (the root and its tree's)."""
+        contact shadows were found (``ScreenOcclusion.draw_picture``), and its draw reads them;
+        ``reflections``: its camera's ``ScreenReflections`` (``ScreenReflectionPass.begin_picture``;
+        None: none, and its images are let go).  Returns the views drawn (the root and its tree's)."""
         held = self._pictures[entity]
         if view.size != held.size:
             raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
@@ -158,7 +163,13 @@ class MonitorPictures:
         before = self.renderer.scene_version
         # As the main view: the root without its glass, then (after its tree, if any) what
         # a root does last: its waters' foam, its refracting surfaces and its glass.
-        options = _OCCLUDED_TREE_ROOT if occluded else TREE_ROOT
+        screen = self.scene_pass.screen_reflections
+        if screen is not None:
+            if reflections is not None:
+                screen.begin_picture(entity, view, targets, reflections)
+            else:
+                screen.drop_picture(entity)
+        options = _ROOTS[occluded, reflections is not None and screen is not None]
         self.scene_pass.draw([view], targets, options)
         if surfaces is not None and depth > 0:
             settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
@@ -167,6 +178,8 @@ class MonitorPictures:
             repeatable = not result.end_views and result.visibility != "predicted"
         else:
             self.scene_pass.finish_root(view, targets, options)
+        if screen is not None:
+            screen.end_picture()
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
         held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}
@@ -227,7 +240,10 @@ class MonitorPictures:
         return pixels[::-1].astype(np.float32)
 
     def drop(self, entity: int) -> None:
-        """Let go of monitor ``entity``'s picture (the GPU keeps it while a batch samples it)."""
+        """Let go of monitor ``entity``'s picture (the GPU keeps it while a batch samples it),
+        and its screen reflections' images."""
+        if self.scene_pass.screen_reflections is not None:
+            self.scene_pass.screen_reflections.drop_picture(entity)
         held = self._pictures.pop(entity, None)
         if held is not None:
             held.levels.release()

@@ -42,6 +42,11 @@ draws the composite once a view over its rectangle (``LEVEL_VIEWS`` builds: that
 pixels only, its own projection, a ray that comes to another view's pixels found nothing).
 A level's rays are marched a pixel each (``half_resolution`` is the camera's view's alone).
 
+**Monitors' pictures** (``begin_picture``): a monitor's camera with ``ScreenReflections`` of
+its own reflects in its picture as the active camera's view does, into images of the
+picture's own (kept by monitor), the composite drawn in its root's ``ScenePass.finish_root``;
+its mirror and portal levels reflect nothing.
+
 A pixel is left as it was where the ray leaves the screen (or its view), passes behind what
 is drawn by more than ``thickness``, meets a surface from behind, or reaches the sky; where
 glass or a see-through surface was drawn over it after its weights (the surface id there is
@@ -149,6 +154,13 @@ class ScreenReflectionPass:
         self._pending: tuple[View, ScreenReflections] | None = None
         self._levels: dict[int, _Targets] = {}  # a reflection level's images, by its depth
         self._drawing: _Targets | None = None    # the level drawn now (begin_level until end_level)
+        # A monitor's picture's images, by its monitor, and the picture drawn now (its images,
+        # view and settings: begin_picture until its composite or end_picture).
+        self._pictures: dict[int, _Targets] = {}
+        self._picture: tuple[_Targets, View, ScreenReflections] | None = None
+        # The debug overlay's toggle (``MainViewSystem.reflections``): off, no camera's
+        # reflections are drawn, the active camera's or a monitor's.
+        self.shown = True
         self.composites = 0  # composites drawn so far (tests count them)
         # The debug overlay's "SSR only": the composite writes what the screen gave (the colour
         # found times the confidence, black where nothing was) in place of the picture; the
@@ -161,6 +173,8 @@ class ScreenReflectionPass:
         (``SceneOptions.reflections``; None: none)."""
         if self._drawing is not None:
             return self._drawing.framebuffer
+        if self._picture is not None:
+            return self._picture[0].framebuffer
         return None if self._pending is None or self._targets is None else self._targets.framebuffer
 
     def begin(self, view: View, targets: RenderTargets, settings: ScreenReflections) -> None:
@@ -172,18 +186,46 @@ class ScreenReflectionPass:
         if kept is None or kept.level is not targets:
             self.release_targets()
             kept = self._targets = self._make(targets)
-        if settings.half_resolution and kept.hits is None:
-            size = ((targets.size[0] + 1) // 2, (targets.size[1] + 1) // 2)
-            kept.hits = self.ctx.texture(size, 4, dtype="f4")  # (found pixels past 2048 need more than half floats)
-            kept.hits.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            kept.hits_framebuffer = self.ctx.framebuffer([kept.hits])
-        elif not settings.half_resolution and kept.hits is not None:
-            release_framebuffer(kept.hits_framebuffer)
-            kept.hits.release()
-            kept.hits, kept.hits_framebuffer = None, None
+        self._fit_hits(kept, settings)
         self._pending = (view, settings)
         for depth in [depth for depth in self._levels if depth > settings.reflection_depth]:
             self._levels.pop(depth).release()
+
+    def _fit_hits(self, images: _Targets, settings: ScreenReflections) -> None:
+        """The half-size march's image for ``images`` where ``settings`` march at half size
+        (made once), let go where they do not."""
+        if settings.half_resolution and images.hits is None:
+            size = ((images.level.size[0] + 1) // 2, (images.level.size[1] + 1) // 2)
+            images.hits = self.ctx.texture(size, 4, dtype="f4")  # (found pixels past 2048 need more than half floats)
+            images.hits.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            images.hits_framebuffer = self.ctx.framebuffer([images.hits])
+        elif not settings.half_resolution and images.hits is not None:
+            release_framebuffer(images.hits_framebuffer)
+            images.hits.release()
+            images.hits, images.hits_framebuffer = None, None
+
+    def begin_picture(self, monitor: int, view: View, targets: RenderTargets, settings: ScreenReflections) -> None:
+        """Monitor ``monitor``'s picture, about to be drawn from ``view`` into ``targets`` (its
+        level 0), reflects as its camera's ``settings`` say: as ``begin``, with images of the
+        picture's own (kept by monitor), until its root's composite (``composite``) or
+        ``end_picture``.  Its mirror and portal levels reflect nothing (the camera's view's
+        ``reflection_depth`` is the active camera's alone)."""
+        images = self._pictures.get(monitor)
+        if images is None or images.level is not targets:
+            self.drop_picture(monitor)
+            images = self._pictures[monitor] = self._make(targets)
+        self._fit_hits(images, settings)
+        self._picture = (images, view, settings)
+
+    def end_picture(self) -> None:
+        """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached)."""
+        self._picture = None
+
+    def drop_picture(self, monitor: int) -> None:
+        """Let go of monitor ``monitor``'s picture's images (it went, or its camera reflects nothing)."""
+        images = self._pictures.pop(monitor, None)
+        if images is not None:
+            images.release()
 
     def begin_level(self, depth: int, targets: RenderTargets) -> bool:
         """Reflection level ``depth``, about to be drawn into ``targets`` (its claims made),
@@ -264,6 +306,12 @@ class ScreenReflectionPass:
         """Put the screen's reflections into ``level`` (the main tree's level 0, its mirrors
         and portals composited, its glass not yet drawn), if the main view was drawn for
         them this frame (``begin``); nothing otherwise."""
+        picture = self._picture
+        if picture is not None and picture[0].level is level:   # a monitor's picture's root
+            self._picture = None
+            images, view, settings = picture
+            self._composite(images, [view], view, settings, False)
+            return
         targets, pending = self._targets, self._pending
         if pending is None or targets is None or targets.level is not level:
             return  # (another tree's root: a probe face's)
@@ -348,9 +396,10 @@ class ScreenReflectionPass:
 
     def target_count(self) -> int:
         """Images held now (4 while a camera asks for reflections, 5 at half resolution, and
-        4 for each reflection level that reflects, else 0)."""
+        4 for each reflection level that reflects and each monitor's picture that does (5 at
+        half resolution), else 0)."""
         return (0 if self._targets is None else self._targets.count()) + sum(
-            images.count() for images in self._levels.values())
+            images.count() for images in (*self._levels.values(), *self._pictures.values()))
 
     def level_key(self) -> tuple | None:
         """What this frame's reflection levels reflect with, as values (the reflect stage's
@@ -386,6 +435,9 @@ class ScreenReflectionPass:
 
     def release(self) -> None:
         self.release_targets()
+        for monitor in list(self._pictures):
+            self.drop_picture(monitor)
+        self._picture = None
         self._release_programs()
 
 
