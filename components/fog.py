@@ -98,7 +98,8 @@ class VolumetricFog(TrackedComponent):
     ``Fog``, shadowed by what stands between the air and the sun, for the camera whose
     entity holds it beside its ``Fog`` (as Unreal's volumetric fog, Godot's and HDRP's do
     for their height fog).  Sunbeams through a window, a doorway or a portal's frame, the
-    shadow of a pillar across the haze.
+    shadow of a pillar across the haze.  The active camera's, and a ``Monitor`` camera's for
+    its picture (through its own ``Fog``, else the active camera's).
 
     Along each pixel's ray from the camera to what it shows (the sky: ``distance`` on), the
     air's single scattering of the sun (the brightest ``DirectionalLight``; by night the

@@ -32,18 +32,16 @@ from engine.render.renderer import Renderer
 from engine.render.resample import render_size
 from engine.render.scene_options import TREE_ROOT, SceneOptions
 from engine.render.scene_programs import reflects_environment
-from engine.render.sky import air_light
 from engine.render.targets import RenderTargets
 from engine.render.temporal_aa import jittered
 from engine.render.unlit_mirrors import shading_replaced
 from engine.render.views import View, camera_view
-from engine.resources import ContactLamps, Surfaces, ViewBudget, VolumetricLamps
+from engine.resources import ContactLamps, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import KeptLights, brightest_directional
-from engine.rules.shadow_rules import ShadowCasters
+from engine.rules.light_rules import brightest_directional
+from systems.camera_shafts import camera_shafts
 
 _NO_LAMPS = ContactLamps()
-_NO_SHAFT_LAMPS = VolumetricLamps()
 
 
 class MainViewSystem(esper.Processor):
@@ -172,29 +170,22 @@ class MainViewSystem(esper.Processor):
 
     def _shafts(self, camera: int, view: View, targets: RenderTargets) -> None:
         """The camera's ``VolumetricFog``, begun for this frame's ``view`` (drawn into
-        ``targets``) where its Fog has air and the world a sun or a lamp that lights it (the
-        prepare stage's ``VolumetricLamps``); said once where not."""
-        shafts = self.world.try_get(camera, VolumetricFog)
-        fog = self.world.try_get(camera, Fog) if shafts is not None else None
-        why = None
-        if shafts is not None and (fog is None or fog.density <= 0.0) and not self.renderer.fog.volume_count:
-            why = "has no Fog with a density beside it and no FogVolume stands (the shafts are its air's light)"
-        lamps = self.world.resources.get(VolumetricLamps, _NO_SHAFT_LAMPS)
-        lit_by = air_light(self.world) if shafts is not None else None   # (the sun, or the moon by night)
-        if why is None and shafts is not None and lit_by is None and not lamps.slots:
-            why = ("lights its air with the sun or the moon and the lamps with volumetric > 0, and the world has no "
-                   "DirectionalLight that shines and no such PointLight")
+        ``targets``) where its Fog has air and the world a sun or a lamp that lights it
+        (``camera_shafts``); said once where not."""
+        fog = self.world.try_get(camera, Fog)
+        found, why = camera_shafts(self.world, self.renderer, camera, fog)
         if why is not None:
+            shafts = self.world.get(camera, VolumetricFog)
             if self._said_no_shafts != (shafts, why):
                 self._said_no_shafts = (shafts, why)
                 warnings.warn(ComponentWarning(f"VolumetricFog on entity {camera} {why}, so it adds nothing"),
                               stacklevel=3)
-            shafts = None
-        self.shafts = shafts
-        if shafts is None:
+        self.shafts = None if found is None else found.settings
+        if found is None:
             self.renderer.volumetric_fog.release_targets()
             self._said_lamps_cut = 0
             return
+        lamps = found.lamps
         self.renderer.stats.volumetric_lamps_cut = lamps.cut
         if lamps.cut > self._said_lamps_cut:   # (said again only when more are cut)
             warnings.warn(LightLimitWarning(
@@ -202,27 +193,8 @@ class MainViewSystem(esper.Processor):
                 f"scatter at most {MAX_VOLUMETRIC_LAMPS} at once (the first by the lights' slots), so {lamps.cut} "
                 "light no air (RenderStats.volumetric_lamps_cut)"), stacklevel=3)
         self._said_lamps_cut = lamps.cut
-        kept = self.world.resources.get(KeptLights)
-        slot = kept.directional.index(lit_by.entity) \
-            if lit_by is not None and kept is not None and lit_by.entity in kept.directional else None
-        self.renderer.volumetric_fog.begin(view, targets, shafts, self.renderer.antialias == "taa", lamps,
-                                           None if slot is None else (slot, lit_by.towards),
-                                           self._image_shares(None if slot is None else lit_by.entity, lamps, kept))
-
-    def _image_shares(self, air: int | None, lamps: VolumetricLamps, kept: KeptLights | None) -> tuple[float, ...]:
-        """Each light through a mirror or portal this frame (the shadows stage's
-        ``ShadowCasters.virtual``, by slot): its share of the shafts, its light's: 1 for the
-        image of the sun or moon that lights the air (``air``), a scattered lamp's
-        ``volumetric`` for the lamp's (one of ``lamps``: those past the limit scatter neither),
-        0 for the rest."""
-        casters = self.world.resources.get(ShadowCasters)
-        if casters is None or not casters.virtual:
-            return ()
-        scattered = {kept.point[slot]: share for slot, share in zip(lamps.slots, lamps.scatter, strict=True)} \
-            if kept is not None else {}
-        return tuple(1.0 if light.kind == "directional" and light.light == air
-                     else scattered.get(light.light, 0.0) if light.kind == "point" else 0.0
-                     for light in casters.virtual)
+        self.renderer.volumetric_fog.begin(view, targets, found.settings, self.renderer.antialias == "taa", lamps,
+                                           found.sky_light, found.image_shares)
 
     def _check_reflecting(self, camera: int, reflections: ScreenReflections) -> None:
         """Say once, for a camera's ``ScreenReflections``, when nothing the world draws reflects

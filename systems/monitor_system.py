@@ -20,8 +20,9 @@ decided here:
   is missing (no entity, no ``Camera`` or no ``Transform`` on it) is said once, and the
   picture kept as it is (black at first); the camera's own ``Fog`` (``_camera_fog``), and
   its ``AmbientOcclusion`` and ``ContactShadows``, found for the picture before its root is
-  drawn (``_occlusion``: ``ScreenOcclusion.draw_picture``), and its ``ScreenReflections``
-  (``ScreenReflectionPass.begin_picture``);
+  drawn (``_occlusion``: ``ScreenOcclusion.draw_picture``), its ``ScreenReflections``
+  (``ScreenReflectionPass.begin_picture``) and its ``VolumetricFog`` (``_shafts``:
+  ``VolumetricFogPass.begin_picture``);
 - whether its mirrors and portals get views: to ``Monitor.depth`` levels, planned with the
   frame's surfaces as a probe face's tree is, outside the frame's ``ViewBudget``
   (``outside_the_budget``: the monitors' own limits bound them, and drawn before the main
@@ -80,12 +81,13 @@ from components import (
     ScreenReflections,
     Skin,
     Transform,
+    VolumetricFog,
 )
 from engine.core.errors import MonitorLimitWarning
 from engine.core.frame_io import Output
 from engine.core.world import World
 from engine.frame_stats import BudgetLedger
-from engine.render.monitors import MAX_MONITORS
+from engine.render.monitors import MAX_MONITORS, PictureShafts
 from engine.render.renderer import Renderer
 from engine.render.sky import air_light
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
@@ -95,6 +97,7 @@ from engine.resources import ContactLamps, PicturesDrawn, Surfaces
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import ViewEyes, brightest_directional
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
+from systems.camera_shafts import camera_shafts
 
 
 class MonitorSystem(esper.Processor):
@@ -107,6 +110,7 @@ class MonitorSystem(esper.Processor):
         self.drawn: dict[int, int] = {}         # monitor -> the frame its picture was last drawn (or kept)
         self._said: set[tuple[int, int | None]] = set()  # (monitor, the camera it named) said once
         self._said_no_light: ContactShadows | None = None  # a camera's contact shadows that darken nothing, said
+        self._said_no_shafts: tuple | None = None  # (a camera's VolumetricFog, why it adds nothing), said
         self._cut = 0
         self._keep_still_pictures = True
         self._keys: dict[int, tuple[tuple, tuple, int]] = {}   # monitor -> _still_key at its last drawing
@@ -202,9 +206,10 @@ class MonitorSystem(esper.Processor):
                 reflections = self.world.try_get(monitor.camera, ScreenReflections) \
                     if self.renderer.screen_reflections.shown and monitor.camera is not None \
                     and self.world.exists(monitor.camera) else None
+                shafts = self._shafts(entity, monitor.camera)
                 # (still, but drawn on predicted counts: once more exactly, to keep)
                 views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still,
-                                      faces=faces, occluded=occluded, reflections=reflections)
+                                      faces=faces, occluded=occluded, reflections=reflections, shafts=shafts)
                 if occluded:
                     self.renderer.occlusion.restore_root()
             stats.monitor_views += views
@@ -334,6 +339,30 @@ class MonitorSystem(esper.Processor):
                 "DirectionalLight that shines (a sun) and no PointLight with contact_shadows, and contact shadows "
                 "darken only those lights, so they darken nothing in its picture"), stacklevel=3)
         return occlusion.draw_picture(monitor, view, settings, contact, None if sun is None else -sun.direction, lamps)
+
+    def _shafts(self, monitor: int, camera: int | None) -> PictureShafts | None:
+        """The light shafts of ``monitor``'s picture: its ``camera``'s ``VolumetricFog``, through
+        the fog its picture is drawn through (the camera's own ``Fog``, else the active
+        camera's; ``camera_shafts``); None where it has none, or it adds nothing (said
+        once for each component and reason, as the active camera's is)."""
+        world = self.world
+        if camera is None or not world.exists(camera) or not world.has(camera, VolumetricFog):
+            return None
+        fog = world.try_get(camera, Fog)
+        if fog is None:
+            active = active_camera_parts(world)
+            fog = world.try_get(active[0], Fog) if active is not None else None
+        found, why = camera_shafts(world, self.renderer, camera, fog)
+        if why is not None:
+            said = (world.get(camera, VolumetricFog), why)
+            if self._said_no_shafts != said:
+                self._said_no_shafts = said
+                warnings.warn(ComponentWarning(
+                    f"VolumetricFog on entity {camera}, the camera of monitor {monitor}, {why}, so it adds nothing "
+                    "to its picture"), stacklevel=3)
+        if found is None:
+            return None
+        return found.settings, found.lamps, found.sky_light, found.image_shares
 
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
         """The Camera and Transform of the entity ``monitor`` shows, or None, said once for each

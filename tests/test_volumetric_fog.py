@@ -1166,3 +1166,88 @@ def test_a_lamps_image_through_a_portal_pair_of_two_scales_lights_the_air_beyond
     error = np.abs(added - truth)[lit] / truth[lit]
     assert np.median(error) < 0.03, np.median(error)
     assert np.quantile(error, 0.9) < 0.1, np.quantile(error, 0.9)
+
+
+def _watched_hall(world, shafts: VolumetricFog | None, lens_fog: bool = True) -> dict:
+    """``_hall`` with no shafts on the active camera, and a monitor whose camera (not active)
+    stands where it does with ``shafts`` (and the hall's fog of its own, ``lens_fog``, else it
+    takes the active camera's), its picture the frame's size, the screen out of both cameras'
+    sight."""
+    from components import Camera, Monitor
+
+    camera = _hall(world)
+    lens = look_from(world, EYE, TARGET, fov=70.0)
+    world.get(lens, Camera).active = False
+    if lens_fog:
+        world.add_component(lens, Fog(density=DENSITY, color=(0.02, 0.02, 0.02)))
+    if shafts is not None:
+        world.add_component(lens, shafts)
+    screen = world.spawn(Transform(position=(0.0, 1.0, 14.0)), MeshRef(quad(1.6, 0.9)),
+                         Material(color=(0.0, 0.0, 0.0), roughness=1.0, environment_reflection=0.0),
+                         Monitor(camera=lens, size=SIZE))
+    return {"camera": camera, "lens": lens, "screen": screen}
+
+
+@pytest.mark.parametrize("lens_fog", [True, False], ids=["own_fog", "the_frames_fog"])
+def test_a_monitors_camera_has_its_shafts_in_its_picture(scene, lens_fog):
+    """A monitor's camera with a ``VolumetricFog`` (the active camera, at the same place, none):
+    what the shafts add to its picture is what they add to the camera's own view where the
+    active camera has them (a second path, checked against the ground truth above), whether
+    its air is its own ``Fog`` or the frame's; its image is the picture's own, let go with
+    the component and with the monitor."""
+    from components import Monitor
+
+    settings = VolumetricFog(steps=64)
+    with_shafts = scene(lambda world: _hall(world, settings), SIZE)
+    with_shafts.frame()
+    plain = scene(lambda world: _hall(world), SIZE)
+    plain.frame()
+    expected = _linear(with_shafts).astype(np.float64) - _linear(plain).astype(np.float64)
+    assert expected.max() > 0.1
+
+    def picture(shafts):
+        names: dict = {}
+        runner = scene(lambda world: names.update(_watched_hall(world, shafts, lens_fog)), SIZE)
+        runner.frame()
+        # (rows from the bottom, as _linear's)
+        return runner.engine.renderer.monitors.read(names["screen"])[::-1, :, :3].astype(np.float64), runner, names
+
+    lit, runner, names = picture(VolumetricFog(steps=64))
+    bare, _, _ = picture(None)
+    added = lit - bare
+    # (the two paths' pictures without shafts differ by up to 2e-3 already: half floats, a
+    # texture's copy and a framebuffer's)
+    assert (expected.max(axis=-1) > 0.02).mean() > 0.5   # the shafts cover most of the view
+    close = np.abs(added - expected).max(axis=-1) < 5e-3 + 0.03 * np.abs(expected).max(axis=-1)
+    assert close.mean() > 0.99, close.mean()
+    counts = runner.engine.renderer.resource_counts
+    assert counts()["volumetric_targets"] == 1   # the picture's alone
+    runner.world.remove_component(names["lens"], VolumetricFog)
+    runner.frame()
+    assert counts()["volumetric_targets"] == 0
+    runner.world.add_component(names["lens"], VolumetricFog())
+    runner.frame()
+    assert counts()["volumetric_targets"] == 1
+    runner.world.remove_component(names["screen"], Monitor)
+    runner.frame()
+    assert counts()["volumetric_targets"] == 0
+
+
+def test_a_monitors_camera_with_shafts_and_no_air_says_so_once(scene):
+    """No fog on the monitor's camera nor on the active one: its shafts add nothing, said once."""
+    from components import Monitor
+
+    names: dict = {}
+
+    def build(world):
+        names.update(_watched_hall(world, VolumetricFog(), lens_fog=False))
+        world.remove_component(names["camera"], Fog)
+
+    runner = scene(build, SIZE)
+    with pytest.warns(ComponentWarning, match=r"the camera of monitor \d+, has no Fog .*adds nothing to its picture"):
+        runner.frame()
+    runner.world.get(names["screen"], Monitor).size = (80, 48)   # (drawn again: nothing more said)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runner.frame()
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 0

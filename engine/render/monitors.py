@@ -41,6 +41,7 @@ import moderngl
 import numpy as np
 from pyglm import glm
 
+from components.fog import VolumetricFog
 from components.screen_reflections import ScreenReflections
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError
@@ -54,8 +55,13 @@ from engine.render.tree_walk import TreeSettings
 from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import ViewTree
 from engine.render.views import View
+from engine.resources import VolumetricLamps
 
 MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait a frame: monitors_cut)
+# A picture's light shafts: its camera's VolumetricFog, the lamps it scatters, the sun's or
+# moon's slot and way, the images' shares (VolumetricFogPass.begin_picture's arguments).
+PictureShafts = tuple[VolumetricFog, VolumetricLamps, tuple[int, tuple[float, float, float]] | None,
+                      tuple[float, ...]]
 # A picture's root, by (its camera's ambient occlusion found, its screen reflections drawn):
 # made once, as options are compared by identity.
 _ROOTS = {(occluded, reflecting): replace(TREE_ROOT, occlusion=occluded, reflections=reflecting)
@@ -145,7 +151,7 @@ class MonitorPictures:
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
              blends: SurfaceBlends = NO_BLENDS, exact: bool = False,
              faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None, occluded: bool = False,
-             reflections: ScreenReflections | None = None) -> int:
+             reflections: ScreenReflections | None = None, shafts: PictureShafts | None = None) -> int:
         """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
         pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
         mirrors and portals; ``exact``: its visibility exact whatever ``visibility`` says),
@@ -154,7 +160,9 @@ class MonitorPictures:
         out where a view's eye is behind one).  ``occluded``: the root's ambient occlusion and
         contact shadows were found (``ScreenOcclusion.draw_picture``), and its draw reads them;
         ``reflections``: its camera's ``ScreenReflections`` (``ScreenReflectionPass.begin_picture``;
-        None: none, and its images are let go).  Returns the views drawn (the root and its tree's)."""
+        None: none, and its images are let go); ``shafts``: its camera's light shafts
+        (``VolumetricFogPass.begin_picture``'s settings, lamps, sky light and shares; None: none,
+        and its image is let go).  Returns the views drawn (the root and its tree's)."""
         held = self._pictures[entity]
         if view.size != held.size:
             raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
@@ -169,6 +177,12 @@ class MonitorPictures:
                 screen.begin_picture(entity, view, targets, reflections)
             else:
                 screen.drop_picture(entity)
+        air = self.scene_pass.volumetric_fog
+        if air is not None:
+            if shafts is not None:
+                air.begin_picture(entity, view, targets, *shafts)
+            else:
+                air.drop_picture(entity)
         options = _ROOTS[occluded, reflections is not None and screen is not None]
         self.scene_pass.draw([view], targets, options)
         if surfaces is not None and depth > 0:
@@ -180,6 +194,8 @@ class MonitorPictures:
             self.scene_pass.finish_root(view, targets, options)
         if screen is not None:
             screen.end_picture()
+        if air is not None:
+            air.end_picture()
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
         held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}
@@ -244,6 +260,8 @@ class MonitorPictures:
         and its screen reflections' images."""
         if self.scene_pass.screen_reflections is not None:
             self.scene_pass.screen_reflections.drop_picture(entity)
+        if self.scene_pass.volumetric_fog is not None:
+            self.scene_pass.volumetric_fog.drop_picture(entity)
         held = self._pictures.pop(entity, None)
         if held is not None:
             held.levels.release()

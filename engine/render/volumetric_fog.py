@@ -45,6 +45,12 @@ of), a ray a pixel.  The air between the eye and the surface is its parent's, an
 composite fogs the level's light as a whole over that stretch, so the shafts a mirror shows
 are dimmed as what it shows is.
 
+**Monitors' pictures** (``begin_picture``): a monitor's camera with a ``VolumetricFog`` of its
+own gets the same two draws in its picture's root, before its glass, in an image of the
+picture's own (kept by monitor), through the fog the picture is drawn through (the camera's
+own ``Fog``, or the frame's); never jittered, marched at every drawing (a picture nothing it
+shows changed is kept whole); its mirror and portal levels get none.
+
 The images are made the first frame a camera asks (a level's the first frame it is reached)
 and let go when none does (a level's when the depth no longer reaches it or the world has
 no mirror or portal left: ``release_levels``).
@@ -153,6 +159,10 @@ class VolumetricFogPass:
         self._sky_light: tuple[int, tuple[float, float, float]] | None = None   # begin's ``sky_light``
         self.cloud_stride = 1   # the march's steps between two reads of the clouds' share (the last march's)
         self.keep_still = True  # False: marched every frame (what the still fuzz compares with)
+        # A monitor's picture's image, by its monitor, and the picture drawn now: (its images,
+        # its ``begin``'s pending, its sky light), from begin_picture to its root's composite.
+        self._pictures: dict[int, _Images] = {}
+        self._picture: tuple[_Images, tuple, tuple[int, tuple[float, float, float]] | None] | None = None
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
               lamps: VolumetricLamps = _NO_LAMPS,
@@ -181,6 +191,33 @@ class VolumetricFogPass:
             self._levels.pop(depth).release()
         self._frame += 1
 
+    def begin_picture(self, monitor: int, view: View, targets: RenderTargets, settings: VolumetricFog,
+                      lamps: VolumetricLamps = _NO_LAMPS,
+                      sky_light: tuple[int, tuple[float, float, float]] | None = None,
+                      image_shares: tuple[float, ...] = ()) -> None:
+        """Monitor ``monitor``'s picture, about to be drawn from ``view`` into ``targets`` (its
+        level 0), gets its camera's shafts (the arguments as ``begin``'s, never jittered), into
+        an image of the picture's own (kept by monitor), marched and added at its root's
+        composite (``composite``; ``end_picture`` after the draw).  Its mirror and portal
+        levels get none."""
+        ratio = 2 if settings.half_resolution else 1
+        images = self._pictures.get(monitor)
+        if images is None or images.level is not targets or images.ratio != ratio:
+            self.drop_picture(monitor)
+            images = self._pictures[monitor] = self._make(targets, ratio)
+        self._picture = (images, (view, settings, False, lamps, image_shares if any(image_shares) else ()),
+                         sky_light)
+
+    def end_picture(self) -> None:
+        """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached)."""
+        self._picture = None
+
+    def drop_picture(self, monitor: int) -> None:
+        """Let go of monitor ``monitor``'s picture's image (it went, or its camera has no shafts)."""
+        images = self._pictures.pop(monitor, None)
+        if images is not None:
+            images.release()
+
     def _make(self, targets: RenderTargets, ratio: int) -> _Images:
         size = (-(-targets.size[0] // ratio), -(-targets.size[1] // ratio))
         light = self.ctx.texture(size, 4, dtype="f4")  # (the ray's length in metres beside the light)
@@ -191,6 +228,12 @@ class VolumetricFogPass:
         """March and add this frame's shafts into ``level`` (the main tree's level 0, its
         mirrors and portals composited, its glass not yet drawn), if its view was begun
         this frame; nothing otherwise (another tree's root: a probe face's)."""
+        picture = self._picture
+        if picture is not None and picture[0].level is level:   # a monitor's picture's root
+            self._picture = None
+            images, pending, sky_light = picture
+            self._draw(images, [pending[0]], pending, False, True, sky_light)
+            return
         images, pending = self._images, self._pending
         if pending is None or images is None or images.level is not level:
             return
@@ -199,7 +242,7 @@ class VolumetricFogPass:
         key = None if jittered else self._still_key(view, images, settings, lamps, shares)
         march = not (self.keep_still and key is not None and key == self._marched_from)
         self._marched_from = key
-        self._draw(images, [view], pending, False, march)
+        self._draw(images, [view], pending, False, march, self._sky_light)
 
     def composite_level(self, depth: int, views: Sequence[View], level: RenderTargets) -> None:
         """March and add this frame's shafts into reflection level ``depth``'s ``level``
@@ -213,7 +256,7 @@ class VolumetricFogPass:
             if images is not None:
                 images.release()
             images = self._levels[depth] = self._make(level, 1)
-        self._draw(images, views, pending, True, True)
+        self._draw(images, views, pending, True, True, self._sky_light)
 
     def _still_key(self, view: View, images: _Images, settings: VolumetricFog, lamps: VolumetricLamps,
                    shares: tuple[float, ...]) -> tuple:
@@ -229,10 +272,10 @@ class VolumetricFogPass:
                 ripples.version if ripples.caustic_defines else -1)
 
     def _draw(self, images: _Images, views: Sequence[View], pending: tuple, level_views: bool,
-              march_again: bool) -> None:
+              march_again: bool, sky_light: tuple[int, tuple[float, float, float]] | None) -> None:
         """The march into ``images`` (unless not ``march_again``: the image stands) and the
-        filter into its level's colour (``pending``: ``begin``'s), one draw each over the
-        view's pixels, or with ``level_views`` one a view over its rectangle."""
+        filter into its level's colour (``pending``: ``begin``'s, ``sky_light`` with it), one
+        draw each over the view's pixels, or with ``level_views`` one a view over its rectangle."""
         _, settings, jittered, lamps, shares = pending
         ctx, gpu = self.ctx, self.gpu
         level = images.level
@@ -259,7 +302,6 @@ class VolumetricFogPass:
                 tiles[slot, :3] = tile
             spare = MAX_VOLUMETRIC_LAMPS - len(lamps.slots)
             clouds = gpu.clouds.shape
-            sky_light = self._sky_light
             self.cloud_stride = 1 if clouds is None or sky_light is None else \
                 cloud_stride(clouds, settings.distance / settings.steps, np.array(sky_light[1], np.float64))
             self._write(march.program, {**shared, "scatter": settings.intensity, "albedo": tuple(settings.albedo),
@@ -350,8 +392,8 @@ class VolumetricFogPass:
 
     def target_count(self) -> int:
         """Images held now (1 while a camera asks for shafts, and 1 for each reflection level
-        they reach, else 0)."""
-        return (0 if self._images is None else 1) + len(self._levels)
+        they reach and each monitor's picture that has them, else 0)."""
+        return (0 if self._images is None else 1) + len(self._levels) + len(self._pictures)
 
     def level_key(self) -> tuple | None:
         """What this frame's reflection levels get shafts with, as values (the reflect
@@ -384,6 +426,9 @@ class VolumetricFogPass:
 
     def release(self) -> None:
         self.release_targets()
+        for monitor in list(self._pictures):
+            self.drop_picture(monitor)
+        self._picture = None
         self._release_programs()
 
 
