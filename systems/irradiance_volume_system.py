@@ -14,7 +14,10 @@ places or draws its captures changes (its tiles then hold nothing the new grid m
 scene is lit without the grid until the new bake is whole); all of them again, the grid
 lighting the scene meanwhile, after ``request()``; and with ``refresh = "continuous"`` round
 and round the grid for as long as it stands; with ``refresh = "scripted"`` only after
-``request()``, its first bake too.  ``points_per_frame`` a frame, each six views
+``request()``, its first bake too; and a ``once`` or ``scripted`` volume's again, the grid
+lighting meanwhile, when a screen within ``far`` of its grid has its first ``Monitor``
+picture drawn after the bake began (``PicturesDrawn.first``: its captures showed the screen
+black, which its light would keep for good).  ``points_per_frame`` a frame, each six views
 of the frame's view budget (``ViewBudget.views``): the points past it wait for the next
 frame (under a budget below six views, one point a frame is drawn past it, when it is the
 frame's first view, so the bake ends); and within its capture time (``ViewBudget.probe_ms``,
@@ -41,13 +44,15 @@ import esper
 import numpy as np
 from pyglm import glm
 
-from components import IrradianceVolume, Transform
+from components import IrradianceVolume, MeshRef, Transform
 from components.limits import MAX_IRRADIANCE_VOLUMES
 from engine.core.errors import VolumeLimitWarning
 from engine.core.world import World
 from engine.render.irradiance import VolumeGrid
 from engine.render.probes import face_view
 from engine.render.renderer import Renderer
+from engine.resources import PicturesDrawn
+from engine.rules.probe_rules import pose_bounds, world_bounds
 from engine.rules.volume_rules import capture_margin, pushed_out, solid_boxes
 
 FACES = 6  # views a point's capture spends of the view budget
@@ -82,6 +87,7 @@ class VolumeBake:
         self.requests = 0
         self.points_moved = 0                # points of its last bake captured from outside a solid object
         self.round = 1                       # the round of its bake under way (IrradianceVolume.bounces)
+        self.taken = 0                       # points captured since its bake last started
 
     @property
     def key(self) -> int:
@@ -100,6 +106,7 @@ class IrradianceVolumeSystem(esper.Processor):
         self._said_more = False
         self.points_captured = 0               # over the run (tests, the overlay)
         self.bakes = 0                         # whole grids captured, over the run
+        self._pictures = 0                     # PicturesDrawn.count when last looked at
 
     @property
     def points_moved(self) -> int:
@@ -116,12 +123,15 @@ class IrradianceVolumeSystem(esper.Processor):
         kept = dict(volumes[:MAX_IRRADIANCE_VOLUMES])
         for owner in [owner for owner in self.volumes if owner not in kept]:
             self._drop(self.volumes.pop(owner))
+        first = self._first_pictures()
         for owner, volume in kept.items():
             bake = self.volumes.get(owner)
             if bake is None:
                 taken = {b.slot for b in self.volumes.values()}
                 bake = self.volumes[owner] = VolumeBake(owner, next(s for s in range(MAX_IRRADIANCE_VOLUMES)
                                                                     if s not in taken))
+            if first and self._showed_black(bake, volume, first):
+                self._start(bake, volume.near)   # (the grid lights the scene meanwhile, as after a request)
             self._update(bake, volume)
         if not any(bake.due and bake.round > 1 for bake in self.volumes.values()):
             self.renderer.irradiance.end_bounces()   # (no bounce round under way: the table's copy let go)
@@ -134,8 +144,9 @@ class IrradianceVolumeSystem(esper.Processor):
         table = self.renderer.irradiance
         if capture != bake.capture:
             # A new grid: its tiles hold nothing it means until every point is captured.
+            if bake.capture is not None:   # (a new volume's requests so far ask for its first bake)
+                bake.requests = volume.requests
             bake.capture, bake.grid, bake.whole = capture, grid, False
-            bake.requests = volume.requests
             bake.due = []
             if volume.refresh != "scripted":  # (a scripted one waits for its request)
                 self._start(bake, volume.near)
@@ -161,12 +172,43 @@ class IrradianceVolumeSystem(esper.Processor):
             bake.due = grid_points(grid.points)  # another round, from the places this grid's bake found
         self._capture_due(bake, volume)
 
+    def _first_pictures(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The world boxes of the screens whose ``Monitor`` pictures were first drawn since the
+        last look (``PicturesDrawn.first``: the monitor stage comes later in the frame)."""
+        world = self.world
+        pictures = world.resources.get(PicturesDrawn)
+        if pictures is None or pictures.count == self._pictures:
+            return []
+        self._pictures = pictures.count
+        boxes = []
+        for entity in sorted(pictures.first):
+            mesh_ref = world.try_get(entity, MeshRef) if world.exists(entity) else None
+            transform = world.try_get(entity, Transform) if mesh_ref is not None else None
+            if transform is not None:
+                boxes.append(world_bounds(mesh_ref.mesh, transform.world, pose_bounds(world, entity, mesh_ref.mesh)))
+        return boxes
+
+    @staticmethod
+    def _showed_black(bake: VolumeBake, volume: IrradianceVolume, screens: list[tuple[np.ndarray, np.ndarray]]
+                      ) -> bool:
+        """Whether a ``once`` or ``scripted`` volume's bake captured points before a screen of
+        ``screens`` had its first picture, within ``far`` of its grid (its captures may show
+        the screen black, and would for good): it is baked again.  A continuous one's next
+        round captures it anyway."""
+        if volume.refresh == "continuous" or bake.grid is None:
+            return False
+        if not bake.whole and not bake.taken:
+            return False   # (nothing captured yet: the bake to come sees the picture)
+        low, high = np.array(bake.grid.low) - volume.far, np.array(bake.grid.high) + volume.far
+        return any(bool(np.all(lo <= high) and np.all(hi >= low)) for lo, hi in screens)
+
     def _start(self, bake: VolumeBake, near: float) -> None:
         """A bake of every point of its grid, each captured from its place or from outside the
         solid object it lies in (``volume_rules.pushed_out``)."""
         grid = bake.grid
         bake.due = grid_points(grid.points)
         bake.round = 1
+        bake.taken = 0
         places = np.array([grid.position(index) for index in bake.due])
         low, high = np.array(grid.low), np.array(grid.high)
         margin = capture_margin(near)
@@ -203,6 +245,7 @@ class IrradianceVolumeSystem(esper.Processor):
             drawn += 1
         count = drawn
         del bake.due[:count]
+        bake.taken += count
         stats.views_spent += FACES * count
         stats.volume_points += count
         self.points_captured += count

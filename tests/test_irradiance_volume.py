@@ -415,7 +415,8 @@ def test_a_continuous_volume_with_bounces_settles_to_every_bounce(scene):
 
 
 def test_a_scripted_volume_bakes_only_when_asked(scene):
-    """``refresh="scripted"``: nothing captured until ``request()``, then the whole grid."""
+    """``refresh="scripted"``: nothing captured until ``request()``, then the whole grid (a
+    request made before its first frame too)."""
     volume = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8, refresh="scripted")
     runner = scene(floor_scene(volume), (32, 24))
     runner.frame()
@@ -424,6 +425,14 @@ def test_a_scripted_volume_bakes_only_when_asked(scene):
     volume.request()
     runner.frame()
     assert runner.stats.volume_points == 8 and runner.engine.renderer.irradiance.volumes
+    # A request made before the volume's first frame asks for that bake too.
+    asked = IrradianceVolume(size=(2.0, 2.0, 2.0), points=(2, 2, 2), points_per_frame=8, refresh="scripted")
+    asked.request()
+    runner = scene(floor_scene(asked), (32, 24))
+    runner.frame()
+    assert runner.stats.volume_points == 8
+    runner.frame()
+    assert runner.stats.volume_points == 0
 
 
 def test_removing_the_volume_releases_its_cube_and_its_light(scene):
@@ -552,3 +561,51 @@ def test_the_editor_outlines_the_volumes_box_and_marks_it():
     assert outer == corners and inner == inside
     assert [m.kind for m in markers(world, view_proj, (640, 480)) if m.entity == entity] == ["volume"]
     world.close()
+
+
+@pytest.mark.parametrize("refresh", ["once", "scripted"])
+def test_a_bake_that_showed_a_screen_before_its_first_picture_is_baked_again(scene, refresh):
+    """The closed room with a screen on its floor facing up, its monitor's camera inside
+    looking at the yellow wall.  The volume's first bake (all its points on the first frame)
+    is drawn before the monitors: the screen black in it.  The next frame the picture is there
+    and the bake is taken again (``PicturesDrawn.first``): the grid then equals the first bake
+    of a volume made only after the picture was drawn, and differs from the black screen's
+    where the screen's light reaches."""
+    from components import Camera, Monitor
+    from engine.assets.mesh import quad
+
+    volume_at = (0.0, 0.0, 0.0)
+
+    def build(world, with_volume: bool, held: dict):
+        room(world)
+        look_from(world, (0.0, 0.0, 1.0), (0.0, 0.0, -1.0))
+        lens = look_from(world, (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), fov=60.0)   # the yellow wall, above
+        world.get(lens, Camera).active = False
+        world.spawn(Transform(position=(0.0, -ROOM + 0.01, 0.0), rotation=glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))),
+                    MeshRef(quad(2.0, 2.0)), Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0),
+                    Monitor(camera=lens, size=(32, 32), brightness=4.0))
+        if with_volume:
+            held["volume"] = IrradianceVolume(size=(2.0, 1.6, 1.2), points=(3, 2, 2), points_per_frame=12,
+                                              refresh=refresh)
+            world.spawn(Transform(position=volume_at), held["volume"])
+            if refresh == "scripted":
+                held["volume"].request()
+
+    early, late = {}, {}
+    runner = scene(lambda world: build(world, True, early), (32, 24))
+    twin = scene(lambda world: build(world, False, late), (32, 24))
+    runner.frame()
+    twin.frame()
+    black = volume_light(runner, early["volume"], volume_at).copy()
+    late["volume"] = IrradianceVolume(size=(2.0, 1.6, 1.2), points=(3, 2, 2), points_per_frame=12, refresh=refresh)
+    twin.world.spawn(Transform(position=volume_at), late["volume"])
+    if refresh == "scripted":
+        late["volume"].request()
+    runner.frame()
+    twin.frame()
+    assert runner.stats.volume_points == 12 and twin.stats.volume_points == 12, twin.stats.volume_points
+    baked = volume_light(runner, early["volume"], volume_at)
+    np.testing.assert_allclose(baked, volume_light(twin, late["volume"], volume_at), atol=1e-5)
+    assert abs(baked[:, 0] - black[:, 0]).max() > 0.1   # the lower points see the lit screen below them
+    runner.frame()
+    assert runner.stats.volume_points == 0   # (once: nothing more)
