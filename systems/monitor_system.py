@@ -11,7 +11,8 @@ decided here:
   next (counted in ``RenderStats.monitors_cut``, said when the count grows; a picture kept,
   below, is not drawn and not counted);
 - whether it can be seen, for a ``Monitor.update`` "when_seen" (``_seen``): its screen
-  reached by this frame's main view, last frame's mirror and portal views (``ViewEyes``), the
+  reached by this frame's main view, its first level of mirror and portal views
+  (``_first_level``, conservatively), last frame's deeper ones (``ViewEyes``), the
   probes' faces recaptured after this frame's present (``ProbeSchedule``) or the last
   drawing's views of a monitor itself seen, or shown on a ``ScreenPanel``; unseen,
   it is not drawn and stays due (``RenderStats.monitors_unseen``);
@@ -233,12 +234,13 @@ class MonitorSystem(esper.Processor):
 
     def _seen(self, faces: dict[int, tuple[glm.vec3, glm.vec3]]) -> set[int]:
         """The monitors whose screens a view may see: this frame's main view (the active
-        camera's, at the output's aspect), last frame's mirror and portal views
-        (``ViewEyes``) or the probes' faces recaptured after this frame's present (the
-        schedule's undrawn faces: a chrome ball's reflection of the screen) or captured first
-        this frame (their faces are asked for again once the picture is: ``PicturesDrawn``) may see them, or
-        they are on a ``ScreenPanel``; then, over and over, those the last drawings of the
-        pictures seen may see."""
+        camera's, at the output's aspect) and its first level of mirror and portal views
+        (``_first_level``), last frame's mirror and portal views (``ViewEyes``) or the
+        probes' faces recaptured after this frame's present (the schedule's undrawn faces: a
+        chrome ball's reflection of the screen) or captured first this frame (their faces are
+        asked for again once the picture is: ``PicturesDrawn``) may see them, or they are on a
+        ``ScreenPanel``; then, over and over, those the last drawings of the pictures seen may
+        see."""
         world = self.world
         views = []
         output, camera = world.resources.get(Output), active_camera_parts(world)
@@ -246,6 +248,7 @@ class MonitorSystem(esper.Processor):
             _, cam, cam_t = camera
             views.append(camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size,
                                      ortho_height=cam.ortho_height if cam.projection == "orthographic" else None))
+            views += self._first_level(views[0])
         eyes = world.resources.get(ViewEyes)
         if eyes is not None:
             views += [node.view for node in eyes.views if node.level > 0]
@@ -267,6 +270,46 @@ class MonitorSystem(esper.Processor):
             found = pictures.screens_reaching(pictures.last_views(found), faces) - seen
             seen = seen | found
         return seen
+
+    def _first_level(self, main: View) -> list[View]:
+        """This frame's first level of mirror and portal views below ``main`` (the active
+        camera's), as the reflect stage will plan them, conservatively: for each mirror or
+        portal (a water's top or underside) whose front the eye is before and whose corners
+        fall on the screen, the camera carried through it (``SurfaceState.carry``), looking
+        out of its exit plane, over the screen's rectangle the corners cover (all of it where
+        one lies behind the eye).  A screen first seen in a mirror is so drawn that frame;
+        deeper levels are last frame's (``ViewEyes``)."""
+        surfaces = self.world.resources.get(Surfaces)
+        if surfaces is None:
+            return []
+        states = [*surfaces.mirrors.values(), *surfaces.portals.values(), *surfaces.undersides.values()]
+        if not states:
+            return []
+        width, height = main.size
+        # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
+        view_proj = np.array(main.view_proj.to_list(), np.float64)
+        eye = main.eye
+        views = []
+        for state in states:
+            plane = state.plane
+            if not state.enabled or glm.dot(glm.vec3(plane), eye) + plane.w <= 0.0:
+                continue   # (off, or its back to the eye)
+            clip = np.asarray(state.corners, np.float64) @ view_proj
+            if (clip[:, 3] <= 1e-6).any():
+                rect = (0, 0, width, height)
+            else:
+                ndc = clip[:, :2] / clip[:, 3:4]
+                low = np.floor((np.clip(ndc.min(axis=0), -1.0, 1.0) * 0.5 + 0.5) * (width, height))
+                high = np.ceil((np.clip(ndc.max(axis=0), -1.0, 1.0) * 0.5 + 0.5) * (width, height))
+                if (high <= low).any() or (ndc.max(axis=0) < -1.0).any() or (ndc.min(axis=0) > 1.0).any():
+                    continue   # (off the screen)
+                rect = (int(low[0]), int(low[1]), int(high[0] - low[0]), int(high[1] - low[1]))
+            carry = state.carry
+            views.append(View(view=main.view * glm.inverse(carry), proj=main.proj,
+                              eye=glm.vec3(carry * glm.vec4(eye, 1.0)), size=main.size,
+                              name=f"{state.kind} {state.entity} (seen first)", clip_plane=state.exit_plane,
+                              mirrored=state.kind == "mirror", scissor=rect, layers=state.layers))
+        return views
 
     def _screen_faces(self, monitors: list[tuple[int, Monitor]]) -> dict[int, tuple[glm.vec3, glm.vec3]]:
         """Each screen that shows its picture on one side only, as (a point, its front's unit
