@@ -41,9 +41,11 @@ the camera (the box then reflecting the sky).  The change is one of:
 
 Now and then a monitor stands in the level too: a screen the camera sees, its picture drawn
 from a lens watching the box and the pair, to depth 0-2, drawn always or when seen
-(``monitor``); the drawing engine draws every due picture (``MonitorSystem.keep_still_pictures``
-off), so a picture kept must equal one drawn again.  Its Monitor, Material and Transform, and the lens's Camera and
-Transform, are among the components written, and both among the entities removed.
+(``monitor``), the lens with the camera's ambient occlusion, screen reflections and light
+shafts where the case gives the camera them; the drawing engine draws every due picture
+(``MonitorSystem.keep_still_pictures`` off), so a picture kept must equal one drawn again.
+Its Monitor, Material and Transform, and the lens's Camera and Transform, are among the
+components written, and both among the entities removed.
 
 A case passes when a refused write is refused with a ``ComponentValueError`` naming
 ``Class.field`` in both engines, and every frame of both renders with no NaN in the HDR
@@ -369,6 +371,13 @@ def _spawn(world, case: StillCase) -> dict[str, int]:
         lens = glm.vec3(1.5, 1.8, -2.0)
         named["lens"] = world.spawn(Transform(position=lens, rotation=look_rotation(glm.vec3(0.8, 0.6, 0.0) - lens)),
                                     Camera(fov_y=50.0, active=False))
+        # The camera's screen effects on the lens too (its picture's own: kept, it must equal one drawn).
+        if case.occlusion:
+            world.add_component(named["lens"], AmbientOcclusion(radius=0.8))
+        if case.reflections:
+            world.add_component(named["lens"], ScreenReflections(thickness=0.5))
+        if case.fog and case.shafts:
+            world.add_component(named["lens"], VolumetricFog(steps=8))
         screen = glm.vec3(-0.9, 1.5, -1.4)
         facing = look_rotation(screen - glm.vec3(0.4, 1.5, 1.2))   # (its +z, its face, to the camera)
         named["monitor"] = world.spawn(Transform(position=screen, rotation=facing),
