@@ -332,16 +332,22 @@ def _filtered(marched: np.ndarray, reach: np.ndarray, ratio: int, counts: np.nda
         return total / weights   # (NaN where no texel may be taken)
 
 
+def _added(scene, settings: VolumetricFog) -> tuple[np.ndarray, object]:
+    """What ``settings``' shafts add to the hall's HDR colour (linear, rows from the bottom),
+    and the runner drawn with them."""
+    with_shafts = scene(lambda world: _hall(world, settings), SIZE)
+    with_shafts.frame()
+    plain = scene(lambda world: _hall(world), SIZE)
+    plain.frame()
+    return _linear(with_shafts).astype(np.float64) - _linear(plain).astype(np.float64), with_shafts
+
+
 def test_the_filter_adds_the_light_to_every_pixel(scene):
     """The view's colour with shafts less the same view's without is the march's light
     filtered up to each pixel: by the texels about it, weighed by their distance and their
     rays' lengths against the pixel's own (its ray's length found by the slab tests)."""
     settings = VolumetricFog(steps=64)
-    with_shafts = scene(lambda world: _hall(world, settings), SIZE)
-    with_shafts.frame()
-    plain = scene(lambda world: _hall(world), SIZE)
-    plain.frame()
-    added = _linear(with_shafts).astype(np.float64) - _linear(plain).astype(np.float64)
+    added, with_shafts = _added(scene, settings)
     _, _, reach = _rays(with_shafts, 1, settings.distance)
     expected = _filtered(marched_light(with_shafts).astype(np.float64), reach, 2)
     assert np.allclose(added[..., 0], added[..., 2], atol=2e-3)
@@ -1197,12 +1203,7 @@ def test_a_monitors_camera_has_its_shafts_in_its_picture(scene, lens_fog):
     the component and with the monitor."""
     from components import Monitor
 
-    settings = VolumetricFog(steps=64)
-    with_shafts = scene(lambda world: _hall(world, settings), SIZE)
-    with_shafts.frame()
-    plain = scene(lambda world: _hall(world), SIZE)
-    plain.frame()
-    expected = _linear(with_shafts).astype(np.float64) - _linear(plain).astype(np.float64)
+    expected, _ = _added(scene, VolumetricFog(steps=64))
     assert expected.max() > 0.1
 
     def picture(shafts):

@@ -109,6 +109,7 @@ from engine.render.bindings import (
     set_scissor,
 )
 from engine.render.gpu import Gpu
+from engine.render.picture_images import PictureImages
 from engine.render.scene_pass import ScenePass, stepped_scissor
 from engine.render.spot_cookies import SCENE_SAMPLERS
 from engine.render.targets import RenderTargets, check_target_size, release_framebuffer
@@ -211,7 +212,7 @@ class ScreenOcclusion:
         # not run again and the image stands.
         self._found_from: tuple | None = None
         self.keep_still = True  # False: found every frame (what the still fuzz compares with)
-        self._pictures: dict[int, _Targets] = {}  # a monitor's picture's images, by its monitor (draw_picture)
+        self._pictures: PictureImages[_Targets] = PictureImages()  # monitors' pictures' (draw_picture)
         # The debug overlay's toggle (``MainViewSystem.occlusion``): off, no camera's occlusion
         # or contact shadows are found, the active camera's or a monitor's.
         self.shown = True
@@ -331,10 +332,8 @@ class ScreenOcclusion:
             lamps = ()
         half = (settings or contact).half_resolution
         want = (max(1, view.size[0] // 2), max(1, view.size[1] // 2)) if half else view.size
-        images = self._pictures.get(monitor)
-        if images is None or images.size != want or images.view_size != view.size:
-            self.drop_picture(monitor)
-            images = self._pictures[monitor] = self._make_targets(view.size, half, guard=True)
+        images = self._pictures.kept(monitor, lambda kept: kept.size == want and kept.view_size == view.size,
+                                     lambda: self._make_targets(view.size, half, guard=True))
         guard = _guarded(view, images.size, images.margin)
         self.scene_pass.draw_depth_normals([guard], images.prepass, guard.size)
         self._find(images, [view], guard.proj, settings, contact, sun, lamps, 0)
@@ -343,9 +342,7 @@ class ScreenOcclusion:
 
     def drop_picture(self, monitor: int) -> None:
         """Let go of monitor ``monitor``'s picture's images (it went, or its camera finds none)."""
-        images = self._pictures.pop(monitor, None)
-        if images is not None:
-            images.release()
+        self._pictures.drop(monitor)
 
     def usable_lamps(self, lamps: Sequence[tuple[float, float, float]]) -> tuple:
         """``lamps`` (the contact lamps' positions), or none where the context lacks the texture
@@ -534,8 +531,7 @@ class ScreenOcclusion:
 
     def release(self) -> None:
         self.release_targets()
-        for monitor in list(self._pictures):
-            self.drop_picture(monitor)
+        self._pictures.release()
         self._release_programs()
 
 

@@ -79,6 +79,7 @@ from engine.render.bindings import (
     bind_texture,
     set_scissor,
 )
+from engine.render.picture_images import PictureImages
 from engine.render.targets import HDR_FORMAT, RenderTargets, release_framebuffer
 from engine.render.views import View
 
@@ -154,10 +155,9 @@ class ScreenReflectionPass:
         self._pending: tuple[View, ScreenReflections] | None = None
         self._levels: dict[int, _Targets] = {}  # a reflection level's images, by its depth
         self._drawing: _Targets | None = None    # the level drawn now (begin_level until end_level)
-        # A monitor's picture's images, by its monitor, and the picture drawn now (its images,
-        # view and settings: begin_picture until its composite or end_picture).
-        self._pictures: dict[int, _Targets] = {}
-        self._picture: tuple[_Targets, View, ScreenReflections] | None = None
+        # Monitors' pictures' images, and the picture drawn now (``drawing``: its images, view
+        # and settings, from begin_picture until its composite or end_picture).
+        self._pictures: PictureImages[_Targets] = PictureImages()
         # The debug overlay's toggle (``MainViewSystem.reflections``): off, no camera's
         # reflections are drawn, the active camera's or a monitor's.
         self.shown = True
@@ -173,8 +173,8 @@ class ScreenReflectionPass:
         (``SceneOptions.reflections``; None: none)."""
         if self._drawing is not None:
             return self._drawing.framebuffer
-        if self._picture is not None:
-            return self._picture[0].framebuffer
+        if self._pictures.drawing is not None:
+            return self._pictures.drawing[0].framebuffer
         return None if self._pending is None or self._targets is None else self._targets.framebuffer
 
     def begin(self, view: View, targets: RenderTargets, settings: ScreenReflections) -> None:
@@ -210,22 +210,17 @@ class ScreenReflectionPass:
         picture's own (kept by monitor), until its root's composite (``composite``) or
         ``end_picture``.  Its mirror and portal levels reflect nothing (the camera's view's
         ``reflection_depth`` is the active camera's alone)."""
-        images = self._pictures.get(monitor)
-        if images is None or images.level is not targets:
-            self.drop_picture(monitor)
-            images = self._pictures[monitor] = self._make(targets)
+        images = self._pictures.kept(monitor, lambda kept: kept.level is targets, lambda: self._make(targets))
         self._fit_hits(images, settings)
-        self._picture = (images, view, settings)
+        self._pictures.drawing = (images, view, settings)
 
     def end_picture(self) -> None:
         """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached)."""
-        self._picture = None
+        self._pictures.drawing = None
 
     def drop_picture(self, monitor: int) -> None:
         """Let go of monitor ``monitor``'s picture's images (it went, or its camera reflects nothing)."""
-        images = self._pictures.pop(monitor, None)
-        if images is not None:
-            images.release()
+        self._pictures.drop(monitor)
 
     def begin_level(self, depth: int, targets: RenderTargets) -> bool:
         """Reflection level ``depth``, about to be drawn into ``targets`` (its claims made),
@@ -306,9 +301,9 @@ class ScreenReflectionPass:
         """Put the screen's reflections into ``level`` (the main tree's level 0, its mirrors
         and portals composited, its glass not yet drawn), if the main view was drawn for
         them this frame (``begin``); nothing otherwise."""
-        picture = self._picture
+        picture = self._pictures.drawing
         if picture is not None and picture[0].level is level:   # a monitor's picture's root
-            self._picture = None
+            self._pictures.drawing = None
             images, view, settings = picture
             self._composite(images, [view], view, settings, False)
             return
@@ -399,7 +394,7 @@ class ScreenReflectionPass:
         4 for each reflection level that reflects and each monitor's picture that does (5 at
         half resolution), else 0)."""
         return (0 if self._targets is None else self._targets.count()) + sum(
-            images.count() for images in (*self._levels.values(), *self._pictures.values()))
+            images.count() for images in (*self._levels.values(), *self._pictures))
 
     def level_key(self) -> tuple | None:
         """What this frame's reflection levels reflect with, as values (the reflect stage's
@@ -435,9 +430,7 @@ class ScreenReflectionPass:
 
     def release(self) -> None:
         self.release_targets()
-        for monitor in list(self._pictures):
-            self.drop_picture(monitor)
-        self._picture = None
+        self._pictures.release()
         self._release_programs()
 
 

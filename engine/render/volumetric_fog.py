@@ -96,6 +96,7 @@ from engine.render.bindings import (
     set_scissor,
 )
 from engine.render.clouds import cloud_stride
+from engine.render.picture_images import PictureImages
 from engine.render.targets import RenderTargets, release_framebuffer
 from engine.render.views import MAX_DIRECTIONAL_LIGHTS, View
 from engine.resources import VolumetricLamps
@@ -159,10 +160,9 @@ class VolumetricFogPass:
         self._sky_light: tuple[int, tuple[float, float, float]] | None = None   # begin's ``sky_light``
         self.cloud_stride = 1   # the march's steps between two reads of the clouds' share (the last march's)
         self.keep_still = True  # False: marched every frame (what the still fuzz compares with)
-        # A monitor's picture's image, by its monitor, and the picture drawn now: (its images,
-        # its ``begin``'s pending, its sky light), from begin_picture to its root's composite.
-        self._pictures: dict[int, _Images] = {}
-        self._picture: tuple[_Images, tuple, tuple[int, tuple[float, float, float]] | None] | None = None
+        # Monitors' pictures' images, and the picture drawn now (``drawing``: its images, its
+        # ``begin``'s pending, its sky light), from begin_picture to its root's composite.
+        self._pictures: PictureImages[_Images] = PictureImages()
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
               lamps: VolumetricLamps = _NO_LAMPS,
@@ -201,22 +201,18 @@ class VolumetricFogPass:
         composite (``composite``; ``end_picture`` after the draw).  Its mirror and portal
         levels get none."""
         ratio = 2 if settings.half_resolution else 1
-        images = self._pictures.get(monitor)
-        if images is None or images.level is not targets or images.ratio != ratio:
-            self.drop_picture(monitor)
-            images = self._pictures[monitor] = self._make(targets, ratio)
-        self._picture = (images, (view, settings, False, lamps, image_shares if any(image_shares) else ()),
-                         sky_light)
+        images = self._pictures.kept(monitor, lambda kept: kept.level is targets and kept.ratio == ratio,
+                                     lambda: self._make(targets, ratio))
+        self._pictures.drawing = (images, (view, settings, False, lamps, image_shares if any(image_shares) else ()),
+                                  sky_light)
 
     def end_picture(self) -> None:
         """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached)."""
-        self._picture = None
+        self._pictures.drawing = None
 
     def drop_picture(self, monitor: int) -> None:
         """Let go of monitor ``monitor``'s picture's image (it went, or its camera has no shafts)."""
-        images = self._pictures.pop(monitor, None)
-        if images is not None:
-            images.release()
+        self._pictures.drop(monitor)
 
     def _make(self, targets: RenderTargets, ratio: int) -> _Images:
         size = (-(-targets.size[0] // ratio), -(-targets.size[1] // ratio))
@@ -228,9 +224,9 @@ class VolumetricFogPass:
         """March and add this frame's shafts into ``level`` (the main tree's level 0, its
         mirrors and portals composited, its glass not yet drawn), if its view was begun
         this frame; nothing otherwise (another tree's root: a probe face's)."""
-        picture = self._picture
+        picture = self._pictures.drawing
         if picture is not None and picture[0].level is level:   # a monitor's picture's root
-            self._picture = None
+            self._pictures.drawing = None
             images, pending, sky_light = picture
             self._draw(images, [pending[0]], pending, False, True, sky_light)
             return
@@ -426,9 +422,7 @@ class VolumetricFogPass:
 
     def release(self) -> None:
         self.release_targets()
-        for monitor in list(self._pictures):
-            self.drop_picture(monitor)
-        self._picture = None
+        self._pictures.release()
         self._release_programs()
 
 
