@@ -217,10 +217,14 @@ class Editor:
 
     # --- selection -------------------------------------------------------------------------
     def pick(self, ids: np.ndarray, surface_ids: np.ndarray | None, x: int, y: int,
-             surface: bool = False) -> int | None:
-        """Select the entity at a pixel (``pick``); the sky selects nothing. A new selection
-        clears the message of the last refused edit."""
+             surface: bool = False, follow: Callable[[int], int | None] | None = None) -> int | None:
+        """Select the entity at a pixel (``pick``); the sky selects nothing. ``follow``: what a
+        picked entity picks in turn (``shell/picture_pick.py``: a monitor's screen, what its
+        picture shows there), but for the ``surface`` itself. A new selection clears the
+        message of the last refused edit."""
         picked = pick(ids, surface_ids, x, y, surface)
+        if follow is not None and picked is not None and not surface:
+            picked = follow(picked)
         part = self.world.try_get(picked, FromModel) if picked is not None and self.world.exists(picked) else None
         # A model's part is the file's: the click selects the model (its root), what a level
         # file holds and a designer moves, as Unity's and Godot's editors pick a placed scene.

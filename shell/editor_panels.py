@@ -48,6 +48,7 @@ from shell.handles import (
     transform_handles,
     view_ray,
 )
+from shell.picture_pick import into_pictures
 
 if TYPE_CHECKING:
     from shell.app import Engine
@@ -132,7 +133,12 @@ class EditorPanels:
         # The id images are the drawn picture's size (smaller at a render scale below 1).
         output = engine.world.resources.get(Output)
         across, down = (targets.size[0] / output.size[0], targets.size[1] / output.size[1]) if output else (1, 1)
-        editor.pick(targets.read_ids(), targets.read_surface_ids(), int(x * across), int(y * down), surface)
+        follow = None
+        if view is not None:   # (a monitor's screen picks what its picture shows there)
+            size = self.io.display_size
+            follow = into_pictures(engine.world, engine.renderer.monitors.entities,
+                                   *view_ray(view.view_proj, (size.x, size.y), (x, y)))
+        editor.pick(targets.read_ids(), targets.read_surface_ids(), int(x * across), int(y * down), surface, follow)
         return True
 
     def _place_at(self, engine: Engine, editor: Editor, x: float, y: float) -> None:

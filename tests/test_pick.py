@@ -90,3 +90,46 @@ def dilated(mask: np.ndarray) -> np.ndarray:
         for dx in (-1, 0, 1):
             near |= padded[1 + dy:1 + dy + mask.shape[0], 1 + dx:1 + dx + mask.shape[1]]
     return near
+
+
+def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene):
+    """The monitors' studio: the active camera before the screen, whose picture shows the red
+    box the lens watches.  A pixel where the frame shows the box on the screen (red: the GPU's
+    picture) picks the box (the main view's ray to the screen, its texture coordinates there,
+    the lens's ray through that pixel of the picture, cast on the CPU:
+    ``shell/picture_pick.py``); a pixel of the screen showing the black sky picks nothing; the
+    surface modifier picks the screen."""
+    from components import Monitor
+    from shell.handles import view_ray
+    from shell.picture_pick import into_pictures
+    from tests.test_monitors import DT, PICTURE, studio
+
+    build, held = studio(Monitor(size=PICTURE))
+    runner = scene(build, (160, 120))
+    runner.engine.renderer.antialias = "off"
+    runner.frame(DT)
+    rgb = runner.frame(DT).astype(np.int32)
+    ids, surfaces = runner.ids(), runner.engine.renderer.targets.read_surface_ids()
+    screen = ids == held["screen"]
+    red = screen & (rgb[..., 0] - rgb[..., 1] > 50)
+    inner = red.copy()   # (away from the box's edges, where a pixel's ray and the picture's texels part)
+    for axis in (0, 1):
+        for step in (1, -1):
+            inner &= np.roll(red, step, axis=axis)
+    dark = screen & (rgb.max(axis=-1) < 10)
+    assert inner.sum() > 5 and dark.sum() > 50
+    editor = Editor(runner.world)
+    view = runner.engine.main_view
+
+    def click(x, y, surface=False):
+        follow = into_pictures(runner.world, runner.engine.renderer.monitors.entities,
+                               *view_ray(view.view_proj, runner.size, (x + 0.5, y + 0.5)))
+        return editor.pick(ids, surfaces, x, y, surface, follow)
+
+    for row, column in zip(*np.nonzero(inner), strict=True):
+        assert click(column, row) == held["box"], (column, row)
+    rows, columns = np.nonzero(dark)
+    for row, column in list(zip(rows, columns, strict=True))[::10]:
+        assert click(column, row) is None, (column, row)
+    row, column = np.argwhere(inner)[0]
+    assert click(column, row, surface=True) == held["screen"]
