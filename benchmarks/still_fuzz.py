@@ -8,7 +8,8 @@ Each case is run in two engines of the same level, in lockstep (as
 ``tests/test_end_image_settle.py`` does): one keeps still views, the other
 (``keep_still_views = False``) draws its whole tree every frame, and draws every shadow map
 whole every frame too (its shadow stage's record of what each map was drawn from wiped before
-each frame), so a map kept on a still frame, or drawn again only where casters moved, must
+each frame; not in a case with a monitor: ``StillFuzzer.run`` says why), so a map kept on a
+still frame, or drawn again only where casters moved, must
 equal one drawn from scratch (its ambient occlusion found every frame too:
 ``ScreenOcclusion.keep_still``); and it plans each reflection level after its parent's claims
 (``ViewTree.plan_ahead = False``), so levels the keeping engine planned ahead
@@ -486,6 +487,14 @@ class StillFuzzer:
     def run(self, case: StillCase, index: int = 0) -> str | None:
         sides = (self.keeping, self.drawing)
         refused = False
+        # With a monitor, the drawing engine keeps its shadow maps as the keeping one does.
+        # Drawn whole every frame, each map's drawing moves the scene's version on, so every
+        # picture drawn would be a new look of its screen (``PicturesDrawn``), which the
+        # probes that see it recapture; the keeping engine publishes only a picture that
+        # changed for more than the probes' own captures (``MonitorSystem``: a picture
+        # showing a probe's reflection, which that probe sees, would loop).  The two then
+        # differ by design wherever a probe sees a screen that shows it.
+        self.drawing.redraw_shadows = case.monitor is None
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
