@@ -169,7 +169,9 @@ class MonitorSystem(esper.Processor):
         seen = None    # (the screens some view sees, found when a "when_seen" one is first due)
         for entity, monitor in due:
             parts = self._camera(entity, monitor)
-            if parts is None:
+            if parts is None:   # (its picture kept as it is; its camera's screen effects' images let go)
+                pictures.drop_effects(entity)
+                self.renderer.occlusion.drop_picture(entity)
                 continue
             if monitor.update == "when_seen":
                 if faces is None:

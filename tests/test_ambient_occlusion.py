@@ -20,6 +20,7 @@ from pyglm import glm
 from components import (
     AmbientOcclusion,
     ComponentValueError,
+    ComponentWarning,
     DirectionalLight,
     HemisphereLight,
     Material,
@@ -430,6 +431,10 @@ def test_a_monitors_camera_finds_its_pictures_occlusion(scene):
     runner.world.add_component(names["lens"], AmbientOcclusion(radius=RADIUS))
     runner.frame()
     assert occlusion.target_count() == 4
+    runner.world.delete_entity(names["lens"])   # (the picture kept as it is, said once; the images go)
+    with pytest.warns(ComponentWarning, match="names entity"):
+        runner.frame()
+    assert occlusion.target_count() == 0
     runner.world.remove_component(names["screen"], Monitor)
     runner.frame()
     assert occlusion.target_count() == 0

@@ -599,6 +599,10 @@ def test_a_monitors_camera_reflects_in_its_picture_as_the_cameras_view_does(scen
     runner.world.add_component(names["lens"], ScreenReflections(half_resolution=True))
     runner.frame()
     assert counts()["reflection_targets"] == 5
+    runner.world.delete_entity(names["lens"])   # (the picture kept as it is, said once; the images go)
+    with pytest.warns(ComponentWarning, match="names entity"):
+        runner.frame()
+    assert counts()["reflection_targets"] == 0
     runner.world.remove_component(names["screen"], Monitor)
     runner.frame()
     assert counts()["reflection_targets"] == 0

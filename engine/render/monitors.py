@@ -255,13 +255,18 @@ class MonitorPictures:
         pixels = np.frombuffer(held.texture.read(), np.float16).reshape(h, w, 4)
         return pixels[::-1].astype(np.float32)
 
-    def drop(self, entity: int) -> None:
-        """Let go of monitor ``entity``'s picture (the GPU keeps it while a batch samples it),
-        and its screen reflections' images."""
+    def drop_effects(self, entity: int) -> None:
+        """Let go of monitor ``entity``'s screen reflections' and light shafts' images (it went,
+        or its camera did)."""
         if self.scene_pass.screen_reflections is not None:
             self.scene_pass.screen_reflections.drop_picture(entity)
         if self.scene_pass.volumetric_fog is not None:
             self.scene_pass.volumetric_fog.drop_picture(entity)
+
+    def drop(self, entity: int) -> None:
+        """Let go of monitor ``entity``'s picture (the GPU keeps it while a batch samples it),
+        and its screen effects' images."""
+        self.drop_effects(entity)
         held = self._pictures.pop(entity, None)
         if held is not None:
             held.levels.release()
