@@ -195,8 +195,10 @@ def test_a_monitors_picture_shows_the_mirrors_its_camera_sees_to_its_depth(scene
     hits = np.zeros(len(rays), bool)
     hits[on_mirror] = box_hits(point[on_mirror], reflected[on_mirror], behind, half)
     hits = hits.reshape(PICTURE[1], PICTURE[0])
-    # (the first frame's picture, kept: the mirror's view sees the one-sided screen from behind)
-    assert (runner.stats.monitor_views, runner.stats.monitors_kept) == (0, 1)
+    # (the first frame's picture, kept: the mirror's view sees the one-sided screen from behind;
+    # on a GPU a tree drawn on predicted counts is drawn once more with exact ones first)
+    predicted = depth > 0 and not runner.engine.renderer.caps.software
+    assert (runner.stats.monitor_views, runner.stats.monitors_kept) == ((2, 0) if predicted else (0, 1))
     if depth == 0:
         assert not red.any()
     else:
