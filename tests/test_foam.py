@@ -221,3 +221,38 @@ def test_a_context_with_too_few_texture_units_draws_no_foam_and_says_so(scene, c
     assert len(said) == 1 and f"foam needs {FOAM_SAMPLERS} texture units" in str(said[0].message)
     assert runner.engine.renderer.foam.waters == ()
     np.testing.assert_array_equal(srgb_to_linear(image), plain)
+
+
+@pytest.mark.parametrize("depth", [0, 1])
+def test_a_monitors_picture_shows_the_foam_the_cameras_view_does(scene, depth):
+    """A monitor's camera where the active camera stands (its ``depth`` 0: no view tree, the
+    root finished as the main view's is; 1: the pond's reflection view too): the foam changes
+    the picture where it changes the camera's own frame, nearly all the surface at the water's
+    edge and none where the water is deep."""
+    from components import Camera, Monitor
+
+    size = (160, 120)
+
+    def watched(foam):
+        def build(world):
+            pool(foam)(world)
+            (camera, (_, transform)), = [(e, c) for e, c in world.query(Camera, Transform)]
+            lens = world.spawn(Transform(position=transform.position, rotation=transform.rotation),
+                               Camera(fov_y=55.0, active=False))
+            world.spawn(Transform(position=(0.6, 2.2, 9.0)), MeshRef(quad(1.6, 0.9)), Material(color=(0.0, 0.0, 0.0)),
+                        Monitor(camera=lens, size=size, depth=depth))
+        return build
+
+    pictures, frames = [], []
+    for foam in (1.0, 0.0):
+        runner, frame = render(scene, watched(foam), size)
+        (screen, _), = runner.world.query_one(Monitor)
+        pictures.append(runner.engine.renderer.monitors.read(screen)[..., :3])
+        frames.append(frame)
+    in_picture = np.abs(pictures[0] - pictures[1]).max(axis=-1) > 0.02
+    in_frame = np.abs(frames[0] - frames[1]).max(axis=-1) > 0.02
+    under = water_under(runner)
+    edge, deep = under < 0.05 * FOAM_DEPTH / 0.3, under > FOAM_DEPTH * 1.05
+    assert edge.sum() > 40 and deep.sum() > 2000
+    assert in_picture[edge].mean() > 0.9 and not in_picture[deep].any()
+    assert (in_picture & in_frame).sum() > 0.9 * max(in_picture.sum(), in_frame.sum())
