@@ -142,11 +142,11 @@ class MonitorSystem(esper.Processor):
         present = {entity for entity, _ in monitors}
         for gone in pictures.entities - present:
             pictures.drop(gone)
+            self.renderer.occlusion.drop_picture(gone)   # (its camera's occlusion images: the pass's own)
         for gone in set(self.drawn) - present:
             del self.drawn[gone]
         for gone in set(self._keys) - present:
             del self._keys[gone]
-            self.renderer.occlusion.drop_picture(gone)
         # Changes since the last look: after this stage in the last frame, and before it in this one.
         changes = world.change_count()
         self._world_version += world.last_step_changes - self._changes_seen + changes
