@@ -435,3 +435,39 @@ def test_a_water_earlier_on_a_lamps_way_weighs_its_light_by_the_angle_the_light_
     assert kept.sum() > 200 and expected.max() > 0.01, (kept.sum(), expected.max())
     # (0.0036 at most on llvmpipe, an 8-bit step at 0.1; with no weight there, 0.18)
     assert np.abs(added - expected).max() < 0.006, np.abs(added - expected).max()
+
+
+@pytest.mark.parametrize("visibility", ["exact", "predicted"])
+@pytest.mark.parametrize("side", ["above", "below"])
+def test_a_waters_view_plans_no_view_of_its_other_side(scene, visibility, side):
+    """A view looking out of one side of a water cannot see the other: it lies on the view's
+    clip plane, where the water is not drawn.  So a lone pond's tree is one view a frame, by
+    either side and either visibility (predicted visibility once drew a second, of the other
+    side, every frame: empty, its whole scene pass and its fallback's refraction copy paid
+    for nothing), and no candidate below it is claimed.  The frame is the same either way."""
+    eye, target = ((0.0, 0.6, 0.0), (0.0, -0.3, -3.0)) if side == "above" else ((0.0, -0.5, 0.0), (0.0, 1.5, -2.0))
+    frames = []
+    for mode in ("exact", visibility):
+        runner = scene(under(eye, target), (48, 36))
+        system = runner.engine.reflection_system
+        system.visibility = mode
+        levels: list[int] = []
+        system.tree._choose = _counting(system.tree._choose, levels)
+        for _ in range(4):
+            levels.clear()
+            rgb = runner.frame()
+            stats = runner.engine.renderer.stats
+            assert stats.reflection_views == 1 and stats.reflection_views_unseen == 0, (mode, stats)
+            (view,) = system.views[1:]
+            assert view.surface.water.underside == (side == "below")
+            assert levels == [1], (mode, levels)   # no level below the water's view
+        frames.append(rgb)
+    np.testing.assert_array_equal(frames[0], frames[1])
+
+
+def _counting(choose, levels: list[int]):
+    """A spy on ``ViewTree._choose``: each level the tree chooses views from, by its candidates."""
+    def counted(walk, stack, candidates):
+        levels.append(len(candidates))
+        return choose(walk, stack, candidates)
+    return counted

@@ -152,6 +152,15 @@ class SurfaceTable:
         # and is not drawn in it: ``ID_SKIP`` is the entity.)
         self.exit_rows = np.array([i if e == entity else row_of.get(e, -1) for i, (e, entity) in enumerate(
             zip(self.exit_entities.tolist(), self.entity_list, strict=True))], np.int64)
+        # Each row's other side (a water's underside for its top and the top for its underside,
+        # -1: none): a view that looks out of one side of a water cannot see the other either,
+        # which lies on its clip plane (without it each water's reflection planned a view of
+        # its own underside, empty, every frame: with predicted visibility drawn whole).
+        rows_of: dict[int, list[int]] = {}
+        for i, entity in enumerate(self.entity_list):
+            rows_of.setdefault(entity, []).append(i)
+        self.other_side = np.array([next((j for j in rows_of[entity] if j != i), -1)
+                                    for i, entity in enumerate(self.entity_list)], np.int64)
         self.is_mirror = np.array([s.kind == "mirror" for s in states], bool)
         # The surfaces that show a fallback (the probe's or the sky's reflection, drawn by the
         # composite) where they are seen without a view of their own: every mirror, switched
@@ -205,7 +214,7 @@ class SurfaceTable:
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, list]] = {}  # _bias_rows' tables, by depth, cap, ends
         self._bias_tables: dict[bytes, list] = {}  # [allowed, class rows]: _bias_rows', by the surfaces allowed
-        self._exit_columns = np.zeros(0, np.int64)  # _bias_rows' knock-out column, by ids number
+        self._exit_columns = np.zeros((0, 2), np.int64)  # _bias_rows' knock-out columns, by ids number
         self._row_starts: dict[tuple[int, int], np.ndarray] = {}  # _bias_rows' flat row starts, by (rows, width)
         # What plan_chain reads of each surface row as Python numbers: its views' exit row, the
         # mask bits they keep, the kind bit they gain, whether it is a mirror.
@@ -366,19 +375,19 @@ class SurfaceTable:
         table = found[1]
         try:
             rows = table[1].take(ids_classes().take(numbers), axis=0)
-            columns = self._exit_columns.take(numbers)
+            columns = self._exit_columns.take(numbers, axis=0)
         except IndexError:  # numbers or classes first seen since: their rows and columns join
             table[1] = self._more_bias(table[0], table[1])
             if len(self._exit_columns) < len(IDS_OF):
                 self._exit_columns = self._more_exit_columns()
             rows = table[1].take(ids_classes().take(numbers), axis=0)
-            columns = self._exit_columns.take(numbers)
+            columns = self._exit_columns.take(numbers, axis=0)
         width = rows.shape[1]
         starts = self._row_starts.get((len(numbers), width))
         if starts is None:
             if len(self._row_starts) > 256:
                 self._row_starts.clear()
-            starts = self._row_starts[(len(numbers), width)] = np.arange(0, len(numbers) * width, width)
+            starts = self._row_starts[(len(numbers), width)] = np.arange(0, len(numbers) * width, width).reshape(-1, 1)
         rows.put(starts + columns, np.inf)
         return rows[:, :-1]
 
@@ -395,11 +404,16 @@ class SurfaceTable:
         return found
 
     def _more_exit_columns(self) -> np.ndarray:
-        """Each ids number's exit row as a column of ``_bias_rows``' tables: the surface its
-        views look out of, S (the spare column) where none of this table's."""
+        """(N, 2): each ids number's exit row and that row's other side (``other_side``) as
+        columns of ``_bias_rows``' tables: the surfaces its views look out of, S (the spare
+        column) where none of this table's."""
         exit_rows = np.array([exit_row for exit_row, _, _ in IDS_OF], np.float64).astype(np.int64)
         surfaces = len(self.states)
-        found = np.where((exit_rows >= 0) & (exit_rows < surfaces), exit_rows, surfaces)
+        found = np.full((len(exit_rows), 2), surfaces, np.int64)
+        valid = (exit_rows >= 0) & (exit_rows < surfaces)
+        found[valid, 0] = exit_rows[valid]
+        other = self.other_side.take(exit_rows[valid])
+        found[valid, 1] = np.where(other >= 0, other, surfaces)
         found.flags.writeable = False
         return found
 
