@@ -94,7 +94,7 @@ from engine.render.sky import air_light
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View, camera_view
-from engine.resources import ContactLamps, PicturesDrawn, Surfaces
+from engine.resources import ContactLamps, PicturesDrawn, Surfaces, SurfaceState
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import ViewEyes, brightest_directional
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
@@ -118,6 +118,9 @@ class MonitorSystem(esper.Processor):
         self._world_version = 0   # moved on by every change to the world's components (World.change_count)
         self._changes_seen = 0    # World.change_count when this stage last looked
         self._flat: dict[int, tuple | bool] = {}   # mesh id -> its one face (point, normal), or False
+        self._surfaces_of: Surfaces | None = None   # what _surface_arrays' rows were made from
+        self._surface_rows: tuple[list[SurfaceState], np.ndarray, np.ndarray] = ([], np.zeros((0, 8, 4)),
+                                                                                  np.zeros((0, 4)))
 
     @property
     def keep_still_pictures(self) -> bool:
@@ -284,34 +287,51 @@ class MonitorSystem(esper.Processor):
         surfaces = self.world.resources.get(Surfaces)
         if surfaces is None:
             return []
-        states = [*surfaces.mirrors.values(), *surfaces.portals.values(), *surfaces.undersides.values()]
+        states, corners, planes = self._surface_arrays(surfaces)
         if not states:
             return []
         width, height = main.size
         # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
         view_proj = np.array(main.view_proj.to_list(), np.float64)
         eye = main.eye
+        # (off, or its back to the eye: not seen)
+        facing = planes[:, :3] @ (eye.x, eye.y, eye.z) + planes[:, 3] > 0.0
+        clip = corners[facing] @ view_proj     # every corner of every surface facing the eye at once
+        behind = (clip[:, :, 3] <= 1e-6).any(axis=1)
+        ndc = clip[:, :, :2] / np.where(clip[:, :, 3:4] > 1e-6, clip[:, :, 3:4], 1.0)
+        low_ndc, high_ndc = ndc.min(axis=1), ndc.max(axis=1)
+        low = np.floor((np.clip(low_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
+        high = np.ceil((np.clip(high_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
+        off = (high <= low).any(axis=1) | (high_ndc < -1.0).any(axis=1) | (low_ndc > 1.0).any(axis=1)
         views = []
-        for state in states:
-            plane = state.plane
-            if not state.enabled or glm.dot(glm.vec3(plane), eye) + plane.w <= 0.0:
-                continue   # (off, or its back to the eye)
-            clip = np.asarray(state.corners, np.float64) @ view_proj
-            if (clip[:, 3] <= 1e-6).any():
-                rect = (0, 0, width, height)
+        for at, row in enumerate(np.flatnonzero(facing).tolist()):
+            if behind[at]:
+                rect = (0, 0, width, height)     # (a corner behind the eye: all of the screen)
+            elif off[at]:
+                continue   # (off the screen)
             else:
-                ndc = clip[:, :2] / clip[:, 3:4]
-                low = np.floor((np.clip(ndc.min(axis=0), -1.0, 1.0) * 0.5 + 0.5) * (width, height))
-                high = np.ceil((np.clip(ndc.max(axis=0), -1.0, 1.0) * 0.5 + 0.5) * (width, height))
-                if (high <= low).any() or (ndc.max(axis=0) < -1.0).any() or (ndc.min(axis=0) > 1.0).any():
-                    continue   # (off the screen)
-                rect = (int(low[0]), int(low[1]), int(high[0] - low[0]), int(high[1] - low[1]))
+                rect = (int(low[at, 0]), int(low[at, 1]), int(high[at, 0] - low[at, 0]),
+                        int(high[at, 1] - low[at, 1]))
+            state = states[row]
             carry = state.carry
             views.append(View(view=main.view * glm.inverse(carry), proj=main.proj,
                               eye=glm.vec3(carry * glm.vec4(eye, 1.0)), size=main.size,
                               name=f"{state.kind} {state.entity} (seen first)", clip_plane=state.exit_plane,
                               mirrored=state.kind == "mirror", scissor=rect, layers=state.layers))
         return views
+
+    def _surface_arrays(self, surfaces: Surfaces) -> tuple[list[SurfaceState], np.ndarray, np.ndarray]:
+        """The enabled mirrors, portals and waters' undersides of ``surfaces`` with their
+        corners (S, 8, 4: a portal's four twice over) and planes (S, 4), for ``_first_level``;
+        kept while the surfaces stage publishes no new ``Surfaces`` (none changed)."""
+        if self._surfaces_of is not surfaces:
+            states = [state for state in (*surfaces.mirrors.values(), *surfaces.portals.values(),
+                                          *surfaces.undersides.values()) if state.enabled]
+            corners = np.array([np.asarray(state.corners, np.float64)[np.arange(8) % len(state.corners)]
+                                for state in states], np.float64).reshape(len(states), 8, 4)
+            planes = np.array([tuple(state.plane) for state in states], np.float64).reshape(len(states), 4)
+            self._surfaces_of, self._surface_rows = surfaces, (states, corners, planes)
+        return self._surface_rows
 
     def _screen_faces(self, monitors: list[tuple[int, Monitor]]) -> dict[int, tuple[glm.vec3, glm.vec3]]:
         """Each screen that shows its picture on one side only, as (a point, its front's unit
