@@ -45,24 +45,7 @@ float vignette_factor(vec2 uv) {
     return 1.0 - vignette.x + vignette.x * pow(cos_theta, vignette.y);
 }
 #endif
-#ifdef GRADE
-uniform mat3 white_balance;   // linear sRGB, adapted (engine/render/grading.py)
-uniform float contrast;       // about middle grey, in log space
-uniform vec3 slope;           // the ASC Color Decision List's
-uniform vec3 offset;
-uniform vec3 power;
-uniform float saturation;     // about Rec. 709 luma
-
-// ColorGrading's order: white balance, contrast, slope-offset-power, saturation.  Each step
-// keeps values >= 0 (pow of a negative number is undefined in GLSL).
-vec3 grade(vec3 c) {
-    c = max(white_balance * c, 0.0);
-    c = 0.18 * pow(max(c, 1e-10) / 0.18, vec3(contrast));
-    c = pow(max(c * slope + offset, 0.0), power);
-    float luma = dot(c, vec3(0.2126, 0.7152, 0.0722));
-    return max(luma + saturation * (c - luma), 0.0);
-}
-#endif
+#include "grade.glsl"
 #ifdef ABERRATION
 uniform float aberration;     // the red image's scale over the green's less 1 (the blue's: 1 less it)
 #endif
@@ -83,12 +66,6 @@ float grain_noise(vec2 pixel, float seed) {
     uint h = pcg_hash(cell.x + pcg_hash(cell.y + pcg_hash(uint(seed))));
     return float(h >> 8u) * (2.0 / 16777216.0) - 1.0;
 }
-#endif
-#ifdef LUT
-uniform sampler3D lut_map;    // ColorGrading.lut (engine/assets/color_lut.py), trilinear
-uniform vec3 lut_scale;       // encoded colour -> its texture coordinates (grading.lut_lookup)
-uniform vec3 lut_bias;
-uniform float lut_strength;
 #endif
 #endif
 
@@ -134,7 +111,7 @@ void main() {
 #endif
     vec3 srgb = linear_to_srgb(tone_map(exposed));
 #ifdef LUT
-    srgb = mix(srgb, textureLod(lut_map, srgb * lut_scale + lut_bias, 0.0).rgb, lut_strength);
+    srgb = lut_graded(srgb);
 #endif
 #ifdef GRAIN
     // Film grain on the encoded picture, less on its bright parts by the response.

@@ -4,7 +4,8 @@
 // With PICTURE, a picture panel (engine/render/text.py): the monitor's picture across the
 // quad, filtered, times its linear colour, then exposed and tone-mapped as the frame under
 // it was (the present's exposure, AUTO_EXPOSURE's adapted EV, the TONEMAP_CURVE:
-// PresentPass.look) and sRGB-encoded here (the output holds encoded values), so a rear-view
+// PresentPass.look), graded as it was (GRADE before the curve, LUT after the encoding:
+// include/grade.glsl) and sRGB-encoded here (the output holds encoded values), so a rear-view
 // panel looks as the view does.
 #include "color.glsl"
 
@@ -16,6 +17,7 @@ out vec4 frag_color;
 
 #ifdef PICTURE
 #include "tonemap.glsl"
+#include "grade.glsl"
 
 uniform sampler2D picture;
 uniform float exposure;   // linear
@@ -29,7 +31,14 @@ void main() {
     scale *= exp2(texelFetch(exposure_state, ivec2(0), 0).r);
 #endif
     vec3 light = texture(picture, vec2(v_corner.x, 1.0 - v_corner.y)).rgb * v_color.rgb * scale;
-    frag_color = vec4(linear_to_srgb(tone_map(light)), v_color.a);
+#ifdef GRADE
+    light = grade(light);
+#endif
+    vec3 srgb = linear_to_srgb(tone_map(light));
+#ifdef LUT
+    srgb = lut_graded(srgb);
+#endif
+    frag_color = vec4(srgb, v_color.a);
 }
 #else
 uniform sampler2D atlas;

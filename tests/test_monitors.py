@@ -459,6 +459,45 @@ def test_a_picture_panel_is_exposed_and_tone_mapped_as_the_frame_under_it(scene,
     assert np.abs(expected - expected_srgb8(CURVES[curve](shown * scale / (2.0 ** ev if auto else 2.0)))).max() > 5
 
 
+@pytest.mark.parametrize("table", [False, True], ids=["grade", "grade_and_table"])
+def test_a_picture_panel_is_graded_as_the_frame_under_it(scene, table):
+    """With a ``ColorGrading`` on the active camera (contrast, slope, saturation; in the second
+    case a colour table at half strength too), a picture panel's pixels are the grade of
+    picture x colour x exposure (the numpy formula of tests/test_color_grading.py), through
+    the curve, encoded, then the table's own CPU lookup mixed in: within one 8-bit step.  The
+    panel without the grade is far from that: the rear view is graded as the view is."""
+    from components import ColorGrading, ScreenPanel
+    from components.post import Tonemap
+    from tests.support import linear_to_srgb8
+    from tests.test_color_grading import _function_lut, grade
+    from tests.test_post_processing import CURVES
+
+    held = {}
+    build, parts = studio(None, eye=(0.0, 1.0, 30.0))
+    tint = np.array([1.0, 0.5, 1.0])
+    controls = dict(contrast=1.3, slope=(1.2, 1.0, 0.8), saturation=0.6)
+    lut = _function_lut(9) if table else None
+
+    def hud(world):
+        build(world)
+        camera = active_camera(world)
+        world.add_component(camera, Tonemap(curve="agx", exposure=1.0))
+        world.add_component(camera, ColorGrading(**controls, lut=lut, lut_strength=0.5))
+        held["panel"] = world.spawn(ScreenPanel(size=PICTURE, position=(10, 6), color=(*tint, 1.0)),
+                                    Monitor(camera=parts["lens"], size=PICTURE))
+
+    runner, rgb = run(scene, hud, 3)
+    shown = runner.engine.renderer.monitors.read(held["panel"])[..., :3] * tint * 2.0
+    drawn = rgb[6:6 + PICTURE[1], 10:10 + PICTURE[0]].astype(np.int16)
+    encoded = linear_to_srgb8(CURVES["agx"](grade(shown, **controls))) / 255.0
+    if table:
+        encoded = 0.5 * encoded + 0.5 * np.clip(lut.apply(encoded), 0.0, 1.0)
+    expected = np.rint(np.clip(encoded, 0.0, 1.0) * 255.0)
+    assert np.abs(drawn - expected).max() <= 1
+    ungraded = np.rint(linear_to_srgb8(CURVES["agx"](shown)))
+    assert np.abs(expected - ungraded).max() > 20
+
+
 def test_a_monitor_spends_none_of_the_frames_view_budget(scene):
     """Under a ViewBudget that allows one view, one pixel and no view under a million pixels,
     the monitor's mirror still gets its view (its picture red where the box's image is) and

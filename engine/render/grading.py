@@ -1,6 +1,7 @@
-"""The colour grade's numbers the present shader reads (``ColorGrading``, ``shaders/present.frag``
-GRADE and LUT builds): the white balance as one 3 x 3 matrix on linear sRGB, and the colour
-table's texture coordinates.  No GL here but the table's upload (``upload_lut``).
+"""The colour grade's numbers the present shader reads (``ColorGrading``,
+``shaders/include/grade.glsl``, in the present's GRADE and LUT builds and a picture panel's
+over the frame): the white balance as one 3 x 3 matrix on linear sRGB, and the colour table's
+texture coordinates.  No GL here but the table's upload (``upload_lut``).
 
 **White balance** is a von Kries adaptation in CAT02's cone space (CIECAM02): linear sRGB ->
 CIE XYZ -> cone responses, each scaled by the target white's response over the source
@@ -11,6 +12,8 @@ by ``0.05 x tint``.  So temperature 0 and tint 0 are the identity, and a light o
 source's colour comes out neutral.
 """
 from __future__ import annotations
+
+import functools
 
 import moderngl
 import numpy as np
@@ -51,6 +54,20 @@ def daylight_xy(kelvin: float) -> tuple[float, float]:
 
 def _cone_white(x: float, y: float) -> np.ndarray:
     return XYZ_TO_CAT02 @ np.array([x / y, 1.0, (1.0 - x - y) / y])
+
+
+def grade_uniforms(grading: ColorGrading) -> dict[str, bytes | float | tuple[float, float, float]]:
+    """The GRADE build's uniforms by name: ``white_balance`` as the bytes of GLSL's
+    column-major mat3 (worked out once for each temperature and tint), the rest as values."""
+    return {"white_balance": _white_balance_bytes(grading.temperature, grading.tint),
+            "contrast": grading.contrast, "slope": tuple(grading.slope), "offset": tuple(grading.offset),
+            "power": tuple(grading.power), "saturation": grading.saturation}
+
+
+@functools.lru_cache(maxsize=16)
+def _white_balance_bytes(temperature: float, tint: float) -> bytes:
+    # Row-major numpy to GLSL's column-major mat3: the transpose's bytes.
+    return white_balance(temperature, tint).T.astype("f4").tobytes()
 
 
 def white_balance(temperature: float, tint: float) -> np.ndarray:

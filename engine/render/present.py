@@ -64,7 +64,7 @@ from engine.render.bindings import (
 from engine.render.bloom import BloomPass
 from engine.render.depth_of_field import DepthOfFieldPass
 from engine.render.gpu import GL_SRGB8_ALPHA8
-from engine.render.grading import grades, lut_lookup, upload_lut, white_balance
+from engine.render.grading import grade_uniforms, grades, lut_lookup, upload_lut
 from engine.render.lens_flare import LensFlarePass
 from engine.render.motion_blur import MotionBlurPass
 from engine.render.object_motion import ObjectMotion
@@ -114,15 +114,21 @@ class CameraPost:
 
 @dataclass(frozen=True)
 class PictureLook:
-    """How the last present exposed and tone-mapped the frame: what a picture panel over it
-    (``engine/render/text.py``: a monitor's picture on the HUD) goes through too, so it looks
-    as the view does.  ``scale``: the linear exposure (the Tonemap's ``2^exposure``, else the
-    renderer's); ``curve``: the tone curve ("none" clamps); ``exposure_state``: the adapted
-    automatic exposure's 1x1 texture (its EV multiplies the scale), or None."""
+    """How the last present exposed, graded and tone-mapped the frame: what a picture panel
+    over it (``engine/render/text.py``: a monitor's picture on the HUD) goes through too, so it
+    looks as the view does.  ``scale``: the linear exposure (the Tonemap's ``2^exposure``, else
+    the renderer's); ``curve``: the tone curve ("none" clamps); ``exposure_state``: the adapted
+    automatic exposure's 1x1 texture (its EV multiplies the scale), or None; ``grading``: the
+    camera's ColorGrading where it changes a colour (its controls or its table), else None;
+    ``lut``: its table's texture where it has one.  The lens's effects over the frame (bloom,
+    flare, vignette, aberration, grain) are not the panel's: it lies over the lens's image, as
+    a HUD does."""
 
     scale: float = 1.0
     curve: str = "none"
     exposure_state: moderngl.Texture | None = None
+    grading: ColorGrading | None = None
+    lut: moderngl.Texture3D | None = None
 
 
 class PresentPass:
@@ -368,7 +374,7 @@ class PresentPass:
             self._set(encode, "dirt_intensity", bloom.dirt_intensity)
         scale = 2.0 ** tonemap.exposure if tonemap is not None else exposure
         self._set(encode, "exposure", scale)
-        self.look = PictureLook(scale, curve, state)
+        self.look = PictureLook(scale, curve, state, grading if graded or lut is not None else None, lut)
         if graded:
             self._set_grade(encode, grading)
         if lut is not None:
@@ -410,18 +416,9 @@ class PresentPass:
         shares.filter = filtered
 
     def _set_grade(self, encode: moderngl.VertexArray, grading: ColorGrading) -> None:
-        """The GRADE build's uniforms from ``grading`` (the white balance's matrix worked out
-        again only when its two fields change)."""
-        balance = (grading.temperature, grading.tint)
-        if self._written.get((id(encode), "white_balance_of")) != balance:
-            # Row-major numpy to GLSL's column-major mat3: the transpose's bytes.
-            encode.program["white_balance"].write(white_balance(*balance).T.astype("f4").tobytes())
-            self._written[(id(encode), "white_balance_of")] = balance
-        self._set(encode, "contrast", grading.contrast)
-        self._set(encode, "slope", tuple(grading.slope))
-        self._set(encode, "offset", tuple(grading.offset))
-        self._set(encode, "power", tuple(grading.power))
-        self._set(encode, "saturation", grading.saturation)
+        """The GRADE build's uniforms from ``grading`` (``grade_uniforms``)."""
+        for name, value in grade_uniforms(grading).items():
+            self._set(encode, name, value)
 
     def _lut_texture(self, lut: ColorLut | None) -> moderngl.Texture3D | None:
         """``lut`` uploaded (once while it is the camera's), or None; a table no camera uses
@@ -456,7 +453,10 @@ class PresentPass:
         """Write a uniform of a POST build only when its value changes (each write is a GL call)."""
         key = (id(vao), name)
         if self._written.get(key) != value:
-            vao.program[name].value = value
+            if isinstance(value, bytes):
+                vao.program[name].write(value)
+            else:
+                vao.program[name].value = value
             self._written[key] = value
 
     def release_post_targets(self) -> None:

@@ -19,9 +19,10 @@ present stage encoded them), alpha kept.  Every corner is a whole pixel and a gl
 filled with the monitor's picture (``engine/render/monitors.py``): its quad's atlas rect is
 (index, 0, -1, 0), the index into the frame's pictures, its colour linear, and the shader
 (its PICTURE build) reads the picture filtered across the quad, times the colour, then
-exposes and tone-maps it as the present did the frame under it (``PresentPass.look``: the
-exposure, the adapted automatic exposure, the tone curve; not the bloom, grade or vignette)
-and sRGB-encodes it there: the picture is the camera's linear light, as the screens in the
+exposes, grades and tone-maps it as the present did the frame under it (``PresentPass.look``:
+the exposure, the adapted automatic exposure, the colour grade and its table, the tone curve;
+not the lens's bloom, flare, vignette, aberration or grain: the panel lies over the lens's
+image, as a HUD does) and sRGB-encodes it there: the picture is the camera's linear light, as the screens in the
 world show it, and on the HUD it looks as the view does.
 
 **The pass** (``TextPass.draw``) runs after the present stage, into the output: one instanced
@@ -43,7 +44,16 @@ import numpy as np
 
 from components.post import TONEMAP_CURVES
 from engine.core.color import linear_to_srgb
-from engine.render.bindings import EXPOSURE_UNIT, PICTURE_UNIT, TEXT_UNIT, PassState, apply_pass_state, bind_texture
+from engine.render.bindings import (
+    EXPOSURE_UNIT,
+    LUT_UNIT,
+    PICTURE_UNIT,
+    TEXT_UNIT,
+    PassState,
+    apply_pass_state,
+    bind_texture,
+)
+from engine.render.grading import grade_uniforms, grades, lut_lookup
 from engine.render.present import PictureLook
 from engine.render.shader_library import ShaderLibrary
 
@@ -209,8 +219,8 @@ class TextPass:
         self.corners = ctx.buffer(np.array([0, 0, 1, 0, 0, 1, 1, 1], np.float32).tobytes())
         self.quads = ctx.buffer(reserve=MAX_QUADS * QUAD_FLOATS * 4, dynamic=True)
         self.vao = self._vertex_array(self.program)
-        # The picture panels' builds, by (tone curve, automatic exposure): program, vertex array.
-        self._pictures: dict[tuple[str, bool], tuple[moderngl.Program, moderngl.VertexArray]] = {}
+        # The picture panels' builds, by (tone curve, automatic exposure, grade, table): program, vertex array.
+        self._pictures: dict[tuple[str, bool, bool, bool], tuple[moderngl.Program, moderngl.VertexArray]] = {}
         self.drawn = 0  # quads drawn in the last draw
         self.cut = 0    # quads left out (past MAX_QUADS) in the last draw
 
@@ -221,19 +231,40 @@ class TextPass:
         return self.ctx.vertex_array(program, [(self.corners, "2f", "corner"), rows])
 
     def _picture_build(self, look: PictureLook) -> tuple[moderngl.Program, moderngl.VertexArray]:
-        """The picture panels' build for ``look``'s curve and automatic exposure, made once."""
-        key = (look.curve, look.exposure_state is not None)
+        """The picture panels' build for ``look``'s curve, automatic exposure, grade and grade's
+        table, made once."""
+        key = (look.curve, look.exposure_state is not None, grades(look.grading), look.lut is not None)
         build = self._pictures.get(key)
         if build is None:
             defines = {"PICTURE": "1", "TONEMAP_CURVE": str(TONEMAP_CURVES.index(look.curve))}
-            if key[1]:
-                defines["AUTO_EXPOSURE"] = "1"
+            defines.update((name, "1") for name, on in zip(("AUTO_EXPOSURE", "GRADE", "LUT"), key[1:], strict=True)
+                           if on)
             program = self.shaders.program("screen_text.vert", "screen_text.frag", defines=defines)
             program["picture"].value = PICTURE_UNIT
             if key[1]:
                 program["exposure_state"].value = EXPOSURE_UNIT
+            if key[3]:
+                program["lut_map"].value = LUT_UNIT
             build = self._pictures[key] = (program, self._vertex_array(program, atlas=False))
         return build
+
+    def _set_look(self, program: moderngl.Program, look: PictureLook) -> None:
+        """``look``'s exposure, grade and table on the picture build ``program`` (the present's
+        own values: the panel's colours go through what the frame's went through)."""
+        program["exposure"].value = look.scale
+        if look.exposure_state is not None:
+            bind_texture(self.ctx, look.exposure_state, EXPOSURE_UNIT)
+        if grades(look.grading):
+            for name, value in grade_uniforms(look.grading).items():
+                if isinstance(value, bytes):
+                    program[name].write(value)
+                else:
+                    program[name].value = value
+        if look.lut is not None:
+            bind_texture(self.ctx, look.lut, LUT_UNIT)
+            scale, bias = lut_lookup(look.grading.lut)
+            program["lut_scale"].value, program["lut_bias"].value = scale, bias
+            program["lut_strength"].value = look.grading.lut_strength
 
     def draw(self, quads: np.ndarray, framebuffer: moderngl.Framebuffer, size: tuple[int, int],
              pictures: tuple[moderngl.Texture, ...] = (), look: PictureLook = PLAIN_LOOK) -> None:
@@ -260,9 +291,7 @@ class TextPass:
             return
         program, vao = self._picture_build(look)
         program["output_size"].value = output_size
-        program["exposure"].value = look.scale
-        if look.exposure_state is not None:
-            bind_texture(self.ctx, look.exposure_state, EXPOSURE_UNIT)
+        self._set_look(program, look)
         start = 0
         for row in marked:   # the runs of quads before each picture, then the picture alone
             if row > start:
