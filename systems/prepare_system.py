@@ -84,6 +84,7 @@ from engine.rules.light_rules import (
     choose_lights,
     cube_serves,
     is_panel,
+    kept_sun_ways,
     lamp_cone,
     lamp_cookie,
     lamp_rectangle,
@@ -243,10 +244,12 @@ class PrepareSystem(esper.Processor):
         renderer.stats.caustic_waters_cut = cut
         held = {water.entity: water for water in renderer.caustics.waters}
         width = caustic_map_size([state.bumps.normal_map for _, state, _ in found])[0] if found else 0
+        suns = kept_sun_ways(self.world, LIGHT_LIMITS) if any(state.carries_light for _, state, _ in found) else ()
         chosen = []
         for entity, state, water in found:
+            box = reach_box(state.corners, tuple(glm.vec3(state.plane)), water.depth, state.carries_light, suns)
             key = (state, state.water.flow.offset, water.tiling, water.cross, water.ior, water.caustics, water.depth,
-                   width)
+                   width, box)
             kept = held.get(entity)
             if key == self._caustic_keys.get(entity) and kept is not None:
                 chosen.append(kept)   # (a still water, as it was: nothing packed)
@@ -258,9 +261,7 @@ class PrepareSystem(esper.Processor):
             if rows is None:   # (UVs square to the surface: no frame to read the waves in)
                 self._say_still(entity)
                 continue
-            chosen.append(CausticWater(entity, state.bumps.normal_map, rows,
-                                       reach_box(state.corners, tuple(glm.vec3(state.plane)), water.depth,
-                                                 state.carries_light)))
+            chosen.append(CausticWater(entity, state.bumps.normal_map, rows, box))
         for entity in set(self._caustic_keys) - {entry[0] for entry in found}:
             del self._caustic_keys[entity]
         lamps = self._caustic_lamps(chosen)

@@ -751,6 +751,64 @@ def test_what_stands_over_a_water_that_reflects_light_is_drawn_with_its_caustics
         assert (over, far) == (((pool_entity,), ()) if reflects else ((), ()))
 
 
+CANOPY = (3.65, 0.7)   # a canopy past the pool's edge (x = 2): its middle (x, height)
+CANOPY_TILT = math.radians(10.0)   # facing down, turned 10 degrees towards the pool
+
+
+def low_sun_pool(caustics: float, elevation: float, ids: dict | None = None):
+    """``ceiling_pool``'s water (depth 1) under a sun ``elevation`` degrees up, slanting along
+    +x, and past it a grey canopy 1.1 m wide facing down and back towards the pool, tilted
+    so that the sun (20 degrees up) misses its face: only the light the water throws up lights
+    it, rising along +x, under the water's depth over it where the sun is low."""
+    def build(world):
+        at = glm.vec3(2.4, 0.15, 0.0)
+        world.spawn(Transform(position=at, rotation=look_rotation(glm.vec3(CANOPY[0], CANOPY[1], 0.0) - at)),
+                    Camera(fov_y=50.0))
+        world.spawn(Skybox(faces=[np.zeros((8, 8, 3), np.float32) for _ in range(6)]))
+        e = math.radians(elevation)
+        world.spawn(DirectionalLight(direction=(math.cos(e), -math.sin(e), 0.0), intensity=30.0))
+        facing = glm.angleAxis(CANOPY_TILT, glm.vec3(0, 0, 1)) * glm.angleAxis(math.pi / 2, glm.vec3(1, 0, 0))
+        canopy = world.spawn(Transform(position=(CANOPY[0], CANOPY[1], 0.0), rotation=facing),
+                             MeshRef(quad(1.1, 4.0), casts_shadows=False),
+                             Material(color=(ALBEDO, ALBEDO, ALBEDO, 1.0), roughness=1.0, environment_reflection=0.0))
+        if ids is not None:
+            ids["canopy"] = canopy
+        world.spawn(Transform(rotation=FLAT), MeshRef(quad(SIDE, SIDE)),
+                    Material(color=(1.0, 1.0, 1.0, 0.0), normal_map=wave_map(PERIODS, slope=SLOPE), normal_scale=CALM),
+                    Mirror(reflects_light=True),
+                    Water(ior=IOR, tiling=TILING, speed=0.0, cross=0.0, caustics=caustics, depth=1.0))
+    return build
+
+
+def test_a_low_suns_light_thrown_up_by_the_water_carries_its_caustics_as_far_as_it_leans(scene):
+    """At 20 degrees the sun's light off the pool rises 1 m (the water's depth, as far as its
+    caustics reach) over 2.75 m along the plane, so it lights a canopy 1.1-2.2 m past the
+    pool's edge under that height: the canopy is keyed under the water (drawn with its
+    caustics) and shows the net, the share of the flat water's light swinging about 1.  The
+    reach box leans with the sun (``reach_box``): at 45 degrees or higher it is the one a
+    high sun gives, which leaves the canopy out (drawn without the net: a share of 1)."""
+    from engine.render.caustics import reach_box
+
+    corners = np.array([[-2.0, 0.0, -2.0, 1.0], [2.0, 0.0, -2.0, 1.0], [-2.0, 0.0, 2.0, 1.0], [2.0, 0.0, 2.0, 1.0]])
+    high = reach_box(corners, (0.0, 1.0, 0.0), 1.0, True, ((0.5, -0.8, 0.0),))
+    assert high == reach_box(corners, (0.0, 1.0, 0.0), 1.0, True) == ((-3.0, -1.0, -3.0), (3.0, 1.0, 3.0))
+    e = math.radians(20.0)
+    low = reach_box(corners, (0.0, 1.0, 0.0), 1.0, True, ((math.cos(e), -math.sin(e), 0.0),))
+    assert low[1][0] >= 2.0 + 1.0 / math.tan(e) and low[0] == high[0]   # (leaning one way: away from the sun)
+
+    ids = {}
+    runner, lit = render(scene, low_sun_pool(1.0, 20.0, ids), size=(64, 48))
+    _, flat = render(scene, low_sun_pool(0.0, 20.0), size=(64, 48))
+    pool_entity = next(entity for entity, _ in runner.world.query_one(Water))
+    canopy = next(b for b in runner.engine.renderer.batches.values() if ids["canopy"] in b.entity_at[:b.count])
+    assert canopy.caustic_waters == (pool_entity,)
+    seen = flat[..., 0] > 0.01   # (the canopy lit by the water's light: nothing else lights anything)
+    assert seen.sum() > 400, seen.sum()
+    share = lit[..., 0][seen] / flat[..., 0][seen]
+    assert share.std() > 0.15 and share.max() > 1.3 and share.min() < 0.8, (share.std(), share.min(), share.max())
+    assert 0.75 < share.mean() < 1.25, share.mean()
+
+
 LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics
 
 

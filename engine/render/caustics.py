@@ -43,6 +43,7 @@ a probe shows them as they were when it captured its faces.
 """
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -93,22 +94,59 @@ def body_box(corners: np.ndarray, down: tuple[float, float, float],
 Box = tuple[tuple[float, float, float], tuple[float, float, float]]   # a world box (lo, hi)
 
 
-def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float, reflects: bool) -> Box:
+MAX_REACH_LEAN = 8.0   # a low sun's light thrown back up reaches at most this many depths out along the plane
+LEAN_STEP = 0.25       # the lean's depths rounded up to these (a sun moving over a day keys rows again rarely)
+HEADINGS = 64          # ... and its way along the plane to one of these
+
+
+def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float, reflects: bool,
+              suns: tuple[tuple[float, float, float], ...] = ()) -> Box:
     """The world box [lo, hi] of what a water's caustics can light: its body (``body_box``:
     down to ``depth`` under its surface ``corners``) and, for a water that reflects light
     (``Mirror.reflects_light``: its waves gather the sun's light they throw back up), the air
-    up to ``depth`` over it too, widened by ``depth`` every way along its plane (the light
-    leans out as it rises: as far as it rises, for a sun 45 degrees or more over the
-    surface).  What lies in it is drawn with the caustics (``reaches``)."""
+    up to ``depth`` over it too: where each of ``suns`` (the ways their light travels) is
+    reflected, rising ``depth`` as it leans out along the plane (``depth`` / tan of the sun's
+    height over the plane, rounded up to ``LEAN_STEP`` depths: 1 at 45 degrees, 2.75 at 20;
+    at most ``MAX_REACH_LEAN``, a sun under 7 degrees), the whole widened by ``depth`` every
+    way along its plane (the waves turn the light aside; a sun 45 degrees or more over the
+    surface leans no farther).  What lies in it is drawn with the caustics (``reaches``):
+    ``shaders/include/caustics.glsl`` gathers the net at any point up to ``depth`` over the
+    water whose flat reflected ray meets it."""
     up_vector = np.asarray(up, np.float64)
     lo, hi = body_box(corners, tuple(-up_vector), depth)
     if not reflects:
         return lo, hi
     top = np.asarray(corners, np.float64)[:, :3]
-    ends = np.concatenate([top, top + up_vector * depth])
+    risen = top + up_vector * depth
+    ends = [top, risen]
+    for sun in suns:
+        travel = np.asarray(sun, np.float64)
+        rise = -float(travel @ up_vector)   # the reflected ray's rise a unit of its length
+        if rise <= 1e-6:
+            continue   # (a sun under the plane: no light off it)
+        along = travel + rise * up_vector   # the reflected ray's way along the plane
+        length = float(np.linalg.norm(along))
+        if length <= rise:
+            continue   # (45 degrees or higher: within the widening below)
+        lean = min(MAX_REACH_LEAN, math.ceil(length / rise / LEAN_STEP - 1e-9) * LEAN_STEP)
+        ends.append(risen + _heading(along / length, up_vector) * (lean * depth))
+    ends = np.concatenate(ends)
     widen = depth * np.sqrt(np.clip(1.0 - up_vector * up_vector, 0.0, 1.0))   # along the plane, per axis
     return (tuple(np.minimum(lo, ends.min(axis=0) - widen).tolist()),
             tuple(np.maximum(hi, ends.max(axis=0) + widen).tolist()))
+
+
+def _heading(along: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """The unit way ``along`` (in the plane square to ``up``) turned to the nearest of
+    ``HEADINGS`` ways round: so a sun moving over a day moves a reach box in steps (at
+    ``MAX_REACH_LEAN`` the step's half turns the lean's end by 0.4 depth, inside the box's
+    widening by one)."""
+    first = np.cross(up, (1.0, 0.0, 0.0) if abs(up[0]) < 0.9 else (0.0, 0.0, 1.0))
+    first /= np.linalg.norm(first)
+    second = np.cross(up, first)
+    step = 2.0 * math.pi / HEADINGS
+    angle = round(math.atan2(float(along @ second), float(along @ first)) / step) * step
+    return first * math.cos(angle) + second * math.sin(angle)
 
 
 def placed_box(matrix: glm.mat4, lo: tuple[float, float, float], hi: tuple[float, float, float]) -> Box:

@@ -717,6 +717,18 @@ _SUN_REST = tuple(field.name for field in dataclasses.fields(DirectionalLight)
                   if field.name not in ("direction", "color", "intensity"))
 
 
+def kept_sun_ways(world: World, limits: LightLimits) -> tuple[tuple[float, float, float], ...]:
+    """The ways the kept directional lights' light travels (``kept_lights``' suns that shine),
+    unit vectors: what a water's thrown-up caustics lean out along (``caustics.reach_box``)."""
+    ways = []
+    for entity in kept_lights(world, limits).directional:
+        light = None if entity is None else world.try_get(entity, DirectionalLight)
+        if light is not None and light.intensity > 0.0:
+            way = glm.normalize(glm.vec3(raw_field(light, "direction")))
+            ways.append((float(way.x), float(way.y), float(way.z)))
+    return tuple(ways)
+
+
 def kept_lights(world: World, limits: LightLimits) -> KeptLights:
     """The choice the prepare stage published this frame, or, where it has not run (a stage
     run alone), a first choice made now (not stored)."""
