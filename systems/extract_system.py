@@ -55,7 +55,7 @@ from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
 from engine.render.surface_table import SurfaceBlends
 from engine.resources import PortalCrossings, Surfaces, ViewBudget
-from engine.rules.light_rules import kept_sun_ways
+from engine.rules.light_rules import kept_lamp_places, kept_sun_ways
 from engine.rules.probe_rules import APPEARANCE_KINDS, POSE_KINDS, LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
 from systems.material_dispatch import choose_material, layer_uniforms
@@ -166,16 +166,16 @@ class ExtractSystem(esper.Processor):
         if surfaces is None or not surfaces.undersides:
             return ()
         bodies = []
-        suns = None
+        suns = lamps = None
         for entity, state in surfaces.mirrors.items():
             if state.water is None or state.bumps is None:
                 continue
             water = self.world.try_get(entity, Water)
             if water is not None and water.caustics > 0.0:
-                if state.carries_light and suns is None:
-                    suns = kept_sun_ways(self.world, LIGHT_LIMITS)   # (last frame's choice: lights come later)
+                if state.carries_light and suns is None:   # (last frame's choice: lights come later)
+                    suns, lamps = kept_sun_ways(self.world, LIGHT_LIMITS), kept_lamp_places(self.world, LIGHT_LIMITS)
                 bodies.append((entity, reach_box(state.corners, tuple(glm.vec3(state.plane)), water.depth,
-                                                 state.carries_light, suns or ())))
+                                                 state.carries_light, suns or (), lamps or ())))
         return tuple(sorted(bodies))
 
     def _keyed_apart_wrongly(self, bodies: tuple[tuple[int, Box], ...]) -> set[int]:

@@ -84,6 +84,7 @@ from engine.rules.light_rules import (
     choose_lights,
     cube_serves,
     is_panel,
+    kept_lamp_places,
     kept_sun_ways,
     lamp_cone,
     lamp_cookie,
@@ -244,10 +245,11 @@ class PrepareSystem(esper.Processor):
         renderer.stats.caustic_waters_cut = cut
         held = {water.entity: water for water in renderer.caustics.waters}
         width = caustic_map_size([state.bumps.normal_map for _, state, _ in found])[0] if found else 0
-        suns = kept_sun_ways(self.world, LIGHT_LIMITS) if any(state.carries_light for _, state, _ in found) else ()
+        suns, lamps = ((kept_sun_ways(self.world, LIGHT_LIMITS), kept_lamp_places(self.world, LIGHT_LIMITS))
+                       if any(state.carries_light for _, state, _ in found) else ((), ()))
         chosen = []
         for entity, state, water in found:
-            box = reach_box(state.corners, tuple(glm.vec3(state.plane)), water.depth, state.carries_light, suns)
+            box = reach_box(state.corners, tuple(glm.vec3(state.plane)), water.depth, state.carries_light, suns, lamps)
             key = (state, state.water.flow.offset, water.tiling, water.cross, water.ior, water.caustics, water.depth,
                    width, box)
             kept = held.get(entity)

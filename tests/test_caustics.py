@@ -894,6 +894,94 @@ def test_a_lamps_light_under_rippled_water_is_where_a_ray_tracer_gathers_it(scen
     assert np.median(np.abs(share - traced)) < 0.04, np.median(np.abs(share - traced))
 
 
+def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, height: float = CEILING) -> np.ndarray:
+    """The light at points ``xs`` ``height`` over the surface (on the line over the lamp's
+    foot, along the waves' U) that a lamp ``lamp_height`` over the pool throws up off its
+    waves (scaled by CALM), over the same off flat water, by tracing: rays from the lamp meet
+    the surface at a fine row of points, each reflected by the map's normal there, and land on
+    the plane; the light at a landing is the lamp's cos / distance^2 at the crossing over the
+    area it lands on (along the line the spacing of the landings, across it the spread of two
+    rays a millimetre apart).  Fresnel's reflectance is the flat water's, as the lamp's image
+    weighs it, in both."""
+    texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
+    size = len(texels)
+    lamp = np.array([0.0, lamp_height, 0.0])
+
+    def light(flat: bool) -> np.ndarray:
+        crossings = np.linspace(xs.min() * 0.5 - 0.2, xs.max() * 0.7 + 0.2, 40001)   # (each lands farther out)
+        u = (crossings + SIDE / 2.0) / SIDE * TILING * size - 0.5
+        low = np.floor(u).astype(int)
+        share = (u - low)[:, None]
+        m = texels[low % size] * (1.0 - share) + texels[(low + 1) % size] * share
+        slope_u = np.zeros(len(crossings)) if flat else m[:, 0] / m[:, 2] * CALM
+        normal = np.stack([slope_u, np.ones_like(slope_u), np.zeros_like(slope_u)], axis=1)
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+
+        def land(z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            at = np.stack([crossings, np.zeros_like(crossings), np.full_like(crossings, z)], axis=1)
+            incident = at - lamp
+            distance = np.linalg.norm(incident, axis=1)
+            incident /= distance[:, None]
+            ray = reflect(incident, normal)
+            t = height / ray[:, 1]
+            flux = -incident[:, 1] / distance ** 2   # per unit of surface
+            return at[:, 0] + ray[:, 0] * t, at[:, 2] + ray[:, 2] * t, flux
+
+        landed, _, flux = land(0.0)
+        _, aside, _ = land(1e-3)
+        along = np.gradient(landed, crossings)
+        assert (along > 0.0).all()   # no fold
+        return np.interp(xs, landed, flux / (along * (aside / 1e-3)))
+
+    return light(False) / light(True)
+
+
+def ceiling_lamp_pool(caustics: float, reflects: bool = True):
+    """``ceiling_pool`` lit by a lamp LAMP_HEIGHT over the pool's centre, over the ceiling
+    (which casts no shadow: its light reaches the water), instead of the sun: the ceiling's
+    face is lit by the lamp's image in the water alone."""
+    def build(world):
+        ceiling_pool(caustics, reflects)(world)
+        (sun,) = [entity for entity, _ in world.query_one(DirectionalLight)]
+        world.delete_entity(sun)
+        world.spawn(Transform(position=(0.0, LAMP_HEIGHT, 0.0)), PointLight(intensity=150.0, range=20.0))
+    return build
+
+
+def test_the_light_a_rippled_water_throws_up_from_a_lamp_is_where_a_ray_tracer_gathers_it(scene):
+    """A lamp over a water that reflects light (``Mirror.reflects_light``): its image in the
+    water lights the ceiling, and the waves gather its light there as they gather the sun's
+    (``caustic_reflected_lamp_light``).  Along the line over the lamp's foot, each ceiling
+    pixel's light over the same pixel with ``caustics`` 0 is the traced light off the waves
+    over the traced light off flat water: the profiles match, the brightest lines where the
+    tracer puts them.  Without the water's light the ceiling is black."""
+    from tests.support import pixel_rays
+
+    runner, lit = render(scene, ceiling_lamp_pool(1.0))
+    _, flat = render(scene, ceiling_lamp_pool(0.0))
+    _, dark = render(scene, ceiling_lamp_pool(1.0, reflects=False))
+    assert runner.stats.virtual_lights == 1
+    assert dark.max() < 0.01 and 0.03 < flat.min() and flat.max() < 0.5, (dark.max(), flat.min(), flat.max())
+    eye, directions = pixel_rays(runner.engine.main_view, runner.size)
+    t = (CEILING - eye[1]) / directions[..., 1]
+    points = eye + directions * t[..., None]
+    line = np.abs(points[..., 2]) < 0.04   # ceiling pixels over the line across the waves, through the lamp's foot
+    assert line.sum() > 100
+    share = lit[..., 0][line] / flat[..., 0][line]
+    traced = traced_reflected_lamp_light(points[..., 0][line])
+    assert traced.max() > 1.3 and traced.min() < 0.8, (traced.min(), traced.max())   # (a marked net)
+    assert np.corrcoef(share, traced)[0, 1] > 0.97, np.corrcoef(share, traced)[0, 1]
+    assert np.median(np.abs(share - traced)) < 0.05, np.median(np.abs(share - traced))
+    # What it can reach: the air up to the depth over the water, leaned out from the lamp's
+    # foot as its light rises (a corner 2 m out each way: 1.33 m more at 1 m up, then the
+    # waves' metre, out to the quarter metre).
+    from engine.render.caustics import reach_box
+
+    corners = np.array([[-2.0, 0.0, -2.0, 1.0], [2.0, 0.0, -2.0, 1.0], [-2.0, 0.0, 2.0, 1.0], [2.0, 0.0, 2.0, 1.0]])
+    assert reach_box(corners, (0.0, 1.0, 0.0), 1.0, True, (), ((0.0, LAMP_HEIGHT, 0.0),)) == \
+        ((-4.5, -1.0, -4.5), (4.5, 1.0, 4.5))
+
+
 def test_the_lamps_over_a_water_are_held_up_to_four_and_the_rest_are_said(scene):
     """Six lamps over the pool, each brighter than the one before, and one beside it whose
     range stops short of it: the four brightest over it are held (``CausticBlock.lamps``, the

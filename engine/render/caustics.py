@@ -97,10 +97,12 @@ Box = tuple[tuple[float, float, float], tuple[float, float, float]]   # a world 
 MAX_REACH_LEAN = 8.0   # a low sun's light thrown back up reaches at most this many depths out along the plane
 LEAN_STEP = 0.25       # the lean's depths rounded up to these (a sun moving over a day keys rows again rarely)
 HEADINGS = 64          # ... and its way along the plane to one of these
+REACH_GRID = 0.25      # metres: a reach box's edges lie on this grid (out), so small moves keep it
 
 
 def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float, reflects: bool,
-              suns: tuple[tuple[float, float, float], ...] = ()) -> Box:
+              suns: tuple[tuple[float, float, float], ...] = (),
+              lamps: tuple[tuple[float, float, float], ...] = ()) -> Box:
     """The world box [lo, hi] of what a water's caustics can light: its body (``body_box``:
     down to ``depth`` under its surface ``corners``) and, for a water that reflects light
     (``Mirror.reflects_light``: its waves gather the sun's light they throw back up), the air
@@ -109,7 +111,10 @@ def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float,
     height over the plane, rounded up to ``LEAN_STEP`` depths: 1 at 45 degrees, 2.75 at 20;
     at most ``MAX_REACH_LEAN``, a sun under 7 degrees), the whole widened by ``depth`` every
     way along its plane (the waves turn the light aside; a sun 45 degrees or more over the
-    surface leans no farther).  What lies in it is drawn with the caustics (``reaches``):
+    surface leans no farther), and where each of ``lamps`` (positions) over the water throws
+    its light as it rises ``depth`` (out from the lamp's foot, as far again times ``depth``
+    over the lamp's height, at most ``MAX_REACH_LEAN`` depths past the surface's edge).  What
+    lies in it is drawn with the caustics (``reaches``):
     ``shaders/include/caustics.glsl`` gathers the net at any point up to ``depth`` over the
     water whose flat reflected ray meets it."""
     up_vector = np.asarray(up, np.float64)
@@ -130,10 +135,20 @@ def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float,
             continue   # (45 degrees or higher: within the widening below)
         lean = min(MAX_REACH_LEAN, math.ceil(length / rise / LEAN_STEP - 1e-9) * LEAN_STEP)
         ends.append(risen + _heading(along / length, up_vector) * (lean * depth))
+    for lamp in lamps:
+        position = np.asarray(lamp, np.float64)
+        height = float((position - top[0]) @ up_vector)   # (over the plane)
+        if height <= 1e-4:
+            continue   # (a lamp under the plane throws nothing up)
+        foot = position - height * up_vector
+        out = (top - foot) * (depth / height)   # each corner's light, risen depth, leaned out from the foot
+        length = np.linalg.norm(out, axis=1, keepdims=True)
+        ends.append(risen + out * np.minimum(1.0, MAX_REACH_LEAN * depth / np.maximum(length, 1e-9)))
     ends = np.concatenate(ends)
     widen = depth * np.sqrt(np.clip(1.0 - up_vector * up_vector, 0.0, 1.0))   # along the plane, per axis
-    return (tuple(np.minimum(lo, ends.min(axis=0) - widen).tolist()),
-            tuple(np.maximum(hi, ends.max(axis=0) + widen).tolist()))
+    # (out to a grid of REACH_GRID metres: a lamp moving a little moves no edge)
+    return (tuple((np.floor(np.minimum(lo, ends.min(axis=0) - widen) / REACH_GRID) * REACH_GRID).tolist()),
+            tuple((np.ceil(np.maximum(hi, ends.max(axis=0) + widen) / REACH_GRID) * REACH_GRID).tolist()))
 
 
 def _heading(along: np.ndarray, up: np.ndarray) -> np.ndarray:

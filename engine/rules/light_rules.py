@@ -729,6 +729,19 @@ def kept_sun_ways(world: World, limits: LightLimits) -> tuple[tuple[float, float
     return tuple(ways)
 
 
+def kept_lamp_places(world: World, limits: LightLimits) -> tuple[tuple[float, float, float], ...]:
+    """Where the kept point lights that shine stand (``kept_lights``' lamps), world: what a
+    water's thrown-up caustics reach out from (``caustics.reach_box``)."""
+    places = []
+    for entity in kept_lights(world, limits).point:
+        light = None if entity is None else world.try_get(entity, PointLight)
+        transform = None if light is None or light.intensity <= 0.0 else world.try_get(entity, Transform)
+        if transform is not None:
+            m = transform.world
+            places.append((float(m[3].x), float(m[3].y), float(m[3].z)))
+    return tuple(places)
+
+
 def kept_lights(world: World, limits: LightLimits) -> KeptLights:
     """The choice the prepare stage published this frame, or, where it has not run (a stage
     run alone), a first choice made now (not stored)."""

@@ -800,9 +800,12 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
 
 def reflected_caustic_water(light: VirtualLight) -> int | None:
     """The water whose waves gather what ``light`` reflects (``shaders/include/caustics.glsl``
-    caustic_reflected_light): the sun's image in one water's top, its entity; None for any
-    other (a lamp's image, light off two surfaces, a water's underside, a mirror)."""
-    if light.kind != "directional" or len(light.apertures) != 1 or light.apertures[0].water <= 0.0:
+    caustic_reflected_light, caustic_reflected_lamp_light): the sun's or a point light's image
+    in one water's top, its entity; None for any other (light off two surfaces, a water's
+    underside, a mirror, a rectangle's or a tube's image: lit as a whole shape, not a point)."""
+    if len(light.apertures) != 1 or light.apertures[0].water <= 0.0:
+        return None
+    if light.kind != "directional" and light.rectangle != NO_RECTANGLE:
         return None
     return light.surface
 

@@ -22,7 +22,9 @@
 // Up to MAX_CAUSTIC_WATERS waters (a define the block's owner gives), by entity; a draw names
 // the ones its batch reaches into (caustic_waters).  A lamp's light is gathered the same way
 // (caustic_lamp_light, CAUSTIC_LAMPS builds: up to four lamps over a held water, caustic_lamps),
-// its rays fanning out from it: the ratio is the flat water's spread over the waves'.
+// its rays fanning out from it: the ratio is the flat water's spread over the waves'; and the
+// light a water that reflects light throws back up, the sun's and a lamp's
+// (caustic_reflected_light, caustic_reflected_lamp_light: virtual_lights.glsl).
 layout(std140) uniform Caustics {
     vec4 caustic_plane[MAX_CAUSTIC_WATERS];   // xyz: the water's up normal (out of its top), w: its plane's d
     vec4 caustic_u[MAX_CAUSTIC_WATERS];       // the mirror's UV u as dot(xyz, p) + w (the UV square, before tiling)
@@ -111,41 +113,46 @@ float caustic_reflected_light(int w, vec3 x, vec3 l, float footprint) {
     return caustic_gather(w, x, l, footprint, true);
 }
 
-#ifdef CAUSTIC_LAMPS
-// The share of a lamp's light that reaches x under water w (the lamp at ``lamp``, world, over
-// the water; ``radius`` its sphere's, which blurs the net as the sun's disc does): the flat
-// water's spread of the lamp's rays at x over the waves' (|det J_flat| / |det J|: its rays fan
-// out through a flat surface too), mixed in by the strength; 1 off the water, past its body,
-// or with the lamp under it.  The flat water's crossing is found along the line from the
-// lamp's foot through x's (Snell's law is symmetric about it: Newton's method on r + h tan t
-// = R), and J_flat there in closed form (across the line its stretch is R / r); the waves'
-// crossing then by the chord method with J_flat (the sun's fixed-point search, whose J_flat
-// is 1), from the flat one.
-float caustic_lamp_light(int w, vec3 x, vec3 lamp, float radius, float footprint) {
+// The share of a lamp's light that the waves of water w gather at x (the lamp at ``lamp``,
+// world, over the water; ``radius`` its sphere's, which blurs the net as the sun's disc does):
+// under the water (``reflected`` false) through it, or over it (true) thrown back up off
+// it; the flat water's spread of the lamp's rays at x over the waves' (|det J_flat| / |det J|:
+// its rays fan out off or through a flat surface too), mixed in by the strength; 1 off the
+// water, past its depth under or over it, or with the lamp under it.  The flat water's
+// crossing lies on the line from the lamp's foot through x's: thrown up, on the straight
+// line from the lamp's image (its stretch (a + h) / a both ways); through the water, where
+// Snell's law puts it (symmetric about that line: Newton's method on r + h tan t = R), and
+// J_flat there in closed form (across the line its stretch is R / r); the waves' crossing
+// then by the chord method with J_flat (the sun's fixed-point search, whose J_flat is 1),
+// from the flat one.  (Called with a constant ``reflected``: each build keeps one way.)
+float caustic_lamp_gather(int w, vec3 x, vec3 lamp, float radius, float footprint, bool reflected) {
     vec3 up = caustic_plane[w].xyz;
-    float h = -(dot(up, x) + caustic_plane[w].w);
+    vec3 along = reflected ? up : -up;   // the way the light leaves the surface
+    float h = reflected ? dot(up, x) + caustic_plane[w].w : -(dot(up, x) + caustic_plane[w].w);
     float a = dot(up, lamp) + caustic_plane[w].w;   // the lamp's height over the plane
     if (h <= 0.0 || h > caustic_sizes[w].z || a <= 1e-4) return 1.0;
     float eta = caustic_flow[w].z;
-    vec3 on_plane = x + up * h;
+    vec3 on_plane = x - along * h;
     vec3 foot = lamp - up * a;
     vec3 outward = on_plane - foot;
     float far_out = length(outward);   // R
     vec3 radial = far_out > 1e-6 ? outward / far_out : caustic_axis_u[w].xyz;
     vec3 across = cross(up, radial);
     float r = far_out * a / (a + h);   // the straight line's crossing
-    float stretch_along = 1.0;
-    for (int k = 0; k < 5; ++k) {
-        float hyp = sqrt(r * r + a * a);
+    float stretch_along = (a + h) / a;
+    if (!reflected) {
+        for (int k = 0; k < 5; ++k) {
+            float hyp = sqrt(r * r + a * a);
+            float sin_t = r / hyp * eta;
+            float cos_t = sqrt(max(1.0 - sin_t * sin_t, 1e-6));
+            stretch_along = 1.0 + h * (a * a / (hyp * hyp * hyp) * eta) / (cos_t * cos_t * cos_t);
+            r = max(r - (r + h * sin_t / cos_t - far_out) / stretch_along, 0.0);
+        }
+        float hyp = sqrt(r * r + a * a);   // (the stretch where the search ended)
         float sin_t = r / hyp * eta;
         float cos_t = sqrt(max(1.0 - sin_t * sin_t, 1e-6));
         stretch_along = 1.0 + h * (a * a / (hyp * hyp * hyp) * eta) / (cos_t * cos_t * cos_t);
-        r = max(r - (r + h * sin_t / cos_t - far_out) / stretch_along, 0.0);
     }
-    float hyp = sqrt(r * r + a * a);   // (the stretch where the search ended)
-    float sin_t = r / hyp * eta;
-    float cos_t = sqrt(max(1.0 - sin_t * sin_t, 1e-6));
-    stretch_along = 1.0 + h * (a * a / (hyp * hyp * hyp) * eta) / (cos_t * cos_t * cos_t);
     float stretch_across = r > 1e-4 * (a + h) ? far_out / r : stretch_along;
     vec3 s = foot + radial * r;
     vec2 uv0 = vec2(dot(caustic_u[w].xyz, s) + caustic_u[w].w, dot(caustic_v[w].xyz, s) + caustic_v[w].w);
@@ -156,16 +163,28 @@ float caustic_lamp_light(int w, vec3 x, vec3 lamp, float radius, float footprint
     float stride = max(max(caustic_sizes[w].y, spread), footprint);
     float lod = log2(stride / caustic_sizes[w].y);
     for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) {
-        vec3 miss = s + caustic_offset(w, s, normalize(lamp - s), h, lod, false) - on_plane;
+        vec3 miss = s + caustic_offset(w, s, normalize(lamp - s), h, lod, reflected) - on_plane;
         s -= radial * (dot(radial, miss) / stretch_along) + across * (dot(across, miss) / stretch_across);
     }
     vec3 half1 = e1 * (0.5 * stride), half2 = e2 * (0.5 * stride);
-    vec3 d1 = caustic_offset(w, s + half1, normalize(lamp - s - half1), h, lod, false)
-              - caustic_offset(w, s - half1, normalize(lamp - s + half1), h, lod, false);
-    vec3 d2 = caustic_offset(w, s + half2, normalize(lamp - s - half2), h, lod, false)
-              - caustic_offset(w, s - half2, normalize(lamp - s + half2), h, lod, false);
+    vec3 d1 = caustic_offset(w, s + half1, normalize(lamp - s - half1), h, lod, reflected)
+              - caustic_offset(w, s - half1, normalize(lamp - s + half1), h, lod, reflected);
+    vec3 d2 = caustic_offset(w, s + half2, normalize(lamp - s - half2), h, lod, reflected)
+              - caustic_offset(w, s - half2, normalize(lamp - s + half2), h, lod, reflected);
     float det = (1.0 + dot(d1, e1) / stride) * (1.0 + dot(d2, e2) / stride) - dot(d1, e2) / stride * (dot(d2, e1) / stride);
     float flat_det = stretch_along * stretch_across;
     return mix(1.0, flat_det / max(abs(det), flat_det / CAUSTIC_MAX_FOCUS), caustic_flow[w].w);
 }
-#endif
+
+// A lamp's light under water w (caustic_lamp_gather through it): CAUSTIC_LAMPS builds, up
+// to four lamps over a held water (caustic_lamps).
+float caustic_lamp_light(int w, vec3 x, vec3 lamp, float radius, float footprint) {
+    return caustic_lamp_gather(w, x, lamp, radius, footprint, false);
+}
+
+// Over water w: the share of a lamp's light it reflects that its waves gather at x
+// (caustic_lamp_gather thrown up): the net a lamp over a pool throws on the ceiling over it
+// (virtual_lights.glsl, the lamp's image in a water that reflects light).
+float caustic_reflected_lamp_light(int w, vec3 x, vec3 lamp, float radius, float footprint) {
+    return caustic_lamp_gather(w, x, lamp, radius, footprint, true);
+}

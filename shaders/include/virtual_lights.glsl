@@ -59,12 +59,18 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
         // (a water's body on its way: fog.glsl water_light's, virtual_light_ways.glsl)
         vec3 color = virtual_lights.virtual_color[i].rgb * virtual_kept(i, position, l, dist);
 #ifdef CAUSTICS
-        // The sun's image in a rippled water that gathers it: the light its waves throw up
-        // (caustics.glsl caustic_reflected_light, from the sun itself: l turned back up through
-        // the plane); the water's slot + 1 in the v row's w (shadow_system), 0 none.
+        // The sun's or a lamp's image in a rippled water that gathers it: the light its waves
+        // throw up (caustics.glsl caustic_reflected_light, from the sun itself: l turned back
+        // up through the plane; caustic_reflected_lamp_light, from the lamp: its image turned
+        // back over the plane); the water's slot + 1 in the v row's w (shadow_system), 0 none.
         int caustic = int(virtual_lights.virtual_v[i].w) - 1;
-        if (caustic >= 0)
-            color *= caustic_reflected_light(caustic, position, reflect(l, caustic_plane[caustic].xyz), caustic_footprint);
+        if (caustic >= 0) {
+            vec4 plane = caustic_plane[caustic];
+            color *= image.w > 0.5
+                ? caustic_reflected_lamp_light(caustic, position, image.xyz - 2.0 * (dot(plane.xyz, image.xyz) + plane.w)
+                                               * plane.xyz, virtual_lights.virtual_cookie_v[i].w, caustic_footprint)
+                : caustic_reflected_light(caustic, position, reflect(l, plane.xyz), caustic_footprint);
+        }
 #endif
         float shade = shadowed ? virtual_shadow(i, position, geometric, l, dist) : 1.0;
         vec3 arriving = color * cookie * falloff * shade;
