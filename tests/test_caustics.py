@@ -894,7 +894,8 @@ def test_a_lamps_light_under_rippled_water_is_where_a_ray_tracer_gathers_it(scen
     assert np.median(np.abs(share - traced)) < 0.04, np.median(np.abs(share - traced))
 
 
-def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, height: float = CEILING) -> np.ndarray:
+def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT,
+                                height: float = CEILING) -> np.ndarray:
     """The light at points ``xs`` ``height`` over the surface (on the line over the lamp's
     foot, along the waves' U) that a lamp ``lamp_height`` over the pool throws up off its
     waves (scaled by CALM), over the same off flat water, by tracing: rays from the lamp meet
