@@ -4,6 +4,7 @@ screen is worked out by projection and reflection math, not read from the render
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from shell.editor import Editor, pick
 from tests.test_level_edit import edit_scene
@@ -92,19 +93,31 @@ def dilated(mask: np.ndarray) -> np.ndarray:
     return near
 
 
-def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene):
+@pytest.mark.parametrize("veil", [False, True], ids=["bare", "veiled"])
+def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, veil):
     """The monitors' studio: the active camera before the screen, whose picture shows the red
     box the lens watches.  A pixel where the frame shows the box on the screen (red: the GPU's
     picture) picks the box (the main view's ray to the screen, its texture coordinates there,
     the lens's ray through that pixel of the picture, cast on the CPU:
     ``shell/picture_pick.py``); a pixel of the screen showing the black sky picks nothing; the
-    surface modifier picks the screen."""
-    from components import Monitor
+    surface modifier picks the screen.  ``veiled``: a wall between the lens and the box on a
+    layer the lens hides (``Camera.hides_layers``): its picture shows the box through it, and
+    the click picks the box, not the wall."""
+    from components import Camera, Material, MeshRef, Monitor, Transform, Visibility
+    from engine.assets.mesh import quad
     from shell.handles import view_ray
     from shell.picture_pick import into_pictures
-    from tests.test_monitors import DT, PICTURE, studio
+    from tests.test_monitors import BOX_AT, DT, PICTURE, studio
 
-    build, held = studio(Monitor(size=PICTURE))
+    made, held = studio(Monitor(size=PICTURE))
+
+    def build(world):
+        made(world)
+        if veil:
+            world.get(held["lens"], Camera).hides_layers = [3]
+            held["veil"] = world.spawn(Transform(position=(0.0, 1.0, (BOX_AT[2] + 0.0) / 2.0)), MeshRef(quad(6.0, 4.0)),
+                                       Material(color=(0.0, 1.0, 0.0, 1.0), unlit=True), Visibility(layers=[3]))
+
     runner = scene(build, (160, 120))
     runner.engine.renderer.antialias = "off"
     runner.frame(DT)
