@@ -815,23 +815,41 @@ LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics
 def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, depth: float = DEPTH) -> np.ndarray:
     """The light at points ``xs`` ``depth`` under the surface (on the line under the lamp,
     along the waves' U) of a lamp ``lamp_height`` over the pool, through the waves, over the
-    same through flat water,
-    by tracing: rays from the lamp cross the surface at a fine row of points, each bent by the
-    map's normal there (as ``traced_light``), and land on the floor; the light at a landing is
-    the light through the crossing (the lamp's cos / distance^2 there, and Fresnel's
-    transmission) over the area it lands on (the spacing of the landings along the line, and
-    across it the spread of two rays a millimetre either side)."""
+    same through flat water (``traced_lamp_share``: each ray bent by Snell's law, and
+    weighed by Fresnel's transmission, unpolarised, at its crossing)."""
+    def through(incident: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ray = refract(incident, normal, 1.0 / IOR)
+        cos_i = -np.sum(incident * normal, axis=1)
+        cos_t = -np.sum(ray * normal, axis=1)
+        rs = ((cos_i - IOR * cos_t) / (cos_i + IOR * cos_t)) ** 2
+        rp = ((IOR * cos_i - cos_t) / (IOR * cos_i + cos_t)) ** 2
+        return ray, 1.0 - 0.5 * (rs + rp)
+
+    crossings = np.linspace(xs.min() - 0.05, xs.max() + 0.05, 40001)   # (each lands farther out)
+    return traced_lamp_share(xs, lamp_height, crossings, 1.0, through, -depth)
+
+
+def traced_lamp_share(xs: np.ndarray, lamp_height: float, crossings: np.ndarray, scale: float, leave,
+                      plane: float) -> np.ndarray:
+    """The light at points ``xs`` of the plane y = ``plane`` (on the line over or under the
+    lamp's foot, along the waves' U) of a lamp ``lamp_height`` over the pool, off or through
+    its waves (the map's normals, tilted ``scale`` times), over the same off or through flat
+    water, by tracing: rays from the lamp meet the surface at ``crossings`` (a fine row),
+    each leaves it as ``leave`` (incident, normal) says (the ray on, and the share of the
+    light it takes), and lands on the plane; the light at a landing is the light at the
+    crossing (the lamp's cos / distance^2 there, times the share) over the area it lands on
+    (along the line the spacing of the landings, across it the spread of two rays a
+    millimetre apart)."""
     texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
     size = len(texels)
     lamp = np.array([0.0, lamp_height, 0.0])
 
     def light(flat: bool) -> np.ndarray:
-        crossings = np.linspace(xs.min() - 0.05, xs.max() + 0.05, 40001)   # (each lands farther out)
         u = (crossings + SIDE / 2.0) / SIDE * TILING * size - 0.5
         low = np.floor(u).astype(int)
         share = (u - low)[:, None]
         m = texels[low % size] * (1.0 - share) + texels[(low + 1) % size] * share
-        slope_u = np.zeros(len(crossings)) if flat else m[:, 0] / m[:, 2]
+        slope_u = np.zeros(len(crossings)) if flat else m[:, 0] / m[:, 2] * scale
         normal = np.stack([slope_u, np.ones_like(slope_u), np.zeros_like(slope_u)], axis=1)
         normal /= np.linalg.norm(normal, axis=1, keepdims=True)
 
@@ -840,14 +858,9 @@ def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, depth: f
             incident = at - lamp
             distance = np.linalg.norm(incident, axis=1)
             incident /= distance[:, None]
-            ray = refract(incident, normal, 1.0 / IOR)
-            t = depth / -ray[:, 1]
-            cos_i = -np.sum(incident * normal, axis=1)
-            # (Fresnel's transmission, unpolarised, at the crossing)
-            cos_t = -np.sum(ray * normal, axis=1)
-            rs = ((cos_i - IOR * cos_t) / (cos_i + IOR * cos_t)) ** 2
-            rp = ((IOR * cos_i - cos_t) / (IOR * cos_i + cos_t)) ** 2
-            flux = -incident[:, 1] / distance ** 2 * (1.0 - 0.5 * (rs + rp))   # per unit of surface
+            ray, taken = leave(incident, normal)
+            t = plane / ray[:, 1]
+            flux = -incident[:, 1] / distance ** 2 * taken   # per unit of surface
             return at[:, 0] + ray[:, 0] * t, at[:, 2] + ray[:, 2] * t, flux
 
         landed, _, flux = land(0.0)
@@ -898,43 +911,12 @@ def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT
                                 height: float = CEILING) -> np.ndarray:
     """The light at points ``xs`` ``height`` over the surface (on the line over the lamp's
     foot, along the waves' U) that a lamp ``lamp_height`` over the pool throws up off its
-    waves (scaled by CALM), over the same off flat water, by tracing: rays from the lamp meet
-    the surface at a fine row of points, each reflected by the map's normal there, and land on
-    the plane; the light at a landing is the lamp's cos / distance^2 at the crossing over the
-    area it lands on (along the line the spacing of the landings, across it the spread of two
-    rays a millimetre apart).  Fresnel's reflectance is the flat water's, as the lamp's image
-    weighs it, in both."""
-    texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
-    size = len(texels)
-    lamp = np.array([0.0, lamp_height, 0.0])
-
-    def light(flat: bool) -> np.ndarray:
-        crossings = np.linspace(xs.min() * 0.5 - 0.2, xs.max() * 0.7 + 0.2, 40001)   # (each lands farther out)
-        u = (crossings + SIDE / 2.0) / SIDE * TILING * size - 0.5
-        low = np.floor(u).astype(int)
-        share = (u - low)[:, None]
-        m = texels[low % size] * (1.0 - share) + texels[(low + 1) % size] * share
-        slope_u = np.zeros(len(crossings)) if flat else m[:, 0] / m[:, 2] * CALM
-        normal = np.stack([slope_u, np.ones_like(slope_u), np.zeros_like(slope_u)], axis=1)
-        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-
-        def land(z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            at = np.stack([crossings, np.zeros_like(crossings), np.full_like(crossings, z)], axis=1)
-            incident = at - lamp
-            distance = np.linalg.norm(incident, axis=1)
-            incident /= distance[:, None]
-            ray = reflect(incident, normal)
-            t = height / ray[:, 1]
-            flux = -incident[:, 1] / distance ** 2   # per unit of surface
-            return at[:, 0] + ray[:, 0] * t, at[:, 2] + ray[:, 2] * t, flux
-
-        landed, _, flux = land(0.0)
-        _, aside, _ = land(1e-3)
-        along = np.gradient(landed, crossings)
-        assert (along > 0.0).all()   # no fold
-        return np.interp(xs, landed, flux / (along * (aside / 1e-3)))
-
-    return light(False) / light(True)
+    waves (tilted CALM times), over the same off flat water (``traced_lamp_share``: each ray
+    reflected, all of it: Fresnel's reflectance is the flat water's, as the lamp's image
+    weighs it, in both)."""
+    crossings = np.linspace(xs.min() * 0.5 - 0.2, xs.max() * 0.7 + 0.2, 40001)   # (each lands farther out)
+    return traced_lamp_share(xs, lamp_height, crossings, CALM,
+                             lambda incident, normal: (reflect(incident, normal), 1.0), height)
 
 
 def ceiling_lamp_pool(caustics: float, reflects: bool = True):
