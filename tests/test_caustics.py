@@ -807,6 +807,17 @@ def test_a_low_suns_light_thrown_up_by_the_water_carries_its_caustics_as_far_as_
     share = lit[..., 0][seen] / flat[..., 0][seen]
     assert share.std() > 0.15 and share.max() > 1.3 and share.min() < 0.8, (share.std(), share.min(), share.max())
     assert 0.75 < share.mean() < 1.25, share.mean()
+    # The sun rising to 60 degrees: the reach box is the high sun's again, the canopy keyed out
+    # (its light no longer reaches it under the depth); back to 20, keyed in again.
+    (light,) = [light for _, light in runner.world.query_one(DirectionalLight)]
+    for elevation, keyed in ((60.0, ()), (20.0, (pool_entity,))):
+        e = math.radians(elevation)
+        light.direction = (math.cos(e), -math.sin(e), 0.0)
+        runner.frame(1.0 / 60.0)
+        canopy = next(b for b in runner.engine.renderer.batches.values() if ids["canopy"] in b.entity_at[:b.count])
+        assert canopy.caustic_waters == keyed, elevation
+        held = {water.entity: water.box for water in runner.engine.renderer.caustics.waters}
+        assert held[pool_entity] == (high if not keyed else low), elevation
 
 
 LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics

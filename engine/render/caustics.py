@@ -146,9 +146,33 @@ def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float,
         ends.append(risen + out * np.minimum(1.0, MAX_REACH_LEAN * depth / np.maximum(length, 1e-9)))
     ends = np.concatenate(ends)
     widen = depth * np.sqrt(np.clip(1.0 - up_vector * up_vector, 0.0, 1.0))   # along the plane, per axis
-    # (out to a grid of REACH_GRID metres: a lamp moving a little moves no edge)
-    return (tuple((np.floor(np.minimum(lo, ends.min(axis=0) - widen) / REACH_GRID) * REACH_GRID).tolist()),
-            tuple((np.ceil(np.maximum(hi, ends.max(axis=0) + widen) / REACH_GRID) * REACH_GRID).tolist()))
+    # (out to a grid of REACH_GRID metres: a lamp moving a little moves no edge; an edge a
+    # rounding error past a line of the grid stays on it)
+    low = np.minimum(lo, ends.min(axis=0) - widen) / REACH_GRID
+    high = np.maximum(hi, ends.max(axis=0) + widen) / REACH_GRID
+    return (tuple((np.floor(low + 1e-6) * REACH_GRID).tolist()), tuple((np.ceil(high - 1e-6) * REACH_GRID).tolist()))
+
+
+class ReachBoxes:
+    """Each water's ``reach_box``, made again only when what it is made from changed (its
+    surface's state, by identity, its depth, whether it reflects light, the suns' ways and the
+    lamps' places): a stage asks every frame, and a box with suns and lamps is about 80 us of
+    numpy."""
+
+    def __init__(self) -> None:
+        self._boxes: dict[int, tuple[tuple, Box]] = {}
+
+    def box(self, entity: int, state, depth: float, reflects: bool, suns: tuple = (), lamps: tuple = ()) -> Box:
+        """``reach_box`` of ``state`` (a ``SurfaceState``: its corners and plane) for ``entity``."""
+        key = (depth, reflects, suns if reflects else (), lamps if reflects else ())
+        kept = self._boxes.get(entity)
+        if kept is not None and kept[0][0] is state and kept[0][1] == key:
+            return kept[1]
+        found = reach_box(state.corners, tuple(glm.vec3(state.plane)), depth, reflects, key[2], key[3])
+        if len(self._boxes) > 64:
+            self._boxes.clear()
+        self._boxes[entity] = ((state, key), found)
+        return found
 
 
 def _heading(along: np.ndarray, up: np.ndarray) -> np.ndarray:
