@@ -56,7 +56,7 @@ from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitWarning
 from engine.render.bindings import CAUSTIC_UNIT, CAUSTICS_BINDING, bind_texture, bind_uniform_block
 from engine.render.spot_cookies import SCENE_SAMPLERS
-from engine.resources import MirrorBumps
+from engine.resources import MirrorBumps, SurfaceState
 
 MAX_CAUSTIC_WATERS = 4      # waters whose caustics are drawn at once (the nearest the active camera; at most 4:
 #                             a draw names its waters in an ivec4, scene.frag's caustic_waters)
@@ -162,7 +162,8 @@ class ReachBoxes:
     def __init__(self) -> None:
         self._boxes: dict[int, tuple[tuple, Box]] = {}
 
-    def box(self, entity: int, state, depth: float, reflects: bool, suns: tuple = (), lamps: tuple = ()) -> Box:
+    def box(self, entity: int, state: SurfaceState, depth: float, reflects: bool, suns: tuple = (),
+            lamps: tuple = ()) -> Box:
         """``reach_box`` of ``state`` (a ``SurfaceState``: its corners and plane) for ``entity``."""
         key = (depth, reflects, suns if reflects else (), lamps if reflects else ())
         kept = self._boxes.get(entity)
