@@ -134,7 +134,7 @@ def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float,
         if length <= rise:
             continue   # (45 degrees or higher: within the widening below)
         lean = min(MAX_REACH_LEAN, math.ceil(length / rise / LEAN_STEP - 1e-9) * LEAN_STEP)
-        ends.append(risen + _heading(along / length, up_vector) * (lean * depth))
+        ends.append(risen + _snapped_way(along / length, up_vector) * (lean * depth))
     for lamp in lamps:
         position = np.asarray(lamp, np.float64)
         height = float((position - top[0]) @ up_vector)   # (over the plane)
@@ -176,7 +176,7 @@ class ReachBoxes:
         return found
 
 
-def _heading(along: np.ndarray, up: np.ndarray) -> np.ndarray:
+def _snapped_way(along: np.ndarray, up: np.ndarray) -> np.ndarray:
     """The unit way ``along`` (in the plane square to ``up``) turned to the nearest of
     ``HEADINGS`` ways round: so a sun moving over a day moves a reach box in steps (at
     ``MAX_REACH_LEAN`` the step's half turns the lean's end by 0.4 depth, inside the box's
