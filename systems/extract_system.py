@@ -49,7 +49,7 @@ from engine.assets.mesh import Mesh
 from engine.core.errors import GLLimitError
 from engine.core.skinning import posed_bounds
 from engine.core.world import World
-from engine.render.caustics import Box, ReachBoxes, caustic_waters_of, placed_box
+from engine.render.caustics import Box, caustic_waters_of, placed_box
 from engine.render.instances import PROBE_WEIGHTS, TINT_VISIBILITY, InstanceBatch
 from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
@@ -77,7 +77,6 @@ class ExtractSystem(esper.Processor):
         self.world = world
         self.renderer = renderer
         self._batch_of: dict[int, InstanceBatch] = {}
-        self._reach = ReachBoxes()   # each caustic water's reach box (_caustic_bodies), kept while made from the same
         self._looks = LookChanges()  # what changes a look, and which probe each object samples
         self._joined: set[int] = set()
         self._surface_probes = SurfaceProbes()  # each mirror's and portal's fallback probes
@@ -175,8 +174,9 @@ class ExtractSystem(esper.Processor):
             if water is not None and water.caustics > 0.0:
                 if state.carries_light and suns is None:   # (last frame's choice: lights come later)
                     suns, lamps = kept_sun_ways(self.world, LIGHT_LIMITS), kept_lamp_places(self.world, LIGHT_LIMITS)
-                bodies.append((entity, self._reach.box(entity, state, water.depth, state.carries_light, suns or (),
-                                                       lamps or ())))
+                box = self.renderer.caustics.reach.box(entity, state, water.depth, state.carries_light, suns or (),
+                                                       lamps or ())
+                bodies.append((entity, box))
         return tuple(sorted(bodies))
 
     def _keyed_apart_wrongly(self, bodies: tuple[tuple[int, Box], ...]) -> set[int]:

@@ -55,7 +55,6 @@ from engine.render.caustics import (
     MAX_CAUSTIC_LAMPS,
     MAX_CAUSTIC_WATERS,
     CausticWater,
-    ReachBoxes,
     caustic_map_size,
     caustic_rows,
     lamps_over,
@@ -138,7 +137,6 @@ class PrepareSystem(esper.Processor):
         self._cuts: dict[str, int] = {}           # RenderStats field -> what a limit left out last frame (_say_cut)
         self._caustic_still: set[int] = set()     # waters with caustics and no waves to gather with (said once)
         self._caustic_keys: dict[int, tuple] = {}  # what each held water's rows were packed from (_caustics)
-        self._reach = ReachBoxes()   # each caustic water's reach box, kept while made from the same
         self._volumetric = VolumetricLamps()   # the lamps the light shafts scatter, by slot
         self._kept: KeptLights | None = None   # the last choice of lights (light_rules)
         self._sun: SkySun | None = None   # where the sky pass draws the sun, and its tint (sky_sun)
@@ -250,7 +248,7 @@ class PrepareSystem(esper.Processor):
                        if any(state.carries_light for _, state, _ in found) else ((), ()))
         chosen = []
         for entity, state, water in found:
-            box = self._reach.box(entity, state, water.depth, state.carries_light, suns, lamps)
+            box = self.renderer.caustics.reach.box(entity, state, water.depth, state.carries_light, suns, lamps)
             key = (state, state.water.flow.offset, water.tiling, water.cross, water.ior, water.caustics, water.depth,
                    width, box)
             kept = held.get(entity)

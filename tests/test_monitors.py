@@ -488,14 +488,24 @@ def test_a_picture_panel_is_graded_as_the_frame_under_it(scene, table):
 
     runner, rgb = run(scene, hud, 3)
     shown = runner.engine.renderer.monitors.read(held["panel"])[..., :3] * tint * 2.0
+
+    def expected_panel() -> np.ndarray:
+        encoded = linear_to_srgb8(CURVES["agx"](grade(shown, **controls))) / 255.0
+        if table:
+            encoded = 0.5 * encoded + 0.5 * np.clip(lut.apply(encoded), 0.0, 1.0)
+        return np.rint(np.clip(encoded, 0.0, 1.0) * 255.0)
+
     drawn = rgb[6:6 + PICTURE[1], 10:10 + PICTURE[0]].astype(np.int16)
-    encoded = linear_to_srgb8(CURVES["agx"](grade(shown, **controls))) / 255.0
-    if table:
-        encoded = 0.5 * encoded + 0.5 * np.clip(lut.apply(encoded), 0.0, 1.0)
-    expected = np.rint(np.clip(encoded, 0.0, 1.0) * 255.0)
+    expected = expected_panel()
     assert np.abs(drawn - expected).max() <= 1
     ungraded = np.rint(linear_to_srgb8(CURVES["agx"](shown)))
     assert np.abs(expected - ungraded).max() > 20
+    # The grade changed: the panel follows the next frame (its uniforms written again).
+    controls["contrast"] = 0.8
+    runner.world.get(active_camera(runner.world), ColorGrading).contrast = 0.8
+    rgb = runner.frame(DT)
+    drawn = rgb[6:6 + PICTURE[1], 10:10 + PICTURE[0]].astype(np.int16)
+    assert np.abs(drawn - expected_panel()).max() <= 1 and np.abs(expected_panel() - expected).max() > 5
 
 
 def test_a_monitor_spends_none_of_the_frames_view_budget(scene):

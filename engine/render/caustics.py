@@ -156,8 +156,8 @@ def reach_box(corners: np.ndarray, up: tuple[float, float, float], depth: float,
 class ReachBoxes:
     """Each water's ``reach_box``, made again only when what it is made from changed (its
     surface's state, by identity, its depth, whether it reflects light, the suns' ways and the
-    lamps' places): a stage asks every frame, and a box with suns and lamps is about 80 us of
-    numpy."""
+    lamps' places): the extract and prepare stages ask every frame (one keeper for both:
+    ``CausticBlock.reach``), and a box with suns and lamps is about 80 us of numpy."""
 
     def __init__(self) -> None:
         self._boxes: dict[int, tuple[tuple, Box]] = {}
@@ -352,6 +352,7 @@ class CausticBlock:
         self.waters: tuple[CausticWater, ...] = ()
         self.lamps: tuple[int, ...] = ()   # the Lights block slots of the lamps whose light is gathered
         self.maps = CausticMaps(ctx)
+        self.reach = ReachBoxes()   # the waters' reach boxes, which the extract and prepare stages both ask
         self.defines: tuple[tuple[str, str], ...] = ()
         self._warned = False
         # slots_of's answers while the held waters' entities and bodies stay: id(box) -> (box, keyed, posed, slots)

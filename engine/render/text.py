@@ -221,6 +221,7 @@ class TextPass:
         self.vao = self._vertex_array(self.program)
         # The picture panels' builds, by (tone curve, automatic exposure, grade, table): program, vertex array.
         self._pictures: dict[tuple[str, bool, bool, bool], tuple[moderngl.Program, moderngl.VertexArray]] = {}
+        self._written: dict[int, dict[str, object]] = {}   # the picture builds' uniforms as last written, by program
         self.drawn = 0  # quads drawn in the last draw
         self.cut = 0    # quads left out (past MAX_QUADS) in the last draw
 
@@ -250,21 +251,25 @@ class TextPass:
 
     def _set_look(self, program: moderngl.Program, look: PictureLook) -> None:
         """``look``'s exposure, grade and table on the picture build ``program`` (the present's
-        own values: the panel's colours go through what the frame's went through)."""
-        program["exposure"].value = look.scale
+        own values: the panel's colours go through what the frame's went through), each uniform
+        written only when its value changed (a write is a GL call)."""
+        values: dict[str, object] = {"exposure": look.scale}
         if look.exposure_state is not None:
             bind_texture(self.ctx, look.exposure_state, EXPOSURE_UNIT)
         if grades(look.grading):
-            for name, value in grade_uniforms(look.grading).items():
+            values.update(grade_uniforms(look.grading))
+        if look.lut is not None:
+            bind_texture(self.ctx, look.lut, LUT_UNIT)
+            values["lut_scale"], values["lut_bias"] = lut_lookup(look.grading.lut)
+            values["lut_strength"] = look.grading.lut_strength
+        written = self._written.setdefault(id(program), {})
+        for name, value in values.items():
+            if written.get(name) != value:
                 if isinstance(value, bytes):
                     program[name].write(value)
                 else:
                     program[name].value = value
-        if look.lut is not None:
-            bind_texture(self.ctx, look.lut, LUT_UNIT)
-            scale, bias = lut_lookup(look.grading.lut)
-            program["lut_scale"].value, program["lut_bias"].value = scale, bias
-            program["lut_strength"].value = look.grading.lut_strength
+                written[name] = value
 
     def draw(self, quads: np.ndarray, framebuffer: moderngl.Framebuffer, size: tuple[int, int],
              pictures: tuple[moderngl.Texture, ...] = (), look: PictureLook = PLAIN_LOOK) -> None:
