@@ -55,7 +55,7 @@ from engine.render.renderer import Renderer
 from engine.render.shadows import LIGHT_LIMITS
 from engine.render.surface_table import SurfaceBlends
 from engine.resources import PortalCrossings, Surfaces, ViewBudget
-from engine.rules.light_rules import kept_lamp_places, kept_sun_ways
+from engine.rules.light_rules import kept_lamp_places, kept_sun_ways, lights_this_frame
 from engine.rules.probe_rules import APPEARANCE_KINDS, POSE_KINDS, LookChanges, SurfaceProbes, probe_blend
 from engine.rules.visibility_rules import entity_code
 from systems.material_dispatch import choose_material, layer_uniforms
@@ -172,8 +172,10 @@ class ExtractSystem(esper.Processor):
                 continue
             water = self.world.try_get(entity, Water)
             if water is not None and water.caustics > 0.0:
-                if state.carries_light and suns is None:   # (last frame's choice: lights come later)
-                    suns, lamps = kept_sun_ways(self.world, LIGHT_LIMITS), kept_lamp_places(self.world, LIGHT_LIMITS)
+                if state.carries_light and suns is None:   # (the prepare stage's choice, made ahead)
+                    now = lights_this_frame(self.world, LIGHT_LIMITS)
+                    suns = kept_sun_ways(self.world, LIGHT_LIMITS, now)
+                    lamps = kept_lamp_places(self.world, LIGHT_LIMITS, now)
                 box = self.renderer.caustics.reach.box(entity, state, water.depth, state.carries_light, suns or (),
                                                        lamps or ())
                 bodies.append((entity, box))

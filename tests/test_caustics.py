@@ -818,6 +818,16 @@ def test_a_low_suns_light_thrown_up_by_the_water_carries_its_caustics_as_far_as_
         assert canopy.caustic_waters == keyed, elevation
         held = {water.entity: water.box for water in runner.engine.renderer.caustics.waters}
         assert held[pool_entity] == (high if not keyed else low), elevation
+    # A second, low sun new this frame (the first raised again): the canopy is keyed in on its
+    # first frame (the extract stage keys rows before the prepare stage chooses the lights: it
+    # makes the same choice ahead), under the box the prepare stage holds.
+    light.direction = (math.cos(math.radians(60.0)), -math.sin(math.radians(60.0)), 0.0)
+    runner.frame(1.0 / 60.0)
+    runner.world.spawn(DirectionalLight(direction=(math.cos(e), -math.sin(e), 0.0), intensity=30.0))
+    runner.frame(1.0 / 60.0)
+    canopy = next(b for b in runner.engine.renderer.batches.values() if ids["canopy"] in b.entity_at[:b.count])
+    held = {water.entity: water.box for water in runner.engine.renderer.caustics.waters}
+    assert canopy.caustic_waters == (pool_entity,) and held[pool_entity] == low
 
 
 LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics

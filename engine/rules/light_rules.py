@@ -717,11 +717,13 @@ _SUN_REST = tuple(field.name for field in dataclasses.fields(DirectionalLight)
                   if field.name not in ("direction", "color", "intensity"))
 
 
-def kept_sun_ways(world: World, limits: LightLimits) -> tuple[tuple[float, float, float], ...]:
-    """The ways the kept directional lights' light travels (``kept_lights``' suns that shine),
-    unit vectors: what a water's thrown-up caustics lean out along (``caustics.reach_box``)."""
+def kept_sun_ways(world: World, limits: LightLimits,
+                  kept: KeptLights | None = None) -> tuple[tuple[float, float, float], ...]:
+    """The ways the kept directional lights' light travels (the suns of ``kept``, by default
+    ``kept_lights``', that shine), unit vectors: what a water's thrown-up caustics lean out
+    along (``caustics.reach_box``)."""
     ways = []
-    for entity in kept_lights(world, limits).directional:
+    for entity in (kept or kept_lights(world, limits)).directional:
         light = None if entity is None else world.try_get(entity, DirectionalLight)
         if light is not None and light.intensity > 0.0:
             way = glm.normalize(glm.vec3(raw_field(light, "direction")))
@@ -729,11 +731,13 @@ def kept_sun_ways(world: World, limits: LightLimits) -> tuple[tuple[float, float
     return tuple(ways)
 
 
-def kept_lamp_places(world: World, limits: LightLimits) -> tuple[tuple[float, float, float], ...]:
-    """Where the kept point lights that shine stand (``kept_lights``' lamps), world: what a
-    water's thrown-up caustics reach out from (``caustics.reach_box``)."""
+def kept_lamp_places(world: World, limits: LightLimits,
+                     kept: KeptLights | None = None) -> tuple[tuple[float, float, float], ...]:
+    """Where the kept point lights that shine stand (the lamps of ``kept``, by default
+    ``kept_lights``'), world: what a water's thrown-up caustics reach out from
+    (``caustics.reach_box``)."""
     places = []
-    for entity in kept_lights(world, limits).point:
+    for entity in (kept or kept_lights(world, limits)).point:
         light = None if entity is None else world.try_get(entity, PointLight)
         transform = None if light is None or light.intensity <= 0.0 else world.try_get(entity, Transform)
         if transform is not None:
@@ -747,6 +751,13 @@ def kept_lights(world: World, limits: LightLimits) -> KeptLights:
     run alone), a first choice made now (not stored)."""
     kept = world.resources.get(KeptLights)
     return kept if kept is not None else choose_lights(world, None, limits)
+
+
+def lights_this_frame(world: World, limits: LightLimits) -> KeptLights:
+    """The choice the prepare stage will make this frame, made ahead of it (not stored): from
+    the last one published, by the same rule, so a stage before the prepare stage (the
+    extract stage's keying of rows under waters) sees a light new this frame."""
+    return choose_lights(world, world.resources.get(KeptLights), limits)
 
 
 @world_invariant(Skybox)
