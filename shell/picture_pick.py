@@ -4,9 +4,9 @@ mirror picks the thing seen in it.  The main view's ray through the clicked pixe
 coordinates on the screen's mesh give the picture's pixel, and the monitor camera's ray
 through that pixel is cast on in turn, into a picture in the picture too, up to
 ``MAX_PICTURES_FOLLOWED`` deep.  Cast on the CPU (``engine/rules/raycast.py``): the picture
-keeps no id image of what it shows.  The lens's cast meets only what its view draws (the
-visibility rule: its layers, and what is hidden in direct views), on every stretch: a thing
-hidden only in the mirrors the lens sees is still met in them."""
+keeps no id image of what it shows.  The lens's cast meets only what its views draw (the
+visibility rule: its layers, what is hidden in direct views, and past a mirror or portal
+what that view draws: ``raycast_seen``'s ``view_mask``)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Collection
@@ -20,7 +20,6 @@ from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.render.views import camera_view
 from engine.rules.raycast import RayHit, raycast_seen
-from engine.rules.visibility_rules import drawn_code, drawn_in
 from shell.handles import view_ray
 
 MAX_PICTURES_FOLLOWED = 4   # pictures in pictures a click follows (a camera seeing its own screen stops there)
@@ -60,16 +59,9 @@ def seen_in_pictures(world: World, pictures: Collection[int], picked: int, origi
                            ortho_height=camera.ortho_height if camera.projection == "orthographic" else None)
         # The picture's texel at the point (its rows from the bottom, as the screen samples it).
         origin, direction = view_ray(view.view_proj, (width, height), (uv[0] * width, (1.0 - uv[1]) * height))
-        seen = raycast_seen(world, origin, direction, where=_drawn_by(world, view.kinds, camera.layer_mask))
+        seen = raycast_seen(world, origin, direction, view_mask=visibility_code(view.kinds, camera.layer_mask))
         entity = None if seen is None else seen.hit.entity
     return entity
-
-
-def _drawn_by(world: World, kinds: int, layers: int) -> Callable[[int], bool]:
-    """Whether a view of ``kinds`` showing ``layers`` (a camera's: ``Camera.layer_mask``)
-    draws an entity (``drawn_in``, ``drawn_code``: its Visibility and its mesh's)."""
-    mask = visibility_code(kinds, layers)
-    return lambda entity: bool(drawn_in(drawn_code(world, entity), mask))
 
 
 def _uv_at(world: World, hit: RayHit) -> tuple[float, float] | None:

@@ -146,3 +146,58 @@ def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, 
         assert click(column, row) is None, (column, row)
     row, column = np.argwhere(inner)[0]
     assert click(column, row, surface=True) == held["screen"]
+
+
+GHOST = (-0.75, 1.26, -0.9)   # on the way from the mirror to the box's image in it
+VAMPIRE = (0.6, 1.0, 0.3)
+
+
+def test_a_cast_from_a_view_meets_in_each_stretch_what_the_view_there_draws(scene):
+    """``raycast_seen`` with the main view's mask agrees with the GPU's id image pixel by pixel
+    over the mirror: a box hidden in mirror views (``Visibility(in_mirrors=False)``) standing
+    between the red box and the mirror is met where the view sees it directly and passed
+    through in the mirror (the red box behind it is met there), and a box hidden in direct
+    views is met only in the mirror.  The view through the mirror is ``mask_through`` it; the
+    direct view's mask on every stretch met the first box in the mirror and missed the second."""
+    from components import Material, MeshRef, Transform, Visibility
+    from engine.assets.mesh import box
+    from engine.rules.raycast import raycast_seen
+    from shell.handles import view_ray
+
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        ents["ghost"] = world.spawn(Transform(position=GHOST, scale=(0.35, 0.35, 0.35)), MeshRef(box()),
+                                    Material(color=(0.1, 0.9, 0.1)), Visibility(in_mirrors=False))
+        ents["vampire"] = world.spawn(Transform(position=VAMPIRE, scale=(0.6, 0.6, 0.6)), MeshRef(box()),
+                                      Material(color=(0.1, 0.1, 0.9)), Visibility(direct=False))
+
+    runner = scene(build, (160, 120))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    ids, surfaces = runner.ids(), runner.engine.renderer.targets.read_surface_ids()
+    view = runner.engine.main_view
+    glass = surfaces == ents["mirror"]
+    inner = glass.copy()   # (away from any edge in the id image, where a pixel's centre ray and the raster part)
+    for axis in (0, 1):
+        for step in (1, -1):
+            inner &= np.roll(ids, step, axis=axis) == ids
+    found = {name: 0 for name in ents}
+    wrong = []
+    for row, column in zip(*np.nonzero(inner), strict=True):
+        origin, direction = view_ray(view.view_proj, runner.size, (column + 0.5, row + 0.5))
+        seen = raycast_seen(runner.world, origin, direction, view_mask=view.view_mask)
+        cast = 0 if seen is None else seen.hit.entity
+        if cast != ids[row, column]:
+            wrong.append((column, row, cast, int(ids[row, column])))
+        for name, entity in ents.items():
+            found[name] += ids[row, column] == entity
+    assert found["box"] > 20 and found["vampire"] > 20 and found["ghost"] == 0, found
+    assert len(wrong) <= inner.sum() // 100, wrong[:10]
+    # Straight ahead the ghost is met, the vampire is not: the sky behind it is.
+    origin, direction = view_ray(view.view_proj, runner.size, np.add(runner.project(GHOST), 0.5))
+    assert raycast_seen(runner.world, origin, direction, view_mask=view.view_mask).hit.entity == ents["ghost"]
+    origin, direction = view_ray(view.view_proj, runner.size, np.add(runner.project(VAMPIRE), 0.5))
+    assert raycast_seen(runner.world, origin, direction, view_mask=view.view_mask) is None   # (the sky)
+    assert raycast_seen(runner.world, origin, direction).hit.entity == ents["vampire"]   # (no mask: anything)

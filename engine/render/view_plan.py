@@ -41,8 +41,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pyglm import glm
 
-from components.limits import VIEW_DIRECT, VIEW_MIRROR, VIEW_PORTAL
-from components.visibility import KIND_MASK, visibility_code
+from components.limits import VIEW_MIRROR, VIEW_PORTAL
+from components.visibility import visibility_code
 from engine.render.plan_rows import (
     _PARENT,
     _SURFACE,
@@ -93,12 +93,10 @@ from engine.render.plan_scratch import (
     node_numbers,
 )
 from engine.render.views import CAMERA_FLOATS, View
-from engine.rules.visibility_rules import drawn_in
+from engine.rules.visibility_rules import KINDS_BUT_DIRECT, drawn_in
 
 if TYPE_CHECKING:  # the surfaces stage's records (engine/resources.py): read here by their fields
     from engine.resources import SurfaceState
-
-_KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
 
 
 def _mat(matrix: glm.mat4) -> np.ndarray:
@@ -210,7 +208,7 @@ class SurfaceTable:
         self.float_rows[:, EXIT_PLANE] = self.exit_planes
         self.float_rows[:, NEG_EXIT_PLANE] = -self.exit_planes
         self.float_rows[:, SCALE] = self.scale
-        self.keep = visibility_code(_KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
+        self.keep = visibility_code(KINDS_BUT_DIRECT, self.layers)  # the mask bits a view through it keeps
         self._depths: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, list[bool], bool]] = {}
         self._biases: dict[tuple, tuple[np.ndarray | None, list]] = {}  # _bias_rows' tables, by depth, cap, ends
         self._bias_tables: dict[bytes, list] = {}  # [allowed, class rows]: _bias_rows', by the surfaces allowed

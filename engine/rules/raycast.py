@@ -44,6 +44,7 @@ from engine.core.skinning import posed_positions
 from engine.core.transforms import MAX_PARENT_HOPS, current_world_matrix
 from engine.core.world import World
 from engine.resources import Surfaces
+from engine.rules.visibility_rules import drawn_code, drawn_in, mask_through
 
 EPSILON = 1e-9  # |determinant| below this: the ray runs along the triangle's plane (no hit)
 MAX_SEEN_SURFACES = 16  # raycast_seen follows at most this many mirrors and portals (facing pairs)
@@ -250,13 +251,17 @@ class SeenHit:
 
 def raycast_seen(world: World, origin: glm.vec3 | Sequence[float], direction: glm.vec3 | Sequence[float],
                  where: Callable[[int], bool] | None = None, ignore: Collection[int] = (),
-                 max_surfaces: int = MAX_SEEN_SURFACES) -> SeenHit | None:
+                 max_surfaces: int = MAX_SEEN_SURFACES, view_mask: int | None = None) -> SeenHit | None:
     """``raycast``, followed on through each enabled mirror met from its front (the ray
     reflected by the mirror's ``carry``) and each open portal met from its front (the point and
     the ray carried by the pair to beyond the partner, which the next stretch leaves out), as
     the surfaces stage left them (``Surfaces``; none there: a plain cast).  A surface met
     from behind, switched off, or past ``max_surfaces`` is the hit itself.  ``where`` and
-    ``ignore`` as for ``raycast``, on every stretch.  None when a stretch meets nothing."""
+    ``ignore`` as for ``raycast``, on every stretch.  With ``view_mask`` (the mask of the view
+    the ray leaves: ``View.view_mask``) each stretch meets only what its view draws (the
+    visibility rule: ``drawn_in``), the view through each surface passed being
+    ``mask_through`` it, as the planner makes it: a thing hidden in mirror views is met in
+    the direct view and passed through in a mirror.  None when a stretch meets nothing."""
     surfaces = world.resources.get(Surfaces)
     o = glm.vec3(*_vector("origin", origin))
     d = _vector("direction", direction)
@@ -267,8 +272,9 @@ def raycast_seen(world: World, origin: glm.vec3 | Sequence[float], direction: gl
     through: list[int] = []
     way = 0.0
     left_out = set(ignore)
+    mask = view_mask
     while True:
-        hit = raycast(world, o, d, where=where, ignore=left_out)
+        hit = raycast(world, o, d, where=where if mask is None else _drawn_and(world, where, mask), ignore=left_out)
         if hit is None:
             return None
         way += hit.distance
@@ -277,12 +283,19 @@ def raycast_seen(world: World, origin: glm.vec3 | Sequence[float], direction: gl
                 or len(through) >= max_surfaces:
             return SeenHit(hit, tuple(through), way)
         through.append(hit.entity)
+        if mask is not None:
+            mask = mask_through(mask, state.kind == "mirror", state.layers)
         o = glm.vec3(state.carry * glm.vec4(hit.point, 1.0))
         d = glm.normalize(glm.vec3(state.carry * glm.vec4(d, 0.0)))
         left_out = set(ignore) | {state.exit_entity}
 
 
 # --- helpers ---------------------------------------------------------------------------------
+
+def _drawn_and(world: World, where: Callable[[int], bool] | None, mask: int) -> Callable[[int], bool]:
+    """``where`` (None: anything) and drawn by a view of ``mask`` (``drawn_in``)."""
+    return lambda entity: (where is None or bool(where(entity))) and bool(drawn_in(drawn_code(world, entity), mask))
+
 
 def _vector(name: str, value) -> np.ndarray:
     try:

@@ -31,7 +31,15 @@ from typing import TypeVar
 import numpy as np
 
 from components import MeshRef, Portal, PortalClone, Refractive, Visibility
-from components.limits import NO_RECEIVE_BIT, NO_SHADOW_BIT, OPENING_CASTS_BIT, VIEW_KINDS
+from components.limits import (
+    NO_RECEIVE_BIT,
+    NO_SHADOW_BIT,
+    OPENING_CASTS_BIT,
+    VIEW_DIRECT,
+    VIEW_KINDS,
+    VIEW_MIRROR,
+    VIEW_PORTAL,
+)
 from components.visibility import DRAWN_EVERYWHERE, KIND_MASK, visibility_code
 from engine.core.material_slots import ReflectVariant
 from engine.core.world import World
@@ -59,6 +67,17 @@ def drawn_code(world: World, entity: int) -> int:
     no layer at all with an invisible mesh (a mirror's or portal's own, for the planner)."""
     mesh_ref = world.try_get(entity, MeshRef)
     return entity_code(world.try_get(entity, Visibility), drawn=mesh_ref is None or mesh_ref.visible)
+
+
+KINDS_BUT_DIRECT = KIND_MASK & ~VIEW_DIRECT  # a view through a surface is no longer direct
+
+
+def mask_through(view_mask: int, mirror: bool, layers: int) -> int:
+    """The mask of the view through a mirror (``mirror``) or a portal whose view shows
+    ``layers`` (its ``SurfaceState.layers``), seen in a view of ``view_mask``: no longer
+    direct, a mirror or a portal view besides the kinds it was, showing the layers both show
+    (the planner's ``SurfaceTable.keep`` and ``kind_bit``, every surface at once)."""
+    return (view_mask & visibility_code(KINDS_BUT_DIRECT, layers)) | (VIEW_MIRROR if mirror else VIEW_PORTAL)
 
 
 def drawn_in(codes: Code, view_mask: Code) -> bool | np.ndarray:
