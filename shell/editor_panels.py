@@ -137,14 +137,15 @@ class EditorPanels:
         if view is not None:   # (a monitor's screen picks what its picture shows there)
             size = self.io.display_size
             follow = into_pictures(engine.world, engine.renderer.monitors.entities,
-                                   *view_ray(view.view_proj, (size.x, size.y), (x, y)))
+                                   *view_ray(view.view_proj, (size.x, size.y), (x, y)), view.view_mask)
         editor.pick(targets.read_ids(), targets.read_surface_ids(), int(x * across), int(y * down), surface, follow)
         return True
 
     def _place_at(self, engine: Engine, editor: Editor, x: float, y: float) -> None:
         """Shift+click: the selection put where the main view's ray through output pixel
         (``x``, ``y``) meets a surface, followed through mirrors and portals; the selection,
-        its descendants and decals' cuts are left out of the cast."""
+        its descendants and decals' cuts are left out of the cast, and in each stretch what that
+        view does not draw (``raycast_seen``'s ``view_mask``)."""
         entity = editor.selected
         view = engine.main_view
         if entity is None or not engine.world.exists(entity) or view is None:
@@ -154,7 +155,8 @@ class EditorPanels:
         origin, direction = view_ray(view.view_proj, (size.x, size.y), (x, y))
         world = engine.world
         own = descendants(world, entity) | {entity}
-        seen = raycast_seen(world, origin, direction, ignore=own, where=lambda e: not world.has(e, FromDecal))
+        seen = raycast_seen(world, origin, direction, ignore=own, where=lambda e: not world.has(e, FromDecal),
+                            view_mask=view.view_mask)
         if seen is None:
             editor.message = "nothing there to put it on"
             return

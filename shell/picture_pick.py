@@ -25,19 +25,20 @@ from shell.handles import view_ray
 MAX_PICTURES_FOLLOWED = 4   # pictures in pictures a click follows (a camera seeing its own screen stops there)
 
 
-def into_pictures(world: World, pictures: Collection[int], origin: glm.vec3, direction: glm.vec3
-                  ) -> Callable[[int], int | None]:
+def into_pictures(world: World, pictures: Collection[int], origin: glm.vec3, direction: glm.vec3,
+                  view_mask: int | None = None) -> Callable[[int], int | None]:
     """For the entity a click picked (the id image's, at the pixel whose ray from the main
-    view is ``origin``, ``direction``), what it picks: a monitor's screen that has a picture
-    (``pictures``: ``MonitorPictures.entities``) gives what its picture shows at the point
-    the ray meets (None: the sky there); anything else is itself."""
+    view, of ``view_mask`` (None: any), is ``origin``, ``direction``), what it picks: a
+    monitor's screen that has a picture (``pictures``: ``MonitorPictures.entities``) gives
+    what its picture shows at the point the ray meets (None: the sky there); anything else is
+    itself."""
     def follow(picked: int) -> int | None:
-        return seen_in_pictures(world, pictures, picked, origin, direction)
+        return seen_in_pictures(world, pictures, picked, origin, direction, view_mask)
     return follow
 
 
 def seen_in_pictures(world: World, pictures: Collection[int], picked: int, origin: glm.vec3,
-                     direction: glm.vec3) -> int | None:
+                     direction: glm.vec3, view_mask: int | None = None) -> int | None:
     """``picked``, or where it is a screen with a picture, what the picture shows along the
     ray (``into_pictures``), followed into pictures in pictures."""
     entity: int | None = picked
@@ -45,7 +46,7 @@ def seen_in_pictures(world: World, pictures: Collection[int], picked: int, origi
         if entity is None or entity not in pictures or not world.exists(entity):
             return entity
         monitor = world.try_get(entity, Monitor)
-        seen = raycast_seen(world, origin, direction)
+        seen = raycast_seen(world, origin, direction, view_mask=view_mask)
         if monitor is None or seen is None or seen.hit.entity != entity:
             return entity   # (the CPU's cast and the picture disagree at an edge: the screen)
         uv = _uv_at(world, seen.hit)
@@ -59,7 +60,8 @@ def seen_in_pictures(world: World, pictures: Collection[int], picked: int, origi
                            ortho_height=camera.ortho_height if camera.projection == "orthographic" else None)
         # The picture's texel at the point (its rows from the bottom, as the screen samples it).
         origin, direction = view_ray(view.view_proj, (width, height), (uv[0] * width, (1.0 - uv[1]) * height))
-        seen = raycast_seen(world, origin, direction, view_mask=visibility_code(view.kinds, camera.layer_mask))
+        view_mask = visibility_code(view.kinds, camera.layer_mask)
+        seen = raycast_seen(world, origin, direction, view_mask=view_mask)
         entity = None if seen is None else seen.hit.entity
     return entity
 

@@ -111,14 +111,25 @@ def test_a_decal_is_put_into_a_wall_and_a_crate_on_the_floor_in_one_step_each(sc
     assert crate.rotation == rotation
 
 
-def test_shift_click_puts_the_selection_on_the_floor_seen_in_the_mirror(scene, ctx):
+@pytest.mark.parametrize("slab", [False, True], ids=["floor", "slab_hidden_in_mirrors"])
+def test_shift_click_puts_the_selection_on_the_floor_seen_in_the_mirror(scene, ctx, slab):
     """With the overlay shown, Shift+click on the floor's image in the mirror puts the
-    selected crate on the real floor there (not on the glass, nor behind it)."""
+    selected crate on the real floor there (not on the glass, nor behind it).  ``slab``: a
+    slab on the floor there hidden in mirror views (``Visibility(in_mirrors=False)``): the
+    mirror shows the floor, and the crate is put on the floor, not on the slab."""
     pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
+    from components import Visibility
     from shell.overlay import DebugOverlay
 
     ents = {}
-    runner = scene(lambda world: mirror_room(world, ents), SIZE)
+
+    def build(world):
+        mirror_room(world, ents)
+        if slab:
+            world.spawn(Transform(position=(FLOOR_SPOT.x, 0.15, FLOOR_SPOT.z), scale=(1.0, 0.3, 1.0)), MeshRef(box()),
+                        Material(color=(0.2, 0.6, 0.2)), Visibility(in_mirrors=False))
+
+    runner = scene(build, SIZE)
     runner.frame()
     overlay = DebugOverlay(ctx)
     try:
