@@ -698,7 +698,8 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
         for (int k = 0; k < MAX_CAUSTIC_WATERS; ++k) {
             if (caustic_waters[k] < 0) break;
             lamp_caustic[j] *= caustic_lamp_light(caustic_waters[k], s.position, lights.point_pos[lamp].xyz,
-                                                  lights.point_color[lamp].w, caustic_footprint);
+                                                  lights.point_color[lamp].w, lights.point_rect_u[lamp],
+                                                  lights.point_rect_v[lamp], caustic_footprint);
         }
     }
 #endif

@@ -188,7 +188,8 @@ void main() {
                 for (int c = 0; c < 4; ++c) {   // (a lamp over rippled water: the columns its waves gather)
                     if (caustic_lamps[c] != j) continue;
                     for (int w = 0; w < caustic_held.x; ++w)
-                        cookie *= caustic_lamp_light(w, x, lights.point_pos[j].xyz, lights.point_color[j].w, 0.0);
+                        cookie *= caustic_lamp_light(w, x, lights.point_pos[j].xyz, lights.point_color[j].w,
+                                                     lights.point_rect_u[j], lights.point_rect_v[j], 0.0);
                 }
 #endif
                 lamps += lights.point_color[j].rgb * cookie * (lamp_scatter[k] * lamp_falloff(j, dist, l)

@@ -833,7 +833,8 @@ def test_a_low_suns_light_thrown_up_by_the_water_carries_its_caustics_as_far_as_
 LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics
 
 
-def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, depth: float = DEPTH) -> np.ndarray:
+def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, depth: float = DEPTH,
+                      along_x: tuple[float, ...] = (0.0,), shape: str = "point") -> np.ndarray:
     """The light at points ``xs`` ``depth`` under the surface (on the line under the lamp,
     along the waves' U) of a lamp ``lamp_height`` over the pool, through the waves, over the
     same through flat water (``traced_lamp_share``: each ray bent by Snell's law, and
@@ -847,11 +848,11 @@ def traced_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, depth: f
         return ray, 1.0 - 0.5 * (rs + rp)
 
     crossings = np.linspace(xs.min() - 0.05, xs.max() + 0.05, 40001)   # (each lands farther out)
-    return traced_lamp_share(xs, lamp_height, crossings, 1.0, through, -depth)
+    return traced_lamp_share(xs, lamp_height, crossings, 1.0, through, -depth, along_x, shape)
 
 
 def traced_lamp_share(xs: np.ndarray, lamp_height: float, crossings: np.ndarray, scale: float, leave,
-                      plane: float) -> np.ndarray:
+                      plane: float, along_x: tuple[float, ...] = (0.0,), shape: str = "point") -> np.ndarray:
     """The light at points ``xs`` of the plane y = ``plane`` (on the line over or under the
     lamp's foot, along the waves' U) of a lamp ``lamp_height`` over the pool, off or through
     its waves (the map's normals, tilted ``scale`` times), over the same off or through flat
@@ -860,10 +861,23 @@ def traced_lamp_share(xs: np.ndarray, lamp_height: float, crossings: np.ndarray,
     light it takes), and lands on the plane; the light at a landing is the light at the
     crossing (the lamp's cos / distance^2 there, times the share) over the area it lands on
     (along the line the spacing of the landings, across it the spread of two rays a
-    millimetre apart)."""
+    millimetre apart).  A lamp with a length along x: its points ``along_x`` (evenly over it)
+    each traced so, the light the sum of theirs, each weighed as its ``shape`` sends light
+    its way ("panel": a face turned down, by the cosine from straight down; "tube": along x,
+    by the sine from its axis)."""
+    waves = flat = 0.0
+    for x in along_x:
+        lit = traced_lamp_lights(xs, np.array([x, lamp_height, 0.0]), crossings, scale, leave, plane, shape)
+        waves, flat = waves + lit[0], flat + lit[1]
+    return waves / flat
+
+
+def traced_lamp_lights(xs: np.ndarray, lamp: np.ndarray, crossings: np.ndarray, scale: float, leave, plane: float,
+                       shape: str) -> tuple[np.ndarray, np.ndarray]:
+    """``traced_lamp_share``'s light at ``xs`` of one point of a lamp at ``lamp`` (x, its
+    height, 0), through the waves and through flat water."""
     texels = wave_map(PERIODS, slope=SLOPE).pixels[0, :, :3].astype(np.float64) / 255.0 * 2.0 - 1.0
     size = len(texels)
-    lamp = np.array([0.0, lamp_height, 0.0])
 
     def light(flat: bool) -> np.ndarray:
         u = (crossings + SIDE / 2.0) / SIDE * TILING * size - 0.5
@@ -882,6 +896,7 @@ def traced_lamp_share(xs: np.ndarray, lamp_height: float, crossings: np.ndarray,
             ray, taken = leave(incident, normal)
             t = plane / ray[:, 1]
             flux = -incident[:, 1] / distance ** 2 * taken   # per unit of surface
+            flux *= {"point": 1.0, "panel": -incident[:, 1], "tube": np.sqrt(1.0 - incident[:, 0] ** 2)}[shape]
             return at[:, 0] + ray[:, 0] * t, at[:, 2] + ray[:, 2] * t, flux
 
         landed, _, flux = land(0.0)
@@ -890,18 +905,40 @@ def traced_lamp_share(xs: np.ndarray, lamp_height: float, crossings: np.ndarray,
         assert (along > 0.0).all()   # no fold
         return np.interp(xs, landed, flux / (along * (aside / 1e-3)))
 
-    return light(False) / light(True)
+    return light(False), light(True)
 
 
-def lamp_pool(caustics: float, height: float = LAMP_HEIGHT):
+LAMP_HALF = 0.2   # half the length along x (the waves' U) of the panel and the tube lamps
+
+
+def spawn_lamp(world, height: float, intensity: float, shape: str = "point") -> int:
+    """A lamp ``height`` over the pool's centre: a point, a panel 2 x LAMP_HALF along x and
+    2 cm across turned face down, or a tube 2 x LAMP_HALF long along x (each of about the
+    same light straight down)."""
+    if shape == "panel":
+        down = glm.angleAxis(-math.pi / 2.0, glm.vec3(1, 0, 0))   # (its face, -Z, turned to -Y)
+        return world.spawn(Transform(position=(0.0, height, 0.0), rotation=down),
+                           PointLight(intensity=intensity, range=20.0, rectangle=(2.0 * LAMP_HALF, 0.02)))
+    if shape == "tube":
+        return world.spawn(Transform(position=(0.0, height, 0.0)),
+                           PointLight(intensity=intensity, range=20.0, length=2.0 * LAMP_HALF, radius=0.01))
+    return world.spawn(Transform(position=(0.0, height, 0.0)), PointLight(intensity=intensity, range=20.0))
+
+
+def lamp_along(shape: str) -> tuple[float, ...]:
+    """The points along x the tracer sums for a lamp of ``shape`` (``spawn_lamp``'s)."""
+    return (0.0,) if shape == "point" else tuple(np.linspace(-LAMP_HALF, LAMP_HALF, 21).tolist())
+
+
+def lamp_pool(caustics: float, height: float = LAMP_HEIGHT, shape: str = "point"):
     """``pool``'s floor and waves lit by a lamp ``height`` over the surface's centre instead
-    of the sun, the camera just under the surface looking down at the floor under the lamp."""
+    of the sun (``spawn_lamp``'s ``shape``), the camera just under the surface looking down at
+    the floor under the lamp."""
     def build(world):
         pool(caustics, sun=(0.0, -1.0, 0.0))(world)
         (sun,) = [entity for entity, _ in world.query_one(DirectionalLight)]
         world.delete_entity(sun)
-        world.spawn(Transform(position=(0.0, height, 0.0)),
-                    PointLight(intensity=12.0 * ((height + DEPTH) / (LAMP_HEIGHT + DEPTH)) ** 2, range=20.0))
+        spawn_lamp(world, height, 12.0 * ((height + DEPTH) / (LAMP_HEIGHT + DEPTH)) ** 2, shape)
     return build
 
 
@@ -928,8 +965,8 @@ def test_a_lamps_light_under_rippled_water_is_where_a_ray_tracer_gathers_it(scen
     assert np.median(np.abs(share - traced)) < 0.04, np.median(np.abs(share - traced))
 
 
-def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT,
-                                height: float = CEILING) -> np.ndarray:
+def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, height: float = CEILING,
+                                along_x: tuple[float, ...] = (0.0,), shape: str = "point") -> np.ndarray:
     """The light at points ``xs`` ``height`` over the surface (on the line over the lamp's
     foot, along the waves' U) that a lamp ``lamp_height`` over the pool throws up off its
     waves (tilted CALM times), over the same off flat water (``traced_lamp_share``: each ray
@@ -937,18 +974,18 @@ def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT
     weighs it, in both)."""
     crossings = np.linspace(xs.min() * 0.5 - 0.2, xs.max() * 0.7 + 0.2, 40001)   # (each lands farther out)
     return traced_lamp_share(xs, lamp_height, crossings, CALM,
-                             lambda incident, normal: (reflect(incident, normal), 1.0), height)
+                             lambda incident, normal: (reflect(incident, normal), 1.0), height, along_x, shape)
 
 
-def ceiling_lamp_pool(caustics: float, reflects: bool = True):
-    """``ceiling_pool`` lit by a lamp LAMP_HEIGHT over the pool's centre, over the ceiling
-    (which casts no shadow: its light reaches the water), instead of the sun: the ceiling's
-    face is lit by the lamp's image in the water alone."""
+def ceiling_lamp_pool(caustics: float, reflects: bool = True, shape: str = "point"):
+    """``ceiling_pool`` lit by a lamp LAMP_HEIGHT over the pool's centre (``spawn_lamp``'s
+    ``shape``), over the ceiling (which casts no shadow: its light reaches the water), instead
+    of the sun: the ceiling's face is lit by the lamp's image in the water alone."""
     def build(world):
         ceiling_pool(caustics, reflects)(world)
         (sun,) = [entity for entity, _ in world.query_one(DirectionalLight)]
         world.delete_entity(sun)
-        world.spawn(Transform(position=(0.0, LAMP_HEIGHT, 0.0)), PointLight(intensity=150.0, range=20.0))
+        spawn_lamp(world, LAMP_HEIGHT, 150.0, shape)
     return build
 
 
@@ -984,6 +1021,43 @@ def test_the_light_a_rippled_water_throws_up_from_a_lamp_is_where_a_ray_tracer_g
     corners = np.array([[-2.0, 0.0, -2.0, 1.0], [2.0, 0.0, -2.0, 1.0], [-2.0, 0.0, 2.0, 1.0], [2.0, 0.0, 2.0, 1.0]])
     assert reach_box(corners, (0.0, 1.0, 0.0), 1.0, True, (), ((0.0, LAMP_HEIGHT, 0.0),)) == \
         ((-4.5, -1.0, -4.5), (4.5, 1.0, 4.5))
+
+
+@pytest.mark.parametrize("shape, way", [("panel", "under"), ("tube", "under"), ("panel", "over"), ("tube", "over")])
+def test_a_panels_or_a_tubes_net_blurs_as_far_as_its_light_spreads(scene, shape, way):
+    """A panel (0.4 m along the waves' U, 2 cm across, face down) or a tube (0.4 m along U)
+    over the pool, its net on the floor under the water (``under``) or thrown up on the
+    ceiling over it (``over``: its image in a water that reflects light).  The ray tracer sums
+    the light of 21 points along the lamp (each weighed as the shape sends light its way):
+    the net is much softer than a point's (its std about two thirds), and the shader's
+    (``caustic_lamp_radius``: the steps along each axis as far as the lamp spreads its light)
+    follows it: the same profile, within 6% at the median, as marked as the traced one
+    within a fifth.  A point lamp's gather (the lamp's size left out) is half again as marked."""
+    from tests.support import pixel_rays
+
+    build = lamp_pool if way == "under" else ceiling_lamp_pool
+    runner, lit = render(scene, build(1.0, shape=shape))
+    _, flat = render(scene, build(0.0, shape=shape))
+    if way == "under":
+        assert runner.engine.renderer.caustics.lamps == (0,)
+        points = floor_points(runner)
+        line = np.abs(points[..., 1]) < 0.04
+        xs = points[..., 0][line]
+        traced, point = traced_lamp_light(xs, along_x=lamp_along(shape), shape=shape), traced_lamp_light(xs)
+    else:
+        assert runner.stats.virtual_lights == 1
+        eye, directions = pixel_rays(runner.engine.main_view, runner.size)
+        t = (CEILING - eye[1]) / directions[..., 1]
+        line = np.abs((eye + directions * t[..., None])[..., 2]) < 0.04
+        xs = (eye + directions * t[..., None])[..., 0][line]
+        traced = traced_reflected_lamp_light(xs, along_x=lamp_along(shape), shape=shape)
+        point = traced_reflected_lamp_light(xs)
+    assert line.sum() > 100 and 0.03 < flat.min() and flat.max() < 0.6, (line.sum(), flat.min(), flat.max())
+    assert traced.std() < 0.75 * point.std(), (traced.std(), point.std())
+    share = lit[..., 0][line] / flat[..., 0][line]
+    assert np.corrcoef(share, traced)[0, 1] > 0.92, np.corrcoef(share, traced)[0, 1]
+    assert np.median(np.abs(share - traced)) < 0.06, np.median(np.abs(share - traced))
+    assert 0.8 < share.std() / traced.std() < 1.2, (share.std(), traced.std())
 
 
 def test_the_lamps_over_a_water_are_held_up_to_four_and_the_rest_are_said(scene):

@@ -800,12 +800,11 @@ def virtual_lights(directional: list[tuple[int, glm.vec3, glm.vec3]],
 
 def reflected_caustic_water(light: VirtualLight) -> int | None:
     """The water whose waves gather what ``light`` reflects (``shaders/include/caustics.glsl``
-    caustic_reflected_light, caustic_reflected_lamp_light): the sun's or a point light's image
-    in one water's top, its entity; None for any other (light off two surfaces, a water's
-    underside, a mirror, a rectangle's or a tube's image: lit as a whole shape, not a point)."""
+    caustic_reflected_light, caustic_reflected_lamp_light): the sun's or a lamp's image (a
+    point, a sphere, a rectangle or a tube: its net blurred as far as its shape spreads its
+    light, ``caustic_lamp_radius``) in one water's top, its entity; None for any other (light
+    off two surfaces, a water's underside, a mirror)."""
     if len(light.apertures) != 1 or light.apertures[0].water <= 0.0:
-        return None
-    if light.kind != "directional" and light.rectangle != NO_RECTANGLE:
         return None
     return light.surface
 

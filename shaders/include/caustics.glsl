@@ -125,7 +125,7 @@ float caustic_reflected_light(int w, vec3 x, vec3 l, float footprint) {
 // J_flat there in closed form (across the line its stretch is R / r); the waves' crossing
 // then by the chord method with J_flat (the sun's fixed-point search, whose J_flat is 1),
 // from the flat one.  (Called with a constant ``reflected``: each build keeps one way.)
-float caustic_lamp_gather(int w, vec3 x, vec3 lamp, float radius, float footprint, bool reflected) {
+float caustic_lamp_gather(int w, vec3 x, vec3 lamp, vec2 radius, float footprint, bool reflected) {
     vec3 up = caustic_plane[w].xyz;
     vec3 along = reflected ? up : -up;   // the way the light leaves the surface
     float h = reflected ? dot(up, x) + caustic_plane[w].w : -(dot(up, x) + caustic_plane[w].w);
@@ -159,32 +159,54 @@ float caustic_lamp_gather(int w, vec3 x, vec3 lamp, float radius, float footprin
     if (any(lessThan(uv0, vec2(0.0))) || any(greaterThan(uv0, vec2(1.0)))) return 1.0;
     vec3 e1 = caustic_axis_u[w].xyz;
     vec3 e2 = normalize(caustic_axis_v[w].xyz - dot(caustic_axis_v[w].xyz, e1) * e1);
-    float spread = h * radius / max(length(lamp - s), 1e-3);   // the lamp's sphere seen from the surface
-    float stride = max(max(caustic_sizes[w].y, spread), footprint);
-    float lod = log2(stride / caustic_sizes[w].y);
+    // The lamp's size seen from the surface, along each axis (caustic_lamp_radius): the steps.
+    vec2 spread = h * radius / max(length(lamp - s), 1e-3);
+    vec2 stride = max(max(vec2(caustic_sizes[w].y), spread), vec2(footprint));
+    float lod = log2(min(stride.x, stride.y) / caustic_sizes[w].y);   // (the longer step's differences blur the rest)
     for (int k = 0; k < CAUSTIC_ITERATIONS; ++k) {
         vec3 miss = s + caustic_offset(w, s, normalize(lamp - s), h, lod, reflected) - on_plane;
         s -= radial * (dot(radial, miss) / stretch_along) + across * (dot(across, miss) / stretch_across);
     }
-    vec3 half1 = e1 * (0.5 * stride), half2 = e2 * (0.5 * stride);
+    vec3 half1 = e1 * (0.5 * stride.x), half2 = e2 * (0.5 * stride.y);
     vec3 d1 = caustic_offset(w, s + half1, normalize(lamp - s - half1), h, lod, reflected)
               - caustic_offset(w, s - half1, normalize(lamp - s + half1), h, lod, reflected);
     vec3 d2 = caustic_offset(w, s + half2, normalize(lamp - s - half2), h, lod, reflected)
               - caustic_offset(w, s - half2, normalize(lamp - s + half2), h, lod, reflected);
-    float det = (1.0 + dot(d1, e1) / stride) * (1.0 + dot(d2, e2) / stride) - dot(d1, e2) / stride * (dot(d2, e1) / stride);
+    float det = (1.0 + dot(d1, e1) / stride.x) * (1.0 + dot(d2, e2) / stride.y)
+                - dot(d1, e2) / stride.x * (dot(d2, e1) / stride.y);
     float flat_det = stretch_along * stretch_across;
     return mix(1.0, flat_det / max(abs(det), flat_det / CAUSTIC_MAX_FOCUS), caustic_flow[w].w);
 }
 
+// How far a lamp's light comes from about its centre along each axis of water w's surface
+// (+U, +V), as the radius of a sphere that spreads as much along it: a sphere's ``sphere``
+// itself; a rectangle's (half sides ``rect_u``.xyz and ``rect_v``.xyz: lights.glsl's
+// point_rect_u / _v rows) or a tube's (its half length in rect_u, its radius in rect_v.w)
+// the radius whose sphere's light has the same mean square offset along the axis (a side's
+// uniform light |U.e|^2 / 3, a disc's R^2 / 4), so a panel's or a tube's net blurs as far
+// along each axis as its light spreads: along a tube, not across it.
+vec2 caustic_lamp_radius(int w, float sphere, vec4 rect_u, vec4 rect_v) {
+    vec3 e1 = caustic_axis_u[w].xyz;
+    vec3 e2 = normalize(caustic_axis_v[w].xyz - dot(caustic_axis_v[w].xyz, e1) * e1);
+    float tube = max(rect_v.w, 0.0);   // (a rectangle's w is 0, or its face's image: below 0)
+    vec2 square = vec2(dot(rect_u.xyz, e1) * dot(rect_u.xyz, e1) + dot(rect_v.xyz, e1) * dot(rect_v.xyz, e1),
+                       dot(rect_u.xyz, e2) * dot(rect_u.xyz, e2) + dot(rect_v.xyz, e2) * dot(rect_v.xyz, e2))
+                  + tube * tube;
+    return max(vec2(sphere), sqrt(square * (4.0 / 3.0)));
+}
+
 // A lamp's light under water w (caustic_lamp_gather through it): CAUSTIC_LAMPS builds, up
-// to four lamps over a held water (caustic_lamps).
-float caustic_lamp_light(int w, vec3 x, vec3 lamp, float radius, float footprint) {
-    return caustic_lamp_gather(w, x, lamp, radius, footprint, false);
+// to four lamps over a held water (caustic_lamps); ``sphere``, ``rect_u``, ``rect_v`` its
+// shape (caustic_lamp_radius).
+float caustic_lamp_light(int w, vec3 x, vec3 lamp, float sphere, vec4 rect_u, vec4 rect_v, float footprint) {
+    return caustic_lamp_gather(w, x, lamp, caustic_lamp_radius(w, sphere, rect_u, rect_v), footprint, false);
 }
 
 // Over water w: the share of a lamp's light it reflects that its waves gather at x
 // (caustic_lamp_gather thrown up): the net a lamp over a pool throws on the ceiling over it
-// (virtual_lights.glsl, the lamp's image in a water that reflects light).
-float caustic_reflected_lamp_light(int w, vec3 x, vec3 lamp, float radius, float footprint) {
-    return caustic_lamp_gather(w, x, lamp, radius, footprint, true);
+// (virtual_lights.glsl, the lamp's image in a water that reflects light; its shape's rows
+// are the image's, whose sides along the surface are the lamp's).
+float caustic_reflected_lamp_light(int w, vec3 x, vec3 lamp, float sphere, vec4 rect_u, vec4 rect_v,
+                                   float footprint) {
+    return caustic_lamp_gather(w, x, lamp, caustic_lamp_radius(w, sphere, rect_u, rect_v), footprint, true);
 }

@@ -68,7 +68,9 @@ vec3 virtual_lighting(vec3 position, vec3 normal, vec3 geometric, vec3 to_eye, v
             vec4 plane = caustic_plane[caustic];
             color *= image.w > 0.5
                 ? caustic_reflected_lamp_light(caustic, position, image.xyz - 2.0 * (dot(plane.xyz, image.xyz) + plane.w)
-                                               * plane.xyz, virtual_lights.virtual_cookie_v[i].w, caustic_footprint)
+                                               * plane.xyz, virtual_lights.virtual_cookie_v[i].w,
+                                               virtual_lights.virtual_rect_u[i], virtual_lights.virtual_rect_v[i],
+                                               caustic_footprint)
                 : caustic_reflected_light(caustic, position, reflect(l, plane.xyz), caustic_footprint);
         }
 #endif
