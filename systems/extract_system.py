@@ -238,11 +238,16 @@ class ExtractSystem(esper.Processor):
             box = self._mesh_boxes[mesh] = (tuple(float(v) for v in lo), tuple(float(v) for v in hi))
         return box
 
-    def _caustic_waters(self, entity: int) -> tuple[int, ...]:
+    def _caustic_waters(self, entity: int, pose_box: Box | None = None) -> tuple[int, ...]:
         """The caustic waters whose bodies ``entity``'s mesh, where its Transform places it,
-        reaches into (``caustics.caustic_waters_of``; its model box kept a mesh)."""
-        box = self._mesh_box(self.world.get(entity, MeshRef).mesh)
-        return caustic_waters_of(placed_box(self.world.get(entity, Transform).world, *box), self._bodies)
+        reaches into (``caustics.caustic_waters_of``): its model box kept a mesh, or, posed,
+        the box holding its pose (``pose_box``, else its own batch's: a bent arm or a morph
+        may reach into a water its mesh as modelled does not)."""
+        if pose_box is None:
+            batch = self._batch_of.get(entity)
+            posed = batch is not None and (batch.skinned or batch.morphed)
+            pose_box = (batch.box_lo, batch.box_hi) if posed else self._mesh_box(self.world.get(entity, MeshRef).mesh)
+        return caustic_waters_of(placed_box(self.world.get(entity, Transform).world, *pose_box), self._bodies)
 
     def _by_batch(self, entities: set[int]) -> dict[InstanceBatch, list[int]]:
         """``entities`` that have a row, by their batch."""
@@ -292,6 +297,7 @@ class ExtractSystem(esper.Processor):
         morph = world.try_get(entity, Morph) if drawn.morph_count else None
         posed = (entity, skin.skinning if skin is not None else "", morph is not None) \
             if skin is not None or morph is not None else (0, "", False)
+        pose_box = self._pose_box(drawn, skin, morph) if posed[0] else None
         # A Monitor's screen gives off its picture (engine/render/monitors.py: the picture's
         # stand-in is its emissive map, the monitor's brightness its emission).
         monitor = world.try_get(entity, Monitor)
@@ -314,7 +320,8 @@ class ExtractSystem(esper.Processor):
                                             unlit=material is not None and material.unlit,
                                             posed=posed, second_uv_maps=second_uv_mask(material), decal=decal,
                                             decal_order=cut.order if cut is not None else 0,
-                                            caustic_waters=self._caustic_waters(entity) if self._bodies else (),
+                                            caustic_waters=self._caustic_waters(entity, pose_box) if self._bodies
+                                            else (),
                                             **layer_uniforms(material, refractive))
         except GLLimitError as exc:
             raise GLLimitError(f"entity {entity}{f' (the cut of the Decal on entity {cut.decal})' if cut else ''}: "
@@ -335,7 +342,7 @@ class ExtractSystem(esper.Processor):
         else:
             row = batch.row(entity)
         if posed[0]:
-            self._pose(entity, batch, drawn, skin, morph)
+            self._pose(entity, batch, drawn, skin, morph, pose_box)
         if batch.set_size(entity, None if drawn is mesh_ref.mesh else mesh_ref.mesh.unit_scale):
             self._joined.add(entity)  # its model matrix is written again below, with its size
         casting_before = batch.shadow_fields(row) if old is batch else None
@@ -387,18 +394,27 @@ class ExtractSystem(esper.Processor):
             if (skin is not None or morph is not None) and batch.skinned == skinning \
                     and batch.morphed == (morph is not None):
                 self._pose(entity, batch, world.get(entity, MeshRef).mesh, skin, morph)
-                done.add(entity)
+                if not self._bodies or batch.caustic_waters == self._caustic_waters(entity):
+                    done.add(entity)   # (else the pose reached into a caustic water, or left one: keyed again)
         return touched - done if done else touched
 
-    def _pose(self, entity: int, batch: InstanceBatch, mesh: Mesh, skin: Skin | None, morph: Morph | None) -> None:
+    @staticmethod
+    def _pose_box(mesh: Mesh, skin: Skin | None, morph: Morph | None) -> Box:
+        """The model box holding ``mesh`` as ``skin`` and ``morph`` pose it (``skinning.posed_bounds``)."""
+        joints = skin.joint_matrices if skin is not None else None
+        weights = morph.weights if morph is not None else None
+        lo, hi = posed_bounds(mesh, joints, weights, skin is not None and skin.skinning == "dual_quaternion")
+        return tuple(float(v) for v in lo), tuple(float(v) for v in hi)
+
+    def _pose(self, entity: int, batch: InstanceBatch, mesh: Mesh, skin: Skin | None, morph: Morph | None,
+              box: Box | None = None) -> None:
         """Write ``entity``'s joint matrices and morph weights to its row of the pose texture
         (its batch's draws read that row) and give its batch the box holding the pose
-        (``skinning.posed_bounds``)."""
+        (``_pose_box``, or ``box`` where it is known)."""
         joints = skin.joint_matrices if skin is not None else None
         weights = morph.weights if morph is not None else None
         batch.pose_row = self.renderer.pose_rows.write(entity, joints, weights)  # (a limit names it)
-        dual_quaternion = skin is not None and skin.skinning == "dual_quaternion"
-        batch.set_local_box(*posed_bounds(mesh, joints, weights, dual_quaternion))
+        batch.set_local_box(*(box or self._pose_box(mesh, skin, morph)))
         self.renderer.note_scene_change()
 
     def _remove_instance(self, entity: int, batch: InstanceBatch) -> None:

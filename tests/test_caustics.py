@@ -830,6 +830,39 @@ def test_a_low_suns_light_thrown_up_by_the_water_carries_its_caustics_as_far_as_
     assert canopy.caustic_waters == (pool_entity,) and held[pool_entity] == low
 
 
+def test_a_pose_that_reaches_into_the_water_is_keyed_under_it(scene):
+    """A morphed sheet standing over the pool, its mesh as modelled 0.2 m over the surface:
+    keyed under no water.  Its second target's weight at -1 pulls its right half down 0.5 m,
+    into the water's body: it is keyed under the water the frame the weight changes (the box
+    holding its pose, not its mesh's), its rows drawn with the CAUSTICS builds; back to 0,
+    keyed out again.  The same sheet spawned already posed is keyed under the water at once."""
+    from components import Morph
+    from tests.test_morph_targets import morphed_sheet
+
+    held = {}
+
+    def build(weights):
+        def b(world):
+            pool(1.0)(world)
+            held["sheet"] = world.spawn(Transform(position=(0.0, -0.3, 0.0)), MeshRef(morphed_sheet()),
+                                        Material(color=(0.8, 0.2, 0.2, 1.0)), Morph(weights))
+        return b
+
+    def keyed(runner) -> tuple[int, ...]:
+        (batch,) = [b for b in runner.engine.renderer.batches.values() if held["sheet"] in b.entity_at[:b.count]]
+        return batch.caustic_waters
+
+    runner, _ = render(scene, build((0.0, 0.0)))
+    water = next(entity for entity, _ in runner.world.query_one(Water))
+    assert keyed(runner) == ()
+    for weights, expected in (((0.0, -1.0), (water,)), ((0.0, 0.0), ()), ((0.0, -1.0), (water,))):
+        runner.world.get(held["sheet"], Morph).weights = weights
+        runner.frame(1.0 / 60.0)
+        assert keyed(runner) == expected, weights
+    runner, _ = render(scene, build((0.0, -1.0)))
+    assert keyed(runner) == (next(entity for entity, _ in runner.world.query_one(Water)),)
+
+
 LAMP_HEIGHT = 1.5   # the lamp over the pool's surface, for the lamps' caustics
 
 
