@@ -860,13 +860,12 @@ def test_a_pane_in_the_mirrors_light_moved_faded_or_removed_draws_what_a_fresh_e
     assert runner.engine.renderer.shadows.virtual_see_through_atlas is None
 
 
-def test_a_see_through_pane_between_two_mirrors_lets_through_its_share(scene):
-    """A see-through pane (alpha 0.6) on the way from A to B (the middle stretch of A-through-B's
-    way, drawn between both mirrors' planes: ``_LEG_SEE_THROUGH``): where the way back from the
-    floor crosses it between the mirrors, the twice-reflected light is 1 - alpha of what it is
-    beside."""
-    centre = np.array([0.3, 3.2, 0.6])
-
+def _twice_share_behind_a_pane(scene, centre: np.ndarray, where: str) -> np.ndarray:
+    """The two-mirror scene with a see-through pane (alpha 0.6) at ``centre``: the
+    twice-reflected light (the frame with two bounces less the one with one) on the floor
+    where the way back from it crosses the pane, over where it does not, per channel (the
+    medians); the way between the mirrors (``where`` "between"), or its line on past B
+    ("beyond_b": behind B)."""
     def build(world):
         ids = _two_mirror_scene(world)
         ids["pane"] = world.spawn(Transform(position=centre.tolist()), MeshRef(plane(*(2 * PANE_HALF))),
@@ -885,14 +884,34 @@ def test_a_see_through_pane_between_two_mirrors_lets_through_its_share(scene):
     ones = np.ones(len(points))
 
     def crossed(grow):
+        if where == "beyond_b":
+            return _pane_crossed(at_b, at_b - at_a, centre, grow)
         return _pane_crossed(at_b, at_a - at_b, centre, grow, ones)
 
     lit = _twice_lit(points, 0.1) & floor
     behind, beside = lit & crossed(-0.1), lit & ~crossed(0.1)
     assert behind.sum() > 100 and beside.sum() > 500, (int(behind.sum()), int(beside.sum()))
     share = (srgb_to_linear(twice) - srgb_to_linear(once)).reshape(-1, 3)
-    ratio = np.median(share[behind], axis=0) / np.median(share[beside], axis=0)
+    return np.median(share[behind], axis=0) / np.median(share[beside], axis=0)
+
+
+def test_a_see_through_pane_between_two_mirrors_lets_through_its_share(scene):
+    """A see-through pane (alpha 0.6) on the way from A to B (the middle stretch of A-through-B's
+    way, drawn between both mirrors' planes: ``_LEG_SEE_THROUGH``): where the way back from the
+    floor crosses it between the mirrors, the twice-reflected light is 1 - alpha of what it is
+    beside."""
+    ratio = _twice_share_behind_a_pane(scene, np.array([0.3, 3.2, 0.6]), "between")
     np.testing.assert_allclose(ratio, 1.0 - PANE_ALPHA, rtol=0.06)
+
+
+def test_a_see_through_pane_behind_the_second_mirror_dims_no_light_off_both(scene):
+    """The same pane behind B, low over the floor, on the line of the way from A to B carried
+    on past B: the middle stretch's view of the sun's image looks through it towards the
+    floor's image, and only B's plane (the stretch's second clip plane, ``leg_plane``) leaves
+    it out; the light leaves B from its front, so the twice-reflected light where that line
+    crosses the pane is what it is beside (with the plane left out: 1 - alpha)."""
+    ratio = _twice_share_behind_a_pane(scene, np.array([-2.7, 0.2, 0.0]), "beyond_b")
+    np.testing.assert_allclose(ratio, 1.0, rtol=0.06)
 
 
 def test_a_see_through_pane_in_a_lamps_light_out_of_a_portal_lets_through_its_share(scene):
