@@ -19,7 +19,7 @@ from components.visibility import visibility_code
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.render.views import camera_view
-from engine.rules.raycast import RayHit, raycast_seen
+from engine.rules.raycast import RayCaster, RayHit, raycast_seen
 from shell.handles import view_ray
 
 MAX_PICTURES_FOLLOWED = 4   # pictures in pictures a click follows (a camera seeing its own screen stops there)
@@ -68,15 +68,18 @@ def seen_in_pictures(world: World, pictures: Collection[int], picked: int, origi
 
 def _uv_at(world: World, hit: RayHit) -> tuple[float, float] | None:
     """The texture coordinates of the mesh of ``hit.entity`` at ``hit.point`` (its triangle's,
-    by the point's barycentric weights in the mesh's own space); None where it has none."""
+    by the point's barycentric weights in the triangle as the cast met it: posed by its Skin
+    and Morph, ``RayCaster.triangles``); None where it has none."""
     mesh_ref = world.try_get(hit.entity, MeshRef)
     if mesh_ref is None or mesh_ref.mesh.uvs is None or not len(mesh_ref.mesh.uvs):
         return None
     mesh = mesh_ref.mesh
-    local = glm.inverse(current_world_matrix(world, world.get(hit.entity, Transform))) * glm.vec4(hit.point, 1.0)
-    point = np.array(local.xyz, np.float64)
+    caster = world.resources.get(RayCaster)
+    if caster is None or caster.world is not world:
+        caster = world.resources[RayCaster] = RayCaster(world)
+    a, b, c = caster.triangles(hit.entity)[hit.triangle]
     corners = mesh.indices.reshape(-1, 3)[hit.triangle]
-    a, b, c = (np.asarray(mesh.positions[i], np.float64) for i in corners)
+    point = np.array(hit.point, np.float64)
     ab, ac, ap = b - a, c - a, point - a
     d00, d01, d11 = ab @ ab, ab @ ac, ac @ ac
     d20, d21 = ap @ ab, ap @ ac

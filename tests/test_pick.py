@@ -93,7 +93,7 @@ def dilated(mask: np.ndarray) -> np.ndarray:
     return near
 
 
-@pytest.mark.parametrize("veil", [False, True], ids=["bare", "veiled"])
+@pytest.mark.parametrize("veil", [False, True, "morphed"], ids=["bare", "veiled", "morphed"])
 def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, veil):
     """The monitors' studio: the active camera before the screen, whose picture shows the red
     box the lens watches.  A pixel where the frame shows the box on the screen (red: the GPU's
@@ -102,7 +102,9 @@ def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, 
     ``shell/picture_pick.py``); a pixel of the screen showing the black sky picks nothing; the
     surface modifier picks the screen.  ``veiled``: a wall between the lens and the box on a
     layer the lens hides (``Camera.hides_layers``): its picture shows the box through it, and
-    the click picks the box, not the wall."""
+    the click picks the box, not the wall.  ``morphed``: the screen's mesh wears a morph target
+    that moves it 0.4 m to the right: its texture coordinates at the point are read off the
+    triangle as posed, not as modelled (a quarter of the picture's width off)."""
     from components import Camera, Material, MeshRef, Monitor, Transform, Visibility
     from engine.assets.mesh import quad
     from shell.handles import view_ray
@@ -113,7 +115,18 @@ def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, 
 
     def build(world):
         made(world)
-        if veil:
+        if veil == "morphed":
+            from components import Morph
+            from engine.assets.mesh import Mesh
+            from tests.test_monitors import SCREEN_SIZE
+
+            flat = quad(*SCREEN_SIZE)
+            right = np.tile([0.4, 0.0, 0.0], (len(flat.positions), 1))[None]
+            world.get(held["screen"], MeshRef).mesh = Mesh(flat.positions, flat.normals, flat.uvs,
+                                                            np.asarray(flat.indices).reshape(-1, 3), name="slid screen",
+                                                            morph_positions=right, morph_normals=np.zeros_like(right))
+            world.add_component(held["screen"], Morph((1.0,)))
+        elif veil:
             world.get(held["lens"], Camera).hides_layers = [3]
             held["veil"] = world.spawn(Transform(position=(0.0, 1.0, (BOX_AT[2] + 0.0) / 2.0)), MeshRef(quad(6.0, 4.0)),
                                        Material(color=(0.0, 1.0, 0.0, 1.0), unlit=True), Visibility(layers=[3]))
