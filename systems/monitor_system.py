@@ -217,7 +217,7 @@ class MonitorSystem(esper.Processor):
                 views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still,
                                       faces=faces, occluded=occluded, reflections=reflections, shafts=shafts)
                 if occluded:
-                    self.renderer.occlusion.restore_root()
+                    self.renderer.occlusion.end_picture()
             stats.monitor_views += views
             drawn += 1
             if not alike:

@@ -386,3 +386,56 @@ def test_a_mirror_shows_a_lamps_contact_shadow_where_its_ray_meets_the_box(scene
     assert inside.sum() > 80 and outside.sum() > 5000, (inside.sum(), outside.sum())
     assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.3, kept[inside]
     assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
+
+
+@pytest.mark.parametrize("active", [False, True], ids=["lens_alone", "both"])
+def test_a_monitors_camera_finds_the_occlusion_in_the_mirror_its_picture_shows(scene, active):
+    """A monitor whose camera (not active, posed as the mirror test's camera, at the
+    picture's size) has ``AmbientOcclusion(reflection_depth=1)``: its picture shows the room in
+    the mirror occluded as the ground truth (the active camera, posed the same, gives the rays
+    and the mirror's pixels); its levels' images are the picture's own (4 for its root, 4 for
+    its mirror level), let go with the camera's component.  At ``reflection_depth`` 0 the
+    mirror in the picture is bare.  ``both``: the active camera has the same component, and
+    its own frame's mirror is occluded as the ground truth too (the picture's images put
+    aside for it and back)."""
+    from components import Camera, Monitor
+
+    def picture(occlusion):
+        names: dict = {}
+
+        def build(world):
+            own = AmbientOcclusion(radius=RADIUS, reflection_depth=occlusion.reflection_depth) \
+                if active and occlusion is not None else None   # (the active camera's: a component of its own)
+            names.update(_mirror_room(world, own))
+            eye, target = (glm.vec3(point) for point in MIRROR_EYE)
+            pose = dict(position=eye, rotation=look_rotation(target - eye))
+            camera = world.get(names["camera"], Camera)
+            names["lens"] = world.spawn(Transform(**pose), Camera(fov_y=camera.fov_y, near=camera.near, far=camera.far,
+                                                                  active=False), *([occlusion] if occlusion else []))
+            names["screen"] = world.spawn(Transform(position=(-6.0, 1.0, 3.0)), MeshRef(quad(1.6, 0.9)),
+                                          Material(color=(0.0, 0.0, 0.0), roughness=1.0),
+                                          Monitor(camera=names["lens"], size=SIZE, depth=1))
+
+        runner = scene(build, SIZE)
+        _aim(runner, names["camera"], *MIRROR_EYE)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        names["frame"] = srgb_to_linear(runner.frame())
+        return runner.engine.renderer.monitors.read(names["screen"])[..., :3].astype(np.float64), runner, names
+
+    lit, runner, names = picture(AmbientOcclusion(radius=RADIUS, reflection_depth=1))
+    plain, _, plain_names = picture(None)
+    bare, _, _ = picture(AmbientOcclusion(radius=RADIUS, reflection_depth=0))
+    shares = (lit / np.maximum(plain, 1e-6)).mean(axis=-1)
+    surface = runner.engine.renderer.targets.read_surface_ids()   # (the active camera's: the lens's pose and size)
+    shown = _inside(surface == names["mirror"], INSIDE)
+    hits = _room_hits(*_reflected_rays(runner), shown)
+    _assert_ground_truth(shares, *hits)
+    assert runner.engine.renderer.occlusion.target_count() == (16 if active else 8)
+    if active:
+        _assert_ground_truth((names["frame"] / np.maximum(plain_names["frame"], 1e-6)).mean(axis=-1), *hits)
+    bare_shares = (bare / np.maximum(plain, 1e-6)).mean(axis=-1)
+    assert bare_shares[shown].min() > 0.98   # (the mirror bare; the room seen directly is found as before)
+    runner.world.remove_component(names["lens"], AmbientOcclusion)
+    runner.frame()
+    assert runner.engine.renderer.occlusion.target_count() == (8 if active else 0)

@@ -187,7 +187,12 @@ class MonitorPictures:
         self.scene_pass.draw([view], targets, options)
         if surfaces is not None and depth > 0:
             settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
-            result = self.tree.render(view, held.levels, surfaces, settings, blends, options)
+            # (its camera's occlusion found in the levels its components reach: draw_picture's frame)
+            self.tree.occlusion = self.renderer.occlusion if occluded else None
+            try:
+                result = self.tree.render(view, held.levels, surfaces, settings, blends, options)
+            finally:
+                self.tree.occlusion = None
             drawn += [node.view for node in result.views[1:]]
             repeatable = not result.end_views and result.visibility != "predicted"
         else:

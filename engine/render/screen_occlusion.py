@@ -213,6 +213,10 @@ class ScreenOcclusion:
         self._found_from: tuple | None = None
         self.keep_still = True  # False: found every frame (what the still fuzz compares with)
         self._pictures: PictureImages[_Targets] = PictureImages()  # monitors' pictures' (draw_picture)
+        # Their reflection levels' images, by monitor, then depth; and, while a picture is
+        # drawn, the active camera's frame, levels and images put aside (``end_picture``).
+        self._picture_levels: dict[int, dict[int, _Targets]] = {}
+        self._aside: tuple | None = None
         # The debug overlay's toggle (``MainViewSystem.occlusion``): off, no camera's occlusion
         # or contact shadows are found, the active camera's or a monitor's.
         self.shown = True
@@ -337,12 +341,31 @@ class ScreenOcclusion:
         guard = _guarded(view, images.size, images.margin)
         self.scene_pass.draw_depth_normals([guard], images.prepass, guard.size)
         self._find(images, [view], guard.proj, settings, contact, sun, lamps, 0)
+        # Until ``end_picture``: the picture's frame, levels and images are the pass's (its
+        # tree's levels are found as its camera's components reach, ``draw_level``, and
+        # ``restore_root`` puts the picture's root back after each).
+        if self._aside is None:
+            self._aside = (self.frame, self._levels, self._targets)
+        self._levels = self._picture_levels.setdefault(monitor, {})
+        self._targets = images
+        self._set_frame(settings, contact, sun, lamps)
         self._bind_shares(images, bool(lamps))
         return True
 
+    def end_picture(self) -> None:
+        """After a picture ``draw_picture`` found: the active camera's frame, levels and
+        images back, its shares bound again (``restore_root``)."""
+        if self._aside is not None:
+            self.frame, self._levels, self._targets = self._aside
+            self._aside = None
+        self.restore_root()
+
     def drop_picture(self, monitor: int) -> None:
-        """Let go of monitor ``monitor``'s picture's images (it went, or its camera finds none)."""
+        """Let go of monitor ``monitor``'s picture's images (it went, or its camera finds none),
+        its levels' too."""
         self._pictures.drop(monitor)
+        for images in self._picture_levels.pop(monitor, {}).values():
+            images.release()
 
     def usable_lamps(self, lamps: Sequence[tuple[float, float, float]]) -> tuple:
         """``lamps`` (the contact lamps' positions), or none where the context lacks the texture
@@ -491,8 +514,10 @@ class ScreenOcclusion:
 
     def target_count(self) -> int:
         """Images held now (4 while a camera asks for occlusion, and 4 for each reflection
-        level found and each monitor's picture found, else 0)."""
-        return 4 * ((self._targets is not None) + len(self._levels) + len(self._pictures))
+        level found, each monitor's picture found and each of its levels, else 0)."""
+        aside = self._aside if self._aside is not None else (None, self._levels, self._targets)
+        levels = sum(len(kept) for kept in self._picture_levels.values())
+        return 4 * ((aside[2] is not None) + len(aside[1]) + len(self._pictures) + levels)
 
     def _still_key(self, view: View, settings: AmbientOcclusion | None, contact: ContactShadows | None,
                    sun: glm.vec3 | None, lamps: tuple) -> tuple:
@@ -531,6 +556,8 @@ class ScreenOcclusion:
 
     def release(self) -> None:
         self.release_targets()
+        for monitor in list(self._picture_levels):
+            self.drop_picture(monitor)
         self._pictures.release()
         self._release_programs()
 
