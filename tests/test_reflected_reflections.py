@@ -182,3 +182,62 @@ def test_a_still_tree_with_end_images_keeps_its_levels_reflections_and_occlusion
     assert kept_frames_equal_drawn(keeping, drawing, frames=60) >= 2
     assert drawing.stats.reflection_end_views > 0
     assert keeping.engine.renderer.screen_reflections.target_count() > 5   # (a level's images: it reflects)
+
+
+@pytest.mark.parametrize("active", [False, True], ids=["lens_alone", "both"])
+def test_a_monitors_picture_through_a_portal_reflects_as_seen_directly(scene, active):
+    """A monitor whose camera (not active) stands before portal A at ``THROUGH_A`` with
+    ``ScreenReflections`` (its ``reflection_depth`` 1) and sees its mirrors and portals (depth
+    1): its picture through the portal shows the polished floor reflecting the boxes as the
+    camera at the eye sees it directly (the active camera, posed as the lens, gives the
+    portal's pixels), its level's images its own; at ``reflection_depth`` 0 the portal's view
+    in the picture shows the sky's reflection where the boxes' stood.  ``both``: the active
+    camera has the same component, and its own frame through the portal still matches."""
+    from components import Camera, Material, Monitor
+    from engine.assets.mesh import quad
+    from tests.support import linear_to_srgb8
+
+    def picture(reflections: ScreenReflections | None):
+        names: dict = {}
+
+        def build(world):
+            own = ScreenReflections() if active else None
+            names.update(_scene(world, reflections=own))
+            names["a"], names["b"] = spawn_portal_pair(
+                world, PORTAL_A, None, PORTAL_B, glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0)),
+                size=(3.0, 3.0))
+            pose = dict(position=glm.vec3(THROUGH_A), rotation=look_rotation(glm.vec3(TARGET) - glm.vec3(EYE)))
+            names["lens"] = world.spawn(Transform(**pose), Camera(active=False),
+                                        *([reflections] if reflections is not None else []))
+            names["screen"] = world.spawn(Transform(position=(0.0, 1.0, 9.0)), MeshRef(quad(1.6, 0.9)),
+                                          Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0,
+                                                   environment_reflection=0.0),
+                                          Monitor(camera=names["lens"], size=SIZE, depth=1))
+
+        runner = scene(build, SIZE)
+        transform = runner.world.get(names["camera"], Transform)
+        transform.position = glm.vec3(THROUGH_A)
+        transform.rotation = look_rotation(glm.vec3(TARGET) - glm.vec3(EYE))
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        names["frame"] = runner.frame().astype(np.int32)
+        shown = runner.engine.renderer.monitors.read(names["screen"])[..., :3]
+        return linear_to_srgb8(np.clip(shown, 0.0, 1.0)).astype(np.int32), runner, names
+
+    image, runner, names = picture(ScreenReflections())
+    plain, _, _ = picture(ScreenReflections(reflection_depth=0))
+    direct, direct_runner, direct_names = _frame(scene, ScreenReflections(), portal=False)
+    judged = _judged(runner, direct_runner, names)
+    assert judged.sum() > 8000
+    difference = np.abs(image[judged] - direct[judged]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+    floor = direct_runner.ids() == direct_names["floor"]
+    reflecting = judged & floor & (np.abs(direct - plain).max(axis=-1) > 40)
+    assert reflecting.sum() > 300, reflecting.sum()
+    difference = np.abs(image[reflecting] - direct[reflecting]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+    counts = runner.engine.renderer.resource_counts()["reflection_targets"]
+    assert counts == (4 + 5) * (2 if active else 1), counts   # (the picture's root and level, and the camera's)
+    if active:
+        difference = np.abs(names["frame"][judged] - direct[judged]).max(axis=-1)
+        assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])

@@ -332,12 +332,12 @@ def _filtered(marched: np.ndarray, reach: np.ndarray, ratio: int, counts: np.nda
         return total / weights   # (NaN where no texel may be taken)
 
 
-def _added(scene, settings: VolumetricFog) -> tuple[np.ndarray, object]:
+def _added(scene, settings: VolumetricFog, mirror: bool = False) -> tuple[np.ndarray, object]:
     """What ``settings``' shafts add to the hall's HDR colour (linear, rows from the bottom),
-    and the runner drawn with them."""
-    with_shafts = scene(lambda world: _hall(world, settings), SIZE)
+    and the runner drawn with them (``mirror``: the hall's mirror on its wall)."""
+    with_shafts = scene(lambda world: _hall(world, settings, mirror=mirror), SIZE)
     with_shafts.frame()
-    plain = scene(lambda world: _hall(world), SIZE)
+    plain = scene(lambda world: _hall(world, mirror=mirror), SIZE)
     plain.frame()
     return _linear(with_shafts).astype(np.float64) - _linear(plain).astype(np.float64), with_shafts
 
@@ -1174,14 +1174,14 @@ def test_a_lamps_image_through_a_portal_pair_of_two_scales_lights_the_air_beyond
     assert np.quantile(error, 0.9) < 0.1, np.quantile(error, 0.9)
 
 
-def _watched_hall(world, shafts: VolumetricFog | None, lens_fog: bool = True) -> dict:
+def _watched_hall(world, shafts: VolumetricFog | None, lens_fog: bool = True, mirror: bool = False) -> dict:
     """``_hall`` with no shafts on the active camera, and a monitor whose camera (not active)
     stands where it does with ``shafts`` (and the hall's fog of its own, ``lens_fog``, else it
     takes the active camera's), its picture the frame's size, the screen out of both cameras'
-    sight."""
+    sight (``mirror``: the hall's mirror on its wall, the picture's view tree one level deep)."""
     from components import Camera, Monitor
 
-    camera = _hall(world)
+    camera = _hall(world, mirror=mirror)
     lens = look_from(world, EYE, TARGET, fov=70.0)
     world.get(lens, Camera).active = False
     if lens_fog:
@@ -1232,6 +1232,39 @@ def test_a_monitors_camera_has_its_shafts_in_its_picture(scene, lens_fog):
     runner.world.remove_component(names["screen"], Monitor)
     runner.frame()
     assert counts()["volumetric_targets"] == 0
+
+
+def test_a_monitors_camera_has_its_shafts_in_the_mirror_its_picture_shows(scene):
+    """The hall's mirror on its wall, seen by the monitor's camera (a view tree one level
+    deep; its ``VolumetricFog`` reaching one level): what the shafts add to its picture,
+    the mirror's view too, is what they add to the camera's own view where the active camera
+    has them; its images are the picture's own, its root's and its level's (2)."""
+    expected, direct = _added(scene, VolumetricFog(steps=64), mirror=True)
+    assert direct.engine.renderer.resource_counts()["volumetric_targets"] == 2   # (the camera's root and level)
+
+    def picture(shafts):
+        names: dict = {}
+        runner = scene(lambda world: names.update(_watched_hall(world, shafts, mirror=True)), SIZE)
+        runner.frame()
+        return runner.engine.renderer.monitors.read(names["screen"])[::-1, :, :3].astype(np.float64), runner, names
+
+    lit, runner, names = picture(VolumetricFog(steps=64))
+    bare, _, _ = picture(None)
+    shallow, _, _ = picture(VolumetricFog(steps=64, reflection_depth=0))
+    added = lit - bare
+    close = np.abs(added - expected).max(axis=-1) < 5e-3 + 0.03 * np.abs(expected).max(axis=-1)
+    assert close.mean() > 0.99, close.mean()
+    # The mirror's pixels (its level's): the level's own shafts, over the root's, are what
+    # they are in the camera's own view (its frame at reflection_depth 1 less at 0).
+    (mirror,) = [entity for entity, _ in direct.world.query_one(Mirror)]
+    nodes = direct.engine.renderer.targets.read_surface_ids()[::-1] == mirror
+    expected_level = expected - _added(scene, VolumetricFog(steps=64, reflection_depth=0), mirror=True)[0]
+    level = lit - shallow
+    assert nodes.sum() > 500 and expected_level.max() > 0.03, (nodes.sum(), expected_level.max())
+    close = np.abs(level - expected_level).max(axis=-1) < 5e-3 + 0.03 * np.abs(expected_level).max(axis=-1)
+    assert close[nodes].mean() > 0.99, close[nodes].mean()
+    assert np.abs(level[~nodes]).max() < 5e-3
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 2
 
 
 def test_a_monitors_camera_with_shafts_and_no_air_says_so_once(scene):

@@ -187,12 +187,14 @@ class MonitorPictures:
         self.scene_pass.draw([view], targets, options)
         if surfaces is not None and depth > 0:
             settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
-            # (its camera's occlusion found in the levels its components reach: draw_picture's frame)
+            # (its camera's occlusion and reflections in the levels its components reach:
+            # draw_picture's frame, begin_picture's settings)
             self.tree.occlusion = self.renderer.occlusion if occluded else None
+            self.tree.reflections = screen if reflections is not None else None
             try:
                 result = self.tree.render(view, held.levels, surfaces, settings, blends, options)
             finally:
-                self.tree.occlusion = None
+                self.tree.occlusion = self.tree.reflections = None
             drawn += [node.view for node in result.views[1:]]
             repeatable = not result.end_views and result.visibility != "predicted"
         else:

@@ -158,6 +158,10 @@ class ScreenReflectionPass:
         # Monitors' pictures' images, and the picture drawn now (``drawing``: its images, view
         # and settings, from begin_picture until its composite or end_picture).
         self._pictures: PictureImages[_Targets] = PictureImages()
+        # Their reflection levels' images, by monitor, then depth; and, while a picture is
+        # drawn, the active camera's pending view and levels put aside (``end_picture``).
+        self._picture_levels: dict[int, dict[int, _Targets]] = {}
+        self._aside: tuple | None = None
         # The debug overlay's toggle (``MainViewSystem.reflections``): off, no camera's
         # reflections are drawn, the active camera's or a monitor's.
         self.shown = True
@@ -208,19 +212,33 @@ class ScreenReflectionPass:
         """Monitor ``monitor``'s picture, about to be drawn from ``view`` into ``targets`` (its
         level 0), reflects as its camera's ``settings`` say: as ``begin``, with images of the
         picture's own (kept by monitor), until its root's composite (``composite``) or
-        ``end_picture``.  Its mirror and portal levels reflect nothing (the camera's view's
-        ``reflection_depth`` is the active camera's alone)."""
+        ``end_picture``; its mirror and portal levels too, as far as ``reflection_depth``
+        reaches (``begin_level``, ``composite_level``: the active camera's pending view and
+        levels put aside until ``end_picture``, the picture's levels' images its own)."""
         images = self._pictures.kept(monitor, lambda kept: kept.level is targets, lambda: self._make(targets))
         self._fit_hits(images, settings)
         self._pictures.drawing = (images, view, settings)
+        if self._aside is None:
+            self._aside = (self._pending, self._levels)
+        levels = self._levels = self._picture_levels.setdefault(monitor, {})
+        for depth in [depth for depth in levels if depth > settings.reflection_depth]:
+            levels.pop(depth).release()
+        self._pending = (view, settings)
 
     def end_picture(self) -> None:
-        """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached)."""
+        """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached):
+        the active camera's pending view and levels back."""
         self._pictures.drawing = None
+        if self._aside is not None:
+            self._pending, self._levels = self._aside
+            self._aside = None
 
     def drop_picture(self, monitor: int) -> None:
-        """Let go of monitor ``monitor``'s picture's images (it went, or its camera reflects nothing)."""
+        """Let go of monitor ``monitor``'s picture's images (it went, or its camera reflects
+        nothing), its levels' too."""
         self._pictures.drop(monitor)
+        for images in self._picture_levels.pop(monitor, {}).values():
+            images.release()
 
     def begin_level(self, depth: int, targets: RenderTargets) -> bool:
         """Reflection level ``depth``, about to be drawn into ``targets`` (its claims made),
@@ -304,6 +322,8 @@ class ScreenReflectionPass:
         picture = self._pictures.drawing
         if picture is not None and picture[0].level is level:   # a monitor's picture's root
             self._pictures.drawing = None
+            if self._aside is not None:
+                self._pending = None   # (its levels are composited: nothing after the root draws for them)
             images, view, settings = picture
             self._composite(images, [view], view, settings, False)
             return
@@ -393,8 +413,10 @@ class ScreenReflectionPass:
         """Images held now (4 while a camera asks for reflections, 5 at half resolution, and
         4 for each reflection level that reflects and each monitor's picture that does (5 at
         half resolution), else 0)."""
+        levels = self._aside[1] if self._aside is not None else self._levels
+        pictures = [images for kept in self._picture_levels.values() for images in kept.values()]
         return (0 if self._targets is None else self._targets.count()) + sum(
-            images.count() for images in (*self._levels.values(), *self._pictures))
+            images.count() for images in (*levels.values(), *self._pictures, *pictures))
 
     def level_key(self) -> tuple | None:
         """What this frame's reflection levels reflect with, as values (the reflect stage's
@@ -430,6 +452,8 @@ class ScreenReflectionPass:
 
     def release(self) -> None:
         self.release_targets()
+        for monitor in list(self._picture_levels):
+            self.drop_picture(monitor)
         self._pictures.release()
         self._release_programs()
 

@@ -163,6 +163,11 @@ class VolumetricFogPass:
         # Monitors' pictures' images, and the picture drawn now (``drawing``: its images, its
         # ``begin``'s pending, its sky light), from begin_picture to its root's composite.
         self._pictures: PictureImages[_Images] = PictureImages()
+        # Their reflection levels' images, by monitor, then depth; and, while a picture is
+        # drawn, the active camera's pending view, levels, sky light and reach put aside
+        # (``end_picture``).
+        self._picture_levels: dict[int, dict[int, _Images]] = {}
+        self._aside: tuple | None = None
 
     def begin(self, view: View, targets: RenderTargets, settings: VolumetricFog, jittered: bool = False,
               lamps: VolumetricLamps = _NO_LAMPS,
@@ -198,21 +203,36 @@ class VolumetricFogPass:
         """Monitor ``monitor``'s picture, about to be drawn from ``view`` into ``targets`` (its
         level 0), gets its camera's shafts (the arguments as ``begin``'s, never jittered), into
         an image of the picture's own (kept by monitor), marched and added at its root's
-        composite (``composite``; ``end_picture`` after the draw).  Its mirror and portal
-        levels get none."""
+        composite (``composite``; ``end_picture`` after the draw); its mirror and portal levels
+        too, as far as ``reflection_depth`` reaches (``composite_level``: the active camera's
+        pending view, levels, sky light and reach put aside until ``end_picture``, the
+        picture's levels' images its own)."""
         ratio = 2 if settings.half_resolution else 1
         images = self._pictures.kept(monitor, lambda kept: kept.level is targets and kept.ratio == ratio,
                                      lambda: self._make(targets, ratio))
-        self._pictures.drawing = (images, (view, settings, False, lamps, image_shares if any(image_shares) else ()),
-                                  sky_light)
+        pending = (view, settings, False, lamps, image_shares if any(image_shares) else ())
+        self._pictures.drawing = (images, pending, sky_light)
+        if self._aside is None:
+            self._aside = (self._pending, self._levels, self._sky_light, self.reach)
+        levels = self._levels = self._picture_levels.setdefault(monitor, {})
+        for depth in [depth for depth in levels if depth > settings.reflection_depth]:
+            levels.pop(depth).release()
+        self._pending, self._sky_light, self.reach = pending, sky_light, settings.reflection_depth
 
     def end_picture(self) -> None:
-        """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached)."""
+        """The picture ``begin_picture`` began is drawn (its composite drawn, or not reached):
+        the active camera's pending view, levels, sky light and reach back."""
         self._pictures.drawing = None
+        if self._aside is not None:
+            self._pending, self._levels, self._sky_light, self.reach = self._aside
+            self._aside = None
 
     def drop_picture(self, monitor: int) -> None:
-        """Let go of monitor ``monitor``'s picture's image (it went, or its camera has no shafts)."""
+        """Let go of monitor ``monitor``'s picture's image (it went, or its camera has no
+        shafts), its levels' too."""
         self._pictures.drop(monitor)
+        for images in self._picture_levels.pop(monitor, {}).values():
+            images.release()
 
     def _make(self, targets: RenderTargets, ratio: int) -> _Images:
         size = (-(-targets.size[0] // ratio), -(-targets.size[1] // ratio))
@@ -227,6 +247,8 @@ class VolumetricFogPass:
         picture = self._pictures.drawing
         if picture is not None and picture[0].level is level:   # a monitor's picture's root
             self._pictures.drawing = None
+            if self._aside is not None:
+                self._pending = None   # (its levels are composited: nothing after the root adds to them)
             images, pending, sky_light = picture
             self._draw(images, [pending[0]], pending, False, True, sky_light)
             return
@@ -389,7 +411,9 @@ class VolumetricFogPass:
     def target_count(self) -> int:
         """Images held now (1 while a camera asks for shafts, and 1 for each reflection level
         they reach and each monitor's picture that has them, else 0)."""
-        return (0 if self._images is None else 1) + len(self._levels) + len(self._pictures)
+        levels = self._aside[1] if self._aside is not None else self._levels
+        return (0 if self._images is None else 1) + len(levels) + len(self._pictures) \
+            + sum(len(kept) for kept in self._picture_levels.values())
 
     def level_key(self) -> tuple | None:
         """What this frame's reflection levels get shafts with, as values (the reflect
@@ -422,6 +446,8 @@ class VolumetricFogPass:
 
     def release(self) -> None:
         self.release_targets()
+        for monitor in list(self._picture_levels):
+            self.drop_picture(monitor)
         self._pictures.release()
         self._release_programs()
 
