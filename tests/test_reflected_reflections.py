@@ -63,17 +63,24 @@ def test_through_a_portal_the_polished_floor_reflects_as_seen_directly(scene):
     direct, direct_runner, direct_names = _frame(scene, ScreenReflections(), portal=False)
     plain, _, _ = _frame(scene, ScreenReflections(reflection_depth=0), portal=True, eye=THROUGH_A)
     assert runner.stats.reflection_views >= 1
+    _assert_reflects_as_seen_directly(image, plain, runner, names, direct, direct_runner, direct_names)
+
+
+def _assert_reflects_as_seen_directly(image, plain, runner, names, direct, direct_runner, direct_names) -> np.ndarray:
+    """``image`` through the portal (drawn by ``runner``'s active camera's pose) matches the
+    ``direct`` frame in the judged pixels (``_judged``), and where the direct view's floor
+    reflects a box, where the portal's view without the level's reflections (``plain``) shows
+    the sky's reflection, far from it (what the test stands on).  Returns the judged pixels."""
     judged = _judged(runner, direct_runner, names)
     assert judged.sum() > 8000
     difference = np.abs(image[judged] - direct[judged]).max(axis=-1)
     assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
-    # Where the direct view's floor reflects a box, the portal's view without the level's
-    # reflections shows the sky's reflection: far from it (what the test stands on).
     floor = direct_runner.ids() == direct_names["floor"]
     reflecting = judged & floor & (np.abs(direct - plain).max(axis=-1) > 40)
     assert reflecting.sum() > 300, reflecting.sum()
     difference = np.abs(image[reflecting] - direct[reflecting]).max(axis=-1)
     assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+    return judged
 
 
 def test_a_mirror_level_reflects_and_its_images_go_with_the_depth(scene):
@@ -227,15 +234,7 @@ def test_a_monitors_picture_through_a_portal_reflects_as_seen_directly(scene, ac
     image, runner, names = picture(ScreenReflections())
     plain, _, _ = picture(ScreenReflections(reflection_depth=0))
     direct, direct_runner, direct_names = _frame(scene, ScreenReflections(), portal=False)
-    judged = _judged(runner, direct_runner, names)
-    assert judged.sum() > 8000
-    difference = np.abs(image[judged] - direct[judged]).max(axis=-1)
-    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
-    floor = direct_runner.ids() == direct_names["floor"]
-    reflecting = judged & floor & (np.abs(direct - plain).max(axis=-1) > 40)
-    assert reflecting.sum() > 300, reflecting.sum()
-    difference = np.abs(image[reflecting] - direct[reflecting]).max(axis=-1)
-    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+    judged = _assert_reflects_as_seen_directly(image, plain, runner, names, direct, direct_runner, direct_names)
     counts = runner.engine.renderer.resource_counts()["reflection_targets"]
     assert counts == (4 + 5) * (2 if active else 1), counts   # (the picture's root and level, and the camera's)
     if active:
