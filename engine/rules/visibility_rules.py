@@ -2,7 +2,9 @@
 view draws an entity, defined once.  Every place that decides it calls this module: the scene
 shaders (per instance, through ``shaders/include/visibility.glsl``, whose ``VIEW_KIND_BITS``
 is ``glsl_defines`` here), the view planner (which mirrors and portals a parent view draws:
-``SurfaceTable.drawn_in``) and the probes' scheduler (which moves a probe can see: ``ChangedBoxes.seen_by``).
+``SurfaceTable.drawn_in``; the view through one: ``mask_through``), the probes' scheduler (which
+moves a probe can see: ``ChangedBoxes.seen_by``) and a cast as a view sees it
+(``raycast.raycast_seen``'s ``view_mask``: the editor's clicks).
 
 One packing serves both sides, an integer of ``VIEW_KINDS`` bits of kinds of view and
 ``REFLECTION_LAYERS`` bits of layers above them (``visibility_code``):
