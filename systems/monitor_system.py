@@ -209,15 +209,18 @@ class MonitorSystem(esper.Processor):
                 faces = self._screen_faces(monitors)
             with outside_the_budget(stats), self._camera_fog(monitor.camera):
                 occluded = self._occlusion(entity, monitor.camera, view)
-                reflections = self.world.try_get(monitor.camera, ScreenReflections) \
-                    if self.renderer.screen_reflections.shown and monitor.camera is not None \
-                    and self.world.exists(monitor.camera) else None
-                shafts = self._shafts(entity, monitor.camera)
-                # (still, but drawn on predicted counts: once more exactly, to keep)
-                views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends, exact=still,
-                                      faces=faces, occluded=occluded, reflections=reflections, shafts=shafts)
-                if occluded:
-                    self.renderer.occlusion.end_picture()
+                try:
+                    reflections = self.world.try_get(monitor.camera, ScreenReflections) \
+                        if self.renderer.screen_reflections.shown and monitor.camera is not None \
+                        and self.world.exists(monitor.camera) else None
+                    shafts = self._shafts(entity, monitor.camera)
+                    # (still, but drawn on predicted counts: once more exactly, to keep)
+                    views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends,
+                                          exact=still, faces=faces, occluded=occluded, reflections=reflections,
+                                          shafts=shafts)
+                finally:   # (the active camera's images back, whatever the picture's draw raised)
+                    if occluded:
+                        self.renderer.occlusion.end_picture()
             stats.monitor_views += views
             drawn += 1
             if not alike:

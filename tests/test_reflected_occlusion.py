@@ -439,3 +439,60 @@ def test_a_monitors_camera_finds_the_occlusion_in_the_mirror_its_picture_shows(s
     runner.world.remove_component(names["lens"], AmbientOcclusion)
     runner.frame()
     assert runner.engine.renderer.occlusion.target_count() == (8 if active else 0)
+
+
+def test_a_pictures_draw_that_raises_leaves_the_active_cameras_effects_as_they_were(scene, monkeypatch):
+    """The mirror room with the active camera and a monitor's camera (posed alike) both with
+    occlusion, screen reflections and light shafts reaching one level: a picture's tree that
+    raises mid-draw (the error comes out of the frame) leaves the passes' state the active
+    camera's (``end_picture`` whatever happened): with the monitor gone after (no later
+    picture to put it back), the frames are the frames of an engine whose picture never
+    failed."""
+    from components import Camera, DirectionalLight, Fog, Monitor, ScreenReflections, VolumetricFog
+    from engine.render import view_tree
+
+    def build(names):
+        def b(world):
+            names.update(_mirror_room(world, AmbientOcclusion(radius=RADIUS)))
+            world.spawn(DirectionalLight(direction=(0.6, -1.0, 0.3), intensity=2.0))   # (the shafts' light)
+            eye, target = (glm.vec3(point) for point in MIRROR_EYE)
+            for entity in (names["camera"],):
+                world.add_component(entity, ScreenReflections())
+                world.add_component(entity, VolumetricFog(steps=16))
+                world.add_component(entity, Fog(density=0.05))
+            names["lens"] = world.spawn(Transform(position=eye, rotation=look_rotation(target - eye)),
+                                        Camera(active=False), AmbientOcclusion(radius=RADIUS), ScreenReflections(),
+                                        VolumetricFog(steps=16), Fog(density=0.05))
+            names["screen"] = world.spawn(Transform(position=(-6.0, 1.0, 3.0)), MeshRef(quad(1.6, 0.9)),
+                                          Material(color=(0.0, 0.0, 0.0), roughness=1.0),
+                                          Monitor(camera=names["lens"], size=(64, 48), depth=1))
+        return b
+
+    def engine():
+        names: dict = {}
+        runner = scene(build(names), SIZE)
+        _aim(runner, names["camera"], *MIRROR_EYE)
+        runner.engine.renderer.antialias = "off"
+        return runner
+
+    failing, sound = engine(), engine()
+    render = view_tree.ViewTree.render
+    calls = {"n": 0}
+
+    def raising(self, *args, **kwargs):
+        if self is failing.engine.renderer.monitors.tree and calls["n"] == 0:
+            calls["n"] += 1
+            raise RuntimeError("a picture's tree failed")
+        return render(self, *args, **kwargs)
+
+    sound.frame()
+    with monkeypatch.context() as patch:
+        patch.setattr(view_tree.ViewTree, "render", raising)
+        with pytest.raises(RuntimeError, match="a picture's tree failed"):
+            failing.frame()
+        assert calls["n"] == 1
+        for runner in (failing, sound):   # (no picture after: nothing puts the camera's state back but end_picture)
+            screen = next(entity for entity, _ in runner.world.query_one(Monitor))
+            runner.world.remove_component(screen, Monitor)
+        for _ in range(2):
+            assert np.array_equal(failing.frame(), sound.frame())

@@ -172,37 +172,37 @@ class MonitorPictures:
         # As the main view: the root without its glass, then (after its tree, if any) what
         # a root does last: its waters' foam, its refracting surfaces and its glass.
         screen = self.scene_pass.screen_reflections
-        if screen is not None:
-            if reflections is not None:
-                screen.begin_picture(entity, view, targets, reflections)
-            else:
-                screen.drop_picture(entity)
         air = self.scene_pass.volumetric_fog
-        if air is not None:
-            if shafts is not None:
-                air.begin_picture(entity, view, targets, *shafts)
-            else:
-                air.drop_picture(entity)
-        options = _ROOTS[occluded, reflections is not None and screen is not None]
-        self.scene_pass.draw([view], targets, options)
-        if surfaces is not None and depth > 0:
-            settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
-            # (its camera's occlusion and reflections in the levels its components reach:
-            # draw_picture's frame, begin_picture's settings)
-            self.tree.occlusion = self.renderer.occlusion if occluded else None
-            self.tree.reflections = screen if reflections is not None else None
-            try:
+        try:
+            if screen is not None:
+                if reflections is not None:
+                    screen.begin_picture(entity, view, targets, reflections)
+                else:
+                    screen.drop_picture(entity)
+            if air is not None:
+                if shafts is not None:
+                    air.begin_picture(entity, view, targets, *shafts)
+                else:
+                    air.drop_picture(entity)
+            options = _ROOTS[occluded, reflections is not None and screen is not None]
+            self.scene_pass.draw([view], targets, options)
+            if surfaces is not None and depth > 0:
+                settings = TreeSettings(depth_cap=depth, visibility="exact" if exact else self.visibility)
+                # (its camera's occlusion and reflections in the levels its components reach:
+                # draw_picture's frame, begin_picture's settings)
+                self.tree.occlusion = self.renderer.occlusion if occluded else None
+                self.tree.reflections = screen if reflections is not None else None
                 result = self.tree.render(view, held.levels, surfaces, settings, blends, options)
-            finally:
-                self.tree.occlusion = self.tree.reflections = None
-            drawn += [node.view for node in result.views[1:]]
-            repeatable = not result.end_views and result.visibility != "predicted"
-        else:
-            self.scene_pass.finish_root(view, targets, options)
-        if screen is not None:
-            screen.end_picture()
-        if air is not None:
-            air.end_picture()
+                drawn += [node.view for node in result.views[1:]]
+                repeatable = not result.end_views and result.visibility != "predicted"
+            else:
+                self.scene_pass.finish_root(view, targets, options)
+        finally:   # (the active camera's state back, whatever the picture's draw raised)
+            self.tree.occlusion = self.tree.reflections = None
+            if screen is not None:
+                screen.end_picture()
+            if air is not None:
+                air.end_picture()
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
         held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}
