@@ -27,7 +27,10 @@ B_PLANE_Z = 3.0
 THROUGH_A = (20.0, EYE[1], 20.0 + (EYE[2] - B_PLANE_Z))   # the camera before A that is carried to EYE
 
 
-def _frame(scene, reflections: ScreenReflections | None, portal: bool, eye=EYE) -> tuple[np.ndarray, object, dict]:
+def _frame(scene, reflections: ScreenReflections | None, portal: bool, eye=EYE,
+           extra=None) -> tuple[np.ndarray, object, dict]:
+    """The second frame of the scene (``reflections`` on its camera, the portal pair where
+    ``portal``) from ``eye``, its runner and names; ``extra(world, names)`` adds to it."""
     names: dict = {}
 
     def build(world):
@@ -36,6 +39,8 @@ def _frame(scene, reflections: ScreenReflections | None, portal: bool, eye=EYE) 
             names["a"], names["b"] = spawn_portal_pair(
                 world, PORTAL_A, None, PORTAL_B, glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0)),
                 size=(3.0, 3.0))
+        if extra is not None:
+            extra(world, names)
 
     runner = scene(build, SIZE)
     transform = runner.world.get(names["camera"], Transform)
@@ -205,14 +210,7 @@ def test_a_monitors_picture_through_a_portal_reflects_as_seen_directly(scene, ac
     from tests.support import linear_to_srgb8
 
     def picture(reflections: ScreenReflections | None):
-        names: dict = {}
-
-        def build(world):
-            own = ScreenReflections() if active else None
-            names.update(_scene(world, reflections=own))
-            names["a"], names["b"] = spawn_portal_pair(
-                world, PORTAL_A, None, PORTAL_B, glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0)),
-                size=(3.0, 3.0))
+        def lens(world, names):
             pose = dict(position=glm.vec3(THROUGH_A), rotation=look_rotation(glm.vec3(TARGET) - glm.vec3(EYE)))
             names["lens"] = world.spawn(Transform(**pose), Camera(active=False),
                                         *([reflections] if reflections is not None else []))
@@ -221,13 +219,9 @@ def test_a_monitors_picture_through_a_portal_reflects_as_seen_directly(scene, ac
                                                    environment_reflection=0.0),
                                           Monitor(camera=names["lens"], size=SIZE, depth=1))
 
-        runner = scene(build, SIZE)
-        transform = runner.world.get(names["camera"], Transform)
-        transform.position = glm.vec3(THROUGH_A)
-        transform.rotation = look_rotation(glm.vec3(TARGET) - glm.vec3(EYE))
-        runner.engine.renderer.antialias = "off"
-        runner.frame()
-        names["frame"] = runner.frame().astype(np.int32)
+        frame, runner, names = _frame(scene, ScreenReflections() if active else None, portal=True, eye=THROUGH_A,
+                                      extra=lens)
+        names["frame"] = frame
         shown = runner.engine.renderer.monitors.read(names["screen"])[..., :3]
         return linear_to_srgb8(np.clip(shown, 0.0, 1.0)).astype(np.int32), runner, names
 
