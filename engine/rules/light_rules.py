@@ -756,8 +756,14 @@ def kept_lights(world: World, limits: LightLimits) -> KeptLights:
 def lights_this_frame(world: World, limits: LightLimits) -> KeptLights:
     """The choice the prepare stage will make this frame, made ahead of it (not stored): from
     the last one published, by the same rule, so a stage before the prepare stage (the
-    extract stage's keying of rows under waters) sees a light new this frame."""
-    return choose_lights(world, world.resources.get(KeptLights), limits)
+    extract stage's keying of rows under waters) sees a light new this frame.  The last one
+    itself where it must be the same: every light kept (none cut, so neither the camera nor
+    where a lamp stands can change it) and no light added, removed or changed since."""
+    kept = world.resources.get(KeptLights)
+    if kept is not None and kept.cut == (0, 0) and not world.changed(DirectionalLight) \
+            and not world.changed(PointLight):
+        return kept
+    return choose_lights(world, kept, limits)
 
 
 @world_invariant(Skybox)
