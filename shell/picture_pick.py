@@ -19,7 +19,7 @@ from components.visibility import visibility_code
 from engine.core.transforms import current_world_matrix
 from engine.core.world import World
 from engine.render.views import camera_view
-from engine.rules.raycast import RayCaster, RayHit, raycast_seen
+from engine.rules.raycast import RayHit, raycast_seen, shared_caster
 from shell.handles import view_ray
 
 MAX_PICTURES_FOLLOWED = 4   # pictures in pictures a click follows (a camera seeing its own screen stops there)
@@ -74,10 +74,7 @@ def _uv_at(world: World, hit: RayHit) -> tuple[float, float] | None:
     if mesh_ref is None or mesh_ref.mesh.uvs is None or not len(mesh_ref.mesh.uvs):
         return None
     mesh = mesh_ref.mesh
-    caster = world.resources.get(RayCaster)
-    if caster is None or caster.world is not world:
-        caster = world.resources[RayCaster] = RayCaster(world)
-    a, b, c = caster.triangles(hit.entity)[hit.triangle]
+    a, b, c = shared_caster(world).triangles(hit.entity)[hit.triangle]
     corners = mesh.indices.reshape(-1, 3)[hit.triangle]
     point = np.array(hit.point, np.float64)
     ab, ac, ap = b - a, c - a, point - a

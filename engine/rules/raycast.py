@@ -230,11 +230,17 @@ def raycast(world: World, origin: glm.vec3 | Sequence[float], direction: glm.vec
             max_distance: float = math.inf,
             where: Callable[[int], bool] | None = None, ignore: Collection[int] = (),
             two_sided: bool = True) -> RayHit | None:
-    """``RayCaster.cast`` on the world's shared caster (``world.resources[RayCaster]``, made on first use)."""
+    """``RayCaster.cast`` on the world's shared caster (``shared_caster``)."""
+    return shared_caster(world).cast(origin, direction, max_distance, where, ignore, two_sided)
+
+
+def shared_caster(world: World) -> RayCaster:
+    """The world's shared caster (``world.resources[RayCaster]``, made on first use): its
+    cache of posed world triangles, which ``raycast`` and ``raycast_seen`` cast against."""
     caster = world.resources.get(RayCaster)
     if caster is None or caster.world is not world:
         caster = world.resources[RayCaster] = RayCaster(world)
-    return caster.cast(origin, direction, max_distance, where, ignore, two_sided)
+    return caster
 
 
 @dataclass(frozen=True)

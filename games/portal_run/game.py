@@ -68,7 +68,7 @@ from engine.core.frame_io import Input
 from engine.core.game import GameSystem
 from engine.core.world import World
 from engine.resources import PortalCrossings
-from engine.rules.raycast import RayCaster
+from engine.rules.raycast import shared_caster
 from games.portal_run.autopilot import Autopilot, ScriptError, parse_script
 from games.portal_run.physics import BodyShape, Solid, move_body
 
@@ -333,9 +333,7 @@ class PortalRun(LevelGame):
         if self._want_pilot and self.pilot is None:
             self.pilot = Autopilot(self._script_source if self._script_source is not None else self.rules.solution,
                                    f"{where}: rule 'solution'")
-        self.caster = world.resources.get(RayCaster)
-        if self.caster is None or self.caster.world is not world:
-            self.caster = world.resources[RayCaster] = RayCaster(world)
+        self.caster = shared_caster(world)
         level_entities = set(self.names.values())
         skip = {self.names[n] for n in self.rules.not_solid}
         self.solids = {e for e in level_entities if world.has(e, MeshRef) and world.has(e, Transform)} - skip
