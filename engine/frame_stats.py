@@ -93,6 +93,9 @@ class RenderStats(BudgetLedger):
     # A sun's cascades about the camera (DirectionalLight.shadow_cascades; each a map, counted
     # in shadow_maps_drawn and _kept too) left out: the atlas's four tiles were taken.
     shadow_cascades_cut: int = 0
+    # A monitor's picture's rings about its own camera (systems/shadow_rings.py) left out: the
+    # free tiles' quarters were taken; it read the active camera's rings.
+    picture_cascades_cut: int = 0
     # Lights past the Lights block's slots (views.MAX_DIRECTIONAL_LIGHTS directional,
     # MAX_POINT_LIGHTS point: those that matter most are kept, engine/rules/light_rules.py),
     # which light nothing this frame; set every frame while it lasts (the prepare stage warns

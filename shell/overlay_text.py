@@ -50,6 +50,7 @@ def overlay_lines(engine: Engine, frame_times: Sequence[float]) -> list[str]:
             f"{stats.monitors_unseen}"] if monitors else []),
         f"cut: lights {stats.lights_cut}, shadows {stats.shadows_cut}"
         f"{f', cascades {stats.shadow_cascades_cut}' if stats.shadow_cascades_cut else ''}"
+        f"{f', picture cascades {stats.picture_cascades_cut}' if stats.picture_cascades_cut else ''}"
         f"{f', rectangles (lit as points) {stats.rect_lights_cut}' if stats.rect_lights_cut else ''}"
         f"{f', fog volumes {stats.fog_volumes_cut}' if stats.fog_volumes_cut else ''}"
         f"{f', caustic waters {stats.caustic_waters_cut}' if stats.caustic_waters_cut else ''}"

@@ -98,7 +98,9 @@ from engine.resources import ContactLamps, PicturesDrawn, Surfaces, SurfaceState
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import ViewEyes, brightest_directional
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
+from engine.rules.shadow_rules import ShadowCasters
 from systems.camera_shafts import camera_shafts
+from systems.shadow_rings import PictureRings
 
 
 class MonitorSystem(esper.Processor):
@@ -114,6 +116,7 @@ class MonitorSystem(esper.Processor):
         self._said_no_shafts: tuple | None = None  # (a camera's VolumetricFog, why it adds nothing), said
         self._cut = 0
         self._keep_still_pictures = True
+        self._rings = PictureRings()   # each picture's suns' cascades about its camera (_cascades)
         self._keys: dict[int, tuple[tuple, tuple, int]] = {}   # monitor -> _still_key at its last drawing
         self._world_version = 0   # moved on by every change to the world's components (World.change_count)
         self._changes_seen = 0    # World.change_count when this stage last looked
@@ -148,6 +151,7 @@ class MonitorSystem(esper.Processor):
             self.renderer.occlusion.drop_picture(gone)   # (its camera's occlusion images: the pass's own)
         for gone in set(self.drawn) - present:
             del self.drawn[gone]
+            self._rings.drop(gone)
         for gone in set(self._keys) - present:
             del self._keys[gone]
         # Changes since the last look: after this stage in the last frame, and before it in this one.
@@ -207,7 +211,8 @@ class MonitorSystem(esper.Processor):
             trees = monitor.depth > 0 and table is not None
             if faces is None:
                 faces = self._screen_faces(monitors)
-            with outside_the_budget(stats), self._camera_fog(monitor.camera):
+            with outside_the_budget(stats), self._camera_fog(monitor.camera), \
+                    self._cascades(entity, transform.world[3]):
                 occluded = self._occlusion(entity, monitor.camera, view)
                 try:
                     reflections = self.world.try_get(monitor.camera, ScreenReflections) \
@@ -374,6 +379,22 @@ class MonitorSystem(esper.Processor):
                   view.camera_block(), view.layers, monitor.size, monitor.depth, flows, self._world_version,
                   self.renderer.occlusion.shown, self.renderer.screen_reflections.shown)
         return values, (table, blends.by_surface), captures
+
+    @contextmanager
+    def _cascades(self, monitor: int, eye: glm.vec4) -> Iterator[None]:
+        """While monitor ``monitor``'s picture is drawn, the suns' cascades about its camera at
+        ``eye`` are read in place of the active camera's (``systems/shadow_rings.py``): put
+        back after, whatever the draw raised."""
+        casters = self.world.resources.get(ShadowCasters)
+        cascades = None if casters is None else casters.cascades
+        rows = {} if cascades is None else self._rings.rows(
+            monitor, (float(eye.x), float(eye.y), float(eye.z)), cascades, self.renderer.shadows, self.renderer.stats)
+        aside = self.renderer.shadows.swap_ring_rows(rows) if rows else None
+        try:
+            yield
+        finally:
+            if aside is not None:
+                self.renderer.shadows.swap_ring_rows(aside)
 
     def _camera_fog(self, camera: int | None) -> AbstractContextManager[None]:
         """The fog a picture from ``camera`` is drawn through: the camera's own ``Fog`` where it

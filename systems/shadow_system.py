@@ -83,6 +83,8 @@ from engine.rules.probe_rules import pose_bounds, world_bounds
 from engine.rules.shadow_rules import (
     ENCLOSING_SHARE,
     MAX_VIRTUAL_LIGHTS,
+    CascadeRing,
+    Cascades,
     DirectionalFit,
     ShadowCasters,
     VirtualLight,
@@ -101,6 +103,7 @@ from engine.rules.shadow_rules import (
     virtual_shadow_camera,
 )
 from engine.rules.visibility_rules import ShadowCasting
+from systems.shadow_rings import ring_to_draw
 
 # What decides whether, and what shape, a thing casts.
 _LOOKS = (MeshRef, Material, Visibility, Refractive, Portal, Skin, Morph)
@@ -136,6 +139,8 @@ class ShadowSystem(esper.Processor):
         self._still: tuple | None = None
         # The light rule's choice last read, and its directional lights slot by slot.
         self._kept: tuple[KeptLights | None, list[DirectionalLight | None]] = (None, [])
+        # The active camera's rings and the atlas's free squares, for the pictures' (``_draw_rings``).
+        self._cascades: Cascades | None = None
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
@@ -178,6 +183,9 @@ class ShadowSystem(esper.Processor):
         # A virtual light's map is drawn whole: again only when what casts changed (the
         # changed box: a row that casts moved, came, went or started or stopped casting).
         published.virtual = self._virtual_maps(kept, changed_box is not None, fitted, carrying)
+        if self._cascades is not None and level is not None and self.enabled:
+            published.cascades = replace(self._cascades, casters_changed=casters_changed or changed_box is not None,
+                                         changes=(changed_box, changed_parts))
         world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:
@@ -290,12 +298,15 @@ class ShadowSystem(esper.Processor):
         """Each casting light's rings (``DirectionalLight.shadow_cascades`` - 1 of them, about
         the camera at ``eye``) into the atlas tiles no light's level map takes, in slot order,
         outermost first: kept, drawn again under changed casters, or drawn whole in a new
-        cell.  The rings that find no tile are counted in ``shadow_cascades_cut`` (returned)."""
+        cell (``shadow_rings.ring_to_draw``).  The rings that find no tile are counted in
+        ``shadow_cascades_cut`` (returned).  What the monitors' pictures need to draw the same
+        rings about their cameras is kept for ``ShadowCasters.cascades`` (``_cascades``)."""
         maps = self.renderer.shadows
         stats: RenderStats = self.world.resources[RenderStats]
         free = [tile for tile in range(MAX_DIRECTIONAL_LIGHTS) if tile not in {slot for slot, _ in casting}]
         ring = cut = 0
         cells: dict[tuple, tuple[int, int]] = {}   # the rings' cells now (only these are kept)
+        rings: list[CascadeRing] = []
         for slot, light in casting:
             if light.shadow_cascades < 2 or eye is None:
                 continue
@@ -309,31 +320,27 @@ class ShadowSystem(esper.Processor):
                 cell = cells[slot, radius] = ring_cell(level, eye, radius, light.shadow_resolution,
                                                        self._ring_cells_kept.get((slot, radius)))
                 key = (self._directional[slot], tile, radius, cell)
-                kept = self._rings.get(ring)
-                region = None
-                if kept is not None and kept[0] == key:
-                    fit = kept[1]
-                    if not casters_changed:
-                        stats.shadow_maps_kept += 1
-                        ring += 1
-                        continue
-                    region = changed_region(fit, *changes, light.shadow_resolution)
-                    if region is not None and region[2] * region[3] == 0:
-                        stats.shadow_maps_kept += 1
-                        ring += 1
-                        continue
+                todo = ring_to_draw(self._rings.get(ring), key, casters_changed, changes, light.shadow_resolution)
+                if todo is None:
+                    stats.shadow_maps_kept += 1
                 else:
-                    fit = ring_fit(level, cell, radius, light.shadow_resolution)
-                stats.shadow_texels_drawn += maps.draw_ring(ring, tile, slot, fit, light.shadow_resolution,
-                                                            light.shadow_softness, region)
-                self._rings[ring] = (key, fit)
-                stats.shadow_maps_drawn += 1
+                    fit = todo[0] or ring_fit(level, cell, radius, light.shadow_resolution)
+                    stats.shadow_texels_drawn += maps.draw_ring(ring, tile, slot, fit, light.shadow_resolution,
+                                                                light.shadow_softness, todo[1])
+                    stats.shadow_maps_drawn += 1
+                    self._rings[ring] = (key, fit)
+                rings.append(CascadeRing(ring, slot, radius, light.shadow_resolution, light.shadow_softness))
                 ring += 1
         for stale in [r for r in self._rings if r >= ring]:
             del self._rings[stale]
         self._ring_cells_kept = cells
         maps.clear_rings(ring)
         stats.shadow_cascades_cut += cut
+        half = maps.tile // 2
+        self._cascades = None if not rings else Cascades(
+            tuple(rings), {slot: self._fits[slot] for slot, _ in casting}, dict(self._directional),
+            tuple((x + dx, y + dy) for x, y in map(maps.tile_origin, free) for dy in (0, half) for dx in (0, half)),
+            half)
         return cut
 
     # --- point lights -------------------------------------------------------------------------

@@ -13,8 +13,19 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, DirectionalLight, Material, MeshRef, Mirror, Transform
+from components import (
+    Camera,
+    ComponentValueError,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    Monitor,
+    Transform,
+    look_rotation,
+)
 from engine.assets.mesh import box, plane, quad
+from engine.render.views import camera_view
 from engine.rules.shadow_rules import (
     RING_STEP_SHARE,
     changed_region,
@@ -69,10 +80,11 @@ def _floor_points(runner) -> np.ndarray:
 
 
 def _agreement(runner, with_shadows: np.ndarray, without: np.ndarray, points: np.ndarray | None = None,
-               mask: np.ndarray | None = None, centre=BOX_CENTRE) -> tuple[float, int, int]:
+               mask: np.ndarray | None = None, centre=BOX_CENTRE, linear: bool = False) -> tuple[float, int, int]:
     """(share of ``mask``'s pixels (the floor's), each showing the floor point of its row of
     ``points``, near the box's outline but outside the band, whose shading agrees with the
-    float64 shadow rays; pixels counted; pixels the rays put in shadow)."""
+    float64 shadow rays; pixels counted; pixels the rays put in shadow).  ``linear``: the
+    pictures are linear light (a monitor's), not the frame's sRGB."""
     ids = runner.world.resources["ids"]
     points = _floor_points(runner) if points is None else points
     mask = runner.ids() == ids["floor"] if mask is None else mask
@@ -82,7 +94,9 @@ def _agreement(runner, with_shadows: np.ndarray, without: np.ndarray, points: np
         return box_hits(points, to_light, np.asarray(centre, np.float64), BOX_HALF + grow).reshape(mask.shape)
 
     inside, outside = hits(-BAND), hits(BAND)
-    ratio = srgb_to_linear(with_shadows).mean(axis=-1) / np.maximum(srgb_to_linear(without).mean(axis=-1), 1e-6)
+    if not linear:
+        with_shadows, without = srgb_to_linear(with_shadows), srgb_to_linear(without)
+    ratio = with_shadows[..., :3].mean(axis=-1) / np.maximum(without[..., :3].mean(axis=-1), 1e-6)
     # Only the floor near the outline (within EDGE of it), where the maps' texels decide.
     sure = mask & (inside == outside) & (hits(-EDGE) != hits(EDGE))
     frame_says = np.where(ratio < 0.7, 1, np.where(ratio > 0.95, 0, -1))[sure]
@@ -134,6 +148,103 @@ def test_a_mirror_shows_the_rings_sharp_shadow_of_what_stands_behind_the_camera(
         assert counted > 500 and in_shadow > 200, (counted, in_shadow)
     assert shares[3] >= 0.99, shares
     assert shares[1] < 0.95, shares
+
+
+PICTURE_OFF = np.array([30.0, 0.0, 25.0])   # the monitor's box and camera, this far from the camera's
+
+
+def _watched(cascades: int, suns: int = 1):
+    """The camera at EYE looking at a box's shadow (as ``_build``), and 39 metres off, past
+    its largest ring's reach, a second box and a monitor's camera looking at its shadow as
+    the camera looks at the first's, its picture on a screen behind the camera."""
+    def build(world):
+        _build(cascades, suns)(world)
+        ids = world.resources["ids"]
+        eye, target = glm.vec3(*(np.array(EYE) + PICTURE_OFF)), glm.vec3(*(np.array(TARGET) + PICTURE_OFF))
+        ids["lens"] = world.spawn(Transform(position=eye, rotation=look_rotation(target - eye)),
+                                  Camera(fov_y=60.0, active=False))
+        world.spawn(Transform(position=list(BOX_CENTRE + PICTURE_OFF)), MeshRef(box()),
+                    Material(color=(0.8, 0.3, 0.2)))
+        ids["screen"] = world.spawn(Transform(position=(15.0, 1.6, 45.0)), MeshRef(quad(1.6, 1.0)), Material(),
+                                    Monitor(camera=ids["lens"], size=PICTURE_SIZE))
+    return build
+
+
+PICTURE_SIZE = (480, 320)
+
+
+def _pictures_with_and_without(runner) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """((the frame with the sun's shadows, without), (the picture with, without))."""
+    ids = runner.world.resources["ids"]
+    sun = runner.world.get(ids["sun"], DirectionalLight)
+    sun.shadows = False
+    without = runner.frame(), runner.engine.renderer.monitors.read(ids["screen"]).copy()
+    sun.shadows = True
+    with_shadows = runner.frame(), runner.engine.renderer.monitors.read(ids["screen"]).copy()
+    return (with_shadows[0], without[0]), (with_shadows[1], without[1])
+
+
+def _picture_floor(runner) -> tuple[np.ndarray, np.ndarray]:
+    """The floor points each picture pixel shows (a row a pixel, rows from the top) and the
+    pixels that show the floor (their rays meet it, and not the box first)."""
+    lens = runner.world.get(runner.world.resources["ids"]["lens"], Transform)
+    view = camera_view(lens.world, 60.0, 0.1, 100.0, PICTURE_SIZE)
+    eye, rays = pixel_rays(view, PICTURE_SIZE)
+    rays = rays.reshape(-1, 3)
+    t = -eye[1] / rays[:, 1]
+    box_first = box_hits(np.tile(eye, (len(rays), 1)), rays, BOX_CENTRE + PICTURE_OFF, BOX_HALF + 0.02)
+    floor = (rays[:, 1] < 0.0) & ~box_first
+    return eye + rays * t[:, None], floor.reshape(PICTURE_SIZE[1], PICTURE_SIZE[0])
+
+
+def test_a_monitors_picture_reads_rings_about_its_own_camera(scene):
+    """The monitor's camera stands 39 metres from the active camera, past its rings: its
+    picture's shadow agrees with the float64 rays as sharply as the camera's own frame does
+    (the picture's own rings, in the atlas's free tile's quarters), where the level's map
+    alone cannot; the camera's frame keeps its rings (the picture's are put back); a still
+    frame draws and keeps the same maps."""
+    assert np.hypot(*PICTURE_OFF[[0, 2]]) > 2.0 * DISTANCE
+    shares = {}
+    for cascades in (1, 3):
+        runner = scene(_watched(cascades), (240, 160))
+        runner.engine.renderer.antialias = "off"
+        frame, pictured = _pictures_with_and_without(runner)
+        points, floor = _picture_floor(runner)
+        share, counted, in_shadow = _agreement(runner, *pictured, points, floor, BOX_CENTRE + PICTURE_OFF,
+                                               linear=True)
+        assert counted > 1000 and in_shadow > 400, (counted, in_shadow)   # a real floor, a real shadow
+        shares[cascades] = share, _agreement(runner, *frame)[0]
+        assert runner.stats.picture_cascades_cut == 0
+    assert shares[3][0] >= 0.99 and shares[3][1] >= 0.99, shares
+    assert shares[1][0] < 0.95 and shares[1][1] < 0.95, shares   # the band is too narrow for the level's map
+    # Still: the picture is kept, and every map with it (the level's and the camera's rings;
+    # the picture's, drawn again by nothing, are not looked at).
+    runner.frame()
+    runner.frame()
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept, runner.stats.monitors_kept) == (0, 3, 1)
+    # The monitor's box moved: its footprint drawn again in the level's map and the picture's
+    # rings (the camera's rings hold nothing of it: kept).
+    moved = [e for e, (t, _) in runner.world.query(Transform, MeshRef)
+             if np.allclose(np.array(t.position), BOX_CENTRE + PICTURE_OFF)]
+    runner.world.get(moved[0], Transform).position = tuple(BOX_CENTRE + PICTURE_OFF + np.array([0.1, 0.0, 0.0]))
+    runner.frame()
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (3, 2)
+    assert runner.stats.monitors_kept == 0
+
+
+def test_a_picture_with_no_free_quarter_reads_the_cameras_rings_and_is_counted(scene):
+    """Two suns with four cascades take the atlas's four tiles: no quarter is left for the
+    picture's rings, so it reads the camera's (counted in ``picture_cascades_cut``, every
+    frame it is drawn), and its picture still shows the level's map's shadow."""
+    runner = scene(_watched(4, suns=2), (96, 64))
+    runner.frame()
+    assert runner.stats.shadow_cascades_cut == 1
+    assert runner.stats.picture_cascades_cut == 2
+    shown = runner.engine.renderer.monitors.read(runner.world.resources["ids"]["screen"])
+    assert shown[..., :3].max() > 0.05   # a lit picture
+    from shell.overlay_text import overlay_lines
+
+    assert any("picture cascades 2" in line for line in overlay_lines(runner.engine, [1.0 / 60.0]))
 
 
 def test_rings_are_drawn_again_only_when_the_camera_leaves_their_cell_or_a_caster_moves(scene):

@@ -6,7 +6,10 @@ A directional light's map is one tile of a depth atlas (a tile a light, up to
 probe face find their shadows in the same map, and the same shadow shows directly, in a
 mirror and through a portal.  A sun with cascades (``DirectionalLight.shadow_cascades``) has
 rings about the camera besides, each a map in a tile no level map takes (``draw_ring``); the
-lookup reads the smallest ring holding the point, whatever the view.  A point light's map
+lookup reads the smallest ring holding the point, whatever the view.  A monitor's picture has
+rings about its own camera, at half the tile's side in the quarters of the tiles left free
+(``draw_picture_ring``), read in place of the camera's while it is drawn (``swap_ring_rows``).
+A point light's map
 is a cube of distances (distance / range in a 32-bit float channel), drawn in one layered
 pass where the path self-check trusts the layered cube capture
 (``engine/render/path_checks.py``, the probes' check), else as six views (a spot's: only the
@@ -233,7 +236,8 @@ class ShadowMaps:
         self.atlas = self._make_atlas((1, 1))
         self.tile = 0
         # slot -> (the fit, resolution, the buffer holding its Camera block) (_bind_fit)
-        self._fit_blocks: dict[int, tuple[DirectionalFit, int, moderngl.Buffer]] = {}
+        # (a picture's ring's: under ("picture", ring): draw_picture_ring)
+        self._fit_blocks: dict[object, tuple[DirectionalFit, int, moderngl.Buffer]] = {}
         self._block_rows: dict[int, tuple] = {}  # slot -> what its Shadows block rows were written from
         self._atlas_framebuffer = ctx.framebuffer(depth_attachment=self.atlas)
         self._atlas_framebuffer.clear(depth=1.0)
@@ -479,7 +483,7 @@ class ShadowMaps:
         casters' draws scissored to them: the same depths a whole redraw writes there).
         Returns the texels drawn.  With a see-through atlas its tile is drawn too, over the
         same texels (``_draw_see_through``)."""
-        texels = self._draw_tile(slot, slot, fit, resolution, region)
+        texels = self._draw_square(self.tile_origin(slot), slot, fit, resolution, region)
         if self.see_through_atlas is not None:
             self._draw_see_through(slot, resolution, region)
         # World -> the tile's uv and depth in [0, 1]; the block's rows written again only when
@@ -509,34 +513,71 @@ class ShadowMaps:
         """Draw ring ``ring`` (a cascade about the camera, ``DirectionalLight.shadow_cascades``)
         of directional light ``slot`` into atlas tile ``tile`` from ``fit``, as
         ``draw_directional`` draws a level map (the light's own, drawn first), and write its
-        rows of the Shadows block: the map from the level map's uv to the ring's own [0, 1]
-        square (the lookup tests a point is inside it before it reads the atlas), its texel,
-        where the tile lies and the filter's margin."""
-        texels = self._draw_tile(tile, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region)
-        width = self.atlas.size[0]
+        rows of the Shadows block (``ring_rows``)."""
+        origin = self.tile_origin(tile)
+        texels = self._draw_square(origin, MAX_DIRECTIONAL_LIGHTS + ring, fit, resolution, region)
         key = MAX_DIRECTIONAL_LIGHTS + ring
-        level = self._level_uv[slot]   # the light's level map, drawn before its rings
-        written = (fit, resolution, softness, width, tile, slot, level)
+        written = (fit, resolution, softness, self.atlas.size[0], tile, slot, self._level_uv[slot])
         if self._block_rows.get(key) != written:
-            x, y = self.tile_origin(tile)
-            # Both maps are the same light space through an orthographic projection (scale and
-            # offset a light-space axis): the ring's square from the level map's uv, axis by axis.
-            square = _axes(glm.translate(glm.vec3(0.5)) * glm.scale(glm.vec3(0.5)) * fit.proj)
-            sx, sy = square[0] / level[0], square[2] / level[2]
-            base = _POINTS_END // 4
-            self.block[base + 4 * ring:base + 4 * ring + 4] = (sx, sy, square[1] - sx * level[1],
-                                                               square[3] - sy * level[3])
-            base += 4 * MAX_SHADOW_RINGS
-            self.block[base + 4 * ring:base + 4 * ring + 2] = (fit.texel, softness)   # z: set_ring_blend's
-            base += 4 * MAX_SHADOW_RINGS
-            # A point nearer the square's edge than the filter reaches is left to a larger map.
-            margin = (softness + 2.0) / resolution
-            self.block[base + 4 * ring:base + 4 * ring + 4] = (x / width, y / width, resolution / width, margin)
+            self._write_ring_rows(ring, self.ring_rows(origin, slot, fit, resolution, softness))
             self._ring_slots[ring] = slot
             self._block_rows[key] = written
         if self.renderer.debug:
             self.renderer.checkpoint(f"shadow ring {ring} of directional light {slot}")
         return texels
+
+    def ring_rows(self, origin: tuple[int, int], slot: int, fit: DirectionalFit, resolution: int,
+                  softness: float) -> np.ndarray:
+        """A ring's rows of the Shadows block, for its map drawn from ``fit`` at ``origin``
+        (texels) in the atlas, ``resolution`` texels a side, of directional light ``slot``
+        (its level map drawn): the map from the level map's uv to the ring's own [0, 1]
+        square (the lookup tests a point is inside it before it reads the atlas), its texel
+        and softness, where its square lies in the atlas and the filter's margin; ten floats."""
+        width = self.atlas.size[0]
+        level = self._level_uv[slot]
+        # Both maps are the same light space through an orthographic projection (scale and
+        # offset a light-space axis): the ring's square from the level map's uv, axis by axis.
+        square = _axes(glm.translate(glm.vec3(0.5)) * glm.scale(glm.vec3(0.5)) * fit.proj)
+        sx, sy = square[0] / level[0], square[2] / level[2]
+        # A point nearer the square's edge than the filter reaches is left to a larger map.
+        margin = (softness + 2.0) / resolution
+        return np.array((sx, sy, square[1] - sx * level[1], square[3] - sy * level[3], fit.texel, softness,
+                         origin[0] / width, origin[1] / width, resolution / width, margin), np.float32)
+
+    def _ring_row_spans(self, ring: int) -> tuple[slice, slice, slice]:
+        """Where ring ``ring``'s rows lie in the block: its map, its texel and softness (the
+        blend band after them is ``set_ring_blend``'s), its square in the atlas."""
+        base = _POINTS_END // 4 + 4 * ring
+        return (slice(base, base + 4), slice(base + 4 * MAX_SHADOW_RINGS, base + 4 * MAX_SHADOW_RINGS + 2),
+                slice(base + 8 * MAX_SHADOW_RINGS, base + 8 * MAX_SHADOW_RINGS + 4))
+
+    def _write_ring_rows(self, ring: int, rows: np.ndarray) -> None:
+        spans = self._ring_row_spans(ring)
+        self.block[spans[0]], self.block[spans[1]], self.block[spans[2]] = rows[:4], rows[4:6], rows[6:]
+
+    def draw_picture_ring(self, ring: int, origin: tuple[int, int], fit: DirectionalFit, resolution: int,
+                          region: tuple[int, int, int, int] | None = None) -> int:
+        """Draw a monitor's picture's ring ``ring`` (its camera's cascade, in place of the active
+        camera's while the picture is drawn: ``swap_ring_rows``) at ``origin`` (texels: a square
+        no level map or the active camera's rings take) from ``fit``; the texels drawn."""
+        texels = self._draw_square(origin, ("picture", ring), fit, resolution, region)
+        if self.renderer.debug:
+            self.renderer.checkpoint(f"a picture's shadow ring {ring}")
+        return texels
+
+    def swap_ring_rows(self, rows: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """Put ``rows`` (ring -> ``ring_rows``) in the Shadows block in place of those rings'
+        own and send it: what the scene programs read while a monitor's picture is drawn
+        (its camera's rings, the same lights' and ring counts: the programs' builds stay).
+        Returns the rows put aside, to be swapped back after the picture: the block then is
+        what it was, so no scene change is noted."""
+        aside = {}
+        for ring, values in rows.items():
+            spans = self._ring_row_spans(ring)
+            aside[ring] = np.concatenate([self.block[span] for span in spans])
+            self._write_ring_rows(ring, values)
+        self.ubo.write(self.block.tobytes())
+        return aside
 
     def set_ring_blend(self, ring: int, blend: float) -> None:
         """Ring ``ring`` fades into the next larger map over the outer ``blend`` share of its
@@ -554,12 +595,12 @@ class ShadowMaps:
                 if kept is not None:
                     kept[2].release()
 
-    def _draw_tile(self, tile: int, camera: int, fit: DirectionalFit, resolution: int,
-                   region: tuple[int, int, int, int] | None) -> int:
-        """The casters' depths into atlas ``tile`` (``resolution`` texels a side) from ``fit``
-        (its Camera block kept under ``camera``), all of it or only ``region``; the texels drawn
-        (a sun has no body: ``_draw_casters``)."""
-        x, y = self.tile_origin(tile)
+    def _draw_square(self, origin: tuple[int, int], camera: object, fit: DirectionalFit, resolution: int,
+                     region: tuple[int, int, int, int] | None) -> int:
+        """The casters' depths into the atlas's square at ``origin`` (texels), ``resolution``
+        texels a side, from ``fit`` (its Camera block kept under ``camera``), all of it or only
+        ``region``; the texels drawn (a sun has no body: ``_draw_casters``)."""
+        x, y = origin
         square = (x, y, resolution, resolution)
         rect = square if region is None else (x + region[0], y + region[1], region[2], region[3])
         framebuffer = self._atlas_framebuffer
@@ -573,7 +614,7 @@ class ShadowMaps:
     def _draw_see_through(self, slot: int, resolution: int, region: tuple[int, int, int, int] | None) -> None:
         """Directional light ``slot``'s see-through tile (its level map's, ``resolution`` /
         SEE_THROUGH_SCALE texels a side; ``region``: only the texels under the depth map's
-        region, grown to whole see-through texels) from the Camera block ``_draw_tile`` bound:
+        region, grown to whole see-through texels) from the Camera block ``_draw_square`` bound:
         cleared to all the light let through, then each see-through caster multiplies in its
         share and keeps the nearest depth (the alpha channel blends by MIN: the blend equation
         is set for this pass and given back)."""
@@ -624,7 +665,7 @@ class ShadowMaps:
             batch.draw(program)
             renderer.stats.shadow_draw_calls += 1
 
-    def _bind_fit(self, slot: int, fit: DirectionalFit, resolution: int) -> None:
+    def _bind_fit(self, slot: object, fit: DirectionalFit, resolution: int) -> None:
         """Bind the Camera block of directional light ``slot``'s map (a ring's: past the
         lights' slots), drawn from ``fit``: a buffer of the slot's own, packed and written
         when the light's map is fitted again (a new ``fit``), so a frame that redraws only

@@ -460,6 +460,37 @@ def point_shadow_bounds(lo: np.ndarray, hi: np.ndarray, position: np.ndarray,
     return out_lo, out_hi
 
 
+@dataclass(frozen=True)
+class CascadeRing:
+    """One of the active camera's rings this frame (``ShadowCasters.cascades``): its index
+    in the Shadows block, its light's slot, radius, map side and softness."""
+
+    ring: int
+    slot: int
+    radius: float
+    resolution: int
+    softness: float
+
+
+@dataclass(frozen=True)
+class Cascades:
+    """What a monitor's picture needs to draw the suns' cascades about its own camera (the
+    monitors stage: ``systems/shadow_rings.py``), published by the shadows stage: the active
+    camera's rings (a picture's are the same rings about another eye, so the scene programs'
+    builds stay), each casting light's level map's fit and what that map was drawn from, by
+    slot, the atlas squares no level map or ring of the camera's takes (texel corners,
+    ``side`` texels a side: the free tiles' quarters), and whether casters changed this
+    frame (and the renderer's changed box and parts: ``changed_region``'s)."""
+
+    rings: tuple[CascadeRing, ...]
+    levels: dict[int, DirectionalFit]
+    keys: dict[int, tuple]
+    places: tuple[tuple[int, int], ...]
+    side: int
+    casters_changed: bool = False
+    changes: tuple = (None, None)
+
+
 @dataclass
 class ShadowCasters:
     """The lights casting shadows this frame (published by the shadows stage,
@@ -472,6 +503,8 @@ class ShadowCasters:
     # Lights through mirrors and portals: each image's light shadows what lies beyond the
     # surface, and what stands on the way in shadows there as its carried image.
     virtual: list[VirtualLight] = field(default_factory=list)
+    # The suns' cascades, for the monitors' pictures to draw their own (None: no sun has rings).
+    cascades: Cascades | None = None
 
     def shadow_bounds(self, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World boxes (rows) holding where the shadows of the boxes [lo, hi] may fall under
