@@ -2,8 +2,8 @@
 nearest eye, before the extract stage reads the meshes.
 
 The eyes are the active camera's, now, and those of last frame's mirror and portal views
-that showed a share of the screen (``light_rules.view_eyes``: the reflect stage publishes
-them); the distance is to the centre of the finest mesh's box, placed by the entity's world
+that showed a share of the screen and of the monitors' cameras whose pictures did
+(``light_rules.view_eyes``: the reflect and monitors stages publish them); the distance is to the centre of the finest mesh's box, placed by the entity's world
 matrix.  A level changes as ``LevelOfDetail.level_at`` says (further out at once, finer past
 the hysteresis band), and only then is ``MeshRef.mesh`` written: the extract stage moves the
 entity to its new mesh's batch, and a still frame writes nothing.
@@ -136,7 +136,7 @@ class DetailSystem(esper.Processor):
         return distance * (2.0 * math.tan(math.radians(lens.fov_y) * 0.5)) / sizes
 
     def _eyes(self) -> np.ndarray:
-        """The active camera's eye and last frame's mirror and portal views' (n, 3)."""
+        """The active camera's eye and last frame's mirror and portal views' and monitors' cameras' (n, 3)."""
         world = self.world
         points = [point[:3] for point in view_eyes(world)]
         camera = frame_rules(world).active_camera

@@ -95,8 +95,8 @@ from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View, camera_view
 from engine.resources import ContactLamps, PicturesDrawn, Surfaces, SurfaceState
-from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import ViewEyes, brightest_directional
+from engine.rules.frame_rules import active_camera_parts, world_corners
+from engine.rules.light_rules import MIN_VIEW_SHARE, PictureEyes, ViewEyes, brightest_directional
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
 from engine.rules.shadow_rules import ShadowCasters
 from systems.camera_shafts import camera_shafts
@@ -234,6 +234,7 @@ class MonitorSystem(esper.Processor):
                 first.add(entity)
             self.drawn[entity] = frame
             self._keys[entity] = key
+        world.resources[PictureEyes] = self._picture_eyes(monitors)
         if screens:
             published = world.resources.get(PicturesDrawn, PicturesDrawn())
             world.resources[PicturesDrawn] = PicturesDrawn(published.count + 1, frozenset(screens),
@@ -256,12 +257,10 @@ class MonitorSystem(esper.Processor):
         see."""
         world = self.world
         views = []
-        output, camera = world.resources.get(Output), active_camera_parts(world)
-        if output is not None and camera is not None and output.size[0] > 0 and output.size[1] > 0:
-            _, cam, cam_t = camera
-            views.append(camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size,
-                                     ortho_height=cam.ortho_height if cam.projection == "orthographic" else None))
-            views += self._first_level(views[0])
+        main = self._main_view()
+        if main is not None:
+            views.append(main)
+            views += self._first_level(main)
         eyes = world.resources.get(ViewEyes)
         if eyes is not None:
             views += [node.view for node in eyes.views if node.level > 0]
@@ -284,6 +283,48 @@ class MonitorSystem(esper.Processor):
             seen = seen | found
         return seen
 
+    def _main_view(self) -> View | None:
+        """This frame's main view: the active camera's, at the output's aspect (None: no
+        camera or no output)."""
+        output, camera = self.world.resources.get(Output), active_camera_parts(self.world)
+        if output is None or camera is None or output.size[0] <= 0 or output.size[1] <= 0:
+            return None
+        _, cam, cam_t = camera
+        return camera_view(cam_t.world, cam.fov_y, cam.near, cam.far, output.size,
+                           ortho_height=cam.ortho_height if cam.projection == "orthographic" else None)
+
+    def _picture_eyes(self, monitors: list[tuple[int, Monitor]]) -> PictureEyes:
+        """Where each picture's camera stands and the share of the frame its picture shows: its
+        screen's box's rectangle in this frame's main view (all of it where the box lies across
+        the eye's plane, none where it lies behind), or its ``ScreenPanel``'s, the larger; for
+        the next frame's lights and levels of detail (``light_rules.view_eyes``), as a mirror's
+        view's eye counts."""
+        world = self.world
+        pictures = self.renderer.monitors.entities
+        main = self._main_view()
+        output = world.resources.get(Output)
+        found = []
+        for entity, monitor in monitors:
+            lens = world.try_get(monitor.camera, Transform) \
+                if entity in pictures and monitor.camera is not None and world.exists(monitor.camera) else None
+            if lens is None:
+                continue
+            share = 0.0
+            panel = world.try_get(entity, ScreenPanel)
+            if panel is not None and output is not None and output.size[0] * output.size[1] > 0:
+                share = float(panel.size.x * panel.size.y) / (output.size[0] * output.size[1])
+            mesh, placed = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
+            if main is not None and mesh is not None and placed is not None:
+                low, high, behind, off = projected_rects(world_corners(mesh.mesh, placed.world)[None], main)
+                if behind[0] and not off[0]:   # (across the eye's plane: all of the frame)
+                    share = 1.0
+                elif not off[0]:
+                    share = max(share, float(np.prod(high[0] - low[0])) / (main.size[0] * main.size[1]))
+            if share >= MIN_VIEW_SHARE:
+                eye = lens.world[3]
+                found.append((float(eye.x), float(eye.y), float(eye.z), min(1.0, share)))
+        return PictureEyes(tuple(found))
+
     def _first_level(self, main: View) -> list[View]:
         """This frame's first level of mirror and portal views below ``main`` (the active
         camera's), as the reflect stage will plan them, conservatively: for each mirror or
@@ -299,18 +340,10 @@ class MonitorSystem(esper.Processor):
         if not states:
             return []
         width, height = main.size
-        # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
-        view_proj = np.array(main.view_proj.to_list(), np.float64)
         eye = main.eye
         # (off, or its back to the eye: not seen)
         facing = planes[:, :3] @ (eye.x, eye.y, eye.z) + planes[:, 3] > 0.0
-        clip = corners[facing] @ view_proj     # every corner of every surface facing the eye at once
-        behind = (clip[:, :, 3] <= 1e-6).any(axis=1)
-        ndc = clip[:, :, :2] / np.where(clip[:, :, 3:4] > 1e-6, clip[:, :, 3:4], 1.0)
-        low_ndc, high_ndc = ndc.min(axis=1), ndc.max(axis=1)
-        low = np.floor((np.clip(low_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
-        high = np.ceil((np.clip(high_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
-        off = (high <= low).any(axis=1) | (high_ndc < -1.0).any(axis=1) | (low_ndc > 1.0).any(axis=1)
+        low, high, behind, off = projected_rects(corners[facing], main)
         views = []
         for at, row in enumerate(np.flatnonzero(facing).tolist()):
             if behind[at]:
@@ -471,6 +504,23 @@ class MonitorSystem(esper.Processor):
             warnings.warn(ComponentWarning(f"Monitor on entity {entity} {why}: its picture is not drawn (it keeps "
                                            "what it showed, black at first)"), stacklevel=3)
         return None
+
+
+def projected_rects(corners: np.ndarray, view: View) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pixel rectangles of boxes on ``view``'s screen: ``corners`` (n, 8, 4) world rows;
+    (low and high corners, (n, 2) whole pixels clipped to the screen; whether a corner lies
+    behind the eye; whether the box is off the screen: beside it, or wholly behind the eye)."""
+    width, height = view.size
+    # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
+    clip = corners @ np.array(view.view_proj.to_list(), np.float64)   # every corner of every box at once
+    behind = (clip[:, :, 3] <= 1e-6).any(axis=1)
+    ndc = clip[:, :, :2] / np.where(clip[:, :, 3:4] > 1e-6, clip[:, :, 3:4], 1.0)
+    low_ndc, high_ndc = ndc.min(axis=1), ndc.max(axis=1)
+    low = np.floor((np.clip(low_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
+    high = np.ceil((np.clip(high_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
+    off = (high <= low).any(axis=1) | (high_ndc < -1.0).any(axis=1) | (low_ndc > 1.0).any(axis=1) \
+        | (clip[:, :, 3] <= 1e-6).all(axis=1)
+    return low, high, behind, off
 
 
 def _same(key: tuple[tuple, tuple, int], other: tuple[tuple, tuple, int]) -> bool:

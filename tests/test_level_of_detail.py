@@ -11,7 +11,16 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, LevelOfDetail, Material, MeshRef, Mirror, Transform
+from components import (
+    Camera,
+    ComponentValueError,
+    LevelOfDetail,
+    Material,
+    MeshRef,
+    Mirror,
+    Monitor,
+    Transform,
+)
 from engine.assets.mesh import box, quad, sphere
 from engine.assets.portals import spawn_portal_pair
 from tests.support import look_from
@@ -72,6 +81,29 @@ def test_an_object_near_a_portals_far_side_keeps_its_fine_mesh(scene):
         runner.frame()
     assert runner.world.get(runner.world.thing, MeshRef).mesh is FINE
     assert runner.stats.reflection_views >= 1
+
+
+@pytest.mark.parametrize("screen", [True, False])
+def test_an_object_a_monitors_camera_sees_close_keeps_its_fine_mesh(scene, screen):
+    """The camera 3 m from a screen, the object 1.5 m from the screen's monitor's camera, 60 m
+    away: in the picture it is close, so from the frame after the picture's first drawing it
+    is fine; with the screen off the frame (turned away behind the camera), the picture's
+    eye counts for nothing and the object is coarse."""
+    def build(world):
+        look_from(world, (0.0, 1.5, 3.0), (0.0, 1.5, 0.0), fov=60.0)
+        lens = look_from(world, (60.0, 1.5, 0.0), (60.0, 1.5, -1.5), fov=60.0)
+        world.get(lens, Camera).active = False
+        world.spawn(Transform(position=(0.0, 1.5, 0.0 if screen else 6.0)), MeshRef(quad(2.0, 1.5)), Material(),
+                    Monitor(camera=lens, size=(64, 48)))
+        world.thing = world.spawn(Transform(position=glm.vec3(60.0, 1.5, -1.5)), MeshRef(FINE),
+                                  Material(color=(0.8, 0.3, 0.2)),
+                                  LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), distances=(6.0, 12.0)))
+    runner = scene(build, (96, 72))
+    runner.frame()
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is COARSE   # (no picture drawn yet)
+    for _ in range(2):
+        runner.frame()
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is (FINE if screen else COARSE)
 
 
 def test_the_rule_refuses_what_it_cannot_do(scene):

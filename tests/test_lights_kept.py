@@ -17,11 +17,17 @@ import pytest
 from pyglm import glm
 from scipy import ndimage
 
-from components import Material, MeshRef, PointLight, Transform, look_rotation
-from engine.assets.mesh import box, plane
+from components import Camera, Material, MeshRef, Monitor, PointLight, Transform, look_rotation
+from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.errors import LightLimitWarning
-from engine.render.views import LIGHTS_BLOCK_BYTES, MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, SKY_SH_COEFFICIENTS
+from engine.render.views import (
+    LIGHTS_BLOCK_BYTES,
+    MAX_DIRECTIONAL_LIGHTS,
+    MAX_POINT_LIGHTS,
+    SKY_SH_COEFFICIENTS,
+    camera_view,
+)
 from engine.rules.light_rules import KeptLights
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
@@ -386,5 +392,64 @@ def test_a_lamp_far_from_the_camera_is_kept_when_a_portal_shows_what_it_lights(s
     np.testing.assert_array_equal(rgb[box_b], every_lamp.frame()[box_b])
     lit, unlit = srgb_to_linear(rgb[box_b]).mean(), srgb_to_linear(no_lamp_b.frame()[box_b]).mean()
     assert lit > unlit + 0.1, (lit, unlit)
+    runner.frame()
+    assert runner.world.resources[KeptLights] is kept  # still: nothing ranked again
+
+
+# -- lights that matter in what a monitor shows -------------------------------------------------
+
+LENS_SIZE = (160, 120)
+
+
+def _monitor_on_box_b(world, fillers: bool = True, lamp_b: bool = True) -> dict:
+    """``_two_boxes`` with a screen between the camera and box A (a fifth of the frame) whose
+    monitor's camera stands at EYE_B looking at box B's lit face: the picture shows what LAMP_B
+    lights, though LAMP_B is the lamp farthest from the active camera."""
+    ids = _two_boxes(world, lamp_b=lamp_b, fillers=FILLERS if fillers else 0)
+    eye = glm.vec3(EYE_B)
+    ids["lens"] = world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(*BOX_B) - eye)),
+                              Camera(fov_y=60.0, active=False))
+    ids["screen"] = world.spawn(Transform(position=(0.0, 1.6, 2.0)), MeshRef(quad(2.4, 1.8)),
+                                Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0),
+                                Monitor(camera=ids["lens"], size=LENS_SIZE))
+    return ids
+
+
+def _picture_front_face(runner) -> np.ndarray:
+    """The picture's pixels (rows from the top) showing box B's front face, away from its edges."""
+    lens = runner.world.get(runner.world.resources["ids"]["lens"], Transform)
+    eye, rays = pixel_rays(camera_view(lens.world, 60.0, 0.1, 100.0, LENS_SIZE), LENS_SIZE)
+    t = (BOX_B[2] + 0.5 - eye[2]) / rays[..., 2]
+    hit = eye + rays * t[..., None]
+    inside = (np.abs(hit[..., 0] - BOX_B[0]) < 0.4) & (np.abs(hit[..., 1] - BOX_B[1]) < 0.4) & (t > 0)
+    assert inside.sum() > 200, "the box's face is in the picture"
+    return inside
+
+
+def test_a_lamp_far_from_the_camera_is_kept_when_a_monitor_shows_what_it_lights(scene):
+    """Seventeen lamps, a screen before the camera showing box B: from the second frame (the
+    picture's camera's eye published with its screen's share of the frame) LAMP_B, 40 m
+    away, is kept instead of a filler lamp, and box B in the picture is lit as in the scene
+    with no fillers (every lamp kept), brighter than without LAMP_B.  The camera's choice
+    alone (the first frame's) cut LAMP_B; a still frame ranks nothing again."""
+    runner = scene(_monitor_on_box_b)
+    ids = runner.world.resources["ids"]
+    runner.frame()
+    assert ids["lamp_b"] not in runner.world.resources[KeptLights].point  # no picture's eye yet
+    runner.frame()
+    kept = runner.world.resources[KeptLights]
+    assert ids["lamp_b"] in kept.point and ids["lamp_a"] in kept.point and kept.cut == (0, 1)
+    assert len(kept.views) == 1 and kept.views[0][:3] == pytest.approx(EYE_B) and kept.views[0][3] > 0.15, kept.views
+    face = _picture_front_face(runner)
+    picture = runner.engine.renderer.monitors.read(ids["screen"])[..., :3][face]
+    shown = {}
+    for name, build in (("every_lamp", lambda world: _monitor_on_box_b(world, fillers=False)),
+                        ("no_lamp_b", lambda world: _monitor_on_box_b(world, lamp_b=False))):
+        other = scene(build)
+        other.frame()
+        other.frame()
+        shown[name] = other.engine.renderer.monitors.read(other.world.resources["ids"]["screen"])[..., :3][face]
+    np.testing.assert_allclose(picture, shown["every_lamp"], atol=2e-3)
+    assert picture.mean() > shown["no_lamp_b"].mean() + 0.1, (picture.mean(), shown["no_lamp_b"].mean())
     runner.frame()
     assert runner.world.resources[KeptLights] is kept  # still: nothing ranked again

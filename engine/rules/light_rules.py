@@ -19,6 +19,9 @@ is and in the rooms its portals open on, not the first sixteen made.
   stage), times the share of the screen the view showed (its rectangle's, from
   ``MIN_VIEW_SHARE`` of it up), where that is more than it brings to the camera: a torch in
   the room a portal opens on, far from the camera, matters as much as the portal is large.
+  Each monitor's camera counts the same way, at the share of the frame its picture shows
+  (``PictureEyes``, published by the monitors stage): a torch a security camera watches
+  matters as much as its screen is large.
   (A frame has one Lights block for all its views, so a view's lights compete with the
   camera's.)
   A spot light (``PointLight.spot_angle``) counts as the point light it is, its cone left
@@ -142,6 +145,16 @@ class ViewEyes:
                 eye = node.view.eye
                 found.append((float(eye.x), float(eye.y), float(eye.z), share))
         return tuple(found)
+
+
+@dataclass(frozen=True)
+class PictureEyes:
+    """Where the monitors' cameras stand and the share of the frame each one's picture shows
+    (x, y, z, share; at least ``MIN_VIEW_SHARE``), published by the monitors stage each
+    frame and read with ``ViewEyes`` the next (``view_eyes``): a torch in the room a security
+    camera watches matters as much as its screen is large, as a portal's would."""
+
+    points: tuple[tuple[float, float, float, float], ...] = ()
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
@@ -571,9 +584,9 @@ def choose_lights(world: World, previous: KeptLights | None, limits: LightLimits
 
 def view_eyes(world: World) -> tuple[tuple[float, float, float, float], ...]:
     """Last frame's mirror and portal views' eyes and shares (``ViewEyes.points``; none
-    before the reflect stage has drawn)."""
-    found = world.resources.get(ViewEyes)
-    return found.points if found is not None else ()
+    before the reflect stage has drawn), then the monitors' cameras' (``PictureEyes``)."""
+    found, pictures = world.resources.get(ViewEyes), world.resources.get(PictureEyes)
+    return (found.points if found is not None else ()) + (pictures.points if pictures is not None else ())
 
 
 class SkySun(NamedTuple):
