@@ -3,9 +3,10 @@ nearest eye, before the extract stage reads the meshes.
 
 The eyes are the active camera's, now, and those of last frame's mirror and portal views
 that showed a share of the screen and of the monitors' cameras whose pictures did
-(``light_rules.view_eyes``: the reflect and monitors stages publish them); the distance is to the centre of the finest mesh's box, placed by the entity's world
-matrix.  A level changes as ``LevelOfDetail.level_at`` says (further out at once, finer past
-the hysteresis band), and only then is ``MeshRef.mesh`` written: the extract stage moves the
+(``light_rules.view_eyes``: the reflect and monitors stages publish them); the distance is
+to the centre of the finest mesh's box, placed by the entity's world matrix.  A level
+changes as ``LevelOfDetail.level_at`` says (further out at once, finer past the hysteresis
+band), and only then is ``MeshRef.mesh`` written: the extract stage moves the
 entity to its new mesh's batch, and a still frame writes nothing.
 
 Worked out on arrays, whatever the count: the entities' centres, thresholds and levels are

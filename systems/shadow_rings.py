@@ -12,9 +12,11 @@ reach: its picture read only the level's map there (a coarse shadow, 3 cm texels
 sample level's floor).  So each picture gets the same rings about its own camera, in the
 atlas's free tiles' quarters (``Cascades.places``: half the tile's side; a picture's few
 hundred pixels a side want no more), read in place of the camera's while it is drawn
-(``ShadowMaps.swap_ring_rows``).  Where the quarters run out, a picture reads the active
-camera's rings (still right where they reach; coarser where they do not) and
-``RenderStats.picture_cascades_cut`` counts its rings."""
+(``ShadowMaps.swap_ring_rows``); a picture not drawn on a frame casters changed in (a slow
+``Monitor.every``, a kept or unseen picture) draws its rings whole when it is next drawn.
+Where the quarters run out, a picture reads the active camera's rings (still right where
+they reach; coarser where they do not) and ``RenderStats.picture_cascades_cut`` counts its
+rings."""
 from __future__ import annotations
 
 import numpy as np
@@ -49,12 +51,14 @@ class PictureRings:
         self._held: dict[int, tuple[tuple[int, int], ...]] = {}   # monitor -> its squares
         self._rings: dict[int, dict[int, tuple]] = {}    # monitor -> ring -> (key, fit)
         self._cells: dict[int, dict[int, tuple[int, int]]] = {}   # monitor -> ring -> its cell
+        self._stamps: dict[int, int] = {}   # monitor -> the Cascades.stamp its rings were last brought to
 
     def drop(self, monitor: int) -> None:
         """Monitor ``monitor`` is gone: its squares are free again."""
         self._held.pop(monitor, None)
         self._rings.pop(monitor, None)
         self._cells.pop(monitor, None)
+        self._stamps.pop(monitor, None)
 
     def rows(self, monitor: int, eye: tuple[float, float, float], cascades: Cascades, maps: ShadowMaps,
              stats: RenderStats) -> dict[int, np.ndarray]:
@@ -68,6 +72,7 @@ class PictureRings:
             self._held.clear()
             self._rings.clear()
             self._cells.clear()
+            self._stamps.clear()
         places = self._held.get(monitor)
         if places is None or len(places) != len(cascades.rings):
             self._held.pop(monitor, None)
@@ -80,6 +85,11 @@ class PictureRings:
             self._rings[monitor] = {}
             self._cells[monitor] = {}
         rings, cells = self._rings[monitor], self._cells[monitor]
+        # Casters that changed on a frame this picture was not drawn: its rings drawn whole.
+        seen = self._stamps.get(monitor, cascades.stamp)
+        if cascades.stamp - seen > int(cascades.casters_changed):
+            rings.clear()
+        self._stamps[monitor] = cascades.stamp
         rows = {}
         for ring, place in zip(cascades.rings, places, strict=True):
             level = cascades.levels[ring.slot]

@@ -141,6 +141,7 @@ class ShadowSystem(esper.Processor):
         self._kept: tuple[KeptLights | None, list[DirectionalLight | None]] = (None, [])
         # The active camera's rings and the atlas's free squares, for the pictures' (``_draw_rings``).
         self._cascades: Cascades | None = None
+        self._cascade_stamp = 0   # the frames casters changed in (Cascades.stamp)
         world.resources[ShadowCasters] = ShadowCasters()
 
     def process(self, dt: float) -> None:
@@ -183,9 +184,11 @@ class ShadowSystem(esper.Processor):
         # A virtual light's map is drawn whole: again only when what casts changed (the
         # changed box: a row that casts moved, came, went or started or stopped casting).
         published.virtual = self._virtual_maps(kept, changed_box is not None, fitted, carrying)
+        changed = casters_changed or changed_box is not None
+        self._cascade_stamp += changed
         if self._cascades is not None and level is not None and self.enabled:
-            published.cascades = replace(self._cascades, casters_changed=casters_changed or changed_box is not None,
-                                         changes=(changed_box, changed_parts))
+            published.cascades = replace(self._cascades, casters_changed=changed, changes=(changed_box, changed_parts),
+                                         stamp=self._cascade_stamp)
         world.resources[ShadowCasters] = published
         block = maps.block.tobytes() + maps.virtual_block.tobytes()
         if block != self._uploaded:

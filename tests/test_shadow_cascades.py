@@ -153,7 +153,7 @@ def test_a_mirror_shows_the_rings_sharp_shadow_of_what_stands_behind_the_camera(
 PICTURE_OFF = np.array([30.0, 0.0, 25.0])   # the monitor's box and camera, this far from the camera's
 
 
-def _watched(cascades: int, suns: int = 1):
+def _watched(cascades: int, suns: int = 1, every: int = 1):
     """The camera at EYE looking at a box's shadow (as ``_build``), and 39 metres off, past
     its largest ring's reach, a second box and a monitor's camera looking at its shadow as
     the camera looks at the first's, its picture on a screen behind the camera."""
@@ -163,10 +163,10 @@ def _watched(cascades: int, suns: int = 1):
         eye, target = glm.vec3(*(np.array(EYE) + PICTURE_OFF)), glm.vec3(*(np.array(TARGET) + PICTURE_OFF))
         ids["lens"] = world.spawn(Transform(position=eye, rotation=look_rotation(target - eye)),
                                   Camera(fov_y=60.0, active=False))
-        world.spawn(Transform(position=list(BOX_CENTRE + PICTURE_OFF)), MeshRef(box()),
-                    Material(color=(0.8, 0.3, 0.2)))
+        ids["watched"] = world.spawn(Transform(position=list(BOX_CENTRE + PICTURE_OFF)), MeshRef(box()),
+                                     Material(color=(0.8, 0.3, 0.2)))
         ids["screen"] = world.spawn(Transform(position=(15.0, 1.6, 45.0)), MeshRef(quad(1.6, 1.0)), Material(),
-                                    Monitor(camera=ids["lens"], size=PICTURE_SIZE))
+                                    Monitor(camera=ids["lens"], size=PICTURE_SIZE, every=every))
     return build
 
 
@@ -184,15 +184,15 @@ def _pictures_with_and_without(runner) -> tuple[tuple[np.ndarray, np.ndarray], t
     return (with_shadows[0], without[0]), (with_shadows[1], without[1])
 
 
-def _picture_floor(runner) -> tuple[np.ndarray, np.ndarray]:
+def _picture_floor(runner, box_at=BOX_CENTRE + PICTURE_OFF) -> tuple[np.ndarray, np.ndarray]:
     """The floor points each picture pixel shows (a row a pixel, rows from the top) and the
-    pixels that show the floor (their rays meet it, and not the box first)."""
+    pixels that show the floor (their rays meet it, and not the box at ``box_at`` first)."""
     lens = runner.world.get(runner.world.resources["ids"]["lens"], Transform)
     view = camera_view(lens.world, 60.0, 0.1, 100.0, PICTURE_SIZE)
     eye, rays = pixel_rays(view, PICTURE_SIZE)
     rays = rays.reshape(-1, 3)
     t = -eye[1] / rays[:, 1]
-    box_first = box_hits(np.tile(eye, (len(rays), 1)), rays, BOX_CENTRE + PICTURE_OFF, BOX_HALF + 0.02)
+    box_first = box_hits(np.tile(eye, (len(rays), 1)), rays, np.asarray(box_at, np.float64), BOX_HALF + 0.02)
     floor = (rays[:, 1] < 0.0) & ~box_first
     return eye + rays * t[:, None], floor.reshape(PICTURE_SIZE[1], PICTURE_SIZE[0])
 
@@ -224,12 +224,40 @@ def test_a_monitors_picture_reads_rings_about_its_own_camera(scene):
     assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept, runner.stats.monitors_kept) == (0, 3, 1)
     # The monitor's box moved: its footprint drawn again in the level's map and the picture's
     # rings (the camera's rings hold nothing of it: kept).
-    moved = [e for e, (t, _) in runner.world.query(Transform, MeshRef)
-             if np.allclose(np.array(t.position), BOX_CENTRE + PICTURE_OFF)]
-    runner.world.get(moved[0], Transform).position = tuple(BOX_CENTRE + PICTURE_OFF + np.array([0.1, 0.0, 0.0]))
+    watched = runner.world.get(runner.world.resources["ids"]["watched"], Transform)
+    watched.position = tuple(BOX_CENTRE + PICTURE_OFF + np.array([0.1, 0.0, 0.0]))
     runner.frame()
     assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (3, 2)
     assert runner.stats.monitors_kept == 0
+
+
+def test_a_picture_drawn_every_other_frame_draws_its_rings_again_after_a_caster_moved_between(scene):
+    """A monitor drawn every second frame: its box moves on a frame its picture is not drawn
+    (the level's map redrawn under it then), and on the next the picture's rings are drawn
+    whole again, so its shadow agrees with the rays at the box's new place (a ring kept
+    from before the move would hold the old shadow there)."""
+    runner = scene(_watched(3, every=2), (96, 64))
+    ids = runner.world.resources["ids"]
+    for _ in range(4):
+        runner.frame()
+    if runner.stats.monitor_views + runner.stats.monitors_kept == 0:   # (due the next frame: one more)
+        runner.frame()
+    assert runner.stats.monitors_kept == 1   # (due, and still: kept; the next frame it is not due)
+    moved = BOX_CENTRE + PICTURE_OFF + np.array([0.12, 0.0, -0.09])
+    runner.world.get(ids["watched"], Transform).position = tuple(moved)
+    runner.frame()
+    assert runner.stats.monitor_views == 0 and runner.stats.shadow_maps_drawn == 1   # (the level's map)
+    runner.frame()
+    assert runner.stats.monitor_views == 1 and runner.stats.shadow_maps_drawn == 2   # (the picture's rings)
+    shown = runner.engine.renderer.monitors.read(ids["screen"]).copy()
+    runner.world.get(ids["sun"], DirectionalLight).shadows = False
+    for _ in range(2):
+        runner.frame()
+    without = runner.engine.renderer.monitors.read(ids["screen"])
+    points, _ = _picture_floor(runner)
+    _, floor = _picture_floor(runner, moved)
+    share, counted, _ = _agreement(runner, shown, without, points, floor, moved, linear=True)
+    assert counted > 1000 and share >= 0.99, (share, counted)
 
 
 def test_a_picture_with_no_free_quarter_reads_the_cameras_rings_and_is_counted(scene):

@@ -480,7 +480,9 @@ class Cascades:
     builds stay), each casting light's level map's fit and what that map was drawn from, by
     slot, the atlas squares no level map or ring of the camera's takes (texel corners,
     ``side`` texels a side: the free tiles' quarters), and whether casters changed this
-    frame (and the renderer's changed box and parts: ``changed_region``'s)."""
+    frame (and the renderer's changed box and parts: ``changed_region``'s), with ``stamp``
+    the count of frames they changed in (a picture not drawn every frame redraws its rings
+    whole when it missed one)."""
 
     rings: tuple[CascadeRing, ...]
     levels: dict[int, DirectionalFit]
@@ -489,6 +491,7 @@ class Cascades:
     side: int
     casters_changed: bool = False
     changes: tuple = (None, None)
+    stamp: int = 0
 
 
 @dataclass
