@@ -47,7 +47,7 @@ class PictureRings:
     their cells."""
 
     def __init__(self) -> None:
-        self._places: tuple[tuple[int, int], ...] = ()   # the free squares as last published
+        self._places: tuple = ()   # the free squares and the atlas as last published
         self._held: dict[int, tuple[tuple[int, int], ...]] = {}   # monitor -> its squares
         self._rings: dict[int, dict[int, tuple]] = {}    # monitor -> ring -> (key, fit)
         self._cells: dict[int, dict[int, tuple[int, int]]] = {}   # monitor -> ring -> its cell
@@ -67,8 +67,8 @@ class PictureRings:
         read while its picture is drawn.  Empty where no square is left for it (counted)."""
         if not cascades.rings:
             return {}
-        if cascades.places != self._places:   # (another atlas layout: every picture's rings drawn anew)
-            self._places = cascades.places
+        if (cascades.places, cascades.atlas) != self._places:   # (another atlas or layout: all drawn anew)
+            self._places = (cascades.places, cascades.atlas)
             self._held.clear()
             self._rings.clear()
             self._cells.clear()

@@ -343,7 +343,7 @@ class ShadowSystem(esper.Processor):
         self._cascades = None if not rings else Cascades(
             tuple(rings), {slot: self._fits[slot] for slot, _ in casting}, dict(self._directional),
             tuple((x + dx, y + dy) for x, y in map(maps.tile_origin, free) for dy in (0, half) for dx in (0, half)),
-            half)
+            half, maps.atlases_made)
         return cut
 
     # --- point lights -------------------------------------------------------------------------

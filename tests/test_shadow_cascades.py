@@ -260,6 +260,26 @@ def test_a_picture_drawn_every_other_frame_draws_its_rings_again_after_a_caster_
     assert counted > 1000 and share >= 0.99, (share, counted)
 
 
+def test_a_picture_kept_while_the_atlas_was_made_again_draws_its_rings_again(scene):
+    """The sun's maps go to 1024 texels and back to 2048 on two frames the picture is not
+    drawn: the atlas is made again each time (its texels undefined), so when the picture is
+    next drawn its rings are drawn again, though everything they were drawn from is as it was."""
+    runner = scene(_watched(3, every=3), (96, 64))
+    ids = runner.world.resources["ids"]
+    sun = runner.world.get(ids["sun"], DirectionalLight)
+    runner.frame()
+    assert runner.stats.monitor_views == 1 and runner.stats.shadow_maps_drawn == 5   # level, 2 rings, 2 picture's
+    atlas = runner.engine.renderer.shadows.atlases_made
+    for resolution in (1024, 2048):
+        sun.shadow_resolution = resolution
+        runner.frame()
+        assert runner.stats.monitor_views == 0   # (not due)
+    assert runner.engine.renderer.shadows.atlases_made == atlas + 2
+    runner.frame()
+    assert runner.stats.monitor_views == 1
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (2, 3)   # the picture's rings
+
+
 def test_a_picture_with_no_free_quarter_reads_the_cameras_rings_and_is_counted(scene):
     """Two suns with four cascades take the atlas's four tiles: no quarter is left for the
     picture's rings, so it reads the camera's (counted in ``picture_cascades_cut``, every

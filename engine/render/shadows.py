@@ -235,6 +235,7 @@ class ShadowMaps:
         # (every lookup lit), so the scene programs always have something defined to read.
         self.atlas = self._make_atlas((1, 1))
         self.tile = 0
+        self.atlases_made = 0   # (fit_atlas: a new atlas holds none of the old one's maps)
         # slot -> (the fit, resolution, the buffer holding its Camera block) (_bind_fit)
         # (a picture's ring's: under ("picture", ring): draw_picture_ring)
         self._fit_blocks: dict[object, tuple[DirectionalFit, int, moderngl.Buffer]] = {}
@@ -324,6 +325,7 @@ class ShadowMaps:
         self.atlas = self._make_atlas((2 * tile, 2 * tile))
         self._atlas_framebuffer = self.ctx.framebuffer(depth_attachment=self.atlas)
         self.tile = tile
+        self.atlases_made += 1
 
     def fit_see_through(self, casting: bool) -> bool:
         """Make the see-through atlas (``see_through_atlas``) while see-through things cast

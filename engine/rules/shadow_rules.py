@@ -489,6 +489,7 @@ class Cascades:
     keys: dict[int, tuple]
     places: tuple[tuple[int, int], ...]
     side: int
+    atlas: int = 0   # which atlas (ShadowMaps.atlases_made): a new one holds no picture's rings
     casters_changed: bool = False
     changes: tuple = (None, None)
     stamp: int = 0
