@@ -80,6 +80,7 @@ from engine.rules.light_rules import (
     SkySun,
     air_tinted,
     brightest_directional,
+    choice_stands,
     choose_lights,
     cube_serves,
     is_panel,
@@ -90,7 +91,6 @@ from engine.rules.light_rules import (
     lamp_rectangle,
     sky_sun,
     sphere_radius,
-    view_eyes,
 )
 
 # A freed slot no light took yet: black (no light), its range 1 (no division by zero).
@@ -171,8 +171,7 @@ class PrepareSystem(esper.Processor):
             renderer.note_scene_change()
         self._probe_boxes()
         kept = self._kept
-        if not (self._lights and not sky_changed and self._lights_stand_still()
-                and not (kept.by_eye and self._camera_moved(kept))
+        if not (self._lights and not sky_changed and not world.changed(Skybox) and choice_stands(world, kept)
                 and self._environment_packed == self.environment_reflections):
             kept = self._kept = choose_lights(world, kept, LIGHT_LIMITS)
             self._environment_packed = self.environment_reflections
@@ -598,24 +597,3 @@ class PrepareSystem(esper.Processor):
             (entity, tuple(t.world[3].xyz), tuple(probe.influence), probe.blend_distance)
             for entity, (probe, t) in probes if probe.influence is not None)
 
-    def _camera_moved(self, kept: KeptLights) -> bool:
-        """The active camera moved (or another became active), or the eyes of its mirror and
-        portal views did (``view_eyes``), since ``kept`` was chosen."""
-        world = self.world
-        camera = frame_rules(world).active_camera
-        return camera != kept.camera or (camera is not None and camera in world.frame.moved) \
-            or view_eyes(world) != kept.views
-
-    def _lights_stand_still(self) -> bool:
-        """No light came, went or changed, and no point light moved, got or lost its Transform
-        (its own or a parent's: the transform stage lists both in ``frame.moved``): last
-        frame's block holds."""
-        world = self.world
-        if world.changed(DirectionalLight) or world.changed(PointLight) or world.changed(Skybox):
-            return False   # (a Skybox: an atmosphere's air tints its sun: _air_tint)
-        frame = world.frame
-        moved, added, removed = frame.moved, frame.added, frame.removed
-        if not (moved or added or removed):
-            return True
-        return not any(entity in moved or entity in added or entity in removed
-                       for entity, _ in world.query_one(PointLight))

@@ -453,3 +453,38 @@ def test_a_lamp_far_from_the_camera_is_kept_when_a_monitor_shows_what_it_lights(
     assert picture.mean() > shown["no_lamp_b"].mean() + 0.1, (picture.mean(), shown["no_lamp_b"].mean())
     runner.frame()
     assert runner.world.resources[KeptLights] is kept  # still: nothing ranked again
+
+
+def test_the_choice_made_ahead_is_the_prepare_stages_every_frame(scene, monkeypatch):
+    """``lights_this_frame`` (what the extract stage asks, before the prepare stage chooses)
+    gives the prepare stage's choice on every frame of a walk from lamp A to lamp B and back
+    past the lamps' limit (the choice swaps, stands while the camera stands), and on a still
+    frame it is the published choice itself: nothing ranked."""
+    from engine.render.shadows import LIGHT_LIMITS
+    from engine.rules.light_rules import lights_this_frame
+    from systems.extract_system import ExtractSystem
+
+    runner = scene(_two_boxes)
+    ahead = []
+    extract = runner.world.get_system(ExtractSystem)
+    process = extract.process
+
+    def asking(dt):
+        ahead.append(lights_this_frame(runner.world, LIGHT_LIMITS))
+        process(dt)
+    monkeypatch.setattr(extract, "process", asking)
+    ids = runner.world.resources["ids"]
+    chosen = []
+    walk = [EYE_A] * 2 + [tuple(np.array(EYE_A) + (np.array(EYE_B) - EYE_A) * t) for t in np.linspace(0, 1, 9)] \
+        + [EYE_B] * 2 + [EYE_A] * 2
+    for eye in walk:
+        _move_camera(runner.world, eye, (eye[0], 0.5, 0.0))
+        runner.frame()
+        chosen.append(runner.world.resources[KeptLights])
+    assert [k.point for k in ahead] == [k.point for k in chosen]
+    kept_a = {k.point.count(ids["lamp_a"]) for k in chosen}
+    assert kept_a == {0, 1}   # (the choice did swap: lamp A cut at B's end)
+    # Still (the camera not moved): the published choice, the same object, both stages.
+    before = runner.world.resources[KeptLights]
+    runner.frame()
+    assert ahead[-1] is before and runner.world.resources[KeptLights] is before

@@ -53,7 +53,9 @@ camera crosses it, and does not hold for lights that move.)
 **When.**  The prepare stage asks for a choice only when a light came, went, changed or
 moved, or, while the answer depends on the camera (``KeptLights.by_eye``: more point lights
 than slots, or more casting ones kept than cubes), when the active camera moved or another
-became active, or the views' eyes moved; a still scene ranks nothing.  It publishes the answer as
+became active, or the views' eyes moved (``choice_stands``: the test ``lights_this_frame``,
+the extract stage's choice made ahead, makes too, so the two agree every frame); a still
+scene ranks nothing.  It publishes the answer as
 ``world.resources[KeptLights]``; ``kept_lights(world)`` reads it.
 
 GL-free: numpy only (the limits are the render side's, given by the callers).
@@ -766,15 +768,33 @@ def kept_lights(world: World, limits: LightLimits) -> KeptLights:
     return kept if kept is not None else choose_lights(world, None, limits)
 
 
+def choice_stands(world: World, kept: KeptLights) -> bool:
+    """Whether ``kept`` is this frame's choice as it is (the module's "When"): no light came,
+    went or changed, no point light moved, got or lost its Transform (its own or a parent's:
+    the transform stage lists both in ``frame.moved``), and, where the choice depends on the
+    eyes (``kept.by_eye``), the active camera did not move (nor another become active) and its
+    views' eyes are where they were (``view_eyes``).  The prepare stage's test and
+    ``lights_this_frame``'s, one rule."""
+    if world.changed(DirectionalLight) or world.changed(PointLight):
+        return False
+    frame = world.frame
+    moved, added, removed = frame.moved, frame.added, frame.removed
+    if (moved or added or removed) and any(entity in moved or entity in added or entity in removed
+                                           for entity, _ in world.query_one(PointLight)):
+        return False
+    if not kept.by_eye:
+        return True
+    camera = frame_rules(world).active_camera
+    return camera == kept.camera and (camera is None or camera not in moved) and view_eyes(world) == kept.views
+
+
 def lights_this_frame(world: World, limits: LightLimits) -> KeptLights:
-    """The choice the prepare stage will make this frame, made ahead of it (not stored): from
-    the last one published, by the same rule, so a stage before the prepare stage (the
-    extract stage's keying of rows under waters) sees a light new this frame.  The last one
-    itself where it must be the same: every light kept (none cut, so neither the camera nor
-    where a lamp stands can change it) and no light added, removed or changed since."""
+    """The choice the prepare stage will make this frame, made ahead of it (not stored): the
+    last one published where it stands (``choice_stands``, the prepare stage's own test),
+    else from it by the same rule, so a stage before the prepare stage (the extract stage's
+    keying of rows under waters) sees a light new this frame."""
     kept = world.resources.get(KeptLights)
-    if kept is not None and kept.cut == (0, 0) and not world.changed(DirectionalLight) \
-            and not world.changed(PointLight):
+    if kept is not None and choice_stands(world, kept):
         return kept
     return choose_lights(world, kept, limits)
 
