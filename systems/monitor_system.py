@@ -294,32 +294,49 @@ class MonitorSystem(esper.Processor):
                            ortho_height=cam.ortho_height if cam.projection == "orthographic" else None)
 
     def _picture_eyes(self, monitors: list[tuple[int, Monitor]]) -> PictureEyes:
-        """Where each picture's camera stands and the share of the frame its picture shows: its
-        screen's box's rectangle in this frame's main view (all of it where the box lies across
-        the eye's plane, none where it lies behind), or its ``ScreenPanel``'s, the larger; for
-        the next frame's lights and levels of detail (``light_rules.view_eyes``), as a mirror's
+        """Where each picture's camera stands and the share of the frame its picture shows: the
+        largest of its screen's box's rectangles in this frame's main view and in last frame's
+        mirror and portal views (``ViewEyes``; each within its view's rectangle; a box across
+        a view's eye plane takes all of it, one behind none) and its ``ScreenPanel``'s; for the
+        next frame's lights and levels of detail (``light_rules.view_eyes``), as a mirror's
         view's eye counts."""
         world = self.world
         pictures = self.renderer.monitors.entities
-        main = self._main_view()
         output = world.resources.get(Output)
+        if output is None or output.size[0] * output.size[1] <= 0:
+            return PictureEyes()
+        screen = output.size[0] * output.size[1]
+        views: list[tuple[View, tuple[int, int, int, int]]] = []
+        main = self._main_view()
+        if main is not None:
+            views.append((main, (0, 0, *main.size)))
+        eyes = world.resources.get(ViewEyes)
+        if eyes is not None:
+            views += [(node.view, tuple(node.rect)) for node in eyes.views if node.level > 0]
+        def to_screen(view: View) -> np.ndarray:
+            return np.array(output.size, np.float64) / np.maximum(np.array(view.size, np.float64), 1.0)
+
         found = []
         for entity, monitor in monitors:
             lens = world.try_get(monitor.camera, Transform) \
                 if entity in pictures and monitor.camera is not None and world.exists(monitor.camera) else None
             if lens is None:
                 continue
-            share = 0.0
             panel = world.try_get(entity, ScreenPanel)
-            if panel is not None and output is not None and output.size[0] * output.size[1] > 0:
-                share = float(panel.size.x * panel.size.y) / (output.size[0] * output.size[1])
+            share = 0.0 if panel is None else float(panel.size.x * panel.size.y) / screen
             mesh, placed = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
-            if main is not None and mesh is not None and placed is not None:
-                low, high, behind, off = projected_rects(world_corners(mesh.mesh, placed.world)[None], main)
-                if behind[0] and not off[0]:   # (across the eye's plane: all of the frame)
-                    share = 1.0
-                elif not off[0]:
-                    share = max(share, float(np.prod(high[0] - low[0])) / (main.size[0] * main.size[1]))
+            if mesh is not None and placed is not None and views:
+                corners = world_corners(mesh.mesh, placed.world)[None]
+                for view, (x, y, width, height) in views:
+                    low, high, behind, off = projected_rects(corners, view)
+                    if off[0]:
+                        continue
+                    # (a level drawn smaller than the screen: its pixels to the screen's, as its rectangle is)
+                    low, high = low * to_screen(view), high * to_screen(view)
+                    if behind[0]:   # (across the eye's plane: all of the view's rectangle)
+                        low[0], high[0] = (x, y), (x + width, y + height)
+                    extent = np.minimum(high[0], (x + width, y + height)) - np.maximum(low[0], (x, y))
+                    share = max(share, float(np.prod(np.maximum(extent, 0.0))) / screen)
             if share >= MIN_VIEW_SHARE:
                 eye = lens.world[3]
                 found.append((float(eye.x), float(eye.y), float(eye.z), min(1.0, share)))

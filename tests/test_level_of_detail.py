@@ -83,18 +83,22 @@ def test_an_object_near_a_portals_far_side_keeps_its_fine_mesh(scene):
     assert runner.stats.reflection_views >= 1
 
 
-@pytest.mark.parametrize("screen", [True, False])
+@pytest.mark.parametrize("screen", ["ahead", "behind", "in_a_mirror"])
 def test_an_object_a_monitors_camera_sees_close_keeps_its_fine_mesh(scene, screen):
     """The camera 3 m from a screen, the object 1.5 m from the screen's monitor's camera, 60 m
     away: in the picture it is close, so from the frame after the picture's first drawing it
-    is fine; with the screen off the frame (turned away behind the camera), the picture's
-    eye counts for nothing and the object is coarse."""
+    is fine; so too where the screen stands behind the camera and a mirror ahead shows it
+    (last frame's mirror view sees it); with the screen behind the camera and no mirror, the
+    picture's eye counts for nothing and the object is coarse."""
     def build(world):
         look_from(world, (0.0, 1.5, 3.0), (0.0, 1.5, 0.0), fov=60.0)
         lens = look_from(world, (60.0, 1.5, 0.0), (60.0, 1.5, -1.5), fov=60.0)
         world.get(lens, Camera).active = False
-        world.spawn(Transform(position=(0.0, 1.5, 0.0 if screen else 6.0)), MeshRef(quad(2.0, 1.5)), Material(),
-                    Monitor(camera=lens, size=(64, 48)))
+        if screen == "in_a_mirror":
+            world.spawn(Transform(position=(0.0, 1.5, 0.0)), MeshRef(quad(3.0, 2.0)), Material(), Mirror())
+        world.spawn(Transform(position=(0.0, 1.5, 0.0 if screen == "ahead" else 6.0),
+                              rotation=glm.angleAxis(0.0 if screen == "ahead" else glm.pi(), glm.vec3(0, 1, 0))),
+                    MeshRef(quad(2.0, 1.5)), Material(), Monitor(camera=lens, size=(64, 48)))
         world.thing = world.spawn(Transform(position=glm.vec3(60.0, 1.5, -1.5)), MeshRef(FINE),
                                   Material(color=(0.8, 0.3, 0.2)),
                                   LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), distances=(6.0, 12.0)))
@@ -103,7 +107,7 @@ def test_an_object_a_monitors_camera_sees_close_keeps_its_fine_mesh(scene, scree
     assert runner.world.get(runner.world.thing, MeshRef).mesh is COARSE   # (no picture drawn yet)
     for _ in range(2):
         runner.frame()
-    assert runner.world.get(runner.world.thing, MeshRef).mesh is (FINE if screen else COARSE)
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is (COARSE if screen == "behind" else FINE)
 
 
 def test_the_rule_refuses_what_it_cannot_do(scene):
