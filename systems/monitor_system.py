@@ -95,9 +95,10 @@ from engine.render.surface_table import NO_BLENDS, SurfaceBlends, surface_table
 from engine.render.view_plan import SurfaceTable
 from engine.render.views import View, camera_view
 from engine.resources import ContactLamps, PicturesDrawn, Surfaces, SurfaceState
-from engine.rules.frame_rules import active_camera_parts, world_corners
-from engine.rules.light_rules import MIN_VIEW_SHARE, PictureEyes, ViewEyes, brightest_directional
+from engine.rules.frame_rules import active_camera_parts
+from engine.rules.light_rules import PictureEyes, ViewEyes, brightest_directional
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
+from engine.rules.screen_rects import projected_rects, view_matrix
 from engine.rules.shadow_rules import ShadowCasters
 from systems.camera_shafts import camera_shafts
 from systems.shadow_rings import PictureRings
@@ -294,53 +295,32 @@ class MonitorSystem(esper.Processor):
                            ortho_height=cam.ortho_height if cam.projection == "orthographic" else None)
 
     def _picture_eyes(self, monitors: list[tuple[int, Monitor]]) -> PictureEyes:
-        """Where each picture's camera stands and the share of the frame its picture shows: the
-        largest of its screen's box's rectangles in this frame's main view and in last frame's
-        mirror and portal views (``ViewEyes``; each within its view's rectangle; a box across
-        a view's eye plane takes all of it, one behind none) and its ``ScreenPanel``'s; for the
-        next frame's lights and levels of detail (``light_rules.view_eyes``), as a mirror's
-        view's eye counts."""
+        """What the next frame's lights and levels of detail need to weigh each picture's
+        camera as a mirror's view's eye (``light_rules.PictureEyes``, worked out only if asked):
+        its eye, its screen's box as placed, its ``ScreenPanel``'s share of the frame, this
+        frame's main view and last frame's mirror and portal views."""
         world = self.world
         pictures = self.renderer.monitors.entities
         output = world.resources.get(Output)
         if output is None or output.size[0] * output.size[1] <= 0:
             return PictureEyes()
-        screen = output.size[0] * output.size[1]
-        views: list[tuple[View, tuple[int, int, int, int]]] = []
-        main = self._main_view()
-        if main is not None:
-            views.append((main, (0, 0, *main.size)))
-        eyes = world.resources.get(ViewEyes)
-        if eyes is not None:
-            views += [(node.view, tuple(node.rect)) for node in eyes.views if node.level > 0]
-        def to_screen(view: View) -> np.ndarray:
-            return np.array(output.size, np.float64) / np.maximum(np.array(view.size, np.float64), 1.0)
-
-        found = []
+        screens = []
         for entity, monitor in monitors:
             lens = world.try_get(monitor.camera, Transform) \
                 if entity in pictures and monitor.camera is not None and world.exists(monitor.camera) else None
             if lens is None:
                 continue
             panel = world.try_get(entity, ScreenPanel)
-            share = 0.0 if panel is None else float(panel.size.x * panel.size.y) / screen
             mesh, placed = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
-            if mesh is not None and placed is not None and views:
-                corners = world_corners(mesh.mesh, placed.world)[None]
-                for view, (x, y, width, height) in views:
-                    low, high, behind, off = projected_rects(corners, view)
-                    if off[0]:
-                        continue
-                    # (a level drawn smaller than the screen: its pixels to the screen's, as its rectangle is)
-                    low, high = low * to_screen(view), high * to_screen(view)
-                    if behind[0]:   # (across the eye's plane: all of the view's rectangle)
-                        low[0], high[0] = (x, y), (x + width, y + height)
-                    extent = np.minimum(high[0], (x + width, y + height)) - np.maximum(low[0], (x, y))
-                    share = max(share, float(np.prod(np.maximum(extent, 0.0))) / screen)
-            if share >= MIN_VIEW_SHARE:
-                eye = lens.world[3]
-                found.append((float(eye.x), float(eye.y), float(eye.z), min(1.0, share)))
-        return PictureEyes(tuple(found))
+            eye = lens.world[3]
+            screens.append(((float(eye.x), float(eye.y), float(eye.z)),
+                            None if mesh is None or placed is None else (mesh.mesh, glm.mat4(placed.world)),
+                            0.0 if panel is None else float(panel.size.x * panel.size.y)))
+        if not screens:
+            return PictureEyes()
+        main = self._main_view()
+        return PictureEyes(tuple(screens), tuple(output.size), None if main is None else view_matrix(main),
+                           world.resources.get(ViewEyes))
 
     def _first_level(self, main: View) -> list[View]:
         """This frame's first level of mirror and portal views below ``main`` (the active
@@ -360,7 +340,7 @@ class MonitorSystem(esper.Processor):
         eye = main.eye
         # (off, or its back to the eye: not seen)
         facing = planes[:, :3] @ (eye.x, eye.y, eye.z) + planes[:, 3] > 0.0
-        low, high, behind, off = projected_rects(corners[facing], main)
+        low, high, behind, off = projected_rects(corners[facing], view_matrix(main), np.array(main.size))
         views = []
         for at, row in enumerate(np.flatnonzero(facing).tolist()):
             if behind[at]:
@@ -521,23 +501,6 @@ class MonitorSystem(esper.Processor):
             warnings.warn(ComponentWarning(f"Monitor on entity {entity} {why}: its picture is not drawn (it keeps "
                                            "what it showed, black at first)"), stacklevel=3)
         return None
-
-
-def projected_rects(corners: np.ndarray, view: View) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The pixel rectangles of boxes on ``view``'s screen: ``corners`` (n, 8, 4) world rows;
-    (low and high corners, (n, 2) whole pixels clipped to the screen; whether a corner lies
-    behind the eye; whether the box is off the screen: beside it, or wholly behind the eye)."""
-    width, height = view.size
-    # glm's buffer is the matrix's rows; a row vector takes its columns (its to_list).
-    clip = corners @ np.array(view.view_proj.to_list(), np.float64)   # every corner of every box at once
-    behind = (clip[:, :, 3] <= 1e-6).any(axis=1)
-    ndc = clip[:, :, :2] / np.where(clip[:, :, 3:4] > 1e-6, clip[:, :, 3:4], 1.0)
-    low_ndc, high_ndc = ndc.min(axis=1), ndc.max(axis=1)
-    low = np.floor((np.clip(low_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
-    high = np.ceil((np.clip(high_ndc, -1.0, 1.0) * 0.5 + 0.5) * (width, height))
-    off = (high <= low).any(axis=1) | (high_ndc < -1.0).any(axis=1) | (low_ndc > 1.0).any(axis=1) \
-        | (clip[:, :, 3] <= 1e-6).all(axis=1)
-    return low, high, behind, off
 
 
 def _same(key: tuple[tuple, tuple, int], other: tuple[tuple, tuple, int]) -> bool:

@@ -79,7 +79,8 @@ from components.tracking import raw_field
 from engine.core.budget import spending_order
 from engine.core.color import LUMINANCE
 from engine.core.world import World, world_invariant
-from engine.rules.frame_rules import frame_rules
+from engine.rules.frame_rules import frame_rules, world_corners
+from engine.rules.screen_rects import largest_share
 
 # A light left out replaces a kept one only at more than this times its importance.
 HYSTERESIS = 1.25
@@ -136,6 +137,17 @@ class ViewEyes:
     size: tuple[int, int]
 
     @functools.cached_property
+    def projections(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The mirror and portal views' (level 0 left out): each one's view-projection as a
+        (4, 4) float64 array a row of world points is multiplied by, its rectangle on the
+        screen (x, y, width, height) and its size: (n, 4, 4), (n, 4), (n, 2); worked out once
+        (the monitors stage's screens' shares of the frame)."""
+        nodes = [node for node in self.views if node.level > 0]
+        return (np.array([node.view.view_proj.to_list() for node in nodes], np.float64).reshape(-1, 4, 4),
+                np.array([node.rect for node in nodes], np.float64).reshape(-1, 4),
+                np.array([node.view.size for node in nodes], np.float64).reshape(-1, 2))
+
+    @functools.cached_property
     def points(self) -> tuple[tuple[float, float, float, float], ...]:
         """(x, y, z, share) of each view's eye that shows at least ``MIN_VIEW_SHARE`` of the
         screen: its rectangle's area over the screen's."""
@@ -149,14 +161,42 @@ class ViewEyes:
         return tuple(found)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PictureEyes:
-    """Where the monitors' cameras stand and the share of the frame each one's picture shows
-    (x, y, z, share; at least ``MIN_VIEW_SHARE``), published by the monitors stage each
-    frame and read with ``ViewEyes`` the next (``view_eyes``): a torch in the room a security
-    camera watches matters as much as its screen is large, as a portal's would."""
+    """The monitors' cameras as eyes (published by the monitors stage each frame, read with
+    ``ViewEyes`` the next: ``view_eyes``): a torch in the room a security camera watches
+    matters as much as its screen is large, as a portal's would.  Each screen: its camera's
+    eye, its mesh and world matrix (None: no mesh) and its ``ScreenPanel``'s pixels; the
+    output's ``size``, the main view's ``matrix`` (``screen_rects.view_matrix``; None: no
+    camera) and last frame's mirror and portal views (``eyes``).  ``points`` is worked out
+    only when a choice depends on them."""
 
-    points: tuple[tuple[float, float, float, float], ...] = ()
+    screens: tuple[tuple[tuple[float, float, float], Any, float], ...] = ()
+    size: tuple[int, int] = (0, 0)
+    matrix: np.ndarray | None = None
+    eyes: ViewEyes | None = None
+
+    @functools.cached_property
+    def points(self) -> tuple[tuple[float, float, float, float], ...]:
+        """(x, y, z, share) of each camera whose picture shows at least ``MIN_VIEW_SHARE`` of
+        the frame: the largest of its screen's rectangles in the main view and in the mirror
+        and portal views (``screen_rects.largest_share``) and its panel's."""
+        if not self.screens:
+            return ()
+        matrices, rects, sizes = self.eyes.projections if self.eyes is not None else \
+            (np.zeros((0, 4, 4)), np.zeros((0, 4)), np.zeros((0, 2)))
+        if self.matrix is not None:
+            matrices = np.concatenate([self.matrix[None], matrices])
+            rects = np.concatenate([[(0.0, 0.0, *self.size)], rects])
+            sizes = np.concatenate([[self.size], sizes])
+        found = []
+        for eye, placed, panel in self.screens:
+            share = panel / (self.size[0] * self.size[1])
+            if placed is not None:
+                share = max(share, largest_share(world_corners(*placed), matrices, rects, sizes, self.size))
+            if share >= MIN_VIEW_SHARE:
+                found.append((*eye, min(1.0, share)))
+        return tuple(found)
 
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
