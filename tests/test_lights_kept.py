@@ -488,3 +488,41 @@ def test_the_choice_made_ahead_is_the_prepare_stages_every_frame(scene, monkeypa
     before = runner.world.resources[KeptLights]
     runner.frame()
     assert ahead[-1] is before and runner.world.resources[KeptLights] is before
+
+
+def test_a_pictures_eye_is_weighed_by_its_screens_or_its_panels_share_of_the_frame(scene):
+    """``PictureEyes.points``: a screen's share is its box's rectangle on the frame (its four
+    corners projected by glm, a second path, the rectangle's area in whole pixels over the
+    frame's); a HUD panel's, its pixels over the frame's; a screen off the frame counts for
+    nothing (under ``MIN_VIEW_SHARE``: left out)."""
+    from components import ScreenPanel
+    from engine.rules.light_rules import MIN_VIEW_SHARE, PictureEyes
+
+    size = (160, 120)
+
+    def build(world):
+        ids = {"camera": look_from(world, (0.0, 1.6, 5.0), (0.0, 1.6, 0.0))}
+        lens = world.spawn(Transform(position=(20.0, 1.0, 0.0)), Camera(active=False))
+        ids["seen"] = world.spawn(Transform(position=(0.7, 1.4, 0.0)), MeshRef(quad(1.6, 0.9)), Material(),
+                                  Monitor(camera=lens, size=(32, 18)))
+        ids["behind"] = world.spawn(Transform(position=(0.0, 1.4, 9.0)), MeshRef(quad(1.6, 0.9)), Material(),
+                                    Monitor(camera=lens, size=(32, 18)))
+        ids["panel"] = world.spawn(ScreenPanel(size=(64, 30)), Monitor(camera=lens, size=(32, 18)))
+        world.resources["ids"] = ids
+
+    runner = scene(build, size)
+    runner.frame()
+    points = runner.world.resources[PictureEyes].points
+    # The seen screen's corners through the main view, by glm: its rectangle in whole pixels.
+    view = runner.engine.main_view
+    xs, ys = [], []
+    for dx in (-0.8, 0.8):
+        for dy in (-0.45, 0.45):
+            clip = view.view_proj * glm.vec4(0.7 + dx, 1.4 + dy, 0.0, 1.0)
+            xs.append((clip.x / clip.w * 0.5 + 0.5) * size[0])
+            ys.append((clip.y / clip.w * 0.5 + 0.5) * size[1])
+    seen = (math.ceil(max(xs)) - math.floor(min(xs))) * (math.ceil(max(ys)) - math.floor(min(ys))) / (size[0] * size[1])
+    panel = 64 * 30 / (size[0] * size[1])
+    assert seen > MIN_VIEW_SHARE and panel > MIN_VIEW_SHARE
+    assert sorted(share for *_, share in points) == pytest.approx(sorted([seen, panel]))
+    assert all(eye == pytest.approx((20.0, 1.0, 0.0)) for *eye, _ in points)
