@@ -8,7 +8,8 @@ draws each foamy water's batch once more (``ScenePass.draw_foam``), with its ``F
 build, blended over the level as glass is, lit as any surface is.  Where the foam lies needs
 the depth of what is under each pixel of the surface: the level's window depth, copied first
 (``RefractionCopy``: the water itself writes no depth, so the copy holds what lies below it).
-A probe's faces have no copy: they show the water without its foam.
+A probe's faces are finished as a root is, with no view tree at ``depth`` 0
+(``ProbeCaptures._finished``): they show the foam too.
 
 Up to ``MAX_FOAM_WATERS`` waters have foam at once (the first by entity; the rest counted in
 ``RenderStats.foam_waters_cut`` and said once).  A draw's instances find their water by

@@ -706,17 +706,19 @@ class ProbeCaptures:
         views = self.face_views(key, faces, position, settings)
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
+        # (a mirror or portal at depth 0 too: a see-through one's fallback is a root's finish)
+        finishes = surfaces is not None and bool(surfaces.states) or self._finished()
         plan = None
         if key in self.cubes and self.cubes[key].resolution == settings.resolution:  # else a new cube: none kept
-            plan = self._keep_plan(key, views, unchanged, self._direct(sees_surfaces), sees_surfaces, regions)
+            plan = self._keep_plan(key, views, unchanged, self._direct(finishes), finishes, regions)
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
                                                   blends=blends, unchanged=unchanged, plan=plan,
-                                                  regions=regions),
+                                                  regions=regions, finish=finishes),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         # A face kept, or one no change reached (kept from the next capture on, once drawn
         # with a record): a capture of some faces, which the six-pass path draws.
         kept = plan is not None and (plan.kept or plan.parts)
-        path = self.paths.draw(draws, len(faces) == 6 and not sees_surfaces and not kept and not unchanged,
+        path = self.paths.draw(draws, len(faces) == 6 and not finishes and not kept and not unchanged,
                                settings.resolution)
         cube = self.cubes[key]
         box = projection_box(position, settings)
@@ -736,14 +738,16 @@ class ProbeCaptures:
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
                 blends: SurfaceBlends = NO_BLENDS, unchanged: frozenset[int] = frozenset(),
-                plan: _KeepPlan | None = None, regions: dict[int, tuple[float, float, float, float]] | None = None
-                ) -> None:
+                plan: _KeepPlan | None = None, regions: dict[int, tuple[float, float, float, float]] | None = None,
+                finish: bool = False) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
-        full level: it is drawn into a 2D level target and copied into its face; any other
-        face is drawn straight into its face (``CubeFaceTargets``) once the path self-check
-        has verified that on this context (``direct`` forces one way: the check itself).
+        full level: it is drawn into a 2D level target and copied into its face; so is a face
+        finished as a root is with no tree (``finish``, or ``_finished``: its foam, its glass,
+        a see-through mirror's fallback); any other face is drawn straight into its face
+        (``CubeFaceTargets``) once the path self-check has verified that on this context
+        (``direct`` forces one way: the check itself).
 
         A face that shows the sky alone (``sky_only_faces``: no instance's box touches its
         frustum) and showed the sky alone at its last drawing, with the same camera, sky,
@@ -764,12 +768,14 @@ class ProbeCaptures:
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
         trees = surfaces is not None and depth > 0
+        # (a face that roots a tree, or finishes as a root does; ``direct`` forced: the path check's faces)
+        finishes = trees or finish or (direct is None and self._finished())
         if direct is None:
-            direct = self._direct(trees)
-        targets_direct = self._face_targets(key, cube.texture) if direct and not trees else None
+            direct = self._direct(finishes)
+        targets_direct = self._face_targets(key, cube.texture) if direct and not finishes else None
         direct = targets_direct is not None
         if plan is None or plan.direct != direct:  # (a face target refused just now: the copy path)
-            plan = self._keep_plan(key, views, unchanged, direct, trees, regions)
+            plan = self._keep_plan(key, views, unchanged, direct, finishes, regions)
         records = self._sky_faces.setdefault(key, {})
         scene_records = self._scene_faces.setdefault(key, {})
         kept, sky_only, scene = plan.kept, plan.sky_only, plan.scene
@@ -792,6 +798,9 @@ class ProbeCaptures:
                     if trees:
                         self.scene_pass.draw([view], targets, FACE_TREE)
                         self.tree.render(view, levels, surfaces, TreeSettings(depth_cap=depth), blends, FACE_TREE)
+                    elif finishes:   # (no mirror or portal view: its foam, glass and slot as a root's)
+                        self.scene_pass.draw([view], targets, FACE_TREE)
+                        self.scene_pass.finish_root(view, targets, FACE_TREE)
                     else:
                         self.scene_pass.draw([view], targets, FACE)
                     renderer.raw_gl.copy_to_cube_face(targets.framebuffer, cube.texture, face, SCRATCH_UNIT)
@@ -859,6 +868,15 @@ class ProbeCaptures:
         self._sky_faces.pop(key, None)
         self._scene_faces.pop(key, None)
         self._versions[key] = self._versions.get(key, 0) + 1
+
+    def _finished(self) -> bool:
+        """Whether a face with no view tree is still finished as a tree's root is (drawn into a
+        2D level target, copied into its face, ``ScenePass.finish_root``): while a water has
+        shore foam or a surface refracts the screen (``Refractive.screen``), which a view drawn
+        whole leaves out, so a probe shows them at any ``depth`` as the camera does.  (So too
+        where any mirror or portal is, at ``depth`` 0: ``capture_probe``'s ``finish``; a view
+        drawn whole shows a see-through one without its fallback's reflection.)"""
+        return bool(self.renderer.foam.entities) or bool(self.renderer.refracting_batches())
 
     def _direct(self, trees: bool) -> bool:
         """Whether faces are drawn straight into the cube (else into a 2D target, copied)."""

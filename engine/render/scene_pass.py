@@ -398,6 +398,7 @@ class ScenePass:
             framebuffer.use()
             apply_pass_state(self.ctx, _SCENE, viewport)
             renderer.raw_gl.clear_level(framebuffer)
+            self.refraction_copy.drawn_over(targets)   # (a copy of them is of what the clear wiped)
         # Per-view draws start with the first view's scissor (set once, not reset then set).
         self._begin(views, targets, options, _BATCHED_SCENE if options.batched else _SCENE, run)
         if options.batched:

@@ -4,7 +4,8 @@ refraction read the frame behind a transparent surface.
 
 Speculum draws forward, so what lies behind a refracting surface is known only once the rest
 of the view is drawn.  Every view a view tree draws (the camera's, its mirror and portal
-views, a probe face that roots a tree) leaves its refracting batches out of its opaque draws
+views, a probe face, which roots a tree or is finished as a root) leaves its refracting
+batches out of its opaque draws
 (``Gpu.tree_opaque_batches``) and draws them last but its glass, in the tree's finish of its
 level (``ScenePass.refract``, from ``finish_root`` and ``finish_level``: after the levels
 below, the screen reflections and the light shafts are composited into it):
@@ -351,6 +352,12 @@ class RefractionCopy:
         (``ScenePass.draw_foam``)."""
         self._count_frames()
         return self._whole_of is targets and self._whole_frame is self._frame
+
+    def drawn_over(self, targets: RenderTargets) -> None:
+        """``targets`` were cleared for another view (a probe's next face in the same level
+        target): the copy taken of them holds their depth no longer (``holds_depth_of``)."""
+        if self._whole_of is targets:
+            self._whole_of = None
 
     def held(self) -> int:
         """Copy images held now."""
