@@ -117,7 +117,7 @@ class MonitorSystem(esper.Processor):
         self._said_no_shafts: tuple | None = None  # (a camera's VolumetricFog, why it adds nothing), said
         self._cut = 0
         self._keep_still_pictures = True
-        self._rings = PictureRings()   # each picture's suns' cascades about its camera (_cascades)
+        self._rings = PictureRings()   # each monitor's camera's suns' cascades about it (_cascades)
         self._keys: dict[int, tuple[tuple, tuple, int]] = {}   # monitor -> _still_key at its last drawing
         self._world_version = 0   # moved on by every change to the world's components (World.change_count)
         self._changes_seen = 0    # World.change_count when this stage last looked
@@ -152,7 +152,7 @@ class MonitorSystem(esper.Processor):
             self.renderer.occlusion.drop_picture(gone)   # (its camera's occlusion images: the pass's own)
         for gone in set(self.drawn) - present:
             del self.drawn[gone]
-            self._rings.drop(gone)
+        self._rings.keep({monitor.camera for _, monitor in monitors})
         for gone in set(self._keys) - present:
             del self._keys[gone]
         # Changes since the last look: after this stage in the last frame, and before it in this one.
@@ -213,7 +213,7 @@ class MonitorSystem(esper.Processor):
             if faces is None:
                 faces = self._screen_faces(monitors)
             with outside_the_budget(stats), self._camera_fog(monitor.camera), \
-                    self._cascades(entity, transform.world[3]):
+                    self._cascades(monitor.camera, transform.world[3]):
                 occluded = self._occlusion(entity, monitor.camera, view)
                 try:
                     reflections = self.world.try_get(monitor.camera, ScreenReflections) \
@@ -411,14 +411,14 @@ class MonitorSystem(esper.Processor):
         return values, (table, blends.by_surface), captures
 
     @contextmanager
-    def _cascades(self, monitor: int, eye: glm.vec4) -> Iterator[None]:
-        """While monitor ``monitor``'s picture is drawn, the suns' cascades about its camera at
-        ``eye`` are read in place of the active camera's (``systems/shadow_rings.py``): put
+    def _cascades(self, camera: int, eye: glm.vec4) -> Iterator[None]:
+        """While a picture from ``camera`` (at ``eye``) is drawn, the suns' cascades about the
+        camera are read in place of the active camera's (``systems/shadow_rings.py``): put
         back after, whatever the draw raised."""
         casters = self.world.resources.get(ShadowCasters)
         cascades = None if casters is None else casters.cascades
         rows = {} if cascades is None else self._rings.rows(
-            monitor, (float(eye.x), float(eye.y), float(eye.z)), cascades, self.renderer.shadows, self.renderer.stats)
+            camera, (float(eye.x), float(eye.y), float(eye.z)), cascades, self.renderer.shadows, self.renderer.stats)
         aside = self.renderer.shadows.swap_ring_rows(rows) if rows else None
         try:
             yield

@@ -153,7 +153,7 @@ def test_a_mirror_shows_the_rings_sharp_shadow_of_what_stands_behind_the_camera(
 PICTURE_OFF = np.array([30.0, 0.0, 25.0])   # the monitor's box and camera, this far from the camera's
 
 
-def _watched(cascades: int, suns: int = 1, every: int = 1):
+def _watched(cascades: int, suns: int = 1, every: int = 1, screens: int = 1):
     """The camera at EYE looking at a box's shadow (as ``_build``), and 39 metres off, past
     its largest ring's reach, a second box and a monitor's camera looking at its shadow as
     the camera looks at the first's, its picture on a screen behind the camera."""
@@ -167,6 +167,9 @@ def _watched(cascades: int, suns: int = 1, every: int = 1):
                                      Material(color=(0.8, 0.3, 0.2)))
         ids["screen"] = world.spawn(Transform(position=(15.0, 1.6, 45.0)), MeshRef(quad(1.6, 1.0)), Material(),
                                     Monitor(camera=ids["lens"], size=PICTURE_SIZE, every=every))
+        ids["screens"] = [ids["screen"]] + [
+            world.spawn(Transform(position=(15.0 + 2.0 * k, 1.6, 45.0)), MeshRef(quad(1.6, 1.0)), Material(),
+                        Monitor(camera=ids["lens"], size=PICTURE_SIZE, every=every)) for k in range(1, screens)]
     return build
 
 
@@ -278,6 +281,28 @@ def test_a_picture_kept_while_the_atlas_was_made_again_draws_its_rings_again(sce
     runner.frame()
     assert runner.stats.monitor_views == 1
     assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (2, 3)   # the picture's rings
+
+
+def test_the_monitors_one_camera_feeds_share_its_rings(scene):
+    """Three screens fed by the one camera: its two rings are drawn once (the level's map, the
+    active camera's two and the monitors' camera's two), none cut, though the free tile's four
+    quarters would hold two of the three monitors' rings each their own; the three pictures
+    are one picture.  The next frame, the watched box moved: the camera's rings are drawn
+    again under it once, not once a monitor."""
+    runner = scene(_watched(3, screens=3), (96, 64))
+    runner.frame()
+    assert runner.stats.monitor_views == 3
+    assert (runner.stats.shadow_maps_drawn, runner.stats.picture_cascades_cut) == (5, 0)
+    ids = runner.world.resources["ids"]
+    pictures = [runner.engine.renderer.monitors.read(screen) for screen in ids["screens"]]
+    assert pictures[0][..., :3].max() > 0.05
+    for other in pictures[1:]:
+        np.testing.assert_array_equal(other, pictures[0])
+    watched = runner.world.get(ids["watched"], Transform)
+    watched.position = tuple(BOX_CENTRE + PICTURE_OFF + np.array([0.1, 0.0, 0.0]))
+    runner.frame()
+    assert runner.stats.monitor_views == 3
+    assert (runner.stats.shadow_maps_drawn, runner.stats.shadow_maps_kept) == (3, 2)   # the level's, the camera's 2
 
 
 def test_a_picture_with_no_free_quarter_reads_the_cameras_rings_and_is_counted(scene):
