@@ -87,10 +87,9 @@ def capture_due(world: World, renderer: Renderer, due: ProbeDue, only: frozenset
     stats.views_spent += len(faces)
     start = time.perf_counter()
     surfaces: Surfaces | None = world.resources.get(Surfaces)
-    # Its faces' view trees plan with it (a water seen by the side each view's eye is on); at
-    # depth 0 it says there are mirrors or portals (its faces are finished as roots are).
     table = surface_table(world.resources, surfaces) \
-        if surfaces is not None and (surfaces.mirrors or surfaces.portals) else None
+        if state.settings.depth > 0 and surfaces is not None and (surfaces.mirrors or surfaces.portals) \
+        else None  # its faces' view trees plan with it (a water seen by the side each view's eye is on)
     regions = {face: region for face, region in due.regions.items() if face in faces} if due.regions else None
     renderer.probes.capture_probe(due.owner, faces, state.position, state.settings, table,
                                   world.resources.get(SurfaceBlends, NO_BLENDS), due.unchanged & faces, regions)

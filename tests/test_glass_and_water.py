@@ -164,16 +164,17 @@ def test_panes_around_a_pond_the_budget_cuts(scene):
 @pytest.mark.parametrize("depth,probe_path", [(2, "six_pass"), (0, "six_pass"), (0, "layered")])
 def test_panes_around_a_pond_in_a_probe_face(scene, depth, probe_path):
     """A probe whose faces see the pond and mirror A: at depth 2 each face roots a view
-    tree (the pond's reflection composited in it); at depth 0 a face draws the pond as its
-    see-through material alone, one view a face or all six in one layered pass from the
-    probe's centre.  Its -Z face, read back in linear float, is the panes blended in depth
-    order either way."""
+    tree (the pond's reflection composited in it); at depth 0 a face is finished as a root
+    with no tree (the see-through pond shows its fallback, as a view the budget cut does),
+    so even a capture asked of the layered path (all six faces in one pass, which finishes
+    none) takes the six-pass path.  Its -Z face, read back in linear float, is the panes
+    blended in depth order either way."""
     face = FACE_NAMES.index("-Z")
     faces = {}
     for alpha in (ALPHA, None, SOLID):
         ents: dict = {}
         rendered = _render(scene, _pond(ents, alpha, probe=depth), ents, probe_path=probe_path)
-        assert rendered["runner"].stats.probe_path == probe_path
+        assert rendered["runner"].stats.probe_path == "six_pass"
         faces[alpha] = rendered["runner"].engine.renderer.probes.read_face(ents["probe"], face).astype(np.float64)
     covered = np.abs(faces[SOLID] - faces[None]).max(axis=-1) > 0.05  # where a pane is in the face
     assert covered.sum() > 300, covered.sum()

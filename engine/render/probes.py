@@ -50,6 +50,7 @@ from engine.render.irradiance import IrradianceTable
 from engine.render.raw_gl import CubeMipTarget, LayeredArrayTarget, LayeredCubeTarget, inspect_bound_target
 from engine.render.scene_options import SceneOptions
 from engine.render.scene_pass import ScenePass
+from engine.render.slot_order import see_through_surface
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
 from engine.render.targets import LevelStack, release_framebuffer
 from engine.render.tree_walk import TreeSettings
@@ -706,14 +707,13 @@ class ProbeCaptures:
         views = self.face_views(key, faces, position, settings)
         sees_surfaces = settings.depth > 0 and surfaces is not None and bool(surfaces.states)
         table = surfaces if sees_surfaces else None
-        # (a mirror or portal at depth 0 too: a see-through one's fallback is a root's finish)
-        finishes = surfaces is not None and bool(surfaces.states) or self._finished()
+        finishes = sees_surfaces or self._finished()
         plan = None
         if key in self.cubes and self.cubes[key].resolution == settings.resolution:  # else a new cube: none kept
             plan = self._keep_plan(key, views, unchanged, self._direct(finishes), finishes, regions)
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
                                                   blends=blends, unchanged=unchanged, plan=plan,
-                                                  regions=regions, finish=finishes),
+                                                  regions=regions),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         # A face kept, or one no change reached (kept from the next capture on, once drawn
         # with a record): a capture of some faces, which the six-pass path draws.
@@ -738,14 +738,14 @@ class ProbeCaptures:
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
                 blends: SurfaceBlends = NO_BLENDS, unchanged: frozenset[int] = frozenset(),
-                plan: _KeepPlan | None = None, regions: dict[int, tuple[float, float, float, float]] | None = None,
-                finish: bool = False) -> None:
+                plan: _KeepPlan | None = None, regions: dict[int, tuple[float, float, float, float]] | None = None
+                ) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
         full level: it is drawn into a 2D level target and copied into its face; so is a face
-        finished as a root is with no tree (``finish``, or ``_finished``: its foam, its glass,
-        a see-through mirror's fallback); any other face is drawn straight into its face
+        finished as a root is with no tree (``_finished``: its foam, its glass, a see-through
+        mirror's fallback); any other face is drawn straight into its face
         (``CubeFaceTargets``) once the path self-check has verified that on this context
         (``direct`` forces one way: the check itself).
 
@@ -769,7 +769,7 @@ class ProbeCaptures:
         cube = self.cube(key, resolution)
         trees = surfaces is not None and depth > 0
         # (a face that roots a tree, or finishes as a root does; ``direct`` forced: the path check's faces)
-        finishes = trees or finish or (direct is None and self._finished())
+        finishes = trees or (direct is None and self._finished())
         if direct is None:
             direct = self._direct(finishes)
         targets_direct = self._face_targets(key, cube.texture) if direct and not finishes else None
@@ -870,13 +870,16 @@ class ProbeCaptures:
         self._versions[key] = self._versions.get(key, 0) + 1
 
     def _finished(self) -> bool:
-        """Whether a face with no view tree is still finished as a tree's root is (drawn into a
-        2D level target, copied into its face, ``ScenePass.finish_root``): while a water has
-        shore foam or a surface refracts the screen (``Refractive.screen``), which a view drawn
-        whole leaves out, so a probe shows them at any ``depth`` as the camera does.  (So too
-        where any mirror or portal is, at ``depth`` 0: ``capture_probe``'s ``finish``; a view
-        drawn whole shows a see-through one without its fallback's reflection.)"""
-        return bool(self.renderer.foam.entities) or bool(self.renderer.refracting_batches())
+        """Whether a face with no view tree (``depth`` 0, or none in sight) is still finished as
+        a tree's root is (drawn into a 2D level target, copied into its face,
+        ``ScenePass.finish_root``): while a water has shore foam, a surface refracts the screen
+        (``Refractive.screen``) or a mirror or portal is see-through (water), which a view
+        drawn whole leaves out (it showed no foam, glass refracting the probe's image, and a
+        see-through mirror's material alone, without its fallback's reflection), so a probe
+        shows them at any ``depth`` as the camera does."""
+        renderer = self.renderer
+        return bool(renderer.foam.entities) or bool(renderer.refracting_batches()) \
+            or any(see_through_surface(batch) for batch in renderer.transparent_batches())
 
     def _direct(self, trees: bool) -> bool:
         """Whether faces are drawn straight into the cube (else into a 2D target, copied)."""
