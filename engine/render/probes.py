@@ -474,7 +474,9 @@ class ProbePaths:
     chosen ``layered`` takes ``six_pass`` (a refused layered capture would leave faces
     unwritten), and ``auto`` never times it.  A capture of some faces only (a face kept as
     it is, or one the scheduler says no change reached, counts: ``ProbeCaptures.capture_probe``),
-    or of a probe whose faces see mirrors or portals, takes ``six_pass``.
+    or of a probe whose faces see mirrors or portals, or whose faces are finished as a root
+    is (``ProbeCaptures._finished``: foam, screen-refracting glass, a see-through mirror or
+    portal about), takes ``six_pass``.
 
     How ``auto`` measures, with no ``ctx.finish()`` in a frame stage.  On the first full
     capture either path could draw, each path draws it once untimed (programs built, targets
