@@ -578,7 +578,8 @@ class ShadowMaps:
             spans = self._ring_row_spans(ring)
             aside[ring] = np.concatenate([self.block[span] for span in spans])
             self._write_ring_rows(ring, values)
-        self.ubo.write(self.block.tobytes())
+        # (the rings' rows alone: from the first ring's map to the ring slots' row)
+        self.ubo.write(self.block[_POINTS_END // 4:_RINGS_END // 4].tobytes(), offset=_POINTS_END)
         return aside
 
     def set_ring_blend(self, ring: int, blend: float) -> None:
