@@ -118,6 +118,7 @@ class MonitorSystem(esper.Processor):
         self._cut = 0
         self._keep_still_pictures = True
         self._rings = PictureRings()   # each monitor's camera's suns' cascades about it (_cascades)
+        self._eyes_from: tuple | None = None   # what the PictureEyes published were made from
         self._keys: dict[int, tuple[tuple, tuple, int]] = {}   # monitor -> _still_key at its last drawing
         self._world_version = 0   # moved on by every change to the world's components (World.change_count)
         self._changes_seen = 0    # World.change_count when this stage last looked
@@ -235,7 +236,14 @@ class MonitorSystem(esper.Processor):
                 first.add(entity)
             self.drawn[entity] = frame
             self._keys[entity] = key
-        world.resources[PictureEyes] = self._picture_eyes(monitors)
+        # (a still frame: what they were made from is as it was, the same snapshot again)
+        output, views = world.resources.get(Output), world.resources.get(ViewEyes)
+        if views is not None and not any(node.level > 0 for node in views.views):
+            views = None   # (no mirror or portal view: nothing of it weighs a screen)
+        eyes_from = (self._world_version, views, None if output is None else output.size, frozenset(pictures.entities))
+        if self._eyes_from is None or not _same_eyes_from(eyes_from, self._eyes_from):
+            world.resources[PictureEyes] = self._picture_eyes(monitors)
+            self._eyes_from = eyes_from
         if screens:
             published = world.resources.get(PicturesDrawn, PicturesDrawn())
             world.resources[PicturesDrawn] = PicturesDrawn(published.count + 1, frozenset(screens),
@@ -501,6 +509,12 @@ class MonitorSystem(esper.Processor):
             warnings.warn(ComponentWarning(f"Monitor on entity {entity} {why}: its picture is not drawn (it keeps "
                                            "what it showed, black at first)"), stacklevel=3)
         return None
+
+
+def _same_eyes_from(key: tuple, other: tuple) -> bool:
+    """Two ``PictureEyes`` sources agree: the world's version, the output's size and the
+    pictures held equal, last frame's mirror and portal views the same object."""
+    return key[0] == other[0] and key[1] is other[1] and key[2] == other[2] and key[3] == other[3]
 
 
 def _same(key: tuple[tuple, tuple, int], other: tuple[tuple, tuple, int]) -> bool:

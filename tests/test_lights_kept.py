@@ -28,7 +28,7 @@ from engine.render.views import (
     SKY_SH_COEFFICIENTS,
     camera_view,
 )
-from engine.rules.light_rules import KeptLights
+from engine.rules.light_rules import KeptLights, PictureEyes
 from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
 BOX_A, BOX_B = np.array([0.0, 0.5, 0.0]), np.array([40.0, 0.5, 0.0])
@@ -451,8 +451,13 @@ def test_a_lamp_far_from_the_camera_is_kept_when_a_monitor_shows_what_it_lights(
         shown[name] = other.engine.renderer.monitors.read(other.world.resources["ids"]["screen"])[..., :3][face]
     np.testing.assert_allclose(picture, shown["every_lamp"], atol=2e-3)
     assert picture.mean() > shown["no_lamp_b"].mean() + 0.1, (picture.mean(), shown["no_lamp_b"].mean())
+    eyes = runner.world.resources[PictureEyes]
     runner.frame()
     assert runner.world.resources[KeptLights] is kept  # still: nothing ranked again
+    assert runner.world.resources[PictureEyes] is eyes  # ... and no snapshot of the eyes made again
+    _move_camera(runner.world, (0.0, 2.0, 5.2), BOX_A)
+    runner.frame()
+    assert runner.world.resources[PictureEyes] is not eyes  # (the camera moved: the screen's share may have)
 
 
 def test_the_choice_made_ahead_is_the_prepare_stages_every_frame(scene, monkeypatch):
