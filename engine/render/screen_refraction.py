@@ -76,6 +76,8 @@ from engine.render.bindings import (
 )
 from engine.render.gpu import Gpu
 from engine.render.targets import RenderTargets, release_framebuffer
+from engine.rules.probe_rules import box_corners
+from engine.rules.screen_rects import ndc_extents, view_matrix
 
 if TYPE_CHECKING:
     from engine.render.instances import InstanceBatch
@@ -210,18 +212,12 @@ def box_rects(view: View, size: tuple[int, int], boxes: np.ndarray, widen: float
     x, y, w, h = view.scissor or (0, 0, width, height)
     unmeasured = np.isnan(boxes).any(axis=(1, 2))
     boxes = np.where(unmeasured[:, None, None], 0.0, boxes)
-    corners = np.empty((len(boxes), 8, 4))
-    for k in range(8):
-        corners[:, k, 0] = boxes[:, (k >> 0) & 1, 0]
-        corners[:, k, 1] = boxes[:, (k >> 1) & 1, 1]
-        corners[:, k, 2] = boxes[:, (k >> 2) & 1, 2]
-    corners[:, :, 3] = 1.0
-    clip = corners @ np.asarray(view.view_proj.to_list(), np.float64)   # (column-major: rows of the transpose)
-    ahead = (clip[:, :, 3] > 1e-6).all(axis=1) & ~unmeasured
-    w_safe = np.where(clip[:, :, 3] > 1e-6, clip[:, :, 3], 1.0)
-    px = (clip[:, :, 0] / w_safe * 0.5 + 0.5) * width
-    py = (clip[:, :, 1] / w_safe * 0.5 + 0.5) * height
-    rects = np.stack([px.min(axis=1), py.min(axis=1), px.max(axis=1), py.max(axis=1)], axis=1)
+    corners = np.ones((len(boxes), 8, 4))
+    corners[:, :, :3] = box_corners(boxes[:, 0], boxes[:, 1])
+    low, high, behind, _ = ndc_extents(corners, view_matrix(view))
+    scale = np.array([width, height], np.float64)
+    rects = np.concatenate([(low * 0.5 + 0.5) * scale, (high * 0.5 + 0.5) * scale], axis=1)
+    ahead = ~behind & ~unmeasured
     if widen:
         reach = (rects[:, 2:] - rects[:, :2]) * widen
         rects[:, :2] -= reach

@@ -1,11 +1,27 @@
 """Where boxes fall on screens, in pixels: the monitors stage's tests of which mirrors and
-screens a view may see (``systems/monitor_system.py``) and a picture's share of the frame
-(``light_rules.PictureEyes``).  GL-free: numpy only."""
+screens a view may see (``systems/monitor_system.py``), a picture's share of the frame
+(``light_rules.PictureEyes``) and the glass's layers (``screen_refraction.box_rects``).
+GL-free: numpy only."""
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
+
+
+def ndc_extents(corners: np.ndarray,
+                view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rectangles in normalized device coordinates holding boxes on screens: ``corners``
+    (n, 8, 4) world rows through ``view_proj`` ((4, 4) or (n, 4, 4), as ``view_matrix`` gives
+    it); (low and high corners, (n, 2); whether a corner lies at or behind the eye, where
+    it is not divided by its w and the box's rectangle means nothing; whether every corner
+    does).  The one projection under
+    ``projected_rects`` (whole pixels, for the monitors' tests) and
+    ``screen_refraction.box_rects`` (subpixel, for the glass's layers)."""
+    clip = corners @ view_proj   # every corner of every box at once
+    w = clip[:, :, 3]
+    ndc = clip[:, :, :2] / np.where(w[:, :, None] > 1e-6, w[:, :, None], 1.0)
+    return ndc.min(axis=1), ndc.max(axis=1), (w <= 1e-6).any(axis=1), (w <= 1e-6).all(axis=1)
 
 
 def projected_rects(corners: np.ndarray, view_proj: np.ndarray,
@@ -15,14 +31,10 @@ def projected_rects(corners: np.ndarray, view_proj: np.ndarray,
     a view each) onto a screen of ``size`` pixels ((2,) or (n, 2)); (low and high corners,
     (n, 2) whole pixels clipped to the screen; whether a corner lies behind the eye; whether
     the box is off the screen: beside it, or wholly behind the eye)."""
-    clip = corners @ view_proj   # every corner of every box at once
-    behind = (clip[:, :, 3] <= 1e-6).any(axis=1)
-    ndc = clip[:, :, :2] / np.where(clip[:, :, 3:4] > 1e-6, clip[:, :, 3:4], 1.0)
-    low_ndc, high_ndc = ndc.min(axis=1), ndc.max(axis=1)
+    low_ndc, high_ndc, behind, wholly_behind = ndc_extents(corners, view_proj)
     low = np.floor((np.clip(low_ndc, -1.0, 1.0) * 0.5 + 0.5) * size)
     high = np.ceil((np.clip(high_ndc, -1.0, 1.0) * 0.5 + 0.5) * size)
-    off = (high <= low).any(axis=1) | (high_ndc < -1.0).any(axis=1) | (low_ndc > 1.0).any(axis=1) \
-        | (clip[:, :, 3] <= 1e-6).all(axis=1)
+    off = (high <= low).any(axis=1) | (high_ndc < -1.0).any(axis=1) | (low_ndc > 1.0).any(axis=1) | wholly_behind
     return low, high, behind, off
 
 
