@@ -531,5 +531,6 @@ def main(args: argparse.Namespace) -> int:
               f"back after; {still_passes['refill_frames']} refilled frames, {still_passes['glass_between_frames']} "
               f"with glass between see-through surfaces, {still_passes['glass_layered_frames']} with glass behind "
               f"glass drawn in layers, {still_passes['slot_cut_frames']} with see-through things drawn in part after "
-              f"the glass, {still_passes['pictures_kept_frames']} that kept a monitor's picture; seed {args.seed})")
+              f"the glass, {still_passes['pictures_kept_frames']} that kept a monitor's picture, "
+              f"{still_passes['program_restarts']} restarts for the programs held; seed {args.seed})")
     return 1 if failures or level_failures or file_failures or model_failures or still_failures else 0

@@ -53,7 +53,9 @@ A case passes when a refused write is refused with a ``ComponentValueError`` nam
 colour target and ``ctx.error`` clean, the keeping engine's colour, HDR image and
 entity-id image equal bit for bit to the drawing engine's; and when the case's entities are
 deleted, each engine's ``Renderer.resource_counts`` (its tree's level copies among them) come back
-to what they were before the case (programs aside: a variant compiled once is kept).
+to what they were before the case (programs aside: a variant compiled once is kept; past
+``PROGRAMS_BEFORE_RESTART`` both engines are made afresh and the programs released, so a
+long run's memory stays bounded).
 
     python -m benchmarks fuzz --still-cases 100
 """
@@ -98,6 +100,7 @@ from engine.assets.portals import spawn_portal_pair
 from engine.core.budget import ViewBudget
 from engine.core.frame_io import Output
 from engine.core.game import Game
+from engine.render.shader_library import FreePrograms
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
 
@@ -420,6 +423,16 @@ def _spawn_see_through_mirror(world, alpha: float) -> int:
                        Mirror(max_depth=2, reflect_rate=0.7))
 
 
+# The programs the keeping engine may hold when a case starts before both engines are made
+# afresh and the context's free programs past its ``FreePrograms.keep`` (the suite's) are
+# released: each case's scene-wide features (shadow rings, kinds of lamp, fog, the screen
+# effects) make builds of their own, about 35 new a case in each engine, 3-7 MB each on
+# llvmpipe: the process of ``--still-cases 60`` (seed 322, after the other parts) reached
+# 13.5 GB; 24 cases alone peaked at 4.1 GB, and at 2.9 GB with this bound (two restarts,
+# their builds linked again from Mesa's shader cache: 57 s, the unbounded run 33 s).
+PROGRAMS_BEFORE_RESTART = 400
+
+
 class StillFuzzer:
     """Two engines of ``_Base`` (one keeping still views, one drawing every frame); each case
     spawns its level in both, runs it still, changes it, runs it still again, deletes it and
@@ -446,6 +459,7 @@ class StillFuzzer:
         self.glass_layered = 0  # ... and frames that drew glass behind glass in layers (refraction_layers)
         self.slot_cut = 0  # ... and frames with see-through things drawn in part after the glass (slot_after_glass)
         self.pictures_kept = 0  # ... and frames that kept a monitor's picture (RenderStats.monitors_kept)
+        self.restarts = 0  # ... and times both engines were made afresh for the programs they held
 
     def close(self) -> None:
         self.keeping.close()
@@ -485,6 +499,11 @@ class StillFuzzer:
         return None
 
     def run(self, case: StillCase, index: int = 0) -> str | None:
+        if self.keeping.engine.renderer.resource_counts()["programs"] > PROGRAMS_BEFORE_RESTART:
+            self._restart()
+            free = FreePrograms.of(self.ctx)
+            free.shrink(free.keep or 0)
+            self.restarts += 1
         sides = (self.keeping, self.drawing)
         refused = False
         # With a monitor, the drawing engine keeps its shadow maps as the keeping one does.
@@ -666,10 +685,10 @@ class StillFuzzer:
         except Exception:  # noqa: BLE001 - a case that broke the engine: start fresh ones
             pass
         counts = (self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut,
-                  self.pictures_kept)
+                  self.pictures_kept, self.restarts)
         self.__init__(self.ctx)
         (self.refused, self.rendered, self.refills, self.glass_between, self.glass_layered, self.slot_cut,
-         self.pictures_kept) = counts
+         self.pictures_kept, self.restarts) = counts
 
 
 def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[tuple[str, str]], dict[str, int]]:
@@ -681,4 +700,5 @@ def fuzz_still(ctx, cases: int, seed: int = 0, report=None) -> tuple[int, list[t
     passes["refill_frames"], passes["glass_between_frames"] = fuzzer.refills, fuzzer.glass_between
     passes["glass_layered_frames"], passes["slot_cut_frames"] = fuzzer.glass_layered, fuzzer.slot_cut
     passes["pictures_kept_frames"] = fuzzer.pictures_kept
+    passes["program_restarts"] = fuzzer.restarts
     return ran, failures, passes

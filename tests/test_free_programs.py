@@ -156,6 +156,21 @@ def test_the_list_keeps_as_many_as_the_fullest_library_held_and_lets_the_longest
     assert free.count == 0 and type(last.mglo).__name__ == "InvalidObject"
 
 
+def test_shrink_lets_the_longest_unused_go_below_what_trim_keeps(ctx, free, root):
+    """``shrink``: a run past scenes it will not see again (the still fuzz) gives back more
+    than ``trim``'s rule (the fullest library's count) would: the longest unused first."""
+    library = ShaderLibrary(ctx, root)
+    programs = [library.program("main.vert", "main.frag", defines={"N": str(n)}) for n in range(4)]
+    library.release()
+    assert free.count == 4 and free.most == 4   # (trim keeps them all)
+    free.shrink(1)
+    assert free.count == 1
+    assert [type(p.mglo).__name__ == "InvalidObject" for p in programs] == [True, True, True, False]
+    again = ShaderLibrary(ctx, root)
+    assert again.program("main.vert", "main.frag", defines={"N": "3"}) is programs[3]   # (still there to take)
+    again.release()
+
+
 def test_a_relinked_program_and_a_library_with_errors_hand_nothing_on(ctx, free, root):
     library = ShaderLibrary(ctx, root)
     program = library.program("main.vert", "main.frag")

@@ -177,6 +177,42 @@ def test_still_cases_refill_and_draw_what_a_whole_drawn_engine_draws(ctx):
     assert passes["slot_cut_frames"] > 0, passes  # (see-through things on both sides of the glass)
 
 
+def test_the_still_fuzz_makes_its_engines_afresh_past_its_programs_bound(monkeypatch):
+    """Each still case's scene-wide features (shadow rings, kinds of lamp, fog, the screen
+    effects) make builds of their own, kept by each engine: past ``PROGRAMS_BEFORE_RESTART``
+    the fuzzer makes both engines afresh and the context's free list lets go of all but its
+    ``keep``, so a long run's programs (llvmpipe's memory for them: 3-7 MB each) stay
+    bounded.  A context of its own (the suite's keeps 512 free programs for its engines)."""
+    import benchmarks.still_fuzz as still_fuzz
+    from benchmarks.fuzz_cases import run_cases
+    from engine.render.gl_context import create_headless_context
+    from engine.render.shader_library import FreePrograms
+
+    ctx = create_headless_context()
+    try:
+        fuzzer = still_fuzz.StillFuzzer(ctx)
+        base = fuzzer.keeping.engine.renderer.resource_counts()["programs"]
+        free = FreePrograms.of(ctx)
+        at_start = []   # (the keeping engine's programs, the free list's) as each case spawns its level
+        real_spawn = still_fuzz._spawn
+
+        def spawn(world, case):
+            if world is fuzzer.keeping.world:
+                at_start.append((fuzzer.keeping.engine.renderer.resource_counts()["programs"], free.count))
+            return real_spawn(world, case)
+
+        monkeypatch.setattr(still_fuzz, "_spawn", spawn)
+        monkeypatch.setattr(still_fuzz, "PROGRAMS_BEFORE_RESTART", base + 5)
+        ran, failures, passes = run_cases(fuzzer, still_fuzz.random_still_case, 4, 322)
+        assert ran == 4 and failures == [], failures
+        assert passes["refused"] + passes["rendered"] == 4 and fuzzer.restarts == 3, (fuzzer.restarts, at_start)
+        # Every case after the first starts on fresh engines, nothing left on the free list.
+        assert at_start[0] == (base, 0) and all(start == (base, 0) for start in at_start[1:]), (base, at_start)
+    finally:
+        FreePrograms.of(ctx).release()
+        ctx.release()
+
+
 def _glass_pair_case(change: str, detail: dict):
     from benchmarks.still_fuzz import StillCase
 

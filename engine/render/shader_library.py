@@ -531,7 +531,13 @@ class FreePrograms:
         """Release the longest unused programs until the list holds at most ``keep`` (by
         default the most any library given back held; ``held``: the one given back now)."""
         self.most = max(self.most, held)
-        keep = self.most if self.keep is None else self.keep
+        self.shrink(self.most if self.keep is None else self.keep)
+
+    def shrink(self, keep: int) -> None:
+        """Release the longest unused programs until the list holds at most ``keep``: for a
+        run that has gone through scenes it will not see again (each set of the scene's
+        features, shadow rings, kinds of lamp, fog, is a set of builds of its own: on
+        llvmpipe 3-7 MB each, its compiled code), which ``trim``'s rule would keep."""
         while self.count > keep:
             first = next(iter(self._free))
             entries = self._free[first]
