@@ -423,9 +423,9 @@ def _spawn_see_through_mirror(world, alpha: float) -> int:
                        Mirror(max_depth=2, reflect_rate=0.7))
 
 
-# The programs the keeping engine may hold when a case starts before both engines are made
-# afresh and the context's free programs past its ``FreePrograms.keep`` (the suite's) are
-# released: each case's scene-wide features (shadow rings, kinds of lamp, fog, the screen
+# How many programs the keeping engine may hold as a case starts; past it both engines are
+# made afresh and the context's free programs past its ``FreePrograms.keep`` (the suite's)
+# are released.  Each case's scene-wide features (shadow rings, kinds of lamp, fog, the screen
 # effects) make builds of their own, about 35 new a case in each engine, 3-7 MB each on
 # llvmpipe: the process of ``--still-cases 60`` (seed 322, after the other parts) reached
 # 13.5 GB; 24 cases alone peaked at 4.1 GB, and at 2.9 GB with this bound (two restarts,

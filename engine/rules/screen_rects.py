@@ -15,9 +15,8 @@ def ndc_extents(corners: np.ndarray,
     (n, 8, 4) world rows through ``view_proj`` ((4, 4) or (n, 4, 4), as ``view_matrix`` gives
     it); (low and high corners, (n, 2); whether a corner lies at or behind the eye, where
     it is not divided by its w and the box's rectangle means nothing; whether every corner
-    does).  The one projection under
-    ``projected_rects`` (whole pixels, for the monitors' tests) and
-    ``screen_refraction.box_rects`` (subpixel, for the glass's layers)."""
+    does).  The one projection under ``projected_rects`` (whole pixels, for the monitors'
+    tests) and ``screen_refraction.box_rects`` (subpixel, for the glass's layers)."""
     clip = corners @ view_proj   # every corner of every box at once
     w = clip[:, :, 3]
     ndc = clip[:, :, :2] / np.where(w[:, :, None] > 1e-6, w[:, :, None], 1.0)
