@@ -295,3 +295,26 @@ def test_a_probe_shows_the_foam_where_the_water_is_shallow_at_any_depth(scene, d
     assert edge.sum() > 20 and deep.sum() > 200, (edge.sum(), deep.sum())
     assert changed[edge].mean() > 0.9, changed[edge].mean()
     assert not changed[deep].any()
+
+
+def test_a_probe_capture_asks_once_whether_its_faces_are_finished_as_a_root(scene, monkeypatch):
+    """Whether a probe's faces with no view tree are finished as a root (``_finished``: a
+    look over the transparent batches for foam, screen-refracting glass and see-through
+    surfaces) is asked once a capture: ``capture_probe`` passes its answer to the six-pass
+    ``capture`` (it asked twice, the same question a capture, before).  The capture still
+    shows the foam (the test above), so the answer passed down is the one that counts."""
+    from components import ReflectionProbe
+    from engine.render.probes import ProbeCaptures
+
+    asked, captured = [], []
+    finished, capture_probe = ProbeCaptures._finished, ProbeCaptures.capture_probe
+    monkeypatch.setattr(ProbeCaptures, "_finished", lambda self: asked.append(1) or finished(self))
+    monkeypatch.setattr(ProbeCaptures, "capture_probe",
+                        lambda self, *a, **k: captured.append(1) or capture_probe(self, *a, **k))
+
+    def build(world):
+        pool(1.0)(world)
+        world.spawn(Transform(position=(1.0, 0.8, 0.0)), ReflectionProbe(resolution=32, depth=0, refresh="every_frame"))
+
+    render(scene, build, size=(32, 24))
+    assert len(captured) >= 2 and len(asked) == len(captured), (len(asked), len(captured))

@@ -715,7 +715,7 @@ class ProbeCaptures:
             plan = self._keep_plan(key, views, unchanged, self._direct(finishes), finishes, regions)
         draws = {"six_pass": lambda: self.capture(key, views, table, settings.depth, settings.prefilter,
                                                   blends=blends, unchanged=unchanged, plan=plan,
-                                                  regions=regions),
+                                                  regions=regions, finishes=finishes),
                  "layered": lambda: self.capture_layered(key, views, prefilter=settings.prefilter)}
         # A face kept, or one no change reached (kept from the next capture on, once drawn
         # with a record): a capture of some faces, which the six-pass path draws.
@@ -740,8 +740,8 @@ class ProbeCaptures:
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
                 prefilter: str = "mips", direct: bool | None = None, build_mips: bool = True,
                 blends: SurfaceBlends = NO_BLENDS, unchanged: frozenset[int] = frozenset(),
-                plan: _KeepPlan | None = None, regions: dict[int, tuple[float, float, float, float]] | None = None
-                ) -> None:
+                plan: _KeepPlan | None = None, regions: dict[int, tuple[float, float, float, float]] | None = None,
+                finishes: bool | None = None) -> None:
         """Draw each face view of ``views`` (face -> view, all of the probe's resolution) into
         the probe's cube, then rebuild the cube's mips.  A face that sees mirrors or portals
         (``surfaces`` given, ``depth`` > 0) roots a view tree, which needs the id images of a
@@ -765,13 +765,16 @@ class ProbeCaptures:
         rectangle alone (``_draw_part``; straight into the face only).  Its mips are rebuilt with
         the others'; when no face was drawn and the chain was built from the faces as they
         are, not even that.  ``plan``: what is kept, worked out already (``capture_probe``,
-        for a capture drawn now, before any other); None works it out here."""
+        for a capture drawn now, before any other); None works it out here.  ``finishes``:
+        whether its faces are drawn as a tree's root is, answered already (``capture_probe``
+        asks ``_finished`` once, a look over the transparent batches); None asks here."""
         renderer = self.renderer
         resolution = next(iter(views.values())).size[0]
         cube = self.cube(key, resolution)
         trees = surfaces is not None and depth > 0
         # (a face that roots a tree, or finishes as a root does; ``direct`` forced: the path check's faces)
-        finishes = trees or (direct is None and self._finished())
+        if finishes is None:
+            finishes = trees or (direct is None and self._finished())
         if direct is None:
             direct = self._direct(finishes)
         targets_direct = self._face_targets(key, cube.texture) if direct and not finishes else None
