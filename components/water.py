@@ -97,8 +97,8 @@ class Water(TrackedComponent):
       surface, all of it at the water's edge and less of it deeper, in ``foam_color`` (a
       linear albedo), lit as any surface is (the suns and their shadows, the lamps, the light
       from all round), over the water's reflection and what is seen through it
-      (``shaders/include/foam.glsl``).  Drawn in every view the view trees draw; a probe's
-      faces show the water without it.
+      (``shaders/include/foam.glsl``).  Drawn in every view the view trees draw, a probe's
+      faces at any ``depth`` too.
     - **Ripples**: a ``Ripples`` component beside it makes it ripple (rings from drops, rain,
       and what wades through it with a ``Wake``: ``components/ripples.py``), their slopes
       bending the reflection and what is seen through the surface as the waves do.

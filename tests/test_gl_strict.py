@@ -446,9 +446,10 @@ def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
     """Every uniform block the scenes draw with has, in the GLSL (std140, as the driver lays it
     out), the size of the bytes the engine packs for it: a block the blocks of tests/
     test_rendering.py and test_ambient_light.py do not cover (Views, Shadows, VirtualLights, Fog,
-    FallbackRows, Caustics: the sample level's pond) included."""
+    FallbackRows, Caustics and Foam: the sample level's pond) included."""
     from engine.render.batched_mirrors import VIEWS_BLOCK_BYTES
     from engine.render.caustics import CAUSTICS_BLOCK_BYTES
+    from engine.render.foam import FOAM_BLOCK_BYTES
     from engine.render.fog import FOG_BLOCK_BYTES
     from engine.render.irradiance import IRRADIANCE_BLOCK_BYTES
     from engine.render.mirror_passes import _FALLBACK_IDS_BYTES, _FALLBACK_WEIGHTS, FALLBACK_ROWS
@@ -457,7 +458,7 @@ def test_uniform_blocks_are_the_size_the_engine_writes(ctx):
 
     packed = {"Camera": CAMERA_BLOCK_BYTES, "Lights": LIGHTS_BLOCK_BYTES, "Irradiance": IRRADIANCE_BLOCK_BYTES,
               "Views": VIEWS_BLOCK_BYTES, "Shadows": SHADOWS_BLOCK_BYTES, "VirtualLights": VIRTUAL_BLOCK_BYTES,
-              "Fog": FOG_BLOCK_BYTES, "Caustics": CAUSTICS_BLOCK_BYTES,
+              "Fog": FOG_BLOCK_BYTES, "Caustics": CAUSTICS_BLOCK_BYTES, "Foam": FOAM_BLOCK_BYTES,
               "FallbackRows": _FALLBACK_IDS_BYTES + FALLBACK_ROWS * _FALLBACK_WEIGHTS.size}
     with strict_draws(ctx) as strict:
         for name in ("hall_start", "mirror_ring_8_batched", "mirror_light_moving", "fog_batched"):
