@@ -90,7 +90,7 @@ void emit_corner(int c, vec4 position, MirrorView v) {
 #ifdef FOG
     v_clip = v.clip_plane;
 #endif
-    gl_Layer = int(v.node.x);  // the face (a face view's node index is its face)
+    gl_Layer = gl_InvocationID;  // the face (views[i] is face i)
     EmitVertex();
 }
 

@@ -39,13 +39,14 @@ def _floor_with_probe(world, hidden_caster: bool = False) -> None:
 
 
 def _faces_drawn(cube: _Cube) -> list[int]:
-    """The probe faces drawn from now on, by node, appended as they are drawn (the drawing
-    itself unchanged)."""
+    """The probe faces drawn from now on, by face (a face view's name, "probe face N"),
+    appended as they are drawn (the drawing itself unchanged)."""
     drawn: list[int] = []
     draw = cube.probes.scene_pass.draw
 
     def seen_drawing(views, *args, **kwargs):
-        drawn.extend(view.node for view in views if view.name.startswith("probe face"))
+        drawn.extend(int(view.name.removeprefix("probe face ")) for view in views
+                     if view.name.startswith("probe face"))
         return draw(views, *args, **kwargs)
 
     cube.probes.scene_pass.draw = seen_drawing

@@ -835,3 +835,37 @@ def test_a_monitors_picture_bends_what_is_behind_a_pane_as_the_cameras_view_does
     # (the frame is tone-mapped and 8-bit: the picture, linear and half-float, within that)
     np.testing.assert_allclose(linear_to_srgb8(np.clip(picture, 0.0, 1.0)).astype(float),
                                linear_to_srgb8(np.clip(shown, 0.0, 1.0)).astype(float), atol=3)
+
+
+@pytest.mark.parametrize("depth", [0, 1])
+def test_a_probe_face_shows_what_is_behind_a_pane_as_it_drew_it(scene, depth):
+    """A probe behind a pane of index 1 (a world with no mirror or portal; the probe's
+    ``depth`` 0 or 1): its -Z face, which looks through the pane at the room, is the face
+    drawn without the pane (the face is finished as a root is and the pane marches its copy,
+    ``ProbeCaptures._finished``), where the pane refracting the probe's or sky's image alone
+    (``screen=False``) shows the sky over the red post and the blue block."""
+    from components import ReflectionProbe
+    from engine.core.cube_faces import FACE_NAMES
+
+    face = FACE_NAMES.index("-Z")
+
+    def captured(with_pane: bool, screen: bool = True) -> np.ndarray:
+        held = {}
+
+        def build(world):
+            look_from(world, (0.0, 1.2, 4.0), (0.0, 1.0, 0.0), fov=50.0)
+            room(world)
+            if with_pane:
+                pane(world, 1.0, screen)
+            held["probe"] = world.spawn(Transform(position=(0.0, 1.0, 2.5)),
+                                        ReflectionProbe(resolution=64, depth=depth, refresh="once"))
+
+        runner, _ = framed(scene, build)
+        return runner.engine.renderer.probes.read_face(held["probe"], face)[..., :3].astype(np.float64)
+
+    drawn, seen, sky_only = captured(False), captured(True), captured(True, screen=False)
+    covered = np.abs(sky_only - drawn).max(axis=-1) > 0.05   # where the pane hides the room without the march
+    assert covered.sum() > 300, covered.sum()
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    assert np.quantile(levels[covered], 0.99) <= 2.0 and levels[covered].mean() < 0.3, \
+        (np.quantile(levels[covered], 0.99), levels[covered].mean())

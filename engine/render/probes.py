@@ -84,12 +84,14 @@ def face_view(face: int, position: glm.vec3, near: float, far: float, size: int,
     """The view of cube face ``face`` from ``position`` (``skip``: the entity left out, the
     probe's own object): a probe view (an entity hidden in probe captures is not drawn in it,
     nor in the mirrors and portals it sees) showing the reflection ``layers`` given (the
-    probe's ``layer_mask``)."""
+    probe's ``layer_mask``).  Its ``node`` is 0: a face drawn into a level target is its own
+    tree's root, whose node image is all 0 (the screen refraction's march keeps to the pixels
+    of its view's node); the layered pass takes a face's layer from its invocation."""
     forward, _, up = CUBE_FACES[face]
     eye = glm.vec3(position)
     view = glm.lookAt(eye, eye + glm.vec3(forward), glm.vec3(up))
     proj = glm.perspective(glm.radians(90.0), 1.0, near, far)
-    return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", node=face, skip=skip,
+    return View(view=view, proj=proj, eye=eye, size=(size, size), name=f"probe face {face}", skip=skip,
                 hide=skip, kinds=VIEW_PROBE, layers=layers)
 
 

@@ -593,8 +593,9 @@ class ScenePass:
         opaque draws are (``engine/render/screen_refraction.py``).  ``conditions`` as for
         ``draw``; ``reach``: the refracting batches' ``batch_reach`` of ``views``, where the
         caller has it.  Nothing where none refracts or none reaches the views, or
-        for a view drawn whole (its ``options.transparent``: a probe face's, which drew them
-        with its opaque batches); where none refracts, the copies are let go once a whole
+        for a view drawn whole (its ``options.transparent``, which drew them with its opaque
+        batches: a paths' self-check's face; a probe's faces finish as a root where glass
+        refracts, ``ProbeCaptures._finished``); where none refracts, the copies are let go once a whole
         frame has taken none (water takes them too)."""
         renderer, ctx = self.renderer, self.ctx
         refracting = renderer.refracting_batches()
@@ -1103,7 +1104,7 @@ class ScenePass:
 
     def draw_layered(self, views: Sequence[View], target: LayeredCubeTarget | LayeredArrayTarget,
                      culled: bool = True) -> None:
-        """The six faces of a cube map in one pass (``views[i]`` is face i, node i): every
+        """The six faces of a cube map in one pass (``views[i]`` is face i, its layer): every
         batch drawn once through the geometry shader with six invocations, each triangle
         emitted to the faces whose frustum it touches (``culled``) or to all six, then the
         sky behind, per face.  Colour only: a layered face has no ids, so it cannot root a

@@ -45,9 +45,11 @@ nothing. Either find gives way to the probe's or sky's image where the rays of n
 pixels land far apart in the copy (``REFRACTION_SPREAD``: a ball's reflection, minified most
 towards its rim, would be one texel of the copy a pixel, speckled; the cube is read at the
 mip level of that footprint). Drawn after them, it takes no part in the screen reflections
-of the surfaces around it (they do not show it) nor in the screen's ambient occlusion. Probe
-captures draw every refracting batch with its opaque draws, reading the probe or the sky
-(their faces have no copy). Where a build with the march would read more samplers than the
+of the surfaces around it (they do not show it) nor in the screen's ambient occlusion. A
+probe's faces, each the root of its own tree (node 0: the march keeps to its view's node),
+march their own copies as the camera's view does (``ProbeCaptures._finished``); only a view
+drawn whole (the paths' self-checks) draws its refracting batches with its opaque draws,
+reading the probe or the sky. Where a build with the march would read more samplers than the
 fragment stage has (a 16-unit driver's fullest builds), the build without serves and a
 ``GLLimitWarning`` says so.
 
