@@ -109,6 +109,13 @@ def own_mesh(mesh):
     return Mesh(mesh.positions.copy(), mesh.normals.copy(), mesh.uvs.copy(), mesh.indices.copy(), name=mesh.name)
 
 
+def probe_face_of(view) -> int | None:
+    """The cube face a probe's face view draws (``engine.render.probes.face_view`` names it
+    "probe face N"; its ``node`` is 0, as its own tree's root), or None for another view."""
+    prefix = "probe face "
+    return int(view.name.removeprefix(prefix)) if view.name.startswith(prefix) else None
+
+
 def srgb_to_linear(values) -> np.ndarray:
     c = np.asarray(values, np.float64) / 255.0
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)

@@ -12,7 +12,7 @@ from pyglm import glm
 
 from components import DirectionalLight, Material, MeshRef, ReflectionProbe, Transform, Visibility
 from engine.assets.mesh import box, plane
-from tests.support import look_from
+from tests.support import look_from, probe_face_of
 
 
 def _probe_stage(runner):
@@ -39,14 +39,13 @@ def _floor_with_probe(world, hidden_caster: bool = False) -> None:
 
 
 def _faces_drawn(cube: _Cube) -> list[int]:
-    """The probe faces drawn from now on, by face (a face view's name, "probe face N"),
-    appended as they are drawn (the drawing itself unchanged)."""
+    """The probe faces drawn from now on, by face, appended as they are drawn (the drawing
+    itself unchanged)."""
     drawn: list[int] = []
     draw = cube.probes.scene_pass.draw
 
     def seen_drawing(views, *args, **kwargs):
-        drawn.extend(int(view.name.removeprefix("probe face ")) for view in views
-                     if view.name.startswith("probe face"))
+        drawn.extend(face for face in map(probe_face_of, views) if face is not None)
         return draw(views, *args, **kwargs)
 
     cube.probes.scene_pass.draw = seen_drawing

@@ -16,7 +16,7 @@ from engine.assets.mesh import box, plane
 from engine.core.cube_faces import CUBE_FACES
 from engine.rules.probe_rules import NO_RECT, face_rects
 from engine.rules.probe_schedule import ProbeSchedule
-from tests.support import look_from
+from tests.support import look_from, probe_face_of
 from tests.test_probe_keeping import _Cube, _probe_stage
 
 RESOLUTION = 64
@@ -180,7 +180,7 @@ def _parts_drawn(cube: _Cube) -> list[tuple[int, tuple[int, int, int, int]]]:
     draw = cube.probes._draw_part
 
     def recorded(view, target, rect):
-        parts.append((view.node, rect))
+        parts.append((probe_face_of(view), rect))
         return draw(view, target, rect)
 
     cube.probes._draw_part = recorded
