@@ -25,6 +25,7 @@ from components import (
     Refractive,
     Skybox,
     Transform,
+    look_rotation,
 )
 from engine.assets.mesh import Mesh, box, quad, sphere
 from engine.core.errors import GLLimitWarning
@@ -866,6 +867,56 @@ def test_a_probe_face_shows_what_is_behind_a_pane_as_it_drew_it(scene, depth):
     drawn, seen, sky_only = captured(False), captured(True), captured(True, screen=False)
     covered = np.abs(sky_only - drawn).max(axis=-1) > 0.05   # where the pane hides the room without the march
     assert covered.sum() > 300, covered.sum()
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    assert np.quantile(levels[covered], 0.99) <= 2.0 and levels[covered].mean() < 0.3, \
+        (np.quantile(levels[covered], 0.99), levels[covered].mean())
+
+
+@pytest.mark.parametrize("face", range(6))
+def test_every_face_of_a_probe_shows_what_is_behind_a_pane_as_it_drew_it(scene, face):
+    """Each cube face in turn looks through a pane of index 1 at a red and a blue block before
+    a grey wall (all set along the face's axis from the probe, the camera looking elsewhere):
+    the face is the face drawn without the pane, where the pane refracting the probe's or
+    sky's image alone (``screen=False``) shows the sky.  Faces drawn as a root once marched
+    only in face 0 (+X): a face view's node was its face, the root's node image all 0."""
+    from components import ReflectionProbe
+    from engine.core.cube_faces import CUBE_FACES
+
+    forward, right, up = (np.array(axis) for axis in CUBE_FACES[face])
+    at = np.array([0.0, 3.0, 0.0])
+
+    def floats(v) -> tuple[float, ...]:
+        return tuple(float(x) for x in v)
+
+    def spawn_box(world, centre, half, colour):
+        world.spawn(Transform(position=floats(centre)), MeshRef(box(floats(2.0 * np.abs(half) + 0.02))),
+                    Material(color=(*colour, 1.0)))
+
+    def captured(with_pane: bool, screen: bool = True) -> np.ndarray:
+        held = {}
+
+        def build(world):
+            look_from(world, floats(at - 6.0 * forward + 0.5 * up), floats(at - 9.0 * forward), fov=50.0)
+            world.spawn(Skybox())
+            world.spawn(DirectionalLight(direction=floats(forward - up * 0.5), intensity=2.0))
+            spawn_box(world, at + 4.0 * forward, 1.8 * (np.abs(right) + np.abs(up)), (0.5, 0.5, 0.5))
+            spawn_box(world, at + 2.5 * forward + 0.4 * right, 0.15 * (np.abs(right) + np.abs(up) + np.abs(forward)),
+                      (0.9, 0.1, 0.1))
+            spawn_box(world, at + 2.5 * forward - 0.4 * right - 0.3 * up,
+                      0.2 * (np.abs(right) + np.abs(up) + np.abs(forward)), (0.1, 0.2, 0.9))
+            if with_pane:
+                world.spawn(Transform(position=floats(at + 1.0 * forward), rotation=look_rotation(floats(forward))),
+                            MeshRef(quad(1.4, 1.4)), Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR),
+                            Refractive(ior=1.0, screen=screen))
+            held["probe"] = world.spawn(Transform(position=floats(at)),
+                                        ReflectionProbe(resolution=32, depth=0, refresh="once"))
+
+        runner, _ = framed(scene, build, (32, 24))
+        return runner.engine.renderer.probes.read_face(held["probe"], face)[..., :3].astype(np.float64)
+
+    drawn, seen, sky_only = captured(False), captured(True), captured(True, screen=False)
+    covered = np.abs(sky_only - drawn).max(axis=-1) > 0.05   # where the pane hides the blocks and the wall, unmarched
+    assert covered.sum() > 100, covered.sum()
     levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
     assert np.quantile(levels[covered], 0.99) <= 2.0 and levels[covered].mean() < 0.3, \
         (np.quantile(levels[covered], 0.99), levels[covered].mean())
