@@ -1245,24 +1245,30 @@ def test_the_levels_a_probes_faces_root_their_trees_in_go_with_the_last_probe_of
     assert counts()["probe_levels"] == 0
 
 
+@pytest.mark.parametrize("face", range(6))
 @pytest.mark.parametrize("depth", [0, 1])
-def test_a_see_through_mirror_shows_its_reflection_in_a_probe_at_any_depth(scene, depth):
-    """Under a sky of one grey everywhere, a half see-through mirror before a probe shows that
-    grey whatever it mixes: its reflection (depth 1: its view; depth 0: its fallback, the
-    sky) and what shows through it.  Drawn whole, a face at depth 0 showed the see-through
-    part alone (half the grey); finished as a root is, it shows both."""
+def test_a_see_through_mirror_shows_its_reflection_in_a_probe_at_any_depth(scene, depth, face):
+    """Under a sky of one grey everywhere, a half see-through mirror before a probe (along
+    each face's axis in turn) shows that grey whatever it mixes: its reflection (depth 1: its
+    view; depth 0: its fallback, the sky) and what shows through it.  Drawn whole, a face at
+    depth 0 showed the see-through part alone (half the grey); finished as a root is, it
+    shows both."""
+    from engine.core.cube_faces import CUBE_FACES
+
     grey = 0.25
+    forward = glm.vec3(*CUBE_FACES[face][0])
+    at = glm.vec3(0.0, 1.0, 0.0)
 
     def build(world):
         look_from(world, (0.0, 1.0, 5.0), (0.0, 1.0, 0.0))
         world.spawn(Skybox(faces=[np.full((8, 8, 3), grey, np.float32) for _ in range(6)]))
-        world.spawn(Transform(position=(0.0, 1.0, -2.0)), MeshRef(quad(3.0, 2.0)),
+        world.spawn(Transform(position=at + 2.0 * forward, rotation=look_rotation(forward)), MeshRef(quad(3.0, 2.0)),
                     Material(color=(1.0, 1.0, 1.0, 0.5), roughness=0.0), Mirror())
-        world.resources["probe"] = world.spawn(Transform(position=(0.0, 1.0, 0.0)),
+        world.resources["probe"] = world.spawn(Transform(position=at),
                                                ReflectionProbe(resolution=32, depth=depth, refresh="once"))
 
     runner = scene(build, (64, 48))
     runner.frame()
     runner.frame()
-    face = runner.engine.renderer.probes.read_face(runner.world.resources["probe"], 5)   # -z: the mirror
-    np.testing.assert_allclose(face[12:20, 12:20], grey, atol=0.01)
+    seen = runner.engine.renderer.probes.read_face(runner.world.resources["probe"], face)   # the mirror's face
+    np.testing.assert_allclose(seen[12:20, 12:20], grey, atol=0.01)
