@@ -1087,14 +1087,16 @@ SUN_DOWN = glm.normalize(glm.vec3(0.0, -1.0, -0.3))
 LAMPS_AT = {"point": np.array([-0.3, 2.9, 0.2]), "spot": np.array([-0.3, 6.0, 0.2])}
 
 
-def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=False, post=True, lamp=None):
+def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=False, post=True, lamp=None,
+                turn=None):
     """A floor, a sun nearly overhead, a flat see-through pane (``alpha``; ``glass``: a
     Refractive, drawn with the opaque batches), a second one under it (``second``: its alpha;
     both cast or neither: ``casts``),
     a box hanging over the pane (``above``) and a 3 m post (the level's top, so the pane
     moving or going leaves the level's box as it is).  ``lamp`` ("point", or "spot": a cone
     40 degrees a side, looking down) lights it instead of the sun, from LAMPS_AT (``sun``:
-    its intensity over 2.5, the sun's)."""
+    its intensity over 2.5, the sun's).  ``turn`` (a glm quaternion) turns the whole scene,
+    camera and lamp too, about the origin."""
     def build(world):
         ids = world.resources["ids"] = {}
         look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
@@ -1120,17 +1122,21 @@ def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=Fals
                                        Material(color=(0.9, 0.8, 0.2)))
         if post:
             world.spawn(Transform(position=(-5.0, 1.5, -5.0)), MeshRef(box((0.2, 3.0, 0.2))), Material())
+        if turn is not None:
+            for _, (transform,) in world.query(Transform):
+                transform.position = turn * glm.vec3(transform.position)
+                transform.rotation = turn * transform.rotation
     return build
 
 
-def _pane_frames(scene, shadow_filter="single", **how):
-    """The frame with the pane (``how``), and the floor's share of the direct sunlight (or
+def _pane_frames(scene, shadow_filter="single", size=(320, 240), **how):
+    """The frame (``size``) with the pane (``how``), and the floor's share of the direct sunlight (or
     lamplight) the pane's dimming took away at each pixel: (without - with) / (without -
     sunless), where "without" has a pane that casts nothing and "sunless" no light: engines
     built apart.  (A pixel the light does not reach: 0.)"""
     frames = {}
     for name, extra in (("with", {}), ("without", {"casts": False}), ("sunless", {"casts": False, "sun": 0.0})):
-        runner = scene(_pane_scene(**{**how, **extra}), (320, 240))
+        runner = scene(_pane_scene(**{**how, **extra}), size)
         runner.engine.renderer.antialias = "off"
         runner.engine.renderer.shadows.filter = shadow_filter
         runner.frame()
@@ -1186,6 +1192,45 @@ def test_a_see_through_pane_takes_its_alpha_of_a_lamps_light(scene, lamp, alpha,
     assert np.abs(taken[beside]).max() < 0.02
     defines = dict(runner.engine.renderer.shadows.program_defines)
     assert defines.get("LAMP_SEE_THROUGH_SHADOWS") == "1" and ("SPOT_MAP0" in defines) == (lamp == "spot")
+
+
+# A half turn about (1, 0, 1): the lamp's -Y, +X and -Z faces, the ones the pane spans as
+# it stands, become its +Y, +Z and -X: the two scenes between them put the pane in all six.
+HALF_TURN_XZ = glm.angleAxis(math.pi, glm.normalize(glm.vec3(1.0, 0.0, 1.0)))
+
+
+@pytest.mark.parametrize("turned", [False, True], ids=["-Y+X-Z", "+Y+Z-X"])
+def test_a_see_through_pane_takes_its_alpha_of_a_point_lights_light_through_every_face(scene, turned):
+    """The point light over the pane, the scene as it stands and turned half about (1, 0, 1)
+    (HALF_TURN_XZ): between them the pane lies in each of the six faces of the lamp's cube,
+    and in each face's own share of the floor under the pane (the face GL's cube lookup takes
+    for the ray from the lamp, worked out here by the largest of its axes) the floor loses
+    alpha of the lamp's light.  A face whose see-through tile is drawn or read as another's
+    lets the whole light through there, or dims where no pane is."""
+    alpha, turn = 0.5, HALF_TURN_XZ if turned else glm.quat()
+    runner, taken, lit = _pane_frames(scene, alpha=alpha, lamp="point", turn=turn, size=(480, 360))
+    rotation = np.array(glm.mat3_cast(turn).to_list(), np.float64).T   # column-major -> rows: R @ x
+    normal = rotation @ np.array([0.0, 1.0, 0.0])
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = -(eye @ normal) / (rays @ normal)
+    points = (eye + rays * t[..., None]).reshape(-1, 3)        # the (turned) floor's points, world space
+    local = points @ rotation                                  # R^T: the scene as it stands
+    to_lamp = LAMPS_AT["point"] - local
+    at = local + to_lamp * ((PANE_AT[1] - local[:, 1]) / to_lamp[:, 1])[:, None]
+    reach = np.maximum(np.abs(at[:, 0] - PANE_AT[0]), np.abs(at[:, 2] - PANE_AT[2])).reshape(lit.shape)
+    floor = (runner.ids() == runner.world.resources["ids"]["floor"]) & lit
+    under, beside = floor & (reach < PANE_HALF - 0.08), floor & (reach > PANE_HALF + 0.08)
+    away = points - rotation @ LAMPS_AT["point"]                 # lamp to floor, world space
+    axis = np.abs(away).argmax(axis=1)
+    face = (2 * axis + (away[np.arange(len(away)), axis] < 0)).reshape(lit.shape)   # +X -X +Y -Y +Z -Z
+    names = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
+    expected = ("-Y", "+X", "-Z") if not turned else ("+Y", "+Z", "-X")
+    for name in expected:
+        mine = under & (face == names.index(name))
+        assert mine.sum() > 300, (name, mine.sum())
+        assert abs(float(np.median(taken[mine])) - alpha) < 0.03, (name, np.percentile(taken[mine], [5, 50, 95]))
+        assert np.percentile(np.abs(taken[mine] - alpha), 95) < 0.05, (name, np.percentile(taken[mine], [5, 50, 95]))
+    assert beside.sum() > 3000 and np.abs(taken[beside]).max() < 0.02
 
 
 def test_two_see_through_panes_let_through_the_product_and_what_is_over_them_keeps_its_light(scene):
