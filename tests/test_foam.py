@@ -261,15 +261,18 @@ def test_a_monitors_picture_shows_the_foam_the_cameras_view_does(scene, depth):
 @pytest.mark.parametrize("depth", [0, 1])
 def test_a_probe_shows_the_foam_where_the_water_is_shallow_at_any_depth(scene, depth):
     """A probe over the shore (its ``depth`` 0: no mirror or portal views in its faces, each
-    finished as a root is; 1: the pond's reflection view too): in the face looking down, where
-    a texel's ray from the probe finds more than ``foam_depth`` of water under the surface the
-    foam changes nothing, and at the water's edge nearly all of the surface is foam.  Before
-    the faces of a probe with no view tree were finished as a root, one at depth 0 showed
-    none (drawn whole: no copy of the depth under the water)."""
+    finished as a root is; 1: the pond's reflection view too): in every face that sees the
+    pond (looking down, and the -X, +Z and -Z faces' lower halves; +X looks past the shore),
+    where a texel's ray from the probe finds more than ``foam_depth`` of water under the
+    surface the foam changes nothing, and at the water's edge (seen looking down and along
+    the shore, +Z and -Z) nearly all of the surface is foam.  Before the faces of a probe
+    with no view tree were finished as a root, one at depth 0 showed none (drawn whole: no
+    copy of the depth under the water)."""
     from components import ReflectionProbe
     from engine.core.cube_faces import face_directions
 
-    probe_at, size, down = np.array([1.0, 0.8, 0.0]), 64, 3
+    probe_at, size = np.array([1.0, 0.8, 0.0]), 64
+    seen = {1: "-X", 3: "-Y", 4: "+Z", 5: "-Z"}   # the faces that see the pond; the last three its edge
 
     def probed(foam):
         def build(world):
@@ -281,20 +284,24 @@ def test_a_probe_shows_the_foam_where_the_water_is_shallow_at_any_depth(scene, d
     faces = []
     for foam in (1.0, 0.0):
         runner, _ = render(scene, probed(foam))
-        faces.append(runner.engine.renderer.probes.read_face(runner.world.resources["probe"], down))
-    directions = face_directions(down, size)
-    assert (directions[..., 1] < -0.5).all()   # (the face looks down)
-    t = -probe_at[1] / directions[..., 1]
-    at = probe_at + directions * t[..., None]
-    on = (np.abs(at[..., 0]) < 1.95) & (np.abs(at[..., 2]) < 1.95)
+        faces.append({face: runner.engine.renderer.probes.read_face(runner.world.resources["probe"], face)
+                      for face in seen})
     k = math.tan(SLOPE)
-    s = (FLOOR_AT[1] + (probe_at[0] - FLOOR_AT[0]) * k - probe_at[1]) / (directions[..., 1] - directions[..., 0] * k)
-    under = np.where(on & (s > t), at[..., 1] - (probe_at + directions * s[..., None])[..., 1], np.nan)
-    changed = np.abs(faces[0] - faces[1]).max(axis=-1) > 0.02
-    edge, deep = under < 0.05 * FOAM_DEPTH / 0.3, under > FOAM_DEPTH * 1.05
-    assert edge.sum() > 20 and deep.sum() > 200, (edge.sum(), deep.sum())
-    assert changed[edge].mean() > 0.9, changed[edge].mean()
-    assert not changed[deep].any()
+    rise = FLOOR_AT[1] + (probe_at[0] - FLOOR_AT[0]) * k - probe_at[1]   # the floor's plane along a ray from the probe
+    for face, name in seen.items():
+        directions = face_directions(face, size)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -probe_at[1] / directions[..., 1]
+            s = rise / (directions[..., 1] - directions[..., 0] * k)
+        at = probe_at + directions * t[..., None]
+        on = (t > 0) & (np.abs(at[..., 0]) < 1.95) & (np.abs(at[..., 2]) < 1.95)
+        under = np.where(on & (s > t), at[..., 1] - (probe_at + directions * s[..., None])[..., 1], np.nan)
+        changed = np.abs(faces[0][face] - faces[1][face]).max(axis=-1) > 0.02
+        edge, deep = under < 0.05 * FOAM_DEPTH / 0.3, under > FOAM_DEPTH * 1.05
+        assert deep.sum() > 200 and (edge.sum() > 20) == (name != "-X"), (name, edge.sum(), deep.sum())
+        if name != "-X":
+            assert changed[edge].mean() > 0.9, (name, changed[edge].mean())
+        assert not changed[deep].any(), name
 
 
 def test_a_probe_capture_asks_once_whether_its_faces_are_finished_as_a_root(scene, monkeypatch):
