@@ -1088,7 +1088,7 @@ LAMPS_AT = {"point": np.array([-0.3, 2.9, 0.2]), "spot": np.array([-0.3, 6.0, 0.
 
 
 def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=False, post=True, lamp=None,
-                turn=None):
+                turn=None, lamp_before=False):
     """A floor, a sun nearly overhead, a flat see-through pane (``alpha``; ``glass``: a
     Refractive, drawn with the opaque batches), a second one under it (``second``: its alpha;
     both cast or neither: ``casts``),
@@ -1096,10 +1096,14 @@ def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=Fals
     moving or going leaves the level's box as it is).  ``lamp`` ("point", or "spot": a cone
     40 degrees a side, looking down) lights it instead of the sun, from LAMPS_AT (``sun``:
     its intensity over 2.5, the sun's).  ``turn`` (a glm quaternion) turns the whole scene,
-    camera and lamp too, about the origin."""
+    camera and lamp too, about the origin.  ``lamp_before``: a casting point light spawned
+    first, in a corner, whose 3 m range reaches neither the pane nor the floor under it."""
     def build(world):
         ids = world.resources["ids"] = {}
         look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
+        if lamp_before:
+            ids["lamp_before"] = world.spawn(Transform(position=(-6.0, 1.5, 6.0)),
+                                             PointLight(intensity=4.0, range=3.0, shadows=True))
         if lamp is None:
             world.spawn(DirectionalLight(direction=tuple(SUN_DOWN), intensity=sun))
         else:
@@ -1231,6 +1235,24 @@ def test_a_see_through_pane_takes_its_alpha_of_a_point_lights_light_through_ever
         assert abs(float(np.median(taken[mine])) - alpha) < 0.03, (name, np.percentile(taken[mine], [5, 50, 95]))
         assert np.percentile(np.abs(taken[mine] - alpha), 95) < 0.05, (name, np.percentile(taken[mine], [5, 50, 95]))
     assert beside.sum() > 3000 and np.abs(taken[beside]).max() < 0.02
+
+
+@pytest.mark.parametrize("lamp", ["point", "spot"])
+def test_a_lamp_in_the_second_shadow_slot_reads_its_own_see_through_tiles(scene, lamp):
+    """A casting lamp in a far corner, its range short of the pane, takes the first shadow
+    slot; the lamp over the pane takes the second, whose row of see-through tiles (a point
+    light's six, a spot's first) holds the pane: under it the floor loses alpha of that
+    lamp's light, beside it nothing (a lookup in the first slot's row reads no pane)."""
+    alpha = 0.5
+    runner, taken, lit = _pane_frames(scene, alpha=alpha, lamp=lamp, lamp_before=True)
+    shadows = runner.engine.renderer.shadows
+    assert shadows._lamp_through[0, 2] == 0.0 and shadows._lamp_through[1, 2] > 0.0   # (slot 1's tiles hold it)
+    under, beside = _under_pane(runner, 0.08, lamp=lamp)
+    under, beside = under & lit, beside & lit
+    assert under.sum() > 3000 and beside.sum() > 3000, (under.sum(), beside.sum())
+    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
+    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05, np.percentile(taken[under], [5, 50, 95])
+    assert np.abs(taken[beside]).max() < 0.02
 
 
 def test_two_see_through_panes_let_through_the_product_and_what_is_over_them_keeps_its_light(scene):
