@@ -1088,7 +1088,7 @@ LAMPS_AT = {"point": np.array([-0.3, 2.9, 0.2]), "spot": np.array([-0.3, 6.0, 0.
 
 
 def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=False, post=True, lamp=None,
-                turn=None, lamp_before=False):
+                turn=None, lamp_before=False, sun_before=False):
     """A floor, a sun nearly overhead, a flat see-through pane (``alpha``; ``glass``: a
     Refractive, drawn with the opaque batches), a second one under it (``second``: its alpha;
     both cast or neither: ``casts``),
@@ -1097,10 +1097,13 @@ def _pane_scene(alpha, casts=True, glass=False, sun=2.5, second=None, above=Fals
     40 degrees a side, looking down) lights it instead of the sun, from LAMPS_AT (``sun``:
     its intensity over 2.5, the sun's).  ``turn`` (a glm quaternion) turns the whole scene,
     camera and lamp too, about the origin.  ``lamp_before``: a casting point light spawned
-    first, in a corner, whose 3 m range reaches neither the pane nor the floor under it."""
+    first, in a corner, whose 3 m range reaches neither the pane nor the floor under it.
+    ``sun_before``: a weak sun from elsewhere spawned first, casting no shadow."""
     def build(world):
         ids = world.resources["ids"] = {}
         look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
+        if sun_before:
+            world.spawn(DirectionalLight(direction=(0.5, -1.0, 0.4), intensity=0.4, shadows=False))
         if lamp_before:
             ids["lamp_before"] = world.spawn(Transform(position=(-6.0, 1.5, 6.0)),
                                              PointLight(intensity=4.0, range=3.0, shadows=True))
@@ -1235,6 +1238,20 @@ def test_a_see_through_pane_takes_its_alpha_of_a_point_lights_light_through_ever
         assert abs(float(np.median(taken[mine])) - alpha) < 0.03, (name, np.percentile(taken[mine], [5, 50, 95]))
         assert np.percentile(np.abs(taken[mine] - alpha), 95) < 0.05, (name, np.percentile(taken[mine], [5, 50, 95]))
     assert beside.sum() > 3000 and np.abs(taken[beside]).max() < 0.02
+
+
+def test_a_sun_in_the_second_shadow_slot_reads_its_own_see_through_map(scene):
+    """A sun casting no shadow spawned first (directional slot 0), the pane's sun second
+    (slot 1, DIRECTIONAL_SHADOWS 2): under the pane the floor loses alpha of the second
+    sun's light, beside it nothing."""
+    alpha = 0.4
+    runner, taken, _ = _pane_frames(scene, alpha=alpha, sun_before=True)
+    assert ("DIRECTIONAL_SHADOWS", "2") in runner.engine.renderer.shadows.program_defines
+    under, beside = _under_pane(runner, 0.08)
+    assert under.sum() > 800 and beside.sum() > 20000, (under.sum(), beside.sum())
+    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
+    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05
+    assert np.abs(taken[beside]).max() < 0.02
 
 
 @pytest.mark.parametrize("lamp", ["point", "spot"])
