@@ -998,6 +998,37 @@ def test_a_lamps_light_under_rippled_water_is_where_a_ray_tracer_gathers_it(scen
     assert np.median(np.abs(share - traced)) < 0.04, np.median(np.abs(share - traced))
 
 
+def test_a_lamp_over_the_water_in_the_second_lamp_slot_gathers_its_own_net(scene):
+    """``lamp_pool``'s lamp 1.5 m over the pool, with another lamp spawned before it (the
+    first point-light slot) whose range stops short of the water: the lamp over the pool is
+    held from the second slot (``CausticBlock.lamps`` (1,): the block's first caustic lamp
+    names light slot 1), and its net on the floor is the tracer's, as in the one-lamp pool;
+    the frame is the one-lamp pool's (the other lamp lights nothing here)."""
+    def build(world):
+        pool(1.0, sun=(0.0, -1.0, 0.0))(world)
+        (sun,) = [entity for entity, _ in world.query_one(DirectionalLight)]
+        world.delete_entity(sun)
+        world.spawn(Transform(position=(9.0, 1.0, 0.0)), PointLight(intensity=5.0, range=3.0))   # short of it
+        spawn_lamp(world, LAMP_HEIGHT, 12.0)
+
+    runner, lit = render(scene, build)
+    _, flat = render(scene, lamp_pool(0.0))
+    _, alone = render(scene, lamp_pool(1.0))
+    kept = runner.world.resources[KeptLights]
+    over = [slot for slot, entity in enumerate(kept.point)
+            if entity is not None and runner.world.get(entity, Transform).position.x == 0.0]
+    assert over == [1] and runner.engine.renderer.caustics.lamps == (1,)
+    points = floor_points(runner)
+    line = np.abs(points[..., 1]) < 0.04   # floor pixels on the line under the lamp
+    assert line.sum() > 100
+    share = lit[..., 0][line] / flat[..., 0][line]
+    traced = traced_lamp_light(points[..., 0][line], LAMP_HEIGHT)
+    assert traced.max() > 1.5 and traced.min() < 0.75, (traced.min(), traced.max())
+    assert np.corrcoef(share, traced)[0, 1] > 0.98, np.corrcoef(share, traced)[0, 1]
+    assert np.median(np.abs(share - traced)) < 0.04, np.median(np.abs(share - traced))
+    np.testing.assert_allclose(lit, alone, atol=1.5 / 255.0)
+
+
 def traced_reflected_lamp_light(xs: np.ndarray, lamp_height: float = LAMP_HEIGHT, height: float = CEILING,
                                 along_x: tuple[float, ...] = (0.0,), shape: str = "point") -> np.ndarray:
     """The light at points ``xs`` ``height`` over the surface (on the line over the lamp's

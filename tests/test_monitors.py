@@ -879,6 +879,48 @@ def test_a_monitor_drawn_when_seen_through_a_mirror_is_drawn_from_the_first_fram
     assert runner.stats.monitor_views == 1 and runner.stats.monitors_unseen == 0
 
 
+def test_a_monitor_drawn_when_seen_through_a_portal_is_drawn_from_the_first_frame(scene):
+    """The screen seen only through a portal: the active camera, far off, looks into portal
+    A, whose partner B stands behind the screen facing it.  From the first frame (no view of
+    the frame before to see it by) the camera carried through the pair
+    (``MonitorSystem._first_level``) sees the screen, so it is drawn every frame, each frame
+    equal to an engine whose monitor is drawn always, the box on the screen through the
+    portal; with B turned away from the screen it is not drawn."""
+    from engine.assets.portals import spawn_portal_pair
+    from tests.support import look_from
+
+    def make_build(update, b_turn=np.pi):
+        build, held = studio(Monitor(size=PICTURE, update=update))
+
+        def through(world):
+            build(world)
+            world.delete_entity(active_camera(world))
+            look_from(world, (20.0, 1.0, 2.0), target=(20.0, 1.0, 0.0), fov=50.0)
+            held["a"], held["b"] = spawn_portal_pair(world, (20.0, 1.0, 0.0), None, (0.0, 1.0, 8.5),
+                                                     glm.angleAxis(float(b_turn), glm.vec3(0, 1, 0)), size=(2.0, 1.5))
+        return through, held
+
+    runners = []
+    for update in ("when_seen", "always"):
+        build, held = make_build(update)
+        runners.append((scene(build, (96, 72)), held))
+    seeing = runners[0][0]
+    drawn, same = [], []
+    for _ in range(4):
+        _moving_box(runners)
+        frames = [runner.frame(DT) for runner, _ in runners]
+        same.append(np.array_equal(frames[0], frames[1]))
+        drawn.append(seeing.stats.monitor_views)
+    assert seeing.stats.reflection_views >= 1
+    assert drawn == [1, 1, 1, 1] and same == [True, True, True, True], (drawn, same)
+    assert (frames[0][..., 0] > 60).sum() > 5   # the box, on the screen, through the portal
+    build, _ = make_build("when_seen", b_turn=np.pi / 2)   # (B looks along +x: no screen there)
+    away = scene(build, (96, 72))
+    for _ in range(2):
+        away.frame(DT)
+        assert away.stats.monitor_views == 0 and away.stats.monitors_unseen == 1
+
+
 def test_a_monitor_drawn_when_seen_by_another_monitor_is_drawn(scene):
     """Monitor B (``when_seen``) is seen by monitor A's camera alone (the active camera looks
     away): A, the lower entity, is drawn first each frame, and its view (its last drawing's)

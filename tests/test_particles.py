@@ -327,6 +327,39 @@ def test_a_lit_particle_is_lit_through_a_mirror_as_a_thin_sheet_is(scene, reflec
                                                                          without[middle].mean())
 
 
+def test_a_lit_particle_behind_a_see_through_pane_in_a_mirrors_light_takes_the_share_it_lets_through(scene):
+    """through_a_mirror's particle with a see-through pane (alpha 0.6, 0.5 m by 1 m) across the
+    line from it to the lamp's image (4, 0, 3), 0.1 m past the lamp's own depth along that
+    line (off the lamp's straight way to the particle and its way to the glass): the light the
+    mirror adds to the particle (less the frame whose mirror reflects none) is 0.4 of what it
+    adds with the pane casting nothing (the virtual light's see-through map, read by the
+    particles' lighting), and the particle's middle is the thin quad's there (the scene's
+    path: tests/test_virtual_lights.py)."""
+    way = glm.vec3(0.8, 0.0, 0.6)   # towards the lamp's image in the mirror
+
+    def build(particle: bool, pane: float, reflects: bool = True):
+        base = through_a_mirror(particle, reflects)
+
+        def make(world):
+            base(world)
+            world.spawn(Transform(position=way * 2.3, rotation=look_rotation(way)),
+                        MeshRef(quad(0.5, 1.0), casts_shadows=pane >= 0.0),
+                        Material(color=(0.1, 0.1, 0.1, abs(pane)), double_sided=True))
+        return make
+
+    runner, through = render(scene, build(True, 0.6))
+    assert runner.engine.renderer.shadows.virtual_see_through_atlas is not None
+    _, open_pane = render(scene, build(True, -0.6))
+    _, dark = render(scene, build(True, -0.6, reflects=False))
+    _, sheet = render(scene, build(False, 0.6))
+    middle = (slice(33, 39), slice(45, 51))
+    mirror_light = (open_pane - dark)[middle].mean(axis=(0, 1))
+    assert mirror_light.min() > 0.05, mirror_light
+    np.testing.assert_allclose((through - dark)[middle].mean(axis=(0, 1)) / mirror_light, 0.4, rtol=0.05)
+    np.testing.assert_allclose(through[middle].mean(axis=(0, 1)), sheet[middle].mean(axis=(0, 1)), rtol=0.04,
+                               atol=0.004)
+
+
 @pytest.mark.parametrize("light", ["sun", "lamp", "mirror"])
 def test_a_lit_particle_in_a_waters_body_is_lit_through_it_as_a_thin_sheet_is(scene, light):
     """The particle and the camera a metre under a tinted pond (red taken four times faster

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pyglm import glm
 
 from shell.editor import Editor, pick
 from tests.test_level_edit import edit_scene
@@ -214,3 +215,124 @@ def test_a_cast_from_a_view_meets_in_each_stretch_what_the_view_there_draws(scen
     origin, direction = view_ray(view.view_proj, runner.size, np.add(runner.project(VAMPIRE), 0.5))
     assert raycast_seen(runner.world, origin, direction, view_mask=view.view_mask) is None   # (the sky)
     assert raycast_seen(runner.world, origin, direction).hit.entity == ents["vampire"]   # (no mask: anything)
+
+
+def test_a_cast_through_a_portal_meets_what_the_portals_view_draws(scene):
+    """``raycast_seen`` with the main view's mask through a portal (portal A hiding layer 3,
+    its partner B turned a quarter about y, 10 m off and out of the camera's sight) agrees
+    with the GPU's id image pixel by pixel over portal A: beyond B a box hidden in portal
+    views (``Visibility(in_portals=False)``) and one on layer 3 stand before the boxes
+    behind them and are passed through (those are met), while a box hidden in direct views
+    and one hidden in mirror views are met (the view through a portal is no longer direct,
+    and is a portal's, not a mirror's: ``mask_through`` with ``mirror`` False and A's
+    layers).  Cast without the mask, the two passed through are met there."""
+    from components import Material, MeshRef, Portal, Transform, Visibility
+    from engine.assets.mesh import box
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+    from engine.rules.raycast import raycast_seen
+    from shell.handles import view_ray
+    from tests.support import look_from
+    from tests.test_mirrors import base_scene
+
+    turn = glm.angleAxis(glm.radians(90.0), glm.vec3(0, 1, 0))
+    a_at, b_at = glm.vec3(0.0, 1.5, 0.0), glm.vec3(10.0, 1.5, 0.0)
+    carry = pair_transform(glm.translate(a_at), glm.translate(b_at) * glm.mat4_cast(turn))
+    # Where each stands as seen through A (behind A's plane), its scale, what hides it.
+    seen_at = {"box": ((0.35, 1.2, -2.0), 1.0, None),
+               "ghost": ((0.34, 1.29, -0.8), 0.5, Visibility(in_portals=False)),
+               "vampire": ((-0.45, 1.0, -2.3), 1.0, Visibility(direct=False)),
+               "veiled": ((-0.26, 1.15, -0.9), 0.5, Visibility(layers=[3])),
+               "mirror_shy": ((0.0, 2.3, -2.0), 0.7, Visibility(in_mirrors=False))}
+    ents = {}
+
+    def build(world):
+        base_scene(world)
+        look_from(world, (0.3, 1.6, 3.2), (0.0, 1.5, 0.0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, a_at, None, b_at, turn)
+        world.get(ents["a"], Portal).hides_layers = [3]
+        for name, (image, scale, hidden) in seen_at.items():
+            at = glm.vec3(carry * glm.vec4(glm.vec3(image), 1.0))
+            ents[name] = world.spawn(Transform(position=at, scale=(scale, scale, scale)), MeshRef(box()),
+                                     Material(color=(0.8, 0.3, 0.1)), *([hidden] if hidden else []))
+
+    runner = scene(build, (160, 120))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    ids, surfaces = runner.ids(), runner.engine.renderer.targets.read_surface_ids()
+    view = runner.engine.main_view
+    inner = surfaces == ents["a"]   # (away from any edge in the id image)
+    for axis in (0, 1):
+        for step in (1, -1):
+            inner &= (np.roll(ids, step, axis=axis) == ids) & (np.roll(surfaces, step, axis=axis) == surfaces)
+    assert inner.sum() > 1000, inner.sum()
+    found = {name: 0 for name in seen_at}
+    wrong = []
+    for row, column in zip(*np.nonzero(inner), strict=True):
+        origin, direction = view_ray(view.view_proj, runner.size, (column + 0.5, row + 0.5))
+        seen = raycast_seen(runner.world, origin, direction, view_mask=view.view_mask)
+        cast = 0 if seen is None else seen.hit.entity
+        if cast != ids[row, column] or (seen is not None and seen.through != (ents["a"],)):
+            wrong.append((column, row, cast, int(ids[row, column])))
+        for name in seen_at:
+            found[name] += ids[row, column] == ents[name]
+    assert all(found[name] > 50 for name in ("box", "vampire", "mirror_shy")), found
+    assert found["ghost"] == 0 and found["veiled"] == 0, found
+    # Where each of the two stands in the way, the id image shows the box behind it, and the
+    # cast without the mask meets it.
+    for name, behind in (("ghost", "box"), ("veiled", "vampire")):
+        column, row = runner.project(seen_at[name][0])
+        assert inner[row, column] and ids[row, column] == ents[behind], (name, column, row)
+        origin, direction = view_ray(view.view_proj, runner.size, (column + 0.5, row + 0.5))
+        assert raycast_seen(runner.world, origin, direction).hit.entity == ents[name]
+    assert len(wrong) <= inner.sum() // 100, wrong[:10]
+
+
+def test_a_click_through_a_thing_hidden_in_direct_views_picks_what_the_screen_behind_shows(scene, ctx):
+    """The monitors' studio with a slab hidden in direct views (``Visibility(direct=False)``)
+    between the active camera and the screen: the frame shows the screen through it.  The
+    overlay's click on a pixel where the screen shows the red box selects the box (the main
+    view's cast to the screen meets only what the main view draws: its mask, passed to
+    ``into_pictures``), not the screen, as a click on the same pixel with no slab does."""
+    pytest.importorskip("imgui_bundle", reason="the debug overlay needs imgui-bundle (not installed here)")
+    from components import Material, MeshRef, Monitor, Transform, Visibility
+    from engine.assets.mesh import box
+    from shell.overlay import DebugOverlay
+    from tests.test_monitors import DT, PICTURE, SCREEN_AT, studio
+
+    size = (96, 72)
+    chosen = {}
+    for slab in (False, True):
+        made, held = studio(Monitor(size=PICTURE))
+
+        def build(world, made=made, held=held, slab=slab):
+            made(world)
+            if slab:
+                held["slab"] = world.spawn(Transform(position=(SCREEN_AT[0], SCREEN_AT[1], SCREEN_AT[2] + 0.6)),
+                                           MeshRef(box((2.4, 1.6, 0.1))), Material(color=(0.1, 0.9, 0.1)),
+                                           Visibility(direct=False))
+
+        runner = scene(build, size)
+        runner.engine.renderer.antialias = "off"
+        runner.frame(DT)
+        rgb = runner.frame(DT).astype(np.int32)
+        ids = runner.ids()
+        red = (ids == held["screen"]) & (rgb[..., 0] - rgb[..., 1] > 50)
+        inner = red.copy()   # (away from the box's edges, where a pixel's ray and the picture's texels part)
+        for axis in (0, 1):
+            for step in (1, -1):
+                inner &= np.roll(red, step, axis=axis)
+        assert inner.sum() > 5, inner.sum()
+        overlay = DebugOverlay(ctx)
+        try:
+            overlay.draw(runner.engine, runner.capture.framebuffer, size)
+            editor = overlay.editing(runner.engine)
+            picked = []
+            for row, column in np.argwhere(inner)[::3]:
+                assert overlay.click(runner.engine, column + 0.5, row + 0.5)
+                picked.append(editor.selected)
+        finally:
+            overlay.release()
+        assert set(picked) == {held["box"]}, (slab, set(picked), held)
+        chosen[slab] = np.argwhere(inner)
+    np.testing.assert_array_equal(chosen[True], chosen[False])   # (the slab hides nothing of the frame)

@@ -970,15 +970,27 @@ def _added_by_images(scene, build_for) -> tuple:
 FLOOR_MIRROR = ((1.75, 0.01, -1.25), (2.6, 6.0))   # a floor mirror across the shaft's patch (centre, x and z sides)
 
 
-def _image_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog) -> np.ndarray:
+def _level_pane_crossed(start: np.ndarray, way: np.ndarray, length: np.ndarray | float, pane) -> np.ndarray:
+    """Whether each line (rows: ``start`` + s ``way``, 0 < s < ``length``) crosses ``pane`` (a
+    level rectangle: its centre, its x and z sides)."""
+    (px, py, pz), (sx, sz) = pane
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (py - start[:, 1]) / way[:, 1]
+    at = start + way * s[:, None]
+    return (s > 0) & (s < length) & (np.abs(at[:, 0] - px) < sx / 2) & (np.abs(at[:, 2] - pz) < sz / 2)
+
+
+def _image_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, settings: VolumetricFog,
+                 points: int = 1000, pane=None, alpha: float = 0.0) -> np.ndarray:
     """The sun's light the floor mirror reflects (a sun at its image, travelling ``R``, the
-    sun's way turned up), scattered back along each ray: at each of 1,000 points, lit where
+    sun's way turned up), scattered back along each ray: at each of ``points`` points, lit where
     the line back along R meets the mirror's rectangle, nothing stands between, and the sun
-    reaches that point of the glass through the roof's gap."""
+    reaches that point of the glass through the roof's gap (``pane``: a level see-through
+    pane, ``_level_pane_crossed``'s, of ``alpha``: 1 - alpha of the light for each stretch of
+    its way, sun to glass and glass to the point, that crosses it)."""
     (cx, cy, cz), (width, depth) = FLOOR_MIRROR
     sun = np.array(tuple(SUN))
     up = sun * np.array([1.0, -1.0, 1.0])   # R: the reflected light's way
-    points = 1000
     t = (np.arange(points) + 0.5) / points
     total = np.zeros(len(origin))
     for first in range(0, len(origin), 512):
@@ -990,7 +1002,12 @@ def _image_light(origin: np.ndarray, way: np.ndarray, reach: np.ndarray, setting
         inside = (s > 0) & (np.abs(glass[:, 0] - cx) <= width / 2) & (np.abs(glass[:, 2] - cz) <= depth / 2)
         between = _hits(at, np.broadcast_to(-up, at.shape), [*ROOF, WALL]) < s
         sunlit = ~np.isfinite(_hits(glass, np.broadcast_to(-sun, glass.shape), ROOF))
-        lit = (inside & ~between & sunlit).reshape(along.shape)
+        lit = (inside & ~between & sunlit).astype(np.float64)
+        if pane is not None:
+            lit *= np.where(_level_pane_crossed(at, np.broadcast_to(-up, at.shape), s, pane), 1.0 - alpha, 1.0)
+            lit *= np.where(_level_pane_crossed(glass, np.broadcast_to(-sun, glass.shape), np.inf, pane),
+                            1.0 - alpha, 1.0)
+        lit = lit.reshape(along.shape)
         total[part] = (DENSITY * np.exp(-DENSITY * along) * lit).sum(1) * reach[part] / points
     g = settings.anisotropy
     c = way @ -up
@@ -1036,6 +1053,60 @@ def test_the_suns_light_off_a_mirror_lights_the_air_as_the_sun_at_its_image(scen
     assert np.median(column_error) < 0.05, np.median(column_error)
     assert np.quantile(column_error, 0.9) < 0.15, np.quantile(column_error, 0.9)
     assert np.abs(added[steady & (image == 0.0)]).max() < 0.01 * image.max()
+
+
+# A level pane over the floor mirror (centre, x and z sides), narrower along x than the way R
+# and the sun's way part in its height: no line of the image's map crosses it twice.
+MIRROR_PANE = ((1.8, 2.5, 0.5), (1.6, 3.0))
+
+
+def test_a_see_through_pane_in_the_light_off_a_mirror_lets_its_share_of_the_image_into_the_air(scene):
+    """The floor mirror's column of the sun's reflected light, with a level see-through pane
+    (alpha 0.6) 2.5 m over the glass across part of it: the image's light in the air (what the
+    march adds over the same hall whose mirror reflects no light) is ``_image_light``'s with
+    0.4 of it for each stretch of the way, sun to glass or glass to the point, that crosses
+    the pane (the virtual light's see-through map, read by the march at each step: at points
+    over the pane on the way out, under it where the sun came through it on the way in), not
+    the bare image's.  Rays that meet the pane on their way from the camera are left out."""
+    settings = VolumetricFog(steps=64, anisotropy=0.0)
+    alpha = 0.6
+
+    def hall(reflects: bool):
+        def build(world):
+            _hall(world, settings)
+            centre, sides = FLOOR_MIRROR   # (the quad's +y turned to -z)
+            world.spawn(Transform(position=centre, rotation=glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))),
+                        MeshRef(quad(*sides)), Material(), Mirror(reflects_light=reflects))
+            pane_centre, (sx, sz) = MIRROR_PANE   # (likewise: a level pane)
+            world.spawn(Transform(position=pane_centre, rotation=glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))),
+                        MeshRef(quad(sx, sz)), Material(color=(0.7, 0.8, 0.9, alpha), double_sided=True))
+        return build
+
+    runner, _, added, origin, way, shape, floor = _added_by_images(scene, hall)
+    assert runner.engine.renderer.shadows.virtual_see_through_atlas is not None
+    centre, (width, depth) = FLOOR_MIRROR
+    ends = np.minimum(floor, _hits(origin, way, [*ROOF, WALL, (centre, (width, 2e-4, depth))]))
+    reach = np.minimum(ends, settings.distance)
+    # The image's light at 400 points a ray, on the rays a 40 points' sum finds in its column
+    # (and their neighbours): elsewhere none.
+    near = (_image_light(origin, way, reach, settings, 40) > 0.0).reshape(shape)
+    near = (near | np.roll(near, 1, 0) | np.roll(near, -1, 0) | np.roll(near, 1, 1) | np.roll(near, -1, 1)).ravel()
+    image, bare = np.zeros(len(origin)), np.zeros(len(origin))
+    image[near] = _image_light(origin[near], way[near], reach[near], settings, 400, MIRROR_PANE, alpha)
+    bare[near] = _image_light(origin[near], way[near], reach[near], settings, 400)
+    seen_through = _level_pane_crossed(origin, way, reach, MIRROR_PANE).reshape(shape)
+    image, bare, reach = image.reshape(shape), bare.reshape(shape), reach.reshape(shape)
+    steady = np.abs(reach - np.roll(reach, 1, 0)) + np.abs(reach - np.roll(reach, 1, 1)) < 0.05 * reach
+    column = steady & ~seen_through & (image > 0.05 * image.max())
+    dimmed = column & (image < 0.8 * bare)   # (rays whose light the pane takes a fifth of or more)
+    assert column.sum() > 60 and dimmed.sum() > 30, (column.sum(), dimmed.sum())
+    assert bare[dimmed].sum() > 1.4 * image[dimmed].sum()
+    # Where the pane dims the light, the march's sum is the pane's truth's (the bare image's is
+    # half again as much), and texel by texel it keeps to it as it does beside the pane.
+    np.testing.assert_allclose(added[dimmed].sum() / image[dimmed].sum(), 1.0, atol=0.06)
+    error = np.abs(added - image)[column] / image[column]
+    assert np.median(error) < 0.07, np.median(error)
+    assert np.quantile(error, 0.9) < 0.2, np.quantile(error, 0.9)
 
 
 WALL_MIRROR = ((-3.0, 2.0, -1.0), (6.0, 4.0))   # a standing mirror facing +x (centre, z and y sides)
