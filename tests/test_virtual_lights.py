@@ -10,7 +10,17 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import DirectionalLight, Material, MeshRef, Mirror, PointLight, Portal, Transform, look_rotation
+from components import (
+    Camera,
+    DirectionalLight,
+    Material,
+    MeshRef,
+    Mirror,
+    PointLight,
+    Portal,
+    Transform,
+    look_rotation,
+)
 from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.portal_math import pair_transform
@@ -912,6 +922,51 @@ def test_a_see_through_pane_behind_the_second_mirror_dims_no_light_off_both(scen
     crosses the pane is what it is beside (with the plane left out: 1 - alpha)."""
     ratio = _twice_share_behind_a_pane(scene, np.array([-2.7, 0.2, 0.0]), "beyond_b")
     np.testing.assert_allclose(ratio, 1.0, rtol=0.06)
+
+
+def test_a_pane_past_what_the_mirror_lights_dims_none_of_its_light_where_one_on_the_way_in_does(scene):
+    """A lower sun (its way (1, -1/2, 0)) thrown by the mirror onto the wall's face, through a
+    level pane (alpha 0.6) high over the hall on its way in, and a standing pane behind the
+    wall (on the way out, past the face along the line): on the face the mirror's light is
+    0.4 of what it is with the high pane casting nothing, and the pane behind the wall takes
+    none of it, though the map's line through a point of the face meets both, the way-in
+    pane nearer than the point (its stretches before the glass are kept apart from the last
+    one's: shadows.glsl virtual_see_through_at)."""
+    sun = np.array([1.0, -0.5, 0.0]) / np.sqrt(1.25)
+
+    def build(reflects: bool, high_casts: bool, behind_casts: bool):
+        def make(world):
+            ids = _scene(world, sun=sun, reflects=reflects)
+            for entity, _ in world.query_one(Camera):
+                world.delete_entity(entity)
+            look_from(world, (2.0, 1.5, 4.0), (-1.0, 0.8, 0.0))
+            ids["high"] = world.spawn(Transform(position=(-1.5, 4.5, 0.0)), MeshRef(plane(7.0, 5.0),
+                                      casts_shadows=high_casts), Material(color=(0.7, 0.8, 0.9, PANE_ALPHA)))
+            facing_x = look_rotation(glm.vec3(-1, 0, 0))
+            ids["behind"] = world.spawn(Transform(position=(-1.6, 1.25, 0.0), rotation=facing_x),
+                                        MeshRef(quad(6.0, 2.5), casts_shadows=behind_casts),
+                                        Material(color=(0.7, 0.8, 0.9, PANE_ALPHA), double_sided=True))
+            world.resources["ids"] = ids
+        return make
+
+    frames = {}
+    for name, how in (("off", (False, True, True)), ("both", (True, True, True)), ("high", (True, True, False)),
+                      ("neither", (True, False, False))):
+        runner = scene(build(*how), (320, 240))
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        frames[name] = srgb_to_linear(runner.frame()).mean(axis=-1)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    t = (-1.0 - eye[0]) / rays[..., 0]
+    at = eye + rays * t[..., None]   # where each ray meets the face's plane (x = -1)
+    face = (runner.ids() == runner.world.resources["ids"]["wall"]) & (t > 0) & (at[..., 1] > 0.2) & \
+        (at[..., 1] < 1.5) & (np.abs(at[..., 2] + 0.55) < 0.65)   # (short of the cube's shadow at z 0.3-0.9)
+    assert face.sum() > 500, face.sum()
+    light = {name: frames[name][face] - frames["off"][face] for name in ("both", "high", "neither")}
+    assert np.median(light["neither"]) > 0.05, np.median(light["neither"])
+    np.testing.assert_allclose(np.median(light["high"] / light["neither"]), 1.0 - PANE_ALPHA, rtol=0.06)
+    np.testing.assert_allclose(np.median(light["both"] / light["high"]), 1.0, atol=0.02)
+    assert np.abs(light["both"] - light["high"]).max() < 0.02
 
 
 def test_a_see_through_pane_in_a_lamps_light_out_of_a_portal_lets_through_its_share(scene):

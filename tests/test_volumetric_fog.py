@@ -1055,19 +1055,25 @@ def test_the_suns_light_off_a_mirror_lights_the_air_as_the_sun_at_its_image(scen
     assert np.abs(added[steady & (image == 0.0)]).max() < 0.01 * image.max()
 
 
-# A level pane over the floor mirror (centre, x and z sides), narrower along x than the way R
-# and the sun's way part in its height: no line of the image's map crosses it twice.
-MIRROR_PANE = ((1.8, 2.5, 0.5), (1.6, 3.0))
+# Level panes over the floor mirror (centre, x and z sides): the narrow one narrower along x
+# than the way R and the sun's way part in its height (no line of the image's map crosses it
+# twice); the wide one met by many lines twice, on the way in and again past the points under it.
+MIRROR_PANES = {"narrow": ((1.8, 2.5, 0.5), (1.6, 3.0)), "wide": ((1.8, 2.5, 0.5), (3.2, 3.0))}
 
 
-def test_a_see_through_pane_in_the_light_off_a_mirror_lets_its_share_of_the_image_into_the_air(scene):
+@pytest.mark.parametrize("pane", list(MIRROR_PANES))
+def test_a_see_through_pane_in_the_light_off_a_mirror_lets_its_share_of_the_image_into_the_air(scene, pane):
     """The floor mirror's column of the sun's reflected light, with a level see-through pane
     (alpha 0.6) 2.5 m over the glass across part of it: the image's light in the air (what the
     march adds over the same hall whose mirror reflects no light) is ``_image_light``'s with
     0.4 of it for each stretch of the way, sun to glass or glass to the point, that crosses
     the pane (the virtual light's see-through map, read by the march at each step: at points
     over the pane on the way out, under it where the sun came through it on the way in), not
-    the bare image's.  Rays that meet the pane on their way from the camera are left out."""
+    the bare image's.  Rays that meet the pane on their way from the camera are left out.
+    Under the wide pane the line through a point meets the pane again past it, on the way
+    out: that point takes the pane's share once (the map keeps the stretches before the
+    glass apart from the last one's)."""
+    MIRROR_PANE = MIRROR_PANES[pane]  # noqa: N806
     settings = VolumetricFog(steps=64, anisotropy=0.0)
     alpha = 0.6
 

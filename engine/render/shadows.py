@@ -173,6 +173,9 @@ _LEG_CASTERS = PassState(depth_func="<", cull=False, clips=SCENE_CLIPS | frozens
 # let through multiplied into the texel's (its alpha, the depth, by MIN: _draw_see_through).
 _SEE_THROUGH_CASTERS = PassState(cull=False, blend=(moderngl.DST_COLOR, moderngl.ZERO, moderngl.ONE, moderngl.ONE),
                                  clips=SCENE_CLIPS)
+# A virtual light's see-through tile: the last stretch's share into green, its depth into
+# alpha; the stretches before it into red (``_draw_virtual_see_through``).
+_LAST_STRETCH_WRITES, _EARLIER_STRETCH_WRITES = (False, True, False, True), (True, False, False, False)
 _LEG_SEE_THROUGH_CASTERS = replace(_SEE_THROUGH_CASTERS, clips=SCENE_CLIPS | frozenset((CLIP_LEG_PLANE,)))
 # The see-through map's texels against the depth map's, a side (a soft dimming needs fewer).
 SEE_THROUGH_SCALE = 2
@@ -838,7 +841,11 @@ class ShadowMaps:
         the texels): cleared to all the light let through, then the see-through casters drawn
         from each stretch's view of ``views`` as the depth map's casters were (the same clip
         planes: in front of a stretch's surfaces, carried to where the image sees them), each
-        multiplying in its share and keeping the nearest depth (MIN, as the suns')."""
+        multiplying in its share: the stretches before the last surface into red alone (every
+        point the light reaches lies past them), the last stretch's into green, keeping its
+        nearest depth in alpha (MIN, as the suns'), so a pane the line meets on the way in and
+        again past a lit point (a pane over a floor mirror) dims that point once
+        (shadows.glsl virtual_see_through_at)."""
         ctx = self.ctx
         side = VIRTUAL_RESOLUTION // SEE_THROUGH_SCALE
         rect = ((slot % 2) * side, (slot // 2) * side, side, side)
@@ -849,7 +856,9 @@ class ShadowMaps:
         batches = self.renderer.see_through_casters()
         ctx.blend_equation = moderngl.FUNC_ADD, moderngl.MIN
         try:
-            for view, leg in zip(views, legs, strict=True):
+            for index, (view, leg) in enumerate(zip(views, legs, strict=True)):
+                framebuffer.color_mask = _LAST_STRETCH_WRITES if index == 0 else _EARLIER_STRETCH_WRITES
+                framebuffer.use()   # (moderngl applies a framebuffer's colour mask as it binds it)
                 self.renderer.bind_view(replace(view, size=(side, side)))
                 if len(leg.planes) == 1:
                     apply_pass_state(ctx, _SEE_THROUGH_CASTERS, rect, rect)
@@ -859,6 +868,8 @@ class ShadowMaps:
                     self._draw_see_through_casters(_LEG_SEE_THROUGH, {"leg_plane": tuple(glm.vec4(leg.planes[1]))},
                                                    body, batches)
         finally:
+            framebuffer.color_mask = (True, True, True, True)
+            framebuffer.use()
             ctx.blend_equation = moderngl.FUNC_ADD
 
     def set_virtual_color(self, slot: int, color: tuple[float, float, float], light_range: float) -> None:

@@ -298,8 +298,18 @@ float see_through_at(sampler2D map, vec3 p) {
 
 #ifdef VIRTUAL_SEE_THROUGH_SHADOWS
 // The lights through mirrors and portals' see-through maps (ShadowMaps.virtual_see_through_atlas),
-// laid out as the virtual atlas: read in virtual_shadow (virtual_light_ways.glsl).
+// laid out as the virtual atlas: read in virtual_shadow (virtual_light_ways.glsl).  Red: the
+// share the see-through things of the stretches before the last surface let through (every
+// point the light reaches lies past them); green and alpha: the last stretch's share and its
+// nearest see-through thing's depth, as a sun's map holds them (a pane over a floor mirror is
+// met twice on one texel's line, on the way in and on the way out: a point between the glass
+// and the pane takes its share once).
 uniform sampler2D virtual_see_through_atlas;
+
+float virtual_see_through_at(vec3 p) {
+    vec4 through = texture(virtual_see_through_atlas, p.xy);
+    return through.r * (p.z > through.a + SEE_THROUGH_BIAS ? through.g : 1.0);
+}
 #endif
 
 #ifdef SEE_THROUGH_SHADOWS

@@ -70,7 +70,7 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
     float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y);  // shadows.glsl
 #ifdef VIRTUAL_SEE_THROUGH_SHADOWS
-    lit *= see_through_at(virtual_see_through_atlas, p.xyz);  // what see-through things on its way let through
+    lit *= virtual_see_through_at(p.xyz);  // what see-through things on its way let through (shadows.glsl)
 #endif
     return lit;
 }
