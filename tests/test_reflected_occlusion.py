@@ -25,6 +25,7 @@ from components import (
     Material,
     MeshRef,
     Mirror,
+    Monitor,
     Transform,
     look_rotation,
 )
@@ -34,6 +35,7 @@ from engine.core.errors import GLLimitWarning
 from tests.support import box_hits, pixel_rays, srgb_to_linear
 from tests.test_ambient_occlusion import GREY, RADIUS, WALL_FACE, _room, open_share
 from tests.test_contact_shadows import BOX, SUN
+from tests.test_contact_shadows import SIZE as CONTACT_SIZE
 from tests.test_contact_shadows import _scene as contact_scene
 
 SIZE = (200, 150)
@@ -283,25 +285,39 @@ def _overhead(names: dict, world) -> dict:
     return names
 
 
-def _kept_in_mirror(scene, build, contact: ContactShadows, dark: dict) -> tuple:
+def _kept_in_mirror(scene, build, contact: ContactShadows, dark: dict, watched: bool = False) -> tuple:
     """The overhead mirror over ``build``'s scene (``build(world, contact, **options)``): each
     pixel's share of the light ``dark`` turns off kept under ``contact`` (linear, as
     ``tests/test_contact_shadows.py`` finds it), each pixel's floor point (its ray reflected
     off the ceiling to the floor, float64), the mirror's floor pixels to judge (lit, clear of
-    the box's footprint) and the runner drawn with ``contact``."""
+    the box's footprint) and the runner drawn with ``contact``.  ``watched``: ``contact`` on a
+    monitor's camera posed as the active one (which has none), the picture's pixels judged
+    (the frame and the picture ``tests/test_contact_shadows.py``'s size)."""
+    def posed(names: dict, world) -> dict:
+        _overhead(names, world)
+        if watched:   # (the lens where the active camera now stands)
+            lens = world.get(world.get(names["screen"], Monitor).camera, Transform)
+            active = world.get(names["camera"], Transform)
+            lens.position, lens.rotation = active.position, active.rotation
+        return names
+
     frames = []
     for light_off, shadows in (({}, contact), ({}, None), (dark, None)):
         names: dict = {}
-        runner = scene(lambda world, names=names, shadows=shadows, light_off=light_off: names.update(
-            _overhead(build(world, shadows, **light_off), world)), SIZE)
+        extra = {"watched": True} if watched else {}
+        runner = scene(lambda world, names=names, shadows=shadows, light_off=light_off, extra=extra: names.update(
+            posed(build(world, shadows, **light_off, **extra), world)), CONTACT_SIZE if watched else SIZE)
         runner.engine.renderer.antialias = "off"
         runner.frame()
-        frames.append((srgb_to_linear(runner.frame()), runner, names))
+        frame = srgb_to_linear(runner.frame())
+        if watched:
+            frame = runner.engine.renderer.monitors.read(names["screen"])[..., :3].astype(np.float64)
+        frames.append((frame, runner, names))
     (shadowed, runner, names), (lit, _, _), (off, _, _) = frames
     light = (lit - off).mean(axis=-1)
     kept = (shadowed - off).mean(axis=-1) / np.maximum(light, 1e-6)
     assert runner.stats.reflection_views == 1
-    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     starts = eye + rays * ((CEILING - eye[1]) / rays[..., 1])[..., None]
     ways = rays * np.array([1.0, -1.0, 1.0])
     points = starts + ways * (-starts[..., 1] / ways[..., 1])[..., None]
@@ -330,6 +346,25 @@ def test_a_mirror_shows_the_contact_shadow_where_the_sun_ray_meets_the_box(scene
     reflection_depth 0 it is kept everywhere (the camera's own view sees only the mirror)."""
     contact = ContactShadows(length=0.3, thickness=0.5, reflection_depth=depth)
     kept, points, floor = _kept_in_mirror(scene, contact_scene, contact, {"sun": 0.0})
+    towards = np.broadcast_to(-np.array(SUN, np.float64), points[floor].shape)
+    inside, outside = _judged(points, floor, towards, contact.length, 0.0)
+    assert inside.sum() > 120 and outside.sum() > 5000, (inside.sum(), outside.sum())
+    if depth:
+        assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.25, kept[inside]
+    else:
+        assert np.percentile(kept[inside], 5) > 0.97
+    assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
+
+
+@pytest.mark.parametrize("depth", [1, 0])
+def test_a_monitors_picture_shows_the_contact_shadow_in_its_mirror_where_the_sun_ray_meets_the_box(scene, depth):
+    """The same with ``ContactShadows`` on a monitor's camera posed as the active camera
+    (which has none), at the frame's size: in the picture's mirror level each floor point's
+    sun is gone within the ray's reach of the box and kept outside it, as the rays cast from
+    the active camera's view say (the picture's levels occluded as its camera's component
+    reaches: ``ScreenOcclusion.draw_picture``); at reflection_depth 0 it is kept everywhere."""
+    contact = ContactShadows(length=0.3, thickness=0.5, reflection_depth=depth)
+    kept, points, floor = _kept_in_mirror(scene, contact_scene, contact, {"sun": 0.0}, watched=True)
     towards = np.broadcast_to(-np.array(SUN, np.float64), points[floor].shape)
     inside, outside = _judged(points, floor, towards, contact.length, 0.0)
     assert inside.sum() > 120 and outside.sum() > 5000, (inside.sum(), outside.sum())
