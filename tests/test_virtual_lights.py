@@ -807,6 +807,27 @@ def test_a_see_through_pane_on_the_mirrors_way_lets_through_its_share(scene, whe
     np.testing.assert_allclose(_share_behind_the_pane(runner, off, on, PANES[where]), 1.0 - PANE_ALPHA, rtol=0.06)
 
 
+@pytest.mark.parametrize("decoys", [1, 2, 3])
+def test_a_virtual_light_in_a_later_slot_reads_its_own_see_through_tile(scene, decoys):
+    """Small mirrors of a higher ``priority`` beside the hall (along z, far from the floor the
+    mirror lights), each throwing the sun away from it, take the first virtual-light slots,
+    so the mirror's light is drawn in slot ``decoys`` (the 2 x 2 tiles' second column, and
+    in its second row: slots 2 and 3): the pane on its way out lets through 1 - alpha, as in
+    slot 0."""
+    def build(world):
+        _one_mirror_with_pane(PANES["way_out"])(world)
+        facing_minus_x = look_rotation(glm.vec3(1, 0, 0))
+        for z in (-5.0, 5.0, 9.0)[:decoys]:
+            world.spawn(Transform(position=(MIRROR_X, MIRROR_Y, z), rotation=facing_minus_x),
+                        MeshRef(quad(1.0, 1.0)), Material(), Mirror(reflects_light=True, priority=1))
+
+    runner, off, on = _frames(scene, build, size=(480, 360))
+    mirror = runner.world.resources["ids"]["mirror"]
+    slots = {slot: key[1] for slot, key in runner.engine.stages["shadows"]._virtual.items()}
+    assert len(slots) == decoys + 1 and slots[decoys] == (mirror,), slots
+    np.testing.assert_allclose(_share_behind_the_pane(runner, off, on, PANES["way_out"]), 1.0 - PANE_ALPHA, rtol=0.06)
+
+
 def test_without_a_unit_for_the_virtual_see_through_map_the_pane_dims_no_mirror_light_and_says_so(scene):
     """A context whose fragment stage has too few texture units for the virtual lights'
     see-through map (one more than the lamps'): a GLLimitWarning names the count, once, no
