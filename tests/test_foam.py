@@ -43,10 +43,12 @@ def floor_height(x: np.ndarray) -> np.ndarray:
     return FLOOR_AT[1] + (x - FLOOR_AT[0]) * math.tan(SLOPE)
 
 
-def pool(foam: float, *, water: bool = True, offset=(0.0, 0.0), post: bool = False, waves: bool = False):
+def pool(foam: float, *, water: bool = True, offset=(0.0, 0.0), post: bool = False, waves: bool = False,
+         halves=None):
     """A still pond 4 m square over a floor that rises out of it along +x, lit by a sun and a
     grey sky, seen from above; ``water`` False: an opaque quad of the foam's colour in its
-    place (what the foam's light is measured against)."""
+    place (what the foam's light is measured against); ``halves``: the pond as two waters,
+    its far half (z < 0) and its near one, each with its (foam, colour)."""
     def build(world):
         eye = glm.vec3(0.6, 2.2, 1.6)
         world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(0.8, 0.0, 0.0) - eye)), Camera(fov_y=55.0))
@@ -58,7 +60,12 @@ def pool(foam: float, *, water: bool = True, offset=(0.0, 0.0), post: bool = Fal
         if post:
             world.spawn(Transform(position=POST), MeshRef(box((0.2, 2.4, 0.2))),
                         Material(color=(0.6, 0.6, 0.6, 1.0), roughness=1.0))
-        if water:
+        if halves is not None:   # (one mesh and material: one batch of two waters)
+            mesh, look = quad(4.0, 2.0), Material(color=(0.05, 0.2, 0.25, 0.3), roughness=0.2)
+            for z, (strength, colour) in zip((-1.0, 1.0), halves, strict=True):
+                world.spawn(Transform(position=(0.0, 0.0, z), rotation=FLAT), MeshRef(mesh), look, Mirror(),
+                            Water(foam=strength, foam_depth=FOAM_DEPTH, foam_scale=0.1, foam_color=colour))
+        elif water:
             world.spawn(Transform(rotation=FLAT), MeshRef(quad(4.0, 4.0)),
                         Material(color=(0.05, 0.2, 0.25, 0.3), roughness=0.2,
                                  normal_map=wave_normal_map() if waves else None, normal_scale=0.2), Mirror(),
@@ -181,6 +188,32 @@ def test_a_mirror_shows_the_ponds_foam(scene):
     in_front = ~(under < np.inf)   # (pixels the pond does not cover: the mirror's own)
     changed = np.abs(foamy - plain).max(axis=-1) > 0.05
     assert (changed & on_mirror & in_front).sum() > 20, (changed & on_mirror & in_front).sum()
+
+
+def test_a_second_water_shows_its_own_foam_as_it_does_alone(scene):
+    """Two waters side by side, each with foam of its own colour: each half of the frame is
+    the frame with that water's foam alone (the other's off), the far one held in the block's
+    first slot and the near one in its second, where alone it had the first; and the near
+    one's foam is there (its half differs from the frame with the far one's alone)."""
+    far, near = (1.0, (0.9, 0.45, 0.3)), (0.8, (0.3, 0.55, 0.95))
+    runner, both = render(scene, pool(1.0, halves=(far, near)))
+    slots = [water.entity for water in runner.engine.renderer.foam.waters]
+    _, far_alone = render(scene, pool(1.0, halves=(far, (0.0, near[1]))))
+    _, near_alone = render(scene, pool(1.0, halves=((0.0, far[1]), near)))
+    eye, directions = pixel_rays(runner.engine.main_view, runner.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -eye[1] / directions[..., 1]
+    z = (eye + directions * t[..., None])[..., 2]
+    under = water_under(runner)
+    on_far, on_near = (under < np.inf) & (z < -0.05), (under < np.inf) & (z > 0.05)
+    (first, _), (second, _) = sorted(runner.world.query(Water), key=lambda pair: pair[0])
+    assert slots == [first, second]
+    shallow = under < FOAM_DEPTH
+    assert (on_far & shallow).sum() > 100 and (on_near & shallow).sum() > 100
+    near_foam = np.abs(near_alone - far_alone).max(axis=-1) > 0.05
+    assert near_foam[on_near & shallow].mean() > 0.3
+    np.testing.assert_allclose(both[on_far], far_alone[on_far], atol=1.5 / 255)
+    np.testing.assert_allclose(both[on_near], near_alone[on_near], atol=1.5 / 255)
 
 
 def test_foam_values_are_checked_and_waters_past_the_limit_are_said(scene):

@@ -706,6 +706,50 @@ def test_a_soft_particle_fades_by_the_room_behind_it(scene, gap, softness):
     assert added == pytest.approx(expected, rel=0.04, abs=0.01)
 
 
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_a_soft_particle_in_a_mirror_fades_by_the_room_behind_it_in_the_mirrors_view(scene, path):
+    """A solid additive square out of the camera's sight (beside and just in front of it) and
+    an unlit wall behind the camera, both seen only in the mirrors the camera faces: a
+    mirror's view (one of a level's two) reads its own level's depth, so the square's image
+    adds its colour times the room from it to the wall along the image camera's ray over its
+    softness (the ray from the eye's image through its centre), against the same square hard
+    (softness 0)."""
+    centre, wall_z, mirror_z, softness = glm.vec3(1.0, 0.0, 3.5), 5.5, -2.5, 4.0
+
+    def build(softness_now):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            for x in (-1.0, 1.0):   # (two mirrors: a level of two views, each drawn where its node is)
+                world.spawn(Transform(position=glm.vec3(x, 0.0, mirror_z)), MeshRef(quad(2.0, 3.0)), Mirror())
+            turned = glm.angleAxis(math.pi, glm.vec3(0.0, 1.0, 0.0))   # (facing the mirror)
+            world.spawn(Transform(position=glm.vec3(0.0, 0.0, wall_z), rotation=turned), MeshRef(quad(40.0, 40.0)),
+                        Material(color=(*WALL, 1.0), unlit=True))
+            if softness_now is not None:
+                world.spawn(Transform(position=centre),
+                            still(size=1.2, texture=solid(), softness=softness_now, color=(0.5, 0.5, 0.5, 1.0),
+                                  end_color=(0.5, 0.5, 0.5, 1.0)))
+        return make
+    shown = {}
+    for softness_now in (None, 0.0, softness):
+        runner = scene(build(softness_now), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.path = path
+        runner.frame()
+        shown[softness_now] = srgb_to_linear(runner.frame().astype(np.float64) / 255.0)
+        assert runner.stats.reflection_path == path
+    col, row = runner.project(glm.vec3(centre.x, centre.y, 2.0 * mirror_z - centre.z))   # its image's centre
+    assert not (0 <= runner.project(centre)[0] < SIZE[0])   # (the square itself is out of the camera's sight)
+    patch = (slice(row - 1, row + 2), slice(col - 1, col + 2), slice(None))
+    hard = (shown[0.0] - shown[None])[patch].mean()
+    soft = (shown[softness] - shown[None])[patch].mean()
+    assert hard > 0.3, hard
+    # The room along the image camera's ray: from the eye's image through the centre to the wall.
+    image_eye = np.array([EYE.x, EYE.y, 2.0 * mirror_z - EYE.z])
+    ray = np.array(centre) - image_eye
+    room = (wall_z - centre.z) * np.linalg.norm(ray) / ray[2]
+    assert soft / hard == pytest.approx(room / softness, abs=0.03), (soft / hard, room / softness)
+
+
 def test_emitters_are_drawn_farthest_first_in_each_view(scene):
     """Two solid alpha squares, a red one nearer the camera, a green one behind it, made in
     the other order: the red covers the green where they overlap; in a mirror behind them the

@@ -336,6 +336,55 @@ def test_ripples_bend_the_reflection_where_the_rings_are_and_nowhere_else(scene,
     assert (np.abs(after.astype(int) - frame.astype(int)).max(axis=-1) > 2).sum() > 30
 
 
+def test_a_second_water_shows_its_own_rings_where_its_field_slopes(scene):
+    """Two rippling ponds side by side before the checkered wall, a splash in the second (held
+    in the atlas's second tile, the Ripples block's second row): against the same ponds with
+    no Ripples, the frame changes on the second water where its own field read back slopes
+    (each pixel's point on it found along its ray) and nowhere on the first."""
+    size, cell = (128, 96), 0.02
+    other = (Transform(position=(1.0, 0.0, -0.6), rotation=FLAT), MeshRef(quad(1.8, 3.0)),
+             Material(color=(0.05, 0.2, 0.25, 0.3), roughness=0.2), Mirror(), Water())
+    drop = [(0.15, 0.03, (1.1, 0.0, -0.7))]
+
+    def ponds(rippling: bool):
+        ripples = (lambda: Ripples(speed=0.5, damping=0.0, cell=cell)) if rippling else (lambda: None)
+        build, held = pond(ripples(), size=(1.8, 3.0), centre=(-1.0, 0.0, -0.6), splashes=drop, wall=True,
+                           things=[other + ((ripples(),) if rippling else ())], eye=(0.0, 1.4, 2.5),
+                           target=(0.0, 0.0, -1.0))
+        return build, held
+    rippled_build, held = ponds(True)
+    plain_build, _ = ponds(False)
+    rippled, frame = run(scene, rippled_build, 24, size)
+    _, plain = run(scene, plain_build, 24, size)
+    atlas = rippled.engine.renderer.ripples
+    second = {"water": held["things"][0]}
+    assert atlas.tile_of(held["water"]) == 0 and atlas.tile_of(second["water"]) == 1
+    assert np.abs(heights(rippled, held)).max() == 0.0   # (the first's field is flat)
+    field = heights(rippled, second)
+    slope = np.hypot(*np.gradient(field.astype(np.float64), cell))
+    near = slope.copy()
+    for axis in (0, 1):
+        for shift in (-2, -1, 1, 2):
+            near = np.maximum(near, np.roll(slope, shift, axis=axis))
+    eye, directions = pixel_rays(rippled.engine.main_view, size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -eye[1] / directions[..., 1]
+    ahead = (t > 0) & np.isfinite(t)
+    at = eye + directions * np.where(ahead, t, 0.0)[..., None]
+    on_first = ahead & (np.abs(at[..., 0] + 1.0) < 0.85) & (np.abs(at[..., 2] + 0.6) < 1.45)
+    on_second = ahead & (np.abs(at[..., 0] - 1.0) < 0.85) & (np.abs(at[..., 2] + 0.6) < 1.45)
+    texel = atlas.to_texels(second["water"], at.reshape(-1, 3)).reshape(*size[::-1], 2)
+    ix = np.clip(texel[..., 0].astype(int), 0, field.shape[1] - 1)
+    iy = np.clip(texel[..., 1].astype(int), 0, field.shape[0] - 1)
+    under = near[iy, ix]
+    changed = np.abs(frame.astype(int) - plain.astype(int)).max(axis=-1)
+    flat, tilted = on_second & (under < 1e-5), on_second & (under > 0.02)
+    assert on_first.sum() > 1000 and flat.sum() > 1000 and tilted.sum() > 80, (on_first.sum(), flat.sum(),
+                                                                              tilted.sum())
+    assert changed[on_first].max() <= 2 and changed[flat].max() <= 2
+    assert (changed[tilted] > 2).mean() > 0.4
+
+
 def test_the_rings_fall_calm_and_then_cost_nothing(scene):
     """With damping, once a splash's rings have died away (their height under 0.01 mm) the
     water is no longer stepped, the composites' plain builds come back, and the frame is the
