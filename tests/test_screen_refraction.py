@@ -100,14 +100,15 @@ def test_a_pane_of_index_one_shows_the_frame_behind_it_as_drawn(scene, projectio
     def through(screen):
         def build(world):
             without(world)
-            pane(world, 1.0, screen)
+            world.resources["pane"] = pane(world, 1.0, screen)
         return build
 
     drawn = frame(scene, without)
-    seen = frame(scene, through(True))
+    runner, seen = framed(scene, through(True))
     sky_only = frame(scene, through(False))
     covered = np.abs(sky_only - drawn).max(axis=-1) > 0.05  # where the pane hides the room without it
     assert covered.sum() > 1000
+    assert (runner.ids()[covered] == runner.world.resources["pane"]).all()   # (the pane drawn there)
     levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
     # (the sky through it is the sky's cube map, a level or two from the sky drawn a pixel
     # each; a ray along the eye's may land on a pixel's neighbour at a shadow's edge)
@@ -247,9 +248,11 @@ def test_a_pane_in_a_mirror_shows_what_the_mirrors_view_drew_behind_it(scene):
     the camera faces: the mirror's view refracts its own image (a reflection level's copy),
     so the pane shows the post as the mirror shows it without the pane; refracting the sky
     instead (``screen`` False) hides it."""
-    drawn, seen, sky_only = (frame(scene, build) for build in through_mirror())
+    without, through, through_sky = through_mirror()
+    drawn, (runner, seen), sky_only = frame(scene, without), framed(scene, through), frame(scene, through_sky)
     red = (drawn[..., 0] > 0.3) & (drawn[..., 1] < 0.1)
     assert red.sum() > 60                                                      # the post, in the mirror
+    assert (runner.ids()[red] == runner.world.resources["pane"]).mean() > 0.6  # the pane drawn over it
     assert ((sky_only[..., 0] > 0.3) & (sky_only[..., 1] < 0.1)).sum() < red.sum() / 4  # hidden by the sky's image
     levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
     assert np.quantile(levels, 0.99) <= 2.0 and levels[red].max() <= 3.0
@@ -268,10 +271,57 @@ def through_mirror():
     def through(screen):
         def build(world):
             without(world)
-            pane(world, 1.0, screen, position=(0.0, 1.2, 4.5), turn=float(np.pi))
+            world.resources["pane"] = pane(world, 1.0, screen, position=(0.0, 1.2, 4.5), turn=float(np.pi))
         return build
 
     return without, through(True), through(False)
+
+
+def test_a_pane_through_a_portal_shows_what_the_portals_view_drew_behind_it(scene):
+    """The camera looks into portal A; beyond its partner B (10 m off, turned a quarter) stand
+    a red post and before it a pane of index 1, seen only through the portal: the portal's
+    view refracts its own image (its level's copy), so the pane shows the post as the portal
+    shows it without the pane; refracting the sky instead (``screen`` False) hides it."""
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    a_at, b_at = glm.vec3(0.0, 1.2, -2.0), glm.vec3(10.0, 1.2, 0.0)
+    turn = glm.angleAxis(glm.radians(90.0), glm.vec3(0, 1, 0))
+    carry = pair_transform(glm.translate(a_at), glm.translate(b_at) * glm.mat4_cast(turn))
+
+    def carried(at) -> tuple[glm.vec3, glm.quat]:
+        """Where a thing seen through A at ``at`` stands, and its turn."""
+        return glm.vec3(carry * glm.vec4(glm.vec3(at), 1.0)), glm.quat_cast(carry)
+
+    def without(world):
+        look_from(world, (0.0, 1.2, 2.0), (0.0, 1.2, -2.0), fov=50.0)
+        world.spawn(Skybox())
+        spawn_portal_pair(world, a_at, None, b_at, turn, size=(3.0, 2.4))
+        at, rotation = carried((0.0, 0.0, -8.0))
+        world.spawn(Transform(position=at, rotation=rotation), MeshRef(box((10.0, 0.1, 12.0))),
+                    Material(color=(0.6, 0.6, 0.6, 1.0)))
+        at, rotation = carried((0.2, 1.0, -8.0))
+        world.spawn(Transform(position=at, rotation=rotation), MeshRef(box((0.8, 2.0, 0.4))),
+                    Material(color=(1.0, 0.0, 0.0, 1.0), unlit=True))
+
+    def through(screen):
+        def build(world):
+            without(world)
+            at, rotation = carried((0.0, 1.2, -5.5))
+            world.resources["pane"] = world.spawn(Transform(position=at, rotation=rotation), MeshRef(quad(1.6, 1.6)),
+                                                  Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, **CLEAR),
+                                                  Refractive(ior=1.0, screen=screen))
+        return build
+
+    runner, drawn = framed(scene, without)
+    assert runner.stats.reflection_views >= 1
+    (runner, seen), sky_only = framed(scene, through(True)), frame(scene, through(False))
+    red = (drawn[..., 0] > 0.3) & (drawn[..., 1] < 0.1)
+    assert red.sum() > 60, red.sum()                                           # the post, through the portal
+    assert (runner.ids()[red] == runner.world.resources["pane"]).mean() > 0.6  # the pane drawn over it (not its foot)
+    assert ((sky_only[..., 0] > 0.3) & (sky_only[..., 1] < 0.1)).sum() < red.sum() / 4  # hidden by the sky's image
+    levels = np.abs(linear_to_srgb8(seen) - linear_to_srgb8(drawn)).max(axis=-1)
+    assert np.quantile(levels, 0.99) <= 2.0 and levels[red].max() <= 3.0
 
 
 def test_a_still_tree_keeps_refracting_surfaces_as_drawn_whole(scene):
