@@ -620,6 +620,44 @@ def test_both_reflection_paths_draw_particles_in_a_mirror(scene, path):
     assert shown[True][row, col].min() > shown[False][row, col].max() + 0.3
 
 
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_both_reflection_paths_draw_particles_through_a_portal(scene, path):
+    """A bright particle beyond portal B (20 m off, turned a quarter), where the view through
+    A puts it 1.2 m behind A's plane: it shows through A at that point's pixel (the camera's
+    projection of where the portal's view sees it) and not beside it."""
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    a_at, b_at = glm.vec3(0.0, 0.0, -2.5), glm.vec3(20.0, 0.0, 0.0)
+    turn = glm.angleAxis(glm.radians(90.0), glm.vec3(0, 1, 0))
+    carry = pair_transform(glm.translate(a_at), glm.translate(b_at) * glm.mat4_cast(turn))
+    seen_at = glm.vec3(-0.4, 0.3, -3.7)   # as the view through A sees it
+
+    def build(with_particles):
+        def make(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            spawn_portal_pair(world, a_at, None, b_at, turn, size=(2.5, 2.0))
+            world.spawn(Transform(position=glm.vec3(carry * glm.vec4(0.0, 0.0, -5.0, 1.0)),
+                                  rotation=glm.quat_cast(carry)),
+                        MeshRef(quad(40.0, 40.0)), Material(color=(*WALL, 1.0), unlit=True))   # (a wall beyond B)
+            if with_particles:
+                world.spawn(Transform(position=glm.vec3(carry * glm.vec4(seen_at, 1.0))),
+                            still(size=0.3, color=(3.0, 3.0, 3.0, 1.0)))
+        return make
+    shown = {}
+    for with_particles in (False, True):
+        runner = scene(build(with_particles), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.path = path
+        runner.frame()
+        shown[with_particles] = srgb_to_linear(runner.frame().astype(np.float64) / 255.0)
+        assert runner.stats.reflection_views >= 1 and runner.stats.reflection_path == path
+    col, row = runner.project(seen_at)
+    assert shown[True][row, col].min() > shown[False][row, col].max() + 0.3
+    col, row = runner.project(seen_at + glm.vec3(0.5, 0.0, 0.0))   # (beside it: the wall as it was)
+    np.testing.assert_allclose(shown[True][row, col], shown[False][row, col], atol=0.01)
+
+
 def test_a_paused_cloud_keeps_the_mirrors_views_and_a_moving_one_does_not(scene):
     def build(world):
         look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
