@@ -27,9 +27,9 @@ from components.tracking import (
     boolean,
     choice,
     color,
+    direction,
     finite,
     integer,
-    vec3,
 )
 from components.visibility import LAYER_FIELDS, ShownLayers
 
@@ -204,7 +204,7 @@ class DirectionalLight(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "direction":
-            return glm.normalize(vec3(self, name, value, nonzero=True))
+            return direction(self, name, value)
         if name == "body":
             return choice(self, name, value, CELESTIAL_BODIES)
         if name == "angular_diameter":

@@ -12,6 +12,7 @@ from components.tracking import (
     ComponentValueError,
     boolean,
     color,
+    direction,
     end_image_choice,
     finite,
     integer,
@@ -106,7 +107,7 @@ class Mirror(ShownLayers):
         if name == "plane_point" and value is not None:
             return vec3(self, name, value)
         if name == "plane_normal" and value is not None:
-            return glm.normalize(vec3(self, name, value, nonzero=True))
+            return direction(self, name, value)
         return value
 
 

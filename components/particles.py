@@ -18,6 +18,7 @@ from components.tracking import (
     boolean,
     choice,
     color,
+    direction,
     finite,
     integer,
     vec3,
@@ -172,7 +173,7 @@ class ParticleEmitter(TrackedComponent):
         if name == "angle":
             return self._range(name, value, low=-360.0, high=360.0)
         if name == "direction":
-            return glm.normalize(vec3(self, name, value, nonzero=True))
+            return direction(self, name, value)
         if name == "spread":
             return finite(self, name, value, low=0.0, high=180.0)
         if name == "shape":

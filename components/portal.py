@@ -5,10 +5,20 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 from pyglm import glm
 
 from components.limits import MAX_VIEW_DEPTH
-from components.tracking import ComponentValueError, TrackedComponent, color, end_image_choice, finite, integer, vec3
+from components.tracking import (
+    ComponentValueError,
+    TrackedComponent,
+    _items,
+    color,
+    end_image_choice,
+    finite,
+    integer,
+    vec3,
+)
 from components.visibility import LAYER_FIELDS, ShownLayers
 
 
@@ -130,13 +140,12 @@ class Slice(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name == "plane":
-            try:
-                p = glm.vec4(value)
-            except TypeError:
-                raise ComponentValueError(f"Slice.plane must be 4 numbers, got {value!r}") from None
-            for c in p:
-                finite(self, name, c)
-            return p
+            # Each part through float() (glm.vec4 wraps an int past 2**63, 2**64 to 0, reads
+            # bytes as their codes and one number as four), not text or a bool.
+            parts = _items(value) if not isinstance(value, (str, bytes, dict)) else []
+            if len(parts) != 4 or any(isinstance(c, (bool, np.bool_)) for c in parts):
+                raise ComponentValueError(f"Slice.plane must be 4 numbers (nx, ny, nz, d), got {value!r}")
+            return glm.vec4(*(finite(self, name, c) for c in parts))
         return value
 
 

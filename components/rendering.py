@@ -602,9 +602,9 @@ class Skybox(TrackedComponent):
         if name == "tints_sunlight":
             return boolean(self, name, value)
         if name == "sun_direction":
-            from components.tracking import vec3
+            from components.tracking import direction
 
-            return None if value is None else glm.normalize(vec3(self, name, value, nonzero=True))
+            return None if value is None else direction(self, name, value)
         if name == "face_size":
             return integer(self, name, value, low=4, high=2048)
         if name == "faces" and value is not None:

@@ -239,6 +239,22 @@ def vec3(owner: object, name: str, value: Any, *, low: float | None = None, high
     return v
 
 
+def direction(owner: object, name: str, value: Any) -> glm.vec3:
+    """A unit glm.vec3 along three finite numbers, not all zero.  ``glm.normalize`` squares
+    in float32, where a length past about 1.8e19 is infinite (the vector came out zero) and
+    one below about 1e-19 loses its digits (it came out longer or shorter than 1): such a
+    vector is normalised in double precision instead (any other keeps glm's result, bit for bit)."""
+    v = vec3(owner, name, value)
+    unit = glm.normalize(v)
+    if abs(glm.length(unit) - 1.0) <= 1e-5:  # (a NaN fails it too)
+        return unit
+    x, y, z = float(v.x), float(v.y), float(v.z)
+    length = math.sqrt(x * x + y * y + z * z)
+    if length == 0.0:
+        raise _fail(owner, name, value, "must not be the zero vector")
+    return glm.vec3(x / length, y / length, z / length)
+
+
 def color(owner: object, name: str, value: Any) -> glm.vec4:
     """A linear RGBA colour; RGB given alone gets alpha 1. Components in [0, inf), alpha <= 1."""
     parts = [] if _not_a_number(value) or isinstance(value, dict) else _items(value)

@@ -15,10 +15,13 @@ from components import (
     FlyController,
     Material,
     MeshRef,
+    Mirror,
+    ParticleEmitter,
     PointLight,
     Reflective,
     Refractive,
     Skybox,
+    Slice,
     Transform,
 )
 from engine.assets.mesh import box
@@ -234,6 +237,44 @@ def test_good_values_are_converted():
     assert Reflective(mix=None).mix is None
     assert Emissive(0).power == 0.0
 
+
+DIRECTION_FIELDS = [(DirectionalLight, "direction"), (Mirror, "plane_normal"), (ParticleEmitter, "direction"),
+                    (Skybox, "sun_direction")]
+
+
+@pytest.mark.parametrize("cls, field", DIRECTION_FIELDS, ids=lambda v: getattr(v, "__name__", v))
+def test_a_direction_of_any_finite_length_becomes_a_unit_vector_or_is_refused(cls, field):
+    """A direction is normalised without float32's overflow and underflow: (1e20, 0, 0) was
+    the zero vector (its squared length infinite in float32) and (1e-22, 0, 0) came out 1%
+    long; each is now the unit vector it points along, given at construction or written
+    after.  One that is zero in float32 is refused naming the field."""
+    for given, unit in (((0.0, -1e20, 0.0), (0.0, -1.0, 0.0)), ((3e19, 0.0, 3e19), (0.5 ** 0.5, 0.0, 0.5 ** 0.5)),
+                        ((1e38, 1e38, 1e38), (3 ** -0.5,) * 3), ((1e-22, 0.0, 0.0), (1.0, 0.0, 0.0))):
+        made, written = cls(**{field: given}), cls()
+        setattr(written, field, given)
+        for component in (made, written):
+            assert tuple(getattr(component, field)) == pytest.approx(unit, abs=1e-6), (given, component)
+    with pytest.raises(ComponentValueError, match=rf"{cls.__name__}\.{field} must not be the zero vector"):
+        cls(**{field: (1e-46, 0.0, 0.0)})
+    with pytest.raises(ComponentValueError, match=rf"{cls.__name__}\.{field} must not be the zero vector"):
+        setattr(cls(), field, (1e-46, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("plane", [(True, 0, 0, 1), b"abcd", 5.0, (0.0, 1.0, 0.0),
+                                   ("0", 1, 0, 0), (NAN, 1, 0, 0)], ids=repr)
+def test_a_bad_slice_plane_is_refused_when_given_and_when_written(plane):
+    """Slice.plane is four numbers each through float(): glm.vec4 alone took True as 1, bytes
+    as their codes and one number as four, and read (2**64, 0, 0, -1) as (0, 0, 0, -1) (a
+    wrapped int: a plane that hides the whole entity)."""
+    with pytest.raises(ComponentValueError, match=r"Slice\.plane must"):
+        Slice(plane=plane)
+    written = Slice(plane=(0.0, 1.0, 0.0, -0.5))
+    with pytest.raises(ComponentValueError, match=r"Slice\.plane must"):
+        written.plane = plane
+    assert written.plane == glm.vec4(0.0, 1.0, 0.0, -0.5)
+    assert Slice(plane=np.array([0.0, 0.0, 1.0, 2.0])).plane == glm.vec4(0.0, 0.0, 1.0, 2.0)
+    written.plane = (2 ** 64, 0, 0, -1)
+    assert written.plane == glm.vec4(2.0 ** 64, 0.0, 0.0, -1.0)
 
 # --- change tracking ------------------------------------------------------------------------
 

@@ -256,6 +256,46 @@ def test_a_failure_at_spawn_takes_back_what_it_made(tmp_path):
     assert not world.query_one(Mirror)
 
 
+# An entity's components that each pass their own checks but break a rule the world holds them
+# to together (engine/rules): (its tables, the table or field named, its line's text, reason).
+WHOLE_ENTITY_MISTAKES = {
+    "mirrored_portal": ("[entity.Transform]\nscale = [-1.0, 1.0, 1.0]\n[entity.MeshRef]\nmesh = { quad = [1.0, 1.0] }\n"
+                        "[entity.Material]\n[entity.Portal]\n", "Portal", "[entity.Portal]", r"mirrors it"),
+    "detail_without_mesh": ("[entity.Transform]\n[entity.LevelOfDetail]\nmeshes = [{ box = [1.0, 1.0, 1.0] }]\n",
+                            "LevelOfDetail", "[entity.LevelOfDetail]", r"give the entity a MeshRef too"),
+    "mesh_emitter_without_mesh": ("[entity.Transform]\n[entity.ParticleEmitter]\nshape = \"mesh\"\n",
+                                  "ParticleEmitter", "[entity.ParticleEmitter]", r"give the entity a MeshRef too"),
+    "second_uvs_the_mesh_lacks": ("[entity.Transform]\n[entity.MeshRef]\nmesh = { box = [1.0, 1.0, 1.0] }\n"
+                                  "[entity.Material]\nlightmap = { checker = [8, 2] }\n"
+                                  "second_uv_maps = [\"lightmap\"]\n", "Material.second_uv_maps",
+                                  "second_uv_maps =", r"has no second UV set"),
+    "cutout_portal": ("[entity.Transform]\n[entity.MeshRef]\nmesh = { quad = [1.0, 1.0] }\n[entity.Material]\n"
+                      "alpha_cutoff = 0.5\n[entity.Portal]\n", "Material.alpha_cutoff", "alpha_cutoff =",
+                      r"a mirror or portal is drawn whole"),
+    "occlusion_on_orthographic_camera": ("[entity.Transform]\n[entity.Camera]\nprojection = \"orthographic\"\n"
+                                         "[entity.AmbientOcclusion]\n", None, None,
+                                         r"AmbientOcclusion on an orthographic Camera"),
+    "second_sky": ("[entity.Skybox]\n\n[[entity]]\nname = \"extra_sky\"\n[entity.Skybox]\n", "Skybox",
+                   "[entity.Skybox]", r"entity 'extra' holds the level's Skybox already, and a world has one sky"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(WHOLE_ENTITY_MISTAKES))
+def test_a_whole_entity_mistake_is_refused_when_the_level_loads(tmp_path, case):
+    """The world's rules over an entity's components together are run when the file loads:
+    the LevelError names the file, the line and the entity of the file (not a world's
+    "entity 4" at spawn, after the level was taken as checked), and the component or field."""
+    tables, field, line_text, reason = WHOLE_ENTITY_MISTAKES[case]
+    path = write(tmp_path, BASE + "\n[[entity]]\nname = \"extra\"\n" + tables)
+    with pytest.raises(LevelError, match=reason) as caught:
+        load_level(path)
+    error = caught.value
+    entity = "extra_sky" if case == "second_sky" else "extra"
+    assert error.entity == entity and error.field == field and "entity 0" not in str(error)
+    after = f"name = \"{entity}\""  # (no table named: the entity's own [[entity]] line, just above)
+    line = line_of(path, line_text, after=after) if line_text else line_of(path, after) - 1
+    assert error.line == line and f"{path}:{error.line}:" in str(error)
+
 def test_bad_paths_and_headers_are_named(tmp_path):
     with pytest.raises(LevelError, match=r"no such file"):
         load_level(tmp_path / "nothing.toml")

@@ -273,6 +273,11 @@ def load_level(path: str | Path, extra_components: Mapping[str, type] | None = N
                                  lines.get((spec.index, cls_name, field), lines.get((spec.index, cls_name))),
                                  spec.name, f"{cls_name}.{field}")
     _check_parent_cycles(path, entities, lines)
+    skies = [spec for spec in entities if any(cls.__name__ == "Skybox" for cls, _ in spec.components)]
+    if len(skies) > 1:  # (engine.rules.light_rules.check_one_sky refuses the second at spawn)
+        raise LevelError(path, f"entity {skies[0].name!r} holds the level's Skybox already, and a world has one sky "
+                               "(change that one's fields, or take one out)",
+                         lines.get((skies[1].index, "Skybox"), lines.get((skies[1].index,))), skies[1].name, "Skybox")
     return Level(path, header["name"], game, rules, entities, lines, budget, where)
 
 
@@ -308,6 +313,7 @@ def _short(value: Any) -> str:
 def _entity(path: Path, assets: LevelAssets, index: int, name: str, table: dict[str, Any], known: Mapping[str, type],
             lines: dict[tuple, int]) -> _EntitySpec:
     parts: list[tuple[type, dict[str, Any]]] = []
+    built: list[Any] = []  # the components as made while checking, for the whole entity's rules
     references: list[tuple[str, str, str]] = []
     for key, fields in table.items():
         if key == "name":
@@ -349,7 +355,7 @@ def _entity(path: Path, assets: LevelAssets, index: int, name: str, table: dict[
             except MemoryError:
                 raise LevelError(path, "does not fit in memory", where, name, f"{key}.{field}") from None
         try:
-            cls(**decoded)  # the component's own checks, now, not at spawn
+            built.append(cls(**decoded))  # the component's own checks, now, not at spawn
         except ComponentValueError as exc:
             match = re.match(r"(\w+)\.(\w+)", str(exc))
             field = match.group(2) if match and match.group(1) == key else None
@@ -361,7 +367,32 @@ def _entity(path: Path, assets: LevelAssets, index: int, name: str, table: dict[
     _check_mirror(path, index, name, parts, lines)
     _check_water(path, index, name, parts, lines)
     _check_model(path, index, name, parts, lines, assets)
+    _check_entity_rules(path, index, name, built, lines)
     return _EntitySpec(name, index, parts, references)
+
+
+def _check_entity_rules(path: Path, index: int, name: str, built: list[Any], lines: dict[tuple, int]) -> None:
+    """The rules a world holds an entity's components to together (engine/rules: a Portal and
+    a Mirror on one entity, a mirrored portal, a LevelOfDetail without a MeshRef, a mesh
+    emitter without a mesh, second UVs the mesh lacks, ...), run on the entity's components
+    now, so the file is refused when it loads with its line, not when it spawns as "entity N"
+    (a world's id, which the file does not have).  The refusal names the component the rule
+    names (``Portal on entity 0: ...``) or the field it starts with (``Material.alpha_cutoff``)."""
+    try:
+        check_components(built)
+    except ComponentValueError as exc:
+        message = str(exc)
+        match = re.match(r"(?:(\w+) on )?entity 0: (.*)", message, re.S)
+        kind, reason = (match.group(1), match.group(2)) if match else (None, message)
+        held = {type(c).__name__ for c in built}
+        named = re.match(r"(\w+)\.(\w+)\b", reason)
+        if kind is None and named and named.group(1) in held:
+            kind, field = named.group(1), named.group(2)
+            where = lines.get((index, kind, field), lines.get((index, kind), lines.get((index,))))
+            raise LevelError(path, reason, where, name, f"{kind}.{field}") from None
+        kind = kind if kind in held else None
+        where = lines.get((index, kind), lines.get((index,))) if kind else lines.get((index,))
+        raise LevelError(path, reason, where, name, kind) from None
 
 
 def _check_water(path: Path, index: int, name: str, parts: list[tuple[type, dict[str, Any]]],
