@@ -275,6 +275,11 @@ WHOLE_ENTITY_MISTAKES = {
     "occlusion_on_orthographic_camera": ("[entity.Transform]\n[entity.Camera]\nprojection = \"orthographic\"\n"
                                          "[entity.AmbientOcclusion]\n", None, None,
                                          r"AmbientOcclusion on an orthographic Camera"),
+    "mirror_and_portal": ("[entity.Transform]\n[entity.MeshRef]\nmesh = { quad = [1.0, 1.0] }\n[entity.Material]\n"
+                          "[entity.Mirror]\n[entity.Portal]\n", None, None, r"on an entity with a (Mirror|Portal)"),
+    "mirror_with_reflective": ("[entity.Transform]\n[entity.MeshRef]\nmesh = { quad = [1.0, 1.0] }\n"
+                               "[entity.Material]\n[entity.Mirror]\n[entity.Reflective]\n", None, None,
+                               r"a Reflective on a Mirror changes nothing"),
     "second_sky": ("[entity.Skybox]\n\n[[entity]]\nname = \"extra_sky\"\n[entity.Skybox]\n", "Skybox",
                    "[entity.Skybox]", r"entity 'extra' holds the level's Skybox already, and a world has one sky"),
 }

@@ -41,25 +41,29 @@ def check_components(components: Iterable[Any], entity: int = 0) -> None:
     made yet).  What a rule only says (a ComponentWarning) is said when a world takes them,
     not here as well."""
     held = {type(component): component for component in components}
-    detached = _Detached(held)
+    detached = _Detached(held, entity)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ComponentWarning)
-        for kind in held:
+        for kind, component in held.items():   # (each as the one joining, as a spawn adds them)
             for check in (*_INVARIANTS.get(kind, ()), *_WHOLE_INVARIANTS.get(kind, ())):
-                check(detached, entity, None)
+                check(detached, entity, component)
 
 
 class _Detached:
-    """One entity's components as an invariant reads a world (``try_get``, ``exists``)."""
+    """One entity's components as an invariant reads a world (``try_get``, ``exists``,
+    ``query_one``: a world that holds that entity alone)."""
 
-    def __init__(self, held: dict[type, Any]) -> None:
-        self._held = held
+    def __init__(self, held: dict[type, Any], entity: int) -> None:
+        self._held, self._entity = held, entity
 
     def exists(self, entity: int) -> bool:
         return True
 
     def try_get(self, entity: int, kind: type[C]) -> C | None:
         return self._held.get(kind)
+
+    def query_one(self, kind: type[C]) -> list[tuple[int, C]]:
+        return [(self._entity, self._held[kind])] if kind in self._held else []
 
 
 def world_invariant(*kinds: type, whole: bool = False) -> Callable[[Invariant], Invariant]:
