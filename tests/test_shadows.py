@@ -1166,6 +1166,17 @@ def _under_pane(runner, margin: float, lamp: str | None = None) -> tuple[np.ndar
     return floor & (reach < PANE_HALF - margin), floor & (reach > PANE_HALF + margin)
 
 
+def _assert_share(taken: np.ndarray, under: np.ndarray, beside: np.ndarray, alpha: float,
+                  least: tuple[int, int] = (3000, 3000)) -> None:
+    """Under the pane (``under``: more than ``least[0]`` pixels) the floor lost ``alpha`` of the
+    light (``taken``, ``_pane_frames``'): the median to 0.03, 95% of the pixels to 0.05; beside
+    it (more than ``least[1]``) none of it, to 0.02."""
+    assert under.sum() > least[0] and beside.sum() > least[1], (under.sum(), beside.sum())
+    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
+    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05, np.percentile(taken[under], [5, 50, 95])
+    assert np.abs(taken[beside]).max() < 0.02
+
+
 @pytest.mark.parametrize("alpha, glass, shadow_filter", [(0.25, False, "single"), (0.7, False, "grid"),
                                                         (0.4, True, "single")])
 def test_a_see_through_pane_takes_its_alpha_of_the_suns_light(scene, alpha, glass, shadow_filter):
@@ -1175,10 +1186,7 @@ def test_a_see_through_pane_takes_its_alpha_of_the_suns_light(scene, alpha, glas
     8-bit frames); beside it, nothing."""
     runner, taken, _ = _pane_frames(scene, shadow_filter, alpha=alpha, glass=glass)
     under, beside = _under_pane(runner, 0.08)
-    assert under.sum() > 800 and beside.sum() > 20000, (under.sum(), beside.sum())
-    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
-    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05
-    assert np.abs(taken[beside]).max() < 0.02
+    _assert_share(taken, under, beside, alpha, least=(800, 20000))
     assert ("SEE_THROUGH_SHADOWS", "1") in runner.engine.renderer.shadows.program_defines
 
 
@@ -1192,11 +1200,7 @@ def test_a_see_through_pane_takes_its_alpha_of_a_lamps_light(scene, lamp, alpha,
     alpha of its light; beside it, nothing."""
     runner, taken, lit = _pane_frames(scene, shadow_filter, alpha=alpha, glass=glass, lamp=lamp)
     under, beside = _under_pane(runner, 0.08, lamp=lamp)
-    under, beside = under & lit, beside & lit
-    assert under.sum() > 3000 and beside.sum() > 3000, (under.sum(), beside.sum())
-    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
-    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05, np.percentile(taken[under], [5, 50, 95])
-    assert np.abs(taken[beside]).max() < 0.02
+    _assert_share(taken, under & lit, beside & lit, alpha)
     defines = dict(runner.engine.renderer.shadows.program_defines)
     assert defines.get("LAMP_SEE_THROUGH_SHADOWS") == "1" and ("SPOT_MAP0" in defines) == (lamp == "spot")
 
@@ -1248,10 +1252,7 @@ def test_a_sun_in_the_second_shadow_slot_reads_its_own_see_through_map(scene):
     runner, taken, _ = _pane_frames(scene, alpha=alpha, sun_before=True)
     assert ("DIRECTIONAL_SHADOWS", "2") in runner.engine.renderer.shadows.program_defines
     under, beside = _under_pane(runner, 0.08)
-    assert under.sum() > 800 and beside.sum() > 20000, (under.sum(), beside.sum())
-    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
-    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05
-    assert np.abs(taken[beside]).max() < 0.02
+    _assert_share(taken, under, beside, alpha, least=(800, 20000))
 
 
 @pytest.mark.parametrize("lamp", ["point", "spot"])
@@ -1265,11 +1266,7 @@ def test_a_lamp_in_the_second_shadow_slot_reads_its_own_see_through_tiles(scene,
     shadows = runner.engine.renderer.shadows
     assert shadows._lamp_through[0, 2] == 0.0 and shadows._lamp_through[1, 2] > 0.0   # (slot 1's tiles hold it)
     under, beside = _under_pane(runner, 0.08, lamp=lamp)
-    under, beside = under & lit, beside & lit
-    assert under.sum() > 3000 and beside.sum() > 3000, (under.sum(), beside.sum())
-    assert abs(float(np.median(taken[under])) - alpha) < 0.03, np.percentile(taken[under], [5, 50, 95])
-    assert np.percentile(np.abs(taken[under] - alpha), 95) < 0.05, np.percentile(taken[under], [5, 50, 95])
-    assert np.abs(taken[beside]).max() < 0.02
+    _assert_share(taken, under & lit, beside & lit, alpha)
 
 
 def test_two_see_through_panes_let_through_the_product_and_what_is_over_them_keeps_its_light(scene):
