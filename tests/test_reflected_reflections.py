@@ -28,9 +28,10 @@ THROUGH_A = (20.0, EYE[1], 20.0 + (EYE[2] - B_PLANE_Z))   # the camera before A 
 
 
 def _frame(scene, reflections: ScreenReflections | None, portal: bool, eye=EYE,
-           extra=None) -> tuple[np.ndarray, object, dict]:
+           extra=None, way=None) -> tuple[np.ndarray, object, dict]:
     """The second frame of the scene (``reflections`` on its camera, the portal pair where
-    ``portal``) from ``eye``, its runner and names; ``extra(world, names)`` adds to it."""
+    ``portal``) from ``eye`` looking along ``way`` (EYE's towards TARGET by default), its
+    runner and names; ``extra(world, names)`` adds to it."""
     names: dict = {}
 
     def build(world):
@@ -45,7 +46,7 @@ def _frame(scene, reflections: ScreenReflections | None, portal: bool, eye=EYE,
     runner = scene(build, SIZE)
     transform = runner.world.get(names["camera"], Transform)
     transform.position = glm.vec3(eye)
-    transform.rotation = look_rotation(glm.vec3(TARGET) - glm.vec3(EYE))
+    transform.rotation = look_rotation(glm.vec3(way) if way is not None else glm.vec3(TARGET) - glm.vec3(EYE))
     runner.engine.renderer.antialias = "off"
     runner.frame()
     return runner.frame().astype(np.int32), runner, names
@@ -169,6 +170,67 @@ def test_two_mirrors_side_by_side_each_reflect_their_own_world(scene):
     # reflection elsewhere (most of it: as drawn at depth 0).
     change = np.abs(image - frames["none"][0]).max(axis=-1)[left]
     assert (change > 20).sum() > 100 and np.mean(change <= 1) > 0.5, (np.sum(change > 20), np.mean(change <= 1))
+
+
+# A mirror standing where B stands (z = 3, facing the boxes), and the camera before it whose
+# image in it is the eye: the mirror's view is the eye's view turned left for right.
+MIRROR_Z = 3.0
+BEFORE_MIRROR = (EYE[0], EYE[1], 2.0 * MIRROR_Z - EYE[2])
+INTO_MIRROR = tuple(np.subtract(TARGET, EYE) * np.array([1.0, 1.0, -1.0]))
+
+
+@pytest.mark.parametrize("who", ["camera", "picture"])
+def test_a_mirror_level_reflects_the_polished_floor_as_the_eye_sees_it_turned(scene, who):
+    """The camera (``who`` "picture": a monitor's camera posed the same, the active one bare)
+    before a mirror standing where the eye's image puts it, with ``ScreenReflections`` of
+    ``reflection_depth`` 1: the mirror's view shows the polished floor reflecting the boxes as
+    the camera at the eye sees it directly, left for right (its pixels whose ray meets the
+    world past the mirror's plane, within 3 levels for 97%), where at ``reflection_depth`` 0
+    it shows the sky's reflection there."""
+    from components import Camera, Material, Monitor
+    from engine.assets.mesh import quad
+    from tests.support import linear_to_srgb8
+
+    def mirrored(reflections: ScreenReflections):
+        def extra(world, names):
+            names["mirror"] = world.spawn(
+                Transform(position=(0.0, 1.2, MIRROR_Z), rotation=glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0))),
+                MeshRef(quad(4.0, 3.0), casts_shadows=False), Material(), Mirror())
+            if who == "picture":
+                pose = dict(position=glm.vec3(BEFORE_MIRROR), rotation=look_rotation(glm.vec3(INTO_MIRROR)))
+                names["lens"] = world.spawn(Transform(**pose), Camera(active=False), reflections)
+                names["screen"] = world.spawn(Transform(position=(0.0, 1.0, 9.0)), MeshRef(quad(1.6, 0.9)),
+                                              Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0,
+                                                       environment_reflection=0.0),
+                                              Monitor(camera=names["lens"], size=SIZE, depth=1))
+
+        frame, runner, names = _frame(scene, reflections if who == "camera" else None, portal=False,
+                                      eye=BEFORE_MIRROR, extra=extra, way=INTO_MIRROR)
+        if who == "picture":
+            shown = runner.engine.renderer.monitors.read(names["screen"])[..., :3]
+            frame = linear_to_srgb8(np.clip(shown, 0.0, 1.0)).astype(np.int32)
+        return frame, runner, names
+
+    image, runner, names = mirrored(ScreenReflections())
+    plain, _, _ = mirrored(ScreenReflections(reflection_depth=0))
+    direct, direct_runner, direct_names = _frame(scene, ScreenReflections(), portal=False)
+    assert runner.stats.reflection_views >= 1
+    direct = direct[:, ::-1]   # (the eye's view turned left for right: the mirror's)
+    through = runner.engine.renderer.targets.read_surface_ids() == names["mirror"]
+    eye, rays = pixel_rays(direct_runner.engine.main_view, SIZE)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_plane = (MIRROR_Z - eye[2]) / rays[..., 2]
+        t_floor = -eye[1] / rays[..., 1]
+    past = ((t_plane > 0) & ((t_floor <= 0) | (t_floor > t_plane + 0.05)))[:, ::-1]
+    judged = _eroded(through, 3) & past
+    assert judged.sum() > 8000, judged.sum()
+    difference = np.abs(image[judged] - direct[judged]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+    floor = (direct_runner.ids() == direct_names["floor"])[:, ::-1]
+    reflecting = judged & floor & (np.abs(direct - plain).max(axis=-1) > 40)
+    assert reflecting.sum() > 300, reflecting.sum()
+    difference = np.abs(image[reflecting] - direct[reflecting]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
 
 
 def test_a_still_tree_with_end_images_keeps_its_levels_reflections_and_occlusion(scene):
