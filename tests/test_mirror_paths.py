@@ -273,3 +273,51 @@ def test_instanced_groups_hold_each_view_once_one_winding_and_at_most_the_limit(
     assert all(len({views[i].mirrored for i in group}) == 1 for group in groups)
     assert [len(group) for group in groups] == [24, 32, 14]  # not mirrored first, then mirrored in two
     assert instanced_groups([]) == []
+
+
+def mirror_wall(ents, columns=9, rows=5):
+    """``columns`` x ``rows`` small mirrors on a wall facing the camera, each seeing its own
+    part of a large glowing checker panel behind the camera (none sees another mirror):
+    one level of columns x rows views, all mirrored."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Transform(position=(0.0, 1.5, 4.0), rotation=look_rotation(glm.vec3(0.0, 0.0, -1.0))),
+                    Camera(fov_y=70.0))
+        ents["mirrors"] = [
+            world.spawn(Transform(position=(-3.2 + 0.8 * c, 0.3 + 0.55 * r, -2.0)), MeshRef(quad(0.5, 0.42)),
+                        Material(color=(0.1, 0.1, 0.1)), Mirror())
+            for c in range(columns) for r in range(rows)]
+        ents["panel"] = world.spawn(Transform(position=(0.0, 1.5, 9.0), scale=(40.0, 20.0, 0.1)), MeshRef(box()),
+                                    Material(texture=checker_texture(64, 16)), Emissive(1.0))
+    return build
+
+
+def test_a_level_of_more_views_than_one_batched_draw_takes_draws_every_group_as_the_per_mirror_path(scene):
+    """A level of 45 mirrored views is more than MAX_BATCHED_VIEWS of one winding: the batched
+    path draws it in two groups (``instanced_groups``), each with its own Views table.  Every
+    mirror shows its part of the panel, pixel for pixel as the per-mirror path draws it,
+    those of the second group as well as the first (a mirror is under 0.3% of the frame, so
+    the whole-frame check alone would let a group go)."""
+    ents = {}
+    build = mirror_wall(ents)
+    size = (240, 150)
+    per_mirror = render(scene, build, "per_mirror", size)
+    batched = render(scene, build, "batched", size)
+    views = batched["runner"].engine.reflection_system.views[1:]
+    level = [node.view for node in views if node.level == 1]
+    assert len(level) == len(ents["mirrors"]) > MAX_BATCHED_VIEWS and all(view.mirrored for view in level)
+    groups = instanced_groups(level)
+    assert len(groups) == 2 and len(groups[1]) == len(level) - MAX_BATCHED_VIEWS
+    assert_same_frame(per_mirror, batched)
+    surface = batched["surface"]
+    assert np.array_equal(surface, per_mirror["surface"])
+    second = {views[i].surface.entity for i in groups[1]}
+    for mirror in ents["mirrors"]:
+        on_it = surface == mirror
+        assert on_it.sum() >= 40, mirror
+        assert (batched["ids"][on_it] == ents["panel"]).mean() > 0.9, (mirror, mirror in second)
+        diff = np.abs(batched["rgb"][on_it].astype(int) - per_mirror["rgb"][on_it].astype(int))
+        assert diff.max() <= 2, (mirror, mirror in second, int(diff.max()))
+    shown = per_mirror["rgb"][np.isin(surface, ents["mirrors"])].astype(int)
+    assert shown.std() > 20  # the checker's squares, not one colour
+    assert batched["stats"].reflection_path == "batched" and batched["stats"].passes == 1 + len(groups)

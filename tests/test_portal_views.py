@@ -19,7 +19,7 @@ from engine.assets.portals import spawn_portal_pair
 from engine.assets.texture_data import checker_texture
 from engine.render.sky import sky_radiance
 from engine.rules.light_rules import SkySun
-from tests.support import look_from, srgb_to_linear
+from tests.support import box_hits, look_from, pixel_rays, srgb_to_linear
 
 SIZE = (200, 150)
 TURN_Y_90 = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
@@ -241,3 +241,47 @@ def test_sharp_rough_and_portal_views_in_one_level_composite_as_they_do_alone(sc
         assert pixels.sum() > 500, kind
         assert np.abs(mixed[pixels] - single[pixels]).max() <= 2, kind
         assert mixed[pixels].std() > 5, kind  # a reflection or a view, not a flat fill
+
+
+def test_looking_into_the_portal_scaled_2_shows_the_other_side_at_twice_its_size_where_rays_say(scene):
+    """B scaled 2 by its Transform, seen from in front of B: through it, A's side is carried
+    out by the pair's carry, so it shows at twice its size.  Each pixel of B's picture is
+    checked against its ray carried back to A's side (carry^-1, float64) and cast at a green
+    box in front of A: the box where the ray meets it (a margin in), not where it misses (a
+    margin out).  At A's own scale (the carry without B's scale) the rays would find it in
+    under half of those pixels, mostly elsewhere."""
+    ents = {}
+    size = (160, 120)
+
+    def build(world):
+        lit(world)
+        look_from(world, (15.0, 1.7, 0.8), (10.0, 1.5, 0.0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), TURN_Y_90)
+        world.get(ents["b"], Transform).scale = glm.vec3(2.0)
+        ents["green"] = glowing_box(world, (0.8, 1.5, 1.5), (0.1, 0.9, 0.1), size=0.8)
+
+    runner = scene(build, size)
+    runner.frame()
+    ids = runner.ids()
+    on_b = runner.engine.renderer.targets.read_surface_ids() == ents["b"]
+    assert on_b.sum() > 3000 and runner.stats.reflection_views >= 1
+    a_world, b_world = (np.array(glm.dmat4(runner.world.get(ents[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    centre, half = np.array([0.8, 1.5, 1.5]), np.full(3, 0.4)
+
+    def hits(carry, grow):
+        back = np.linalg.inv(carry)
+        origin = back[:3, :3] @ eye + back[:3, 3]
+        directions = rays[on_b] @ back[:3, :3].T
+        return box_hits(origin, directions, centre, half + grow)
+
+    carry = b_world @ turn @ np.linalg.inv(a_world)
+    inside, outside = hits(carry, -0.03), ~hits(carry, 0.03)
+    shown = ids[on_b] == ents["green"]
+    assert inside.sum() > 300
+    assert shown[inside].all(), int((~shown[inside]).sum())
+    assert not shown[outside].any(), int(shown[outside].sum())
+    unscaled = b_world @ np.diag([0.5, 0.5, 0.5, 1.0]) @ turn @ np.linalg.inv(a_world)
+    at_own_scale = hits(unscaled, 0.0)  # (llvmpipe: 196 pixels, 98 of them green, against 574 green)
+    assert at_own_scale.sum() < 0.5 * inside.sum() and (at_own_scale & shown).sum() < 0.5 * shown.sum()
