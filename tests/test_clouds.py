@@ -234,6 +234,52 @@ def test_the_cube_map_and_the_skys_light_take_the_clouds(scene):
     assert light[0, 2] / light[0, 0] < 0.9 * clear[0, 2] / clear[0, 0]
 
 
+@pytest.mark.parametrize("night", [False, True], ids=["gradient_by_day", "atmosphere_moonlit"])
+def test_a_sharp_mirror_shows_the_clouds_and_the_moon_as_the_twin_along_its_reflected_rays(scene, night):
+    """A mirror across the view, facing the camera: each of its pixels is the CPU's sky along
+    the pixel's ray reflected in it (the composite's per-pixel sky: the clouds' edges, and by
+    night an atmosphere's moonlit air, the moon's disc and the clouds it lights, as the sky
+    pass draws them; not the cube map's blocks), clouds and clear sky both in it, and not the
+    sky straight ahead (the mirror is there)."""
+    from components import Mirror
+    from engine.assets.mesh import quad
+    from engine.rules.light_rules import SkySun
+
+    if night:
+        night_sun = glm.normalize(glm.vec3(0.6, -0.3, 0.75))
+        target = glm.normalize(glm.vec3(-0.5, 0.7, -0.75))   # the moon
+        skybox = Skybox(model="atmosphere", sun_direction=tuple(night_sun), moon_color=(2.0, 2.0, 2.1))
+        sun = SkySun(tuple(night_sun), moon=tuple(target))
+    else:
+        target, skybox, sun = UP_AHEAD, Skybox(**SKY), None
+    look = glm.normalize(glm.vec3(target.x, target.y, -target.z))   # what a plane z = 2 reflects to target
+    layer = _still(coverage=0.5, drift=(400.0, 900.0))
+
+    def build_more(world):
+        if night:
+            world.spawn(DirectionalLight(direction=tuple(-target), intensity=0.3, body="moon", shadows=False))
+        world.spawn(Transform(position=(0.0, 0.0, 2.0), rotation=glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))),
+                    MeshRef(quad(40.0, 40.0)), Material(), Mirror())
+    colour, rays, _ = _cloud_frame(scene, skybox, layer, look, fov=40.0, build_more=build_more)
+    on_mirror = rays[..., 2] > 0.05
+    hit = rays * (2.0 / np.where(on_mirror, rays[..., 2], 1.0))[..., None]
+    on_mirror &= (np.abs(hit[..., 0]) < 19.0) & (np.abs(hit[..., 1]) < 19.0)
+    assert on_mirror.mean() > 0.95
+    reflected = rays * np.array([1.0, 1.0, -1.0])
+    shape = cloud_shape(layer)
+    want = sky_radiance(skybox, reflected, sun, shape)
+    np.testing.assert_allclose(colour[on_mirror], want[on_mirror], rtol=6e-3, atol=1e-3 if night else 6e-3)
+    hidden = cloud_hidden(sky_model(skybox, sun, shape), reflected)[0][on_mirror]
+    assert (hidden > 0.9).mean() > 0.05 and (hidden < 0.05).mean() > 0.05         # (clouds and clear sky)
+    clear = sky_radiance(skybox, reflected, sun)[on_mirror]
+    assert np.abs(colour[on_mirror] - clear).max(axis=-1)[hidden > 0.9].min() > (0.002 if night else 0.02)
+    ahead = sky_radiance(skybox, rays, sun, shape)[on_mirror]
+    assert np.abs(colour[on_mirror] - ahead).max() > 0.05                          # (the mirror is drawn)
+    if night:
+        discless = model_sky(sky_model(skybox, sun, shape), reflected, disc=False)
+        assert ((colour - discless)[..., 2][on_mirror] > 0.05).sum() > 20          # (the moon's disc)
+
+
 # -- shadows ------------------------------------------------------------------------------------
 
 SHADOW_SUN = glm.normalize(glm.vec3(-0.3, -0.85, 0.2))   # the way the light travels

@@ -130,6 +130,54 @@ def test_the_lightmap_goes_with_its_entity(scene):
     assert renderer.resource_counts()["textures"] == textures - 1
 
 
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_mirrors_show_the_lightmapped_floor_as_the_image_says_where_their_rays_meet_it(scene, path):
+    """Two mirrors overhead facing down, the camera under them looking up: every pixel of the
+    floor in them (their views: a reflection level's scene pass) is albedo x the image
+    where the pixel's ray, reflected at y = 3, meets the floor, x the intensity, as the main
+    view's floor is, and the sky's light is not added (the same under a brighter sky; a floor
+    without the lightmap shows that sky's light).  Both of the reflection levels' paths: each
+    view its own draws, and the views in one draw (``BATCHED_VIEWS``)."""
+    from components import Mirror
+    from engine.assets.mesh import quad
+
+    image = gradient_image()
+
+    def frame(material: Material, sky: Skybox | None = None):
+        def build(world):
+            look_from(world, (0.0, 1.0, 0.0), (0.0, 3.0, -0.001), fov=50.0)
+            world.spawn(sky or Skybox())
+            world.spawn(Transform(), MeshRef(plane(2 * HALF, 2 * HALF)), material)
+            for x in (-3.0, 3.0):   # two mirrors side by side: one level of two views
+                world.spawn(Transform(position=(x, 3.0, 0.0), rotation=glm.angleAxis(glm.pi() / 2, glm.vec3(1, 0, 0))),
+                            MeshRef(quad(6.0, 12.0)), Material(), Mirror())
+
+        runner = scene(build, SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.path = path
+        runner.frame()
+        colour, rays = _read(runner)
+        return colour, rays, runner
+
+    colour, rays, runner = frame(matte(lightmap=image, lightmap_intensity=1.5))
+    assert runner.stats.reflection_views == 2
+    eye = np.array(runner.engine.main_view.eye, np.float64)
+    assert (rays[..., 1] > 0.3).all()   # (every pixel looks up at the mirror)
+    up, down = (3.0 - eye[1]) / rays[..., 1], 3.0 / rays[..., 1]   # to the mirror, then down to the floor
+    hit = eye + rays * (up + down)[..., None]
+    u, v = (hit[..., 0] + HALF) / (2 * HALF), (HALF - hit[..., 2]) / (2 * HALF)
+    seam = np.abs(eye[0] + rays[..., 0] * up) < 0.05   # (where the two mirrors meet)
+    inside = (np.abs(hit[..., 0]) < HALF - 0.15) & (np.abs(hit[..., 2]) < HALF - 0.15) & ~seam
+    assert inside.sum() > 3000
+    want = ALBEDO * sample(image, u, v) * 1.5
+    np.testing.assert_allclose(colour[inside], want[inside], rtol=0.02, atol=0.004)
+    bright = Skybox(zenith=(1.0, 1.0, 2.0), horizon=(2.0, 2.0, 2.0), ground=(0.5, 0.5, 0.5))
+    again, *_ = frame(matte(lightmap=image, lightmap_intensity=1.5), sky=bright)
+    np.testing.assert_allclose(again[inside], colour[inside], atol=1e-3)   # the sky's light is not added
+    plain, *_ = frame(matte(), sky=bright)
+    assert np.abs(plain[inside] - colour[inside]).mean() > 0.1              # (without it, it is)
+
+
 @pytest.mark.parametrize("field, value", [("lightmap_intensity", -1.0), ("lightmap_intensity", float("nan")),
                                           ("lightmap_intensity", 1e5), ("lightmap", "lightmap.png")])
 def test_bad_lightmap_values_are_refused_when_given(field, value):

@@ -387,6 +387,51 @@ def test_a_curved_object_in_two_overlapping_boxes_shows_them_mixed_by_the_oracle
     assert seen[1] < 0.5 * seen[0]  # no green sky in it
 
 
+def test_a_glass_ball_in_two_overlapping_boxes_refracts_them_mixed_by_the_oracles_weights(scene):
+    """The glass half of "a chrome or glass object": a clear (alpha 0) solid glass ball
+    (``Refractive``, ``screen=False``: its probes' images alone) with a probe of its own, walls before it as well
+    as behind the camera (red where room A's probe looks through it, blue for B).  Its middle
+    (the ray straight through it, and Fresnel's few percent reflected) in the overlap is the
+    two rooms' colours mixed by the oracle's weights, each measured where its box alone holds
+    the ball; seen directly (the ball not drawn) or through its own probe alone it would be one
+    wall's colour, switching at x = 0.  In A's falloff alone its own probe takes the rest, not
+    the green sky."""
+    from components import Refractive
+    from tests.test_probe_blending import expected_weights, place, two_rooms
+
+    ents = {}
+    rooms = two_rooms(ents)
+
+    def build(world) -> None:
+        rooms(world)
+        world.delete_entity(ents["quad"])
+        for x, colour in ((-6.0, (0.6, 0.05, 0.05)), (6.0, (0.05, 0.05, 0.6))):   # before the ball, facing it
+            world.spawn(Transform(position=(x, 0.0, -6.0)), MeshRef(quad(12, 12)), Material(color=colour),
+                        Emissive(1.0))
+        ents["quad"] = world.spawn(Transform(), MeshRef(sphere(0.5)), Material(color=(1, 1, 1, 0), roughness=0.0),
+                                   Refractive(ior=1.5, solid=True, screen=False))
+
+    runner = scene(build, (64, 48))
+    runner.engine.renderer.antialias = "off"
+    runner.engine.stages["probes"].recapture_after_present = False  # the ball's own probe where it is now
+    pure = {"a": place(runner, ents, -3.0), "b": place(runner, ents, 3.0)}
+    assert pure["a"][0] > 3 * pure["a"][2] and pure["b"][2] > 3 * pure["b"][0]
+    spread = np.abs(pure["a"] - pure["b"]).max()
+    for x in (-0.7, -0.3, 0.0, 0.4, 0.8):
+        a, b, left = expected_weights(x)
+        assert abs(left) < 1e-9 and 0.0 < a < 1.0
+        seen = place(runner, ents, x)
+        expect = a * pure["a"] + b * pure["b"]
+        assert np.abs(seen - expect).max() < 0.03 * spread + 0.004, (x, (a, b), seen, expect)
+    a, b, left = expected_weights(-6.5)
+    assert (a, b) == pytest.approx((0.5, 0.0)) and left == pytest.approx(0.5)
+    own = place(runner, ents, -8.0)
+    seen = place(runner, ents, -6.5)
+    expect = a * pure["a"] + left * own
+    assert np.abs(seen - expect).max() < 0.03 * spread + 0.004, (seen, expect)
+    assert seen[1] < 0.5 * seen[0]  # no green sky in it
+
+
 def test_a_cut_water_surface_weighs_its_fallback_by_fresnel(scene):
     """Water (a still pond: no normal map) cut by the budget: the sky's reflection, tinted,
     over its own shading by Schlick's Fresnel for its index at each pixel's angle (the
