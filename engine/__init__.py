@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import engine.rules.camera_rules  # noqa: F401  (registers the orthographic camera's rule with every world)
 import engine.rules.detail_rules  # noqa: F401  (registers the level-of-detail rule with every world)
+import engine.rules.glass_rules  # noqa: F401  (registers the opaque-glass warning with every world)
 import engine.rules.light_rules  # noqa: F401  (registers the one-sky rule with every world)
 import engine.rules.mirror_rules  # noqa: F401  (registers the mirror-mesh and one-surface invariants with every world)
 import engine.rules.particle_rules  # noqa: F401  (registers the mesh-emitter rule with every world)

@@ -366,6 +366,31 @@ def _warned(make) -> list[str]:
     return [str(w.message) for w in caught if issubclass(w.category, ComponentWarning)]
 
 
+def test_glass_on_an_opaque_material_is_said_as_either_joins_and_see_through_glass_is_not():
+    """A Refractive whose Material has alpha 1 (the default) shows the material's colour over
+    all of it (the bent light is blended by the alpha): said, naming the entity, when the
+    Refractive joins the Material's entity, when the Material joins the Refractive's, and at
+    spawn; glass of alpha under 1, an albedo texture (its alpha may open it) or a cutout is not."""
+    from components import Refractive
+    from engine.assets.texture_data import TextureData
+
+    world = World()
+    said = _warned(lambda: world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), Material(), Refractive()))
+    assert len(said) == 1 and "Refractive on entity" in said[0] and "alpha is 1" in said[0], said
+    plain = world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), Material(color=(1.0, 1.0, 1.0, 1.0)))
+    said = _warned(lambda: world.add_component(plain, Refractive(ior=1.3)))
+    assert len(said) == 1 and f"entity {plain}:" in said[0], said
+    glass = world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), Refractive())
+    said = _warned(lambda: world.add_component(glass, Material(color=(0.9, 0.9, 0.9))))
+    assert len(said) == 1 and f"entity {glass}:" in said[0], said
+    texels = TextureData(np.full((2, 2, 4), 255, np.uint8), name="white")
+    for material in (Material(color=(1.0, 1.0, 1.0, 0.0)), Material(color=(0.2, 0.9, 0.3, 0.5)),
+                     Material(texture=texels), Material(alpha_cutoff=0.5)):
+        assert _warned(lambda material=material: world.spawn(Transform(), MeshRef(quad(1.0, 1.0)), material,
+                                                             Refractive())) == []
+    world.close()
+
+
 def test_colours_written_0_to_255_are_warned_and_colours_in_0_to_1_or_bright_floats_are_not():
     from components import PointLight
     said = _warned(lambda: Material(color=(255, 128, 0)))
