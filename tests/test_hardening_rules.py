@@ -391,6 +391,34 @@ def test_glass_on_an_opaque_material_is_said_as_either_joins_and_see_through_gla
     world.close()
 
 
+def test_a_cameras_component_on_an_entity_without_a_camera_is_said_once_and_on_a_camera_is_not():
+    """Every component a camera reads from its own entity (``CAMERA_COMPONENTS``: the screen
+    passes, fog, the post chain) spawned on an entity without a Camera is said once, naming
+    them all and the entity; one joining such an entity later is said; on a camera's entity,
+    spawned beside the Camera or joining it, nothing is said."""
+    from components import AmbientOcclusion, Bloom, Camera, Fog
+    from engine.rules.camera_rules import CAMERA_COMPONENTS
+
+    world = World()
+    for kind in CAMERA_COMPONENTS:
+        said = _warned(lambda kind=kind: world.spawn(Transform(), kind()))
+        assert len(said) == 1 and f"{kind.__name__} on entity" in said[0] and "has no Camera" in said[0], said
+    said = _warned(lambda: world.spawn(Transform(), Bloom(), AmbientOcclusion()))
+    assert len(said) == 1 and "AmbientOcclusion, Bloom on entity" in said[0], said
+    crate = world.spawn(Transform(), MeshRef(quad(1.0, 1.0)))
+    assert _warned(lambda: world.add_component(crate, Fog())) == [f"Fog on entity {crate}, which has no Camera: a "
+                                                                   "camera reads it from its own entity, so here it "
+                                                                   "does nothing; put it on the camera's entity"]
+    camera = None
+
+    def on_a_camera():
+        nonlocal camera
+        camera = world.spawn(Bloom(), Transform(), Camera(), AmbientOcclusion())   # (the Camera after one)
+        world.add_component(camera, Fog())
+    assert _warned(on_a_camera) == []
+    world.close()
+
+
 def test_colours_written_0_to_255_are_warned_and_colours_in_0_to_1_or_bright_floats_are_not():
     from components import PointLight
     said = _warned(lambda: Material(color=(255, 128, 0)))
