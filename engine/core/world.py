@@ -186,9 +186,10 @@ class World:
         try:
             for component in components:
                 self._add(entity, component, whole=False)
-            for kind in dict.fromkeys(type(component) for component in components):
-                for check in _WHOLE_INVARIANTS.get(kind, ()):
-                    check(self, entity, None)
+            # Each whole-entity check once (one registered for several kinds the entity holds too).
+            for check in dict.fromkeys(check for component in components
+                                       for check in _WHOLE_INVARIANTS.get(type(component), ())):
+                check(self, entity, None)
             self._check_whole(entity, components)
         except BaseException:
             for component in esper.components_for_entity(entity):

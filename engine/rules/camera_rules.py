@@ -53,9 +53,6 @@ def check_screen_passes(world: World, entity: int, joining: Any = None, projecti
                                   "projection \"perspective\", or take them off)")
 
 
-_last_said: tuple | None = None   # the world, entity and kinds last said (one spawn runs the check a kind)
-
-
 @world_invariant(*CAMERA_COMPONENTS, whole=True)
 def warn_camera_component_without_camera(world: World, entity: int, joining: Any = None, **_other: Any) -> None:
     """Say a camera's component (CAMERA_COMPONENTS) on an entity without a Camera, at the end
@@ -66,10 +63,6 @@ def warn_camera_component_without_camera(world: World, entity: int, joining: Any
         return
     kinds = [kind.__name__ for kind in CAMERA_COMPONENTS
              if (joining if type(joining) is kind else world.try_get(entity, kind)) is not None]
-    global _last_said
-    said, _last_said = _last_said, (id(world), entity, tuple(kinds))
-    if joining is None and said == _last_said:
-        return  # (a spawn runs this once for each of its camera components: said once)
     if kinds:
         warn_component(f"{', '.join(kinds)} on entity {entity}, which has no Camera: a camera reads "
                        f"{'it' if len(kinds) == 1 else 'them'} from its own entity, so here "
