@@ -25,7 +25,7 @@ from components import (
 from engine.assets.mesh import box, plane
 from engine.render import atmosphere as atm
 from engine.render.irradiance import generated_sky_sh, project_faces
-from engine.render.sky import air_of, build_faces, model_radiance, sky_model, sky_radiance
+from engine.render.sky import air_of, build_faces, model_radiance, model_sky, sky_model, sky_radiance
 from engine.rules.light_rules import SkySun
 from tests.test_generated_sky import SIZE, _cube_faces, _read
 
@@ -556,3 +556,84 @@ def test_the_light_a_mirror_throws_is_reddened_as_the_suns_own(scene):
     r = atm.GROUND_KM + atm.EYE_KM
     want = np.exp(-_optical_depth(EARTH, r, sun[1])) / np.exp(-_optical_depth(EARTH, r, 1.0))
     np.testing.assert_allclose(thrown[True][patch].mean(axis=0) / thrown[False][patch].mean(axis=0), want, rtol=0.03)
+
+
+def _cube_bilinear(faces: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``faces`` (6, n, n, 3) sampled along unit ``directions`` (..., 3) as GL's LINEAR reads a
+    cube map's level 0 (GL's face selection, bilinear between the texel centres of the face),
+    and the mask of the directions whose four texels lie on their own face (off it, a seamless
+    cube map blends in the next face's)."""
+    from engine.core.cube_faces import CUBE_FACES
+
+    d = np.asarray(directions, np.float64).reshape(-1, 3)
+    n = faces.shape[1]
+    axis = np.argmax(np.abs(d), axis=1)
+    face = axis * 2 + (d[np.arange(len(d)), axis] < 0.0)
+    table = np.array(CUBE_FACES, np.float64)[face]
+    major = np.abs(np.einsum("nk,nk->n", d, table[:, 0]))
+    x = (np.einsum("nk,nk->n", d, table[:, 1]) / major + 1.0) * 0.5 * n - 0.5
+    y = (np.einsum("nk,nk->n", d, table[:, 2]) / major + 1.0) * 0.5 * n - 0.5
+    inside = (x >= 0.0) & (x <= n - 1.0) & (y >= 0.0) & (y <= n - 1.0)
+    x0, y0 = np.clip(np.floor(x).astype(int), 0, n - 2), np.clip(np.floor(y).astype(int), 0, n - 2)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    f = np.asarray(faces, np.float64)
+    top = f[face, y0, x0] * (1 - fx) + f[face, y0, x0 + 1] * fx
+    bottom = f[face, y0 + 1, x0] * (1 - fx) + f[face, y0 + 1, x0 + 1] * fx
+    shape = np.shape(directions)[:-1]
+    return (top * (1 - fy) + bottom * fy).reshape(*shape, 3), inside.reshape(shape)
+
+
+def test_a_sharp_mirror_shows_the_stars_as_the_twin_along_its_reflected_rays(scene):
+    """A mirror across the view, facing the camera, under a night atmosphere with stars
+    (``star_faces``, 32 texels a face): each of its pixels is the air's light along the pixel's
+    ray reflected in it (the twin, ``model_sky``) plus the stars' faces sampled there in numpy
+    (GL's bilinear filter between texel centres; the pixels whose four texels cross a face's
+    edge left out) times the share the air lets through and the share that shows through air
+    that bright (as ``build_faces`` adds them); stars stand out in it, and they are the
+    reflected rays' stars, not those straight ahead (the mirror is there)."""
+    from components import Mirror
+    from engine.assets.mesh import quad
+    from engine.assets.star_field import star_faces
+
+    n = 32
+    stars = star_faces(size=n, stars=1000, seed=5)
+    sun = _toward(-14.0, 150.0)   # (past dusk: the stars are out)
+    skybox = Skybox(model="atmosphere", faces=stars, face_size=n)
+    target = _toward(35.0, -30.0)   # the sky the mirror shows, over -Z
+    look = target * np.array([1.0, 1.0, -1.0])   # what a plane z = 2 reflects to it
+
+    def build(world):
+        world.spawn(Transform(rotation=look_rotation(glm.vec3(*look))), Camera(fov_y=40.0, near=0.1, far=100.0))
+        world.spawn(skybox)
+        world.spawn(DirectionalLight(direction=tuple(-sun), intensity=3.0))
+        world.spawn(Transform(position=(0.0, 0.0, 2.0), rotation=glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))),
+                    MeshRef(quad(40.0, 40.0)), Material(), Mirror())
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    colour, rays = _read(runner)
+    assert runner.stats.reflection_views == 1
+    on_mirror = rays[..., 2] > 0.05
+    hit = rays * (2.0 / np.where(on_mirror, rays[..., 2], 1.0))[..., None]
+    on_mirror &= (np.abs(hit[..., 0]) < 19.0) & (np.abs(hit[..., 1]) < 19.0)
+    assert on_mirror.mean() > 0.95
+    model = sky_model(skybox, SkySun(tuple(sun)))
+    table = atm.sky_view_table(model.air, model.air_elevation)
+
+    def twin(ways):
+        beyond, whole = _cube_bilinear(stars, ways)
+        through = atm.air_transmittance(table, ways, sun) * atm.space_shown(atm.air_radiance(table, ways, sun))
+        return model_sky(model, ways) + beyond * through * (ways[..., 1:2] >= -atm.horizon_sine(model.air)), whole
+
+    reflected = rays * np.array([1.0, 1.0, -1.0])
+    want, whole = twin(reflected)
+    air = model_sky(model, reflected)
+    checked = on_mirror & whole
+    assert checked.sum() > 0.6 * on_mirror.sum()
+    np.testing.assert_allclose(colour[checked], want[checked], rtol=1e-2, atol=2e-3)
+    starry = (want - air).max(axis=-1) > 0.05
+    assert (starry & checked).sum() > 100                                            # (the stars are in it)
+    assert ((colour - air).max(axis=-1)[starry & checked] > 0.03).all()
+    ahead, _ = twin(rays)
+    assert np.abs(colour - ahead)[checked].max() > 0.2                               # (the mirror is drawn)

@@ -39,13 +39,14 @@ from components import (
     MeshRef,
     Mirror,
     PointLight,
+    Portal,
     Refractive,
     Transform,
     look_rotation,
 )
 from engine.assets.mesh import Mesh, box, plane, quad, sphere
 from engine.rules.shadow_rules import holds_point
-from tests.support import look_from, six_pass_only
+from tests.support import look_from, pixel_rays, six_pass_only
 
 SIZE = (320, 240)
 LAMP = glm.vec3(0.0, 2.0, 0.0)
@@ -137,6 +138,84 @@ def test_a_lamps_image_in_a_mirror_leaves_its_bulbs_image_out(scene):
     x, y = runner.project(glm.vec3(-2.0, 0.0, -0.5))
     assert own[y, x].sum() > dark[y, x].sum() + 30, (own[y, x], dark[y, x])
 
+
+
+PORTAL_SIZE = (160, 120)
+PORTAL_LAMP = np.array([11.5, 1.8, 0.3])   # 1.5 m in front of B (at x = 10, facing +X)
+PORTAL_BULB = 0.3                          # (a wide globe: many pixels through the portal)
+
+
+def _portal_level(bulb_casts: bool = True, carries: bool = True, lamp: float = 12.0):
+    """A portal pair, A at (0, 1.5, -3) facing +Z (the camera before it), B at (10, 1.5, 0)
+    facing +X (``carries``: its lights shine out of A), and the lamp on its glowing bulb in
+    front of B, casting; a floor under both."""
+    def build(world):
+        from engine.assets.portals import spawn_portal_pair
+
+        look_from(world, (0.3, 1.6, 2.0), (0.0, 1.5, -3.0))
+        world.spawn(Transform(), MeshRef(plane(40, 40)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        world.resources["a"], world.resources["b"] = spawn_portal_pair(
+            world, (0.0, 1.5, -3.0), None, (10.0, 1.5, 0.0), glm.angleAxis(glm.pi() / 2, glm.vec3(0, 1, 0)))
+        world.get(world.resources["b"], Portal).carries_light = carries
+        world.resources["bulb"] = world.spawn(
+            Transform(position=tuple(PORTAL_LAMP)), MeshRef(sphere(PORTAL_BULB), casts_shadows=bulb_casts),
+            Material(color=(1.0, 0.9, 0.7)), Emissive(2.0), PointLight(intensity=lamp, range=9.0, shadows=True))
+    return build
+
+
+def _portal_frame(scene, build):
+    runner = scene(build, PORTAL_SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    return runner.frame().astype(np.int32), runner
+
+
+def test_a_lamps_glowing_bulb_is_seen_through_a_portal_where_its_carry_puts_it(scene):
+    """Each pixel of A's picture, its ray carried by the pair's transform (float64, from the
+    Transforms), is the bulb where the carried ray meets the bulb's sphere (a margin in), and
+    not where it misses it (a margin out); there the glow's colour (warm, bright), and its
+    image is behind A, where carry^-1 puts the lamp (not the lamp's own place)."""
+    own, runner = _portal_frame(scene, _portal_level())
+    world = runner.world
+    on_a = runner.engine.renderer.targets.read_surface_ids() == world.resources["a"]
+    assert on_a.sum() > 2000 and runner.stats.reflection_views >= 1
+    a_world, b_world = (np.array(glm.dmat4(world.get(world.resources[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    carry = b_world @ turn @ np.linalg.inv(a_world)
+    eye, rays = pixel_rays(runner.engine.main_view, PORTAL_SIZE)
+    origin = carry[:3, :3] @ eye + carry[:3, 3]
+    ways = rays[on_a] @ carry[:3, :3].T
+    along = (PORTAL_LAMP - origin) @ ways.T
+    miss = np.linalg.norm(origin + along[:, None] * ways - PORTAL_LAMP, axis=1)   # the ray's distance from the centre
+    shown = runner.ids()[on_a] == world.resources["bulb"]
+    inside, outside = miss < PORTAL_BULB - 0.02, miss > PORTAL_BULB + 0.02
+    assert inside.sum() > 20
+    assert shown[inside].all(), int((~shown[inside]).sum())
+    assert not shown[outside].any(), int(shown[outside].sum())
+    glow = own[on_a][inside]
+    assert (glow[:, 0] > 200).all() and (glow[:, 0] >= glow[:, 2]).all(), glow.min(axis=0)
+    behind = np.linalg.inv(carry) @ np.append(PORTAL_LAMP, 1.0)
+    assert behind[2] < -3.0   # (behind A's opening)
+    col, row = runner.project(glm.vec3(*behind[:3]))
+    assert runner.ids()[row, col] == world.resources["bulb"]
+    col, row = runner.project(glm.vec3(*PORTAL_LAMP))
+    assert not (0 <= col < PORTAL_SIZE[0] and 0 <= row < PORTAL_SIZE[1]) \
+        or runner.ids()[row, col] != world.resources["bulb"]
+
+
+def test_a_lamps_light_carried_out_of_a_portal_leaves_its_bulb_out(scene):
+    """The lamp's light through B shines out of A (``Portal.carries_light``): its image's map,
+    drawn with the scene carried through the pair, leaves the bulb out as the lamp's own map
+    does (the frame is the one with the bulb a non-caster, bit for bit), and the floor before
+    A, where the lamp's image reaches through A's opening, is brighter than with B carrying no
+    light."""
+    own, runner = _portal_frame(scene, _portal_level())
+    assert runner.stats.virtual_lights == 1, runner.stats.virtual_lights
+    no_caster, _ = _portal_frame(scene, _portal_level(bulb_casts=False))
+    np.testing.assert_array_equal(own, no_caster)
+    dark, _ = _portal_frame(scene, _portal_level(carries=False))
+    x, y = runner.project(glm.vec3(0.0, 0.0, -1.2))   # under the line from A's centre to the lamp's image
+    assert own[y, x].sum() > dark[y, x].sum() + 30, (own[y, x], dark[y, x])
 
 def _bulb_apart(how: str):
     """A lamp that casts shadows, with a mesh round it made as an entity of its own: ``how``

@@ -178,6 +178,89 @@ def test_mirrors_show_the_lightmapped_floor_as_the_image_says_where_their_rays_m
     assert np.abs(plain[inside] - colour[inside]).mean() > 0.1              # (without it, it is)
 
 
+
+@pytest.mark.parametrize("scale", [1.0, 2.0])
+def test_a_portal_shows_the_lightmapped_floor_as_the_image_says_where_its_carried_rays_meet_it(scene, scale):
+    """A portal pair facing down, A far off over the camera, B 3 m over the lightmapped floor
+    (``scale``: B's Transform's): every pixel of the floor seen through A (its view: a
+    reflection level's scene pass) is albedo x the image x the intensity where the pixel's
+    ray, carried by the pair's transform (float64, from the Transforms), meets the floor,
+    unscaled by the pair's scale; the floor's entity is what those pixels show."""
+    from engine.assets.portals import spawn_portal_pair
+
+    image = gradient_image()
+    down = glm.angleAxis(glm.pi() / 2, glm.vec3(1, 0, 0))   # a quad's front (+Z) turned to -Y
+    ents = {}
+
+    def build(world):
+        look_from(world, (20.0, 1.2, 0.0), (20.0, 3.0, -0.001), fov=60.0)
+        world.spawn(Skybox())
+        ents["floor"] = world.spawn(Transform(), MeshRef(plane(2 * HALF, 2 * HALF)),
+                                    matte(lightmap=image, lightmap_intensity=1.5))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (20.0, 3.0, 0.0), down, (0.0, 3.0, 0.0), down)
+        world.get(ents["b"], Transform).scale = glm.vec3(scale)
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    colour, rays = _read(runner)
+    assert runner.stats.reflection_views == 1
+    on_a = runner.engine.renderer.targets.read_surface_ids() == ents["a"]
+    a_world, b_world = (np.array(glm.dmat4(runner.world.get(ents[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    carry = b_world @ turn @ np.linalg.inv(a_world)
+    eye = carry[:3, :3] @ np.array(runner.engine.main_view.eye, np.float64) + carry[:3, 3]
+    ways = rays @ carry[:3, :3].T
+    hit = eye + ways * (-eye[1] / np.where(ways[..., 1] < -1e-6, ways[..., 1], -1.0))[..., None]
+    u, v = (hit[..., 0] + HALF) / (2 * HALF), (HALF - hit[..., 2]) / (2 * HALF)
+    inside = on_a & (ways[..., 1] < -0.1) & (np.abs(hit[..., 0]) < HALF - 0.15) & (np.abs(hit[..., 2]) < HALF - 0.15)
+    edge = np.zeros_like(on_a)   # (a pixel beside the portal's outline: its composite's edge)
+    for shift in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        edge |= ~np.roll(on_a, shift, axis=(0, 1))
+    inside &= ~edge
+    assert inside.sum() > 1500
+    assert (runner.ids()[inside] == ents["floor"]).all()
+    want = ALBEDO * sample(image, u, v) * 1.5
+    np.testing.assert_allclose(colour[inside], want[inside], rtol=0.02, atol=0.004)
+
+
+def test_a_probes_faces_show_the_lightmapped_floor_as_the_image_says_where_their_texels_look(scene, ctx):
+    """A reflection probe 0.6 m over the lightmapped floor: each texel of its capture (level 0
+    of every face, read back) that sees the floor is albedo x the image x the intensity where
+    the texel centre's way from the probe meets the floor (``face_directions``), unscaled, as
+    the main view's floor is: the face looking down whole, the side faces' lower rows (ways
+    steeper than 33 degrees: flatter ones read the lightmap's coarser mips, which the
+    finest-level ``sample`` is not)."""
+    from components import ReflectionProbe
+    from engine.core.cube_faces import face_directions
+    from engine.render.bindings import SCRATCH_UNIT
+    from engine.render.raw_gl import read_cube_level
+
+    image = gradient_image()
+    n, centre = 32, np.array([0.3, 0.6, -0.2])
+
+    def build(world):
+        look_from(world, (0.0, 4.5, 0.0), (0.0, 0.0, -0.001), fov=50.0)
+        world.spawn(Skybox())
+        world.spawn(Transform(), MeshRef(plane(2 * HALF, 2 * HALF)), matte(lightmap=image, lightmap_intensity=1.5))
+        world.spawn(Transform(position=tuple(centre)), ReflectionProbe(resolution=n, far=20.0, refresh="every_frame"))
+
+    runner = scene(build, SIZE)
+    for _ in range(2):
+        runner.frame()
+    (texture,) = [cube.texture for cube in runner.engine.renderer.probes.cubes.values()]
+    checked = 0
+    for face in range(6):
+        got = read_cube_level(ctx, texture, face, 0, SCRATCH_UNIT)[..., :3].astype(np.float64)
+        ways = face_directions(face, n)
+        hit = centre + ways * (-centre[1] / np.where(ways[..., 1] < -1e-6, ways[..., 1], -1.0))[..., None]
+        u, v = (hit[..., 0] + HALF) / (2 * HALF), (HALF - hit[..., 2]) / (2 * HALF)
+        inside = (ways[..., 1] < -0.55) & (np.abs(hit[..., 0]) < HALF - 0.15) & (np.abs(hit[..., 2]) < HALF - 0.15)
+        want = ALBEDO * sample(image, u, v) * 1.5
+        np.testing.assert_allclose(got[inside], want[inside], rtol=0.02, atol=0.004, err_msg=f"face {face}")
+        checked += inside.sum()
+    assert checked > n * n + 400
+
 @pytest.mark.parametrize("field, value", [("lightmap_intensity", -1.0), ("lightmap_intensity", float("nan")),
                                           ("lightmap_intensity", 1e5), ("lightmap", "lightmap.png")])
 def test_bad_lightmap_values_are_refused_when_given(field, value):

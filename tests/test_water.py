@@ -598,3 +598,56 @@ def test_near_the_pictures_edge_what_is_below_fades_from_bent_to_unbent(scene):
     assert between.sum() >= 3, rows  # the band's rows: bent and unbent both show there
     assert (expected < 0.01).any() and (expected > 0.99).any()
     np.testing.assert_allclose(excess / whole, expected, atol=0.12)
+
+
+def test_a_waters_sky_is_the_generated_skys_along_its_reflected_rays_pixel_by_pixel(scene):
+    """A still pond (no normal map) over a black floor under a generated sky, the sun's disc
+    in its reflection: where nothing else is reflected, each water pixel (level 0's HDR
+    colour) is F x ``sky_radiance`` along the pixel's ray reflected at y = 0, F Schlick's
+    for the water's index at the pixel's angle (what is below is black: the floor alone is
+    checked so), the disc's sharp edge included (the composite draws the sky per pixel, not
+    from the cube map's texels); above the horizon, the sky itself."""
+    from engine.render.sky import sky_radiance
+    from engine.rules.light_rules import SkySun
+    from tests.test_generated_sky import SIZE, SKY, SUN, _read
+
+    sun = np.array(SUN, np.float64)
+    look = sun * np.array([1.0, -1.0, 1.0]) + np.array([0.0, 0.25, 0.0])   # at the sun's image, the horizon in view
+
+    def build(water: bool):
+        def b(world):
+            world.spawn(Transform(position=(0.0, 1.5, 0.0), rotation=look_rotation(glm.vec3(*look))),
+                        Camera(fov_y=50.0, near=0.1, far=500.0))
+            world.spawn(Skybox(**SKY))
+            world.spawn(Transform(position=(0.0, -1.0, 0.0), rotation=FLAT), MeshRef(quad(400.0, 400.0)),
+                        Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0, environment_reflection=0.0))
+            if water:
+                world.spawn(Transform(rotation=FLAT), MeshRef(quad(400.0, 400.0)), Material(color=(1.0, 1.0, 1.0, 0.0)),
+                            Mirror(), Water(ior=1.333, speed=0.0))
+        return b
+
+    colours = {}
+    for water in (True, False):
+        runner = scene(build(water), SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        colours[water], rays = _read(runner)
+        if water:
+            assert runner.stats.reflection_views == 1
+    colour, dry = colours[True], colours[False]
+    eye = np.array(runner.engine.main_view.eye, np.float64)
+    down = rays[..., 1] < -0.02
+    hit = eye + rays * (-eye[1] / np.where(down, rays[..., 1], -1.0))[..., None]
+    on_water = down & (np.abs(hit[..., 0]) < 150.0) & (np.abs(hit[..., 2]) < 150.0)
+    assert on_water.sum() > 5000 and (rays[..., 1] > 0.02).sum() > 1000
+    assert dry[on_water].max() < 1e-3                                     # (black below)
+    reflected = rays * np.array([1.0, -1.0, 1.0])
+    sky = sky_radiance(Skybox(**SKY), reflected, SkySun(tuple(sun)))
+    f0 = ((1.333 - 1.0) / (1.333 + 1.0)) ** 2
+    weight = schlick(f0, -rays[..., 1:2])
+    np.testing.assert_allclose(colour[on_water], (weight * sky)[on_water], rtol=1e-2, atol=2e-3)
+    disc = sky_radiance(Skybox(**SKY), reflected, SkySun(tuple(sun))).max(axis=-1) > 3.0
+    assert (disc & on_water).sum() >= 10                                   # (the sun's disc in the water)
+    up = rays[..., 1] > 0.02
+    np.testing.assert_allclose(colour[up], sky_radiance(Skybox(**SKY), rays, SkySun(tuple(sun)))[up],
+                               rtol=1e-2, atol=2e-3)
