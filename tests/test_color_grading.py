@@ -292,3 +292,53 @@ def test_a_tables_edit_in_place_raises_at_the_edit_and_a_callers_array_is_not_sh
         lut.table[0, 0, 0] = (1.0, 0.0, 0.0)
     source[0, 0, 0] = (1.0, 0.0, 0.0)
     assert lut.table[0, 0, 0].tolist() == [0.0, 0.0, 0.0]
+
+
+def test_a_picture_panel_is_white_balanced_and_graded_as_the_frame_and_ungraded_with_it(scene):
+    """A picture panel (a ``ScreenPanel`` with a ``Monitor``: the monitors' studio's red box
+    on black, tinted) under a camera whose ``ColorGrading`` uses every control the panel test
+    of tests/test_monitors.py leaves out: white balance (temperature and tint), the CDL's
+    offset and power.  Each panel pixel is ``grade`` here (after the white balance's matrix,
+    the one the daylight test above checks against the CIE's whites) of picture x colour x
+    exposure, through the curve, encoded: within one 8-bit step, and far from the panel
+    without the white balance or without the rest.  The present stage's grade switch off
+    (the overlay's): the panel is ungraded as the frame is, the curve of the picture alone."""
+    from components import Monitor, ScreenPanel
+    from engine.render.grading import white_balance
+    from tests.test_monitors import DT, PICTURE, active_camera, studio
+
+    build, parts = studio(None, eye=(0.0, 1.0, 30.0))   # (the main camera sees black: the box is far off)
+    tint = np.array([1.0, 0.8, 0.6])
+    controls = dict(offset=(0.01, 0.02, 0.0), power=(0.8, 1.0, 1.25), contrast=1.1)
+    temperature, hue = 0.8, 0.6
+    held = {}
+
+    def hud(world):
+        build(world)
+        camera = active_camera(world)
+        world.add_component(camera, Tonemap(curve="agx", exposure=1.0))
+        world.add_component(camera, ColorGrading(temperature=temperature, tint=hue, **controls))
+        held["panel"] = world.spawn(ScreenPanel(size=PICTURE, position=(10, 6), color=(*tint, 1.0)),
+                                    Monitor(camera=parts["lens"], size=PICTURE))
+
+    runner = scene(hud, (128, 72))
+    runner.engine.renderer.antialias = "off"
+    for _ in range(2):
+        rgb = runner.frame(DT)
+    shown = runner.engine.renderer.monitors.read(held["panel"])[..., :3].astype(np.float64) * tint * 2.0
+    assert shown[..., 0].max() > 0.3 and (shown.max(axis=-1) == 0.0).mean() > 0.3   # the box, and black about it
+    balance = white_balance(temperature, hue)
+    assert np.abs(balance - np.eye(3)).max() > 0.05
+
+    def panel(linear):
+        return expected_srgb8(CURVES["agx"](linear))
+
+    drawn = rgb[6:6 + PICTURE[1], 10:10 + PICTURE[0]].astype(np.int16)
+    want = panel(grade(shown @ balance.T, **controls))
+    off = np.abs(drawn - want)
+    assert off.max() <= 1, (off.max(), np.argwhere(off > 1)[:5])
+    assert np.abs(want - panel(grade(shown, **controls))).max() > 5   # (the white balance shows)
+    assert np.abs(want - panel(shown @ balance.T)).max() > 8           # (and the CDL's steps)
+    runner.engine.stages["present"].grade = False
+    drawn = runner.frame(DT)[6:6 + PICTURE[1], 10:10 + PICTURE[0]].astype(np.int16)
+    assert np.abs(drawn - panel(shown)).max() <= 1

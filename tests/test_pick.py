@@ -94,7 +94,7 @@ def dilated(mask: np.ndarray) -> np.ndarray:
     return near
 
 
-@pytest.mark.parametrize("veil", [False, True, "morphed"], ids=["bare", "veiled", "morphed"])
+@pytest.mark.parametrize("veil", [False, True, "morphed", "skinned"], ids=["bare", "veiled", "morphed", "skinned"])
 def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, veil):
     """The monitors' studio: the active camera before the screen, whose picture shows the red
     box the lens watches.  A pixel where the frame shows the box on the screen (red: the GPU's
@@ -105,7 +105,11 @@ def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, 
     layer the lens hides (``Camera.hides_layers``): its picture shows the box through it, and
     the click picks the box, not the wall.  ``morphed``: the screen's mesh wears a morph target
     that moves it 0.4 m to the right: its texture coordinates at the point are read off the
-    triangle as posed, not as modelled (a quarter of the picture's width off)."""
+    triangle as posed, not as modelled (a quarter of the picture's width off).  ``skinned``:
+    the screen's mesh is bent by a ``Skin`` instead, its right edge on a joint that carries it
+    0.8 m further right (the screen stretched to half as wide again) and 0.2 m towards the
+    eye (no longer flat in its plane), so a point's texture coordinates are the stretched
+    triangle's (a sixth of the picture's width off at the screen's middle)."""
     from components import Camera, Material, MeshRef, Monitor, Transform, Visibility
     from engine.assets.mesh import quad
     from shell.handles import view_ray
@@ -127,6 +131,21 @@ def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, 
                                                             np.asarray(flat.indices).reshape(-1, 3), name="slid screen",
                                                             morph_positions=right, morph_normals=np.zeros_like(right))
             world.add_component(held["screen"], Morph((1.0,)))
+        elif veil == "skinned":
+            from components import Skin
+            from engine.assets.mesh import Mesh
+            from tests.test_monitors import SCREEN_SIZE
+
+            flat = quad(*SCREEN_SIZE)
+            right = (np.asarray(flat.positions)[:, 0] > 0).astype(np.uint16)   # (the right edge's two corners)
+            stretch = np.stack([np.eye(4), np.eye(4)])
+            stretch[1, :3, 3] = (0.8, 0.0, 0.2)   # (points as columns: M @ (x, y, z, 1))
+            world.get(held["screen"], MeshRef).mesh = Mesh(flat.positions, flat.normals, flat.uvs,
+                                                            np.asarray(flat.indices).reshape(-1, 3),
+                                                            name="stretched screen",
+                                                            joints=np.stack([right, 0 * right], axis=1),
+                                                            weights=np.tile([1.0, 0.0], (len(right), 1)))
+            world.add_component(held["screen"], Skin(stretch))
         elif veil:
             world.get(held["lens"], Camera).hides_layers = [3]
             held["veil"] = world.spawn(Transform(position=(0.0, 1.0, (BOX_AT[2] + 0.0) / 2.0)), MeshRef(quad(6.0, 4.0)),
@@ -140,9 +159,8 @@ def test_a_click_on_a_monitors_screen_picks_what_its_picture_shows_there(scene, 
     screen = ids == held["screen"]
     red = screen & (rgb[..., 0] - rgb[..., 1] > 50)
     inner = red.copy()   # (away from the box's edges, where a pixel's ray and the picture's texels part)
-    for axis in (0, 1):
-        for step in (1, -1):
-            inner &= np.roll(red, step, axis=axis)
+    for _ in range(2 if veil == "skinned" else 1):   # (stretched: a texel's blend spans two pixels)
+        inner = inner & np.roll(inner, 1, 0) & np.roll(inner, -1, 0) & np.roll(inner, 1, 1) & np.roll(inner, -1, 1)
     dark = screen & (rgb.max(axis=-1) < 10)
     assert inner.sum() > 5 and dark.sum() > 50
     editor = Editor(runner.world)

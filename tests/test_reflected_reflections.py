@@ -296,3 +296,120 @@ def test_a_monitors_picture_through_a_portal_reflects_as_seen_directly(scene, ac
     if active:
         difference = np.abs(names["frame"][judged] - direct[judged]).max(axis=-1)
         assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+
+
+
+# A periscope of two mirrors: the camera looks sideways into a small mirror turned 45 degrees
+# about y (the first), which sends its rays along z, over the boxes, to a tall mirror at
+# z = 3 facing them (the second), which sends them back onto the floor and the boxes.  Two
+# reflections in vertical planes are a turn about y (here, half a turn and a quarter), so
+# what the second's view (level 2) shows is the world seen from the eye carried back through
+# both: ``CARRIED``, looking ``DOWN_THE_HALL`` (the camera's pose is worked out from it).
+CARRIED, DOWN_THE_HALL = np.array([0.0, 3.0, 10.0]), np.array([0.0, -2.5, -10.0]) / np.hypot(2.5, 10.0)
+SECOND_Z, SECOND_SIZE = 3.0, (6.0, 3.6)                      # facing -z, its foot on the floor
+FIRST_NORMAL, FIRST_SIZE = np.array([-1.0, 0.0, 1.0]) / np.sqrt(2.0), (1.6, 0.8)
+
+
+def _reflect(v: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    return v - 2.0 * (v @ normal)[..., None] * normal
+
+
+def _periscope() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the first mirror's centre, the camera's eye, its way): the carried eye's image in the
+    second mirror is 0.6 m along its way from the first mirror's centre, and the camera that
+    image's image in the first."""
+    across = np.array([0.0, 0.0, -1.0])
+    image = _reflect(CARRIED - (0.0, 0.0, SECOND_Z), across) + (0.0, 0.0, SECOND_Z)
+    image_way = _reflect(DOWN_THE_HALL, across)
+    centre = image + 0.6 * image_way
+    return centre, centre + _reflect(image - centre, FIRST_NORMAL), _reflect(image_way, FIRST_NORMAL)
+
+
+def _rect_hits(origin: np.ndarray, direction: np.ndarray, centre, normal: np.ndarray, size) -> np.ndarray:
+    """The distance along each ray (rows) to the vertical rectangle (``centre``, facing
+    ``normal`` in the x-z plane, ``size`` wide and high) where it meets it ahead; inf: not."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((np.asarray(centre) - origin) @ normal) / (direction @ normal)
+    point = origin + np.where(np.isfinite(t), t, 0.0)[:, None] * direction - centre
+    across = np.array([normal[2], 0.0, -normal[0]])
+    inside = (np.abs(point @ across) < size[0] / 2) & (np.abs(point[:, 1]) < size[1] / 2)
+    return np.where((t > 1e-6) & inside, t, np.inf)
+
+
+def _nearest_box(origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """The distance along each ray (rows) to the nearest box of the scene it meets ahead (the
+    slab test; inf: none)."""
+    from tests.test_screen_reflections import BOXES
+
+    nearest = np.full(len(direction), np.inf)
+    for centre, size, _ in BOXES:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (np.subtract(centre, np.multiply(size, 0.5)) - origin) / direction
+            t2 = (np.add(centre, np.multiply(size, 0.5)) - origin) / direction
+        near, far = np.nanmax(np.minimum(t1, t2), axis=1), np.nanmin(np.maximum(t1, t2), axis=1)
+        nearest = np.where((near <= far) & (far > 1e-6), np.minimum(nearest, np.maximum(near, 0.0)), nearest)
+    return nearest
+
+
+def test_two_mirror_levels_deep_the_polished_floor_reflects_as_the_carried_eye_sees_it(scene):
+    """``ScreenReflections(reflection_depth=2)`` on a camera looking into a periscope of two
+    mirrors (above): in the second mirror seen in the first (level 2) the polished floor
+    reflects the boxes as the camera at ``CARRIED`` sees it directly in the scene without the
+    mirrors.  Judged: the pixels whose ray, cast here segment by segment, meets the first
+    mirror, then the second over the boxes and the floor, then the floor, a box or the sky
+    without meeting the first mirror again, and, on the floor, whose reflected ray misses the
+    first mirror too (3 pixels from any edge of that set): within 3 levels for 97%; and where
+    the ground truth's floor reflects a box, far (40 levels) from the same periscope with
+    ``reflection_depth`` 1 (level 2 shows the sky's reflection there)."""
+    from components import Camera, Material
+    from engine.assets.mesh import quad
+
+    centre, eye, way = _periscope()
+    turn = float(np.degrees(np.arctan2(FIRST_NORMAL[0], FIRST_NORMAL[2])))   # (a quad faces +z)
+    placed = (("first", tuple(centre), turn, FIRST_SIZE),
+              ("second", (0.0, SECOND_SIZE[1] / 2, SECOND_Z), 180.0, SECOND_SIZE))
+
+    def narrow(world, names):
+        world.get(names["camera"], Camera).fov_y = 30.0
+
+    def periscope(world, names):
+        narrow(world, names)
+        for name, at, angle, size in placed:
+            names[name] = world.spawn(
+                Transform(position=at, rotation=glm.angleAxis(glm.radians(angle), glm.vec3(0, 1, 0))),
+                MeshRef(quad(*size), casts_shadows=False), Material(), Mirror())
+
+    image, runner, names = _frame(scene, ScreenReflections(reflection_depth=2), portal=False, eye=tuple(eye),
+                                  extra=periscope, way=tuple(way))
+    plain, _, _ = _frame(scene, ScreenReflections(reflection_depth=1), portal=False, eye=tuple(eye),
+                         extra=periscope, way=tuple(way))
+    direct, direct_runner, direct_names = _frame(scene, ScreenReflections(), portal=False, eye=tuple(CARRIED),
+                                                 extra=narrow, way=tuple(DOWN_THE_HALL))
+    assert runner.stats.reflection_views >= 2
+    origin, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    into = _rect_hits(origin[None], rays, centre, FIRST_NORMAL, FIRST_SIZE)
+    first = origin + np.where(np.isfinite(into), into, 0.0)[:, None] * rays
+    along = _reflect(rays, FIRST_NORMAL)
+    facing = np.array([0.0, 0.0, -1.0])
+    across = _rect_hits(first, along, (0.0, SECOND_SIZE[1] / 2, SECOND_Z), facing, SECOND_SIZE)
+    second = first + np.where(np.isfinite(across), across, 0.0)[:, None] * along
+    back = _reflect(along, facing)
+    crossed = np.isfinite(into) & np.isfinite(across) & (first[:, 1] > 0.0) & (_nearest_box(first, along) > across)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_floor = np.where(back[:, 1] < 0.0, -second[:, 1] / back[:, 1], np.inf)
+    met = np.minimum(t_floor, _nearest_box(second, back))
+    on_floor = np.isfinite(t_floor) & (t_floor <= met)
+    ground = second + np.where(on_floor, t_floor, 0.0)[:, None] * back
+    bounced = back * (1.0, -1.0, 1.0)
+    clear = (_rect_hits(second, back, centre, FIRST_NORMAL, FIRST_SIZE) > met) \
+        & ~(on_floor & np.isfinite(_rect_hits(ground, bounced, centre, FIRST_NORMAL, FIRST_SIZE)))
+    judged = _eroded((crossed & clear).reshape(SIZE[1], SIZE[0]), 3)
+    assert judged.sum() > 8000, judged.sum()
+    difference = np.abs(image[judged] - direct[judged]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
+    floor = direct_runner.ids() == direct_names["floor"]
+    reflecting = judged & floor & (np.abs(direct - plain).max(axis=-1) > 40)
+    assert reflecting.sum() > 300, reflecting.sum()
+    difference = np.abs(image[reflecting] - direct[reflecting]).max(axis=-1)
+    assert np.mean(difference <= 3) > 0.97, np.percentile(difference, [50, 90, 99])
