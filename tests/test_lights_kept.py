@@ -17,7 +17,7 @@ import pytest
 from pyglm import glm
 from scipy import ndimage
 
-from components import Camera, Material, MeshRef, Monitor, PointLight, Transform, look_rotation
+from components import Camera, Material, MeshRef, Mirror, Monitor, PointLight, Transform, look_rotation
 from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.errors import LightLimitWarning
@@ -531,3 +531,156 @@ def test_a_pictures_eye_is_weighed_by_its_screens_or_its_panels_share_of_the_fra
     assert seen > MIN_VIEW_SHARE and panel > MIN_VIEW_SHARE
     assert sorted(share for *_, share in points) == pytest.approx(sorted([seen, panel]))
     assert all(eye == pytest.approx((20.0, 1.0, 0.0)) for *eye, _ in points)
+
+
+PORTAL_A, PORTAL_B = (0.0, 1.6, 2.0), (-30.0, 1.6, 4.5)   # B turned half about y: the carry is a shift
+SCREEN_BEYOND, SCREEN_BEYOND_SIZE = (-30.0, 1.6, 3.0), (4.8, 2.4)   # wider than the portal shows
+
+
+def _screen_through_a_portal(world, portal: bool = True) -> dict:
+    """``_monitor_on_box_b``'s monitor, its screen 30 m off to the side where the camera
+    (before a portal) cannot see it directly: only through the portal, whose partner stands
+    1.5 m before the screen's face (``portal`` False: no portal, the screen seen nowhere)."""
+    ids = _two_boxes(world)
+    _move_camera(world, (0.0, 1.6, 4.5), (0.0, 1.6, 0.0))
+    if portal:
+        ids["portals"] = spawn_portal_pair(world, PORTAL_A, None, PORTAL_B, HALF_TURN, size=(2.4, 2.4))
+    eye = glm.vec3(EYE_B)
+    ids["lens"] = world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(*BOX_B) - eye)),
+                              Camera(fov_y=60.0, active=False))
+    ids["screen"] = world.spawn(Transform(position=SCREEN_BEYOND), MeshRef(quad(*SCREEN_BEYOND_SIZE)),
+                                Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0),
+                                Monitor(camera=ids["lens"], size=(32, 24)))
+    return ids
+
+
+def _pixel_rect(view, corners, size) -> np.ndarray:
+    """(x0, y0, x1, y1): the whole pixels holding world ``corners`` projected by glm through
+    ``view``, on a frame of ``size``."""
+    xs, ys = [], []
+    for corner in corners:
+        clip = view.view_proj * glm.vec4(*corner, 1.0)
+        assert clip.w > 0.0
+        xs.append((clip.x / clip.w * 0.5 + 0.5) * size[0])
+        ys.append((clip.y / clip.w * 0.5 + 0.5) * size[1])
+    return np.array([math.floor(min(xs)), math.floor(min(ys)), math.ceil(max(xs)), math.ceil(max(ys))], float)
+
+
+def test_a_pictures_eye_counts_its_screen_seen_only_through_a_portal(scene):
+    """The screen stands where the camera cannot see it, but the portal before the camera
+    shows it: its share of the frame is its rectangle through the portal, worked out here
+    as the screen carried back through the pair (the partner turned half about y: a shift
+    by A - B) seen by the main view through glm, cut to the portal's own rectangle (the
+    screen is wider than the portal shows); from the second frame (last frame's portal view
+    published) the picture's eye counts so, and from the third (the lights chosen by the
+    eyes published the frame before) LAMP_B, which lights what the picture shows, is kept
+    in place of a filler (as with the screen before the camera); without the portal the eye
+    counts for nothing and LAMP_B stays cut.  The screen's entity is in the id image where
+    the portal shows it."""
+    runner = scene(_screen_through_a_portal)
+    ids = runner.world.resources["ids"]
+    runner.frame()
+    assert runner.world.resources[PictureEyes].points == ()   # (no portal view yet: the screen is not seen)
+    _save("screen_through_a_portal", runner.frame())
+    assert (runner.ids() == ids["screen"]).sum() > 200   # seen, through the portal
+    view, size = runner.engine.main_view, runner.size
+    shift = np.array(PORTAL_A) - np.array(PORTAL_B)
+    half = np.array([SCREEN_BEYOND_SIZE[0] / 2, SCREEN_BEYOND_SIZE[1] / 2, 0.0])
+    screen = [np.array(SCREEN_BEYOND) + half * (sx, sy, 0) + shift for sx in (-1, 1) for sy in (-1, 1)]
+    portal = [np.array(PORTAL_A) + (1.2 * sx, 1.2 * sy, 0.0) for sx in (-1, 1) for sy in (-1, 1)]
+    seen, opening = _pixel_rect(view, screen, size), _pixel_rect(view, portal, size)
+    inside = np.maximum(np.minimum(seen[2:], opening[2:]) - np.maximum(seen[:2], opening[:2]), 0.0)
+    expected = inside[0] * inside[1] / (size[0] * size[1])
+    assert seen[0] < opening[0] and seen[2] > opening[2] and seen[3] < opening[3]   # cut at the portal's sides
+    assert expected > 0.2
+    (point,) = runner.world.resources[PictureEyes].points
+    assert point[:3] == pytest.approx(EYE_B) and point[3] == pytest.approx(expected, rel=0.03)
+    runner.frame()   # (the lights are chosen before the monitors stage: by the eyes it published the frame before)
+    kept = runner.world.resources[KeptLights]
+    assert ids["lamp_b"] in kept.point and ids["lamp_a"] in kept.point and kept.cut == (0, 1)
+    assert (*EYE_B, point[3]) in kept.views
+    unseen = scene(lambda world: _screen_through_a_portal(world, portal=False))
+    for _ in range(3):
+        unseen.frame()
+    assert unseen.world.resources[PictureEyes].points == ()
+    assert unseen.world.resources["ids"]["lamp_b"] not in unseen.world.resources[KeptLights].point
+
+
+def _pictures_before_the_camera(screen_at=(0.7, 1.4, 0.0), lens_at=(20.0, 1.0, 0.0), behind: bool = False,
+                                mirror: bool = False, monitors: int = 1):
+    """The camera at (0, 1.6, 5) looking down -z; ``monitors`` screens in a row from
+    ``screen_at`` (``behind``: one screen at z = 6, behind the camera, turned to face -z),
+    fed by one camera at ``lens_at``; ``mirror``: a mirror at z = 2 facing the camera,
+    which shows the screen behind it."""
+    def build(world):
+        world.resources["ids"] = ids = {"camera": look_from(world, (0.0, 1.6, 5.0), (0.0, 1.6, 0.0))}
+        ids["lens"] = world.spawn(Transform(position=lens_at), Camera(active=False))
+        if mirror:
+            ids["mirror"] = world.spawn(Transform(position=(0.0, 1.5, 2.0)), MeshRef(quad(4.0, 3.0)), Material(),
+                                        Mirror())
+        if behind:
+            ids["screens"] = [world.spawn(Transform(position=(0.3, 1.4, 6.0), rotation=HALF_TURN),
+                                          MeshRef(quad(3.2, 1.8)), Material(),
+                                          Monitor(camera=ids["lens"], size=(8, 8)))]
+        else:
+            ids["screens"] = [world.spawn(Transform(position=(screen_at[0] - 1.7 * k, screen_at[1], screen_at[2])),
+                                          MeshRef(quad(1.6, 0.9)), Material(), Monitor(camera=ids["lens"], size=(8, 8)))
+                              for k in range(monitors)]
+    return build
+
+
+def _move(runner, name, position) -> None:
+    ids = runner.world.resources["ids"]
+    runner.world.get(ids[name] if name != "screen" else ids["screens"][0], Transform).position = position
+
+
+def _resize(runner, size) -> None:
+    from engine.render.targets import CaptureTarget
+
+    runner.capture.release()
+    runner.size, runner.capture = size, CaptureTarget(runner.ctx, size)
+
+
+SIZE = (64, 48)
+REMADE = {   # what changes, the build before, the change, the build after (and the frame's size after)
+    "the screen moved": ({}, lambda runner: _move(runner, "screen", (-0.9, 1.2, 2.0)),
+                         {"screen_at": (-0.9, 1.2, 2.0)}, SIZE),
+    "the pictures camera moved": ({}, lambda runner: _move(runner, "lens", (25.0, 2.0, 3.0)),
+                                  {"lens_at": (25.0, 2.0, 3.0)}, SIZE),
+    "the output resized": ({}, lambda runner: _resize(runner, (32, 48)), {}, (32, 48)),
+    "a mirror placed": ({"behind": True}, lambda runner: runner.world.spawn(
+        Transform(position=(0.0, 1.5, 2.0)), MeshRef(quad(4.0, 3.0)), Material(), Mirror()),
+        {"behind": True, "mirror": True}, SIZE),
+    "a mirror removed": ({"behind": True, "mirror": True},
+                         lambda runner: runner.world.delete_entity(runner.world.resources["ids"]["mirror"]),
+                         {"behind": True}, SIZE),
+}
+
+
+@pytest.mark.parametrize("change", list(REMADE))
+def test_a_pictures_eye_is_worked_out_again_after_each_change_it_depends_on(scene, change):
+    """``PictureEyes`` is kept while nothing it is made from changed (a still frame: the
+    same snapshot) and made again after each change its screen's share or its eye depends
+    on: the screen or the picture's camera moved, the frame resized, a mirror showing the
+    screen placed or removed (last frame's mirror views: the frame after).  Two frames
+    after the change, the eyes are those of the scene built as it now stands (a second
+    engine, run as long), and not those from before the change."""
+    before, act, after, size = REMADE[change]
+    runner = scene(_pictures_before_the_camera(**before), SIZE)
+    for _ in range(3):
+        runner.frame()
+    eyes = runner.world.resources[PictureEyes]
+    old = eyes.points
+    runner.frame()
+    assert runner.world.resources[PictureEyes] is eyes   # still: kept
+    act(runner)
+    for _ in range(2):
+        runner.frame()
+    fresh = scene(_pictures_before_the_camera(**after), size)
+    for _ in range(3):
+        fresh.frame()
+    expected = fresh.world.resources[PictureEyes].points
+    assert np.shape(expected) != np.shape(old) or not np.allclose(expected, old, atol=1e-3), (expected, old)
+    points = runner.world.resources[PictureEyes].points
+    assert np.shape(points) == np.shape(expected) and np.allclose(points, expected, atol=1e-6), (points, expected)
+

@@ -14,6 +14,7 @@ from benchmarks.mirrors import MirrorRing
 from components import ComponentValueError, DirectionalLight, Emissive, Material, MeshRef, Mirror, Transform
 from engine.assets.level_file import LevelError, load_level
 from engine.assets.mesh import box, quad
+from engine.assets.portals import spawn_portal_pair
 from engine.core.world import World
 from tests.support import SceneRunner, linear_to_srgb8, look_from, srgb_to_linear
 
@@ -180,3 +181,97 @@ fade_angle = [30.0, 75.0]
     path.write_text(text.replace("75.0", "120.0"))
     with pytest.raises(LevelError, match="fade_angle"):
         load_level(path)
+
+
+# A portal pair: A before the camera, B far off behind it and turned a quarter about y.
+PORTAL_A, PORTAL_B = glm.vec3(0.0, 1.5, 1.0), glm.vec3(40.0, 1.5, 40.0)
+B_TURN = glm.angleAxis(-math.pi / 2, glm.vec3(0, 1, 0))
+CAMERA_AT = glm.vec3(0.0, 1.5, 4.0)
+
+
+def _beyond(local) -> glm.vec3:
+    """A point in portal B's frame (x right, z out of its front) in the world."""
+    return PORTAL_B + B_TURN * glm.vec3(local)
+
+
+def _carried(point) -> glm.vec3:
+    """``point`` before A as the view through A sees it beyond B: B x a half turn x A^-1 (so
+    looking into A's front shows what lies before B's: ``spawn_portal_pair``)."""
+    carry = glm.translate(PORTAL_B) * glm.mat4_cast(B_TURN) * glm.mat4_cast(glm.angleAxis(math.pi, glm.vec3(0, 1, 0))) \
+        * glm.translate(-PORTAL_A)
+    return glm.vec3(carry * glm.vec4(point, 1.0))
+
+
+BEYOND_MIRROR = _beyond((1.0, 0.0, 4.0))   # 4 m before B, turned 30 degrees from facing it
+BEYOND_TURN = B_TURN * glm.angleAxis(math.pi + math.radians(30.0), glm.vec3(0, 1, 0))
+BEYOND_FADES = {"fade_distance": (4.0, 9.0), "fade_angle": (10.0, 50.0)}
+
+
+def _mirror_beyond_a_portal(mirror: Mirror, through_portal: bool = True):
+    """The camera 3 m before portal A, looking into it; beyond B a mirror and, off to B's
+    left, a red glowing wall it reflects.  ``through_portal`` False: no portals, the camera
+    standing where the carried camera stands (at the carried eye, looking at B)."""
+    def build(world: World) -> None:
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.0))
+        if through_portal:
+            look_from(world, tuple(CAMERA_AT), target=tuple(PORTAL_A), fov=60.0)
+            spawn_portal_pair(world, PORTAL_A, None, PORTAL_B, B_TURN, size=(2.4, 2.4), max_depth=1)
+        else:
+            look_from(world, tuple(_carried(CAMERA_AT)), target=tuple(PORTAL_B), fov=60.0)
+        world.spawn(Transform(position=BEYOND_MIRROR, rotation=BEYOND_TURN), MeshRef(quad(2 * HALF, 2 * HALF)),
+                    Material(color=(0.05, 0.1, 0.6)), mirror)
+        world.spawn(Transform(position=_beyond((-12.0, 0.0, 0.0)), rotation=B_TURN, scale=(0.1, 30, 60)),
+                    MeshRef(box()), Material(color=(0.9, 0.1, 0.1)), Emissive(1.0))
+    return build
+
+
+def test_a_mirror_seen_through_a_portal_fades_by_the_eye_carried_through_it(ctx):
+    """A mirror 4 m beyond portal B, the camera 3 m before portal A (and 56 m from the mirror
+    itself, past its fade's end): its view's weight is the fades' formula from the eye
+    carried through the pair (worked out here by hand: B x a half turn x A^-1, and checked
+    against the portal view's eye), whose distance to the mirror is the way from the camera
+    through the portal's opening to the mirror; a second path, a camera standing at the
+    carried eye with no portal at all, gives its view of the mirror the same weight and
+    shows the mirror's pixels as the portal does; the unfaded mirror through the portal
+    shows more of the red wall."""
+    eye = _carried(CAMERA_AT)
+    # The way through the opening: from the camera to where it crosses A, then on from the
+    # point B's plane has there to the mirror (the straight line from the carried eye
+    # crosses B's plane inside the opening).
+    local_eye = glm.inverse(B_TURN) * (eye - PORTAL_B)
+    local_mirror = glm.inverse(B_TURN) * (BEYOND_MIRROR - PORTAL_B)
+    crossing = glm.mix(local_eye, local_mirror, -local_eye.z / (local_mirror.z - local_eye.z))
+    assert abs(crossing.x) < 1.2 and abs(crossing.y) < 1.2
+    way = glm.length(local_eye - crossing) + glm.length(local_mirror - crossing)
+    assert glm.length(CAMERA_AT - PORTAL_A) == pytest.approx(3.0)
+    assert way == pytest.approx(glm.distance(eye, BEYOND_MIRROR))
+    d = max(way - math.sqrt(2.0) * HALF, 0.0)
+    normal = BEYOND_TURN * glm.vec3(0, 0, 1)
+    angle = math.degrees(math.acos(glm.dot(glm.normalize(eye - BEYOND_MIRROR), normal)))
+    (near, far), (low, high) = BEYOND_FADES["fade_distance"], BEYOND_FADES["fade_angle"]
+    weight = min(max((far - d) / (far - near), 0.0), 1.0) * min(max((high - angle) / (high - low), 0.0), 1.0)
+    assert 0.15 < weight < 0.85, weight
+    assert glm.distance(CAMERA_AT, BEYOND_MIRROR) - math.sqrt(2.0) * HALF > far   # from the camera: faded out
+
+    size = (96, 72)
+    runner = SceneRunner(ctx, _mirror_beyond_a_portal(Mirror(reflect_rate=0.9, **BEYOND_FADES)), size)
+    through = runner.frame()
+    portal_view, mirror_view = runner.engine.reflection_system.views[1:]
+    assert (portal_view.level, mirror_view.level, mirror_view.parent) == (1, 2, portal_view)
+    assert tuple(portal_view.view.eye) == pytest.approx(tuple(eye), abs=1e-4)
+    assert mirror_view.fade == pytest.approx(weight, abs=1e-5)
+    runner.close()
+    direct = SceneRunner(ctx, _mirror_beyond_a_portal(Mirror(reflect_rate=0.9, **BEYOND_FADES), False), size)
+    seen = direct.frame()
+    (view,) = direct.engine.reflection_system.views[1:]
+    assert view.fade == pytest.approx(weight, abs=1e-5)
+    x, y = direct.project(BEYOND_MIRROR)
+    direct.close()
+    patch = (slice(y - 4, y + 4), slice(x - 4, x + 4))
+    np.testing.assert_allclose(through[patch].astype(float), seen[patch].astype(float), atol=2.0)
+    unfaded = SceneRunner(ctx, _mirror_beyond_a_portal(Mirror(reflect_rate=0.9)), size)
+    whole = unfaded.frame()[patch].astype(float)
+    unfaded.close()
+    shown = through[patch].astype(float)
+    assert shown[..., 0].mean() > shown[..., 1].mean() + 40.0   # (the red wall, in the mirror)
+    assert whole[..., 0].mean() > shown[..., 0].mean() + 20.0

@@ -1214,3 +1214,54 @@ def test_a_kept_picture_is_drawn_again_when_its_cameras_own_fog_changes(scene):
                                   fresh.engine.renderer.monitors.read(fresh_held["screen"]))
     runner.frame(DT)
     assert runner.stats.monitors_kept == 1
+
+
+def test_two_monitors_cameras_far_apart_each_read_the_sharp_shadow_of_their_own_rings(scene):
+    """Two monitors' cameras, each 39 m from the active camera and 78 m from the other, each
+    looking at a box's shadow as the camera looks at its own: each picture's shadow agrees
+    with float64 shadow rays cast from its own floor points (a few millimetres from the
+    box's outline: only a ring about that camera resolves it; the level's map and the other
+    camera's rings cannot), and so does the frame: the rings read while each picture is
+    drawn are its own camera's (``ShadowMaps.swap_ring_rows``), put back for the next."""
+    from components import DirectionalLight
+    from tests.test_shadow_cascades import BOX_CENTRE, BOX_HALF, EYE, TARGET, _agreement, _build
+
+    offsets = [np.array([30.0, 0.0, 25.0]), np.array([-30.0, 0.0, -25.0])]
+    size = (320, 216)
+
+    def build(world):
+        _build(3)(world)
+        ids = world.resources["ids"]
+        ids["lenses"], ids["screens"] = [], []
+        for k, off in enumerate(offsets):
+            eye, target = glm.vec3(*(np.array(EYE) + off)), glm.vec3(*(np.array(TARGET) + off))
+            lens = world.spawn(Transform(position=eye, rotation=look_rotation(target - eye)),
+                               Camera(fov_y=60.0, active=False))
+            world.spawn(Transform(position=list(BOX_CENTRE + off)), MeshRef(box()), Material(color=(0.8, 0.3, 0.2)))
+            ids["screens"].append(world.spawn(Transform(position=(2.0 * k, 1.6, 6.0)), MeshRef(quad(1.6, 1.0)),
+                                              Material(), Monitor(camera=lens, size=size)))
+            ids["lenses"].append(lens)
+
+    runner = scene(build, (96, 64))
+    runner.engine.renderer.antialias = "off"
+    ids = runner.world.resources["ids"]
+    sun = runner.world.get(ids["sun"], DirectionalLight)
+    sun.shadows = False
+    frame_without = runner.frame()
+    without = [picture(runner, {"screen": screen}).copy() for screen in ids["screens"]]
+    sun.shadows = True
+    frame_with = runner.frame()
+    assert runner.stats.monitor_views == 2 and runner.stats.picture_cascades_cut == 0
+    for k, (lens, screen) in enumerate(zip(ids["lenses"], ids["screens"], strict=True)):
+        # The floor point each picture pixel shows, where its ray meets the floor before the box.
+        eye, rays = pixel_rays(camera_view(runner.world.get(lens, Transform).world, 60.0, 0.1, 100.0, size), size)
+        rays = rays.reshape(-1, 3)
+        boxed = box_hits(np.tile(eye, (len(rays), 1)), rays, BOX_CENTRE + offsets[k], BOX_HALF + 0.02)
+        points = eye + rays * (-eye[1] / rays[:, 1])[:, None]
+        floor = ((rays[:, 1] < 0.0) & ~boxed).reshape(size[1], size[0])
+        shown = picture(runner, {"screen": screen})
+        share, counted, in_shadow = _agreement(runner, shown, without[k], points, floor, BOX_CENTRE + offsets[k],
+                                               linear=True)
+        assert counted > 400 and in_shadow > 150, (k, counted, in_shadow)   # a real floor, a real shadow
+        assert share >= 0.99, (k, share)
+    assert _agreement(runner, frame_with, frame_without)[0] >= 0.99
