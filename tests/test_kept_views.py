@@ -37,7 +37,12 @@ from engine.assets.texture_data import TextureData, checker_texture
 from engine.core.budget import ViewBudget
 from shell.overlay_text import overlay_lines
 from tests.support import look_from
-from tests.test_predicted_visibility import _covered_mirrors
+from tests.test_predicted_visibility import (
+    SCALED_SIZE,
+    _assert_the_box_where_the_scaled_carry_says,
+    _covered_mirrors,
+    _scaled_facing_pair,
+)
 
 SIZE = (96, 64)
 TURN = glm.angleAxis(math.pi / 2, glm.vec3(0, 1, 0))  # a quad facing +X
@@ -182,6 +187,13 @@ def _box_layers(world):
     world.get(world.resources["mirror"], Mirror).shows_layers = [1]  # nothing of layer 0 (all) in it now
 
 
+def _portal_scale(world):
+    """The hall's portal behind the camera (the one its partner ahead looks out of) made 1.5
+    times larger: what the portal ahead shows is carried by another transform."""
+    behind = next(e for e, (_, t) in world.query(Portal, Transform) if t.position.z > 4.0)
+    world.get(behind, Transform).scale = glm.vec3(1.5)
+
+
 def _budget(world):
     world.resources[ViewBudget] = ViewBudget(views=3)
 
@@ -196,6 +208,7 @@ def _probe_recaptures(world):
 CHANGES = {"camera_step": _move_camera, "object_moves": _move_box, "material_colour": _recolour_box,
            "light": _dim_sun, "shadow_caster": _move_caster, "sky": _new_sky, "reflect_rate": _mirror_rate,
            "fade": _mirror_fade, "visibility": _hide_box_in_mirrors, "layers": _box_layers, "budget": _budget,
+           "portal_scale": _portal_scale,
            "probe_recaptures": _probe_recaptures}
 
 
@@ -340,3 +353,31 @@ def test_the_switches_refuse_what_is_not_a_bool_when_set(scene, name):
     assert getattr(system, name) is True
     setattr(system, name, False)
     assert getattr(system, name) is False
+
+
+@pytest.mark.parametrize("visibility", ["exact", "predicted"])
+def test_a_still_scaled_portal_pair_keeps_its_tree_and_a_new_scale_draws_it_again(scene, visibility):
+    """A facing pair, one portal scaled 2 (tests/test_predicted_visibility.py's): once still,
+    the tree is kept, with a drawn frame's pixels, and the kept frame shows the box where
+    the pair's scaled carry puts it (rays cast in float64).  Scaled 1.5 instead, the next
+    frame draws again, then keeps again, the box where the new carry puts it."""
+    ents: dict = {}
+
+    def build(world):
+        found: dict = {}
+        _scaled_facing_pair(world, found)
+        ents.setdefault("worlds", []).append((world, found))
+    pair = _Pair(scene, build, size=SCALED_SIZE, visibility=visibility)
+    found = dict(ents["worlds"])[pair.keeping.world]
+    pair.first()
+    assert pair.frame() and pair.frame()
+    assert pair.keeping.stats.reflection_views == 4
+    _assert_the_box_where_the_scaled_carry_says(pair.keeping, found)
+
+    def rescale(world):
+        world.get(dict(ents["worlds"])[world]["b"], Transform).scale = glm.vec3(1.5)
+    pair.both(rescale)
+    assert not pair.frame()
+    kept = [pair.frame() for _ in range(2)]
+    assert kept[-1]
+    _assert_the_box_where_the_scaled_carry_says(pair.keeping, found, scale=1.5)

@@ -12,16 +12,18 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from pyglm import glm
 
-from components import Material, MeshRef, Transform
+from components import DirectionalLight, Emissive, Material, MeshRef, Portal, Skybox, Transform
 from engine.assets.mesh import box
+from engine.assets.portals import spawn_portal_pair
 from engine.render import view_tree
 from engine.render.mirror_passes import MirrorPasses
 from engine.render.tree_visibility import TreeVisibility
 from engine.render.tree_walk import TreeSettings
 from tests import golden
 from tests.golden_scenes import cases
-from tests.support import look_from
+from tests.support import box_hits, look_from, pixel_rays
 from tests.test_mirrors import FACING_BACK, base_scene, mirror_wall
 
 SCENES = ("hall_start", "hall_mirror_wall", "mirror_ring_16", "mirror_ring_8_batched", "portals_depth_8")
@@ -376,3 +378,95 @@ def test_the_camera_going_through_a_portal_is_a_cut(scene, monkeypatch):
             crossed.append(n)
     assert len(crossed) == 1
     assert forgot == [0, crossed[0]]
+
+
+SCALED_SIZE = (128, 96)
+SCALED_BOX = (np.array([0.8, 1.4, 4.0]), np.full(3, 0.5))  # a glowing box between B and A, behind the camera
+
+
+def _scaled_facing_pair(world, ents):
+    """A facing portal pair, B scaled 2 by its Transform (4 x 6 m): A at the origin facing
+    +Z, B 6 m down +Z facing back; the camera between them looks into A, so each level shows
+    the corridor again, at half the size of the one before.  A green box stands in the
+    corridor behind the camera: seen only through A."""
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+    ents["camera"] = look_from(world, (0.3, 1.6, 3.0), (0.0, 1.5, 0.0))
+    ents["a"], ents["b"] = spawn_portal_pair(world, (0.0, 1.5, 0.0), None, (0.0, 1.5, 6.0),
+                                             glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0)), max_depth=4)
+    world.get(ents["b"], Transform).scale = glm.vec3(2.0)
+    for portal in ents["a"], ents["b"]:
+        world.get(portal, Portal).end_image = False
+    ents["green"] = world.spawn(Transform(position=tuple(SCALED_BOX[0])), MeshRef(box()),
+                                Material(color=(0.1, 0.9, 0.1)), Emissive(1.0))
+    for x in (-1.3, 1.3):  # posts beside A: something at every level
+        world.spawn(Transform(position=(x, 1.5, 0.0), scale=(0.4, 2.0, 0.4)), MeshRef(box()),
+                    Material(color=(0.9, 0.6, 0.1)), Emissive(0.6))
+
+
+def _assert_the_box_where_the_scaled_carry_says(runner, ents, scale=2.0):
+    """Level 1 of ``_scaled_facing_pair`` (A's pixels) shows the green box where the pixels'
+    rays, carried by the pair's transform (B scaled ``scale``; float64), meet it (a margin
+    in), and not where they miss it before they reach A again (a margin out); the carry
+    without B's scale would find it mostly elsewhere."""
+    ids = runner.ids()
+    on_a = runner.engine.renderer.targets.read_surface_ids() == ents["a"]
+    a_world, b_world = (np.array(glm.dmat4(runner.world.get(ents[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    carry = b_world @ turn @ np.linalg.inv(a_world)  # A's side to B's, scaled
+    assert np.isclose(abs(np.linalg.det(carry[:3, :3])), scale ** 3)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    origin, directions = carry[:3, :3] @ eye + carry[:3, 3], rays[on_a] @ carry[:3, :3].T
+    t_a = (0.0 - origin[2]) / directions[:, 2]  # where the carried ray comes to A's plane again
+    inside = box_hits(origin, directions, SCALED_BOX[0], SCALED_BOX[1] - 0.05)
+    outside = ~box_hits(origin, directions, SCALED_BOX[0], SCALED_BOX[1] + 0.05, limit=t_a)
+    shown = ids[on_a] == ents["green"]
+    assert inside.sum() > 30 and shown[inside].all(), (int(inside.sum()), int((~shown[inside]).sum()))
+    assert not shown[outside & (t_a > 0)].any()
+    unscaled = carry[:3, :3] / scale  # the carry without B's scale
+    assert (box_hits(unscaled @ eye + carry[:3, 3], rays[on_a] @ unscaled.T, *SCALED_BOX) & shown).sum() \
+        < 0.5 * shown.sum()
+
+
+@pytest.mark.parametrize("mode", ("exact", "predicted"))
+def test_a_scaled_portal_pair_predicted_draws_the_exact_frame_and_the_scaled_carry(scene, monkeypatch, mode):
+    """A facing pair, one portal scaled 2, four levels deep (A seen through A, each time
+    smaller), the camera swaying a little a frame: a few frames in, the frame
+    is the one drawn exactly with the planner's shortcuts off (no level planned ahead, no
+    chain of single views planned in one run, which a moving camera's frames take: counted
+    here), and level 1 shows the box where the scaled carry says
+    (``_assert_the_box_where_the_scaled_carry_says``)."""
+    from engine.render.view_plan import SurfaceTable
+
+    chains = []
+    plan_chain = SurfaceTable.plan_chain
+
+    def counted(self, *args, **kwargs):
+        levels = plan_chain(self, *args, **kwargs)
+        chains.append(len(levels))
+        return levels
+    monkeypatch.setattr(SurfaceTable, "plan_chain", counted)
+    frames = {}
+    for shortcuts in (True, False):
+        ents: dict = {}
+        runner = scene(lambda world, ents=ents: _scaled_facing_pair(world, ents), SCALED_SIZE)
+        runner.engine.reflection_system.visibility = mode if shortcuts else "exact"
+        tree = runner.engine.reflection_system.tree
+        tree.plan_ahead = tree.plan_chains = shortcuts
+        runner.engine.reflection_system.keep_still_views = False
+        for step in range(4):
+            runner.world.get(ents["camera"], Transform).position = (0.3 - 0.03 * step, 1.6, 3.0)
+            rgb = runner.frame()
+        assert runner.stats.reflection_visibility == (mode if shortcuts else "exact")
+        views = runner.engine.reflection_system.views[1:]
+        assert [v.surface.entity for v in views] == [ents["a"]] * 4
+        frames[shortcuts] = (rgb.astype(int), runner.ids(), [(v.level, v.surface.entity, v.rect) for v in views])
+        if shortcuts:
+            _assert_the_box_where_the_scaled_carry_says(runner, ents)
+    assert max(chains) >= 2  # a chain of levels planned in one run
+    (rgb, ids, views), (plain_rgb, plain_ids, plain_views) = frames[True], frames[False]
+    assert views == plain_views and [level for level, _, _ in views] == [1, 2, 3, 4]
+    areas = [w * h for _, _, (_, _, w, h) in views]
+    assert all(a > b for a, b in zip(areas, areas[1:], strict=False)), areas
+    np.testing.assert_array_equal(ids, plain_ids)
+    assert np.abs(rgb - plain_rgb).max() <= 1

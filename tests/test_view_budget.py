@@ -22,10 +22,11 @@ from components import (
     Transform,
 )
 from engine.assets.mesh import box, quad, sphere
+from engine.assets.portals import spawn_portal_pair
 from engine.resources import ViewBudget
 from engine.rules.probe_schedule import ProbeStates
 from shell.overlay_text import overlay_lines
-from tests.support import look_from
+from tests.support import look_from, pixel_rays
 from tests.test_view_tree import mirror_grid
 
 
@@ -443,3 +444,117 @@ def test_probe_faces_leave_out_their_small_views_too(scene):
     stats = runner.stats
     assert stats.views_small >= 1 and stats.probe_faces == faces and stats.reflection_views == 0
     assert stats.views_spent == spent - stats.views_small and stats.passes == passes - stats.views_small
+
+
+HALF_TURN = glm.angleAxis(math.pi, glm.vec3(0, 1, 0))
+SMALL_SIZE = (128, 96)
+BIG = ((-0.5, 1.5, -1.0), (1.6, 1.2))    # a mirror facing the camera: centre, half sizes
+BEHIND = ((2.2, 1.7, 5.5), (0.8, 0.6))   # a mirror behind the camera facing it, seen in BIG
+DOOR = ((1.7, 1.0, -1.0), (0.2, 0.2))    # a small portal beside BIG
+
+
+def _small_portal_and_level_two(ents):
+    """A large mirror (level 1, depth 1), a small portal beside it (level 1: its partner
+    faces a green wall) and, behind the camera, a mirror seen in the large one (level 2,
+    depth 2), whose image straddles the large mirror's right edge.  A red wall behind the
+    camera is what the large mirror shows, a yellow one behind the large mirror what the
+    mirror behind shows (each distinct from the sky a skipped view's fallback shows)."""
+    def build(world):
+        look_from(world, (0.0, 1.5, 4.0), target=(0.0, 1.5, -1.0))
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Transform(position=(0.0, 1.5, 9.0)), MeshRef(box((16.0, 6.0, 0.5))),
+                    Material(color=(0.9, 0.2, 0.1)))
+        world.spawn(Transform(position=(0.0, 1.5, -6.0)), MeshRef(box((16.0, 8.0, 0.5))),
+                    Material(color=(0.9, 0.8, 0.1)), Emissive(0.6))
+        ents["big"] = world.spawn(Transform(position=BIG[0]), MeshRef(quad(2 * BIG[1][0], 2 * BIG[1][1])),
+                                  Mirror(max_depth=1, end_image=False))
+        ents["behind"] = world.spawn(Transform(position=BEHIND[0], rotation=HALF_TURN),
+                                     MeshRef(quad(2 * BEHIND[1][0], 2 * BEHIND[1][1])),
+                                     Mirror(max_depth=2, end_image=False))
+        ents["door"], _ = spawn_portal_pair(world, DOOR[0], None, (30.0, 1.5, 0.0),
+                                            glm.angleAxis(math.pi / 2, glm.vec3(0, 1, 0)),
+                                            size=(2 * DOOR[1][0], 2 * DOOR[1][1]), max_depth=1)
+        world.spawn(Transform(position=(33.0, 1.5, 0.0)), MeshRef(box((0.3, 6.0, 6.0))),
+                    Material(color=(0.1, 0.9, 0.2)), Emissive(1.0))
+    return build
+
+
+def _rect_hits(origin, directions, rect):
+    """Whether rays meet the rectangle ``rect`` (centre, half sizes) in the plane z = centre.z."""
+    (x, y, z), (hw, hh) = rect
+    t = (z - origin[..., 2]) / directions[..., 2]
+    at = origin + t[..., None] * directions
+    return (t > 0) & (np.abs(at[..., 0] - x) < hw) & (np.abs(at[..., 1] - y) < hh)
+
+
+def _grown(mask):
+    """``mask`` and the pixels next to it (the antialiasing pass blends an edge's neighbours)."""
+    padded = np.pad(mask, 1)
+    return np.any([padded[1 + dy:padded.shape[0] - 1 + dy, 1 + dx:padded.shape[1] - 1 + dx]
+                   for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+
+
+@pytest.mark.parametrize("visibility", ["exact", "predicted"])
+def test_a_small_portal_view_and_a_small_level_two_view_go_by_their_projected_pixels(scene, visibility):
+    """``min_pixels`` holds for a portal's view and for a view below a mirror's, by the pixels
+    each would show, cast in float64 at pixel centres (no renderer): the portal's rectangle
+    hit by the camera's rays; the mirror behind hit by the rays the large mirror reflects,
+    only where they come off the large mirror (its image straddles the large mirror's edge:
+    what lies past it is no pixel of the view).  A budget of exactly a view's pixels keeps
+    it, one more skips it: counted (``views_small``), no pass, its surface shows its
+    fallback there (the sky, not the green wall or the yellow one) and every other pixel (but
+    its antialiased edge) is as drawn whole.  Predicted visibility goes by last frame's counts: two frames a step
+    (the second not kept from the first, so its passes are counted)."""
+    ents = {}
+    runner = scene(_small_portal_and_level_two(ents), SMALL_SIZE)
+    runner.engine.reflection_system.visibility = visibility
+    runner.engine.reflection_system.keep_still_views = False
+
+    def frames(budget):
+        if budget is None:
+            runner.world.resources.pop(ViewBudget, None)
+        else:
+            runner.world.resources[ViewBudget] = ViewBudget(min_pixels=budget)
+        runner.frame()
+        rgb = runner.frame()
+        views = [(v.level, v.surface.entity) for v in runner.engine.reflection_system.views[1:]]
+        return rgb, views, runner.stats
+
+    whole, views, stats = frames(None)
+    eye, rays = pixel_rays(runner.engine.main_view, SMALL_SIZE)
+    big, door = _rect_hits(eye, rays, BIG), _rect_hits(eye, rays, DOOR)
+    flip = np.array([1.0, 1.0, -1.0])
+    reflected = (eye * flip + (0.0, 0.0, 2.0 * BIG[0][2]), rays * flip)  # in the large mirror's plane
+    behind = big & _rect_hits(*reflected, BEHIND)
+    assert _rect_hits(*reflected, BEHIND).sum() > behind.sum() + 20  # the image crosses the large mirror's edge
+    assert 30 < door.sum() < behind.sum() < big.sum()
+    assert sorted(views) == sorted([(1, ents["big"]), (1, ents["door"]), (2, ents["behind"])])
+    assert stats.views_small == 0 and stats.passes == 1 + 3
+    assert stats.pixels_spent == big.sum() + door.sum() + behind.sum()
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    assert np.array_equal(surface == ents["big"], big) and np.array_equal(surface == ents["door"], door)
+    green, yellow = whole[door].astype(int), whole[behind].astype(int)
+    assert (green[:, 1] > green[:, 0] + 60).all() and (yellow[:, 2] < yellow[:, 0] - 60).all()
+
+    rgb, views, stats = frames(int(door.sum()))  # exactly the portal's pixels: kept
+    assert len(views) == 3 and stats.views_small == 0 and np.array_equal(rgb, whole)
+
+    rgb, views, stats = frames(int(door.sum()) + 1)
+    assert sorted(views) == sorted([(1, ents["big"]), (2, ents["behind"])])
+    assert stats.views_small == 1 and stats.passes == 1 + 2 and stats.views_cut == 0
+    assert stats.pixels_spent == big.sum() + behind.sum() and stats.reflection_fallbacks >= 1
+    elsewhere = ~_grown(door)
+    assert np.array_equal(rgb[elsewhere], whole[elsewhere])
+    shown = rgb[door].astype(int)
+    assert (shown[:, 1] < shown[:, 0] + 30).all() and (shown.sum(axis=1) > 100).all()  # the sky's grey, not green
+
+    rgb, views, stats = frames(int(behind.sum()))  # exactly the level-2 view's pixels: kept
+    assert len(views) == 2 and stats.views_small == 1 and np.array_equal(rgb[elsewhere], whole[elsewhere])
+
+    rgb, views, stats = frames(int(behind.sum()) + 1)
+    assert views == [(1, ents["big"])]
+    assert stats.views_small == 2 and stats.passes == 1 + 1 and stats.pixels_spent == big.sum()
+    elsewhere = ~_grown(door | behind)
+    assert np.array_equal(rgb[elsewhere], whole[elsewhere])
+    shown = rgb[behind].astype(int)
+    assert (shown[:, 2] > shown[:, 0] - 30).all() and (shown.sum(axis=1) > 100).all()  # the sky's, not yellow

@@ -27,7 +27,7 @@ from engine.assets.mesh import box, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
 from engine.render.sky import face_directions
-from tests.support import look_from, skip_unless_trusted, srgb_to_linear
+from tests.support import box_hits, look_from, pixel_rays, skip_unless_trusted, srgb_to_linear
 
 SIZE = (200, 150)
 VAMPIRE = (-1.0, 1.2, 0.0)
@@ -616,3 +616,140 @@ def test_a_mirror_hidden_in_mirrors_is_not_looked_into_from_a_mirror(scene, visi
     runner.frame()
     seen = [v.surface.entity for v in runner.engine.reflection_system.views[1:]]
     assert seen == [ents["front"]]
+
+
+HALF_TURN = glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))
+CHAIN_SIZE = (128, 96)
+CHAIN_BOX = (np.array([20.0, 1.3, 2.0]), np.full(3, 0.5))  # the box in front of B: centre, half sizes
+
+
+def mirror_then_portal(ents, visibility=None):
+    """A mirror at z = -1.5 facing the camera (z = 1) and, behind the camera, portal A at
+    z = 2.5 facing the mirror; its partner B stands at (20, 1.5, 0) facing +Z with a red box
+    (the vampire) 2 m in front of it and a blue backdrop behind that.  The box is seen only
+    in the mirror, through A: a portal's view below a mirror's."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        look_from(world, (0.0, 1.5, 1.0), target=(0.0, 1.5, -1.5))
+        ents["mirror"] = world.spawn(Transform(position=(0, 1.5, -1.5)), MeshRef(quad(4, 3)),
+                                     Material(color=(0.1, 0.1, 0.1)), Mirror())
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 2.5), HALF_TURN, (20, 1.5, 0), None, size=(3.0, 2.4))
+        ents["backdrop"] = world.spawn(Transform(position=(20, 2, 10)), MeshRef(box((16, 8, 0.2))),
+                                       Material(color=BLUE_BACKDROP), Emissive(1.0))
+        parts = [Transform(position=tuple(CHAIN_BOX[0])), MeshRef(box()), Material(color=(0.9, 0.05, 0.05)),
+                 Emissive(0.8)]
+        ents["vampire"] = world.spawn(*parts, *([visibility] if visibility is not None else []))
+    return build
+
+
+def mirror_then_portal_rays(runner, ents, grow):
+    """Which pixels see the box along the chain, in float64 (no renderer): each pixel's ray
+    reflected in the mirror's plane (z = -1.5), through A's rectangle (z = 2.5, 3 x 2.4 m),
+    carried to B's side by the pair's transform and cast at the box grown by ``grow``."""
+    eye, rays = pixel_rays(runner.engine.main_view, CHAIN_SIZE)
+    rays = rays.reshape(-1, 3)
+    t = (-1.5 - eye[2]) / rays[:, 2]
+    on_mirror = (t > 0) & (np.abs(eye[0] + t * rays[:, 0]) < 2.0) & (np.abs(eye[1] + t * rays[:, 1] - 1.5) < 1.5)
+    flip = np.array([1.0, 1.0, -1.0])
+    origin, directions = eye * flip + (0.0, 0.0, -3.0), rays * flip  # reflected in z = -1.5
+    t = (2.5 - origin[2]) / directions[:, 2]
+    at_a = origin + t[:, None] * directions
+    through_a = on_mirror & (t > 0) & (np.abs(at_a[:, 0]) < 1.5) & (np.abs(at_a[:, 1] - 1.5) < 1.2)
+    a_world, b_world = (np.array(glm.dmat4(runner.world.get(ents[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    carry = b_world @ turn @ np.linalg.inv(a_world)
+    carried_origin = carry[:3, :3] @ origin + carry[:3, 3]
+    hits = box_hits(np.broadcast_to(carried_origin, at_a.shape), directions @ carry[:3, :3].T, CHAIN_BOX[0],
+                    CHAIN_BOX[1] + grow)
+    return (through_a & hits).reshape(CHAIN_SIZE[1], CHAIN_SIZE[0])
+
+
+@pytest.mark.parametrize("visibility, hides, seen", [
+    (None, {}, True), (Visibility(in_mirrors=False), {}, False), (Visibility(in_portals=False), {}, False),
+    (Visibility(direct=False), {}, True), (Visibility(in_probes=False), {}, True),
+    (Visibility(layers=[2]), {"mirror": [2]}, False), (Visibility(layers=[2]), {"a": [2]}, False),
+    (Visibility(layers=[2]), {"b": [2]}, True), (Visibility(layers=[2]), {"camera": [2]}, False),
+    (Visibility(layers=[2, 5]), {"mirror": [5]}, True), (Visibility(layers=[2, 5]), {"a": [2]}, True),
+    (Visibility(layers=[2, 5]), {"mirror": [5], "a": [2]}, False)],
+    ids=["shown", "in_mirrors", "in_portals", "direct", "in_probes", "mirror_hides", "a_hides", "b_hides",
+         "camera_hides", "mirror_hides_one_of_two", "a_hides_one_of_two", "each_hides_one_of_two"])
+def test_a_portal_seen_in_a_mirror_is_both_kinds_and_shows_the_layers_both_show(scene, visibility, hides, seen):
+    """The other way round from the test above: a portal's view below a mirror's.  Kinds
+    accumulate (hidden in mirrors or in portals, the box is not drawn there) and the view
+    shows the layers the camera, the mirror and A all show (B's are for looking into B): a
+    box on layers 2 and 5 is seen through a mirror hiding 5 or a portal hiding 2, not through
+    both at once.  Where the box should be is cast along the chain in float64: the box's
+    pixels (a margin in) are the box, or the backdrop behind it where it is hidden; none
+    outside them (a margin out) is the box."""
+    ents = {}
+    runner = scene(mirror_then_portal(ents, visibility), CHAIN_SIZE)
+    for name, layers in hides.items():
+        if name == "camera":
+            for _, camera in runner.world.query_one(Camera):
+                camera.hides_layers = layers
+        else:
+            runner.world.get(ents[name], Mirror if name == "mirror" else Portal).hides_layers = layers
+    rgb = runner.frame()
+    ids = runner.ids()
+    levels = [(v.level, v.surface.entity) for v in runner.engine.reflection_system.views[1:]]
+    assert levels == [(1, ents["mirror"]), (2, ents["a"])]
+    inside, outside = mirror_then_portal_rays(runner, ents, -0.05), ~mirror_then_portal_rays(runner, ents, 0.05)
+    assert inside.sum() > 60
+    assert not (ids[outside] == ents["vampire"]).any()
+    if seen:
+        assert (ids[inside] == ents["vampire"]).all(), int((ids[inside] != ents["vampire"]).sum())
+        red = srgb_to_linear(rgb[inside])
+        assert (red[:, 0] > 2 * red[:, 2]).all()  # (antialiasing softens the edge pixels)
+    else:
+        assert (ids[inside] == ents["backdrop"]).all(), np.unique(ids[inside])
+        blue = srgb_to_linear(rgb[inside])
+        assert (blue[:, 2] > 2 * blue[:, 0]).all()
+
+
+@pytest.mark.parametrize("case", ["portal_hidden", "portal_layer", "portal_shows", "in_mirror_shown",
+                                  "in_mirror_hidden_in_portals", "in_mirror_hidden_in_mirrors", "in_mirror_layers"])
+def test_the_batched_path_hides_through_portals_and_by_their_layers_as_the_per_mirror_path(scene, case):
+    """The batched path (one draw per mesh for a level, each view's mask in its row of the
+    Views table) leaves out what is hidden in portals, or on a layer the portal hides, as the
+    per-mirror path does, for a portal looked into directly and for one seen in a mirror (a
+    mirrored portal view, level 2): the same ids, the same colours, and the box drawn or not
+    as the chain says (its carried centre is the box, or the backdrop)."""
+    results = {}
+    for path in ("per_mirror", "batched"):
+        ents = {}
+        if case.startswith("portal"):
+            visibility = {"portal_hidden": Visibility(in_portals=False), "portal_layer": Visibility(layers=[2]),
+                          "portal_shows": Visibility(in_mirrors=False, layers=[2, 5])}[case]
+            runner = scene(portal_room(ents, visibility), SIZE)
+            if case != "portal_hidden":
+                runner.world.get(ents["a"], Portal).hides_layers = [2]
+            point, seen = (0.0, 1.2, -2.0), case == "portal_shows"  # the box's centre carried back to A's side
+        else:
+            visibility = {"in_mirror_shown": None, "in_mirror_hidden_in_portals": Visibility(in_portals=False),
+                          "in_mirror_hidden_in_mirrors": Visibility(in_mirrors=False),
+                          "in_mirror_layers": Visibility(layers=[2, 5])}[case]
+            runner = scene(mirror_then_portal(ents, visibility), CHAIN_SIZE)
+            if case == "in_mirror_layers":
+                runner.world.get(ents["mirror"], Mirror).hides_layers = [5]
+                runner.world.get(ents["a"], Portal).hides_layers = [2]
+            point, seen = None, case == "in_mirror_shown"
+        runner.engine.reflection_system.path = path
+        runner.engine.reflection_system.visibility = "exact"
+        rgb = runner.frame()
+        assert runner.stats.reflection_path == path
+        ids = runner.ids()
+        if point is None:
+            expected = mirror_then_portal_rays(runner, ents, -0.05)
+            assert expected.sum() > 60
+            shown = ids[expected]
+        else:
+            col, row = runner.project(point)
+            shown = ids[row, col]
+        assert (shown == ents["vampire"] if seen else shown == ents["backdrop"]).all(), (path, np.unique(shown))
+        results[path] = (ids, rgb.astype(int), [(v.level, v.surface.entity, v.view.mirrored)
+                                                for v in runner.engine.reflection_system.views[1:]])
+    (ids, rgb, views), (batched_ids, batched_rgb, batched_views) = results["per_mirror"], results["batched"]
+    assert views == batched_views and len(views) >= 1
+    np.testing.assert_array_equal(batched_ids, ids)
+    assert np.abs(batched_rgb - rgb).max() <= 2
