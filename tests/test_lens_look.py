@@ -149,3 +149,109 @@ def test_output_is_unchanged_by_a_zero_intensity(scene):
     present = runner.engine.stages["present"]
     present.grade = False
     np.testing.assert_array_equal(runner.frame(), shown)
+
+
+LENS_FOG, FRAME_FOG = (0.1, 0.2, 0.6), (0.6, 0.2, 0.1)   # the lens's own fog's colour, the active camera's
+
+
+def _nearest_box(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """How far each ray (rows, unit ``direction``) goes to the axis-aligned box (inf: it misses)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (centre - half - origin) / direction
+        t2 = (centre + half - origin) / direction
+    near = np.nanmax(np.minimum(t1, t2), axis=1)
+    far = np.nanmin(np.maximum(t1, t2), axis=1)
+    return np.where((near <= far) & (near > 0.0), near, np.inf)
+
+
+@pytest.mark.parametrize("frame_fog", [False, True], ids=["frame_without", "frame_with_another"])
+def test_a_lenss_own_fog_fogs_its_pictures_mirror_along_the_lights_whole_way(scene, frame_fog):
+    """A monitor's camera with a ``Fog`` of its own (density 0.25, one colour) looks at a mirror
+    3 m off; the unlit red box stands behind it, seen only in the mirror, in a black world
+    (``tests/test_monitors.py``'s studio).  Each picture pixel whose ray, reflected off the
+    mirror, meets the box shows red x T + the fog's colour x (1 - T), T = exp(-0.25 L) over
+    the whole way L from the lens to the mirror and on to the box (cast here in float64), as
+    the camera's own mirror level is fogged; the mirror's sky, all the fog's colour; whether
+    the active camera has no fog or another (``frame_with_another``: its colour nowhere in
+    the picture).  The active camera posed as the lens with that fog draws its mirror the same
+    (its level 0, linear, against the picture)."""
+    from components import Camera, Fog, Monitor
+    from tests.test_monitors import PICTURE, RED, active_camera, lens_rays, run, studio
+
+    behind, half = np.array([0.5, 1.2, 1.5]), np.array([0.8, 0.6, 0.3])   # (behind the lens, out of its sight)
+    density = 0.25
+
+    def build_with(fogged_lens: bool):
+        build, held = studio(Monitor(size=PICTURE, depth=1), mirror=True, box_at=behind, box_half=half)
+
+        def fogged(world):
+            build(world)
+            eye = active_camera(world)
+            if fogged_lens:
+                world.add_component(held["lens"], Fog(color=LENS_FOG, density=density))
+                if frame_fog:
+                    world.add_component(eye, Fog(color=FRAME_FOG, density=0.1))
+            else:   # the active camera where the lens stands, with its fog, at the picture's size
+                lens = world.get(held["lens"], Transform)
+                world.get(eye, Transform).position, world.get(eye, Transform).rotation = lens.position, lens.rotation
+                world.get(eye, Camera).fov_y = world.get(held["lens"], Camera).fov_y
+                world.add_component(eye, Fog(color=LENS_FOG, density=density))
+        return fogged, held
+
+    build, held = build_with(True)
+    runner, _ = run(scene, build, 2, size=(160, 120))
+    shown = runner.engine.renderer.monitors.read(held["screen"])[..., :3].astype(np.float64)
+    eye, rays = lens_rays()
+    rays = rays.reshape(-1, 3)
+    t_mirror = (-3.0 - eye[2]) / rays[:, 2]
+    glass = eye + rays * t_mirror[:, None]
+    on_mirror = (t_mirror > 0) & (np.abs(glass[:, 0]) < 1.45) & (np.abs(glass[:, 1] - 1.0) < 0.95)
+    t_box = _nearest_box(glass, rays * np.array([1.0, 1.0, -1.0]), behind, half)
+    whole = (t_mirror + t_box).reshape(PICTURE[1], PICTURE[0])
+    box = on_mirror.reshape(PICTURE[1], PICTURE[0]) & np.isfinite(whole)
+    padded = np.pad(box, 1)
+    box &= padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:]   # (a pixel from its edge)
+    sky = on_mirror.reshape(PICTURE[1], PICTURE[0]) & ~np.isfinite(whole)
+    assert box.sum() > 40 and sky.sum() > 500, (box.sum(), sky.sum())
+    kept = np.exp(-density * whole[box])[:, None]
+    expected = np.array(RED) * kept + np.array(LENS_FOG) * (1.0 - kept)
+    np.testing.assert_allclose(shown[box], expected, atol=4e-3)
+    beyond = np.exp(-density * t_box.reshape(PICTURE[1], PICTURE[0])[box])[:, None]   # (the mirror's stretch alone)
+    assert np.abs(np.array(RED) * beyond + np.array(LENS_FOG) * (1.0 - beyond) - expected).min() > 0.02
+    np.testing.assert_allclose(shown[sky], np.broadcast_to(LENS_FOG, shown[sky].shape), atol=4e-3)
+    # The camera's own mirror level, the same fog on the active camera posed as the lens.
+    direct_build, _ = build_with(False)
+    direct, _ = run(scene, direct_build, 2, size=PICTURE)
+    targets = direct.engine.renderer.targets
+    level = np.frombuffer(targets.color.read(), np.float16).reshape(targets.size[1], targets.size[0], 4)[::-1, :, :3]
+    mirror = on_mirror.reshape(PICTURE[1], PICTURE[0])
+    np.testing.assert_allclose(shown[mirror], level[mirror].astype(np.float64), atol=3e-3)
+
+
+def test_a_monitors_cameras_fringes_and_grain_leave_its_picture_as_it_is(scene):
+    """A picture has no post-processing of its own (README, "Monitors"): a monitor's camera
+    with ``ChromaticAberration`` and ``FilmGrain`` at full strength draws its picture, the
+    mirror it shows too, texel for texel as without them; the same components on the active
+    camera do change its frame (so they are drawn where a camera presents)."""
+    from components import Monitor
+    from tests.test_monitors import PICTURE, active_camera, run, studio
+
+    def drawn(on_lens: bool, on_eye: bool):
+        build, held = studio(Monitor(size=PICTURE, depth=1), mirror=True, box_at=np.array([0.5, 1.2, 1.5]),
+                             box_half=np.array([0.8, 0.6, 0.3]))
+
+        def look(world):
+            build(world)
+            for entity, on in ((held["lens"], on_lens), (active_camera(world), on_eye)):
+                if on:
+                    world.add_component(entity, ChromaticAberration(intensity=1.0))
+                    world.add_component(entity, FilmGrain(intensity=1.0, response=0.0))
+        runner, rgb = run(scene, look, 2)
+        return runner.engine.renderer.monitors.read(held["screen"]), rgb
+
+    plain, plain_frame = drawn(False, False)
+    lens, _ = drawn(True, False)
+    _, eye_frame = drawn(False, True)
+    assert (plain[..., 0] > 0.1).sum() > 60   # (the box, in the mirror)
+    np.testing.assert_array_equal(lens, plain)
+    assert np.abs(eye_frame.astype(int) - plain_frame.astype(int)).max() > 20

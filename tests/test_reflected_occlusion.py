@@ -285,16 +285,48 @@ def _overhead(names: dict, world) -> dict:
     return names
 
 
-def _kept_in_mirror(scene, build, contact: ContactShadows, dark: dict, watched: bool = False) -> tuple:
+OVERHEAD_A = np.array([10.0, 1.3, 10.0])   # portal A, facing +z, away from everything
+OVERHEAD_B = np.array([0.3, CEILING, 0.0])   # portal B over the box, facing down (the overhead mirror's place)
+
+
+def _overhead_portal(names: dict, world) -> dict:
+    """A scene of ``tests/test_contact_shadows.py`` (its ``names``) seen through a portal pair:
+    the camera 0.5 m before A looking into it, B overhead facing down where ``_overhead``'s
+    mirror hangs, so the portal's view looks down on the box from 0.5 m over B."""
+    transform = world.get(names["camera"], Transform)
+    transform.position = glm.vec3(*(OVERHEAD_A + (0.0, 0.0, 0.5)))
+    transform.rotation = look_rotation(glm.vec3(0.0, 0.0, -1.0))
+    names["mirror"], names["b"] = spawn_portal_pair(
+        world, tuple(OVERHEAD_A), None, tuple(OVERHEAD_B), glm.angleAxis(glm.radians(90.0), glm.vec3(1, 0, 0)),
+        size=(3.0, 3.0))
+    return names
+
+
+def _carried_down(eye: np.ndarray, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each pixel's ray through A (the plane z = A's) and out of B: A's local (x, y, z) leaves B
+    at B's local (-x, y, -z), and B's quarter turn about x takes local (x, y, z) to the world's
+    (x, -z, y): so the world's (-x, z, y) about B, its way likewise."""
+    at = eye + rays * ((OVERHEAD_A[2] - eye[2]) / rays[..., 2])[..., None] - OVERHEAD_A
+
+    def out_of_b(local: np.ndarray) -> np.ndarray:
+        return np.stack([-local[..., 0], local[..., 2], local[..., 1]], axis=-1)
+
+    return out_of_b(at) + OVERHEAD_B, out_of_b(rays)
+
+
+def _kept_in_mirror(scene, build, contact: ContactShadows, dark: dict, watched: bool = False,
+                    portal: bool = False) -> tuple:
     """The overhead mirror over ``build``'s scene (``build(world, contact, **options)``): each
     pixel's share of the light ``dark`` turns off kept under ``contact`` (linear, as
     ``tests/test_contact_shadows.py`` finds it), each pixel's floor point (its ray reflected
     off the ceiling to the floor, float64), the mirror's floor pixels to judge (lit, clear of
     the box's footprint) and the runner drawn with ``contact``.  ``watched``: ``contact`` on a
     monitor's camera posed as the active one (which has none), the picture's pixels judged
-    (the frame and the picture ``tests/test_contact_shadows.py``'s size)."""
+    (the frame and the picture ``tests/test_contact_shadows.py``'s size).  ``portal``: the
+    scene seen through a portal pair in place of the mirror (``_overhead_portal``: each pixel's
+    ray carried out of B), its A the surface judged (``names["mirror"]``)."""
     def posed(names: dict, world) -> dict:
-        _overhead(names, world)
+        (_overhead_portal if portal else _overhead)(names, world)
         if watched:   # (the lens where the active camera now stands)
             lens = world.get(world.get(names["screen"], Monitor).camera, Transform)
             active = world.get(names["camera"], Transform)
@@ -318,8 +350,11 @@ def _kept_in_mirror(scene, build, contact: ContactShadows, dark: dict, watched: 
     kept = (shadowed - off).mean(axis=-1) / np.maximum(light, 1e-6)
     assert runner.stats.reflection_views == 1
     eye, rays = pixel_rays(runner.engine.main_view, runner.size)
-    starts = eye + rays * ((CEILING - eye[1]) / rays[..., 1])[..., None]
-    ways = rays * np.array([1.0, -1.0, 1.0])
+    if portal:
+        starts, ways = _carried_down(eye, rays)
+    else:
+        starts = eye + rays * ((CEILING - eye[1]) / rays[..., 1])[..., None]
+        ways = rays * np.array([1.0, -1.0, 1.0])
     points = starts + ways * (-starts[..., 1] / ways[..., 1])[..., None]
     floor = (runner.engine.renderer.targets.read_surface_ids() == names["mirror"]) & (light > 0.02)
     floor &= ~((np.abs(points[..., 0] - BOX[0][0]) < BOX[1][0] + MARGIN)
@@ -351,6 +386,28 @@ def test_a_mirror_shows_the_contact_shadow_where_the_sun_ray_meets_the_box(scene
     judged by the rays cast from the active camera's view."""
     contact = ContactShadows(length=0.3, thickness=0.5, reflection_depth=depth)
     kept, points, floor = _kept_in_mirror(scene, contact_scene, contact, {"sun": 0.0}, watched=watched)
+    towards = np.broadcast_to(-np.array(SUN, np.float64), points[floor].shape)
+    inside, outside = _judged(points, floor, towards, contact.length, 0.0)
+    assert inside.sum() > 120 and outside.sum() > 5000, (inside.sum(), outside.sum())
+    if depth:
+        assert np.median(kept[inside]) < 0.05 and np.percentile(kept[inside], 90) < 0.25, kept[inside]
+    else:
+        assert np.percentile(kept[inside], 5) > 0.97
+    assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
+
+
+@pytest.mark.parametrize("watched", [False, True], ids=["camera", "picture"])
+@pytest.mark.parametrize("depth", [1, 0])
+def test_through_a_portal_the_contact_shadow_lies_where_the_sun_ray_meets_the_box(scene, depth, watched):
+    """The box under the sun seen through a portal pair, B overhead facing down (the view
+    looks down on the box from 0.5 m over B): each floor point the portal shows (its pixel's
+    ray carried out of B to the floor), within the ray's reach of the box towards the sun, has
+    lost its sun, outside it kept; at reflection_depth 0 kept everywhere.  ``watched``: the
+    same in the portal level of a monitor's picture whose camera, posed as the active one (which
+    has none) at the frame's size, has the ``ContactShadows``, judged by the rays carried from
+    the active camera's view."""
+    contact = ContactShadows(length=0.3, thickness=0.5, reflection_depth=depth)
+    kept, points, floor = _kept_in_mirror(scene, contact_scene, contact, {"sun": 0.0}, watched=watched, portal=True)
     towards = np.broadcast_to(-np.array(SUN, np.float64), points[floor].shape)
     inside, outside = _judged(points, floor, towards, contact.length, 0.0)
     assert inside.sum() > 120 and outside.sum() > 5000, (inside.sum(), outside.sum())
@@ -409,6 +466,36 @@ def test_a_mirror_shows_a_lamps_contact_shadow_where_its_ray_meets_the_box(scene
     assert np.percentile(kept[outside], 0.5) > 0.9, np.percentile(kept[outside], 0.5)
 
 
+def _watched_room(scene, build, aim, occlusion, active: bool) -> tuple[np.ndarray, object, dict]:
+    """``build``'s room with a monitor whose camera (not active, posed at ``aim`` as the active
+    one, at the picture's size, ``depth`` 1) has ``occlusion`` (None: nothing), the active
+    camera the same component of its own where ``active``: the picture (linear), the runner
+    and the names (the active camera's frame, linear, as ``frame``)."""
+    from components import Camera, Monitor
+
+    names: dict = {}
+
+    def room(world):
+        own = AmbientOcclusion(radius=RADIUS, reflection_depth=occlusion.reflection_depth) \
+            if active and occlusion is not None else None   # (the active camera's: a component of its own)
+        names.update(build(world, own))
+        eye, target = (glm.vec3(point) for point in aim)
+        pose = dict(position=eye, rotation=look_rotation(target - eye))
+        camera = world.get(names["camera"], Camera)
+        names["lens"] = world.spawn(Transform(**pose), Camera(fov_y=camera.fov_y, near=camera.near, far=camera.far,
+                                                              active=False), *([occlusion] if occlusion else []))
+        names["screen"] = world.spawn(Transform(position=(-6.0, 1.0, 3.0)), MeshRef(quad(1.6, 0.9)),
+                                      Material(color=(0.0, 0.0, 0.0), roughness=1.0),
+                                      Monitor(camera=names["lens"], size=SIZE, depth=1))
+
+    runner = scene(room, SIZE)
+    _aim(runner, names["camera"], *aim)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    names["frame"] = srgb_to_linear(runner.frame())
+    return runner.engine.renderer.monitors.read(names["screen"])[..., :3].astype(np.float64), runner, names
+
+
 @pytest.mark.parametrize("active", [False, True], ids=["lens_alone", "both"])
 def test_a_monitors_camera_finds_the_occlusion_in_the_mirror_its_picture_shows(scene, active):
     """A monitor whose camera (not active, posed as the mirror test's camera, at the
@@ -419,30 +506,8 @@ def test_a_monitors_camera_finds_the_occlusion_in_the_mirror_its_picture_shows(s
     mirror in the picture is bare.  ``both``: the active camera has the same component, and
     its own frame's mirror is occluded as the ground truth too (the picture's images put
     aside for it and back)."""
-    from components import Camera, Monitor
-
     def picture(occlusion):
-        names: dict = {}
-
-        def build(world):
-            own = AmbientOcclusion(radius=RADIUS, reflection_depth=occlusion.reflection_depth) \
-                if active and occlusion is not None else None   # (the active camera's: a component of its own)
-            names.update(_mirror_room(world, own))
-            eye, target = (glm.vec3(point) for point in MIRROR_EYE)
-            pose = dict(position=eye, rotation=look_rotation(target - eye))
-            camera = world.get(names["camera"], Camera)
-            names["lens"] = world.spawn(Transform(**pose), Camera(fov_y=camera.fov_y, near=camera.near, far=camera.far,
-                                                                  active=False), *([occlusion] if occlusion else []))
-            names["screen"] = world.spawn(Transform(position=(-6.0, 1.0, 3.0)), MeshRef(quad(1.6, 0.9)),
-                                          Material(color=(0.0, 0.0, 0.0), roughness=1.0),
-                                          Monitor(camera=names["lens"], size=SIZE, depth=1))
-
-        runner = scene(build, SIZE)
-        _aim(runner, names["camera"], *MIRROR_EYE)
-        runner.engine.renderer.antialias = "off"
-        runner.frame()
-        names["frame"] = srgb_to_linear(runner.frame())
-        return runner.engine.renderer.monitors.read(names["screen"])[..., :3].astype(np.float64), runner, names
+        return _watched_room(scene, _mirror_room, MIRROR_EYE, occlusion, active)
 
     lit, runner, names = picture(AmbientOcclusion(radius=RADIUS, reflection_depth=1))
     plain, _, plain_names = picture(None)
@@ -460,6 +525,33 @@ def test_a_monitors_camera_finds_the_occlusion_in_the_mirror_its_picture_shows(s
     runner.world.remove_component(names["lens"], AmbientOcclusion)
     runner.frame()
     assert runner.engine.renderer.occlusion.target_count() == (8 if active else 0)
+
+
+@pytest.mark.parametrize("active", [False, True], ids=["lens_alone", "both"])
+def test_a_monitors_camera_finds_the_occlusion_in_the_portal_its_picture_shows(scene, active):
+    """The portal room seen by a monitor's camera (not active, posed as the portal test's
+    camera, at the picture's size) with ``AmbientOcclusion(reflection_depth=1)``: the room
+    beyond portal A, in the picture's portal level, is occluded as the ground truth along the
+    rays carried out of B (cast from the active camera's view, posed the same, which gives
+    portal A's pixels too); 4 images for the picture's root and 4 for its level.  At
+    ``reflection_depth`` 0 the room through the portal is bare in the picture.  ``both``: the
+    active camera has the same component and its frame's portal is occluded as the truth too."""
+    def picture(occlusion):
+        return _watched_room(scene, _portal_room, PORTAL_EYE, occlusion, active)
+
+    lit, runner, names = picture(AmbientOcclusion(radius=RADIUS, reflection_depth=1))
+    plain, _, plain_names = picture(None)
+    bare, _, _ = picture(AmbientOcclusion(radius=RADIUS, reflection_depth=0))
+    surface = runner.engine.renderer.targets.read_surface_ids()
+    shown = _inside(surface == names["a"], INSIDE)
+    assert shown.sum() > 10000
+    hits = _room_hits(*_carried_rays(runner), shown)
+    _assert_ground_truth((lit / np.maximum(plain, 1e-6)).mean(axis=-1), *hits)
+    assert runner.engine.renderer.occlusion.target_count() == (16 if active else 8)
+    if active:
+        _assert_ground_truth((names["frame"] / np.maximum(plain_names["frame"], 1e-6)).mean(axis=-1), *hits)
+    bare_shares = (bare / np.maximum(plain, 1e-6)).mean(axis=-1)
+    assert bare_shares[shown].min() > 0.98
 
 
 def test_a_pictures_draw_that_raises_leaves_the_active_cameras_effects_as_they_were(scene, monkeypatch):

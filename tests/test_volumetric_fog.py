@@ -1362,3 +1362,169 @@ def test_a_monitors_camera_with_shafts_and_no_air_says_so_once(scene):
         warnings.simplefilter("error")
         runner.frame()
     assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 0
+
+
+# --- deeper levels: a portal on the wall, a mirror facing the wall's (the camera's and a picture's) ---
+CARRY = np.array([0.0, 0.0, 18.8])   # A on the wall (MIRROR's place), B this far behind it turned half round
+DEEP_EYE, DEEP_TARGET = (0.5, 2.2, -0.5), (0.5, 2.4, -6.8)   # the cameras 6.3 m from the wall, facing it
+
+
+def _deep_hall(world, shafts: VolumetricFog | None, through: str, watched: bool = False) -> dict:
+    """``_hall`` (``watched``: ``_watched_hall``, the monitor's picture two levels deep), its
+    cameras at DEEP_EYE facing the wall, with ``through`` "portals": portal A on the wall where
+    the mirror hangs and B at A + CARRY behind the camera, turned half round (facing -z:
+    looking into A is looking out of B, a shift by CARRY), so A's view shows the hall again and
+    A in it (level 2, a portal through a portal); or "mirrors": the wall's mirror and one at
+    the same place + CARRY facing it (level 2, a mirror in a mirror).  B and the back mirror
+    cast no shadow (the ground truth's sun is shaded by the roof alone)."""
+    from components import Monitor
+    from engine.assets.portals import spawn_portal_pair
+
+    mirrors = through == "mirrors"
+    if watched:
+        names = _watched_hall(world, shafts, mirror=mirrors)
+        world.get(names["screen"], Monitor).depth = 2
+    else:
+        names = {"camera": _hall(world, shafts, mirror=mirrors)}
+    for camera in (names["camera"], names.get("lens")):   # (both posed 6.3 m from the wall)
+        if camera is not None:
+            pose = world.get(camera, Transform)
+            pose.position = glm.vec3(DEEP_EYE)
+            pose.rotation = look_rotation(glm.vec3(DEEP_TARGET) - glm.vec3(DEEP_EYE))
+    if mirrors:
+        (names["mirror"],) = [entity for entity, _ in world.query_one(Mirror)]
+    half_round = glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0))
+    if mirrors:
+        names["back"] = world.spawn(Transform(position=tuple(np.add(MIRROR[0], CARRY)), rotation=half_round),
+                                    MeshRef(quad(*MIRROR[1][:2]), casts_shadows=False), Material(), Mirror())
+    else:
+        names["a"], names["b"] = spawn_portal_pair(world, MIRROR[0], None, tuple(np.add(MIRROR[0], CARRY)),
+                                                   half_round, size=MIRROR[1][:2])
+        for portal in (names["a"], names["b"]):
+            world.get(portal, MeshRef).casts_shadows = False
+    return names
+
+
+BACK = ((MIRROR[0][0], MIRROR[0][1], MIRROR[0][2] + CARRY[2]), MIRROR[1])   # B, or the back mirror, as a thin box
+
+
+def _deep_rays(runner, depth: int, through: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each pixel's camera ray ``depth`` levels down ``_deep_hall``'s ``through``: "portals",
+    each time it meets A's plane it goes on from that point + CARRY, its way the same;
+    "mirrors", reflected in the wall's mirror, then in the back one (a z = const plane each):
+    where it leaves the last surface, its way, how far it goes on (to the floor, a slab, the
+    wall, A or a mirror, at most 40 m), and whether it met each surface well inside its
+    outline (3 pixels' worth at the length of the way so far), by rows of pixels (from the
+    bottom)."""
+    view = runner.engine.main_view
+    inverse = np.array(glm.inverse(view.view_proj).to_list(), np.float64).T
+    width, height = SIZE
+    ys, xs = np.mgrid[0:height, 0:width]
+    ndc = np.stack([(xs + 0.5) / width * 2 - 1, (ys + 0.5) / height * 2 - 1], -1).reshape(-1, 2)
+
+    def unproject(z):
+        points = np.concatenate([ndc, np.full((len(ndc), 1), z), np.ones((len(ndc), 1))], 1) @ inverse.T
+        return points[:, :3] / points[:, 3:]
+
+    start = unproject(-1.0)
+    way = unproject(1.0) - start
+    way /= np.linalg.norm(way, axis=1, keepdims=True)
+    inside = np.ones(len(start), bool)
+    travelled = np.zeros(len(start))
+    for level in range(depth):
+        (cx, cy, cz), (w, h, _) = BACK if through == "mirrors" and level % 2 else MIRROR
+        t = (cz - start[:, 2]) / way[:, 2]
+        glass = start + way * t[:, None]
+        travelled += t
+        margin = 3 * 2 * np.tan(np.radians(35.0)) * travelled / height
+        inside &= (t > 0) & (np.abs(glass[:, 0] - cx) < 0.5 * w - margin) \
+            & (np.abs(glass[:, 1] - cy) < 0.5 * h - margin)
+        if through == "mirrors":
+            start, way = glass, way * np.array([1.0, 1.0, -1.0])
+        else:
+            start = glass + CARRY
+    with np.errstate(divide="ignore", invalid="ignore"):
+        floor = np.where(way[:, 1] < 0, -start[:, 1] / way[:, 1], np.inf)
+    landing = start + way * np.where(np.isfinite(floor), floor, 0.0)[:, None]
+    floor = np.where(np.abs(landing[:, [0, 2]]).max(1) <= 0.5 * FLOOR, floor, np.inf)   # (the floor's edge)
+    ahead = [MIRROR] if through == "portals" or depth % 2 == 0 else [BACK]   # (the surface it may end on)
+    reach = np.clip(np.minimum(floor, _hits(start, way, [*ROOF, WALL, *ahead])), 0.0, 40.0)
+    return start, way, reach, inside.reshape(height, width)
+
+
+def _marched(images) -> np.ndarray:
+    """A march image's texels (rows from the bottom): the light, and the ray's length in alpha."""
+    return np.frombuffer(images.light.read(), np.float32).reshape(images.light.size[1], images.light.size[0], 4)
+
+
+@pytest.mark.parametrize("watched", [False, True], ids=["camera", "picture"])
+@pytest.mark.parametrize("through", ["portals", "mirrors"])
+def test_each_level_two_deep_marches_the_air_it_shows_from_its_surface(scene, through, watched):
+    """Portal A on the hall's wall and B behind the camera (a shift by CARRY), or the wall's
+    mirror and one facing it there: each pixel of level 1 (A's view, the mirror's) and of
+    level 2 (A seen through A, the back mirror in the wall's) marches its ray carried or
+    reflected that far (``_deep_rays``) on to the floor, a slab, the wall or the surface ahead,
+    and its light is the ground truth's for that ray.  ``watched``: the march images of a
+    monitor's picture whose camera, posed as the active one (which has none), has the shafts
+    reaching two levels, the picture two levels deep: its portal level and its level 2 are
+    marched as the rays say."""
+    settings = VolumetricFog(steps=64, reflection_depth=2)
+    names: dict = {}
+    runner = scene(lambda world: names.update(_deep_hall(world, settings, through, watched)), SIZE)
+    runner.frame()
+    fog = runner.engine.renderer.volumetric_fog
+    levels = fog._picture_levels[names["screen"]] if watched else fog._levels
+    assert sorted(levels) == [1, 2]
+    for depth, least in ((1, 1000), (2, 60)):
+        marched = _marched(levels[depth]).reshape(-1, 4)
+        assert levels[depth].light.size == SIZE
+        origin, way, reach, inside = _deep_rays(runner, depth, through)
+        grid = reach.reshape(SIZE[1], SIZE[0])
+        steady = np.abs(grid - np.roll(grid, 1, 0)) + np.abs(grid - np.roll(grid, 1, 1)) < 0.05 * grid
+        check = inside & steady
+        assert check.sum() > least, (depth, check.sum())
+        rows = np.flatnonzero(check)[::max(1, check.sum() // 1200)]   # (about 1,200 of them)
+        assert np.median(np.abs(marched[rows, 3] - reach[rows]) / reach[rows]) < 0.002, depth
+        truth = _light(origin[rows], way[rows], reach[rows], settings)
+        error = np.abs(marched[rows, 0] - truth) / truth
+        assert np.median(error) < 0.025 and np.quantile(error, 0.9) < 0.07, (depth, np.median(error),
+                                                                             np.quantile(error, 0.9))
+        assert truth.max() > 1.5 * np.median(truth), depth   # (the rays cross the shaft too)
+
+
+@pytest.mark.parametrize("through", ["portals", "mirrors"])
+def test_a_monitors_camera_has_its_shafts_two_levels_deep_in_its_picture(scene, through):
+    """A monitor's camera (the active camera, at the same place, none) whose ``VolumetricFog``
+    reaches two levels, its picture two levels deep, facing a portal on the wall (level 2: A
+    through A) or the wall's mirror facing another (level 2: a mirror in a mirror): what each
+    level's shafts add to its picture (the picture at reflection_depth d less at d - 1) is
+    what they add to the camera's own view where the active camera has them (its frame
+    likewise), within the wall's surface and nothing outside it; level 2's (0.008 at most,
+    near the half floats' step) on the whole; its images are the picture's own (3)."""
+    def drawn(depth: int, watched: bool) -> tuple[np.ndarray, object, dict]:
+        names: dict = {}
+        runner = scene(lambda world: names.update(
+            _deep_hall(world, VolumetricFog(steps=64, reflection_depth=depth), through, watched)), SIZE)
+        runner.frame()
+        if watched:
+            return runner.engine.renderer.monitors.read(names["screen"])[::-1, :, :3].astype(np.float64), runner, names
+        return _linear(runner).astype(np.float64), runner, names
+
+    camera = {depth: drawn(depth, False)[0] for depth in (0, 1, 2)}
+    picture = {}
+    for depth in (0, 1, 2):
+        picture[depth], runner, names = drawn(depth, True)
+    assert runner.engine.renderer.resource_counts()["volumetric_targets"] == 3
+    surface = runner.engine.renderer.targets.read_surface_ids()[::-1]   # (the active camera's: the lens's pose)
+    seen = surface == names["mirror" if through == "mirrors" else "a"]
+    for depth in (1, 2):
+        expected = camera[depth] - camera[depth - 1]
+        got = picture[depth] - picture[depth - 1]
+        strong = expected.max(axis=-1) > 0.3 * expected.max()
+        assert strong.sum() > (1000 if depth == 1 else 150) and not (strong & ~seen).any(), (depth, strong.sum())
+        assert np.abs(got[~seen]).max() < 2e-3, depth
+        if depth == 1:
+            close = np.abs(got - expected).max(axis=-1) < 5e-3 + 0.03 * np.abs(expected).max(axis=-1)
+            assert close.mean() > 0.99, close.mean()
+        else:
+            assert got[strong].mean() == pytest.approx(expected[strong].mean(), rel=0.05)

@@ -78,7 +78,9 @@ camera's view alone and says so once (a ``GLLimitWarning``).
 **Monitors' pictures** (``draw_picture``): a monitor's camera with an ``AmbientOcclusion`` or
 ``ContactShadows`` of its own has its picture's found as the active camera's view's is (the
 same three passes, the guard band, images of the picture's size kept by monitor), before
-the picture's root view is drawn; its mirror and portal levels are drawn without.
+the picture's root view is drawn; its mirror and portal levels as far as its camera's
+components reach (``draw_level``, images of the picture's own; the active camera's put aside
+until ``end_picture``).
 
 Probe views and the transparent slot are drawn without it.  The targets are made at the
 first occluded frame of a size (a level's at the first frame that finds it) and released

@@ -49,7 +49,9 @@ are dimmed as what it shows is.
 own gets the same two draws in its picture's root, before its glass, in an image of the
 picture's own (kept by monitor), through the fog the picture is drawn through (the camera's
 own ``Fog``, or the frame's); never jittered, marched at every drawing (a picture nothing it
-shows changed is kept whole); its mirror and portal levels get none.
+shows changed is kept whole); its mirror and portal levels as far as its ``reflection_depth``
+reaches (``composite_level``, images of the picture's own; the active camera's put aside
+until ``end_picture``).
 
 The images are made the first frame a camera asks (a level's the first frame it is reached)
 and let go when none does (a level's when the depth no longer reaches it or the world has
