@@ -717,3 +717,78 @@ def test_no_word_where_a_surface_in_the_box_takes_the_decal(scene):
         warnings.simplefilter("error", ComponentWarning)
         runner.frame()
     assert len(runner.world.query_one(FromDecal)) == 1
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_a_portal_shows_the_decal_as_the_eye_it_carries_sees_it(scene, path):
+    """A wall beyond portal B with a decal of the mapped look (a normal map, metallic, rough:
+    lit by a lamp and the sky as its view's eye sees them) rendered through portal A, and the
+    same world without portals rendered directly from the eye the pair carries the camera's
+    to: inside A's opening the two are the same pixels, and the decal is there (the opening
+    differs from the bare wall's)."""
+    from components import HemisphereLight, PointLight
+    from tests.test_particles import beyond_b, through_a_portal_and_from_its_eye
+
+    decal = looks()["mapped"][0]
+
+    def content(with_decal):
+        def make(world, carry):
+            turn = glm.quat_cast(carry)
+            world.spawn(Skybox())
+            world.spawn(HemisphereLight(sky=(0.3, 0.35, 0.5), ground=(0.2, 0.15, 0.1), intensity=1.0))
+            world.spawn(Transform(position=beyond_b(carry, 0.6, 0.5, -3.0)), PointLight(intensity=10.0, range=20.0))
+            world.spawn(Transform(position=beyond_b(carry, 0.0, 0.0, -4.0), rotation=turn), MeshRef(quad(8.0, 8.0)),
+                        Material(color=GREY))
+            if with_decal:
+                world.spawn(Transform(position=beyond_b(carry, -0.1, 0.1, -4.0), rotation=turn,
+                                      scale=glm.vec3(1.2, 0.9, 0.5)), Decal(**decal))
+        return make
+
+    through, direct, opening, _ = through_a_portal_and_from_its_eye(scene, content(True), path=path)
+    bare, _, _, _ = through_a_portal_and_from_its_eye(scene, content(False), path=path)
+    shown = np.abs(through - bare).max(axis=-1)[opening]
+    assert (shown > 0.05).sum() > 150, (shown > 0.05).sum()   # (the decal is there)
+    apart = np.abs(through - direct).max(axis=-1)[opening]
+    assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())
+
+
+def test_a_decal_running_under_refracting_glass_shows_through_it_as_without_the_glass(scene):
+    """A floor's decal running from in front of a standing refracting pane (index 1, reflecting
+    nothing) to well behind it: the decal lies on an opaque surface, so the transparent slot
+    draws it before the glass (``ScenePass._slot_before``), into the copy the glass marches,
+    though its box reaches nearer the eye than the pane: where the pane covers the decal's far
+    part it shows as the frame drawn without the pane does (the floor's rays, as a second
+    path), decal and all; drawn after the glass it would be hidden there."""
+    from components import Refractive
+    from tests.support import pixel_rays
+
+    colour = (0.9, 0.2, 0.1, 1.0)
+
+    def build(glass, decal=True):
+        def make(world):
+            lit(world)
+            look_from(world, (0.0, 1.2, 4.0), target=(0.0, 0.3, 0.0), fov=40.0)
+            world.spawn(Transform(rotation=glm.angleAxis(glm.radians(-90.0), glm.vec3(1, 0, 0))),
+                        MeshRef(quad(8.0, 8.0)), Material(color=GREY))
+            if decal:
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, 0.5),
+                                      rotation=look_rotation(glm.vec3(0, -1, 0), glm.vec3(0, 0, -1)),
+                                      scale=glm.vec3(1.2, 3.0, 0.5)), Decal(color=colour))
+            if glass:
+                world.spawn(Transform(position=glm.vec3(0.0, 0.8, 0.6)), MeshRef(quad(2.0, 1.6)),
+                            Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, roughness=0.0, reflectance=0.0,
+                                     environment_reflection=0.0), Refractive(ior=1.0))
+        return make
+
+    runner, seen = render(scene, build(True))
+    _, drawn = render(scene, build(False))
+    _, bare = render(scene, build(False, decal=False))
+    assert runner.engine.renderer.refracting_batches()
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    floor = eye + (-eye[1] / rays[..., 1])[..., None] * rays          # (where each ray meets the floor)
+    pane = eye + ((0.6 - eye[2]) / rays[..., 2])[..., None] * rays     # (and the pane's plane)
+    behind = (rays[..., 1] < 0) & (np.abs(floor[..., 0]) < 0.5) & (floor[..., 2] > -0.9) & (floor[..., 2] < 0.45) \
+        & (np.abs(pane[..., 0]) < 0.95) & (pane[..., 1] > 0.05) & (pane[..., 1] < 1.55)
+    assert behind.sum() > 100, behind.sum()
+    assert (np.abs(drawn - bare).max(axis=-1)[behind] > 40).all()   # (the decal is there)
+    assert np.abs(seen - drawn).max(axis=-1)[behind].max() <= 3

@@ -358,3 +358,49 @@ def test_a_probe_capture_asks_once_whether_its_faces_are_finished_as_a_root(scen
 
     render(scene, build, size=(32, 24))
     assert len(captured) >= 2 and len(asked) == len(captured), (len(asked), len(captured))
+
+
+def carried_pool(foam: float, place: glm.mat4):
+    """``pool``'s floor, sky, sun and pond (with ``foam``), each placed by ``place`` (rigid)
+    after its own transform: for a test that spawns it beyond a portal."""
+    turn = glm.quat_cast(place)
+
+    def build(world):
+        world.spawn(Skybox(faces=[np.full((8, 8, 3), 0.25, np.float32) for _ in range(6)]))
+        world.spawn(DirectionalLight(direction=(-0.8, -1.0, -0.2), intensity=1.5))
+        world.spawn(Transform(position=glm.vec3(place * glm.vec4(*FLOOR_AT, 1.0)),
+                              rotation=turn * glm.angleAxis(SLOPE, glm.vec3(0, 0, 1)) * FLAT),
+                    MeshRef(quad(RUN / math.cos(SLOPE) + 0.4, 4.0)),
+                    Material(color=(0.5, 0.4, 0.3, 1.0), roughness=1.0))
+        world.spawn(Transform(position=glm.vec3(place[3]), rotation=turn * FLAT), MeshRef(quad(4.0, 4.0)),
+                    Material(color=(0.05, 0.2, 0.25, 0.3), roughness=0.2), Mirror(),
+                    Water(foam=foam, foam_depth=FOAM_DEPTH, foam_scale=0.1, foam_color=FOAM_COLOR))
+    return build
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_a_portal_shows_the_foam_as_the_eye_it_carries_sees_it(scene, path):
+    """The pond with its shore beyond portal B, seen down through portal A (the pond's
+    reflection a level below the portal's view), and the same world without portals rendered
+    directly from the eye the pair carries the camera's to: inside A's opening the two are the
+    same pixels (the portal's level draws the foam with its own camera: its depth read back
+    through the portal view's projection, its oblique near plane and all), and the foam is
+    there (the opening differs from the pond's without foam).  (A batched level drew its
+    water writing depth, so the foam drawn over it failed its depth test: none showed.)"""
+    from tests.test_particles import through_a_portal_and_from_its_eye
+
+    def content(foam):
+        def make(world, carry):
+            carried_pool(foam, carry * glm.translate(glm.vec3(-1.0, -1.3, -4.7)))(world)
+        return make
+
+    shot = dict(path=path, eye=glm.vec3(0.0, 0.6, 0.0), target=(0.3, -1.3, -4.7), fov=55.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # (a still water: no waves, said)
+        foamy, direct, opening, runners = through_a_portal_and_from_its_eye(scene, content(1.0), **shot)
+        plain, _, _, _ = through_a_portal_and_from_its_eye(scene, content(0.0), **shot)
+    assert runners[True].stats.reflection_views >= 2   # (the portal's view and the pond's below it)
+    shown = np.abs(foamy - plain).max(axis=-1)[opening]
+    assert (shown > 0.05).sum() > 60, (shown > 0.05).sum()   # (the foam is there)
+    apart = np.abs(foamy - direct).max(axis=-1)[opening]
+    assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())

@@ -658,6 +658,57 @@ def test_both_reflection_paths_draw_particles_through_a_portal(scene, path):
     np.testing.assert_allclose(shown[True][row, col], shown[False][row, col], atol=0.01)
 
 
+PORTAL_A, PORTAL_B = glm.vec3(0.0, 0.0, -2.5), glm.vec3(20.0, 0.0, 0.0)
+PORTAL_TURN = glm.angleAxis(glm.radians(90.0), glm.vec3(0, 1, 0))
+PORTAL_SIZE = (2.5, 2.0)
+
+
+def pair_carry() -> glm.mat4:
+    """The transform of the portal pair ``through_a_portal_and_from_its_eye`` spawns, A's side to B's."""
+    from engine.core.portal_math import pair_transform
+
+    return pair_transform(glm.translate(PORTAL_A), glm.translate(PORTAL_B) * glm.mat4_cast(PORTAL_TURN))
+
+
+def through_a_portal_and_from_its_eye(scene, content, *, path="per_mirror", frames=2, size=SIZE, eye=EYE,
+                                      target=(0.0, 0.0, 0.0), fov=FOV, step=None, margin=3):
+    """What ``content(world, carry)`` spawns beyond portal B (20 m off, turned a quarter; ``carry``
+    the pair's transform, A's side to B's) rendered twice: through portal A from ``eye``
+    (``path`` the reflection path), and directly from the eye the portal carries (the camera
+    carried by ``carry``: its eye, its target) in a world with no portals; linear images, and
+    the pixels at least ``margin`` in from the edges of A's opening (by the main view's rays),
+    where the two must agree.  ``step(runner, k)`` runs before each frame ``k``."""
+    from engine.assets.portals import spawn_portal_pair
+    from tests.support import pixel_rays
+
+    carry = pair_carry()
+    images, runners = {}, {}
+    for through in (True, False):
+        def build(world, through=through):
+            if through:
+                look_from(world, eye, target, fov=fov)
+                spawn_portal_pair(world, PORTAL_A, None, PORTAL_B, PORTAL_TURN, size=PORTAL_SIZE)
+            else:
+                look_from(world, glm.vec3(carry * glm.vec4(glm.vec3(eye), 1.0)),
+                          glm.vec3(carry * glm.vec4(glm.vec3(target), 1.0)), fov=fov)
+            content(world, carry)
+        runner = scene(build, size)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.path = path
+        for k in range(frames):
+            if step is not None:
+                step(runner, k)
+            image = runner.frame(1.0 / 60.0 if k < frames - 1 else 0.0)
+        images[through], runners[through] = srgb_to_linear(image.astype(np.float64) / 255.0), runner
+    assert runners[True].stats.reflection_views >= 1 and runners[True].stats.reflection_path == path
+    origin, rays = pixel_rays(runners[True].engine.main_view, size)
+    hit = origin + rays * ((PORTAL_A.z - origin[2]) / rays[..., 2])[..., None]
+    pixel = 2.0 * math.tan(math.radians(fov / 2.0)) * abs(PORTAL_A.z - origin[2]) / size[1]
+    opening = (np.abs(hit[..., 0] - PORTAL_A.x) < PORTAL_SIZE[0] / 2 - margin * pixel) \
+        & (np.abs(hit[..., 1] - PORTAL_A.y) < PORTAL_SIZE[1] / 2 - margin * pixel)
+    return images[True], images[False], opening, runners
+
+
 def test_a_paused_cloud_keeps_the_mirrors_views_and_a_moving_one_does_not(scene):
     def build(world):
         look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
@@ -1140,3 +1191,56 @@ def test_a_ribbon_bends_through_its_points_with_no_gap_and_shows_in_a_mirror(sce
     mx, my = runner.project(glm.vec3(-1.7, 0.0, -0.3))
     mirror_region = (slice(max(my - 40, 0), my + 40), slice(max(mx - 12, 0), mx + 12))
     assert (np.abs(images[True][mirror_region] - images[False][mirror_region]).max(axis=2) > 40).sum() > 20
+
+
+
+def beyond_b(carry, x, y, z) -> glm.vec3:
+    """The point beyond portal B that the view through A sees at (x, y, z)."""
+    return glm.vec3(carry * glm.vec4(x, y, z, 1.0))
+
+
+PORTAL_KINDS = {
+    "lit": dict(size=0.8, color=(*ALBEDO, 1.0), end_color=(*ALBEDO, 1.0), lit=True, translucency=0.3, blend="alpha",
+                texture=solid()),
+    "ribbon": dict(size=0.3, color=(0.5, 0.3, 0.1, 1.0), end_color=(0.5, 0.3, 0.1, 1.0), lit=True, ribbon=True,
+                   rate=60.0, burst=0),
+    "soft": dict(size=1.2, color=(0.5, 0.5, 0.5, 1.0), end_color=(0.5, 0.5, 0.5, 1.0), texture=solid(), softness=1.0),
+}
+
+
+@pytest.mark.parametrize("kind, path", [("lit", "per_mirror"), ("lit", "batched"), ("ribbon", "per_mirror"),
+                                        ("ribbon", "batched"), ("soft", "per_mirror")])
+def test_a_lit_particle_a_ribbon_and_a_soft_particle_show_through_a_portal_as_from_the_eye_it_carries(scene, kind,
+                                                                                                       path):
+    """What lies beyond portal B (a wall, a lamp, and a lit particle, a lit ribbon swept along
+    a line, or a soft particle 0.4 m in front of the wall) rendered through portal A, and the
+    same world without portals rendered directly from the eye the pair carries the camera's
+    to: inside A's opening the two are the same pixels (the portal's view lights the particle
+    by the world's lights, faces the ribbon to its own eye, fades the soft particle by its own
+    depth); and the particle is there (the opening differs from the same world without it)."""
+    def content(emitter):
+        def make(world, carry):
+            turn = glm.quat_cast(carry)
+            world.spawn(Transform(position=beyond_b(carry, 0.0, 0.0, -5.0 if kind == "soft" else -6.0),
+                                  rotation=turn), MeshRef(quad(40.0, 40.0)), Material(color=(0.4, 0.4, 0.4, 1.0)))
+            world.spawn(HemisphereLight(sky=(0.3, 0.35, 0.5), ground=(0.2, 0.15, 0.1), intensity=1.0))
+            world.spawn(Transform(position=beyond_b(carry, 1.0, 1.0, -2.5)), PointLight(intensity=12.0, range=20.0))
+            if emitter:
+                world.emitter = world.spawn(Transform(position=beyond_b(carry, -0.2, 0.1, -4.6 if kind == "soft"
+                                                                        else -3.3), rotation=turn),
+                                            still(**PORTAL_KINDS[kind]))
+        return make
+
+    def sweep(runner, k):   # (a ribbon's emitter swept along x, as seen through A, leaving its points)
+        if kind == "ribbon":
+            carry = pair_carry()
+            runner.world.get(runner.world.emitter, Transform).position = beyond_b(carry, -0.9 + 0.06 * k,
+                                                                                  -0.2 + 0.03 * k, -3.3)
+    frames = 30 if kind == "ribbon" else 2
+    through, direct, opening, _ = through_a_portal_and_from_its_eye(scene, content(True), path=path, frames=frames,
+                                                                    step=sweep)
+    without, _, _, _ = through_a_portal_and_from_its_eye(scene, content(False), path=path)
+    shown = np.abs(through - without).max(axis=-1)[opening]
+    assert (shown > 0.05).sum() > 40, (shown > 0.05).sum()   # (the particle is there)
+    apart = np.abs(through - direct).max(axis=-1)[opening]
+    assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())

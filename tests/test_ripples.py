@@ -922,3 +922,98 @@ def test_a_first_drop_builds_no_program(scene):
             runner.frame(DT)
     assert runner.engine.renderer.ripples.caustic_defines and runner.stats.ripple_steps >= 1
     assert len(shaders._programs) == before
+
+
+def carried_pond(ripples: bool, place: glm.mat4, enabled: bool = True, floor: bool = False):
+    """``pond``'s rippling water (a splash in it; ``enabled`` False: its Mirror switched off, so
+    its fallback shows; ``floor``: a checkered floor 0.4 m under it) and checkered wall under
+    the sun and a grey sky, each placed by ``place`` (rigid) after its own transform; a build
+    of (world, carry) for ``tests.test_particles.through_a_portal_and_from_its_eye``, or of a
+    world alone (``world.water``: the water's entity)."""
+    turn = glm.quat_cast(place)
+
+    def at(x, y, z) -> glm.vec3:
+        return glm.vec3(place * glm.vec4(x, y, z, 1.0))
+
+    def build(world, carry=None):
+        world.spawn(Skybox(faces=[np.full((8, 8, 3), 0.3, np.float32) for _ in range(6)]))
+        world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.4), intensity=1.5))
+        for i in range(8):
+            for j in range(4):
+                world.spawn(Transform(position=at(-2.0 + i * 0.5 + 0.25, 0.25 + j * 0.5, -2.0), rotation=turn),
+                            MeshRef(quad(0.5, 0.5)),
+                            Material(color=(0.9, 0.2, 0.1, 1) if (i + j) % 2 else (0.1, 0.3, 0.9, 1), roughness=1.0))
+                if floor:
+                    world.spawn(Transform(position=at(-2.0 + i * 0.5 + 0.25, -0.4, -2.0 + j * 0.5 + 0.25),
+                                          rotation=turn * FLAT), MeshRef(quad(0.5, 0.5)),
+                                Material(color=(0.9, 0.8, 0.2, 1) if (i + j) % 2 else (0.1, 0.5, 0.2, 1),
+                                         roughness=1.0))
+        world.water = world.spawn(Transform(position=at(0.0, 0.0, 0.0), rotation=turn * FLAT),
+                                  MeshRef(quad(4.0, 4.0)), Material(color=(0.05, 0.2, 0.25, 0.3), roughness=0.2),
+                                  Mirror(enabled=enabled), Water(),
+                                  *([Ripples(speed=0.5, damping=0.0, cell=0.02)] if ripples else []))
+        world.spawn(Transform(position=at(0.2, 0.0, -0.4)), Splash(radius=0.12, depth=0.04))
+    return build
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_a_portal_shows_the_rings_as_the_eye_it_carries_sees_them(scene, path):
+    """A splashed rippling pond reflecting a checkered wall beyond portal B, seen through portal
+    A (the pond's reflection a level below the portal's view), and the same world without
+    portals rendered directly from the eye the pair carries the camera's to, the same frames
+    stepped: inside A's opening the two are the same pixels (the portal's level composites
+    the water with its rings), and the rings are there (the opening differs from the same
+    pond's without Ripples)."""
+    from tests.test_particles import through_a_portal_and_from_its_eye
+
+    def content(ripples):
+        def make(world, carry):
+            carried_pond(ripples, carry * glm.translate(glm.vec3(0.0, -0.5, -4.6)))(world)
+        return make
+
+    shot = dict(path=path, eye=glm.vec3(0.0, 0.6, -1.0), target=(0.2, -0.5, -5.0), fov=40.0, frames=20)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # (a still water: no waves, said)
+        rippled, direct, opening, runners = through_a_portal_and_from_its_eye(scene, content(True), **shot)
+        plain, _, _, _ = through_a_portal_and_from_its_eye(scene, content(False), **shot)
+    assert runners[True].stats.reflection_views >= 2   # (the portal's view and the pond's below it)
+    shown = np.abs(rippled - plain).max(axis=-1)[opening]
+    assert (shown > 0.02).sum() > 20, (shown > 0.02).sum()   # (the rings are there)
+    apart = np.abs(rippled - direct).max(axis=-1)[opening]
+    assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())
+
+
+def test_a_waters_fallback_shows_the_rings_where_they_are_and_nowhere_else(scene):
+    """The splashed pond over a checkered floor with its Mirror switched off (no view: its
+    fallback, the sky's reflection and the floor bent below it), against the same pond with no
+    Ripples: the frame changes where the rings tilt the surface (each pixel's point on the
+    water found along its ray, the field's slope there read back) and not where it is flat."""
+    def build(ripples):
+        def make(world):
+            world.spawn(Transform(position=(0.0, 1.2, 2.2), rotation=look_rotation(glm.vec3(0.2, -1.2, -2.6))),
+                        Camera(fov_y=40.0))
+            carried_pond(ripples, glm.mat4(), enabled=False, floor=True)(world)
+        return make
+
+    size = (96, 72)
+    rippled, frame = run(scene, build(True), 20, size)
+    _, plain = run(scene, build(False), 20, size)
+    stats = rippled.stats
+    assert (stats.reflection_views, stats.reflection_fallbacks) == (0, 1)
+    field = heights(rippled, {"water": rippled.world.water})
+    slope = np.hypot(*np.gradient(field.astype(np.float64), 0.02))
+    eye, directions = pixel_rays(rippled.engine.main_view, size)
+    at = eye + directions * (-eye[1] / directions[..., 1])[..., None]
+    on = (directions[..., 1] < 0) & (np.abs(at[..., 0]) < 1.9) & (np.abs(at[..., 2]) < 1.9)
+    texel = rippled.engine.renderer.ripples.to_texels(rippled.world.water, at.reshape(-1, 3)).reshape(*size[::-1], 2)
+    near = slope.copy()
+    for axis in (0, 1):
+        for shift in (-3, -2, -1, 1, 2, 3):
+            near = np.maximum(near, np.roll(slope, shift, axis=axis))
+    under = near[np.clip(texel[..., 1].astype(int), 0, field.shape[0] - 1),
+                 np.clip(texel[..., 0].astype(int), 0, field.shape[1] - 1)]
+    changed = np.abs(frame.astype(int) - plain.astype(int)).max(axis=-1)
+    flat, tilted = on & (under < 1e-5), on & (under > 0.02)
+    assert flat.sum() > 1000 and tilted.sum() > 30, (flat.sum(), tilted.sum())
+    assert changed[flat].max() <= 2
+    assert (changed[tilted] > 2).mean() > 0.3

@@ -403,7 +403,7 @@ class ScenePass:
         self._begin(views, targets, options, _BATCHED_SCENE if options.batched else _SCENE, run)
         if options.batched:
             for group in instanced_groups(views):
-                self._draw_batched([views[i] for i in group], options)
+                self._draw_batched([views[i] for i in group], targets, options)
         else:
             self._draw_each(views, targets, viewport, options, conditions)
         if renderer.debug:  # the name is made only where it is checked
@@ -1034,12 +1034,14 @@ class ScenePass:
         self.renderer.stats.draws_culled += len(batches) - len(kept)
         return kept
 
-    def _draw_batched(self, views: Sequence[View], options: SceneOptions) -> None:
+    def _draw_batched(self, views: Sequence[View], targets: RenderTargets, options: SceneOptions) -> None:
         """Every batch once for all ``views`` (a group of ``instanced_groups``: at most
         MAX_BATCHED_VIEWS, one winding): each instance drawn once a view, its view's camera
         from the Views block, clipped to the view's rectangle by clip distances 1-4 (the
         per-view scissor of ``_draw_each``).  A batch whose boxes reach none of the views is
-        left out (``batch_reach``, at the per-view pass's thresholds)."""
+        left out (``batch_reach``, at the per-view pass's thresholds).  The slot's part drawn
+        with them (see-through mirrors, water) tests depth but writes none (``begin_glass``), as
+        ``_draw_each``'s: a water's foam is drawn over it later, and its copy holds what lies below."""
         renderer = self.renderer
         ctx = self.ctx
         scissor = self._views_table(views)
@@ -1065,6 +1067,7 @@ class ScenePass:
             unlit = check.unlit
         self._draw_batches(opaque, count, options.masked, unlit=unlit)
         if now:
+            targets.begin_glass()
             viewport = (0, 0, *views[0].size)
             if groups is None:  # farthest from the first view's eye first (the views of a level are close)
                 apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
@@ -1081,6 +1084,7 @@ class ScenePass:
                     apply_pass_state(ctx, _BATCHED_TRANSPARENT, viewport, scissor)
                     set_front_face(ctx, winding)
                     self._draw_batches(first, len(group), options.masked)
+            targets.end_glass()
             apply_pass_state(ctx, _BATCHED_SCENE, viewport)
         renderer.stats.passes += 1
 
