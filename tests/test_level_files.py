@@ -644,3 +644,428 @@ def test_a_bad_normal_map_names_the_entity_and_field(tmp_path, old, new, field, 
     assert error.line == line_of(path, new.split(" = ")[0] if new.startswith("normal_scale") else "normal_map =",
                                  after='name = "pond"')
     assert f"{path}:{error.line}: entity 'pond': {field}: " in str(error)
+
+
+# --- every component kind and field a level file holds, read and written back ------------------------------------
+
+# The tables an entity needs beside the component under test (a mirror's mesh, a water's mirror, ...).
+QUAD = "[entity.MeshRef]\nmesh = { quad = [1.0, 1.0] }\n[entity.Material]\n"
+PLACED_QUAD = "[entity.Transform]\n" + QUAD
+HOSTS = {
+    "Mirror": QUAD, "Portal": QUAD, "Monitor": QUAD, "Water": QUAD + "[entity.Mirror]\n",
+    "Ripples": QUAD + "[entity.Mirror]\n[entity.Water]\n",
+    "LevelOfDetail": "[entity.MeshRef]\nmesh = { box = [1.0, 1.0, 1.0] }\n",
+    "Animation": "[entity.Model]\nfile = \"door.glb\"\n",
+    "AnimationLayer": "[entity.Model]\nfile = \"door.glb\"\n[entity.Animation]\nclip = \"Open\"\n",
+    "AnimationEvents": "[entity.Model]\nfile = \"door.glb\"\n[entity.Animation]\nclip = \"Open\"\n",
+}
+# Values a variation of the default cannot find (assets, names, None defaults), as the file writes them.
+GIVEN = {
+    "Material": {"texture": "{ checker = [8, 2] }", "normal_map": "{ ripples = [16, 2] }",
+                 "emissive_map": "{ checker = [8, 4] }", "metallic_roughness_map": "{ checker = [4, 2] }",
+                 "occlusion_map": "{ checker = [16, 4] }", "lightmap": "{ checker = [16, 2] }", "alpha_cutoff": "0.5"},
+    "MeshRef": {"mesh": "{ box = [1.0, 2.0, 3.0] }"},
+    "LevelOfDetail": {"meshes": "[{ box = [1.0, 1.0, 1.0] }, { sphere = 0.5 }]", "distances": "[12.0]"},
+    "Mirror": {"shows_layers": "[0, 1]", "hides_layers": "[2]", "end_image": "true", "plane_point": "[0.0, 0.0, 0.0]",
+               "plane_normal": "[0.0, 0.0, 1.0]", "fade_distance": "[8.0, 14.0]", "fade_angle": "[60.0, 85.0]"},
+    "Portal": {"partner": "\"Portal_partner\"", "shows_layers": "[0, 1]", "hides_layers": "[2]", "end_image": "true"},
+    "Camera": {"shows_layers": "[0, 1]", "hides_layers": "[2]"},
+    "ReflectionProbe": {"shows_layers": "[0, 1]", "hides_layers": "[2]", "influence": "[4.0, 3.0, 4.0]"},
+    "IrradianceVolume": {"shows_layers": "[0, 1]", "hides_layers": "[2]"},
+    "Model": {"file": "\"door.glb\""},
+    "Animation": {"clip": "\"Open\"", "fade_from": "\"Slide\"", "root_motion": "\"door\""},
+    "AnimationLayer": {"clip": "\"Slide\"", "root": "\"door\""},
+    "AnimationEvents": {"events": "[[\"Open\", 0.5, \"creak\"]]"},
+    "Bloom": {"dirt": "{ checker = [8, 2] }"},
+    "ColorGrading": {"lut": "{ file = \"grade.cube\" }"},
+    "DepthOfField": {"focal_length": "85.0"},
+    "Decal": {"texture": "{ puff = [16, 3] }", "normal_map": "{ ripples = [16, 2] }", "alpha_cutoff": "0.5",
+              "layers": "[1]"},
+    "ParticleEmitter": {"end_color": "[1.0, 0.0, 0.0, 0.0]", "texture": "{ puff = [16, 2] }", "ground": "-1.0",
+                        "burst_on": "\"step\"", "color_keys": "[[0.0, 1.0, 0.9, 0.2, 1.0], [1.0, 0.3, 0.3, 0.3, 0.0]]",
+                        "size_keys": "[[0.0, 0.5], [1.0, 0.25]]", "on_death": "\"ParticleEmitter_partner\""},
+    "PointLight": {"cookie": "{ checker = [8, 2] }"},
+    "Reflective": {"mix": "0.5"},
+    "ScreenText": {"text": "\"Level 1\"", "background": "[0.0, 0.0, 0.0, 0.5]"},
+    "Skybox": {"sun_direction": "[0.0, 1.0, 0.0]", "faces": "{ panorama = \"sky.png\", face_size = 8 }"},
+    "Transform": {"parent": "\"Transform_partner\""},
+    "Monitor": {"camera": "\"Monitor_partner\""},
+}
+# Fields that exclude others set above (a rectangle light has no radius, ...): on a second entity, "<kind>_alt".
+ALTERNATES = {"PointLight": {"rectangle": "[1.0, 0.5]"}, "ParticleEmitter": {"space": "\"local\""},
+              "LevelOfDetail": {"meshes": "[{ box = [1.0, 1.0, 1.0] }, { sphere = 0.5 }]", "screen_heights": "[0.3]"}}
+# The entities those names name.
+PARTNERS = {"Portal": QUAD + "[entity.Portal]\npartner = \"Portal\"\n", "ParticleEmitter": "[entity.ParticleEmitter]\n",
+            "Transform": "", "Monitor": "[entity.Camera]\n"}
+# Fields no level here sets, and why (each is read and saved in the test named).
+NOT_VARIED = {
+    ("Material", "second_uv_maps"): "needs a mesh file with a second UV set (tests/test_second_uvs.py)",
+    ("Model", "variant"): "needs a file with material variants (tests/test_model_variants.py)",
+}
+
+
+def every_kind_level(folder: Path, varied: dict[str, dict[str, object]] | None = None) -> str:
+    """A level with an entity named after each engine component kind holding it (its
+    ``HOSTS`` tables beside it), its ``GIVEN`` fields and ``varied`` ones; the assets it names
+    are written into ``folder``."""
+    from PIL import Image
+
+    from engine.assets.level_read import ENGINE_COMPONENTS
+    from engine.assets.level_save import _literal, _plain
+    from tests.test_color_grading import _cube
+    from tests.test_model_animation import door
+
+    if not (folder / "door.glb").exists():
+        door(folder / "door.glb")
+        _cube(folder / "grade.cube", 2)
+        Image.fromarray(np.linspace(0, 255, 16 * 8 * 3).astype(np.uint8).reshape(8, 16, 3)).save(folder / "sky.png")
+    text = '[level]\nname = "every kind"\n'
+    for kind in sorted(ENGINE_COMPONENTS):
+        fields = dict(GIVEN.get(kind, {}))
+        for field, value in (varied or {}).get(kind, {}).items():
+            fields[field] = _literal(_plain(value, folder, kind, field))
+        host = "" if kind == "Transform" else "[entity.Transform]\n"
+        text += f'\n[[entity]]\nname = "{kind}"\n{host}{HOSTS.get(kind, "")}[entity.{kind}]\n'
+        text += "".join(f"{field} = {value}\n" for field, value in fields.items())
+        if kind in ALTERNATES:
+            text += f'\n[[entity]]\nname = "{kind}_alt"\n{host}{HOSTS.get(kind, "")}[entity.{kind}]\n'
+            text += "".join(f"{field} = {value}\n" for field, value in ALTERNATES[kind].items())
+        if kind in PARTNERS:
+            text += f'\n[[entity]]\nname = "{kind}_partner"\n[entity.Transform]\n{PARTNERS[kind]}'
+    return text
+
+
+def vary_fields(level) -> dict[str, dict[str, object]]:
+    """For each kind's entity of ``level`` (loaded from ``every_kind_level``): each field not
+    given set to a value unlike its default that the component, and the entity's rules with
+    its other components, accept: a boolean flipped, a number or vector moved, a string the
+    first other choice its refusal names."""
+    import dataclasses
+    import re
+    import warnings
+
+    from pyglm import glm
+
+    from components import ComponentValueError
+    from engine.core.world import check_components
+
+    def numbers(value, integer):
+        if integer:
+            return [value + 1, value - 1, 2, 1, 0, 3, 4, 8, 16, value * 2, value // 2]
+        return [value * 0.5 if value else 0.25, value + 0.25, value * 2, 0.75, 0.5, 0.125, value - 0.25, 1.0, 2.0]
+
+    def choices(cls, given, default, field):
+        if isinstance(default, bool):
+            return [not default]
+        if isinstance(default, int):
+            return numbers(default, True)
+        if isinstance(default, float):
+            return numbers(default, False)
+        if isinstance(default, (glm.vec2, glm.vec3, glm.vec4)):
+            return [type(default)(*(numbers(v, False)[k] for v in default)) for k in range(3)] + \
+                [type(default)(*(min(v, 0.875) * 0.5 + 0.0625 for v in default))]
+        if isinstance(default, glm.quat):
+            return [glm.angleAxis(0.5, glm.normalize(glm.vec3(1.0, 2.0, 3.0)))]
+        if isinstance(default, (tuple, list)) and default and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in default):
+            integer = all(isinstance(v, int) for v in default)
+            return [type(default)(numbers(v, integer)[k] for v in default) for k in range(4)] + \
+                [type(default)(sorted(numbers(v, integer)[0] for v in default))]
+        if isinstance(default, str):
+            try:
+                cls(**{**given, field: "not_one_of_them"})
+            except (ComponentValueError, ValueError) as exc:
+                return [s for s in re.findall(r"['\"](\w+)['\"]", str(exc)) if s not in (default, "not_one_of_them")]
+        return []
+
+    varied: dict[str, dict[str, object]] = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for spec in level._entities:
+            kind = spec.name
+            parts = {cls.__name__: (cls, fields) for cls, fields in spec.components}
+            if kind not in parts:
+                continue  # a partner
+            cls, given = parts[kind]
+            host = [c(**f) for name, (c, f) in parts.items() if name != kind]
+            defaults = cls(**given)
+            chosen: dict[str, object] = {}
+            for f in dataclasses.fields(cls):
+                if not f.init or f.name.startswith("_") or f.name in GIVEN.get(kind, {}):
+                    continue
+                default = getattr(defaults, f.name)
+                for value in choices(cls, given, default, f.name):
+                    try:
+                        made = cls(**{**given, **chosen, f.name: value})
+                        check_components([*host, made])
+                    except Exception:
+                        continue
+                    if getattr(made, f.name) != default:  # (a direction is normalised: a longer one is the same)
+                        chosen[f.name] = getattr(made, f.name)
+                        break
+            varied[kind] = chosen
+    return varied
+
+
+def test_every_component_kind_and_field_is_read_as_written_and_saved_back_to_the_same_world(tmp_path):
+    """One entity for every component a level file may hold (``ENGINE_COMPONENTS``), each of
+    its fields set to a value unlike its default (found by varying the default until the
+    component takes it, or given: assets, names, fields whose default is None): loaded, each
+    field is the value written, not its default; saved and loaded again, the world is the
+    same, references included. A component or field added later that no level here can set
+    fails until it is given a value (or a reason in ``NOT_VARIED``)."""
+    import dataclasses
+
+    from engine.assets.level_read import ENGINE_COMPONENTS, REFERENCE_FIELDS
+    from engine.assets.level_save import _plain
+
+    plain = write(tmp_path, every_kind_level(tmp_path), "given.toml")
+    varied = vary_fields(load_level(plain))
+    path = write(tmp_path, every_kind_level(tmp_path, varied), "every_kind.toml")
+    level = load_level(path)
+    first = World("first")
+    names = level.spawn(first)
+    written = fields_by_name(first, names)
+    unset = []
+    for kind, cls in sorted(ENGINE_COMPONENTS.items()):
+        fields = {f.name for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")}
+        # Read as written: each varied value is the loaded component's (to float32), and every
+        # field the file sets differs from its default (the save writes only those).
+        loaded = first.get(names[kind], cls)
+        for field, value in varied[kind].items():
+            assert same_floats(_plain(getattr(loaded, field), path, kind, field), _plain(value, path, kind, field),
+                               1e-6), (kind, field, getattr(loaded, field), value)
+        set_here = set(written[kind][kind]) | {f for c, f in REFERENCE_FIELDS if c == kind}
+        assert set(varied[kind]) | set(GIVEN.get(kind, {})) <= set_here, (kind, set(varied[kind]) - set_here)
+        if kind in ALTERNATES:
+            assert set(ALTERNATES[kind]) <= set(written[f"{kind}_alt"][kind]), kind
+            set_here |= set(ALTERNATES[kind])
+        unset += [(kind, f) for f in sorted(fields - set_here) if (kind, f) not in NOT_VARIED]
+    assert not unset, f"fields no level here sets (give them in GIVEN, or a reason in NOT_VARIED): {unset}"
+
+    saved = save_level(first, tmp_path / "saved" / "every_kind.toml", names, name=level.name) \
+        if (tmp_path / "saved").mkdir() is None else None
+    again = load_level(saved, asset_roots=[tmp_path])
+    second = World("second")
+    names_again = again.spawn(second)
+    assert list(names_again) == list(names)
+    assert same_floats(fields_by_name(second, names_again), written, 1e-6)
+    by_id = {entity: name for name, entity in names.items()}
+    by_id_again = {entity: name for name, entity in names_again.items()}
+    for kind, field in sorted(REFERENCE_FIELDS):
+        assert by_id[getattr(first.get(names[kind], ENGINE_COMPONENTS[kind]), field)] == f"{kind}_partner"
+        assert by_id_again[getattr(second.get(names_again[kind], ENGINE_COMPONENTS[kind]), field)] == \
+            f"{kind}_partner"
+
+
+# --- docs/level_files.md against the reader ----------------------------------------------------------------------
+
+DOC = ROOT / "docs" / "level_files.md"
+
+
+def level_fields(cls) -> set[str]:
+    import dataclasses
+
+    return {f.name for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")}
+
+
+def doc_items(text: str) -> list[str]:
+    """The doc's list items and paragraphs (a fenced example stays with the item before it)."""
+    import re
+
+    items, current, fenced = [], [], False
+    for line in text.splitlines():
+        if not fenced and current and (line.startswith(("- ", "#")) or not line.strip()):
+            items.append("\n".join(current))
+            current = []
+        fenced ^= line.strip().startswith("```")
+        current.append(line)
+    return [re.sub(r"[ \t]*\n[ \t]*", "\n", item) for item in [*items, "\n".join(current)]]
+
+
+def named_in(kind: str, field: str, text: str) -> bool:
+    """Whether ``text`` names ``kind``'s ``field``: as `Kind.field`, or in an item about the kind
+    as `field` or as a key a TOML example sets (`field = ...`)."""
+    import re
+
+    if f"{kind}.{field}" in text:
+        return True
+    return any(re.search(rf"\b{kind}\b", item) and re.search(rf"`{field}`|(^|[\s{{,`\]#]){field} =", item, re.M)
+               for item in doc_items(text))
+
+
+def test_the_docs_component_list_is_every_component_a_level_file_holds():
+    """The doc's list of component tables (``Components and values``) is the reader's
+    ``ENGINE_COMPONENTS``, and every `Kind.field` the doc names is a field the reader takes."""
+    import re
+
+    from engine.assets.level_read import ENGINE_COMPONENTS
+
+    text = DOC.read_text()
+    listed = re.search(r"A component table is named by its class \(`\[entity\.Material\]`\): (.*?)\. A game", text,
+                       re.S).group(1)
+    assert sorted(w.strip() for w in listed.split(",")) == sorted(ENGINE_COMPONENTS)
+    named = set(re.findall(r"`(\w+)\.(\w+)", text))
+    for kind, field in named:
+        if kind in ENGINE_COMPONENTS:
+            assert field in level_fields(ENGINE_COMPONENTS[kind]), f"the doc names {kind}.{field}, not a field"
+    assert len([n for n in named if n[0] in ENGINE_COMPONENTS]) > 50
+
+
+def test_every_field_a_level_file_takes_is_named_in_the_docs():
+    """Each field of each component a level file may hold is named where that component is
+    spoken of, in docs/level_files.md or the README: a field added without a word fails."""
+    from engine.assets.level_read import ENGINE_COMPONENTS
+
+    doc, readme = DOC.read_text(), (ROOT / "README.md").read_text()
+    unnamed = [(kind, field) for kind, cls in sorted(ENGINE_COMPONENTS.items()) for field in sorted(level_fields(cls))
+               if not named_in(kind, field, doc) and not named_in(kind, field, readme)]
+    assert not unnamed, f"fields no doc names: {unnamed}"
+
+
+def doc_defaults(text: str) -> list[tuple[str, str, str]]:
+    """(component, field, the default as TOML) for each "`field` (..., default X)" of the doc,
+    the field's component the nearest one its item names that has such a field; "`a` and `b`
+    (..., default X and Y)" gives each its own, and a default after another field named in the
+    parentheses' last clause, which it starts (`padding` pixels..., default 6), is that field's."""
+    import re
+
+    from engine.assets.level_read import ENGINE_COMPONENTS
+    from engine.core.budget import ViewBudget
+
+    owners = {**ENGINE_COMPONENTS, "ViewBudget": ViewBudget}
+    kinds = "|".join(sorted(owners, key=len, reverse=True))
+    value = r"(`[^`]*`|-?[\d.]+\b|true|false)"
+    found = []
+    for item in doc_items(text):
+        flat = re.sub(r"\s+", " ", item)
+        marks = [(m.start(), m.group(1)) for m in re.finditer(rf"\b({kinds})\b", flat)]
+        for m in re.finditer(rf"(?:`(\w+)` and )?`(?:(\w+)\.)?(\w+)` \(((?:[^()]|\([^()]*\))*?)\bdefault {value}"
+                             rf"(?: and {value})?", flat):
+            first, named, field, inner, default, second = m.groups()
+            clause = re.split(r"[,;:] ", inner.rstrip(" ,;"))[-1]
+            pairs = [(first, default), (field, second)] if first and second else [(field, default)]
+            if clause.startswith("`") and re.match(r"`(\w+)`", clause) and not first:
+                pairs = [(re.match(r"`(\w+)`", clause).group(1), default)]
+            for name, text_value in pairs:
+                nearest = [k for p, k in reversed(marks) if p < m.end(3)] + [k for p, k in marks if p >= m.end(3)]
+                owner = named if named in owners else next((k for k in nearest if name in level_fields(owners[k])),
+                                                           None)
+                if owner is not None and name in level_fields(owners[owner]):
+                    found.append((owner, name, text_value.strip("`")))
+    return found
+
+
+def test_the_defaults_the_doc_gives_are_the_components_defaults():
+    """Every "(..., default X)" docs/level_files.md gives a field is that component's default
+    as a level file leaves the field out (a colour given as [r, g, b] has alpha 1)."""
+    import math
+
+    import tomllib
+
+    from engine.assets.level_read import ENGINE_COMPONENTS
+    from engine.core.budget import ViewBudget
+
+    owners = {**ENGINE_COMPONENTS, "ViewBudget": ViewBudget}
+    found = doc_defaults(DOC.read_text())
+    assert len(found) > 100
+    wrong = []
+    for kind, field, text in found:
+        doc = tomllib.loads(f"v = {text}")["v"]
+        actual = getattr(owners[kind](), field)
+        if not isinstance(actual, (bool, int, float, str)) and actual is not None:
+            actual = [float(v) for v in actual]
+            if isinstance(doc, list) and len(doc) == 3 and len(actual) == 4 and actual[3] == 1.0:
+                actual = actual[:3]
+        if isinstance(doc, list) != isinstance(actual, list):
+            same = False
+        elif isinstance(doc, list):
+            same = len(doc) == len(actual) and all(math.isclose(a, b, rel_tol=1e-6)
+                                                   for a, b in zip(doc, actual, strict=True))
+        elif isinstance(doc, bool) or isinstance(actual, bool) or not isinstance(actual, (int, float)):
+            same = doc == actual
+        else:
+            same = math.isclose(doc, actual, rel_tol=1e-6, abs_tol=1e-12)
+        if not same:
+            wrong.append((kind, field, text, actual))
+    assert not wrong, f"the doc's defaults that are not the code's: {wrong}"
+
+
+# --- the refusals docs/level_files.md promises, each by its line, entity and field ---------------------------------
+
+# case: (the entity "extra"'s tables, the field or table named, the refused line's text, reason pattern)
+PROMISED_REFUSALS = {
+    "water_without_mirror": (PLACED_QUAD + "[entity.Water]\n", "Water", "[entity.Water]", r"a Water needs a Mirror"),
+    "water_on_a_rough_mirror": (PLACED_QUAD + "[entity.Mirror]\nroughness = 0.2\n[entity.Water]\n", "Mirror.roughness",
+                                "roughness = 0.2", r"a water surface is sharp: its Mirror\.roughness must be 0"),
+    "ripples_without_water": (PLACED_QUAD + "[entity.Mirror]\n[entity.Ripples]\n", "Ripples", "[entity.Ripples]",
+                              r"Ripples need a Water"),
+    "model_without_transform": ("[entity.Model]\nfile = \"door.glb\"\n", "Model", "[entity.Model]",
+                                r"a Model needs a Transform"),
+    "model_file_not_a_model": ("[entity.Transform]\n[entity.Model]\nfile = \"junk.glb\"\n", "Model.file",
+                               "file = \"junk.glb\"", r"junk\.glb"),
+    "clip_the_model_lacks": ("[entity.Transform]\n[entity.Model]\nfile = \"door.glb\"\n[entity.Animation]\n"
+                             "clip = \"Dance\"\n", "Animation.clip", "clip = \"Dance\"",
+                             r"no animation clip 'Dance' \(its clips: 'Open', 'Slide', 'Blink'\)"),
+    "event_past_its_clip": ("[entity.Transform]\n[entity.Model]\nfile = \"door.glb\"\n[entity.AnimationEvents]\n"
+                            "events = [[\"Open\", 9.0, \"late\"]]\n", "AnimationEvents.events", "events =", r"9"),
+    "partner_names_itself": ("[entity.Transform]\n" + QUAD + "[entity.Portal]\npartner = \"extra\"\n",
+                             "Portal.partner", "partner = \"extra\"", r"names the entity itself"),
+    "reference_not_a_name": ("[entity.Transform]\n" + QUAD + "[entity.Portal]\npartner = 3\n", "Portal.partner",
+                             "partner = 3", r"must be an entity's name, got 3"),
+    "component_not_a_table": ("Material = 5\n", None, "Material = 5", r"\[entity\.Material\] must be a table"),
+    "a_games_field_of_the_wrong_type": ("[entity.Transform]\n[entity.Spin]\nspeed = \"fast\"\n", "Spin.speed",
+                                        "speed = \"fast\"", r"must be a number \(the annotation of Spin\.speed\)"),
+    "curve_not_one_of_them": ("[entity.Transform]\n[entity.Camera]\n[entity.Tonemap]\ncurve = \"filmic\"\n",
+                              "Tonemap.curve", "curve = \"filmic\"", r"Tonemap\.curve"),
+    "exposure_out_of_range": ("[entity.Transform]\n[entity.Camera]\n[entity.Tonemap]\nexposure = 30.0\n",
+                              "Tonemap.exposure", "exposure = 30.0", r"Tonemap\.exposure"),
+    "min_ev_above_max_ev": ("[entity.Transform]\n[entity.Camera]\n[entity.Tonemap]\nmin_ev = 4.0\nmax_ev = 2.0\n",
+                            "Tonemap.max_ev", "max_ev = 2.0", r"min_ev"),
+    "bloom_levels_not_an_integer": ("[entity.Transform]\n[entity.Camera]\n[entity.Bloom]\nlevels = 2.5\n",
+                                    "Bloom.levels", "levels = 2.5", r"Bloom\.levels"),
+    "grading_out_of_range": ("[entity.Transform]\n[entity.Camera]\n[entity.ColorGrading]\ncontrast = 5.0\n",
+                             "ColorGrading.contrast", "contrast = 5.0", r"ColorGrading\.contrast"),
+    "lut_not_a_cube_file": ("[entity.Transform]\n[entity.Camera]\n[entity.ColorGrading]\n"
+                            "lut = { file = \"junk.cube\" }\n", "ColorGrading.lut", "lut = ", r"junk\.cube"),
+    "fade_start_past_its_end": ("[entity.Transform]\n" + QUAD + "[entity.Mirror]\nfade_distance = [14.0, 8.0]\n",
+                                "Mirror.fade_distance", "fade_distance =", r"Mirror\.fade_distance"),
+    "fade_angle_over_90": ("[entity.Transform]\n" + QUAD + "[entity.Mirror]\nfade_angle = [60.0, 95.0]\n",
+                           "Mirror.fade_angle", "fade_angle =", r"Mirror\.fade_angle"),
+    "priority_not_an_integer": ("[entity.Transform]\n" + QUAD + "[entity.Mirror]\npriority = 1.5\n",
+                                "Mirror.priority", "priority = 1.5", r"Mirror\.priority"),
+    "another_end_image": ("[entity.Transform]\n" + QUAD + "[entity.Mirror]\nend_image = \"sometimes\"\n",
+                          "Mirror.end_image", "end_image =", r"Mirror\.end_image"),
+    "bad_anchor": ("[entity.ScreenText]\ntext = \"hi\"\nanchor = \"middle\"\n", "ScreenText.anchor",
+                   "anchor = \"middle\"", r"ScreenText\.anchor"),
+    "bad_text_scale": ("[entity.ScreenText]\ntext = \"hi\"\nscale = 0\n", "ScreenText.scale", "scale = 0",
+                       r"ScreenText\.scale"),
+    "bad_panel_size": ("[entity.ScreenPanel]\nsize = [-4.0, 8.0]\n", "ScreenPanel.size", "size = [-4.0",
+                       r"ScreenPanel\.size"),
+    "a_bare_layer_number": ("[entity.Transform]\n[entity.Visibility]\nlayers = 3\n", "Visibility.layers",
+                            "layers = 3", r"Visibility\.layers"),
+    "mesh_emitter_without_a_mesh": ("[entity.Transform]\n[entity.ParticleEmitter]\nshape = \"mesh\"\n",
+                                    "ParticleEmitter", "[entity.ParticleEmitter]", r"MeshRef"),
+    "a_derived_component": ("[entity.Transform]\n[entity.Slice]\n", None, "[entity.Slice]",
+                            r"Slice is made by the engine each frame, not written in a level"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PROMISED_REFUSALS))
+def test_a_refusal_the_doc_promises_names_the_file_line_entity_and_field(tmp_path, case):
+    """docs/level_files.md's refusals (``Mistakes`` and each component's "is refused naming the
+    field"): each fails the load with a LevelError whose text names the file and the line
+    the mistake is on, the entity and the field (or the table), found by the line's text here."""
+    from tests.test_model_animation import door
+
+    door(tmp_path / "door.glb")
+    (tmp_path / "junk.glb").write_bytes(b"glTF\x02\x00\x00\x00junk")
+    (tmp_path / "junk.cube").write_text("LUT_3D_SIZE 2\n0 0 0\n")
+    tables, field, line_text, reason = PROMISED_REFUSALS[case]
+    path = write(tmp_path, BASE + "\n[[entity]]\nname = \"extra\"\n" + tables)
+    with pytest.raises(LevelError, match=reason) as caught:
+        load_level(path, EXTRA)
+    error = caught.value
+    assert (error.entity, error.field) == ("extra", field), (error.entity, error.field, str(error))
+    assert error.line == line_of(path, line_text, after='name = "extra"'), (error.line, str(error))
+    assert str(error).startswith(f"{path}:{error.line}: entity 'extra': " + (f"{field}: " if field else ""))
