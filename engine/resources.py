@@ -216,8 +216,10 @@ class FiredEvents(list):
 class PortalCrossing:
     """``entity`` went into ``from_portal`` and came out of ``to_portal``; ``carry`` took it
     there (world to world: the pair's transform) and ``turn`` is carry's rotation, what a
-    game turns a facing it keeps itself by.  A velocity it keeps goes by ``glm.mat3(carry)``:
-    turned, and scaled where the pair's portals differ in scale (as a Traveller's is)."""
+    game turns a facing it keeps itself by.  A velocity it keeps goes by
+    ``engine.core.portal_math.carried_velocity(carry, turn, velocity)``: turned, and scaled
+    where the pair's portals differ in scale, as a Traveller's is (by the pair's one factor:
+    through ``glm.mat3(carry)``'s float32 a speed drifts a little each time there and back)."""
 
     entity: int
     from_portal: int

@@ -53,7 +53,7 @@ from components.portal import MAX_SPEED
 from components.tracking import warn_component
 from components.transform import SCALE_RANGE
 from engine.core.frame_io import Output
-from engine.core.portal_math import carried_pose, carries_scale, near_plane_corners
+from engine.core.portal_math import carried_pose, carried_velocity, carries_scale, near_plane_corners
 from engine.core.reflection_math import signed_distance
 from engine.core.world import World
 from engine.resources import PortalCrossing, PortalCrossings
@@ -203,7 +203,8 @@ class PortalTravelSystem(esper.Processor):
         if scaled:
             transform.scale = scale
         if traveller is not None:  # (a pair of one size: turned, as the rotation is, bit for bit)
-            traveller.velocity = glm.mat3(gate.carry) * traveller.velocity if scaled else gate.turn * traveller.velocity
+            velocity = traveller.velocity
+            traveller.velocity = carried_velocity(gate.carry, gate.turn, velocity) if scaled else gate.turn * velocity
         fly = world.try_get(entity, FlyController)
         if fly is not None:
             forward = rotation * glm.vec3(0.0, 0.0, -1.0)

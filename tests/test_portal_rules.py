@@ -310,3 +310,55 @@ def test_world_corners_by_hand():
     assert corners.shape == (8, 4) and corners.dtype == np.float64
     np.testing.assert_allclose(corners[:, :3], expected, atol=1e-6)
     np.testing.assert_allclose(corners[:, 3], 1.0)
+
+
+# --- a pair scaled unevenly by its Transforms ------------------------------------------------------
+def test_a_pair_scaled_unevenly_is_open_and_its_view_shows_what_its_carried_rays_meet(scene):
+    """B scaled (2, 1, 0.5) by its Transform (twice as wide, as tall, half as deep along its
+    facing): the pair is open (no rule refuses it: portal_math.even_scale says it scales
+    unevenly, and its carry is applied as it is), and its view, drawn without a GL error (the
+    suite's fixture checks), shows through B what each pixel's ray carried back through the
+    pair (carry^-1 in float64: stretched twice across, squeezed along the facing) meets: a
+    green box in front of A where the ray meets it (a margin in), nowhere it misses (a margin
+    out).  Carried as by B scaled 2 every way, the rays would miss a third of those or more."""
+    from engine.core.portal_math import even_scale
+    from tests.support import box_hits, pixel_rays
+    from tests.test_portal_views import TURN_Y_90, glowing_box, lit
+
+    ents = {}
+    size = (96, 72)
+
+    def build(world):
+        lit(world)
+        look_from(world, (15.0, 1.7, 0.8), (10.0, 1.5, 0.0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), TURN_Y_90)
+        world.get(ents["b"], Transform).scale = glm.vec3(2.0, 1.0, 0.5)
+        ents["green"] = glowing_box(world, (0.8, 1.5, 1.5), (0.1, 0.9, 0.1), size=0.8)
+
+    runner = scene(build, size)
+    runner.frame()
+    assert open_portal_pairs(runner.world) == {ents["a"]: ents["b"], ents["b"]: ents["a"]}
+    ids = runner.ids()
+    on_b = runner.engine.renderer.targets.read_surface_ids() == ents["b"]
+    assert on_b.sum() > 1000 and runner.stats.reflection_views >= 1
+    a_world, b_world = (np.array(glm.dmat4(runner.world.get(ents[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    carry = b_world @ turn @ np.linalg.inv(a_world)
+    assert even_scale(glm.mat4(*carry.T.flatten())) is None
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    centre, half = np.array([0.8, 1.5, 1.5]), np.full(3, 0.4)
+
+    def hits(carry, grow):
+        back = np.linalg.inv(carry)
+        origin = back[:3, :3] @ eye + back[:3, 3]
+        directions = rays[on_b] @ back[:3, :3].T
+        return box_hits(origin, directions, centre, half + grow)
+
+    inside, outside = hits(carry, -0.03), ~hits(carry, 0.03)
+    shown = ids[on_b] == ents["green"]
+    assert inside.sum() > 100
+    assert shown[inside].all(), int((~shown[inside]).sum())
+    assert not shown[outside].any(), int(shown[outside].sum())
+    even = b_world @ np.diag([1.0, 2.0, 4.0, 1.0]) @ turn @ np.linalg.inv(a_world)  # B scaled 2 every way
+    at_even_scale = hits(even, 0.0)
+    assert (at_even_scale ^ shown).sum() > 0.3 * shown.sum(), ((at_even_scale ^ shown).sum(), shown.sum())

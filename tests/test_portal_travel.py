@@ -618,3 +618,89 @@ def test_a_crossing_past_what_a_transform_holds_is_not_made_and_is_said_once(wor
         world.get(big, Transform).position = glm.vec3(0.3, 1.8, 0.5)   # again: not said again
         world.step(0.1)
         assert crossings(world) == [] and len([w for w in caught if issubclass(w.category, ComponentWarning)]) == 1
+
+
+@pytest.mark.parametrize("scale_a, scale_b", [(1.0, 2.0), (2.0, 0.5)])
+def test_crossing_a_pair_of_two_scales_back_and_forth_never_drifts(world, scale_a, scale_b):
+    """A ball goes into A and out of B, turns back, in through B and out of A, 100 times over
+    (A and B scaled by their Transforms: B twice A's size, or a quarter): each time out of B
+    it is k = scale_b / scale_a times its size, exactly (portal_math.even_scale), k times as
+    fast and as far across B's face as it was across A's (worked out here: the unscaled pair's
+    map, then k times as far from B), and each time out of A its own size, exactly, at its
+    own speed, as near as float32 holds one crossing's: the 200th crossing is the 2nd's, as a
+    pair of one scale keeps it (a velocity carried by the scaled carry's float32 matrix lost
+    2.4e-7 of its speed each time round: 5e-5 m/s of 6 after 200 crossings)."""
+    k = scale_b / scale_a
+    a, b = pair(world)
+    world.get(a, Transform).scale = glm.vec3(scale_a)
+    world.get(b, Transform).scale = glm.vec3(scale_b)
+    across = (0.3 * scale_a, 1.5 + 0.3 * scale_a)  # inside A's rectangle, whatever its scale
+    ball = world.spawn(Transform(position=(*across, 0.5), rotation=yaw_pitch_rotation(10.0, 0.0),
+                                 scale=(1.0, 0.5, 1.0)), Traveller(velocity=(0, 0, -6)))
+    out_of_a, out_of_b = [], []
+    for _ in range(200):
+        for _ in range(10):
+            world.step(0.1)
+            if crossings(world):
+                break
+        (crossing,) = crossings(world)
+        t, traveller = world.get(ball, Transform), world.get(ball, Traveller)
+        if crossing.from_portal == a:
+            assert tuple(t.scale) == (k, 0.5 * k, k)
+            np.testing.assert_allclose(t.position - glm.vec3(B_POS),
+                                       k * (carry_point((*across, 0.5 - 0.6)) - glm.vec3(B_POS)), atol=5e-4)
+            out_of_b.append((np.array(t.position), np.array(traveller.velocity), np.array(t.rotation)))
+        else:
+            assert tuple(t.scale) == (1.0, 0.5, 1.0)
+            out_of_a.append((np.array(t.position), np.array(traveller.velocity), np.array(t.rotation)))
+        world.step(0.1)   # a step out (no exit takes it back in the next frame), then back
+        traveller.velocity = -traveller.velocity
+    assert len(out_of_a) == len(out_of_b) == 100
+    np.testing.assert_allclose(out_of_b[0][1], k * carry_dir((0, 0, -6)), rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(out_of_a[0][1], (0, 0, 6), atol=1e-5)
+    for outs, speed in ((out_of_a, 6.0), (out_of_b, 6.0 * k)):
+        (first_at, first_velocity, first_turn), (last_at, last_velocity, last_turn) = outs[0], outs[-1]
+        # (one float32 step of a speed of 6 or 12 is 1e-6)
+        assert abs(np.linalg.norm(last_velocity) - speed) < 3e-6, (np.linalg.norm(last_velocity), speed)
+        np.testing.assert_allclose(last_velocity, first_velocity, atol=1e-4 * speed)
+        np.testing.assert_allclose(last_turn, first_turn, atol=1e-5)
+        # (float32 steps of a position 10 m out round by 1e-6: 2e-4 over the 100 trips out of B and back, as
+        # with a pair of one scale, whose 200th crossing is 1e-5 off its 2nd)
+        np.testing.assert_allclose(last_at, first_at, atol=5e-4)
+
+
+def test_a_turned_thing_through_a_pair_scaled_unevenly_keeps_its_axes_and_drops_the_shear(world):
+    """B scaled (2, 1, 0.5) and a ball turned 45 degrees about up: the carry times its model
+    matrix is sheared (B's stretch is along axes the ball's are turned from), which a
+    Transform cannot hold, so (portal_math.decompose_pose) the ball comes out where the carry
+    puts its centre, with that matrix less its shear: worked out here as the QR decomposition
+    of its 3 x 3 part in float64 (Gram-Schmidt on its columns in order: the ball's own x axis
+    keeps the carried one's direction and length, y is made square to it, then z), so the
+    rotation is the orthonormal Q and the scale the diagonal of R.  What is dropped is real:
+    the model matrix after differs from the carried one (its clone's) by the shear."""
+    a, b = pair(world)
+    world.get(b, Transform).scale = glm.vec3(2.0, 1.0, 0.5)
+    turned = glm.angleAxis(glm.radians(45.0), glm.vec3(0, 1, 0))
+    ball = world.spawn(Transform(position=(0.3, 1.8, 0.5), rotation=turned, scale=(0.5, 1.0, 1.0)),
+                       Traveller(velocity=(0, 0, -6)))
+    world.step(0.05)
+    model = glm.translate(glm.vec3(0.3, 1.8, 0.2)) * glm.mat4_cast(turned) * glm.scale(glm.vec3(0.5, 1.0, 1.0))
+    world.step(0.05)  # z 0.2 -> -0.1: in
+    (crossing,) = crossings(world)
+    assert (crossing.from_portal, crossing.to_portal) == (a, b)
+    def as_array(matrix):
+        return np.array(glm.dmat4(matrix).to_list()).T
+
+    # moved on 0.3, then carried: the clone's matrix
+    carried = as_array(crossing.carry) @ as_array(glm.translate(glm.vec3(0, 0, -0.3))) @ as_array(model)
+    q, r = np.linalg.qr(carried[:3, :3])
+    signs = np.sign(np.diag(r))
+    q, r = q * signs, r * signs[:, None]    # (a positive diagonal: the scale)
+    assert np.abs(r[np.triu_indices(3, 1)]).max() > 0.1   # a shear
+    t = world.get(ball, Transform)
+    np.testing.assert_allclose(t.position, carried[:3, 3], atol=1e-5)
+    np.testing.assert_allclose(t.scale, np.diag(r), atol=1e-5)
+    np.testing.assert_allclose(as_array(glm.mat4_cast(t.rotation))[:3, :3], q, atol=1e-5)
+    after = as_array(glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale))
+    np.testing.assert_allclose(after[:3, 0], carried[:3, 0], atol=1e-5)   # its x axis as carried
+    assert np.abs(after - carried).max() > 0.1

@@ -10,10 +10,21 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import Camera, Emissive, Material, MeshRef, Mirror, ReflectionProbe, Transform, Water, look_rotation
+from components import (
+    Camera,
+    Emissive,
+    Material,
+    MeshRef,
+    Mirror,
+    ReflectionProbe,
+    Skybox,
+    Transform,
+    Water,
+    look_rotation,
+)
 from engine.assets.mesh import quad, sphere
 from engine.resources import Surfaces
-from tests.support import kept_frames_equal_drawn
+from tests.support import kept_frames_equal_drawn, srgb_to_linear
 from tests.test_water import FLAT, FLOOR_SEEN, SKY, pool, render, schlick, uniform_sky
 
 INDEX = 1.333
@@ -471,3 +482,158 @@ def _counting(choose, levels: list[int]):
         levels.append(len(candidates))
         return choose(walk, stack, candidates)
     return counted
+
+
+# A sky each part of which says where it was read: straight up, straight down, and the sides'
+# upper and lower halves (rows 0-3 of a side face look above the horizon: cube_faces.py).
+_SKY_UP, _SKY_DOWN = (0.9, 0.8, 0.2), (0.05, 0.4, 0.05)
+_SKY_SIDE_UPPER, _SKY_SIDE_LOWER = (0.1, 0.1, 0.6), (0.6, 0.2, 0.05)
+
+
+def _told_sky():
+    from components import Skybox
+
+    side = np.empty((8, 8, 3), np.float32)
+    side[:4], side[4:] = _SKY_SIDE_UPPER, _SKY_SIDE_LOWER
+    up, down = np.full((8, 8, 3), _SKY_UP, np.float32), np.full((8, 8, 3), _SKY_DOWN, np.float32)
+    return Skybox(faces=[side, side.copy(), up, down, side.copy(), side.copy()])
+
+
+def _told_sky_along(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``_told_sky``'s radiance along unit ``directions`` (..., 3), and whether each is clear of
+    a face's edge and the sides' horizon (where the cube's filter blends two colours)."""
+    a = np.abs(directions)
+    major = a.max(axis=-1)
+    second = np.sort(a, axis=-1)[..., 1]
+    y = directions[..., 1]
+    up_or_down = a[..., 1] >= major
+    colour = np.where((y > 0.0)[..., None], _SKY_SIDE_UPPER, _SKY_SIDE_LOWER)
+    colour = np.where((up_or_down & (y > 0.0))[..., None], _SKY_UP, colour)
+    colour = np.where((up_or_down & (y < 0.0))[..., None], _SKY_DOWN, colour)
+    clear = (second < 0.72 * major) & (up_or_down | (np.abs(y) > 0.28 * major))  # (8 texels a side, filtered)
+    return colour, clear
+
+
+_NO_VIEW = {"switched off": "enabled", "past the view budget": "views", "under min_pixels": "min_pixels"}
+
+
+@pytest.mark.parametrize("shown_by", _NO_VIEW)
+def test_a_water_seen_from_below_with_no_view_shows_the_undersides_fallback(scene, shown_by):
+    """Half a metre under a clear pond whose underside gets no view (its mirror switched off,
+    the view budget spent, or its view under ``min_pixels``): its fallback is the underside's,
+    not the top's.  Under a sky whose up, down and the sides' upper and lower halves differ,
+    each pixel is, by the optics worked out here in numpy, w x the sky along the ray reflected
+    down off the surface + (1 - w) x the sky along the ray bent up through Snell's window, w
+    the underside's reflectance: 1 past the critical angle (so there the sides' lower half,
+    below the horizon, shows), Schlick's at the angle in the air inside it.  The top's
+    fallback (Fresnel from above, nothing bent from below) shows the sky above there."""
+    from engine.resources import ViewBudget
+    from tests.support import pixel_rays
+
+    def build(world):
+        pool(world, True, (0.0, -0.5, 0.0), (0.0, 1.5, -2.0))
+        for entity, _ in list(world.query_one(Skybox)):
+            world.remove_component(entity, Skybox)
+            world.add_component(entity, _told_sky())
+        if shown_by == "switched off":
+            for _, mirror in world.query_one(Mirror):
+                mirror.enabled = False
+        else:
+            world.resources[ViewBudget] = ViewBudget(views=0) if shown_by == "past the view budget" else \
+                ViewBudget(min_pixels=10 ** 6)
+
+    runner, seen = render(scene, build, size=(48, 72))
+    stats = runner.stats
+    assert (stats.reflection_fallbacks, stats.reflection_views) == (1, 0), stats
+    assert runner.engine.reflection_system.views[1:] == []
+    view = runner.engine.main_view
+    _, d = pixel_rays(view, runner.size)
+    up = d[..., 1]
+    cos_air_2 = 1.0 - INDEX * INDEX * (1.0 - up * up)
+    inside = cos_air_2 > 0.0
+    cos_air = np.sqrt(np.clip(cos_air_2, 0.0, 1.0))
+    weight = np.where(inside, F0 + (1.0 - F0) * (1.0 - cos_air) ** 5, 1.0)
+    reflected = d * np.array([1.0, -1.0, 1.0])
+    level = d * np.array([1.0, 0.0, 1.0])
+    level /= np.maximum(np.linalg.norm(level, axis=-1, keepdims=True), 1e-9)
+    bent = level * np.sqrt(np.clip(1.0 - cos_air_2, 0.0, 1.0))[..., None] + np.array([0.0, 1.0, 0.0]) * \
+        cos_air[..., None]
+    sky_reflected, clear_reflected = _told_sky_along(reflected)
+    sky_bent, clear_bent = _told_sky_along(bent)
+    expected = weight[..., None] * sky_reflected + (1.0 - weight[..., None]) * sky_bent
+    # Where the bent ray's sky lies in the picture (the fallback reads it there), clear of the
+    # band along the edges over which it fades to the unbent pixel (water_edge_share).
+    far = np.concatenate([bent * 1e4 + np.array(view.eye), np.ones(bent.shape[:-1] + (1,))], axis=-1)
+    clip = far @ np.array(view.view_proj.to_list(), np.float64)
+    ndc = clip[..., :2] / clip[..., 3:]
+    landed = (clip[..., 3] > 0.0) & (np.abs(ndc) < 0.8).all(axis=-1)
+    rim = np.abs(np.arccos(np.clip(up, -1.0, 1.0)) - CRITICAL) < math.radians(2.5)
+    measured = (up > 0.05) & ~rim & clear_reflected & (~inside | (clear_bent & landed))
+    tir = measured & ~inside
+    window = measured & inside
+    assert tir.sum() > 300 and window.sum() > 100, (tir.sum(), window.sum())
+    # Past the critical angle: the sky below the horizon (what the top's fallback never shows).
+    assert np.abs(seen[tir] - _SKY_SIDE_LOWER).max() < 0.01
+    error = np.abs(seen - expected).max(axis=-1)
+    # (0.003 at most on llvmpipe)
+    assert error[measured].max() < 0.01, (np.argwhere(measured & (error >= 0.01))[:5], error[measured].max())
+
+
+def _diving(world):
+    """``pool`` seen from 0.3 m over it, looking ahead, with a mirror standing under the water
+    3 m off facing the camera (no end image: a frame that differs would echo on in it) and a
+    red ball under the water between them, which the mirror shows."""
+    pool(world, True, (0.0, 0.3, 2.0), (0.0, 0.1, -3.0))
+    world.spawn(Transform(position=(0.0, -0.55, -3.0)), MeshRef(quad(3.0, 0.8)), Material(color=(0.1, 0.1, 0.1)),
+                Mirror(end_image=False))
+    world.spawn(Transform(position=(1.2, -0.5, -1.5)), MeshRef(sphere(0.15)),
+                Material(color=(0.9, 0.05, 0.05, 1.0), roughness=1.0), Emissive(1.0))
+
+
+@pytest.mark.parametrize("visibility", ["exact", "predicted"])
+def test_the_frame_the_eye_goes_under_the_water_draws_its_underside_and_the_mirror_under_it(scene, visibility):
+    """The camera dives through the pond (0.3 m over it for three frames, then 0.3 m under it,
+    then up again): on the very frame its eye crosses the plane, the water's view is its
+    underside's (going up, its top's), the mirror under the water, hidden from above behind
+    the surface, has a view of its own that shows the red ball where the mirror's plane
+    reflects it (worked out here), and the frame is the exact visibility's frame but for the
+    mirror's own pixels (predicted visibility: the mirrors inside an uncovered one come a
+    frame later, README).  A frame later they agree everywhere, and on the frame going up."""
+    from engine.core.reflection_math import plane_from_point_normal, reflection_matrix
+
+    runners = []
+    for mode in ("exact", visibility):
+        runner = scene(_diving, (96, 72))
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.visibility = mode
+        runners.append(runner)
+    camera = next(e for e, _ in runners[0].world.query_one(Camera))
+    mirror = next(e for e, m in runners[0].world.query_one(Mirror) if runners[0].world.try_get(e, Water) is None)
+    heights = (0.3, 0.3, 0.3, -0.3, -0.3, 0.3, 0.3)
+    for n, height in enumerate(heights):
+        frames, sides = [], []
+        for runner in runners:
+            runner.world.get(camera, Transform).position = glm.vec3(0.0, height, 2.0)
+            frames.append(srgb_to_linear(runner.frame()))
+            sides.append([view.surface.water.underside for view in runner.engine.reflection_system.views[1:]
+                          if view.level == 1 and view.surface.water is not None])
+        exact, seen = frames
+        assert sides[0] == sides[1] == [height < 0.0], (n, sides)
+        runner = runners[1]
+        differs = np.abs(exact - seen).max(axis=-1) > 0.01
+        if n == 3:  # the dive's frame
+            near = np.zeros(runner.size[::-1], bool)
+            in_mirror = runner.engine.renderer.targets.read_surface_ids() == mirror
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    near |= np.roll(in_mirror, (dy, dx), axis=(0, 1))
+            assert in_mirror.sum() > 100 and not (differs & ~near).any(), np.argwhere(differs & ~near)[:5]
+            assert any(view.surface.entity == mirror and view.level == 1
+                       for view in runner.engine.reflection_system.views[1:])
+            image = reflection_matrix(plane_from_point_normal((0.0, -0.55, -3.0), (0.0, 0.0, 1.0))) * \
+                glm.vec4(1.2, -0.5, -1.5, 1.0)
+            column, row = runner.project(glm.vec3(image))
+            red, green = seen[row, column, 0], seen[row, column, 1]
+            assert in_mirror[row, column] and red > 0.5 and red > 4.0 * green, seen[row, column]
+        else:
+            assert not differs.any(), (n, np.argwhere(differs)[:5])

@@ -49,6 +49,16 @@ def even_scale(carry: glm.mat4) -> float | None:
     return float(f"{k:.6e}") if all(abs(length - k) <= RIGID * k for length in lengths) else None
 
 
+def carried_velocity(carry: glm.mat4, turn: glm.quat, velocity: glm.vec3) -> glm.vec3:
+    """A velocity (or any direction with a length) through a pair transform ``carry`` whose
+    rotation is ``turn``: turned, then times the pair's one factor (``even_scale``), as
+    ``carried_pose`` scales a size, so 2 and its way back 0.5 are exact (through the carry's
+    float32 matrix a speed lost 2.4e-7 of itself each time there and back); a pair scaled
+    unevenly: the carry's matrix."""
+    k = even_scale(carry)
+    return turn * velocity * k if k is not None else glm.mat3(carry) * velocity
+
+
 def decompose_pose(matrix: glm.mat4) -> tuple[glm.vec3, glm.quat, glm.vec3]:
     """Position, rotation and scale of a model matrix (``glm.decompose``; a shear, which a
     pair of unevenly scaled portals can give a turned thing, is dropped)."""
