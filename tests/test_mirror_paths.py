@@ -3,6 +3,8 @@
 view, scene.vert's INSTANCED_VIEWS build)."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from pyglm import glm
@@ -15,8 +17,10 @@ from components import (
     MeshRef,
     Mirror,
     PointLight,
+    Refractive,
     Skybox,
     Transform,
+    Water,
     look_rotation,
 )
 from engine.assets.mesh import box, plane, quad, sphere
@@ -32,6 +36,7 @@ from engine.render.batched_mirrors import (
     submitted_triangles,
 )
 from engine.render.views import View
+from tests.support import look_from, pixel_rays
 
 SIZE = (200, 150)
 
@@ -321,3 +326,205 @@ def test_a_level_of_more_views_than_one_batched_draw_takes_draws_every_group_as_
     shown = per_mirror["rgb"][np.isin(surface, ents["mirrors"])].astype(int)
     assert shown.std() > 20  # the checker's squares, not one colour
     assert batched["stats"].reflection_path == "batched" and batched["stats"].passes == 1 + len(groups)
+
+
+# ---- The transparent slot and glass in a batched level, against the per-mirror level and the
+# ---- eye a portal carries (the same world drawn without portals from there).
+
+FLAT = glm.angleAxis(-np.pi / 2, glm.vec3(1, 0, 0))   # a quad turned to lie flat, facing up
+SLOT_SIZE = (96, 72)
+
+
+def placed(carry, position, rotation=None) -> Transform:
+    """A transform at ``position`` (turned by ``rotation``) as seen through portal A, placed
+    beyond portal B by the pair's ``carry``."""
+    turn = glm.quat_cast(carry)
+    return Transform(position=glm.vec3(carry * glm.vec4(glm.vec3(position), 1.0)),
+                     rotation=turn if rotation is None else turn * rotation)
+
+
+def three_ways(scene, content, *, eye=(0.0, 0.6, 0.0), target=(0.0, -0.6, -5.0), fov=55.0, size=SLOT_SIZE,
+               frames=2, margin=2):
+    """What ``content(world, carry, ents)`` spawns beyond portal B (``tests/test_particles``'s
+    pair: ``carry`` A's side to B's; ``ents`` a dict it names entities in) drawn three ways:
+    through portal A from ``eye`` with each reflection path ("per_mirror", "batched": every
+    level of the portal's tree so), and ("direct") from the eye the pair carries the
+    camera's to, in the same world without portals.  For each: level 0's linear colour
+    (HDR, before present), its seen ids mapped to ``ents``' names ("": none of them), its
+    ways, the runner; and the pixels at
+    least ``margin`` in from the edges of A's opening (the main view's rays), where all
+    three must agree."""
+    from tests.test_particles import PORTAL_A, PORTAL_B, PORTAL_SIZE, PORTAL_TURN, pair_carry
+
+    carry = pair_carry()
+    out = {}
+    for way in ("per_mirror", "batched", "direct"):
+        ents: dict = {}
+
+        def build(world, through=way != "direct", ents=ents):
+            if through:
+                look_from(world, eye, target, fov=fov)
+                spawn_portal_pair(world, PORTAL_A, None, PORTAL_B, PORTAL_TURN, size=PORTAL_SIZE)
+            else:
+                look_from(world, glm.vec3(carry * glm.vec4(glm.vec3(eye), 1.0)),
+                          glm.vec3(carry * glm.vec4(glm.vec3(target), 1.0)), fov=fov)
+            content(world, carry, ents)
+        runner = scene(build, size)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.visibility = "exact"
+        if way != "direct":
+            runner.engine.reflection_system.path = way
+        for k in range(frames):
+            runner.frame(1.0 / 60.0 if k < frames - 1 else 0.0)
+        level = runner.engine.renderer.levels[0]
+        w, h = size
+        colour = np.frombuffer(level.color.read(), np.float16).reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
+        seen = level.read_ids()
+        names = np.zeros(seen.shape, object)
+        names[:] = ""
+        for name, entity in ents.items():
+            names[seen == entity] = name
+        out[way] = {"colour": colour, "names": names, "ways": level.read_ways(), "runner": runner, "ents": ents}
+    for way in ("per_mirror", "batched"):
+        stats = out[way]["runner"].stats
+        assert stats.reflection_views >= 1 and stats.reflection_path == way, (way, stats.reflection_path)
+    origin, rays = pixel_rays(out["batched"]["runner"].engine.main_view, size)
+    hit = origin + rays * ((PORTAL_A.z - origin[2]) / rays[..., 2])[..., None]
+    pixel = 2.0 * np.tan(np.radians(fov / 2.0)) * abs(PORTAL_A.z - origin[2]) / size[1]
+    out["opening"] = (np.abs(hit[..., 0] - PORTAL_A.x) < PORTAL_SIZE[0] / 2 - margin * pixel) \
+        & (np.abs(hit[..., 1] - PORTAL_A.y) < PORTAL_SIZE[1] / 2 - margin * pixel)
+    return out
+
+
+def assert_three_agree(out, truth_q95=0.02, truth_names=0.98):
+    """Inside A's opening: the batched level's colour is the per-mirror level's within a few
+    levels of a float16 image, its seen ids the same entities pixel for pixel and its ways
+    (the lengths of the light's way, what depth of field and motion read) the same; and each
+    path's is the direct frame's (where the portal's level is its own view: all but a few
+    pixels at the opening's rim, where a refracting march reads beyond its view)."""
+    opening = out["opening"]
+    parity = np.abs(out["batched"]["colour"] - out["per_mirror"]["colour"]).max(axis=-1)[opening]
+    assert np.quantile(parity, 0.99) <= 0.004 and parity.max() <= 0.03, (np.quantile(parity, 0.99), parity.max())
+    assert (out["batched"]["names"][opening] == out["per_mirror"]["names"][opening]).all()
+    ways = [out[way]["ways"][opening] for way in ("batched", "per_mirror", "direct")]
+    assert (ways[0] > 0).all() and np.abs(ways[0] - ways[1]).max() <= 1e-4 * ways[1].max(), \
+        np.abs(ways[0] - ways[1]).max()
+    for way in ("batched", "per_mirror"):
+        apart = np.abs(out[way]["colour"] - out["direct"]["colour"]).max(axis=-1)[opening]
+        assert np.quantile(apart, 0.95) <= truth_q95, (way, np.quantile(apart, [0.5, 0.8, 0.9, 0.95, 0.99]))
+        assert (out[way]["names"][opening] == out["direct"]["names"][opening]).mean() >= truth_names, way
+        near = np.abs(out[way]["ways"] - out["direct"]["ways"])[opening] <= 0.01 * out["direct"]["ways"][opening]
+        assert near.mean() >= truth_names, (way, near.mean())
+
+
+FOG_GREEN = (0.05, 0.6, 0.1)
+FLOOR_RED = (0.9, 0.15, 0.1, 1.0)
+
+
+def pond_beyond(*, density=0.0, alpha=0.0, water=True, depth=3.0):
+    """Beyond the portal, 5 m off and 1.3 m down: a still pond 5 m square over a red glowing
+    floor a metre below it, a white block standing in the water, a blue-grey wall behind
+    (no sky shows through the portal), a grey sky.  ``water``: a water whose body is fogged
+    to FOG_GREEN at ``density`` down to ``depth``; else a see-through mirror tinted gold.  Its
+    material at ``alpha``."""
+    def content(world, carry, ents):
+        world.spawn(Skybox(faces=[np.full((8, 8, 3), 0.25, np.float32) for _ in range(6)]))
+        ents["floor"] = world.spawn(placed(carry, (0.0, -2.3, -5.0), FLAT), MeshRef(quad(12.0, 12.0)),
+                                    Material(color=FLOOR_RED, roughness=1.0), Emissive(1.0))
+        ents["block"] = world.spawn(placed(carry, (0.6, -1.6, -5.5)), MeshRef(box((0.8, 1.0, 0.8))),
+                                    Material(color=(0.9, 0.9, 0.9, 1.0), roughness=1.0), Emissive(1.0))
+        ents["wall"] = world.spawn(placed(carry, (0.0, 0.0, -9.0)), MeshRef(quad(30.0, 20.0)),
+                                   Material(color=(0.3, 0.3, 0.5, 1.0), roughness=1.0), Emissive(1.0))
+        kind = [Water(speed=0.0, fog_density=density, fog_color=FOG_GREEN, depth=depth)] if water else []
+        ents["pond"] = world.spawn(placed(carry, (0.0, -1.3, -5.0), FLAT), MeshRef(quad(5.0, 5.0)),
+                                   Material(color=(0.1, 0.2, 0.3, alpha), roughness=0.1),
+                                   Mirror(reflect_rate=1.0 if water else 0.6,
+                                          color=(1.0, 1.0, 1.0) if water else (1.0, 0.8, 0.3)), *kind)
+    return content
+
+
+def glass_beyond():
+    """``pond_beyond``'s pond as a see-through mirror (tinted gold, at alpha 0.5), a pink pane
+    of glass at alpha 0.5 standing on its far side, and a refracting pane (index 1.3, screen
+    refraction) standing in it in front of the block."""
+    pond = pond_beyond(water=False, alpha=0.5)
+
+    def content(world, carry, ents):
+        pond(world, carry, ents)
+        ents["pane"] = world.spawn(placed(carry, (-1.0, -0.8, -6.5)), MeshRef(quad(1.4, 1.0)),
+                                   Material(color=(0.9, 0.15, 0.5, 0.5)), Emissive(0.6))
+        ents["glass"] = world.spawn(placed(carry, (0.7, -0.7, -4.3)), MeshRef(quad(1.2, 1.4)),
+                                    Material(color=(1.0, 1.0, 1.0, 0.0), double_sided=True, roughness=0.0,
+                                             reflectance=0.0, environment_reflection=0.0), Refractive(ior=1.3))
+    return content
+
+
+def under_the_pond(world, carry, ents):
+    """Beyond the portal, the whole opening under water: a still pond 20 m square 1.5 m up
+    (over the carried eye), its floor 3 m down, a yellow glowing panel 2.5 m over the water
+    (seen through Snell's window) and a grey sky."""
+    world.spawn(Skybox(faces=[np.full((8, 8, 3), 0.25, np.float32) for _ in range(6)]))
+    ents["floor"] = world.spawn(placed(carry, (0.0, -4.0, -5.0), FLAT), MeshRef(quad(60.0, 60.0)),
+                                Material(color=FLOOR_RED, roughness=1.0), Emissive(1.0))
+    ents["panel"] = world.spawn(placed(carry, (0.0, 4.0, -6.0), glm.angleAxis(np.pi / 2, glm.vec3(1, 0, 0))),
+                                MeshRef(quad(3.0, 3.0)), Material(color=(0.9, 0.8, 0.1, 1.0), double_sided=True),
+                                Emissive(2.0))
+    ents["pond"] = world.spawn(placed(carry, (0.0, 1.5, -5.0), FLAT), MeshRef(quad(20.0, 20.0)),
+                               Material(color=(1.0, 1.0, 1.0, 0.0)), Mirror(), Water(speed=0.0))
+
+
+def pond_pixels(out) -> np.ndarray:
+    """The opening's pixels whose rays (straight through the portal: it carries them) meet
+    ``pond_beyond``'s pond inside its outline, at least 0.2 m in, and pass the block."""
+    eye, rays = pixel_rays(out["batched"]["runner"].engine.main_view, SLOT_SIZE)
+    t = (-1.3 - eye[1]) / rays[..., 1]
+    hit = eye + t[..., None] * rays
+    inside = (t > 0) & (np.abs(hit[..., 0]) < 2.3) & (hit[..., 2] > -7.3) & (hit[..., 2] < -2.7)
+    block = np.abs(hit[..., 0] - 0.6) < 0.6   # (the block and its shadowed strip, to be sure)
+    return out["opening"] & inside & ~block
+
+
+def test_a_batched_levels_water_shows_its_fogged_body_below_as_the_per_mirror_level_and_a_camera_there(scene):
+    """A pond whose body fogs green (its reflection a level below) seen through a portal, the
+    portal's tree drawn batched (checked reported), per mirror, and directly from the eye the
+    portal carries: the same pixels, ids and ways (``assert_three_agree``).  The water's
+    composite reads the level's depth under it from the copy it takes: the batched level drew
+    the water writing its depth, so the copy held the surface itself, no way through the
+    water and no fog (2d32e5f1).  The fog is there: the pond's pixels are green over a red
+    floor."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # (a still water: no waves, said)
+        out = three_ways(scene, pond_beyond(density=1.2), margin=6)
+    assert_three_agree(out)
+    pond = pond_pixels(out)
+    assert pond.sum() > 400, pond.sum()
+    colour = out["batched"]["colour"][pond]
+    assert (colour[:, 1] > 1.5 * colour[:, 0]).mean() > 0.95
+
+
+def test_see_through_mirror_glass_on_it_and_refracting_glass_in_a_batched_level(scene):
+    """A see-through mirror (tinted, at alpha 0.5: drawn with the level's opaque batches, its
+    reflection a level below), a pane of glass standing on it and a refracting pane in front
+    of it, seen through a portal: batched (checked reported), per mirror and directly from
+    the eye the portal carries, the same pixels, ids and ways; both panes seen."""
+    out = three_ways(scene, glass_beyond(), margin=4)
+    assert_three_agree(out)
+    names = out["batched"]["names"][out["opening"]]
+    assert (names == "pane").sum() > 150 and (names == "glass").sum() > 300
+    assert out["batched"]["runner"].engine.renderer.refracting_batches()
+
+
+def test_a_batched_level_under_the_water_sees_its_underside_as_the_per_mirror_level_and_a_camera_there(scene):
+    """A portal whose view lies under a pond (its eye carried under the water, looking up at a
+    slant): the water's underside, the floor mirrored past the critical angle and the yellow
+    panel in Snell's window, drawn batched (checked reported), per mirror and directly from
+    the eye the portal carries: the same pixels, ids and ways; the window and the floor's
+    mirror image both in the opening."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = three_ways(scene, under_the_pond, eye=(0.0, -0.9, -1.0), target=(0.0, 0.4, -3.5), margin=3)
+    assert_three_agree(out)
+    colour = out["batched"]["colour"][out["opening"]]
+    panel = (colour[:, 0] > 0.6) & (colour[:, 1] > 0.6) & (colour[:, 2] < 0.3)
+    floor = out["batched"]["names"][out["opening"]] == "floor"
+    assert panel.sum() > 20 and floor.sum() > 1000, (panel.sum(), floor.sum())
