@@ -5,7 +5,9 @@
 // Built in three variants, one program each (MirrorPasses draws each level's views grouped
 // by variant), so a pixel runs only its own path: a software rasteriser such as llvmpipe
 // executes both sides of every branch, even one no pixel of the draw takes.
-//   COMPOSITE_PORTAL: a plain window onto the view, the sky beyond the partner behind it;
+//   COMPOSITE_PORTAL: a plain window onto the view, the sky beyond the partner behind it
+//                     (its row carries the carry's translation in the tile's slots, as a
+//                     fallback's place does);
 //   COMPOSITE_ROUGH:  a rough mirror, reading the blurred mips of its own atlas tile;
 //   neither:          a sharp mirror, reading its level 1:1;
 //   COMPOSITE_BUMPY:  (with or without ROUGH) a mirror with a normal map, which reads its
@@ -352,10 +354,13 @@ void main() {
     out_color = vec4(hdr_store(fog_over(fallback_environment(v_carry * at + v_place.yzw, v_carry * view_dir, 0.0),
                                         parent_fog)), 1.0);
 #else
-    // (The sky beyond the partner fogged from this side's crossing: the partner's height is
-    // not in the row, so height fog there is this side's.)
+    // The sky beyond the partner, fogged along the carried ray from where it comes out of the
+    // partner (its row carries the carry's translation in the tile's slots: height fog and
+    // fog volumes there are the far side's).
     vec4 through = texel_for_texel ? texelFetch(reflection, px, 0) : textureLod(reflection, uv, 0.0);
-    vec3 beyond = fog_sky(textureLod(sky_map, v_carry * view_dir, 0.0).rgb, at, v_carry * view_dir);
+    vec3 carried = normalize(v_carry * view_dir);
+    vec3 beyond = fog_sky(textureLod(sky_map, carried, 0.0).rgb, v_carry * at + vec3(v_eye.w, v_tint.a, v_normal.w),
+                          carried);
     out_color = vec4(hdr_store(fog_over(through.rgb + beyond * (1.0 - through.a), parent_fog)), 1.0);
 #endif
 #else

@@ -11,7 +11,8 @@ in vec4 in_eye;              // xyz: the parent view's eye; w: a rough view's ti
 in vec4 in_tint;             // rgb: tint; a: a rough view's tile scale (0: no tile, read the level)
 in vec4 in_params;           // reflect_rate, roughness, the surface plane's w (in_normal its xyz), the view's index
                              // (water: eye.w and normal.w are the waves' offset, tint.a the
-                             // second layer's share, params.y F0: mirror_passes.composite_rows)
+                             // second layer's share, params.y F0; a portal: eye.w, tint.a and
+                             // normal.w its carry's translation: mirror_passes.composite_rows)
 in vec4 in_normal;           // xyz: the mirror's normal, world, facing the parent eye; w: tile y
 in mat3 in_carry;            // a portal's rotation: directions here -> beyond the partner
 #include "composite_bent.glsl"

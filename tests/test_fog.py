@@ -374,3 +374,58 @@ def test_a_chrome_ball_reflects_the_sky_as_fogged_as_the_background(scene):
     assert ball.sum() > 2000
     assert np.abs(foggy[ball] - FOG_COLOR).max() < TOLERANCE
     assert np.abs(clear[ball] - FOG_COLOR).max(axis=-1).mean() > 0.1   # the test's fog colour is not the sky's
+
+
+@pytest.mark.parametrize("kind", ["height_fog", "volume_this_side"])
+def test_the_sky_beyond_a_portals_partner_is_fogged_from_the_partner_on(scene, kind):
+    """Portal A low in the air (y 1 to 4), its partner B high above the fog (y 20 to 23), both
+    facing -z... A facing +z, B turned to face -z: a ray into A comes out of B going the way
+    it went.  Through A the camera sees the sky beyond B, fogged by the air from the eye to A
+    and from B on to the sky (the height fog's closed form there, k the falloff:
+    d exp(-k (y - h)) / (k r_y)), nothing of the air on A's side past A.  "height_fog": the
+    sky from B (21 m up) is all but clear, where from A it would be well fogged;
+    "volume_this_side": a bank of mist behind A, which the sky past B never crosses (it does
+    fog the pixels beside A whose rays cross it: it is there)."""
+    from components import FogVolume, Portal
+    from engine.assets.portals import spawn_portal_pair
+
+    fog = Fog(color=tuple(FOG_COLOR), density=0.25, height=0.0, height_falloff=0.4) if kind == "height_fog" else None
+    frames = []
+    for fogged in (False, True):
+        def build(world, fogged=fogged):
+            camera = look_from(world, (0.0, 2.0, 9.0), (0.0, 3.5, 4.0))
+            world.spawn(DirectionalLight(direction=SUN, intensity=SUN_LIGHT, shadows=False))
+            ids = world.resources["ids"] = {}
+            ids["floor"] = world.spawn(Transform(), MeshRef(plane(60, 60)), floor_material())
+            ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 2.5, 4.0), None, (0.0, 21.5, -30.0),
+                                                   glm.angleAxis(np.pi, glm.vec3(0.0, 1.0, 0.0)))
+            if fogged and fog is not None:
+                world.add_component(camera, fog)
+            if fogged and fog is None:
+                world.spawn(Transform(position=(0.0, 3.0, 1.0)), FogVolume(size=(8.0, 8.0, 5.0), density=2.0))
+        runner = scene(build, (160, 100))
+        runner.engine.renderer.antialias = "off"
+        frames.append(srgb_to_linear(runner.frame()).reshape(-1, 3))
+    ids = runner.world.resources["ids"]
+    assert runner.world.has(ids["a"], Portal)
+    through = ((runner.engine.renderer.targets.read_surface_ids() == ids["a"]) & (runner.ids() == 0)).reshape(-1)
+    assert through.sum() > 1000, through.sum()
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    rays = rays.reshape(-1, 3)
+    if fog is None:
+        np.testing.assert_allclose(frames[1][through], frames[0][through], atol=TOLERANCE)
+        beside = (runner.engine.renderer.targets.read_surface_ids() != ids["a"]).reshape(-1) \
+            & (runner.ids() == 0).reshape(-1)
+        assert (np.abs(frames[1][beside] - frames[0][beside]).max(axis=1) > 0.05).sum() > 200   # (the mist is there)
+        return
+    through &= rays[:, 1] > 0.05   # (rays going down from B pass the floor's end: the sky below the horizon)
+    assert through.sum() > 600, through.sum()
+    rays = rays[through]
+    at_a = eye + rays * ((4.0 - eye[2]) / rays[:, 2])[:, None]
+    at_b = at_a + np.array([0.0, 19.0, -34.0])   # (the pair's carry: a shift, B turned as the ray is)
+    k = fog.height_falloff
+    beyond = fog.density * np.exp(-k * (at_b[:, 1] - fog.height)) / (k * rays[:, 1])
+    here = _depth(np.tile(eye, (len(rays), 1)), at_a, fog)
+    assert beyond.max() < 0.01 and here.min() > 0.3   # (from A the sky would take ~0.3-1.5 more)
+    expected = _expected(frames[0][through], here + beyond, fog, rays)
+    _close(np.abs(frames[1][through] - _shown(expected)).max(axis=1))

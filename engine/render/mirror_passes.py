@@ -457,7 +457,9 @@ def _composite_row(surface: CompositeSurface, block: bytes, rect: tuple[int, int
         corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)
     lx, ly, lw, lh = level_rect
     water = surface.water
-    if water is None:
+    if surface.variant.startswith("portal"):  # (no tile: its slots carry the carry's translation)
+        (x, scale, y), rough = surface.offset, surface.roughness
+    elif water is None:
         tile = tile or _NO_TILE
         x, y, scale, rough = tile.x, tile.y, tile.scale, surface.roughness
     else:  # this frame's offset of the waves (the surfaces stage moves it in place)
