@@ -65,11 +65,11 @@ def test_a_mirror_behind_a_double_sided_sheet_shows_its_back(scene, path):
     def build(world, double_sided):
         _sheet(world, double_sided=double_sided, mirror=True)
 
-    runners = {}
+    runners, rgb = {}, {}
     for double_sided in (False, True):
         runner = runners[double_sided] = scene(lambda w, d=double_sided: build(w, d), SIZE)
         runner.engine.reflection_system.path = path
-        runner.frame()
+        rgb[double_sided] = runner.frame()
     runner = runners[True]
     eye, rays = pixel_rays(runner.engine.main_view, runner.size)
     t = (-2.0 - eye[2]) / rays[..., 2]
@@ -86,6 +86,15 @@ def test_a_mirror_behind_a_double_sided_sheet_shows_its_back(scene, path):
     sheet = runner.world.resources["ids"]["sheet"]
     assert (runners[True].ids()[sees_sheet] == sheet).all()
     assert not (runners[False].ids()[sees_sheet] == sheet).any()
+    # Its back in the mirror is the back of a one-sided sheet turned round, seen there as its
+    # front: the side the mirror's view sees is lit (the mirrored view's winding turns which
+    # face is the front; a back taken for the front is dark on the sun's side).
+    turned = scene(lambda w: _sheet(w, turned=True, mirror=True), SIZE)
+    turned.engine.reflection_system.path = path
+    turned_rgb = turned.frame()
+    assert (turned.ids()[sees_sheet] == turned.world.resources["ids"]["sheet"]).all()
+    np.testing.assert_array_equal(rgb[True][sees_sheet], turned_rgb[sees_sheet])
+    assert np.abs(rgb[True][sees_sheet].astype(int) - rgb[False][sees_sheet]).max() > 40
 
 
 def test_double_sided_is_a_checked_switch_and_never_a_surfaces():

@@ -378,14 +378,14 @@ def test_a_chrome_ball_reflects_the_sky_as_fogged_as_the_background(scene):
 
 @pytest.mark.parametrize("kind", ["height_fog", "volume_this_side"])
 def test_the_sky_beyond_a_portals_partner_is_fogged_from_the_partner_on(scene, kind):
-    """Portal A low in the air (y 1 to 4), its partner B high above the fog (y 20 to 23), both
-    facing -z... A facing +z, B turned to face -z: a ray into A comes out of B going the way
-    it went.  Through A the camera sees the sky beyond B, fogged by the air from the eye to A
-    and from B on to the sky (the height fog's closed form there, k the falloff:
-    d exp(-k (y - h)) / (k r_y)), nothing of the air on A's side past A.  "height_fog": the
-    sky from B (21 m up) is all but clear, where from A it would be well fogged;
-    "volume_this_side": a bank of mist behind A, which the sky past B never crosses (it does
-    fog the pixels beside A whose rays cross it: it is there)."""
+    """Portal A low in the air (y 1 to 4) facing +z, its partner B high above the fog (y 20
+    to 23) turned to face -z: a ray into A comes out of B going the way it went.  Through A
+    the camera sees the sky beyond B, fogged by the air from the eye to A and from B on to
+    the sky (the height fog's closed form there, k the falloff: d exp(-k (y - h)) / (k r_y)),
+    nothing of the air on A's side past A.  "height_fog": the sky from B (21 m up) is all but
+    clear, where from A it would be well fogged; "volume_this_side": a bank of mist behind A,
+    which the sky past B never crosses (it does fog the pixels beside A whose rays cross it:
+    it is there)."""
     from components import FogVolume, Portal
     from engine.assets.portals import spawn_portal_pair
 

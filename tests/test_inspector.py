@@ -263,16 +263,19 @@ def _hands(runner, overlay, size=SIZE):
 
 def _scrolled_to(overlay, draw, widget: str, size) -> tuple[float, float]:
     """The inspector scrolled by the wheel (the mouse over it) until ``widget`` is inside the
-    window's height; its place then."""
+    window's height (down to it, or up to it above the inspector's top); its place then."""
     for _ in range(40):
         x, y = overlay.widgets[widget]
-        if y < size[1] - 12:
+        top = overlay.windows["Inspector"][0][1] + 24 * overlay.scale if "Inspector" in overlay.windows else 0
+        if top <= y < size[1] - 12:
             return x, y
         overlay.mouse_moved(x, size[1] - 20)
-        overlay.scroll(0.0, -1.0)
+        overlay.scroll(0.0, -1.0 if y >= top else 1.0)
         draw()
         draw()
-    raise AssertionError(f"{widget} stayed below the window: {overlay.widgets[widget]}")
+        if y < top and overlay.widgets[widget][1] == y:   # at the top already
+            return x, y
+    raise AssertionError(f"{widget} stayed out of the window: {overlay.widgets[widget]}")
 
 
 def test_a_tall_inspector_fits_the_window_and_scrolls_to_its_last_field(scene, ctx):
@@ -1371,3 +1374,323 @@ def test_whole_numbers_drag_as_a_vector_of_ints(scene, ctx):
     points, undone = _drag_first_number(scene, ctx, IrradianceVolume(points=(3, 2, 3)), "points")
     assert points[0] > 3 and points[1:] == (2, 3) and all(type(v) is int for v in points), points
     assert undone == (3, 2, 3)
+
+
+# --- through a portal ------------------------------------------------------------------------
+PORTAL_A, PORTAL_B = (-0.8, 1.5, 0.0), (0.8, 1.5, 0.0)
+THROUGH_BOX = (0.8, 1.5, 1.5)       # B + (0, 0, 1.5): in front of B, seen directly too
+THROUGH_SEEN_AT = (-0.8, 1.5, -1.5)  # A + (0, 0, -1.5): the pair carries A + (x, y, z) to B + (-x, y, -z)
+
+
+def _portal_scene(world, ents):
+    from components import DirectionalLight, Emissive, MeshRef, Skybox
+    from engine.assets.mesh import box
+    from engine.assets.portals import spawn_portal_pair
+    from tests.support import look_from
+
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+    look_from(world, (0.0, 1.5, 6.0), (0.0, 1.5, 0.0))
+    ents["a"], ents["b"] = spawn_portal_pair(world, PORTAL_A, None, PORTAL_B, None, size=(1.2, 1.6))
+    ents["box"] = world.spawn(Transform(position=THROUGH_BOX, scale=(0.4, 0.4, 0.4)), MeshRef(box()),
+                              Material(color=(0.1, 0.9, 0.1)), Emissive(1.0))
+
+
+def test_a_click_through_a_portal_selects_what_it_shows_and_the_outline_follows_it_there(scene, ctx):
+    """Two portals side by side facing the camera, a green box in front of B: seen directly and,
+    through A, where the pair carries it (B + (x, y, z) shows at A + (-x, y, -z), worked out by
+    hand).  A click on its image in A selects the box, Ctrl+click there the portal A; the
+    overlay's outline of the box is exactly the ring round its pixels in the id image (a 3x3
+    dilation in numpy) wherever the overlay's windows and handles leave the frame, round both
+    its shapes; of A, the ring round A's own quad in the surface-id image."""
+    from engine.render.outline import OUTLINE_COLOR
+    from tests.test_pick import dilated
+
+    size = (768, 432)
+    ents = {}
+    runner = scene(lambda world: _portal_scene(world, ents), size)
+    runner.engine.renderer.antialias = "off"
+    overlay = DebugOverlay(ctx)
+    overlay.set_scale(0.5)   # (small windows: the portals between them)
+    try:
+        draw, _ = _hands(runner, overlay, size)
+        draw()
+        ids, surfaces = runner.ids(), runner.engine.renderer.targets.read_surface_ids()
+        through, direct = runner.project(THROUGH_SEEN_AT), runner.project(THROUGH_BOX)
+        assert ids[through[1], through[0]] == ents["box"] and surfaces[through[1], through[0]] == ents["a"]
+        assert ids[direct[1], direct[0]] == ents["box"] == surfaces[direct[1], direct[0]]
+        assert overlay.click(runner.engine, *through)
+        editor = overlay.editor
+        assert editor.selected == ents["box"]
+        assert overlay.click(runner.engine, *through, surface=True) and editor.selected == ents["a"]
+        assert overlay.click(runner.engine, *direct) and editor.selected == ents["box"]
+        orange = tuple(round(c * 255) for c in OUTLINE_COLOR[:3])
+        targets = runner.engine.renderer.targets
+        for selected, image in ((ents["box"], targets.read_ids), (ents["a"], targets.read_surface_ids)):
+            editor.select(selected)
+            draw()
+            draw()   # (an auto-sized window takes its size a frame after its fields change)
+            rgb = runner.capture.read_rgb()
+            mask = image() == selected
+            ring = dilated(mask) & ~mask
+            free = np.ones(mask.shape, bool)   # where the overlay's windows and handles leave the frame
+            x, y, w, h = overlay.region
+            covered = [*overlay.windows.values(), ((x, y), (x + w, y + h))]
+            if overlay.handles is not None:
+                points = np.array([p for line in overlay.handles.lines for p in line])
+                covered.append((points.min(axis=0) - 8, points.max(axis=0) + 8))
+            for (left, top), (right, bottom) in covered:
+                free[max(int(top) - 1, 0):int(bottom) + 2, max(int(left) - 1, 0):int(right) + 2] = False
+            painted = np.all(rgb == orange, axis=-1) & free
+            assert np.array_equal(painted, ring & free), (selected, (painted ^ (ring & free)).sum())
+            if selected == ents["box"]:   # round both of its shapes: where it stands and in A
+                for column, row in (through, direct):
+                    near = painted[max(row - 30, 0):row + 30, max(column - 30, 0):column + 30]
+                    assert near.sum() > 20, (column, row, near.sum())
+            else:
+                assert painted.sum() > 100
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        overlay.release()
+
+
+# --- a tick and a typed choice ---------------------------------------------------------------
+def _toned_scene(ents, curve="agx", unlit=False):
+    """``edit_scene`` with a Tonemap of ``curve`` on its camera and the box ``unlit`` or not."""
+    from components import Tonemap
+    from engine.rules.frame_rules import active_camera
+
+    def build(world):
+        edit_scene(world, ents)
+        ents["camera"] = active_camera(world)
+        world.add_component(ents["camera"], Tonemap(curve=curve))
+        world.get(ents["box"], Material).unlit = unlit
+
+    return build
+
+
+def _typed(overlay, draw, click, widget: str, text: str, before_enter=lambda: None) -> None:
+    """``widget``'s text field clicked, its text chosen whole (Ctrl+A) and ``text`` typed over it
+    (``before_enter`` called then), Enter."""
+    click(widget)
+    overlay.key("A", True, ctrl=True)
+    draw()
+    overlay.key("A", False)
+    draw()
+    overlay.text(text)
+    draw()
+    before_enter()
+    overlay.key("ENTER", True)
+    draw()
+    overlay.key("ENTER", False)
+    draw()
+
+
+def test_a_boolean_ticks_and_a_choice_is_typed_and_taken_on_enter_as_the_same_edit_in_code(scene, ctx):
+    """The box's ``Material.unlit`` ticked in the inspector and the camera's ``Tonemap.curve``
+    typed ("aces", Enter): each is one undo step, and the frame is, pixel for pixel, that of the
+    scene built with those values in code (a second engine).  A choice that is none of the
+    curves ("filmic") is refused: the inspector shows the component's own message (the
+    choices named), the curve and the frame stay as they were, and nothing joins the undo list."""
+    from components import Tonemap
+
+    size = (640, 360)
+    ents, made = {}, {}
+    runner = scene(_toned_scene(ents), size)
+    unlit_in_code = scene(_toned_scene(made, unlit=True), size)
+    aces_in_code = scene(_toned_scene({}, curve="aces", unlit=True), size)
+    for each in (runner, unlit_in_code, aces_in_code):
+        each.engine.renderer.antialias = "off"
+    world, box = runner.world, ents["box"]
+    overlay = DebugOverlay(ctx)
+    overlay.set_scale(0.5)   # (small windows: a small frame)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        lit = runner.frame()
+        face = runner.ids() == box
+        assert face.sum() > 500
+        editor = overlay.editing(runner.engine)
+        editor.select(box)
+        draw()
+        assert "  unlit = False" in overlay.inspector_lines
+        _scrolled_to(overlay, draw, "Material.unlit", size)
+        click("Material.unlit")
+        assert world.get(box, Material).unlit is True and "  unlit = True" in overlay.inspector_lines
+        unlit = runner.frame()
+        assert np.array_equal(unlit, unlit_in_code.frame())
+        assert np.abs(unlit[face].astype(int) - lit[face]).max() > 20   # the box itself changed
+        assert editor.undo() and world.get(box, Material).unlit is False
+        assert np.array_equal(runner.frame(), lit)
+        assert editor.redo() and not editor.can_redo
+
+        editor.select(ents["camera"])
+        draw()
+        draw()
+        assert "  curve = agx" in overlay.inspector_lines
+        def not_yet():
+            assert world.get(ents["camera"], Tonemap).curve == "agx" and overlay.wants_keyboard
+
+        _typed(overlay, draw, click, "Tonemap.curve", "aces", not_yet)   # taken on Enter, not as typed
+        assert world.get(ents["camera"], Tonemap).curve == "aces" and editor.message is None
+        aces = runner.frame()
+        assert np.array_equal(aces, aces_in_code.frame()) and not np.array_equal(aces, unlit)
+        steps = editor.edit_count
+        with pytest.raises(ComponentValueError) as refused:
+            Tonemap(curve="filmic")
+        _typed(overlay, draw, click, "Tonemap.curve", "filmic")
+        assert world.get(ents["camera"], Tonemap).curve == "aces"
+        assert editor.message == str(refused.value) and "pbr_neutral" in editor.message
+        assert str(refused.value) in overlay.inspector_lines
+        assert editor.edit_count == steps and np.array_equal(runner.frame(), aces)
+        assert editor.undo() and world.get(ents["camera"], Tonemap).curve == "agx"
+        assert np.array_equal(runner.frame(), unlit)
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        overlay.release()
+
+
+def test_a_childs_scale_handle_scales_its_own_axis_whatever_its_parent_and_with_ctrl_in_tenths(scene, ctx):
+    """A box whose parent is turned and scaled unevenly (its own axes in the world are then
+    neither the world's nor square to each other): its scale handle, dragged 30 pixels outwards,
+    stretches the child's world matrix along that axis alone (that column times the factor, the
+    others as they were: the engine's own chain) by as much as puts the handle's end, scaled
+    with it, under the mouse (the test's projection); one undo puts it back.  With Ctrl held the
+    factor is a whole number of tenths, and not 1."""
+    from components import MeshRef
+    from engine.assets.mesh import box
+    from engine.core.transforms import current_world_matrix
+
+    size = (960, 540)
+    ents = {}
+
+    def build(world):
+        edit_scene(world, ents)
+        ents["parent"] = world.spawn(Transform(position=(0.2, 1.3, 1.5), scale=(2.0, 0.5, 1.0),
+                                               rotation=glm.angleAxis(glm.radians(35.0),
+                                                                      glm.normalize(glm.vec3(0.3, 0.2, 1.0)))))
+        ents["child"] = world.spawn(Transform(position=(0.1, 0.2, 0.0), parent=ents["parent"], scale=(0.3, 0.3, 0.3),
+                                              rotation=glm.angleAxis(0.6, glm.vec3(0, 0, 1))),
+                                    MeshRef(box()), Material(color=(0.2, 0.3, 0.9)))
+
+    runner = scene(build, size)
+    world, child = runner.world, ents["child"]
+    overlay = DebugOverlay(ctx)
+    overlay.set_scale(0.5)   # (small windows: the child between them)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        editor = overlay.editing(runner.engine)
+        editor.select(child)
+        draw()
+        click("handles scale")
+        handles = overlay.handles
+        assert handles.mode == "scale" and (runner.ids() == child).sum() > 100
+
+        def columns():
+            matrix = current_world_matrix(world, world.get(child, Transform))
+            return np.array([list(glm.vec3(matrix[i])) for i in range(4)])
+
+        before, start = columns(), glm.vec3(world.get(child, Transform).scale)
+        eye = runner.engine.main_view.eye   # the axis most across the view (the drag's rule is linear on screen)
+        axis = min(range(3), key=lambda i: abs(glm.dot(handles.axes[i], glm.normalize(eye - glm.vec3(*before[3])))))
+        square = glm.dot(glm.normalize(glm.vec3(*before[0])), glm.normalize(glm.vec3(*before[1])))
+        assert abs(square) > 0.5   # the child's own axes are not square to each other in the world
+        np.testing.assert_allclose(list(handles.axes[axis]), before[axis] / np.linalg.norm(before[axis]), atol=1e-5)
+        centre = glm.vec3(*before[3])
+        origin = np.array(handles.lines[axis][0], float)
+        end = np.array(handles.lines[axis][1], float)
+        along = (end - origin) / np.linalg.norm(end - origin)
+        grab = end - along * 2.0
+        _drag(overlay, draw, [grab + along * 10.0 * step for step in range(4)])
+        after = columns()
+        factor = float(np.linalg.norm(after[axis]) / np.linalg.norm(before[axis]))
+        assert factor > 1.05, factor
+        np.testing.assert_allclose(after[axis], before[axis] * factor, atol=1e-5)
+        others = [i for i in range(4) if i != axis]
+        np.testing.assert_allclose(after[others], before[others], atol=1e-6)
+        landed = np.array(runner.project(centre + handles.axes[axis] * (handles.length * factor)), float)
+        assert np.linalg.norm(landed - (end + along * 30.0)) < 3.0, (landed, end + along * 30.0)
+        assert editor.undo() and world.get(child, Transform).scale == start and not editor.can_undo
+
+        overlay.key("", True, ctrl=True)
+        _drag(overlay, draw, [grab, grab + along * 23.0])
+        overlay.key("", False)
+        factor = world.get(child, Transform).scale[axis] / start[axis]
+        assert factor > 1.05 and abs(factor * 10.0 - round(factor * 10.0)) < 1e-4, factor
+        np.testing.assert_allclose(columns()[axis], before[axis] * factor, atol=1e-5)
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        overlay.release()
+
+
+def _combo_item(overlay, index: int) -> tuple[float, float]:
+    """The middle of item ``index`` of the combo list open now (ImGui's popup window: items a
+    text line and its spacing apart from its inner top)."""
+    from imgui_bundle import imgui
+
+    imgui.set_current_context(overlay.context)
+    popup = next(w for w in imgui.get_current_context().windows if w.name.startswith("##Combo_") and w.active)
+    step = imgui.get_text_line_height_with_spacing()
+    top = popup.pos.y + imgui.get_style().window_padding.y
+    assert (index + 1) * step < popup.size.y, (index, popup.size)   # in sight without scrolling
+    return popup.pos.x + popup.size.x / 2, top + index * step + step / 2
+
+
+@pytest.mark.filterwarnings("ignore:AmbientOcclusion on entity")   # (said on purpose: the inspector shows it)
+def test_a_component_is_added_from_the_inspectors_list_and_removed_by_its_button(scene, ctx):
+    """The box given an AmbientOcclusion from the inspector's "add component" list: it joins
+    (one undo step), the frame is the same pixel for pixel (a camera reads it from its own
+    entity only), and the rule's warning saying so is the inspector's message; its "remove"
+    button takes it away, and undo gives it back.  The mirror's "remove MeshRef" is refused:
+    the component's words in the inspector, the MeshRef kept, the frame unchanged, no undo step."""
+    from components import AmbientOcclusion, MeshRef
+
+    size = (640, 360)
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), size)
+    runner.engine.renderer.antialias = "off"
+    world, box = runner.world, ents["box"]
+    overlay = DebugOverlay(ctx)
+    overlay.set_scale(0.5)   # (small windows: a small frame)
+    try:
+        draw, click = _hands(runner, overlay, size)
+        draw()
+        first = runner.frame()
+        editor = overlay.editing(runner.engine)
+        editor.select(box)
+        draw()
+        wanted = editor.addable(box).index("AmbientOcclusion")
+        _scrolled_to(overlay, draw, "add component", size)
+        click("add component")
+        x, y = _combo_item(overlay, wanted)
+        overlay.mouse_moved(x, y)
+        draw()
+        overlay.mouse_button(1, True)
+        draw()
+        overlay.mouse_button(1, False)
+        draw()
+        draw()
+        added = world.try_get(box, AmbientOcclusion)
+        assert added is not None and editor.edit_count == 1
+        assert editor.message and "AmbientOcclusion" in editor.message and "no Camera" in editor.message
+        assert editor.message in overlay.inspector_lines
+        assert np.array_equal(runner.frame(), first)
+        _scrolled_to(overlay, draw, "remove AmbientOcclusion", size)
+        click("remove AmbientOcclusion")
+        assert not world.has(box, AmbientOcclusion) and editor.edit_count == 2
+        assert editor.undo() and world.get(box, AmbientOcclusion) is added
+
+        mirror = ents["mirror"]
+        editor.select(mirror)
+        draw()
+        draw()
+        steps, shape = editor.edit_count, world.get(mirror, MeshRef)
+        _scrolled_to(overlay, draw, "remove MeshRef", size)
+        click("remove MeshRef")
+        assert world.get(mirror, MeshRef) is shape and editor.edit_count == steps
+        assert "a Mirror needs a MeshRef" in editor.message and editor.message in overlay.inspector_lines
+        assert np.array_equal(runner.frame(), first)
+        assert ctx.error == "GL_NO_ERROR"
+    finally:
+        overlay.release()

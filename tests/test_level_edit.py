@@ -828,3 +828,66 @@ def test_a_portal_added_in_the_editor_takes_its_quads_outline_as_its_size(tmp_pa
         assert editor.message is None and len([w for w in caught if issubclass(w.category, ComponentWarning)]) == 2
     assert world.get(door, MeshRef).mesh.name == "quad"
     world.close()
+
+
+def test_a_deleted_entity_made_again_by_undo_takes_its_earlier_edits_with_it(scene):
+    """The box recoloured, then deleted; undo makes it again under a new id, green, and the
+    undo after that takes back the recolouring of the new box (the edit follows it there):
+    each frame, pixel for pixel, the frame the scene showed at that step before (the first
+    frame, the green one); redo twice is the green box and then none again."""
+    from shell.editor import Editor
+
+    ents = {}
+    runner = scene(lambda world: edit_scene(world, ents), (96, 72))
+    world, box = runner.world, ents["box"]
+    editor = Editor(world)
+    first = runner.frame()
+    assert (runner.ids() == box).sum() > 30
+    editor.set_field(box, "Material", "color", (0.1, 0.8, 0.1, 1.0))
+    green = runner.frame()
+    editor.delete(box)
+    gone = runner.frame()
+    assert not world.exists(box) and not np.array_equal(gone, green) and not np.array_equal(green, first)
+    assert editor.undo()
+    back = editor.names[f"entity {box}"]
+    assert back != box and world.exists(back) and editor.selected != box
+    assert np.array_equal(runner.frame(), green) and (runner.ids() == back).sum() > 30
+    assert editor.undo() and world.get(back, Material).color == glm.vec4(0.9, 0.05, 0.05, 1.0)
+    assert np.array_equal(runner.frame(), first) and not editor.can_undo
+    assert editor.redo() and world.get(back, Material).color == glm.vec4(0.1, 0.8, 0.1, 1.0)
+    assert np.array_equal(runner.frame(), green)
+    assert editor.redo() and not world.exists(back) and not editor.can_redo
+    assert np.array_equal(runner.frame(), gone)
+
+
+def test_a_handle_is_the_same_size_on_screen_near_or_far_and_through_an_orthographic_lens(scene):
+    """``transform_handles``: the x handle of a box straight ahead (its axis across the view)
+    is, on a 96x72 output, GIZMO_SHARE x 72 / (2 tan 30 degrees) pixels long from the box's
+    projected origin, whether the 60-degree camera stands 3 m or 12 m away, and as long again
+    through an orthographic lens 10 m or 40 m tall (the frame's own view-projection each time)."""
+    from components import Camera
+    from shell.handles import GIZMO_SHARE, transform_handles
+    from tests.support import look_from
+
+    size, ents = (96, 72), {}
+
+    def build(world):
+        ents["camera"] = look_from(world, (0.0, 1.5, 3.0), (0.0, 1.5, 0.0))
+        ents["box"] = world.spawn(Transform(position=(0.0, 1.5, 0.0)), MeshRef(box()), Material())
+
+    runner = scene(build, size)
+    world = runner.world
+    want = GIZMO_SHARE * size[1] / (2.0 * np.tan(np.radians(30.0)))
+    for distance, projection, height in ((3.0, "perspective", None), (12.0, "perspective", None),
+                                         (6.0, "orthographic", 10.0), (6.0, "orthographic", 40.0)):
+        world.get(ents["camera"], Transform).position = (0.0, 1.5, distance)
+        lens = world.get(ents["camera"], Camera)
+        lens.projection = projection
+        if height is not None:
+            lens.ortho_height = height
+        runner.frame()
+        view = runner.engine.main_view
+        handles = transform_handles(world, ents["box"], view.view_proj, view.eye, size, "move")
+        (x0, y0), (x1, y1) = handles.lines[0]
+        assert abs(x0 - size[0] / 2) < 1e-3 and abs(y0 - size[1] / 2) < 1e-3, (projection, x0, y0)
+        assert abs(y1 - y0) < 1e-3 and x1 - x0 == pytest.approx(want, rel=1e-4), (projection, height, x1 - x0, want)

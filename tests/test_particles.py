@@ -1244,3 +1244,111 @@ def test_a_lit_particle_a_ribbon_and_a_soft_particle_show_through_a_portal_as_fr
     assert (shown > 0.05).sum() > 40, (shown > 0.05).sum()   # (the particle is there)
     apart = np.abs(through - direct).max(axis=-1)[opening]
     assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())
+
+
+MIRROR_AT = glm.vec3(0.0, 0.0, -2.5)
+MIRROR_TURN = glm.angleAxis(glm.radians(30.0), glm.vec3(0.0, 1.0, 0.0))   # (its view 60 degrees off the camera's)
+MIRROR_SIZE = (3.0, 2.4)
+MIRROR_EYE = glm.vec3(0.0, 0.0, 1.0)   # (3.5 m before the mirror, looking at its middle)
+
+
+def mirrored_point(point) -> glm.vec3:
+    """``point``'s image in the plane of ``in_a_mirror_and_from_its_eye``'s mirror."""
+    normal = MIRROR_TURN * glm.vec3(0.0, 0.0, 1.0)
+    point = glm.vec3(point)
+    return point - normal * (2.0 * glm.dot(point - MIRROR_AT, normal))
+
+
+def in_a_mirror_and_from_its_eye(scene, content, *, path="per_mirror", frames=2, size=(128, 96), step=None,
+                                 margin=3):
+    """What ``content(world)`` spawns in front of a mirror (at MIRROR_AT, turned MIRROR_TURN
+    about y: it shows the room off to the camera's right, out of the camera's own sight)
+    rendered twice: in the mirror from MIRROR_EYE (``path`` the reflection path), and directly from
+    the eye's image in the mirror's plane (looking at the target's image; the mirror upright,
+    so up stays up) in a world with no mirror, that picture turned left for right (the mirror
+    view's right is the image camera's left); linear images, and the pixels at least
+    ``margin`` in from the edges of the mirror (by the main view's rays), where the two must
+    agree.  ``step(runner, k)`` runs before each frame ``k``."""
+    from tests.support import pixel_rays
+
+    images, runners = {}, {}
+    for mirrored in (True, False):
+        def build(world, mirrored=mirrored):
+            if mirrored:
+                look_from(world, MIRROR_EYE, MIRROR_AT, fov=FOV)
+                world.mirror = world.spawn(Transform(position=MIRROR_AT, rotation=MIRROR_TURN),
+                                           MeshRef(quad(*MIRROR_SIZE)), Mirror())
+            else:
+                look_from(world, mirrored_point(MIRROR_EYE), mirrored_point(MIRROR_AT), fov=FOV)
+            content(world)
+        runner = scene(build, size)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.path = path
+        for k in range(frames):
+            if step is not None:
+                step(runner, k)
+            image = runner.frame(1.0 / 60.0 if k < frames - 1 else 0.0)
+        images[mirrored], runners[mirrored] = srgb_to_linear(image.astype(np.float64) / 255.0), runner
+    assert runners[True].stats.reflection_views >= 1 and runners[True].stats.reflection_path == path
+    origin, rays = pixel_rays(runners[True].engine.main_view, size)
+    to_mirror = np.linalg.inv(np.array(glm.mat4_cast(MIRROR_TURN).to_list(), np.float64).T[:3, :3])
+    local_origin, local_rays = to_mirror @ (origin - np.array(MIRROR_AT)), rays @ to_mirror.T
+    hit = local_origin + local_rays * (-local_origin[2] / local_rays[..., 2])[..., None]
+    pixel = 2.0 * math.tan(math.radians(FOV / 2.0)) * float(np.linalg.norm(origin - np.array(MIRROR_AT))) / size[1]
+    inside = (np.abs(hit[..., 0]) < MIRROR_SIZE[0] / 2 - margin * pixel) \
+        & (np.abs(hit[..., 1]) < MIRROR_SIZE[1] / 2 - margin * pixel)
+    surface = runners[True].engine.renderer.targets.read_surface_ids()
+    assert (surface[inside] == runners[True].world.mirror).all()   # (the rays' mirror is the engine's)
+    return images[True], images[False][:, ::-1], inside, runners
+
+
+MIRROR_KINDS = {
+    "billboard": dict(size=0.9, color=(0.8, 0.6, 0.3, 1.0), end_color=(0.8, 0.6, 0.3, 1.0)),
+    "lit": dict(size=0.9, color=(*ALBEDO, 1.0), end_color=(*ALBEDO, 1.0), lit=True, translucency=0.3, blend="alpha",
+                texture=solid()),
+    "ribbon": dict(size=0.3, color=(0.5, 0.3, 0.1, 1.0), end_color=(0.5, 0.3, 0.1, 1.0), lit=True, ribbon=True,
+                   rate=60.0, burst=0),
+}
+# Off to the camera's right, out of its sight, where the mirror's view looks (60 degrees off
+# the camera's way: a particle facing the camera is seen there at half its width).
+MIRROR_SEEN = glm.vec3(2.2, 0.1, -1.3)
+
+
+@pytest.mark.parametrize("kind, path", [("billboard", "per_mirror"), ("lit", "per_mirror"), ("lit", "batched"),
+                                        ("ribbon", "per_mirror"), ("ribbon", "batched")])
+def test_a_billboard_a_lit_particle_and_a_ribbon_show_in_a_mirror_as_from_the_eyes_image(scene, kind, path):
+    """What stands off to the camera's right (a lit wall, a hemisphere and a lamp on the
+    mirror's side, and a round spot, a lit particle, or a lit ribbon swept up and across),
+    seen only in a mirror turned 30 degrees, and the same world without the mirror rendered
+    directly from the eye's image in the mirror's plane, turned left for right: inside the
+    mirror the two are the same pixels (the mirror's view turns the spot to its own eye, lights
+    the particle's side that eye sees, faces the ribbon to it); and the particle is there (the
+    mirror differs from the same world without it), out of the camera's own sight."""
+    towards = glm.normalize(mirrored_point(MIRROR_EYE) - MIRROR_SEEN)   # (the way to the eye's image)
+    facing = look_rotation(-towards)   # (the wall behind, facing the eye's image)
+
+    def content(emitter):
+        def make(world):
+            world.spawn(Transform(position=MIRROR_SEEN - towards * 3.0, rotation=facing), MeshRef(quad(40.0, 40.0)),
+                        Material(color=(0.15, 0.15, 0.15, 1.0)))
+            world.spawn(HemisphereLight(sky=(0.3, 0.35, 0.5), ground=(0.2, 0.15, 0.1), intensity=1.0))
+            world.spawn(Transform(position=MIRROR_SEEN + towards * 1.8 + glm.vec3(0.0, 0.8, 0.0)),
+                        PointLight(intensity=10.0, range=20.0))
+            if emitter:
+                world.emitter = world.spawn(Transform(position=MIRROR_SEEN), still(**MIRROR_KINDS[kind]))
+        return make
+
+    def sweep(runner, k):   # (a ribbon's emitter swept across the way to the eye's image and up)
+        if kind == "ribbon":
+            across = glm.normalize(glm.cross(towards, glm.vec3(0.0, 1.0, 0.0)))
+            runner.world.get(runner.world.emitter, Transform).position = \
+                MIRROR_SEEN + across * (-0.8 + 0.055 * k) + glm.vec3(0.0, -0.3 + 0.02 * k, 0.0)
+    frames = 30 if kind == "ribbon" else 2
+    shown, direct, inside, runners = in_a_mirror_and_from_its_eye(scene, content(True), path=path, frames=frames,
+                                                                  step=sweep)
+    without, _, _, _ = in_a_mirror_and_from_its_eye(scene, content(False), path=path)
+    assert not (0 <= runners[True].project(MIRROR_SEEN)[0] < runners[True].size[0])   # (out of the camera's own sight)
+    there = np.abs(shown - without).max(axis=-1)[inside]
+    assert (there > 0.05).sum() > 40, (there > 0.05).sum()   # (the particle is there)
+    apart = np.abs(shown - direct).max(axis=-1)[inside]
+    assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())

@@ -304,11 +304,14 @@ def test_world_text_is_seen_in_a_mirror_when_asked(scene):
     from engine.assets.world_text import spawn_world_text
     from tests.support import look_from
 
-    def build_with(label: bool):
+    def build_with(label: bool, from_the_image: bool = False):
         def build(world):
-            look_from(world, (0.0, 1.4, 3.0), (0.0, 1.3, -3.0))
-            world.resources["mirror"] = world.spawn(Transform(position=(0.0, 1.5, -3.0)), MeshRef(quad(4.0, 2.5)),
-                                                    Material(), Mirror())
+            if from_the_image:   # the eye's image in the mirror's plane (z = -3), looking at the target (on it)
+                look_from(world, (0.0, 1.4, -9.0), (0.0, 1.3, -3.0))
+            else:
+                look_from(world, (0.0, 1.4, 3.0), (0.0, 1.3, -3.0))
+                world.resources["mirror"] = world.spawn(Transform(position=(0.0, 1.5, -3.0)),
+                                                        MeshRef(quad(4.0, 2.5)), Material(), Mirror())
             if label:  # its front (+Z) turned to the mirror: the camera sees its back
                 spawn_world_text(world, "EXIT", (0.0, 1.3, 0.0), look_rotation(_glm.vec3(0.0, 0.0, 1.0)),
                                  height=0.6, color=(1.0, 0.2, 0.1))
@@ -318,6 +321,8 @@ def test_world_text_is_seen_in_a_mirror_when_asked(scene):
     labelled = scene(build_with(True), (160, 120))
     for runner in (plain, labelled):
         runner.engine.renderer.antialias = "off"
+        # (the albedo filtered inside the mirror's view as in the main view: the direct view's below)
+        runner.engine.renderer.reflection_anisotropy = runner.engine.renderer.texture_anisotropy
     before, after = plain.frame(), labelled.frame()
     changed = np.any(before != after, axis=-1)
     mirror = labelled.engine.renderer.targets.read_surface_ids() == labelled.world.resources["mirror"]
@@ -327,3 +332,16 @@ def test_world_text_is_seen_in_a_mirror_when_asked(scene):
     Image.fromarray(after).save("/tmp/speculum_world_text.png")  # to look at
     seen = after[changed].astype(int)
     assert (seen[:, 0] > seen[:, 1] + 20).mean() > 0.5   # the label's colour (red), in the mirror
+    # It reads in the mirror as the eye's image sees it directly (no mirror there), left for
+    # right: turned round, as a mirror shows writing, and not as written.
+    direct = scene(build_with(True, from_the_image=True), (160, 120))
+    direct.engine.renderer.antialias = "off"
+    turned = direct.frame()[:, ::-1].astype(int)
+    inner = mirror.copy()   # (the mirror's pixels two in from its edges)
+    for axis in (0, 1):
+        for shift in (-2, 2):
+            inner &= np.roll(mirror, shift, axis=axis)
+    assert (changed & inner).sum() > 100, (changed & inner).sum()
+    assert np.abs(after[inner].astype(int) - turned[inner]).max() <= 2, np.abs(after[inner] - turned[inner]).max()
+    as_written = np.abs(after.astype(int) - turned[:, ::-1]).max(axis=-1)[changed & inner]
+    assert (as_written > 20).sum() > 20, (as_written > 20).sum()   # (and not as written)
