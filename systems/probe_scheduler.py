@@ -24,7 +24,9 @@ has a ``ProbeState``.  What is due each frame, per probe:
     ``_suns_relight``), the clouds came, went, changed or drifted an eighth of their finest
     detail since they last relit them ("CloudLayer changed": ``clouds.shadows_served``,
     counted by the prepare stage's ``CloudChanges``) or a point light whose range reaches what the probe sees
-    changed, came, went or moved, its own Transform or a parent's ("light 7 moved");
+    changed, came, went or moved, its own Transform or a parent's ("light 7 moved"), or joined
+    or left the lights kept or those with shadow cubes (``KeptLights``: past the Lights block's
+    places or the cubes the camera chooses, so it may leave as the camera walks away: "light 7 went");
   - ``every_frame``: all six; ``every_n``: all six every n frames; ``once``: nothing more;
     ``scripted``: all six after a request; but a ``once`` or ``scripted`` probe's faces that
     may see a screen whose ``Monitor`` picture was first drawn after its capture (it showed
@@ -61,7 +63,14 @@ from engine.core.budget import spending_order
 from engine.core.world import World
 from engine.resources import CloudChanges, PicturesDrawn, RenderStats, Surfaces, ViewBudget
 from engine.rules.frame_rules import active_camera_parts
-from engine.rules.light_rules import SAME_SUN_DEGREES, SAME_SUN_TINT, shadow_texel_tangent, sun_relights, sun_states
+from engine.rules.light_rules import (
+    SAME_SUN_DEGREES,
+    SAME_SUN_TINT,
+    KeptLights,
+    shadow_texel_tangent,
+    sun_relights,
+    sun_states,
+)
 from engine.rules.probe_rules import (
     ALL_FACES,
     LIGHTING_KINDS,
@@ -142,6 +151,8 @@ class ProbeScheduler:
         self.probes = world.resources[ProbeStates] = ProbeStates()
         self._bounds: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # entity -> last world box
         self._lights: dict[int, tuple[np.ndarray, float]] = {}  # point light -> (position, range) last seen
+        # The point lights kept (the Lights block's) and those with a shadow cube, last seen (_kept_changes).
+        self._kept: tuple[frozenset[int], frozenset[int]] = (frozenset(), frozenset())
         self._looks = LookChanges()
         self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
         self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
@@ -397,8 +408,9 @@ class ProbeScheduler:
         this frame was and is."""
         world = self.world
         frame = world.frame
+        joined, left, recast = self._kept_changes()
         entities = (frame.moved | frame.added | frame.removed | world.deleted() | world.changed(PointLight)
-                    | world.changed(Transform))
+                    | world.changed(Transform) | joined | left | recast)
         # Only an entity with a point light now, or one when last seen, has a sphere to compare.
         lights = self._lights.keys() | {entity for entity, _ in world.query_one(PointLight)}
         rows = []
@@ -407,8 +419,8 @@ class ProbeScheduler:
             new = self._light_sphere(entity)
             if old is None and new is None:
                 continue
-            what = "came" if old is None else "went" if new is None else "moved" if entity in frame.moved \
-                else "changed"
+            what = "came" if old is None or entity in joined else "went" if new is None or entity in left \
+                else "moved" if entity in frame.moved else "changed"
             for sphere in (old, new):
                 if sphere is not None:
                     rows.append((f"light {entity} {what}", *sphere))
@@ -416,7 +428,20 @@ class ProbeScheduler:
                 self._lights[entity] = new
         return rows
 
+    def _kept_changes(self) -> tuple[set[int], set[int], set[int]]:
+        """The point lights that joined or left the ones kept (``KeptLights``: where there are
+        more than the Lights block's places, chosen by the camera and the views' eyes, so a
+        light may leave as the camera walks away, nothing of its own changed) and those that
+        gained or lost a shadow cube, since the last look: a face they light draws otherwise
+        (they count as come, gone or changed)."""
+        kept = self.world.resources.get(KeptLights)
+        now = (frozenset(), frozenset()) if kept is None else \
+            (frozenset(kept.point) - {None}, frozenset(kept.point_shadows) - {None})
+        before, self._kept = self._kept, now
+        return set(now[0] - before[0]), set(before[0] - now[0]), set(now[1] ^ before[1])
+
     def _all_lights(self) -> list[tuple[str, np.ndarray, float]]:
+        self._kept_changes()  # (as the first capture draws them)
         self._lights = {entity: sphere for entity, _ in self.world.query_one(PointLight)
                         if (sphere := self._light_sphere(entity)) is not None}
         return []  # a first capture takes every face anyway

@@ -257,3 +257,269 @@ def test_a_probe_that_kept_every_face_leaves_its_irradiance_row_as_projected(sce
     runner.frame()
     assert runner.stats.probe_faces >= 1 and table.projections == projected + 1  # (a face of sky alone is kept)
     np.testing.assert_allclose(table.read_row(ents["probe"]), row, rtol=1e-5, atol=1e-6)
+
+
+# --- each change README lists, against an engine built where the change leaves the world -----
+def _room_with_probe(world) -> None:
+    """A lit floor, an every-frame probe 0.6 m above it that sees 6 m, a small box in its
+    +X face, and a caster hidden from probes high over the -Z side (its shadow on the
+    floor there, out of the -Y face: the probe sees the floor within 0.6 m of its foot)."""
+    look_from(world, (0, 3, 6), (0, 0, 0))
+    world.resources["sun"] = world.spawn(DirectionalLight(direction=(-1.0, -1.5, 0.3), intensity=2.0))
+    world.spawn(Transform(), MeshRef(plane(60, 60)), Material(color=(0.8, 0.8, 0.8)))
+    world.resources["probe"] = world.spawn(Transform(position=(0.0, 0.6, 0.0)),
+                                           ReflectionProbe(resolution=32, far=6.0, refresh="every_frame"))
+    world.resources["near"] = world.spawn(Transform(position=(2.5, 0.5, -0.6)), MeshRef(box((0.3, 0.3, 0.3))),
+                                          Material(color=(0.9, 0.2, 0.1)))
+    world.resources["caster"] = world.spawn(Transform(position=(1.9, 2.4, -3.0)), MeshRef(box((0.5, 0.5, 0.5))),
+                                            Material(), Visibility(in_probes=False))
+
+
+def _lamp(world) -> None:
+    from components import PointLight
+
+    world.resources["lamp"] = world.spawn(Transform(position=(2.0, 1.5, 0.5)),
+                                          PointLight(color=(1.0, 0.5, 0.2), intensity=6.0, range=5.0))
+
+
+def _spot_with_cookie(world) -> None:
+    from components import PointLight
+    from engine.assets.texture_data import checker_texture
+
+    world.resources["lamp"] = world.spawn(
+        Transform(position=(2.0, 2.5, 0.0), rotation=glm.angleAxis(-1.5708, glm.vec3(1, 0, 0))),
+        PointLight(intensity=12.0, range=6.0, spot_angle=60.0, cookie=checker_texture(16, 4)))
+
+
+def _sky(world) -> None:
+    from components import Skybox
+
+    world.resources["sky"] = world.spawn(Skybox())
+
+
+def _far_lamps(world) -> None:
+    """The lamp beside the probe and, 140 m away, sixteen lamps: one more than the Lights
+    block's sixteen places, so which are kept follows the camera."""
+    from components import PointLight
+
+    _lamp(world)
+    for i in range(16):
+        world.spawn(Transform(position=(100.0 + i % 4, 1.0, 100.0 + i // 4)),
+                    PointLight(color=(0.2, 0.2, 1.0), intensity=1.0, range=4.0))
+
+
+def _casting_lamps(world) -> None:
+    """A lamp casting shadows over the +X face (a post beside the probe casts one) and, 140 m
+    away, two more: one more than the two shadow cubes, so which cast follows the camera."""
+    from components import PointLight
+
+    world.resources["lamp"] = world.spawn(Transform(position=(1.5, 1.8, 0.5)),
+                                          PointLight(color=(1.0, 0.5, 0.2), intensity=8.0, range=6.0, shadows=True))
+    world.spawn(Transform(position=(1.5, 0.4, 0.0)), MeshRef(box((0.4, 0.8, 0.4))), Material())
+    for i in range(2):
+        world.spawn(Transform(position=(100.0 + i, 1.0, 100.0)),
+                    PointLight(color=(0.2, 0.2, 1.0), intensity=1.0, range=4.0, shadows=True))
+
+
+def _portal(world) -> None:
+    from components.transform import look_rotation
+    from engine.assets.portals import spawn_portal_pair
+
+    world.resources["portal"], _ = spawn_portal_pair(world, (2.5, 1.0, 0.0), look_rotation((1, 0, 0)),
+                                                     (-20.0, 1.0, 0.0), look_rotation((1, 0, 0)), size=(1.5, 1.5))
+    world.spawn(Transform(position=(-22.0, 1.0, 0.0)), MeshRef(box((1, 2, 2))), Material(color=(0.1, 0.1, 0.9)))
+
+
+def _monitor(world) -> None:
+    """A screen in the +X face whose camera, 30 m away (out of the probe's reach), watches a box."""
+    from components import Camera, Monitor
+    from components.transform import look_rotation
+    from engine.assets.mesh import quad
+
+    lens = world.spawn(Transform(position=(30.0, 1.0, 5.0), rotation=look_rotation((0, 0, -1))),
+                       Camera(fov_y=40.0, active=False))
+    world.resources["subject"] = world.spawn(Transform(position=(30.0, 1.0, 0.0)), MeshRef(box()),
+                                             Material(color=(0.1, 0.9, 0.1)))
+    world.spawn(Transform(position=(2.5, 1.0, 0.0), rotation=glm.angleAxis(-1.5708, glm.vec3(0, 1, 0))),
+                MeshRef(quad(2.0, 1.5)), Material(color=(0, 0, 0, 1), roughness=1.0, environment_reflection=0.0),
+                Monitor(camera=lens, size=(16, 12)))
+
+
+def _set(name, kind, field, value):
+    def change(world):
+        setattr(world.get(world.resources[name], kind), field, value)
+    return change
+
+
+def _moved(name, by):
+    def change(world):
+        world.get(world.resources[name], Transform).position += glm.vec3(*by)
+    return change
+
+
+def _came(world):
+    world.spawn(Transform(position=(2.5, 0.5, 0.8)), MeshRef(box((0.3, 0.3, 0.3))), Material(color=(0.1, 0.9, 0.2)))
+
+
+def _went(world):
+    world.delete_entity(world.resources["near"])
+
+
+def _textured(world):
+    from engine.assets.texture_data import checker_texture
+
+    world.get(world.resources["near"], Material).texture = checker_texture(16, 4, (255, 255, 0), (0, 0, 255))
+
+
+def _decal(world):
+    from components import Decal
+
+    world.spawn(Transform(position=(1.5, 0.05, 0.0), rotation=glm.angleAxis(-1.5708, glm.vec3(1, 0, 0)),
+                          scale=(1.0, 1.0, 0.4)), Decal(color=(0.0, 0.2, 1.0, 1.0)))
+
+
+def _new_cookie(world):
+    from components import PointLight
+    from engine.assets.texture_data import checker_texture
+
+    world.get(world.resources["lamp"], PointLight).cookie = checker_texture(16, 2, (255, 0, 0), (0, 255, 0))
+
+
+def _camera_walks_to_the_far_lamps(world):
+    from components import Camera
+
+    (camera, _), = world.query_one(Camera)
+    world.get(camera, Transform).position = glm.vec3(101.5, 1.5, 101.5)
+
+
+def _portal_closed(world):
+    from components import Portal
+
+    world.get(world.resources["portal"], Portal).enabled = False
+
+
+def _skybox_zenith(world):
+    from components import Skybox
+
+    world.get(world.resources["sky"], Skybox).zenith = (0.9, 0.1, 0.1)
+
+
+def _lamp_brighter(world):
+    from components import PointLight
+
+    world.get(world.resources["lamp"], PointLight).intensity = 20.0
+
+
+def _subject_recoloured(world):
+    world.get(world.resources["subject"], Material).color = (0.9, 0.1, 0.9)
+
+
+# name: (what the scene has besides the room, the change, the faces it may draw: None, any)
+CHANGES = {
+    "moved": (None, _moved("near", (0.0, 0.0, 0.3)), {0}),
+    "came": (None, _came, {0}),
+    "went": (None, _went, None),   # (its batch goes: every face showing a batch)
+    "look_changed": (None, _set("near", Material, "color", (0.1, 0.9, 0.1)), {0}),
+    "texture_swapped": (None, _textured, None),   # (its batch changes: every face showing a batch)
+    "shadow_in": (None, _moved("caster", (0.0, 0.0, 2.7)), None),
+    "shadow_out": (lambda w: _moved("caster", (0.0, 0.0, 2.7))(w), _moved("caster", (0.0, 0.0, -2.7)), None),
+    "lamp_changed": (_lamp, _lamp_brighter, None),
+    "sun_changed": (None, _set("sun", DirectionalLight, "intensity", 1.0), None),
+    "sky_changed": (_sky, _skybox_zenith, None),
+    "decal_added": (None, _decal, None),
+    "cookie_swapped": (_spot_with_cookie, _new_cookie, None),
+    "portal_closed": (_portal, _portal_closed, None),
+    "picture_changed": (_monitor, _subject_recoloured, None),
+    "lamp_left_behind": (_far_lamps, _camera_walks_to_the_far_lamps, None),
+    "lamp_lost_its_shadow_cube": (_casting_lamps, _camera_walks_to_the_far_lamps, None),
+}
+
+
+# Scenes whose every-frame probe draws faces in still frames too: a level with a portal (every
+# face that sees a batch, as README says), and a face showing a monitor's screen (its picture
+# is drawn again after each capture, which draws that face again: a face and a picture a frame).
+REDRAWN_STILL = {"portal_closed", "picture_changed"}
+
+
+def _cube_faces(runner) -> list[np.ndarray]:
+    probes, owner = runner.engine.renderer.probes, runner.world.resources["probe"]
+    return [probes.read_face(owner, face) for face in range(6)]
+
+
+def _kept_and_fresh(scene, change, refresh="every_frame"):
+    """The room (with the change's extra), run three frames, then changed and run two: the
+    faces before the change, the faces after, those a second engine built changed draws
+    (five frames on), and the faces the first drew after the change."""
+    extra, change_world, _ = CHANGES[change]
+
+    def build(world):
+        _room_with_probe(world)
+        world.get(world.resources["probe"], ReflectionProbe).refresh = refresh
+        if extra is not None:
+            extra(world)
+
+    def built_changed(world):
+        build(world)
+        change_world(world)
+
+    runner = scene(build, (48, 32))
+    _probe_stage(runner).path = "six_pass"
+    for _ in range(3):
+        runner.frame()
+    if change not in REDRAWN_STILL:
+        assert runner.stats.probe_faces == 0  # still: every face kept
+    before = _cube_faces(runner)
+    drawn = _faces_drawn(_Cube(runner))
+    change_world(runner.world)
+    for _ in range(2):
+        runner.frame()
+    kept = _cube_faces(runner)
+    fresh_runner = scene(built_changed, (48, 32))
+    _probe_stage(fresh_runner).path = "six_pass"
+    for _ in range(5):
+        fresh_runner.frame()
+    return before, kept, _cube_faces(fresh_runner), set(drawn)
+
+
+def _stale_faces(kept, fresh) -> dict[int, float]:
+    return {face: float(np.abs(kept[face] - fresh[face]).max()) for face in range(6)
+            if not np.array_equal(kept[face], fresh[face])}
+
+
+@pytest.mark.filterwarnings("ignore::engine.core.errors.LightLimitWarning")  # (the lamps past the limits)
+@pytest.mark.parametrize("change", list(CHANGES))
+def test_an_every_frame_probe_redraws_each_face_a_change_reaches_as_a_fresh_engine_draws_it(scene, change):
+    """Each change README lists (a thing in a face that moved, came, went or changed its look,
+    a shadow moving into or out of a face, a light or the sky changing) and some it does not
+    name (a texture swapped, a decal added, a spot's cookie swapped, a portal closed, a
+    monitor's picture changing, a lamp left out of the Lights block as the camera walks
+    away): one engine runs still frames (every face kept), then the change and a frame; a
+    second engine is built with the change already made.  Every face of the first is, bit
+    for bit, the second's (a face kept that the change reached would hold what it showed
+    before); the change shows in some face; each face it changed was drawn again, and a
+    change within one face draws that face alone."""
+    before, kept, fresh, drawn = _kept_and_fresh(scene, change)
+    changed = {face for face in range(6) if not np.array_equal(before[face], fresh[face])}
+    assert changed, "the change shows in no face"
+    assert changed <= drawn, (sorted(changed), sorted(drawn))
+    assert not _stale_faces(kept, fresh)
+    allowed = CHANGES[change][2]
+    if allowed is not None:
+        assert drawn <= allowed, sorted(drawn)
+
+
+@pytest.mark.filterwarnings("ignore::engine.core.errors.LightLimitWarning")  # (the lamps past the limits)
+@pytest.mark.parametrize("refresh", ["on_change", "every_n"])
+@pytest.mark.parametrize("change", ["lamp_left_behind", "lamp_lost_its_shadow_cube"])
+def test_a_lamp_the_camera_leaves_out_of_the_lights_relights_the_faces_it_lit(scene, change, refresh):
+    """Nothing of the lamp beside the probe changes, but the camera walks 140 m away to
+    other lamps, which take its place: with seventeen lamps, the Lights block's sixteen
+    places (it lights nothing any more), or with three casting, the two shadow cubes (it
+    lights without its shadow) (``KeptLights``).  An ``on_change`` probe (and an ``every_n``
+    one, 1) recaptures the faces that changed, which then equal a second engine's built
+    with the camera there: a probe keeping them would show the lamp's light, or its
+    shadow, for good."""
+    before, kept, fresh, drawn = _kept_and_fresh(scene, change, refresh)
+    lit = {face for face in range(6) if not np.array_equal(before[face], fresh[face])}
+    assert lit and lit <= drawn, (sorted(lit), sorted(drawn))
+    assert not _stale_faces(kept, fresh)
