@@ -114,3 +114,56 @@ def test_a_mirror_carries_an_all_round_cookie_the_other_way_round(scene):
     assert judged.sum() > 5000 and len(set(index[judged].tolist())) >= 2
     agree = seen_cells(frame)[judged] == index[judged]
     assert agree.mean() > 0.97, agree.mean()
+
+
+def test_a_portal_carries_an_all_round_cookie_turned_not_mirrored(scene):
+    """A lamp turned 30 degrees before portal A (which carries light) shines out of B onto a
+    wall beyond it, the wall's back to the lamp itself.  Each lit pixel shows the cell of the
+    lamp's picture that the ray from the lamp's image (the lamp carried by the pair's
+    transform, its frame turned with it) to the wall point falls in, for points whose line to
+    the image crosses B's opening; the frame turned inside out (as a mirror's) names other
+    cells on a share of them."""
+    from components import Portal
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    lamp = np.array([0.2, 1.5, 5.5])
+    turn = glm.angleAxis(math.radians(30.0), glm.vec3(0.0, 1.0, 0.0))
+    names = {}
+
+    def build(world):
+        look_from(world, (-5.0, 1.5, 3.0), (-2.0, 1.5, 0.0), fov=70.0)
+        world.spawn(dark_sky())
+        world.spawn(Transform(position=(-2.0, 1.5, 0.0), rotation=glm.angleAxis(glm.radians(-90.0), glm.vec3(0, 1, 0))),
+                    MeshRef(quad(8.0, 6.0)), matte())
+        world.spawn(Transform(position=tuple(lamp), rotation=turn), PointLight(intensity=60.0, range=30.0,
+                                                                              cookie=panorama()))
+        names["a"], names["b"] = spawn_portal_pair(world, (0.0, 1.5, 4.0), None, (-6.0, 1.5, 0.0),
+                                                   look_rotation(glm.vec3(-1, 0, 0)), size=(3.0, 3.0))
+        world.get(names["a"], Portal).carries_light = True
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    frame = srgb_to_linear(runner.frame())
+    assert runner.engine.renderer.stats.virtual_lights == 1
+    world = runner.engine.world
+    carry = np.array(glm.dmat4(pair_transform(world.get(names["a"], Transform).world,
+                                              world.get(names["b"], Transform).world)).to_list(), np.float64).T
+    image = carry[:3, :3] @ lamp + carry[:3, 3]
+    m = carry[:3, :3] @ np.array(glm.mat3_cast(turn).to_list(), np.float64).T   # the image's right, top, back
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    t = (-2.0 - eye[0]) / rays[:, 0]
+    wall = eye + rays * t[:, None]
+    towards = image - wall
+    crossing = wall + towards * ((-6.0 - wall[:, 0]) / towards[:, 0])[:, None]   # on B's plane
+    through = (t > 0) & (np.abs(crossing[:, 1] - 1.5) < 1.4) & (np.abs(crossing[:, 2]) < 1.4) \
+        & (np.abs(wall[:, 1] - 1.5) < 2.9) & (np.abs(wall[:, 2]) < 3.9)
+    index, clear = expected_cells(wall, image, (m[:, 0], m[:, 1], -m[:, 2]))
+    bright = frame.reshape(-1, 3).max(axis=1) > 0.02
+    judged = through & clear & bright
+    assert judged.sum() > 3000 and len(set(index[judged].tolist())) >= 2, judged.sum()
+    agree = seen_cells(frame)[judged] == index[judged]
+    assert agree.mean() > 0.97, agree.mean()
+    mirrored, _ = expected_cells(wall, image, (m[:, 0], m[:, 1], m[:, 2]))
+    assert (mirrored[judged] != index[judged]).mean() > 0.3

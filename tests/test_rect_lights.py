@@ -488,3 +488,89 @@ def test_rectangles_past_the_limit_light_as_points_and_are_said_and_counted(scen
     slots = block[base + 4 * 7 * MAX_POINT_LIGHTS:][:MAX_RECT_LIGHTS].view(np.int32)
     assert sorted(slots.tolist()) == sorted(np.flatnonzero(rect_w).tolist()) and len(set(slots)) == MAX_RECT_LIGHTS
     assert sorted(rect_w[:count].tolist()) == [-4.0] * MAX_RECT_LIGHTS + [0.0]
+
+
+def test_tubes_count_among_the_rectangles_and_each_new_cut_is_said_once(scene):
+    """Seven panels and two tubes: nine past MAX_RECT_LIGHTS (8), one cut, counted and said;
+    the lights chosen again with the same cut say nothing more; a tenth (a tube) coming makes
+    two cut, said again; two going leave none cut (counted 0 the next frame)."""
+    import warnings
+
+    from components.limits import MAX_RECT_LIGHTS
+    from engine.core.errors import LightLimitWarning
+
+    assert MAX_RECT_LIGHTS == 8
+    down = look_rotation(glm.vec3(0.0, -1.0, 0.0), glm.vec3(0.0, 0.0, -1.0))
+    shapes = [dict(rectangle=(0.5, 0.5))] * 7 + [dict(length=0.6, radius=0.02)] * 2
+
+    def build(world):
+        look_from(world, (0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
+        world.spawn(Transform(), MeshRef(plane(30.0, 30.0)), Material(roughness=1.0))
+        for k, shape in enumerate(shapes):
+            world.spawn(Transform(position=(-4.0 + k, 1.0, 0.0), rotation=down),
+                        PointLight(intensity=1.0, range=5.0, **shape))
+    with pytest.warns(LightLimitWarning, match=r"9 rectangle and tube lights .* so 1 light as points"):
+        runner = scene(build, SIZE)
+        runner.frame()
+    assert runner.stats.rect_lights_cut == 1
+    lamps = [entity for entity, _ in runner.world.query_one(PointLight)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LightLimitWarning)
+        runner.world.get(lamps[0], Transform).position += glm.vec3(0.0, 0.1, 0.0)   # (the lights chosen again)
+        runner.frame()
+        runner.frame()
+    assert runner.stats.rect_lights_cut == 1
+    runner.world.spawn(Transform(position=(0.0, 1.0, 1.5), rotation=down),
+                       PointLight(intensity=1.0, range=5.0, length=0.6, radius=0.02))
+    with pytest.warns(LightLimitWarning, match=r"10 rectangle and tube lights .* so 2 light as points"):
+        runner.frame()
+    assert runner.stats.rect_lights_cut == 2
+    for lamp in lamps[-2:]:
+        runner.world.delete_entity(lamp)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LightLimitWarning)
+        runner.frame()
+    assert runner.stats.rect_lights_cut == 0
+
+
+def test_a_panel_past_the_limit_lights_as_a_point_without_its_picture(scene):
+    """Nine panels each showing an all-red picture, over a floor of their own (3 x 3, 2 m
+    apart, 0.5 m up, a range of 0.9 m: no two reach one floor point): eight are lit as
+    rectangles, the floor under each red only; the ninth (cut, lit as a point from its
+    centre) shines its own white light, its picture left out: the floor under exactly one
+    panel takes green and blue as it takes red."""
+    import warnings
+
+    from engine.assets.texture_data import TextureData
+    from engine.core.errors import LightLimitWarning
+    from tests.support import srgb_to_linear
+
+    red = np.zeros((8, 8, 4), np.uint8)
+    red[..., 0], red[..., 3] = 255, 255
+    picture = TextureData(red, name="red")
+    down = look_rotation(glm.vec3(0.0, -1.0, 0.0), glm.vec3(0.0, 0.0, -1.0))
+    spots = [(x, z) for x in (-2.0, 0.0, 2.0) for z in (-2.0, 0.0, 2.0)]
+
+    def build(world):
+        look_from(world, (0.0, 7.0, 0.01), (0.0, 0.0, 0.0), fov=60.0)
+        world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+        world.spawn(Transform(), MeshRef(plane(30.0, 30.0)), Material(roughness=1.0, environment_reflection=0.0))
+        for x, z in spots:
+            world.spawn(Transform(position=(x, 0.5, z), rotation=down),
+                        PointLight(intensity=1.0, range=0.9, rectangle=(0.4, 0.4), cookie=picture))
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LightLimitWarning)
+        runner.frame()
+    shown = srgb_to_linear(runner.frame())
+    assert runner.stats.rect_lights_cut == 1
+    under = []
+    for x, z in spots:
+        column, row = runner.project((x, 0.0, z))
+        under.append(shown[row - 1:row + 2, column - 1:column + 2].reshape(-1, 3).mean(axis=0))
+    under = np.array(under)
+    assert (under[:, 0] > 0.05).all(), under   # each panel lights its floor
+    white = under[:, 1] > 0.5 * under[:, 0]
+    assert white.sum() == 1, under
+    assert (under[~white, 1:] < 0.02 * under[~white, :1]).all(), under

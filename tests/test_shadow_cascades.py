@@ -601,3 +601,36 @@ shadow_cascade_blend = 0.3
     with pytest.raises(LevelError, match=r"DirectionalLight\.shadow_cascade_blend") as caught:
         load_level(path).spawn(World("refused"))
     assert str(path) in str(caught.value)
+
+
+def test_a_portal_shows_the_rings_sharp_shadow_of_what_stands_behind_the_camera(scene):
+    """As the mirror's: the box stands behind the camera, seen only through portal A ahead of
+    it, whose partner B stands past the box facing back at it; its shadow there agrees with
+    the rays (each pixel's ray carried by the pair's transform to the floor) as sharply as a
+    shadow seen directly, which the level's map alone cannot."""
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    box_at = (-0.6, 0.5, 2.0)
+    shares = {}
+    for cascades in (1, 3):
+        def build(world, cascades=cascades):
+            _build(cascades, distance=16.0, eye=(0.0, 1.4, 1.0), target=(-0.4, 0.0, MIRROR_Z), box_at=box_at)(world)
+            ids = world.resources["ids"]
+            ids["a"], ids["b"] = spawn_portal_pair(world, (0.0, 1.2, MIRROR_Z), None, (0.0, 1.2, 5.0),
+                                                   look_rotation(glm.vec3(0.0, 0.0, 1.0)), size=(6.0, 2.4))
+        runner = scene(build, (320, 240))
+        runner.engine.renderer.antialias = "off"
+        with_shadows, without = _with_and_without(runner)
+        ids = runner.world.resources["ids"]
+        through = (runner.engine.renderer.targets.read_surface_ids() == ids["a"]) & (runner.ids() == ids["floor"])
+        carry = np.array(glm.dmat4(pair_transform(runner.world.get(ids["a"], Transform).world,
+                                                  runner.world.get(ids["b"], Transform).world)).to_list()).T
+        eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+        at_a = (eye + rays * ((MIRROR_Z - eye[2]) / rays[..., 2])[..., None]) @ carry[:3, :3].T + carry[:3, 3]
+        turned = rays @ carry[:3, :3].T
+        points = (at_a + turned * (-at_a[..., 1] / turned[..., 1])[..., None]).reshape(-1, 3)
+        shares[cascades], counted, in_shadow = _agreement(runner, with_shadows, without, points, through, box_at)
+        assert counted > 300 and in_shadow > 100, (counted, in_shadow)
+    assert shares[3] >= 0.99, shares
+    assert shares[1] < 0.95, shares

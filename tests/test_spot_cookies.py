@@ -369,3 +369,55 @@ def test_the_editor_sets_a_cookie_as_a_level_file_names_it(tmp_path):
     with pytest.raises(EditError, match="PointLight.range is not an image"):
         editor.set_texture(spot, "range", "checker = [64, 4]", "PointLight")
     assert editor.undo() and world.get(spot, PointLight).cookie is None
+
+
+@pytest.mark.parametrize("how", ["mirror", "portal"])
+def test_a_cookies_image_on_a_wall_seen_in_a_mirror_or_through_a_portal_is_the_one_the_rays_meet(scene, how):
+    """The turned spot of the first test throws the quadrant image on the wall; the eye sees
+    the wall only in a mirror (at z = 5, facing it) or through a portal (A aside, B at z = 4.2
+    facing the wall).  Each pixel's ray, reflected in the mirror's plane or carried by the
+    pair's transform in float64, meets the wall where the line from the light says the
+    quadrant it shows (the view reads the light's cookie as the eye does)."""
+    from components import Portal
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    position = np.array([0.3, -0.2, 3.0])
+    rotation = glm.angleAxis(glm.radians(8.0), glm.vec3(0, 1, 0)) * glm.angleAxis(glm.radians(90.0), glm.vec3(0, 0, 1))
+    angle = 28.0
+    turned_round = glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0))   # a quad facing -z
+    names = {}
+
+    def build(world):
+        world.spawn(dark_sky())
+        world.spawn(Transform(), MeshRef(quad(9.0, 7.0)), matte())
+        world.spawn(Transform(position=tuple(position), rotation=rotation),
+                    PointLight(range=30.0, cookie=quadrant_cookie(), intensity=12.0, spot_angle=angle, spot_blend=0.0))
+        if how == "mirror":
+            look_from(world, (0.4, 0.3, 1.0), (0.0, 0.0, 5.0), fov=45.0)
+            names["surface"] = world.spawn(Transform(position=(0.0, 0.0, 5.0), rotation=turned_round),
+                                           MeshRef(quad(8.0, 6.0)), Material(), Mirror())
+        else:
+            look_from(world, (10.3, 0.2, 1.2), (10.0, 0.0, 0.0), fov=70.0)
+            names["surface"], names["b"] = spawn_portal_pair(world, (10.0, 0.0, 0.0), None, (0.0, 0.0, 4.2),
+                                                             turned_round, size=(5.0, 4.0))
+            assert world.get(names["surface"], Portal).partner == names["b"]
+    linear, runner = render(scene, build)
+    _save(f"seen_{how}", linear)
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    rays = rays.reshape(-1, 3)
+    if how == "mirror":
+        at = eye + rays * ((5.0 - eye[2]) / rays[:, 2])[:, None]
+        turned = rays * np.array([1.0, 1.0, -1.0])
+    else:
+        world = runner.engine.world
+        carry = np.array(glm.dmat4(pair_transform(world.get(names["surface"], Transform).world,
+                                                  world.get(names["b"], Transform).world)).to_list(), np.float64).T
+        at = (eye + rays * (-eye[2] / rays[:, 2])[:, None]) @ carry[:3, :3].T + carry[:3, 3]
+        turned = rays @ carry[:3, :3].T
+    wall = at + turned * (-at[:, 2] / turned[:, 2])[:, None]
+    seen = (runner.engine.renderer.targets.read_surface_ids() == names["surface"]).reshape(-1) \
+        & (np.abs(wall[:, 0]) < 4.4) & (np.abs(wall[:, 1]) < 3.4)
+    frame = glm.translate(glm.vec3(*position)) * glm.mat4_cast(rotation)
+    uv, ahead = image_place(wall, position, frame, angle)
+    assert check_quadrants(linear.reshape(-1, 3), uv, seen & ahead) > 1500
