@@ -47,13 +47,23 @@ other's changes; a flat one-sided screen a view sees from behind shows it nothin
 (``_screen_faces``).  Kept, a picture moves no version on: a still camera's mirrors that show
 it keep their views too.
 
+The reflection probes' captures are followed probe by probe: a picture is drawn again after
+a capture only of a probe its last drawing may have sampled (``MonitorPictures.probes_read``:
+a probe of a batch its views reach, or one with an influence box), else it is kept.  Were
+every capture an input (``ProbeCaptures.moved_on``), an ``every_frame`` probe that sees the
+screen would draw the picture again after each capture, and the face that shows it would see
+a new picture each frame: a face and a picture drawn every frame of a still scene.  Where the
+camera does see that probe's reflection (a chrome ball before the screen), the picture shows
+it, the probe shows the picture: an ``every_frame`` probe and the picture draw each other
+every frame, each showing the other's last, as a camera that sees its own screen does.
+
 A picture drawn is published (``PicturesDrawn``) for the probes' scheduler, whose
 ``on_change`` probes recapture the faces that see its screen (and ``once`` and ``scripted``
 probes those that showed it black, before its first drawing); not one drawn again for
-nothing but reflection probes' captures since (``ProbeCaptures.moved_on``): a probe that
-recaptured the screen would draw it again, and that drawing recapture the probe, forever in a
-still scene.  So an ``on_change`` probe shows a screen whose picture shows that probe's own
-reflection as it was a capture before.
+nothing but captures since of probes it samples: a probe that recaptured the screen would
+draw it again, and that drawing recapture the probe, forever in a still scene.  So an
+``on_change`` probe shows a screen whose picture shows that probe's own reflection as it was
+a capture before.
 
 The pictures of monitors gone (or deleted) are let go here; the extract stage makes a
 screen's picture when it first draws the screen (its emissive map is the picture)."""
@@ -119,7 +129,7 @@ class MonitorSystem(esper.Processor):
         self._keep_still_pictures = True
         self._rings = PictureRings()   # each monitor's camera's suns' cascades about it (_cascades)
         self._eyes_from: tuple | None = None   # what the PictureEyes published were made from
-        self._keys: dict[int, tuple[tuple, tuple, int]] = {}   # monitor -> _still_key at its last drawing
+        self._keys: dict[int, tuple[tuple, tuple]] = {}   # monitor -> _still_key at its last drawing
         self._world_version = 0   # moved on by every change to the world's components (World.change_count)
         self._changes_seen = 0    # World.change_count when this stage last looked
         self._flat: dict[int, tuple | bool] = {}   # mesh id -> its one face (point, normal), or False
@@ -198,11 +208,13 @@ class MonitorSystem(esper.Processor):
             view.layers = camera.layer_mask
             key = self._still_key(monitor, view, table, blends)
             kept = self._keys.get(entity)
-            # As it was but for the reflection probes' captures since (``alike``): drawn again, it
-            # is not published as a new look of its screen (the probes that see the screen
-            # would recapture it, moving the version on that drew it: a loop in a still scene).
+            # As it was but for the captures since of the reflection probes its last drawing may
+            # have sampled (``alike``): drawn again, it is not published as a new look of its
+            # screen (the probes that see the screen would recapture it, moving the version on
+            # that drew it: a loop in a still scene).  A capture of a probe it could not sample
+            # leaves it still (``MonitorPictures.probes_read``).
             alike = kept is not None and _same(key, kept) and pictures.shown_unchanged(entity)
-            still = self.keep_still_pictures and alike and key[2] == kept[2]
+            still = self.keep_still_pictures and alike and pictures.probes_unchanged(entity, self.renderer.probes)
             if still and pictures.repeatable(entity):
                 stats.monitors_kept += 1
                 self.drawn[entity] = frame
@@ -224,7 +236,7 @@ class MonitorSystem(esper.Processor):
                     # (still, but drawn on predicted counts: once more exactly, to keep)
                     views = pictures.draw(entity, view, table if trees else None, monitor.depth, blends,
                                           exact=still, faces=faces, occluded=occluded, reflections=reflections,
-                                          shafts=shafts)
+                                          shafts=shafts, captures=self.renderer.probes)
                 finally:   # (the active camera's images back, whatever the picture's draw raised)
                     if occluded:
                         self.renderer.occlusion.end_picture()
@@ -406,17 +418,17 @@ class MonitorSystem(esper.Processor):
         return faces
 
     def _still_key(self, monitor: Monitor, view: View, table: SurfaceTable | None,
-                   blends: SurfaceBlends) -> tuple[tuple, tuple, int]:
+                   blends: SurfaceBlends) -> tuple[tuple, tuple]:
         """What a monitor's picture shows, as (values compared equal, objects compared as the
-        same object, the reflection probes' captures): the module docstring's list, less the
-        pictures'."""
+        same object): the module docstring's list, less the pictures' and the reflection
+        probes' captures (``MonitorPictures.probes_unchanged`` follows those it may sample)."""
         flows = () if table is None else tuple(state.water.flow.offset for state in table.states
                                                if state.water is not None)
-        captures = self.renderer.probes.moved_on
+        captures = self.renderer.probes.moved_on   # (every probe's: those it samples are followed apart)
         values = (self.renderer.monitors.scene_version - captures, self.renderer.drawing_settings(),
                   view.camera_block(), view.layers, monitor.size, monitor.depth, flows, self._world_version,
                   self.renderer.occlusion.shown, self.renderer.screen_reflections.shown)
-        return values, (table, blends.by_surface), captures
+        return values, (table, blends.by_surface)
 
     @contextmanager
     def _cascades(self, camera: int, eye: glm.vec4) -> Iterator[None]:
@@ -517,8 +529,8 @@ def _same_eyes_from(key: tuple, other: tuple) -> bool:
     return key[0] == other[0] and key[1] is other[1] and key[2] == other[2] and key[3] == other[3]
 
 
-def _same(key: tuple[tuple, tuple, int], other: tuple[tuple, tuple, int]) -> bool:
-    """Two ``_still_key``s agree but for the probes' captures: values equal, objects the same."""
+def _same(key: tuple[tuple, tuple], other: tuple[tuple, tuple]) -> bool:
+    """Two ``_still_key``s agree: values equal, objects the same."""
     return key[0] == other[0] and all(a is b for a, b in zip(key[1], other[1], strict=True))
 
 

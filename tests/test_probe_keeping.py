@@ -336,13 +336,15 @@ def _monitor(world) -> None:
     from components.transform import look_rotation
     from engine.assets.mesh import quad
 
-    lens = world.spawn(Transform(position=(30.0, 1.0, 5.0), rotation=look_rotation((0, 0, -1))),
-                       Camera(fov_y=40.0, active=False))
+    lens = world.resources["lens"] = world.spawn(Transform(position=(30.0, 1.0, 5.0),
+                                                           rotation=look_rotation((0, 0, -1))),
+                                                 Camera(fov_y=40.0, active=False))
     world.resources["subject"] = world.spawn(Transform(position=(30.0, 1.0, 0.0)), MeshRef(box()),
                                              Material(color=(0.1, 0.9, 0.1)))
-    world.spawn(Transform(position=(2.5, 1.0, 0.0), rotation=glm.angleAxis(-1.5708, glm.vec3(0, 1, 0))),
-                MeshRef(quad(2.0, 1.5)), Material(color=(0, 0, 0, 1), roughness=1.0, environment_reflection=0.0),
-                Monitor(camera=lens, size=(16, 12)))
+    world.resources["screen"] = world.spawn(
+        Transform(position=(2.5, 1.0, 0.0), rotation=glm.angleAxis(-1.5708, glm.vec3(0, 1, 0))),
+        MeshRef(quad(2.0, 1.5)), Material(color=(0, 0, 0, 1), roughness=1.0, environment_reflection=0.0),
+        Monitor(camera=lens, size=(16, 12)))
 
 
 def _set(name, kind, field, value):
@@ -436,9 +438,10 @@ CHANGES = {
 
 
 # Scenes whose every-frame probe draws faces in still frames too: a level with a portal (every
-# face that sees a batch, as README says), and a face showing a monitor's screen (its picture
-# is drawn again after each capture, which draws that face again: a face and a picture a frame).
-REDRAWN_STILL = {"portal_closed", "picture_changed"}
+# face that sees a batch, as README says).  (A face showing a monitor's screen settles: the
+# picture is not drawn again for a capture of a probe it cannot sample,
+# test_an_every_frame_probe_seeing_a_screen_draws_nothing_once_both_settled.)
+REDRAWN_STILL = {"portal_closed"}
 
 
 def _cube_faces(runner) -> list[np.ndarray]:
@@ -523,3 +526,164 @@ def test_a_lamp_the_camera_leaves_out_of_the_lights_relights_the_faces_it_lit(sc
     lit = {face for face in range(6) if not np.array_equal(before[face], fresh[face])}
     assert lit and lit <= drawn, (sorted(lit), sorted(drawn))
     assert not _stale_faces(kept, fresh)
+
+
+# --- a probe that sees a monitor's screen: still frames settle, a loop through a chrome ball does not ---
+TOWARDS_SCREEN = 0   # the probe's +X face: the room's screen (``_monitor``) stands 2.5 m that way
+
+
+def _screen_room(world, refresh="every_frame", ball=False) -> None:
+    """The room, its probe (``refresh``) and the screen in its +X face (``_monitor``); with
+    ``ball`` the probe's entity is a chrome ball sampling its own cube (what it reflects is
+    the room, the screen in it), and the monitor's camera stands 1 m from it, looking at it:
+    the picture shows the ball, the ball the picture; with ``ball="box"`` the probe has an
+    influence box over the room instead (no ball): the floor the camera looks at is lit by
+    its irradiance row, and reflects its cube."""
+    from components import Reflective
+    from components.transform import look_rotation
+    from engine.assets.mesh import sphere
+
+    _room_with_probe(world)
+    _monitor(world)
+    # (The box the monitor watches casts no shadow: its move reaches the probe only through
+    # the screen, not through a shadow swept along the sun to the floor's edge.)
+    world.get(world.resources["subject"], MeshRef).casts_shadows = False
+    probe = world.resources["probe"]
+    world.get(probe, ReflectionProbe).refresh = refresh
+    if ball == "box":
+        world.get(probe, ReflectionProbe).influence = (8.0, 4.0, 8.0)
+    elif ball:
+        for component in (MeshRef(sphere(0.3, 16, 8)), Material(color=(1, 1, 1), metallic=1.0, roughness=0.0),
+                          Reflective(mode="cube")):
+            world.add_component(probe, component)
+    if ball:
+        lens = world.get(world.resources["lens"], Transform)
+        lens.position = glm.vec3(0.9, 0.7, 0.5)
+        lens.rotation = look_rotation(glm.vec3(0.0, 0.6, 0.0) - lens.position)
+
+
+def _two_screen_rooms(scene, refresh="every_frame", ball=False, change=None):
+    """Two engines of ``_screen_room``: the first keeps still pictures, the second draws every
+    due picture (``keep_still_pictures`` False: each frame's picture drawn afresh, what the
+    first must equal).  ``change`` (a world's edit) is made in both before their first frame."""
+    runners = []
+    for keep in (True, False):
+        def build(world):
+            _screen_room(world, refresh, ball)
+            if change is not None:
+                change(world)
+        runner = scene(build, (48, 32))
+        _probe_stage(runner).path = "six_pass"
+        runner.engine.stages["monitors"].keep_still_pictures = keep
+        runners.append(runner)
+    return runners
+
+
+def _frame_counts(runner) -> tuple[int, int, int]:
+    """One frame; (probe faces drawn, monitor views drawn, how far the scene's version moved)."""
+    before = runner.engine.renderer.scene_version
+    runner.frame()
+    return runner.stats.probe_faces, runner.stats.monitor_views, runner.engine.renderer.scene_version - before
+
+
+def _picture_and_faces(runner) -> list[np.ndarray]:
+    return [runner.engine.renderer.monitors.read(runner.world.resources["screen"]), *_cube_faces(runner)]
+
+
+def _assert_same(runner, other, what) -> None:
+    for index, (a, b) in enumerate(zip(_picture_and_faces(runner), _picture_and_faces(other), strict=True)):
+        np.testing.assert_array_equal(a, b, err_msg=f"{what}: {'the picture' if index == 0 else f'face {index - 1}'}")
+
+
+def test_an_every_frame_probe_seeing_a_screen_draws_nothing_once_both_settled(scene):
+    """An every-frame probe whose +X face shows a monitor's screen; the monitor's camera, 30 m
+    away, sees nothing that samples the probe (a plain floor, a box: a probe with no
+    influence box lights neither).  Frame 0 captures the screen black and draws the
+    picture; frame 1 recaptures the face showing it; from frame 2 on nothing is drawn, the
+    scene's version stands, the picture is kept.  (Before, each capture moved the version
+    the picture's stillness was judged by, so it was drawn again, and the face showing the
+    new picture too: a face and a picture every frame, the version 2 on.)  Every frame the
+    picture and the six faces are, bit for bit, those of an engine that draws every due
+    picture afresh; the face shows the picture (the subject's green)."""
+    runner, afresh = _two_screen_rooms(scene)
+    counts = []
+    for frame in range(5):
+        counts.append(_frame_counts(runner))
+        afresh.frame()
+        _assert_same(runner, afresh, f"frame {frame}")
+        assert afresh.stats.monitor_views == 1   # (the other draws it every frame)
+    assert [faces for faces, _, _ in counts[2:]] == [0, 0, 0], counts
+    assert [views for _, views, _ in counts[2:]] == [0, 0, 0], counts
+    assert [moved for _, _, moved in counts[2:]] == [0, 0, 0], counts
+    assert runner.stats.monitors_kept == 1
+    face = _cube_faces(runner)[TOWARDS_SCREEN]
+    assert ((face[..., 1] > 2.0 * face[..., 0]) & (face[..., 1] > 0.02)).sum() > 3   # the subject's green
+    assert _Cube(runner).as_if_drawn_whole()
+
+
+@pytest.mark.parametrize("change", ["lens_turned", "subject_moved"])
+def test_a_settled_screen_whose_picture_changes_redraws_the_face_showing_it_as_a_fresh_engine(scene, change):
+    """The settled scene of the test above; then the monitor's camera turns (or the box it
+    watches moves, down and towards it: within the level's box, so the sun's map is fitted
+    as a fresh engine's, ``level_fit_box``; both 30 m out of the probe's reach).
+    That frame the picture is drawn again, and the probe's face showing the screen with it,
+    that face alone, after present (its record holds the picture's version): the next frame
+    samples it.  The frame after, the scheduler hears of the picture and draws the faces the
+    screen's box (and its shadow) may reach as they are; then nothing is drawn again.  The
+    picture and all six faces are then, bit for bit, those of a second engine built with
+    the change made (run as many frames), and the face differs from what it showed before."""
+    def edit(world):
+        if change == "lens_turned":
+            world.get(world.resources["lens"], Transform).rotation = glm.angleAxis(0.12, glm.vec3(0, 1, 0))
+        else:
+            world.get(world.resources["subject"], Transform).position += glm.vec3(0.0, -0.2, 0.6)
+
+    runner = _two_screen_rooms(scene)[0]
+    for _ in range(4):
+        runner.frame()
+    before = _cube_faces(runner)[TOWARDS_SCREEN]
+    drawn = _faces_drawn(_Cube(runner))
+    edit(runner.world)
+    counts = [_frame_counts(runner)]
+    assert counts[0][:2] == (1, 1) and drawn == [TOWARDS_SCREEN], (counts, drawn)
+    counts += [_frame_counts(runner) for _ in range(2)]
+    # (The frame after, the scheduler hears of the picture (``PicturesDrawn``) and counts the
+    # screen's box as a look changed: the faces it and its shadow may reach are drawn again,
+    # as they were; the picture is kept.  Then nothing.)
+    assert counts[1][1] == 0 and counts[2][:2] == (0, 0), counts
+    fresh = _two_screen_rooms(scene, change=edit)[0]
+    for _ in range(7):
+        fresh.frame()
+    _assert_same(runner, fresh, change)
+    assert not np.array_equal(_cube_faces(runner)[TOWARDS_SCREEN], before)
+
+
+@pytest.mark.parametrize("refresh", ["every_frame", "on_change"])
+@pytest.mark.parametrize("sampler", ["ball", "box"])
+def test_a_camera_that_sees_the_probes_reflection_of_its_screen_draws_with_the_probe(scene, refresh, sampler):
+    """The probe's entity is a chrome ball that samples its own cube, and the monitor's
+    camera looks at the ball, whose +X side reflects the screen: the picture shows the
+    probe's capture, the capture shows the picture.  That is a loop, drawn as a camera that
+    sees its own screen is (README: each picture shows the one before): an every-frame
+    probe's face and the picture draw each other every frame, one face and one picture a
+    frame from frame 2 on.  An on-change probe is asked for the face only by a picture
+    drawn as a new look of its screen (``PicturesDrawn``), and the picture drawn again for
+    the probe's capture alone is none: both settle.  Every frame, bit for bit, the picture
+    and the six faces are those of an engine drawing every due picture afresh (a picture
+    kept while the probe it shows was recaptured would differ from frame 2 on), and the
+    picture did change with the probe (frame 2's is not frame 1's: the ball shows the
+    screen's picture).  The same where the probe has an influence box instead and the
+    camera looks at the floor in it (the floor's batch samples the box's probe, and its
+    irradiance row lights the floor: ``MonitorPictures.probes_read`` follows both)."""
+    runner, afresh = _two_screen_rooms(scene, refresh, ball=sampler if sampler == "box" else True)
+    counts, pictures = [], []
+    for frame in range(6):
+        counts.append(_frame_counts(runner))
+        afresh.frame()
+        _assert_same(runner, afresh, f"frame {frame}")
+        pictures.append(_picture_and_faces(runner)[0])
+    assert not np.array_equal(pictures[1], pictures[2])
+    if refresh == "every_frame":
+        assert [count[:2] for count in counts[2:]] == [(1, 1)] * 4, counts
+    else:
+        assert [count[:2] for count in counts[3:]] == [(0, 0)] * 3, counts

@@ -29,6 +29,12 @@ last frame's visibility counts).  What the drawings moved ``Gpu.scene_version`` 
 apart (``scene_version``: the scene's version less the pictures'), so the monitor stage
 can tell a picture whose camera, scene and shown pictures are as they were at its last
 drawing, and keep it rather than draw it again (``MonitorSystem.keep_still_pictures``).
+So are the reflection probes' captures, probe by probe (``ProbeCaptures.moved_by``): a
+drawing notes the probes it may have sampled, with their stamps then (``probes_read``),
+and is as it was while those are (``probes_unchanged``).  A probe the picture could not
+sample is no input of it: were every capture one, an every-frame probe that sees the
+screen would draw the picture again after each capture, and that picture (a new version)
+the probe's face that shows it, a face and a picture every frame of a still scene.
 
 A picture is made black (a GPU hands back new textures holding anything), remade at a new
 size, and let go with its monitor; the batch that samples it keeps it until it goes too."""
@@ -36,6 +42,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
@@ -56,6 +63,9 @@ from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import ViewTree
 from engine.render.views import View
 from engine.resources import VolumetricLamps
+
+if TYPE_CHECKING:
+    from engine.render.probes import ProbeCaptures
 
 MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait a frame: monitors_cut)
 # A picture's light shafts: its camera's VolumetricFog, the lamps it scatters, the sun's or
@@ -80,6 +90,7 @@ class _Picture:
     version: int                     # moved on by each drawing (a number no other picture had)
     shown: dict[int, int] = field(default_factory=dict)   # pictures its last drawing showed: their versions
     repeatable: bool = False         # its last drawing read nothing from the frame before
+    probes: dict[int, int] = field(default_factory=dict)   # probes its last drawing may have sampled: their stamps
     views: list[View] = field(default_factory=list)   # its last drawing's views (the root, its tree's)
 
 
@@ -111,6 +122,33 @@ class MonitorPictures:
         pictures = self._pictures
         return all(other in pictures and pictures[other].version == version
                    for other, version in pictures[entity].shown.items())
+
+    def probes_unchanged(self, entity: int, captures: ProbeCaptures) -> bool:
+        """Whether no probe the last drawing of ``entity``'s picture may have sampled was
+        captured since into anything new (``ProbeCaptures.moved_by``, as ``probes_read`` noted it)."""
+        moved = captures.moved_by
+        return all(moved.get(probe, 0) == count for probe, count in self._pictures[entity].probes.items())
+
+    def probes_read(self, views: list[View], captures: ProbeCaptures) -> dict[int, int]:
+        """The reflection probes a drawing of ``views`` may have sampled, with the stamps of
+        their last captures that moved the version (``ProbeCaptures.moved_by``): the probes
+        of the batches whose instances' boxes reach a view (``batch_reach``, conservative: a
+        batch's probe, its second and the one taking the rest), and every probe with an
+        influence box (``ProbeCaptures.boxed``: its irradiance row lights whatever stands in
+        its box, pixel by pixel, and the mirrors' and portals' fallbacks there show its cube).
+        A probe with no box lights only what samples it (``probe_rules.probe_blend``)."""
+        sampled = set(captures.boxed)
+        batches = [batch for batch in self.renderer.batches.values()
+                   if batch.count and (batch.probe or batch.second_probe or batch.rest_probe)]
+        if batches:
+            by_size: dict[tuple[int, int], list[View]] = {}
+            for view in views:
+                by_size.setdefault(tuple(view.size), []).append(view)
+            for size, group in by_size.items():
+                for reach in batch_reach(group, size, batches):
+                    sampled.update(probe for batch, hit in zip(batches, reach, strict=True) if hit
+                                   for probe in (batch.probe, batch.second_probe, batch.rest_probe) if probe)
+        return {probe: captures.moved_by.get(probe, 0) for probe in sampled}
 
     def last_views(self, entities: set[int]) -> list[View]:
         """The views of the last drawings of ``entities``' pictures (what their cameras saw)."""
@@ -151,7 +189,8 @@ class MonitorPictures:
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
              blends: SurfaceBlends = NO_BLENDS, exact: bool = False,
              faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None, occluded: bool = False,
-             reflections: ScreenReflections | None = None, shafts: PictureShafts | None = None) -> int:
+             reflections: ScreenReflections | None = None, shafts: PictureShafts | None = None,
+             captures: ProbeCaptures | None = None) -> int:
         """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
         pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
         mirrors and portals; ``exact``: its visibility exact whatever ``visibility`` says),
@@ -162,7 +201,8 @@ class MonitorPictures:
         ``reflections``: its camera's ``ScreenReflections`` (``ScreenReflectionPass.begin_picture``;
         None: none, and its images are let go); ``shafts``: its camera's light shafts
         (``VolumetricFogPass.begin_picture``'s settings, lamps, sky light and shares; None: none,
-        and its image is let go).  Returns the views drawn (the root and its tree's)."""
+        and its image is let go).  ``captures``: the probes' (what the drawing notes it may have
+        sampled, ``probes_read``; None: none).  Returns the views drawn (the root and its tree's)."""
         held = self._pictures[entity]
         if view.size != held.size:
             raise ValueError(f"monitor {entity}: a view of {view.size} for a picture of {held.size}")
@@ -206,6 +246,7 @@ class MonitorPictures:
         self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
         held.texture.build_mipmaps()
         held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}
+        held.probes = {} if captures is None else self.probes_read(drawn, captures)
         held.version, held.repeatable, held.views = next(self._versions), repeatable, drawn
         self.renderer.note_scene_change()   # (a screen's picture is what views show: no tree kept over it)
         self._moved_on += self.renderer.scene_version - before

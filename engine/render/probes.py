@@ -645,6 +645,13 @@ class ProbeCaptures:
         self._mips_stale: dict[int, set[int]] = {}
         self.faces_kept = 0  # faces left as they were, the sky alone as before (counted over the run)
         self.moved_on = 0  # what the reflection probes' captures moved Gpu.scene_version on by (capture_probe)
+        # By probe, ``moved_on`` as its last capture that moved the version left it (a stamp:
+        # it only grows, so a probe made again under a dropped one's entity never matches an
+        # old record), and the probes whose last capture had an influence box: what a
+        # monitor's picture read of the probes is theirs alone (``MonitorPictures.probes_read``),
+        # so a capture of a probe its drawing could not sample does not draw it again.
+        self.moved_by: dict[int, int] = {}
+        self.boxed: set[int] = set()
         self.faces_in_part = 0  # faces drawn in part (within the changes' rectangle), over the run
         self.texels_in_part = 0  # the texels those parts covered
 
@@ -736,7 +743,14 @@ class ProbeCaptures:
             if self.irradiance.project(key, cube):
                 self._projected[key] = self._versions.get(key, 0)
         self.renderer.stats.probe_captures += 1
-        self.moved_on += self.renderer.scene_version - before
+        moved = self.renderer.scene_version - before
+        self.moved_on += moved
+        if moved:
+            self.moved_by[key] = self.moved_on
+        if settings.influence is not None:
+            self.boxed.add(key)
+        else:
+            self.boxed.discard(key)
         return path
 
     def capture(self, key: int, views: dict[int, View], surfaces: SurfaceTable | None, depth: int,
@@ -1050,6 +1064,8 @@ class ProbeCaptures:
         self._views.pop(key, None)
         self._projected.pop(key, None)
         self._mips_stale.pop(key, None)
+        self.boxed.discard(key)
+        self.moved_by.pop(key, None)   # (a later probe of this entity stamps past every record of this one)
         self.mips.drop(key)
         self.irradiance.drop(key)
         faces = self._faces.pop(key, None)
