@@ -493,9 +493,11 @@ def fallback_surfaces(states: Sequence[SurfaceState]) -> list[_FallbackSurface]:
     found = []
     for state in states:
         look = surface_look(state)
+        # (no tile: a portal's tile slots carry its carry's translation, as _composite_row's)
+        x, scale, y = look.offset if look.variant.startswith("portal") else (0.0, 0.0, 0.0)
         head, tail = _water_pieces(look) if look.water is not None else (
-            _PIECE_HEAD.pack(0.0, look.tint, 0.0, look.reflect_rate, look.roughness, look.params_z),
-            _PIECE_TAIL.pack(look.normal, 0.0, look.carry))
+            _PIECE_HEAD.pack(x, look.tint, scale, look.reflect_rate, look.roughness, look.params_z),
+            _PIECE_TAIL.pack(look.normal, y, look.carry))
         found.append(_FallbackSurface(head, tail, look.outline, _FALLBACK_IDS.pack(look.entity & 0xFFFFFFFF, 0, 0, 0),
                                       _FALLBACK_WEIGHTS.pack(0.0, 0.0, 1.0, 0.0, look.plane_w, *look.offset),
                                       (look.fallback_variant, look.normal_map, 0, 0), look))
