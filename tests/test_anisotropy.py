@@ -165,3 +165,25 @@ def test_anisotropy_values_are_checked_and_read_from_gltf(tmp_path):
                          material({"anisotropyStrength": 1, "anisotropyTexture": {"index": 0}}), [])
     with pytest.warns(UserWarning, match=r"'brushed'.*anisotropyTexture left out"):
         load_model(textured)
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_a_brushed_ball_in_a_mirror_and_through_a_portal_is_shaded_from_that_views_eye(scene, way):
+    """A brushed metal ball off to the camera's right, seen only in a mirror (or through a
+    portal): its stretched highlight and its bent reflection of the sky are the frame a camera
+    at the mirror's image eye (the eye carried through the portal) draws, turned left for right
+    for the mirror (tests/test_clearcoat.py's assert_shown_as_from_its_eye; the frame from the
+    UVs' derivatives is the same either way round); and the anisotropy is there (the isotropic
+    ball's frame differs)."""
+    from tests.test_clearcoat import assert_shown_as_from_its_eye
+    base = dict(color=(0.9, 0.85, 0.8, 1.0), metallic=1.0, roughness=0.3)
+    assert_shown_as_from_its_eye(scene, dict(base, anisotropy=0.9, anisotropy_direction=30.0), base, way)
+
+
+def test_a_brushed_ball_in_a_probe_face_is_shaded_from_the_probes_centre(scene):
+    """The brushed metal ball off a probe's +X face: the face shows it as a camera at the
+    probe's centre looking that way does, texel by texel (tests/test_clearcoat.py's
+    assert_probe_face_as_from_its_centre); and the anisotropy is there."""
+    from tests.test_clearcoat import assert_probe_face_as_from_its_centre
+    base = dict(color=(0.9, 0.85, 0.8, 1.0), metallic=1.0, roughness=0.3)
+    assert_probe_face_as_from_its_centre(scene, dict(base, anisotropy=0.9, anisotropy_direction=30.0), base)

@@ -211,3 +211,205 @@ def test_a_gltf_ior_and_specular_set_the_reflectance(tmp_path, extensions, refle
     factor = extensions.get("KHR_materials_specular", {}).get("specularFactor", 1.0)
     f0 = [min(((ior - 1) / (ior + 1)) ** 2 * c, 1.0) * factor for c in colour]   # (glTF's, channel by channel)
     assert [0.16 * reflectance ** 2 * t for t in part.specular_color] == pytest.approx(f0, rel=1e-6)
+
+
+# Every view shades from its own eye: a mirror's view from the camera's image in the mirror's
+# plane, a portal's from the eye carried through it.  What stands off to the camera's right
+# (SEEN), out of its own sight, shows in a mirror at MIRROR_AT turned 30 degrees about y; the
+# portal pair's B stands where that mirror does, facing the same way, and the camera before A
+# is the one carried to the mirror's image eye (A turned otherwise, far away): so both
+# reflections show what a camera at IMAGE_EYE looking at MIRROR_AT sees, the mirror's turned
+# left for right.  tests/test_particles.py's in_a_mirror_and_from_its_eye is the model.
+MIRROR_AT = glm.vec3(0.0, 0.0, -2.5)
+MIRROR_TURN = glm.angleAxis(glm.radians(30.0), glm.vec3(0.0, 1.0, 0.0))
+MIRROR_SIZE = (3.0, 2.4)
+CAMERA_EYE = glm.vec3(0.0, 0.0, 1.0)   # (3.5 m before the mirror, looking at its middle)
+SEEN = glm.vec3(2.2, 0.1, -1.3)
+PORTAL_A = glm.vec3(20.0, 0.0, 20.0)
+PORTAL_A_TURN = glm.angleAxis(glm.radians(-75.0), glm.vec3(0.0, 1.0, 0.0))
+EYE_FOV = 40.0
+EYE_SIZE = (64, 48)
+
+
+def mirrored_point(point) -> glm.vec3:
+    """``point``'s image in the mirror's plane."""
+    normal = MIRROR_TURN * glm.vec3(0.0, 0.0, 1.0)
+    return glm.vec3(point) - 2.0 * glm.dot(glm.vec3(point) - MIRROR_AT, normal) * normal
+
+
+IMAGE_EYE = mirrored_point(CAMERA_EYE)
+
+
+def before_portal_a(point) -> glm.vec3:
+    """The point before portal A that the pair carries to ``point`` before B (B's local (x, y, z)
+    is A's (-x, y, -z): spawn_portal_pair)."""
+    half_turn = glm.angleAxis(glm.radians(180.0), glm.vec3(0.0, 1.0, 0.0))
+    at_a = glm.translate(PORTAL_A) * glm.mat4_cast(PORTAL_A_TURN) * glm.mat4_cast(half_turn)
+    return glm.vec3(at_a * glm.inverse(glm.translate(MIRROR_AT) * glm.mat4_cast(MIRROR_TURN)) * glm.vec4(point, 1.0))
+
+
+def seen_object_scene(world, material: dict, mesh=None, turn=None) -> int:
+    """At SEEN: a ball of ``Material(**material)`` (or ``mesh``, turned by ``turn``) before a grey
+    wall, under a sky with some shape and a lamp between it and the mirror's image eye, up and
+    to the side."""
+    towards = glm.normalize(IMAGE_EYE - SEEN)
+    across = glm.normalize(glm.cross(towards, glm.vec3(0.0, 1.0, 0.0)))
+    world.spawn(Skybox(faces=SKY))
+    world.spawn(Transform(position=SEEN - towards * 3.0, rotation=look_rotation(-towards)),
+                MeshRef(quad(40.0, 40.0)), Material(color=(0.15, 0.15, 0.15, 1.0)))
+    world.spawn(Transform(position=SEEN + towards * 1.6 + across * 0.9 + glm.vec3(0.0, 0.9, 0.0)),
+                PointLight(intensity=12.0, range=20.0))
+    shape = mesh if mesh is not None else sphere(0.8, 32, 16)
+    return world.spawn(Transform(position=SEEN, rotation=turn or glm.quat()), MeshRef(shape), Material(**material))
+
+
+def _linear_frame(scene, build, size, path):
+    """The second frame of ``build``'s world (linear, antialiasing off) and its runner."""
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.reflection_system.path = path
+    runner.frame()
+    return srgb_to_linear(runner.frame()), runner
+
+
+def from_its_eye(scene, content, *, path="per_mirror", size=EYE_SIZE) -> np.ndarray:
+    """What ``content(world)`` spawns, seen directly from IMAGE_EYE looking at MIRROR_AT."""
+    def direct(world):
+        look_from(world, tuple(IMAGE_EYE), tuple(MIRROR_AT), fov=EYE_FOV)
+        content(world)
+    return _linear_frame(scene, direct, size, path)[0]
+
+
+def through_a_reflection_and_from_its_eye(scene, content, way, *, path="per_mirror", size=EYE_SIZE, margin=2):
+    """What ``content(world)`` spawns, rendered through ``way`` ("mirror": from CAMERA_EYE;
+    "portal": from the point before A carried to IMAGE_EYE) by the reflection ``path``, and
+    directly from IMAGE_EYE (looking at MIRROR_AT) in a world with neither, turned left for right
+    for a mirror; linear images, the pixels at least ``margin`` in from the mirror's or
+    portal A's outline (by the surface ids), and the reflection's runner."""
+    names: dict = {}
+
+    def reflected(world):
+        if way == "mirror":
+            look_from(world, tuple(CAMERA_EYE), tuple(MIRROR_AT), fov=EYE_FOV)
+            names["surface"] = world.spawn(Transform(position=MIRROR_AT, rotation=MIRROR_TURN),
+                                           MeshRef(quad(*MIRROR_SIZE)), Mirror())
+        else:
+            from engine.assets.portals import spawn_portal_pair
+            look_from(world, tuple(before_portal_a(IMAGE_EYE)), tuple(PORTAL_A), fov=EYE_FOV)
+            names["surface"], _ = spawn_portal_pair(world, PORTAL_A, PORTAL_A_TURN, MIRROR_AT, MIRROR_TURN,
+                                                    size=MIRROR_SIZE)
+        content(world)
+
+    shown, runner = _linear_frame(scene, reflected, size, path)
+    direct = from_its_eye(scene, content, path=path, size=size)
+    assert runner.stats.reflection_views >= 1 and runner.stats.reflection_path == path
+    inside = runner.engine.renderer.targets.read_surface_ids() == names["surface"]
+    for _ in range(margin):
+        shrunk = inside.copy()
+        shrunk[1:, :] &= inside[:-1, :]
+        shrunk[:-1, :] &= inside[1:, :]
+        shrunk[:, 1:] &= inside[:, :-1]
+        shrunk[:, :-1] &= inside[:, 1:]
+        inside = shrunk
+    assert inside.mean() > 0.5, inside.mean()
+    return shown, direct[:, ::-1] if way == "mirror" else direct, inside, runner
+
+
+def assert_shown_as_from_its_eye(scene, material: dict, bare: dict, way: str, *, path="per_mirror",
+                                 mesh=None, turn=None, extra=None, changed: int = 40, by: float = 0.05,
+                                 at_most=(0.01, 0.04)) -> None:
+    """The ball at SEEN of ``material`` (Material's fields; out of the camera's sight) through
+    ``way`` is the frame from the reflection's own eye, pixel by pixel (the 99th percentile and
+    largest difference of a channel within ``at_most``), and the feature is there: at least
+    ``changed`` of those pixels differ by ``by`` from the ``bare`` material's frame from that eye.
+    ``mesh`` and ``turn``: another object than the ball; ``extra(world)`` adds to the scene."""
+    def content(chosen):
+        def build(world):
+            seen_object_scene(world, chosen, mesh, turn)
+            if extra is not None:
+                extra(world)
+        return build
+
+    shown, direct, inside, runner = through_a_reflection_and_from_its_eye(scene, content(material), way, path=path)
+    assert not (0 <= runner.project(SEEN)[0] < runner.size[0])   # (out of the camera's own sight)
+    without = from_its_eye(scene, content(bare), path=path)
+    if way == "mirror":
+        without = without[:, ::-1]
+    there = np.abs(shown - without).max(axis=-1)[inside]
+    assert (there > by).sum() >= changed, (there > by).sum()
+    apart = np.abs(shown - direct).max(axis=-1)[inside]
+    assert np.quantile(apart, 0.99) <= at_most[0] and apart.max() <= at_most[1], (np.quantile(apart, 0.99),
+                                                                                    apart.max())
+
+
+@pytest.mark.parametrize("way, path", [("mirror", "per_mirror"), ("portal", "per_mirror"), ("mirror", "batched"),
+                                       ("portal", "batched")])
+def test_a_coat_in_a_mirror_and_through_a_portal_is_shaded_from_that_views_eye(scene, way, path):
+    """A coated red ball off to the camera's right, seen only in a mirror (or through a portal):
+    its coat's highlight and its sky reflection, Fresnel and all, are the frame a camera at the
+    mirror's image eye (the eye carried through the portal) draws of it, turned left for right for
+    the mirror, by either reflection path; and the coat is there (the bare ball's frame differs)."""
+    base = dict(color=(0.5, 0.08, 0.05, 1.0), roughness=0.9, environment_reflection=0.0)
+    assert_shown_as_from_its_eye(scene, dict(base, clearcoat=1.0, clearcoat_roughness=0.15), base, way, path=path)
+
+
+# A probe face is shaded from the probe's centre: a ball off the probe's +X face, the face
+# against a camera standing at the probe's centre looking +x (90 degrees, square).
+PROBE_BALL = glm.vec3(2.6, 0.2, 0.4)
+PROBE_SIZE = 32
+
+
+def probe_face_and_from_its_centre(scene, material: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Face +X of a probe at the origin (six-pass capture, the ball of ``material`` before a wall
+    and a lamp, under the sky with some shape) and, texel by texel, the pixel of a camera at
+    the probe's centre looking +x whose ray is the texel's direction; both linear.  The main
+    camera stands 6 m back, looking away."""
+    from components import ReflectionProbe
+    from engine.core.cube_faces import face_directions
+
+    def content(world):
+        world.spawn(Skybox(faces=SKY))
+        world.spawn(Transform(position=(7.0, 0.0, 0.0), rotation=look_rotation(glm.vec3(1.0, 0.0, 0.0))),
+                    MeshRef(quad(30.0, 30.0)), Material(color=(0.15, 0.15, 0.15, 1.0)))
+        world.spawn(Transform(position=(1.2, 1.2, 1.3)), PointLight(intensity=10.0, range=20.0))
+        world.spawn(Transform(position=PROBE_BALL), MeshRef(sphere(0.8, 32, 16)), Material(**material))
+
+    def probed(world):
+        look_from(world, (0.0, 0.0, 6.0), (-3.0, 0.0, 6.0), fov=EYE_FOV)
+        world.probe = world.spawn(Transform(), ReflectionProbe(resolution=PROBE_SIZE, refresh="once"))
+        content(world)
+
+    def direct(world):
+        look_from(world, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), fov=90.0)
+        content(world)
+
+    runner = scene(probed, (16, 16))
+    runner.engine.stages["probes"].path = "six_pass"
+    runner.frame()
+    assert runner.stats.probe_faces == 6 and runner.stats.probe_path == "six_pass"
+    face = runner.engine.renderer.probes.read_face(runner.world.probe, 0).astype(np.float64)
+    seen, camera = _linear_frame(scene, direct, (PROBE_SIZE, PROBE_SIZE), "per_mirror")
+    _, rays = pixel_rays(camera.engine.main_view, (PROBE_SIZE, PROBE_SIZE))
+    nearest = np.argmax(face_directions(0, PROBE_SIZE).reshape(-1, 3) @ rays.reshape(-1, 3).T, axis=1)
+    return face, seen.reshape(-1, 3)[nearest].reshape(face.shape)
+
+
+def assert_probe_face_as_from_its_centre(scene, material: dict, bare: dict, *, changed: int = 20,
+                                         by: float = 0.05) -> None:
+    """The probe's face showing the ball of ``material`` is the frame from the probe's centre
+    (linear, the face's float against the frame's 8 bits: within 0.01, 99th percentile, and
+    0.04), and the feature is there: ``changed`` texels differ by ``by`` from ``bare``'s face."""
+    face, seen = probe_face_and_from_its_centre(scene, material)
+    without, _ = probe_face_and_from_its_centre(scene, bare)
+    there = np.abs(np.clip(face, 0.0, 1.0) - np.clip(without, 0.0, 1.0)).max(axis=-1)
+    assert (there > by).sum() >= changed, (there > by).sum()
+    apart = np.abs(np.clip(face, 0.0, 1.0) - seen).max(axis=-1)
+    assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())
+
+
+def test_a_coat_in_a_probe_face_is_shaded_from_the_probes_centre(scene):
+    """A coated red ball off a probe's +X face: the face shows it (its coat's highlight, its sky
+    reflection and Fresnel) as a camera at the probe's centre looking that way does, texel by
+    texel; and the coat is there (the bare ball's face differs)."""
+    base = dict(color=(0.5, 0.08, 0.05, 1.0), roughness=0.9, environment_reflection=0.0)
+    assert_probe_face_as_from_its_centre(scene, dict(base, clearcoat=1.0, clearcoat_roughness=0.15), base)

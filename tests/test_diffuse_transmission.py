@@ -93,3 +93,21 @@ def test_a_gltf_diffuse_transmission_is_read_and_bad_values_refused(tmp_path):
         Material(diffuse_transmission_color=(2.0, 0.0, 0.0))
     with pytest.raises(ComponentValueError, match="Material.diffuse_transmission"):
         Material(diffuse_transmission=-0.1)
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_a_sheet_in_a_mirror_and_through_a_portal_shows_the_side_that_views_eye_sees(scene, way):
+    """A sheet off to the camera's right, parallel to a mirror (its front towards the camera, its
+    back towards the camera's image in the mirror), a lamp before each side: seen only in the
+    mirror (or through a portal), it shows its back, lit by the back's lamp and by the front's
+    through it, as the frame a camera at the mirror's image eye (the eye carried through the
+    portal) draws, turned left for right for the mirror (tests/test_clearcoat.py's
+    assert_shown_as_from_its_eye); and the transmission is there (the opaque sheet's differs)."""
+    from tests.test_clearcoat import MIRROR_TURN, SEEN, assert_shown_as_from_its_eye
+
+    def front_lamp(world):
+        world.spawn(Transform(position=SEEN + MIRROR_TURN * glm.vec3(0.3, 0.5, 1.2)),
+                    PointLight(intensity=8.0, range=20.0))
+    base = dict(color=(*COLOUR, 1.0), roughness=0.6, double_sided=True)
+    through = dict(base, diffuse_transmission=0.6, diffuse_transmission_color=(0.3, 0.9, 0.4))
+    assert_shown_as_from_its_eye(scene, through, base, way, mesh=quad(1.8, 1.8), turn=MIRROR_TURN, extra=front_lamp)

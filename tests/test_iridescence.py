@@ -122,3 +122,25 @@ def test_iridescence_values_are_checked_and_read_from_gltf(tmp_path):
                          material({"iridescenceFactor": 1, "iridescenceThicknessTexture": {"index": 0}}), [])
     with pytest.warns(UserWarning, match=r"'bubble'.*iridescenceThicknessTexture left out"):
         load_model(textured)
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_a_film_in_a_mirror_and_through_a_portal_is_coloured_by_that_views_angle(scene, way):
+    """A black ball with a film off to the camera's right, seen only in a mirror (or through a
+    portal): its colours, which turn with n.v, are the frame a camera at the mirror's image eye
+    (the eye carried through the portal) draws, turned left for right for the mirror
+    (tests/test_clearcoat.py's assert_shown_as_from_its_eye); and the film is there (the bare
+    ball's frame differs)."""
+    from tests.test_clearcoat import assert_shown_as_from_its_eye
+    base = dict(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3)
+    assert_shown_as_from_its_eye(scene, dict(base, iridescence=1.0, iridescence_thickness=450.0), base, way, by=0.01)
+
+
+def test_a_film_in_a_probe_face_is_coloured_by_the_angle_from_the_probes_centre(scene):
+    """The black ball with a film off a probe's +X face: the face shows its colours as a camera
+    at the probe's centre looking that way does, texel by texel (tests/test_clearcoat.py's
+    assert_probe_face_as_from_its_centre); and the film is there."""
+    from tests.test_clearcoat import assert_probe_face_as_from_its_centre
+    base = dict(color=(0.0, 0.0, 0.0, 1.0), roughness=0.3)
+    assert_probe_face_as_from_its_centre(scene, dict(base, iridescence=1.0, iridescence_thickness=450.0), base,
+                                         by=0.01)

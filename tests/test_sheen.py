@@ -194,3 +194,24 @@ def test_a_gltf_sheen_reaches_the_material(tmp_path):
                          material({"sheenColorFactor": [1, 1, 1], "sheenColorTexture": {"index": 0}}), [])
     with pytest.warns(UserWarning, match=r"'velvet'.*sheenColorTexture left out"):
         load_model(textured)
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_a_sheen_in_a_mirror_and_through_a_portal_is_shaded_from_that_views_eye(scene, way):
+    """A dark ball with a sheen off to the camera's right, seen only in a mirror (or through a
+    portal): its sheen, brightest where the ball turns away from the eye, is the frame a camera
+    at the mirror's image eye (the eye carried through the portal) draws, turned left for right
+    for the mirror (tests/test_clearcoat.py's assert_shown_as_from_its_eye); and the sheen is
+    there (the bare ball's frame differs)."""
+    from tests.test_clearcoat import assert_shown_as_from_its_eye
+    base = dict(color=(0.06, 0.06, 0.1, 1.0), roughness=0.9, environment_reflection=0.0)
+    assert_shown_as_from_its_eye(scene, dict(base, sheen_color=(0.9, 0.7, 0.3), sheen_roughness=0.4), base, way)
+
+
+def test_a_sheen_in_a_probe_face_is_shaded_from_the_probes_centre(scene):
+    """The sheened ball off a probe's +X face: the face shows it as a camera at the probe's
+    centre looking that way does, texel by texel (tests/test_clearcoat.py's
+    assert_probe_face_as_from_its_centre); and the sheen is there."""
+    from tests.test_clearcoat import assert_probe_face_as_from_its_centre
+    base = dict(color=(0.06, 0.06, 0.1, 1.0), roughness=0.9, environment_reflection=0.0)
+    assert_probe_face_as_from_its_centre(scene, dict(base, sheen_color=(0.9, 0.7, 0.3), sheen_roughness=0.4), base)

@@ -7,6 +7,7 @@ offset and their pixels stay as near it as one sample's are."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from components import DirectionalLight, Material, MeshRef, Skybox, Transform
 from engine.assets.mesh import plane, sphere
@@ -91,3 +92,16 @@ def test_a_flat_surface_keeps_its_highlight(scene):
     assert bright.sum() > 50
     step = np.abs(srgb_to_linear(np.clip(np.round(linear_to_srgb8(expected[bright])) + 1.5, 0, 255)) - expected[bright])
     assert np.abs(shown[floor][bright] - expected[bright]).max() <= step.max() + 0.01
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_a_small_balls_highlight_in_a_mirror_and_through_a_portal_is_from_that_views_eye(scene, way):
+    """A small glossy black ball off to the camera's right, seen only in a mirror (or through a
+    portal): its tight highlight (its roughness widened by the normal's change over each of the
+    view's own pixels) is the frame a camera at the mirror's image eye (the eye carried through
+    the portal) draws, turned left for right for the mirror (tests/test_clearcoat.py's
+    assert_shown_as_from_its_eye); and the highlight is there (the unreflecting ball's differs)."""
+    from tests.test_clearcoat import assert_shown_as_from_its_eye
+    base = dict(color=(0.0, 0.0, 0.0, 1.0), roughness=0.35, environment_reflection=0.0)
+    assert_shown_as_from_its_eye(scene, base, dict(base, reflectance=0.0), way, mesh=sphere(0.4, 24, 12), changed=5,
+                                 by=0.01)

@@ -402,3 +402,20 @@ def test_a_candle_lit_from_behind_glows_without_an_edge(scene):
     assert body[:, inside].mean() > plain[rows][:, inside, 0].mean() + 0.01
     steps = np.abs(np.diff(body[:, inside], axis=1))
     assert steps.max() < 0.012, steps.max()
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_a_subsurface_ball_in_a_mirror_and_through_a_portal_is_shaded_from_that_views_eye(scene, way):
+    """A skin-coloured ball off to the camera's right, seen only in a mirror (or through a
+    portal): its light scattered past the terminator (by the curvature each view finds from its
+    own pixels) and its highlight are the frame a camera at the mirror's image eye (the eye
+    carried through the portal) draws, turned left for right for the mirror
+    (tests/test_clearcoat.py's assert_shown_as_from_its_eye); and the scattering is there (the
+    plain ball's frame differs)."""
+    from tests.test_clearcoat import IMAGE_EYE, SEEN, assert_shown_as_from_its_eye
+
+    def side_lamp(world):   # (across the way to the image eye: the terminator down the ball's middle)
+        across = glm.normalize(glm.cross(IMAGE_EYE - SEEN, glm.vec3(0.0, 1.0, 0.0)))
+        world.spawn(Transform(position=SEEN - across * 1.5), PointLight(intensity=8.0, range=20.0))
+    base = dict(color=(0.9, 0.6, 0.5, 1.0), roughness=0.4)
+    assert_shown_as_from_its_eye(scene, dict(base, subsurface=1.0, subsurface_scale=0.3), base, way, extra=side_lamp)
