@@ -2,7 +2,7 @@
 the way's length each level's seen image carries (against ray casts through a mirror and a
 portal), the lens's radii against ``engine/rules/lens_rules.py``, the picture's blur where the
 lens says (a mirror's frame against its reflection), the two layers at an edge, autofocus
-through a mirror, and the component's checks."""
+through a mirror and a portal, and the component's checks."""
 from __future__ import annotations
 
 import math
@@ -598,3 +598,39 @@ def test_every_pixel_of_the_sample_level_has_a_way_no_shorter_than_its_first_sur
     finally:
         capture.release()
         engine.close()
+
+
+def test_autofocus_through_a_portal_focuses_on_what_lies_beyond_its_partner(scene):
+    """Autofocus at the middle of portal a, which shows a wall 4 m beyond its partner b (10 m
+    to the side, turned 90 degrees): the focus is the way cast here in float64 at the focus
+    pixel (the eye to a's plane, then carried through the pair, b to the wall), about 10 m, not
+    a's 6 m; the wall's pixels there are the wall's through a."""
+    ents = {}
+
+    def build(world):
+        lit(world)
+        camera = look_from(world, (0.0, 1.5, 6.0), (0, 1.5, 0))
+        world.add_component(camera, DepthOfField(autofocus=True, f_stop=1.4, focal_length=85.0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), TURN_Y_90)
+        ents["wall"] = world.spawn(Transform(position=(14.0, 1.5, 0.0), rotation=glm.angleAxis(-glm.pi() / 2,
+                                                                                               glm.vec3(0, 1, 0))),
+                                   MeshRef(quad(6, 6)), Material(color=(0.9, 0.9, 0.9), texture=checker_texture(64, 8)),
+                                   Emissive(0.5))
+
+    runner = scene(build, SIZE)
+    runner.frame()
+    col, gl_row = focus_pixel((0.5, 0.5), SIZE)
+    row = SIZE[1] - 1 - gl_row
+    targets = runner.engine.renderer.targets
+    assert targets.read_ids()[row, col] == ents["wall"]
+    assert targets.read_surface_ids()[row, col] == ents["a"]
+    eye, d = pixel_rays(runner.engine.main_view, SIZE)
+    ray = d[row, col]
+    t1 = -eye[2] / ray[2]
+    world = runner.world
+    carry = np.array(pair_transform(world.get(ents["a"], Transform).world, world.get(ents["b"], Transform).world))
+    carried = carry[:3, :3] @ (eye + ray * t1) + carry[:3, 3]
+    direction = carry[:3, :3] @ ray
+    t2 = (14.0 - carried[0]) / direction[0]   # the wall: the plane x = 14
+    assert 9.5 < t1 + t2 < 10.5
+    assert runner.engine.renderer.present_pass.depth_of_field.focused() == pytest.approx(t1 + t2, rel=1e-4)

@@ -101,3 +101,52 @@ def test_values_are_checked():
                        ("halo", float("nan")), ("fringe", 0.1)):
         with pytest.raises(ComponentValueError, match=f"LensFlare.{field}"):
             LensFlare(**{field: bad})
+
+
+def test_a_light_seen_only_in_a_mirror_throws_its_ghosts_from_its_reflection(scene):
+    """The ball hidden from the camera (``Visibility(direct=False)``) but shown by a mirror:
+    the flare is made of the finished picture's bloom, so its ghosts stand where the
+    geometry throws them from the ball's reflection (the ball mirrored in the glass's plane
+    and projected; the ids there say the ball, on the mirror, its only pixels)."""
+    from components import Mirror, Visibility
+    from engine.assets.mesh import quad
+
+    ball, image = (1.6, 1.0, 2.0), (1.6, 1.0, -2.0)   # its reflection in the plane z = 0
+
+    def frame(flare):
+        ents = {}
+
+        def build(world):
+            camera = look_from(world, (0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov=60.0)
+            world.add_component(camera, Bloom(intensity=0.2, threshold=2.0))
+            if flare:
+                world.add_component(camera, LensFlare(intensity=2.0, ghosts=4, ghost_spacing=0.3, halo=0.0,
+                                                      fringe=0.0))
+            world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+            ents["mirror"] = world.spawn(Transform(), MeshRef(quad(7.0, 5.0)), Material(), Mirror())
+            ents["ball"] = world.spawn(Transform(position=ball), MeshRef(sphere(0.1)),
+                                       Material(color=(1.0, 1.0, 1.0), unlit=True), Emissive(power=60.0),
+                                       Visibility(direct=False))
+        runner = scene(build, SIZE)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        return srgb_to_linear(runner.frame()) @ np.array([0.2126, 0.7152, 0.0722]), runner, ents
+
+    plain, runner, ents = frame(False)
+    flared, _, _ = frame(True)
+    added = flared - plain
+    col, row = runner.project(image)
+    assert runner.ids()[row, col] == ents["ball"]
+    assert runner.engine.renderer.targets.read_surface_ids()[row, col] == ents["mirror"]
+    light = np.array([(col + 0.5) / SIZE[0], 1.0 - (row + 0.5) / SIZE[1]])
+    places = [p for p in ghost_places(light, 4, 0.3) if np.all((p > 0.03) & (p < 0.97))]
+    assert len(places) >= 2, places
+    for p in places:
+        row, col = int((1.0 - p[1]) * SIZE[1]), int(p[0] * SIZE[0])
+        window = added[max(row - 8, 0):row + 9, max(col - 8, 0):col + 9]
+        assert window.max() > 20.0 * max(np.median(added), 1e-4), (row, col, window.max())   # (the glow's wider)
+        peak = np.unravel_index(np.argmax(window), window.shape)
+        assert abs(peak[0] - min(row, 8)) <= 3 and abs(peak[1] - min(col, 8)) <= 3, (row, col, peak)
+    # (what blooms is the reflection only: every pixel of the ball is on the mirror)
+    shown = runner.ids() == ents["ball"]
+    assert shown.sum() >= 5 and (runner.engine.renderer.targets.read_surface_ids()[shown] == ents["mirror"]).all()

@@ -794,3 +794,48 @@ def test_a_lamp_seen_only_in_a_mirror_glows_there(scene):
     gain = (glowing - plain).sum(axis=2)
     assert gain[near].mean() > 20, gain[near].mean()
     assert np.abs(glowing[:16, :16] - plain[:16, :16]).max() <= 2
+
+
+def test_a_lamp_seen_only_through_a_portal_glows_there(scene):
+    """As in a mirror, through a portal: a lamp beyond the partner (behind the camera, out of
+    its view) shows through the near portal, which the ids and surface ids say, and glows
+    round its image there (the neighbouring pixels brighter than without Bloom); far from it
+    the frame is as without."""
+    from components import DirectionalLight, Emissive, Material, MeshRef
+    from engine.assets.mesh import plane, sphere
+    from engine.assets.portals import spawn_portal_pair
+    from tests.support import look_from
+
+    ents = {}
+
+    def build(bloom: bool):
+        def make(world) -> None:
+            camera = look_from(world, (0.0, 1.2, 4.0), (0.0, 1.2, 0.0))
+            world.add_component(camera, Tonemap(curve="none"))
+            if bloom:
+                world.add_component(camera, Bloom(intensity=0.5, threshold=1.0, composite="additive"))
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=1.0))
+            world.spawn(Transform(), MeshRef(plane(10, 10)), Material(color=(0.3, 0.3, 0.3)))
+            # a faces the camera; b stands 30 m behind it, looking away (+z), its world beyond out of view
+            ents["a"], ents["b"] = spawn_portal_pair(world, (0.0, 1.2, -2.0), None, (0.0, 1.2, 30.0), None,
+                                                     size=(3.0, 2.2))
+            ents["lamp"] = world.spawn(Transform(position=(-0.4, 1.1, 33.0)), MeshRef(sphere(0.2)),
+                                       Material(color=(1.0, 0.9, 0.7)), Emissive(20.0))
+        return make
+
+    runs = {}
+    for bloom in (False, True):
+        runner = scene(build(bloom), (192, 128))
+        runner.engine.renderer.antialias = "off"
+        runs[bloom] = (runner.frame().astype(int), runner.ids(), runner.engine.renderer.targets.read_surface_ids())
+    (plain, ids, surfaces), (glowing, _, _) = runs[False], runs[True]
+    lit = ids == ents["lamp"]
+    assert 5 <= lit.sum() < 200, lit.sum()
+    assert (surfaces[lit] == ents["a"]).all()   # seen through a, and only there
+    rows, columns = np.nonzero(lit)
+    near = np.zeros_like(lit)
+    near[max(rows.min() - 6, 0):rows.max() + 7, max(columns.min() - 6, 0):columns.max() + 7] = True
+    near &= ~lit
+    gain = (glowing - plain).sum(axis=2)
+    assert gain[near].mean() > 20, gain[near].mean()
+    assert np.abs(glowing[:16, :16] - plain[:16, :16]).max() <= 2
