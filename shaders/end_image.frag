@@ -44,5 +44,6 @@ void main() {
     out_color = vec4(textureLod(history, clamp(uv, 0.0, 1.0), 0.0).rgb, 1.0);
     out_surface = 0u;
     out_seen = seen_at(held ? surface : NO_END_IMAGE,
-                       length(on_surface - ray_eye(camera.eye.xyz, view_axis(camera.view_proj), on_surface)));
+                       length(on_surface - ray_eye(camera.eye.xyz, view_axis(camera.view_proj), on_surface))
+                       * way_scale(camera.view_proj));
 }

@@ -114,6 +114,7 @@ uniform vec4 probe2_box_max;
 flat in uvec4 v_ids;       // x: the surface's entity; y: its end view + 1 (0: not an end view)
 flat in vec4 v_weights;    // x, y: the probes' weights (the sky has the rest); z: the fallback's share
 flat in vec4 v_place;      // x: the plane's w; yzw: a portal's offset to beyond its partner
+flat in float v_way_scale; // the parent view's metres in the root's (view_axis.glsl way_scale)
 
 // The surface's environment along ``ray`` from ``p``: the probes by their weights and the sky
 // (its share of the fog out from ``p``) taking what is left of 1, each read at its level for
@@ -346,7 +347,7 @@ void main() {
     if (seen_pair.r == NO_END_IMAGE) discard;  // an end view's pixel last frame's image did not hold
     out_seen = carried_seen(seen_pair);
 #else
-    out_seen = seen_at(v_ids.x, length(at - eye));  // nothing followed: the surface itself, as its scene pass wrote it
+    out_seen = seen_at(v_ids.x, length(at - eye) * v_way_scale);  // nothing followed: the surface itself, as its scene pass wrote it
 #endif
 #ifdef COMPOSITE_PORTAL
 #ifdef COMPOSITE_FALLBACK

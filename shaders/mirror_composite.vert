@@ -16,6 +16,7 @@ in vec4 in_params;           // reflect_rate, roughness, the surface plane's w (
 in vec4 in_normal;           // xyz: the mirror's normal, world, facing the parent eye; w: tile y
 in mat3 in_carry;            // a portal's rotation: directions here -> beyond the partner
 #include "composite_bent.glsl"
+#include "view_axis.glsl"
 
 flat out vec4 v_rect;
 flat out mat4 v_inv_view_proj;
@@ -44,6 +45,7 @@ layout(std140) uniform FallbackRows {
 flat out uvec4 v_ids;
 flat out vec4 v_weights;
 flat out vec4 v_place;
+flat out float v_way_scale;  // the parent view's metres in the root's (view_axis.glsl way_scale)
 #endif
 
 uniform vec2 parent_size;     // pixels of the level composited into
@@ -117,6 +119,7 @@ void main() {
     v_ids = fallback_ids[gl_InstanceID];
     v_weights = fallback_weights[2 * gl_InstanceID];
     v_place = fallback_weights[2 * gl_InstanceID + 1];
+    v_way_scale = way_scale(inverse(in_inv_view_proj));
 #endif
 #ifdef COMPOSITE_BENT
     mat4 view_proj = inverse(in_inv_view_proj);

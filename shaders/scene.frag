@@ -148,10 +148,11 @@ bool dropped_pixel = false;
 // INSTANCED_VIEWS build or scene_layered.geom says which view (node index and eye) each
 // triangle was drawn for.
 flat in uint v_node;
-flat in vec3 v_eye;
+flat in vec4 v_eye;      // w: its way_scale (view_axis.glsl)
 flat in vec3 v_eye_axis;  // its axis where it is orthographic (0: perspective; view_axis.glsl)
 #define node_index v_node
-#define VIEW_POINT v_eye
+#define VIEW_POINT v_eye.xyz
+#define VIEW_WAY_SCALE v_eye.w
 #define VIEW_AXIS v_eye_axis
 #ifdef FOG
 flat in vec4 v_clip;
@@ -160,6 +161,7 @@ flat in vec4 v_clip;
 #else
 #define node_index camera.skip.w  // the view's index in its tree (camera.glsl)
 #define VIEW_POINT camera.eye.xyz
+#define VIEW_WAY_SCALE way_scale(camera.view_proj)
 #define VIEW_AXIS view_axis(camera.view_proj)
 #define VIEW_ENTRY camera.clip_plane
 #endif
@@ -1031,7 +1033,7 @@ void main() {
     // its colour is never seen, so only its depth and ids count (the claims below read them).
     out_color = vec4(0.0, 0.0, 0.0, 1.0);
     out_surface = v_slots.w;
-    out_seen = SEEN(v_slots.w, length(v_world_pos - ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos)));
+    out_seen = SEEN(v_slots.w, length(v_world_pos - ray_eye(VIEW_POINT, VIEW_AXIS, v_world_pos)) * VIEW_WAY_SCALE);
     out_node = node_index;
     DISCARD_DROPPED();
     return;
@@ -1255,7 +1257,7 @@ void main() {
 #endif
     out_color = vec4(hdr_store(color), alpha);
     out_surface = v_slots.w;
-    out_seen = SEEN(v_slots.w, length(v_world_pos - VIEW_EYE));
+    out_seen = SEEN(v_slots.w, length(v_world_pos - VIEW_EYE) * VIEW_WAY_SCALE);
     out_node = node_index;
     DISCARD_DROPPED();
 }

@@ -30,7 +30,7 @@ invariant gl_Position;
 #include "views_block.glsl"
 #include "view_axis.glsl"
 flat out uint v_node;     // the view's node index, its eye and axis (scene.frag's BATCHED_VIEWS inputs)
-flat out vec3 v_eye;
+flat out vec4 v_eye;      // w: the view's way_scale (view_axis.glsl)
 flat out vec3 v_eye_axis;
 #ifdef FOG
 flat out vec4 v_clip;     // the view's clip plane: where its rays enter it (fog.glsl)
@@ -177,7 +177,7 @@ void main() {
     gl_ClipDistance[CLIP_RECT_BOTTOM] = gl_Position.y - v.rect.y * gl_Position.w;
     gl_ClipDistance[CLIP_RECT_TOP] = v.rect.w * gl_Position.w - gl_Position.y;
     v_node = v.node.x;
-    v_eye = v.eye.xyz;
+    v_eye = vec4(v.eye.xyz, way_scale(v.view_proj));
     v_eye_axis = view_axis(v.view_proj);
 #ifdef FOG
     v_clip = v.clip_plane;

@@ -50,7 +50,7 @@ flat out vec4 v_reflect;
 flat out vec4 v_tint;
 flat out uvec4 v_slots;
 flat out uint v_node;
-flat out vec3 v_eye;
+flat out vec4 v_eye;      // w: the view's way_scale (view_axis.glsl)
 flat out vec3 v_eye_axis;  // the view's axis where it is orthographic (view_axis.glsl; 0: perspective)
 #ifdef FOG
 flat out vec4 v_clip;  // the view's clip plane: where its rays enter it, for the fog (fog.glsl)
@@ -85,7 +85,7 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     v_vertex_color = g_vertex_color[c];
 #endif
     v_node = v.node.x;
-    v_eye = v.eye.xyz;
+    v_eye = vec4(v.eye.xyz, way_scale(v.view_proj));
     v_eye_axis = view_axis(v.view_proj);
 #ifdef FOG
     v_clip = v.clip_plane;

@@ -600,11 +600,19 @@ def test_every_pixel_of_the_sample_level_has_a_way_no_shorter_than_its_first_sur
         engine.close()
 
 
-def test_autofocus_through_a_portal_focuses_on_what_lies_beyond_its_partner(scene):
+@pytest.mark.parametrize("path, target", [("per_mirror", "wall"), ("batched", "wall"),
+                                          ("per_mirror", "cut_mirror")])
+@pytest.mark.parametrize("scale", [1.0, 2.0])
+def test_autofocus_through_a_portal_focuses_on_what_lies_beyond_its_partner(scene, scale, path, target):
     """Autofocus at the middle of portal a, which shows a wall 4 m beyond its partner b (10 m
     to the side, turned 90 degrees): the focus is the way cast here in float64 at the focus
     pixel (the eye to a's plane, then carried through the pair, b to the wall), about 10 m, not
-    a's 6 m; the wall's pixels there are the wall's through a."""
+    a's 6 m; the wall's pixels there are the wall's through a.  With b scaled 2 the pair shows
+    the wall half as far beyond a (the image's way, 6 + 4 / 2 m: the carried ray's parameter,
+    its direction twice as long), not the carried eye's 2 x 6 + 4; on either path (the batched
+    one reads the view's scale from its row of the Views block).  "cut_mirror": a mirror
+    switched off stands there, drawn as its fallback over the portal's view, whose way is the
+    way to its glass."""
     ents = {}
 
     def build(world):
@@ -612,13 +620,17 @@ def test_autofocus_through_a_portal_focuses_on_what_lies_beyond_its_partner(scen
         camera = look_from(world, (0.0, 1.5, 6.0), (0, 1.5, 0))
         world.add_component(camera, DepthOfField(autofocus=True, f_stop=1.4, focal_length=85.0))
         ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 0), None, (10, 1.5, 0), TURN_Y_90)
+        world.get(ents["b"], Transform).scale = glm.vec3(scale)
         ents["wall"] = world.spawn(Transform(position=(14.0, 1.5, 0.0), rotation=glm.angleAxis(-glm.pi() / 2,
                                                                                                glm.vec3(0, 1, 0))),
                                    MeshRef(quad(6, 6)), Material(color=(0.9, 0.9, 0.9), texture=checker_texture(64, 8)),
-                                   Emissive(0.5))
+                                   *([Mirror(enabled=False)] if target == "cut_mirror" else [Emissive(0.5)]))
 
     runner = scene(build, SIZE)
+    runner.engine.reflection_system.path = path
     runner.frame()
+    stats = runner.engine.renderer.stats
+    assert stats.reflection_path == path and (stats.reflection_fallbacks > 0) == (target == "cut_mirror")
     col, gl_row = focus_pixel((0.5, 0.5), SIZE)
     row = SIZE[1] - 1 - gl_row
     targets = runner.engine.renderer.targets
@@ -631,6 +643,6 @@ def test_autofocus_through_a_portal_focuses_on_what_lies_beyond_its_partner(scen
     carry = np.array(pair_transform(world.get(ents["a"], Transform).world, world.get(ents["b"], Transform).world))
     carried = carry[:3, :3] @ (eye + ray * t1) + carry[:3, 3]
     direction = carry[:3, :3] @ ray
-    t2 = (14.0 - carried[0]) / direction[0]   # the wall: the plane x = 14
-    assert 9.5 < t1 + t2 < 10.5
+    t2 = (14.0 - carried[0]) / direction[0]   # the wall: the plane x = 14 (in the ray's parameter: a's metres)
+    assert 6.0 + 4.0 / scale - 0.5 < t1 + t2 < 6.0 + 4.0 / scale + 0.5
     assert runner.engine.renderer.present_pass.depth_of_field.focused() == pytest.approx(t1 + t2, rel=1e-4)

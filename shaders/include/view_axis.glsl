@@ -11,6 +11,16 @@ vec3 view_axis(mat4 view_proj) {
                            vec3(view_proj[0][1], view_proj[1][1], view_proj[2][1])));
 }
 
+// How long a metre of a view's world is in its tree root's: a view beyond portals of two
+// sizes sees that world scaled by their ratio k (its view matrix scales by 1 / k), which a
+// perspective view-projection's fourth row keeps (its xyz is the axis over the scale);
+// mirrors keep lengths (1).  The light's way (way.glsl) is measured in the root's metres by
+// it, the image's distance.  An orthographic view's fourth row holds no scale: 1.
+float way_scale(mat4 view_proj) {
+    float s = length(vec3(view_proj[0][3], view_proj[1][3], view_proj[2][3]));
+    return s > 1e-5 ? s : 1.0;
+}
+
 // Where the view's ray to ``p`` starts: a perspective view's eye (``axis`` 0); an
 // orthographic view's rays are parallel to its axis, each from the plane across it through
 // its eye.  The direction towards the viewer and the air a ray crosses follow from it.

@@ -5,8 +5,10 @@
 // moved on the picture since the last frame by its own motion (float bits, in the
 // picture's widths and heights: now less then), which a two-channel image drops.  A mirror or portal view's camera is the eye carried through every surface
 // before it (reflected, or moved to beyond the partner), so the distance from a view's eye
-// to what it shows is the whole way's length: eye to the first surface, on through each.  It
-// is the image's distance, which depth of field focuses by (engine/rules/lens_rules.py).
+// to what it shows is the whole way's length: eye to the first surface, on through each, in
+// the root view's metres (beyond portals of two sizes a view's metres are their ratio's:
+// view_axis.glsl way_scale).  It is the image's distance, which depth of field focuses by
+// (engine/rules/lens_rules.py), and where motion blur and TAA find the point a pixel shows.
 // The scene pass writes it for what it draws opaque (glass leaves it: what shows through
 // keeps its way), the sky SKY_WAY (lens_rules), a composite its view's pair whole, and a
 // surface with no view of its own (a fallback, an end image) the way to the surface itself.
