@@ -528,3 +528,29 @@ def test_a_batched_level_under_the_water_sees_its_underside_as_the_per_mirror_le
     panel = (colour[:, 0] > 0.6) & (colour[:, 1] > 0.6) & (colour[:, 2] < 0.3)
     floor = out["batched"]["names"][out["opening"]] == "floor"
     assert panel.sum() > 20 and floor.sum() > 1000, (panel.sum(), floor.sum())
+
+
+def test_a_level_the_screen_effects_reach_is_drawn_view_by_view_and_says_so(scene):
+    """Ambient occlusion reaching the reflection levels (``AmbientOcclusion.reflection_depth``)
+    reads and writes images of each view, which the batched builds do not: asked for
+    "batched", those levels are drawn view by view, as many passes as the per-mirror path's,
+    and the stats say "per_mirror", as drawn; the levels past its reach batch again ("mixed":
+    the third level's nine views one pass, eight fewer)."""
+    from components import AmbientOcclusion
+
+    def occluded(reach):
+        def build(world):
+            hall({}, sphere_detail=None)(world)
+            for entity, _ in world.query_one(Camera):
+                world.add_component(entity, AmbientOcclusion(reflection_depth=reach))
+        return build
+
+    every = render(scene, occluded(3), "batched")
+    assert every["levels"] == [5, 5, 9]
+    assert every["stats"].reflection_path == "per_mirror"
+    assert every["stats"].passes == render(scene, occluded(3), "per_mirror")["stats"].passes
+    two = render(scene, occluded(2), "batched")
+    assert two["stats"].reflection_path == "mixed"
+    assert two["stats"].passes == render(scene, occluded(2), "per_mirror")["stats"].passes - 8
+    plain = render(scene, hall({}, sphere_detail=None), "batched")
+    assert plain["stats"].reflection_path == "batched" and plain["stats"].passes == 1 + 3

@@ -338,7 +338,6 @@ class ViewTree:
             return None
         if children:
             step.path = choose_path(settings.path, len(children), walk.triangles, self._software)
-            result.paths.add(step.path)
             step.unlit = self._unlit_mirrors(surfaces)
         step.composite = children + step.ended
         return step
@@ -411,7 +410,6 @@ class ViewTree:
             if walk.one is None:  # the path and unlit mirrors of a level of one view: the same at every depth
                 walk.one = (choose_path(walk.settings.path, 1, walk.triangles, self._software),
                             self._unlit_mirrors(surfaces))
-                walk.result.paths.add(walk.one[0])
             step.path, step.unlit = walk.one
             step.composite = children
             return step
@@ -677,6 +675,7 @@ class ViewTree:
                 self.occlusion.draw_level(step.depth, step.views, step.targets) is not None
             reflecting = self.reflections is not None and self.reflections.begin_level(step.depth, step.targets)
             options = _BATCHED if step.path == "batched" and not (occluded or reflecting) else REFLECTION_LEVEL
+            walk.result.paths.add("batched" if options.batched else "per_mirror")  # (as drawn: the stats say it)
             if step.apart and step.conditions is None:  # depth alone tells the claimed pixels (_APART)
                 options = _APART[options]
             if step.unlit or occluded or reflecting:
