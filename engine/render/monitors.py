@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import moderngl
 import numpy as np
@@ -64,8 +64,14 @@ from engine.render.view_tree import ViewTree
 from engine.render.views import View
 from engine.resources import VolumetricLamps
 
-if TYPE_CHECKING:
-    from engine.render.probes import ProbeCaptures
+
+class ProbeStamps(Protocol):
+    """What a picture reads of the reflection probes' captures (``engine.render.probes.
+    ProbeCaptures``, which imports this module: named by its shape, not imported)."""
+
+    moved_by: dict[int, int]   # probe -> the stamp of its last capture that moved the version
+    boxed: set[int]            # the probes whose last capture had an influence box
+
 
 MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait a frame: monitors_cut)
 # A picture's light shafts: its camera's VolumetricFog, the lamps it scatters, the sun's or
@@ -123,13 +129,13 @@ class MonitorPictures:
         return all(other in pictures and pictures[other].version == version
                    for other, version in pictures[entity].shown.items())
 
-    def probes_unchanged(self, entity: int, captures: ProbeCaptures) -> bool:
+    def probes_unchanged(self, entity: int, captures: ProbeStamps) -> bool:
         """Whether no probe the last drawing of ``entity``'s picture may have sampled was
         captured since into anything new (``ProbeCaptures.moved_by``, as ``probes_read`` noted it)."""
         moved = captures.moved_by
         return all(moved.get(probe, 0) == count for probe, count in self._pictures[entity].probes.items())
 
-    def probes_read(self, views: list[View], captures: ProbeCaptures) -> dict[int, int]:
+    def probes_read(self, views: list[View], captures: ProbeStamps) -> dict[int, int]:
         """The reflection probes a drawing of ``views`` may have sampled, with the stamps of
         their last captures that moved the version (``ProbeCaptures.moved_by``): the probes
         of the batches whose instances' boxes reach a view (``batch_reach``, conservative: a
@@ -190,7 +196,7 @@ class MonitorPictures:
              blends: SurfaceBlends = NO_BLENDS, exact: bool = False,
              faces: dict[int, tuple[glm.vec3, glm.vec3]] | None = None, occluded: bool = False,
              reflections: ScreenReflections | None = None, shafts: PictureShafts | None = None,
-             captures: ProbeCaptures | None = None) -> int:
+             captures: ProbeStamps | None = None) -> int:
         """Draw monitor ``entity``'s picture from ``view`` (of the picture's size): the scene
         pass as a root, the view tree below it to ``depth`` where ``surfaces`` is given (the
         mirrors and portals; ``exact``: its visibility exact whatever ``visibility`` says),
