@@ -80,18 +80,27 @@ from pyglm import glm
 
 from components import (
     AmbientOcclusion,
+    Bloom,
     Camera,
+    ChromaticAberration,
+    ColorGrading,
     ComponentWarning,
     ContactShadows,
+    DepthOfField,
+    FilmGrain,
     Fog,
+    LensFlare,
     Material,
     MeshRef,
     Monitor,
     Morph,
+    MotionBlur,
     ScreenPanel,
     ScreenReflections,
     Skin,
+    Tonemap,
     Transform,
+    Vignette,
     VolumetricFog,
 )
 from engine.core.errors import MonitorLimitWarning
@@ -113,6 +122,12 @@ from engine.rules.shadow_rules import ShadowCasters
 from systems.camera_shafts import camera_shafts
 from systems.shadow_rings import PictureRings
 
+# A camera's components that shape the frame after its views are drawn (the tone curve and
+# exposure, the grade, the lens's effects): a monitor's picture has none of its own (the
+# frame's apply to it as to any light; a picture panel is graded as the frame under it).
+PICTURE_SKIPS = (Tonemap, ColorGrading, Bloom, LensFlare, Vignette, ChromaticAberration, FilmGrain, DepthOfField,
+                 MotionBlur)
+
 
 class MonitorSystem(esper.Processor):
     """Draws the due monitors' pictures, from their cameras."""
@@ -123,6 +138,7 @@ class MonitorSystem(esper.Processor):
         self.renderer = renderer
         self.drawn: dict[int, int] = {}         # monitor -> the frame its picture was last drawn (or kept)
         self._said: set[tuple[int, int | None]] = set()  # (monitor, the camera it named) said once
+        self._said_post: set[tuple[int, int, tuple[str, ...]]] = set()  # (monitor, camera, kinds): _say_post
         self._said_no_light: ContactShadows | None = None  # a camera's contact shadows that darken nothing, said
         self._said_no_shafts: tuple | None = None  # (a camera's VolumetricFog, why it adds nothing), said
         self._cut = 0
@@ -171,6 +187,7 @@ class MonitorSystem(esper.Processor):
         self._world_version += world.last_step_changes - self._changes_seen + changes
         self._changes_seen = changes
         self._said = {(entity, camera) for entity, camera in self._said if entity in present}
+        self._said_post = {said for said in self._said_post if said[0] in present}
         frame = world.frame_index
         # The longest waiting first (a new one first of all), then by entity: past MAX_MONITORS
         # drawn, those left wait a frame and are drawn first the next (a kept one costs none).
@@ -503,6 +520,23 @@ class MonitorSystem(esper.Processor):
             return None
         return found.settings, found.lamps, found.sky_light, found.image_shares
 
+    def _say_post(self, entity: int, camera: int) -> None:
+        """Say once, for each monitor, camera and set of them, the components of
+        ``PICTURE_SKIPS`` on the camera ``entity``'s monitor shows, while it is not the active
+        camera: they do nothing in the picture (made the active camera, it uses them)."""
+        kinds = _post_kinds(self.world, camera)
+        if not kinds or (entity, camera, kinds) in self._said_post:
+            return
+        active = active_camera_parts(self.world)
+        if active is not None and active[0] == camera:
+            return
+        self._said_post.add((entity, camera, kinds))
+        warnings.warn(ComponentWarning(
+            f"{', '.join(kinds)} on entity {camera}, the camera of the Monitor on entity {entity}: a monitor's "
+            f"picture has no {'tone curve, grade or lens effects' if len(kinds) > 1 else 'such effect'} of its "
+            f"own (the frame's apply to it as to any light), so {'they do' if len(kinds) > 1 else 'it does'} "
+            "nothing there (it works while that camera is the active one)"), stacklevel=3)
+
     def _camera(self, entity: int, monitor: Monitor) -> tuple[Camera, Transform] | None:
         """The Camera and Transform of the entity ``monitor`` shows, or None, said once for each
         entity it names that is not a camera."""
@@ -515,12 +549,19 @@ class MonitorSystem(esper.Processor):
             lacking = "Camera" if world.try_get(camera, Camera) is None else "Transform"
             why = f"names entity {camera}, which has no {lacking}"
         else:
+            self._say_post(entity, camera)
             return world.get(camera, Camera), world.get(camera, Transform)
         if (entity, camera) not in self._said:   # (said once for each camera it names)
             self._said.add((entity, camera))
             warnings.warn(ComponentWarning(f"Monitor on entity {entity} {why}: its picture is not drawn (it keeps "
                                            "what it showed, black at first)"), stacklevel=3)
         return None
+
+
+def _post_kinds(world: World, camera: int) -> tuple[str, ...]:
+    """The components on ``camera``'s entity that shape the frame after its views are drawn
+    (``PICTURE_SKIPS``), by name."""
+    return tuple(kind.__name__ for kind in PICTURE_SKIPS if world.try_get(camera, kind) is not None)
 
 
 def _same_eyes_from(key: tuple, other: tuple) -> bool:

@@ -8,7 +8,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from components import ChromaticAberration, ComponentValueError, Emissive, FilmGrain, Material, MeshRef, Transform
+from components import (
+    ChromaticAberration,
+    ComponentValueError,
+    ComponentWarning,
+    Emissive,
+    FilmGrain,
+    Material,
+    MeshRef,
+    Transform,
+)
 from components.post import MAX_ABERRATION
 from engine.assets.mesh import quad
 from engine.render.present import GRAIN_SPREAD
@@ -231,8 +240,8 @@ def test_a_lenss_own_fog_fogs_its_pictures_mirror_along_the_lights_whole_way(sce
 def test_a_monitors_cameras_fringes_and_grain_leave_its_picture_as_it_is(scene):
     """A picture has no post-processing of its own (README, "Monitors"): a monitor's camera
     with ``ChromaticAberration`` and ``FilmGrain`` at full strength draws its picture, the
-    mirror it shows too, texel for texel as without them; the same components on the active
-    camera do change its frame (so they are drawn where a camera presents)."""
+    mirror it shows too, texel for texel as without them, and a warning says so; the same
+    components on the active camera do change its frame (so they are drawn where a camera presents)."""
     from components import Monitor
     from tests.test_monitors import PICTURE, active_camera, run, studio
 
@@ -250,7 +259,8 @@ def test_a_monitors_cameras_fringes_and_grain_leave_its_picture_as_it_is(scene):
         return runner.engine.renderer.monitors.read(held["screen"]), rgb
 
     plain, plain_frame = drawn(False, False)
-    lens, _ = drawn(True, False)
+    with pytest.warns(ComponentWarning, match="ChromaticAberration, FilmGrain on entity .* do nothing there"):
+        lens, _ = drawn(True, False)   # (and said so)
     _, eye_frame = drawn(False, True)
     assert (plain[..., 0] > 0.1).sum() > 60   # (the box, in the mirror)
     np.testing.assert_array_equal(lens, plain)

@@ -1265,3 +1265,50 @@ def test_two_monitors_cameras_far_apart_each_read_the_sharp_shadow_of_their_own_
         assert counted > 400 and in_shadow > 150, (k, counted, in_shadow)   # a real floor, a real shadow
         assert share >= 0.99, (k, share)
     assert _agreement(runner, frame_with, frame_without)[0] >= 0.99
+
+
+def test_a_monitor_cameras_tone_curve_and_lens_effects_are_said_once_to_do_nothing_in_its_picture(scene):
+    """A Bloom and a Vignette on the camera a monitor shows (not the active one) do nothing in
+    its picture (it has no post-processing of its own: the frame's apply to it as to any
+    light): said once, naming both, the camera and the monitor, over frames; the picture is
+    texel for texel the one drawn without them.  Made the active camera, it is not said again
+    (they work there); a monitor camera with none is not said."""
+    from components import Bloom, Vignette
+
+    def with_lens_effects(effects):
+        build, held = studio(Monitor(size=PICTURE))
+
+        def make(world):
+            build(world)
+            for effect in effects:
+                world.add_component(held["lens"], effect)
+        return make, held
+
+    plain_build, plain_held = with_lens_effects(())
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        plain, _ = run(scene, plain_build, 2)
+    assert not [w for w in said if "camera of the Monitor" in str(w.message)]
+    build, held = with_lens_effects((Bloom(), Vignette()))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        runner, _ = run(scene, build, 3)
+    messages = [str(w.message) for w in said if issubclass(w.category, ComponentWarning)
+                and "camera of the Monitor" in str(w.message)]
+    assert messages == [f"Bloom, Vignette on entity {held['lens']}, the camera of the Monitor on entity "
+                        f"{held['screen']}: a monitor's picture has no tone curve, grade or lens effects of its own "
+                        "(the frame's apply to it as to any light), so they do nothing there (it works while that "
+                        "camera is the active one)"], messages
+    drawn = picture(runner, held)
+    assert drawn[..., 0].max() > RED[0] / 2   # (the box is in it)
+    np.testing.assert_array_equal(drawn, picture(plain, plain_held))
+    world = runner.world
+    world.get(active_camera(world), Camera).active = False
+    world.get(held["lens"], Camera).active = True
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        runner.frame(DT)
+        world.remove_component(held["lens"], Vignette)
+        runner.frame(DT)
+    assert active_camera(world) == held["lens"]
+    assert not [w for w in said if "camera of the Monitor" in str(w.message)]
