@@ -123,6 +123,9 @@ class CompositeSurface:
     entity: int = 0                        # the surface's (its fallback finds its pixels by it)
     plane_w: float = 0.0                   # its plane's w (the normal's is ``normal``)
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # a portal's carry's translation (its fallback)
+    # What its row's tile slots (x, scale, y) hold where no rough tile is placed: 0, but a
+    # portal's its offset (the sky beyond the partner is fogged from there, mirror_composite.frag).
+    tile_slots: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def fallback_variant(self) -> str:
@@ -159,12 +162,12 @@ def composite_surface(tint: glm.vec4, reflect_rate: float, roughness: float, nor
             u, v = u * water.tiling, v * water.tiling
         carry = glm.mat3(glm.vec3(u), glm.vec3(v), glm.vec3(u.w, v.w, bumps.scale))
         params_z = float(bumps.plane_offset)
+    placed = tuple(map(float, offset)) if offset is not None else (0.0, 0.0, 0.0)
     return CompositeSurface(variant, float(roughness), float(reflect_rate), params_z, columns,
                             glm.vec3(tint).to_bytes(), glm.vec3(normal).to_bytes(),
                             (carry if carry is not None else glm.mat3(1.0)).to_bytes(),
                             bumps.normal_map if bumps is not None and not portal else None, water,
-                            int(entity), float(plane_w), tuple(map(float, offset)) if offset is not None
-                            else (0.0, 0.0, 0.0))
+                            int(entity), float(plane_w), placed, placed if portal else (0.0, 0.0, 0.0))
 
 
 _LOOKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -329,7 +332,6 @@ _BLOCK_EYE = slice(4 * CAMERA_BLOCK_EYE.start, 4 * CAMERA_BLOCK_EYE.stop)
 # Flattens clip-space corners onto z = 0: every depth is kept (an oblique near plane would
 # cut the quad) while clipping still drops w <= 0.
 _FLATTEN_Z = glm.mat4(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
-_NO_TILE = Tile(0, 0, 0.0)
 _COLOR_UNIT, _SEEN_UNIT, _NODE_UNIT = REFLECTION_UNITS  # the composite's units for a level's images
 _NO_PROBE = ((0.0, 0.0, 0.0, 0.0),) * 3  # a probe's lookup uniforms where the sky stands in for it
 # A claim as two clip-space triangles, each vertex its position and the claim's ids (claim.vert).
@@ -457,11 +459,9 @@ def _composite_row(surface: CompositeSurface, block: bytes, rect: tuple[int, int
         corners = struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0)
     lx, ly, lw, lh = level_rect
     water = surface.water
-    if surface.variant.startswith("portal"):  # (no tile: its slots carry the carry's translation)
-        (x, scale, y), rough = surface.offset, surface.roughness
-    elif water is None:
-        tile = tile or _NO_TILE
-        x, y, scale, rough = tile.x, tile.y, tile.scale, surface.roughness
+    if water is None:
+        x, scale, y = (tile.x, tile.scale, tile.y) if tile is not None else surface.tile_slots
+        rough = surface.roughness
     else:  # this frame's offset of the waves (the surfaces stage moves it in place)
         (x, y), scale, rough = water.flow.offset, water.cross, water_row_f0(water)
         if fade < 1.0:  # (partly faded: its fallback under it bends what is below, mirror_composite.frag)
@@ -493,8 +493,7 @@ def fallback_surfaces(states: Sequence[SurfaceState]) -> list[_FallbackSurface]:
     found = []
     for state in states:
         look = surface_look(state)
-        # (no tile: a portal's tile slots carry its carry's translation, as _composite_row's)
-        x, scale, y = look.offset if look.variant.startswith("portal") else (0.0, 0.0, 0.0)
+        x, scale, y = look.tile_slots   # (no tile: as _composite_row's)
         head, tail = _water_pieces(look) if look.water is not None else (
             _PIECE_HEAD.pack(x, look.tint, scale, look.reflect_rate, look.roughness, look.params_z),
             _PIECE_TAIL.pack(look.normal, y, look.carry))
