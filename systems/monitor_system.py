@@ -116,6 +116,7 @@ from engine.render.views import View, camera_view
 from engine.resources import ContactLamps, PicturesDrawn, Surfaces, SurfaceState
 from engine.rules.frame_rules import active_camera_parts
 from engine.rules.light_rules import PictureEyes, ViewEyes, brightest_directional
+from engine.rules.probe_rules import pose_bounds
 from engine.rules.probe_schedule import ProbeSchedule, ProbeStates
 from engine.rules.screen_rects import projected_rects, view_matrix
 from engine.rules.shadow_rules import ShadowCasters
@@ -334,8 +335,9 @@ class MonitorSystem(esper.Processor):
     def _picture_eyes(self, monitors: list[tuple[int, Monitor]]) -> PictureEyes:
         """What the next frame's lights and levels of detail need to weigh each picture's
         camera as a mirror's view's eye (``light_rules.PictureEyes``, worked out only if asked):
-        its eye, its screen's box as placed, its ``ScreenPanel``'s share of the frame, this
-        frame's main view and last frame's mirror and portal views."""
+        its eye, its screen's box as placed (and posed, by its Skin and Morph), its
+        ``ScreenPanel``'s share of the frame, this frame's main view and last frame's mirror
+        and portal views."""
         world = self.world
         pictures = self.renderer.monitors.entities
         output = world.resources.get(Output)
@@ -351,7 +353,8 @@ class MonitorSystem(esper.Processor):
             mesh, placed = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
             eye = lens.world[3]
             screens.append(((float(eye.x), float(eye.y), float(eye.z)),
-                            None if mesh is None or placed is None else (mesh.mesh, glm.mat4(placed.world)),
+                            None if mesh is None or placed is None else
+                            (mesh.mesh, glm.mat4(placed.world), pose_bounds(world, entity, mesh.mesh)),
                             0.0 if panel is None else float(panel.size.x * panel.size.y)))
         if not screens:
             return PictureEyes()

@@ -1312,3 +1312,261 @@ def test_a_monitor_cameras_tone_curve_and_lens_effects_are_said_once_to_do_nothi
         runner.frame(DT)
     assert active_camera(world) == held["lens"]
     assert not [w for w in said if "camera of the Monitor" in str(w.message)]
+
+
+STRETCH = (0.8, 0.0, 0.2)   # where a skinned screen's joint carries its right edge (right, and towards +z)
+
+
+def _skinned_screen(world, held, by_hand: bool = False) -> None:
+    """The studio's screen re-meshed as a quad whose right edge's two corners ride a second
+    joint that carries them by ``STRETCH`` (``Skin``: the screen half as wide again and bent,
+    its two triangles no longer in one plane); ``by_hand``: the same shape modelled so, the
+    corners moved in the mesh itself, with no skin."""
+    from components import Skin
+    from engine.assets.mesh import Mesh
+
+    flat = quad(*SCREEN_SIZE)
+    positions = np.asarray(flat.positions, np.float32)
+    right = (positions[:, 0] > 0).astype(np.uint16)   # (corners 1 and 2)
+    triangles = np.asarray(flat.indices).reshape(-1, 3)
+    if by_hand:
+        moved = positions + right[:, None] * np.asarray(STRETCH, np.float32)
+        world.get(held["screen"], MeshRef).mesh = Mesh(moved, flat.normals, flat.uvs, triangles, name="bent screen")
+        return
+    joints = np.stack([np.eye(4), np.eye(4)])
+    joints[1, :3, 3] = STRETCH   # (points as columns: M @ (x, y, z, 1))
+    world.get(held["screen"], MeshRef).mesh = Mesh(positions, flat.normals, flat.uvs, triangles, name="skinned screen",
+                                                    joints=np.stack([right, 0 * right], axis=1),
+                                                    weights=np.tile([1.0, 0.0], (len(right), 1)))
+    world.add_component(held["screen"], Skin(joints))
+
+
+def _posed_screen_uvs(eye: np.ndarray, rays: np.ndarray, at=SCREEN_AT) -> tuple[np.ndarray, np.ndarray]:
+    """Where each ray (..., 3) from ``eye`` (one, or one a ray) first meets ``_skinned_screen``'s two triangles as
+    posed (worked out here: the quad's corners, the right two moved by STRETCH, placed at
+    ``at``): whether it meets one, and the texture coordinates there (the triangle's
+    barycentric weights of the corners' UVs), float64."""
+    flat = quad(*SCREEN_SIZE)
+    corners = np.asarray(flat.positions, np.float64) + np.asarray(at, np.float64)
+    corners[corners[:, 0] > at[0]] += STRETCH
+    uvs = np.asarray(flat.uvs, np.float64)
+    shape = rays.shape[:-1]
+    rays = rays.reshape(-1, 3)
+    eye = np.broadcast_to(eye, (*shape, 3)).reshape(-1, 3)
+    best = np.full(len(rays), np.inf)
+    found = np.zeros((len(rays), 2))
+    for i, j, k in np.asarray(flat.indices).reshape(-1, 3):   # (Moeller-Trumbore)
+        e1, e2 = corners[j] - corners[i], corners[k] - corners[i]
+        p = np.cross(rays, e2)
+        det = p @ e1
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = eye - corners[i]
+            b1 = (p * s).sum(-1) / det
+            q = np.cross(s, e1)
+            b2 = (rays * q).sum(-1) / det
+            t = (q @ e2) / det
+        hit = (np.abs(det) > 1e-12) & (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > 0) & (t < best)
+        best[hit] = t[hit]
+        found[hit] = ((1 - b1 - b2)[:, None] * uvs[i] + b1[:, None] * uvs[j] + b2[:, None] * uvs[k])[hit]
+    return np.isfinite(best).reshape(shape), found.reshape(*shape, 2)
+
+
+def _sampled(shown: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """The picture's red (rows from the top) sampled bilinearly at texture coordinates ``uv``
+    (rows from the bottom, texel centres at (i + 0.5) / size), as the screen's batch samples it."""
+    height, width = shown.shape[:2]
+    x = np.clip(uv[:, 0] * width - 0.5, 0, width - 1.001)
+    y = np.clip((1.0 - uv[:, 1]) * height - 0.5, 0, height - 1.001)
+    x0, y0 = x.astype(int), y.astype(int)
+    fx, fy = x - x0, y - y0
+    texels = shown[..., 0]
+    return (texels[y0, x0] * (1 - fx) * (1 - fy) + texels[y0, x0 + 1] * fx * (1 - fy)
+            + texels[y0 + 1, x0] * (1 - fx) * fy + texels[y0 + 1, x0 + 1] * fx * fy)
+
+
+def test_a_skinned_screen_shows_its_picture_by_its_texture_coordinates_as_posed(scene):
+    """The studio's screen bent by a ``Skin`` (its right edge's corners carried 0.8 m right and
+    0.2 m towards the eye): each frame pixel whose ray meets the screen as posed (its two
+    triangles, cast here in float64) gives off the picture sampled at the texture coordinates
+    of the posed triangle there, not at the flat quad's; and the frame is the frame of the
+    same shape modelled with no skin (a second path), the box on it."""
+    frames = {}
+    for by_hand in (False, True):
+        build, held = studio(Monitor(size=PICTURE))
+
+        def bent(world, build=build, held=held, by_hand=by_hand):
+            build(world)
+            _skinned_screen(world, held, by_hand)
+            eye = world.get(active_camera(world), Transform)   # (the whole bent screen in view)
+            eye.position = glm.vec3(0.4, 1.0, 9.5)
+            eye.rotation = look_rotation(glm.vec3(0.0, 0.0, -1.0))
+
+        runner, rgb = run(scene, bent, 2)
+        frames[by_hand] = (runner, rgb, held)
+    runner, rgb, held = frames[False]
+    linear = srgb_to_linear(rgb)[..., 0]
+    shown = picture(runner, held)
+    assert (shown[..., 0] > RED[0] / 2).sum() > 150   # (the box, in the picture)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    met, uv = _posed_screen_uvs(eye, rays)
+    inside = met & (uv[..., 0] > 0.02) & (uv[..., 0] < 0.98) & (uv[..., 1] > 0.02) & (uv[..., 1] < 0.98)
+    assert inside.sum() > 3000, inside.sum()
+    sampled = _sampled(shown, uv[inside])
+    seen = linear[inside]
+    assert (sampled > RED[0] / 2).sum() > 100 and (seen > RED[0] / 2).sum() > 100   # (the box, on the screen)
+    assert np.corrcoef(seen, sampled)[0, 1] > 0.97, np.corrcoef(seen, sampled)[0, 1]
+    assert np.median(np.abs(seen - sampled)) < 0.01 and abs(seen.mean() - sampled.mean()) < 0.01
+    # The flat quad's coordinates (the mesh as modelled, where the ray meets its plane) would
+    # put the box elsewhere: the skin moved what the picture lands on.
+    t = (SCREEN_AT[2] - eye[2]) / rays[..., 2]
+    point = eye + rays * t[..., None]
+    flat_uv = np.stack([(point[..., 0] - SCREEN_AT[0]) / SCREEN_SIZE[0] + 0.5,
+                        (point[..., 1] - SCREEN_AT[1]) / SCREEN_SIZE[1] + 0.5], axis=-1)
+    assert np.corrcoef(seen, _sampled(shown, flat_uv[inside]))[0, 1] < 0.8
+    # Off the bent screen the frame is black; the screen modelled bent draws the same frame.
+    grown = met.copy()
+    for _ in range(2):   # (two pixels past its outline)
+        padded = np.pad(grown, 1)
+        grown = grown | padded[:-2, 1:-1] | padded[2:, 1:-1] | padded[1:-1, :-2] | padded[1:-1, 2:]
+    assert linear[~grown].max() < 0.02
+    by_hand = frames[True][1].astype(np.int32)
+    assert np.abs(rgb.astype(np.int32) - by_hand).max() <= 2
+
+
+@pytest.mark.parametrize("bent", [False, True], ids=["flat", "skinned"])
+def test_a_click_through_a_portal_on_a_screen_picks_what_its_picture_shows_there(scene, bent):
+    """The screen seen only through a portal (the active camera, 1 m before portal A, sees
+    nothing but A; its partner B stands 2.5 m before the screen, facing it), as the pick path
+    says (``shell/picture_pick.py``: the main view's ray is cast on through mirrors and
+    portals to the screen): every pixel where the frame shows the box on the screen (red: the
+    GPU's picture) picks the box, every pixel of the screen showing the black sky picks
+    nothing; the surface image holds A there, the id image the screen.  ``skinned``: the
+    screen bent by a ``Skin`` (``_skinned_screen``), its texture coordinates the posed
+    triangle's; the red pixels are where the rays carried through the pair by hand (A's
+    point moved by B - A: B is A half turned, facing it) meet the posed screen where the
+    picture is red."""
+    from engine.assets.portals import spawn_portal_pair
+    from shell.editor import Editor
+    from shell.handles import view_ray
+    from shell.picture_pick import into_pictures
+    from tests.support import look_from
+
+    made, held = studio(Monitor(size=PICTURE))
+    a_at, b_at = np.array([20.0, 1.0, 0.0]), np.array([0.0, 1.0, 8.5])
+
+    def build(world):
+        made(world)
+        if bent:
+            _skinned_screen(world, held)
+        world.delete_entity(active_camera(world))
+        look_from(world, tuple(a_at + (0.3, 0.0, 1.0)), target=tuple(a_at + (0.3, 0.0, 0.0)), fov=50.0)
+        held["a"], held["b"] = spawn_portal_pair(world, tuple(a_at), None, tuple(b_at),
+                                                 glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0)), size=(2.0, 1.5))
+
+    runner, rgb = run(scene, build, 2)
+    rgb = rgb.astype(np.int32)
+    ids, surfaces = runner.ids(), runner.engine.renderer.targets.read_surface_ids()
+    assert (surfaces == held["a"]).all() and runner.stats.reflection_views == 1   # (nothing but A in view)
+    screen = ids == held["screen"]
+    red = screen & (rgb[..., 0] - rgb[..., 1] > 50)
+    # Each pixel's ray carried through the pair by hand: A's local point (x, y, z) leaves B at
+    # B's local (-x, y, -z), B half turned about y: the world's (x, y, z) from B, its way the same.
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    start, way = b_at + eye + rays * ((a_at[2] - eye[2]) / rays[..., 2])[..., None] - a_at, rays
+    if bent:
+        met, uv = _posed_screen_uvs(start, way)
+    else:
+        t = (SCREEN_AT[2] - start[..., 2]) / way[..., 2]
+        point = start + way * t[..., None]
+        uv = np.stack([(point[..., 0] - SCREEN_AT[0]) / SCREEN_SIZE[0] + 0.5,
+                       (point[..., 1] - SCREEN_AT[1]) / SCREEN_SIZE[1] + 0.5], axis=-1)
+        met = (t > 0) & (uv >= 0).all(-1) & (uv <= 1).all(-1)
+    met, uv = met.reshape(screen.shape), uv.reshape(*screen.shape, 2)
+    assert np.mean(met != screen) < 0.01, np.mean(met != screen)
+    expected = np.zeros(screen.shape)
+    expected[met] = _sampled(picture(runner, held), uv[met])
+    assert np.mean((expected > RED[0] / 2) != red) < 0.005, np.mean((expected > RED[0] / 2) != red)
+    inner = red.copy()   # (away from the box's edges, where a pixel's ray and the picture's texels part)
+    for _ in range(2 if bent else 1):
+        inner = inner & np.roll(inner, 1, 0) & np.roll(inner, -1, 0) & np.roll(inner, 1, 1) & np.roll(inner, -1, 1)
+    within = screen & np.roll(screen, 1, 0) & np.roll(screen, -1, 0) & np.roll(screen, 1, 1) & np.roll(screen, -1, 1)
+    dark = within & (rgb.max(axis=-1) < 10)   # (a pixel from the screen's outline, where the casts may part)
+    assert inner.sum() > 20 and dark.sum() > 200, (inner.sum(), dark.sum())
+    editor = Editor(runner.world)
+    view = runner.engine.main_view
+
+    def click(x, y, surface=False):
+        follow = into_pictures(runner.world, runner.engine.renderer.monitors.entities,
+                               *view_ray(view.view_proj, runner.size, (x + 0.5, y + 0.5)), view.view_mask)
+        return editor.pick(ids, surfaces, x, y, surface, follow)
+
+    for row, column in zip(*np.nonzero(inner), strict=True):
+        assert click(column, row) == held["box"], (column, row)
+    rows, columns = np.nonzero(dark)
+    for row, column in list(zip(rows, columns, strict=True))[::10]:
+        assert click(column, row) is None, (column, row)
+    row, column = np.argwhere(inner)[0]
+    assert click(column, row, surface=True) == held["a"]
+
+
+@pytest.mark.parametrize("posed_by", ["skin", "morph"])
+def test_a_posed_screens_picture_eye_is_weighed_by_its_share_as_posed(scene, posed_by):
+    """A screen modelled 10 m behind the active camera and carried 10 m forward into its view
+    by a ``Skin``'s joint (or a ``Morph``'s target): its picture's camera is weighed by the
+    share of the frame the screen covers as posed (``PictureEyes``: its rectangle's area over
+    the frame's), the share of the same screen placed there with no pose (a second path), and
+    the share worked out here from its four corners projected by glm (whole pixels, within
+    a row and a column); the screen is drawn there (its id's pixels)."""
+    from components import Morph, Skin
+    from engine.assets.mesh import Mesh
+    from engine.rules.light_rules import PictureEyes
+    from tests.support import look_from
+
+    size, shown_at, forward = (64, 48), np.array([0.7, 1.4, 0.0]), np.array([0.0, 0.0, -10.0])
+
+    def build_for(posed: bool):
+        def build(world):
+            look_from(world, (0.0, 1.6, 5.0), (0.0, 1.6, 0.0))
+            lens = world.spawn(Transform(position=(20.0, 1.0, 0.0)), Camera(active=False))
+            flat = quad(*SCREEN_SIZE)
+            positions, triangles = np.asarray(flat.positions, np.float32), np.asarray(flat.indices).reshape(-1, 3)
+            parts = [Material(), Monitor(camera=lens, size=(8, 8))]
+            if not posed:
+                world.spawn(Transform(position=tuple(shown_at)), MeshRef(flat), *parts)
+                return
+            n = len(positions)
+            if posed_by == "skin":
+                mesh = Mesh(positions, flat.normals, flat.uvs, triangles, name="carried screen",
+                            joints=np.zeros((n, 2), np.uint16), weights=np.tile([1.0, 0.0], (n, 1)))
+                joint = np.eye(4)[None].copy()
+                joint[0, :3, 3] = forward
+                parts.append(Skin(joint))
+            else:
+                offsets = np.tile(forward, (n, 1))[None].astype(np.float32)
+                mesh = Mesh(positions, flat.normals, flat.uvs, triangles, name="carried screen",
+                            morph_positions=offsets, morph_normals=np.zeros_like(offsets))
+                parts.append(Morph((1.0,)))
+            world.spawn(Transform(position=tuple(shown_at - forward)), MeshRef(mesh), *parts)
+        return build
+
+    shares = {}
+    for posed in (True, False):
+        runner = scene(build_for(posed), size)
+        for _ in range(3):
+            runner.frame(DT)
+        (screen, _), = runner.world.query_one(Monitor)
+        assert (runner.ids() == screen).sum() > 60   # (drawn where it was carried to)
+        points = runner.world.resources[PictureEyes].points
+        assert len(points) == 1 and np.allclose(points[0][:3], (20.0, 1.0, 0.0)), points
+        shares[posed] = points[0][3]
+    # The four corners projected: the whole pixels they span.
+    view_proj = np.array(runner.engine.main_view.view_proj.to_list(), np.float64).T
+    corners = np.array([(x, y, 0.0, 1.0) for x in (-0.8, 0.8) for y in (-0.45, 0.45)]) + (*shown_at, 0.0)
+    clip = corners @ view_proj.T
+    ndc = clip[:, :2] / clip[:, 3:]
+    pixels = (ndc * 0.5 + 0.5) * size
+    width, height = np.ceil(pixels.max(axis=0)) - np.floor(pixels.min(axis=0))
+    expected = width * height / (size[0] * size[1])
+    assert shares[True] == pytest.approx(shares[False], abs=1e-9)
+    assert shares[True] == pytest.approx(expected, abs=(width + height + 1) / (size[0] * size[1])), \
+        (shares[True], expected)

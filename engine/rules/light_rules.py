@@ -166,7 +166,8 @@ class PictureEyes:
     """The monitors' cameras as eyes (published by the monitors stage each frame, read with
     ``ViewEyes`` the next: ``view_eyes``): a torch in the room a security camera watches
     matters as much as its screen is large, as a portal's would.  Each screen: its camera's
-    eye, its mesh and world matrix (None: no mesh) and its ``ScreenPanel``'s pixels; the
+    eye, its mesh, world matrix and pose's box (``world_corners``' ``bounds``: None, the
+    mesh's own; the whole None: no mesh) and its ``ScreenPanel``'s pixels; the
     output's ``size``, the main view's ``matrix`` (``screen_rects.view_matrix``; None: no
     camera) and last frame's mirror and portal views (``eyes``).  ``points`` is worked out
     only when a choice depends on them."""
