@@ -637,3 +637,57 @@ def test_a_sharp_mirror_shows_the_stars_as_the_twin_along_its_reflected_rays(sce
     assert ((colour - air).max(axis=-1)[starry & checked] > 0.03).all()
     ahead, _ = twin(rays)
     assert np.abs(colour - ahead)[checked].max() > 0.2                               # (the mirror is drawn)
+
+
+def test_a_portal_turning_the_view_shows_the_stars_as_the_twin_along_its_carried_rays(scene):
+    """A portal filling the view, its partner turned to face another part of the night sky:
+    each pixel is the twin (the air's light, ``model_sky``, and the stars' faces sampled in
+    numpy as in the mirror's test) along the pixel's ray carried by the pair's transform
+    (float64, from the Transforms), not along its own ray; stars stand out in it, and the
+    pixels are the portal's."""
+    from engine.assets.portals import spawn_portal_pair
+    from engine.assets.star_field import star_faces
+
+    n = 32
+    stars = star_faces(size=n, stars=1000, seed=5)
+    sun = _toward(-14.0, 150.0)   # (past dusk: the stars are out)
+    skybox = Skybox(model="atmosphere", faces=stars, face_size=n)
+    look, target = _toward(15.0, 100.0), _toward(35.0, -30.0)   # the camera's way; the sky beyond the partner
+    ents = {}
+
+    def build(world):
+        world.spawn(Transform(rotation=look_rotation(glm.vec3(*look))), Camera(fov_y=40.0, near=0.1, far=100.0))
+        world.spawn(skybox)
+        world.spawn(DirectionalLight(direction=tuple(-sun), intensity=3.0))
+        ents["a"], ents["b"] = spawn_portal_pair(world, tuple(2.0 * look), look_rotation(glm.vec3(*look)),
+                                                 (0.0, 0.0, 30.0), look_rotation(glm.vec3(*-target)), size=(40.0, 40.0))
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    colour, rays = _read(runner)
+    assert runner.stats.reflection_views == 1
+    on_a = runner.engine.renderer.targets.read_surface_ids() == ents["a"]
+    assert on_a.all()
+    a_world, b_world = (np.array(glm.dmat4(runner.world.get(ents[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    carry = (b_world @ turn @ np.linalg.inv(a_world))[:3, :3]
+    np.testing.assert_allclose(carry @ look, target, atol=1e-6)   # (the pair turns the view's way to the target)
+    model = sky_model(skybox, SkySun(tuple(sun)))
+    table = atm.sky_view_table(model.air, model.air_elevation)
+
+    def twin(ways):
+        beyond, whole = _cube_bilinear(stars, ways)
+        through = atm.air_transmittance(table, ways, sun) * atm.space_shown(atm.air_radiance(table, ways, sun))
+        return model_sky(model, ways) + beyond * through * (ways[..., 1:2] >= -atm.horizon_sine(model.air)), whole
+
+    carried = rays @ carry.T
+    want, whole = twin(carried)
+    assert whole.mean() > 0.6
+    np.testing.assert_allclose(colour[whole], want[whole], rtol=1e-2, atol=2e-3)
+    air = model_sky(model, carried)
+    starry = (want - air).max(axis=-1) > 0.05
+    assert (starry & whole).sum() > 100                                              # (the stars are in it)
+    assert ((colour - air).max(axis=-1)[starry & whole] > 0.03).all()
+    own, _ = twin(rays)
+    assert np.abs(colour - own)[whole].max() > 0.2                                   # (not the camera's own sky)

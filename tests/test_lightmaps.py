@@ -261,6 +261,73 @@ def test_a_probes_faces_show_the_lightmapped_floor_as_the_image_says_where_their
         checked += inside.sum()
     assert checked > n * n + 400
 
+
+def test_an_end_image_shows_the_lightmapped_floor_where_last_frames_reprojected_ray_meets_it(scene):
+    """Two mirrors facing across a lightmapped floor (z = -1 and +1, depth 2): the third
+    image of the one ahead (its plane's copy at z = -5, unfolding the reflections) is cut,
+    an end image (``engine/render/end_images.py``): a pixel whose ray meets that copy at
+    (x, y) shows what last frame's picture showed at (x, y, -1) on the mirror itself.  Each
+    such pixel whose ray from the eye to (x, y, -1) (float64, the reflections unfolded:
+    z -> -2 - z past the first plane, z + 4 past the second) meets the floor is albedo x the
+    image there x the intensity, within 2% and 0.004 (last frame's picture read between its
+    pixels); not on the first frame (no image yet: the fallback), and the sky's light is not
+    added (the same under a brighter sky; a floor without the lightmap shows it)."""
+    from components import Mirror
+    from engine.assets.mesh import quad
+
+    image, wide, room = gradient_image(), 3.0, 1.0   # the floor 6 m across (x), 2 m between the mirrors (z)
+
+    def frames(material: Material, sky: Skybox | None = None):
+        def build(world):
+            look_from(world, (0.3, 0.8, 0.9), (0.0, 0.5, -5.0), fov=40.0)
+            world.spawn(sky or Skybox())
+            world.spawn(Transform(), MeshRef(plane(2 * wide, 2 * room)), material)
+            for z, turn in ((-room, 0.0), (room, glm.pi())):
+                world.spawn(Transform(position=(0.0, 1.5, z), rotation=glm.angleAxis(turn, glm.vec3(0, 1, 0))),
+                            MeshRef(quad(2 * wide, 3.0)), Material(), Mirror(max_depth=2, end_image=True))
+
+        runner = scene(build, SIZE)
+        runner.engine.renderer.antialias = "off"
+        shown = []
+        for _ in range(2):
+            runner.frame()
+            shown.append(_read(runner)[0])
+        assert runner.stats.reflection_end_views == 1
+        return shown, runner
+
+    (first, colour), runner = frames(matte(lightmap=image, lightmap_intensity=1.5))
+    _, rays = _read(runner)
+    eye = np.array(runner.engine.main_view.eye, np.float64)
+    margin = 0.15
+    ahead = np.where(rays[..., 2] < -0.05, rays[..., 2], -1.0)
+    cut = rays[..., 2] < -0.05
+    for k in range(3):   # the ray crosses the mirror ahead, the one behind and the one ahead again
+        at = eye + rays * ((-room - 2 * room * k - eye[2]) / ahead)[..., None]
+        cut &= (np.abs(at[..., 0]) < wide - margin) & (at[..., 1] > margin) & (at[..., 1] < 3.0 - margin)
+    x, y = at[..., 0], at[..., 1]
+    on_mirror = np.stack([x, y, np.full_like(x, -room), np.ones_like(x)], -1)
+    view_proj = np.array(glm.dmat4(runner.engine.main_view.view_proj).to_list(), np.float64).T
+    clip = on_mirror @ view_proj.T
+    cut &= (np.abs(clip[..., :2] / clip[..., 3:]) < 1 - 4.0 / np.array(SIZE)).all(axis=-1)   # held by last frame's
+    way = on_mirror[..., :3] - eye
+    cut &= way[..., 1] < -0.05
+    hit = eye + way * (-eye[1] / np.where(way[..., 1] < -0.05, way[..., 1], -1.0))[..., None]
+    beyond = -room - hit[..., 2]   # how far past the mirror ahead, unfolded
+    cut &= (beyond > margin) & (beyond < 4 * room - margin) & (np.abs(beyond - 2 * room) > margin)
+    cut &= np.abs(hit[..., 0]) < wide - margin
+    z = np.where(beyond < 2 * room, -2 * room - hit[..., 2], hit[..., 2] + 4 * room)   # folded back into the room
+    u, v = (hit[..., 0] + wide) / (2 * wide), (room - z) / (2 * room)
+    assert cut.sum() > 300
+    want = ALBEDO * sample(image, u, v) * 1.5
+    np.testing.assert_allclose(colour[cut], want[cut], rtol=0.02, atol=0.004)
+    assert np.abs(first[cut] - want[cut]).max(axis=-1).mean() > 0.1   # (the first frame's fallback is not it)
+    bright = Skybox(zenith=(1.0, 1.0, 2.0), horizon=(2.0, 2.0, 2.0), ground=(0.5, 0.5, 0.5))
+    (_, again), _ = frames(matte(lightmap=image, lightmap_intensity=1.5), sky=bright)
+    np.testing.assert_allclose(again[cut], colour[cut], atol=1e-3)   # the sky's light is not added
+    (_, plain), _ = frames(matte(), sky=bright)
+    assert np.abs(plain[cut] - colour[cut]).mean() > 0.1              # (without it, it is)
+
+
 @pytest.mark.parametrize("field, value", [("lightmap_intensity", -1.0), ("lightmap_intensity", float("nan")),
                                           ("lightmap_intensity", 1e5), ("lightmap", "lightmap.png")])
 def test_bad_lightmap_values_are_refused_when_given(field, value):
