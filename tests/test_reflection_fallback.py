@@ -502,3 +502,132 @@ def test_a_mirror_inside_one_uncovered_this_frame_shows_its_fallback_in_predicte
             in_mirror = runner.engine.renderer.targets.read_surface_ids() == ents["mirror"]
     differs = np.abs(frames[0] - frames[1]).max(axis=2) > 10
     assert differs.sum() > 50 and not (differs & ~in_mirror).any()
+
+
+# --- the transparent slot over a fallback ------------------------------------------------------
+SLOT_SIZE = (96, 72)
+BEHIND = glm.angleAxis(math.pi, glm.vec3(0, 1, 0))  # a quad turned to face -z
+
+
+def _slot_things(world, ents: dict, case: str) -> None:
+    """A pane of red emissive glass (alpha 0.5) and a lit blue ribbon (a trail of a prewarmed
+    emitter blowing along x, alpha 0.7) in front of the cut surface as the view showing it sees
+    it: over the floor mirror, seen by the camera ("mirror"); between the camera and the
+    portal ("portal"); behind the camera, over the mirror it faces, seen only in the mirror
+    before the camera ("level 1")."""
+    from components import ParticleEmitter
+
+    size, width, speed = ((1.8, 1.4), 0.3, 1.6) if case == "level 1" else ((0.9, 0.7), 0.15, 0.8)
+    if case == "mirror":
+        pane, turn, trail = (-0.5, 0.45, 0.3), glm.quat(), (0.05, 0.35, 0.5)
+    elif case == "portal":
+        pane, turn, trail = (-0.45, 1.3, 0.9), glm.quat(), (0.05, 1.9, 0.9)
+    else:
+        pane, turn, trail = (-0.9, 1.0, 3.6), BEHIND, (-0.6, 2.2, 3.6)
+    ents["pane"] = world.spawn(Transform(position=pane, rotation=turn), MeshRef(quad(*size)),
+                               Material(color=(0.9, 0.15, 0.1, 0.5)), Emissive(0.6))
+    ents["ribbon"] = world.spawn(Transform(position=trail), ParticleEmitter(
+        rate=60.0, burst=0, speed=speed, spread=0.0, direction=(1.0, 0.0, 0.0), lifetime=1.0, angle=(0.0, 0.0),
+        size=width, color=(0.1, 0.3, 0.9, 0.7), end_color=(0.1, 0.3, 0.9, 0.7), blend="alpha", lit=True,
+        ribbon=True, prewarm=True))
+
+
+def _slot_scene(ents: dict, case: str, backdrop: float | None, things: bool):
+    """``case``'s cut surface (``_slot_things``), or, with ``backdrop``, an unlit grey quad of
+    that level in its place (no mirror, no portal); ``things``: the pane and the ribbon too."""
+    from engine.assets.mesh import box as a_box
+
+    def surface(world, place, turn, size, cut):
+        if backdrop is not None:
+            return world.spawn(Transform(position=place, rotation=turn), MeshRef(quad(*size)),
+                               Material(color=(backdrop,) * 3, unlit=True))
+        return world.spawn(Transform(position=place, rotation=turn), MeshRef(quad(*size)),
+                           Material(color=MATERIAL), Mirror(color=TINT, **cut))
+
+    def build(world) -> None:
+        world.spawn(Skybox())
+        world.spawn(DirectionalLight(direction=SUN_LIGHT, intensity=1.5))
+        world.spawn(Transform(position=(1.2, 0.5, -2.2)), MeshRef(a_box()), Material(color=(0.5, 0.5, 0.5)))
+        if case == "mirror":
+            look_from(world, EYE, target=(0.0, 0.0, 0.0), fov=50.0)
+            ents["surface"] = surface(world, (0.0, 0.0, 0.0), FACING_UP, (3.0, 3.0), dict(max_depth=0))
+        elif case == "portal":
+            look_from(world, (0.3, 1.4, 3.0), target=(0.0, 1.6, 0.0), fov=50.0)
+            turn = glm.angleAxis(glm.radians(90), glm.vec3(0, 1, 0))
+            if backdrop is None:
+                ents["surface"], _ = spawn_portal_pair(world, (0.0, 1.5, 0.0), None, (10.0, 1.5, 0.0), turn,
+                                                       size=(2.0, 2.5))
+                world.resources[ViewBudget] = ViewBudget(views=0)
+            else:
+                ents["surface"] = surface(world, (0.0, 1.5, 0.0), glm.quat(), (2.0, 2.5), {})
+        else:  # (mirror A before the camera, drawn; B behind it, past its depth in A: a fallback in level 1)
+            look_from(world, (0.0, 1.5, 2.0), target=(0.0, 1.5, -2.0), fov=40.0)
+            ents["a"] = world.spawn(Transform(position=(0.0, 1.5, -2.0)), MeshRef(quad(4.0, 3.0)), Material(),
+                                    Mirror())
+            ents["surface"] = surface(world, (0.0, 1.5, 4.5), BEHIND, (6.0, 4.0), dict(max_depth=1))
+        if things:
+            _slot_things(world, ents, case)
+    return build
+
+
+def _slot_frame(scene, case: str, path: str, keep: bool, backdrop: float | None, things: bool) -> dict:
+    """The third frame of ``_slot_scene`` (``keep``: a still tree kept from the frame before, as
+    ``keep_still_views``): level 0's linear colour (h, w, 3), the seen ids, the surface ids of
+    levels 0 and 1, the runner, the entities."""
+    ents: dict = {}
+    runner = scene(_slot_scene(ents, case, backdrop, things), SLOT_SIZE)
+    runner.engine.renderer.antialias = "off"
+    runner.engine.reflection_system.path = path
+    runner.engine.reflection_system.keep_still_views = keep
+    for _ in range(3):
+        runner.frame()
+    levels = runner.engine.renderer.levels
+    w, h = SLOT_SIZE
+    colour = np.frombuffer(levels[0].color.read(), np.float16).reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
+    return {"colour": colour, "seen": runner.ids(), "surface": levels[0].read_surface_ids(),
+            "level1": levels[1].read_surface_ids() if len(levels) > 1 else None, "runner": runner, "ents": ents}
+
+
+@pytest.mark.parametrize("case,path,keep", [("mirror", "per_mirror", True), ("mirror", "per_mirror", False),
+                                            ("portal", "per_mirror", False), ("level 1", "per_mirror", False),
+                                            ("level 1", "batched", False)])
+def test_glass_and_a_ribbon_in_front_of_a_cut_surface_blend_over_its_fallback(scene, case, path, keep):
+    """A pane of glass and a lit ribbon (the transparent slot: ``_slot_things``) in front of a
+    surface with no view of its own: a floor mirror past its depth limit, a portal cut by the
+    budget, and a mirror seen in a mirror past its depth there (its fallback drawn into level
+    1, the pane and the ribbon only in that level).  Whatever the slot draws at a pixel is an
+    "over" blend, affine in what lies behind (glass by its alpha, a particle premultiplied):
+    drawn over two unlit backdrops of known grey in the surface's place it gives, pixel by
+    pixel and channel by channel, its own light P and what it lets through K; over the
+    fallback F (the same surface drawn without the pane and the ribbon) the frame must be
+    P + K F.  A slot blended under the fallback (the fallback painted over the glass) would
+    show F there.  And both are there: the pane's id over the surface, and the ribbon's
+    colour over it where the pane is not.  The tree drawn whole, and (level 0) kept from the
+    frame before (``StillTree.keep``: the fallbacks drawn again, then the root's slot)."""
+    frames = {(backdrop, things): _slot_frame(scene, case, path, keep, backdrop, things)
+              for backdrop in (None, 0.1, 0.8) for things in (False, True)}
+    cut, bare = frames[None, True], frames[None, False]
+    stats = cut["runner"].stats
+    assert stats.reflection_fallbacks >= 1
+    # (the surface's pixels as drawn without the slot: the glass takes its pixels' surface ids)
+    if case == "level 1":
+        assert stats.reflection_views == 1 and stats.reflection_path == path
+        where = (bare["surface"] == bare["ents"]["a"]) & (bare["level1"] == bare["ents"]["surface"])
+    else:
+        assert stats.reflection_views == 0
+        where = bare["surface"] == bare["ents"]["surface"]
+    backdrop = frames[0.1, False]
+    where &= backdrop["seen"] == backdrop["ents"]["surface"]  # (the backdrop there too, seen directly or in A)
+    low, high = frames[0.1, True]["colour"], frames[0.8, True]["colour"]
+    with np.errstate(divide="ignore", invalid="ignore"):   # (0 / 0 off the backdrop)
+        let_through = (high - low) / (frames[0.8, False]["colour"] - frames[0.1, False]["colour"])
+    own = low - let_through * frames[0.1, False]["colour"]
+    fallback = bare["colour"]
+    want = own + let_through * fallback
+    pane = where & (cut["seen"] == cut["ents"]["pane"])
+    ribbon = where & ~pane & (np.abs(cut["colour"] - fallback).max(axis=-1) > 0.05)
+    assert pane.sum() > 60 and ribbon.sum() > 20, (pane.sum(), ribbon.sum())
+    assert np.abs(cut["colour"][pane] - fallback[pane]).max(axis=-1).min() > 0.05
+    bad = ~np.isclose(cut["colour"][where], want[where], rtol=5e-3, atol=4e-3).all(axis=-1)
+    assert not bad.any(), (f"{int(bad.sum())} of {int(where.sum())} pixels are not the slot over the fallback; "
+                           f"worst {np.abs(cut['colour'][where] - want[where]).max():.4f}")

@@ -1017,3 +1017,47 @@ def test_a_waters_fallback_shows_the_rings_where_they_are_and_nowhere_else(scene
     assert flat.sum() > 1000 and tilted.sum() > 30, (flat.sum(), tilted.sum())
     assert changed[flat].max() <= 2
     assert (changed[tilted] > 2).mean() > 0.3
+
+
+def test_a_wake_faster_than_the_ripples_leaves_a_v_of_half_angle_asin_of_their_speed_over_its_own(scene):
+    """A thin post with a ``Wake`` (radius 4 cm: a drop 1.5 texels wide, ``MIN_DROP_TEXELS``)
+    wading along x at ``u`` through still water whose rings spread at ``c`` (no damping): past
+    the ripples' speed its rings, each from where it was, are enveloped by Mach's V, whose
+    sides stand at asin(c / u) from its way and which nothing crosses ahead of it (for a point
+    source; a drop of radius r moves the sides out by r / cos of that).  Read back after 1.6 s:
+    ahead of it the water is still; the V's edge (the farthest a disturbance of 5% of the
+    field's greatest reaches from the way, at each distance behind the post, fitted by a line)
+    stands at that angle within 1.5 degrees and starts r / cos of it out, within a texel, for
+    u = 2c (30 degrees) and 4c (14.5 degrees); slower than the ripples (u = c / 2) the rings
+    run ahead of it, and there is no V."""
+    c, cell, radius, start, frames, dt = 0.3, 0.03, 0.04, -1.4, 48, 1.0 / 30.0
+
+    def wade(u: float):
+        post = (Transform(position=(start, 0.0, 0.0)), MeshRef(box((0.1, 0.3, 0.1))),
+                Material(color=(0.9, 0.9, 0.2, 1.0)), Wake(strength=0.5, radius=radius))
+        build, held = pond(Ripples(speed=c, damping=0.0, cell=cell), things=[post])
+        runner = scene(build, (32, 24))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for k in range(frames):
+                runner.world.get(held["things"][0], Transform).position = glm.vec3(start + u * dt * k, 0.0, 0.0)
+                runner.frame(dt)
+        assert runner.stats.ripple_steps >= 1
+        xz, _ = texel_centres(runner, held)
+        behind = start + u * dt * (frames - 1) - xz[..., 0]   # (metres behind the post along its way)
+        spacing = 4.0 / runner.engine.renderer.ripples.waters[held["water"]][1].texels[0]
+        return np.abs(heights(runner, held).astype(np.float64)), behind, np.abs(xz[..., 1]), spacing
+
+    for u in (2.0 * c, 4.0 * c):
+        field, behind, off_the_way, spacing = wade(u)
+        assert field.max() > 1e-3
+        assert field[behind < -2.0 * spacing].max() < 1e-6 * field.max()   # (nothing ahead of it)
+        stirred = field > 0.05 * field.max()
+        distances = np.arange(0.1, 0.8 * u * dt * frames, spacing)
+        edges = [off_the_way[(np.abs(behind - s) < spacing / 2) & stirred].max() for s in distances]
+        slope, start_out = np.polyfit(distances, edges, 1)
+        half_angle = math.asin(c / u)
+        assert math.degrees(abs(math.atan(slope) - half_angle)) < 1.5, (u, math.degrees(math.atan(slope)))
+        assert abs(start_out - max(radius, 1.5 * spacing) / math.cos(half_angle)) < spacing, (u, start_out)
+    field, behind, _, _ = wade(0.5 * c)
+    assert field[behind < -0.15].max() > 0.2 * field.max()   # (slower than its rings: they run ahead)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import (
     ComponentValueError,
@@ -140,3 +141,73 @@ def test_transparent_keeps_an_emissive_panes_light_whole(scene):
     assert light[..., 0].min() > 0.3 and light[..., 1].min() > 0.08   # the glow
     np.testing.assert_allclose(kept[middle], light + (1.0 - ALPHA) * wall[middle], atol=0.012, rtol=0.02)
     np.testing.assert_allclose(faded[middle], ALPHA * light + (1.0 - ALPHA) * wall[middle], atol=0.012, rtol=0.02)
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_through_a_portal_the_slot_is_cut_about_tinted_glass_as_its_things_lie_before_and_behind_it(scene, path):
+    """Beyond portal B, seen through A (``tests.test_particles``'s pair): a refracting pane of
+    index 1 that reflects nothing and lets through half the light behind it (a tint of 0.5),
+    a see-through green square behind it and a yellow one in front of it, over part of it on
+    screen (both unlit, at alpha 0.5, fading all their light).  The portal's level cuts its
+    slot about the glass (``ScenePass._slot_and_glass``): the green is drawn before the glass,
+    into what it marches, so through the pane it is tinted with the rest, the frame half the
+    frame without the pane; the yellow after, over it, untinted: its own light (the frame
+    without the pane, less half what lies behind it there) over the tinted frame without the
+    yellow, let through by half.  Drawn all after the glass, the green would lie over the
+    tint; all before, the yellow under it.  Level 0's linear colour, pixel by pixel where
+    the rays (the camera's, straight through A) meet each square and the pane."""
+    from components import Refractive
+    from engine.assets.portals import spawn_portal_pair
+    from tests.support import pixel_rays
+    from tests.test_particles import EYE, FOV, PORTAL_A, PORTAL_B, PORTAL_SIZE, PORTAL_TURN, beyond_b, pair_carry
+    from tests.test_screen_refraction import CLEAR, on_quad
+
+    size, carry = (96, 72), pair_carry()
+    turn = glm.quat_cast(carry)
+    pane_at, green_at, yellow_at = (0.0, 0.0, -4.0), (-0.3, 0.1, -4.8), (0.35, -0.15, -3.4)
+
+    def frame(pane: bool, yellow: bool) -> tuple[np.ndarray, object]:
+        def build(world):
+            look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+            spawn_portal_pair(world, PORTAL_A, None, PORTAL_B, PORTAL_TURN, size=PORTAL_SIZE)
+            world.spawn(Skybox())
+            world.spawn(Transform(position=beyond_b(carry, 0.0, 0.0, -7.0), rotation=turn), MeshRef(quad(20.0, 20.0)),
+                        Material(color=(0.5, 0.3, 0.6, 1.0), unlit=True))
+            world.spawn(Transform(position=beyond_b(carry, *green_at), rotation=turn), MeshRef(quad(0.8, 0.8)),
+                        Material(color=(0.1, 0.9, 0.1, 0.5), unlit=True, double_sided=True))
+            if yellow:
+                world.spawn(Transform(position=beyond_b(carry, *yellow_at), rotation=turn), MeshRef(quad(0.5, 0.5)),
+                            Material(color=(0.9, 0.9, 0.1, 0.5), unlit=True, double_sided=True))
+            if pane:
+                world.spawn(Transform(position=beyond_b(carry, *pane_at), rotation=turn), MeshRef(quad(1.2, 1.2)),
+                            Material(color=(0.5, 0.5, 0.5, 0.0), double_sided=True, **CLEAR),
+                            Refractive(ior=1.0, solid=False))
+        runner = scene(build, size)
+        runner.engine.renderer.antialias = "off"
+        runner.engine.reflection_system.path = path
+        runner.engine.reflection_system.keep_still_views = False   # (the portal's level drawn each frame)
+        for _ in range(2):
+            runner.frame()
+        w, h = size
+        colour = runner.engine.renderer.levels[0].color.read()
+        return np.frombuffer(colour, np.float16).reshape(h, w, 4)[::-1, :, :3].astype(np.float64), runner
+
+    seen, runner = frame(True, True)
+    stats = runner.stats
+    assert stats.reflection_views == 1 and stats.reflection_path == path
+    unpaned, _ = frame(False, True)
+    bare, _ = frame(False, False)
+    tinted, _ = frame(True, False)
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    inside = on_quad(eye, rays, np.array(PORTAL_A), 0.9)   # (A's opening, 2.5 x 2, less a margin)
+    pane = inside & on_quad(eye, rays, np.array(pane_at), 0.57)
+    yellow = on_quad(eye, rays, np.array(yellow_at), 0.23)
+    green = pane & on_quad(eye, rays, np.array(green_at), 0.37) & ~on_quad(eye, rays, np.array(yellow_at), 0.27)
+    yellow &= pane
+    assert green.sum() > 40 and yellow.sum() > 20, (green.sum(), yellow.sum())
+    assert (unpaned[green][:, 1] > 1.3 * unpaned[green][:, [0, 2]].max(axis=1)).all()   # (the green square there)
+    assert np.abs(unpaned[yellow] - bare[yellow]).max(axis=-1).min() > 0.1               # (the yellow one there)
+    np.testing.assert_allclose(seen[green], 0.5 * unpaned[green], rtol=6e-3, atol=3e-3)
+    own = unpaned - 0.5 * bare
+    np.testing.assert_allclose(seen[yellow], own[yellow] + 0.5 * tinted[yellow], rtol=6e-3, atol=3e-3)
+    assert stats.slot_after_glass >= 1   # (the cut made in the portal's level: the yellow after the glass)
