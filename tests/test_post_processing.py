@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pyglm import glm
 
 from components import Camera, Transform
 from components.post import BLOOM_COMPOSITES, TONEMAP_CURVES, Bloom, Tonemap
@@ -839,3 +840,133 @@ def test_a_lamp_seen_only_through_a_portal_glows_there(scene):
     gain = (glowing - plain).sum(axis=2)
     assert gain[near].mean() > 20, gain[near].mean()
     assert np.abs(glowing[:16, :16] - plain[:16, :16]).max() <= 2
+
+
+def _hdr_frame(runner) -> np.ndarray:
+    """The main view's level 0 as the present stage read it (every reflection composited in),
+    linear RGB float64, row 0 at the top."""
+    color = runner.engine.renderer.targets.color
+    w, h = color.size
+    return np.flipud(np.frombuffer(color.read(), np.float16).reshape(h, w, 4)[..., :3]).astype(np.float64)
+
+
+@pytest.mark.parametrize("through", ["mirror", "portal"])
+def test_auto_exposure_meters_a_lamp_seen_only_in_a_mirror_or_through_a_portal_as_the_frames_pixels(scene, through):
+    """A bright tile (emissive 40) the camera cannot see directly, shown by a mirror (or through
+    a portal) filling the upper right of a 128 x 128 frame (each of the meter's taps on a pixel's
+    centre).  The first frame's exposure (no adaptation yet) is the one worked out here in numpy
+    from the composited frame's own luminance: log2(key) less the mean of its clamped log2
+    Rec. 709 luminance, within its range.  The tile is there (ids say so, inside the mirror or
+    portal's pixels, and bright), and it counts: with its pixels' luminance left out of the
+    mean the exposure would be more than a third of a stop higher, and the tile made dark
+    brings the metered exposure up as the numpy mean of that frame says."""
+    from components import DirectionalLight, Emissive, Material, MeshRef, Mirror, Visibility
+    from engine.assets.mesh import plane, quad
+    from engine.assets.portals import spawn_portal_pair
+    from tests.support import look_from
+
+    size, key, low, high = (128, 128), 0.18, -6.0, 6.0
+    ents = {}
+
+    def build(glow: float):
+        def make(world) -> None:
+            camera = look_from(world, (0.0, 1.5, 4.0), (0.0, 1.5, 0.0))
+            world.add_component(camera, Tonemap(curve="aces", auto_exposure=True, key=key, min_ev=low, max_ev=high))
+            world.spawn(DirectionalLight(direction=(-0.3, -1.0, -0.5), intensity=1.0))
+            world.spawn(Transform(), MeshRef(plane(20, 20)), Material(color=(0.3, 0.3, 0.3)))
+            world.spawn(Transform(position=(0, 1.5, -0.3)), MeshRef(quad(20, 20)), Material(color=(0.2, 0.2, 0.2)))
+            where, tile, extent = glm.vec3(1.2, 2.55, 0.0), glm.vec3(1.5, 2.9, 1.5), (2.2, 2.0)
+            behind = glm.angleAxis(glm.radians(180.0), glm.vec3(0, 1, 0))
+            if through == "mirror":
+                ents["surface"] = world.spawn(Transform(position=where), MeshRef(quad(*extent)), Material(), Mirror())
+                hidden = (Visibility(direct=False),)
+                tile = Transform(position=tile, rotation=behind)
+            else:   # b 30 m behind, facing away from the camera: the tile before it out of the camera's view
+                ents["surface"], _ = spawn_portal_pair(world, where, None, where + glm.vec3(0, 0, 30), behind,
+                                                       size=extent)
+                hidden = ()
+                tile = Transform(position=where + glm.vec3(0, 0, 30) + (tile - where) * glm.vec3(1, 1, -1))
+            ents["tile"] = world.spawn(tile, MeshRef(quad(*extent)), Material(color=(1.0, 0.9, 0.8)), Emissive(glow),
+                                       *hidden)
+        return make
+
+    def metered(glow: float):
+        runner = scene(build(glow), size)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        hdr = _hdr_frame(runner)
+        logs = np.clip(np.log2(np.maximum(hdr @ [0.2126, 0.7152, 0.0722], 1e-10)),
+                       math.log2(key) - high, math.log2(key) - low)
+        return runner, hdr, logs, runner.engine.renderer.present_pass.auto_exposure.adapted_ev()
+
+    def expected(logs):
+        return float(np.clip(math.log2(key) - logs.mean(), low, high))
+
+    runner, hdr, logs, ev = metered(40.0)
+    tile = runner.ids() == ents["tile"]
+    assert 800 < tile.sum() < 4000, tile.sum()
+    assert (runner.engine.renderer.targets.read_surface_ids()[tile] == ents["surface"]).all()
+    rows, columns = np.nonzero(tile)
+    assert rows.max() < size[1] / 2 and columns.min() > size[0] / 2   # (upper right)
+    assert (hdr[tile] @ [0.2126, 0.7152, 0.0722]).min() > 10.0
+    assert ev == pytest.approx(expected(logs), abs=0.02)
+    assert expected(logs[~tile]) - expected(logs) > 0.35   # (the tile's pixels count)
+    _, dark_hdr, dark_logs, dark_ev = metered(0.0)
+    assert dark_ev == pytest.approx(expected(dark_logs), abs=0.02) and dark_ev - ev > 0.35
+
+
+@pytest.mark.parametrize("first_step", FIRST_STEPS)
+def test_the_bloom_threshold_fades_light_in_over_its_soft_knee(known, first_step):
+    """``Bloom(threshold=1, knee=0.5)`` on constant images of one colour (r, r/2, r/4): every
+    filter of the chain keeps a constant (its weights sum to 1, Karis's boxes all alike), so
+    the chain's sum over its levels is the colour times the soft threshold's share, worked out
+    here: Unity's and Unreal's quadratic from threshold - knee to threshold + knee (its
+    brightness the largest channel), then the light above the threshold; nothing below
+    0.5, and at 0.9 light a hard threshold would keep out."""
+    threshold, knee = 1.0, 0.5
+    tint = np.array([1.0, 0.5, 0.25])
+
+    def share(bright: float) -> float:
+        soft = np.clip(bright - threshold * (1 - knee), 0.0, 2 * threshold * knee) ** 2 / (4 * threshold * knee)
+        return max(soft, bright - threshold) / bright
+
+    def constant(bright: float) -> np.ndarray:
+        image = np.ones((64, 128, 4), np.float16)
+        image[..., :3] = bright * tint
+        return image
+
+    runner = start_at(known(constant(0.3), Tonemap(curve="none", exposure=-4.0),
+                            Bloom(intensity=0.5, threshold=threshold, knee=knee, composite="additive")), first_step)
+    bloom = runner.engine.renderer.present_pass.bloom
+    for bright in (0.3, 0.6, 0.9, 1.2, 1.45, 2.0, 4.0):
+        runner.game.image = constant(bright)
+        runner.frame()
+        w, h = bloom.textures[0].size
+        summed = np.frombuffer(bloom.textures[0].read(), LEVEL_DTYPE).reshape(h, w, 4)[..., :3].astype(np.float64)
+        want = bright * tint * share(bright)
+        np.testing.assert_allclose(summed / bloom.levels, np.broadcast_to(want, summed.shape), rtol=4e-3, atol=2e-4,
+                                   err_msg=str(bright))
+    assert share(0.9) > 0.08 and share(0.3) == 0.0 and share(4.0) == pytest.approx(0.75)
+
+
+@pytest.mark.parametrize("intensity", [0.3, 0.8])
+def test_additive_bloom_adds_what_energy_conserving_bloom_takes_from_the_image(known, intensity):
+    """The two composites of one bloom on a smooth HDR image (curve none, 4 stops down: nothing
+    clips): "additive" is image + bloom x intensity, "energy_conserving" image x (1 - intensity)
+    + bloom x intensity, so in linear light the first frame less the second is the image x
+    intensity x 2^-4 at every pixel (the bloom cancels), within the 8-bit encoding's steps;
+    and each frame is not the image alone (the bloom shows)."""
+    image = smooth_image()
+    linear, steps = {}, 0.0
+    for composite in BLOOM_COMPOSITES:
+        runner = known(image, Tonemap(curve="none", exposure=-4.0), Bloom(intensity=intensity, composite=composite))
+        code = runner.frame().astype(np.float64)
+        linear[composite] = srgb_to_linear(code)
+        steps = steps + srgb_to_linear(np.minimum(code + 1.0, 255.0)) - srgb_to_linear(np.maximum(code - 1.0, 0.0))
+    assert set(linear) == {"additive", "energy_conserving"}
+    scaled = image[..., :3].astype(np.float64) / 16.0
+    assert linear["additive"].max() < 0.98   # (nothing clipped)
+    off = np.abs(linear["additive"] - linear["energy_conserving"] - scaled * intensity)
+    assert (off <= 0.5 * steps + 1e-4).all(), (off.max(), np.argwhere(off > 0.5 * steps + 1e-4)[:5])   # (a step each)
+    for frame in linear.values():
+        assert np.abs(frame - scaled).mean() > 0.004

@@ -345,3 +345,74 @@ def test_world_text_is_seen_in_a_mirror_when_asked(scene):
     assert np.abs(after[inner].astype(int) - turned[inner]).max() <= 2, np.abs(after[inner] - turned[inner]).max()
     as_written = np.abs(after.astype(int) - turned[:, ::-1]).max(axis=-1)[changed & inner]
     assert (as_written > 20).sum() > 20, (as_written > 20).sum()   # (and not as written)
+
+
+def test_the_hud_lies_over_the_lens_a_picture_panel_takes_the_frames_look_and_plain_ones_their_colour(scene):
+    """Under an active camera with a tone curve a stop up, a grade, and every lens effect at
+    full strength (a vignette, film grain, colour fringes, a bloom from 0 up and its flare),
+    which the grey wall the camera sees shows (its corner darker than its middle, grainy):
+    a picture panel (a ``Monitor`` on it: the monitors' studio's red box) in the top-left
+    corner, where the vignette is strongest, is the grade of picture x colour x 2 through the
+    curve, sRGB-encoded (the numpy formula of tests/test_color_grading.py) within one 8-bit
+    step, untouched by the lens (README: "not the lens's bloom, flare, vignette, aberration or
+    grain, which the panel lies over"); a plain panel in the bottom-right corner is its own
+    linear colour encoded, ungraded and not tone-mapped, and the text over it is the atlas's
+    glyphs blended over that colour in numpy."""
+    from components import (
+        Bloom,
+        ChromaticAberration,
+        ColorGrading,
+        FilmGrain,
+        LensFlare,
+        Monitor,
+        Tonemap,
+        Vignette,
+    )
+    from tests.test_color_grading import grade
+    from tests.test_monitors import DT, PICTURE, active_camera, studio
+    from tests.test_post_processing import CURVES, expected_srgb8
+
+    size, tint, plain = (160, 120), np.array([1.0, 0.6, 0.9]), (0.2, 0.5, 0.8, 1.0)
+    controls = dict(contrast=1.2, slope=(1.1, 1.0, 0.9), saturation=0.6)
+    build, parts = studio(None, eye=(0.0, 1.0, 30.0))   # (the lens sees the red box; the main camera a wall)
+    held = {}
+
+    def hud(world):
+        build(world)
+        camera = active_camera(world)
+        for component in (Tonemap(curve="agx", exposure=1.0), ColorGrading(**controls), Vignette(intensity=1.0),
+                          FilmGrain(intensity=1.0, response=0.0), ChromaticAberration(intensity=1.0),
+                          Bloom(intensity=0.8, threshold=0.0), LensFlare(intensity=1.0)):
+            world.add_component(camera, component)
+        world.spawn(Transform(position=(0.0, 1.0, 20.0)), MeshRef(quad(40, 40)),
+                    Material(color=(0.3, 0.3, 0.3, 1.0), unlit=True))
+        held["picture"] = world.spawn(ScreenPanel(size=PICTURE, position=(0, 0), color=(*tint, 1.0)),
+                                      Monitor(camera=parts["lens"], size=PICTURE))
+        held["plain"] = world.spawn(ScreenPanel(size=(60, 24), position=(0, 0), anchor="bottom_right", color=plain))
+        world.spawn(ScreenText("HUD", position=(-20, -4), anchor="bottom_right", color=(1.0, 0.9, 0.1, 1.0), order=1))
+
+    runner = scene(hud, size)
+    runner.engine.renderer.antialias = "off"
+    for _ in range(2):
+        rgb = runner.frame(DT).astype(np.int16)
+    # The lens acts on the frame: the wall's corner (bottom-left) darker than its middle, and grainy.
+    corner, middle = rgb[size[1] - 12:, :12].mean(), rgb[size[1] // 2 + 10:size[1] // 2 + 22, 70:90].mean()
+    assert middle - corner > 20, (middle, corner)
+    assert rgb[size[1] // 2 + 10:size[1] // 2 + 22, 70:90].std() > 2.0
+    # The picture panel: the frame's exposure, grade and curve, nothing of the lens.
+    shown = runner.engine.renderer.monitors.read(held["picture"])[..., :3].astype(np.float64) * tint * 2.0
+    assert shown[..., 0].max() > 0.3 and (shown.max(axis=-1) == 0.0).mean() > 0.3   # the box, and black about it
+    want = expected_srgb8(CURVES["agx"](grade(shown, **controls)))
+    drawn = rgb[:PICTURE[1], :PICTURE[0]]
+    assert np.abs(drawn - want).max() <= 1, np.abs(drawn - want).max()
+    assert np.abs(want - expected_srgb8(CURVES["agx"](shown))).max() > 8   # (the grade shows)
+    # The plain panel: its colour encoded; the text over it the glyphs blended over that colour.
+    panel = np.zeros((24, 60, 3)) + np.rint(srgb(plain[:3]) * 255.0)
+    text_x = 60 - 20 - (sum(pillow_advances()[ch] for ch in "HUD"))   # (anchored by its box's bottom-right)
+    drawn = rgb[size[1] - 24:, size[0] - 60:]
+    assert (np.abs(drawn - panel).max(axis=-1) <= 1).mean() > 0.8   # (most of it: no text there)
+    atlas = make_atlas()
+    text_y = 24 - 4 - atlas.line_height
+    want = expected_text(panel, "HUD", text_x, text_y, (1.0, 0.9, 0.1, 1.0))
+    assert close_to(drawn, want) <= 1
+    assert (np.abs(want - panel).max(axis=-1) > 50).sum() > 20   # (the text is there)
