@@ -1,7 +1,9 @@
 """The game's own code (its ``update``, its systems) failing: headless, the error ends the
 frame as ever; in the window shell (``GameGuard.contain``), it stops the game instead of the
 program, the engine's stages draw the world on, the overlay and the console say where, the
-level's edits can still be saved, and F5 resumes the game."""
+level's edits can still be saved, and F5 resumes the game.  Then the sample level's own game
+code and controls, as README's "Game: hall of mirrors" and "Controls (windowed)" state them:
+the headless tour, the spinning crates, what the level holds, and the fly camera's keys."""
 from __future__ import annotations
 
 import numpy as np
@@ -291,3 +293,169 @@ def test_a_processor_reused_by_a_second_engine_is_guarded_by_that_engine_alone(c
         assert counting.runs == 3 and second.game_guard.stopped is None
     finally:
         capture.release()
+
+
+# --- the sample level's game code and the windowed controls ------------------------------------
+
+def _hall():
+    from engine.core.world import World
+    from games.hall_of_mirrors.level import HallOfMirrors
+
+    game = HallOfMirrors(tour=True)
+    world = World("hall")
+    game.build(world)
+    return game, world
+
+
+def _looks(rotation) -> glm.vec3:
+    return glm.normalize(rotation * glm.vec3(0.0, 0.0, -1.0))
+
+
+def test_the_sample_levels_tour_holds_each_pose_while_it_pans_and_its_crates_spin_at_their_speed():
+    """The hall's script (``HallOfMirrors.update``, no frames drawn) at 0.25 s a frame over two
+    rounds of the tour: in each pose's two seconds (the file's ``tour_seconds``) the camera
+    stands at that pose, its yaw starting half of ``tour_pan`` (20 degrees) left of the
+    pose's and panning right, never back, with the pose's pitch; it looks where that yaw and
+    pitch say (yaw 0 looks down -Z, 90 down -X: -sin yaw cos pitch, sin pitch, -cos yaw cos
+    pitch); after the last pose the first comes again.  Each Spin crate has turned about +Y
+    by its speed times the time (its +X axis's heading, worked out from its rotation)."""
+    import math
+
+    from components import FlyController
+    from games.hall_of_mirrors.level import Spin
+
+    try:
+        import tomllib
+    except ImportError:  # Python 3.10
+        import tomli as tomllib
+    from games.hall_of_mirrors.level import LEVEL
+
+    rules = tomllib.loads(LEVEL.read_text())["rules"]
+    poses, seconds, pan = rules["tour"], rules["tour_seconds"], rules["tour_pan"]
+    assert (len(poses), seconds, pan) == (6, 2.0, 20.0)
+    game, world = _hall()
+    camera = game.names["camera"]
+    spins = {e: (spin.speed, glm.quat(world.get(e, Transform).rotation)) for e, spin in world.query_one(Spin)}
+    assert len(spins) >= 3
+    dt = 0.25
+    per_pose = int(seconds / dt)
+    yaws: dict[int, list[float]] = {}
+    for frame in range(2 * len(poses) * per_pose):
+        game.update(world, dt)
+        index = frame // per_pose % len(poses)
+        x, y, z, yaw, pitch = poses[index]
+        transform = world.get(camera, Transform)
+        assert glm.distance(transform.position, glm.vec3(x, y, z)) < 1e-6, frame
+        fly = world.get(camera, FlyController)
+        assert fly.pitch == pytest.approx(pitch)
+        a, b = math.radians(fly.yaw), math.radians(pitch)
+        expected = glm.vec3(-math.sin(a) * math.cos(b), math.sin(b), -math.cos(a) * math.cos(b))
+        assert glm.distance(_looks(transform.rotation), expected) < 1e-5, frame
+        yaws.setdefault(frame // per_pose, []).append((fly.yaw - yaw + 180.0) % 360.0 - 180.0)
+    for window, turned in yaws.items():
+        assert turned[0] == pytest.approx(-pan / 2), window
+        assert all(b > a for a, b in zip(turned, turned[1:], strict=False)) and turned[-1] < pan / 2
+    elapsed = 2 * len(poses) * per_pose * dt
+    for entity, (speed, start) in spins.items():
+        side = world.get(entity, Transform).rotation * glm.inverse(start) * glm.vec3(1.0, 0.0, 0.0)
+        heading = math.degrees(math.atan2(-side.z, side.x))  # counter-clockwise seen from above
+        assert abs(side.y) < 1e-5
+        assert (heading - speed * elapsed + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-2), entity
+
+
+def test_the_sample_level_holds_the_pairs_its_section_lists():
+    """What "Game: hall of mirrors" says the level holds, from its file (geometry worked out
+    from each surface's position and +Z normal): mirrors tinted and rough, a facing pair of
+    mirrors (normals opposite, each in front of the other), two portal pairs, one of them
+    facing each other (the tunnel), the other's far door beyond the hall's mirror wall span
+    (more than 10 m off); the chrome ball's probe redrawn every frame a face a frame; a
+    normal-mapped brass statue; a glass ball; an emissive lamp with a point light; motes;
+    the pond's water and ripples, its koi breathing every 2.5 s; a monitor showing the
+    security camera; one mirror of the wall throwing the sun's light back."""
+    from components import (
+        Camera,
+        DirectionalLight,
+        Emissive,
+        Material,
+        Mirror,
+        Monitor,
+        ParticleEmitter,
+        PointLight,
+        Portal,
+        ReflectionProbe,
+        Refractive,
+        Ripples,
+        Water,
+    )
+    from games.hall_of_mirrors.level import Rise
+
+    game, world = _hall()
+    names = game.names
+
+    def placed(entity):
+        transform = world.get(entity, Transform)
+        return glm.vec3(transform.position), glm.normalize(transform.rotation * glm.vec3(0.0, 0.0, 1.0))
+
+    def facing(a, b) -> bool:
+        (pa, na), (pb, nb) = placed(a), placed(b)
+        return glm.dot(na, nb) < -0.99 and glm.dot(pb - pa, na) > 0.5 and glm.dot(pa - pb, nb) > 0.5
+
+    mirrors = [e for e, m in world.query_one(Mirror) if not world.has(e, Water)]
+    assert any(tuple(world.get(e, Mirror).color)[:3] != (1.0, 1.0, 1.0) for e in mirrors)
+    assert any(world.get(e, Mirror).roughness > 0.0 for e in mirrors)
+    assert any(facing(a, b) for a in mirrors for b in mirrors if a < b), "a facing pair of mirrors"
+    pairs = {frozenset((e, p.partner)) for e, p in world.query_one(Portal)}
+    assert len(pairs) == 2
+    facing_pairs = [pair for pair in pairs if facing(*pair)]
+    assert [set(pair) for pair in facing_pairs] == [{names["tunnel"], names["tunnel_far"]}]
+    door = next(iter(pairs - set(facing_pairs)))
+    assert glm.distance(*(placed(e)[0] for e in door)) > 10.0, "a doorway that opens far across the hall"
+    probe = world.get(names["probe_ball"], ReflectionProbe)
+    assert (probe.refresh, probe.time_slicing) == ("every_frame", "one_face_per_frame")
+    assert world.get(names["brass_statue"], Material).normal_map is not None
+    assert world.has(names["glass_ball"], Refractive)
+    assert world.has(names["lamp"], Emissive) and world.has(names["lamp"], PointLight)
+    assert world.query_one(ParticleEmitter) and world.query_one(DirectionalLight)
+    assert world.has(names["pond"], Water) and world.has(names["pond"], Ripples)
+    assert [rise.every for _, rise in world.query_one(Rise)] == [2.5]
+    monitors = [m for _, m in world.query_one(Monitor)]
+    assert len(monitors) == 1 and monitors[0].camera == names["security_camera"]
+    assert world.has(names["security_camera"], Camera)
+    throwing = [e for e in mirrors if world.get(e, Mirror).reflects_light]
+    assert len(throwing) == 1 and placed(throwing[0])[0].z == pytest.approx(-6.0), "one mirror of the wall"
+
+
+@pytest.mark.parametrize("shift", [False, True])
+def test_the_fly_keys_move_the_camera_along_its_own_view_axes_and_shift_flies_three_times_as_far(ctx, shift):
+    """A fly camera looking down at a room (pitched, turned): W, S, A, D, Q, E held for one
+    0.1 s frame each move its eye by the controller's speed x 0.1 s (x 3 with Shift) along the
+    view's own forward, back, left, right, down and up: the columns of the inverse of the view
+    matrix the renderer drew the frame before with."""
+    from components import Camera, FlyController, look_rotation
+    from engine.core.frame_io import Input
+
+    def build(world) -> None:
+        _room(world)  # its camera, turned aside and given the controller
+        camera, _ = next(iter(world.query_one(Camera)))
+        eye = glm.vec3(1.0, 2.0, 5.0)
+        world.get(camera, Transform).position = eye
+        world.get(camera, Transform).rotation = look_rotation(glm.vec3(-0.5, 0.5, 0.0) - eye)
+        world.add_component(camera, FlyController(speed=4.0))
+
+    runner = SceneRunner(ctx, build, (32, 24))
+    try:
+        runner.frame(0.1)
+        keys = runner.world.resources[Input]
+        speed = 4.0 * (3.0 if shift else 1.0)
+        for key, column, sign in (("w", 2, -1.0), ("s", 2, 1.0), ("a", 0, -1.0), ("d", 0, 1.0),
+                                  ("q", 1, -1.0), ("e", 1, 1.0)):
+            view = glm.inverse(runner.engine.main_view.view)
+            axis = glm.normalize(glm.vec3(view[column])) * sign
+            eye = glm.vec3(view[3])
+            keys.held |= {key} | ({"shift"} if shift else set())
+            runner.frame(0.1)
+            keys.held.clear()
+            moved = glm.vec3(glm.inverse(runner.engine.main_view.view)[3]) - eye
+            assert glm.distance(moved, axis * (speed * 0.1)) < 1e-4, (key, moved, axis)
+    finally:
+        runner.close()

@@ -547,3 +547,179 @@ def test_the_target_lights_up_because_the_lasers_reflected_light_reaches_it(run,
         assert not brighter.any()
     else:
         assert brighter.sum() > 20, int(brighter.sum())
+
+
+def test_a_beam_sent_straight_back_stops_on_the_lasers_front_face(run):
+    """Level 1 as it starts: m1 at (0, 1, -2) faces -X (yaw -90), square to the laser's beam
+    (from (-4, 1, -2) along +X), so d - 2(d.n)n sends it straight back along -X; the laser is
+    solid to its own beam once it has left it, so the beam stops on the housing's front face,
+    x = -4 + 0.7 / 2 (its box is 0.7 long along the way it looks)."""
+    r = run(level_file("01_one_bounce"))
+    r.frame()
+    beam = r.state.path
+    m1 = r.game.names["m1"]
+    d, n = glm.vec3(1.0, 0.0, 0.0), glm.vec3(-1.0, 0.0, 0.0)
+    back = d - 2.0 * glm.dot(d, n) * n
+    assert [b.mirror for b in beam.bounces] == [m1]
+    assert glm.distance(beam.bounces[0].outgoing, back) < 1e-5
+    assert beam.end == "solid" and beam.stopped_by == r.state.rules.source
+    expected = [glm.vec3(-4.0, 1.0, -2.0), glm.vec3(0.0, 1.0, -2.0), glm.vec3(-4.0 + 0.35, 1.0, -2.0)]
+    assert len(beam.points) == 3 and all(glm.distance(a, b) < 1e-4 for a, b in zip(beam.points, expected, strict=True))
+    assert not r.state.lit and not r.state.wins()
+
+
+def test_a_beam_passing_beside_a_mirrors_outline_goes_on_past_it(run):
+    """Level 1 with m1 (1.2 x 1.0) raised: the beam (y = 1) crosses m1's plane x = 0 at
+    (0, 1, -2); raised 0.45 m that point is inside the outline (0.45 < 0.5 below its centre)
+    and the beam bounces; raised 1.2 m it is outside, and the beam goes on along +X past the
+    mirror and its frame (nothing else stands there: it leaves the level), and the frame
+    shows a beam segment beyond the mirror."""
+    r = run(level_file("01_one_bounce"), size=(192, 108))
+    m1 = r.game.names["m1"]
+    segments = {e for e, _ in r.world.query_one(BeamSegment)}
+    for raised, bounces in ((0.45, 1), (1.2, 0)):
+        r.world.get(m1, Transform).position = (0.0, 1.0 + raised, -2.0)
+        r.frame()
+        image = r.frame()
+        beam = r.state.path
+        local = glm.vec3(0.0, 1.0, -2.0) - glm.vec3(0.0, 1.0 + raised, -2.0)  # the crossing, from m1's centre
+        assert (abs(local.y) <= 0.5) == bool(bounces)
+        assert len(beam.bounces) == bounces, raised
+        if bounces:
+            assert beam.bounces[0].mirror == m1 and glm.distance(beam.points[1], glm.vec3(0.0, 1.0, -2.0)) < 1e-4
+            continue
+        assert beam.end == "open" and len(beam.points) == 2
+        assert beam.points[1].x > 30.0 and abs(beam.points[1].y - 1.0) < 1e-5 and abs(beam.points[1].z + 2.0) < 1e-5
+        ids = r.engine.renderer.targets.read_ids()
+        x, y = r.project(glm.vec3(2.0, 1.0, -2.0))  # past the mirror
+        near = [(int(y) + dy, int(x) + dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+        # (a thin beam at this size: a pixel wide, its red blended with the floor by FXAA)
+        assert any(ids[p] in segments for p in near) and any(int(image[p][0]) - int(image[p][1]) > 20 for p in near)
+
+
+def _blocked_level_2(r, blocker_at):
+    """Level 2 with a tall slab (0.2 x 2.2 x 1.6) standing across the beam's last leg, which
+    runs from m2 at (-1, 1, 1.5) along +X to the target's face at x = 3.2, once solved."""
+    from components import Material
+    from engine.assets.mesh import box
+
+    return r.world.spawn(Transform(position=blocker_at), MeshRef(box((0.2, 2.2, 1.6), name="slab")), Material())
+
+
+def test_a_solid_on_the_lights_way_keeps_the_target_unlit_until_it_is_moved_away(run):
+    """Level 2 solved with a slab across the last leg: the beam stops on the slab's face
+    (x = 1.5 - 0.1) and the laser's light is not said to reach the target (no win).  The slab
+    moved off the way (no mirror turned): the next frame's beam reaches the target, the light
+    is said to reach it and the level is won; the frame agrees (a second path: with the
+    target's glow and the beam hidden, the mirrors' light brightens target pixels).  (The
+    light's test was kept from the mirrors' last turn, so a moved solid was not seen: the beam
+    drawn onto a lit target, and no win.)"""
+    path = level_file("02_two_bounces")
+    r = run(path, (192, 108))
+    slab = _blocked_level_2(r, (1.5, 1.0, 1.5))
+    for key in [None, *solution_keys(path), None]:
+        r.frame(*([key] if key else []))
+    state = r.state
+    assert state.path.end == "solid" and state.path.stopped_by == slab
+    assert glm.distance(state.path.points[-1], glm.vec3(1.4, 1.0, 1.5)) < 1e-4
+    assert not state.lit and not state.wins()
+    r.world.get(slab, Transform).position = (1.5, 1.0, -1.0)  # off the way
+    r.frame()
+    assert state.path.end == "target"
+    assert state.lit and len(state.wins()) == 1, "the light on the target once nothing stands in its way"
+    r.world.get(state.rules.target, Emissive).power = 0.0
+    for _, (_, mesh_ref) in r.world.query(BeamSegment, MeshRef):
+        mesh_ref.visible = False
+    on = r.frame()
+    target = r.engine.renderer.targets.read_ids() == state.rules.target
+    for _, mirror in r.world.query_one(Mirror):
+        mirror.reflects_light = False
+    off = r.frame()
+    brighter = (on.astype(int).sum(-1) - off.astype(int).sum(-1) > 6) & target
+    assert target.sum() > 50 and brighter.sum() > 10, (int(target.sum()), int(brighter.sum()))
+
+
+def _normal_on_screen(r, mirror) -> float:
+    """The screen angle (degrees, counter-clockwise positive, y up) of a mirror's normal as
+    the level's camera sees it on the floor plane: its centre and a point a metre along its
+    normal, both projected."""
+    t = r.world.get(mirror, Transform)
+    centre = glm.vec3(t.position)
+    tip = centre + t.rotation * glm.vec3(0.0, 0.0, 1.0)
+    (x0, y0), (x1, y1) = r.project(centre), r.project(tip)
+    return math.degrees(math.atan2(-(y1 - y0), x1 - x0))
+
+
+def test_tab_and_number_keys_select_a_mirror_the_marker_shows_it_and_left_turns_it_counter_clockwise(run):
+    """Level 3 (three mirrors): Tab steps the selection 1, 2, 3 and round to 1, a number key
+    picks its mirror; the yellow marker stands 0.2 m over the selected mirror's top (its
+    position from the file, half its 1 m height up) and is where its id is drawn; Left turns
+    the selected mirror's normal counter-clockwise as the camera above shows it (its angle on
+    the screen grows by about the level's 15 degrees), Right back; once solved the marker is
+    gone from the frame."""
+    from games.mirror_beam.game import SelectionMarker
+
+    path = level_file("03_sixty_degrees")
+    r = run(path, size=(192, 108))
+    r.frame()
+    marker = next(e for e, _ in r.world.query_one(SelectionMarker))
+    names = ["m1", "m2", "m3"]
+    for keys, index in ((None, 0), ("tab", 1), ("tab", 2), ("tab", 0), ("3", 2), ("2", 1), ("1", 0)):
+        r.frame(*([keys] if keys else []))
+        r.frame()
+        assert r.state.selected == index
+        position, _ = mirror_pose(path, names[index])
+        over = position + glm.vec3(0.0, 0.5 + 0.2, 0.0)
+        assert glm.distance(glm.vec3(r.world.get(marker, Transform).position), over) < 1e-5
+        x, y = r.project(over)
+        ids = r.engine.renderer.targets.read_ids()
+        assert any(ids[int(y) + dy, int(x) + dx] == marker for dy in (-1, 0, 1) for dx in (-1, 0, 1)), keys
+    m3 = r.game.names["m3"]
+    r.frame("3")
+    before = _normal_on_screen(r, m3)
+    r.frame("left")
+    turned = (_normal_on_screen(r, m3) - before + 180.0) % 360.0 - 180.0
+    assert 8.0 < turned < 25.0, turned  # counter-clockwise (the camera's tilt stretches the 15 degrees)
+    r.frame("right")
+    assert abs((_normal_on_screen(r, m3) - before + 180.0) % 360.0 - 180.0) < 1e-3
+    for key in [*solution_keys(path), None]:
+        r.frame(*([key] if key else []))
+    assert r.state.won
+    assert marker not in set(np.unique(r.engine.renderer.targets.read_ids()).tolist())
+
+
+def test_the_caption_says_solved_and_the_autopilot_presses_a_key_every_interval_frames(ctx):
+    """Level 1 played by the autopilot with ``interval=3``: its four keys (the file's
+    solution: m1's number, then three turns left) come three frames apart after three empty
+    frames, so the last turn, which wins in its own frame, is pressed in frame 3 x 4 = 12;
+    the caption is the level's name until then and says "solved!" with the keys from that
+    frame, and the caption's pixels (top left, past the name) change with it; 'r' puts the name back."""
+    from components import ScreenText
+    from games.mirror_beam.game import Caption
+
+    path = level_file("01_one_bounce")
+    keys = solution_keys(path)
+    game = MirrorBeam(path, autopilot=True, interval=3, verbose=False)
+    engine = Engine(game, ctx)
+    size = (512, 72)  # wide enough for the caption's whole line (16-pixel text)
+    capture = CaptureTarget(ctx, size)
+    try:
+        caption = next(t for _, (t, _) in engine.world.query(ScreenText, Caption))
+        frames = []
+        while not game.state.won and len(frames) < 30:
+            engine.frame(1 / 60, Output(capture.framebuffer, size))
+            frames.append(capture.read_rgb())
+            if not game.state.won:
+                assert caption.text == "Mirror beam 1: one bounce"
+        assert game.state.wins()[0].frame == 3 * len(keys) == len(frames) - 1
+        assert caption.text == "Mirror beam 1: one bounce: solved! (n: next, r: restart)"
+        engine.frame(1 / 60, Output(capture.framebuffer, size))
+        solved = capture.read_rgb()
+        said = (slice(10, 36), slice(230, 470))  # right of the level's name: the words "solved! (...)"
+        assert np.abs(solved[said].astype(int) - frames[-3][said].astype(int)).max() > 100, "the caption's text"
+        engine.world.resources[Input].press("r")
+        engine.frame(1 / 60, Output(capture.framebuffer, size))
+        assert caption.text == "Mirror beam 1: one bounce" and not game.state.won
+    finally:
+        capture.release()
+        engine.close()

@@ -448,9 +448,10 @@ def light_system(world: World, state: BeamState) -> None:
     if surfaces is None:
         return
     rules = state.rules
-    # Worked out again only when a mirror (a new SurfaceState), the target or the lamp changed.
+    # Worked out again only when a mirror (a new SurfaceState), the target, the lamp or a solid
+    # that may stand on the light's way (moved, shown, hidden, given another mesh) changed.
     seen = (tuple(surfaces.mirrors.values()), world.get(rules.target, Transform).world.to_bytes(),
-            tuple(t.world.to_bytes() for _, (t, _) in world.query(Transform, BeamLamp)))
+            tuple(t.world.to_bytes() for _, (t, _) in world.query(Transform, BeamLamp)), _solids_seen(world))
     if len(seen[0]) == len(state.light_seen[0] if state.light_seen else ()) and \
             all(a is b for a, b in zip(seen[0], state.light_seen[0], strict=True)) and seen[1:] == state.light_seen[1:]:
         return
@@ -466,6 +467,15 @@ def light_system(world: World, state: BeamState) -> None:
         if lit_by:
             break
     state.lit, state.lit_by = bool(lit_by), lit_by
+
+
+def _solids_seen(world: World) -> tuple:
+    """What the light's legs are cast against (``first_solid``): each mesh's entity, mesh,
+    visibility and world matrix, the beam's own display left out."""
+    return tuple((entity, id(mesh_ref.mesh), mesh_ref.visible, transform.world.to_bytes())
+                 for entity, (mesh_ref, transform) in world.query(MeshRef, Transform)
+                 if not (world.has(entity, Mirror) or world.has(entity, BeamSegment)
+                         or world.has(entity, SelectionMarker)))
 
 
 def _clear(cast: FirstSolid, way: list, lamp: int) -> bool:
