@@ -275,3 +275,74 @@ def test_a_mirror_seen_through_a_portal_fades_by_the_eye_carried_through_it(ctx)
     shown = through[patch].astype(float)
     assert shown[..., 0].mean() > shown[..., 1].mean() + 40.0   # (the red wall, in the mirror)
     assert whole[..., 0].mean() > shown[..., 0].mean() + 20.0
+
+
+def _three_mirrors_and_a_box(world: World) -> None:
+    """``test_a_mirror_seen_in_a_mirror_fades_by_the_reflected_eye``'s three mirrors, and a red
+    glowing box behind the camera that the two before it show."""
+    world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.0))
+    look_from(world, (0.5, 1.5, 0.5), target=(0.0, 1.5, -3.0), fov=80.0)
+    for x, z, turn in ((-1.3, -3.0, 0.0), (1.3, -4.0, 0.0), (0.0, 3.0, math.pi)):
+        world.spawn(Transform(position=(x, 1.5, z), rotation=glm.angleAxis(turn, glm.vec3(0, 1, 0))),
+                    MeshRef(quad(2.4, 2.0)), Material(color=(0.2, 0.2, 0.2)),
+                    Mirror(fade_distance=(2.0, 16.0), max_depth=3))
+    world.spawn(Transform(position=(0.0, 1.2, 1.6), scale=(3.0, 1.4, 0.3)), MeshRef(box()),
+                Material(color=(0.9, 0.1, 0.1)), Emissive(1.0))
+
+
+@pytest.mark.parametrize("case", ["through_portal", "in_mirrors"])
+def test_fades_from_carried_and_reflected_eyes_are_the_same_on_the_batched_path(ctx, case):
+    """The batched path (a level's views in one draw per mesh) fades each view as the
+    per-mirror path does: the mirror beyond a portal by the eye carried through the pair (the
+    weight worked out by hand as in the test above), the three mirrors' views by each parent's
+    reflected eye (levels of several views, one draw); on either path each view's weight is the
+    formula from its parent's eye, the same views are drawn, and the frames agree within 2
+    levels.  The reflection is there: the red wall in the mirror beyond the portal, the red
+    box's id in the mirrors' pixels at each level's composite."""
+    results = {}
+    for path in ("per_mirror", "batched"):
+        if case == "through_portal":
+            runner = SceneRunner(ctx, _mirror_beyond_a_portal(Mirror(reflect_rate=0.9, **BEYOND_FADES)), (96, 72))
+        else:
+            runner = SceneRunner(ctx, _three_mirrors_and_a_box, (96, 72))
+        runner.engine.reflection_system.path = path
+        runner.engine.reflection_system.visibility = "exact"
+        rgb = runner.frame()
+        assert runner.stats.reflection_path == path
+        views = runner.engine.reflection_system.views[1:]
+        for v in views:
+            if v.surface.kind != "mirror":
+                continue
+            corners = v.surface.corners[:, :3]
+            centre = corners.mean(axis=0)
+            to_eye = np.array(v.parent.view.eye) - centre
+            d = max(np.linalg.norm(to_eye) - np.linalg.norm(corners - centre, axis=1).max(), 0.0)
+            if case == "through_portal":
+                assert tuple(v.parent.view.eye) == pytest.approx(tuple(_carried(CAMERA_AT)), abs=1e-4)
+                normal = np.array(BEYOND_TURN * glm.vec3(0, 0, 1))
+                angle = math.degrees(math.acos(np.dot(to_eye, normal) / np.linalg.norm(to_eye)))
+                weight = min(max((9.0 - d) / 5.0, 0.0), 1.0) * min(max((50.0 - angle) / 40.0, 0.0), 1.0)
+                assert 0.15 < weight < 0.85
+            else:
+                weight = min(max((16.0 - d) / 14.0, 0.0), 1.0)
+            assert v.fade == pytest.approx(weight, abs=1e-5), (path, v.level)
+        if case == "through_portal":
+            assert [v.level for v in views] == [1, 2]
+            carry = glm.translate(PORTAL_B) * glm.mat4_cast(B_TURN) \
+                * glm.mat4_cast(glm.angleAxis(math.pi, glm.vec3(0, 1, 0))) * glm.translate(-PORTAL_A)
+            x, y = runner.project(glm.vec3(glm.inverse(carry) * glm.vec4(BEYOND_MIRROR, 1.0)))  # where it shows
+            patch = rgb[y - 3:y + 3, x - 3:x + 3].astype(float)
+            assert patch[..., 0].mean() > patch[..., 1].mean() + 40.0  # the red wall in the faded mirror
+        else:
+            assert max(v.level for v in views) == 3 and len([v for v in views if v.level == 2]) >= 2
+            assert len({round(v.fade, 4) for v in views}) >= 3
+            ids = runner.ids()
+            mirrors = [entity for entity, _ in runner.world.query_one(Mirror)]
+            ((box_id, _),) = runner.world.query_one(Emissive)
+            on_glass = np.isin(runner.engine.renderer.targets.read_surface_ids(), mirrors)
+            assert (ids[on_glass] == box_id).sum() > 20
+        results[path] = rgb.astype(int), [(v.level, v.surface.entity, round(v.fade, 6)) for v in views]
+        runner.close()
+    (rgb, views), (batched_rgb, batched_views) = results["per_mirror"], results["batched"]
+    assert views == batched_views
+    assert np.abs(batched_rgb - rgb).max() <= 2

@@ -36,7 +36,7 @@ from engine.render.batched_mirrors import (
     submitted_triangles,
 )
 from engine.render.views import View
-from tests.support import look_from, pixel_rays
+from tests.support import box_hits, look_from, pixel_rays
 
 SIZE = (200, 150)
 
@@ -554,3 +554,89 @@ def test_a_level_the_screen_effects_reach_is_drawn_view_by_view_and_says_so(scen
     assert two["stats"].passes == render(scene, occluded(2), "per_mirror")["stats"].passes - 8
     plain = render(scene, hall({}, sphere_detail=None), "batched")
     assert plain["stats"].reflection_path == "batched" and plain["stats"].passes == 1 + 3
+
+
+# ---- Portals seen in mirrors: a level of portal views drawn in one batched draw.
+
+TWIN_SIZE = (128, 96)
+TWIN_BOX = (np.array([20.0, 1.3, 2.0]), np.full(3, 0.5))   # before B: centre, half sizes
+TWIN_GAP = 0.05                                             # half the gap between the two mirrors
+
+
+def twin_mirrors_and_a_portal(ents):
+    """Two mirrors side by side in the plane z = -1.5 (2 m wide each, a 0.1 m gap between)
+    facing the camera (z = 1) and, behind the camera, portal A facing them: each mirror sees
+    A, so level 2 is two portal views seen in mirrors (mirrored, one batched draw).  A red
+    box 2 m before partner B (at (20, 1.5, 0)), a blue backdrop behind it: the box's image
+    straddles the gap, so each view shows part of it."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        world.spawn(Transform(position=(0.0, 1.5, 1.0), rotation=look_rotation(glm.vec3(0.0, 0.0, -1.0))),
+                    Camera(fov_y=60.0))
+        ents["mirrors"] = [world.spawn(Transform(position=(x, 1.5, -1.5)), MeshRef(quad(2.0, 3.0)),
+                                       Material(color=(0.1, 0.1, 0.1)), Mirror())
+                           for x in (-1.0 - TWIN_GAP, 1.0 + TWIN_GAP)]
+        ents["a"], ents["b"] = spawn_portal_pair(world, (0, 1.5, 2.5), yaw(180), (20, 1.5, 0), None, size=(3.0, 2.4))
+        ents["backdrop"] = world.spawn(Transform(position=(20, 2, 10)), MeshRef(box((16, 8, 0.2))),
+                                       Material(color=(0.05, 0.05, 0.9)), Emissive(1.0))
+        ents["box"] = world.spawn(Transform(position=tuple(TWIN_BOX[0]), scale=tuple(2.0 * TWIN_BOX[1])),
+                                  MeshRef(box()), Material(color=(0.9, 0.05, 0.05)), Emissive(0.8))
+    return build
+
+
+def twin_rays(runner, grow):
+    """Which pixels see the box, in float64 (no renderer), and on which side of the gap: each
+    pixel's ray met on a mirror's rectangle (z = -1.5), reflected, through A's rectangle
+    (z = 2.5, 3 x 2.4 m), carried to B's side by the pair's transform (B x a half turn x
+    A^-1, A itself turned a half turn and B not: a move by B - A) and cast at the box grown
+    by ``grow``.  Returns (box pixels, mirror x < 0 there)."""
+    eye, rays = pixel_rays(runner.engine.main_view, TWIN_SIZE)
+    rays = rays.reshape(-1, 3)
+    t = (-1.5 - eye[2]) / rays[:, 2]
+    at_mirror = eye + t[:, None] * rays
+    x = at_mirror[:, 0]
+    on_mirror = (t > 0) & (np.abs(x) > TWIN_GAP) & (np.abs(x) < 2.0 + TWIN_GAP) & (np.abs(at_mirror[:, 1] - 1.5) < 1.5)
+    directions = rays * (1.0, 1.0, -1.0)
+    t = (2.5 - at_mirror[:, 2]) / directions[:, 2]
+    at_a = at_mirror + t[:, None] * directions
+    through = on_mirror & (t > 0) & (np.abs(at_a[:, 0]) < 1.5) & (np.abs(at_a[:, 1] - 1.5) < 1.2)
+    hits = box_hits(at_a + (20.0, 0.0, -2.5), directions, TWIN_BOX[0], TWIN_BOX[1] + grow)
+    shape = (TWIN_SIZE[1], TWIN_SIZE[0])
+    return (through & hits).reshape(shape), (x < 0).reshape(shape)
+
+
+def test_portal_views_seen_in_two_mirrors_draw_in_one_batched_draw_as_the_per_mirror_path(scene):
+    """Two mirrors each see portal A behind the camera: level 1 is two mirror views, level 2
+    two portal views seen in them (mirrored, so one winding: the batched path draws each
+    level in one pass, the per-mirror path in one pass a view).  The box beyond B lands where
+    the rays, reflected and carried through the pair in float64, meet it (a margin in: the
+    box; a margin out: never), in both level-2 views (its pixels on both sides of the gap),
+    red there; the two paths draw the same views, the same ids and colours within 2."""
+    results = {}
+    for path in ("per_mirror", "batched"):
+        ents = {}
+        runner = scene(twin_mirrors_and_a_portal(ents), TWIN_SIZE)
+        runner.engine.reflection_system.path = path
+        runner.engine.reflection_system.visibility = "exact"
+        rgb = runner.frame()
+        stats = runner.stats
+        assert stats.reflection_path == path
+        views = runner.engine.reflection_system.views[1:]
+        assert sorted((v.level, v.surface.entity, v.view.mirrored) for v in views) == sorted(
+            [(1, m, True) for m in ents["mirrors"]] + [(2, ents["a"], True)] * 2)
+        assert stats.passes == 1 + (4 if path == "per_mirror" else 2)
+        ids = runner.ids()
+        inside, left = twin_rays(runner, -0.05)
+        outside = ~twin_rays(runner, 0.05)[0]
+        assert (inside & left).sum() > 20 and (inside & ~left).sum() > 20  # in both portal views
+        assert (ids[inside] == ents["box"]).all(), (path, np.unique(ids[inside]))
+        red = rgb[inside].astype(int)
+        assert (red[:, 0] > red[:, 2] + 60).all(), path
+        assert not (ids[outside] == ents["box"]).any(), path
+        surface = runner.engine.renderer.targets.read_surface_ids()
+        assert (ids[np.isin(surface, ents["mirrors"]) & outside] == ents["backdrop"]).sum() > 100
+        results[path] = ids, rgb.astype(int)
+    (ids, rgb), (batched_ids, batched_rgb) = results["per_mirror"], results["batched"]
+    np.testing.assert_array_equal(batched_ids, ids)
+    assert np.abs(batched_rgb - rgb).max() <= 2

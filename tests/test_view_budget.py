@@ -558,3 +558,59 @@ def test_a_small_portal_view_and_a_small_level_two_view_go_by_their_projected_pi
     assert np.array_equal(rgb[elsewhere], whole[elsewhere])
     shown = rgb[behind].astype(int)
     assert (shown[:, 2] > shown[:, 0] - 30).all() and (shown.sum(axis=1) > 100).all()  # the sky's, not yellow
+
+
+def test_min_pixels_leaves_out_the_same_small_views_on_the_batched_path_as_on_the_per_mirror_path(scene):
+    """The small portal (level 1) and the small level-2 view above, on both reflection
+    paths: at each budget (none; exactly the portal's pixels; one more; one more than the
+    level-2 view's, pixels cast in float64 as there) the same views are drawn, the same
+    counted small, the pixels spent are the rays' count, and the passes are the paths' own
+    (per mirror: one a view; batched: one a level and winding, the large mirror's view
+    mirrored, the portal's not, the level-2 view reflected twice: worked out from the views
+    kept); the batched frame is the per-mirror one's within 2 levels, and a skipped view's
+    surface shows the sky there, not the green or yellow wall its view shows."""
+    runs = {}
+    for path in ("per_mirror", "batched"):
+        ents = {}
+        runner = scene(_small_portal_and_level_two(ents), SMALL_SIZE)
+        runner.engine.reflection_system.path = path
+        runner.engine.reflection_system.visibility = "exact"
+        runner.engine.reflection_system.keep_still_views = False
+        runs[path] = runner, ents
+    runner, ents = runs["per_mirror"]
+    runner.frame()
+    eye, rays = pixel_rays(runner.engine.main_view, SMALL_SIZE)
+    big, door = _rect_hits(eye, rays, BIG), _rect_hits(eye, rays, DOOR)
+    flip = np.array([1.0, 1.0, -1.0])
+    behind = big & _rect_hits(eye * flip + (0.0, 0.0, 2.0 * BIG[0][2]), rays * flip, BEHIND)
+    assert 30 < door.sum() < behind.sum() < big.sum()
+    windings = {"big": (1, True), "door": (1, False), "behind": (2, False)}
+    for budget, kept in ((None, ("big", "door", "behind")), (int(door.sum()), ("big", "door", "behind")),
+                         (int(door.sum()) + 1, ("big", "behind")), (int(behind.sum()) + 1, ("big",))):
+        frames = {}
+        for path, (runner, ents) in runs.items():
+            if budget is None:
+                runner.world.resources.pop(ViewBudget, None)
+            else:
+                runner.world.resources[ViewBudget] = ViewBudget(min_pixels=budget)
+            runner.frame()
+            rgb = frames[path] = runner.frame().astype(int)
+            stats = runner.stats
+            assert stats.reflection_path == path
+            views = sorted((v.level, v.surface.entity, v.view.mirrored)
+                           for v in runner.engine.reflection_system.views[1:])
+            expected = sorted((windings[name][0], ents[name], windings[name][1]) for name in kept)
+            assert views == expected, (path, budget)
+            assert stats.views_small == 3 - len(kept) and stats.views_cut == 0
+            assert stats.pixels_spent == sum(int({"big": big, "door": door, "behind": behind}[name].sum())
+                                             for name in kept)
+            groups = len(kept) if path == "per_mirror" else len({windings[name] for name in kept})
+            assert stats.passes == 1 + groups, (path, budget, stats.passes)
+            green, yellow = rgb[door], rgb[behind]
+            assert ((green[:, 1] > green[:, 0] + 60).all()) == ("door" in kept), (path, budget)
+            assert ((yellow[:, 2] < yellow[:, 0] - 60).all()) == ("behind" in kept), (path, budget)
+            if "door" not in kept:  # the sky's grey
+                assert (green[:, 1] < green[:, 0] + 30).all() and (green.sum(axis=1) > 100).all()
+            if "behind" not in kept:
+                assert (yellow[:, 2] > yellow[:, 0] - 30).all() and (yellow.sum(axis=1) > 100).all()
+        assert np.abs(frames["batched"] - frames["per_mirror"]).max() <= 2, budget

@@ -643,10 +643,11 @@ def mirror_then_portal(ents, visibility=None):
     return build
 
 
-def mirror_then_portal_rays(runner, ents, grow):
+def mirror_then_portal_rays(runner, ents, grow, chain_box=CHAIN_BOX):
     """Which pixels see the box along the chain, in float64 (no renderer): each pixel's ray
     reflected in the mirror's plane (z = -1.5), through A's rectangle (z = 2.5, 3 x 2.4 m),
-    carried to B's side by the pair's transform and cast at the box grown by ``grow``."""
+    carried to B's side by the pair's transform and cast at the box (``chain_box``: centre,
+    half sizes) grown by ``grow``."""
     eye, rays = pixel_rays(runner.engine.main_view, CHAIN_SIZE)
     rays = rays.reshape(-1, 3)
     t = (-1.5 - eye[2]) / rays[:, 2]
@@ -660,8 +661,8 @@ def mirror_then_portal_rays(runner, ents, grow):
     turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
     carry = b_world @ turn @ np.linalg.inv(a_world)
     carried_origin = carry[:3, :3] @ origin + carry[:3, 3]
-    hits = box_hits(np.broadcast_to(carried_origin, at_a.shape), directions @ carry[:3, :3].T, CHAIN_BOX[0],
-                    CHAIN_BOX[1] + grow)
+    hits = box_hits(np.broadcast_to(carried_origin, at_a.shape), directions @ carry[:3, :3].T, chain_box[0],
+                    chain_box[1] + grow)
     return (through_a & hits).reshape(CHAIN_SIZE[1], CHAIN_SIZE[0])
 
 
@@ -753,3 +754,160 @@ def test_the_batched_path_hides_through_portals_and_by_their_layers_as_the_per_m
     assert views == batched_views and len(views) >= 1
     np.testing.assert_array_equal(batched_ids, ids)
     assert np.abs(batched_rgb - rgb).max() <= 2
+
+
+FRONT_Z, BACK_Z = -1.5, 1.5   # two facing mirrors, 4 x 3 m, centred at y = 1.5
+CORRIDOR_SIZE = (160, 120)
+CORRIDOR_BOX = (np.array([-0.6, 1.2, 0.0]), np.full(3, 0.35))
+
+
+def corridor(ents, visibility=None, front=None, back=None):
+    """Two facing mirrors (the front one at z = -1.5 facing +Z, the back one at z = 1.5
+    facing it), each to depth 3 without end images, and a red glowing box between them: the
+    camera, near the back mirror, sees the box directly and in the front mirror at levels 1
+    (front), 2 (back seen in front) and 3 (front seen in back seen in front)."""
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=2.0))
+        world.spawn(Skybox())
+        look_from(world, (0.7, 1.6, 1.2), target=(-0.3, 1.4, FRONT_Z), fov=55.0)
+        for name, z, turn, layers in (("front", FRONT_Z, glm.quat(), front), ("back", BACK_Z, HALF_TURN, back)):
+            ents[name] = world.spawn(Transform(position=(0, 1.5, z), rotation=turn), MeshRef(quad(4, 3)),
+                                     Material(color=(0.1, 0.1, 0.1)),
+                                     Mirror(max_depth=3, end_image=False, hides_layers=layers or ()))
+        parts = [Transform(position=tuple(CORRIDOR_BOX[0]), scale=tuple(2.0 * CORRIDOR_BOX[1])), MeshRef(box()),
+                 Material(color=(0.9, 0.05, 0.05)), Emissive(0.8)]
+        ents["box"] = world.spawn(*parts, *([visibility] if visibility is not None else []))
+    return build
+
+
+def corridor_levels(runner, drawn, grow) -> np.ndarray:
+    """The level (0 to 3) at which each pixel's ray meets the box grown by ``grow``, -1 where
+    it never does, in float64 (no renderer): each ray bounced between the two mirrors'
+    rectangles (z flipped at each), at most three times, meeting the box at level n only where
+    ``drawn(n)`` says it is drawn there and it lies before the next mirror."""
+    eye, rays = pixel_rays(runner.engine.main_view, CORRIDOR_SIZE)
+    direction = rays.reshape(-1, 3).copy()
+    origin = np.broadcast_to(eye, direction.shape).copy()
+    found = np.full(len(direction), -1)
+    alive = np.ones(len(direction), bool)
+    centre, half = CORRIDOR_BOX
+    for level in range(4):
+        t = (np.where(direction[:, 2] < 0, FRONT_Z, BACK_Z) - origin[:, 2]) / direction[:, 2]
+        at = origin + t[:, None] * direction
+        on_glass = (t > 1e-6) & (np.abs(at[:, 0]) < 2.0) & (np.abs(at[:, 1] - 1.5) < 1.5)
+        if drawn(level):
+            hit = box_hits(origin, direction, centre, half + grow, np.where(on_glass, t, np.inf))
+            found[alive & hit] = level
+            alive &= ~hit
+        alive &= on_glass & (level < 3)  # past level 3 the front mirror shows its fallback
+        origin = np.where(alive[:, None], at, origin)
+        direction = np.where(alive[:, None], direction * (1.0, 1.0, -1.0), direction)
+    return found.reshape(CORRIDOR_SIZE[1], CORRIDOR_SIZE[0])
+
+
+@pytest.mark.parametrize("visibility, front, back, levels", [
+    (None, None, None, {0, 1, 2, 3}), (Visibility(in_mirrors=False), None, None, {0}),
+    (Visibility(direct=False), None, None, {1, 2, 3}), (Visibility(in_portals=False), None, None, {0, 1, 2, 3}),
+    (Visibility(layers=[3]), None, [3], {0, 1}), (Visibility(layers=[3]), [3], None, {0}),
+    (Visibility(layers=[3, 5]), [5], [3], {0, 1})],
+    ids=["shown", "in_mirrors", "ghost", "in_portals", "back_hides", "front_hides", "each_hides_one_of_two"])
+def test_hide_rules_hold_three_mirrors_deep_on_both_paths(scene, visibility, front, back, levels):
+    """A mirror in a mirror in a mirror: the box's pixels at each level are cast in float64
+    (rays bounced between the two mirrors), and at the levels the rule draws it (kinds: a
+    mirror view from level 1 on; layers: those every mirror of the chain shows, so the back
+    mirror hiding a layer takes the box out of levels 2 and 3, not 1) each of them is the box,
+    on the per-mirror path and the batched one alike; no pixel outside them (a margin out)
+    is.  The two paths draw the same ids, and colours within 2."""
+    results = {}
+    for path in ("per_mirror", "batched"):
+        ents = {}
+        runner = scene(corridor(ents, visibility, front, back), CORRIDOR_SIZE)
+        runner.engine.reflection_system.path = path
+        runner.engine.reflection_system.visibility = "exact"
+        rgb = runner.frame()
+        assert runner.stats.reflection_path == path
+        views = [(v.level, v.surface.entity) for v in runner.engine.reflection_system.views[1:]]
+        assert views == [(1, ents["front"]), (2, ents["back"]), (3, ents["front"])]
+        ids = runner.ids()
+        inside = corridor_levels(runner, lambda level: level in levels, -0.03)
+        outside = corridor_levels(runner, lambda level: level in levels, 0.03) < 0
+        everywhere = corridor_levels(runner, lambda level: True, -0.03)
+        for level in range(4):
+            assert (everywhere == level).sum() > 30  # the box is there to be seen at every level
+            if level in levels:
+                assert (inside == level).sum() > 30
+                assert (ids[inside == level] == ents["box"]).all(), (path, level)
+                red = srgb_to_linear(rgb[inside == level])
+                assert (red[:, 0] > 3 * red[:, 2]).all(), (path, level)
+        assert not (ids[outside] == ents["box"]).any(), (path, np.unique(everywhere[outside & (ids == ents["box"])]))
+        results[path] = ids, rgb.astype(int)
+    (ids, rgb), (batched_ids, batched_rgb) = results["per_mirror"], results["batched"]
+    np.testing.assert_array_equal(batched_ids, ids)
+    assert np.abs(batched_rgb - rgb).max() <= 2
+
+
+# Four boxes before B, each seen only in the mirror through A (level 2: a mirror's and a
+# portal's view at once), and one behind the camera seen in the mirror alone (level 1).
+CROWD_HALF = np.full(3, 0.25)
+CROWD = {"plain": ((19.4, 1.0, 2.0), None), "in_mirrors": ((20.6, 1.0, 2.0), Visibility(in_mirrors=False)),
+         "in_portals": ((19.4, 1.9, 2.0), Visibility(in_portals=False)),
+         "ghost": ((20.6, 1.9, 2.0), Visibility(direct=False)),
+         "near": ((-2.0, 1.0, 1.8), Visibility(in_portals=False))}
+
+
+@pytest.mark.parametrize("path", ["per_mirror", "batched"])
+def test_one_level_two_view_leaves_out_both_what_is_hidden_in_mirrors_and_what_is_hidden_in_portals(scene, path):
+    """The mirror-then-portal chain with five boxes at once: through the portal seen in the
+    mirror (level 2) the box hidden in mirrors and the box hidden in portals are both left out
+    (the backdrop behind each is there instead), while a plain box and one hidden only
+    directly are drawn; a box hidden in portals standing behind the camera is drawn in the
+    mirror (level 1, a mirror view only).  Each box's pixels are cast in float64 (rays
+    reflected in the mirror, and for the four, carried through the pair: a margin in), on
+    either path; no pixel outside them (a margin out) is a box."""
+    ents = {}
+
+    def build(world):
+        mirror_then_portal(ents)(world)
+        world.delete_entity(ents["vampire"])  # the chain's own box: the crowd stands in its place
+        for name, (centre, visibility) in CROWD.items():
+            ents[name] = world.spawn(Transform(position=centre, scale=tuple(2.0 * CROWD_HALF)), MeshRef(box()),
+                                     Material(color=(0.9, 0.05, 0.05)), Emissive(0.8),
+                                     *([visibility] if visibility is not None else []))
+    runner = scene(build, CHAIN_SIZE)
+    runner.engine.reflection_system.path = path
+    runner.engine.reflection_system.visibility = "exact"
+    rgb = runner.frame()
+    assert runner.stats.reflection_path == path
+    assert [(v.level, v.surface.entity) for v in runner.engine.reflection_system.views[1:]] == \
+        [(1, ents["mirror"]), (2, ents["a"])]
+    ids = runner.ids()
+    assert not (ids == ents["vampire"]).any()
+    eye, rays = pixel_rays(runner.engine.main_view, CHAIN_SIZE)
+    flip = np.array([1.0, 1.0, -1.0])
+    t = (-1.5 - eye[2]) / rays[..., 2]
+    at = eye + t[..., None] * rays
+    on_mirror = (t > 0) & (np.abs(at[..., 0]) < 2.0) & (np.abs(at[..., 1] - 1.5) < 1.5)
+
+    def near_hits(grow):  # reflected in z = -1.5, cast at the box behind the camera
+        hits = box_hits(np.broadcast_to(eye * flip + (0.0, 0.0, -3.0), (rays.size // 3, 3)),
+                        (rays * flip).reshape(-1, 3), np.array(CROWD["near"][0]), CROWD_HALF + grow)
+        return on_mirror & hits.reshape(on_mirror.shape)
+
+    any_box = np.zeros_like(on_mirror)
+    for name, (centre, _) in CROWD.items():
+        if name == "near":
+            inside, grown = near_hits(-0.03), near_hits(0.03)
+        else:
+            inside, grown = (mirror_then_portal_rays(runner, ents, grow, (np.array(centre), CROWD_HALF))
+                             for grow in (-0.03, 0.03))
+        any_box |= grown
+        assert inside.sum() > 15, name
+        if name in ("in_mirrors", "in_portals"):
+            assert (ids[inside] == ents["backdrop"]).all(), (name, np.unique(ids[inside]))
+            blue = srgb_to_linear(rgb[inside])
+            assert (blue[:, 2] > 2 * blue[:, 0]).all(), name
+        else:
+            assert (ids[inside] == ents[name]).all(), (name, np.unique(ids[inside]))
+            red = srgb_to_linear(rgb[inside])
+            assert (red[:, 0] > 2 * red[:, 2]).all(), name
+    assert not np.isin(ids[~any_box], [ents[name] for name in CROWD]).any()
