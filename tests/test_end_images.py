@@ -323,3 +323,72 @@ def test_end_image_values_are_checked():
         with pytest.raises(ComponentValueError, match=f"{component.__name__}.end_image"):
             component(end_image="yes")
 
+
+
+def _scaled_facing_portals(depth: int, scale: float, end_image=True):
+    """``_facing_portals`` with the portal behind the camera (b) ``scale`` times the one ahead
+    (a): looking into a, the room beyond b shows 1 / ``scale`` its size, each period of the
+    tunnel smaller again."""
+    def build(world) -> None:
+        _facing_portals(depth, end_image)(world)
+        for entity, _ in list(world.query_one(Portal)):
+            if world.get(entity, Transform).position.z > 0.0:
+                world.get(entity, Transform).scale = glm.vec3(scale)
+    return build
+
+
+def test_a_portal_pair_of_two_sizes_ends_in_an_image_that_shows_what_its_rays_meet(ctx):
+    """Past depth 1 the tunnel of a pair whose b is 1.5 times a ends in an image (last
+    frame's, shrunk by the carries' scale onto the end view).  Where a pixel shows it (its
+    seen id a: the end of two crossings) its way is the image's distance, the sum of the
+    ray's parameters to a's plane twice (carried through the pair once: its direction 1.5
+    times longer), in float64 (view_axis.glsl way_scale; a fallback there holds the same).
+    On the fourth frame the blue pillar's image two periods in, which only the end image
+    draws, is where the pillar carried back twice (inverse carry squared) projects, and as
+    large as the depth-8 rendering draws it (the image is seen from one period up, so a
+    little parallax is left: measured a pixel here; at a pair of one size, 4 px)."""
+    from scipy import ndimage
+
+    from engine.core.portal_math import pair_transform
+    from tests.support import pixel_rays
+
+    found = {}
+
+    def read(runner):
+        world = runner.world
+        a, b = sorted((entity for entity, _ in world.query_one(Portal)),
+                      key=lambda entity: world.get(entity, Transform).position.z)
+        carry = pair_transform(world.get(a, Transform).world, world.get(b, Transform).world)
+        back = glm.inverse(carry) * glm.inverse(carry)
+        corners = [runner.project(glm.vec3(back * glm.vec4(-0.9 + x * 0.25, 0.6 + y * 0.6, 0.5 + z * 0.25, 1.0)))
+                   for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]  # the blue pillar's corners, two periods in
+        found.update(a=a, carry=np.array(carry, np.float64), corners=np.array(corners, np.float64),
+                     ids=runner.ids(), ways=runner.engine.renderer.targets.read_ways(),
+                     rays=pixel_rays(runner.engine.main_view, runner.size))
+
+    (deep,), _ = _frames(ctx, _scaled_facing_portals(8, 1.5), 1, fxaa=False)
+    images, ends = _frames(ctx, _scaled_facing_portals(1, 1.5), 4, after=read, fxaa=False)
+    assert ends[0] == 0 and all(count >= 1 for count in ends[1:])
+    end = found["ids"] == found["a"]
+    assert end.sum() >= 150
+    eye, ray = found["rays"]
+    t1 = (-3.0 - eye[2]) / ray[..., 2]                     # a's plane, z = -3
+    carry = found["carry"]
+    start = (eye + ray * t1[..., None]) @ carry[:3, :3].T + carry[:3, 3]
+    direction = ray @ carry[:3, :3].T
+    t2 = (-3.0 - start[..., 2]) / direction[..., 2]        # a's plane again, beyond b
+    np.testing.assert_allclose(found["ways"][end], (t1 + t2)[end], rtol=2e-3)
+
+    corners = found["corners"]
+    centre = (corners.min(axis=0) + corners.max(axis=0) + 1.0) / 2.0   # (column, row) of its box's middle
+    blobs = []
+    for image in (deep, images[3]):
+        blue, count = ndimage.label((image[..., 2] > 150) & (image[..., 0] < 120) & end)
+        at = blue[int(centre[1]), int(centre[0])]           # the blob over the middle of the projected box
+        assert at > 0
+        rows, cols = np.nonzero(blue == at)
+        blobs.append((len(rows), cols.mean() + 0.5, rows.mean() + 0.5))
+    (deep_count, deep_col, deep_row), (count, col, row) = blobs
+    assert deep_count >= 15 and abs(count - deep_count) <= 0.3 * deep_count
+    assert abs(deep_col - centre[0]) < 0.75 and abs(deep_row - centre[1]) < 0.75   # (the second path agrees)
+    assert abs(col - centre[0]) < 1.5 and abs(row - centre[1]) < 1.5

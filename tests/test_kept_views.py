@@ -381,3 +381,28 @@ def test_a_still_scaled_portal_pair_keeps_its_tree_and_a_new_scale_draws_it_agai
     kept = [pair.frame() for _ in range(2)]
     assert kept[-1]
     _assert_the_box_where_the_scaled_carry_says(pair.keeping, found, scale=1.5)
+
+
+def test_a_still_scaled_portal_pair_with_end_images_is_kept_once_its_image_settles(scene):
+    """The facing pair with one portal scaled 2 (tests/test_predicted_visibility.py's), two
+    levels deep and ending in images (each period of its tunnel half the last's): its
+    picture changes while the end images fill in, and no frame keeps its tree whole before
+    it settles; then the frames keep, bit for bit as the engine that draws every frame, and
+    level 1 shows the box where the scaled carry says."""
+    ents: dict = {}
+
+    def build(world):
+        found: dict = {}
+        _scaled_facing_pair(world, found)
+        for portal in found["a"], found["b"]:
+            world.get(portal, Portal).max_depth = 2
+            world.get(portal, Portal).end_image = True
+        ents.setdefault("worlds", []).append((world, found))
+    pair = _Pair(scene, build, size=SCALED_SIZE)
+    found = dict(ents["worlds"])[pair.keeping.world]
+    kept = [pair.frame() for _ in range(10)]
+    assert pair.drawing.stats.reflection_end_views > 0
+    assert not kept[0] and not kept[1] and kept[-1]
+    first = kept.index(True)
+    assert all(kept[first:]), "once kept, a still tree stays kept"
+    _assert_the_box_where_the_scaled_carry_says(pair.keeping, found)

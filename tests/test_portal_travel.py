@@ -704,3 +704,41 @@ def test_a_turned_thing_through_a_pair_scaled_unevenly_keeps_its_axes_and_drops_
     after = as_array(glm.translate(t.position) * glm.mat4_cast(t.rotation) * glm.scale(t.scale))
     np.testing.assert_allclose(after[:3, 0], carried[:3, 0], atol=1e-5)   # its x axis as carried
     assert np.abs(after - carried).max() > 0.1
+
+
+def test_a_games_gravity_on_a_traveller_goes_on_from_the_velocity_a_pair_of_two_scales_carried(world):
+    """The engine pulls no Traveller down (Traveller.velocity alone moves it); a game's gravity
+    is its own, written into the velocity before the travel stage.  A ball falling with one
+    (9.8 m/s^2, world down) into A, then on past B (scaled 2): each frame is the game's pull,
+    then the move, then, where the step went into A, the carry (twice as far from B, the
+    velocity turned and doubled: README), worked out here in float64 frame by frame; the
+    pull after goes on from the carried velocity (the game's next write reads it), in world
+    metres, not scaled again."""
+    import esper
+
+    a, b = scaled_pair(world)
+    g = np.array([0.0, -9.8, 0.0])
+
+    class Gravity(esper.Processor):
+        def process(self, dt):
+            for _, traveller in world.query_one(Traveller):
+                traveller.velocity = traveller.velocity + glm.vec3(*g) * dt
+
+    world.add_system(Gravity(), 90)
+    # (A faces +Z: the ball comes at it from the front, arcing down through its rectangle.)
+    ball = world.spawn(Transform(position=(0.2, 2.5, 1.2)), Traveller(velocity=(0.0, 0.0, -2.4)))
+    p, v = np.array([0.2, 2.5, 1.2]), np.array([0.0, 0.0, -2.4])
+    crossed = []
+    for frame in range(60):
+        world.step(DT)
+        v = v + g * DT
+        before, p = p, p + v * DT
+        if before[2] > 0.0 >= p[2]:                   # into A's front (its rectangle: checked below)
+            assert abs(p[0]) < 1.0 and abs(p[1] - 1.5) < 1.5
+            p, v = np.array(carry_point_scaled(p)), 2.0 * np.array(carry_dir(v))
+            crossed.append(frame)
+        assert [c.entity for c in crossings(world)] == ([ball] if crossed and crossed[-1] == frame else [])
+        np.testing.assert_allclose(world.get(ball, Transform).position, p, atol=2e-4)
+        np.testing.assert_allclose(world.get(ball, Traveller).velocity, v, atol=2e-4)
+    assert len(crossed) == 1 and world.get(ball, Transform).scale == glm.vec3(2.0)
+    assert p[0] > B_POS[0] + 1.0   # flown out of B (+X) at twice the speed, falling as before
