@@ -56,7 +56,9 @@ class Mirror(ShownLayers):
     the eye (0: straight on, 90: edge on).  Between start and end the reflection's weight
     falls linearly from 1 to 0 and the mirror shows its fallback instead (the two mixed by the
     weight); at end and past it the mirror costs no view at all.  A view's weight is the product of the two, seen from
-    that view's eye (a mirror seen in another mirror fades by the reflected eye's distance).
+    that view's eye (a mirror seen in another mirror fades by the reflected eye's distance; one
+    beyond a portal pair of two sizes by the carried eye's, in its own side's metres, so it
+    fades at the size it looks, as it would seen there directly).
 
     ``reflects_light`` (off by default): the lights that reach its front are reflected onto
     what it faces, through its outline, tinted by ``color`` and scaled by ``reflect_rate``
