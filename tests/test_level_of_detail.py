@@ -14,6 +14,7 @@ from pyglm import glm
 from components import (
     Camera,
     ComponentValueError,
+    DirectionalLight,
     LevelOfDetail,
     Material,
     MeshRef,
@@ -261,3 +262,34 @@ def test_screen_heights_are_checked_and_written_in_level_files(tmp_path):
     assert detail.screen_heights == (0.25,)
     assert "screen_heights = [0.25]" in saved
     assert again.by_screen
+
+
+@pytest.mark.parametrize("behind, expected", [(5.0, FINE), (9.0, MIDDLE)])
+def test_an_object_seen_only_in_a_mirror_takes_the_level_of_the_nearest_eye_and_the_mirror_shows_it(
+        scene, behind, expected):
+    """The camera 2 m before a mirror, looking into it, the object ``behind`` metres behind the
+    camera (out of its view): the camera's eye is ``behind`` from it, the mirror's eye (the
+    camera's image, 4 m behind the glass) ``behind`` + 4; the nearest picks (thresholds 6
+    and 12: 5 -> fine though the image's way is 9, 9 -> middle though it is 13), and the
+    mirror's picture is that mesh's, pixel for pixel as the object given it plainly."""
+    def build(plain):
+        def made(world):
+            world.camera = look_from(world, (0.0, 0.0, 1.5), (0.0, 0.0, -0.5), fov=30.0)
+            world.spawn(DirectionalLight(direction=(0.3, -0.5, 1.0), intensity=3.0))   # (on the side the mirror sees)
+            world.spawn(Transform(position=(0.0, 0.0, -0.5)), MeshRef(quad(6.0, 4.0)), Mirror())
+            chain = () if plain else (LevelOfDetail(meshes=(FINE, MIDDLE, COARSE), distances=(6.0, 12.0)),)
+            world.thing = world.spawn(Transform(position=(0.0, 0.0, 1.5 + behind)),
+                                      MeshRef(expected if plain else FINE), Material(color=(0.8, 0.3, 0.2)), *chain)
+        return made
+
+    pictures = []
+    for plain in (False, True):
+        runner = scene(build(plain), (64, 48))
+        runner.engine.renderer.antialias = "off"
+        for _ in range(2):
+            runner.frame()
+        pictures.append(runner.frame())
+        assert runner.stats.reflection_views >= 1
+    assert runner.world.get(runner.world.thing, MeshRef).mesh is expected
+    np.testing.assert_array_equal(pictures[0], pictures[1])
+    assert (np.abs(pictures[0].astype(int) - pictures[0][0, 0]).max(axis=-1) > 30).sum() > 20   # (it is in the mirror)

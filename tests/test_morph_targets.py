@@ -19,7 +19,16 @@ from engine.core.world import World
 from engine.rules.raycast import raycast
 from tests.test_materials_from_files import write_glb
 from tests.test_model_variants import edit_glb
-from tests.test_skinning import RED, bar_arrays, elbow_matrix, frame_of, lit, same_picture
+from tests.test_skinning import (
+    RED,
+    bar_arrays,
+    elbow_matrix,
+    frame_of,
+    lamp_shadow,
+    lit,
+    same_picture,
+    seen_elsewhere,
+)
 
 N = 12  # a sheet's cells a side
 
@@ -292,3 +301,29 @@ def test_targets_past_what_the_offsets_texture_holds_are_refused_naming_the_mesh
                                            r"need a 1024x6 texture .* 2 rows at most \(GL_MAX_TEXTURE_SIZE\)"):
         runner.frame()
     assert renderer.resource_counts()["meshes"] == meshes
+
+
+@pytest.mark.parametrize("where", ["per_mirror", "batched", "portal", "probe"])
+def test_a_morph_is_worn_in_a_mirror_by_either_path_through_a_portal_and_in_a_probe(scene, where):
+    """The sheet at weights (0.8, 0.6), where the camera sees it only in a mirror's view (per
+    mirror and batched), through a portal or in a chrome ball's cube probe: drawn there as
+    the sheet moved by hand is (its lifted half, its bump), and not as the flat sheet."""
+    worn = seen_elsewhere(scene, where, morphed_sheet(), Morph((0.8, 0.6)))
+    hand = seen_elsewhere(scene, where, sheet_by_hand((0.8, 0.6)))
+    flat = seen_elsewhere(scene, where, sheet_by_hand((0.0, 0.0)))
+    assert same_picture(worn, hand) and not same_picture(worn, flat)
+    assert (worn[..., 0] > worn[..., 2] + 40).sum() > 300   # (the sheet there: no empty view)
+
+
+@pytest.mark.parametrize("spot", [False, True], ids=["cube", "spot"])
+def test_a_lamps_cube_and_a_spots_map_cast_the_worn_sheets_shadow(scene, spot):
+    """Lit only by a lamp (its shadow cube) or a spot (its one map): the floor round the sheet
+    at weights (0.8, 0.6) (every pixel the sheet itself covers in none of the frames) is as
+    the sheet moved by hand leaves it, and not as the flat sheet's shadow does."""
+    worn, worn_at = lamp_shadow(scene, spot, morphed_sheet(), Morph((0.8, 0.6)))
+    hand, hand_at = lamp_shadow(scene, spot, sheet_by_hand((0.8, 0.6)))
+    flat, flat_at = lamp_shadow(scene, spot, sheet_by_hand((0.0, 0.0)))
+    floor = ~(worn_at | hand_at | flat_at)
+    assert worn_at.sum() > 100   # (the sheet is in view)
+    assert (np.abs(worn - hand).max(axis=-1)[floor] > 12).sum() <= 0.002 * floor.size
+    assert (np.abs(worn - flat).max(axis=-1)[floor] > 20).sum() > 40   # (the shadows differ: the test sees them)

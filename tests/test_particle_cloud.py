@@ -452,3 +452,36 @@ def test_the_editor_offers_the_other_emitters_as_a_sub_emitter(scene):
     assert [entity for entity, _ in choices] == [None, runner.world.b] and not more
     editor.set_field(runner.world.a, "ParticleEmitter", "on_death", runner.world.b)
     assert runner.world.get(runner.world.a, ParticleEmitter).on_death == runner.world.b
+
+
+def test_each_capped_emitter_is_named_in_its_own_warning_once_and_again_after_a_run_uncapped(scene):
+    """Two emitters past their max_particles: one ParticleLimitWarning each, naming its entity
+    and its cap, over frames of being capped; the first, no longer capped (paused until its
+    particles die) and then capped again, is said again; ``particles_capped`` is the frame's
+    sum of both (600 and 1200 a second asked at 60 Hz: 10 and 20 not born a frame)."""
+    from components import Transform
+    from engine.core.errors import ParticleLimitWarning
+
+    held = {}
+
+    def build(world):
+        held["a"] = world.spawn(Transform(), ParticleEmitter(rate=600.0, lifetime=0.2, max_particles=50))
+        held["b"] = world.spawn(Transform(), ParticleEmitter(rate=1200.0, lifetime=10.0, max_particles=30))
+    runner = scene(build, (16, 16))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(8):
+            runner.frame()
+        capped = runner.stats.particles_capped
+        emitter = runner.world.get(held["a"], ParticleEmitter)
+        emitter.playing = False
+        for _ in range(20):   # (0.33 s: every one of its particles gone)
+            runner.frame()
+        emitter.playing = True
+        for _ in range(8):
+            runner.frame()
+    said = [str(w.message) for w in caught if issubclass(w.category, ParticleLimitWarning)]
+    assert capped == 30
+    a, b = f"entity {held['a']}:", f"entity {held['b']}:"
+    assert [m.startswith(a) for m in said].count(True) == 2 and all("max_particles (50)" in m for m in said if a in m)
+    assert [m.startswith(b) for m in said].count(True) == 1 and all("max_particles (30)" in m for m in said if b in m)

@@ -1352,3 +1352,72 @@ def test_a_billboard_a_lit_particle_and_a_ribbon_show_in_a_mirror_as_from_the_ey
     assert (there > 0.05).sum() > 40, (there > 0.05).sum()   # (the particle is there)
     apart = np.abs(shown - direct).max(axis=-1)[inside]
     assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.04, (np.quantile(apart, 0.99), apart.max())
+
+
+@pytest.mark.parametrize("blend", ["alpha", "additive"])
+def test_a_particle_casts_no_shadow_where_a_card_its_size_does(scene, blend):
+    """A solid white particle 0.8 m across, 1.5 m over a floor under a sun slanting along +x:
+    the floor where its shadow would fall (1.5 x 0.5 m along x from under it, well away from
+    where the camera sees the particle itself) is as bright as with no particle; a card of
+    its size lying there (the test's control) darkens those same pixels."""
+    white = TextureData(np.full((4, 4, 4), 255, np.uint8), name="white")
+    centre = glm.vec3(0.0, 1.5, 0.0)
+    sun = glm.vec3(0.5, -1.0, 0.0)
+    under = centre + sun * 1.5   # where the sun's ray through its centre meets the floor
+
+    def build(thing):
+        def make(world):
+            look_from(world, (-2.0, 3.0, 4.0), (0.5, 0.5, 0.0), fov=50.0)
+            world.spawn(DirectionalLight(direction=tuple(sun), intensity=2.0))
+            world.spawn(Transform(position=(0.0, -0.05, 0.0)), MeshRef(box((8.0, 0.1, 8.0))),
+                        Material(color=(0.6, 0.6, 0.6, 1.0)))   # (its top at y = 0)
+            if thing == "particle":
+                world.spawn(Transform(position=centre), still(size=0.8, color=(1.0, 1.0, 1.0, 1.0),
+                                                              end_color=(1.0, 1.0, 1.0, 1.0), blend=blend,
+                                                              texture=white))
+            elif thing == "card":
+                world.spawn(Transform(position=centre, rotation=glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))),
+                            MeshRef(quad(0.8, 0.8)), Material(color=(1.0, 1.0, 1.0, 1.0)))
+        return make
+
+    shown = {}
+    for thing in ("none", "particle", "card"):
+        runner, shown[thing] = render(scene, build(thing))
+    col, row = runner.project(under)
+    patch = np.s_[row - 2:row + 3, col - 2:col + 3]
+    np.testing.assert_allclose(shown["particle"][patch], shown["none"][patch], atol=0.004)
+    assert (shown["card"][patch] < shown["none"][patch] - 0.1).all()   # (a caster there darkens it)
+    col, row = runner.project(centre)
+    assert shown["particle"][row, col].min() > shown["none"][row, col].max() + 0.1   # (the particle is drawn)
+
+
+def test_a_monitors_picture_shows_a_particle_where_its_camera_projects_it(scene):
+    """A bright particle before a monitor's camera (the studio of tests/test_monitors.py: a
+    black world, the lens looking down -z, its screen behind it): the picture is bright at the
+    pixel the lens's own projection puts the particle's centre on, and unchanged half a metre
+    beside it, against the same studio without the particle."""
+    from components import Monitor
+    from engine.render.views import camera_view
+    from tests.test_monitors import LENS_AT, LENS_FOV, PICTURE, picture, run, studio
+
+    at = glm.vec3(0.6, 1.3, -4.0)
+    shown = {}
+    for with_particle in (False, True):
+        build, held = studio(Monitor(size=PICTURE), box_at=(0.0, -20.0, 0.0))   # (the studio's box out of sight)
+
+        def made(world, build=build, with_particle=with_particle):
+            build(world)
+            if with_particle:
+                world.spawn(Transform(position=at), still(size=0.5, color=(0.8, 0.8, 0.8, 1.0)))
+        runner, _ = run(scene, made, 2)
+        shown[with_particle] = picture(runner, held)[..., :3]
+    view = camera_view(glm.translate(glm.vec3(LENS_AT)), LENS_FOV, 0.1, 100.0, PICTURE)
+
+    def pixel(point):
+        clip = view.view_proj * glm.vec4(point, 1.0)
+        return (int((clip.x / clip.w * 0.5 + 0.5) * PICTURE[0]), int((0.5 - clip.y / clip.w * 0.5) * PICTURE[1]))
+
+    col, row = pixel(at)
+    assert shown[True][row, col].min() > shown[False][row, col].max() + 0.5
+    col, row = pixel(at - glm.vec3(0.5, 0.0, 0.0))
+    np.testing.assert_allclose(shown[True][row, col], shown[False][row, col], atol=0.01)

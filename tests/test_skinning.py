@@ -533,3 +533,141 @@ def test_a_skinned_mesh_with_vertex_colours_and_a_cutout_draws_as_bent_by_hand(s
     by_hand = frame_of(scene, lit(lambda w: w.spawn(Transform(), MeshRef(hand), cutout())))
     assert same_picture(bent, by_hand)
     assert (np.abs(bent - bent[0, 0]).max(axis=-1) > 60).sum() > 300
+
+
+ELSEWHERE_A, ELSEWHERE_B = glm.vec3(0.0, 1.2, -0.5), glm.vec3(20.0, 1.2, 0.0)
+ELSEWHERE_TURN = glm.angleAxis(math.pi / 2, glm.vec3(0.0, 1.0, 0.0))
+
+
+def seen_elsewhere(scene, where: str, mesh, *posed, size=(96, 72), frames=3, change=None, after=0,
+                   kept=None, configure=None, casts=True) -> np.ndarray:
+    """``mesh`` (with the components ``posed``) drawn where the camera sees it only in a view of
+    its own: ``where`` "per_mirror" or "batched", behind the camera (at z = 2.5, turned to face
+    -z) and seen in a mirror ahead (z = -0.5, either reflection path); "portal", beyond portal
+    B (20 m off, turned a quarter) where the view through A (ahead, at z = -0.5) puts it 3 m
+    behind A; "probe", behind the camera seen in a chrome ball's cube probe ahead.  Under a
+    sun with shadows over a floor (lit's) and a second sun lighting the side those views see.
+    ``change(world, entity)``, given, is called after ``frames`` - 1 frames, then ``after`` more
+    and the last are drawn; ``kept`` (a list) is given the mirror views kept the frame before;
+    ``configure(runner)``, given, is called before the first frame; ``casts``: the mesh's
+    MeshRef.casts_shadows."""
+    from components import Reflective
+    from engine.assets.mesh import sphere
+    from engine.assets.portals import spawn_portal_pair
+    from engine.core.portal_math import pair_transform
+
+    behind = glm.translate(glm.vec3(0.0, 0.0, 2.5)) * glm.mat4_cast(glm.angleAxis(math.pi, glm.vec3(0.0, 1.0, 0.0)))
+    if where == "portal":
+        carry = pair_transform(glm.translate(ELSEWHERE_A), glm.translate(ELSEWHERE_B) * glm.mat4_cast(ELSEWHERE_TURN))
+        place = carry * glm.translate(glm.vec3(0.0, 0.0, -3.5))
+    else:
+        place = behind
+
+    def build(world):
+        world.spawn(DirectionalLight(direction=(0.3, -0.6, 1.0), intensity=2.0))
+        if where in ("per_mirror", "batched"):
+            world.spawn(Transform(position=ELSEWHERE_A), MeshRef(quad(5.0, 3.0)), Mirror())
+        elif where == "portal":
+            spawn_portal_pair(world, ELSEWHERE_A, None, ELSEWHERE_B, ELSEWHERE_TURN, size=(5.0, 3.0))
+        else:
+            world.spawn(Transform(position=(0.0, 1.2, 0.0)), MeshRef(sphere(0.5, 48, 24)),
+                        Material(color=(1, 1, 1), metallic=1.0, roughness=0.0), Reflective("cube"))
+        world.thing = world.spawn(Transform(position=glm.vec3(place[3]), rotation=glm.quat_cast(place)),
+                                  MeshRef(mesh, casts_shadows=casts), Material(color=RED), *posed)
+
+    eye = (0.0, 1.2, 1.6) if where == "probe" else (0.0, 1.2, 1.5)
+    runner = scene(lit(build, eye=eye, target=(0.0, 1.2, 0.0), fov=25.0 if where == "probe" else 35.0), size)
+    if where != "probe":
+        runner.engine.reflection_system.path = "per_mirror" if where == "portal" else where
+    if configure is not None:
+        configure(runner)
+    for _ in range(frames - 1):
+        runner.frame()
+    if kept is not None:
+        kept.append(runner.stats.reflection_views_kept)
+    if change is not None:
+        change(runner.world, runner.world.thing)
+        for _ in range(after):
+            runner.frame()
+    frame = runner.frame().astype(int)
+    if where != "probe":
+        stats = runner.stats
+        assert stats.reflection_views >= 1 and stats.reflection_path == runner.engine.reflection_system.path
+    return frame
+
+
+@pytest.mark.parametrize("where", ["per_mirror", "batched", "portal"])
+def test_a_skin_is_bent_in_a_mirror_by_either_path_and_through_a_portal(scene, where):
+    """The bar bent a quarter at the elbow, where the camera sees it only in a mirror's view
+    (per mirror and batched) or through a portal: drawn there as the bar bent vertex by
+    vertex is (and not as the bar as modelled); the bar is there to see (red)."""
+    posed = seen_elsewhere(scene, where, skinned_bar(), Skin(np.stack([np.eye(4), elbow_matrix(math.pi / 2)])))
+    by_hand = seen_elsewhere(scene, where, bent_by_hand(math.pi / 2))
+    modelled = seen_elsewhere(scene, where, skinned_bar())
+    assert same_picture(posed, by_hand)
+    assert not same_picture(posed, modelled)
+    assert (posed[..., 0] > posed[..., 2] + 40).sum() > 60   # (the bar there: no empty view)
+
+
+def lamp_shadow(scene, spot: bool, mesh, *posed, size=(96, 72)) -> tuple[np.ndarray, np.ndarray]:
+    """``mesh`` (with the components ``posed``) at the origin over a floor, lit only by a lamp
+    above and to its right casting shadows: all round (its cube's faces, drawn in one
+    layered pass) or, ``spot``, a 40-degree spot aimed past it (its one perspective map);
+    seen from above.  The frame and the pixels the mesh itself covers (its id)."""
+    from components import PointLight, look_rotation
+
+    held = {}
+
+    def build(world):
+        look_from(world, (0.0, 4.5, 4.0), (-0.8, 0.0, -0.3), fov=55.0)
+        lamp = glm.vec3(1.5, 3.0, 0.5)
+        world.spawn(Transform(position=lamp, rotation=look_rotation(glm.vec3(-1.0, 0.0, 0.0) - lamp)),
+                    PointLight(intensity=12.0, range=15.0, shadows=True, spot_angle=40.0 if spot else 180.0))
+        world.spawn(Transform(), MeshRef(plane(8, 8)), Material(color=(0.6, 0.6, 0.6, 1.0)))
+        held["mesh"] = world.spawn(Transform(), MeshRef(mesh), Material(color=RED), *posed)
+
+    runner = scene(build, size)
+    runner.frame()
+    frame = runner.frame().astype(int)
+    return frame, runner.ids() == held["mesh"]
+
+
+@pytest.mark.parametrize("spot", [False, True], ids=["cube", "spot"])
+def test_a_lamps_cube_and_a_spots_map_cast_the_bent_arms_shadow(scene, spot):
+    """Lit only by a lamp (its shadow cube) or a spot (its one map): the floor round the arm
+    bent a quarter at the elbow (every pixel the arm itself covers in none of the frames) is
+    as the arm bent by hand leaves it, and not as the straight arm's shadow does."""
+    bent, bent_at = lamp_shadow(scene, spot, skinned_bar(), Skin(np.stack([np.eye(4), elbow_matrix(math.pi / 2)])))
+    hand, hand_at = lamp_shadow(scene, spot, bent_by_hand(math.pi / 2))
+    straight, straight_at = lamp_shadow(scene, spot, skinned_bar())
+    floor = ~(bent_at | hand_at | straight_at)
+    assert bent_at.sum() > 50   # (the arm is in view)
+    assert (np.abs(bent - hand).max(axis=-1)[floor] > 12).sum() <= 0.002 * floor.size
+    assert (np.abs(bent - straight).max(axis=-1)[floor] > 20).sum() > 40   # (the shadows differ: the test sees them)
+
+
+@pytest.mark.parametrize("where, watch_world", [("per_mirror", True), ("per_mirror", False), ("batched", True),
+                                               ("probe", True)], ids=["per_mirror", "scene_version_alone", "batched",
+                                                                      "probe"])
+def test_a_new_pose_is_drawn_in_a_still_mirror_the_next_frame_and_in_a_probe_soon_after(scene, where, watch_world):
+    """The camera and everything else still (the mirror's views kept from frame to frame), the
+    arm given a new pose: the next frame's mirror shows the arm bent the new way, as the arm
+    bent by hand does (so too with the reflect stage's check of the world's writes off and
+    no shadow map drawn again, the arm casting none: the pose's upload moves the scene's
+    version on); a chrome ball's probe (its faces recaptured after that frame's views,
+    sampled from the next) the frame after."""
+    def bend(world, entity):
+        world.get(entity, Skin).joint_matrices = np.stack([np.eye(4), elbow_matrix(math.pi / 2)])
+
+    def watch(runner):
+        runner.engine.reflection_system.watch_world = watch_world
+
+    kept = []
+    posed = seen_elsewhere(scene, where, skinned_bar(), Skin(np.stack([np.eye(4), elbow_matrix(0.0)])),
+                           frames=4, change=bend, after=1 if where == "probe" else 0, kept=kept, configure=watch,
+                           casts=watch_world)
+    if where != "probe":
+        assert kept[0] >= 1   # (still before the new pose: the mirror's view was being kept)
+    by_hand = seen_elsewhere(scene, where, bent_by_hand(math.pi / 2), casts=watch_world)
+    modelled = seen_elsewhere(scene, where, skinned_bar(), casts=watch_world)
+    assert same_picture(posed, by_hand) and not same_picture(posed, modelled)
