@@ -176,6 +176,38 @@ def test_a_monitor_shows_what_its_camera_sees_on_its_screen(scene):
     assert frames[1.0][~((u > -0.05) & (u < 1.05) & (v > -0.05) & (v < 1.05))].max() < 0.02
 
 
+def test_a_pictures_light_is_kept_whole_past_one_and_between_eight_bit_steps(scene):
+    """The picture holds the light its camera sees as the frame's own levels do (half floats):
+    a box of linear colour (3, 0.3039, 0.05) reads back so where the lens's rays meet it, its
+    red past 1 and its green halfway between two 8-bit steps (an 8-bit copy reads 1 and
+    0.302 or 0.306); and the frame's screen, at a brightness of 0.25, gives off 0.25 x 3 in
+    red where the picture's box fills it (0.25 from a picture cut at 1)."""
+    bright = (3.0, 0.3039, 0.05)
+    build, held = studio(Monitor(size=PICTURE, brightness=0.25))
+
+    def brighter(world):
+        build(world)
+        world.get(held["box"], Material).color = (*bright, 1.0)
+
+    runner, rgb = run(scene, brighter, 2)
+    shown = picture(runner, held)
+    eye, rays = lens_rays()
+    hits = box_hits(eye, rays.reshape(-1, 3), BOX_AT, BOX_HALF).reshape(PICTURE[1], PICTURE[0])
+    assert hits.sum() > 150
+    # (inside the box's image, a texel from its edge: bilinear mips leave the texels as drawn)
+    inner = hits & np.roll(hits, 1, 0) & np.roll(hits, -1, 0) & np.roll(hits, 1, 1) & np.roll(hits, -1, 1)
+    assert inner.sum() > 100
+    np.testing.assert_allclose(shown[inner][:, :3], np.broadcast_to(bright, (inner.sum(), 3)), rtol=2e-3, atol=3e-4)
+    # On the frame: the screen's brightest pixels are the box's image, 0.75 in red (under 1:
+    # the frame's 8-bit output holds it), and its green at 0.25 x 0.3039.
+    linear = srgb_to_linear(rgb)
+    red = linear[..., 0]
+    top = red > 0.5
+    assert top.sum() > 40, top.sum()
+    assert np.median(red[top]) == pytest.approx(0.25 * bright[0], abs=0.02)
+    assert np.median(linear[..., 1][top]) == pytest.approx(0.25 * bright[1], abs=0.01)
+
+
 @pytest.mark.parametrize("depth", [0, 1])
 def test_a_monitors_picture_shows_the_mirrors_its_camera_sees_to_its_depth(scene, depth):
     """The lens looks at a mirror; the box stands behind the lens, out of its sight.  With

@@ -53,11 +53,12 @@ from components.screen_reflections import ScreenReflections
 from engine.assets.texture_data import TextureData
 from engine.core.errors import GLLimitError
 from engine.render.batch_cull import batch_reach
+from engine.render.bindings import PassState, apply_pass_state
 from engine.render.gpu import Gpu
 from engine.render.scene_options import TREE_ROOT
 from engine.render.scene_pass import ScenePass
 from engine.render.surface_table import NO_BLENDS, SurfaceBlends
-from engine.render.targets import HDR_FORMAT, LevelStack
+from engine.render.targets import HDR_FORMAT, LevelStack, release_framebuffer
 from engine.render.tree_walk import TreeSettings
 from engine.render.view_plan import SurfaceTable
 from engine.render.view_tree import ViewTree
@@ -78,6 +79,7 @@ MAX_MONITORS = 8   # monitors drawn a frame (the longest waiting; the rest wait 
 # moon's slot and way, the images' shares (VolumetricFogPass.begin_picture's arguments).
 PictureShafts = tuple[VolumetricFog, VolumetricLamps, tuple[int, tuple[float, float, float]] | None,
                       tuple[float, ...]]
+_BLIT = PassState()  # the picture's blit into its texture tests nothing but the scissor (none)
 # A picture's root, by (its camera's ambient occlusion found, its screen reflections drawn):
 # made once, as options are compared by identity.
 _ROOTS = {(occluded, reflecting): replace(TREE_ROOT, occlusion=occluded, reflections=reflecting)
@@ -86,10 +88,12 @@ _ROOTS = {(occluded, reflecting): replace(TREE_ROOT, occlusion=occluded, reflect
 
 @dataclass
 class _Picture:
-    """One monitor's picture: the texture its screen samples, the stand-in it is known by, the
-    targets its view is drawn into."""
+    """One monitor's picture: the texture its screen samples (and a framebuffer over it, which
+    the picture is blitted into), the stand-in it is known by, the targets its view is drawn
+    into."""
 
     texture: moderngl.Texture
+    framebuffer: moderngl.Framebuffer
     stand_in: TextureData
     levels: LevelStack
     size: tuple[int, int]
@@ -189,7 +193,8 @@ class MonitorPictures:
         texture.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         stand_in = TextureData(np.zeros((1, 1, 4), np.uint8), name=f"monitor {entity}'s picture")
         self.renderer.hold_texture(stand_in, texture)
-        self._pictures[entity] = _Picture(texture, stand_in, LevelStack(self.ctx), tuple(size), next(self._versions))
+        self._pictures[entity] = _Picture(texture, self.ctx.framebuffer([texture]), stand_in, LevelStack(self.ctx),
+                                          tuple(size), next(self._versions))
         return stand_in
 
     def draw(self, entity: int, view: View, surfaces: SurfaceTable | None, depth: int,
@@ -249,7 +254,11 @@ class MonitorPictures:
                 screen.end_picture()
             if air is not None:
                 air.end_picture()
-        self.ctx.copy_framebuffer(held.texture, targets.color_framebuffer)
+        # Blitted, framebuffer to framebuffer: moderngl copies into a texture by glCopyTexImage2D
+        # with an unsized format (GL_RGBA), which makes the picture 8-bit, its light over 1 cut.
+        held.framebuffer.use()
+        apply_pass_state(self.ctx, _BLIT, (0, 0, *held.size))
+        self.ctx.copy_framebuffer(held.framebuffer, targets.color_framebuffer)
         held.texture.build_mipmaps()
         held.shown = {other: self._pictures[other].version for other in self.screens_reaching(drawn, faces or {})}
         held.probes = {} if captures is None else self.probes_read(drawn, captures)
@@ -324,6 +333,7 @@ class MonitorPictures:
         held = self._pictures.pop(entity, None)
         if held is not None:
             held.levels.release()
+            release_framebuffer(held.framebuffer)
             self.renderer.let_go_texture(held.stand_in)
 
     def release(self) -> None:
