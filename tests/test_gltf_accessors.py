@@ -196,3 +196,113 @@ def test_a_webp_or_avif_texture_is_read_in_place_of_its_fallback(tmp_path, kind)
         else:  # (AVIF's "lossless" goes through YUV: exact away from the edge, within a few levels)
             away = np.r_[0:5, 11:16]
             assert np.abs(part.texture.pixels[:, away, :3].astype(int) - webp_pixels[:, away]).max() <= 6
+
+
+# --- sparse accessors, and accessors past the bytes a file holds ------------------------------
+
+MOVED = np.array([[1.0, 1.5, 0.25]], np.float32)   # vertex 2's place, stored sparsely
+
+
+def sparse_of(writer: GlbWriter, indices: np.ndarray, values: np.ndarray, index_type: int) -> dict:
+    return {"count": len(indices),
+            "indices": {"bufferView": writer.view(indices.tobytes()), "componentType": index_type},
+            "values": {"bufferView": writer.view(values.tobytes())}}
+
+
+def test_a_sparse_accessor_is_read_as_its_base_with_the_stored_elements_put_in(tmp_path):
+    """glTF's sparse accessors outside morph targets: positions with a base view and vertex 2
+    stored sparsely, positions with no base (zeros but for vertices 1 and 3), and normalised
+    short UVs with vertex 0's stored sparsely (made dense, then read as the floats they stand
+    for); each loaded array is the base with those rows replaced, written out here with numpy."""
+    writer = GlbWriter()
+    positions = float_positions(writer)
+    writer.accessors[positions]["sparse"] = sparse_of(writer, np.array([2], np.uint16), MOVED, 5123)
+    writer.accessors[positions]["max"] = [1.0, 1.5, 0.25]
+    uv_shorts = np.round(UVS * 65535).astype(np.uint16)
+    uvs = writer.accessor(uv_shorts, "VEC2", 5123, normalized=True)
+    writer.accessors[uvs]["sparse"] = sparse_of(writer, np.array([0], np.uint32), np.array([[65535, 0]], np.uint16),
+                                                5125)
+    (part,) = load_model(writer.write(tmp_path / "sparse.glb", {"POSITION": positions, "TEXCOORD_0": uvs},
+                                      FLAT.indices))
+    expected = FLAT.positions.copy()
+    expected[2] = MOVED[0]
+    np.testing.assert_array_equal(part.mesh.positions, expected)
+    expected_uvs = uv_shorts / 65535.0
+    expected_uvs[0] = (1.0, 0.0)
+    np.testing.assert_allclose(gltf_uvs(part.mesh), expected_uvs, atol=1e-6)
+
+    writer = GlbWriter()
+    writer.accessors.append({"componentType": 5126, "count": 4, "type": "VEC3", "min": [-1.0, -1.0, 0.0],
+                             "max": [1.0, 1.0, 0.0],
+                             "sparse": sparse_of(writer, np.array([1, 3], np.uint8),
+                                                 FLAT.positions[[1, 3]].astype(np.float32), 5121)})
+    (part,) = load_model(writer.write(tmp_path / "zeros.glb", {"POSITION": 0}, FLAT.indices))
+    expected = np.zeros((4, 3))
+    expected[[1, 3]] = FLAT.positions[[1, 3]]
+    np.testing.assert_array_equal(part.mesh.positions, expected)
+
+
+@pytest.mark.parametrize("indices, count, message", [
+    ([2, 1], 2, r"accessor 0: sparse\.indices must increase and lie in 0\.\.3"),
+    ([1, 4], 2, r"accessor 0: sparse\.indices must increase and lie in 0\.\.3"),
+    ([0, 1, 2, 3, 3], 5, r"accessor 0: sparse\.count must be an integer in 1\.\.4, got 5"),
+], ids=["decreasing", "past the count", "more than the count"])
+def test_a_sparse_accessor_that_cannot_be_read_is_refused_naming_it(tmp_path, indices, count, message):
+    writer = GlbWriter()
+    positions = float_positions(writer)
+    writer.accessors[positions]["sparse"] = sparse_of(writer, np.array(indices, np.uint16),
+                                                      np.zeros((len(indices), 3), np.float32), 5123)
+    writer.accessors[positions]["sparse"]["count"] = count
+    with pytest.raises(AssetError, match=rf"bad\.glb.*{message}"):
+        load_model(writer.write(tmp_path / "bad.glb", {"POSITION": positions}, FLAT.indices))
+
+
+def cut_short(path: Path, how: str) -> Path:
+    """The plain quad's GLB spoilt as ``how`` says (its JSON kept unless a .gltf is made)."""
+    data = path.read_bytes()
+    json_length = struct.unpack("<I", data[12:16])[0]
+    doc, binary = json.loads(data[20:20 + json_length]), data[20 + json_length + 8:]
+    if how == "truncated":   # (the last bytes lost in a copy)
+        path.write_bytes(data[:-30])
+    elif how == "header":
+        path.write_bytes(data[:10])
+    elif how == "no binary chunk":   # (its header's length made to fit, the buffer without a uri)
+        kept = data[:20 + json_length]
+        path.write_bytes(kept[:8] + struct.pack("<I", len(kept)) + kept[12:])
+    else:
+        if how == "short bin":
+            (path.parent / "quad.bin").write_bytes(binary[:20])
+        else:
+            (path.parent / "quad.bin").write_bytes(binary)
+            if how == "missing buffer":
+                doc["bufferViews"][0]["buffer"] = 3
+            else:   # "count past its view"
+                doc["accessors"][0]["count"] = 40
+        doc["buffers"][0]["uri"] = "quad.bin"
+        path = path.with_suffix(".gltf")
+        path.write_text(json.dumps(doc))
+    return path
+
+
+CUT_SHORT = [
+    ("truncated", r"is cut short \(its GLB header says \d+ bytes, the file holds \d+\)"),
+    ("header", r"is cut short \(its GLB header says 12 bytes, the file holds 10\)"),
+    ("no binary chunk", r"accessor 0: its bufferView 0 reads buffer 0, whose bytes the file does not hold"),
+    ("short bin", r"accessor 0: its bufferView 0 \(48 bytes at 0\) runs past the end of buffer 0, which holds 20 "
+                  r"bytes \(the file is cut short\)"),
+    ("missing buffer", r"accessor 0: its bufferView 0 names buffer 3, which the file does not have"),
+    ("count past its view", r"accessor 0: its 40 elements run past the end of bufferView 0"),
+]
+
+
+@pytest.mark.parametrize("how, message", CUT_SHORT, ids=[case[0] for case in CUT_SHORT])
+def test_a_file_cut_short_or_reading_past_its_bytes_is_refused_naming_the_accessor(tmp_path, how, message):
+    """A GLB or .bin cut short, a GLB without its binary chunk, a view naming a buffer the file
+    lacks, a count past its view: each refused naming the file, the accessor and why (trimesh,
+    left to read them, fails with a bare IndexError, ValueError or AssertionError)."""
+    writer = GlbWriter()
+    path = writer.write(tmp_path / "quad.glb", {"POSITION": float_positions(writer)}, FLAT.indices)
+    assert len(load_model(path)) == 1   # (whole, it loads)
+    path = cut_short(path, how)
+    with pytest.raises(AssetError, match=rf"quad\.gl(b|tf)': {message}"):
+        load_model(path)

@@ -608,3 +608,34 @@ def test_gltf_texture_transform_rotation_turns_the_uvs_counter_clockwise_with_v_
     np.testing.assert_allclose(after[origin], offset, atol=1e-6)
     np.testing.assert_allclose(after[along_u] - after[origin], scale * np.array([math.cos(r), -math.sin(r)]), atol=1e-6)
     np.testing.assert_allclose(after[along_v] - after[origin], scale * np.array([math.sin(r), math.cos(r)]), atol=1e-6)
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"emissiveFactor": [1.0, -0.5, 0.0]}, r"material 'bad': emissiveFactor must be three numbers in \[0, 65504\]"),
+    ({"emissiveFactor": [1.0, 1.0]}, r"material 'bad': emissiveFactor must be three numbers"),
+    ({"transform": {"offset": [0.5]}},
+     r"material 'bad': baseColorTexture: KHR_texture_transform\.offset must be 2 finite numbers, got \[0\.5\]"),
+    ({"transform": {"rotation": "quarter"}},
+     r"material 'bad': baseColorTexture: KHR_texture_transform\.rotation must be 1 finite number, got 'quarter'"),
+    ({"transform": {"scale": [1.0, 1e9]}},
+     r"material 'bad': baseColorTexture: KHR_texture_transform\.scale must be 2 finite numbers"),
+    ({"transform": [0.5, 0.5]},
+     r"material 'bad': baseColorTexture: KHR_texture_transform must be an object, got \[0\.5, 0\.5\]"),
+], ids=["a negative emission", "two emission numbers", "a one-number offset", "a word for a rotation",
+        "a scale past 1e6", "a list for a transform"])
+def test_a_malformed_emission_or_texture_transform_is_refused_naming_the_material_and_map(tmp_path, change,
+                                                                                         message):
+    """A file's emissiveFactor and KHR_texture_transform are checked as they are read: one
+    written wrong is an error naming the file, the material and (a transform) the map, not
+    a glow or UVs made of it."""
+    material = {"name": "bad", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0],
+                                                        "baseColorTexture": {"index": 0}}}
+    if "transform" in change:
+        material["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
+            "KHR_texture_transform": change["transform"]}
+    else:
+        material.update(change)
+    path = write_glb(tmp_path / "bad.glb", quad(1.0, 1.0), material, [np.full((4, 4, 3), 128, np.uint8)],
+                     {"extensionsUsed": ["KHR_texture_transform"]})
+    with pytest.raises(AssetError, match=rf"bad\.glb': {message}"):
+        load_model(path)

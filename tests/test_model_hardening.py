@@ -537,3 +537,25 @@ def test_the_model_fuzz_reports_what_is_not_an_asset_error(ctx, tmp_path, monkey
         assert "without the model's file name" in fuzzer.run(case, 1)
     finally:
         fuzzer.close()
+
+
+# --- what a file requires ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("required, message", [
+    ("EXT_made_up", r"extensionsRequired must be a list of extension names, got 'EXT_made_up'"),
+    ({"EXT_made_up": True}, r"extensionsRequired must be a list of extension names, got \{'EXT_made_up': True\}"),
+    ([7], r"extensionsRequired must be a list of extension names, got \[7\]"),
+    (["KHR_texture_transform", "EXT_made_up", "EXT_also_made_up"],
+     r"requires the glTF extensions EXT_also_made_up, EXT_made_up, which the engine does not read"),
+], ids=["a name", "an object", "a number", "two unread among read ones"])
+def test_what_a_file_requires_is_read_as_the_list_gltf_says_or_the_file_is_refused(tmp_path, required, message):
+    """glTF's ``extensionsRequired`` is a list of names; one written otherwise (a bare name)
+    must not let the file through as requiring nothing, and a list names each extension it
+    requires that the engine does not read, not those it reads."""
+    from tests.test_gltf_accessors import FLAT, GlbWriter, float_positions
+
+    writer = GlbWriter()
+    path = writer.write(tmp_path / "needs.glb", {"POSITION": float_positions(writer)}, FLAT.indices,
+                        extra={"extensionsUsed": ["EXT_made_up"], "extensionsRequired": required})
+    with pytest.raises(AssetError, match=rf"needs\.glb': {message}"):
+        load_model(path)

@@ -117,6 +117,52 @@ def dense_sparse_accessors(doc: dict, buffer_bytes: BufferBytes, what: str) -> i
     return len(rewritten)
 
 
+def check_accessor_views(doc: dict, buffer_bytes: BufferBytes, what: str) -> None:
+    """Every dense accessor's elements inside its bufferView and that view inside its buffer's
+    bytes as read, before trimesh reads them: a GLB or ``.bin`` cut short, a GLB without its
+    binary chunk, a view naming a buffer the file lacks or a count past its view is an
+    AssetError naming the accessor and why (trimesh fails on them with a bare IndexError,
+    ValueError or AssertionError).  Run after ``dense_sparse_accessors``."""
+    accessors = doc.get("accessors")
+    if not isinstance(accessors, list):
+        return
+    views = doc.get("bufferViews") if isinstance(doc.get("bufferViews"), list) else []
+    buffers = doc.get("buffers") if isinstance(doc.get("buffers"), list) else []
+    for index, accessor in enumerate(accessors):
+        if not isinstance(accessor, dict) or "bufferView" not in accessor or "sparse" in accessor:
+            continue
+        label = f"{what}: accessor {index}"
+        ctype, kind, count = accessor.get("componentType"), accessor.get("type"), accessor.get("count")
+        if ctype not in COMPONENT_TYPES or kind not in COMPONENTS or isinstance(count, bool) \
+                or not isinstance(count, int) or count < 1:
+            continue  # (not an accessor of a kind read here: trimesh's to refuse)
+        view_index = accessor["bufferView"]
+        if isinstance(view_index, bool) or not isinstance(view_index, int) or not 0 <= view_index < len(views) \
+                or not isinstance(views[view_index], dict):
+            raise AssetError(f"{label}: names bufferView {view_index!r}, which the file does not have")
+        view = views[view_index]
+        buffer_index = view.get("buffer")
+        if isinstance(buffer_index, bool) or not isinstance(buffer_index, int) or not 0 <= buffer_index < len(buffers):
+            raise AssetError(f"{label}: its bufferView {view_index} names buffer {buffer_index!r}, which the file "
+                             "does not have")
+        data = buffer_bytes(buffer_index)
+        if data is None:
+            raise AssetError(f"{label}: its bufferView {view_index} reads buffer {buffer_index}, whose bytes the "
+                             "file does not hold (a GLB without its binary chunk, or data that is not base64)")
+        element = np.dtype(COMPONENT_TYPES[ctype]).itemsize * COMPONENTS[kind]
+        stride, view_offset = view.get("byteStride", element), view.get("byteOffset", 0)
+        view_length, offset = view.get("byteLength"), accessor.get("byteOffset", 0)
+        if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
+                   for n in (stride, view_offset, view_length, offset)):
+            raise AssetError(f"{label}: its offsets, length and stride ({offset!r}, {view_offset!r}, "
+                             f"{view_length!r}, {stride!r}) must be whole numbers >= 0")
+        if view_offset + view_length > len(data):
+            raise AssetError(f"{label}: its bufferView {view_index} ({view_length} bytes at {view_offset}) runs past "
+                             f"the end of buffer {buffer_index}, which holds {len(data)} bytes (the file is cut short)")
+        if offset + max(stride, element) * (count - 1) + element > view_length:
+            raise AssetError(f"{label}: its {count} elements run past the end of bufferView {view_index}")
+
+
 def _dense(accessor: dict, views: list, buffer_bytes: BufferBytes, label: str) -> np.ndarray:
     """A sparse accessor's elements, its base with the sparse ones put in (its own type)."""
     ctype, kind, count = accessor.get("componentType"), accessor.get("type"), accessor.get("count")

@@ -31,7 +31,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote
 
-from engine.assets.gltf_accessors import BufferBytes, dense_sparse_accessors, float_normalized_accessors
+from engine.assets.gltf_accessors import (
+    BufferBytes,
+    check_accessor_views,
+    dense_sparse_accessors,
+    float_normalized_accessors,
+)
 from engine.assets.gltf_animations import read_animations, read_node_tree
 from engine.assets.gltf_compression import (
     decode_basisu_textures,
@@ -587,6 +592,10 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     resolver = CheckedFiles(path.name)
     glb = path.suffix.lower() == ".glb"
     if glb:
+        declared = int.from_bytes(data[8:12], "little") if len(data) >= 12 else 12
+        if data[:4] == b"glTF" and declared > len(data):  # (trimesh's word for it: a bare ValueError)
+            raise AssetError(f"{what}: is cut short (its GLB header says {declared} bytes, the file holds "
+                             f"{len(data)})")
         doc, chunk_end = _glb_json(path, data)
         if doc is None:
             return GltfFiles(data, resolver, None)  # trimesh says what is wrong; it can open nothing
@@ -595,6 +604,8 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
         if doc is None or "asset" not in doc:
             raise AssetError(f"{what}: is not a glTF document (no 'asset' object)")
     required = doc.get("extensionsRequired")
+    if required is not None and not (isinstance(required, list) and all(isinstance(n, str) for n in required)):
+        raise AssetError(f"{what}: extensionsRequired must be a list of extension names, got {required!r}")
     missing = sorted(str(name) for name in required if name not in GLTF_READ_EXTENSIONS) \
         if isinstance(required, list) else []
     missing += missing_decoders(required if isinstance(required, list) else [])
@@ -620,6 +631,7 @@ def prepare_gltf(path: Path, data: bytes, roots: Sequence[Path], textures: bool,
     decode_meshopt_views(doc, buffer_bytes, what)
     dense_sparse_accessors(doc, buffer_bytes, what)  # (first: a sparse normalised one is then decoded too)
     float_normalized_accessors(doc, buffer_bytes, what)
+    check_accessor_views(doc, buffer_bytes, what)  # (a file cut short: named here, not trimesh's IndexError)
     expand_gpu_instancing(doc, buffer_bytes, what)
     try:
         apply_variant(doc, variant)
