@@ -691,3 +691,62 @@ def test_a_portal_turning_the_view_shows_the_stars_as_the_twin_along_its_carried
     assert ((colour - air).max(axis=-1)[starry & whole] > 0.03).all()
     own, _ = twin(rays)
     assert np.abs(colour - own)[whole].max() > 0.2                                   # (not the camera's own sky)
+
+
+def test_a_monitors_picture_shows_the_stars_as_the_twin_along_its_cameras_rays(scene):
+    """A monitor whose camera (not the active one) looks up at another part of the night
+    sky than the active camera, which looks at its screen: each texel of the picture (read
+    back, linear) is the twin (the air's light, ``model_sky``, and the stars' faces sampled in
+    numpy as in the mirror's test) along the monitor camera's ray through it (its own view
+    worked out from its Transform, fov and the picture's size), not along the active
+    camera's; stars stand out in it."""
+    from components import Monitor
+    from engine.assets.mesh import quad
+    from engine.assets.star_field import star_faces
+    from engine.render.views import camera_view
+    from tests.support import pixel_rays
+
+    n = 32
+    stars = star_faces(size=n, stars=1000, seed=5)
+    sun = _toward(-14.0, 150.0)   # (past dusk: the stars are out)
+    skybox = Skybox(model="atmosphere", faces=stars, face_size=n)
+    lens_look, fov, picture = _toward(35.0, -30.0), 40.0, (64, 48)
+    ents = {}
+
+    def build(world):
+        world.spawn(Transform(position=(0.0, 0.0, 3.0)), Camera(fov_y=40.0, near=0.1, far=100.0))   # down -z
+        world.spawn(skybox)
+        world.spawn(DirectionalLight(direction=tuple(-sun), intensity=3.0))
+        ents["lens"] = world.spawn(Transform(rotation=look_rotation(glm.vec3(*lens_look))),
+                                   Camera(fov_y=fov, near=0.1, far=100.0, active=False))
+        ents["screen"] = world.spawn(Transform(), MeshRef(quad(1.6, 1.2)),
+                                     Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0, environment_reflection=0.0),
+                                     Monitor(camera=ents["lens"], size=picture))
+
+    runner = scene(build, (64, 48))
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = runner.engine.renderer.monitors.read(ents["screen"])[..., :3].astype(np.float64)
+    assert shown.shape == (picture[1], picture[0], 3)
+    lens = runner.world.get(ents["lens"], Transform).world
+    _, rays = pixel_rays(camera_view(lens, fov, 0.1, 100.0, picture), picture)
+    np.testing.assert_allclose(rays[picture[1] // 2 - 1:picture[1] // 2 + 1, picture[0] // 2 - 1:picture[0] // 2 + 1]
+                               .mean(axis=(0, 1)), lens_look, atol=0.02)   # (the lens's way)
+    model = sky_model(skybox, SkySun(tuple(sun)))
+    table = atm.sky_view_table(model.air, model.air_elevation)
+
+    def twin(ways):
+        beyond, whole = _cube_bilinear(stars, ways)
+        through = atm.air_transmittance(table, ways, sun) * atm.space_shown(atm.air_radiance(table, ways, sun))
+        return model_sky(model, ways) + beyond * through * (ways[..., 1:2] >= -atm.horizon_sine(model.air)), whole
+
+    want, whole = twin(rays)
+    assert whole.mean() > 0.6
+    np.testing.assert_allclose(shown[whole], want[whole], rtol=1e-2, atol=2e-3)
+    air = model_sky(model, rays)
+    starry = (want - air).max(axis=-1) > 0.05
+    assert (starry & whole).sum() > 20                                               # (the stars are in it)
+    assert ((shown - air).max(axis=-1)[starry & whole] > 0.03).all()
+    _, active_rays = pixel_rays(runner.engine.main_view, picture)
+    other, _ = twin(active_rays)
+    assert np.abs(shown - other)[whole].max() > 0.2                                 # (the lens's sky, not the frame's)

@@ -346,3 +346,96 @@ def test_fades_from_carried_and_reflected_eyes_are_the_same_on_the_batched_path(
     (rgb, views), (batched_rgb, batched_views) = results["per_mirror"], results["batched"]
     assert views == batched_views
     assert np.abs(batched_rgb - rgb).max() <= 2
+
+
+def _scaled_carry(scale: float) -> glm.mat4:
+    """The pair's carry with B scaled ``scale`` by its Transform: B (its scale too) x a half
+    turn x A^-1, worked out here from the placements."""
+    return glm.translate(PORTAL_B) * glm.mat4_cast(B_TURN) * glm.scale(glm.vec3(scale)) \
+        * glm.mat4_cast(glm.angleAxis(math.pi, glm.vec3(0, 1, 0))) * glm.translate(-PORTAL_A)
+
+
+def _mirror_beyond_a_scaled_portal(scale: float, mirror: Mirror, through_portal: bool = True):
+    """``_mirror_beyond_a_portal`` with portal B scaled ``scale`` by its Transform and what
+    stands beyond it (the mirror, its place, the red wall) made ``scale`` times larger with
+    it: the world beyond B is the one-size scene's at ``scale``.  ``through_portal`` False:
+    no portals, the camera at the carried eye looking at B."""
+    def beyond(local) -> glm.vec3:
+        return PORTAL_B + B_TURN * (scale * glm.vec3(local))
+
+    def build(world: World) -> None:
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.5), intensity=1.0))
+        if through_portal:
+            look_from(world, tuple(CAMERA_AT), target=tuple(PORTAL_A), fov=60.0)
+            _, b = spawn_portal_pair(world, PORTAL_A, None, PORTAL_B, B_TURN, size=(2.4, 2.4), max_depth=1)
+            world.get(b, Transform).scale = glm.vec3(scale)
+        else:
+            eye = glm.vec3(_scaled_carry(scale) * glm.vec4(CAMERA_AT, 1.0))
+            look_from(world, tuple(eye), target=tuple(PORTAL_B), fov=60.0)
+        world.spawn(Transform(position=beyond((1.0, 0.0, 4.0)), rotation=BEYOND_TURN),
+                    MeshRef(quad(2 * HALF * scale, 2 * HALF * scale)), Material(color=(0.05, 0.1, 0.6)), mirror)
+        world.spawn(Transform(position=beyond((-12.0, 0.0, 0.0)), rotation=B_TURN, scale=(0.1 * scale, 30 * scale,
+                                                                                       60 * scale)),
+                    MeshRef(box()), Material(color=(0.9, 0.1, 0.1)), Emissive(1.0))
+    return build
+
+
+@pytest.mark.parametrize("scale", [2.0, 0.5])
+def test_a_mirror_beyond_a_pair_of_two_sizes_fades_by_the_carried_eyes_distance_in_its_own_sides_metres(ctx, scale):
+    """Portal B scaled 2 (or 0.5) by its Transform, the mirror and wall beyond it that much
+    larger with it (4 m before B times the scale, fades from 4 to 9 m times it): the mirror's
+    view's weight is the fades' formula from the eye carried through the pair (its carry,
+    B's scale in it, worked out here by hand and checked against the portal view's eye), by
+    the distance in B's side's metres, the way through the opening times the scale (here the
+    one-size case's weight; by A's metres, the way unscaled, it would be another); a second
+    path, a camera standing at the carried eye with no portal, gives the mirror the same
+    weight and shows its pixels as the portal does (the red wall in it, less of it than the
+    unfaded mirror shows)."""
+    carry = _scaled_carry(scale)
+    eye = glm.vec3(carry * glm.vec4(CAMERA_AT, 1.0))
+    mirror_at = PORTAL_B + B_TURN * (scale * glm.vec3(1.0, 0.0, 4.0))
+    local_eye = glm.inverse(B_TURN) * (eye - PORTAL_B)
+    local_mirror = glm.inverse(B_TURN) * (mirror_at - PORTAL_B)
+    crossing = glm.mix(local_eye, local_mirror, -local_eye.z / (local_mirror.z - local_eye.z))
+    assert abs(crossing.x) < 1.2 * scale and abs(crossing.y) < 1.2 * scale   # (through B's opening, scaled)
+    at_a = glm.vec3(glm.inverse(carry) * glm.vec4(PORTAL_B + B_TURN * crossing, 1.0))   # the crossing, on A
+    assert abs(at_a.z - PORTAL_A.z) < 1e-5
+    way_here = glm.distance(CAMERA_AT, at_a) + glm.length(local_mirror - crossing) / scale   # in A's metres
+    distance = glm.distance(eye, mirror_at)
+    assert distance == pytest.approx(scale * way_here, rel=1e-5)                # B's metres: the way times the scale
+    fades = {"fade_distance": (4.0 * scale, 9.0 * scale), "fade_angle": BEYOND_FADES["fade_angle"]}
+    (near, far), (low, high) = fades["fade_distance"], fades["fade_angle"]
+    normal = BEYOND_TURN * glm.vec3(0, 0, 1)
+    angle = math.degrees(math.acos(glm.dot(glm.normalize(eye - mirror_at), normal)))
+    by_angle = min(max((high - angle) / (high - low), 0.0), 1.0)
+
+    def weight_at(d):
+        d = max(d - math.sqrt(2.0) * HALF * scale, 0.0)
+        return min(max((far - d) / (far - near), 0.0), 1.0) * by_angle
+
+    weight = weight_at(distance)
+    assert 0.15 < weight < 0.85, weight
+    assert abs(weight_at(way_here) - weight) > 0.1      # (A's metres would fade it otherwise)
+
+    size = (96, 72)
+    runner = SceneRunner(ctx, _mirror_beyond_a_scaled_portal(scale, Mirror(reflect_rate=0.9, **fades)), size)
+    through = runner.frame()
+    portal_view, mirror_view = runner.engine.reflection_system.views[1:]
+    assert (portal_view.level, mirror_view.level, mirror_view.parent) == (1, 2, portal_view)
+    assert tuple(portal_view.view.eye) == pytest.approx(tuple(eye), abs=1e-4 * max(scale, 1.0))
+    assert mirror_view.fade == pytest.approx(weight, abs=1e-5)
+    runner.close()
+    direct = SceneRunner(ctx, _mirror_beyond_a_scaled_portal(scale, Mirror(reflect_rate=0.9, **fades), False), size)
+    seen = direct.frame()
+    (view,) = direct.engine.reflection_system.views[1:]
+    assert view.fade == pytest.approx(weight, abs=1e-5)
+    x, y = direct.project(mirror_at)
+    direct.close()
+    patch = (slice(y - 4, y + 4), slice(x - 4, x + 4))
+    np.testing.assert_allclose(through[patch].astype(float), seen[patch].astype(float), atol=2.0)
+    unfaded = SceneRunner(ctx, _mirror_beyond_a_scaled_portal(scale, Mirror(reflect_rate=0.9)), size)
+    whole = unfaded.frame()[patch].astype(float)
+    unfaded.close()
+    shown = through[patch].astype(float)
+    assert shown[..., 0].mean() > shown[..., 1].mean() + 40.0   # (the red wall, in the mirror)
+    assert whole[..., 0].mean() > shown[..., 0].mean() + 20.0

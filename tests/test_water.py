@@ -651,3 +651,86 @@ def test_a_waters_sky_is_the_generated_skys_along_its_reflected_rays_pixel_by_pi
     up = rays[..., 1] > 0.02
     np.testing.assert_allclose(colour[up], sky_radiance(Skybox(**SKY), rays, SkySun(tuple(sun)))[up],
                                rtol=1e-2, atol=2e-3)
+
+
+def _level0_hdr(runner) -> np.ndarray:
+    """Level 0's linear HDR colour (h, w, 3; row 0 at the top), at the runner's size."""
+    w, h = runner.size
+    colour = np.frombuffer(runner.engine.renderer.levels[0].color.read(), np.float16)
+    return colour.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
+
+
+def test_a_waters_sky_seen_through_a_portal_is_the_generated_skys_along_the_carried_then_reflected_rays(scene):
+    """The still pond of the test above lies beyond portal B, far off; the camera looks into
+    portal A (filling the view) along another way, the pair turning it towards the sun's
+    image in the pond.  Each pixel's ray is carried through the pair (float64, from the
+    Transforms: where it crosses A's plane and its direction), and where the carried ray
+    meets the pond beyond B, the pixel (level 0's HDR colour) is F x ``sky_radiance`` along
+    the carried ray reflected at y = 0, F Schlick's at the carried ray's angle, the sun's
+    disc's sharp edge included; above the horizon the sky along the carried ray.  Not the
+    camera's own rays' sky (the pair turned them), and what is below is black (the floor
+    alone, seen through the pair, is)."""
+    from engine.assets.portals import spawn_portal_pair
+    from engine.render.sky import sky_radiance
+    from engine.rules.light_rules import SkySun
+    from tests.support import pixel_rays
+    from tests.test_generated_sky import SKY, SUN
+
+    sun = np.array(SUN, np.float64)
+    target = glm.normalize(glm.vec3(*(sun * np.array([1.0, -1.0, 1.0]) + np.array([0.0, 0.25, 0.0]))))
+    look = glm.normalize(glm.vec3(0.5, -0.2, 1.0))    # the camera's own way (towards +z, away from the sun)
+    camera_at, b_at = glm.vec3(0.0, 1.5, 0.0), glm.vec3(300.0, 1.5, 0.0)
+    ents = {}
+
+    def build(water: bool):
+        def b(world):
+            world.spawn(Transform(position=camera_at, rotation=look_rotation(look)),
+                        Camera(fov_y=50.0, near=0.1, far=500.0))
+            world.spawn(Skybox(**SKY))
+            ents["a"], ents["b"] = spawn_portal_pair(world, camera_at + 2.0 * look, look_rotation(look), b_at,
+                                                     look_rotation(-target), size=(40.0, 40.0), max_depth=1)
+            world.spawn(Transform(position=(b_at.x, -1.0, b_at.z), rotation=FLAT), MeshRef(quad(400.0, 400.0)),
+                        Material(color=(0.0, 0.0, 0.0, 1.0), roughness=1.0, environment_reflection=0.0))
+            if water:
+                world.spawn(Transform(position=(b_at.x, 0.0, b_at.z), rotation=FLAT), MeshRef(quad(400.0, 400.0)),
+                            Material(color=(1.0, 1.0, 1.0, 0.0)), Mirror(), Water(ior=1.333, speed=0.0))
+        return b
+
+    size = (96, 72)
+    colours = {}
+    for water in (True, False):
+        runner = scene(build(water), size)
+        runner.engine.renderer.antialias = "off"
+        runner.frame()
+        colours[water] = _level0_hdr(runner)
+        if water:
+            assert runner.stats.reflection_views == 2        # the portal's view and the water's in it
+            assert (runner.engine.renderer.targets.read_surface_ids() == ents["a"]).all()
+    colour, dry = colours[True], colours[False]
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    a_world, b_world = (np.array(glm.dmat4(runner.world.get(ents[e], Transform).world).to_list()).T for e in "ab")
+    turn = np.array(glm.dmat4(glm.rotate(glm.pi(), glm.vec3(0, 1, 0))).to_list()).T
+    carry = b_world @ turn @ np.linalg.inv(a_world)
+    a_normal = a_world[:3, 2] / np.linalg.norm(a_world[:3, 2])
+    t_a = np.dot(a_world[:3, 3] - eye, a_normal) / (rays @ a_normal)
+    assert (t_a > 0.0).all()
+    start = (eye + rays * t_a[..., None]) @ carry[:3, :3].T + carry[:3, 3]   # on B's plane
+    carried = rays @ carry[:3, :3].T
+    np.testing.assert_allclose(carry[:3, :3] @ np.array(look), np.array(target), atol=1e-5)
+    down = carried[..., 1] < -0.02
+    hit = start + carried * (-start[..., 1] / np.where(down, carried[..., 1], -1.0))[..., None]
+    on_water = down & (np.abs(hit[..., 0] - b_at.x) < 150.0) & (np.abs(hit[..., 2] - b_at.z) < 150.0)
+    up = carried[..., 1] > 0.02
+    assert on_water.sum() > 0.4 * on_water.size and up.sum() > 0.1 * up.size
+    assert dry[on_water].max() < 1e-3                                     # (black below)
+    skybox, sky_sun = Skybox(**SKY), SkySun(tuple(sun))
+    reflected = carried * np.array([1.0, -1.0, 1.0])
+    sky = sky_radiance(skybox, reflected, sky_sun)
+    f0 = ((1.333 - 1.0) / (1.333 + 1.0)) ** 2
+    want = schlick(f0, -carried[..., 1:2]) * sky
+    np.testing.assert_allclose(colour[on_water], want[on_water], rtol=1e-2, atol=2e-3)
+    assert ((sky.max(axis=-1) > 3.0) & on_water).sum() >= 10              # (the sun's disc in the water)
+    np.testing.assert_allclose(colour[up], sky_radiance(skybox, carried, sky_sun)[up], rtol=1e-2, atol=2e-3)
+    own = np.where(rays[..., 1:2] < 0.0, schlick(f0, np.abs(rays[..., 1:2])) * sky_radiance(
+        skybox, rays * np.array([1.0, -1.0, 1.0]), sky_sun), sky_radiance(skybox, rays, sky_sun))
+    assert np.abs(colour - own)[on_water].max() > 0.2                     # (not the camera's own rays' water)
