@@ -138,8 +138,22 @@ def reopen_portal_disabled(world, ents):
     world.get(ents["a"], Portal).enabled = True
 
 
+def close_partner_mirrored_by_its_parent(world, ents):
+    """B put below a parent whose scale mirrors x, at the same place (the parent's -x of B's x):
+    a pair cannot carry a mirror image, so the rules close it (``mirrored_by_parents``)."""
+    ents["mirroring"] = world.spawn(Transform(scale=(-1.0, 1.0, 1.0)))
+    b = world.get(ents["b"], Transform)
+    b.parent, b.position = ents["mirroring"], (-B_POS[0], B_POS[1], B_POS[2])
+
+
+def reopen_partner_mirrored_by_its_parent(world, ents):
+    world.get(ents["mirroring"], Transform).scale = (1.0, 1.0, 1.0)  # the parent turned back: B at -3 now
+    world.get(ents["b"], Transform).position = B_POS
+
+
 CASES = {
     "partner disabled": (close_partner_disabled, reopen_partner_disabled),
+    "partner mirrored by its parent": (close_partner_mirrored_by_its_parent, reopen_partner_mirrored_by_its_parent),
     "partner without Transform": (close_partner_transform_removed, reopen_partner_transform_removed),
     "partner deleted": (close_partner_deleted, None),
     "portal itself disabled": (close_portal_disabled, reopen_portal_disabled),
@@ -147,6 +161,7 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.filterwarnings("ignore:Portal on entity .* its parents' Transform.scale mirror it")  # (said: its own test)
 def test_a_closed_pair_is_closed_in_every_system_and_reopens_the_next_frame(scene, case):
     close, reopen = CASES[case]
     ents: dict = {}

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from pyglm import glm
 
 from components import (
@@ -11,7 +12,12 @@ from components import (
     FromDecal,
     Material,
     MeshRef,
+    Mirror,
+    Morph,
     PortalClone,
+    Reflective,
+    Refractive,
+    Skin,
     Skybox,
     Slice,
     Transform,
@@ -19,8 +25,10 @@ from components import (
     look_rotation,
 )
 from components.decal import Decal
-from engine.assets.mesh import box
+from engine.assets.mesh import Mesh, box, quad
 from engine.assets.portals import spawn_portal_pair
+from engine.resources import PortalCrossings
+from tests.support import look_from
 
 SIZE = (200, 150)
 
@@ -294,3 +302,277 @@ def test_a_decal_on_a_traveller_is_cut_at_the_portal_with_it(scene):
     clones = {clone.source: entity for entity, clone in world.query_one(PortalClone)}
     assert set(clones) == {ents["bar"], cut}
     assert world.get(clones[cut], FromDecal).decal == ents["decal"]
+
+
+# --- the cut and the clone against the two halves built by hand -----------------------------------
+FACING_MINUS_X = glm.angleAxis(glm.radians(-90.0), glm.vec3(0, 1, 0))  # local +Z to world -X
+CUT_EYES = {  # (eye, target): where each look of the cut scene stands
+    "before both portals": ((0.0, 3.5, 7.0), (0.0, 1.0, -0.5)),  # both halves, and each through the other portal
+    "behind A": ((-8.0, 2.5, -3.5), (-2.8, 0.8, -0.5)),          # where the part gone in would stand
+    "in the mirror": ((0.0, 3.0, 7.0), (-1.0, 1.5, -4.0)),       # the mirror behind both portals
+}
+CUT_SIZE = (128, 96)
+
+
+def open_half(length: float = 1.0) -> Mesh:
+    """``box((0.4, 0.4, length))`` without its -Z face (box's last two triangles): a part of
+    the bar open where the portal cuts it (a slice plane clips the bar; it does not cap it)."""
+    whole = box((0.4, 0.4, length))
+    return Mesh(whole.positions[:20], whole.normals[:20], whole.uvs[:20], whole.indices[:10], name="open half")
+
+
+CUT_LOOKS = {  # the bar's (and its halves') look: (Material colour, its other look components)
+    "matte": ((0.9, 0.5, 0.1), ()),
+    "chrome": ((0.9, 0.5, 0.1), (Reflective,)),
+    "glass": ((0.9, 0.5, 0.1, 0.3), (Refractive,)),  # refracting: drawn over a copy of the frame
+    "see-through": ((0.9, 0.5, 0.1, 0.3), ()),  # drawn in the transparent slot
+}
+
+
+def build_cut(world, ents, scale: float, by_hand: bool, look: str = "matte") -> None:
+    """A at (-3, 1.5, 0) facing +Z, B at (3, 1.5, -1) facing -X (scaled ``scale``), over a
+    matte floor, a mirror behind both, and the 2 m bar halfway into A (x -3..-2.6, y
+    1.3..1.7, z -1..1); ``by_hand``: no bar, but its two halves where they should be drawn.
+    By hand: the pair carries A + (x, y, z) to B-local (-x, y, -z), and B's turn takes
+    B-local (x, y, z) to world (-z, y, x), times ``scale``; so the half behind A (its centre
+    A + (0.2, 0, -0.5)) stands at B + scale (-0.5, 0, -0.2), turned as B, open towards B.
+    ``look``: a ``CUT_LOOKS`` key."""
+    color, kinds = CUT_LOOKS[look]
+    world.spawn(Skybox())
+    world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+    ents["camera"] = look_from(world, *CUT_EYES["before both portals"])
+    ents["a"], ents["b"] = spawn_portal_pair(world, (-3, 1.5, 0), None, (3, 1.5, -1), FACING_MINUS_X)
+    world.get(ents["b"], Transform).scale = (scale, scale, scale)
+    if by_hand:
+        ents["bar"] = world.spawn(Transform(position=(-2.8, 1.5, 0.5)), MeshRef(open_half()),
+                                  Material(color=color), *(kind() for kind in kinds))
+    else:
+        ents["bar"] = world.spawn(Transform(position=(-2.8, 1.5, 0.0)), MeshRef(box((0.4, 0.4, 2.0))),
+                                  Material(color=color), Traveller(), *(kind() for kind in kinds))
+    ents["floor"] = world.spawn(Transform(position=(0, -0.05, 0)), MeshRef(box((20, 0.1, 20))),
+                                Material(color=(0.25, 0.25, 0.25)))
+    ents["mirror"] = world.spawn(Transform(position=(0, 2, -5)), MeshRef(quad(14, 4)),
+                                 Material(color=(0.1, 0.1, 0.1)), Mirror())
+    if by_hand:
+        ents["half"] = world.spawn(Transform(position=(3 - 0.5 * scale, 1.5, -1 - 0.2 * scale), rotation=FACING_MINUS_X,
+                                             scale=(scale, scale, scale)),
+                                   MeshRef(open_half()), Material(color=color), *(kind() for kind in kinds))
+
+
+@pytest.mark.parametrize("scale, path, look", [(1.0, "per_mirror", "matte"), (1.0, "batched", "matte"),
+                                               (2.0, "per_mirror", "matte"), (1.0, "batched", "chrome"),
+                                               (1.0, "per_mirror", "glass"), (1.0, "per_mirror", "see-through"),
+                                               (1.0, "batched", "see-through")])
+def test_a_box_halfway_through_is_drawn_as_its_two_halves_built_by_hand(scene, scale, path, look):
+    """The bar halfway into A, B turned to face -X (and scaled 2: the clone twice the size,
+    cut on B's front), its views drawn each alone or batched, matte, chrome, refracting glass
+    or see-through (the transparent slot), is drawn, seamlessly, as the
+    same scene with the bar's two halves built
+    by hand (``build_cut``: the half in front of A where it is, the half gone in at the pose
+    worked out by hand beyond B, no Traveller, no slicing): colours and ids alike (the clone
+    reports its source), seen before both portals (each half directly and the other half
+    through the portal it went into), from behind A (where the part gone in is cut away and
+    casts no shadow) and in a mirror behind both (whose view sees behind A and behind B)."""
+    sliced, hand = {}, {}
+    cut = scene(lambda world: build_cut(world, sliced, scale, False, look), CUT_SIZE)
+    reference = scene(lambda world: build_cut(world, hand, scale, True, look), CUT_SIZE)
+    assert [hand[k] for k in sliced] == list(sliced.values())  # one id each (the clone's comes after)
+    for runner in (cut, reference):
+        runner.engine.reflection_system.path = path
+    for view in CUT_EYES:
+        seen = []
+        for runner, ents in ((cut, sliced), (reference, hand)):
+            place_camera(runner.world, ents, view)
+            rgb = runner.frame()
+            ids = runner.ids()
+            ids[ids == ents.get("half", -1)] = ents["bar"]
+            seen.append((rgb.astype(int), ids, runner.engine.renderer.targets.read_surface_ids()))
+            assert list(runner.world.resources[PortalCrossings]) == []
+            assert runner.stats.reflection_path == path
+        (rgb, ids, surfaces), (expected_rgb, expected_ids, _) = seen
+        differ = ids != expected_ids
+        assert differ.sum() <= 3, (view, int(differ.sum()))
+        assert np.abs(rgb - expected_rgb)[~differ].max() <= 4, view
+        bar = ids == sliced["bar"]
+        where = {name: int((bar & (surfaces == sliced[name])).sum()) for name in ("a", "b", "mirror")}
+        where["directly"] = int((bar & (surfaces == sliced["bar"])).sum())
+        if view == "behind A":
+            assert where["directly"] > 20, where
+        else:
+            assert min(where.values()) >= 5, (view, where)  # directly, through A, through B, in the mirror
+    world = cut.world
+    (clone, _), = world.query_one(PortalClone)
+    assert world.get(sliced["bar"], Slice).plane == glm.vec4(0, 0, 1, 0)
+    np.testing.assert_allclose(world.get(clone, Slice).plane, (-1, 0, 0, 3), atol=1e-6)  # B's front, x < 3, kept
+
+
+def bar_parts_by_hand(world, low: float, high: float) -> list[int]:
+    """The bar from A + (0.2, 0, ``low``) to A + (0.2, 0, ``high``) along A's axis, as the parts
+    a person sees (``build_cut``'s pair, worked out by hand): the part in front of A (z 0 up)
+    where it is, and the part gone into A (z below 0) beyond B, at B-local (-0.2, 0, -z) turned
+    as B (world: B + (z, 0, -0.2)); each open where A's plane cuts it.  Their entities."""
+    parts = []
+    look = (0.9, 0.5, 0.1)
+    if high > 0.0:  # in front of A
+        start = max(low, 0.0)
+        mesh = open_half(high - start) if low < 0.0 else box((0.4, 0.4, high - low))
+        parts.append(world.spawn(Transform(position=(-2.8, 1.5, (start + high) / 2)), MeshRef(mesh),
+                                 Material(color=look)))
+    if low < 0.0:  # gone in: B-local z from -min(high, 0) to -low, open at B-local z = 0
+        end = min(high, 0.0)
+        mesh = open_half(end - low) if high > 0.0 else box((0.4, 0.4, high - low))
+        parts.append(world.spawn(Transform(position=(3.0 + (low + end) / 2, 1.5, -1.2), rotation=FACING_MINUS_X),
+                                 MeshRef(mesh), Material(color=look)))
+    return parts
+
+
+def build_bare(world, ents, eye: str) -> None:
+    """``build_cut``'s scene without the bar or its halves, seen from ``CUT_EYES[eye]``."""
+    build_cut(world, ents, 1.0, by_hand=True)
+    for name in ("bar", "half"):
+        world.delete_entity(ents.pop(name))
+    place_camera(world, ents, eye)
+
+
+def place_camera(world, ents, eye: str) -> None:
+    position, target = (glm.vec3(v) for v in CUT_EYES[eye])
+    camera = world.get(ents["camera"], Transform)
+    camera.position, camera.rotation = position, look_rotation(target - position)
+
+
+def assert_drawn_as_by_hand(rgb, ids, expected_rgb, expected_ids, bar: int, parts: list[int], why) -> None:
+    """A frame (sRGB, ids) is the hand-built one, its parts' ids read as ``bar``'s (a clone
+    reports its source): a few edge pixels may differ, and it shows the bar."""
+    expected_ids = expected_ids.copy()
+    expected_ids[np.isin(expected_ids, parts)] = bar
+    differ = ids != expected_ids
+    assert differ.sum() <= 3, (why, int(differ.sum()))
+    assert np.abs(rgb.astype(int) - expected_rgb.astype(int))[~differ].max() <= 4, why
+    assert (ids == bar).sum() > 20, why
+
+
+@pytest.mark.parametrize("step", [0.6, 1.4])
+def test_a_bar_going_through_fast_is_drawn_every_frame_as_its_parts_built_by_hand(scene, step):
+    """The 2 m bar walking into A at ``step`` metres a frame (36 and 84 m/s: 1.4 m takes it
+    from wholly in front of A to its middle past A's plane in one frame) is drawn, frame by
+    frame, as the parts worked out by hand from where its centre has got to along A's axis
+    (``bar_parts_by_hand``, its ends a metre either side): before A, cut at A with the rest
+    beyond B; on the frame its middle goes through, carried to B and cut there with the rest
+    still in front of A (a clone at A); then wholly beyond B, whole.  Seen from behind A and
+    in the mirror behind both portals (which sees behind B)."""
+    eyes = ("behind A", "in the mirror")
+    start, dt = 1.3 + step, 1.0 / 60.0
+    runners, ents = [], []
+    for eye in eyes:
+        found = {}
+
+        def build(world, found=found, eye=eye):
+            build_bare(world, found, eye)
+            found["bar"] = world.spawn(Transform(position=(-2.8, 1.5, start)), MeshRef(box((0.4, 0.4, 2.0))),
+                                       Material(color=(0.9, 0.5, 0.1)), Traveller(velocity=(0, 0, -step / dt)))
+
+        runners.append(scene(build, CUT_SIZE))
+        ents.append(found)
+    states = []  # (the centre along A's axis, crossed this frame, the bar cut, its clones)
+    for frame in range(1, 20):
+        centre = start - step * frame
+        if centre < -1.0 - step:
+            break
+        seen = [(runner.frame(dt), runner.ids()) for runner in runners]
+        world, bar = runners[0].world, ents[0]["bar"]
+        clones = world.query_one(PortalClone)
+        states.append((round(centre, 2), bool(world.resources[PortalCrossings]), world.has(bar, Slice), len(clones)))
+        if centre < 0.0 and world.has(bar, Slice):  # carried to B, still straddling it: cut at B, the rest at A
+            np.testing.assert_allclose(world.get(bar, Slice).plane, (-1, 0, 0, 3), atol=1e-5)
+            assert world.get(clones[0][0], Slice).plane == glm.vec4(0, 0, 1, 0)
+        for (rgb, ids), eye, found in zip(seen, eyes, ents, strict=True):
+            hand = {}
+
+            def build_hand(world, hand=hand, eye=eye, centre=centre):
+                build_bare(world, hand, eye)
+                hand["parts"] = bar_parts_by_hand(world, centre - 1.0, centre + 1.0)
+
+            reference = scene(build_hand, CUT_SIZE)
+            assert_drawn_as_by_hand(rgb, ids, reference.frame(dt), reference.ids(), found["bar"], hand["parts"],
+                                    (eye, states[-1]))
+            reference.close()
+    crossed = [state for state in states if state[1]]
+    assert len(crossed) == 1 and -1.0 < crossed[0][0] < 0.0 and crossed[0][2:] == (True, 1), states
+    assert states[-1][2:] == (False, 0), states  # wholly through: whole, no clone
+
+
+@pytest.mark.parametrize("pose", ["morph", "skin"])
+def test_a_bar_stretched_into_a_by_its_pose_is_cut_by_its_posed_box(scene, pose):
+    """A 1 m bar standing 0.1 m in front of A (z 0.1..1.1: its mesh's box does not reach A),
+    stretched by its pose (a morph target, or a second joint, moving its back end 1 m along
+    -Z: z -0.9..1.1) is cut at A and comes out of B as the stretched bar's parts worked out by
+    hand (``bar_parts_by_hand``), seen from behind A (where the stretched end would stand) and
+    before both portals: its straddling is read from its posed box, not its mesh's."""
+    ents = {}
+    plain = box((0.4, 0.4, 1.0))
+    back = plain.positions[:, 2] < 0.0
+    if pose == "morph":
+        offsets = np.where(back[:, None], (0.0, 0.0, -1.0), 0.0)[None]
+        mesh = Mesh(plain.positions, plain.normals, plain.uvs, plain.indices, name="stretched", morph_positions=offsets)
+        posing = Morph((1.0,))
+    else:
+        mesh = Mesh(plain.positions, plain.normals, plain.uvs, plain.indices, name="stretched",
+                    joints=np.stack([back.astype(int), np.zeros(len(back), int)], axis=1),
+                    weights=np.tile([1.0, 0.0], (len(back), 1)))
+        posing = Skin(np.stack([np.eye(4), np.array(glm.translate(glm.vec3(0, 0, -1)).to_list()).T]))
+
+    def build(world):
+        build_bare(world, ents, "behind A")
+        ents["bar"] = world.spawn(Transform(position=(-2.8, 1.5, 0.6)), MeshRef(mesh), Material(color=(0.9, 0.5, 0.1)),
+                                  Traveller(), posing)
+
+    hand = {}
+
+    def build_hand(world):
+        build_bare(world, hand, "behind A")
+        hand["parts"] = bar_parts_by_hand(world, -0.9, 1.1)
+
+    cut, reference = scene(build, CUT_SIZE), scene(build_hand, CUT_SIZE)
+    for look in ("behind A", "before both portals"):
+        for runner, found in ((cut, ents), (reference, hand)):
+            place_camera(runner.world, found, look)
+        rgb, ids = cut.frame(), cut.ids()
+        assert_drawn_as_by_hand(rgb, ids, reference.frame(), reference.ids(), ents["bar"], hand["parts"], look)
+    assert cut.world.get(ents["bar"], Slice).plane == glm.vec4(0, 0, 1, 0)
+    (clone, _), = cut.world.query_one(PortalClone)
+    assert cut.world.has(clone, Morph if pose == "morph" else Skin)
+
+
+def test_a_box_halfway_through_is_whole_again_from_the_frame_its_pair_closes(scene):
+    """The bar halfway into A (cut there, its clone beyond B), B disabled: from that frame
+    on nothing is cut at A, so seen from behind A the bar's far half stands where it is again
+    (its id 0.6 m behind A), and the frame is the one of the same scene whose B was disabled
+    from the start (the bar never cut); enabled again, it is cut again."""
+    from components import Portal
+
+    ents, never = {}, {}
+    cut = scene(lambda world: build_cut(world, ents, 1.0, by_hand=False), CUT_SIZE)
+
+    def closed_from_the_start(world):
+        build_cut(world, never, 1.0, by_hand=False)
+        world.get(never["b"], Portal).enabled = False
+
+    reference = scene(closed_from_the_start, CUT_SIZE)
+    for runner, found in ((cut, ents), (reference, never)):
+        place_camera(runner.world, found, "behind A")
+    cut.frame()
+    world = cut.world
+    assert world.has(ents["bar"], Slice) and world.query_one(PortalClone)
+    far_half = cut.project((-2.8, 1.5, -0.6))
+    assert cut.ids()[far_half[::-1]] != ents["bar"]
+    world.get(ents["b"], Portal).enabled = False
+    rgb = cut.frame().astype(int)
+    ids = cut.ids()
+    assert not world.has(ents["bar"], Slice) and world.query_one(PortalClone) == []
+    assert ids[far_half[::-1]] == ents["bar"]
+    expected_rgb = reference.frame().astype(int)
+    np.testing.assert_array_equal(ids, reference.ids())
+    assert np.abs(rgb - expected_rgb).max() <= 2
+    world.get(ents["b"], Portal).enabled = True
+    cut.frame()
+    assert world.has(ents["bar"], Slice) and cut.ids()[far_half[::-1]] != ents["bar"]
