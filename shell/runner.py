@@ -271,6 +271,9 @@ def _pose(text: str) -> tuple[float, ...]:
     if not all(math.isfinite(v) for v in values) or any(abs(v) > MAX_POSE for v in values):
         raise argparse.ArgumentTypeError(f"--camera must be five finite numbers (metres, degrees; at most "
                                          f"{MAX_POSE:g} either way), got {text!r}")
+    if abs(values[4]) > 90.0:  # (past it the view is upside down, and a FlyController refuses it)
+        raise argparse.ArgumentTypeError(f"--camera's pitch must be degrees from -90 (straight down) to 90 "
+                                         f"(straight up), got {text!r}")
     return values
 
 
@@ -299,6 +302,8 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def _main(game: Game, args: argparse.Namespace) -> int:
     try:
         use_level(game, args.level)
+        if getattr(args, "reload", False):
+            check_reload(game)
         if not args.headless and not have_display():
             print("speculum: no display found (DISPLAY/WAYLAND_DISPLAY unset); running headless", file=sys.stderr)
             args.headless = True
@@ -342,6 +347,15 @@ def use_level(game: Game, level: Path | None) -> None:
         game.level_path = level
     game.load()  # load_level and the game's own checks (a level for another game, no camera)
 
+
+def check_reload(game: Game) -> None:
+    """``--reload`` needs a level file to watch: a game built in Python is refused, as
+    ``--level`` is, before a context or an output folder is made."""
+    from engine.assets.level_file import LevelGame
+
+    if not isinstance(game, LevelGame):
+        raise SpeculumError(f"--reload: {game.title!r} builds its own world in Python, not from a level file, so "
+                            "there is no file to reload")
 
 
 def describe_written(written: Sequence[Path]) -> str:

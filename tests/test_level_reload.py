@@ -400,3 +400,74 @@ def test_an_image_a_model_names_beside_it_reloads_the_level_when_painted_again(c
         assert texel(run.engine) == [30, 60, 220]
     finally:
         run.close()
+
+
+def test_reload_on_the_command_line_reloads_and_without_it_a_save_is_not(ctx, tmp_path, capsys):
+    """``main`` with ``--reload`` parsed from the command line (not a Namespace made here): a
+    level that saves its own file at frame 1 is drawn as saved from frame 3 on, the same
+    pixels as the saved file played from the start; without ``--reload`` every frame is the
+    old level's."""
+    from shell.runner import main
+
+    changed = level_text(box_x=-0.8, color=BLUE)
+    camera = ",".join(str(v) for v in POSE)
+    last = {}
+    for name, flags in (("reload", ["--reload"]), ("plain", [])):
+        path = tmp_path / f"{name}.toml"
+        save(path, level_text())
+        out = tmp_path / name
+        argv = ["--headless", "--frames", "4", "--size", f"{SIZE[0]}x{SIZE[1]}", "--camera", camera,
+                "--out", str(out), *flags]
+        assert main(SavingLevel(path, changed, at=1), argv) == 0
+        said = [line for line in capsys.readouterr().err.splitlines() if "level reload" in line]
+        assert said == ([f"speculum: level reloaded: {path}"] if flags else []), said
+        import imageio.v3 as iio
+
+        last[name] = iio.imread(out / "frame_0003.png")[..., :3].astype(int)
+    saved = reference(ctx, tmp_path, changed, frames=2).astype(int)
+    old = reference(ctx, tmp_path, level_text(), frames=4).astype(int)
+    assert np.abs(last["reload"] - saved).max() <= 1
+    assert np.abs(last["plain"] - old).max() <= 1
+    assert np.abs(saved - old).max() > 60  # (the save is a change one can see)
+
+
+FLY = '\n[entity.FlyController]\nyaw = 0.0\npitch = 0.0\n'
+
+
+def test_a_reload_keeps_the_fly_cameras_heading_so_the_next_mouse_move_turns_from_it(ctx, tmp_path):
+    """The camera kept across a reload is its FlyController's yaw and pitch too: a mouse move
+    after the reload turns from the kept heading (POSE's yaw less dx times the sensitivity),
+    not from the file's 0, 0 (which would swing the view back first)."""
+    from components import FlyController, yaw_pitch_rotation
+    from engine.core.frame_io import Input
+
+    text = level_text().replace("[entity.Camera]\n", "[entity.Camera]" + FLY, 1)
+    path = tmp_path / "level.toml"
+    save(path, text)
+    run = Run(ctx, path)
+    try:
+        reload = run.engine.watch_level(interval=0.0)
+        run.engine.place_camera(*POSE)
+        run.frame()
+        save(path, text.replace("roughness = 0.5", "roughness = 0.3"))
+        reload.poll()
+        assert reload.poll() == [f"level reloaded: {path}"]
+        entity, _, transform = run.engine.active_camera()
+        fly = run.engine.world.get(entity, FlyController)
+        assert (fly.yaw, fly.pitch) == pytest.approx(POSE[3:])
+        run.engine.world.resources[Input].mouse_dx = 20.0
+        run.frame()
+        yaw = POSE[3] - 20.0 * fly.mouse_sensitivity
+        expected = yaw_pitch_rotation(yaw, POSE[4])
+        turned = transform.rotation * glm_forward()
+        wanted = expected * glm_forward()
+        assert np.allclose(tuple(turned), tuple(wanted), atol=1e-5), (tuple(turned), tuple(wanted))
+        assert tuple(transform.position) == pytest.approx(POSE[:3])
+    finally:
+        run.close()
+
+
+def glm_forward():
+    from pyglm import glm
+
+    return glm.vec3(0.0, 0.0, -1.0)
