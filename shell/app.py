@@ -41,7 +41,7 @@ from components import (
     VolumetricFog,
     yaw_pitch_rotation,
 )
-from engine.core.errors import GLPassError, StartOptionError
+from engine.core.errors import AssetError, GLPassError, StartOptionError
 from engine.core.frame_io import Input, Output
 from engine.core.game import Game, GameSystem, schedule_order
 from engine.core.world import FrameEvents, World
@@ -419,7 +419,10 @@ class Engine:
 
             skies = world.query_one(Skybox)
             sky = skies[0][1] if skies else world.get(world.spawn(Skybox()), Skybox)
-            sky.faces = sky_faces_from_file(panorama, 512, panorama_yaw, without_sun=panorama_sun)
+            try:
+                sky.faces = sky_faces_from_file(panorama, 512, panorama_yaw, without_sun=panorama_sun)
+            except AssetError as error:   # (the file's own error, said as the option's)
+                raise StartOptionError(f"--panorama: {error}") from None
             if sky.faces.sun is not None:
                 light = brightest_directional(world)
                 if light is None:

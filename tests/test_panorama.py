@@ -305,7 +305,7 @@ def test_the_sample_level_takes_a_panorama_from_the_command_line(tmp_path):
     assert result.returncode == 0, result.stderr
     frame = np.asarray(Image.open(tmp_path / "red" / "frame_0000.png")).astype(float)
     assert frame[..., 0].mean() > 1.3 * frame[..., 2].mean()   # (the hall lit and reflecting a red sky)
-    for bad, words in ((("--panorama", str(tmp_path / "none.hdr")), "none.hdr"),
+    for bad, words in ((("--panorama", str(tmp_path / "none.hdr")), "--panorama: panorama file"),
                        (("--panorama-yaw", "10"), "--panorama-yaw needs --panorama"),
                        (("--panorama", str(path), "--panorama-yaw", "west"), "--panorama-yaw must be")):
         result = run_level("--headless", "--frames", "1", "--size", "16x12", "--out", str(tmp_path / "bad"), *bad)
