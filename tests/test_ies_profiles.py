@@ -151,3 +151,70 @@ def test_a_level_file_names_a_profile(tmp_path):
         'cookie = { ies = "lamp.ies" }\n', ('ies = "lamp.ies"', 'ies = "none.ies"'), "cookie")
     cookie = world.get(it, PointLight).cookie
     assert cookie.source == {"ies": str(tmp_path / "lamp.ies")} and cookie.pixels.shape == (128, 256, 4)
+
+
+def lopsided(phi):
+    """A share by horizontal angle that differs in each of the four ways: 0.85 at 0 (the
+    lamp's +X), 0.7 at 90 (its +Y), 0.25 at 180, 0.4 at 270."""
+    phi = np.radians(phi)
+    return 0.55 + 0.3 * np.cos(phi) + 0.15 * np.sin(phi)
+
+
+def table_intensity(vertical, horizontal, table, gamma, phi):
+    """Candelas from a whole-turn file's ``table`` (a row of vertical values for each
+    horizontal angle, 0 to 360) at ``gamma`` and ``phi`` (degrees): linear between the
+    vertical angles along each of the two horizontal rows about ``phi``, then between them."""
+    phi = np.mod(phi, 360.0)
+    k = np.clip(np.searchsorted(horizontal, phi, side="right") - 1, 0, len(horizontal) - 2)
+    f = (phi - horizontal[k]) / (horizontal[k + 1] - horizontal[k])
+    rows = np.array([np.interp(gamma, vertical, row) for row in table])   # (horizontal, points)
+    index = np.arange(len(gamma))
+    return rows[k, index] * (1.0 - f) + rows[k + 1, index] * f
+
+
+def test_a_whole_turn_profile_lights_each_way_round_the_lamp_by_its_table(scene):
+    """A whole-turn file (0 to 360 every 45 degrees, vertical every 10) lopsided all round: its
+    horizontal angle 0 towards the lamp's +X (the world's +X) and 90 towards its +Y (the
+    world's -Z: the lamp hangs facing down, its top towards -Z), each floor pixel the plain
+    lamp's light times the file's table, interpolated here, at its direction over the peak:
+    within 0.008 at the 99th percentile, 0.002 in the median (measured 0.0032 and 0.0002: the
+    cookie's texels and 8-bit steps); the profile the other way round (phi turned to -phi, as
+    a cookie built or wrapped inside out would be) misses by up to 0.1 and more.  (The
+    profiles above are the same either way round.)"""
+    vertical, horizontal = np.arange(0.0, 181.0, 10.0), np.arange(0.0, 361.0, 45.0)
+    table = np.array([downlight(vertical) * lopsided(h) for h in horizontal])
+    profile = parse_ies(ies_text(vertical, horizontal, table), "lopsided")
+    plain, points, _ = floor_light(scene, None)
+    worn, _, _ = floor_light(scene, ies_cookie(profile))
+    d = points - np.asarray(LAMP)
+    gamma = np.degrees(np.arccos(np.clip(-d[:, 1] / np.linalg.norm(d, axis=1), -1.0, 1.0)))
+    phi = np.degrees(np.arctan2(-d[:, 2], d[:, 0]))   # (the lamp's +Y is the world's -Z)
+    peak = table.max()
+    share = table_intensity(vertical, horizontal, table, gamma, phi) / peak
+    lit = plain > 0.03
+    assert lit.sum() > 2000
+    error = np.abs(worn[lit] - plain[lit] * share[lit])
+    assert np.median(error) < 0.002 and np.percentile(error, 99) < 0.008, (np.median(error), np.percentile(error, 99))
+    turned = table_intensity(vertical, horizontal, table, gamma, -phi) / peak
+    assert np.abs(plain[lit] * (turned[lit] - share[lit])).max() > 0.1
+    assert np.abs(worn[lit] - plain[lit] * turned[lit]).max() > 0.05
+
+
+def test_a_half_turn_file_is_mirrored_about_its_0_to_180_plane():
+    """A half (0 to 180) unfolds as its symmetry says: the intensity at 360 - phi is the one
+    at phi; a whole-turn file's own values are read at each phi, the 0 and 360 rows alike."""
+    vertical = np.arange(0.0, 181.0, 10.0)
+    half = np.arange(0.0, 181.0, 30.0)
+    profile = parse_ies(ies_text(vertical, half, [downlight(vertical) * (0.5 + 0.4 * np.cos(np.radians(h)))
+                                                   for h in half]), "half")
+    phi = np.array([0.0, 30.0, 90.0, 150.0, 180.0, 45.0, 100.0])
+    gamma = np.full(len(phi), 20.0)
+    np.testing.assert_allclose(profile.intensity(gamma, 360.0 - phi), profile.intensity(gamma, phi), rtol=1e-12)
+    np.testing.assert_allclose(profile.intensity(gamma[:5], phi[:5]),   # (to the file's 6 digits)
+                               downlight(20.0) * (0.5 + 0.4 * np.cos(np.radians(phi[:5]))), rtol=1e-5)
+    whole = np.arange(0.0, 361.0, 45.0)
+    table = np.array([downlight(vertical) * lopsided(h) for h in whole])
+    full = parse_ies(ies_text(vertical, whole, table), "whole")
+    phi = np.array([0.0, 45.0, 100.0, 200.0, 270.0, 315.0, 359.0, 360.0])
+    np.testing.assert_allclose(full.intensity(np.full(len(phi), 35.0), phi),
+                               table_intensity(vertical, whole, table, np.full(len(phi), 35.0), phi), rtol=1e-5)

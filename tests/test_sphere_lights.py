@@ -150,3 +150,38 @@ def test_a_sphere_lights_image_in_a_mirror_keeps_its_radius(scene):
     runner.world.get(runner.world.query_one(PointLight)[0][0], PointLight).radius = 0.0
     runner.frame()
     assert not renderer.sphere_lights and block[at + 3] == 0.0
+
+
+def test_a_sphere_lights_diffuse_light_is_a_points(scene):
+    """A sphere of 0.5 m, 1.2 m over a rough floor: its diffuse light (the white floor's frame
+    less a black floor's: the highlight is the same in both) is the point light's, the
+    sphere's closed form where all of it stands above the floor's horizon (its form factor
+    cos theta (R / d)^2 and radiance I / (pi R^2): I cos theta / d^2, the inverse square kept
+    finite at the light, 1 / (d^2 + 1), as a point's), albedo / pi x that, within 2% in the
+    median and 4% at the 90th percentile: the sphere's size changes its highlight only."""
+    radius, intensity = 0.5, 3.0
+
+    def build_with(albedo):
+        def build(world):
+            look_from(world, (0.0, 1.0, 3.0), (0.0, 0.0, -1.0), fov=50.0)
+            world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+            world.spawn(Transform(), MeshRef(plane(30.0, 30.0)),
+                        Material(color=(albedo, albedo, albedo, 1.0), roughness=0.5, environment_reflection=0.0))
+            world.spawn(Transform(position=tuple(LIGHT)), PointLight(intensity=intensity, range=RANGE, radius=radius))
+        return build
+    white, eye, rays = green_and_rays(scene, build_with(1.0), SIZE)
+    black, _, _ = green_and_rays(scene, build_with(0.0), SIZE)
+    t = -eye[1] / rays[:, 1]
+    on_floor = (t > 0) & (t < 12.0)
+    points = (eye + rays * t[:, None])[on_floor]
+    diffuse = (white - black)[on_floor]
+    to_light = LIGHT - points
+    d = np.linalg.norm(to_light, axis=1)
+    cosine = to_light[:, 1] / d
+    above = cosine > radius / d   # (the sphere's whole disc above the horizon)
+    fade = np.clip(1.0 - (d / RANGE) ** 4, 0.0, 1.0) ** 2
+    expected = intensity * cosine * fade / (d ** 2 + 1.0) / math.pi
+    lit = above & (expected > 0.03) & (expected < 0.95)
+    assert lit.sum() > 1500 and black[on_floor].max() > 0.05   # (the highlight there, taken out)
+    error = np.abs(diffuse[lit] / expected[lit] - 1.0)
+    assert np.median(error) < 0.02 and np.percentile(error, 90) < 0.04, (np.median(error), np.percentile(error, 90))
