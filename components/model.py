@@ -198,7 +198,7 @@ class AnimationLayer(TrackedComponent):
     layer's by ``weight`` (0 none, 1 the layer's alone; translations and scales mixed,
     rotations along the shorter arc).  "additive": the layer's change from its clip's first
     key is added to the base pose, times ``weight`` (a rotation turned on by the layer's
-    turn, a translation moved by its move, a scale multiplied by its ratio), as three.js's
+    turn, a translation moved by its move, a scale by its change added, not multiplied), as three.js's
     additive blending of a clip made additive against its first frame.
 
     A clip or root the model lacks is an error naming those it has."""

@@ -70,10 +70,10 @@ def test_a_layers_clip_fires_its_events_as_the_layers(tmp_path):
 
 def test_passed_events_counts_what_a_frame_leaves_out():
     events = [(0.0, "tick")]
-    fired, dropped = passed_events(events, 0.0, 10.0, 0.01, True)  # a thousand passes of a 10 ms clip
-    assert len(fired) == MAX_EVENTS_A_FRAME and len(fired) + dropped == 1000
-    fired, dropped = passed_events(events, 10.0, -10.0, 0.01, True)
-    assert len(fired) == MAX_EVENTS_A_FRAME and len(fired) + dropped == 1000
+    fired, dropped = passed_events(events, 0.0, 10.0, 1 / 128, True)  # 1280 passes of a 7.8 ms clip
+    assert len(fired) == MAX_EVENTS_A_FRAME and len(fired) + dropped == 1280
+    fired, dropped = passed_events(events, 10.0, -10.0, 1 / 128, True)   # (1 / 128: 10 s is 1280 of it exactly)
+    assert len(fired) == MAX_EVENTS_A_FRAME and len(fired) + dropped == 1280
 
 
 def test_bad_events_are_refused(tmp_path):
@@ -148,3 +148,71 @@ def test_an_emitter_under_a_model_bursts_on_its_event(scene, tmp_path):
         runner.frame(0.25)
         counts.append((clouds[runner.world.dust][0].count, clouds[runner.world.other][0].count))
     assert counts == [(0, 0), (0, 0), (10, 0), (10, 0), (10, 0), (10, 0), (20, 0), (20, 0)]
+
+
+PASSES = (("Walk", 0.0, "left"), ("Walk", 0.1, "tick"), ("Walk", 1.0, "right"), ("Walk", 2.0, "end"))
+
+
+@pytest.mark.parametrize(("start", "dt", "frames", "speed"), [
+    ("0.5", "0.25", 17, 1.0),    # frames landing right on the wrap (2.0, 4.0): "end" and "left" there
+    ("1.6", "0.5", 8, 1.0),      # frames landing on "tick"'s place past the wrap (2.1 = 0.1 + 2)
+    ("1.5", "0.25", 15, -1.0),   # backwards, landing right on the start (0.0) and a loop before it
+    ("0.3", "0.1", 5, -1.0),     # backwards, landing a hair below 0 (0.3 - 3 x 0.1), which wraps to 2.0 itself
+    ("0.3", "0.35", 6, 2.0),     # twice as fast (0.7 s of clip a frame)
+    ("0.05", "1.3", 4, 1.0),     # frames longer than half the clip
+])
+def test_each_event_fires_once_for_each_of_its_places_however_the_frames_land(tmp_path, start, dt, frames, speed):
+    """The 2 s Walk played on from ``start`` by ``frames`` frames of ``dt`` x ``speed``: each
+    event fires, over the run, once for each of its places t + 2k on the unwrapped time line
+    between where the run starts and ends (counted here in exact fractions of the decimal
+    times; neither end is any event's place), whether or not a frame lands right on a wrap
+    or on an event's place after one."""
+    from fractions import Fraction
+
+    seen = playing(tmp_path, [float(dt)] * frames, events=PASSES, time=float(start), speed=speed)
+    low = Fraction(start)
+    high = low + frames * Fraction(dt) * Fraction(speed)
+    low, high = min(low, high), max(low, high)
+    for _, t, name in PASSES:
+        at = Fraction(str(t))
+        expected = sum(1 for k in range(-10, 10) if low < at + 2 * k < high)
+        got = sum(1 for frame in seen for fired, _, _ in frame if fired == name)
+        assert got == expected, (name, got, expected, seen)
+
+
+def test_a_games_update_reads_the_last_frames_events_and_a_long_frame_counts_what_it_left_out(ctx, tmp_path):
+    """Rendered frames of 0.6 s (Walk's "left" at 0, "right" at 1, "end" at 2): the game's
+    update sees each frame the events the frame before fired (none, left, right, none), and
+    after the fourth frame ``FiredEvents`` holds its own (end, left); one 601 s frame passes
+    301 + 300 + 300 places, fires the first 256 and counts the 645 others as dropped."""
+    from engine.assets.models import spawn_model
+    from tests.support import SceneRunner
+
+    path = walker(tmp_path / "walker.glb")
+    heard = []
+
+    def build(world):
+        look_from(world, (0.0, 1.0, 6.0), (0.0, 1.0, 0.0))
+        root = spawn_model(world, path)
+        world.add_component(root, Animation("Walk"))
+        world.add_component(root, AnimationEvents(events=STEPS))
+
+    def update(world, dt):
+        heard.append([event.name for event in world.resources.get(FiredEvents, [])])
+
+    runner = SceneRunner(ctx, build, (16, 16), update)
+    try:
+        for _ in range(4):
+            runner.frame(0.6)
+        assert heard == [[], ["left"], ["right"], []]
+        assert [event.name for event in runner.world.resources[FiredEvents]] == ["end", "left"]
+    finally:
+        runner.close()
+    world = World("long")
+    root = spawn_model(world, path)
+    world.add_component(root, Animation("Walk"))
+    world.add_component(root, AnimationEvents(events=STEPS))
+    ModelSystem(world).process(601.0)
+    fired = world.resources[FiredEvents]
+    assert len(fired) == MAX_EVENTS_A_FRAME and fired.dropped == 301 + 300 + 300 - MAX_EVENTS_A_FRAME
+    assert [event.name for event in fired[:6]] == ["left", "right", "end", "left", "right", "end"]

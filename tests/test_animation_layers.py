@@ -172,3 +172,62 @@ def test_a_level_file_lays_a_layer_and_refuses_a_clip_or_root_the_model_lacks_by
     with pytest.raises(LevelError, match=r"no node 'spine' \(its nodes: 'hinge', 'door'\)") as caught:
         load_level(tmp_path / "hall.toml")
     assert (caught.value.field, caught.value.line) == ("AnimationLayer.root", 18)
+
+
+def turn_y(angle: float) -> glm.quat:
+    return glm.angleAxis(angle, glm.vec3(0, 1, 0))
+
+
+def flipped(tmp_path):
+    """The door with a clip "Flip" turning the hinge from none to a quarter about +y, that
+    quarter written as its negative quaternion (the same turn; dot with the first key < 0)."""
+    from tests.test_model_animation import spun
+
+    negated = [-QUARTER.x, -QUARTER.y, -QUARTER.z, -QUARTER.w]
+    return spun(tmp_path / "flip.glb", {"Flip": ("LINEAR", [0.0, 2.0], np.array([[0, 0, 0, 1], negated]))})
+
+
+def test_layers_and_fades_mix_a_negated_quaternion_along_the_shorter_arc(tmp_path):
+    """"Flip" at 2 s (a quarter, as -q) over "Open" at 0 s (none), overriding at weight 0.5:
+    an eighth turn (the long way round would be three eighths the other way); added at 0.5
+    over "Open" at 1 s (an eighth): a quarter; a crossfade from "Flip" held at its end into
+    "Open", half way (Open 0.5 s in: a quarter of its 90 degrees): the hinge half way between
+    90 and 22.5 degrees; each angle worked out here."""
+    from engine.assets.models import crossfade
+
+    path = flipped(tmp_path)
+
+    def hinge_after(animation, layer=None, fade=None):
+        world = World("flip")
+        root = spawn_model(world, path)
+        world.add_component(root, animation)
+        if layer is not None:
+            world.add_component(root, layer)
+        stage = ModelSystem(world)
+        stage.process(0.0)
+        if fade is not None:
+            animation.playing = True
+            crossfade(animation, fade, 1.0)
+            stage.process(0.5)
+        return door_matrix(world)
+
+    over = hinge_after(Animation("Open", time=0.0, playing=False),
+                       AnimationLayer("Flip", time=2.0, playing=False, weight=0.5))
+    assert close(over, HINGE * glm.mat4_cast(turn_y(math.pi / 4)) * glm.translate(REST))
+    added = hinge_after(Animation("Open", time=1.0, playing=False),
+                        AnimationLayer("Flip", time=2.0, playing=False, weight=0.5, blend="additive"))
+    assert close(added, HINGE * glm.mat4_cast(turn_y(math.pi / 2)) * glm.translate(REST))
+    faded = hinge_after(Animation("Flip", time=2.0, playing=False, loop=False), fade="Open")
+    open_at = 0.25 * math.pi / 2   # "Open" 0.5 s into its 2 s quarter turn
+    assert close(faded, HINGE * glm.mat4_cast(turn_y(0.5 * (math.pi / 2 + open_at))) * glm.translate(REST))
+
+
+def test_an_additive_layer_adds_its_change_in_scale(tmp_path):
+    """"Blink" (the door's scale stepping 1, 2, 1 at 0, 1, 2 s) at 1.5 s (scale 2) over "Blink"
+    at 1.5 s: its change from its first key (2 - 1) added on: 3 (as three.js adds an additive
+    clip's scale change); at weight 0.5: 2.5; over the rest pose (1): 2."""
+    for base, weight, expected in ((Animation("Blink", time=1.5, playing=False), 1.0, 3.0),
+                                   (Animation("Blink", time=1.5, playing=False), 0.5, 2.5), (None, 1.0, 2.0)):
+        _, (m,) = posed(tmp_path, base, AnimationLayer("Blink", time=1.5, playing=False, blend="additive",
+                                                       weight=weight))
+        assert close(m, HINGE * glm.translate(REST) * glm.scale(glm.vec3(expected))), (weight, expected)

@@ -629,3 +629,113 @@ def test_a_crossfade_mixes_the_two_clips_poses_and_ends_in_the_new_one(tmp_path)
     stage.process(0.5)   # the fade's second is up: the slide alone (at 1 s: its end, (0.5, 1, 0))
     assert animation.fade_from == ""
     assert close(door_matrix(world), glm.translate(glm.vec3(1, 0, 0)) * glm.translate(glm.vec3(0.5, 1, 0)))
+
+
+def spun(path: Path, clips: dict[str, tuple[str, list[float], np.ndarray]]) -> Path:
+    """The door with more clips turning its hinge: name -> (interpolation, key times, the
+    rotation keys (x, y, z, w) a key, or (in-tangent, value, out-tangent) a key for a cubic
+    spline)."""
+    door(path)
+
+    def change(doc: dict) -> None:
+        for name, (interpolation, times, values) in clips.items():
+            first = add_accessors(doc, [np.array(times, np.float32), np.asarray(values, np.float32).reshape(-1, 4)])
+            doc["animations"].append({"name": name, "samplers": [
+                {"input": first, "output": first + 1, "interpolation": interpolation}],
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "rotation"}}]})
+    return edit_glb(path, change)
+
+
+def hinged(rotation) -> glm.mat4:
+    """The door's matrix with its hinge turned by ``rotation`` (x, y, z, w; any length)."""
+    x, y, z, w = np.asarray(rotation, np.float64) / np.linalg.norm(rotation)
+    return glm.translate(glm.vec3(1, 0, 0)) * glm.mat4_cast(glm.quat(w, x, y, z)) * glm.translate(glm.vec3(0.5, 0, 0))
+
+
+def test_rotation_keys_turn_along_the_shorter_arc_step_and_follow_a_normalised_cubic_spline(tmp_path):
+    """Rotations as glTF says, worked out here with numpy: linear keys whose quaternions point
+    apart (the second a quarter turn written as its negative, dot < 0) turn the short way (half
+    way: an eighth turn, not three eighths the other way round); step keys hold each key to the
+    next; cubic-spline keys over spans of 0.5 and 1.5 s are the Hermite sum with the tangents
+    scaled by the span, normalised."""
+    rng = np.random.default_rng(3)
+    negated = -np.array([QUARTER.x, QUARTER.y, QUARTER.z, QUARTER.w])
+    steps = np.array([[0, 0, 0, 1], [QUARTER.x, QUARTER.y, QUARTER.z, QUARTER.w], [0, 0, 0.6, 0.8]])
+    values = rng.normal(size=(3, 3, 4)) * 0.3
+    values[:, 1] = [[0, 0, 0, 1], [0.3, 0.2, 0.1, 0.9], [-0.5, 0.4, 0.2, 0.7]]   # the keys' values
+    values[:, 1] /= np.linalg.norm(values[:, 1], axis=1, keepdims=True)
+    path = spun(tmp_path / "spun.glb", {"Short": ("LINEAR", [0.0, 2.0], np.array([[0, 0, 0, 1], negated])),
+                                         "Steps": ("STEP", [0.0, 1.0, 2.0], steps),
+                                         "Spline": ("CUBICSPLINE", [0.0, 0.5, 2.0], values)})
+    _, (half,) = played(path, "Short", [1.0], playing=False, time=1.0)
+    eighth = glm.angleAxis(math.pi / 4, glm.vec3(0, 1, 0))
+    assert close(half, hinged([eighth.x, eighth.y, eighth.z, eighth.w]))
+    for t, key in ((0.0, 0), (0.99, 0), (1.0, 1), (1.7, 1), (2.0, 2)):
+        _, (m,) = played(path, "Steps", [0.0], playing=False, time=t, loop=False)
+        assert close(m, hinged(steps[key])), t
+    times = [0.0, 0.5, 2.0]
+    for t in (0.2, 0.5, 0.9, 1.6):
+        k = 0 if t < 0.5 else 1
+        span = times[k + 1] - times[k]
+        s = (t - times[k]) / span
+        q = (2 * s ** 3 - 3 * s ** 2 + 1) * values[k, 1] + (s ** 3 - 2 * s ** 2 + s) * span * values[k, 2] \
+            + (-2 * s ** 3 + 3 * s ** 2) * values[k + 1, 1] + (s ** 3 - s ** 2) * span * values[k + 1, 0]
+        _, (m,) = played(path, "Spline", [0.0], playing=False, time=t)
+        assert close(m, hinged(q)), t
+
+
+def test_speed_scales_the_clips_time_and_a_looping_clip_played_backwards_wraps_to_its_end(tmp_path):
+    """``speed`` 2: a frame of 0.25 s moves "Open" on 0.5 s; 0.5: 0.125 s; -1 on a looping
+    clip from 0.25 s by 0.5 s: 1.75 s (wrapped from below its start to the end of its 2 s),
+    posed there (the hinge's turn slerped by hand)."""
+    path = door(tmp_path / "door.glb")
+    hinge, offset = glm.translate(glm.vec3(1, 0, 0)), glm.translate(glm.vec3(0.5, 0, 0))
+    for speed, start, expected in ((2.0, 0.0, 0.5), (0.5, 0.0, 0.125), (-1.0, 0.5, 1.75)):
+        steps = [0.25] if speed > 0 else [0.25, 0.5]
+        world, placed = played(path, "Open", steps, speed=speed, time=start)
+        ((_, animation),) = list(world.query_one(Animation))
+        assert animation.time == pytest.approx(expected), speed
+        assert close(placed[-1], hinge * glm.mat4_cast(glm.slerp(glm.quat(), QUARTER, expected / 2.0)) * offset)
+
+
+@pytest.mark.parametrize("where", ["per_mirror", "batched", "direct"])
+def test_a_playing_clips_skinned_pose_is_drawn_in_a_mirror_as_it_is_that_frame(scene, tmp_path, where):
+    """The skinned arm of tests/test_skinning.py playing "Bend" (its elbow turned a quarter over
+    1 s) at 0.25 s a frame, behind the camera and seen only in a mirror ahead (either
+    reflection path; or in front of it, seen directly): the third frame (0.75 s in) shows the
+    arm as the bar bent by hand at that frame's angle, 3/4 of a quarter, and not at the frame
+    before's (1/2 of it): the mirror's view is not a frame behind the pose."""
+    from components import Mirror
+    from engine.assets.mesh import quad
+    from tests.test_skinning import RED, arm_glb, bent_by_hand, same_picture
+
+    path = arm_glb(tmp_path / "arm.glb")
+    behind = glm.vec3(0.0, 0.0, 2.5) if where != "direct" else glm.vec3(-0.3, 0.0, -2.5)
+    turned = glm.angleAxis(math.pi, glm.vec3(0.0, 1.0, 0.0)) if where != "direct" else glm.quat()
+
+    def drawn(place) -> np.ndarray:
+        def build(world):
+            look_from(world, (0.0, 1.2, 1.5), (0.0, 1.2, 0.0), fov=35.0)
+            world.spawn(DirectionalLight(direction=(0.3, -0.6, 1.0 if where != "direct" else -1.0), intensity=2.0))
+            if where != "direct":
+                world.spawn(Transform(position=(0.0, 1.2, -0.5)), MeshRef(quad(5.0, 3.0)), Mirror())
+            place(world)
+        runner = scene(build, (96, 72))
+        if where != "direct":
+            runner.engine.reflection_system.path = where
+        for _ in range(2):
+            runner.frame(0.25)
+        return runner.frame(0.25).astype(int)
+
+    def playing(world):
+        root = spawn_model(world, path, position=behind, rotation=turned)
+        world.add_component(root, Animation(clip="Bend"))
+
+    def by_hand(share):
+        return lambda world: world.spawn(Transform(position=behind, rotation=turned),
+                                         MeshRef(bent_by_hand(share * math.pi / 2)), Material(color=RED))
+
+    posed, now, before = drawn(playing), drawn(by_hand(0.75)), drawn(by_hand(0.5))
+    assert same_picture(posed, now)
+    assert not same_picture(posed, before)
+    assert (posed[..., 0] > posed[..., 2] + 40).sum() > 60   # (the arm is there to see: red)

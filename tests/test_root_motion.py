@@ -196,3 +196,27 @@ def test_a_looping_turn_carries_on_round_through_each_wrap(tmp_path, steps):
     quarter = glm.angleAxis(math.pi / 2, glm.vec3(0.0, 1.0, 0.0))
     assert near(world.get(root, Transform).position, glm.vec3(1.0, 0.0, 2.0) + arc + quarter * arc)
     assert abs(glm.dot(world.get(root, Transform).rotation, quarter * quarter)) == pytest.approx(1.0, abs=1e-6)
+
+
+def test_the_root_moves_by_the_clips_time_times_its_speed_and_not_by_a_layers(tmp_path):
+    """Speed 2: two frames of 0.25 s are 1 s of Walk, 2 m (the clip's 4 m halved); backwards
+    not looping from 1.5 s by 1 s frames: 2 m back to 0.5 s, then 1 m more, held at the start;
+    a layer playing Walk three times as fast over it leaves the root moving by the Animation's
+    clip alone (its travel is the Animation's)."""
+    from components import AnimationLayer
+
+    _, seen = walking(tmp_path, [0.25, 0.25], speed=2.0)
+    assert near(seen[0][0], (1.0, 0.0, 0.0)) and near(seen[1][0], (2.0, 0.0, 0.0)), seen
+    assert near(seen[1][1], (0.0, height(1.0), 0.0)), seen   # (on the spot, at the top of its bob)
+    _, seen = walking(tmp_path, [1.0, 1.0, 1.0], time=1.5, speed=-1.0, loop=False)
+    assert [round(root.x, 5) for root, _ in seen] == [-2.0, -3.0, -3.0], seen
+    _, seen = walking(tmp_path, [0.1] * 5, time=0.3, speed=-1.0)   # (0.3 - 3 x 0.1 lands a hair below 0)
+    assert [round(root.x, 5) for root, _ in seen] == [-0.2, -0.4, -0.6, -0.8, -1.0], seen
+    world = World("layered walk")
+    root = spawn_model(world, walker(tmp_path / "walker.glb"))
+    world.add_component(root, Animation("Walk", root_motion="hips"))
+    world.add_component(root, AnimationLayer("Walk", speed=3.0, weight=0.5))
+    stage = ModelSystem(world)
+    for _ in range(3):
+        stage.process(0.25)
+    assert near(world.get(root, Transform).position, (1.5, 0.0, 0.0))

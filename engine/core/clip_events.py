@@ -5,14 +5,15 @@ Playback runs a clip's time from ``before`` by ``step`` seconds (the frame's tim
 negative plays it backwards).  Laid out as one unwrapped line (a loop's second pass is the
 clip's times plus its duration, a third plus twice), an event at time t fires once for each
 of its places t + k duration the step passes: forwards those in [before, before + step),
-backwards those in (before + step, before], each in the order the playback meets them.  So an
-event at 0 fires as a loop starts and each time it comes round, and a loop that wraps three
-times in a long frame fires its events three times.  A clip that does not loop stops at its
-end (or its start, backwards): an event right there fires on the frame that arrives, once.
+backwards those in (before + step, before], each in the order the playback meets them (an
+event at the very end of a looping clip, the next pass's start, going forwards as the playback
+arrives there), whether or not a frame lands right on a wrap or an event.  So an event at 0
+fires as a loop starts and each time it comes round, and a loop that wraps three times in a
+long frame fires its events three times.  A clip that does not loop stops at its end (or its
+start, backwards): an event right there fires on the frame that arrives, once.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 # A frame at most fires this many of one clip's events (a tiny looping clip stepped a long
@@ -37,46 +38,44 @@ def passed_events(events: Sequence[tuple[float, str]], before: float, step: floa
             arrived = end <= 0.0 < before
             fired = [(t, n) for t, n in reversed(events) if end < t <= before or (arrived and t == end)]
         return fired[:MAX_EVENTS_A_FRAME], max(len(fired) - MAX_EVENTS_A_FRAME, 0)
-    total = 0
+    # Where the playback starts and ends as (pass of the loop, time within it), found as the
+    # models stage wraps a time (``time % duration``), so a frame ends exactly where the next
+    # starts: an event's place is compared there, never as t + k x duration rounded, which
+    # can fall just past a frame's end and just before the next frame's start and fire in
+    # neither.  An event at the clip's very end (t = duration) is the next pass's start: met
+    # going forwards it fires as the playback arrives there (a frame landing right on the
+    # wrap fires it then), going backwards as it leaves (with the next pass's events at 0).
+    after = before + step
+    at_before, at_after = (at if at < duration else 0.0 for at in (before % duration, after % duration))
+    # (a tiny time below 0 wraps to the duration itself: the next pass's start)
+    pass_before = round((before - at_before) / duration)
+    pass_after = round((after - at_after) / duration)
+    spans = [_passes(t, at_before, pass_before, at_after, pass_after, step > 0.0, duration) for t, _ in events]
+    total = sum(max(0, high - low + 1) for low, high in spans)
     if step > 0.0:
-        first, last = math.floor(before / duration), math.floor((before + step) / duration)
-        for k in range(first, last + 1):
-            for t, n in events:
-                at = t + k * duration
-                if before <= at < before + step:
-                    total += 1
-                    if len(fired) < MAX_EVENTS_A_FRAME:
-                        fired.append((t, n))
-            if total >= MAX_EVENTS_A_FRAME and k < last:  # (the rest only counted)
-                total += _count_passes(events, before, step, duration, k + 1, last)
-                break
+        order, passes = list(zip(events, spans, strict=True)), range(pass_before, pass_after + 1)
     else:
-        first, last = math.floor(before / duration), math.floor((before + step) / duration)
-        for k in range(first, last - 1, -1):
-            for t, n in reversed(events):
-                at = t + k * duration
-                if before + step < at <= before:
-                    total += 1
-                    if len(fired) < MAX_EVENTS_A_FRAME:
-                        fired.append((t, n))
-            if total >= MAX_EVENTS_A_FRAME and k > last:
-                total += _count_passes(events, before + step, -step, duration, last, k - 1, upper=True)
-                break
+        order, passes = list(zip(events, spans, strict=True))[::-1], range(pass_before, pass_after - 1, -1)
+    for k in passes:
+        if len(fired) >= min(total, MAX_EVENTS_A_FRAME):
+            break
+        fired.extend((t, n) for (t, n), (low, high) in order if low <= k <= high)
+    fired = fired[:MAX_EVENTS_A_FRAME]
     return fired, total - len(fired)
 
 
-def _count_passes(events: Sequence[tuple[float, str]], low: float, length: float, duration: float, first: int,
-                  last: int, upper: bool = False) -> int:
-    """How many event places t + k duration, k in [first, last], lie in [low, low + length)
-    (``upper``: in (low, low + length]), counted in closed form (no loop over k)."""
-    count = 0
-    for t, _ in events:
-        if upper:  # k with low < t + k d <= low + length
-            lo_k, hi_k = math.floor((low - t) / duration) + 1, math.floor((low + length - t) / duration)
-        else:      # k with low <= t + k d < low + length
-            lo_k, hi_k = math.ceil((low - t) / duration), math.ceil((low + length - t) / duration) - 1
-        count += max(0, min(hi_k, last) - max(lo_k, first) + 1)
-    return count
+def _passes(t: float, at_before: float, pass_before: int, at_after: float, pass_after: int, forwards: bool,
+            duration: float) -> tuple[int, int]:
+    """The passes of the loop (first, last) in which a playback from (``pass_before``,
+    ``at_before``) to (``pass_after``, ``at_after``) meets an event at ``t``: forwards those
+    from the one it leaves at or after ``t`` to the one it ends before ``t``; backwards from
+    the one it ends below ``t`` to the one it leaves at or above ``t``; an event at the end
+    (t >= duration, the next pass's start) arrived at forwards, left backwards."""
+    if t >= duration:
+        return (pass_before, pass_after - 1) if forwards else (pass_after, pass_before - 1)
+    if forwards:
+        return (pass_before if t >= at_before else pass_before + 1, pass_after if t < at_after else pass_after - 1)
+    return (pass_after if t > at_after else pass_after + 1, pass_before if t <= at_before else pass_before - 1)
 
 
 def events_problem(events: Sequence[tuple[str, float, str]], clips: dict[str, float]) -> str | None:
