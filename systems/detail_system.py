@@ -107,6 +107,9 @@ class DetailSystem(esper.Processor):
             self.levels[row] = level
             if mesh_ref.mesh is not detail.meshes[level]:
                 mesh_ref.mesh = detail.meshes[level]
+        # Only the finest meshes of the entities there now: a deleted entity's mesh is let go.
+        finest = {id(detail.meshes[0]) for detail in self._details}
+        self._mesh_centres = {key: kept for key, kept in self._mesh_centres.items() if key in finest}
 
     def _centre(self, entity: int, detail: LevelOfDetail) -> tuple[tuple[float, float, float], float]:
         """The world centre of ``detail``'s finest mesh's box on ``entity``, and the box's size

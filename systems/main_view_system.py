@@ -227,6 +227,7 @@ class MainViewSystem(esper.Processor):
         drawn unlit, worked out again only when a surface or the pixel budget changed."""
         surfaces = self.world.resources.get(Surfaces)
         if self.depth_cap is None or surfaces is None or not surfaces.mirrors:
+            self._options = (((), ()), TREE_ROOT)   # (the gone mirrors' states let go)
             return TREE_ROOT
         budget = ViewBudget.of(self.world.resources)
         pixel_budget = budget is not None and budget.pixels is not None

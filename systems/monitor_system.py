@@ -418,15 +418,17 @@ class MonitorSystem(esper.Processor):
         the picture (its faces are culled), so the picture is not an input of the view's."""
         world = self.world
         faces = {}
+        flat, self._flat = self._flat, {}   # (kept for the screens there now only: a gone screen's mesh let go)
         for entity, _ in monitors:
             mesh_ref, transform = world.try_get(entity, MeshRef), world.try_get(entity, Transform)
             material = world.try_get(entity, Material)
             if mesh_ref is None or transform is None or (material is not None and material.double_sided) \
                     or world.try_get(entity, Skin) is not None or world.try_get(entity, Morph) is not None:
                 continue
-            local = self._flat.get(mesh_ref.mesh.id)
+            local = flat.get(mesh_ref.mesh.id)
             if local is None:
-                local = self._flat[mesh_ref.mesh.id] = flat_face(mesh_ref.mesh.positions, mesh_ref.mesh.indices)
+                local = flat_face(mesh_ref.mesh.positions, mesh_ref.mesh.indices)
+            self._flat[mesh_ref.mesh.id] = local
             if local is False:
                 continue
             matrix = transform.world

@@ -50,6 +50,7 @@ A face leaves the waiting set (``ProbeState.pending``) when it is published as d
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 from pyglm import glm
@@ -157,7 +158,7 @@ class ProbeScheduler:
         self._lights_came_or_went = False  # this frame: a point light came or went (periodic probes' changes)
         self._reach: tuple[ShadowCasters | None, float] = (None, 0.0)  # _filter_reach's, for these casters
         self._grown: tuple[tuple | None, float] = (None, 0.0)  # _filter_reach's level box (bytes) -> its grown diagonal
-        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (mesh, its box's corners): _mesh_corners
+        self._mesh_boxes: dict[int, tuple] = {}  # id(mesh) -> (a weak ref to it, its box's corners): _mesh_corners
         self._watching = False  # the boxes and lights are kept: a watching probe was there last frame
         self._suns: tuple = ()  # the directional lights as the probes were last relit by them (sun_states)
         self._suns_behind = False  # a sun turned a little since: the probes relight once it stands still
@@ -389,12 +390,13 @@ class ProbeScheduler:
             corners = box_corners(np.asarray(posed[0], np.float64)[None], np.asarray(posed[1], np.float64)[None])[0]
             return np.concatenate([corners, np.ones((8, 1))], axis=1)
         kept = self._mesh_boxes.get(id(mesh))
-        if kept is None or kept[0] is not mesh:
+        if kept is None or kept[0]() is not mesh:
             if len(self._mesh_boxes) > 4096:
                 self._mesh_boxes.clear()
             lo, hi = mesh.bounds
             corners = box_corners(np.asarray(lo, np.float64)[None], np.asarray(hi, np.float64)[None])[0]
-            kept = self._mesh_boxes[id(mesh)] = (mesh, np.concatenate([corners, np.ones((8, 1))], axis=1))
+            # (weakly: a deleted thing's mesh is let go; a new mesh at its id finds the ref dead)
+            kept = self._mesh_boxes[id(mesh)] = (weakref.ref(mesh), np.concatenate([corners, np.ones((8, 1))], axis=1))
         return kept[1]
 
     def _all_boxes(self) -> ChangedBoxes:

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 import warnings
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -160,19 +161,19 @@ class ReachBoxes:
     ``CausticBlock.reach``), and a box with suns and lamps is about 80 us of numpy."""
 
     def __init__(self) -> None:
-        self._boxes: dict[int, tuple[tuple, Box]] = {}
+        self._boxes: dict[int, tuple[tuple, Box]] = {}   # entity -> ((a weak ref to its state, key), box)
 
     def box(self, entity: int, state: SurfaceState, depth: float, reflects: bool, suns: tuple = (),
             lamps: tuple = ()) -> Box:
         """``reach_box`` of ``state`` (a ``SurfaceState``: its corners and plane) for ``entity``."""
         key = (depth, reflects, suns if reflects else (), lamps if reflects else ())
         kept = self._boxes.get(entity)
-        if kept is not None and kept[0][0] is state and kept[0][1] == key:
+        if kept is not None and kept[0][0]() is state and kept[0][1] == key:
             return kept[1]
         found = reach_box(state.corners, tuple(glm.vec3(state.plane)), depth, reflects, key[2], key[3])
         if len(self._boxes) > 64:
             self._boxes.clear()
-        self._boxes[entity] = ((state, key), found)
+        self._boxes[entity] = ((weakref.ref(state), key), found)   # (a gone water's state, its normal map, let go)
         return found
 
 
