@@ -88,6 +88,13 @@ class GLNames:
         self._program = (ctypes.CFUNCTYPE(ctypes.c_uint)(load("glCreateProgram")),
                          ctypes.CFUNCTYPE(None, ctypes.c_uint)(load("glDeleteProgram")))
         self.floor = {kind: self._next(kind) for kind in KINDS}
+        # Names are read as a rising count (Mesa's way); a driver that gives a deleted name out
+        # again (some GPU drivers) leaves nothing to count by: the sweep skips there, saying so.
+        reused = [kind for kind in KINDS if kind not in POOLED and self._next(kind) <= self.floor[kind]]
+        if reused:
+            pytest.skip(f"this driver gives deleted GL names out again ({', '.join(reused)}): the sweep "
+                        "counts names as they rise")
+        self.floor = {kind: self._next(kind) for kind in KINDS}
 
     def _next(self, kind: str) -> int:
         if kind == "Program":
