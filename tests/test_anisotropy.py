@@ -16,8 +16,7 @@ from pyglm import glm
 
 from components import ComponentValueError, Material, MeshRef, Mirror, PointLight, Skybox, Transform, look_rotation
 from engine.assets.mesh import plane, quad
-from engine.render.environment_brdf import environment_brdf
-from tests.support import look_from, pixel_rays, srgb_to_linear
+from tests.support import look_from, pixel_rays, split_sum, srgb_to_linear
 
 SIZE = (96, 72)
 EYE, LAMP, INTENSITY, RANGE = (0.0, 2.0, 3.0), np.array([0.3, 1.0, 0.5]), 3.0, 20.0
@@ -61,7 +60,7 @@ def expected_highlight(view, anisotropy: float, direction: float) -> np.ndarray:
     gl = nl + np.sqrt((at * dot(t, l)) ** 2 + (ab * dot(b, l)) ** 2 + nl ** 2)
     gv = nv + np.sqrt((at * dot(t, v)) ** 2 + (ab * dot(b, v)) ** 2 + nv ** 2)
     fade = np.clip(1.0 - (d / RANGE) ** 4, 0.0, 1.0) ** 2
-    split = environment_brdf(ROUGHNESS, nv).sum(-1)
+    split = split_sum(ROUGHNESS, nv).sum(-1)
     return D / (gl * gv) * nl * INTENSITY * fade / (d * d + 1.0) / split
 
 

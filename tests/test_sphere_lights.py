@@ -13,8 +13,7 @@ import pytest
 
 from components import ComponentValueError, Material, MeshRef, PointLight, Skybox, Transform
 from engine.assets.mesh import plane, quad
-from engine.render.environment_brdf import environment_brdf
-from tests.support import green_and_rays, look_from
+from tests.support import green_and_rays, look_from, split_sum
 
 SIZE = (96, 72)
 LIGHT = np.array([0.0, 1.2, -1.0])
@@ -57,7 +56,7 @@ def sphere_light_reference(points: np.ndarray, view: np.ndarray, roughness: floa
         c = (from_light ** 2).sum(axis=1)[:, None] - radius ** 2
         meets = (b * b > c) & (b < 0.0)
         out[start:start + 256] = (weight * meets).mean(axis=1)
-    return out * radiance / environment_brdf(np.full(len(view), roughness), view[:, 1]).sum(axis=-1)
+    return out * radiance / split_sum(roughness, view[:, 1]).sum(axis=-1)
 
 
 def floor_frame(scene, roughness: float, radius: float, intensity: float):
@@ -109,7 +108,7 @@ def test_a_smooth_floor_shows_the_spheres_disc_not_a_point(scene):
     miss = np.sqrt(np.maximum((from_light ** 2).sum(axis=1) - b * b, 0.0))   # the ray's closest approach
     inside, clear = (miss < 0.8 * radius) & (b < 0), (miss > 1.3 * radius) | (b > 0)
     assert inside.sum() > 30
-    expected = radiance * intensity / environment_brdf(np.full(len(view), roughness), view[:, 1]).sum(axis=-1)
+    expected = radiance * intensity / split_sum(roughness, view[:, 1]).sum(axis=-1)
     np.testing.assert_allclose(shown[inside], expected[inside], rtol=0.1)
     assert shown[clear].max() < 0.05
     point, _, _ = floor_frame(scene, roughness, 0.0, intensity)
