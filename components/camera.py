@@ -90,7 +90,10 @@ class Camera(ShownLayers):
 @dataclass(eq=False)
 class FlyController(TrackedComponent):
     """WASD + mouse fly controls for the entity's Transform (used by windowed runs).
-    ``speed`` is in the entity's own units a second: its Transform's scale multiplies it."""
+    ``speed`` is in the entity's own units a second: its Transform's scale multiplies it.
+    ``yaw`` and ``pitch`` are degrees (``yaw_pitch_rotation``'s); ``pitch`` from -90 (straight
+    down) to 90 (straight up): past them a view is upside down, and the first mouse move held
+    it to 89 either way, a jump."""
 
     SHAREABLE = False  # one entity's own state: see components.tracking
     speed: float = 4.0
@@ -104,8 +107,10 @@ class FlyController(TrackedComponent):
             return finite(self, name, value, low=0.0, high=1e6)
         if name == "mouse_sensitivity":
             return finite(self, name, value, low=0.0, high=1e3)
-        if name in ("yaw", "pitch"):
+        if name == "yaw":
             return finite(self, name, value, low=-1e6, high=1e6)
+        if name == "pitch":
+            return finite(self, name, value, low=-90.0, high=90.0)
         return value
 
 

@@ -23,6 +23,7 @@ from components.tracking import (
     integer,
     vec3,
 )
+from components.transform import POSITION_MAX
 
 # Assets are the engine's types (engine.assets.texture_data.TextureData); components import none
 # of it: the field is checked by the class's ASSET_KIND.
@@ -184,7 +185,8 @@ class ParticleEmitter(TrackedComponent):
                     world.check_invariants(entity, ParticleEmitter, shape=value)
             return value
         if name == "extent":
-            return vec3(self, name, value, low=0.0)
+            # (Further out than a Transform may stand, a particle is born nowhere it could be drawn.)
+            return vec3(self, name, value, low=0.0, high=POSITION_MAX, why=" metres (Transform's POSITION_MAX)")
         if name == "gravity":
             g = vec3(self, name, value)
             if max(abs(c) for c in g) > MAX_PARTICLE_GRAVITY:
@@ -233,7 +235,11 @@ class ParticleEmitter(TrackedComponent):
             if self.__dict__.get("space") == "local":
                 raise ComponentValueError('ParticleEmitter.ground is a world height: give it to a "world" space '
                                           f'emitter, not a "local" one, got {value!r}')
-            return finite(self, name, value)
+            height = finite(self, name, value)
+            if abs(height) > POSITION_MAX:
+                raise ComponentValueError(f"ParticleEmitter.ground must be within {POSITION_MAX:g} m of y = 0 (a "
+                                          f"world height: no Transform stands further out), got {value!r}")
+            return height
         if name == "bounce":
             return finite(self, name, value, low=0.0, high=1.0)
         if name == "color_keys":

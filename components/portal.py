@@ -72,11 +72,11 @@ class Portal(ShownLayers):
             raise ComponentValueError(f"Portal on entity {entity} is paired with itself")
 
     def _validate(self, name: str, value: Any) -> Any:
-        if name == "partner" and value is not None and value == self._entity and self._sink is not None:
-            raise ComponentValueError(f"Portal on entity {value} is paired with itself")
         if name == "partner" and value is not None:
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ComponentValueError(f"Portal.partner must be an entity id, got {value!r}")
+        if name == "partner" and value is not None and value == self._entity and self._sink is not None:
+            raise ComponentValueError(f"Portal on entity {value} is paired with itself")
         if name == "size":
             try:
                 w, h = (finite(self, name, v, positive=True) for v in value)

@@ -394,7 +394,7 @@ def second_uv_names(value: Any) -> tuple[str, ...]:
         names = tuple(names)
     except TypeError:
         raise ComponentValueError(f"Material.second_uv_maps must be a list of map names, got {value!r}") from None
-    unknown = [n for n in names if n not in MATERIAL_IMAGES]
+    unknown = [n for n in names if not isinstance(n, str) or n not in MATERIAL_IMAGES]  # (an array: no ==)
     if unknown:
         raise ComponentValueError(f"Material.second_uv_maps names {unknown[0]!r}, which is not one of its maps "
                                   f"({', '.join(MATERIAL_IMAGES)})")

@@ -57,7 +57,7 @@ class TimeOfDay(TrackedComponent):
         if name == "latitude":
             return finite(self, name, value, low=-90.0, high=90.0)
         if name == "north":
-            way = vec3(self, name, value)
+            way = vec3(self, name, value, one_number=False)
             flat = glm.vec3(way.x, 0.0, way.z)
             if glm.length(flat) < 1e-6 * max(1.0, glm.length(way)) or not math.isfinite(glm.length(flat)):
                 raise ComponentValueError(f"TimeOfDay.north must point somewhere along the ground (its x or z "

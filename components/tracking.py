@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from numbers import Integral
+from numbers import Integral, Real
 from typing import Any, ClassVar
 
 import numpy as np
@@ -204,9 +204,11 @@ def finite(owner: object, name: str, value: Any, *, low: float | None = None,
 
 
 def vec3(owner: object, name: str, value: Any, *, low: float | None = None, high: float | None = None,
-         why: str = "", nonzero: bool = False) -> glm.vec3:
+         why: str = "", nonzero: bool = False, one_number: bool = True) -> glm.vec3:
     """A glm.vec3 of finite components (each >= low and <= high when given; ``why``: what the
-    bounds are, said after them when one is crossed)."""
+    bounds are, said after them when one is crossed).  Three numbers, or (``one_number``) one
+    number standing for all three (a uniform scale, no gravity); never two or four (glm took
+    four, a glm.vec4 among them, and dropped the last silently)."""
     if type(value) is glm.vec3 and low is None and high is None and not nonzero:
         # The per-frame case (``t.position += step``): a glm vector needs only the finite test.
         x, y, z = value
@@ -215,9 +217,14 @@ def vec3(owner: object, name: str, value: Any, *, low: float | None = None, high
         raise _fail(owner, name, value, "must be finite")
     if _not_a_number(value) or isinstance(value, dict) or any(_not_a_number(c) for c in _items(value)):
         raise _fail(owner, name, value, "must be three numbers")
+    parts = _items(value)
+    if parts and len(parts) != 3:
+        raise _fail(owner, name, value, f"must be three numbers, not {len(parts)}")
+    if not parts and not one_number:
+        one = isinstance(value, (Real, np.number)) or (isinstance(value, np.ndarray) and value.ndim == 0)
+        raise _fail(owner, name, value, "must be three numbers" + (" (a direction, not one number)" if one else ""))
     try:
-        parts = _items(value)
-        if len(parts) == 3:
+        if parts:
             # Through float() first: glm wraps ints >= 2**63 silently ((2**64 + 5, 0, 0) -> 5).
             v = glm.vec3(*(float(c) for c in parts))
         else:
@@ -244,7 +251,7 @@ def direction(owner: object, name: str, value: Any) -> glm.vec3:
     in float32, where a length past about 1.8e19 is infinite (the vector came out zero) and
     one below about 1e-19 loses its digits (it came out longer or shorter than 1): such a
     vector is normalised in double precision instead (any other keeps glm's result, bit for bit)."""
-    v = vec3(owner, name, value)
+    v = vec3(owner, name, value, one_number=False)
     unit = glm.normalize(v)
     if abs(glm.length(unit) - 1.0) <= 1e-5:  # (a NaN fails it too)
         return unit
@@ -308,7 +315,7 @@ def _items(value: Any) -> list[Any]:
 
 def end_image_choice(owner: object, name: str, value: Any) -> bool | str:
     """True, False or "auto" (a surface's ``end_image``)."""
-    if value is True or value is False or value == "auto":
+    if value is True or value is False or (isinstance(value, str) and value == "auto"):  # (an array: no ==)
         return value
     raise _fail(owner, name, value, 'must be True, False or "auto"')
 

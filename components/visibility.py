@@ -61,7 +61,11 @@ def layer_list(owner: object, name: str, value: Any) -> tuple[int, ...]:
     if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
         raise ComponentValueError(f"{what} must be a list of layer numbers in [0, {REFLECTION_LAYERS - 1}] "
                                   f"(e.g. [3]), got {value!r}")
-    layers = list(value)
+    try:
+        layers = list(value)
+    except TypeError:  # (a 0-d numpy array has __iter__ but no items)
+        raise ComponentValueError(f"{what} must be a list of layer numbers in [0, {REFLECTION_LAYERS - 1}] "
+                                  f"(e.g. [3]), got {value!r}") from None
     for layer in layers:
         if isinstance(layer, (bool, np.bool_)) or not isinstance(layer, (int, np.integer)) \
                 or not 0 <= layer < REFLECTION_LAYERS:

@@ -18,11 +18,15 @@ from components import (
     Mirror,
     ParticleEmitter,
     PointLight,
+    Portal,
     Reflective,
     Refractive,
     Skybox,
     Slice,
+    TimeOfDay,
     Transform,
+    Visibility,
+    Water,
 )
 from engine.assets.mesh import box
 from engine.core.world import World
@@ -110,6 +114,32 @@ BAD_CONSTRUCTIONS = [
     (FlyController, {"yaw": NAN}, "yaw"),
     (MeshRef, {"mesh": None}, "mesh"),
     (MeshRef, {"mesh": "box.obj"}, "mesh"),
+    # Three numbers are three: glm.vec3 took four (a glm.vec4 among them) and dropped the last.
+    (Transform, {"position": (1.0, 2.0, 3.0, 4.0)}, "position"),
+    (Transform, {"position": glm.vec4(1.0, 2.0, 3.0, 1.0)}, "position"),
+    (Transform, {"scale": (2.0, 2.0, 2.0, 0.0)}, "scale"),
+    (DirectionalLight, {"direction": (0.0, -1.0, 0.0, 9.0)}, "direction"),
+    (Water, {"absorption": (1.0, 1.0, 1.0, 1.0)}, "absorption"),
+    (Material, {"sheen_color": (1.0, 1.0, 1.0, 1.0)}, "sheen_color"),
+    # One number is no direction (it was read as (n, n, n): a diagonal nobody meant).
+    (DirectionalLight, {"direction": 5.0}, "direction"),
+    (Mirror, {"plane_normal": -1.0}, "plane_normal"),
+    (Skybox, {"sun_direction": 1.0}, "sun_direction"),
+    (ParticleEmitter, {"direction": 1.0}, "direction"),
+    (TimeOfDay, {"north": 1.0}, "north"),
+    # Pitch past straight up or down (the fly system held it to 89 at the first mouse move).
+    (FlyController, {"pitch": 90.5}, "pitch"),
+    (FlyController, {"pitch": -120.0}, "pitch"),
+    # A particle born, or a floor, further out than any Transform may stand.
+    (ParticleEmitter, {"extent": (1e30, 1.0, 1.0)}, "extent"),
+    (ParticleEmitter, {"ground": 3.4e38}, "ground"),
+    (ParticleEmitter, {"ground": -2e9}, "ground"),
+    # numpy values that raised numpy's own TypeError or ValueError (no class, no field named).
+    (Mirror, {"shows_layers": np.array(1)}, "shows_layers"),
+    (Visibility, {"layers": np.array(3)}, "layers"),
+    (Mirror, {"end_image": np.array([1.0, 2.0])}, "end_image"),
+    (Portal, {"partner": np.array([1, 2])}, "partner"),
+    (Material, {"second_uv_maps": np.zeros((1, 3))}, "second_uv_maps"),
 ]
 
 
@@ -181,6 +211,10 @@ BAD_ASSIGNMENTS = [
     (Skybox, "face_size", 1),
     (Skybox, "faces", np.zeros((5, 4, 4, 3), np.float32)),
     (MeshRef, "visible", "no"),
+    (Transform, "position", glm.vec4(1.0, 2.0, 3.0, 1.0)),   # (takes the general path: not a glm.vec3)
+    (DirectionalLight, "direction", 1.0),
+    (FlyController, "pitch", 95.0),
+    (ParticleEmitter, "ground", 1e30),
 ]
 
 
@@ -196,6 +230,18 @@ def test_bad_value_assigned_later_is_rejected_and_old_value_kept(cls, field, val
         assert after is before
     else:
         assert after == before
+
+
+def test_a_view_budgets_min_pixels_past_a_float_is_refused_when_given():
+    """``ViewBudget(min_pixels=10**400)`` was taken and raised an OverflowError from inside the
+    frame's view-tree pass (its coverage test is in floats; found by the budget fuzz, seed 21):
+    refused at once now, naming the field; 2**53 (no view has as many pixels) still taken."""
+    from engine.core.budget import ViewBudget, ViewBudgetError
+
+    for too_many in (10 ** 400, 2 ** 53 + 1):
+        with pytest.raises(ViewBudgetError, match=r"ViewBudget\.min_pixels must be at most 2\*\*53"):
+            ViewBudget(min_pixels=too_many)
+    assert ViewBudget(min_pixels=2 ** 53).min_pixels == 2 ** 53
 
 
 def test_camera_planes_can_move_together_in_a_valid_order():
@@ -236,6 +282,20 @@ def test_good_values_are_converted():
 
     assert Reflective(mix=None).mix is None
     assert Emissive(0).power == 0.0
+
+
+def test_one_number_stands_for_three_except_in_a_direction():
+    """What ``vec3`` still takes: one number for all three where that means something (a
+    uniform scale, no gravity, a cube), a pitch of exactly straight up or down."""
+    assert Transform(scale=2.0).scale == glm.vec3(2.0)
+    assert ParticleEmitter(gravity=0.0).gravity == glm.vec3(0.0)
+    assert Transform(position=glm.dvec3(1.0, 2.0, 3.0)).position == glm.vec3(1.0, 2.0, 3.0)
+    assert Transform(position=np.array([1.0, 2.0, 3.0])).position == glm.vec3(1.0, 2.0, 3.0)
+    assert (FlyController(pitch=-90.0).pitch, FlyController(pitch=90).pitch) == (-90.0, 90.0)
+    with pytest.raises(ComponentValueError, match=r"Transform\.position must be three numbers, not 4"):
+        Transform(position=[0.0, 1.0, 2.0, 3.0])
+    with pytest.raises(ComponentValueError, match=r"Skybox\.sun_direction must be three numbers \(a direction"):
+        Skybox(sun_direction=np.float32(1.0))
 
 
 DIRECTION_FIELDS = [(DirectionalLight, "direction"), (Mirror, "plane_normal"), (ParticleEmitter, "direction"),

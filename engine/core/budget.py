@@ -25,6 +25,9 @@ class ViewBudgetError(SpeculumError, ValueError):
     class itself, a dict) where the world's ``ViewBudget`` resource should be."""
 
 
+MAX_MIN_PIXELS = 2 ** 53  # ViewBudget.min_pixels: counts of pixels exact in a float (no view is near it)
+
+
 @dataclass(frozen=True)
 class ViewBudget:
     """The frame's one view budget (a world resource; none: no limit), shared by every view
@@ -84,6 +87,10 @@ class ViewBudget:
         if self.min_pixels is not None and (not isinstance(self.min_pixels, int) or isinstance(self.min_pixels, bool)
                                             or self.min_pixels < 1):
             raise ViewBudgetError(f"ViewBudget.min_pixels must be None or an int >= 1, got {self.min_pixels!r}")
+        if self.min_pixels is not None and self.min_pixels > MAX_MIN_PIXELS:
+            # (Past a float's range the coverage test, in floats, overflowed frames later.)
+            raise ViewBudgetError(f"ViewBudget.min_pixels must be at most 2**53 (a count of pixels), got "
+                                  f"{self.min_pixels!r}")
         if self.probe_ms is not None and (isinstance(self.probe_ms, bool) or not isinstance(self.probe_ms, (int, float))
                                           or not 0.0 < self.probe_ms < float("inf")):
             raise ViewBudgetError(f"ViewBudget.probe_ms must be None or a finite number > 0, got {self.probe_ms!r}")
