@@ -18,15 +18,17 @@ from components import (
     IrradianceVolume,
     Material,
     MeshRef,
+    Mirror,
     Skybox,
     Transform,
     Visibility,
 )
-from engine.assets.mesh import box, plane
+from engine.assets.mesh import box, plane, quad
+from engine.assets.portals import spawn_portal_pair
 from engine.core.budget import ViewBudget
 from engine.core.cube_faces import face_directions
 from engine.core.errors import VolumeLimitWarning
-from engine.render.irradiance import evaluate_sh, project_faces
+from engine.render.irradiance import evaluate_sh, project_faces, sh_basis
 from systems.irradiance_volume_system import volume_grid
 from tests.support import look_from, pixel_rays, srgb_to_linear
 
@@ -160,12 +162,14 @@ def test_a_point_in_a_solid_box_is_moved_out_through_its_nearest_face():
         assert np.max(np.abs(both - centre)) > 0.5 + 0.04
 
 
-def floor_scene(volume: IrradianceVolume | None, sky=(0.5, 0.5, 0.5), reflection: float = 0.0, roughness=1.0):
+def floor_scene(volume: IrradianceVolume | None, sky=(0.5, 0.5, 0.5), reflection: float = 0.0, roughness=1.0,
+                camera: bool = True):
     """A white floor under a hemisphere sky, a red wall and a blue wall of light standing on
-    it (unlit: their colours are their radiance), seen from above; ``volume`` centred at
-    ``VOLUME_AT``."""
+    it (unlit: their colours are their radiance), seen from above (with ``camera``); ``volume``
+    centred at ``VOLUME_AT``."""
     def build(world):
-        look_from(world, (0.0, 5.0, 2.0), (0.0, 0.0, 0.0), fov=70.0)
+        if camera:
+            look_from(world, (0.0, 5.0, 2.0), (0.0, 0.0, 0.0), fov=70.0)
         world.spawn(HemisphereLight(sky=sky, ground=(0.0, 0.0, 0.0)))
         world.spawn(Transform(), MeshRef(plane(12.0, 12.0)),
                     Material(color=(1.0, 1.0, 1.0, 1.0), roughness=roughness, environment_reflection=reflection))
@@ -197,18 +201,10 @@ def floor_pixels(runner, size) -> tuple[np.ndarray, np.ndarray]:
     return shown[floor], points[floor]
 
 
-def test_the_floor_reads_the_grid_between_its_points(scene):
-    """A white floor's light from all round, through a 4 x 2 x 3 grid with a blend distance:
-    the grid's coefficients as the GPU holds them, at each floor point moved up by the normal
-    bias, blended between the eight points about it (trilinear, in numpy) and weighed against
-    the sky by the distance inside the box's walls, then E(+y) / pi: within 0.02 of each
-    pixel's colour, in 99% of the floor's pixels (the rest on the box's edges and the walls'
-    feet, where a pixel straddles them)."""
-    size = (96, 72)
-    volume = IrradianceVolume(size=(3.0, 2.0, 3.0), points=(4, 2, 3), points_per_frame=24, blend_distance=0.15,
-                              normal_bias=0.3)
-    runner = scene(floor_scene(volume), size)
-    shown, points = floor_pixels(runner, size)
+def grid_at(runner, volume: IrradianceVolume, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The grid's coefficients as the GPU holds them at floor ``points`` moved up by the normal
+    bias, blended between the eight points about each (trilinear, in numpy), (n, 9, 3), and the
+    volume's weight there (the distance inside the box's walls over the blend distance)."""
     grid = volume_grid(volume, glm.vec3(VOLUME_AT))
     coefficients = volume_light(runner, volume, VOLUME_AT)
     low, high = np.array(grid.low), np.array(grid.high)
@@ -223,10 +219,33 @@ def test_the_floor_reads_the_grid_between_its_points(scene):
         i, j, k = (base + np.array(corner)).T
         blended += weight[:, None, None] * coefficients[i, j, k]
     inside = np.min(np.minimum(q - low, high - q), axis=1)
-    w = np.where(inside < 0.0, 0.0, np.minimum(1.0, inside / volume.blend_distance))
+    w = np.where(inside < 0.0, 0.0, np.minimum(1.0, inside / volume.blend_distance)) if volume.blend_distance > 0 \
+        else (inside >= 0.0).astype(float)
+    return blended, w
+
+
+def floor_from_grid(runner, volume: IrradianceVolume, points: np.ndarray, sky: float = 0.5):
+    """What a white floor at ``points`` shows: the grid's E(+y) / pi by the volume's weight,
+    the hemisphere sky's ``sky`` (its E(+y) / pi) by the rest; and the weights."""
+    blended, w = grid_at(runner, volume, points)
     up = np.array([0.0, 1.0, 0.0])
     grid_e = np.stack([evaluate_sh(c, up) for c in blended])
-    expected = w[:, None] * grid_e / np.pi + (1.0 - w[:, None]) * 0.5  # a white floor under the sky shows it
+    return w[:, None] * grid_e / np.pi + (1.0 - w[:, None]) * sky, w  # a white floor under the sky shows it
+
+
+def test_the_floor_reads_the_grid_between_its_points(scene):
+    """A white floor's light from all round, through a 4 x 2 x 3 grid with a blend distance:
+    the grid's coefficients as the GPU holds them, at each floor point moved up by the normal
+    bias, blended between the eight points about it (trilinear, in numpy) and weighed against
+    the sky by the distance inside the box's walls, then E(+y) / pi: within 0.02 of each
+    pixel's colour, in 99% of the floor's pixels (the rest on the box's edges and the walls'
+    feet, where a pixel straddles them)."""
+    size = (96, 72)
+    volume = IrradianceVolume(size=(3.0, 2.0, 3.0), points=(4, 2, 3), points_per_frame=24, blend_distance=0.15,
+                              normal_bias=0.3)
+    runner = scene(floor_scene(volume), size)
+    shown, points = floor_pixels(runner, size)
+    expected, w = floor_from_grid(runner, volume, points)
     error = np.abs(shown - expected).max(axis=1)
     assert np.mean(error < 0.02) > 0.99, (np.mean(error < 0.02), np.percentile(error, 99))
     # The grid's light is not one colour: the floor by the red wall (x = -1.5) is redder than
@@ -236,6 +255,89 @@ def test_the_floor_reads_the_grid_between_its_points(scene):
     redness = shown[:, 0] - shown[:, 2]
     assert near_red.sum() > 10 and near_blue.sum() > 10
     assert redness[near_red].mean() > redness[near_blue].mean() + 0.1
+
+
+# A mirror or portal B standing on the floor at z = 1.6 (out of the volume's box), facing the
+# room (-z); the eye whose view B shows: the camera's image in the mirror, or the camera
+# carried through the pair (portal A far off along +x, facing +x).
+SURFACE_AT, SURFACE_SIZE = glm.vec3(0.0, 0.75, 1.6), (3.2, 1.3)
+FACING_ROOM = glm.angleAxis(glm.pi(), glm.vec3(0.0, 1.0, 0.0))
+SEEN_FROM, SEEN_AT = glm.vec3(0.0, 3.2, 4.2), glm.vec3(0.0, 0.3, 0.6)
+PORTAL_A, PORTAL_A_TURN = glm.vec3(12.0, 0.75, 0.0), glm.angleAxis(glm.pi() / 2, glm.vec3(0.0, 1.0, 0.0))
+
+
+def _carried_to_b(point) -> glm.vec3:
+    """The point before portal A that the pair carries to ``point`` (B's local (x, y, z) is A's
+    (-x, y, -z): spawn_portal_pair)."""
+    half_turn = glm.angleAxis(glm.pi(), glm.vec3(0.0, 1.0, 0.0))
+    at_a = glm.translate(PORTAL_A) * glm.mat4_cast(PORTAL_A_TURN) * glm.mat4_cast(half_turn)
+    at_b = glm.translate(SURFACE_AT) * glm.mat4_cast(FACING_ROOM)
+    return glm.vec3(at_a * glm.inverse(at_b) * glm.vec4(glm.vec3(point), 1.0))
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_the_floor_in_a_mirror_or_through_a_portal_reads_the_grid_as_seen_directly(scene, way):
+    """The floor of ``test_the_floor_reads_the_grid_between_its_points`` seen in a mirror, or
+    through a portal pair, whose surface stands outside the volume: each of the surface's floor
+    pixels is the floor point its ray meets after the surface (the eye's image in the mirror's
+    plane, or carried through the pair, cast in numpy to y = 0), lit as a floor seen directly:
+    the grid's read-back coefficients blended there in numpy, E(+y) / pi, weighed against the
+    sky.  The grid's light is there: the floor near the red wall (x < -0.8) is redder than far
+    from it (x > 0.8).  (The surfaces are left out of the captures.)"""
+    size = (80, 60)
+    volume = IrradianceVolume(size=(3.0, 2.0, 3.0), points=(4, 2, 3), points_per_frame=24, blend_distance=0.15,
+                              normal_bias=0.3)
+    floor_build = floor_scene(volume, camera=False)
+    names = {}
+
+    def build(world):
+        floor_build(world)
+        hidden = Visibility(in_probes=False)
+        if way == "mirror":
+            look_from(world, tuple(SEEN_FROM * glm.vec3(1.0, 1.0, -1.0) + glm.vec3(0.0, 0.0, 2.0 * SURFACE_AT.z)),
+                      tuple(SEEN_AT * glm.vec3(1.0, 1.0, -1.0) + glm.vec3(0.0, 0.0, 2.0 * SURFACE_AT.z)), fov=60.0)
+            names["surface"] = world.spawn(Transform(position=SURFACE_AT, rotation=FACING_ROOM),
+                                           MeshRef(quad(*SURFACE_SIZE)), Material(), Mirror(), hidden)
+        else:
+            look_from(world, tuple(_carried_to_b(SEEN_FROM)), tuple(_carried_to_b(SEEN_AT)), fov=60.0)
+            a, b = spawn_portal_pair(world, PORTAL_A, PORTAL_A_TURN, SURFACE_AT, FACING_ROOM, size=SURFACE_SIZE)
+            world.add_component(a, hidden)
+            world.add_component(b, Visibility(in_probes=False))
+            names["surface"] = a
+
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame()).reshape(-1, 3)
+    assert runner.stats.reflection_views >= 1
+    inside = runner.engine.renderer.targets.read_surface_ids() == names["surface"]
+    shrunk = inside.copy()  # a pixel in from the outline
+    shrunk[1:, :] &= inside[:-1, :]
+    shrunk[:-1, :] &= inside[1:, :]
+    shrunk[:, 1:] &= inside[:, :-1]
+    shrunk[:, :-1] &= inside[:, 1:]
+    # Each pixel's ray from the eye B's view is seen from (the camera's ray carried past B).
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    rays = rays.reshape(-1, 3)
+    if way == "mirror":
+        flip = np.array([1.0, 1.0, -1.0])
+        eye, rays = eye * flip + np.array([0.0, 0.0, 2.0 * SURFACE_AT.z]), rays * flip
+    else:
+        eye = np.array(SEEN_FROM)
+        carry = np.array(glm.inverse(glm.mat3(glm.mat4_cast(PORTAL_A_TURN) * glm.mat4_cast(FACING_ROOM))).to_list()).T
+        rays = rays @ (carry @ np.diag([-1.0, 1.0, -1.0])).T
+    points = eye + rays * (-eye[1] / rays[:, 1])[:, None]
+    # The floor's pixels: in from the surface's outline, clear of the walls and their feet.
+    floor = shrunk.reshape(-1) & (points[:, 0] > -1.3) & (points[:, 2] > -1.3) & (rays[:, 1] < 0.0)
+    assert floor.sum() > 400, floor.sum()
+    expected, w = floor_from_grid(runner, volume, points[floor])
+    error = np.abs(shown[floor] - expected).max(axis=1)
+    assert np.mean(error < 0.02) > 0.98, (np.mean(error < 0.02), np.percentile(error, 99))
+    redness = shown[floor][:, 0] - shown[floor][:, 2]
+    near_red = (w > 0.99) & (points[floor][:, 0] < -0.8)
+    far_from_it = (w > 0.99) & (points[floor][:, 0] > 0.8)
+    assert near_red.sum() > 10 and far_from_it.sum() > 10, (near_red.sum(), far_from_it.sum())
+    assert redness[near_red].mean() > redness[far_from_it].mean() + 0.1
 
 
 def test_a_dark_room_dims_the_skys_reflection(scene):
@@ -264,6 +366,52 @@ def test_a_dark_room_dims_the_skys_reflection(scene):
     dimmed = srgb_to_linear(dark.frame()).mean()
     assert plain > 0.3
     assert dimmed < 0.03 * plain, (dimmed, plain)
+
+
+def test_the_skys_reflection_is_scaled_by_the_grids_light_over_the_skys_along_the_reflected_ray(scene):
+    """A smooth white metal floor (no diffuse light: its reflection alone) under a uniform sky of
+    radiance S, the red and blue walls of light standing on it, seen low so the reflected rays
+    lean towards the walls: without a volume each pixel shows the sky's reflection; with one, that
+    times (1 - w) + w E(r) / (pi S), E the grid's read-back coefficients blended at the pixel's
+    floor point (moved up by the normal bias) and evaluated along the reflected ray r (in numpy),
+    pi S the sky's irradiance, w the volume's weight.  Along the normal instead of r the answer
+    differs by more than the tolerance at most pixels (the test tells them apart)."""
+    size = (80, 60)
+    sky = 0.8
+    eye = np.array([0.0, 2.2, 3.2])
+
+    def build(volume):
+        def make(world):
+            look_from(world, tuple(eye), (0.0, 0.0, -0.6), fov=60.0)
+            floor_scene(volume, camera=False)(world)
+            world.spawn(Skybox(faces=np.full((6, 4, 4, 3), sky, np.float32)))
+            floor = world.query_one(MeshRef)  # (the floor is the first mesh floor_scene spawns)
+            world.get(floor[0][0], Material).metallic = 1.0
+            world.get(floor[0][0], Material).roughness = 0.1
+            world.get(floor[0][0], Material).environment_reflection = 1.0
+        return make
+
+    plain_shown, points = floor_pixels(scene(build(None), size), size)
+    volume = IrradianceVolume(size=(3.0, 2.0, 3.0), points=(4, 2, 3), points_per_frame=24, blend_distance=0.15,
+                              normal_bias=0.3)
+    runner = scene(build(volume), size)
+    shown, same_points = floor_pixels(runner, size)
+    np.testing.assert_allclose(same_points, points)
+    assert np.median(plain_shown) > 0.5 * sky  # the sky's reflection, bright
+    view = points - eye
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    reflected = view * np.array([1.0, -1.0, 1.0])
+    blended, w = grid_at(runner, volume, points)
+    along_r = np.einsum("nk,nkc->nc", sh_basis(reflected), blended)
+    along_n = np.einsum("k,nkc->nc", sh_basis(np.array([0.0, 1.0, 0.0])), blended)
+    expected = plain_shown * ((1.0 - w)[:, None] + w[:, None] * along_r / (np.pi * sky))
+    error = np.abs(shown - expected).max(axis=1)
+    assert np.mean(error < 0.02) > 0.98, (np.mean(error < 0.02), np.percentile(error, 99))
+    # The grid is darker than the sky here, and not the same along the normal.
+    inside = w > 0.99
+    assert inside.sum() > 300 and np.median(shown[inside] / plain_shown[inside], axis=0)[1] < 0.8
+    wrong = plain_shown * ((1.0 - w)[:, None] + w[:, None] * along_n / (np.pi * sky))
+    assert np.mean(np.abs(wrong - expected).max(axis=1)[inside] > 0.05) > 0.5
 
 
 def test_the_bake_takes_points_per_frame_under_the_view_budget_and_lights_once_whole(scene):

@@ -17,7 +17,7 @@ from engine.assets.mesh import quad
 from engine.core.world import World
 from engine.rules.probe_rules import MAX_BLENDED_PROBES, probe_blend
 from systems.transform_system import TransformSystem
-from tests.support import look_from, srgb_to_linear
+from tests.support import look_from, pixel_rays, srgb_to_linear
 
 CENTRES = {"a": 0.0, "b": 2.5, "c": 3.5}
 COLOURS = {"a": (0.6, 0.05, 0.05), "b": (0.05, 0.6, 0.05), "c": (0.05, 0.05, 0.6)}
@@ -124,3 +124,98 @@ def test_an_object_in_three_boxes_shows_the_two_strongest_probes_mixed_by_their_
         # The mix with the third probe in the second's place is far from what is seen.
         wrong = sum(weight * pure[name] for name, weight in expected_blend(x, picks=(0, 2)).items())
         assert np.abs(seen - wrong).max() > 0.2 * spread, (x, seen, wrong)
+
+
+# Two box-projected probes whose boxes share their +X wall (x = 4), their y and z walls, and hold
+# a plain smooth metal tile (no Reflective) at full weight each: A about (0, 1, 0), 8 m wide,
+# B about (1, 1, 0), 6 m wide.  A red panel of light on the shared wall.
+PROJECTED = {"a": ((0.0, 1.0, 0.0), (8.0, 4.0, 8.0)), "b": ((1.0, 1.0, 0.0), (6.0, 4.0, 8.0))}
+TILE_AT = np.array([2.0, 0.0, 0.0])
+
+
+def _on_panel(points: np.ndarray) -> np.ndarray:
+    """Whether points on the plane x = 4 lie on the panel (2 x 2.4 about (4, 1.2, 0))."""
+    return (np.abs(points[:, 1] - 1.2) < 1.2) & (np.abs(points[:, 2]) < 1.0)
+
+
+def _seen_from(centre: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """Whether a lookup of ``rays`` (rows, unprojected) from ``centre`` shows the panel."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (4.0 - centre[0]) / rays[:, 0]
+        hit = centre + rays * t[:, None]
+    return (rays[:, 0] > 1e-6) & _on_panel(hit)
+
+
+def test_a_plain_metal_in_two_box_projected_boxes_shows_each_probe_projected_by_its_own_box(scene):
+    """A smooth white metal tile with no Reflective (it samples the probes whose boxes hold it:
+    a blend of A and B, half each) on the floor.  Each pixel's reflected ray, followed in numpy
+    from the tile to the boxes' shared wall (ray-box intersection), meets the red panel or not;
+    both probes, each box-projected by its own box, then say the same.  Where a lookup without
+    the correction, from A's centre or from B's, would say otherwise, the pixel is red as a
+    pixel all lookups agree is red (both probes show the panel) or not red at all: a probe looked
+    up along the bare ray would leave half the red, or half of it where none belongs."""
+    ents = {}
+    size = (128, 96)
+
+    def build(world):
+        world.spawn(Skybox())
+        look_from(world, (0.5, 0.4, 1.0), target=(4.0, 0.3, -0.3), fov=50.0)
+        for name, (centre, box_size) in PROJECTED.items():
+            ents[name] = world.spawn(Transform(position=centre), ReflectionProbe(
+                resolution=128, refresh="once", influence=box_size, box_projection=True))
+        ents["tile"] = world.spawn(Transform(position=tuple(TILE_AT),
+                                             rotation=glm.angleAxis(-glm.pi() / 2, glm.vec3(1, 0, 0))),
+                                   MeshRef(quad(3, 3)), Material(color=(1, 1, 1), metallic=1.0, roughness=0.0),
+                                   Visibility(in_probes=False))
+        world.spawn(Transform(position=(4.0, 1.2, 0.0), rotation=glm.angleAxis(-glm.pi() / 2, glm.vec3(0, 1, 0))),
+                    MeshRef(quad(2.0, 2.4)), Material(color=(0.9, 0.05, 0.05)), Emissive(1.5))
+
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    shown = srgb_to_linear(runner.frame()).reshape(-1, 3)
+    blend = probe_blend(runner.world, ents["tile"])
+    assert set(blend.probes) == {ents["a"], ents["b"]} and blend.weights == pytest.approx((0.5, 0.5))
+    eye, rays = pixel_rays(runner.engine.main_view, size)
+    rays = rays.reshape(-1, 3)
+    on_tile = runner.ids().reshape(-1) == ents["tile"]
+    points = eye + rays * (-eye[1] / rays[:, 1])[:, None]
+    reflected = rays * np.array([1.0, -1.0, 1.0])
+
+    def corrected(r: np.ndarray) -> np.ndarray:
+        """The panel along ``r`` from the tile's points: each ray to the first wall of the box
+        (y in [-1, 3], z in [-4, 4], x = 4: both boxes' walls for a ray going +x)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.minimum((np.where(r[:, 1] > 0, 3.0, -1.0) - points[:, 1]) / r[:, 1],
+                           (np.where(r[:, 2] > 0, 4.0, -4.0) - points[:, 2]) / r[:, 2])
+            tx = (4.0 - points[:, 0]) / r[:, 0]
+        hit = points + r * tx[:, None]
+        return (r[:, 0] > 1e-6) & (tx <= t) & _on_panel(hit)
+
+    truth = corrected(reflected)
+    plain = [_seen_from(np.array(centre), reflected) for centre, _ in PROJECTED.values()]
+    # Clear of the panel's edges, where a texel's blur decides: the answers the same for rays
+    # turned a little each way.
+    steady = on_tile.copy()
+    for turn in ((0, 0.06, 0), (0, -0.06, 0), (0, 0, 0.06), (0, 0, -0.06)):
+        steady &= corrected(reflected + np.array(turn)) == truth
+        for centre, _ in PROJECTED.values():
+            steady &= _seen_from(np.array(centre), reflected + np.array(turn)) == _seen_from(np.array(centre),
+                                                                                             reflected)
+    differ = steady & ((truth != plain[0]) | (truth != plain[1]))
+    assert (differ & truth).sum() > 20 and (differ & ~truth).sum() > 20, ((differ & truth).sum(),
+                                                                           (differ & ~truth).sum())
+
+    def redness(linear: np.ndarray) -> np.ndarray:
+        return linear[:, 0] - np.maximum(linear[:, 1], linear[:, 2])
+
+    # The panel's red at full weight: A's box alone holding the tile (B's taken away).
+    runner.world.get(ents["b"], ReflectionProbe).influence = None
+    runner.frame()
+    alone = redness(srgb_to_linear(runner.frame()).reshape(-1, 3))
+    assert probe_blend(runner.world, ents["tile"]).probes == (ents["a"],)
+    full = np.median(alone[differ & truth])
+    assert full > 0.3, full
+    for red in (alone, redness(shown)):
+        assert np.mean(np.abs(red[differ & truth] - full) < 0.15 * full) > 0.95, np.percentile(red[differ & truth], 5)
+        assert np.mean(red[differ & ~truth] < 0.1 * full) > 0.95, np.percentile(red[differ & ~truth], 95)
