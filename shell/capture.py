@@ -78,7 +78,7 @@ def export_scene(world: World, path: str | Path, camera_entity: int, size: tuple
     pictures = pictures or {}
     write_gltf(path, [_export_part(world, entity, mesh_ref, transform, pictures.get(entity))
                       for entity, (mesh_ref, transform) in sorted(world.query(MeshRef, Transform))],
-               _export_lights(world), _export_cameras(world))
+               _export_lights(world), _export_cameras(world, size[0] / size[1]))
 
     camera = world.get(camera_entity, Camera)
     cam_world = world.get(camera_entity, Transform).world
@@ -200,9 +200,10 @@ def _light_fields(light: object, names: dict[str, str]) -> dict[str, object]:
     return fields
 
 
-def _export_cameras(world: World) -> list[ExportCamera]:
+def _export_cameras(world: World, aspect: float) -> list[ExportCamera]:
+    """The cameras as glTF's, each drawing a picture of ``aspect`` (width / height: the export's)."""
     return [ExportCamera(str(entity), camera.fov_y, camera.near, camera.far, _placement(transform.world),
-                         camera.ortho_height if camera.projection == "orthographic" else None)
+                         camera.ortho_height if camera.projection == "orthographic" else None, aspect)
             for entity, (camera, transform) in sorted(world.query(Camera, Transform))]
 
 

@@ -160,3 +160,60 @@ def test_a_scene_rebuilt_from_scene_json_renders_the_same_frame(scene, tmp_path)
     np.testing.assert_array_equal(ids[same], expected_ids[same])
     difference = np.abs(frame.astype(int) - expected.astype(int))
     assert (difference > 2).mean() < 0.002, ((difference > 2).mean(), difference.max())
+
+
+def test_an_export_path_that_cannot_be_written_is_one_clear_error_naming_it(scene, tmp_path):
+    """``write_scene`` (``--export-scene``): a path under a file, a path that is a folder and an
+    extension that is not glTF's are each one error naming the path and why (OutputPathError,
+    a SpeculumError the runner prints as one line; ValueError for the extension), nothing
+    half-written beside them; a good path writes both files."""
+    import pytest
+
+    from components import Material, MeshRef
+    from engine.assets.mesh import box
+    from engine.core.errors import SpeculumError
+    from shell.capture import OutputPathError, write_scene
+    from tests.support import look_from
+
+    def stage(world):
+        look_from(world, (0.0, 1.0, 4.0), (0.0, 0.0, 0.0))
+        world.spawn(Transform(), MeshRef(box((1.0, 1.0, 1.0))), Material())
+
+    runner = scene(stage, (32, 32))
+    runner.frame()
+    a_file = tmp_path / "taken"
+    a_file.write_text("not a folder")
+    a_folder = tmp_path / "folder.glb"
+    a_folder.mkdir()
+    for path, why in ((a_file / "scene.glb", "cannot be written"), (a_folder, "cannot be written")):
+        with pytest.raises(OutputPathError) as error:
+            write_scene(runner.engine, path, (32, 32))
+        assert isinstance(error.value, SpeculumError) and "\n" not in str(error.value)
+        assert repr(str(path)) in str(error.value) and why in str(error.value), str(error.value)
+    with pytest.raises(ValueError, match=r"'.*scene\.obj' must end in \.glb or \.gltf"):
+        write_scene(runner.engine, tmp_path / "scene.obj", (32, 32))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.glb", "taken"]
+    assert a_file.read_text() == "not a folder" and not list(a_folder.iterdir())
+    written = write_scene(runner.engine, tmp_path / "good" / "scene.gltf", (32, 32))
+    assert [p.name for p in written] == ["scene.gltf", "scene.json"] and all(p.stat().st_size for p in written)
+
+
+def test_an_export_scene_folder_that_is_a_file_stops_the_runner_before_it_draws_with_one_line(tmp_path):
+    """``--export-scene taken/scene.glb`` where ``taken`` is a file: the runner checks the folder
+    up front (``prepare_out``) and stops with exit 2 and one ``speculum: error:`` line naming
+    it, no traceback, no frame drawn."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    a_file = tmp_path / "taken"
+    a_file.write_text("not a folder")
+    root = Path(__file__).resolve().parent.parent
+    result = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "1", "--size",
+                             "32x32", "--out", str(tmp_path / "frames"), "--export-scene", str(a_file / "scene.glb")],
+                            cwd=root, env={**os.environ}, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2, result.stderr
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith("speculum: error: --export-scene folder") and repr(str(a_file)) in line, line
+    assert "existing file" in line and not list((tmp_path / "frames").glob("frame_*"))

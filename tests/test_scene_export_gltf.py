@@ -457,3 +457,274 @@ def test_a_lights_engine_fields_are_read_back_from_its_extras_and_light_as_they_
     assert_drawn_as_before(after, before)
     plain = drawn_without_extras(scene, doc, tmp_path)
     assert ((plain - before).max(axis=-1) > 0.05).mean() > 0.05   # (the box's shadow gone)
+
+
+# --- a second reader: the GLB's own bytes, parsed here by hand ---------------------------------
+
+def read_glb(path) -> tuple[dict, bytes]:
+    """A binary glTF's JSON and its BIN chunk, by the container's layout (glTF 2.0, 4.4)."""
+    import json
+    import struct
+
+    data = path.read_bytes()
+    magic, version, length = struct.unpack_from("<4sII", data, 0)
+    assert (magic, version, length) == (b"glTF", 2, len(data))
+    json_length, kind = struct.unpack_from("<I4s", data, 12)
+    assert kind == b"JSON"
+    doc = json.loads(data[20:20 + json_length])
+    bin_length, kind = struct.unpack_from("<I4s", data, 20 + json_length)
+    assert kind == b"BIN\0"
+    return doc, data[28 + json_length:28 + json_length + bin_length]
+
+
+def accessor_array(doc: dict, data: bytes, index: int) -> np.ndarray:
+    """An accessor's values as numpy reads its buffer view (floats or uint32 indices only)."""
+    accessor = doc["accessors"][index]
+    view = doc["bufferViews"][accessor["bufferView"]]
+    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[accessor["type"]]
+    dtype = {5126: np.float32, 5125: np.uint32}[accessor["componentType"]]
+    start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
+    return np.frombuffer(data, dtype, accessor["count"] * width, start).reshape(accessor["count"], width)
+
+
+def trs_matrix(position, rotation, scale) -> np.ndarray:
+    """A local matrix T R S in numpy, its rotation from the quaternion's formula (not glm)."""
+    w, x, y, z = rotation.w, rotation.x, rotation.y, rotation.z
+    turn = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    matrix = np.eye(4)
+    matrix[:3, :3] = turn * np.asarray(scale, np.float64)[None, :]
+    matrix[:3, 3] = position
+    return matrix
+
+
+def test_a_child_under_a_turned_stretched_mirroring_parent_is_written_where_the_world_draws_it(scene, tmp_path):
+    """A box, a spot and a second camera parented to an entity turned, stretched and mirrored
+    (scale (-1.5, 0.8, 1.2)), each with its own turn and scale: the GLB read byte by byte
+    here gives each box vertex at parent T R S x child T R S (composed in numpy from the
+    components' fields, not the engine's world matrix), its normals by that matrix's inverse
+    transpose and its triangles wound towards them; the spot's and the camera's nodes at the
+    composed place, aimed along its -Z; and the engine's loader reads the same mesh back."""
+    ids: dict = {}
+    parent_pose = ((0.4, 0.3, -0.6), glm.angleAxis(0.6, glm.normalize(glm.vec3(0.3, 1.0, 0.2))), (-1.5, 0.8, 1.2))
+    child_pose = ((0.5, 0.2, 0.1), glm.angleAxis(-0.5, glm.normalize(glm.vec3(1.0, 0.2, 0.4))), (1.0, 0.7, 1.3))
+
+    def parented(world):
+        build(world, ids)
+        ids["parent"] = world.spawn(Transform(position=parent_pose[0], rotation=parent_pose[1], scale=parent_pose[2]))
+        ids["child"] = world.spawn(Transform(position=child_pose[0], rotation=child_pose[1], scale=child_pose[2],
+                                             parent=ids["parent"]), MeshRef(box((0.8, 0.6, 0.5))),
+                                   Material(color=(0.7, 0.2, 0.2, 1.0)))
+        ids["camera"] = next(entity for entity, _ in world.query_one(Camera))
+        ids["second_camera"] = world.spawn(Transform(position=(0.2, 0.5, 1.0), rotation=glm.angleAxis(
+            0.3, glm.vec3(0, 1, 0)), scale=(2.0, 1.0, 1.0), parent=ids["parent"]), Camera(active=False))
+        world.get(ids["spot"], Transform).parent = ids["parent"]
+
+    runner = scene(parented, (64, 48))
+    runner.frame()
+    world = runner.world
+    assert runner.ids()[runner.ids() == ids["child"]].size > 20   # the child is drawn where it is
+    path = export_scene(world, tmp_path / "scene.glb", ids["camera"], (64, 48))
+    doc, data = read_glb(path)
+    nodes = {node["name"]: node for node in doc["nodes"]}
+    parent = trs_matrix(*parent_pose)
+
+    def composed(entity) -> np.ndarray:
+        own = world.get(entity, Transform)
+        return parent @ trs_matrix(own.position, own.rotation, own.scale)
+
+    matrix = composed(ids["child"])
+    assert np.linalg.det(matrix[:3, :3]) < 0.0
+    mesh = world.get(ids["child"], MeshRef).mesh
+    expected_points = mesh.positions @ matrix[:3, :3].T + matrix[:3, 3]
+    expected_normals = mesh.normals @ np.linalg.inv(matrix[:3, :3])
+    expected_normals /= np.linalg.norm(expected_normals, axis=1, keepdims=True)
+    node = nodes[str(ids["child"])]
+    assert "matrix" not in node and "translation" not in node   # its place is in its vertices
+    (primitive,) = doc["meshes"][node["mesh"]]["primitives"]
+    points = accessor_array(doc, data, primitive["attributes"]["POSITION"])
+    normals = accessor_array(doc, data, primitive["attributes"]["NORMAL"])
+    np.testing.assert_allclose(points, expected_points, atol=1e-5)
+    np.testing.assert_allclose(normals, expected_normals, atol=1e-5)
+    triangles = accessor_array(doc, data, primitive["indices"]).reshape(-1, 3)
+    corners = points[triangles]
+    facing = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    assert ((facing * normals[triangles].sum(axis=1)).sum(axis=1) > 1e-6).all()   # counter-clockwise, seen from out
+    (part,) = [part for part in load_model_file(path).parts if part.mesh.name.endswith(f":{ids['child']}")]
+    np.testing.assert_allclose(part.mesh.positions, expected_points, atol=1e-5)
+
+    for name in ("spot", "second_camera"):
+        placed = np.array(nodes[str(ids[name])]["matrix"], np.float64).reshape(4, 4).T   # column-major
+        expected = composed(ids[name])
+        np.testing.assert_allclose(placed[:3, 3], expected[:3, 3], atol=1e-5, err_msg=name)
+        aim = expected[:3, :3] @ (0.0, 0.0, -1.0)
+        np.testing.assert_allclose(placed[:3, :3] @ (0.0, 0.0, -1.0), aim / np.linalg.norm(aim), atol=1e-5,
+                                   err_msg=name)
+
+
+def small_stage(world) -> None:
+    """A camera over a grey floor under a dim sky."""
+    look_from(world, (0.0, 2.0, 4.0), (0.0, 0.3, 0.0))
+    world.spawn(Skybox(faces=[np.full((4, 4, 3), 0.02, np.float32) for _ in range(6)]))
+    world.spawn(Transform(rotation=look_rotation((0, -1, 0), (0, 0, -1))), MeshRef(quad(8.0, 8.0)),
+                Material(color=(0.5, 0.5, 0.5, 1.0), roughness=0.9))
+
+
+def exported_glb(runner, tmp_path) -> tuple[object, dict, bytes]:
+    """The runner's world after a frame exported as GLB: its path, JSON and BIN chunk."""
+    runner.frame()
+    camera = next(entity for entity, _ in runner.world.query_one(Camera))
+    path = export_scene(runner.world, tmp_path / "scene.glb", camera, runner.size)
+    return (path, *read_glb(path))
+
+
+def test_a_light_coloured_past_white_is_written_white_at_most_its_intensity_taking_the_rest(scene, tmp_path):
+    """A lamp of colour (2, 1, 0.5) at 3 cd and a sun of (0.5, 3, 1) at 0.4 lux: KHR_lights_punctual's
+    colour is within [0, 1], so the file holds (1, 0.5, 0.25) at 6 cd and (1/6, 1, 1/3) at
+    1.2 lux, the same colour x intensity (what lights a surface), and the loader reads those back."""
+    def lit(world):
+        small_stage(world)
+        world.spawn(Transform(position=(0.0, 1.0, 0.0)), PointLight(color=(2.0, 1.0, 0.5, 1.0), intensity=3.0,
+                                                                     range=5.0))
+        world.spawn(DirectionalLight(direction=(0.2, -1.0, -0.3), color=(0.5, 3.0, 1.0, 1.0), intensity=0.4))
+
+    path, doc, _ = exported_glb(scene(lit, (32, 32)), tmp_path)
+    written = {light["type"]: light for light in doc["extensions"]["KHR_lights_punctual"]["lights"]}
+    expected = {"point": ((1.0, 0.5, 0.25), 6.0), "directional": ((1 / 6, 1.0, 1 / 3), 1.2)}
+    for kind, (color, intensity) in expected.items():
+        np.testing.assert_allclose(written[kind]["color"], color, atol=1e-6, err_msg=kind)
+        assert written[kind]["intensity"] == pytest.approx(intensity), kind
+    read = {light.kind: light for light in load_model_file(path).lights}
+    for kind, (color, intensity) in expected.items():
+        np.testing.assert_allclose(np.asarray(read[kind].color) * read[kind].intensity,
+                                   np.asarray(color) * intensity, rtol=1e-5, err_msg=kind)
+
+
+def test_a_16_bit_map_is_written_rounded_to_8_bits(scene, tmp_path):
+    """A 16-bit colour map (uint16 texels) goes into the file as an 8-bit PNG, each channel
+    round(v x 255 / 65535), computed here from the texels; the loader reads those bytes back."""
+    texels = np.random.default_rng(7).integers(0, 65536, (8, 8, 4), dtype=np.uint16)
+    texels[..., 3] = 65535
+    texels[0, 0, :3] = (128, 129, 65406)   # either side of a half step: 0.498 -> 0, 0.502 -> 1, 254.498 -> 254
+    deep = TextureData(texels, name="deep")
+
+    def stage(world):
+        small_stage(world)
+        world.spawn(Transform(position=(0.0, 0.5, 0.0)), MeshRef(box((0.8, 0.8, 0.8))),
+                    Material(color=(1.0, 1.0, 1.0, 1.0), texture=deep))
+
+    path, doc, data = exported_glb(scene(stage, (32, 32)), tmp_path)
+    from PIL import Image
+
+    (image,) = doc["images"]
+    view = doc["bufferViews"][image["bufferView"]]
+    png = Image.open(__import__("io").BytesIO(data[view["byteOffset"]:view["byteOffset"] + view["byteLength"]]))
+    expected = np.floor(texels.astype(np.float64) * 255.0 / 65535.0 + 0.5).astype(np.uint8)
+    assert png.mode == "RGBA"
+    np.testing.assert_array_equal(np.asarray(png), expected)
+    assert tuple(np.asarray(png)[0, 0, :3]) == (0, 1, 254)
+    (part,) = [part for part in load_model_file(path).parts if part.texture is not None]
+    np.testing.assert_array_equal(part.texture.as_8_bits(), expected)
+
+
+def test_a_lightmap_and_a_cookie_are_left_out_and_the_rest_of_their_owners_written(scene, tmp_path):
+    """glTF has no slot for a lightmap or a lamp's cookie: a material with a lightmap (on its
+    second UV set) and a spot with a cookie export without them (no image but the colour
+    map's, no map on the second UV set), the material's colour map, the spot's cone and its
+    other fields are written as without them."""
+    from engine.assets.mesh import box as make_box
+
+    baked = _texture(11, "baked lightmap")
+    slide = _texture(12, "slide")
+
+    def stage(world):
+        small_stage(world)
+        shape = make_box((0.8, 0.8, 0.8))
+        mesh = Mesh(shape.positions, shape.normals, shape.uvs, shape.indices, name="baked box",
+                    second_uvs=shape.uvs.copy())
+        world.spawn(Transform(position=(0.0, 0.5, 0.0)), MeshRef(mesh),
+                    Material(color=(0.8, 0.8, 0.8, 1.0), texture=CHECKER, lightmap=baked,
+                             second_uv_maps=("lightmap",)))
+        world.spawn(Transform(position=(0.0, 2.0, 0.5), rotation=look_rotation((0.0, -1.0, -0.2))),
+                    PointLight(intensity=4.0, range=6.0, spot_angle=40.0, spot_blend=0.2, cookie=slide,
+                               shadows=True))
+
+    path, doc, _ = exported_glb(scene(stage, (32, 32)), tmp_path)
+    assert [image["name"] for image in doc["images"]] == ["checker"]
+    (light,) = doc["extensions"]["KHR_lights_punctual"]["lights"]
+    assert light["type"] == "spot" and light["extras"] == {"speculum": {"shadows": True}}
+    assert light["spot"]["outerConeAngle"] == pytest.approx(np.radians(40.0))
+    (part,) = [part for part in load_model_file(path).parts if part.texture is not None]
+    assert part.second_uv_maps == ()
+    np.testing.assert_array_equal(part.texture.pixels, CHECKER.pixels)
+
+
+@pytest.mark.parametrize("posed_by", ["skin", "morph"])
+def test_a_skinned_or_morphed_mesh_is_written_at_rest(scene, tmp_path, posed_by):
+    """The file is a still scene: a quad bent 1.5 up by its Skin's one joint (or by a Morph's
+    target) is drawn there (its pixels in the id image above where the rest pose would be),
+    and the file holds its rest positions in world space (the mesh's own vertices through
+    its transform, computed here), with neither joints nor targets."""
+    from components import Morph, Skin
+
+    lift = np.array([0.0, 1.5, 0.0])
+
+    def stage(world):
+        small_stage(world)
+        flat = quad(1.0, 1.0)
+        count = len(flat.positions)
+        if posed_by == "skin":
+            joint = np.eye(4)[None].copy()
+            joint[0, :3, 3] = lift
+            mesh = Mesh(flat.positions, flat.normals, flat.uvs, flat.indices, name="bent",
+                        joints=np.zeros((count, 1), np.uint16), weights=np.ones((count, 1), np.float32))
+            pose = Skin(joint)
+        else:
+            offsets = np.tile(lift, (count, 1))[None].astype(np.float32)
+            mesh = Mesh(flat.positions, flat.normals, flat.uvs, flat.indices, name="bent", morph_positions=offsets)
+            pose = Morph((1.0,))
+        world.spawn(Transform(position=(0.0, 0.6, 0.0), scale=(1.2, 1.0, 1.0)), MeshRef(mesh),
+                    Material(color=(0.9, 0.2, 0.2, 1.0), double_sided=True), pose)
+
+    runner = scene(stage, (48, 48))
+    path, doc, data = exported_glb(runner, tmp_path)
+    (entity,) = [entity for entity, (ref,) in runner.world.query(MeshRef) if ref.mesh.name == "bent"]
+    rows = np.nonzero((runner.ids() == entity).any(axis=1))[0]
+    assert rows.size > 4 and rows.max() < 14   # drawn lifted (at rest: rows 16 to 25)
+    rest = quad(1.0, 1.0).positions * (1.2, 1.0, 1.0) + (0.0, 0.6, 0.0)
+    (primitive,) = doc["meshes"][[node["name"] for node in doc["nodes"]].index(str(entity))]["primitives"]
+    np.testing.assert_allclose(accessor_array(doc, data, primitive["attributes"]["POSITION"]), rest, atol=1e-6)
+    assert set(primitive["attributes"]) == {"POSITION", "NORMAL", "TEXCOORD_0"} and "targets" not in primitive
+    assert "skins" not in doc
+
+
+def test_an_orthographic_camera_is_written_with_the_pictures_aspect_and_spawned_again_draws_the_same_frame(
+        scene, tmp_path):
+    """An orthographic camera 6 units tall seen at 64x32: glTF's orthographic camera has no
+    aspect but its magnifications (a viewer's projection is x / xmag, y / ymag: glTF 2.0,
+    3.10.3), so the file holds ymag 3 and xmag 6 (half the width the picture spans), the
+    loader reads its height back, and the file spawned again, looking through it, draws
+    what the world drew."""
+    size = (64, 32)
+
+    def stage(world):
+        small_stage(world)
+        camera = next(entity for entity, _ in world.query_one(Camera))
+        lens = world.get(camera, Camera)
+        lens.projection, lens.ortho_height = "orthographic", 6.0
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, -0.4), intensity=2.0))
+        for x, color in ((-2.5, (0.8, 0.2, 0.1, 1.0)), (0.0, (0.2, 0.7, 0.2, 1.0)), (2.5, (0.2, 0.3, 0.9, 1.0))):
+            world.spawn(Transform(position=(x, 0.5, 0.0)), MeshRef(box((1.0, 1.0, 1.0))), Material(color=color))
+
+    original = scene(stage, size)
+    before = frame(original)
+    path, doc, _ = exported_glb(original, tmp_path)
+    (lens,) = doc["cameras"]
+    assert lens["type"] == "orthographic"
+    assert (lens["orthographic"]["xmag"], lens["orthographic"]["ymag"]) == pytest.approx((6.0, 3.0))
+    (view,) = load_model_file(path).cameras
+    assert view.ortho_height == pytest.approx(6.0)
+    after = frame(scene(spawned(path), size))
+    assert before.std() > 0.05
+    assert_drawn_as_before(after, before)

@@ -106,7 +106,9 @@ class ExportLight:
 @dataclass
 class ExportCamera:
     """A camera: ``fov_y`` in degrees, or ``ortho_height`` (not None: orthographic), its
-    planes, and ``matrix`` its node's world transform (column-major; it looks along -Z)."""
+    planes, and ``matrix`` its node's world transform (column-major; it looks along -Z).
+    ``aspect``: the picture's width / height, which an orthographic camera's ``xmag`` spans
+    (glTF's projection is x / xmag, y / ymag: equal ones would make a viewer draw it square)."""
 
     name: str
     fov_y: float
@@ -114,6 +116,7 @@ class ExportCamera:
     far: float
     matrix: list[float]
     ortho_height: float | None = None
+    aspect: float = 1.0
 
 
 class _Buffer:
@@ -278,7 +281,7 @@ def _camera_json(camera: ExportCamera) -> dict:
     if camera.ortho_height is not None:
         half = camera.ortho_height / 2.0
         return {"name": camera.name, "type": "orthographic",
-                "orthographic": {"xmag": half, "ymag": half, "znear": camera.near, "zfar": camera.far}}
+                "orthographic": {"xmag": half * camera.aspect, "ymag": half, "znear": camera.near, "zfar": camera.far}}
     return {"name": camera.name, "type": "perspective",
             "perspective": {"yfov": math.radians(camera.fov_y), "znear": camera.near, "zfar": camera.far}}
 
