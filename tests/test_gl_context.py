@@ -93,3 +93,91 @@ def test_capabilities_are_what_the_context_reports(ctx):
         gl_name = "GL_MAX_CUBE_MAP_TEXTURE_SIZE" if name == "max_cube_map_size" else f"GL_{name.upper()}"
         assert getattr(caps, name) == info[gl_name] > 0, name
     assert caps.extensions == frozenset(ctx.extensions)
+
+
+# --- the shaders keep to GLSL 4.10 ---------------------------------------------------------------
+
+SHADER_DIR = __import__("pathlib").Path(__file__).resolve().parent.parent / "shaders"
+
+# What GLSL 4.10 has not (each with the version that brought it): Mesa compiles a #version 410
+# shader with some of them as extensions of its own where macOS's 4.1 driver refuses them.
+PAST_410 = {
+    "layout(binding=) (4.20)": r"layout\s*\([^)]*\bbinding\b",
+    "layout(location=) on a uniform (4.30)": r"layout\s*\([^)]*\blocation\b[^)]*\)\s*uniform\b",
+    "layout(offset=/align=) (4.40)": r"layout\s*\([^)]*\b(offset|align)\b",
+    "std430 (4.30)": r"\bstd430\b",
+    "a buffer block, an SSBO (4.30)": r"(^|[;}\s)])buffer\s+\w+\s*\{",
+    "image types and loads/stores (4.20)": r"\b[iu]?image(1D|2D|3D|Cube|2DRect|Buffer|1DArray|2DArray|CubeArray|2DMS|"
+                                           r"2DMSArray)\b|\bimage(Load|Store|Size|Samples|Atomic\w*)\s*\(",
+    "memory qualifiers (4.20)": r"\b(coherent|volatile|restrict|readonly|writeonly)\b",
+    "atomic counters and buffer atomics (4.20/4.30)": r"\batomic_uint\b|\batomic(Counter\w*|Add|Min|Max|And|Or|Xor|"
+                                                      r"Exchange|CompSwap)\s*\(",
+    "compute shaders (4.30)": r"\bgl_(GlobalInvocationID|LocalInvocationID|LocalInvocationIndex|WorkGroupID|"
+                              r"NumWorkGroups|WorkGroupSize)\b|\blocal_size_[xyz]\b|\bshared\s+\w+\s+\w+|"
+                              r"\bmemoryBarrier\w*\s*\(|\bgroupMemoryBarrier\s*\(",
+    "textureQueryLevels (4.30)": r"\btextureQueryLevels\s*\(",
+    "textureSamples (4.50)": r"\btextureSamples\s*\(",
+    "early_fragment_tests (4.20)": r"\bearly_fragment_tests\b",
+    "gl_HelperInvocation (4.50)": r"\bgl_HelperInvocation\b",
+    "fine and coarse derivatives (4.50)": r"\b(dFdx|dFdy|fwidth)(Fine|Coarse)\s*\(",
+    "packHalf2x16, pack/unpackSnorm2x16 (4.20)": r"\b(un)?packHalf2x16\s*\(|\b(un)?packSnorm2x16\s*\(",
+    "initializer lists (4.20)": r"=\s*\{",
+    "#extension": r"#\s*extension\b",
+}
+
+
+def _glsl_code(text: str) -> str:
+    """``text`` without its comments (what the compiler reads)."""
+    import re
+
+    return re.sub(r"//[^\n]*", "", re.sub(r"/\*.*?\*/", " ", text, flags=re.S))
+
+
+def test_every_shader_is_glsl_410_core_and_uses_nothing_past_it():
+    """Each stage file under shaders/ starts ``#version 410 core`` and no file (stages and
+    includes, comments left out) uses what GLSL 4.10 lacks: layout(binding=), SSBOs, std430,
+    images, atomics, compute, textureQueryLevels, ... (PAST_410: each names the version it
+    came in), gl_Layer read in a fragment shader (4.30), or any #extension.  Nothing of 4.2+
+    sits behind a define here: the start-up check sets none, so none may."""
+    import re
+
+    stages = sorted(p for p in SHADER_DIR.iterdir() if p.suffix in (".vert", ".frag", ".geom"))
+    includes = sorted((SHADER_DIR / "include").glob("*.glsl"))
+    assert len(stages) > 40 and len(includes) > 40
+    assert not [p.name for p in SHADER_DIR.rglob("*") if p.suffix in (".comp", ".tesc", ".tese", ".mesh")]
+    found = []
+    for path in stages + includes:
+        text = path.read_text()
+        if path in stages:
+            assert text.startswith("#version 410 core\n"), path.name
+        else:
+            assert "#version" not in text, path.name   # the library inserts the version, includes never repeat it
+        code = _glsl_code(text)
+        for what, pattern in PAST_410.items():
+            for match in re.finditer(pattern, code, flags=re.M):
+                line = code[:match.start()].count("\n") + 1
+                found.append(f"{path.name}:{line}: {what}: {match.group(0).strip()!r}")
+        if path.suffix == ".frag" and re.search(r"\bgl_Layer\b", code):
+            found.append(f"{path.name}: gl_Layer read in a fragment shader (4.30)")
+    assert not found, "\n".join(found)
+
+
+@pytest.mark.parametrize("line, what", [
+    ("layout(std140, binding = 2) uniform Camera { mat4 m; };", "layout(binding=)"),
+    ("layout(std430) buffer Rows { vec4 rows[]; };", "std430"),
+    ("readonly buffer Rows { vec4 rows[]; };", "a buffer block"),
+    ("layout(rgba16f) uniform image2D target;", "image types"),
+    ("float levels = float(textureQueryLevels(probe));", "textureQueryLevels"),
+    ("layout(local_size_x = 8) in;", "compute shaders"),
+    ("#extension GL_ARB_shading_language_420pack : require", "#extension"),
+    ("const float w[3] = {0.25, 0.5, 0.25};", "initializer lists"),
+    ("layout(location = 3) uniform float scale;", "layout(location=) on a uniform"),
+])
+def test_the_shader_scan_sees_each_feature_past_410(line, what):
+    """The scan above is not vacuous: each of a sample of 4.2+ lines is caught by the pattern
+    for its feature (and a commented-out one is not)."""
+    import re
+
+    hits = [name for name, pattern in PAST_410.items() if re.search(pattern, _glsl_code(line), flags=re.M)]
+    assert any(name.startswith(what) for name in hits), (line, hits)
+    assert not any(re.search(p, _glsl_code("// " + line), flags=re.M) for p in PAST_410.values())

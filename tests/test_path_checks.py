@@ -544,3 +544,131 @@ def test_where_only_the_cube_map_target_is_refused_point_shadows_draw_one_pass_i
         assert faces[None][face].max() < SENTINEL / 2
         np.testing.assert_allclose(faces["array"][face], faces[None][face], rtol=1e-6, atol=1e-7,
                                    err_msg=f"face {face}")
+
+
+def test_a_ggx_chain_where_both_mip_passes_are_refused_is_box_filtered_and_said_once(
+        scene, ctx, fresh_checks, monkeypatch, caplog):
+    """A driver whose layered and per-face mip passes both leave level 2 undrawn: both are
+    refused (each naming level 2), a GGX probe's chain is then the driver's glGenerateMipmap
+    (``prefilter`` "mips", said in one warning however many builds), each level the 2x2 box
+    average of the one above (numpy, from the level read back), level 2 included."""
+    original = CubeMipTarget.bind_level
+
+    def skip_level_two(self, level, unit, face=None, *rest):
+        size = original(self, level, unit, face, *rest)
+        if level == 2:
+            self.gl["glViewport"](0, 0, 0, 0)  # nothing of level 2 is drawn, a face at a time or all at once
+        return size
+
+    monkeypatch.setattr(CubeMipTarget, "bind_level", skip_level_two)
+    ents = {}
+
+    def build(world):
+        marked_chrome_scene(ents)(world)
+        world.get(ents["sphere"], Material).roughness = 0.5
+        world.add_component(ents["sphere"], ReflectionProbe(resolution=32, prefilter="ggx"))
+
+    runner = scene(build, (64, 48))
+    with caplog.at_level(logging.WARNING, logger="speculum"):
+        runner.frame()
+        runner.world.get(ents["wall"], Material).color = (0.05, 0.9, 0.05)   # captured and built again
+        runner.frame()
+    renderer = runner.engine.renderer
+    verdicts = renderer.path_checks.verdicts
+    for path in ("layered_mips", "face_mips"):
+        assert verdicts[path].status == "refused" and "level 2" in verdicts[path].detail, verdicts[path]
+    probes = renderer.probes
+    assert probes.mips.used == "build_mipmaps" and probes.cubes[ents["sphere"]].prefilter == "mips"
+    said = [r.getMessage() for r in caplog.records if "box-filtered instead" in r.getMessage()]
+    assert len(said) == 1 and "GGX-prefiltered probes" in said[0]
+    above = np.stack(cube_faces(ctx, probes, ents["sphere"]))
+    assert above.max() < SENTINEL / 2 and (above[..., 1] > 2 * above[..., 0]).any()   # the green wall, drawn
+    for level in (1, 2, 3):
+        drawn = np.stack(cube_faces(ctx, probes, ents["sphere"], level))
+        n = above.shape[1] // 2
+        box = above.reshape(6, n, 2, n, 2, -1).mean(axis=(2, 4))
+        assert np.abs(drawn - box).max() < 4e-3, level
+        above = drawn
+
+
+def _draw_framebuffer_binding(ctx) -> int:
+    import ctypes
+
+    from engine.render.raw_gl import GL_DRAW_FRAMEBUFFER_BINDING, _load
+
+    get = _load(ctx, "glGetIntegerv", ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.POINTER(ctypes.c_int)))
+    value = ctypes.c_int(0)
+    get(GL_DRAW_FRAMEBUFFER_BINDING, ctypes.byref(value))
+    return value.value
+
+
+def test_a_cube_face_attachment_the_driver_refuses_is_named_and_leaves_moderngls_framebuffer_bound(ctx):
+    """``RawGL.attach_cube_face`` checks its calls with glGetError: a face of a mip level the
+    cube does not have (level 10 of a 16-texel cube: Mesa says incomplete, a GPU may say
+    GL_INVALID_VALUE) is a RuntimeError naming the face, the level, the framebuffer status and
+    the error, no error is left for the next pass, and the
+    framebuffer moderngl last bound is the one the driver has bound (read back with glGet)."""
+    raw = RawGL(ctx)
+    cube = ctx.texture_cube((16, 16), 4, dtype="f2")
+    colour = ctx.texture((16, 16), 4, dtype="f2")
+    target = ctx.framebuffer([colour])
+    other_colour = ctx.texture((8, 8), 4)
+    other = ctx.framebuffer([other_colour])
+    try:
+        other.use()
+        assert ctx.error == "GL_NO_ERROR"
+        with pytest.raises(RuntimeError, match=r"cube-map face 2 level 10 of 16 as a colour attachment: "
+                                               r"framebuffer status 0x[0-9a-f]+, GL error 0x[0-9a-f]+") as info:
+            raw.attach_cube_face(target, cube, 2, level=10)
+        assert "status 0x8cd5, GL error 0x0" not in str(info.value)   # something was wrong, and said
+        assert ctx.error == "GL_NO_ERROR"
+        assert ctx.fbo is other and _draw_framebuffer_binding(ctx) == other.glo
+        raw.attach_cube_face(target, cube, 3)   # a face it has: attached, and still moderngl's bound
+        assert _draw_framebuffer_binding(ctx) == other.glo and ctx.error == "GL_NO_ERROR"
+        target.use()
+        target.clear(0.25, 0.5, 0.75, 1.0)
+        ctx.finish()
+        face = read_cube_level(ctx, cube, 3, 0, SCRATCH_UNIT)
+        np.testing.assert_allclose(face, np.broadcast_to((0.25, 0.5, 0.75, 1.0), face.shape), atol=1e-3)
+    finally:
+        for thing in (target, other, colour, other_colour, cube):
+            thing.release()
+
+
+def test_a_layered_target_clears_every_face_whole_whatever_moderngls_framebuffer_left_set(ctx):
+    """``LayeredCubeTarget.bind`` sets the viewport, scissor and write masks for its own
+    framebuffer: bound after a moderngl framebuffer with a 2x2 scissor box, its colour
+    mask off but for red and depth writes off, its clear reaches every texel of all six
+    faces; after ``unbind`` moderngl's framebuffer is bound again with its own state, so its
+    next clear still keeps to its scissor box and mask."""
+    cube = ctx.texture_cube((16, 16), 4, dtype="f2")
+    colour = ctx.texture((16, 16), 4, dtype="f2")
+    depth = ctx.depth_texture((16, 16))
+    other = ctx.framebuffer([colour], depth)
+    layered = None
+    try:
+        other.use()
+        other.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        other.scissor = (0, 0, 2, 2)
+        other.color_mask = (True, False, False, False)
+        other.depth_mask = False
+        other.use()
+        for face in range(6):
+            cube.write(face, np.full((16, 16, 4), SENTINEL, np.float16).tobytes())
+        layered = LayeredCubeTarget(ctx, cube)
+        layered.bind()
+        layered.clear((0.25, 0.5, 0.75, 1.0))
+        layered.unbind()
+        assert ctx.error == "GL_NO_ERROR" and _draw_framebuffer_binding(ctx) == other.glo
+        for face in range(6):
+            texels = read_cube_level(ctx, cube, face, 0, SCRATCH_UNIT)
+            np.testing.assert_allclose(texels, np.broadcast_to((0.25, 0.5, 0.75, 1.0), texels.shape), atol=1e-3,
+                                       err_msg=f"face {face}")
+        other.clear(1.0, 1.0, 1.0, 1.0)   # moderngl's own state again: red, in the 2x2 box alone
+        image = np.frombuffer(other.read(components=4, dtype="f2"), np.float16).reshape(16, 16, 4)
+        assert (image[:2, :2] == (1, 0, 0, 0)).all() and (image[2:] == 0).all() and (image[:, 2:] == 0).all()
+    finally:
+        if layered is not None:
+            layered.release()
+        for thing in (other, colour, depth, cube):
+            thing.release()

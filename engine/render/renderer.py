@@ -422,14 +422,26 @@ class Renderer(Gpu):
     def set_sky_faces(self, faces: np.ndarray | None) -> None:
         """The world's sky: a Skybox's given ``faces`` (None: the flat background), sampled
         from the cube map by the sky pass too."""
+        if faces is not None:
+            self._check_sky_size("Skybox.faces", faces.shape[1])
         self._replace_sky(upload_cube(self.ctx, faces) if faces is not None else flat_cube(self.ctx, BACKGROUND),
                           None)
 
     def set_generated_sky(self, model: SkyModel, size: int) -> None:
         """The world's sky: a generated Skybox, drawn per pixel from ``model`` by the sky pass
         and into a cube map of ``size`` texels a face for what samples it (``SkyBake``)."""
+        self._check_sky_size("Skybox.face_size", size)
         self._set_sky_view(model)   # (the bake reads an atmosphere's table and space)
         self._replace_sky(self.sky_bake.bake(model, size), model)
+
+    def _check_sky_size(self, what: str, size: int) -> None:
+        """A GLLimitError naming ``what`` where a sky cube map of ``size`` texels a face is past
+        this context's cube-map limit (the start-up check asks 512 of it; a Skybox takes 2048)."""
+        limit = self.caps.max_cube_map_size
+        if size > limit:
+            raise GLLimitError(f"{what}: a sky cube map of {size}x{size} texels a face is over this OpenGL's "
+                               f"({self.caps.renderer}) {limit} (GL_MAX_CUBE_MAP_TEXTURE_SIZE); make the faces "
+                               "smaller")
 
     def _replace_sky(self, cube: moderngl.TextureCube, model: SkyModel | None) -> None:
         old = self.sky

@@ -53,7 +53,7 @@ from pyglm import glm
 from components.limits import ALL_LAYERS
 from components.rendering import ALBEDO_UV_BIT
 from engine.core.cube_faces import CUBE_FACES
-from engine.core.errors import GLLimitWarning
+from engine.core.errors import GLLimitError, GLLimitWarning
 from engine.render.bindings import (
     ALBEDO_UNIT,
     CAMERA_BINDING,
@@ -322,6 +322,8 @@ class ShadowMaps:
         keeping it when it does; a new atlas leaves every map to be drawn again."""
         if tile == self.tile:
             return
+        self._check_size(f"DirectionalLight.shadow_resolution {tile}: the suns' shadow atlas (2 x 2 of its maps)",
+                         (2 * tile, 2 * tile))
         release_framebuffer(self._atlas_framebuffer)
         give_depth_image(self.ctx, self.atlas)
         self.renderer.note_scene_change()
@@ -370,6 +372,16 @@ class ShadowMaps:
             atlas.release()
             self.renderer.note_scene_change()
 
+    def _check_size(self, what: str, size: tuple[int, int], cube: bool = False) -> None:
+        """A GLLimitError naming ``what`` where a texture (``cube``: a cube map's face) of
+        ``size`` texels is past this context's limit, before anything is made or let go."""
+        caps = self.renderer.caps
+        limit, name = (caps.max_cube_map_size, "GL_MAX_CUBE_MAP_TEXTURE_SIZE") if cube else \
+            (caps.max_texture_size, "GL_MAX_TEXTURE_SIZE")
+        if max(size) > limit:
+            raise GLLimitError(f"{what} is {size[0]}x{size[1]} texels{' a face' if cube else ''}: this OpenGL "
+                               f"({caps.renderer}) takes at most {limit} ({name}); make shadow_resolution smaller")
+
     def _see_through_target(self, size: tuple[int, int]) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
         """A see-through atlas of ``size`` (RGBA half floats, filtered linearly, clamped) and
         its framebuffer, cleared to nothing in the way (a new texture's texels are undefined
@@ -397,9 +409,12 @@ class ShadowMaps:
         face = max(resolution // SEE_THROUGH_SCALE, 1) if casting else 0
         if face == self.lamp_see_through_face:
             return False
+        tile = face + 2 * LAMP_SEE_THROUGH_GUTTER
+        if face:
+            self._check_size(f"PointLight.shadow_resolution {resolution}: the lamps' see-through atlas",
+                             (6 * tile, MAX_POINT_SHADOWS * tile))
         self._drop_lamp_see_through()
         if face:
-            tile = face + 2 * LAMP_SEE_THROUGH_GUTTER
             self.lamp_see_through_atlas, self._lamp_see_through_framebuffer = \
                 self._see_through_target((6 * tile, MAX_POINT_SHADOWS * tile))
         self.lamp_see_through_face = face
@@ -947,6 +962,9 @@ class ShadowMaps:
         map to be drawn again."""
         if tile == self.spot_tile:
             return
+        if tile:
+            self._check_size(f"PointLight.shadow_resolution {tile}: the spot lights' shadow atlas",
+                             (MAX_POINT_SHADOWS * (tile + 2 * SPOT_GUTTER), tile + 2 * SPOT_GUTTER))
         self.renderer.note_scene_change()
         if self._spot_framebuffer is not None:
             release_framebuffer(self._spot_framebuffer)
@@ -1028,6 +1046,8 @@ class ShadowMaps:
         cube = self.cubes.get(slot)
         if cube is not None and cube.size[0] == resolution:
             return cube
+        self._check_size(f"PointLight.shadow_resolution {resolution}: a point light's shadow cube map",
+                         (resolution, resolution), cube=True)
         self._drop_cube(slot)
         ctx = self.ctx
         cube = self.cubes[slot] = ctx.texture_cube((resolution, resolution), 1, dtype="f4")
