@@ -63,3 +63,47 @@ def test_each_instance_is_a_part_placed_by_the_node_and_its_own_transform(tmp_pa
 def test_a_malformed_instancing_is_refused_naming_the_node(tmp_path, change, message):
     with pytest.raises(AssetError, match=rf"forest\.glb.*node 0: EXT_mesh_gpu_instancing.*{message}"):
         load_model(instanced(tmp_path, change=change))
+
+
+@pytest.mark.parametrize("clip", [False, True])
+def test_an_instanced_nodes_own_morph_weights_and_their_clip_go_with_every_instance(tmp_path, clip):
+    """The morphed sheet's node (its own weights (0.5, 1.0) over the mesh's (0.25, 0)) made two
+    instances by EXT_mesh_gpu_instancing: each instance wears the node's weights, not the
+    mesh's, and the node's "weights" clip (Breathe: (0, 0) to (1, 0.5) over 2 s) plays on each
+    (half way: (0.5, 0.25))."""
+    import base64
+
+    from components import Animation, FromModel, Morph
+    from engine.assets.mesh import load_model_file
+    from systems.model_system import ModelSystem
+    from tests.test_model_variants import edit_glb
+    from tests.test_morph_targets import sheet_glb
+
+    places = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], np.float32)
+
+    def instanced_node(doc: dict) -> None:
+        blob = places.tobytes()
+        doc["buffers"].append({"byteLength": len(blob),
+                               "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
+        doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": 0, "byteLength": len(blob)})
+        doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126, "count": 2,
+                                 "type": "VEC3"})
+        doc["nodes"][0]["extensions"] = {"EXT_mesh_gpu_instancing": {
+            "attributes": {"TRANSLATION": len(doc["accessors"]) - 1}}}
+        doc["extensionsUsed"] = [*doc.get("extensionsUsed", []), "EXT_mesh_gpu_instancing"]
+        if not clip:
+            del doc["animations"]
+
+    path = edit_glb(sheet_glb(tmp_path / "sheet.glb", node_weights=[0.5, 1.0]), instanced_node)
+    parts = load_model_file(path).parts
+    assert len(parts) == 2 and all(part.morph_weights == (0.5, 1.0) for part in parts), \
+        [part.morph_weights for part in parts]
+    world = World("instanced sheets")
+    root = spawn_model(world, path)
+    morphed = [world.get(part, Morph) for part, _ in world.query_one(FromModel)]
+    assert len(morphed) == 2 and all(m.weights == (0.5, 1.0) for m in morphed)
+    if clip:
+        world.add_component(root, Animation(clip="Breathe", time=1.0, playing=False))
+        ModelSystem(world).process(1 / 60)
+        assert all(m.weights == pytest.approx((0.5, 0.25)) for m in morphed), [m.weights for m in morphed]
+    world.close()

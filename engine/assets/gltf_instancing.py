@@ -58,10 +58,29 @@ def expand_gpu_instancing(doc: dict, buffer_bytes: BufferBytes, what: str) -> in
         rotation = values.get("ROTATION", np.tile(np.float32([0.0, 0.0, 0.0, 1.0]), (count, 1)))
         scale = values.get("SCALE", np.ones((count, 3), np.float32))
         mesh = node.pop("mesh")
+        weights = node.pop("weights", None)   # (the node's morph weights are its mesh's: each instance's)
         del extensions["EXT_mesh_gpu_instancing"]
         first = len(nodes)
         for i in range(count):
             nodes.append({"mesh": mesh, "translation": translation[i].tolist(), "rotation": rotation[i].tolist(),
-                          "scale": scale[i].tolist()})
+                          "scale": scale[i].tolist(), **({} if weights is None else {"weights": weights})})
         node["children"] = [*(node.get("children") or []), *range(first, first + count)]
+        _weights_channels_to_instances(doc, index, range(first, first + count))
     return made
+
+
+def _weights_channels_to_instances(doc: dict, index: int, instances: range) -> None:
+    """A clip's ``weights`` channels on node ``index`` (its mesh's morph weights), played on
+    each of its ``instances`` instead: one channel an instance, sharing the sampler."""
+    for animation in doc.get("animations") or []:
+        channels = animation.get("channels") if isinstance(animation, dict) else None
+        if not isinstance(channels, list):
+            continue
+        kept = []
+        for channel in channels:
+            target = channel.get("target") if isinstance(channel, dict) else None
+            if isinstance(target, dict) and target.get("node") == index and target.get("path") == "weights":
+                kept += [{**channel, "target": {**target, "node": node}} for node in instances]
+            else:
+                kept.append(channel)
+        animation["channels"] = kept
