@@ -587,3 +587,37 @@ def test_an_engine_keeps_its_clouds_beside_another_engine_on_the_context(scene):
     np.testing.assert_array_equal(clouded.frame(), alone)   # the other made, not drawn yet
     other.frame()
     np.testing.assert_array_equal(clouded.frame(), alone)   # ... and drawn
+
+
+def test_the_clouds_shadows_move_over_the_floor_with_the_wind_at_its_speed(scene):
+    """A wind of (6, -4) m/s for 1.5 s (three half-second frames) moves the clouds' shadows
+    (6 m across their finest detail) by (9, -6) m over the floor: the floor seen from over a
+    point moved that far shows, pixel for pixel, what the still layer's floor showed from over
+    the first point; from over the first point it shows something else."""
+    wind, seconds = np.array([6.0, -4.0]), 1.5
+    values = dict(coverage=0.5, scale=40.0, height=80.0, drift=(13.0, 7.0))
+
+    def frame(layer, at, frames, dt=0.5):
+        def build(world):
+            world.spawn(Transform(position=(at[0], 30.0, at[1]), rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0),
+                                                                                        glm.vec3(0.0, 0.0, -1.0))),
+                        Camera(fov_y=60.0, near=0.5, far=200.0))
+            world.spawn(Skybox(**SKY), layer)
+            world.spawn(DirectionalLight(direction=tuple(SHADOW_SUN), intensity=3.0, shadows=False))
+            world.spawn(Transform(), MeshRef(plane(400.0, 400.0)), Material(color=(0.5, 0.5, 0.5), roughness=0.9))
+
+        runner = scene(build, (64, 48))
+        runner.engine.renderer.antialias = "off"
+        for _ in range(frames):
+            picture = runner.frame(dt=dt).astype(np.float64)
+        return picture
+
+    start = np.array([5.0, -3.0])
+    still = frame(_still(**values), start, 1)
+    blown = CloudLayer(**values, wind=tuple(wind))
+    followed = frame(blown, start + wind * seconds, 3)
+    np.testing.assert_allclose(blown.drift, np.array(values["drift"]) + wind * seconds, atol=1e-6)
+    assert still.std() > 20.0   # (shadows and sunlight both on the floor)
+    assert np.abs(followed - still).max() <= 2.0   # (the sRGB rounding; measured 1)
+    left = frame(CloudLayer(**values, wind=tuple(wind)), start, 3)
+    assert np.abs(left - still).mean() > 10.0

@@ -391,3 +391,109 @@ def test_the_runners_moon_follows_the_clock(ctx, tmp_path):
     for bad, words in ((("--moon", "3"), "--moon needs --time"), (("--time", "22", "--moon", "40"), "--moon must be")):
         result = run_level("--headless", "--frames", "1", "--size", "16x12", "--out", str(tmp_path / "bad"), *bad)
         assert result.returncode != 0 and words in result.stderr.splitlines()[-1], result.stderr
+
+
+def _moon_pixels(scene, skybox, look, size=(96, 72), fov=7.0, mirror=False):
+    """Level 0's linear colour (h, w, 3) of ``skybox`` (a moon light along MOON) through a
+    ``fov`` lens along ``look``, and each pixel's ray as the sky sees it (reflected in a
+    mirror across the view at z = 2 where ``mirror``); whether each pixel is on the mirror."""
+    from components import Camera, Mirror, look_rotation
+    from engine.assets.mesh import quad
+    from tests.support import pixel_rays
+
+    def build(world):
+        world.spawn(Transform(rotation=look_rotation(glm.vec3(*look))), Camera(fov_y=fov, near=0.1, far=100.0))
+        world.spawn(skybox)
+        world.spawn(moon_light(color=(1.0, 1.0, 1.0)))
+        if mirror:
+            world.spawn(Transform(position=(0.0, 0.0, 2.0), rotation=glm.angleAxis(glm.pi(), glm.vec3(0, 1, 0))),
+                        MeshRef(quad(40.0, 40.0)), Material(), Mirror())
+
+    runner = scene(build, size)
+    runner.engine.renderer.antialias = "off"
+    runner.frame()
+    w, h = size
+    colour = np.frombuffer(runner.engine.renderer.levels[0].color.read(), np.float16)
+    colour = colour.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
+    _, rays = pixel_rays(runner.engine.main_view, size)
+    on = rays[..., 2] > 0.05 if mirror else np.ones(rays.shape[:2], bool)
+    return colour, (rays * np.array([1.0, 1.0, -1.0]) if mirror else rays), on
+
+
+@pytest.mark.parametrize("mirror", [False, True], ids=["ahead", "in_a_mirror"])
+@pytest.mark.parametrize("degrees", [60.0, 90.0, 135.0])
+def test_the_lit_part_of_the_disc_is_the_side_of_a_ball_facing_the_sun(scene, degrees, mirror):
+    """The sun ``degrees`` from the moon, off to one side: each pixel of the disc is lit where
+    the point of a ball the moon's size seen along its ray (its normal: the ray's offset from
+    the centre over the disc's radius, tipped back towards the eye) faces the sun, and dark
+    where it faces away, seen straight and in a mirror (the image flipped, the lit side still
+    the sun's); and the lit pixels' middle lies towards the sun."""
+    moon = np.array(MOON, np.float64)
+    side = np.cross(moon, [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    up = np.cross(side, moon)
+    angle = math.radians(degrees)
+    sun = moon * math.cos(angle) + (side * 0.8 + up * 0.6) * math.sin(angle)   # (off the horizontal)
+    skybox = Skybox(zenith=(0, 0, 0), horizon=(0, 0, 0), ground=(0, 0, 0), sun_direction=tuple(sun),
+                    sun_color=(0.0, 0.0, 0.0), moon_color=(1.0, 1.0, 1.0))
+    look = moon * np.array([1.0, 1.0, -1.0]) if mirror else moon
+    colour, rays, on = _moon_pixels(scene, skybox, look, mirror=mirror)
+    radius = math.sqrt(1.0 - 0.9990 ** 2)   # the disc's edge
+    offset = (rays - (rays @ moon)[..., None] * moon) / radius
+    inside = on & (rays @ moon > 0.0) & ((offset * offset).sum(-1) < 0.9 ** 2)   # (short of the faded rim)
+    normal = offset - np.sqrt(np.maximum(1.0 - (offset * offset).sum(-1), 0.0))[..., None] * moon
+    facing = normal @ sun
+    lit = colour[..., 1] - sky_radiance(skybox, rays, SkySun(tuple(sun)))[..., 1] > 0.02   # (above the sun's glow)
+    assert inside.sum() > 1000 and (inside & (facing > 0.05)).sum() > 100
+    assert lit[inside & (facing > 0.05)].all() and not lit[inside & (facing < -0.05)].any()
+    middle = rays[inside & lit].mean(axis=0) - moon
+    assert middle @ (sun - (sun @ moon) * moon) > 0.0
+
+
+def _elevation_and_bearing(way) -> tuple[float, float]:
+    """Degrees over the horizon, and degrees from north (-Z) towards east (+X)."""
+    return math.degrees(math.asin(way.y)), math.degrees(math.atan2(way.x, -way.z)) % 360.0
+
+
+@pytest.mark.parametrize("day", [172, 355, 80])
+def test_a_full_moon_rises_at_sunset_opposite_the_sun_high_in_winter_low_in_summer(day):
+    """At 45 north: at sunset (the sunrise equation's hour, cos H = -tan(latitude)
+    tan(declination)) a full moon is on the horizon, rising, at the bearing opposite the
+    setting sun's (cos A = sin(declination) / cos(latitude)); at midnight it stands due south
+    at 90 - 45 - its declination, the opposite of the sun's: high in winter, low in summer."""
+    phi = math.radians(45.0)
+    declination = math.radians(-23.44) * math.cos(2.0 * math.pi / 365.0 * (day + 10))
+    sunset = 12.0 + math.degrees(math.acos(-math.tan(phi) * math.tan(declination))) / 15.0
+    setting = 360.0 - math.degrees(math.acos(math.sin(declination) / math.cos(phi)))
+    full = SYNODIC_MONTH / 2.0
+    elevation, bearing = _elevation_and_bearing(moon_towards(TimeOfDay(hour=sunset, day=day, moon_age=full)))
+    assert abs(elevation) < 0.5 and bearing == pytest.approx(setting - 180.0, abs=1.0)
+    later = _elevation_and_bearing(moon_towards(TimeOfDay(hour=sunset + 0.5, day=day, moon_age=full)))[0]
+    assert later > elevation + 4.0   # (climbing: rising, not setting)
+    elevation, bearing = _elevation_and_bearing(moon_towards(TimeOfDay(hour=0.0, day=day, moon_age=full)))
+    assert elevation == pytest.approx(90.0 - 45.0 - math.degrees(declination), abs=0.6)
+    assert bearing == pytest.approx(180.0, abs=0.5)
+
+
+def test_the_moon_rises_later_each_day_by_a_lunar_days_step():
+    """A moon on a clock run by the time stage an hour a second, six minutes a frame, for 30
+    days at 45 north: each moonrise (its elevation crossing 0 upwards) comes more than 24 hours
+    after the one before, and on average 24 x 29.53 / 28.53 = 24.84 hours after (the moon a
+    turn behind the sun each synodic month: 50 minutes later a day)."""
+    from engine.core.world import World
+    from systems.time_of_day_system import TimeOfDaySystem
+
+    world = World()
+    entity = world.spawn(DirectionalLight(body="moon"), TimeOfDay(hour=0.0, day=1, moon_age=3.0, hours_per_second=1.0))
+    stage = TimeOfDaySystem(world)
+    light = world.get(entity, DirectionalLight)
+    rises, before, step = [], None, 0.1
+    for frame in range(30 * 24 * 10):
+        stage.process(step)
+        height = -light.direction.y
+        if before is not None and before < 0.0 <= height:
+            rises.append((frame + before / (before - height)) * step)   # (hours since the start)
+        before = height
+    gaps = np.diff(rises)
+    assert len(gaps) >= 27 and gaps.min() > 24.2, gaps
+    assert (rises[-1] - rises[0]) / len(gaps) == pytest.approx(24.0 * SYNODIC_MONTH / (SYNODIC_MONTH - 1.0), abs=0.05)

@@ -160,3 +160,56 @@ def test_the_command_line_refuses_a_panorama_sun_without_a_panorama_or_with_a_cl
         with pytest.raises(SystemExit):
             parse_args(HallOfMirrors(), argv)
         assert words in capsys.readouterr().err
+
+
+def test_the_runners_panorama_sun_casts_a_posts_shadow_away_from_the_brightest_texel(scene, tmp_path):
+    """A panorama (256 x 512) with a sun 1 degree across at 40 degrees up, turned 25 degrees
+    by ``--panorama-yaw``: the runner gives its light to the brighter of two lights (the dimmer
+    left as it was), and a 2 m post's shadow on the floor (the darker pixels' floor points, seen
+    from 12 m straight down) runs from its foot away from the brightest texel's way (its row's
+    latitude and column's longitude, the middle column -Z and a quarter right +X, turned 25
+    degrees about +Y, 90 bringing the middle round to -X), as long as 2 m over the tangent of
+    its latitude."""
+    from pyglm import glm
+
+    from components import Camera, Material, MeshRef, Transform, look_rotation
+    from engine.assets.mesh import box, plane
+    from tests.support import pixel_rays
+
+    image, _ = sunny([6000.0, 5600.0, 5000.0], 1.0, 40.0, 70.0, height=256, width=512,
+                     sky=lambda ways: np.full(ways.shape, 0.4))
+    path = save_hdr(tmp_path / "sky.hdr", image)
+    row, column = np.unravel_index(int(np.argmax(image.sum(axis=-1))), image.shape[:2])
+    latitude = math.pi / 2.0 - (row + 0.5) / 256 * math.pi
+    longitude = ((column + 0.5) / 512 - 0.5) * 2.0 * math.pi
+    ahead = glm.vec3(math.cos(latitude) * math.sin(longitude), math.sin(latitude),
+                     -math.cos(latitude) * math.cos(longitude))
+    towards = np.array(tuple(glm.angleAxis(math.radians(25.0), glm.vec3(0.0, 1.0, 0.0)) * ahead), np.float64)
+
+    def build(world):
+        world.spawn(Transform(position=(0.0, 12.0, 0.0), rotation=look_rotation(glm.vec3(0.0, -1.0, 0.0),
+                                                                                 glm.vec3(0.0, 0.0, -1.0))),
+                    Camera(fov_y=60.0, near=0.5, far=50.0))
+        world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.0), intensity=1.0, shadow_resolution=2048))
+        world.spawn(DirectionalLight(direction=(0.3, -1.0, 0.0), intensity=0.05, shadows=False))
+        grey = Material(color=(0.3, 0.3, 0.3), roughness=1.0)
+        world.spawn(Transform(), MeshRef(plane(40.0, 40.0)), grey)
+        world.spawn(Transform(position=(0.0, 1.0, 0.0)), MeshRef(box((0.16, 2.0, 0.16))), grey)
+
+    runner = scene(build, (96, 96))
+    runner.engine.start_sky(None, panorama=str(path), panorama_yaw=25.0, panorama_sun=True)
+    frame = runner.frame().astype(np.float64).sum(axis=-1)
+    lights = runner.world.query_one(DirectionalLight)
+    bright, dim = sorted((light for _, light in lights), key=lambda light: light.intensity, reverse=True)
+    np.testing.assert_allclose(tuple(dim.direction), tuple(glm.normalize(glm.vec3(0.3, -1.0, 0.0))), atol=1e-6)
+    assert dim.intensity == 0.05 and bright.angular_diameter == pytest.approx(2.0, rel=0.1)
+    angle = math.degrees(math.acos(min(1.0, float(-np.array(tuple(bright.direction)) @ towards))))
+    assert angle < 0.5, angle   # (half a texel: 0.35 degrees)
+    eye, rays = pixel_rays(runner.engine.main_view, runner.size)
+    dark = frame < 0.8 * np.median(frame)   # (the shadow's: 0.56 of it)
+    floor = (eye + rays * (-eye[1] / rays[..., 1:2]))[dark][:, [0, 2]]
+    away = -towards[[0, 2]] / np.linalg.norm(towards[[0, 2]])
+    along, across = floor @ away, floor @ np.array([-away[1], away[0]])
+    length = 2.0 / math.tan(latitude)
+    assert len(floor) > 10 and along.max() == pytest.approx(length, abs=0.3), (len(floor), along.max(), length)
+    assert along.min() > -0.3 and np.abs(across).max() < 0.2, (along.min(), np.abs(across).max())
