@@ -3,7 +3,11 @@ path (a quad of the same look laid on the wall: the same pixels, lit alike), its
 right way up, in a mirror's view as a quad there is, over a wall seen far off and at a
 grazing angle, cut again when a surface moves into its box (and not when decal and wall
 move together), a surface on another layer, turned away, or a mirror left bare, its
-Visibility honoured, emission, and its part and GPU mesh gone with it."""
+Visibility honoured, emission, and its part and GPU mesh gone with it.  Against rays: a
+turned, tilted box covers the floor pixels whose point lies in it, and one held by a sliding
+crate where it is now; against quads of computed alphas, the angle and depth fades; a
+normal map leans the light as a turned wall does; same-order overlaps by the view's eye
+(a mirror's its own); a monitor's picture, a shadow, a region; posed meshes take none."""
 from __future__ import annotations
 
 import warnings
@@ -13,6 +17,7 @@ import pytest
 from pyglm import glm
 
 from components import (
+    Camera,
     ComponentWarning,
     DirectionalLight,
     Emissive,
@@ -792,3 +797,392 @@ def test_a_decal_running_under_refracting_glass_shows_through_it_as_without_the_
     assert behind.sum() > 100, behind.sum()
     assert (np.abs(drawn - bare).max(axis=-1)[behind] > 40).all()   # (the decal is there)
     assert np.abs(seen - drawn).max(axis=-1)[behind].max() <= 3
+
+
+FLOOR_TURN = glm.angleAxis(glm.radians(-90.0), glm.vec3(1, 0, 0))  # a quad facing +y
+
+
+def settled(mask: np.ndarray) -> np.ndarray:
+    """Pixels of ``mask`` whose eight neighbours are in it too (none on its edge)."""
+    kept = mask.copy()
+    kept[0, :] = kept[-1, :] = kept[:, 0] = kept[:, -1] = False
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            kept &= np.roll(np.roll(mask, dy, axis=0), dx, axis=1)
+    return kept
+
+
+def test_a_turned_tilted_decal_covers_the_floor_pixels_whose_ray_point_lies_in_its_box(scene):
+    """A decal thrown 20 degrees off straight down, its box turned about the vertical and
+    reaching below the floor at one corner (depth fade 0: a hard cut): each pixel's ray is
+    followed to the floor and its point taken into the box's own space (numpy, float64): the
+    pixels whose point lies inside the unit cube (with their neighbours) show the decal (its
+    id, its green), those outside (with their neighbours) the bare floor to the level."""
+    from tests.support import pixel_rays
+
+    turn = look_rotation(glm.vec3(0.3, -1.0, 0.2), glm.vec3(0.5, 0.0, -1.0))
+    where, scale = glm.vec3(0.1, 0.15, -0.1), glm.vec3(1.4, 0.9, 0.8)
+
+    def build(decal):
+        def make(world):
+            lit(world)
+            look_from(world, (0.3, 3.0, 2.5), target=(0.0, 0.0, 0.0), fov=45.0)
+            world.spawn(Transform(rotation=FLOOR_TURN), MeshRef(quad(8.0, 8.0)), Material(color=GREY))
+            if decal:
+                world.spawn(Transform(position=where, rotation=turn, scale=scale),
+                            Decal(color=(0.1, 0.9, 0.1, 1.0), depth_fade=0.0))
+        return make
+
+    runner, image = render(scene, build(True))
+    _, bare = render(scene, build(False))
+    part = [e for e, _ in runner.world.query_one(FromDecal)][0]
+    ids = runner.ids()
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    assert (rays[..., 1] < 0).all()
+    point = eye + (-eye[1] / rays[..., 1])[..., None] * rays  # where each ray meets the floor
+    to_box = np.linalg.inv(np.array(glm.mat4(glm.translate(where) * glm.mat4_cast(turn) * glm.scale(scale)),
+                                    np.float64))
+    local = point @ to_box[:3, :3].T + to_box[:3, 3]
+    inside = (np.abs(local) <= 0.5).all(axis=-1)
+    assert (local[..., 2][inside] < -0.49).any() and (np.abs(local[..., 2]) > 0.5).any()  # (the depth cuts it too)
+    shown, clear = settled(inside), settled(~inside)
+    assert shown.sum() > 300 and clear.sum() > 2000
+    assert (ids[shown] == part).all() and not (ids[clear] == part).any()
+    green = image[shown]
+    assert (green[:, 1] > 2 * green[:, 0]).all() and (np.abs(image - bare).max(axis=-1)[shown] > 40).all()
+    assert np.abs(image - bare).max(axis=-1)[clear].max() <= 1
+
+
+@pytest.mark.parametrize("case", ["turned 70 of 60-80", "turned 30 of 20-40", "turned 10 of 0-0", "deep 0.45 of 0.1",
+                                  "deep 0.2 of 0.4"])
+def test_a_surface_turned_from_the_decal_or_near_its_boxs_end_takes_it_faded_by_the_stated_share(scene, case):
+    """A wall turned about y by ``turn`` degrees from facing the decal (or standing
+    ``deep`` of the box's depth from its middle, towards its far end) through a decal of
+    opacity 0.7: it takes the decal as it takes a quad of the same look laid on it whose
+    alpha is 0.7 times the share worked out here from the README's words (angle: 1 up to
+    the fade's start, 0 past its end, linear in degrees between; depth: linear over
+    ``depth_fade`` of the box's depth at each end); the share is neither 0 nor 1, so the
+    wall and the full decal both differ from it."""
+    words = case.split()
+    turn, deep = (float(words[1]), 0.0) if words[0] == "turned" else (0.0, float(words[1]))
+    if words[0] == "turned":
+        start, end = (float(v) for v in words[3].split("-"))
+        share = 1.0 if turn <= start else 0.0 if turn >= end else (end - turn) / (end - start)
+        fields = {"angle_fade": (start, end), "depth_fade": 0.0}
+        if end == 0.0:  # (a hard angle: 0 degrees of fade, a surface turned 10 takes none)
+            share = 0.0
+    else:
+        fade = float(words[3])
+        share = (0.5 - deep) / fade
+        fields = {"depth_fade": fade}
+    rotation = glm.angleAxis(glm.radians(turn), glm.vec3(0, 1, 0))
+    normal = rotation * glm.vec3(0, 0, 1)
+    across = 0.5 / np.cos(np.radians(turn))  # half the width the box's sides cut out of the turned wall
+
+    def build(kind, alpha=LOOK[3]):
+        def make(world):
+            lit(world)
+            look_from(world, 3.0 * normal + glm.vec3(0.0, 0.3, 0.0), target=(0.0, 0.0, 0.0), fov=40.0)
+            world.spawn(Transform(rotation=rotation), MeshRef(quad(6.0, 6.0)), Material(color=GREY))
+            if kind == "decal":
+                depth = 1.0 if deep else 4.0
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, deep), scale=glm.vec3(1.0, 1.0, depth)),
+                            Decal(color=LOOK, **fields))
+            elif kind == "quad":
+                world.spawn(Transform(position=1e-3 * normal, rotation=rotation),
+                            MeshRef(quad(2.0 * across, 1.0), casts_shadows=False), Material(color=(*LOOK[:3], alpha)))
+        return make
+
+    runner, with_decal = render(scene, build("decal"))
+    _, bare = render(scene, build("none"))
+    _, full = render(scene, build("quad"))
+    middle = [runner.project(rotation * glm.vec3(sx * 0.8 * across, sy * 0.4, 0.0)) for sx in (-1, 1) for sy in (-1, 1)]
+    xs, ys = zip(*middle, strict=True)
+    window = (slice(min(ys), max(ys)), slice(min(xs), max(xs)))
+    assert with_decal[window].size > 300
+    if share == 0.0:
+        assert not runner.world.query_one(FromDecal)
+        assert np.abs(with_decal - bare).max() == 0
+        return
+    _, faded = render(scene, build("quad", LOOK[3] * share))
+    assert np.abs(with_decal[window] - faded[window]).max() <= 2
+    assert np.abs(full[window] - faded[window]).max() > 12 and np.abs(bare[window] - faded[window]).max() > 12
+
+
+@pytest.mark.parametrize("towards, scale", [("u", 1.0), ("v", 1.0), ("u", 0.5)])
+def test_a_normal_mapped_decal_is_lit_as_a_wall_turned_as_its_map_says(scene, towards, scale):
+    """A decal turned a quarter turn on a flat wall (its image's +U along the world's +y, +V
+    along -x) whose normal map leans every normal 35 degrees towards +U (or +V), times
+    ``normal_scale``: the middle of it is lit as a plain decal of the same look on a wall
+    turned by the angle worked out here from the map's bytes (atan of scale x lean over
+    out, OpenGL's convention: red towards +U, green towards +V) towards +y (or -x), and
+    not as on the flat wall."""
+    lean = np.radians(35.0)
+    texel = np.array([np.sin(lean), 0.0, np.cos(lean)] if towards == "u" else [0.0, np.sin(lean), np.cos(lean)])
+    stored = np.round((texel * 0.5 + 0.5) * 255.0).astype(np.uint8)
+    bytes_read = stored / 255.0 * 2.0 - 1.0
+    along = bytes_read[0] if towards == "u" else bytes_read[1]
+    angle = np.degrees(np.arctan2(scale * along, bytes_read[2]))
+    # Leaning towards +U (world +y) is the wall turned about x by -angle; towards +V (world -x), about y by -angle.
+    wall_turn = glm.angleAxis(glm.radians(-angle), glm.vec3(1, 0, 0) if towards == "u" else glm.vec3(0, 1, 0))
+    flat_map = TextureData(np.tile(np.append(stored, 255).astype(np.uint8), (8, 8, 1)), name="leaning")
+    decal_turn = glm.angleAxis(glm.radians(90.0), glm.vec3(0, 0, 1))
+    look = {"color": (0.4, 0.4, 0.4, 1.0), "roughness": 0.6}
+
+    def build(mapped, turned):
+        def make(world):
+            world.spawn(Skybox())
+            world.spawn(DirectionalLight(direction=(0.0, -0.8, -0.6) if towards == "u" else (0.8, 0.0, -0.6),
+                                         intensity=1.5))  # (grazing from where the normals lean)
+            look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=30.0)
+            world.spawn(Transform(rotation=wall_turn if turned else glm.quat()), MeshRef(quad(4.0, 4.0)),
+                        Material(color=GREY))
+            extra = {"normal_map": flat_map, "normal_scale": scale} if mapped else {}
+            world.spawn(Transform(rotation=decal_turn, scale=glm.vec3(1.0, 1.0, 2.0)), Decal(**look, **extra))
+        return make
+
+    runner, mapped = render(scene, build(True, False))
+    _, turned = render(scene, build(False, True))
+    _, flat = render(scene, build(False, False))
+    (x0, y0), (x1, y1) = runner.project((-0.15, 0.15, 0.0)), runner.project((0.15, -0.15, 0.0))
+    window = (slice(y0, y1), slice(x0, x1))
+    assert mapped[window].size > 300
+    assert np.abs(turned[window] - flat[window]).max(axis=-1).min() > 12   # (the lean shows)
+    assert np.abs(mapped[window] - turned[window]).max() <= 2, np.abs(mapped[window] - turned[window]).max()
+
+
+def two_decals(world, eye, target=(0.0, 0.0, 0.0)) -> None:
+    """A red decal's box middle at x = -0.3, a green one's at +0.3, the same order, both
+    on a wall facing +z and overlapping over -0.3 < x < 0.3; the camera at ``eye``."""
+    lit(world)
+    look_from(world, eye, target=target, fov=40.0)
+    wall(world, size=6.0)
+    world.spawn(Transform(position=glm.vec3(-0.3, 0.0, 0.0), scale=glm.vec3(1.2, 1.0, 0.5)),
+                Decal(color=(0.9, 0.05, 0.05, 1.0)))
+    world.spawn(Transform(position=glm.vec3(0.3, 0.0, 0.0), scale=glm.vec3(1.2, 1.0, 0.5)),
+                Decal(color=(0.05, 0.9, 0.05, 1.0)))
+
+
+def red_or_green(rgb) -> str:
+    r, g, _ = (int(v) for v in rgb)
+    assert max(r, g) > 2 * min(r, g), rgb
+    return "red" if r > g else "green"
+
+
+def test_of_two_decals_of_one_order_the_one_nearer_the_views_eye_is_over_a_mirrors_eye_its_own(scene):
+    """Same order, overlapping: from an eye on the left the red (its box's middle nearer)
+    covers the overlap, from the right the green, as the eye moves (no order kept from an
+    earlier frame).  A mirror standing at x = 3 facing -x, seen from the left (x = -0.5),
+    shows the overlap as a camera at the eye's image behind it (x = 6.5) sees it: its
+    view's eye, not the camera's, orders the two (the green, nearer that eye)."""
+    runner, image = render(scene, lambda world: two_decals(world, (-1.5, 0.0, 3.0)))
+    assert red_or_green(image[runner.project((0.0, 0.0, 0.0))[::-1]]) == "red"
+    camera = [e for e, c in runner.world.query_one(Camera)][0]
+    runner.world.get(camera, Transform).position = glm.vec3(1.5, 0.0, 3.0)
+    runner.world.get(camera, Transform).rotation = look_rotation(glm.vec3(-1.5, 0.0, -3.0))
+    runner.frame()
+    image = runner.frame()
+    assert red_or_green(image[runner.project((0.0, 0.0, 0.0))[::-1]]) == "green"
+    _, behind = render(scene, lambda world: two_decals(world, (6.5, 0.0, 3.0)))
+    assert red_or_green(behind[runner.project((0.0, 0.0, 0.0))[::-1]]) == "green"
+
+    def mirrored(world):
+        two_decals(world, (-0.5, 0.0, 3.0), target=(3.0, 0.0, 1.4))
+        world.spawn(Transform(position=glm.vec3(3.0, 0.0, 1.4), rotation=look_rotation(glm.vec3(1, 0, 0))),
+                    MeshRef(quad(2.4, 2.0)), Mirror())  # (its face, +z, turned to -x)
+
+    runner, image = render(scene, mirrored)
+    x, y = runner.project((6.0, 0.0, 0.0))  # the overlap's middle's image behind the mirror
+    assert red_or_green(image[y, x]) == "green"
+
+
+def picture_look(decal: bool) -> dict:
+    """The mapped look less its normal map (whose bumps, read at a few texels a pixel, turn
+    highlights on the least difference of UVs between the cut's triangles and a quad's)."""
+    look = dict(looks()["mapped"][0 if decal else 1])
+    look.pop("normal_map"), look.pop("normal_scale")
+    return look
+
+
+def test_a_monitors_picture_shows_the_decal_as_it_shows_a_quad_of_its_look(scene):
+    """A camera (not active) looking at the wall feeds a monitor's screen: its picture (read
+    back) of the decal is its picture of a quad of the same look laid there, and the look is
+    in it (it differs from the bare wall's)."""
+    from components import Monitor
+
+    def build(kind):
+        def make(world):
+            lit(world)
+            look_from(world, (0.0, 0.0, -3.0), target=(0.0, 0.0, -6.0), fov=40.0)  # (the frame sees the screen)
+            wall(world)
+            lens = world.spawn(Transform(position=glm.vec3(0.5, 0.3, 3.0),
+                                         rotation=look_rotation(glm.vec3(-0.5, -0.3, -3.0))),
+                               Camera(fov_y=40.0, active=False))
+            world.screen = world.spawn(Transform(position=glm.vec3(0.0, 0.0, -6.0)), MeshRef(quad(1.6, 1.2)),
+                                       Material(color=(0.0, 0.0, 0.0, 1.0)), Monitor(camera=lens, size=(48, 36)))
+            if kind == "decal":
+                world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(**picture_look(True)))
+            elif kind == "quad":
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, 1e-3)), MeshRef(quad(1.0, 1.0), casts_shadows=False),
+                            Material(**picture_look(False)))
+        return make
+
+    pictures = {}
+    for kind in ("decal", "quad", "none"):
+        runner, _ = render(scene, build(kind))
+        pictures[kind] = runner.engine.renderer.monitors.read(runner.world.screen)[..., :3].astype(np.float64)
+    assert (np.abs(pictures["decal"] - pictures["none"]).max(axis=-1) > 0.05).sum() > 150
+    apart = np.abs(pictures["decal"] - pictures["quad"]).max(axis=-1)
+    assert np.quantile(apart, 0.99) <= 0.01 and apart.max() <= 0.03, (np.quantile(apart, 0.99), apart.max())
+
+
+def test_a_decal_parented_to_a_sliding_crate_recuts_the_floor_alone_and_lies_where_rays_say(scene):
+    """A decal held by a crate (its child), looking down over the crate's top and the floor
+    beside it: the crate slides 0.7 m, the decal with it.  The floor's piece is cut again,
+    the crate's kept (they moved together); each pixel's first hit (numpy rays against the
+    crate's box and the floor) shows the decal's id exactly where that point lies in the
+    decal's new box on a surface facing up (the crate's top, the floor), not on the crate's
+    sides nor where the box was."""
+    from tests.support import pixel_rays
+
+    made = {}
+    down = look_rotation(glm.vec3(0, -1, 0), glm.vec3(0, 0, -1))
+
+    def build(world):
+        lit(world)
+        look_from(world, (0.6, 3.2, 3.0), target=(0.6, 0.0, 0.0), fov=50.0)
+        made["floor"] = world.spawn(Transform(rotation=FLOOR_TURN), MeshRef(quad(8.0, 8.0)), Material(color=GREY))
+        made["crate"] = world.spawn(Transform(position=glm.vec3(-0.4, 0.5, 0.0)), MeshRef(box((1.0, 1.0, 1.0))),
+                                    Material(color=GREY))
+        made["decal"] = world.spawn(Transform(parent=made["crate"], position=glm.vec3(0.7, 0.0, 0.0), rotation=down,
+                                              scale=glm.vec3(1.6, 1.2, 2.4)), Decal(color=(0.1, 0.1, 0.9, 1.0)))
+
+    runner, _ = render(scene, build)
+    stage = decals(runner)
+    assert set(stage.states[made["decal"]].pieces) == {made["floor"], made["crate"]}
+    cuts, pieces = stage.cuts, stage.pieces_cut
+    runner.world.get(made["crate"], Transform).position = glm.vec3(0.3, 0.5, 0.0)
+    runner.frame()
+    assert stage.cuts == cuts + 1 and stage.pieces_cut == pieces + 1  # (the floor's piece alone)
+    ids = runner.ids()
+    part = stage.states[made["decal"]].part
+    eye, rays = pixel_rays(runner.engine.main_view, SIZE)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (np.array([-0.2, 0.0, -0.5]) - eye) / rays
+        t2 = (np.array([0.8, 1.0, 0.5]) - eye) / rays
+    near, far = np.minimum(t1, t2), np.maximum(t1, t2)
+    on_crate = (near.max(axis=-1) <= far.min(axis=-1)) & (far.min(axis=-1) > 0)
+    t = np.where(on_crate, near.max(axis=-1), -eye[1] / rays[..., 1])
+    facing_up = ~on_crate | (near.argmax(axis=-1) == 1)  # the floor, or the crate's top
+    point = eye + t[..., None] * rays
+    box_world = np.array(runner.world.get(made["decal"], Transform).world, np.float64)
+    assert box_world[:3, 3] == pytest.approx([1.0, 0.5, 0.0])
+    local = (point - box_world[:3, 3]) @ np.linalg.inv(box_world[:3, :3]).T
+    painted = (np.abs(local) <= 0.5).all(axis=-1) & facing_up
+    shown, clear = settled(painted), settled(~painted)
+    assert settled(painted & on_crate).sum() > 40 and settled(painted & ~on_crate).sum() > 100
+    assert (ids[shown] == part).all() and not (ids[clear] == part).any()
+
+
+def test_skinned_and_morphed_surfaces_take_no_decal_and_the_same_meshes_unposed_do(scene):
+    """A quad posed by a Morph and one posed by a Skin (both left where they are modelled)
+    in a decal's box take none of it (the GPU poses them): no piece, no part, the frame the
+    bare one; the same quads as plain meshes take it."""
+    from components import Morph, Skin
+    from engine.assets.mesh import Mesh
+
+    made = {}
+
+    def build(posed, decal=True):
+        def make(world):
+            lit(world)
+            look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+            flat = quad(0.6, 0.6)
+            positions, triangles = np.asarray(flat.positions, np.float32), np.asarray(flat.indices).reshape(-1, 3)
+            n = len(positions)
+            still = np.zeros((1, n, 3), np.float32)
+            if posed:
+                morphed = Mesh(positions, flat.normals, flat.uvs, triangles, name="morphed",
+                               morph_positions=still, morph_normals=still)
+                skinned = Mesh(positions, flat.normals, flat.uvs, triangles, name="skinned",
+                               joints=np.zeros((n, 2), np.uint16), weights=np.tile([1.0, 0.0], (n, 1)))
+                extra = ([Morph((1.0,))], [Skin(np.eye(4)[None].copy())])
+            else:
+                morphed = skinned = flat
+                extra = ([], [])
+            made["morphed"] = world.spawn(Transform(position=glm.vec3(-0.35, 0.0, 0.0)), MeshRef(morphed),
+                                          Material(color=GREY), *extra[0])
+            made["skinned"] = world.spawn(Transform(position=glm.vec3(0.35, 0.0, 0.0)), MeshRef(skinned),
+                                          Material(color=GREY), *extra[1])
+            if decal:
+                made["decal"] = world.spawn(Transform(scale=glm.vec3(1.6, 1.0, 0.5)), Decal(color=LOOK))
+        return make
+
+    runner, posed = render(scene, build(True))
+    assert decals(runner).states[made["decal"]].pieces == {} and not runner.world.query_one(FromDecal)
+    ids = runner.ids()
+    assert all(ids[runner.project((x, 0.0, 0.0))[::-1]] == made[name]
+               for x, name in ((-0.35, "morphed"), (0.35, "skinned")))  # (they are drawn)
+    _, bare = render(scene, build(True, decal=False))
+    assert np.abs(posed - bare).max() == 0
+    runner, plain = render(scene, build(False))
+    assert set(decals(runner).states[made["decal"]].pieces) == {made["morphed"], made["skinned"]}
+    for x in (-0.35, 0.35):
+        column, row = runner.project((x, 0.0, 0.0))
+        assert np.abs(plain[row, column] - posed[row, column]).max() > 40
+
+
+def test_a_decal_in_a_shadow_is_shadowed_as_a_quad_of_its_look_there(scene):
+    """A post between the sun and the wall throws its shadow across the decal's middle: the
+    decal is lit as a quad of its look laid there (casting none) is, shadow and all, and the
+    shadow is on it (darker than the same decal with no post)."""
+    def build(kind, post=True):
+        def make(world):
+            world.spawn(Skybox())
+            world.spawn(DirectionalLight(direction=(-0.6, -0.3, -1.0), intensity=2.0))
+            look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+            wall(world)
+            if post:
+                world.spawn(Transform(position=glm.vec3(0.6, 0.3, 1.0)), MeshRef(box((0.2, 2.6, 0.2))),
+                            Material(color=GREY))
+            if kind == "decal":
+                world.spawn(Transform(scale=glm.vec3(1.0, 1.0, 0.5)), Decal(color=(0.8, 0.6, 0.2, 1.0)))
+            else:
+                world.spawn(Transform(position=glm.vec3(0.0, 0.0, 1e-3)), MeshRef(quad(1.0, 1.0), casts_shadows=False),
+                            Material(color=(0.8, 0.6, 0.2, 1.0)))
+        return make
+
+    runner, shaded = render(scene, build("decal"))
+    _, quad_shaded = render(scene, build("quad"))
+    _, sunlit = render(scene, build("decal", post=False))
+    # The post (x = 0.6, 1 m out from the wall) casts along the sun onto x = 0 +- 0.16 of the wall,
+    # out of the eye's way to it; x = 0.38 is lit.
+    shade_x, shade_y = runner.project((0.0, -0.3, 0.0))
+    lit_x, _ = runner.project((0.38, -0.3, 0.0))
+    ids = runner.ids()
+    part = [e for e, _ in runner.world.query_one(FromDecal)][0]
+    assert ids[shade_y, shade_x] == part and ids[shade_y, lit_x] == part
+    assert shaded[shade_y, shade_x].sum() < 0.7 * sunlit[shade_y, shade_x].sum()   # (in the shadow)
+    assert np.abs(shaded[shade_y, lit_x] - sunlit[shade_y, lit_x]).max() <= 3       # (beside it, lit)
+    (x0, y0), (x1, y1) = runner.project((-0.4, 0.4, 0.0)), runner.project((0.4, -0.4, 0.0))
+    assert np.abs(shaded[y0:y1, x0:x1] - quad_shaded[y0:y1, x0:x1]).max() <= 3
+
+
+@pytest.mark.parametrize("region, colour", [((0.0, 0.5, 0.5, 1.0), "red"), ((0.5, 0.5, 1.0, 1.0), "green"),
+                                            ((0.0, 0.0, 0.5, 0.5), "blue")])
+def test_a_region_throws_that_part_of_the_image_over_the_whole_box(scene, region, colour):
+    """``region`` (u0, v0, u1, v1), v up the image (row 0 its top): of the 2 x 2 corners image
+    the quarter named, stretched over the whole box, all of its pixels that colour."""
+    def build(world):
+        lit(world)
+        look_from(world, (0.0, 0.0, 3.0), target=(0.0, 0.0, 0.0), fov=40.0)
+        wall(world)
+        world.spawn(Transform(scale=glm.vec3(1.2, 1.2, 0.5)), Decal(texture=corners_texture(), region=region))
+
+    runner, image = render(scene, build)
+    (x0, y0), (x1, y1) = runner.project((-0.5, 0.5, 0.0)), runner.project((0.5, -0.5, 0.0))
+    rgb = image[y0:y1, x0:x1].reshape(-1, 3)
+    assert len(rgb) > 500
+    channel = {"red": 0, "green": 1, "blue": 2}[colour]
+    others = [c for c in range(3) if c != channel]
+    assert (rgb[:, channel] > 2 * rgb[:, others].max(axis=1)).all()
