@@ -38,6 +38,7 @@ from engine.render.raw_gl import (
     RawGL,
     read_cube_level,
 )
+from engine.render.targets import release_framebuffer
 from tests.support import srgb_to_linear
 from tests.test_probes import chrome_scene, ggx_reference, marked_chrome_scene, probe_stage
 
@@ -631,7 +632,9 @@ def test_a_cube_face_attachment_the_driver_refuses_is_named_and_leaves_moderngls
         face = read_cube_level(ctx, cube, 3, 0, SCRATCH_UNIT)
         np.testing.assert_allclose(face, np.broadcast_to((0.25, 0.5, 0.75, 1.0), face.shape), atol=1e-3)
     finally:
-        for thing in (target, other, colour, other_colour, cube):
+        release_framebuffer(target)   # (bound ones unbound first: a deleted name left bound breaks the next pass)
+        release_framebuffer(other)
+        for thing in (colour, other_colour, cube):
             thing.release()
 
 
@@ -670,5 +673,6 @@ def test_a_layered_target_clears_every_face_whole_whatever_moderngls_framebuffer
     finally:
         if layered is not None:
             layered.release()
-        for thing in (other, colour, depth, cube):
+        release_framebuffer(other)
+        for thing in (colour, depth, cube):
             thing.release()
