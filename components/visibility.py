@@ -123,7 +123,15 @@ class ShownLayers(TrackedComponent):
 
     def _validate(self, name: str, value: Any) -> Any:
         if name in LAYER_FIELDS:
-            return check_surface_layers(self, name, value)
+            checked = check_surface_layers(self, name, value)
+            shows = checked if name == "shows_layers" else getattr(self, "shows_layers", None)
+            hides = checked if name == "hides_layers" else getattr(self, "hides_layers", ())
+            if hides and (shows is None or shows) and not surface_layers(shows, hides):
+                # (shows_layers=[] is said by check_surface_layers: no second word for it)
+                warn_component(f"{type(self).__name__}.hides_layers = {list(hides)} hides every layer its "
+                               f"shows_layers = {'None (all)' if shows is None else list(shows)} shows, so its "
+                               "view draws nothing")
+            return checked
         return value
 
 

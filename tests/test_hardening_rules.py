@@ -451,6 +451,27 @@ def test_a_view_that_shows_no_layer_is_warned():
     assert _warned(lambda: Camera(shows_layers=None)) == _warned(lambda: Camera(shows_layers=[0])) == []
 
 
+def test_a_view_whose_hidden_layers_cover_every_layer_it_shows_is_warned_as_either_is_given():
+    """shows_layers less hides_layers empty draws nothing, as shows_layers=[] does: said once
+    when the second of the two is given, at construction or written later, naming both; a
+    hidden layer among others shown, or hides_layers alone, is not said."""
+    from components import Camera, Portal
+    for make in (lambda: Camera(shows_layers=[1], hides_layers=[1]), lambda: Mirror(shows_layers=(2, 3),
+                 hides_layers=[3, 2]), lambda: Portal(shows_layers=[5], hides_layers=[4, 5])):
+        said = _warned(make)
+        assert len(said) == 1 and "hides every layer" in said[0] and "view draws nothing" in said[0], said
+    camera = Camera(shows_layers=[1])
+    said = _warned(lambda: setattr(camera, "hides_layers", [1]))
+    assert len(said) == 1 and "Camera.hides_layers = [1]" in said[0] and "shows_layers = [1]" in said[0], said
+    mirror = Mirror(hides_layers=[1])
+    said = _warned(lambda: setattr(mirror, "shows_layers", [1]))
+    assert len(said) == 1 and "Mirror.hides_layers = [1]" in said[0], said
+    assert _warned(lambda: Camera(shows_layers=[1, 2], hides_layers=[1])) == []
+    assert _warned(lambda: Mirror(hides_layers=[0, 3])) == []
+    assert _warned(lambda: Camera(shows_layers=[], hides_layers=[1])) == [w for w in _warned(
+        lambda: Camera(shows_layers=[])) if "shows no layer" in w]   # (said once, as shows_layers=[])
+
+
 def test_water_with_no_normal_map_is_warned_once_at_spawn(world):
     from engine.assets.texture_data import ripple_normal_map
     said = _warned(lambda: world.spawn(*_pond(), Water()))
