@@ -177,7 +177,7 @@ class BeamState:
     path: BeamPath | None = None
     lit: bool = False                      # the laser's reflected light reaches the target
     lit_by: tuple[int, ...] = ()           # the mirrors of the way it came, in order
-    light_seen: tuple = ()                 # what ``lit`` was worked out from (the mirrors' states, poses)
+    light_seen: tuple = ()                 # what ``lit`` was worked out from: (the mirrors' states,)
     won: bool = False
     next_asked: bool = False
     frame: int = 0
@@ -440,6 +440,10 @@ def reflected_light(world: World, surfaces: Surfaces) -> list[VirtualLight]:
     return found
 
 
+# What the laser's light is cast against and from: a change to any of them works it out again.
+LIGHT_WAY_KINDS = (MeshRef, Transform, PointLight)
+
+
 def light_system(world: World, state: BeamState) -> None:
     """Whether the laser's reflected light reaches the target this frame: a virtual light of
     the lamp lights a point of the target's faces (``shadow_rules.light_path``, the shader's
@@ -448,14 +452,18 @@ def light_system(world: World, state: BeamState) -> None:
     if surfaces is None:
         return
     rules = state.rules
-    # Worked out again only when a mirror (a new SurfaceState), the target, the lamp or a solid
-    # that may stand on the light's way (moved, shown, hidden, given another mesh) changed.
-    seen = (tuple(surfaces.mirrors.values()), world.get(rules.target, Transform).world.to_bytes(),
-            tuple(t.world.to_bytes() for _, (t, _) in world.query(Transform, BeamLamp)), _solids_seen(world))
-    if len(seen[0]) == len(state.light_seen[0] if state.light_seen else ()) and \
-            all(a is b for a, b in zip(seen[0], state.light_seen[0], strict=True)) and seen[1:] == state.light_seen[1:]:
+    # Worked out again only when a mirror changed (a new SurfaceState) or anything the light's
+    # way is cast against may have, by the world's change sets (nothing a frame when all stands
+    # still): a mesh, a transform or a lamp written or an entity deleted this step, or a world
+    # matrix the transform stage moved last frame (a parent's move, an animation, a stage that
+    # runs after the game's update).
+    mirrors = tuple(surfaces.mirrors.values())
+    frame = world.frame
+    touched = world.changed_any(LIGHT_WAY_KINDS) or world.deleted() or frame.moved or frame.added or frame.removed
+    if state.light_seen and not touched and len(mirrors) == len(state.light_seen[0]) and \
+            all(a is b for a, b in zip(mirrors, state.light_seen[0], strict=True)):
         return
-    state.light_seen = seen
+    state.light_seen = (mirrors,)
     cast = first_solid(world)
     lit_by: tuple[int, ...] = ()
     for light in sorted(reflected_light(world, surfaces), key=lambda v: v.bounces):
@@ -467,15 +475,6 @@ def light_system(world: World, state: BeamState) -> None:
         if lit_by:
             break
     state.lit, state.lit_by = bool(lit_by), lit_by
-
-
-def _solids_seen(world: World) -> tuple:
-    """What the light's legs are cast against (``first_solid``): each mesh's entity, mesh,
-    visibility and world matrix, the beam's own display left out."""
-    return tuple((entity, id(mesh_ref.mesh), mesh_ref.visible, transform.world.to_bytes())
-                 for entity, (mesh_ref, transform) in world.query(MeshRef, Transform)
-                 if not (world.has(entity, Mirror) or world.has(entity, BeamSegment)
-                         or world.has(entity, SelectionMarker)))
 
 
 def _clear(cast: FirstSolid, way: list, lamp: int) -> bool:
