@@ -184,7 +184,7 @@ def test_a_phase_lights_the_share_of_the_disc_a_ball_shows(scene, degrees):
     runner.frame()
     from tests.test_generated_sky import _read
     colour, rays = _read(runner)
-    inner = 0.99925                     # well inside the disc's ramp (cos 0.9990 to 0.9995)
+    inner = 0.99925                     # well inside the disc (its edge at cos 0.9990, its rim 2% of it)
     disc = rays @ moon > inner
     lit = colour[..., 1] - sky_radiance(skybox, rays, SkySun(tuple(sun)))[..., 1] > 0.02   # (above the sun's glow)
     share = float((lit & disc).sum() / disc.sum())
@@ -193,6 +193,56 @@ def test_a_phase_lights_the_share_of_the_disc_a_ball_shows(scene, degrees):
     if degrees == 180.0:   # even up to where the disc's ramp begins
         whole = rays @ moon > 0.9995
         assert colour[whole][:, 1].min() > 0.97 and colour[whole][:, 1].max() < 1.03
+
+
+def lommel_seeliger_phase(degrees: float) -> float:
+    """A hard ball of Lommel and Seeliger's dust seen with the sun ``degrees`` from it (the
+    phase angle a = 180 - degrees): its light over a full one's, in closed form,
+    1 - sin(a/2) tan(a/2) ln cot(a/4)."""
+    a = math.radians(180.0 - degrees)
+    return 1.0 - math.sin(a / 2.0) * math.tan(a / 2.0) * math.log(1.0 / math.tan(a / 4.0))
+
+
+@pytest.mark.parametrize("degrees", [90.0, 45.0, 30.0])
+def test_a_crescent_sends_the_light_a_hard_balls_phase_leaves_and_its_lit_edge_is_brightest(scene, degrees):
+    """The disc drawn full (the sun behind the eye) and then with the sun ``degrees`` from it,
+    on a black sky: the crescent's light, summed over its pixels by their solid angle, over
+    the full moon's is the closed form's share plus the Earth's light (``moon_phase``, which
+    sets the moon's light in the air and on the clouds, says the same); along the lit limb,
+    where the eye's cosine is small, each pixel is 2 mu0 / (mu0 + mu) written out here (up
+    to 2: brighter than a full moon), the rim anti-aliased over a pixel, not faded over a
+    third of the radius."""
+    moon = np.array([0.0, 0.3, -1.0]) / np.linalg.norm([0.0, 0.3, -1.0])
+    side = np.cross(moon, [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    angle = math.radians(degrees)
+    sun = moon * math.cos(angle) + side * math.sin(angle)
+    black = dict(zenith=(0, 0, 0), horizon=(0, 0, 0), ground=(0, 0, 0), sun_color=(0.0, 0.0, 0.0),
+                 moon_color=(1.0, 1.0, 1.0))
+    light = {}
+    for name, towards in (("full", -moon), ("phase", sun)):
+        skybox = Skybox(**black, sun_direction=tuple(towards))
+        _, _, runner = _hdr_frame(scene, skybox, fov=7.0, look=glm.vec3(*moon))
+        runner.world.spawn(moon_light(glm.vec3(*moon), color=(1.0, 1.0, 1.0)))
+        runner.frame()
+        from tests.test_generated_sky import _read
+        colour, rays = _read(runner)
+        glow = sky_radiance(skybox, rays, SkySun(tuple(towards)))[..., 1]   # (the black sky's glow about the sun)
+        solid = (rays @ moon) ** 3   # (a pixel's solid angle on a flat screen, the lens on the moon)
+        light[name] = float(((colour[..., 1] - glow) * solid)[rays @ moon > 0.998].sum())
+    want = lommel_seeliger_phase(degrees) + earthshine_by_hand(degrees)
+    assert light["phase"] / light["full"] == pytest.approx(want, rel=0.03)
+    assert moon_phase(moon, sun)[0] == pytest.approx(want, rel=0.015)
+    radius = math.sqrt(1.0 - 0.9990 ** 2)
+    across = (rays - (rays @ moon)[..., None] * moon) / radius
+    reach = np.sqrt((across * across).sum(-1))
+    mu = np.sqrt(np.maximum(1.0 - reach * reach, 0.0))
+    mu0 = (across - mu[..., None] * moon) @ sun
+    limb = (reach > 0.9) & (reach < 0.98) & (mu0 > mu)
+    assert limb.sum() > 10
+    law = 2.0 * mu0 / (mu0 + mu) + earthshine_by_hand(degrees)
+    np.testing.assert_allclose(colour[limb][:, 1] - glow[limb], law[limb], rtol=0.02)
+    assert colour[limb][:, 1].max() > 1.05   # (brighter than a full moon, whose face is 1 all across)
 
 
 def earthshine_by_hand(degrees: float) -> float:

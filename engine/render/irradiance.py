@@ -90,6 +90,8 @@ from engine.render.ltc_fit import LTC_SIZE, load_table
 from engine.render.sky import (
     DISC_EDGE,
     GLOW_COLOR,
+    MOON_RADIUS_SINE,
+    MOON_RIM,
     SkyModel,
     clear_radiance,
     cloud_hidden,
@@ -97,6 +99,7 @@ from engine.render.sky import (
     glow_strength,
     ground_share,
     model_radiance,
+    moon_cover,
     moon_phase,
     zenith_share,
 )
@@ -178,12 +181,12 @@ def generated_sky_sh(model: SkyModel) -> np.ndarray:
     under 1e-4 of the largest coefficient (the faces sample the 2.6-degree disc coarsely).
     An atmosphere's air has no closed form: its sky is projected from ``ATMOSPHERE_FACE``
     texels a face of the CPU's small table (smooth: the nine coefficients need no more), its
-    disc in closed form.  A moon's disc is the sun's shape times its colour and the share of
-    a full moon's light its phase leaves, about the way its lit part's light comes from
-    (``moon_phase``)."""
-    rise, fall, glow, disc = _zonal_integrals()
+    disc in closed form.  A moon's disc is a full moon's (``moon_cover``) times its colour
+    and the share of a full moon's light its phase leaves, about the way its lit part's light
+    comes from (``moon_phase``)."""
+    rise, fall, glow, disc, moon_disc = _zonal_integrals()
     sun_seen, moon_seen, clouds = _cloud_sh(model)
-    moon = _moon_sh(model, disc) * moon_seen
+    moon = _moon_sh(model, moon_disc) * moon_seen
     bands = [0, 1, 1, 1, 2, 2, 2, 2, 2]
     sun_disc = np.outer(disc, np.array(model.sun_color, np.float64) * sun_seen)
     if model.atmosphere:
@@ -225,7 +228,8 @@ def _cloud_sh(model: SkyModel) -> tuple[float, float, np.ndarray]:
 
 
 def _moon_sh(model: SkyModel, disc: np.ndarray) -> np.ndarray:
-    """The irradiance coefficients (9, 3) of ``model``'s moon disc (0 without one)."""
+    """The irradiance coefficients (9, 3) of ``model``'s moon disc (0 without one), ``disc``
+    a full moon's F_l."""
     colour = np.array(model.moon_color, np.float64)
     if not colour.any():
         return np.zeros((9, 3))
@@ -264,15 +268,20 @@ ZONAL_SAMPLES = 1 << 16  # midpoints an interval of each shape's integrals
 @functools.lru_cache(maxsize=1)
 def _zonal_integrals() -> tuple[np.ndarray, ...]:
     """F_0..F_2 of the sky's shapes: the rise over [0, 1], the fall over [-1, 0], the glow
-    over [0, 1] and the disc over [DISC_EDGE, 1] (each by the midpoint rule)."""
+    over [0, 1], the sun's disc over [DISC_EDGE, 1] and a full moon's over its rim's outer
+    cosine to 1 (each by the midpoint rule)."""
 
     def integral(shape, low: float, high: float) -> np.ndarray:
         t = low + (np.arange(ZONAL_SAMPLES) + 0.5) * ((high - low) / ZONAL_SAMPLES)
         legendre = np.stack([np.ones_like(t), t, 0.5 * (3.0 * t * t - 1.0)])
         return legendre @ shape(t) * ((high - low) / ZONAL_SAMPLES)
 
+    def full_moon(t: np.ndarray) -> np.ndarray:
+        return moon_cover(np.sqrt(1.0 - t * t) / MOON_RADIUS_SINE)
+
+    moon_edge = float(np.sqrt(1.0 - (MOON_RADIUS_SINE * (1.0 + 0.5 * MOON_RIM)) ** 2))
     return (integral(zenith_share, 0.0, 1.0), integral(ground_share, -1.0, 0.0), integral(glow_strength, 0.0, 1.0),
-            integral(disc_strength, DISC_EDGE, 1.0))
+            integral(disc_strength, DISC_EDGE, 1.0), integral(full_moon, moon_edge, 1.0))
 
 
 def hemisphere_sh(sky: Iterable[float], ground: Iterable[float]) -> np.ndarray:

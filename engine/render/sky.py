@@ -254,6 +254,8 @@ def disc_strength(cos_sun: np.ndarray) -> np.ndarray:
 
 
 MOON_RADIUS_SINE = float(np.sqrt(1.0 - DISC_EDGE * DISC_EDGE))   # the disc's edge, sin of its angle from the centre
+MOON_RIM = 0.02   # the moon's rim fades over this share of its radius, half inside the edge, half out
+MOON_LIMB = 0.999   # on the rim further out the law is read here (at the edge a full moon is 0 / 0)
 # Earthshine: the sunlight the Earth sends back onto the moon, over the sun's own, with the
 # Earth full as seen from the moon: its geometric albedo (0.367) times (its radius over the
 # moon's distance, 6371 / 384400 km) squared.
@@ -271,18 +273,32 @@ def earthshine(moon: np.ndarray, sun: np.ndarray) -> float:
     return EARTHSHINE * (np.sin(a) + (np.pi - a) * np.cos(a)) / np.pi
 
 
+def moon_cover(reach: np.ndarray) -> np.ndarray:
+    """How much of a way ``reach`` off the moon's centre (its angle's sine over
+    ``MOON_RADIUS_SINE``: the disc's edge at 1) the disc covers: 1 inside, 0 outside, a ramp
+    ``MOON_RIM`` of the radius wide centred on the edge, so the rim is anti-aliased as a hard
+    disc's coverage is (about a pixel at a 60-degree lens on 1080 rows) and the disc keeps
+    its area: a crescent, whose light lies along the rim, keeps the light Lommel and
+    Seeliger's law gives a hard disc (the sun's disc, a glow, fades over 29% of its radius;
+    the moon's crescent would lose most of its light in such a fade)."""
+    return np.clip((1.0 + 0.5 * MOON_RIM - reach) / MOON_RIM, 0.0, 1.0)
+
+
 def moon_share(d: np.ndarray, moon: np.ndarray, sun: np.ndarray) -> np.ndarray:
-    """The moon's disc along unit directions ``d`` (...): its strength (``disc_strength``)
-    times the light its ball sends back lit from ``sun`` (towards the sun), by Lommel and
+    """The moon's disc along unit directions ``d`` (...): its cover (``moon_cover``) times
+    the light its ball sends back lit from ``sun`` (towards the sun), by Lommel and
     Seeliger's law for the moon's dust, 2 mu0 / (mu0 + mu) (mu0 the sunlight's cosine at the
-    ball's point seen along ``d``, mu the eye's): 1 across a full moon (no limb darkening, as
-    the real one), a crescent's lit edge brighter than its middle, past the terminator the
-    Earth's light (``earthshine``)."""
+    ball's point seen along ``d``, mu the eye's; on the rim past ``MOON_LIMB``, that point's):
+    1 across a full moon (no limb darkening, as the real one), a crescent's lit edge brighter
+    than its middle (2 at the limb), past the terminator the Earth's light (``earthshine``)."""
     cos_moon = np.clip(d @ moon, -1.0, 1.0)
     across = (d - cos_moon[..., None] * moon) / MOON_RADIUS_SINE   # where on the disc, its edge at 1
+    reach = np.sqrt((across * across).sum(-1))
+    cover = moon_cover(reach) * (cos_moon > 0.0)
+    across = across * (np.minimum(reach, MOON_LIMB) / np.maximum(reach, 1e-30))[..., None]   # (the rim: the limb's)
     facing = np.sqrt(np.maximum(1.0 - (across * across).sum(-1), 0.0))   # mu
     lit = np.maximum((across - moon * facing[..., None]) @ sun, 0.0)      # mu0
-    return disc_strength(cos_moon) * (2.0 * lit / np.maximum(lit + facing, 1e-4) + earthshine(moon, sun))
+    return cover * (2.0 * lit / np.maximum(lit + facing, 1e-4) + earthshine(moon, sun))
 
 
 def moon_light(d: np.ndarray, moon: np.ndarray, sun: np.ndarray, colour: np.ndarray) -> np.ndarray:
@@ -293,24 +309,45 @@ def moon_light(d: np.ndarray, moon: np.ndarray, sun: np.ndarray, colour: np.ndar
     return moon_share(d, moon, sun)[..., None] * colour
 
 
-def moon_phase(moon: np.ndarray, sun: np.ndarray, samples: int = 48) -> tuple[float, np.ndarray]:
-    """The moon's light as its phase leaves it: the sum of ``moon_share`` over its disc
+def moon_phase(moon: np.ndarray, sun: np.ndarray) -> tuple[float, np.ndarray]:
+    """The moon's light as its phase leaves it: the integral of ``moon_share`` over its disc
     against a full one's, and the unit way its light comes from on average (a crescent's lies
-    towards the sun), from a grid of ``samples`` x ``samples`` ways over the disc."""
+    towards the sun).  Integrated in rings about the disc's centre, by the sine of their
+    angle (so a ring's ``moon_cover`` is exact): Gauss-Legendre rings inside the rim and
+    across it (the rim's light, where a crescent's lies, is its own interval), 96 ways
+    round; within 0.1% of a fine grid's sum, and a hard disc's share within 0.2% of
+    Lommel and Seeliger's closed form."""
     moon = moon / np.linalg.norm(moon)
     side = np.cross(moon, [0.0, 1.0, 0.0] if abs(moon[1]) < 0.9 else [1.0, 0.0, 0.0])
     side /= np.linalg.norm(side)
     up = np.cross(side, moon)
-    grid = (np.arange(samples) + 0.5) / samples * 2.0 - 1.0
-    a, b = np.meshgrid(grid, grid)
-    d = moon + (a[..., None] * side + b[..., None] * up) * MOON_RADIUS_SINE
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    full = moon_share(d, moon, -moon).sum()
-    lit = moon_share(d, moon, sun)
+    reach, weight = _PHASE_RINGS
+    turn = (np.arange(_PHASE_WAYS) + 0.5) * (2.0 * np.pi / _PHASE_WAYS)
+    sine = reach * MOON_RADIUS_SINE
+    d = (np.sqrt(1.0 - sine * sine)[:, None, None] * moon
+         + sine[:, None, None] * (np.cos(turn)[None, :, None] * side + np.sin(turn)[None, :, None] * up))
+    area = (weight * sine / np.sqrt(1.0 - sine * sine))[:, None]   # solid angle: sin ds dturn / cos
+    full = (moon_share(d, moon, -moon) * area).sum()
+    lit = moon_share(d, moon, sun) * area
     if full <= 0.0 or lit.sum() <= 0.0:
         return 0.0, moon
     centre = (lit[..., None] * d).sum(axis=(0, 1))
     return float(lit.sum() / full), centre / np.linalg.norm(centre)
+
+
+def _rings() -> tuple[np.ndarray, np.ndarray]:
+    """``moon_phase``'s rings: reach (of the disc's radius) and width, 48 Gauss-Legendre
+    nodes inside the rim, 16 across it."""
+    inner = 1.0 - 0.5 * MOON_RIM
+    parts = []
+    for low, high, count in ((0.0, inner, 48), (inner, 1.0 + 0.5 * MOON_RIM, 16)):
+        x, w = np.polynomial.legendre.leggauss(count)
+        parts.append((low + (x + 1.0) * 0.5 * (high - low), w * 0.5 * (high - low) * MOON_RADIUS_SINE))
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+_PHASE_RINGS = _rings()
+_PHASE_WAYS = 96
 
 
 @functools.lru_cache(maxsize=8)

@@ -20,8 +20,9 @@ vec3 sun_disc(float cos_sun) {
 uniform vec3 sky_moon_direction;  // unit, towards the moon (its disc, MOON; its light in the air, MOON_AIR)
 #endif
 #ifdef MOON
-// The moon's disc (the MOON builds: a sky with a DirectionalLight whose body is "moon"), the
-// sun's size, lit from the sun as a ball of dust is (Lommel and Seeliger: 2 mu0 / (mu0 + mu),
+// The moon's disc (the MOON builds: a sky with a DirectionalLight whose body is "moon"): a
+// hard disc out to the sun's outer edge, its rim anti-aliased over 2% of its radius, lit from
+// the sun as a ball of dust is (Lommel and Seeliger: 2 mu0 / (mu0 + mu),
 // mu0 the sunlight's cosine at the ball's point seen, mu the eye's): a full moon even to its
 // edge, a crescent, and all across it the Earth's light (earthshine: EARTHSHINE times a Lambert
 // sphere's phase function at the Earth's phase seen from the moon, the angle between the ways
@@ -29,6 +30,8 @@ uniform vec3 sky_moon_direction;  // unit, towards the moon (its disc, MOON; its
 uniform vec3 sky_moon_color;      // its disc lit head on (an atmosphere's: through the air)
 uniform vec3 sky_moon_light;      // its light: the disc's colour times its phase's share (the clouds it lights)
 const float MOON_RADIUS_SINE = 0.0447101778;   // sin of the disc's edge from its centre (cos 0.9990)
+const float MOON_RIM = 0.02;   // its rim fades over this share of its radius, about the edge (sky.py moon_cover)
+const float MOON_LIMB = 0.999;
 
 float earthshine() {
     const float PI = 3.14159265;
@@ -39,9 +42,12 @@ float earthshine() {
 vec3 moon_disc(vec3 d) {
     float cos_moon = clamp(dot(d, sky_moon_direction), -1.0, 1.0);
     vec3 across = (d - cos_moon * sky_moon_direction) / MOON_RADIUS_SINE;
+    float reach = length(across);
+    float cover = clamp((1.0 + 0.5 * MOON_RIM - reach) / MOON_RIM, 0.0, 1.0) * step(0.0, cos_moon);
+    across *= min(reach, MOON_LIMB) / max(reach, 1e-30);   // (the rim: the law read at the limb, sky.py MOON_LIMB)
     float facing = sqrt(max(1.0 - dot(across, across), 0.0));
     float lit = max(dot(across - sky_moon_direction * facing, sky_sun_direction), 0.0);
-    return disc_strength(cos_moon) * (2.0 * lit / max(lit + facing, 1e-4) + earthshine()) * sky_moon_color;
+    return cover * (2.0 * lit / max(lit + facing, 1e-4) + earthshine()) * sky_moon_color;
 }
 #define MOON_DISC(d) + moon_disc(d)
 #else
