@@ -30,6 +30,7 @@ from components.tracking import (
     direction,
     finite,
     integer,
+    warn_component,
 )
 from components.visibility import LAYER_FIELDS, ShownLayers
 
@@ -284,7 +285,9 @@ class PointLight(TrackedComponent):
     point of the sphere nearest each reflected ray, ``shaders/include/ggx.glsl``
     ``sphere_highlight``).  Its diffuse light is a point's; its shadow from its cube is soft,
     the sphere's penumbra (percentage-closer soft shadows: ``shaders/include/shadows.glsl``
-    ``soft_cube_shadow``, with the "grid" shadow filter).  At most ``MAX_LIGHT_RADIUS`` (10 m).
+    ``soft_cube_shadow``, with the "grid" shadow filter).  At most ``MAX_LIGHT_RADIUS`` (10 m);
+    its range is measured from its centre, so a radius reaching it (the light falls to zero
+    inside the sphere) is warned.
 
     ``rectangle`` (metres, (width, height); default (0, 0): a point) makes it a rectangle of
     light, as a ceiling panel, a softbox or a window's glow is (Unreal's and three.js's rect
@@ -371,7 +374,9 @@ class PointLight(TrackedComponent):
         if name == "range":
             # At most a camera's far plane: the range is the shadow cube's far plane, whose
             # perspective overflows float32 near its top (3.4e38 cast no shadow, silently).
-            return finite(self, name, value, positive=True, high=MAX_FAR)
+            value = finite(self, name, value, positive=True, high=MAX_FAR)
+            _say_sphere_past_range(getattr(self, "radius", 0.0), value)
+            return value
         if name == "spot_angle":
             value = finite(self, name, value, low=MIN_SPOT_ANGLE, high=180.0)
             if MAX_COOKIE_SPOT_ANGLE < value < 180.0 and getattr(self, "cookie", None) is not None:
@@ -388,6 +393,7 @@ class PointLight(TrackedComponent):
                 raise ComponentValueError(
                     f"PointLight.radius = {value:g}: this light is a rectangle (rectangle = {self.rectangle!r}); a "
                     "light is a sphere, a tube or a rectangle, not two: set rectangle = (0, 0) first")
+            _say_sphere_past_range(value, getattr(self, "range", 10.0))
             return value
         if name == "rectangle":
             return self._rectangle(value)
@@ -428,6 +434,16 @@ class PointLight(TrackedComponent):
                 f"PointLight.rectangle = {value!r}: this light is a tube (length = {self.length:g}); a light is a "
                 "sphere, a tube or a rectangle, not two: set length = 0 first")
         return (width, height)
+
+
+def _say_sphere_past_range(radius: float, reach: float) -> None:
+    """Warn of a sphere light whose ``radius`` reaches its ``range``: its light falls to zero
+    at the range from its centre, inside the sphere, so it lights nothing outside it (said
+    once, when the second of the two is given)."""
+    if radius > 0.0 and radius >= reach:
+        warn_component(f"PointLight.radius = {radius:g} reaches its range = {reach:g}: its light falls to zero "
+                       "at the range from its centre, inside the sphere, so it lights nothing outside it; give it "
+                       "a range past its radius")
 
 
 def _not_pair(value: Any) -> bool:

@@ -122,6 +122,39 @@ def test_radius_is_checked():
     assert PointLight(radius=0.05).radius == 0.05
 
 
+def test_a_sphere_whose_radius_reaches_its_range_is_warned_as_either_is_given(scene):
+    """A sphere light's range is measured from its centre, so one whose radius reaches its
+    range lights nothing outside itself: said once when the second of the two is given (at
+    construction or written later), naming both; and so it is: a floor 1.5 m below a
+    sphere of 1.4 m with range 1.4 stays black, where range 3 lights it."""
+    from components import ComponentWarning
+    with pytest.warns(ComponentWarning, match=r"PointLight.radius = 1.4 reaches its range = 1.4"):
+        PointLight(range=1.4, radius=1.4)
+    light = PointLight(range=3.0, radius=1.4)
+    with pytest.warns(ComponentWarning, match=r"PointLight.radius = 1.4 reaches its range = 1"):
+        light.range = 1.0
+    light = PointLight(range=3.0)
+    with pytest.warns(ComponentWarning, match=r"PointLight.radius = 5 reaches its range = 3"):
+        light.radius = 5.0
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        PointLight(range=1.5, radius=1.4)
+        PointLight(range=0.5)
+
+    def frame(reach):
+        def build(world):
+            look_from(world, (0.0, 1.0, 3.0), (0.0, 0.0, -1.0), fov=50.0)
+            world.spawn(Skybox(faces=np.zeros((6, 4, 4, 3), np.float32)))
+            world.spawn(Transform(), MeshRef(plane(30.0, 30.0)), Material(roughness=0.6, environment_reflection=0.0))
+            world.spawn(Transform(position=(0.0, 1.5, -1.0)), PointLight(intensity=3.0, range=reach, radius=1.4))
+        shown, eye, rays = green_and_rays(scene, build, SIZE)
+        return shown[(-eye[1] / rays[:, 1] > 0.0)]
+    with pytest.warns(ComponentWarning):
+        short = frame(1.4)
+    assert short.max() < 1e-3 and (frame(3.0) > 0.05).sum() > 500
+
+
 def test_a_sphere_lights_image_in_a_mirror_keeps_its_radius(scene):
     """Through a mirror that carries light the light's image is a sphere of the same radius
     (a mirror keeps lengths): the VirtualLights block's row gives it to the scene shader,
