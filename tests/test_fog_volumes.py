@@ -28,13 +28,16 @@ BLUE = ((-1.8, 1.0, -0.5), (3.0, 3.0, 3.0), 0.0, 0.45, (0.3, 0.5, 0.9))
 BEHIND = ((0.5, 1.0, 3.0), (3.0, 2.0, 2.0), 0.0, 0.8, (0.8, 0.8, 0.8))   # behind the eye, seen in the mirror
 
 
-def _with(volumes, fog: Fog | None = None, mirror: bool = False):
+def _with(volumes, fog: Fog | None = None, mirror: bool = False, scale=(1.0, 1.0, 1.0)):
+    """``_scene`` with ``volumes`` on entities of their own, each Transform scaled by ``scale``
+    (which a volume leaves out: its ``size`` alone gives its ellipsoid)."""
     base = _scene(fog, mirror)
 
     def build(world):
         base(world)
         for centre, size, yaw, density, colour in volumes:
-            world.spawn(Transform(position=centre, rotation=glm.angleAxis(math.radians(yaw), glm.vec3(0, 1, 0))),
+            world.spawn(Transform(position=centre, rotation=glm.angleAxis(math.radians(yaw), glm.vec3(0, 1, 0)),
+                                  scale=scale),
                         FogVolume(size=size, density=density, color=colour))
     return build
 
@@ -83,10 +86,12 @@ def _over(colour: np.ndarray, a: np.ndarray, b: np.ndarray, volumes, fog: Fog | 
 def test_the_floor_is_fogged_by_the_volumes_it_is_seen_through(scene, case):
     """Each floor pixel is the clear frame's fogged by the orange bank (alone, no camera Fog:
     the FOG build comes for the volume), or by the bank, the blue ball it overlaps and the
-    camera's uniform fog, along its way from the eye."""
+    camera's uniform fog, along its way from the eye, the volumes' entities scaled (2, 0.5,
+    1.5): a volume leaves its entity's scale out, so the fog is the same ellipsoids' (the
+    ground truth's, from the components' numbers alone)."""
     volumes, fog = ([ORANGE], None) if case == "one" else ([ORANGE, BLUE], Fog(color=tuple(FOG_COLOR), density=0.03))
     clear_runner, clear = _frame(scene, _scene(None))
-    runner, foggy = _frame(scene, _with(volumes, fog))
+    runner, foggy = _frame(scene, _with(volumes, fog, scale=(1.0, 1.0, 1.0) if case == "one" else (2.0, 0.5, 1.5)))
     assert ("FOG_VOLUMES", str(len(volumes))) in runner.engine.renderer.fog.defines
     floor = (runner.ids() == runner.world.resources["ids"]["floor"]).reshape(-1)
     eye, rays = pixel_rays(runner.engine.main_view, runner.size)

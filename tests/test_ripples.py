@@ -75,10 +75,12 @@ def pond(ripples: Ripples | None, size=(4.0, 4.0), centre=(0.0, 0.0, 0.0), splas
     return build, held
 
 
-def run(scene, build, frames: int, size=(32, 24)):
+def run(scene, build, frames: int, size=(32, 24), antialias: str | None = None):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")   # (a still water: no waves, said)
         runner = scene(build, size)
+        if antialias is not None:
+            runner.engine.renderer.antialias = antialias
         rgb = None
         for _ in range(frames):
             rgb = runner.frame(DT)
@@ -89,15 +91,16 @@ def heights(runner, held) -> np.ndarray:
     return runner.engine.renderer.ripples.heights(held["water"])
 
 
-def field_normals(runner, held) -> np.ndarray:
+def field_normals(runner, held, strength: float = 1.0) -> np.ndarray:
     """The normal of a flat water's surface (y up) at each texel of its field read back: up
     less the height's world gradient (central differences, each texel axis taken to the world
-    by the atlas's texel rows), [row, column, 3]."""
+    by the atlas's texel rows) times ``strength`` (``Ripples.strength``: the slopes drawn),
+    [row, column, 3]."""
     atlas = runner.engine.renderer.ripples
     tile, water = atlas.waters[held["water"]]
     u_row, v_row = water.texel_rows(tile)
     along_v, along_u = np.gradient(heights(runner, held).astype(np.float64))   # (metres a texel)
-    normal = np.array([0.0, 1.0, 0.0]) - (along_u[..., None] * u_row[:3] + along_v[..., None] * v_row[:3])
+    normal = np.array([0.0, 1.0, 0.0]) - strength * (along_u[..., None] * u_row[:3] + along_v[..., None] * v_row[:3])
     return normal / np.linalg.norm(normal, axis=-1, keepdims=True)
 
 
@@ -619,13 +622,17 @@ def test_a_moving_water_carries_its_rings_along(scene):
                                             + 1.0)
 
 
-def test_the_rings_tilt_the_surface_the_way_their_slopes_go(scene):
+def test_the_rings_tilt_the_surface_the_way_their_slopes_go_as_far_as_their_strength_says(scene):
     """Over a dark floor under a bright, even sky a pixel of the water is as bright as the
     share Fresnel reflects at the angle between its eye ray and the surface's normal, so the
     rings' brightening and darkening follow where each ring's side faces: the frame's change
     (against the same pond with no Ripples) against Schlick's weight at the normal the field
-    read back gives (up less the height's gradient: the surface of the height field) over the
-    flat one's, pixel by pixel.  A tilt the wrong way would turn the correlation over."""
+    read back gives (up less the height's gradient: the surface of the height field; taken
+    bilinearly between texel centres, as the filtered field is read) over the flat one's,
+    times the sky less what the calm water shows under its reflection, pixel by pixel, in
+    size as well as in sign.  A tilt the wrong way would turn the correlation over.
+    ``Ripples.strength`` scales the slopes drawn: the same field drawn at 2 tilts the surface
+    as twice its slopes do, at 0 not at all (the calm water's frame)."""
     def dark_floor(ripples):
         build, held = pond(ripples, splashes=[(0.1, 0.03, (0.0, 0.0, 0.0))], eye=(0.0, 1.2, 2.0),
                            target=(0.0, 0.0, 0.0),
@@ -640,29 +647,54 @@ def test_the_rings_tilt_the_surface_the_way_their_slopes_go(scene):
     size = (160, 120)
     rippled_build, held = dark_floor(Ripples(speed=0.5, damping=0.0, cell=0.02))
     plain_build, _ = dark_floor(None)
-    rippled, frame = run(scene, rippled_build, 20, size)
-    _, plain = run(scene, plain_build, 20, size)
+    rippled, frame = run(scene, rippled_build, 20, size, antialias="off")
+    _, plain = run(scene, plain_build, 20, size, antialias="off")
     atlas = rippled.engine.renderer.ripples
-    normals = field_normals(rippled, held)
     eye, directions = pixel_rays(rippled.engine.main_view, size)
     t = -eye[1] / directions[..., 1]
     at = eye + directions * t[..., None]
     on = (t > 0) & (np.abs(at[..., 0]) < 1.9) & (np.abs(at[..., 2]) < 1.9)
     texel = atlas.to_texels(held["water"], at.reshape(-1, 3)).reshape(*size[::-1], 2)
-    ix = np.clip(texel[..., 0].astype(int), 1, normals.shape[1] - 2)
-    iy = np.clip(texel[..., 1].astype(int), 1, normals.shape[0] - 2)
-    normal = normals[iy, ix]
+    sky = 0.8
 
     def schlick(n):
         cosine = np.clip(np.sum(n * -directions, axis=-1), 0.0, 1.0)
         return 0.02 + 0.98 * (1.0 - cosine) ** 5
 
-    predicted = schlick(normal) - schlick(np.array([0.0, 1.0, 0.0]))
-    seen = (srgb_to_linear(frame) - srgb_to_linear(plain)).mean(axis=-1)
-    ringed = on & (np.abs(predicted) > 0.002)
-    assert ringed.sum() > 150, ringed.sum()
-    correlation = np.corrcoef(predicted[ringed], seen[ringed])[0, 1]
-    assert correlation > 0.8, correlation
+    flat = schlick(np.array([0.0, 1.0, 0.0]))
+    calm = srgb_to_linear(plain).mean(axis=-1)
+    below = (calm - flat * sky) / (1.0 - flat)   # (what the calm water shows under its reflection)
+
+    def held_to(strength: float, frame: np.ndarray) -> tuple[float, float]:
+        """The frame's change against the prediction at the field's slopes times
+        ``strength``: their correlation, and the least-squares gain of the one on the other."""
+        normals = field_normals(rippled, held, strength)
+        x = np.clip(texel[..., 0] - 0.5, 1.0, normals.shape[1] - 3.0)   # (texel centres at + 0.5)
+        y = np.clip(texel[..., 1] - 0.5, 1.0, normals.shape[0] - 3.0)
+        x0, y0 = x.astype(int), y.astype(int)
+        ax, ay = (x - x0)[..., None], (y - y0)[..., None]
+        normal = (normals[y0, x0] * (1 - ax) * (1 - ay) + normals[y0, x0 + 1] * ax * (1 - ay)
+                  + normals[y0 + 1, x0] * (1 - ax) * ay + normals[y0 + 1, x0 + 1] * ax * ay)
+        normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+        predicted = (schlick(normal) - flat) * (sky - below)
+        seen = srgb_to_linear(frame).mean(axis=-1) - calm
+        ringed = on & (np.abs(predicted) > 0.002)
+        assert ringed.sum() > 150, ringed.sum()
+        p, s = predicted[ringed], seen[ringed]
+        return np.corrcoef(p, s)[0, 1], float(p @ s / (p @ p))
+
+    field = heights(rippled, held).copy()
+    (_, ripples), = rippled.world.query_one(Ripples)
+    for strength in (1.0, 2.0, 0.0):
+        if strength != 1.0:   # (the same field drawn again: no time passes)
+            ripples.strength = strength
+            frame = rippled.frame(0.0)
+            np.testing.assert_array_equal(heights(rippled, held), field)
+        if strength > 0.0:
+            correlation, gain = held_to(strength, frame)
+            assert correlation > 0.97 and abs(gain - 1.0) < 0.05, (strength, correlation, gain)
+        else:
+            np.testing.assert_allclose(srgb_to_linear(frame), srgb_to_linear(plain), atol=1e-6)
 
 
 def test_the_rings_gather_the_suns_light_under_the_water_where_a_ray_tracer_does(scene):

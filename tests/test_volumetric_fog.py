@@ -389,18 +389,18 @@ def test_bad_values_are_refused_naming_the_field(field, value):
         VolumetricFog(**{field: value})
 
 
-def test_the_albedo_scatters_each_colour_by_its_share(scene):
+def test_the_albedo_and_intensity_scatter_each_colour_by_their_share(scene):
     """``VolumetricFog.albedo``: each channel of the march is the white air's times its share
     (the same steps at the same points: to float rounding), the sun's shafts and the
-    lamps' alike; given while running (a still camera, its march kept) it is marched again
-    the next frame."""
+    lamps' alike, and times ``intensity`` (2.5 here: the air's scattering boosted); given
+    while running (a still camera, its march kept) it is marched again the next frame."""
     white = scene(lambda world: _hall(world, VolumetricFog(steps=32)), SIZE)
     white.frame()
     plain = marched_light(white)[..., :3].astype(np.float64)
     share = np.array([1.0, 0.5, 0.25])
-    tinted = scene(lambda world: _hall(world, VolumetricFog(steps=32, albedo=tuple(share))), SIZE)
+    tinted = scene(lambda world: _hall(world, VolumetricFog(steps=32, albedo=tuple(share), intensity=2.5)), SIZE)
     tinted.frame()
-    np.testing.assert_allclose(marched_light(tinted)[..., :3], plain * share, rtol=1e-5, atol=1e-8)
+    np.testing.assert_allclose(marched_light(tinted)[..., :3], plain * share * 2.5, rtol=1e-5, atol=1e-8)
     assert plain.max() > 0.05
     white.frame()   # (still: the march kept)
     marches = white.engine.renderer.volumetric_fog.marches

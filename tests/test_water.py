@@ -47,10 +47,10 @@ def uniform_sky(value: float) -> Skybox:
 
 
 def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), ior: float = 1.333,
-         reflect_rate: float = 1.0) -> None:
+         reflect_rate: float = 1.0, tint=(1.0, 1.0, 1.0)) -> None:
     """A uniform sky over a flat pond at y = 0 (a clear water surface unless ``water_colour``
-    says otherwise) with a floor of colour FLOOR a metre below it, lit by no light but the
-    sky's ambient light."""
+    says otherwise, its reflection tinted ``tint``: ``Mirror.color``) with a floor of colour
+    FLOOR a metre below it, lit by no light but the sky's ambient light."""
     eye = glm.vec3(eye)
     world.spawn(Transform(position=eye, rotation=look_rotation(glm.vec3(target) - eye)), Camera(fov_y=60.0))
     world.spawn(uniform_sky(SKY))
@@ -58,7 +58,7 @@ def pool(world, water: bool, eye, target, *, water_colour=(1.0, 1.0, 1.0, 0.0), 
                 Material(color=(FLOOR, FLOOR, FLOOR, 1.0), roughness=1.0, environment_reflection=0.0), Emissive(1.0))
     if water:
         world.spawn(Transform(rotation=FLAT), MeshRef(quad(200.0, 200.0)), Material(color=water_colour),
-                    Mirror(reflect_rate=reflect_rate), Water(ior=ior))
+                    Mirror(reflect_rate=reflect_rate, color=tint), Water(ior=ior))
 
 
 def render(scene, build, size=(64, 96), frames: int = 2, dt: float = 1.0 / 60.0):
@@ -114,16 +114,21 @@ def test_the_reflection_is_weighted_by_schlicks_fresnel_for_the_waters_index(sce
         assert expected.max() > 0.5   # grazing: the reflection dominates
 
 
-@pytest.mark.parametrize("ior, reflect_rate", [(1.5, 1.0), (2.0, 1.0), (2.0, 0.5)])
-def test_the_weight_follows_the_index_and_reflect_rate_scales_it(scene, ior, reflect_rate):
+@pytest.mark.parametrize("ior, reflect_rate, tint", [(1.5, 1.0, (1.0, 1.0, 1.0)), (2.0, 1.0, (1.0, 1.0, 1.0)),
+                                                     (2.0, 0.5, (1.0, 0.5, 0.1))])
+def test_the_weight_follows_the_index_and_reflect_rate_scales_it(scene, ior, reflect_rate, tint):
     """Looking straight down the weight is F0 for the index given (0.04 for glass's 1.5, 1/9
-    for 2), not a constant, times the Mirror's reflect_rate."""
+    for 2), not a constant, times the Mirror's reflect_rate; the Mirror's colour tints what
+    is reflected, channel by channel (F x tint x sky over (1 - F) x what is below)."""
     eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
-    runner, water = render(scene, lambda w: pool(w, True, eye, target, ior=ior, reflect_rate=reflect_rate))
+    runner, water = render(scene, lambda w: pool(w, True, eye, target, ior=ior, reflect_rate=reflect_rate, tint=tint))
     _, floor = render(scene, lambda w: pool(w, False, eye, target))
     col, row = runner.project((0.0, 0.0, 0.0))  # straight below the eye: normal incidence
     weight = (water[row, col, 0] - floor[row, col, 0]) / (SKY - floor[row, col, 0])
-    assert weight == pytest.approx(reflect_rate * ((ior - 1.0) / (ior + 1.0)) ** 2, abs=0.004)
+    f = reflect_rate * ((ior - 1.0) / (ior + 1.0)) ** 2
+    assert weight == pytest.approx(f, abs=0.004)
+    expected = f * np.asarray(tint) * SKY + (1.0 - f) * floor[row, col]
+    np.testing.assert_allclose(water[row, col], expected, atol=0.004)
 
 
 def test_looking_down_shows_what_is_under_the_surface_and_grazing_shows_the_reflection(scene):

@@ -137,13 +137,15 @@ def test_from_above_the_water_column_fogs_what_is_below_and_the_bank_is_clear(sc
 
 
 @ABSORPTIONS
-@pytest.mark.parametrize("light", ["sun", "lamp", "panel", "sky"])
+@pytest.mark.parametrize("light", ["sun", "slanted_sun", "lamp", "panel", "sky"])
 def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light, absorption):
-    """A grey floor a metre under a murky pond, lit by one light: a sun straight down, a lamp
-    a metre over the pond, a small panel there facing down (a rectangle light's own falloff:
-    its light through the water lost once), or the uniform sky alone.  Its light came down through the metre
-    of water (exp(-density)), and keeps exp(-density) on the way up to the eye looking
-    straight down (the pond reflecting nothing)."""
+    """A grey floor a metre under a murky pond, lit by one light: a sun straight down, a sun
+    53.1 degrees off straight down (its way through the metre of water 1 / cos = 5/3 m long),
+    a lamp a metre over the pond, a small panel there facing down (a rectangle light's own
+    falloff: its light through the water lost once), or the uniform sky alone.  Its light
+    came down through the water along its own way (exp(-density x length)), and keeps
+    exp(-density) on the way up to the eye looking straight down (the pond reflecting
+    nothing)."""
     eye, target = (0.0, 3.0, 0.0), (0.0, 0.0, -0.01)
 
     def build(density: float):
@@ -157,6 +159,8 @@ def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light
                             PointLight(intensity=5.0, range=20.0, rectangle=(0.2, 0.2)))
             elif light == "sun":
                 world.spawn(DirectionalLight(direction=(0.0, -1.0, 0.0), intensity=1.0))
+            elif light == "slanted_sun":
+                world.spawn(DirectionalLight(direction=(0.8, -0.6, 0.0), intensity=4.0))
         return b
 
     runner, fogged = render(scene, build(DENSITY))
@@ -164,7 +168,8 @@ def test_the_light_comes_down_through_the_water_to_what_is_under_it(scene, light
     col, row = runner.project((0.0, -1.0, 0.0))
     assert 0.1 < clear[row, col].max() < 0.9, clear[row, col]  # lit, not clipped
     kept = kept_through(1.0, absorption)
-    np.testing.assert_allclose(fogged[row, col], clear[row, col] * kept * kept + np.array(FOG) * (1.0 - kept),
+    came = kept_through(1.0 / 0.6 if light == "slanted_sun" else 1.0, absorption)   # (the light's way down)
+    np.testing.assert_allclose(fogged[row, col], clear[row, col] * came * kept + np.array(FOG) * (1.0 - kept),
                                atol=0.01)
 
 
