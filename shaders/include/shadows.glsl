@@ -8,6 +8,10 @@
 // up is moved off the surface along its geometric normal, more at grazing light, by the
 // texel's world size: Holbein's "normal offset shadows", 2011) plus the slope-scaled depth
 // offset the caster pass draws with; nothing is offset along the light, so contact is kept.
+// A sun's grid of taps compares each with the receiver's own plane (receiver-plane depth
+// bias), so its push stays a texel whatever the softness (a push as wide as the filter moved
+// a grazing sun's shadow edges in by it); a lamp's cube and a spot's map still push by the
+// filter's reach.
 // MAX_POINT_SHADOWS (the cube samplers below) and MAX_SHADOW_RINGS are engine/render/shadows.py's,
 // defined by the shader library.  SHADOW_RINGS (the ring entries read) is compiled in while
 // a light has cascades: rings about the camera in atlas tiles of their own, whose lookup
@@ -81,6 +85,30 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float so
 #endif
 }
 
+// The same with each tap compared with the receiver's own plane there (receiver-plane depth
+// bias: ``slope``, its depth per uv of the atlas, held to a slope of 8), less a texel's
+// worth of it (the 2 x 2 texels a bilinear comparison reads lie up to a texel off the tap):
+// a surface does not shadow itself across the filter's width, so the point needs moving off
+// it by no more than a texel, whatever the softness (a wider push moved a grazing light's
+// shadow edges in: 3.9 texels at softness 1, the shadow gone at 4).  The suns' grid.
+float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float softness, vec2 slope) {
+#ifdef SHADOW_SINGLE_TAP
+    return texture(atlas, p);
+#else
+    slope = clamp(slope, vec2(-8.0), vec2(8.0));
+    vec2 step = n > 1 ? texel * softness / float(n - 1) : vec2(0.0);
+    vec2 start = p.xy - 0.5 * step * float(n - 1);
+    float z = p.z;
+    float lit = 0.0;
+    for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x) {
+            vec2 at = start + step * vec2(x, y);
+            lit += texture(atlas, vec3(at, z + dot(slope, at - p.xy)));
+        }
+    return lit / float(n * n);
+#endif
+}
+
 #if (defined(SOFT_POINT_SHADOWS) || defined(SOFT_SUN_SHADOWS)) && !defined(SHADOW_SINGLE_TAP)
 // The k-th of ``count`` taps on a Vogel disc (a golden-angle spiral) of radius 1, the same at
 // every pixel: the soft shadows' blocker searches and filters.
@@ -149,7 +177,7 @@ float directional_lookup(int i, vec3 p, vec4 params, vec2 scale, vec2 slope, vec
     if (size.y > 0.0)
         return soft_sun_shadow(p, params.x / params.z / scale.x, params.z, scale.x, size, slope / scale, tile);
 #endif
-    return filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y);
+    return filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y, slope / scale);
 }
 
 #ifdef SHADOW_RINGS
@@ -238,13 +266,14 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     vec4 params = shadows.directional_params[i];
     if (params.w == 0.0) return 1.0;
     float nl = clamp(dot(normal, l), 0.0, 1.0);
-    // Off the surface by about the filter's reach in texels, more as the light grazes it.
-    float grazing = (1.0 + params.y) * (1.5 - nl);
+    // Off the surface by a texel, more as the light grazes it (the filter's taps follow the
+    // receiver's plane: filtered_shadow).
+    float grazing = 1.5 - nl;
     mat4 to_map = shadows.directional_matrix[i];
     vec3 at = (to_map * vec4(position, 1.0)).xyz;  // the point in the level map's coordinates
     vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
     vec2 slope = vec2(0.0);
-#if defined(SOFT_SUN_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
+#ifndef SHADOW_SINGLE_TAP
     // The receiver's plane in the map: two ways along the surface carried into it, the depth
     // per uv of the plane they span (receiver-plane depth bias, without screen derivatives).
     vec3 t1 = normalize(cross(normal, abs(normal.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
