@@ -116,6 +116,13 @@ def ambient_sh(world: World, sun: SkySun | None = None, clouds: CloudShape | Non
     return hemisphere_sh(DEFAULT_SKY, DEFAULT_GROUND)
 
 
+def _live(world: World, said: set[int]) -> set[int]:
+    """The entities of a said-once set ``said`` that are alive: deleted ones are let go when a
+    new one is said to (one deleted after ``World.deleted`` was read, by a later stage, too),
+    so such a set holds at most the warned entities alive at once, plus one."""
+    return {entity for entity in said if world.exists(entity)}
+
+
 class PrepareSystem(esper.Processor):
     def __init__(self, world: World, renderer: Renderer) -> None:
         self.world = world
@@ -157,6 +164,7 @@ class PrepareSystem(esper.Processor):
     def process(self, dt: float) -> None:
         world = self.world
         renderer = self.renderer
+        self._forget_deleted()
         sky_changed = self._sky()
         if not shadows_served(self._probe_clouds, self._clouds):   # (the probes' captures relit)
             self._probe_clouds = self._clouds
@@ -326,9 +334,20 @@ class PrepareSystem(esper.Processor):
             if state.water is not None and (water := self.world.try_get(entity, Water)) is not None:
                 yield entity, state, water
 
+    def _forget_deleted(self) -> None:
+        """The said-once sets (``_caustic_still``, ``_unboxed``) let go of the entities deleted
+        since the last frame, so a long run that makes and deletes warned waters holds no more
+        (ids are never given twice in a world: a new water is a new id, said to again)."""
+        deleted = self.world.deleted()
+        if deleted and (self._caustic_still or self._unboxed):
+            self._caustic_still -= deleted
+            self._unboxed -= deleted
+
     def _say_still(self, entity: int) -> None:
-        """Say, once, that the water on ``entity`` has caustics and no waves to gather with."""
+        """Say, once, that the water on ``entity`` has caustics and no waves to gather with
+        (those said to and deleted since, by a system after this stage, let go first)."""
         if entity not in self._caustic_still:
+            self._caustic_still = _live(self.world, self._caustic_still)
             self._caustic_still.add(entity)
             warnings.warn(ComponentWarning(
                 f"Water on entity {entity}: its caustics are the sun's light gathered by its waves, and it has none "
@@ -385,6 +404,7 @@ class PrepareSystem(esper.Processor):
                 continue
             if state.outline is None:
                 if entity not in self._unboxed:
+                    self._unboxed = _live(self.world, self._unboxed)
                     self._unboxed.add(entity)
                     warnings.warn(ComponentWarning(
                         f"Water on entity {entity}: its fog_density fogs a box under the water's outline, and its "

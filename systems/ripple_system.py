@@ -66,6 +66,7 @@ class RippleSystem(esper.Processor):
         self._cut = 0
 
     def process(self, dt: float) -> None:
+        self._forget_deleted()
         stats = self.renderer.stats
         atlas = self.renderer.ripples
         found = sorted(self.world.query_one(Ripples), key=lambda pair: pair[0])
@@ -74,6 +75,7 @@ class RippleSystem(esper.Processor):
                 atlas.release()
             self.loudness.clear()
             self._crossed.clear()
+            self._owed.clear()
             for entity, _ in self.world.query_one(Splash):   # (no rippling water to land in)
                 self.world.remove_component(entity, Splash)
             return
@@ -100,7 +102,7 @@ class RippleSystem(esper.Processor):
             if len(these) > MAX_RIPPLE_DROPS:
                 stats.ripple_drops_cut += len(these) - MAX_RIPPLE_DROPS
                 if ("drops", entity) not in self._said:
-                    self._said.add(("drops", entity))
+                    self._note_said("drops", entity)
                     warnings.warn(WaterLimitWarning(
                         f"Ripples on entity {entity}: {len(these)} drops in one frame, {MAX_RIPPLE_DROPS} are taken "
                         "(the rest counted in RenderStats.ripple_drops_cut)"), stacklevel=2)
@@ -221,18 +223,20 @@ class RippleSystem(esper.Processor):
                 water, x, y = landed
                 drops[water.entity].append((x, y, max(splash.radius / min(_spacing(water)), MIN_DROP_TEXELS),
                                             splash.depth))
+        owed_now: dict[int, float] = {}   # (the waters raining now only: a deleted one's fraction goes)
         for water, ripples in waters:
             if ripples.rain <= 0.0 or ripples.drop_depth <= 0.0:
                 continue
             area = float(np.linalg.norm(np.cross(water.edge_u, water.edge_v)))
             owed = self._owed.get(water.entity, 0.0) + ripples.rain * area * dt
             count = int(owed)
-            self._owed[water.entity] = owed - count
+            owed_now[water.entity] = owed - count
             if count:
                 nu, nv = water.texels
                 places = self._rain.random((count, 2)) * (nu, nv)
                 radius = max(ripples.drop_radius / min(_spacing(water)), MIN_DROP_TEXELS)
                 drops[water.entity] += [(float(x), float(y), radius, ripples.drop_depth) for x, y in places]
+        self._owed = owed_now
         return drops
 
     def _landing(self, waters: list[tuple[RippleWater, Ripples]], place: np.ndarray
@@ -264,8 +268,24 @@ class RippleSystem(esper.Processor):
 
     def _say_once(self, what: str, entity: int, warning: Warning) -> None:
         if (what, entity) not in self._said:
-            self._said.add((what, entity))
+            self._note_said(what, entity)
             warnings.warn(warning, stacklevel=4)
+
+    def _note_said(self, what: str, entity: int) -> None:
+        """Remember ``what`` said of ``entity``, letting go of what was said of entities
+        deleted since (by a stage after this one, after ``World.deleted`` was read): the set
+        holds what was said of live entities, plus this."""
+        world = self.world
+        self._said = {key for key in self._said if world.exists(key[1])}
+        self._said.add((what, entity))
+
+    def _forget_deleted(self) -> None:
+        """What was said once of an entity is let go when it is deleted, so a long run that
+        makes and deletes waters, wakes and splashes holds no more (ids are never given twice
+        in a world: a new entity is said to again)."""
+        deleted = self.world.deleted()
+        if deleted and self._said:
+            self._said = {key for key in self._said if key[1] not in deleted}
 
 
 def _spacing(water: RippleWater) -> tuple[float, float]:

@@ -510,24 +510,33 @@ def test_a_probe_gone_gives_back_its_row_and_its_light(scene):
 
 
 def test_more_boxes_than_the_shader_blends_are_reported(scene, caplog):
-    """MAX_IRRADIANCE_PROBES boxes at most reach the shader; one more is said in a warning,
-    once, and the frame is drawn."""
+    """MAX_IRRADIANCE_PROBES boxes at most reach the shader; the probe the full table leaves
+    out is said in a warning, once, naming the limit, its value, how many probes have
+    boxes and the entity of each probe left out (the one holding no row: not the last by
+    entity here, the later entities nearer and captured first), and the frame is drawn."""
     from engine.render.irradiance import MAX_IRRADIANCE_PROBES
+    probes = []
 
     def build(world):
         look_from(world, (0.0, 1.0, 4.0), target=(0.0, 1.0, 0.0))
         world.spawn(Transform(position=(0, 1, 0)), MeshRef(box()), Material())
         for i in range(MAX_IRRADIANCE_PROBES + 1):
-            world.spawn(Transform(position=(i * 3.0, 1.0, -10.0)),
-                        ReflectionProbe(resolution=8, refresh="once", influence=(2.0, 2.0, 2.0)))
+            probes.append(world.spawn(Transform(position=((MAX_IRRADIANCE_PROBES - i) * 3.0, 1.0, -10.0)),
+                                      ReflectionProbe(resolution=8, refresh="once", influence=(2.0, 2.0, 2.0))))
 
     runner = scene(build, (32, 24))
+    irradiance = runner.engine.renderer.irradiance
     with caplog.at_level("WARNING", logger="speculum"):
         runner.frame()
         runner.frame()
-    said = [r for r in caplog.records if "MAX_IRRADIANCE_PROBES" in r.getMessage()]
-    assert len(said) == 1 and str(MAX_IRRADIANCE_PROBES + 1) in said[0].getMessage()
-    assert runner.engine.renderer.irradiance._count == MAX_IRRADIANCE_PROBES
+    said = [r.getMessage() for r in caplog.records if "MAX_IRRADIANCE_PROBES" in r.getMessage()]
+    left_out = [probe for probe in probes if probe not in irradiance.rows]
+    assert len(left_out) == 1 and len(irradiance.rows) == MAX_IRRADIANCE_PROBES and left_out != probes[-1:]
+    assert len(said) == 1, said
+    assert f"MAX_IRRADIANCE_PROBES = {MAX_IRRADIANCE_PROBES} " in said[0]
+    assert f"and {MAX_IRRADIANCE_PROBES + 1} have influence boxes" in said[0]
+    assert f"the probes of entities {left_out} are left out" in said[0]
+    assert irradiance._count == MAX_IRRADIANCE_PROBES
 
 
 def test_lights_past_the_blocks_slots_light_nothing_and_are_counted(scene):

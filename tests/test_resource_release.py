@@ -52,6 +52,7 @@ from components import (
     Skybox,
     Transform,
     VolumetricFog,
+    Wake,
     Water,
     look_rotation,
     yaw_pitch_rotation,
@@ -59,6 +60,7 @@ from components import (
 from engine.assets.mesh import box, plane, quad, sphere
 from engine.assets.portals import spawn_portal_pair
 from engine.assets.texture_data import TextureData
+from engine.resources import Surfaces
 from tests.support import own_mesh
 from tests.test_model_placement import textured_box
 from tests.test_morph_targets import morphed_sheet
@@ -453,3 +455,123 @@ def _watch(world, entities, label):
                     if type(asset).__name__ in ("Mesh", "TextureData"):
                         watched.append((f"{label}: {kind}.{name}", weakref.ref(asset)))
     return watched
+
+
+def _warned_water(world) -> int:
+    """A water said to once by the prepare and ripple stages: caustics with no waves (no
+    normal map), a fog under an outline it has not (a box, its plane given) and ripples
+    on it (no outline to ripple in)."""
+    return world.spawn(Transform(position=(0.0, 0.5, 0.0)), MeshRef(box((1.0, 1.0, 1.0))),
+                       Material(color=(0.1, 0.3, 0.3, 0.3)),
+                       Mirror(plane_point=(0.0, 0.5, 0.0), plane_normal=(0.0, 1.0, 0.0)),
+                       Water(caustics=1.0, fog_density=0.5), Ripples())
+
+
+def _rainy_water(world) -> int:
+    """A flat water that ripples in the rain (the ripple stage keeps the drop it owes)."""
+    return world.spawn(Transform(position=(0.0, 0.05, 0.0), rotation=FLAT), MeshRef(quad(2.0, 2.0)),
+                       Material(color=(0.1, 0.3, 0.3, 0.3)), Mirror(), Water(), Ripples(rain=7.0))
+
+
+def _said_of(engine) -> dict[str, set[int]]:
+    """The entities each stage's said-once (and owed) state names."""
+    prepare, ripples = engine.stages["prepare"], engine.stages["ripples"]
+    return {"caustics with no waves": set(prepare._caustic_still), "fog with no outline": set(prepare._unboxed),
+            "ripples said": {entity for _, entity in ripples._said}, "rain owed": set(ripples._owed)}
+
+
+class _LateDeleter:
+    """A system run after the ripple stage that deletes what it is given, in the frame (after
+    the stages before it read ``World.deleted``)."""
+
+    def __init__(self, world) -> None:
+        self.world = world
+        self.due: list[int] = []
+
+    def process(self, dt: float) -> None:
+        for entity in self.due:
+            self.world.delete_entity(entity)
+        self.due = []
+
+
+def test_what_is_said_once_of_an_entity_is_let_go_when_the_entity_is_deleted(scene):
+    """Warned waters (caustics with no waves, a fog and ripples with no outline), wakes with
+    no Transform and a water owed rain, spawned, drawn and deleted in rounds beside a water
+    that ripples throughout: each round's are warned about anew (a world never gives an id
+    twice, so each is a new entity), and once they are deleted the prepare and ripple stages
+    hold none of their ids, so a long run's warnings hold no more memory.  Deleted by a
+    system after those stages, in the frame (round 1), they are let go when the next one is
+    said to (round 2)."""
+    runner = scene(stage, SIZE)
+    world = runner.world
+    engine = runner.engine
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # (its want of waves: said at its spawn)
+        keeper = _rainy_water(world)
+        runner.frame()
+    late = _LateDeleter(world)
+    ripple_priority = next(len(engine.schedule) - i for i, (name, _) in enumerate(engine.schedule) if name == "ripples")
+    world.add_system(late, priority=ripple_priority - 0.5)
+    seen: set[int] = set()
+    for n in range(3):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            waters = [_warned_water(world) for _ in range(2)]
+            wakes = [world.spawn(Wake(radius=0.2)) for _ in range(2)]
+            made = [*waters, *wakes, _rainy_water(world)]
+            runner.frame()
+            runner.frame()
+        assert min(made) > max(seen | {keeper}), f"round {n}: ids {made} given before ({sorted(seen)})"
+        seen |= set(made)
+        said = [str(w.message) for w in caught]
+        for water in waters:
+            for what in ("Water on entity {}: its caustics", "Water on entity {}: its fog_density",
+                         "Ripples on entity {}: its water's mesh is not one flat quad"):
+                assert sum(what.format(water) in s for s in said) == 1, f"round {n}: {what.format(water)} in {said}"
+        for wake in wakes:
+            assert sum(f"Wake on entity {wake}: it has no Transform" in s for s in said) == 1, said
+        held = _said_of(engine)
+        assert held["rain owed"] == {keeper, made[-1]} and set(waters) <= held["caustics with no waves"]
+        if n == 1:
+            late.due = made   # (deleted after the prepare and ripple stages read World.deleted)
+        else:
+            delete_all(world, made)
+        runner.frame()
+        runner.frame()
+        assert not any(world.exists(entity) for entity in made)
+        if n != 1:
+            assert {what: ids & seen for what, ids in _said_of(engine).items()} == \
+                {"caustics with no waves": set(), "fog with no outline": set(), "ripples said": set(),
+                 "rain owed": set()}, f"round {n}"
+
+
+def test_the_reflection_fallbacks_hold_nothing_of_surfaces_deleted_once_the_level_has_none(scene):
+    """A bumpy mirror and a water, each with no view of its own (``max_depth=0``: a fallback
+    shows the probe's reflection in them), drawn, then deleted with the probe: once the
+    garbage is collected no normal map, surface state or component of theirs is alive
+    (weak references), though no fallback is drawn again to replace what the last ones
+    were packed from."""
+    runner = scene(stage, SIZE)
+    world = runner.world
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        made = [world.spawn(Transform(position=(0.0, 1.0, -1.0)), MeshRef(quad(2.0, 1.5)),
+                            Material(normal_map=image("mirror bumps", 128)), Mirror(max_depth=0)),
+                world.spawn(Transform(position=(0.0, 0.05, 0.0), rotation=FLAT), MeshRef(quad(2.0, 2.0)),
+                            Material(color=(0.1, 0.3, 0.3, 0.3), normal_map=image("waves", 128)),
+                            Mirror(max_depth=0), Water()),
+                world.spawn(Transform(position=(0.0, 1.0, 0.0)), ReflectionProbe(resolution=16,
+                                                                                 influence=(8.0, 8.0, 8.0)))]
+        runner.frame()
+        runner.frame()
+    assert runner.stats.reflection_fallbacks >= 2
+    states = world.resources[Surfaces].mirrors
+    watched = _watch(world, made, "level") + [(f"state of {e}", weakref.ref(states[e])) for e in made[:2]]
+    del states
+    delete_all(world, made)
+    runner.frame()
+    runner.frame()
+    assert runner.stats.reflection_fallbacks == 0
+    gc.collect()
+    alive = [label for label, ref in watched if ref() is not None]
+    assert alive == [], alive

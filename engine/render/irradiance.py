@@ -416,7 +416,7 @@ class IrradianceTable:
         self.bounce_lit = False   # set about a volume point's capture that its grid's last round lights
         self._stale = False
         self._count = 0  # boxes in the block
-        self._warned = False
+        self._left_out: frozenset[int] = frozenset()  # the probes last said to get no row (_say_left_out)
         self._vao: moderngl.VertexArray | None = None
         self.projections = 0  # rows written since made (tests and the overlay read it)
 
@@ -467,11 +467,6 @@ class IrradianceTable:
         whatever the GPU left there)."""
         kept = sorted((int(owner), tuple(map(float, centre)), tuple(float(v) / 2.0 for v in size), float(blend))
                       for owner, centre, size, blend in boxes)
-        if len(kept) > MAX_IRRADIANCE_PROBES and not self._warned:
-            LOG.warning("speculum: %d reflection probes with influence boxes; the ambient light blends from the "
-                        "first %d (MAX_IRRADIANCE_PROBES) by entity id, the rest light nothing", len(kept),
-                        MAX_IRRADIANCE_PROBES)
-            self._warned = True
         if kept != self._boxes:
             self._boxes = kept
             self._stale = True
@@ -540,14 +535,28 @@ class IrradianceTable:
         """Project probe ``owner``'s capture (its mip chain built) into its row: one draw of
         nine fragments, each summing one coefficient over the six faces of the cube's
         ``PROJECTION_FACE_SIZE``-texel level, every texel weighted by its solid angle.  False
-        when the table is full (the probe lights nothing; ``set_boxes`` warned)."""
+        when the table is full (the probe lights nothing: said, ``_say_left_out``)."""
         row = self._row_for(owner)
         if row is None:
+            self._say_left_out()
             return False
         self._project(cube, [((0, row, SH_COEFFICIENTS, 1), -1)])
         self.projections += 1
         self.renderer.checkpoint("probe irradiance projection")
         return True
+
+    def _say_left_out(self) -> None:
+        """Say which probes the full table leaves out of the ambient light (those with an
+        influence box and no row: the first ``MAX_IRRADIANCE_PROBES`` projected hold the
+        rows), when one is left out that was not when last said."""
+        left_out = frozenset(owner for owner, *_ in self._boxes if owner not in self.rows)
+        if left_out - self._left_out:
+            LOG.warning("speculum: the ambient light's irradiance table (Renderer.irradiance) has rows for "
+                        "MAX_IRRADIANCE_PROBES = %d reflection probes and %d have influence boxes: the first %d "
+                        "captured hold the rows, so the probes of entities %s are left out and add nothing to the "
+                        "ambient light", MAX_IRRADIANCE_PROBES, len(self._boxes), MAX_IRRADIANCE_PROBES,
+                        sorted(left_out))
+        self._left_out = left_out
 
     def project_volume_point(self, grid: VolumeGrid, index: tuple[int, int, int], cube: ProbeCube) -> None:
         """Project the capture of the volume's point ``index`` (its mip chain built) into its

@@ -589,7 +589,9 @@ class MirrorPasses:
         self._fallback_block = ctx.buffer(reserve=_FALLBACK_IDS_BYTES + 32 * FALLBACK_ROWS)
         self.fallback_chunk = FALLBACK_ROWS  # rows a fallback draw takes, at most FALLBACK_ROWS (fewer: more draws)
         self.rough_atlas = RoughAtlas(renderer)
-        self._fallback_table: tuple | None = None  # (states, probes, their pieces, water rows: prepare_fallbacks)
+        # (weak references to the states, their probes' blends, their pieces, water rows:
+        # _fallback_surfaces), let go when a state it was packed from goes (_keep_fallbacks)
+        self._fallback_table: tuple | None = None
         self._claim_buffer: moderngl.Buffer | None = None  # the claims' triangles (claim.vert), grown as needed
         self._reset_vao: moderngl.VertexArray | None = None
         self._claim_vao: moderngl.VertexArray | None = None
@@ -971,11 +973,12 @@ class MirrorPasses:
                            ) -> tuple[list[_FallbackSurface], list[int]]:
         """``fallback_surfaces(states)`` with each surface's probes of ``probes`` in its key
         and weights, and the rows of water surfaces (whose pieces the caller packs again),
-        kept while the states and the probes are the same objects (the table's, the same every
-        frame while no surface changes: ``surface_look`` keeps a state's look as long; the
-        extract stage's blends, while no probe or surface moves)."""
+        kept while the states are the same objects (the same every frame while no surface
+        changes: ``surface_look`` keeps a state's look as long) and their probes' blends the
+        same (while no probe or surface moves)."""
         kept = self._fallback_table
-        if kept is not None and kept[0] is states and kept[1] is probes:
+        blends = [probes.get(state.entity) for state in states]
+        if kept is not None and kept[1] == blends and [ref() for ref in kept[0]] == states:  # (a state: by identity)
             return kept[2], kept[3]
         found = fallback_surfaces(states)
         for row, piece in enumerate(found):
@@ -991,8 +994,24 @@ class MirrorPasses:
             found[row] = replace(piece, key=(variant, normal_map, *owners),
                                  weights=_FALLBACK_WEIGHTS.pack(w1, w2, 1.0, 0.0, look.plane_w, *look.offset))
         water = [row for row, piece in enumerate(found) if piece.look.water is not None]
-        self._fallback_table = (states, probes, found, water)
+        self._keep_fallbacks(states, blends, found, water)
         return found, water
+
+    def _keep_fallbacks(self, states: Sequence[SurfaceState], blends: list[ProbeBlend | None],
+                        found: list[_FallbackSurface], water: list[int]) -> None:
+        """Keep ``_fallback_surfaces``'s table, holding its states weakly: when one of them
+        goes (its surface changed or was deleted) the table is let go, so the pieces (their
+        normal maps, their waters' looks) do not outlive the surfaces when no fallback is
+        drawn again to replace them (a level left with no surface)."""
+        passes = weakref.ref(self)
+
+        def forget(gone: weakref.ref) -> None:
+            held = passes()
+            table = held._fallback_table if held is not None else None
+            if table is not None and any(ref is gone for ref in table[0]):
+                held._fallback_table = None
+
+        self._fallback_table = (tuple(weakref.ref(state, forget) for state in states), blends, found, water)
 
     def draw_fallbacks(self, parent: RenderTargets, level: RenderTargets | None, prepared: PreparedFallbacks,
                        parent_is_root: bool = False) -> None:

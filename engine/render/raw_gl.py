@@ -18,7 +18,9 @@ either, so the one-pass probe capture (a geometry shader choosing each triangle'
 ``gl_Layer``) draws into a framebuffer made here: the probe's cube map (moderngl's) as its
 colour attachment and a depth cube map of its own.  It is bound with raw calls for the
 pass; the next moderngl ``Framebuffer.use`` binds moderngl's again (it always binds), and
-the calls are checked with ``glGetError`` so a failure is named where it happens.
+the calls are checked with ``glGetError`` so a failure is named where it happens; an error
+already pending before them (left by earlier moderngl or engine work) is raised as such
+(``start_clean``), never taken for theirs nor dropped.
 
 A layered 2D-array target copied into the cube (``LayeredArrayTarget``): on an NVIDIA H200
 (driver 580.159.04, OpenGL 4.1 core through EGL, 2026-11-26) a cube map attached with
@@ -73,11 +75,13 @@ They bind nothing and change no state.
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
+from engine.core.errors import GLPassError
 from engine.render.bindings import bind_texture_now, invalidate
 
 _VOID_CALL = ctypes.CFUNCTYPE(None)
@@ -182,6 +186,33 @@ class MissingEntryPoints(RuntimeError):
     not broken)."""
 
 
+GL_ERROR_NAMES = {0x0500: "GL_INVALID_ENUM", 0x0501: "GL_INVALID_VALUE", 0x0502: "GL_INVALID_OPERATION",
+                  0x0503: "GL_STACK_OVERFLOW", 0x0504: "GL_STACK_UNDERFLOW", 0x0505: "GL_OUT_OF_MEMORY",
+                  0x0506: "GL_INVALID_FRAMEBUFFER_OPERATION"}
+_MAX_ERROR_FLAGS = 8  # glGetError calls that empty every flag a driver keeps (one an error kind, at most)
+
+
+def gl_error_name(code: int) -> str:
+    """``code`` (a ``glGetError`` answer) as its number and name, as in 0x500 (GL_INVALID_ENUM)."""
+    return f"0x{code:x} ({GL_ERROR_NAMES.get(code, 'GL_NO_ERROR' if not code else 'an unknown GL error')})"
+
+
+def start_clean(get_error: Callable[[], int], before: str) -> None:
+    """Before raw calls whose errors are checked (``glGetError`` after them): raise
+    ``GLPassError`` naming each error already pending, left by earlier moderngl or engine
+    work, so it is neither taken for the raw calls' own nor dropped unsaid; the flags are
+    read, so the context is clean after either way.  ``before``: what the calls do."""
+    pending = []
+    for _ in range(_MAX_ERROR_FLAGS):
+        code = get_error()
+        if not code:
+            break
+        pending.append(code)
+    if pending:
+        raise GLPassError(f"OpenGL error {', '.join(map(gl_error_name, pending))} was pending before {before} "
+                          "(left by earlier moderngl or engine work on this context, not by these raw GL calls)")
+
+
 def clear_images(ctx: moderngl.Context, framebuffer: moderngl.Framebuffer) -> None:
     """Clear the bound ``framebuffer`` to colour 0, integer ids 0 and depth far, each
     attachment with the clear call of its kind (glClearBufferfv for float colour and depth,
@@ -255,7 +286,7 @@ class RawGL:
         if not self.can_attach_cube_faces:
             raise RuntimeError("attaching a cube-map face needs GL entry points the loader lacks")
         gl = self._attach
-        gl["glGetError"]()  # start clean: what follows is checked
+        start_clean(gl["glGetError"], f"attaching face {face} level {level} of a cube map to a framebuffer")
         gl["glBindFramebuffer"](GL_FRAMEBUFFER, framebuffer.glo)
         gl["glFramebufferTexture2D"](GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_CUBE_MAP_POSITIVE_X + face,
                                      cube.glo, level)
@@ -266,7 +297,7 @@ class RawGL:
             self.ctx.fbo.use()
         if status != GL_FRAMEBUFFER_COMPLETE or error:
             raise RuntimeError(f"cube-map face {face} level {level} of {cube.size[0]} as a colour attachment: "
-                               f"framebuffer status 0x{status:x}, GL error 0x{error:x}")
+                               f"framebuffer status 0x{status:x}, GL error {gl_error_name(error)}")
 
     def flush(self) -> None:
         """Start the GPU (or llvmpipe's rasteriser threads) on every queued command."""
@@ -316,7 +347,7 @@ class LayeredCubeTarget:
         if missing:
             raise RuntimeError(f"layered cube-map capture needs GL entry points the loader lacks: {missing}")
         gl = self.gl
-        gl["glGetError"]()  # start clean: what follows is checked
+        start_clean(gl["glGetError"], f"making a layered cube-map target of {self.size}")
         name = _u(0)
         gl["glGenTextures"](1, ctypes.byref(name))
         self.depth = name.value
@@ -341,7 +372,7 @@ class LayeredCubeTarget:
         if status != GL_FRAMEBUFFER_COMPLETE or error:
             self.release()
             raise RuntimeError(f"layered cube-map target of {self.size}: framebuffer status 0x{status:x}, "
-                               f"GL error 0x{error:x}")
+                               f"GL error {gl_error_name(error)}")
 
     def bind(self) -> None:
         """Draw into all six faces from now on (until a moderngl framebuffer is used).  The
@@ -406,7 +437,7 @@ class LayeredArrayTarget:
         self.read_framebuffers: list[int] = []
         self.texture_binding = GL_TEXTURE_BINDING_2D_ARRAY
         gl = self.gl
-        gl["glGetError"]()  # start clean: what follows is checked
+        start_clean(gl["glGetError"], f"making a layered array target of {self.size}")
         problems = []
         try:
             self.texture = self._array(*(colour or ARRAY_RGBA16F))
@@ -431,7 +462,7 @@ class LayeredArrayTarget:
                     problems.append(f"layer {layer}'s read framebuffer status 0x{status:x}")
             error = gl["glGetError"]()
             if error:
-                problems.append(f"GL error 0x{error:x}")
+                problems.append(f"GL error {gl_error_name(error)}")
         finally:
             self.unbind()
         if problems:
@@ -467,7 +498,7 @@ class LayeredArrayTarget:
         while the cube is drawn into); then moderngl's framebuffer is bound again.  Raises
         RuntimeError naming the GL error a copy left."""
         gl = self.gl
-        gl["glGetError"]()  # start clean: what follows is checked
+        start_clean(gl["glGetError"], f"copying a layered array into the faces of a {self.size} cube")
         bind_texture_now(self.ctx, self.cube, unit)
         for face, read in enumerate(self.read_framebuffers):
             gl["glBindFramebuffer"](GL_READ_FRAMEBUFFER, read)
@@ -476,7 +507,7 @@ class LayeredArrayTarget:
         self.unbind()
         if error:
             raise RuntimeError(f"copying the layered array into the faces of a {self.size} cube: "
-                               f"GL error 0x{error:x}")
+                               f"GL error {gl_error_name(error)}")
 
     def release(self) -> None:
         framebuffers = [fb for fb in (self.framebuffer, *self.read_framebuffers) if fb]
@@ -526,7 +557,7 @@ class CubeMipTarget:
         size = max(1, self.cube.size[0] >> level)
         first = (level, face) not in self._complete
         if first:
-            gl["glGetError"]()  # start clean: what follows is checked
+            start_clean(gl["glGetError"], f"drawing into cube-map mip level {level} of {self.cube.size[0]}")
         if self._level is None:  # a build's first level
             invalidate(self.ctx)  # the viewport and scissor below are set behind moderngl's back
             gl["glBindFramebuffer"](GL_FRAMEBUFFER, self.framebuffer)
@@ -559,7 +590,7 @@ class CubeMipTarget:
                 self.done(unit)
                 where = "every face" if face is None else f"face {face}"
                 raise RuntimeError(f"cube-map mip level {level} ({where}) of {self.cube.size[0]}: framebuffer "
-                                   f"status 0x{status:x}, GL error 0x{error:x}")
+                                   f"status 0x{status:x}, GL error {gl_error_name(error)}")
             self._complete.add((level, face))
         return size
 

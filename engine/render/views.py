@@ -74,7 +74,7 @@ MAX_DIRECTIONAL_LIGHTS = 4
 MAX_POINT_LIGHTS = 16
 MAX_POINT_SHADOWS = 2  # cube samplers in shaders/include/shadows.glsl
 MAX_SHADOW_RINGS = MAX_SHADOW_CASCADES - 1  # a sun's cascades about the camera besides its level map
-MAX_IRRADIANCE_PROBES = 32   # influence boxes the scene shader blends from (more: the first kept, a warning)
+MAX_IRRADIANCE_PROBES = 32   # influence boxes the shader blends from (more: the first captured hold rows, a warning)
 # The irradiance table's rows (engine/render/irradiance.py): the probes', the environment
 # BRDF's, then from here the LTC table's of rectangle lights (shaders/include/rect_lights.glsl),
 # then the irradiance volumes' tiles (VOLUME_ROW, a slot of VOLUME_SLOT_ROWS a volume: tile
