@@ -179,6 +179,8 @@ class ProbeSystem(esper.Processor):
         schedule = self.scheduler.update()
         for owner in schedule.gone:
             probes.drop(owner)
+        if schedule.gone:
+            probes.project_waiting()   # (a row freed: a probe the full table left out takes it)
         if not self.probes:
             return
         limited = self.world.resources[RenderStats].view_budget is not None

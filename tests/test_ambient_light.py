@@ -513,7 +513,8 @@ def test_more_boxes_than_the_shader_blends_are_reported(scene, caplog):
     """MAX_IRRADIANCE_PROBES boxes at most reach the shader; the probe the full table leaves
     out is said in a warning, once, naming the limit, its value, how many probes have
     boxes and the entity of each probe left out (the one holding no row: not the last by
-    entity here, the later entities nearer and captured first), and the frame is drawn."""
+    entity here, the later entities nearer and captured first), and the frame is drawn.  When
+    a probe holding a row goes, the one left out takes it, though it is never captured again."""
     from engine.render.irradiance import MAX_IRRADIANCE_PROBES
     probes = []
 
@@ -536,6 +537,11 @@ def test_more_boxes_than_the_shader_blends_are_reported(scene, caplog):
     assert f"MAX_IRRADIANCE_PROBES = {MAX_IRRADIANCE_PROBES} " in said[0]
     assert f"and {MAX_IRRADIANCE_PROBES + 1} have influence boxes" in said[0]
     assert f"the probes of entities {left_out} are left out" in said[0]
+    assert irradiance._count == MAX_IRRADIANCE_PROBES
+    # A probe holding a row deleted: the one left out (captured once, never again) takes it.
+    runner.world.delete_entity(next(probe for probe in probes if probe in irradiance.rows))
+    runner.frame()
+    assert left_out[0] in irradiance.rows and len(irradiance.rows) == MAX_IRRADIANCE_PROBES
     assert irradiance._count == MAX_IRRADIANCE_PROBES
 
 

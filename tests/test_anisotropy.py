@@ -15,7 +15,7 @@ import pytest
 from pyglm import glm
 
 from components import ComponentValueError, Material, MeshRef, Mirror, PointLight, Skybox, Transform, look_rotation
-from engine.assets.mesh import plane, quad
+from engine.assets.mesh import Mesh, plane, quad
 from tests.support import look_from, pixel_rays, split_sum, srgb_to_linear
 
 SIZE = (96, 72)
@@ -23,12 +23,22 @@ EYE, LAMP, INTENSITY, RANGE = (0.0, 2.0, 3.0), np.array([0.3, 1.0, 0.5]), 3.0, 2
 ROUGHNESS = 0.35
 
 
-def floor_frame(scene, anisotropy: float, direction: float):
-    """The lit brushed floor (a white metal, its sky reflection off) under the lamp."""
+def mirrored_uv_plane(size: float) -> Mesh:
+    """The plane with its u running the other way (+u along -x, +v still along -z): the UVs of
+    a model's mirrored half, whose tangent frame is left-handed."""
+    flat = plane(size, size)
+    uvs = flat.uvs.copy()
+    uvs[:, 0] = 1.0 - uvs[:, 0]
+    return Mesh(flat.positions.copy(), flat.normals.copy(), uvs, flat.indices.copy(), name="mirrored uv plane")
+
+
+def floor_frame(scene, anisotropy: float, direction: float, mirrored: bool = False):
+    """The lit brushed floor (a white metal, its sky reflection off) under the lamp; ``mirrored``:
+    its UVs' u turned round."""
     def build(world):
         look_from(world, EYE, (0.0, 0.0, 0.0), fov=50.0)
         world.spawn(Transform(position=tuple(LAMP)), PointLight(intensity=INTENSITY, range=RANGE))
-        world.spawn(Transform(), MeshRef(plane(8.0, 8.0)),
+        world.spawn(Transform(), MeshRef(mirrored_uv_plane(8.0) if mirrored else plane(8.0, 8.0)),
                     Material(color=(1.0, 1.0, 1.0, 1.0), metallic=1.0, roughness=ROUGHNESS, environment_reflection=0.0,
                              anisotropy=anisotropy, anisotropy_direction=direction))
     runner = scene(build, SIZE)
@@ -37,12 +47,14 @@ def floor_frame(scene, anisotropy: float, direction: float):
     return srgb_to_linear(runner.frame())[..., 1], runner.engine.main_view
 
 
-def expected_highlight(view, anisotropy: float, direction: float) -> np.ndarray:
-    """Each pixel's highlight: F (1: a white metal) D V n.l x the lamp's light x 1 / (A + B)."""
+def expected_highlight(view, anisotropy: float, direction: float, mirrored: bool = False) -> np.ndarray:
+    """Each pixel's highlight: F (1: a white metal) D V n.l x the lamp's light x 1 / (A + B).
+    ``mirrored``: the plane's +u runs along -x, its +v still along -z (glTF's bitangent, the
+    tangent's w -1: the direction still turns from +u towards +v)."""
     eye, rays = pixel_rays(view, SIZE)
     p = eye + (-eye[1] / rays[..., 1])[..., None] * rays          # where each ray meets y = 0
     n = np.array([0.0, 1.0, 0.0])
-    u, w = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -1.0])  # the plane's +u, and n x u (+v)
+    u, w = np.array([-1.0 if mirrored else 1.0, 0.0, 0.0]), np.array([0.0, 0.0, -1.0])  # the plane's +u and +v
     t = math.cos(math.radians(direction)) * u + math.sin(math.radians(direction)) * w
     b = np.cross(n, t)
     to_lamp = LAMP - p
@@ -64,10 +76,13 @@ def expected_highlight(view, anisotropy: float, direction: float) -> np.ndarray:
     return D / (gl * gv) * nl * INTENSITY * fade / (d * d + 1.0) / split
 
 
-@pytest.mark.parametrize("anisotropy, direction", [(0.0, 0.0), (0.8, 0.0), (0.8, 90.0), (0.6, 30.0)])
-def test_a_brushed_floors_highlight_is_anisotropic_ggx(scene, anisotropy, direction):
-    shown, view = floor_frame(scene, anisotropy, direction)
-    expected = expected_highlight(view, anisotropy, direction)
+@pytest.mark.parametrize("anisotropy, direction, mirrored", [(0.0, 0.0, False), (0.8, 0.0, False), (0.8, 90.0, False),
+                                                              (0.6, 30.0, False), (0.6, 30.0, True)])
+def test_a_brushed_floors_highlight_is_anisotropic_ggx(scene, anisotropy, direction, mirrored):
+    """``mirrored``: on UVs whose u runs the other way the direction still turns from +u
+    towards +v (not towards n x u, which is -v there)."""
+    shown, view = floor_frame(scene, anisotropy, direction, mirrored)
+    expected = expected_highlight(view, anisotropy, direction, mirrored)
     checked = (expected > 0.03) & (shown < 0.97)
     assert checked.sum() > 150
     np.testing.assert_allclose(shown[checked], expected[checked], rtol=0.05, atol=0.01)

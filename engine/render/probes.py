@@ -1057,6 +1057,20 @@ class ProbeCaptures:
         data = np.frombuffer(cube.texture.read(face), np.float16).reshape(n, n, 4)
         return data[..., :3].astype(np.float32)
 
+    def project_waiting(self) -> None:
+        """Project the captures the full irradiance table refused a row (their probes' boxes
+        lit nothing), now that rows may be free: a probe captured once (``refresh="once"``)
+        is not captured again to take one.  Whole chains only (a chain stale since its last
+        build waits for the capture that builds it again)."""
+        for key in sorted(self.boxed):
+            cube = self.cubes.get(key)
+            version = self._versions.get(key, 0)
+            if cube is None or self._projected.get(key) == version or self._mips_stale.get(key):
+                continue
+            if not self.irradiance.project(key, cube):
+                return   # (the table is full again)
+            self._projected[key] = version
+
     def drop(self, key: int) -> None:
         self.renderer.note_scene_change()
         self._forget_faces(key)
