@@ -88,7 +88,10 @@ class Material(TrackedComponent):
     ``normalTexture.scale``: 0 is flat).  It bends lighting, sky and probe reflections,
     refraction, and a mirror's reflection (the mirror's lookup of its reflected image
     follows the bent ray: engine/render/mirror_passes.py).  The tangent frame comes from
-    the UVs' screen derivatives, so meshes need UVs, not tangents.
+    the UVs' screen derivatives, so meshes need UVs, not tangents: red leans towards +U
+    and green towards +V also where the UVs are mirrored (glTF's tangent w of -1), the same
+    seen in a mirror as directly, and a double-sided back face's bent normal is minus its
+    front's (as glTF and three.js have it: a bump on the front is a dent behind).
 
     On a mirror (limits): the UVs must be a linear map of the mirror's plane (a quad's
     are; otherwise the map, or the mirror, is refused when given: the mirror rule,

@@ -828,7 +828,11 @@ vec3 direct_lighting(Surface s, AmbientBoxes boxes) {
 vec3 mapped_normal(vec3 n, vec3 p, vec2 uv, float scale) {
     vec3 dp1 = dFdx(p), dp2 = dFdy(p);
     vec2 duv1 = dFdx(uv), duv2 = dFdy(uv);
-    vec3 dp2perp = cross(dp2, n), dp1perp = cross(n, dp1);
+    // (those sums are the gradients times dot(n, dp1 x dp2): negative in a mirror's view, whose
+    // screen is the world turned, so undone by its sign; and a double-sided back face's frame
+    // is turned round with its normal, so its bent normal is minus the front's, as glTF's)
+    float handed = (dot(n, cross(dp1, dp2)) < 0.0 ? -1.0 : 1.0) * (gl_FrontFacing ? 1.0 : -1.0);
+    vec3 dp2perp = cross(dp2, n) * handed, dp1perp = cross(n, dp1) * handed;
     vec3 t = dp2perp * duv1.x + dp1perp * duv2.x;  // the gradients of u and of v in the surface
     vec3 b = dp2perp * duv1.y + dp1perp * duv2.y;
     if (dot(t, t) < 1e-30 || dot(b, b) < 1e-30) return n;  // UVs that do not vary here: flat

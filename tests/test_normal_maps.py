@@ -15,6 +15,7 @@ from engine.assets.texture_data import TextureData, checker_texture
 from engine.core.errors import GLLimitError
 from engine.render.gl_context import GLCapabilities
 from engine.render.sky import face_directions
+from tests.support import look_from
 
 TILT = math.radians(18.0)
 
@@ -75,6 +76,60 @@ def test_a_map_of_one_bent_normal_shades_a_flat_quad_as_the_turned_quad(scene, k
         runner.close()
     np.testing.assert_allclose(colours[True], colours[False], atol=3.0)
     assert np.abs(colours[True] - colours[None]).max() > 12.0, colours  # the map does something
+
+
+def mirrored_uv_quad(size: float = 1.0) -> Mesh:
+    """A quad whose u runs the other way (+u along -x, +v still along +y): the UVs of a model's
+    mirrored half, whose tangent frame is left-handed (glTF's tangent w of -1)."""
+    flat = quad(size, size)
+    uvs = flat.uvs.copy()
+    uvs[:, 0] = 1.0 - uvs[:, 0]
+    return Mesh(flat.positions.copy(), flat.normals.copy(), uvs, flat.indices.copy(), name="mirrored uv quad")
+
+
+def sheet_colour(scene, mapped: bool | None, axis: str, *, mirrored_uvs: bool = False, from_behind: bool = False):
+    """The centre of a lit quad: with the map bent towards +U or +V (``mapped``), or without
+    one, turned as the map says the normal is (``mapped`` False), or flat (None).  With
+    ``mirrored_uvs`` the quad's u runs along -x, so +U on it is -x: the turned quad for "u" is
+    turned the other way.  ``from_behind``: a double-sided quad seen from its back (the camera
+    at -z, the sun on that side), where the normal is the front's turned round (glTF's
+    double-sided: the back's normal is minus the front's, bumps and all)."""
+    def build(world):
+        eye = -2.5 if from_behind else 2.5
+        look_from(world, (0.0, 0.0, eye), (0.0, 0.0, 0.0), fov=50.0)
+        world.spawn(DirectionalLight(direction=(-0.5, -0.6, 0.6 if from_behind else -0.6), intensity=2.5))
+        sign = -1.0 if (mirrored_uvs and axis == "u") else 1.0
+        rotation = tilted(axis, sign * TILT) if mapped is False else glm.quat()
+        world.spawn(Transform(rotation=rotation), MeshRef(mirrored_uv_quad() if mirrored_uvs else quad(1.0, 1.0)),
+                    Material(color=(0.7, 0.6, 0.5), roughness=0.5, double_sided=from_behind,
+                             normal_map=tilt_map(axis) if mapped else None))
+    runner = scene(build, (48, 48))
+    colour = centre_pixel(runner)
+    runner.close()
+    return colour
+
+
+@pytest.mark.parametrize("axis", ["u", "v"])
+@pytest.mark.parametrize("case", ["mirrored_uvs", "from_behind"])
+def test_a_bent_normal_follows_mirrored_uvs_and_turns_round_on_a_double_sided_back(scene, axis, case):
+    """On UVs whose u runs backwards the map's red still leans towards +U (-x there) and its
+    green towards +V (the frame is the UVs' gradients, not n x t); seen from behind, a
+    double-sided quad's bent normal is minus the front's, as the turned quad's is."""
+    colours = {mapped: sheet_colour(scene, mapped, axis, **{case: True}) for mapped in (True, False, None)}
+    np.testing.assert_allclose(colours[True], colours[False], atol=3.0)
+    assert np.abs(colours[True] - colours[None]).max() > 12.0, colours  # the map does something
+
+
+@pytest.mark.parametrize("way", ["mirror", "portal"])
+def test_a_normal_mapped_ball_in_a_mirror_and_through_a_portal_is_shaded_from_that_views_eye(scene, way):
+    """A ball whose map leans every normal 30 degrees towards +U, seen only in a mirror (or
+    through a portal): the frame a camera at the mirror's image eye draws of it (the eye carried
+    through the portal), turned left for right for the mirror (tests/test_clearcoat.py's
+    assert_shown_as_from_its_eye).  A mirror's view draws the world turned, its screen's
+    frame left-handed: the UVs' gradients must come out the same there."""
+    from tests.test_clearcoat import assert_shown_as_from_its_eye
+    base = dict(color=(0.6, 0.5, 0.4, 1.0), roughness=0.35)
+    assert_shown_as_from_its_eye(scene, dict(base, normal_map=tilt_map("u", math.radians(30.0))), base, way)
 
 
 def test_normal_scale_zero_is_flat_and_scales_the_slope(scene):

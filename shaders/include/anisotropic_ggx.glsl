@@ -44,6 +44,8 @@ void anisotropic_frame(vec3 n, vec3 p, vec2 uv, float angle, float alpha) {
     if (dot(u, u) < 1e-30) u = abs(n.x) < 0.9 ? cross(n, vec3(1.0, 0.0, 0.0)) : cross(n, vec3(0.0, 1.0, 0.0));
     u = normalize(u);
     vec3 w = cross(n, u);
+    // towards +v, also where the UVs are mirrored (glTF's bitangent: the tangent's w of -1)
+    if (dot(w, cross(dp2, n) * duv1.y + cross(n, dp1) * duv2.y) < 0.0) w = -w;
     aniso_t = cos(angle) * u + sin(angle) * w;
     aniso_b = cross(n, aniso_t);
     aniso_ab = max(alpha, 1e-2);
