@@ -8,10 +8,9 @@
 // up is moved off the surface along its geometric normal, more at grazing light, by the
 // texel's world size: Holbein's "normal offset shadows", 2011) plus the slope-scaled depth
 // offset the caster pass draws with; nothing is offset along the light, so contact is kept.
-// A sun's grid of taps compares each with the receiver's own plane (receiver-plane depth
-// bias), so its push stays a texel whatever the softness (a push as wide as the filter moved
-// a grazing sun's shadow edges in by it); a lamp's cube and a spot's map still push by the
-// filter's reach.
+// A sun's, a spot's map's and a lamp's cube's grid of taps compares each with the receiver's
+// own plane (receiver-plane depth bias), so the push stays a texel whatever the softness (a
+// push as wide as the filter moved a grazing light's shadow edges in by it).
 // MAX_POINT_SHADOWS (the cube samplers below) and MAX_SHADOW_RINGS are engine/render/shadows.py's,
 // defined by the shader library.  SHADOW_RINGS (the ring entries read) is compiled in while
 // a light has cascades: rings about the camera in atlas tiles of their own, whose lookup
@@ -90,7 +89,8 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float so
 // worth of it (the 2 x 2 texels a bilinear comparison reads lie up to a texel off the tap):
 // a surface does not shadow itself across the filter's width, so the point needs moving off
 // it by no more than a texel, whatever the softness (a wider push moved a grazing light's
-// shadow edges in: 3.9 texels at softness 1, the shadow gone at 4).  The suns' grid.
+// shadow edges in: 3.9 texels at softness 1, the shadow gone at 4).  The suns' and the spots'
+// grids.
 float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float softness, vec2 slope) {
 #ifdef SHADOW_SINGLE_TAP
     return texture(atlas, p);
@@ -478,37 +478,59 @@ float lamp_see_through_at(int slot, int face, vec2 ndc, float d) {
 float lamp_see_through_cube(int slot, vec3 from_light, vec3 normal, vec3 l) {
     vec4 params = shadows.point_params[slot];
     float nl = clamp(dot(normal, l), 0.0, 1.0);
-    vec3 p = from_light + normal * (2.0 * params.x * length(from_light) * (1.0 + params.y) * (1.5 - nl));
+    vec3 p = from_light + normal * (2.0 * params.x * length(from_light) * (1.5 - nl));
     vec2 st;
     int face = cube_face_of(p, st);
     return lamp_see_through_at(slot, face, st, length(p) / params.z);
 }
 #endif
 
+#if !defined(SHADOW_SINGLE_TAP)
+// How much farther than the point's (its distance times this) the receiver's own plane lies
+// along a tap's way ``tap`` from the light: the plane through the point (``facing``: the
+// cosine between its ``normal`` and the way to the point, below 0 where it faces the light)
+// met along the tap, the ratio of the two ways' cosines, exact; at most ``widest`` (a tap whose
+// way runs past the plane's edge meets it nowhere).  1 where the surface faces away.
+float receiver_ratio(vec3 normal, float facing, vec3 tap, float widest) {
+    if (facing > -1e-4) return 1.0;
+    return facing / min(dot(normal, normalize(tap)), facing / widest);
+}
+#endif
+
 float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l, vec4 size) {
     float dist = length(from_light);
     float nl = clamp(dot(normal, l), 0.0, 1.0);
-    // The normal offset: a texel's world size at this distance (its angle x the distance).
+    // The normal offset: a texel's world size at this distance (its angle x the distance),
+    // more as the light grazes the surface; the grid's taps follow the receiver's plane, so
+    // not the filter's width (a push as wide as the filter moved a grazing lamp's shadow
+    // edges in by it).
     float texel = params.x * dist;
-    vec3 p = from_light + normal * texel * (1.0 + params.y) * (1.5 - nl);
+#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)  // (the shafts' march: one tap, hard)
+    // (a light with a size is still pushed by the filter's reach: its taps' own plane,
+    // receiver_at, is not held to the grid's)
+    vec3 q = from_light + normal * texel * (1.0 + params.y) * (1.5 - nl);
+    if (size.x > 0.0) return soft_cube_shadow(cube, q, normal, length(q) / params.z, size, params.z, params.x);
+#endif
+    vec3 p = from_light + normal * texel * (1.5 - nl);
     float d = length(p) / params.z;
     vec3 dir = normalize(p);
-#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)  // (the shafts' march: one tap, hard)
-    if (size.x > 0.0) return soft_cube_shadow(cube, p, normal, d, size, params.z, params.x);
-#endif
 #ifdef SHADOW_SINGLE_TAP
     return d <= texture(cube, dir).r ? 1.0 : 0.0;
 #else
-    // Taps on a cross around the direction, in the plane facing the light.
+    // Taps on a cross around the direction, in the plane facing the light, each compared with
+    // the receiver's own plane along it (receiver-plane depth bias; its slope held to 8 across
+    // the tap's angle).
     vec3 side = normalize(cross(dir, abs(dir.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
     vec3 up = cross(dir, side);
     float spread = params.w > 1.0 ? params.x * max(params.y, 0.5) : 0.0;
+    float facing = dot(normal, dir);
+    float widest = 1.0 + 8.0 * spread * 0.70710678;   // (a tap lies spread / sqrt(2) off the direction)
     int taps = int(params.w);
     float lit = 0.0;
     for (int k = 0; k < taps; ++k) {
         vec2 o = vec2(k & 1, k >> 1) * 2.0 - 1.0;
         vec3 tap = dir + (side * o.x + up * o.y) * spread * 0.5;
-        lit += d <= texture(cube, tap).r ? 1.0 : 0.0;
+        lit += d * receiver_ratio(normal, facing, tap, widest) <= texture(cube, tap).r ? 1.0 : 0.0;
     }
     return lit / float(taps);
 #endif
@@ -535,8 +557,23 @@ float point_cube_light_shadow(int slot, samplerCube cube, vec3 position, vec3 no
 // (ShadowMaps.program_defines): a build reads one or the other for each slot, never both.
 uniform sampler2DShadow spot_atlas;
 
+// The receiver's plane in a spot's map at ``p`` (the point in the map, divided by its ``w``):
+// its depth per atlas uv.  A perspective map carries a plane to a plane (depth and all, the
+// divide's too), so the map's derivative along two ways on the surface (``normal``'s tangents,
+// each carried in as a direction: its change less ``p`` times its w's, over w, the 1 / w
+// dropped as the ratio keeps none of it) spans it exactly (receiver-plane depth bias).
+vec2 spot_receiver_slope(mat4 to_map, vec3 p, vec3 normal) {
+    vec3 t1 = normalize(cross(normal, abs(normal.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
+    vec4 a = to_map * vec4(t1, 0.0);
+    vec4 b = to_map * vec4(cross(normal, t1), 0.0);
+    vec3 m = cross(a.xyz - p * a.w, b.xyz - p * b.w);
+    return -m.xy / (abs(m.z) > 1e-12 ? m.z : 1e-12);
+}
+
 // How much of the spot light whose map is tile ``slot`` of the spot atlas reaches
-// ``position``: the cube's normal offset (a texel's width at this distance), then a
+// ``position``: the normal offset (a texel's width at this distance, more as the light grazes
+// the surface; the filter's taps follow the receiver's plane, so not the filter's width: a
+// push as wide as the filter moved a grazing spot's shadow edges in by it), then a
 // perspective lookup filtered as a directional map's (1 where the slot holds no light, and
 // off the map: behind the spot, past its range or outside its cone, where it sheds no light).
 float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
@@ -547,17 +584,25 @@ float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
     vec3 l = d / max(dist, 1e-4);
     vec4 params = shadows.point_params[slot];
     float nl = clamp(dot(normal, l), 0.0, 1.0);
-    vec3 off = position + normal * (params.x * dist * (1.0 + params.y) * (1.5 - nl));
-    vec4 p = shadows.spot_matrix[slot] * vec4(off, 1.0);
+    vec3 off = position + normal * (params.x * dist * (1.5 - nl));
+    mat4 to_map = shadows.spot_matrix[slot];
+    vec4 p = to_map * vec4(off, 1.0);
     if (p.w <= 0.0) return 1.0;
     p.xyz /= p.w;
     vec4 box = shadows.spot_box[slot];
     if (any(lessThan(p.xyz, vec3(box.xy, 0.0))) || any(greaterThan(p.xyz, vec3(box.zw, 1.0)))) return 1.0;
-    float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), 1.0 / vec2(textureSize(spot_atlas, 0)), params.y);
+    vec2 texel = 1.0 / vec2(textureSize(spot_atlas, 0));
+#ifdef SHADOW_SINGLE_TAP
+    float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), texel, params.y);
+#else
+    float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), texel, params.y,
+                                spot_receiver_slope(to_map, p.xyz, normal));
+#endif
 #ifdef LAMP_SEE_THROUGH_SHADOWS
     // Its see-through tile is the map's view widened over the gutter: the map's square is the
-    // tile's inside.  The point moved twice as far off its surface (the tiles' texels are twice as big).
-    vec3 twice = position + normal * (2.0 * params.x * dist * (1.0 + params.y) * (1.5 - nl));
+    // tile's inside.  The point moved twice as far off its surface (the tiles' texels are twice
+    // as big), as a sun's see-through lookup moves it.
+    vec3 twice = position + normal * (2.0 * params.x * dist * (1.5 - nl));
     vec4 q = shadows.spot_matrix[slot] * vec4(twice, 1.0);
     if (q.w > 0.0) {
         vec2 ndc = ((q.xy / q.w - box.xy) / (box.zw - box.xy)) * 2.0 - 1.0;
