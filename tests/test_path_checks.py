@@ -353,15 +353,20 @@ def test_box_mips_fall_back_to_glGenerateMipmap_where_the_layered_mip_pass_is_re
         above = drawn
 
 
-def test_a_mip_pass_that_skips_a_level_is_refused_and_the_per_face_pass_draws_the_ggx_chain(
-        scene, ctx, fresh_checks, monkeypatch):
-    layered_mips_skip_level_two(monkeypatch)
-    ents = {}
-
+def rough_probe_sphere_scene(ents: dict):
+    """``marked_chrome_scene``'s sphere at roughness 0.5 with a GGX-filtered probe of its own."""
     def build(world):
         marked_chrome_scene(ents)(world)
         world.get(ents["sphere"], Material).roughness = 0.5
         world.add_component(ents["sphere"], ReflectionProbe(resolution=32, prefilter="ggx"))
+    return build
+
+
+def test_a_mip_pass_that_skips_a_level_is_refused_and_the_per_face_pass_draws_the_ggx_chain(
+        scene, ctx, fresh_checks, monkeypatch):
+    layered_mips_skip_level_two(monkeypatch)
+    ents = {}
+    build = rough_probe_sphere_scene(ents)
 
     runner = scene(build, (96, 72))
     runner.frame()
@@ -563,11 +568,7 @@ def test_a_ggx_chain_where_both_mip_passes_are_refused_is_box_filtered_and_said_
 
     monkeypatch.setattr(CubeMipTarget, "bind_level", skip_level_two)
     ents = {}
-
-    def build(world):
-        marked_chrome_scene(ents)(world)
-        world.get(ents["sphere"], Material).roughness = 0.5
-        world.add_component(ents["sphere"], ReflectionProbe(resolution=32, prefilter="ggx"))
+    build = rough_probe_sphere_scene(ents)
 
     runner = scene(build, (64, 48))
     with caplog.at_level(logging.WARNING, logger="speculum"):
