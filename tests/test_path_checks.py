@@ -345,8 +345,14 @@ def test_box_mips_fall_back_to_glGenerateMipmap_where_the_layered_mip_pass_is_re
     probes = renderer.probes
     assert probes.mips.used == "build_mipmaps" and probes.cubes[ents["sphere"]].prefilter == "mips"
     above = np.stack(cube_faces(ctx, probes, ents["sphere"]))
+    assert_box_filtered_chain(ctx, probes, ents["sphere"], above)
+
+
+def assert_box_filtered_chain(ctx, probes, owner: int, above: np.ndarray) -> None:
+    """Probe ``owner``'s mip levels 1 to 3 each the 2 x 2 box mean of the level above
+    (``above``: its level 0's faces), within 4e-3."""
     for level in (1, 2, 3):
-        drawn = np.stack(cube_faces(ctx, probes, ents["sphere"], level))
+        drawn = np.stack(cube_faces(ctx, probes, owner, level))
         n = above.shape[1] // 2
         box = above.reshape(6, n, 2, n, 2, -1).mean(axis=(2, 4))
         assert np.abs(drawn - box).max() < 4e-3, level
@@ -585,12 +591,7 @@ def test_a_ggx_chain_where_both_mip_passes_are_refused_is_box_filtered_and_said_
     assert len(said) == 1 and "GGX-prefiltered probes" in said[0]
     above = np.stack(cube_faces(ctx, probes, ents["sphere"]))
     assert above.max() < SENTINEL / 2 and (above[..., 1] > 2 * above[..., 0]).any()   # the green wall, drawn
-    for level in (1, 2, 3):
-        drawn = np.stack(cube_faces(ctx, probes, ents["sphere"], level))
-        n = above.shape[1] // 2
-        box = above.reshape(6, n, 2, n, 2, -1).mean(axis=(2, 4))
-        assert np.abs(drawn - box).max() < 4e-3, level
-        above = drawn
+    assert_box_filtered_chain(ctx, probes, ents["sphere"], above)
 
 
 def _draw_framebuffer_binding(ctx) -> int:
