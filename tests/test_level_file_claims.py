@@ -237,6 +237,37 @@ def test_generator_options_the_view_budget_the_game_and_the_rules_are_saved_as_g
     second.close()
 
 
+@pytest.mark.parametrize("table, saved", [
+    ('{ panorama = "sky.png" }', {"panorama": "../sky.png"}),
+    ('{ panorama = "sky.png", face_size = 8, yaw = 0.0 }', {"panorama": "../sky.png", "face_size": 8}),
+    ('{ panorama = "sky.png", face_size = 256, yaw = -30.0 }', {"panorama": "../sky.png", "yaw": -30.0}),
+])
+def test_a_panoramas_table_is_saved_with_what_was_given_past_its_defaults(tmp_path, table, saved):
+    """A sky panorama's table (docs/level_files.md: ``face_size`` 256 and ``yaw`` 0 unless
+    given) is written back with its file and what differs from those defaults, as every
+    component field is (a default is not written): a table naming only its file comes back
+    naming only its file (a save used to add ``face_size = 256`` and ``yaw = 0.0`` to it).
+    The saved level loads again into the same faces."""
+    from PIL import Image
+
+    from components import Skybox
+
+    Image.fromarray(np.full((8, 16, 3), 100, np.uint8)).save(tmp_path / "sky.png")
+    path = write(tmp_path, f'[level]\nname = "sky"\n[[entity]]\nname = "ground"\n[entity.Skybox]\nfaces = {table}\n')
+    level = load_level(path)
+    world = World("sky")
+    names = level.spawn(world)
+    (tmp_path / "saved").mkdir()
+    saved_path = save_level(world, tmp_path / "saved" / "level.toml", names, name=level.name)
+    got = tomllib.loads(saved_path.read_text())["entity"][0]["Skybox"]["faces"]
+    assert got == saved, got
+    second = World("sky again")
+    again = load_level(saved_path, asset_roots=[tmp_path]).spawn(second)
+    assert np.array_equal(second.get(again["ground"], Skybox).faces, world.get(names["ground"], Skybox).faces)
+    world.close()
+    second.close()
+
+
 # --- files past their documented sizes -------------------------------------------------------------------------
 
 def test_a_level_file_over_4_mib_and_a_mesh_file_over_256_mib_are_refused_by_their_size(tmp_path):

@@ -23,7 +23,14 @@ from typing import Any
 from engine.assets.color_lut import MAX_LUT_FILE_BYTES, ColorLut, load_cube_lut
 from engine.assets.ies_profile import COOKIE_HEIGHT, COOKIE_WIDTH, ies_cookie, load_ies
 from engine.assets.mesh import LoadedModel, Mesh, box, load_model, load_model_file, model_bytes, plane, quad, sphere
-from engine.assets.panorama import MAX_FACE_SIZE, MAX_INTENSITY, MAX_PANORAMA_FILE_BYTES, SkyFaces, sky_faces_from_file
+from engine.assets.panorama import (
+    FACE_SIZE,
+    MAX_FACE_SIZE,
+    MAX_INTENSITY,
+    MAX_PANORAMA_FILE_BYTES,
+    SkyFaces,
+    sky_faces_from_file,
+)
 from engine.assets.texture_data import (
     MAX_TEXTURE_SIDE,
     TextureData,
@@ -269,7 +276,7 @@ def level_texture(spec: Any, where: LevelAssets, normal_map: bool = False) -> Te
 
 def level_sky_faces(spec: Any, where: LevelAssets) -> SkyFaces:
     """A ``Skybox.faces`` table: ``{ panorama = "sky.hdr" }`` with optional ``face_size``
-    (default 256), ``yaw`` (degrees), ``intensity`` (default 1), ``without_sun`` (default
+    (default 256: FACE_SIZE), ``yaw`` (degrees), ``intensity`` (default 1), ``without_sun`` (default
     false: its sun taken out, for a DirectionalLight to give) and ``layer`` (an OpenEXR file's
     part or layer of that name): the panorama made into six faces
     (``engine/assets/panorama.py``; a star field or faces made in code are not written in files)."""
@@ -278,7 +285,7 @@ def level_sky_faces(spec: Any, where: LevelAssets) -> SkyFaces:
                          f"yaw = 0 }} (faces made in code are not written in files), got {spec!r}")
     spec = dict(spec)
     path = _asset_path(spec.pop("panorama"), where)
-    face_size, yaw, intensity = spec.pop("face_size", 256), spec.pop("yaw", 0.0), spec.pop("intensity", 1.0)
+    face_size, yaw, intensity = spec.pop("face_size", FACE_SIZE), spec.pop("yaw", 0.0), spec.pop("intensity", 1.0)
     without_sun, layer = spec.pop("without_sun", False), spec.pop("layer", None)
     _no_more(spec, "sky panorama")
     if layer is not None and not (isinstance(layer, str) and layer):

@@ -43,6 +43,7 @@ MAX_PANORAMA_FILE_BYTES = 1 << 30   # a panorama file's size on disk
 # is made into faces (a run-length file declares its size in a few bytes: checked before any pixel).
 MAX_PANORAMA_PIXELS = 8192 * 4096
 MAX_FACE_SIZE = 2048                # a Skybox face's side (components.rendering's check)
+FACE_SIZE = 256                     # a face's side where none is given
 MAX_FOOTPRINT_TAPS = 8              # bilinear taps a side per face texel at most
 MAX_INTENSITY = 1e4                 # what a panorama's colours may be multiplied by
 _XYZ_TO_RGB = xyz_to_rec709_matrix()  # an XYZE file's colours to the engine's linear Rec. 709 (D65)
@@ -293,7 +294,7 @@ def _face_bilinear(image: np.ndarray, face: np.ndarray, x: np.ndarray, y: np.nda
             + (image[row + y1, x0] * (1 - fx) + image[row + y1, x1] * fx) * fy).astype(np.float32)
 
 
-def panorama_faces(panorama: np.ndarray, face_size: int = 256, yaw: float = 0.0) -> np.ndarray:
+def panorama_faces(panorama: np.ndarray, face_size: int = FACE_SIZE, yaw: float = 0.0) -> np.ndarray:
     """Six cube faces (6, face_size, face_size, 3) float32 of an equirectangular panorama
     (height, width, 3; longitude across, latitude up, the middle column ahead at -Z) turned
     ``yaw`` degrees about +Y, each texel the mean of a grid of bilinear taps over its
@@ -348,7 +349,7 @@ def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
             + (image[y1, x0] * (1 - fx) + image[y1, x1] * fx) * fy)
 
 
-def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0,
+def sky_faces_from_file(path: str | Path, face_size: int = FACE_SIZE, yaw: float = 0.0,
                         intensity: float = 1.0, without_sun: bool = False, layer: str | None = None) -> SkyFaces:
     """A panorama file (``load_panorama``) as a Skybox's ``faces`` (``panorama_faces``), its
     colours times ``intensity`` (three.js's ``environmentIntensity``, Godot's sky energy: a
@@ -371,7 +372,13 @@ def sky_faces_from_file(path: str | Path, face_size: int = 256, yaw: float = 0.0
             raise AssetError(f"panorama file {str(path)!r}: times {intensity:g} its brightest texel passes 65504, "
                              "more than the half floats a sky's faces keep")
     faces = faces.view(SkyFaces)
-    faces.source = {"panorama": str(Path(path).resolve()), "face_size": face_size, "yaw": float(yaw)}
+    # (what was given past the defaults, as a level file's table names it: a level saved writes
+    # back the table it read)
+    faces.source = {"panorama": str(Path(path).resolve())}
+    if face_size != FACE_SIZE:
+        faces.source["face_size"] = face_size
+    if yaw != 0.0:
+        faces.source["yaw"] = float(yaw)
     if intensity != 1.0:
         faces.source["intensity"] = float(intensity)
     if layer is not None:
