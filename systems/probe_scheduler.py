@@ -654,9 +654,10 @@ class ProbeScheduler:
 
     def _filter_reach(self, casters: ShadowCasters) -> float:
         """How far (world units) past where a shadow falls its filtered edge can change a
-        pixel: a lookup reads its map ``(1 + softness) * 1.5`` texels off the surface (the
-        normal offset) and ``softness / 2`` texels plus a bilinear texel around that
-        (``shaders/include/shadows.glsl``), at most ``2.5 + 2 * softness`` texels; a
+        pixel: a lookup reads its map at most 1.5 texels off the surface (the normal offset,
+        whatever the softness: the taps follow the receiver's plane) and ``softness / 2``
+        texels plus a bilinear texel around that (``shaders/include/shadows.glsl``), at most
+        ``2.5 + softness / 2`` texels; a
         directional texel is at most the grown level box's diagonal over the map's side
         (``shadow_rules.directional_fit``), a point light's at most its range times
         ``light_rules.shadow_texel_tangent`` (a cube face's ``2 / resolution``, a spot map's
@@ -674,12 +675,12 @@ class ProbeScheduler:
             grown = self._grown[1]
             for _, light in self.world.query_one(DirectionalLight):
                 if light.shadows:
-                    reach = max(reach, grown / light.shadow_resolution * (2.5 + 2.0 * light.shadow_softness))
+                    reach = max(reach, grown / light.shadow_resolution * (2.5 + 0.5 * light.shadow_softness))
         if casters.points:
             for _, light in self.world.query_one(PointLight):
                 if light.shadows:
                     reach = max(reach, shadow_texel_tangent(light) * light.range
-                                * (2.5 + 2.0 * light.shadow_softness))
+                                * (2.5 + 0.5 * light.shadow_softness))
         self._reach = (casters, reach)
         return reach
 

@@ -169,8 +169,8 @@ def test_the_faces_a_change_reaches_are_its_corners_and_its_shadows_hulls(rows_s
 def test_the_filter_reach_follows_the_level_box_and_the_light():
     """``ProbeScheduler._filter_reach`` keeps the grown level's diagonal by the level box:
     a level grown on either side, or back as it was, and a light's map made finer, give
-    the reach worked out afresh (the grown diagonal over the map's side, times 2.5 + 2
-    softness texels)."""
+    the reach worked out afresh (the grown diagonal over the map's side, times 2.5 + softness / 2
+    texels)."""
     from components import DirectionalLight
     from engine.core.world import World
     from engine.rules.shadow_rules import SHADOW_MARGIN, SHADOW_MARGIN_SHARE, ShadowCasters
@@ -184,7 +184,7 @@ def test_the_filter_reach_follows_the_level_box_and_the_light():
     def expected(level):
         diagonal = float(np.sqrt(((level[1] - level[0]) ** 2).sum()))
         grown = diagonal + 2.0 * np.sqrt(3.0) * max(SHADOW_MARGIN, SHADOW_MARGIN_SHARE * diagonal)
-        return grown / light.shadow_resolution * (2.5 + 2.0 * light.shadow_softness)
+        return grown / light.shadow_resolution * (2.5 + 0.5 * light.shadow_softness)
 
     small = (np.array([-5.0, 0.0, -5.0]), np.array([5.0, 3.0, 5.0]))
     for level in (small, (small[0] - 20.0, small[1]), (small[0], small[1] + 20.0), small):

@@ -3,8 +3,8 @@
 the bias moves nothing along the light, so a thin wall's shadow starts at its foot (no
 peter-panning), from a sun's map and a lamp's cube; a spot up to 45 degrees casts from a
 map fitted to its cone, to the cone's very edge, and one a degree wider from its cube's lit
-faces; a low sun's, a spot's and a lamp's edge under grazing light stays put whatever the
-softness, with no acne on the lit floor and a tilted panel.  Each against a second
+faces; a low sun's, a spot's and a lamp's (with a size or without) edge under grazing light
+stays put whatever the softness, with no acne on the lit floor and a tilted panel.  Each against a second
 computation: the edge's profile worked out from the filter's taps over a step, float64
 shadow rays to the sun, the lamp and the spot, the frame with the light's shadows off."""
 from __future__ import annotations
@@ -242,10 +242,12 @@ def test_a_spot_to_45_degrees_casts_from_its_map_to_the_cones_edge_and_a_wider_o
 GRAZING_LAMP = np.array([-1.5, 1.0, 0.0])   # 1 m up, 1.5 m beside the slab's edge
 SLAB, SLAB_HALF = np.array([-2.0, 0.5, 0.0]), np.array([2.0, 0.01, 4.0])   # _sun_edge's slab, over x < 0
 PANEL, PANEL_TILT = np.array([2.0, 0.6, -1.1]), 40.0   # a panel off the edge's way, tilted towards the lamp
+SPHERE_RADIUS = 0.05   # a lamp with a size: its penumbra on the floor at the edge about 0.16 m across
 
 
 def _grazing_frames(scene, kind: str) -> dict:
-    """A spot (30 degrees, its map 128 texels) or a lamp (its cube 128 texels a face) 1 m up
+    """A spot (30 degrees, its map 128 texels), a lamp (its cube 128 texels a face) or a lamp
+    with a size (a sphere SPHERE_RADIUS across: percentage-closer soft shadows) 1 m up
     and 1.5 m to the side of _sun_edge's slab (white floor, black sky), aimed at the slab's
     shadow edge, which its light meets 18 degrees up, and a panel to the side tilted 40
     degrees to face it (n.l 0.27 at its middle), clear of the floor: the light (linear
@@ -269,10 +271,10 @@ def _grazing_frames(scene, kind: str) -> dict:
             Transform(position=tuple(PANEL), rotation=glm.angleAxis(np.radians(PANEL_TILT), glm.vec3(1, 0, 0))),
             MeshRef(box((1.0, 0.02, 1.0))), Material(color=(1.0, 1.0, 1.0), roughness=1.0,
                                                      environment_reflection=0.0))
-        cone = {"spot_angle": 30.0, "spot_blend": 0.0} if kind == "spot" else {}
+        shape = {"spot": {"spot_angle": 30.0, "spot_blend": 0.0}, "sphere": {"radius": SPHERE_RADIUS}}.get(kind, {})
         world.resources["light"] = world.spawn(
             Transform(position=tuple(GRAZING_LAMP), rotation=look_rotation(tuple((edge, 0.0, 0.0) - GRAZING_LAMP))),
-            PointLight(intensity=6.0, range=10.0, shadows=False, shadow_resolution=128, **cone))
+            PointLight(intensity=6.0, range=10.0, shadows=False, shadow_resolution=128, **shape))
 
     runner = scene(build, (128, 96))
     runner.engine.renderer.antialias = "off"
@@ -306,7 +308,7 @@ def _grazing_frames(scene, kind: str) -> dict:
             "texel": texel, "edge": edge}
 
 
-@pytest.mark.parametrize("kind", ["spot", "lamp"])
+@pytest.mark.parametrize("kind", ["spot", "lamp", "sphere"])
 def test_a_grazing_spots_and_lamps_shadow_edge_stays_put_whatever_the_softness(scene, kind):
     """A spot's map and a lamp's cube under light 18 degrees up (the texels on the floor 10
     and 15 cm): the slab's shadow edge (the place an ideal step with the floor's light there
@@ -319,7 +321,10 @@ def test_a_grazing_spots_and_lamps_shadow_edge_stays_put_whatever_the_softness(s
     And no acne: the lit floor past the edge and the tilted panel keep 0.97 of their light
     with the shadows off, at each softness and under the "single" filter (the taps compared
     with a flat plane left the spot's 0.91 and 0.86 at softness 4, the lamp's panel 0.73 at
-    1; a spot's plane found without the divide's term, 0.48)."""
+    1; a spot's plane found without the divide's term, 0.48).  A lamp with a size filters
+    over its penumbra, the softness unused but for the push it took (soft_cube_shadow's was
+    still (1 + softness) texels: the floor 0.4 m under the slab 0.2 lit at softness 4); its
+    taps compare with the receiver's plane along their ways too (receiver_at)."""
     shot = _grazing_frames(scene, kind)
     frames, points, floor, texel, edge = shot["frames"], shot["points"], shot["floor"], shot["texel"], shot["edge"]
     off = frames["off"]

@@ -149,8 +149,9 @@ SOFT_SUN_SAMPLERS = 18
 SLOPE_BIAS = (1.5, 2.0)
 POINT_NEAR = 0.02   # metres: a point light's cube sees casters from here out
 # Texels of far depth round each spot map in its atlas tile: the lookup's normal offset (at
-# most (1 + softness) x 1.5 texels) and the filter's spread (softness / 2 + 1) from a point
-# just inside the cone stay in its own tile (MAX_SHADOW_SOFTNESS 8: 13.5 + 5).
+# most 1.5 texels) and the filter's spread (softness / 2 + 1) from a point just inside the
+# cone stay in its own tile (MAX_SHADOW_SOFTNESS 8: 1.5 + 5; the push was (1 + softness) x
+# 1.5 texels before the taps followed the receiver's plane).
 SPOT_GUTTER = 20
 # The caster builds (shadow.vert/frag's defines): a depth map's; a point light's cube face
 # (distance over range); its six faces in one layered pass; a middle stretch of a virtual

@@ -109,6 +109,23 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float so
 #endif
 }
 
+#if !defined(SHADOW_SINGLE_TAP)
+// The receiver's plane in a map that ``to_map`` carries the world into (a spot's perspective
+// map, a light's image through mirrors and portals) at ``p`` (the point in the map, divided
+// by its ``w``): its depth per atlas uv.  A projective map carries a plane to a plane (depth
+// and all, the divide's too), so the map's derivative along two ways on the surface
+// (``normal``'s tangents, each carried in as a direction: its change less ``p`` times its
+// w's, over w, the 1 / w dropped as the ratio keeps none of it) spans it exactly
+// (receiver-plane depth bias: filtered_shadow).
+vec2 receiver_slope_in_map(mat4 to_map, vec3 p, vec3 normal) {
+    vec3 t1 = normalize(cross(normal, abs(normal.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
+    vec4 a = to_map * vec4(t1, 0.0);
+    vec4 b = to_map * vec4(cross(normal, t1), 0.0);
+    vec3 m = cross(a.xyz - p * a.w, b.xyz - p * b.w);
+    return -m.xy / (abs(m.z) > 1e-12 ? m.z : 1e-12);
+}
+#endif
+
 #if (defined(SOFT_POINT_SHADOWS) || defined(SOFT_SUN_SHADOWS)) && !defined(SHADOW_SINGLE_TAP)
 // The k-th of ``count`` taps on a Vogel disc (a golden-angle spiral) of radius 1, the same at
 // every pixel: the soft shadows' blocker searches and filters.
@@ -274,11 +291,8 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
     vec2 slope = vec2(0.0);
 #ifndef SHADOW_SINGLE_TAP
-    // The receiver's plane in the map: two ways along the surface carried into it, the depth
-    // per uv of the plane they span (receiver-plane depth bias, without screen derivatives).
-    vec3 t1 = normalize(cross(normal, abs(normal.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
-    vec3 m = cross(mat3(to_map) * t1, mat3(to_map) * cross(normal, t1));
-    slope = -m.xy / (abs(m.z) > 1e-12 ? m.z : 1e-12);
+    // The receiver's plane in the map (receiver-plane depth bias, without screen derivatives).
+    slope = receiver_slope_in_map(to_map, at, normal);
 #endif
     return directional_shadow_at(i, params, at, along, grazing, slope);
 #endif
@@ -505,13 +519,11 @@ float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 nor
     // not the filter's width (a push as wide as the filter moved a grazing lamp's shadow
     // edges in by it).
     float texel = params.x * dist;
-#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)  // (the shafts' march: one tap, hard)
-    // (a light with a size is still pushed by the filter's reach: its taps' own plane,
-    // receiver_at, is not held to the grid's)
-    vec3 q = from_light + normal * texel * (1.0 + params.y) * (1.5 - nl);
-    if (size.x > 0.0) return soft_cube_shadow(cube, q, normal, length(q) / params.z, size, params.z, params.x);
-#endif
     vec3 p = from_light + normal * texel * (1.5 - nl);
+#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)  // (the shafts' march: one tap, hard)
+    // (a light with a size: its taps compare with the receiver's plane too, receiver_at)
+    if (size.x > 0.0) return soft_cube_shadow(cube, p, normal, length(p) / params.z, size, params.z, params.x);
+#endif
     float d = length(p) / params.z;
     vec3 dir = normalize(p);
 #ifdef SHADOW_SINGLE_TAP
@@ -557,19 +569,6 @@ float point_cube_light_shadow(int slot, samplerCube cube, vec3 position, vec3 no
 // (ShadowMaps.program_defines): a build reads one or the other for each slot, never both.
 uniform sampler2DShadow spot_atlas;
 
-// The receiver's plane in a spot's map at ``p`` (the point in the map, divided by its ``w``):
-// its depth per atlas uv.  A perspective map carries a plane to a plane (depth and all, the
-// divide's too), so the map's derivative along two ways on the surface (``normal``'s tangents,
-// each carried in as a direction: its change less ``p`` times its w's, over w, the 1 / w
-// dropped as the ratio keeps none of it) spans it exactly (receiver-plane depth bias).
-vec2 spot_receiver_slope(mat4 to_map, vec3 p, vec3 normal) {
-    vec3 t1 = normalize(cross(normal, abs(normal.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
-    vec4 a = to_map * vec4(t1, 0.0);
-    vec4 b = to_map * vec4(cross(normal, t1), 0.0);
-    vec3 m = cross(a.xyz - p * a.w, b.xyz - p * b.w);
-    return -m.xy / (abs(m.z) > 1e-12 ? m.z : 1e-12);
-}
-
 // How much of the spot light whose map is tile ``slot`` of the spot atlas reaches
 // ``position``: the normal offset (a texel's width at this distance, more as the light grazes
 // the surface; the filter's taps follow the receiver's plane, so not the filter's width: a
@@ -596,7 +595,7 @@ float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
     float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), texel, params.y);
 #else
     float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), texel, params.y,
-                                spot_receiver_slope(to_map, p.xyz, normal));
+                                receiver_slope_in_map(to_map, p.xyz, normal));
 #endif
 #ifdef LAMP_SEE_THROUGH_SHADOWS
     // Its see-through tile is the map's view widened over the gutter: the map's square is the
