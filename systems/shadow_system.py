@@ -549,8 +549,11 @@ class ShadowSystem(esper.Processor):
             if slot == MAX_VIRTUAL_LIGHTS:
                 stats.virtual_lights_cut += 1
                 continue
+            # (its edges filtered as its light's own: shadow_softness texels of the map holding them)
+            softness = world.get(light.light, DirectionalLight if light.kind == "directional" else PointLight
+                                 ).shadow_softness
             key = (light.light, light.path, light.kind, light.position, light.color, light.light_range, light.cone,
-                   light.cookie, light.radius, light.rectangle,
+                   light.cookie, light.radius, light.rectangle, softness,
                    light.exit_plane, light.aperture, light.apertures,
                    tuple((leg.carry.to_bytes(), tuple(p.to_bytes() for p in leg.planes), leg.skip)
                          for leg in light.legs),
@@ -565,7 +568,7 @@ class ShadowSystem(esper.Processor):
                 if light.kind == "directional":
                     for leg in light.legs[1:]:
                         lo, hi = _with_image(lo, hi, leg.carry, *level)
-                maps.draw_virtual(slot, light, virtual_shadow_camera(light, lo, hi, VIRTUAL_RESOLUTION))
+                maps.draw_virtual(slot, light, virtual_shadow_camera(light, lo, hi, VIRTUAL_RESOLUTION), softness)
                 self._virtual[slot] = key
                 stats.views_spent += 1
                 stats.shadow_maps_drawn += 1

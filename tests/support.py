@@ -225,6 +225,17 @@ def box_hits(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, half
     return hit
 
 
+def pcf_edge_profile(t: np.ndarray, softness: float) -> np.ndarray:
+    """The light a grid-filtered shadow map (``shaders/include/shadows.glsl`` filtered_shadow,
+    "grid") leaves at ``t`` map texels from a straight shadow edge's middle, towards the lit
+    side: a bilinear comparison ramps over one texel (between the two texel centres astride
+    the edge), and the grid's taps (2 a side, 3 past a softness of 1) spread ``softness``
+    texels apart average that ramp shifted to each: ``softness`` + 1 texels from dark to lit."""
+    n = 3 if softness > 1.0 else 2
+    offsets = (np.arange(n) - (n - 1) / 2.0) * (softness / (n - 1))
+    return np.mean([np.clip(t - o + 0.5, 0.0, 1.0) for o in offsets], axis=0)
+
+
 def kept_frames_equal_drawn(keeping, drawing, frames: int = 4) -> int:
     """Run two scene runners (``conftest.scene``) of the same scene side by side, ``drawing``
     with ``keep_still_views`` off, asserting every frame's colour, HDR image and ids equal bit

@@ -781,9 +781,10 @@ class ShadowMaps:
             kept[2].release()
 
     # --- virtual lights (through mirrors and portals) -------------------------------------
-    def draw_virtual(self, slot: int, light: VirtualLight, fit: DirectionalFit) -> None:
+    def draw_virtual(self, slot: int, light: VirtualLight, fit: DirectionalFit, softness: float = 1.0) -> None:
         """Draw virtual light ``slot``'s map (a tile of the virtual atlas) and write its row of
-        the VirtualLights block.  The casters are drawn once for each stretch of the light's
+        the VirtualLights block, its edges filtered ``softness`` of the map's texels wide (its
+        light's ``shadow_softness``).  The casters are drawn once for each stretch of the light's
         way (``VirtualLight.legs``) into the one map: as they are, in front of the last
         surface (the way out to what it lights), and, for each stretch before it, carried to
         where the image sees it and kept between the surfaces it runs between (the way in
@@ -832,7 +833,7 @@ class ShadowMaps:
             "origin": (*light.aperture[0], fit.texel),
             "u": (*_over_length(light.aperture[1]), light.apertures[0].water if light.apertures else 0.0),
             "v": (*_over_length(light.aperture[2]), 0.0),
-            "params": (1.0 / width, 1.0, self._taps(1.0), float(len(more))),
+            "params": (1.0 / width, softness, self._taps(softness), float(len(more))),
             "spot": light.cone,
             "cookie_u": light.cookie[0],
             "cookie_v": (*light.cookie[1][:3], light.radius),

@@ -65,10 +65,18 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
     float nl = clamp(dot(normal, l), 0.0, 1.0);
     float texel = virtual_lights.virtual_origin[i].w;
     if (virtual_lights.virtual_position[i].w > 0.5) texel *= dist;  // an angle: its size here
-    vec4 p = virtual_lights.virtual_matrix[i] * vec4(position + normal * texel * (1.0 + params.y) * (1.5 - nl), 1.0);
+    // Off the surface by a texel, more as the light grazes it; the filter's taps follow the
+    // receiver's plane carried into the map (a push as wide as the filter moved the edges in).
+    mat4 to_map = virtual_lights.virtual_matrix[i];
+    vec4 p = to_map * vec4(position + normal * texel * (1.5 - nl), 1.0);
     p.xyz /= p.w;
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
+#ifdef SHADOW_SINGLE_TAP
     float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y);  // shadows.glsl
+#else
+    float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y,
+                                receiver_slope_in_map(to_map, p.xyz, normal));
+#endif
 #ifdef VIRTUAL_SEE_THROUGH_SHADOWS
     lit *= virtual_see_through_at(p.xyz);  // what see-through things on its way let through (shadows.glsl)
 #endif
