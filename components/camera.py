@@ -177,7 +177,8 @@ class DirectionalLight(TrackedComponent):
     more for the scene programs (the 18th of the fullest build): on an OpenGL with fewer
     than 18 (``GL_MAX_TEXTURE_IMAGE_UNITS``) the edge stays hard and a ``GLLimitWarning``
     says so.  At most ``MAX_SUN_ANGULAR_DIAMETER`` (20 degrees); the penumbra is at most 64
-    of the level map's texels across (a cascade's finer texels do not narrow it).
+    of the level map's (longer side's) texels across (a cascade's finer texels do not narrow
+    it), round in metres where the level's map has longer texels one way.
 
     ``bounces`` (default 1): how many mirrors and portals that carry light
     (``Mirror.reflects_light``, ``Portal.carries_light``) its light goes through in a row:

@@ -154,15 +154,18 @@ const int SUN_SEARCH = 12;
 const int SUN_TAPS = 16;
 const float SUN_SEARCH_TEXELS = 32.0;   // the search's and the penumbra's widest radius (level-map texels)
 
-// ``p``: the point in the atlas (uv, depth); ``metres_per_uv``: this map's; ``texel``: the
-// atlas's texel in uv; ``scale``: this map's uv per the level map's.
-float soft_sun_shadow(vec3 p, float metres_per_uv, float texel, float scale, vec4 size, vec2 slope, vec3 tile) {
+// ``p``: the point in the atlas (uv, depth); ``metres_per_uv``: this map's, along u and along
+// v (a level not square in the sun's view has its map's texels longer one way: the disc of
+// taps is round in metres, not in uv); ``texel``: the atlas's texel in uv; ``widest``: the
+// widest radius, metres.
+float soft_sun_shadow(vec3 p, vec2 metres_per_uv, float texel, float widest_metres, vec4 size, vec2 slope,
+                      vec3 tile) {
     vec2 low = tile.xy + 0.5 * texel, high = tile.xy + tile.z - 0.5 * texel;
-    float spread = size.x * size.y / metres_per_uv;   // the penumbra's width (uv) a unit of depth gap
-    float widest = SUN_SEARCH_TEXELS * texel * scale;
-    float search = clamp(0.5 * p.z * spread, texel, widest);
-    float steepest = 8.0 * metres_per_uv / max(size.x, 1e-6);   // a slope of 8 in depth per uv
-    slope = clamp(slope, vec2(-steepest), vec2(steepest));
+    vec2 spread = size.x * size.y / metres_per_uv;   // the penumbra's width (uv) a unit of depth gap
+    vec2 widest = widest_metres / metres_per_uv;
+    vec2 search = clamp(0.5 * p.z * spread, vec2(texel), widest);
+    vec2 steepest = 8.0 * metres_per_uv / max(size.x, 1e-6);   // a slope of 8 in depth per uv
+    slope = clamp(slope, -steepest, steepest);
     float bias = 2.0 * texel * (abs(slope.x) + abs(slope.y)) + 1e-5;
     float blockers = 0.0, found = 0.0;
     for (int k = 0; k < SUN_SEARCH; ++k) {
@@ -174,7 +177,7 @@ float soft_sun_shadow(vec3 p, float metres_per_uv, float texel, float scale, vec
         }
     }
     if (found == 0.0) return 1.0;
-    float radius = clamp(0.5 * (p.z - blockers / found) * spread, 0.5 * texel, widest);
+    vec2 radius = clamp(0.5 * (p.z - blockers / found) * spread, vec2(0.5 * texel), widest);
     float lit = 0.0;
     for (int k = 0; k < SUN_TAPS; ++k) {
         vec2 o = vogel_tap(k, SUN_TAPS) * radius;
@@ -191,8 +194,13 @@ float soft_sun_shadow(vec3 p, float metres_per_uv, float texel, float scale, vec
 float directional_lookup(int i, vec3 p, vec4 params, vec2 scale, vec2 slope, vec3 tile) {
 #if defined(SOFT_SUN_SHADOWS) && !defined(SHADOW_SINGLE_TAP)
     vec4 size = shadows.directional_size[i];
-    if (size.y > 0.0)
-        return soft_sun_shadow(p, params.x / params.z / scale.x, params.z, scale.x, size, slope / scale, tile);
+    if (size.y > 0.0) {
+        // The level map's metres per uv along u and v (its matrix's first two rows: uv per
+        // metre), this map's over its scale.
+        mat4 m = shadows.directional_matrix[i];
+        vec2 level = 1.0 / vec2(length(vec3(m[0][0], m[1][0], m[2][0])), length(vec3(m[0][1], m[1][1], m[2][1])));
+        return soft_sun_shadow(p, level / scale, params.z, SUN_SEARCH_TEXELS * params.x, size, slope / scale, tile);
+    }
 #endif
     return filtered_shadow(shadow_atlas, p, int(params.w), vec2(params.z), params.y, slope / scale);
 }
