@@ -44,7 +44,9 @@ def test_every_readme_python_block_runs_and_renders_a_picture(tmp_path):
     for index, code in enumerate(PYTHON_BLOCKS):
         assert 'if __name__ == "__main__":' in code and "run(" in code, \
             f"README python block {index} is not a runnable program:\n{code[:200]}"
-    with ThreadPoolExecutor(max_workers=len(PYTHON_BLOCKS)) as pool:
+    # (a worker a core: all at once, each block's 120 s ran out while forty compiled their
+    # shaders together on a machine with no shader cache)
+    with ThreadPoolExecutor(max_workers=min(len(PYTHON_BLOCKS), os.cpu_count() or 2)) as pool:
         runs = list(pool.map(lambda item: run_block(*item, tmp_path), enumerate(PYTHON_BLOCKS)))
     for index, (result, out) in enumerate(runs):
         assert result.returncode == 0, f"README python block {index} failed:\n{result.stderr[-2000:]}"
