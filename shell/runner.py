@@ -1,9 +1,12 @@
 """Command line of every game: windowed through moderngl-window, or headless on EGL.
 
-  python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR] [--level FILE.toml]
-                         [--ids] [--export-scene FILE.glb|FILE.gltf] [--camera x,y,z,yaw,pitch]
-                         [--dt SECONDS] [--gif FILE.gif] [--aa fxaa|taa|off] [--overlay]
-                         [--asset-root DIR ...] [--reload]
+  python -m games.<name> [--headless] [--frames N] [--size WxH] [--out DIR] [--level FILE.toml] ...
+
+``python -m games.<name> --help`` lists every option (``build_parser``): what to write (PNGs,
+ids, a GIF, the scene as glTF), the camera and time step, the effects to turn on (ambient
+occlusion, contact shadows, light shafts, screen-space reflections, depth of field, motion
+blur), the sky (model, altitude, panorama, time of day, moon, clouds), anti-aliasing and
+resolution scaling, asset folders, the overlay and live reload of the level file.
 
 With no display the runner goes headless by itself and says so.
 """
