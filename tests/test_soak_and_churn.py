@@ -1,4 +1,5 @@
-"""Short soak and churn runs (the benchmarks ``soak`` and ``churn`` at small sizes): nothing
+"""Short soak and churn runs (the benchmarks ``soak`` and ``churn`` at small sizes, the tours'
+probes' faces 32 texels: at 128 a quarter of a tour's time, and the same resources): nothing
 the engine holds grows over a tour of the sample level, and everything made in waves of
 mirrors, portals, probes, meshes, textures, particle emitters, decals and weather (a pond with
 caustics, lamps that cast, a spot's cookie, clouds, a fog volume) goes back when they are deleted."""
@@ -8,7 +9,7 @@ from benchmarks import churn, soak
 
 
 def test_a_tour_of_the_sample_level_holds_its_resources_flat():
-    rows = soak.run(frames=90, every=30, warmup=30, size=(160, 90))
+    rows = soak.run(frames=90, every=30, warmup=30, size=(160, 90), probe_resolution=32)
     assert [row["frame"] for row in rows] == [0, 30, 60, 90]
     assert rows[1]["gl_resources"]["probe_cubes"] == 3 and rows[1]["gl_resources"]["batches"] > 10
     assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
@@ -22,7 +23,8 @@ def test_a_tour_through_a_lens_with_motion_blur_and_dynamic_resolution_holds_its
     blur run at the output's size after temporal upsampling); every level's targets and the
     reactive mask are made again at each step; nothing grows from frame 32 (at the floor) to
     64 (three steps up)."""
-    rows = soak.run(frames=64, every=32, warmup=32, size=(96, 54), lens=True, dynamic=True)
+    rows = soak.run(frames=64, every=32, warmup=32, size=(96, 54), lens=True, dynamic=True,
+                    probe_resolution=32)
     counts = rows[-1]["gl_resources"]
     assert counts["object_motion"] == 1 and counts["post_targets"] > 4
     assert soak.grew(rows, warmup=32, rss_slack=20.0) == []
@@ -32,7 +34,7 @@ def test_a_day_and_a_night_under_an_atmosphere_hold_their_resources_flat():
     """The tour under an atmosphere with stars, its sun going a quarter of the way round the
     sky from frame 30 to 90 (its sky-view table drawn every frame, the cube map and the sky's
     light every degree): nothing grows."""
-    rows = soak.run(frames=90, every=30, warmup=30, size=(96, 54), day=True)
+    rows = soak.run(frames=90, every=30, warmup=30, size=(96, 54), day=True, probe_resolution=32)
     counts = rows[-1]["gl_resources"]
     assert counts["sky_view"] == 1 and counts["sky_space"] == 1
     assert soak.grew(rows, warmup=30, rss_slack=20.0) == []
