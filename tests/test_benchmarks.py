@@ -553,18 +553,40 @@ def test_the_suite_collects_without_imgui():
     assert all("imgui-bundle" in why for why in skipped.values()), skipped
 
 
-def test_stages_time_every_stage_inside_its_frame(ctx):
+NO_RASTERISER_THREADS = 77  # the exit status of a check below that needs them where a process has none
+
+
+def _in_a_process_of_its_own(check: str) -> None:
+    """Run ``check``, a function of this module, in a fresh interpreter: llvmpipe's
+    rasteriser threads are what it looks at, and the suite's workers may draw without them
+    (``pytest_sessionstart`` in tests/conftest.py); a fresh process has the threads its
+    environment gives it.  Skips where ``check`` says it found none it needs."""
+    done = subprocess.run([sys.executable, "-c", f"import tests.test_benchmarks as module; module.{check}()"],
+                          cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+                          timeout=300)
+    if done.returncode == NO_RASTERISER_THREADS:
+        pytest.skip(done.stdout.strip())
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+
+
+def test_stages_time_every_stage_inside_its_frame():
     """Every stage of every scene has a row, and the stages' CPU times are parts of the
     frame's: their medians add up to no more than Engine.frame's (plus a little: medians of
     parts need not add up exactly), and the view stages are where the mirrors' time goes.
     The CPU columns are timed here by this thread's CPU time (``time.thread_time``, injected):
-    another process's load does not stretch one stage of one frame and not the next."""
+    another process's load does not stretch one stage of one frame and not the next.  In a
+    process of its own, with the rasteriser threads llvmpipe starts there (none on a GPU)."""
+    _in_a_process_of_its_own("_stages_check")
+
+
+def _stages_check() -> None:
     import time
 
     from benchmarks import stages
-    from engine.render.gl_context import prepare_context
+    from engine.render.gl_context import create_headless_context, prepare_context
     from shell.app import FRAME_STAGES
 
+    ctx = create_headless_context()
     rows = stages.run(ctx, (0, 16), frames=3, warmup=1, size=(64, 36), clock=time.thread_time)
     scenes = {r["scene"] for r in rows}
     assert scenes == {"mirrors_0", "mirrors_16", "probe_dynamic", f"sparks_8_{stages.SPARKS}"}
@@ -595,20 +617,26 @@ def test_stages_time_every_stage_inside_its_frame(ctx):
         assert all(r["raster_ms_median"] is None for r in rows)
 
 
-def test_the_rasteriser_clock_counts_llvmpipes_threads_not_this_one(ctx):
+def test_the_rasteriser_clock_counts_llvmpipes_threads_not_this_one():
     """A draw that llvmpipe's threads shade for milliseconds shows in ``RasterClock`` and
-    hardly in this thread's CPU time (which issued it and waited)."""
+    hardly in this thread's CPU time (which issued it and waited).  In a process of its own,
+    whose llvmpipe has its threads (skipped where it has none)."""
+    _in_a_process_of_its_own("_rasteriser_clock_check")
+
+
+def _rasteriser_clock_check() -> None:
     import time
 
     import moderngl
 
     from benchmarks.stages import RasterClock
-    from engine.render.bindings import invalidate
-    from engine.render.targets import release_framebuffer
+    from engine.render.gl_context import create_headless_context
 
+    ctx = create_headless_context()
     clock = RasterClock()
     if not clock.clocks:
-        pytest.skip("no llvmpipe rasteriser threads in this process (a GPU, LP_NUM_THREADS=0, or not Linux)")
+        print("no llvmpipe rasteriser threads in a process of its own (a GPU, LP_NUM_THREADS=0, or not Linux)")
+        sys.exit(NO_RASTERISER_THREADS)
     target = ctx.texture((320, 180), 4)
     framebuffer = ctx.framebuffer([target])
     program = ctx.program(vertex_shader="#version 410 core\nvoid main() { vec2 p = vec2(gl_VertexID & 1, "
@@ -627,10 +655,7 @@ def test_the_rasteriser_clock_counts_llvmpipes_threads_not_this_one(ctx):
         raster, own = clock() - raster, time.thread_time() - own
         assert raster > 0.002 and raster > 5 * own, (raster, own)
     finally:
-        release_framebuffer(framebuffer)  # the bound one: moderngl would bind its deleted name again
-        for thing in (vao, program, target):
-            thing.release()
-        invalidate(ctx)  # the engines' state cache: this test set state behind it
+        ctx.release()
 
 
 FAILING_TEST = """

@@ -92,8 +92,11 @@ def _hits(origin: np.ndarray, way: np.ndarray, boxes) -> np.ndarray:
             lo = np.array(centre) - 0.5 * np.array(size)
             hi = np.array(centre) + 0.5 * np.array(size)
             t1, t2 = (lo - origin) / way, (hi - origin) / way
-            t_in = np.nanmax(np.minimum(t1, t2), axis=1)
-            t_out = np.nanmin(np.maximum(t1, t2), axis=1)
+            near, far = np.minimum(t1, t2), np.maximum(t1, t2)
+            # (fmax and fmin pass over a NaN, a ray in a slab's face, as nanmax and nanmin do;
+            # column by column: a reduce along rows of three took half this file's time)
+            t_in = np.fmax(np.fmax(near[:, 0], near[:, 1]), near[:, 2])
+            t_out = np.fmin(np.fmin(far[:, 0], far[:, 1]), far[:, 2])
             hit = (t_out >= np.maximum(t_in, 0.0))
             nearest = np.where(hit, np.minimum(nearest, np.maximum(t_in, 0.0)), nearest)
     return nearest
