@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import json
 import os
 import re
 import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -28,29 +28,36 @@ def test_the_readme_has_its_python_examples():
     assert len(PYTHON_BLOCKS) >= 2  # the tiny game and the mirror/portal/probe game
 
 
-def run_block(index: int, code: str, tmp_path: Path) -> tuple[subprocess.CompletedProcess, Path]:
-    script = tmp_path / f"readme_block_{index}.py"
-    script.write_text(code)
-    out = tmp_path / f"out_{index}"
-    result = subprocess.run([sys.executable, str(script), "--headless", "--frames", "1", "--size", "160x90",
-                             "--out", str(out)], cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)},
-                            capture_output=True, text=True, timeout=120)
-    return result, out
-
-
 def test_every_readme_python_block_runs_and_renders_a_picture(tmp_path):
     """Each block is a whole program (a Game and ``run``): saved as a file and run the way its
-    own first line says, it exits 0 and writes a frame with something in it."""
+    own first line says, it exits 0 and writes a frame with something in it.  Each runs as a
+    program of its own forked from one interpreter that has imported the engine
+    (``tests/forked_scripts.py``: the imports were most of each run's time)."""
     for index, code in enumerate(PYTHON_BLOCKS):
         assert 'if __name__ == "__main__":' in code and "run(" in code, \
             f"README python block {index} is not a runnable program:\n{code[:200]}"
+    jobs = []
+    for index, code in enumerate(PYTHON_BLOCKS):
+        script = tmp_path / f"readme_block_{index}.py"
+        script.write_text(code)
+        jobs.append({"script": str(script), "cwd": str(tmp_path), "stdout": str(tmp_path / f"out_{index}.txt"),
+                     "stderr": str(tmp_path / f"err_{index}.txt"),
+                     "args": ["--headless", "--frames", "1", "--size", "160x90",
+                              "--out", str(tmp_path / f"out_{index}")]})
+    (tmp_path / "jobs.json").write_text(json.dumps(jobs))
     # (a worker a core: all at once, each block's 120 s ran out while forty compiled their
     # shaders together on a machine with no shader cache)
-    with ThreadPoolExecutor(max_workers=min(len(PYTHON_BLOCKS), os.cpu_count() or 2)) as pool:
-        runs = list(pool.map(lambda item: run_block(*item, tmp_path), enumerate(PYTHON_BLOCKS)))
-    for index, (result, out) in enumerate(runs):
-        assert result.returncode == 0, f"README python block {index} failed:\n{result.stderr[-2000:]}"
-        frame = np.asarray(Image.open(out / "frame_0000.png")).astype(float)
+    done = subprocess.run([sys.executable, "-m", "tests.forked_scripts", str(tmp_path / "jobs.json"),
+                           "--workers", str(os.cpu_count() or 2), "--timeout", "120"],
+                          cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
+                          timeout=1200)
+    assert done.returncode == 0, done.stderr[-3000:]
+    statuses = json.loads(done.stdout.splitlines()[-1])
+    assert len(statuses) == len(PYTHON_BLOCKS)
+    for index, status in enumerate(statuses):
+        assert status == 0, f"README python block {index} failed (exit {status}):\n" \
+                            f"{(tmp_path / f'err_{index}.txt').read_text()[-2000:]}"
+        frame = np.asarray(Image.open(tmp_path / f"out_{index}" / "frame_0000.png")).astype(float)
         assert frame.shape == (90, 160, 3)
         # (A blank frame's deviation is 0; the lowest a block's has, the mist's, about 10.)
         assert frame.mean() > 20 and frame.std() > 5, f"README python block {index} rendered a blank frame"
