@@ -16,6 +16,7 @@ import pytest
 os.environ.setdefault("SPECULUM_DEBUG", "1")
 
 from engine.render.gl_context import GLCapabilities, create_headless_context
+from engine.render.raw_gl import make_current
 from engine.render.shader_library import FreePrograms
 from tests.support import SceneRunner
 
@@ -73,8 +74,12 @@ def _no_gl_error(request):
         yield
         return
     context = request.getfixturevalue("ctx")
+    # Current first: a test before this one (or this one) may have run a program in this
+    # process that made and released a context of its own (tests/test_runner.py's run_level).
+    make_current(context)
     assert context.error == "GL_NO_ERROR"
     yield
+    make_current(context)
     assert context.error == "GL_NO_ERROR"
 
 

@@ -2,7 +2,13 @@
 from __future__ import annotations
 
 import contextlib
+import io
+import os
+import runpy
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import moderngl
 import numpy as np
@@ -15,6 +21,8 @@ from engine.core.game import Game
 from engine.render.shader_library import FreePrograms
 from engine.render.targets import CaptureTarget
 from shell.app import Engine
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @contextlib.contextmanager
@@ -397,3 +405,36 @@ def grey_ball_under_sky(scene, faces: np.ndarray, *lights, size: int = 64) -> tu
     runner = scene(ball, (size, size))
     runner.frame()
     return (srgb_to_linear(runner.frame()), *ball_normals(size))
+
+
+def run_level(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+    """``python -m games.hall_of_mirrors ARGS``: its exit status and what it printed.  Run in
+    this process as ``python -m`` runs the module (``runpy``, ``sys.argv`` set: the engine's
+    imports and shader sources are this process's already, a second or two of each run), or
+    in a process of its own where ``env_extra`` changes its environment.  (tests/test_runner.py's
+    first test starts a real ``python -m`` as a user does.)"""
+    if env_extra is not None:
+        return run_level_process(*args, env_extra=env_extra)
+    out, err = io.StringIO(), io.StringIO()
+    argv, folder = sys.argv, os.getcwd()
+    sys.argv = ["games.hall_of_mirrors", *args]
+    os.chdir(ROOT)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                runpy.run_module("games.hall_of_mirrors", run_name="__main__", alter_sys=True)
+                status = 0
+            except SystemExit as exit_:
+                status = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
+    finally:
+        sys.argv = argv
+        os.chdir(folder)
+    return subprocess.CompletedProcess(["python", "-m", "games.hall_of_mirrors", *args], status, out.getvalue(),
+                                       err.getvalue())
+
+
+def run_level_process(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+    """``python -m games.hall_of_mirrors ARGS`` in a process of its own."""
+    env = {**os.environ, **(env_extra or {})}
+    return subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", *args], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=300)

@@ -4,8 +4,6 @@ the id image is the same either way; the setting and the runner's ``--aa`` refus
 they do not know."""
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +14,7 @@ from pyglm import glm
 from components import Camera, Emissive, Material, MeshRef, Transform
 from engine.assets.mesh import box
 from engine.render.present import MAX_SEARCH_STEPS
-from tests.support import linear_to_srgb8, srgb_to_linear
+from tests.support import linear_to_srgb8, run_level, srgb_to_linear
 
 ROOT = Path(__file__).resolve().parents[1]
 SIZE = (160, 120)
@@ -130,9 +128,7 @@ def test_runner_aa_flag(tmp_path, capsys):
     written = {}
     for mode in ("off", "fxaa", "taa"):
         out = tmp_path / mode
-        done = subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "3",
-                               "--size", "160x90", "--ids", "--out", str(out), "--aa", mode],
-                              cwd=ROOT, capture_output=True, text=True, timeout=300)
+        done = run_level("--headless", "--frames", "3", "--size", "160x90", "--ids", "--out", str(out), "--aa", mode)
         assert done.returncode == 0, done.stderr
         written[mode] = (np.asarray(Image.open(out / "frame_0002.png")).astype(int), np.load(out / "ids_0002.npy"))
     np.testing.assert_array_equal(written["off"][1], written["fxaa"][1])

@@ -6,7 +6,6 @@ reddened by the same air; from a level's altitude, the thinner air above it."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -313,15 +312,12 @@ def test_a_skyboxs_altitude_draws_its_sky_and_a_level_file_keeps_it(scene, tmp_p
 def test_the_runners_altitude_stands_the_level_in_its_atmosphere(tmp_path):
     """``--altitude`` with ``--sky atmosphere`` draws the hall under the thinner air (its sky
     darker than at 200 m); without an atmosphere, or past 10,000 m, one line says why."""
-    import subprocess
-    import sys
-
     from PIL import Image
 
+    from tests.support import run_level
+
     def run(*extra):
-        return subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", "--headless", "--frames", "1",
-                               "--size", "64x36", "--aa", "off", *extra], capture_output=True, text=True,
-                              cwd=str(Path(__file__).resolve().parents[1]), timeout=300)
+        return run_level("--headless", "--frames", "1", "--size", "64x36", "--aa", "off", *extra)
 
     pictures = {}
     for metres in ("200", "8000"):

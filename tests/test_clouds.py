@@ -519,7 +519,7 @@ def test_the_runners_clouds_cover_the_levels_sky(ctx, tmp_path):
     has none); a bad share, and clouds over a photographed sky, are one error line each."""
     from engine import Game, spawn_camera
     from shell.app import Engine
-    from tests.test_runner import run_level
+    from tests.support import run_level
 
     class Open(Game):
         def build(self, world):

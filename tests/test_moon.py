@@ -419,7 +419,7 @@ def test_the_runners_moon_follows_the_clock(ctx, tmp_path):
     stands; ``--moon`` without ``--time`` and a bad age are one error line each."""
     from engine import Game, spawn_camera
     from shell.app import Engine
-    from tests.test_runner import run_level
+    from tests.support import run_level
 
     class Open(Game):
         def build(self, world):

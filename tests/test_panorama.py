@@ -297,7 +297,7 @@ def test_the_runners_panorama_becomes_the_levels_sky(scene, tmp_path):
 def test_the_sample_level_takes_a_panorama_from_the_command_line(tmp_path):
     from PIL import Image
 
-    from tests.test_runner import run_level
+    from tests.support import run_level
 
     path = write_hdr(tmp_path / "sky.hdr", np.tile(np.array([200, 40, 40, 129], np.uint8), (16, 32, 1)))   # red
     result = run_level("--headless", "--frames", "1", "--size", "64x36", "--aa", "off", "--panorama", str(path),

@@ -10,20 +10,16 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from tests.support import run_level, run_level_process
+
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def run_level(*args: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
-    env = {**os.environ, **(env_extra or {})}
-    return subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", *args], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=300)
 
 
 def test_sample_level_headless_writes_frames_ids_and_scene(tmp_path):
     out = tmp_path / "frames"
     scene_file = tmp_path / "scene.glb"
-    result = run_level("--headless", "--frames", "2", "--size", "160x90", "--out", str(out), "--ids",
-                       "--export-scene", str(scene_file), "--camera", "0,1.7,6.5,0,-8")
+    result = run_level_process("--headless", "--frames", "2", "--size", "160x90", "--out", str(out), "--ids",
+                               "--export-scene", str(scene_file), "--camera", "0,1.7,6.5,0,-8")
     assert result.returncode == 0, result.stderr
     frames = sorted(out.glob("frame_*.png"))
     assert [f.name for f in frames] == ["frame_0000.png", "frame_0001.png"]
