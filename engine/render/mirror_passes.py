@@ -569,10 +569,12 @@ class MirrorPasses:
         self.claim["parent_node_map"].value = PARENT_NODE_UNIT
         self.claim["parent_surface_map"].value = PARENT_SURFACE_UNIT
         self.uniforms = renderer.shaders.uniforms  # what the claim, composite and fallback programs hold
-        # Each composite and fallback variant's draw, by the fog's defines (FogBlock.defines):
-        # the builds without fog made now, those with it the first time a frame has fog.
+        # Each composite and fallback variant's draw, by the fog's defines (FogBlock.defines),
+        # made the first time they are needed: when a level with mirrors or portals loads
+        # (``prepare``: the main tree's) or a tree first composites (a probe's, the monitors'),
+        # not with every engine (three trees of 18 draws each were a quarter of an engine's
+        # making: 16 ms on llvmpipe, with the programs already linked).
         self._draws: dict[tuple, tuple[dict[str, _CompositeDraw], dict[str, _CompositeDraw]]] = {}
-        self.composites, self.fallbacks = self._variant_draws(())
         # The SURFACE_MOTION builds, by the fog's defines and variant, made the first time a
         # moved surface's view is composited.
         self._moving_draws: dict[tuple[tuple, str], _CompositeDraw] = {}
@@ -785,7 +787,8 @@ class MirrorPasses:
         builds = (fog, fog + RIPPLE_DEFINES) if self.renderer.ripples.waters else (fog,)
         sky_draws = [self._composite_for(fogging, variant, False)
                      for fogging in builds for variant in sorted(SKY_VARIANTS)]
-        for draw in (*self.composites.values(), *self.fallbacks.values(), *sky_draws, *rippling[0].values(),
+        composites, fallbacks = self._variant_draws(())
+        for draw in (*composites.values(), *fallbacks.values(), *sky_draws, *rippling[0].values(),
                      *rippling[1].values()):
             if draw.vao is None:
                 draw.prepare()
