@@ -44,11 +44,11 @@ def workers_fill_the_cores() -> bool:
 def pytest_sessionstart(session):
     """Where the workers fill the cores (``workers_fill_the_cores``) and nobody set
     ``LP_NUM_THREADS``: llvmpipe without rasteriser threads in this worker, drawing on the
-    calling thread (the suite took 5-10% less time so, 2026-12-07).  llvmpipe reads the
-    variable once a process, when its first context is made (every later one shares that
-    screen, released or not), so one is made and released here, before any test makes its
-    own; the variable is then put back, so the subprocesses the tests start get the
-    environment they were given."""
+    calling thread (7 render-heavy test files took 87-93 s so, 90-99 s with the threads,
+    2026-12-07).  llvmpipe reads the variable once a process, when its first context is
+    made (every later one shares that screen, released or not), so one is made and released
+    here, before any test makes its own; the variable is then put back, so the subprocesses
+    the tests start get the environment they were given."""
     if "LP_NUM_THREADS" in os.environ or not workers_fill_the_cores():
         return
     os.environ["LP_NUM_THREADS"] = "0"
@@ -75,7 +75,7 @@ def _no_gl_error(request):
         return
     context = request.getfixturevalue("ctx")
     # Current first: a test before this one (or this one) may have run a program in this
-    # process that made and released a context of its own (tests/test_runner.py's run_level).
+    # process that made and released a context of its own (tests/support.py's run_level).
     make_current(context)
     assert context.error == "GL_NO_ERROR"
     yield
