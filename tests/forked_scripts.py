@@ -58,7 +58,7 @@ def run_all(jobs: list[dict], workers: int, timeout: float) -> list[int]:
     """Each job's exit status, at most ``workers`` running at once."""
     if not hasattr(os, "fork"):
         return [_run_as_a_process(job, timeout) for job in jobs]
-    statuses: list[int | None] = [None] * len(jobs)
+    statuses = [-9] * len(jobs)
     running: dict[int, tuple[int, float]] = {}  # pid -> (job index, when it started)
     waiting = list(range(len(jobs)))
     while waiting or running:
@@ -77,7 +77,7 @@ def run_all(jobs: list[dict], workers: int, timeout: float) -> list[int]:
             continue
         index, _ = running.pop(pid)
         statuses[index] = os.waitstatus_to_exitcode(status)
-    return [status if status is not None else -9 for status in statuses]
+    return statuses
 
 
 def _run_as_a_process(job: dict, timeout: float) -> int:

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import Camera, Transform, look_rotation
+from components import Camera, ReflectionProbe, Transform, look_rotation
 from engine.core.frame_io import Output
 from engine.core.game import Game
 from engine.render.shader_library import FreePrograms
@@ -438,3 +438,10 @@ def run_level_process(*args: str, env_extra: dict | None = None) -> subprocess.C
     env = {**os.environ, **(env_extra or {})}
     return subprocess.run([sys.executable, "-m", "games.hall_of_mirrors", *args], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=300)
+
+
+def small_probes(world, resolution: int = 32) -> None:
+    """Every reflection probe's faces ``resolution`` texels a side: for a test of the sample
+    level that reads nothing from its probes (at 128 their captures are much of each frame)."""
+    for _, probe in world.query_one(ReflectionProbe):
+        probe.resolution = resolution

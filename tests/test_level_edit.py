@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import ComponentValueError, Material, MeshRef, Mirror, ReflectionProbe, Transform, Visibility
+from components import ComponentValueError, Material, MeshRef, Mirror, Transform, Visibility
 from engine.assets.level_file import load_level, save_level
 from engine.assets.level_save import same_floats
 from engine.assets.mesh import box
 from engine.core.world import World
 from games.hall_of_mirrors.level import Rise, Spin
+from tests.support import small_probes
 from tests.test_level_files import fields_by_name
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -618,8 +619,7 @@ def test_random_edits_while_the_sample_level_runs_draw_without_a_gl_error(ctx):
     capture = CaptureTarget(ctx, size)
     world = engine.world
     editor = Editor(world, game.components, dict(game.names))
-    for _, probe in world.query_one(ReflectionProbe):   # (at 128 the captures edits set off took half the time)
-        probe.resolution = 32
+    small_probes(world)   # (at 128 the captures edits set off took half the time)
     try:
         def frame() -> None:
             engine.frame(1 / 60, Output(capture.framebuffer, size))

@@ -19,7 +19,6 @@ from components import (
     Material,
     MeshRef,
     Mirror,
-    ReflectionProbe,
     Ripples,
     Skybox,
     Splash,
@@ -40,7 +39,7 @@ from engine.render.ripples import (
     RippleAtlas,
 )
 from shell.overlay_text import overlay_lines
-from tests.support import pixel_rays, srgb_to_linear
+from tests.support import pixel_rays, small_probes, srgb_to_linear
 
 FLAT = glm.angleAxis(-math.pi / 2, glm.vec3(1, 0, 0))
 DT = 1.0 / 60.0
@@ -899,8 +898,7 @@ def test_the_sample_levels_koi_rings_its_pond_each_time_it_rises(ctx):
     engine = Engine(game, ctx)
     capture = CaptureTarget(ctx, (32, 18))
     try:
-        for _, probe in engine.world.query_one(ReflectionProbe):   # (what is checked here is not in them)
-            probe.resolution = 32
+        small_probes(engine.world)   # (what is checked here is not in them)
         pond, mouth = game.names["pond"], game.names["koi_mouth"]
         rise = engine.world.get(mouth, Rise)
         drops, step = [], 0.1

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 from pyglm import glm
 
-from components import DirectionalLight, Mirror, ReflectionProbe
+from components import DirectionalLight, Mirror
 from engine.core.frame_io import Output
 from engine.render.targets import CaptureTarget
 from games.hall_of_mirrors.level import HallOfMirrors
 from shell.app import Engine
+from tests.support import small_probes
 
 SIZE = (480, 270)
 
@@ -30,8 +31,7 @@ def _frame(ctx, pose, change=None):
         engine.renderer.antialias = "off"
         engine.place_camera(*pose)
         names = game.names
-        for _, probe in engine.world.query_one(ReflectionProbe):   # (what is read here is not in them)
-            probe.resolution = 32
+        small_probes(engine.world)   # (what is read here is not in them)
         if change is not None:
             change(engine.world, names)
         for _ in range(2):
