@@ -222,6 +222,8 @@ class _NotRegularFile(Exception):
     def __init__(self, kind: str) -> None:
         super().__init__(kind)
         self.kind = kind
+        self.mtime_ns: int | None = None  # (its time and size, where ``_read_file`` looked)
+        self.size: int | None = None
 
 
 def _kind(mode: int) -> str:
@@ -349,22 +351,21 @@ class _Branches:
         states = [entry[0] for entry in self.open]
         return False if False in states else None if None in states else True
 
-    def read(self, line: str) -> None:
-        """Follow one line of source (a directive changes the state; other lines do not)."""
-        match = _CONDITION.match(line)
-        if match is not None:
-            self._condition(match.group(1), match.group(2))
+    def read(self, condition: tuple[str, str] | None, definition: tuple[str, str] | None) -> None:
+        """Follow one line of source, as ``_directive`` reads it: an ``#if`` family directive
+        and its name, or a ``#define`` or ``#undef`` and its name (other lines change nothing)."""
+        if condition is not None:
+            self._condition(*condition)
             return
-        match = _DEFINITION.match(line)
         kept = self.kept()
-        if match is None or kept is False:
+        if definition is None or kept is False:
             return
         if kept is None:
-            self.unsure.add(match.group(2))
-        elif match.group(1) == "define":
-            self.defined.add(match.group(2))
+            self.unsure.add(definition[1])
+        elif definition[0] == "define":
+            self.defined.add(definition[1])
         else:
-            self.defined.discard(match.group(2))
+            self.defined.discard(definition[1])
 
     def _condition(self, directive: str, name: str) -> None:
         if directive in ("ifdef", "ifndef", "if"):
@@ -391,35 +392,67 @@ def _expand(name: str, stack: tuple[str, ...], root: Path, files: SourceFiles,
         raise ShaderError(f"shader include cycle: {' -> '.join(stack + (name,))}")
     where = f" (included from {stack[-1]!r})" if stack else ""
     try:
-        data = contents[name] if contents and name in contents else _read_bytes(root / name)
+        data = contents[name] if contents and name in contents else _read_file(os.path.join(str(root), name))[2]
     except _NotRegularFile as exc:
         raise ShaderError(f"shader file {name!r} in {root}{where} is {exc.kind}, not a regular file") from None
     except (FileNotFoundError, NotADirectoryError):
         raise ShaderError(f"shader file {name!r} not found in {root}{where}") from None
     except OSError as exc:
         raise ShaderError(f"shader file {name!r} in {root}{where} could not be read: {exc.strerror}") from None
-    text = _decode(data, name, where)
     number = files.number(name)
     out = []
-    for index, line in enumerate(text.split("\n"), start=1):
-        if "#" not in line:   # (most lines: no directive, nothing to follow)
-            out.append(line)
+    for piece in _pieces(data, name, where):
+        if isinstance(piece, str):   # (lines with no directive: nothing to follow)
+            out.append(piece)
             continue
-        match = _INCLUDE.match(line)
-        if match is None:
+        index, line, include, branch, condition, definition = piece
+        if include is None:
             out.append(line)
-            branches.read(line)
-            if _BRANCH.match(line):
+            branches.read(condition, definition)
+            if branch:
                 out.append(_line(index + 1, number))
             continue
         if branches.kept() is False:
-            out.append(f"// ({match.group(1)}: in a branch this build leaves out)")  # (moderngl reads any "#include")
+            out.append(f"// ({include}: in a branch this build leaves out)")  # (moderngl reads any "#include")
             continue
-        included = f"include/{match.group(1)}"
+        included = f"include/{include}"
         out.append(_line(1, files.number(included)))
         out.append(_expand(included, stack + (name,), root, files, contents, branches=branches))
         out.append(_line(index + 1, number))
     return "\n".join(out)
+
+
+# Each shader file's text cut into pieces once a process, by name: (its bytes, its pieces).
+# A program's expansion walks a file's directive lines only; a level builds ~140 programs
+# from ~290 sources, each expanding ~13 files, so reading every line in Python again for
+# each was most of the time a new process took to expand its programs.
+_PIECES: dict[str, tuple[bytes, list]] = {}
+
+
+def _pieces(data: bytes, name: str, where: str) -> list:
+    """File ``name``'s text (``data``) as its runs of lines with no ``#`` (one string each,
+    joined) and, between them, each line with one as (its line number, the line, the file it
+    includes or None, whether it is an ``#else``, ``#elif`` or ``#endif``, its ``#if`` family
+    directive and name or None, its ``#define`` or ``#undef`` and name or None)."""
+    known = _PIECES.get(name)
+    if known is not None and known[0] == data:
+        return known[1]
+    pieces: list = []
+    run: list[str] = []
+    for index, line in enumerate(_decode(data, name, where).split("\n"), start=1):
+        if "#" not in line:
+            run.append(line)
+            continue
+        if run:
+            pieces.append("\n".join(run))
+            run = []
+        include, condition, definition = _INCLUDE.match(line), _CONDITION.match(line), _DEFINITION.match(line)
+        pieces.append((index, line, include and include.group(1), include is None and _BRANCH.match(line) is not None,
+                       condition and condition.group(1, 2), definition and definition.group(1, 2)))
+    if run:
+        pieces.append("\n".join(run))
+    _PIECES[name] = data, pieces
+    return pieces
 
 
 ProgramKey = tuple  # (vertex, fragment, geometry, sorted defines)
@@ -437,6 +470,23 @@ _EXPANDED: dict[tuple, tuple[dict[str, str | None], list[str], list[tuple[int, i
 # A library remembers every file its programs were built from (the hot reload's last good
 # copies); one whose time and size are what another library read is not read again.
 _FILE_BYTES: dict[str, tuple[int, int, bytes]] = {}
+
+
+def _read_file(path: str) -> tuple[int, int, bytes]:
+    """(mtime_ns, size, bytes) of the regular file at ``path``, read again only when its time
+    or size changed since a library or an expansion last read it (as the hot reload compares
+    them); ``_NotRegularFile`` or OSError as ``_read_bytes``."""
+    found = os.stat(path)
+    known = _FILE_BYTES.get(path)
+    if known is not None and known[:2] == (found.st_mtime_ns, found.st_size) and stat.S_ISREG(found.st_mode):
+        return known
+    try:
+        read = found.st_mtime_ns, found.st_size, _read_bytes(Path(path))
+    except _NotRegularFile as exc:
+        exc.mtime_ns, exc.size = found.st_mtime_ns, found.st_size
+        raise
+    _FILE_BYTES[path] = read
+    return read
 
 
 def _stamps(root: Path, names: list[str]) -> list[tuple[int, int]] | None:
@@ -704,19 +754,11 @@ class ShaderLibrary:
         saving by rename: rebuilt, and refused, until it is back)."""
         path = os.path.join(str(self.root or shader_dir()), name)
         try:
-            found = os.stat(path)
-            known = _FILE_BYTES.get(path)
-            if known is not None and known[:2] == (found.st_mtime_ns, found.st_size) and stat.S_ISREG(found.st_mode):
-                return known
-            contents = _read_bytes(Path(path))
+            return _read_file(path)
         except _NotRegularFile as exc:
-            contents = exc.kind
+            return exc.mtime_ns, exc.size, exc.kind
         except OSError:
             return None, None, None
-        read = found.st_mtime_ns, found.st_size, contents
-        if isinstance(contents, bytes):
-            _FILE_BYTES[path] = read
-        return read
 
     def changed_files(self) -> set[str]:
         """Files some program was built from whose bytes changed since they were last read
