@@ -254,6 +254,31 @@ def test_the_glsl_cube_face_of_a_direction_is_the_tables_inverse(ctx, tmp_path):
         np.testing.assert_allclose(drawn[..., 2], t, atol=1e-5, err_msg=FACE_NAMES[face])
 
 
+CUBE_FACE_POINT_FRAG = """#version 410 core
+#include "cube_faces.glsl"
+uniform int face;
+uniform float level_size;
+out vec4 color;
+void main() {
+    vec2 st = gl_FragCoord.xy / level_size * 2.0 - 1.0;
+    color = vec4(cube_face_point(cube_face_direction(face, st) * 3.7, vec2(0.5, -0.75) * st.yx), 1.0);
+}
+"""
+
+
+def test_the_glsl_point_on_a_directions_face_is_the_tables(ctx, tmp_path):
+    """``cube_face_point`` (shaders/include/cube_faces.glsl: a lamp's cube's bilinear
+    comparisons gather at the corner of their four texels with it) takes each texel's
+    direction of each face, scaled, and another (s, t) to the direction the table gives
+    that face at that (s, t): its axes, written out axis by axis, agree with it."""
+    c = (np.arange(16) + 0.5) / 16 * 2.0 - 1.0
+    t, s = np.meshgrid(c, c, indexing="ij")
+    for face, drawn in enumerate(_faces_drawn(ctx, tmp_path, CUBE_FACE_POINT_FRAG)):
+        forward, s_axis, t_axis = (np.array(axis, np.float64) for axis in CUBE_FACES[face])
+        expected = forward + (0.5 * t)[..., None] * s_axis + (-0.75 * s)[..., None] * t_axis
+        np.testing.assert_allclose(drawn[..., :3], expected, atol=1e-6, err_msg=FACE_NAMES[face])
+
+
 def test_the_glsl_names_every_clip_distance_and_numbers_none():
     """Every gl_ClipDistance a shader writes is indexed by a name the shader library defines
     from engine/render/bindings.py (never a number, never a define of the shader's own), and

@@ -258,8 +258,9 @@ class ShadowMaps:
         self.spot_atlas: moderngl.Texture | None = None
         self._spot_framebuffer: moderngl.Framebuffer | None = None
         self.spot_tile = 0
-        # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, four on a
-        # cube), each a bilinear percentage-closer comparison; "single" (one such tap: a
+        # How edges are filtered: "grid" (2 x 2 taps, 3 x 3 past a softness of 1, a lamp's
+        # cube's too), each a bilinear percentage-closer comparison (a cube's gathered and
+        # weighed by hand: shadows.glsl cube_bilinear_lit); "single" (one such tap: a
         # one-texel edge).  On a software rasteriser every tap is CPU time for every pixel a
         # light reaches (the benchmark scene at 640x360 on llvmpipe, the sun's map 2048 a side:
         # a still frame 1.43x the frame without shadows with the grid, 1.24x with one tap
@@ -747,7 +748,7 @@ class ShadowMaps:
             ("SHADOW_SINGLE_TAP", "1", self._filter == "single")) if on)
 
     def _taps(self, softness: float) -> float:
-        """Taps a side of a directional light's grid."""
+        """Taps a side of a light's grid (a sun's, a spot's map's, a lamp's cube's)."""
         if self._filter == "single":
             return 1.0
         return 3.0 if softness > 1.0 else 2.0
@@ -950,9 +951,9 @@ class ShadowMaps:
         self._cube_lights[slot] = light_index
         self._spot_maps[slot] = False
         base = (64 + 16) * MAX_DIRECTIONAL_LIGHTS // 4 + MAX_POINT_LIGHTS + 4 * slot
-        # A texel's angle: 90 degrees over the face's texels.
-        self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range,
-                                     1.0 if self.filter == "single" else 4.0)
+        # A texel's angle: 90 degrees over the face's texels; the grid's taps a side, as a
+        # sun's (shadows.glsl point_cube_shadow).
+        self.block[base:base + 4] = (np.pi / 2.0 / resolution, softness, light_range, self._taps(softness))
         self.block[_SPOTS_END // 4 + 4 * slot:_SPOTS_END // 4 + 4 * slot + 4] = size
         self.renderer.checkpoint(f"shadow cube of point light {light_index}")
         return path

@@ -27,4 +27,16 @@ int cube_face_of(vec3 d, out vec2 st) {
     st = st_major.xy / max(st_major.z, 1e-30);
     return x ? (d.x < 0.0 ? 1 : 0) : y ? (d.y < 0.0 ? 3 : 2) : (d.z < 0.0 ? 5 : 4);
 }
+
+// The direction through point ``st`` of the face direction ``d`` falls in (the face
+// ``cube_face_of`` gives): ``cube_face_direction`` of that face, written out one major axis
+// at a time as ``cube_face_of`` is (no table index).  tests/test_one_owner.py holds it to the
+// table.
+vec3 cube_face_point(vec3 d, vec2 st) {
+    vec3 a = abs(d);
+    bool x = a.x >= a.y && a.x >= a.z;
+    bool y = !x && a.y >= a.z;
+    return x ? vec3(sign(d.x), -st.y, -sign(d.x) * st.x) : y ? vec3(st.x, sign(d.y), sign(d.y) * st.y)
+        : vec3(sign(d.z) * st.x, -st.y, sign(d.z));
+}
 #endif

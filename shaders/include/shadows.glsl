@@ -34,7 +34,7 @@ layout(std140) uniform Shadows {
                                                       // z: one atlas texel in uv, w: taps a side (0: no shadow)
     ivec4 point_slot[MAX_POINT_LIGHTS / 4];           // per point light: its cube (0, 1) or -1
     vec4 point_params[MAX_POINT_SHADOWS];             // x: a texel's angular size (radians), y: softness
-                                                      // (texels), z: range, w: taps (1 or 4)
+                                                      // (texels), z: range, w: taps a side
     ivec4 point_light;                                // per cube (0, 1): the point light it is, or -1
     // Cascades (rings about the camera, DirectionalLight.shadow_cascades), a light's outermost first;
     // a ring shares its light's space and depth with the level's map, so its square is that map's
@@ -69,22 +69,8 @@ uniform samplerCube point_shadow1;
 // (engine/render/shadows.py ShadowMaps.filter), each a bilinear comparison of 2 x 2 texels,
 // ``softness`` atlas texels (``texel``: one in uv, each way) across: 2 x 2 taps half a
 // softness apart (a 3 x 3-texel tent at softness 1), 3 x 3 for wider edges; one tap on a
-// software rasteriser.
-float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float softness) {
-#ifdef SHADOW_SINGLE_TAP
-    return texture(atlas, p);
-#else
-    vec2 step = n > 1 ? texel * softness / float(n - 1) : vec2(0.0);
-    vec2 start = p.xy - 0.5 * step * float(n - 1);
-    float lit = 0.0;
-    for (int y = 0; y < n; ++y)
-        for (int x = 0; x < n; ++x)
-            lit += texture(atlas, vec3(start + step * vec2(x, y), p.z));
-    return lit / float(n * n);
-#endif
-}
-
-// The same with each tap compared with the receiver's own plane there (receiver-plane depth
+// software rasteriser (SHADOW_SINGLE_TAP: ``slope`` unused, so its making is compiled out).
+// Each tap is compared with the receiver's own plane there (receiver-plane depth
 // bias: ``slope``, its depth per uv of the atlas, held to a slope of 8), less a texel's
 // worth of it (the 2 x 2 texels a bilinear comparison reads lie up to a texel off the tap):
 // a surface does not shadow itself across the filter's width, so the point needs moving off
@@ -109,7 +95,6 @@ float filtered_shadow(sampler2DShadow atlas, vec3 p, int n, vec2 texel, float so
 #endif
 }
 
-#if !defined(SHADOW_SINGLE_TAP)
 // The receiver's plane in a map that ``to_map`` carries the world into (a spot's perspective
 // map, a light's image through mirrors and portals) at ``p`` (the point in the map, divided
 // by its ``w``): its depth per atlas uv.  A projective map carries a plane to a plane (depth
@@ -124,7 +109,6 @@ vec2 receiver_slope_in_map(mat4 to_map, vec3 p, vec3 normal) {
     vec3 m = cross(a.xyz - p * a.w, b.xyz - p * b.w);
     return -m.xy / (abs(m.z) > 1e-12 ? m.z : 1e-12);
 }
-#endif
 
 #if (defined(SOFT_POINT_SHADOWS) || defined(SOFT_SUN_SHADOWS)) && !defined(SHADOW_SINGLE_TAP)
 // The k-th of ``count`` taps on a Vogel disc (a golden-angle spiral) of radius 1, the same at
@@ -156,8 +140,8 @@ const float SUN_SEARCH_TEXELS = 32.0;   // the search's and the penumbra's wides
 
 // ``p``: the point in the atlas (uv, depth); ``metres_per_uv``: this map's, along u and along
 // v (a level not square in the sun's view has its map's texels longer one way: the disc of
-// taps is round in metres, not in uv); ``texel``: the atlas's texel in uv; ``widest``: the
-// widest radius, metres.
+// taps is round in metres, not in uv); ``texel``: the atlas's texel in uv; ``widest_metres``:
+// the widest radius.
 float soft_sun_shadow(vec3 p, vec2 metres_per_uv, float texel, float widest_metres, vec4 size, vec2 slope,
                       vec3 tile) {
     vec2 low = tile.xy + 0.5 * texel, high = tile.xy + tile.z - 0.5 * texel;
@@ -297,11 +281,8 @@ float directional_shadow(int i, vec3 position, vec3 normal, vec3 l) {
     mat4 to_map = shadows.directional_matrix[i];
     vec3 at = (to_map * vec4(position, 1.0)).xyz;  // the point in the level map's coordinates
     vec3 along = mat3(to_map) * normal;            // ... and a metre along its normal
-    vec2 slope = vec2(0.0);
-#ifndef SHADOW_SINGLE_TAP
     // The receiver's plane in the map (receiver-plane depth bias, without screen derivatives).
-    slope = receiver_slope_in_map(to_map, at, normal);
-#endif
+    vec2 slope = receiver_slope_in_map(to_map, at, normal);
     return directional_shadow_at(i, params, at, along, grazing, slope);
 #endif
 }
@@ -519,6 +500,26 @@ float receiver_ratio(vec3 normal, float facing, vec3 tap, float widest) {
 }
 #endif
 
+#include "cube_faces.glsl"
+// One bilinear percentage-closer comparison in a distance cube, by hand (it holds distances in
+// a float colour channel, which the hardware's depth comparison does not take): the four
+// texels bilinear filtering reads about the way ``tap``, each lit where ``d`` (distance over
+// range) is no farther than it holds, weighed as bilinear filtering weighs them, so a straight
+// edge ramps over a texel as a sun's map's does (nearest texels made a staircase of them).
+// The four are gathered at their shared corner, half a texel from any other four whatever the
+// rounding; a tap within half a texel of its face's edge takes the face's edge texels (as a
+// map clamped to its edge does), so every gather stays in one face's texels.
+float cube_bilinear_lit(samplerCube cube, vec3 tap, float d, float face_size) {
+    vec2 st;
+    cube_face_of(tap, st);
+    vec2 texel = (st * 0.5 + 0.5) * face_size - 0.5;
+    vec2 corner = max(min(floor(texel), vec2(face_size - 2.0)), vec2(0.0));   // (a 1-texel cube: 0)
+    vec2 f = clamp(texel - corner, 0.0, 1.0);
+    vec4 held = textureGather(cube, cube_face_point(tap, (corner + 1.0) / face_size * 2.0 - 1.0));
+    vec4 lit = step(vec4(d), held);   // (x: texel (i0, j1), y: (i1, j1), z: (i1, j0), w: (i0, j0))
+    return mix(mix(lit.w, lit.z, f.x), mix(lit.x, lit.y, f.x), f.y);
+}
+
 float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 normal, vec3 l, vec4 size) {
     float dist = length(from_light);
     float nl = clamp(dot(normal, l), 0.0, 1.0);
@@ -528,31 +529,42 @@ float point_cube_shadow(samplerCube cube, vec4 params, vec3 from_light, vec3 nor
     // edges in by it).
     float texel = params.x * dist;
     vec3 p = from_light + normal * texel * (1.5 - nl);
-#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)  // (the shafts' march: one tap, hard)
+#if defined(SOFT_POINT_SHADOWS) && !defined(SHADOW_SINGLE_TAP)  // (the shafts' march: one tap)
     // (a light with a size: its taps compare with the receiver's plane too, receiver_at)
     if (size.x > 0.0) return soft_cube_shadow(cube, p, normal, length(p) / params.z, size, params.z, params.x);
 #endif
+    // A bilinear comparison reads texels up to one of its face's off its tap on each axis, and
+    // a face's middle texel is 4 / pi (1.27) of the mean (params.x): pushed 1.5 times farther,
+    // a surface the light grazes does not shadow itself across them (a panel 16 degrees from
+    // the light kept 0.97 of its light at softness 4 pushed 1.27 times, 0.96 at 1, 1.0 at 1.4:
+    // tests/test_shadow_claims.py grazing).
+    p = from_light + normal * (texel * 1.5 * (1.5 - nl));
     float d = length(p) / params.z;
     vec3 dir = normalize(p);
+    float face_size = float(textureSize(cube, 0).x);
 #ifdef SHADOW_SINGLE_TAP
-    return d <= texture(cube, dir).r ? 1.0 : 0.0;
+    return cube_bilinear_lit(cube, dir, d, face_size);
 #else
-    // Taps on a cross around the direction, in the plane facing the light, each compared with
-    // the receiver's own plane along it (receiver-plane depth bias; its slope held to 8 across
-    // the tap's angle).
+    // A grid of n x n taps (params.w a side) ``softness`` (params.y) of the cube's mean texel
+    // angles (params.x) across, in the plane facing the light, each a bilinear comparison with
+    // the receiver's own plane along its way (receiver-plane depth bias; its slope held to 8
+    // across the grid): the suns' and the spots' grid (filtered_shadow), so an edge is
+    // softness + 1 texels wide whatever the light.
     vec3 side = normalize(cross(dir, abs(dir.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0)));
     vec3 up = cross(dir, side);
-    float spread = params.w > 1.0 ? params.x * max(params.y, 0.5) : 0.0;
+    int n = int(params.w);
+    float spread = params.x * params.y;
+    float pitch = n > 1 ? spread / float(n - 1) : 0.0;
     float facing = dot(normal, dir);
-    float widest = 1.0 + 8.0 * spread * 0.70710678;   // (a tap lies spread / sqrt(2) off the direction)
-    int taps = int(params.w);
+    float widest = 1.0 + 8.0 * spread * 0.70710678;   // (a corner tap lies spread / sqrt(2) off the direction)
     float lit = 0.0;
-    for (int k = 0; k < taps; ++k) {
-        vec2 o = vec2(k & 1, k >> 1) * 2.0 - 1.0;
-        vec3 tap = dir + (side * o.x + up * o.y) * spread * 0.5;
-        lit += d * receiver_ratio(normal, facing, tap, widest) <= texture(cube, tap).r ? 1.0 : 0.0;
-    }
-    return lit / float(taps);
+    for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x) {
+            vec2 o = (vec2(x, y) - 0.5 * float(n - 1)) * pitch;
+            vec3 tap = dir + side * o.x + up * o.y;
+            lit += cube_bilinear_lit(cube, tap, d * receiver_ratio(normal, facing, tap, widest), face_size);
+        }
+    return lit / float(n * n);
 #endif
 }
 
@@ -599,12 +611,8 @@ float spot_map_light_shadow(int slot, vec3 position, vec3 normal) {
     vec4 box = shadows.spot_box[slot];
     if (any(lessThan(p.xyz, vec3(box.xy, 0.0))) || any(greaterThan(p.xyz, vec3(box.zw, 1.0)))) return 1.0;
     vec2 texel = 1.0 / vec2(textureSize(spot_atlas, 0));
-#ifdef SHADOW_SINGLE_TAP
-    float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), texel, params.y);
-#else
     float lit = filtered_shadow(spot_atlas, p.xyz, int(params.w), texel, params.y,
                                 receiver_slope_in_map(to_map, p.xyz, normal));
-#endif
 #ifdef LAMP_SEE_THROUGH_SHADOWS
     // Its see-through tile is the map's view widened over the gutter: the map's square is the
     // tile's inside.  The point moved twice as far off its surface (the tiles' texels are twice

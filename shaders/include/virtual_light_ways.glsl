@@ -71,12 +71,8 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
     vec4 p = to_map * vec4(position + normal * texel * (1.5 - nl), 1.0);
     p.xyz /= p.w;
     if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
-#ifdef SHADOW_SINGLE_TAP
-    float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y);  // shadows.glsl
-#else
-    float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y,
+    float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y,  // shadows.glsl
                                 receiver_slope_in_map(to_map, p.xyz, normal));
-#endif
 #ifdef VIRTUAL_SEE_THROUGH_SHADOWS
     lit *= virtual_see_through_at(p.xyz);  // what see-through things on its way let through (shadows.glsl)
 #endif
