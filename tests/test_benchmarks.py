@@ -213,6 +213,23 @@ sys.exit(status)
 """
 
 
+def test_gpu_report_makes_the_lighting_stand_in_once_whatever_the_sizes():
+    """The report runs every sized suite at each ``--size``, size by size, the lighting suite
+    at the later sizes with its ``frames`` part only: its LP_NUM_THREADS=0 stand-in is a 4x2
+    frame, the same whatever the size (its rows at the first size)."""
+    from benchmarks.gpu_report import FIXED_SIZE, sized_runs
+
+    suites = ("mirrors", "lighting", "cpu")
+    runs = sized_runs(suites, [(640, 360), (1920, 1080), (160, 90)])
+    assert [(suite, size) for suite, size, _ in runs] == [
+        (suite, size) for size in ((640, 360), (1920, 1080), (160, 90)) for suite in suites if suite not in FIXED_SIZE]
+    assert [extra for suite, _, extra in runs if suite == "lighting"] == [(), ("--parts", "frames"),
+                                                                           ("--parts", "frames")]
+    assert all(extra == () for suite, _, extra in runs if suite != "lighting")
+    parser, _ = build_parser()
+    assert parser.parse_args(["lighting", "--parts", "frames"]).parts == ("frames",)
+
+
 def test_gpu_report_writes_markdown_and_json_without_imgui(ctx, tmp_path):
     out = tmp_path / "report"
     done = subprocess.run(
