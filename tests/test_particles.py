@@ -1421,3 +1421,46 @@ def test_a_monitors_picture_shows_a_particle_where_its_camera_projects_it(scene)
     assert shown[True][row, col].min() > shown[False][row, col].max() + 0.5
     col, row = pixel(at - glm.vec3(0.5, 0.0, 0.0))
     np.testing.assert_allclose(shown[True][row, col], shown[False][row, col], atol=0.01)
+
+
+def test_a_lit_particle_past_the_suns_map_is_lit_whatever_its_atlas_holds_there(scene):
+    """The sun's map is fitted to the opaque things (``Renderer.level_bounds``): a small box
+    beside it.  A particle (not in that box) past the map's square has no caster between it and
+    the sun, and is lit as with the sun casting no shadow: its lookup reads nothing of the
+    atlas, where the next tile lies (another sun's map, a ring's, or texels no draw wrote: the
+    test clears the whole atlas to the near depth before the map is drawn again, as such
+    texels may hold)."""
+    sun = glm.normalize(glm.vec3(0.4, -0.3, -1.0))
+
+    def build(world):
+        look_from(world, EYE, (0.0, 0.0, 0.0), fov=FOV)
+        world.resources["sun"] = world.spawn(DirectionalLight(direction=sun, intensity=3.0))
+        world.spawn(HemisphereLight(sky=(0.3, 0.35, 0.5), ground=(0.2, 0.15, 0.1), intensity=1.0))
+        world.spawn(Transform(), still(size=1.0, color=(*ALBEDO, 1.0), end_color=(*ALBEDO, 1.0), lit=True,
+                                       translucency=0.3, blend="alpha", texture=solid()))
+        world.spawn(Transform(position=glm.vec3(-1.5, -1.5, -0.5)), MeshRef(box((1.0, 1.0, 1.0))), Material())
+
+    runner = scene(build, SIZE)
+    runner.engine.renderer.antialias = "off"
+    light = runner.world.get(runner.world.resources["sun"], DirectionalLight)
+    light.shadows = False
+    runner.frame()
+    no_shadow = runner.frame()
+    light.shadows = True
+    runner.frame()   # (the atlas made)
+    maps = runner.engine.renderer.shadows
+    cleared = runner.ctx.framebuffer(depth_attachment=maps.atlas)
+    cleared.clear(depth=0.0)
+    cleared.release()
+    light.shadows = False
+    runner.frame()
+    light.shadows = True
+    shadowed = runner.frame()   # the map drawn again into the cleared atlas
+    # The particle's middle lies past the map's square, on the side of the next tile.
+    matrix = np.array(maps.block[:16], np.float64).reshape(4, 4)   # (glm's columns: numpy rows)
+    uv = (np.array([0.0, 0.0, 0.0, 1.0]) @ matrix)[:2]
+    corner, side = np.array(maps.directional_tiles[0][:2]), maps.directional_tiles[0][2]
+    assert (uv > corner + side).any() and (uv < 1.0).all(), (uv, corner, side)
+    middle = (slice(34, 38), slice(46, 50))
+    assert shadowed[middle].mean() > 120   # (8-bit: the sunlit particle, not a dark frame)
+    np.testing.assert_array_equal(shadowed, no_shadow)

@@ -1171,3 +1171,83 @@ def test_a_grazing_sun_through_a_mirror_keeps_its_shadow_edge_whatever_the_softn
     assert max(grid) - min(grid) < 0.3, places
     assert max(abs(p) for p in places.values()) < 2.0, places
     assert max(abs(p - shot["lattice"]) for p in places.values()) < 1.5, (places, shot["lattice"])
+
+
+# A lamp 5 cm in front of a wide, low wall mirror (at x = 0, facing +x, 8 m along z, 1 m tall,
+# centred 0.5 m up): its image's map opens no wider than VIRTUAL_MAX_FOV, so the floor along
+# the wall, where the image's light comes in more than 85 degrees off the map's axis, lies
+# past the map on both sides.
+WIDE_LAMP = np.array([0.05, 0.5, 0.0])
+WIDE_HALF = np.array([0.5, 4.0])   # the mirror's half height and half width
+
+
+def _past_the_widest_angle(points: np.ndarray) -> np.ndarray:
+    """Floor points whose line to the lamp's image comes in past VIRTUAL_MAX_FOV / 2 sideways."""
+    from engine.rules.shadow_rules import VIRTUAL_MAX_FOV
+    image = WIDE_LAMP * np.array([-1.0, 1.0, 1.0])
+    d = points - image
+    return np.abs(d[:, 2]) > np.tan(np.radians(VIRTUAL_MAX_FOV / 2.0)) * d[:, 0]
+
+
+def test_a_lamp_by_a_wide_mirror_lights_the_floor_past_its_maps_widest_angle_on_both_sides(scene):
+    """Past the map's widest angle nothing of the image's is shadowed (``virtual_shadow``
+    takes a point outside the light's tile as unshadowed), whichever side: a lookup there
+    read the next tile's texels on one side (another light's map, or texels no draw wrote:
+    the test clears the whole atlas to the near depth first, as such texels may hold).  By
+    the rays, with nothing in the way, every floor point in front of the mirror whose line to
+    the image crosses its outline is lit by it."""
+    def build(world):
+        look_from(world, (1.0, 1.0, 0.0), (0.1, 0.0, 0.0), fov=110.0)
+        ids = world.resources["ids"] = {}
+        ids["floor"] = world.spawn(Transform(), MeshRef(plane(14, 14)), Material(color=(0.8, 0.8, 0.8), roughness=1.0))
+        world.spawn(Transform(position=WIDE_LAMP.tolist()), PointLight(intensity=8.0, range=12.0))
+        facing_plus_x = look_rotation(glm.vec3(-1, 0, 0))
+        ids["mirror"] = world.spawn(Transform(position=(0.0, WIDE_HALF[0], 0.0), rotation=facing_plus_x),
+                                    MeshRef(quad(2 * WIDE_HALF[1], 2 * WIDE_HALF[0])), Material(), Mirror())
+
+    runner = scene(build, (320, 240))
+    runner.engine.renderer.antialias = "off"
+    mirror = runner.world.get(runner.world.resources["ids"]["mirror"], Mirror)
+    mirror.reflects_light = False
+    off = runner.frame()
+    mirror.reflects_light = True
+    runner.frame()   # (the virtual atlas made)
+    maps = runner.engine.renderer.shadows
+    cleared = runner.ctx.framebuffer(depth_attachment=maps.virtual_atlas)
+    cleared.clear(depth=0.0)
+    cleared.release()
+    mirror.reflects_light = False
+    runner.frame()
+    mirror.reflects_light = True
+    on = runner.frame()   # its map drawn again into the cleared atlas
+    assert runner.stats.virtual_lights == 1
+    points = _floor_points(runner)
+    floor = (runner.ids() == runner.world.resources["ids"]["floor"]).reshape(-1)
+    past = floor & _past_the_widest_angle(points) & (points[:, 0] > 0.02)
+    ratio = (srgb_to_linear(on).mean(-1) / np.maximum(srgb_to_linear(off).mean(-1), 1e-6)).reshape(-1)
+    # Where the image's light is bright enough to see in 8 bits (lights.glsl's falloff, the
+    # cosine at the floor, a Lambertian 0.8): there it lights the floor by the rays.
+    to_image = WIDE_LAMP * np.array([-1.0, 1.0, 1.0]) - points
+    distance = np.linalg.norm(to_image, axis=1)
+    fade = np.clip(1.0 - (distance / 12.0) ** 4, 0.0, 1.0)
+    expected = 8.0 * fade * fade / (distance ** 2 + 1.0) * np.clip(to_image[:, 1] / distance, 0.0, 1.0) * 0.8 / np.pi
+    lit = ratio > 1.05
+    left, right = (past & (expected > 0.02) & side for side in (points[:, 2] < 0.0, points[:, 2] > 0.0))
+    assert left.sum() > 300 and right.sum() > 300, (int(left.sum()), int(right.sum()))
+    assert lit[left].mean() > 0.99 and lit[right].mean() > 0.99, (float(lit[left].mean()), float(lit[right].mean()))
+    # The tile drawn again holds the far depth in its gutter round the map, the floor in the
+    # map, and left the rest of the atlas as it was.
+    from engine.render.shadows import VIRTUAL_GUTTER, VIRTUAL_RESOLUTION, VIRTUAL_TILE
+    side = maps.virtual_atlas.size[0]
+    assert side == 2 * VIRTUAL_TILE
+    depth = np.frombuffer(maps.virtual_atlas.read(), np.float32).reshape(side, side)
+    tile = depth[:VIRTUAL_TILE, :VIRTUAL_TILE]
+    inner = slice(VIRTUAL_GUTTER, VIRTUAL_GUTTER + VIRTUAL_RESOLUTION)
+    ring = np.ones(tile.shape, bool)
+    ring[inner, inner] = False
+    assert (tile[ring] == 1.0).all()
+    assert (tile[inner, inner] < 1.0).mean() > 0.3   # the floor (half the map looks down at it)
+    assert (depth[VIRTUAL_TILE:, :] == 0.0).all() and (depth[:, VIRTUAL_TILE:] == 0.0).all()
+    # The filter's widest reach from a point just inside the map stays in the gutter.
+    from components.camera import MAX_SHADOW_SOFTNESS
+    assert MAX_SHADOW_SOFTNESS / 2.0 + 1.0 <= VIRTUAL_GUTTER

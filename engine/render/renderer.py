@@ -574,8 +574,9 @@ class Renderer(Gpu):
         return _union(boxes), parts
 
     def level_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The world box holding every instance that casts (opaque, and see-through ones:
-        ``shadow_casting_batches``) as of the last upload (None: none): what a directional
+        """The world box holding every instance of the batches that cast (the opaque ones,
+        an instance that casts no shadow among them, and the see-through ones:
+        ``shadow_casting_batches``; not the particles) as of the last upload (None: none): what a directional
         light's shadow map is fitted to."""
         batches = self.shadow_casting_batches()
         kept = self._level_union

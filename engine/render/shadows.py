@@ -109,10 +109,16 @@ SHADOW_FILTERS = ("grid", "single")
 # The slots the light rule (engine/rules/light_rules.py) fills: the Lights block's and the cubes.
 LIGHT_LIMITS = LightLimits(MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS, MAX_POINT_SHADOWS)
 VIRTUAL_RESOLUTION = 1024   # texels a side of a virtual light's map (a tile of the virtual atlas)
+# Texels of far depth round each virtual light's map in its atlas tile: the filter's taps from a
+# point just inside the map (softness / 2 + 1 texels out: 5 at MAX_SHADOW_SOFTNESS 8) read its
+# own tile's far depth, not the next light's map or texels no draw wrote.  A multiple of
+# SEE_THROUGH_SCALE: the see-through tile keeps a whole gutter of its own.
+VIRTUAL_GUTTER = 8
+VIRTUAL_TILE = VIRTUAL_RESOLUTION + 2 * VIRTUAL_GUTTER   # texels a side of a virtual light's tile
 # The VirtualLights block (shaders/include/virtual_light_ways.glsl): a count, then per light a
-# matrix and twelve vectors.
+# matrix and thirteen vectors.
 VIRTUAL_FIELDS = ("position", "color", "exit", "origin", "u", "v", "params", "spot", "cookie_u", "cookie_v",
-                  "rect_u", "rect_v")
+                  "rect_u", "rect_v", "tile")
 # ... then, for light reflected more than once, each light's further outlines (the earlier
 # surfaces as the later ones carry them): a plane, a corner and two edges each.
 VIRTUAL_MORE = MAX_APERTURES - 1
@@ -488,7 +494,7 @@ class ShadowMaps:
         self._release_target(self.virtual_see_through_atlas, self._virtual_see_through_framebuffer)
         self.virtual_see_through_atlas = self._virtual_see_through_framebuffer = None
         if casting:
-            side = 2 * VIRTUAL_RESOLUTION // SEE_THROUGH_SCALE
+            side = 2 * VIRTUAL_TILE // SEE_THROUGH_SCALE
             self.virtual_see_through_atlas, self._virtual_see_through_framebuffer = \
                 self._see_through_target((side, side))
         self._set_program_defines()
@@ -791,16 +797,21 @@ class ShadowMaps:
         where the image sees it and kept between the surfaces it runs between (the way in
         from the light: in front of the first surface; a stretch from one mirror to the next:
         in front of both, the second plane a clip distance of its own); the surfaces on the
-        way are left out."""
+        way are left out.  The tile is cleared to far depth whole, its gutter
+        (``VIRTUAL_GUTTER``) round the map included; the lookup takes a point outside the
+        tile as unshadowed (``virtual_shadow``), as a sun's outside its map."""
         if self.virtual_atlas is None:
-            self.virtual_atlas = self._make_atlas((2 * VIRTUAL_RESOLUTION, 2 * VIRTUAL_RESOLUTION))
+            self.virtual_atlas = self._make_atlas((2 * VIRTUAL_TILE, 2 * VIRTUAL_TILE))
             self._virtual_framebuffer = self.ctx.framebuffer(depth_attachment=self.virtual_atlas)
-        x, y = (slot % 2) * VIRTUAL_RESOLUTION, (slot // 2) * VIRTUAL_RESOLUTION
+        tile_x, tile_y = (slot % 2) * VIRTUAL_TILE, (slot // 2) * VIRTUAL_TILE
+        x, y = tile_x + VIRTUAL_GUTTER, tile_y + VIRTUAL_GUTTER   # the map's corner
         rect = (x, y, VIRTUAL_RESOLUTION, VIRTUAL_RESOLUTION)
         framebuffer = self._virtual_framebuffer
         framebuffer.use()
+        whole = (tile_x, tile_y, VIRTUAL_TILE, VIRTUAL_TILE)
+        apply_pass_state(self.ctx, _CASTERS, whole, whole)
+        framebuffer.clear(depth=1.0, viewport=whole)
         apply_pass_state(self.ctx, _CASTERS, rect, rect)
-        framebuffer.clear(depth=1.0, viewport=rect)
         size = (VIRTUAL_RESOLUTION, VIRTUAL_RESOLUTION)
         body = light.light if light.kind == "point" else 0   # a lamp's image leaves its bulb's image out too
         legs = light.legs or (Leg(glm.mat4(1.0), (glm.vec4(*light.exit_plane),), (light.exit_entity, light.surface)),
@@ -818,7 +829,7 @@ class ShadowMaps:
             apply_pass_state(self.ctx, _CASTERS, rect, rect)
         if self.virtual_see_through_atlas is not None:
             self._draw_virtual_see_through(slot, views, legs, body)
-        width = 2 * VIRTUAL_RESOLUTION
+        width = 2 * VIRTUAL_TILE
         scale = VIRTUAL_RESOLUTION / width
         to_tile = glm.translate(glm.vec3(x / width + 0.5 * scale, y / width + 0.5 * scale, 0.5)) \
             * glm.scale(glm.vec3(0.5 * scale, 0.5 * scale, 0.5))
@@ -840,6 +851,7 @@ class ShadowMaps:
             "cookie_v": (*light.cookie[1][:3], light.radius),
             "rect_u": light.rectangle[0],
             "rect_v": light.rectangle[1],
+            "tile": (tile_x / width, tile_y / width, VIRTUAL_TILE / width, 0.0),
         }
         for index, name in enumerate(VIRTUAL_FIELDS):
             at = 4 + 16 * MAX_VIRTUAL_LIGHTS + 4 * (index * MAX_VIRTUAL_LIGHTS + slot)
@@ -865,12 +877,15 @@ class ShadowMaps:
         again past a lit point (a pane over a floor mirror) dims that point once
         (shadows.glsl virtual_see_through_at)."""
         ctx = self.ctx
-        side = VIRTUAL_RESOLUTION // SEE_THROUGH_SCALE
-        rect = ((slot % 2) * side, (slot // 2) * side, side, side)
+        tile, gutter, side = (n // SEE_THROUGH_SCALE for n in (VIRTUAL_TILE, VIRTUAL_GUTTER, VIRTUAL_RESOLUTION))
+        tile_x, tile_y = (slot % 2) * tile, (slot // 2) * tile
+        rect = (tile_x + gutter, tile_y + gutter, side, side)
         framebuffer = self._virtual_see_through_framebuffer
         framebuffer.use()
+        whole = (tile_x, tile_y, tile, tile)
+        apply_pass_state(ctx, _SEE_THROUGH_CASTERS, whole, whole)
+        framebuffer.clear(1.0, 1.0, 1.0, 1.0, viewport=whole)
         apply_pass_state(ctx, _SEE_THROUGH_CASTERS, rect, rect)
-        framebuffer.clear(1.0, 1.0, 1.0, 1.0, viewport=rect)
         batches = self.renderer.see_through_casters()
         ctx.blend_equation = moderngl.FUNC_ADD, moderngl.MIN
         try:

@@ -171,6 +171,11 @@ float soft_sun_shadow(vec3 p, vec2 metres_per_uv, float texel, float widest_metr
 }
 #endif
 
+// Whether atlas uv ``p`` lies outside ``tile`` (its corner and side, uv).
+bool outside_tile(vec2 p, vec3 tile) {
+    return any(lessThan(p, tile.xy)) || any(greaterThan(p, tile.xy + tile.z));
+}
+
 // Directional light i's lookup of its map at ``p`` (atlas uv, depth): its grid of taps, or a
 // sun with a size's soft shadow (``scale``: the map's uv per the level map's, 1 for the level
 // map, a ring's its own; ``slope``: the receiver's depth per level-map uv; ``tile``: the map's
@@ -245,7 +250,8 @@ float directional_shadow_at(int i, vec4 params, vec3 at, vec3 along, float grazi
 #endif
 #endif
     // Beside the map: no caster is between the point and the light (the map holds them all).
-    if (any(lessThan(p.xy, vec2(0.0))) || any(greaterThan(p.xy, vec2(1.0)))) return 1.0;
+    // Its own square, not the atlas's: past it lie the other lights' maps and the rings'.
+    if (outside_tile(p.xy, map_tile)) return 1.0;
     // Past its far side (what the map's fit leaves out: a particle below the level's last
     // caster) it is behind every caster over it: compared at the far side (the reference is
     // clamped so whatever the depth format; in front of the near side it is lit either way).
@@ -253,7 +259,7 @@ float directional_shadow_at(int i, vec4 params, vec3 at, vec3 along, float grazi
     float lit = directional_lookup(i, p, params, scale, slope, map_tile);
 #ifdef SHADOW_RING_BLEND
     if (fine < 1.0) {   // in a ring's band: fade towards the next larger map's shadow
-        bool off = any(lessThan(coarser, vec3(0.0))) || any(greaterThan(coarser, vec3(1.0)));
+        bool off = outside_tile(coarser.xy, coarser_tile) || coarser.z < 0.0 || coarser.z > 1.0;
         float far_lit = off ? 1.0 : directional_lookup(i, coarser, params, coarser_scale, slope, coarser_tile);
         lit = mix(far_lit, lit, fine);
     }

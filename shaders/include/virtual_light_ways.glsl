@@ -30,6 +30,8 @@ layout(std140) uniform VirtualLights {
                                                     // w: a point image's sphere radius (PointLight.radius)
     vec4 virtual_rect_u[MAX_VIRTUAL_LIGHTS];        // a point image's rectangle rows, carried (light_rules
     vec4 virtual_rect_v[MAX_VIRTUAL_LIGHTS];        // carried_rectangle; lights.glsl point_rect_u / _v)
+    vec4 virtual_tile[MAX_VIRTUAL_LIGHTS];          // its tile in the atlas: corner (uv), side (its map
+                                                    // inside it, a gutter of far depth round it)
     vec4 virtual_more[MAX_VIRTUAL_LIGHTS * (MAX_APERTURES - 1) * 4];  // per outline: plane, corner, u, v (as above,
                                                                       // u's w its water)
     mat4 virtual_unfold[MAX_VIRTUAL_LIGHTS * MAX_APERTURES];  // per outline: the line past it -> where that
@@ -70,7 +72,9 @@ float virtual_shadow(int i, vec3 position, vec3 normal, vec3 l, float dist) {
     mat4 to_map = virtual_lights.virtual_matrix[i];
     vec4 p = to_map * vec4(position + normal * texel * (1.5 - nl), 1.0);
     p.xyz /= p.w;
-    if (any(lessThan(p.xyz, vec3(0.0))) || any(greaterThan(p.xyz, vec3(1.0)))) return 1.0;
+    // Outside its tile (past the map's widest angle: VIRTUAL_MAX_FOV) or its depth range: no
+    // caster of its is between the point and the image.
+    if (outside_tile(p.xy, virtual_lights.virtual_tile[i].xyz) || p.z < 0.0 || p.z > 1.0) return 1.0;
     float lit = filtered_shadow(virtual_atlas, p.xyz, int(params.z), vec2(params.x), params.y,  // shadows.glsl
                                 receiver_slope_in_map(to_map, p.xyz, normal));
 #ifdef VIRTUAL_SEE_THROUGH_SHADOWS
