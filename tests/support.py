@@ -244,6 +244,20 @@ def pcf_edge_profile(t: np.ndarray, softness: float) -> np.ndarray:
     return np.mean([np.clip(t - o + 0.5, 0.0, 1.0) for o in offsets], axis=0)
 
 
+def drawn_over_near_depth(runner, atlas: moderngl.Texture, shining) -> np.ndarray:
+    """The frame whose map is drawn again into ``atlas`` (a depth texture) after the whole of
+    it was cleared to the near depth, as texels no draw wrote may hold on a GPU (llvmpipe
+    zero-fills a new one, a reused one holds an earlier engine's maps): ``shining(False)``
+    for a frame, then ``shining(True)`` (the map's owner turned off and on: drawn again)."""
+    cleared = runner.ctx.framebuffer(depth_attachment=atlas)
+    cleared.clear(depth=0.0)
+    cleared.release()
+    shining(False)
+    runner.frame()
+    shining(True)
+    return runner.frame()
+
+
 def kept_frames_equal_drawn(keeping, drawing, frames: int = 4) -> int:
     """Run two scene runners (``conftest.scene``) of the same scene side by side, ``drawing``
     with ``keep_still_views`` off, asserting every frame's colour, HDR image and ids equal bit

@@ -32,7 +32,7 @@ from engine.assets.mesh import box, quad
 from engine.assets.texture_data import TextureData
 from engine.core.color import srgb_to_linear
 from engine.core.particle_cloud import ROW_FRAME, ROW_SIZE
-from tests.support import look_from
+from tests.support import drawn_over_near_depth, look_from
 
 SIZE = (96, 72)
 EYE = glm.vec3(0.0, 0.0, 4.0)
@@ -1449,13 +1449,7 @@ def test_a_lit_particle_past_the_suns_map_is_lit_whatever_its_atlas_holds_there(
     light.shadows = True
     runner.frame()   # (the atlas made)
     maps = runner.engine.renderer.shadows
-    cleared = runner.ctx.framebuffer(depth_attachment=maps.atlas)
-    cleared.clear(depth=0.0)
-    cleared.release()
-    light.shadows = False
-    runner.frame()
-    light.shadows = True
-    shadowed = runner.frame()   # the map drawn again into the cleared atlas
+    shadowed = drawn_over_near_depth(runner, maps.atlas, lambda on: setattr(light, "shadows", on))
     # The particle's middle lies past the map's square, on the side of the next tile.
     matrix = np.array(maps.block[:16], np.float64).reshape(4, 4)   # (glm's columns: numpy rows)
     uv = (np.array([0.0, 0.0, 0.0, 1.0]) @ matrix)[:2]

@@ -26,7 +26,7 @@ from engine.assets.mesh import box, plane, quad
 from engine.assets.portals import spawn_portal_pair
 from engine.core.portal_math import pair_transform
 from engine.resources import ViewBudget
-from tests.support import box_hits, look_from, pcf_edge_profile, pixel_rays, srgb_to_linear
+from tests.support import box_hits, drawn_over_near_depth, look_from, pcf_edge_profile, pixel_rays, srgb_to_linear
 
 SUN = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
 # Boxes as (centre, half sizes): a wall shading part of the floor from the sun, a small box.
@@ -1213,13 +1213,7 @@ def test_a_lamp_by_a_wide_mirror_lights_the_floor_past_its_maps_widest_angle_on_
     mirror.reflects_light = True
     runner.frame()   # (the virtual atlas made)
     maps = runner.engine.renderer.shadows
-    cleared = runner.ctx.framebuffer(depth_attachment=maps.virtual_atlas)
-    cleared.clear(depth=0.0)
-    cleared.release()
-    mirror.reflects_light = False
-    runner.frame()
-    mirror.reflects_light = True
-    on = runner.frame()   # its map drawn again into the cleared atlas
+    on = drawn_over_near_depth(runner, maps.virtual_atlas, lambda shines: setattr(mirror, "reflects_light", shines))
     assert runner.stats.virtual_lights == 1
     points = _floor_points(runner)
     floor = (runner.ids() == runner.world.resources["ids"]["floor"]).reshape(-1)
