@@ -45,5 +45,5 @@ void main() {
     out_surface = 0u;
     out_seen = seen_at(held ? surface : NO_END_IMAGE,
                        length(on_surface - ray_eye(camera.eye.xyz, view_axis(camera.view_proj), on_surface))
-                       * way_scale(camera.view_proj));
+                       * way_scale(camera.view));
 }

@@ -32,7 +32,8 @@ flat out mat3 v_project_dir; // rows x, y, w of the parent's view-projection for
 #ifdef COMPOSITE_FALLBACK
 // A fallback row's values the composite's row has no room for (a vertex shader has 16
 // attribute slots, all taken), by instance (mirror_passes.prepare_fallbacks): ids x the
-// surface's entity, y its end view + 1 (0: none); weights[2i] the probes' weights (x, y)
+// surface's entity, y its end view + 1 (0: none), z its parent view's way scale's bits
+// (view_axis.glsl; 0: 1, a metre a metre); weights[2i] the probes' weights (x, y)
 // and the fallback's share (z), weights[2i + 1] the plane's w and, for a portal, the pair's
 // offset (yzw: the translation of the carry).  A uniform block (FALLBACK_ROWS of 256 rows is
 // 12 KiB, inside GL 4.1's least block size of 16 KiB), so a level's fallbacks of one build
@@ -119,7 +120,8 @@ void main() {
     v_ids = fallback_ids[gl_InstanceID];
     v_weights = fallback_weights[2 * gl_InstanceID];
     v_place = fallback_weights[2 * gl_InstanceID + 1];
-    v_way_scale = way_scale(inverse(in_inv_view_proj));
+    uint scale = fallback_ids[gl_InstanceID].z;   // the parent's way scale's bits (0: 1)
+    v_way_scale = scale == 0u ? 1.0 : uintBitsToFloat(scale);
 #endif
 #ifdef COMPOSITE_BENT
     mat4 view_proj = inverse(in_inv_view_proj);

@@ -161,7 +161,7 @@ flat in vec4 v_clip;
 #else
 #define node_index camera.skip.w  // the view's index in its tree (camera.glsl)
 #define VIEW_POINT camera.eye.xyz
-#define VIEW_WAY_SCALE way_scale(camera.view_proj)
+#define VIEW_WAY_SCALE way_scale(camera.view)
 #define VIEW_AXIS view_axis(camera.view_proj)
 #define VIEW_ENTRY camera.clip_plane
 #endif

@@ -177,7 +177,7 @@ void main() {
     gl_ClipDistance[CLIP_RECT_BOTTOM] = gl_Position.y - v.rect.y * gl_Position.w;
     gl_ClipDistance[CLIP_RECT_TOP] = v.rect.w * gl_Position.w - gl_Position.y;
     v_node = v.node.x;
-    v_eye = vec4(v.eye.xyz, way_scale(v.view_proj));
+    v_eye = vec4(v.eye.xyz, abs(v.eye.w));
     v_eye_axis = view_axis(v.view_proj);
 #ifdef FOG
     v_clip = v.clip_plane;

@@ -85,7 +85,7 @@ void emit_corner(int c, vec4 position, MirrorView v) {
     v_vertex_color = g_vertex_color[c];
 #endif
     v_node = v.node.x;
-    v_eye = vec4(v.eye.xyz, way_scale(v.view_proj));
+    v_eye = vec4(v.eye.xyz, abs(v.eye.w));
     v_eye_axis = view_axis(v.view_proj);
 #ifdef FOG
     v_clip = v.clip_plane;
@@ -116,7 +116,7 @@ void main() {
         || outside(vec4(0.0, -1.0, 0.0, v.rect.w), p0, p1, p2)) return;
 #endif
     emit_corner(0, p0, v);
-    if (v.eye.w > 0.5) {
+    if (v.eye.w < 0.0) {   // mirrored
         emit_corner(2, p2, v);
         emit_corner(1, p1, v);
     } else {

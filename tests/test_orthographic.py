@@ -230,23 +230,21 @@ def test_the_editors_handles_are_one_size_on_screen_in_an_orthographic_view():
     assert lengths[0] == pytest.approx(math.hypot(x1 - x0, y1 - y0), rel=0.02)
 
 
-SCALED_ORTHOGRAPHIC_WAY = pytest.mark.xfail(strict=True, reason=(
-    "an orthographic view's view-projection holds no scale (view_axis.glsl way_scale: 1): through a pair "
-    "scaled k it is the carried eye's way, k t1 + t2 (16 m here), not the image's t1 + t2 / k (8 m); its matrix "
-    "is a plain orthographic camera's k times as tall, so the scale must come from elsewhere (the view matrix)"))
-
-
-@pytest.mark.parametrize("scale, path", [(1.0, "per_mirror"), (1.0, "batched"),
-                                         pytest.param(2.0, "per_mirror", marks=SCALED_ORTHOGRAPHIC_WAY),
-                                         pytest.param(2.0, "batched", marks=SCALED_ORTHOGRAPHIC_WAY)])
-def test_an_orthographic_view_through_a_pair_of_two_sizes_focuses_on_the_images_distance(scene, scale, path):
+@pytest.mark.parametrize("target", ["wall", "cut_mirror"])
+@pytest.mark.parametrize("scale, path", [(1.0, "per_mirror"), (1.0, "batched"), (2.0, "per_mirror"),
+                                         (2.0, "batched")])
+def test_an_orthographic_view_through_a_pair_of_two_sizes_focuses_on_the_images_distance(scene, scale, path,
+                                                                                        target):
     """An orthographic camera 6 m before portal a, whose partner b (10 m to the side, turned
     90 degrees, scaled ``scale``) shows an emissive wall 4 m beyond it: the way each pixel
     through a holds, and the autofocus at its middle, is the image's distance, worked out here
     in float64 along each parallel ray (its start on the plane across the axis through the
     eye, to a's plane, then carried through the pair to the wall, in the ray's parameter: a's
     metres): 6 + 4 / scale, not the carried eye's 6 x scale + 4, as a perspective camera's is
-    (tests/test_depth_of_field.py); on either reflection path."""
+    (tests/test_depth_of_field.py); on either reflection path (the view's metres in the root's
+    read off its view matrix, or its row of the Views block).  "cut_mirror": a mirror switched
+    off stands there, drawn as its fallback over the portal's view (its row's parent scale),
+    whose way is the way to its glass."""
     size = (96, 64)
     ents = {}
 
@@ -260,12 +258,14 @@ def test_an_orthographic_view_through_a_pair_of_two_sizes_focuses_on_the_images_
         ents["wall"] = world.spawn(Transform(position=(14.0, 1.5, 0.0),
                                              rotation=glm.angleAxis(-glm.pi() / 2, glm.vec3(0, 1, 0))),
                                    MeshRef(quad(10, 10)),
-                                   Material(color=(0.9, 0.9, 0.9), texture=checker_texture(64, 8)), Emissive(0.5))
+                                   Material(color=(0.9, 0.9, 0.9), texture=checker_texture(64, 8)),
+                                   *([Mirror(enabled=False)] if target == "cut_mirror" else [Emissive(0.5)]))
 
     runner = scene(build, size)
     runner.engine.reflection_system.path = path
     runner.frame()
     assert runner.stats.reflection_path == path
+    assert (runner.stats.reflection_fallbacks > 0) == (target == "cut_mirror")
     targets = runner.engine.renderer.targets
     ids, surfaces, ways = targets.read_ids(), targets.read_surface_ids(), targets.read_ways()
     through = surfaces == ents["a"]

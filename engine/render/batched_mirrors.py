@@ -32,14 +32,14 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from engine.render.gpu import Gpu
-from engine.render.views import CAMERA_BYTES, CAMERA_EYE_BYTES, View
+from engine.render.views import CAMERA_BYTES, CAMERA_EYE_BYTES, View, way_scale
 
 PATHS = ("auto", "per_mirror", "batched")
 # Views one batched draw takes (a level with more is drawn in groups of this many).  The
 # Views block is 16 + 128 bytes a view, well under GL 4.1's 16 KiB minimum block size.
 MAX_BATCHED_VIEWS = 32
 # std140 layout of the Views block: ivec4 count, then per view (128 bytes)
-# mat4 view_proj, vec4 clip_plane, vec4 eye (w: mirrored), vec4 rect (NDC), uvec4 node (node,
+# mat4 view_proj, vec4 clip_plane, vec4 eye (w: its way scale, negative: mirrored), vec4 rect (NDC), uvec4 node (node,
 # skip, hide, view mask: View.view_mask).
 _VIEW_DTYPE = np.dtype([
     ("view_proj", "<f4", (16,)),
@@ -52,7 +52,7 @@ VIEWS_BLOCK_BYTES = 16 + MAX_BATCHED_VIEWS * _VIEW_DTYPE.itemsize
 _ROW_BYTES = _VIEW_DTYPE.itemsize
 _NO_ROWS = bytes(MAX_BATCHED_VIEWS * _ROW_BYTES)
 _COUNT, _RECT = struct.Struct("<4i"), struct.Struct("<4f")
-_MIRRORED, _UNMIRRORED = struct.pack("<f", 1.0), struct.pack("<f", 0.0)  # the eye's w
+_EYE_W = struct.Struct("<f")   # the eye's w: the view's way scale, negative where it is mirrored
 _VIEW_PROJ, _CLIP, _IDS = CAMERA_BYTES["view_proj"], CAMERA_BYTES["clip_plane"], CAMERA_BYTES["skip"]
 
 # The "auto" rule: batched when a level has at least AUTO_MIN_VIEWS views and the scene
@@ -156,7 +156,8 @@ def views_row(view: View) -> bytes:
         x, y, w, h = view.scissor if view.scissor is not None else (0, 0, width, height)
         ids = block[_IDS]  # (skip, hide, view mask, node) in the block; (node, skip, hide, view mask) in the row
         row = view._views_row = b"".join((
-            block[_VIEW_PROJ], block[_CLIP], block[CAMERA_EYE_BYTES], _MIRRORED if view.mirrored else _UNMIRRORED,
+            block[_VIEW_PROJ], block[_CLIP], block[CAMERA_EYE_BYTES],
+            _EYE_W.pack(-way_scale(view) if view.mirrored else way_scale(view)),
             _RECT.pack(2.0 * x / width - 1.0, 2.0 * y / height - 1.0, 2.0 * (x + w) / width - 1.0,
                        2.0 * (y + h) / height - 1.0),  # the screen rectangle in NDC: the scissor, or the whole target
             ids[12:16], ids[0:12]))

@@ -87,6 +87,7 @@ from engine.render.views import (
     CAMERA_BLOCK_INVERSE,
     CAMERA_BLOCK_VIEW_PROJ,
     View,
+    way_scale_bits,
 )
 from engine.resources import MirrorBumps, SurfaceState, WaterLook
 from engine.rules.probe_rules import ProbeBlend
@@ -943,11 +944,11 @@ class MirrorPasses:
             outline = surface.outline
             rows += ((parent[0] * outline).to_bytes() if outline is not None else parent[1], parent[2],
                      surface.head, parent[3], surface.tail)
-            if ends is None or ends[i] < 0:
+            if (ends is None or ends[i] < 0) and not parent[4]:
                 ids.append(surface.ids)
             else:
-                look = surface.look
-                ids.append(_FALLBACK_IDS.pack(look.entity & 0xFFFFFFFF, ends[i] + 1, 0, 0))
+                ids.append(_FALLBACK_IDS.pack(surface.look.entity & 0xFFFFFFFF,
+                                              0 if ends is None or ends[i] < 0 else ends[i] + 1, parent[4], 0))
             if shares is None or shares[i] == 1.0:
                 weights.append(surface.weights)
             else:
@@ -959,10 +960,12 @@ class MirrorPasses:
                                   for key, (rows, ids, weights) in groups.items()}, count)
 
     @staticmethod
-    def _fallback_parent(parent: FallbackParent, size: tuple[int, int]) -> tuple[glm.mat4, bytes, bytes, bytes]:
+    def _fallback_parent(parent: FallbackParent,
+                         size: tuple[int, int]) -> tuple[glm.mat4, bytes, bytes, bytes, int]:
         """A parent view's pieces of its fallbacks' rows: its view-projection flattened onto
         z = 0 (times an outline: the corners), the corners of its rectangle (a surface with
-        no outline), its head and its node (``_PIECE_PARENT``, ``_PIECE_NODE``)."""
+        no outline), its head and its node (``_PIECE_PARENT``, ``_PIECE_NODE``), and its way
+        scale's bits for the rows' ids (``way_scale_bits``: 0 for a metre a metre)."""
         view = parent.view
         block = view.camera_block()
         x, y, w, h = rect = view.scissor if parent.level and view.scissor is not None else (0, 0, *view.size)
@@ -970,7 +973,7 @@ class MirrorPasses:
         return (_FLATTEN_Z * glm.mat4.from_bytes(block[_BLOCK_VIEW_PROJ]),
                 struct.pack("<16f", x0, y0, 0.0, 1.0, x0, y1, 0.0, 1.0, x1, y0, 0.0, 1.0, x1, y1, 0.0, 1.0),
                 _PIECE_PARENT.pack(x, y, x + w, y + h, block[_BLOCK_INVERSE], block[_BLOCK_EYE]),
-                _PIECE_NODE.pack(float(parent.index)))
+                _PIECE_NODE.pack(float(parent.index)), way_scale_bits(view))
 
     def _fallback_surfaces(self, states: Sequence[SurfaceState], probes: Mapping[int, ProbeBlend]
                            ) -> tuple[list[_FallbackSurface], list[int]]:

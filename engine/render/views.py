@@ -9,6 +9,8 @@ layers: direct, mirror, portal or probe, and the reflection layers every surface
 chain shows (``view_mask``)."""
 from __future__ import annotations
 
+import math
+import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -225,6 +227,27 @@ class PlannedView(View):
     @property
     def view_mask(self) -> int:
         return int.from_bytes(self._block[_VIEW_MASK_BYTES], "little")
+
+
+_VIEW_COLUMN = struct.Struct("<3f")   # the view matrix's first column's xyz, at the block's start
+_FLOAT = struct.Struct("<f")
+_UINT = struct.Struct("<I")
+
+
+def way_scale(view: View) -> float:
+    """How long a metre of ``view``'s world is in its tree root's (the light's way, depth of
+    field's distance: shaders/include/view_axis.glsl way_scale, the same rule): its view
+    matrix's first column's length, read from its Camera block: 1 / k beyond a pair of
+    portals k times as large on the way out, 1 through mirrors."""
+    x, y, z = _VIEW_COLUMN.unpack_from(view.camera_block(), CAMERA_BYTES["view"].start)
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def way_scale_bits(view: View) -> int:
+    """``way_scale`` as a float32's bits, 0 where it is 1 within a float32's step (a row that
+    holds 0 takes a metre a metre: mirror_composite.vert's fallbacks)."""
+    scale = way_scale(view)
+    return 0 if abs(scale - 1.0) < 1e-6 else _UINT.unpack(_FLOAT.pack(scale))[0]
 
 
 # How far back along an orthographic view's axis its transparent things are ordered from

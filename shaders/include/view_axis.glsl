@@ -12,13 +12,14 @@ vec3 view_axis(mat4 view_proj) {
 }
 
 // How long a metre of a view's world is in its tree root's: a view beyond portals of two
-// sizes sees that world scaled by their ratio k (its view matrix scales by 1 / k), which a
-// perspective view-projection's fourth row keeps (its xyz is the axis over the scale);
-// mirrors keep lengths (1).  The light's way (way.glsl) is measured in the root's metres by
-// it, the image's distance.  An orthographic view's fourth row holds no scale: 1.
-float way_scale(mat4 view_proj) {
-    float s = length(vec3(view_proj[0][3], view_proj[1][3], view_proj[2][3]));
-    return s > 1e-5 ? s : 1.0;
+// sizes sees that world scaled by their ratio k (its view matrix scales by 1 / k); mirrors
+// keep lengths (1).  The light's way (way.glsl) is measured in the root's metres by it, the
+// image's distance.  Read off the view matrix (a column's length), not the view-projection:
+// an orthographic one holds no scale where a perspective one's fourth row does.  The views
+// of a batched level carry it in their rows (views_block.glsl eye.w), a fallback its
+// parent's (mirror_composite.vert).
+float way_scale(mat4 view) {
+    return length(view[0].xyz);
 }
 
 // Where the view's ray to ``p`` starts: a perspective view's eye (``axis`` 0); an

@@ -6,7 +6,8 @@
 struct MirrorView {
     mat4 view_proj;   // the view's camera: projection x view (a mirror's with its oblique near plane)
     vec4 clip_plane;  // world-space mirror or portal plane; geometry behind it is clipped
-    vec4 eye;         // xyz: world-space eye; w: 1 if mirrored (front faces clockwise)
+    vec4 eye;         // xyz: world-space eye; w: its way scale (view_axis.glsl), negative if
+                      // mirrored (front faces clockwise)
     vec4 rect;        // the view's screen rectangle in NDC: x0, y0, x1, y1
     uvec4 node;       // x: the view's index in the node image; y: the entity it never draws (its surface);
                       // z: one no view of its tree draws (a probe's own object); 0: none;
