@@ -46,7 +46,8 @@ def batched_row(view: View) -> np.ndarray:
     row = np.zeros(32, np.float32)
     row[0:16] = np.frombuffer(view.view_proj.to_bytes(), np.float32)
     row[16:20] = tuple(view.clip_plane)
-    row[20:24] = (*view.eye, 1.0 if view.mirrored else 0.0)
+    scale = glm.length(glm.vec3(view.view[0]))   # the way scale (view_axis.glsl), negative where mirrored
+    row[20:24] = (*view.eye, -scale if view.mirrored else scale)
     row[24:28] = (2.0 * x / width - 1.0, 2.0 * y / height - 1.0,
                   2.0 * (x + w) / width - 1.0, 2.0 * (y + h) / height - 1.0)
     row[28:32].view(np.uint32)[:] = (view.node, view.skip, view.hide, view.view_mask)
